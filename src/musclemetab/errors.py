@@ -1,0 +1,73 @@
+"""The package's error hierarchy.
+
+Every error raised on bad input derives from :class:`MusclemetabError`. Messages name the
+file, column, muscle or option at fault and say what to do about it. The command-line
+interface prints the message on one line and exits with a non-zero code.
+
+Errors are plain exceptions carrying one message string, so they cross process
+boundaries (the OpenSim worker, a process pool, a Dask cluster) unchanged.
+"""
+
+from __future__ import annotations
+
+
+class MusclemetabError(Exception):
+    """Root of every error this package raises on purpose."""
+
+    def __init__(self, message: str):
+        super().__init__(message)
+        self.message = message
+
+    def __reduce__(self):  # picklable across processes
+        return (type(self), (self.message,))
+
+    def __str__(self) -> str:
+        return self.message
+
+
+class InputFileError(MusclemetabError):
+    """A file is missing, unreadable, truncated or malformed."""
+
+
+class StorageFormatError(InputFileError):
+    """An OpenSim storage file (.mot/.sto) does not follow the format."""
+
+
+class MissingColumnError(InputFileError):
+    """A required column is absent from a data file."""
+
+
+class TimeColumnError(InputFileError):
+    """A time column holds NaN or is not strictly increasing."""
+
+
+class ModelError(MusclemetabError):
+    """An OpenSim model cannot be loaded, or lacks a coordinate or muscle asked for."""
+
+
+class UnknownMuscleError(ModelError):
+    """A muscle name is not in the model or in the property table."""
+
+
+class UnknownCoordinateError(ModelError):
+    """A degree of freedom is not a coordinate of the model."""
+
+
+class OptionError(MusclemetabError):
+    """An option or argument has an invalid value."""
+
+
+class DataMismatchError(MusclemetabError):
+    """Inputs that must agree (time ranges, units, models, shapes) do not."""
+
+
+class SolverError(MusclemetabError):
+    """An optimisation problem could not be built or did not converge."""
+
+
+class OpenSimWorkerError(MusclemetabError):
+    """The isolated OpenSim process failed unexpectedly."""
+
+
+class DatasetError(MusclemetabError):
+    """Example data could not be found, downloaded or verified."""

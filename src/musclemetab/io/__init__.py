@@ -1,0 +1,15 @@
+"""File input and output: OpenSim storage files, atomic writes."""
+
+from .atomic import atomic_directory, atomic_path, atomic_write_bytes, atomic_write_text
+from .storage import read_storage, require_columns, storage_from_arrays, write_storage
+
+__all__ = [
+    "read_storage",
+    "write_storage",
+    "require_columns",
+    "storage_from_arrays",
+    "atomic_path",
+    "atomic_write_text",
+    "atomic_write_bytes",
+    "atomic_directory",
+]

@@ -1,0 +1,263 @@
+"""Read and write OpenSim storage files (``.mot`` / ``.sto``).
+
+Two header dialects occur in practice and are both read:
+
+* OpenSim 4 style: a table name, ``version=1``, ``nRows=``, ``nColumns=``,
+  ``inDegrees=yes|no``, free comment lines, then ``endheader``;
+* legacy SIMM style: a path or name line, ``nRows=``/``nColumns=``, ``name <...>``,
+  ``datacolumns N``, ``datarows M``, ``range t0 t1``, then ``endheader``.
+
+The line after ``endheader`` holds the column names (the first is ``time``); the rest are
+whitespace-separated numbers. :func:`read_storage` returns a pandas DataFrame indexed by
+time, with the header metadata in ``DataFrame.attrs``:
+
+``name``        the table name (first header line), or ``None``
+``in_degrees``  ``True``/``False`` from ``inDegrees``, ``None`` when the header has none
+``path``        the file read
+``header``      the header lines, verbatim
+
+Values are returned exactly as stored: no unit conversion happens here (use
+:func:`rotational_to_radians` where the caller knows which columns are angles).
+:func:`write_storage` writes an OpenSim 4 ``.sto`` atomically (temporary file, then rename).
+"""
+
+from __future__ import annotations
+
+import io as _io
+import math
+import os
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..errors import MissingColumnError, StorageFormatError, TimeColumnError
+from .atomic import atomic_write_text
+
+__all__ = [
+    "read_storage",
+    "write_storage",
+    "require_columns",
+    "storage_from_arrays",
+]
+
+
+def _parse_header(lines: list[str], path: Path) -> dict:
+    meta: dict = {"name": None, "in_degrees": None, "n_rows": None, "n_columns": None}
+    if lines:
+        first = lines[0].strip()
+        if first and "=" not in first:
+            meta["name"] = first
+    for raw in lines:
+        line = raw.strip()
+        low = line.lower()
+        key, sep, value = line.partition("=")
+        if sep:
+            k = key.strip().lower()
+            v = value.strip()
+            if k == "indegrees":
+                if v.lower() not in ("yes", "no"):
+                    raise StorageFormatError(
+                        f"{path}: header line '{line}' must say inDegrees=yes or inDegrees=no"
+                    )
+                meta["in_degrees"] = v.lower() == "yes"
+            elif k in ("nrows", "ncolumns"):
+                try:
+                    meta["n_rows" if k == "nrows" else "n_columns"] = int(v)
+                except ValueError:
+                    raise StorageFormatError(
+                        f"{path}: header line '{line}' must give a whole number"
+                    ) from None
+        elif low.startswith("datarows "):
+            try:
+                meta["n_rows"] = int(line.split()[1])
+            except (IndexError, ValueError):
+                raise StorageFormatError(f"{path}: header line '{line}' must give a whole number") from None
+        elif low.startswith("datacolumns "):
+            try:
+                meta["n_columns"] = int(line.split()[1])
+            except (IndexError, ValueError):
+                raise StorageFormatError(f"{path}: header line '{line}' must give a whole number") from None
+        elif low.startswith("name ") and meta["name"] is None:
+            meta["name"] = line[5:].strip()
+    return meta
+
+
+def read_storage(path: str | os.PathLike) -> pd.DataFrame:
+    """Read an OpenSim ``.mot``/``.sto`` file into a time-indexed DataFrame.
+
+    Parameters
+    ----------
+    path
+        The storage file.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Index ``time`` (s), one float column per data column, header metadata in ``.attrs``.
+
+    Raises
+    ------
+    StorageFormatError
+        The file is missing, has no ``endheader`` line, no column names, non-numeric or
+        ragged rows, fewer rows than its header announces, or duplicate column names.
+    TimeColumnError
+        The first column is not ``time``, holds NaN, or is not strictly increasing.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except FileNotFoundError:
+        raise StorageFormatError(f"{path}: no such file; check the path") from None
+    except OSError as exc:
+        raise StorageFormatError(f"{path}: cannot be read ({exc.strerror})") from None
+
+    lines = text.splitlines()
+    end = next((i for i, ln in enumerate(lines) if ln.strip().lower() == "endheader"), None)
+    if end is None:
+        raise StorageFormatError(
+            f"{path}: no 'endheader' line; this is not an OpenSim storage file (.mot/.sto)"
+        )
+    header = lines[:end]
+    meta = _parse_header(header, path)
+
+    body_start = end + 1
+    while body_start < len(lines) and not lines[body_start].strip():
+        body_start += 1
+    if body_start >= len(lines):
+        raise StorageFormatError(f"{path}: no column-name line after 'endheader'; the file is truncated")
+    names = lines[body_start].split()
+    if not names:
+        raise StorageFormatError(f"{path}: empty column-name line after 'endheader'")
+    if names[0].lower() != "time":
+        raise TimeColumnError(f"{path}: the first column is '{names[0]}', expected 'time'")
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise StorageFormatError(f"{path}: duplicate column names {dup}; each column must be unique")
+
+    data_lines = [ln for ln in lines[body_start + 1:] if ln.strip()]
+    if not data_lines:
+        raise StorageFormatError(f"{path}: no data rows after the column names; the file is truncated")
+    ncol = len(names)
+    values = np.empty((len(data_lines), ncol), dtype=float)
+    for r, ln in enumerate(data_lines):
+        fields = ln.split()
+        if len(fields) != ncol:
+            raise StorageFormatError(
+                f"{path}: data row {r + 1} (line {body_start + 2 + r}) has {len(fields)} values "
+                f"but there are {ncol} columns; the file is truncated or malformed"
+            )
+        try:
+            values[r] = [float(x) for x in fields]
+        except ValueError:
+            bad = next(x for x in fields if not _is_float(x))
+            raise StorageFormatError(
+                f"{path}: data row {r + 1} (line {body_start + 2 + r}) holds '{bad}', which is not a number"
+            ) from None
+
+    n_rows = meta.get("n_rows")
+    if n_rows is not None and len(data_lines) < n_rows:
+        raise StorageFormatError(
+            f"{path}: the header announces {n_rows} rows but only {len(data_lines)} are present; "
+            "the file is truncated"
+        )
+    t = values[:, 0]
+    if np.isnan(t).any():
+        row = int(np.flatnonzero(np.isnan(t))[0]) + 1
+        raise TimeColumnError(f"{path}: column 'time' is NaN at data row {row}")
+    if t.size > 1 and not np.all(np.diff(t) > 0):
+        row = int(np.flatnonzero(np.diff(t) <= 0)[0]) + 2
+        raise TimeColumnError(
+            f"{path}: column 'time' is not strictly increasing (data row {row}, t = {t[row - 1]:g} s)"
+        )
+
+    df = pd.DataFrame(values[:, 1:], columns=names[1:], index=pd.Index(t, name="time"))
+    df.attrs.update(
+        name=meta["name"], in_degrees=meta["in_degrees"], path=str(path), header=list(header)
+    )
+    return df
+
+
+def _is_float(x: str) -> bool:
+    try:
+        float(x)
+    except ValueError:
+        return False
+    return True
+
+
+def require_columns(
+    df: pd.DataFrame, columns: Iterable[str], *, allow_nan: bool = False, what: str = "column"
+) -> None:
+    """Raise :class:`MissingColumnError` naming the file and every absent (or NaN) column."""
+    source = df.attrs.get("path", "<table>")
+    columns = list(columns)
+    missing = [c for c in columns if c not in df.columns]
+    if missing:
+        raise MissingColumnError(
+            f"{source}: missing {what}{'s' if len(missing) > 1 else ''} {', '.join(missing)}; "
+            f"the file has {', '.join(map(str, df.columns[:12]))}{' ...' if len(df.columns) > 12 else ''}"
+        )
+    if not allow_nan:
+        bad = [c for c in columns if df[c].isna().any()]
+        if bad:
+            raise MissingColumnError(f"{source}: {what} {', '.join(bad)} holds NaN values; fill or remove them")
+
+
+def storage_from_arrays(
+    time: Sequence[float] | np.ndarray,
+    columns: dict[str, np.ndarray] | None = None,
+    *,
+    names: Sequence[str] | None = None,
+    data: np.ndarray | None = None,
+    name: str = "musclemetab",
+    in_degrees: bool = False,
+) -> pd.DataFrame:
+    """Build a time-indexed DataFrame in the layout :func:`write_storage` expects."""
+    time = np.asarray(time, dtype=float)
+    if columns is not None:
+        df = pd.DataFrame({k: np.asarray(v, dtype=float) for k, v in columns.items()}, index=time)
+    else:
+        df = pd.DataFrame(np.asarray(data, dtype=float), columns=list(names), index=time)
+    df.index.name = "time"
+    df.attrs.update(name=name, in_degrees=in_degrees)
+    return df
+
+
+def _format(x: float) -> str:
+    if math.isnan(x):
+        return "NaN"
+    return f"{x:.12g}"
+
+
+def write_storage(
+    path: str | os.PathLike,
+    df: pd.DataFrame,
+    *,
+    name: str | None = None,
+    in_degrees: bool | None = None,
+    comments: Sequence[str] = (),
+) -> Path:
+    """Write a time-indexed DataFrame as an OpenSim 4 ``.sto`` file, atomically.
+
+    The file is first written to a temporary file beside ``path`` and renamed into place,
+    so a failure never leaves a half-written file. OpenSim 4.6 reads the result with
+    ``opensim.TimeSeriesTable``.
+    """
+    path = Path(path)
+    name = name if name is not None else (df.attrs.get("name") or path.stem)
+    if in_degrees is None:
+        in_degrees = bool(df.attrs.get("in_degrees") or False)
+    values = np.column_stack([np.asarray(df.index, dtype=float), df.to_numpy(dtype=float)])
+    buf = _io.StringIO()
+    buf.write(f"{name}\nversion=1\nnRows={values.shape[0]}\nnColumns={values.shape[1]}\n")
+    buf.write(f"inDegrees={'yes' if in_degrees else 'no'}\n")
+    for c in comments:
+        buf.write(f"{c}\n")
+    buf.write("endheader\n")
+    buf.write("\t".join(["time", *map(str, df.columns)]) + "\n")
+    for row in values:
+        buf.write("\t".join(_format(x) for x in row) + "\n")
+    atomic_write_text(path, buf.getvalue())
+    return path

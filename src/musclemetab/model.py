@@ -1,0 +1,136 @@
+"""The musculoskeletal model: muscle parameters by name, body mass, degrees of freedom.
+
+The ``.osim`` file is read by OpenSim in the worker process
+(:mod:`musclemetab.opensim_bridge`); this module holds the result as plain arrays.
+Only five Hill parameters are taken from the model (see ``docs/method.md``): maximal
+isometric force, optimal fibre length, tendon slack length, pennation angle at optimal
+fibre length and maximal contraction velocity (optimal lengths per second; OpenSim's
+default of 10 when the model does not give it).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import ModelError, OptionError, UnknownMuscleError
+
+__all__ = [
+    "MuscleParameters",
+    "ModelInfo",
+    "read_model",
+    "read_muscle_parameters",
+    "default_dofs",
+    "SIDES",
+]
+
+SIDES = ("r", "l")
+_DOF_STEMS = ("ankle_angle", "knee_angle", "hip_flexion", "hip_adduction", "hip_rotation")
+
+
+def default_dofs(side: str = "r") -> list[str]:
+    """The five lower-limb DOFs of the study for one side, in the solver's order."""
+    if side not in SIDES:
+        raise OptionError(f"side must be 'r' or 'l', not {side!r}")
+    return [f"{s}_{side}" for s in _DOF_STEMS]
+
+
+@dataclass(frozen=True)
+class MuscleParameters:
+    """Hill-model parameters of a set of muscles, one array entry per muscle (by name)."""
+
+    names: tuple[str, ...]
+    max_isometric_force_N: np.ndarray
+    optimal_fiber_length_m: np.ndarray
+    tendon_slack_length_m: np.ndarray
+    pennation_angle_at_optimal_rad: np.ndarray
+    max_contraction_velocity: np.ndarray  # optimal fibre lengths per second
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def index(self, name: str) -> int:
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise UnknownMuscleError(
+                f"muscle '{name}' is not among the model's muscles ({', '.join(self.names[:6])}, ...)"
+            ) from None
+
+    def subset(self, names) -> "MuscleParameters":
+        """The parameters of ``names``, in that order (matched by name)."""
+        idx = [self.index(n) for n in names]
+        return MuscleParameters(
+            tuple(names),
+            *(getattr(self, f)[idx] for f in _ARRAY_FIELDS),
+        )
+
+    def to_dict(self) -> dict:
+        return {n: {f: float(getattr(self, f)[i]) for f in _ARRAY_FIELDS} for i, n in enumerate(self.names)}
+
+
+_ARRAY_FIELDS = (
+    "max_isometric_force_N",
+    "optimal_fiber_length_m",
+    "tendon_slack_length_m",
+    "pennation_angle_at_optimal_rad",
+    "max_contraction_velocity",
+)
+
+
+@dataclass(frozen=True)
+class ModelInfo:
+    """What the package needs to know of an ``.osim`` model."""
+
+    path: str
+    name: str
+    muscles: MuscleParameters
+    body_mass_kg: float
+    coordinates: tuple[dict, ...] = field(repr=False)
+    couplers: tuple[dict, ...] = field(repr=False)
+    opensim_version: str = ""
+
+    def coordinate_names(self, unlocked_only: bool = True) -> list[str]:
+        return [c["name"] for c in self.coordinates if not (unlocked_only and c["locked"])]
+
+
+_CACHE: dict = {}
+
+
+def read_model(model_path: str | os.PathLike) -> ModelInfo:
+    """Read muscles, body mass and coordinates of an ``.osim`` model (through OpenSim)."""
+    from .opensim_bridge import call
+
+    path = Path(model_path)
+    if not path.is_file():
+        raise ModelError(f"{path}: no such model file; check the path")
+    key = (str(path.resolve()), path.stat().st_mtime_ns, path.stat().st_size)
+    if key in _CACHE:
+        return _CACHE[key]
+    raw = call("model_ops:read_model_info", str(path))
+    ms = raw["muscles"]
+    if not ms:
+        raise ModelError(f"{path}: the model has no muscles")
+    params = MuscleParameters(
+        tuple(m["name"] for m in ms),
+        *(np.array([m[f] for m in ms], dtype=float) for f in _ARRAY_FIELDS),
+    )
+    info = ModelInfo(
+        path=raw["path"],
+        name=raw["name"],
+        muscles=params,
+        body_mass_kg=float(raw["body_mass_kg"]),
+        coordinates=tuple(raw["coordinates"]),
+        couplers=tuple(raw["couplers"]),
+        opensim_version=raw["opensim_version"],
+    )
+    _CACHE[key] = info
+    return info
+
+
+def read_muscle_parameters(model_path: str | os.PathLike) -> MuscleParameters:
+    """The five Hill parameters of every muscle of the model, in model order."""
+    return read_model(model_path).muscles

@@ -1,0 +1,112 @@
+"""Client side of the OpenSim worker: start it, send calls, return results.
+
+Wire protocol (pipes, one request at a time): each message is an 8-byte big-endian length
+followed by a pickle. Request: ``(target, args, kwargs)`` with ``target = "module:function"``
+relative to :mod:`musclemetab.opensim_bridge`. Reply: ``("ok", result)`` or
+``("error", exception)``; package errors (``MusclemetabError``) are re-raised as they are.
+"""
+
+from __future__ import annotations
+
+import atexit
+import os
+import pickle
+import struct
+import subprocess
+import sys
+import threading
+import time
+
+from ..errors import MusclemetabError, OpenSimWorkerError
+
+_LOCK = threading.Lock()
+_PROC: subprocess.Popen | None = None
+_STARTUP_S: float | None = None
+
+
+def _send(stream, obj) -> None:
+    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+    stream.write(struct.pack(">Q", len(data)))
+    stream.write(data)
+    stream.flush()
+
+
+def _recv(stream):
+    head = stream.read(8)
+    if len(head) < 8:
+        raise EOFError
+    (n,) = struct.unpack(">Q", head)
+    data = stream.read(n)
+    if len(data) < n:
+        raise EOFError
+    return pickle.loads(data)
+
+
+def _start() -> subprocess.Popen:
+    global _STARTUP_S
+    t0 = time.perf_counter()
+    env = dict(os.environ)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "musclemetab.opensim_bridge.worker"],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=None if env.get("MUSCLEMETAB_OPENSIM_VERBOSE") else subprocess.DEVNULL,
+        env=env,
+    )
+    try:
+        ready = _recv(proc.stdout)
+    except EOFError:
+        proc.kill()
+        raise OpenSimWorkerError(
+            "the OpenSim worker process did not start; check that the 'opensim' package (4.6) "
+            "imports in this environment: python -c 'import opensim'"
+        ) from None
+    if ready[0] != "ready":
+        proc.kill()
+        raise OpenSimWorkerError(f"the OpenSim worker process failed to start: {ready[1]}")
+    _STARTUP_S = time.perf_counter() - t0
+    return proc
+
+
+def call(target: str, *args, **kwargs):
+    """Run ``module:function`` of :mod:`musclemetab.opensim_bridge` in the OpenSim worker."""
+    global _PROC
+    with _LOCK:
+        if _PROC is None or _PROC.poll() is not None:
+            _PROC = _start()
+        try:
+            _send(_PROC.stdin, (target, args, kwargs))
+            status, payload = _recv(_PROC.stdout)
+        except (EOFError, BrokenPipeError):
+            code = _PROC.poll()
+            _PROC = None
+            raise OpenSimWorkerError(
+                f"the OpenSim worker process ended unexpectedly (exit code {code}) while running "
+                f"{target}; set MUSCLEMETAB_OPENSIM_VERBOSE=1 to see OpenSim's messages"
+            ) from None
+    if status == "ok":
+        return payload
+    if isinstance(payload, MusclemetabError):
+        raise payload
+    raise OpenSimWorkerError(f"OpenSim failed in {target}: {payload}")
+
+
+def worker_startup_s() -> float | None:
+    """Seconds the worker took to start (process start plus ``import opensim``), if started."""
+    return _STARTUP_S
+
+
+def shutdown() -> None:
+    """Stop the worker process (it is restarted on the next call)."""
+    global _PROC
+    with _LOCK:
+        if _PROC is not None and _PROC.poll() is None:
+            try:
+                _PROC.stdin.close()
+                _PROC.wait(timeout=5)
+            except Exception:  # pragma: no cover - best effort
+                _PROC.kill()
+        _PROC = None
+
+
+atexit.register(shutdown)

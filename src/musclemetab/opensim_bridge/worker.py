@@ -1,0 +1,50 @@
+"""The OpenSim worker process (``python -m musclemetab.opensim_bridge.worker``).
+
+It imports ``opensim`` once, then serves calls from :mod:`.client` until its input closes.
+OpenSim writes log messages to standard output; the protocol stream is therefore a
+duplicate of the original stdout, and file descriptor 1 is pointed at stderr.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import sys
+
+
+def main() -> int:
+    proto_out = os.fdopen(os.dup(1), "wb")
+    os.dup2(2, 1)  # anything printed (OpenSim's log) goes to stderr
+    proto_in = sys.stdin.buffer
+
+    from .client import _recv, _send
+
+    try:
+        import opensim
+
+        opensim.Logger.setLevelString("error")
+    except Exception as exc:  # pragma: no cover - environment problem
+        _send(proto_out, ("failed", f"{type(exc).__name__}: {exc}"))
+        return 1
+    _send(proto_out, ("ready", opensim.__version__))
+
+    while True:
+        try:
+            target, args, kwargs = _recv(proto_in)
+        except EOFError:
+            return 0
+        try:
+            mod_name, func_name = target.split(":")
+            mod = importlib.import_module(f"musclemetab.opensim_bridge.{mod_name}")
+            result = ("ok", getattr(mod, func_name)(*args, **kwargs))
+        except Exception as exc:  # returned to the caller, which raises it
+            from ..errors import MusclemetabError
+
+            if not isinstance(exc, MusclemetabError):
+                exc = RuntimeError(f"{type(exc).__name__}: {exc}")
+            result = ("error", exc)
+        _send(proto_out, result)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

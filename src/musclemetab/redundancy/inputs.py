@@ -1,0 +1,410 @@
+"""Input preparation for the muscle redundancy problem.
+
+From inverse kinematics (IK), inverse dynamics (ID) and muscle geometry (muscle-tendon
+lengths and moment arms at the IK frames) this module builds the data the optimal control
+problem needs on its mesh:
+
+1. **Time window** = the IK file, ``[t_first, t_last]``.
+2. **Filtering**: 6th-order, 6 Hz low-pass Butterworth applied forward and backward
+   (zero phase), with the padding of MATLAB's ``filtfilt`` (odd reflection of
+   ``3 (max(len(a), len(b)) - 1) = 18`` samples). Muscle-tendon lengths and moment arms
+   are filtered at the IK frames; the ID moments are filtered **on the full ID file**,
+   then linearly interpolated onto the IK time stamps.
+3. **Mesh**: ``N = round((tf - t0) * 100)`` intervals, ``h = (tf - t0)/N``,
+   ``t_k = t0 + k h``. Lengths, moment arms and moments are evaluated at the nodes with
+   not-a-knot cubic splines through the filtered frames.
+
+Layouts are time-first: ``(frames, muscles)``, ``(frames, dofs, muscles)``,
+``(frames, dofs)``. Moment arms follow OpenSim, ``r = -dlMT/dq``.
+
+Reference: De Groote F, Kinney AL, Rao AV, Fregly BJ (2016) Ann Biomed Eng 44:2922-2936;
+Luis I, Afschrift M, De Groote F, Gutierrez-Farewik EM (2024) PLoS Comput Biol.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from typing import Protocol, Sequence
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+from scipy.signal import butter, filtfilt
+
+from ..errors import DataMismatchError, InputFileError, MissingColumnError
+from ..io import read_storage, require_columns
+
+__all__ = [
+    "DEFAULT_DOFS",
+    "MESH_FREQUENCY_HZ",
+    "FILTER_CUTOFF_HZ",
+    "FILTER_ORDER",
+    "MUSCLE_SELECTION_THRESHOLD_M",
+    "GeometryLike",
+    "TrialInputs",
+    "lowpass_filtfilt",
+    "mesh_for_window",
+    "read_kinematics",
+    "read_inverse_dynamics",
+    "select_muscles",
+    "prepare_inputs",
+]
+
+#: The five right-leg degrees of freedom of the study, in the order of the moment arms.
+DEFAULT_DOFS = (
+    "ankle_angle_r",
+    "knee_angle_r",
+    "hip_flexion_r",
+    "hip_adduction_r",
+    "hip_rotation_r",
+)
+MESH_FREQUENCY_HZ = 100.0
+FILTER_CUTOFF_HZ = 6.0
+FILTER_ORDER = 6
+#: A muscle is kept if ``|r| > 1e-4 m`` about a DOF at the first frame.
+MUSCLE_SELECTION_THRESHOLD_M = 1e-4
+# Rotations in radians beyond this are not joint angles (model ranges are below pi).
+_MAX_PLAUSIBLE_ANGLE_RAD = math.pi
+
+
+class GeometryLike(Protocol):
+    """What the solver needs from a muscle-geometry source (e.g. ``musclemetab.geometry``)."""
+
+    time: np.ndarray  # (F,) s, the IK frames
+    muscles: Sequence[str]  # (M,)
+    dofs: Sequence[str]  # (D,)
+    lmt_m: np.ndarray  # (F, M) muscle-tendon length
+    moment_arms_m: np.ndarray  # (F, D, M), r = -dlMT/dq
+
+
+@dataclass(frozen=True)
+class TrialInputs:
+    """Filtered trial data at the IK frames and on the optimisation mesh.
+
+    Attributes
+    ----------
+    muscles, dofs
+        Names, in the order of the array axes.
+    frame_time_s
+        ``(F,)`` IK frame times (the window is ``frame_time_s[[0, -1]]``).
+    lmt_frames_m, lmt_velocity_frames_m_per_s
+        ``(F, M)`` filtered muscle-tendon length and its time derivative (analytic
+        derivative of the not-a-knot spline), used by the static optimisation.
+    moment_arms_frames_m
+        ``(F, D, M)`` filtered moment arms.
+    moments_frames_Nm
+        ``(F, D)`` filtered ID moments at the IK frames.
+    mesh_time_s
+        ``(N+1,)`` nodes ``t_k = t0 + k h``.
+    lmt_m, moment_arms_m, moments_Nm
+        The same quantities at the mesh nodes: ``(N+1, M)``, ``(N+1, D, M)``, ``(N+1, D)``.
+    sources
+        Paths or labels of the inputs, for the record.
+    """
+
+    muscles: tuple[str, ...]
+    dofs: tuple[str, ...]
+    frame_time_s: np.ndarray
+    lmt_frames_m: np.ndarray
+    lmt_velocity_frames_m_per_s: np.ndarray
+    moment_arms_frames_m: np.ndarray
+    moments_frames_Nm: np.ndarray
+    mesh_time_s: np.ndarray
+    lmt_m: np.ndarray
+    moment_arms_m: np.ndarray
+    moments_Nm: np.ndarray
+    sources: dict
+
+    @property
+    def n_intervals(self) -> int:
+        """``N``, the number of mesh intervals."""
+        return self.mesh_time_s.size - 1
+
+    @property
+    def step_s(self) -> float:
+        """``h = (tf - t0)/N``."""
+        return float(self.mesh_time_s[-1] - self.mesh_time_s[0]) / self.n_intervals
+
+    @property
+    def window_s(self) -> tuple[float, float]:
+        return float(self.mesh_time_s[0]), float(self.mesh_time_s[-1])
+
+
+def lowpass_filtfilt(
+    x: np.ndarray,
+    sample_rate_hz: float,
+    cutoff_hz: float = FILTER_CUTOFF_HZ,
+    order: int = FILTER_ORDER,
+) -> np.ndarray:
+    """Zero-phase Butterworth low-pass along axis 0, padded like MATLAB's ``filtfilt``.
+
+    The filter is designed with ``butter(order, cutoff/(fs/2))`` and applied forward and
+    backward, so the magnitude response is that of a ``2*order`` filter. MATLAB pads both
+    ends with an odd reflection of ``3 (max(len(a), len(b)) - 1)`` samples (18 for order 6)
+    and starts from steady-state initial conditions; SciPy's ``filtfilt`` does the same with
+    ``padtype='odd'`` and that ``padlen`` (SciPy's default would be 21).
+
+    Raises :class:`DataMismatchError` if the signal has no more samples than the padding.
+    """
+    x = np.asarray(x, dtype=float)
+    b, a = butter(order, cutoff_hz / (sample_rate_hz / 2.0))
+    padlen = 3 * (max(len(a), len(b)) - 1)
+    if x.shape[0] <= padlen:
+        raise DataMismatchError(
+            f"a signal of {x.shape[0]} samples is too short for the {order}th-order "
+            f"{cutoff_hz:g} Hz zero-phase filter (needs more than {padlen} samples); "
+            "use a longer trial"
+        )
+    return filtfilt(b, a, x, axis=0, padtype="odd", padlen=padlen)
+
+
+def mesh_for_window(t0: float, tf: float, mesh_frequency_hz: float = MESH_FREQUENCY_HZ) -> np.ndarray:
+    """Mesh nodes ``t_k = t0 + k h``, ``k = 0..N``, ``N = round((tf - t0) f)``, ``h = (tf - t0)/N``."""
+    n = int(round((tf - t0) * mesh_frequency_hz))
+    if n < 2:
+        raise DataMismatchError(
+            f"the time window {t0:g}-{tf:g} s gives {n} mesh intervals at {mesh_frequency_hz:g} per "
+            "second; at least 2 are needed (use a longer trial)"
+        )
+    return t0 + (tf - t0) * np.arange(n + 1) / n
+
+
+def _sample_rate(time: np.ndarray, what: str) -> float:
+    dt = np.diff(time)
+    mean_dt = float(np.mean(dt))
+    if np.max(np.abs(dt - mean_dt)) > 0.01 * mean_dt + 1e-9:
+        raise DataMismatchError(
+            f"{what}: the time stamps are not evenly spaced (steps {dt.min():.6g}-{dt.max():.6g} s); "
+            "the low-pass filter needs a constant sampling rate: resample the file"
+        )
+    return 1.0 / mean_dt
+
+
+def read_kinematics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT_DOFS):
+    """Read an IK ``.mot`` file: its time stamps and the DOF angles in radians.
+
+    Checks that every DOF column is present and that the angle units agree with the header:
+    with ``inDegrees=no``, an angle beyond pi rad (180 degrees) means the values are in
+    degrees; with ``inDegrees=yes``, all DOF angles staying below 1 degree over a trial that
+    moves the joints is reported as radians mislabelled as degrees.
+
+    Returns
+    -------
+    time_s : (F,) array
+    angles_rad : (F, D) array
+    """
+    ik = read_storage(path)
+    require_columns(ik, dofs, what="IK coordinate column")
+    if len(ik.index) < 2:
+        raise InputFileError(f"{path}: the IK file has fewer than 2 frames")
+    q = ik[list(dofs)].to_numpy(dtype=float)
+    in_degrees = ik.attrs.get("in_degrees")
+    peak = float(np.max(np.abs(q)))
+    if in_degrees is False and peak > _MAX_PLAUSIBLE_ANGLE_RAD:
+        col = dofs[int(np.argmax(np.max(np.abs(q), axis=0)))]
+        raise DataMismatchError(
+            f"{path}: the header says inDegrees=no but column '{col}' reaches {peak:.4g}, which is "
+            "not an angle in radians; the values look like degrees: fix the header to inDegrees=yes"
+        )
+    if in_degrees is None and peak > _MAX_PLAUSIBLE_ANGLE_RAD:
+        in_degrees = True
+    if in_degrees and peak < 1.0 and float(np.ptp(q, axis=0).max()) > 0.05:
+        raise DataMismatchError(
+            f"{path}: the header says inDegrees=yes but no DOF angle exceeds 1 degree while the "
+            "joints move; the values look like radians: fix the header to inDegrees=no"
+        )
+    if in_degrees:
+        q = np.deg2rad(q)
+    return ik.index.to_numpy(dtype=float), q
+
+
+def read_inverse_dynamics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT_DOFS):
+    """Read the ``<dof>_moment`` columns (N m) of an inverse-dynamics ``.sto`` file.
+
+    Returns
+    -------
+    time_s : (T,) array
+    moments_Nm : (T, D) array
+    """
+    table = read_storage(path)
+    cols = [f"{d}_moment" for d in dofs]
+    try:
+        require_columns(table, cols, what="inverse-dynamics column")
+    except MissingColumnError as exc:
+        raise MissingColumnError(
+            f"{exc.message}. The inverse dynamics must give one '<dof>_moment' column (N m) per "
+            f"degree of freedom: {', '.join(cols)}"
+        ) from None
+    if len(table.index) < 2:
+        raise InputFileError(f"{path}: the inverse-dynamics file has fewer than 2 rows")
+    return table.index.to_numpy(dtype=float), table[cols].to_numpy(dtype=float)
+
+
+def select_muscles(
+    muscles: Sequence[str],
+    moment_arms_m: np.ndarray,
+    dofs: Sequence[str],
+    threshold_m: float = MUSCLE_SELECTION_THRESHOLD_M,
+):
+    """Muscles and DOFs of the problem (study rule, ``muscle_redundancy.md`` §1).
+
+    A muscle is kept when ``|r| > threshold`` about at least one DOF **at the first frame**
+    (raw moment arms); a DOF is kept when at least one kept muscle has ``|r| > threshold``
+    about it at some frame. Order is preserved.
+
+    Returns ``(muscle_indices, dof_indices)``.
+    """
+    r = np.asarray(moment_arms_m, dtype=float)
+    keep_m = np.flatnonzero(np.any(np.abs(r[0]) > threshold_m, axis=0))
+    if keep_m.size == 0:
+        raise DataMismatchError(
+            f"no muscle has a moment arm above {threshold_m:g} m about {', '.join(dofs)}; "
+            "check the model and the DOF names"
+        )
+    keep_d = np.flatnonzero(np.any(np.abs(r[:, :, keep_m]) > threshold_m, axis=(0, 2)))
+    return keep_m, keep_d
+
+
+def _check_window(ik_time: np.ndarray, id_time: np.ndarray, ik_path, id_path) -> None:
+    t0, tf = float(ik_time[0]), float(ik_time[-1])
+    tol = 0.5 * float(np.min(np.diff(ik_time)))
+    if id_time[-1] < t0 or id_time[0] > tf:
+        raise DataMismatchError(
+            f"the inverse dynamics {id_path} ({id_time[0]:g}-{id_time[-1]:g} s) and the inverse "
+            f"kinematics {ik_path} ({t0:g}-{tf:g} s) do not overlap in time; use files of the same trial"
+        )
+    if id_time[0] > t0 + tol or id_time[-1] < tf - tol:
+        raise DataMismatchError(
+            f"the inverse dynamics {id_path} covers {id_time[0]:g}-{id_time[-1]:g} s but the inverse "
+            f"kinematics {ik_path} (the analysis window) covers {t0:g}-{tf:g} s; the ID must cover "
+            "the whole IK window: use files of the same trial or crop the IK"
+        )
+
+
+def check_moment_magnitudes(
+    moments_Nm: np.ndarray,
+    dofs: Sequence[str],
+    moment_arms_m: np.ndarray,
+    max_isometric_force_N: np.ndarray,
+    id_path="inverse dynamics",
+    reserve_Nm: float = 150.0,
+) -> None:
+    """Reject ID moments whose size cannot be N m of a walking-like trial.
+
+    Too large: a moment beyond what the muscles crossing the DOF can produce
+    (``sum F0 * 2 * |r|``, force-velocity peak below 1.8) plus the reserve, typically N mm.
+    Too small: every DOF stays below 1 N m, typically moments normalised to body mass
+    (N m/kg) or in kN m.
+    """
+    M = np.asarray(moments_Nm, dtype=float)
+    r = np.abs(np.asarray(moment_arms_m, dtype=float))  # (F, D, M)
+    capacity = 2.0 * np.einsum("fdm,m->fd", r, np.asarray(max_isometric_force_N, float)) + reserve_Nm
+    ratio = np.abs(M) / capacity
+    if np.max(ratio) > 1.0:
+        f, d = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
+        raise DataMismatchError(
+            f"{id_path}: '{dofs[d]}_moment' reaches {M[f, d]:.6g}, more than the muscles crossing "
+            f"{dofs[d]} and the reserve can produce ({capacity[f, d]:.4g} N m); the moments must be "
+            "in N m (not N mm) and belong to this model and trial"
+        )
+    if np.max(np.abs(M)) < 1.0:
+        raise DataMismatchError(
+            f"{id_path}: all joint moments stay below 1 N m (peak {np.max(np.abs(M)):.3g}); they look "
+            "normalised (e.g. N m/kg) or in kN m. The solver needs moments in N m"
+        )
+
+
+def prepare_inputs(
+    geometry: GeometryLike,
+    id_time_s: np.ndarray,
+    id_moments_Nm: np.ndarray,
+    *,
+    ik_time_s: np.ndarray | None = None,
+    dofs: Sequence[str] | None = None,
+    filter_inputs: bool = True,
+    cutoff_hz: float = FILTER_CUTOFF_HZ,
+    filter_order: int = FILTER_ORDER,
+    mesh_frequency_hz: float = MESH_FREQUENCY_HZ,
+    sources: dict | None = None,
+) -> TrialInputs:
+    """Filter the trial data and evaluate it on the optimisation mesh.
+
+    Parameters
+    ----------
+    geometry
+        Muscle-tendon lengths ``(F, M)`` and moment arms ``(F, D, M)`` at the IK frames.
+    id_time_s, id_moments_Nm
+        The full ID file ``(T,)``, ``(T, D)`` with columns in the order of ``dofs``.
+    ik_time_s
+        IK frame times; the window is ``[ik_time_s[0], ik_time_s[-1]]``. Defaults to the
+        geometry's time (which must equal the IK frames).
+    dofs
+        DOF names of the ID columns; defaults to ``geometry.dofs``.
+    filter_inputs
+        The study filters everything (6 Hz, order 6); ``False`` skips filtering.
+    """
+    sources = dict(sources or {})
+    g_time = np.asarray(geometry.time, dtype=float)
+    dofs = tuple(dofs if dofs is not None else geometry.dofs)
+    if tuple(geometry.dofs) != dofs:
+        raise DataMismatchError(
+            f"the geometry has DOFs {list(geometry.dofs)} but the moments are for {list(dofs)}; "
+            "compute the geometry for the same DOFs"
+        )
+    muscles = tuple(geometry.muscles)
+    lmt = np.asarray(geometry.lmt_m, dtype=float)
+    r = np.asarray(geometry.moment_arms_m, dtype=float)
+    F, M, D = g_time.size, len(muscles), len(dofs)
+    if lmt.shape != (F, M) or r.shape != (F, D, M):
+        raise DataMismatchError(
+            f"geometry arrays have shapes {lmt.shape} and {r.shape}; expected ({F}, {M}) and ({F}, {D}, {M})"
+        )
+    if not (np.all(np.isfinite(lmt)) and np.all(np.isfinite(r))):
+        raise DataMismatchError("the muscle geometry holds NaN or infinite values")
+    if ik_time_s is None:
+        ik_time_s = g_time
+    ik_time_s = np.asarray(ik_time_s, dtype=float)
+    if ik_time_s.size != F or np.max(np.abs(ik_time_s - g_time)) > 1e-6:
+        raise DataMismatchError(
+            f"the muscle geometry has {F} frames ({g_time[0]:g}-{g_time[-1]:g} s) but the IK has "
+            f"{ik_time_s.size} ({ik_time_s[0]:g}-{ik_time_s[-1]:g} s); compute the geometry from this IK file"
+        )
+    id_time_s = np.asarray(id_time_s, dtype=float)
+    id_moments_Nm = np.asarray(id_moments_Nm, dtype=float).reshape(id_time_s.size, -1)
+    if id_moments_Nm.shape[1] != D:
+        raise DataMismatchError(f"{id_moments_Nm.shape[1]} ID moment columns for {D} DOFs")
+    if not np.all(np.isfinite(id_moments_Nm)):
+        raise DataMismatchError(f"the inverse dynamics {sources.get('id', '')} holds NaN or infinite values")
+    _check_window(ik_time_s, id_time_s, sources.get("ik", "IK"), sources.get("id", "ID"))
+
+    fs_ik = _sample_rate(ik_time_s, str(sources.get("ik", "IK")))
+    if filter_inputs:
+        fs_id = _sample_rate(id_time_s, str(sources.get("id", "ID")))
+        lmt_f = lowpass_filtfilt(lmt, fs_ik, cutoff_hz, filter_order)
+        r_f = lowpass_filtfilt(r.reshape(F, D * M), fs_ik, cutoff_hz, filter_order).reshape(F, D, M)
+        id_f = lowpass_filtfilt(id_moments_Nm, fs_id, cutoff_hz, filter_order)
+    else:
+        lmt_f, r_f, id_f = lmt, r, id_moments_Nm
+    # ID: filtered on the full file, linearly interpolated onto the IK frames.
+    id_frames = np.column_stack([np.interp(ik_time_s, id_time_s, id_f[:, j]) for j in range(D)])
+
+    mesh = mesh_for_window(float(ik_time_s[0]), float(ik_time_s[-1]), mesh_frequency_hz)
+    lmt_spline = CubicSpline(ik_time_s, lmt_f, axis=0, bc_type="not-a-knot")
+    r_spline = CubicSpline(ik_time_s, r_f.reshape(F, D * M), axis=0, bc_type="not-a-knot")
+    id_spline = CubicSpline(ik_time_s, id_frames, axis=0, bc_type="not-a-knot")
+    return TrialInputs(
+        muscles=muscles,
+        dofs=dofs,
+        frame_time_s=ik_time_s,
+        lmt_frames_m=lmt_f,
+        lmt_velocity_frames_m_per_s=lmt_spline(ik_time_s, 1),
+        moment_arms_frames_m=r_f,
+        moments_frames_Nm=id_frames,
+        mesh_time_s=mesh,
+        lmt_m=lmt_spline(mesh),
+        moment_arms_m=r_spline(mesh).reshape(mesh.size, D, M),
+        moments_Nm=id_spline(mesh),
+        sources=sources,
+    )
+

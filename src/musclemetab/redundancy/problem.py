@@ -1,0 +1,334 @@
+"""The muscle redundancy optimal control problem (De Groote et al. 2016), CasADi + IPOPT.
+
+Variables (``M`` muscles, ``D`` DOFs, ``N`` mesh intervals, ``h = (tf - t0)/N``):
+
+========================  ==========  ===================
+variable                  size        bounds
+========================  ==========  ===================
+activation ``a``          M x (N+1)   0 ... 1
+fibre length ``l~M``      M x (N+1)   0.1 ... 1.7
+projected length ``lp``   M x (N+1)   >= 1e-4 m
+excitation ``e``          M x N       0 ... 1
+reserve ``aT``            D x N       -1 ... 1 (x Topt = 150 N m)
+fibre velocity ``v~M``    M x N       -10 ... 10 lMo/s
+========================  ==========  ===================
+
+Constraints at nodes ``k = 0 ... N-1`` (forward Euler)::
+
+    a_{k+1} - a_k - h ADyn(e_k, a_k) = 0
+    l~M_{k+1} - l~M_k - h v~M_k = 0
+    (l~M_k lMo)^2 - w^2 - lp_k^2 = 0                       (also at node N)
+    [a_k fL fV(v~M_k/vmax) + fPE] lp_k/(l~M_k lMo) - fT((lMT_k - lp_k)/lTs) = 0
+    ID_j(t_k) - sum_m F0_m fT_mk r_jm(t_k) - Topt aT_jk = 0
+
+Objective::
+
+    J = wAct/2 (sum e^2 + sum a^2)/(N M) + wTres sum aT^2/(N D) + wVm sum v~M^2/(N M)
+
+(``a`` has N+1 columns but is divided by N, as in the study.) Simple bounds are passed to
+IPOPT as variable bounds (``lbx``/``ubx``), not as constraint rows. The per-node constraint
+function is built once from symbolic expressions and mapped over the mesh, so the expression
+graph (and its derivatives) does not grow with ``N``.
+
+Variables are ordered node by node, ``[a_k, l~M_k, lp_k, e_k, aT_k, v~M_k]`` for
+``k = 0 ... N-1`` then ``[a_N, l~M_N, lp_N]``, and constraints likewise, which keeps the KKT
+matrix banded.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import time as _time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..errors import OptionError, SolverError
+from ..muscle import activation_rate, hill_residual, tendon_force_length
+from .inputs import TrialInputs
+from .parameters import MuscleTendonParameters
+from .static_opt import InitialGuess
+
+__all__ = ["SolverOptions", "OcpResult", "solve_ocp", "problem_size", "tune_malloc"]
+
+ACTIVATION_BOUNDS = (0.0, 1.0)
+FIBRE_LENGTH_BOUNDS = (0.1, 1.7)
+FIBRE_VELOCITY_BOUNDS = (-10.0, 10.0)
+RESERVE_BOUNDS = (-1.0, 1.0)
+MIN_PROJECTED_LENGTH_M = 1e-4
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """Weights and numerical settings of the optimal control problem.
+
+    The defaults reproduce the study: weights ``[wAct, wTres, wVm] = [1, 1000, 0.01]``,
+    ``Topt = 150 N m``, IPOPT with exact Hessian, MUMPS, gradient-based NLP scaling,
+    ``tol = 1e-6``, ``max_iter = 10000`` and IPOPT's default monotone barrier strategy with
+    ``mu_init = 0.1`` (the problem has several local optima; other barrier settings can end
+    in a different one).
+
+    ``node_function`` chooses the symbolic type of the per-node constraint function: ``"MX"``
+    (default) or ``"SX"``; the optimum is the same. ``tune_malloc`` raises glibc's
+    ``malloc`` thresholds for the process before solving (MUMPS reallocates its work arrays
+    every iteration). ``ipopt`` holds further IPOPT options, e.g. ``{"mu_init": 1e-6}`` for a
+    warm start; anything there may change which optimum is found.
+    """
+
+    w_activation: float = 1.0
+    w_reserve: float = 1000.0
+    w_velocity: float = 0.01
+    optimal_reserve_Nm: float = 150.0
+    tol: float = 1e-6
+    max_iter: int = 10000
+    linear_solver: str = "mumps"
+    print_level: int = 0
+    node_function: str = "MX"
+    tune_malloc: bool = True
+    ipopt: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.node_function not in ("MX", "SX"):
+            raise OptionError(f"node_function must be 'MX' or 'SX', not {self.node_function!r}")
+        for name in ("w_activation", "w_reserve", "w_velocity"):
+            if getattr(self, name) < 0:
+                raise OptionError(f"the weight {name} must be non-negative, not {getattr(self, name)}")
+        if self.optimal_reserve_Nm <= 0:
+            raise OptionError(f"optimal_reserve_Nm must be positive, not {self.optimal_reserve_Nm}")
+        if self.max_iter < 1:
+            raise OptionError(f"max_iter must be at least 1, not {self.max_iter}")
+
+    def with_(self, **kw) -> "SolverOptions":
+        return replace(self, **kw)
+
+    def to_dict(self) -> dict:
+        return {
+            "w_activation": self.w_activation,
+            "w_reserve": self.w_reserve,
+            "w_velocity": self.w_velocity,
+            "optimal_reserve_Nm": self.optimal_reserve_Nm,
+            "tol": self.tol,
+            "max_iter": self.max_iter,
+            "linear_solver": self.linear_solver,
+            "node_function": self.node_function,
+            "tune_malloc": self.tune_malloc,
+            "ipopt": dict(self.ipopt),
+        }
+
+
+@dataclass(frozen=True)
+class OcpResult:
+    """Raw optimum: states ``(N+1, M)``, controls ``(N, M)`` / ``(N, D)``, IPOPT statistics."""
+
+    activation: np.ndarray
+    lm_norm: np.ndarray
+    lm_projected_m: np.ndarray
+    excitation: np.ndarray
+    reserve: np.ndarray
+    vm_norm: np.ndarray
+    objective: float
+    objective_terms: dict
+    status: str
+    success: bool
+    iterations: int
+    solve_time_s: float
+    build_time_s: float
+    n_variables: int
+    n_constraints: int
+    max_constraint_violation: float
+
+
+def problem_size(n_muscles: int, n_dofs: int, n_intervals: int) -> tuple[int, int]:
+    """Number of variables and equality constraints (``205 N + 120`` and ``165 N + 40`` for 40/5)."""
+    M, D, N = n_muscles, n_dofs, n_intervals
+    return (5 * M + D) * N + 3 * M, (4 * M + D) * N + M
+
+
+_MALLOC_TUNED = False
+
+
+def tune_malloc(threshold_bytes: int = 512 * 1024 * 1024) -> bool:
+    """Raise glibc's mmap/trim thresholds so freed work arrays are reused, not unmapped.
+
+    Equivalent to ``MALLOC_MMAP_THRESHOLD_``/``MALLOC_TRIM_THRESHOLD_``/``MALLOC_TOP_PAD_``
+    in the environment, set at run time with ``mallopt``. Returns ``False`` (and does
+    nothing) where glibc is not available.
+    """
+    global _MALLOC_TUNED
+    if _MALLOC_TUNED:
+        return True
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):
+        return False
+    M_TRIM_THRESHOLD, M_TOP_PAD, M_MMAP_THRESHOLD = -1, -2, -3
+    ok = bool(mallopt(M_MMAP_THRESHOLD, min(threshold_bytes, 2**31 - 1)))
+    ok &= bool(mallopt(M_TRIM_THRESHOLD, min(2 * threshold_bytes, 2**31 - 1)))
+    ok &= bool(mallopt(M_TOP_PAD, 64 * 1024 * 1024))
+    _MALLOC_TUNED = ok
+    return ok
+
+
+def _node_functions(inputs: TrialInputs, params: MuscleTendonParameters, options: SolverOptions, ca):
+    M, D = len(inputs.muscles), len(inputs.dofs)
+    h = inputs.step_s
+    sym = ca.MX.sym if options.node_function == "MX" else ca.SX.sym
+    P = {k: ca.DM(np.asarray(v, dtype=float)) for k, v in dict(
+        lmo=params.optimal_fiber_length_m,
+        lts=params.tendon_slack_length_m,
+        vmax=params.max_contraction_velocity,
+        kT=params.tendon_stiffness,
+        kpe=params.passive_kpe,
+        s0=params.passive_s0,
+        sm=params.passive_sm,
+        f0=params.max_isometric_force_N,
+    ).items()}
+    w2 = ca.DM(np.asarray(params.width_m, dtype=float) ** 2)
+
+    a, lm, lp = sym("a", M), sym("lm", M), sym("lp", M)
+    e, aT, vm = sym("e", M), sym("aT", D), sym("vm", M)
+    a1, lm1 = sym("a1", M), sym("lm1", M)
+    lmt, rflat, mom = sym("lmt", M), sym("r", D * M), sym("id", D)
+
+    penn = (lm * P["lmo"]) ** 2 - w2 - lp**2
+    dyn_a = a1 - a - h * activation_rate(e, a)
+    dyn_lm = lm1 - lm - h * vm
+    hill = hill_residual(
+        a, lm, vm, lp, lmt,
+        optimal_fiber_length_m=P["lmo"], tendon_slack_length_m=P["lts"],
+        max_contraction_velocity=P["vmax"], kT=P["kT"], kpe=P["kpe"], s0=P["s0"], sm=P["sm"],
+    )
+    ft = tendon_force_length((lmt - lp) / P["lts"], P["kT"])
+    R = ca.reshape(rflat, D, M)
+    moment = mom - ca.mtimes(R, P["f0"] * ft) - options.optimal_reserve_Nm * aT
+    node = ca.Function(
+        "node",
+        [a, lm, lp, e, aT, vm, a1, lm1, lmt, rflat, mom],
+        [ca.vertcat(dyn_a, dyn_lm, penn, hill, moment)],
+    )
+    last = ca.Function("last", [lm, lp], [penn])
+    return node, last
+
+
+def solve_ocp(
+    inputs: TrialInputs,
+    params: MuscleTendonParameters,
+    guess: InitialGuess,
+    options: SolverOptions | None = None,
+) -> OcpResult:
+    """Build and solve the optimal control problem; never raises on non-convergence.
+
+    The returned ``status`` is IPOPT's return status (``Solve_Succeeded`` on success) and
+    ``success`` says whether IPOPT reported success. Errors while building the problem raise
+    :class:`SolverError`.
+    """
+    import casadi as ca
+
+    options = options or SolverOptions()
+    if tuple(params.names) != tuple(inputs.muscles):
+        params = params.subset(inputs.muscles)
+    t_build = _time.perf_counter()
+    M, D, N = len(inputs.muscles), len(inputs.dofs), inputs.n_intervals
+    nx, nu = 3 * M, 2 * M + D
+    nz = nx + nu
+    n_var, n_con = problem_size(M, D, N)
+
+    node, last = _node_functions(inputs, params, options, ca)
+    w = ca.MX.sym("w", n_var)
+    W = ca.reshape(w[: nz * N], nz, N)
+    xN = w[nz * N:]
+    A, LM, LP = W[0:M, :], W[M:2 * M, :], W[2 * M:3 * M, :]
+    E, AT, VM = W[3 * M:4 * M, :], W[4 * M:4 * M + D, :], W[4 * M + D:, :]
+    A1 = ca.horzcat(A[:, 1:], xN[0:M])
+    LM1 = ca.horzcat(LM[:, 1:], xN[M:2 * M])
+    lmt = ca.DM(inputs.lmt_m[:N].T)
+    rr = ca.DM(inputs.moment_arms_m[:N].transpose(0, 2, 1).reshape(N, D * M).T)  # column-major D x M
+    mom = ca.DM(inputs.moments_Nm[:N].T)
+    G = node.map(N)(A, LM, LP, E, AT, VM, A1, LM1, lmt, rr, mom)
+    g = ca.vertcat(ca.vec(G), last(xN[M:2 * M], xN[2 * M:3 * M]))
+
+    a_all = ca.vertcat(ca.vec(A), xN[0:M])
+    terms = {
+        "activation": options.w_activation * 0.5 * ca.sumsqr(a_all) / (N * M),
+        "excitation": options.w_activation * 0.5 * ca.sumsqr(E) / (N * M),
+        "reserve": options.w_reserve * ca.sumsqr(AT) / (N * D),
+        "fibre_velocity": options.w_velocity * ca.sumsqr(VM) / (N * M),
+    }
+    J = terms["activation"] + terms["excitation"] + terms["reserve"] + terms["fibre_velocity"]
+
+    # bounds and initial guess, node-major layout
+    inf = np.inf
+    lb_node = np.concatenate([
+        np.full(M, ACTIVATION_BOUNDS[0]), np.full(M, FIBRE_LENGTH_BOUNDS[0]), np.full(M, MIN_PROJECTED_LENGTH_M),
+        np.full(M, ACTIVATION_BOUNDS[0]), np.full(D, RESERVE_BOUNDS[0]), np.full(M, FIBRE_VELOCITY_BOUNDS[0]),
+    ])
+    ub_node = np.concatenate([
+        np.full(M, ACTIVATION_BOUNDS[1]), np.full(M, FIBRE_LENGTH_BOUNDS[1]), np.full(M, inf),
+        np.full(M, ACTIVATION_BOUNDS[1]), np.full(D, RESERVE_BOUNDS[1]), np.full(M, FIBRE_VELOCITY_BOUNDS[1]),
+    ])
+    lbx = np.concatenate([np.tile(lb_node, N), lb_node[:nx]])
+    ubx = np.concatenate([np.tile(ub_node, N), ub_node[:nx]])
+    Z0 = np.vstack([
+        guess.activation[:N].T, guess.lm_norm[:N].T, guess.lm_projected_m[:N].T,
+        guess.excitation.T, guess.reserve.T, guess.vm_norm.T,
+    ])
+    x0 = np.concatenate([Z0.T.reshape(-1), guess.activation[N], guess.lm_norm[N], guess.lm_projected_m[N]])
+    if x0.size != n_var or g.shape[0] != n_con:
+        raise SolverError(f"internal error: problem size {x0.size}/{g.shape[0]}, expected {n_var}/{n_con}")
+    if not np.all(np.isfinite(x0)):
+        raise SolverError("the initial guess holds NaN or infinite values; check the muscle geometry and parameters")
+
+    ipopt = {
+        "tol": options.tol,
+        "max_iter": int(options.max_iter),
+        "nlp_scaling_method": "gradient-based",
+        "linear_solver": options.linear_solver,
+        "print_level": int(options.print_level),
+        "hessian_approximation": "exact",
+    }
+    ipopt.update(options.ipopt)
+    try:
+        solver = ca.nlpsol(
+            "mrs", "ipopt", {"x": w, "f": J, "g": g},
+            {"ipopt": ipopt, "print_time": False, "error_on_fail": False},
+        )
+    except RuntimeError as exc:
+        raise SolverError(f"the optimal control problem could not be built: {exc}") from None
+    terms_f = ca.Function("terms", [w], list(terms.values()))
+    build_time = _time.perf_counter() - t_build
+
+    if options.tune_malloc:
+        tune_malloc()
+    t0 = _time.perf_counter()
+    try:
+        sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=0.0, ubg=0.0)
+    except RuntimeError as exc:
+        raise SolverError(f"IPOPT stopped with an error: {exc}") from None
+    solve_time = _time.perf_counter() - t0
+    stats = solver.stats()
+    global LAST_STATS
+    LAST_STATS = stats
+    x = np.asarray(sol["x"]).reshape(-1)
+    gval = np.asarray(sol["g"]).reshape(-1)
+    Z = x[: nz * N].reshape(N, nz)
+    xNv = x[nz * N:]
+    return OcpResult(
+        activation=np.vstack([Z[:, 0:M], xNv[0:M]]),
+        lm_norm=np.vstack([Z[:, M:2 * M], xNv[M:2 * M]]),
+        lm_projected_m=np.vstack([Z[:, 2 * M:3 * M], xNv[2 * M:3 * M]]),
+        excitation=Z[:, 3 * M:4 * M].copy(),
+        reserve=Z[:, 4 * M:4 * M + D].copy(),
+        vm_norm=Z[:, 4 * M + D:].copy(),
+        objective=float(sol["f"]),
+        objective_terms={k: float(v) for k, v in zip(terms, terms_f(x))},
+        status=str(stats.get("return_status", "unknown")),
+        success=bool(stats.get("success", False)),
+        iterations=int(stats.get("iter_count", -1)),
+        solve_time_s=solve_time,
+        build_time_s=build_time,
+        n_variables=n_var,
+        n_constraints=n_con,
+        max_constraint_violation=float(np.max(np.abs(gval))) if gval.size else 0.0,
+    )

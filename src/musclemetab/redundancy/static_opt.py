@@ -1,0 +1,147 @@
+"""Static optimisation with rigid tendons: the initial guess of the optimal control problem.
+
+At every IK frame (``muscle_redundancy.md`` §4, ``muscle_model.md`` §10)::
+
+    min  sum_m a_m^2 + 1000 sum_j ar_j^2
+    s.t. ID_j = sum_m r_jm (a_m Fact_m + Fpas_m) + ar_j,    0 <= a_m <= 1
+
+with the rigid-tendon fibre state ``lM = sqrt((lMT - lTs)^2 + w^2)``,
+``cos(alpha) = (lMT - lTs)/lM``, ``v~MT = (dlMT/dt)/lMo``,
+``Fact = F0 fL(l~M) fV(v~MT/vmax) cos(alpha)`` and ``Fpas = F0 fPE(l~M) cos(alpha)``.
+The reserve ``ar`` (N m, ``Topt = 1``) is free in practice (bounds +-1.5e6 never bind).
+
+Eliminating ``ar = b - A a`` turns each frame into the bounded linear least-squares problem
+``min ||a||^2 + 1000 ||b - A a||^2, 0 <= a <= 1``, a strictly convex QP whose unique optimum
+is computed exactly with the bounded-variable least-squares method (Stark & Parker 1995);
+the study solved the same QP with IPOPT (tolerance 1e-6).
+
+From the static solution the OCP guess is built on the mesh: ``a``, ``ar`` and the normalised
+tendon force ``F~T = (a fL fV + fPE) cos(alpha)`` are interpolated linearly onto the nodes, the
+tendon curve is inverted with the *compliant* ``kT`` to get ``l~T``, then
+``lM = sqrt(w^2 + (lMT - lTs l~T)^2)``; the fibre-velocity guess is the derivative of a
+not-a-knot spline through that fibre-length guess.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+from scipy.optimize import lsq_linear
+
+from ..muscle import (
+    active_force_length,
+    force_velocity,
+    passive_force_length,
+    tendon_length_from_force,
+)
+from .inputs import TrialInputs
+from .parameters import MuscleTendonParameters
+
+__all__ = ["StaticOptimisation", "InitialGuess", "static_optimisation", "initial_guess"]
+
+RESERVE_WEIGHT_SO = 1000.0
+
+
+@dataclass(frozen=True)
+class StaticOptimisation:
+    """Rigid-tendon static optimisation at the IK frames.
+
+    ``activation`` ``(F, M)``, ``reserve_Nm`` ``(F, D)``, ``tendon_force_norm`` ``(F, M)``
+    (``F~T``), ``objective`` summed over frames.
+    """
+
+    time_s: np.ndarray
+    activation: np.ndarray
+    reserve_Nm: np.ndarray
+    tendon_force_norm: np.ndarray
+    objective: float
+
+
+@dataclass(frozen=True)
+class InitialGuess:
+    """Initial guess on the mesh: states ``(N+1, M)``, controls ``(N, M)`` / ``(N, D)``."""
+
+    activation: np.ndarray
+    lm_norm: np.ndarray
+    lm_projected_m: np.ndarray
+    excitation: np.ndarray
+    reserve: np.ndarray
+    vm_norm: np.ndarray
+
+
+def rigid_tendon_forces(lmt_m, lmt_velocity_m_per_s, params: MuscleTendonParameters):
+    """Per-unit-activation active force and passive force along the tendon (N), rigid tendon."""
+    lmo = params.optimal_fiber_length_m
+    along = lmt_m - params.tendon_slack_length_m
+    lm = np.sqrt(along**2 + params.width_m**2)
+    lm_norm = lm / lmo
+    cos_alpha = along / lm
+    vbar = lmt_velocity_m_per_s / lmo / params.max_contraction_velocity
+    fl = active_force_length(lm_norm)
+    fv = force_velocity(vbar)
+    fpe = passive_force_length(lm_norm, params.passive_kpe, params.passive_s0, params.passive_sm)
+    f0 = params.max_isometric_force_N
+    return f0 * fl * fv * cos_alpha, f0 * fpe * cos_alpha, (fl * fv * cos_alpha, fpe * cos_alpha)
+
+
+def static_optimisation(
+    inputs: TrialInputs,
+    params: MuscleTendonParameters,
+    reserve_weight: float = RESERVE_WEIGHT_SO,
+) -> StaticOptimisation:
+    """Solve the rigid-tendon static optimisation at every IK frame (exactly)."""
+    F = inputs.frame_time_s.size
+    M, D = len(inputs.muscles), len(inputs.dofs)
+    f_act, f_pas, (act_norm, pas_norm) = rigid_tendon_forces(
+        inputs.lmt_frames_m, inputs.lmt_velocity_frames_m_per_s, params
+    )
+    act = np.zeros((F, M))
+    res = np.zeros((F, D))
+    total = 0.0
+    sw = np.sqrt(reserve_weight)
+    eye = np.eye(M)
+    for k in range(F):
+        r = inputs.moment_arms_frames_m[k]  # (D, M)
+        A = r * f_act[k]
+        b = inputs.moments_frames_Nm[k] - r @ f_pas[k]
+        sol = lsq_linear(np.vstack([eye, sw * A]), np.concatenate([np.zeros(M), sw * b]),
+                         bounds=(0.0, 1.0), method="bvls", tol=1e-12)
+        a = np.clip(sol.x, 0.0, 1.0)
+        act[k] = a
+        res[k] = b - A @ a
+        total += float(a @ a + reserve_weight * res[k] @ res[k])
+    ft = act * act_norm + pas_norm
+    return StaticOptimisation(inputs.frame_time_s, act, res, ft, total)
+
+
+def initial_guess(inputs: TrialInputs, params: MuscleTendonParameters, so: StaticOptimisation) -> InitialGuess:
+    """The OCP initial guess on the mesh from the static optimisation (see module doc).
+
+    As in the study, the reserve guess is the static-optimisation reserve in N m, not divided
+    by the optimal reserve torque (only a starting point; IPOPT moves it into its bounds).
+    """
+    t = inputs.mesh_time_s
+    N = inputs.n_intervals
+
+    def lin(y):
+        return np.column_stack([np.interp(t, so.time_s, y[:, j]) for j in range(y.shape[1])])
+
+    a = lin(so.activation)
+    ar = lin(so.reserve_Nm)
+    ft = lin(so.tendon_force_norm)
+    lt_norm = tendon_length_from_force(ft, params.tendon_stiffness)
+    lm_proj = inputs.lmt_m - params.tendon_slack_length_m * lt_norm
+    lm_m = np.sqrt(params.width_m**2 + lm_proj**2)
+    lm_norm = lm_m / params.optimal_fiber_length_m
+    vm = CubicSpline(t, lm_norm, axis=0, bc_type="not-a-knot")(t[:N], 1)
+    lm_proj_guess = np.sqrt(np.maximum(lm_m**2 - params.width_m**2, 0.0))
+    return InitialGuess(
+        activation=a,
+        lm_norm=lm_norm,
+        lm_projected_m=lm_proj_guess,
+        excitation=a[:N].copy(),
+        reserve=ar[:N].copy(),
+        vm_norm=vm,
+    )
