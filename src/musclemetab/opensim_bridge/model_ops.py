@@ -302,3 +302,12 @@ def muscle_geometry(
         defaulted_coordinates=defaulted,
         opensim_version=osim.__version__,
     )
+
+
+def read_time_series_table(path: str) -> dict:
+    """Read a storage file with ``opensim.TimeSeriesTable`` (used to check our writer)."""
+    table = osim.TimeSeriesTable(path)
+    labels = list(table.getColumnLabels())
+    mat = table.getMatrix().to_numpy()
+    meta = {k: table.getTableMetaDataAsString(k) for k in table.getTableMetaDataKeys()}
+    return dict(labels=labels, time=np.asarray(table.getIndependentColumn()), values=mat, metadata=meta)

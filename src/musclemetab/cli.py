@@ -1,0 +1,108 @@
+"""The ``musclemetab`` command.
+
+Thin by design: each subcommand parses its arguments, calls the library and prints what
+it wrote. A package error is printed as one line (``musclemetab: error: ...``) and the
+command exits with status 1; a usage error exits with status 2 (argparse's convention).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from . import __version__
+from .errors import MusclemetabError
+
+# Subcommands provided by the stages of the method: (module, function adding the parser).
+_SUBCOMMANDS = (
+    ("musclemetab.cli", "add_geometry_parser"),
+    ("musclemetab.redundancy.cli", "add_solve_parser"),
+    ("musclemetab.metabolics.cli", "add_metabolics_parser"),
+)
+
+
+def _dof_list(text: str) -> list[str]:
+    return [d for d in text.replace(",", " ").split() if d]
+
+
+def add_geometry_parser(sub) -> None:
+    p = sub.add_parser(
+        "geometry",
+        help="muscle-tendon lengths and moment arms along an IK motion",
+        description=(
+            "Compute muscle-tendon lengths and moment arms (m) of the muscles spanning the chosen "
+            "DOFs at every frame of an inverse-kinematics motion, with OpenSim. Writes "
+            "DIR/muscle_tendon_lengths.sto and DIR/moment_arms_<dof>.sto (one column per muscle). "
+            "Results are cached: a second run on the same inputs does no OpenSim work."
+        ),
+    )
+    p.add_argument("--model", required=True, metavar="M.osim", help="OpenSim model")
+    p.add_argument("--ik", required=True, metavar="IK.mot", help="inverse kinematics motion")
+    p.add_argument(
+        "--dofs", nargs="+", metavar="DOF",
+        help="coordinates for the moment arms (default: ankle_angle, knee_angle, hip_flexion, "
+        "hip_adduction, hip_rotation of --side)",
+    )
+    p.add_argument("--side", default="r", choices=("r", "l"), help="leg (default r)")
+    p.add_argument("--muscles", nargs="+", metavar="MUSCLE", help="muscles (default: those spanning the DOFs)")
+    p.add_argument(
+        "--method", default="velocity", choices=("velocity", "opensim", "finite_difference"),
+        help="moment-arm method (default velocity; see the documentation)",
+    )
+    p.add_argument("--no-cache", action="store_true", help="do not read or write the geometry cache")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.set_defaults(func=geometry_command)
+
+
+def geometry_command(args) -> int:
+    from .geometry import compute_geometry, write_geometry
+
+    dofs = [d for item in args.dofs for d in _dof_list(item)] if args.dofs else None
+    geom = compute_geometry(
+        args.model, args.ik, dofs=dofs, side=args.side, muscles=args.muscles,
+        use_cache=not args.no_cache, method=args.method,
+    )
+    files = write_geometry(geom, args.out)
+    print(
+        f"geometry: {len(geom.muscles)} muscles x {len(geom.dofs)} DOFs x {len(geom.time)} frames"
+        f"{' (cached)' if geom.source.get('cached') else ''} -> {args.out} ({len(files)} files)"
+    )
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="musclemetab",
+        description="Muscle-by-muscle, moment-by-moment metabolic energy of walking.",
+    )
+    parser.add_argument("--version", action="version", version=f"musclemetab {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for module, func in _SUBCOMMANDS:
+        try:
+            mod = importlib.import_module(module)
+        except ModuleNotFoundError as exc:  # a stage not installed in this build
+            if exc.name and exc.name.startswith("musclemetab"):
+                continue
+            raise
+        getattr(mod, func)(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except MusclemetabError as exc:
+        msg = " ".join(str(exc).split())
+        print(f"musclemetab: error: {msg}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:  # pragma: no cover
+        print("musclemetab: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,183 @@
+"""Muscle geometry against the authors' OpenSim 4.1 MuscleAnalysis and OpenSim 4.6 itself."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from musclemetab.errors import ModelError, MissingColumnError, UnknownCoordinateError, UnknownMuscleError
+from musclemetab.geometry import compute_geometry
+from musclemetab.io import read_storage
+from musclemetab.model import default_dofs, read_model
+
+DOFS = ["ankle_angle_r", "knee_angle_r", "hip_flexion_r", "hip_adduction_r", "hip_rotation_r"]
+RIGHT_LEG = (
+    "addbrev_r addlong_r addmagDist_r addmagIsch_r addmagMid_r addmagProx_r bflh_r bfsh_r edl_r ehl_r "
+    "fdl_r fhl_r gaslat_r gasmed_r glmax1_r glmax2_r glmax3_r glmed1_r glmed2_r glmed3_r glmin1_r "
+    "glmin2_r glmin3_r grac_r iliacus_r perbrev_r perlong_r piri_r psoas_r recfem_r sart_r semimem_r "
+    "semiten_r soleus_r tfl_r tibant_r tibpost_r vasint_r vaslat_r vasmed_r"
+).split()
+
+
+@pytest.fixture(scope="module")
+def normal_geometry(example, tmp_path_factory):
+    return compute_geometry(example.model, example.ik["normal"], cache_dir=tmp_path_factory.mktemp("g"))
+
+
+def test_selection_is_the_forty_right_leg_muscles(normal_geometry):
+    assert default_dofs("r") == DOFS
+    assert list(normal_geometry.muscles) == RIGHT_LEG
+    assert list(normal_geometry.dofs) == DOFS
+    assert normal_geometry.lmt_m.shape == (119, 40)
+    assert normal_geometry.moment_arms_m.shape == (119, 5, 40)
+
+
+def test_lengths_match_opensim41_muscle_analysis(example, normal_geometry):
+    ref = read_storage(example.reference_muscle_analysis / "IK_sub1_normal_MuscleAnalysis_Length.sto")
+    np.testing.assert_allclose(normal_geometry.time, ref.index.to_numpy(), atol=1e-9)
+    diff = np.abs(ref[RIGHT_LEG].to_numpy() - normal_geometry.lmt_m)
+    assert diff.max() < 0.1e-3, f"largest length difference {diff.max() * 1e3:.4f} mm"
+
+
+@pytest.mark.parametrize("dof", DOFS)
+def test_moment_arms_match_opensim41_muscle_analysis(example, normal_geometry, dof):
+    ref = read_storage(example.reference_muscle_analysis / f"IK_sub1_normal_MuscleAnalysis_MomentArm_{dof}.sto")
+    diff = np.abs(ref[RIGHT_LEG].to_numpy() - normal_geometry.moment_arm(dof))
+    worst = RIGHT_LEG[int(np.unravel_index(diff.argmax(), diff.shape)[1])]
+    assert diff.max() < 0.3e-3, f"{dof}: {diff.max() * 1e3:.4f} mm ({worst})"
+
+
+def test_moment_arms_equal_opensim46_compute_moment_arm(example, normal_geometry, tmp_path):
+    """The fast method against Muscle.computeMomentArm, OpenSim 4.6, on every frame."""
+    api = compute_geometry(example.model, example.ik["normal"], method="opensim", use_cache=False)
+    assert api.muscles == normal_geometry.muscles
+    np.testing.assert_allclose(normal_geometry.moment_arms_m, api.moment_arms_m, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(normal_geometry.lmt_m, api.lmt_m)
+
+
+def test_coupled_knee_coordinate_comes_from_its_coupler(example, tmp_path):
+    """Corrupting the knee_angle_r_beta column must change nothing: it is never read."""
+    ik = read_storage(example.ik["fast"])
+    ik["knee_angle_r_beta"] = 57.0
+    from musclemetab.io import write_storage
+
+    path = write_storage(tmp_path / "ik_beta.mot", ik, in_degrees=True)
+    a = compute_geometry(example.model, example.ik["fast"], use_cache=False)
+    b = compute_geometry(example.model, path, use_cache=False)
+    np.testing.assert_array_equal(a.lmt_m, b.lmt_m)
+    np.testing.assert_array_equal(a.moment_arms_m, b.moment_arms_m)
+
+
+def test_cache_second_call_does_no_opensim_work(example, tmp_path, monkeypatch):
+    first = compute_geometry(example.model, example.ik["slow"], cache_dir=tmp_path)
+    assert first.source["cached"] is False
+    import musclemetab.opensim_bridge as bridge
+
+    def forbidden(*a, **k):
+        raise AssertionError("OpenSim was called although the result is cached")
+
+    monkeypatch.setattr(bridge, "call", forbidden)
+    second = compute_geometry(example.model, example.ik["slow"], cache_dir=tmp_path)
+    assert second.source["cached"] is True
+    np.testing.assert_array_equal(first.lmt_m, second.lmt_m)
+    np.testing.assert_array_equal(first.moment_arms_m, second.moment_arms_m)
+    assert second.muscles == first.muscles and second.dofs == first.dofs
+
+
+def test_cache_key_follows_content(example, tmp_path):
+    compute_geometry(example.model, example.ik["fast"], cache_dir=tmp_path)
+    ik = read_storage(example.ik["fast"])
+    ik["ankle_angle_r"] += 5.0
+    from musclemetab.io import write_storage
+
+    changed = write_storage(tmp_path / "ik.mot", ik, in_degrees=True)
+    g = compute_geometry(example.model, changed, cache_dir=tmp_path)
+    assert g.source["cached"] is False
+    # a corrupted cache entry is recomputed, not trusted
+    for f in tmp_path.glob("*.npz"):
+        f.write_bytes(b"garbage")
+    again = compute_geometry(example.model, changed, cache_dir=tmp_path)
+    assert again.source["cached"] is False
+    np.testing.assert_array_equal(again.lmt_m, g.lmt_m)
+
+
+def test_explicit_muscles_by_name(example, normal_geometry):
+    g = compute_geometry(example.model, example.ik["normal"], muscles=["soleus_r", "addbrev_r"], use_cache=False)
+    assert g.muscles == ("soleus_r", "addbrev_r")
+    np.testing.assert_array_equal(g.lmt_m[:, 0], normal_geometry.lmt_m[:, RIGHT_LEG.index("soleus_r")])
+
+
+def test_model_facts(example):
+    info = read_model(example.model)
+    assert info.body_mass_kg == pytest.approx(72.6, abs=1e-9)
+    assert len(info.muscles) == 80 and info.muscles.names[:2] == ("addbrev_r", "addlong_r")
+    sol = info.muscles.subset(["soleus_r"])
+    assert sol.max_contraction_velocity[0] == 10.0
+    generic = read_model(example.calibration_model)  # no max_contraction_velocity element
+    assert np.all(generic.muscles.max_contraction_velocity == 10.0)
+    assert generic.muscles.subset(["soleus_r"]).max_isometric_force_N[0] == pytest.approx(6194.84, abs=0.01)
+    assert {"dependent": "knee_angle_r_beta", "independent": ["knee_angle_r"]} in info.couplers
+
+
+def test_bad_inputs(example, tmp_path):
+    with pytest.raises(ModelError, match="no such model file"):
+        compute_geometry(tmp_path / "none.osim", example.ik["normal"])
+    junk = tmp_path / "junk.osim"
+    junk.write_text("<OpenSimDocument><Model name='x'><broken")
+    with pytest.raises(ModelError, match="junk.osim"):
+        compute_geometry(junk, example.ik["normal"], use_cache=False)
+    with pytest.raises(MissingColumnError, match="foo_r"):
+        compute_geometry(example.model, example.ik["normal"], dofs=["foo_r"])
+    ik = read_storage(example.ik["normal"])
+    ik["foo_r"] = 0.0
+    from musclemetab.io import write_storage
+
+    path = write_storage(tmp_path / "extra.mot", ik, in_degrees=True)
+    with pytest.raises(UnknownCoordinateError, match="no coordinate 'foo_r'"):
+        compute_geometry(example.model, path, dofs=["foo_r"], use_cache=False)
+    with pytest.raises(UnknownCoordinateError, match="locked or coupled"):
+        compute_geometry(example.model, path, dofs=["knee_angle_r_beta"], use_cache=False)
+    with pytest.raises(UnknownMuscleError, match="soleus_x"):
+        compute_geometry(example.model, example.ik["normal"], muscles=["soleus_x"], use_cache=False)
+
+
+def _cli(*args):
+    exe = shutil.which("musclemetab") or sys.executable
+    cmd = [exe, *args] if exe != sys.executable else [sys.executable, "-m", "musclemetab.cli", *args]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+
+
+def test_cli_geometry_writes_opensim_files(example, tmp_path, normal_geometry):
+    out = tmp_path / "geom"
+    r = _cli("geometry", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    names = sorted(p.name for p in out.iterdir())
+    assert names == sorted(["muscle_tendon_lengths.sto"] + [f"moment_arms_{d}.sto" for d in DOFS])
+    lengths = read_storage(out / "muscle_tendon_lengths.sto")
+    assert list(lengths.columns) == RIGHT_LEG
+    np.testing.assert_allclose(lengths.to_numpy(), normal_geometry.lmt_m, rtol=1e-11)
+    knee = read_storage(out / "moment_arms_knee_angle_r.sto")
+    np.testing.assert_allclose(knee.to_numpy(), normal_geometry.moment_arm("knee_angle_r"), rtol=1e-10, atol=1e-15)
+
+
+@pytest.mark.parametrize(
+    "args, phrase",
+    [
+        (["--ik", "{id}"], "missing DOF columns"),
+        (["--ik", "{ik}", "--dofs", "ankle_angle_q"], "ankle_angle_q"),
+        (["--ik", "{missing}"], "no such file"),
+    ],
+)
+def test_cli_errors_one_line_no_output(example, tmp_path, args, phrase):
+    out = tmp_path / "out"
+    subs = {"{id}": str(example.id["normal"]), "{ik}": str(example.ik["normal"]), "{missing}": str(tmp_path / "x.mot")}
+    args = [subs.get(a, a) for a in args]
+    r = _cli("geometry", "--model", str(example.model), *args, "--out", str(out))
+    assert r.returncode == 1
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("musclemetab: error:") and phrase in lines[0]
+    assert not out.exists() or not any(out.iterdir())

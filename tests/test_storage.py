@@ -1,0 +1,138 @@
+"""OpenSim storage files: both header styles, writing for OpenSim, every malformed case."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from musclemetab.errors import MissingColumnError, StorageFormatError, TimeColumnError
+from musclemetab.io import read_storage, require_columns, storage_from_arrays, write_storage
+
+
+def test_modern_header_ik(example):
+    df = read_storage(example.ik["normal"])
+    assert df.attrs["name"] == "Coordinates"
+    assert df.attrs["in_degrees"] is True
+    assert df.shape == (119, 39)
+    assert df.index[0] == pytest.approx(0.57) and df.index[-1] == pytest.approx(1.75)
+    # first data row as printed in the file
+    assert df["pelvis_tilt"].iloc[0] == pytest.approx(2.14633367)
+    assert df["hip_flexion_r"].iloc[0] == pytest.approx(34.34281872)
+    assert list(df.columns[:3]) == ["pelvis_tilt", "pelvis_list", "pelvis_rotation"]
+
+
+def test_modern_header_radians(example):
+    df = read_storage(example.id["normal"])
+    assert df.attrs["in_degrees"] is False
+    assert df.attrs["name"] == "Inverse Dynamics Generalized Forces"
+    # normal-speed ranges stated with the data set
+    assert df["ankle_angle_r_moment"].min() == pytest.approx(-103.9, abs=0.05)
+    assert df["knee_angle_r_moment"].max() == pytest.approx(35.6, abs=0.05)
+
+
+def test_legacy_header_emg(example):
+    df = read_storage(example.emg["normal"])
+    assert df.attrs["in_degrees"] is None  # the legacy header has no inDegrees line
+    assert df.attrs["name"].endswith("P1S100W01_EMG(MVC)_40ms.mot")
+    assert df.shape == (2460, 15)
+    assert list(df.columns) == "BF ST VL VM RF TFL GE GA TA GL GM SO ES MF VI_a".split()
+    assert df.index[0] == pytest.approx(0.040) and df.index[-1] == pytest.approx(2.499)
+    assert df["BF"].iloc[0] == pytest.approx(-0.0071125277)
+    # VI_a is documented as the mean of VL and VM
+    np.testing.assert_allclose(df["VI_a"], (df["VL"] + df["VM"]) / 2, atol=1e-9)
+
+
+def test_legacy_header_with_trailing_tabs(example):
+    df = read_storage(example.calibration_trials["ankle"]["moments"])
+    assert df.shape == (150, 3)
+    assert df["ankle_angle_r_moment"].iloc[0] == pytest.approx(-0.63964)
+    assert df.index[1] == pytest.approx(0.0202040816)
+
+
+def test_round_trip_through_opensim(tmp_path, example):
+    from musclemetab.opensim_bridge import call
+
+    ik = read_storage(example.ik["fast"])
+    out = write_storage(tmp_path / "copy.sto", ik, name="roundtrip", in_degrees=True)
+    back = call("model_ops:read_time_series_table", str(out))
+    assert back["labels"] == list(ik.columns)
+    np.testing.assert_allclose(back["time"], ik.index.to_numpy(), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(back["values"], ik.to_numpy(), rtol=1e-11, atol=1e-12)
+    assert back["metadata"]["inDegrees"] == "yes"
+    # and through our own reader
+    again = read_storage(out)
+    assert again.attrs["in_degrees"] is True and again.attrs["name"] == "roundtrip"
+    np.testing.assert_allclose(again.to_numpy(), ik.to_numpy(), rtol=1e-11)
+
+
+def test_written_columns_with_slashes_and_nan(tmp_path):
+    from musclemetab.opensim_bridge import call
+
+    df = storage_from_arrays([0.0, 0.01, 0.02], {"/forceset/soleus_r/activation": [0.1, 0.2, np.nan]})
+    out = write_storage(tmp_path / "s.sto", df)
+    back = call("model_ops:read_time_series_table", str(out))
+    assert back["labels"] == ["/forceset/soleus_r/activation"]
+    assert np.isnan(back["values"][2, 0]) and back["values"][1, 0] == pytest.approx(0.2)
+
+
+def test_write_is_atomic(tmp_path, monkeypatch):
+    target = tmp_path / "keep.sto"
+    target.write_text("old content")
+    df = storage_from_arrays([0.0, 1.0], {"x": [1.0, 2.0]})
+
+    def boom(*a, **k):
+        raise RuntimeError("disk full")
+
+    import musclemetab.io.storage as storage
+
+    monkeypatch.setattr(storage, "_format", boom)
+    with pytest.raises(RuntimeError):
+        write_storage(target, df)
+    assert target.read_text() == "old content"
+    assert [p.name for p in tmp_path.iterdir()] == ["keep.sto"]  # no temporary left
+
+
+GOOD = "Coordinates\nversion=1\nnRows=3\nnColumns=3\ninDegrees=yes\nendheader\ntime\ta\tb\n0\t1\t2\n0.01\t3\t4\n0.02\t5\t6\n"
+
+
+@pytest.mark.parametrize(
+    "text, error, phrase",
+    [
+        ("", StorageFormatError, "no 'endheader'"),
+        (GOOD.replace("endheader\n", ""), StorageFormatError, "no 'endheader'"),
+        (GOOD.split("time")[0], StorageFormatError, "truncated"),
+        (GOOD.rsplit("0.02", 1)[0], StorageFormatError, "announces 3 rows"),
+        (GOOD.replace("0.01\t3\t4", "0.01\t3"), StorageFormatError, "has 2 values"),
+        (GOOD.replace("0.01\t3\t4", "0.01\tthree\t4"), StorageFormatError, "'three'"),
+        (GOOD.replace("0.01\t3", "nan\t3"), TimeColumnError, "NaN"),
+        (GOOD.replace("0.02\t5", "0.005\t5"), TimeColumnError, "not strictly increasing"),
+        (GOOD.replace("0.01\t3", "0\t3"), TimeColumnError, "not strictly increasing"),
+        (GOOD.replace("time\ta\tb", "t\ta\tb"), TimeColumnError, "expected 'time'"),
+        (GOOD.replace("time\ta\tb", "time\ta\ta"), StorageFormatError, "duplicate"),
+        (GOOD.replace("inDegrees=yes", "inDegrees=maybe"), StorageFormatError, "inDegrees"),
+        (GOOD.replace("nRows=3", "nRows=three"), StorageFormatError, "whole number"),
+    ],
+)
+def test_malformed_files_name_the_file(tmp_path, text, error, phrase):
+    path = tmp_path / "bad.mot"
+    path.write_text(text)
+    with pytest.raises(error) as info:
+        read_storage(path)
+    assert str(path) in str(info.value)
+    assert phrase in str(info.value)
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(StorageFormatError, match="no such file"):
+        read_storage(tmp_path / "absent.mot")
+
+
+def test_require_columns(example):
+    df = read_storage(example.id["normal"])
+    require_columns(df, ["ankle_angle_r_moment"])
+    with pytest.raises(MissingColumnError) as info:
+        require_columns(df, ["ankle_angle_r_moment", "ankle_angle_x_moment"])
+    assert "ankle_angle_x_moment" in str(info.value) and "ID_sub1_normal.sto" in str(info.value)
+    df.loc[df.index[3], "ankle_angle_r_moment"] = np.nan
+    with pytest.raises(MissingColumnError, match="NaN"):
+        require_columns(df, ["ankle_angle_r_moment"])
