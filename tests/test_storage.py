@@ -136,3 +136,14 @@ def test_require_columns(example):
     df.loc[df.index[3], "ankle_angle_r_moment"] = np.nan
     with pytest.raises(MissingColumnError, match="NaN"):
         require_columns(df, ["ankle_angle_r_moment"])
+
+
+def test_written_files_have_a_normal_mode(tmp_path):
+    import os
+
+    mask = os.umask(0o022)
+    try:
+        out = write_storage(tmp_path / "m.sto", storage_from_arrays([0.0], {"x": [1.0]}))
+    finally:
+        os.umask(mask)
+    assert (out.stat().st_mode & 0o777) == 0o644

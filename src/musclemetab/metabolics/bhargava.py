@@ -1,0 +1,251 @@
+"""BH04: Bhargava, Pandy & Anderson (2004), as implemented in the study."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import DataMismatchError, OptionError
+from ._common import (
+    BASAL_RATE_W_PER_KG,
+    MetabolicRates,
+    apply_non_negativity,
+    basal_rate,
+    check_flag,
+    model_function,
+    prepare_inputs,
+    recruitment_terms,
+    run_kernel,
+)
+
+__all__ = ["bhargava2004", "bhargava_stimulation_time_s", "BHARGAVA_CONSTANTS"]
+
+#: Bhargava et al. (2004) constants: activation and maintenance heat (W/kg) per fibre
+#: type, time constant of the activation-heat decay (s), and the excitation threshold of
+#: the study's stimulation-time counter.
+BHARGAVA_CONSTANTS = {
+    "activation_slow_W_per_kg": 40.0,
+    "activation_fast_W_per_kg": 133.0,
+    "maintenance_slow_W_per_kg": 74.0,
+    "maintenance_fast_W_per_kg": 111.0,
+    "decay_time_constant_s": 0.045,
+    "decay_floor": 0.06,
+    "excitation_threshold": 0.1,
+}
+
+_LENGTH_DEPENDENCE = ("study", "published")
+
+
+def bhargava_stimulation_time_s(excitation, time_s, threshold: float = 0.1) -> np.ndarray:
+    """Time since stimulation onset as the study's BH04 code counts it (s).
+
+    Along the last axis, a counter increases by one at every sample where
+    ``excitation > threshold`` (strict) and is reset to 0 where it is not;
+    ``t_stim = counter * dt_mean`` with ``dt_mean = (t_last - t_first)/(n - 1)``. The first
+    supra-threshold sample therefore has ``t_stim = dt_mean``, and samples at or below the
+    threshold have ``t_stim = 0``. The counter starts at the first sample given (no memory
+    of earlier, e.g. trimmed, samples).
+
+    Parameters
+    ----------
+    excitation : array_like
+        Excitation, time along the last axis.
+    time_s : array_like
+        1-D time (s), one value per sample of the last axis, increasing.
+    threshold : float
+        Excitation threshold (0.1).
+    """
+    e = np.asarray(excitation, dtype=float)
+    t = np.asarray(time_s, dtype=float)
+    if e.ndim == 0:
+        raise DataMismatchError("BH04: the excitation needs a time axis (its last axis) to count stimulation time")
+    if t.ndim != 1 or t.size != e.shape[-1]:
+        raise DataMismatchError(
+            f"BH04: time_s must be 1-D with one value per sample of the last (time) axis: "
+            f"{e.shape[-1]} samples, but time_s has shape {t.shape}"
+        )
+    if t.size < 2:
+        raise OptionError(
+            "BH04: one time sample gives no sampling interval for the stimulation time; "
+            "pass stimulation_time_s explicitly"
+        )
+    if not np.all(np.isfinite(t)) or not np.all(np.diff(t) > 0):
+        raise OptionError("BH04: time_s must be finite and strictly increasing (s)")
+    dt_mean = (t[-1] - t[0]) / (t.size - 1)
+    on = e > threshold
+    count = np.cumsum(on, axis=-1)
+    reset = np.maximum.accumulate(np.where(on, 0, count), axis=-1)
+    return (count - reset) * dt_mean
+
+
+@model_function("BH04")
+def bhargava2004(
+    excitation,
+    activation,
+    normalized_fiber_length,
+    normalized_fiber_velocity,
+    active_force_length_multiplier,
+    force_velocity_multiplier,
+    passive_fiber_force_N,
+    max_isometric_force_N,
+    optimal_fiber_length_m,
+    max_contraction_velocity,
+    muscle_mass_kg,
+    slow_twitch_fraction,
+    *,
+    time_s=None,
+    stimulation_time_s=None,
+    activation_heat_decay: bool = True,
+    excitation_threshold: float = 0.1,
+    maintenance_length_dependence: str = "study",
+    non_negative: bool = True,
+    basal: bool = True,
+    basal_rate_W_per_kg: float = BASAL_RATE_W_PER_KG,
+    check: bool = True,
+) -> MetabolicRates:
+    """BH04: Bhargava, Pandy & Anderson (2004), as implemented in the study.
+
+    Reference: Bhargava LJ, Pandy MG, Anderson FC (2004) A phenomenological model for
+    estimating metabolic energy consumption in muscle contraction. J Biomech 37:81-88.
+
+    Equations (W for one muscle; ``V_CE = vbar vmax lMo`` in m/s, negative = shortening;
+    constant fibre fractions ``f_ST``, ``f_FT = 1 - f_ST``)::
+
+        u_f = 1 - cos(pi e/2),  u_s = sin(pi e/2)
+        H_A  = phi m (133 f_FT u_f + 40 f_ST u_s)
+        phi  = 0.06 + exp(-t_stim e / 0.045)   where t_stim > 0,  0 elsewhere
+        H_M  = g(l~M) m (111 f_FT u_f + 74 f_ST u_s)
+        F_iso = a fL F0,   F_M = a fL fV F0 + F_pe     (passive force included)
+        H_SL = -(0.16 F_iso + 0.18 F_M) V_CE           if V_CE <= 0
+        H_SL = -0.157 F_M V_CE                          if V_CE >  0
+        W_CE = -a fL fV F0 V_CE
+        Edot = W_CE + H_A + H_M + H_SL (+ basal)
+
+    Non-negativity (study setting on): where ``Edot <= 0``, ``H_SL := -H_A - H_M - W_CE``.
+    ``activation_maintenance = H_A + H_M``; ``extras`` gives ``activation`` and
+    ``maintenance`` separately.
+
+    Quirks of the study's implementation, reproduced by default:
+
+    * the stimulation time ``t_stim`` is the count of consecutive samples with
+      ``e > 0.1`` times the mean sampling interval (:func:`bhargava_stimulation_time_s`),
+      so there is **no activation heat while e <= 0.1** and the count starts at the first
+      sample given; it needs ``time_s`` (or pass ``stimulation_time_s``);
+    * the maintenance length factor is ``g(l~M) = l~M`` (unbounded): the code builds
+      Bhargava's piecewise factor and then overwrites it. ``maintenance_length_dependence=
+      "published"`` uses the piecewise factor (0.5 for l~M <= 0.5, l~M to 1,
+      ``-2 l~M + 3`` to 1.5, 0 beyond);
+    * the shortening-heat coefficient is force dependent (``0.16 F_iso + 0.18 F_M``).
+
+    OpenSim's ``Bhargava2004MuscleMetabolicsProbe`` has no activation-heat decay
+    (``phi = 1``, no threshold): ``activation_heat_decay=False`` reproduces that.
+
+    Parameters
+    ----------
+%(shared)s
+
+    Other parameters
+    ----------------
+    stimulation_time_s : array_like, optional
+        Time since stimulation onset (s), broadcastable to the states; replaces the count
+        from ``time_s``. ``phi = 0`` where it is 0; ``inf`` gives the steady-state limit
+        ``phi = 0.06``.
+    activation_heat_decay : bool
+        False: ``phi = 1`` everywhere (no decay, no threshold; OpenSim's formulation).
+    excitation_threshold : float
+        Threshold of the stimulation counter (0.1).
+    maintenance_length_dependence : {"study", "published"}
+        ``g(l~M) = l~M`` (study's code) or Bhargava's piecewise-linear factor.
+    non_negative : bool
+        Apply the non-negativity rule (default True, the study's setting).
+    """
+    model = "BH04"
+    for flag in ("activation_heat_decay", "non_negative", "basal"):
+        check_flag(model, flag, locals()[flag])
+    if maintenance_length_dependence not in _LENGTH_DEPENDENCE:
+        raise OptionError(
+            f"BH04: maintenance_length_dependence must be one of {', '.join(_LENGTH_DEPENDENCE)}, "
+            f"not {maintenance_length_dependence!r}"
+        )
+    inp = prepare_inputs(model, locals(), check=check)
+    k = BHARGAVA_CONSTANTS
+    e = inp.excitation
+    mass = inp.muscle_mass_kg
+    f_st = inp.slow_twitch_fraction
+    f_ft = 1.0 - f_st
+
+    if activation_heat_decay:
+        if stimulation_time_s is not None:
+            t_stim = np.asarray(stimulation_time_s, dtype=float)
+            if np.any(np.isnan(t_stim)) or np.any(t_stim < 0):
+                raise OptionError(
+                    "BH04: stimulation_time_s must not be NaN or negative (s; inf is the steady-state limit)"
+                )
+            try:
+                np.broadcast_shapes(t_stim.shape, inp.shape)
+            except ValueError:
+                raise DataMismatchError(
+                    f"BH04: stimulation_time_s has shape {t_stim.shape}, not broadcastable to the "
+                    f"muscle states {inp.shape}"
+                ) from None
+        elif time_s is not None:
+            t_stim = bhargava_stimulation_time_s(np.broadcast_to(e, inp.shape), time_s, excitation_threshold)
+        else:
+            raise OptionError(
+                "BH04: the activation-heat decay needs time: pass time_s (s, along the last axis) or "
+                "stimulation_time_s, or set activation_heat_decay=False"
+            )
+    else:
+        t_stim = np.zeros(())
+    decay = bool(activation_heat_decay)
+    infinite = bool(np.any(np.isinf(t_stim)))
+    floor = k["decay_floor"]
+    rate = 1.0 / k["decay_time_constant_s"]
+    published = maintenance_length_dependence == "published"
+
+    # per-muscle constants
+    act_fast = k["activation_fast_W_per_kg"] * f_ft * mass
+    act_slow = k["activation_slow_W_per_kg"] * f_st * mass
+    main_fast = k["maintenance_fast_W_per_kg"] * f_ft * mass
+    main_slow = k["maintenance_slow_W_per_kg"] * f_st * mass
+    v_scale = inp.max_contraction_velocity * inp.optimal_fiber_length_m
+    basal_w = basal_rate(inp, basal, basal_rate_W_per_kg)
+
+    def kernel(e, a, lm, vb, fl, fv, fpe, f0, t_stim, act_fast, act_slow, main_fast, main_slow, v_scale, basal_w):
+        u_s, u_f = recruitment_terms(e)
+        h_a = act_fast * u_f + act_slow * u_s
+        if decay:
+            x = t_stim * e
+            if infinite:  # inf * 0: no excitation, no activation heat either way
+                x = np.where(np.isnan(x), 0.0, x)
+            h_a = h_a * np.where(t_stim > 0, floor + np.exp(-rate * x), 0.0)
+        g = np.interp(lm, [0.5, 1.0, 1.5], [0.5, 1.0, 0.0]) if published else lm
+        h_m = g * (main_fast * u_f + main_slow * u_s)
+        v_ce = vb * v_scale
+        f_iso = a * fl * f0
+        f_ce = f_iso * fv
+        f_m = f_ce + fpe
+        h_sl = np.where(v_ce <= 0, 0.16 * f_iso + 0.18 * f_m, 0.157 * f_m) * -v_ce
+        work = -f_ce * v_ce
+        h_am = h_a + h_m
+        if non_negative:
+            h_sl = apply_non_negativity(work, h_am, h_sl, strict=False)
+        return work, h_am, h_sl, basal_w, work + h_am + h_sl + basal_w, h_a, h_m
+
+    work, h_am, h_sl, b, total, h_a, h_m = run_kernel(
+        kernel,
+        [
+            e, inp.activation, inp.normalized_fiber_length, inp.normalized_fiber_velocity,
+            inp.active_force_length_multiplier, inp.force_velocity_multiplier, inp.passive_fiber_force_N,
+            inp.max_isometric_force_N, t_stim, act_fast, act_slow, main_fast, main_slow, v_scale, basal_w,
+        ],
+        7,
+    )
+    return MetabolicRates(
+        model=model,
+        work=work,
+        activation_maintenance=h_am,
+        shortening_lengthening=h_sl,
+        basal=b,
+        total=total,
+        extras={"activation": h_a, "maintenance": h_m},
+    )

@@ -1,0 +1,149 @@
+"""HO06: Houdijk et al. (2006), as implemented in the study."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._common import (
+    BASAL_RATE_W_PER_KG,
+    MetabolicRates,
+    apply_non_negativity,
+    basal_rate,
+    check_flag,
+    model_function,
+    prepare_inputs,
+    run_kernel,
+)
+
+__all__ = ["houdijk2006", "HOUDIJK_CONSTANTS"]
+
+#: Per fibre type (fast, slow): activation and maintenance heat coefficients (W/kg; Hatze's
+#: stable heat 150 / 24.4 W/kg split 0.35 / 0.45 into activation heat), Hatze's
+#: stimulation-frequency constants k3 and k4 (1/s), and the shortening-heat coefficient
+#: (times F0).
+HOUDIJK_CONSTANTS = {
+    "activation_fast_W_per_kg": 0.35 * 150.0,  # 52.50
+    "activation_slow_W_per_kg": 0.45 * 24.4,  # 10.98
+    "maintenance_fast_W_per_kg": 0.65 * 150.0,  # 97.50
+    "maintenance_slow_W_per_kg": 0.55 * 24.4,  # 13.42
+    "k3_fast": 12.0,
+    "k3_slow": 6.0,
+    "k4_fast": 14.0,
+    "k4_slow": 8.0,
+    "shortening_fast": 0.28,
+    "shortening_slow": 0.16,
+}
+
+
+@model_function("HO06")
+def houdijk2006(
+    excitation,
+    activation,
+    normalized_fiber_length,
+    normalized_fiber_velocity,
+    active_force_length_multiplier,
+    force_velocity_multiplier,
+    passive_fiber_force_N,
+    max_isometric_force_N,
+    optimal_fiber_length_m,
+    max_contraction_velocity,
+    muscle_mass_kg,
+    slow_twitch_fraction,
+    *,
+    time_s=None,
+    non_negative: bool = True,
+    basal: bool = True,
+    basal_rate_W_per_kg: float = BASAL_RATE_W_PER_KG,
+    check: bool = True,
+) -> MetabolicRates:
+    """HO06: Houdijk, Bobbert & de Haan (2006), as implemented in the study.
+
+    Reference: Houdijk H, Bobbert MF, de Haan A (2006) Evaluation of a Hill based muscle
+    model for the energy cost and efficiency of muscular contraction. J Biomech
+    39:536-543 (heat terms after Hatze & Buys 1977).
+
+    Equations (W for one muscle; fibre-weighted constants with ``f_FT = 1 - f_ST``)::
+
+        hA = 52.50 f_FT + 10.98 f_ST,  hM = 97.50 f_FT + 13.42 f_ST         (W/kg)
+        k3 = 12 f_FT + 6 f_ST,  k4 = 14 f_FT + 8 f_ST,  a~ = (0.28 f_FT + 0.16 f_ST) F0
+        nu_max = k3 + k4 a,   nu_rel = a^2
+        H_A  = m hA nu_rel [1 - exp(-0.25 - 18.2/(nu_rel nu_max))]
+                           / [1 - exp(-0.25 - 18.2/nu_max)]                (0 at a = 0)
+        H_M  = m (hA + hM) a (fL - hA/(hA + hM))
+        H_SL = -a~ a fL V_CE      if V_CE <= 0,   0 if V_CE > 0   (V_CE in m/s)
+        W_CE = -a fL fV F0 V_CE
+        Edot = W_CE + H_A + H_M + H_SL (+ basal)
+
+    Non-negativity (study setting on): where ``Edot <= 0``, ``H_SL := -H_A - H_M - W_CE``.
+    Only activation drives the heats (excitation unused); no lengthening heat.
+    ``activation_maintenance = H_A + H_M``; ``extras`` gives ``activation`` and
+    ``maintenance`` separately.
+
+    Quirk reproduced: the maintenance heat is **negative** where ``fL < hA/(hA + hM)``
+    (0.35 for fast-twitch, 0.45 for slow-twitch fibres), i.e. far from optimal length; it
+    is not clipped.
+
+    Parameters
+    ----------
+%(shared)s
+
+    Other parameters
+    ----------------
+    non_negative : bool
+        Apply the non-negativity rule (default True, the study's setting).
+    """
+    model = "HO06"
+    for flag in ("non_negative", "basal"):
+        check_flag(model, flag, locals()[flag])
+    inp = prepare_inputs(model, locals(), check=check)
+    k = HOUDIJK_CONSTANTS
+    mass = inp.muscle_mass_kg
+    f_st = inp.slow_twitch_fraction
+    f_ft = 1.0 - f_st
+
+    # per-muscle constants
+    h_a_coef = k["activation_fast_W_per_kg"] * f_ft + k["activation_slow_W_per_kg"] * f_st
+    h_m_coef = k["maintenance_fast_W_per_kg"] * f_ft + k["maintenance_slow_W_per_kg"] * f_st
+    act_m = mass * h_a_coef
+    total_m = mass * (h_a_coef + h_m_coef)
+    k3 = k["k3_fast"] * f_ft + k["k3_slow"] * f_st
+    k4 = k["k4_fast"] * f_ft + k["k4_slow"] * f_st
+    a_short = (k["shortening_fast"] * f_ft + k["shortening_slow"] * f_st) * inp.max_isometric_force_N
+    v_scale = inp.max_contraction_velocity * inp.optimal_fiber_length_m
+    basal_w = basal_rate(inp, basal, basal_rate_W_per_kg)
+
+    def kernel(a, vb, fl, fv, f0, act_m, total_m, k3, k4, a_short, v_scale, basal_w):
+        nu_max = k3 + k4 * a
+        nu_rel = a * a
+        with np.errstate(divide="ignore"):
+            # nu_rel = 0 gives exp(-inf) = 0 in the numerator and h_a = 0
+            ratio = (1.0 - np.exp(-0.25 - 18.2 / (nu_rel * nu_max))) / (1.0 - np.exp(-0.25 - 18.2 / nu_max))
+        h_a = act_m * nu_rel * ratio
+        h_m = a * (total_m * fl - act_m)
+        v_ce = vb * v_scale
+        a_fl = a * fl
+        h_sl = np.where(v_ce <= 0, -a_short * a_fl * v_ce, 0.0)
+        work = -(a_fl * fv * f0) * v_ce
+        h_am = h_a + h_m
+        if non_negative:
+            h_sl = apply_non_negativity(work, h_am, h_sl, strict=False)
+        return work, h_am, h_sl, basal_w, work + h_am + h_sl + basal_w, h_a, h_m
+
+    work, h_am, h_sl, b, total, h_a, h_m = run_kernel(
+        kernel,
+        [
+            inp.activation, inp.normalized_fiber_velocity, inp.active_force_length_multiplier,
+            inp.force_velocity_multiplier, inp.max_isometric_force_N, act_m, total_m, k3, k4, a_short, v_scale,
+            basal_w,
+        ],
+        7,
+    )
+    return MetabolicRates(
+        model=model,
+        work=work,
+        activation_maintenance=h_am,
+        shortening_lengthening=h_sl,
+        basal=b,
+        total=total,
+        extras={"activation": h_a, "maintenance": h_m},
+    )

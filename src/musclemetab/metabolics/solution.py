@@ -1,0 +1,440 @@
+"""Metabolic rates of every muscle of a muscle-redundancy solution, and their files.
+
+Input: a solution folder (``solution.sto`` with one row per mesh node ``t_0 ... t_N`` and
+columns ``/forceset/<muscle>/<quantity>``; ``summary.json`` with ``muscles`` and the
+per-muscle ``parameters`` of the solve; see :mod:`musclemetab.redundancy.solution`).
+
+Trimming (``metabolic_models.md`` §1.1): the solver's first and last nodes are padding
+(free initial and final states). The study keeps nodes ``t_5 ... t_{N-6}``
+(0-based ``slice(5, N - 5)``, ``N - 10`` samples): 5 nodes dropped at the start and 6 at
+the end (the last includes node ``N``, where the controls only repeat node ``N-1``).
+Excitation and fibre velocity at node ``k`` pair with the states at node ``k``.
+
+Muscle parameters (``F0``, ``lMo``, ``vmax``) are matched by muscle name, from the solution's
+``summary.json`` (the values the solve used) or from a model; masses and slow-twitch
+fractions come from :mod:`musclemetab.properties` (volume rule, body mass and height).
+
+Outputs of :func:`write_metabolics` in a folder:
+
+``metabolics.sto``
+    time (trimmed nodes) and one column ``<model>/<muscle>/<component>`` (W) per model,
+    muscle and component (``work``, ``activation_maintenance``, ``shortening_lengthening``,
+    ``basal``, ``total``, and model extras). ``total`` includes the per-muscle basal heat
+    (1.2 W/kg of muscle mass) as the study's code computes it; ``total - basal`` is the
+    muscle's rate without basal heat.
+``metabolics.csv``
+    the same values as a tidy table: ``time``, ``model``, ``muscle``, ``component``,
+    ``value_W``.
+``whole_body.csv``
+    one row per model: ``model``, ``mean_W_per_kg`` (both legs, basal per the rule, by
+    default 1.2 W/kg of body mass), ``mean_W_per_kg_no_basal``, ``one_leg_mean_W``, then
+    ``basal_rule``, ``duration_s`` and, when a speed is given,
+    ``cost_of_transport_J_per_kg_per_m``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DataMismatchError, InputFileError, MissingColumnError, OptionError, SolverError
+from ._common import MetabolicRates
+from .registry import MODELS, parse_models
+from .whole_body import BASAL_RULES, WholeBodyRate, whole_body_rate
+
+__all__ = [
+    "SolutionStates",
+    "SolutionMetabolics",
+    "read_solution_states",
+    "trim_slice",
+    "metabolics_from_solution",
+    "write_metabolics",
+    "SOLUTION_FILE",
+    "SUMMARY_FILE",
+    "METABOLICS_STO",
+    "METABOLICS_CSV",
+    "WHOLE_BODY_CSV",
+]
+
+SOLUTION_FILE = "solution.sto"
+SUMMARY_FILE = "summary.json"
+METABOLICS_STO = "metabolics.sto"
+METABOLICS_CSV = "metabolics.csv"
+WHOLE_BODY_CSV = "whole_body.csv"
+
+#: solution column quantity -> model argument
+_QUANTITIES = {
+    "excitation": "excitation",
+    "activation": "activation",
+    "normalized_fiber_length": "normalized_fiber_length",
+    "normalized_fiber_velocity": "normalized_fiber_velocity",
+    "active_force_length_multiplier": "active_force_length_multiplier",
+    "force_velocity_multiplier": "force_velocity_multiplier",
+    "passive_fiber_force": "passive_fiber_force_N",
+}
+#: summary.json parameter keys -> model argument
+_SUMMARY_KEYS = {
+    "F0_N": "max_isometric_force_N",
+    "lMo_m": "optimal_fiber_length_m",
+    "vmax_lMo_per_s": "max_contraction_velocity",
+}
+_PARAMETER_NAMES = ("max_isometric_force_N", "optimal_fiber_length_m", "max_contraction_velocity")
+
+
+@dataclass
+class SolutionStates:
+    """Muscle states of a solution on its mesh: arrays ``(muscles, nodes)``.
+
+    ``states`` maps the model arguments (``excitation``, ``activation``,
+    ``normalized_fiber_length``, ``normalized_fiber_velocity``,
+    ``active_force_length_multiplier``, ``force_velocity_multiplier``,
+    ``passive_fiber_force_N``) to arrays; ``parameters`` maps muscle name to
+    ``{max_isometric_force_N, optimal_fiber_length_m, max_contraction_velocity}`` (may be
+    empty when the source has none).
+    """
+
+    time_s: np.ndarray
+    muscles: tuple[str, ...]
+    states: dict[str, np.ndarray]
+    parameters: dict[str, dict[str, float]] = field(default_factory=dict)
+    source: str = ""
+
+
+def read_solution_states(directory: str | os.PathLike, *, require_success: bool = True) -> SolutionStates:
+    """Read the muscle states and parameters of a solution folder.
+
+    Raises
+    ------
+    InputFileError
+        A file is missing, or ``summary.json`` is not valid JSON or lacks ``muscles``.
+    MissingColumnError
+        ``solution.sto`` lacks a needed column.
+    SolverError
+        The summary says the solve did not succeed (unless ``require_success=False``).
+    """
+    from ..io import read_storage
+
+    directory = Path(directory)
+    spath, jpath = directory / SOLUTION_FILE, directory / SUMMARY_FILE
+    for p in (spath, jpath):
+        if not p.is_file():
+            raise InputFileError(f"{p}: missing; {directory} is not a solution folder (run 'musclemetab solve')")
+    try:
+        summary = json.loads(jpath.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputFileError(f"{jpath}: not valid JSON ({exc})") from None
+    if not isinstance(summary, dict) or not summary.get("muscles"):
+        raise InputFileError(f"{jpath}: no 'muscles' list; the summary is incomplete")
+    if require_success and "success" in summary and not summary["success"]:
+        raise SolverError(
+            f"{directory}: the stored solve did not succeed (status '{summary.get('status')}'); its values "
+            "are not a solution. Solve again, or pass require_success=False to evaluate it anyway"
+        )
+    muscles = tuple(str(m) for m in summary["muscles"])
+    df = read_storage(spath)
+    need = [f"/forceset/{m}/{q}" for q in _QUANTITIES for m in muscles]
+    missing = [c for c in need if c not in df.columns]
+    if missing:
+        raise MissingColumnError(
+            f"{spath}: missing column{'s' if len(missing) > 1 else ''} {', '.join(missing[:6])}"
+            f"{' ...' if len(missing) > 6 else ''} ({len(missing)} in all); the metabolic models need "
+            f"{', '.join(_QUANTITIES)} for every muscle of {jpath.name}"
+        )
+    states = {
+        arg: df[[f"/forceset/{m}/{q}" for m in muscles]].to_numpy(dtype=float).T for q, arg in _QUANTITIES.items()
+    }
+    params: dict[str, dict[str, float]] = {}
+    records = summary.get("parameters") or {}
+    if isinstance(records, Mapping):
+        for m in muscles:
+            rec = records.get(m)
+            if isinstance(rec, Mapping) and all(k in rec for k in _SUMMARY_KEYS):
+                params[m] = {arg: float(rec[k]) for k, arg in _SUMMARY_KEYS.items()}
+    return SolutionStates(
+        time_s=df.index.to_numpy(dtype=float), muscles=muscles, states=states, parameters=params, source=str(directory)
+    )
+
+
+def trim_slice(n_nodes: int, start: int = 5, end: int = 6) -> slice:
+    """The kept nodes: drop ``start`` nodes at the beginning and ``end`` at the end.
+
+    The study's default (5, 6) on ``N + 1`` nodes keeps ``t_5 ... t_{N-6}``, i.e.
+    ``slice(5, N - 5)`` (``N - 10`` samples).
+    """
+    if start < 0 or end < 0:
+        raise OptionError(f"trim counts must not be negative, not ({start}, {end})")
+    if n_nodes - start - end < 2:
+        raise DataMismatchError(
+            f"the solution has {n_nodes} nodes; dropping {start} at the start and {end} at the end leaves fewer "
+            "than two samples. Solve over a longer window (the study pads the cycle with 5 frames at each end)"
+        )
+    return slice(start, n_nodes - end)
+
+
+def _parameters_for(muscles: Sequence[str], source, what: str) -> dict[str, np.ndarray]:
+    """Per-muscle F0, lMo, vmax arrays matched by name from a MuscleParameters or a mapping."""
+    if hasattr(source, "names") and hasattr(source, "max_isometric_force_N"):
+        pos = {n: i for i, n in enumerate(source.names)}
+        missing = [m for m in muscles if m not in pos]
+        if missing:
+            raise DataMismatchError(
+                f"the {what} has no parameters for muscle{'s' if len(missing) > 1 else ''} {', '.join(missing)}; "
+                "check that the model is the one the solution was computed with"
+            )
+        idx = [pos[m] for m in muscles]
+        return {k: np.asarray(getattr(source, k), dtype=float)[idx] for k in _PARAMETER_NAMES}
+    missing = [m for m in muscles if m not in source]
+    if missing:
+        raise DataMismatchError(
+            f"the {what} has no parameters for muscle{'s' if len(missing) > 1 else ''} {', '.join(missing)}; "
+            "give the model (.osim) the solution was computed with"
+        )
+    out = {}
+    for k in _PARAMETER_NAMES:
+        try:
+            out[k] = np.array([float(source[m][k]) for m in muscles])
+        except KeyError:
+            raise OptionError(f"the {what} lacks '{k}' for some muscles") from None
+    return out
+
+
+def _per_muscle(muscles: Sequence[str], overrides: Mapping[str, float] | None, table) -> np.ndarray:
+    """One value per muscle: from ``overrides`` by name, else from ``table(names)``."""
+    overrides = dict(overrides or {})
+    rest = [m for m in muscles if m not in overrides]
+    values = dict(zip(rest, table(rest))) if rest else {}
+    return np.array([float(overrides[m]) if m in overrides else float(values[m]) for m in muscles])
+
+
+@dataclass
+class SolutionMetabolics:
+    """Metabolic rates of every muscle of one solution, for several models.
+
+    ``rates[model]`` is a :class:`MetabolicRates` of arrays ``(muscles, time)``;
+    ``whole_body[model]`` a :class:`WholeBodyRate`.
+    """
+
+    time_s: np.ndarray
+    muscles: tuple[str, ...]
+    models: tuple[str, ...]
+    rates: dict[str, MetabolicRates]
+    whole_body: dict[str, WholeBodyRate]
+    muscle_mass_kg: np.ndarray
+    slow_twitch_fraction: np.ndarray
+    parameters: dict[str, np.ndarray]
+    body_mass_kg: float
+    height_m: float
+    basal_rule: str
+    speed_m_per_s: float | None = None
+    source: str = ""
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """``{"<model>/<muscle>/<component>": 1-D array (W)}`` in model, muscle, component order."""
+        out = {}
+        for model in self.models:
+            comps = self.rates[model].components()
+            for i, m in enumerate(self.muscles):
+                for c, arr in comps.items():
+                    out[f"{model}/{m}/{c}"] = arr[i]
+        return out
+
+    def to_dataframe(self):
+        """Wide table indexed by time, columns ``<model>/<muscle>/<component>`` (W)."""
+        from ..io import storage_from_arrays
+
+        return storage_from_arrays(self.time_s, self.columns(), name="musclemetab metabolic rates")
+
+    def to_long(self):
+        """Tidy table: ``time``, ``model``, ``muscle``, ``component``, ``value_W``."""
+        import pandas as pd
+
+        frames = []
+        t = self.time_s
+        n_t = t.size
+        for model in self.models:
+            comps = self.rates[model].components()
+            names = list(comps)
+            values = np.stack([comps[c] for c in names], axis=1)  # (M, C, T)
+            n_m, n_c = values.shape[0], values.shape[1]
+            frames.append(
+                pd.DataFrame(
+                    {
+                        "time": np.tile(t, n_m * n_c),
+                        "model": model,
+                        "muscle": np.repeat(np.asarray(self.muscles, dtype=object), n_c * n_t),
+                        "component": np.tile(np.repeat(np.asarray(names, dtype=object), n_t), n_m),
+                        "value_W": values.reshape(-1),
+                    }
+                )
+            )
+        return pd.concat(frames, ignore_index=True)
+
+    def whole_body_table(self):
+        """One row per model: ``model``, ``mean_W_per_kg``, ``mean_W_per_kg_no_basal``,
+        ``one_leg_mean_W``, ``basal_rule``, ``duration_s`` (and the cost of transport
+        when a speed was given)."""
+        import pandas as pd
+
+        rows = []
+        for model in self.models:
+            wb = self.whole_body[model]
+            row = {
+                "model": model,
+                "mean_W_per_kg": wb.mean_W_per_kg,
+                "mean_W_per_kg_no_basal": wb.mean_W_per_kg_no_basal,
+                "one_leg_mean_W": wb.one_leg_mean_W,
+                "basal_rule": wb.basal_rule,
+                "duration_s": wb.duration_s,
+            }
+            if self.speed_m_per_s is not None:
+                row["cost_of_transport_J_per_kg_per_m"] = wb.cost_of_transport_J_per_kg_per_m(self.speed_m_per_s)
+            rows.append(row)
+        return pd.DataFrame(rows)
+
+
+def metabolics_from_solution(
+    solution: str | os.PathLike | SolutionStates,
+    body_mass_kg: float,
+    height_m: float,
+    *,
+    models="all",
+    muscle_parameters=None,
+    basal: str = "body",
+    trim: tuple[int, int] = (5, 6),
+    model_options: Mapping[str, Mapping[str, object]] | None = None,
+    muscle_masses_kg: Mapping[str, float] | None = None,
+    slow_twitch_fractions: Mapping[str, float] | None = None,
+    cycle_duration_s: float | None = None,
+    speed_m_per_s: float | None = None,
+    require_success: bool = True,
+) -> SolutionMetabolics:
+    """Metabolic rates of every muscle of a solution, for a set of models.
+
+    Parameters
+    ----------
+    solution
+        A solution folder, or :class:`SolutionStates`.
+    body_mass_kg, height_m
+        The subject (muscle masses from the volume rule of :mod:`musclemetab.properties`;
+        whole-body rate per kg of body mass).
+    models
+        ``"all"`` (the six study models), ``"UM10,BH04"`` or a list.
+    muscle_parameters
+        ``F0``, ``lMo``, ``vmax`` by muscle name: a
+        :class:`musclemetab.model.MuscleParameters` (e.g. from
+        :func:`musclemetab.model.read_muscle_parameters`) or ``{muscle: {name: value}}``.
+        Default: the parameters recorded in the solution's ``summary.json``.
+    basal
+        Whole-body basal rule (:func:`whole_body_rate`): ``"body"`` (1.2 W/kg of body
+        mass, the paper), ``"muscle"`` (1.2 W/kg of muscle mass in every muscle, the
+        study's code) or ``"none"``. The per-muscle rates always carry the per-muscle
+        ``basal`` component (the study's code), apart from the other components.
+    trim
+        Nodes dropped at the start and at the end (5, 6).
+    model_options
+        Per-model options, e.g. ``{"BH04": {"activation_heat_decay": False}}``.
+    muscle_masses_kg, slow_twitch_fractions
+        Overrides by muscle name (otherwise from the property table; unknown muscles
+        raise :class:`~musclemetab.errors.UnknownMuscleError` naming them).
+    cycle_duration_s
+        ``T`` of the whole-body average (default: the span of the kept nodes).
+    speed_m_per_s
+        Walking speed, for the cost of transport in the whole-body table.
+    """
+    from ..properties import muscle_masses_kg as _masses
+    from ..properties import slow_twitch_fraction as _fst
+
+    names = parse_models(models)
+    if basal not in BASAL_RULES:
+        raise OptionError(f"basal rule must be one of {', '.join(BASAL_RULES)}, not {basal!r}")
+    model_options = {k.upper(): dict(v) for k, v in (model_options or {}).items()}
+    unknown = [k for k in model_options if k not in MODELS]
+    if unknown:
+        raise OptionError(f"options given for unknown model(s) {', '.join(unknown)}; known: {', '.join(MODELS)}")
+    sol = solution if isinstance(solution, SolutionStates) else read_solution_states(
+        solution, require_success=require_success
+    )
+    muscles = sol.muscles
+    if muscle_parameters is not None:
+        params = _parameters_for(muscles, muscle_parameters, "model")
+    elif sol.parameters:
+        params = _parameters_for(muscles, sol.parameters, "solution summary")
+    else:
+        raise OptionError(
+            f"{sol.source or 'the solution'}: no muscle parameters recorded; pass muscle_parameters "
+            "(e.g. read_muscle_parameters('model.osim'))"
+        )
+    n_nodes = sol.time_s.size
+    for arg, arr in sol.states.items():
+        if arr.shape != (len(muscles), n_nodes):
+            raise DataMismatchError(
+                f"solution state '{arg}' has shape {arr.shape}; expected (muscles, nodes) = ({len(muscles)}, {n_nodes})"
+            )
+    keep = trim_slice(n_nodes, *trim)
+    time = sol.time_s[keep]
+    states = {arg: arr[:, keep] for arg, arr in sol.states.items()}
+
+    masses = _per_muscle(muscles, muscle_masses_kg, lambda rest: _masses(rest, body_mass_kg, height_m))
+    fst = _per_muscle(muscles, slow_twitch_fractions, _fst)
+
+    inputs = dict(states)
+    inputs.update(params)
+    inputs.update(muscle_mass_kg=masses, slow_twitch_fraction=fst)
+    rates = {}
+    for name in names:
+        opts = {"basal": True}
+        opts.update(model_options.get(name, {}))
+        try:
+            rates[name] = MODELS[name](**inputs, time_s=time, **opts)
+        except TypeError as exc:
+            raise OptionError(f"{name}: invalid option ({exc})") from None
+    wb = {
+        name: whole_body_rate(r, time, body_mass_kg, basal=basal, cycle_duration_s=cycle_duration_s)
+        for name, r in rates.items()
+    }
+    return SolutionMetabolics(
+        time_s=time,
+        muscles=tuple(muscles),
+        models=tuple(names),
+        rates=rates,
+        whole_body=wb,
+        muscle_mass_kg=masses,
+        slow_twitch_fraction=fst,
+        parameters=params,
+        body_mass_kg=float(body_mass_kg),
+        height_m=float(height_m),
+        basal_rule=basal,
+        speed_m_per_s=None if speed_m_per_s is None else float(speed_m_per_s),
+        source=sol.source,
+    )
+
+
+def write_metabolics(result: SolutionMetabolics, out_dir: str | os.PathLike) -> dict[str, Path]:
+    """Write ``metabolics.sto``, ``metabolics.csv`` and ``whole_body.csv`` into ``out_dir``.
+
+    The three files are written together (:func:`musclemetab.io.atomic_directory`).
+    """
+    from ..io import atomic_directory, write_storage
+
+    out_dir = Path(out_dir)
+    comments = [
+        f"models={','.join(result.models)}",
+        f"body_mass_kg={result.body_mass_kg:g}",
+        f"height_m={result.height_m:g}",
+        "units=W; total includes the per-muscle basal heat (1.2 W/kg of muscle mass)",
+    ]
+    with atomic_directory(out_dir) as tmp:
+        write_storage(tmp / METABOLICS_STO, result.to_dataframe(), name="musclemetab metabolic rates",
+                      in_degrees=False, comments=comments)
+        result.to_long().to_csv(tmp / METABOLICS_CSV, index=False, float_format="%.10g")
+        result.whole_body_table().to_csv(tmp / WHOLE_BODY_CSV, index=False, float_format="%.10g")
+    return {
+        "metabolics_sto": out_dir / METABOLICS_STO,
+        "metabolics_csv": out_dir / METABOLICS_CSV,
+        "whole_body_csv": out_dir / WHOLE_BODY_CSV,
+    }

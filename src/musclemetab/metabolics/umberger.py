@@ -1,0 +1,357 @@
+"""The Umberger family: UM03, UM10 and UC16.
+
+One formulation (:func:`_umberger_family`) with three settings. Shared equations (W for one
+muscle; ``VCE~ = V_CE / lMo`` in optimal lengths per second, negative = shortening)::
+
+    A    = e              if e > a          (excitation/activation blend)
+    A    = (e + a)/2      if e <= a
+    A_AM = A^0.6
+    A_S  = A^2 if VCE~ <= 0 (shortening, isometric), A if VCE~ > 0 (lengthening)
+    S    = 1.5                               (aerobic scaling factor)
+    vmax_ST = vmax/2.5;  alpha_S_ST = 100/vmax_ST;  alpha_S_FT = 153/vmax
+    h_AM = 128 f_FT' + 25                                          (W/kg)
+    h_SL = -(alpha_S_ST VCE~ f_ST' + alpha_S_FT VCE~ f_FT') A_S    if VCE~ <= 0
+    h_SL =  alpha_L VCE~ A                                         if VCE~ >  0
+    H_AM = h_AM A_AM S m            (x (0.4 + 0.6 fL) if lM > lMo)
+    H_SL = h_SL S m                 (x fL             if lM > lMo)
+    W_CE = -F_CE V_CE,   F_CE = a fL fV F0   (no passive force, along the fibre)
+
+``f_ST'`` and ``f_FT' = 1 - f_ST'`` are the muscle's constant fibre fractions (UM03, UM10)
+or the excitation-dependent recruited fractions (UC16).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._common import (
+    BASAL_RATE_W_PER_KG,
+    MetabolicRates,
+    apply_non_negativity,
+    basal_rate,
+    check_flag,
+    model_function,
+    prepare_inputs,
+    recruitment_terms,
+    run_kernel,
+)
+
+__all__ = ["umberger2003", "umberger2010", "uchida2016", "AEROBIC_FACTOR"]
+
+#: Aerobic scaling factor S (multiplies the activation-maintenance and the
+#: shortening-lengthening heat).
+AEROBIC_FACTOR = 1.5
+#: vmax of slow-twitch fibres is vmax / 2.5.
+SLOW_TWITCH_VMAX_RATIO = 2.5
+#: alpha_L = factor * alpha_S_ST: 4 in Umberger et al. (2003) (and UC16), 0.3 in Umberger (2010).
+LENGTHENING_FACTOR_2003 = 4.0
+LENGTHENING_FACTOR_2010 = 0.3
+
+
+def _umberger_family(
+    model: str,
+    values: dict,
+    *,
+    lengthening_factor: float,
+    include_negative_work: bool,
+    recruitment: bool,
+    non_negative: bool,
+    strict: bool,
+    slow_twitch_shortening_cap: bool,
+    basal: bool,
+    basal_rate_W_per_kg: float,
+    check: bool,
+) -> MetabolicRates:
+    for flag in ("include_negative_work", "non_negative", "slow_twitch_shortening_cap", "basal"):
+        check_flag(model, flag, locals()[flag])
+    inp = prepare_inputs(model, values, check=check)
+
+    # per-muscle constants (parameter-shaped)
+    vmax = inp.max_contraction_velocity
+    f_st = inp.slow_twitch_fraction
+    vmax_st = vmax / SLOW_TWITCH_VMAX_RATIO
+    alpha_st = 100.0 / vmax_st
+    alpha_ft = 153.0 / vmax
+    alpha_l = lengthening_factor * alpha_st
+    s_m = AEROBIC_FACTOR * inp.muscle_mass_kg
+    basal_w = basal_rate(inp, basal, basal_rate_W_per_kg)
+    if recruitment:
+        am_coef = s_m  # h_AM depends on the recruited fractions: computed per sample
+        st_coef, ft_coef = alpha_st, alpha_ft
+    else:
+        am_coef = (128.0 * (1.0 - f_st) + 25.0) * s_m
+        st_coef = alpha_st * f_st
+        ft_coef = alpha_ft * (1.0 - f_st)
+    cap = slow_twitch_shortening_cap
+
+    def kernel(e, a, lm, vb, fl, fv, f0, lmo, vmax, f_st, s_m, am_coef, st_coef, ft_coef, alpha_l, vmax_st, basal_w):
+        vt = vb * vmax  # VCE~ (lMo/s)
+        shortening = vt <= 0
+        blend = 0.5 * (e + np.maximum(e, a))  # e if e > a, else (e + a)/2 (exact: 0.5 (e + e) = e)
+        if recruitment:
+            f_st_r = _recruited_slow_twitch_fraction(e, f_st)
+            f_ft_r = 1.0 - f_st_r
+            h_am = (128.0 * f_ft_r + 25.0) * am_coef
+            st = st_coef * f_st_r
+            ft = ft_coef * f_ft_r
+        else:
+            h_am = am_coef
+            st, ft = st_coef, ft_coef
+        h_am = h_am * blend**0.6
+        longer = lm > 1.0
+        h_am = np.where(longer, h_am * (0.4 + 0.6 * fl), h_am)
+        if cap:
+            h_short = -(st * np.maximum(vt, -vmax_st) + ft * vt) * (blend * blend)
+        else:
+            h_short = -(st + ft) * vt * (blend * blend)
+        h_sl = np.where(shortening, h_short, alpha_l * vt * blend) * s_m
+        h_sl = np.where(longer, h_sl * fl, h_sl)
+        work = -(a * fl * fv * f0) * (vt * lmo)
+        if not include_negative_work:
+            work = np.where(shortening, work, 0.0)
+        if non_negative:
+            h_sl = apply_non_negativity(work, h_am, h_sl, strict=strict)
+        return work, h_am, h_sl, basal_w, work + h_am + h_sl + basal_w
+
+    work, h_am, h_sl, b, total = run_kernel(
+        kernel,
+        [
+            inp.excitation, inp.activation, inp.normalized_fiber_length, inp.normalized_fiber_velocity,
+            inp.active_force_length_multiplier, inp.force_velocity_multiplier, inp.max_isometric_force_N,
+            inp.optimal_fiber_length_m, vmax, f_st, s_m, am_coef, st_coef, ft_coef, alpha_l, vmax_st, basal_w,
+        ],
+        5,
+    )
+    return MetabolicRates(
+        model=model, work=work, activation_maintenance=h_am, shortening_lengthening=h_sl, basal=b, total=total
+    )
+
+
+def _recruited_slow_twitch_fraction(excitation, slow_twitch_fraction):
+    """UC16's recruited slow-twitch fraction (orderly recruitment from excitation).
+
+    ``u_f = 1 - cos(pi e/2)``, ``u_s = sin(pi e/2)``,
+    ``f_ST' = f_ST u_s / (f_ST u_s + f_FT u_f)``, and ``f_ST' = 1`` where the denominator
+    is zero (``e = 0``; the reference implementation tests ``e == 0``).
+    """
+    u_s, u_f = recruitment_terms(excitation)
+    num = slow_twitch_fraction * u_s
+    den = num + (1.0 - slow_twitch_fraction) * u_f
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(den == 0, 1.0, num / den)
+
+
+@model_function("UM03")
+def umberger2003(
+    excitation,
+    activation,
+    normalized_fiber_length,
+    normalized_fiber_velocity,
+    active_force_length_multiplier,
+    force_velocity_multiplier,
+    passive_fiber_force_N,
+    max_isometric_force_N,
+    optimal_fiber_length_m,
+    max_contraction_velocity,
+    muscle_mass_kg,
+    slow_twitch_fraction,
+    *,
+    time_s=None,
+    non_negative: bool = True,
+    include_negative_work: bool = True,
+    slow_twitch_shortening_cap: bool = False,
+    basal: bool = True,
+    basal_rate_W_per_kg: float = BASAL_RATE_W_PER_KG,
+    check: bool = True,
+) -> MetabolicRates:
+    """UM03: Umberger, Gerritsen & Martin (2003), as implemented in the study.
+
+    Reference: Umberger BR, Gerritsen KGM, Martin PE (2003) A model of human muscle energy
+    expenditure. Comput Methods Biomech Biomed Engin 6:99-111.
+
+    Equations: the Umberger family (module :mod:`musclemetab.metabolics.umberger`) with
+    constant fibre fractions and the lengthening coefficient
+    ``alpha_L = 4 alpha_S_ST`` (100 W/kg per lMo/s for vmax = 10)::
+
+        Edot = W_CE + H_AM + H_SL (+ basal)
+
+    The full (signed) work rate ``W_CE`` is counted. Non-negativity (paper Eq. 3; study
+    setting on): where ``W_CE + H_AM + H_SL < 0`` (strict), ``H_SL := -H_AM - W_CE`` so that
+    the rate is zero; the basal heat is added afterwards. Units: W.
+
+    Quirks of the study's implementation reproduced by default: the slow-twitch cap of
+    the shortening heat is off (``slow_twitch_shortening_cap``); the passive force is not
+    used; the minimum heat rate of 1 W/kg is not enforced.
+
+    Parameters
+    ----------
+%(shared)s
+
+    Other parameters
+    ----------------
+    non_negative : bool
+        Apply the non-negativity rule (default True, the study's setting).
+    include_negative_work : bool
+        Count negative (eccentric) work (default True). False gives UM10's work term.
+    slow_twitch_shortening_cap : bool
+        Cap the slow-twitch shortening term at ``alpha_S_ST vmax_ST`` (100 W/kg, reached
+        when shortening faster than ``vmax/2.5``), as Umberger et al. (2003) and OpenSim's
+        ``Umberger2010MuscleMetabolicsProbe`` do. Default False: the study's code has the
+        cap commented out.
+    """
+    return _umberger_family(
+        "UM03",
+        locals(),
+        lengthening_factor=LENGTHENING_FACTOR_2003,
+        include_negative_work=include_negative_work,
+        recruitment=False,
+        non_negative=non_negative,
+        strict=True,
+        slow_twitch_shortening_cap=slow_twitch_shortening_cap,
+        basal=basal,
+        basal_rate_W_per_kg=basal_rate_W_per_kg,
+        check=check,
+    )
+
+
+@model_function("UM10")
+def umberger2010(
+    excitation,
+    activation,
+    normalized_fiber_length,
+    normalized_fiber_velocity,
+    active_force_length_multiplier,
+    force_velocity_multiplier,
+    passive_fiber_force_N,
+    max_isometric_force_N,
+    optimal_fiber_length_m,
+    max_contraction_velocity,
+    muscle_mass_kg,
+    slow_twitch_fraction,
+    *,
+    time_s=None,
+    non_negative: bool = False,
+    include_negative_work: bool = False,
+    slow_twitch_shortening_cap: bool = False,
+    basal: bool = True,
+    basal_rate_W_per_kg: float = BASAL_RATE_W_PER_KG,
+    check: bool = True,
+) -> MetabolicRates:
+    """UM10: Umberger (2010), as implemented in the study.
+
+    Reference: Umberger BR (2010) Stance and swing phase costs in human walking.
+    J R Soc Interface 7:1329-1340.
+
+    Equations: UM03 (module :mod:`musclemetab.metabolics.umberger`) except
+
+    * lengthening coefficient ``alpha_L = 0.3 alpha_S_ST`` (7.5 W/kg per lMo/s for
+      vmax = 10);
+    * only concentric work is counted: ``W = -F_CE V_CE`` where ``V_CE <= 0``, else 0;
+    * no non-negativity rule (the rate is never negative since ``W >= 0`` and the heats
+      are non-negative; during lengthening it is the heat alone).
+
+    ``Edot = W + H_AM + H_SL (+ basal)``, W. The Umberger (2010) rule that the total heat
+    rate be at least 1 W/kg is not applied (commented out in the study's code); nor is the
+    slow-twitch cap (option).
+
+    Parameters
+    ----------
+%(shared)s
+
+    Other parameters
+    ----------------
+    non_negative : bool
+        Apply the non-negativity rule (default False, the study's setting).
+    include_negative_work : bool
+        Count negative work (default False, the UM10 formulation).
+    slow_twitch_shortening_cap : bool
+        Cap the slow-twitch shortening term at ``alpha_S_ST vmax_ST`` (100 W/kg, reached
+        when shortening faster than ``vmax/2.5``), as Umberger et al. (2003) and OpenSim's
+        ``Umberger2010MuscleMetabolicsProbe`` do. Default False: the study's code has the
+        cap commented out.
+    """
+    return _umberger_family(
+        "UM10",
+        locals(),
+        lengthening_factor=LENGTHENING_FACTOR_2010,
+        include_negative_work=include_negative_work,
+        recruitment=False,
+        non_negative=non_negative,
+        strict=False,
+        slow_twitch_shortening_cap=slow_twitch_shortening_cap,
+        basal=basal,
+        basal_rate_W_per_kg=basal_rate_W_per_kg,
+        check=check,
+    )
+
+
+@model_function("UC16")
+def uchida2016(
+    excitation,
+    activation,
+    normalized_fiber_length,
+    normalized_fiber_velocity,
+    active_force_length_multiplier,
+    force_velocity_multiplier,
+    passive_fiber_force_N,
+    max_isometric_force_N,
+    optimal_fiber_length_m,
+    max_contraction_velocity,
+    muscle_mass_kg,
+    slow_twitch_fraction,
+    *,
+    time_s=None,
+    non_negative: bool = True,
+    include_negative_work: bool = True,
+    slow_twitch_shortening_cap: bool = False,
+    basal: bool = True,
+    basal_rate_W_per_kg: float = BASAL_RATE_W_PER_KG,
+    check: bool = True,
+) -> MetabolicRates:
+    """UC16: Uchida et al. (2016), the Umberger formulation with orderly recruitment.
+
+    Reference: Uchida TK, Hicks JL, Dembia CL, Delp SL (2016) Stretching your energetic
+    budget: how tendon compliance affects the metabolic cost of running. PLoS ONE
+    11:e0150378.
+
+    Equations: UM03 (module :mod:`musclemetab.metabolics.umberger`) with the fibre
+    fractions replaced by excitation-dependent recruited fractions::
+
+        u_f = 1 - cos(pi e/2),   u_s = sin(pi e/2)
+        f_ST' = f_ST u_s / (f_ST u_s + f_FT u_f)      (1 where e = 0),  f_FT' = 1 - f_ST'
+
+    used in ``h_AM = 128 f_FT' + 25`` and in the shortening heat. Lengthening coefficient
+    ``alpha_L = 4 alpha_S_ST`` (UM03's value, as in the paper's Table 1). Full work rate.
+    Non-negativity (``total <= 0`` -> ``H_SL := -H_AM - W_CE``) is applied always in the
+    study's code (here the default). Units: W.
+
+    Parameters
+    ----------
+%(shared)s
+
+    Other parameters
+    ----------------
+    non_negative : bool
+        Apply the non-negativity rule (default True).
+    include_negative_work : bool
+        Count negative work (default True).
+    slow_twitch_shortening_cap : bool
+        Cap the slow-twitch shortening term at ``alpha_S_ST vmax_ST`` (100 W/kg, reached
+        when shortening faster than ``vmax/2.5``), as Umberger et al. (2003) and OpenSim's
+        ``Umberger2010MuscleMetabolicsProbe`` do. Default False: the study's code has the
+        cap commented out.
+    """
+    return _umberger_family(
+        "UC16",
+        locals(),
+        lengthening_factor=LENGTHENING_FACTOR_2003,
+        include_negative_work=include_negative_work,
+        recruitment=True,
+        non_negative=non_negative,
+        strict=False,
+        slow_twitch_shortening_cap=slow_twitch_shortening_cap,
+        basal=basal,
+        basal_rate_W_per_kg=basal_rate_W_per_kg,
+        check=check,
+    )
+
