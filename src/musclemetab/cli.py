@@ -19,6 +19,7 @@ _SUBCOMMANDS = (
     ("musclemetab.cli", "add_geometry_parser"),
     ("musclemetab.redundancy.cli", "add_solve_parser"),
     ("musclemetab.metabolics.cli", "add_metabolics_parser"),
+    ("musclemetab.calibration.cli", "add_calibrate_parser"),
 )
 
 

@@ -29,11 +29,11 @@ from dataclasses import dataclass
 from typing import Protocol, Sequence
 
 import numpy as np
-from scipy.interpolate import CubicSpline
-from scipy.signal import butter, filtfilt
 
 from ..errors import DataMismatchError, InputFileError, MissingColumnError
-from ..io import read_storage, require_columns
+
+# SciPy and pandas are imported inside the functions that use them, so that importing the
+# solver stays cheap (the command line starts the OpenSim worker first, then imports them).
 
 __all__ = [
     "DEFAULT_DOFS",
@@ -49,6 +49,8 @@ __all__ = [
     "read_inverse_dynamics",
     "select_muscles",
     "prepare_inputs",
+    "check_moment_magnitudes",
+    "check_time_ranges",
 ]
 
 #: The five right-leg degrees of freedom of the study, in the order of the moment arms.
@@ -147,6 +149,8 @@ def lowpass_filtfilt(
 
     Raises :class:`DataMismatchError` if the signal has no more samples than the padding.
     """
+    from scipy.signal import butter, filtfilt
+
     x = np.asarray(x, dtype=float)
     b, a = butter(order, cutoff_hz / (sample_rate_hz / 2.0))
     padlen = 3 * (max(len(a), len(b)) - 1)
@@ -181,19 +185,22 @@ def _sample_rate(time: np.ndarray, what: str) -> float:
     return 1.0 / mean_dt
 
 
-def read_kinematics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT_DOFS):
+def read_kinematics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT_DOFS, check_units: bool = True):
     """Read an IK ``.mot`` file: its time stamps and the DOF angles in radians.
 
     Checks that every DOF column is present and that the angle units agree with the header:
     with ``inDegrees=no``, an angle beyond pi rad (180 degrees) means the values are in
-    degrees; with ``inDegrees=yes``, all DOF angles staying below 1 degree over a trial that
-    moves the joints is reported as radians mislabelled as degrees.
+    degrees; with ``inDegrees=yes``, all DOF angles staying below 2.5 "degrees" while the
+    joints move (a walking knee alone flexes by some 60 degrees, i.e. about 1.1 rad) is
+    reported as radians mislabelled as degrees. ``check_units=False`` skips both checks.
 
     Returns
     -------
     time_s : (F,) array
     angles_rad : (F, D) array
     """
+    from ..io import read_storage, require_columns
+
     ik = read_storage(path)
     require_columns(ik, dofs, what="IK coordinate column")
     if len(ik.index) < 2:
@@ -201,7 +208,7 @@ def read_kinematics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT_DOFS)
     q = ik[list(dofs)].to_numpy(dtype=float)
     in_degrees = ik.attrs.get("in_degrees")
     peak = float(np.max(np.abs(q)))
-    if in_degrees is False and peak > _MAX_PLAUSIBLE_ANGLE_RAD:
+    if check_units and in_degrees is False and peak > _MAX_PLAUSIBLE_ANGLE_RAD:
         col = dofs[int(np.argmax(np.max(np.abs(q), axis=0)))]
         raise DataMismatchError(
             f"{path}: the header says inDegrees=no but column '{col}' reaches {peak:.4g}, which is "
@@ -209,10 +216,10 @@ def read_kinematics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT_DOFS)
         )
     if in_degrees is None and peak > _MAX_PLAUSIBLE_ANGLE_RAD:
         in_degrees = True
-    if in_degrees and peak < 1.0 and float(np.ptp(q, axis=0).max()) > 0.05:
+    if check_units and in_degrees and peak < 2.5 and float(np.ptp(q, axis=0).max()) > 0.05:
         raise DataMismatchError(
-            f"{path}: the header says inDegrees=yes but no DOF angle exceeds 1 degree while the "
-            "joints move; the values look like radians: fix the header to inDegrees=no"
+            f"{path}: the header says inDegrees=yes but no DOF angle exceeds 2.5 degrees while the "
+            f"joints move (peak {peak:.3g}); the values look like radians: fix the header to inDegrees=no"
         )
     if in_degrees:
         q = np.deg2rad(q)
@@ -227,6 +234,8 @@ def read_inverse_dynamics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT
     time_s : (T,) array
     moments_Nm : (T, D) array
     """
+    from ..io import read_storage, require_columns
+
     table = read_storage(path)
     cols = [f"{d}_moment" for d in dofs]
     try:
@@ -266,7 +275,8 @@ def select_muscles(
     return keep_m, keep_d
 
 
-def _check_window(ik_time: np.ndarray, id_time: np.ndarray, ik_path, id_path) -> None:
+def check_time_ranges(ik_time: np.ndarray, id_time: np.ndarray, ik_path="IK", id_path="ID") -> None:
+    """Raise :class:`DataMismatchError` unless the ID covers the whole IK window (half a frame of slack)."""
     t0, tf = float(ik_time[0]), float(ik_time[-1])
     tol = 0.5 * float(np.min(np.diff(ik_time)))
     if id_time[-1] < t0 or id_time[0] > tf:
@@ -344,6 +354,8 @@ def prepare_inputs(
     filter_inputs
         The study filters everything (6 Hz, order 6); ``False`` skips filtering.
     """
+    from scipy.interpolate import CubicSpline
+
     sources = dict(sources or {})
     g_time = np.asarray(geometry.time, dtype=float)
     dofs = tuple(dofs if dofs is not None else geometry.dofs)
@@ -376,7 +388,7 @@ def prepare_inputs(
         raise DataMismatchError(f"{id_moments_Nm.shape[1]} ID moment columns for {D} DOFs")
     if not np.all(np.isfinite(id_moments_Nm)):
         raise DataMismatchError(f"the inverse dynamics {sources.get('id', '')} holds NaN or infinite values")
-    _check_window(ik_time_s, id_time_s, sources.get("ik", "IK"), sources.get("id", "ID"))
+    check_time_ranges(ik_time_s, id_time_s, sources.get("ik", "IK"), sources.get("id", "ID"))
 
     fs_ik = _sample_rate(ik_time_s, str(sources.get("ik", "IK")))
     if filter_inputs:

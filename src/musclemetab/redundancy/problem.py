@@ -50,7 +50,15 @@ from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
 from .static_opt import InitialGuess
 
-__all__ = ["SolverOptions", "OcpResult", "solve_ocp", "problem_size", "tune_malloc"]
+__all__ = [
+    "SolverOptions",
+    "OcpResult",
+    "solve_ocp",
+    "build_nlp",
+    "problem_size",
+    "tune_malloc",
+    "set_blas_threads",
+]
 
 ACTIVATION_BOUNDS = (0.0, 1.0)
 FIBRE_LENGTH_BOUNDS = (0.1, 1.7)
@@ -69,10 +77,18 @@ class SolverOptions:
     ``mu_init = 0.1`` (the problem has several local optima; other barrier settings can end
     in a different one).
 
-    ``node_function`` chooses the symbolic type of the per-node constraint function: ``"MX"``
-    (default) or ``"SX"``; the optimum is the same. ``tune_malloc`` raises glibc's
-    ``malloc`` thresholds for the process before solving (MUMPS reallocates its work arrays
-    every iteration). ``ipopt`` holds further IPOPT options, e.g. ``{"mu_init": 1e-6}`` for a
+    ``derivatives="explicit"`` (default) gives IPOPT the constraint Jacobian and the Hessian
+    of the Lagrangian assembled from per-interval symbolic derivatives (the Jacobian is block
+    banded, the Hessian block diagonal); ``"auto"`` lets CasADi differentiate the whole mapped
+    expression graph. Both compute the same derivatives; the explicit form builds and
+    evaluates faster. ``node_function`` chooses the symbolic type of the per-interval
+    constraint function used for the constraint values: ``"MX"`` (default) or ``"SX"``.
+
+    ``tune_malloc`` raises glibc's ``malloc`` thresholds for the process before solving
+    (MUMPS reallocates its work arrays every iteration). ``blas_threads`` sets the number of
+    threads of the BLAS used by MUMPS (CasADi's OpenBLAS); the dense blocks here are small, so
+    one thread is fastest and leaves the other cores to other solves (``None`` leaves the
+    library default). ``ipopt`` holds further IPOPT options, e.g. ``{"mu_init": 1e-6}`` for a
     warm start; anything there may change which optimum is found.
     """
 
@@ -85,10 +101,14 @@ class SolverOptions:
     linear_solver: str = "mumps"
     print_level: int = 0
     node_function: str = "MX"
+    derivatives: str = "explicit"
     tune_malloc: bool = True
+    blas_threads: int | None = 1
     ipopt: dict = field(default_factory=dict)
 
     def __post_init__(self):
+        if self.derivatives not in ("explicit", "auto"):
+            raise OptionError(f"derivatives must be 'explicit' or 'auto', not {self.derivatives!r}")
         if self.node_function not in ("MX", "SX"):
             raise OptionError(f"node_function must be 'MX' or 'SX', not {self.node_function!r}")
         for name in ("w_activation", "w_reserve", "w_velocity"):
@@ -112,7 +132,9 @@ class SolverOptions:
             "max_iter": self.max_iter,
             "linear_solver": self.linear_solver,
             "node_function": self.node_function,
+            "derivatives": self.derivatives,
             "tune_malloc": self.tune_malloc,
+            "blas_threads": self.blas_threads,
             "ipopt": dict(self.ipopt),
         }
 
@@ -133,10 +155,12 @@ class OcpResult:
     success: bool
     iterations: int
     solve_time_s: float
+    solve_cpu_s: float
     build_time_s: float
     n_variables: int
     n_constraints: int
     max_constraint_violation: float
+    function_time_s: dict = field(default_factory=dict)
 
 
 def problem_size(n_muscles: int, n_dofs: int, n_intervals: int) -> tuple[int, int]:
@@ -171,10 +195,23 @@ def tune_malloc(threshold_bytes: int = 512 * 1024 * 1024) -> bool:
     return ok
 
 
-def _node_functions(inputs: TrialInputs, params: MuscleTendonParameters, options: SolverOptions, ca):
-    M, D = len(inputs.muscles), len(inputs.dofs)
-    h = inputs.step_s
-    sym = ca.MX.sym if options.node_function == "MX" else ca.SX.sym
+def set_blas_threads(n: int) -> bool:
+    """Set the thread count of CasADi's bundled OpenBLAS (used by MUMPS).
+
+    Acts on the library instance already loaded by the IPOPT plugin (found by its soname);
+    returns ``False`` when it is not loaded or has no such function.
+    """
+    import os
+
+    try:
+        lib = ctypes.CDLL("libcasadi-tp-openblas.so.0", mode=getattr(os, "RTLD_NOLOAD", 4) | os.RTLD_LOCAL)
+        lib.openblas_set_num_threads(int(n))
+    except (OSError, AttributeError):
+        return False
+    return True
+
+
+def _constants(params: MuscleTendonParameters, ca):
     P = {k: ca.DM(np.asarray(v, dtype=float)) for k, v in dict(
         lmo=params.optimal_fiber_length_m,
         lts=params.tendon_slack_length_m,
@@ -185,14 +222,17 @@ def _node_functions(inputs: TrialInputs, params: MuscleTendonParameters, options
         sm=params.passive_sm,
         f0=params.max_isometric_force_N,
     ).items()}
-    w2 = ca.DM(np.asarray(params.width_m, dtype=float) ** 2)
+    P["w2"] = ca.DM(np.asarray(params.width_m, dtype=float) ** 2)
+    return P
 
+
+def _node_expressions(sym, M: int, D: int, h: float, P: dict, optimal_reserve_Nm: float, ca):
+    """Symbols and constraint expressions of one mesh interval (see module docstring)."""
     a, lm, lp = sym("a", M), sym("lm", M), sym("lp", M)
     e, aT, vm = sym("e", M), sym("aT", D), sym("vm", M)
     a1, lm1 = sym("a1", M), sym("lm1", M)
     lmt, rflat, mom = sym("lmt", M), sym("r", D * M), sym("id", D)
-
-    penn = (lm * P["lmo"]) ** 2 - w2 - lp**2
+    penn = (lm * P["lmo"]) ** 2 - P["w2"] - lp**2
     dyn_a = a1 - a - h * activation_rate(e, a)
     dyn_lm = lm1 - lm - h * vm
     hill = hill_residual(
@@ -202,34 +242,109 @@ def _node_functions(inputs: TrialInputs, params: MuscleTendonParameters, options
     )
     ft = tendon_force_length((lmt - lp) / P["lts"], P["kT"])
     R = ca.reshape(rflat, D, M)
-    moment = mom - ca.mtimes(R, P["f0"] * ft) - options.optimal_reserve_Nm * aT
-    node = ca.Function(
-        "node",
-        [a, lm, lp, e, aT, vm, a1, lm1, lmt, rflat, mom],
-        [ca.vertcat(dyn_a, dyn_lm, penn, hill, moment)],
-    )
-    last = ca.Function("last", [lm, lp], [penn])
+    moment = mom - ca.mtimes(R, P["f0"] * ft) - optimal_reserve_Nm * aT
+    syms = dict(a=a, lm=lm, lp=lp, e=e, aT=aT, vm=vm, a1=a1, lm1=lm1, lmt=lmt, r=rflat, id=mom)
+    return syms, ca.vertcat(dyn_a, dyn_lm, penn, hill, moment), penn
+
+
+def _node_functions(inputs: TrialInputs, params: MuscleTendonParameters, options: SolverOptions, ca):
+    M, D = len(inputs.muscles), len(inputs.dofs)
+    sym = ca.MX.sym if options.node_function == "MX" else ca.SX.sym
+    P = _constants(params, ca)
+    S, g, penn = _node_expressions(sym, M, D, inputs.step_s, P, options.optimal_reserve_Nm, ca)
+    order = ("a", "lm", "lp", "e", "aT", "vm", "a1", "lm1", "lmt", "r", "id")
+    node = ca.Function("node", [S[k] for k in order], [g])
+    last = ca.Function("last", [S["lm"], S["lp"]], [penn])
     return node, last
 
 
-def solve_ocp(
+def _explicit_derivatives(inputs, params, options, ca, w, g, weights, data):
+    """Gradient, constraint Jacobian and (upper-triangular) Lagrangian Hessian, assembled.
+
+    Each mesh interval's constraints depend on its own node block ``z_k`` and linearly on the
+    next node's ``a, l~M``; the objective is a separable quadratic. So the Jacobian is made of
+    per-interval blocks and the Hessian of the Lagrangian is block diagonal. Per-interval
+    derivatives are computed once symbolically (SX), mapped over the mesh and their nonzeros
+    placed into the global sparse matrices: cheaper to build and to evaluate than
+    differentiating the whole mapped expression graph, and exactly the same numbers.
+    """
+    M, D, N = len(inputs.muscles), len(inputs.dofs), inputs.n_intervals
+    nz = 5 * M + D
+    P = _constants(params, ca)
+    S, gk, penn = _node_expressions(ca.SX.sym, M, D, inputs.step_s, P, options.optimal_reserve_Nm, ca)
+    z = ca.vertcat(S["a"], S["lm"], S["lp"], S["e"], S["aT"], S["vm"])
+    xn = ca.vertcat(S["a1"], S["lm1"])
+    d = ca.vertcat(S["lmt"], S["r"], S["id"])
+    lam = ca.SX.sym("lam", gk.shape[0])
+    sigma = ca.SX.sym("sigma")
+    cz = ca.DM(weights[:nz])
+    jac_node = ca.Function("jac_node", [z, xn, d], [ca.jacobian(gk, ca.vertcat(z, xn))])
+    lag = sigma * ca.dot(cz, z**2) + ca.dot(lam, gk)
+    hess_node = ca.Function("hess_node", [z, d, lam, sigma], [ca.triu(ca.hessian(lag, z)[0])])
+    xl = ca.vertcat(S["a"], S["lm"], S["lp"])
+    laml = ca.SX.sym("laml", M)
+    jac_last = ca.Function("jac_last", [xl], [ca.jacobian(penn, xl)])
+    hess_last = ca.Function("hess_last", [xl, laml, sigma],
+                            [ca.triu(ca.hessian(sigma * ca.dot(ca.DM(weights[nz * N:]), xl**2)
+                                                + ca.dot(laml, penn), xl)[0])])
+
+    Wm = ca.reshape(w[: nz * N], nz, N)
+    xN = w[nz * N:]
+    Xn = ca.horzcat(Wm[0:2 * M, 1:], xN[0:2 * M])
+    lam_f = ca.MX.sym("lam_f")
+    lam_g = ca.MX.sym("lam_g", g.shape[0])
+    ng = gk.shape[0]
+    Lg = ca.reshape(lam_g[: ng * N], ng, N)
+
+    def assemble(blocks_nz, block_sp, last_nz, last_sp, row_step, col_step, shape):
+        rb, cb = (np.asarray(v, dtype=np.int64) for v in block_sp.get_triplet())
+        rl, cl = (np.asarray(v, dtype=np.int64) for v in last_sp.get_triplet())
+        k = np.repeat(np.arange(N), rb.size)
+        rows = np.concatenate([np.tile(rb, N) + row_step * k, rl + row_step * N])
+        cols = np.concatenate([np.tile(cb, N) + col_step * k, cl + col_step * N])
+        perm = np.lexsort((rows, cols))
+        sp = ca.Sparsity.triplet(shape[0], shape[1], rows[perm].tolist(), cols[perm].tolist())
+        values = ca.vertcat(blocks_nz, last_nz)
+        if not np.array_equal(perm, np.arange(perm.size)):
+            values = values.nz[perm.tolist()]
+        return ca.MX(sp, values)
+
+    n_var, n_con = w.shape[0], g.shape[0]
+    Jb = jac_node.map(N)(Wm, Xn, data)
+    Jl = jac_last(xN)
+    jac = assemble(Jb.nz[:], jac_node.sparsity_out(0), Jl.nz[:], jac_last.sparsity_out(0), ng, nz, (n_con, n_var))
+    Hb = hess_node.map(N)(Wm, data, Lg, lam_f)
+    Hl = hess_last(xN, lam_g[ng * N:], lam_f)
+    hess = assemble(Hb.nz[:], hess_node.sparsity_out(0), Hl.nz[:], hess_last.sparsity_out(0), nz, nz, (n_var, n_var))
+    cw = ca.DM(weights)
+    p = ca.MX.sym("p", 0, 1)
+    f = ca.dot(cw, w**2)
+    return {
+        "grad_f": ca.Function("nlp_grad_f", [w, p], [f, 2 * cw * w], ["x", "p"], ["f", "grad_f_x"]),
+        "jac_g": ca.Function("nlp_jac_g", [w, p], [g, jac], ["x", "p"], ["g", "jac_g_x"]),
+        "hess_lag": ca.Function("nlp_hess_l", [w, p, lam_f, lam_g], [hess],
+                                ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"]),
+    }
+
+
+def build_nlp(
     inputs: TrialInputs,
     params: MuscleTendonParameters,
     guess: InitialGuess,
     options: SolverOptions | None = None,
-) -> OcpResult:
-    """Build and solve the optimal control problem; never raises on non-convergence.
+) -> dict:
+    """The NLP of the optimal control problem, without solving it.
 
-    The returned ``status`` is IPOPT's return status (``Solve_Succeeded`` on success) and
-    ``success`` says whether IPOPT reported success. Errors while building the problem raise
-    :class:`SolverError`.
+    Returns a dict with the CasADi symbols and expressions ``x``, ``f``, ``g``, the objective
+    ``terms``, the bounds and initial guess ``lbx``, ``ubx``, ``x0`` (node-major layout, see
+    the module docstring), the sizes, and, for ``derivatives="explicit"``, the functions
+    ``grad_f``, ``jac_g`` and ``hess_lag`` handed to IPOPT.
     """
     import casadi as ca
 
     options = options or SolverOptions()
     if tuple(params.names) != tuple(inputs.muscles):
         params = params.subset(inputs.muscles)
-    t_build = _time.perf_counter()
     M, D, N = len(inputs.muscles), len(inputs.dofs), inputs.n_intervals
     nx, nu = 3 * M, 2 * M + D
     nz = nx + nu
@@ -246,6 +361,7 @@ def solve_ocp(
     lmt = ca.DM(inputs.lmt_m[:N].T)
     rr = ca.DM(inputs.moment_arms_m[:N].transpose(0, 2, 1).reshape(N, D * M).T)  # column-major D x M
     mom = ca.DM(inputs.moments_Nm[:N].T)
+    data = ca.vertcat(lmt, rr, mom)
     G = node.map(N)(A, LM, LP, E, AT, VM, A1, LM1, lmt, rr, mom)
     g = ca.vertcat(ca.vec(G), last(xN[M:2 * M], xN[2 * M:3 * M]))
 
@@ -257,6 +373,13 @@ def solve_ocp(
         "fibre_velocity": options.w_velocity * ca.sumsqr(VM) / (N * M),
     }
     J = terms["activation"] + terms["excitation"] + terms["reserve"] + terms["fibre_velocity"]
+    # the same objective as one weighted sum of squares: J = sum(c * w^2)
+    c_node = np.concatenate([
+        np.full(M, options.w_activation * 0.5 / (N * M)), np.zeros(2 * M),
+        np.full(M, options.w_activation * 0.5 / (N * M)), np.full(D, options.w_reserve / (N * D)),
+        np.full(M, options.w_velocity / (N * M)),
+    ])
+    weights = np.concatenate([np.tile(c_node, N), c_node[:M], np.zeros(2 * M)])
 
     # bounds and initial guess, node-major layout
     inf = np.inf
@@ -280,6 +403,35 @@ def solve_ocp(
     if not np.all(np.isfinite(x0)):
         raise SolverError("the initial guess holds NaN or infinite values; check the muscle geometry and parameters")
 
+    out = {"x": w, "f": J, "g": g, "terms": terms, "x0": x0, "lbx": lbx, "ubx": ubx,
+           "n_variables": n_var, "n_constraints": n_con, "layout": (M, D, N, nz)}
+    if options.derivatives == "explicit":
+        out.update(_explicit_derivatives(inputs, params, options, ca, w, g, weights, data))
+    return out
+
+
+def solve_ocp(
+    inputs: TrialInputs,
+    params: MuscleTendonParameters,
+    guess: InitialGuess,
+    options: SolverOptions | None = None,
+) -> OcpResult:
+    """Build and solve the optimal control problem; never raises on non-convergence.
+
+    The returned ``status`` is IPOPT's return status (``Solve_Succeeded`` on success) and
+    ``success`` says whether IPOPT reported success. Errors while building the problem raise
+    :class:`SolverError`.
+    """
+    import casadi as ca
+
+    options = options or SolverOptions()
+    if tuple(params.names) != tuple(inputs.muscles):
+        params = params.subset(inputs.muscles)
+    t_build = _time.perf_counter()
+    nlp = build_nlp(inputs, params, guess, options)
+    M, D, N, nz = nlp["layout"]
+    n_var, n_con = nlp["n_variables"], nlp["n_constraints"]
+    w, terms = nlp["x"], nlp["terms"]
     ipopt = {
         "tol": options.tol,
         "max_iter": int(options.max_iter),
@@ -289,11 +441,10 @@ def solve_ocp(
         "hessian_approximation": "exact",
     }
     ipopt.update(options.ipopt)
+    nlp_options = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
+    nlp_options.update({k: nlp[k] for k in ("grad_f", "jac_g", "hess_lag") if k in nlp})
     try:
-        solver = ca.nlpsol(
-            "mrs", "ipopt", {"x": w, "f": J, "g": g},
-            {"ipopt": ipopt, "print_time": False, "error_on_fail": False},
-        )
+        solver = ca.nlpsol("mrs", "ipopt", {"x": w, "f": nlp["f"], "g": nlp["g"]}, nlp_options)
     except RuntimeError as exc:
         raise SolverError(f"the optimal control problem could not be built: {exc}") from None
     terms_f = ca.Function("terms", [w], list(terms.values()))
@@ -301,15 +452,17 @@ def solve_ocp(
 
     if options.tune_malloc:
         tune_malloc()
+    if options.blas_threads is not None:
+        set_blas_threads(options.blas_threads)
     t0 = _time.perf_counter()
+    c0 = _time.process_time()
     try:
-        sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=0.0, ubg=0.0)
+        sol = solver(x0=nlp["x0"], lbx=nlp["lbx"], ubx=nlp["ubx"], lbg=0.0, ubg=0.0)
     except RuntimeError as exc:
         raise SolverError(f"IPOPT stopped with an error: {exc}") from None
     solve_time = _time.perf_counter() - t0
+    solve_cpu = _time.process_time() - c0
     stats = solver.stats()
-    global LAST_STATS
-    LAST_STATS = stats
     x = np.asarray(sol["x"]).reshape(-1)
     gval = np.asarray(sol["g"]).reshape(-1)
     Z = x[: nz * N].reshape(N, nz)
@@ -327,8 +480,11 @@ def solve_ocp(
         success=bool(stats.get("success", False)),
         iterations=int(stats.get("iter_count", -1)),
         solve_time_s=solve_time,
+        solve_cpu_s=solve_cpu,
         build_time_s=build_time,
         n_variables=n_var,
         n_constraints=n_con,
         max_constraint_violation=float(np.max(np.abs(gval))) if gval.size else 0.0,
+        function_time_s={k[len("t_wall_"):]: float(v) for k, v in stats.items()
+                         if k.startswith("t_wall_nlp") and v},
     )

@@ -27,8 +27,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import CubicSpline
-from scipy.optimize import lsq_linear
 
 from ..muscle import (
     active_force_length,
@@ -39,7 +37,7 @@ from ..muscle import (
 from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
 
-__all__ = ["StaticOptimisation", "InitialGuess", "static_optimisation", "initial_guess"]
+__all__ = ["StaticOptimisation", "InitialGuess", "static_optimisation", "initial_guess", "guess_from_solution"]
 
 RESERVE_WEIGHT_SO = 1000.0
 
@@ -92,6 +90,8 @@ def static_optimisation(
     reserve_weight: float = RESERVE_WEIGHT_SO,
 ) -> StaticOptimisation:
     """Solve the rigid-tendon static optimisation at every IK frame (exactly)."""
+    from scipy.optimize import lsq_linear
+
     F = inputs.frame_time_s.size
     M, D = len(inputs.muscles), len(inputs.dofs)
     f_act, f_pas, (act_norm, pas_norm) = rigid_tendon_forces(
@@ -122,6 +122,8 @@ def initial_guess(inputs: TrialInputs, params: MuscleTendonParameters, so: Stati
     As in the study, the reserve guess is the static-optimisation reserve in N m, not divided
     by the optimal reserve torque (only a starting point; IPOPT moves it into its bounds).
     """
+    from scipy.interpolate import CubicSpline
+
     t = inputs.mesh_time_s
     N = inputs.n_intervals
 
@@ -144,4 +146,32 @@ def initial_guess(inputs: TrialInputs, params: MuscleTendonParameters, so: Stati
         excitation=a[:N].copy(),
         reserve=ar[:N].copy(),
         vm_norm=vm,
+    )
+
+
+def guess_from_solution(solution, inputs: TrialInputs, params: MuscleTendonParameters,
+                        optimal_reserve_Nm: float = 150.0) -> InitialGuess:
+    """An initial guess from a previous solution on the same mesh and muscles (warm start).
+
+    Raises :class:`~musclemetab.errors.DataMismatchError` when the mesh or the muscles differ.
+    """
+    from ..errors import DataMismatchError
+
+    N = inputs.n_intervals
+    if tuple(solution.muscles) != tuple(inputs.muscles) or tuple(solution.dofs) != tuple(inputs.dofs):
+        raise DataMismatchError("the warm-start solution has other muscles or DOFs than this problem")
+    if solution.time_s.size != N + 1 or np.max(np.abs(solution.time_s - inputs.mesh_time_s)) > 1e-9:
+        raise DataMismatchError(
+            f"the warm-start solution's mesh ({solution.time_s[0]:g}-{solution.time_s[-1]:g} s, "
+            f"{solution.time_s.size - 1} intervals) differs from this trial's "
+            f"({inputs.mesh_time_s[0]:g}-{inputs.mesh_time_s[-1]:g} s, {N} intervals)"
+        )
+    lm_m = solution.lm_norm * params.optimal_fiber_length_m
+    return InitialGuess(
+        activation=solution.activation.copy(),
+        lm_norm=solution.lm_norm.copy(),
+        lm_projected_m=np.sqrt(np.maximum(lm_m**2 - params.width_m**2, 0.0)),
+        excitation=solution.excitation[:N].copy(),
+        reserve=solution.reserve_Nm[:N] / optimal_reserve_Nm,
+        vm_norm=solution.vm_norm[:N].copy(),
     )

@@ -1,0 +1,33 @@
+"""Muscle redundancy solver with compliant tendons (De Groote et al. 2016).
+
+The effort-based workflows of Luis et al. (PLoS Comput Biol 2024): EFFORT-GEN, EFFORT-CAL and
+EFFORT-TEN. From inverse kinematics, inverse dynamics and muscle geometry, an optimal control
+problem (CasADi + IPOPT) finds muscle excitations, activations, fibre lengths and velocities and
+tendon forces that reproduce the joint moments with minimal effort.
+
+Modules: :mod:`.inputs` (filtering, splines, mesh), :mod:`.static_opt` (initial guess),
+:mod:`.problem` (the optimal control problem), :mod:`.solution` (results, files),
+:mod:`.workflows` (presets, passive and tendon parameters), :mod:`.solve` (the pipeline),
+:mod:`.cli` (``musclemetab solve``). Importing this package does not import CasADi; solving
+does. OpenSim is never imported here.
+"""
+
+from .parameters import MuscleTendonParameters
+from .problem import SolverOptions
+from .solution import Solution
+from .solve import solve_files, solve_trial, solve_with_parameters
+from .workflows import WORKFLOWS, Workflow, get_workflow, read_passive_parameters, workflow_parameters
+
+__all__ = [
+    "MuscleTendonParameters",
+    "SolverOptions",
+    "Solution",
+    "solve_trial",
+    "solve_files",
+    "solve_with_parameters",
+    "WORKFLOWS",
+    "Workflow",
+    "get_workflow",
+    "read_passive_parameters",
+    "workflow_parameters",
+]

@@ -1,0 +1,116 @@
+"""``musclemetab solve``: the muscle redundancy problem of one trial, from files.
+
+::
+
+    musclemetab solve --model M.osim --ik IK.mot --id ID.sto \\
+        --workflow effort-gen|effort-cal|effort-ten [--passive FILE] \\
+        [--tendon-stiffness soleus_r=10.6,...] [--parameters parameters.json] --out DIR
+
+Writes ``DIR/solution.sto`` and ``DIR/summary.json`` (see :mod:`.solution`). The muscle
+geometry comes from :func:`musclemetab.geometry.compute_geometry`, which runs OpenSim in its
+own process and caches the result; this process only runs CasADi.
+
+Exit status: 0 on success; 1 on a package error (bad input, or a solve that did not
+converge, in which case the folder is still written with ``"success": false`` and IPOPT's
+status, for inspection).
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from ..errors import OptionError, SolverError
+
+__all__ = ["add_solve_parser", "solve_command"]
+
+
+def add_solve_parser(subparsers) -> argparse.ArgumentParser:
+    """Add the ``solve`` subcommand to an ``argparse`` sub-parser collection."""
+    p = subparsers.add_parser(
+        "solve",
+        help="muscle redundancy problem of one trial (effort-based workflows)",
+        description=(
+            "Solve the muscle redundancy problem with compliant tendons (De Groote et al. 2016) for "
+            "one trial: muscle excitations, activations, fibre lengths and velocities and tendon forces "
+            "that reproduce the inverse-dynamics moments of the five right-leg DOFs with minimal effort. "
+            "Workflows: effort-gen (generic passive muscle, kT = 35), effort-cal (calibrated passive "
+            "muscle), effort-ten (calibrated passive muscle and personalised triceps-surae and vasti "
+            "tendon stiffness). Writes DIR/solution.sto and DIR/summary.json."
+        ),
+    )
+    p.add_argument("--model", required=True, metavar="M.osim", help="OpenSim model")
+    p.add_argument("--ik", required=True, metavar="IK.mot", help="inverse kinematics (defines the time window)")
+    p.add_argument("--id", required=True, metavar="ID.sto",
+                   help="inverse dynamics with '<dof>_moment' columns in N m")
+    p.add_argument("--workflow", default="effort-gen", choices=("effort-gen", "effort-cal", "effort-ten"),
+                   help="workflow preset (default effort-gen)")
+    p.add_argument("--passive", metavar="FILE",
+                   help="calibrated passive parameters for effort-cal/effort-ten: passive_parameters.csv "
+                   "(muscle,kPE,s0,sM) or the study's passiveMoments.mat (default: the published "
+                   "calibration shipped with the package)")
+    p.add_argument("--tendon-stiffness", metavar="MUSCLE=KT[,...]",
+                   help="effort-ten: tendon stiffness per muscle, e.g. soleus_r=10.6,vaslat_r=4.7 "
+                   "(default: triceps surae 10.617977, vasti 4.695786)")
+    p.add_argument("--parameters", metavar="parameters.json",
+                   help="effort-ten: JSON file with {\"tendon_stiffness\": {muscle: kT}}")
+    p.add_argument("--dofs", nargs="+", metavar="DOF",
+                   help="degrees of freedom (default: ankle_angle_r knee_angle_r hip_flexion_r "
+                   "hip_adduction_r hip_rotation_r)")
+    p.add_argument("--cache-dir", metavar="DIR", help="geometry cache folder (default: the package's)")
+    p.add_argument("--max-iter", type=int, default=10000, help="IPOPT iteration limit (default 10000)")
+    p.add_argument("--print-level", type=int, default=0, help="IPOPT print level 0-12 (default 0)")
+    p.add_argument("--warm-start", metavar="DIR",
+                   help="start from the solution in DIR (same trial, e.g. another workflow) with IPOPT's "
+                   "barrier parameter at 1e-6: faster, but may end in another local optimum than the "
+                   "study's start from static optimisation")
+    p.add_argument("--skip-unit-checks", action="store_true",
+                   help="do not reject inverse-dynamics moments whose size looks like wrong units")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.set_defaults(func=solve_command)
+    return p
+
+
+def solve_command(args) -> int:
+    """Run ``musclemetab solve`` with parsed arguments; returns the exit status.
+
+    Raises a :class:`~musclemetab.errors.MusclemetabError` on bad input and
+    :class:`~musclemetab.errors.SolverError` when IPOPT did not converge (after writing the
+    folder with ``success: false``).
+    """
+    from .inputs import DEFAULT_DOFS
+    from .problem import SolverOptions
+    from .solve import solve_files
+    from .workflows import parse_tendon_stiffness
+
+    if args.max_iter is not None and args.max_iter < 1:
+        raise OptionError(f"--max-iter must be at least 1, not {args.max_iter}")
+    kt = parse_tendon_stiffness(args.tendon_stiffness) if args.tendon_stiffness else None
+    dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else DEFAULT_DOFS
+    options = SolverOptions(max_iter=args.max_iter, print_level=args.print_level)
+    warm = None
+    if args.warm_start:
+        from .solution import Solution
+
+        warm = Solution.load(args.warm_start)
+    solution = solve_files(
+        args.model, args.ik, args.id, args.workflow,
+        dofs=dofs, passive=args.passive, tendon_stiffness=kt, tendon_stiffness_file=args.parameters,
+        options=options, cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, warm_start=warm,
+    )
+    solution.write(args.out)
+    s = solution.summary
+    if not solution.success:
+        raise SolverError(
+            f"the {args.workflow} solve did not converge (IPOPT status '{s['status']}' after "
+            f"{s['iterations']} iterations); the unconverged result is in {args.out} with "
+            "\"success\": false. Check the inputs (units, time ranges) or raise --max-iter"
+        )
+    worst_reserve = max(s["reserve_rms_Nm"].values()) if s["reserve_rms_Nm"] else 0.0
+    print(
+        f"solve: {args.workflow} {len(solution.muscles)} muscles x {len(solution.dofs)} DOFs, "
+        f"N = {s['n_intervals']}: {s['status']} in {s['iterations']} iterations, "
+        f"objective {s['objective']:.6e}, solve {s['solve_time_s']:.2f} s, "
+        f"max moment residual {s['max_moment_residual_Nm']:.1e} N m, max reserve RMS "
+        f"{worst_reserve:.3g} N m -> {args.out}"
+    )
+    return 0

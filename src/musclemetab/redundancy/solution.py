@@ -1,0 +1,386 @@
+"""The solution of a muscle redundancy problem: arrays, derived forces, files.
+
+A solution folder holds two files:
+
+``solution.sto``
+    OpenSim storage, one row per mesh node ``t_0 ... t_N``, columns
+    ``/forceset/<muscle>/<quantity>`` with quantity
+
+    ==================================  =====================================================
+    ``excitation``                      ``e`` (-)
+    ``activation``                      ``a`` (-)
+    ``normalized_fiber_length``         ``l~M = lM/lMo`` (-)
+    ``normalized_fiber_velocity``       ``v~M/vmax``: fibre velocity in units of ``lMo vmax``
+                                        (OpenSim's definition, in [-1, 1]; positive =
+                                        lengthening). Multiply by ``vmax`` for ``lMo/s``, by
+                                        ``lMo vmax`` for m/s.
+    ``tendon_force``                    ``F0 fT(l~T)`` (N), with ``lT = lMT - sqrt(lM^2 - w^2)``
+                                        from the geometry (``muscle_model.md`` §11)
+    ``active_fiber_force``              ``a fL fV F0`` (N), along the fibre
+    ``passive_fiber_force``             ``F0 fPE(l~M)`` (N), along the fibre
+    ``active_force_length_multiplier``  ``fL(l~M)``
+    ``force_velocity_multiplier``       ``fV(v~M/vmax)``
+    ==================================  =====================================================
+
+    plus ``/forceset/reserve_<dof>`` (N m). Controls (excitation, fibre velocity, and what
+    depends on them: ``fV`` and the active fibre force) and reserves live on the intervals,
+    i.e. at nodes ``0 ... N-1``; at node ``N`` the file repeats the value of node ``N-1``.
+``summary.json``
+    Status, objective, iterations, times, residuals, reserve RMS per DOF, muscles, DOFs,
+    the muscle parameters used, the window, ``N`` and the workflow settings.
+
+Both files are written together (:func:`musclemetab.io.atomic_directory`): a reader never
+sees one without the other.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputFileError, MissingColumnError, SolverError
+from ..muscle import (
+    active_force_length,
+    activation_rate,
+    force_velocity,
+    passive_force_length,
+    tendon_force_length,
+)
+from .parameters import MuscleTendonParameters
+
+__all__ = [
+    "Solution",
+    "MUSCLE_QUANTITIES",
+    "SOLUTION_FILE",
+    "SUMMARY_FILE",
+    "muscle_column",
+    "reserve_column",
+    "derived_quantities",
+]
+
+SOLUTION_FILE = "solution.sto"
+SUMMARY_FILE = "summary.json"
+SUMMARY_FORMAT = "musclemetab.redundancy.solution"
+SUMMARY_VERSION = 1
+
+MUSCLE_QUANTITIES = (
+    "excitation",
+    "activation",
+    "normalized_fiber_length",
+    "normalized_fiber_velocity",
+    "tendon_force",
+    "active_fiber_force",
+    "passive_fiber_force",
+    "active_force_length_multiplier",
+    "force_velocity_multiplier",
+)
+
+CONVENTIONS = {
+    "normalized_fiber_velocity": "v~M / vmax: fibre velocity in units of lMo*vmax (OpenSim's "
+    "definition), positive = lengthening; the optimisation variable v~M (lMo/s) is this times vmax",
+    "controls_at_last_node": "excitation, normalized_fiber_velocity, force_velocity_multiplier, "
+    "active_fiber_force and the reserves are defined at nodes 0..N-1; the row of node N repeats node N-1",
+    "tendon_force": "F0*fT(l~T) with lT = lMT - sqrt(lM^2 - w^2) from the geometry, w = lMo*sin(alpha0)",
+    "active_fiber_force": "a*fL*fV*F0 along the fibre (not projected on the tendon)",
+    "passive_fiber_force": "F0*fPE(l~M) along the fibre (not projected on the tendon)",
+    "residuals": "moment residual = ID - sum(r*tendon_force) - reserve at nodes 0..N-1 (N m); "
+    "hill residual = (a fL fV + fPE) cos(alpha) - fT at nodes 0..N-1 (normalised); activation "
+    "residual = a_{k+1} - a_k - h*da/dt(e_k, a_k)",
+}
+
+
+def muscle_column(muscle: str, quantity: str) -> str:
+    return f"/forceset/{muscle}/{quantity}"
+
+
+def reserve_column(dof: str) -> str:
+    return f"/forceset/reserve_{dof}"
+
+
+def derived_quantities(
+    params: MuscleTendonParameters,
+    activation: np.ndarray,
+    lm_norm: np.ndarray,
+    vm_norm: np.ndarray,
+    lmt_m: np.ndarray,
+) -> dict:
+    """Forces and multipliers from the states (``muscle_model.md`` §11), NumPy.
+
+    Arrays are ``(nodes, M)``; ``vm_norm`` is ``v~M`` in lMo/s at the same nodes.
+    """
+    lmo = params.optimal_fiber_length_m
+    f0 = params.max_isometric_force_N
+    lm_m = lm_norm * lmo
+    lm_proj = np.sqrt(np.maximum(lm_m**2 - params.width_m**2, 0.0))
+    lt_norm = (lmt_m - lm_proj) / params.tendon_slack_length_m
+    ft = tendon_force_length(lt_norm, params.tendon_stiffness)
+    fl = active_force_length(lm_norm)
+    fv = force_velocity(vm_norm / params.max_contraction_velocity)
+    fpe = passive_force_length(lm_norm, params.passive_kpe, params.passive_s0, params.passive_sm)
+    return {
+        "tendon_force_norm": ft,
+        "tendon_force_N": f0 * ft,
+        "active_force_length_multiplier": fl,
+        "force_velocity_multiplier": fv,
+        "passive_force_length_multiplier": fpe,
+        "active_fiber_force_N": activation * fl * fv * f0,
+        "passive_fiber_force_N": f0 * fpe,
+        "cos_pennation": lm_proj / lm_m,
+        "lt_norm": lt_norm,
+    }
+
+
+def _hold_last(x: np.ndarray) -> np.ndarray:
+    return np.vstack([x, x[-1:]])
+
+
+@dataclass
+class Solution:
+    """Muscle states, controls and forces on the mesh, time-first arrays ``(N+1, M)``.
+
+    Controls (``excitation``, ``vm_norm``), ``force_velocity_multiplier``,
+    ``active_fiber_force_N`` and ``reserve_Nm`` repeat node ``N-1`` at node ``N``.
+    ``vm_norm`` is ``v~M`` in lMo/s (the optimisation variable); the file stores
+    ``v~M/vmax`` (see :attr:`normalized_fiber_velocity`).
+    """
+
+    time_s: np.ndarray
+    muscles: tuple[str, ...]
+    dofs: tuple[str, ...]
+    excitation: np.ndarray
+    activation: np.ndarray
+    lm_norm: np.ndarray
+    vm_norm: np.ndarray
+    tendon_force_N: np.ndarray
+    active_fiber_force_N: np.ndarray
+    passive_fiber_force_N: np.ndarray
+    active_force_length_multiplier: np.ndarray
+    force_velocity_multiplier: np.ndarray
+    reserve_Nm: np.ndarray
+    parameters: MuscleTendonParameters
+    summary: dict = field(default_factory=dict)
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def status(self) -> str:
+        return str(self.summary.get("status", "unknown"))
+
+    @property
+    def success(self) -> bool:
+        return bool(self.summary.get("success", False))
+
+    @property
+    def objective(self) -> float:
+        return float(self.summary.get("objective", math.nan))
+
+    @property
+    def n_intervals(self) -> int:
+        return self.time_s.size - 1
+
+    @property
+    def normalized_fiber_velocity(self) -> np.ndarray:
+        """``v~M / vmax`` (OpenSim's normalised fibre velocity)."""
+        return self.vm_norm / self.parameters.max_contraction_velocity
+
+    @property
+    def fiber_length_m(self) -> np.ndarray:
+        return self.lm_norm * self.parameters.optimal_fiber_length_m
+
+    @property
+    def fiber_velocity_m_per_s(self) -> np.ndarray:
+        return self.vm_norm * self.parameters.optimal_fiber_length_m
+
+    def muscle_index(self, name: str) -> int:
+        try:
+            return self.muscles.index(name)
+        except ValueError:
+            from ..errors import UnknownMuscleError
+
+            raise UnknownMuscleError(
+                f"muscle '{name}' is not in this solution; it has {', '.join(self.muscles)}"
+            ) from None
+
+    # ------------------------------------------------------------------ files
+    def to_dataframe(self):
+        from ..io import storage_from_arrays
+
+        cols: dict[str, np.ndarray] = {}
+        per_quantity = {
+            "excitation": self.excitation,
+            "activation": self.activation,
+            "normalized_fiber_length": self.lm_norm,
+            "normalized_fiber_velocity": self.normalized_fiber_velocity,
+            "tendon_force": self.tendon_force_N,
+            "active_fiber_force": self.active_fiber_force_N,
+            "passive_fiber_force": self.passive_fiber_force_N,
+            "active_force_length_multiplier": self.active_force_length_multiplier,
+            "force_velocity_multiplier": self.force_velocity_multiplier,
+        }
+        for q in MUSCLE_QUANTITIES:
+            arr = per_quantity[q]
+            for i, m in enumerate(self.muscles):
+                cols[muscle_column(m, q)] = arr[:, i]
+        for j, d in enumerate(self.dofs):
+            cols[reserve_column(d)] = self.reserve_Nm[:, j]
+        return storage_from_arrays(self.time_s, cols, name="musclemetab muscle redundancy solution")
+
+    def write(self, directory: str | os.PathLike) -> Path:
+        """Write ``solution.sto`` and ``summary.json`` into ``directory`` (atomically)."""
+        from ..io import atomic_directory, write_storage
+
+        directory = Path(directory)
+        summary = dict(self.summary)
+        summary.setdefault("format", SUMMARY_FORMAT)
+        summary.setdefault("format_version", SUMMARY_VERSION)
+        summary["muscles"] = list(self.muscles)
+        summary["dofs"] = list(self.dofs)
+        summary["parameters"] = self.parameters.to_records()
+        summary.setdefault("conventions", CONVENTIONS)
+        text = json.dumps(_jsonable(summary), indent=2, allow_nan=True)
+        with atomic_directory(directory) as tmp:
+            write_storage(
+                tmp / SOLUTION_FILE,
+                self.to_dataframe(),
+                name="musclemetab muscle redundancy solution",
+                in_degrees=False,
+                comments=[f"status={summary.get('status', 'unknown')}",
+                          f"workflow={summary.get('workflow', {}).get('name', '')}"],
+            )
+            (tmp / SUMMARY_FILE).write_text(text + "\n", encoding="utf-8")
+        return directory
+
+    @classmethod
+    def load(cls, directory: str | os.PathLike, *, require_success: bool = True) -> "Solution":
+        """Read a solution folder written by :meth:`write`.
+
+        Raises :class:`SolverError` when the stored solve did not succeed (unless
+        ``require_success=False``), :class:`InputFileError` when a file is missing or
+        inconsistent.
+        """
+        from ..io import read_storage
+
+        directory = Path(directory)
+        spath, jpath = directory / SOLUTION_FILE, directory / SUMMARY_FILE
+        for p in (spath, jpath):
+            if not p.is_file():
+                raise InputFileError(f"{p}: missing; {directory} is not a solution folder (run 'musclemetab solve')")
+        try:
+            summary = json.loads(jpath.read_text(encoding="utf-8"))
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise InputFileError(f"{jpath}: not valid JSON ({exc}); solve again") from None
+        for key in ("muscles", "dofs", "parameters", "status"):
+            if key not in summary:
+                raise InputFileError(f"{jpath}: no '{key}' entry; the summary is incomplete, solve again")
+        if require_success and not summary.get("success", False):
+            raise SolverError(
+                f"{directory}: the stored solve did not succeed (status '{summary.get('status')}'); "
+                "its values are not a solution. Solve again or pass require_success=False to inspect it"
+            )
+        muscles = tuple(summary["muscles"])
+        dofs = tuple(summary["dofs"])
+        params = MuscleTendonParameters.from_records(summary["parameters"]).subset(muscles)
+        df = read_storage(spath)
+        need = [muscle_column(m, q) for q in MUSCLE_QUANTITIES for m in muscles]
+        need += [reserve_column(d) for d in dofs]
+        missing = [c for c in need if c not in df.columns]
+        if missing:
+            raise MissingColumnError(
+                f"{spath}: missing column{'s' if len(missing) > 1 else ''} {', '.join(missing[:5])}"
+                f"{' ...' if len(missing) > 5 else ''}; the file does not match {jpath}"
+            )
+
+        def block(q):
+            return df[[muscle_column(m, q) for m in muscles]].to_numpy(dtype=float)
+
+        return cls(
+            time_s=df.index.to_numpy(dtype=float),
+            muscles=muscles,
+            dofs=dofs,
+            excitation=block("excitation"),
+            activation=block("activation"),
+            lm_norm=block("normalized_fiber_length"),
+            vm_norm=block("normalized_fiber_velocity") * params.max_contraction_velocity,
+            tendon_force_N=block("tendon_force"),
+            active_fiber_force_N=block("active_fiber_force"),
+            passive_fiber_force_N=block("passive_fiber_force"),
+            active_force_length_multiplier=block("active_force_length_multiplier"),
+            force_velocity_multiplier=block("force_velocity_multiplier"),
+            reserve_Nm=df[[reserve_column(d) for d in dofs]].to_numpy(dtype=float),
+            parameters=params,
+            summary=summary,
+        )
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    if isinstance(x, (np.floating,)):
+        return float(x)
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, (np.bool_,)):
+        return bool(x)
+    if isinstance(x, Path):
+        return str(x)
+    return x
+
+
+def build_solution(
+    inputs,
+    params: MuscleTendonParameters,
+    ocp,
+    summary: dict,
+) -> Solution:
+    """Assemble a :class:`Solution` from an :class:`~.problem.OcpResult` and the trial inputs.
+
+    Fills ``summary`` with residuals (moment, Hill equilibrium, activation dynamics) and
+    reserve statistics computed here in NumPy from the reported quantities.
+    """
+    N = inputs.n_intervals
+    h = inputs.step_s
+    vm_nodes = _hold_last(ocp.vm_norm)
+    d = derived_quantities(params, ocp.activation, ocp.lm_norm, vm_nodes, inputs.lmt_m)
+    reserve_Nm = _hold_last(ocp.reserve * summary.get("optimal_reserve_Nm", 150.0))
+    # residuals at the constrained nodes 0..N-1, from the reported (geometry-based) forces
+    muscle_moment = np.einsum("kdm,km->kd", inputs.moment_arms_m[:N], d["tendon_force_N"][:N])
+    moment_res = inputs.moments_Nm[:N] - muscle_moment - reserve_Nm[:N]
+    fibre = (ocp.activation * d["active_force_length_multiplier"] * d["force_velocity_multiplier"]
+             + d["passive_force_length_multiplier"])
+    hill_res = (fibre * d["cos_pennation"] - d["tendon_force_norm"])[:N]
+    act_res = ocp.activation[1:] - ocp.activation[:-1] - h * activation_rate(ocp.excitation, ocp.activation[:N])
+    reserve_rms = np.sqrt(np.mean(ocp.reserve**2, axis=0)) * summary.get("optimal_reserve_Nm", 150.0)
+    summary = dict(summary)
+    summary.update(
+        max_moment_residual_Nm=float(np.max(np.abs(moment_res))),
+        max_moment_residual_by_dof_Nm=dict(zip(inputs.dofs, np.max(np.abs(moment_res), axis=0).tolist())),
+        max_hill_residual=float(np.max(np.abs(hill_res))),
+        max_activation_dynamics_residual=float(np.max(np.abs(act_res))),
+        reserve_rms_Nm=dict(zip(inputs.dofs, reserve_rms.tolist())),
+        reserve_max_abs_Nm=dict(zip(inputs.dofs, np.max(np.abs(reserve_Nm), axis=0).tolist())),
+    )
+    return Solution(
+        time_s=inputs.mesh_time_s.copy(),
+        muscles=tuple(inputs.muscles),
+        dofs=tuple(inputs.dofs),
+        excitation=_hold_last(ocp.excitation),
+        activation=ocp.activation.copy(),
+        lm_norm=ocp.lm_norm.copy(),
+        vm_norm=vm_nodes,
+        tendon_force_N=d["tendon_force_N"],
+        active_fiber_force_N=d["active_fiber_force_N"],
+        passive_fiber_force_N=d["passive_fiber_force_N"],
+        active_force_length_multiplier=d["active_force_length_multiplier"],
+        force_velocity_multiplier=d["force_velocity_multiplier"],
+        reserve_Nm=reserve_Nm,
+        parameters=params,
+        summary=summary,
+    )

@@ -1,0 +1,443 @@
+"""The effort-based workflows of the study and their muscle parameters.
+
+==============  =====================================  ==========================================
+workflow        passive force-length (kPE, s0, sM)     tendon stiffness kT
+==============  =====================================  ==========================================
+``effort-gen``  generic: 4, 1, 0.6 for every muscle    35 for every muscle
+``effort-cal``  calibrated                             35 for every muscle
+``effort-ten``  calibrated                             35, except triceps surae (soleus, gasmed,
+                                                       gaslat) 10.617977 and vasti (vasint,
+                                                       vaslat, vasmed) 4.695786 (example-subject
+                                                       EMG-informed estimates), settable per muscle
+==============  =====================================  ==========================================
+
+All three use the weights ``[wAct, wTres, wVm] = [1, 1000, 0.01]`` (``muscle_redundancy.md`` §2).
+
+Calibrated passive parameters come from, in this order of preference:
+
+* a file given by the user: the package's calibration output ``passive_parameters.csv``
+  (columns ``muscle,kPE,s0,sM``) or the study's ``passiveMoments.mat``
+  (``sim.Results.onlyParam.calParam.kpe/ksf``, ``sM = 0.6``);
+* otherwise the published calibration of the example subject shipped with the package
+  (``kpe_calibrated_reference``, ``s0_calibrated_reference`` of
+  ``musclemetab/data/muscle_properties.csv``). ``summary.json`` records which was used.
+
+Names are matched by muscle name; a table without side suffix (``soleus``) applies to both
+``soleus_r`` and ``soleus_l``, and a value for one side is used for the other when the table
+has no value for it (the study copies right-leg values to the left leg).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from ..errors import InputFileError, MissingColumnError, OptionError, UnknownMuscleError
+from ..muscle import KT_GENERIC
+from .parameters import MuscleTendonParameters
+
+__all__ = [
+    "Workflow",
+    "WORKFLOWS",
+    "get_workflow",
+    "PassiveParameters",
+    "read_passive_parameters",
+    "reference_passive_parameters",
+    "generic_passive_parameters",
+    "read_tendon_stiffness_json",
+    "parse_tendon_stiffness",
+    "DEFAULT_PERSONALISED_KT",
+    "workflow_parameters",
+    "check_workflow_options",
+    "base_name",
+]
+
+GENERIC_KPE, GENERIC_S0, GENERIC_SM = 4.0, 1.0, 0.6
+
+#: Example-subject EMG-informed tendon stiffness (``muscle_redundancy.md`` §6.8).
+KT_TRICEPS_SURAE = 10.617977
+KT_VASTI = 4.695786
+DEFAULT_PERSONALISED_KT = {
+    "soleus": KT_TRICEPS_SURAE,
+    "gasmed": KT_TRICEPS_SURAE,
+    "gaslat": KT_TRICEPS_SURAE,
+    "vasint": KT_VASTI,
+    "vaslat": KT_VASTI,
+    "vasmed": KT_VASTI,
+}
+
+
+@dataclass(frozen=True)
+class Workflow:
+    """A named preset: which passive parameters and tendon stiffness, which weights."""
+
+    name: str
+    passive: str  # "generic" | "calibrated"
+    tendon: str  # "generic" | "personalised"
+    w_activation: float = 1.0
+    w_reserve: float = 1000.0
+    w_velocity: float = 0.01
+    description: str = ""
+
+
+WORKFLOWS = {
+    "effort-gen": Workflow("effort-gen", "generic", "generic",
+                           description="generic passive force-length, generic tendons (kT = 35)"),
+    "effort-cal": Workflow("effort-cal", "calibrated", "generic",
+                           description="calibrated passive force-length, generic tendons (kT = 35)"),
+    "effort-ten": Workflow("effort-ten", "calibrated", "personalised",
+                           description="calibrated passive force-length, personalised triceps-surae "
+                           "and vasti tendon stiffness"),
+}
+
+
+def get_workflow(name: str | Workflow) -> Workflow:
+    if isinstance(name, Workflow):
+        return name
+    key = str(name).strip().lower().replace("_", "-")
+    if key not in WORKFLOWS:
+        raise OptionError(f"unknown workflow '{name}'; choose one of {', '.join(WORKFLOWS)}")
+    return WORKFLOWS[key]
+
+
+def base_name(muscle: str) -> str:
+    """``soleus_r`` -> ``soleus``; names without a side suffix are returned unchanged."""
+    if muscle.endswith(("_r", "_l")):
+        return muscle[:-2]
+    return muscle
+
+
+def _mirror(muscle: str) -> str | None:
+    if muscle.endswith("_r"):
+        return muscle[:-2] + "_l"
+    if muscle.endswith("_l"):
+        return muscle[:-2] + "_r"
+    return None
+
+
+@dataclass(frozen=True)
+class PassiveParameters:
+    """Passive force-length parameters by muscle name: ``{name: (kPE, s0, sM)}`` and the source."""
+
+    values: Mapping[str, tuple[float, float, float]]
+    source: str
+
+    def lookup(self, muscle: str) -> tuple[float, float, float] | None:
+        for key in (muscle, _mirror(muscle), base_name(muscle)):
+            if key is None:
+                continue
+            v = self.values.get(key)
+            if v is not None and all(math.isfinite(x) for x in v):
+                return v
+        return None
+
+    def for_muscles(self, muscles: Sequence[str]) -> np.ndarray:
+        """``(M, 3)`` array of kPE, s0, sM; raises :class:`UnknownMuscleError` for gaps."""
+        out, missing = [], []
+        for m in muscles:
+            v = self.lookup(m)
+            if v is None:
+                missing.append(m)
+                v = (math.nan,) * 3
+            out.append(v)
+        if missing:
+            raise UnknownMuscleError(
+                f"{self.source}: no passive parameters for {', '.join(missing)}; the calibration must "
+                "cover every muscle of the problem (or use the effort-gen workflow)"
+            )
+        return np.array(out, dtype=float)
+
+
+def generic_passive_parameters(muscles: Sequence[str]) -> PassiveParameters:
+    return PassiveParameters({m: (GENERIC_KPE, GENERIC_S0, GENERIC_SM) for m in muscles}, "generic")
+
+
+def _package_table() -> list[dict]:
+    text = resources.files("musclemetab").joinpath("data/muscle_properties.csv").read_text(encoding="utf-8")
+    lines = [ln for ln in text.splitlines() if not ln.startswith("#")]
+    return list(csv.DictReader(io.StringIO("\n".join(lines))))
+
+
+def reference_passive_parameters() -> PassiveParameters:
+    """The published passive calibration shipped with the package (side-free names, sM = 0.6)."""
+    rows = _package_table()
+    values = {
+        r["muscle"]: (float(r["kpe_calibrated_reference"]), float(r["s0_calibrated_reference"]), GENERIC_SM)
+        for r in rows
+        if r.get("kpe_calibrated_reference") and r.get("s0_calibrated_reference")
+    }
+    return PassiveParameters(values, "package:muscle_properties.csv (published calibration)")
+
+
+def _tendon_groups() -> dict[str, str]:
+    try:
+        return {r["muscle"]: r.get("tendon_stiffness_group", "") for r in _package_table()}
+    except (OSError, KeyError):  # pragma: no cover
+        return {}
+
+
+def read_passive_parameters(path: str | os.PathLike) -> PassiveParameters:
+    """Read calibrated passive parameters from ``passive_parameters.csv`` or ``passiveMoments.mat``."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputFileError(f"{path}: no such passive-parameter file; check the --passive path")
+    if path.suffix.lower() == ".mat":
+        return _read_passive_mat(path)
+    if path.suffix.lower() in (".csv", ".txt"):
+        return _read_passive_csv(path)
+    raise InputFileError(
+        f"{path}: unknown passive-parameter format '{path.suffix}'; give a passive_parameters.csv "
+        "(columns muscle,kPE,s0,sM) or the study's passiveMoments.mat"
+    )
+
+
+def _read_passive_csv(path: Path) -> PassiveParameters:
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputFileError(f"{path}: cannot be read ({exc})") from None
+    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    reader = csv.DictReader(io.StringIO("\n".join(lines)))
+    cols = [c.strip() for c in (reader.fieldnames or [])]
+    need = ["muscle", "kPE", "s0"]
+    missing = [c for c in need if c not in cols]
+    if missing:
+        raise MissingColumnError(
+            f"{path}: missing column{'s' if len(missing) > 1 else ''} {', '.join(missing)}; a passive "
+            f"parameter table has columns muscle,kPE,s0,sM (found {', '.join(cols) or 'none'})"
+        )
+    values = {}
+    for i, row in enumerate(reader, start=2):
+        row = {k.strip(): (v or "").strip() for k, v in row.items() if k is not None}
+        try:
+            kpe, s0 = float(row["kPE"]), float(row["s0"])
+            sm = float(row["sM"]) if row.get("sM") else GENERIC_SM
+        except ValueError:
+            raise InputFileError(f"{path}: row {i} ('{row.get('muscle')}') holds a value that is not a number") from None
+        if not (kpe > 0 and sm > 0 and math.isfinite(s0)):
+            raise InputFileError(f"{path}: row {i} ('{row['muscle']}'): kPE and sM must be positive, s0 finite")
+        values[row["muscle"]] = (kpe, s0, sm)
+    if not values:
+        raise InputFileError(f"{path}: no rows; the passive parameter table is empty")
+    return PassiveParameters(values, str(path))
+
+
+def _read_passive_mat(path: Path) -> PassiveParameters:
+    import scipy.io
+
+    try:
+        mat = scipy.io.loadmat(str(path), squeeze_me=True, struct_as_record=False)
+    except Exception as exc:  # scipy raises several types on malformed files
+        raise InputFileError(f"{path}: not a readable MATLAB file ({exc})") from None
+    try:
+        only = mat["sim"].Results.onlyParam
+        names = [str(n) for n in np.atleast_1d(only.MuscleNames)]
+        kpe = np.atleast_1d(np.asarray(only.calParam.kpe, dtype=float))
+        ksf = np.atleast_1d(np.asarray(only.calParam.ksf, dtype=float))
+    except (KeyError, AttributeError):
+        raise InputFileError(
+            f"{path}: no sim.Results.onlyParam.calParam (kpe, ksf) with MuscleNames; this is not a "
+            "passive calibration result of the study"
+        ) from None
+    if not (len(names) == kpe.size == ksf.size):
+        raise InputFileError(f"{path}: {len(names)} muscle names but {kpe.size} kpe and {ksf.size} ksf values")
+    values = {n: (float(k), float(s), GENERIC_SM) for n, k, s in zip(names, kpe, ksf)}
+    return PassiveParameters(values, str(path))
+
+
+def parse_tendon_stiffness(text: str) -> dict[str, float]:
+    """Parse ``"soleus_r=10.6,gasmed_r=10.6"`` into ``{muscle: kT}``."""
+    out: dict[str, float] = {}
+    for item in (s.strip() for s in str(text).split(",")):
+        if not item:
+            continue
+        name, sep, value = item.partition("=")
+        try:
+            kt = float(value)
+        except ValueError:
+            kt = math.nan
+        if not sep or not name.strip() or not (kt > 0 and math.isfinite(kt)):
+            raise OptionError(
+                f"--tendon-stiffness: '{item}' is not 'muscle=kT' with a positive number, e.g. soleus_r=10.6"
+            )
+        out[name.strip()] = kt
+    if not out:
+        raise OptionError("--tendon-stiffness is empty; give e.g. soleus_r=10.6,vaslat_r=4.7")
+    return out
+
+
+def read_tendon_stiffness_json(path: str | os.PathLike) -> dict[str, float]:
+    """Read ``{"tendon_stiffness": {muscle: kT}}`` from a ``parameters.json``."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputFileError(f"{path}: no such parameters file; check the --parameters path") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputFileError(f"{path}: not a readable JSON file ({exc})") from None
+    table = data.get("tendon_stiffness") if isinstance(data, dict) else None
+    if not isinstance(table, dict) or not table:
+        raise InputFileError(
+            f"{path}: no 'tendon_stiffness' object; expected {{\"tendon_stiffness\": {{\"soleus_r\": 10.6, ...}}}}"
+        )
+    out = {}
+    for name, value in table.items():
+        try:
+            kt = float(value)
+        except (TypeError, ValueError):
+            kt = math.nan
+        if not (kt > 0 and math.isfinite(kt)):
+            raise InputFileError(f"{path}: tendon_stiffness of '{name}' is {value!r}; it must be a positive number")
+        out[str(name)] = kt
+    return out
+
+
+def _apply_by_name(muscles: Sequence[str], table: Mapping[str, float], what: str,
+                   strict: bool) -> dict[str, float]:
+    """Resolve a ``{name: value}`` table (names with or without side suffix) onto ``muscles``."""
+    resolved: dict[str, float] = {}
+    unknown = []
+    for name, value in table.items():
+        hits = [m for m in muscles if m == name] or [m for m in muscles if base_name(m) == name]
+        if not hits:
+            unknown.append(name)
+        for m in hits:
+            resolved[m] = float(value)
+    if unknown and strict:
+        raise UnknownMuscleError(
+            f"{what}: muscle{'s' if len(unknown) > 1 else ''} {', '.join(unknown)} not among the muscles "
+            f"of this problem ({', '.join(muscles[:6])}{' ...' if len(muscles) > 6 else ''})"
+        )
+    return resolved
+
+
+def check_workflow_options(
+    workflow: str | Workflow,
+    passive=None,
+    tendon_stiffness: Mapping[str, float] | None = None,
+    tendon_stiffness_file=None,
+) -> Workflow:
+    """Reject option combinations a workflow does not accept; returns the :class:`Workflow`."""
+    wf = get_workflow(workflow)
+    if wf.passive == "generic" and passive is not None:
+        raise OptionError(
+            f"workflow {wf.name} uses the generic passive parameters (kPE = 4, s0 = 1, sM = 0.6); "
+            "drop --passive or choose effort-cal / effort-ten"
+        )
+    if wf.tendon == "generic" and (tendon_stiffness or tendon_stiffness_file):
+        raise OptionError(
+            f"workflow {wf.name} uses generic tendons (kT = 35); tendon stiffness values "
+            "(--tendon-stiffness / --parameters) belong to effort-ten"
+        )
+    return wf
+
+
+def workflow_parameters(
+    workflow: str | Workflow,
+    model_parameters,
+    muscles: Sequence[str],
+    *,
+    passive: str | os.PathLike | PassiveParameters | None = None,
+    tendon_stiffness: Mapping[str, float] | None = None,
+    tendon_stiffness_file: str | os.PathLike | None = None,
+) -> tuple[MuscleTendonParameters, dict]:
+    """Muscle parameters of a workflow for the given muscles, and a record of their sources.
+
+    Parameters
+    ----------
+    workflow
+        ``effort-gen``, ``effort-cal`` or ``effort-ten`` (or a :class:`Workflow`).
+    model_parameters
+        Object with arrays ``names``, ``max_isometric_force_N``, ``optimal_fiber_length_m``,
+        ``tendon_slack_length_m``, ``pennation_angle_at_optimal_rad``,
+        ``max_contraction_velocity`` (e.g. ``musclemetab.model.read_muscle_parameters``).
+    passive
+        Calibration for effort-cal/ten: a path (``passive_parameters.csv`` or
+        ``passiveMoments.mat``) or :class:`PassiveParameters`. ``None`` uses the published
+        calibration shipped with the package. Not allowed with effort-gen.
+    tendon_stiffness, tendon_stiffness_file
+        effort-ten only: ``{muscle: kT}`` overrides (names with or without side suffix) and
+        a ``parameters.json`` with a ``tendon_stiffness`` object. Precedence: defaults <
+        file < mapping.
+    """
+    wf = check_workflow_options(workflow, passive, tendon_stiffness, tendon_stiffness_file)
+    muscles = tuple(muscles)
+    base = _model_arrays(model_parameters, muscles)
+
+    if wf.passive == "generic":
+        pp = generic_passive_parameters(muscles)
+    elif passive is None:
+        pp = reference_passive_parameters()
+    elif isinstance(passive, PassiveParameters):
+        pp = passive
+    else:
+        pp = read_passive_parameters(passive)
+    passive_arr = pp.for_muscles(muscles)
+
+    kt = np.full(len(muscles), KT_GENERIC)
+    record = {"name": wf.name, "description": wf.description, "passive_source": pp.source,
+              "weights": {"w_activation": wf.w_activation, "w_reserve": wf.w_reserve,
+                          "w_velocity": wf.w_velocity}}
+    if wf.tendon == "personalised":
+        groups = _tendon_groups()
+        defaults = {name: KT_TRICEPS_SURAE if g == "PF" else KT_VASTI
+                    for name, g in groups.items() if g in ("PF", "VA")} or dict(DEFAULT_PERSONALISED_KT)
+        resolved = _apply_by_name(muscles, defaults, "default tendon stiffness", strict=False)
+        sources = {m: "default (example-subject EMG-informed estimate)" for m in resolved}
+        if tendon_stiffness_file is not None:
+            table = read_tendon_stiffness_json(tendon_stiffness_file)
+            # values for the other leg's muscles (same name, other side) are not an error
+            other_side = {n for n in table if not any(m == n or base_name(m) == n for m in muscles)
+                          and any(base_name(m) == base_name(n) for m in muscles)}
+            from_file = _apply_by_name(muscles, {n: v for n, v in table.items() if n not in other_side},
+                                       str(tendon_stiffness_file), strict=True)
+            resolved.update(from_file)
+            sources.update({m: str(tendon_stiffness_file) for m in from_file})
+            if other_side:
+                record["tendon_stiffness_ignored"] = sorted(other_side)
+        if tendon_stiffness:
+            given = _apply_by_name(muscles, tendon_stiffness, "--tendon-stiffness", strict=True)
+            resolved.update(given)
+            sources.update({m: "option" for m in given})
+        for m, v in resolved.items():
+            kt[muscles.index(m)] = v
+        record["tendon_stiffness"] = {m: resolved[m] for m in muscles if m in resolved}
+        record["tendon_stiffness_sources"] = {m: sources[m] for m in muscles if m in sources}
+    record["tendon_stiffness_other_muscles"] = KT_GENERIC
+
+    params = MuscleTendonParameters(
+        names=muscles,
+        tendon_stiffness=kt,
+        passive_kpe=passive_arr[:, 0],
+        passive_s0=passive_arr[:, 1],
+        passive_sm=passive_arr[:, 2],
+        sources={"passive": pp.source},
+        **base,
+    )
+    return params, record
+
+
+def _model_arrays(model_parameters, muscles: Sequence[str]) -> dict:
+    names = [str(n) for n in getattr(model_parameters, "names")]
+    pos = {n: i for i, n in enumerate(names)}
+    missing = [m for m in muscles if m not in pos]
+    if missing:
+        raise UnknownMuscleError(
+            f"the model parameters have no muscle{'s' if len(missing) > 1 else ''} {', '.join(missing)}; "
+            "the geometry and the parameters must come from the same model"
+        )
+    idx = np.array([pos[m] for m in muscles], dtype=int)
+    out = {}
+    for f in ("max_isometric_force_N", "optimal_fiber_length_m", "tendon_slack_length_m",
+              "pennation_angle_at_optimal_rad", "max_contraction_velocity"):
+        out[f] = np.asarray(getattr(model_parameters, f), dtype=float)[idx]
+    return out
