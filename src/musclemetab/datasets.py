@@ -12,13 +12,13 @@ files found there are checked against the same hashes.
 
 from __future__ import annotations
 
-import hashlib
 import os
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from urllib.parse import quote
 
+from .io.atomic import file_sha256
 from .errors import DatasetError
 
 __all__ = ["ExampleSubject", "example_subject", "manifest", "SOURCE_COMMIT", "SOURCE_REPOSITORY"]
@@ -67,11 +67,7 @@ class ExampleSubject:
 
 
 def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
+    return file_sha256(path)
 
 
 def _fetch_all(entries: dict) -> Path:

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .io.atomic import file_sha256
 from .errors import DataMismatchError, OptionError, UnknownCoordinateError
 from .io import atomic_path, read_storage, write_storage
 from .model import default_dofs
@@ -79,11 +80,7 @@ def default_cache_dir() -> Path:
 
 
 def _digest(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
+    return file_sha256(path)
 
 
 def compute_geometry(

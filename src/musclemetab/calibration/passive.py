@@ -376,7 +376,6 @@ def solve_passive(
     import casadi as ca
 
     opti = ca.Opti()
-    n = len(data.muscles)
     free = parameters is None
     if free:
         groups = parameter_groups(data.muscles)

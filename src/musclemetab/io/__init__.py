@@ -1,6 +1,6 @@
 """File input and output: OpenSim storage files, atomic writes."""
 
-from .atomic import atomic_directory, atomic_path, atomic_write_bytes, atomic_write_text
+from .atomic import file_sha256, atomic_directory, atomic_path, atomic_write_bytes, atomic_write_text
 from .storage import read_storage, require_columns, storage_from_arrays, write_storage
 
 __all__ = [
@@ -12,4 +12,5 @@ __all__ = [
     "atomic_write_text",
     "atomic_write_bytes",
     "atomic_directory",
+    "file_sha256",
 ]

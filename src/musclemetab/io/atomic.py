@@ -13,7 +13,18 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["atomic_write_text", "atomic_write_bytes", "atomic_path", "atomic_directory"]
+__all__ = ["file_sha256", "atomic_write_text", "atomic_write_bytes", "atomic_path", "atomic_directory"]
+
+
+def file_sha256(path: str | os.PathLike) -> str:
+    """SHA-256 of a file's content, as a hexadecimal string."""
+    import hashlib
+
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
 
 
 def _umask() -> int:

@@ -34,7 +34,6 @@ Outputs of :func:`write_metabolics` in a folder:
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -42,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DataMismatchError, InputFileError, MissingColumnError, OptionError, SolverError
+from ..errors import DataMismatchError, MissingColumnError, OptionError
 from ._common import MetabolicRates
 from .registry import MODELS, parse_models
 from .whole_body import BASAL_RULES, WholeBodyRate, whole_body_rate
@@ -61,8 +60,7 @@ __all__ = [
     "WHOLE_BODY_CSV",
 ]
 
-SOLUTION_FILE = "solution.sto"
-SUMMARY_FILE = "summary.json"
+from ..redundancy.solution import SOLUTION_FILE, SUMMARY_FILE  # noqa: E402  (one definition of the format)
 METABOLICS_STO = "metabolics.sto"
 METABOLICS_CSV = "metabolics.csv"
 WHOLE_BODY_CSV = "whole_body.csv"
@@ -117,26 +115,12 @@ def read_solution_states(directory: str | os.PathLike, *, require_success: bool 
     SolverError
         The summary says the solve did not succeed (unless ``require_success=False``).
     """
-    from ..io import read_storage
+    from ..redundancy.solution import read_solution_folder
 
     directory = Path(directory)
     spath, jpath = directory / SOLUTION_FILE, directory / SUMMARY_FILE
-    for p in (spath, jpath):
-        if not p.is_file():
-            raise InputFileError(f"{p}: missing; {directory} is not a solution folder (run 'musclemetab solve')")
-    try:
-        summary = json.loads(jpath.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputFileError(f"{jpath}: not valid JSON ({exc})") from None
-    if not isinstance(summary, dict) or not summary.get("muscles"):
-        raise InputFileError(f"{jpath}: no 'muscles' list; the summary is incomplete")
-    if require_success and "success" in summary and not summary["success"]:
-        raise SolverError(
-            f"{directory}: the stored solve did not succeed (status '{summary.get('status')}'); its values "
-            "are not a solution. Solve again, or pass require_success=False to evaluate it anyway"
-        )
+    df, summary = read_solution_folder(directory, require_success=require_success)
     muscles = tuple(str(m) for m in summary["muscles"])
-    df = read_storage(spath)
     need = [f"/forceset/{m}/{q}" for q in _QUANTITIES for m in muscles]
     missing = [c for c in need if c not in df.columns]
     if missing:

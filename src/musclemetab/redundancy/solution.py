@@ -139,6 +139,39 @@ def _hold_last(x: np.ndarray) -> np.ndarray:
     return np.vstack([x, x[-1:]])
 
 
+def read_solution_folder(
+    directory: str | os.PathLike, *, require_success: bool = True, required_keys=("muscles",)
+):
+    """Read ``solution.sto`` and ``summary.json`` of a solution folder, checked.
+
+    Returns ``(table, summary)``. Raises :class:`InputFileError` when a file is missing, the
+    summary is not JSON or lacks one of ``required_keys``; :class:`SolverError` when the
+    stored solve did not succeed (unless ``require_success=False``).
+    """
+    from ..io import read_storage
+
+    directory = Path(directory)
+    spath, jpath = directory / SOLUTION_FILE, directory / SUMMARY_FILE
+    for p in (spath, jpath):
+        if not p.is_file():
+            raise InputFileError(f"{p}: missing; {directory} is not a solution folder (run 'musclemetab solve')")
+    try:
+        summary = json.loads(jpath.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputFileError(f"{jpath}: not valid JSON ({exc}); solve again") from None
+    if not isinstance(summary, dict):
+        raise InputFileError(f"{jpath}: not a summary (a JSON object is expected); solve again")
+    for key in required_keys:
+        if not summary.get(key):
+            raise InputFileError(f"{jpath}: no '{key}' entry; the summary is incomplete, solve again")
+    if require_success and not summary.get("success", False):
+        raise SolverError(
+            f"{directory}: the stored solve did not succeed (status '{summary.get('status')}'); "
+            "its values are not a solution. Solve again or pass require_success=False to inspect it"
+        )
+    return read_storage(spath), summary
+
+
 @dataclass
 class Solution:
     """Muscle states, controls and forces on the mesh, time-first arrays ``(N+1, M)``.
@@ -262,29 +295,14 @@ class Solution:
         ``require_success=False``), :class:`InputFileError` when a file is missing or
         inconsistent.
         """
-        from ..io import read_storage
-
         directory = Path(directory)
+        df, summary = read_solution_folder(
+            directory, require_success=require_success, required_keys=("muscles", "dofs", "parameters", "status")
+        )
         spath, jpath = directory / SOLUTION_FILE, directory / SUMMARY_FILE
-        for p in (spath, jpath):
-            if not p.is_file():
-                raise InputFileError(f"{p}: missing; {directory} is not a solution folder (run 'musclemetab solve')")
-        try:
-            summary = json.loads(jpath.read_text(encoding="utf-8"))
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise InputFileError(f"{jpath}: not valid JSON ({exc}); solve again") from None
-        for key in ("muscles", "dofs", "parameters", "status"):
-            if key not in summary:
-                raise InputFileError(f"{jpath}: no '{key}' entry; the summary is incomplete, solve again")
-        if require_success and not summary.get("success", False):
-            raise SolverError(
-                f"{directory}: the stored solve did not succeed (status '{summary.get('status')}'); "
-                "its values are not a solution. Solve again or pass require_success=False to inspect it"
-            )
         muscles = tuple(summary["muscles"])
         dofs = tuple(summary["dofs"])
         params = MuscleTendonParameters.from_records(summary["parameters"]).subset(muscles)
-        df = read_storage(spath)
         need = [muscle_column(m, q) for q in MUSCLE_QUANTITIES for m in muscles]
         need += [reserve_column(d) for d in dofs]
         missing = [c for c in need if c not in df.columns]
