@@ -20,6 +20,9 @@ _SUBCOMMANDS = (
     ("musclemetab.redundancy.cli", "add_solve_parser"),
     ("musclemetab.metabolics.cli", "add_metabolics_parser"),
     ("musclemetab.calibration.cli", "add_calibrate_parser"),
+    ("musclemetab.study.cli", "add_run_parser"),
+    ("musclemetab.study.cli", "add_demo_parser"),
+    ("musclemetab.report.cli", "add_report_parser"),
 )
 
 

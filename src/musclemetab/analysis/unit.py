@@ -1,0 +1,229 @@
+"""Phase and group analysis of the metabolic rates of one solved gait cycle.
+
+Puts :mod:`~musclemetab.analysis.phases` and :mod:`~musclemetab.analysis.groups`
+together for a :class:`~musclemetab.metabolics.solution.SolutionMetabolics` (per-muscle
+rates of several models on the trimmed solver nodes) and the muscle geometry of the
+trial (moment arms at the IK frames, linearly interpolated to the nodes).
+
+Reported without basal heat by default (``analysis.md`` §3: the per-muscle basal term
+adds a constant that dilutes phase and group differences); the phase shares with the
+per-muscle basal heat (``MetabolicRates.total``) are given alongside.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from typing import NamedTuple
+
+import numpy as np
+
+from ..errors import DataMismatchError, OptionError
+from ._common import as_time
+from .events import GaitCycle
+from .groups import DEFAULT_THRESHOLD_M, GROUPS, GROUPS_WITH_OTHER, OTHER, group_rates, group_shares, group_weights
+from .phases import phase_shares
+
+__all__ = ["MetabolicAnalysis", "analyse_metabolics", "analyse_solution_folder", "interpolate_moment_arms"]
+
+
+class MetabolicAnalysis(NamedTuple):
+    """``summary``: one row per model; ``timeseries``: long table of leg and group rates."""
+
+    summary: "object"
+    timeseries: "object"
+
+
+def interpolate_moment_arms(time_s, moment_arm_time_s, moment_arms_m, *, tolerance_s: float = 1e-6) -> np.ndarray:
+    """Moment arms ``(F, D, M)`` at times ``moment_arm_time_s`` linearly interpolated to
+    ``time_s`` -> ``(T, D, M)``. Times outside the geometry's span (beyond
+    ``tolerance_s``) raise :class:`DataMismatchError`."""
+    t = as_time(time_s, "time_s", min_samples=1)
+    tg = as_time(moment_arm_time_s, "moment_arm_time_s")
+    r = np.asarray(moment_arms_m, dtype=float)
+    if r.ndim != 3 or r.shape[0] != tg.size:
+        raise DataMismatchError(
+            f"moment_arms_m must have shape (time, dofs, muscles) with {tg.size} times, not {r.shape}"
+        )
+    if t[0] < tg[0] - tolerance_s or t[-1] > tg[-1] + tolerance_s:
+        raise DataMismatchError(
+            f"the rates span {t[0]:g}-{t[-1]:g} s but the moment arms only {tg[0]:g}-{tg[-1]:g} s; "
+            "compute the geometry on the IK file of the solved trial"
+        )
+    tq = np.clip(t, tg[0], tg[-1])
+    k = np.clip(np.searchsorted(tg, tq, side="right") - 1, 0, tg.size - 2)
+    w = ((tq - tg[k]) / (tg[k + 1] - tg[k]))[:, None, None]
+    return r[k] * (1.0 - w) + r[k + 1] * w
+
+
+def _match_muscles(wanted: Sequence[str], available: Sequence[str]) -> list[int]:
+    pos = {m: i for i, m in enumerate(available)}
+    missing = [m for m in wanted if m not in pos]
+    if missing:
+        raise DataMismatchError(
+            f"no moment arms for muscle{'s' if len(missing) > 1 else ''} {', '.join(missing)} of the metabolic "
+            f"rates; the geometry has {', '.join(list(available)[:8])}{' ...' if len(available) > 8 else ''}. "
+            "Compute the geometry for the solution's muscles (same model)"
+        )
+    return [pos[m] for m in wanted]
+
+
+def analyse_metabolics(
+    result,
+    moment_arm_time_s,
+    moment_arms_m,
+    dofs: Sequence[str],
+    muscles: Sequence[str],
+    cycle: GaitCycle,
+    *,
+    models: Sequence[str] | None = None,
+    threshold_m: float = DEFAULT_THRESHOLD_M,
+    dof_groups: Mapping[str, tuple[str, str]] | None = None,
+    coverage_tolerance_s: float | None = None,
+) -> MetabolicAnalysis:
+    """Stance/swing and group shares of every model of a metabolic result.
+
+    Parameters
+    ----------
+    result : SolutionMetabolics
+        ``rates[model]`` of arrays ``(muscles, time)`` (W) on ``result.time_s``.
+    moment_arm_time_s : (F,) s
+    moment_arms_m : (F, D, M_g) m, OpenSim convention (e.g. ``Geometry.moment_arms_m``,
+        filtered or not as the caller chooses; the study used the solver's 6 Hz filtered
+        moment arms)
+    dofs : D DOF names; muscles : M_g muscle names of the geometry (matched by name)
+    cycle : GaitCycle
+    models : subset of ``result.models`` (default all)
+    threshold_m, dof_groups : see :func:`~musclemetab.analysis.groups.group_weights`
+    coverage_tolerance_s : see :func:`~musclemetab.analysis.phases.phase_shares`
+
+    Returns
+    -------
+    MetabolicAnalysis
+        ``summary`` (pandas.DataFrame, one row per model): ``model``, ``cycle_start_s``,
+        ``toe_off_s``, ``cycle_end_s``, ``toe_off_pct``, ``leg_energy_J`` (one leg, no
+        basal, over the sampled cycle), ``stance_pct``, ``swing_pct`` (no basal),
+        ``stance_pct_with_basal``, ``swing_pct_with_basal`` (per-muscle basal heat
+        included), ``share_<G>_pct`` for the ten groups and ``share_other_pct`` (no basal;
+        the eleven sum to 100).
+
+        ``timeseries`` (pandas.DataFrame, long): ``time_s``, ``cycle_pct``, ``model``,
+        ``series``, ``value_W`` with ``series`` = ``whole_body`` (the leg's summed muscle
+        rate without basal heat) and ``group/<G>`` for the ten groups and
+        ``group/other``, which sum to ``whole_body`` at every time.
+    """
+    import pandas as pd
+
+    t = as_time(result.time_s, "result.time_s")
+    if not isinstance(cycle, GaitCycle):
+        raise DataMismatchError(f"cycle must be a GaitCycle, not {type(cycle).__name__}")
+    idx = _match_muscles(list(result.muscles), [str(m) for m in muscles])
+    r = np.asarray(moment_arms_m, dtype=float)
+    if r.ndim != 3 or r.shape[2] != len(muscles):
+        raise DataMismatchError(
+            f"moment_arms_m has shape {r.shape}; expected (time, dofs, muscles) with {len(muscles)} muscles"
+        )
+    r_nodes = interpolate_moment_arms(t, moment_arm_time_s, r[:, :, idx])
+    weights = group_weights(r_nodes, dofs, threshold_m, dof_groups=dof_groups)
+
+    chosen = list(result.models) if models is None else [str(m).upper() for m in models]
+    unknown = [m for m in chosen if m not in result.rates]
+    if unknown:
+        raise OptionError(
+            f"model{'s' if len(unknown) > 1 else ''} {', '.join(unknown)} not in the result; it has "
+            f"{', '.join(result.models)}"
+        )
+    pct = cycle.percent(t)
+    rows, frames = [], []
+    for model in chosen:
+        rates = result.rates[model]
+        no_basal = np.asarray(rates.total_without_basal(), dtype=float)
+        with_basal = np.asarray(rates.total, dtype=float)
+        if no_basal.shape != (len(result.muscles), t.size):
+            raise DataMismatchError(
+                f"{model}: rates have shape {no_basal.shape}; expected (muscles, time) = "
+                f"({len(result.muscles)}, {t.size})"
+            )
+        leg = no_basal.sum(axis=0)
+        ph = phase_shares(t, leg, cycle, coverage_tolerance_s=coverage_tolerance_s)
+        ph_b = phase_shares(t, with_basal.sum(axis=0), cycle, coverage_tolerance_s=coverage_tolerance_s)
+        g = group_rates(no_basal, weights)
+        shares = group_shares(t, g, leg, GROUPS_WITH_OTHER, cycle=cycle, coverage_tolerance_s=coverage_tolerance_s)
+        row = dict(
+            model=model,
+            cycle_start_s=cycle.start_s,
+            toe_off_s=cycle.toe_off_s,
+            cycle_end_s=cycle.end_s,
+            toe_off_pct=cycle.toe_off_pct,
+            leg_energy_J=ph["cycle_J"],
+            stance_pct=ph["stance_pct"],
+            swing_pct=ph["swing_pct"],
+            stance_pct_with_basal=ph_b["stance_pct"],
+            swing_pct_with_basal=ph_b["swing_pct"],
+        )
+        row.update({f"share_{name}_pct": shares[name] for name in GROUPS})
+        row["share_other_pct"] = shares[OTHER]
+        rows.append(row)
+        names = ["whole_body"] + [f"group/{name}" for name in GROUPS_WITH_OTHER]
+        values = np.vstack([leg[None, :], g])
+        frames.append(pd.DataFrame({
+            "time_s": np.tile(t, len(names)),
+            "cycle_pct": np.tile(pct, len(names)),
+            "model": model,
+            "series": np.repeat(np.asarray(names, dtype=object), t.size),
+            "value_W": values.reshape(-1),
+        }))
+    return MetabolicAnalysis(pd.DataFrame(rows), pd.concat(frames, ignore_index=True))
+
+
+def filtered_moment_arms(geometry, filter_cutoff_hz: float | None = 6.0) -> tuple[np.ndarray, np.ndarray]:
+    """The geometry's time and moment arms ``(frames, dofs, muscles)``, low-pass filtered
+    like the solver's inputs (zero-phase Butterworth, order 6, ``filter_cutoff_hz`` = 6 Hz;
+    ``None`` returns them unfiltered)."""
+    r = np.asarray(geometry.moment_arms_m, dtype=float)
+    tg = as_time(geometry.time, "geometry.time")
+    if filter_cutoff_hz is not None:
+        from ..redundancy.inputs import FILTER_ORDER, lowpass_filtfilt
+
+        dt = np.diff(tg)
+        if not np.allclose(dt, dt[0], rtol=1e-6, atol=1e-9):
+            raise DataMismatchError(
+                "the geometry's frames are not evenly spaced, so its moment arms cannot be filtered; "
+                "resample the IK file or pass filter_cutoff_hz=None"
+            )
+        shape = r.shape
+        r = lowpass_filtfilt(r.reshape(shape[0], -1), 1.0 / dt[0], float(filter_cutoff_hz), FILTER_ORDER).reshape(shape)
+    return tg, r
+
+
+def analyse_solution_folder(
+    folder: str | os.PathLike,
+    geometry,
+    cycle: GaitCycle,
+    body_mass_kg: float,
+    height_m: float,
+    models="all",
+    *,
+    filter_cutoff_hz: float | None = 6.0,
+    threshold_m: float = DEFAULT_THRESHOLD_M,
+    dof_groups: Mapping[str, tuple[str, str]] | None = None,
+    coverage_tolerance_s: float | None = None,
+    **metabolics_options,
+) -> MetabolicAnalysis:
+    """:func:`analyse_metabolics` of a solver solution folder.
+
+    The metabolic rates come from
+    :func:`musclemetab.metabolics.solution.metabolics_from_solution` (``models`` and any
+    ``metabolics_options`` are passed on). ``geometry`` is a
+    :class:`musclemetab.geometry.Geometry` of the trial; its moment arms are low-pass
+    filtered like the solver's inputs (zero-phase Butterworth, order 6, ``filter_cutoff_hz``
+    = 6 Hz; ``None`` skips the filter) before interpolation to the nodes.
+    """
+    from ..metabolics.solution import metabolics_from_solution
+
+    result = metabolics_from_solution(folder, body_mass_kg, height_m, models=models, **metabolics_options)
+    tg, r = filtered_moment_arms(geometry, filter_cutoff_hz)
+    return analyse_metabolics(
+        result, tg, r, list(geometry.dofs), list(geometry.muscles), cycle,
+        threshold_m=threshold_m, dof_groups=dof_groups, coverage_tolerance_s=coverage_tolerance_s,
+    )

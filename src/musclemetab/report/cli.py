@@ -1,0 +1,47 @@
+"""``musclemetab report``: the figures and the HTML report of a study folder.
+
+    musclemetab report DIR [--out FILE]
+
+Writes ``DIR/figures/<name>.png`` and ``.svg`` for every figure the data support, and
+``DIR/report.html`` (or ``FILE``, with its figures in ``figures/`` beside it): one
+self-contained page (see :mod:`musclemetab.report.html`).
+"""
+
+from __future__ import annotations
+
+__all__ = ["add_report_parser", "report_command"]
+
+
+def add_report_parser(subparsers) -> None:
+    """Add the ``report`` subcommand to an ``argparse`` subparsers object."""
+    p = subparsers.add_parser(
+        "report",
+        help="figures and a self-contained HTML report of a study folder",
+        description=(
+            "Read a study folder written by 'musclemetab run' (study.json, results.csv, failures.csv, "
+            "units/) and write its figures (DIR/figures/<name>.png and .svg: excitations and fibre lengths, "
+            "estimated vs measured rate, group rates over the cycle, whole-body rate across speeds, stance "
+            "and swing shares, group shares) and one HTML page, DIR/report.html, with the settings, the "
+            "method, the result tables (W/kg, J/(kg m), %), the figures embedded, the failures and the "
+            "software versions. A figure the data do not support is replaced by a note."
+        ),
+    )
+    p.add_argument("study_dir", metavar="DIR", help="study folder (holding results.csv)")
+    p.add_argument(
+        "--out", metavar="FILE",
+        help="HTML file to write (default DIR/report.html); the figures go to a folder 'figures' beside it",
+    )
+    p.set_defaults(func=report_command)
+
+
+def report_command(args) -> int:
+    """Run the ``report`` subcommand (``args`` from :func:`add_report_parser`)."""
+    from .html import FIGURES_FOLDER, generate_report
+
+    out, entries = generate_report(args.study_dir, args.out)
+    drawn = [e.name for e in entries if e.paths is not None]
+    print(f"report: {len(drawn)} of {len(entries)} figures -> {out.parent / FIGURES_FOLDER}; page -> {out}")
+    for e in entries:
+        if e.paths is None:
+            print(f"  not drawn: {e.name}: {e.note}")
+    return 0

@@ -1,0 +1,797 @@
+"""Figures of a study: pure functions from tables and solutions to matplotlib figures.
+
+Every function takes DataFrames or solver objects, returns a :class:`matplotlib.figure.Figure`
+(drawn with the non-interactive Agg canvas, never through ``pyplot``) and does no file I/O;
+:func:`save_figure` writes a figure as PNG and SVG. A function raises
+:class:`~musclemetab.errors.OptionError` when its data cannot make the figure (no measured
+rates, a model absent from the table, ...); the report shows the message instead.
+
+Colours are fixed by name: each metabolic model has one colour (the same as in the Figure-2
+plot of :mod:`musclemetab.metabolics.figure2`), each workflow one colour and each muscle group
+one colour, in every figure. Names not known in advance get a colour derived from the name,
+so they too keep it from one figure to the next.
+
+Units: metabolic rates in W (one leg, summed muscles, no basal heat) over the gait cycle,
+whole-body averages in W/kg of body mass (both legs, with basal heat), shares in %, speeds in
+m/s, the gait cycle in % from initial contact to the next initial contact of the same leg.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import os
+import sys
+import zlib
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import MusclemetabError, OptionError, UnknownMuscleError
+
+__all__ = [
+    "MODEL_COLOURS",
+    "WORKFLOW_COLOURS",
+    "GROUP_COLOURS",
+    "GROUPS",
+    "DEFAULT_MUSCLES",
+    "PLATEAU_BAND",
+    "DESCENDING_LIMB",
+    "model_colour",
+    "workflow_colour",
+    "group_colour",
+    "trial_order",
+    "preferred_trial",
+    "main_workflow",
+    "excitations_and_fiber_lengths",
+    "estimated_vs_measured",
+    "group_rates_over_cycle",
+    "whole_body_over_cycle",
+    "phase_shares",
+    "group_shares",
+    "save_figure",
+]
+
+#: One colour per metabolic model (as in the Figure-2 plot).
+MODEL_COLOURS = {
+    "UM03": "#1f77b4",
+    "BH04": "#d62728",
+    "HO06": "#2ca02c",
+    "LW07": "#9467bd",
+    "UM10": "#17becf",
+    "UC16": "#ff7f0e",
+}
+
+#: One colour per workflow of the muscle redundancy solver.
+WORKFLOW_COLOURS = {
+    "effort-gen": "#4d4d4d",
+    "effort-cal": "#e08214",
+    "effort-ten": "#2166ac",
+    "emg-ten": "#b2182b",
+}
+
+#: Muscle function groups (``analysis.md`` §4): ankle, knee, hip, then the remainder.
+GROUPS = ("PF", "DF", "KE", "KF", "HE", "HF", "HAD", "HAB", "HIR", "HER", "other")
+
+GROUP_NAMES = {
+    "PF": "ankle plantarflexors",
+    "DF": "ankle dorsiflexors",
+    "KE": "knee extensors",
+    "KF": "knee flexors",
+    "HE": "hip extensors",
+    "HF": "hip flexors",
+    "HAD": "hip adductors",
+    "HAB": "hip abductors",
+    "HIR": "hip internal rotators",
+    "HER": "hip external rotators",
+    "other": "other",
+}
+
+#: One colour per group; the two groups of a degree of freedom share a hue.
+GROUP_COLOURS = {
+    "PF": "#08519c",
+    "DF": "#9ecae1",
+    "KE": "#a63603",
+    "KF": "#fdae6b",
+    "HE": "#006d2c",
+    "HF": "#a1d99b",
+    "HAD": "#a50f15",
+    "HAB": "#fc9272",
+    "HIR": "#54278f",
+    "HER": "#bcbddc",
+    "other": "#969696",
+}
+
+#: Muscles of the excitation and fibre-length figure (side suffix added when matching).
+DEFAULT_MUSCLES = (
+    "soleus", "gasmed", "gaslat", "tibant", "vasmed", "vaslat",
+    "recfem", "bflh", "semiten", "glmax2", "glmed2", "iliacus",
+)
+
+#: Normalised fibre lengths of the plateau of the active force-length curve (shaded).
+PLATEAU_BAND = (0.75, 1.05)
+#: Normalised fibre length above which a fibre works on the descending limb.
+DESCENDING_LIMB = 1.05
+
+_FALLBACK = ("#1b9e77", "#d95f02", "#7570b3", "#e7298a", "#66a61e", "#e6ab02", "#a6761d",
+             "#666666", "#8dd3c7", "#fb8072", "#80b1d3", "#b3de69")
+_MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*", "<", ">", "h", "p")
+_LINESTYLES = ("-", "--", "-.", ":")
+
+
+def _named_colour(table: Mapping[str, str], name: str) -> str:
+    key = str(name)
+    for k in (key, key.upper(), key.lower()):
+        if k in table:
+            return table[k]
+    return _FALLBACK[zlib.crc32(key.encode("utf-8")) % len(_FALLBACK)]
+
+
+def model_colour(model: str) -> str:
+    """The colour of a metabolic model (known models fixed, others derived from the name)."""
+    return _named_colour(MODEL_COLOURS, model)
+
+
+def workflow_colour(workflow: str) -> str:
+    """The colour of a workflow (known workflows fixed, others derived from the name)."""
+    return _named_colour(WORKFLOW_COLOURS, workflow)
+
+
+def group_colour(group: str) -> str:
+    """The colour of a muscle group."""
+    return _named_colour(GROUP_COLOURS, group)
+
+
+# ---------------------------------------------------------------------------------- helpers
+def _new_figure(width: float, height: float):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width, height), layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _grid(n: int, max_cols: int = 3) -> tuple[int, int]:
+    ncol = max(1, min(max_cols, n))
+    return int(math.ceil(n / ncol)), ncol
+
+
+def _require_columns(df, columns: Sequence[str], what: str) -> None:
+    missing = [c for c in columns if c not in df.columns]
+    if missing:
+        raise OptionError(f"{what} lacks the column{'s' if len(missing) > 1 else ''} {', '.join(missing)}")
+
+
+def _ok_rows(results):
+    _require_columns(results, ("subject", "trial", "workflow", "model"), "the results table")
+    if "status" in results.columns:
+        results = results[results["status"].astype(str).str.lower() == "ok"]
+    return results
+
+
+def _unique(values) -> list:
+    out = []
+    for v in values:
+        if v not in out:
+            out.append(v)
+    return out
+
+
+def _ordered_models(names) -> list[str]:
+    names = _unique(str(n) for n in names)
+    known = [m for m in MODEL_COLOURS if m in names]
+    return known + [m for m in names if m not in known]
+
+
+def _ordered_workflows(names) -> list[str]:
+    names = _unique(str(n) for n in names)
+    known = [w for w in WORKFLOW_COLOURS if w in names]
+    return known + [w for w in names if w not in known]
+
+
+def trial_order(results) -> list[str]:
+    """Trials ordered by mean walking speed over subjects (trials without a speed last, by name)."""
+    _require_columns(results, ("trial",), "the results table")
+    trials = _unique(str(t) for t in results["trial"])
+    if "speed_m_per_s" not in results.columns:
+        return sorted(trials)
+    speeds = results.assign(trial=results["trial"].astype(str)).groupby("trial")["speed_m_per_s"].mean()
+
+    def key(t):
+        v = speeds.get(t, math.nan)
+        return (0, float(v), t) if np.isfinite(v) else (1, 0.0, t)
+
+    return sorted(trials, key=key)
+
+
+def preferred_trial(results) -> str:
+    """The trial at the preferred walking speed.
+
+    The trial named ``normal`` (or ``preferred``, ``pws``; case-insensitive) if there is one,
+    otherwise the middle trial in speed order (the slower of the two middle ones for an even
+    number of trials).
+    """
+    order = trial_order(results)
+    if not order:
+        raise OptionError("the results table has no trial")
+    for name in ("normal", "preferred", "pws"):
+        for t in order:
+            if t.lower() == name:
+                return t
+    return order[(len(order) - 1) // 2]
+
+
+def main_workflow(workflows: Sequence[str]) -> str:
+    """The workflow shown when a figure shows one: EFFORT-TEN if present, otherwise the first."""
+    workflows = [str(w) for w in workflows]
+    if not workflows:
+        raise OptionError("no workflow given")
+    for w in workflows:
+        if w.lower() == "effort-ten":
+            return w
+    return workflows[0]
+
+
+def _mean_sd(values) -> tuple[float, float, int]:
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return math.nan, math.nan, 0
+    return float(v.mean()), float(v.std(ddof=1)) if v.size > 1 else math.nan, int(v.size)
+
+
+def _rmcorr(x, y, subject):
+    """Repeated-measures correlation (``analysis.md`` §5): ``(result, None)`` or ``(None, reason)``."""
+    from ..analysis.stats import rmcorr
+
+    try:
+        res = rmcorr(np.asarray(x, float), np.asarray(y, float), np.asarray(subject, dtype=object))
+    except MusclemetabError as exc:
+        return None, " ".join(str(exc).split())
+    if not np.isfinite(res.slope):
+        return None, "the slope is not finite"
+    return res, None
+
+
+def _p_text(p: float) -> str:
+    if not np.isfinite(p):
+        return "p = n/a"
+    return "p < 0.001" if p < 0.001 else f"p = {p:.3f}"
+
+
+# ---------------------------------------------------------------- 1. excitations, fibre lengths
+def _match_muscle(name: str, available: Sequence[str], side: str) -> str | None:
+    if name in available:
+        return name
+    for s in (side, "l" if side == "r" else "r"):
+        cand = f"{name}_{s}"
+        if cand in available:
+            return cand
+    return None
+
+
+def excitations_and_fiber_lengths(
+    solutions: Mapping[str, object],
+    cycles: Mapping[str, Sequence[float]],
+    muscles: Sequence[str] | None = None,
+    *,
+    side: str = "r",
+    title: str | None = None,
+):
+    """Excitation and normalised fibre length of selected muscles over the gait cycle.
+
+    Parameters
+    ----------
+    solutions
+        Workflow name -> :class:`~musclemetab.redundancy.Solution` (one trial).
+    cycles
+        Workflow name -> ``(start_s, toe_off_s, end_s)``: initial contact, toe-off and the next
+        initial contact (s). Nodes outside ``[start_s, end_s]`` (the solver's padding) are not
+        drawn.
+    muscles
+        Muscle names, with or without the side suffix (``soleus`` matches ``soleus_r``, the
+        ``side`` leg first). Default :data:`DEFAULT_MUSCLES`; default muscles absent from every
+        solution are left out, named ones raise :class:`UnknownMuscleError`.
+
+    Per muscle, an excitation panel (-) above a fibre-length panel (``lM/lMo``), one line per
+    workflow, a vertical line at toe-off; the fibre-length panels shade the plateau of the
+    active force-length curve (0.75-1.05) and draw the start of the descending limb (1.05).
+    """
+    if not solutions:
+        raise OptionError("no solution given for the excitation and fibre-length figure")
+    workflows = _ordered_workflows(solutions)
+    missing = [w for w in workflows if w not in cycles]
+    if missing:
+        raise OptionError(f"no gait cycle (start, toe-off, end) given for workflow {', '.join(missing)}")
+    cyc = {}
+    for w in workflows:
+        vals = tuple(float(v) for v in cycles[w])
+        if len(vals) != 3 or not (vals[0] < vals[1] < vals[2]):
+            raise OptionError(
+                f"gait cycle of workflow {w} must be (start_s, toe_off_s, end_s) increasing, not {cycles[w]}"
+            )
+        cyc[w] = vals
+    explicit = muscles is not None
+    wanted = list(DEFAULT_MUSCLES if muscles is None else muscles)
+    rows: list[tuple[str, dict]] = []  # (label, {workflow: column name})
+    for name in wanted:
+        found = {}
+        for w in workflows:
+            col = _match_muscle(name, tuple(solutions[w].muscles), side)
+            if col is not None:
+                found[w] = col
+        if not found:
+            if explicit:
+                some = tuple(solutions[workflows[0]].muscles)
+                raise UnknownMuscleError(
+                    f"muscle '{name}' is in none of the solutions; they have {', '.join(some)}"
+                )
+            continue
+        rows.append((_unique(found.values())[0], found))
+    if not rows:
+        raise OptionError(f"none of the muscles {', '.join(wanted)} is in the solutions")
+
+    n = len(rows)
+    ncol = min(6, n)
+    nmrow = int(math.ceil(n / ncol))
+    fig = _new_figure(2.6 * ncol + 0.6, 2 * 2.0 * nmrow + 1.0)
+    axes = fig.subplots(2 * nmrow, ncol, squeeze=False, sharex=True)
+    toe_offs = _unique(round(100.0 * (c[1] - c[0]) / (c[2] - c[0]), 6) for c in cyc.values())
+    for k, (label, found) in enumerate(rows):
+        i, j = divmod(k, ncol)
+        ax_e, ax_l = axes[2 * i, j], axes[2 * i + 1, j]
+        ax_l.axhspan(*PLATEAU_BAND, color="0.88", zorder=0, label="_plateau", gid="plateau")
+        ax_l.axhline(DESCENDING_LIMB, color="0.35", lw=0.8, ls="--", label="_descending", gid="descending-limb")
+        for w in workflows:
+            if w not in found:
+                continue
+            sol = solutions[w]
+            start, _, end = cyc[w]
+            t = np.asarray(sol.time_s, dtype=float)
+            keep = (t >= start - 1e-9) & (t <= end + 1e-9)
+            pct = 100.0 * (t[keep] - start) / (end - start)
+            idx = tuple(sol.muscles).index(found[w])
+            kw = dict(color=workflow_colour(w), lw=1.3, label=w, gid=f"workflow:{w}")
+            ax_e.plot(pct, np.asarray(sol.excitation)[keep, idx], **kw)
+            ax_l.plot(pct, np.asarray(sol.lm_norm)[keep, idx], **kw)
+        for ax in (ax_e, ax_l):
+            for to in toe_offs:
+                ax.axvline(to, color="k", lw=0.8, ls=":", label="_toe-off", gid="toe-off")
+            ax.set_xlim(0, 100)
+        ax_e.set_ylim(0, 1.02)
+        ax_e.set_title(label, fontsize=10)
+        if j == 0:
+            ax_e.set_ylabel("excitation (-)")
+            ax_l.set_ylabel("fibre length\n$l^M/l^M_o$ (-)")
+        lo, hi = ax_l.get_ylim()
+        ax_l.set_ylim(min(lo, PLATEAU_BAND[0] - 0.05), max(hi, DESCENDING_LIMB + 0.05))
+    for k in range(n, nmrow * ncol):
+        i, j = divmod(k, ncol)
+        axes[2 * i, j].set_visible(False)
+        axes[2 * i + 1, j].set_visible(False)
+    for j in range(ncol):
+        last = max(i for i in range(2 * nmrow) if axes[i, j].get_visible())
+        axes[last, j].set_xlabel("gait cycle (%)")
+        axes[last, j].tick_params(labelbottom=True)
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    handles = [Line2D([], [], color=workflow_colour(w), lw=1.5, label=w) for w in workflows]
+    handles += [
+        Line2D([], [], color="k", lw=0.8, ls=":", label="toe-off"),
+        Patch(color="0.88", label=f"plateau {PLATEAU_BAND[0]:g}-{PLATEAU_BAND[1]:g}"),
+        Line2D([], [], color="0.35", lw=0.8, ls="--", label=f"descending limb > {DESCENDING_LIMB:g}"),
+    ]
+    fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 8), fontsize=9, frameon=False)
+    fig.suptitle(title or "Muscle excitation and normalised fibre length over the gait cycle", fontsize=11)
+    return fig
+
+
+# ------------------------------------------------------------- 2. estimated vs measured rate
+def estimated_vs_measured(results, *, models: Sequence[str] | None = None, title: str | None = None):
+    """Estimated against measured whole-body metabolic rate (W/kg), one panel per model.
+
+    Points: one per subject and trial (marker per subject, colour per workflow). Lines: the
+    repeated-measures correlation of each workflow (``analysis.md`` §5; estimated on measured),
+    one parallel segment per subject over that subject's measured range; the legend gives the
+    slope ``m``, ``r`` and ``p``. The dashed line is the identity. Rows with status other than
+    ``ok`` or without a measured rate are left out; raises :class:`OptionError` when no row has
+    a measured rate.
+    """
+    res = _ok_rows(results)
+    _require_columns(res, ("mean_W_per_kg", "measured_W_per_kg"), "the results table")
+    res = res[np.isfinite(res["measured_W_per_kg"].astype(float)) & np.isfinite(res["mean_W_per_kg"].astype(float))]
+    if res.empty:
+        raise OptionError(
+            "no measured metabolic rate in the results (column measured_W_per_kg is empty); "
+            "give measured rates to the study to compare estimates with measurements"
+        )
+    models = _ordered_models(res["model"]) if models is None else [str(m) for m in models]
+    absent = [m for m in models if m not in set(res["model"].astype(str))]
+    if absent:
+        raise OptionError(f"no measured comparison for model {', '.join(absent)}")
+    workflows = _ordered_workflows(res["workflow"])
+    subjects = _unique(str(s) for s in res["subject"])
+    marker = {s: _MARKERS[i % len(_MARKERS)] for i, s in enumerate(subjects)}
+    nrow, ncol = _grid(len(models))
+    fig = _new_figure(4.3 * ncol, 4.2 * nrow + 1.0)
+    axes = fig.subplots(nrow, ncol, squeeze=False)
+    notes: list[str] = []
+    allv = np.concatenate([res["measured_W_per_kg"].to_numpy(float), res["mean_W_per_kg"].to_numpy(float)])
+    lo, hi = float(np.min(allv)), float(np.max(allv))
+    pad = 0.06 * max(hi - lo, 0.5)
+    lim = (max(0.0, lo - pad), hi + pad)
+    for k, m in enumerate(models):
+        ax = axes.flat[k]
+        ax.plot(lim, lim, color="0.4", ls="--", lw=0.9, label="identity", gid="identity")
+        dm = res[res["model"].astype(str) == m]
+        for w in workflows:
+            dw = dm[dm["workflow"].astype(str) == w]
+            if dw.empty:
+                continue
+            col = workflow_colour(w)
+            for s in subjects:
+                ds = dw[dw["subject"].astype(str) == s]
+                if not ds.empty:
+                    ax.scatter(ds["measured_W_per_kg"], ds["mean_W_per_kg"], color=col, marker=marker[s],
+                               s=26, zorder=3, label="_" + s)
+            x = dw["measured_W_per_kg"].to_numpy(float)
+            y = dw["mean_W_per_kg"].to_numpy(float)
+            subj = dw["subject"].astype(str).to_numpy()
+            rm, why = _rmcorr(x, y, subj)
+            if rm is None:
+                ax.plot([], [], color=col, label=f"{w}: no repeated-measures correlation")
+                notes.append(f"{m}, {w}: {why}")
+                continue
+            first = True
+            for s in _unique(subj.tolist()):
+                xs = x[subj == s]
+                if xs.size < 2 or s not in rm.intercepts:
+                    continue
+                xx = np.array([xs.min(), xs.max()])
+                ax.plot(xx, rm.intercepts[s] + rm.slope * xx, color=col, lw=1.2, gid=f"rmcorr:{w}:{s}",
+                        label=(f"{w}: m = {rm.slope:.2f}, r = {rm.r:.2f}, {_p_text(rm.p)}" if first else "_" + w))
+                first = False
+        ax.set_xlim(lim)
+        ax.set_ylim(lim)
+        ax.set_title(m, color=model_colour(m), fontsize=11, fontweight="bold")
+        ax.set_xlabel("measured (W/kg)")
+        ax.set_ylabel("estimated (W/kg)")
+        ax.legend(fontsize=7, loc="best", framealpha=0.8)
+    for k in range(len(models), nrow * ncol):
+        axes.flat[k].set_visible(False)
+    if len(subjects) > 1:
+        from matplotlib.lines import Line2D
+
+        handles = [Line2D([], [], ls="", marker=marker[s], color="0.3", label=s) for s in subjects]
+        fig.legend(handles=handles, loc="outside lower center", ncol=min(len(subjects), 10), fontsize=8,
+                   frameon=False, title="subject", title_fontsize=8)
+    heading = title or ("Estimated vs measured whole-body metabolic rate (W/kg, with basal heat); "
+                        "lines: repeated-measures correlation")
+    if notes:  # why a correlation is missing, once per distinct reason
+        import textwrap
+
+        reasons = _unique(n.split(": ", 1)[1] for n in notes)
+        heading += "\n" + textwrap.fill("Lines not drawn: " + "; ".join(reasons), 150)
+    fig.suptitle(heading, fontsize=11)
+    return fig
+
+
+# ------------------------------------------------------------- 3. group rates over the cycle
+def _long_table(timeseries, what: str):
+    _require_columns(timeseries, ("cycle_pct", "model", "series", "value_W"), what)
+    return timeseries
+
+
+def group_rates_over_cycle(timeseries, toe_off_pct: float, models: Sequence[str] | None = None,
+                           *, title: str | None = None):
+    """Metabolic rate of each muscle group over the gait cycle (W), one panel per model.
+
+    ``timeseries`` is a unit's long table (``cycle_pct``, ``model``, ``series``, ``value_W``;
+    series ``group/<G>``). One line per group, a vertical line at ``toe_off_pct`` (%).
+    """
+    ts = _long_table(timeseries, "the time-series table")
+    ts = ts[ts["series"].astype(str).str.startswith("group/")]
+    if ts.empty:
+        raise OptionError("the time-series table has no group series (group/<G>)")
+    available = _ordered_models(ts["model"])
+    models = available if models is None else [str(m) for m in models]
+    absent = [m for m in models if m not in available]
+    if absent:
+        raise OptionError(f"no group rates for model {', '.join(absent)} (the table has {', '.join(available)})")
+    to = float(toe_off_pct)
+    if not (0.0 < to < 100.0):
+        raise OptionError(f"toe-off must be inside the cycle (0-100 %), not {toe_off_pct}")
+    present = _unique(s.split("/", 1)[1] for s in ts["series"].astype(str))
+    groups = [g for g in GROUPS if g in present] + [g for g in present if g not in GROUPS]
+    nrow, ncol = _grid(len(models))
+    fig = _new_figure(4.4 * ncol, 3.0 * nrow + 1.0)
+    axes = fig.subplots(nrow, ncol, squeeze=False, sharex=True, sharey=True)
+    for k, m in enumerate(models):
+        ax = axes.flat[k]
+        dm = ts[ts["model"].astype(str) == m]
+        for g in groups:
+            d = dm[dm["series"].astype(str) == f"group/{g}"].sort_values("cycle_pct")
+            if d.empty:
+                continue
+            ax.plot(d["cycle_pct"], d["value_W"], color=group_colour(g), lw=1.3, label=g, gid=f"group:{g}")
+        ax.axvline(to, color="k", lw=0.8, ls=":", label="_toe-off", gid="toe-off")
+        ax.axhline(0.0, color="0.7", lw=0.6, label="_zero")
+        ax.set_xlim(0, 100)
+        ax.set_title(m, color=model_colour(m), fontsize=11, fontweight="bold")
+        if k % ncol == 0:
+            ax.set_ylabel("metabolic rate (W)")
+        if k // ncol == nrow - 1 or k + ncol >= len(models):
+            ax.set_xlabel("gait cycle (%)")
+            ax.tick_params(labelbottom=True)
+    for k in range(len(models), nrow * ncol):
+        axes.flat[k].set_visible(False)
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], color=group_colour(g), lw=1.5, label=f"{g} ({GROUP_NAMES.get(g, g)})") for g in groups]
+    handles.append(Line2D([], [], color="k", lw=0.8, ls=":", label=f"toe-off ({to:.1f} %)"))
+    fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 6), fontsize=8, frameon=False)
+    fig.suptitle(title or "Metabolic rate of the muscle groups over the gait cycle (one leg, no basal heat)",
+                 fontsize=11)
+    return fig
+
+
+# ------------------------------------------------------- 4. whole body over the cycle, speeds
+def whole_body_over_cycle(timeseries_by_trial: Mapping[str, object], speeds: Mapping[str, float],
+                          models: Sequence[str] | None = None, *,
+                          toe_off_pct: Mapping[str, float] | None = None, title: str | None = None):
+    """Whole-body (one leg, summed muscles, no basal) metabolic rate over the cycle across speeds.
+
+    ``timeseries_by_trial``: trial label -> the unit's long table (series ``whole_body``);
+    ``speeds``: trial label -> walking speed (m/s). One panel per model, one line per trial
+    coloured by speed (slow = light, fast = dark); ``toe_off_pct`` (label -> %) adds a short
+    mark at each trial's toe-off.
+    """
+    if not timeseries_by_trial:
+        raise OptionError("no time series given for the whole-body figure")
+    labels = list(timeseries_by_trial)
+    missing = [t for t in labels if t not in speeds or not np.isfinite(float(speeds[t]))]
+    if missing:
+        raise OptionError(f"no walking speed given for trial {', '.join(map(str, missing))}")
+    labels.sort(key=lambda t: float(speeds[t]))
+    tables = {}
+    for t in labels:
+        ts = _long_table(timeseries_by_trial[t], f"the time series of trial {t}")
+        tables[t] = ts[ts["series"].astype(str) == "whole_body"]
+        if tables[t].empty:
+            raise OptionError(f"the time series of trial {t} has no whole_body series")
+    available = _ordered_models(m for t in labels for m in tables[t]["model"].astype(str))
+    models = available if models is None else [str(m) for m in models]
+    absent = [m for m in models if all(m not in set(tables[t]["model"].astype(str)) for t in labels)]
+    if absent:
+        raise OptionError(f"no whole-body rate for model {', '.join(absent)}")
+    from matplotlib import colormaps
+
+    cmap = colormaps["viridis_r"]
+    shades = np.linspace(0.15, 0.9, len(labels)) if len(labels) > 1 else np.array([0.6])
+    colour = {t: cmap(float(s)) for t, s in zip(labels, shades)}
+    nrow, ncol = _grid(len(models))
+    fig = _new_figure(4.4 * ncol, 3.0 * nrow + 1.0)
+    axes = fig.subplots(nrow, ncol, squeeze=False, sharex=True, sharey=True)
+    for k, m in enumerate(models):
+        ax = axes.flat[k]
+        for t in labels:
+            d = tables[t][tables[t]["model"].astype(str) == m].sort_values("cycle_pct")
+            if d.empty:
+                continue
+            ax.plot(d["cycle_pct"], d["value_W"], color=colour[t], lw=1.4,
+                    label=f"{t} ({float(speeds[t]):.2f} m/s)", gid=f"trial:{t}")
+            if toe_off_pct is not None and t in toe_off_pct and np.isfinite(float(toe_off_pct[t])):
+                ax.axvline(float(toe_off_pct[t]), ymin=0.0, ymax=0.06, color=colour[t], lw=1.5,
+                           label="_toe-off", gid="toe-off")
+        ax.set_xlim(0, 100)
+        ax.set_title(m, color=model_colour(m), fontsize=11, fontweight="bold")
+        if k % ncol == 0:
+            ax.set_ylabel("metabolic rate (W)")
+        if k // ncol == nrow - 1 or k + ncol >= len(models):
+            ax.set_xlabel("gait cycle (%)")
+            ax.tick_params(labelbottom=True)
+    for k in range(len(models), nrow * ncol):
+        axes.flat[k].set_visible(False)
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], color=colour[t], lw=1.6, label=f"{t} ({float(speeds[t]):.2f} m/s)") for t in labels]
+    if toe_off_pct:
+        handles.append(Line2D([], [], color="0.3", lw=1.5, marker="|", ls="", markersize=9,
+                              label="toe-off (marks at the bottom)"))
+    fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 8), fontsize=8, frameon=False)
+    fig.suptitle(title or "Whole-body metabolic rate over the gait cycle across walking speeds "
+                 "(one leg, summed muscles, no basal heat)", fontsize=11)
+    return fig
+
+
+# --------------------------------------------------------------------- 5. phase shares
+def _speed_table(res, value: str):
+    """Per trial: mean speed over subjects and mean of ``value`` over subjects."""
+    rows = []
+    for t in trial_order(res):
+        d = res[res["trial"].astype(str) == t]
+        sp = float(np.nanmean(d["speed_m_per_s"].to_numpy(float))) if d["speed_m_per_s"].notna().any() else math.nan
+        mean, sd, n = _mean_sd(d[value])
+        rows.append((t, sp, mean, sd, n))
+    return rows
+
+
+def phase_shares(results, *, trial: str | None = None, workflow: str | None = None, title: str | None = None):
+    """Stance and swing shares of the cycle's muscle energy (%; one leg, no basal heat).
+
+    Left: at the preferred speed (``trial``, default :func:`preferred_trial`), stacked bars
+    (stance solid, swing hatched, mean over subjects, error bar = SD of the swing share) per
+    model (groups of bars) and workflow (bar colour). Right: swing share against walking speed
+    (m/s) for ``workflow`` (default :func:`main_workflow`), one line per model through the
+    means over subjects at each trial, subjects as small points; the legend gives the
+    repeated-measures slope (% per m/s) when there are two speeds or more.
+    """
+    res = _ok_rows(results)
+    _require_columns(res, ("stance_pct", "swing_pct", "speed_m_per_s"), "the results table")
+    if res.empty:
+        raise OptionError("no successful unit in the results")
+    trial = preferred_trial(res) if trial is None else str(trial)
+    if trial not in set(res["trial"].astype(str)):
+        raise OptionError(f"trial '{trial}' is not in the results")
+    models = _ordered_models(res["model"])
+    workflows = _ordered_workflows(res["workflow"])
+    wf_line = main_workflow(workflows) if workflow is None else str(workflow)
+    if wf_line not in workflows:
+        raise OptionError(f"workflow '{wf_line}' is not in the results; it has {', '.join(workflows)}")
+    fig = _new_figure(min(15.0, max(10.0, 0.5 * len(models) * max(1, len(workflows)) + 6.0)), 4.8)
+    ax_b, ax_s = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.5, 1.0]})
+    pref = res[res["trial"].astype(str) == trial]
+    nw = len(workflows)
+    width = 0.8 / max(nw, 1)
+    for i, w in enumerate(workflows):
+        col = workflow_colour(w)
+        xs, stance, swing, sd = [], [], [], []
+        for j, m in enumerate(models):
+            d = pref[(pref["workflow"].astype(str) == w) & (pref["model"].astype(str) == m)]
+            sw, sw_sd, n = _mean_sd(d["swing_pct"])
+            st, _, _ = _mean_sd(d["stance_pct"])
+            if n == 0:
+                continue
+            xs.append(j - 0.4 + width * (i + 0.5))
+            stance.append(st)
+            swing.append(sw)
+            sd.append(sw_sd)
+        if not xs:
+            continue
+        xs, stance, swing = np.array(xs), np.array(stance), np.array(swing)
+        ax_b.bar(xs, stance, width=width * 0.92, color=col, label=f"{w}", gid=f"stance:{w}")
+        ax_b.bar(xs, swing, width=width * 0.92, bottom=stance, color=col, alpha=0.35, hatch="///",
+                 edgecolor=col, label="_swing", gid=f"swing:{w}")
+        sd = np.array(sd)
+        if np.any(np.isfinite(sd)):
+            ax_b.errorbar(xs, stance, yerr=np.nan_to_num(sd), fmt="none", ecolor="k", elinewidth=0.8, capsize=2)
+        for x, s in zip(xs, swing):
+            ax_b.text(x, 101.0, f"{s:.0f}", ha="center", va="bottom", fontsize=6.5, rotation=90)
+    ax_b.set_xticks(range(len(models)), models)
+    for lab in ax_b.get_xticklabels():
+        lab.set_color(model_colour(lab.get_text()))
+    ax_b.set_ylim(0, 112)
+    ax_b.set_ylabel("share of the cycle's muscle energy (%)")
+    speed_txt = ""
+    sp = pref["speed_m_per_s"].to_numpy(float)
+    if np.any(np.isfinite(sp)):
+        speed_txt = f", {np.nanmean(sp):.2f} m/s"
+    ax_b.set_title(f"Stance (solid) and swing (hatched; % above the bar) at the preferred speed "
+                   f"({trial}{speed_txt})", fontsize=9)
+    ax_b.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=max(1, min(nw, 6)),
+                frameon=False, title="workflow (stance solid, swing hatched)", title_fontsize=8)
+
+    dl = res[res["workflow"].astype(str) == wf_line]
+    n_speeds = len(_unique(dl["trial"].astype(str)))
+    for k, m in enumerate(models):
+        d = dl[dl["model"].astype(str) == m]
+        if d.empty:
+            continue
+        col = model_colour(m)
+        ax_s.scatter(d["speed_m_per_s"], d["swing_pct"], color=col, s=9, alpha=0.45, label="_" + m, zorder=2)
+        rows = [r for r in _speed_table(d, "swing_pct") if np.isfinite(r[1]) and r[4] > 0]
+        label = m
+        if n_speeds > 1:
+            rm, _ = _rmcorr(d["speed_m_per_s"], d["swing_pct"], d["subject"].astype(str))
+            if rm is not None:
+                label = f"{m}: {rm.slope:+.1f} %/(m/s), r = {rm.r:.2f}"
+        ax_s.plot([r[1] for r in rows], [r[2] for r in rows], color=col, marker="o", ms=4, lw=1.4,
+                  label=label, gid=f"model:{m}", zorder=3)
+    ax_s.yaxis.get_major_formatter().set_useOffset(False)
+    ax_s.set_xlabel("walking speed (m/s)")
+    ax_s.set_ylabel("swing share (%)")
+    note = "" if n_speeds > 1 else " - one speed only, no trend"
+    ax_s.set_title(f"Swing share against speed ({wf_line}){note}", fontsize=9)
+    ax_s.legend(fontsize=7, frameon=False)
+    fig.suptitle(title or "Relative phase cost: stance and swing shares of the muscle metabolic energy "
+                 "(one leg, no basal heat)", fontsize=11)
+    return fig
+
+
+# --------------------------------------------------------------------- 6. group shares
+def group_shares(results, *, workflows: Sequence[str] | None = None, models: Sequence[str] | None = None,
+                 title: str | None = None):
+    """Share of each muscle group in the cycle's muscle energy (%), stacked bars.
+
+    One row of panels per workflow, one panel per model, one bar per trial (ordered by speed;
+    mean over subjects of ``share_<G>_pct``), stacked in the order of :data:`GROUPS`.
+    """
+    res = _ok_rows(results)
+    cols = [c for c in (f"share_{g}_pct" for g in GROUPS) if c in res.columns]
+    if not cols:
+        raise OptionError("the results table has no group-share column (share_<G>_pct)")
+    if res.empty:
+        raise OptionError("no successful unit in the results")
+    groups = [c[len("share_"):-len("_pct")] for c in cols]
+    all_wf = _ordered_workflows(res["workflow"])
+    workflows = all_wf if workflows is None else [str(w) for w in workflows]
+    absent = [w for w in workflows if w not in all_wf]
+    if absent:
+        raise OptionError(f"workflow {', '.join(absent)} is not in the results; it has {', '.join(all_wf)}")
+    models = _ordered_models(res["model"]) if models is None else [str(m) for m in models]
+    trials = trial_order(res)
+    speeds = {t: r[1] for t, r in zip(trials, _speed_table(res, cols[0]))}
+    panel_w = max(1.8, 0.3 * len(trials) + 0.9)
+    fig = _new_figure(min(20.0, panel_w * len(models) + 1.0), 2.9 * len(workflows) + 1.4)
+    axes = fig.subplots(len(workflows), len(models), squeeze=False, sharey=True)
+    xt = [f"{t}\n{speeds[t]:.2f}" if np.isfinite(speeds[t]) else t for t in trials]
+    for i, w in enumerate(workflows):
+        for j, m in enumerate(models):
+            ax = axes[i, j]
+            d = res[(res["workflow"].astype(str) == w) & (res["model"].astype(str) == m)]
+            bottom = np.zeros(len(trials))
+            for g, c in zip(groups, cols):
+                vals = np.array([_mean_sd(d[d["trial"].astype(str) == t][c])[0] for t in trials])
+                vals = np.nan_to_num(vals)
+                ax.bar(np.arange(len(trials)), vals, bottom=bottom, width=0.75, color=group_colour(g),
+                       edgecolor="white", linewidth=0.4, label=g, gid=f"group:{g}")
+                bottom += vals
+            ax.set_xticks(np.arange(len(trials)), xt, fontsize=6.5 if len(trials) > 4 else 7,
+                          rotation=90 if len(trials) > 4 else 0)
+            ax.set_ylim(0, 100)
+            if i == 0:
+                ax.set_title(m, color=model_colour(m), fontsize=11, fontweight="bold")
+            if j == 0:
+                ax.set_ylabel(f"{w}\nshare (%)", color=workflow_colour(w))
+            if i == len(workflows) - 1:
+                ax.set_xlabel("trial, speed (m/s)", fontsize=8)
+    from matplotlib.patches import Patch
+
+    handles = [Patch(color=group_colour(g), label=f"{g} ({GROUP_NAMES.get(g, g)})") for g in groups]
+    fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 6), fontsize=8, frameon=False)
+    fig.suptitle(title or "Shares of the muscle groups in the cycle's muscle metabolic energy "
+                 "(%, one leg, no basal heat; mean over subjects)", fontsize=11)
+    return fig
+
+
+# ------------------------------------------------------------------------------ saving
+def save_figure(fig, out_dir: str | os.PathLike, name: str, *, dpi: int = 110) -> dict[str, Path]:
+    """Write ``out_dir/name.png`` and ``out_dir/name.svg`` atomically; close the figure.
+
+    Returns ``{"png": path, "svg": path}``. The SVG carries no date, so identical figures
+    give identical files.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from ..io.atomic import atomic_write_bytes
+
+    name = str(name)
+    if not name or any(ch in name for ch in "/\\") or name.startswith("."):
+        raise OptionError(f"figure name '{name}' must be a plain file name without an extension")
+    out_dir = Path(out_dir)
+    if not isinstance(fig.canvas, FigureCanvasAgg):
+        FigureCanvasAgg(fig)
+    import matplotlib
+
+    paths = {}
+    with matplotlib.rc_context({"svg.hashsalt": "musclemetab", "svg.fonttype": "path"}):
+        for fmt, meta in (("png", {"Software": None}), ("svg", {"Date": None})):
+            buf = io.BytesIO()
+            fig.savefig(buf, format=fmt, dpi=dpi, metadata=meta)
+            paths[fmt] = atomic_write_bytes(out_dir / f"{name}.{fmt}", buf.getvalue())
+    if "matplotlib.pyplot" in sys.modules:
+        sys.modules["matplotlib.pyplot"].close(fig)
+    return paths

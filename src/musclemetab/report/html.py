@@ -1,0 +1,808 @@
+"""The report of a study folder: its figures and one self-contained HTML page.
+
+:func:`write_report` reads a study folder (``study.json``, ``results.csv``, ``failures.csv``
+and the unit folders ``units/<subject>/<trial>/<workflow>``), draws every figure of
+:mod:`musclemetab.report.figures` that the data support, writes them to ``figures/`` (PNG and
+SVG) and writes ``report.html``: settings, method, result tables, figures (embedded as
+base64 PNG), failures and software versions. A figure the data cannot support (no measured
+rates, one speed only, missing unit files) is replaced by a short note saying why. The page
+needs nothing else: no external resource, no script. Every file is written atomically.
+"""
+
+from __future__ import annotations
+
+import base64
+import datetime as _dt
+import html
+import json
+import math
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputFileError, MissingColumnError, MusclemetabError, OptionError
+
+__all__ = [
+    "StudyFolder",
+    "FigureEntry",
+    "read_study_folder",
+    "make_figures",
+    "render_html",
+    "write_report",
+    "generate_report",
+    "REPORT_FILE",
+    "FIGURES_FOLDER",
+    "FIGURE_NAMES",
+    "REQUIRED_COLUMNS",
+]
+
+REPORT_FILE = "report.html"
+FIGURES_FOLDER = "figures"
+STUDY_JSON = "study.json"
+RESULTS_CSV = "results.csv"
+FAILURES_CSV = "failures.csv"
+TIMESERIES_FILE = "timeseries.csv"
+UNIT_FILE = "unit.json"
+
+#: Columns ``results.csv`` must have; the others are used when present.
+REQUIRED_COLUMNS = ("subject", "trial", "workflow", "model", "status", "mean_W_per_kg")
+
+#: File names (without extension) of the figures, in the order of the report.
+FIGURE_NAMES = (
+    "excitations_fiber_lengths",
+    "estimated_vs_measured",
+    "group_rates_over_cycle",
+    "whole_body_over_cycle",
+    "phase_shares",
+    "group_shares",
+)
+
+#: Packages whose versions the report lists (OpenSim's from study.json only).
+SOFTWARE = ("musclemetab", "numpy", "scipy", "casadi", "pandas", "matplotlib", "opensim")
+
+GROUPS = ("PF", "DF", "KE", "KF", "HE", "HF", "HAD", "HAB", "HIR", "HER", "other")
+
+
+# ------------------------------------------------------------------------------ reading
+@dataclass
+class StudyFolder:
+    """A study folder's contents: settings, the results (all rows) and the failures."""
+
+    path: Path
+    settings: dict
+    results: object  # pandas.DataFrame
+    failures: object  # pandas.DataFrame: subject, trial, workflow, reason
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self):
+        """Rows of the results whose status is ``ok``."""
+        r = self.results
+        return r[r["status"].astype(str).str.lower() == "ok"]
+
+    def unit_folder(self, row) -> Path:
+        rel = row.get("unit_dir") if hasattr(row, "get") else None
+        if isinstance(rel, str) and rel.strip():
+            return self.path / rel
+        return self.path / "units" / str(row["subject"]) / str(row["trial"]) / str(row["workflow"])
+
+    @property
+    def name(self) -> str:
+        return str(self.settings.get("name") or self.path.name)
+
+
+def read_study_folder(study_dir: str | os.PathLike) -> StudyFolder:
+    """Read ``study.json``, ``results.csv`` and ``failures.csv`` of a study folder.
+
+    Raises :class:`InputFileError` when the folder or ``results.csv`` is missing or
+    unreadable, or ``study.json`` is not JSON; :class:`MissingColumnError` when
+    ``results.csv`` lacks one of :data:`REQUIRED_COLUMNS`. A missing ``study.json`` or
+    ``failures.csv`` gives a note in the report.
+    """
+    import pandas as pd
+
+    path = Path(study_dir)
+    if not path.is_dir():
+        raise InputFileError(
+            f"{path}: no such study folder; give the output folder of 'musclemetab run' "
+            "(the folder holding results.csv and study.json)"
+        )
+    rpath = path / RESULTS_CSV
+    if not rpath.is_file():
+        raise InputFileError(
+            f"{rpath}: missing; {path} is not a finished study folder. Run the study first "
+            "('musclemetab run STUDY.toml'), or give the folder holding results.csv"
+        )
+    try:
+        results = pd.read_csv(rpath, dtype={"subject": str, "trial": str, "workflow": str, "model": str})
+    except (pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise InputFileError(f"{rpath}: not a readable results table ({exc}); run the study again") from None
+    missing = [c for c in REQUIRED_COLUMNS if c not in results.columns]
+    if missing:
+        raise MissingColumnError(
+            f"{rpath}: missing column{'s' if len(missing) > 1 else ''} {', '.join(missing)}; "
+            "the file was not written by the study runner of this version; run the study again"
+        )
+    for c in results.columns:
+        if c.endswith(("_pct", "_W_per_kg", "_per_m", "_m_per_s")) or c in ("mean_W_per_kg",):
+            results[c] = pd.to_numeric(results[c], errors="coerce")
+    notes: list[str] = []
+    settings: dict = {}
+    spath = path / STUDY_JSON
+    if spath.is_file():
+        try:
+            settings = json.loads(spath.read_text(encoding="utf-8"))
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise InputFileError(f"{spath}: not valid JSON ({exc}); run the study again to rewrite it") from None
+        if not isinstance(settings, dict):
+            raise InputFileError(f"{spath}: a JSON object is expected; run the study again to rewrite it")
+    else:
+        notes.append(f"{STUDY_JSON} is missing: the settings below are taken from the results table.")
+    fpath = path / FAILURES_CSV
+    cols = ["subject", "trial", "workflow", "reason"]
+    failures = pd.DataFrame(columns=cols)
+    if fpath.is_file():
+        try:
+            failures = pd.read_csv(fpath, dtype=str, keep_default_na=False)
+        except pd.errors.EmptyDataError:
+            pass
+        except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+            raise InputFileError(f"{fpath}: not a readable table ({exc}); run the study again") from None
+        for c in cols:
+            if c not in failures.columns:
+                failures[c] = ""
+        failures = failures[cols]
+    else:
+        notes.append(f"{FAILURES_CSV} is missing: only failures recorded in the results table are listed.")
+    return StudyFolder(path=path, settings=settings, results=results, failures=failures, notes=notes)
+
+
+# ------------------------------------------------------------------------------ figures
+@dataclass
+class FigureEntry:
+    """One figure of the report: its files, or the note saying why it is not drawn."""
+
+    name: str
+    title: str
+    caption: str = ""
+    paths: dict | None = None
+    note: str | None = None
+
+
+def _workflows(study: StudyFolder) -> list[str]:
+    from .figures import _ordered_workflows
+
+    listed = [str(w) for w in study.settings.get("workflows") or []]
+    present = _ordered_workflows(study.results["workflow"].astype(str))
+    return listed + [w for w in present if w not in listed] if listed else present
+
+
+def _models(study: StudyFolder) -> list[str]:
+    from .figures import _ordered_models
+
+    listed = study.settings.get("models")
+    present = _ordered_models(study.results["model"].astype(str))
+    if isinstance(listed, (list, tuple)) and listed:
+        listed = [str(m) for m in listed]
+        return listed + [m for m in present if m not in listed]
+    return present
+
+
+def _subjects(study: StudyFolder) -> list[str]:
+    listed = list((study.settings.get("subjects") or {}).keys()) if isinstance(study.settings.get("subjects"), dict) else []
+    present = []
+    for s in study.results["subject"].astype(str):
+        if s not in present:
+            present.append(s)
+    return [s for s in listed if s in present] + [s for s in present if s not in listed]
+
+
+def _preferred(study: StudyFolder, ok) -> str:
+    from .figures import preferred_trial
+
+    pt = study.settings.get("preferred_trial")
+    if isinstance(pt, str) and pt in set(ok["trial"].astype(str)):
+        return pt
+    return preferred_trial(ok)
+
+
+def _read_unit_json(folder: Path) -> dict:
+    p = folder / UNIT_FILE
+    if not p.is_file():
+        raise InputFileError(f"{p}: missing")
+    try:
+        rec = json.loads(p.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputFileError(f"{p}: not valid JSON ({exc})") from None
+    if not isinstance(rec, dict):
+        raise InputFileError(f"{p}: a JSON object is expected")
+    return rec
+
+
+def _cycle(rec: dict, where: Path) -> tuple[float, float, float]:
+    c = rec.get("cycle") or {}
+    try:
+        vals = (float(c["start_s"]), float(c["toe_off_s"]), float(c["end_s"]))
+    except (KeyError, TypeError, ValueError):
+        raise InputFileError(f"{where / UNIT_FILE}: no gait cycle (cycle.start_s, toe_off_s, end_s)") from None
+    return vals
+
+
+def _read_timeseries(folder: Path):
+    import pandas as pd
+
+    p = folder / TIMESERIES_FILE
+    if not p.is_file():
+        raise InputFileError(f"{p}: missing")
+    try:
+        return pd.read_csv(p)
+    except (pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise InputFileError(f"{p}: not a readable table ({exc})") from None
+
+
+def _short(study: StudyFolder, exc: BaseException) -> str:
+    """An error message on one line, with paths relative to the study folder."""
+    text = " ".join(str(exc).split())
+    return text.replace(str(study.path) + os.sep, "").replace(str(study.path.resolve()) + os.sep, "")
+
+
+def make_figures(study: StudyFolder, fig_dir: str | os.PathLike) -> list[FigureEntry]:
+    """Draw the figures the study's data support and save them in ``fig_dir`` (PNG and SVG).
+
+    Returns one :class:`FigureEntry` per name of :data:`FIGURE_NAMES`, with the file paths or
+    the note saying why the figure is not drawn (the files of a figure not drawn are
+    removed from ``fig_dir``, so that no figure of an earlier report remains).
+    """
+    from . import figures as F
+
+    fig_dir = Path(fig_dir)
+    ok = study.ok
+    entries: dict[str, FigureEntry] = {}
+    titles = {
+        "excitations_fiber_lengths": "Muscle excitations and normalised fibre lengths",
+        "estimated_vs_measured": "Estimated vs measured whole-body metabolic rate",
+        "group_rates_over_cycle": "Metabolic rate of the muscle groups over the gait cycle",
+        "whole_body_over_cycle": "Whole-body metabolic rate over the gait cycle across speeds",
+        "phase_shares": "Stance and swing shares",
+        "group_shares": "Muscle-group shares",
+    }
+
+    def attempt(name: str, build: Callable[[], tuple[object, str]]):
+        try:
+            fig, caption = build()
+        except MusclemetabError as exc:
+            entries[name] = FigureEntry(name, titles[name], note=_short(study, exc))
+            return
+        entries[name] = FigureEntry(name, titles[name], caption=caption, paths=F.save_figure(fig, fig_dir, name))
+
+    if ok.empty:
+        for name in FIGURE_NAMES:
+            entries[name] = FigureEntry(name, titles[name], note="no unit of the study succeeded: nothing to draw.")
+    else:
+        workflows = [w for w in _workflows(study) if w in set(ok["workflow"].astype(str))]
+        models = [m for m in _models(study) if m in set(ok["model"].astype(str))]
+        trial = _preferred(study, ok)
+        main_wf = F.main_workflow(workflows)
+        # the subject shown in the single-unit figures: the first with the preferred trial done
+        pref = ok[ok["trial"].astype(str) == trial]
+        subject = next((s for s in _subjects(study) if s in set(pref["subject"].astype(str))), None)
+
+        def unit_rows(subject, trial=None, workflow=None):
+            d = ok[ok["subject"].astype(str) == subject]
+            if trial is not None:
+                d = d[d["trial"].astype(str) == trial]
+            if workflow is not None:
+                d = d[d["workflow"].astype(str) == workflow]
+            return d
+
+        def fig1():
+            from ..redundancy.solution import Solution
+
+            sols, cycles, skipped = {}, {}, []
+            rows = unit_rows(subject, trial)
+            for w in workflows:
+                d = rows[rows["workflow"].astype(str) == w]
+                if d.empty:
+                    continue
+                folder = study.unit_folder(d.iloc[0])
+                try:
+                    rec = _read_unit_json(folder)
+                    cycles[w] = _cycle(rec, folder)
+                    sols[w] = Solution.load(folder)
+                except MusclemetabError as exc:
+                    cycles.pop(w, None)
+                    skipped.append(f"{w} ({_short(study, exc)})")
+            if not sols:
+                raise OptionError(
+                    f"no solution could be read for {subject}, trial {trial}"
+                    + (f": {'; '.join(skipped)}" if skipped else "")
+                )
+            fig = F.excitations_and_fiber_lengths(
+                sols, cycles,
+                title=f"Muscle excitation and normalised fibre length over the gait cycle: subject {subject}, "
+                f"trial {trial}",
+            )
+            cap = (f"Subject {subject}, trial {trial} (preferred speed). Excitation (-) and fibre length "
+                   "normalised by the optimal fibre length (-), one line per workflow; dotted line: toe-off; "
+                   "grey band: plateau of the active force-length curve (0.75-1.05); dashed line: start of "
+                   "the descending limb (1.05).")
+            if skipped:
+                cap += f" Not shown: {'; '.join(skipped)}."
+            return fig, cap
+
+        def fig2():
+            fig = F.estimated_vs_measured(ok)
+            cap = ("Whole-body average metabolic rate (W/kg of body mass, both legs, with basal heat) estimated "
+                   "by each model against the measured rate, one point per subject and trial; lines: "
+                   "repeated-measures correlation of each workflow (common slope m, one intercept per "
+                   "subject); dashed: identity.")
+            return fig, cap
+
+        def unit_timeseries(subject, trial, workflow):
+            d = unit_rows(subject, trial, workflow)
+            if d.empty:
+                raise OptionError(f"no successful unit for {subject}, trial {trial}, workflow {workflow}")
+            folder = study.unit_folder(d.iloc[0])
+            ts = _read_timeseries(folder)
+            to = d["toe_off_pct"].iloc[0] if "toe_off_pct" in d.columns else math.nan
+            if not np.isfinite(to):
+                rec = _read_unit_json(folder)
+                s, t, e = _cycle(rec, folder)
+                to = 100.0 * (t - s) / (e - s)
+            sp = d["speed_m_per_s"].iloc[0] if "speed_m_per_s" in d.columns else math.nan
+            return ts, float(to), float(sp)
+
+        def fig3():
+            ts, to, _ = unit_timeseries(subject, trial, main_wf)
+            fig = F.group_rates_over_cycle(
+                ts, to, [m for m in models if m in set(ts["model"].astype(str))] or None,
+                title=f"Metabolic rate of the muscle groups over the gait cycle (W, one leg, no basal heat): "
+                f"subject {subject}, trial {trial}, {main_wf}",
+            )
+            cap = (f"Subject {subject}, trial {trial} (preferred speed), workflow {main_wf}. Muscle metabolic "
+                   f"rates (W, one leg, without basal heat) distributed to the muscle groups by moment-arm "
+                   f"ratio; dotted line: toe-off ({to:.1f} % of the cycle).")
+            return fig, cap
+
+        def fig4():
+            trials = [t for t in F.trial_order(ok) if not unit_rows(subject, t, main_wf).empty]
+            if len(trials) < 2:
+                raise OptionError(
+                    f"one speed only ({', '.join(trials) or 'no trial'} for subject {subject}, {main_wf}): "
+                    "nothing to compare across speeds"
+                )
+            tables, speeds, toes, skipped = {}, {}, {}, []
+            for t in trials:
+                try:
+                    ts, to, sp = unit_timeseries(subject, t, main_wf)
+                except MusclemetabError as exc:
+                    skipped.append(f"{t} ({_short(study, exc)})")
+                    continue
+                if not np.isfinite(sp):
+                    skipped.append(f"{t} (no walking speed)")
+                    continue
+                tables[t], speeds[t], toes[t] = ts, sp, to
+            if len(tables) < 2:
+                raise OptionError(
+                    "fewer than two speeds with time series" + (f": {'; '.join(skipped)}" if skipped else "")
+                )
+            fig = F.whole_body_over_cycle(
+                tables, speeds, [m for m in models if any(m in set(x["model"].astype(str)) for x in tables.values())],
+                toe_off_pct=toes,
+                title=f"Whole-body metabolic rate over the gait cycle across speeds (W, one leg, summed muscles, "
+                f"no basal heat): subject {subject}, {main_wf}",
+            )
+            cap = (f"Subject {subject}, workflow {main_wf}. Sum of the muscle metabolic rates of one leg (W, "
+                   "without basal heat) over the gait cycle, one line per walking speed; marks at the bottom: "
+                   "toe-off of each trial.")
+            if skipped:
+                cap += f" Not shown: {'; '.join(skipped)}."
+            return fig, cap
+
+        def fig5():
+            fig = F.phase_shares(ok, trial=trial, workflow=main_wf)
+            cap = (f"Share of the cycle's muscle metabolic energy (one leg, without basal heat) spent in stance "
+                   f"(initial contact to toe-off) and swing, mean over subjects (error bar: SD). Left: at the "
+                   f"preferred speed (trial {trial}); right: swing share against walking speed for {main_wf}, "
+                   "with the repeated-measures slope (% per m/s).")
+            return fig, cap
+
+        def fig6():
+            fig = F.group_shares(ok, workflows=workflows, models=models)
+            cap = ("Share of each muscle group in the cycle's muscle metabolic energy (%, one leg, without basal "
+                   "heat; mean over subjects), one bar per trial (walking speed in m/s).")
+            return fig, cap
+
+        builders = {
+            "excitations_fiber_lengths": fig1,
+            "estimated_vs_measured": fig2,
+            "group_rates_over_cycle": fig3,
+            "whole_body_over_cycle": fig4,
+            "phase_shares": fig5,
+            "group_shares": fig6,
+        }
+        for name in FIGURE_NAMES:
+            if subject is None and name in ("excitations_fiber_lengths", "group_rates_over_cycle",
+                                            "whole_body_over_cycle"):
+                entries[name] = FigureEntry(name, titles[name], note=f"no successful unit for trial {trial}.")
+                continue
+            attempt(name, builders[name])
+    for e in entries.values():
+        if e.paths is None:
+            for ext in ("png", "svg"):
+                stale = fig_dir / f"{e.name}.{ext}"
+                if stale.is_file():
+                    stale.unlink()
+    return [entries[n] for n in FIGURE_NAMES]
+
+
+# ------------------------------------------------------------------------------ tables
+def _esc(x) -> str:
+    return html.escape(str(x), quote=True)
+
+
+def _fmt(mean: float, sd: float, digits: int) -> str:
+    if not np.isfinite(mean):
+        return "–"
+    if np.isfinite(sd):
+        return f"{mean:.{digits}f} [{sd:.{digits}f}]"
+    return f"{mean:.{digits}f}"
+
+
+def _mean_sd(values) -> tuple[float, float]:
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return math.nan, math.nan
+    return float(v.mean()), (float(v.std(ddof=1)) if v.size > 1 else math.nan)
+
+
+def _table(header: list[list[tuple[str, int]]], body: list[list[str]], n_index: int, cls: str = "") -> str:
+    """HTML table; ``header`` rows of ``(text, colspan)``; the first ``n_index`` body cells are <th>."""
+    out = [f'<table class="{_esc(cls)}">' if cls else "<table>", "<thead>"]
+    for row in header:
+        out.append("<tr>" + "".join(
+            f'<th colspan="{span}">{_esc(text)}</th>' if span > 1 else f"<th>{_esc(text)}</th>" for text, span in row
+        ) + "</tr>")
+    out.append("</thead><tbody>")
+    for row in body:
+        cells = [f'<th scope="row">{_esc(c)}</th>' if i < n_index else f"<td>{_esc(c)}</td>" for i, c in enumerate(row)]
+        out.append("<tr>" + "".join(cells) + "</tr>")
+    out.append("</tbody></table>")
+    return "\n".join(out)
+
+
+def _pivot(ok, value: str, trials: Sequence[str], labels: Sequence[str], workflows: Sequence[str],
+           models: Sequence[str], digits: int) -> str:
+    """Rows: trial (headed by ``labels``) × model; columns: workflow; cells: mean [SD] over subjects."""
+    header = [[("trial (speed)", 1), ("model", 1)] + [(w, 1) for w in workflows]]
+    body = []
+    for t, lab in zip(trials, labels):
+        dt = ok[ok["trial"].astype(str) == t]
+        first = True
+        for m in models:
+            dm = dt[dt["model"].astype(str) == m]
+            if dm.empty:
+                continue
+            row = [lab if first else "", m]
+            first = False
+            for w in workflows:
+                row.append(_fmt(*_mean_sd(dm.loc[dm["workflow"].astype(str) == w, value]), digits))
+            body.append(row)
+    return _table(header, body, 2, "results")
+
+
+def _trial_heading(ok, trials) -> list[str]:
+    out = []
+    for t in trials:
+        sp = ok.loc[ok["trial"].astype(str) == t, "speed_m_per_s"] if "speed_m_per_s" in ok.columns else []
+        m, _ = _mean_sd(sp)
+        out.append(f"{t} ({m:.2f} m/s)" if np.isfinite(m) else t)
+    return out
+
+
+def _results_section(study: StudyFolder) -> str:
+    from .figures import trial_order
+
+    ok = study.ok
+    parts = ["<h2>Results</h2>"]
+    if ok.empty:
+        parts.append('<p class="note">No unit of the study succeeded: no results to tabulate.</p>')
+        return "\n".join(parts)
+    trials = trial_order(ok)
+    workflows = [w for w in _workflows(study) if w in set(ok["workflow"].astype(str))]
+    models = [m for m in _models(study) if m in set(ok["model"].astype(str))]
+    n_sub = len(set(ok["subject"].astype(str)))
+    tlabels = _trial_heading(ok, trials)
+    label = dict(zip(trials, tlabels))
+    parts.append(
+        f"<p>Values are the mean [SD] over the {n_sub} subject{'s' if n_sub != 1 else ''} with a successful "
+        "unit (SD shown when at least two subjects contribute); trials are ordered by walking speed "
+        "(mean over subjects, m/s).</p>"
+    )
+
+    def pivot_section(hid, title, value, digits, text):
+        parts.append(f'<h3 id="{hid}">{_esc(title)}</h3>')
+        if value not in ok.columns or not ok[value].notna().any():
+            parts.append(f'<p class="note">The results table has no values of {_esc(value)}.</p>')
+            return
+        parts.append(f"<p>{_esc(text)}</p>")
+        parts.append(_pivot(ok, value, trials, tlabels, workflows, models, digits))
+
+    pivot_section("table-whole-body", "Whole-body metabolic rate (W/kg)", "mean_W_per_kg", 2,
+                  "Whole-body average metabolic rate over the gait cycle, W per kg of body mass: both legs "
+                  "(twice the simulated leg), with basal heat; rows: trial and metabolic model; columns: workflow.")
+    if "measured_W_per_kg" in ok.columns and ok["measured_W_per_kg"].notna().any():
+        meas = ok.drop_duplicates(["subject", "trial"])
+        body = [["measured"] + [_fmt(*_mean_sd(meas.loc[meas["trial"].astype(str) == t, "measured_W_per_kg"]), 2)
+                                for t in trials]]
+        parts.append("<p>Measured whole-body metabolic rate (W/kg, indirect calorimetry):</p>")
+        parts.append(_table([[("", 1)] + [(lab, 1) for lab in tlabels]], body, 1, "results"))
+    else:
+        parts.append('<p class="note">No measured metabolic rate in the results.</p>')
+    pivot_section("table-cost-of-transport", "Cost of transport (J/(kg·m))", "cost_of_transport_J_per_kg_per_m", 2,
+                  "Metabolic cost of transport: the whole-body rate (W/kg) divided by the walking speed (m/s), "
+                  "in J per kg of body mass per metre.")
+
+    # phase shares
+    parts.append('<h3 id="table-phase-shares">Stance and swing shares (%)</h3>')
+    have = [c for c in ("stance_pct", "swing_pct", "swing_pct_with_basal") if c in ok.columns]
+    if "swing_pct" not in have:
+        parts.append('<p class="note">The results table has no phase shares.</p>')
+    else:
+        parts.append(
+            "<p>Share of the cycle's muscle metabolic energy (one leg) spent in stance (initial contact to "
+            "toe-off) and in swing (toe-off to the next initial contact), %, without basal heat; the column "
+            "'swing, with basal' counts the basal heat as well.</p>"
+        )
+        names = {"stance_pct": "stance", "swing_pct": "swing", "swing_pct_with_basal": "swing, with basal"}
+        header = [[("trial (speed)", 1), ("model", 1)] + [(w, len(have)) for w in workflows],
+                  [("", 1), ("", 1)] + [(names[c], 1) for _ in workflows for c in have]]
+        body = []
+        for t in trials:
+            first = True
+            for m in models:
+                d = ok[(ok["trial"].astype(str) == t) & (ok["model"].astype(str) == m)]
+                if d.empty:
+                    continue
+                row = [label[t] if first else "", m]
+                first = False
+                for w in workflows:
+                    dw = d[d["workflow"].astype(str) == w]
+                    row += [_fmt(*_mean_sd(dw[c]), 1) for c in have]
+                body.append(row)
+        parts.append(_table(header, body, 2, "results"))
+
+    # group shares
+    parts.append('<h3 id="table-group-shares">Muscle-group shares (%)</h3>')
+    gcols = [(g, f"share_{g}_pct") for g in GROUPS if f"share_{g}_pct" in ok.columns]
+    if not gcols:
+        parts.append('<p class="note">The results table has no group shares.</p>')
+    else:
+        parts.append(
+            "<p>Share of each muscle group in the cycle's muscle metabolic energy (one leg, without basal heat), "
+            "%; each muscle's rate is distributed over the degrees of freedom it spans by moment-arm ratio. "
+            "PF/DF: ankle plantar-/dorsiflexors; KE/KF: knee extensors/flexors; HE/HF: hip extensors/flexors; "
+            "HAD/HAB: hip adductors/abductors; HIR/HER: hip internal/external rotators.</p>"
+        )
+        header = [[("workflow", 1), ("model", 1), ("trial", 1)] + [(g, 1) for g, _ in gcols]]
+        body = []
+        for w in workflows:
+            for m in models:
+                for t in trials:
+                    d = ok[(ok["workflow"].astype(str) == w) & (ok["model"].astype(str) == m)
+                           & (ok["trial"].astype(str) == t)]
+                    if d.empty:
+                        continue
+                    body.append([w, m, label[t]] + [_fmt(*_mean_sd(d[c]), 1) for _, c in gcols])
+        parts.append(_table(header, body, 3, "results"))
+    return "\n".join(parts)
+
+
+def _settings_section(study: StudyFolder) -> str:
+    s = study.settings
+    parts = ['<h2 id="settings">Settings</h2>']
+    for n in study.notes:
+        parts.append(f'<p class="note">{_esc(n)}</p>')
+    items = [("study", study.name), ("folder", str(study.path)),
+             ("workflows", ", ".join(_workflows(study))), ("metabolic models", ", ".join(_models(study)))]
+    if s.get("basal") is not None:
+        items.append(("whole-body basal rule", str(s["basal"])))
+    parts.append("<dl>" + "".join(f"<dt>{_esc(k)}</dt><dd>{_esc(v)}</dd>" for k, v in items) + "</dl>")
+    subjects = s.get("subjects") if isinstance(s.get("subjects"), dict) else {}
+    names = _subjects(study)
+    names = list(subjects) + [n for n in names if n not in subjects]
+    body = []
+    for n in names:
+        rec = subjects.get(n) or {}
+        mass, height = rec.get("body_mass_kg"), rec.get("height_m")
+        trials = rec.get("trials")
+        if not trials:
+            trials = sorted(set(study.results.loc[study.results["subject"].astype(str) == n, "trial"].astype(str)))
+        body.append([n, "–" if mass is None else f"{float(mass):g}", "–" if height is None else f"{float(height):g}",
+                     str(rec.get("model") or "–"), ", ".join(map(str, trials))])
+    parts.append("<h3>Subjects</h3>")
+    parts.append(_table([[("subject", 1), ("body mass (kg)", 1), ("height (m)", 1), ("model", 1), ("trials", 1)]],
+                        body, 1, "settings"))
+    other = {k: v for k, v in s.items() if k not in ("name", "workflows", "models", "subjects", "software")}
+    if other:
+        parts.append("<h3>Other settings (study.json)</h3>")
+        parts.append(f"<pre>{_esc(json.dumps(other, indent=2, default=str))}</pre>")
+    return "\n".join(parts)
+
+
+def _failures_section(study: StudyFolder) -> str:
+    parts = ['<h2 id="failures">Failures</h2>']
+    rows = []
+    seen = set()
+    for _, r in study.failures.iterrows():
+        key = (str(r["subject"]), str(r["trial"]), str(r["workflow"]))
+        seen.add(key)
+        rows.append([key[0], key[1] or "(all trials)", key[2], str(r["reason"])])
+    bad = study.results[study.results["status"].astype(str).str.lower() != "ok"]
+    for _, r in bad.drop_duplicates(["subject", "trial", "workflow"]).iterrows():
+        key = (str(r["subject"]), str(r["trial"]), str(r["workflow"]))
+        if key not in seen:
+            rows.append([key[0], key[1], key[2], f"status '{r['status']}'"])
+    if not rows:
+        parts.append("<p>None: every unit of the study succeeded.</p>")
+    else:
+        parts.append(f"<p>{len(rows)} unit{'s' if len(rows) != 1 else ''} did not succeed; "
+                     f"{'they are' if len(rows) != 1 else 'it is'} left out of the tables and figures.</p>")
+        parts.append(_table([[("subject", 1), ("trial", 1), ("workflow", 1), ("reason", 1)]], rows, 0, "failures"))
+    return "\n".join(parts)
+
+
+def software_versions() -> dict[str, str]:
+    """Versions of the packages in this process, read from their metadata (none is imported)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    from .. import __version__
+
+    out = {}
+    for name in SOFTWARE:
+        if name == "opensim":
+            continue  # never imported nor probed in the report's process
+        if name == "musclemetab":
+            out[name] = __version__
+            continue
+        try:
+            out[name] = version(name)
+        except PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
+def _software_section(study: StudyFolder) -> str:
+    run = study.settings.get("software") if isinstance(study.settings.get("software"), dict) else {}
+    now = software_versions()
+    names = list(SOFTWARE) + [k for k in run if k not in SOFTWARE]
+    body = []
+    for n in names:
+        body.append([n, str(run.get(n, "not recorded")), now.get(n, "–" if n == "opensim" else "not checked")])
+    parts = ['<h2 id="software">Software</h2>',
+             "<p>Versions recorded by the study run (study.json) and those of the process that wrote this "
+             "report. OpenSim is used only by the study run (for the muscle geometry).</p>",
+             _table([[("package", 1), ("study run", 1), ("report", 1)]], body, 1, "software")]
+    return "\n".join(parts)
+
+
+def _method_section(study: StudyFolder) -> str:
+    basal = study.settings.get("basal", "body")
+    basal_txt = {
+        "body": "plus a basal heat of 1.2 W per kg of body mass",
+        "muscle": "with a basal heat of 1.2 W per kg of muscle mass in every muscle",
+        "none": "without basal heat",
+    }.get(str(basal), f"basal rule '{basal}'")
+    text = (
+        "For every subject, trial and workflow, muscle-tendon lengths and moment arms (m) of the right leg "
+        "were computed with OpenSim from the inverse kinematics; the muscle redundancy problem with compliant "
+        "tendons was solved by direct collocation to reproduce the inverse-dynamics joint moments (N·m) with "
+        "minimal effort (workflows EFFORT-GEN: generic passive and tendon properties; EFFORT-CAL: calibrated "
+        "passive properties; EFFORT-TEN: calibrated passive properties and personalised tendon stiffness; "
+        "EMG-TEN: EMG-informed). The metabolic models (UM03, BH04, HO06, LW07, UM10, UC16) give each muscle's "
+        "metabolic rate (W) at every node of the gait cycle (initial contact to the next initial contact of the "
+        "same leg). The whole-body average rate (W/kg) is twice the one-leg sum of the muscle rates averaged "
+        f"over the cycle and divided by the body mass, {basal_txt}; the cost of transport (J/(kg·m)) is that "
+        "rate divided by the walking speed (m/s). Phase shares are the stance (initial contact to toe-off) and "
+        "swing parts of the cycle's one-leg muscle energy (%, without basal heat). Group shares distribute "
+        "each muscle's rate over the degrees of freedom it spans in proportion to the absolute moment arms, "
+        "and to the group given by the sign of the moment arm (%). Estimated and measured rates, and shares "
+        "against speed, are related by repeated-measures correlation (common within-subject slope, one "
+        "intercept per subject)."
+    )
+    return f'<h2 id="method">Method</h2>\n<p>{_esc(text)}</p>'
+
+
+def _figures_section(entries: Sequence[FigureEntry], figures_rel: str) -> str:
+    parts = ['<h2 id="figures">Figures</h2>']
+    for i, e in enumerate(entries, 1):
+        parts.append(f'<h3 id="figure-{_esc(e.name)}">Figure {i}. {_esc(e.title)}</h3>')
+        if e.paths is None:
+            parts.append(f'<p class="note">Not drawn: {_esc(e.note or "no data")}</p>')
+            continue
+        data = base64.b64encode(Path(e.paths["png"]).read_bytes()).decode("ascii")
+        parts.append(
+            f'<figure><img alt="{_esc(e.title)}" src="data:image/png;base64,{data}">'
+            f"<figcaption>{_esc(e.caption)} Files: {_esc(figures_rel)}/{_esc(e.name)}.png, "
+            f"{_esc(figures_rel)}/{_esc(e.name)}.svg.</figcaption></figure>"
+        )
+    return "\n".join(parts)
+
+
+_CSS = """
+body { font-family: -apple-system, "Segoe UI", Helvetica, Arial, sans-serif; margin: 2em auto; max-width: 1200px;
+       padding: 0 1em; color: #222; line-height: 1.45; }
+h1 { font-size: 1.6em; margin-bottom: 0.2em; } h2 { border-bottom: 1px solid #ccc; margin-top: 2em; }
+table { border-collapse: collapse; margin: 0.6em 0 1.2em; font-size: 0.85em; }
+th, td { border: 1px solid #ccc; padding: 0.2em 0.5em; text-align: right; }
+thead th { background: #f0f0f0; text-align: center; } tbody th { text-align: left; background: #fafafa; }
+table.failures td, table.settings td { text-align: left; }
+figure { margin: 1em 0; } figure img { max-width: 100%; height: auto; border: 1px solid #eee; }
+figcaption { font-size: 0.85em; color: #444; }
+.note { color: #8a4b00; background: #fff6e5; padding: 0.3em 0.6em; border-left: 3px solid #e0a040; }
+dl { display: grid; grid-template-columns: max-content auto; gap: 0.2em 1em; } dt { font-weight: bold; }
+dd { margin: 0; } pre { background: #f7f7f7; padding: 0.6em; overflow-x: auto; font-size: 0.8em; }
+.meta { color: #666; font-size: 0.9em; }
+"""
+
+
+def render_html(study: StudyFolder, entries: Sequence[FigureEntry], figures_rel: str = FIGURES_FOLDER) -> str:
+    """The report page as a string (figures embedded from the PNG files of ``entries``)."""
+    ok = study.ok
+    n_units = len(study.results.drop_duplicates(["subject", "trial", "workflow"])) if not study.results.empty else 0
+    n_ok = len(ok.drop_duplicates(["subject", "trial", "workflow"])) if not ok.empty else 0
+    when = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    title = f"musclemetab study report: {study.name}"
+    drawn = sum(e.paths is not None for e in entries)
+    summary = (f"{len(_subjects(study))} subject(s), {len(set(study.results['trial'].astype(str)))} trial(s), "
+               f"{len(_workflows(study))} workflow(s), {len(_models(study))} metabolic model(s); "
+               f"{n_ok} of {n_units} subject × trial × workflow units in the results succeeded; "
+               f"{drawn} of {len(entries)} figures drawn.")
+    toc = "".join(f'<li><a href="#{a}">{_esc(t)}</a></li>' for a, t in (
+        ("settings", "Settings"), ("method", "Method"), ("results", "Results"), ("figures", "Figures"),
+        ("failures", "Failures"), ("software", "Software")))
+    body = "\n".join([
+        f"<h1>{_esc(title)}</h1>",
+        f'<p class="meta">Written {_esc(when)} by musclemetab {_esc(software_versions()["musclemetab"])} '
+        f"from {_esc(study.path)}.</p>",
+        f"<p>{_esc(summary)}</p>",
+        f"<nav><ul>{toc}</ul></nav>",
+        _settings_section(study),
+        _method_section(study),
+        f'<div id="results">{_results_section(study)}</div>',
+        _figures_section(entries, figures_rel),
+        _failures_section(study),
+        _software_section(study),
+    ])
+    return (
+        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
+        f"<title>{_esc(title)}</title>\n<style>{_CSS}</style>\n</head>\n<body>\n{body}\n</body>\n</html>\n"
+    )
+
+
+def generate_report(study_dir: str | os.PathLike, out: str | os.PathLike | None = None
+                    ) -> tuple[Path, list[FigureEntry]]:
+    """:func:`write_report`, also returning the figure entries (files written or notes)."""
+    from ..io.atomic import atomic_write_text
+
+    study = read_study_folder(study_dir)
+    out = Path(out) if out is not None else study.path / REPORT_FILE
+    if out.is_dir():
+        out = out / REPORT_FILE
+    entries = make_figures(study, out.parent / FIGURES_FOLDER)
+    atomic_write_text(out, render_html(study, entries, figures_rel=FIGURES_FOLDER))
+    return out, entries
+
+
+def write_report(study_dir: str | os.PathLike, out: str | os.PathLike | None = None) -> Path:
+    """Write the figures and the HTML report of a study folder; return the report's path.
+
+    ``out`` is the HTML file (default ``study_dir/report.html``); the figures are written to the
+    folder ``figures`` beside it (PNG and SVG). Everything is written atomically.
+    Raises :class:`InputFileError` when the folder or its ``results.csv`` is missing.
+    """
+    return generate_report(study_dir, out)[0]

@@ -1,0 +1,76 @@
+"""The example study: the example subject's three speeds, EFFORT-TEN and EFFORT-GEN.
+
+:func:`demo_study` writes a study file for the example subject (fetched with
+:func:`musclemetab.datasets.example_subject`) into the output folder and returns it;
+:func:`run_demo` runs it and writes the report. ``musclemetab demo`` calls
+:func:`run_demo`.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from ..io.atomic import atomic_write_text
+from .spec import Study, load_study
+
+__all__ = ["demo_study", "run_demo", "DEMO_WORKFLOWS"]
+
+DEMO_WORKFLOWS = ("effort-gen", "effort-ten")
+
+
+def _toml_string(value) -> str:
+    return '"' + str(value).replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def demo_study(out: str | os.PathLike = "musclemetab-demo", *, speeds=None,
+               workflows=DEMO_WORKFLOWS, models: str | list[str] = "all") -> Study:
+    """Write ``OUT/study.toml`` for the example subject and return the study."""
+    from ..datasets import SPEEDS, example_subject
+
+    ex = example_subject()
+    speeds = list(speeds or SPEEDS)
+    out = Path(out)
+    models_toml = _toml_string(models) if isinstance(models, str) else "[" + ", ".join(map(_toml_string, models)) + "]"
+    lines = [
+        "# The example subject of musclemetab walking at three speeds (55, 100, 145 % of the",
+        "# preferred speed). Written by `musclemetab demo`; run it again with `musclemetab run`.",
+        'name = "example subject"',
+        'output = "."',
+        "workflows = [" + ", ".join(map(_toml_string, workflows)) + "]",
+        f"models = {models_toml}",
+        'basal = "body"',
+        "",
+        "[[subjects]]",
+        'name = "sub1"',
+        f"model = {_toml_string(ex.model)}",
+        f"body_mass_kg = {ex.body_mass_kg}",
+        f"height_m = {ex.height_m}",
+        f"passive = {_toml_string(ex.passive_moments_mat)}",
+    ]
+    for s in speeds:
+        lines += [
+            "",
+            "[[subjects.trials]]",
+            f"name = {_toml_string(s)}",
+            f"ik = {_toml_string(ex.ik[s])}",
+            f"id = {_toml_string(ex.id[s])}",
+            f"emg = {_toml_string(ex.emg[s])}",
+        ]
+    path = out / "study.toml"
+    atomic_write_text(path, "\n".join(lines) + "\n")
+    return load_study(path)
+
+
+def run_demo(out: str | os.PathLike = "musclemetab-demo", *, workers: int | None = None, speeds=None,
+             report: bool = True, progress: bool = True, force: bool = False):
+    """Run the example study and write its report; returns the :class:`StudyRun`."""
+    from .runner import run_study
+
+    study = demo_study(out, speeds=speeds)
+    run = run_study(study, workers=workers, progress=progress, force=force)
+    if report:
+        from ..report import write_report
+
+        run.report = write_report(study.output)
+    return run

@@ -1,0 +1,59 @@
+"""Gait cycle and walking speed of a study trial, from what the trial provides.
+
+Order of preference for the cycle (initial contact, toe-off, next initial contact):
+
+1. times given in the study file (``start_s``, ``toe_off_s``, ``end_s``; any subset: the
+   rest is found as below);
+2. ground reaction forces (``grf``): threshold crossings of the vertical force
+   (``grf_threshold_N``, 20 N by default), the cycle holding the middle of the IK window;
+3. otherwise: the cycle is the IK window less 0.05 s of padding at both ends (the
+   example data carry five extra frames at 100 Hz at each end) and toe-off is found
+   from the ankle moment of inverse dynamics (see
+   :func:`musclemetab.analysis.events.cycle_from_inverse_dynamics`).
+
+Speed: the study file's ``speed_m_per_s``, else the pelvis displacement over the cycle
+(:func:`musclemetab.analysis.speed.walking_speed_from_ik`).
+"""
+
+from __future__ import annotations
+
+from ..analysis.events import GaitCycle, cycle_from_grf, cycle_from_id_file, read_grf
+from ..analysis.speed import walking_speed_from_ik
+from .spec import Trial
+
+__all__ = ["trial_cycle", "trial_speed", "PADDING_S", "ANKLE_MOMENT_COLUMN"]
+
+PADDING_S = 0.05
+ANKLE_MOMENT_COLUMN = "ankle_angle_r_moment"
+
+
+def _ik_window(trial: Trial) -> tuple[float, float]:
+    from ..io import read_storage
+
+    t = read_storage(trial.ik).index.to_numpy(float)
+    return float(t[0]), float(t[-1])
+
+
+def trial_cycle(trial: Trial) -> GaitCycle:
+    """The trial's gait cycle (see the module docstring for the order of preference)."""
+    given = (trial.start_s, trial.toe_off_s, trial.end_s)
+    if all(v is not None for v in given):
+        return GaitCycle(*given)
+    if trial.grf is not None:
+        force = read_grf(trial.grf, trial.grf_column)
+        t0, tf = _ik_window(trial)  # the cycle that holds the middle of the simulated window
+        found = cycle_from_grf(force.index.to_numpy(float), force.to_numpy(float),
+                               threshold_N=trial.grf_threshold_N, at_time_s=trial.start_s if trial.start_s is not None else 0.5 * (t0 + tf))
+    else:
+        found = cycle_from_id_file(trial.id, ANKLE_MOMENT_COLUMN, window_s=_ik_window(trial), padding_s=PADDING_S)
+    start, toe_off, end = (g if g is not None else f for g, f in
+                           zip(given, (found.start_s, found.toe_off_s, found.end_s)))
+    return GaitCycle(start, toe_off, end)
+
+
+def trial_speed(trial: Trial) -> float:
+    """Walking speed (m/s) of the trial."""
+    if trial.speed_m_per_s is not None:
+        return trial.speed_m_per_s
+    start, end = trial.start_s, trial.end_s
+    return walking_speed_from_ik(trial.ik, start_s=start, end_s=end, padding_s=PADDING_S)

@@ -1,0 +1,292 @@
+"""Study files: subjects, trials, workflows and metabolic models in one TOML file.
+
+A study file names everything a study needs; paths are relative to the file::
+
+    name = "speeds"
+    output = "results"                 # folder for the study's results
+    workflows = ["effort-gen", "effort-ten"]
+    models = "all"                     # or ["UM10", "BH04", ...]
+    basal = "body"                     # whole-body basal rule: body | muscle | none
+
+    [[subjects]]
+    name = "sub1"
+    model = "data/sub1.osim"
+    body_mass_kg = 72.6
+    height_m = 1.743
+    passive = "data/passiveMoments.mat"   # optional: calibration for effort-cal / effort-ten
+    tendon_stiffness = "emg-ten"          # optional, effort-ten: "emg-ten" (the subject's own
+                                          # EMG-TEN estimate), a parameters.json, or a table
+                                          # {soleus = 10.6, ...}; default: the example estimates
+    emg_mapping = "default"               # EMG-TEN channel mapping: default | authors
+
+    [[subjects.trials]]
+    name = "normal"
+    ik = "data/IK_normal.mot"
+    id = "data/ID_normal.sto"
+    emg = "data/EMG_normal.mot"           # needed by emg-ten
+    grf = "data/GRF_normal.mot"           # optional: gait events from the vertical force
+    grf_column = "ground_force_vy"        # optional
+    grf_threshold_N = 20.0                # optional
+    speed_m_per_s = 1.33                  # optional: default from the pelvis in the IK file
+    vo2_mL_per_min = 1050.0               # optional calorimetry (or vo2_mL_per_s / vco2_mL_per_s,
+    vco2_mL_per_min = 900.0               #  or measured_W_per_kg)
+    toe_off_s = 1.29                      # optional event overrides (start_s, toe_off_s, end_s)
+
+Every key is checked: an unknown key, a missing file or a wrong type raises
+:class:`~musclemetab.errors.OptionError` or :class:`~musclemetab.errors.InputFileError`
+naming the file, the subject, the trial and the key.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+from ..errors import InputFileError, OptionError
+
+__all__ = ["Study", "Subject", "Trial", "load_study", "study_from_dict", "EMG_TEN", "KNOWN_WORKFLOWS"]
+
+EMG_TEN = "emg-ten"
+KNOWN_WORKFLOWS = ("effort-gen", "effort-cal", "effort-ten", EMG_TEN)
+BASAL_RULES = ("body", "muscle", "none")
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One gait cycle of a subject: files, speed, events and calorimetry."""
+
+    name: str
+    ik: Path
+    id: Path
+    emg: Path | None = None
+    grf: Path | None = None
+    grf_column: str | None = None
+    grf_threshold_N: float = 20.0
+    speed_m_per_s: float | None = None
+    measured_W_per_kg: float | None = None
+    vo2_mL_per_s: float | None = None
+    vco2_mL_per_s: float | None = None
+    start_s: float | None = None
+    toe_off_s: float | None = None
+    end_s: float | None = None
+
+    def files(self) -> dict[str, Path]:
+        return {k: v for k, v in (("ik", self.ik), ("id", self.id), ("emg", self.emg), ("grf", self.grf)) if v}
+
+
+@dataclass(frozen=True)
+class Subject:
+    """A participant: model, anthropometry, personalisation sources and trials."""
+
+    name: str
+    model: Path
+    body_mass_kg: float
+    height_m: float
+    trials: tuple[Trial, ...]
+    passive: Path | None = None
+    tendon_stiffness: str | Path | Mapping[str, float] | None = None
+    emg_mapping: str = "default"
+
+    def trial(self, name: str) -> Trial:
+        for t in self.trials:
+            if t.name == name:
+                return t
+        raise OptionError(f"subject '{self.name}' has no trial '{name}'; it has {', '.join(t.name for t in self.trials)}")
+
+    @property
+    def uses_emg_ten_estimate(self) -> bool:
+        return isinstance(self.tendon_stiffness, str) and self.tendon_stiffness == EMG_TEN
+
+
+@dataclass(frozen=True)
+class Study:
+    """A study: subjects × trials × workflows, evaluated with a set of metabolic models."""
+
+    name: str
+    subjects: tuple[Subject, ...]
+    workflows: tuple[str, ...]
+    models: tuple[str, ...]
+    output: Path
+    basal: str = "body"
+    source: Path | None = None
+    settings: dict = field(default_factory=dict)
+
+    def subject(self, name: str) -> Subject:
+        for s in self.subjects:
+            if s.name == name:
+                return s
+        raise OptionError(f"the study has no subject '{name}'; it has {', '.join(s.name for s in self.subjects)}")
+
+
+# ---------------------------------------------------------------------------------------
+_STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "subjects"}
+_SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials"}
+_TRIAL_KEYS = {
+    "name", "ik", "id", "emg", "grf", "grf_column", "grf_threshold_N", "speed_m_per_s",
+    "measured_W_per_kg", "vo2_mL_per_s", "vco2_mL_per_s", "vo2_mL_per_min", "vco2_mL_per_min",
+    "start_s", "toe_off_s", "end_s",
+}
+
+
+def load_study(path: str | os.PathLike, *, output: str | os.PathLike | None = None) -> Study:
+    """Read and check a study file (TOML). ``output`` overrides the file's ``output``."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputFileError(f"study file {path} not found; give the path of a .toml study file")
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputFileError(f"{path}: not a valid TOML file ({exc}); fix the syntax at the position given") from None
+    return study_from_dict(data, base=path.parent, source=path, output=output)
+
+
+def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", source: Path | None = None,
+                    output: str | os.PathLike | None = None) -> Study:
+    """Build a :class:`Study` from a mapping with the structure of a study file."""
+    where = str(source) if source else "study"
+    base = Path(base)
+    _unknown(data, _STUDY_KEYS, where)
+    from ..metabolics.registry import parse_models
+
+    name = str(data.get("name", source.stem if source else "study"))
+    workflows = data.get("workflows", ["effort-gen", "effort-ten"])
+    if isinstance(workflows, str):
+        workflows = [workflows]
+    workflows = tuple(str(w).strip().lower().replace("_", "-") for w in workflows)
+    bad = [w for w in workflows if w not in KNOWN_WORKFLOWS]
+    if bad or not workflows:
+        raise OptionError(f"{where}: 'workflows' has unknown workflow(s) {bad or '[]'}; choose from {', '.join(KNOWN_WORKFLOWS)}")
+    try:
+        models = tuple(parse_models(data.get("models", "all")))
+    except OptionError as exc:
+        raise OptionError(f"{where}: 'models': {exc}") from None
+    basal = str(data.get("basal", "body"))
+    if basal not in BASAL_RULES:
+        raise OptionError(f"{where}: 'basal' must be one of {', '.join(BASAL_RULES)}, not {basal!r}")
+    out = Path(output) if output is not None else base / str(data.get("output", "results"))
+    subjects_data = data.get("subjects")
+    if not isinstance(subjects_data, list) or not subjects_data:
+        raise OptionError(f"{where}: no subjects; add at least one [[subjects]] table with its [[subjects.trials]]")
+    subjects = tuple(_subject(s, base, where, workflows) for s in subjects_data)
+    names = [s.name for s in subjects]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise OptionError(f"{where}: subject name(s) {', '.join(dup)} used more than once; names must be unique")
+    settings = {"name": name, "workflows": list(workflows), "models": list(models), "basal": basal}
+    return Study(name=name, subjects=subjects, workflows=workflows, models=models, output=out,
+                 basal=basal, source=source, settings=settings)
+
+
+def _unknown(data: Mapping, allowed: set, where: str) -> None:
+    if not isinstance(data, Mapping):
+        raise OptionError(f"{where}: expected a table, got {type(data).__name__}")
+    extra = sorted(set(data) - allowed)
+    if extra:
+        raise OptionError(f"{where}: unknown key(s) {', '.join(extra)}; allowed: {', '.join(sorted(allowed))}")
+
+
+def _path(value, base: Path, where: str, key: str, required: bool = True) -> Path | None:
+    if value is None:
+        if required:
+            raise OptionError(f"{where}: '{key}' is required (a file path)")
+        return None
+    p = Path(str(value))
+    p = p if p.is_absolute() else base / p
+    if not p.is_file():
+        raise InputFileError(f"{where}: '{key}' file {p} not found; check the path (relative to the study file)")
+    return p.resolve()
+
+
+def _number(value, where: str, key: str, positive: bool = False, required: bool = False) -> float | None:
+    if value is None:
+        if required:
+            raise OptionError(f"{where}: '{key}' is required (a number)")
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise OptionError(f"{where}: '{key}' must be a finite number, not {value!r}")
+    if positive and value <= 0:
+        raise OptionError(f"{where}: '{key}' must be positive, not {value!r}")
+    return float(value)
+
+
+def _subject(data, base: Path, where: str, workflows) -> Subject:
+    name = str(data.get("name", "")) if isinstance(data, Mapping) else ""
+    here = f"{where}: subject '{name or '?'}'"
+    _unknown(data, _SUBJECT_KEYS, here)
+    if not name:
+        raise OptionError(f"{here}: 'name' is required")
+    model = _path(data.get("model"), base, here, "model")
+    mass = _number(data.get("body_mass_kg"), here, "body_mass_kg", positive=True, required=True)
+    height = _number(data.get("height_m"), here, "height_m", positive=True, required=True)
+    if not 0.5 < height < 2.7:
+        raise OptionError(f"{here}: 'height_m' = {height} is not a human height in metres")
+    passive = _path(data.get("passive"), base, here, "passive", required=False)
+    kt = data.get("tendon_stiffness")
+    if isinstance(kt, str):
+        if kt.strip().lower() == EMG_TEN:
+            kt = EMG_TEN
+        else:
+            kt = _path(kt, base, here, "tendon_stiffness")
+    elif isinstance(kt, Mapping):
+        kt = {str(k): _number(v, here, f"tendon_stiffness.{k}", positive=True, required=True) for k, v in kt.items()}
+    elif kt is not None:
+        raise OptionError(f"{here}: 'tendon_stiffness' must be \"emg-ten\", a parameters.json path or a table")
+    mapping = str(data.get("emg_mapping", "default"))
+    if mapping not in ("default", "authors"):
+        raise OptionError(f"{here}: 'emg_mapping' must be default or authors, not {mapping!r}")
+    trials_data = data.get("trials")
+    if not isinstance(trials_data, list) or not trials_data:
+        raise OptionError(f"{here}: no trials; add [[subjects.trials]] tables with name, ik and id")
+    trials = tuple(_trial(t, base, here) for t in trials_data)
+    names = [t.name for t in trials]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise OptionError(f"{here}: trial name(s) {', '.join(dup)} used more than once")
+    if EMG_TEN in workflows or kt == EMG_TEN:
+        missing = [t.name for t in trials if t.emg is None]
+        if missing:
+            raise OptionError(f"{here}: the emg-ten workflow needs an 'emg' file for every trial; missing for "
+                              f"{', '.join(missing)}")
+    return Subject(name=name, model=model, body_mass_kg=mass, height_m=height, trials=trials,
+                   passive=passive, tendon_stiffness=kt, emg_mapping=mapping)
+
+
+def _trial(data, base: Path, where: str) -> Trial:
+    name = str(data.get("name", "")) if isinstance(data, Mapping) else ""
+    here = f"{where}, trial '{name or '?'}'"
+    _unknown(data, _TRIAL_KEYS, here)
+    if not name:
+        raise OptionError(f"{here}: 'name' is required")
+    if "/" in name or "\\" in name or name.startswith("."):
+        raise OptionError(f"{here}: 'name' must be a plain folder name")
+    num = {k: _number(data.get(k), here, k) for k in _TRIAL_KEYS if k.endswith(("_s", "_per_s", "_per_min", "_per_kg", "_N"))}
+    vo2, vco2 = num["vo2_mL_per_s"], num["vco2_mL_per_s"]
+    if num["vo2_mL_per_min"] is not None:
+        vo2 = num["vo2_mL_per_min"] / 60.0
+    if num["vco2_mL_per_min"] is not None:
+        vco2 = num["vco2_mL_per_min"] / 60.0
+    if (vo2 is None) != (vco2 is None):
+        raise OptionError(f"{here}: give both VO2 and VCO2 (Brockway's equation needs both)")
+    for key in ("speed_m_per_s", "measured_W_per_kg"):
+        if num[key] is not None and num[key] <= 0:
+            raise OptionError(f"{here}: '{key}' must be positive")
+    return Trial(
+        name=name,
+        ik=_path(data.get("ik"), base, here, "ik"),
+        id=_path(data.get("id"), base, here, "id"),
+        emg=_path(data.get("emg"), base, here, "emg", required=False),
+        grf=_path(data.get("grf"), base, here, "grf", required=False),
+        grf_column=data.get("grf_column"),
+        grf_threshold_N=num["grf_threshold_N"] if num["grf_threshold_N"] is not None else 20.0,
+        speed_m_per_s=num["speed_m_per_s"],
+        measured_W_per_kg=num["measured_W_per_kg"],
+        vo2_mL_per_s=vo2,
+        vco2_mL_per_s=vco2,
+        start_s=num["start_s"],
+        toe_off_s=num["toe_off_s"],
+        end_s=num["end_s"],
+    )

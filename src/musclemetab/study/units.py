@@ -1,0 +1,351 @@
+"""Units of work of a study, their keys, and how one unit is run.
+
+A *trial unit* is one subject × trial × workflow: solve the muscle redundancy problem,
+evaluate the metabolic models, find the gait cycle and analyse phases and muscle groups.
+An *estimation unit* is one subject's EMG-TEN problem over all its trials at once; the
+EMG-TEN trial units and EFFORT-TEN units that use the subject's own estimate depend on it.
+
+Every unit has a folder ``units/<subject>/<trial>/<workflow>`` (estimation:
+``units/<subject>/_emg-ten``) and, when complete, a ``unit.json`` in it recording the unit's
+key (a SHA-256 of everything its result depends on: input file contents, settings,
+the package version and the keys of the units it depends on), its status and the SHA-256 of
+each output file. A unit is complete when ``unit.json`` says ``ok``, its key equals the
+current key and every output file is present with its recorded hash; otherwise it is
+run again. A unit's folder is replaced as a whole: its outputs are written into a
+temporary folder beside it which is renamed into place at the end.
+
+Run a unit with :func:`execute_unit`; it never raises: a failure is returned (and written)
+as a record with ``status = "failed"`` and the reason.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import tempfile
+import time
+import traceback
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from .. import __version__
+from ..errors import MusclemetabError
+from ..io.atomic import file_sha256
+from .spec import EMG_TEN, Study, Subject, Trial
+
+__all__ = [
+    "Unit",
+    "UNIT_FILE",
+    "plan_units",
+    "unit_key",
+    "read_unit_record",
+    "is_complete",
+    "execute_unit",
+    "ESTIMATION_FOLDER",
+]
+
+UNIT_FILE = "unit.json"
+ESTIMATION_FOLDER = "_emg-ten"
+ANALYSIS_FILE = "analysis.csv"
+TIMESERIES_FILE = "timeseries.csv"
+
+
+@dataclass(frozen=True)
+class Unit:
+    """One unit of work: ``trial`` is ``None`` for a subject's EMG-TEN estimation."""
+
+    subject: str
+    trial: str | None
+    workflow: str
+
+    @property
+    def is_estimation(self) -> bool:
+        return self.trial is None
+
+    @property
+    def folder(self) -> Path:
+        if self.trial is None:
+            return Path("units") / self.subject / ESTIMATION_FOLDER
+        return Path("units") / self.subject / self.trial / self.workflow
+
+    @property
+    def label(self) -> str:
+        return f"{self.subject}/{self.trial or 'all trials'}/{self.workflow}"
+
+    def depends_on(self, study: Study) -> "Unit | None":
+        """The estimation unit this unit needs, if any."""
+        if self.trial is None:
+            return None
+        subject = study.subject(self.subject)
+        if self.workflow == EMG_TEN or (self.workflow == "effort-ten" and subject.uses_emg_ten_estimate):
+            return Unit(self.subject, None, EMG_TEN)
+        return None
+
+
+def plan_units(study: Study) -> tuple[list[Unit], list[Unit]]:
+    """The study's units in two stages: estimations first, then the trial units."""
+    stage1 = [Unit(s.name, None, EMG_TEN) for s in study.subjects
+              if EMG_TEN in study.workflows or s.uses_emg_ten_estimate]
+    # Workflow by workflow: parallel workers start on different trials, so a trial's
+    # geometry is computed once and found in the cache by its other workflows.
+    stage2 = [Unit(s.name, t.name, w) for w in study.workflows for s in study.subjects for t in s.trials]
+    return stage1, stage2
+
+
+# ---------------------------------------------------------------------------------------
+_HASHES: dict[tuple[str, int, int], str] = {}
+
+
+def _file_hash(path: Path | None) -> str | None:
+    """Content hash of an input file (memoised by path, size and modification time)."""
+    if path is None:
+        return None
+    st = os.stat(path)
+    key = (str(path), st.st_size, st.st_mtime_ns)
+    if key not in _HASHES:
+        _HASHES[key] = file_sha256(path)
+    return _HASHES[key]
+
+
+def _trial_record(trial: Trial) -> dict:
+    rec = {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(trial).items()}
+    rec["files"] = {k: _file_hash(p) for k, p in trial.files().items()}
+    for k in ("ik", "id", "emg", "grf"):
+        rec.pop(k, None)  # paths do not matter, contents do
+    return rec
+
+
+def _subject_record(subject: Subject, workflow: str) -> dict:
+    kt = subject.tendon_stiffness
+    if isinstance(kt, Path):
+        kt = {"file": _file_hash(kt)}
+    return {
+        "model": _file_hash(subject.model),
+        "body_mass_kg": subject.body_mass_kg,
+        "height_m": subject.height_m,
+        "passive": _file_hash(subject.passive) if workflow != "effort-gen" else None,
+        "tendon_stiffness": kt if workflow in ("effort-ten",) else None,
+        "emg_mapping": subject.emg_mapping if workflow == EMG_TEN else None,
+    }
+
+
+def unit_key(study: Study, unit: Unit, dependency_key: str | None = None) -> str:
+    """SHA-256 of everything the unit's result depends on."""
+    subject = study.subject(unit.subject)
+    content = {
+        "musclemetab": __version__,
+        "unit": [unit.subject, unit.trial, unit.workflow],
+        "subject": _subject_record(subject, unit.workflow),
+        "dependency": dependency_key,
+    }
+    if unit.trial is None:
+        content["trials"] = [_trial_record(t) for t in subject.trials]
+    else:
+        content["trial"] = _trial_record(subject.trial(unit.trial))
+        content["models"] = list(study.models)
+        content["basal"] = study.basal
+    text = json.dumps(content, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def read_unit_record(folder: Path) -> dict | None:
+    """The unit's ``unit.json``, or ``None`` when absent or unreadable."""
+    try:
+        return json.loads((Path(folder) / UNIT_FILE).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+
+
+def is_complete(folder: Path, key: str) -> bool:
+    """Whether the unit in ``folder`` finished with key ``key`` and its outputs are intact."""
+    rec = read_unit_record(folder)
+    if not rec or rec.get("status") != "ok" or rec.get("key") != key:
+        return False
+    outputs = rec.get("outputs") or {}
+    if not outputs:
+        return False
+    for rel, digest in outputs.items():
+        p = Path(folder) / rel
+        if not p.is_file() or file_sha256(p) != digest:
+            return False
+    return True
+
+
+# ---------------------------------------------------------------------------------------
+def _outputs(folder: Path) -> dict[str, str]:
+    return {
+        str(p.relative_to(folder)): file_sha256(p)
+        for p in sorted(folder.rglob("*"))
+        if p.is_file() and p.name != UNIT_FILE
+    }
+
+
+def _replace_folder(tmp: Path, folder: Path) -> None:
+    """Put ``tmp`` in the place of ``folder`` (the old folder is removed)."""
+    old = None
+    if folder.exists():
+        old = folder.with_name(f".{folder.name}.old-{os.getpid()}-{time.monotonic_ns()}")
+        os.replace(folder, old)
+    os.replace(tmp, folder)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def execute_unit(study: Study, unit: Unit, key: str, dependency_folder: str | None = None) -> dict:
+    """Run one unit and write its folder; returns its record (never raises)."""
+    out_root = Path(study.output)
+    folder = out_root / unit.folder
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.partial-", dir=folder.parent))
+    record = {
+        "status": "failed",
+        "key": key,
+        "subject": unit.subject,
+        "trial": unit.trial,
+        "workflow": unit.workflow,
+        "error": None,
+        "times": {},
+    }
+    t0 = time.perf_counter()
+    try:
+        if unit.is_estimation:
+            record.update(_run_estimation(study, unit, tmp))
+        else:
+            dep = Path(dependency_folder) if dependency_folder else None
+            record.update(_run_trial(study, unit, tmp, dep))
+        record["status"] = "ok"
+    except MusclemetabError as exc:
+        record["error"] = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+    except Exception as exc:  # a bug or a library failure: keep the traceback for the report
+        record["error"] = f"{type(exc).__name__}: {exc}"
+        record["traceback"] = traceback.format_exc(limit=8)
+    record["times"]["total_s"] = time.perf_counter() - t0
+    try:
+        record["outputs"] = _outputs(tmp) if record["status"] == "ok" else {}
+        (tmp / UNIT_FILE).write_text(json.dumps(record, indent=2, default=str) + "\n", encoding="utf-8")
+        os.chmod(tmp, 0o777 & ~_umask())
+        _replace_folder(tmp, folder)
+    except OSError as exc:  # pragma: no cover - disk full, permissions
+        shutil.rmtree(tmp, ignore_errors=True)
+        record.update(status="failed", error=f"could not write {folder}: {exc}")
+    return record
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _run_estimation(study: Study, unit: Unit, tmp: Path) -> dict:
+    """EMG-TEN over all the subject's trials: per-trial solutions and parameters.json."""
+    from ..redundancy.emg_ten import solve_emg_ten
+
+    subject = study.subject(unit.subject)
+    t0 = time.perf_counter()
+    result = solve_emg_ten(
+        subject.model,
+        [t.ik for t in subject.trials],
+        [t.id for t in subject.trials],
+        [t.emg for t in subject.trials],
+        emg_mapping=subject.emg_mapping,
+        labels=[t.name for t in subject.trials],
+    )
+    result.write(tmp)
+    if not result.success:
+        raise _failed_solve(f"EMG-TEN of subject {subject.name}", result.summary)
+    return {"times": {"solve_s": time.perf_counter() - t0}}
+
+
+def _failed_solve(what: str, summary: dict):
+    from ..errors import SolverError
+
+    return SolverError(
+        f"{what} did not converge (status {summary.get('status', 'unknown')}, "
+        f"{summary.get('iterations', '?')} iterations)"
+    )
+
+
+def _copy_solution(source: Path, target: Path) -> None:
+    from ..redundancy.solution import SOLUTION_FILE, SUMMARY_FILE
+
+    for name in (SOLUTION_FILE, SUMMARY_FILE):
+        if not (source / name).is_file():
+            from ..errors import InputFileError
+
+            raise InputFileError(f"{source / name} is missing; the EMG-TEN estimation did not write it")
+        shutil.copyfile(source / name, target / name)
+
+
+def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> dict:
+    """Solve (or take the EMG-TEN solution), metabolics, gait cycle, phases and groups."""
+    import numpy as np
+
+    from ..geometry import compute_geometry
+    from ..metabolics.solution import metabolics_from_solution, write_metabolics
+    from ..redundancy import solve_files
+    from ..redundancy.solution import Solution
+    from .events import trial_cycle, trial_speed
+
+    subject = study.subject(unit.subject)
+    trial = subject.trial(unit.trial)
+    times = {}
+    t0 = time.perf_counter()
+    if unit.workflow == EMG_TEN:
+        _copy_solution(dependency / trial.name, tmp)
+        summary = Solution.load(tmp, require_success=False).summary
+        if summary.get("status") and not summary.get("success", False):
+            raise _failed_solve(f"EMG-TEN solution of trial {trial.name}", summary)
+    else:
+        kwargs = {}
+        if unit.workflow != "effort-gen" and subject.passive is not None:
+            kwargs["passive"] = subject.passive
+        if unit.workflow == "effort-ten":
+            kt = subject.tendon_stiffness
+            if subject.uses_emg_ten_estimate:
+                kwargs["tendon_stiffness_file"] = dependency / "parameters.json"
+            elif isinstance(kt, Path):
+                kwargs["tendon_stiffness_file"] = kt
+            elif isinstance(kt, dict):
+                kwargs["tendon_stiffness"] = kt
+        sol = solve_files(subject.model, trial.ik, trial.id, unit.workflow, **kwargs)
+        sol.write(tmp)
+        times["solve_s"] = sol.summary.get("solve_time_s")
+        if not sol.success:
+            raise _failed_solve(f"{unit.workflow} solve of {subject.name}/{trial.name}", sol.summary)
+    times["solution_s"] = time.perf_counter() - t0
+
+    t1 = time.perf_counter()
+    speed = trial_speed(trial)
+    result = metabolics_from_solution(
+        tmp, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
+        speed_m_per_s=speed,
+    )
+    write_metabolics(result, tmp)
+    times["metabolics_s"] = time.perf_counter() - t1
+
+    t2 = time.perf_counter()
+    cycle = trial_cycle(trial)
+    geometry = compute_geometry(subject.model, trial.ik)
+    from ..analysis.unit import analyse_metabolics, filtered_moment_arms
+
+    tg, r = filtered_moment_arms(geometry)
+    analysis = analyse_metabolics(result, tg, r, list(geometry.dofs), list(geometry.muscles), cycle)
+    analysis.summary.to_csv(tmp / ANALYSIS_FILE, index=False, float_format="%.10g")
+    analysis.timeseries.to_csv(tmp / TIMESERIES_FILE, index=False, float_format="%.10g")
+    times["analysis_s"] = time.perf_counter() - t2
+    measured = trial.measured_W_per_kg
+    if measured is None and trial.vo2_mL_per_s is not None:
+        from ..metabolics.whole_body import brockway_rate_W
+
+        measured = float(brockway_rate_W(trial.vo2_mL_per_s, trial.vco2_mL_per_s)) / subject.body_mass_kg
+    return {
+        "times": times,
+        "speed_m_per_s": speed,
+        "measured_W_per_kg": measured,
+        "cycle": {"start_s": cycle.start_s, "toe_off_s": cycle.toe_off_s, "end_s": cycle.end_s},
+        "toe_off_pct": float(100.0 * (cycle.toe_off_s - cycle.start_s) / (cycle.end_s - cycle.start_s)),
+        "n_nodes": int(np.asarray(result.time_s).size),
+    }

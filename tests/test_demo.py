@@ -1,0 +1,138 @@
+"""The main job: ``musclemetab demo`` on the example subject, against the paper's findings.
+
+The demo runs the three speeds with EFFORT-TEN and EFFORT-GEN and the six study models.
+Its numbers are checked against what the study published (``analysis.md`` §7): Table 2's
+ordering of the models and their means within two between-subject SDs (one subject here,
+eight in the paper), and the reported trends of the phase and group shares with speed.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+from html.parser import HTMLParser
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+#: Table 2, EFFORT-TEN at the preferred speed: mean [SD] over 8 subjects, W/kg.
+TABLE2_EFFORT_TEN = {"UM03": (6.4, 0.5), "BH04": (5.0, 0.6), "HO06": (4.3, 0.5),
+                     "LW07": (7.7, 0.9), "UM10": (7.2, 0.6), "UC16": (4.5, 0.5)}
+MODELS = tuple(TABLE2_EFFORT_TEN)
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory):
+    from musclemetab.cli import main
+
+    out = tmp_path_factory.mktemp("demo")
+    code = main(["demo", "--out", str(out), "--workers", "2", "--no-progress"])
+    assert code == 0
+    return out, pd.read_csv(out / "results.csv")
+
+
+def _pivot(table, workflow, column):
+    t = table[table.workflow == workflow]
+    return t.pivot(index="model", columns="trial", values=column)[["slow", "normal", "fast"]]
+
+
+def test_demo_writes_every_unit_and_the_table(demo):
+    out, table = demo
+    assert len(table) == 3 * 2 * 6  # speeds x workflows x models
+    assert set(table.model) == set(MODELS)
+    assert (table.status == "ok").all()
+    assert pd.read_csv(out / "failures.csv").empty
+    for unit in table.unit_dir.unique():
+        for name in ("solution.sto", "summary.json", "metabolics.sto", "whole_body.csv", "timeseries.csv", "unit.json"):
+            assert (out / unit / name).is_file(), (unit, name)
+
+
+def test_demo_matches_table2_ordering_and_range(demo):
+    _, table = demo
+    normal = _pivot(table, "effort-ten", "mean_W_per_kg")["normal"]
+    # the paper's ordering of the models' means (Table 2, EFFORT-TEN)
+    paper_order = sorted(MODELS, key=lambda m: -TABLE2_EFFORT_TEN[m][0])
+    assert list(normal.sort_values(ascending=False).index) == paper_order
+    for model, (mean, sd) in TABLE2_EFFORT_TEN.items():
+        assert abs(normal[model] - mean) <= 2 * sd, (model, normal[model])
+
+
+def test_demo_reproduces_the_trends_with_speed(demo):
+    _, table = demo
+    pf = _pivot(table, "effort-ten", "share_PF_pct")
+    assert (pf["slow"] < pf["normal"]).all() and (pf["normal"] < pf["fast"]).all()  # PF share rises
+    for group in ("HF", "HAD", "HAB"):  # hip flexor, adductor, abductor shares fall
+        g = _pivot(table, "effort-ten", f"share_{group}_pct")
+        assert (g["fast"] < g["slow"]).all(), group
+    swing = _pivot(table, "effort-ten", "swing_pct")
+    assert (swing["fast"] < swing["slow"]).all()  # the swing share falls with speed
+    rate = _pivot(table, "effort-ten", "mean_W_per_kg")
+    assert (rate["slow"] < rate["normal"]).all() and (rate["normal"] < rate["fast"]).all()
+
+
+def test_demo_generic_tendons_give_a_larger_swing_share(demo):
+    # EFFORT-GEN 36.5 % (BH04) and 36.7 % (HO06) against 25.9-29.6 % with EFFORT-TEN
+    _, table = demo
+    gen = _pivot(table, "effort-gen", "swing_pct")["normal"]
+    ten = _pivot(table, "effort-ten", "swing_pct")["normal"]
+    for model in ("BH04", "HO06"):
+        assert gen[model] > ten[model] + 3.0, model
+
+
+class _Collect(HTMLParser):
+    def __init__(self):
+        super().__init__()
+        self.images, self.svgs, self.tables, self.external = 0, 0, 0, []
+
+    def handle_starttag(self, tag, attrs):
+        attrs = dict(attrs)
+        self.images += tag == "img"
+        self.svgs += tag == "svg"
+        self.tables += tag == "table"
+        for key in ("src", "href"):
+            if attrs.get(key, "").startswith(("http:", "https:", "//")):
+                self.external.append(attrs[key])
+
+
+def test_demo_report_is_self_contained(demo):
+    out, _ = demo
+    html = (out / "report.html").read_text(encoding="utf-8")
+    p = _Collect()
+    p.feed(html)
+    assert p.images + p.svgs >= 5 and p.tables >= 3
+    assert not p.external
+    pngs = sorted((out / "figures").glob("*.png"))
+    assert len(pngs) >= 5 and len(sorted((out / "figures").glob("*.svg"))) == len(pngs)
+    assert not list(out.rglob(".*partial*"))
+
+
+def test_demo_second_run_is_resumed(demo, capsys):
+    from musclemetab.cli import main
+
+    out, table = demo
+    capsys.readouterr()
+    assert main(["demo", "--out", str(out), "--workers", "1", "--no-progress"]) == 0
+    assert "0 run, 6 up to date" in capsys.readouterr().out
+    pd.testing.assert_frame_equal(pd.read_csv(out / "results.csv"), table)
+
+
+def _chromium():
+    for name in ("chromium", "chromium-browser", "google-chrome", "chrome", "headless_shell"):
+        path = shutil.which(name)
+        if path:
+            return path
+    return None
+
+
+@pytest.mark.skipif(_chromium() is None, reason="no Chromium on this machine")
+def test_demo_report_renders_in_headless_chromium(demo, tmp_path):
+    out, _ = demo
+    dom = subprocess.run(
+        [_chromium(), "--headless", "--disable-gpu", "--no-sandbox", "--virtual-time-budget=5000",
+         "--dump-dom", (out / "report.html").as_uri()],
+        capture_output=True, text=True, timeout=120,
+    ).stdout
+    # every embedded image decoded: Chromium keeps the data URIs in the DOM it rendered
+    assert len(re.findall(r"<img[^>]+src=\"data:image/png;base64,", dom)) + dom.count("<svg") >= 5

@@ -1,0 +1,557 @@
+"""Figures and the HTML report of a study folder.
+
+The study folders are synthetic: results and time-series tables built here with the study
+runner's layout, and solver solutions built from synthetic arrays in the solver's format
+(:class:`~musclemetab.redundancy.Solution`, written with its own writer).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from html.parser import HTMLParser
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from musclemetab.errors import InputFileError, MissingColumnError, OptionError, UnknownMuscleError
+from musclemetab.redundancy import MuscleTendonParameters, Solution
+from musclemetab.report import (
+    FIGURE_NAMES,
+    GROUPS,
+    estimated_vs_measured,
+    excitations_and_fiber_lengths,
+    group_rates_over_cycle,
+    group_shares,
+    phase_shares,
+    save_figure,
+    whole_body_over_cycle,
+    write_report,
+)
+from musclemetab.report.figures import model_colour, preferred_trial, trial_order, workflow_colour
+
+MUSCLES = ("soleus_r", "gasmed_r", "tibant_r", "vaslat_r", "recfem_r", "glmax2_r", "addlong_r")
+TRIALS = {"slow": 0.75, "normal": 1.25, "fast": 1.75}
+WORKFLOWS = ("effort-gen", "effort-ten")
+MODELS = ("UM10", "BH04", "HO06")
+ORDERED = ("BH04", "HO06", "UM10")  # figures order models as the paper's Table 2
+SUBJECTS = {"s1": (70.0, 1.75), "s2": (62.0, 1.66), "s3": (81.0, 1.82)}
+CYCLE = (0.62, 1.29, 1.70)  # start, toe-off, end (s)
+TOE_OFF_PCT = 100.0 * (CYCLE[1] - CYCLE[0]) / (CYCLE[2] - CYCLE[0])
+
+
+# ------------------------------------------------------------------------ synthetic data
+def make_solution(workflow: str, muscles=MUSCLES) -> Solution:
+    """A solution on the mesh of the cycle plus 5 padding nodes at both ends."""
+    h = 0.01
+    t = np.arange(CYCLE[0] - 5 * h, CYCLE[2] + 5 * h + 1e-9, h)
+    n, m = t.size, len(muscles)
+    phase = 2 * np.pi * (t[:, None] - CYCLE[0]) / (CYCLE[2] - CYCLE[0]) + np.arange(m)[None, :]
+    shift = 0.1 if workflow == "effort-ten" else 0.0
+    e = np.clip(0.3 + 0.25 * np.sin(phase), 0.01, 1.0)
+    a = np.clip(0.3 + 0.25 * np.sin(phase - 0.3), 0.01, 1.0)
+    lm = 0.95 + shift + 0.15 * np.cos(phase)
+    params = MuscleTendonParameters(
+        names=muscles, max_isometric_force_N=np.full(m, 2000.0), optimal_fiber_length_m=np.full(m, 0.06),
+        tendon_slack_length_m=np.full(m, 0.25), pennation_angle_at_optimal_rad=np.full(m, 0.1),
+        max_contraction_velocity=np.full(m, 10.0), tendon_stiffness=np.full(m, 35.0),
+        passive_kpe=np.full(m, 4.0), passive_s0=np.full(m, 0.6), passive_sm=np.full(m, 0.6),
+    )
+    zeros = np.zeros((n, m))
+    return Solution(
+        time_s=t, muscles=tuple(muscles), dofs=("ankle_angle_r",), excitation=e, activation=a, lm_norm=lm,
+        vm_norm=zeros, tendon_force_N=zeros, active_fiber_force_N=zeros, passive_fiber_force_N=zeros,
+        active_force_length_multiplier=np.ones((n, m)), force_velocity_multiplier=np.ones((n, m)),
+        reserve_Nm=np.zeros((n, 1)), parameters=params,
+        summary={"status": "Solve_Succeeded", "success": True, "workflow": {"name": workflow}},
+    )
+
+
+def _bump(pct, centre, width, height):
+    return height * np.exp(-0.5 * ((pct - centre) / width) ** 2)
+
+
+WORKFLOW_SCALE = {"effort-gen": 1.2, "effort-cal": 1.1, "emg-ten": 1.5}
+
+
+def make_timeseries(speed: float, models=None, workflow="effort-ten") -> pd.DataFrame:
+    """Group rates (W) over the cycle: early-stance, pre-swing and swing peaks that change with speed."""
+    models = MODELS if models is None else models
+    pct = np.linspace(0.0, 100.0, 51)
+    time = CYCLE[0] + pct / 100 * (CYCLE[2] - CYCLE[0])
+    rows = []
+    for k, model in enumerate(models):
+        scale = (1.0 + 0.15 * k) * WORKFLOW_SCALE.get(workflow, 1.0)
+        groups = {}
+        for i, g in enumerate(GROUPS):
+            groups[g] = scale * (
+                (0.5 + speed) * _bump(pct, 10 + 3 * i, 6, 20 + 2 * i)
+                + speed**2 * _bump(pct, 55, 5, 30 if g in ("PF", "HAB") else 5)
+                + _bump(pct, 75, 6, 18 if g in ("HF", "HAD", "KE") else 2) + 1.0
+            )
+        for g, v in groups.items():
+            rows.append(pd.DataFrame({"time_s": time, "cycle_pct": pct, "model": model, "series": f"group/{g}",
+                                      "value_W": v}))
+        rows.append(pd.DataFrame({"time_s": time, "cycle_pct": pct, "model": model, "series": "whole_body",
+                                  "value_W": sum(groups.values())}))
+    return pd.concat(rows, ignore_index=True)
+
+
+def _integral(pct, v, lo=0.0, hi=100.0):
+    m = (pct >= lo) & (pct <= hi)
+    return float(np.trapezoid(v[m], pct[m]))
+
+
+def make_study(root: Path, *, measured=True, trials=None, solutions=True, failed=()) -> Path:
+    """A study folder with the runner's layout; ``failed``: (subject, trial, workflow) units that failed."""
+    trials = TRIALS if trials is None else trials
+    root.mkdir(parents=True, exist_ok=True)
+    sol = {w: make_solution(w) for w in WORKFLOWS} if solutions else {}
+    rows, failures = [], []
+    rng = np.random.default_rng(1)
+    for si, (subject, (mass, height)) in enumerate(SUBJECTS.items()):
+        for trial, speed in trials.items():
+            sp = speed * (1 + 0.04 * si)
+            meas = 2.2 + 1.8 * sp + 0.3 * si + 0.05 * rng.standard_normal()
+            for workflow in WORKFLOWS:
+                rel = Path("units") / subject / trial / workflow
+                folder = root / rel
+                folder.mkdir(parents=True, exist_ok=True)
+                if (subject, trial, workflow) in failed:
+                    (folder / "unit.json").write_text(json.dumps(
+                        {"status": "failed", "subject": subject, "trial": trial, "workflow": workflow,
+                         "error": "solver did not converge <maximum iterations>"}))
+                    failures.append({"subject": subject, "trial": trial, "workflow": workflow,
+                                     "reason": "solver did not converge <maximum iterations>"})
+                    continue
+                ts = make_timeseries(sp, workflow=workflow)
+                ts.to_csv(folder / "timeseries.csv", index=False)
+                if solutions:
+                    sol[workflow].write(folder)
+                (folder / "unit.json").write_text(json.dumps({
+                    "status": "ok", "subject": subject, "trial": trial, "workflow": workflow, "speed_m_per_s": sp,
+                    "cycle": {"start_s": CYCLE[0], "toe_off_s": CYCLE[1], "end_s": CYCLE[2]}, "error": None,
+                    "times": {},
+                }))
+                for model in MODELS:
+                    d = ts[ts["model"] == model]
+                    pct = d["cycle_pct"].unique()
+                    wb = d[d["series"] == "whole_body"]["value_W"].to_numpy()
+                    total = _integral(pct, wb)
+                    stance = 100 * _integral(pct, wb, 0, TOE_OFF_PCT) / total
+                    mean_w = total / 100.0
+                    row = {
+                        "subject": subject, "trial": trial, "workflow": workflow, "model": model,
+                        "speed_m_per_s": sp, "status": "ok",
+                        "mean_W_per_kg": 2 * mean_w / mass + 1.2, "mean_W_per_kg_no_basal": 2 * mean_w / mass,
+                        "cost_of_transport_J_per_kg_per_m": (2 * mean_w / mass + 1.2) / sp,
+                        "stance_pct": stance, "swing_pct": 100 - stance,
+                        "stance_pct_with_basal": stance - 2, "swing_pct_with_basal": 102 - stance,
+                    }
+                    for g in GROUPS:
+                        gv = d[d["series"] == f"group/{g}"]["value_W"].to_numpy()
+                        row[f"share_{g}_pct"] = 100 * _integral(pct, gv) / total
+                    row.update(toe_off_pct=TOE_OFF_PCT, measured_W_per_kg=meas if measured else math.nan,
+                               unit_dir=str(rel))
+                    rows.append(row)
+    pd.DataFrame(rows).to_csv(root / "results.csv", index=False)
+    pd.DataFrame(failures, columns=["subject", "trial", "workflow", "reason"]).to_csv(root / "failures.csv", index=False)
+    settings = {
+        "name": "speeds <synthetic> & co",
+        "workflows": list(WORKFLOWS),
+        "models": list(MODELS),
+        "basal": "body",
+        "subjects": {s: {"body_mass_kg": m, "height_m": h, "model": f"data/{s}.osim", "trials": list(trials)}
+                     for s, (m, h) in SUBJECTS.items()},
+        "software": {"musclemetab": "0.1.0", "numpy": "2.0.0", "opensim": "4.6-study", "casadi": "3.6.0"},
+    }
+    (root / "study.json").write_text(json.dumps(settings, indent=2))
+    return root
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory) -> Path:
+    return make_study(tmp_path_factory.mktemp("study"))
+
+
+@pytest.fixture(scope="module")
+def results(study) -> pd.DataFrame:
+    return pd.read_csv(study / "results.csv")
+
+
+# ------------------------------------------------------------------------------- helpers
+def _lines(ax, prefix):
+    return [ln for ln in ax.get_lines() if (ln.get_gid() or "").startswith(prefix)]
+
+
+def _visible_axes(fig):
+    return [ax for ax in fig.axes if ax.get_visible()]
+
+
+class _Parser(HTMLParser):
+    def __init__(self):
+        super().__init__()
+        self.tags, self.stack, self.imgs, self.tables, self.ids = [], [], [], 0, set()
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        self.tags.append(tag)
+        if "id" in a:
+            self.ids.add(a["id"])
+        if tag == "img":
+            self.imgs.append(a)
+        elif tag == "table":
+            self.tables += 1
+        if tag not in ("img", "meta", "br", "hr", "link", "input"):
+            self.stack.append(tag)
+
+    def handle_endtag(self, tag):
+        assert self.stack and self.stack[-1] == tag, f"unbalanced </{tag}> (open: {self.stack[-3:]})"
+        self.stack.pop()
+
+
+def _parse(text):
+    p = _Parser()
+    p.feed(text)
+    p.close()
+    assert not p.stack, f"unclosed tags {p.stack}"
+    return p
+
+
+# ----------------------------------------------------------------------------- figure 1
+def test_excitations_and_fiber_lengths():
+    sols = {w: make_solution(w) for w in WORKFLOWS}
+    cycles = {w: CYCLE for w in WORKFLOWS}
+    fig = excitations_and_fiber_lengths(sols, cycles)
+    axes = _visible_axes(fig)
+    # default muscles present: soleus, gasmed, tibant, vaslat, recfem, glmax2 -> 6 muscles x 2 panels
+    assert len(axes) == 12
+    titles = [ax.get_title() for ax in axes if ax.get_title()]
+    assert titles == ["soleus_r", "gasmed_r", "tibant_r", "vaslat_r", "recfem_r", "glmax2_r"]
+    for ax in axes:
+        data = _lines(ax, "workflow:")
+        assert len(data) == len(WORKFLOWS)
+        assert {ln.get_color() for ln in data} == {workflow_colour(w) for w in WORKFLOWS}
+        to = _lines(ax, "toe-off")
+        assert len(to) == 1 and np.allclose(to[0].get_xdata(), TOE_OFF_PCT)
+        for ln in data:  # padding nodes dropped, the cycle in %
+            x = np.asarray(ln.get_xdata())
+            assert x.min() == pytest.approx(0.0, abs=1e-9) and x.max() == pytest.approx(100.0, abs=1e-9)
+    # fibre-length panels: plateau band and descending-limb line
+    fl = [ax for ax in axes if "fibre length" in ax.get_ylabel() or _lines(ax, "descending-limb")]
+    assert len(fl) == 6
+    for ax in fl:
+        assert np.allclose(_lines(ax, "descending-limb")[0].get_ydata(), 1.05)
+        band = [p for p in ax.patches if p.get_gid() == "plateau"]
+        assert len(band) == 1
+        display = band[0].get_transform().transform(band[0].get_path().vertices)
+        y = ax.transData.inverted().transform(display)[:, 1]
+        assert (y.min(), y.max()) == pytest.approx((0.75, 1.05))
+    # values: the excitation line of soleus equals the solution's cycle nodes
+    ax_e = axes[0]
+    ln = _lines(ax_e, "workflow:effort-gen")[0]
+    t = sols["effort-gen"].time_s
+    keep = (t >= CYCLE[0] - 1e-9) & (t <= CYCLE[2] + 1e-9)
+    assert np.allclose(ln.get_ydata(), sols["effort-gen"].excitation[keep, 0])
+
+
+def test_excitations_muscle_choice_and_errors():
+    sols = {"effort-gen": make_solution("effort-gen")}
+    fig = excitations_and_fiber_lengths(sols, {"effort-gen": CYCLE}, muscles=["soleus", "addlong_r"])
+    assert len(_visible_axes(fig)) == 4
+    with pytest.raises(UnknownMuscleError, match="psoas"):
+        excitations_and_fiber_lengths(sols, {"effort-gen": CYCLE}, muscles=["psoas"])
+    with pytest.raises(OptionError, match="gait cycle"):
+        excitations_and_fiber_lengths(sols, {})
+    with pytest.raises(OptionError, match="increasing"):
+        excitations_and_fiber_lengths(sols, {"effort-gen": (1.0, 0.9, 2.0)})
+    with pytest.raises(OptionError):
+        excitations_and_fiber_lengths({}, {})
+
+
+# ----------------------------------------------------------------------------- figure 2
+def _rmcorr_lstsq(x, y, subject):
+    """Common slope of the ANCOVA with one dummy per subject, by least squares."""
+    subjects = sorted(set(subject))
+    X = np.column_stack([x] + [(np.asarray(subject) == s).astype(float) for s in subjects])
+    coef = np.linalg.lstsq(X, y, rcond=None)[0]
+    return coef[0], dict(zip(subjects, coef[1:]))
+
+
+def test_estimated_vs_measured(results):
+    fig = estimated_vs_measured(results)
+    axes = _visible_axes(fig)
+    assert [ax.get_title() for ax in axes] == list(ORDERED)
+    for ax, model in zip(axes, ORDERED):
+        assert len(_lines(ax, "identity")) == 1
+        for w in WORKFLOWS:
+            lines = _lines(ax, f"rmcorr:{w}:")
+            assert len(lines) == len(SUBJECTS)  # one parallel segment per subject
+            d = results[(results["model"] == model) & (results["workflow"] == w)]
+            slope, intercepts = _rmcorr_lstsq(d["measured_W_per_kg"].to_numpy(), d["mean_W_per_kg"].to_numpy(),
+                                              d["subject"].to_numpy())
+            for ln in lines:
+                x, y = np.asarray(ln.get_xdata(), float), np.asarray(ln.get_ydata(), float)
+                assert (y[1] - y[0]) / (x[1] - x[0]) == pytest.approx(slope, rel=1e-9)
+                s = ln.get_gid().split(":")[2]
+                assert y[0] - slope * x[0] == pytest.approx(intercepts[s], rel=1e-9)
+                assert ln.get_color() == workflow_colour(w)
+        # points: every subject x trial x workflow
+        n_points = sum(len(c.get_offsets()) for c in ax.collections)
+        assert n_points == len(SUBJECTS) * len(TRIALS) * len(WORKFLOWS)
+        assert ax.get_xlabel() == "measured (W/kg)" and ax.get_ylabel() == "estimated (W/kg)"
+
+
+def test_estimated_vs_measured_without_measurements(results):
+    with pytest.raises(OptionError, match="measured"):
+        estimated_vs_measured(results.assign(measured_W_per_kg=np.nan))
+
+
+def test_estimated_vs_measured_one_subject(results):
+    fig = estimated_vs_measured(results[results["subject"] == "s1"])
+    for ax in _visible_axes(fig):
+        assert _lines(ax, "rmcorr:") == [] and len(_lines(ax, "identity")) == 1
+        assert sum(len(c.get_offsets()) for c in ax.collections) == len(TRIALS) * len(WORKFLOWS)
+    assert "Lines not drawn: " in fig.get_suptitle() and "subject" in fig.get_suptitle()
+
+
+# ----------------------------------------------------------------------------- figures 3, 4
+def test_group_rates_over_cycle():
+    ts = make_timeseries(1.25)
+    fig = group_rates_over_cycle(ts, 61.3, ["BH04", "UM10"])
+    axes = _visible_axes(fig)
+    assert [ax.get_title() for ax in axes] == ["BH04", "UM10"]
+    for ax, model in zip(axes, ["BH04", "UM10"]):
+        groups = _lines(ax, "group:")
+        assert [ln.get_gid() for ln in groups] == [f"group:{g}" for g in GROUPS]
+        pf = _lines(ax, "group:PF")[0]
+        ref = ts[(ts["model"] == model) & (ts["series"] == "group/PF")]
+        assert np.allclose(pf.get_ydata(), ref["value_W"])
+        assert np.allclose(_lines(ax, "toe-off")[0].get_xdata(), 61.3)
+        assert "(W)" in ax.get_ylabel() or ax is not axes[0]
+    assert axes[0].get_ylabel() == "metabolic rate (W)"
+    with pytest.raises(OptionError, match="LW07"):
+        group_rates_over_cycle(ts, 61.3, ["LW07"])
+    with pytest.raises(OptionError, match="toe-off"):
+        group_rates_over_cycle(ts, 120.0)
+    with pytest.raises(OptionError, match="group"):
+        group_rates_over_cycle(ts[ts["series"] == "whole_body"], 60.0)
+
+
+def test_whole_body_over_cycle():
+    tables = {t: make_timeseries(s) for t, s in TRIALS.items()}
+    fig = whole_body_over_cycle(tables, TRIALS, toe_off_pct={t: 60.0 + i for i, t in enumerate(TRIALS)})
+    axes = _visible_axes(fig)
+    assert [ax.get_title() for ax in axes] == list(ORDERED)
+    for ax in axes:
+        lines = _lines(ax, "trial:")
+        assert [ln.get_gid() for ln in lines] == ["trial:slow", "trial:normal", "trial:fast"]  # by speed
+        assert len({ln.get_color() for ln in lines}) == 3
+        assert sorted(np.asarray(ln.get_xdata())[0] for ln in _lines(ax, "toe-off")) == [60.0, 61.0, 62.0]
+        peaks = [np.max(ln.get_ydata()) for ln in lines]
+        assert peaks == sorted(peaks)  # synthetic rates grow with speed
+    with pytest.raises(OptionError, match="speed"):
+        whole_body_over_cycle(tables, {"slow": 0.75})
+
+
+# ----------------------------------------------------------------------------- figures 5, 6
+def test_phase_shares(results):
+    fig = phase_shares(results)
+    ax_b, ax_s = fig.axes
+    # bars: one stance and one swing bar per model and workflow, stacking to 100 %
+    for w in WORKFLOWS:
+        st = [p for p in ax_b.patches if p.get_gid() == f"stance:{w}"]
+        sw = [p for p in ax_b.patches if p.get_gid() == f"swing:{w}"]
+        assert len(st) == len(sw) == len(ORDERED)
+        for a, b in zip(st, sw):
+            assert a.get_height() + b.get_height() == pytest.approx(100.0)
+            assert b.get_y() == pytest.approx(a.get_height())
+        d = results[(results["trial"] == "normal") & (results["workflow"] == w)]
+        for a, m in zip(st, ORDERED):
+            assert a.get_height() == pytest.approx(d[d["model"] == m]["stance_pct"].mean())
+    assert [t.get_text() for t in ax_b.get_xticklabels()] == list(ORDERED)
+    # lines: one per model, through the means over subjects of the main workflow (effort-ten)
+    lines = _lines(ax_s, "model:")
+    assert [ln.get_gid() for ln in lines] == [f"model:{m}" for m in ORDERED]
+    assert [ln.get_color() for ln in lines] == [model_colour(m) for m in ORDERED]
+    d = results[(results["workflow"] == "effort-ten") & (results["model"] == "BH04")]
+    means = d.groupby("trial")[["speed_m_per_s", "swing_pct"]].mean().loc[["slow", "normal", "fast"]]
+    ln = _lines(ax_s, "model:BH04")[0]
+    assert np.allclose(ln.get_xdata(), means["speed_m_per_s"]) and np.allclose(ln.get_ydata(), means["swing_pct"])
+    assert ax_s.get_xlabel() == "walking speed (m/s)"
+    assert "%/(m/s)" in ln.get_label()
+
+
+def test_phase_shares_one_speed(results):
+    fig = phase_shares(results[results["trial"] == "fast"])
+    ax_b, ax_s = fig.axes
+    assert "fast" in ax_b.get_title() and "one speed only" in ax_s.get_title()
+    assert len(_lines(ax_s, "model:")) == len(MODELS)
+    with pytest.raises(OptionError, match="trial 'normal'"):
+        phase_shares(results[results["trial"] == "fast"], trial="normal")
+
+
+def test_group_shares(results):
+    fig = group_shares(results)
+    axes = _visible_axes(fig)
+    assert len(axes) == len(WORKFLOWS) * len(MODELS)
+    assert [ax.get_title() for ax in axes[:len(ORDERED)]] == list(ORDERED)
+    ax = axes[len(ORDERED) - 1]  # first row: effort-gen; last column: UM10
+    pf = [p for p in ax.patches if p.get_gid() == "group:PF"]
+    assert len(pf) == len(TRIALS)
+    d = results[(results["workflow"] == "effort-gen") & (results["model"] == "UM10")]
+    exp = d.groupby("trial")["share_PF_pct"].mean().loc[["slow", "normal", "fast"]]
+    assert np.allclose([p.get_height() for p in pf], exp)
+    tops = np.zeros(len(TRIALS))
+    for g in GROUPS:
+        bars = [p for p in ax.patches if p.get_gid() == f"group:{g}"]
+        tops = np.maximum(tops, [p.get_y() + p.get_height() for p in bars])
+    assert np.allclose(tops, 100.0)  # the shares add up
+    with pytest.raises(OptionError, match="emg-ten"):
+        group_shares(results, workflows=["emg-ten"])
+
+
+def test_trial_helpers(results):
+    assert trial_order(results) == ["slow", "normal", "fast"]
+    assert preferred_trial(results) == "normal"
+    renamed = results.assign(trial=results["trial"].map({"slow": "p55", "normal": "p100", "fast": "p145"}))
+    assert preferred_trial(renamed) == "p100"  # the middle speed
+
+
+# ------------------------------------------------------------------------------- saving
+def test_save_figure(tmp_path):
+    fig = group_rates_over_cycle(make_timeseries(1.0), 60.0)
+    paths = save_figure(fig, tmp_path / "figs", "groups")
+    assert set(paths) == {"png", "svg"}
+    assert paths["png"].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert b"<svg" in paths["svg"].read_bytes()[:2000]
+    assert sorted(p.name for p in (tmp_path / "figs").iterdir()) == ["groups.png", "groups.svg"]
+    with pytest.raises(OptionError):
+        save_figure(fig, tmp_path, "../x")
+
+
+# ------------------------------------------------------------------------------- report
+def test_write_report(study):
+    out = write_report(study)
+    assert out == study / "report.html"
+    text = out.read_text(encoding="utf-8")
+    p = _parse(text)
+    # one embedded figure per figure
+    assert len(p.imgs) == len(FIGURE_NAMES)
+    assert all(img["src"].startswith("data:image/png;base64,") for img in p.imgs)
+    for name in FIGURE_NAMES:
+        assert (study / "figures" / f"{name}.png").is_file() and (study / "figures" / f"{name}.svg").is_file()
+        assert f'id="figure-{name}"' in text
+    # nothing external, no script
+    assert "http" not in text and "<script" not in text.lower() and "<link" not in text.lower()
+    # tables: subjects, whole-body, measured, cost of transport, phase shares, group shares, failures?, software
+    for anchor in ("table-whole-body", "table-cost-of-transport", "table-phase-shares", "table-group-shares"):
+        assert anchor in p.ids
+    assert p.tables >= 7
+    assert "W/kg" in text and "J/(kg·m)" in text and "Measured whole-body" in text
+    # values: BH04 effort-ten normal mean over subjects appears in the whole-body table
+    r = pd.read_csv(study / "results.csv")
+    d = r[(r["model"] == "BH04") & (r["workflow"] == "effort-ten") & (r["trial"] == "normal")]["mean_W_per_kg"]
+    assert f"{d.mean():.2f} [{d.std(ddof=1):.2f}]" in text
+    # settings, escaping, software
+    assert "speeds &lt;synthetic&gt; &amp; co" in text and "<synthetic>" not in text
+    for s in SUBJECTS:
+        assert f"<th scope=\"row\">{s}</th>" in text
+    import casadi, matplotlib, scipy  # noqa: E401
+
+    import musclemetab
+
+    for pkg, ver in (("musclemetab", musclemetab.__version__), ("numpy", np.__version__), ("scipy", scipy.__version__),
+                     ("casadi", casadi.__version__), ("pandas", pd.__version__),
+                     ("matplotlib", matplotlib.__version__), ("opensim", "4.6-study")):
+        assert f"<th scope=\"row\">{pkg}</th>" in text and ver in text
+    assert "Method" in text and "None: every unit of the study succeeded" in text
+    # atomic: no temporary file left anywhere
+    leftovers = [q for q in study.rglob(".*") if q.name.startswith(".")]
+    assert leftovers == []
+
+
+def test_report_notes_and_failures(tmp_path):
+    root = make_study(tmp_path / "one", measured=False, trials={"normal": 1.25}, solutions=False,
+                      failed={("s2", "normal", "effort-gen")})
+    out = write_report(root, tmp_path / "elsewhere" / "page.html")
+    assert out == tmp_path / "elsewhere" / "page.html"
+    text = out.read_text(encoding="utf-8")
+    p = _parse(text)
+    notes = {
+        "estimated_vs_measured": "no measured metabolic rate",
+        "whole_body_over_cycle": "one speed only",
+        "excitations_fiber_lengths": "solution.sto: missing",
+    }
+    assert len(p.imgs) == len(FIGURE_NAMES) - len(notes)
+    for name, note in notes.items():
+        i = text.index(f'id="figure-{name}"')
+        assert note in text[i:i + 1500]
+        assert not (tmp_path / "elsewhere" / "figures" / f"{name}.png").exists()
+    assert (tmp_path / "elsewhere" / "figures" / "phase_shares.png").is_file()
+    assert "one speed only, no trend" not in text  # the note is in the figure, not the page
+    # failures table lists the failed unit, escaped
+    assert "solver did not converge &lt;maximum iterations&gt;" in text
+    assert "No measured metabolic rate in the results" in text
+    assert not (root / "report.html").exists()
+    assert str(root) not in text.split('id="failures"')[0].split('id="method"')[1]  # notes name relative paths
+
+
+def test_stale_figures_removed(tmp_path):
+    root = make_study(tmp_path / "s", solutions=False, trials={"normal": 1.25})
+    (root / "figures").mkdir()
+    (root / "figures" / "excitations_fiber_lengths.png").write_bytes(b"old")
+    write_report(root)
+    assert not (root / "figures" / "excitations_fiber_lengths.png").exists()
+
+
+def test_report_errors(tmp_path):
+    with pytest.raises(InputFileError, match="no such study folder"):
+        write_report(tmp_path / "absent")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(InputFileError, match=r"results\.csv: missing.*musclemetab run"):
+        write_report(tmp_path / "empty")
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    pd.DataFrame({"subject": ["s1"], "trial": ["normal"]}).to_csv(bad / "results.csv", index=False)
+    with pytest.raises(MissingColumnError, match="workflow"):
+        write_report(bad)
+    ok = make_study(tmp_path / "j", solutions=False)
+    (ok / "study.json").write_text("{not json")
+    with pytest.raises(InputFileError, match="study.json"):
+        write_report(ok)
+
+
+def test_cli(study, tmp_path, capsys):
+    import argparse
+
+    from musclemetab.report.cli import add_report_parser
+
+    parser = argparse.ArgumentParser(prog="musclemetab")
+    add_report_parser(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(["report", str(study), "--out", str(tmp_path / "r.html")])
+    assert args.func(args) == 0
+    out = capsys.readouterr().out
+    assert "6 of 6 figures" in out and (tmp_path / "r.html").is_file()
+    assert (tmp_path / "figures" / "phase_shares.svg").is_file()
+    args = parser.parse_args(["report", str(tmp_path / "absent")])
+    with pytest.raises(InputFileError, match="absent: no such study folder"):
+        args.func(args)
+
+
+def test_report_when_every_unit_failed(tmp_path):
+    root = tmp_path / "failed"
+    root.mkdir()
+    columns = ["subject", "trial", "workflow", "model", "speed_m_per_s", "status", "mean_W_per_kg", "unit_dir"]
+    pd.DataFrame(columns=columns).to_csv(root / "results.csv", index=False)
+    pd.DataFrame([{"subject": "s1", "trial": "", "workflow": "emg-ten", "reason": "EMG file missing"}]).to_csv(
+        root / "failures.csv", index=False)
+    text = write_report(root).read_text(encoding="utf-8")
+    p = _parse(text)
+    assert p.imgs == []
+    assert text.count("no unit of the study succeeded: nothing to draw.") == len(FIGURE_NAMES)
+    assert "No unit of the study succeeded: no results to tabulate." in text
+    assert "(all trials)" in text and "EMG file missing" in text
+    assert "study.json is missing" in text

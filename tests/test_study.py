@@ -1,0 +1,265 @@
+"""Studies: the study file, walking speed, resumable runs, failures, process pool and Dask."""
+
+from __future__ import annotations
+
+import shutil
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from musclemetab.errors import InputFileError, OptionError
+from musclemetab.study import load_study, run_study, study_from_dict
+
+
+def _study_dict(example, trials=("slow", "normal"), workflows=("effort-gen",), models=("UM10", "BH04")):
+    return {
+        "name": "test study",
+        "workflows": list(workflows),
+        "models": list(models),
+        "subjects": [{
+            "name": "sub1",
+            "model": str(example.model),
+            "body_mass_kg": example.body_mass_kg,
+            "height_m": example.height_m,
+            "trials": [{"name": t, "ik": str(example.ik[t]), "id": str(example.id[t])} for t in trials],
+        }],
+    }
+
+
+# ----------------------------------------------------------------------------- study file
+def test_study_file_round_trip(tmp_path, example):
+    text = f"""
+name = "two speeds"
+output = "out"
+workflows = ["effort-gen", "effort-ten"]
+models = ["UM10", "bh04"]
+
+[[subjects]]
+name = "sub1"
+model = "{example.model}"
+body_mass_kg = 72.6
+height_m = 1.743
+tendon_stiffness = {{soleus = 12.0}}
+
+[[subjects.trials]]
+name = "normal"
+ik = "{example.ik['normal']}"
+id = "{example.id['normal']}"
+vo2_mL_per_min = 1200.0
+vco2_mL_per_min = 1020.0
+"""
+    path = tmp_path / "study.toml"
+    path.write_text(text)
+    study = load_study(path)
+    assert study.output == tmp_path / "out"
+    assert study.models == ("UM10", "BH04")
+    s = study.subject("sub1")
+    assert s.tendon_stiffness == {"soleus": 12.0}
+    t = s.trial("normal")
+    assert t.vo2_mL_per_s == pytest.approx(20.0) and t.vco2_mL_per_s == pytest.approx(17.0)
+
+
+@pytest.mark.parametrize(
+    "edit, error, words",
+    [
+        (lambda d: d.update(colour="red"), OptionError, ["unknown key", "colour"]),
+        (lambda d: d.update(workflows=["effort-xyz"]), OptionError, ["effort-xyz", "effort-gen"]),
+        (lambda d: d.update(models=["UM99"]), OptionError, ["models", "UM99"]),
+        (lambda d: d.update(basal="lots"), OptionError, ["basal"]),
+        (lambda d: d["subjects"][0].pop("body_mass_kg"), OptionError, ["sub1", "body_mass_kg"]),
+        (lambda d: d["subjects"][0].update(height_m=174.3), OptionError, ["height_m", "metres"]),
+        (lambda d: d["subjects"][0]["trials"][0].update(ik="nowhere.mot"), InputFileError,
+         ["trial 'slow'", "'ik'", "nowhere.mot"]),
+        (lambda d: d["subjects"][0]["trials"][0].update(vo2_mL_per_s=10.0), OptionError, ["VO2", "VCO2"]),
+        (lambda d: d["subjects"][0]["trials"][0].update(speed_m_per_s="fast"), OptionError, ["speed_m_per_s"]),
+        (lambda d: d["subjects"][0]["trials"].append(dict(d["subjects"][0]["trials"][0])), OptionError,
+         ["slow", "more than once"]),
+        (lambda d: d.update(workflows=["emg-ten"]), OptionError, ["emg", "slow"]),
+        (lambda d: d.update(subjects=[]), OptionError, ["no subjects"]),
+    ],
+)
+def test_study_file_errors_name_the_key(example, edit, error, words):
+    data = _study_dict(example)
+    edit(data)
+    with pytest.raises(error) as info:
+        study_from_dict(data, base="/")
+    for w in words:
+        assert w in str(info.value)
+
+
+def test_study_file_not_toml(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("name = \n")
+    with pytest.raises(InputFileError, match="bad.toml"):
+        load_study(bad)
+    with pytest.raises(InputFileError, match="not found"):
+        load_study(tmp_path / "none.toml")
+
+
+# ----------------------------------------------------------------------------- speed
+def test_walking_speed_of_a_synthetic_pelvis():
+    from musclemetab.analysis.speed import walking_speed_from_ik
+    from musclemetab.io import storage_from_arrays
+
+    # 0.05 s padding, a 1.0 s cycle from 0.05 to 1.05 s. The pelvis moves at 1.2 m/s along x
+    # and -0.5 m/s along z (speed sqrt(1.2^2 + 0.5^2) = 1.3 m/s) and sways with the gait
+    # period, which drops out over a whole cycle.
+    t = np.arange(0.0, 1.1001, 0.01)
+    sway = 0.03 * np.sin(2 * np.pi * (t - 0.05) / 1.0)
+    df = storage_from_arrays(t, {"pelvis_tx": 1.2 * t + sway, "pelvis_tz": -0.5 * t, "pelvis_ty": 0.9 + sway})
+    assert walking_speed_from_ik(df) == pytest.approx(1.3, rel=1e-9)
+
+
+def test_example_speeds_follow_the_protocol(example):
+    # The protocol: 55 %, 100 % and 145 % of the preferred walking speed (analysis.md §1).
+    from musclemetab.analysis.speed import walking_speed_from_ik
+
+    v = {s: walking_speed_from_ik(example.ik[s]) for s in ("slow", "normal", "fast")}
+    assert 1.0 < v["normal"] < 1.6
+    assert v["slow"] / v["normal"] == pytest.approx(0.55, rel=0.10)
+    assert v["fast"] / v["normal"] == pytest.approx(1.45, rel=0.10)
+
+
+# ----------------------------------------------------------------------------- runs
+@pytest.fixture(scope="module")
+def pool_run(example, tmp_path_factory):
+    """Two trials, EFFORT-GEN, two models, in a pool of two processes."""
+    out = tmp_path_factory.mktemp("pool")
+    study = study_from_dict(_study_dict(example), base="/", output=out)
+    run = run_study(study, workers=2, progress=False)
+    return study, run
+
+
+def test_pool_run_results_table(pool_run):
+    study, run = pool_run
+    assert not run.failed, run.failed
+    assert sorted(run.ran) == ["sub1/normal/effort-gen", "sub1/slow/effort-gen"]
+    table = run.results
+    assert len(table) == 2 * 2  # trials x models
+    assert set(table["model"]) == {"UM10", "BH04"}
+    on_disk = pd.read_parquet(study.output / "results.parquet")
+    pd.testing.assert_frame_equal(on_disk, pd.read_csv(study.output / "results.csv"), check_dtype=False, rtol=1e-9)
+    for col in ("mean_W_per_kg", "cost_of_transport_J_per_kg_per_m", "stance_pct", "swing_pct", "share_PF_pct",
+                "toe_off_pct", "speed_m_per_s"):
+        assert table[col].notna().all(), col
+    # the whole-body rate of the table is the unit's whole_body.csv
+    row = table[(table.trial == "normal") & (table.model == "UM10")].iloc[0]
+    wb = pd.read_csv(study.output / row.unit_dir / "whole_body.csv").set_index("model")
+    assert row.mean_W_per_kg == pytest.approx(wb.loc["UM10", "mean_W_per_kg"], rel=1e-12)
+
+
+def test_swing_share_recomputed_from_the_unit_files(pool_run):
+    """Stance and swing shares of the table, recomputed here from metabolics.csv."""
+    import json
+
+    study, run = pool_run
+    row = run.results[(run.results.trial == "normal") & (run.results.model == "BH04")].iloc[0]
+    folder = study.output / row.unit_dir
+    cycle = json.loads((folder / "unit.json").read_text())["cycle"]
+    m = pd.read_csv(folder / "metabolics.csv")
+    m = m[(m.model == "BH04") & (m.component.isin(["total", "basal"]))]
+    wide = m.pivot_table(index="time", columns="component", values="value_W", aggfunc="sum")
+    t = wide.index.to_numpy()
+    rate = (wide["total"] - wide["basal"]).to_numpy()  # one leg, without basal heat
+
+    def energy(a, b):  # over the nodes there are: the kept nodes end 10 ms before the next contact
+        a, b = max(a, t[0]), min(b, t[-1])
+        tt = np.concatenate([[a], t[(t > a) & (t < b)], [b]])
+        return np.trapezoid(np.interp(tt, t, rate), tt)
+
+    stance = energy(cycle["start_s"], cycle["toe_off_s"])
+    swing = energy(cycle["toe_off_s"], cycle["end_s"])
+    assert row.swing_pct == pytest.approx(100 * swing / (stance + swing), abs=1e-6)
+    assert row.stance_pct + row.swing_pct == pytest.approx(100.0)
+
+
+def test_second_run_does_no_solver_work_and_corrupt_output_is_redone(pool_run, monkeypatch):
+    import musclemetab.redundancy as redundancy
+
+    study, _ = pool_run
+    calls = []
+    real = redundancy.solve_files
+
+    def counting(*args, **kwargs):
+        calls.append(args[1])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(redundancy, "solve_files", counting)
+    run2 = run_study(study, workers=1, progress=False)
+    assert calls == [] and run2.ran == [] and len(run2.skipped) == 2
+    assert len(run2.results) == 4
+
+    # corrupt one output file: that unit (only) is recomputed
+    target = study.output / "units" / "sub1" / "slow" / "effort-gen" / "metabolics.csv"
+    target.write_text(target.read_text()[:1000])
+    before = pd.read_csv(study.output / "results.csv")
+    run3 = run_study(study, workers=1, progress=False)
+    assert run3.ran == ["sub1/slow/effort-gen"] and len(calls) == 1
+    pd.testing.assert_frame_equal(run3.results, before, check_dtype=False, rtol=1e-9)
+
+
+def test_failing_unit_is_reported_and_the_rest_complete(pool_run, example, tmp_path, capsys):
+    from musclemetab.cli import main
+    from musclemetab.io import read_storage, write_storage
+
+    study, _ = pool_run
+    # an ID file without the knee moment
+    df = read_storage(example.id["fast"]).drop(columns=["knee_angle_r_moment"])
+    broken = tmp_path / "ID_broken.sto"
+    write_storage(broken, df, in_degrees=False)
+    data = _study_dict(example, trials=("slow", "normal", "fast"))
+    data["subjects"][0]["trials"][2]["id"] = str(broken)
+    bad_study = study_from_dict(data, base="/", output=study.output)
+    run = run_study(bad_study, workers=1, progress=False)
+    assert list(run.failed) == ["sub1/fast/effort-gen"]
+    assert "knee_angle_r_moment" in run.failed["sub1/fast/effort-gen"]
+    assert sorted(run.skipped) == ["sub1/normal/effort-gen", "sub1/slow/effort-gen"]
+    assert len(run.results) == 4
+    failures = pd.read_csv(study.output / "failures.csv")
+    assert failures.trial.tolist() == ["fast"] and "knee_angle_r_moment" in failures.reason[0]
+    rec = (study.output / "units" / "sub1" / "fast" / "effort-gen" / "unit.json").read_text()
+    assert '"failed"' in rec
+    # the command line: one line per failure, exit status 1
+    toml = tmp_path / "study.toml"
+    trials = "".join(
+        f'\n[[subjects.trials]]\nname = "{t["name"]}"\nik = "{t["ik"]}"\nid = "{t["id"]}"\n'
+        for t in data["subjects"][0]["trials"]
+    )
+    toml.write_text(
+        f'workflows = ["effort-gen"]\nmodels = ["UM10", "BH04"]\n[[subjects]]\nname = "sub1"\n'
+        f'model = "{example.model}"\nbody_mass_kg = 72.6\nheight_m = 1.743\n' + trials
+    )
+    capsys.readouterr()
+    code = main(["run", str(toml), "--out", str(study.output), "--workers", "1", "--no-progress"])
+    out = capsys.readouterr().out
+    assert code == 1
+    assert "2 up to date" in out and "1 failed" in out
+    assert "failed sub1/fast/effort-gen" in out and "knee_angle_r_moment" in out
+
+
+def test_dask_cluster_gives_the_process_pool_table(pool_run, example, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    study, run = pool_run
+    data = _study_dict(example)
+    dask_study = study_from_dict(data, base="/", output=tmp_path / "dask")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        dask_run = run_study(dask_study, scheduler=cluster.scheduler_address, progress=False)
+    assert not dask_run.failed and sorted(dask_run.ran) == sorted(run.ran)
+    a = run.results.drop(columns=["unit_dir"])
+    b = dask_run.results.drop(columns=["unit_dir"])
+    pd.testing.assert_frame_equal(a, b, check_dtype=False, rtol=1e-8)
+
+
+def test_bad_scheduler_address_is_an_option_error(pool_run, tmp_path):
+    pytest.importorskip("distributed")
+    study, _ = pool_run
+    with pytest.raises(OptionError, match="scheduler"):
+        run_study(study, scheduler="tcp://127.0.0.1:1", progress=False, force=True)
+
+
+def test_workers_must_be_positive(pool_run):
+    study, _ = pool_run
+    with pytest.raises(OptionError, match="workers"):
+        run_study(study, workers=0, progress=False)
