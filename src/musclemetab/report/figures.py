@@ -28,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..analysis.groups import GROUP_NAMES as _GROUP_NAMES
+from ..analysis.groups import GROUPS_WITH_OTHER, OTHER
 from ..errors import MusclemetabError, OptionError, UnknownMuscleError
 
 __all__ = [
@@ -72,21 +74,8 @@ WORKFLOW_COLOURS = {
 }
 
 #: Muscle function groups (``analysis.md`` §4): ankle, knee, hip, then the remainder.
-GROUPS = ("PF", "DF", "KE", "KF", "HE", "HF", "HAD", "HAB", "HIR", "HER", "other")
-
-GROUP_NAMES = {
-    "PF": "ankle plantarflexors",
-    "DF": "ankle dorsiflexors",
-    "KE": "knee extensors",
-    "KF": "knee flexors",
-    "HE": "hip extensors",
-    "HF": "hip flexors",
-    "HAD": "hip adductors",
-    "HAB": "hip abductors",
-    "HIR": "hip internal rotators",
-    "HER": "hip external rotators",
-    "other": "other",
-}
+GROUPS = GROUPS_WITH_OTHER
+GROUP_NAMES = {**_GROUP_NAMES, OTHER: "other"}
 
 #: One colour per group; the two groups of a degree of freedom share a hue.
 GROUP_COLOURS = {

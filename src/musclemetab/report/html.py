@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..analysis.groups import GROUPS_WITH_OTHER as GROUPS
 from ..errors import InputFileError, MissingColumnError, MusclemetabError, OptionError
 
 __all__ = [
@@ -63,7 +64,6 @@ FIGURE_NAMES = (
 #: Packages whose versions the report lists (OpenSim's from study.json only).
 SOFTWARE = ("musclemetab", "numpy", "scipy", "casadi", "pandas", "matplotlib", "opensim")
 
-GROUPS = ("PF", "DF", "KE", "KF", "HE", "HF", "HAD", "HAB", "HIR", "HER", "other")
 
 
 # ------------------------------------------------------------------------------ reading
