@@ -263,3 +263,37 @@ def test_workers_must_be_positive(pool_run):
     study, _ = pool_run
     with pytest.raises(OptionError, match="workers"):
         run_study(study, workers=0, progress=False)
+
+
+def test_emg_ten_in_a_study(example, tmp_path):
+    """A subject's EMG-TEN estimate feeds its EMG-TEN trial units and its EFFORT-TEN units."""
+    import json
+
+    data = _study_dict(example, trials=("slow", "normal", "fast"), workflows=("emg-ten", "effort-ten"),
+                       models=("BH04",))
+    data["subjects"][0]["tendon_stiffness"] = "emg-ten"
+    data["subjects"][0]["emg_mapping"] = "authors"
+    for t in data["subjects"][0]["trials"]:
+        t["emg"] = str(example.emg[t["name"]])
+    study = study_from_dict(data, base="/", output=tmp_path)
+    run = run_study(study, workers=1, progress=False)
+    assert not run.failed, run.failed
+    assert run.ran[0] == "sub1/all trials/emg-ten" and len(run.ran) == 7
+    params = json.loads((tmp_path / "units" / "sub1" / "_emg-ten" / "parameters.json").read_text())
+    kt = params["tendon_stiffness"]
+    # the study's published EMG-TEN estimate with the authors' channel mapping (§6.8)
+    assert kt["soleus_r"] == pytest.approx(10.617977, rel=0.02)
+    # the EFFORT-TEN units used this estimate, not the package defaults
+    summary = json.loads((tmp_path / "units" / "sub1" / "normal" / "effort-ten" / "summary.json").read_text())
+    assert summary["workflow"]["tendon_stiffness"]["soleus_r"] == pytest.approx(kt["soleus_r"], rel=1e-12)
+    assert "parameters.json" in summary["workflow"]["tendon_stiffness_sources"]["soleus_r"]
+    assert len(run.results) == 3 * 2
+    # a changed EMG-TEN setting changes the key of the estimate and of the units using it
+    from musclemetab.study.units import Unit, unit_key
+
+    est, ten, gen = Unit("sub1", None, "emg-ten"), Unit("sub1", "normal", "effort-ten"), Unit("sub1", "normal", "effort-gen")
+    data["subjects"][0]["emg_mapping"] = "default"
+    changed = study_from_dict(data, base="/", output=tmp_path)
+    assert unit_key(changed, est) != unit_key(study, est)
+    assert unit_key(changed, ten, unit_key(changed, est)) != unit_key(study, ten, unit_key(study, est))
+    assert unit_key(changed, gen) == unit_key(study, gen)  # EFFORT-GEN does not use EMG

@@ -1,17 +1,19 @@
 """Muscle redundancy solver with compliant tendons (De Groote et al. 2016).
 
-The effort-based workflows of Luis et al. (PLoS Comput Biol 2024): EFFORT-GEN, EFFORT-CAL and
-EFFORT-TEN. From inverse kinematics, inverse dynamics and muscle geometry, an optimal control
-problem (CasADi + IPOPT) finds muscle excitations, activations, fibre lengths and velocities and
+The workflows of Luis et al. (PLoS Comput Biol 2024): the effort-based EFFORT-GEN, EFFORT-CAL
+and EFFORT-TEN, and EMG-TEN, the EMG-informed estimation of tendon stiffness over several trials.
+From inverse kinematics, inverse dynamics and muscle geometry, an optimal control problem
+(CasADi + IPOPT) finds muscle excitations, activations, fibre lengths and velocities and
 tendon forces that reproduce the joint moments with minimal effort.
 
 Modules: :mod:`.inputs` (filtering, splines, mesh), :mod:`.static_opt` (initial guess),
 :mod:`.problem` (the optimal control problem), :mod:`.solution` (results, files),
 :mod:`.workflows` (presets, passive and tendon parameters), :mod:`.solve` (the pipeline),
-:mod:`.cli` (``musclemetab solve``). Importing this package does not import CasADi; solving
-does. OpenSim is never imported here.
+:mod:`.emg_ten` (EMG-TEN), :mod:`.cli` (``musclemetab solve``). Importing this package does not
+import CasADi; solving does. OpenSim is never imported here.
 """
 
+from .emg_ten import EmgTenResult, EmgTenSettings, solve_emg_ten
 from .parameters import MuscleTendonParameters
 from .problem import SolverOptions
 from .solution import Solution
@@ -30,4 +32,7 @@ __all__ = [
     "get_workflow",
     "read_passive_parameters",
     "workflow_parameters",
+    "solve_emg_ten",
+    "EmgTenResult",
+    "EmgTenSettings",
 ]

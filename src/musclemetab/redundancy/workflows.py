@@ -276,14 +276,27 @@ def parse_tendon_stiffness(text: str) -> dict[str, float]:
 
 
 def read_tendon_stiffness_json(path: str | os.PathLike) -> dict[str, float]:
-    """Read ``{"tendon_stiffness": {muscle: kT}}`` from a ``parameters.json``."""
+    """Read ``{"tendon_stiffness": {muscle: kT}}`` from a ``parameters.json``.
+
+    The ``parameters.json`` written by EMG-TEN (:mod:`.emg_ten`) has this section (the
+    estimated muscles; its other sections are ignored here). A folder is read as the
+    ``parameters.json`` inside it.
+    """
     path = Path(path)
+    if path.is_dir():
+        path = path / "parameters.json"
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise InputFileError(f"{path}: no such parameters file; check the --parameters path") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise InputFileError(f"{path}: not a readable JSON file ({exc})") from None
+    solve = data.get("solve") if isinstance(data, dict) else None
+    if isinstance(solve, dict) and solve.get("success") is False:
+        raise InputFileError(
+            f"{path}: the solve that estimated these parameters did not converge (status "
+            f"'{solve.get('status')}'); its tendon stiffness is not an estimate. Solve EMG-TEN again"
+        )
     table = data.get("tendon_stiffness") if isinstance(data, dict) else None
     if not isinstance(table, dict) or not table:
         raise InputFileError(

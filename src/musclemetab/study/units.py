@@ -252,6 +252,7 @@ def _run_estimation(study: Study, unit: Unit, tmp: Path) -> dict:
         [t.emg for t in subject.trials],
         emg_mapping=subject.emg_mapping,
         labels=[t.name for t in subject.trials],
+        passive=subject.passive,
     )
     result.write(tmp)
     if not result.success:
