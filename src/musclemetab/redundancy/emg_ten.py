@@ -96,13 +96,10 @@ from .inputs import (
 )
 from .parameters import MuscleTendonParameters
 from .problem import (
-    ACTIVATION_BOUNDS,
-    FIBRE_LENGTH_BOUNDS,
-    FIBRE_VELOCITY_BOUNDS,
-    MIN_PROJECTED_LENGTH_M,
-    RESERVE_BOUNDS,
     OcpResult,
     ipopt_options,
+    ipopt_statistics,
+    node_bounds,
     SolverOptions,
     _constants,
     _node_expressions,
@@ -577,15 +574,7 @@ def build_emg_ten_nlp(
     hess = _sparse(ca, (n_var, n_var), np.concatenate(rows), np.concatenate(cols), vals)
 
     # ---- bounds, initial guess
-    inf = np.inf
-    lb_node = np.concatenate([
-        np.full(M, ACTIVATION_BOUNDS[0]), np.full(M, FIBRE_LENGTH_BOUNDS[0]), np.full(M, MIN_PROJECTED_LENGTH_M),
-        np.full(M, ACTIVATION_BOUNDS[0]), np.full(D, RESERVE_BOUNDS[0]), np.full(M, FIBRE_VELOCITY_BOUNDS[0]),
-    ])
-    ub_node = np.concatenate([
-        np.full(M, ACTIVATION_BOUNDS[1]), np.full(M, FIBRE_LENGTH_BOUNDS[1]), np.full(M, inf),
-        np.full(M, ACTIVATION_BOUNDS[1]), np.full(D, RESERVE_BOUNDS[1]), np.full(M, FIBRE_VELOCITY_BOUNDS[1]),
-    ])
+    lb_node, ub_node = node_bounds(M, D)
     lbx, ubx, x0, lbg, ubg = [], [], [], [], []
     tol = settings.emg_tolerance
     lbg_node = np.concatenate([np.zeros(ng - nE), np.full(nE, -tol)])
@@ -1245,18 +1234,8 @@ def _assemble_result(trials, params, wf_record, ocp: EmgTenOcpResult, settings, 
     n_tot = sum(t.inputs.n_intervals for t in trials)
     record = {
         "workflow": EMG_TEN,
-        "status": ocp.status,
-        "success": ocp.success,
-        "objective": ocp.objective,
-        "objective_terms": ocp.objective_terms,
-        "iterations": ocp.iterations,
-        "solve_time_s": ocp.solve_time_s,
-        "solve_cpu_time_s": ocp.solve_cpu_s,
-        "build_time_s": ocp.build_time_s,
+        **ipopt_statistics(ocp),
         "preparation_time_s": t_prep,
-        "function_evaluation_time_s": ocp.function_time_s,
-        "ms_per_iteration": 1e3 * ocp.solve_time_s / max(ocp.iterations, 1),
-        "max_constraint_violation": ocp.max_constraint_violation,
         "max_coupling_violation": ocp.max_coupling_violation,
         "problem_size": {"variables": ocp.n_variables, "equality_constraints": ocp.n_equality_constraints,
                          "inequality_constraints": ocp.n_inequality_constraints, "mesh_intervals": n_tot},

@@ -163,6 +163,24 @@ class OcpResult:
     function_time_s: dict = field(default_factory=dict)
 
 
+def ipopt_statistics(result) -> dict:
+    """Status, objective and IPOPT statistics of an optimum (:class:`OcpResult` or the
+    EMG-TEN result), as recorded in ``summary.json``."""
+    return {
+        "status": result.status,
+        "success": result.success,
+        "objective": result.objective,
+        "objective_terms": result.objective_terms,
+        "iterations": result.iterations,
+        "solve_time_s": result.solve_time_s,
+        "solve_cpu_time_s": result.solve_cpu_s,
+        "build_time_s": result.build_time_s,
+        "function_evaluation_time_s": result.function_time_s,
+        "ms_per_iteration": 1e3 * result.solve_time_s / max(result.iterations, 1),
+        "max_constraint_violation": result.max_constraint_violation,
+    }
+
+
 def problem_size(n_muscles: int, n_dofs: int, n_intervals: int) -> tuple[int, int]:
     """Number of variables and equality constraints (``205 N + 120`` and ``165 N + 40`` for 40/5)."""
     M, D, N = n_muscles, n_dofs, n_intervals
@@ -327,6 +345,19 @@ def _explicit_derivatives(inputs, params, options, ca, w, g, weights, data):
     }
 
 
+def node_bounds(M: int, D: int) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper bounds of one node's variables ``[a, l~M, lM cos(alpha), e, reserve, v~M]``."""
+    lb = np.concatenate([
+        np.full(M, ACTIVATION_BOUNDS[0]), np.full(M, FIBRE_LENGTH_BOUNDS[0]), np.full(M, MIN_PROJECTED_LENGTH_M),
+        np.full(M, ACTIVATION_BOUNDS[0]), np.full(D, RESERVE_BOUNDS[0]), np.full(M, FIBRE_VELOCITY_BOUNDS[0]),
+    ])
+    ub = np.concatenate([
+        np.full(M, ACTIVATION_BOUNDS[1]), np.full(M, FIBRE_LENGTH_BOUNDS[1]), np.full(M, np.inf),
+        np.full(M, ACTIVATION_BOUNDS[1]), np.full(D, RESERVE_BOUNDS[1]), np.full(M, FIBRE_VELOCITY_BOUNDS[1]),
+    ])
+    return lb, ub
+
+
 def build_nlp(
     inputs: TrialInputs,
     params: MuscleTendonParameters,
@@ -382,15 +413,7 @@ def build_nlp(
     weights = np.concatenate([np.tile(c_node, N), c_node[:M], np.zeros(2 * M)])
 
     # bounds and initial guess, node-major layout
-    inf = np.inf
-    lb_node = np.concatenate([
-        np.full(M, ACTIVATION_BOUNDS[0]), np.full(M, FIBRE_LENGTH_BOUNDS[0]), np.full(M, MIN_PROJECTED_LENGTH_M),
-        np.full(M, ACTIVATION_BOUNDS[0]), np.full(D, RESERVE_BOUNDS[0]), np.full(M, FIBRE_VELOCITY_BOUNDS[0]),
-    ])
-    ub_node = np.concatenate([
-        np.full(M, ACTIVATION_BOUNDS[1]), np.full(M, FIBRE_LENGTH_BOUNDS[1]), np.full(M, inf),
-        np.full(M, ACTIVATION_BOUNDS[1]), np.full(D, RESERVE_BOUNDS[1]), np.full(M, FIBRE_VELOCITY_BOUNDS[1]),
-    ])
+    lb_node, ub_node = node_bounds(M, D)
     lbx = np.concatenate([np.tile(lb_node, N), lb_node[:nx]])
     ubx = np.concatenate([np.tile(ub_node, N), ub_node[:nx]])
     Z0 = np.vstack([

@@ -27,7 +27,7 @@ from .inputs import (
     select_muscles,
 )
 from .parameters import MuscleTendonParameters
-from .problem import SolverOptions, solve_ocp
+from .problem import SolverOptions, ipopt_statistics, solve_ocp
 from .solution import Solution, build_solution
 from .static_opt import guess_from_solution, initial_guess, static_optimisation
 from .workflows import (
@@ -119,17 +119,8 @@ def solve_with_parameters(
     from .. import __version__
 
     summary = {
-        "status": ocp.status,
-        "success": ocp.success,
-        "objective": ocp.objective,
-        "objective_terms": ocp.objective_terms,
-        "iterations": ocp.iterations,
-        "solve_time_s": ocp.solve_time_s,
-        "solve_cpu_time_s": ocp.solve_cpu_s,
-        "build_time_s": ocp.build_time_s,
-        "function_evaluation_time_s": ocp.function_time_s,
+        **ipopt_statistics(ocp),
         "preparation_time_s": t_prep,
-        "max_constraint_violation": ocp.max_constraint_violation,
         "problem_size": {"variables": ocp.n_variables, "equality_constraints": ocp.n_constraints},
         "time_window_s": list(inputs.window_s),
         "n_intervals": inputs.n_intervals,
