@@ -1,29 +1,39 @@
 """Benchmark: metabolic energy models on a large array, against OpenSim's probes.
 
-    python benchmarks/metabolics.py [--muscles 40] [--samples 50000] [--probe-states 5000] [--repeats 5]
+    python benchmarks/metabolics.py [--muscles 40] [--samples 50000] [--probe-states all] [--repeats 5]
 
-Measured in the same run:
+Measured in the same run, on the same states:
 
 * each model of :mod:`musclemetab.metabolics` on arrays of shape (muscles, samples)
   (default 40 x 50 000 = 2 million muscle-samples; realistic states: fibre lengths,
   velocities and activations drawn at random, curve values from the package's curves), input
-  checks included; best of ``--repeats`` calls;
+  checks included; ``--repeats`` timed calls after one untimed warm-up call, with the default
+  number of threads and with one thread (``musclemetab.metabolics._common.THREADS = 1``);
 * OpenSim 4.6's ``Umberger2010MuscleMetabolicsProbe`` (UM10 settings) and
   ``Bhargava2004MuscleMetabolicsProbe`` (BH04 settings), each alone in a one-muscle model
-  (the example soleus on a slider, rigid tendon), evaluated at ``--probe-states`` states in
-  the OpenSim worker process: per state, set the fibre length, velocity, activation and
-  excitation, realise to accelerations and read the probe's output (the least work OpenSim
-  needs to evaluate a probe at a given state; process start, model building and the transfer
-  of arrays are not counted).
+  (the example soleus on a slider, rigid tendon), evaluated in the OpenSim worker process at
+  the same states (fibre length, velocity, activation and excitation of every muscle-sample,
+  in order): per state, set the fibre length, velocity, activation and excitation, realise to
+  accelerations and read the probe's output (the least work OpenSim needs to evaluate a probe
+  at a given state; process start, model building and the transfer of arrays are not
+  counted). The states are cut into ``--repeats`` blocks, one per repeat, so that the probes
+  evaluate every state once (``--probe-states N``: only the first N states, for a quick run),
+  after one untimed warm-up call on 1000 states.
 
-Prints muscle-samples per second and the ratio of each model to the probe of its family
-(HO06 and LW07 have no OpenSim counterpart: compared with the Umberger probe). Asserts
-nothing; timings on a shared machine vary by tens of percent from run to run.
+The repeats are interleaved (per repeat: one block per probe, one untimed call, then one
+call per model and thread setting), so that changes of the machine's load during the run
+affect the package and the probes alike; the untimed call absorbs the slower first call
+after the OpenSim worker has run (this process's caches are then cold). Prints
+muscle-samples (states) per second, median and best of the repeats, and the ratio of each
+model to the probe of its family, median to median and best to best (HO06 and LW07 have no
+OpenSim counterpart: compared with the Umberger probe). Asserts nothing; timings on a shared
+machine vary by tens of percent from run to run.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
 import numpy as np
@@ -57,23 +67,26 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--muscles", type=int, default=40)
     ap.add_argument("--samples", type=int, default=50_000, help="samples per muscle")
-    ap.add_argument("--probe-states", type=int, default=5000)
+    ap.add_argument("--probe-states", default="all", help="'all' (default) or the number of states for the probes")
     ap.add_argument("--repeats", type=int, default=5)
     args = ap.parse_args()
 
     from musclemetab import opensim_bridge
     from musclemetab.datasets import example_subject
-    from musclemetab.metabolics import MODELS
+    from musclemetab.metabolics import MODELS, _common
 
     inputs = _states(args.muscles, args.samples)
     n = args.muscles * args.samples
     time_s = np.linspace(0.0, 1.0, args.samples)
+    repeats = max(1, args.repeats)
 
-    # OpenSim probes first (the worker start and model build are not timed)
-    rng = np.random.default_rng(1)
-    k = args.probe_states
-    lm, vb = rng.uniform(0.5, 1.5, k), rng.uniform(-1.0, 1.0, k)
-    act, exc = rng.uniform(0.01, 1.0, k), rng.uniform(0.0, 1.0, k)
+    # the probes' states: the package's states, muscle-sample by muscle-sample
+    k = n if args.probe_states == "all" else min(n, int(args.probe_states))
+    probe_states = [
+        np.ascontiguousarray(inputs[key].ravel()[:k])
+        for key in ("normalized_fiber_length", "normalized_fiber_velocity", "activation", "excitation")
+    ]
+    blocks = np.array_split(np.arange(k), repeats)
     model_path = str(example_subject().model)
     probes = {
         "Umberger2010": dict(probe="Umberger2010", name="UM10", use_Bhargava_recruitment_model=False,
@@ -81,33 +94,61 @@ def main() -> None:
         "Bhargava2004": dict(probe="Bhargava2004", name="BH04", use_force_dependent_shortening_prop_constant=True,
                              maintenance_length_dependence="identity"),
     }
-    probe_rate = {}
-    for label, cfg in probes.items():
-        best = np.inf
-        for _ in range(max(1, args.repeats // 2)):
-            r = opensim_bridge.call("probes:evaluate_probes", lm, vb, act, exc, probes=[cfg],
-                                    slow_twitch_fraction=0.8, muscle_mass_kg=0.48, model_path=model_path,
-                                    muscle_name="soleus_r", read_muscle_quantities=False)
-            best = min(best, r["seconds_per_state"])
-        probe_rate[label] = 1.0 / best
+
+    def run_probe(cfg, index):
+        r = opensim_bridge.call("probes:evaluate_probes", *(x[index] for x in probe_states), probes=[cfg],
+                                slow_twitch_fraction=0.8, muscle_mass_kg=0.48, model_path=model_path,
+                                muscle_name="soleus_r", read_muscle_quantities=False)
+        return r
+
+    # warm-up (not timed): worker start, OpenSim's first evaluations, thread pool, scratch arrays
+    for cfg in probes.values():
+        version = run_probe(cfg, slice(0, min(k, 1000)))["opensim_version"]
+    threads_default = _common.THREADS
+    for f in MODELS.values():
+        f(**inputs, time_s=time_s)
+
+    settings = {"default": threads_default, "1 thread": 1}
+    probe_s = {label: [] for label in probes}  # seconds per state, per block
+    model_s = {(name, s): [] for name in MODELS for s in settings}  # seconds per call
+    try:
+        for rep in range(repeats):
+            for label, cfg in probes.items():
+                if blocks[rep].size:
+                    probe_s[label].append(run_probe(cfg, blocks[rep])["seconds_per_state"])
+            # untimed: the first call after the worker has run finds this process's caches cold
+            next(iter(MODELS.values()))(**inputs, time_s=time_s)
+            for name, f in MODELS.items():
+                for setting, threads in settings.items():
+                    _common.THREADS = threads
+                    t0 = time.perf_counter()
+                    f(**inputs, time_s=time_s)
+                    model_s[name, setting].append(time.perf_counter() - t0)
+    finally:
+        _common.THREADS = threads_default
+
+    def rates(seconds, per):
+        s = np.asarray(seconds)
+        return per / np.median(s), per / s.min()
 
     family = {"UM03": "Umberger2010", "UM10": "Umberger2010", "UC16": "Umberger2010", "BH04": "Bhargava2004",
               "HO06": "Umberger2010", "LW07": "Umberger2010"}
-    print(f"musclemetab.metabolics: arrays of {args.muscles} muscles x {args.samples} samples = {n:,} muscle-samples, "
-          f"best of {args.repeats}")
-    print(f"OpenSim {r['opensim_version']} probes: {k} states each, best of {max(1, args.repeats // 2)}")
-    for label, rate in probe_rate.items():
-        print(f"  {label + 'MuscleMetabolicsProbe':40s} {rate:12,.0f} states/s   ({1e6 / rate:.1f} us per state)")
-    print(f"{'model':6s} {'seconds':>9s} {'muscle-samples/s':>18s} {'x probe':>9s}  (probe)")
-    for name, f in MODELS.items():
-        best = np.inf
-        for _ in range(args.repeats):
-            t0 = time.perf_counter()
-            f(**inputs, time_s=time_s)
-            best = min(best, time.perf_counter() - t0)
-        rate = n / best
-        p = family[name]
-        print(f"{name:6s} {best:9.4f} {rate:18,.0f} {rate / probe_rate[p]:9.0f}  ({p})")
+    probe_rate = {label: rates(s, 1.0) for label, s in probe_s.items()}
+    print(f"musclemetab.metabolics: arrays of {args.muscles} muscles x {args.samples} samples = {n:,} "
+          f"muscle-samples, {repeats} repeats; threads: default (one per idle core, up to "
+          f"{len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else os.cpu_count()}), and 1")
+    print(f"OpenSim {version} probes: the same states, {k:,} of them, in {repeats} blocks")
+    print(f"  {'probe':40s} {'states/s median':>16s} {'best':>12s}")
+    for label, (med, best) in probe_rate.items():
+        print(f"  {label + 'MuscleMetabolicsProbe':40s} {med:16,.0f} {best:12,.0f}   ({1e6 / med:.1f} us per state)")
+    print(f"{'model':6s} {'M samples/s median':>19s} {'best':>7s} {'1 thread':>9s} {'x probe median':>15s} "
+          f"{'best':>6s} {'1 thread':>9s}  (probe)")
+    for name in MODELS:
+        med, best = rates(model_s[name, "default"], n)
+        med1, _ = rates(model_s[name, "1 thread"], n)
+        p_med, p_best = probe_rate[family[name]]
+        print(f"{name:6s} {med / 1e6:19.1f} {best / 1e6:7.1f} {med1 / 1e6:9.1f} {med / p_med:15.0f} "
+              f"{best / p_best:6.0f} {med1 / p_med:9.0f}  ({family[name]})")
 
 
 if __name__ == "__main__":

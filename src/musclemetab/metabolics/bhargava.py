@@ -2,19 +2,30 @@
 
 from __future__ import annotations
 
+import math
+from types import SimpleNamespace
+
 import numpy as np
 
 from ..errors import DataMismatchError, OptionError
+from . import _common
 from ._common import (
     BASAL_RATE_W_PER_KG,
+    ZERO,
+    ChunkPlan,
     MetabolicRates,
-    apply_non_negativity,
+    as_mask,
     basal_rate,
     check_flag,
+    evaluate_chunked,
+    keep_where,
     model_function,
+    non_negativity_into,
     prepare_inputs,
-    recruitment_terms,
-    run_kernel,
+    recruitment_terms_into,
+    run_chunks,
+    select_into,
+    total_into,
 )
 
 __all__ = ["bhargava2004", "bhargava_stimulation_time_s", "BHARGAVA_CONSTANTS"]
@@ -33,6 +44,9 @@ BHARGAVA_CONSTANTS = {
 }
 
 _LENGTH_DEPENDENCE = ("study", "published")
+
+#: Shortening-heat coefficients of the kernel as 0-d arrays (cheaper ufunc operands).
+_C = SimpleNamespace(short_iso=np.array(0.16), short_total=np.array(0.18), lengthening=np.array(0.157))
 
 
 def bhargava_stimulation_time_s(excitation, time_s, threshold: float = 0.1) -> np.ndarray:
@@ -55,13 +69,22 @@ def bhargava_stimulation_time_s(excitation, time_s, threshold: float = 0.1) -> n
         Excitation threshold (0.1).
     """
     e = np.asarray(excitation, dtype=float)
+    dt_mean = _mean_sampling_interval(e.shape, time_s)
+    if e.size < _common.PARALLEL_MIN_SIZE:
+        return _stimulation_count(e, threshold) * dt_mean
+    return _stimulation_time(e, threshold, dt_mean)
+
+
+def _mean_sampling_interval(shape: tuple[int, ...], time_s):
+    """``dt_mean = (t_last - t_first)/(n - 1)`` of ``time_s`` for excitation of ``shape``,
+    after checking ``time_s`` (one value per sample of the last axis, increasing)."""
     t = np.asarray(time_s, dtype=float)
-    if e.ndim == 0:
+    if len(shape) == 0:
         raise DataMismatchError("BH04: the excitation needs a time axis (its last axis) to count stimulation time")
-    if t.ndim != 1 or t.size != e.shape[-1]:
+    if t.ndim != 1 or t.size != shape[-1]:
         raise DataMismatchError(
             f"BH04: time_s must be 1-D with one value per sample of the last (time) axis: "
-            f"{e.shape[-1]} samples, but time_s has shape {t.shape}"
+            f"{shape[-1]} samples, but time_s has shape {t.shape}"
         )
     if t.size < 2:
         raise OptionError(
@@ -70,11 +93,101 @@ def bhargava_stimulation_time_s(excitation, time_s, threshold: float = 0.1) -> n
         )
     if not np.all(np.isfinite(t)) or not np.all(np.diff(t) > 0):
         raise OptionError("BH04: time_s must be finite and strictly increasing (s)")
-    dt_mean = (t[-1] - t[0]) / (t.size - 1)
+    return (t[-1] - t[0]) / (t.size - 1)
+
+
+def _stimulation_count(e: np.ndarray, threshold) -> np.ndarray:
+    """Consecutive samples with ``e > threshold`` up to each sample, along the last axis."""
     on = e > threshold
     count = np.cumsum(on, axis=-1)
     reset = np.maximum.accumulate(np.where(on, 0, count), axis=-1)
-    return (count - reset) * dt_mean
+    return count - reset
+
+
+class _StimulationCounter:
+    """The stimulation count of :func:`_stimulation_count`, chunk by chunk of a
+    :class:`~musclemetab.metabolics._common.ChunkPlan` whose rows run along the last axis.
+
+    Pieces of a row are counted independently: a cumulative sum of 1 per sample above the
+    threshold and, per sample at or below it, minus the run before it. The count carried
+    into a piece from the pieces before it in the row comes from a first pass over the
+    excitation (each piece's first sample at or below the threshold and its trailing run)
+    and is added to the piece's leading run. The counts are integers, so the result equals
+    the direct evaluation exactly, however the rows are cut.
+    """
+
+    def __init__(self, e2: np.ndarray, threshold, plan: ChunkPlan):
+        self.e2, self.threshold, self.plan = e2, threshold, plan
+        self.carry = None
+        if not plan.pieces or plan.pieces == 1:
+            return
+        first_off = np.empty(plan.n_chunks, dtype=np.int64)  # first sample at or below the threshold
+        trailing = np.empty(plan.n_chunks, dtype=np.int64)  # run of samples above it at the end
+
+        def scan(i, arrays):
+            r, _, t0, t1 = plan.bounds(i)
+            on = arrays[0][: t1 - t0]
+            np.greater(e2[r, t0:t1], threshold, on)
+            k = int(on.argmin())
+            if on[k]:  # all above the threshold
+                first_off[i] = trailing[i] = t1 - t0
+            else:
+                first_off[i] = k
+                trailing[i] = int(on[::-1].argmin())
+
+        run_chunks(plan.n_chunks, scan, scratch="?", scratch_size=plan.chunk_size)
+        self.carry = carry = np.zeros(plan.n_chunks, dtype=np.int64)
+        for r in range(plan.n_rows):
+            c = 0
+            for j in range(plan.pieces):
+                i = r * plan.pieces + j
+                carry[i] = c
+                _, _, t0, t1 = plan.bounds(i)
+                c = c + (t1 - t0) if first_off[i] == t1 - t0 else int(trailing[i])
+
+    def count_into(self, i: int, e: np.ndarray, count: np.ndarray, on: np.ndarray) -> None:
+        """The count of chunk ``i`` (excitation ``e``) into the int64 array ``count``; ``on``
+        (bool) receives ``e > threshold``."""
+        np.greater(e, self.threshold, on)
+        if not self.plan.pieces:  # blocks of whole rows
+            np.copyto(count, _stimulation_count(e, self.threshold))
+            return
+        offs = np.flatnonzero(~on)
+        np.copyto(count, on)
+        if offs.size:  # at each sample at or below the threshold, minus the run before it
+            neg_runs = np.empty_like(offs)
+            neg_runs[0] = -offs[0]
+            np.subtract(offs[:-1], offs[1:], neg_runs[1:])
+            np.add(neg_runs[1:], 1, neg_runs[1:])
+            count[offs] = neg_runs
+        np.cumsum(count, out=count)
+        carry = 0 if self.carry is None else int(self.carry[i])
+        if carry:
+            count[: offs[0] if offs.size else count.size] += carry
+
+
+def _stimulation_time(e: np.ndarray, threshold, dt_mean) -> np.ndarray:
+    """``_stimulation_count(e, threshold) * dt_mean`` for large arrays, in chunks on threads."""
+    n = e.shape[-1]
+    plan = ChunkPlan((e.size // n, n), [], min_lead=1)
+    e2 = e.reshape(plan.n_rows, n)
+    out = np.empty(e.shape)
+    o2 = out.reshape(plan.n_rows, n)
+    counter = _StimulationCounter(e2, threshold, plan)
+    dt = np.asarray(dt_mean)
+
+    def work(i, arrays):
+        r0, r1, t0, t1 = plan.bounds(i)
+        if plan.pieces:  # a piece of row r0 (1-D, as in evaluate_chunked)
+            rows, shape = r0, (t1 - t0,)
+        else:
+            rows, shape = slice(r0, r1), (r1 - r0, t1 - t0)
+        count, on = (a[: math.prod(shape)].reshape(shape) for a in arrays)
+        counter.count_into(i, e2[rows, t0:t1], count, on)
+        np.multiply(count, dt, o2[rows, t0:t1])
+
+    run_chunks(plan.n_chunks, work, scratch="q?", scratch_size=plan.chunk_size)
+    return out
 
 
 @model_function("BH04")
@@ -173,6 +286,7 @@ def bhargava2004(
     f_st = inp.slow_twitch_fraction
     f_ft = 1.0 - f_st
 
+    counting = False  # count the stimulation time chunk by chunk in the kernel
     if activation_heat_decay:
         if stimulation_time_s is not None:
             t_stim = np.asarray(stimulation_time_s, dtype=float)
@@ -188,7 +302,9 @@ def bhargava2004(
                     f"muscle states {inp.shape}"
                 ) from None
         elif time_s is not None:
-            t_stim = bhargava_stimulation_time_s(np.broadcast_to(e, inp.shape), time_s, excitation_threshold)
+            dt_mean = _mean_sampling_interval(inp.shape, time_s)
+            counting = True
+            t_stim = np.zeros(())
         else:
             raise OptionError(
                 "BH04: the activation-heat decay needs time: pass time_s (s, along the last axis) or "
@@ -209,36 +325,85 @@ def bhargava2004(
     main_slow = k["maintenance_slow_W_per_kg"] * f_st * mass
     v_scale = inp.max_contraction_velocity * inp.optimal_fiber_length_m
     basal_w = basal_rate(inp, basal, basal_rate_W_per_kg)
+    params = [inp.max_isometric_force_N, act_fast, act_slow, main_fast, main_slow, v_scale, basal_w]
+    neg_rate = np.array(-rate)
+    floor = np.array(floor)
 
-    def kernel(e, a, lm, vb, fl, fv, fpe, f0, t_stim, act_fast, act_slow, main_fast, main_slow, v_scale, basal_w):
-        u_s, u_f = recruitment_terms(e)
-        h_a = act_fast * u_f + act_slow * u_s
+    plan = ChunkPlan(inp.shape, params, min_lead=max(0, inp.ndim - 1))
+    counter = None
+    if counting:
+        if plan.lead == inp.ndim - 1:  # rows along the last axis: count in the kernel
+            e2 = np.broadcast_to(e, inp.shape).reshape(plan.n_rows, plan.n_cols)
+            counter = _StimulationCounter(e2, excitation_threshold, plan)
+            dt = np.asarray(dt_mean)
+        else:  # parameters vary along the last axis: count first
+            t_stim = bhargava_stimulation_time_s(np.broadcast_to(e, inp.shape), time_s, excitation_threshold)
+
+    def kernel(out, s, p, tmp, i):
+        work, h_am, h_sl, b, total, h_a, h_m = out
+        e, a, lm, vb, fl, fv, fpe, t_stim = s
+        f0, act_fast, act_slow, main_fast, main_slow, v_scale, basal_w = p
+        u_s, u_f, t1, t2, t3, m1, m2, count, on = tmp
+        recruitment_terms_into(e, u_s, u_f, t1)
+        np.multiply(u_f, act_fast, h_a)
+        np.multiply(u_s, act_slow, t1)
+        np.add(h_a, t1, h_a)
         if decay:
-            x = t_stim * e
-            if infinite:  # inf * 0: no excitation, no activation heat either way
-                x = np.where(np.isnan(x), 0.0, x)
-            h_a = h_a * np.where(t_stim > 0, floor + np.exp(-rate * x), 0.0)
-        g = np.interp(lm, [0.5, 1.0, 1.5], [0.5, 1.0, 0.0]) if published else lm
-        h_m = g * (main_fast * u_f + main_slow * u_s)
-        v_ce = vb * v_scale
-        f_iso = a * fl * f0
-        f_ce = f_iso * fv
-        f_m = f_ce + fpe
-        h_sl = np.where(v_ce <= 0, 0.16 * f_iso + 0.18 * f_m, 0.157 * f_m) * -v_ce
-        work = -f_ce * v_ce
-        h_am = h_a + h_m
+            if counter is not None:  # t_stim = count * dt_mean, > 0 exactly where e > threshold
+                counter.count_into(i, e, count, on)
+                np.multiply(count, dt, t1)
+                np.multiply(t1, e, t1)
+                np.negative(on.view(np.int8), m1)
+            else:
+                np.multiply(t_stim, e, t1)
+                if infinite:  # inf * 0: no excitation, no activation heat either way
+                    keep_where(t1, as_mask(np.equal(t1, t1, m1)))  # 0 where NaN
+                as_mask(np.greater(t_stim, ZERO, m1))
+            np.multiply(t1, neg_rate, t1)
+            np.exp(t1, t1)
+            np.add(t1, floor, t1)
+            keep_where(t1, m1)  # phi = 0 where t_stim = 0
+            np.multiply(h_a, t1, h_a)
+        np.multiply(u_f, main_fast, h_m)
+        np.multiply(u_s, main_slow, t1)
+        np.add(h_m, t1, h_m)
+        if published:
+            np.multiply(h_m, np.interp(lm, [0.5, 1.0, 1.5], [0.5, 1.0, 0.0]), h_m)
+        else:
+            np.multiply(h_m, lm, h_m)
+        np.multiply(vb, v_scale, t3)  # V_CE
+        as_mask(np.less_equal(t3, ZERO, m2))
+        np.negative(t3, t3)  # -V_CE
+        np.multiply(a, fl, t1)
+        np.multiply(t1, f0, t1)  # F_iso
+        np.multiply(t1, fv, work)  # F_CE
+        np.add(work, fpe, t2)  # F_M
+        np.multiply(t1, _C.short_iso, t1)
+        np.multiply(t2, _C.short_total, u_s)
+        np.add(t1, u_s, t1)  # shortening coefficient
+        np.multiply(t2, _C.lengthening, h_sl)  # lengthening coefficient
+        select_into(h_sl, m2, t1, t2)
+        np.multiply(h_sl, t3, h_sl)
+        np.multiply(work, t3, work)  # -F_CE V_CE
+        np.add(h_a, h_m, h_am)
         if non_negative:
-            h_sl = apply_non_negativity(work, h_am, h_sl, strict=False)
-        return work, h_am, h_sl, basal_w, work + h_am + h_sl + basal_w, h_a, h_m
+            non_negativity_into(work, h_am, h_sl, t1, total, m1, t2, strict=False)
+        else:
+            np.add(work, h_am, t1)
+        total_into(total, t1, h_sl, basal_w)
+        np.copyto(b, basal_w)
 
-    work, h_am, h_sl, b, total, h_a, h_m = run_kernel(
+    work, h_am, h_sl, b, total, h_a, h_m = evaluate_chunked(
         kernel,
+        inp.shape,
         [
             e, inp.activation, inp.normalized_fiber_length, inp.normalized_fiber_velocity,
-            inp.active_force_length_multiplier, inp.force_velocity_multiplier, inp.passive_fiber_force_N,
-            inp.max_isometric_force_N, t_stim, act_fast, act_slow, main_fast, main_slow, v_scale, basal_w,
+            inp.active_force_length_multiplier, inp.force_velocity_multiplier, inp.passive_fiber_force_N, t_stim,
         ],
+        params,
         7,
+        scratch="dddddqqq?",
+        plan=plan,
     )
     return MetabolicRates(
         model=model,

@@ -2,17 +2,24 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 
 from ._common import (
     BASAL_RATE_W_PER_KG,
+    ONE,
+    ZERO,
     MetabolicRates,
-    apply_non_negativity,
+    as_mask,
     basal_rate,
     check_flag,
+    evaluate_chunked,
+    keep_where,
     model_function,
+    non_negativity_into,
     prepare_inputs,
-    run_kernel,
+    total_into,
 )
 
 __all__ = ["houdijk2006", "HOUDIJK_CONSTANTS"]
@@ -33,6 +40,10 @@ HOUDIJK_CONSTANTS = {
     "shortening_fast": 0.28,
     "shortening_slow": 0.16,
 }
+
+
+#: Constants of Hatze's activation-heat ratio as 0-d arrays (cheaper ufunc operands).
+_C = SimpleNamespace(rate=np.array(18.2), offset=np.array(-0.25))
 
 
 @model_function("HO06")
@@ -112,31 +123,60 @@ def houdijk2006(
     v_scale = inp.max_contraction_velocity * inp.optimal_fiber_length_m
     basal_w = basal_rate(inp, basal, basal_rate_W_per_kg)
 
-    def kernel(a, vb, fl, fv, f0, act_m, total_m, k3, k4, a_short, v_scale, basal_w):
-        nu_max = k3 + k4 * a
-        nu_rel = a * a
-        with np.errstate(divide="ignore"):
-            # nu_rel = 0 gives exp(-inf) = 0 in the numerator and h_a = 0
-            ratio = (1.0 - np.exp(-0.25 - 18.2 / (nu_rel * nu_max))) / (1.0 - np.exp(-0.25 - 18.2 / nu_max))
-        h_a = act_m * nu_rel * ratio
-        h_m = a * (total_m * fl - act_m)
-        v_ce = vb * v_scale
-        a_fl = a * fl
-        h_sl = np.where(v_ce <= 0, -a_short * a_fl * v_ce, 0.0)
-        work = -(a_fl * fv * f0) * v_ce
-        h_am = h_a + h_m
-        if non_negative:
-            h_sl = apply_non_negativity(work, h_am, h_sl, strict=False)
-        return work, h_am, h_sl, basal_w, work + h_am + h_sl + basal_w, h_a, h_m
+    neg_a_short = -a_short
 
-    work, h_am, h_sl, b, total, h_a, h_m = run_kernel(
+    def kernel(out, s, p, tmp, i):
+        work, h_am, h_sl, b, total, h_a, h_m = out
+        a, vb, fl, fv = s
+        f0, act_m, total_m, k3, k4, neg_a_short, v_scale, basal_w = p
+        t1, t2, t3, m1 = tmp
+        np.multiply(a, k4, t1)
+        np.add(t1, k3, t1)  # nu_max
+        np.multiply(a, a, t2)  # nu_rel
+        np.multiply(t2, t1, t3)
+        # nu_rel = 0 gives exp(-inf) = 0 in the numerator and h_a = 0
+        with np.errstate(divide="ignore"):
+            np.divide(_C.rate, t3, t3)
+            np.divide(_C.rate, t1, t1)
+        np.subtract(_C.offset, t3, t3)
+        np.exp(t3, t3)
+        np.subtract(ONE, t3, t3)
+        np.subtract(_C.offset, t1, t1)
+        np.exp(t1, t1)
+        np.subtract(ONE, t1, t1)
+        np.divide(t3, t1, t3)  # ratio
+        np.multiply(t2, act_m, h_a)
+        np.multiply(h_a, t3, h_a)
+        np.multiply(fl, total_m, h_m)
+        np.subtract(h_m, act_m, h_m)
+        np.multiply(h_m, a, h_m)
+        np.multiply(vb, v_scale, t1)  # V_CE
+        np.multiply(a, fl, t2)
+        np.multiply(t2, neg_a_short, h_sl)
+        np.multiply(h_sl, t1, h_sl)
+        keep_where(h_sl, as_mask(np.less_equal(t1, ZERO, m1)))  # no heat unless V_CE <= 0
+        np.multiply(t2, fv, work)
+        np.multiply(work, f0, work)
+        np.negative(t1, t1)
+        np.multiply(work, t1, work)
+        np.add(h_a, h_m, h_am)
+        if non_negative:
+            non_negativity_into(work, h_am, h_sl, t1, total, m1, t2, strict=False)
+        else:
+            np.add(work, h_am, t1)
+        total_into(total, t1, h_sl, basal_w)
+        np.copyto(b, basal_w)
+
+    work, h_am, h_sl, b, total, h_a, h_m = evaluate_chunked(
         kernel,
+        inp.shape,
         [
             inp.activation, inp.normalized_fiber_velocity, inp.active_force_length_multiplier,
-            inp.force_velocity_multiplier, inp.max_isometric_force_N, act_m, total_m, k3, k4, a_short, v_scale,
-            basal_w,
+            inp.force_velocity_multiplier,
         ],
+        [inp.max_isometric_force_N, act_m, total_m, k3, k4, neg_a_short, v_scale, basal_w],
         7,
+        scratch="dddq",
     )
     return MetabolicRates(
         model=model,

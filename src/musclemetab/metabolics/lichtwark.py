@@ -5,17 +5,24 @@ LW05 (Lichtwark & Wilson 2005) is not implemented: see ``docs/metabolics.md`` fo
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 
 from ._common import (
     BASAL_RATE_W_PER_KG,
+    ONE,
+    ZERO,
     MetabolicRates,
-    apply_non_negativity,
+    as_mask,
     basal_rate,
     check_flag,
+    evaluate_chunked,
     model_function,
+    non_negativity_into,
     prepare_inputs,
-    run_kernel,
+    select_into,
+    total_into,
 )
 
 __all__ = ["lichtwark2007", "LICHTWARK_CONSTANTS"]
@@ -103,25 +110,63 @@ def lichtwark2007(
     share_a, share_x = k["activation_share"], k["force_share"]
     basal_w = basal_rate(inp, basal, basal_rate_W_per_kg)
 
-    def kernel(a, vb, fl, fv, f0, lmo, vmax, n0, h_iso, decay, basal_w):
-        x = a * fl
-        h_rate = np.where(fv < 1.0, h_iso, h_iso * (0.3 + 0.7 * np.exp(-decay * (fv - 1.0))))
-        h_m = (share_a * a + share_x * x) * h_rate
-        vt = vb * vmax  # VCE~ (lMo/s)
-        h_sl = np.where(vt <= 0, -inv_g * vt, half * fv * vt) * (x * n0)
-        work = -(x * fv * f0) * (vt * lmo)
-        if non_negative:
-            h_sl = apply_non_negativity(work, h_m, h_sl, strict=False)
-        return work, h_m, h_sl, basal_w, work + h_m + h_sl + basal_w
+    neg_decay = -decay
+    neg_lmo = -inp.optimal_fiber_length_m
+    c = SimpleNamespace(
+        share_a=np.array(share_a),
+        share_x=np.array(share_x),
+        neg_inv_g=np.array(-inv_g),
+        half=np.array(half),
+        rest=np.array(0.3),
+        decaying=np.array(0.7),
+    )
 
-    work, h_m, h_sl, b, total = run_kernel(
+    def kernel(out, s, p, tmp, i):
+        work, h_m, h_sl, b, total = out
+        a, vb, fl, fv = s
+        f0, neg_lmo, vmax, n0, h_iso, neg_decay, basal_w = p
+        x, t1, t2, vt, m1, m2 = tmp
+        np.multiply(a, fl, x)
+        # h_iso where fV < 1, else h_iso (0.3 + 0.7 exp(-7 vmax (fV - 1))) (h_iso 1.0 = h_iso exactly)
+        np.subtract(fv, ONE, t1)
+        np.multiply(t1, neg_decay, t1)
+        np.exp(t1, t1)
+        np.multiply(t1, c.decaying, t1)
+        np.add(t1, c.rest, t1)
+        select_into(t1, as_mask(np.less(fv, ONE, m1)), ONE, t2)
+        np.multiply(t1, h_iso, t1)
+        np.multiply(a, c.share_a, h_m)
+        np.multiply(x, c.share_x, t2)
+        np.add(h_m, t2, h_m)
+        np.multiply(h_m, t1, h_m)
+        np.multiply(vb, vmax, vt)  # VCE~ (lMo/s)
+        np.multiply(fv, c.half, h_sl)
+        np.multiply(h_sl, vt, h_sl)
+        np.multiply(vt, c.neg_inv_g, t1)
+        select_into(h_sl, as_mask(np.less_equal(vt, ZERO, m1)), t1, t2)
+        np.multiply(x, n0, t1)
+        np.multiply(h_sl, t1, h_sl)
+        np.multiply(x, fv, work)
+        np.multiply(work, f0, work)
+        np.multiply(vt, neg_lmo, t1)
+        np.multiply(work, t1, work)
+        if non_negative:
+            non_negativity_into(work, h_m, h_sl, t1, total, m2, t2, strict=False)
+        else:
+            np.add(work, h_m, t1)
+        total_into(total, t1, h_sl, basal_w)
+        np.copyto(b, basal_w)
+
+    work, h_m, h_sl, b, total = evaluate_chunked(
         kernel,
+        inp.shape,
         [
             inp.activation, inp.normalized_fiber_velocity, inp.active_force_length_multiplier,
-            inp.force_velocity_multiplier, inp.max_isometric_force_N, inp.optimal_fiber_length_m, vmax, n0,
-            h_iso, decay, basal_w,
+            inp.force_velocity_multiplier,
         ],
+        [inp.max_isometric_force_N, neg_lmo, vmax, n0, h_iso, neg_decay, basal_w],
         5,
+        scratch="ddddqq",
     )
     return MetabolicRates(
         model=model, work=work, activation_maintenance=h_m, shortening_lengthening=h_sl, basal=b, total=total

@@ -22,18 +22,28 @@ or the excitation-dependent recruited fractions (UC16).
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 
 from ._common import (
     BASAL_RATE_W_PER_KG,
+    HALF,
+    ONE,
+    ZERO,
     MetabolicRates,
-    apply_non_negativity,
+    as_mask,
     basal_rate,
     check_flag,
+    evaluate_chunked,
+    keep_where,
     model_function,
+    non_negativity_into,
     prepare_inputs,
     recruitment_terms,
-    run_kernel,
+    recruitment_terms_into,
+    select_into,
+    total_into,
 )
 
 __all__ = ["umberger2003", "umberger2010", "uchida2016", "AEROBIC_FACTOR"]
@@ -83,44 +93,95 @@ def _umberger_family(
         st_coef = alpha_st * f_st
         ft_coef = alpha_ft * (1.0 - f_st)
     cap = slow_twitch_shortening_cap
+    # -(st + ft) VCE~ A^2 without the cap; -(F_CE V_CE) = F_CE (VCE~ (-lMo)) exactly
+    neg_coef = -(st_coef + ft_coef)
+    neg_lmo = -inp.optimal_fiber_length_m
+    neg_vmax_st = -vmax_st
 
-    def kernel(e, a, lm, vb, fl, fv, f0, lmo, vmax, f_st, s_m, am_coef, st_coef, ft_coef, alpha_l, vmax_st, basal_w):
-        vt = vb * vmax  # VCE~ (lMo/s)
-        shortening = vt <= 0
-        blend = 0.5 * (e + np.maximum(e, a))  # e if e > a, else (e + a)/2 (exact: 0.5 (e + e) = e)
+    def kernel(out, s, p, tmp, i):
+        work, h_am, h_sl, b, total = out
+        e, a, lm, vb, fl, fv = s
+        vmax, f0, neg_lmo, f_st, s_m, am_coef, st_coef, ft_coef, neg_coef, alpha_l, neg_vmax_st, basal_w = p
+        vt, blend, t1, t2, f_st_r, f_ft_r, shortening, longer, m3 = tmp
+        np.multiply(vb, vmax, vt)  # VCE~ (lMo/s)
+        as_mask(np.less_equal(vt, ZERO, shortening))
+        as_mask(np.greater(lm, ONE, longer))
+        np.maximum(e, a, out=blend)  # e if e > a, else (e + a)/2 (exact: 0.5 (e + e) = e)
+        np.add(e, blend, blend)
+        np.multiply(blend, HALF, blend)
+        np.power(blend, _C.am_exponent, t1)
         if recruitment:
-            f_st_r = _recruited_slow_twitch_fraction(e, f_st)
-            f_ft_r = 1.0 - f_st_r
-            h_am = (128.0 * f_ft_r + 25.0) * am_coef
-            st = st_coef * f_st_r
-            ft = ft_coef * f_ft_r
+            _recruited_slow_twitch_fraction_into(e, f_st, f_st_r, f_ft_r, t2, m3)
+            np.subtract(ONE, f_st_r, f_ft_r)
+            np.multiply(f_ft_r, _C.am_fast, h_am)
+            np.add(h_am, _C.am_base, h_am)
+            np.multiply(h_am, am_coef, h_am)
+            np.multiply(h_am, t1, h_am)
+            np.multiply(f_st_r, st_coef, f_st_r)  # st
+            np.multiply(f_ft_r, ft_coef, f_ft_r)  # ft
         else:
-            h_am = am_coef
-            st, ft = st_coef, ft_coef
-        h_am = h_am * blend**0.6
-        longer = lm > 1.0
-        h_am = np.where(longer, h_am * (0.4 + 0.6 * fl), h_am)
-        if cap:
-            h_short = -(st * np.maximum(vt, -vmax_st) + ft * vt) * (blend * blend)
+            np.multiply(t1, am_coef, h_am)
+        # above optimal length: h_am (0.4 + 0.6 fL)
+        np.multiply(fl, _C.am_length_slope, t1)
+        np.add(t1, _C.am_length_base, t1)
+        np.multiply(t1, h_am, t1)
+        select_into(h_am, longer, t1, t2)
+        # lengthening heat (t2), replaced by the shortening heat where VCE~ <= 0
+        np.multiply(vt, alpha_l, t2)
+        np.multiply(t2, blend, t2)
+        np.multiply(blend, blend, blend)
+        if recruitment:
+            if cap:
+                np.maximum(vt, neg_vmax_st, out=t1)
+                np.multiply(f_st_r, t1, t1)
+                np.multiply(f_ft_r, vt, h_sl)
+                np.add(t1, h_sl, h_sl)
+                np.negative(h_sl, h_sl)
+            else:
+                np.add(f_st_r, f_ft_r, h_sl)
+                np.negative(h_sl, h_sl)
+                np.multiply(h_sl, vt, h_sl)
+        elif cap:
+            np.maximum(vt, neg_vmax_st, out=t1)
+            np.multiply(t1, st_coef, t1)
+            np.multiply(vt, ft_coef, h_sl)
+            np.add(t1, h_sl, h_sl)
+            np.negative(h_sl, h_sl)
         else:
-            h_short = -(st + ft) * vt * (blend * blend)
-        h_sl = np.where(shortening, h_short, alpha_l * vt * blend) * s_m
-        h_sl = np.where(longer, h_sl * fl, h_sl)
-        work = -(a * fl * fv * f0) * (vt * lmo)
-        if not include_negative_work:
-            work = np.where(shortening, work, 0.0)
+            np.multiply(vt, neg_coef, h_sl)
+        np.multiply(h_sl, blend, h_sl)  # times A^2
+        select_into(t2, shortening, h_sl, t1)
+        np.multiply(t2, s_m, h_sl)
+        np.multiply(h_sl, fl, t1)  # above optimal length: times fL
+        select_into(h_sl, longer, t1, t2)
+        # work rate
+        np.multiply(a, fl, work)
+        np.multiply(work, fv, work)
+        np.multiply(work, f0, work)
+        np.multiply(vt, neg_lmo, t1)
+        np.multiply(work, t1, work)
+        if not include_negative_work:  # 0 where VCE~ > 0
+            keep_where(work, shortening)
         if non_negative:
-            h_sl = apply_non_negativity(work, h_am, h_sl, strict=strict)
-        return work, h_am, h_sl, basal_w, work + h_am + h_sl + basal_w
+            non_negativity_into(work, h_am, h_sl, t1, total, m3, t2, strict=strict)
+        else:
+            np.add(work, h_am, t1)
+        total_into(total, t1, h_sl, basal_w)
+        np.copyto(b, basal_w)
 
-    work, h_am, h_sl, b, total = run_kernel(
+    work, h_am, h_sl, b, total = evaluate_chunked(
         kernel,
+        inp.shape,
         [
             inp.excitation, inp.activation, inp.normalized_fiber_length, inp.normalized_fiber_velocity,
-            inp.active_force_length_multiplier, inp.force_velocity_multiplier, inp.max_isometric_force_N,
-            inp.optimal_fiber_length_m, vmax, f_st, s_m, am_coef, st_coef, ft_coef, alpha_l, vmax_st, basal_w,
+            inp.active_force_length_multiplier, inp.force_velocity_multiplier,
+        ],
+        [
+            vmax, inp.max_isometric_force_N, neg_lmo, f_st, s_m, am_coef, st_coef, ft_coef, neg_coef, alpha_l,
+            neg_vmax_st, basal_w,
         ],
         5,
+        scratch="ddddddqqq",
     )
     return MetabolicRates(
         model=model, work=work, activation_maintenance=h_am, shortening_lengthening=h_sl, basal=b, total=total
@@ -139,6 +200,30 @@ def _recruited_slow_twitch_fraction(excitation, slow_twitch_fraction):
     den = num + (1.0 - slow_twitch_fraction) * u_f
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(den == 0, 1.0, num / den)
+
+
+def _recruited_slow_twitch_fraction_into(excitation, slow_twitch_fraction, out, tmp, tmp2, mask) -> None:
+    """:func:`_recruited_slow_twitch_fraction` into ``out`` (chunk kernels; ``tmp``, ``tmp2``
+    (float) and ``mask`` (int64) are scratch arrays), with the same arithmetic."""
+    recruitment_terms_into(excitation, out, tmp, tmp2)  # u_s in out, u_f in tmp
+    np.multiply(out, slow_twitch_fraction, out)  # num
+    np.multiply(tmp, ONE - slow_twitch_fraction, tmp)
+    np.add(out, tmp, tmp)  # den
+    with np.errstate(divide="ignore", invalid="ignore"):
+        np.divide(out, tmp, out)
+    np.equal(tmp, ZERO, mask)
+    if mask.any():
+        select_into(out, as_mask(mask), ONE, tmp)
+
+
+#: Constants of the kernel as 0-d arrays (cheaper ufunc operands, same arithmetic).
+_C = SimpleNamespace(
+    am_exponent=np.array(0.6),
+    am_fast=np.array(128.0),
+    am_base=np.array(25.0),
+    am_length_slope=np.array(0.6),
+    am_length_base=np.array(0.4),
+)
 
 
 @model_function("UM03")
