@@ -100,11 +100,10 @@ from .problem import (
     ipopt_options,
     ipopt_statistics,
     node_bounds,
+    run_ipopt,
     SolverOptions,
     _constants,
     _node_expressions,
-    set_blas_threads,
-    tune_malloc,
 )
 from .solution import _jsonable, build_solution
 from .static_opt import InitialGuess, initial_guess, static_optimisation
@@ -687,21 +686,8 @@ def solve_emg_ten_ocp(
     except RuntimeError as exc:
         raise SolverError(f"the EMG-TEN problem could not be built: {exc}") from None
     build_time = _time.perf_counter() - t_build
-    if options.tune_malloc:
-        tune_malloc()
-    if options.blas_threads is not None:
-        set_blas_threads(options.blas_threads)
-    t0 = _time.perf_counter()
-    c0 = _time.process_time()
-    try:
-        sol = solver(x0=nlp["x0"], lbx=nlp["lbx"], ubx=nlp["ubx"], lbg=nlp["lbg"], ubg=nlp["ubg"])
-    except RuntimeError as exc:
-        raise SolverError(f"IPOPT stopped with an error: {exc}") from None
-    solve_time = _time.perf_counter() - t0
-    solve_cpu = _time.process_time() - c0
-    stats = solver.stats()
-    x = np.asarray(sol["x"]).reshape(-1)
-    gval = np.asarray(sol["g"]).reshape(-1)
+    x, gval, f_opt, stats, solve_time, solve_cpu = run_ipopt(
+        solver, options, nlp["x0"], nlp["lbx"], nlp["ubx"], nlp["lbg"], nlp["ubg"])
     lbg, ubg = nlp["lbg"], nlp["ubg"]
     viol = np.maximum(lbg - gval, 0.0) + np.maximum(gval - ubg, 0.0)
     p = x[L["P0"]:]
@@ -745,7 +731,7 @@ def solve_emg_ten_ocp(
         tendon_scale=s_kt.copy(),
         emg_muscles=tuple(L["emg_muscles"]),
         emg_scale=s_emg.copy(),
-        objective=float(sol["f"]),
+        objective=f_opt,
         objective_terms=terms,
         status=str(stats.get("return_status", "unknown")),
         success=bool(stats.get("success", False)),

@@ -459,6 +459,23 @@ def ipopt_options(options: SolverOptions, mumps_settings: dict | None = None) ->
     return ipopt
 
 
+def run_ipopt(solver, options: SolverOptions, x0, lbx, ubx, lbg, ubg):
+    """Apply the process settings of ``options`` (``tune_malloc``, ``blas_threads``) and run
+    an IPOPT ``nlpsol``; returns ``(x, g, f, stats, wall time s, CPU time s)``."""
+    if options.tune_malloc:
+        tune_malloc()
+    if options.blas_threads is not None:
+        set_blas_threads(options.blas_threads)
+    t0 = _time.perf_counter()
+    c0 = _time.process_time()
+    try:
+        sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+    except RuntimeError as exc:
+        raise SolverError(f"IPOPT stopped with an error: {exc}") from None
+    return (np.asarray(sol["x"]).reshape(-1), np.asarray(sol["g"]).reshape(-1), float(sol["f"]), solver.stats(),
+            _time.perf_counter() - t0, _time.process_time() - c0)
+
+
 def solve_ocp(
     inputs: TrialInputs,
     params: MuscleTendonParameters,
@@ -491,21 +508,7 @@ def solve_ocp(
     terms_f = ca.Function("terms", [w], list(terms.values()))
     build_time = _time.perf_counter() - t_build
 
-    if options.tune_malloc:
-        tune_malloc()
-    if options.blas_threads is not None:
-        set_blas_threads(options.blas_threads)
-    t0 = _time.perf_counter()
-    c0 = _time.process_time()
-    try:
-        sol = solver(x0=nlp["x0"], lbx=nlp["lbx"], ubx=nlp["ubx"], lbg=0.0, ubg=0.0)
-    except RuntimeError as exc:
-        raise SolverError(f"IPOPT stopped with an error: {exc}") from None
-    solve_time = _time.perf_counter() - t0
-    solve_cpu = _time.process_time() - c0
-    stats = solver.stats()
-    x = np.asarray(sol["x"]).reshape(-1)
-    gval = np.asarray(sol["g"]).reshape(-1)
+    x, gval, f_opt, stats, solve_time, solve_cpu = run_ipopt(solver, options, nlp["x0"], nlp["lbx"], nlp["ubx"], 0.0, 0.0)
     Z = x[: nz * N].reshape(N, nz)
     xNv = x[nz * N:]
     return OcpResult(
@@ -515,7 +518,7 @@ def solve_ocp(
         excitation=Z[:, 3 * M:4 * M].copy(),
         reserve=Z[:, 4 * M:4 * M + D].copy(),
         vm_norm=Z[:, 4 * M + D:].copy(),
-        objective=float(sol["f"]),
+        objective=f_opt,
         objective_terms={k: float(v) for k, v in zip(terms, terms_f(x))},
         status=str(stats.get("return_status", "unknown")),
         success=bool(stats.get("success", False)),
