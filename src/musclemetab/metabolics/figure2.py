@@ -33,6 +33,7 @@ import numpy as np
 
 from ..errors import OptionError
 from ..muscle import active_force_length, force_velocity, passive_force_length
+from .registry import MODEL_COLOURS as _COLOURS
 from .registry import MODELS, STUDY_MODELS
 
 __all__ = ["FIGURE2_DEFAULTS", "figure2_data", "ordering_summary", "save_figure2", "EXAMPLE_SOLEUS_F0_N"]
@@ -206,16 +207,6 @@ def ordering_summary(data: dict) -> dict:
         "efficiency_gap_BH04_HO06_low_speed": float(np.nanmean(diff[:, low])),
         "efficiency_gap_BH04_HO06_high_speed": float(np.nanmean(diff[:, high])),
     }
-
-
-_COLOURS = {
-    "UM03": "#1f77b4",
-    "BH04": "#d62728",
-    "HO06": "#2ca02c",
-    "LW07": "#9467bd",
-    "UM10": "#17becf",
-    "UC16": "#ff7f0e",
-}
 
 
 def _choices_text(cfg: dict) -> str:

@@ -11,9 +11,19 @@ from .houdijk import houdijk2006
 from .lichtwark import lichtwark2007
 from .umberger import uchida2016, umberger2003, umberger2010
 
-__all__ = ["MODELS", "STUDY_MODELS", "get_model", "parse_models", "compute_models"]
+__all__ = ["MODELS", "STUDY_MODELS", "MODEL_COLOURS", "get_model", "parse_models", "compute_models"]
 
 #: Every implemented model by its short name, in the order of the paper's Table 2.
+#: One plotting colour per model, shared by every figure of the package.
+MODEL_COLOURS = {
+    "UM03": "#1f77b4",
+    "BH04": "#d62728",
+    "HO06": "#2ca02c",
+    "LW07": "#9467bd",
+    "UM10": "#17becf",
+    "UC16": "#ff7f0e",
+}
+
 MODELS = {
     "UM03": umberger2003,
     "BH04": bhargava2004,

@@ -30,6 +30,7 @@ import numpy as np
 
 from ..analysis.groups import GROUP_NAMES as _GROUP_NAMES
 from ..analysis.groups import GROUPS_WITH_OTHER, OTHER
+from ..metabolics.registry import MODEL_COLOURS as _MODEL_COLOURS
 from ..errors import MusclemetabError, OptionError, UnknownMuscleError
 
 __all__ = [
@@ -55,15 +56,8 @@ __all__ = [
     "save_figure",
 ]
 
-#: One colour per metabolic model (as in the Figure-2 plot).
-MODEL_COLOURS = {
-    "UM03": "#1f77b4",
-    "BH04": "#d62728",
-    "HO06": "#2ca02c",
-    "LW07": "#9467bd",
-    "UM10": "#17becf",
-    "UC16": "#ff7f0e",
-}
+#: One colour per metabolic model (the package's, as in the Figure-2 plot).
+MODEL_COLOURS = _MODEL_COLOURS
 
 #: One colour per workflow of the muscle redundancy solver.
 WORKFLOW_COLOURS = {
