@@ -18,6 +18,7 @@ import pytest
 
 from musclemetab.errors import OptionError
 from musclemetab.metabolics import MODELS, _common, bhargava_stimulation_time_s, umberger2003
+from musclemetab.metabolics._common import STATE_ARGUMENTS
 from musclemetab.metabolics.bhargava import _stimulation_count
 
 CHUNK = 64  # small chunks: many of them even on small arrays
@@ -49,7 +50,7 @@ SHAPES = [
 
 def _states(rng, shape, pshape):
     """Random states reaching every branch: excitation above and below activation, 0,
-    negative and beyond 1 (the cosine branch); fibres shorter, longer and exactly at optimal
+    negative and beyond 1; fibres shorter, longer and exactly at optimal
     length; shortening, lengthening and isometric; fV below, at and above 1; runs of
     excitation above and below BH04's threshold; totals below zero (non-negativity)."""
     e = rng.uniform(-0.05, 1.0, shape)
@@ -188,6 +189,27 @@ def test_non_finite_state_reported_first_in_argument_order(monkeypatch):
         umberger2003(**s)
 
 
+@pytest.mark.parametrize("name", ["BH04", "UC16", "HO06", "LW07"])
+def test_non_finite_large_state_found_during_evaluation(monkeypatch, name):
+    # large states are checked chunk by chunk while the model is evaluated: every state, the
+    # ones a model does not use included, gives the same error as the check before evaluation
+    _many_chunks(monkeypatch, 2)
+    rng = np.random.default_rng(3)
+    base = _states(rng, (3, 5 * CHUNK + 17), (3,))
+    base["excitation"] = np.abs(base["excitation"])  # no NaN of the model's own making
+    base["activation"] = np.maximum(base["activation"], base["excitation"])
+    extra = {"time_s": np.arange(base["excitation"].shape[-1]) * 0.01} if name == "BH04" else {}
+    for state in STATE_ARGUMENTS:
+        for value, kind in ((np.nan, "NaN"), (-np.inf, "infinite")):
+            s = dict(base)
+            s[state] = s[state].copy()
+            s[state][2, 4 * CHUNK + 5] = value
+            with pytest.raises(OptionError, match=rf"'{state}' holds {kind} values \(1 of .*index \(2, {4 * CHUNK + 5}\)"):
+                MODELS[name](**s, **extra)
+            with np.errstate(all="raise"), pytest.raises(OptionError, match=f"'{state}' holds {kind}"):
+                MODELS[name](**s, **extra)
+
+
 def test_callers_floating_point_settings_apply_in_threads(monkeypatch):
     # negative excitation below activation gives a negative blend and NaN from A^0.6
     _many_chunks(monkeypatch, 3)
@@ -203,7 +225,7 @@ def test_callers_floating_point_settings_apply_in_threads(monkeypatch):
 
 
 def test_in_place_recruitment_terms_equal_the_array_formula():
-    # including excitation outside [-1, 1] (the cosine branch) and NaN
+    # including excitation outside [-1, 1] and NaN
     e = np.concatenate([np.linspace(-1.5, 1.5, 3001), [0.0, -0.0, 1.0, -1.0, np.nan]])
     u_s, u_f = _common.recruitment_terms(e)
     got_s, got_f, tmp = np.empty_like(e), np.empty_like(e), np.empty_like(e)
@@ -218,6 +240,6 @@ def test_in_place_recruited_fraction_equals_the_array_formula():
     e = np.concatenate([np.linspace(-1.5, 1.5, 3001), [0.0, -0.0, 1.0, 2.0, -2.0]])
     for f_st in (np.array(0.0), np.array(0.6), np.array(1.0)):
         expected = _recruited_slow_twitch_fraction(e, f_st)
-        got, tmp, tmp2, mask = np.empty_like(e), np.empty_like(e), np.empty_like(e), np.empty(e.shape, np.int64)
-        _recruited_slow_twitch_fraction_into(e, f_st, got, tmp, tmp2, mask)
+        got, tmp, mask = np.empty_like(e), np.empty_like(e), np.empty(e.shape, np.int64)
+        _recruited_slow_twitch_fraction_into(e, f_st, got, tmp, mask)
         assert _same_bits(got, expected), float(f_st)

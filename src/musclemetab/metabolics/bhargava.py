@@ -16,6 +16,7 @@ from ._common import (
     MetabolicRates,
     as_mask,
     basal_rate,
+    basal_view,
     check_flag,
     evaluate_chunked,
     keep_where,
@@ -279,7 +280,7 @@ def bhargava2004(
             f"BH04: maintenance_length_dependence must be one of {', '.join(_LENGTH_DEPENDENCE)}, "
             f"not {maintenance_length_dependence!r}"
         )
-    inp = prepare_inputs(model, locals(), check=check)
+    inp = prepare_inputs(model, locals(), check=check, defer_large=True)
     k = BHARGAVA_CONSTANTS
     e = inp.excitation
     mass = inp.muscle_mass_kg
@@ -340,7 +341,7 @@ def bhargava2004(
             t_stim = bhargava_stimulation_time_s(np.broadcast_to(e, inp.shape), time_s, excitation_threshold)
 
     def kernel(out, s, p, tmp, i):
-        work, h_am, h_sl, b, total, h_a, h_m = out
+        work, h_am, h_sl, total, h_a, h_m = out
         e, a, lm, vb, fl, fv, fpe, t_stim = s
         f0, act_fast, act_slow, main_fast, main_slow, v_scale, basal_w = p
         u_s, u_f, t1, t2, t3, m1, m2, count, on = tmp
@@ -391,9 +392,8 @@ def bhargava2004(
         else:
             np.add(work, h_am, t1)
         total_into(total, t1, h_sl, basal_w)
-        np.copyto(b, basal_w)
 
-    work, h_am, h_sl, b, total, h_a, h_m = evaluate_chunked(
+    work, h_am, h_sl, total, h_a, h_m = evaluate_chunked(
         kernel,
         inp.shape,
         [
@@ -401,16 +401,17 @@ def bhargava2004(
             inp.active_force_length_multiplier, inp.force_velocity_multiplier, inp.passive_fiber_force_N, t_stim,
         ],
         params,
-        7,
+        6,
         scratch="dddddqqq?",
         plan=plan,
+        inputs=inp,
     )
     return MetabolicRates(
         model=model,
         work=work,
         activation_maintenance=h_am,
         shortening_lengthening=h_sl,
-        basal=b,
+        basal=basal_view(basal_w, inp.shape),
         total=total,
         extras={"activation": h_a, "maintenance": h_m},
     )

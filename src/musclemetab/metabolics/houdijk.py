@@ -13,6 +13,7 @@ from ._common import (
     MetabolicRates,
     as_mask,
     basal_rate,
+    basal_view,
     check_flag,
     evaluate_chunked,
     keep_where,
@@ -106,7 +107,7 @@ def houdijk2006(
     model = "HO06"
     for flag in ("non_negative", "basal"):
         check_flag(model, flag, locals()[flag])
-    inp = prepare_inputs(model, locals(), check=check)
+    inp = prepare_inputs(model, locals(), check=check, defer_large=True)
     k = HOUDIJK_CONSTANTS
     mass = inp.muscle_mass_kg
     f_st = inp.slow_twitch_fraction
@@ -126,7 +127,7 @@ def houdijk2006(
     neg_a_short = -a_short
 
     def kernel(out, s, p, tmp, i):
-        work, h_am, h_sl, b, total, h_a, h_m = out
+        work, h_am, h_sl, total, h_a, h_m = out
         a, vb, fl, fv = s
         f0, act_m, total_m, k3, k4, neg_a_short, v_scale, basal_w = p
         t1, t2, t3, m1 = tmp
@@ -165,9 +166,8 @@ def houdijk2006(
         else:
             np.add(work, h_am, t1)
         total_into(total, t1, h_sl, basal_w)
-        np.copyto(b, basal_w)
 
-    work, h_am, h_sl, b, total, h_a, h_m = evaluate_chunked(
+    work, h_am, h_sl, total, h_a, h_m = evaluate_chunked(
         kernel,
         inp.shape,
         [
@@ -175,15 +175,16 @@ def houdijk2006(
             inp.force_velocity_multiplier,
         ],
         [inp.max_isometric_force_N, act_m, total_m, k3, k4, neg_a_short, v_scale, basal_w],
-        7,
+        6,
         scratch="dddq",
+        inputs=inp,
     )
     return MetabolicRates(
         model=model,
         work=work,
         activation_maintenance=h_am,
         shortening_lengthening=h_sl,
-        basal=b,
+        basal=basal_view(basal_w, inp.shape),
         total=total,
         extras={"activation": h_a, "maintenance": h_m},
     )

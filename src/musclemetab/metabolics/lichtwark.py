@@ -16,6 +16,7 @@ from ._common import (
     MetabolicRates,
     as_mask,
     basal_rate,
+    basal_view,
     check_flag,
     evaluate_chunked,
     model_function,
@@ -98,7 +99,7 @@ def lichtwark2007(
     model = "LW07"
     for flag in ("non_negative", "basal"):
         check_flag(model, flag, locals()[flag])
-    inp = prepare_inputs(model, locals(), check=check)
+    inp = prepare_inputs(model, locals(), check=check, defer_large=True)
     k = LICHTWARK_CONSTANTS
     vmax = inp.max_contraction_velocity
     # per-muscle constants
@@ -122,7 +123,7 @@ def lichtwark2007(
     )
 
     def kernel(out, s, p, tmp, i):
-        work, h_m, h_sl, b, total = out
+        work, h_m, h_sl, total = out
         a, vb, fl, fv = s
         f0, neg_lmo, vmax, n0, h_iso, neg_decay, basal_w = p
         x, t1, t2, vt, m1, m2 = tmp
@@ -155,9 +156,8 @@ def lichtwark2007(
         else:
             np.add(work, h_m, t1)
         total_into(total, t1, h_sl, basal_w)
-        np.copyto(b, basal_w)
 
-    work, h_m, h_sl, b, total = evaluate_chunked(
+    work, h_m, h_sl, total = evaluate_chunked(
         kernel,
         inp.shape,
         [
@@ -165,9 +165,11 @@ def lichtwark2007(
             inp.force_velocity_multiplier,
         ],
         [inp.max_isometric_force_N, neg_lmo, vmax, n0, h_iso, neg_decay, basal_w],
-        5,
+        4,
         scratch="ddddqq",
+        inputs=inp,
     )
     return MetabolicRates(
-        model=model, work=work, activation_maintenance=h_m, shortening_lengthening=h_sl, basal=b, total=total
+        model=model, work=work, activation_maintenance=h_m, shortening_lengthening=h_sl,
+        basal=basal_view(basal_w, inp.shape), total=total,
     )

@@ -30,18 +30,18 @@ from ._common import (
     BASAL_RATE_W_PER_KG,
     HALF,
     ONE,
+    QUARTER_PI,
     ZERO,
     MetabolicRates,
     as_mask,
     basal_rate,
+    basal_view,
     check_flag,
     evaluate_chunked,
     keep_where,
     model_function,
     non_negativity_into,
     prepare_inputs,
-    recruitment_terms,
-    recruitment_terms_into,
     select_into,
     total_into,
 )
@@ -74,7 +74,7 @@ def _umberger_family(
 ) -> MetabolicRates:
     for flag in ("include_negative_work", "non_negative", "slow_twitch_shortening_cap", "basal"):
         check_flag(model, flag, locals()[flag])
-    inp = prepare_inputs(model, values, check=check)
+    inp = prepare_inputs(model, values, check=check, defer_large=True)
 
     # per-muscle constants (parameter-shaped)
     vmax = inp.max_contraction_velocity
@@ -99,7 +99,7 @@ def _umberger_family(
     neg_vmax_st = -vmax_st
 
     def kernel(out, s, p, tmp, i):
-        work, h_am, h_sl, b, total = out
+        work, h_am, h_sl, total = out
         e, a, lm, vb, fl, fv = s
         vmax, f0, neg_lmo, f_st, s_m, am_coef, st_coef, ft_coef, neg_coef, alpha_l, neg_vmax_st, basal_w = p
         vt, blend, t1, t2, f_st_r, f_ft_r, shortening, longer, m3 = tmp
@@ -111,7 +111,7 @@ def _umberger_family(
         np.multiply(blend, HALF, blend)
         np.power(blend, _C.am_exponent, t1)
         if recruitment:
-            _recruited_slow_twitch_fraction_into(e, f_st, f_st_r, f_ft_r, t2, m3)
+            _recruited_slow_twitch_fraction_into(e, f_st, f_st_r, t2, m3)
             np.subtract(ONE, f_st_r, f_ft_r)
             np.multiply(f_ft_r, _C.am_fast, h_am)
             np.add(h_am, _C.am_base, h_am)
@@ -167,9 +167,8 @@ def _umberger_family(
         else:
             np.add(work, h_am, t1)
         total_into(total, t1, h_sl, basal_w)
-        np.copyto(b, basal_w)
 
-    work, h_am, h_sl, b, total = evaluate_chunked(
+    work, h_am, h_sl, total = evaluate_chunked(
         kernel,
         inp.shape,
         [
@@ -180,11 +179,13 @@ def _umberger_family(
             vmax, inp.max_isometric_force_N, neg_lmo, f_st, s_m, am_coef, st_coef, ft_coef, neg_coef, alpha_l,
             neg_vmax_st, basal_w,
         ],
-        5,
+        4,
         scratch="ddddddqqq",
+        inputs=inp,
     )
     return MetabolicRates(
-        model=model, work=work, activation_maintenance=h_am, shortening_lengthening=h_sl, basal=b, total=total
+        model=model, work=work, activation_maintenance=h_am, shortening_lengthening=h_sl,
+        basal=basal_view(basal_w, inp.shape), total=total,
     )
 
 
@@ -194,23 +195,28 @@ def _recruited_slow_twitch_fraction(excitation, slow_twitch_fraction):
     ``u_f = 1 - cos(pi e/2)``, ``u_s = sin(pi e/2)``,
     ``f_ST' = f_ST u_s / (f_ST u_s + f_FT u_f)``, and ``f_ST' = 1`` where the denominator
     is zero (``e = 0``; the reference implementation tests ``e == 0``).
+
+    With ``t = tan(pi e/4)``, ``u_f = t u_s`` (see
+    :func:`~musclemetab.metabolics._common.recruitment_terms`), so where ``u_s != 0`` the
+    fraction is ``f_ST / (f_ST + f_FT t)``. That form is evaluated, with 1 where its
+    denominator is zero; at ``e = 0`` (``t = 0``) it gives 1 for every ``f_ST``, as the
+    definition does.
     """
-    u_s, u_f = recruitment_terms(excitation)
-    num = slow_twitch_fraction * u_s
-    den = num + (1.0 - slow_twitch_fraction) * u_f
+    t = np.tan(QUARTER_PI * np.asarray(excitation, dtype=float))
+    den = slow_twitch_fraction + (1.0 - slow_twitch_fraction) * t
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(den == 0, 1.0, num / den)
+        return np.where(den == 0, 1.0, slow_twitch_fraction / den)
 
 
-def _recruited_slow_twitch_fraction_into(excitation, slow_twitch_fraction, out, tmp, tmp2, mask) -> None:
-    """:func:`_recruited_slow_twitch_fraction` into ``out`` (chunk kernels; ``tmp``, ``tmp2``
-    (float) and ``mask`` (int64) are scratch arrays), with the same arithmetic."""
-    recruitment_terms_into(excitation, out, tmp, tmp2)  # u_s in out, u_f in tmp
-    np.multiply(out, slow_twitch_fraction, out)  # num
-    np.multiply(tmp, ONE - slow_twitch_fraction, tmp)
-    np.add(out, tmp, tmp)  # den
+def _recruited_slow_twitch_fraction_into(excitation, slow_twitch_fraction, out, tmp, mask) -> None:
+    """:func:`_recruited_slow_twitch_fraction` into ``out`` (chunk kernels; ``tmp`` (float)
+    and ``mask`` (int64) are scratch arrays), with the same arithmetic."""
+    np.multiply(QUARTER_PI, excitation, tmp)
+    np.tan(tmp, tmp)
+    np.multiply(ONE - slow_twitch_fraction, tmp, tmp)
+    np.add(slow_twitch_fraction, tmp, tmp)  # den
     with np.errstate(divide="ignore", invalid="ignore"):
-        np.divide(out, tmp, out)
+        np.divide(slow_twitch_fraction, tmp, out)
     np.equal(tmp, ZERO, mask)
     if mask.any():
         select_into(out, as_mask(mask), ONE, tmp)
