@@ -12,6 +12,7 @@ that reach every branch of every model and option.
 from __future__ import annotations
 
 import itertools
+import math
 
 import numpy as np
 import pytest
@@ -224,14 +225,19 @@ def test_callers_floating_point_settings_apply_in_threads(monkeypatch):
     assert np.isnan(r.activation_maintenance).all()
 
 
-def test_in_place_recruitment_terms_equal_the_array_formula():
-    # including excitation outside [-1, 1] and NaN
-    e = np.concatenate([np.linspace(-1.5, 1.5, 3001), [0.0, -0.0, 1.0, -1.0, np.nan]])
+def test_recruitment_terms_are_the_sine_and_one_minus_cosine():
+    # the half-angle forms against math.sin and 1 - cos = 2 sin^2(x/2) (no cancellation),
+    # including excitation outside [-1, 1]; the in-place form gives the same bits
+    e = np.concatenate([np.linspace(-1.5, 1.5, 3001), [0.0, -0.0, 1.0, -1.0, 1e-9, 0.1, 0.999999]])
     u_s, u_f = _common.recruitment_terms(e)
-    got_s, got_f, tmp = np.empty_like(e), np.empty_like(e), np.empty_like(e)
-    with np.errstate(invalid="ignore"):
-        _common.recruitment_terms_into(e, got_s, got_f, tmp)
-    assert _same_bits(got_s, u_s) and _same_bits(got_f, u_f)
+    x = [0.5 * math.pi * v for v in e]
+    np.testing.assert_allclose(u_s, [math.sin(v) for v in x], rtol=2e-15, atol=0)
+    np.testing.assert_allclose(u_f, [2.0 * math.sin(0.5 * v) ** 2 for v in x], rtol=2e-15, atol=0)
+    e = np.append(e, np.nan)
+    u_s, u_f = _common.recruitment_terms(e)
+    t, got_s, tmp = np.empty_like(e), np.empty_like(e), np.empty_like(e)
+    _common.recruitment_terms_into(e, t, got_s, tmp)
+    assert _same_bits(got_s, u_s) and _same_bits(t * got_s, u_f)
 
 
 def test_in_place_recruited_fraction_equals_the_array_formula():

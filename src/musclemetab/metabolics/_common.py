@@ -812,16 +812,16 @@ def recruitment_terms(excitation):
     return u_s, t * u_s
 
 
-def recruitment_terms_into(excitation, u_s, u_f, tmp) -> None:
-    """:func:`recruitment_terms` into the arrays ``u_s`` and ``u_f`` (chunk kernels; ``tmp``
-    is a scratch array), with the same arithmetic."""
-    np.multiply(QUARTER_PI, excitation, tmp)
-    np.tan(tmp, tmp)  # t
-    np.multiply(tmp, tmp, u_f)
-    np.add(ONE, u_f, u_f)
-    np.multiply(TWO, tmp, u_s)
-    np.divide(u_s, u_f, u_s)
-    np.multiply(tmp, u_s, u_f)
+def recruitment_terms_into(excitation, t, u_s, tmp) -> None:
+    """:func:`recruitment_terms` in place (chunk kernels): ``t = tan(pi e/4)`` into ``t`` and
+    ``u_s`` into ``u_s`` (``tmp`` is a scratch array), with the same arithmetic; the caller
+    forms ``u_f = t u_s`` where it needs it (or folds it into a coefficient)."""
+    np.multiply(QUARTER_PI, excitation, t)
+    np.tan(t, t)
+    np.multiply(t, t, tmp)
+    np.add(ONE, tmp, tmp)
+    np.multiply(TWO, t, u_s)
+    np.divide(u_s, tmp, u_s)
 
 
 def full_shape(x, shape: tuple[int, ...]) -> np.ndarray:

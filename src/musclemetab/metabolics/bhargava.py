@@ -324,9 +324,9 @@ def bhargava2004(
     act_slow = k["activation_slow_W_per_kg"] * f_st * mass
     main_fast = k["maintenance_fast_W_per_kg"] * f_ft * mass
     main_slow = k["maintenance_slow_W_per_kg"] * f_st * mass
-    v_scale = inp.max_contraction_velocity * inp.optimal_fiber_length_m
+    neg_v_scale = -(inp.max_contraction_velocity * inp.optimal_fiber_length_m)  # -V_CE / vbar
     basal_w = basal_rate(inp, basal, basal_rate_W_per_kg)
-    params = [inp.max_isometric_force_N, act_fast, act_slow, main_fast, main_slow, v_scale, basal_w]
+    params = [inp.max_isometric_force_N, act_fast, act_slow, main_fast, main_slow, neg_v_scale, basal_w]
     neg_rate = np.array(-rate)
     floor = np.array(floor)
 
@@ -336,23 +336,24 @@ def bhargava2004(
         if plan.lead == inp.ndim - 1:  # rows along the last axis: count in the kernel
             e2 = np.broadcast_to(e, inp.shape).reshape(plan.n_rows, plan.n_cols)
             counter = _StimulationCounter(e2, excitation_threshold, plan)
-            dt = np.asarray(dt_mean)
+            neg_rate_dt = np.asarray(-rate * dt_mean)
         else:  # parameters vary along the last axis: count first
             t_stim = bhargava_stimulation_time_s(np.broadcast_to(e, inp.shape), time_s, excitation_threshold)
 
     def kernel(out, s, p, tmp, i):
         work, h_am, h_sl, total, h_a, h_m = out
         e, a, lm, vb, fl, fv, fpe, t_stim = s
-        f0, act_fast, act_slow, main_fast, main_slow, v_scale, basal_w = p
-        u_s, u_f, t1, t2, t3, m1, m2, count, on = tmp
-        recruitment_terms_into(e, u_s, u_f, t1)
-        np.multiply(u_f, act_fast, h_a)
-        np.multiply(u_s, act_slow, t1)
-        np.add(h_a, t1, h_a)
+        f0, act_fast, act_slow, main_fast, main_slow, neg_v_scale, basal_w = p
+        u_s, tan_q, t1, t2, t3, m1, m2, count, on = tmp
+        # u_f = t u_s: h = (c_fast u_f + c_slow u_s) = (c_fast t + c_slow) u_s
+        recruitment_terms_into(e, tan_q, u_s, t1)
+        np.multiply(tan_q, act_fast, h_a)
+        np.add(h_a, act_slow, h_a)
+        np.multiply(h_a, u_s, h_a)
         if decay:
             if counter is not None:  # t_stim = count * dt_mean, > 0 exactly where e > threshold
                 counter.count_into(i, e, count, on)
-                np.multiply(count, dt, t1)
+                np.multiply(count, neg_rate_dt, t1)  # -t_stim / 0.045
                 np.multiply(t1, e, t1)
                 np.negative(on.view(np.int8), m1)
             else:
@@ -360,21 +361,20 @@ def bhargava2004(
                 if infinite:  # inf * 0: no excitation, no activation heat either way
                     keep_where(t1, as_mask(np.equal(t1, t1, m1)))  # 0 where NaN
                 as_mask(np.greater(t_stim, ZERO, m1))
-            np.multiply(t1, neg_rate, t1)
+                np.multiply(t1, neg_rate, t1)
             np.exp(t1, t1)
             np.add(t1, floor, t1)
             keep_where(t1, m1)  # phi = 0 where t_stim = 0
             np.multiply(h_a, t1, h_a)
-        np.multiply(u_f, main_fast, h_m)
-        np.multiply(u_s, main_slow, t1)
-        np.add(h_m, t1, h_m)
+        np.multiply(tan_q, main_fast, h_m)
+        np.add(h_m, main_slow, h_m)
+        np.multiply(h_m, u_s, h_m)
         if published:
             np.multiply(h_m, np.interp(lm, [0.5, 1.0, 1.5], [0.5, 1.0, 0.0]), h_m)
         else:
             np.multiply(h_m, lm, h_m)
-        np.multiply(vb, v_scale, t3)  # V_CE
-        as_mask(np.less_equal(t3, ZERO, m2))
-        np.negative(t3, t3)  # -V_CE
+        np.multiply(vb, neg_v_scale, t3)  # -V_CE
+        as_mask(np.greater_equal(t3, ZERO, m2))  # shortening or isometric: V_CE <= 0
         np.multiply(a, fl, t1)
         np.multiply(t1, f0, t1)  # F_iso
         np.multiply(t1, fv, work)  # F_CE
