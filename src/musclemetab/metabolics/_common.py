@@ -370,8 +370,7 @@ def _finish_checks(inputs: MuscleInputs, states: list) -> list[int]:
         try:
             _check_states_finite(rest, inputs.model)
         except OptionError:
-            _report_non_finite(inputs)
-            raise
+            _report_non_finite(inputs)  # names the first non-finite state in argument order
     return positions
 
 
