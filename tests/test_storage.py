@@ -147,3 +147,26 @@ def test_written_files_have_a_normal_mode(tmp_path):
     finally:
         os.umask(mask)
     assert (out.stat().st_mode & 0o777) == 0o644
+
+
+def test_read_json_object_names_the_file_and_what_to_do(tmp_path):
+    from musclemetab.errors import InputFileError
+    from musclemetab.io import read_json_object
+
+    good = tmp_path / "good.json"
+    good.write_text('{"kT": 10.6, "muscles": ["soleus_r"]}', encoding="utf-8")
+    assert read_json_object(good) == {"kT": 10.6, "muscles": ["soleus_r"]}
+    with pytest.raises(InputFileError, match=r"absent\.json: no such file; check the path$"):
+        read_json_object(tmp_path / "absent.json", missing="no such file; check the path")
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"kT": 10.6,', encoding="utf-8")
+    with pytest.raises(InputFileError, match=r"bad\.json: not a readable JSON file \(.*line 1.*\); solve again$"):
+        read_json_object(bad, remedy="solve again")
+    latin = tmp_path / "latin.json"
+    latin.write_bytes(b'{"name": "\xe9"}')
+    with pytest.raises(InputFileError, match=r"latin\.json: not a readable JSON file"):
+        read_json_object(latin)
+    arr = tmp_path / "list.json"
+    arr.write_text("[1, 2]", encoding="utf-8")
+    with pytest.raises(InputFileError, match=r"list\.json: a JSON object is expected, not list; solve again$"):
+        read_json_object(arr, remedy="solve again")

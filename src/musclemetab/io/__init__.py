@@ -1,6 +1,7 @@
-"""File input and output: OpenSim storage files, atomic writes."""
+"""File input and output: OpenSim storage files, JSON objects, atomic writes."""
 
 from .atomic import file_sha256, atomic_directory, atomic_path, atomic_write_bytes, atomic_write_text
+from .jsonfile import read_json_object
 from .storage import read_storage, require_columns, storage_from_arrays, write_storage
 
 __all__ = [
@@ -13,4 +14,5 @@ __all__ = [
     "atomic_write_bytes",
     "atomic_directory",
     "file_sha256",
+    "read_json_object",
 ]

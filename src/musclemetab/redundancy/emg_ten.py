@@ -229,15 +229,12 @@ def resolve_emg_mapping(mapping: str | Mapping[str, Sequence[str] | str] | os.Pa
             return {m: list(c) for m, c in AUTHORS_EMG_MAPPING.items()}
         path = Path(key)
         if path.suffix.lower() == ".json" or path.is_file():
-            try:
-                mapping = json.loads(path.read_text(encoding="utf-8"))
-            except FileNotFoundError:
-                raise InputFileError(f"{path}: no such EMG mapping file; give 'default', 'authors' or a JSON "
-                                     "file {\"muscle\": [\"channel\", ...]}") from None
-            except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-                raise InputFileError(f"{path}: not a readable JSON EMG mapping ({exc})") from None
-            if not isinstance(mapping, dict):
-                raise InputFileError(f"{path}: an EMG mapping is a JSON object {{\"muscle\": [\"channel\", ...]}}")
+            from ..io.jsonfile import read_json_object
+
+            form = 'a JSON object {"muscle": ["channel", ...]}'
+            mapping = read_json_object(
+                path, missing=f"no such EMG mapping file; give 'default', 'authors' or {form}",
+                remedy=f"an EMG mapping is {form}")
         else:
             raise OptionError(f"EMG mapping '{key}' is not 'default', 'authors' or a JSON file; "
                               "give one of these")

@@ -148,19 +148,14 @@ def read_solution_folder(
     summary is not JSON or lacks one of ``required_keys``; :class:`SolverError` when the
     stored solve did not succeed (unless ``require_success=False``).
     """
-    from ..io import read_storage
+    from ..io import read_json_object, read_storage
 
     directory = Path(directory)
     spath, jpath = directory / SOLUTION_FILE, directory / SUMMARY_FILE
     for p in (spath, jpath):
         if not p.is_file():
             raise InputFileError(f"{p}: missing; {directory} is not a solution folder (run 'musclemetab solve')")
-    try:
-        summary = json.loads(jpath.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputFileError(f"{jpath}: not valid JSON ({exc}); solve again") from None
-    if not isinstance(summary, dict):
-        raise InputFileError(f"{jpath}: not a summary (a JSON object is expected); solve again")
+    summary = read_json_object(jpath, remedy="solve again")
     for key in required_keys:
         if not summary.get(key):
             raise InputFileError(f"{jpath}: no '{key}' entry; the summary is incomplete, solve again")

@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import math
 import os
 from dataclasses import dataclass
@@ -285,19 +284,16 @@ def read_tendon_stiffness_json(path: str | os.PathLike) -> dict[str, float]:
     path = Path(path)
     if path.is_dir():
         path = path / "parameters.json"
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputFileError(f"{path}: no such parameters file; check the --parameters path") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputFileError(f"{path}: not a readable JSON file ({exc})") from None
-    solve = data.get("solve") if isinstance(data, dict) else None
+    from ..io.jsonfile import read_json_object
+
+    data = read_json_object(path, missing="no such parameters file; check the --parameters path")
+    solve = data.get("solve")
     if isinstance(solve, dict) and solve.get("success") is False:
         raise InputFileError(
             f"{path}: the solve that estimated these parameters did not converge (status "
             f"'{solve.get('status')}'); its tendon stiffness is not an estimate. Solve EMG-TEN again"
         )
-    table = data.get("tendon_stiffness") if isinstance(data, dict) else None
+    table = data.get("tendon_stiffness")
     if not isinstance(table, dict) or not table:
         raise InputFileError(
             f"{path}: no 'tendon_stiffness' object; expected {{\"tendon_stiffness\": {{\"soleus_r\": 10.6, ...}}}}"

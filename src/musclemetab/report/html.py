@@ -133,12 +133,9 @@ def read_study_folder(study_dir: str | os.PathLike) -> StudyFolder:
     settings: dict = {}
     spath = path / STUDY_JSON
     if spath.is_file():
-        try:
-            settings = json.loads(spath.read_text(encoding="utf-8"))
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise InputFileError(f"{spath}: not valid JSON ({exc}); run the study again to rewrite it") from None
-        if not isinstance(settings, dict):
-            raise InputFileError(f"{spath}: a JSON object is expected; run the study again to rewrite it")
+        from ..io.jsonfile import read_json_object
+
+        settings = read_json_object(spath, remedy="run the study again to rewrite it")
     else:
         notes.append(f"{STUDY_JSON} is missing: the settings below are taken from the results table.")
     fpath = path / FAILURES_CSV
@@ -210,16 +207,9 @@ def _preferred(study: StudyFolder, ok) -> str:
 
 
 def _read_unit_json(folder: Path) -> dict:
-    p = folder / UNIT_FILE
-    if not p.is_file():
-        raise InputFileError(f"{p}: missing")
-    try:
-        rec = json.loads(p.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputFileError(f"{p}: not valid JSON ({exc})") from None
-    if not isinstance(rec, dict):
-        raise InputFileError(f"{p}: a JSON object is expected")
-    return rec
+    from ..io.jsonfile import read_json_object
+
+    return read_json_object(folder / UNIT_FILE, missing="missing", remedy="run the study again to rewrite it")
 
 
 def _cycle(rec: dict, where: Path) -> tuple[float, float, float]:

@@ -1,0 +1,29 @@
+"""Reading the package's small JSON files (summaries, parameters, unit records, mappings)."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+from ..errors import InputFileError
+
+
+def read_json_object(path: str | os.PathLike, *, missing: str = "not found", remedy: str = "") -> dict:
+    """Read a JSON file that holds one object.
+
+    Raises :class:`~musclemetab.errors.InputFileError` naming the file when it does not
+    exist (``"<path>: <missing>"``), cannot be read or decoded, is not valid JSON, or holds
+    something other than an object; ``remedy`` (what to do) is appended to the last three.
+    """
+    path = Path(path)
+    tail = f"; {remedy}" if remedy else ""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputFileError(f"{path}: {missing}") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputFileError(f"{path}: not a readable JSON file ({exc}){tail}") from None
+    if not isinstance(data, dict):
+        raise InputFileError(f"{path}: a JSON object is expected, not {type(data).__name__}{tail}")
+    return data
