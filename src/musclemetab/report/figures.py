@@ -468,6 +468,30 @@ def _long_table(timeseries, what: str):
     return timeseries
 
 
+def _cycle_panels(n: int):
+    """A figure with one panel per model over the gait cycle (shared axes): ``(fig, axes)``."""
+    nrow, ncol = _grid(n)
+    fig = _new_figure(4.4 * ncol, 3.0 * nrow + 1.0)
+    return fig, fig.subplots(nrow, ncol, squeeze=False, sharex=True, sharey=True)
+
+
+def _label_cycle_panels(axes, models: Sequence[str]) -> None:
+    """Titles, axis labels and limits of the panels of :func:`_cycle_panels`; unused panels hidden."""
+    nrow, ncol = axes.shape
+    for k, ax in enumerate(axes.flat):
+        if k >= len(models):
+            ax.set_visible(False)
+            continue
+        m = models[k]
+        ax.set_xlim(0, 100)
+        ax.set_title(m, color=model_colour(m), fontsize=11, fontweight="bold")
+        if k % ncol == 0:
+            ax.set_ylabel("metabolic rate (W)")
+        if k // ncol == nrow - 1 or k + ncol >= len(models):
+            ax.set_xlabel("gait cycle (%)")
+            ax.tick_params(labelbottom=True)
+
+
 def group_rates_over_cycle(timeseries, toe_off_pct: float, models: Sequence[str] | None = None,
                            *, title: str | None = None):
     """Metabolic rate of each muscle group over the gait cycle (W), one panel per model.
@@ -489,9 +513,7 @@ def group_rates_over_cycle(timeseries, toe_off_pct: float, models: Sequence[str]
         raise OptionError(f"toe-off must be inside the cycle (0-100 %), not {toe_off_pct}")
     present = _unique(s.split("/", 1)[1] for s in ts["series"].astype(str))
     groups = [g for g in GROUPS if g in present] + [g for g in present if g not in GROUPS]
-    nrow, ncol = _grid(len(models))
-    fig = _new_figure(4.4 * ncol, 3.0 * nrow + 1.0)
-    axes = fig.subplots(nrow, ncol, squeeze=False, sharex=True, sharey=True)
+    fig, axes = _cycle_panels(len(models))
     for k, m in enumerate(models):
         ax = axes.flat[k]
         dm = ts[ts["model"].astype(str) == m]
@@ -502,15 +524,7 @@ def group_rates_over_cycle(timeseries, toe_off_pct: float, models: Sequence[str]
             ax.plot(d["cycle_pct"], d["value_W"], color=group_colour(g), lw=1.3, label=g, gid=f"group:{g}")
         ax.axvline(to, color="k", lw=0.8, ls=":", label="_toe-off", gid="toe-off")
         ax.axhline(0.0, color="0.7", lw=0.6, label="_zero")
-        ax.set_xlim(0, 100)
-        ax.set_title(m, color=model_colour(m), fontsize=11, fontweight="bold")
-        if k % ncol == 0:
-            ax.set_ylabel("metabolic rate (W)")
-        if k // ncol == nrow - 1 or k + ncol >= len(models):
-            ax.set_xlabel("gait cycle (%)")
-            ax.tick_params(labelbottom=True)
-    for k in range(len(models), nrow * ncol):
-        axes.flat[k].set_visible(False)
+    _label_cycle_panels(axes, models)
     from matplotlib.lines import Line2D
 
     handles = [Line2D([], [], color=group_colour(g), lw=1.5, label=f"{g} ({GROUP_NAMES.get(g, g)})") for g in groups]
@@ -555,9 +569,7 @@ def whole_body_over_cycle(timeseries_by_trial: Mapping[str, object], speeds: Map
     cmap = colormaps["viridis_r"]
     shades = np.linspace(0.15, 0.9, len(labels)) if len(labels) > 1 else np.array([0.6])
     colour = {t: cmap(float(s)) for t, s in zip(labels, shades)}
-    nrow, ncol = _grid(len(models))
-    fig = _new_figure(4.4 * ncol, 3.0 * nrow + 1.0)
-    axes = fig.subplots(nrow, ncol, squeeze=False, sharex=True, sharey=True)
+    fig, axes = _cycle_panels(len(models))
     for k, m in enumerate(models):
         ax = axes.flat[k]
         for t in labels:
@@ -569,15 +581,7 @@ def whole_body_over_cycle(timeseries_by_trial: Mapping[str, object], speeds: Map
             if toe_off_pct is not None and t in toe_off_pct and np.isfinite(float(toe_off_pct[t])):
                 ax.axvline(float(toe_off_pct[t]), ymin=0.0, ymax=0.06, color=colour[t], lw=1.5,
                            label="_toe-off", gid="toe-off")
-        ax.set_xlim(0, 100)
-        ax.set_title(m, color=model_colour(m), fontsize=11, fontweight="bold")
-        if k % ncol == 0:
-            ax.set_ylabel("metabolic rate (W)")
-        if k // ncol == nrow - 1 or k + ncol >= len(models):
-            ax.set_xlabel("gait cycle (%)")
-            ax.tick_params(labelbottom=True)
-    for k in range(len(models), nrow * ncol):
-        axes.flat[k].set_visible(False)
+    _label_cycle_panels(axes, models)
     from matplotlib.lines import Line2D
 
     handles = [Line2D([], [], color=colour[t], lw=1.6, label=f"{t} ({float(speeds[t]):.2f} m/s)") for t in labels]
