@@ -28,6 +28,14 @@ def example():
 
 
 @pytest.fixture(scope="session")
+def gait2392():
+    """OpenSim's gait2392 walking example (second subject: other model family, both legs, 60 Hz)."""
+    from musclemetab.datasets import gait2392_subject01
+
+    return gait2392_subject01()
+
+
+@pytest.fixture(scope="session")
 def reference_dir() -> Path:
     """The method's reference tables (published values used as test oracles)."""
     path = SHARED / "reference"

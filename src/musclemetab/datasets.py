@@ -1,13 +1,20 @@
-"""Example data: one subject walking at three speeds.
+"""Example data: the study's subject at three speeds, and OpenSim's gait2392 subject.
 
-The files are those published with the reference study (repository
-``israelluis/MetabolicRateWalking``, GPL-2.0), downloaded on first use with pooch from a
-pinned commit and checked against SHA-256 hashes (``data/example_subject_manifest.txt``).
-They are not part of this package.
+Two data sets, neither part of this package, each downloaded on first use with pooch from a
+pinned commit of its public repository and checked against SHA-256 hashes:
 
-Set ``MUSCLEMETAB_DATA`` to a folder that already holds the files (for instance a copy
-made for offline use, or the folder a test system provides) and no download happens; the
-files found there are checked against the same hashes.
+* :func:`example_subject`: the subject published with the reference study (repository
+  ``israelluis/MetabolicRateWalking``, GPL-2.0; ``data/example_subject_manifest.txt``);
+  Rajagopal-family model, right leg, 100 Hz, IK, ID, EMG, passive-calibration trials;
+* :func:`gait2392_subject01`: OpenSim's own walking example (repository
+  ``opensim-org/opensim-models``, Apache-2.0; ``data/gait2392_subject01_manifest.txt``);
+  gait2392 model with Thelen muscles, both legs, 60 Hz IK, ground forces and an ExternalLoads
+  file, and an ID file that covers no complete gait cycle.
+
+Set ``MUSCLEMETAB_DATA`` to a folder that already holds the files (offline machines, test
+systems) and no download happens. The folder may hold one data set's files directly, or one
+sub-folder per data set named ``example_subject`` and ``gait2392_subject01``. Files found
+there are checked against the same hashes.
 """
 
 from __future__ import annotations
@@ -21,7 +28,15 @@ from urllib.parse import quote
 from .io.atomic import file_sha256
 from .errors import DatasetError
 
-__all__ = ["ExampleSubject", "example_subject", "manifest", "SOURCE_COMMIT", "SOURCE_REPOSITORY"]
+__all__ = [
+    "ExampleSubject",
+    "example_subject",
+    "Gait2392Subject",
+    "gait2392_subject01",
+    "manifest",
+    "SOURCE_COMMIT",
+    "SOURCE_REPOSITORY",
+]
 
 SOURCE_REPOSITORY = "israelluis/MetabolicRateWalking"
 SOURCE_COMMIT = "acaf8a1af4c9dd1fae763b50ea4cabbe0be1a0e9"
@@ -31,10 +46,15 @@ ENV_VAR = "MUSCLEMETAB_DATA"
 SPEEDS = ("slow", "normal", "fast")
 
 
-def manifest() -> dict[str, tuple[str, str]]:
-    """``{local file name: (sha256, path in the source repository)}``."""
+GAIT2392_REPOSITORY = "opensim-org/opensim-models"
+GAIT2392_COMMIT = "20a888b9655e73fb84963d6e03eee3752cf6074b"
+_GAIT2392_URL = f"https://raw.githubusercontent.com/{GAIT2392_REPOSITORY}/{GAIT2392_COMMIT}/"
+
+
+def manifest(dataset: str = "example_subject") -> dict[str, tuple[str, str]]:
+    """``{local file name: (sha256, path in the source repository)}`` of a data set."""
     out = {}
-    text = resources.files("musclemetab").joinpath("data/example_subject_manifest.txt").read_text()
+    text = resources.files("musclemetab").joinpath(f"data/{dataset}_manifest.txt").read_text()
     for line in text.splitlines():
         if not line.strip() or line.startswith("#"):
             continue
@@ -70,26 +90,55 @@ def _sha256(path: Path) -> str:
     return file_sha256(path)
 
 
-def _fetch_all(entries: dict) -> Path:
+def _fetch_all(entries: dict, dataset: str = "example_subject", repository: str | None = None,
+               commit: str | None = None, base_url: str | None = None) -> Path:
     import pooch
 
-    cache = pooch.os_cache("musclemetab") / "example_subject" / SOURCE_COMMIT[:12]
+    repository = repository or SOURCE_REPOSITORY
+    commit = commit or SOURCE_COMMIT
+    base_url = base_url or _BASE_URL
+    cache = pooch.os_cache("musclemetab") / dataset / commit[:12]
     fetcher = pooch.create(
         path=cache,
-        base_url=_BASE_URL,
+        base_url=base_url,
         registry={name: f"sha256:{sha}" for name, (sha, _) in entries.items()},
-        urls={name: _BASE_URL + quote(path) for name, (_, path) in entries.items()},
+        urls={name: base_url + quote(path) for name, (_, path) in entries.items()},
     )
     for name in entries:
         try:
             fetcher.fetch(name)
         except Exception as exc:
             raise DatasetError(
-                f"could not download example file {name} from {SOURCE_REPOSITORY}@{SOURCE_COMMIT[:7]} "
+                f"could not download example file {name} from {repository}@{commit[:7]} "
                 f"({type(exc).__name__}: {exc}); check the network, or set {ENV_VAR} to a folder "
                 "that holds the files"
             ) from None
     return Path(cache)
+
+
+def _local_root(folder, dataset: str, entries: dict, verify: bool) -> Path | None:
+    """The local folder holding ``dataset`` (directly or in a sub-folder named after it)."""
+    folder = folder or os.environ.get(ENV_VAR)
+    if not folder:
+        return None
+    root = Path(folder).expanduser()
+    if (root / dataset).is_dir() and not all((root / n).is_file() for n in entries):
+        root = root / dataset
+    missing = [n for n in entries if not (root / n).is_file()]
+    if missing:
+        raise DatasetError(
+            f"{root}: missing {dataset} file{'s' if len(missing) > 1 else ''} {', '.join(missing[:4])}"
+            f"{' ...' if len(missing) > 4 else ''}; point {ENV_VAR} at a folder holding a complete copy "
+            f"(or a sub-folder {dataset}/ with one), or unset it to download"
+        )
+    if verify:
+        bad = [n for n, (sha, _) in entries.items() if _sha256(root / n) != sha]
+        if bad:
+            raise DatasetError(
+                f"{root}: file{'s' if len(bad) > 1 else ''} {', '.join(bad)} differ from the published "
+                f"{dataset} data (SHA-256 mismatch); restore the original files"
+            )
+    return root
 
 
 def example_subject(folder: str | os.PathLike | None = None, verify: bool = True) -> ExampleSubject:
@@ -104,23 +153,8 @@ def example_subject(folder: str | os.PathLike | None = None, verify: bool = True
         Check every local file against its SHA-256 (about 30 ms).
     """
     entries = manifest()
-    folder = folder or os.environ.get(ENV_VAR)
-    if folder:
-        root = Path(folder).expanduser()
-        missing = [n for n in entries if not (root / n).is_file()]
-        if missing:
-            raise DatasetError(
-                f"{root}: missing example file{'s' if len(missing) > 1 else ''} {', '.join(missing[:4])}"
-                f"{' ...' if len(missing) > 4 else ''}; point {ENV_VAR} at a complete copy or unset it to download"
-            )
-        if verify:
-            bad = [n for n, (sha, _) in entries.items() if _sha256(root / n) != sha]
-            if bad:
-                raise DatasetError(
-                    f"{root}: file{'s' if len(bad) > 1 else ''} {', '.join(bad)} differ from the published "
-                    "example data (SHA-256 mismatch); restore the original files"
-                )
-    else:
+    root = _local_root(folder, "example_subject", entries, verify)
+    if root is None:
         root = _fetch_all(entries)
     return ExampleSubject(
         folder=root,
@@ -135,4 +169,45 @@ def example_subject(folder: str | os.PathLike | None = None, verify: bool = True
         },
         passive_moments_mat=root / "passiveMoments.mat",
         reference_muscle_analysis=root / "reference_muscle_analysis",
+    )
+
+
+@dataclass(frozen=True)
+class Gait2392Subject:
+    """Local paths of OpenSim's gait2392 walking example (subject01, walk1).
+
+    Both legs, 60 Hz inverse kinematics (0.5-4.0 s, degrees), ground forces at 600 Hz
+    (0-2.5 s) with the ExternalLoads file that applies them to ``calcn_r`` and ``calcn_l``,
+    and OpenSim's inverse dynamics for 0.4-1.6 s only. Body height is not recorded.
+    """
+
+    folder: Path
+    model: Path
+    ik: Path
+    grf: Path
+    external_loads: Path
+    id_setup: Path
+    id: Path
+    body_mass_kg: float = 72.6
+    height_m: float | None = None
+
+
+def gait2392_subject01(folder: str | os.PathLike | None = None, verify: bool = True) -> Gait2392Subject:
+    """Paths of OpenSim's gait2392 walking example, downloading the files if needed.
+
+    Parameters are those of :func:`example_subject`; with ``$MUSCLEMETAB_DATA`` set, the
+    files are looked for there or in its sub-folder ``gait2392_subject01``.
+    """
+    entries = manifest("gait2392_subject01")
+    root = _local_root(folder, "gait2392_subject01", entries, verify)
+    if root is None:
+        root = _fetch_all(entries, "gait2392_subject01", GAIT2392_REPOSITORY, GAIT2392_COMMIT, _GAIT2392_URL)
+    return Gait2392Subject(
+        folder=root,
+        model=root / "subject01_simbody.osim",
+        ik=root / "subject01_walk1_ik.mot",
+        grf=root / "subject01_walk1_grf.mot",
+        external_loads=root / "subject01_walk1_grf.xml",
+        id_setup=root / "subject01_Setup_InverseDynamics.xml",
+        id=root / "subject01_walk1_id.sto",
     )
