@@ -14,15 +14,15 @@ import sys
 from . import __version__
 from .errors import MusclemetabError
 
-# Subcommands provided by the stages of the method: (module, function adding the parser).
+# Subcommands provided by the stages of the method: (name, module, function adding the parser).
 _SUBCOMMANDS = (
-    ("musclemetab.cli", "add_geometry_parser"),
-    ("musclemetab.redundancy.cli", "add_solve_parser"),
-    ("musclemetab.metabolics.cli", "add_metabolics_parser"),
-    ("musclemetab.calibration.cli", "add_calibrate_parser"),
-    ("musclemetab.study.cli", "add_run_parser"),
-    ("musclemetab.study.cli", "add_demo_parser"),
-    ("musclemetab.report.cli", "add_report_parser"),
+    ("geometry", "musclemetab.cli", "add_geometry_parser"),
+    ("solve", "musclemetab.redundancy.cli", "add_solve_parser"),
+    ("metabolics", "musclemetab.metabolics.cli", "add_metabolics_parser"),
+    ("calibrate-passive", "musclemetab.calibration.cli", "add_calibrate_parser"),
+    ("run", "musclemetab.study.cli", "add_run_parser"),
+    ("demo", "musclemetab.study.cli", "add_demo_parser"),
+    ("report", "musclemetab.report.cli", "add_report_parser"),
 )
 
 
@@ -75,7 +75,9 @@ def geometry_command(args) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``musclemetab`` parser; with ``command``, only that subcommand (its module alone is
+    imported, which keeps the start of a command short)."""
     parser = argparse.ArgumentParser(
         prog="musclemetab",
         description="Muscle-by-muscle, moment-by-moment metabolic energy of walking.",
@@ -83,7 +85,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"musclemetab {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for module, func in _SUBCOMMANDS:
+    names = {name for name, _, _ in _SUBCOMMANDS}
+    for name, module, func in _SUBCOMMANDS:
+        if command in names and name != command:
+            continue
         try:
             mod = importlib.import_module(module)
         except ModuleNotFoundError as exc:  # a stage not installed in this build
@@ -95,7 +100,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(argv[0] if argv else None)
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)

@@ -19,7 +19,6 @@ coordinate as OpenSim's couplers say. All results in SI units (m).
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import time as _time
@@ -28,15 +27,17 @@ from pathlib import Path
 
 import numpy as np
 
+from .cache import cache_file as _cache_file, default_cache_dir, load_entry, save_entry
 from .io.atomic import file_sha256
 from .errors import DataMismatchError, OptionError, UnknownCoordinateError
-from .io import atomic_path, read_storage, write_storage
+from .io import read_storage, write_storage
 from .model import default_dofs
 
-__all__ = ["Geometry", "compute_geometry", "default_cache_dir", "write_geometry", "GEOMETRY_FORMAT"]
+__all__ = ["Geometry", "compute_geometry", "geometry_is_cached", "default_cache_dir", "write_geometry", "GEOMETRY_FORMAT"]
 
 GEOMETRY_FORMAT = 1  # bump when the cached content changes meaning
 MOMENT_ARM_METHODS = ("velocity", "opensim", "finite_difference")
+_ENTRY_ARRAYS = ("time", "muscles", "dofs", "lmt_m", "moment_arms_m", "source")
 
 
 @dataclass(frozen=True)
@@ -71,16 +72,38 @@ class Geometry:
         return Geometry(self.time, tuple(muscles), self.dofs, self.lmt_m[:, idx], self.moment_arms_m[:, :, idx], self.source)
 
 
-def default_cache_dir() -> Path:
-    """``$MUSCLEMETAB_CACHE`` or ``~/.cache/musclemetab``, plus ``/geometry``."""
-    root = os.environ.get("MUSCLEMETAB_CACHE") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "musclemetab"
+def _entry_path(model_path, ik_path, dofs, muscles, method, cache_dir) -> Path:
+    spec = dict(
+        fmt=GEOMETRY_FORMAT,
+        model=file_sha256(model_path),
+        ik=file_sha256(ik_path),
+        dofs=list(dofs),
+        muscles=list(muscles) if muscles else None,
+        method=method,
     )
-    return Path(root) / "geometry"
+    return _cache_file(spec, cache_dir)
 
 
-def _digest(path: Path) -> str:
-    return file_sha256(path)
+def geometry_is_cached(
+    model_path: str | os.PathLike,
+    ik_path: str | os.PathLike,
+    dofs: list[str] | None = None,
+    side: str = "r",
+    muscles: list[str] | None = None,
+    *,
+    cache_dir: str | os.PathLike | None = None,
+    method: str = "velocity",
+) -> bool:
+    """Whether :func:`compute_geometry` with these arguments would find a cache entry.
+
+    Lets a caller start the OpenSim worker early only when it will be needed. Files that
+    cannot be read count as not cached (:func:`compute_geometry` reports them).
+    """
+    try:
+        dofs = list(dofs) if dofs else default_dofs(side)
+        return _entry_path(Path(model_path), Path(ik_path), dofs, muscles, method, cache_dir).is_file()
+    except (OSError, OptionError):
+        return False
 
 
 def compute_geometry(
@@ -139,33 +162,19 @@ def compute_geometry(
 
     require_columns(ik, dofs, what="DOF column")
 
-    key = None
-    cache_file = None
+    entry_path = None
     if use_cache:
-        spec = dict(
-            fmt=GEOMETRY_FORMAT,
-            model=_digest(model_path),
-            ik=_digest(ik_path),
-            dofs=dofs,
-            muscles=list(muscles) if muscles else None,
-            method=method,
-        )
-        key = hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:32]
-        cache_file = Path(cache_dir) if cache_dir else default_cache_dir()
-        cache_file = cache_file / f"{key}.npz"
-        if cache_file.is_file():
-            try:
-                with np.load(cache_file, allow_pickle=False) as z:
-                    return Geometry(
-                        time=z["time"],
-                        muscles=tuple(z["muscles"].tolist()),
-                        dofs=tuple(z["dofs"].tolist()),
-                        lmt_m=z["lmt_m"],
-                        moment_arms_m=z["moment_arms_m"],
-                        source=json.loads(str(z["source"])) | {"cached": True},
-                    )
-            except Exception:
-                cache_file.unlink(missing_ok=True)  # unreadable cache entry: recompute
+        entry_path = _entry_path(model_path, ik_path, dofs, muscles, method, cache_dir)
+        z = load_entry(entry_path, required=_ENTRY_ARRAYS)
+        if z is not None:
+            return Geometry(
+                time=z["time"],
+                muscles=tuple(z["muscles"].tolist()),
+                dofs=tuple(z["dofs"].tolist()),
+                lmt_m=z["lmt_m"],
+                moment_arms_m=z["moment_arms_m"],
+                source=json.loads(str(z["source"])) | {"cached": True},
+            )
 
     in_degrees = ik.attrs.get("in_degrees")
     if in_degrees is None:
@@ -203,17 +212,16 @@ def compute_geometry(
         moment_arms_m=raw["moment_arms_m"],
         source=source | {"cached": False},
     )
-    if cache_file is not None:
-        with atomic_path(cache_file, suffix=".npz") as tmp:
-            np.savez(
-                tmp,
-                time=geom.time,
-                muscles=np.array(geom.muscles),
-                dofs=np.array(geom.dofs),
-                lmt_m=geom.lmt_m,
-                moment_arms_m=geom.moment_arms_m,
-                source=json.dumps(source),
-            )
+    if entry_path is not None:
+        save_entry(
+            entry_path,
+            time=geom.time,
+            muscles=np.array(geom.muscles),
+            dofs=np.array(geom.dofs),
+            lmt_m=geom.lmt_m,
+            moment_arms_m=geom.moment_arms_m,
+            source=json.dumps(source),
+        )
     return geom
 
 

@@ -23,6 +23,7 @@ __all__ = [
     "ModelInfo",
     "read_model",
     "read_muscle_parameters",
+    "model_is_cached",
     "default_dofs",
     "SIDES",
 ]
@@ -98,11 +99,36 @@ class ModelInfo:
 
 
 _CACHE: dict = {}
+MODEL_CACHE_FORMAT = 1  # bump when the cached content changes meaning
 
 
-def read_model(model_path: str | os.PathLike) -> ModelInfo:
-    """Read muscles, body mass and coordinates of an ``.osim`` model (through OpenSim)."""
-    from .opensim_bridge import call
+def _cache_entry(path: Path, cache_dir) -> Path:
+    from .cache import cache_file
+    from .io.atomic import file_sha256
+
+    return cache_file({"fmt": MODEL_CACHE_FORMAT, "model": file_sha256(path)}, cache_dir, prefix="model-")
+
+
+def model_is_cached(model_path: str | os.PathLike, cache_dir: str | os.PathLike | None = None) -> bool:
+    """Whether :func:`read_model` would answer without OpenSim (from memory or the disk cache)."""
+    path = Path(model_path)
+    try:
+        key = (str(path.resolve()), path.stat().st_mtime_ns, path.stat().st_size)
+        return key in _CACHE or _cache_entry(path, cache_dir).is_file()
+    except OSError:
+        return False
+
+
+def read_model(model_path: str | os.PathLike, *, cache_dir: str | os.PathLike | None = None,
+               use_cache: bool = True) -> ModelInfo:
+    """Read muscles, body mass and coordinates of an ``.osim`` model (through OpenSim).
+
+    The result is cached on disk, keyed by the file's content, in the folder of the
+    geometry cache (:mod:`musclemetab.cache`; ``cache_dir`` as for
+    :func:`musclemetab.geometry.compute_geometry`): a second process reading the same model
+    does not start OpenSim.
+    """
+    import json
 
     path = Path(model_path)
     if not path.is_file():
@@ -110,7 +136,26 @@ def read_model(model_path: str | os.PathLike) -> ModelInfo:
     key = (str(path.resolve()), path.stat().st_mtime_ns, path.stat().st_size)
     if key in _CACHE:
         return _CACHE[key]
-    raw = call("model_ops:read_model_info", str(path))
+    raw = None
+    entry = None
+    if use_cache:
+        from .cache import load_entry
+
+        entry = _cache_entry(path, cache_dir)
+        z = load_entry(entry, required=("model_info",))
+        if z is not None:
+            raw = json.loads(str(z["model_info"]))
+            raw["path"] = str(path.resolve())
+    if raw is None:
+        from .opensim_bridge import call
+
+        raw = call("model_ops:read_model_info", str(path))
+        # one form whether read now or from the cache (JSON: tuples become lists)
+        raw = json.loads(json.dumps(raw))
+        if entry is not None:
+            from .cache import save_entry
+
+            save_entry(entry, model_info=json.dumps(raw))
     ms = raw["muscles"]
     if not ms:
         raise ModelError(f"{path}: the model has no muscles")
@@ -131,6 +176,7 @@ def read_model(model_path: str | os.PathLike) -> ModelInfo:
     return info
 
 
-def read_muscle_parameters(model_path: str | os.PathLike) -> MuscleParameters:
+def read_muscle_parameters(model_path: str | os.PathLike, *,
+                           cache_dir: str | os.PathLike | None = None) -> MuscleParameters:
     """The five Hill parameters of every muscle of the model, in model order."""
-    return read_model(model_path).muscles
+    return read_model(model_path, cache_dir=cache_dir).muscles

@@ -68,12 +68,32 @@ def _start() -> subprocess.Popen:
     return proc
 
 
+def _ensure_started() -> None:
+    global _PROC
+    if _PROC is None or _PROC.poll() is not None:
+        _PROC = _start()
+
+
+def start_in_background() -> None:
+    """Start the worker in a background thread, so that its start-up (``import opensim``,
+    about a second) overlaps with the caller's work; :func:`call` waits for it. A start-up
+    failure is reported by the next :func:`call`."""
+
+    def run():
+        with _LOCK:
+            try:
+                _ensure_started()
+            except Exception:  # reported again by call()
+                pass
+
+    threading.Thread(target=run, daemon=True).start()
+
+
 def call(target: str, *args, **kwargs):
     """Run ``module:function`` of :mod:`musclemetab.opensim_bridge` in the OpenSim worker."""
     global _PROC
     with _LOCK:
-        if _PROC is None or _PROC.poll() is not None:
-            _PROC = _start()
+        _ensure_started()
         try:
             _send(_PROC.stdin, (target, args, kwargs))
             status, payload = _recv(_PROC.stdout)

@@ -13,12 +13,33 @@ Modules: :mod:`.inputs` (filtering, splines, mesh), :mod:`.static_opt` (initial 
 import CasADi; solving does. OpenSim is never imported here.
 """
 
-from .emg_ten import EmgTenResult, EmgTenSettings, solve_emg_ten
-from .parameters import MuscleTendonParameters
-from .problem import SolverOptions
-from .solution import Solution
-from .solve import solve_files, solve_trial, solve_with_parameters
-from .workflows import WORKFLOWS, Workflow, get_workflow, read_passive_parameters, workflow_parameters
+import importlib
+
+# Public names and the module that defines each: imported on first use, so that importing
+# one stage (e.g. the single-trial solve) does not import the others (e.g. EMG-TEN).
+_EXPORTS = {
+    "EmgTenResult": "emg_ten", "EmgTenSettings": "emg_ten", "solve_emg_ten": "emg_ten",
+    "MuscleTendonParameters": "parameters",
+    "SolverOptions": "problem",
+    "Solution": "solution",
+    "solve_files": "solve", "solve_trial": "solve", "solve_with_parameters": "solve",
+    "WORKFLOWS": "workflows", "Workflow": "workflows", "get_workflow": "workflows",
+    "read_passive_parameters": "workflows", "workflow_parameters": "workflows",
+}
+
+
+def __getattr__(name):
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_EXPORTS))
+
 
 __all__ = [
     "MuscleTendonParameters",

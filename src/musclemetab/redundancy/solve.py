@@ -209,14 +209,22 @@ def solve_files(
         passive = read_passive_parameters(passive)
     if tendon_stiffness_file is not None:
         read_tendon_stiffness_json(tendon_stiffness_file)
-    # The model parameters come from the OpenSim worker process: ask now, in a background
-    # thread, so that the worker's start-up overlaps with reading the IK/ID files, the
-    # geometry and the imports of pandas, SciPy and CasADi.
-    params_request = _Background(_read_model_parameters, model_path)
+    # Model parameters and geometry come from the on-disk cache when it holds them; no
+    # OpenSim work at all then. Otherwise the OpenSim worker is started now, so that its
+    # start-up overlaps with reading the IK/ID files and the imports of pandas, SciPy and
+    # CasADi, and the model parameters are asked for in a background thread.
+    from ..geometry import compute_geometry, geometry_is_cached
+    from ..model import model_is_cached
+
+    model_cached = model_is_cached(model_path, cache_dir)
+    if not (model_cached and geometry_is_cached(model_path, ik_path, list(dofs), cache_dir=cache_dir)):
+        from ..opensim_bridge import start_in_background
+
+        start_in_background()
+    params_request = None if model_cached else _Background(_read_model_parameters, model_path, cache_dir)
     ik_time, _ = read_kinematics(ik_path, dofs, check_units=check_units)
     id_time, id_moments = read_inverse_dynamics(id_path, dofs)
     check_time_ranges(ik_time, id_time, ik_path, id_path)
-    from ..geometry import compute_geometry
 
     t0 = _time.perf_counter()
     geometry = compute_geometry(model_path, ik_path, dofs=list(dofs), side="r", cache_dir=cache_dir)
@@ -226,7 +234,8 @@ def solve_files(
     import scipy.optimize  # noqa: F401
     import scipy.signal  # noqa: F401
 
-    model_parameters = params_request.result()
+    model_parameters = (params_request.result() if params_request is not None
+                        else _read_model_parameters(model_path, cache_dir))
     sources = {"model": Path(model_path), "ik": Path(ik_path), "id": Path(id_path)}
     solution = solve_trial(
         geometry, model_parameters, id_time, id_moments, wf,
@@ -239,10 +248,10 @@ def solve_files(
 
 
 
-def _read_model_parameters(model_path):
+def _read_model_parameters(model_path, cache_dir=None):
     from ..model import read_muscle_parameters
 
-    return read_muscle_parameters(model_path)
+    return read_muscle_parameters(model_path, cache_dir=cache_dir)
 
 
 class _Background:

@@ -1,0 +1,97 @@
+"""Start-up of a solve: the on-disk cache of model parameters, no OpenSim when every cache
+hits, and a command that imports only the stage it runs."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from musclemetab import model as model_module
+from musclemetab.errors import OpenSimWorkerError
+from musclemetab.opensim_bridge import client
+
+
+def _forbid_opensim(monkeypatch):
+    """Make any start of the OpenSim worker fail, and stop a running one."""
+    client.shutdown()
+
+    def refuse():
+        raise OpenSimWorkerError("the OpenSim worker was started although every cache entry exists")
+
+    monkeypatch.setattr(client, "_start", refuse)
+
+
+def test_model_parameters_from_disk_cache(example, tmp_path, monkeypatch):
+    model_module._CACHE.clear()
+    first = model_module.read_model(example.model, cache_dir=tmp_path)  # OpenSim in the worker
+    entries = list(tmp_path.glob("model-*.npz"))
+    assert len(entries) == 1
+    assert model_module.model_is_cached(example.model, tmp_path)
+
+    model_module._CACHE.clear()  # a new process: nothing in memory
+    _forbid_opensim(monkeypatch)
+    again = model_module.read_model(example.model, cache_dir=tmp_path)
+    assert again.muscles.names == first.muscles.names
+    for f in model_module._ARRAY_FIELDS:
+        np.testing.assert_array_equal(getattr(again.muscles, f), getattr(first.muscles, f))
+    assert again.body_mass_kg == first.body_mass_kg == pytest.approx(72.6, abs=1e-9)
+    assert again.coordinates == first.coordinates and again.couplers == first.couplers
+
+    # the key is the content: a copy under another name hits the same entry
+    copy = tmp_path / "renamed.osim"
+    copy.write_bytes(example.model.read_bytes())
+    assert model_module.read_model(copy, cache_dir=tmp_path).muscles.names == first.muscles.names
+    model_module._CACHE.clear()
+
+
+def test_unreadable_model_cache_entry_is_recomputed(example, tmp_path):
+    model_module._CACHE.clear()
+    first = model_module.read_model(example.model, cache_dir=tmp_path)
+    (entry,) = tmp_path.glob("model-*.npz")
+    entry.write_bytes(b"not an npz file")
+    model_module._CACHE.clear()
+    again = model_module.read_model(example.model, cache_dir=tmp_path)
+    np.testing.assert_array_equal(again.muscles.max_isometric_force_N, first.muscles.max_isometric_force_N)
+    assert np.load(entry)["model_info"].size == 1  # rewritten, readable again
+    model_module._CACHE.clear()
+
+
+def test_solve_without_opensim_when_cached(example, tmp_path, monkeypatch):
+    """Geometry and model parameters cached: the solve runs with OpenSim unavailable."""
+    from musclemetab.geometry import compute_geometry, geometry_is_cached
+    from musclemetab.redundancy import SolverOptions, solve_files
+
+    ik, idf = example.ik["normal"], example.id["normal"]
+    assert not geometry_is_cached(example.model, ik, cache_dir=tmp_path)
+    model_module._CACHE.clear()
+    geom = compute_geometry(example.model, ik, cache_dir=tmp_path)
+    model_module.read_model(example.model, cache_dir=tmp_path)
+    assert geometry_is_cached(example.model, ik, cache_dir=tmp_path)
+
+    model_module._CACHE.clear()
+    _forbid_opensim(monkeypatch)
+    sol = solve_files(example.model, ik, idf, "effort-gen", cache_dir=tmp_path,
+                      options=SolverOptions(max_iter=2))
+    assert sol.summary["iterations"] == 2
+    assert sol.muscles == geom.muscles
+    model_module._CACHE.clear()
+
+
+def test_command_imports_only_its_stage():
+    code = (
+        "import sys; from musclemetab.cli import build_parser; p = build_parser('solve'); "
+        "p.parse_args(['solve', '--model', 'm', '--ik', 'i', '--id', 'd', '--out', 'o']); "
+        "print(sorted(m for m in ('musclemetab.study', 'musclemetab.report', 'musclemetab.metabolics', "
+        "'musclemetab.redundancy.emg_ten', 'scipy.stats', 'casadi', 'opensim') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
+    # the full parser still offers every command
+    from musclemetab.cli import build_parser
+
+    help_text = build_parser().format_help()
+    for name in ("geometry", "solve", "metabolics", "calibrate-passive", "run", "demo", "report"):
+        assert name in help_text
