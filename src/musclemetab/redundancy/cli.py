@@ -77,6 +77,13 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
                    "hip_adduction_r hip_rotation_r)")
     p.add_argument("--cache-dir", metavar="DIR", help="geometry cache folder (default: the package's)")
     p.add_argument("--max-iter", type=int, default=10000, help="IPOPT iteration limit (default 10000)")
+    p.add_argument("--linear-solver", default="mumps", metavar="NAME",
+                   help="IPOPT's linear solver: mumps (default) or spral (built in), ma27/ma57/ma77/ma86/ma97 (HSL) "
+                   "or pardiso (loaded at run time from --linear-solver-library); another solver can end in "
+                   "another local optimum")
+    p.add_argument("--linear-solver-library", metavar="LIB",
+                   help="library IPOPT loads the linear solver from (default libhsl.so for the HSL solvers, "
+                   "libpardiso.so for pardiso, on the library search path)")
     p.add_argument("--print-level", type=int, default=0, help="IPOPT print level 0-12 (default 0)")
     p.add_argument("--warm-start", metavar="DIR",
                    help="start from the solution in DIR (same trial, e.g. another workflow) with IPOPT's "
@@ -97,7 +104,6 @@ def solve_command(args) -> int:
     folder with ``success: false``).
     """
     from .inputs import DEFAULT_DOFS
-    from .problem import SolverOptions
     from .solve import solve_files
     from .workflows import parse_tendon_stiffness
 
@@ -119,7 +125,7 @@ def solve_command(args) -> int:
     args.ik, args.id = ik[0], idf[0]
     kt = parse_tendon_stiffness(args.tendon_stiffness) if args.tendon_stiffness else None
     dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else DEFAULT_DOFS
-    options = SolverOptions(max_iter=args.max_iter, print_level=args.print_level)
+    options = _solver_options(args)
     warm = None
     if args.warm_start:
         from .solution import Solution
@@ -149,6 +155,17 @@ def solve_command(args) -> int:
     return 0
 
 
+def _solver_options(args):
+    """The ``SolverOptions`` of the command line (the linear solver checked before any work)."""
+    from .problem import SolverOptions
+
+    try:
+        return SolverOptions(max_iter=args.max_iter, print_level=args.print_level,
+                             linear_solver=args.linear_solver, linear_solver_library=args.linear_solver_library)
+    except OptionError as exc:
+        raise OptionError(f"--linear-solver: {exc}") from None
+
+
 def _as_list(value) -> list:
     if value is None:
         return []
@@ -161,7 +178,6 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
     """``musclemetab solve --workflow emg-ten``: one NLP over all trials, then the files."""
     from .emg_ten import solve_emg_ten
     from .inputs import DEFAULT_DOFS
-    from .problem import SolverOptions
 
     wrong = [o for o, v in (("--tendon-stiffness", args.tendon_stiffness), ("--parameters", args.parameters),
                             ("--warm-start", args.warm_start)) if v]
@@ -174,7 +190,7 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
     if not emg:
         raise OptionError("--workflow emg-ten needs --emg: one processed EMG file per trial, in the order of --ik")
     dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else DEFAULT_DOFS
-    options = SolverOptions(max_iter=args.max_iter, print_level=args.print_level)
+    options = _solver_options(args)
     result = solve_emg_ten(
         args.model, ik, idf, emg, emg_mapping=args.emg_mapping or "default", labels=args.labels,
         passive=args.passive, dofs=dofs, options=options, cache_dir=args.cache_dir,

@@ -84,6 +84,13 @@ class SolverOptions:
     evaluates faster. ``node_function`` chooses the symbolic type of the per-interval
     constraint function used for the constraint values: ``"MX"`` (default) or ``"SX"``.
 
+    ``linear_solver`` is IPOPT's solver of the KKT systems: ``"mumps"`` (default) and
+    ``"spral"`` are part of CasADi's IPOPT; ``"ma27"``, ``"ma57"``, ``"ma77"``, ``"ma86"``,
+    ``"ma97"`` (HSL) and ``"pardiso"`` (pardiso-project.org) are loaded by IPOPT at run time
+    from ``linear_solver_library`` (default ``libhsl.so`` / ``libpardiso.so`` on the library
+    search path); the library is loaded when the options are made, so a missing one is
+    reported before any problem is built. Another solver can end in another local optimum.
+
     ``tune_malloc`` raises glibc's ``malloc`` thresholds for the process before solving
     (MUMPS reallocates its work arrays every iteration). ``blas_threads`` sets the number of
     threads of the BLAS used by MUMPS (CasADi's OpenBLAS); the dense blocks here are small, so
@@ -99,6 +106,7 @@ class SolverOptions:
     tol: float = 1e-6
     max_iter: int = 10000
     linear_solver: str = "mumps"
+    linear_solver_library: str | None = None
     print_level: int = 0
     node_function: str = "MX"
     derivatives: str = "explicit"
@@ -118,6 +126,7 @@ class SolverOptions:
             raise OptionError(f"optimal_reserve_Nm must be positive, not {self.optimal_reserve_Nm}")
         if self.max_iter < 1:
             raise OptionError(f"max_iter must be at least 1, not {self.max_iter}")
+        check_linear_solver(self.linear_solver, self.linear_solver_library)
 
     def with_(self, **kw) -> "SolverOptions":
         return replace(self, **kw)
@@ -131,12 +140,54 @@ class SolverOptions:
             "tol": self.tol,
             "max_iter": self.max_iter,
             "linear_solver": self.linear_solver,
+            "linear_solver_library": self.linear_solver_library,
             "node_function": self.node_function,
             "derivatives": self.derivatives,
             "tune_malloc": self.tune_malloc,
             "blas_threads": self.blas_threads,
             "ipopt": dict(self.ipopt),
         }
+
+
+#: IPOPT's linear solvers: built into CasADi's IPOPT, or loaded at run time from a library
+#: (IPOPT option naming the library, default file name).
+BUILTIN_LINEAR_SOLVERS = ("mumps", "spral")
+RUNTIME_LINEAR_SOLVERS = {
+    "ma27": ("hsllib", "libhsl.so"),
+    "ma57": ("hsllib", "libhsl.so"),
+    "ma77": ("hsllib", "libhsl.so"),
+    "ma86": ("hsllib", "libhsl.so"),
+    "ma97": ("hsllib", "libhsl.so"),
+    "pardiso": ("pardisolib", "libpardiso.so"),
+}
+
+
+def check_linear_solver(name: str, library: str | None = None) -> None:
+    """Raise :class:`OptionError` unless IPOPT can use the linear solver ``name``.
+
+    For the solvers IPOPT loads at run time, the library (``library`` or the default name on
+    the search path) is loaded here, so that a missing one is reported before the problem
+    is built.
+    """
+    if name in BUILTIN_LINEAR_SOLVERS:
+        if library is not None:
+            raise OptionError(f"linear solver {name} is built into IPOPT; drop the linear-solver library {library!r}")
+        return
+    if name not in RUNTIME_LINEAR_SOLVERS:
+        raise OptionError(
+            f"linear solver {name!r} is unknown; choose one of "
+            f"{', '.join(BUILTIN_LINEAR_SOLVERS + tuple(RUNTIME_LINEAR_SOLVERS))}"
+        )
+    option, default = RUNTIME_LINEAR_SOLVERS[name]
+    lib = library or default
+    try:
+        ctypes.CDLL(lib)
+    except OSError as exc:
+        what = "the HSL library (www.hsl.rl.ac.uk/ipopt)" if option == "hsllib" else "the Pardiso library"
+        raise OptionError(
+            f"linear solver {name}: IPOPT loads it from {lib}, which cannot be loaded ({exc}); install {what} "
+            f"and give its path as the linear-solver library (--linear-solver-library), or use mumps or spral"
+        ) from None
 
 
 @dataclass(frozen=True)
@@ -453,6 +504,9 @@ def ipopt_options(options: SolverOptions, mumps_settings: dict | None = None) ->
         "hessian_approximation": "exact",
         "sb": "yes",  # no banner
     }
+    if options.linear_solver in RUNTIME_LINEAR_SOLVERS:
+        option, default = RUNTIME_LINEAR_SOLVERS[options.linear_solver]
+        ipopt[option] = options.linear_solver_library or default
     if options.linear_solver == "mumps" and mumps_settings:
         ipopt.update(mumps_settings)
     ipopt.update(options.ipopt)

@@ -7,6 +7,8 @@ A study file names everything a study needs; paths are relative to the file::
     workflows = ["effort-gen", "effort-ten"]
     models = "all"                     # or ["UM10", "BH04", ...]
     basal = "body"                     # whole-body basal rule: body | muscle | none
+    linear_solver = "mumps"            # optional: IPOPT's linear solver (mumps, spral, ma27...,
+    linear_solver_library = "libhsl.so"  #  pardiso) and the library of a run-time-loaded one
 
     [[subjects]]
     name = "sub1"
@@ -114,6 +116,8 @@ class Study:
     basal: str = "body"
     source: Path | None = None
     settings: dict = field(default_factory=dict)
+    linear_solver: str = "mumps"
+    linear_solver_library: str | None = None
 
     def subject(self, name: str) -> Subject:
         for s in self.subjects:
@@ -123,7 +127,7 @@ class Study:
 
 
 # ---------------------------------------------------------------------------------------
-_STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "subjects"}
+_STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "subjects", "linear_solver", "linear_solver_library"}
 _SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials"}
 _TRIAL_KEYS = {
     "name", "ik", "id", "emg", "grf", "grf_column", "grf_threshold_N", "speed_m_per_s",
@@ -167,6 +171,15 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
     basal = str(data.get("basal", "body"))
     if basal not in BASAL_RULES:
         raise OptionError(f"{where}: 'basal' must be one of {', '.join(BASAL_RULES)}, not {basal!r}")
+    linear_solver = str(data.get("linear_solver", "mumps")).strip().lower()
+    library = data.get("linear_solver_library")
+    library = None if library is None else str(library)
+    from ..redundancy.problem import check_linear_solver
+
+    try:
+        check_linear_solver(linear_solver, library)
+    except OptionError as exc:
+        raise OptionError(f"{where}: 'linear_solver': {exc}") from None
     out = Path(output) if output is not None else base / str(data.get("output", "results"))
     subjects_data = data.get("subjects")
     if not isinstance(subjects_data, list) or not subjects_data:
@@ -177,8 +190,11 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
     if dup:
         raise OptionError(f"{where}: subject name(s) {', '.join(dup)} used more than once; names must be unique")
     settings = {"name": name, "workflows": list(workflows), "models": list(models), "basal": basal}
+    if linear_solver != "mumps":
+        settings["linear_solver"] = linear_solver
     return Study(name=name, subjects=subjects, workflows=workflows, models=models, output=out,
-                 basal=basal, source=source, settings=settings)
+                 basal=basal, source=source, settings=settings, linear_solver=linear_solver,
+                 linear_solver_library=library)
 
 
 def _unknown(data: Mapping, allowed: set, where: str) -> None:

@@ -140,6 +140,8 @@ def unit_key(study: Study, unit: Unit, dependency_key: str | None = None) -> str
         "subject": _subject_record(subject, unit.workflow),
         "dependency": dependency_key,
     }
+    if study.linear_solver != "mumps":  # another linear solver can end in another optimum
+        content["linear_solver"] = study.linear_solver
     if unit.trial is None:
         content["trials"] = [_trial_record(t) for t in subject.trials]
     else:
@@ -253,11 +255,18 @@ def _run_estimation(study: Study, unit: Unit, tmp: Path) -> dict:
         emg_mapping=subject.emg_mapping,
         labels=[t.name for t in subject.trials],
         passive=subject.passive,
+        options=_solver_options(study),
     )
     result.write(tmp)
     if not result.success:
         raise _failed_solve(f"EMG-TEN of subject {subject.name}", result.summary)
     return {"times": {"solve_s": time.perf_counter() - t0}}
+
+
+def _solver_options(study: Study):
+    from ..redundancy.problem import SolverOptions
+
+    return SolverOptions(linear_solver=study.linear_solver, linear_solver_library=study.linear_solver_library)
 
 
 def _failed_solve(what: str, summary: dict):
@@ -311,7 +320,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
                 kwargs["tendon_stiffness_file"] = kt
             elif isinstance(kt, dict):
                 kwargs["tendon_stiffness"] = kt
-        sol = solve_files(subject.model, trial.ik, trial.id, unit.workflow, **kwargs)
+        sol = solve_files(subject.model, trial.ik, trial.id, unit.workflow, options=_solver_options(study), **kwargs)
         sol.write(tmp)
         times["solve_s"] = sol.summary.get("solve_time_s")
         if not sol.success:

@@ -1,0 +1,76 @@
+"""Choice of IPOPT's linear solver: option checks before any work, options passed to IPOPT."""
+
+from __future__ import annotations
+
+import ctypes.util
+
+import pytest
+
+from musclemetab.cli import main
+from musclemetab.errors import OptionError
+from musclemetab.redundancy.problem import (
+    LINEAR_SOLVER_OPTIONS,
+    SolverOptions,
+    check_linear_solver,
+    ipopt_options,
+)
+
+
+def test_missing_runtime_library_is_an_option_error(tmp_path):
+    missing = tmp_path / "libhsl_missing.so"
+    with pytest.raises(OptionError, match=r"ma57.*libhsl_missing\.so.*cannot be loaded"):
+        SolverOptions(linear_solver="ma57", linear_solver_library=str(missing))
+    with pytest.raises(OptionError, match=r"pardiso.*libpardiso_missing\.so"):
+        check_linear_solver("pardiso", str(tmp_path / "libpardiso_missing.so"))
+    with pytest.raises(OptionError, match=r"'superlu' is unknown.*mumps, spral, ma27"):
+        SolverOptions(linear_solver="superlu")
+    with pytest.raises(OptionError, match="built into IPOPT"):
+        SolverOptions(linear_solver="spral", linear_solver_library="libhsl.so")
+
+
+def test_runtime_library_passed_to_ipopt():
+    # any loadable shared library passes the load check; IPOPT gets its name under the
+    # option of the solver family
+    libm = ctypes.util.find_library("m")
+    assert libm
+    hsl = ipopt_options(SolverOptions(linear_solver="ma86", linear_solver_library=libm), LINEAR_SOLVER_OPTIONS)
+    assert hsl["linear_solver"] == "ma86" and hsl["hsllib"] == libm
+    assert "min_refinement_steps" not in hsl  # the MUMPS settings stay with MUMPS
+    par = ipopt_options(SolverOptions(linear_solver="pardiso", linear_solver_library=libm))
+    assert par["pardisolib"] == libm and "hsllib" not in par
+    default = ipopt_options(SolverOptions(), LINEAR_SOLVER_OPTIONS)
+    assert default["linear_solver"] == "mumps" and default["min_refinement_steps"] == 0
+    assert "hsllib" not in default and "pardisolib" not in default
+
+
+def test_command_line_reports_the_library_before_reading_files(tmp_path, capsys):
+    out = tmp_path / "out"
+    code = main(["solve", "--model", str(tmp_path / "no_model.osim"), "--ik", "ik.mot", "--id", "id.sto",
+                 "--linear-solver", "ma27", "--linear-solver-library", str(tmp_path / "nolib.so"),
+                 "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert code == 1 and len(err.splitlines()) == 1
+    assert "--linear-solver" in err and "nolib.so" in err and "no_model.osim" not in err
+    assert not out.exists()
+
+
+def test_study_key(example):
+    from musclemetab.study import study_from_dict
+    from musclemetab.study.units import plan_units, unit_key
+
+    def study(**extra):
+        data = {
+            "name": "s", "workflows": ["effort-gen"], "models": ["UM10"],
+            "subjects": [{"name": "sub1", "model": str(example.model), "body_mass_kg": 70.0, "height_m": 1.7,
+                          "trials": [{"name": "normal", "ik": str(example.ik["normal"]),
+                                      "id": str(example.id["normal"])}]}],
+        }
+        return study_from_dict(data | extra, base="/")
+
+    with pytest.raises(OptionError, match=r"'linear_solver'.*ma97.*libhsl_nowhere\.so"):
+        study(linear_solver="ma97", linear_solver_library="/nowhere/libhsl_nowhere.so")
+    default, mumps, spral = study(), study(linear_solver="mumps"), study(linear_solver="spral")
+    assert spral.linear_solver == "spral" and spral.settings["linear_solver"] == "spral"
+    unit = plan_units(default)[1][0]
+    assert unit_key(default, unit) == unit_key(mumps, unit)  # the default keeps existing results valid
+    assert unit_key(spral, unit) != unit_key(default, unit)
