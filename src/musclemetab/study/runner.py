@@ -15,7 +15,8 @@ trial units — and gathers every complete unit into one results table:
 
 Executors: ``workers=1`` runs the units in this process, one after the other;
 ``workers=N`` in a pool of N processes (started with ``spawn``; each runs its own OpenSim
-worker); ``scheduler="tcp://host:port"`` on a Dask cluster (``pip install
+worker; the BLAS/OpenMP thread pools of each process are limited to its share of the cores,
+``cpu_count // N``, through ``OMP_NUM_THREADS`` and its siblings unless the caller set them); ``scheduler="tcp://host:port"`` on a Dask cluster (``pip install
 musclemetab[dask]``; the workers need musclemetab installed and the study's files at the
 same paths). A unit failure is recorded and the other units go on.
 """
@@ -137,8 +138,46 @@ def _executor(workers: int, scheduler: str | None):
         return None, None, lambda: None
     import multiprocessing
 
+    restore = _pin_threads(max(1, (os.cpu_count() or 1) // workers))
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
-    return pool.submit, as_completed, lambda: pool.shutdown(wait=True, cancel_futures=True)
+
+    def close():
+        try:
+            pool.shutdown(wait=True, cancel_futures=True)
+        finally:
+            restore()
+
+    return pool.submit, as_completed, close
+
+
+#: environment variables that size the thread pools of BLAS/LAPACK and OpenMP libraries
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
+                    "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")
+
+
+def _pin_threads(threads: int):
+    """Set the thread variables the caller has not set to ``threads`` (for the worker
+    processes, which read them when their libraries load); returns a function that
+    restores the environment."""
+    added = [v for v in THREAD_VARIABLES if v not in os.environ]
+    for v in added:
+        os.environ[v] = str(threads)
+
+    def restore():
+        for v in added:
+            os.environ.pop(v, None)
+
+    return restore
+
+
+def unit_batches(study: Study) -> list[list[Unit]]:
+    """The units in the order they are submitted: every unit that needs no EMG-TEN estimate
+    (all subjects, trials, sides and workflows together) with the estimations, longest
+    first; then the units that use an estimate, once the estimations are done."""
+    stage1, stage2 = plan_units(study)
+    independent = [u for u in stage2 if u.depends_on(study) is None]
+    dependent = [u for u in stage2 if u.depends_on(study) is not None]
+    return [b for b in (stage1 + independent, dependent) if b]
 
 
 def _run_units(study: Study, jobs: list[tuple[Unit, str, str | None]], submit, completed, progress: _Progress) -> dict:
@@ -189,7 +228,7 @@ def run_study(
     out = Path(study.output)
     out.mkdir(parents=True, exist_ok=True)
     _write_study_json(study, out)
-    stages = plan_units(study)
+    stages = unit_batches(study)
     n_total = sum(len(s) for s in stages)
     if workers is None:
         workers = min(os.cpu_count() or 1, n_total) if not scheduler else 0
