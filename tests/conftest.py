@@ -45,6 +45,19 @@ def reference_table():
     return pd.read_csv(TEST_DATA / "muscle_properties_reference.csv").set_index("name")
 
 
+@pytest.fixture(scope="session")
+def demo(tmp_path_factory):
+    """``musclemetab demo`` run once per test session: ``(output folder, results table)``."""
+    import pandas as pd
+
+    from musclemetab.cli import main
+
+    out = tmp_path_factory.mktemp("demo")
+    code = main(["demo", "--out", str(out), "--workers", "2", "--no-progress"])
+    assert code == 0
+    return out, pd.read_csv(out / "results.csv")
+
+
 @contextlib.contextmanager
 def loopback_mirror(files: dict, root: Path):
     """Serve ``{path under the server root: local file}`` over HTTP on 127.0.0.1.
