@@ -19,8 +19,7 @@ Calibrated passive parameters come from, in this order of preference:
   (columns ``muscle,kPE,s0,sM``) or the study's ``passiveMoments.mat``
   (``sim.Results.onlyParam.calParam.kpe/ksf``, ``sM = 0.6``);
 * otherwise the published calibration of the example subject shipped with the package
-  (``kpe_calibrated_reference``, ``s0_calibrated_reference`` of
-  ``musclemetab/data/muscle_properties.csv``). ``summary.json`` records which was used.
+  (``musclemetab/data/study_passive_parameters.csv``, names of the study's model). ``summary.json`` records which was used.
 
 Names are matched by muscle name; a table without side suffix (``soleus``) applies to both
 ``soleus_r`` and ``soleus_l``, and a value for one side is used for the other when the table
@@ -160,28 +159,12 @@ def generic_passive_parameters(muscles: Sequence[str]) -> PassiveParameters:
     return PassiveParameters({m: (GENERIC_KPE, GENERIC_S0, GENERIC_SM) for m in muscles}, "generic")
 
 
-def _package_table() -> list[dict]:
-    text = resources.files("musclemetab").joinpath("data/muscle_properties.csv").read_text(encoding="utf-8")
-    lines = [ln for ln in text.splitlines() if not ln.startswith("#")]
-    return list(csv.DictReader(io.StringIO("\n".join(lines))))
-
-
 def reference_passive_parameters() -> PassiveParameters:
     """The published passive calibration shipped with the package (side-free names, sM = 0.6)."""
-    rows = _package_table()
-    values = {
-        r["muscle"]: (float(r["kpe_calibrated_reference"]), float(r["s0_calibrated_reference"]), GENERIC_SM)
-        for r in rows
-        if r.get("kpe_calibrated_reference") and r.get("s0_calibrated_reference")
-    }
-    return PassiveParameters(values, "package:muscle_properties.csv (published calibration)")
+    from ..properties import study_passive_parameters
 
-
-def _tendon_groups() -> dict[str, str]:
-    try:
-        return {r["muscle"]: r.get("tendon_stiffness_group", "") for r in _package_table()}
-    except (OSError, KeyError):  # pragma: no cover
-        return {}
+    values = {m: (kpe, s0, GENERIC_SM) for m, (kpe, s0) in study_passive_parameters().items()}
+    return PassiveParameters(values, "package:study_passive_parameters.csv (published calibration)")
 
 
 def read_passive_parameters(path: str | os.PathLike) -> PassiveParameters:
