@@ -76,6 +76,7 @@ __all__ = [
     "default_emg_mapping",
     "report_muscles",
     "study_passive_parameters",
+    "tendon_literature",
 ]
 
 MUSCLE_DENSITY_KG_PER_M3 = 1059.7
@@ -596,6 +597,14 @@ def report_muscles(names: Sequence[str]) -> list[str]:
             if parts and parts[(len(parts) - 1) // 2] not in out:
                 out.append(parts[(len(parts) - 1) // 2])
     return out
+
+
+@functools.lru_cache(maxsize=1)
+def tendon_literature() -> dict[str, tuple[float, float, str]]:
+    """``{tendon: (stiffness_N_per_mm, reference_force_fraction, source)}`` (EFFORT-TEN default)."""
+    df = _read_package_csv("tendon_stiffness_literature.csv")
+    return {t: (float(k), float(f), s) for t, k, f, s in
+            zip(df["tendon"], df["stiffness_N_per_mm"], df["reference_force_fraction"], df["source"])}
 
 
 @functools.lru_cache(maxsize=1)
