@@ -349,12 +349,8 @@ def resolve_muscles(
         group = sharers[(a, split_side(n)[1])]
         if len(group) == 1:
             return 1.0
-        missing = [m for m in group if m not in forces]
-        if missing:
-            raise OptionError(
-                f"muscles {', '.join(group)} share the volume of {a.replace('_', ' ')} by maximal isometric "
-                f"force; give the forces (max_isometric_force_N) of {', '.join(missing)}"
-            )
+        if any(m not in forces for m in group):
+            return float("nan")  # needs the forces; volumes and masses ask for them
         total = sum(forces[m] for m in group)
         return forces[n] / total
 
@@ -369,7 +365,8 @@ def resolve_muscles(
             rows = anat.loc[list(ids)]
             frac = tuple(fraction(n, a) for a in ids)
             vol = np.array(frac) * rows["volume_percent"].to_numpy(dtype=float)
-            w = vol / vol.sum() if vol.sum() > 0 else np.full(len(ids), 1.0 / len(ids))
+            wvol = np.where(np.isnan(vol), rows["volume_percent"].to_numpy(dtype=float), vol)
+            w = wvol / wvol.sum() if wvol.sum() > 0 else np.full(len(ids), 1.0 / len(ids))
             vp = float(vol.sum())
             fst = float(w @ rows["slow_twitch_fraction"].to_numpy(dtype=float))
             sigma = float(w @ rows["specific_tension_Pa"].to_numpy(dtype=float))
@@ -440,8 +437,19 @@ def total_muscle_volume_m3(body_mass_kg: float, height_m: float) -> float:
     return (HANDSFIELD_SLOPE_CM3_PER_KG_M * body_mass_kg * height_m + HANDSFIELD_INTERCEPT_CM3) * 1e-6
 
 
+def _check_split(recs: Sequence[MuscleRecord]) -> None:
+    """Muscles sharing a volume by maximal isometric force need the forces."""
+    need = [r.name for r in recs if r.placed and np.isnan(r.volume_percent)]
+    if need:
+        raise OptionError(
+            f"muscles {', '.join(need)} share an anatomical muscle's volume in proportion to maximal isometric "
+            "force; give the model's forces (max_isometric_force_N)"
+        )
+
+
 def _placed_records(names, max_isometric_force_N, overrides, what: str) -> tuple[MuscleRecord, ...]:
     recs = resolve_muscles(names, max_isometric_force_N, overrides, warn=False)
+    _check_split(recs)
     missing = [r.name for r in recs if not r.placed]
     if missing:
         raise UnknownMuscleError(
@@ -477,6 +485,7 @@ def muscle_masses_kg(
     """
     names = list(names)
     recs = resolve_muscles(names, max_isometric_force_N, overrides, strict=strict, warn=False)
+    _check_split([r for r in recs if r.mass_kg_override is None])
     v_total = total_muscle_volume_m3(body_mass_kg, height_m)
     forces = _forces(names, max_isometric_force_N)
     lmo = _forces(names, optimal_fiber_length_m)
