@@ -71,3 +71,7 @@ class OpenSimWorkerError(MusclemetabError):
 
 class DatasetError(MusclemetabError):
     """Example data could not be found, downloaded or verified."""
+
+
+class MuscleTableWarning(UserWarning):
+    """Some muscles are not in the anatomical muscle table and take fallback properties."""
