@@ -61,7 +61,9 @@ def add_geometry_parser(sub) -> None:
 
 def geometry_command(args) -> int:
     from .geometry import compute_geometry, write_geometry
+    from .io import check_output_folder
 
+    check_output_folder(args.out)
     dofs = [d for item in args.dofs for d in _dof_list(item)] if args.dofs else None
     geom = compute_geometry(
         args.model, args.ik, dofs=dofs, side=args.side, muscles=args.muscles,

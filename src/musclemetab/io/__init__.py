@@ -1,6 +1,14 @@
 """File input and output: OpenSim storage files, JSON objects, atomic writes."""
 
-from .atomic import file_sha256, atomic_directory, atomic_path, atomic_write_bytes, atomic_write_text
+from .atomic import (
+    atomic_directory,
+    atomic_path,
+    atomic_write_bytes,
+    atomic_write_text,
+    check_inside,
+    check_output_folder,
+    file_sha256,
+)
 from .jsonfile import read_json_object
 from .storage import read_storage, require_columns, storage_from_arrays, write_storage
 
@@ -14,5 +22,7 @@ __all__ = [
     "atomic_write_bytes",
     "atomic_directory",
     "file_sha256",
+    "check_output_folder",
+    "check_inside",
     "read_json_object",
 ]

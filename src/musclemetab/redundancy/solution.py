@@ -162,7 +162,8 @@ def read_solution_folder(
     if require_success and not summary.get("success", False):
         raise SolverError(
             f"{directory}: the stored solve did not succeed (status '{summary.get('status')}'); "
-            "its values are not a solution. Solve again or pass require_success=False to inspect it"
+            "its values are not a solution. Solve again, or to inspect it anyway use --allow-failed "
+            "(musclemetab metabolics) or require_success=False (Python)"
         )
     return read_storage(spath), summary
 
