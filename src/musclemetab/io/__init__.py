@@ -10,13 +10,14 @@ from .atomic import (
     file_sha256,
 )
 from .jsonfile import read_json_object
-from .storage import read_storage, require_columns, storage_from_arrays, write_storage
+from .storage import check_time_stamps, read_storage, require_columns, storage_from_arrays, write_storage
 
 __all__ = [
     "read_storage",
     "write_storage",
     "require_columns",
     "storage_from_arrays",
+    "check_time_stamps",
     "atomic_path",
     "atomic_write_text",
     "atomic_write_bytes",

@@ -23,7 +23,6 @@ Luis I, Afschrift M, De Groote F, Gutierrez-Farewik EM (2024) PLoS Comput Biol.
 
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import dataclass
 from typing import Protocol, Sequence
@@ -66,8 +65,6 @@ FILTER_CUTOFF_HZ = 6.0
 FILTER_ORDER = 6
 #: A muscle is kept if ``|r| > 1e-4 m`` about a DOF at the first frame.
 MUSCLE_SELECTION_THRESHOLD_M = 1e-4
-# Rotations in radians beyond this are not joint angles (model ranges are below pi).
-_MAX_PLAUSIBLE_ANGLE_RAD = math.pi
 
 
 class GeometryLike(Protocol):
@@ -188,39 +185,21 @@ def _sample_rate(time: np.ndarray, what: str) -> float:
 def read_kinematics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT_DOFS, check_units: bool = True):
     """Read an IK ``.mot`` file: its time stamps and the DOF angles in radians.
 
-    Checks that every DOF column is present and that the angle units agree with the header:
-    with ``inDegrees=no``, an angle beyond pi rad (180 degrees) means the values are in
-    degrees; with ``inDegrees=yes``, all DOF angles staying below 2.5 "degrees" while the
-    joints move (a walking knee alone flexes by some 60 degrees, i.e. about 1.1 rad) is
-    reported as radians mislabelled as degrees. ``check_units=False`` skips both checks.
+    The file is checked by :func:`musclemetab.geometry.check_kinematics`, the same check the
+    geometry applies: DOF columns present, values finite, time in seconds, and angle units
+    that agree with the header (``check_units=False`` skips the unit check).
 
     Returns
     -------
     time_s : (F,) array
     angles_rad : (F, D) array
     """
-    from ..io import read_storage, require_columns
+    from ..geometry import check_kinematics
+    from ..io import read_storage
 
     ik = read_storage(path)
-    require_columns(ik, dofs, what="IK coordinate column")
-    if len(ik.index) < 2:
-        raise InputFileError(f"{path}: the IK file has fewer than 2 frames")
+    in_degrees = check_kinematics(ik, dofs, check_units)
     q = ik[list(dofs)].to_numpy(dtype=float)
-    in_degrees = ik.attrs.get("in_degrees")
-    peak = float(np.max(np.abs(q)))
-    if check_units and in_degrees is False and peak > _MAX_PLAUSIBLE_ANGLE_RAD:
-        col = dofs[int(np.argmax(np.max(np.abs(q), axis=0)))]
-        raise DataMismatchError(
-            f"{path}: the header says inDegrees=no but column '{col}' reaches {peak:.4g}, which is "
-            "not an angle in radians; the values look like degrees: fix the header to inDegrees=yes"
-        )
-    if in_degrees is None and peak > _MAX_PLAUSIBLE_ANGLE_RAD:
-        in_degrees = True
-    if check_units and in_degrees and peak < 2.5 and float(np.ptp(q, axis=0).max()) > 0.05:
-        raise DataMismatchError(
-            f"{path}: the header says inDegrees=yes but no DOF angle exceeds 2.5 degrees while the "
-            f"joints move (peak {peak:.3g}); the values look like radians: fix the header to inDegrees=no"
-        )
     if in_degrees:
         q = np.deg2rad(q)
     return ik.index.to_numpy(dtype=float), q
@@ -234,9 +213,10 @@ def read_inverse_dynamics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT
     time_s : (T,) array
     moments_Nm : (T, D) array
     """
-    from ..io import read_storage, require_columns
+    from ..io import check_time_stamps, read_storage, require_columns
 
     table = read_storage(path)
+    check_time_stamps(table, "inverse dynamics")
     cols = [f"{d}_moment" for d in dofs]
     try:
         require_columns(table, cols, what="inverse-dynamics column")
@@ -247,7 +227,13 @@ def read_inverse_dynamics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT
         ) from None
     if len(table.index) < 2:
         raise InputFileError(f"{path}: the inverse-dynamics file has fewer than 2 rows")
-    return table.index.to_numpy(dtype=float), table[cols].to_numpy(dtype=float)
+    moments = table[cols].to_numpy(dtype=float)
+    bad = ~np.isfinite(moments)
+    if bad.any():
+        row, col = (int(i) for i in np.argwhere(bad)[0])
+        raise DataMismatchError(f"{path}: column '{cols[col]}' is {moments[row, col]:g} at data row {row + 1}; "
+                                "every moment must be finite: fix or remove the row")
+    return table.index.to_numpy(dtype=float), moments
 
 
 def select_muscles(
