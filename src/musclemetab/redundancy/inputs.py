@@ -49,6 +49,8 @@ __all__ = [
     "select_muscles",
     "prepare_inputs",
     "check_moment_magnitudes",
+    "check_moments_per_body_mass",
+    "MIN_PEAK_MOMENT_NM_PER_KG",
     "check_time_ranges",
 ]
 
@@ -65,6 +67,10 @@ FILTER_CUTOFF_HZ = 6.0
 FILTER_ORDER = 6
 #: A muscle is kept if ``|r| > 1e-4 m`` about a DOF at the first frame.
 MUSCLE_SELECTION_THRESHOLD_M = 1e-4
+#: The largest joint moment of a walking trial, per kilogram of the model's body mass, is
+#: about 1-1.7 N m/kg (ankle plantarflexion; hip and knee near 1); below this value the
+#: moments are normalised to body mass (N m/kg), which gives a peak near 0.02 "N m/kg".
+MIN_PEAK_MOMENT_NM_PER_KG = 0.2
 
 
 class GeometryLike(Protocol):
@@ -308,6 +314,31 @@ def check_moment_magnitudes(
         raise DataMismatchError(
             f"{id_path}: all joint moments stay below 1 N m (peak {np.max(np.abs(M)):.3g}); they look "
             "normalised (e.g. N m/kg) or in kN m. The solver needs moments in N m"
+        )
+
+
+def check_moments_per_body_mass(
+    moments_Nm: np.ndarray, dofs: Sequence[str], body_mass_kg: float, id_path="inverse dynamics",
+    model_path="the model",
+) -> None:
+    """Reject ID moments that look normalised to body mass.
+
+    The largest moment over all DOFs and frames, divided by the model's body mass, must reach
+    :data:`MIN_PEAK_MOMENT_NM_PER_KG` (0.2 N m/kg; walking gives 1-1.7 N m/kg). Moments
+    divided by the mass give about 1/70 of that and are refused with a message naming the
+    file and the column of the largest moment.
+    """
+    M = np.abs(np.asarray(moments_Nm, dtype=float))
+    if not body_mass_kg or body_mass_kg <= 0 or M.size == 0:
+        return
+    peak = float(M.max())
+    per_kg = peak / float(body_mass_kg)
+    if per_kg < MIN_PEAK_MOMENT_NM_PER_KG:
+        col = dofs[int(np.argmax(M.max(axis=0)))]
+        raise DataMismatchError(
+            f"{id_path}: the largest joint moment ('{col}_moment', {peak:.3g}) is {per_kg:.3g} N m per kg of the "
+            f"{body_mass_kg:.4g} kg of {model_path}, below the {MIN_PEAK_MOMENT_NM_PER_KG:g} N m/kg any walking "
+            "trial reaches; the moments look normalised to body mass (N m/kg): multiply them by the body mass"
         )
 
 

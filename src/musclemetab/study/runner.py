@@ -7,7 +7,9 @@ trial units — and gathers every complete unit into one results table:
 ``DIR/results.csv`` and ``DIR/results.parquet``
     one row per subject × trial × workflow × model: whole-body rate (W/kg, with and
     without basal heat), cost of transport, stance and swing shares, muscle-group shares,
-    toe-off (% of the cycle), speed and measured rate when the study gives calorimetry.
+    toe-off (% of the cycle), speed and measured rate when the study gives calorimetry, and
+    ``large_reserve`` (the solve's reserves exceed 1 % of the peak joint moment, see
+    :data:`musclemetab.redundancy.solution.LARGE_RESERVE_SHARE`).
 ``DIR/failures.csv``
     one row per failed unit with its reason.
 ``DIR/study.json``
@@ -476,6 +478,7 @@ def collect_results(study: Study, failed: dict[str, str] | None = None):
         df["speed_m_per_s"] = rec.get("speed_m_per_s")
         df["toe_off_pct"] = rec.get("toe_off_pct")
         df["measured_W_per_kg"] = rec.get("measured_W_per_kg")
+        df["large_reserve"] = bool(rec.get("large_reserve", False))
         df["status"] = "ok"
         df["unit_dir"] = str(unit.folder)
         frames.append(df)

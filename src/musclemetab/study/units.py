@@ -400,6 +400,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         summary = Solution.load(tmp, require_success=False).summary
         if summary.get("status") and not summary.get("success", False):
             raise _failed_solve(f"EMG-TEN solution of trial {trial.name}", summary)
+        solve_summary = summary
     else:
         kwargs = {}
         if unit.workflow != "effort-gen" and subject.passive is not None:
@@ -414,6 +415,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
                 kwargs["tendon_stiffness"] = kt
         sol = solve_files(subject.model, trial.ik, trial.id, unit.workflow, **kwargs)
         sol.write(tmp)
+        solve_summary = sol.summary
         times["solve_s"] = sol.summary.get("solve_time_s")
         if not sol.success:
             raise _failed_solve(f"{unit.workflow} solve of {subject.name}/{trial.name}", sol.summary)
@@ -450,4 +452,6 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         "cycle": {"start_s": cycle.start_s, "toe_off_s": cycle.toe_off_s, "end_s": cycle.end_s},
         "toe_off_pct": float(100.0 * (cycle.toe_off_s - cycle.start_s) / (cycle.end_s - cycle.start_s)),
         "n_nodes": int(np.asarray(result.time_s).size),
+        "large_reserve": bool(solve_summary.get("large_reserve", False)),
+        "reserve_share_of_peak_moment": solve_summary.get("reserve_share_of_peak_moment"),
     }
