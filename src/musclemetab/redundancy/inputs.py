@@ -141,6 +141,7 @@ def lowpass_filtfilt(
     sample_rate_hz: float,
     cutoff_hz: float = FILTER_CUTOFF_HZ,
     order: int = FILTER_ORDER,
+    what: str = "a signal",
 ) -> np.ndarray:
     """Zero-phase Butterworth low-pass along axis 0, padded like MATLAB's ``filtfilt``.
 
@@ -150,7 +151,8 @@ def lowpass_filtfilt(
     and starts from steady-state initial conditions; SciPy's ``filtfilt`` does the same with
     ``padtype='odd'`` and that ``padlen`` (SciPy's default would be 21).
 
-    Raises :class:`DataMismatchError` if the signal has no more samples than the padding.
+    Raises :class:`DataMismatchError` if the signal has no more samples than the padding;
+    its message starts with ``what`` (the file or signal, as far as the caller knows it).
     """
     from scipy.signal import butter, filtfilt
 
@@ -159,9 +161,8 @@ def lowpass_filtfilt(
     padlen = 3 * (max(len(a), len(b)) - 1)
     if x.shape[0] <= padlen:
         raise DataMismatchError(
-            f"a signal of {x.shape[0]} samples is too short for the {order}th-order "
-            f"{cutoff_hz:g} Hz zero-phase filter (needs more than {padlen} samples); "
-            "use a longer trial"
+            f"{what} is too short: {x.shape[0]} samples, and the {order}th-order "
+            f"{cutoff_hz:g} Hz zero-phase filter needs more than {padlen}; use a longer trial"
         )
     return filtfilt(b, a, x, axis=0, padtype="odd", padlen=padlen)
 
@@ -390,7 +391,12 @@ def prepare_inputs(
             f"geometry arrays have shapes {lmt.shape} and {r.shape}; expected ({F}, {M}) and ({F}, {D}, {M})"
         )
     if not (np.all(np.isfinite(lmt)) and np.all(np.isfinite(r))):
-        raise DataMismatchError("the muscle geometry holds NaN or infinite values")
+        bad = [m for j, m in enumerate(muscles) if not (np.isfinite(lmt[:, j]).all() and np.isfinite(r[:, :, j]).all())]
+        raise DataMismatchError(
+            f"the muscle geometry of {sources.get('ik', 'the IK motion')} holds NaN or infinite values for "
+            f"{', '.join(bad[:5])}{' ...' if len(bad) > 5 else ''}; check that the IK file belongs to "
+            f"{sources.get('model', 'the model')}"
+        )
     if ik_time_s is None:
         ik_time_s = g_time
     ik_time_s = np.asarray(ik_time_s, dtype=float)
@@ -410,9 +416,11 @@ def prepare_inputs(
     fs_ik = _sample_rate(ik_time_s, str(sources.get("ik", "IK")))
     if filter_inputs:
         fs_id = _sample_rate(id_time_s, str(sources.get("id", "ID")))
-        lmt_f = lowpass_filtfilt(lmt, fs_ik, cutoff_hz, filter_order)
-        r_f = lowpass_filtfilt(r.reshape(F, D * M), fs_ik, cutoff_hz, filter_order).reshape(F, D, M)
-        id_f = lowpass_filtfilt(id_moments_Nm, fs_id, cutoff_hz, filter_order)
+        ik_what = f"the IK file {sources.get('ik', '')}".rstrip()
+        lmt_f = lowpass_filtfilt(lmt, fs_ik, cutoff_hz, filter_order, what=ik_what)
+        r_f = lowpass_filtfilt(r.reshape(F, D * M), fs_ik, cutoff_hz, filter_order, what=ik_what).reshape(F, D, M)
+        id_f = lowpass_filtfilt(id_moments_Nm, fs_id, cutoff_hz, filter_order,
+                                what=f"the inverse dynamics {sources.get('id', '')}".rstrip())
     else:
         lmt_f, r_f, id_f = lmt, r, id_moments_Nm
     # ID: filtered on the full file, linearly interpolated onto the IK frames.

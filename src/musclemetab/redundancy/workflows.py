@@ -61,6 +61,10 @@ __all__ = [
 ]
 
 GENERIC_KPE, GENERIC_S0, GENERIC_SM = 4.0, 1.0, 0.6
+#: Plausible ranges of passive parameters read from a file (generic 4, 1, 0.6; the study's
+#: calibration bounds kPE to 3-5 and s0 to 0.8-1.2). Values outside are typos or other
+#: conventions, and overflow the exponential passive curve.
+PASSIVE_RANGES = {"kPE": (0.1, 50.0), "s0": (0.25, 4.0), "sM": (0.05, 2.0)}
 
 #: Example-subject EMG-informed tendon stiffness (``muscle_redundancy.md`` §6.8).
 KT_TRICEPS_SURAE = 10.617977
@@ -227,7 +231,20 @@ def _read_passive_csv(path: Path) -> PassiveParameters:
         values[row["muscle"]] = (kpe, s0, sm)
     if not values:
         raise InputFileError(f"{path}: no rows; the passive parameter table is empty")
+    _check_passive_ranges(values, path)
     return PassiveParameters(values, str(path))
+
+
+def _check_passive_ranges(values: Mapping[str, tuple[float, float, float]], path) -> None:
+    """:class:`InputFileError` naming the file, muscle and parameter outside :data:`PASSIVE_RANGES`."""
+    for muscle, triple in values.items():
+        for name, v in zip(("kPE", "s0", "sM"), triple):
+            lo, hi = PASSIVE_RANGES[name]
+            if math.isfinite(v) and not lo <= v <= hi:
+                raise InputFileError(
+                    f"{path}: muscle '{muscle}' has {name} = {v:g}, outside the plausible {lo:g}-{hi:g}; "
+                    "fix the value (the generic values are kPE 4, s0 1, sM 0.6)"
+                )
 
 
 def _read_passive_mat(path: Path) -> PassiveParameters:
@@ -250,6 +267,7 @@ def _read_passive_mat(path: Path) -> PassiveParameters:
     if not (len(names) == kpe.size == ksf.size):
         raise InputFileError(f"{path}: {len(names)} muscle names but {kpe.size} kpe and {ksf.size} ksf values")
     values = {n: (float(k), float(s), GENERIC_SM) for n, k, s in zip(names, kpe, ksf)}
+    _check_passive_ranges(values, path)
     return PassiveParameters(values, str(path))
 
 
