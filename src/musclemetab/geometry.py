@@ -206,10 +206,9 @@ def compute_geometry(
     dofs = list(dofs) if dofs else default_dofs(side)
     if len(set(dofs)) != len(dofs):
         raise OptionError(f"DOF list {dofs} names a DOF twice")
-    if not model_path.is_file():
-        from .errors import ModelError
+    from .model import check_model_path
 
-        raise ModelError(f"{model_path}: no such model file; check the path")
+    check_model_path(model_path)
     ik = read_storage(ik_path)  # validates the file before any cache lookup
     in_degrees = check_kinematics(ik, dofs, check_units)
 

@@ -112,6 +112,8 @@ def read_storage(path: str | os.PathLike) -> pd.DataFrame:
         The first column is not ``time``, holds NaN, or is not strictly increasing.
     """
     path = Path(path)
+    if path.is_dir():
+        raise StorageFormatError(f"{path} is a folder, not a file; give the path of the .mot/.sto file in it")
     try:
         text = path.read_text(encoding="utf-8", errors="replace")
     except FileNotFoundError:

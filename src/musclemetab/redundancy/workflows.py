@@ -191,6 +191,8 @@ def _tendon_groups() -> dict[str, str]:
 def read_passive_parameters(path: str | os.PathLike) -> PassiveParameters:
     """Read calibrated passive parameters from ``passive_parameters.csv`` or ``passiveMoments.mat``."""
     path = Path(path)
+    if path.is_dir():
+        raise InputFileError(f"{path} is a folder, not a passive-parameter file; give the path of the file")
     if not path.is_file():
         raise InputFileError(f"{path}: no such passive-parameter file; check the --passive path")
     if path.suffix.lower() == ".mat":
