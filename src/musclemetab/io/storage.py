@@ -103,7 +103,8 @@ def read_storage(path: str | os.PathLike) -> pd.DataFrame:
         The file is missing, has no ``endheader`` line, no column names, non-numeric or
         ragged rows, fewer rows than its header announces, or duplicate column names.
     TimeColumnError
-        The first column is not ``time``, holds NaN, or is not strictly increasing.
+        The first column is not ``time``, holds NaN or infinite values, or is not strictly
+        increasing.
     """
     path = Path(path)
     try:
@@ -166,6 +167,11 @@ def read_storage(path: str | os.PathLike) -> pd.DataFrame:
     if np.isnan(t).any():
         row = int(np.flatnonzero(np.isnan(t))[0]) + 1
         raise TimeColumnError(f"{path}: column 'time' is NaN at data row {row}")
+    if np.isinf(t).any():
+        row = int(np.flatnonzero(np.isinf(t))[0]) + 1
+        raise TimeColumnError(
+            f"{path}: column 'time' is infinite at data row {row}; time stamps must be finite seconds"
+        )
     if t.size > 1 and not np.all(np.diff(t) > 0):
         row = int(np.flatnonzero(np.diff(t) <= 0)[0]) + 2
         raise TimeColumnError(
