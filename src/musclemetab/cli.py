@@ -15,7 +15,7 @@ import sys
 import warnings
 
 from . import __version__
-from .errors import MusclemetabError
+from .errors import MuscleTableWarning, MusclemetabError
 
 # Subcommands provided by the stages of the method: (module, function adding the parser).
 _SUBCOMMANDS = (
@@ -117,12 +117,26 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _one_line_warnings(default):
+    """``warnings.showwarning`` printing package warnings as one line on stderr."""
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, MuscleTableWarning):
+            print(f"musclemetab: warning: {' '.join(str(message).split())}", file=sys.stderr)
+        else:
+            default(message, category, filename, lineno, file, line)
+
+    return show
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     previous, warnings.showwarning = warnings.showwarning, _show_warning
     try:
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():
+            warnings.showwarning = _one_line_warnings(warnings.showwarning)
+            return int(args.func(args) or 0)
     except MusclemetabError as exc:
         msg = " ".join(str(exc).split())
         print(f"musclemetab: error: {msg}", file=sys.stderr)

@@ -83,3 +83,7 @@ class CacheWarning(MusclemetabWarning):
 
 class LargeReserveWarning(MusclemetabWarning):
     """The reserve actuators carry a large share of a joint moment."""
+
+
+class MuscleTableWarning(MusclemetabWarning):
+    """Some muscles are not in the anatomical muscle table and take fallback properties."""

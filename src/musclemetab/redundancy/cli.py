@@ -66,9 +66,11 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
                    help="calibrated passive parameters for effort-cal/effort-ten/emg-ten: passive_parameters.csv "
                    "(muscle,kPE,s0,sM) or the study's passiveMoments.mat (default: the published "
                    "calibration shipped with the package)")
-    p.add_argument("--tendon-stiffness", metavar="MUSCLE=KT[,...]",
-                   help="effort-ten: tendon stiffness per muscle, e.g. soleus_r=10.6,vaslat_r=4.7 "
-                   "(default: triceps surae 10.617977, vasti 4.695786)")
+    p.add_argument("--tendon-stiffness", metavar="MUSCLE=KT[,...]|example",
+                   help="effort-ten: tendon stiffness per muscle, e.g. soleus_r=10.6,vaslat_r=4.7, or 'example' "
+                   "for the example subject's estimates (triceps surae 10.617977, vasti 4.695786) "
+                   "(default: the subject's --parameters, else the literature Achilles and patellar tendon "
+                   "stiffness converted through the model; docs/muscles.md)")
     p.add_argument("--parameters", metavar="parameters.json",
                    help="effort-ten: JSON file with {\"tendon_stiffness\": {muscle: kT}}, e.g. the "
                    "parameters.json written by --workflow emg-ten (or the folder holding it)")

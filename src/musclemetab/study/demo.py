@@ -47,6 +47,8 @@ def demo_study(out: str | os.PathLike = "musclemetab-demo", *, speeds=None,
         f"body_mass_kg = {ex.body_mass_kg}",
         f"height_m = {ex.height_m}",
         f"passive = {_toml_string(ex.passive_moments_mat)}",
+        '# the study\'s EMG-informed tendon stiffness of this subject (triceps surae, vasti)',
+        'tendon_stiffness = "example"',
     ]
     for s in speeds:
         lines += [

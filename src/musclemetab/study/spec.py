@@ -15,8 +15,11 @@ A study file names everything a study needs; paths are relative to the file::
     height_m = 1.743
     passive = "data/passiveMoments.mat"   # optional: calibration for effort-cal / effort-ten
     tendon_stiffness = "emg-ten"          # optional, effort-ten: "emg-ten" (the subject's own
-                                          # EMG-TEN estimate), a parameters.json, or a table
-                                          # {soleus = 10.6, ...}; default: the example estimates
+                                          # EMG-TEN estimate), a parameters.json, a table
+                                          # {soleus = 10.6, ...} or "example" (the example
+                                          # subject's estimates); default: literature values
+                                          # converted through the model (docs/muscles.md)
+    muscle_properties = "muscles.csv"     # optional: per-muscle overrides (docs/muscles.md)
     emg_mapping = "default"               # EMG-TEN channel mapping: default | authors
 
     [[subjects.trials]]
@@ -111,6 +114,7 @@ class Subject:
     passive: Path | None = None
     tendon_stiffness: str | Path | Mapping[str, float] | None = None
     emg_mapping: str = "default"
+    muscle_properties: Path | None = None
 
     def trial(self, name: str) -> Trial:
         for t in self.trials:
@@ -145,7 +149,8 @@ class Study:
 
 # ---------------------------------------------------------------------------------------
 _STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "subjects"}
-_SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials"}
+_SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials",
+                 "muscle_properties"}
 _TRIAL_KEYS = {
     "name", "ik", "id", "emg", "grf", "grf_column", "grf_threshold_N", "speed_m_per_s",
     "measured_W_per_kg", "vo2_mL_per_s", "vco2_mL_per_s", "vo2_mL_per_min", "vco2_mL_per_min",
@@ -270,12 +275,14 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
     if isinstance(kt, str):
         if kt.strip().lower() == EMG_TEN:
             kt = EMG_TEN
+        elif kt.strip().lower() == "example":
+            kt = "example"
         else:
             kt = _path(kt, base, here, "tendon_stiffness")
     elif isinstance(kt, Mapping):
         kt = {str(k): _number(v, here, f"tendon_stiffness.{k}", positive=True, required=True) for k, v in kt.items()}
     elif kt is not None:
-        raise OptionError(f"{here}: 'tendon_stiffness' must be \"emg-ten\", a parameters.json path or a table")
+        raise OptionError(f"{here}: 'tendon_stiffness' must be \"emg-ten\", \"example\", a parameters.json path or a table")
     mapping = str(data.get("emg_mapping", "default"))
     if mapping not in ("default", "authors"):
         raise OptionError(f"{here}: 'emg_mapping' must be default or authors, not {mapping!r}")
@@ -292,8 +299,13 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
         if missing:
             raise OptionError(f"{here}: the emg-ten workflow needs an 'emg' file for every trial; missing for "
                               f"{', '.join(missing)}")
+    muscle_properties = _path(data.get("muscle_properties"), base, here, "muscle_properties", required=False)
+    if muscle_properties is not None:
+        from ..properties import read_muscle_properties
+
+        read_muscle_properties(muscle_properties)  # reject a bad file before anything runs
     return Subject(name=name, model=model, body_mass_kg=mass, height_m=height, trials=trials,
-                   passive=passive, tendon_stiffness=kt, emg_mapping=mapping)
+                   passive=passive, tendon_stiffness=kt, emg_mapping=mapping, muscle_properties=muscle_properties)
 
 
 def _trial(data, base: Path, where: str) -> Trial:

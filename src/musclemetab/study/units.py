@@ -135,7 +135,7 @@ def _subject_record(subject: Subject, workflow: str) -> dict:
     kt = subject.tendon_stiffness
     if isinstance(kt, Path):
         kt = {"file": _file_hash(kt)}
-    return {
+    rec = {
         "model": _file_hash(subject.model),
         "body_mass_kg": subject.body_mass_kg,
         "height_m": subject.height_m,
@@ -143,6 +143,9 @@ def _subject_record(subject: Subject, workflow: str) -> dict:
         "tendon_stiffness": kt if workflow in ("effort-ten",) else None,
         "emg_mapping": subject.emg_mapping if workflow == EMG_TEN else None,
     }
+    if subject.muscle_properties is not None:  # absent key: earlier studies keep their unit keys
+        rec["muscle_properties"] = _file_hash(subject.muscle_properties)
+    return rec
 
 
 def unit_key(study: Study, unit: Unit, dependency_key: str | None = None) -> str:
@@ -411,7 +414,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
                 kwargs["tendon_stiffness_file"] = dependency / "parameters.json"
             elif isinstance(kt, Path):
                 kwargs["tendon_stiffness_file"] = kt
-            elif isinstance(kt, dict):
+            elif isinstance(kt, (dict, str)):  # a table, or "example"
                 kwargs["tendon_stiffness"] = kt
         sol = solve_files(subject.model, trial.ik, trial.id, unit.workflow, **kwargs)
         sol.write(tmp)
@@ -425,7 +428,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
     speed = trial_speed(trial)
     result = metabolics_from_solution(
         tmp, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
-        speed_m_per_s=speed,
+        speed_m_per_s=speed, muscle_properties=subject.muscle_properties,
     )
     write_metabolics(result, tmp)
     times["metabolics_s"] = time.perf_counter() - t1
