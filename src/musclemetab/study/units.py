@@ -257,7 +257,11 @@ _INTERRUPTED = threading.Event()
 
 
 def _on_sigint(signum, frame):
-    """SIGINT while a unit runs: remember it, then interrupt as Python does by default."""
+    """SIGINT while a unit runs: remember it, then interrupt as Python does by default.
+
+    A second SIGINT (the terminal's and the runner's) does not interrupt the clean-up."""
+    if _INTERRUPTED.is_set():
+        return
     _INTERRUPTED.set()
     raise KeyboardInterrupt
 
