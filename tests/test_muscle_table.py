@@ -1,0 +1,207 @@
+"""The anatomical muscle table, its aliases per model family, and the placement rules.
+
+Oracles: the study's published per-muscle table (reference_table), hand computations from the
+package tables' numbers (Handsfield volume shares, Uchida slow-twitch fractions) and the
+maximal isometric forces OpenSim reads from the gait2392 model.
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+
+import numpy as np
+import pytest
+
+from musclemetab.errors import InputFileError, MuscleTableWarning, OptionError, UnknownMuscleError
+from musclemetab.properties import (
+    MUSCLE_DENSITY_KG_PER_M3,
+    alias_table,
+    anatomical_table,
+    coupling_groups,
+    emg_scale_groups,
+    model_family,
+    muscle_masses_kg,
+    read_muscle_properties,
+    report_muscles,
+    resolve_muscles,
+    slow_twitch_fraction,
+    split_side,
+    tendon_groups,
+    total_muscle_volume_m3,
+)
+
+MASS, HEIGHT = 72.6, 1.8  # gait2392 subject: 72.6 kg; its height is not recorded, 1.8 m assumed here
+RHO = MUSCLE_DENSITY_KG_PER_M3
+
+
+def _rajagopal(side="r"):
+    a = alias_table()
+    return [f"{n}_{side}" for n, f in zip(a["model_name"], a["families"]) if "rajagopal" in f]
+
+
+@pytest.fixture(scope="module")
+def g2392(gait2392):
+    from musclemetab.model import read_model
+
+    return read_model(gait2392.model)
+
+
+def test_tables_are_consistent():
+    anat = anatomical_table()
+    assert len(anat) == 30 and anat["volume_percent"].sum() == pytest.approx(97.0, abs=1e-9)
+    assert anat["slow_twitch_fraction"].between(0, 1).all()
+    ids = {a for t in alias_table()["anatomical"] for a in t}
+    assert ids <= set(anat.index)
+    # every anatomical muscle has a name in the study's model family
+    raj = resolve_muscles(_rajagopal())
+    assert {a for r in raj for a in r.anatomical} == set(anat.index)
+
+
+def test_study_model_keeps_the_published_shares(reference_table):
+    names = list(reference_table.index)
+    recs = resolve_muscles(names)
+    np.testing.assert_allclose([r.volume_percent for r in recs],
+                               reference_table["handsfield_volume_percent"].to_numpy(), rtol=1e-6)
+    np.testing.assert_allclose([r.slow_twitch_fraction for r in recs],
+                               reference_table["slow_twitch_fraction"].to_numpy(), rtol=1e-12)
+    # no model forces needed for the study's model (explicit shares), and no warning
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        masses = muscle_masses_kg(names, 72.6, 1.743)
+    np.testing.assert_allclose(masses, reference_table["mass_kg_sub1"].to_numpy(), rtol=1e-5)
+
+
+def test_families_are_recognised(g2392):
+    assert model_family(_rajagopal("l")) == "rajagopal"
+    assert model_family(g2392.muscles.names) == "gait2392"
+    lumped = ["hamstrings_r", "bifemsh_r", "glut_max_r", "iliopsoas_r", "rect_fem_r", "vasti_r", "gastroc_r",
+              "soleus_r", "tib_ant_r"]
+    assert model_family(lumped) == "gait10dof18musc"
+
+
+def test_gait2392_split_muscles_share_by_force(g2392):
+    # glut_med1..3: gluteus medius is 4.54 % of V_total, split by the model's F0 (819, 573, 653 N)
+    names = ["glut_med1_r", "glut_med2_r", "glut_med3_r", "add_mag1_l", "add_mag2_l", "add_mag3_l", "soleus_r"]
+    mp = g2392.muscles.subset(names)
+    f0 = dict(zip(names, mp.max_isometric_force_N))
+    assert [f0[n] for n in names[:3]] == [819.0, 573.0, 653.0]
+    masses = muscle_masses_kg(names, MASS, HEIGHT, mp.max_isometric_force_N, mp.optimal_fiber_length_m)
+    v_total_cm3 = 47 * MASS * HEIGHT + 1285  # 7427.08 cm^3
+    assert total_muscle_volume_m3(MASS, HEIGHT) == pytest.approx(v_total_cm3 * 1e-6, rel=1e-12)
+    expected = {
+        "glut_med1_r": 0.0454 * 819 / (819 + 573 + 653),
+        "glut_med3_r": 0.0454 * 653 / (819 + 573 + 653),
+        "add_mag2_l": 0.0786 * f0["add_mag2_l"] / (f0["add_mag1_l"] + f0["add_mag2_l"] + f0["add_mag3_l"]),
+        "soleus_r": 0.0621,
+    }
+    for n, share in expected.items():
+        assert masses[names.index(n)] == pytest.approx(RHO * share * v_total_cm3 * 1e-6, rel=1e-12), n
+    # the parts of one side add up to the anatomical muscle
+    assert sum(masses[:3]) == pytest.approx(RHO * 0.0454 * v_total_cm3 * 1e-6, rel=1e-12)
+    assert sum(masses[3:6]) == pytest.approx(RHO * 0.0786 * v_total_cm3 * 1e-6, rel=1e-12)
+
+
+def test_gait2392_unplaced_muscles_fall_back_with_one_warning(g2392):
+    right = [n for n in g2392.muscles.names if n.endswith("_r")]
+    mp = g2392.muscles.subset(right)
+    with pytest.warns(MuscleTableWarning) as rec:
+        masses = muscle_masses_kg(right, MASS, HEIGHT, mp.max_isometric_force_N, mp.optimal_fiber_length_m)
+    assert len(rec) == 1
+    msg = str(rec[0].message)
+    named = set(re.findall(r"\b\w+_r\b", msg))
+    assert named == {"pect_r", "quad_fem_r", "gem_r", "per_tert_r", "ercspn_r", "intobl_r", "extobl_r"}
+    assert "--muscle-properties" in msg
+    i = right.index("pect_r")
+    # OpenSim's probe rule: F0 / sigma * rho * lMo
+    assert masses[i] == pytest.approx(mp.max_isometric_force_N[i] / 0.6e6 * RHO * mp.optimal_fiber_length_m[i],
+                                      rel=1e-12)
+    fst = slow_twitch_fraction(right, default=0.5)
+    assert fst[i] == 0.5 and fst[right.index("soleus_r")] == 0.803
+    with pytest.raises(UnknownMuscleError, match="pect_r.*quad_fem_r|quad_fem_r.*pect_r"):
+        muscle_masses_kg(right, MASS, HEIGHT, mp.max_isometric_force_N, mp.optimal_fiber_length_m, strict=True)
+    # without the model's parameters the fallback cannot be computed: a clear error
+    with pytest.raises(UnknownMuscleError, match="pect_r"):
+        muscle_masses_kg(["pect_r"], MASS, HEIGHT)
+
+
+def test_lumped_muscles_take_the_sum_of_their_parts():
+    v = total_muscle_volume_m3(MASS, HEIGHT)
+    ham, vasti, gastroc = muscle_masses_kg(["hamstrings_l", "vasti_l", "gastroc_l"], MASS, HEIGHT)
+    assert ham == pytest.approx(RHO * (0.0346 + 0.0260 + 0.0292) * v, rel=1e-12)
+    assert vasti == pytest.approx(RHO * (0.0384 + 0.1166 + 0.0606) * v, rel=1e-12)
+    assert gastroc == pytest.approx(RHO * (0.0362 + 0.0211) * v, rel=1e-12)
+    # slow-twitch fraction weighted by the parts' volumes
+    fst = slow_twitch_fraction(["hamstrings_l", "gastroc_l"])
+    assert fst[0] == pytest.approx((3.46 * 0.4925 + 2.60 * 0.425 + 2.92 * 0.5425) / 8.98, rel=1e-12)
+    assert fst[1] == pytest.approx((3.62 * 0.566 + 2.11 * 0.507) / 5.73, rel=1e-12)
+    (r,) = resolve_muscles(["vasti_l"])
+    assert r.tendon == "patellar" and r.emg_scale_group == "vasti" and r.coupling_group == "P6"
+
+
+def test_sides_and_case():
+    assert split_side("soleus_R") == ("soleus", "r") and split_side("Soleus_l") == ("Soleus", "l")
+    assert split_side("soleus") == ("soleus", "")
+    a = muscle_masses_kg(["soleus_r", "TIB_ANT_L", "vas_lat_R"], MASS, HEIGHT)
+    b = muscle_masses_kg(["soleus_l", "tib_ant_r", "vas_lat_l"], MASS, HEIGHT)
+    np.testing.assert_allclose(a, b, rtol=1e-15)
+    # a split muscle needs the model's forces; the message says which
+    with pytest.raises(OptionError, match="glut_med1_r.*max_isometric_force_N"):
+        muscle_masses_kg(["glut_med1_r", "glut_med2_r"], MASS, HEIGHT)
+
+
+def test_groups_from_the_table_for_any_model_and_side(g2392):
+    names = list(g2392.muscles.names)
+    cg = coupling_groups(names)
+    assert cg["P8_l"] == ("glut_med1_l", "glut_med2_l", "glut_med3_l")
+    assert set(cg["P5_r"]) == {"semimem_r", "semiten_r", "bifemlh_r"}
+    assert set(cg["P1_r"]) == {"per_brev_r", "per_long_r"}
+    tg = tendon_groups(names)
+    assert set(tg) == {"achilles_r", "achilles_l", "patellar_r", "patellar_l"}
+    assert set(tg["achilles_l"]) == {"soleus_l", "med_gas_l", "lat_gas_l"}
+    assert set(emg_scale_groups(names)["gastrocnemii_r"]) == {"med_gas_r", "lat_gas_r"}
+    # the study's model: the same groups as the study's right-leg names
+    raj = _rajagopal()
+    assert set(tendon_groups(raj)["patellar_r"]) == {"vasint_r", "vaslat_r", "vasmed_r"}
+    assert report_muscles([n for n in names if n.endswith("_l")])[:4] == ["soleus_l", "med_gas_l", "lat_gas_l",
+                                                                           "tib_ant_l"]
+
+
+def test_calibration_groups_follow_the_table(g2392):
+    from musclemetab.calibration.passive import default_tendon_stiffness, parameter_groups
+
+    names = ["glut_med1_l", "soleus_l", "glut_med2_l", "med_gas_l", "tib_ant_l", "pect_l"]
+    assert parameter_groups(names) == [("glut_med1_l", "glut_med2_l"), ("soleus_l",), ("med_gas_l",),
+                                       ("tib_ant_l",), ("pect_l",)]
+    assert default_tendon_stiffness(names).tolist() == [35, 20, 35, 20, 35, 35]
+
+
+def test_override_file(tmp_path, g2392):
+    p = tmp_path / "muscles.csv"
+    p.write_text("muscle,anatomical_muscles,mass_kg,slow_twitch_fraction\n"
+                 "pect,adductor_longus,,\n"
+                 "quad_fem_r,,0.08,0.6\n"
+                 "gem_r,,0.02,0.5\n"
+                 "per_tert_r,,0.01,0.5\n")
+    names = ["pect_r", "pect_l", "quad_fem_r", "gem_r", "per_tert_r", "soleus_r"]
+    mp = g2392.muscles.subset(names)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # every muscle placed or given: no warning, strict passes
+        masses = muscle_masses_kg(names, MASS, HEIGHT, mp.max_isometric_force_N, mp.optimal_fiber_length_m,
+                                  overrides=p, strict=True)
+    v = total_muscle_volume_m3(MASS, HEIGHT)
+    # a side-free name covers both sides; pect alone stands for adductor longus on each side
+    assert masses[0] == masses[1] == pytest.approx(RHO * 0.0226 * v, rel=1e-12)
+    assert masses[2] == 0.08
+    assert slow_twitch_fraction(names, overrides=p)[2] == 0.6
+    for text, match in (("muscle,colour\nx,red\n", "unknown column colour"),
+                        ("name,mass_kg\nx,1\n", "no 'muscle' column"),
+                        ("muscle,mass_kg\npect_r,-1\n", "muscle 'pect_r', column 'mass_kg'"),
+                        ("muscle,slow_twitch_fraction\npect_r,1.5\n", r"fraction in \[0, 1\]"),
+                        ("muscle,anatomical_muscles\npect_r,pectineus\n", "unknown anatomical muscle pectineus"),
+                        ("muscle,mass_kg\npect_r,1\npect_r,2\n", "appears twice")):
+        p.write_text(text)
+        with pytest.raises(InputFileError, match=match):
+            read_muscle_properties(p)
+    with pytest.raises(InputFileError, match="no such muscle-properties file"):
+        read_muscle_properties(tmp_path / "absent.csv")
