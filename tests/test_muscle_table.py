@@ -205,3 +205,80 @@ def test_override_file(tmp_path, g2392):
             read_muscle_properties(p)
     with pytest.raises(InputFileError, match="no such muscle-properties file"):
         read_muscle_properties(tmp_path / "absent.csv")
+
+
+# ------------------------------------------------------------------ metabolics on gait2392 muscles
+def _gait2392_states(folder, g2392):
+    """A solution folder with the 43 right-leg gait2392 muscles (synthetic smooth states) and the
+    model's parameters: the metabolic chain is tested, not the solver."""
+    import json
+
+    from musclemetab.io import storage_from_arrays, write_storage
+    from musclemetab.muscle import active_force_length, force_velocity, passive_force_length
+
+    muscles = [n for n in g2392.muscles.names if n.endswith("_r") and n.split("_")[0] not in
+               ("ercspn", "intobl", "extobl")]
+    assert len(muscles) == 43
+    mp = g2392.muscles.subset(muscles)
+    folder.mkdir(parents=True)
+    t = 0.6 + 0.01 * np.arange(61)
+    cols, params = {}, {}
+    for i, m in enumerate(muscles):
+        f0 = mp.max_isometric_force_N[i]
+        a = np.clip(0.3 + 0.25 * np.sin(2 * np.pi * t + i), 0.01, 1.0)
+        lm = 1.0 + 0.15 * np.sin(4 * np.pi * t + i)
+        vb = 0.3 * np.cos(4 * np.pi * t + i)
+        fl, fv = active_force_length(lm), force_velocity(vb)
+        for q, v in dict(excitation=a, activation=a, normalized_fiber_length=lm, normalized_fiber_velocity=vb,
+                         tendon_force=np.zeros_like(t), active_fiber_force=a * fl * fv * f0,
+                         passive_fiber_force=f0 * passive_force_length(lm), active_force_length_multiplier=fl,
+                         force_velocity_multiplier=fv).items():
+            cols[f"/forceset/{m}/{q}"] = v
+        params[m] = dict(F0_N=f0, lMo_m=mp.optimal_fiber_length_m[i], lTs_m=mp.tendon_slack_length_m[i],
+                         alpha0_rad=mp.pennation_angle_at_optimal_rad[i], vmax_lMo_per_s=10.0,
+                         kT=35.0, kPE=4.0, s0=1.0, sM=0.6)
+    write_storage(folder / "solution.sto", storage_from_arrays(t, cols))
+    (folder / "summary.json").write_text(json.dumps(dict(
+        status="Solve_Succeeded", success=True, muscles=muscles, dofs=["ankle_angle_r"], parameters=params)))
+    return muscles, mp
+
+
+@pytest.mark.opensim
+def test_metabolics_cli_on_gait2392_muscles(g2392, tmp_path, capsys):
+    import pandas as pd
+
+    from musclemetab.cli import main
+
+    muscles, mp = _gait2392_states(tmp_path / "sol", g2392)
+    base = ["metabolics", "--solution", str(tmp_path / "sol"), "--mass", str(MASS), "--height", str(HEIGHT)]
+    # --strict: one line naming the unplaced muscles, exit 1, nothing written
+    assert main(base + ["--strict", "--out", str(tmp_path / "strict")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("musclemetab: error:")
+    assert all(m in err[0] for m in ("pect_r", "quad_fem_r", "gem_r", "per_tert_r"))
+    assert not (tmp_path / "strict").exists()
+    # default: one warning line, every model runs
+    assert main(base + ["--out", str(tmp_path / "out")]) == 0
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(err) == 1 and err[0].startswith("musclemetab: warning:") and "pect_r" in err[0]
+    wb = pd.read_csv(tmp_path / "out" / "whole_body.csv")
+    assert len(wb) == 6 and np.isfinite(wb.select_dtypes("number").to_numpy()).all()
+    # the per-muscle basal heat is 1.2 W per kg of the muscle's mass: the masses by hand
+    long = pd.read_csv(tmp_path / "out" / "metabolics.csv")
+    basal = long[(long.component == "basal") & (long.model == wb["model"].iloc[0])].groupby("muscle")["value_W"].mean()
+    v = (47 * MASS * HEIGHT + 1285) * 1e-6
+    f0 = dict(zip(muscles, mp.max_isometric_force_N))
+    lmo = dict(zip(muscles, mp.optimal_fiber_length_m))
+    glut_med = f0["glut_med1_r"] + f0["glut_med2_r"] + f0["glut_med3_r"]
+    expected = {"glut_med2_r": RHO * 0.0454 * f0["glut_med2_r"] / glut_med * v,
+                "vas_lat_r": RHO * 0.1166 * v,
+                "per_long_r": RHO * 0.0183 * f0["per_long_r"] / (f0["per_long_r"] + f0["per_brev_r"]) * v,
+                "pect_r": f0["pect_r"] / 0.6e6 * RHO * lmo["pect_r"]}
+    for m, mass in expected.items():
+        assert basal[m] == pytest.approx(1.2 * mass, rel=1e-6), m
+    # placing them with an override file: no warning
+    p = tmp_path / "muscles.csv"
+    p.write_text("muscle,anatomical_muscles,mass_kg,slow_twitch_fraction\npect,adductor_longus,,\n"
+                 "quad_fem,,0.1,0.5\ngem,,0.03,0.5\nper_tert,,0.02,0.7\n")
+    assert main(base + ["--strict", "--muscle-properties", str(p), "--out", str(tmp_path / "placed")]) == 0
+    assert "warning" not in capsys.readouterr().err
