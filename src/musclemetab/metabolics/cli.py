@@ -75,7 +75,10 @@ def metabolics_command(args) -> int:
     from .registry import parse_models
     from .solution import metabolics_from_solution, read_solution_states, write_metabolics
 
+    from ..io import check_output_folder
+
     models = parse_models(args.models)
+    check_output_folder(args.out)
     if args.speed is not None and not (np.isfinite(args.speed) and args.speed > 0):
         raise OptionError(f"--speed must be a positive number of m/s, not {args.speed}")
     states = read_solution_states(args.solution, require_success=not args.allow_failed)

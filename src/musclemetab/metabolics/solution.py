@@ -363,6 +363,14 @@ def metabolics_from_solution(
     keep = trim_slice(n_nodes, *trim)
     time = sol.time_s[keep]
     states = {arg: arr[:, keep] for arg, arr in sol.states.items()}
+    for arg, arr in states.items():  # named here, where the solution and the muscles are known
+        bad = ~np.isfinite(arr)
+        if bad.any():
+            m, k = (int(i) for i in np.argwhere(bad)[0])
+            raise DataMismatchError(
+                f"{sol.source or 'the solution'}: '{arg}' of muscle {muscles[m]} is {arr[m, k]:g} at t = {time[k]:g} s "
+                f"({int(bad.sum())} non-finite values); the solution is damaged or did not converge: solve again"
+            )
 
     overrides = (as_overrides(muscle_properties).with_column("mass_kg", muscle_masses_kg)
                  .with_column("slow_twitch_fraction", slow_twitch_fractions))

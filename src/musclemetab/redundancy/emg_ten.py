@@ -1086,6 +1086,13 @@ def solve_emg_ten(
     geometries = [compute_geometry(model, ik, dofs=list(dofs), side="r", cache_dir=cache_dir) for ik in ik_paths]
     t_geometry = _time.perf_counter() - t0
     model_parameters = params_request.result()
+    if check_units:
+        from ..model import read_model
+        from .inputs import check_moments_per_body_mass
+
+        mass = read_model(model).body_mass_kg
+        for (_, moments), idp in zip(id_data, id_paths):
+            check_moments_per_body_mass(moments, dofs, mass, idp, model)
     sources = [{"model": Path(model), "ik": Path(ik), "id": Path(idp),
                 "emg": Path(emg) if isinstance(emg, (str, os.PathLike)) else f"EMG table of trial {lab}"}
                for ik, idp, emg, lab in zip(ik_paths, id_paths, emg_paths, labels)]

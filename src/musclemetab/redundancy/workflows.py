@@ -1,15 +1,12 @@
 """The effort-based workflows of the study and their muscle parameters.
 
-==============  =====================================  ==========================================
-workflow        passive force-length (kPE, s0, sM)     tendon stiffness kT
-==============  =====================================  ==========================================
-``effort-gen``  generic: 4, 1, 0.6 for every muscle    35 for every muscle
+==============  =====================================  ===================================workflow        passive force-length (kPE, s0, sM)     tendon stiffness kT
+==============  =====================================  ===================================``effort-gen``  generic: 4, 1, 0.6 for every muscle    35 for every muscle
 ``effort-cal``  calibrated                             35 for every muscle
 ``effort-ten``  calibrated                             personalised for the muscles of the Achilles
                                                        (triceps surae) and patellar (vasti)
                                                        tendons, 35 for the others
-==============  =====================================  ==========================================
-
+==============  =====================================  ===================================
 EFFORT-TEN's personalised ``kT``, in this order of precedence (``summary.json`` records the
 source of every value, ``tendon_stiffness_sources``, and their kinds,
 ``tendon_stiffness_source``):
@@ -75,6 +72,10 @@ __all__ = [
 GENERIC_KPE, GENERIC_S0, GENERIC_SM = 4.0, 1.0, 0.6
 #: ``--tendon-stiffness example``: the example subject's estimates, only when asked for.
 EXAMPLE = "example"
+#: Plausible ranges of passive parameters read from a file (generic 4, 1, 0.6; the study's
+#: calibration bounds kPE to 3-5 and s0 to 0.8-1.2). Values outside are typos or other
+#: conventions, and overflow the exponential passive curve.
+PASSIVE_RANGES = {"kPE": (0.1, 50.0), "s0": (0.25, 4.0), "sM": (0.05, 2.0)}
 
 #: Example-subject EMG-informed tendon stiffness (``muscle_redundancy.md`` §6.8).
 KT_TRICEPS_SURAE = 10.617977
@@ -216,6 +217,8 @@ def literature_tendon_stiffness(muscles: Sequence[str], max_isometric_force_N, t
 def read_passive_parameters(path: str | os.PathLike) -> PassiveParameters:
     """Read calibrated passive parameters from ``passive_parameters.csv`` or ``passiveMoments.mat``."""
     path = Path(path)
+    if path.is_dir():
+        raise InputFileError(f"{path} is a folder, not a passive-parameter file; give the path of the file")
     if not path.is_file():
         raise InputFileError(f"{path}: no such passive-parameter file; check the --passive path")
     if path.suffix.lower() == ".mat":
@@ -256,7 +259,20 @@ def _read_passive_csv(path: Path) -> PassiveParameters:
         values[row["muscle"]] = (kpe, s0, sm)
     if not values:
         raise InputFileError(f"{path}: no rows; the passive parameter table is empty")
+    _check_passive_ranges(values, path)
     return PassiveParameters(values, str(path))
+
+
+def _check_passive_ranges(values: Mapping[str, tuple[float, float, float]], path) -> None:
+    """:class:`InputFileError` naming the file, muscle and parameter outside :data:`PASSIVE_RANGES`."""
+    for muscle, triple in values.items():
+        for name, v in zip(("kPE", "s0", "sM"), triple):
+            lo, hi = PASSIVE_RANGES[name]
+            if math.isfinite(v) and not lo <= v <= hi:
+                raise InputFileError(
+                    f"{path}: muscle '{muscle}' has {name} = {v:g}, outside the plausible {lo:g}-{hi:g}; "
+                    "fix the value (the generic values are kPE 4, s0 1, sM 0.6)"
+                )
 
 
 def _read_passive_mat(path: Path) -> PassiveParameters:
@@ -279,6 +295,7 @@ def _read_passive_mat(path: Path) -> PassiveParameters:
     if not (len(names) == kpe.size == ksf.size):
         raise InputFileError(f"{path}: {len(names)} muscle names but {kpe.size} kpe and {ksf.size} ksf values")
     values = {n: (float(k), float(s), GENERIC_SM) for n, k, s in zip(names, kpe, ksf)}
+    _check_passive_ranges(values, path)
     return PassiveParameters(values, str(path))
 
 

@@ -71,7 +71,7 @@ def run_demo(out: str | os.PathLike = "musclemetab-demo", *, workers: int | None
 
     study = demo_study(out, speeds=speeds)
     run = run_study(study, workers=workers, progress=progress, force=force)
-    if report:
+    if report and not run.interrupted:
         from ..report import write_report
 
         run.report = write_report(study.output)
