@@ -282,3 +282,31 @@ def test_metabolics_cli_on_gait2392_muscles(g2392, tmp_path, capsys):
                  "quad_fem,,0.1,0.5\ngem,,0.03,0.5\nper_tert,,0.02,0.7\n")
     assert main(base + ["--strict", "--muscle-properties", str(p), "--out", str(tmp_path / "placed")]) == 0
     assert "warning" not in capsys.readouterr().err
+
+
+def test_study_file_muscle_properties_key(tmp_path, example):
+    from musclemetab.study.spec import load_study
+
+    def study(csv_text):
+        (tmp_path / "muscles.csv").write_text(csv_text)
+        path = tmp_path / "study.toml"
+        path.write_text(f'''name = "s"
+output = "out"
+workflows = ["effort-gen"]
+[[subjects]]
+name = "sub1"
+model = "{example.model}"
+body_mass_kg = 72.6
+height_m = 1.743
+muscle_properties = "muscles.csv"
+[[subjects.trials]]
+name = "normal"
+ik = "{example.ik['normal']}"
+id = "{example.id['normal']}"
+''')
+        return load_study(path)
+
+    assert study("muscle,mass_kg\nsoleus,0.5\n").subjects[0].muscle_properties == tmp_path / "muscles.csv"
+    # a bad file is refused when the study is read, before anything runs
+    with pytest.raises(InputFileError, match="muscles.csv: unknown column colour"):
+        study("muscle,colour\nsoleus,red\n")
