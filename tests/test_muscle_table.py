@@ -207,66 +207,63 @@ def test_override_file(tmp_path, g2392):
         read_muscle_properties(tmp_path / "absent.csv")
 
 
-# ------------------------------------------------------------------ metabolics on gait2392 muscles
-def _gait2392_states(folder, g2392):
-    """A solution folder with the 43 right-leg gait2392 muscles (synthetic smooth states) and the
-    model's parameters: the metabolic chain is tested, not the solver."""
-    import json
+# ------------------------------------------------------------------ metabolics on a gait2392 solution
+@pytest.fixture(scope="module")
+def g2392_solution(gait2392, g2392, tmp_path_factory):
+    """EFFORT-GEN on the gait2392 right leg, 0.7-1.3 s (inside the stored ID file's 0.4-1.6 s).
 
-    from musclemetab.io import storage_from_arrays, write_storage
-    from musclemetab.muscle import active_force_length, force_velocity, passive_force_length
+    ``tfl_r`` is left out: on this motion its rigid-tendon fibre length reaches 1.67-2.0 optimal
+    lengths, beyond the solver's upper bound of 1.7, which makes the problem infeasible.
+    """
+    from musclemetab.geometry import compute_geometry
+    from musclemetab.io import read_storage, write_storage
+    from musclemetab.redundancy.inputs import read_inverse_dynamics, read_kinematics
+    from musclemetab.redundancy.solve import solve_trial
 
-    muscles = [n for n in g2392.muscles.names if n.endswith("_r") and n.split("_")[0] not in
-               ("ercspn", "intobl", "extobl")]
-    assert len(muscles) == 43
-    mp = g2392.muscles.subset(muscles)
-    folder.mkdir(parents=True)
-    t = 0.6 + 0.01 * np.arange(61)
-    cols, params = {}, {}
-    for i, m in enumerate(muscles):
-        f0 = mp.max_isometric_force_N[i]
-        a = np.clip(0.3 + 0.25 * np.sin(2 * np.pi * t + i), 0.01, 1.0)
-        lm = 1.0 + 0.15 * np.sin(4 * np.pi * t + i)
-        vb = 0.3 * np.cos(4 * np.pi * t + i)
-        fl, fv = active_force_length(lm), force_velocity(vb)
-        for q, v in dict(excitation=a, activation=a, normalized_fiber_length=lm, normalized_fiber_velocity=vb,
-                         tendon_force=np.zeros_like(t), active_fiber_force=a * fl * fv * f0,
-                         passive_fiber_force=f0 * passive_force_length(lm), active_force_length_multiplier=fl,
-                         force_velocity_multiplier=fv).items():
-            cols[f"/forceset/{m}/{q}"] = v
-        params[m] = dict(F0_N=f0, lMo_m=mp.optimal_fiber_length_m[i], lTs_m=mp.tendon_slack_length_m[i],
-                         alpha0_rad=mp.pennation_angle_at_optimal_rad[i], vmax_lMo_per_s=10.0,
-                         kT=35.0, kPE=4.0, s0=1.0, sM=0.6)
-    write_storage(folder / "solution.sto", storage_from_arrays(t, cols))
-    (folder / "summary.json").write_text(json.dumps(dict(
-        status="Solve_Succeeded", success=True, muscles=muscles, dofs=["ankle_angle_r"], parameters=params)))
-    return muscles, mp
+    folder = tmp_path_factory.mktemp("g2392_solution")
+    ik = read_storage(gait2392.ik)
+    write_storage(folder / "ik.mot", ik.loc[(ik.index > 0.7 - 1e-6) & (ik.index < 1.3 + 1e-6)], in_degrees=True)
+    dofs = ["ankle_angle_r", "knee_angle_r", "hip_flexion_r", "hip_adduction_r", "hip_rotation_r"]
+    spanning = compute_geometry(gait2392.model, folder / "ik.mot", dofs=dofs, cache_dir=folder / "cache").muscles
+    muscles = [m for m in spanning if m != "tfl_r"]
+    geometry = compute_geometry(gait2392.model, folder / "ik.mot", dofs=dofs, muscles=muscles,
+                                cache_dir=folder / "cache")
+    ik_time, _ = read_kinematics(folder / "ik.mot", dofs)
+    id_time, id_moments = read_inverse_dynamics(gait2392.id, dofs)
+    sol = solve_trial(geometry, g2392.muscles, id_time, id_moments, "effort-gen", ik_time_s=ik_time)
+    sol.write(folder / "sol")
+    return sol, folder / "sol", muscles
 
 
 @pytest.mark.opensim
-def test_metabolics_cli_on_gait2392_muscles(g2392, tmp_path, capsys):
+@pytest.mark.slow
+def test_metabolics_cli_on_a_gait2392_solution(g2392_solution, g2392, tmp_path, capsys):
     import pandas as pd
 
     from musclemetab.cli import main
 
-    muscles, mp = _gait2392_states(tmp_path / "sol", g2392)
-    base = ["metabolics", "--solution", str(tmp_path / "sol"), "--mass", str(MASS), "--height", str(HEIGHT)]
+    sol, folder, muscles = g2392_solution
+    assert sol.summary["success"] and sol.summary["max_moment_residual_Nm"] <= 1e-4
+    assert len(muscles) == 42
+    base = ["metabolics", "--solution", str(folder), "--mass", str(MASS), "--height", str(HEIGHT)]
     # --strict: one line naming the unplaced muscles, exit 1, nothing written
     assert main(base + ["--strict", "--out", str(tmp_path / "strict")]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("musclemetab: error:")
     assert all(m in err[0] for m in ("pect_r", "quad_fem_r", "gem_r", "per_tert_r"))
     assert not (tmp_path / "strict").exists()
-    # default: one warning line, every model runs
+    # default: one warning line, every metabolic model runs
     assert main(base + ["--out", str(tmp_path / "out")]) == 0
     err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
     assert len(err) == 1 and err[0].startswith("musclemetab: warning:") and "pect_r" in err[0]
     wb = pd.read_csv(tmp_path / "out" / "whole_body.csv")
-    assert len(wb) == 6 and np.isfinite(wb.select_dtypes("number").to_numpy()).all()
+    assert sorted(wb["model"]) == sorted(["UM03", "BH04", "HO06", "LW07", "UM10", "UC16"])
+    assert np.isfinite(wb.select_dtypes("number").to_numpy()).all() and (wb["mean_W_per_kg_no_basal"] > 0).all()
     # the per-muscle basal heat is 1.2 W per kg of the muscle's mass: the masses by hand
     long = pd.read_csv(tmp_path / "out" / "metabolics.csv")
-    basal = long[(long.component == "basal") & (long.model == wb["model"].iloc[0])].groupby("muscle")["value_W"].mean()
+    basal = long[(long.component == "basal") & (long.model == "UM10")].groupby("muscle")["value_W"].mean()
     v = (47 * MASS * HEIGHT + 1285) * 1e-6
+    mp = g2392.muscles.subset(muscles)
     f0 = dict(zip(muscles, mp.max_isometric_force_N))
     lmo = dict(zip(muscles, mp.optimal_fiber_length_m))
     glut_med = f0["glut_med1_r"] + f0["glut_med2_r"] + f0["glut_med3_r"]
@@ -276,7 +273,7 @@ def test_metabolics_cli_on_gait2392_muscles(g2392, tmp_path, capsys):
                 "pect_r": f0["pect_r"] / 0.6e6 * RHO * lmo["pect_r"]}
     for m, mass in expected.items():
         assert basal[m] == pytest.approx(1.2 * mass, rel=1e-6), m
-    # placing them with an override file: no warning
+    # placing them with an override file: no warning, --strict passes
     p = tmp_path / "muscles.csv"
     p.write_text("muscle,anatomical_muscles,mass_kg,slow_twitch_fraction\npect,adductor_longus,,\n"
                  "quad_fem,,0.1,0.5\ngem,,0.03,0.5\nper_tert,,0.02,0.7\n")
