@@ -232,7 +232,11 @@ def g2392_solution(gait2392, g2392, tmp_path_factory):
     id_time, id_moments = read_inverse_dynamics(gait2392.id, dofs)
     sol = solve_trial(geometry, g2392.muscles, id_time, id_moments, "effort-gen", ik_time_s=ik_time)
     sol.write(folder / "sol")
-    return sol, folder / "sol", muscles
+
+    def solve(workflow, **kw):
+        return solve_trial(geometry, g2392.muscles, id_time, id_moments, workflow, ik_time_s=ik_time, **kw)
+
+    return sol, folder / "sol", muscles, solve
 
 
 @pytest.mark.opensim
@@ -242,7 +246,7 @@ def test_metabolics_cli_on_a_gait2392_solution(g2392_solution, g2392, tmp_path, 
 
     from musclemetab.cli import main
 
-    sol, folder, muscles = g2392_solution
+    sol, folder, muscles, _ = g2392_solution
     assert sol.summary["success"] and sol.summary["max_moment_residual_Nm"] <= 1e-4
     assert len(muscles) == 42
     base = ["metabolics", "--solution", str(folder), "--mass", str(MASS), "--height", str(HEIGHT)]
@@ -307,3 +311,31 @@ id = "{example.id['normal']}"
     # a bad file is refused when the study is read, before anything runs
     with pytest.raises(InputFileError, match="muscles.csv: unknown column colour"):
         study("muscle,colour\nsoleus,red\n")
+
+
+@pytest.mark.opensim
+@pytest.mark.slow
+def test_effort_ten_on_gait2392_takes_the_literature_default(g2392_solution, g2392, tmp_path):
+    import json
+
+    from musclemetab.muscle import tendon_length_from_force, tendon_stiffness_N_per_m
+    from musclemetab.redundancy.workflows import generic_passive_parameters
+
+    _, _, muscles, solve = g2392_solution
+    ten = solve("effort-ten", passive=generic_passive_parameters(muscles))
+    assert ten.summary["success"] and ten.summary["max_moment_residual_Nm"] <= 1e-4
+    ten.write(tmp_path / "ten")
+    wf = json.loads((tmp_path / "ten" / "summary.json").read_text())["workflow"]
+    assert wf["tendon_stiffness_source"] == ["literature"]
+    kt = wf["tendon_stiffness"]
+    assert set(kt) == {"soleus_r", "med_gas_r", "lat_gas_r", "vas_int_r", "vas_lat_r", "vas_med_r"}
+    # the Achilles group's summed slope at a quarter of F0 is the tabulated 155 N/mm
+    mp = g2392.muscles
+    k = kt["soleus_r"]
+    lt = tendon_length_from_force(0.25, k)
+    slope = sum(float(tendon_stiffness_N_per_m(lt, mp.max_isometric_force_N[mp.index(m)],
+                                               mp.tendon_slack_length_m[mp.index(m)], k))
+                for m in ("soleus_r", "med_gas_r", "lat_gas_r"))
+    assert slope == pytest.approx(155e3, rel=1e-9)
+    assert all(v.startswith("literature (achilles") for m, v in wf["tendon_stiffness_sources"].items()
+               if m in ("soleus_r", "med_gas_r", "lat_gas_r"))
