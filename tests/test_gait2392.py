@@ -168,3 +168,16 @@ def test_left_leg_effort_gen(left_solution):
     assert "clipped" in s["window"]["warnings"][0]
     assert s["inverse_dynamics"]["coordinate_lowpass_hz"] == 6.0
     assert (left_solution / "inverse_dynamics.sto").is_file()
+
+
+def test_walking_speed_from_the_models_forward_coordinates(gait2392, example):
+    from musclemetab.analysis.speed import walking_speed_from_ik
+
+    # The study's subject walks overground: the model's forward coordinates give the same speed
+    # as the naming rule, in the protocol's range (analysis.md: 55-145 % of ~1.3 m/s).
+    v = walking_speed_from_ik(example.ik["normal"], model=example.model)
+    assert 1.0 < v < 1.6
+    assert v == pytest.approx(walking_speed_from_ik(example.ik["normal"]), rel=1e-12)
+    # gait2392's subject walks on a treadmill: the pelvis moves < 1 cm/s, so the speed must be given
+    with pytest.raises(DataMismatchError, match="pelvis_tx, pelvis_tz\\): treadmill walking"):
+        walking_speed_from_ik(gait2392.ik, start_s=0.618, end_s=1.853, model=gait2392.model)

@@ -90,6 +90,8 @@ class Subject:
     passive: Path | None = None
     tendon_stiffness: str | Path | Mapping[str, float] | None = None
     emg_mapping: str = "default"
+    side: str = "r"
+    dofs: tuple[str, ...] | None = None
 
     def trial(self, name: str) -> Trial:
         for t in self.trials:
@@ -124,7 +126,8 @@ class Study:
 
 # ---------------------------------------------------------------------------------------
 _STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "subjects"}
-_SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials"}
+_SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials",
+                 "side", "dofs"}
 _TRIAL_KEYS = {
     "name", "ik", "id", "emg", "grf", "grf_column", "grf_threshold_N", "speed_m_per_s",
     "measured_W_per_kg", "vo2_mL_per_s", "vco2_mL_per_s", "vo2_mL_per_min", "vco2_mL_per_min",
@@ -238,6 +241,14 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
     mapping = str(data.get("emg_mapping", "default"))
     if mapping not in ("default", "authors"):
         raise OptionError(f"{here}: 'emg_mapping' must be default or authors, not {mapping!r}")
+    side = data.get("side", "r")
+    if side not in ("r", "l"):
+        raise OptionError(f"{here}: 'side' must be \"r\" or \"l\", not {side!r}")
+    dofs = data.get("dofs")
+    if dofs is not None:
+        if not isinstance(dofs, list) or not dofs or not all(isinstance(d, str) and d for d in dofs):
+            raise OptionError(f"{here}: 'dofs' must be a list of coordinate names, e.g. [\"knee_angle_l\"]")
+        dofs = tuple(dofs)
     trials_data = data.get("trials")
     if not isinstance(trials_data, list) or not trials_data:
         raise OptionError(f"{here}: no trials; add [[subjects.trials]] tables with name, ik and id")
@@ -252,7 +263,7 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
             raise OptionError(f"{here}: the emg-ten workflow needs an 'emg' file for every trial; missing for "
                               f"{', '.join(missing)}")
     return Subject(name=name, model=model, body_mass_kg=mass, height_m=height, trials=trials,
-                   passive=passive, tendon_stiffness=kt, emg_mapping=mapping)
+                   passive=passive, tendon_stiffness=kt, emg_mapping=mapping, side=side, dofs=dofs)
 
 
 def _trial(data, base: Path, where: str) -> Trial:

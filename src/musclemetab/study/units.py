@@ -311,7 +311,8 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
                 kwargs["tendon_stiffness_file"] = kt
             elif isinstance(kt, dict):
                 kwargs["tendon_stiffness"] = kt
-        sol = solve_files(subject.model, trial.ik, trial.id, unit.workflow, **kwargs)
+        sol = solve_files(subject.model, trial.ik, trial.id, unit.workflow, side=subject.side, dofs=subject.dofs,
+                          **kwargs)
         sol.write(tmp)
         times["solve_s"] = sol.summary.get("solve_time_s")
         if not sol.success:
@@ -319,7 +320,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
     times["solution_s"] = time.perf_counter() - t0
 
     t1 = time.perf_counter()
-    speed = trial_speed(trial)
+    speed = trial_speed(trial, subject.model)
     result = metabolics_from_solution(
         tmp, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
         speed_m_per_s=speed,
@@ -328,8 +329,9 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
     times["metabolics_s"] = time.perf_counter() - t1
 
     t2 = time.perf_counter()
-    cycle = trial_cycle(trial)
-    geometry = compute_geometry(subject.model, trial.ik)
+    cycle = trial_cycle(trial, subject.side)
+    solved_dofs = Solution.load(tmp, require_success=False).dofs
+    geometry = compute_geometry(subject.model, trial.ik, dofs=list(solved_dofs))
     from ..analysis.unit import analyse_metabolics, filtered_moment_arms
 
     tg, r = filtered_moment_arms(geometry)
