@@ -1,0 +1,63 @@
+"""Per-leg solution folders in metabolics: legs added instead of doubled, cycle-based trimming.
+
+The solution folders are synthetic, in the solver's file format (see test_metabolics_solution).
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from test_metabolics_solution import HEIGHT, MASS, make_solution
+
+
+def _cli(*argv):
+    from musclemetab.cli import main
+
+    return main(list(map(str, argv)))
+
+
+def test_metabolics_adds_two_legs_and_doubles_one(tmp_path, capsys):
+    import pandas as pd
+
+    from musclemetab.metabolics.solution import metabolics_from_solution
+
+    parent = tmp_path / "both"
+    make_solution(parent / "r")
+    make_solution(parent / "l", n=40)  # another cycle length: each leg averaged over its own
+    for side in "rl":
+        s = json.loads((parent / side / "summary.json").read_text())
+        (parent / side / "summary.json").write_text(json.dumps(s | {"side": side}))
+    one = {s: metabolics_from_solution(parent / s, MASS, HEIGHT, models="UM10,BH04", legs=1) for s in "rl"}
+    assert _cli("metabolics", "--solution", parent, "--mass", MASS, "--height", HEIGHT, "--models", "UM10,BH04",
+                "--out", tmp_path / "m") == 0
+    assert "legs r + l added" in capsys.readouterr().out
+    wb = pd.read_csv(tmp_path / "m" / "whole_body.csv").set_index("model")
+    for m in ("UM10", "BH04"):
+        # basal rule "body": 1.2 W/kg once, the two legs' muscle averages added
+        expected = (one["r"].whole_body[m].one_leg_mean_W + one["l"].whole_body[m].one_leg_mean_W) / MASS + 1.2
+        assert wb.loc[m, "mean_W_per_kg"] == pytest.approx(expected, rel=1e-9)
+        assert wb.loc[m, "legs"] == "r+l"
+    assert (tmp_path / "m" / "r" / "metabolics.sto").is_file() and (tmp_path / "m" / "l" / "metabolics.sto").is_file()
+    # one leg: doubled, and the output says which
+    assert _cli("metabolics", "--solution", parent / "l", "--mass", MASS, "--height", HEIGHT, "--models", "UM10",
+                "--out", tmp_path / "one") == 0
+    assert "whole body = 2 x the left leg" in capsys.readouterr().out
+    with pytest.raises(Exception, match="neither a solution folder"):
+        from musclemetab.metabolics.cli import _solution_folders
+
+        _solution_folders(tmp_path)
+
+
+def test_metabolics_trims_to_the_recorded_gait_cycle(tmp_path):
+    from musclemetab.metabolics.solution import metabolics_from_solution
+
+    folder = make_solution(tmp_path / "s")  # nodes 0.57, 0.58, ..., 0.87 s
+    s = json.loads((folder / "summary.json").read_text())
+    s["window"] = {"gait_cycle": {"start_s": 0.6149, "toe_off_s": 0.7, "end_s": 0.8555}}
+    (folder / "summary.json").write_text(json.dumps(s))
+    res = metabolics_from_solution(folder, MASS, HEIGHT, models="UM10")
+    # the nodes inside the cycle: 0.62 ... 0.85 s (instead of the study's 5 and 6 padding nodes)
+    np.testing.assert_allclose(res.time_s[[0, -1]], [0.62, 0.85])
