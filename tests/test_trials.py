@@ -61,3 +61,27 @@ def test_metabolics_trims_to_the_recorded_gait_cycle(tmp_path):
     res = metabolics_from_solution(folder, MASS, HEIGHT, models="UM10")
     # the nodes inside the cycle: 0.62 ... 0.85 s (instead of the study's 5 and 6 padding nodes)
     np.testing.assert_allclose(res.time_s[[0, -1]], [0.62, 0.85])
+
+
+def test_calibration_coordinates_and_trials_found_by_content(example, gait2392, tmp_path):
+    from musclemetab.calibration.passive import CALIBRATION_JOINTS, calibration_dofs, trial_files
+    from musclemetab.errors import InputFileError
+
+    # the joint tree gives the study's coordinates for its model, and gait2392's left ones
+    assert calibration_dofs(example.calibration_model, "r") == CALIBRATION_JOINTS
+    assert calibration_dofs(gait2392.model, "l") == {"ankle": "ankle_angle_l", "knee": "knee_angle_l",
+                                                     "hip": "hip_flexion_l"}
+    # the example folder (with IK, ID and EMG files beside the trials): each trial found by its moments
+    folder = example.calibration_trials["ankle"]["motion"].parent
+    assert trial_files(folder) == example.calibration_trials
+    # renamed, left-side copies: found by the coordinate they move, not by their names
+    left = {"ankle": "ankle_angle_l", "knee": "knee_angle_l", "hip": "hip_flexion_l"}
+    for joint, files in example.calibration_trials.items():
+        for kind, path in files.items():
+            text = path.read_text().replace("_r\t", "_l\t").replace("_r_moment", "_l_moment").replace("_r\n", "_l\n")
+            (tmp_path / f"sweep_{joint}{path.suffix}").write_text(text)
+    got = trial_files(tmp_path, left)
+    assert {j: f["moments"].name for j, f in got.items()} == {j: f"sweep_{j}.sto" for j in left}
+    (tmp_path / "sweep_knee.sto").unlink()
+    with pytest.raises(InputFileError, match="no calibration trial for knee_angle_l"):
+        trial_files(tmp_path, left)
