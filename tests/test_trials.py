@@ -85,3 +85,53 @@ def test_calibration_coordinates_and_trials_found_by_content(example, gait2392, 
     (tmp_path / "sweep_knee.sto").unlink()
     with pytest.raises(InputFileError, match="no calibration trial for knee_angle_l"):
         trial_files(tmp_path, left)
+
+
+# ------------------------------------------------------------------ a 2D lumped-muscle model
+@pytest.fixture(scope="session")
+def lumped_model(gait2392, tmp_path_factory):
+    """gait2392's subject as a sagittal 18-muscle model (DeGrooteFregly right, Millard left)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    out = tmp_path_factory.mktemp("lumped") / "lumped2d.osim"
+    subprocess.run([sys.executable, str(Path(__file__).with_name("opensim_models.py")), str(gait2392.model), str(out)],
+                   check=True, capture_output=True)
+    return out
+
+
+@pytest.fixture(scope="session")
+def lumped_both(lumped_model, gait2392, tmp_path_factory):
+    out = tmp_path_factory.mktemp("lumped_solve") / "both"
+    code = _cli("solve", "--model", lumped_model, "--ik", gait2392.ik, "--external-loads", gait2392.external_loads,
+                "--cycle", "auto", "--side", "both", "--out", out)
+    assert code == 0
+    return out
+
+
+def test_lumped_2d_model_with_degroote_and_millard_muscles_both_legs(lumped_model, lumped_both, gait2392, tmp_path):
+    import pandas as pd
+
+    from musclemetab.metabolics.solution import metabolics_from_solution
+    from musclemetab.opensim_bridge import call
+
+    kinds = {m["name"][-1]: m["class_name"] for m in call("model_ops:read_model_info", str(lumped_model))["muscles"]}
+    for side in "rl":
+        s = json.loads((lumped_both / side / "summary.json").read_text())
+        assert s["success"] and s["max_moment_residual_Nm"] <= 1e-4
+        # only the sagittal DOFs are free: discovered from the joint tree, distal to proximal
+        assert s["dofs"] == [f"ankle_angle_{side}", f"knee_angle_{side}", f"hip_flexion_{side}"]
+        assert sorted(s["muscles"]) == sorted(f"{m}_{side}" for m in (
+            "hamstrings", "bifemsh", "glut_max", "iliopsoas", "rect_fem", "vasti", "gastroc", "soleus", "tib_ant"))
+        assert (lumped_both / side / "inverse_dynamics.sto").is_file()
+    assert kinds == {"r": "DeGrooteFregly2016Muscle", "l": "Millard2012EquilibriumMuscle"}
+    # both legs added, each over its own cycle; every model in the plausible walking range
+    assert _cli("metabolics", "--solution", lumped_both, "--mass", gait2392.body_mass_kg, "--height", 1.8,
+                "--out", tmp_path / "m") == 0
+    wb = pd.read_csv(tmp_path / "m" / "whole_body.csv").set_index("model")
+    one = {s: metabolics_from_solution(lumped_both / s, gait2392.body_mass_kg, 1.8, legs=1) for s in "rl"}
+    for m, row in wb.iterrows():
+        total = (one["r"].whole_body[m].one_leg_mean_W + one["l"].whole_body[m].one_leg_mean_W) / gait2392.body_mass_kg
+        assert row["mean_W_per_kg"] == pytest.approx(total + 1.2, rel=1e-9)
+        assert 2.6 < row["mean_W_per_kg"] < 15.8, m

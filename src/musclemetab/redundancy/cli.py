@@ -181,13 +181,12 @@ def solve_command(args) -> int:
                 f"{out} with \"success\": false"
             )
         worst_reserve = max(s["reserve_rms_Nm"].values()) if s["reserve_rms_Nm"] else 0.0
-        notes = s.get("window", {}).get("warnings", [])
         print(
             f"solve: {args.workflow} side {side}, {len(solution.muscles)} muscles x {len(solution.dofs)} DOFs, "
             f"N = {s['n_intervals']}: {s['status']} in {s['iterations']} iterations, "
             f"objective {s['objective']:.6e}, solve {s['solve_time_s']:.2f} s, "
             f"max moment residual {s['max_moment_residual_Nm']:.1e} N m, max reserve RMS "
-            f"{worst_reserve:.3g} N m -> {out}" + "".join(f"\nwarning: {n}" for n in notes)
+            f"{worst_reserve:.3g} N m -> {out}"
         )
     return 0
 

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DataMismatchError, OptionError
+from ..errors import DataMismatchError, OptionError, WindowWarning
 
 __all__ = ["PADDING_S", "TrialWindow", "parse_window", "parse_cycle", "resolve_window", "frames_in_window"]
 
@@ -143,7 +143,7 @@ def resolve_window(
                 f"{clipped[0]:.3f}-{clipped[1]:.3f} s"
             )
             notes.append(msg)
-            _warnings.warn(msg, stacklevel=2)
+            _warnings.warn(msg, WindowWarning, stacklevel=2)
             t0, t1 = clipped
         cycle_rec = dict(start_s=gc.start_s, toe_off_s=gc.toe_off_s, end_s=gc.end_s, side=side,
                          number=cycle, source=where)
