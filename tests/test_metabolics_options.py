@@ -177,3 +177,22 @@ def test_recruited_fibre_fractions_in_bh04_and_ho06():
     assert abs(fr - fst) > 0.1 and abs(float(ho.total) - float(ho0.total)) > 1.0
     with pytest.raises(OptionError, match="fiber_fractions"):
         houdijk2006(**s, fiber_fractions="uchida")
+
+
+def test_basal_exponent_as_opensim_writes_it():
+    from musclemetab.metabolics import whole_body_rate
+
+    t = np.array([0.0, 0.5, 1.0])
+    leg = np.array([[10.0, 20.0, 30.0]])  # one muscle, mean 20 W over the cycle
+    m = 80.0
+    default = whole_body_rate(leg, t, m)
+    assert default.mean_W_per_kg == pytest.approx(2 * 20.0 / m + 1.2, rel=1e-14)
+    # basal_coefficient * m^basal_exponent W: 1.2 * 80^0.75 W = 32.098... W, per kg of body mass
+    k = whole_body_rate(leg, t, m, basal_exponent=0.75)
+    assert k.mean_W_per_kg == pytest.approx(2 * 20.0 / m + 1.2 * 80.0**0.75 / 80.0, rel=1e-14)
+    assert k.mean_W_per_kg_no_basal == default.mean_W_per_kg_no_basal  # only the basal term changes
+    np.testing.assert_array_equal(k.one_leg_W, default.one_leg_W)
+    # the exponent belongs to the body rule only
+    assert whole_body_rate(leg, t, m, basal="none", basal_exponent=0.75).mean_W_per_kg == pytest.approx(0.5)
+    with pytest.raises(OptionError, match="basal_exponent"):
+        whole_body_rate(leg, t, m, basal_exponent=float("nan"))
