@@ -22,6 +22,7 @@ from musclemetab.metabolics import (
     umberger2010,
 )
 from musclemetab.opensim_bridge import call
+from test_metabolics_opensim import _inputs as _opensim_inputs
 
 # all slow-twitch: with OpenSim's activation floor of 0.01 (e = 0: A = 0.005) the Umberger
 # heat falls below 1 W/kg only for slow-twitch fibres far above optimal length
@@ -59,17 +60,7 @@ def probe_run(example):
 
 
 def _inputs(r):
-    mp = r["muscle"]
-    return dict(
-        excitation=r["excitation"], activation=r["activation"],
-        normalized_fiber_length=r["normalized_fiber_length"],
-        normalized_fiber_velocity=r["normalized_fiber_velocity"],
-        active_force_length_multiplier=r["active_force_length_multiplier"],
-        force_velocity_multiplier=r["force_velocity_multiplier"],
-        passive_fiber_force_N=r["passive_fiber_force_N"],
-        max_isometric_force_N=mp["max_isometric_force_N"], optimal_fiber_length_m=mp["optimal_fiber_length_m"],
-        max_contraction_velocity=mp["max_contraction_velocity"], muscle_mass_kg=MASS, slow_twitch_fraction=FST,
-    )
+    return {**_opensim_inputs(r), "slow_twitch_fraction": FST}
 
 
 def _probe(r, name):

@@ -43,7 +43,7 @@ from .umberger import AEROBIC_FACTOR, LENGTHENING_FACTOR_2003, LENGTHENING_FACTO
 __all__ = ["SMOOTHING", "SMOOTH_MODELS", "smooth_rates"]
 
 #: Default smoothing parameter ``s`` (dimensionless).
-SMOOTHING = 1e-3
+SMOOTHING = 1e-4
 
 
 class _Smooth:
