@@ -66,6 +66,12 @@ class _Smooth:
         return self.m.sqrt(x * x + self.s * self.s)
 
 
+def _activation_and_curves(x):
+    """``a``, ``vbar``, ``fL``, ``fV`` of the arguments ``x``."""
+    return (x["activation"], x["normalized_fiber_velocity"], x["active_force_length_multiplier"],
+            x["force_velocity_multiplier"])
+
+
 def _recruitment(m, e):
     t = m.tan(0.25 * math.pi * e)
     u_s = (2.0 * t) / (1.0 + t * t)
@@ -148,8 +154,7 @@ def _bhargava(k, x, *, non_negative, activation_heat_decay, stimulation_time_s, 
 def _houdijk(k, x, *, non_negative):
     m = k.m
     c = HOUDIJK_CONSTANTS
-    a, vbar, f_l, f_v = x["activation"], x["normalized_fiber_velocity"], x["active_force_length_multiplier"], \
-        x["force_velocity_multiplier"]
+    a, vbar, f_l, f_v = _activation_and_curves(x)
     mass, f_st, F0 = x["mass"], x["fst"], x["F0"]
     f_ft = 1.0 - f_st
     h_A = c["activation_fast_W_per_kg"] * f_ft + c["activation_slow_W_per_kg"] * f_st
@@ -170,8 +175,7 @@ def _houdijk(k, x, *, non_negative):
 def _lichtwark2007(k, x, *, non_negative):
     m = k.m
     c = LICHTWARK_CONSTANTS
-    a, vbar, f_l, P = x["activation"], x["normalized_fiber_velocity"], x["active_force_length_multiplier"], \
-        x["force_velocity_multiplier"]
+    a, vbar, f_l, P = _activation_and_curves(x)
     v_max, l_mo, F0 = x["vmax"], x["lMo"], x["F0"]
     N0, X, v_tilde = F0 * l_mo, a * f_l, vbar * v_max
     h_iso = c["gamma"] * v_max / c["G"] ** 2
@@ -185,8 +189,7 @@ def _lichtwark2007(k, x, *, non_negative):
 def _lichtwark2005(k, x, *, stimulation_time_s, fiber_force_rate_N_per_s):
     m = k.m
     c = LICHTWARK_2005_CONSTANTS
-    a, vbar, f_l, f_v = x["activation"], x["normalized_fiber_velocity"], x["active_force_length_multiplier"], \
-        x["force_velocity_multiplier"]
+    a, vbar, f_l, f_v = _activation_and_curves(x)
     v_max, l_mo, F0 = x["vmax"], x["lMo"], x["F0"]
     G, N0 = c["G"], F0 * l_mo
     V = -vbar * v_max * l_mo
