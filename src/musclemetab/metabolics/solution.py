@@ -43,7 +43,7 @@ import numpy as np
 
 from ..errors import DataMismatchError, MissingColumnError, OptionError
 from ._common import MetabolicRates
-from .registry import MODELS, parse_models
+from .registry import ALL_MODELS, parse_models
 from .whole_body import BASAL_RULES, WholeBodyRate, whole_body_rate
 
 __all__ = [
@@ -309,7 +309,7 @@ def metabolics_from_solution(
         The subject (muscle masses from the volume rule of :mod:`musclemetab.properties`;
         whole-body rate per kg of body mass).
     models
-        ``"all"`` (the six study models), ``"UM10,BH04"`` or a list.
+        ``"all"`` (the six study models), ``"UM10,BH04"``, ``"all,LW05,MA68"`` or a list.
     muscle_parameters
         ``F0``, ``lMo``, ``vmax`` by muscle name: a
         :class:`musclemetab.model.MuscleParameters` (e.g. from
@@ -351,9 +351,9 @@ def metabolics_from_solution(
     if basal not in BASAL_RULES:
         raise OptionError(f"basal rule must be one of {', '.join(BASAL_RULES)}, not {basal!r}")
     model_options = {k.upper(): dict(v) for k, v in (model_options or {}).items()}
-    unknown = [k for k in model_options if k not in MODELS]
+    unknown = [k for k in model_options if k not in ALL_MODELS]
     if unknown:
-        raise OptionError(f"options given for unknown model(s) {', '.join(unknown)}; known: {', '.join(MODELS)}")
+        raise OptionError(f"options given for unknown model(s) {', '.join(unknown)}; known: {', '.join(ALL_MODELS)}")
     sol = solution if isinstance(solution, SolutionStates) else read_solution_states(
         solution, require_success=require_success
     )
@@ -404,7 +404,7 @@ def metabolics_from_solution(
         opts = {"basal": True}
         opts.update(model_options.get(name, {}))
         try:
-            rates[name] = MODELS[name](**inputs, time_s=time, **opts)
+            rates[name] = ALL_MODELS[name](**inputs, time_s=time, **opts)
         except TypeError as exc:
             raise OptionError(f"{name}: invalid option ({exc})") from None
     wb = {
