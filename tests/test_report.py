@@ -146,9 +146,9 @@ def make_study(root: Path, *, measured=True, trials=None, solutions=True, failed
                         "subject": subject, "trial": trial, "workflow": workflow, "model": model,
                         "speed_m_per_s": sp, "status": "ok",
                         "mean_W_per_kg": 2 * mean_w / mass + 1.2, "mean_W_per_kg_no_basal": 2 * mean_w / mass,
-                        "cost_of_transport_J_per_kg_per_m": (2 * mean_w / mass + 1.2) / sp,
-                        "stance_pct": stance, "swing_pct": 100 - stance,
-                        "stance_pct_with_basal": stance - 2, "swing_pct_with_basal": 102 - stance,
+                        "gross_cost_of_transport_J_per_kg_per_m": (2 * mean_w / mass + 1.2) / sp,
+                        "stance_energy_share_pct": stance, "swing_energy_share_pct": 100 - stance,
+                        "stance_energy_share_with_basal_pct": stance - 2, "swing_energy_share_with_basal_pct": 102 - stance,
                     }
                     for g in GROUPS:
                         gv = d[d["series"] == f"group/{g}"]["value_W"].to_numpy()
@@ -370,16 +370,16 @@ def test_phase_shares(results):
             assert b.get_y() == pytest.approx(a.get_height())
         d = results[(results["trial"] == "normal") & (results["workflow"] == w)]
         for a, m in zip(st, ORDERED):
-            assert a.get_height() == pytest.approx(d[d["model"] == m]["stance_pct"].mean())
+            assert a.get_height() == pytest.approx(d[d["model"] == m]["stance_energy_share_pct"].mean())
     assert [t.get_text() for t in ax_b.get_xticklabels()] == list(ORDERED)
     # lines: one per model, through the means over subjects of the main workflow (effort-ten)
     lines = _lines(ax_s, "model:")
     assert [ln.get_gid() for ln in lines] == [f"model:{m}" for m in ORDERED]
     assert [ln.get_color() for ln in lines] == [model_colour(m) for m in ORDERED]
     d = results[(results["workflow"] == "effort-ten") & (results["model"] == "BH04")]
-    means = d.groupby("trial")[["speed_m_per_s", "swing_pct"]].mean().loc[["slow", "normal", "fast"]]
+    means = d.groupby("trial")[["speed_m_per_s", "swing_energy_share_pct"]].mean().loc[["slow", "normal", "fast"]]
     ln = _lines(ax_s, "model:BH04")[0]
-    assert np.allclose(ln.get_xdata(), means["speed_m_per_s"]) and np.allclose(ln.get_ydata(), means["swing_pct"])
+    assert np.allclose(ln.get_xdata(), means["speed_m_per_s"]) and np.allclose(ln.get_ydata(), means["swing_energy_share_pct"])
     assert ax_s.get_xlabel() == "walking speed (m/s)"
     assert "%/(m/s)" in ln.get_label()
 

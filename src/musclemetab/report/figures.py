@@ -617,7 +617,7 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
     repeated-measures slope (% per m/s) when there are two speeds or more.
     """
     res = _ok_rows(results)
-    _require_columns(res, ("stance_pct", "swing_pct", "speed_m_per_s"), "the results table")
+    _require_columns(res, ("stance_energy_share_pct", "swing_energy_share_pct", "speed_m_per_s"), "the results table")
     if res.empty:
         raise OptionError("no successful unit in the results")
     trial = preferred_trial(res) if trial is None else str(trial)
@@ -638,8 +638,8 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
         xs, stance, swing, sd = [], [], [], []
         for j, m in enumerate(models):
             d = pref[(pref["workflow"].astype(str) == w) & (pref["model"].astype(str) == m)]
-            sw, sw_sd, n = _mean_sd(d["swing_pct"])
-            st, _, _ = _mean_sd(d["stance_pct"])
+            sw, sw_sd, n = _mean_sd(d["swing_energy_share_pct"])
+            st, _, _ = _mean_sd(d["stance_energy_share_pct"])
             if n == 0:
                 continue
             xs.append(j - 0.4 + width * (i + 0.5))
@@ -678,11 +678,11 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
         if d.empty:
             continue
         col = model_colour(m)
-        ax_s.scatter(d["speed_m_per_s"], d["swing_pct"], color=col, s=9, alpha=0.45, label="_" + m, zorder=2)
-        rows = [r for r in _speed_table(d, "swing_pct") if np.isfinite(r[1]) and r[4] > 0]
+        ax_s.scatter(d["speed_m_per_s"], d["swing_energy_share_pct"], color=col, s=9, alpha=0.45, label="_" + m, zorder=2)
+        rows = [r for r in _speed_table(d, "swing_energy_share_pct") if np.isfinite(r[1]) and r[4] > 0]
         label = m
         if n_speeds > 1:
-            rm, _ = _rmcorr(d["speed_m_per_s"], d["swing_pct"], d["subject"].astype(str))
+            rm, _ = _rmcorr(d["speed_m_per_s"], d["swing_energy_share_pct"], d["subject"].astype(str))
             if rm is not None:
                 label = f"{m}: {rm.slope:+.1f} %/(m/s), r = {rm.r:.2f}"
         ax_s.plot([r[1] for r in rows], [r[2] for r in rows], color=col, marker="o", ms=4, lw=1.4,

@@ -533,14 +533,14 @@ def _results_section(study: StudyFolder) -> str:
         parts.append(_table([[("", 1)] + [(lab, 1) for lab in tlabels]], body, 1, "results"))
     else:
         parts.append('<p class="note">No measured metabolic rate in the results.</p>')
-    pivot_section("table-cost-of-transport", "Cost of transport (J/(kg·m))", "cost_of_transport_J_per_kg_per_m", 2,
+    pivot_section("table-cost-of-transport", "Cost of transport (J/(kg·m))", "gross_cost_of_transport_J_per_kg_per_m", 2,
                   "Metabolic cost of transport: the whole-body rate (W/kg) divided by the walking speed (m/s), "
                   "in J per kg of body mass per metre.")
 
     # phase shares
     parts.append('<h3 id="table-phase-shares">Stance and swing shares (%)</h3>')
-    have = [c for c in ("stance_pct", "swing_pct", "swing_pct_with_basal") if c in ok.columns]
-    if "swing_pct" not in have:
+    have = [c for c in ("stance_energy_share_pct", "swing_energy_share_pct", "swing_energy_share_with_basal_pct") if c in ok.columns]
+    if "swing_energy_share_pct" not in have:
         parts.append('<p class="note">The results table has no phase shares.</p>')
     else:
         parts.append(
@@ -548,7 +548,7 @@ def _results_section(study: StudyFolder) -> str:
             "toe-off) and in swing (toe-off to the next initial contact), %, without basal heat; the column "
             "'swing, with basal' counts the basal heat as well.</p>"
         )
-        names = {"stance_pct": "stance", "swing_pct": "swing", "swing_pct_with_basal": "swing, with basal"}
+        names = {"stance_energy_share_pct": "stance", "swing_energy_share_pct": "swing", "swing_energy_share_with_basal_pct": "swing, with basal"}
         header = [[("trial (speed)", 1), ("model", 1)] + [(w, len(have)) for w in workflows],
                   [("", 1), ("", 1)] + [(names[c], 1) for _ in workflows for c in have]]
         body = []
