@@ -3,8 +3,9 @@
 For every trial (slow, normal, fast) and workflow (effort-gen, effort-cal, effort-ten):
 IPOPT wall time and iterations, objective, time from files to solution with the geometry
 cached (``solve_files`` in a warm process), and the split of the solve into NLP function
-evaluations and IPOPT's own work (mostly the MUMPS factorisation). One cold command-line run
-(``musclemetab solve`` in a fresh process, geometry cached) is also timed.
+evaluations and IPOPT's own work (mostly the MUMPS factorisation). Cold command-line runs
+(``musclemetab solve`` in a new process, geometry and model parameters cached) are also
+timed (median of ``--cold-repeat``).
 
 With ``--baseline moco`` OpenSim's MocoInverse solves the same trials on the same mesh
 (100 intervals per second, compliant tendons; set-up of ``opensim_baselines.md`` §3) in a
@@ -46,7 +47,7 @@ def _example():
     return example_subject()
 
 
-def run_solver(ex, trials, workflows, cache_dir, repeat):
+def run_solver(ex, trials, workflows, cache_dir, repeat, options=None):
     from musclemetab.geometry import compute_geometry
     from musclemetab.model import read_muscle_parameters
     from musclemetab.redundancy import solve_files
@@ -54,7 +55,7 @@ def run_solver(ex, trials, workflows, cache_dir, repeat):
     t0 = time.perf_counter()
     for t in trials:  # warm the geometry cache and the OpenSim worker (not timed below)
         compute_geometry(ex.model, ex.ik[t], cache_dir=cache_dir)
-    read_muscle_parameters(ex.model)
+    read_muscle_parameters(ex.model, cache_dir=cache_dir)
     import casadi  # noqa: F401  (process start-up costs are measured by the cold run)
     import scipy.interpolate  # noqa: F401
     import scipy.optimize  # noqa: F401
@@ -67,7 +68,7 @@ def run_solver(ex, trials, workflows, cache_dir, repeat):
             runs = []
             for _ in range(repeat):
                 t0 = time.perf_counter()
-                sol = solve_files(ex.model, ex.ik[trial], ex.id[trial], wf, cache_dir=cache_dir)
+                sol = solve_files(ex.model, ex.ik[trial], ex.id[trial], wf, cache_dir=cache_dir, options=options)
                 runs.append((time.perf_counter() - t0, sol))
             wall, sol = min(runs, key=lambda r: r[0])
             s = sol.summary
@@ -93,16 +94,22 @@ def _fmt_row(r):
             f"{r['ms_per_iteration']:.0f} ms/it) build {r['build_s']:.2f} s files->solution {r['files_to_solution_s']:5.2f} s")
 
 
-def cold_cli(ex, trial, cache_dir):
+def cold_cli(ex, trial, cache_dir, linear_solver="mumps"):
+    """One ``musclemetab solve`` in a new process: wall time, the solve time it reports, and
+    the time outside the solve (imports, files, problem set-up, writing)."""
     out = tempfile.mkdtemp(prefix="mm-bench-")
     cmd = [sys.executable, "-m", "musclemetab.cli", "solve", "--model", str(ex.model), "--ik", str(ex.ik[trial]),
-           "--id", str(ex.id[trial]), "--workflow", "effort-gen", "--cache-dir", str(cache_dir), "--out", out]
+           "--id", str(ex.id[trial]), "--workflow", "effort-gen", "--cache-dir", str(cache_dir),
+           "--linear-solver", linear_solver, "--out", out]
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, capture_output=True, text=True)
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
         print(proc.stderr, file=sys.stderr)
-    return wall
+        return {"wall_s": wall}
+    s = json.loads((Path(out) / "summary.json").read_text())
+    return {"wall_s": wall, "solve_s": s["solve_time_s"], "overhead_s": wall - s["solve_time_s"],
+            "total_in_process_s": s["total_time_s"]}
 
 
 def run_moco(ex, trial, mesh_interval, tendons):
@@ -132,6 +139,8 @@ def main(argv=None):
     p.add_argument("--mesh-interval", type=float, default=0.01, help="baseline mesh interval (default 0.01 s, as the solver)")
     p.add_argument("--cache-dir", help="geometry cache (default: a temporary folder)")
     p.add_argument("--no-cold", action="store_true", help="skip the cold command-line run")
+    p.add_argument("--cold-repeat", type=int, default=3, help="cold command-line runs (median reported)")
+    p.add_argument("--linear-solver", default="mumps", help="IPOPT's linear solver (default mumps)")
     p.add_argument("--json", help="write all figures to this file")
     args = p.parse_args(argv)
 
@@ -139,7 +148,11 @@ def main(argv=None):
     cache_dir = Path(args.cache_dir or tempfile.mkdtemp(prefix="mm-geometry-"))
     print(f"musclemetab solver benchmark: {os.cpu_count()} cores, load average "
           f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}")
-    rows, warm = run_solver(ex, args.trials, args.workflows, cache_dir, args.repeat)
+    from musclemetab.redundancy.problem import SolverOptions
+
+    options = SolverOptions(linear_solver=args.linear_solver)
+    print(f"linear solver: {args.linear_solver}")
+    rows, warm = run_solver(ex, args.trials, args.workflows, cache_dir, args.repeat, options)
     result = {"solver": rows, "geometry_and_worker_warmup_s": warm}
     solve = [r["solve_s"] for r in rows]
     f2s = [r["files_to_solution_s"] for r in rows]
@@ -152,10 +165,18 @@ def main(argv=None):
           f"and solves, step computation) {100 * (tot - fun) / tot:.0f} %")
     if not args.no_cold:
         trial = "normal" if "normal" in args.trials else args.trials[0]
-        cold = cold_cli(ex, trial, cache_dir)
-        result["cold_cli_s"] = {trial: cold}
-        print(f"cold 'musclemetab solve' ({trial}, effort-gen, fresh process incl. imports and the OpenSim worker "
-              f"that reads the model parameters, geometry cached): {cold:.2f} s")
+        colds = [cold_cli(ex, trial, cache_dir, args.linear_solver) for _ in range(max(1, args.cold_repeat))]
+        ok = [c for c in colds if "overhead_s" in c]
+        result["cold_cli"] = {trial: colds}
+        if ok:
+            med = {k: statistics.median(c[k] for c in ok) for k in ("wall_s", "solve_s", "overhead_s")}
+            warm_row = [r for r in rows if r["trial"] == trial and r["workflow"] == "effort-gen"]
+            warm_txt = (f"; warm process files->solution {warm_row[0]['files_to_solution_s']:.2f} s "
+                        f"(solve {warm_row[0]['solve_s']:.2f} s)") if warm_row else ""
+            print(f"cold 'musclemetab solve' ({trial}, effort-gen, new process, geometry and model parameters "
+                  f"cached, no OpenSim started), median of {len(ok)}: {med['wall_s']:.2f} s, of which the solve "
+                  f"{med['solve_s']:.2f} s and everything else (imports, files, set-up, writing) "
+                  f"{med['overhead_s']:.2f} s{warm_txt}")
 
     if args.baseline == "moco":
         result["moco"] = {}

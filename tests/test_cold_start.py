@@ -29,6 +29,10 @@ def test_model_parameters_from_disk_cache(example, tmp_path, monkeypatch):
     first = model_module.read_model(example.model, cache_dir=tmp_path)  # OpenSim in the worker
     entries = list(tmp_path.glob("model-*.npz"))
     assert len(entries) == 1
+    assert not model_module.model_is_cached(example.model, tmp_path)  # the layout is not cached yet
+    from musclemetab.layout import read_layout
+
+    read_layout(example.model, cache_dir=tmp_path)
     assert model_module.model_is_cached(example.model, tmp_path)
 
     model_module._CACHE.clear()  # a new process: nothing in memory
@@ -55,13 +59,14 @@ def test_unreadable_model_cache_entry_is_recomputed(example, tmp_path):
     model_module._CACHE.clear()
     again = model_module.read_model(example.model, cache_dir=tmp_path)
     np.testing.assert_array_equal(again.muscles.max_isometric_force_N, first.muscles.max_isometric_force_N)
-    assert np.load(entry)["model_info"].size == 1  # rewritten, readable again
+    assert np.load(entry)["result"].size == 1  # rewritten, readable again
     model_module._CACHE.clear()
 
 
 def test_solve_without_opensim_when_cached(example, tmp_path, monkeypatch):
     """Geometry and model parameters cached: the solve runs with OpenSim unavailable."""
     from musclemetab.geometry import compute_geometry, geometry_is_cached
+    from musclemetab.layout import read_layout
     from musclemetab.redundancy import SolverOptions, solve_files
 
     ik, idf = example.ik["normal"], example.id["normal"]
@@ -69,7 +74,9 @@ def test_solve_without_opensim_when_cached(example, tmp_path, monkeypatch):
     model_module._CACHE.clear()
     geom = compute_geometry(example.model, ik, cache_dir=tmp_path)
     model_module.read_model(example.model, cache_dir=tmp_path)
+    layout = read_layout(example.model, cache_dir=tmp_path)
     assert geometry_is_cached(example.model, ik, cache_dir=tmp_path)
+    assert model_module.model_is_cached(example.model, tmp_path)
 
     model_module._CACHE.clear()
     _forbid_opensim(monkeypatch)
@@ -77,6 +84,8 @@ def test_solve_without_opensim_when_cached(example, tmp_path, monkeypatch):
                       options=SolverOptions(max_iter=2))
     assert sol.summary["iterations"] == 2
     assert sol.muscles == geom.muscles
+    again = read_layout(example.model, cache_dir=tmp_path)  # from the cache, OpenSim refused
+    assert again.coordinates == layout.coordinates and again.joints == layout.joints
     model_module._CACHE.clear()
 
 

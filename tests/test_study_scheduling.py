@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 
 from musclemetab.study import study_from_dict
-from musclemetab.study.runner import THREAD_VARIABLES, _executor, _pin_threads, unit_batches
+from musclemetab.study.runner import THREAD_VARIABLES, _Executor, _pin_threads, unit_batches
 
 
 def _study(example, workflows, **subject):
@@ -32,12 +32,12 @@ def test_worker_processes_get_their_share_of_the_cores(monkeypatch):
     for v in THREAD_VARIABLES:
         monkeypatch.delenv(v, raising=False)
     monkeypatch.setenv("MKL_NUM_THREADS", "7")  # set by the caller: kept
-    submit, completed, close = _executor(2, None)
+    executor = _Executor(2, None)
     try:
-        seen = {v: submit(os.getenv, v).result(timeout=120) for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
+        seen = {v: executor.submit(os.getenv, v).result(timeout=120) for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
                                                                       "MKL_NUM_THREADS")}
     finally:
-        close()
+        executor.close()
     share = str(max(1, (os.cpu_count() or 1) // 2))
     assert seen == {"OMP_NUM_THREADS": share, "OPENBLAS_NUM_THREADS": share, "MKL_NUM_THREADS": "7"}
     assert "OMP_NUM_THREADS" not in os.environ  # restored after the pool

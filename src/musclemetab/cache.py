@@ -3,8 +3,14 @@
 Entries are ``.npz`` files named by a content key: the SHA-256 of a JSON description of
 the request that includes the SHA-256 of every input file (never file names or times),
 so an entry is found again whatever the files are called and is never reused after a
-file changes. Entries are written atomically (a reader sees a complete file or none);
-an entry that cannot be read is deleted and recomputed.
+file changes. Integrity rules, the same for every kind of entry:
+
+* an entry is written atomically (a reader sees a complete file or none) with a SHA-256
+  checksum of its arrays; one that cannot be written is skipped with a :class:`CacheWarning`;
+* an entry that cannot be read, fails its checksum or does not fit the request is deleted
+  with a :class:`CacheWarning` and computed again;
+* a cache folder that cannot be used, or an entry that is a folder or a link, is left alone:
+  the result is computed without the cache (with a :class:`CacheWarning`).
 
 The folder is ``$MUSCLEMETAB_CACHE/geometry`` (default ``~/.cache/musclemetab/geometry``),
 or the folder a caller names (``--cache-dir``).
@@ -15,13 +21,17 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
 
+from .errors import CacheWarning
 from .io.atomic import atomic_path
 
-__all__ = ["default_cache_dir", "content_key", "cache_file", "load_entry", "save_entry"]
+__all__ = ["default_cache_dir", "content_key", "entry_path", "read_entry", "discard_entry", "write_entry"]
+
+CHECKSUM = "checksum"
 
 
 def default_cache_dir() -> Path:
@@ -37,31 +47,120 @@ def content_key(spec: dict) -> str:
     return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:32]
 
 
-def cache_file(spec: dict, cache_dir: str | os.PathLike | None = None, prefix: str = "") -> Path:
-    """Path of the entry for ``spec`` in ``cache_dir`` (default :func:`default_cache_dir`)."""
-    folder = Path(cache_dir) if cache_dir else default_cache_dir()
-    return folder / f"{prefix}{content_key(spec)}.npz"
-
-
-def load_entry(path: Path, required: tuple[str, ...] = ()) -> dict[str, np.ndarray] | None:
-    """The arrays of a cache entry, or ``None`` when there is none.
-
-    An entry that cannot be read or lacks one of the ``required`` arrays is deleted.
-    """
-    if not path.is_file():
+def _usable_folder(folder: Path, what: str) -> Path | None:
+    """``folder`` if it is (or can be made) a writable folder; ``None`` with a warning otherwise."""
+    try:
+        if folder.exists() and not folder.is_dir():
+            raise NotADirectoryError(f"{folder} is a file")
+        folder.mkdir(parents=True, exist_ok=True)
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise PermissionError("not writable")
+    except OSError as exc:
+        warnings.warn(f"{what} cache folder {folder} cannot be used ({exc.strerror or exc}); computing without "
+                      "the cache (set MUSCLEMETAB_CACHE to a writable folder)", CacheWarning, stacklevel=4)
         return None
+    return folder
+
+
+def entry_path(spec: dict, cache_dir: str | os.PathLike | None, what: str, prefix: str = "") -> Path | None:
+    """Where the entry of ``spec`` lives, or ``None`` when the cache cannot be used (warned)."""
+    folder = _usable_folder(Path(cache_dir) if cache_dir else default_cache_dir(), what)
+    if folder is None:
+        return None
+    path = folder / f"{prefix}{content_key(spec)}.npz"
+    if path.is_dir() or path.is_symlink():
+        warnings.warn(f"{what} cache entry {path} is a folder or a link, not a file; computing without the "
+                      "cache (remove it)", CacheWarning, stacklevel=3)
+        return None
+    return path
+
+
+def existing_entry(spec: dict, cache_dir: str | os.PathLike | None, prefix: str = "") -> bool:
+    """Whether an entry for ``spec`` exists (no folder is created, nothing is read)."""
+    folder = Path(cache_dir) if cache_dir else default_cache_dir()
+    return (folder / f"{prefix}{content_key(spec)}.npz").is_file()
+
+
+def _checksum(arrays: dict) -> str:
+    """SHA-256 of the arrays of an entry (names, shapes, types and values)."""
+    h = hashlib.sha256()
+    for name in sorted(arrays):
+        if name == CHECKSUM:
+            continue
+        a = np.ascontiguousarray(arrays[name])
+        h.update(f"{name}:{a.dtype.str}:{a.shape}".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def read_entry(path: Path) -> tuple[dict | None, str]:
+    """The arrays of an intact entry, or ``(None, reason)`` (``(None, "")`` when there is none)."""
+    if not path.is_file():
+        return None, ""
     try:
         with np.load(path, allow_pickle=False) as z:
-            entry = {k: z[k] for k in z.files}
-        if all(k in entry for k in required):
-            return entry
-    except Exception:
-        pass
-    path.unlink(missing_ok=True)  # unreadable entry: the caller recomputes it
-    return None
+            arrays = {k: z[k] for k in z.files}
+        stored = str(arrays[CHECKSUM])
+    except Exception as exc:  # truncated, not an npz, no checksum
+        return None, f"cannot be read ({type(exc).__name__})"
+    if _checksum(arrays) != stored:
+        return None, "does not match its checksum (it was modified or damaged)"
+    return arrays, ""
 
 
-def save_entry(path: Path, **arrays) -> None:
-    """Write a cache entry atomically (no pickled objects: arrays and strings only)."""
-    with atomic_path(path, suffix=".npz") as tmp:
-        np.savez(tmp, **arrays)
+def discard_entry(path: Path, problem: str, what: str) -> None:
+    """Delete an entry that cannot be used, with a warning saying why."""
+    warnings.warn(f"{what} cache entry {path} {problem}; deleted, computing it again", CacheWarning, stacklevel=3)
+    path.unlink(missing_ok=True)
+
+
+def write_entry(path: Path, what: str, **arrays) -> None:
+    """Write an entry atomically with its checksum; a failure to write is a warning."""
+    arrays[CHECKSUM] = np.array(_checksum(arrays))
+    try:
+        with atomic_path(path, suffix=".npz") as tmp:
+            np.savez(tmp, **arrays)
+    except OSError as exc:
+        warnings.warn(f"could not write the {what} cache entry {path} ({exc.strerror or exc}); "
+                      "continuing without caching it", CacheWarning, stacklevel=3)
+
+
+#: bump when a cached model result changes meaning
+MODEL_CACHE_FORMAT = 1
+
+
+def _model_spec(path: Path, target: str) -> dict:
+    from .io.atomic import file_sha256
+
+    return {"fmt": MODEL_CACHE_FORMAT, "model": file_sha256(path), "call": target}
+
+
+def model_call_is_cached(model_path: str | os.PathLike, target: str, cache_dir=None) -> bool:
+    """Whether :func:`cached_model_call` would answer from the cache (nothing is created)."""
+    try:
+        return existing_entry(_model_spec(Path(model_path), target), cache_dir, prefix="model-")
+    except OSError:
+        return False
+
+
+def cached_model_call(model_path: str | os.PathLike, target: str, cache_dir=None, use_cache: bool = True) -> dict:
+    """The result of the OpenSim worker function ``target`` (``"module:function"``) applied to
+    the model file alone, cached by the file's content. The result must be JSON data; it is
+    returned in its JSON form (tuples become lists) whether computed now or read back."""
+    path = Path(model_path)
+    entry = entry_path(_model_spec(path, target), cache_dir, "model", prefix="model-") if use_cache else None
+    if entry is not None:
+        arrays, problem = read_entry(entry)
+        if arrays is not None:
+            try:
+                return json.loads(str(arrays["result"]))
+            except (KeyError, ValueError):
+                problem = "does not hold a model result"
+        if problem:
+            discard_entry(entry, problem, "model")
+    from .opensim_bridge import call
+
+    text = json.dumps(call(target, str(path)))
+    if entry is not None:
+        write_entry(entry, "model", result=np.array(text))
+    return json.loads(text)

@@ -46,7 +46,7 @@ class ModelError(MusclemetabError):
 
 
 class UnknownMuscleError(ModelError):
-    """A muscle name is not in the model or in the property table."""
+    """A muscle name is not in the model, or (strict) not in the anatomical muscle table."""
 
 
 class UnknownCoordinateError(ModelError):
@@ -71,3 +71,23 @@ class OpenSimWorkerError(MusclemetabError):
 
 class DatasetError(MusclemetabError):
     """Example data could not be found, downloaded or verified."""
+
+
+class MusclemetabWarning(UserWarning):
+    """Root of the warnings this package gives (results usable, but look at them)."""
+
+
+class CacheWarning(MusclemetabWarning):
+    """A cache entry or folder could not be used; the result was computed without it."""
+
+
+class LargeReserveWarning(MusclemetabWarning):
+    """The reserve actuators carry a large share of a joint moment."""
+
+
+class MuscleTableWarning(MusclemetabWarning):
+    """Some muscles are not in the anatomical muscle table and take fallback properties."""
+
+
+class WindowWarning(MusclemetabWarning):
+    """The solve window was clipped at the edge of the data (the record says where)."""

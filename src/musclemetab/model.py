@@ -2,10 +2,15 @@
 
 The ``.osim`` file is read by OpenSim in the worker process
 (:mod:`musclemetab.opensim_bridge`); this module holds the result as plain arrays.
-Only five Hill parameters are taken from the model (see ``docs/method.md``): maximal
-isometric force, optimal fibre length, tendon slack length, pennation angle at optimal
-fibre length and maximal contraction velocity (optimal lengths per second; OpenSim's
-default of 10 when the model does not give it).
+Only five Hill parameters are taken from the model (see ``docs/method.md`` and
+``docs/muscles.md``): maximal isometric force, optimal fibre length, tendon slack length,
+pennation angle at optimal fibre length and maximal contraction velocity (optimal lengths
+per second; OpenSim's default of 10 when the model does not give it). They are read
+through OpenSim's common ``Muscle`` interface, so every muscle class reads the same way
+(Thelen2003, Millard2012 equilibrium and acceleration, DeGrooteFregly2016, ...); the
+class-specific curves and time constants are not used: the study's muscle curves
+(:mod:`musclemetab.muscle`) apply to every class. ``ModelInfo.muscle_classes`` records
+each muscle's class.
 """
 
 from __future__ import annotations
@@ -93,69 +98,56 @@ class ModelInfo:
     coordinates: tuple[dict, ...] = field(repr=False)
     couplers: tuple[dict, ...] = field(repr=False)
     opensim_version: str = ""
+    muscle_classes: dict = field(default_factory=dict, repr=False)  # muscle -> OpenSim class name
 
     def coordinate_names(self, unlocked_only: bool = True) -> list[str]:
         return [c["name"] for c in self.coordinates if not (unlocked_only and c["locked"])]
 
 
 _CACHE: dict = {}
-MODEL_CACHE_FORMAT = 1  # bump when the cached content changes meaning
 
 
-def _cache_entry(path: Path, cache_dir) -> Path:
-    from .cache import cache_file
-    from .io.atomic import file_sha256
-
-    return cache_file({"fmt": MODEL_CACHE_FORMAT, "model": file_sha256(path)}, cache_dir, prefix="model-")
+def check_model_path(path: str | os.PathLike) -> Path:
+    """``path`` as a Path; :class:`ModelError` when it is a folder or does not exist."""
+    path = Path(path)
+    if path.is_dir():
+        raise ModelError(f"{path} is a folder, not a model file; give the path of the .osim file")
+    if not path.is_file():
+        raise ModelError(f"{path}: no such model file; check the path")
+    return path
 
 
 def model_is_cached(model_path: str | os.PathLike, cache_dir: str | os.PathLike | None = None) -> bool:
-    """Whether :func:`read_model` would answer without OpenSim (from memory or the disk cache)."""
+    """Whether the model parameters (:func:`read_model`) and the layout
+    (:func:`musclemetab.layout.read_layout`) would come without OpenSim (memory or disk cache)."""
+    from .cache import model_call_is_cached
+
     path = Path(model_path)
     try:
         key = (str(path.resolve()), path.stat().st_mtime_ns, path.stat().st_size)
-        return key in _CACHE or _cache_entry(path, cache_dir).is_file()
     except OSError:
         return False
+    return ((key in _CACHE or model_call_is_cached(path, "model_ops:read_model_info", cache_dir))
+            and model_call_is_cached(path, "model_ops:model_layout", cache_dir))
 
 
 def read_model(model_path: str | os.PathLike, *, cache_dir: str | os.PathLike | None = None,
                use_cache: bool = True) -> ModelInfo:
     """Read muscles, body mass and coordinates of an ``.osim`` model (through OpenSim).
 
-    The result is cached on disk, keyed by the file's content, in the folder of the
-    geometry cache (:mod:`musclemetab.cache`; ``cache_dir`` as for
-    :func:`musclemetab.geometry.compute_geometry`): a second process reading the same model
+    The result is cached on disk, keyed by the file's content, beside the geometry
+    (:func:`musclemetab.cache.cached_model_call`, same integrity rules; ``cache_dir`` as for
+    :func:`musclemetab.geometry.compute_geometry`): another process reading the same model
     does not start OpenSim.
     """
-    import json
+    from .cache import cached_model_call
 
-    path = Path(model_path)
-    if not path.is_file():
-        raise ModelError(f"{path}: no such model file; check the path")
+    path = check_model_path(model_path)
     key = (str(path.resolve()), path.stat().st_mtime_ns, path.stat().st_size)
     if key in _CACHE:
         return _CACHE[key]
-    raw = None
-    entry = None
-    if use_cache:
-        from .cache import load_entry
-
-        entry = _cache_entry(path, cache_dir)
-        z = load_entry(entry, required=("model_info",))
-        if z is not None:
-            raw = json.loads(str(z["model_info"]))
-            raw["path"] = str(path.resolve())
-    if raw is None:
-        from .opensim_bridge import call
-
-        raw = call("model_ops:read_model_info", str(path))
-        # one form whether read now or from the cache (JSON: tuples become lists)
-        raw = json.loads(json.dumps(raw))
-        if entry is not None:
-            from .cache import save_entry
-
-            save_entry(entry, model_info=json.dumps(raw))
+    raw = cached_model_call(path, "model_ops:read_model_info", cache_dir, use_cache)
+    raw["path"] = str(path.resolve())
     ms = raw["muscles"]
     if not ms:
         raise ModelError(f"{path}: the model has no muscles")
@@ -171,6 +163,7 @@ def read_model(model_path: str | os.PathLike, *, cache_dir: str | os.PathLike | 
         coordinates=tuple(raw["coordinates"]),
         couplers=tuple(raw["couplers"]),
         opensim_version=raw["opensim_version"],
+        muscle_classes={m["name"]: m.get("class_name", "") for m in ms},
     )
     _CACHE[key] = info
     return info

@@ -16,7 +16,10 @@ Couplings: ``s_kT(vaslat) = s_kT(vasmed) = s_kT(vasint)`` and
 ``s_kT(gaslat) = s_kT(gasmed) = s_kT(soleus)`` (consecutive pairs of each group);
 ``s_EMG(vaslat) = s_EMG(vasmed)``, ``s_EMG(vaslat) = s_EMG(vasint)``,
 ``s_EMG(gaslat) = s_EMG(gasmed)``. By default (``EmgTenSettings.coupling = "shared"``) each
-coupled group is one variable (2 tendon factors and 6 EMG factors on the example);
+coupled group is one variable (2 tendon factors and 6 EMG factors on the example). These
+defaults name the study's right-leg model; for other models or the left leg the groups come
+from the anatomical muscle table (tendon ``achilles`` / ``patellar``, EMG scale groups
+``gastrocnemii`` / ``vasti``; :func:`settings_for_muscles`, ``docs/muscles.md``);
 ``coupling = "constraints"`` keeps the study's 6 + 9 factors with the 4 + 3 equalities. Same
 objective, feasible set and bounds; the shared form took 133 IPOPT iterations on the example
 against 158-177 for the constraint form (same optimum).
@@ -115,8 +118,8 @@ __all__ = [
     "EmgTenOcpResult",
     "EmgTenResult",
     "PARAMETERS_FILE",
-    "TRICEPS_SURAE",
-    "VASTI",
+    "settings_for_muscles",
+    "mapping_for_muscles",
     "resolve_emg_mapping",
     "build_emg_ten_nlp",
     "solve_emg_ten_ocp",
@@ -139,8 +142,6 @@ PARAMETERS_VERSION = 1
 #: step; here that saves a quarter of the solve time with identical iterates to 1e-11). They
 #: change the round-off of the KKT solves, not the problem.
 LINEAR_SOLVER_OPTIONS = {"mumps_pivot_order": 2, "min_refinement_steps": 0}
-TRICEPS_SURAE = ("soleus_r", "gasmed_r", "gaslat_r")
-VASTI = ("vasint_r", "vaslat_r", "vasmed_r")
 
 
 @dataclass(frozen=True)
@@ -246,6 +247,38 @@ def resolve_emg_mapping(mapping: str | Mapping[str, Sequence[str] | str] | os.Pa
         if not chans or not all(isinstance(c, str) and c for c in chans):
             raise OptionError(f"EMG mapping: muscle '{m}' needs one or more channel names, not {chans!r}")
         out[str(m)] = chans
+    return out
+
+
+def settings_for_muscles(settings: EmgTenSettings | None, muscles: Sequence[str]) -> EmgTenSettings:
+    """``settings`` whose default tendon and EMG groups (the study's right-leg model) are
+    replaced, when the problem lacks those muscles, by the groups of the anatomical muscle
+    table for ``muscles`` (any model family, either side; see ``docs/muscles.md``)."""
+    from ..properties import emg_scale_groups, tendon_groups
+
+    settings = settings or EmgTenSettings()
+    default = EmgTenSettings()
+    present = set(muscles)
+    changes = {}
+    if settings.tendon_groups == default.tendon_groups and not set(settings.tendon_muscles) <= present:
+        changes["tendon_groups"] = tuple(tendon_groups(muscles).values())
+    if settings.emg_groups == default.emg_groups and not {m for g in settings.emg_groups for m in g} <= present:
+        changes["emg_groups"] = tuple(emg_scale_groups(muscles).values())
+    return replace(settings, **changes) if changes else settings
+
+
+def mapping_for_muscles(emg_mapping, mapping: dict, muscles: Sequence[str]) -> dict:
+    """The named mappings (``default``, ``authors``) placed on other models' muscle names
+    through the anatomical muscle table when the study's names are not in the problem."""
+    from ..properties import default_emg_mapping, resolve_muscles
+
+    named = isinstance(emg_mapping, str) and emg_mapping.strip().lower() in ("default", "authors")
+    if not named or set(mapping) <= set(muscles):
+        return mapping
+    out = default_emg_mapping(muscles)
+    if emg_mapping.strip().lower() == "authors":
+        out.update({r.name: ["ES"] for r in resolve_muscles(muscles, warn=False)
+                    if r.anatomical == ("vastus_intermedius",)})
     return out
 
 
@@ -409,7 +442,7 @@ def build_emg_ten_nlp(
     """
     import casadi as ca
 
-    settings = settings or EmgTenSettings()
+    settings = settings_for_muscles(settings, params.names)
     options = options or SolverOptions()
     if not trials:
         raise OptionError("EMG-TEN needs at least one trial")
@@ -669,7 +702,7 @@ def solve_emg_ten_ocp(
     """Build and solve the EMG-TEN NLP; never raises on non-convergence (see ``success``)."""
     import casadi as ca
 
-    settings = settings or EmgTenSettings()
+    settings = settings_for_muscles(settings, params.names)
     options = options or SolverOptions()
     t_build = _time.perf_counter()
     nlp = build_emg_ten_nlp(trials, params, settings, options)
@@ -821,18 +854,23 @@ class EmgTenResult:
         return out
 
     def achilles_stiffness_N_per_mm(self) -> dict | None:
-        """Achilles tendon (soleus + gasmed + gaslat in parallel) stiffness in N/mm.
+        """Achilles tendon stiffness in N/mm: the muscles of the Achilles tendon in the
+        anatomical muscle table (triceps surae) in parallel.
 
         ``{"at_max_isometric_force": k, "at_peak_walking_force": {trial: k}}``, or ``None``
-        when the three muscles' stiffness was not estimated.
+        when no Achilles-tendon muscle's stiffness was estimated.
         """
-        if not all(m in self.tendon_stiffness for m in TRICEPS_SURAE):
+        from ..properties import tendon_groups
+
+        groups = [g for k, g in tendon_groups(list(self.tendon_stiffness)).items() if k.split("_")[0] == "achilles"]
+        if not groups:
             return None
+        members = groups[0]
         at_f0 = self.tendon_stiffness_N_per_mm()
         peak = self.tendon_stiffness_at_peak_force_N_per_mm()
         return {
-            "at_max_isometric_force": float(sum(at_f0[m] for m in TRICEPS_SURAE)),
-            "at_peak_walking_force": {t: float(sum(v[m]["stiffness_N_per_mm"] for m in TRICEPS_SURAE))
+            "at_max_isometric_force": float(sum(at_f0[m] for m in members)),
+            "at_peak_walking_force": {t: float(sum(v[m]["stiffness_N_per_mm"] for m in members))
                                       for t, v in peak.items()},
         }
 
@@ -1048,6 +1086,13 @@ def solve_emg_ten(
     geometries = [compute_geometry(model, ik, dofs=list(dofs), side="r", cache_dir=cache_dir) for ik in ik_paths]
     t_geometry = _time.perf_counter() - t0
     model_parameters = params_request.result()
+    if check_units:
+        from ..model import read_model
+        from .inputs import check_moments_per_body_mass
+
+        mass = read_model(model).body_mass_kg
+        for (_, moments), idp in zip(id_data, id_paths):
+            check_moments_per_body_mass(moments, dofs, mass, idp, model)
     sources = [{"model": Path(model), "ik": Path(ik), "id": Path(idp),
                 "emg": Path(emg) if isinstance(emg, (str, os.PathLike)) else f"EMG table of trial {lab}"}
                for ik, idp, emg, lab in zip(ik_paths, id_paths, emg_paths, labels)]
@@ -1088,8 +1133,11 @@ def solve_emg_ten_arrays(
     """EMG-TEN from arrays: per trial a geometry-like object, ``(ID time, ID moments)`` with
     columns in the order of ``geometry.dofs``, and an EMG table (time-indexed ``DataFrame``,
     channels as columns, or already mapped to muscles by ``musclemetab.emg.map_channels``)."""
+    from .solve import _restrict_geometry
+
     t_start = _time.perf_counter()
-    settings = settings or EmgTenSettings()
+    settings = settings_for_muscles(settings, _restrict_geometry(list(geometries)[0]).muscles) if geometries \
+        else (settings or EmgTenSettings())
     options = emg_ten_options(options, settings)
     trials, params, wf_record = prepare_emg_ten_trials(
         geometries, model_parameters, id_data, emg_tables, labels=labels, ik_times=ik_times, passive=passive,
@@ -1153,6 +1201,8 @@ def prepare_emg_ten_trials(
                 "need the same model"
             )
     muscles = tuple(ref.muscles)
+    settings = settings_for_muscles(settings, muscles)
+    mapping = mapping_for_muscles(emg_mapping, mapping, muscles)
     unknown = [m for m in mapping if m not in muscles]
     if unknown:
         raise UnknownMuscleError(

@@ -17,8 +17,11 @@ A study file names everything a study needs; paths are relative to the file::
     height_m = 1.743
     passive = "data/passiveMoments.mat"   # optional: calibration for effort-cal / effort-ten
     tendon_stiffness = "emg-ten"          # optional, effort-ten: "emg-ten" (the subject's own
-                                          # EMG-TEN estimate), a parameters.json, or a table
-                                          # {soleus = 10.6, ...}; default: the example estimates
+                                          # EMG-TEN estimate), a parameters.json, a table
+                                          # {soleus = 10.6, ...} or "example" (the example
+                                          # subject's estimates); default: literature values
+                                          # converted through the model (docs/muscles.md)
+    muscle_properties = "muscles.csv"     # optional: per-muscle overrides (docs/muscles.md)
     emg_mapping = "default"               # EMG-TEN channel mapping: default | authors
 
     [[subjects.trials]]
@@ -36,13 +39,17 @@ A study file names everything a study needs; paths are relative to the file::
 
 Every key is checked: an unknown key, a missing file or a wrong type raises
 :class:`~musclemetab.errors.OptionError` or :class:`~musclemetab.errors.InputFileError`
-naming the file, the subject, the trial and the key.
+naming the file, the subject, the trial and the key. Subject and trial names become
+folder names, so they must be plain names (letters, digits, ``-``, ``_``, ``.``, not
+starting with a dot). ``body_mass_kg`` must lie in :data:`BODY_MASS_RANGE_KG` (20 to
+300 kg, a human body mass in kilograms) and ``height_m`` in 0.5 to 2.7 m.
 """
 
 from __future__ import annotations
 
 import math
 import os
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -55,6 +62,23 @@ __all__ = ["Study", "Subject", "Trial", "load_study", "study_from_dict", "EMG_TE
 EMG_TEN = "emg-ten"
 KNOWN_WORKFLOWS = ("effort-gen", "effort-cal", "effort-ten", EMG_TEN)
 BASAL_RULES = ("body", "muscle", "none")
+#: Plausible human body mass, kg: outside it the number is in other units (g, lb) or a typo.
+BODY_MASS_RANGE_KG = (20.0, 300.0)
+_PLAIN_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
+
+
+def check_plain_name(name: str, what: str) -> str:
+    """Return ``name`` if it can be used as one folder name; raise :class:`OptionError` otherwise.
+
+    Accepted: letters, digits, ``_``, ``-`` and ``.``, not starting with ``.`` or ``-``,
+    at most 100 characters. ``..``, ``/``, ``\\``, absolute paths and hidden names are refused.
+    """
+    if not isinstance(name, str) or not _PLAIN_NAME.fullmatch(name) or len(name) > 100:
+        raise OptionError(
+            f"{what} {name!r} is not a plain folder name; use letters, digits, '_', '-' and '.' "
+            "(not starting with '.'), without '/' or '..'"
+        )
+    return name
 
 
 @dataclass(frozen=True)
@@ -63,7 +87,7 @@ class Trial:
 
     name: str
     ik: Path
-    id: Path
+    id: Path | None
     emg: Path | None = None
     grf: Path | None = None
     grf_column: str | None = None
@@ -75,9 +99,19 @@ class Trial:
     start_s: float | None = None
     toe_off_s: float | None = None
     end_s: float | None = None
+    #: OpenSim ExternalLoads file: ground forces for ``cycle`` and, without ``id``, for inverse dynamics
+    external_loads: Path | None = None
+    #: ``"auto"`` or N: solve that gait cycle of the subject's side (see ``musclemetab.redundancy.window``)
+    cycle: str | int | None = None
 
     def files(self) -> dict[str, Path]:
-        return {k: v for k, v in (("ik", self.ik), ("id", self.id), ("emg", self.emg), ("grf", self.grf)) if v}
+        out = {k: v for k, v in (("ik", self.ik), ("id", self.id), ("emg", self.emg), ("grf", self.grf),
+                                 ("external_loads", self.external_loads)) if v}
+        if self.external_loads is not None:
+            from ..external_loads import read_external_loads
+
+            out["ground_forces"] = read_external_loads(self.external_loads).datafile
+        return out
 
 
 @dataclass(frozen=True)
@@ -92,6 +126,9 @@ class Subject:
     passive: Path | None = None
     tendon_stiffness: str | Path | Mapping[str, float] | None = None
     emg_mapping: str = "default"
+    muscle_properties: Path | None = None
+    side: str = "r"
+    dofs: tuple[str, ...] | None = None
 
     def trial(self, name: str) -> Trial:
         for t in self.trials:
@@ -128,11 +165,12 @@ class Study:
 
 # ---------------------------------------------------------------------------------------
 _STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "subjects", "linear_solver", "linear_solver_library"}
-_SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials"}
+_SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials",
+                 "muscle_properties", "side", "dofs"}
 _TRIAL_KEYS = {
     "name", "ik", "id", "emg", "grf", "grf_column", "grf_threshold_N", "speed_m_per_s",
     "measured_W_per_kg", "vo2_mL_per_s", "vco2_mL_per_s", "vo2_mL_per_min", "vco2_mL_per_min",
-    "start_s", "toe_off_s", "end_s",
+    "start_s", "toe_off_s", "end_s", "external_loads", "cycle",
 }
 
 
@@ -160,12 +198,20 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
     workflows = data.get("workflows", ["effort-gen", "effort-ten"])
     if isinstance(workflows, str):
         workflows = [workflows]
+    if not isinstance(workflows, (list, tuple)) or not all(isinstance(w, str) for w in workflows):
+        raise OptionError(f"{where}: 'workflows' must be a list of workflow names such as "
+                          f"[\"effort-gen\", \"effort-ten\"], not {workflows!r}; choose from {', '.join(KNOWN_WORKFLOWS)}")
     workflows = tuple(str(w).strip().lower().replace("_", "-") for w in workflows)
     bad = [w for w in workflows if w not in KNOWN_WORKFLOWS]
     if bad or not workflows:
         raise OptionError(f"{where}: 'workflows' has unknown workflow(s) {bad or '[]'}; choose from {', '.join(KNOWN_WORKFLOWS)}")
+    models_value = data.get("models", "all")
+    if not isinstance(models_value, str) and not (
+            isinstance(models_value, (list, tuple)) and all(isinstance(m, str) for m in models_value)):
+        raise OptionError(f"{where}: 'models' must be \"all\" or a list of model names such as "
+                          f"[\"UM10\", \"BH04\"], not {models_value!r}")
     try:
-        models = tuple(parse_models(data.get("models", "all")))
+        models = tuple(parse_models(models_value))
     except OptionError as exc:
         raise OptionError(f"{where}: 'models': {exc}") from None
     basal = str(data.get("basal", "body"))
@@ -180,7 +226,10 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
         check_linear_solver(linear_solver, library)
     except OptionError as exc:
         raise OptionError(f"{where}: 'linear_solver': {exc}") from None
-    out = Path(output) if output is not None else base / str(data.get("output", "results"))
+    out_value = data.get("output", "results")
+    if output is None and (not isinstance(out_value, str) or not out_value.strip()):
+        raise OptionError(f"{where}: 'output' must be a folder path (text), not {out_value!r}")
+    out = Path(output) if output is not None else base / out_value
     subjects_data = data.get("subjects")
     if not isinstance(subjects_data, list) or not subjects_data:
         raise OptionError(f"{where}: no subjects; add at least one [[subjects]] table with its [[subjects.trials]]")
@@ -210,8 +259,12 @@ def _path(value, base: Path, where: str, key: str, required: bool = True) -> Pat
         if required:
             raise OptionError(f"{where}: '{key}' is required (a file path)")
         return None
-    p = Path(str(value))
+    if not isinstance(value, str) or not value.strip():
+        raise OptionError(f"{where}: '{key}' must be a file path (text), not {value!r}")
+    p = Path(value)
     p = p if p.is_absolute() else base / p
+    if p.is_dir():
+        raise InputFileError(f"{where}: '{key}' is the folder {p}, not a file; give the path of the file in it")
     if not p.is_file():
         raise InputFileError(f"{where}: '{key}' file {p} not found; check the path (relative to the study file)")
     return p.resolve()
@@ -235,9 +288,14 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
     _unknown(data, _SUBJECT_KEYS, here)
     if not name:
         raise OptionError(f"{here}: 'name' is required")
+    check_plain_name(name, f"{where}: subject name")
     model = _path(data.get("model"), base, here, "model")
     mass = _number(data.get("body_mass_kg"), here, "body_mass_kg", positive=True, required=True)
     height = _number(data.get("height_m"), here, "height_m", positive=True, required=True)
+    lo, hi = BODY_MASS_RANGE_KG
+    if not lo <= mass <= hi:
+        raise OptionError(f"{here}: 'body_mass_kg' = {mass:g} is not a human body mass in kilograms "
+                          f"({lo:g}-{hi:g} kg); give the mass in kg")
     if not 0.5 < height < 2.7:
         raise OptionError(f"{here}: 'height_m' = {height} is not a human height in metres")
     passive = _path(data.get("passive"), base, here, "passive", required=False)
@@ -245,15 +303,25 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
     if isinstance(kt, str):
         if kt.strip().lower() == EMG_TEN:
             kt = EMG_TEN
+        elif kt.strip().lower() == "example":
+            kt = "example"
         else:
             kt = _path(kt, base, here, "tendon_stiffness")
     elif isinstance(kt, Mapping):
         kt = {str(k): _number(v, here, f"tendon_stiffness.{k}", positive=True, required=True) for k, v in kt.items()}
     elif kt is not None:
-        raise OptionError(f"{here}: 'tendon_stiffness' must be \"emg-ten\", a parameters.json path or a table")
+        raise OptionError(f"{here}: 'tendon_stiffness' must be \"emg-ten\", \"example\", a parameters.json path or a table")
     mapping = str(data.get("emg_mapping", "default"))
     if mapping not in ("default", "authors"):
         raise OptionError(f"{here}: 'emg_mapping' must be default or authors, not {mapping!r}")
+    side = data.get("side", "r")
+    if side not in ("r", "l"):
+        raise OptionError(f"{here}: 'side' must be \"r\" or \"l\", not {side!r}")
+    dofs = data.get("dofs")
+    if dofs is not None:
+        if not isinstance(dofs, list) or not dofs or not all(isinstance(d, str) and d for d in dofs):
+            raise OptionError(f"{here}: 'dofs' must be a list of coordinate names, e.g. [\"knee_angle_l\"]")
+        dofs = tuple(dofs)
     trials_data = data.get("trials")
     if not isinstance(trials_data, list) or not trials_data:
         raise OptionError(f"{here}: no trials; add [[subjects.trials]] tables with name, ik and id")
@@ -267,8 +335,14 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
         if missing:
             raise OptionError(f"{here}: the emg-ten workflow needs an 'emg' file for every trial; missing for "
                               f"{', '.join(missing)}")
+    muscle_properties = _path(data.get("muscle_properties"), base, here, "muscle_properties", required=False)
+    if muscle_properties is not None:
+        from ..properties import read_muscle_properties
+
+        read_muscle_properties(muscle_properties)  # reject a bad file before anything runs
     return Subject(name=name, model=model, body_mass_kg=mass, height_m=height, trials=trials,
-                   passive=passive, tendon_stiffness=kt, emg_mapping=mapping)
+                   passive=passive, tendon_stiffness=kt, emg_mapping=mapping, muscle_properties=muscle_properties,
+                   side=side, dofs=dofs)
 
 
 def _trial(data, base: Path, where: str) -> Trial:
@@ -277,8 +351,7 @@ def _trial(data, base: Path, where: str) -> Trial:
     _unknown(data, _TRIAL_KEYS, here)
     if not name:
         raise OptionError(f"{here}: 'name' is required")
-    if "/" in name or "\\" in name or name.startswith("."):
-        raise OptionError(f"{here}: 'name' must be a plain folder name")
+    check_plain_name(name, f"{where}: trial name")
     num = {k: _number(data.get(k), here, k) for k in _TRIAL_KEYS if k.endswith(("_s", "_per_s", "_per_min", "_per_kg", "_N"))}
     vo2, vco2 = num["vo2_mL_per_s"], num["vco2_mL_per_s"]
     if num["vo2_mL_per_min"] is not None:
@@ -293,7 +366,7 @@ def _trial(data, base: Path, where: str) -> Trial:
     return Trial(
         name=name,
         ik=_path(data.get("ik"), base, here, "ik"),
-        id=_path(data.get("id"), base, here, "id"),
+        id=_path(data.get("id"), base, here, "id", required=data.get("external_loads") is None),
         emg=_path(data.get("emg"), base, here, "emg", required=False),
         grf=_path(data.get("grf"), base, here, "grf", required=False),
         grf_column=data.get("grf_column"),
@@ -305,4 +378,17 @@ def _trial(data, base: Path, where: str) -> Trial:
         start_s=num["start_s"],
         toe_off_s=num["toe_off_s"],
         end_s=num["end_s"],
+        external_loads=_path(data.get("external_loads"), base, here, "external_loads", required=False),
+        cycle=_cycle_key(data.get("cycle"), here),
     )
+
+
+def _cycle_key(value, where: str):
+    if value is None:
+        return None
+    from ..redundancy.window import parse_cycle
+
+    try:
+        return parse_cycle(value)
+    except OptionError as exc:
+        raise OptionError(f"{where}: 'cycle': {exc}") from None

@@ -1,0 +1,85 @@
+"""Cold start of ``musclemetab solve``: a new process against the solve time it reports.
+
+Runs ``musclemetab solve`` (example subject, one trial, EFFORT-GEN) in new processes with
+the geometry and model parameters cached, alternating between this source tree and, with
+``--baseline-src``, another one (e.g. an older version), so that both see the same machine
+load. Reports per tree the median wall time, the solve time IPOPT reports and the rest
+(interpreter start, imports, reading files, OpenSim if it is started, set-up, writing), and
+the process CPU time.
+
+    python benchmarks/cold_start.py [--trial normal] [--repeat 3] [--baseline-src OTHER/src]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+
+def _example():
+    from musclemetab.datasets import example_subject
+
+    shared = HERE.parent.parent / "shared" / "data" / "example_subject"
+    if not os.environ.get("MUSCLEMETAB_DATA") and shared.is_dir():
+        os.environ["MUSCLEMETAB_DATA"] = str(shared)
+    return example_subject()
+
+
+def cold_run(src: Path, ex, trial: str, cache: Path) -> dict:
+    out = Path(tempfile.mkdtemp(prefix="mm-cold-")) / "out"
+    env = dict(os.environ, PYTHONPATH=str(src), MUSCLEMETAB_CACHE=str(cache))
+    cmd = [sys.executable, "-m", "musclemetab.cli", "solve", "--model", str(ex.model), "--ik", str(ex.ik[trial]),
+           "--id", str(ex.id[trial]), "--workflow", "effort-gen", "--out", str(out)]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if proc.returncode != 0:
+        sys.exit(f"musclemetab solve failed with {src}:\n{proc.stderr}")
+    s = json.loads((out / "summary.json").read_text())
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return {"wall_s": wall, "solve_s": s["solve_time_s"], "rest_s": wall - s["solve_time_s"],
+            "cpu_s": cpu, "solve_cpu_s": s.get("solve_cpu_time_s", float("nan")),
+            "rest_cpu_s": cpu - s.get("solve_cpu_time_s", float("nan"))}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--trial", default="normal", choices=("slow", "normal", "fast"))
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--baseline-src", type=Path, help="another source tree (its src folder) to compare with")
+    args = ap.parse_args(argv)
+    ex = _example()
+    trees = {"this tree": HERE.parent / "src"}
+    if args.baseline_src:
+        trees["baseline"] = args.baseline_src.resolve()
+    cache = Path(tempfile.mkdtemp(prefix="mm-cold-cache-"))
+    print(f"cold start: {os.cpu_count()} cores, load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    for src in trees.values():  # fill each tree's caches (not timed)
+        cold_run(src, ex, args.trial, cache)
+    runs = {name: [] for name in trees}
+    for _ in range(args.repeat):
+        for name, src in trees.items():
+            runs[name].append(cold_run(src, ex, args.trial, cache))
+    print(f"{'tree':<10} {'wall s':>7} {'solve s':>8} {'rest s':>7} {'CPU s':>6} {'solve CPU s':>12} {'rest CPU s':>11}")
+    for name, rs in runs.items():
+        med = {k: statistics.median(r[k] for r in rs) for k in rs[0]}
+        print(f"{name:<10} {med['wall_s']:>7.2f} {med['solve_s']:>8.2f} {med['rest_s']:>7.2f} {med['cpu_s']:>6.2f} "
+              f"{med['solve_cpu_s']:>12.2f} {med['rest_cpu_s']:>11.2f}")
+    print(f"(medians of {args.repeat}; load average at the end {' '.join(f'{x:.2f}' for x in os.getloadavg())})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
