@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from musclemetab import model as model_module
-from musclemetab.errors import OpenSimWorkerError
+from musclemetab.errors import CacheWarning, OpenSimWorkerError
 from musclemetab.opensim_bridge import client
 
 
@@ -57,7 +57,8 @@ def test_unreadable_model_cache_entry_is_recomputed(example, tmp_path):
     (entry,) = tmp_path.glob("model-*.npz")
     entry.write_bytes(b"not an npz file")
     model_module._CACHE.clear()
-    again = model_module.read_model(example.model, cache_dir=tmp_path)
+    with pytest.warns(CacheWarning, match=f"{entry.name} cannot be read"):
+        again = model_module.read_model(example.model, cache_dir=tmp_path)
     np.testing.assert_array_equal(again.muscles.max_isometric_force_N, first.muscles.max_isometric_force_N)
     assert np.load(entry)["result"].size == 1  # rewritten, readable again
     model_module._CACHE.clear()
