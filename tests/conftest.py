@@ -58,6 +58,79 @@ def demo(tmp_path_factory):
     return out, pd.read_csv(out / "results.csv")
 
 
+@pytest.fixture(scope="session")
+def geometry_cache(_isolated_cache) -> Path:
+    """The test session's geometry cache (``$MUSCLEMETAB_CACHE/geometry``), shared by every
+    test that computes the example subject's geometry: each trial goes through OpenSim once."""
+    from musclemetab.geometry import default_cache_dir
+
+    return default_cache_dir()
+
+
+def _solve_key(func, args, kwargs) -> str:
+    """Content key of a solve call: input files by SHA-256, every other argument by value.
+
+    ``cache_dir`` (where the geometry is cached) does not change the result and is left out.
+    """
+    import hashlib
+    import inspect
+    import json
+
+    from musclemetab.io.atomic import file_sha256
+    from musclemetab.redundancy.problem import SolverOptions
+
+    bound = inspect.signature(func).bind(*args, **kwargs)
+    bound.apply_defaults()
+    content = {}
+    for name, value in bound.arguments.items():
+        if name == "cache_dir":
+            continue
+        if name == "options" and value is None:
+            value = SolverOptions()
+        if isinstance(value, (str, os.PathLike)) and Path(value).is_file():
+            value = file_sha256(value)
+        elif isinstance(value, (list, tuple)):
+            value = [file_sha256(v) if isinstance(v, (str, os.PathLike)) and Path(v).is_file() else v
+                     for v in value]
+        content[name] = value
+    return hashlib.sha256(json.dumps(content, sort_keys=True, default=repr).encode()).hexdigest()
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _emg_ten_solved_once():
+    """Each EMG-TEN problem is solved once per test session.
+
+    The command line (``solve --workflow emg-ten``) and a study's EMG-TEN unit call
+    :func:`musclemetab.redundancy.emg_ten.solve_emg_ten` with the same inputs; the second call
+    of this process gets the first call's result (keyed by the input files' content and every
+    setting, like the package's own caches) and its warnings again. Calls with other inputs
+    or settings solve as usual.
+    """
+    import warnings
+
+    import musclemetab.redundancy.emg_ten as emg_ten
+
+    solve = emg_ten.solve_emg_ten
+    results: dict = {}
+
+    @functools.wraps(solve)
+    def solve_once(*args, **kwargs):
+        key = _solve_key(solve, args, kwargs)
+        if key not in results:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                result = solve(*args, **kwargs)
+            results[key] = (result, caught)
+        result, caught = results[key]
+        for w in caught:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        return result
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(emg_ten, "solve_emg_ten", solve_once)
+        yield
+
+
 @contextlib.contextmanager
 def loopback_mirror(files: dict, root: Path):
     """Serve ``{path under the server root: local file}`` over HTTP on 127.0.0.1.
