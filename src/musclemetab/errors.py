@@ -87,3 +87,7 @@ class LargeReserveWarning(MusclemetabWarning):
 
 class MuscleTableWarning(MusclemetabWarning):
     """Some muscles are not in the anatomical muscle table and take fallback properties."""
+
+
+class WindowWarning(MusclemetabWarning):
+    """The solve window was clipped at the edge of the data (the record says where)."""
