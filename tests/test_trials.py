@@ -135,3 +135,57 @@ def test_lumped_2d_model_with_degroote_and_millard_muscles_both_legs(lumped_mode
         total = (one["r"].whole_body[m].one_leg_mean_W + one["l"].whole_body[m].one_leg_mean_W) / gait2392.body_mass_kg
         assert row["mean_W_per_kg"] == pytest.approx(total + 1.2, rel=1e-9)
         assert 2.6 < row["mean_W_per_kg"] < 15.8, m
+
+
+# ------------------------------------------------------------------ a two-subject study
+def test_two_subject_study_different_models_and_sides(example, gait2392, lumped_model, tmp_path, capsys):
+    """The study's subject (Rajagopal model, right leg, ID file) and gait2392's subject (a lumped
+    sagittal model, left leg, cycle and inverse dynamics from the ground forces) in one study file,
+    run end to end by ``musclemetab run`` with the report."""
+    import pandas as pd
+
+    study = tmp_path / "study.toml"
+    study.write_text(f"""
+name = "two subjects"
+output = "out"
+workflows = ["effort-gen"]
+models = ["UM10", "BH04"]
+
+[[subjects]]
+name = "example"
+model = "{example.model}"
+body_mass_kg = {example.body_mass_kg}
+height_m = {example.height_m}
+
+[[subjects.trials]]
+name = "normal"
+ik = "{example.ik['normal']}"
+id = "{example.id['normal']}"
+
+[[subjects]]
+name = "gait2392"
+model = "{lumped_model}"
+body_mass_kg = {gait2392.body_mass_kg}
+height_m = 1.8
+side = "l"
+
+[[subjects.trials]]
+name = "walk1"
+ik = "{gait2392.ik}"
+external_loads = "{gait2392.external_loads}"
+cycle = "auto"
+""")
+    assert _cli("run", study, "--workers", 2, "--report", "--no-progress") == 0
+    out = tmp_path / "out"
+    res = pd.read_csv(out / "results.csv")
+    assert sorted(set(res["subject"])) == ["example", "gait2392"] and len(res) == 4
+    unit = out / "units" / "gait2392" / "walk1" / "effort-gen"
+    s = json.loads((unit / "summary.json").read_text())
+    assert s["side"] == "l" and s["dofs"] == ["ankle_angle_l", "knee_angle_l", "hip_flexion_l"]
+    assert s["window"]["gait_cycle"]["start_s"] == pytest.approx(1.247, abs=3e-3)
+    assert (unit / "inverse_dynamics.sto").is_file()
+    ex = json.loads((out / "units" / "example" / "normal" / "effort-gen" / "summary.json").read_text())
+    assert ex["side"] == "r" and len(ex["muscles"]) == 40
+    assert (out / "report.html").is_file()
+    wkg = [c for c in res.columns if "W_per_kg" in c]
+    assert wkg and res[wkg[0]].between(2.6, 15.8).all()

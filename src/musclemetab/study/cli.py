@@ -69,7 +69,7 @@ def _status(run) -> int:
         print(f"musclemetab: interrupted; {len(run.interrupted)} unit(s) marked interrupted, no new unit started. "
               "Run the same command again to finish the study", file=sys.stderr)
         return 130
-    return _status(run)
+    return 1 if run.failed else 0
 
 
 def run_command(args) -> int:
