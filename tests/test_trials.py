@@ -91,13 +91,16 @@ def test_calibration_coordinates_and_trials_found_by_content(example, gait2392, 
 @pytest.fixture(scope="session")
 def lumped_model(gait2392, tmp_path_factory):
     """gait2392's subject as a sagittal 18-muscle model (DeGrooteFregly right, Millard left)."""
+    return _build(gait2392, tmp_path_factory.mktemp("lumped") / "lumped2d.osim")
+
+
+def _build(gait2392, out, *flags):
     import subprocess
     import sys
     from pathlib import Path
 
-    out = tmp_path_factory.mktemp("lumped") / "lumped2d.osim"
-    subprocess.run([sys.executable, str(Path(__file__).with_name("opensim_models.py")), str(gait2392.model), str(out)],
-                   check=True, capture_output=True)
+    subprocess.run([sys.executable, str(Path(__file__).with_name("opensim_models.py")), str(gait2392.model), str(out),
+                    *flags], check=True, capture_output=True)
     return out
 
 
@@ -189,3 +192,32 @@ cycle = "auto"
     assert (out / "report.html").is_file()
     wkg = [c for c in res.columns if "W_per_kg" in c]
     assert wkg and res[wkg[0]].between(2.6, 15.8).all()
+
+
+def test_bad_input_no_muscles_on_the_side_and_unknown_muscles(gait2392, lumped_both, tmp_path, capsys):
+    model = _build(gait2392, tmp_path / "right_only.osim", "--right-only")
+    out = tmp_path / "out"
+    cases = [
+        (["solve", "--model", model, "--ik", gait2392.ik, "--external-loads", gait2392.external_loads,
+          "--cycle", "auto", "--side", "l", "--out", out], "no muscle has a moment arm above 0.1 mm"),
+        (["solve", "--model", model, "--ik", gait2392.ik, "--external-loads", gait2392.external_loads,
+          "--cycle", "auto", "--exclude-muscles", "tfl_r", "--out", out], "tfl_r is not among the muscles"),
+        (["metabolics", "--solution", _renamed_muscle(lumped_both / "r", tmp_path / "renamed"), "--mass", 72.6,
+          "--height", 1.8, "--strict", "--out", out], "muscle mystery_r not in the anatomical muscle table (--strict)"),
+    ]
+    for argv, message in cases:
+        code = _cli(*argv)
+        errors = [line for line in capsys.readouterr().err.splitlines() if line.startswith("musclemetab: error:")]
+        assert code != 0 and len(errors) == 1 and message in errors[0], (argv[0], errors)
+        assert not out.exists()
+
+
+def _renamed_muscle(solution, folder):
+    """A copy of a solution folder in which vasti_r is called mystery_r (a muscle no table knows)."""
+    import shutil
+
+    shutil.copytree(solution, folder)
+    for name in ("summary.json", "solution.sto"):
+        path = folder / name
+        path.write_text(path.read_text().replace("vasti_r", "mystery_r"))
+    return folder
