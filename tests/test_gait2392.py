@@ -243,3 +243,28 @@ def test_metabolics_phases_and_groups_of_both_legs(both_solutions, gait2392):
         assert lo < total[m] < hi, (m, total[m])
         assert total[m] == pytest.approx(sum(legs[x].whole_body[m].one_leg_mean_W for x in "rl")
                                          / gait2392.body_mass_kg + 1.2, rel=1e-12)
+
+
+def test_geometry_of_both_legs_against_opensims_moment_arm_solver(gait2392, tmp_path, capsys):
+    from musclemetab.geometry import compute_geometry
+    from musclemetab.io import read_storage
+
+    assert _cli("geometry", "--model", gait2392.model, "--ik", gait2392.ik, "--side", "both", "--out", tmp_path / "g") == 0
+    assert "side l, 43 muscles x 7 DOFs x 211 frames" in capsys.readouterr().out
+    # OpenSim's own moment-arm solver (Muscle.computeMomentArm) on a few frames and muscles of each leg
+    ik = read_storage(gait2392.ik)
+    short = tmp_path / "short.mot"
+    lines = gait2392.ik.read_text().splitlines()
+    end = next(i for i, line in enumerate(lines) if line.strip().lower() == "endheader")
+    rows = lines[end + 2 :: 3][:10]  # 20 Hz, 0.50-0.95 s
+    head = [f"nRows={len(rows)}" if line.startswith("nRows=") else line for line in lines[: end + 2]]
+    short.write_text("\n".join(head + rows) + "\n")
+    frames = np.isin(np.round(ik.index.to_numpy(), 6), np.round(read_storage(short).index.to_numpy(), 6))
+    for side in "rl":
+        muscles = [f"{m}_{side}" for m in ("med_gas", "soleus", "rect_fem", "glut_med1", "semimem")]
+        ref = compute_geometry(gait2392.model, short, side=side, muscles=muscles, method="opensim", use_cache=False)
+        for j, dof in enumerate(ref.dofs):
+            ours = read_storage(tmp_path / "g" / side / f"moment_arms_{dof}.sto")[muscles].to_numpy()[frames]
+            np.testing.assert_allclose(ours, ref.moment_arms_m[:, j, :], atol=2e-3, err_msg=dof)
+        lmt = read_storage(tmp_path / "g" / side / "muscle_tendon_lengths.sto")[muscles].to_numpy()[frames]
+        np.testing.assert_allclose(lmt, ref.lmt_m, atol=1e-9)
