@@ -200,19 +200,11 @@ PLAUSIBLE_W_PER_KG = (4.1 - 3 * 0.5, 12.2 + 3 * 1.2)
 
 def test_metabolics_phases_and_groups_of_both_legs(both_solutions, gait2392):
     from musclemetab.analysis.events import GaitCycle
-    from musclemetab.analysis.groups import dof_group_pair
     from musclemetab.analysis.unit import analyse_solution_folder
-    from musclemetab.errors import OptionError
     from musclemetab.geometry import compute_geometry
+    from musclemetab.analysis.groups import has_function_group  # subtalar and mtp: no function group
     from musclemetab.metabolics import MODELS
     from musclemetab.metabolics.solution import add_legs, metabolics_from_solution
-
-    def grouped(d):
-        try:
-            dof_group_pair(d)
-            return True
-        except OptionError:  # subtalar and mtp belong to no function group
-            return False
 
     legs = {}
     for side in "rl":
@@ -226,7 +218,7 @@ def test_metabolics_phases_and_groups_of_both_legs(both_solutions, gait2392):
         assert c["start_s"] <= res.time_s[0] < c["start_s"] + 0.01
         assert c["end_s"] - 0.01 < res.time_s[-1] <= c["end_s"]
         legs[side] = res
-        geo = compute_geometry(gait2392.model, gait2392.ik, dofs=[d for d in s["dofs"] if grouped(d)])
+        geo = compute_geometry(gait2392.model, gait2392.ik, dofs=[d for d in s["dofs"] if has_function_group(d)])
         with pytest.warns(UserWarning, match="not in the anatomical muscle table"):
             a = analyse_solution_folder(folder, geo, GaitCycle(c["start_s"], c["toe_off_s"], c["end_s"]),
                                         gait2392.body_mass_kg, GAIT2392_HEIGHT_M).summary.set_index("model")

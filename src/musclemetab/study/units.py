@@ -456,8 +456,10 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         cycle = GaitCycle(recorded["start_s"], toe_off, recorded["end_s"])
     else:
         cycle = trial_cycle(trial, subject.side)
-    solved_dofs = solved.dofs
-    geometry = compute_geometry(subject.model, trial.ik, dofs=list(solved_dofs))
+    from ..analysis.groups import has_function_group
+
+    # DOFs with no muscle function group (a subtalar or toe joint) stay out of the group analysis
+    geometry = compute_geometry(subject.model, trial.ik, dofs=[d for d in solved.dofs if has_function_group(d)])
     from ..analysis.unit import analyse_metabolics, filtered_moment_arms
 
     tg, r = filtered_moment_arms(geometry)
@@ -480,3 +482,4 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         "large_reserve": bool(solve_summary.get("large_reserve", False)),
         "reserve_share_of_peak_moment": solve_summary.get("reserve_share_of_peak_moment"),
     }
+
