@@ -46,7 +46,7 @@ class ModelError(MusclemetabError):
 
 
 class UnknownMuscleError(ModelError):
-    """A muscle name is not in the model or in the property table."""
+    """A muscle name is not in the model, or (strict) not in the anatomical muscle table."""
 
 
 class UnknownCoordinateError(ModelError):

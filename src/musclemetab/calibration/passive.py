@@ -23,7 +23,7 @@ with ``0.05 <= l~M <= 2``, ``lM_proj >= 1e-4 m``, ``-1 <= aT <= 1``, ``3 <= kPE 
 passive-moment error divided by 150 N m over every frame of the three trials.
 
 A muscle spanning two calibrated joints has one ``kPE`` and one ``s0``; muscles of one
-coupling group (property table column ``passive_coupling_group``, P1-P10) share them.
+coupling group (anatomical muscle table column ``passive_coupling_group``, P1-P10) share them.
 Shared values are single NLP variables (equivalent to equality constraints between
 per-trial copies).
 

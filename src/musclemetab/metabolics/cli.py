@@ -1,7 +1,7 @@
 """``musclemetab metabolics``: metabolic rates of every muscle of a solver solution.
 
     musclemetab metabolics --solution DIR|PARENT --model M.osim --mass KG --height M
-                           [--models all|UM10,BH04,...] [--basal body|muscle|none]
+                           [--models all|UM10,BH04,...|all,LW05,MA68] [--basal body|muscle|none]
                            [--speed M_PER_S] --out DIR
 
 Writes ``OUT/metabolics.sto``, ``OUT/metabolics.csv`` and ``OUT/whole_body.csv`` (see
@@ -24,7 +24,7 @@ __all__ = ["add_metabolics_parser", "metabolics_command"]
 
 def add_metabolics_parser(subparsers) -> None:
     """Add the ``metabolics`` subcommand to an ``argparse`` subparsers object."""
-    from .registry import MODELS
+    from .registry import ADDITIONAL_MODELS, MODELS
 
     p = subparsers.add_parser(
         "metabolics",
@@ -34,7 +34,8 @@ def add_metabolics_parser(subparsers) -> None:
             "trimmed: 5 at the start, 6 at the end), muscle by muscle and node by node. Writes "
             "OUT/metabolics.sto (columns <model>/<muscle>/<component>, W), OUT/metabolics.csv (tidy: time, "
             "model, muscle, component, value_W) and OUT/whole_body.csv (one row per model: whole-body "
-            f"average in W/kg). Models: {', '.join(MODELS)}."
+            f"average in W/kg). Models: the study's {', '.join(MODELS)} ('all', the default) and, when "
+            f"named, {', '.join(ADDITIONAL_MODELS)}."
         ),
     )
     p.add_argument("--solution", required=True, metavar="DIR",
@@ -49,7 +50,8 @@ def add_metabolics_parser(subparsers) -> None:
     p.add_argument("--height", required=True, type=float, metavar="M", help="body height (m)")
     p.add_argument(
         "--models", default="all", metavar="LIST",
-        help=f"'all' (default) or a comma-separated list of {', '.join(MODELS)}",
+        help=f"'all' (default: the study's {', '.join(MODELS)}) or a comma-separated list of these and "
+        f"{', '.join(ADDITIONAL_MODELS)}, e.g. all,LW05,MA68",
     )
     p.add_argument(
         "--basal", default="body", choices=("body", "muscle", "none"),

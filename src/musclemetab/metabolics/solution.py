@@ -22,14 +22,21 @@ Outputs of :func:`write_metabolics` in a folder:
     ``basal``, ``total``, and model extras). ``total`` includes the per-muscle basal heat
     (1.2 W/kg of muscle mass) as the study's code computes it; ``total - basal`` is the
     muscle's rate without basal heat.
-``metabolics.csv``
-    the same values as a tidy table: ``time``, ``model``, ``muscle``, ``component``,
-    ``value_W``.
+``metabolics.parquet``
+    the same values as a tidy table (Parquet, full precision): ``time``, ``model``,
+    ``muscle``, ``component``, ``value_W``.
 ``whole_body.csv``
     one row per model: ``model``, ``mean_W_per_kg`` (both legs, basal per the rule, by
     default 1.2 W/kg of body mass), ``mean_W_per_kg_no_basal``, ``one_leg_mean_W``, then
     ``basal_rule``, ``duration_s`` and, when a speed is given,
-    ``cost_of_transport_J_per_kg_per_m``.
+    ``gross_cost_of_transport_J_per_kg_per_m`` (with the basal heat of the rule) and
+    ``net_cost_of_transport_J_per_kg_per_m`` (without basal heat).
+``per_muscle.csv``
+    one row per model and muscle: cycle-average rate, W/kg, energy per cycle, share of
+    the leg, stance and swing energies (given a gait cycle), components, basal heat apart
+    (:func:`musclemetab.analysis.per_muscle.per_muscle_table`).
+
+Every column is described in ``docs/data_dictionary.md``.
 """
 
 from __future__ import annotations
@@ -43,7 +50,7 @@ import numpy as np
 
 from ..errors import DataMismatchError, MissingColumnError, OptionError
 from ._common import MetabolicRates
-from .registry import MODELS, parse_models
+from .registry import ALL_MODELS, parse_models
 from .whole_body import BASAL_RULES, WholeBodyRate, whole_body_rate
 
 __all__ = [
@@ -56,13 +63,13 @@ __all__ = [
     "SOLUTION_FILE",
     "SUMMARY_FILE",
     "METABOLICS_STO",
-    "METABOLICS_CSV",
+    "METABOLICS_PARQUET",
     "WHOLE_BODY_CSV",
 ]
 
 from ..redundancy.solution import SOLUTION_FILE, SUMMARY_FILE  # noqa: E402  (one definition of the format)
 METABOLICS_STO = "metabolics.sto"
-METABOLICS_CSV = "metabolics.csv"
+METABOLICS_PARQUET = "metabolics.parquet"
 WHOLE_BODY_CSV = "whole_body.csv"
 
 #: solution column quantity -> model argument
@@ -259,8 +266,8 @@ class SolutionMetabolics:
 
     def whole_body_table(self):
         """One row per model: ``model``, ``mean_W_per_kg``, ``mean_W_per_kg_no_basal``,
-        ``one_leg_mean_W``, ``basal_rule``, ``duration_s`` (and the cost of transport
-        when a speed was given)."""
+        ``one_leg_mean_W``, ``basal_rule``, ``duration_s`` (and the gross and net costs of
+        transport when a speed was given)."""
         import pandas as pd
 
         rows = []
@@ -275,7 +282,9 @@ class SolutionMetabolics:
                 "duration_s": wb.duration_s,
             }
             if self.speed_m_per_s is not None:
-                row["cost_of_transport_J_per_kg_per_m"] = wb.cost_of_transport_J_per_kg_per_m(self.speed_m_per_s)
+                row["gross_cost_of_transport_J_per_kg_per_m"] = wb.cost_of_transport_J_per_kg_per_m(self.speed_m_per_s)
+                row["net_cost_of_transport_J_per_kg_per_m"] = wb.net_cost_of_transport_J_per_kg_per_m(
+                    self.speed_m_per_s)
             rows.append(row)
         return pd.DataFrame(rows)
 
@@ -309,7 +318,7 @@ def metabolics_from_solution(
         The subject (muscle masses from the volume rule of :mod:`musclemetab.properties`;
         whole-body rate per kg of body mass).
     models
-        ``"all"`` (the six study models), ``"UM10,BH04"`` or a list.
+        ``"all"`` (the six study models), ``"UM10,BH04"``, ``"all,LW05,MA68"`` or a list.
     muscle_parameters
         ``F0``, ``lMo``, ``vmax`` by muscle name: a
         :class:`musclemetab.model.MuscleParameters` (e.g. from
@@ -351,9 +360,9 @@ def metabolics_from_solution(
     if basal not in BASAL_RULES:
         raise OptionError(f"basal rule must be one of {', '.join(BASAL_RULES)}, not {basal!r}")
     model_options = {k.upper(): dict(v) for k, v in (model_options or {}).items()}
-    unknown = [k for k in model_options if k not in MODELS]
+    unknown = [k for k in model_options if k not in ALL_MODELS]
     if unknown:
-        raise OptionError(f"options given for unknown model(s) {', '.join(unknown)}; known: {', '.join(MODELS)}")
+        raise OptionError(f"options given for unknown model(s) {', '.join(unknown)}; known: {', '.join(ALL_MODELS)}")
     sol = solution if isinstance(solution, SolutionStates) else read_solution_states(
         solution, require_success=require_success
     )
@@ -404,7 +413,7 @@ def metabolics_from_solution(
         opts = {"basal": True}
         opts.update(model_options.get(name, {}))
         try:
-            rates[name] = MODELS[name](**inputs, time_s=time, **opts)
+            rates[name] = ALL_MODELS[name](**inputs, time_s=time, **opts)
         except TypeError as exc:
             raise OptionError(f"{name}: invalid option ({exc})") from None
     wb = {
@@ -428,11 +437,15 @@ def metabolics_from_solution(
     )
 
 
-def write_metabolics(result: SolutionMetabolics, out_dir: str | os.PathLike) -> dict[str, Path]:
-    """Write ``metabolics.sto``, ``metabolics.csv`` and ``whole_body.csv`` into ``out_dir``.
+def write_metabolics(result: SolutionMetabolics, out_dir: str | os.PathLike, cycle=None) -> dict[str, Path]:
+    """Write ``metabolics.sto``, ``metabolics.parquet``, ``whole_body.csv`` and
+    ``per_muscle.csv`` into ``out_dir``.
 
-    The three files are written together (:func:`musclemetab.io.atomic_directory`).
+    ``cycle`` (a :class:`~musclemetab.analysis.GaitCycle`) adds the stance and swing
+    energies to ``per_muscle.csv``. The files are written together
+    (:func:`musclemetab.io.atomic_directory`).
     """
+    from ..analysis.per_muscle import PER_MUSCLE_FILE, per_muscle_table
     from ..io import atomic_directory, write_storage
 
     out_dir = Path(out_dir)
@@ -445,12 +458,14 @@ def write_metabolics(result: SolutionMetabolics, out_dir: str | os.PathLike) -> 
     with atomic_directory(out_dir) as tmp:
         write_storage(tmp / METABOLICS_STO, result.to_dataframe(), name="musclemetab metabolic rates",
                       in_degrees=False, comments=comments)
-        result.to_long().to_csv(tmp / METABOLICS_CSV, index=False, float_format="%.10g")
+        result.to_long().to_parquet(tmp / METABOLICS_PARQUET, index=False)
         result.whole_body_table().to_csv(tmp / WHOLE_BODY_CSV, index=False, float_format="%.10g")
+        per_muscle_table(result, cycle).to_csv(tmp / PER_MUSCLE_FILE, index=False, float_format="%.10g")
     return {
         "metabolics_sto": out_dir / METABOLICS_STO,
-        "metabolics_csv": out_dir / METABOLICS_CSV,
+        "metabolics_parquet": out_dir / METABOLICS_PARQUET,
         "whole_body_csv": out_dir / WHOLE_BODY_CSV,
+        "per_muscle_csv": out_dir / PER_MUSCLE_FILE,
     }
 
 

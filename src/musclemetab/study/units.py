@@ -263,7 +263,11 @@ _INTERRUPTED = threading.Event()
 
 
 def _on_sigint(signum, frame):
-    """SIGINT while a unit runs: remember it, then interrupt as Python does by default."""
+    """SIGINT while a unit runs: remember it, then interrupt as Python does by default.
+
+    A second SIGINT (the terminal's and the runner's) does not interrupt the clean-up."""
+    if _INTERRUPTED.is_set():
+        return
     _INTERRUPTED.set()
     raise KeyboardInterrupt
 
@@ -390,6 +394,15 @@ def _copy_solution(source: Path, target: Path) -> None:
         shutil.copyfile(source / name, target / name)
 
 
+def _cycle_source(trial: Trial) -> str:
+    """Where the trial's gait events come from (:func:`musclemetab.study.events.trial_cycle`)."""
+    if all(v is not None for v in (trial.start_s, trial.toe_off_s, trial.end_s)):
+        return "study file"
+    if trial.grf is not None:
+        return "ground reaction forces"
+    return "estimated from the IK window and the ankle moment (no ground reaction forces)"
+
+
 def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> dict:
     """Solve (or take the EMG-TEN solution), metabolics, gait cycle, phases and groups."""
     import numpy as np
@@ -439,14 +452,6 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
     except DataMismatchError as exc:  # e.g. a treadmill trial without speed_m_per_s: no cost of transport
         warnings.warn(f"{subject.name}/{trial.name}: no walking speed ({exc})", stacklevel=2)
         speed = None
-    result = metabolics_from_solution(
-        tmp, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
-        speed_m_per_s=speed, muscle_properties=subject.muscle_properties,
-    )
-    write_metabolics(result, tmp)
-    times["metabolics_s"] = time.perf_counter() - t1
-
-    t2 = time.perf_counter()
     solved = Solution.load(tmp, require_success=False)
     recorded = (solved.summary.get("window") or {}).get("gait_cycle")
     if recorded and trial.start_s is None and trial.end_s is None:  # the cycle the solve found
@@ -456,6 +461,14 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         cycle = GaitCycle(recorded["start_s"], toe_off, recorded["end_s"])
     else:
         cycle = trial_cycle(trial, subject.side)
+    result = metabolics_from_solution(
+        tmp, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
+        speed_m_per_s=speed, muscle_properties=subject.muscle_properties,
+    )
+    write_metabolics(result, tmp, cycle=cycle)
+    times["metabolics_s"] = time.perf_counter() - t1
+
+    t2 = time.perf_counter()
     from ..analysis.groups import has_function_group
 
     # DOFs with no muscle function group (a subtalar or toe joint) stay out of the group analysis
@@ -467,6 +480,12 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
     analysis.summary.to_csv(tmp / ANALYSIS_FILE, index=False, float_format="%.10g")
     analysis.timeseries.to_csv(tmp / TIMESERIES_FILE, index=False, float_format="%.10g")
     times["analysis_s"] = time.perf_counter() - t2
+
+    t3 = time.perf_counter()
+    from ..redundancy.export import write_opensim_states
+
+    write_opensim_states(tmp, subject.model, trial.ik, tmp)
+    times["opensim_states_s"] = time.perf_counter() - t3
     measured = trial.measured_W_per_kg
     if measured is None and trial.vo2_mL_per_s is not None:
         from ..metabolics.whole_body import brockway_rate_W
@@ -477,6 +496,9 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         "speed_m_per_s": speed,
         "measured_W_per_kg": measured,
         "cycle": {"start_s": cycle.start_s, "toe_off_s": cycle.toe_off_s, "end_s": cycle.end_s},
+        "cycle_source": _cycle_source(trial),
+        "speed_source": "study file" if trial.speed_m_per_s is not None else (
+            "estimated from the pelvis displacement over the cycle (IK)"),
         "toe_off_pct": float(100.0 * (cycle.toe_off_s - cycle.start_s) / (cycle.end_s - cycle.start_s)),
         "n_nodes": int(np.asarray(result.time_s).size),
         "large_reserve": bool(solve_summary.get("large_reserve", False)),
