@@ -1,0 +1,163 @@
+"""Estimated parameters of a multi-trial problem: the EMG-TEN result and ``parameters.json``.
+
+**Tendon stiffness in N/mm.** ``kT`` is dimensionless; the stiffness reported in N/mm is the
+tangent slope of the tendon force-length curve where the tendon carries its maximal isometric
+force ``F0`` (``fT = 1``)::
+
+    k = dFT/dlT |_(fT = 1) = F0 kT (1.25 - shift(kT)) / lTs
+
+(``muscle_model.md`` §7: ``dFT/dlT = F0 kT exp(kT (l~T - 0.995))/(5 lTs)`` and
+``exp(kT (l~T - 0.995))/5 = fT + 0.25 - shift``). The slope at each trial's peak walking
+tendon force is reported too. The Achilles tendon stiffness is the sum over soleus, gasmed
+and gaslat (three tendons in parallel).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..muscle import KT_GENERIC, tendon_length_from_force, tendon_stiffness_N_per_m
+from .parameters import MuscleTendonParameters
+from .solution import _jsonable
+
+__all__ = ["EMG_TEN", "EmgTenResult", "PARAMETERS_FILE", "TRICEPS_SURAE", "VASTI",
+           "tendon_stiffness_at_force_N_per_mm"]
+
+EMG_TEN = "emg-ten"
+PARAMETERS_FILE = "parameters.json"
+PARAMETERS_FORMAT = "musclemetab.redundancy.emg_ten_parameters"
+PARAMETERS_VERSION = 1
+TRICEPS_SURAE = ("soleus_r", "gasmed_r", "gaslat_r")
+VASTI = ("vasint_r", "vaslat_r", "vasmed_r")
+
+
+def tendon_stiffness_at_force_N_per_mm(force_norm, max_isometric_force_N, tendon_slack_length_m, kT):
+    """Tangent slope ``dFT/dlT`` (N/mm) of the tendon curve where ``FT = force_norm F0``.
+
+    With ``force_norm = 1``: ``F0 kT (1.25 - shift(kT)) / lTs`` (the module's definition of
+    the stiffness in N/mm).
+    """
+    lt = tendon_length_from_force(np.asarray(force_norm, dtype=float), kT)
+    return tendon_stiffness_N_per_m(lt, max_isometric_force_N, tendon_slack_length_m, kT) / 1000.0
+
+
+@dataclass
+class EmgTenResult:
+    """Solutions of all trials and the estimated parameters of one EMG-TEN solve.
+
+    ``solutions`` maps the trial labels (IK file stems by default) to :class:`Solution`
+    objects in the solver's format (``summary['workflow']['name'] == 'emg-ten'``), computed
+    with the estimated tendon stiffness. ``tendon_stiffness``/``tendon_scale`` and
+    ``emg_scale`` hold the estimates by muscle; ``record`` the solve record.
+    """
+
+    solutions: dict
+    parameters: MuscleTendonParameters
+    tendon_scale: dict
+    tendon_stiffness: dict
+    emg_scale: dict
+    emg_channels: dict
+    record: dict
+    settings: object
+    trials: tuple = field(default=(), repr=False)
+
+    @property
+    def success(self) -> bool:
+        return bool(self.record.get("success", False))
+
+    @property
+    def status(self) -> str:
+        return str(self.record.get("status", "unknown"))
+
+    @property
+    def objective(self) -> float:
+        return float(self.record.get("objective", math.nan))
+
+    @property
+    def iterations(self) -> int:
+        return int(self.record.get("iterations", -1))
+
+    def tendon_stiffness_N_per_mm(self) -> dict:
+        """Tangent stiffness (N/mm) at ``FT = F0`` of every muscle whose ``kT`` was estimated."""
+        p = self.parameters
+        out = {}
+        for m in self.tendon_stiffness:
+            i = p.names.index(m)
+            out[m] = float(tendon_stiffness_at_force_N_per_mm(
+                1.0, p.max_isometric_force_N[i], p.tendon_slack_length_m[i], p.tendon_stiffness[i]))
+        return out
+
+    def tendon_stiffness_at_peak_force_N_per_mm(self) -> dict:
+        """``{trial: {muscle: {peak_force_N, stiffness_N_per_mm}}}`` at each trial's peak tendon force."""
+        p = self.parameters
+        out = {}
+        for label, sol in self.solutions.items():
+            rec = {}
+            for m in self.tendon_stiffness:
+                i, j = p.names.index(m), sol.muscles.index(m)
+                peak = float(np.max(sol.tendon_force_N[:, j]))
+                rec[m] = {"peak_force_N": peak, "stiffness_N_per_mm": float(tendon_stiffness_at_force_N_per_mm(
+                    peak / p.max_isometric_force_N[i], p.max_isometric_force_N[i], p.tendon_slack_length_m[i],
+                    p.tendon_stiffness[i]))}
+            out[label] = rec
+        return out
+
+    def achilles_stiffness_N_per_mm(self) -> dict | None:
+        """Achilles tendon (soleus + gasmed + gaslat in parallel) stiffness in N/mm.
+
+        ``{"at_max_isometric_force": k, "at_peak_walking_force": {trial: k}}``, or ``None``
+        when the three muscles' stiffness was not estimated.
+        """
+        if not all(m in self.tendon_stiffness for m in TRICEPS_SURAE):
+            return None
+        at_f0 = self.tendon_stiffness_N_per_mm()
+        peak = self.tendon_stiffness_at_peak_force_N_per_mm()
+        return {
+            "at_max_isometric_force": float(sum(at_f0[m] for m in TRICEPS_SURAE)),
+            "at_peak_walking_force": {t: float(sum(v[m]["stiffness_N_per_mm"] for m in TRICEPS_SURAE))
+                                      for t, v in peak.items()},
+        }
+
+    def parameters_document(self) -> dict:
+        """The content of ``parameters.json``."""
+        return _jsonable({
+            "format": PARAMETERS_FORMAT,
+            "format_version": PARAMETERS_VERSION,
+            "workflow": EMG_TEN,
+            "tendon_stiffness": dict(self.tendon_stiffness),
+            "tendon_stiffness_scale": dict(self.tendon_scale),
+            "tendon_stiffness_nominal": KT_GENERIC,
+            "tendon_stiffness_other_muscles": KT_GENERIC,
+            "tendon_stiffness_N_per_mm": self.tendon_stiffness_N_per_mm(),
+            "tendon_stiffness_N_per_mm_definition": (
+                "tangent slope dFT/dlT of the tendon force-length curve where the tendon carries its maximal "
+                "isometric force (fT = 1): F0*kT*(1.25 - shift(kT))/lTs, converted from N/m to N/mm"),
+            "tendon_stiffness_N_per_mm_at_peak_walking_force": self.tendon_stiffness_at_peak_force_N_per_mm(),
+            "achilles_tendon_stiffness_N_per_mm": self.achilles_stiffness_N_per_mm(),
+            "emg_scale": dict(self.emg_scale),
+            "emg_channels": dict(self.emg_channels),
+            "solve": dict(self.record),
+        })
+
+    def write(self, out_dir: str | os.PathLike) -> Path:
+        """Write one solution folder per trial and ``parameters.json`` into ``out_dir``.
+
+        Each folder is written atomically; ``parameters.json`` is removed first and written last
+        (atomically), so its presence means that all trial folders belong to it.
+        """
+        from ..io import atomic_write_text
+
+        out_dir = Path(out_dir)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        (out_dir / PARAMETERS_FILE).unlink(missing_ok=True)
+        for label, sol in self.solutions.items():
+            sol.write(out_dir / label)
+        text = json.dumps(self.parameters_document(), indent=2, allow_nan=True)
+        atomic_write_text(out_dir / PARAMETERS_FILE, text + "\n")
+        return out_dir
