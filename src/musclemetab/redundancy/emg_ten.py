@@ -49,7 +49,6 @@ from __future__ import annotations
 
 import math
 import os
-import platform
 import time as _time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -80,7 +79,8 @@ from .inputs import (
     read_kinematics,
 )
 from .parameters import MuscleTendonParameters
-from .problem import ProblemResult, SolverOptions, ipopt_statistics, solve_problem
+from .problem import ProblemResult, SolverOptions, solve_problem
+from .record import RunRecord
 from .solution import build_solution
 from .static_opt import InitialGuess, initial_guess, static_optimisation
 
@@ -497,24 +497,16 @@ def prepare_emg_ten_trials(
 
 
 def _assemble_result(trials, params, wf_record, ocp: ProblemResult, settings, options, t_prep, t_start):
-    from .. import __version__
-
     tendon_scale = dict(ocp.factors["tendon_stiffness"])
     emg_scale = dict(ocp.factors["emg_scale"])
     kt_est = {m: float(params.tendon_stiffness[params.names.index(m)] * s) for m, s in tendon_scale.items()}
     est_params = params.replace(tendon_stiffness=kt_est)
     emg_channels = dict(trials[0].emg_channels)
-    software = {"musclemetab": __version__, "python": platform.python_version()}
-    try:
-        import casadi
-
-        software["casadi"] = casadi.__version__
-    except Exception:  # pragma: no cover
-        pass
+    run = RunRecord.from_result(ocp, {f"{t.label}/{k}": v for t in trials for k, v in t.sources.items()})
     n_tot = sum(t.inputs.n_intervals for t in trials)
     record = {
         "workflow": EMG_TEN,
-        **ipopt_statistics(ocp),
+        **run.to_dict(),
         "preparation_time_s": t_prep,
         "max_coupling_violation": ocp.max_coupling_violation,
         "problem_size": {"variables": ocp.n_variables, "equality_constraints": ocp.n_equality_constraints,
@@ -529,7 +521,6 @@ def _assemble_result(trials, params, wf_record, ocp: ProblemResult, settings, op
         "solver_options": options.to_dict(),
         "ipopt_options": ocp.ipopt_options,
         "initial_guess": "static optimisation (rigid tendons) per trial, reserve divided by Topt; scale factors 1",
-        "software": software,
     }
     workflow = {
         "name": EMG_TEN,
@@ -547,18 +538,12 @@ def _assemble_result(trials, params, wf_record, ocp: ProblemResult, settings, op
     for t, o, dev in zip(trials, ocp.trials, ocp.emg_deviation):
         inp = t.inputs
         summary = {
-            "status": ocp.status,
-            "success": ocp.success,
-            "objective": ocp.objective,
+            **run.to_dict(),
             "objective_trial": o.objective,
             "objective_terms": o.objective_terms,
-            "iterations": ocp.iterations,
-            "solve_time_s": ocp.solve_time_s,
-            "solve_cpu_time_s": ocp.solve_cpu_s,
-            "build_time_s": ocp.build_time_s,
-            "function_evaluation_time_s": ocp.function_time_s,
+            "input_hashes": {k.split("/", 1)[1]: v for k, v in run.input_hashes.items()
+                             if k.startswith(f"{t.label}/")},
             "preparation_time_s": t_prep,
-            "max_constraint_violation": ocp.max_constraint_violation,
             "problem_size": dict(record["problem_size"]),
             "time_window_s": list(inp.window_s),
             "n_intervals": inp.n_intervals,
@@ -579,7 +564,6 @@ def _assemble_result(trials, params, wf_record, ocp: ProblemResult, settings, op
                                   "mesh_intervals_per_second": 100, "interpolation": "not-a-knot cubic spline",
                                   "emg": "linear interpolation at nodes 0..N-1"},
             "inputs": {k: str(v) for k, v in t.sources.items()},
-            "software": software,
         }
         sol = build_solution(inp, est_params.subset(inp.muscles), o, summary)
         sol.summary["total_time_s"] = _time.perf_counter() - t_start

@@ -68,6 +68,13 @@ class EmgTenResult:
     trials: tuple = field(default=(), repr=False)
 
     @property
+    def run_record(self):
+        """The :class:`~.record.RunRecord` of the solve."""
+        from .record import RunRecord
+
+        return RunRecord.from_dict(self.record)
+
+    @property
     def success(self) -> bool:
         return bool(self.record.get("success", False))
 

@@ -153,24 +153,6 @@ class OcpResult:
     function_time_s: dict = field(default_factory=dict)
 
 
-def ipopt_statistics(result) -> dict:
-    """Status, objective and IPOPT statistics of an optimum (:class:`OcpResult` or the
-    EMG-TEN result), as recorded in ``summary.json``."""
-    return {
-        "status": result.status,
-        "success": result.success,
-        "objective": result.objective,
-        "objective_terms": result.objective_terms,
-        "iterations": result.iterations,
-        "solve_time_s": result.solve_time_s,
-        "solve_cpu_time_s": result.solve_cpu_s,
-        "build_time_s": result.build_time_s,
-        "function_evaluation_time_s": result.function_time_s,
-        "ms_per_iteration": 1e3 * result.solve_time_s / max(result.iterations, 1),
-        "max_constraint_violation": result.max_constraint_violation,
-    }
-
-
 def problem_size(n_muscles: int, n_dofs: int, n_intervals: int) -> tuple[int, int]:
     """Number of variables and equality constraints (``205 N + 120`` and ``165 N + 40`` for 40/5)."""
     M, D, N = n_muscles, n_dofs, n_intervals

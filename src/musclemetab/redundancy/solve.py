@@ -9,7 +9,6 @@ process never imports ``opensim``).
 from __future__ import annotations
 
 import os
-import platform
 import threading
 import time as _time
 from pathlib import Path
@@ -27,7 +26,8 @@ from .inputs import (
     select_muscles,
 )
 from .parameters import MuscleTendonParameters
-from .problem import SolverOptions, ipopt_statistics, solve_ocp
+from .problem import SolverOptions, solve_ocp
+from .record import RunRecord
 from .solution import Solution, build_solution
 from .static_opt import guess_from_solution, initial_guess, static_optimisation
 from .workflows import (
@@ -116,10 +116,8 @@ def solve_with_parameters(
         options = options.with_(ipopt={"mu_init": WARM_START_MU_INIT, **options.ipopt})
     t_prep = _time.perf_counter() - t_start
     ocp = solve_ocp(inputs, params, guess, options)
-    from .. import __version__
-
     summary = {
-        **ipopt_statistics(ocp),
+        **RunRecord.from_result(ocp, sources).to_dict(),
         "preparation_time_s": t_prep,
         "problem_size": {"variables": ocp.n_variables, "equality_constraints": ocp.n_constraints},
         "time_window_s": list(inputs.window_s),
@@ -136,14 +134,7 @@ def solve_with_parameters(
                               if filter_inputs else "none",
                               "mesh_intervals_per_second": 100, "interpolation": "not-a-knot cubic spline"},
         "inputs": {k: str(v) for k, v in (sources or {}).items()},
-        "software": {"musclemetab": __version__, "python": platform.python_version()},
     }
-    try:
-        import casadi
-
-        summary["software"]["casadi"] = casadi.__version__
-    except Exception:  # pragma: no cover
-        pass
     solution = build_solution(inputs, params, ocp, summary)
     solution.summary["total_time_s"] = _time.perf_counter() - t_start
     return solution

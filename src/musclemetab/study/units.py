@@ -140,6 +140,8 @@ def unit_key(study: Study, unit: Unit, dependency_key: str | None = None) -> str
         "subject": _subject_record(subject, unit.workflow),
         "dependency": dependency_key,
     }
+    if study.settings.get("solver"):
+        content["solver"] = study.settings["solver"]
     if unit.trial is None:
         content["trials"] = [_trial_record(t) for t in subject.trials]
     else:
@@ -253,20 +255,20 @@ def _run_estimation(study: Study, unit: Unit, tmp: Path) -> dict:
         emg_mapping=subject.emg_mapping,
         labels=[t.name for t in subject.trials],
         passive=subject.passive,
+        options=_solver_options(study),
     )
+    if not result.success:  # nothing of a failed estimate is written
+        raise result.run_record.failure(f"EMG-TEN of subject {subject.name}")
     result.write(tmp)
-    if not result.success:
-        raise _failed_solve(f"EMG-TEN of subject {subject.name}", result.summary)
     return {"times": {"solve_s": time.perf_counter() - t0}}
 
 
-def _failed_solve(what: str, summary: dict):
-    from ..errors import SolverError
+def _solver_options(study: Study):
+    """The study's ``[solver]`` settings as :class:`~musclemetab.redundancy.SolverOptions` (or ``None``)."""
+    from ..redundancy import SolverOptions
 
-    return SolverError(
-        f"{what} did not converge (status {summary.get('status', 'unknown')}, "
-        f"{summary.get('iterations', '?')} iterations)"
-    )
+    settings = study.settings.get("solver") or {}
+    return SolverOptions(**settings) if settings else None
 
 
 def _copy_solution(source: Path, target: Path) -> None:
@@ -296,9 +298,9 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
     t0 = time.perf_counter()
     if unit.workflow == EMG_TEN:
         _copy_solution(dependency / trial.name, tmp)
-        summary = Solution.load(tmp, require_success=False).summary
-        if summary.get("status") and not summary.get("success", False):
-            raise _failed_solve(f"EMG-TEN solution of trial {trial.name}", summary)
+        record = Solution.load(tmp, require_success=False).run_record
+        if not record.success:
+            raise record.failure(f"EMG-TEN solution of trial {trial.name}")
     else:
         kwargs = {}
         if unit.workflow != "effort-gen" and subject.passive is not None:
@@ -311,11 +313,11 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
                 kwargs["tendon_stiffness_file"] = kt
             elif isinstance(kt, dict):
                 kwargs["tendon_stiffness"] = kt
-        sol = solve_files(subject.model, trial.ik, trial.id, unit.workflow, **kwargs)
+        sol = solve_files(subject.model, trial.ik, trial.id, unit.workflow, options=_solver_options(study), **kwargs)
         sol.write(tmp)
         times["solve_s"] = sol.summary.get("solve_time_s")
         if not sol.success:
-            raise _failed_solve(f"{unit.workflow} solve of {subject.name}/{trial.name}", sol.summary)
+            raise sol.run_record.failure(f"{unit.workflow} solve of {subject.name}/{trial.name}")
     times["solution_s"] = time.perf_counter() - t0
 
     t1 = time.perf_counter()
