@@ -57,7 +57,6 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import DataMismatchError, OptionError, UnknownMuscleError
-from ..muscle import KT_GENERIC
 from .core import Goals, ParameterSpec, TrialBlock, build_problem
 from .emg_inputs import (
     _as_list,
@@ -68,7 +67,15 @@ from .emg_inputs import (
     _require_emg_window,
     resolve_emg_mapping,
 )
-from .estimates import EMG_TEN, PARAMETERS_FILE, TRICEPS_SURAE, VASTI, EmgTenResult, tendon_stiffness_at_force_N_per_mm
+from .estimates import (
+    EMG_TEN,
+    PARAMETERS_FILE,
+    TRICEPS_SURAE,
+    VASTI,
+    EmgTenResult,
+    assemble_result,
+    tendon_stiffness_at_force_N_per_mm,
+)
 from .inputs import (
     DEFAULT_DOFS,
     TrialInputs,
@@ -80,8 +87,6 @@ from .inputs import (
 )
 from .parameters import MuscleTendonParameters
 from .problem import ProblemResult, SolverOptions, solve_problem
-from .record import RunRecord
-from .solution import build_solution
 from .static_opt import InitialGuess, initial_guess, static_optimisation
 
 __all__ = [
@@ -111,6 +116,7 @@ __all__ = [
 #: step; here that saves a quarter of the solve time with identical iterates to 1e-11). They
 #: change the round-off of the KKT solves, not the problem.
 LINEAR_SOLVER_OPTIONS = {"mumps_pivot_order": 2, "min_refinement_steps": 0}
+EMG_MODES = ("constrained", "driven", "tracking")
 
 
 @dataclass(frozen=True)
@@ -127,6 +133,11 @@ class EmgTenSettings:
     imposes the couplings as equality constraints, the study's NLP (77 250 variables and 62 002
     equalities on the example instead of 77 243 and 61 995). Both are the same problem (same
     objective, feasible set, bounds); they take different paths to the same optimum.
+
+    ``emg_mode``: ``"constrained"`` (the EMG bound rows with ``emg_tolerance`` and the tracking
+    cost ``w_emg``), ``"driven"`` (bound rows with tolerance 0: each tracked excitation is its
+    scaled EMG) or ``"tracking"`` (the cost only). With ``tendon_groups`` empty no tendon
+    stiffness is estimated: an EMG-informed solve of one or more trials.
     """
 
     w_emg: float = 10.0
@@ -141,6 +152,7 @@ class EmgTenSettings:
     emg_groups: tuple[tuple[str, ...], ...] = (("vaslat_r", "vasmed_r", "vasint_r"), ("gaslat_r", "gasmed_r"))
     emg_range_tolerance: float = 0.0
     coupling: str = "shared"
+    emg_mode: str = "constrained"
 
     def __post_init__(self):
         for name in ("w_emg", "w_activation", "w_reserve", "w_velocity"):
@@ -164,8 +176,15 @@ class EmgTenSettings:
             object.__setattr__(self, name, groups)
         if self.coupling not in ("constraints", "shared"):
             raise OptionError(f"coupling must be 'constraints' or 'shared', not {self.coupling!r}")
-        if not any(self.tendon_groups):
-            raise OptionError("tendon_groups is empty: EMG-TEN needs at least one muscle whose kT is estimated")
+        if self.emg_mode not in EMG_MODES:
+            raise OptionError(f"the EMG mode must be one of {', '.join(EMG_MODES)}, not {self.emg_mode!r}")
+        if self.emg_mode == "tracking" and not self.w_emg > 0:
+            raise OptionError("the EMG mode 'tracking' needs a positive EMG weight w_emg")
+
+    @property
+    def emg_bound(self) -> float | None:
+        """Half-width of the EMG bound rows (``None``: no bound rows)."""
+        return {"constrained": self.emg_tolerance, "driven": 0.0}.get(self.emg_mode)
 
     @property
     def tendon_muscles(self) -> tuple[str, ...]:
@@ -182,6 +201,7 @@ class EmgTenSettings:
             "emg_groups": [list(g) for g in self.emg_groups],
             "emg_range_tolerance": self.emg_range_tolerance,
             "coupling": self.coupling,
+            "emg_mode": self.emg_mode,
         }
 
 
@@ -240,11 +260,11 @@ def emg_ten_problem(trials: Sequence[EmgTenTrial], params: MuscleTendonParameter
     order = list(dict.fromkeys(m for t in trials for m in t.inputs.muscles))
     kt_muscles = tuple(m for m in order if m in settings.tendon_muscles)
     specs = [ParameterSpec("tendon_stiffness", kt_muscles, settings.tendon_scale_bounds,
-                           _coupling_pairs(settings.tendon_groups, kt_muscles, consecutive=True)),
-             ParameterSpec("emg_scale", emg_muscles, settings.emg_scale_bounds,
-                           _coupling_pairs(settings.emg_groups, emg_muscles, consecutive=False))]
+                           _coupling_pairs(settings.tendon_groups, kt_muscles, consecutive=True))] if kt_muscles else []
+    specs.append(ParameterSpec("emg_scale", emg_muscles, settings.emg_scale_bounds,
+                               _coupling_pairs(settings.emg_groups, emg_muscles, consecutive=False)))
     goals = Goals(w_activation=settings.w_activation, w_reserve=settings.w_reserve,
-                  w_velocity=settings.w_velocity, w_emg=settings.w_emg, emg_tolerance=settings.emg_tolerance)
+                  w_velocity=settings.w_velocity, w_emg=settings.w_emg, emg_tolerance=settings.emg_bound)
     blocks = [TrialBlock(t.label, t.inputs, t.guess, emg_muscles=emg_muscles, emg_nodes=t.emg_nodes)
               for t in trials]
     return blocks, goals, specs
@@ -291,6 +311,8 @@ def solve_emg_ten(
     options: SolverOptions | None = None,
     cache_dir: str | os.PathLike | None = None,
     check_units: bool = True,
+    workflow: str = EMG_TEN,
+    tendon_stiffness=None,
 ) -> EmgTenResult:
     """EMG-TEN from files: one model, and per trial an IK ``.mot``, an ID ``.sto`` and an EMG file.
 
@@ -363,6 +385,7 @@ def solve_emg_ten(
     result = solve_emg_ten_arrays(
         geometries, model_parameters, id_data, emg_tables, labels=labels, ik_times=ik_times, passive=passive,
         emg_mapping=mapping, settings=settings, options=options, sources=sources, check_units=check_units,
+        workflow=workflow, tendon_stiffness=tendon_stiffness,
     )
     result.record["geometry_time_s"] = t_geometry
     return result
@@ -382,6 +405,8 @@ def solve_emg_ten_arrays(
     options: SolverOptions | None = None,
     sources: Sequence[dict] | None = None,
     check_units: bool = True,
+    workflow: str = EMG_TEN,
+    tendon_stiffness=None,
 ) -> EmgTenResult:
     """EMG-TEN from arrays: per trial a geometry-like object, ``(ID time, ID moments)`` with
     columns in the order of ``geometry.dofs``, and an EMG table (time-indexed ``DataFrame``,
@@ -391,10 +416,12 @@ def solve_emg_ten_arrays(
     options = emg_ten_options(options, settings)
     trials, params, wf_record = prepare_emg_ten_trials(
         geometries, model_parameters, id_data, emg_tables, labels=labels, ik_times=ik_times, passive=passive,
-        emg_mapping=emg_mapping, settings=settings, options=options, sources=sources, check_units=check_units)
+        emg_mapping=emg_mapping, settings=settings, options=options, sources=sources, check_units=check_units,
+        workflow="effort-cal" if workflow == EMG_TEN else workflow, tendon_stiffness=tendon_stiffness)
     t_prep = _time.perf_counter() - t_start
     ocp = solve_emg_ten_ocp(trials, params, settings, options)
-    return _assemble_result(trials, params, wf_record, ocp, settings, options, t_prep, t_start)
+    name = EMG_TEN if workflow == EMG_TEN else f"{workflow} emg-{settings.emg_mode}"
+    return assemble_result(trials, params, wf_record, ocp, settings, options, t_prep, t_start, name=name)
 
 
 def emg_ten_options(options: SolverOptions | None, settings: EmgTenSettings) -> SolverOptions:
@@ -417,6 +444,8 @@ def prepare_emg_ten_trials(
     options: SolverOptions | None = None,
     sources: Sequence[dict] | None = None,
     check_units: bool = True,
+    workflow: str = "effort-cal",
+    tendon_stiffness=None,
 ) -> tuple[list[EmgTenTrial], MuscleTendonParameters, dict]:
     """The trials of an EMG-TEN problem (mesh inputs, EMG at the nodes, initial guess), the
     muscle parameters (calibrated passive muscle, nominal ``kT``) and their record; the
@@ -463,7 +492,8 @@ def prepare_emg_ten_trials(
             f"the tendon stiffness of {', '.join(missing_kt)} is to be estimated but the problem has no such muscle "
             f"({', '.join(muscles[:6])} ...); change EmgTenSettings.tendon_groups"
         )
-    params, wf_record = workflow_parameters("effort-cal", model_parameters, muscles, passive=passive)
+    params, wf_record = workflow_parameters(workflow, model_parameters, muscles, passive=passive,
+                                            tendon_stiffness=tendon_stiffness)
     emg_muscles = tuple(sorted(mapping))
 
     trials = []
@@ -494,84 +524,3 @@ def prepare_emg_ten_trials(
                                   emg_channels={m: list(mapping[m]) for m in emg_muscles}, guess=guess,
                                   sources=src, static_optimisation_objective=so.objective))
     return trials, params, wf_record
-
-
-def _assemble_result(trials, params, wf_record, ocp: ProblemResult, settings, options, t_prep, t_start):
-    tendon_scale = dict(ocp.factors["tendon_stiffness"])
-    emg_scale = dict(ocp.factors["emg_scale"])
-    kt_est = {m: float(params.tendon_stiffness[params.names.index(m)] * s) for m, s in tendon_scale.items()}
-    est_params = params.replace(tendon_stiffness=kt_est)
-    emg_channels = dict(trials[0].emg_channels)
-    run = RunRecord.from_result(ocp, {f"{t.label}/{k}": v for t in trials for k, v in t.sources.items()})
-    n_tot = sum(t.inputs.n_intervals for t in trials)
-    record = {
-        "workflow": EMG_TEN,
-        **run.to_dict(),
-        "preparation_time_s": t_prep,
-        "max_coupling_violation": ocp.max_coupling_violation,
-        "problem_size": {"variables": ocp.n_variables, "equality_constraints": ocp.n_equality_constraints,
-                         "inequality_constraints": ocp.n_inequality_constraints, "mesh_intervals": n_tot},
-        "trials": [{"label": t.label, "time_window_s": list(t.inputs.window_s), "n_intervals": t.inputs.n_intervals,
-                    "inputs": {k: str(v) for k, v in t.sources.items()}} for t in trials],
-        "emg_mapping": emg_channels,
-        "max_emg_deviation": {t.label: float(np.max(np.abs(d))) if d.size else 0.0
-                              for t, d in zip(trials, ocp.emg_deviation)},
-        "settings": settings.to_dict(),
-        "passive_source": wf_record.get("passive_source"),
-        "solver_options": options.to_dict(),
-        "ipopt_options": ocp.ipopt_options,
-        "initial_guess": "static optimisation (rigid tendons) per trial, reserve divided by Topt; scale factors 1",
-    }
-    workflow = {
-        "name": EMG_TEN,
-        "description": "EMG-informed multi-trial estimation of triceps-surae and vasti tendon stiffness",
-        "passive_source": wf_record.get("passive_source"),
-        "weights": settings.to_dict()["weights"],
-        "tendon_stiffness": kt_est,
-        "tendon_stiffness_scale": tendon_scale,
-        "tendon_stiffness_other_muscles": KT_GENERIC,
-        "emg_scale": emg_scale,
-        "emg_channels": emg_channels,
-        "trials": [t.label for t in trials],
-    }
-    solutions = {}
-    for t, o, dev in zip(trials, ocp.trials, ocp.emg_deviation):
-        inp = t.inputs
-        summary = {
-            **run.to_dict(),
-            "objective_trial": o.objective,
-            "objective_terms": o.objective_terms,
-            "input_hashes": {k.split("/", 1)[1]: v for k, v in run.input_hashes.items()
-                             if k.startswith(f"{t.label}/")},
-            "preparation_time_s": t_prep,
-            "problem_size": dict(record["problem_size"]),
-            "time_window_s": list(inp.window_s),
-            "n_intervals": inp.n_intervals,
-            "mesh_step_s": inp.step_s,
-            "optimal_reserve_Nm": options.optimal_reserve_Nm,
-            "static_optimisation_objective": t.static_optimisation_objective,
-            "initial_guess": record["initial_guess"],
-            "workflow": dict(workflow, trial=t.label),
-            "emg_tracking": {
-                m: {"channels": t.emg_channels[m], "scale": emg_scale[m],
-                    "max_abs_deviation": float(np.max(np.abs(dev[:, j]))) if dev.size else 0.0,
-                    "rms_deviation": float(np.sqrt(np.mean(dev[:, j] ** 2))) if dev.size else 0.0}
-                for j, m in enumerate(t.emg_muscles)
-            },
-            "emg_tolerance": settings.emg_tolerance,
-            "solver_options": options.to_dict(),
-            "input_preparation": {"filter": "butterworth 6th order 6 Hz zero-phase (MATLAB filtfilt padding)",
-                                  "mesh_intervals_per_second": 100, "interpolation": "not-a-knot cubic spline",
-                                  "emg": "linear interpolation at nodes 0..N-1"},
-            "inputs": {k: str(v) for k, v in t.sources.items()},
-        }
-        sol = build_solution(inp, est_params.subset(inp.muscles), o, summary)
-        sol.summary["total_time_s"] = _time.perf_counter() - t_start
-        solutions[t.label] = sol
-    record["max_moment_residual_Nm"] = max(s.summary["max_moment_residual_Nm"] for s in solutions.values())
-    record["max_hill_residual"] = max(s.summary["max_hill_residual"] for s in solutions.values())
-    record["total_time_s"] = _time.perf_counter() - t_start
-    return EmgTenResult(
-        solutions=solutions, parameters=est_params, tendon_scale=tendon_scale, tendon_stiffness=kt_est,
-        emg_scale=emg_scale, emg_channels=emg_channels, record=record, settings=settings, trials=tuple(trials),
-    )

@@ -26,7 +26,7 @@ from ..muscle import KT_GENERIC, tendon_length_from_force, tendon_stiffness_N_pe
 from .parameters import MuscleTendonParameters
 from .solution import _jsonable
 
-__all__ = ["EMG_TEN", "EmgTenResult", "PARAMETERS_FILE", "TRICEPS_SURAE", "VASTI",
+__all__ = ["EMG_TEN", "EmgTenResult", "assemble_result", "PARAMETERS_FILE", "TRICEPS_SURAE", "VASTI",
            "tendon_stiffness_at_force_N_per_mm"]
 
 EMG_TEN = "emg-ten"
@@ -168,3 +168,93 @@ class EmgTenResult:
         text = json.dumps(self.parameters_document(), indent=2, allow_nan=True)
         atomic_write_text(out_dir / PARAMETERS_FILE, text + "\n")
         return out_dir
+
+
+def assemble_result(trials, params, wf_record, ocp, settings, options, t_prep, t_start,
+                    name: str = EMG_TEN) -> "EmgTenResult":
+    """The :class:`EmgTenResult` of a solved EMG-TEN problem: per-trial solutions with the
+    estimated tendon stiffness, the estimates and the solve record."""
+    import time as _time
+
+    from .record import RunRecord
+    from .solution import build_solution
+
+    tendon_scale = dict(ocp.factors.get("tendon_stiffness", {}))
+    emg_scale = dict(ocp.factors["emg_scale"])
+    kt_est = {m: float(params.tendon_stiffness[params.names.index(m)] * s) for m, s in tendon_scale.items()}
+    est_params = params.replace(tendon_stiffness=kt_est)
+    emg_channels = dict(trials[0].emg_channels)
+    run = RunRecord.from_result(ocp, {f"{t.label}/{k}": v for t in trials for k, v in t.sources.items()})
+    n_tot = sum(t.inputs.n_intervals for t in trials)
+    record = {
+        "workflow": name,
+        **run.to_dict(),
+        "preparation_time_s": t_prep,
+        "max_coupling_violation": ocp.max_coupling_violation,
+        "problem_size": {"variables": ocp.n_variables, "equality_constraints": ocp.n_equality_constraints,
+                         "inequality_constraints": ocp.n_inequality_constraints, "mesh_intervals": n_tot},
+        "trials": [{"label": t.label, "time_window_s": list(t.inputs.window_s), "n_intervals": t.inputs.n_intervals,
+                    "inputs": {k: str(v) for k, v in t.sources.items()}} for t in trials],
+        "emg_mapping": emg_channels,
+        "max_emg_deviation": {t.label: float(np.max(np.abs(d))) if d.size else 0.0
+                              for t, d in zip(trials, ocp.emg_deviation)},
+        "settings": settings.to_dict(),
+        "passive_source": wf_record.get("passive_source"),
+        "solver_options": options.to_dict(),
+        "ipopt_options": ocp.ipopt_options,
+        "initial_guess": "static optimisation (rigid tendons) per trial, reserve divided by Topt; scale factors 1",
+    }
+    workflow = {
+        "name": name,
+        "description": "EMG-informed multi-trial estimation of triceps-surae and vasti tendon stiffness"
+        if name == EMG_TEN else f"EMG-informed solve ({settings.emg_mode}) with the {name.split()[0]} muscle parameters",
+        "passive_source": wf_record.get("passive_source"),
+        "weights": settings.to_dict()["weights"],
+        "tendon_stiffness": kt_est,
+        "tendon_stiffness_scale": tendon_scale,
+        "tendon_stiffness_other_muscles": KT_GENERIC,
+        "emg_scale": emg_scale,
+        "emg_channels": emg_channels,
+        "trials": [t.label for t in trials],
+    }
+    solutions = {}
+    for t, o, dev in zip(trials, ocp.trials, ocp.emg_deviation):
+        inp = t.inputs
+        summary = {
+            **run.to_dict(),
+            "objective_trial": o.objective,
+            "objective_terms": o.objective_terms,
+            "input_hashes": {k.split("/", 1)[1]: v for k, v in run.input_hashes.items()
+                             if k.startswith(f"{t.label}/")},
+            "preparation_time_s": t_prep,
+            "problem_size": dict(record["problem_size"]),
+            "time_window_s": list(inp.window_s),
+            "n_intervals": inp.n_intervals,
+            "mesh_step_s": inp.step_s,
+            "optimal_reserve_Nm": options.optimal_reserve_Nm,
+            "static_optimisation_objective": t.static_optimisation_objective,
+            "initial_guess": record["initial_guess"],
+            "workflow": dict(workflow, trial=t.label),
+            "emg_tracking": {
+                m: {"channels": t.emg_channels[m], "scale": emg_scale[m],
+                    "max_abs_deviation": float(np.max(np.abs(dev[:, j]))) if dev.size else 0.0,
+                    "rms_deviation": float(np.sqrt(np.mean(dev[:, j] ** 2))) if dev.size else 0.0}
+                for j, m in enumerate(t.emg_muscles)
+            },
+            "emg_tolerance": settings.emg_tolerance,
+            "solver_options": options.to_dict(),
+            "input_preparation": {"filter": "butterworth 6th order 6 Hz zero-phase (MATLAB filtfilt padding)",
+                                  "mesh_intervals_per_second": 100, "interpolation": "not-a-knot cubic spline",
+                                  "emg": "linear interpolation at nodes 0..N-1"},
+            "inputs": {k: str(v) for k, v in t.sources.items()},
+        }
+        sol = build_solution(inp, est_params.subset(inp.muscles), o, summary)
+        sol.summary["total_time_s"] = _time.perf_counter() - t_start
+        solutions[t.label] = sol
+    record["max_moment_residual_Nm"] = max(s.summary["max_moment_residual_Nm"] for s in solutions.values())
+    record["max_hill_residual"] = max(s.summary["max_hill_residual"] for s in solutions.values())
+    record["total_time_s"] = _time.perf_counter() - t_start
+    return EmgTenResult(
+        solutions=solutions, parameters=est_params, tendon_scale=tendon_scale, tendon_stiffness=kt_est,
+        emg_scale=emg_scale, emg_channels=emg_channels, record=record, settings=settings, trials=tuple(trials),
+    )

@@ -129,9 +129,24 @@ class SolverOptions:
         }
 
 
-@dataclass(frozen=True)
-class OcpResult:
-    """Raw optimum: states ``(N+1, M)``, controls ``(N, M)`` / ``(N, D)``, IPOPT statistics."""
+@dataclass(frozen=True, kw_only=True)
+class SolveOutcome:
+    """IPOPT's outcome of one solve (shared by all trials of a problem)."""
+
+    status: str
+    success: bool
+    iterations: int
+    solve_time_s: float
+    solve_cpu_s: float
+    build_time_s: float
+    n_variables: int
+    max_constraint_violation: float
+    function_time_s: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True, kw_only=True)
+class OcpResult(SolveOutcome):
+    """Raw optimum of one trial: states ``(N+1, M)``, controls ``(N, M)`` / ``(N, D)``, IPOPT statistics."""
 
     activation: np.ndarray
     lm_norm: np.ndarray
@@ -141,16 +156,7 @@ class OcpResult:
     vm_norm: np.ndarray
     objective: float
     objective_terms: dict
-    status: str
-    success: bool
-    iterations: int
-    solve_time_s: float
-    solve_cpu_s: float
-    build_time_s: float
-    n_variables: int
     n_constraints: int
-    max_constraint_violation: float
-    function_time_s: dict = field(default_factory=dict)
 
 
 def problem_size(n_muscles: int, n_dofs: int, n_intervals: int) -> tuple[int, int]:
@@ -265,8 +271,8 @@ def run_ipopt(solver, options: SolverOptions, x0, lbx, ubx, lbg, ubg):
 
 
 
-@dataclass(frozen=True)
-class ProblemResult:
+@dataclass(frozen=True, kw_only=True)
+class ProblemResult(SolveOutcome):
     """Raw optimum of a problem (:func:`solve_problem`): one :class:`OcpResult` per trial (its
     ``objective`` the trial's own terms), the factors by kind and muscle, IPOPT's outcome."""
 
@@ -275,18 +281,9 @@ class ProblemResult:
     objective_terms: dict  # trial label -> {term: value}
     emg_deviation: tuple[np.ndarray, ...]  # per trial (N, nEMG): e - s E
     objective: float
-    status: str
-    success: bool
-    iterations: int
-    solve_time_s: float
-    solve_cpu_s: float
-    build_time_s: float
-    n_variables: int
     n_equality_constraints: int
     n_inequality_constraints: int
-    max_constraint_violation: float
     max_coupling_violation: float
-    function_time_s: dict = field(default_factory=dict)
     ipopt_options: dict = field(default_factory=dict)
 
 
