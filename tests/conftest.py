@@ -1,23 +1,25 @@
-"""Shared fixtures: the example subject and the reference documents.
+"""Shared fixtures: the example data sets, the stored reference values, a loopback mirror.
 
-The example data are located through ``MUSCLEMETAB_DATA`` (set by CI to the shared data
-folder); without it, a folder ``shared/data/example_subject`` beside the repository is
-used; otherwise the files are downloaded (pooch). The tests need the real data: they
-fail, not skip, when it cannot be had.
+The example data are located by :mod:`musclemetab.datasets` alone: ``MUSCLEMETAB_DATA`` when
+set (a folder holding one data set's files, or one sub-folder per data set), otherwise the
+files are downloaded with pooch on first use. The tests need the real data: they fail, not
+skip, when it cannot be had. Every value a test compares against lives in this repository
+(``tests/data/``, sources named in its README) or comes from those data sets.
 """
 
 from __future__ import annotations
 
+import contextlib
+import functools
+import http.server
 import os
+import shutil
+import threading
 from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
-SHARED = Path(os.environ.get("MUSCLEMETAB_SHARED", REPO.parent / "shared"))
-
-if not os.environ.get("MUSCLEMETAB_DATA") and (SHARED / "data" / "example_subject").is_dir():
-    os.environ["MUSCLEMETAB_DATA"] = str(SHARED / "data" / "example_subject")
+TEST_DATA = Path(__file__).resolve().parent / "data"
 
 
 @pytest.fixture(scope="session")
@@ -36,18 +38,63 @@ def gait2392():
 
 
 @pytest.fixture(scope="session")
-def reference_dir() -> Path:
-    """The method's reference tables (published values used as test oracles)."""
-    path = SHARED / "reference"
-    assert path.is_dir(), f"reference folder {path} not found; set MUSCLEMETAB_SHARED"
-    return path
+def reference_table():
+    """Published per-muscle values of the example subject (``tests/data/muscle_properties_reference.csv``)."""
+    import pandas as pd
+
+    return pd.read_csv(TEST_DATA / "muscle_properties_reference.csv").set_index("name")
 
 
 @pytest.fixture(scope="session")
-def reference_table(reference_dir):
+def demo(tmp_path_factory):
+    """``musclemetab demo`` run once per test session: ``(output folder, results table)``."""
     import pandas as pd
 
-    return pd.read_csv(reference_dir / "muscle_properties.csv", comment="#").set_index("name")
+    from musclemetab.cli import main
+
+    out = tmp_path_factory.mktemp("demo")
+    code = main(["demo", "--out", str(out), "--workers", "2", "--no-progress"])
+    assert code == 0
+    return out, pd.read_csv(out / "results.csv")
+
+
+@contextlib.contextmanager
+def loopback_mirror(files: dict, root: Path):
+    """Serve ``{path under the server root: local file}`` over HTTP on 127.0.0.1.
+
+    Yields ``(root, base_url)``; the files are copied under ``root`` so a test may alter them.
+    """
+    for rel, source in files.items():
+        target = root / rel
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(source, target)
+    handler = functools.partial(http.server.SimpleHTTPRequestHandler, directory=str(root))
+    handler.log_message = lambda *a, **k: None
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        yield root, f"http://127.0.0.1:{server.server_address[1]}/"
+    finally:
+        server.shutdown()
+        server.server_close()
+        thread.join(timeout=5)
+
+
+@pytest.fixture()
+def dataset_mirror(tmp_path):
+    """``mirror(dataset, local_folder, commit)``: a loopback server laid out like the source
+    repository at ``commit`` (files at ``<commit>/<path in the repository>``); returns
+    ``(server root, base URL of the commit)``."""
+    import musclemetab.datasets as ds
+
+    with contextlib.ExitStack() as stack:
+        def mirror(dataset: str, folder: Path, commit: str):
+            files = {f"{commit}/{path}": Path(folder) / name for name, (_, path) in ds.manifest(dataset).items()}
+            root, url = stack.enter_context(loopback_mirror(files, tmp_path / "www" / dataset))
+            return root, f"{url}{commit}/"
+
+        yield mirror
 
 
 @pytest.fixture(autouse=True, scope="session")

@@ -35,10 +35,12 @@ def test_help_on_every_subcommand(command, capsys):
     assert out.startswith(f"usage: musclemetab {command}") and "--out" in out
 
 
-def test_usage_error_exit_code(capsys):
+def test_usage_error_is_one_line_and_status_1(capsys):
     with pytest.raises(SystemExit) as info:
         main(["geometry"])
-    assert info.value.code == 2
+    assert info.value.code == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("musclemetab: error: ") and "--out" in err
 
 
 def test_importing_the_package_loads_neither_opensim_nor_casadi():

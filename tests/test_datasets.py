@@ -2,10 +2,7 @@
 
 from __future__ import annotations
 
-import functools
-import http.server
 import shutil
-import threading
 from pathlib import Path
 
 import pytest
@@ -46,31 +43,18 @@ def test_incomplete_or_altered_copy_is_refused(example, tmp_path):
         ds.example_subject(copy)
 
 
-@pytest.fixture()
-def mirror(example, tmp_path):
-    """A loopback HTTP server laid out like the source repository at the pinned commit."""
-    root = tmp_path / "www"
-    for name, (_, path) in ds.manifest().items():
-        target = root / ds.SOURCE_COMMIT / path
-        target.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copy(example.folder / name, target)
-    handler = functools.partial(http.server.SimpleHTTPRequestHandler, directory=str(root))
-    handler.log_message = lambda *a, **k: None
-    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
-    yield root, f"http://127.0.0.1:{server.server_address[1]}/{ds.SOURCE_COMMIT}/"
-    server.shutdown()
-
-
-def test_download_with_pooch_checks_hashes(mirror, tmp_path, monkeypatch):
-    root, url = mirror
-    monkeypatch.delenv(ds.ENV_VAR, raising=False)
-    monkeypatch.setattr(ds, "_BASE_URL", url)
-    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+def _cache_in(tmp_path, monkeypatch):
     import pooch
 
+    monkeypatch.delenv(ds.ENV_VAR, raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     monkeypatch.setattr(pooch, "os_cache", lambda name: tmp_path / "cache" / name)
+
+
+def test_download_with_pooch_checks_hashes(example, dataset_mirror, tmp_path, monkeypatch):
+    root, url = dataset_mirror("example_subject", example.folder, ds.SOURCE_COMMIT)
+    monkeypatch.setattr(ds, "_BASE_URL", url)
+    _cache_in(tmp_path, monkeypatch)
     subject = ds.example_subject()
     assert subject.model.is_file() and str(tmp_path / "cache") in str(subject.model)
     assert (subject.reference_muscle_analysis / "IK_sub1_normal_MuscleAnalysis_Length.sto").is_file()
@@ -80,3 +64,19 @@ def test_download_with_pooch_checks_hashes(mirror, tmp_path, monkeypatch):
     tampered.write_text(tampered.read_text() + "\n")
     with pytest.raises(DatasetError, match="EMG_sub1_fast.mot"):
         ds.example_subject()
+
+
+def test_gait2392_download_with_pooch_checks_hashes(gait2392, dataset_mirror, tmp_path, monkeypatch):
+    root, url = dataset_mirror("gait2392_subject01", gait2392.folder, ds.GAIT2392_COMMIT)
+    monkeypatch.setattr(ds, "_GAIT2392_URL", url)
+    _cache_in(tmp_path, monkeypatch)
+    subject = ds.gait2392_subject01()
+    assert str(tmp_path / "cache") in str(subject.model)
+    for name, (sha, _) in ds.manifest("gait2392_subject01").items():
+        assert ds._sha256(subject.folder / name) == sha
+    assert subject.ik.read_bytes() == gait2392.ik.read_bytes()
+    # a file missing on the server names the file that could not be had
+    shutil.rmtree(tmp_path / "cache")
+    (root / ds.GAIT2392_COMMIT / ds.manifest("gait2392_subject01")["subject01_walk1_grf.mot"][1]).unlink()
+    with pytest.raises(DatasetError, match="subject01_walk1_grf.mot"):
+        ds.gait2392_subject01()

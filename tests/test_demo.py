@@ -4,33 +4,20 @@ The demo runs the three speeds with EFFORT-TEN and EFFORT-GEN and the six study 
 Its numbers are checked against what the study published (``analysis.md`` §7): Table 2's
 ordering of the models and their means within two between-subject SDs (one subject here,
 eight in the paper), and the reported trends of the phase and group shares with speed.
+The demo is run once per test session (the ``demo`` fixture of ``conftest.py``); the report
+it writes is also opened in a browser (``test_report_browser.py``).
 """
 
 from __future__ import annotations
 
-import re
-import shutil
-import subprocess
 from html.parser import HTMLParser
-from pathlib import Path
 
 import pandas as pd
-import pytest
 
 #: Table 2, EFFORT-TEN at the preferred speed: mean [SD] over 8 subjects, W/kg.
 TABLE2_EFFORT_TEN = {"UM03": (6.4, 0.5), "BH04": (5.0, 0.6), "HO06": (4.3, 0.5),
                      "LW07": (7.7, 0.9), "UM10": (7.2, 0.6), "UC16": (4.5, 0.5)}
 MODELS = tuple(TABLE2_EFFORT_TEN)
-
-
-@pytest.fixture(scope="module")
-def demo(tmp_path_factory):
-    from musclemetab.cli import main
-
-    out = tmp_path_factory.mktemp("demo")
-    code = main(["demo", "--out", str(out), "--workers", "2", "--no-progress"])
-    assert code == 0
-    return out, pd.read_csv(out / "results.csv")
 
 
 def _pivot(table, workflow, column):
@@ -116,23 +103,3 @@ def test_demo_second_run_is_resumed(demo, capsys):
     assert main(["demo", "--out", str(out), "--workers", "1", "--no-progress"]) == 0
     assert "0 run, 6 up to date" in capsys.readouterr().out
     pd.testing.assert_frame_equal(pd.read_csv(out / "results.csv"), table)
-
-
-def _chromium():
-    for name in ("chromium", "chromium-browser", "google-chrome", "chrome", "headless_shell"):
-        path = shutil.which(name)
-        if path:
-            return path
-    return None
-
-
-@pytest.mark.skipif(_chromium() is None, reason="no Chromium on this machine")
-def test_demo_report_renders_in_headless_chromium(demo, tmp_path):
-    out, _ = demo
-    dom = subprocess.run(
-        [_chromium(), "--headless", "--disable-gpu", "--no-sandbox", "--virtual-time-budget=5000",
-         "--dump-dom", (out / "report.html").as_uri()],
-        capture_output=True, text=True, timeout=120,
-    ).stdout
-    # every embedded image decoded: Chromium keeps the data URIs in the DOM it rendered
-    assert len(re.findall(r"<img[^>]+src=\"data:image/png;base64,", dom)) + dom.count("<svg") >= 5

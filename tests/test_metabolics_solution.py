@@ -12,7 +12,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from musclemetab.errors import DataMismatchError, MissingColumnError, OptionError, SolverError, UnknownMuscleError
+from musclemetab.errors import (
+    DataMismatchError,
+    MissingColumnError,
+    MuscleTableWarning,
+    OptionError,
+    SolverError,
+    UnknownMuscleError,
+)
 from musclemetab.io import read_storage, storage_from_arrays, write_storage
 from musclemetab.metabolics import (
     MODELS,
@@ -223,8 +230,12 @@ def test_overrides_and_basal_rule(solution_dir):
 
 def test_bad_solutions(tmp_path):
     bad = make_solution(tmp_path / "unknown", muscles=("soleus_r", "mystery_r"))
+    # a muscle the anatomical table cannot place: an error under strict, else one warning
     with pytest.raises(UnknownMuscleError, match="mystery_r"):
-        metabolics_from_solution(bad, MASS, HEIGHT)
+        metabolics_from_solution(bad, MASS, HEIGHT, strict=True)
+    with pytest.warns(MuscleTableWarning, match="mystery_r"):
+        res = metabolics_from_solution(bad, MASS, HEIGHT)
+    assert res.slow_twitch_fraction[1] == 0.5
     missing = make_solution(tmp_path / "missing", drop="/forceset/gasmed_r/force_velocity_multiplier")
     with pytest.raises(MissingColumnError, match="gasmed_r/force_velocity_multiplier"):
         metabolics_from_solution(missing, MASS, HEIGHT)

@@ -92,7 +92,7 @@ def solved(example, geometries, geometry_cache, solve_root, passive_csv, tendon_
     path is exercised while solving the same problems: effort-cal uses the study's .mat for
     slow, the package CSV format for normal and the shipped published calibration for fast;
     effort-ten takes its kT from a parameters.json (slow), the command line (normal) or the
-    defaults (fast).
+    example subject's estimates asked for by name (fast).
     """
     from musclemetab.cli import main
     from musclemetab.redundancy import Solution
@@ -115,7 +115,7 @@ def solved(example, geometries, geometry_cache, solve_root, passive_csv, tendon_
                                     f"soleus_r={KT_TS},gasmed={KT_TS},gaslat_r={KT_TS},"
                                     f"vasint_r={KT_VA},vaslat_r={KT_VA},vasmed_r={KT_VA}",
                                     "--passive", str(passive_csv)],
-                         "fast": []}[trial]
+                         "fast": ["--tendon-stiffness", "example"]}[trial]
             assert main(argv) == 0
             cache[key] = (Solution.load(out), out)
         return cache[key]

@@ -137,12 +137,23 @@ def test_workflow_presets_and_options(model_params):
     names = ["soleus_r", "gasmed_r", "vaslat_r", "tibant_r"]
     gen, rec = W.workflow_parameters("effort-gen", model_params, names)
     assert np.all(gen.passive_kpe == 4) and np.all(gen.tendon_stiffness == 35)
-    ten, rec = W.workflow_parameters("EFFORT_TEN", model_params, names)
+    # the example subject's estimates only when asked for by name
+    ten, rec = W.workflow_parameters("EFFORT_TEN", model_params, names, tendon_stiffness="example")
     np.testing.assert_array_equal(ten.tendon_stiffness, [10.617977, 10.617977, 4.695786, 35])
+    assert rec["tendon_stiffness_source"] == ["example"]
     assert rec["passive_source"].startswith("package:")
     assert ten.passive_s0[0] == pytest.approx(1.107804)
     ten2, rec2 = W.workflow_parameters("effort-ten", model_params, names, tendon_stiffness={"soleus": 12.0, "vaslat_r": 5})
-    np.testing.assert_array_equal(ten2.tendon_stiffness, [12.0, 10.617977, 5.0, 35])
+    # gasmed_r keeps the literature default (155 N/mm for the Achilles tendon at 0.25 F0, shared
+    # here by soleus_r and gasmed_r): k = kT (0.25 + 0.25 - shift(kT)) (F0_so/lTs_so + F0_gm/lTs_gm)
+    kt = ten2.tendon_stiffness[1]
+    i, j = (list(model_params.names).index(m) for m in ("soleus_r", "gasmed_r"))
+    c = sum(model_params.max_isometric_force_N[k] / model_params.tendon_slack_length_m[k] for k in (i, j))
+    shift = (np.exp(0.175) - np.exp(0.005 * kt)) / 5
+    assert kt * (0.5 - shift) * c == pytest.approx(155e3, rel=1e-9)
+    np.testing.assert_array_equal(ten2.tendon_stiffness[[0, 2, 3]], [12.0, 5.0, 35])
+    assert rec2["tendon_stiffness_sources"]["gasmed_r"].startswith("literature (achilles tendon 155 N/mm")
+    assert rec2["tendon_stiffness_source"] == ["literature", "option"]
     assert rec2["tendon_stiffness_sources"]["soleus_r"] == "option"
     with pytest.raises(OptionError, match="generic passive"):
         W.workflow_parameters("effort-gen", model_params, names, passive="x.csv")
@@ -386,10 +397,12 @@ def test_explicit_derivatives_equal_automatic_ones(example, ref_geometry, model_
 def test_tendon_stiffness_file_for_both_legs(model_params, tmp_path):
     p = tmp_path / "parameters.json"
     p.write_text(json.dumps({"tendon_stiffness": {"soleus_r": 9.0, "soleus_l": 8.0}}))
-    params, rec = W.workflow_parameters("effort-ten", model_params, ["soleus_r", "gasmed_r"], tendon_stiffness_file=p)
+    params, rec = W.workflow_parameters("effort-ten", model_params, ["soleus_r", "gasmed_r"], tendon_stiffness_file=p,
+                                        tendon_stiffness="example")
     assert params.tendon_stiffness.tolist() == [9.0, 10.617977]
     assert rec["tendon_stiffness_ignored"] == ["soleus_l"]
-    assert rec["tendon_stiffness_sources"] == {"soleus_r": str(p), "gasmed_r": "default (example-subject EMG-informed estimate)"}
+    assert rec["tendon_stiffness_sources"] == {"soleus_r": str(p),
+                                               "gasmed_r": "example (example subject's EMG-TEN estimate, asked for)"}
     p.write_text(json.dumps({"tendon_stiffness": {"soleos_r": 9.0}}))
     with pytest.raises(UnknownMuscleError, match="soleos_r"):
         W.workflow_parameters("effort-ten", model_params, ["soleus_r"], tendon_stiffness_file=p)

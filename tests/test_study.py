@@ -310,7 +310,7 @@ def test_emg_ten_that_does_not_converge_is_a_failure_with_ipopt_status(example, 
     run = run_study(study, workers=1, progress=False)
     reason = run.failed["sub1/all trials/emg-ten"]
     assert "Maximum_Iterations_Exceeded" in reason and "after 3 iterations" in reason
-    assert "iteration limit" in reason and "AttributeError" not in reason
+    assert "limit was reached" in reason and "AttributeError" not in reason
     failures = pd.read_csv(tmp_path / "failures.csv")
     row = failures[(failures.workflow == "emg-ten") & failures.trial.isna()]
     assert len(row) == 1 and "Maximum_Iterations_Exceeded" in row.reason.iloc[0]

@@ -1,8 +1,10 @@
 """The ``musclemetab`` command.
 
 Thin by design: each subcommand parses its arguments, calls the library and prints what
-it wrote. A package error is printed as one line (``musclemetab: error: ...``) and the
-command exits with status 1; a usage error exits with status 2 (argparse's convention).
+it wrote. Every error, a usage error included, is printed as one line
+(``musclemetab: error: ...``) and the command exits with status 1; Ctrl-C exits with
+status 130. The package's warnings are printed as one line each,
+``musclemetab: warning: ...``.
 """
 
 from __future__ import annotations
@@ -10,9 +12,10 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+import warnings
 
 from . import __version__
-from .errors import MusclemetabError
+from .errors import MuscleTableWarning, MusclemetabError
 
 # Subcommands provided by the stages of the method: (module, function adding the parser).
 _SUBCOMMANDS = (
@@ -61,7 +64,9 @@ def add_geometry_parser(sub) -> None:
 
 def geometry_command(args) -> int:
     from .geometry import compute_geometry, write_geometry
+    from .io import check_output_folder
 
+    check_output_folder(args.out)
     dofs = [d for item in args.dofs for d in _dof_list(item)] if args.dofs else None
     geom = compute_geometry(
         args.model, args.ik, dofs=dofs, side=args.side, muscles=args.muscles,
@@ -75,8 +80,26 @@ def geometry_command(args) -> int:
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with the package's error convention: one line, exit status 1."""
+
+    def error(self, message):  # noqa: D401 - argparse's hook
+        msg = " ".join(str(message).split())
+        sys.stderr.write(f"musclemetab: error: {msg}; see '{self.prog} --help'\n")
+        sys.exit(1)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None):
+    from .errors import MusclemetabWarning
+
+    if issubclass(category, MusclemetabWarning):
+        print(f"musclemetab: warning: {' '.join(str(message).split())}", file=file or sys.stderr)
+    else:
+        print(warnings.formatwarning(message, category, filename, lineno, line).rstrip(), file=file or sys.stderr)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="musclemetab",
         description="Muscle-by-muscle, moment-by-moment metabolic energy of walking.",
     )
@@ -94,11 +117,26 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _one_line_warnings(default):
+    """``warnings.showwarning`` printing package warnings as one line on stderr."""
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, MuscleTableWarning):
+            print(f"musclemetab: warning: {' '.join(str(message).split())}", file=sys.stderr)
+        else:
+            default(message, category, filename, lineno, file, line)
+
+    return show
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    previous, warnings.showwarning = warnings.showwarning, _show_warning
     try:
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():
+            warnings.showwarning = _one_line_warnings(warnings.showwarning)
+            return int(args.func(args) or 0)
     except MusclemetabError as exc:
         msg = " ".join(str(exc).split())
         print(f"musclemetab: error: {msg}", file=sys.stderr)
@@ -106,6 +144,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:  # pragma: no cover
         print("musclemetab: interrupted", file=sys.stderr)
         return 130
+    finally:
+        warnings.showwarning = previous
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -71,3 +71,19 @@ class OpenSimWorkerError(MusclemetabError):
 
 class DatasetError(MusclemetabError):
     """Example data could not be found, downloaded or verified."""
+
+
+class MusclemetabWarning(UserWarning):
+    """Root of the warnings this package gives (results usable, but look at them)."""
+
+
+class CacheWarning(MusclemetabWarning):
+    """A cache entry or folder could not be used; the result was computed without it."""
+
+
+class LargeReserveWarning(MusclemetabWarning):
+    """The reserve actuators carry a large share of a joint moment."""
+
+
+class MuscleTableWarning(MusclemetabWarning):
+    """Some muscles are not in the anatomical muscle table and take fallback properties."""

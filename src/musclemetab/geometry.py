@@ -11,6 +11,15 @@ about at least one of the DOFs exceeds 1e-4 m in magnitude at the first frame, i
 order. For the Rajagopal model and the five right-leg DOFs this gives the 40 right-leg
 muscles.
 
+Before any OpenSim work the IK file is checked by :func:`check_kinematics` (the same
+check the solver applies): DOF columns present, every value finite, time stamps in
+seconds, and angle units that agree with the header. A cache entry is used only if the
+SHA-256 of its arrays equals the checksum stored with it and its shape and time stamps
+match the IK file and the DOFs asked for; otherwise it is deleted and recomputed, with a
+:class:`~musclemetab.errors.CacheWarning`. A cache folder that cannot be used (the cache
+path is a file, or cannot be written) gives a warning and the geometry is computed
+without the cache.
+
 Moment arms follow OpenSim's convention ``r = -dl/dq`` (a positive moment arm means that
 muscle tension produces a positive generalised moment); coupled coordinates (the
 Rajagopal knee's ``knee_angle_r_beta``, the patella) move with their independent
@@ -21,21 +30,30 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import time as _time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from .io.atomic import file_sha256
-from .errors import DataMismatchError, OptionError, UnknownCoordinateError
+from .errors import CacheWarning, DataMismatchError, OptionError, UnknownCoordinateError
 from .io import atomic_path, read_storage, write_storage
 from .model import default_dofs
 
-__all__ = ["Geometry", "compute_geometry", "default_cache_dir", "write_geometry", "GEOMETRY_FORMAT"]
+__all__ = ["Geometry", "compute_geometry", "default_cache_dir", "write_geometry", "check_kinematics",
+           "GEOMETRY_FORMAT"]
 
-GEOMETRY_FORMAT = 1  # bump when the cached content changes meaning
+GEOMETRY_FORMAT = 2  # bump when the cached content changes meaning
+#: Rotations in radians beyond this are not joint angles (model ranges are below pi).
+MAX_PLAUSIBLE_ANGLE_RAD = math.pi
+#: With ``inDegrees=yes``, DOF angles all below this many "degrees" while the joints move
+#: (range above :data:`MIN_MOTION_RANGE`) are radians mislabelled as degrees.
+MIN_PEAK_ANGLE_DEG = 2.5
+MIN_MOTION_RANGE = 0.05
 MOMENT_ARM_METHODS = ("velocity", "opensim", "finite_difference")
 
 
@@ -71,6 +89,61 @@ class Geometry:
         return Geometry(self.time, tuple(muscles), self.dofs, self.lmt_m[:, idx], self.moment_arms_m[:, :, idx], self.source)
 
 
+def check_kinematics(ik, dofs, check_units: bool = True) -> bool:
+    """Check an IK table (from :func:`~musclemetab.io.read_storage`); return whether it is in degrees.
+
+    Raises, naming the file and column: :class:`~musclemetab.errors.MissingColumnError` when a
+    DOF column is absent; :class:`~musclemetab.errors.InputFileError` for fewer than 2 frames;
+    :class:`~musclemetab.errors.TimeColumnError` for time stamps that are not seconds;
+    :class:`DataMismatchError` for a NaN or infinite value in any column (OpenSim is given
+    every column) and, unless ``check_units=False``, for angles whose size contradicts the
+    header: with ``inDegrees=no`` an angle beyond pi rad means degrees; with ``inDegrees=yes``
+    all angles of the DOFs and of the legs' main joints (:func:`~musclemetab.model.default_dofs`,
+    when in the file) below 2.5 "degrees" while the joints move (a walking knee flexes by
+    some 60 degrees) means radians. Without the flag, angles beyond pi are taken as degrees and
+    others as radians.
+    """
+    from .errors import InputFileError
+    from .io import check_time_stamps, require_columns
+
+    path = ik.attrs.get("path", "IK")
+    require_columns(ik, dofs, what="IK coordinate column")
+    if len(ik.index) < 2:
+        raise InputFileError(f"{path}: the IK file has fewer than 2 frames")
+    check_time_stamps(ik, "IK")
+    values = ik.to_numpy(dtype=float)
+    bad = ~np.isfinite(values)
+    if bad.any():
+        row, col = (int(i) for i in np.argwhere(bad)[0])
+        raise DataMismatchError(
+            f"{path}: column '{ik.columns[col]}' is {values[row, col]:g} at data row {row + 1} (t = "
+            f"{ik.index[row]:g} s); every coordinate must be finite: fix or remove the frame"
+        )
+    q = ik[list(dofs)].to_numpy(dtype=float)
+    in_degrees = ik.attrs.get("in_degrees")
+    peak_by_dof = np.max(np.abs(q), axis=0)
+    peak = float(peak_by_dof.max())
+    if check_units and in_degrees is False and peak > MAX_PLAUSIBLE_ANGLE_RAD:
+        col = dofs[int(np.argmax(peak_by_dof))]
+        raise DataMismatchError(
+            f"{path}: the header says inDegrees=no but column '{col}' reaches {peak:.4g}, which is "
+            "not an angle in radians; the values look like degrees: fix the header to inDegrees=yes"
+        )
+    if in_degrees is None:
+        in_degrees = peak > MAX_PLAUSIBLE_ANGLE_RAD
+    # The radians-as-degrees test looks at the leg's main joints too when the file has them
+    # (a coupled coordinate alone, such as a knee's beta angle, moves by a few degrees).
+    legs = [c for c in dict.fromkeys([*dofs, *default_dofs("r"), *default_dofs("l")]) if c in ik.columns]
+    q = ik[legs].to_numpy(dtype=float)
+    peak = float(np.max(np.abs(q)))
+    if check_units and in_degrees and peak < MIN_PEAK_ANGLE_DEG and float(np.ptp(q, axis=0).max()) > MIN_MOTION_RANGE:
+        raise DataMismatchError(
+            f"{path}: the header says inDegrees=yes but no DOF angle exceeds {MIN_PEAK_ANGLE_DEG:g} degrees "
+            f"while the joints move (peak {peak:.3g}); the values look like radians: fix the header to inDegrees=no"
+        )
+    return bool(in_degrees)
+
+
 def default_cache_dir() -> Path:
     """``$MUSCLEMETAB_CACHE`` or ``~/.cache/musclemetab``, plus ``/geometry``."""
     root = os.environ.get("MUSCLEMETAB_CACHE") or os.path.join(
@@ -93,6 +166,7 @@ def compute_geometry(
     cache_dir: str | os.PathLike | None = None,
     use_cache: bool = True,
     method: str = "velocity",
+    check_units: bool = True,
 ) -> Geometry:
     """Muscle-tendon lengths and moment arms at every frame of an IK motion.
 
@@ -112,6 +186,8 @@ def compute_geometry(
         Where to cache results (default :func:`default_cache_dir`).
     method
         Moment-arm method, see :mod:`musclemetab.opensim_bridge.model_ops`.
+    check_units
+        Refuse angles whose size contradicts the header (see :func:`check_kinematics`).
 
     Raises
     ------
@@ -130,14 +206,11 @@ def compute_geometry(
     dofs = list(dofs) if dofs else default_dofs(side)
     if len(set(dofs)) != len(dofs):
         raise OptionError(f"DOF list {dofs} names a DOF twice")
-    if not model_path.is_file():
-        from .errors import ModelError
+    from .model import check_model_path
 
-        raise ModelError(f"{model_path}: no such model file; check the path")
+    check_model_path(model_path)
     ik = read_storage(ik_path)  # validates the file before any cache lookup
-    from .io import require_columns
-
-    require_columns(ik, dofs, what="DOF column")
+    in_degrees = check_kinematics(ik, dofs, check_units)
 
     key = None
     cache_file = None
@@ -151,25 +224,20 @@ def compute_geometry(
             method=method,
         )
         key = hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:32]
-        cache_file = Path(cache_dir) if cache_dir else default_cache_dir()
-        cache_file = cache_file / f"{key}.npz"
-        if cache_file.is_file():
-            try:
-                with np.load(cache_file, allow_pickle=False) as z:
-                    return Geometry(
-                        time=z["time"],
-                        muscles=tuple(z["muscles"].tolist()),
-                        dofs=tuple(z["dofs"].tolist()),
-                        lmt_m=z["lmt_m"],
-                        moment_arms_m=z["moment_arms_m"],
-                        source=json.loads(str(z["source"])) | {"cached": True},
-                    )
-            except Exception:
-                cache_file.unlink(missing_ok=True)  # unreadable cache entry: recompute
+        folder = _usable_cache_dir(Path(cache_dir) if cache_dir else default_cache_dir())
+        cache_file = folder / f"{key}.npz" if folder is not None else None
+        if cache_file is not None and (cache_file.is_dir() or cache_file.is_symlink()):
+            warnings.warn(f"geometry cache entry {cache_file} is a folder or a link, not a file; computing "
+                          "without the cache (remove it)", CacheWarning, stacklevel=2)
+            cache_file = None
+        if cache_file is not None and cache_file.is_file():
+            geom, problem = _read_cache_entry(cache_file, ik.index.to_numpy(dtype=float), dofs)
+            if geom is not None:
+                return geom
+            warnings.warn(f"geometry cache entry {cache_file} {problem}; deleted, computing it again",
+                          CacheWarning, stacklevel=2)
+            cache_file.unlink(missing_ok=True)
 
-    in_degrees = ik.attrs.get("in_degrees")
-    if in_degrees is None:
-        in_degrees = True  # OpenSim's convention for motion files without the flag
     t0 = _time.perf_counter()
     raw = call(
         "model_ops:muscle_geometry",
@@ -186,6 +254,12 @@ def compute_geometry(
             f"{model_path}: no muscle has a moment arm above 0.1 mm about {', '.join(dofs)}; "
             "check the DOF names and the side"
         )
+    for name, arr in (("muscle-tendon lengths", raw["lmt_m"]), ("moment arms", raw["moment_arms_m"])):
+        if not np.all(np.isfinite(arr)):
+            raise DataMismatchError(
+                f"OpenSim gave NaN or infinite {name} for {model_path} along {ik_path}; check that the "
+                "IK file belongs to this model (coordinate values within the model's ranges)"
+            )
     source = dict(
         model=str(model_path.resolve()),
         ik=str(ik_path.resolve()),
@@ -204,17 +278,70 @@ def compute_geometry(
         source=source | {"cached": False},
     )
     if cache_file is not None:
-        with atomic_path(cache_file, suffix=".npz") as tmp:
-            np.savez(
-                tmp,
-                time=geom.time,
-                muscles=np.array(geom.muscles),
-                dofs=np.array(geom.dofs),
-                lmt_m=geom.lmt_m,
-                moment_arms_m=geom.moment_arms_m,
-                source=json.dumps(source),
-            )
+        try:
+            with atomic_path(cache_file, suffix=".npz") as tmp:
+                np.savez(
+                    tmp,
+                    time=geom.time,
+                    muscles=np.array(geom.muscles),
+                    dofs=np.array(geom.dofs),
+                    lmt_m=geom.lmt_m,
+                    moment_arms_m=geom.moment_arms_m,
+                    source=json.dumps(source),
+                    checksum=_checksum(geom.time, geom.muscles, geom.dofs, geom.lmt_m, geom.moment_arms_m),
+                )
+        except OSError as exc:
+            warnings.warn(f"could not write the geometry cache entry {cache_file} ({exc.strerror or exc}); "
+                          "continuing without caching it", CacheWarning, stacklevel=2)
     return geom
+
+
+def _checksum(time, muscles, dofs, lmt_m, moment_arms_m) -> str:
+    """SHA-256 of the arrays of a geometry (values, shapes and names)."""
+    h = hashlib.sha256()
+    for arr in (time, lmt_m, moment_arms_m):
+        a = np.ascontiguousarray(arr, dtype=np.float64)
+        h.update(str(a.shape).encode())
+        h.update(a.tobytes())
+    h.update(json.dumps([list(muscles), list(dofs)]).encode())
+    return h.hexdigest()
+
+
+def _usable_cache_dir(folder: Path) -> Path | None:
+    """``folder`` if it is (or can be made) a writable folder; ``None`` with a warning otherwise."""
+    try:
+        if folder.exists() and not folder.is_dir():
+            raise NotADirectoryError(f"{folder} is a file")
+        folder.mkdir(parents=True, exist_ok=True)
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise PermissionError("not writable")
+    except OSError as exc:
+        warnings.warn(f"geometry cache folder {folder} cannot be used ({exc.strerror or exc}); computing without "
+                      "the cache (set MUSCLEMETAB_CACHE to a writable folder)", CacheWarning, stacklevel=3)
+        return None
+    return folder
+
+
+def _read_cache_entry(path: Path, ik_time: np.ndarray, dofs) -> tuple[Geometry | None, str]:
+    """The cached geometry if the entry is intact and fits the IK file, else ``(None, reason)``."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            time, lmt, r = z["time"], z["lmt_m"], z["moment_arms_m"]
+            muscles, cdofs = tuple(z["muscles"].tolist()), tuple(z["dofs"].tolist())
+            source, stored = json.loads(str(z["source"])), str(z["checksum"])
+    except Exception as exc:  # truncated, not an npz, missing arrays, bad JSON
+        return None, f"cannot be read ({type(exc).__name__})"
+    if _checksum(time, muscles, cdofs, lmt, r) != stored:
+        return None, "does not match its checksum (it was modified or damaged)"
+    F, M, D = ik_time.size, len(muscles), len(cdofs)
+    if (time.shape != (F,) or not np.allclose(time, ik_time, rtol=0, atol=1e-9) or list(cdofs) != list(dofs)
+            or lmt.shape != (F, M) or r.shape != (F, D, M)):
+        return None, (f"holds {time.size} frames x DOFs {list(cdofs)}, not the {F} frames x {list(dofs)} of the "
+                      "IK file")
+    if not (np.all(np.isfinite(lmt)) and np.all(np.isfinite(r))):
+        return None, "holds NaN or infinite values"
+    return Geometry(time=time, muscles=muscles, dofs=cdofs, lmt_m=lmt, moment_arms_m=r,
+                    source=source | {"cached": True}), ""
 
 
 def write_geometry(geom: Geometry, out_dir: str | os.PathLike) -> list[Path]:

@@ -100,13 +100,21 @@ class ModelInfo:
 _CACHE: dict = {}
 
 
+def check_model_path(path: str | os.PathLike) -> Path:
+    """``path`` as a Path; :class:`ModelError` when it is a folder or does not exist."""
+    path = Path(path)
+    if path.is_dir():
+        raise ModelError(f"{path} is a folder, not a model file; give the path of the .osim file")
+    if not path.is_file():
+        raise ModelError(f"{path}: no such model file; check the path")
+    return path
+
+
 def read_model(model_path: str | os.PathLike) -> ModelInfo:
     """Read muscles, body mass and coordinates of an ``.osim`` model (through OpenSim)."""
     from .opensim_bridge import call
 
-    path = Path(model_path)
-    if not path.is_file():
-        raise ModelError(f"{path}: no such model file; check the path")
+    path = check_model_path(model_path)
     key = (str(path.resolve()), path.stat().st_mtime_ns, path.stat().st_size)
     if key in _CACHE:
         return _CACHE[key]

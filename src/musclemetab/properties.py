@@ -1,40 +1,68 @@
-"""Per-muscle properties: one table, and the rules that individualise a muscle.
+"""Per-muscle properties: one anatomical table, aliases per model family, and the rules.
 
-The package table (``musclemetab/data/muscle_properties.csv``) holds, per muscle of the
-Rajagopal (2015) lower limb (side-free names: ``soleus``; models append ``_r``/``_l``):
-slow-twitch fraction (Uchida et al. 2016 compilation, 0.5 where unknown), share of total
-lower-limb muscle volume (Handsfield et al. 2014, split equally over the model's sub-parts),
-function groups, tendon-stiffness and passive-calibration coupling groups, the default EMG
-channel of the example data, and the published calibrated passive parameters.
+Two package tables (parsed once, see ``docs/muscles.md``):
 
-Rules (see ``docs/method.md``):
+* ``data/anatomical_muscles.csv``: one row per anatomical muscle of the lower-limb volume
+  regression (side-free id such as ``gluteus_medius``): share of total lower-limb muscle
+  volume (Handsfield et al. 2014, as coded by the study), slow-twitch fraction (Uchida et
+  al. 2016 compilation, 0.5 where unknown), specific tension, function groups, the tendon
+  and EMG scale groups of EMG-TEN, the passive-calibration trials and coupling group, the
+  example data's EMG channel and the report's default muscle list;
+* ``data/muscle_aliases.csv``: model muscle name (side-free) -> anatomical muscle(s), per
+  model family (Rajagopal, gait2392 / gait2354 / Delp 1990 / Hamner 2010 / Arnold 2010,
+  gait10dof18musc), with an optional explicit volume share.
+
+Rules:
 
 * total lower-limb muscle volume, Handsfield et al. (2014) regression as used by the study:
   ``V_total [cm^3] = 47 * m_body [kg] * h [m] + 1285``;
-* muscle volume ``V_i = volume_percent_i / 100 * V_total``;
+* a model muscle's volume is ``sum_a f_a * volume_percent_a / 100 * V_total`` over the
+  anatomical muscles ``a`` it stands for, with ``f_a`` its explicit share (the study's
+  model: equal splits), else its maximal isometric force over the summed force of all
+  muscles of the same side standing for ``a`` (split muscles share, lumped ones add);
+* slow-twitch fraction and specific tension: volume-weighted mean over the parts;
 * muscle mass ``m_i = rho * V_i`` with ``rho = 1059.7 kg/m^3``;
-* individualised maximal isometric force ``F0_i = sigma * V_i / lMo_i`` with specific
-  tension ``sigma = 0.6 MPa`` and the (scaled) optimal fibre length (PCSA = V/lMo, no
+* a muscle the tables cannot place: ``m_i = F0_i / sigma * rho * lMo_i`` (the rule of
+  OpenSim's metabolic probes, with the package's ``sigma = 0.6 MPa``), slow-twitch
+  fraction 0.5, and one :class:`~musclemetab.errors.MuscleTableWarning` naming every such
+  muscle (``strict=True``: :class:`~musclemetab.errors.UnknownMuscleError` instead);
+* individualised maximal isometric force ``F0_i = sigma * V_i / lMo_i`` (PCSA = V/lMo, no
   pennation factor). This reproduces the example model's forces to better than 1e-6.
 
-Names are always matched by muscle name and side, never by position.
+Overrides per muscle (mass, slow-twitch fraction, specific tension, function groups,
+anatomical placement) come from a CSV (:func:`read_muscle_properties`). Names are always
+matched by muscle name and side (``_r``/``_l``, also ``_R``/``_L``; case-insensitive),
+never by position.
 """
 
 from __future__ import annotations
 
 import functools
-from collections.abc import Sequence
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from fractions import Fraction
 from importlib import resources
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from .errors import OptionError, UnknownMuscleError
+from .errors import InputFileError, MuscleTableWarning, OptionError, UnknownMuscleError
 
 __all__ = [
     "MUSCLE_DENSITY_KG_PER_M3",
     "SPECIFIC_TENSION_PA",
+    "FALLBACK_SLOW_TWITCH_FRACTION",
+    "MuscleRecord",
+    "MuscleOverrides",
+    "anatomical_table",
+    "alias_table",
     "property_table",
+    "model_family",
+    "resolve_muscles",
+    "read_muscle_properties",
+    "as_overrides",
     "split_side",
     "muscle_property",
     "slow_twitch_fraction",
@@ -42,65 +70,358 @@ __all__ = [
     "muscle_volumes_m3",
     "muscle_masses_kg",
     "individualised_max_isometric_force_N",
+    "coupling_groups",
+    "tendon_groups",
+    "emg_scale_groups",
+    "default_emg_mapping",
+    "report_muscles",
+    "study_passive_parameters",
+    "tendon_literature",
 ]
 
 MUSCLE_DENSITY_KG_PER_M3 = 1059.7
 SPECIFIC_TENSION_PA = 0.6e6
+FALLBACK_SLOW_TWITCH_FRACTION = 0.5
 HANDSFIELD_SLOPE_CM3_PER_KG_M = 47.0
 HANDSFIELD_INTERCEPT_CM3 = 1285.0
 
+_TEXT_COLUMNS = ("function_groups", "tendon", "emg_scale_group", "passive_calibration_trials",
+                 "passive_coupling_group", "emg_channel")
+
+
+def _read_package_csv(name: str) -> pd.DataFrame:
+    with resources.files("musclemetab").joinpath(f"data/{name}").open() as f:
+        return pd.read_csv(f, comment="#", keep_default_na=False, na_values=[""], dtype=str)
+
 
 @functools.lru_cache(maxsize=1)
-def property_table() -> pd.DataFrame:
-    """The package's muscle property table, indexed by side-free muscle name."""
-    with resources.files("musclemetab").joinpath("data/muscle_properties.csv").open() as f:
-        df = pd.read_csv(f, comment="#", keep_default_na=False, na_values=[""])
-    for col in ("function_groups", "sign_changing_dofs", "tendon_stiffness_group",
-                "passive_calibration_trials", "passive_coupling_group", "emg_channel"):
+def anatomical_table() -> pd.DataFrame:
+    """Anatomical muscles (side-free ids), indexed by ``anatomical_muscle``."""
+    df = _read_package_csv("anatomical_muscles.csv")
+    for col in ("volume_percent", "slow_twitch_fraction", "specific_tension_Pa", "report_order"):
+        df[col] = pd.to_numeric(df[col])
+    for col in _TEXT_COLUMNS:
         df[col] = df[col].fillna("")
-    return df.set_index("muscle")
+    return df.set_index("anatomical_muscle")
+
+
+@functools.lru_cache(maxsize=1)
+def alias_table() -> pd.DataFrame:
+    """Model muscle names (side-free) per family -> anatomical muscle(s) and explicit share.
+
+    Columns: ``model_name``, ``key`` (lower-case name), ``anatomical`` (tuple of ids),
+    ``families`` (tuple), ``volume_share`` (float or NaN).
+    """
+    df = _read_package_csv("muscle_aliases.csv")
+    anat = anatomical_table()
+    df["anatomical"] = [tuple(s.split()) for s in df["anatomical_muscles"]]
+    bad = sorted({a for t in df["anatomical"] for a in t if a not in anat.index})
+    if bad:  # pragma: no cover - package data consistency (tested)
+        raise OptionError(f"muscle_aliases.csv names unknown anatomical muscles {', '.join(bad)}")
+    df["families"] = [tuple(s.split()) for s in df["family"]]
+    df["key"] = df["model_name"].str.lower()
+    df["volume_share"] = [float(Fraction(s)) if isinstance(s, str) and s else np.nan for s in df["volume_share"]]
+    return df
 
 
 def split_side(name: str) -> tuple[str, str]:
-    """``'soleus_r' -> ('soleus', 'r')``; names without a side suffix get ``''``."""
-    if len(name) > 2 and name[-2] == "_" and name[-1] in "rl":
-        return name[:-2], name[-1]
+    """``'soleus_r' -> ('soleus', 'r')`` (also ``_R``/``_L``); no side suffix gives ``''``."""
+    if len(name) > 2 and name[-2] == "_" and name[-1] in "rlRL":
+        return name[:-2], name[-1].lower()
     return name, ""
 
 
-def _rows(names: Sequence[str], what: str) -> pd.DataFrame:
-    table = property_table()
-    base = [split_side(n)[0] for n in names]
-    missing = [n for n, b in zip(names, base) if b not in table.index]
-    if missing:
-        raise UnknownMuscleError(
-            f"no {what} for muscle{'s' if len(missing) > 1 else ''} {', '.join(missing)} in the muscle "
-            "property table; the table covers the Rajagopal lower-limb muscles "
-            f"({', '.join(table.index[:5])}, ...): rename the muscles or pass the values explicitly"
-        )
-    return table.loc[base]
+def model_family(names: Sequence[str]) -> str:
+    """The alias family that places most of ``names`` (ties: the family with fewer names)."""
+    keys = {split_side(n)[0].lower() for n in names}
+    aliases = alias_table()
+    best, best_score = "", (0, 0)
+    families = list(dict.fromkeys(f for fs in aliases["families"] for f in fs))
+    for fam in families:
+        in_fam = {k for k, fs in zip(aliases["key"], aliases["families"]) if fam in fs}
+        score = (len(keys & in_fam), -len(in_fam))
+        if score[0] and score > best_score:
+            best, best_score = fam, score
+    return best
 
 
-def muscle_property(names: Sequence[str], column: str) -> np.ndarray:
-    """One column of the property table for ``names`` (with or without side suffix)."""
-    if column not in property_table().columns:
-        raise OptionError(f"the muscle property table has no column '{column}'")
-    return _rows(names, column)[column].to_numpy()
+# ---------------------------------------------------------------------------------------
+# Overrides
+# ---------------------------------------------------------------------------------------
+
+_OVERRIDE_COLUMNS = ("anatomical_muscles", "mass_kg", "slow_twitch_fraction", "specific_tension_Pa",
+                     "function_groups")
 
 
-def slow_twitch_fraction(names: Sequence[str], default: float | None = None) -> np.ndarray:
-    """Slow-twitch fibre fraction per muscle.
+@dataclass(frozen=True)
+class MuscleOverrides:
+    """Per-muscle overrides: ``{name: {column: value}}``; a side-free name covers both sides."""
 
-    With ``default`` given, muscles absent from the table get it (the study used 0.5);
-    without, they raise :class:`UnknownMuscleError`.
+    values: Mapping[str, Mapping[str, object]] = field(default_factory=dict)
+    source: str = "overrides"
+
+    def for_muscle(self, name: str) -> dict:
+        base, _ = split_side(name)
+        out: dict = {}
+        for key in (base, base.lower(), name, name.lower()):
+            out.update(self.values.get(key, {}))
+        return out
+
+    def __bool__(self) -> bool:
+        return bool(self.values)
+
+    def with_column(self, column: str, values: Mapping[str, float] | None) -> "MuscleOverrides":
+        """A copy with ``{muscle: value}`` set for one column (these take precedence)."""
+        if not values:
+            return self
+        merged = {k: dict(v) for k, v in self.values.items()}
+        for name, v in values.items():
+            merged.setdefault(name, {})[column] = float(v)
+        return MuscleOverrides(merged, self.source)
+
+
+def _override_value(col: str, raw: str, where: str):
+    if col == "anatomical_muscles":
+        ids = tuple(raw.split())
+        unknown = [a for a in ids if a not in anatomical_table().index]
+        if unknown:
+            raise InputFileError(
+                f"{where}: unknown anatomical muscle {', '.join(unknown)}; use ids of the package table "
+                f"(e.g. {', '.join(anatomical_table().index[:3])}; see docs/muscles.md)"
+            )
+        return ids
+    if col == "function_groups":
+        return tuple(raw.split())
+    try:
+        v = float(raw)
+    except ValueError:
+        v = float("nan")
+    ok = np.isfinite(v) and (0.0 <= v <= 1.0 if col == "slow_twitch_fraction" else v > 0.0)
+    if not ok:
+        what = "a fraction in [0, 1]" if col == "slow_twitch_fraction" else "a positive number (SI units)"
+        raise InputFileError(f"{where}: '{raw}' is not {what}")
+    return v
+
+
+def read_muscle_properties(path: str | Path) -> MuscleOverrides:
+    """Read a muscle-properties override CSV.
+
+    Columns: ``muscle`` (model name; without side suffix it applies to both sides) and any
+    of ``anatomical_muscles`` (space-separated ids of the anatomical table), ``mass_kg``,
+    ``slow_twitch_fraction``, ``specific_tension_Pa``, ``function_groups``. Empty cells
+    keep the table's value.
     """
-    if default is None:
-        return _rows(names, "slow-twitch fraction")["slow_twitch_fraction"].to_numpy(dtype=float)
-    table = property_table()
-    return np.array(
-        [float(table.at[split_side(n)[0], "slow_twitch_fraction"]) if split_side(n)[0] in table.index else default
-         for n in names]
-    )
+    path = Path(path)
+    if not path.is_file():
+        raise InputFileError(f"{path}: no such muscle-properties file; check the --muscle-properties path")
+    try:
+        df = pd.read_csv(path, comment="#", dtype=str, keep_default_na=False, skipinitialspace=True)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise InputFileError(f"{path}: not a readable CSV ({str(exc).splitlines()[0]})") from None
+    if "muscle" not in df.columns:
+        raise InputFileError(f"{path}: no 'muscle' column; expected columns muscle,{','.join(_OVERRIDE_COLUMNS)}")
+    extra = [c for c in df.columns if c != "muscle" and c not in _OVERRIDE_COLUMNS]
+    if extra:
+        raise InputFileError(
+            f"{path}: unknown column{'s' if len(extra) > 1 else ''} {', '.join(extra)}; "
+            f"allowed: muscle,{','.join(_OVERRIDE_COLUMNS)}"
+        )
+    values: dict[str, dict] = {}
+    for i, row in df.iterrows():
+        name = str(row["muscle"]).strip()
+        if not name:
+            raise InputFileError(f"{path}: line {i + 2} has no muscle name")
+        if name in values:
+            raise InputFileError(f"{path}: muscle '{name}' appears twice; give one line per muscle")
+        values[name] = {
+            c: _override_value(c, str(row[c]).strip(), f"{path}: muscle '{name}', column '{c}'")
+            for c in _OVERRIDE_COLUMNS if c in df.columns and str(row[c]).strip()
+        }
+    return MuscleOverrides(values, str(path))
+
+
+def as_overrides(overrides) -> MuscleOverrides:
+    """A :class:`MuscleOverrides` from ``None``, a CSV path, a mapping or itself."""
+    if overrides is None:
+        return MuscleOverrides()
+    if isinstance(overrides, MuscleOverrides):
+        return overrides
+    if isinstance(overrides, (str, Path)):
+        return read_muscle_properties(overrides)
+    return MuscleOverrides({k: dict(v) for k, v in overrides.items()}, "overrides")
+
+
+# ---------------------------------------------------------------------------------------
+# Resolution
+# ---------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class MuscleRecord:
+    """What the tables (and overrides) say of one model muscle."""
+
+    name: str
+    side: str
+    anatomical: tuple[str, ...]  # anatomical ids; () = not placed
+    volume_fraction: tuple[float, ...]  # fraction of each anatomical muscle's volume
+    volume_percent: float  # share of total lower-limb muscle volume (%); NaN when not placed
+    slow_twitch_fraction: float
+    specific_tension_Pa: float
+    function_groups: tuple[str, ...]
+    tendon: str
+    emg_scale_group: str
+    coupling_group: str
+    calibration_trials: str
+    emg_channels: tuple[str, ...]
+    mass_kg_override: float | None = None
+    family: str = ""
+    fallback: tuple[str, ...] = ()  # quantities taken from the fallback rule
+
+    @property
+    def placed(self) -> bool:
+        return bool(self.anatomical)
+
+
+def _forces(names: Sequence[str], f0) -> dict[str, float]:
+    if f0 is None:
+        return {}
+    if isinstance(f0, Mapping):
+        return {n: float(f0[n]) for n in names if n in f0}
+    arr = np.asarray(f0, dtype=float)
+    if arr.shape != (len(names),):
+        raise OptionError(f"{len(names)} muscle names but {arr.size} maximal isometric forces")
+    return dict(zip(names, arr.tolist()))
+
+
+def _common(values: Sequence[str]) -> str:
+    vals = set(values)
+    return values[0] if len(vals) == 1 else ""
+
+
+def resolve_muscles(
+    names: Sequence[str],
+    max_isometric_force_N=None,
+    overrides=None,
+    strict: bool = False,
+    warn: bool = True,
+) -> tuple[MuscleRecord, ...]:
+    """Place each model muscle in the anatomical table (one record per name, same order).
+
+    ``max_isometric_force_N`` (array aligned with ``names`` or ``{name: F0}``) sets the
+    volume split of muscles without an explicit share. ``overrides``: a
+    :class:`MuscleOverrides`, a CSV path or ``{name: {column: value}}``. Muscles the tables
+    cannot place get slow-twitch fraction 0.5 and the fallback mass rule; they are named in
+    one warning, or, with ``strict``, in an :class:`UnknownMuscleError`.
+    """
+    names = list(names)
+    if len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise OptionError(f"muscle names repeated: {', '.join(dup)}")
+    ov = as_overrides(overrides)
+    anat = anatomical_table()
+    aliases = alias_table()
+    family = model_family(names)
+    lookup: dict[str, tuple[tuple[str, ...], float]] = {}
+    for key, ids, fams, share in zip(aliases["key"], aliases["anatomical"], aliases["families"],
+                                     aliases["volume_share"]):
+        if key not in lookup or family in fams:
+            lookup[key] = (ids, share)
+    forces = _forces(names, max_isometric_force_N)
+
+    placement: dict[str, tuple[tuple[str, ...], float]] = {}
+    for n in names:
+        o = ov.for_muscle(n)
+        if "anatomical_muscles" in o:
+            placement[n] = (tuple(o["anatomical_muscles"]), np.nan)
+        else:
+            placement[n] = lookup.get(split_side(n)[0].lower(), ((), np.nan))
+    # F0-proportional split over the muscles of one side standing for the same anatomical muscle
+    sharers: dict[tuple[str, str], list[str]] = {}
+    for n, (ids, share) in placement.items():
+        if np.isnan(share):
+            for a in ids:
+                sharers.setdefault((a, split_side(n)[1]), []).append(n)
+
+    def fraction(n: str, a: str) -> float:
+        ids, share = placement[n]
+        if not np.isnan(share):
+            return share
+        group = sharers[(a, split_side(n)[1])]
+        if len(group) == 1:
+            return 1.0
+        if any(m not in forces for m in group):
+            return float("nan")  # needs the forces; volumes and masses ask for them
+        total = sum(forces[m] for m in group)
+        return forces[n] / total
+
+    records = []
+    unplaced = []
+    for n in names:
+        o = ov.for_muscle(n)
+        ids, _ = placement[n]
+        side = split_side(n)[1]
+        fb: list[str] = []
+        if ids:
+            rows = anat.loc[list(ids)]
+            frac = tuple(fraction(n, a) for a in ids)
+            vol = np.array(frac) * rows["volume_percent"].to_numpy(dtype=float)
+            wvol = np.where(np.isnan(vol), rows["volume_percent"].to_numpy(dtype=float), vol)
+            w = wvol / wvol.sum() if wvol.sum() > 0 else np.full(len(ids), 1.0 / len(ids))
+            vp = float(vol.sum())
+            fst = float(w @ rows["slow_twitch_fraction"].to_numpy(dtype=float))
+            sigma = float(w @ rows["specific_tension_Pa"].to_numpy(dtype=float))
+            groups: list[str] = []
+            for g in " ".join(rows["function_groups"]).split():
+                if g not in groups:
+                    groups.append(g)
+            tendon = _common(list(rows["tendon"]))
+            emg_group = _common(list(rows["emg_scale_group"]))
+            coupling = _common(list(rows["passive_coupling_group"]))
+            trials = "+".join(dict.fromkeys(t for s in rows["passive_calibration_trials"] for t in s.split("+") if t))
+            channels = tuple(c for c in rows["emg_channel"] if c)
+        else:
+            frac, vp, fst, sigma, groups = (), float("nan"), FALLBACK_SLOW_TWITCH_FRACTION, SPECIFIC_TENSION_PA, []
+            tendon = emg_group = coupling = trials = ""
+            channels = ()
+            if "mass_kg" not in o:
+                fb.append("mass")
+            if "slow_twitch_fraction" not in o:
+                fb.append("slow_twitch_fraction")
+        if fb:
+            unplaced.append(n)
+        records.append(MuscleRecord(
+            name=n, side=side, anatomical=tuple(ids), volume_fraction=tuple(frac), volume_percent=vp,
+            slow_twitch_fraction=float(o.get("slow_twitch_fraction", fst)),
+            specific_tension_Pa=float(o.get("specific_tension_Pa", sigma)),
+            function_groups=tuple(o.get("function_groups", groups)),
+            tendon=tendon, emg_scale_group=emg_group, coupling_group=coupling, calibration_trials=trials,
+            emg_channels=channels, mass_kg_override=o.get("mass_kg"), family=family, fallback=tuple(fb),
+        ))
+    _report_unplaced(unplaced, strict, warn)
+    return tuple(records)
+
+
+def _report_unplaced(unplaced: Sequence[str], strict: bool, warn: bool) -> None:
+    if not unplaced:
+        return
+    s = "s" if len(unplaced) > 1 else ""
+    how = ("place them with a --muscle-properties CSV (columns muscle,anatomical_muscles or "
+           "muscle,mass_kg,slow_twitch_fraction; see docs/muscles.md)")
+    if strict:
+        raise UnknownMuscleError(
+            f"muscle{s} {', '.join(unplaced)} not in the anatomical muscle table (--strict); {how}"
+        )
+    if warn:
+        warnings.warn(
+            f"muscle{s} {', '.join(unplaced)} not in the anatomical muscle table: mass from F0/specific "
+            f"tension x density x lMo, slow-twitch fraction 0.5; to override, {how}",
+            MuscleTableWarning, stacklevel=3,
+        )
+
+
+# ---------------------------------------------------------------------------------------
+# Volumes, masses, strength
+# ---------------------------------------------------------------------------------------
 
 
 def _check_subject(body_mass_kg: float, height_m: float) -> None:
@@ -116,15 +437,95 @@ def total_muscle_volume_m3(body_mass_kg: float, height_m: float) -> float:
     return (HANDSFIELD_SLOPE_CM3_PER_KG_M * body_mass_kg * height_m + HANDSFIELD_INTERCEPT_CM3) * 1e-6
 
 
-def muscle_volumes_m3(names: Sequence[str], body_mass_kg: float, height_m: float) -> np.ndarray:
-    """Volume of each muscle (m^3): its table share of the total lower-limb volume."""
-    share = _rows(names, "volume share")["volume_percent"].to_numpy(dtype=float) / 100.0
+def _check_split(recs: Sequence[MuscleRecord]) -> None:
+    """Muscles sharing a volume by maximal isometric force need the forces."""
+    need = [r.name for r in recs if r.placed and np.isnan(r.volume_percent)]
+    if need:
+        raise OptionError(
+            f"muscles {', '.join(need)} share an anatomical muscle's volume in proportion to maximal isometric "
+            "force; give the model's forces (max_isometric_force_N)"
+        )
+
+
+def _placed_records(names, max_isometric_force_N, overrides, what: str) -> tuple[MuscleRecord, ...]:
+    recs = resolve_muscles(names, max_isometric_force_N, overrides, warn=False)
+    _check_split(recs)
+    missing = [r.name for r in recs if not r.placed]
+    if missing:
+        raise UnknownMuscleError(
+            f"no {what} for muscle{'s' if len(missing) > 1 else ''} {', '.join(missing)}: not in the anatomical "
+            "muscle table; place them with a muscle-properties CSV (column anatomical_muscles) or see docs/muscles.md"
+        )
+    return recs
+
+
+def muscle_volumes_m3(names: Sequence[str], body_mass_kg: float, height_m: float,
+                      max_isometric_force_N=None, overrides=None) -> np.ndarray:
+    """Volume of each muscle (m^3) from its anatomical share of the total lower-limb volume."""
+    recs = _placed_records(names, max_isometric_force_N, overrides, "volume share")
+    share = np.array([r.volume_percent for r in recs]) / 100.0
     return share * total_muscle_volume_m3(body_mass_kg, height_m)
 
 
-def muscle_masses_kg(names: Sequence[str], body_mass_kg: float, height_m: float) -> np.ndarray:
-    """Mass of each muscle (kg): volume times 1059.7 kg/m^3."""
-    return MUSCLE_DENSITY_KG_PER_M3 * muscle_volumes_m3(names, body_mass_kg, height_m)
+def muscle_masses_kg(
+    names: Sequence[str],
+    body_mass_kg: float,
+    height_m: float,
+    max_isometric_force_N=None,
+    optimal_fiber_length_m=None,
+    overrides=None,
+    strict: bool = False,
+) -> np.ndarray:
+    """Mass of each muscle (kg): table volume times 1059.7 kg/m^3.
+
+    Muscles the table cannot place take ``F0 / sigma * rho * lMo`` when
+    ``max_isometric_force_N`` and ``optimal_fiber_length_m`` are given (one warning naming
+    them; ``strict``: an error); without them they raise :class:`UnknownMuscleError`.
+    Override masses (``overrides``) are used as given.
+    """
+    names = list(names)
+    recs = resolve_muscles(names, max_isometric_force_N, overrides, strict=strict, warn=False)
+    _check_split([r for r in recs if r.mass_kg_override is None])
+    v_total = total_muscle_volume_m3(body_mass_kg, height_m)
+    forces = _forces(names, max_isometric_force_N)
+    lmo = _forces(names, optimal_fiber_length_m)
+    out = np.empty(len(names))
+    missing = []
+    for i, r in enumerate(recs):
+        if r.mass_kg_override is not None:
+            out[i] = r.mass_kg_override
+        elif r.placed:
+            out[i] = MUSCLE_DENSITY_KG_PER_M3 * r.volume_percent / 100.0 * v_total
+        elif r.name in forces and r.name in lmo:
+            out[i] = forces[r.name] / r.specific_tension_Pa * MUSCLE_DENSITY_KG_PER_M3 * lmo[r.name]
+        else:
+            missing.append(r.name)
+    if missing:
+        raise UnknownMuscleError(
+            f"no volume share for muscle{'s' if len(missing) > 1 else ''} {', '.join(missing)} in the anatomical "
+            "muscle table; give the model's maximal isometric forces and optimal fibre lengths (fallback rule) "
+            "or a muscle-properties CSV (see docs/muscles.md)"
+        )
+    _report_unplaced([r.name for r in recs if r.fallback], strict, True)
+    return out
+
+
+def slow_twitch_fraction(names: Sequence[str], default: float | None = None, overrides=None,
+                         max_isometric_force_N=None) -> np.ndarray:
+    """Slow-twitch fibre fraction per muscle (volume-weighted over a lumped muscle's parts).
+
+    With ``default`` given, muscles absent from the table get it (the study used 0.5);
+    without, they raise :class:`UnknownMuscleError`.
+    """
+    recs = resolve_muscles(names, max_isometric_force_N, overrides, warn=False)
+    missing = [r.name for r in recs if "slow_twitch_fraction" in r.fallback]
+    if missing and default is None:
+        raise UnknownMuscleError(
+            f"no slow-twitch fraction for muscle{'s' if len(missing) > 1 else ''} {', '.join(missing)} in the "
+            "anatomical muscle table; give one in a muscle-properties CSV (see docs/muscles.md)"
+        )
+    return np.array([default if "slow_twitch_fraction" in r.fallback else r.slow_twitch_fraction for r in recs],
+                    dtype=float)
 
 
 def individualised_max_isometric_force_N(
@@ -132,12 +533,136 @@ def individualised_max_isometric_force_N(
     optimal_fiber_length_m: Sequence[float],
     body_mass_kg: float,
     height_m: float,
-    specific_tension_Pa: float = SPECIFIC_TENSION_PA,
+    specific_tension_Pa: float | None = None,
+    max_isometric_force_N=None,
+    overrides=None,
 ) -> np.ndarray:
-    """Maximal isometric force ``sigma * V_i / lMo_i`` (N) from body mass and height."""
+    """Maximal isometric force ``sigma * V_i / lMo_i`` (N) from body mass and height.
+
+    ``specific_tension_Pa`` ``None``: each muscle's table (or override) value, 0.6 MPa.
+    ``max_isometric_force_N`` (the model's) sets the split of muscles sharing a volume.
+    """
     lmo = np.asarray(optimal_fiber_length_m, dtype=float)
     if lmo.shape != (len(names),):
         raise OptionError(f"{len(names)} muscle names but {lmo.size} optimal fibre lengths")
     if np.any(~np.isfinite(lmo)) or np.any(lmo <= 0):
         raise OptionError("optimal fibre lengths must be positive, in metres")
-    return specific_tension_Pa * muscle_volumes_m3(names, body_mass_kg, height_m) / lmo
+    recs = _placed_records(names, max_isometric_force_N, overrides, "volume share")
+    sigma = (np.array([r.specific_tension_Pa for r in recs]) if specific_tension_Pa is None
+             else float(specific_tension_Pa))
+    vol = np.array([r.volume_percent for r in recs]) / 100.0 * total_muscle_volume_m3(body_mass_kg, height_m)
+    return sigma * vol / lmo
+
+
+# ---------------------------------------------------------------------------------------
+# Groups and lists from the table
+# ---------------------------------------------------------------------------------------
+
+
+def _grouped(names: Sequence[str], attr: str) -> dict[str, tuple[str, ...]]:
+    """``{group_side: muscles}`` for a record attribute, members in table order then name."""
+    recs = resolve_muscles(names, warn=False)
+    order = {a: i for i, a in enumerate(anatomical_table().index)}
+    out: dict[str, list[MuscleRecord]] = {}
+    for r in recs:
+        g = getattr(r, attr)
+        if g:
+            out.setdefault(f"{g}_{r.side}" if r.side else g, []).append(r)
+    return {k: tuple(r.name for r in sorted(v, key=lambda r: (min(order[a] for a in r.anatomical), r.name)))
+            for k, v in out.items()}
+
+
+def coupling_groups(names: Sequence[str]) -> dict[str, tuple[str, ...]]:
+    """Passive-calibration coupling groups (``P1_r``: muscles), per side."""
+    return _grouped(names, "coupling_group")
+
+
+def tendon_groups(names: Sequence[str]) -> dict[str, tuple[str, ...]]:
+    """Muscles sharing one tendon in the tendon-stiffness estimation (``achilles_r``: ...)."""
+    return _grouped(names, "tendon")
+
+
+def emg_scale_groups(names: Sequence[str]) -> dict[str, tuple[str, ...]]:
+    """Muscles sharing one EMG scale factor in EMG-TEN (``vasti_r``: ...)."""
+    return _grouped(names, "emg_scale_group")
+
+
+def default_emg_mapping(names: Sequence[str]) -> dict[str, list[str]]:
+    """EMG channel(s) of the example data per model muscle that has one in the table."""
+    return {r.name: list(r.emg_channels) for r in resolve_muscles(names, warn=False) if r.emg_channels}
+
+
+def report_muscles(names: Sequence[str]) -> list[str]:
+    """The report's default muscle list for a model: per listed anatomical muscle (table
+    ``report_order``), the middle one of the model muscles standing for it."""
+    recs = resolve_muscles(names, warn=False)
+    anat = anatomical_table()
+    out = []
+    for a in anat.index[np.argsort(anat["report_order"].to_numpy(), kind="stable")]:
+        if not np.isfinite(anat.at[a, "report_order"]):
+            continue
+        for side in dict.fromkeys(r.side for r in recs):
+            parts = [r.name for r in recs if r.side == side and a in r.anatomical]
+            if parts and parts[(len(parts) - 1) // 2] not in out:
+                out.append(parts[(len(parts) - 1) // 2])
+    return out
+
+
+@functools.lru_cache(maxsize=1)
+def tendon_literature() -> dict[str, tuple[float, float, str]]:
+    """``{tendon: (stiffness_N_per_mm, reference_force_fraction, source)}`` (EFFORT-TEN default)."""
+    df = _read_package_csv("tendon_stiffness_literature.csv")
+    return {t: (float(k), float(f), s) for t, k, f, s in
+            zip(df["tendon"], df["stiffness_N_per_mm"], df["reference_force_fraction"], df["source"])}
+
+
+@functools.lru_cache(maxsize=1)
+def study_passive_parameters() -> dict[str, tuple[float, float]]:
+    """Published calibrated ``(kPE, s0)`` of the study's example subject, by side-free name."""
+    df = _read_package_csv("study_passive_parameters.csv")
+    return {m: (float(k), float(s)) for m, k, s in zip(df["muscle"], df["kpe"], df["s0"])}
+
+
+# ---------------------------------------------------------------------------------------
+# Compatibility view
+# ---------------------------------------------------------------------------------------
+
+
+@functools.lru_cache(maxsize=1)
+def property_table() -> pd.DataFrame:
+    """The study's model's muscles (side-free names) with their resolved properties.
+
+    A view of the anatomical table through the Rajagopal aliases: ``anatomical_name``,
+    ``slow_twitch_fraction``, ``volume_percent``, ``function_groups``,
+    ``tendon_stiffness_group``, ``passive_calibration_trials``, ``passive_coupling_group``,
+    ``emg_channel``, ``kpe_calibrated_reference``, ``s0_calibrated_reference``.
+    """
+    aliases = alias_table()
+    names = [n for n, fs in zip(aliases["model_name"], aliases["families"]) if "rajagopal" in fs]
+    anat = anatomical_table()
+    passive = study_passive_parameters()
+    rows = []
+    for r in resolve_muscles(names, warn=False):
+        rows.append(dict(
+            muscle=r.name, anatomical_name=" + ".join(anat.loc[list(r.anatomical), "name"]),
+            slow_twitch_fraction=r.slow_twitch_fraction, volume_percent=r.volume_percent,
+            function_groups=" ".join(r.function_groups),
+            tendon_stiffness_group={"achilles": "PF", "patellar": "VA"}.get(r.tendon, ""),
+            passive_calibration_trials=r.calibration_trials, passive_coupling_group=r.coupling_group,
+            emg_channel=" ".join(r.emg_channels),
+            kpe_calibrated_reference=passive.get(r.name, (np.nan, np.nan))[0],
+            s0_calibrated_reference=passive.get(r.name, (np.nan, np.nan))[1],
+        ))
+    return pd.DataFrame(rows).set_index("muscle")
+
+
+def muscle_property(names: Sequence[str], column: str) -> np.ndarray:
+    """One column of :func:`property_table` for ``names`` (with or without side suffix)."""
+    table = property_table()
+    if column not in table.columns:
+        raise OptionError(f"the muscle property table has no column '{column}'")
+    base = [split_side(n)[0] for n in names]
+    missing = [n for n, b in zip(names, base) if b not in table.index]
+    if missing:
+        raise UnknownMuscleError(f"no {column} for muscles {', '.join(missing)} in the muscle property table")
+    return table.loc[base, column].to_numpy()

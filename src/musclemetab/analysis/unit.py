@@ -192,7 +192,9 @@ def filtered_moment_arms(geometry, filter_cutoff_hz: float | None = 6.0) -> tupl
                 "resample the IK file or pass filter_cutoff_hz=None"
             )
         shape = r.shape
-        r = lowpass_filtfilt(r.reshape(shape[0], -1), 1.0 / dt[0], float(filter_cutoff_hz), FILTER_ORDER).reshape(shape)
+        what = f"the moment arms along {getattr(geometry, 'source', {}).get('ik', 'the IK motion')}"
+        r = lowpass_filtfilt(r.reshape(shape[0], -1), 1.0 / dt[0], float(filter_cutoff_hz), FILTER_ORDER,
+                             what=what).reshape(shape)
     return tg, r
 
 

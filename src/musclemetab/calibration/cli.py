@@ -48,6 +48,9 @@ def add_calibrate_parser(sub) -> None:
 def calibrate_command(args) -> int:
     from .passive import calibrate_passive, write_calibration
 
+    from ..io import check_output_folder
+
+    check_output_folder(args.out)
     kt = dict(args.tendon_stiffness) if getattr(args, "tendon_stiffness", None) else None
     result = calibrate_passive(args.model, args.trials, tendon_stiffness=kt, use_cache=not args.no_cache)
     write_calibration(result, args.out)

@@ -95,7 +95,8 @@ LM_NORM_BOUNDS = (0.05, 2.0)
 LM_PROJ_MIN_M = 1e-4
 KT_COMPLIANT = 20.0
 KT_DEFAULT = 35.0
-COMPLIANT_TENDON_MUSCLES = ("soleus", "gasmed", "gaslat")
+#: Tendon (column ``tendon`` of the anatomical muscle table) calibrated with ``KT_COMPLIANT``.
+COMPLIANT_TENDON = "achilles"
 
 
 # ------------------------------------------------------------------------------------
@@ -205,12 +206,12 @@ def _blocks(angles: np.ndarray, target_col: int) -> np.ndarray:
 
 
 def default_tendon_stiffness(muscles: Sequence[str]) -> np.ndarray:
-    """``kT`` per muscle for the calibration: 20 for soleus and the gastrocnemii, else 35."""
-    from ..properties import split_side
+    """``kT`` per muscle for the calibration: 20 for the triceps surae (Achilles tendon in the
+    anatomical muscle table), else 35."""
+    from ..properties import resolve_muscles
 
-    return np.array(
-        [KT_COMPLIANT if split_side(m)[0] in COMPLIANT_TENDON_MUSCLES else KT_DEFAULT for m in muscles]
-    )
+    return np.array([KT_COMPLIANT if r.tendon == COMPLIANT_TENDON else KT_DEFAULT
+                     for r in resolve_muscles(muscles, warn=False)])
 
 
 def load_calibration_data(
@@ -301,17 +302,15 @@ def load_calibration_data(
 
 
 def parameter_groups(muscles: Sequence[str]) -> list[tuple[str, ...]]:
-    """Muscles sharing one (kPE, s0) pair: the coupling groups P1-P10 of the property
-    table; every other muscle is its own group. Order: first appearance in ``muscles``."""
-    from ..properties import property_table, split_side
+    """Muscles sharing one (kPE, s0) pair: the coupling groups P1-P10 of the anatomical
+    muscle table, per side; every other muscle is its own group. Order: first appearance in
+    ``muscles``."""
+    from ..properties import resolve_muscles
 
-    table = property_table()
     groups: dict[str, list[str]] = {}
-    for m in muscles:
-        base, side = split_side(m)
-        g = str(table.at[base, "passive_coupling_group"]) if base in table.index else ""
-        key = f"{g}_{side}" if g else m
-        groups.setdefault(key, []).append(m)
+    for r in resolve_muscles(muscles, warn=False):
+        key = f"{r.coupling_group}_{r.side}" if r.coupling_group else r.name
+        groups.setdefault(key, []).append(r.name)
     return [tuple(v) for v in groups.values()]
 
 

@@ -13,7 +13,8 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["file_sha256", "atomic_write_text", "atomic_write_bytes", "atomic_path", "atomic_directory"]
+__all__ = ["file_sha256", "atomic_write_text", "atomic_write_bytes", "atomic_path", "atomic_directory",
+           "check_output_folder", "check_inside"]
 
 
 def file_sha256(path: str | os.PathLike) -> str:
@@ -84,3 +85,54 @@ def atomic_directory(path: str | os.PathLike) -> Iterator[Path]:
             os.replace(item, target)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def check_output_folder(path: str | os.PathLike, option: str = "--out") -> Path:
+    """Check, before any work, that ``path`` is or can become a writable folder.
+
+    Raises :class:`~musclemetab.errors.OptionError` naming ``option`` when ``path`` is an
+    existing file, lies below a file, or cannot be created or written to. The check
+    creates nothing that stays: folders it had to create to try are removed again.
+    """
+    from ..errors import OptionError
+
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise OptionError(f"{option} {path} is an existing file, not a folder; give the path of a folder")
+    created = []
+    try:
+        missing = []
+        p = path.absolute()
+        while not p.exists():
+            missing.append(p)
+            p = p.parent
+        if not p.is_dir():
+            raise OptionError(f"{option} {path} cannot be created: {p} is a file; give a folder path")
+        for d in reversed(missing):
+            d.mkdir()
+            created.append(d)
+        probe = Path(tempfile.mkdtemp(prefix=".musclemetab-probe-", dir=path))
+        probe.rmdir()
+    except OSError as exc:
+        raise OptionError(f"{option} {path} is not a writable folder ({exc.strerror or exc}); "
+                          "choose a folder you can write to") from None
+    finally:
+        for d in reversed(created):
+            try:
+                d.rmdir()
+            except OSError:  # pragma: no cover - something was written into it meanwhile
+                pass
+    return path
+
+
+def check_inside(root: str | os.PathLike, path: str | os.PathLike, what: str = "output") -> Path:
+    """``path`` resolved; :class:`~musclemetab.errors.OptionError` unless it lies inside ``root``."""
+    from ..errors import OptionError
+
+    root_r = Path(root).resolve()
+    p = Path(path)
+    p = (p if p.is_absolute() else root_r / p).resolve()
+    if not p.is_relative_to(root_r):
+        raise OptionError(f"{what} {p} would be written outside the output folder {root_r}; "
+                          "use plain names without '..' or '/'")
+    return p

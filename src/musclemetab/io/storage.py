@@ -40,7 +40,13 @@ __all__ = [
     "write_storage",
     "require_columns",
     "storage_from_arrays",
+    "check_time_stamps",
+    "MAX_SAMPLE_STEP_S",
 ]
+
+#: A time step this long (a sampling rate of 2 Hz or less) is not a motion recording in
+#: seconds: the time column is in milliseconds or counts frames.
+MAX_SAMPLE_STEP_S = 0.5
 
 
 def _parse_header(lines: list[str], path: Path) -> dict:
@@ -106,6 +112,8 @@ def read_storage(path: str | os.PathLike) -> pd.DataFrame:
         The first column is not ``time``, holds NaN, or is not strictly increasing.
     """
     path = Path(path)
+    if path.is_dir():
+        raise StorageFormatError(f"{path} is a folder, not a file; give the path of the .mot/.sto file in it")
     try:
         text = path.read_text(encoding="utf-8", errors="replace")
     except FileNotFoundError:
@@ -163,9 +171,10 @@ def read_storage(path: str | os.PathLike) -> pd.DataFrame:
             "the file is truncated"
         )
     t = values[:, 0]
-    if np.isnan(t).any():
-        row = int(np.flatnonzero(np.isnan(t))[0]) + 1
-        raise TimeColumnError(f"{path}: column 'time' is NaN at data row {row}")
+    if not np.isfinite(t).all():
+        row = int(np.flatnonzero(~np.isfinite(t))[0]) + 1
+        raise TimeColumnError(f"{path}: column 'time' is {'NaN' if np.isnan(t[row - 1]) else f'{t[row - 1]:g}'} at data row {row}; every time stamp must "
+                              "be a finite number of seconds: fix or remove that row")
     if t.size > 1 and not np.all(np.diff(t) > 0):
         row = int(np.flatnonzero(np.diff(t) <= 0)[0]) + 2
         raise TimeColumnError(
@@ -177,6 +186,23 @@ def read_storage(path: str | os.PathLike) -> pd.DataFrame:
         name=meta["name"], in_degrees=meta["in_degrees"], path=str(path), header=list(header)
     )
     return df
+
+
+def check_time_stamps(df: pd.DataFrame, what: str = "file") -> None:
+    """Refuse a time column that cannot be seconds of a motion recording.
+
+    Raises :class:`TimeColumnError` (naming the file) when the median time step is
+    :data:`MAX_SAMPLE_STEP_S` or more: the stamps are milliseconds or frame numbers.
+    """
+    t = np.asarray(df.index, dtype=float)
+    if t.size < 2:
+        return
+    step = float(np.median(np.diff(t)))
+    if step >= MAX_SAMPLE_STEP_S:
+        raise TimeColumnError(
+            f"{df.attrs.get('path', what)}: the time column steps by {step:g} (a sampling rate of {1 / step:.3g} Hz); "
+            "time must be in seconds: the values look like milliseconds or frame numbers, convert them to seconds"
+        )
 
 
 def _is_float(x: str) -> bool:

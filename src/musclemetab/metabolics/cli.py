@@ -56,6 +56,16 @@ def add_metabolics_parser(subparsers) -> None:
         "--allow-failed", action="store_true",
         help="evaluate a solution whose solve did not succeed (default: refuse)",
     )
+    p.add_argument(
+        "--muscle-properties", metavar="FILE",
+        help="CSV of per-muscle overrides (columns muscle and any of anatomical_muscles, mass_kg, "
+        "slow_twitch_fraction, specific_tension_Pa, function_groups; docs/muscles.md)",
+    )
+    p.add_argument(
+        "--strict", action="store_true",
+        help="refuse muscles the anatomical muscle table cannot place (default: fallback mass and "
+        "slow-twitch fraction 0.5, with a warning naming them)",
+    )
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (may be the solution folder)")
     p.set_defaults(func=metabolics_command)
 
@@ -65,7 +75,10 @@ def metabolics_command(args) -> int:
     from .registry import parse_models
     from .solution import metabolics_from_solution, read_solution_states, write_metabolics
 
+    from ..io import check_output_folder
+
     models = parse_models(args.models)
+    check_output_folder(args.out)
     if args.speed is not None and not (np.isfinite(args.speed) and args.speed > 0):
         raise OptionError(f"--speed must be a positive number of m/s, not {args.speed}")
     states = read_solution_states(args.solution, require_success=not args.allow_failed)
@@ -83,6 +96,8 @@ def metabolics_command(args) -> int:
         muscle_parameters=params,
         basal=args.basal,
         speed_m_per_s=args.speed,
+        muscle_properties=args.muscle_properties,
+        strict=args.strict,
     )
     files = write_metabolics(result, args.out)
     means = ", ".join(f"{m} {result.whole_body[m].mean_W_per_kg:.2f}" for m in result.models)

@@ -207,14 +207,6 @@ def _parameters_for(muscles: Sequence[str], source, what: str) -> dict[str, np.n
     return out
 
 
-def _per_muscle(muscles: Sequence[str], overrides: Mapping[str, float] | None, table) -> np.ndarray:
-    """One value per muscle: from ``overrides`` by name, else from ``table(names)``."""
-    overrides = dict(overrides or {})
-    rest = [m for m in muscles if m not in overrides]
-    values = dict(zip(rest, table(rest))) if rest else {}
-    return np.array([float(overrides[m]) if m in overrides else float(values[m]) for m in muscles])
-
-
 @dataclass
 class SolutionMetabolics:
     """Metabolic rates of every muscle of one solution, for several models.
@@ -313,6 +305,8 @@ def metabolics_from_solution(
     model_options: Mapping[str, Mapping[str, object]] | None = None,
     muscle_masses_kg: Mapping[str, float] | None = None,
     slow_twitch_fractions: Mapping[str, float] | None = None,
+    muscle_properties=None,
+    strict: bool = False,
     cycle_duration_s: float | None = None,
     speed_m_per_s: float | None = None,
     require_success: bool = True,
@@ -343,13 +337,20 @@ def metabolics_from_solution(
     model_options
         Per-model options, e.g. ``{"BH04": {"activation_heat_decay": False}}``.
     muscle_masses_kg, slow_twitch_fractions
-        Overrides by muscle name (otherwise from the property table; unknown muscles
-        raise :class:`~musclemetab.errors.UnknownMuscleError` naming them).
+        Overrides by muscle name (they take precedence over ``muscle_properties``).
+    muscle_properties
+        Override CSV path, :class:`musclemetab.properties.MuscleOverrides` or mapping
+        (:func:`musclemetab.properties.read_muscle_properties`). Otherwise masses and
+        slow-twitch fractions come from the anatomical muscle table; a muscle it cannot
+        place takes ``F0 / sigma * rho * lMo`` and 0.5, named in one warning.
+    strict
+        Unplaced muscles raise :class:`~musclemetab.errors.UnknownMuscleError` instead.
     cycle_duration_s
         ``T`` of the whole-body average (default: the span of the kept nodes).
     speed_m_per_s
         Walking speed, for the cost of transport in the whole-body table.
     """
+    from ..properties import FALLBACK_SLOW_TWITCH_FRACTION, as_overrides
     from ..properties import muscle_masses_kg as _masses
     from ..properties import slow_twitch_fraction as _fst
 
@@ -385,9 +386,21 @@ def metabolics_from_solution(
     keep = trim_slice(n_nodes, *trim)
     time = sol.time_s[keep]
     states = {arg: arr[:, keep] for arg, arr in sol.states.items()}
+    for arg, arr in states.items():  # named here, where the solution and the muscles are known
+        bad = ~np.isfinite(arr)
+        if bad.any():
+            m, k = (int(i) for i in np.argwhere(bad)[0])
+            raise DataMismatchError(
+                f"{sol.source or 'the solution'}: '{arg}' of muscle {muscles[m]} is {arr[m, k]:g} at t = {time[k]:g} s "
+                f"({int(bad.sum())} non-finite values); the solution is damaged or did not converge: solve again"
+            )
 
-    masses = _per_muscle(muscles, muscle_masses_kg, lambda rest: _masses(rest, body_mass_kg, height_m))
-    fst = _per_muscle(muscles, slow_twitch_fractions, _fst)
+    overrides = (as_overrides(muscle_properties).with_column("mass_kg", muscle_masses_kg)
+                 .with_column("slow_twitch_fraction", slow_twitch_fractions))
+    f0 = params["max_isometric_force_N"]
+    masses = _masses(muscles, body_mass_kg, height_m, f0, params["optimal_fiber_length_m"],
+                     overrides=overrides, strict=strict)
+    fst = _fst(muscles, FALLBACK_SLOW_TWITCH_FRACTION, overrides=overrides, max_isometric_force_N=f0)
 
     inputs = dict(states)
     inputs.update(params)

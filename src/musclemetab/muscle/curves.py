@@ -38,6 +38,7 @@ __all__ = [
     "tendon_force_length",
     "tendon_length_from_force",
     "tendon_stiffness_N_per_m",
+    "tendon_stiffness_for_slope",
     "activation_rate",
     "hill_residual",
     "fibre_width",
@@ -183,6 +184,34 @@ def tendon_stiffness_N_per_m(lt_norm, max_isometric_force_N, tendon_slack_length
         np.asarray(max_isometric_force_N) * np.asarray(kT) * np.exp(np.asarray(kT) * (lt - 0.995))
         / (5.0 * np.asarray(tendon_slack_length_m))
     )
+
+
+def tendon_stiffness_for_slope(stiffness_N_per_m, max_isometric_force_N, tendon_slack_length_m,
+                               force_fraction=1.0):
+    """The ``kT`` that gives tendons in parallel a summed slope ``stiffness_N_per_m``.
+
+    Every tendon carries ``force_fraction`` of its maximal isometric force (``fT``); there
+    ``dFT/dlT = F0 kT (fT + 0.25 - shift(kT)) / lTs``, so the summed slope is
+    ``kT (fT + 0.25 - shift(kT)) * sum(F0 / lTs)``, increasing in ``kT``; solved by
+    bisection for one shared ``kT`` (NumPy only).
+    """
+    f0 = np.atleast_1d(np.asarray(max_isometric_force_N, dtype=float))
+    lts = np.atleast_1d(np.asarray(tendon_slack_length_m, dtype=float))
+    target = float(stiffness_N_per_m) / float(np.sum(f0 / lts))
+    ft = float(force_fraction)
+
+    def slope(k):
+        return k * (ft + 0.25 - float(tendon_shift(k)))
+
+    lo, hi = 1e-3, 1.0
+    while slope(hi) < target and hi < 1e4:
+        hi *= 2.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if slope(mid) < target else (lo, mid)
+        if hi - lo < 1e-12 * hi:
+            break
+    return 0.5 * (lo + hi)
 
 
 def activation_rate(

@@ -76,9 +76,11 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
                    help="calibrated passive parameters for effort-cal/effort-ten/emg-ten: passive_parameters.csv "
                    "(muscle,kPE,s0,sM) or the study's passiveMoments.mat (default: the published "
                    "calibration shipped with the package)")
-    p.add_argument("--tendon-stiffness", metavar="MUSCLE=KT[,...]",
-                   help="effort-ten: tendon stiffness per muscle, e.g. soleus_r=10.6,vaslat_r=4.7 "
-                   "(default: triceps surae 10.617977, vasti 4.695786)")
+    p.add_argument("--tendon-stiffness", metavar="MUSCLE=KT[,...]|example",
+                   help="effort-ten: tendon stiffness per muscle, e.g. soleus_r=10.6,vaslat_r=4.7, or 'example' "
+                   "for the example subject's estimates (triceps surae 10.617977, vasti 4.695786) "
+                   "(default: the subject's --parameters, else the literature Achilles and patellar tendon "
+                   "stiffness converted through the model; docs/muscles.md)")
     p.add_argument("--parameters", metavar="parameters.json",
                    help="effort-ten: JSON file with {\"tendon_stiffness\": {muscle: kT}}, e.g. the "
                    "parameters.json written by --workflow emg-ten (or the folder holding it)")
@@ -107,12 +109,15 @@ def solve_command(args) -> int:
     folder with ``success: false``).
     """
     from .inputs import DEFAULT_DOFS
-    from .problem import SolverOptions
+    from .problem import SolverOptions, failure_advice
     from .solve import solve_files
     from .workflows import parse_tendon_stiffness
 
+    from ..io import check_output_folder
+
     if args.max_iter is not None and args.max_iter < 1:
         raise OptionError(f"--max-iter must be at least 1, not {args.max_iter}")
+    check_output_folder(args.out)
     ik, idf = _as_list(args.ik), _as_list(args.id)
     if args.workflow == "emg-ten" or getattr(args, "emg", None):
         return _emg_ten_command(args, ik, idf)
@@ -145,8 +150,8 @@ def solve_command(args) -> int:
     if not solution.success:
         raise SolverError(
             f"the {args.workflow} solve did not converge (IPOPT status '{s['status']}' after "
-            f"{s['iterations']} iterations); the unconverged result is in {args.out} with "
-            "\"success\": false. Check the inputs (units, time ranges) or raise --max-iter"
+            f"{s['iterations']} iterations): {failure_advice(s['status'])}. The unconverged result is in "
+            f"{args.out} with \"success\": false"
         )
     worst_reserve = max(s["reserve_rms_Nm"].values()) if s["reserve_rms_Nm"] else 0.0
     print(
@@ -172,7 +177,7 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
     all trials, then the files."""
     from .emg_ten import EmgTenSettings, solve_emg_ten
     from .inputs import DEFAULT_DOFS
-    from .problem import SolverOptions
+    from .problem import SolverOptions, failure_advice
     from .workflows import get_workflow, parse_tendon_stiffness
 
     mode = args.emg_mode or "constrained"
@@ -211,8 +216,8 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
     if not result.success:
         raise SolverError(
             f"the emg-ten solve did not converge (IPOPT status '{r['status']}' after {r['iterations']} "
-            f"iterations); the unconverged result is in {args.out} with \"success\": false. Check the inputs "
-            "(units, time ranges, EMG normalisation) or raise --max-iter"
+            f"iterations): {failure_advice(r['status'])}. The unconverged result is in {args.out} with "
+            "\"success\": false"
         )
     groups = []
     for g in result.settings.tendon_groups:

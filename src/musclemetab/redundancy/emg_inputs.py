@@ -11,7 +11,7 @@ import numpy as np
 from ..errors import DataMismatchError, InputFileError, OptionError
 from .estimates import PARAMETERS_FILE
 
-__all__ = ["resolve_emg_mapping"]
+__all__ = ["resolve_emg_mapping", "mapping_for_muscles"]
 
 
 def resolve_emg_mapping(mapping: str | Mapping[str, Sequence[str] | str] | os.PathLike = "default") -> dict:
@@ -45,6 +45,21 @@ def resolve_emg_mapping(mapping: str | Mapping[str, Sequence[str] | str] | os.Pa
         if not chans or not all(isinstance(c, str) and c for c in chans):
             raise OptionError(f"EMG mapping: muscle '{m}' needs one or more channel names, not {chans!r}")
         out[str(m)] = chans
+    return out
+
+
+def mapping_for_muscles(emg_mapping, mapping: dict, muscles: Sequence[str]) -> dict:
+    """The named mappings (``default``, ``authors``) placed on other models' muscle names
+    through the anatomical muscle table when the study's names are not in the problem."""
+    from ..properties import default_emg_mapping, resolve_muscles
+
+    named = isinstance(emg_mapping, str) and emg_mapping.strip().lower() in ("default", "authors")
+    if not named or set(mapping) <= set(muscles):
+        return mapping
+    out = default_emg_mapping(muscles)
+    if emg_mapping.strip().lower() == "authors":
+        out.update({r.name: ["ES"] for r in resolve_muscles(muscles, warn=False)
+                    if r.anatomical == ("vastus_intermedius",)})
     return out
 
 

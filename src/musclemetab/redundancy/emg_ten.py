@@ -16,7 +16,10 @@ Couplings: ``s_kT(vaslat) = s_kT(vasmed) = s_kT(vasint)`` and
 ``s_kT(gaslat) = s_kT(gasmed) = s_kT(soleus)`` (consecutive pairs of each group);
 ``s_EMG(vaslat) = s_EMG(vasmed)``, ``s_EMG(vaslat) = s_EMG(vasint)``,
 ``s_EMG(gaslat) = s_EMG(gasmed)``. By default (``EmgTenSettings.coupling = "shared"``) each
-coupled group is one variable (2 tendon factors and 6 EMG factors on the example);
+coupled group is one variable (2 tendon factors and 6 EMG factors on the example). These
+defaults name the study's right-leg model; for other models or the left leg the groups come
+from the anatomical muscle table (tendon ``achilles`` / ``patellar``, EMG scale groups
+``gastrocnemii`` / ``vasti``; :func:`settings_for_muscles`, ``docs/muscles.md``);
 ``coupling = "constraints"`` keeps the study's 6 + 9 factors with the 4 + 3 equalities. Same
 objective, feasible set and bounds; the shared form took 133 IPOPT iterations on the example
 against 158-177 for the constraint form (same optimum).
@@ -65,13 +68,12 @@ from .emg_inputs import (
     _emg_table,
     _labels,
     _require_emg_window,
+    mapping_for_muscles,
     resolve_emg_mapping,
 )
 from .estimates import (
     EMG_TEN,
     PARAMETERS_FILE,
-    TRICEPS_SURAE,
-    VASTI,
     EmgTenResult,
     assemble_result,
     tendon_stiffness_at_force_N_per_mm,
@@ -95,8 +97,8 @@ __all__ = [
     "EmgTenTrial",
     "EmgTenResult",
     "PARAMETERS_FILE",
-    "TRICEPS_SURAE",
-    "VASTI",
+    "settings_for_muscles",
+    "mapping_for_muscles",
     "resolve_emg_mapping",
     "build_emg_ten_nlp",
     "solve_emg_ten_ocp",
@@ -205,6 +207,23 @@ class EmgTenSettings:
         }
 
 
+def settings_for_muscles(settings: EmgTenSettings | None, muscles: Sequence[str]) -> EmgTenSettings:
+    """``settings`` whose default tendon and EMG groups (the study's right-leg model) are
+    replaced, when the problem lacks those muscles, by the groups of the anatomical muscle
+    table for ``muscles`` (any model family, either side; see ``docs/muscles.md``)."""
+    from ..properties import emg_scale_groups, tendon_groups
+
+    settings = settings or EmgTenSettings()
+    default = EmgTenSettings()
+    present = set(muscles)
+    changes = {}
+    if settings.tendon_groups == default.tendon_groups and not set(settings.tendon_muscles) <= present:
+        changes["tendon_groups"] = tuple(tendon_groups(muscles).values())
+    if settings.emg_groups == default.emg_groups and not {m for g in settings.emg_groups for m in g} <= present:
+        changes["emg_groups"] = tuple(emg_scale_groups(muscles).values())
+    return replace(settings, **changes) if changes else settings
+
+
 # ----------------------------------------------------------------------------- problem
 @dataclass(frozen=True)
 class EmgTenTrial:
@@ -241,7 +260,7 @@ def emg_ten_problem(trials: Sequence[EmgTenTrial], params: MuscleTendonParameter
     consecutive members of a group) and ``s_EMG`` of the tracked muscles (alphabetical,
     couplings between the first member of an EMG group and each other one).
     """
-    settings = settings or EmgTenSettings()
+    settings = settings_for_muscles(settings, params.names)
     if not trials:
         raise OptionError("EMG-TEN needs at least one trial")
     muscles = tuple(trials[0].inputs.muscles)
@@ -277,7 +296,7 @@ def build_emg_ten_nlp(
     options: SolverOptions | None = None,
 ) -> dict:
     """The EMG-TEN NLP over all ``trials`` (:func:`.core.build_problem`), without solving it."""
-    settings = settings or EmgTenSettings()
+    settings = settings_for_muscles(settings, params.names)
     options = options or SolverOptions()
     blocks, goals, specs = emg_ten_problem(trials, params, settings)
     return build_problem(blocks, params, goals, specs, optimal_reserve_Nm=options.optimal_reserve_Nm,
@@ -291,7 +310,7 @@ def solve_emg_ten_ocp(
     options: SolverOptions | None = None,
 ) -> ProblemResult:
     """Build and solve the EMG-TEN NLP; never raises on non-convergence (see ``success``)."""
-    settings = settings or EmgTenSettings()
+    settings = settings_for_muscles(settings, params.names)
     blocks, goals, specs = emg_ten_problem(trials, params, settings)
     return solve_problem(blocks, params, goals, specs, options=options, coupling=settings.coupling,
                          mumps_settings=LINEAR_SOLVER_OPTIONS)
@@ -379,6 +398,13 @@ def solve_emg_ten(
     geometries = [compute_geometry(model, ik, dofs=list(dofs), side="r", cache_dir=cache_dir) for ik in ik_paths]
     t_geometry = _time.perf_counter() - t0
     model_parameters = params_request.result()
+    if check_units:
+        from ..model import read_model
+        from .inputs import check_moments_per_body_mass
+
+        mass = read_model(model).body_mass_kg
+        for (_, moments), idp in zip(id_data, id_paths):
+            check_moments_per_body_mass(moments, dofs, mass, idp, model)
     sources = [{"model": Path(model), "ik": Path(ik), "id": Path(idp),
                 "emg": Path(emg) if isinstance(emg, (str, os.PathLike)) else f"EMG table of trial {lab}"}
                for ik, idp, emg, lab in zip(ik_paths, id_paths, emg_paths, labels)]
@@ -411,8 +437,11 @@ def solve_emg_ten_arrays(
     """EMG-TEN from arrays: per trial a geometry-like object, ``(ID time, ID moments)`` with
     columns in the order of ``geometry.dofs``, and an EMG table (time-indexed ``DataFrame``,
     channels as columns, or already mapped to muscles by ``musclemetab.emg.map_channels``)."""
+    from .solve import _restrict_geometry
+
     t_start = _time.perf_counter()
-    settings = settings or EmgTenSettings()
+    settings = settings_for_muscles(settings, _restrict_geometry(list(geometries)[0]).muscles) if geometries \
+        else (settings or EmgTenSettings())
     options = emg_ten_options(options, settings)
     trials, params, wf_record = prepare_emg_ten_trials(
         geometries, model_parameters, id_data, emg_tables, labels=labels, ik_times=ik_times, passive=passive,
@@ -480,6 +509,8 @@ def prepare_emg_ten_trials(
                 "need the same model"
             )
     muscles = tuple(ref.muscles)
+    settings = settings_for_muscles(settings, muscles)
+    mapping = mapping_for_muscles(emg_mapping, mapping, muscles)
     unknown = [m for m in mapping if m not in muscles]
     if unknown:
         raise UnknownMuscleError(

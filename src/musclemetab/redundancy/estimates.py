@@ -8,8 +8,8 @@ force ``F0`` (``fT = 1``)::
 
 (``muscle_model.md`` §7: ``dFT/dlT = F0 kT exp(kT (l~T - 0.995))/(5 lTs)`` and
 ``exp(kT (l~T - 0.995))/5 = fT + 0.25 - shift``). The slope at each trial's peak walking
-tendon force is reported too. The Achilles tendon stiffness is the sum over soleus, gasmed
-and gaslat (three tendons in parallel).
+tendon force is reported too. The Achilles tendon stiffness is the sum over the muscles of
+the Achilles tendon in the anatomical muscle table (three tendons in parallel on the example).
 """
 
 from __future__ import annotations
@@ -26,15 +26,13 @@ from ..muscle import KT_GENERIC, tendon_length_from_force, tendon_stiffness_N_pe
 from .parameters import MuscleTendonParameters
 from .solution import _jsonable
 
-__all__ = ["EMG_TEN", "EmgTenResult", "assemble_result", "PARAMETERS_FILE", "TRICEPS_SURAE", "VASTI",
+__all__ = ["EMG_TEN", "EmgTenResult", "assemble_result", "PARAMETERS_FILE",
            "tendon_stiffness_at_force_N_per_mm"]
 
 EMG_TEN = "emg-ten"
 PARAMETERS_FILE = "parameters.json"
 PARAMETERS_FORMAT = "musclemetab.redundancy.emg_ten_parameters"
 PARAMETERS_VERSION = 1
-TRICEPS_SURAE = ("soleus_r", "gasmed_r", "gaslat_r")
-VASTI = ("vasint_r", "vaslat_r", "vasmed_r")
 
 
 def tendon_stiffness_at_force_N_per_mm(force_norm, max_isometric_force_N, tendon_slack_length_m, kT):
@@ -116,18 +114,23 @@ class EmgTenResult:
         return out
 
     def achilles_stiffness_N_per_mm(self) -> dict | None:
-        """Achilles tendon (soleus + gasmed + gaslat in parallel) stiffness in N/mm.
+        """Achilles tendon stiffness in N/mm: the muscles of the Achilles tendon in the
+        anatomical muscle table (triceps surae) in parallel.
 
         ``{"at_max_isometric_force": k, "at_peak_walking_force": {trial: k}}``, or ``None``
-        when the three muscles' stiffness was not estimated.
+        when no Achilles-tendon muscle's stiffness was estimated.
         """
-        if not all(m in self.tendon_stiffness for m in TRICEPS_SURAE):
+        from ..properties import tendon_groups
+
+        groups = [g for k, g in tendon_groups(list(self.tendon_stiffness)).items() if k.split("_")[0] == "achilles"]
+        if not groups:
             return None
+        members = groups[0]
         at_f0 = self.tendon_stiffness_N_per_mm()
         peak = self.tendon_stiffness_at_peak_force_N_per_mm()
         return {
-            "at_max_isometric_force": float(sum(at_f0[m] for m in TRICEPS_SURAE)),
-            "at_peak_walking_force": {t: float(sum(v[m]["stiffness_N_per_mm"] for m in TRICEPS_SURAE))
+            "at_max_isometric_force": float(sum(at_f0[m] for m in members)),
+            "at_peak_walking_force": {t: float(sum(v[m]["stiffness_N_per_mm"] for m in members))
                                       for t, v in peak.items()},
         }
 

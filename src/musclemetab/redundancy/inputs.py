@@ -23,7 +23,6 @@ Luis I, Afschrift M, De Groote F, Gutierrez-Farewik EM (2024) PLoS Comput Biol.
 
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import dataclass
 from typing import Protocol, Sequence
@@ -50,6 +49,8 @@ __all__ = [
     "select_muscles",
     "prepare_inputs",
     "check_moment_magnitudes",
+    "check_moments_per_body_mass",
+    "MIN_PEAK_MOMENT_NM_PER_KG",
     "check_time_ranges",
 ]
 
@@ -66,8 +67,10 @@ FILTER_CUTOFF_HZ = 6.0
 FILTER_ORDER = 6
 #: A muscle is kept if ``|r| > 1e-4 m`` about a DOF at the first frame.
 MUSCLE_SELECTION_THRESHOLD_M = 1e-4
-# Rotations in radians beyond this are not joint angles (model ranges are below pi).
-_MAX_PLAUSIBLE_ANGLE_RAD = math.pi
+#: The largest joint moment of a walking trial, per kilogram of the model's body mass, is
+#: about 1-1.7 N m/kg (ankle plantarflexion; hip and knee near 1); below this value the
+#: moments are normalised to body mass (N m/kg), which gives a peak near 0.02 "N m/kg".
+MIN_PEAK_MOMENT_NM_PER_KG = 0.2
 
 
 class GeometryLike(Protocol):
@@ -138,6 +141,7 @@ def lowpass_filtfilt(
     sample_rate_hz: float,
     cutoff_hz: float = FILTER_CUTOFF_HZ,
     order: int = FILTER_ORDER,
+    what: str = "a signal",
 ) -> np.ndarray:
     """Zero-phase Butterworth low-pass along axis 0, padded like MATLAB's ``filtfilt``.
 
@@ -147,7 +151,8 @@ def lowpass_filtfilt(
     and starts from steady-state initial conditions; SciPy's ``filtfilt`` does the same with
     ``padtype='odd'`` and that ``padlen`` (SciPy's default would be 21).
 
-    Raises :class:`DataMismatchError` if the signal has no more samples than the padding.
+    Raises :class:`DataMismatchError` if the signal has no more samples than the padding;
+    its message starts with ``what`` (the file or signal, as far as the caller knows it).
     """
     from scipy.signal import butter, filtfilt
 
@@ -156,9 +161,8 @@ def lowpass_filtfilt(
     padlen = 3 * (max(len(a), len(b)) - 1)
     if x.shape[0] <= padlen:
         raise DataMismatchError(
-            f"a signal of {x.shape[0]} samples is too short for the {order}th-order "
-            f"{cutoff_hz:g} Hz zero-phase filter (needs more than {padlen} samples); "
-            "use a longer trial"
+            f"{what} is too short: {x.shape[0]} samples, and the {order}th-order "
+            f"{cutoff_hz:g} Hz zero-phase filter needs more than {padlen}; use a longer trial"
         )
     return filtfilt(b, a, x, axis=0, padtype="odd", padlen=padlen)
 
@@ -188,39 +192,21 @@ def _sample_rate(time: np.ndarray, what: str) -> float:
 def read_kinematics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT_DOFS, check_units: bool = True):
     """Read an IK ``.mot`` file: its time stamps and the DOF angles in radians.
 
-    Checks that every DOF column is present and that the angle units agree with the header:
-    with ``inDegrees=no``, an angle beyond pi rad (180 degrees) means the values are in
-    degrees; with ``inDegrees=yes``, all DOF angles staying below 2.5 "degrees" while the
-    joints move (a walking knee alone flexes by some 60 degrees, i.e. about 1.1 rad) is
-    reported as radians mislabelled as degrees. ``check_units=False`` skips both checks.
+    The file is checked by :func:`musclemetab.geometry.check_kinematics`, the same check the
+    geometry applies: DOF columns present, values finite, time in seconds, and angle units
+    that agree with the header (``check_units=False`` skips the unit check).
 
     Returns
     -------
     time_s : (F,) array
     angles_rad : (F, D) array
     """
-    from ..io import read_storage, require_columns
+    from ..geometry import check_kinematics
+    from ..io import read_storage
 
     ik = read_storage(path)
-    require_columns(ik, dofs, what="IK coordinate column")
-    if len(ik.index) < 2:
-        raise InputFileError(f"{path}: the IK file has fewer than 2 frames")
+    in_degrees = check_kinematics(ik, dofs, check_units)
     q = ik[list(dofs)].to_numpy(dtype=float)
-    in_degrees = ik.attrs.get("in_degrees")
-    peak = float(np.max(np.abs(q)))
-    if check_units and in_degrees is False and peak > _MAX_PLAUSIBLE_ANGLE_RAD:
-        col = dofs[int(np.argmax(np.max(np.abs(q), axis=0)))]
-        raise DataMismatchError(
-            f"{path}: the header says inDegrees=no but column '{col}' reaches {peak:.4g}, which is "
-            "not an angle in radians; the values look like degrees: fix the header to inDegrees=yes"
-        )
-    if in_degrees is None and peak > _MAX_PLAUSIBLE_ANGLE_RAD:
-        in_degrees = True
-    if check_units and in_degrees and peak < 2.5 and float(np.ptp(q, axis=0).max()) > 0.05:
-        raise DataMismatchError(
-            f"{path}: the header says inDegrees=yes but no DOF angle exceeds 2.5 degrees while the "
-            f"joints move (peak {peak:.3g}); the values look like radians: fix the header to inDegrees=no"
-        )
     if in_degrees:
         q = np.deg2rad(q)
     return ik.index.to_numpy(dtype=float), q
@@ -234,9 +220,10 @@ def read_inverse_dynamics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT
     time_s : (T,) array
     moments_Nm : (T, D) array
     """
-    from ..io import read_storage, require_columns
+    from ..io import check_time_stamps, read_storage, require_columns
 
     table = read_storage(path)
+    check_time_stamps(table, "inverse dynamics")
     cols = [f"{d}_moment" for d in dofs]
     try:
         require_columns(table, cols, what="inverse-dynamics column")
@@ -247,7 +234,13 @@ def read_inverse_dynamics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT
         ) from None
     if len(table.index) < 2:
         raise InputFileError(f"{path}: the inverse-dynamics file has fewer than 2 rows")
-    return table.index.to_numpy(dtype=float), table[cols].to_numpy(dtype=float)
+    moments = table[cols].to_numpy(dtype=float)
+    bad = ~np.isfinite(moments)
+    if bad.any():
+        row, col = (int(i) for i in np.argwhere(bad)[0])
+        raise DataMismatchError(f"{path}: column '{cols[col]}' is {moments[row, col]:g} at data row {row + 1}; "
+                                "every moment must be finite: fix or remove the row")
+    return table.index.to_numpy(dtype=float), moments
 
 
 def select_muscles(
@@ -325,6 +318,31 @@ def check_moment_magnitudes(
         )
 
 
+def check_moments_per_body_mass(
+    moments_Nm: np.ndarray, dofs: Sequence[str], body_mass_kg: float, id_path="inverse dynamics",
+    model_path="the model",
+) -> None:
+    """Reject ID moments that look normalised to body mass.
+
+    The largest moment over all DOFs and frames, divided by the model's body mass, must reach
+    :data:`MIN_PEAK_MOMENT_NM_PER_KG` (0.2 N m/kg; walking gives 1-1.7 N m/kg). Moments
+    divided by the mass give about 1/70 of that and are refused with a message naming the
+    file and the column of the largest moment.
+    """
+    M = np.abs(np.asarray(moments_Nm, dtype=float))
+    if not body_mass_kg or body_mass_kg <= 0 or M.size == 0:
+        return
+    peak = float(M.max())
+    per_kg = peak / float(body_mass_kg)
+    if per_kg < MIN_PEAK_MOMENT_NM_PER_KG:
+        col = dofs[int(np.argmax(M.max(axis=0)))]
+        raise DataMismatchError(
+            f"{id_path}: the largest joint moment ('{col}_moment', {peak:.3g}) is {per_kg:.3g} N m per kg of the "
+            f"{body_mass_kg:.4g} kg of {model_path}, below the {MIN_PEAK_MOMENT_NM_PER_KG:g} N m/kg any walking "
+            "trial reaches; the moments look normalised to body mass (N m/kg): multiply them by the body mass"
+        )
+
+
 def prepare_inputs(
     geometry: GeometryLike,
     id_time_s: np.ndarray,
@@ -373,7 +391,12 @@ def prepare_inputs(
             f"geometry arrays have shapes {lmt.shape} and {r.shape}; expected ({F}, {M}) and ({F}, {D}, {M})"
         )
     if not (np.all(np.isfinite(lmt)) and np.all(np.isfinite(r))):
-        raise DataMismatchError("the muscle geometry holds NaN or infinite values")
+        bad = [m for j, m in enumerate(muscles) if not (np.isfinite(lmt[:, j]).all() and np.isfinite(r[:, :, j]).all())]
+        raise DataMismatchError(
+            f"the muscle geometry of {sources.get('ik', 'the IK motion')} holds NaN or infinite values for "
+            f"{', '.join(bad[:5])}{' ...' if len(bad) > 5 else ''}; check that the IK file belongs to "
+            f"{sources.get('model', 'the model')}"
+        )
     if ik_time_s is None:
         ik_time_s = g_time
     ik_time_s = np.asarray(ik_time_s, dtype=float)
@@ -393,9 +416,11 @@ def prepare_inputs(
     fs_ik = _sample_rate(ik_time_s, str(sources.get("ik", "IK")))
     if filter_inputs:
         fs_id = _sample_rate(id_time_s, str(sources.get("id", "ID")))
-        lmt_f = lowpass_filtfilt(lmt, fs_ik, cutoff_hz, filter_order)
-        r_f = lowpass_filtfilt(r.reshape(F, D * M), fs_ik, cutoff_hz, filter_order).reshape(F, D, M)
-        id_f = lowpass_filtfilt(id_moments_Nm, fs_id, cutoff_hz, filter_order)
+        ik_what = f"the IK file {sources.get('ik', '')}".rstrip()
+        lmt_f = lowpass_filtfilt(lmt, fs_ik, cutoff_hz, filter_order, what=ik_what)
+        r_f = lowpass_filtfilt(r.reshape(F, D * M), fs_ik, cutoff_hz, filter_order, what=ik_what).reshape(F, D, M)
+        id_f = lowpass_filtfilt(id_moments_Nm, fs_id, cutoff_hz, filter_order,
+                                what=f"the inverse dynamics {sources.get('id', '')}".rstrip())
     else:
         lmt_f, r_f, id_f = lmt, r, id_moments_Nm
     # ID: filtered on the full file, linearly interpolated onto the IK frames.

@@ -56,6 +56,8 @@ __all__ = [
     "solve_ocp",
     "build_nlp",
     "problem_size",
+    "failure_advice",
+    "INFEASIBLE_STATUSES",
     "tune_malloc",
     "set_blas_threads",
 ]
@@ -157,6 +159,27 @@ class OcpResult(SolveOutcome):
     objective: float
     objective_terms: dict
     n_constraints: int
+
+
+#: IPOPT statuses that mean the constraints cannot be met (not a matter of iterations).
+INFEASIBLE_STATUSES = ("Infeasible_Problem_Detected", "Restoration_Failed", "Not_Enough_Degrees_Of_Freedom",
+                       "Search_Direction_Becomes_Too_Small", "Diverging_Iterates")
+
+
+def failure_advice(status: str) -> str:
+    """What to do about a solve that ended with IPOPT status ``status`` (one sentence)."""
+    if status in INFEASIBLE_STATUSES:
+        return ("the problem is infeasible: the muscles and reserves cannot reproduce the inverse-dynamics "
+                "moments within their bounds; check the inputs (moment units and scale, the IK/ID pair, the "
+                "muscle and passive parameters); more iterations will not help")
+    if status in ("Maximum_Iterations_Exceeded", "Maximum_CpuTime_Exceeded", "Maximum_WallTime_Exceeded"):
+        return "the iteration or time limit was reached; raise --max-iter, or check the inputs"
+    if status in ("Invalid_Number_Detected", "Error_In_Step_Computation"):
+        return ("the solver met NaN or infinite values; check the inputs and parameters for extreme values "
+                "(passive parameters, tendon stiffness, moments)")
+    if status in ("User_Requested_Stop", "NonIpopt_Exception_Thrown"):
+        return "the solve was stopped (interrupt or an error in a callback); run it again"
+    return "check the inputs (units, time ranges, parameters)"
 
 
 def problem_size(n_muscles: int, n_dofs: int, n_intervals: int) -> tuple[int, int]:

@@ -15,27 +15,7 @@ import platform
 from dataclasses import dataclass, field
 from pathlib import Path
 
-__all__ = ["RunRecord", "IPOPT_MESSAGES", "software_versions", "input_hashes"]
-
-#: What IPOPT's return statuses mean, and what to do.
-IPOPT_MESSAGES = {
-    "Solve_Succeeded": "converged to the requested tolerance",
-    "Solved_To_Acceptable_Level": "converged to IPOPT's acceptable (looser) tolerance only",
-    "Maximum_Iterations_Exceeded": "stopped at the iteration limit (max_iter) before converging; raise the "
-    "limit or check the inputs",
-    "Maximum_CpuTime_Exceeded": "stopped at the CPU time limit before converging; raise the limit",
-    "Maximum_WallTime_Exceeded": "stopped at the wall time limit before converging; raise the limit",
-    "Infeasible_Problem_Detected": "the constraints cannot all be met (infeasible): check that the inverse "
-    "dynamics, the muscle geometry and the EMG belong to the same trial and model",
-    "Restoration_Failed": "IPOPT's feasibility restoration failed: the problem is nearly infeasible; check "
-    "the inputs (moments, geometry, EMG bounds)",
-    "Search_Direction_Becomes_Too_Small": "the search direction became too small before converging",
-    "Diverging_Iterates": "the iterates diverged; check the inputs and bounds",
-    "Error_In_Step_Computation": "the linear solver failed in the step computation",
-    "Invalid_Number_Detected": "a NaN or infinite value was met while evaluating the problem; check the inputs",
-    "User_Requested_Stop": "stopped on request",
-}
-
+__all__ = ["RunRecord", "software_versions", "input_hashes"]
 
 def software_versions() -> dict:
     """Versions of musclemetab, Python and (when importable) CasADi."""
@@ -81,7 +61,10 @@ class RunRecord:
 
     @property
     def message(self) -> str:
-        return IPOPT_MESSAGES.get(self.status, f"IPOPT returned {self.status}")
+        """What the status means and what to do (:func:`~.problem.failure_advice`)."""
+        from .problem import failure_advice
+
+        return "converged" if self.success else failure_advice(self.status)
 
     @classmethod
     def from_result(cls, result, sources: dict | None = None) -> "RunRecord":

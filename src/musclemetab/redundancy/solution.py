@@ -26,7 +26,10 @@ A solution folder holds two files:
     depends on them: ``fV`` and the active fibre force) and reserves live on the intervals,
     i.e. at nodes ``0 ... N-1``; at node ``N`` the file repeats the value of node ``N-1``.
 ``summary.json``
-    Status, objective, iterations, times, residuals, reserve RMS per DOF, muscles, DOFs,
+    Status, objective, iterations, times, residuals, reserve RMS per DOF (and
+    ``reserve_share_of_peak_moment``, the largest reserve RMS over the peak joint moment;
+    ``large_reserve`` is true, with a :class:`~musclemetab.errors.LargeReserveWarning`,
+    above :data:`LARGE_RESERVE_SHARE`, 1 %), muscles, DOFs,
     the muscle parameters used, the window, ``N`` and the workflow settings.
 
 Both files are written together (:func:`musclemetab.io.atomic_directory`): a reader never
@@ -38,12 +41,13 @@ from __future__ import annotations
 import json
 import math
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputFileError, MissingColumnError, SolverError
+from ..errors import InputFileError, LargeReserveWarning, MissingColumnError, SolverError
 from ..muscle import (
     active_force_length,
     activation_rate,
@@ -67,6 +71,10 @@ SOLUTION_FILE = "solution.sto"
 SUMMARY_FILE = "summary.json"
 SUMMARY_FORMAT = "musclemetab.redundancy.solution"
 SUMMARY_VERSION = 1
+#: Largest reserve RMS (over DOFs), as a share of the peak joint moment (over DOFs and
+#: nodes), above which a solution is flagged: the study's solutions stay below 0.1 %; moments
+#: three times too large (muscles at their limits) give about 4 %.
+LARGE_RESERVE_SHARE = 0.01
 
 MUSCLE_QUANTITIES = (
     "excitation",
@@ -162,7 +170,8 @@ def read_solution_folder(
     if require_success and not summary.get("success", False):
         raise SolverError(
             f"{directory}: the stored solve did not succeed (status '{summary.get('status')}'); "
-            "its values are not a solution. Solve again or pass require_success=False to inspect it"
+            "its values are not a solution. Solve again, or to inspect it anyway use --allow-failed "
+            "(musclemetab metabolics) or require_success=False (Python)"
         )
     return read_storage(spath), summary
 
@@ -378,6 +387,18 @@ def build_solution(
     hill_res = (fibre * d["cos_pennation"] - d["tendon_force_norm"])[:N]
     act_res = ocp.activation[1:] - ocp.activation[:-1] - h * activation_rate(ocp.excitation, ocp.activation[:N])
     reserve_rms = np.sqrt(np.mean(ocp.reserve**2, axis=0)) * summary.get("optimal_reserve_Nm", 150.0)
+    peak_moment = float(np.max(np.abs(inputs.moments_Nm))) if inputs.moments_Nm.size else 0.0
+    share = float(np.max(reserve_rms)) / peak_moment if peak_moment > 0 else 0.0
+    large = share > LARGE_RESERVE_SHARE
+    if large:
+        dof = inputs.dofs[int(np.argmax(reserve_rms))]
+        warnings.warn(
+            f"{summary.get('inputs', {}).get('id', 'the inverse dynamics')}: the reserve about {dof} has an RMS of "
+            f"{float(np.max(reserve_rms)):.3g} N m, {100 * share:.2g} % of the peak joint moment ({peak_moment:.4g} "
+            f"N m), above {100 * LARGE_RESERVE_SHARE:g} %: the muscles do not explain the moments; check the "
+            "moments' scale and that the inverse dynamics belongs to this model and trial",
+            LargeReserveWarning, stacklevel=2,
+        )
     summary = dict(summary)
     summary.update(
         max_moment_residual_Nm=float(np.max(np.abs(moment_res))),
@@ -386,6 +407,8 @@ def build_solution(
         max_activation_dynamics_residual=float(np.max(np.abs(act_res))),
         reserve_rms_Nm=dict(zip(inputs.dofs, reserve_rms.tolist())),
         reserve_max_abs_Nm=dict(zip(inputs.dofs, np.max(np.abs(reserve_Nm), axis=0).tolist())),
+        reserve_share_of_peak_moment=share,
+        large_reserve=bool(large),
     )
     return Solution(
         time_s=inputs.mesh_time_s.copy(),

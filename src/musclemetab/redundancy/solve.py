@@ -19,6 +19,7 @@ import numpy as np
 from .inputs import (
     DEFAULT_DOFS,
     check_moment_magnitudes,
+    check_moments_per_body_mass,
     check_time_ranges,
     prepare_inputs,
     read_inverse_dynamics,
@@ -218,6 +219,10 @@ def solve_files(
     import scipy.signal  # noqa: F401
 
     model_parameters = params_request.result()
+    if check_units:
+        from ..model import read_model
+
+        check_moments_per_body_mass(id_moments, dofs, read_model(model_path).body_mass_kg, id_path, model_path)
     sources = {"model": Path(model_path), "ik": Path(ik_path), "id": Path(id_path)}
     solution = solve_trial(
         geometry, model_parameters, id_time, id_moments, wf,

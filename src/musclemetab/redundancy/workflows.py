@@ -1,15 +1,23 @@
 """The effort-based workflows of the study and their muscle parameters.
 
-==============  =====================================  ==========================================
-workflow        passive force-length (kPE, s0, sM)     tendon stiffness kT
-==============  =====================================  ==========================================
-``effort-gen``  generic: 4, 1, 0.6 for every muscle    35 for every muscle
+==============  =====================================  ===================================workflow        passive force-length (kPE, s0, sM)     tendon stiffness kT
+==============  =====================================  ===================================``effort-gen``  generic: 4, 1, 0.6 for every muscle    35 for every muscle
 ``effort-cal``  calibrated                             35 for every muscle
-``effort-ten``  calibrated                             35, except triceps surae (soleus, gasmed,
-                                                       gaslat) 10.617977 and vasti (vasint,
-                                                       vaslat, vasmed) 4.695786 (example-subject
-                                                       EMG-informed estimates), settable per muscle
-==============  =====================================  ==========================================
+``effort-ten``  calibrated                             personalised for the muscles of the Achilles
+                                                       (triceps surae) and patellar (vasti)
+                                                       tendons, 35 for the others
+==============  =====================================  ===================================
+EFFORT-TEN's personalised ``kT``, in this order of precedence (``summary.json`` records the
+source of every value, ``tendon_stiffness_sources``, and their kinds,
+``tendon_stiffness_source``):
+
+* ``--tendon-stiffness muscle=kT,...`` (names with or without side suffix);
+* the subject's own EMG-TEN estimate (``--parameters parameters.json``);
+* ``--tendon-stiffness example``: the example subject's estimates (triceps surae 10.617977,
+  vasti 4.695786), placed through the anatomical muscle table; used only when asked for;
+* otherwise a literature default per anatomical tendon, given in N/mm and converted into
+  ``kT`` through the model's maximal isometric forces and tendon slack lengths
+  (``data/tendon_stiffness_literature.csv``, ``docs/muscles.md``).
 
 All three use the weights ``[wAct, wTres, wVm] = [1, 1000, 0.01]`` (``muscle_redundancy.md`` §2).
 
@@ -19,8 +27,7 @@ Calibrated passive parameters come from, in this order of preference:
   (columns ``muscle,kPE,s0,sM``) or the study's ``passiveMoments.mat``
   (``sim.Results.onlyParam.calParam.kpe/ksf``, ``sM = 0.6``);
 * otherwise the published calibration of the example subject shipped with the package
-  (``kpe_calibrated_reference``, ``s0_calibrated_reference`` of
-  ``musclemetab/data/muscle_properties.csv``). ``summary.json`` records which was used.
+  (``musclemetab/data/study_passive_parameters.csv``, names of the study's model). ``summary.json`` records which was used.
 
 Names are matched by muscle name; a table without side suffix (``soleus``) applies to both
 ``soleus_r`` and ``soleus_l``, and a value for one side is used for the other when the table
@@ -54,25 +61,25 @@ __all__ = [
     "generic_passive_parameters",
     "read_tendon_stiffness_json",
     "parse_tendon_stiffness",
-    "DEFAULT_PERSONALISED_KT",
+    "EXAMPLE",
+    "example_tendon_stiffness",
+    "literature_tendon_stiffness",
     "workflow_parameters",
     "check_workflow_options",
     "base_name",
 ]
 
 GENERIC_KPE, GENERIC_S0, GENERIC_SM = 4.0, 1.0, 0.6
+#: ``--tendon-stiffness example``: the example subject's estimates, only when asked for.
+EXAMPLE = "example"
+#: Plausible ranges of passive parameters read from a file (generic 4, 1, 0.6; the study's
+#: calibration bounds kPE to 3-5 and s0 to 0.8-1.2). Values outside are typos or other
+#: conventions, and overflow the exponential passive curve.
+PASSIVE_RANGES = {"kPE": (0.1, 50.0), "s0": (0.25, 4.0), "sM": (0.05, 2.0)}
 
 #: Example-subject EMG-informed tendon stiffness (``muscle_redundancy.md`` §6.8).
 KT_TRICEPS_SURAE = 10.617977
 KT_VASTI = 4.695786
-DEFAULT_PERSONALISED_KT = {
-    "soleus": KT_TRICEPS_SURAE,
-    "gasmed": KT_TRICEPS_SURAE,
-    "gaslat": KT_TRICEPS_SURAE,
-    "vasint": KT_VASTI,
-    "vaslat": KT_VASTI,
-    "vasmed": KT_VASTI,
-}
 
 
 @dataclass(frozen=True)
@@ -160,33 +167,58 @@ def generic_passive_parameters(muscles: Sequence[str]) -> PassiveParameters:
     return PassiveParameters({m: (GENERIC_KPE, GENERIC_S0, GENERIC_SM) for m in muscles}, "generic")
 
 
-def _package_table() -> list[dict]:
-    text = resources.files("musclemetab").joinpath("data/muscle_properties.csv").read_text(encoding="utf-8")
-    lines = [ln for ln in text.splitlines() if not ln.startswith("#")]
-    return list(csv.DictReader(io.StringIO("\n".join(lines))))
-
-
 def reference_passive_parameters() -> PassiveParameters:
     """The published passive calibration shipped with the package (side-free names, sM = 0.6)."""
-    rows = _package_table()
-    values = {
-        r["muscle"]: (float(r["kpe_calibrated_reference"]), float(r["s0_calibrated_reference"]), GENERIC_SM)
-        for r in rows
-        if r.get("kpe_calibrated_reference") and r.get("s0_calibrated_reference")
-    }
-    return PassiveParameters(values, "package:muscle_properties.csv (published calibration)")
+    from ..properties import study_passive_parameters
+
+    values = {m: (kpe, s0, GENERIC_SM) for m, (kpe, s0) in study_passive_parameters().items()}
+    return PassiveParameters(values, "package:study_passive_parameters.csv (published calibration)")
 
 
-def _tendon_groups() -> dict[str, str]:
-    try:
-        return {r["muscle"]: r.get("tendon_stiffness_group", "") for r in _package_table()}
-    except (OSError, KeyError):  # pragma: no cover
-        return {}
+def example_tendon_stiffness(muscles: Sequence[str]) -> dict[str, float]:
+    """The example subject's EMG-TEN estimates, placed by tendon (Achilles: triceps surae
+    10.617977, patellar: vasti 4.695786) on the muscles of any model and side."""
+    from ..properties import resolve_muscles
+
+    values = {"achilles": KT_TRICEPS_SURAE, "patellar": KT_VASTI}
+    return {r.name: values[r.tendon] for r in resolve_muscles(muscles, warn=False) if r.tendon in values}
+
+
+def literature_tendon_stiffness(muscles: Sequence[str], max_isometric_force_N, tendon_slack_length_m
+                                ) -> tuple[dict[str, float], dict[str, str], dict]:
+    """The literature default: per anatomical tendon and side, the shared ``kT`` that gives the
+    muscles of the tendon the tabulated stiffness (N/mm) at the tabulated force.
+
+    Returns ``({muscle: kT}, {muscle: source}, {tendon_side: details})``.
+    """
+    from ..muscle import tendon_stiffness_for_slope
+    from ..properties import tendon_groups, tendon_literature
+
+    lit = tendon_literature()
+    pos = {m: i for i, m in enumerate(muscles)}
+    f0 = np.asarray(max_isometric_force_N, dtype=float)
+    lts = np.asarray(tendon_slack_length_m, dtype=float)
+    kt, src, details = {}, {}, {}
+    for key, members in tendon_groups(muscles).items():
+        tendon = key.rsplit("_", 1)[0] if key not in lit else key
+        if tendon not in lit:
+            continue
+        k_mm, frac, source = lit[tendon]
+        idx = [pos[m] for m in members]
+        value = tendon_stiffness_for_slope(k_mm * 1000.0, f0[idx], lts[idx], frac)
+        details[key] = {"muscles": list(members), "stiffness_N_per_mm": k_mm, "reference_force_fraction": frac,
+                        "kT": value, "source": source}
+        for m in members:
+            kt[m] = value
+            src[m] = f"literature ({tendon} tendon {k_mm:g} N/mm at {frac:g} F0)"
+    return kt, src, details
 
 
 def read_passive_parameters(path: str | os.PathLike) -> PassiveParameters:
     """Read calibrated passive parameters from ``passive_parameters.csv`` or ``passiveMoments.mat``."""
     path = Path(path)
+    if path.is_dir():
+        raise InputFileError(f"{path} is a folder, not a passive-parameter file; give the path of the file")
     if not path.is_file():
         raise InputFileError(f"{path}: no such passive-parameter file; check the --passive path")
     if path.suffix.lower() == ".mat":
@@ -227,7 +259,20 @@ def _read_passive_csv(path: Path) -> PassiveParameters:
         values[row["muscle"]] = (kpe, s0, sm)
     if not values:
         raise InputFileError(f"{path}: no rows; the passive parameter table is empty")
+    _check_passive_ranges(values, path)
     return PassiveParameters(values, str(path))
+
+
+def _check_passive_ranges(values: Mapping[str, tuple[float, float, float]], path) -> None:
+    """:class:`InputFileError` naming the file, muscle and parameter outside :data:`PASSIVE_RANGES`."""
+    for muscle, triple in values.items():
+        for name, v in zip(("kPE", "s0", "sM"), triple):
+            lo, hi = PASSIVE_RANGES[name]
+            if math.isfinite(v) and not lo <= v <= hi:
+                raise InputFileError(
+                    f"{path}: muscle '{muscle}' has {name} = {v:g}, outside the plausible {lo:g}-{hi:g}; "
+                    "fix the value (the generic values are kPE 4, s0 1, sM 0.6)"
+                )
 
 
 def _read_passive_mat(path: Path) -> PassiveParameters:
@@ -250,11 +295,15 @@ def _read_passive_mat(path: Path) -> PassiveParameters:
     if not (len(names) == kpe.size == ksf.size):
         raise InputFileError(f"{path}: {len(names)} muscle names but {kpe.size} kpe and {ksf.size} ksf values")
     values = {n: (float(k), float(s), GENERIC_SM) for n, k, s in zip(names, kpe, ksf)}
+    _check_passive_ranges(values, path)
     return PassiveParameters(values, str(path))
 
 
-def parse_tendon_stiffness(text: str) -> dict[str, float]:
-    """Parse ``"soleus_r=10.6,gasmed_r=10.6"`` into ``{muscle: kT}``."""
+def parse_tendon_stiffness(text: str) -> dict[str, float] | str:
+    """Parse ``"soleus_r=10.6,gasmed_r=10.6"`` into ``{muscle: kT}``; ``"example"`` is kept
+    as the request for the example subject's estimates."""
+    if str(text).strip().lower() == EXAMPLE:
+        return EXAMPLE
     out: dict[str, float] = {}
     for item in (s.strip() for s in str(text).split(",")):
         if not item:
@@ -332,7 +381,7 @@ def _apply_by_name(muscles: Sequence[str], table: Mapping[str, float], what: str
 def check_workflow_options(
     workflow: str | Workflow,
     passive=None,
-    tendon_stiffness: Mapping[str, float] | None = None,
+    tendon_stiffness: Mapping[str, float] | str | None = None,
     tendon_stiffness_file=None,
 ) -> Workflow:
     """Reject option combinations a workflow does not accept; returns the :class:`Workflow`."""
@@ -356,7 +405,7 @@ def workflow_parameters(
     muscles: Sequence[str],
     *,
     passive: str | os.PathLike | PassiveParameters | None = None,
-    tendon_stiffness: Mapping[str, float] | None = None,
+    tendon_stiffness: Mapping[str, float] | str | None = None,
     tendon_stiffness_file: str | os.PathLike | None = None,
 ) -> tuple[MuscleTendonParameters, dict]:
     """Muscle parameters of a workflow for the given muscles, and a record of their sources.
@@ -397,11 +446,16 @@ def workflow_parameters(
               "weights": {"w_activation": wf.w_activation, "w_reserve": wf.w_reserve,
                           "w_velocity": wf.w_velocity}}
     if wf.tendon == "personalised":
-        groups = _tendon_groups()
-        defaults = {name: KT_TRICEPS_SURAE if g == "PF" else KT_VASTI
-                    for name, g in groups.items() if g in ("PF", "VA")} or dict(DEFAULT_PERSONALISED_KT)
-        resolved = _apply_by_name(muscles, defaults, "default tendon stiffness", strict=False)
-        sources = {m: "default (example-subject EMG-informed estimate)" for m in resolved}
+        use_example = isinstance(tendon_stiffness, str)
+        if use_example and tendon_stiffness.strip().lower() != EXAMPLE:
+            raise OptionError(f"--tendon-stiffness: '{tendon_stiffness}' is neither 'example' nor muscle=kT pairs")
+        resolved, sources, record["tendon_stiffness_literature"] = literature_tendon_stiffness(
+            muscles, base["max_isometric_force_N"], base["tendon_slack_length_m"])
+        if use_example:
+            example = example_tendon_stiffness(muscles)
+            resolved.update(example)
+            sources.update({m: "example (example subject's EMG-TEN estimate, asked for)" for m in example})
+            tendon_stiffness = None
         if tendon_stiffness_file is not None:
             table = read_tendon_stiffness_json(tendon_stiffness_file)
             # values for the other leg's muscles (same name, other side) are not an error
@@ -421,6 +475,7 @@ def workflow_parameters(
             kt[muscles.index(m)] = v
         record["tendon_stiffness"] = {m: resolved[m] for m in muscles if m in resolved}
         record["tendon_stiffness_sources"] = {m: sources[m] for m in muscles if m in sources}
+        record["tendon_stiffness_source"] = sorted({s.split(" ")[0] for s in record["tendon_stiffness_sources"].values()})
     record["tendon_stiffness_other_muscles"] = KT_GENERIC
 
     params = MuscleTendonParameters(

@@ -86,7 +86,16 @@ GROUP_COLOURS = {
     "other": "#969696",
 }
 
-#: Muscles of the excitation and fibre-length figure (side suffix added when matching).
+def default_muscles(available: Sequence[str], side: str = "r") -> list[str]:
+    """Muscles of the excitation and fibre-length figure: the report list of the anatomical
+    muscle table (column ``report_order``) placed on ``available`` (``side`` leg, else all)."""
+    from ..properties import report_muscles, split_side
+
+    on_side = [m for m in available if split_side(m)[1] == side]
+    return report_muscles(on_side or list(available))
+
+
+#: Side-free names of the figure's muscles in the study's model (``default_muscles`` of it).
 DEFAULT_MUSCLES = (
     "soleus", "gasmed", "gaslat", "tibant", "vasmed", "vaslat",
     "recfem", "bflh", "semiten", "glmax2", "glmed2", "iliacus",
@@ -275,8 +284,9 @@ def excitations_and_fiber_lengths(
         drawn.
     muscles
         Muscle names, with or without the side suffix (``soleus`` matches ``soleus_r``, the
-        ``side`` leg first). Default :data:`DEFAULT_MUSCLES`; default muscles absent from every
-        solution are left out, named ones raise :class:`UnknownMuscleError`.
+        ``side`` leg first). Default: :func:`default_muscles` of the solutions' muscles (the
+        report list of the anatomical muscle table); named muscles absent from every solution
+        raise :class:`UnknownMuscleError`.
 
     Per muscle, an excitation panel (-) above a fibre-length panel (``lM/lMo``), one line per
     workflow, a vertical line at toe-off; the fibre-length panels shade the plateau of the
@@ -297,7 +307,8 @@ def excitations_and_fiber_lengths(
             )
         cyc[w] = vals
     explicit = muscles is not None
-    wanted = list(DEFAULT_MUSCLES if muscles is None else muscles)
+    wanted = list(muscles) if explicit else default_muscles(
+        list(dict.fromkeys(m for w in workflows for m in solutions[w].muscles)), side)
     rows: list[tuple[str, dict]] = []  # (label, {workflow: column name})
     for name in wanted:
         found = {}

@@ -52,10 +52,24 @@ def add_demo_parser(sub) -> None:
 def _print_run(run, command: str) -> None:
     print(f"{command}: {run.summary_line()}")
     for label, reason in run.failed.items():
-        print(f"{command}: failed {label}: {reason}")
+        if label not in run.interrupted:
+            print(f"{command}: failed {label}: {reason}")
+    if run.removed_partials:
+        print(f"{command}: removed {len(run.removed_partials)} unfinished unit folder(s) left by an earlier run")
     report = getattr(run, "report", None)
     if report:
         print(f"{command}: report -> {report}")
+
+
+def _status(run) -> int:
+    """Exit status: 130 after Ctrl-C, 1 when a unit failed, 0 otherwise."""
+    if run.interrupted:
+        import sys
+
+        print(f"musclemetab: interrupted; {len(run.interrupted)} unit(s) marked interrupted, no new unit started. "
+              "Run the same command again to finish the study", file=sys.stderr)
+        return 130
+    return _status(run)
 
 
 def run_command(args) -> int:
@@ -65,12 +79,12 @@ def run_command(args) -> int:
     study = load_study(args.study, output=args.out)
     run = run_study(study, workers=args.workers, scheduler=args.scheduler, force=args.force,
                     progress=not args.no_progress)
-    if args.report:
+    if args.report and not run.interrupted:
         from ..report import write_report
 
         run.report = write_report(study.output)
     _print_run(run, "run")
-    return 1 if run.failed else 0
+    return _status(run)
 
 
 def demo_command(args) -> int:
@@ -79,6 +93,8 @@ def demo_command(args) -> int:
     run = run_demo(args.out, workers=args.workers, speeds=args.speeds, progress=not args.no_progress,
                    force=args.force)
     _print_run(run, "demo")
+    if run.interrupted:
+        return _status(run)
     if not run.failed and run.results is not None and len(run.results):
         table = run.results.pivot_table(index="model", columns=["workflow", "trial"], values="mean_W_per_kg")
         trials = list(dict.fromkeys(run.results.sort_values("speed_m_per_s")["trial"]))  # by speed

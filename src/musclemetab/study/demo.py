@@ -47,6 +47,8 @@ def demo_study(out: str | os.PathLike = "musclemetab-demo", *, speeds=None,
         f"body_mass_kg = {ex.body_mass_kg}",
         f"height_m = {ex.height_m}",
         f"passive = {_toml_string(ex.passive_moments_mat)}",
+        '# the study\'s EMG-informed tendon stiffness of this subject (triceps surae, vasti)',
+        'tendon_stiffness = "example"',
     ]
     for s in speeds:
         lines += [
@@ -69,7 +71,7 @@ def run_demo(out: str | os.PathLike = "musclemetab-demo", *, workers: int | None
 
     study = demo_study(out, speeds=speeds)
     run = run_study(study, workers=workers, progress=progress, force=force)
-    if report:
+    if report and not run.interrupted:
         from ..report import write_report
 
         run.report = write_report(study.output)

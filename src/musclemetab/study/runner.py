@@ -7,7 +7,9 @@ trial units — and gathers every complete unit into one results table:
 ``DIR/results.csv`` and ``DIR/results.parquet``
     one row per subject × trial × workflow × model: whole-body rate (W/kg, with and
     without basal heat), cost of transport, stance and swing shares, muscle-group shares,
-    toe-off (% of the cycle), speed and measured rate when the study gives calorimetry.
+    toe-off (% of the cycle), speed and measured rate when the study gives calorimetry, and
+    ``large_reserve`` (the solve's reserves exceed 1 % of the peak joint moment, see
+    :data:`musclemetab.redundancy.solution.LARGE_RESERVE_SHARE`).
 ``DIR/failures.csv``
     one row per failed unit with its reason.
 ``DIR/study.json``
@@ -18,12 +20,23 @@ Executors: ``workers=1`` runs the units in this process, one after the other;
 worker); ``scheduler="tcp://host:port"`` on a Dask cluster (``pip install
 musclemetab[dask]``; the workers need musclemetab installed and the study's files at the
 same paths). A unit failure is recorded and the other units go on.
+
+Safety: the options (``workers``, ``scheduler``) and the output folder are checked, and the
+cluster connected, before anything is written. While a run works on a study folder it holds
+the lock file ``DIR/.musclemetab.lock`` (process id, host, start time); a second run on the
+same folder refuses with a message naming the lock. A lock left by a process that no longer
+runs (on this host) is stale and taken over. Temporary unit folders a killed run left are
+removed at the next run. Ctrl-C stops the run: the running units are recorded as
+``interrupted`` (their folders stay as they were), no new unit starts, and the results table
+is written from the complete units.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import signal
+import socket
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -32,16 +45,30 @@ from pathlib import Path
 
 from .. import __version__
 from ..errors import OptionError
-from ..io.atomic import atomic_path, atomic_write_text
+from ..io.atomic import atomic_path, atomic_write_text, check_output_folder
 from .spec import Study
-from .units import Unit, execute_unit, is_complete, plan_units, read_unit_record, unit_key
+from .units import (
+    INTERRUPTED,
+    Unit,
+    execute_unit,
+    is_complete,
+    plan_units,
+    read_unit_record,
+    remove_stale_partials,
+    unit_folder,
+    unit_key,
+)
 
-__all__ = ["run_study", "StudyRun", "collect_results", "software_versions", "RESULTS_CSV", "RESULTS_PARQUET"]
+__all__ = ["run_study", "StudyRun", "collect_results", "software_versions", "study_lock", "check_scheduler_address",
+           "RESULTS_CSV", "RESULTS_PARQUET", "LOCK_FILE"]
 
 RESULTS_CSV = "results.csv"
 RESULTS_PARQUET = "results.parquet"
 FAILURES_CSV = "failures.csv"
 STUDY_JSON = "study.json"
+LOCK_FILE = ".musclemetab.lock"
+#: Seconds to wait for a Dask scheduler that has a valid address.
+SCHEDULER_TIMEOUT_S = 5
 
 #: columns of the results table that identify a row
 ID_COLUMNS = ("subject", "trial", "workflow", "model")
@@ -55,17 +82,37 @@ class StudyRun:
     ran: list[str] = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)
     failed: dict[str, str] = field(default_factory=dict)
+    blocked: list[str] = field(default_factory=list)
+    interrupted: list[str] = field(default_factory=list)
+    n_planned: int = 0
     wall_time_s: float = 0.0
     results: object = None  # pandas.DataFrame
     report: Path | None = None
+    removed_partials: list[Path] = field(default_factory=list)
 
     @property
     def n_units(self) -> int:
-        return len(self.ran) + len(self.skipped)
+        return self.n_planned or len(self.ran) + len(self.skipped) + len(self.blocked)
 
     def summary_line(self) -> str:
-        return (f"{self.n_units} units: {len(self.ran)} run, {len(self.skipped)} up to date, "
-                f"{len(self.failed)} failed; {0 if self.results is None else len(self.results)} result rows "
+        """``N units: a run, b up to date, c not run (...), d interrupted; e failed; ...``.
+
+        Every planned unit is counted once among run, up to date, not run because a unit it
+        needs failed, and not started (after an interruption); ``failed`` counts the run
+        units that failed plus the units not run because of a failure.
+        """
+        parts = [f"{len(self.ran)} run", f"{len(self.skipped)} up to date"]
+        if self.blocked:
+            parts.append(f"{len(self.blocked)} not run (a unit they need failed)")
+        not_started = self.n_units - len(self.ran) - len(self.skipped) - len(self.blocked)
+        if self.interrupted or not_started:
+            parts.append(f"{not_started} not started")
+        failed = len([u for u in self.failed if u not in self.interrupted])
+        tail = f"; {failed} failed"
+        if self.interrupted:
+            tail += f", {len(self.interrupted)} interrupted"
+        return (f"{self.n_units} unit{'s' if self.n_units != 1 else ''}: {', '.join(parts)}{tail}; "
+                f"{0 if self.results is None else len(self.results)} result rows "
                 f"in {self.wall_time_s:.1f} s -> {self.output}")
 
 
@@ -113,53 +160,136 @@ class _Progress:
         self.stream.flush()
 
 
-def _executor(workers: int, scheduler: str | None):
-    """A ``submit``/``as_completed`` pair for the chosen executor, and a closer."""
-    if scheduler:
+def check_scheduler_address(address: str) -> str:
+    """Check a Dask scheduler address without connecting; :class:`OptionError` if unusable.
+
+    Accepted: ``tcp://host:port``, and ``tls://host:port`` when the Dask configuration
+    holds the TLS settings (``distributed.comm.tls.ca-file`` and the client's certificate).
+    """
+    hint = "give the scheduler's address as tcp://host:port (Dask's default port is 8786)"
+    if not isinstance(address, str) or "://" not in address:
+        raise OptionError(f"--scheduler {address!r} is not an address; {hint}")
+    scheme, _, rest = address.partition("://")
+    scheme = scheme.lower()
+    if scheme in ("http", "https"):
+        raise OptionError(f"--scheduler {address}: {scheme}:// is the dashboard's web address, not the scheduler's; "
+                          f"{hint}")
+    if scheme not in ("tcp", "tls"):
+        raise OptionError(f"--scheduler {address}: unknown protocol {scheme}://; {hint}")
+    host, sep, port = rest.rstrip("/").rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536 or "/" in host:
+        raise OptionError(f"--scheduler {address}: no host and port number; {hint}")
+    if scheme == "tls":
         try:
-            from distributed import Client
-            from distributed import as_completed as dask_completed
+            import dask.config
         except ImportError:
+            raise OptionError("--scheduler needs Dask's distributed scheduler: pip install 'musclemetab[dask]'") from None
+        tls = dask.config.get("distributed.comm.tls", {}) or {}
+        client = tls.get("client") or {}
+        if not tls.get("ca-file") or not client.get("cert"):
             raise OptionError(
-                "--scheduler needs Dask's distributed scheduler: pip install 'musclemetab[dask]'"
-            ) from None
-        try:
-            client = Client(scheduler, timeout="10s")
-        except (OSError, TimeoutError) as exc:
-            raise OptionError(f"cannot connect to the Dask scheduler at {scheduler} ({exc}); "
-                              "check the address (tcp://host:port) and that the scheduler runs") from None
-
-        def submit(fn, *args):
-            return client.submit(fn, *args, pure=False)
-
-        return submit, dask_completed, client.close
-    if workers <= 1:
-        return None, None, lambda: None
-    import multiprocessing
-
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
-    return pool.submit, as_completed, lambda: pool.shutdown(wait=True, cancel_futures=True)
+                f"--scheduler {address}: tls:// needs Dask's TLS settings (distributed.comm.tls.ca-file and "
+                "distributed.comm.tls.client.cert/key in the Dask configuration); set them, or use tcp://"
+            )
+    return address
 
 
-def _run_units(study: Study, jobs: list[tuple[Unit, str, str | None]], submit, completed, progress: _Progress) -> dict:
-    """Run ``(unit, key, dependency folder)`` jobs; returns ``{unit: record}``."""
+def _ignore_sigint() -> None:
+    """Pool worker start-up: Ctrl-C is handled by the unit running in it, not by the idle worker."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+class _Executor:
+    """``submit``/``completed`` for the chosen executor, with ``interrupt`` and ``close``."""
+
+    def __init__(self, workers: int, scheduler: str | None):
+        self.submit = self.completed = None
+        self._pool = self._client = None
+        if scheduler:
+            try:
+                from distributed import Client
+                from distributed import as_completed as dask_completed
+            except ImportError:
+                raise OptionError(
+                    "--scheduler needs Dask's distributed scheduler: pip install 'musclemetab[dask]'"
+                ) from None
+            try:
+                self._client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")
+            except (OSError, TimeoutError, ValueError, TypeError) as exc:
+                raise OptionError(f"cannot connect to the Dask scheduler at {scheduler} ({exc}); "
+                                  "check the address (tcp://host:port) and that the scheduler runs") from None
+            client = self._client
+            self.submit = lambda fn, *args: client.submit(fn, *args, pure=False)
+            self.completed = dask_completed
+        elif workers > 1:
+            import multiprocessing
+
+            self._pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                                             initializer=_ignore_sigint)
+            self.submit, self.completed = self._pool.submit, as_completed
+
+    def interrupt(self, futures) -> None:
+        """Ctrl-C: cancel what has not started and interrupt the units running."""
+        for fut in futures:
+            fut.cancel()
+        if self._client is not None:
+            self._client.cancel(list(futures))
+        if self._pool is not None:
+            for proc in list((getattr(self._pool, "_processes", None) or {}).values()):
+                try:
+                    os.kill(proc.pid, signal.SIGINT)
+                except OSError:
+                    pass
+
+    def close(self) -> None:
+        if self._client is not None:
+            self._client.close()
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _run_units(study: Study, jobs: list[tuple[Unit, str, str | None]], executor: _Executor,
+               progress: _Progress) -> tuple[dict, bool]:
+    """Run ``(unit, key, dependency folder)`` jobs; returns ``({unit: record}, interrupted)``."""
     records = {}
-    if submit is None:
-        for unit, key, dep in jobs:
-            rec = execute_unit(study, unit, key, dep)
-            records[unit] = rec
-            progress.update(unit.label, rec)
-        return records
-    futures = {submit(execute_unit, study, unit, key, dep): unit for unit, key, dep in jobs}
-    for fut in completed(list(futures)):
-        unit = futures[fut]
+    if executor.submit is None:
         try:
-            rec = fut.result()
-        except BaseException as exc:  # the worker process died, or the cluster lost the task
-            rec = {"status": "failed", "error": f"{type(exc).__name__}: {exc} (worker lost)"}
-        records[unit] = rec
-        progress.update(unit.label, rec)
-    return records
+            for unit, key, dep in jobs:
+                rec = execute_unit(study, unit, key, dep)
+                records[unit] = rec
+                progress.update(unit.label, rec)
+                if rec.get("status") == INTERRUPTED:
+                    return records, True
+        except KeyboardInterrupt:  # between two units
+            return records, True
+        return records, False
+    futures = {executor.submit(execute_unit, study, unit, key, dep): unit for unit, key, dep in jobs}
+    interrupted = False
+    pending = list(futures)
+    while pending:
+        try:
+            for fut in executor.completed(pending):
+                pending.remove(fut)
+                unit = futures[fut]
+                try:
+                    rec = fut.result()
+                except BaseException as exc:  # the worker process died, the cluster lost the task, or cancelled
+                    if interrupted:
+                        continue
+                    rec = {"status": "failed", "error": f"{type(exc).__name__}: {exc} (worker lost)"}
+                records[unit] = rec
+                interrupted = interrupted or rec.get("status") == INTERRUPTED
+                progress.update(unit.label, rec)
+        except KeyboardInterrupt:
+            if interrupted:  # a second Ctrl-C: stop waiting
+                break
+            interrupted = True
+            executor.interrupt(pending)
+            pending = [f for f in pending if not f.cancelled()]
+    for fut, unit in futures.items():  # running when interrupted and not returned
+        if unit not in records and interrupted and not fut.cancelled():
+            records[unit] = {"status": INTERRUPTED, "error": "interrupted (Ctrl-C) before it finished"}
+    return records, interrupted
 
 
 def run_study(
@@ -187,44 +317,124 @@ def run_study(
     """
     t0 = time.perf_counter()
     out = Path(study.output)
-    out.mkdir(parents=True, exist_ok=True)
-    _write_study_json(study, out)
     stages = plan_units(study)
     n_total = sum(len(s) for s in stages)
+    # Everything that can be checked is checked before anything is written.
+    if scheduler is not None:
+        check_scheduler_address(scheduler)
     if workers is None:
         workers = min(os.cpu_count() or 1, n_total) if not scheduler else 0
-    if not scheduler and workers < 1:
-        raise OptionError(f"--workers must be at least 1, not {workers}")
-    run = StudyRun(output=out)
+    if not scheduler and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise OptionError(f"--workers must be a whole number of at least 1, not {workers}")
+    for stage in stages:
+        for unit in stage:
+            unit_folder(out, unit)
+    check_output_folder(out, "the study's output folder")
+    run = StudyRun(output=out, n_planned=n_total)
     keys: dict[Unit, str] = {}
-    bar = _Progress(n_total, progress, stream)
-    submit, completed, close = _executor(workers, scheduler)
+    executor = _Executor(workers, scheduler)
     try:
-        for stage in stages:
-            jobs = []
-            for unit in stage:
-                dep = unit.depends_on(study)
-                dep_key = keys.get(dep) if dep is not None else None
-                keys[unit] = key = unit_key(study, unit, dep_key)
-                if dep is not None and dep.label in run.failed:
-                    rec = {"status": "failed", "error": f"needs {dep.label}, which failed"}
-                    run.failed[unit.label] = rec["error"]
-                    bar.update(unit.label, rec)
-                    continue
-                if not force and is_complete(out / unit.folder, key):
-                    run.skipped.append(unit.label)
-                    bar.update(unit.label, {"status": "ok"})
-                    continue
-                jobs.append((unit, key, str(out / dep.folder) if dep is not None else None))
-            for unit, rec in _run_units(study, jobs, submit, completed, bar).items():
-                run.ran.append(unit.label)
-                if rec.get("status") != "ok":
-                    run.failed[unit.label] = rec.get("error") or "unknown error"
+        with study_lock(out):
+            run.removed_partials = remove_stale_partials(out)
+            _write_study_json(study, out)
+            bar = _Progress(n_total, progress, stream)
+            for stage in stages:
+                jobs = []
+                for unit in stage:
+                    dep = unit.depends_on(study)
+                    dep_key = keys.get(dep) if dep is not None else None
+                    keys[unit] = key = unit_key(study, unit, dep_key)
+                    if dep is not None and dep.label in run.failed:
+                        rec = {"status": "failed", "error": f"needs {dep.label}, which failed"}
+                        run.failed[unit.label] = rec["error"]
+                        run.blocked.append(unit.label)
+                        bar.update(unit.label, rec)
+                        continue
+                    if not force and is_complete(out / unit.folder, key):
+                        run.skipped.append(unit.label)
+                        bar.update(unit.label, {"status": "ok"})
+                        continue
+                    jobs.append((unit, key, str(out / dep.folder) if dep is not None else None))
+                records, stopped = _run_units(study, jobs, executor, bar)
+                for unit, rec in records.items():
+                    run.ran.append(unit.label)
+                    if rec.get("status") == INTERRUPTED:
+                        run.interrupted.append(unit.label)
+                    if rec.get("status") != "ok":
+                        run.failed[unit.label] = rec.get("error") or "unknown error"
+                if stopped:
+                    if not run.interrupted:
+                        run.interrupted.append("(between units)")
+                    break
+            run.results = collect_results(study, failed=run.failed)
     finally:
-        close()
-    run.results = collect_results(study, failed=run.failed)
+        executor.close()
     run.wall_time_s = time.perf_counter() - t0
     return run
+
+
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
+
+
+class study_lock:
+    """Hold ``DIR/.musclemetab.lock`` while a run works on the study folder ``DIR``.
+
+    Raises :class:`OptionError` naming the lock file when another live process holds it;
+    a lock whose process (on this host) no longer exists is stale and is taken over.
+    """
+
+    def __init__(self, folder: Path):
+        self.folder = Path(folder)
+        self.path = self.folder / LOCK_FILE
+        self.owned = False
+
+    def __enter__(self):
+        self.folder.mkdir(parents=True, exist_ok=True)
+        info = {"pid": os.getpid(), "host": socket.gethostname(),
+                "started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+        for _ in range(2):
+            try:
+                fd = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+            except FileExistsError:
+                holder = self._holder()
+                if holder is not None and holder.get("host") == info["host"] and \
+                        isinstance(holder.get("pid"), int) and not _process_alive(holder["pid"]):
+                    self.path.unlink(missing_ok=True)  # stale: its process is gone
+                    continue
+                who = (f"process {holder.get('pid')} on {holder.get('host')}, since {holder.get('started')}"
+                       if holder else "a process that did not record itself")
+                raise OptionError(
+                    f"the study folder {self.folder} is in use by another musclemetab run ({who}; lock file "
+                    f"{self.path}); wait for that run to finish, or delete the lock file if no run uses the folder"
+                ) from None
+            with os.fdopen(fd, "w", encoding="utf-8") as f:
+                json.dump(info, f)
+            self.owned = True
+            return self
+        raise OptionError(f"could not take the lock {self.path}; another run is starting on the same folder, "
+                          "try again")
+
+    def _holder(self) -> dict | None:
+        try:
+            data = json.loads(self.path.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return None
+        return data if isinstance(data, dict) else None
+
+    def __exit__(self, *exc):
+        if self.owned:
+            holder = self._holder()
+            if holder is None or holder.get("pid") == os.getpid():
+                self.path.unlink(missing_ok=True)
+            self.owned = False
+        return False
 
 
 def _write_study_json(study: Study, out: Path) -> None:
@@ -268,6 +478,7 @@ def collect_results(study: Study, failed: dict[str, str] | None = None):
         df["speed_m_per_s"] = rec.get("speed_m_per_s")
         df["toe_off_pct"] = rec.get("toe_off_pct")
         df["measured_W_per_kg"] = rec.get("measured_W_per_kg")
+        df["large_reserve"] = bool(rec.get("large_reserve", False))
         df["status"] = "ok"
         df["unit_dir"] = str(unit.folder)
         frames.append(df)

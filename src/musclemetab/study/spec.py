@@ -15,8 +15,11 @@ A study file names everything a study needs; paths are relative to the file::
     height_m = 1.743
     passive = "data/passiveMoments.mat"   # optional: calibration for effort-cal / effort-ten
     tendon_stiffness = "emg-ten"          # optional, effort-ten: "emg-ten" (the subject's own
-                                          # EMG-TEN estimate), a parameters.json, or a table
-                                          # {soleus = 10.6, ...}; default: the example estimates
+                                          # EMG-TEN estimate), a parameters.json, a table
+                                          # {soleus = 10.6, ...} or "example" (the example
+                                          # subject's estimates); default: literature values
+                                          # converted through the model (docs/muscles.md)
+    muscle_properties = "muscles.csv"     # optional: per-muscle overrides (docs/muscles.md)
     emg_mapping = "default"               # EMG-TEN channel mapping: default | authors
 
     [[subjects.trials]]
@@ -34,13 +37,17 @@ A study file names everything a study needs; paths are relative to the file::
 
 Every key is checked: an unknown key, a missing file or a wrong type raises
 :class:`~musclemetab.errors.OptionError` or :class:`~musclemetab.errors.InputFileError`
-naming the file, the subject, the trial and the key.
+naming the file, the subject, the trial and the key. Subject and trial names become
+folder names, so they must be plain names (letters, digits, ``-``, ``_``, ``.``, not
+starting with a dot). ``body_mass_kg`` must lie in :data:`BODY_MASS_RANGE_KG` (20 to
+300 kg, a human body mass in kilograms) and ``height_m`` in 0.5 to 2.7 m.
 """
 
 from __future__ import annotations
 
 import math
 import os
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -53,6 +60,23 @@ __all__ = ["Study", "Subject", "Trial", "load_study", "study_from_dict", "EMG_TE
 EMG_TEN = "emg-ten"
 KNOWN_WORKFLOWS = ("effort-gen", "effort-cal", "effort-ten", EMG_TEN)
 BASAL_RULES = ("body", "muscle", "none")
+#: Plausible human body mass, kg: outside it the number is in other units (g, lb) or a typo.
+BODY_MASS_RANGE_KG = (20.0, 300.0)
+_PLAIN_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
+
+
+def check_plain_name(name: str, what: str) -> str:
+    """Return ``name`` if it can be used as one folder name; raise :class:`OptionError` otherwise.
+
+    Accepted: letters, digits, ``_``, ``-`` and ``.``, not starting with ``.`` or ``-``,
+    at most 100 characters. ``..``, ``/``, ``\\``, absolute paths and hidden names are refused.
+    """
+    if not isinstance(name, str) or not _PLAIN_NAME.fullmatch(name) or len(name) > 100:
+        raise OptionError(
+            f"{what} {name!r} is not a plain folder name; use letters, digits, '_', '-' and '.' "
+            "(not starting with '.'), without '/' or '..'"
+        )
+    return name
 
 
 @dataclass(frozen=True)
@@ -90,6 +114,7 @@ class Subject:
     passive: Path | None = None
     tendon_stiffness: str | Path | Mapping[str, float] | None = None
     emg_mapping: str = "default"
+    muscle_properties: Path | None = None
 
     def trial(self, name: str) -> Trial:
         for t in self.trials:
@@ -126,7 +151,8 @@ class Study:
 _STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "subjects", "solver"}
 #: keys of the study file's [solver] table (IPOPT settings of every solve)
 _SOLVER_KEYS = {"max_iter", "tol", "linear_solver"}
-_SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials"}
+_SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials",
+                 "muscle_properties"}
 _TRIAL_KEYS = {
     "name", "ik", "id", "emg", "grf", "grf_column", "grf_threshold_N", "speed_m_per_s",
     "measured_W_per_kg", "vo2_mL_per_s", "vco2_mL_per_s", "vo2_mL_per_min", "vco2_mL_per_min",
@@ -158,18 +184,29 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
     workflows = data.get("workflows", ["effort-gen", "effort-ten"])
     if isinstance(workflows, str):
         workflows = [workflows]
+    if not isinstance(workflows, (list, tuple)) or not all(isinstance(w, str) for w in workflows):
+        raise OptionError(f"{where}: 'workflows' must be a list of workflow names such as "
+                          f"[\"effort-gen\", \"effort-ten\"], not {workflows!r}; choose from {', '.join(KNOWN_WORKFLOWS)}")
     workflows = tuple(str(w).strip().lower().replace("_", "-") for w in workflows)
     bad = [w for w in workflows if w not in KNOWN_WORKFLOWS]
     if bad or not workflows:
         raise OptionError(f"{where}: 'workflows' has unknown workflow(s) {bad or '[]'}; choose from {', '.join(KNOWN_WORKFLOWS)}")
+    models_value = data.get("models", "all")
+    if not isinstance(models_value, str) and not (
+            isinstance(models_value, (list, tuple)) and all(isinstance(m, str) for m in models_value)):
+        raise OptionError(f"{where}: 'models' must be \"all\" or a list of model names such as "
+                          f"[\"UM10\", \"BH04\"], not {models_value!r}")
     try:
-        models = tuple(parse_models(data.get("models", "all")))
+        models = tuple(parse_models(models_value))
     except OptionError as exc:
         raise OptionError(f"{where}: 'models': {exc}") from None
     basal = str(data.get("basal", "body"))
     if basal not in BASAL_RULES:
         raise OptionError(f"{where}: 'basal' must be one of {', '.join(BASAL_RULES)}, not {basal!r}")
-    out = Path(output) if output is not None else base / str(data.get("output", "results"))
+    out_value = data.get("output", "results")
+    if output is None and (not isinstance(out_value, str) or not out_value.strip()):
+        raise OptionError(f"{where}: 'output' must be a folder path (text), not {out_value!r}")
+    out = Path(output) if output is not None else base / out_value
     subjects_data = data.get("subjects")
     if not isinstance(subjects_data, list) or not subjects_data:
         raise OptionError(f"{where}: no subjects; add at least one [[subjects]] table with its [[subjects.trials]]")
@@ -215,8 +252,12 @@ def _path(value, base: Path, where: str, key: str, required: bool = True) -> Pat
         if required:
             raise OptionError(f"{where}: '{key}' is required (a file path)")
         return None
-    p = Path(str(value))
+    if not isinstance(value, str) or not value.strip():
+        raise OptionError(f"{where}: '{key}' must be a file path (text), not {value!r}")
+    p = Path(value)
     p = p if p.is_absolute() else base / p
+    if p.is_dir():
+        raise InputFileError(f"{where}: '{key}' is the folder {p}, not a file; give the path of the file in it")
     if not p.is_file():
         raise InputFileError(f"{where}: '{key}' file {p} not found; check the path (relative to the study file)")
     return p.resolve()
@@ -240,9 +281,14 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
     _unknown(data, _SUBJECT_KEYS, here)
     if not name:
         raise OptionError(f"{here}: 'name' is required")
+    check_plain_name(name, f"{where}: subject name")
     model = _path(data.get("model"), base, here, "model")
     mass = _number(data.get("body_mass_kg"), here, "body_mass_kg", positive=True, required=True)
     height = _number(data.get("height_m"), here, "height_m", positive=True, required=True)
+    lo, hi = BODY_MASS_RANGE_KG
+    if not lo <= mass <= hi:
+        raise OptionError(f"{here}: 'body_mass_kg' = {mass:g} is not a human body mass in kilograms "
+                          f"({lo:g}-{hi:g} kg); give the mass in kg")
     if not 0.5 < height < 2.7:
         raise OptionError(f"{here}: 'height_m' = {height} is not a human height in metres")
     passive = _path(data.get("passive"), base, here, "passive", required=False)
@@ -250,12 +296,14 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
     if isinstance(kt, str):
         if kt.strip().lower() == EMG_TEN:
             kt = EMG_TEN
+        elif kt.strip().lower() == "example":
+            kt = "example"
         else:
             kt = _path(kt, base, here, "tendon_stiffness")
     elif isinstance(kt, Mapping):
         kt = {str(k): _number(v, here, f"tendon_stiffness.{k}", positive=True, required=True) for k, v in kt.items()}
     elif kt is not None:
-        raise OptionError(f"{here}: 'tendon_stiffness' must be \"emg-ten\", a parameters.json path or a table")
+        raise OptionError(f"{here}: 'tendon_stiffness' must be \"emg-ten\", \"example\", a parameters.json path or a table")
     mapping = str(data.get("emg_mapping", "default"))
     if mapping not in ("default", "authors"):
         raise OptionError(f"{here}: 'emg_mapping' must be default or authors, not {mapping!r}")
@@ -272,8 +320,13 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
         if missing:
             raise OptionError(f"{here}: the emg-ten workflow needs an 'emg' file for every trial; missing for "
                               f"{', '.join(missing)}")
+    muscle_properties = _path(data.get("muscle_properties"), base, here, "muscle_properties", required=False)
+    if muscle_properties is not None:
+        from ..properties import read_muscle_properties
+
+        read_muscle_properties(muscle_properties)  # reject a bad file before anything runs
     return Subject(name=name, model=model, body_mass_kg=mass, height_m=height, trials=trials,
-                   passive=passive, tendon_stiffness=kt, emg_mapping=mapping)
+                   passive=passive, tendon_stiffness=kt, emg_mapping=mapping, muscle_properties=muscle_properties)
 
 
 def _trial(data, base: Path, where: str) -> Trial:
@@ -282,8 +335,7 @@ def _trial(data, base: Path, where: str) -> Trial:
     _unknown(data, _TRIAL_KEYS, here)
     if not name:
         raise OptionError(f"{here}: 'name' is required")
-    if "/" in name or "\\" in name or name.startswith("."):
-        raise OptionError(f"{here}: 'name' must be a plain folder name")
+    check_plain_name(name, f"{where}: trial name")
     num = {k: _number(data.get(k), here, k) for k in _TRIAL_KEYS if k.endswith(("_s", "_per_s", "_per_min", "_per_kg", "_N"))}
     vo2, vco2 = num["vo2_mL_per_s"], num["vco2_mL_per_s"]
     if num["vo2_mL_per_min"] is not None:

@@ -14,6 +14,14 @@ current key and every output file is present with its recorded hash; otherwise i
 run again. A unit's folder is replaced as a whole: its outputs are written into a
 temporary folder beside it which is renamed into place at the end.
 
+Safety: every unit folder is resolved and must lie inside the study's output folder.
+Each folder the package creates (the temporary ``.<name>.partial-*`` folders and the unit
+folders they become) holds a marker file, :data:`MARKER_FILE`; the package deletes or
+replaces only folders that carry it, so a study file can never make it delete a folder
+it did not create. A folder in a unit's place without the marker makes the unit fail
+with a message naming it. Temporary folders left by a killed run are removed by the
+next run (:func:`remove_stale_partials`).
+
 Run a unit with :func:`execute_unit`; it never raises: a failure is returned (and written)
 as a record with ``status = "failed"`` and the reason.
 """
@@ -25,6 +33,7 @@ import json
 import os
 import shutil
 import tempfile
+import threading
 import time
 import traceback
 from dataclasses import asdict, dataclass
@@ -44,9 +53,14 @@ __all__ = [
     "is_complete",
     "execute_unit",
     "ESTIMATION_FOLDER",
+    "MARKER_FILE",
+    "unit_folder",
+    "remove_stale_partials",
 ]
 
 UNIT_FILE = "unit.json"
+#: Marker file in every folder the package creates for a unit (and may therefore delete).
+MARKER_FILE = ".musclemetab-unit"
 ESTIMATION_FOLDER = "_emg-ten"
 ANALYSIS_FILE = "analysis.csv"
 TIMESERIES_FILE = "timeseries.csv"
@@ -121,7 +135,7 @@ def _subject_record(subject: Subject, workflow: str) -> dict:
     kt = subject.tendon_stiffness
     if isinstance(kt, Path):
         kt = {"file": _file_hash(kt)}
-    return {
+    rec = {
         "model": _file_hash(subject.model),
         "body_mass_kg": subject.body_mass_kg,
         "height_m": subject.height_m,
@@ -129,6 +143,9 @@ def _subject_record(subject: Subject, workflow: str) -> dict:
         "tendon_stiffness": kt if workflow in ("effort-ten",) else None,
         "emg_mapping": subject.emg_mapping if workflow == EMG_TEN else None,
     }
+    if subject.muscle_properties is not None:  # absent key: earlier studies keep their unit keys
+        rec["muscle_properties"] = _file_hash(subject.muscle_properties)
+    return rec
 
 
 def unit_key(study: Study, unit: Unit, dependency_key: str | None = None) -> str:
@@ -180,14 +197,38 @@ def _outputs(folder: Path) -> dict[str, str]:
     return {
         str(p.relative_to(folder)): file_sha256(p)
         for p in sorted(folder.rglob("*"))
-        if p.is_file() and p.name != UNIT_FILE
+        if p.is_file() and p.name not in (UNIT_FILE, MARKER_FILE)
     }
 
 
+def unit_folder(output: Path, unit: Unit) -> Path:
+    """The unit's folder, resolved; :class:`OptionError` if it would leave ``output``."""
+    from ..io.atomic import check_inside
+
+    return check_inside(output, unit.folder, f"the folder of unit {unit.label},")
+
+
+def _is_ours(folder: Path) -> bool:
+    """Whether ``folder`` is a real folder (not a link) that carries the package's marker."""
+    return folder.is_dir() and not folder.is_symlink() and (folder / MARKER_FILE).is_file()
+
+
+def _is_our_unit(folder: Path) -> bool:
+    """A unit folder of ours: the marker, or the ``unit.json`` every unit folder gets."""
+    return _is_ours(folder) or (folder.is_dir() and not folder.is_symlink() and (folder / UNIT_FILE).is_file())
+
+
 def _replace_folder(tmp: Path, folder: Path) -> None:
-    """Put ``tmp`` in the place of ``folder`` (the old folder is removed)."""
+    """Put ``tmp`` in the place of ``folder``; the old folder is removed only if it is ours."""
+    from ..errors import OptionError
+
     old = None
-    if folder.exists():
+    if folder.exists() or folder.is_symlink():
+        if not _is_our_unit(folder):
+            raise OptionError(
+                f"{folder} exists but was not written by musclemetab (no {MARKER_FILE} in it); "
+                "move it away or choose another output folder"
+            )
         old = folder.with_name(f".{folder.name}.old-{os.getpid()}-{time.monotonic_ns()}")
         os.replace(folder, old)
     os.replace(tmp, folder)
@@ -195,12 +236,55 @@ def _replace_folder(tmp: Path, folder: Path) -> None:
         shutil.rmtree(old, ignore_errors=True)
 
 
+def remove_stale_partials(output: Path) -> list[Path]:
+    """Remove the temporary unit folders (``.*.partial-*``, ``.*.old-*``) a killed run left.
+
+    Only folders carrying :data:`MARKER_FILE` are removed. Call it only while holding the
+    study's lock (no other run is writing). Returns the folders removed.
+    """
+    units = Path(output) / "units"
+    removed = []
+    if not units.is_dir() or units.is_symlink():
+        return removed
+    for p in units.rglob(".*"):
+        if (".partial-" in p.name or ".old-" in p.name) and _is_ours(p):
+            shutil.rmtree(p, ignore_errors=True)
+            removed.append(p)
+    return removed
+
+
+#: Status of a unit stopped by Ctrl-C.
+INTERRUPTED = "interrupted"
+_INTERRUPTED = threading.Event()
+
+
+def _on_sigint(signum, frame):
+    """SIGINT while a unit runs: remember it, then interrupt as Python does by default."""
+    _INTERRUPTED.set()
+    raise KeyboardInterrupt
+
+
 def execute_unit(study: Study, unit: Unit, key: str, dependency_folder: str | None = None) -> dict:
-    """Run one unit and write its folder; returns its record (never raises)."""
-    out_root = Path(study.output)
-    folder = out_root / unit.folder
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.partial-", dir=folder.parent))
+    """Run one unit and write its folder; returns its record (never raises).
+
+    Ctrl-C (SIGINT) during the unit gives a record with ``status = "interrupted"`` and
+    leaves the unit's folder as it was, even when the solver caught the interrupt and
+    returned a failure status.
+    """
+    import signal
+
+    _INTERRUPTED.clear()
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGINT, _on_sigint)
+    try:
+        return _execute_unit(study, unit, key, dependency_folder)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+
+
+def _execute_unit(study: Study, unit: Unit, key: str, dependency_folder: str | None = None) -> dict:
     record = {
         "status": "failed",
         "key": key,
@@ -210,7 +294,16 @@ def execute_unit(study: Study, unit: Unit, key: str, dependency_folder: str | No
         "error": None,
         "times": {},
     }
+    try:
+        folder = unit_folder(Path(study.output), unit)
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.partial-", dir=folder.parent))
+        (tmp / MARKER_FILE).write_text("created by musclemetab\n", encoding="utf-8")
+    except (OSError, MusclemetabError) as exc:
+        record["error"] = f"{type(exc).__name__}: {exc}"
+        return record
     t0 = time.perf_counter()
+    interrupted = False
     try:
         if unit.is_estimation:
             record.update(_run_estimation(study, unit, tmp))
@@ -218,20 +311,29 @@ def execute_unit(study: Study, unit: Unit, key: str, dependency_folder: str | No
             dep = Path(dependency_folder) if dependency_folder else None
             record.update(_run_trial(study, unit, tmp, dep))
         record["status"] = "ok"
+    except KeyboardInterrupt:
+        interrupted = True
     except MusclemetabError as exc:
         record["error"] = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
     except Exception as exc:  # a bug or a library failure: keep the traceback for the report
         record["error"] = f"{type(exc).__name__}: {exc}"
         record["traceback"] = traceback.format_exc(limit=8)
     record["times"]["total_s"] = time.perf_counter() - t0
+    if interrupted or _INTERRUPTED.is_set():
+        # Ctrl-C: the solver may have returned early with a failure status; nothing of this
+        # unit is kept and its previous folder (if any) stays as it was.
+        shutil.rmtree(tmp, ignore_errors=True)
+        record.update(status=INTERRUPTED, error="interrupted (Ctrl-C) before it finished")
+        record.pop("traceback", None)
+        return record
     try:
         record["outputs"] = _outputs(tmp) if record["status"] == "ok" else {}
         (tmp / UNIT_FILE).write_text(json.dumps(record, indent=2, default=str) + "\n", encoding="utf-8")
         os.chmod(tmp, 0o777 & ~_umask())
         _replace_folder(tmp, folder)
-    except OSError as exc:  # pragma: no cover - disk full, permissions
+    except (OSError, MusclemetabError) as exc:
         shutil.rmtree(tmp, ignore_errors=True)
-        record.update(status="failed", error=f"could not write {folder}: {exc}")
+        record.update(status="failed", error=f"could not write {folder}: {exc}", outputs={})
     return record
 
 
@@ -298,9 +400,10 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
     t0 = time.perf_counter()
     if unit.workflow == EMG_TEN:
         _copy_solution(dependency / trial.name, tmp)
-        record = Solution.load(tmp, require_success=False).run_record
-        if not record.success:
-            raise record.failure(f"EMG-TEN solution of trial {trial.name}")
+        solution = Solution.load(tmp, require_success=False)
+        if not solution.run_record.success:
+            raise solution.run_record.failure(f"EMG-TEN solution of trial {trial.name}")
+        solve_summary = solution.summary
     else:
         kwargs = {}
         if unit.workflow != "effort-gen" and subject.passive is not None:
@@ -311,10 +414,11 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
                 kwargs["tendon_stiffness_file"] = dependency / "parameters.json"
             elif isinstance(kt, Path):
                 kwargs["tendon_stiffness_file"] = kt
-            elif isinstance(kt, dict):
+            elif isinstance(kt, (dict, str)):  # a table, or "example"
                 kwargs["tendon_stiffness"] = kt
         sol = solve_files(subject.model, trial.ik, trial.id, unit.workflow, options=_solver_options(study), **kwargs)
         sol.write(tmp)
+        solve_summary = sol.summary
         times["solve_s"] = sol.summary.get("solve_time_s")
         if not sol.success:
             raise sol.run_record.failure(f"{unit.workflow} solve of {subject.name}/{trial.name}")
@@ -324,7 +428,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
     speed = trial_speed(trial)
     result = metabolics_from_solution(
         tmp, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
-        speed_m_per_s=speed,
+        speed_m_per_s=speed, muscle_properties=subject.muscle_properties,
     )
     write_metabolics(result, tmp)
     times["metabolics_s"] = time.perf_counter() - t1
@@ -351,4 +455,6 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         "cycle": {"start_s": cycle.start_s, "toe_off_s": cycle.toe_off_s, "end_s": cycle.end_s},
         "toe_off_pct": float(100.0 * (cycle.toe_off_s - cycle.start_s) / (cycle.end_s - cycle.start_s)),
         "n_nodes": int(np.asarray(result.time_s).size),
+        "large_reserve": bool(solve_summary.get("large_reserve", False)),
+        "reserve_share_of_peak_moment": solve_summary.get("reserve_share_of_peak_moment"),
     }

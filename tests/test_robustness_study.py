@@ -1,0 +1,267 @@
+"""Adversarial studies: names that would become paths outside the output folder, folders the
+package did not create, two runs on one folder, leftovers of killed runs, Ctrl-C, options
+that cannot work and outputs that cannot be written. None of these cases solves anything:
+each one must be refused, or handled, before or instead of any solver work."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from musclemetab.errors import InputFileError, OptionError, SolverError
+from musclemetab.study import run_study, study_from_dict
+from musclemetab.study import units as units_mod
+from musclemetab.study.runner import LOCK_FILE, STUDY_JSON, StudyRun, study_lock
+from musclemetab.study.units import MARKER_FILE, Unit, remove_stale_partials, unit_folder
+
+
+def _study(example, *, subject="sub1", trials=("slow", "normal"), workflows=("effort-gen",), **subject_keys):
+    return {
+        "name": "adversarial",
+        "workflows": list(workflows),
+        "models": ["UM10"],
+        "subjects": [{
+            "name": subject,
+            "model": str(example.model),
+            "body_mass_kg": example.body_mass_kg,
+            "height_m": example.height_m,
+            "trials": [{"name": t, "ik": str(example.ik[t]), "id": str(example.id[t])} for t in trials],
+            **subject_keys,
+        }],
+    }
+
+
+# ----------------------------------------------------------------------------- names and paths
+@pytest.mark.parametrize("name", ["../../../victim", "../../evil", "/tmp/absolute", ".hidden", "a/b", "a\\b", "..", ""])
+@pytest.mark.parametrize("where", ["subject", "trial"])
+def test_names_that_are_not_plain_folder_names_are_refused(example, tmp_path, name, where):
+    victim = tmp_path / "victim" / "normal" / "effort-gen"
+    victim.mkdir(parents=True)
+    (victim / "precious.txt").write_text("keep me")
+    data = _study(example)
+    if where == "subject":
+        data["subjects"][0]["name"] = name
+    else:
+        data["subjects"][0]["trials"][0]["name"] = name
+    with pytest.raises(OptionError, match="name"):
+        study_from_dict(data, base="/", output=tmp_path / "study" / "out")
+    assert (victim / "precious.txt").read_text() == "keep me"
+    assert not (tmp_path / "study").exists()
+
+
+def test_unit_folders_must_stay_inside_the_output_folder(tmp_path):
+    out = tmp_path / "out"
+    assert unit_folder(out, Unit("sub1", "normal", "effort-gen")) == (out / "units/sub1/normal/effort-gen").resolve()
+    for unit in (Unit("../../..", "x", "effort-gen"), Unit("sub1", "x", "../../../../etc")):
+        with pytest.raises(OptionError, match="outside the output folder"):
+            unit_folder(out, unit)
+
+
+def test_a_folder_the_package_did_not_create_is_never_replaced(tmp_path):
+    folder = tmp_path / "units" / "sub1" / "normal" / "effort-gen"
+    folder.mkdir(parents=True)
+    (folder / "precious.txt").write_text("keep me")
+    new = tmp_path / "units" / "sub1" / "normal" / ".effort-gen.partial-1"
+    new.mkdir()
+    (new / MARKER_FILE).write_text("")
+    (new / "unit.json").write_text("{}")
+    with pytest.raises(OptionError, match="not written by musclemetab"):
+        units_mod._replace_folder(new, folder)
+    assert (folder / "precious.txt").read_text() == "keep me" and new.is_dir()
+    # a folder of ours is replaced, and the old one removed
+    (folder / "precious.txt").unlink()
+    (folder / MARKER_FILE).write_text("")
+    units_mod._replace_folder(new, folder)
+    assert (folder / "unit.json").is_file() and not new.exists()
+    assert [p.name for p in folder.parent.iterdir()] == ["effort-gen"]
+
+
+def test_stale_partial_folders_are_removed_only_when_marked(tmp_path):
+    parent = tmp_path / "units" / "sub1" / "normal"
+    ours, theirs = parent / ".effort-gen.partial-abc", parent / ".notes.partial-keep"
+    for p in (ours, theirs):
+        p.mkdir(parents=True)
+        (p / "solution.sto").write_bytes(b"x" * 1000)
+    (ours / MARKER_FILE).write_text("")
+    assert remove_stale_partials(tmp_path) == [ours]
+    assert not ours.exists() and (theirs / "solution.sto").is_file()
+
+
+# ----------------------------------------------------------------------------- study file values
+@pytest.mark.parametrize("edit, words", [
+    (lambda d: d.update(workflows=5), "'workflows' must be a list"),
+    (lambda d: d.update(models=3), "'models' must be"),
+    (lambda d: d.update(output=5), "'output' must be a folder path"),
+    (lambda d: d["subjects"][0].update(body_mass_kg=72600), "not a human body mass in kilograms"),
+    (lambda d: d["subjects"][0].update(body_mass_kg=7.26), "not a human body mass in kilograms"),
+    (lambda d: d["subjects"][0]["trials"][0].update(ik=5), "'ik' must be a file path"),
+])
+def test_study_values_of_the_wrong_kind_are_one_line_errors(example, edit, words):
+    data = _study(example)
+    edit(data)
+    with pytest.raises(OptionError, match=words) as info:
+        study_from_dict(data, base="/")
+    assert "\n" not in str(info.value)
+
+
+def test_a_folder_where_a_file_is_expected_says_so(example, tmp_path):
+    data = _study(example)
+    data["subjects"][0]["trials"][0]["ik"] = str(tmp_path)
+    with pytest.raises(InputFileError, match="is the folder .* not a file"):
+        study_from_dict(data, base="/")
+
+
+# ----------------------------------------------------------------------------- before anything is written
+@pytest.mark.parametrize("kwargs, words", [
+    ({"workers": 0}, "--workers must be"),
+    ({"workers": -2}, "--workers must be"),
+    ({"scheduler": "notanaddress"}, "not an address"),
+    ({"scheduler": "http://localhost:8787"}, "dashboard"),
+    ({"scheduler": "tls://localhost:8786"}, "TLS settings"),
+    ({"scheduler": "tcp://localhost"}, "no host and port"),
+    ({"scheduler": "ftp://localhost:21"}, "unknown protocol"),
+])
+def test_bad_executor_options_fail_at_once_and_write_nothing(example, tmp_path, kwargs, words, monkeypatch):
+    import distributed
+
+    def no_connection(*args, **kwargs):  # a connection attempt would wait for a timeout
+        raise AssertionError("a scheduler connection was attempted")
+
+    monkeypatch.setattr(distributed, "Client", no_connection)
+    study = study_from_dict(_study(example), base="/", output=tmp_path / "out")
+    with pytest.raises(OptionError, match=words):
+        run_study(study, progress=False, **kwargs)
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("kind", ["file", "below a file", "unwritable"])
+def test_an_output_that_cannot_be_a_folder_is_refused_before_anything(example, tmp_path, kind):
+    existing = tmp_path / "results.txt"
+    existing.write_text("not a folder")
+    out = {"file": existing, "below a file": existing / "sub", "unwritable": Path("/proc/musclemetab-out")}[kind]
+    study = study_from_dict(_study(example), base="/", output=out)
+    with pytest.raises(OptionError, match="output folder"):
+        run_study(study, workers=1, progress=False)
+    assert existing.read_text() == "not a folder" and sorted(p.name for p in tmp_path.iterdir()) == ["results.txt"]
+
+
+# ----------------------------------------------------------------------------- the lock
+def test_a_second_run_on_the_same_folder_refuses(example, tmp_path, capsys):
+    from musclemetab.cli import main
+
+    out = tmp_path / "out"
+    study = study_from_dict(_study(example), base="/", output=out)
+    with study_lock(out) as lock:
+        holder = json.loads(lock.path.read_text())
+        assert holder["pid"] == os.getpid()
+        with pytest.raises(OptionError, match=f"in use by another musclemetab run .*{LOCK_FILE}"):
+            run_study(study, workers=1, progress=False)
+        toml = tmp_path / "study.toml"
+        toml.write_text(
+            f'output = "out"\nworkflows = ["effort-gen"]\n[[subjects]]\nname = "s"\nmodel = "{example.model}"\n'
+            f'body_mass_kg = 72.6\nheight_m = 1.743\n[[subjects.trials]]\nname = "normal"\n'
+            f'ik = "{example.ik["normal"]}"\nid = "{example.id["normal"]}"\n'
+        )
+        capsys.readouterr()
+        assert main(["run", str(toml), "--no-progress"]) == 1
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "lock file" in err and "wait for that run" in err
+    assert not (out / LOCK_FILE).exists() and not (out / "units").exists()
+
+
+def test_a_stale_lock_of_a_dead_process_is_taken_over(tmp_path):
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    out = tmp_path / "out"
+    out.mkdir()
+    import socket
+
+    (out / LOCK_FILE).write_text(json.dumps({"pid": dead.pid, "host": socket.gethostname(), "started": "then"}))
+    with study_lock(out) as lock:
+        assert json.loads(lock.path.read_text())["pid"] == os.getpid()
+    assert not (out / LOCK_FILE).exists()
+
+
+# ----------------------------------------------------------------------------- Ctrl-C and counting
+def _count_calls(monkeypatch, behaviour):
+    calls = []
+
+    def fake_trial(study, unit, tmp, dep):
+        calls.append(unit.label)
+        return behaviour(unit, tmp)
+
+    monkeypatch.setattr(units_mod, "_run_trial", fake_trial)
+    return calls
+
+
+@pytest.mark.parametrize("how", ["KeyboardInterrupt", "solver swallows SIGINT"])
+def test_ctrl_c_marks_the_running_unit_interrupted_and_starts_nothing_new(example, tmp_path, monkeypatch, how):
+    """The unit's work is replaced by one that gets Ctrl-C half-way, as a solve would."""
+    def interrupted(unit, tmp):
+        (tmp / "solution.sto").write_text("half")
+        if how == "KeyboardInterrupt":
+            raise KeyboardInterrupt
+        try:  # a real SIGINT, caught by the solver, which reports a failed solve
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(1.0)
+        except KeyboardInterrupt:
+            pass
+        raise SolverError("effort-gen solve did not converge (status NonIpopt_Exception_Thrown)")
+
+    calls = _count_calls(monkeypatch, interrupted)
+    out = tmp_path / "out"
+    (out / "units" / "sub1" / "slow").mkdir(parents=True)
+    stale = out / "units" / "sub1" / "slow" / ".effort-gen.partial-old"
+    stale.mkdir()
+    (stale / MARKER_FILE).write_text("")
+    study = study_from_dict(_study(example, trials=("slow", "normal", "fast")), base="/", output=out)
+    run = run_study(study, workers=1, progress=False)
+    assert calls == ["sub1/slow/effort-gen"]  # the queued units never started
+    assert run.interrupted == ["sub1/slow/effort-gen"] and run.removed_partials == [stale]
+    assert run.summary_line().startswith("3 units: 1 run, 0 up to date, 2 not started; 0 failed, 1 interrupted")
+    # nothing half-written: no unit folder, no temporary folder, no lock
+    assert sorted(p.name for p in (out / "units" / "sub1").rglob("*")) == ["slow"]
+    assert not (out / LOCK_FILE).exists()
+    failures = pd.read_csv(out / "failures.csv")
+    assert failures.set_index("trial").loc["slow", "reason"].startswith("interrupted")
+
+
+def test_ctrl_c_on_the_command_line_exits_130(example, tmp_path, monkeypatch, capsys):
+    from musclemetab.study.cli import _status
+
+    def interrupted(unit, tmp):
+        raise KeyboardInterrupt
+
+    _count_calls(monkeypatch, interrupted)
+    study = study_from_dict(_study(example), base="/", output=tmp_path / "out")
+    run = run_study(study, workers=1, progress=False)
+    assert _status(run) == 130
+    assert "interrupted" in capsys.readouterr().err
+
+
+def test_units_not_run_because_a_unit_they_need_failed_are_counted(example, tmp_path):
+    """An EMG-TEN estimation that fails (its EMG file is not a storage file) blocks two units."""
+    bad_emg = tmp_path / "emg.mot"
+    bad_emg.write_text("not an EMG file\n")
+    data = _study(example, workflows=("emg-ten",))
+    for t in data["subjects"][0]["trials"]:
+        t["emg"] = str(bad_emg)
+    study = study_from_dict(data, base="/", output=tmp_path / "out")
+    run = run_study(study, workers=1, progress=False)
+    assert run.ran == ["sub1/all trials/emg-ten"] and len(run.blocked) == 2
+    line = run.summary_line()
+    assert line.startswith("3 units: 1 run, 0 up to date, 2 not run (a unit they need failed); 3 failed"), line
+    assert "emg.mot" in run.failed["sub1/all trials/emg-ten"]
+
+
+def test_summary_line_counts_each_unit_once():
+    run = StudyRun(output=Path("o"), ran=["a", "b"], skipped=["c"], failed={"b": "x"}, n_planned=3)
+    assert run.summary_line().startswith("3 units: 2 run, 1 up to date; 1 failed;")
