@@ -151,7 +151,7 @@ def estimate_parameters(trials: Sequence[TrialBlock], params: MuscleTendonParame
 def tendon_strain_at_one_norm_force(kT) -> float:
     """Tendon strain where the tendon force-length curve of stiffness ``kT`` reaches F0
     (``fT = 1``): ``ln(5 (1.25 - shift(kT)))/kT - 0.005``, the parameter OpenSim's muscle
-    types take for the tendon stiffness (``docs/personalised_model.md``)."""
+    types take for the tendon stiffness (``docs/problem.md``)."""
     from ..muscle import tendon_length_from_force
 
     return float(tendon_length_from_force(1.0, float(kT))) - 1.0
