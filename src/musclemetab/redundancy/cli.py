@@ -274,6 +274,10 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
             f"iterations): {failure_advice(r['status'])}. The unconverged result is in {args.out} with "
             "\"success\": false"
         )
+    from .estimate import write_personalised_model
+
+    model_file, _ = write_personalised_model(args.model, result.parameters,
+                                             {"tendon_stiffness": list(result.tendon_stiffness)}, args.out)
     groups = []
     for g in result.settings.tendon_groups:
         m = next((x for x in g if x in result.tendon_stiffness), None)
@@ -287,7 +291,8 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
         f"{size['variables']} variables, {size['equality_constraints']} equalities, "
         f"{size['inequality_constraints']} EMG bounds: {r['status']} in {r['iterations']} iterations, objective "
         f"{r['objective']:.6e}, solve {r['solve_time_s']:.1f} s, max moment residual "
-        f"{r['max_moment_residual_Nm']:.1e} N m; {'; '.join(groups)}; EMG scale {scales} -> {args.out}"
+        f"{r['max_moment_residual_Nm']:.1e} N m; {'; '.join(groups)}; EMG scale {scales} -> {args.out} "
+        f"(and {model_file.name})"
     )
     return 0
 
