@@ -4,7 +4,7 @@ For each speed (slow, normal, fast): muscle geometry from the OpenSim model, the
 redundancy problem with the EFFORT-TEN workflow (calibrated passive muscle, personalised
 Achilles and patellar tendon stiffness), and the study's six metabolic energy models.
 Writes one folder per trial under --out (solution.sto, summary.json, metabolics.sto,
-metabolics.csv, whole_body.csv) and prints the whole-body metabolic rate per model.
+metabolics.parquet, whole_body.csv, per_muscle.csv) and prints the whole-body metabolic rate per model.
 
     python examples/example_subject.py --out results [--workflow effort-ten] [--speeds normal]
 """

@@ -408,10 +408,10 @@ def test_analyse_metabolics_worked_by_hand():
     row = summary.iloc[0]
     assert row.model == "UM10" and row.toe_off_pct == pytest.approx(50.0)
     # leg without basal 7, 7, 11 W: stance 0.5*7 = 3.5 J, swing 0.5*(7+11)/2 = 4.5 J -> 43.75 %
-    assert row.stance_pct == pytest.approx(43.75) and row.swing_pct == pytest.approx(56.25)
+    assert row.stance_energy_share_pct == pytest.approx(43.75) and row.swing_energy_share_pct == pytest.approx(56.25)
     assert row.leg_energy_J == pytest.approx(8.0)
     # with the basal heat (+1 W): 8, 8, 12 W -> stance 4 J of 9 J
-    assert row.stance_pct_with_basal == pytest.approx(400 / 9)
+    assert row.stance_energy_share_with_basal_pct == pytest.approx(400 / 9)
     for name in GROUPS:
         assert row[f"share_{name}_pct"] == pytest.approx(HAND_SHARES.get(name, 0.0)), name
     assert row.share_other_pct == pytest.approx(12.5)
@@ -472,7 +472,7 @@ def test_analyse_solution_folder(tmp_path):
         assert row.share_DF_pct == pytest.approx(100 * tib / (sol + tib))
         st = t[keep] <= 0.70 + 1e-9
         stance = np.trapezoid(e.sum(0)[st], t[keep][st])
-        assert row.stance_pct == pytest.approx(100 * stance / (sol + tib))
+        assert row.stance_energy_share_pct == pytest.approx(100 * stance / (sol + tib))
     assert list(summary.model) == ["UM10", "BH04"]
 
 

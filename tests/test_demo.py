@@ -53,7 +53,7 @@ def test_demo_reproduces_the_trends_with_speed(demo):
     for group in ("HF", "HAD", "HAB"):  # hip flexor, adductor, abductor shares fall
         g = _pivot(table, "effort-ten", f"share_{group}_pct")
         assert (g["fast"] < g["slow"]).all(), group
-    swing = _pivot(table, "effort-ten", "swing_pct")
+    swing = _pivot(table, "effort-ten", "swing_energy_share_pct")
     assert (swing["fast"] < swing["slow"]).all()  # the swing share falls with speed
     rate = _pivot(table, "effort-ten", "mean_W_per_kg")
     assert (rate["slow"] < rate["normal"]).all() and (rate["normal"] < rate["fast"]).all()
@@ -62,8 +62,8 @@ def test_demo_reproduces_the_trends_with_speed(demo):
 def test_demo_generic_tendons_give_a_larger_swing_share(demo):
     # EFFORT-GEN 36.5 % (BH04) and 36.7 % (HO06) against 25.9-29.6 % with EFFORT-TEN
     _, table = demo
-    gen = _pivot(table, "effort-gen", "swing_pct")["normal"]
-    ten = _pivot(table, "effort-ten", "swing_pct")["normal"]
+    gen = _pivot(table, "effort-gen", "swing_energy_share_pct")["normal"]
+    ten = _pivot(table, "effort-ten", "swing_energy_share_pct")["normal"]
     for model in ("BH04", "HO06"):
         assert gen[model] > ten[model] + 3.0, model
 

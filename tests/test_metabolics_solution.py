@@ -188,7 +188,7 @@ def test_files(solution_dir, tmp_path):
     assert "UM10/soleus_r/total" in sto.columns and "BH04/tibant_r/maintenance" in sto.columns
     np.testing.assert_allclose(sto["BH04/gasmed_r/total"], res.rates["BH04"].total[1], rtol=1e-10)
     np.testing.assert_allclose(sto.index, res.time_s, rtol=1e-12)
-    tidy = pd.read_csv(files["metabolics_csv"])
+    tidy = pd.read_parquet(files["metabolics_parquet"])
     assert list(tidy.columns) == ["time", "model", "muscle", "component", "value_W"]
     assert len(tidy) == (N - 10) * 3 * (5 + 7)
     row = tidy[(tidy.model == "UM10") & (tidy.muscle == "tibant_r") & (tidy.component == "basal")]
@@ -200,7 +200,14 @@ def test_files(solution_dir, tmp_path):
     assert list(wb.model) == ["UM10", "BH04"]
     assert wb.mean_W_per_kg.iloc[0] == pytest.approx(res.whole_body["UM10"].mean_W_per_kg, rel=1e-9)
     assert wb.mean_W_per_kg.iloc[0] - wb.mean_W_per_kg_no_basal.iloc[0] == pytest.approx(1.2, rel=1e-9)
-    assert wb.cost_of_transport_J_per_kg_per_m.iloc[1] == pytest.approx(wb.mean_W_per_kg.iloc[1] / 1.3, rel=1e-9)
+    assert wb.gross_cost_of_transport_J_per_kg_per_m.iloc[1] == pytest.approx(wb.mean_W_per_kg.iloc[1] / 1.3, rel=1e-9)
+    assert wb.net_cost_of_transport_J_per_kg_per_m.iloc[1] == pytest.approx(
+        wb.mean_W_per_kg_no_basal.iloc[1] / 1.3, rel=1e-9)
+    per = pd.read_csv(files["per_muscle_csv"])
+    assert len(per) == 2 * len(MUSCLES) and per["stance_J"].isna().all()  # no gait cycle given
+    for model in ("UM10", "BH04"):
+        d = per[per.model == model]
+        assert 2 * d.mean_W.sum() / MASS == pytest.approx(wb.set_index("model").mean_W_per_kg_no_basal[model], rel=1e-9)
 
 
 def test_parameters_matched_by_name(solution_dir):
@@ -259,7 +266,7 @@ def test_cli(solution_dir, tmp_path, capsys):
     code = main(["metabolics", "--solution", str(solution_dir), "--mass", "72.6", "--height", "1.743",
                  "--models", "UM10,BH04", "--speed", "1.3", "--out", str(out)])
     assert code == 0
-    assert {p.name for p in out.iterdir()} >= {"metabolics.sto", "metabolics.csv", "whole_body.csv"}
+    assert {p.name for p in out.iterdir()} >= {"metabolics.sto", "metabolics.parquet", "whole_body.csv", "per_muscle.csv"}
     assert "UM10" in capsys.readouterr().out
     code = main(["metabolics", "--solution", str(solution_dir), "--mass", "72.6", "--height", "1.743",
                  "--models", "UM10,XX99", "--out", str(out)])

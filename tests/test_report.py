@@ -146,9 +146,9 @@ def make_study(root: Path, *, measured=True, trials=None, solutions=True, failed
                         "subject": subject, "trial": trial, "workflow": workflow, "model": model,
                         "speed_m_per_s": sp, "status": "ok",
                         "mean_W_per_kg": 2 * mean_w / mass + 1.2, "mean_W_per_kg_no_basal": 2 * mean_w / mass,
-                        "cost_of_transport_J_per_kg_per_m": (2 * mean_w / mass + 1.2) / sp,
-                        "stance_pct": stance, "swing_pct": 100 - stance,
-                        "stance_pct_with_basal": stance - 2, "swing_pct_with_basal": 102 - stance,
+                        "gross_cost_of_transport_J_per_kg_per_m": (2 * mean_w / mass + 1.2) / sp,
+                        "stance_energy_share_pct": stance, "swing_energy_share_pct": 100 - stance,
+                        "stance_energy_share_with_basal_pct": stance - 2, "swing_energy_share_with_basal_pct": 102 - stance,
                     }
                     for g in GROUPS:
                         gv = d[d["series"] == f"group/{g}"]["value_W"].to_numpy()
@@ -370,16 +370,16 @@ def test_phase_shares(results):
             assert b.get_y() == pytest.approx(a.get_height())
         d = results[(results["trial"] == "normal") & (results["workflow"] == w)]
         for a, m in zip(st, ORDERED):
-            assert a.get_height() == pytest.approx(d[d["model"] == m]["stance_pct"].mean())
+            assert a.get_height() == pytest.approx(d[d["model"] == m]["stance_energy_share_pct"].mean())
     assert [t.get_text() for t in ax_b.get_xticklabels()] == list(ORDERED)
     # lines: one per model, through the means over subjects of the main workflow (effort-ten)
     lines = _lines(ax_s, "model:")
     assert [ln.get_gid() for ln in lines] == [f"model:{m}" for m in ORDERED]
     assert [ln.get_color() for ln in lines] == [model_colour(m) for m in ORDERED]
     d = results[(results["workflow"] == "effort-ten") & (results["model"] == "BH04")]
-    means = d.groupby("trial")[["speed_m_per_s", "swing_pct"]].mean().loc[["slow", "normal", "fast"]]
+    means = d.groupby("trial")[["speed_m_per_s", "swing_energy_share_pct"]].mean().loc[["slow", "normal", "fast"]]
     ln = _lines(ax_s, "model:BH04")[0]
-    assert np.allclose(ln.get_xdata(), means["speed_m_per_s"]) and np.allclose(ln.get_ydata(), means["swing_pct"])
+    assert np.allclose(ln.get_xdata(), means["speed_m_per_s"]) and np.allclose(ln.get_ydata(), means["swing_energy_share_pct"])
     assert ax_s.get_xlabel() == "walking speed (m/s)"
     assert "%/(m/s)" in ln.get_label()
 
@@ -442,8 +442,11 @@ def test_write_report(study):
     assert len(p.imgs) == len(FIGURE_NAMES)
     assert all(img["src"].startswith("data:image/png;base64,") for img in p.imgs)
     for name in FIGURE_NAMES:
-        assert (study / "figures" / f"{name}.png").is_file() and (study / "figures" / f"{name}.svg").is_file()
+        assert (study / "figures" / f"{name}.png").is_file() and not (study / "figures" / f"{name}.svg").exists()
         assert f'id="figure-{name}"' in text
+    # figures come before the tables; no absolute path of the machine in the page
+    assert text.index('id="figures"') < text.index('id="table-whole-body"')
+    assert str(study) not in text
     # nothing external, no script
     assert "http" not in text and "<script" not in text.lower() and "<link" not in text.lower()
     # tables: subjects, whole-body, measured, cost of transport, phase shares, group shares, failures?, software
@@ -531,7 +534,7 @@ def test_cli(study, tmp_path, capsys):
 
     parser = argparse.ArgumentParser(prog="musclemetab")
     add_report_parser(parser.add_subparsers(dest="command"))
-    args = parser.parse_args(["report", str(study), "--out", str(tmp_path / "r.html")])
+    args = parser.parse_args(["report", str(study), "--out", str(tmp_path / "r.html"), "--svg"])
     assert args.func(args) == 0
     out = capsys.readouterr().out
     assert "6 of 6 figures" in out and (tmp_path / "r.html").is_file()
@@ -555,3 +558,33 @@ def test_report_when_every_unit_failed(tmp_path):
     assert "No unit of the study succeeded: no results to tabulate." in text
     assert "(all trials)" in text and "EMG file missing" in text
     assert "study.json is missing" in text
+
+
+def test_report_is_rebuilt_only_when_its_inputs_change(study, tmp_path):
+    import shutil
+
+    from musclemetab.report.html import generate_report, report_key
+
+    copy = tmp_path / "copy"
+    shutil.copytree(study, copy)
+    out, first = generate_report(copy)
+    page = out.read_text(encoding="utf-8")
+    png = copy / "figures" / "phase_shares.png"
+    stamp = png.stat().st_mtime_ns
+    # nothing changed: the page and the figures are left as they are
+    out2, again = generate_report(copy)
+    assert out2 == out and out.read_text(encoding="utf-8") == page and png.stat().st_mtime_ns == stamp
+    assert [e.name for e in again] == [e.name for e in first] and [e.note for e in again] == [e.note for e in first]
+    key = report_key(copy)
+    assert f'content="{key}"' in page
+    # a unit's record changes (a unit ran again): new key, the report is drawn again
+    unit = next((copy / "units").glob("**/unit.json"))
+    unit.write_text(unit.read_text(encoding="utf-8").replace("{", '{"rerun": 1, ', 1), encoding="utf-8")
+    assert report_key(copy) != key
+    generate_report(copy)
+    assert png.stat().st_mtime_ns != stamp
+    assert f'content="{report_key(copy)}"' in out.read_text(encoding="utf-8")
+    # a missing figure file forces a rebuild too
+    png.unlink()
+    generate_report(copy)
+    assert png.is_file()

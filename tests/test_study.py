@@ -140,9 +140,12 @@ def test_pool_run_results_table(pool_run):
     assert set(table["model"]) == {"UM10", "BH04"}
     on_disk = pd.read_parquet(study.output / "results.parquet")
     pd.testing.assert_frame_equal(on_disk, pd.read_csv(study.output / "results.csv"), check_dtype=False, rtol=1e-9)
-    for col in ("mean_W_per_kg", "cost_of_transport_J_per_kg_per_m", "stance_pct", "swing_pct", "share_PF_pct",
+    for col in ("mean_W_per_kg", "gross_cost_of_transport_J_per_kg_per_m", "stance_energy_share_pct", "swing_energy_share_pct", "share_PF_pct",
                 "toe_off_pct", "speed_m_per_s"):
         assert table[col].notna().all(), col
+    # the study's trials are explained by the muscles: no large-reserve flag (the flagged case
+    # is tests/test_robustness_inputs.py::test_large_reserves_are_flagged)
+    assert table["large_reserve"].dtype == bool and not table["large_reserve"].any()
     # the whole-body rate of the table is the unit's whole_body.csv
     row = table[(table.trial == "normal") & (table.model == "UM10")].iloc[0]
     wb = pd.read_csv(study.output / row.unit_dir / "whole_body.csv").set_index("model")
@@ -170,8 +173,8 @@ def test_swing_share_recomputed_from_the_unit_files(pool_run):
 
     stance = energy(cycle["start_s"], cycle["toe_off_s"])
     swing = energy(cycle["toe_off_s"], cycle["end_s"])
-    assert row.swing_pct == pytest.approx(100 * swing / (stance + swing), abs=1e-6)
-    assert row.stance_pct + row.swing_pct == pytest.approx(100.0)
+    assert row.swing_energy_share_pct == pytest.approx(100 * swing / (stance + swing), abs=1e-6)
+    assert row.stance_energy_share_pct + row.swing_energy_share_pct == pytest.approx(100.0)
 
 
 def test_second_run_does_no_solver_work_and_corrupt_output_is_redone(pool_run, monkeypatch):

@@ -62,6 +62,8 @@ __all__ = [
     "group_shares",
     "muscle_membership",
     "membership_table",
+    "group_key_table",
+    "write_group_key",
 ]
 
 GROUPS = ("PF", "DF", "KE", "KF", "HE", "HF", "HAD", "HAB", "HIR", "HER")
@@ -353,3 +355,29 @@ def membership_table(
             sign_changing=tuple(sub.loc[sub.membership == "sign_changing", "muscle"]),
         ))
     return pd.DataFrame(rows).set_index("dof")
+
+
+def group_key_table(dof_groups: Mapping[str, tuple[str, str]] | None = None):
+    """The key of the group abbreviations: ``group``, ``name``, ``dof``, ``moment_arm_sign``
+    and the results column ``share_<group>_pct`` (one row per group and ``other``)."""
+    import pandas as pd
+
+    pairs = dict(DOF_GROUPS if dof_groups is None else dof_groups)
+    rows = []
+    for g in GROUPS_WITH_OTHER:
+        dof, sign = "", ""
+        for d, (pos, neg) in pairs.items():
+            if g in (pos, neg):
+                dof, sign = d, "positive" if g == pos else "negative"
+        rows.append({"group": g, "name": GROUP_NAMES.get(g, g), "dof": dof, "moment_arm_sign": sign,
+                     "column": f"share_{g}_pct"})
+    return pd.DataFrame(rows)
+
+
+def write_group_key(path, dof_groups: Mapping[str, tuple[str, str]] | None = None):
+    """Write :func:`group_key_table` as CSV (atomically); returns the path."""
+    from ..io.atomic import atomic_path
+
+    with atomic_path(path) as tmp:
+        group_key_table(dof_groups).to_csv(tmp, index=False)
+    return path

@@ -102,9 +102,10 @@ def analyse_metabolics(
     MetabolicAnalysis
         ``summary`` (pandas.DataFrame, one row per model): ``model``, ``cycle_start_s``,
         ``toe_off_s``, ``cycle_end_s``, ``toe_off_pct``, ``leg_energy_J`` (one leg, no
-        basal, over the sampled cycle), ``stance_pct``, ``swing_pct`` (no basal),
-        ``stance_pct_with_basal``, ``swing_pct_with_basal`` (per-muscle basal heat
-        included), ``share_<G>_pct`` for the ten groups and ``share_other_pct`` (no basal;
+        basal, over the sampled cycle), ``stance_energy_share_pct``,
+        ``swing_energy_share_pct`` (shares of the cycle's energy, no basal),
+        ``stance_energy_share_with_basal_pct``, ``swing_energy_share_with_basal_pct``
+        (per-muscle basal heat included), ``share_<G>_pct`` for the ten groups and ``share_other_pct`` (no basal;
         the eleven sum to 100).
 
         ``timeseries`` (pandas.DataFrame, long): ``time_s``, ``cycle_pct``, ``model``,
@@ -156,10 +157,10 @@ def analyse_metabolics(
             cycle_end_s=cycle.end_s,
             toe_off_pct=cycle.toe_off_pct,
             leg_energy_J=ph["cycle_J"],
-            stance_pct=ph["stance_pct"],
-            swing_pct=ph["swing_pct"],
-            stance_pct_with_basal=ph_b["stance_pct"],
-            swing_pct_with_basal=ph_b["swing_pct"],
+            stance_energy_share_pct=ph["stance_pct"],
+            swing_energy_share_pct=ph["swing_pct"],
+            stance_energy_share_with_basal_pct=ph_b["stance_pct"],
+            swing_energy_share_with_basal_pct=ph_b["swing_pct"],
         )
         row.update({f"share_{name}_pct": shares[name] for name in GROUPS})
         row["share_other_pct"] = shares[OTHER]

@@ -109,7 +109,8 @@ def read_storage(path: str | os.PathLike) -> pd.DataFrame:
         The file is missing, has no ``endheader`` line, no column names, non-numeric or
         ragged rows, fewer rows than its header announces, or duplicate column names.
     TimeColumnError
-        The first column is not ``time``, holds NaN, or is not strictly increasing.
+        The first column is not ``time``, holds NaN or infinite values, or is not strictly
+        increasing.
     """
     path = Path(path)
     if path.is_dir():
@@ -173,7 +174,7 @@ def read_storage(path: str | os.PathLike) -> pd.DataFrame:
     t = values[:, 0]
     if not np.isfinite(t).all():
         row = int(np.flatnonzero(~np.isfinite(t))[0]) + 1
-        raise TimeColumnError(f"{path}: column 'time' is {t[row - 1]:g} at data row {row}; every time stamp must "
+        raise TimeColumnError(f"{path}: column 'time' is {'NaN' if np.isnan(t[row - 1]) else f'{t[row - 1]:g}'} at data row {row}; every time stamp must "
                               "be a finite number of seconds: fix or remove that row")
     if t.size > 1 and not np.all(np.diff(t) > 0):
         row = int(np.flatnonzero(np.diff(t) <= 0)[0]) + 2

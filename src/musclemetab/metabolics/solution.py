@@ -22,14 +22,21 @@ Outputs of :func:`write_metabolics` in a folder:
     ``basal``, ``total``, and model extras). ``total`` includes the per-muscle basal heat
     (1.2 W/kg of muscle mass) as the study's code computes it; ``total - basal`` is the
     muscle's rate without basal heat.
-``metabolics.csv``
-    the same values as a tidy table: ``time``, ``model``, ``muscle``, ``component``,
-    ``value_W``.
+``metabolics.parquet``
+    the same values as a tidy table (Parquet, full precision): ``time``, ``model``,
+    ``muscle``, ``component``, ``value_W``.
 ``whole_body.csv``
     one row per model: ``model``, ``mean_W_per_kg`` (both legs, basal per the rule, by
     default 1.2 W/kg of body mass), ``mean_W_per_kg_no_basal``, ``one_leg_mean_W``, then
     ``basal_rule``, ``duration_s`` and, when a speed is given,
-    ``cost_of_transport_J_per_kg_per_m``.
+    ``gross_cost_of_transport_J_per_kg_per_m`` (with the basal heat of the rule) and
+    ``net_cost_of_transport_J_per_kg_per_m`` (without basal heat).
+``per_muscle.csv``
+    one row per model and muscle: cycle-average rate, W/kg, energy per cycle, share of
+    the leg, stance and swing energies (given a gait cycle), components, basal heat apart
+    (:func:`musclemetab.analysis.per_muscle.per_muscle_table`).
+
+Every column is described in ``docs/data_dictionary.md``.
 """
 
 from __future__ import annotations
@@ -56,13 +63,13 @@ __all__ = [
     "SOLUTION_FILE",
     "SUMMARY_FILE",
     "METABOLICS_STO",
-    "METABOLICS_CSV",
+    "METABOLICS_PARQUET",
     "WHOLE_BODY_CSV",
 ]
 
 from ..redundancy.solution import SOLUTION_FILE, SUMMARY_FILE  # noqa: E402  (one definition of the format)
 METABOLICS_STO = "metabolics.sto"
-METABOLICS_CSV = "metabolics.csv"
+METABOLICS_PARQUET = "metabolics.parquet"
 WHOLE_BODY_CSV = "whole_body.csv"
 
 #: solution column quantity -> model argument
@@ -101,6 +108,10 @@ class SolutionStates:
     states: dict[str, np.ndarray]
     parameters: dict[str, dict[str, float]] = field(default_factory=dict)
     source: str = ""
+    #: (start, end) of the gait cycle recorded by a solve over ``--cycle`` (s), else None
+    cycle_s: tuple[float, float] | None = None
+    #: the solved leg ("r"/"l") when the solve recorded it
+    side: str | None = None
 
 
 def read_solution_states(directory: str | os.PathLike, *, require_success: bool = True) -> SolutionStates:
@@ -139,8 +150,11 @@ def read_solution_states(directory: str | os.PathLike, *, require_success: bool 
             rec = records.get(m)
             if isinstance(rec, Mapping) and all(k in rec for k in _SUMMARY_KEYS):
                 params[m] = {arg: float(rec[k]) for k, arg in _SUMMARY_KEYS.items()}
+    cycle = (summary.get("window") or {}).get("gait_cycle") if isinstance(summary.get("window"), Mapping) else None
+    cycle_s = (float(cycle["start_s"]), float(cycle["end_s"])) if isinstance(cycle, Mapping) else None
     return SolutionStates(
-        time_s=df.index.to_numpy(dtype=float), muscles=muscles, states=states, parameters=params, source=str(directory)
+        time_s=df.index.to_numpy(dtype=float), muscles=muscles, states=states, parameters=params, source=str(directory),
+        cycle_s=cycle_s, side=summary.get("side"),
     )
 
 
@@ -252,8 +266,8 @@ class SolutionMetabolics:
 
     def whole_body_table(self):
         """One row per model: ``model``, ``mean_W_per_kg``, ``mean_W_per_kg_no_basal``,
-        ``one_leg_mean_W``, ``basal_rule``, ``duration_s`` (and the cost of transport
-        when a speed was given)."""
+        ``one_leg_mean_W``, ``basal_rule``, ``duration_s`` (and the gross and net costs of
+        transport when a speed was given)."""
         import pandas as pd
 
         rows = []
@@ -268,7 +282,9 @@ class SolutionMetabolics:
                 "duration_s": wb.duration_s,
             }
             if self.speed_m_per_s is not None:
-                row["cost_of_transport_J_per_kg_per_m"] = wb.cost_of_transport_J_per_kg_per_m(self.speed_m_per_s)
+                row["gross_cost_of_transport_J_per_kg_per_m"] = wb.cost_of_transport_J_per_kg_per_m(self.speed_m_per_s)
+                row["net_cost_of_transport_J_per_kg_per_m"] = wb.net_cost_of_transport_J_per_kg_per_m(
+                    self.speed_m_per_s)
             rows.append(row)
         return pd.DataFrame(rows)
 
@@ -281,7 +297,7 @@ def metabolics_from_solution(
     models="all",
     muscle_parameters=None,
     basal: str = "body",
-    trim: tuple[int, int] = (5, 6),
+    trim: tuple[int, int] | None = None,
     model_options: Mapping[str, Mapping[str, object]] | None = None,
     muscle_masses_kg: Mapping[str, float] | None = None,
     slow_twitch_fractions: Mapping[str, float] | None = None,
@@ -290,6 +306,7 @@ def metabolics_from_solution(
     cycle_duration_s: float | None = None,
     speed_m_per_s: float | None = None,
     require_success: bool = True,
+    legs: int = 2,
 ) -> SolutionMetabolics:
     """Metabolic rates of every muscle of a solution, for a set of models.
 
@@ -313,7 +330,12 @@ def metabolics_from_solution(
         study's code) or ``"none"``. The per-muscle rates always carry the per-muscle
         ``basal`` component (the study's code), apart from the other components.
     trim
-        Nodes dropped at the start and at the end (5, 6).
+        Nodes dropped at the start and at the end. Default: for a solve over a gait cycle
+        found from ground forces (``summary.json`` ``window.gait_cycle``), every node outside
+        that cycle; otherwise the study's (5, 6).
+    legs
+        Legs the solved muscles stand for in the whole-body rate: 2 (one leg solved, doubled)
+        or 1 (each leg solved; add the legs, see :func:`add_legs`).
     model_options
         Per-model options, e.g. ``{"BH04": {"activation_heat_decay": False}}``.
     muscle_masses_kg, slow_twitch_fractions
@@ -360,7 +382,11 @@ def metabolics_from_solution(
             raise DataMismatchError(
                 f"solution state '{arg}' has shape {arr.shape}; expected (muscles, nodes) = ({len(muscles)}, {n_nodes})"
             )
-    keep = trim_slice(n_nodes, *trim)
+    if trim is None and sol.cycle_s is not None:
+        inside = np.flatnonzero((sol.time_s >= sol.cycle_s[0] - 1e-9) & (sol.time_s <= sol.cycle_s[1] + 1e-9))
+        keep = trim_slice(n_nodes, int(inside[0]), n_nodes - 1 - int(inside[-1]))
+    else:
+        keep = trim_slice(n_nodes, *(trim if trim is not None else (5, 6)))
     time = sol.time_s[keep]
     states = {arg: arr[:, keep] for arg, arr in sol.states.items()}
     for arg, arr in states.items():  # named here, where the solution and the muscles are known
@@ -391,7 +417,7 @@ def metabolics_from_solution(
         except TypeError as exc:
             raise OptionError(f"{name}: invalid option ({exc})") from None
     wb = {
-        name: whole_body_rate(r, time, body_mass_kg, basal=basal, cycle_duration_s=cycle_duration_s)
+        name: whole_body_rate(r, time, body_mass_kg, basal=basal, cycle_duration_s=cycle_duration_s, legs=legs)
         for name, r in rates.items()
     }
     return SolutionMetabolics(
@@ -411,11 +437,15 @@ def metabolics_from_solution(
     )
 
 
-def write_metabolics(result: SolutionMetabolics, out_dir: str | os.PathLike) -> dict[str, Path]:
-    """Write ``metabolics.sto``, ``metabolics.csv`` and ``whole_body.csv`` into ``out_dir``.
+def write_metabolics(result: SolutionMetabolics, out_dir: str | os.PathLike, cycle=None) -> dict[str, Path]:
+    """Write ``metabolics.sto``, ``metabolics.parquet``, ``whole_body.csv`` and
+    ``per_muscle.csv`` into ``out_dir``.
 
-    The three files are written together (:func:`musclemetab.io.atomic_directory`).
+    ``cycle`` (a :class:`~musclemetab.analysis.GaitCycle`) adds the stance and swing
+    energies to ``per_muscle.csv``. The files are written together
+    (:func:`musclemetab.io.atomic_directory`).
     """
+    from ..analysis.per_muscle import PER_MUSCLE_FILE, per_muscle_table
     from ..io import atomic_directory, write_storage
 
     out_dir = Path(out_dir)
@@ -428,10 +458,36 @@ def write_metabolics(result: SolutionMetabolics, out_dir: str | os.PathLike) -> 
     with atomic_directory(out_dir) as tmp:
         write_storage(tmp / METABOLICS_STO, result.to_dataframe(), name="musclemetab metabolic rates",
                       in_degrees=False, comments=comments)
-        result.to_long().to_csv(tmp / METABOLICS_CSV, index=False, float_format="%.10g")
+        result.to_long().to_parquet(tmp / METABOLICS_PARQUET, index=False)
         result.whole_body_table().to_csv(tmp / WHOLE_BODY_CSV, index=False, float_format="%.10g")
+        per_muscle_table(result, cycle).to_csv(tmp / PER_MUSCLE_FILE, index=False, float_format="%.10g")
     return {
         "metabolics_sto": out_dir / METABOLICS_STO,
-        "metabolics_csv": out_dir / METABOLICS_CSV,
+        "metabolics_parquet": out_dir / METABOLICS_PARQUET,
         "whole_body_csv": out_dir / WHOLE_BODY_CSV,
+        "per_muscle_csv": out_dir / PER_MUSCLE_FILE,
+    }
+
+
+def add_legs(results: Mapping[str, SolutionMetabolics]) -> dict[str, float]:
+    """Whole-body rate (W/kg) of both legs solved separately: the legs' cycle averages added.
+
+    ``results`` maps the side (``"r"``, ``"l"``) to its :class:`SolutionMetabolics`, each
+    computed with ``legs=1`` for the same subject and basal rule. Each leg's muscles are
+    averaged over that leg's own cycle; the basal heat of the ``"body"`` rule is added once.
+    """
+    from ._common import BASAL_RATE_W_PER_KG
+
+    res = list(results.values())
+    if not res:
+        raise OptionError("no leg to add")
+    if any(wb.legs != 1 for r in res for wb in r.whole_body.values()):
+        raise OptionError("add_legs needs each leg's metabolics computed with legs=1")
+    first = res[0]
+    for r in res[1:]:
+        if r.body_mass_kg != first.body_mass_kg or r.basal_rule != first.basal_rule or r.models != first.models:
+            raise DataMismatchError("the legs were evaluated with different body mass, basal rule or models")
+    basal = BASAL_RATE_W_PER_KG if first.basal_rule == "body" else 0.0
+    return {
+        m: sum(r.whole_body[m].one_leg_mean_W for r in res) / first.body_mass_kg + basal for m in first.models
     }

@@ -83,8 +83,12 @@ class WholeBodyRate:
     legs: int
 
     def cost_of_transport_J_per_kg_per_m(self, speed_m_per_s: float) -> float:
-        """Gross cost of transport (J/kg/m) at the walking speed."""
+        """Gross cost of transport (J/kg/m) at the walking speed (basal heat of the rule included)."""
         return cost_of_transport_J_per_kg_per_m(self.mean_W_per_kg, speed_m_per_s)
+
+    def net_cost_of_transport_J_per_kg_per_m(self, speed_m_per_s: float) -> float:
+        """Net cost of transport (J/kg/m) at the walking speed: without any basal heat."""
+        return cost_of_transport_J_per_kg_per_m(self.mean_W_per_kg_no_basal, speed_m_per_s)
 
 
 def whole_body_rate(

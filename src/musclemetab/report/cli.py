@@ -2,7 +2,7 @@
 
     musclemetab report DIR [--out FILE]
 
-Writes ``DIR/figures/<name>.png`` and ``.svg`` for every figure the data support, and
+Writes ``DIR/figures/<name>.png`` (and ``.svg`` with ``--svg``) for every figure the data support, and
 ``DIR/report.html`` (or ``FILE``, with its figures in ``figures/`` beside it): one
 self-contained page (see :mod:`musclemetab.report.html`).
 """
@@ -19,11 +19,12 @@ def add_report_parser(subparsers) -> None:
         help="figures and a self-contained HTML report of a study folder",
         description=(
             "Read a study folder written by 'musclemetab run' (study.json, results.csv, failures.csv, "
-            "units/) and write its figures (DIR/figures/<name>.png and .svg: excitations and fibre lengths, "
+            "units/) and write its figures (DIR/figures/<name>.png, and .svg with --svg: excitations and fibre lengths, "
             "estimated vs measured rate, group rates over the cycle, whole-body rate across speeds, stance "
             "and swing shares, group shares) and one HTML page, DIR/report.html, with the settings, the "
             "method, the result tables (W/kg, J/(kg m), %), the figures embedded, the failures and the "
-            "software versions. A figure the data do not support is replaced by a note."
+            "software versions. A figure the data do not support is replaced by a note. The report is rebuilt only "
+            "when its inputs changed (content hash)."
         ),
     )
     p.add_argument("study_dir", metavar="DIR", help="study folder (holding results.csv)")
@@ -31,6 +32,10 @@ def add_report_parser(subparsers) -> None:
         "--out", metavar="FILE",
         help="HTML file to write (default DIR/report.html); the figures go to a folder 'figures' beside it",
     )
+    p.add_argument("--svg", action="store_true", help="also write every figure as SVG (slower)")
+    p.add_argument("--force", action="store_true",
+                   help="redraw even when the inputs did not change (default: the report is rebuilt only when "
+                   "the study's results, units or the package changed)")
     p.set_defaults(func=report_command)
 
 
@@ -38,7 +43,8 @@ def report_command(args) -> int:
     """Run the ``report`` subcommand (``args`` from :func:`add_report_parser`)."""
     from .html import FIGURES_FOLDER, generate_report
 
-    out, entries = generate_report(args.study_dir, args.out)
+    formats = ("png", "svg") if args.svg else ("png",)
+    out, entries = generate_report(args.study_dir, args.out, formats=formats, force=args.force)
     drawn = [e.name for e in entries if e.paths is not None]
     print(f"report: {len(drawn)} of {len(entries)} figures -> {out.parent / FIGURES_FOLDER}; page -> {out}")
     for e in entries:

@@ -95,11 +95,16 @@ def default_muscles(available: Sequence[str], side: str = "r") -> list[str]:
     return report_muscles(on_side or list(available))
 
 
+def _study_model_default_muscles() -> tuple[str, ...]:
+    from ..properties import alias_table, split_side
+
+    a = alias_table()
+    names = [f"{n}_r" for n, f in zip(a["model_name"], a["families"]) if "rajagopal" in f]
+    return tuple(split_side(m)[0] for m in default_muscles(names))
+
+
 #: Side-free names of the figure's muscles in the study's model (``default_muscles`` of it).
-DEFAULT_MUSCLES = (
-    "soleus", "gasmed", "gaslat", "tibant", "vasmed", "vaslat",
-    "recfem", "bflh", "semiten", "glmax2", "glmed2", "iliacus",
-)
+DEFAULT_MUSCLES = _study_model_default_muscles()
 
 #: Normalised fibre lengths of the plateau of the active force-length curve (shaded).
 PLATEAU_BAND = (0.75, 1.05)
@@ -136,13 +141,34 @@ def group_colour(group: str) -> str:
 
 
 # ---------------------------------------------------------------------------------- helpers
-def _new_figure(width: float, height: float):
+#: Margins of the fixed layout (inches): left, right, top (title), bottom (one legend row).
+_MARGINS_IN = {"left": 0.75, "right": 0.2, "top": 0.55, "bottom": 0.75, "wspace": 0.28, "hspace": 0.32}
+
+
+def _new_figure(width: float, height: float, **margins_in):
+    """An Agg figure with a fixed layout: margins in inches (:data:`_MARGINS_IN`, overridden
+    by ``margins_in``), applied once when the figure is saved.
+
+    A fixed layout is drawn once; matplotlib's constrained layout draws every figure an
+    extra time to measure it, which doubled the report's drawing time.
+    """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(width, height), layout="constrained")
+    fig = Figure(figsize=(width, height))
     FigureCanvasAgg(fig)
+    fig._musclemetab_margins = {**_MARGINS_IN, **margins_in}
     return fig
+
+
+def _apply_layout(fig) -> None:
+    """Place the panels inside the figure's margins (see :func:`_new_figure`)."""
+    m = getattr(fig, "_musclemetab_margins", None)
+    if m is None or fig.get_layout_engine() is not None:
+        return
+    w, h = fig.get_size_inches()
+    fig.subplots_adjust(left=m["left"] / w, right=1.0 - m["right"] / w, top=1.0 - m["top"] / h,
+                        bottom=m["bottom"] / h, wspace=m["wspace"], hspace=m["hspace"])
 
 
 def _grid(n: int, max_cols: int = 3) -> tuple[int, int]:
@@ -330,7 +356,7 @@ def excitations_and_fiber_lengths(
     n = len(rows)
     ncol = min(6, n)
     nmrow = int(math.ceil(n / ncol))
-    fig = _new_figure(2.6 * ncol + 0.6, 2 * 2.0 * nmrow + 1.0)
+    fig = _new_figure(2.6 * ncol + 0.9, 2 * 2.0 * nmrow + 1.3, left=0.95, bottom=0.8, hspace=0.25)
     axes = fig.subplots(2 * nmrow, ncol, squeeze=False, sharex=True)
     toe_offs = _unique(round(100.0 * (c[1] - c[0]) / (c[2] - c[0]), 6) for c in cyc.values())
     for k, (label, found) in enumerate(rows):
@@ -378,7 +404,7 @@ def excitations_and_fiber_lengths(
         Patch(color="0.88", label=f"plateau {PLATEAU_BAND[0]:g}-{PLATEAU_BAND[1]:g}"),
         Line2D([], [], color="0.35", lw=0.8, ls="--", label=f"descending limb > {DESCENDING_LIMB:g}"),
     ]
-    fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 8), fontsize=9, frameon=False)
+    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 8), fontsize=9, frameon=False)
     fig.suptitle(title or "Muscle excitation and normalised fibre length over the gait cycle", fontsize=11)
     return fig
 
@@ -460,7 +486,7 @@ def estimated_vs_measured(results, *, models: Sequence[str] | None = None, title
         from matplotlib.lines import Line2D
 
         handles = [Line2D([], [], ls="", marker=marker[s], color="0.3", label=s) for s in subjects]
-        fig.legend(handles=handles, loc="outside lower center", ncol=min(len(subjects), 10), fontsize=8,
+        fig.legend(handles=handles, loc="lower center", ncol=min(len(subjects), 10), fontsize=8,
                    frameon=False, title="subject", title_fontsize=8)
     heading = title or ("Estimated vs measured whole-body metabolic rate (W/kg, with basal heat); "
                         "lines: repeated-measures correlation")
@@ -540,7 +566,7 @@ def group_rates_over_cycle(timeseries, toe_off_pct: float, models: Sequence[str]
 
     handles = [Line2D([], [], color=group_colour(g), lw=1.5, label=f"{g} ({GROUP_NAMES.get(g, g)})") for g in groups]
     handles.append(Line2D([], [], color="k", lw=0.8, ls=":", label=f"toe-off ({to:.1f} %)"))
-    fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 6), fontsize=8, frameon=False)
+    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 6), fontsize=8, frameon=False)
     fig.suptitle(title or "Metabolic rate of the muscle groups over the gait cycle (one leg, no basal heat)",
                  fontsize=11)
     return fig
@@ -599,7 +625,7 @@ def whole_body_over_cycle(timeseries_by_trial: Mapping[str, object], speeds: Map
     if toe_off_pct:
         handles.append(Line2D([], [], color="0.3", lw=1.5, marker="|", ls="", markersize=9,
                               label="toe-off (marks at the bottom)"))
-    fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 8), fontsize=8, frameon=False)
+    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 8), fontsize=8, frameon=False)
     fig.suptitle(title or "Whole-body metabolic rate over the gait cycle across walking speeds "
                  "(one leg, summed muscles, no basal heat)", fontsize=11)
     return fig
@@ -628,7 +654,7 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
     repeated-measures slope (% per m/s) when there are two speeds or more.
     """
     res = _ok_rows(results)
-    _require_columns(res, ("stance_pct", "swing_pct", "speed_m_per_s"), "the results table")
+    _require_columns(res, ("stance_energy_share_pct", "swing_energy_share_pct", "speed_m_per_s"), "the results table")
     if res.empty:
         raise OptionError("no successful unit in the results")
     trial = preferred_trial(res) if trial is None else str(trial)
@@ -639,7 +665,8 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
     wf_line = main_workflow(workflows) if workflow is None else str(workflow)
     if wf_line not in workflows:
         raise OptionError(f"workflow '{wf_line}' is not in the results; it has {', '.join(workflows)}")
-    fig = _new_figure(min(15.0, max(10.0, 0.5 * len(models) * max(1, len(workflows)) + 6.0)), 4.8)
+    fig = _new_figure(min(15.0, max(10.0, 0.5 * len(models) * max(1, len(workflows)) + 6.0)), 5.4,
+                      bottom=1.2, top=0.75)
     ax_b, ax_s = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.5, 1.0]})
     pref = res[res["trial"].astype(str) == trial]
     nw = len(workflows)
@@ -649,8 +676,8 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
         xs, stance, swing, sd = [], [], [], []
         for j, m in enumerate(models):
             d = pref[(pref["workflow"].astype(str) == w) & (pref["model"].astype(str) == m)]
-            sw, sw_sd, n = _mean_sd(d["swing_pct"])
-            st, _, _ = _mean_sd(d["stance_pct"])
+            sw, sw_sd, n = _mean_sd(d["swing_energy_share_pct"])
+            st, _, _ = _mean_sd(d["stance_energy_share_pct"])
             if n == 0:
                 continue
             xs.append(j - 0.4 + width * (i + 0.5))
@@ -689,11 +716,11 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
         if d.empty:
             continue
         col = model_colour(m)
-        ax_s.scatter(d["speed_m_per_s"], d["swing_pct"], color=col, s=9, alpha=0.45, label="_" + m, zorder=2)
-        rows = [r for r in _speed_table(d, "swing_pct") if np.isfinite(r[1]) and r[4] > 0]
+        ax_s.scatter(d["speed_m_per_s"], d["swing_energy_share_pct"], color=col, s=9, alpha=0.45, label="_" + m, zorder=2)
+        rows = [r for r in _speed_table(d, "swing_energy_share_pct") if np.isfinite(r[1]) and r[4] > 0]
         label = m
         if n_speeds > 1:
-            rm, _ = _rmcorr(d["speed_m_per_s"], d["swing_pct"], d["subject"].astype(str))
+            rm, _ = _rmcorr(d["speed_m_per_s"], d["swing_energy_share_pct"], d["subject"].astype(str))
             if rm is not None:
                 label = f"{m}: {rm.slope:+.1f} %/(m/s), r = {rm.r:.2f}"
         ax_s.plot([r[1] for r in rows], [r[2] for r in rows], color=col, marker="o", ms=4, lw=1.4,
@@ -733,7 +760,8 @@ def group_shares(results, *, workflows: Sequence[str] | None = None, models: Seq
     trials = trial_order(res)
     speeds = {t: r[1] for t, r in zip(trials, _speed_table(res, cols[0]))}
     panel_w = max(1.8, 0.3 * len(trials) + 0.9)
-    fig = _new_figure(min(20.0, panel_w * len(models) + 1.0), 2.9 * len(workflows) + 1.4)
+    fig = _new_figure(min(20.0, panel_w * len(models) + 1.2), 2.9 * len(workflows) + 1.8, left=0.9, bottom=1.3,
+                      hspace=0.45, wspace=0.1)
     axes = fig.subplots(len(workflows), len(models), squeeze=False, sharey=True)
     xt = [f"{t}\n{speeds[t]:.2f}" if np.isfinite(speeds[t]) else t for t in trials]
     for i, w in enumerate(workflows):
@@ -759,18 +787,19 @@ def group_shares(results, *, workflows: Sequence[str] | None = None, models: Seq
     from matplotlib.patches import Patch
 
     handles = [Patch(color=group_colour(g), label=f"{g} ({GROUP_NAMES.get(g, g)})") for g in groups]
-    fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 6), fontsize=8, frameon=False)
+    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 6), fontsize=8, frameon=False)
     fig.suptitle(title or "Shares of the muscle groups in the cycle's muscle metabolic energy "
                  "(%, one leg, no basal heat; mean over subjects)", fontsize=11)
     return fig
 
 
 # ------------------------------------------------------------------------------ saving
-def save_figure(fig, out_dir: str | os.PathLike, name: str, *, dpi: int = 110) -> dict[str, Path]:
-    """Write ``out_dir/name.png`` and ``out_dir/name.svg`` atomically; close the figure.
+def save_figure(fig, out_dir: str | os.PathLike, name: str, *, dpi: int = 110,
+                formats: Sequence[str] = ("png", "svg")) -> dict[str, Path]:
+    """Write ``out_dir/name.<format>`` for each of ``formats`` (PNG, SVG) atomically; close the figure.
 
-    Returns ``{"png": path, "svg": path}``. The SVG carries no date, so identical figures
-    give identical files.
+    Returns ``{format: path}``. The files carry no date or software stamp, so identical
+    figures give identical files.
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
@@ -779,16 +808,21 @@ def save_figure(fig, out_dir: str | os.PathLike, name: str, *, dpi: int = 110) -
     name = str(name)
     if not name or any(ch in name for ch in "/\\") or name.startswith("."):
         raise OptionError(f"figure name '{name}' must be a plain file name without an extension")
+    unknown = [f for f in formats if f not in ("png", "svg")]
+    if unknown or not formats:
+        raise OptionError(f"figure formats must be png and/or svg, not {', '.join(map(str, formats)) or 'none'}")
     out_dir = Path(out_dir)
     if not isinstance(fig.canvas, FigureCanvasAgg):
         FigureCanvasAgg(fig)
+    _apply_layout(fig)
     import matplotlib
 
     paths = {}
+    meta = {"png": {"Software": None}, "svg": {"Date": None}}
     with matplotlib.rc_context({"svg.hashsalt": "musclemetab", "svg.fonttype": "path"}):
-        for fmt, meta in (("png", {"Software": None}), ("svg", {"Date": None})):
+        for fmt in formats:
             buf = io.BytesIO()
-            fig.savefig(buf, format=fmt, dpi=dpi, metadata=meta)
+            fig.savefig(buf, format=fmt, dpi=dpi, metadata=meta[fmt])
             paths[fmt] = atomic_write_bytes(out_dir / f"{name}.{fmt}", buf.getvalue())
     if "matplotlib.pyplot" in sys.modules:
         sys.modules["matplotlib.pyplot"].close(fig)

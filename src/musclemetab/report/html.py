@@ -38,6 +38,7 @@ __all__ = [
     "FIGURES_FOLDER",
     "FIGURE_NAMES",
     "REQUIRED_COLUMNS",
+    "report_key",
 ]
 
 REPORT_FILE = "report.html"
@@ -233,14 +234,29 @@ def _read_timeseries(folder: Path):
         raise InputFileError(f"{p}: not a readable table ({exc})") from None
 
 
+def _rel(study: StudyFolder, path) -> str:
+    """A path as the report shows it: relative to the study folder (``.`` for the folder)."""
+    if path is None or str(path) == "":
+        return "–"
+    p = Path(str(path))
+    if not p.is_absolute():
+        return str(p)
+    try:
+        return os.path.relpath(p, study.path.resolve())
+    except ValueError:  # another drive
+        return p.name
+
+
 def _short(study: StudyFolder, exc: BaseException) -> str:
     """An error message on one line, with paths relative to the study folder."""
     text = " ".join(str(exc).split())
     return text.replace(str(study.path) + os.sep, "").replace(str(study.path.resolve()) + os.sep, "")
 
 
-def make_figures(study: StudyFolder, fig_dir: str | os.PathLike) -> list[FigureEntry]:
-    """Draw the figures the study's data support and save them in ``fig_dir`` (PNG and SVG).
+def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequence[str] = ("png",)
+                 ) -> list[FigureEntry]:
+    """Draw the figures the study's data support and save them in ``fig_dir`` (``formats``:
+    PNG, and SVG when asked for).
 
     Returns one :class:`FigureEntry` per name of :data:`FIGURE_NAMES`, with the file paths or
     the note saying why the figure is not drawn (the files of a figure not drawn are
@@ -266,7 +282,8 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike) -> list[FigureE
         except MusclemetabError as exc:
             entries[name] = FigureEntry(name, titles[name], note=_short(study, exc))
             return
-        entries[name] = FigureEntry(name, titles[name], caption=caption, paths=F.save_figure(fig, fig_dir, name))
+        entries[name] = FigureEntry(name, titles[name], caption=caption,
+                                    paths=F.save_figure(fig, fig_dir, name, formats=formats))
 
     if ok.empty:
         for name in FIGURE_NAMES:
@@ -421,8 +438,8 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike) -> list[FigureE
                 continue
             attempt(name, builders[name])
     for e in entries.values():
-        if e.paths is None:
-            for ext in ("png", "svg"):
+        for ext in ("png", "svg"):
+            if e.paths is None or ext not in e.paths:
                 stale = fig_dir / f"{e.name}.{ext}"
                 if stale.is_file():
                     stale.unlink()
@@ -494,11 +511,73 @@ def _trial_heading(ok, trials) -> list[str]:
     return out
 
 
+def _estimation_notes(study: StudyFolder) -> str:
+    """A note for every trial whose gait events or walking speed were estimated."""
+    ok = study.ok
+    notes = []
+    for col, what in (("cycle_source", "gait events"), ("speed_source", "walking speed")):
+        if col not in ok.columns:
+            continue
+        d = ok.drop_duplicates(["subject", "trial"])
+        est = d[d[col].astype(str).str.startswith("estimated")]
+        for source, rows in est.groupby(col, sort=False):
+            units = ", ".join(f"{r.subject}/{r.trial}" for r in rows.itertuples())
+            notes.append(f"The {what} of {units} were {source}.")
+    return "\n".join(f'<p class="note">{_esc(n)}</p>' for n in notes)
+
+
+def _per_muscle_section(study: StudyFolder) -> str:
+    """The muscles costing most energy: the study's per_muscle.csv, top muscles per model."""
+    import pandas as pd
+
+    from ..analysis.per_muscle import PER_MUSCLE_FILE
+
+    path = study.path / PER_MUSCLE_FILE
+    if not path.is_file():
+        return f'<p class="note">{PER_MUSCLE_FILE} is missing: run the study with this version to get it.</p>'
+    try:
+        pm = pd.read_csv(path, dtype={"subject": str, "trial": str, "workflow": str, "model": str})
+    except (pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError) as exc:
+        return f'<p class="note">{PER_MUSCLE_FILE} is not readable ({_esc(exc)}).</p>'
+    if pm.empty or "mean_W_per_kg" not in pm.columns:
+        return f'<p class="note">{PER_MUSCLE_FILE} holds no rows.</p>'
+    from .figures import main_workflow, trial_order
+
+    ok = study.ok
+    trials = [t for t in trial_order(ok) if t in set(pm["trial"].astype(str))] if not ok.empty else []
+    wf = main_workflow(_ordered(pm["workflow"]))
+    d = pm[pm["workflow"].astype(str) == wf]
+    models = [m for m in _models(study) if m in set(d["model"].astype(str))]
+    top = 10
+    parts = [f"<p>The {top} muscles with the largest cycle-average metabolic rate (W/kg of body mass, one leg, "
+             f"without basal heat; mean over subjects) for workflow {_esc(wf)}, by model and trial; all muscles, "
+             f"sides, workflows, components and stance/swing energies are in {PER_MUSCLE_FILE}.</p>"]
+    for m in models:
+        dm = d[d["model"].astype(str) == m]
+        mean = dm.groupby(["muscle", "trial"])["mean_W_per_kg"].mean().unstack("trial")
+        cols = [t for t in trials if t in mean.columns] or list(mean.columns)
+        mean = mean[cols]
+        order = mean.mean(axis=1).sort_values(ascending=False).index[:top]
+        body = [[mu] + [f"{mean.loc[mu, t]:.3f}" if np.isfinite(mean.loc[mu, t]) else "–" for t in cols]
+                for mu in order]
+        parts.append(f"<h3>{_esc(m)}</h3>")
+        parts.append(_table([[("muscle", 1)] + [(t, 1) for t in cols]], body, 1, "results"))
+    return "\n".join(parts)
+
+
+def _ordered(values) -> list[str]:
+    out = []
+    for v in values.astype(str):
+        if v not in out:
+            out.append(v)
+    return out
+
+
 def _results_section(study: StudyFolder) -> str:
     from .figures import trial_order
 
     ok = study.ok
-    parts = ["<h2>Results</h2>"]
+    parts = []
     if ok.empty:
         parts.append('<p class="note">No unit of the study succeeded: no results to tabulate.</p>')
         return "\n".join(parts)
@@ -533,14 +612,14 @@ def _results_section(study: StudyFolder) -> str:
         parts.append(_table([[("", 1)] + [(lab, 1) for lab in tlabels]], body, 1, "results"))
     else:
         parts.append('<p class="note">No measured metabolic rate in the results.</p>')
-    pivot_section("table-cost-of-transport", "Cost of transport (J/(kg·m))", "cost_of_transport_J_per_kg_per_m", 2,
+    pivot_section("table-cost-of-transport", "Cost of transport (J/(kg·m))", "gross_cost_of_transport_J_per_kg_per_m", 2,
                   "Metabolic cost of transport: the whole-body rate (W/kg) divided by the walking speed (m/s), "
                   "in J per kg of body mass per metre.")
 
     # phase shares
     parts.append('<h3 id="table-phase-shares">Stance and swing shares (%)</h3>')
-    have = [c for c in ("stance_pct", "swing_pct", "swing_pct_with_basal") if c in ok.columns]
-    if "swing_pct" not in have:
+    have = [c for c in ("stance_energy_share_pct", "swing_energy_share_pct", "swing_energy_share_with_basal_pct") if c in ok.columns]
+    if "swing_energy_share_pct" not in have:
         parts.append('<p class="note">The results table has no phase shares.</p>')
     else:
         parts.append(
@@ -548,7 +627,7 @@ def _results_section(study: StudyFolder) -> str:
             "toe-off) and in swing (toe-off to the next initial contact), %, without basal heat; the column "
             "'swing, with basal' counts the basal heat as well.</p>"
         )
-        names = {"stance_pct": "stance", "swing_pct": "swing", "swing_pct_with_basal": "swing, with basal"}
+        names = {"stance_energy_share_pct": "stance", "swing_energy_share_pct": "swing", "swing_energy_share_with_basal_pct": "swing, with basal"}
         header = [[("trial (speed)", 1), ("model", 1)] + [(w, len(have)) for w in workflows],
                   [("", 1), ("", 1)] + [(names[c], 1) for _ in workflows for c in have]]
         body = []
@@ -597,7 +676,7 @@ def _settings_section(study: StudyFolder) -> str:
     parts = ['<h2 id="settings">Settings</h2>']
     for n in study.notes:
         parts.append(f'<p class="note">{_esc(n)}</p>')
-    items = [("study", study.name), ("folder", str(study.path)),
+    items = [("study", study.name), ("folder", ". (the folder holding this report)"),
              ("workflows", ", ".join(_workflows(study))), ("metabolic models", ", ".join(_models(study)))]
     if s.get("basal") is not None:
         items.append(("whole-body basal rule", str(s["basal"])))
@@ -613,11 +692,12 @@ def _settings_section(study: StudyFolder) -> str:
         if not trials:
             trials = sorted(set(study.results.loc[study.results["subject"].astype(str) == n, "trial"].astype(str)))
         body.append([n, "–" if mass is None else f"{float(mass):g}", "–" if height is None else f"{float(height):g}",
-                     str(rec.get("model") or "–"), ", ".join(map(str, trials))])
+                     _rel(study, rec.get("model")), ", ".join(map(str, trials))])
     parts.append("<h3>Subjects</h3>")
     parts.append(_table([[("subject", 1), ("body mass (kg)", 1), ("height (m)", 1), ("model", 1), ("trials", 1)]],
                         body, 1, "settings"))
-    other = {k: v for k, v in s.items() if k not in ("name", "workflows", "models", "subjects", "software")}
+    other = {k: (_rel(study, v) if k in ("source", "output") and v else v) for k, v in s.items()
+             if k not in ("name", "workflows", "models", "subjects", "software")}
     if other:
         parts.append("<h3>Other settings (study.json)</h3>")
         parts.append(f"<pre>{_esc(json.dumps(other, indent=2, default=str))}</pre>")
@@ -654,8 +734,6 @@ def software_versions() -> dict[str, str]:
 
     out = {}
     for name in SOFTWARE:
-        if name == "opensim":
-            continue  # never imported nor probed in the report's process
         if name == "musclemetab":
             out[name] = __version__
             continue
@@ -666,16 +744,26 @@ def software_versions() -> dict[str, str]:
     return out
 
 
+def _installed(name: str) -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version(name)
+    except PackageNotFoundError:
+        return "not installed"
+
+
 def _software_section(study: StudyFolder) -> str:
     run = study.settings.get("software") if isinstance(study.settings.get("software"), dict) else {}
     now = software_versions()
     names = list(SOFTWARE) + [k for k in run if k not in SOFTWARE]
     body = []
     for n in names:
-        body.append([n, str(run.get(n, "not recorded")), now.get(n, "–" if n == "opensim" else "not checked")])
+        body.append([n, str(run.get(n, "not recorded by the run")), now.get(n) or _installed(n)])
     parts = ['<h2 id="software">Software</h2>',
-             "<p>Versions recorded by the study run (study.json) and those of the process that wrote this "
-             "report. OpenSim is used only by the study run (for the muscle geometry).</p>",
+             "<p>Versions recorded by the study run (study.json) and those installed where this report was "
+             "written (read from the packages' metadata; none is imported). OpenSim is used only by the study "
+             "run (muscle geometry, states export).</p>",
              _table([[("package", 1), ("study run", 1), ("report", 1)]], body, 1, "software")]
     return "\n".join(parts)
 
@@ -715,10 +803,10 @@ def _figures_section(entries: Sequence[FigureEntry], figures_rel: str) -> str:
             parts.append(f'<p class="note">Not drawn: {_esc(e.note or "no data")}</p>')
             continue
         data = base64.b64encode(Path(e.paths["png"]).read_bytes()).decode("ascii")
+        files = ", ".join(f"{figures_rel}/{e.name}.{ext}" for ext in e.paths)
         parts.append(
             f'<figure><img alt="{_esc(e.title)}" src="data:image/png;base64,{data}">'
-            f"<figcaption>{_esc(e.caption)} Files: {_esc(figures_rel)}/{_esc(e.name)}.png, "
-            f"{_esc(figures_rel)}/{_esc(e.name)}.svg.</figcaption></figure>"
+            f"<figcaption>{_esc(e.caption)} File{'s' if len(e.paths) > 1 else ''}: {_esc(files)}.</figcaption></figure>"
         )
     return "\n".join(parts)
 
@@ -740,8 +828,10 @@ dd { margin: 0; } pre { background: #f7f7f7; padding: 0.6em; overflow-x: auto; f
 """
 
 
-def render_html(study: StudyFolder, entries: Sequence[FigureEntry], figures_rel: str = FIGURES_FOLDER) -> str:
-    """The report page as a string (figures embedded from the PNG files of ``entries``)."""
+def render_html(study: StudyFolder, entries: Sequence[FigureEntry], figures_rel: str = FIGURES_FOLDER,
+                key: str | None = None) -> str:
+    """The report page as a string (figures embedded from the PNG files of ``entries``;
+    ``key``: the content key of the inputs, recorded in the page, see :func:`report_key`)."""
     ok = study.ok
     n_units = len(study.results.drop_duplicates(["subject", "trial", "workflow"])) if not study.results.empty else 0
     n_ok = len(ok.drop_duplicates(["subject", "trial", "workflow"])) if not ok.empty else 0
@@ -753,20 +843,24 @@ def render_html(study: StudyFolder, entries: Sequence[FigureEntry], figures_rel:
                f"{n_ok} of {n_units} subject × trial × workflow units in the results succeeded; "
                f"{drawn} of {len(entries)} figures drawn.")
     toc = "".join(f'<li><a href="#{a}">{_esc(t)}</a></li>' for a, t in (
-        ("settings", "Settings"), ("method", "Method"), ("results", "Results"), ("figures", "Figures"),
-        ("failures", "Failures"), ("software", "Software")))
+        ("figures", "Figures"), ("results", "Results (tables)"), ("per-muscle", "Per-muscle results"),
+        ("settings", "Settings"), ("method", "Method"), ("failures", "Failures"), ("software", "Software")))
     body = "\n".join([
         f"<h1>{_esc(title)}</h1>",
-        f'<p class="meta">Written {_esc(when)} by musclemetab {_esc(software_versions()["musclemetab"])} '
-        f"from {_esc(study.path)}.</p>",
+        f'<p class="meta">Written {_esc(when)} by musclemetab {_esc(software_versions()["musclemetab"])}; '
+        "paths are relative to the study folder (the folder holding this page).</p>",
         f"<p>{_esc(summary)}</p>",
+        _estimation_notes(study),
         f"<nav><ul>{toc}</ul></nav>",
+        _figures_section(entries, figures_rel),
+        f'<details id="results" open><summary><h2>Results (tables)</h2></summary>{_results_section(study)}</details>',
+        f'<details id="per-muscle"><summary><h2>Per-muscle results</h2></summary>{_per_muscle_section(study)}'
+        "</details>",
         _settings_section(study),
         _method_section(study),
-        f'<div id="results">{_results_section(study)}</div>',
-        _figures_section(entries, figures_rel),
         _failures_section(study),
         _software_section(study),
+        f'<meta name="musclemetab-report-key" content="{_esc(key)}">' if key else "",
     ])
     return (
         "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
@@ -774,25 +868,96 @@ def render_html(study: StudyFolder, entries: Sequence[FigureEntry], figures_rel:
     )
 
 
-def generate_report(study_dir: str | os.PathLike, out: str | os.PathLike | None = None
-                    ) -> tuple[Path, list[FigureEntry]]:
+REPORT_RECORD = "report.json"
+
+
+def report_key(study_dir: str | os.PathLike, formats: Sequence[str] = ("png",)) -> str:
+    """SHA-256 of everything the report is drawn from.
+
+    The study's tables (``results.csv``, ``study.json``, ``failures.csv``, ``per_muscle.csv``),
+    every unit's ``unit.json`` (which records the hash of each of the unit's files), the
+    figure formats, the package version and the source of the report's own modules.
+    """
+    import hashlib
+
+    from .. import __version__
+    from ..io.atomic import file_sha256
+    from . import figures as _figures
+
+    path = Path(study_dir)
+    h = hashlib.sha256()
+    h.update(f"musclemetab {__version__}; formats {','.join(formats)}\n".encode())
+    for src in (Path(__file__), Path(_figures.__file__)):
+        h.update(src.read_bytes())
+    files = [path / n for n in (RESULTS_CSV, STUDY_JSON, FAILURES_CSV, "per_muscle.csv")]
+    files += sorted((path / "units").glob(f"**/{UNIT_FILE}")) if (path / "units").is_dir() else []
+    for f in files:
+        digest = file_sha256(f) if f.is_file() else "absent"
+        h.update(f"{f.relative_to(path).as_posix()} {digest}\n".encode())
+    return h.hexdigest()
+
+
+def _cached_entries(out: Path, key: str) -> list[FigureEntry] | None:
+    """The figure entries of the report at ``out`` if it was written from inputs with ``key``."""
+    from ..io.jsonfile import read_json_object
+
+    record = out.parent / FIGURES_FOLDER / REPORT_RECORD
+    if not (out.is_file() and record.is_file()):
+        return None
+    try:
+        rec = read_json_object(record, remedy="the report is rebuilt")
+    except MusclemetabError:
+        return None
+    if rec.get("key") != key or rec.get("page") != out.name:
+        return None
+    try:
+        entries = [FigureEntry(e["name"], e["title"], e.get("caption", ""),
+                               None if e.get("paths") is None else {k: Path(v) for k, v in e["paths"].items()},
+                               e.get("note")) for e in rec.get("entries") or []]
+    except (KeyError, TypeError, AttributeError):
+        return None
+    if any(e.paths is not None and not all(p.is_file() for p in e.paths.values()) for e in entries):
+        return None
+    if f'content="{key}"' not in out.read_text(encoding="utf-8", errors="replace"):
+        return None
+    return entries
+
+
+def generate_report(study_dir: str | os.PathLike, out: str | os.PathLike | None = None, *,
+                    formats: Sequence[str] = ("png",), force: bool = False) -> tuple[Path, list[FigureEntry]]:
     """:func:`write_report`, also returning the figure entries (files written or notes)."""
     from ..io.atomic import atomic_write_text
 
+    study_dir = Path(study_dir)
     study = read_study_folder(study_dir)
     out = Path(out) if out is not None else study.path / REPORT_FILE
     if out.is_dir():
         out = out / REPORT_FILE
-    entries = make_figures(study, out.parent / FIGURES_FOLDER)
-    atomic_write_text(out, render_html(study, entries, figures_rel=FIGURES_FOLDER))
+    formats = tuple(dict.fromkeys(("png", *formats)))  # the page embeds the PNG
+    key = report_key(study.path, formats)
+    if not force:
+        cached = _cached_entries(out, key)
+        if cached is not None:
+            return out, cached
+    fig_dir = out.parent / FIGURES_FOLDER
+    entries = make_figures(study, fig_dir, formats)
+    atomic_write_text(out, render_html(study, entries, figures_rel=FIGURES_FOLDER, key=key))
+    record = {"key": key, "page": out.name, "entries": [
+        {"name": e.name, "title": e.title, "caption": e.caption, "note": e.note,
+         "paths": None if e.paths is None else {k: str(v) for k, v in e.paths.items()}} for e in entries]}
+    atomic_write_text(fig_dir / REPORT_RECORD, json.dumps(record, indent=1) + "\n")
     return out, entries
 
 
-def write_report(study_dir: str | os.PathLike, out: str | os.PathLike | None = None) -> Path:
+def write_report(study_dir: str | os.PathLike, out: str | os.PathLike | None = None, *,
+                 formats: Sequence[str] = ("png",), force: bool = False) -> Path:
     """Write the figures and the HTML report of a study folder; return the report's path.
 
     ``out`` is the HTML file (default ``study_dir/report.html``); the figures are written to the
-    folder ``figures`` beside it (PNG and SVG). Everything is written atomically.
-    Raises :class:`InputFileError` when the folder or its ``results.csv`` is missing.
+    folder ``figures`` beside it (PNG; ``formats=("png", "svg")`` adds SVG). Everything is
+    written atomically. The report is rebuilt only when its inputs changed (their content
+    hash, :func:`report_key`, is recorded in the page and in ``figures/report.json``) or
+    when ``force`` is true. Raises :class:`InputFileError` when the folder or its
+    ``results.csv`` is missing.
     """
-    return generate_report(study_dir, out)[0]
+    return generate_report(study_dir, out, formats=formats, force=force)[0]

@@ -10,6 +10,13 @@ trial units — and gathers every complete unit into one results table:
     toe-off (% of the cycle), speed and measured rate when the study gives calorimetry, and
     ``large_reserve`` (the solve's reserves exceed 1 % of the peak joint moment, see
     :data:`musclemetab.redundancy.solution.LARGE_RESERVE_SHARE`).
+``DIR/per_muscle.csv`` and ``DIR/per_muscle.parquet``
+    one row per subject × trial × workflow × model × muscle (with its side): the
+    per-muscle table of every unit (:mod:`musclemetab.analysis.per_muscle`).
+``DIR/muscle_groups.csv``
+    the key of the muscle-group abbreviations of the ``share_<G>_pct`` columns.
+``DIR/data_dictionary.csv``
+    every column of every table the package writes, with its unit and meaning.
 ``DIR/failures.csv``
     one row per failed unit with its reason.
 ``DIR/study.json``
@@ -65,6 +72,9 @@ __all__ = ["run_study", "StudyRun", "collect_results", "software_versions", "stu
 RESULTS_CSV = "results.csv"
 RESULTS_PARQUET = "results.parquet"
 FAILURES_CSV = "failures.csv"
+PER_MUSCLE_PARQUET = "per_muscle.parquet"
+GROUP_KEY_CSV = "muscle_groups.csv"
+DATA_DICTIONARY_CSV = "data_dictionary.csv"
 STUDY_JSON = "study.json"
 LOCK_FILE = ".musclemetab.lock"
 #: Seconds to wait for a Dask scheduler that has a valid address.
@@ -460,8 +470,10 @@ def collect_results(study: Study, failed: dict[str, str] | None = None):
     """Gather the complete trial units of ``study`` into the results table (and write it)."""
     import pandas as pd
 
+    from ..analysis.per_muscle import PER_MUSCLE_FILE
+
     out = Path(study.output)
-    frames, failures = [], []
+    frames, failures, muscles = [], [], []
     for unit in plan_units(study)[1]:
         folder = out / unit.folder
         rec = read_unit_record(folder)
@@ -478,10 +490,18 @@ def collect_results(study: Study, failed: dict[str, str] | None = None):
         df["speed_m_per_s"] = rec.get("speed_m_per_s")
         df["toe_off_pct"] = rec.get("toe_off_pct")
         df["measured_W_per_kg"] = rec.get("measured_W_per_kg")
+        df["cycle_source"] = rec.get("cycle_source")
+        df["speed_source"] = rec.get("speed_source")
         df["large_reserve"] = bool(rec.get("large_reserve", False))
         df["status"] = "ok"
         df["unit_dir"] = str(unit.folder)
         frames.append(df)
+        if (folder / PER_MUSCLE_FILE).is_file():
+            pm = pd.read_csv(folder / PER_MUSCLE_FILE)
+            for k, (col, val) in enumerate((("subject", unit.subject), ("trial", unit.trial),
+                                            ("workflow", unit.workflow))):
+                pm.insert(k, col, val)
+            muscles.append(pm)
     for unit in plan_units(study)[0]:
         rec = read_unit_record(out / unit.folder)
         if not rec or rec.get("status") != "ok":
@@ -498,6 +518,18 @@ def collect_results(study: Study, failed: dict[str, str] | None = None):
             table.to_parquet(tmp, index=False)
     except ImportError:  # pragma: no cover - pyarrow missing
         pass
+    per_muscle = pd.concat(muscles, ignore_index=True) if muscles else pd.DataFrame(columns=list(ID_COLUMNS))
+    per_muscle = per_muscle.sort_values(list(ID_COLUMNS) + (["rank"] if "rank" in per_muscle else []),
+                                        kind="stable", ignore_index=True)
+    with atomic_path(out / PER_MUSCLE_FILE) as tmp:
+        per_muscle.to_csv(tmp, index=False, float_format="%.10g")
+    with atomic_path(out / PER_MUSCLE_PARQUET) as tmp:
+        per_muscle.to_parquet(tmp, index=False)
+    from ..analysis.groups import write_group_key
+    from ..datadict import write_data_dictionary
+
+    write_group_key(out / GROUP_KEY_CSV)
+    write_data_dictionary(out / DATA_DICTIONARY_CSV)
     fail = pd.DataFrame(failures, columns=["subject", "trial", "workflow", "reason"])
     with atomic_path(out / FAILURES_CSV) as tmp:
         fail.to_csv(tmp, index=False)

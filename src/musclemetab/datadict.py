@@ -1,0 +1,177 @@
+"""The data dictionary: every column of every table the package writes, with unit and meaning.
+
+:data:`DATA_DICTIONARY` is the one source; :func:`data_dictionary_table` gives it as a
+table, :func:`write_data_dictionary` writes it as CSV (the study runner writes
+``data_dictionary.csv`` beside ``results.csv``) and :func:`data_dictionary_markdown` renders
+``docs/data_dictionary.md``. Column names with ``<...>`` stand for a family of columns
+(``share_<G>_pct``: one per muscle group of ``muscle_groups.csv``).
+
+Conventions: one leg means the simulated leg's muscles; whole body means both legs (twice
+the simulated leg) per kg of body mass; "no basal" means without any basal heat.
+"""
+
+from __future__ import annotations
+
+import os
+
+__all__ = ["DATA_DICTIONARY", "data_dictionary_table", "write_data_dictionary", "data_dictionary_markdown",
+           "describe"]
+
+_STUDY = "results.csv/.parquet"
+_UNIT_WB = "whole_body.csv"
+_UNIT_AN = "analysis.csv"
+_PM = "per_muscle.csv/.parquet"
+
+#: ``(files, column, unit, description)``; ``files`` lists the tables holding the column.
+DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
+    # identifiers
+    (f"{_STUDY}, {_PM} (study), failures.csv", "subject", "-", "subject name of the study file"),
+    (f"{_STUDY}, {_PM} (study), failures.csv", "trial", "-", "trial name of the study file"),
+    (f"{_STUDY}, {_PM} (study), failures.csv", "workflow", "-",
+     "muscle redundancy workflow: effort-gen, effort-cal, effort-ten or emg-ten"),
+    (f"{_STUDY}, {_UNIT_WB}, {_UNIT_AN}, {_PM}, timeseries.csv, metabolics.parquet", "model", "-",
+     "metabolic energy model (short name of the registry, e.g. UM10, BH04)"),
+    ("failures.csv", "reason", "-", "why the unit failed (one line)"),
+    (_STUDY, "status", "-", "ok for a unit whose results are in the row"),
+    (_STUDY, "unit_dir", "-", "the unit's folder, relative to the study folder"),
+    # whole body
+    (f"{_STUDY}, {_UNIT_WB}", "mean_W_per_kg", "W/kg",
+     "whole-body average metabolic rate over the gait cycle: both legs (twice the simulated leg) per kg of "
+     "body mass, with the basal heat of the basal rule"),
+    (f"{_STUDY}, {_UNIT_WB}", "mean_W_per_kg_no_basal", "W/kg",
+     "the same without any basal heat"),
+    (f"{_STUDY}, {_UNIT_WB}", "one_leg_mean_W", "W",
+     "cycle-average summed rate of the simulated leg's muscles (per-muscle basal heat only under the muscle rule)"),
+    (f"{_STUDY}, {_UNIT_WB}", "basal_rule", "-",
+     "basal heat rule: body (1.2 W per kg of body mass added), muscle (1.2 W per kg of muscle mass in every "
+     "muscle) or none"),
+    (f"{_STUDY}, {_UNIT_WB}", "duration_s", "s", "duration the whole-body average is taken over"),
+    (f"{_STUDY}, {_UNIT_WB}", "gross_cost_of_transport_J_per_kg_per_m", "J/(kg m)",
+     "gross cost of transport: mean_W_per_kg (with basal heat) divided by the walking speed"),
+    (f"{_STUDY}, {_UNIT_WB}", "net_cost_of_transport_J_per_kg_per_m", "J/(kg m)",
+     "net cost of transport: mean_W_per_kg_no_basal divided by the walking speed"),
+    # cycle and phases
+    (f"{_STUDY}, {_UNIT_AN}", "cycle_start_s", "s", "initial contact starting the gait cycle"),
+    (f"{_STUDY}, {_UNIT_AN}", "toe_off_s", "s", "toe-off of the simulated leg"),
+    (f"{_STUDY}, {_UNIT_AN}", "cycle_end_s", "s", "next initial contact of the same leg"),
+    (f"{_STUDY}, {_UNIT_AN}", "toe_off_pct", "%", "toe-off in % of the gait cycle"),
+    (f"{_STUDY}, {_UNIT_AN}", "leg_energy_J", "J",
+     "metabolic energy of the simulated leg's muscles over the sampled cycle, no basal"),
+    (f"{_STUDY}, {_UNIT_AN}", "stance_energy_share_pct", "%",
+     "share of the cycle's muscle energy (one leg, no basal) spent in stance (initial contact to toe-off); "
+     "an energy share, not a phase duration"),
+    (f"{_STUDY}, {_UNIT_AN}", "swing_energy_share_pct", "%",
+     "share of the cycle's muscle energy (one leg, no basal) spent in swing (toe-off to the next initial contact)"),
+    (f"{_STUDY}, {_UNIT_AN}", "stance_energy_share_with_basal_pct", "%",
+     "stance energy share with the per-muscle basal heat included"),
+    (f"{_STUDY}, {_UNIT_AN}", "swing_energy_share_with_basal_pct", "%",
+     "swing energy share with the per-muscle basal heat included"),
+    (f"{_STUDY}, {_UNIT_AN}", "share_<G>_pct", "%",
+     "share of muscle group G (key: muscle_groups.csv) in the cycle's muscle energy (one leg, no basal); each "
+     "muscle's rate is split over the DOFs it spans by moment-arm ratio; the groups and share_other_pct sum to 100"),
+    (f"{_STUDY}, {_UNIT_AN}", "share_other_pct", "%",
+     "share of the muscle energy at instants when a muscle has no moment arm above the threshold"),
+    (_STUDY, "speed_m_per_s", "m/s", "walking speed (study file, or estimated: see speed_source)"),
+    (_STUDY, "measured_W_per_kg", "W/kg", "measured whole-body metabolic rate (indirect calorimetry), if given"),
+    (_STUDY, "cycle_source", "-", "where the gait events come from (study file, ground reaction forces, or estimated)"),
+    (_STUDY, "speed_source", "-", "where the walking speed comes from (study file, or estimated from the pelvis)"),
+    # per muscle
+    (_PM, "muscle", "-", "muscle name of the model"),
+    (_PM, "side", "-", "leg of the muscle: r or l ('' when the name has no side suffix)"),
+    (_PM, "mean_W", "W",
+     "the muscle's cycle-average metabolic rate without basal heat (work + activation/maintenance heat + "
+     "shortening/lengthening heat); summed over a leg's muscles it is the whole-body one_leg figure"),
+    (_PM, "mean_W_per_kg", "W/kg", "mean_W per kg of body mass (this muscle of one leg)"),
+    (_PM, "energy_per_cycle_J", "J", "the muscle's energy over the sampled gait cycle, no basal (stance_J + swing_J)"),
+    (_PM, "share_of_leg_pct", "%", "the muscle's part of its leg's summed mean_W (a leg's muscles sum to 100)"),
+    (_PM, "stance_J", "J", "the muscle's energy in stance, no basal (empty without a gait cycle)"),
+    (_PM, "swing_J", "J", "the muscle's energy in swing, no basal (empty without a gait cycle)"),
+    (_PM, "work_mean_W", "W", "cycle average of the mechanical work rate the model counts"),
+    (_PM, "activation_maintenance_heat_mean_W", "W", "cycle average of the activation and maintenance heat rate"),
+    (_PM, "shortening_lengthening_heat_mean_W", "W", "cycle average of the shortening and lengthening heat rate"),
+    (_PM, "basal_heat_mean_W", "W",
+     "the muscle's basal heat (1.2 W per kg of muscle mass); apart, never inside mean_W"),
+    (_PM, "rank", "-", "rank of the muscle by mean_W within its unit and model (1 = largest)"),
+    # time series
+    ("timeseries.csv", "time_s", "s", "time of the solver node"),
+    ("timeseries.csv", "cycle_pct", "%", "time in % of the gait cycle"),
+    ("timeseries.csv", "series", "-", "whole_body (summed muscles of one leg) or group/<G>"),
+    ("timeseries.csv", "value_W", "W", "metabolic rate of the series (one leg, no basal)"),
+    ("metabolics.parquet", "time", "s", "time of the solver node (padding nodes trimmed)"),
+    ("metabolics.parquet", "component", "-",
+     "work, activation_maintenance, shortening_lengthening, basal, total (total includes basal), and model "
+     "extras (e.g. BH04's activation and maintenance, which split activation_maintenance)"),
+    ("metabolics.parquet", "muscle", "-", "muscle name of the model"),
+    ("metabolics.parquet", "value_W", "W", "rate of the component"),
+    ("metabolics.sto", "<model>/<muscle>/<component>", "W", "the rates of metabolics.parquet as an OpenSim storage"),
+    # solver and OpenSim files
+    ("solution.sto", "/forceset/<muscle>/<quantity>", "see summary.json conventions",
+     "solver states and forces: excitation, activation, normalized_fiber_length, normalized_fiber_velocity, "
+     "tendon_force (N), active_fiber_force (N), passive_fiber_force (N), multipliers"),
+    ("solution.sto", "/forceset/reserve_<dof>", "N m", "reserve actuator moment"),
+    ("states.sto", "/jointset/<joint>/<coordinate>/value", "rad or m", "coordinate value from the IK motion"),
+    ("states.sto", "/jointset/<joint>/<coordinate>/speed", "rad/s or m/s", "coordinate speed from the IK motion"),
+    ("states.sto", "/forceset/<muscle>/activation", "-", "muscle activation (model default for muscles not solved)"),
+    ("states.sto", "/forceset/<muscle>/fiber_length", "m", "fibre length (model default for muscles not solved)"),
+    ("controls.sto", "/forceset/<muscle>", "-", "muscle excitation"),
+    # keys
+    ("muscle_groups.csv", "group", "-", "group abbreviation used in share_<G>_pct"),
+    ("muscle_groups.csv", "name", "-", "full name of the group"),
+    ("muscle_groups.csv", "dof", "-", "degree of freedom (without side suffix) the group acts about"),
+    ("muscle_groups.csv", "moment_arm_sign", "-", "sign of the moment arm that puts a muscle in the group"),
+    ("muscle_groups.csv", "column", "-", "the results column of the group's share"),
+    ("data_dictionary.csv", "file", "-", "tables holding the column"),
+    ("data_dictionary.csv", "column", "-", "column name (<...> stands for a family)"),
+    ("data_dictionary.csv", "unit", "-", "unit of the values"),
+    ("data_dictionary.csv", "description", "-", "what the column holds"),
+)
+
+
+def data_dictionary_table():
+    """:data:`DATA_DICTIONARY` as a pandas table (``file``, ``column``, ``unit``, ``description``)."""
+    import pandas as pd
+
+    return pd.DataFrame(list(DATA_DICTIONARY), columns=["file", "column", "unit", "description"])
+
+
+def describe(column: str) -> str | None:
+    """The description of a column (families matched: ``share_PF_pct`` -> ``share_<G>_pct``)."""
+    import re
+
+    for _, col, unit, text in DATA_DICTIONARY:
+        pattern = "^" + re.sub(r"<[^>]+>", "[^/]+", re.escape(col).replace(r"\<", "<").replace(r"\>", ">")) + "$"
+        if col == column or re.match(pattern, column):
+            return f"{text} ({unit})" if unit != "-" else text
+    return None
+
+
+def write_data_dictionary(path: str | os.PathLike):
+    """Write the data dictionary as CSV (atomically); returns the path."""
+    from .io.atomic import atomic_path
+
+    with atomic_path(path) as tmp:
+        data_dictionary_table().to_csv(tmp, index=False)
+    return path
+
+
+def data_dictionary_markdown() -> str:
+    """The data dictionary as the Markdown page ``docs/data_dictionary.md``."""
+    lines = [
+        "# Data dictionary",
+        "",
+        "Every column of every table musclemetab writes: file, column, unit and meaning. The same table is",
+        "written beside each study's results as `data_dictionary.csv`, from `musclemetab.datadict` (the one",
+        "source; this page is rendered from it by `python -m musclemetab.datadict`). `<...>` stands for a",
+        "family of columns. One leg means the simulated leg's muscles; whole body means both legs (twice the",
+        "simulated leg) per kg of body mass; no basal means without any basal heat.",
+        "",
+        "| file | column | unit | description |",
+        "| --- | --- | --- | --- |",
+    ]
+    for f, c, u, d in DATA_DICTIONARY:
+        lines.append(f"| {f} | `{c}` | {u} | {d} |")
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":  # pragma: no cover
+    print(data_dictionary_markdown(), end="")

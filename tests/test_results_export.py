@@ -1,0 +1,150 @@
+"""Per-muscle results and the OpenSim-ready states of a solved trial of the example subject.
+
+One EFFORT-GEN solve of the example subject's preferred-speed trial (module fixture) gives:
+
+* the per-muscle table, whose rows add up to the whole-body figure of every model of the
+  registry (per leg; basal heat as docs/analysis.md §6 says: apart from the muscles, added
+  per kg of body mass under the ``body`` rule, per muscle under the ``muscle`` rule);
+* ``states.sto`` / ``controls.sto``, which OpenSim loads with
+  ``StatesTrajectory.createFromStatesTable`` (no missing or extra columns allowed) and
+  over which OpenSim's Umberger2010 and Bhargava2004 probes run muscle by muscle; the
+  probes agree with this package's UM10 and BH04 fed the muscle quantities OpenSim used,
+  to the tolerance of tests/test_metabolics_opensim.py (1e-6 relative, 1e-9 W absolute).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from musclemetab.metabolics import MODELS, bhargava2004, umberger2010
+from musclemetab.metabolics.solution import metabolics_from_solution
+
+TRIAL = "normal"
+
+
+@pytest.fixture(scope="module")
+def solved(example, tmp_path_factory):
+    from musclemetab.redundancy import solve_files
+
+    folder = tmp_path_factory.mktemp("solution")
+    sol = solve_files(example.model, example.ik[TRIAL], example.id[TRIAL], "effort-gen")
+    assert sol.success
+    sol.write(folder)
+    return sol, folder
+
+
+@pytest.fixture(scope="module")
+def cycle(example):
+    from musclemetab.analysis import cycle_from_id_file
+
+    return cycle_from_id_file(example.id[TRIAL])
+
+
+@pytest.mark.parametrize("basal", ["body", "muscle"])
+def test_per_muscle_table_sums_to_the_whole_body_rate(example, solved, cycle, basal):
+    from musclemetab.analysis.per_muscle import per_muscle_table
+
+    _, folder = solved
+    res = metabolics_from_solution(folder, example.body_mass_kg, example.height_m, models=list(MODELS), basal=basal)
+    table = per_muscle_table(res, cycle)
+    assert set(table["model"]) == set(MODELS)
+    for model in MODELS:
+        d = table[table["model"] == model]
+        wb = res.whole_body[model]
+        assert len(d) == len(res.muscles) and set(d["side"]) == {"r"}
+        # components once: work + heats = the muscle's rate without basal heat
+        parts = d[["work_mean_W", "activation_maintenance_heat_mean_W", "shortening_lengthening_heat_mean_W"]]
+        np.testing.assert_allclose(parts.sum(axis=1), d["mean_W"], rtol=1e-12, atol=1e-12)
+        leg = d["mean_W"].sum() + (d["basal_heat_mean_W"].sum() if basal == "muscle" else 0.0)
+        added = 1.2 if basal == "body" else 0.0
+        assert wb.legs * leg / example.body_mass_kg + added == pytest.approx(wb.mean_W_per_kg, rel=1e-12)
+        assert wb.legs * d["mean_W_per_kg"].sum() == pytest.approx(wb.mean_W_per_kg_no_basal, rel=1e-12)
+        assert d["share_of_leg_pct"].sum() == pytest.approx(100.0)
+        # basal heat of a muscle: 1.2 W per kg of its mass, never inside mean_W
+        np.testing.assert_allclose(d["basal_heat_mean_W"], 1.2 * res.muscle_mass_kg, rtol=1e-12)
+        # stance + swing = the energy of the sampled cycle; the phases sum to the leg's phase energy
+        np.testing.assert_allclose(d["stance_J"] + d["swing_J"], d["energy_per_cycle_J"], rtol=1e-12)
+        assert sorted(d["rank"]) == list(range(1, len(d) + 1))
+        assert d.loc[d["rank"] == 1, "mean_W"].iloc[0] == d["mean_W"].max()
+
+
+def test_per_muscle_phase_energies_match_the_leg_analysis(example, solved, cycle):
+    from musclemetab.analysis.per_muscle import per_muscle_table
+    from musclemetab.analysis.phases import phase_shares
+
+    _, folder = solved
+    res = metabolics_from_solution(folder, example.body_mass_kg, example.height_m, models="UM10,BH04")
+    table = per_muscle_table(res, cycle)
+    for model in res.models:
+        d = table[table["model"] == model]
+        ph = phase_shares(res.time_s, res.rates[model].total_without_basal(), cycle)
+        assert d["stance_J"].sum() == pytest.approx(ph["stance_J"], rel=1e-12)
+        assert d["swing_J"].sum() == pytest.approx(ph["swing_J"], rel=1e-12)
+
+
+# ------------------------------------------------------------------------------ OpenSim
+UM10_PROBE = dict(probe="Umberger2010", name="UM10", use_Bhargava_recruitment_model=False,
+                  include_negative_mechanical_work=False, forbid_negative_total_power=False)
+BH04_PROBE = dict(probe="Bhargava2004", name="BH04", use_force_dependent_shortening_prop_constant=True,
+                  include_negative_mechanical_work=True, maintenance_length_dependence="identity",
+                  forbid_negative_total_power=True)
+
+
+@pytest.fixture(scope="module")
+def exported(example, solved, tmp_path_factory):
+    from musclemetab.opensim_bridge import call
+    from musclemetab.redundancy.export import write_opensim_states
+
+    sol, folder = solved
+    files = write_opensim_states(folder, example.model, example.ik[TRIAL])
+    res = metabolics_from_solution(folder, example.body_mass_kg, example.height_m, models="UM10,BH04")
+    run = call("states:probes_over_states", str(example.model), str(files["states"]), str(files["controls"]),
+               list(sol.muscles), res.muscle_mass_kg.tolist(), res.slow_twitch_fraction.tolist(),
+               [UM10_PROBE, BH04_PROBE])
+    return sol, files, res, run
+
+
+def _inputs(run, res):
+    p = run["parameters"]
+    col = lambda k: np.asarray(p[k], dtype=float)[:, None]  # noqa: E731
+    return dict(
+        excitation=run["excitation"], activation=run["activation"],
+        normalized_fiber_length=run["normalized_fiber_length"],
+        normalized_fiber_velocity=run["normalized_fiber_velocity"],
+        active_force_length_multiplier=run["active_force_length_multiplier"],
+        force_velocity_multiplier=run["force_velocity_multiplier"],
+        passive_fiber_force_N=run["passive_fiber_force_N"],
+        max_isometric_force_N=col("max_isometric_force_N"), optimal_fiber_length_m=col("optimal_fiber_length_m"),
+        max_contraction_velocity=col("max_contraction_velocity"),
+        muscle_mass_kg=res.muscle_mass_kg[:, None], slow_twitch_fraction=res.slow_twitch_fraction[:, None],
+    )
+
+
+def test_exported_states_load_in_opensim_with_the_solution_values(exported):
+    sol, files, _, run = exported
+    assert run["n_states"] == sol.time_s.size and not run["failed_states"]
+    np.testing.assert_allclose(run["time_s"], sol.time_s, atol=1e-12)
+    # every state variable of the model is a column of the file (OpenSim refused none)
+    header = pd.read_csv(files["states"], sep="\t", skiprows=7, nrows=0).columns
+    assert len(header) - 1 == run["n_state_variables"]
+    # OpenSim reads back the solution's activation, excitation and fibre length (m); the muscle
+    # uses the activation clamped to its minimum (Millard: 0.01)
+    np.testing.assert_allclose(run["activation_state"], sol.activation.T, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(run["fiber_length_state_m"], sol.fiber_length_m.T, rtol=1e-10)
+    np.testing.assert_allclose(run["activation"], np.maximum(sol.activation.T, 0.01), rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(run["excitation"], sol.excitation.T, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(run["fiber_length_m"], sol.fiber_length_m.T, rtol=1e-10)
+    np.testing.assert_allclose(run["parameters"]["optimal_fiber_length_m"], sol.parameters.optimal_fiber_length_m,
+                               rtol=1e-12)
+
+
+def test_opensim_probes_on_the_exported_states_agree_with_um10_and_bh04(exported):
+    _, _, res, run = exported
+    inp = _inputs(run, res)
+    um10 = umberger2010(**inp, slow_twitch_shortening_cap=True, basal=False).total
+    bh04 = bhargava2004(**inp, activation_heat_decay=False, basal=False).total
+    np.testing.assert_allclose(um10, run["UM10"], rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(bh04, run["BH04"], rtol=1e-6, atol=1e-9)
+    assert np.max(run["UM10"]) > 50.0 and np.max(run["BH04"]) > 50.0  # not a comparison of zeros
