@@ -198,3 +198,29 @@ def test_analyse_command_gives_what_the_study_unit_gives(example, demo, tmp_path
     np.testing.assert_allclose(wb["mean_W_per_kg"], pd.read_csv(unit / "whole_body.csv").set_index("model")
                                .loc[wb.index, "mean_W_per_kg"], rtol=1e-9)
     assert (tmp_path / "an" / "r" / "muscle_groups.csv").is_file()
+
+
+# ------------------------------------------------------------------------------ data dictionary
+def test_every_column_the_demo_writes_is_in_the_data_dictionary(demo):
+    from pathlib import Path
+
+    from musclemetab.datadict import data_dictionary_markdown, describe
+    from musclemetab.io import read_storage
+
+    out, table = demo
+    unit = out / table.unit_dir.iloc[0]
+    tables = {name: pd.read_csv(out / name) for name in
+              ("results.csv", "per_muscle.csv", "muscle_groups.csv", "data_dictionary.csv", "failures.csv")}
+    tables.update({name: pd.read_csv(unit / name) for name in
+                   ("whole_body.csv", "analysis.csv", "timeseries.csv", "per_muscle.csv")})
+    tables["metabolics.parquet"] = pd.read_parquet(unit / "metabolics.parquet")
+    for name in ("states.sto", "controls.sto", "solution.sto", "metabolics.sto"):
+        tables[name] = read_storage(unit / name)
+    missing = [(name, c) for name, t in tables.items() for c in t.columns if describe(str(c)) is None]
+    assert missing == []
+    # the group key names every share column of the results
+    key = tables["muscle_groups.csv"]
+    assert set(key["column"]) == {c for c in table.columns if c.startswith("share_")}
+    # the documentation is the dictionary rendered
+    doc = Path(__file__).resolve().parents[1] / "docs" / "data_dictionary.md"
+    assert doc.read_text(encoding="utf-8") == data_dictionary_markdown()
