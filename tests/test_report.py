@@ -547,7 +547,7 @@ def test_cli(study, tmp_path, capsys):
     args = parser.parse_args(["report", str(study), "--out", str(tmp_path / "r.html"), "--svg"])
     assert args.func(args) == 0
     out = capsys.readouterr().out
-    assert "7 of 7 figures" in out and (tmp_path / "r.html").is_file()
+    assert "8 of 8 figures" in out and (tmp_path / "r.html").is_file()
     assert (tmp_path / "figures" / "phase_shares.svg").is_file()
     args = parser.parse_args(["report", str(tmp_path / "absent")])
     with pytest.raises(InputFileError, match="absent: no such study folder"):
@@ -619,3 +619,20 @@ def test_per_muscle_ranked_figure_values(study):
         np.testing.assert_allclose([w for _, w in widths], want[["soleus_r", "gasmed_r", "vaslat_r"]], rtol=1e-12)
     # one colour per trial, the same in every panel; a shared axis
     assert fig.axes[0].get_shared_x_axes().joined(fig.axes[0], fig.axes[1])
+
+
+def test_rates_against_speed_values(study):
+    from musclemetab.report.figures import rates_against_speed
+
+    r = pd.read_csv(study / "results.csv")
+    fig = rates_against_speed(r, workflow="effort-ten", models=["UM10", "BH04"])
+    ax = fig.axes[0]
+    d = r[(r.workflow == "effort-ten") & (r.model == "UM10")]
+    means = d.groupby("trial")[["speed_m_per_s", "mean_W_per_kg_no_basal"]].mean().loc[["slow", "normal", "fast"]]
+    wb = next(ln for ln in ax.lines if ln.get_gid() == "whole-body")
+    np.testing.assert_allclose(wb.get_xdata(), means["speed_m_per_s"])
+    np.testing.assert_allclose(wb.get_ydata(), means["mean_W_per_kg_no_basal"])
+    pf = next(ln for ln in ax.lines if ln.get_gid() == "group:PF")
+    want = (d.share_PF_pct / 100 * d.mean_W_per_kg_no_basal).groupby(d.trial).mean().loc[["slow", "normal", "fast"]]
+    np.testing.assert_allclose(pf.get_ydata(), want)
+    assert fig.axes[0].get_shared_y_axes().joined(fig.axes[0], fig.axes[1])

@@ -54,6 +54,7 @@ __all__ = [
     "phase_shares",
     "group_shares",
     "per_muscle_ranked",
+    "rates_against_speed",
     "save_figure",
 ]
 
@@ -787,6 +788,56 @@ def group_shares(results, *, workflows: Sequence[str] | None = None, models: Seq
     fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 6), fontsize=8, frameon=False)
     fig.suptitle(title or "Shares of the muscle groups in the cycle's muscle metabolic energy "
                  "(%, one leg, no basal heat; mean over subjects)", fontsize=11)
+    return fig
+
+
+# ------------------------------------------------------------- 8. rates against speed
+def rates_against_speed(results, *, workflow: str | None = None, models: Sequence[str] | None = None,
+                        title: str | None = None):
+    """Whole-body and muscle-group rates (W/kg of body mass, both legs, no basal) against speed.
+
+    One panel per model (shared axes); a black line through the whole-body rate without basal
+    heat (``mean_W_per_kg_no_basal``) at each trial and one line per group
+    (``share_<G>_pct / 100 * mean_W_per_kg_no_basal``), means over subjects at the trials' mean
+    speeds.
+    """
+    res = _ok_rows(results)
+    _require_columns(res, ("speed_m_per_s", "mean_W_per_kg_no_basal"), "the results table")
+    cols = [c for c in (f"share_{g}_pct" for g in GROUPS) if c in res.columns]
+    wfs = _ordered_workflows(res["workflow"])
+    wf = main_workflow(wfs) if workflow is None else str(workflow)
+    d = res[res["workflow"].astype(str) == wf]
+    if d.empty:
+        raise OptionError(f"workflow '{wf}' is not in the results; it has {', '.join(wfs)}")
+    if len(_unique(d["trial"].astype(str))) < 2:
+        raise OptionError("one speed only: nothing to draw against speed")
+    models = _ordered_models(d["model"]) if models is None else [str(m) for m in models]
+    fig, axes = _cycle_panels(len(models))
+    groups = [c[len("share_"):-len("_pct")] for c in cols]
+    for k, m in enumerate(models):
+        ax = axes.flat[k]
+        dm = d[d["model"].astype(str) == m].copy()
+        for g, c in zip(groups, cols):
+            dm[f"rate_{g}"] = dm[c].astype(float) / 100.0 * dm["mean_W_per_kg_no_basal"].astype(float)
+        rows = _speed_table(dm, "mean_W_per_kg_no_basal")
+        x = [r[1] for r in rows]
+        ax.plot(x, [r[2] for r in rows], color="k", lw=1.8, marker="o", ms=4, label="whole body", gid="whole-body")
+        for g in groups:
+            ys = [r[2] for r in _speed_table(dm, f"rate_{g}")]
+            ax.plot(x, ys, color=group_colour(g), lw=1.2, marker="o", ms=3, label=g, gid=f"group:{g}")
+        ax.set_xlim(min(x) - 0.05, max(x) + 0.05)
+    _label_cycle_panels(axes, models, "metabolic rate (W/kg)")
+    for k, ax in enumerate(axes.flat):
+        if k < len(models) and ax.get_xlabel():
+            ax.set_xlabel("walking speed (m/s)")
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], color="k", lw=1.8, marker="o", label="whole body (both legs, no basal)")]
+    handles += [Line2D([], [], color=group_colour(g), lw=1.2, marker="o", label=f"{g} ({GROUP_NAMES.get(g, g)})")
+                for g in groups]
+    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 6), fontsize=8, frameon=False)
+    fig.suptitle(title or f"Whole-body and muscle-group metabolic rates against walking speed ({wf}; W/kg of body "
+                 "mass, both legs, no basal heat; mean over subjects)", fontsize=11)
     return fig
 
 

@@ -60,6 +60,7 @@ FIGURE_NAMES = (
     "whole_body_over_cycle",
     "phase_shares",
     "group_shares",
+    "rates_against_speed",
     "per_muscle_ranked",
 )
 
@@ -287,6 +288,7 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
         "phase_shares": "Stance and swing shares",
         "group_shares": "Muscle-group shares",
         "per_muscle_ranked": "The muscles costing most energy, across speeds",
+        "rates_against_speed": "Whole-body and muscle-group rates against walking speed",
     }
 
     def attempt(name: str, build: Callable[[], tuple[object, str]]):
@@ -458,6 +460,13 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
                    "(light: slow, dark: fast); every muscle is in per_muscle.csv.")
             return fig, cap
 
+        def fig8():
+            fig = F.rates_against_speed(ok, workflow=main_wf, models=models)
+            cap = (f"Workflow {main_wf}. Whole-body metabolic rate without basal heat (black) and each muscle "
+                   "group's part of it (group share × whole-body rate), W per kg of body mass, both legs; means "
+                   "over subjects at each trial's mean walking speed; same axes in every panel.")
+            return fig, cap
+
         builders = {
             "excitations_fiber_lengths": fig1,
             "estimated_vs_measured": fig2,
@@ -466,6 +475,7 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
             "phase_shares": fig5,
             "group_shares": fig6,
             "per_muscle_ranked": fig7,
+            "rates_against_speed": fig8,
         }
         for name in FIGURE_NAMES:
             if subject is None and name in ("excitations_fiber_lengths", "group_rates_over_cycle",
