@@ -4,11 +4,11 @@
 
 Measured in the same run, on the same states:
 
-* each model of :mod:`musclemetab.metabolics` on arrays of shape (muscles, samples)
-  (default 40 x 50 000 = 2 million muscle-samples; realistic states: fibre lengths,
-  velocities and activations drawn at random, curve values from the package's curves), input
-  checks included; ``--repeats`` timed calls after one untimed warm-up call, with the default
-  number of threads and with one thread (``musclemetab.metabolics._common.THREADS = 1``);
+* each model of :mod:`musclemetab.metabolics` (the study's six and the additional ones) on
+  arrays of shape (muscles, samples) (default 40 x 50 000 = 2 million muscle-samples;
+  realistic states: fibre lengths, velocities and activations drawn at random, curve values
+  from the package's curves), input checks included; ``--repeats`` timed calls after one
+  untimed warm-up call;
 * OpenSim 4.6's ``Umberger2010MuscleMetabolicsProbe`` (UM10 settings) and
   ``Bhargava2004MuscleMetabolicsProbe`` (BH04 settings), each alone in a one-muscle model
   (the example soleus on a slider, rigid tendon), evaluated in the OpenSim worker process at
@@ -21,19 +21,18 @@ Measured in the same run, on the same states:
   after one untimed warm-up call on 1000 states.
 
 The repeats are interleaved (per repeat: one block per probe, one untimed call, then one
-call per model and thread setting), so that changes of the machine's load during the run
+call per model), so that changes of the machine's load during the run
 affect the package and the probes alike; the untimed call absorbs the slower first call
 after the OpenSim worker has run (this process's caches are then cold). Prints
 muscle-samples (states) per second, median and best of the repeats, and the ratio of each
-model to the probe of its family, median to median and best to best (HO06 and LW07 have no
-OpenSim counterpart: compared with the Umberger probe). Asserts nothing; timings on a shared
+model to the probe of its family, median to median and best to best (HO06, LW07, LW05 and
+MA68 have no OpenSim counterpart: compared with the Umberger probe). Asserts nothing; timings on a shared
 machine vary by tens of percent from run to run.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import time
 
 import numpy as np
@@ -73,7 +72,7 @@ def main() -> None:
 
     from musclemetab import opensim_bridge
     from musclemetab.datasets import example_subject
-    from musclemetab.metabolics import MODELS, _common
+    from musclemetab.metabolics import ALL_MODELS as MODELS
 
     inputs = _states(args.muscles, args.samples)
     n = args.muscles * args.samples
@@ -104,51 +103,40 @@ def main() -> None:
     # warm-up (not timed): worker start, OpenSim's first evaluations, thread pool, scratch arrays
     for cfg in probes.values():
         version = run_probe(cfg, slice(0, min(k, 1000)))["opensim_version"]
-    threads_default = _common.THREADS
     for f in MODELS.values():
         f(**inputs, time_s=time_s)
 
-    settings = {"default": threads_default, "1 thread": 1}
     probe_s = {label: [] for label in probes}  # seconds per state, per block
-    model_s = {(name, s): [] for name in MODELS for s in settings}  # seconds per call
-    try:
-        for rep in range(repeats):
-            for label, cfg in probes.items():
-                if blocks[rep].size:
-                    probe_s[label].append(run_probe(cfg, blocks[rep])["seconds_per_state"])
-            # untimed: the first call after the worker has run finds this process's caches cold
-            next(iter(MODELS.values()))(**inputs, time_s=time_s)
-            for name, f in MODELS.items():
-                for setting, threads in settings.items():
-                    _common.THREADS = threads
-                    t0 = time.perf_counter()
-                    f(**inputs, time_s=time_s)
-                    model_s[name, setting].append(time.perf_counter() - t0)
-    finally:
-        _common.THREADS = threads_default
+    model_s = {name: [] for name in MODELS}  # seconds per call
+    for rep in range(repeats):
+        for label, cfg in probes.items():
+            if blocks[rep].size:
+                probe_s[label].append(run_probe(cfg, blocks[rep])["seconds_per_state"])
+        # untimed: the first call after the worker has run finds this process's caches cold
+        next(iter(MODELS.values()))(**inputs, time_s=time_s)
+        for name, f in MODELS.items():
+            t0 = time.perf_counter()
+            f(**inputs, time_s=time_s)
+            model_s[name].append(time.perf_counter() - t0)
 
     def rates(seconds, per):
         s = np.asarray(seconds)
         return per / np.median(s), per / s.min()
 
     family = {"UM03": "Umberger2010", "UM10": "Umberger2010", "UC16": "Umberger2010", "BH04": "Bhargava2004",
-              "HO06": "Umberger2010", "LW07": "Umberger2010"}
+              "HO06": "Umberger2010", "LW07": "Umberger2010", "LW05": "Umberger2010", "MA68": "Umberger2010"}
     probe_rate = {label: rates(s, 1.0) for label, s in probe_s.items()}
     print(f"musclemetab.metabolics: arrays of {args.muscles} muscles x {args.samples} samples = {n:,} "
-          f"muscle-samples, {repeats} repeats; threads: default (one per idle core, up to "
-          f"{len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else os.cpu_count()}), and 1")
+          f"muscle-samples, {repeats} repeats, one thread")
     print(f"OpenSim {version} probes: the same states, {k:,} of them, in {repeats} blocks")
     print(f"  {'probe':40s} {'states/s median':>16s} {'best':>12s}")
     for label, (med, best) in probe_rate.items():
         print(f"  {label + 'MuscleMetabolicsProbe':40s} {med:16,.0f} {best:12,.0f}   ({1e6 / med:.1f} us per state)")
-    print(f"{'model':6s} {'M samples/s median':>19s} {'best':>7s} {'1 thread':>9s} {'x probe median':>15s} "
-          f"{'best':>6s} {'1 thread':>9s}  (probe)")
+    print(f"{'model':6s} {'M samples/s median':>19s} {'best':>7s} {'x probe median':>15s} {'best':>6s}  (probe)")
     for name in MODELS:
-        med, best = rates(model_s[name, "default"], n)
-        med1, _ = rates(model_s[name, "1 thread"], n)
+        med, best = rates(model_s[name], n)
         p_med, p_best = probe_rate[family[name]]
-        print(f"{name:6s} {med / 1e6:19.1f} {best / 1e6:7.1f} {med1 / 1e6:9.1f} {med / p_med:15.0f} "
-              f"{best / p_best:6.0f} {med1 / p_med:9.0f}  ({family[name]})")
+        print(f"{name:6s} {med / 1e6:19.1f} {best / 1e6:7.1f} {med / p_med:15.0f} {best / p_best:6.0f}  ({family[name]})")
 
 
 if __name__ == "__main__":

@@ -277,5 +277,5 @@ def test_cli(example, tmp_path, result):
         ["calibrate-passive", "--model", str(example.calibration_model), "--trials", str(tmp_path),
          "--out", str(tmp_path / "x")]
     )
-    with pytest.raises(InputFileError, match="TrialAnk_r_rajagopalModel.mot"):
+    with pytest.raises(InputFileError, match="no calibration trial for ankle_angle_r"):
         args.func(args)

@@ -383,8 +383,9 @@ def test_shared_signature_and_registry():
     assert parse_models("um10, BH04,UM10") == ["UM10", "BH04"]
     with pytest.raises(OptionError, match="known models: UM03, BH04, HO06, LW07, UM10, UC16"):
         get_model("UM11")
-    with pytest.raises(OptionError, match="LW05 is not implemented"):
-        parse_models("LW05")
+    # the additional models are known by name but never in the study's default set
+    assert parse_models("LW05,all,MA68") == ["LW05", *STUDY_MODELS, "MA68"]
+    assert get_model("lw05").model_name == "LW05" and get_model("MA68").model_name == "MA68"
 
 
 def test_arrays_muscles_by_time_match_scalar_evaluation():

@@ -143,6 +143,9 @@ def test_pool_run_results_table(pool_run):
     for col in ("mean_W_per_kg", "gross_cost_of_transport_J_per_kg_per_m", "stance_energy_share_pct", "swing_energy_share_pct", "share_PF_pct",
                 "toe_off_pct", "speed_m_per_s"):
         assert table[col].notna().all(), col
+    # the study's trials are explained by the muscles: no large-reserve flag (the flagged case
+    # is tests/test_robustness_inputs.py::test_large_reserves_are_flagged)
+    assert table["large_reserve"].dtype == bool and not table["large_reserve"].any()
     # the whole-body rate of the table is the unit's whole_body.csv
     row = table[(table.trial == "normal") & (table.model == "UM10")].iloc[0]
     wb = pd.read_csv(study.output / row.unit_dir / "whole_body.csv").set_index("model")

@@ -46,7 +46,7 @@ class ModelError(MusclemetabError):
 
 
 class UnknownMuscleError(ModelError):
-    """A muscle name is not in the model or in the property table."""
+    """A muscle name is not in the model, or (strict) not in the anatomical muscle table."""
 
 
 class UnknownCoordinateError(ModelError):
@@ -87,3 +87,7 @@ class LargeReserveWarning(MusclemetabWarning):
 
 class MuscleTableWarning(MusclemetabWarning):
     """Some muscles are not in the anatomical muscle table and take fallback properties."""
+
+
+class WindowWarning(MusclemetabWarning):
+    """The solve window was clipped at the edge of the data (the record says where)."""

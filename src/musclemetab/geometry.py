@@ -107,7 +107,7 @@ def check_kinematics(ik, dofs, check_units: bool = True) -> bool:
     from .io import check_time_stamps, require_columns
 
     path = ik.attrs.get("path", "IK")
-    require_columns(ik, dofs, what="IK coordinate column")
+    require_columns(ik, dofs, what="DOF column")
     if len(ik.index) < 2:
         raise InputFileError(f"{path}: the IK file has fewer than 2 frames")
     check_time_stamps(ik, "IK")

@@ -2,10 +2,15 @@
 
 The ``.osim`` file is read by OpenSim in the worker process
 (:mod:`musclemetab.opensim_bridge`); this module holds the result as plain arrays.
-Only five Hill parameters are taken from the model (see ``docs/method.md``): maximal
-isometric force, optimal fibre length, tendon slack length, pennation angle at optimal
-fibre length and maximal contraction velocity (optimal lengths per second; OpenSim's
-default of 10 when the model does not give it).
+Only five Hill parameters are taken from the model (see ``docs/method.md`` and
+``docs/muscles.md``): maximal isometric force, optimal fibre length, tendon slack length,
+pennation angle at optimal fibre length and maximal contraction velocity (optimal lengths
+per second; OpenSim's default of 10 when the model does not give it). They are read
+through OpenSim's common ``Muscle`` interface, so every muscle class reads the same way
+(Thelen2003, Millard2012 equilibrium and acceleration, DeGrooteFregly2016, ...); the
+class-specific curves and time constants are not used: the study's muscle curves
+(:mod:`musclemetab.muscle`) apply to every class. ``ModelInfo.muscle_classes`` records
+each muscle's class.
 """
 
 from __future__ import annotations
@@ -92,6 +97,7 @@ class ModelInfo:
     coordinates: tuple[dict, ...] = field(repr=False)
     couplers: tuple[dict, ...] = field(repr=False)
     opensim_version: str = ""
+    muscle_classes: dict = field(default_factory=dict, repr=False)  # muscle -> OpenSim class name
 
     def coordinate_names(self, unlocked_only: bool = True) -> list[str]:
         return [c["name"] for c in self.coordinates if not (unlocked_only and c["locked"])]
@@ -134,6 +140,7 @@ def read_model(model_path: str | os.PathLike) -> ModelInfo:
         coordinates=tuple(raw["coordinates"]),
         couplers=tuple(raw["couplers"]),
         opensim_version=raw["opensim_version"],
+        muscle_classes={m["name"]: m.get("class_name", "") for m in ms},
     )
     _CACHE[key] = info
     return info

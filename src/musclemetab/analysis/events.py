@@ -159,8 +159,10 @@ def gait_events_from_grf(
     ``min_duration_s``: periods shorter than that (measured between crossings, or
     between a crossing and the start/end of the record) are merged into their
     neighbours, shortest first, so a noisy crossing counts once, at its first crossing
-    of the threshold. Consequently an event closer than ``min_duration_s`` to either end
-    of the record is not reported.
+    of the threshold. A period cut by the start or end of the record is exempt when the
+    force at that edge is clearly on its side (contact: at least twice the threshold; no
+    contact: zero or below), so a heel strike 40 ms before the record ends is reported;
+    otherwise an event closer than ``min_duration_s`` to either end is not.
 
     Parameters
     ----------
@@ -188,9 +190,18 @@ def gait_events_from_grf(
     change = np.flatnonzero(contact[1:] != contact[:-1])
     bounds = [_crossing(t, f, int(k), thr) for k in change]  # run boundaries
     states = [bool(contact[0])] + [bool(contact[k + 1]) for k in change]  # one per run
+    # A run cut by the start or end of the record is real whatever its length when the force
+    # at that edge is clearly on its side of the threshold (contact: at least twice the
+    # threshold; no contact: at most zero): a heel strike shortly before the record ends.
+    clear_start = (f[0] >= 2 * thr) if contact[0] else (f[0] <= 0.0)
+    clear_end = (f[-1] >= 2 * thr) if contact[-1] else (f[-1] <= 0.0)
     while len(states) > 1:
         edges = [float(t[0])] + bounds + [float(t[-1])]
         dur = np.diff(edges)
+        if clear_start:
+            dur[0] = np.inf
+        if clear_end:
+            dur[-1] = np.inf
         j = int(np.argmin(dur))
         if dur[j] >= min_dur:
             break

@@ -23,7 +23,7 @@ with ``0.05 <= l~M <= 2``, ``lM_proj >= 1e-4 m``, ``-1 <= aT <= 1``, ``3 <= kPE 
 passive-moment error divided by 150 N m over every frame of the three trials.
 
 A muscle spanning two calibrated joints has one ``kPE`` and one ``s0``; muscles of one
-coupling group (property table column ``passive_coupling_group``, P1-P10) share them.
+coupling group (anatomical muscle table column ``passive_coupling_group``, P1-P10) share them.
 Shared values are single NLP variables (equivalent to equality constraints between
 per-trial copies).
 
@@ -52,7 +52,6 @@ from ..muscle import fibre_width, passive_force_length, tendon_force_length
 
 __all__ = [
     "CALIBRATION_JOINTS",
-    "TRIAL_FILE_STEMS",
     "KPE_BOUNDS",
     "S0_BOUNDS",
     "SM_FIXED",
@@ -64,6 +63,7 @@ __all__ = [
     "PassiveSolution",
     "CalibrationResult",
     "trial_files",
+    "calibration_dofs",
     "load_calibration_data",
     "default_tendon_stiffness",
     "parameter_groups",
@@ -77,14 +77,9 @@ __all__ = [
     "mirror_to_left",
 ]
 
-#: Calibrated joint -> target DOF, in the order the trials enter the NLP.
+#: Calibrated joint -> target DOF of the study's model, in the order the trials enter the NLP
+#: (other models and the left side: :func:`calibration_dofs`).
 CALIBRATION_JOINTS = {"ankle": "ankle_angle_r", "knee": "knee_angle_r", "hip": "hip_flexion_r"}
-#: Joint -> file stem inside a trials folder (``<stem>.mot`` angles, ``<stem>.sto`` moments).
-TRIAL_FILE_STEMS = {
-    "ankle": "TrialAnk_r_rajagopalModel",
-    "knee": "TrialKne_r_rajagopalModel",
-    "hip": "TrialHip_r_rajagopalModel",
-}
 KPE_BOUNDS = (3.0, 5.0)
 S0_BOUNDS = (0.8, 1.2)
 SM_FIXED = 0.6
@@ -159,35 +154,102 @@ class CalibrationData:
         return np.array([pos[n] for n in names], dtype=int)
 
 
-def trial_files(trials: str | os.PathLike | Mapping) -> dict:
+def calibration_dofs(model_path: str | os.PathLike, side: str = "r") -> dict:
+    """``{"ankle": dof, "knee": dof, "hip": dof}``: the side's flexion coordinates, from the joint tree.
+
+    Rule (no names involved): the hip is the joint on ``side`` whose parent is the body the
+    ground joint moves (the pelvis); the knee is the joint with an unlocked independent
+    coordinate whose parent is the hip's child; the ankle likewise from the knee's child. Each
+    joint's flexion coordinate is its first unlocked independent coordinate (OpenSim's
+    lower-limb models list flexion first). For the study's model: ``hip_flexion_r``,
+    ``knee_angle_r``, ``ankle_angle_r``.
+    """
+    from ..layout import SIDE_NAMES, check_side, read_layout
+
+    check_side(side)
+    layout = read_layout(model_path)
+    coords = {c["name"]: c for c in layout.coordinates}
+
+    def free(j):
+        return [n for n in j["coordinates"] if n in coords and not coords[n]["locked"] and not coords[n]["dependent"]]
+
+    root = next((j["child"] for j in layout.joints if j["parent"] == layout.ground), None)
+    parent, out = root, {}
+    for joint in ("hip", "knee", "ankle"):
+        nxt = [j for j in layout.joints if j["parent"] == parent and free(j)
+               and layout.body_side(j["child"]) == side]
+        if not nxt:
+            raise DataMismatchError(
+                f"{model_path}: no {joint} joint with a free coordinate on the {SIDE_NAMES[side]} side (after "
+                f"{', '.join(out.values()) or 'the pelvis'}); the passive calibration needs hip, knee and ankle "
+                "flexion coordinates"
+            )
+        out[joint] = free(nxt[0])[0]
+        parent = nxt[0]["child"]
+    return {j: out[j] for j in ("ankle", "knee", "hip")}
+
+
+def trial_files(trials: str | os.PathLike | Mapping, dofs: Mapping[str, str] | None = None) -> dict:
     """``{joint: {'motion': Path, 'moments': Path}}`` from a folder or a mapping.
 
-    A folder must hold ``Trial{Ank,Kne,Hip}_r_rajagopalModel.{mot,sto}``.
+    ``dofs``: ``{joint: coordinate}`` (default :data:`CALIBRATION_JOINTS`, the study's right
+    leg). A mapping may be keyed by joint (``"ankle"``) or by coordinate name. In a folder a
+    trial is a ``.sto`` of target passive moments with a ``.mot`` of the same stem beside it;
+    it belongs to the coordinate whose ``<coordinate>_moment`` column is its only calibration
+    column that is not zero throughout (the in-vivo trials sweep one joint at a time). File
+    names do not matter.
     """
+    dofs = dict(dofs or CALIBRATION_JOINTS)
     if isinstance(trials, Mapping):
         out = {}
-        for joint in CALIBRATION_JOINTS:
-            if joint not in trials:
+        for joint, dof in dofs.items():
+            entry = trials.get(joint, trials.get(dof))
+            if entry is None:
                 raise OptionError(
-                    f"calibration trials lack the '{joint}' trial; give motion and moments files for "
-                    f"{', '.join(CALIBRATION_JOINTS)}"
+                    f"calibration trials lack the {joint} trial ({dof}); give motion and moments files for "
+                    f"{', '.join(dofs.values())}"
                 )
-            out[joint] = {"motion": Path(trials[joint]["motion"]), "moments": Path(trials[joint]["moments"])}
+            out[joint] = {"motion": Path(entry["motion"]), "moments": Path(entry["moments"])}
     else:
         folder = Path(trials)
         if not folder.is_dir():
             raise InputFileError(f"{folder}: no such folder of calibration trials; check --trials")
-        out = {
-            j: {"motion": folder / f"{stem}.mot", "moments": folder / f"{stem}.sto"}
-            for j, stem in TRIAL_FILE_STEMS.items()
-        }
+        out = _find_trials(folder, dofs)
     missing = [str(p) for j in out.values() for p in j.values() if not p.is_file()]
     if missing:
         raise InputFileError(
-            f"missing calibration trial file{'s' if len(missing) > 1 else ''} {', '.join(missing)}; "
-            "the trials folder must hold Trial{Ank,Kne,Hip}_r_rajagopalModel.mot (angles, deg) and .sto "
-            "(target passive moments, N m)"
+            f"missing calibration trial file{'s' if len(missing) > 1 else ''} {', '.join(missing)}; each trial "
+            "is a .mot of joint angles (deg) and a .sto of target passive moments (N m)"
         )
+    return out
+
+
+def _find_trials(folder: Path, dofs: Mapping[str, str]) -> dict:
+    from ..io import read_storage
+
+    cols = {f"{d}_moment": j for j, d in dofs.items()}
+    found: dict = {}
+    for sto in sorted(folder.glob("*.sto")):
+        mot = sto.with_suffix(".mot")
+        if not mot.is_file():
+            continue
+        try:
+            table = read_storage(sto)
+        except Exception:
+            continue
+        live = [c for c in cols if c in table.columns and np.any(table[c].to_numpy(dtype=float) != 0.0)]
+        if len(live) == 1:
+            found.setdefault(cols[live[0]], []).append(sto)
+    out = {}
+    for joint, dof in dofs.items():
+        hits = found.get(joint, [])
+        if len(hits) != 1:
+            what = "no" if not hits else f"{len(hits)} ({', '.join(p.name for p in hits)})"
+            raise InputFileError(
+                f"{folder}: {what} calibration trial for {dof}; the folder needs one .sto of target passive "
+                f"moments whose only non-zero moment column is {dof}_moment, with the .mot of the same name"
+            )
+        out[joint] = {"motion": hits[0].with_suffix(".mot"), "moments": hits[0]}
     return out
 
 
@@ -220,6 +282,7 @@ def load_calibration_data(
     *,
     tendon_stiffness: Mapping[str, float] | None = None,
     use_cache: bool = True,
+    side: str | None = None,
 ) -> CalibrationData:
     """Read the three trials, compute their geometry with OpenSim, read the Hill parameters.
 
@@ -228,15 +291,18 @@ def load_calibration_data(
     files are degrees (OpenSim's convention when the header has no ``inDegrees``).
 
     ``tendon_stiffness`` overrides ``kT`` for some muscles (default
-    :func:`default_tendon_stiffness`).
+    :func:`default_tendon_stiffness`). ``side`` (``"r"``/``"l"``): the target DOFs are that
+    side's flexion coordinates of the model (:func:`calibration_dofs`); default the study's
+    right-leg DOFs (:data:`CALIBRATION_JOINTS`).
     """
     from ..geometry import compute_geometry
     from ..io import read_storage
     from ..model import read_muscle_parameters
 
-    files = trial_files(trials)
+    joints = CALIBRATION_JOINTS if side is None else calibration_dofs(model_path, side)
+    files = trial_files(trials, joints)
     out = []
-    for joint, dof in CALIBRATION_JOINTS.items():
+    for joint, dof in joints.items():
         mot = read_storage(files[joint]["motion"])
         sto = read_storage(files[joint]["moments"])
         if dof not in mot.columns:
@@ -575,9 +641,12 @@ def calibrate_passive(
     tendon_stiffness: Mapping[str, float] | None = None,
     use_cache: bool = True,
     print_level: int = 0,
+    side: str | None = None,
 ) -> CalibrationResult:
-    """Load the trials, solve the calibration NLP and the generic-parameter reference."""
-    data = load_calibration_data(model_path, trials, tendon_stiffness=tendon_stiffness, use_cache=use_cache)
+    """Load the trials, solve the calibration NLP and the generic-parameter reference (``side``: see
+    :func:`load_calibration_data`)."""
+    data = load_calibration_data(model_path, trials, tendon_stiffness=tendon_stiffness, use_cache=use_cache,
+                                 side=side)
     generic = solve_passive(data, {m: (KPE_GENERIC, S0_GENERIC, SM_FIXED) for m in data.muscles})
     calibrated = solve_passive(data, None, print_level=print_level)
     return CalibrationResult(data, calibrated, generic)

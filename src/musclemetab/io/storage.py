@@ -109,7 +109,8 @@ def read_storage(path: str | os.PathLike) -> pd.DataFrame:
         The file is missing, has no ``endheader`` line, no column names, non-numeric or
         ragged rows, fewer rows than its header announces, or duplicate column names.
     TimeColumnError
-        The first column is not ``time``, holds NaN, or is not strictly increasing.
+        The first column is not ``time``, holds NaN or infinite values, or is not strictly
+        increasing.
     """
     path = Path(path)
     if path.is_dir():

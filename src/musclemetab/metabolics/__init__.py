@@ -14,6 +14,13 @@ UM10    :func:`umberger2010`                Umberger (2010)
 UC16    :func:`uchida2016`                  Uchida et al. (2016)
 ======  ==================================  =============================================
 
+and two additional models, evaluated only when named (:data:`ADDITIONAL_MODELS`):
+
+======  ==================================  =============================================
+LW05    :func:`lichtwark2005`               Lichtwark & Wilson (2005), made definite
+MA68    :func:`margaria1968`                Margaria (1968), work efficiencies
+======  ==================================  =============================================
+
 Each returns a :class:`MetabolicRates` (``work``, ``activation_maintenance``,
 ``shortening_lengthening``, ``basal``, ``total``; W). Whole-body averages, cost of
 transport and indirect calorimetry are in :mod:`.whole_body`; rates of a solver solution in
@@ -22,12 +29,21 @@ transport and indirect calorimetry are in :mod:`.whole_body`; rates of a solver 
 Importing this package imports NumPy only (neither ``opensim`` nor ``casadi``).
 """
 
-from ._common import BASAL_RATE_W_PER_KG, COMPONENTS, PARAMETER_ARGUMENTS, STATE_ARGUMENTS, MetabolicRates
+from ._common import (
+    BASAL_RATE_W_PER_KG,
+    COMPONENTS,
+    FIBER_FRACTIONS,
+    MINIMUM_HEAT_RATE_W_PER_KG,
+    PARAMETER_ARGUMENTS,
+    STATE_ARGUMENTS,
+    MetabolicRates,
+)
 from .bhargava import BHARGAVA_CONSTANTS, bhargava2004, bhargava_stimulation_time_s
 from .houdijk import HOUDIJK_CONSTANTS, houdijk2006
-from .lichtwark import LICHTWARK_CONSTANTS, lichtwark2007
-from .registry import MODELS, STUDY_MODELS, compute_models, get_model, parse_models
-from .umberger import uchida2016, umberger2003, umberger2010
+from .lichtwark import LICHTWARK_2005_CONSTANTS, LICHTWARK_CONSTANTS, lichtwark2005, lichtwark2007
+from .margaria import MARGARIA_CONSTANTS, margaria1968
+from .registry import ADDITIONAL_MODELS, ALL_MODELS, MODELS, STUDY_MODELS, compute_models, get_model, parse_models
+from .umberger import AEROBIC_FACTOR, ANAEROBIC_FACTOR, uchida2016, umberger2003, umberger2010
 from .whole_body import (
     WholeBodyRate,
     brockway_rate_W,
@@ -38,10 +54,16 @@ from .whole_body import (
 __all__ = [
     "MODELS",
     "STUDY_MODELS",
+    "ADDITIONAL_MODELS",
+    "ALL_MODELS",
     "COMPONENTS",
     "STATE_ARGUMENTS",
     "PARAMETER_ARGUMENTS",
     "BASAL_RATE_W_PER_KG",
+    "MINIMUM_HEAT_RATE_W_PER_KG",
+    "FIBER_FRACTIONS",
+    "AEROBIC_FACTOR",
+    "ANAEROBIC_FACTOR",
     "MetabolicRates",
     "umberger2003",
     "umberger2010",
@@ -50,9 +72,13 @@ __all__ = [
     "bhargava_stimulation_time_s",
     "houdijk2006",
     "lichtwark2007",
+    "lichtwark2005",
+    "margaria1968",
     "BHARGAVA_CONSTANTS",
     "HOUDIJK_CONSTANTS",
     "LICHTWARK_CONSTANTS",
+    "LICHTWARK_2005_CONSTANTS",
+    "MARGARIA_CONSTANTS",
     "get_model",
     "parse_models",
     "compute_models",

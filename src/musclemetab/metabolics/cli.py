@@ -1,11 +1,14 @@
 """``musclemetab metabolics``: metabolic rates of every muscle of a solver solution.
 
-    musclemetab metabolics --solution DIR --model M.osim --mass KG --height M
-                           [--models all|UM10,BH04,...] [--basal body|muscle|none]
+    musclemetab metabolics --solution DIR|PARENT --model M.osim --mass KG --height M
+                           [--models all|UM10,BH04,...|all,LW05,MA68] [--basal body|muscle|none]
                            [--speed M_PER_S] --out DIR
 
 Writes ``OUT/metabolics.sto``, ``OUT/metabolics.csv`` and ``OUT/whole_body.csv`` (see
-:mod:`musclemetab.metabolics.solution`).
+:mod:`musclemetab.metabolics.solution`). One leg solved: the whole-body rate doubles it (the
+study's rule, and the output says so). ``--solution`` may also be the parent written by
+``solve --side both`` (``PARENT/r``, ``PARENT/l``): each leg is evaluated over its own cycle
+into ``OUT/r`` and ``OUT/l``, and ``OUT/whole_body.csv`` adds the two legs (basal heat once).
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ __all__ = ["add_metabolics_parser", "metabolics_command"]
 
 def add_metabolics_parser(subparsers) -> None:
     """Add the ``metabolics`` subcommand to an ``argparse`` subparsers object."""
-    from .registry import MODELS
+    from .registry import ADDITIONAL_MODELS, MODELS
 
     p = subparsers.add_parser(
         "metabolics",
@@ -31,10 +34,13 @@ def add_metabolics_parser(subparsers) -> None:
             "trimmed: 5 at the start, 6 at the end), muscle by muscle and node by node. Writes "
             "OUT/metabolics.sto (columns <model>/<muscle>/<component>, W), OUT/metabolics.csv (tidy: time, "
             "model, muscle, component, value_W) and OUT/whole_body.csv (one row per model: whole-body "
-            f"average in W/kg). Models: {', '.join(MODELS)}."
+            f"average in W/kg). Models: the study's {', '.join(MODELS)} ('all', the default) and, when "
+            f"named, {', '.join(ADDITIONAL_MODELS)}."
         ),
     )
-    p.add_argument("--solution", required=True, metavar="DIR", help="solution folder (solution.sto, summary.json)")
+    p.add_argument("--solution", required=True, metavar="DIR",
+                   help="solution folder (solution.sto, summary.json), or the parent of r/ and l/ written by "
+                   "solve --side both (the legs are then added instead of doubling one)")
     p.add_argument(
         "--model", metavar="M.osim",
         help="OpenSim model the solution was computed with: F0, lMo and vmax are taken from it, by muscle "
@@ -44,7 +50,8 @@ def add_metabolics_parser(subparsers) -> None:
     p.add_argument("--height", required=True, type=float, metavar="M", help="body height (m)")
     p.add_argument(
         "--models", default="all", metavar="LIST",
-        help=f"'all' (default) or a comma-separated list of {', '.join(MODELS)}",
+        help=f"'all' (default: the study's {', '.join(MODELS)}) or a comma-separated list of these and "
+        f"{', '.join(ADDITIONAL_MODELS)}, e.g. all,LW05,MA68",
     )
     p.add_argument(
         "--basal", default="body", choices=("body", "muscle", "none"),
@@ -81,31 +88,70 @@ def metabolics_command(args) -> int:
     check_output_folder(args.out)
     if args.speed is not None and not (np.isfinite(args.speed) and args.speed > 0):
         raise OptionError(f"--speed must be a positive number of m/s, not {args.speed}")
-    states = read_solution_states(args.solution, require_success=not args.allow_failed)
+    from pathlib import Path
+
+    folders = _solution_folders(Path(args.solution))
     params = None
     if args.model:
         from ..model import read_muscle_parameters
 
         params = read_muscle_parameters(args.model)
-        _note_parameter_differences(states, params, args.model)
-    result = metabolics_from_solution(
-        states,
-        args.mass,
-        args.height,
-        models=models,
-        muscle_parameters=params,
-        basal=args.basal,
-        speed_m_per_s=args.speed,
-        muscle_properties=args.muscle_properties,
-        strict=args.strict,
-    )
-    files = write_metabolics(result, args.out)
-    means = ", ".join(f"{m} {result.whole_body[m].mean_W_per_kg:.2f}" for m in result.models)
-    print(
-        f"metabolics: {len(result.models)} models x {len(result.muscles)} muscles x {result.time_s.size} nodes "
-        f"-> {args.out} ({', '.join(p.name for p in files.values())}); whole body (W/kg, basal {args.basal}): {means}"
-    )
+    legs = 1 if len(folders) > 1 else 2
+    results = {}
+    for side, folder in folders.items():
+        states = read_solution_states(folder, require_success=not args.allow_failed)
+        if params is not None:
+            _note_parameter_differences(states, params, args.model)
+        results[side] = metabolics_from_solution(
+            states, args.mass, args.height, models=models, muscle_parameters=params, basal=args.basal,
+            speed_m_per_s=args.speed, legs=legs, muscle_properties=args.muscle_properties, strict=args.strict,
+        )
+    if legs == 2:
+        (side, result), = results.items()
+        files = write_metabolics(result, args.out)
+        means = ", ".join(f"{m} {result.whole_body[m].mean_W_per_kg:.2f}" for m in result.models)
+        leg = {"r": "the right leg", "l": "the left leg"}.get(side, "the solved leg")
+        print(
+            f"metabolics: {len(result.models)} models x {len(result.muscles)} muscles x {result.time_s.size} nodes "
+            f"-> {args.out} ({', '.join(p.name for p in files.values())}); whole body = 2 x {leg} "
+            f"(W/kg, basal {args.basal}): {means}"
+        )
+        return 0
+    from ..io import atomic_write_text
+    from .solution import add_legs
+
+    total = add_legs(results)
+    out = Path(args.out)
+    for side, result in results.items():
+        write_metabolics(result, out / side)
+    rows = ["model,legs,mean_W_per_kg," + ",".join(f"{s}_leg_mean_W" for s in results)]
+    for m, v in total.items():
+        rows.append(f"{m},{'+'.join(results)},{v:.10g}," + ",".join(
+            f"{r.whole_body[m].one_leg_mean_W:.10g}" for r in results.values()))
+    atomic_write_text(out / "whole_body.csv", "\n".join(rows) + "\n")
+    means = ", ".join(f"{m} {v:.2f}" for m, v in total.items())
+    print(f"metabolics: legs {' + '.join(results)} added (each over its own cycle) -> {out}/whole_body.csv and "
+          f"{', '.join(f'{out}/{s}' for s in results)}; whole body (W/kg, basal {args.basal}): {means}")
     return 0
+
+
+def _solution_folders(path) -> dict:
+    """``{side: folder}``: the folder itself if it is a solution, else its ``r``/``l`` solution sub-folders."""
+    from ..errors import InputFileError
+    from ..redundancy.solution import SUMMARY_FILE
+
+    if (path / SUMMARY_FILE).is_file():
+        from ..io import read_json_object
+
+        side = read_json_object(path / SUMMARY_FILE).get("side")
+        return {side if side in ("r", "l") else "": path}
+    found = {s: path / s for s in ("r", "l") if (path / s / SUMMARY_FILE).is_file()}
+    if not found:
+        raise InputFileError(
+            f"{path}: neither a solution folder (summary.json) nor a folder of per-leg solutions (r/, l/); "
+            "give the folder written by musclemetab solve"
+        )
+    return found
 
 
 def _note_parameter_differences(states, params, model_path) -> None:

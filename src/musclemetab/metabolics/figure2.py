@@ -1,4 +1,5 @@
-"""The paper's Figure 2: metabolic rate and efficiency of a soleus for the six models.
+"""The paper's Figure 2: metabolic rate and efficiency of a soleus for the six models, with
+panels for the additional models LW05 and MA68 beside them.
 
 Configuration (the paper's "general case"): slow-twitch fraction 0.8, mass 0.48 kg,
 optimal fibre length 4.5 cm, ``vmax`` = 10 optimal lengths per second, activation levels
@@ -15,6 +16,9 @@ and printed in the figure:
 * ``bh04_stimulation_time_s``: BH04's activation-heat decay needs a time since stimulation
   onset that a steady state does not have. Default ``inf`` (the steady-state limit,
   ``phi = 0.06``); the study's threshold is kept (no activation heat for ``e <= 0.1``);
+* ``lw05_stimulation_time_s``: the same for LW05's labile heat (default ``inf``: no labile
+  heat; ``t_stim = 0``, the largest labile heat, for ``e <= 0.1`` by the same counter).
+  The force is constant in a steady state: no thermoelastic heat;
 * ``basal``: basal heat neither in the rates nor in the efficiency (default False);
 * ``velocity_plane_vbar``: the sign of the "0.1" plane; default -0.1 (shortening is
   negative here, and efficiency is defined for concentric states only).
@@ -34,9 +38,12 @@ import numpy as np
 from ..errors import OptionError
 from ..muscle import active_force_length, force_velocity, passive_force_length
 from .registry import MODEL_COLOURS as _COLOURS
-from .registry import MODELS, STUDY_MODELS
+from .registry import ADDITIONAL_MODELS, ALL_MODELS, STUDY_MODELS
 
-__all__ = ["FIGURE2_DEFAULTS", "figure2_data", "ordering_summary", "save_figure2", "EXAMPLE_SOLEUS_F0_N"]
+#: The models drawn by :func:`save_figure2` by default: the study's six, then the others.
+FIGURE2_MODELS = STUDY_MODELS + tuple(ADDITIONAL_MODELS)
+
+__all__ = ["FIGURE2_MODELS", "FIGURE2_DEFAULTS", "figure2_data", "ordering_summary", "save_figure2", "EXAMPLE_SOLEUS_F0_N"]
 
 #: Maximal isometric force of the example model's soleus (N).
 EXAMPLE_SOLEUS_F0_N = 5978.474277147492
@@ -51,6 +58,7 @@ FIGURE2_DEFAULTS = {
     "length_plane": 1.0,
     "velocity_plane_vbar": -0.1,
     "bh04_stimulation_time_s": float("inf"),
+    "lw05_stimulation_time_s": float("inf"),
     "basal": False,
     "n_velocity": 201,
     "n_length": 121,
@@ -88,7 +96,10 @@ def _evaluate(models, a, lm, vbar, cfg):
         opts = {"basal": cfg["basal"]}
         if name == "BH04":
             opts["stimulation_time_s"] = t_stim
-        rates[name] = MODELS[name](**inputs, **opts).total
+        elif name == "LW05":
+            opts["stimulation_time_s"] = np.where(a > 0.1, cfg["lw05_stimulation_time_s"], 0.0)
+            opts["fiber_force_rate_N_per_s"] = 0.0  # steady state
+        rates[name] = ALL_MODELS[name](**inputs, **opts).total
     v_ce = vbar * cfg["max_contraction_velocity"] * cfg["optimal_fiber_length_m"]
     power = -(a * fl * fv * f0) * v_ce
     return rates, power
@@ -106,7 +117,7 @@ def figure2_data(models=STUDY_MODELS, **config) -> dict:
     Parameters
     ----------
     models
-        Model names (default: the six of the study).
+        Model names (default: the six of the study; :data:`FIGURE2_MODELS` adds LW05 and MA68).
     config
         Overrides of :data:`FIGURE2_DEFAULTS` (see the module docstring for the open
         choices): ``max_isometric_force_N``, ``bh04_stimulation_time_s``, ``basal``,
@@ -128,14 +139,14 @@ def figure2_data(models=STUDY_MODELS, **config) -> dict:
     cfg = {**FIGURE2_DEFAULTS, **config}
     models = [m.upper() for m in models]
     for m in models:
-        if m not in MODELS:
-            raise OptionError(f"unknown metabolic model '{m}'; known models: {', '.join(MODELS)}")
+        if m not in ALL_MODELS:
+            raise OptionError(f"unknown metabolic model '{m}'; known models: {', '.join(ALL_MODELS)}")
     acts = np.asarray(cfg["activations"], dtype=float)
     if acts.ndim != 1 or acts.size == 0 or np.any((acts <= 0) | (acts > 1)):
         raise OptionError("activations must be a list of values in (0, 1]")
-    t_bh = float(cfg["bh04_stimulation_time_s"])
-    if not t_bh > 0:
-        raise OptionError("bh04_stimulation_time_s must be positive (s; inf for the steady-state limit)")
+    for key in ("bh04_stimulation_time_s", "lw05_stimulation_time_s"):
+        if not float(cfg[key]) > 0:
+            raise OptionError(f"{key} must be positive (s; inf for the steady-state limit)")
     vbar = np.linspace(-1.0, 1.0, int(cfg["n_velocity"]))
     lo, hi = cfg["length_range"]
     lm = np.linspace(float(lo), float(hi), int(cfg["n_length"]))
@@ -225,7 +236,8 @@ def _choices_text(cfg: dict) -> str:
 def save_figure2(path: str | os.PathLike, data: dict | None = None, **config) -> Path:
     """Draw Figure 2 and save it (format from the extension, e.g. ``.png``, ``.pdf``).
 
-    Rows: one per model, and a last row comparing the models at full activation (where
+    Rows: one per model (default :data:`FIGURE2_MODELS`: the study's six, then LW05 and
+    MA68), and a last row comparing the models at full activation (where
     the rate ordering is visible). Columns: rate and efficiency over velocity at
     ``l~M = length_plane``; rate and efficiency over length at ``vbar =
     velocity_plane_vbar``. The open choices and the ordering found are printed on the
@@ -239,7 +251,7 @@ def save_figure2(path: str | os.PathLike, data: dict | None = None, **config) ->
     from ..io import atomic_path
 
     if data is None:
-        data = figure2_data(**config)
+        data = figure2_data(**{"models": FIGURE2_MODELS, **config})
     elif config:
         raise OptionError("give either data or configuration options, not both")
     cfg = data["config"]
@@ -300,7 +312,9 @@ def save_figure2(path: str | os.PathLike, data: dict | None = None, **config) ->
     import textwrap
 
     wrapped = "\n".join(textwrap.fill(par, 170) for par in text.split("\n"))
-    fig.suptitle("Figure 2: soleus metabolic rate and efficiency, six models\n" + wrapped, fontsize=9)
+    extra = [m for m in models if m not in STUDY_MODELS]
+    what = f"{len(models)} models" + (f" ({', '.join(extra)} beside the study's)" if extra else "")
+    fig.suptitle(f"Figure 2: soleus metabolic rate and efficiency, {what}\n" + wrapped, fontsize=9)
     path = Path(path)
     suffix = path.suffix or ".png"
     with atomic_path(path, suffix=suffix) as tmp:

@@ -2,25 +2,20 @@
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import numpy as np
 
 from ._common import (
     BASAL_RATE_W_PER_KG,
-    ONE,
-    ZERO,
+    FIBER_FRACTIONS,
     MetabolicRates,
-    as_mask,
+    apply_non_negativity,
     basal_rate,
     basal_view,
+    check_choice,
     check_flag,
-    evaluate_chunked,
-    keep_where,
     model_function,
-    non_negativity_into,
     prepare_inputs,
-    total_into,
+    recruited_slow_twitch_fraction,
 )
 
 __all__ = ["houdijk2006", "HOUDIJK_CONSTANTS"]
@@ -43,10 +38,6 @@ HOUDIJK_CONSTANTS = {
 }
 
 
-#: Constants of Hatze's activation-heat ratio as 0-d arrays (cheaper ufunc operands).
-_C = SimpleNamespace(rate=np.array(18.2), offset=np.array(-0.25))
-
-
 @model_function("HO06")
 def houdijk2006(
     excitation,
@@ -63,6 +54,7 @@ def houdijk2006(
     slow_twitch_fraction,
     *,
     time_s=None,
+    fiber_fractions: str = "constant",
     non_negative: bool = True,
     basal: bool = True,
     basal_rate_W_per_kg: float = BASAL_RATE_W_PER_KG,
@@ -101,90 +93,54 @@ def houdijk2006(
 
     Other parameters
     ----------------
+    fiber_fractions : {"constant", "recruited"}
+        ``f_ST`` and ``f_FT`` in the fibre-weighted constants: the muscle's (default, the
+        study's setting) or Uchida et al. (2016)'s recruited fractions at the excitation of
+        each sample (the study's ``option = 2``; the excitation then enters the heats).
     non_negative : bool
         Apply the non-negativity rule (default True, the study's setting).
     """
     model = "HO06"
     for flag in ("non_negative", "basal"):
         check_flag(model, flag, locals()[flag])
-    inp = prepare_inputs(model, locals(), check=check, defer_large=True)
+    check_choice(model, "fiber_fractions", fiber_fractions, FIBER_FRACTIONS)
+    inp = prepare_inputs(model, locals(), check=check)
     k = HOUDIJK_CONSTANTS
-    mass = inp.muscle_mass_kg
-    f_st = inp.slow_twitch_fraction
+    a, f_l, f_v = inp.activation, inp.active_force_length_multiplier, inp.force_velocity_multiplier
+    m, F0 = inp.muscle_mass_kg, inp.max_isometric_force_N
+    if fiber_fractions == "recruited":
+        f_st = recruited_slow_twitch_fraction(inp.excitation, inp.slow_twitch_fraction)
+    else:
+        f_st = inp.slow_twitch_fraction
     f_ft = 1.0 - f_st
 
-    # per-muscle constants
-    h_a_coef = k["activation_fast_W_per_kg"] * f_ft + k["activation_slow_W_per_kg"] * f_st
-    h_m_coef = k["maintenance_fast_W_per_kg"] * f_ft + k["maintenance_slow_W_per_kg"] * f_st
-    act_m = mass * h_a_coef
-    total_m = mass * (h_a_coef + h_m_coef)
+    # fibre-weighted constants
+    h_A = k["activation_fast_W_per_kg"] * f_ft + k["activation_slow_W_per_kg"] * f_st
+    h_M = k["maintenance_fast_W_per_kg"] * f_ft + k["maintenance_slow_W_per_kg"] * f_st
     k3 = k["k3_fast"] * f_ft + k["k3_slow"] * f_st
     k4 = k["k4_fast"] * f_ft + k["k4_slow"] * f_st
-    a_short = (k["shortening_fast"] * f_ft + k["shortening_slow"] * f_st) * inp.max_isometric_force_N
-    v_scale = inp.max_contraction_velocity * inp.optimal_fiber_length_m
-    basal_w = basal_rate(inp, basal, basal_rate_W_per_kg)
+    a_tilde = (k["shortening_fast"] * f_ft + k["shortening_slow"] * f_st) * F0  # N
 
-    neg_a_short = -a_short
+    nu_max = k3 + k4 * a
+    nu_rel = a**2
+    with np.errstate(divide="ignore"):  # nu_rel = 0: exp(-inf) = 0 and H_A = 0
+        ratio = (1.0 - np.exp(-0.25 - 18.2 / (nu_rel * nu_max))) / (1.0 - np.exp(-0.25 - 18.2 / nu_max))
+    H_A = m * h_A * nu_rel * ratio
+    H_M = m * (h_A + h_M) * a * (f_l - h_A / (h_A + h_M))
+    V_CE = inp.normalized_fiber_velocity * (inp.max_contraction_velocity * inp.optimal_fiber_length_m)  # m/s
+    H_SL = np.where(V_CE <= 0, -a_tilde * a * f_l * V_CE, 0.0)
+    W_CE = -(a * f_l * f_v * F0) * V_CE
 
-    def kernel(out, s, p, tmp, i):
-        work, h_am, h_sl, total, h_a, h_m = out
-        a, vb, fl, fv = s
-        f0, act_m, total_m, k3, k4, neg_a_short, v_scale, basal_w = p
-        t1, t2, t3, m1 = tmp
-        np.multiply(a, k4, t1)
-        np.add(t1, k3, t1)  # nu_max
-        np.multiply(a, a, t2)  # nu_rel
-        np.multiply(t2, t1, t3)
-        # nu_rel = 0 gives exp(-inf) = 0 in the numerator and h_a = 0
-        with np.errstate(divide="ignore"):
-            np.divide(_C.rate, t3, t3)
-            np.divide(_C.rate, t1, t1)
-        np.subtract(_C.offset, t3, t3)
-        np.exp(t3, t3)
-        np.subtract(ONE, t3, t3)
-        np.subtract(_C.offset, t1, t1)
-        np.exp(t1, t1)
-        np.subtract(ONE, t1, t1)
-        np.divide(t3, t1, t3)  # ratio
-        np.multiply(t2, act_m, h_a)
-        np.multiply(h_a, t3, h_a)
-        np.multiply(fl, total_m, h_m)
-        np.subtract(h_m, act_m, h_m)
-        np.multiply(h_m, a, h_m)
-        np.multiply(vb, v_scale, t1)  # V_CE
-        np.multiply(a, fl, t2)
-        np.multiply(t2, neg_a_short, h_sl)
-        np.multiply(h_sl, t1, h_sl)
-        keep_where(h_sl, as_mask(np.less_equal(t1, ZERO, m1)))  # no heat unless V_CE <= 0
-        np.multiply(t2, fv, work)
-        np.multiply(work, f0, work)
-        np.negative(t1, t1)
-        np.multiply(work, t1, work)
-        np.add(h_a, h_m, h_am)
-        if non_negative:
-            non_negativity_into(work, h_am, h_sl, t1, total, m1, t2, strict=False)
-        else:
-            np.add(work, h_am, t1)
-        total_into(total, t1, h_sl, basal_w)
-
-    work, h_am, h_sl, total, h_a, h_m = evaluate_chunked(
-        kernel,
-        inp.shape,
-        [
-            inp.activation, inp.normalized_fiber_velocity, inp.active_force_length_multiplier,
-            inp.force_velocity_multiplier,
-        ],
-        [inp.max_isometric_force_N, act_m, total_m, k3, k4, neg_a_short, v_scale, basal_w],
-        6,
-        scratch="dddq",
-        inputs=inp,
-    )
+    H_AM = H_A + H_M
+    if non_negative:
+        H_SL = apply_non_negativity(W_CE, H_AM, H_SL, strict=False)
+    B = basal_rate(inp, basal, basal_rate_W_per_kg)
     return MetabolicRates(
         model=model,
-        work=work,
-        activation_maintenance=h_am,
-        shortening_lengthening=h_sl,
-        basal=basal_view(basal_w, inp.shape),
-        total=total,
-        extras={"activation": h_a, "maintenance": h_m},
+        work=W_CE,
+        activation_maintenance=H_AM,
+        shortening_lengthening=H_SL,
+        basal=basal_view(B, inp.shape),
+        total=W_CE + H_AM + H_SL + B,
+        extras={"activation": H_A, "maintenance": H_M},
     )

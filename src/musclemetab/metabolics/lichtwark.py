@@ -1,32 +1,23 @@
-"""LW07: Lichtwark & Wilson (2007), as implemented in the study.
-
-LW05 (Lichtwark & Wilson 2005) is not implemented: see ``docs/metabolics.md`` for why.
-"""
+"""LW07: Lichtwark & Wilson (2007), as implemented in the study; LW05: Lichtwark & Wilson
+(2005), made definite (``docs/metabolics.md``)."""
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import numpy as np
 
+from ..errors import DataMismatchError, OptionError
 from ._common import (
     BASAL_RATE_W_PER_KG,
-    ONE,
-    ZERO,
     MetabolicRates,
-    as_mask,
+    apply_non_negativity,
     basal_rate,
     basal_view,
     check_flag,
-    evaluate_chunked,
     model_function,
-    non_negativity_into,
     prepare_inputs,
-    select_into,
-    total_into,
 )
 
-__all__ = ["lichtwark2007", "LICHTWARK_CONSTANTS"]
+__all__ = ["lichtwark2007", "lichtwark2005", "LICHTWARK_CONSTANTS", "LICHTWARK_2005_CONSTANTS", "loess_smooth"]
 
 #: G (curvature of the force-velocity relation), gamma (scales the maintenance heat), the
 #: split of the maintenance heat between activation (0.3) and force (0.7), the decay rate of
@@ -99,77 +90,231 @@ def lichtwark2007(
     model = "LW07"
     for flag in ("non_negative", "basal"):
         check_flag(model, flag, locals()[flag])
-    inp = prepare_inputs(model, locals(), check=check, defer_large=True)
+    inp = prepare_inputs(model, locals(), check=check)
     k = LICHTWARK_CONSTANTS
-    vmax = inp.max_contraction_velocity
-    # per-muscle constants
-    n0 = inp.max_isometric_force_N * inp.optimal_fiber_length_m  # N m
-    h_iso = k["gamma"] * vmax / (k["G"] * k["G"]) * n0  # W per unit of (0.3 a + 0.7 X)
-    decay = k["lengthening_decay"] * vmax
-    inv_g = 1.0 / k["G"]
-    half = k["lengthening_heat_factor"]
-    share_a, share_x = k["activation_share"], k["force_share"]
-    basal_w = basal_rate(inp, basal, basal_rate_W_per_kg)
+    G, gamma = k["G"], k["gamma"]
+    a, f_l, P = inp.activation, inp.active_force_length_multiplier, inp.force_velocity_multiplier
+    v_max, l_mo, F0 = inp.max_contraction_velocity, inp.optimal_fiber_length_m, inp.max_isometric_force_N
+    N0 = F0 * l_mo  # N m
+    X = a * f_l
+    v_tilde = inp.normalized_fiber_velocity * v_max  # VCE~ (lMo/s)
 
-    neg_decay = -decay
-    neg_lmo = -inp.optimal_fiber_length_m
-    c = SimpleNamespace(
-        share_a=np.array(share_a),
-        share_x=np.array(share_x),
-        neg_inv_g=np.array(-inv_g),
-        half=np.array(half),
-        rest=np.array(0.3),
-        decaying=np.array(0.7),
-    )
+    # maintenance heat (1/s, times N0); the branch is taken on fV, not on the velocity
+    h_iso = gamma * v_max / G**2
+    decay = k["activation_share"] + k["force_share"] * np.exp(-k["lengthening_decay"] * v_max * (P - 1.0))
+    h_M = np.where(P < 1.0, h_iso, h_iso * decay)
+    H_M = (k["activation_share"] * a + k["force_share"] * X) * h_M * N0
+    # shortening / lengthening heat (1/s, times X N0)
+    h_SL = np.where(v_tilde <= 0, -v_tilde / G, k["lengthening_heat_factor"] * P * v_tilde)
+    H_SL = h_SL * X * N0
+    W_CE = -(X * P * F0) * (v_tilde * l_mo)
 
-    def kernel(out, s, p, tmp, i):
-        work, h_m, h_sl, total = out
-        a, vb, fl, fv = s
-        f0, neg_lmo, vmax, n0, h_iso, neg_decay, basal_w = p
-        x, t1, t2, vt, m1, m2 = tmp
-        np.multiply(a, fl, x)
-        # h_iso where fV < 1, else h_iso (0.3 + 0.7 exp(-7 vmax (fV - 1))) (h_iso 1.0 = h_iso exactly)
-        np.subtract(fv, ONE, t1)
-        np.multiply(t1, neg_decay, t1)
-        np.exp(t1, t1)
-        np.multiply(t1, c.decaying, t1)
-        np.add(t1, c.rest, t1)
-        select_into(t1, as_mask(np.less(fv, ONE, m1)), ONE, t2)
-        np.multiply(t1, h_iso, t1)
-        np.multiply(a, c.share_a, h_m)
-        np.multiply(x, c.share_x, t2)
-        np.add(h_m, t2, h_m)
-        np.multiply(h_m, t1, h_m)
-        np.multiply(vb, vmax, vt)  # VCE~ (lMo/s)
-        np.multiply(fv, c.half, h_sl)
-        np.multiply(h_sl, vt, h_sl)
-        np.multiply(vt, c.neg_inv_g, t1)
-        select_into(h_sl, as_mask(np.less_equal(vt, ZERO, m1)), t1, t2)
-        np.multiply(x, n0, t1)
-        np.multiply(h_sl, t1, h_sl)
-        np.multiply(x, fv, work)
-        np.multiply(work, f0, work)
-        np.multiply(vt, neg_lmo, t1)
-        np.multiply(work, t1, work)
-        if non_negative:
-            non_negativity_into(work, h_m, h_sl, t1, total, m2, t2, strict=False)
-        else:
-            np.add(work, h_m, t1)
-        total_into(total, t1, h_sl, basal_w)
-
-    work, h_m, h_sl, total = evaluate_chunked(
-        kernel,
-        inp.shape,
-        [
-            inp.activation, inp.normalized_fiber_velocity, inp.active_force_length_multiplier,
-            inp.force_velocity_multiplier,
-        ],
-        [inp.max_isometric_force_N, neg_lmo, vmax, n0, h_iso, neg_decay, basal_w],
-        4,
-        scratch="ddddqq",
-        inputs=inp,
-    )
+    if non_negative:
+        H_SL = apply_non_negativity(W_CE, H_M, H_SL, strict=False)
+    B = basal_rate(inp, basal, basal_rate_W_per_kg)
     return MetabolicRates(
-        model=model, work=work, activation_maintenance=h_m, shortening_lengthening=h_sl,
-        basal=basal_view(basal_w, inp.shape), total=total,
+        model=model, work=W_CE, activation_maintenance=H_M, shortening_lengthening=H_SL,
+        basal=basal_view(B, inp.shape), total=W_CE + H_M + H_SL + B,
     )
+
+
+#: Lichtwark & Wilson (2005): G (curvature of the force-velocity relation), the labile heat's
+#: two exponentials (amplitudes, rates in 1/s), the thermoelastic coefficient (-) and the
+#: lengthening heat's split and decay (times the lengthening force ratio fV - 1).
+LICHTWARK_2005_CONSTANTS = {
+    "G": 4.0,
+    "labile_amplitudes": (0.8, 0.175),
+    "labile_rates_per_s": (0.72, 0.022),
+    "thermoelastic": 0.014,
+    "lengthening_rest": 0.3,
+    "lengthening_decaying": 0.7,
+    "lengthening_decay": 8.0,
+    "excitation_threshold": 0.1,
+}
+
+
+@model_function("LW05")
+def lichtwark2005(
+    excitation,
+    activation,
+    normalized_fiber_length,
+    normalized_fiber_velocity,
+    active_force_length_multiplier,
+    force_velocity_multiplier,
+    passive_fiber_force_N,
+    max_isometric_force_N,
+    optimal_fiber_length_m,
+    max_contraction_velocity,
+    muscle_mass_kg,
+    slow_twitch_fraction,
+    *,
+    time_s=None,
+    stimulation_time_s=None,
+    fiber_force_rate_N_per_s=None,
+    force_smoothing_span: float | None = None,
+    excitation_threshold: float = 0.1,
+    basal: bool = True,
+    basal_rate_W_per_kg: float = BASAL_RATE_W_PER_KG,
+    check: bool = True,
+) -> MetabolicRates:
+    """LW05: Lichtwark & Wilson (2005), made definite (an additional model, not the study's).
+
+    Reference: Lichtwark GA, Wilson AM (2005) A modified Hill muscle model that predicts
+    muscle power output and efficiency during sinusoidal length changes. J Exp Biol
+    208:2831-2843. The study's code holds an uncalled version with defects; the choices
+    made here are listed in ``docs/metabolics.md``.
+
+    Equations (W for one muscle; ``V = -V_CE`` the fibre *shortening* velocity (m/s),
+    ``N0 = F0 lMo`` (N m), ``G = 4``, ``vmax`` in lMo/s)::
+
+        F_CE = a fL fV F0,   W_CE = F_CE V            (work rate, counted once)
+        h_M  = a vmax/G^2 N0                                        stable maintenance
+        h_L  = h_M (0.8 exp(-0.72 t_stim) + 0.175 exp(-0.022 t_stim))   labile maintenance
+        h_S  = a (V/lMo)/G N0                                       shortening, V > 0
+        h_T  = -0.014 dF_CE/dt lMo                                  thermoelastic
+        V >= 0:  h = h_M + h_L + h_S + h_T
+        V <  0:  h = h_M (0.3 + 0.7 exp(-8 (fV - 1))) + h_T         (fV: lengthening force ratio)
+        Edot = h + W_CE (+ basal)
+
+    No non-negativity rule (negative work is returned, as in LW07). ``t_stim`` (s) is the
+    time since the excitation last rose above 0.1, counted as BH04 counts it
+    (:func:`~musclemetab.metabolics.bhargava_stimulation_time_s`; 0 while ``e <= 0.1``).
+    ``dF_CE/dt`` is the central difference of ``F_CE`` along the time axis
+    (``numpy.gradient``). Isometric, ``t_stim = 0``, ``a = 1``: ``Edot = 1.975 vmax/G^2 N0``.
+
+    Components: ``activation_maintenance`` = ``h_M + h_L`` (``V >= 0``) or the lengthening
+    heat (``V < 0``); ``shortening_lengthening`` = ``h_S + h_T``; ``extras``:
+    ``labile`` (``h_L``) and ``thermoelastic`` (``h_T``).
+
+    Parameters
+    ----------
+%(shared)s
+
+    Other parameters
+    ----------------
+    stimulation_time_s : array_like, optional
+        ``t_stim`` (s), broadcastable to the states; replaces the count from ``time_s``.
+    fiber_force_rate_N_per_s : array_like, optional
+        ``dF_CE/dt`` (N/s), broadcastable to the states; replaces the difference along
+        ``time_s``.
+    force_smoothing_span : float or None
+        Smooth ``F_CE`` along time before differentiating, by a local quadratic regression
+        with tricube weights over this fraction of the samples (the authors use 0.05).
+        Default None: no smoothing.
+    excitation_threshold : float
+        Threshold of the stimulation counter (0.1).
+    """
+    model = "LW05"
+    check_flag(model, "basal", basal)
+    inp = prepare_inputs(model, locals(), check=check)
+    k = LICHTWARK_2005_CONSTANTS
+    G = k["G"]
+    a, f_l, f_v = inp.activation, inp.active_force_length_multiplier, inp.force_velocity_multiplier
+    v_max, l_mo, F0 = inp.max_contraction_velocity, inp.optimal_fiber_length_m, inp.max_isometric_force_N
+    N0 = F0 * l_mo
+    V = -inp.normalized_fiber_velocity * v_max * l_mo  # shortening velocity (m/s)
+    F_CE = a * f_l * f_v * F0
+    W_CE = F_CE * V
+
+    t_stim = _lw05_stimulation_time(model, inp, time_s, stimulation_time_s, excitation_threshold)
+    dF_dt = _lw05_force_rate(model, inp, F_CE, time_s, fiber_force_rate_N_per_s, force_smoothing_span)
+
+    h_M = a * v_max / G**2 * N0
+    (c1, c2), (r1, r2) = k["labile_amplitudes"], k["labile_rates_per_s"]
+    h_L = h_M * (c1 * np.exp(-r1 * t_stim) + c2 * np.exp(-r2 * t_stim))
+    h_S = np.where(V > 0, a * (V / l_mo) / G * N0, 0.0)
+    h_T = -k["thermoelastic"] * dF_dt * l_mo
+    h_lengthening = h_M * (k["lengthening_rest"] + k["lengthening_decaying"] * np.exp(-k["lengthening_decay"] * (f_v - 1.0)))
+    lengthening = V < 0
+
+    H_AM = np.where(lengthening, h_lengthening, h_M + h_L)
+    H_SL = np.where(lengthening, 0.0, h_S) + h_T
+    B = basal_rate(inp, basal, basal_rate_W_per_kg)
+
+    def full(x):  # every component has the shape of the states
+        return np.broadcast_to(x, inp.shape).copy()
+
+    return MetabolicRates(
+        model=model, work=full(W_CE), activation_maintenance=full(H_AM), shortening_lengthening=full(H_SL),
+        basal=basal_view(B, inp.shape), total=full(W_CE + H_AM + H_SL + B),
+        extras={"labile": full(np.where(lengthening, 0.0, h_L)), "thermoelastic": full(h_T)},
+    )
+
+
+def _lw05_stimulation_time(model, inp, time_s, stimulation_time_s, threshold):
+    from .bhargava import bhargava_stimulation_time_s
+
+    if stimulation_time_s is not None:
+        t = np.asarray(stimulation_time_s, dtype=float)
+        if np.any(np.isnan(t)) or np.any(t < 0):
+            raise OptionError(f"{model}: stimulation_time_s must not be NaN or negative (s)")
+        _check_broadcast(model, "stimulation_time_s", t, inp.shape)
+        return t
+    if time_s is None:
+        raise OptionError(
+            f"{model}: the labile heat needs the time since stimulation: pass time_s (s, along the last axis) "
+            "or stimulation_time_s"
+        )
+    return bhargava_stimulation_time_s(np.broadcast_to(inp.excitation, inp.shape), time_s, threshold)
+
+
+def _lw05_force_rate(model, inp, F_CE, time_s, rate, span):
+    if rate is not None:
+        r = np.asarray(rate, dtype=float)
+        if not np.all(np.isfinite(r)):
+            raise OptionError(f"{model}: fiber_force_rate_N_per_s must be finite (N/s)")
+        _check_broadcast(model, "fiber_force_rate_N_per_s", r, inp.shape)
+        return r
+    if time_s is None:
+        raise OptionError(
+            f"{model}: the thermoelastic heat needs dF_CE/dt: pass time_s (s, along the last axis) or "
+            "fiber_force_rate_N_per_s"
+        )
+    t = np.asarray(time_s, dtype=float)
+    shape = inp.shape
+    if not shape or t.ndim != 1 or t.size != shape[-1] or t.size < 2:
+        raise DataMismatchError(
+            f"{model}: time_s must be 1-D with one value per sample of the last (time) axis "
+            f"({shape[-1] if shape else 0} samples, at least 2), but has shape {t.shape}"
+        )
+    if not np.all(np.isfinite(t)) or not np.all(np.diff(t) > 0):
+        raise OptionError(f"{model}: time_s must be finite and strictly increasing (s)")
+    force = np.broadcast_to(F_CE, shape)
+    if span is not None:
+        span = float(span)
+        if not 0 < span <= 1:
+            raise OptionError(f"{model}: force_smoothing_span must lie in (0, 1] (a fraction of the samples), not {span}")
+        force = loess_smooth(t, force, span)
+    return np.gradient(force, t, axis=-1)
+
+
+def _check_broadcast(model, name, arr, shape):
+    try:
+        np.broadcast_shapes(arr.shape, shape)
+    except ValueError:
+        raise DataMismatchError(f"{model}: {name} has shape {arr.shape}, not broadcastable to the muscle states {shape}") from None
+
+
+def loess_smooth(x, y, span: float):
+    """Local quadratic regression of ``y`` on ``x`` along the last axis (LOESS).
+
+    At each sample, a quadratic in ``x`` is fitted by weighted least squares to the
+    ``ceil(span n)`` nearest samples (at least 3), with tricube weights
+    ``(1 - (d/d_max)^3)^3`` of the distance ``d`` relative to the farthest of them, and
+    evaluated there (Cleveland 1979; the authors smoothed ``F_CE`` this way with span 0.05).
+    """
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    n = x.size
+    k = min(n, max(3, int(np.ceil(span * n))))
+    out = np.empty(y.shape)
+    for i in range(n):
+        d = np.abs(x - x[i])
+        idx = np.argsort(d, kind="stable")[:k]
+        d_max = d[idx].max()
+        w = (1.0 - (d[idx] / d_max) ** 3) ** 3 if d_max > 0 else np.ones(k)
+        X = np.vander(x[idx] - x[i], 3, increasing=True) * np.sqrt(w)[:, None]
+        # the fitted value at x[i] is the intercept: one row of the pseudo-inverse
+        row = np.linalg.pinv(X)[0] * np.sqrt(w)
+        out[..., i] = y[..., idx] @ row
+    return out

@@ -8,12 +8,12 @@ from ..errors import OptionError
 from ._common import PARAMETER_ARGUMENTS, STATE_ARGUMENTS, MetabolicRates
 from .bhargava import bhargava2004
 from .houdijk import houdijk2006
-from .lichtwark import lichtwark2007
+from .lichtwark import lichtwark2005, lichtwark2007
+from .margaria import margaria1968
 from .umberger import uchida2016, umberger2003, umberger2010
 
-__all__ = ["MODELS", "STUDY_MODELS", "MODEL_COLOURS", "get_model", "parse_models", "compute_models"]
+__all__ = ["MODELS", "STUDY_MODELS", "ADDITIONAL_MODELS", "ALL_MODELS", "MODEL_COLOURS", "get_model", "parse_models", "compute_models"]
 
-#: Every implemented model by its short name, in the order of the paper's Table 2.
 #: One plotting colour per model, shared by every figure of the package.
 MODEL_COLOURS = {
     "UM03": "#1f77b4",
@@ -22,8 +22,12 @@ MODEL_COLOURS = {
     "LW07": "#9467bd",
     "UM10": "#17becf",
     "UC16": "#ff7f0e",
+    "LW05": "#8c564b",
+    "MA68": "#7f7f7f",
 }
 
+#: The study's six models by their short names, in the order of the paper's Table 2: the
+#: default model set everywhere ("all").
 MODELS = {
     "UM03": umberger2003,
     "BH04": bhargava2004,
@@ -33,21 +37,32 @@ MODELS = {
     "UC16": uchida2016,
 }
 
-#: The six models of the study (all of :data:`MODELS`; LW05 is not implemented).
+#: The six models of the study (:data:`MODELS`).
 STUDY_MODELS = ("UM03", "BH04", "HO06", "LW07", "UM10", "UC16")
+
+#: Models beside the study's six, evaluated only when named (``--models all,LW05,MA68``).
+ADDITIONAL_MODELS = {
+    "LW05": lichtwark2005,
+    "MA68": margaria1968,
+}
+
+#: Every implemented model: the study's six, then the additional ones.
+ALL_MODELS = {**MODELS, **ADDITIONAL_MODELS}
 
 
 def get_model(name: str):
     """The model function registered under ``name`` (case-insensitive)."""
     key = str(name).strip().upper()
-    if key not in MODELS:
-        hint = " (LW05 is not implemented; see docs/metabolics.md)" if key == "LW05" else ""
-        raise OptionError(f"unknown metabolic model '{name}'{hint}; known models: {', '.join(MODELS)}")
-    return MODELS[key]
+    if key not in ALL_MODELS:
+        raise OptionError(f"unknown metabolic model '{name}'; known models: {', '.join(ALL_MODELS)}")
+    return ALL_MODELS[key]
 
 
 def parse_models(models: str | Iterable[str] | None) -> list[str]:
-    """Model names from ``"all"``, ``None``, ``"UM10,BH04"`` or a list; checked, unique, in order."""
+    """Model names from ``"all"``, ``None``, ``"UM10,BH04"`` or a list; checked, unique, in order.
+
+    ``"all"`` (alone or in a list, e.g. ``"all,LW05,MA68"``) stands for the study's six
+    models; the additional models are evaluated only when named."""
     if models is None:
         return list(STUDY_MODELS)
     if isinstance(models, str):
@@ -55,15 +70,11 @@ def parse_models(models: str | Iterable[str] | None) -> list[str]:
     else:
         items = [str(m) for m in models]
     if not items:
-        raise OptionError(f"no metabolic model given; known models: {', '.join(MODELS)} (or 'all')")
-    if len(items) == 1 and items[0].lower() == "all":
-        return list(STUDY_MODELS)
+        raise OptionError(f"no metabolic model given; known models: {', '.join(ALL_MODELS)} (or 'all')")
     out: list[str] = []
     for m in items:
-        get_model(m)
-        key = m.strip().upper()
-        if key not in out:
-            out.append(key)
+        keys = STUDY_MODELS if m.strip().lower() == "all" else (get_model(m).model_name,)
+        out.extend(k for k in keys if k not in out)
     return out
 
 
@@ -80,7 +91,7 @@ def compute_models(
     Parameters
     ----------
     models
-        ``"all"``, a comma-separated string or a list of names of :data:`MODELS`.
+        ``"all"``, a comma-separated string or a list of names of :data:`ALL_MODELS`.
     inputs
         The shared arguments by name (the seven states and the five parameters).
     time_s
@@ -95,16 +106,16 @@ def compute_models(
     if missing:
         raise OptionError(f"metabolic models need {', '.join(missing)}; they are missing from the inputs")
     options = dict(options or {})
-    unknown = [k for k in options if k.upper() not in MODELS]
+    unknown = [k for k in options if k.upper() not in ALL_MODELS]
     if unknown:
-        raise OptionError(f"options given for unknown model(s) {', '.join(unknown)}; known: {', '.join(MODELS)}")
+        raise OptionError(f"options given for unknown model(s) {', '.join(unknown)}; known: {', '.join(ALL_MODELS)}")
     args = {k: inputs[k] for k in STATE_ARGUMENTS + PARAMETER_ARGUMENTS}
     out = {}
     for name in names:
         opts = dict(common_options)
         opts.update({k: v for m, o in options.items() if m.upper() == name for k, v in o.items()})
         try:
-            out[name] = MODELS[name](**args, time_s=time_s, **opts)
+            out[name] = ALL_MODELS[name](**args, time_s=time_s, **opts)
         except TypeError as exc:
             raise OptionError(f"{name}: invalid option ({exc})") from None
     return out

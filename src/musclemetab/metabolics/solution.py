@@ -50,7 +50,7 @@ import numpy as np
 
 from ..errors import DataMismatchError, MissingColumnError, OptionError
 from ._common import MetabolicRates
-from .registry import MODELS, parse_models
+from .registry import ALL_MODELS, parse_models
 from .whole_body import BASAL_RULES, WholeBodyRate, whole_body_rate
 
 __all__ = [
@@ -108,6 +108,10 @@ class SolutionStates:
     states: dict[str, np.ndarray]
     parameters: dict[str, dict[str, float]] = field(default_factory=dict)
     source: str = ""
+    #: (start, end) of the gait cycle recorded by a solve over ``--cycle`` (s), else None
+    cycle_s: tuple[float, float] | None = None
+    #: the solved leg ("r"/"l") when the solve recorded it
+    side: str | None = None
 
 
 def read_solution_states(directory: str | os.PathLike, *, require_success: bool = True) -> SolutionStates:
@@ -146,8 +150,11 @@ def read_solution_states(directory: str | os.PathLike, *, require_success: bool 
             rec = records.get(m)
             if isinstance(rec, Mapping) and all(k in rec for k in _SUMMARY_KEYS):
                 params[m] = {arg: float(rec[k]) for k, arg in _SUMMARY_KEYS.items()}
+    cycle = (summary.get("window") or {}).get("gait_cycle") if isinstance(summary.get("window"), Mapping) else None
+    cycle_s = (float(cycle["start_s"]), float(cycle["end_s"])) if isinstance(cycle, Mapping) else None
     return SolutionStates(
-        time_s=df.index.to_numpy(dtype=float), muscles=muscles, states=states, parameters=params, source=str(directory)
+        time_s=df.index.to_numpy(dtype=float), muscles=muscles, states=states, parameters=params, source=str(directory),
+        cycle_s=cycle_s, side=summary.get("side"),
     )
 
 
@@ -290,7 +297,7 @@ def metabolics_from_solution(
     models="all",
     muscle_parameters=None,
     basal: str = "body",
-    trim: tuple[int, int] = (5, 6),
+    trim: tuple[int, int] | None = None,
     model_options: Mapping[str, Mapping[str, object]] | None = None,
     muscle_masses_kg: Mapping[str, float] | None = None,
     slow_twitch_fractions: Mapping[str, float] | None = None,
@@ -299,6 +306,7 @@ def metabolics_from_solution(
     cycle_duration_s: float | None = None,
     speed_m_per_s: float | None = None,
     require_success: bool = True,
+    legs: int = 2,
 ) -> SolutionMetabolics:
     """Metabolic rates of every muscle of a solution, for a set of models.
 
@@ -310,7 +318,7 @@ def metabolics_from_solution(
         The subject (muscle masses from the volume rule of :mod:`musclemetab.properties`;
         whole-body rate per kg of body mass).
     models
-        ``"all"`` (the six study models), ``"UM10,BH04"`` or a list.
+        ``"all"`` (the six study models), ``"UM10,BH04"``, ``"all,LW05,MA68"`` or a list.
     muscle_parameters
         ``F0``, ``lMo``, ``vmax`` by muscle name: a
         :class:`musclemetab.model.MuscleParameters` (e.g. from
@@ -322,7 +330,12 @@ def metabolics_from_solution(
         study's code) or ``"none"``. The per-muscle rates always carry the per-muscle
         ``basal`` component (the study's code), apart from the other components.
     trim
-        Nodes dropped at the start and at the end (5, 6).
+        Nodes dropped at the start and at the end. Default: for a solve over a gait cycle
+        found from ground forces (``summary.json`` ``window.gait_cycle``), every node outside
+        that cycle; otherwise the study's (5, 6).
+    legs
+        Legs the solved muscles stand for in the whole-body rate: 2 (one leg solved, doubled)
+        or 1 (each leg solved; add the legs, see :func:`add_legs`).
     model_options
         Per-model options, e.g. ``{"BH04": {"activation_heat_decay": False}}``.
     muscle_masses_kg, slow_twitch_fractions
@@ -347,9 +360,9 @@ def metabolics_from_solution(
     if basal not in BASAL_RULES:
         raise OptionError(f"basal rule must be one of {', '.join(BASAL_RULES)}, not {basal!r}")
     model_options = {k.upper(): dict(v) for k, v in (model_options or {}).items()}
-    unknown = [k for k in model_options if k not in MODELS]
+    unknown = [k for k in model_options if k not in ALL_MODELS]
     if unknown:
-        raise OptionError(f"options given for unknown model(s) {', '.join(unknown)}; known: {', '.join(MODELS)}")
+        raise OptionError(f"options given for unknown model(s) {', '.join(unknown)}; known: {', '.join(ALL_MODELS)}")
     sol = solution if isinstance(solution, SolutionStates) else read_solution_states(
         solution, require_success=require_success
     )
@@ -369,7 +382,11 @@ def metabolics_from_solution(
             raise DataMismatchError(
                 f"solution state '{arg}' has shape {arr.shape}; expected (muscles, nodes) = ({len(muscles)}, {n_nodes})"
             )
-    keep = trim_slice(n_nodes, *trim)
+    if trim is None and sol.cycle_s is not None:
+        inside = np.flatnonzero((sol.time_s >= sol.cycle_s[0] - 1e-9) & (sol.time_s <= sol.cycle_s[1] + 1e-9))
+        keep = trim_slice(n_nodes, int(inside[0]), n_nodes - 1 - int(inside[-1]))
+    else:
+        keep = trim_slice(n_nodes, *(trim if trim is not None else (5, 6)))
     time = sol.time_s[keep]
     states = {arg: arr[:, keep] for arg, arr in sol.states.items()}
     for arg, arr in states.items():  # named here, where the solution and the muscles are known
@@ -396,11 +413,11 @@ def metabolics_from_solution(
         opts = {"basal": True}
         opts.update(model_options.get(name, {}))
         try:
-            rates[name] = MODELS[name](**inputs, time_s=time, **opts)
+            rates[name] = ALL_MODELS[name](**inputs, time_s=time, **opts)
         except TypeError as exc:
             raise OptionError(f"{name}: invalid option ({exc})") from None
     wb = {
-        name: whole_body_rate(r, time, body_mass_kg, basal=basal, cycle_duration_s=cycle_duration_s)
+        name: whole_body_rate(r, time, body_mass_kg, basal=basal, cycle_duration_s=cycle_duration_s, legs=legs)
         for name, r in rates.items()
     }
     return SolutionMetabolics(
@@ -449,4 +466,28 @@ def write_metabolics(result: SolutionMetabolics, out_dir: str | os.PathLike, cyc
         "metabolics_parquet": out_dir / METABOLICS_PARQUET,
         "whole_body_csv": out_dir / WHOLE_BODY_CSV,
         "per_muscle_csv": out_dir / PER_MUSCLE_FILE,
+    }
+
+
+def add_legs(results: Mapping[str, SolutionMetabolics]) -> dict[str, float]:
+    """Whole-body rate (W/kg) of both legs solved separately: the legs' cycle averages added.
+
+    ``results`` maps the side (``"r"``, ``"l"``) to its :class:`SolutionMetabolics`, each
+    computed with ``legs=1`` for the same subject and basal rule. Each leg's muscles are
+    averaged over that leg's own cycle; the basal heat of the ``"body"`` rule is added once.
+    """
+    from ._common import BASAL_RATE_W_PER_KG
+
+    res = list(results.values())
+    if not res:
+        raise OptionError("no leg to add")
+    if any(wb.legs != 1 for r in res for wb in r.whole_body.values()):
+        raise OptionError("add_legs needs each leg's metabolics computed with legs=1")
+    first = res[0]
+    for r in res[1:]:
+        if r.body_mass_kg != first.body_mass_kg or r.basal_rule != first.basal_rule or r.models != first.models:
+            raise DataMismatchError("the legs were evaluated with different body mass, basal rule or models")
+    basal = BASAL_RATE_W_PER_KG if first.basal_rule == "body" else 0.0
+    return {
+        m: sum(r.whole_body[m].one_leg_mean_W for r in res) / first.body_mass_kg + basal for m in first.models
     }

@@ -7,7 +7,7 @@ muscle; ``VCE~ = V_CE / lMo`` in optimal lengths per second, negative = shorteni
     A    = (e + a)/2      if e <= a
     A_AM = A^0.6
     A_S  = A^2 if VCE~ <= 0 (shortening, isometric), A if VCE~ > 0 (lengthening)
-    S    = 1.5                               (aerobic scaling factor)
+    S    = 1.5 (aerobic) or 1.0 (anaerobic)  (effort scaling, option effort_scaling)
     vmax_ST = vmax/2.5;  alpha_S_ST = 100/vmax_ST;  alpha_S_FT = 153/vmax
     h_AM = 128 f_FT' + 25                                          (W/kg)
     h_SL = -(alpha_S_ST VCE~ f_ST' + alpha_S_FT VCE~ f_FT') A_S    if VCE~ <= 0
@@ -22,35 +22,29 @@ or the excitation-dependent recruited fractions (UC16).
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import numpy as np
 
 from ._common import (
     BASAL_RATE_W_PER_KG,
-    HALF,
-    ONE,
-    QUARTER_PI,
-    ZERO,
     MetabolicRates,
-    as_mask,
+    apply_minimum_heat_rate,
+    apply_non_negativity,
     basal_rate,
     basal_view,
     check_flag,
-    evaluate_chunked,
-    keep_where,
+    check_number,
     model_function,
-    non_negativity_into,
     prepare_inputs,
-    select_into,
-    total_into,
+    recruited_slow_twitch_fraction,
 )
 
-__all__ = ["umberger2003", "umberger2010", "uchida2016", "AEROBIC_FACTOR"]
+__all__ = ["umberger2003", "umberger2010", "uchida2016", "AEROBIC_FACTOR", "ANAEROBIC_FACTOR"]
 
-#: Aerobic scaling factor S (multiplies the activation-maintenance and the
-#: shortening-lengthening heat).
+#: Effort scaling factor S (multiplies the activation-maintenance and the
+#: shortening-lengthening heat): 1.5 for mostly aerobic activity such as walking (the
+#: study's value and OpenSim's default), 1.0 for anaerobic activity (Umberger et al. 2003).
 AEROBIC_FACTOR = 1.5
+ANAEROBIC_FACTOR = 1.0
 #: vmax of slow-twitch fibres is vmax / 2.5.
 SLOW_TWITCH_VMAX_RATIO = 2.5
 #: alpha_L = factor * alpha_S_ST: 4 in Umberger et al. (2003) (and UC16), 0.3 in Umberger (2010).
@@ -63,173 +57,70 @@ def _umberger_family(
     values: dict,
     *,
     lengthening_factor: float,
-    include_negative_work: bool,
     recruitment: bool,
-    non_negative: bool,
     strict: bool,
-    slow_twitch_shortening_cap: bool,
-    basal: bool,
-    basal_rate_W_per_kg: float,
-    check: bool,
 ) -> MetabolicRates:
+    """The Umberger family's equations (module docstring) with the options of ``values``."""
     for flag in ("include_negative_work", "non_negative", "slow_twitch_shortening_cap", "basal"):
-        check_flag(model, flag, locals()[flag])
-    inp = prepare_inputs(model, values, check=check, defer_large=True)
+        check_flag(model, flag, values[flag])
+    S = check_number(model, "effort_scaling", values["effort_scaling"])
+    minimum = check_number(model, "minimum_heat_rate_W_per_kg", values["minimum_heat_rate_W_per_kg"],
+                           allow_none=True)
+    inp = prepare_inputs(model, values, check=values["check"])
+    e, a = inp.excitation, inp.activation
+    l_m, f_l, f_v = inp.normalized_fiber_length, inp.active_force_length_multiplier, inp.force_velocity_multiplier
+    m, F0, l_mo, v_max = (inp.muscle_mass_kg, inp.max_isometric_force_N, inp.optimal_fiber_length_m,
+                          inp.max_contraction_velocity)
 
-    # per-muscle constants (parameter-shaped)
-    vmax = inp.max_contraction_velocity
-    f_st = inp.slow_twitch_fraction
-    vmax_st = vmax / SLOW_TWITCH_VMAX_RATIO
-    alpha_st = 100.0 / vmax_st
-    alpha_ft = 153.0 / vmax
-    alpha_l = lengthening_factor * alpha_st
-    s_m = AEROBIC_FACTOR * inp.muscle_mass_kg
-    basal_w = basal_rate(inp, basal, basal_rate_W_per_kg)
-    if recruitment:
-        am_coef = s_m  # h_AM depends on the recruited fractions: computed per sample
-        st_coef, ft_coef = alpha_st, alpha_ft
-    else:
-        am_coef = (128.0 * (1.0 - f_st) + 25.0) * s_m
-        st_coef = alpha_st * f_st
-        ft_coef = alpha_ft * (1.0 - f_st)
-    cap = slow_twitch_shortening_cap
-    # -(st + ft) VCE~ A^2 without the cap; -(F_CE V_CE) = F_CE (VCE~ (-lMo)) exactly
-    neg_coef = -(st_coef + ft_coef)
-    neg_lmo = -inp.optimal_fiber_length_m
-    neg_vmax_st = -vmax_st
+    # fibre-type fractions: the muscle's, or those recruited at this excitation (UC16)
+    f_st = recruited_slow_twitch_fraction(e, inp.slow_twitch_fraction) if recruitment else inp.slow_twitch_fraction
+    f_ft = 1.0 - f_st
+    # velocity constants
+    v_max_st = v_max / SLOW_TWITCH_VMAX_RATIO
+    alpha_s_st = 100.0 / v_max_st
+    alpha_s_ft = 153.0 / v_max
+    alpha_l = lengthening_factor * alpha_s_st
 
-    def kernel(out, s, p, tmp, i):
-        work, h_am, h_sl, total = out
-        e, a, lm, vb, fl, fv = s
-        vmax, f0, neg_lmo, f_st, s_m, am_coef, st_coef, ft_coef, neg_coef, alpha_l, neg_vmax_st, basal_w = p
-        vt, blend, t1, t2, f_st_r, f_ft_r, shortening, longer, m3 = tmp
-        np.multiply(vb, vmax, vt)  # VCE~ (lMo/s)
-        as_mask(np.less_equal(vt, ZERO, shortening))
-        as_mask(np.greater(lm, ONE, longer))
-        np.maximum(e, a, out=blend)  # e if e > a, else (e + a)/2 (exact: 0.5 (e + e) = e)
-        np.add(e, blend, blend)
-        np.multiply(blend, HALF, blend)
-        np.power(blend, _C.am_exponent, t1)
-        if recruitment:
-            _recruited_slow_twitch_fraction_into(e, f_st, f_st_r, t2, m3)
-            np.subtract(ONE, f_st_r, f_ft_r)
-            np.multiply(f_ft_r, _C.am_fast, h_am)
-            np.add(h_am, _C.am_base, h_am)
-            np.multiply(h_am, am_coef, h_am)
-            np.multiply(h_am, t1, h_am)
-            np.multiply(f_st_r, st_coef, f_st_r)  # st
-            np.multiply(f_ft_r, ft_coef, f_ft_r)  # ft
-        else:
-            np.multiply(t1, am_coef, h_am)
-        # above optimal length: h_am (0.4 + 0.6 fL)
-        np.multiply(fl, _C.am_length_slope, t1)
-        np.add(t1, _C.am_length_base, t1)
-        np.multiply(t1, h_am, t1)
-        select_into(h_am, longer, t1, t2)
-        # lengthening heat (t2), replaced by the shortening heat where VCE~ <= 0
-        np.multiply(vt, alpha_l, t2)
-        np.multiply(t2, blend, t2)
-        np.multiply(blend, blend, blend)
-        if recruitment:
-            if cap:
-                np.maximum(vt, neg_vmax_st, out=t1)
-                np.multiply(f_st_r, t1, t1)
-                np.multiply(f_ft_r, vt, h_sl)
-                np.add(t1, h_sl, h_sl)
-                np.negative(h_sl, h_sl)
-            else:
-                np.add(f_st_r, f_ft_r, h_sl)
-                np.negative(h_sl, h_sl)
-                np.multiply(h_sl, vt, h_sl)
-        elif cap:
-            np.maximum(vt, neg_vmax_st, out=t1)
-            np.multiply(t1, st_coef, t1)
-            np.multiply(vt, ft_coef, h_sl)
-            np.add(t1, h_sl, h_sl)
-            np.negative(h_sl, h_sl)
-        else:
-            np.multiply(vt, neg_coef, h_sl)
-        np.multiply(h_sl, blend, h_sl)  # times A^2
-        select_into(t2, shortening, h_sl, t1)
-        np.multiply(t2, s_m, h_sl)
-        np.multiply(h_sl, fl, t1)  # above optimal length: times fL
-        select_into(h_sl, longer, t1, t2)
-        # work rate
-        np.multiply(a, fl, work)
-        np.multiply(work, fv, work)
-        np.multiply(work, f0, work)
-        np.multiply(vt, neg_lmo, t1)
-        np.multiply(work, t1, work)
-        if not include_negative_work:  # 0 where VCE~ > 0
-            keep_where(work, shortening)
-        if non_negative:
-            non_negativity_into(work, h_am, h_sl, t1, total, m3, t2, strict=strict)
-        else:
-            np.add(work, h_am, t1)
-        total_into(total, t1, h_sl, basal_w)
+    v_tilde = inp.normalized_fiber_velocity * v_max  # VCE~ (lMo/s), positive = lengthening
+    shortening = v_tilde <= 0  # shortening or isometric
+    above_optimal = l_m > 1.0
+    A = np.where(e > a, e, 0.5 * (e + a))
 
-    work, h_am, h_sl, total = evaluate_chunked(
-        kernel,
-        inp.shape,
-        [
-            inp.excitation, inp.activation, inp.normalized_fiber_length, inp.normalized_fiber_velocity,
-            inp.active_force_length_multiplier, inp.force_velocity_multiplier,
-        ],
-        [
-            vmax, inp.max_isometric_force_N, neg_lmo, f_st, s_m, am_coef, st_coef, ft_coef, neg_coef, alpha_l,
-            neg_vmax_st, basal_w,
-        ],
-        4,
-        scratch="ddddddqqq",
-        inputs=inp,
-    )
+    # activation and maintenance heat
+    h_am = (128.0 * f_ft + 25.0) * A**0.6 * S * m
+    H_AM = np.where(above_optimal, (0.4 + 0.6 * f_l) * h_am, h_am)
+    # shortening and lengthening heat (W/kg)
+    v_st = np.maximum(v_tilde, -v_max_st) if values["slow_twitch_shortening_cap"] else v_tilde
+    h_shortening = -(alpha_s_st * v_st * f_st + alpha_s_ft * v_tilde * f_ft) * A**2
+    h_lengthening = alpha_l * v_tilde * A
+    h_sl = np.where(shortening, h_shortening, h_lengthening) * S * m
+    H_SL = np.where(above_optimal, f_l * h_sl, h_sl)
+    # mechanical work rate of the active fibre force (no passive force)
+    W_CE = -(a * f_l * f_v * F0) * (v_tilde * l_mo)
+    if not values["include_negative_work"]:
+        W_CE = np.where(shortening, W_CE, 0.0)
+
+    H_AM, H_SL = apply_minimum_heat_rate((H_AM, H_SL), m, minimum)
+    if values["non_negative"]:
+        H_SL = apply_non_negativity(W_CE, H_AM, H_SL, strict=strict)
+    B = basal_rate(inp, values["basal"], values["basal_rate_W_per_kg"])
+    total = W_CE + H_AM + H_SL + B
     return MetabolicRates(
-        model=model, work=work, activation_maintenance=h_am, shortening_lengthening=h_sl,
-        basal=basal_view(basal_w, inp.shape), total=total,
+        model=model, work=W_CE, activation_maintenance=H_AM, shortening_lengthening=H_SL,
+        basal=basal_view(B, inp.shape), total=total,
     )
 
 
-def _recruited_slow_twitch_fraction(excitation, slow_twitch_fraction):
-    """UC16's recruited slow-twitch fraction (orderly recruitment from excitation).
-
-    ``u_f = 1 - cos(pi e/2)``, ``u_s = sin(pi e/2)``,
-    ``f_ST' = f_ST u_s / (f_ST u_s + f_FT u_f)``, and ``f_ST' = 1`` where the denominator
-    is zero (``e = 0``; the reference implementation tests ``e == 0``).
-
-    With ``t = tan(pi e/4)``, ``u_f = t u_s`` (see
-    :func:`~musclemetab.metabolics._common.recruitment_terms`), so where ``u_s != 0`` the
-    fraction is ``f_ST / (f_ST + f_FT t)``. That form is evaluated, with 1 where its
-    denominator is zero; at ``e = 0`` (``t = 0``) it gives 1 for every ``f_ST``, as the
-    definition does.
-    """
-    t = np.tan(QUARTER_PI * np.asarray(excitation, dtype=float))
-    den = slow_twitch_fraction + (1.0 - slow_twitch_fraction) * t
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(den == 0, 1.0, slow_twitch_fraction / den)
-
-
-def _recruited_slow_twitch_fraction_into(excitation, slow_twitch_fraction, out, tmp, mask) -> None:
-    """:func:`_recruited_slow_twitch_fraction` into ``out`` (chunk kernels; ``tmp`` (float)
-    and ``mask`` (int64) are scratch arrays), with the same arithmetic."""
-    np.multiply(QUARTER_PI, excitation, tmp)
-    np.tan(tmp, tmp)
-    np.multiply(ONE - slow_twitch_fraction, tmp, tmp)
-    np.add(slow_twitch_fraction, tmp, tmp)  # den
-    with np.errstate(divide="ignore", invalid="ignore"):
-        np.divide(slow_twitch_fraction, tmp, out)
-    np.equal(tmp, ZERO, mask)
-    if mask.any():
-        select_into(out, as_mask(mask), ONE, tmp)
-
-
-#: Constants of the kernel as 0-d arrays (cheaper ufunc operands, same arithmetic).
-_C = SimpleNamespace(
-    am_exponent=np.array(0.6),
-    am_fast=np.array(128.0),
-    am_base=np.array(25.0),
-    am_length_slope=np.array(0.6),
-    am_length_base=np.array(0.4),
-)
+_OPTIONS_DOC = """    effort_scaling : float
+        The factor ``S`` of both heats: 1.5 for aerobic activity (default: the study's value
+        and OpenSim's ``aerobic_factor``), 1.0 for anaerobic activity (Umberger et al.
+        2003; :data:`AEROBIC_FACTOR`, :data:`ANAEROBIC_FACTOR`).
+    minimum_heat_rate_W_per_kg : float or None
+        Where the heat rate ``H_AM + H_SL`` of a muscle falls below this many W per kg of
+        muscle mass, raise it to that value (``H_AM`` takes it, ``H_SL = 0``), before the
+        non-negativity rule; Umberger et al. (2003) and OpenSim's
+        ``enforce_minimum_heat_rate_per_muscle`` (1 W/kg, :data:`MINIMUM_HEAT_RATE_W_PER_KG`).
+        Default None: not applied (commented out in the study's code)."""
 
 
 @model_function("UM03")
@@ -251,6 +142,8 @@ def umberger2003(
     non_negative: bool = True,
     include_negative_work: bool = True,
     slow_twitch_shortening_cap: bool = False,
+    effort_scaling: float = AEROBIC_FACTOR,
+    minimum_heat_rate_W_per_kg: float | None = None,
     basal: bool = True,
     basal_rate_W_per_kg: float = BASAL_RATE_W_PER_KG,
     check: bool = True,
@@ -289,20 +182,9 @@ def umberger2003(
         when shortening faster than ``vmax/2.5``), as Umberger et al. (2003) and OpenSim's
         ``Umberger2010MuscleMetabolicsProbe`` do. Default False: the study's code has the
         cap commented out.
+%(options)s
     """
-    return _umberger_family(
-        "UM03",
-        locals(),
-        lengthening_factor=LENGTHENING_FACTOR_2003,
-        include_negative_work=include_negative_work,
-        recruitment=False,
-        non_negative=non_negative,
-        strict=True,
-        slow_twitch_shortening_cap=slow_twitch_shortening_cap,
-        basal=basal,
-        basal_rate_W_per_kg=basal_rate_W_per_kg,
-        check=check,
-    )
+    return _umberger_family("UM03", locals(), lengthening_factor=LENGTHENING_FACTOR_2003, recruitment=False, strict=True)
 
 
 @model_function("UM10")
@@ -324,6 +206,8 @@ def umberger2010(
     non_negative: bool = False,
     include_negative_work: bool = False,
     slow_twitch_shortening_cap: bool = False,
+    effort_scaling: float = AEROBIC_FACTOR,
+    minimum_heat_rate_W_per_kg: float | None = None,
     basal: bool = True,
     basal_rate_W_per_kg: float = BASAL_RATE_W_PER_KG,
     check: bool = True,
@@ -360,20 +244,9 @@ def umberger2010(
         when shortening faster than ``vmax/2.5``), as Umberger et al. (2003) and OpenSim's
         ``Umberger2010MuscleMetabolicsProbe`` do. Default False: the study's code has the
         cap commented out.
+%(options)s
     """
-    return _umberger_family(
-        "UM10",
-        locals(),
-        lengthening_factor=LENGTHENING_FACTOR_2010,
-        include_negative_work=include_negative_work,
-        recruitment=False,
-        non_negative=non_negative,
-        strict=False,
-        slow_twitch_shortening_cap=slow_twitch_shortening_cap,
-        basal=basal,
-        basal_rate_W_per_kg=basal_rate_W_per_kg,
-        check=check,
-    )
+    return _umberger_family("UM10", locals(), lengthening_factor=LENGTHENING_FACTOR_2010, recruitment=False, strict=False)
 
 
 @model_function("UC16")
@@ -395,6 +268,8 @@ def uchida2016(
     non_negative: bool = True,
     include_negative_work: bool = True,
     slow_twitch_shortening_cap: bool = False,
+    effort_scaling: float = AEROBIC_FACTOR,
+    minimum_heat_rate_W_per_kg: float | None = None,
     basal: bool = True,
     basal_rate_W_per_kg: float = BASAL_RATE_W_PER_KG,
     check: bool = True,
@@ -431,18 +306,11 @@ def uchida2016(
         when shortening faster than ``vmax/2.5``), as Umberger et al. (2003) and OpenSim's
         ``Umberger2010MuscleMetabolicsProbe`` do. Default False: the study's code has the
         cap commented out.
+%(options)s
     """
-    return _umberger_family(
-        "UC16",
-        locals(),
-        lengthening_factor=LENGTHENING_FACTOR_2003,
-        include_negative_work=include_negative_work,
-        recruitment=True,
-        non_negative=non_negative,
-        strict=False,
-        slow_twitch_shortening_cap=slow_twitch_shortening_cap,
-        basal=basal,
-        basal_rate_W_per_kg=basal_rate_W_per_kg,
-        check=check,
-    )
+    return _umberger_family("UC16", locals(), lengthening_factor=LENGTHENING_FACTOR_2003, recruitment=True, strict=False)
 
+
+
+for _f in (umberger2003, umberger2010, uchida2016):
+    _f.__doc__ = _f.__doc__.replace("%(options)s", _OPTIONS_DOC)

@@ -9,7 +9,9 @@ cycle duration, ``legs = 2`` (one leg is simulated) and the sum over the simulat
 muscles. Three basal rules:
 
 ``"body"`` (default, the paper's text)
-    muscle rates without any per-muscle basal heat, plus 1.2 W/kg of *body* mass;
+    muscle rates without any per-muscle basal heat, plus 1.2 W/kg of *body* mass (as
+    OpenSim's probes write it: ``basal_coefficient * m_body^basal_exponent`` W, with
+    coefficient 1.2 and exponent 1 by default);
 ``"muscle"`` (the study's code)
     the per-muscle basal heat 1.2 W/kg of *muscle* mass kept in every muscle's rate
     (the rates must have been computed with ``basal=True``), nothing added;
@@ -96,6 +98,7 @@ def whole_body_rate(
     *,
     basal: str = "body",
     basal_rate_W_per_kg: float = BASAL_RATE_W_PER_KG,
+    basal_exponent: float = 1.0,
     legs: int = 2,
     cycle_duration_s: float | None = None,
 ) -> WholeBodyRate:
@@ -116,6 +119,10 @@ def whole_body_rate(
         muscle's basal component (the study's code); ``"none"``.
     basal_rate_W_per_kg
         1.2 W/kg (Umberger et al. 2003).
+    basal_exponent
+        Under the ``"body"`` rule the basal heat is ``basal_rate_W_per_kg *
+        body_mass_kg**basal_exponent`` W, as OpenSim's probes write it (``basal_coefficient``,
+        ``basal_exponent``, default 1: 1.2 W/kg; e.g. 0.75 for a Kleiber-type scaling).
     legs
         Number of legs the simulated leg stands for (2).
     cycle_duration_s
@@ -131,6 +138,8 @@ def whole_body_rate(
         raise OptionError(f"basal rule must be one of {', '.join(BASAL_RULES)}, not {basal!r}")
     if not (np.isfinite(body_mass_kg) and body_mass_kg > 0):
         raise OptionError(f"body mass must be a positive number of kilograms, not {body_mass_kg!r}")
+    if isinstance(basal_exponent, bool) or not np.isfinite(float(basal_exponent)):
+        raise OptionError(f"basal_exponent must be a finite number, not {basal_exponent!r}")
     if not (isinstance(legs, (int, np.integer)) and legs >= 1):
         raise OptionError(f"legs must be a positive whole number, not {legs!r}")
     t = np.asarray(time_s, dtype=float)
@@ -167,7 +176,7 @@ def whole_body_rate(
     duration = float(t[-1] - t[0]) if cycle_duration_s is None else float(cycle_duration_s)
     if not (np.isfinite(duration) and duration > 0):
         raise OptionError(f"cycle duration must be positive (s), not {cycle_duration_s!r}")
-    add = basal_rate_W_per_kg if basal == "body" else 0.0
+    add = basal_rate_W_per_kg * body_mass_kg ** float(basal_exponent) / body_mass_kg if basal == "body" else 0.0
     rate = legs * leg / body_mass_kg + add
     leg_mean = _trapezoid(leg, t) / duration
     mean = legs * leg_mean / body_mass_kg + add

@@ -72,6 +72,7 @@ class _NumpyMath:
     log = staticmethod(np.log)
     sqrt = staticmethod(np.sqrt)
     tanh = staticmethod(np.tanh)
+    tan = staticmethod(np.tan)
     arcsinh = staticmethod(np.arcsinh)
 
 
@@ -83,6 +84,7 @@ class _CasadiMath:
         self.log = ca.log
         self.sqrt = ca.sqrt
         self.tanh = ca.tanh
+        self.tan = ca.tan
         self.arcsinh = ca.asinh
 
 

@@ -311,3 +311,86 @@ def read_time_series_table(path: str) -> dict:
     mat = table.getMatrix().to_numpy()
     meta = {k: table.getTableMetaDataAsString(k) for k in table.getTableMetaDataKeys()}
     return dict(labels=labels, time=np.asarray(table.getIndependentColumn()), values=mat, metadata=meta)
+
+
+def model_layout(model_path: str) -> dict:
+    """Joints, bodies and coordinates of a model, with where each body sits in the default pose.
+
+    Returns a dict with
+
+    * ``gravity``: the gravity vector (m/s^2, ground frame);
+    * ``bodies``: body names;
+    * ``joints``: one dict per joint in model order: ``name``, ``parent`` and ``child``
+      (base body names, ``ground`` for the ground), ``depth`` (number of joints between the
+      child and the ground), ``child_origin_m`` (position of the child body's origin in the
+      ground frame at the default pose), ``coordinates`` (names, joint order);
+    * ``coordinates``: one dict per coordinate: ``name``, ``joint``, ``locked``,
+      ``dependent`` (driven by a coupler), ``motion_type``;
+    * ``root_translations``: for each coordinate of the joint(s) attached to the ground, the
+      displacement (m, ground frame) of the child body's origin when that coordinate grows by
+      one unit from its default (a translational coordinate gives its axis; a rotation about
+      the body's origin gives zero).
+    """
+    m = _load(model_path)
+    model, state = m.model, m.state
+    names = {_ROTATIONAL: "rotational", _TRANSLATIONAL: "translational", _COUPLED: "coupled"}
+    bodies = model.getBodySet()
+    body_names = [bodies.get(i).getName() for i in range(bodies.getSize())]
+    for n, c in m.coords.items():
+        c.setValue(state, c.getDefaultValue(), False)
+    model.realizePosition(state)
+
+    def origin(name):
+        if name not in body_names:
+            return [0.0, 0.0, 0.0]
+        p = bodies.get(name).getPositionInGround(state)
+        return [p.get(0), p.get(1), p.get(2)]
+
+    jset = model.getJointSet()
+    joints, parent_of = [], {}
+    for i in range(jset.getSize()):
+        j = jset.get(i)
+        parent = j.getParentFrame().findBaseFrame().getName()
+        child = j.getChildFrame().findBaseFrame().getName()
+        parent_of[child] = parent
+        joints.append(dict(
+            name=j.getName(), parent=parent, child=child, child_origin_m=origin(child),
+            coordinates=[j.get_coordinates(k).getName() for k in range(j.numCoordinates())],
+        ))
+    ground = model.getGround().getName()
+
+    def depth(body):
+        d = 0
+        while body in parent_of and body != ground and d < 1000:
+            body, d = parent_of[body], d + 1
+        return d
+
+    for j in joints:
+        j["depth"] = depth(j["child"])
+    joint_of = {c: j["name"] for j in joints for c in j["coordinates"]}
+    coordinates = [
+        dict(name=n, joint=joint_of.get(n, ""), locked=m.locked[n], dependent=n in m.dependent,
+             motion_type=names.get(m.motion[n], "unknown"))
+        for n in m.coords
+    ]
+    root_translations = {}
+    for j in joints:
+        if j["parent"] != ground:
+            continue
+        base = np.array(origin(j["child"]))
+        for n in j["coordinates"]:
+            c = m.coords[n]
+            c.setValue(state, c.getDefaultValue() + 1.0, False)
+            model.realizePosition(state)
+            root_translations[n] = (np.array(origin(j["child"])) - base).tolist()
+            c.setValue(state, c.getDefaultValue(), False)
+            model.realizePosition(state)
+    g = model.getGravity()
+    return dict(
+        gravity=[g.get(0), g.get(1), g.get(2)],
+        ground=ground,
+        bodies=body_names,
+        joints=joints,
+        coordinates=coordinates,
+        root_translations=root_translations,
+    )

@@ -50,8 +50,26 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--model", required=True, metavar="M.osim", help="OpenSim model")
     p.add_argument("--ik", required=True, nargs="+", metavar="IK.mot",
                    help="inverse kinematics (defines the time window); emg-ten: one per trial")
-    p.add_argument("--id", required=True, nargs="+", metavar="ID.sto",
-                   help="inverse dynamics with '<dof>_moment' columns in N m; emg-ten: one per trial, same order")
+    p.add_argument("--id", nargs="+", metavar="ID.sto",
+                   help="inverse dynamics with '<dof>_moment' columns in N m; emg-ten: one per trial, same order. "
+                   "Without it, --external-loads computes it with OpenSim")
+    p.add_argument("--external-loads", metavar="GRF.xml",
+                   help="OpenSim ExternalLoads file (its data file beside it): the ground forces for --cycle and, "
+                   "without --id, for inverse dynamics computed by OpenSim's InverseDynamicsTool (coordinates "
+                   "low-pass filtered at 6 Hz), written to the output folder as inverse_dynamics.sto")
+    p.add_argument("--grf", metavar="GRF.mot",
+                   help="ground-force file for --cycle when there is no ExternalLoads file (the foot's vertical "
+                   "force column is found by the documented name rule of musclemetab.analysis.events.read_grf)")
+    p.add_argument("--side", default="r", choices=("r", "l", "both"),
+                   help="leg to solve (default r); both: two independent problems written to DIR/r and DIR/l")
+    p.add_argument("--window", metavar="T0:T1",
+                   help="time window (s) to solve; must lie inside every input (default: the whole IK file)")
+    p.add_argument("--cycle", metavar="auto|N",
+                   help="solve a gait cycle of the leg, heel strike to heel strike from the ground forces, padded "
+                   "by 0.05 s at each end (clipped at the edge of the data, with a warning): auto = the first, "
+                   "N = the N-th complete cycle")
+    p.add_argument("--mesh-frequency", type=float, default=100.0, metavar="PER_S",
+                   help="mesh intervals per second (default 100, the study's)")
     p.add_argument("--workflow", default="effort-gen", choices=("effort-gen", "effort-cal", "effort-ten", "emg-ten"),
                    help="workflow preset (default effort-gen)")
     p.add_argument("--emg", nargs="+", metavar="EMG.mot",
@@ -75,8 +93,9 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
                    help="effort-ten: JSON file with {\"tendon_stiffness\": {muscle: kT}}, e.g. the "
                    "parameters.json written by --workflow emg-ten (or the folder holding it)")
     p.add_argument("--dofs", nargs="+", metavar="DOF",
-                   help="degrees of freedom (default: ankle_angle_r knee_angle_r hip_flexion_r "
-                   "hip_adduction_r hip_rotation_r)")
+                   help="degrees of freedom (default: discovered from the model: the unlocked coordinates of "
+                   "the leg's joints that the inverse dynamics holds, e.g. ankle_angle_r knee_angle_r "
+                   "hip_flexion_r hip_adduction_r hip_rotation_r for the study's model)")
     p.add_argument("--cache-dir", metavar="DIR", help="geometry cache folder (default: the package's)")
     p.add_argument("--max-iter", type=int, default=10000, help="IPOPT iteration limit (default 10000)")
     p.add_argument("--print-level", type=int, default=0, help="IPOPT print level 0-12 (default 0)")
@@ -98,9 +117,9 @@ def solve_command(args) -> int:
     :class:`~musclemetab.errors.SolverError` when IPOPT did not converge (after writing the
     folder with ``success: false``).
     """
-    from .inputs import DEFAULT_DOFS
     from .problem import SolverOptions, failure_advice
     from .solve import solve_files
+    from .window import parse_cycle, parse_window
     from .workflows import parse_tendon_stiffness
 
     from ..io import check_output_folder
@@ -116,42 +135,72 @@ def solve_command(args) -> int:
     if extra:
         raise OptionError(f"{', '.join(extra)} belong{'s' if len(extra) == 1 else ''} to --workflow emg-ten; "
                           f"drop {'it' if len(extra) == 1 else 'them'} for {args.workflow}")
-    if len(ik) != 1 or len(idf) != 1:
+    if len(ik) != 1 or len(idf) > 1:
         raise OptionError(
             f"--workflow {args.workflow} solves one trial: give one --ik and one --id file (got {len(ik)} and "
             f"{len(idf)}); solve trials one by one, or use --workflow emg-ten for a multi-trial problem"
         )
-    args.ik, args.id = ik[0], idf[0]
+    args.ik, args.id = ik[0], (idf[0] if idf else None)
     kt = parse_tendon_stiffness(args.tendon_stiffness) if args.tendon_stiffness else None
-    dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else DEFAULT_DOFS
+    dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else None
+    if args.side == "both" and dofs:
+        raise OptionError("--dofs names one leg's DOFs; with --side both leave it out (each leg's DOFs are discovered)")
+    window = parse_window(args.window) if args.window else None
+    cycle = parse_cycle(args.cycle)
+    if args.mesh_frequency is not None and not args.mesh_frequency > 0:
+        raise OptionError(f"--mesh-frequency must be positive, not {args.mesh_frequency}")
     options = SolverOptions(max_iter=args.max_iter, print_level=args.print_level)
     warm = None
     if args.warm_start:
         from .solution import Solution
 
         warm = Solution.load(args.warm_start)
-    solution = solve_files(
-        args.model, args.ik, args.id, args.workflow,
-        dofs=dofs, passive=args.passive, tendon_stiffness=kt, tendon_stiffness_file=args.parameters,
-        options=options, cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, warm_start=warm,
-    )
-    solution.write(args.out)
-    s = solution.summary
-    if not solution.success:
-        raise SolverError(
-            f"the {args.workflow} solve did not converge (IPOPT status '{s['status']}' after "
-            f"{s['iterations']} iterations): {failure_advice(s['status'])}. The unconverged result is in "
-            f"{args.out} with \"success\": false"
+    sides = ("r", "l") if args.side == "both" else (args.side,)
+    from pathlib import Path
+
+    # every leg is solved before anything is written, so bad input on one leg leaves no output
+    solutions = {}
+    for side in sides:
+        solutions[side] = solve_files(
+            args.model, args.ik, args.id, args.workflow,
+            dofs=dofs, side=side, window=window, cycle=cycle, external_loads=args.external_loads, grf=args.grf,
+            mesh_frequency_hz=args.mesh_frequency,
+            passive=args.passive, tendon_stiffness=kt, tendon_stiffness_file=args.parameters,
+            options=options, cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, warm_start=warm,
         )
-    worst_reserve = max(s["reserve_rms_Nm"].values()) if s["reserve_rms_Nm"] else 0.0
-    print(
-        f"solve: {args.workflow} {len(solution.muscles)} muscles x {len(solution.dofs)} DOFs, "
-        f"N = {s['n_intervals']}: {s['status']} in {s['iterations']} iterations, "
-        f"objective {s['objective']:.6e}, solve {s['solve_time_s']:.2f} s, "
-        f"max moment residual {s['max_moment_residual_Nm']:.1e} N m, max reserve RMS "
-        f"{worst_reserve:.3g} N m -> {args.out}"
-    )
+    for side, solution in solutions.items():
+        out = Path(args.out) / side if args.side == "both" else Path(args.out)
+        write_solution_folder(solution, out)
+    for side, solution in solutions.items():
+        out = Path(args.out) / side if args.side == "both" else Path(args.out)
+        s = solution.summary
+        if not solution.success:
+            raise SolverError(
+                f"the {args.workflow} solve did not converge (IPOPT status '{s['status']}' after "
+                f"{s['iterations']} iterations): {failure_advice(s['status'])}. The unconverged result is in "
+                f"{out} with \"success\": false"
+            )
+        worst_reserve = max(s["reserve_rms_Nm"].values()) if s["reserve_rms_Nm"] else 0.0
+        print(
+            f"solve: {args.workflow} side {side}, {len(solution.muscles)} muscles x {len(solution.dofs)} DOFs, "
+            f"N = {s['n_intervals']}: {s['status']} in {s['iterations']} iterations, "
+            f"objective {s['objective']:.6e}, solve {s['solve_time_s']:.2f} s, "
+            f"max moment residual {s['max_moment_residual_Nm']:.1e} N m, max reserve RMS "
+            f"{worst_reserve:.3g} N m -> {out}"
+        )
     return 0
+
+
+def write_solution_folder(solution, out) -> None:
+    """Write a solution; inverse dynamics computed by OpenSim goes beside it as ``inverse_dynamics.sto``."""
+    from pathlib import Path
+
+    from ..io import atomic_write_bytes
+
+    solution.write(out)
+    if "inverse_dynamics" in solution.summary:
+        src = Path(solution.summary["inputs"]["id"])
+        atomic_write_bytes(Path(out) / "inverse_dynamics.sto", src.read_bytes())
 
 
 def _as_list(value) -> list:
@@ -175,6 +224,12 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
             f"{', '.join(wrong)} cannot be used with --workflow emg-ten (it estimates the tendon stiffness "
             "and starts from static optimisation); drop them"
         )
+    if not idf:
+        raise OptionError("--workflow emg-ten needs --id: one inverse-dynamics file per trial, in the order of --ik")
+    wrong = [o for o, v in (("--external-loads", args.external_loads), ("--grf", args.grf), ("--window", args.window),
+                            ("--cycle", args.cycle)) if v] + (["--side"] if args.side != "r" else [])
+    if wrong:
+        raise OptionError(f"{', '.join(wrong)} are for the single-trial workflows; drop them for --workflow emg-ten")
     emg = _as_list(getattr(args, "emg", None))
     if not emg:
         raise OptionError("--workflow emg-ten needs --emg: one processed EMG file per trial, in the order of --ik")

@@ -18,7 +18,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .inputs import (
-    DEFAULT_DOFS,
+    MESH_FREQUENCY_HZ,
     check_moment_magnitudes,
     check_moments_per_body_mass,
     check_time_ranges,
@@ -28,6 +28,7 @@ from .inputs import (
     select_muscles,
 )
 from .parameters import MuscleTendonParameters
+from ..errors import OptionError
 from .problem import SolverOptions, ipopt_statistics, solve_ocp
 from .solution import Solution, build_solution
 from .static_opt import guess_from_solution, initial_guess, static_optimisation
@@ -83,6 +84,7 @@ def solve_with_parameters(
     check_units: bool = True,
     filter_inputs: bool = True,
     warm_start: Solution | None = None,
+    mesh_frequency_hz: float = MESH_FREQUENCY_HZ,
 ) -> Solution:
     """Solve the muscle redundancy problem with explicit muscle parameters.
 
@@ -104,7 +106,8 @@ def solve_with_parameters(
         id_moments_Nm = np.asarray(id_moments_Nm, dtype=float).reshape(len(id_time_s), -1)[:, keep]
     params = params.subset(geometry.muscles)
     inputs = prepare_inputs(geometry, id_time_s, id_moments_Nm, ik_time_s=ik_time_s,
-                            filter_inputs=filter_inputs, sources=dict(sources or {}))
+                            filter_inputs=filter_inputs, mesh_frequency_hz=mesh_frequency_hz,
+                            sources=dict(sources or {}))
     if check_units:
         check_moment_magnitudes(inputs.moments_frames_Nm, inputs.dofs, inputs.moment_arms_frames_m,
                                 params.max_isometric_force_N, (sources or {}).get("id", "inverse dynamics"),
@@ -135,7 +138,7 @@ def solve_with_parameters(
         "solver_options": options.to_dict(),
         "input_preparation": {"filter": "butterworth 6th order 6 Hz zero-phase (MATLAB filtfilt padding)"
                               if filter_inputs else "none",
-                              "mesh_intervals_per_second": 100, "interpolation": "not-a-knot cubic spline"},
+                              "mesh_intervals_per_second": mesh_frequency_hz, "interpolation": "not-a-knot cubic spline"},
         "inputs": {k: str(v) for k, v in (sources or {}).items()},
         "software": {"musclemetab": __version__, "python": platform.python_version()},
     }
@@ -165,6 +168,7 @@ def solve_trial(
     sources: dict | None = None,
     check_units: bool = True,
     warm_start: Solution | None = None,
+    mesh_frequency_hz: float = MESH_FREQUENCY_HZ,
 ) -> Solution:
     """Solve one trial with a named workflow (``effort-gen``, ``effort-cal``, ``effort-ten``).
 
@@ -182,16 +186,23 @@ def solve_trial(
     return solve_with_parameters(
         geometry, params, id_time_s, id_moments_Nm, ik_time_s=ik_time_s, options=options,
         workflow_record=record, sources=sources, check_units=check_units, warm_start=warm_start,
+        mesh_frequency_hz=mesh_frequency_hz,
     )
 
 
 def solve_files(
     model_path: str | os.PathLike,
     ik_path: str | os.PathLike,
-    id_path: str | os.PathLike,
+    id_path: str | os.PathLike | None,
     workflow: str = "effort-gen",
     *,
-    dofs: Sequence[str] = DEFAULT_DOFS,
+    dofs: Sequence[str] | None = None,
+    side: str = "r",
+    window: tuple[float, float] | None = None,
+    cycle: str | int | None = None,
+    external_loads: str | os.PathLike | None = None,
+    grf: str | os.PathLike | None = None,
+    mesh_frequency_hz: float = MESH_FREQUENCY_HZ,
     passive=None,
     tendon_stiffness: Mapping[str, float] | None = None,
     tendon_stiffness_file=None,
@@ -200,27 +211,77 @@ def solve_files(
     check_units: bool = True,
     warm_start: Solution | None = None,
 ) -> Solution:
-    """Solve from files: model ``.osim``, IK ``.mot`` and ID ``.sto``.
+    """Solve from files: model ``.osim``, IK ``.mot`` and ID ``.sto`` (or ground forces).
+
+    ``side`` (``"r"``/``"l"``) chooses the leg; ``dofs`` default to the DOFs discovered from
+    the model for that side (:func:`musclemetab.layout.discover_dofs`). The window is the IK
+    file, ``window=(T0, T1)`` or ``cycle="auto"|N`` (:mod:`.window`). With ``id_path=None``
+    and ``external_loads`` (an OpenSim ExternalLoads file), the inverse dynamics is computed
+    by OpenSim over the window (:func:`musclemetab.external_loads.compute_inverse_dynamics`);
+    its path is ``solution.summary["inputs"]["id"]``. The mesh has ``mesh_frequency_hz``
+    intervals per second (the study's 100 by default).
 
     The inputs are checked (columns, units, time ranges) before the geometry is computed.
     """
+    from ..layout import check_dofs_in_model, check_side, discover_dofs, read_layout
+    from .window import frames_in_window, resolve_window
+
+    check_side(side)
+    if not (mesh_frequency_hz > 0 and np.isfinite(mesh_frequency_hz)):
+        raise OptionError(f"--mesh-frequency must be a positive number of intervals per second, not {mesh_frequency_hz!r}")
     # Cheap checks of the options and parameter files first.
     wf = check_workflow_options(workflow, passive, tendon_stiffness, tendon_stiffness_file)
     if passive is not None and not isinstance(passive, PassiveParameters):
         passive = read_passive_parameters(passive)
     if tendon_stiffness_file is not None:
         read_tendon_stiffness_json(tendon_stiffness_file)
+    if id_path is None and external_loads is None:
+        raise OptionError("give the inverse dynamics (--id ID.sto) or the ground forces to compute it "
+                          "(--external-loads GRF.xml)")
     # The model parameters come from the OpenSim worker process: ask now, in a background
     # thread, so that the worker's start-up overlaps with reading the IK/ID files, the
     # geometry and the imports of pandas, SciPy and CasADi.
     params_request = _Background(_read_model_parameters, model_path)
+    layout = read_layout(model_path)
+    loads = None
+    if external_loads is not None:
+        from ..external_loads import read_external_loads
+
+        loads = read_external_loads(external_loads)
+        loads.check_bodies(layout)
+    from ..io import read_storage
+
+    id_columns = None
+    if id_path is not None:
+        id_columns = list(read_storage(id_path).columns)
+        _check_id_coordinates(id_path, id_columns, layout)
+    if dofs:
+        dofs = tuple(dofs)
+        check_dofs_in_model(layout, dofs)
+    else:
+        dofs = tuple(discover_dofs(layout, side, id_columns))
+    trial_window = resolve_window(ik_path, side=side, window=window, cycle=cycle, id_path=id_path,
+                                  external_loads=loads, grf_path=grf, layout=layout)
+    id_record = None
+    if id_path is None:
+        from ..external_loads import ID_COORDINATE_FILTER_HZ, compute_inverse_dynamics
+
+        id_path = compute_inverse_dynamics(model_path, ik_path, loads, trial_window.start_s, trial_window.end_s)
+        id_record = {"computed_by": "OpenSim InverseDynamicsTool (muscles excluded)",
+                     "coordinate_lowpass_hz": ID_COORDINATE_FILTER_HZ, "external_loads": str(loads.path),
+                     "ground_force_data": str(loads.datafile)}
     ik_time, _ = read_kinematics(ik_path, dofs, check_units=check_units)
     id_time, id_moments = read_inverse_dynamics(id_path, dofs)
+    keep = frames_in_window(ik_time, trial_window)
+    ik_time = ik_time[keep]
     check_time_ranges(ik_time, id_time, ik_path, id_path)
     from ..geometry import compute_geometry
 
     t0 = _time.perf_counter()
-    geometry = compute_geometry(model_path, ik_path, dofs=list(dofs), side="r", cache_dir=cache_dir)
+    geometry = compute_geometry(model_path, ik_path, dofs=list(dofs), side=side, cache_dir=cache_dir)
+    if keep.size != len(geometry.time):
+        geometry = _Geometry(np.asarray(geometry.time)[keep], geometry.muscles, geometry.dofs,
+                             np.asarray(geometry.lmt_m)[keep], np.asarray(geometry.moment_arms_m)[keep])
     t_geometry = _time.perf_counter() - t0
     import casadi  # noqa: F401  (imported while the worker answers)
     import scipy.interpolate  # noqa: F401
@@ -233,15 +294,38 @@ def solve_files(
 
         check_moments_per_body_mass(id_moments, dofs, read_model(model_path).body_mass_kg, id_path, model_path)
     sources = {"model": Path(model_path), "ik": Path(ik_path), "id": Path(id_path)}
+    if loads is not None:
+        sources["external_loads"] = loads.path
     solution = solve_trial(
         geometry, model_parameters, id_time, id_moments, wf,
         ik_time_s=ik_time, passive=passive, tendon_stiffness=tendon_stiffness,
         tendon_stiffness_file=tendon_stiffness_file, options=options, sources=sources,
-        check_units=check_units, warm_start=warm_start,
+        check_units=check_units, warm_start=warm_start, mesh_frequency_hz=mesh_frequency_hz,
     )
     solution.summary["geometry_time_s"] = t_geometry
+    solution.summary["side"] = side
+    if trial_window.source != "inverse-kinematics file":
+        solution.summary["window"] = trial_window.record()
+    if id_record is not None:
+        solution.summary["inverse_dynamics"] = id_record
     return solution
 
+
+def _check_id_coordinates(id_path, columns, layout) -> None:
+    """Raise :class:`UnknownCoordinateError` for an ID column of a coordinate the model lacks."""
+    from ..errors import UnknownCoordinateError
+
+    coords = {c["name"] for c in layout.coordinates}
+    alien = []
+    for c in columns:
+        for suffix in ("_moment", "_force"):
+            if c.endswith(suffix) and c[: -len(suffix)] not in coords:
+                alien.append(c)
+    if alien:
+        raise UnknownCoordinateError(
+            f"{id_path}: column {', '.join(alien[:5])}{' ...' if len(alien) > 5 else ''} is for a coordinate the "
+            f"model {layout.path} lacks; the inverse dynamics must come from this model"
+        )
 
 
 def _read_model_parameters(model_path):

@@ -41,7 +41,6 @@ import io
 import math
 import os
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Mapping, Sequence
 

@@ -97,11 +97,16 @@ def default_muscles(available: Sequence[str], side: str = "r") -> list[str]:
     return report_muscles(on_side or list(available))
 
 
+def _study_model_default_muscles() -> tuple[str, ...]:
+    from ..properties import alias_table, split_side
+
+    a = alias_table()
+    names = [f"{n}_r" for n, f in zip(a["model_name"], a["families"]) if "rajagopal" in f]
+    return tuple(split_side(m)[0] for m in default_muscles(names))
+
+
 #: Side-free names of the figure's muscles in the study's model (``default_muscles`` of it).
-DEFAULT_MUSCLES = (
-    "soleus", "gasmed", "gaslat", "tibant", "vasmed", "vaslat",
-    "recfem", "bflh", "semiten", "glmax2", "glmed2", "iliacus",
-)
+DEFAULT_MUSCLES = _study_model_default_muscles()
 
 #: Normalised fibre lengths of the plateau of the active force-length curve (shaded).
 PLATEAU_BAND = (0.75, 1.05)

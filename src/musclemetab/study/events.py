@@ -9,10 +9,12 @@ Order of preference for the cycle (initial contact, toe-off, next initial contac
 3. otherwise: the cycle is the IK window less 0.05 s of padding at both ends (the
    example data carry five extra frames at 100 Hz at each end) and toe-off is found
    from the ankle moment of inverse dynamics (see
-   :func:`musclemetab.analysis.events.cycle_from_inverse_dynamics`).
+   :func:`musclemetab.analysis.events.cycle_from_inverse_dynamics`), the column
+   ``ankle_angle_<side>_moment`` of the subject's side (the naming of the Rajagopal and
+   gait2392 families; other models give the events or ground forces).
 
-Speed: the study file's ``speed_m_per_s``, else the pelvis displacement over the cycle
-(:func:`musclemetab.analysis.speed.walking_speed_from_ik`).
+Speed: the study file's ``speed_m_per_s``, else the displacement of the model's forward
+translation coordinates over the cycle (:func:`musclemetab.analysis.speed.walking_speed_from_ik`).
 """
 
 from __future__ import annotations
@@ -21,10 +23,14 @@ from ..analysis.events import GaitCycle, cycle_from_grf, cycle_from_id_file, rea
 from ..analysis.speed import walking_speed_from_ik
 from .spec import Trial
 
-__all__ = ["trial_cycle", "trial_speed", "PADDING_S", "ANKLE_MOMENT_COLUMN"]
+__all__ = ["trial_cycle", "trial_speed", "PADDING_S", "ankle_moment_column"]
 
 PADDING_S = 0.05
-ANKLE_MOMENT_COLUMN = "ankle_angle_r_moment"
+
+
+def ankle_moment_column(side: str = "r") -> str:
+    """The ankle moment column of the Rajagopal and gait2392 naming for one side."""
+    return f"ankle_angle_{side}_moment"
 
 
 def _ik_window(trial: Trial) -> tuple[float, float]:
@@ -34,26 +40,26 @@ def _ik_window(trial: Trial) -> tuple[float, float]:
     return float(t[0]), float(t[-1])
 
 
-def trial_cycle(trial: Trial) -> GaitCycle:
+def trial_cycle(trial: Trial, side: str = "r") -> GaitCycle:
     """The trial's gait cycle (see the module docstring for the order of preference)."""
     given = (trial.start_s, trial.toe_off_s, trial.end_s)
     if all(v is not None for v in given):
         return GaitCycle(*given)
     if trial.grf is not None:
-        force = read_grf(trial.grf, trial.grf_column)
+        force = read_grf(trial.grf, trial.grf_column, side=side)
         t0, tf = _ik_window(trial)  # the cycle that holds the middle of the simulated window
         found = cycle_from_grf(force.index.to_numpy(float), force.to_numpy(float),
                                threshold_N=trial.grf_threshold_N, at_time_s=trial.start_s if trial.start_s is not None else 0.5 * (t0 + tf))
     else:
-        found = cycle_from_id_file(trial.id, ANKLE_MOMENT_COLUMN, window_s=_ik_window(trial), padding_s=PADDING_S)
+        found = cycle_from_id_file(trial.id, ankle_moment_column(side), window_s=_ik_window(trial), padding_s=PADDING_S)
     start, toe_off, end = (g if g is not None else f for g, f in
                            zip(given, (found.start_s, found.toe_off_s, found.end_s)))
     return GaitCycle(start, toe_off, end)
 
 
-def trial_speed(trial: Trial) -> float:
-    """Walking speed (m/s) of the trial."""
+def trial_speed(trial: Trial, model=None) -> float:
+    """Walking speed (m/s) of the trial; ``model`` gives the forward coordinates."""
     if trial.speed_m_per_s is not None:
         return trial.speed_m_per_s
     start, end = trial.start_s, trial.end_s
-    return walking_speed_from_ik(trial.ik, start_s=start, end_s=end, padding_s=PADDING_S)
+    return walking_speed_from_ik(trial.ik, start_s=start, end_s=end, padding_s=PADDING_S, model=model)

@@ -85,7 +85,7 @@ class Trial:
 
     name: str
     ik: Path
-    id: Path
+    id: Path | None
     emg: Path | None = None
     grf: Path | None = None
     grf_column: str | None = None
@@ -97,9 +97,19 @@ class Trial:
     start_s: float | None = None
     toe_off_s: float | None = None
     end_s: float | None = None
+    #: OpenSim ExternalLoads file: ground forces for ``cycle`` and, without ``id``, for inverse dynamics
+    external_loads: Path | None = None
+    #: ``"auto"`` or N: solve that gait cycle of the subject's side (see ``musclemetab.redundancy.window``)
+    cycle: str | int | None = None
 
     def files(self) -> dict[str, Path]:
-        return {k: v for k, v in (("ik", self.ik), ("id", self.id), ("emg", self.emg), ("grf", self.grf)) if v}
+        out = {k: v for k, v in (("ik", self.ik), ("id", self.id), ("emg", self.emg), ("grf", self.grf),
+                                 ("external_loads", self.external_loads)) if v}
+        if self.external_loads is not None:
+            from ..external_loads import read_external_loads
+
+            out["ground_forces"] = read_external_loads(self.external_loads).datafile
+        return out
 
 
 @dataclass(frozen=True)
@@ -115,6 +125,8 @@ class Subject:
     tendon_stiffness: str | Path | Mapping[str, float] | None = None
     emg_mapping: str = "default"
     muscle_properties: Path | None = None
+    side: str = "r"
+    dofs: tuple[str, ...] | None = None
 
     def trial(self, name: str) -> Trial:
         for t in self.trials:
@@ -150,11 +162,11 @@ class Study:
 # ---------------------------------------------------------------------------------------
 _STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "subjects"}
 _SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials",
-                 "muscle_properties"}
+                 "muscle_properties", "side", "dofs"}
 _TRIAL_KEYS = {
     "name", "ik", "id", "emg", "grf", "grf_column", "grf_threshold_N", "speed_m_per_s",
     "measured_W_per_kg", "vo2_mL_per_s", "vco2_mL_per_s", "vo2_mL_per_min", "vco2_mL_per_min",
-    "start_s", "toe_off_s", "end_s",
+    "start_s", "toe_off_s", "end_s", "external_loads", "cycle",
 }
 
 
@@ -286,6 +298,14 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
     mapping = str(data.get("emg_mapping", "default"))
     if mapping not in ("default", "authors"):
         raise OptionError(f"{here}: 'emg_mapping' must be default or authors, not {mapping!r}")
+    side = data.get("side", "r")
+    if side not in ("r", "l"):
+        raise OptionError(f"{here}: 'side' must be \"r\" or \"l\", not {side!r}")
+    dofs = data.get("dofs")
+    if dofs is not None:
+        if not isinstance(dofs, list) or not dofs or not all(isinstance(d, str) and d for d in dofs):
+            raise OptionError(f"{here}: 'dofs' must be a list of coordinate names, e.g. [\"knee_angle_l\"]")
+        dofs = tuple(dofs)
     trials_data = data.get("trials")
     if not isinstance(trials_data, list) or not trials_data:
         raise OptionError(f"{here}: no trials; add [[subjects.trials]] tables with name, ik and id")
@@ -305,7 +325,8 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
 
         read_muscle_properties(muscle_properties)  # reject a bad file before anything runs
     return Subject(name=name, model=model, body_mass_kg=mass, height_m=height, trials=trials,
-                   passive=passive, tendon_stiffness=kt, emg_mapping=mapping, muscle_properties=muscle_properties)
+                   passive=passive, tendon_stiffness=kt, emg_mapping=mapping, muscle_properties=muscle_properties,
+                   side=side, dofs=dofs)
 
 
 def _trial(data, base: Path, where: str) -> Trial:
@@ -329,7 +350,7 @@ def _trial(data, base: Path, where: str) -> Trial:
     return Trial(
         name=name,
         ik=_path(data.get("ik"), base, here, "ik"),
-        id=_path(data.get("id"), base, here, "id"),
+        id=_path(data.get("id"), base, here, "id", required=data.get("external_loads") is None),
         emg=_path(data.get("emg"), base, here, "emg", required=False),
         grf=_path(data.get("grf"), base, here, "grf", required=False),
         grf_column=data.get("grf_column"),
@@ -341,4 +362,17 @@ def _trial(data, base: Path, where: str) -> Trial:
         start_s=num["start_s"],
         toe_off_s=num["toe_off_s"],
         end_s=num["end_s"],
+        external_loads=_path(data.get("external_loads"), base, here, "external_loads", required=False),
+        cycle=_cycle_key(data.get("cycle"), here),
     )
+
+
+def _cycle_key(value, where: str):
+    if value is None:
+        return None
+    from ..redundancy.window import parse_cycle
+
+    try:
+        return parse_cycle(value)
+    except OptionError as exc:
+        raise OptionError(f"{where}: 'cycle': {exc}") from None

@@ -36,11 +36,12 @@ import tempfile
 import threading
 import time
 import traceback
+import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from .. import __version__
-from ..errors import MusclemetabError
+from ..errors import DataMismatchError, MusclemetabError
 from ..io.atomic import file_sha256
 from .spec import EMG_TEN, Study, Subject, Trial
 
@@ -126,8 +127,10 @@ def _file_hash(path: Path | None) -> str | None:
 def _trial_record(trial: Trial) -> dict:
     rec = {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(trial).items()}
     rec["files"] = {k: _file_hash(p) for k, p in trial.files().items()}
-    for k in ("ik", "id", "emg", "grf"):
+    for k in ("ik", "id", "emg", "grf", "external_loads"):
         rec.pop(k, None)  # paths do not matter, contents do
+    if trial.cycle is None:
+        rec.pop("cycle", None)  # absent key: earlier studies keep their unit keys
     return rec
 
 
@@ -145,6 +148,9 @@ def _subject_record(subject: Subject, workflow: str) -> dict:
     }
     if subject.muscle_properties is not None:  # absent key: earlier studies keep their unit keys
         rec["muscle_properties"] = _file_hash(subject.muscle_properties)
+    if subject.side != "r" or subject.dofs is not None:  # absent keys: earlier studies keep their unit keys
+        rec["side"] = subject.side
+        rec["dofs"] = list(subject.dofs) if subject.dofs is not None else None
     return rec
 
 
@@ -257,7 +263,11 @@ _INTERRUPTED = threading.Event()
 
 
 def _on_sigint(signum, frame):
-    """SIGINT while a unit runs: remember it, then interrupt as Python does by default."""
+    """SIGINT while a unit runs: remember it, then interrupt as Python does by default.
+
+    A second SIGINT (the terminal's and the runner's) does not interrupt the clean-up."""
+    if _INTERRUPTED.is_set():
+        return
     _INTERRUPTED.set()
     raise KeyboardInterrupt
 
@@ -384,10 +394,13 @@ def _copy_solution(source: Path, target: Path) -> None:
         shutil.copyfile(source / name, target / name)
 
 
-def _cycle_source(trial: Trial) -> str:
-    """Where the trial's gait events come from (:func:`musclemetab.study.events.trial_cycle`)."""
+def _cycle_source(trial: Trial, recorded: dict | None = None) -> str:
+    """Where the trial's gait events come from (:func:`musclemetab.study.events.trial_cycle`,
+    or ``recorded``: the gait cycle the solve found, from its summary's window)."""
     if all(v is not None for v in (trial.start_s, trial.toe_off_s, trial.end_s)):
         return "study file"
+    if recorded and trial.start_s is None and trial.end_s is None:
+        return f"ground reaction forces ({recorded.get('source') or 'found by the solve'})"
     if trial.grf is not None:
         return "ground reaction forces"
     return "estimated from the IK window and the ankle moment (no ground reaction forces)"
@@ -425,8 +438,11 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
                 kwargs["tendon_stiffness_file"] = kt
             elif isinstance(kt, (dict, str)):  # a table, or "example"
                 kwargs["tendon_stiffness"] = kt
-        sol = solve_files(subject.model, trial.ik, trial.id, unit.workflow, **kwargs)
-        sol.write(tmp)
+        sol = solve_files(subject.model, trial.ik, trial.id, unit.workflow, side=subject.side, dofs=subject.dofs,
+                          external_loads=trial.external_loads, cycle=trial.cycle, **kwargs)
+        from ..redundancy.cli import write_solution_folder
+
+        write_solution_folder(sol, tmp)
         solve_summary = sol.summary
         times["solve_s"] = sol.summary.get("solve_time_s")
         if not sol.success:
@@ -434,8 +450,20 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
     times["solution_s"] = time.perf_counter() - t0
 
     t1 = time.perf_counter()
-    speed = trial_speed(trial)
-    cycle = trial_cycle(trial)
+    try:
+        speed = trial_speed(trial, subject.model)
+    except DataMismatchError as exc:  # e.g. a treadmill trial without speed_m_per_s: no cost of transport
+        warnings.warn(f"{subject.name}/{trial.name}: no walking speed ({exc})", stacklevel=2)
+        speed = None
+    solved = Solution.load(tmp, require_success=False)
+    recorded = (solved.summary.get("window") or {}).get("gait_cycle")
+    if recorded and trial.start_s is None and trial.end_s is None:  # the cycle the solve found
+        from ..analysis.events import GaitCycle
+
+        toe_off = trial.toe_off_s if trial.toe_off_s is not None else recorded["toe_off_s"]
+        cycle = GaitCycle(recorded["start_s"], toe_off, recorded["end_s"])
+    else:
+        cycle = trial_cycle(trial, subject.side)
     result = metabolics_from_solution(
         tmp, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
         speed_m_per_s=speed, muscle_properties=subject.muscle_properties,
@@ -444,7 +472,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
     times["metabolics_s"] = time.perf_counter() - t1
 
     t2 = time.perf_counter()
-    geometry = compute_geometry(subject.model, trial.ik)
+    geometry = compute_geometry(subject.model, trial.ik, dofs=list(solved.dofs))
     from ..analysis.unit import analyse_metabolics, filtered_moment_arms
 
     tg, r = filtered_moment_arms(geometry)
@@ -468,9 +496,9 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         "speed_m_per_s": speed,
         "measured_W_per_kg": measured,
         "cycle": {"start_s": cycle.start_s, "toe_off_s": cycle.toe_off_s, "end_s": cycle.end_s},
-        "cycle_source": _cycle_source(trial),
+        "cycle_source": _cycle_source(trial, recorded),
         "speed_source": "study file" if trial.speed_m_per_s is not None else (
-            "estimated from the pelvis displacement over the cycle (IK)"),
+            "not available" if speed is None else "estimated from the pelvis displacement over the cycle (IK)"),
         "toe_off_pct": float(100.0 * (cycle.toe_off_s - cycle.start_s) / (cycle.end_s - cycle.start_s)),
         "n_nodes": int(np.asarray(result.time_s).size),
         "large_reserve": bool(solve_summary.get("large_reserve", False)),

@@ -1,0 +1,192 @@
+"""Where things are in a model: the legs, their degrees of freedom, the forward coordinate.
+
+Nothing here depends on names: sides, DOFs and the direction of travel are read from the
+model's joint tree and its default pose (through OpenSim in the worker process,
+:func:`musclemetab.opensim_bridge.model_ops.model_layout`).
+
+Rules (documented in ``docs/trials.md``):
+
+* **Side of a body.** OpenSim models use a ground frame with ``x`` forward, ``y`` up and
+  ``z`` to the right. A body belongs to the right (left) side when its origin, in the default
+  pose, lies more than :data:`SIDE_OFFSET_M` to the right (left) of the origin of the body
+  the root joint moves (the pelvis). ``side`` is ``"r"`` or ``"l"``.
+* **DOFs of a side.** The unlocked, independent (not coupler-driven) coordinates of the
+  joints whose child body is on that side, ordered from the most distal joint to the most
+  proximal, and within a joint in the joint's own order (for the lower-limb models this is
+  ankle, knee, then the hip's flexion, adduction and rotation, the study's order). Locked
+  arms and coupled coordinates (the Rajagopal knee's ``knee_angle_r_beta``) drop out.
+  :func:`discover_dofs` then keeps those the inverse dynamics holds a ``<dof>_moment``
+  column for; the muscle selection (``|moment arm| > 1e-4 m``) drops DOFs no muscle spans.
+* **Forward coordinate.** The coordinates of the joint(s) attached to the ground whose unit
+  increase translates the root body along a horizontal axis (perpendicular to gravity);
+  speed is the net horizontal displacement they describe over the gait cycle
+  (:mod:`musclemetab.analysis.speed`).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from .errors import DataMismatchError, ModelError, OptionError
+
+__all__ = [
+    "SIDE_OFFSET_M",
+    "ModelLayout",
+    "read_layout",
+    "check_side",
+    "side_dofs",
+    "discover_dofs",
+]
+
+#: A body is on a side when its origin lies this far (m) to that side of the root body's origin.
+SIDE_OFFSET_M = 0.02
+#: The ground's lateral axis in OpenSim models (z, positive to the right).
+LATERAL_AXIS = 2
+SIDE_NAMES = {"r": "right", "l": "left"}
+
+
+def check_side(side: str, *, allow_both: bool = False) -> str:
+    """Return ``side`` if it is ``r``, ``l`` (or ``both`` when allowed), else raise :class:`OptionError`."""
+    ok = ("r", "l", "both") if allow_both else ("r", "l")
+    if side not in ok:
+        raise OptionError(f"side must be one of {', '.join(ok)}, not {side!r}")
+    return side
+
+
+@dataclass(frozen=True)
+class ModelLayout:
+    """The joint tree of a model in its default pose (see :func:`read_layout`)."""
+
+    path: str
+    gravity: tuple[float, float, float]
+    ground: str
+    bodies: tuple[str, ...]
+    joints: tuple[dict, ...]
+    coordinates: tuple[dict, ...]
+    root_translations: dict
+
+    def _root_origin(self) -> np.ndarray:
+        roots = [j for j in self.joints if j["parent"] == self.ground]
+        if not roots:
+            raise ModelError(f"{self.path}: no joint attaches a body to the ground")
+        return np.asarray(roots[0]["child_origin_m"], dtype=float)
+
+    def body_side(self, body: str) -> str | None:
+        """``"r"``, ``"l"`` or ``None`` (on the mid-line, or the ground) for a body name."""
+        if body == self.ground:
+            return None
+        if body not in self.bodies:
+            raise ModelError(
+                f"{self.path}: the model has no body '{body}'; bodies: {', '.join(self.bodies)}"
+            )
+        child = {j["child"]: j for j in self.joints}
+        if body not in child:
+            return None
+        offset = float(child[body]["child_origin_m"][LATERAL_AXIS] - self._root_origin()[LATERAL_AXIS])
+        if offset > SIDE_OFFSET_M:
+            return "r"
+        if offset < -SIDE_OFFSET_M:
+            return "l"
+        return None
+
+    def forward_coordinates(self) -> tuple[str, ...]:
+        """Root coordinates that translate the root body horizontally (see the module docstring)."""
+        g = np.asarray(self.gravity, dtype=float)
+        up = -g / np.linalg.norm(g) if np.linalg.norm(g) > 0 else np.array([0.0, 1.0, 0.0])
+        out = []
+        for name, d in self.root_translations.items():
+            d = np.asarray(d, dtype=float)
+            n = float(np.linalg.norm(d))
+            if n > 0.5 and abs(float(d @ up)) < 0.1 * n:
+                out.append(name)
+        if not out:
+            raise ModelError(
+                f"{self.path}: the joint attached to the ground has no horizontal translation, so the walking "
+                "speed cannot be read from the kinematics; give the trial's speed"
+            )
+        return tuple(out)
+
+
+def read_layout(model_path: str | os.PathLike) -> ModelLayout:
+    """The model's :class:`ModelLayout`, computed by OpenSim in the worker process."""
+    from .opensim_bridge import call
+
+    path = Path(model_path)
+    if not path.is_file():
+        raise ModelError(f"{path}: no such model file; check the path")
+    raw = call("model_ops:model_layout", str(path))
+    return ModelLayout(
+        path=str(path),
+        gravity=tuple(raw["gravity"]),
+        ground=raw["ground"],
+        bodies=tuple(raw["bodies"]),
+        joints=tuple(raw["joints"]),
+        coordinates=tuple(raw["coordinates"]),
+        root_translations=dict(raw["root_translations"]),
+    )
+
+
+def side_dofs(layout: ModelLayout, side: str) -> list[str]:
+    """Unlocked independent coordinates of the joints on ``side``, distal to proximal.
+
+    Raises :class:`DataMismatchError` when the model has no such coordinate (e.g. no leg on
+    that side).
+    """
+    check_side(side)
+    coords = {c["name"]: c for c in layout.coordinates}
+    on_side = [j for j in layout.joints if j["child"] in layout.bodies and layout.body_side(j["child"]) == side]
+    # stable sort: deepest joint first, model order among equals
+    on_side = sorted(on_side, key=lambda j: -j["depth"])
+    dofs = [
+        n for j in on_side for n in j["coordinates"]
+        if n in coords and not coords[n]["locked"] and not coords[n]["dependent"]
+    ]
+    if not dofs:
+        raise DataMismatchError(
+            f"{layout.path}: the model has no unlocked joint on the {SIDE_NAMES[side]} side (side '{side}'); "
+            "choose the other side or give --dofs"
+        )
+    return dofs
+
+
+def discover_dofs(layout: ModelLayout, side: str, id_columns: Iterable[str] | None = None) -> list[str]:
+    """The side's DOFs (:func:`side_dofs`) that the inverse dynamics holds ``<dof>_moment`` for.
+
+    ``id_columns=None`` keeps them all (inverse dynamics computed by OpenSim holds every
+    coordinate).
+    """
+    dofs = side_dofs(layout, side)
+    if id_columns is None:
+        return dofs
+    cols = set(id_columns)
+    kept = [d for d in dofs if f"{d}_moment" in cols]
+    if not kept:
+        raise DataMismatchError(
+            f"the inverse dynamics holds no moment for the {SIDE_NAMES[side]} side's DOFs "
+            f"({', '.join(f'{d}_moment' for d in dofs)}); check the side and the inverse-dynamics file"
+        )
+    return kept
+
+
+def check_dofs_in_model(layout: ModelLayout, dofs: Sequence[str], where: str = "--dofs") -> None:
+    """Raise :class:`UnknownCoordinateError` naming any DOF the model lacks or cannot move."""
+    from .errors import UnknownCoordinateError
+
+    coords = {c["name"]: c for c in layout.coordinates}
+    missing = [d for d in dofs if d not in coords]
+    if missing:
+        raise UnknownCoordinateError(
+            f"{where}: the model {layout.path} has no coordinate {', '.join(missing)}; its unlocked coordinates: "
+            f"{', '.join(n for n, c in coords.items() if not c['locked'])}"
+        )
+    fixed = [d for d in dofs if coords[d]["locked"] or coords[d]["dependent"]]
+    if fixed:
+        raise UnknownCoordinateError(
+            f"{where}: coordinate {', '.join(fixed)} of {layout.path} is locked or coupled and cannot be a "
+            "degree of freedom; drop it"
+        )

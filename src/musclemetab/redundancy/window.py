@@ -1,0 +1,206 @@
+"""The time window of a solve: the IK file, an explicit ``T0:T1``, or a gait cycle from ground forces.
+
+* No window and no cycle: the whole IK file (the study's rule, ``muscle_redundancy.md`` §3.1).
+* ``window=(T0, T1)``: that window; it must lie inside every input (IK, ID, ground forces),
+  otherwise :class:`DataMismatchError` names the file that falls short and by how much.
+* ``cycle="auto"`` or ``cycle=N``: the first (or the N-th, from 1) complete gait cycle of the
+  solved leg, heel strike to heel strike, from the vertical ground force of that leg
+  (:func:`musclemetab.external_loads.vertical_force` with an ExternalLoads file; or a
+  ground-force file whose column is chosen by :func:`musclemetab.analysis.events.read_grf`),
+  events by :func:`musclemetab.analysis.events.gait_events_from_grf` (20 N threshold). The
+  window is the cycle plus the study's padding (:data:`PADDING_S` = 5 frames at 100 Hz at each
+  end) so that the free initial and final states do not fall inside the cycle. Where the data
+  end before the padding does, the padding is clipped at the edge of the data, a warning is
+  issued and recorded (``TrialWindow.warnings``, written to ``summary.json``); only a cycle
+  that is itself not inside every input is refused.
+
+The window is then snapped outwards to IK frames (never beyond the data).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import warnings as _warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DataMismatchError, OptionError, WindowWarning
+
+__all__ = ["PADDING_S", "TrialWindow", "parse_window", "parse_cycle", "resolve_window", "frames_in_window"]
+
+#: The study's padding of a gait cycle at each end (5 frames at 100 Hz), s.
+PADDING_S = 0.05
+_TOL = 1e-6
+
+
+@dataclass(frozen=True)
+class TrialWindow:
+    """The solved window (s), with the gait cycle it pads when it came from one."""
+
+    start_s: float
+    end_s: float
+    source: str
+    cycle: dict | None = None
+    padding_s: tuple[float, float] | None = None
+    warnings: tuple[str, ...] = field(default_factory=tuple)
+
+    def record(self) -> dict:
+        """JSON-ready description for ``summary.json``."""
+        out = {"start_s": self.start_s, "end_s": self.end_s, "source": self.source}
+        if self.cycle is not None:
+            out["gait_cycle"] = dict(self.cycle)
+        if self.padding_s is not None:
+            out["padding_s"] = list(self.padding_s)
+        out["warnings"] = list(self.warnings)
+        return out
+
+
+def parse_window(text: str) -> tuple[float, float]:
+    """``"T0:T1"`` (seconds) -> ``(T0, T1)``; :class:`OptionError` otherwise."""
+    try:
+        a, b = str(text).split(":")
+        t0, t1 = float(a), float(b)
+    except ValueError:
+        raise OptionError(f"--window must be T0:T1 in seconds, e.g. 0.6:1.9, not {text!r}") from None
+    if not (math.isfinite(t0) and math.isfinite(t1) and t0 < t1):
+        raise OptionError(f"--window {text}: T0 must be finite and before T1")
+    return t0, t1
+
+
+def parse_cycle(text) -> str | int:
+    """``"auto"`` or a cycle number from 1; :class:`OptionError` otherwise."""
+    if text is None or text == "auto":
+        return text
+    try:
+        n = int(text)
+    except (TypeError, ValueError):
+        raise OptionError(f"--cycle must be 'auto' or a cycle number (1, 2, ...), not {text!r}") from None
+    if n < 1:
+        raise OptionError(f"--cycle counts from 1, not {n}")
+    return n
+
+
+def _extent(path) -> tuple[float, float]:
+    from ..io import read_storage
+
+    t = read_storage(path).index
+    return float(t[0]), float(t[-1])
+
+
+def resolve_window(
+    ik_path: str | os.PathLike,
+    *,
+    side: str = "r",
+    window: tuple[float, float] | None = None,
+    cycle: str | int | None = None,
+    id_path: str | os.PathLike | None = None,
+    external_loads=None,
+    grf_path: str | os.PathLike | None = None,
+    layout=None,
+    padding_s: float = PADDING_S,
+) -> TrialWindow:
+    """The solve window for one leg (see the module docstring)."""
+    from ..external_loads import check_inside
+    from ..io import read_storage
+
+    if window is not None and cycle is not None:
+        raise OptionError("give either --window or --cycle, not both")
+    ik_t = read_storage(ik_path).index.to_numpy(dtype=float)
+    inputs = [(Path(ik_path), "inverse kinematics", (float(ik_t[0]), float(ik_t[-1])))]
+    if id_path is not None:
+        inputs.append((Path(id_path), "inverse dynamics", _extent(id_path)))
+    if external_loads is not None:
+        inputs.append((external_loads.datafile, "ground forces", _extent(external_loads.datafile)))
+    elif grf_path is not None:
+        inputs.append((Path(grf_path), "ground forces", _extent(grf_path)))
+    lo = max(e[0] for _, _, e in inputs)
+    hi = min(e[1] for _, _, e in inputs)
+
+    cycle_rec, pads, notes = None, None, []
+    if cycle is None:
+        if window is None:
+            t0, t1 = float(ik_t[0]), float(ik_t[-1])
+            source = "inverse-kinematics file"
+        else:
+            t0, t1 = float(window[0]), float(window[1])
+            source = "--window"
+        for path, what, (a, b) in inputs:
+            check_inside((t0, t1), a, b, path, what)
+    else:
+        gc, where = _cycle(side, cycle, external_loads, grf_path, layout)
+        for path, what, (a, b) in inputs:
+            check_inside((gc.start_s, gc.end_s), a, b, path, f"{what} (needed for the gait cycle)")
+        t0, t1 = gc.start_s - padding_s, gc.end_s + padding_s
+        if t0 < lo - _TOL or t1 > hi + _TOL:
+            edge_file = [p for p, _, (a, b) in inputs if (t0 < a - _TOL) or (t1 > b + _TOL)]
+            clipped = (max(t0, lo), min(t1, hi))
+            msg = (
+                f"the padding of the gait cycle {gc.start_s:.3f}-{gc.end_s:.3f} s ({padding_s:g} s at each end) "
+                f"runs past the data of {', '.join(map(str, edge_file))}; the window is clipped to "
+                f"{clipped[0]:.3f}-{clipped[1]:.3f} s"
+            )
+            notes.append(msg)
+            _warnings.warn(msg, WindowWarning, stacklevel=2)
+            t0, t1 = clipped
+        cycle_rec = dict(start_s=gc.start_s, toe_off_s=gc.toe_off_s, end_s=gc.end_s, side=side,
+                         number=cycle, source=where)
+        source = f"gait cycle {cycle} of the {'right' if side == 'r' else 'left'} leg"
+    # snap outwards to IK frames, never past the data
+    ok = (ik_t >= lo - _TOL) & (ik_t <= hi + _TOL)
+    before = np.flatnonzero(ok & (ik_t <= t0 + _TOL))
+    after = np.flatnonzero(ok & (ik_t >= t1 - _TOL))
+    i0 = int(before[-1]) if before.size else int(np.flatnonzero(ok)[0])
+    i1 = int(after[0]) if after.size else int(np.flatnonzero(ok)[-1])
+    start, end = float(ik_t[i0]), float(ik_t[i1])
+    if cycle_rec is not None:
+        pads = (cycle_rec["start_s"] - start, end - cycle_rec["end_s"])
+    return TrialWindow(start, end, source, cycle_rec, pads, tuple(notes))
+
+
+def _cycle(side, cycle, external_loads, grf_path, layout):
+    from ..analysis.events import GaitCycle, gait_events_from_grf, read_grf
+
+    if external_loads is not None:
+        from ..external_loads import vertical_force
+
+        t, f = vertical_force(external_loads, layout, side)
+        where = str(external_loads.path)
+    elif grf_path is not None:
+        s = read_grf(grf_path, side=side)
+        t, f = s.index.to_numpy(dtype=float), s.to_numpy(dtype=float)
+        where = f"{grf_path} column {s.name}"
+    else:
+        raise OptionError("--cycle needs ground forces: give --external-loads GRF.xml (or --grf GRF.mot)")
+    ev = gait_events_from_grf(t, f)
+    hs, to = ev.heel_strikes_s, ev.toe_offs_s
+    cycles = []
+    for a, b in zip(hs[:-1], hs[1:]):
+        between = to[(to > a) & (to < b)]
+        if between.size:
+            cycles.append(GaitCycle(float(a), float(between[0]), float(b)))
+    n = 1 if cycle == "auto" else int(cycle)
+    if len(cycles) < n:
+        found = (
+            f"heel strikes at {', '.join(f'{x:.3f}' for x in hs) or 'none'} s, toe-offs at "
+            f"{', '.join(f'{x:.3f}' for x in to) or 'none'} s"
+        )
+        raise DataMismatchError(
+            f"{where}: the {'right' if side == 'r' else 'left'} leg's ground force gives "
+            f"{len(cycles)} complete gait cycle{'s' if len(cycles) != 1 else ''} ({found}, threshold "
+            f"{ev.threshold_N:g} N), so cycle {cycle} does not exist; give --window T0:T1"
+        )
+    return cycles[n - 1], where
+
+
+def frames_in_window(time_s: np.ndarray, window: TrialWindow) -> np.ndarray:
+    """Indices of the frames inside the window (inclusive, 1 microsecond of slack)."""
+    t = np.asarray(time_s, dtype=float)
+    idx = np.flatnonzero((t >= window.start_s - _TOL) & (t <= window.end_s + _TOL))
+    if idx.size < 2:
+        raise DataMismatchError(
+            f"the window {window.start_s:.3f}-{window.end_s:.3f} s holds fewer than two frames; widen it"
+        )
+    return idx

@@ -1,0 +1,230 @@
+"""A second subject as a user has it: OpenSim's gait2392 walking example (both legs, 60 Hz, ground forces).
+
+Oracles: the gait events of the data set's README (vertical force, 20 N), OpenSim's own stored
+inverse dynamics (over the time it covers), the model's joint tree as OpenSim reports it, and the
+solver's own constraint residual. One left-leg solve per session (46 muscles, 7 DOFs).
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from musclemetab.errors import DataMismatchError, InputFileError, ModelError, UnknownCoordinateError
+
+
+@pytest.fixture(scope="module")
+def layout(gait2392):
+    from musclemetab.layout import read_layout
+
+    return read_layout(gait2392.model)
+
+
+def test_sides_and_dofs_from_the_joint_tree(layout, example):
+    from musclemetab.layout import discover_dofs, read_layout, side_dofs
+    from musclemetab.redundancy.inputs import DEFAULT_DOFS
+
+    # gait2392: subtalar and mtp joints are unlocked; distal to proximal
+    stems = ["mtp_angle", "subtalar_angle", "ankle_angle", "knee_angle", "hip_flexion", "hip_adduction", "hip_rotation"]
+    for side in "rl":
+        assert side_dofs(layout, side) == [f"{s}_{side}" for s in stems]
+    assert layout.body_side("calcn_l") == "l" and layout.body_side("torso") is None
+    assert layout.forward_coordinates() == ("pelvis_tx", "pelvis_tz")
+    # the study's model: locked subtalar/mtp and the coupled knee_angle_r_beta drop out, giving the
+    # study's five DOFs in the study's order
+    ex = read_layout(example.model)
+    from musclemetab.io import read_storage
+
+    cols = read_storage(example.id["normal"]).columns
+    assert tuple(discover_dofs(ex, "r", cols)) == DEFAULT_DOFS
+
+
+def test_gait_events_of_either_leg_from_the_external_loads(gait2392, layout):
+    from musclemetab.analysis.events import gait_events_from_grf
+    from musclemetab.external_loads import read_external_loads, vertical_force
+
+    loads = read_external_loads(gait2392.external_loads)
+    ev = {s: gait_events_from_grf(*vertical_force(loads, layout, s)) for s in "rl"}
+    # README: right HS 0.618, TO 1.410, HS 1.853; left TO 0.788, HS 1.247, TO 2.018, HS 2.460
+    np.testing.assert_allclose(ev["r"].heel_strikes_s, [0.618, 1.853], atol=3e-3)
+    np.testing.assert_allclose(ev["r"].toe_offs_s[-1], 1.410, atol=3e-3)
+    np.testing.assert_allclose(ev["l"].heel_strikes_s, [1.247, 2.460], atol=3e-3)
+    np.testing.assert_allclose(ev["l"].toe_offs_s, [0.788, 2.018], atol=3e-3)
+
+
+def test_inverse_dynamics_computed_by_opensim_matches_the_stored_file(gait2392):
+    """Computed ID against OpenSim's stored file over their common time (0.5-1.6 s).
+
+    Tolerance: 0.1 N m plus 2 % of each moment's range. The stored file was written by an
+    older OpenSim (setup file version 20302) from the same model, IK, forces and 6 Hz filter;
+    knee and ankle agree to 0.05 N m, the hips to 1.5 N m (1.7 % of range), a difference that
+    grows from zero at the first common frame, as from the upper body's dynamics. A wrong
+    side, force, filter or unit shows up as tens of N m.
+    """
+    from musclemetab.external_loads import compute_inverse_dynamics
+    from musclemetab.io import read_storage
+
+    ours = read_storage(compute_inverse_dynamics(gait2392.model, gait2392.ik, gait2392.external_loads, 0.5, 1.6))
+    stored = read_storage(gait2392.id)
+    t = ours.index.to_numpy()
+    assert t[0] == pytest.approx(0.5, abs=1e-5) and t[-1] == pytest.approx(1.6, abs=1e-5)
+    for side in "rl":
+        for stem in ("hip_flexion", "hip_adduction", "hip_rotation", "knee_angle", "ankle_angle", "subtalar_angle"):
+            c = f"{stem}_{side}_moment"
+            ref = np.interp(t, stored.index.to_numpy(), stored[c].to_numpy())
+            tol = 0.1 + 0.02 * np.ptp(stored[c].to_numpy())
+            assert np.max(np.abs(ours[c].to_numpy() - ref)) < tol, c
+        for stem in ("knee_angle", "ankle_angle"):
+            c = f"{stem}_{side}_moment"
+            ref = np.interp(t, stored.index.to_numpy(), stored[c].to_numpy())
+            assert np.max(np.abs(ours[c].to_numpy() - ref)) < 0.1, c
+
+
+def test_cycle_windows_and_clipping(gait2392, layout):
+    from musclemetab.external_loads import read_external_loads
+    from musclemetab.redundancy.window import resolve_window
+
+    loads = read_external_loads(gait2392.external_loads)
+    r = resolve_window(gait2392.ik, side="r", cycle="auto", external_loads=loads, layout=layout)
+    assert r.cycle["start_s"] == pytest.approx(0.618, abs=3e-3) and r.cycle["end_s"] == pytest.approx(1.853, abs=3e-3)
+    # padding 0.05 s, snapped outwards to 60 Hz frames
+    assert r.start_s <= r.cycle["start_s"] - 0.05 < r.start_s + 1 / 60 and not r.warnings
+    with pytest.warns(UserWarning, match="clipped"):
+        left = resolve_window(gait2392.ik, side="l", cycle="auto", external_loads=loads, layout=layout)
+    # the ground forces end at 2.5 s, 40 ms after the left heel strike: padding clipped there
+    assert left.end_s == pytest.approx(2.5, abs=1e-6) and left.padding_s[1] < 0.05
+    assert "clipped" in left.record()["warnings"][0]
+    with pytest.raises(DataMismatchError, match="1 complete gait cycle.*cycle 2 does not exist"):
+        resolve_window(gait2392.ik, side="l", cycle=2, external_loads=loads, layout=layout)
+    with pytest.raises(DataMismatchError, match=r"subject01_walk1_grf.mot.*ends 0.500 s before the window end 3.000 s"):
+        resolve_window(gait2392.ik, side="r", window=(1.0, 3.0), external_loads=loads, layout=layout)
+    with pytest.raises(DataMismatchError, match=r"subject01_walk1_ik.mot.*starts 0.100 s after"):
+        resolve_window(gait2392.ik, side="r", window=(0.4, 1.0), external_loads=loads, layout=layout)
+
+
+def test_external_loads_errors(gait2392, layout, tmp_path):
+    from musclemetab.external_loads import read_external_loads
+
+    text = gait2392.external_loads.read_text()
+    bad_body = tmp_path / "body.xml"
+    bad_body.write_text(text.replace("<applied_to_body> calcn_l </applied_to_body>",
+                                     "<applied_to_body> foot_left </applied_to_body>"))
+    (tmp_path / gait2392.grf.name).write_bytes(gait2392.grf.read_bytes())
+    with pytest.raises(ModelError, match="ExternalForce_2.*'foot_left' is not a body"):
+        read_external_loads(bad_body).check_bodies(layout)
+    missing = tmp_path / "missing.xml"
+    missing.write_text(text.replace("subject01_walk1_grf.mot", "nowhere.mot"))
+    with pytest.raises(InputFileError, match="nowhere.mot does not exist"):
+        read_external_loads(missing)
+
+
+def _cli(*argv):
+    from musclemetab.cli import main
+
+    return main(list(map(str, argv)))
+
+
+def test_bad_trial_input_one_line_no_output(gait2392, tmp_path, capsys):
+    # a DOF in the ID data the model lacks: the example subject's ID against the gait2392 model
+    id_alien = tmp_path / "id.sto"
+    id_alien.write_text(gait2392.id.read_text().replace("lumbar_rotation_moment", "elbow_flex_r_moment"))
+    out = tmp_path / "out"
+    cases = [
+        (["--id", id_alien], "elbow_flex_r_moment is for a coordinate the model"),
+        (["--id", gait2392.id, "--dofs", "knee_angle_r", "wrist_flex_r"], "has no coordinate wrist_flex_r"),
+        (["--external-loads", gait2392.external_loads, "--window", "2.0:3.0"], "ends 0.500 s before"),
+        (["--external-loads", gait2392.external_loads, "--side", "l", "--cycle", "3"], "cycle 3 does not exist"),
+    ]
+    for extra, message in cases:
+        code = _cli("solve", "--model", gait2392.model, "--ik", gait2392.ik, *extra, "--out", out)
+        err = capsys.readouterr().err.strip()
+        assert code != 0 and message in err and "\n" not in err, (extra, err)
+        assert not out.exists()
+
+
+@pytest.fixture(scope="session")
+def left_solution(gait2392, tmp_path_factory):
+    """EFFORT-GEN on the left leg's gait cycle, inverse dynamics computed by OpenSim (one solve)."""
+    out = tmp_path_factory.mktemp("g2392") / "left"
+    code = _cli("solve", "--model", gait2392.model, "--ik", gait2392.ik, "--external-loads",
+                gait2392.external_loads, "--cycle", "auto", "--side", "l", "--out", out)
+    assert code == 0
+    return out
+
+
+def test_left_leg_effort_gen(left_solution):
+    s = json.loads((left_solution / "summary.json").read_text())
+    assert s["success"] and s["max_moment_residual_Nm"] <= 1e-4
+    assert s["side"] == "l" and s["dofs"][2:] == ["ankle_angle_l", "knee_angle_l", "hip_flexion_l",
+                                                  "hip_adduction_l", "hip_rotation_l"]
+    assert len(s["muscles"]) == 43 and all(m.endswith("_l") for m in s["muscles"])
+    # 60 Hz frames, 100 mesh intervals per second over the clipped window
+    a, b = s["time_window_s"]
+    assert s["n_intervals"] == round((b - a) * 100) and b == pytest.approx(2.5, abs=1e-6)
+    assert s["window"]["gait_cycle"]["start_s"] == pytest.approx(1.247, abs=3e-3)
+    assert "clipped" in s["window"]["warnings"][0]
+    assert s["inverse_dynamics"]["coordinate_lowpass_hz"] == 6.0
+    assert (left_solution / "inverse_dynamics.sto").is_file()
+
+
+def test_walking_speed_from_the_models_forward_coordinates(gait2392, example):
+    from musclemetab.analysis.speed import walking_speed_from_ik
+
+    # The study's subject walks overground: the model's forward coordinates give the same speed
+    # as the naming rule, in the protocol's range (analysis.md: 55-145 % of ~1.3 m/s).
+    v = walking_speed_from_ik(example.ik["normal"], model=example.model)
+    assert 1.0 < v < 1.6
+    assert v == pytest.approx(walking_speed_from_ik(example.ik["normal"]), rel=1e-12)
+    # gait2392's subject walks on a treadmill: the pelvis moves < 1 cm/s, so the speed must be given
+    with pytest.raises(DataMismatchError, match="pelvis_tx, pelvis_tz\\): treadmill walking"):
+        walking_speed_from_ik(gait2392.ik, start_s=0.618, end_s=1.853, model=gait2392.model)
+
+
+#: Body height is not recorded with gait2392's subject01; the volume regression needs one. The
+#: generic gait2392 model represents a subject about 1.8 m tall (OpenSim's model documentation);
+#: the package never guesses a height, the user gives it (--height, height_m).
+GAIT2392_HEIGHT_M = 1.8
+#: Plausible whole-body rates (W/kg) of the models for walking: the lowest and highest mean of the
+#: study's Table 2 (all models and workflows, 4.1 to 12.2 W/kg), less and plus three SD (0.5, 1.2).
+PLAUSIBLE_W_PER_KG = (4.1 - 3 * 0.5, 12.2 + 3 * 1.2)
+
+
+def test_left_leg_metabolics_phases_and_groups(left_solution, gait2392):
+    from musclemetab.analysis.events import GaitCycle
+    from musclemetab.analysis.groups import dof_group_pair
+    from musclemetab.analysis.unit import analyse_solution_folder
+    from musclemetab.errors import OptionError
+    from musclemetab.geometry import compute_geometry
+    from musclemetab.metabolics import MODELS
+    from musclemetab.metabolics.solution import metabolics_from_solution
+
+    s = json.loads((left_solution / "summary.json").read_text())
+    c = s["window"]["gait_cycle"]
+    with pytest.warns(UserWarning, match="not in the anatomical muscle table"):
+        res = metabolics_from_solution(left_solution, gait2392.body_mass_kg, GAIT2392_HEIGHT_M, models="all")
+    assert res.models == tuple(MODELS)
+    # trimmed to the recorded cycle, not to the study's 5 + 6 padding nodes
+    assert c["start_s"] <= res.time_s[0] < c["start_s"] + 0.01 and c["end_s"] - 0.01 < res.time_s[-1] <= c["end_s"]
+    lo, hi = PLAUSIBLE_W_PER_KG
+    for m in MODELS:
+        assert lo < res.whole_body[m].mean_W_per_kg < hi, m
+
+    def grouped(d):
+        try:
+            dof_group_pair(d)
+            return True
+        except OptionError:  # subtalar and mtp belong to no function group
+            return False
+
+    geo = compute_geometry(gait2392.model, gait2392.ik, dofs=[d for d in s["dofs"] if grouped(d)])
+    with pytest.warns(UserWarning, match="not in the anatomical muscle table"):
+        a = analyse_solution_folder(left_solution, geo, GaitCycle(c["start_s"], c["toe_off_s"], c["end_s"]),
+                                    gait2392.body_mass_kg, GAIT2392_HEIGHT_M).summary.set_index("model")
+    np.testing.assert_allclose(a["stance_pct"] + a["swing_pct"], 100.0, atol=1e-9)
+    # EFFORT-GEN swing share of the study: 36.5 % (BH04), 36.7 % (HO06); a quarter to a half here
+    assert ((a["swing_pct"] > 25) & (a["swing_pct"] < 50)).all()
+    shares = a[[col for col in a.columns if col.startswith("share_")]]
+    np.testing.assert_allclose(shares.sum(axis=1), 100.0, atol=1e-6)
+    assert (shares.drop(columns="share_other_pct") > 0).all().all()

@@ -1,0 +1,137 @@
+"""Per-leg solution folders in metabolics: legs added instead of doubled, cycle-based trimming.
+
+The solution folders are synthetic, in the solver's file format (see test_metabolics_solution).
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from test_metabolics_solution import HEIGHT, MASS, make_solution
+
+
+def _cli(*argv):
+    from musclemetab.cli import main
+
+    return main(list(map(str, argv)))
+
+
+def test_metabolics_adds_two_legs_and_doubles_one(tmp_path, capsys):
+    import pandas as pd
+
+    from musclemetab.metabolics.solution import metabolics_from_solution
+
+    parent = tmp_path / "both"
+    make_solution(parent / "r")
+    make_solution(parent / "l", n=40)  # another cycle length: each leg averaged over its own
+    for side in "rl":
+        s = json.loads((parent / side / "summary.json").read_text())
+        (parent / side / "summary.json").write_text(json.dumps(s | {"side": side}))
+    one = {s: metabolics_from_solution(parent / s, MASS, HEIGHT, models="UM10,BH04", legs=1) for s in "rl"}
+    assert _cli("metabolics", "--solution", parent, "--mass", MASS, "--height", HEIGHT, "--models", "UM10,BH04",
+                "--out", tmp_path / "m") == 0
+    assert "legs r + l added" in capsys.readouterr().out
+    wb = pd.read_csv(tmp_path / "m" / "whole_body.csv").set_index("model")
+    for m in ("UM10", "BH04"):
+        # basal rule "body": 1.2 W/kg once, the two legs' muscle averages added
+        expected = (one["r"].whole_body[m].one_leg_mean_W + one["l"].whole_body[m].one_leg_mean_W) / MASS + 1.2
+        assert wb.loc[m, "mean_W_per_kg"] == pytest.approx(expected, rel=1e-9)
+        assert wb.loc[m, "legs"] == "r+l"
+    assert (tmp_path / "m" / "r" / "metabolics.sto").is_file() and (tmp_path / "m" / "l" / "metabolics.sto").is_file()
+    # one leg: doubled, and the output says which
+    assert _cli("metabolics", "--solution", parent / "l", "--mass", MASS, "--height", HEIGHT, "--models", "UM10",
+                "--out", tmp_path / "one") == 0
+    assert "whole body = 2 x the left leg" in capsys.readouterr().out
+    with pytest.raises(Exception, match="neither a solution folder"):
+        from musclemetab.metabolics.cli import _solution_folders
+
+        _solution_folders(tmp_path)
+
+
+def test_metabolics_trims_to_the_recorded_gait_cycle(tmp_path):
+    from musclemetab.metabolics.solution import metabolics_from_solution
+
+    folder = make_solution(tmp_path / "s")  # nodes 0.57, 0.58, ..., 0.87 s
+    s = json.loads((folder / "summary.json").read_text())
+    s["window"] = {"gait_cycle": {"start_s": 0.6149, "toe_off_s": 0.7, "end_s": 0.8555}}
+    (folder / "summary.json").write_text(json.dumps(s))
+    res = metabolics_from_solution(folder, MASS, HEIGHT, models="UM10")
+    # the nodes inside the cycle: 0.62 ... 0.85 s (instead of the study's 5 and 6 padding nodes)
+    np.testing.assert_allclose(res.time_s[[0, -1]], [0.62, 0.85])
+
+
+def test_calibration_coordinates_and_trials_found_by_content(example, gait2392, tmp_path):
+    from musclemetab.calibration.passive import CALIBRATION_JOINTS, calibration_dofs, trial_files
+    from musclemetab.errors import InputFileError
+
+    # the joint tree gives the study's coordinates for its model, and gait2392's left ones
+    assert calibration_dofs(example.calibration_model, "r") == CALIBRATION_JOINTS
+    assert calibration_dofs(gait2392.model, "l") == {"ankle": "ankle_angle_l", "knee": "knee_angle_l",
+                                                     "hip": "hip_flexion_l"}
+    # the example folder (with IK, ID and EMG files beside the trials): each trial found by its moments
+    folder = example.calibration_trials["ankle"]["motion"].parent
+    assert trial_files(folder) == example.calibration_trials
+    # renamed, left-side copies: found by the coordinate they move, not by their names
+    left = {"ankle": "ankle_angle_l", "knee": "knee_angle_l", "hip": "hip_flexion_l"}
+    for joint, files in example.calibration_trials.items():
+        for kind, path in files.items():
+            text = path.read_text().replace("_r\t", "_l\t").replace("_r_moment", "_l_moment").replace("_r\n", "_l\n")
+            (tmp_path / f"sweep_{joint}{path.suffix}").write_text(text)
+    got = trial_files(tmp_path, left)
+    assert {j: f["moments"].name for j, f in got.items()} == {j: f"sweep_{j}.sto" for j in left}
+    (tmp_path / "sweep_knee.sto").unlink()
+    with pytest.raises(InputFileError, match="no calibration trial for knee_angle_l"):
+        trial_files(tmp_path, left)
+
+
+# ------------------------------------------------------------------ a 2D lumped-muscle model
+@pytest.fixture(scope="session")
+def lumped_model(gait2392, tmp_path_factory):
+    """gait2392's subject as a sagittal 18-muscle model (DeGrooteFregly right, Millard left)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    out = tmp_path_factory.mktemp("lumped") / "lumped2d.osim"
+    subprocess.run([sys.executable, str(Path(__file__).with_name("opensim_models.py")), str(gait2392.model), str(out)],
+                   check=True, capture_output=True)
+    return out
+
+
+@pytest.fixture(scope="session")
+def lumped_both(lumped_model, gait2392, tmp_path_factory):
+    out = tmp_path_factory.mktemp("lumped_solve") / "both"
+    code = _cli("solve", "--model", lumped_model, "--ik", gait2392.ik, "--external-loads", gait2392.external_loads,
+                "--cycle", "auto", "--side", "both", "--out", out)
+    assert code == 0
+    return out
+
+
+def test_lumped_2d_model_with_degroote_and_millard_muscles_both_legs(lumped_model, lumped_both, gait2392, tmp_path):
+    import pandas as pd
+
+    from musclemetab.metabolics.solution import metabolics_from_solution
+    from musclemetab.opensim_bridge import call
+
+    kinds = {m["name"][-1]: m["class_name"] for m in call("model_ops:read_model_info", str(lumped_model))["muscles"]}
+    for side in "rl":
+        s = json.loads((lumped_both / side / "summary.json").read_text())
+        assert s["success"] and s["max_moment_residual_Nm"] <= 1e-4
+        # only the sagittal DOFs are free: discovered from the joint tree, distal to proximal
+        assert s["dofs"] == [f"ankle_angle_{side}", f"knee_angle_{side}", f"hip_flexion_{side}"]
+        assert sorted(s["muscles"]) == sorted(f"{m}_{side}" for m in (
+            "hamstrings", "bifemsh", "glut_max", "iliopsoas", "rect_fem", "vasti", "gastroc", "soleus", "tib_ant"))
+        assert (lumped_both / side / "inverse_dynamics.sto").is_file()
+    assert kinds == {"r": "DeGrooteFregly2016Muscle", "l": "Millard2012EquilibriumMuscle"}
+    # both legs added, each over its own cycle; every model in the plausible walking range
+    assert _cli("metabolics", "--solution", lumped_both, "--mass", gait2392.body_mass_kg, "--height", 1.8,
+                "--out", tmp_path / "m") == 0
+    wb = pd.read_csv(tmp_path / "m" / "whole_body.csv").set_index("model")
+    one = {s: metabolics_from_solution(lumped_both / s, gait2392.body_mass_kg, 1.8, legs=1) for s in "rl"}
+    for m, row in wb.iterrows():
+        total = (one["r"].whole_body[m].one_leg_mean_W + one["l"].whole_body[m].one_leg_mean_W) / gait2392.body_mass_kg
+        assert row["mean_W_per_kg"] == pytest.approx(total + 1.2, rel=1e-9)
+        assert 2.6 < row["mean_W_per_kg"] < 15.8, m
