@@ -7,8 +7,6 @@ A study file names everything a study needs; paths are relative to the file::
     workflows = ["effort-gen", "effort-ten"]
     models = "all"                     # or ["UM10", "BH04", ...]
     basal = "body"                     # whole-body basal rule: body | muscle | none
-    linear_solver = "mumps"            # optional: IPOPT's linear solver (mumps, spral, ma27...,
-    linear_solver_library = "libhsl.so"  #  pardiso) and the library of a run-time-loaded one
 
     [[subjects]]
     name = "sub1"
@@ -153,8 +151,6 @@ class Study:
     basal: str = "body"
     source: Path | None = None
     settings: dict = field(default_factory=dict)
-    linear_solver: str = "mumps"
-    linear_solver_library: str | None = None
 
     def subject(self, name: str) -> Subject:
         for s in self.subjects:
@@ -164,7 +160,9 @@ class Study:
 
 
 # ---------------------------------------------------------------------------------------
-_STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "subjects", "linear_solver", "linear_solver_library"}
+_STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "subjects", "solver"}
+#: keys of the study file's [solver] table (IPOPT settings of every solve)
+_SOLVER_KEYS = {"max_iter", "tol", "linear_solver", "linear_solver_library"}
 _SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials",
                  "muscle_properties", "side", "dofs"}
 _TRIAL_KEYS = {
@@ -217,15 +215,6 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
     basal = str(data.get("basal", "body"))
     if basal not in BASAL_RULES:
         raise OptionError(f"{where}: 'basal' must be one of {', '.join(BASAL_RULES)}, not {basal!r}")
-    linear_solver = str(data.get("linear_solver", "mumps")).strip().lower()
-    library = data.get("linear_solver_library")
-    library = None if library is None else str(library)
-    from ..redundancy.problem import check_linear_solver
-
-    try:
-        check_linear_solver(linear_solver, library)
-    except OptionError as exc:
-        raise OptionError(f"{where}: 'linear_solver': {exc}") from None
     out_value = data.get("output", "results")
     if output is None and (not isinstance(out_value, str) or not out_value.strip()):
         raise OptionError(f"{where}: 'output' must be a folder path (text), not {out_value!r}")
@@ -239,11 +228,27 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
     if dup:
         raise OptionError(f"{where}: subject name(s) {', '.join(dup)} used more than once; names must be unique")
     settings = {"name": name, "workflows": list(workflows), "models": list(models), "basal": basal}
-    if linear_solver != "mumps":
-        settings["linear_solver"] = linear_solver
+    solver = _solver(data.get("solver"), where)
+    if solver:
+        settings["solver"] = solver
     return Study(name=name, subjects=subjects, workflows=workflows, models=models, output=out,
-                 basal=basal, source=source, settings=settings, linear_solver=linear_solver,
-                 linear_solver_library=library)
+                 basal=basal, source=source, settings=settings)
+
+
+def _solver(data, where: str) -> dict:
+    """The ``[solver]`` table: ``max_iter``, ``tol``, ``linear_solver``, ``linear_solver_library``, checked."""
+    if data is None:
+        return {}
+    if not isinstance(data, Mapping):
+        raise OptionError(f"{where}: 'solver' must be a table such as [solver] max_iter = 3000")
+    _unknown(data, _SOLVER_KEYS, f"{where}: [solver]")
+    from ..redundancy import SolverOptions
+
+    try:
+        SolverOptions(**dict(data))
+    except (TypeError, ValueError, OptionError) as exc:
+        raise OptionError(f"{where}: [solver]: {exc}") from None
+    return dict(data)
 
 
 def _unknown(data: Mapping, allowed: set, where: str) -> None:
