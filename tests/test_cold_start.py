@@ -10,8 +10,12 @@ import numpy as np
 import pytest
 
 from musclemetab import model as model_module
+from musclemetab.model import default_dofs
 from musclemetab.errors import CacheWarning, OpenSimWorkerError
 from musclemetab.opensim_bridge import client
+
+
+DOFS = default_dofs("r")
 
 
 def _forbid_opensim(monkeypatch):
@@ -71,12 +75,12 @@ def test_solve_without_opensim_when_cached(example, tmp_path, monkeypatch):
     from musclemetab.redundancy import SolverOptions, solve_files
 
     ik, idf = example.ik["normal"], example.id["normal"]
-    assert not geometry_is_cached(example.model, ik, cache_dir=tmp_path)
+    assert not geometry_is_cached(example.model, ik, DOFS, cache_dir=tmp_path)
     model_module._CACHE.clear()
     geom = compute_geometry(example.model, ik, cache_dir=tmp_path)
     model_module.read_model(example.model, cache_dir=tmp_path)
     layout = read_layout(example.model, cache_dir=tmp_path)
-    assert geometry_is_cached(example.model, ik, cache_dir=tmp_path)
+    assert geometry_is_cached(example.model, ik, DOFS, cache_dir=tmp_path)
     assert model_module.model_is_cached(example.model, tmp_path)
 
     model_module._CACHE.clear()

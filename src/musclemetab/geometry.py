@@ -154,16 +154,7 @@ def _cache_spec(model_path, ik_path, dofs, muscles, method) -> dict:
     )
 
 
-def geometry_is_cached(
-    model_path: str | os.PathLike,
-    ik_path: str | os.PathLike,
-    dofs: list[str] | None = None,
-    side: str = "r",
-    muscles: list[str] | None = None,
-    *,
-    cache_dir: str | os.PathLike | None = None,
-    method: str = "velocity",
-) -> bool:
+def geometry_is_cached(model_path, ik_path, dofs, *, cache_dir=None, muscles=None, method="velocity") -> bool:
     """Whether :func:`compute_geometry` with these arguments would find a cache entry.
 
     Lets a caller start the OpenSim worker early only when it will be needed. Nothing is
@@ -171,7 +162,6 @@ def geometry_is_cached(
     cached (:func:`compute_geometry` reports them).
     """
     try:
-        dofs = list(dofs) if dofs else default_dofs(side)
         return existing_entry(_cache_spec(Path(model_path), Path(ik_path), dofs, muscles, method), cache_dir)
     except (OSError, OptionError):
         return False
