@@ -94,7 +94,7 @@ def iterate(nlp, options, k):
     opts = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
     opts.update({key: nlp[key] for key in ("grad_f", "jac_g", "hess_lag")})
     solver = ca.nlpsol("kkt", "ipopt", {"x": nlp["x"], "f": nlp["f"], "g": nlp["g"]}, opts)
-    sol = solver(x0=nlp["x0"], lbx=nlp["lbx"], ubx=nlp["ubx"], lbg=0.0, ubg=0.0)
+    sol = solver(x0=nlp["x0"], lbx=nlp["lbx"], ubx=nlp["ubx"], lbg=nlp["lbg"], ubg=nlp["ubg"])
     st = solver.stats()
     mu = float(st["iterations"]["mu"][-1])
     return (np.asarray(sol["x"]).ravel(), np.asarray(sol["lam_g"]).ravel(), np.asarray(sol["lam_x"]).ravel(),
@@ -121,7 +121,7 @@ def ipopt_linear_algebra_time(nlp, options):
         saved = os.dup(1)
         os.dup2(log.fileno(), 1)
         try:
-            solver(x0=nlp["x0"], lbx=nlp["lbx"], ubx=nlp["ubx"], lbg=0.0, ubg=0.0)
+            solver(x0=nlp["x0"], lbx=nlp["lbx"], ubx=nlp["ubx"], lbg=nlp["lbg"], ubg=nlp["ubg"])
         finally:
             sys.stdout.flush()
             os.dup2(saved, 1)
@@ -290,7 +290,7 @@ def _time(func, repeat):
 def compare(K, b, n, layout, repeat, superlu):
     import casadi as ca
 
-    M, D, N, _ = layout
+    M, D, N = layout
     rows = []
     Kc = ca.DM(ca.Sparsity(K.shape[0], K.shape[1], K.indptr.tolist(), K.indices.tolist()), K.data)
     for name in ("mumps", "ldl"):
@@ -346,7 +346,8 @@ def main(argv=None):
         for k in args.iterations:
             x, lam_g, lam_x, mu, it = iterate(nlp, options, k)
             K, b, n, m = kkt_matrix(nlp, x, lam_g, lam_x, mu)
-            rows, info = compare(K, b, n, nlp["layout"], args.repeat, not args.no_superlu)
+            t0 = nlp["layout"]["trials"][0]  # one trial: node-major variables from offset 0
+            rows, info = compare(K, b, n, (t0["M"], t0["D"], t0["N"]), args.repeat, not args.no_superlu)
             label = f"{trial} it {it} ({K.shape[0]}, {K.nnz // 1000}k nz)"
             for method, ms, res in rows:
                 print(f"{label:<26} {method:<26} {ms:>19.1f} {res:>10.1e}", flush=True)
