@@ -114,9 +114,8 @@ class ModelLayout:
 
 def read_layout(model_path: str | os.PathLike) -> ModelLayout:
     """The model's :class:`ModelLayout`, computed by OpenSim in the worker process."""
-    from .opensim_bridge import call
-
     from .model import check_model_path
+    from .opensim_bridge import call
 
     path = check_model_path(model_path)
     raw = call("model_ops:model_layout", str(path))
