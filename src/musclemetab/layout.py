@@ -114,11 +114,10 @@ class ModelLayout:
 
 def read_layout(model_path: str | os.PathLike) -> ModelLayout:
     """The model's :class:`ModelLayout`, computed by OpenSim in the worker process."""
+    from .model import check_model_path
     from .opensim_bridge import call
 
-    path = Path(model_path)
-    if not path.is_file():
-        raise ModelError(f"{path}: no such model file; check the path")
+    path = check_model_path(model_path)
     raw = call("model_ops:model_layout", str(path))
     return ModelLayout(
         path=str(path),
