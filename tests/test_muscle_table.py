@@ -264,7 +264,7 @@ def test_metabolics_cli_on_a_gait2392_solution(g2392_solution, g2392, tmp_path, 
     assert sorted(wb["model"]) == sorted(["UM03", "BH04", "HO06", "LW07", "UM10", "UC16"])
     assert np.isfinite(wb.select_dtypes("number").to_numpy()).all() and (wb["mean_W_per_kg_no_basal"] > 0).all()
     # the per-muscle basal heat is 1.2 W per kg of the muscle's mass: the masses by hand
-    long = pd.read_csv(tmp_path / "out" / "metabolics.csv")
+    long = pd.read_parquet(tmp_path / "out" / "metabolics.parquet")
     basal = long[(long.component == "basal") & (long.model == "UM10")].groupby("muscle")["value_W"].mean()
     v = (47 * MASS * HEIGHT + 1285) * 1e-6
     mp = g2392.muscles.subset(muscles)
