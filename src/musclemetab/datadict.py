@@ -77,6 +77,9 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
      "true when the solve's largest reserve RMS exceeds 1 % of the peak joint moment (docs/solver.md)"),
     (_STUDY, "cycle_source", "-", "where the gait events come from (study file, ground reaction forces, or estimated)"),
     (_STUDY, "speed_source", "-", "where the walking speed comes from (study file, or estimated from the pelvis)"),
+    (_STUDY, "large_reserve", "-",
+     "true when the solve's largest reserve RMS exceeds 1 % of the peak joint moment (the muscles do not explain "
+     "the moments: check the inputs); summary.json holds reserve_share_of_peak_moment"),
     # per muscle
     (_PM, "muscle", "-", "muscle name of the model"),
     (_PM, "side", "-", "leg of the muscle: r or l ('' when the name has no side suffix)"),

@@ -48,7 +48,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..errors import DataMismatchError, InputFileError, MissingColumnError, OptionError, SolverError, UnknownMuscleError
-from ..muscle import fibre_width, passive_force_length, tendon_force_length
+from ..muscle import fibre_width, hill_residual, passive_force_length, tendon_force_length
 
 __all__ = [
     "CALIBRATION_JOINTS",
@@ -282,7 +282,7 @@ def load_calibration_data(
     *,
     tendon_stiffness: Mapping[str, float] | None = None,
     use_cache: bool = True,
-    side: str | None = None,
+    side: str = "r",
 ) -> CalibrationData:
     """Read the three trials, compute their geometry with OpenSim, read the Hill parameters.
 
@@ -292,14 +292,14 @@ def load_calibration_data(
 
     ``tendon_stiffness`` overrides ``kT`` for some muscles (default
     :func:`default_tendon_stiffness`). ``side`` (``"r"``/``"l"``): the target DOFs are that
-    side's flexion coordinates of the model (:func:`calibration_dofs`); default the study's
-    right-leg DOFs (:data:`CALIBRATION_JOINTS`).
+    side's flexion coordinates of the model (:func:`calibration_dofs`; for the study's model
+    and the right side, :data:`CALIBRATION_JOINTS`).
     """
     from ..geometry import compute_geometry
     from ..io import read_storage
     from ..model import read_muscle_parameters
 
-    joints = CALIBRATION_JOINTS if side is None else calibration_dofs(model_path, side)
+    joints = calibration_dofs(model_path, side)
     files = trial_files(trials, joints)
     out = []
     for joint, dof in joints.items():
@@ -495,10 +495,12 @@ def solve_passive(
         lmo_mat = ca.DM(np.tile(lmo, (F, 1)))
         lm_m = lm * lmo_mat
         opti.subject_to(ca.vec(lm_m**2 - ca.DM(np.tile(w**2, (F, 1))) - proj**2) == 0)
-        lt_norm = (ca.DM(t.lmt_m) - proj) / ca.DM(np.tile(lts, (F, 1)))
-        fT = tendon_force_length(lt_norm, ca.DM(np.tile(kT, (F, 1))))
-        fpe = passive_force_length(lm, kpe_mat, s0_mat, sm_mat)
-        opti.subject_to(ca.vec(fpe * proj / lm_m - fT) == 0)
+        lts_mat, kt_mat, lmt = ca.DM(np.tile(lts, (F, 1))), ca.DM(np.tile(kT, (F, 1))), ca.DM(t.lmt_m)
+        # the Hill equilibrium of the redundancy problem at rest (activation 0, fibre velocity 0)
+        opti.subject_to(ca.vec(hill_residual(0.0, lm, 0.0, proj, lmt, optimal_fiber_length_m=lmo_mat,
+                                             tendon_slack_length_m=lts_mat, max_contraction_velocity=1.0,
+                                             kT=kt_mat, kpe=kpe_mat, s0=s0_mat, sm=sm_mat)) == 0)
+        fT = tendon_force_length((lmt - proj) / lts_mat, kt_mat)
         moment = ca.sum2(fT * ca.DM(np.tile(F0, (F, 1))) * ca.DM(t.moment_arms_m))
         opti.subject_to(moment + TOPT_NM * aT == ca.DM(t.target_Nm))
         objective = objective + ca.sumsqr(aT)
@@ -641,7 +643,7 @@ def calibrate_passive(
     tendon_stiffness: Mapping[str, float] | None = None,
     use_cache: bool = True,
     print_level: int = 0,
-    side: str | None = None,
+    side: str = "r",
 ) -> CalibrationResult:
     """Load the trials, solve the calibration NLP and the generic-parameter reference (``side``: see
     :func:`load_calibration_data`)."""

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..errors import OptionError, SolverError
+from ..errors import OptionError, SolverError, UnknownMuscleError
 
 __all__ = ["add_solve_parser", "solve_command"]
 
@@ -68,12 +68,25 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
                    help="solve a gait cycle of the leg, heel strike to heel strike from the ground forces, padded "
                    "by 0.05 s at each end (clipped at the edge of the data, with a warning): auto = the first, "
                    "N = the N-th complete cycle")
+    p.add_argument("--exclude-muscles", nargs="+", metavar="MUSCLE",
+                   help="leave these muscles out of the problem (e.g. a muscle that cannot reach force equilibrium "
+                   "within the fibre-length bounds, named by a failed solve)")
     p.add_argument("--mesh-frequency", type=float, default=100.0, metavar="PER_S",
                    help="mesh intervals per second (default 100, the study's)")
     p.add_argument("--workflow", default="effort-gen", choices=("effort-gen", "effort-cal", "effort-ten", "emg-ten"),
                    help="workflow preset (default effort-gen)")
     p.add_argument("--emg", nargs="+", metavar="EMG.mot",
-                   help="emg-ten: processed, normalised EMG envelopes, one file per trial, same order as --ik")
+                   help="processed, normalised EMG envelopes, one file per trial, same order as --ik: needed by "
+                   "emg-ten; with an effort workflow an EMG-informed solve of the trials (see --emg-mode)")
+    p.add_argument("--emg-mode", choices=("constrained", "driven", "tracking"),
+                   help="with --emg: 'constrained' (each tracked excitation within --emg-tolerance of its scaled "
+                   "EMG; the default), 'driven' (equal to its scaled EMG) or 'tracking' (a cost on the "
+                   "difference, weight --emg-weight); the EMG scale factors are estimated")
+    p.add_argument("--emg-tolerance", type=float, default=0.01,
+                   help="with --emg-mode constrained: half-width of the EMG band (default 0.01)")
+    p.add_argument("--emg-weight", type=float,
+                   help="weight of the EMG tracking cost (default: 10 for emg-ten and tracking, 0 for an "
+                   "effort workflow's constrained or driven solve)")
     p.add_argument("--emg-mapping", metavar="default|authors|MAP.json",
                    help="emg-ten: EMG channels of the muscles: 'default' (vastus intermedius <- VI_a, the mean of "
                    "VL and VM), 'authors' (vastus intermedius <- ES, as in the published example results) or a "
@@ -128,13 +141,13 @@ def solve_command(args) -> int:
         raise OptionError(f"--max-iter must be at least 1, not {args.max_iter}")
     check_output_folder(args.out)
     ik, idf = _as_list(args.ik), _as_list(args.id)
-    if args.workflow == "emg-ten":
+    if args.workflow == "emg-ten" or getattr(args, "emg", None):
         return _emg_ten_command(args, ik, idf)
-    extra = [o for o, attr in (("--emg", "emg"), ("--emg-mapping", "emg_mapping"), ("--labels", "labels"))
-             if getattr(args, attr, None)]
+    extra = [o for o, attr in (("--emg-mapping", "emg_mapping"), ("--labels", "labels"), ("--emg-mode", "emg_mode"),
+                               ("--emg-weight", "emg_weight")) if getattr(args, attr, None) is not None]
     if extra:
-        raise OptionError(f"{', '.join(extra)} belong{'s' if len(extra) == 1 else ''} to --workflow emg-ten; "
-                          f"drop {'it' if len(extra) == 1 else 'them'} for {args.workflow}")
+        raise OptionError(f"{', '.join(extra)} need{'s' if len(extra) == 1 else ''} EMG: give --emg files, or "
+                          f"drop {'it' if len(extra) == 1 else 'them'}")
     if len(ik) != 1 or len(idf) > 1:
         raise OptionError(
             f"--workflow {args.workflow} solves one trial: give one --ik and one --id file (got {len(ik)} and "
@@ -158,6 +171,7 @@ def solve_command(args) -> int:
     sides = ("r", "l") if args.side == "both" else (args.side,)
     from pathlib import Path
 
+    excluded = [m for item in (args.exclude_muscles or []) for m in item.replace(",", " ").split()]
     # every leg is solved before anything is written, so bad input on one leg leaves no output
     solutions = {}
     for side in sides:
@@ -167,7 +181,11 @@ def solve_command(args) -> int:
             mesh_frequency_hz=args.mesh_frequency,
             passive=args.passive, tendon_stiffness=kt, tendon_stiffness_file=args.parameters,
             options=options, cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, warm_start=warm,
+            exclude_muscles=excluded, exclude_missing_ok=args.side == "both",
         )
+    unused = [m for m in excluded if not any(m in x.summary.get("excluded_muscles", []) for x in solutions.values())]
+    if unused:
+        raise UnknownMuscleError(f"--exclude-muscles: {', '.join(unused)} is in neither leg's problem; check the names")
     for side, solution in solutions.items():
         out = Path(args.out) / side if args.side == "both" else Path(args.out)
         write_solution_folder(solution, out)
@@ -177,8 +195,8 @@ def solve_command(args) -> int:
         if not solution.success:
             raise SolverError(
                 f"the {args.workflow} solve did not converge (IPOPT status '{s['status']}' after "
-                f"{s['iterations']} iterations): {failure_advice(s['status'])}. The unconverged result is in "
-                f"{out} with \"success\": false"
+                f"{s['iterations']} iterations): {failure_advice(s['status'])}.{_bound_note(solution)} The "
+                f"unconverged result is in {out} with \"success\": false"
             )
         worst_reserve = max(s["reserve_rms_Nm"].values()) if s["reserve_rms_Nm"] else 0.0
         print(
@@ -189,6 +207,16 @@ def solve_command(args) -> int:
             f"{worst_reserve:.3g} N m -> {out}"
         )
     return 0
+
+
+def _bound_note(solution) -> str:
+    from .solve import muscles_at_fibre_length_bound
+
+    at = muscles_at_fibre_length_bound(solution)
+    if not at:
+        return ""
+    return (f" Fibres at their longest allowed length (1.7 optimal lengths): {', '.join(at)}; if the model's "
+            f"tendon slack length is too short for them, leave them out with --exclude-muscles {' '.join(at)}.")
 
 
 def write_solution_folder(solution, out) -> None:
@@ -212,11 +240,27 @@ def _as_list(value) -> list:
 
 
 def _emg_ten_command(args, ik: list, idf: list) -> int:
-    """``musclemetab solve --workflow emg-ten``: one NLP over all trials, then the files."""
-    from .emg_ten import solve_emg_ten
+    """``musclemetab solve --workflow emg-ten`` or ``--emg`` with an effort workflow: one NLP over
+    all trials, then the files."""
+    from .emg_ten import EmgTenSettings, solve_emg_ten
     from .inputs import DEFAULT_DOFS
     from .problem import SolverOptions, failure_advice
+    from .workflows import get_workflow, parse_tendon_stiffness
 
+    mode = args.emg_mode or "constrained"
+    if args.workflow != "emg-ten":
+        wf = get_workflow(args.workflow)
+        if args.parameters or args.warm_start:
+            raise OptionError("--parameters and --warm-start cannot be used with an EMG-informed solve; give "
+                              "--tendon-stiffness MUSCLE=KT,... instead of --parameters, and drop --warm-start")
+        w_emg = args.emg_weight if args.emg_weight is not None else (10.0 if mode == "tracking" else 0.0)
+        settings = EmgTenSettings(w_emg=w_emg, w_activation=wf.w_activation, w_reserve=wf.w_reserve,
+                                  w_velocity=wf.w_velocity, emg_tolerance=args.emg_tolerance, tendon_groups=(),
+                                  emg_mode=mode)
+        return _informed_command(args, ik, idf, settings, parse_tendon_stiffness(args.tendon_stiffness)
+                                 if args.tendon_stiffness else None)
+    settings = EmgTenSettings(emg_tolerance=args.emg_tolerance, emg_mode=mode,
+                              **({"w_emg": args.emg_weight} if args.emg_weight is not None else {}))
     wrong = [o for o, v in (("--tendon-stiffness", args.tendon_stiffness), ("--parameters", args.parameters),
                             ("--warm-start", args.warm_start)) if v]
     if wrong:
@@ -238,7 +282,7 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
     result = solve_emg_ten(
         args.model, ik, idf, emg, emg_mapping=args.emg_mapping or "default", labels=args.labels,
         passive=args.passive, dofs=dofs, options=options, cache_dir=args.cache_dir,
-        check_units=not args.skip_unit_checks,
+        check_units=not args.skip_unit_checks, settings=settings,
     )
     result.write(args.out)
     r = result.record
@@ -248,6 +292,10 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
             f"iterations): {failure_advice(r['status'])}. The unconverged result is in {args.out} with "
             "\"success\": false"
         )
+    from .estimate import write_personalised_model
+
+    model_file, _ = write_personalised_model(args.model, result.parameters,
+                                             {"tendon_stiffness": list(result.tendon_stiffness)}, args.out)
     groups = []
     for g in result.settings.tendon_groups:
         m = next((x for x in g if x in result.tendon_stiffness), None)
@@ -261,6 +309,35 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
         f"{size['variables']} variables, {size['equality_constraints']} equalities, "
         f"{size['inequality_constraints']} EMG bounds: {r['status']} in {r['iterations']} iterations, objective "
         f"{r['objective']:.6e}, solve {r['solve_time_s']:.1f} s, max moment residual "
-        f"{r['max_moment_residual_Nm']:.1e} N m; {'; '.join(groups)}; EMG scale {scales} -> {args.out}"
+        f"{r['max_moment_residual_Nm']:.1e} N m; {'; '.join(groups)}; EMG scale {scales} -> {args.out} "
+        f"(and {model_file.name})"
     )
+    return 0
+
+
+def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> int:
+    """An effort workflow's EMG-informed solve of one or more trials: one trial is written to
+    ``--out`` as a solution folder; several as one folder per trial and ``parameters.json``."""
+    from .emg_ten import solve_emg_ten
+    from .inputs import DEFAULT_DOFS
+    from .problem import SolverOptions
+
+    emg = _as_list(args.emg)
+    dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else DEFAULT_DOFS
+    result = solve_emg_ten(
+        args.model, ik, idf, emg, emg_mapping=args.emg_mapping or "default", labels=args.labels,
+        passive=args.passive, dofs=dofs, options=SolverOptions(max_iter=args.max_iter, print_level=args.print_level),
+        cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, settings=settings,
+        workflow=args.workflow, tendon_stiffness=tendon_stiffness,
+    )
+    if len(result.solutions) == 1:
+        next(iter(result.solutions.values())).write(args.out)
+    else:
+        result.write(args.out)
+    r = result.run_record
+    if not r.success:
+        raise r.failure(f"the EMG-informed {args.workflow} solve (written to {args.out})")
+    scales = ", ".join(f"{m} {v:.3g}" for m, v in result.emg_scale.items())
+    print(f"solve: {args.workflow} EMG-{settings.emg_mode} {len(result.solutions)} trial(s): {r.status} in "
+          f"{r.iterations} iterations, objective {r.objective:.6e}; EMG scale {scales} -> {args.out}")
     return 0

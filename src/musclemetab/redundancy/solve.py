@@ -9,7 +9,6 @@ process never imports ``opensim``).
 from __future__ import annotations
 
 import os
-import platform
 import threading
 import time as _time
 from pathlib import Path
@@ -29,7 +28,8 @@ from .inputs import (
 )
 from .parameters import MuscleTendonParameters
 from ..errors import OptionError
-from .problem import SolverOptions, ipopt_statistics, solve_ocp
+from .problem import SolverOptions, solve_ocp
+from .record import RunRecord
 from .solution import Solution, build_solution
 from .static_opt import guess_from_solution, initial_guess, static_optimisation
 from .workflows import (
@@ -71,6 +71,28 @@ def _restrict_geometry(geometry):
     )
 
 
+def prepare_trial(geometry, params: MuscleTendonParameters, id_time_s, id_moments_Nm, *, ik_time_s=None,
+                  options: SolverOptions | None = None, sources: dict | None = None, check_units: bool = True,
+                  filter_inputs: bool = True, mesh_frequency_hz: float = MESH_FREQUENCY_HZ):
+    """Mesh inputs of one trial (muscles and DOFs the problem keeps), its parameters and the
+    static optimisation of its initial guess: ``(inputs, params, static optimisation)``."""
+    options = options or SolverOptions()
+    all_dofs = tuple(geometry.dofs)
+    geometry = _restrict_geometry(geometry)
+    if tuple(geometry.dofs) != all_dofs:
+        keep = [all_dofs.index(d) for d in geometry.dofs]
+        id_moments_Nm = np.asarray(id_moments_Nm, dtype=float).reshape(len(id_time_s), -1)[:, keep]
+    params = params.subset(geometry.muscles)
+    inputs = prepare_inputs(geometry, id_time_s, id_moments_Nm, ik_time_s=ik_time_s,
+                            filter_inputs=filter_inputs, mesh_frequency_hz=mesh_frequency_hz,
+                            sources=dict(sources or {}))
+    if check_units:
+        check_moment_magnitudes(inputs.moments_frames_Nm, inputs.dofs, inputs.moment_arms_frames_m,
+                                params.max_isometric_force_N, (sources or {}).get("id", "inverse dynamics"),
+                                options.optimal_reserve_Nm)
+    return inputs, params, static_optimisation(inputs, params)
+
+
 def solve_with_parameters(
     geometry,
     params: MuscleTendonParameters,
@@ -99,20 +121,9 @@ def solve_with_parameters(
     """
     t_start = _time.perf_counter()
     options = options or SolverOptions()
-    all_dofs = tuple(geometry.dofs)
-    geometry = _restrict_geometry(geometry)
-    if tuple(geometry.dofs) != all_dofs:
-        keep = [all_dofs.index(d) for d in geometry.dofs]
-        id_moments_Nm = np.asarray(id_moments_Nm, dtype=float).reshape(len(id_time_s), -1)[:, keep]
-    params = params.subset(geometry.muscles)
-    inputs = prepare_inputs(geometry, id_time_s, id_moments_Nm, ik_time_s=ik_time_s,
-                            filter_inputs=filter_inputs, mesh_frequency_hz=mesh_frequency_hz,
-                            sources=dict(sources or {}))
-    if check_units:
-        check_moment_magnitudes(inputs.moments_frames_Nm, inputs.dofs, inputs.moment_arms_frames_m,
-                                params.max_isometric_force_N, (sources or {}).get("id", "inverse dynamics"),
-                                options.optimal_reserve_Nm)
-    so = static_optimisation(inputs, params)
+    inputs, params, so = prepare_trial(geometry, params, id_time_s, id_moments_Nm, ik_time_s=ik_time_s,
+                                       options=options, sources=sources, check_units=check_units,
+                                       filter_inputs=filter_inputs, mesh_frequency_hz=mesh_frequency_hz)
     if warm_start is None:
         guess = initial_guess(inputs, params, so)
     else:
@@ -120,10 +131,8 @@ def solve_with_parameters(
         options = options.with_(ipopt={"mu_init": WARM_START_MU_INIT, **options.ipopt})
     t_prep = _time.perf_counter() - t_start
     ocp = solve_ocp(inputs, params, guess, options)
-    from .. import __version__
-
     summary = {
-        **ipopt_statistics(ocp),
+        **RunRecord.from_result(ocp, sources).to_dict(),
         "preparation_time_s": t_prep,
         "problem_size": {"variables": ocp.n_variables, "equality_constraints": ocp.n_constraints},
         "time_window_s": list(inputs.window_s),
@@ -140,14 +149,7 @@ def solve_with_parameters(
                               if filter_inputs else "none",
                               "mesh_intervals_per_second": mesh_frequency_hz, "interpolation": "not-a-knot cubic spline"},
         "inputs": {k: str(v) for k, v in (sources or {}).items()},
-        "software": {"musclemetab": __version__, "python": platform.python_version()},
     }
-    try:
-        import casadi
-
-        summary["software"]["casadi"] = casadi.__version__
-    except Exception:  # pragma: no cover
-        pass
     solution = build_solution(inputs, params, ocp, summary)
     solution.summary["total_time_s"] = _time.perf_counter() - t_start
     return solution
@@ -210,6 +212,8 @@ def solve_files(
     cache_dir: str | os.PathLike | None = None,
     check_units: bool = True,
     warm_start: Solution | None = None,
+    exclude_muscles: Sequence[str] = (),
+    exclude_missing_ok: bool = False,
 ) -> Solution:
     """Solve from files: model ``.osim``, IK ``.mot`` and ID ``.sto`` (or ground forces).
 
@@ -219,7 +223,8 @@ def solve_files(
     and ``external_loads`` (an OpenSim ExternalLoads file), the inverse dynamics is computed
     by OpenSim over the window (:func:`musclemetab.external_loads.compute_inverse_dynamics`);
     its path is ``solution.summary["inputs"]["id"]``. The mesh has ``mesh_frequency_hz``
-    intervals per second (the study's 100 by default).
+    intervals per second (the study's 100 by default). ``exclude_muscles`` leaves muscles out of
+    the problem (e.g. one whose fibre cannot reach force equilibrium within the bounds).
 
     The inputs are checked (columns, units, time ranges) before the geometry is computed.
     """
@@ -282,6 +287,19 @@ def solve_files(
     if keep.size != len(geometry.time):
         geometry = _Geometry(np.asarray(geometry.time)[keep], geometry.muscles, geometry.dofs,
                              np.asarray(geometry.lmt_m)[keep], np.asarray(geometry.moment_arms_m)[keep])
+    if exclude_muscles:
+        from ..errors import UnknownMuscleError
+
+        unknown = [m for m in exclude_muscles if m not in geometry.muscles]
+        exclude_muscles = [m for m in exclude_muscles if m in geometry.muscles]
+        if unknown and not exclude_missing_ok:
+            raise UnknownMuscleError(
+                f"--exclude-muscles: {', '.join(unknown)} {'is' if len(unknown) == 1 else 'are'} not among the "
+                f"muscles of the problem ({', '.join(geometry.muscles[:8])}, ...); check the names and the side"
+            )
+        kept = [i for i, m in enumerate(geometry.muscles) if m not in set(exclude_muscles)]
+        geometry = _Geometry(np.asarray(geometry.time), [geometry.muscles[i] for i in kept], geometry.dofs,
+                             np.asarray(geometry.lmt_m)[:, kept], np.asarray(geometry.moment_arms_m)[:, :, kept])
     t_geometry = _time.perf_counter() - t0
     import casadi  # noqa: F401  (imported while the worker answers)
     import scipy.interpolate  # noqa: F401
@@ -304,6 +322,8 @@ def solve_files(
     )
     solution.summary["geometry_time_s"] = t_geometry
     solution.summary["side"] = side
+    if exclude_muscles:
+        solution.summary["excluded_muscles"] = list(exclude_muscles)
     if trial_window.source != "inverse-kinematics file":
         solution.summary["window"] = trial_window.record()
     if id_record is not None:
@@ -353,3 +373,15 @@ class _Background:
         if self._error is not None:
             raise self._error
         return self._value
+
+
+def muscles_at_fibre_length_bound(solution: Solution, tolerance: float = 1e-3) -> list[str]:
+    """Muscles whose normalised fibre length reaches the problem's upper bound somewhere.
+
+    In an infeasible solve these are the usual culprits: a muscle-tendon unit longer than its
+    tendon slack length plus the longest fibre allowed, whose tendon cannot stretch enough.
+    """
+    from .problem import FIBRE_LENGTH_BOUNDS
+
+    top = np.max(np.asarray(solution.lm_norm, dtype=float), axis=0)
+    return [m for m, v in zip(solution.muscles, top) if v >= FIBRE_LENGTH_BOUNDS[1] - tolerance]
