@@ -1,12 +1,13 @@
 """Small test models built with OpenSim's API (run as a script in its own process: OpenSim only).
 
-``python tests/opensim_models.py SOURCE.osim OUT.osim`` writes a sagittal-plane, lumped-muscle
+``python tests/opensim_models.py SOURCE.osim OUT.osim [--right-only]`` writes a sagittal-plane, lumped-muscle
 version of a gait2392-family model, the layout of OpenSim's gait10dof18musc: every coordinate
 locked except pelvis tilt and its two sagittal translations and each leg's hip flexion, knee and
 ankle; the 92 muscles replaced by 9 per leg (``hamstrings``, ``bifemsh``, ``glut_max``,
 ``iliopsoas``, ``rect_fem``, ``vasti``, ``gastroc``, ``soleus``, ``tib_ant``), each with the path
 of its first part and the summed maximal isometric force of its parts. The right leg's muscles
-are ``DeGrooteFregly2016Muscle``, the left leg's ``Millard2012EquilibriumMuscle``.
+are ``DeGrooteFregly2016Muscle``, the left leg's ``Millard2012EquilibriumMuscle``; with
+``--right-only`` the left leg has no muscles.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ LUMPED = {
 }
 
 
-def lumped_sagittal(source: str, out: str) -> None:
+def lumped_sagittal(source: str, out: str, right_only: bool = False) -> None:
     import opensim as osim
 
     osim.Logger.setLevelString("error")
@@ -40,7 +41,8 @@ def lumped_sagittal(source: str, out: str) -> None:
     forces = model.updForceSet()
     old = {forces.get(i).getName(): osim.Muscle.safeDownCast(forces.get(i)) for i in range(forces.getSize())}
     new = []
-    for side, kind in (("r", osim.DeGrooteFregly2016Muscle), ("l", osim.Millard2012EquilibriumMuscle)):
+    sides = (("r", osim.DeGrooteFregly2016Muscle), ("l", osim.Millard2012EquilibriumMuscle))
+    for side, kind in sides[:1] if right_only else sides:
         for name, parts in LUMPED.items():
             first = old[f"{parts[0]}_{side}"]
             mus = kind()
@@ -63,4 +65,4 @@ def lumped_sagittal(source: str, out: str) -> None:
 
 
 if __name__ == "__main__":
-    lumped_sagittal(sys.argv[1], sys.argv[2])
+    lumped_sagittal(sys.argv[1], sys.argv[2], right_only="--right-only" in sys.argv[3:])

@@ -49,8 +49,8 @@ W_EMG, W_ACT, W_RES, W_VM = 10.0, 0.1, 1000.0, 0.01
 
 # --------------------------------------------------------------------------- the solve (once)
 @pytest.fixture(scope="module")
-def cache_dir(tmp_path_factory):
-    return tmp_path_factory.mktemp("emg_ten_geometry")
+def cache_dir(geometry_cache):
+    return geometry_cache
 
 
 @pytest.fixture(scope="module")

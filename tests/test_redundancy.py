@@ -46,11 +46,6 @@ def solve_root(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
-def geometry_cache(tmp_path_factory):
-    return tmp_path_factory.mktemp("geometry")
-
-
-@pytest.fixture(scope="session")
 def geometries(example, geometry_cache):
     """Geometry of the three trials (OpenSim in its worker; cached for the CLI runs)."""
     from musclemetab.geometry import compute_geometry

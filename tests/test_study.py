@@ -255,8 +255,12 @@ def test_dask_cluster_gives_the_process_pool_table(pool_run, example, tmp_path):
     pd.testing.assert_frame_equal(a, b, check_dtype=False, rtol=1e-8)
 
 
-def test_bad_scheduler_address_is_an_option_error(pool_run, tmp_path):
+def test_bad_scheduler_address_is_an_option_error(pool_run, tmp_path, monkeypatch):
     pytest.importorskip("distributed")
+    import musclemetab.study.runner as runner
+
+    # port 1 refuses at once; Dask retries until its connect timeout, so keep that short
+    monkeypatch.setattr(runner, "SCHEDULER_TIMEOUT_S", 0.5)
     study, _ = pool_run
     with pytest.raises(OptionError, match="scheduler"):
         run_study(study, scheduler="tcp://127.0.0.1:1", progress=False, force=True)

@@ -91,13 +91,16 @@ def test_calibration_coordinates_and_trials_found_by_content(example, gait2392, 
 @pytest.fixture(scope="session")
 def lumped_model(gait2392, tmp_path_factory):
     """gait2392's subject as a sagittal 18-muscle model (DeGrooteFregly right, Millard left)."""
+    return _build(gait2392, tmp_path_factory.mktemp("lumped") / "lumped2d.osim")
+
+
+def _build(gait2392, out, *flags):
     import subprocess
     import sys
     from pathlib import Path
 
-    out = tmp_path_factory.mktemp("lumped") / "lumped2d.osim"
-    subprocess.run([sys.executable, str(Path(__file__).with_name("opensim_models.py")), str(gait2392.model), str(out)],
-                   check=True, capture_output=True)
+    subprocess.run([sys.executable, str(Path(__file__).with_name("opensim_models.py")), str(gait2392.model), str(out),
+                    *flags], check=True, capture_output=True)
     return out
 
 
@@ -135,3 +138,86 @@ def test_lumped_2d_model_with_degroote_and_millard_muscles_both_legs(lumped_mode
         total = (one["r"].whole_body[m].one_leg_mean_W + one["l"].whole_body[m].one_leg_mean_W) / gait2392.body_mass_kg
         assert row["mean_W_per_kg"] == pytest.approx(total + 1.2, rel=1e-9)
         assert 2.6 < row["mean_W_per_kg"] < 15.8, m
+
+
+# ------------------------------------------------------------------ a two-subject study
+def test_two_subject_study_different_models_and_sides(example, gait2392, lumped_model, tmp_path, capsys):
+    """The study's subject (Rajagopal model, right leg, ID file) and gait2392's subject (a lumped
+    sagittal model, left leg, cycle and inverse dynamics from the ground forces) in one study file,
+    run end to end by ``musclemetab run`` with the report."""
+    import pandas as pd
+
+    study = tmp_path / "study.toml"
+    study.write_text(f"""
+name = "two subjects"
+output = "out"
+workflows = ["effort-gen"]
+models = ["UM10", "BH04"]
+
+[[subjects]]
+name = "example"
+model = "{example.model}"
+body_mass_kg = {example.body_mass_kg}
+height_m = {example.height_m}
+
+[[subjects.trials]]
+name = "normal"
+ik = "{example.ik['normal']}"
+id = "{example.id['normal']}"
+
+[[subjects]]
+name = "gait2392"
+model = "{lumped_model}"
+body_mass_kg = {gait2392.body_mass_kg}
+height_m = 1.8
+side = "l"
+
+[[subjects.trials]]
+name = "walk1"
+ik = "{gait2392.ik}"
+external_loads = "{gait2392.external_loads}"
+cycle = "auto"
+""")
+    assert _cli("run", study, "--workers", 2, "--report", "--no-progress") == 0
+    out = tmp_path / "out"
+    res = pd.read_csv(out / "results.csv")
+    assert sorted(set(res["subject"])) == ["example", "gait2392"] and len(res) == 4
+    unit = out / "units" / "gait2392" / "walk1" / "effort-gen"
+    s = json.loads((unit / "summary.json").read_text())
+    assert s["side"] == "l" and s["dofs"] == ["ankle_angle_l", "knee_angle_l", "hip_flexion_l"]
+    assert s["window"]["gait_cycle"]["start_s"] == pytest.approx(1.247, abs=3e-3)
+    assert (unit / "inverse_dynamics.sto").is_file()
+    ex = json.loads((out / "units" / "example" / "normal" / "effort-gen" / "summary.json").read_text())
+    assert ex["side"] == "r" and len(ex["muscles"]) == 40
+    assert (out / "report.html").is_file()
+    wkg = [c for c in res.columns if "W_per_kg" in c]
+    assert wkg and res[wkg[0]].between(2.6, 15.8).all()
+
+
+def test_bad_input_no_muscles_on_the_side_and_unknown_muscles(gait2392, lumped_both, tmp_path, capsys):
+    model = _build(gait2392, tmp_path / "right_only.osim", "--right-only")
+    out = tmp_path / "out"
+    cases = [
+        (["solve", "--model", model, "--ik", gait2392.ik, "--external-loads", gait2392.external_loads,
+          "--cycle", "auto", "--side", "l", "--out", out], "no muscle has a moment arm above 0.1 mm"),
+        (["solve", "--model", model, "--ik", gait2392.ik, "--external-loads", gait2392.external_loads,
+          "--cycle", "auto", "--exclude-muscles", "tfl_r", "--out", out], "tfl_r is not among the muscles"),
+        (["metabolics", "--solution", _renamed_muscle(lumped_both / "r", tmp_path / "renamed"), "--mass", 72.6,
+          "--height", 1.8, "--strict", "--out", out], "muscle mystery_r not in the anatomical muscle table (--strict)"),
+    ]
+    for argv, message in cases:
+        code = _cli(*argv)
+        errors = [line for line in capsys.readouterr().err.splitlines() if line.startswith("musclemetab: error:")]
+        assert code != 0 and len(errors) == 1 and message in errors[0], (argv[0], errors)
+        assert not out.exists()
+
+
+def _renamed_muscle(solution, folder):
+    """A copy of a solution folder in which vasti_r is called mystery_r (a muscle no table knows)."""
+    import shutil
+
+    shutil.copytree(solution, folder)
+    for name in ("summary.json", "solution.sto"):
+        path = folder / name
+        path.write_text(path.read_text().replace("vasti_r", "mystery_r"))
+    return folder

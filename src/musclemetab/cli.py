@@ -49,10 +49,11 @@ def add_geometry_parser(sub) -> None:
     p.add_argument("--ik", required=True, metavar="IK.mot", help="inverse kinematics motion")
     p.add_argument(
         "--dofs", nargs="+", metavar="DOF",
-        help="coordinates for the moment arms (default: ankle_angle, knee_angle, hip_flexion, "
-        "hip_adduction, hip_rotation of --side)",
+        help="coordinates for the moment arms (default: the unlocked coordinates of the --side leg's joints, "
+        "from the model)",
     )
-    p.add_argument("--side", default="r", choices=("r", "l"), help="leg (default r)")
+    p.add_argument("--side", default="r", choices=("r", "l", "both"),
+                   help="leg (default r); both: DIR/r and DIR/l")
     p.add_argument("--muscles", nargs="+", metavar="MUSCLE", help="muscles (default: those spanning the DOFs)")
     p.add_argument(
         "--method", default="velocity", choices=("velocity", "opensim", "finite_difference"),
@@ -68,16 +69,23 @@ def geometry_command(args) -> int:
     from .io import check_output_folder
 
     check_output_folder(args.out)
+    from pathlib import Path
+
+    from .errors import OptionError
+
     dofs = [d for item in args.dofs for d in _dof_list(item)] if args.dofs else None
-    geom = compute_geometry(
-        args.model, args.ik, dofs=dofs, side=args.side, muscles=args.muscles,
-        use_cache=not args.no_cache, method=args.method,
-    )
-    files = write_geometry(geom, args.out)
-    print(
-        f"geometry: {len(geom.muscles)} muscles x {len(geom.dofs)} DOFs x {len(geom.time)} frames"
-        f"{' (cached)' if geom.source.get('cached') else ''} -> {args.out} ({len(files)} files)"
-    )
+    if args.side == "both" and (dofs or args.muscles):
+        raise OptionError("--dofs and --muscles name one leg's; with --side both leave them out")
+    sides = ("r", "l") if args.side == "both" else (args.side,)
+    geoms = {s: compute_geometry(args.model, args.ik, dofs=dofs, side=s, muscles=args.muscles,
+                                 use_cache=not args.no_cache, method=args.method) for s in sides}
+    for side, geom in geoms.items():
+        out = Path(args.out) / side if args.side == "both" else Path(args.out)
+        files = write_geometry(geom, out)
+        print(
+            f"geometry: side {side}, {len(geom.muscles)} muscles x {len(geom.dofs)} DOFs x {len(geom.time)} frames"
+            f"{' (cached)' if geom.source.get('cached') else ''} -> {out} ({len(files)} files)"
+        )
     return 0
 
 

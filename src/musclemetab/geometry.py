@@ -178,8 +178,9 @@ def compute_geometry(
         The IK motion (``.mot``); rotational coordinates in degrees when its header says
         ``inDegrees=yes`` (coupled coordinates are computed from their couplers).
     dofs
-        DOFs for the moment arms; default the five of ``side``
-        (ankle, knee, hip flexion, hip adduction, hip rotation).
+        DOFs for the moment arms; default the DOFs of ``side`` found in the model's joint
+        tree (:func:`musclemetab.layout.side_dofs`; for the study's model the five of the
+        study: ankle, knee, hip flexion, hip adduction, hip rotation).
     muscles
         Muscle names; default: the muscles spanning the DOFs (see module docstring).
     cache_dir
@@ -203,7 +204,11 @@ def compute_geometry(
     if method not in MOMENT_ARM_METHODS:
         raise OptionError(f"moment-arm method must be one of {', '.join(MOMENT_ARM_METHODS)}, not {method!r}")
     model_path, ik_path = Path(model_path), Path(ik_path)
-    dofs = list(dofs) if dofs else default_dofs(side)
+    if not dofs:
+        from .layout import read_layout, side_dofs
+
+        dofs = side_dofs(read_layout(model_path), side)
+    dofs = list(dofs)
     if len(set(dofs)) != len(dofs):
         raise OptionError(f"DOF list {dofs} names a DOF twice")
     from .model import check_model_path
@@ -349,7 +354,7 @@ def write_geometry(geom: Geometry, out_dir: str | os.PathLike) -> list[Path]:
 
     All files are written to a temporary folder first and moved into place together.
     """
-    from .io import atomic_directory, storage_from_arrays
+    from .io import atomic_directory, check_inside, storage_from_arrays
 
     out_dir = Path(out_dir)
     names = list(geom.muscles)
@@ -359,6 +364,7 @@ def write_geometry(geom: Geometry, out_dir: str | os.PathLike) -> list[Path]:
         write_storage(tmp / "muscle_tendon_lengths.sto", df, comments=["units=m"])
         written.append(out_dir / "muscle_tendon_lengths.sto")
         for j, d in enumerate(geom.dofs):
+            check_inside(tmp, f"moment_arms_{d}.sto", f"the moment arms about '{d}'")
             df = storage_from_arrays(geom.time, names=names, data=geom.moment_arms_m[:, j, :], name=f"moment_arms_{d}")
             write_storage(tmp / f"moment_arms_{d}.sto", df, comments=["units=m"])
             written.append(out_dir / f"moment_arms_{d}.sto")

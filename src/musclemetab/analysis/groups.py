@@ -58,6 +58,7 @@ __all__ = [
     "DEFAULT_THRESHOLD_M",
     "dof_group_pair",
     "group_weights",
+    "has_function_group",
     "group_rates",
     "group_shares",
     "muscle_membership",
@@ -116,6 +117,15 @@ def dof_group_pair(dof: str, dof_groups: Mapping[str, tuple[str, str]] | None = 
             f"the groups of DOF '{dof}' must be two of {', '.join(GROUPS)}, not {pair!r}"
         )
     return pair  # type: ignore[return-value]
+
+
+def has_function_group(dof: str, dof_groups: Mapping[str, tuple[str, str]] | None = None) -> bool:
+    """Whether :func:`dof_group_pair` places the DOF (a subtalar or toe joint has no group)."""
+    try:
+        dof_group_pair(dof, dof_groups)
+    except OptionError:
+        return False
+    return True
 
 
 def _moment_arms(moment_arms_m, dofs) -> tuple[np.ndarray, list[str]]:

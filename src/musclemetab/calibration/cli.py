@@ -36,9 +36,9 @@ def add_calibrate_parser(sub) -> None:
         "of joint angles (deg) with the same name; each trial is recognised by its only non-zero "
         "'<coordinate>_moment' column (ankle, knee or hip flexion of the side), whatever the file names",
     )
-    p.add_argument("--side", choices=("r", "l"),
-                   help="leg: its hip, knee and ankle flexion coordinates are found from the model's joint tree "
-                   "(default: the study's right-leg coordinates ankle_angle_r, knee_angle_r, hip_flexion_r)")
+    p.add_argument("--side", choices=("r", "l"), default="r",
+                   help="leg (default r): its hip, knee and ankle flexion coordinates are found from the model's "
+                   "joint tree")
     p.add_argument(
         "--tendon-stiffness", nargs="+", type=_kt_item, metavar="MUSCLE=KT",
         help="override the normalised tendon stiffness of some muscles (default 20 for soleus and "
@@ -57,7 +57,7 @@ def calibrate_command(args) -> int:
     check_output_folder(args.out)
     kt = dict(args.tendon_stiffness) if getattr(args, "tendon_stiffness", None) else None
     result = calibrate_passive(args.model, args.trials, tendon_stiffness=kt, use_cache=not args.no_cache,
-                               side=getattr(args, "side", None))
+                               side=getattr(args, "side", "r"))
     write_calibration(result, args.out)
     rms_g = result.generic.rms_Nm(result.data)
     rms_c = result.calibrated.rms_Nm(result.data)

@@ -282,7 +282,7 @@ def load_calibration_data(
     *,
     tendon_stiffness: Mapping[str, float] | None = None,
     use_cache: bool = True,
-    side: str | None = None,
+    side: str = "r",
 ) -> CalibrationData:
     """Read the three trials, compute their geometry with OpenSim, read the Hill parameters.
 
@@ -292,14 +292,14 @@ def load_calibration_data(
 
     ``tendon_stiffness`` overrides ``kT`` for some muscles (default
     :func:`default_tendon_stiffness`). ``side`` (``"r"``/``"l"``): the target DOFs are that
-    side's flexion coordinates of the model (:func:`calibration_dofs`); default the study's
-    right-leg DOFs (:data:`CALIBRATION_JOINTS`).
+    side's flexion coordinates of the model (:func:`calibration_dofs`; for the study's model
+    and the right side, :data:`CALIBRATION_JOINTS`).
     """
     from ..geometry import compute_geometry
     from ..io import read_storage
     from ..model import read_muscle_parameters
 
-    joints = CALIBRATION_JOINTS if side is None else calibration_dofs(model_path, side)
+    joints = calibration_dofs(model_path, side)
     files = trial_files(trials, joints)
     out = []
     for joint, dof in joints.items():
@@ -643,7 +643,7 @@ def calibrate_passive(
     tendon_stiffness: Mapping[str, float] | None = None,
     use_cache: bool = True,
     print_level: int = 0,
-    side: str | None = None,
+    side: str = "r",
 ) -> CalibrationResult:
     """Load the trials, solve the calibration NLP and the generic-parameter reference (``side``: see
     :func:`load_calibration_data`)."""

@@ -79,6 +79,10 @@ def add_metabolics_parser(subparsers) -> None:
 
 def metabolics_command(args) -> int:
     """Run the ``metabolics`` subcommand (``args`` from :func:`add_metabolics_parser`)."""
+    import warnings
+
+    from ..errors import MuscleTableWarning
+    from ..properties import unplaced_muscles, warn_unplaced
     from .registry import parse_models
     from .solution import metabolics_from_solution, read_solution_states, write_metabolics
 
@@ -98,14 +102,18 @@ def metabolics_command(args) -> int:
         params = read_muscle_parameters(args.model)
     legs = 1 if len(folders) > 1 else 2
     results = {}
-    for side, folder in folders.items():
-        states = read_solution_states(folder, require_success=not args.allow_failed)
-        if params is not None:
-            _note_parameter_differences(states, params, args.model)
-        results[side] = metabolics_from_solution(
-            states, args.mass, args.height, models=models, muscle_parameters=params, basal=args.basal,
-            speed_m_per_s=args.speed, legs=legs, muscle_properties=args.muscle_properties, strict=args.strict,
-        )
+    with warnings.catch_warnings():  # one warning for both legs, below
+        warnings.simplefilter("ignore", MuscleTableWarning)
+        for side, folder in folders.items():
+            states = read_solution_states(folder, require_success=not args.allow_failed)
+            if params is not None:
+                _note_parameter_differences(states, params, args.model)
+            results[side] = metabolics_from_solution(
+                states, args.mass, args.height, models=models, muscle_parameters=params, basal=args.basal,
+                speed_m_per_s=args.speed, legs=legs, muscle_properties=args.muscle_properties, strict=args.strict,
+            )
+    warn_unplaced(list(dict.fromkeys(
+        m for r in results.values() for m in unplaced_muscles(r.muscles, args.muscle_properties))))
     if legs == 2:
         (side, result), = results.items()
         files = write_metabolics(result, args.out)

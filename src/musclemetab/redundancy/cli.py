@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..errors import OptionError, SolverError
+from ..errors import OptionError, SolverError, UnknownMuscleError
 
 __all__ = ["add_solve_parser", "solve_command"]
 
@@ -68,6 +68,9 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
                    help="solve a gait cycle of the leg, heel strike to heel strike from the ground forces, padded "
                    "by 0.05 s at each end (clipped at the edge of the data, with a warning): auto = the first, "
                    "N = the N-th complete cycle")
+    p.add_argument("--exclude-muscles", nargs="+", metavar="MUSCLE",
+                   help="leave these muscles out of the problem (e.g. a muscle that cannot reach force equilibrium "
+                   "within the fibre-length bounds, named by a failed solve)")
     p.add_argument("--mesh-frequency", type=float, default=100.0, metavar="PER_S",
                    help="mesh intervals per second (default 100, the study's)")
     p.add_argument("--workflow", default="effort-gen", choices=("effort-gen", "effort-cal", "effort-ten", "emg-ten"),
@@ -168,6 +171,7 @@ def solve_command(args) -> int:
     sides = ("r", "l") if args.side == "both" else (args.side,)
     from pathlib import Path
 
+    excluded = [m for item in (args.exclude_muscles or []) for m in item.replace(",", " ").split()]
     # every leg is solved before anything is written, so bad input on one leg leaves no output
     solutions = {}
     for side in sides:
@@ -177,7 +181,11 @@ def solve_command(args) -> int:
             mesh_frequency_hz=args.mesh_frequency,
             passive=args.passive, tendon_stiffness=kt, tendon_stiffness_file=args.parameters,
             options=options, cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, warm_start=warm,
+            exclude_muscles=excluded, exclude_missing_ok=args.side == "both",
         )
+    unused = [m for m in excluded if not any(m in x.summary.get("excluded_muscles", []) for x in solutions.values())]
+    if unused:
+        raise UnknownMuscleError(f"--exclude-muscles: {', '.join(unused)} is in neither leg's problem; check the names")
     for side, solution in solutions.items():
         out = Path(args.out) / side if args.side == "both" else Path(args.out)
         write_solution_folder(solution, out)
@@ -187,8 +195,8 @@ def solve_command(args) -> int:
         if not solution.success:
             raise SolverError(
                 f"the {args.workflow} solve did not converge (IPOPT status '{s['status']}' after "
-                f"{s['iterations']} iterations): {failure_advice(s['status'])}. The unconverged result is in "
-                f"{out} with \"success\": false"
+                f"{s['iterations']} iterations): {failure_advice(s['status'])}.{_bound_note(solution)} The "
+                f"unconverged result is in {out} with \"success\": false"
             )
         worst_reserve = max(s["reserve_rms_Nm"].values()) if s["reserve_rms_Nm"] else 0.0
         print(
@@ -199,6 +207,16 @@ def solve_command(args) -> int:
             f"{worst_reserve:.3g} N m -> {out}"
         )
     return 0
+
+
+def _bound_note(solution) -> str:
+    from .solve import muscles_at_fibre_length_bound
+
+    at = muscles_at_fibre_length_bound(solution)
+    if not at:
+        return ""
+    return (f" Fibres at their longest allowed length (1.7 optimal lengths): {', '.join(at)}; if the model's "
+            f"tendon slack length is too short for them, leave them out with --exclude-muscles {' '.join(at)}.")
 
 
 def write_solution_folder(solution, out) -> None:

@@ -212,6 +212,8 @@ def solve_files(
     cache_dir: str | os.PathLike | None = None,
     check_units: bool = True,
     warm_start: Solution | None = None,
+    exclude_muscles: Sequence[str] = (),
+    exclude_missing_ok: bool = False,
 ) -> Solution:
     """Solve from files: model ``.osim``, IK ``.mot`` and ID ``.sto`` (or ground forces).
 
@@ -221,7 +223,8 @@ def solve_files(
     and ``external_loads`` (an OpenSim ExternalLoads file), the inverse dynamics is computed
     by OpenSim over the window (:func:`musclemetab.external_loads.compute_inverse_dynamics`);
     its path is ``solution.summary["inputs"]["id"]``. The mesh has ``mesh_frequency_hz``
-    intervals per second (the study's 100 by default).
+    intervals per second (the study's 100 by default). ``exclude_muscles`` leaves muscles out of
+    the problem (e.g. one whose fibre cannot reach force equilibrium within the bounds).
 
     The inputs are checked (columns, units, time ranges) before the geometry is computed.
     """
@@ -284,6 +287,19 @@ def solve_files(
     if keep.size != len(geometry.time):
         geometry = _Geometry(np.asarray(geometry.time)[keep], geometry.muscles, geometry.dofs,
                              np.asarray(geometry.lmt_m)[keep], np.asarray(geometry.moment_arms_m)[keep])
+    if exclude_muscles:
+        from ..errors import UnknownMuscleError
+
+        unknown = [m for m in exclude_muscles if m not in geometry.muscles]
+        exclude_muscles = [m for m in exclude_muscles if m in geometry.muscles]
+        if unknown and not exclude_missing_ok:
+            raise UnknownMuscleError(
+                f"--exclude-muscles: {', '.join(unknown)} {'is' if len(unknown) == 1 else 'are'} not among the "
+                f"muscles of the problem ({', '.join(geometry.muscles[:8])}, ...); check the names and the side"
+            )
+        kept = [i for i, m in enumerate(geometry.muscles) if m not in set(exclude_muscles)]
+        geometry = _Geometry(np.asarray(geometry.time), [geometry.muscles[i] for i in kept], geometry.dofs,
+                             np.asarray(geometry.lmt_m)[:, kept], np.asarray(geometry.moment_arms_m)[:, :, kept])
     t_geometry = _time.perf_counter() - t0
     import casadi  # noqa: F401  (imported while the worker answers)
     import scipy.interpolate  # noqa: F401
@@ -306,6 +322,8 @@ def solve_files(
     )
     solution.summary["geometry_time_s"] = t_geometry
     solution.summary["side"] = side
+    if exclude_muscles:
+        solution.summary["excluded_muscles"] = list(exclude_muscles)
     if trial_window.source != "inverse-kinematics file":
         solution.summary["window"] = trial_window.record()
     if id_record is not None:
@@ -355,3 +373,15 @@ class _Background:
         if self._error is not None:
             raise self._error
         return self._value
+
+
+def muscles_at_fibre_length_bound(solution: Solution, tolerance: float = 1e-3) -> list[str]:
+    """Muscles whose normalised fibre length reaches the problem's upper bound somewhere.
+
+    In an infeasible solve these are the usual culprits: a muscle-tendon unit longer than its
+    tendon slack length plus the longest fibre allowed, whose tendon cannot stretch enough.
+    """
+    from .problem import FIBRE_LENGTH_BOUNDS
+
+    top = np.max(np.asarray(solution.lm_norm, dtype=float), axis=0)
+    return [m for m, v in zip(solution.muscles, top) if v >= FIBRE_LENGTH_BOUNDS[1] - tolerance]

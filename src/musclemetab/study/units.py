@@ -470,7 +470,10 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
     times["metabolics_s"] = time.perf_counter() - t1
 
     t2 = time.perf_counter()
-    geometry = compute_geometry(subject.model, trial.ik, dofs=list(solved.dofs))
+    from ..analysis.groups import has_function_group
+
+    # DOFs with no muscle function group (a subtalar or toe joint) stay out of the group analysis
+    geometry = compute_geometry(subject.model, trial.ik, dofs=[d for d in solved.dofs if has_function_group(d)])
     from ..analysis.unit import analyse_metabolics, filtered_moment_arms
 
     tg, r = filtered_moment_arms(geometry)
@@ -502,3 +505,4 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         "large_reserve": bool(solve_summary.get("large_reserve", False)),
         "reserve_share_of_peak_moment": solve_summary.get("reserve_share_of_peak_moment"),
     }
+
