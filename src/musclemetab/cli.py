@@ -23,6 +23,7 @@ _SUBCOMMANDS = (
     ("musclemetab.redundancy.cli", "add_solve_parser"),
     ("musclemetab.redundancy.estimate_cli", "add_estimate_parser"),
     ("musclemetab.metabolics.cli", "add_metabolics_parser"),
+    ("musclemetab.analysis.cli", "add_analyse_parser"),
     ("musclemetab.calibration.cli", "add_calibrate_parser"),
     ("musclemetab.study.cli", "add_run_parser"),
     ("musclemetab.study.cli", "add_demo_parser"),

@@ -394,10 +394,13 @@ def _copy_solution(source: Path, target: Path) -> None:
         shutil.copyfile(source / name, target / name)
 
 
-def _cycle_source(trial: Trial) -> str:
-    """Where the trial's gait events come from (:func:`musclemetab.study.events.trial_cycle`)."""
+def _cycle_source(trial: Trial, recorded: dict | None = None) -> str:
+    """Where the trial's gait events come from (:func:`musclemetab.study.events.trial_cycle`,
+    or ``recorded``: the gait cycle the solve found, from its summary's window)."""
     if all(v is not None for v in (trial.start_s, trial.toe_off_s, trial.end_s)):
         return "study file"
+    if recorded and trial.start_s is None and trial.end_s is None:
+        return f"ground reaction forces ({recorded.get('source') or 'found by the solve'})"
     if trial.grf is not None:
         return "ground reaction forces"
     return "estimated from the IK window and the ankle moment (no ground reaction forces)"
@@ -497,9 +500,9 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         "speed_m_per_s": speed,
         "measured_W_per_kg": measured,
         "cycle": {"start_s": cycle.start_s, "toe_off_s": cycle.toe_off_s, "end_s": cycle.end_s},
-        "cycle_source": _cycle_source(trial),
+        "cycle_source": _cycle_source(trial, recorded),
         "speed_source": "study file" if trial.speed_m_per_s is not None else (
-            "estimated from the pelvis displacement over the cycle (IK)"),
+            "not available" if speed is None else "estimated from the pelvis displacement over the cycle (IK)"),
         "toe_off_pct": float(100.0 * (cycle.toe_off_s - cycle.start_s) / (cycle.end_s - cycle.start_s)),
         "n_nodes": int(np.asarray(result.time_s).size),
         "large_reserve": bool(solve_summary.get("large_reserve", False)),
