@@ -15,6 +15,9 @@ import pytest
 from musclemetab.errors import DataMismatchError, InputFileError, ModelError, UnknownCoordinateError
 
 
+pytestmark = pytest.mark.opensim
+
+
 @pytest.fixture(scope="module")
 def layout(gait2392):
     from musclemetab.layout import read_layout
@@ -165,6 +168,7 @@ def left_solution(both_solutions):
     return both_solutions / "l"
 
 
+@pytest.mark.slow
 def test_both_legs_effort_gen(both_solutions):
     cycles = {"r": (0.618, 1.853), "l": (1.247, 2.460)}  # README
     for side in "rl":
@@ -198,6 +202,7 @@ GAIT2392_HEIGHT_M = 1.8
 PLAUSIBLE_W_PER_KG = (4.1 - 3 * 0.5, 12.2 + 3 * 1.2)
 
 
+@pytest.mark.slow
 def test_metabolics_phases_and_groups_of_both_legs(both_solutions, gait2392):
     from musclemetab.analysis.events import GaitCycle
     from musclemetab.analysis.unit import analyse_solution_folder
