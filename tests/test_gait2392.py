@@ -227,9 +227,10 @@ def test_metabolics_phases_and_groups_of_both_legs(both_solutions, gait2392):
         with pytest.warns(UserWarning, match="not in the anatomical muscle table"):
             a = analyse_solution_folder(folder, geo, GaitCycle(c["start_s"], c["toe_off_s"], c["end_s"]),
                                         gait2392.body_mass_kg, GAIT2392_HEIGHT_M).summary.set_index("model")
-        np.testing.assert_allclose(a["stance_pct"] + a["swing_pct"], 100.0, atol=1e-9)
+        stance, swing = a["stance_energy_share_pct"], a["swing_energy_share_pct"]
+        np.testing.assert_allclose(stance + swing, 100.0, atol=1e-9)
         # EFFORT-GEN swing share of the study: 36.5 % (BH04), 36.7 % (HO06); a quarter to a half here
-        assert ((a["swing_pct"] > 25) & (a["swing_pct"] < 50)).all(), side
+        assert ((swing > 25) & (swing < 50)).all(), side
         shares = a[[col for col in a.columns if col.startswith("share_")]]
         np.testing.assert_allclose(shares.sum(axis=1), 100.0, atol=1e-6)
         assert (shares.drop(columns="share_other_pct") > 0).all().all()
