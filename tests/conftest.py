@@ -58,6 +58,118 @@ def demo(tmp_path_factory):
     return out, pd.read_csv(out / "results.csv")
 
 
+@pytest.fixture(scope="session")
+def geometry_cache(_isolated_cache) -> Path:
+    """The test session's geometry cache (``$MUSCLEMETAB_CACHE/geometry``), shared by every
+    test that computes the example subject's geometry: each trial goes through OpenSim once."""
+    from musclemetab.geometry import default_cache_dir
+
+    return default_cache_dir()
+
+
+_PLAIN = (str, int, float, bool, type(None))
+
+
+def _solve_key(func, args, kwargs) -> str | None:
+    """Content key of a solve call: input files by SHA-256, every other argument by value.
+
+    ``cache_dir`` (where the geometry is cached) does not change the result and is left out.
+    ``options=None`` and ``settings=None`` count as the defaults they stand for. ``None`` when
+    an argument is neither a file, a plain value, a list/tuple/dict of those nor a settings
+    dataclass (an in-memory object such as a warm start): such calls always solve.
+    """
+    import dataclasses
+    import hashlib
+    import inspect
+    import json
+
+    from musclemetab.io.atomic import file_sha256
+    from musclemetab.redundancy.emg_ten import EmgTenSettings
+    from musclemetab.redundancy.problem import SolverOptions
+
+    def plain(value):
+        if isinstance(value, (str, os.PathLike)) and Path(value).is_file():
+            return {"sha256": file_sha256(value)}
+        if isinstance(value, os.PathLike):
+            return os.fspath(value)
+        if isinstance(value, _PLAIN):
+            return value
+        if isinstance(value, (list, tuple)):
+            return [plain(v) for v in value]
+        if isinstance(value, dict) and all(isinstance(k, str) for k in value):
+            return {k: plain(v) for k, v in value.items()}
+        if isinstance(value, (SolverOptions, EmgTenSettings)):
+            return {type(value).__name__: plain(dataclasses.asdict(value))}
+        raise TypeError(type(value).__name__)
+
+    bound = inspect.signature(func).bind(*args, **kwargs)
+    bound.apply_defaults()
+    content = {"function": f"{func.__module__}.{func.__qualname__}"}
+    for name, value in bound.arguments.items():
+        if name == "cache_dir":
+            continue
+        if name == "options" and value is None:
+            value = SolverOptions()
+        if name == "settings" and value is None:
+            value = EmgTenSettings()
+        try:
+            content[name] = plain(value)
+        except TypeError:
+            return None
+    return hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()
+
+
+def _solved_once(solve):
+    """``solve`` with its results kept for the test session (see ``_each_problem_solved_once``)."""
+    import copy
+    import warnings
+
+    results: dict = {}
+
+    @functools.wraps(solve)
+    def solve_once(*args, **kwargs):
+        key = _solve_key(solve, args, kwargs)
+        if key is None:
+            return solve(*args, **kwargs)
+        if key not in results:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                result = solve(*args, **kwargs)
+            results[key] = (result, caught)
+        result, caught = results[key]
+        for w in caught:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        return copy.deepcopy(result)
+
+    return solve_once
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _each_problem_solved_once():
+    """Each muscle redundancy problem is solved once per test session (in this process).
+
+    The command line, the studies run in this process and the tests calling the package
+    solve the same example problems many times. :func:`solve_files` and
+    :func:`solve_emg_ten` keep their results here, keyed by the input files' content and
+    every setting (like the package's own caches); a repeated call gets a copy of the first
+    call's result and its warnings again. Calls with other inputs or settings, and calls that
+    raise, solve as usual. Worker processes of a study (``--workers 2``, Dask) solve for
+    themselves.
+    """
+    import musclemetab.redundancy as redundancy
+    import musclemetab.redundancy.emg_ten as emg_ten
+    import musclemetab.redundancy.solve as solve
+
+    solve_files = _solved_once(solve.solve_files)
+    solve_emg_ten = _solved_once(emg_ten.solve_emg_ten)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(solve, "solve_files", solve_files)
+        mp.setattr(redundancy, "solve_files", solve_files)
+        mp.setattr(emg_ten, "solve_emg_ten", solve_emg_ten)
+        mp.setattr(redundancy, "solve_emg_ten", solve_emg_ten)
+        yield
+
+
 @contextlib.contextmanager
 def loopback_mirror(files: dict, root: Path):
     """Serve ``{path under the server root: local file}`` over HTTP on 127.0.0.1.

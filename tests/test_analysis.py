@@ -344,11 +344,10 @@ TABLE_41 = {
 
 
 @pytest.mark.opensim
-def test_membership_table_matches_analysis_md(example, tmp_path_factory):
+def test_membership_table_matches_analysis_md(example, geometry_cache):
     from musclemetab.geometry import compute_geometry
 
-    cache = tmp_path_factory.mktemp("geometry")
-    geoms = [compute_geometry(example.model, example.ik[s], dofs=DOFS, cache_dir=cache)
+    geoms = [compute_geometry(example.model, example.ik[s], dofs=DOFS, cache_dir=geometry_cache)
              for s in ("slow", "normal", "fast")]
     muscles = geoms[0].muscles
     assert all(g.muscles == muscles for g in geoms)

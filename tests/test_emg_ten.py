@@ -49,8 +49,8 @@ W_EMG, W_ACT, W_RES, W_VM = 10.0, 0.1, 1000.0, 0.01
 
 # --------------------------------------------------------------------------- the solve (once)
 @pytest.fixture(scope="module")
-def cache_dir(tmp_path_factory):
-    return tmp_path_factory.mktemp("emg_ten_geometry")
+def cache_dir(geometry_cache):
+    return geometry_cache
 
 
 @pytest.fixture(scope="module")
@@ -95,7 +95,7 @@ def solutions(emg_ten):
 # --------------------------------------------------------------------------- results
 @pytest.mark.opensim
 @pytest.mark.slow
-def test_converges_with_the_study_problem_size(emg_ten, parameters, solutions):
+def test_converges_with_the_study_problem_size(example, emg_ten, parameters, solutions):
     out, stdout = emg_ten
     rec = parameters["solve"]
     assert rec["status"] == "Solve_Succeeded" and rec["success"] is True
@@ -106,7 +106,8 @@ def test_converges_with_the_study_problem_size(emg_ten, parameters, solutions):
     assert rec["problem_size"]["variables"] == 77250 - 7
     assert rec["problem_size"]["equality_constraints"] == 62002 - 7
     assert rec["problem_size"]["inequality_constraints"] == 3375
-    assert sorted(p.name for p in out.iterdir()) == sorted([*TRIALS, "parameters.json"])
+    assert sorted(p.name for p in out.iterdir()) == sorted([*TRIALS, "parameters.json",
+                                                            f"{example.model.stem}_personalised.osim"])
     for t in TRIALS:
         s = solutions[t].summary
         assert s["workflow"]["name"] == "emg-ten" and s["workflow"]["trial"] == t
@@ -137,6 +138,25 @@ def test_tendon_stiffness_matches_the_study(parameters, solutions):
         P = params_of(sol)
         for i, m in enumerate(sol.muscles):
             assert P["kT"][i] == pytest.approx(kt.get(m, 35.0), rel=1e-12)
+
+
+@pytest.mark.opensim
+@pytest.mark.slow
+def test_personalised_model_holds_the_tendon_stiffness(example, emg_ten, parameters):
+    """The written .osim (Millard muscles) holds each estimated kT as the tendon strain at F0, the
+    strain where the tendon curve reaches fT = 1 (muscle_model.md §7), read back by OpenSim."""
+    import math
+
+    from musclemetab.opensim_bridge.client import call
+
+    kt = parameters["tendon_stiffness"]
+    values = call("personalise:read_muscle_values", str(emg_ten[0] / f"{example.model.stem}_personalised.osim"),
+                  [*kt, "tibant_r"])
+    for m, k in kt.items():
+        strain = math.log(5.0 * (1.25 - shift_ref(k))) / k - 0.005
+        assert values[m]["tendon_strain_at_one_norm_force"] == pytest.approx(strain, rel=1e-12), m
+    original = call("personalise:read_muscle_values", str(example.model), ["tibant_r"])
+    assert values["tibant_r"] == original["tibant_r"]
 
 
 @pytest.mark.opensim
@@ -470,10 +490,12 @@ def test_cli_rejects_bad_input_on_one_line(example, tmp_path, capsys):
                  "--id", *map(str, idf[:2]), "--out", str(tmp_path / "x")])
     err = capsys.readouterr().err
     assert code == 1 and "one trial" in err
+    # an effort workflow with --emg is an EMG-informed solve (tests/test_emg_informed.py); its
+    # options are checked before any work
     code = main(["solve", "--workflow", "effort-gen", "--model", str(example.model), "--ik", str(ik[0]),
-                 "--id", str(idf[0]), "--emg", str(emg[0]), "--out", str(tmp_path / "x")])
+                 "--id", str(idf[0]), "--emg", str(emg[0]), "--parameters", "p.json", "--out", str(tmp_path / "x")])
     err = capsys.readouterr().err
-    assert code == 1 and "--emg" in err and "emg-ten" in err
+    assert code == 1 and "--parameters" in err and "EMG-informed" in err
     code = main(["solve", "--workflow", "emg-ten", "--model", str(example.model), "--ik", *map(str, ik),
                  "--id", *map(str, idf), "--emg", *map(str, emg), "--parameters", "p.json",
                  "--out", str(tmp_path / "x")])

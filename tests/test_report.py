@@ -104,12 +104,16 @@ def _integral(pct, v, lo=0.0, hi=100.0):
     return float(np.trapezoid(v[m], pct[m]))
 
 
+#: the synthetic per-muscle split of the leg's rate (sums to 1)
+MUSCLE_PARTS = {"soleus_r": 0.3, "gasmed_r": 0.25, "vaslat_r": 0.2, "psoas_r": 0.15, "tibant_r": 0.1}
+
+
 def make_study(root: Path, *, measured=True, trials=None, solutions=True, failed=()) -> Path:
     """A study folder with the runner's layout; ``failed``: (subject, trial, workflow) units that failed."""
     trials = TRIALS if trials is None else trials
     root.mkdir(parents=True, exist_ok=True)
     sol = {w: make_solution(w) for w in WORKFLOWS} if solutions else {}
-    rows, failures = [], []
+    rows, failures, muscles = [], [], []
     rng = np.random.default_rng(1)
     for si, (subject, (mass, height)) in enumerate(SUBJECTS.items()):
         for trial, speed in trials.items():
@@ -156,7 +160,13 @@ def make_study(root: Path, *, measured=True, trials=None, solutions=True, failed
                     row.update(toe_off_pct=TOE_OFF_PCT, measured_W_per_kg=meas if measured else math.nan,
                                unit_dir=str(rel))
                     rows.append(row)
+                    # a per-muscle table whose muscles add up to the leg: fixed proportions of mean_w
+                    for k, (mu, part) in enumerate(MUSCLE_PARTS.items()):
+                        muscles.append({"subject": subject, "trial": trial, "workflow": workflow, "model": model,
+                                        "muscle": mu, "side": "r", "mean_W": part * mean_w,
+                                        "mean_W_per_kg": part * mean_w / mass, "rank": k + 1})
     pd.DataFrame(rows).to_csv(root / "results.csv", index=False)
+    pd.DataFrame(muscles).to_csv(root / "per_muscle.csv", index=False)
     pd.DataFrame(failures, columns=["subject", "trial", "workflow", "reason"]).to_csv(root / "failures.csv", index=False)
     settings = {
         "name": "speeds <synthetic> & co",
@@ -486,6 +496,7 @@ def test_report_notes_and_failures(tmp_path):
     notes = {
         "estimated_vs_measured": "no measured metabolic rate",
         "whole_body_over_cycle": "one speed only",
+        "rates_against_speed": "one speed only",
         "excitations_fiber_lengths": "solution.sto: missing",
     }
     assert len(p.imgs) == len(FIGURE_NAMES) - len(notes)
@@ -537,7 +548,7 @@ def test_cli(study, tmp_path, capsys):
     args = parser.parse_args(["report", str(study), "--out", str(tmp_path / "r.html"), "--svg"])
     assert args.func(args) == 0
     out = capsys.readouterr().out
-    assert "6 of 6 figures" in out and (tmp_path / "r.html").is_file()
+    assert "8 of 8 figures" in out and (tmp_path / "r.html").is_file()
     assert (tmp_path / "figures" / "phase_shares.svg").is_file()
     args = parser.parse_args(["report", str(tmp_path / "absent")])
     with pytest.raises(InputFileError, match="absent: no such study folder"):
@@ -588,3 +599,41 @@ def test_report_is_rebuilt_only_when_its_inputs_change(study, tmp_path):
     png.unlink()
     generate_report(copy)
     assert png.is_file()
+
+
+def test_per_muscle_ranked_figure_values(study):
+    from musclemetab.report.figures import per_muscle_ranked
+
+    pm = pd.read_csv(study / "per_muscle.csv").merge(
+        pd.read_csv(study / "results.csv").drop_duplicates(["subject", "trial"])[["subject", "trial", "speed_m_per_s"]],
+        on=["subject", "trial"])
+    fig = per_muscle_ranked(pm, workflow="effort-ten", models=["UM10", "BH04"], top=3)
+    ax = fig.axes[0]
+    # largest at the top, the three largest parts only
+    ticks = sorted((t.get_position()[1], t.get_text()) for t in ax.get_yticklabels())[::-1]
+    assert [name for _, name in ticks] == ["soleus_r", "gasmed_r", "vaslat_r"]
+    d = pm[(pm.workflow == "effort-ten") & (pm.model == "UM10")]
+    for trial in ("slow", "normal", "fast"):
+        bars = [p for p in ax.patches if p.get_gid() == f"trial:{trial}"]
+        want = d[d.trial == trial].groupby("muscle")["mean_W_per_kg"].mean()
+        widths = sorted((b.get_y(), b.get_width()) for b in bars)[::-1]  # top bar first
+        np.testing.assert_allclose([w for _, w in widths], want[["soleus_r", "gasmed_r", "vaslat_r"]], rtol=1e-12)
+    # one colour per trial, the same in every panel; a shared axis
+    assert fig.axes[0].get_shared_x_axes().joined(fig.axes[0], fig.axes[1])
+
+
+def test_rates_against_speed_values(study):
+    from musclemetab.report.figures import rates_against_speed
+
+    r = pd.read_csv(study / "results.csv")
+    fig = rates_against_speed(r, workflow="effort-ten", models=["UM10", "BH04"])
+    ax = fig.axes[0]
+    d = r[(r.workflow == "effort-ten") & (r.model == "UM10")]
+    means = d.groupby("trial")[["speed_m_per_s", "mean_W_per_kg_no_basal"]].mean().loc[["slow", "normal", "fast"]]
+    wb = next(ln for ln in ax.lines if ln.get_gid() == "whole-body")
+    np.testing.assert_allclose(wb.get_xdata(), means["speed_m_per_s"])
+    np.testing.assert_allclose(wb.get_ydata(), means["mean_W_per_kg_no_basal"])
+    pf = next(ln for ln in ax.lines if ln.get_gid() == "group:PF")
+    want = (d.share_PF_pct / 100 * d.mean_W_per_kg_no_basal).groupby(d.trial).mean().loc[["slow", "normal", "fast"]]
+    np.testing.assert_allclose(pf.get_ydata(), want)
+    assert fig.axes[0].get_shared_y_axes().joined(fig.axes[0], fig.axes[1])

@@ -1,6 +1,7 @@
 """Per-muscle results and the OpenSim-ready states of a solved trial of the example subject.
 
-One EFFORT-GEN solve of the example subject's preferred-speed trial (module fixture) gives:
+The EFFORT-GEN unit of the example subject's preferred-speed trial in the demo (the
+session's ``demo`` fixture) gives:
 
 * the per-muscle table, whose rows add up to the whole-body figure of every model of the
   registry (per leg; basal heat as docs/analysis.md §6 says: apart from the muscles, added
@@ -25,21 +26,23 @@ TRIAL = "normal"
 
 
 @pytest.fixture(scope="module")
-def solved(example, tmp_path_factory):
-    from musclemetab.redundancy import solve_files
+def solved(demo):
+    from musclemetab.redundancy.solution import Solution
 
-    folder = tmp_path_factory.mktemp("solution")
-    sol = solve_files(example.model, example.ik[TRIAL], example.id[TRIAL], "effort-gen")
-    assert sol.success
-    sol.write(folder)
-    return sol, folder
+    out, table = demo
+    unit = table[(table.trial == TRIAL) & (table.workflow == "effort-gen")].unit_dir.iloc[0]
+    folder = out / unit
+    return Solution.load(folder), folder
 
 
 @pytest.fixture(scope="module")
-def cycle(example):
-    from musclemetab.analysis import cycle_from_id_file
+def cycle(solved):
+    import json
 
-    return cycle_from_id_file(example.id[TRIAL])
+    from musclemetab.analysis import GaitCycle
+
+    c = json.loads((solved[1] / "unit.json").read_text(encoding="utf-8"))["cycle"]
+    return GaitCycle(c["start_s"], c["toe_off_s"], c["end_s"])
 
 
 @pytest.mark.parametrize("basal", ["body", "muscle"])
@@ -70,6 +73,19 @@ def test_per_muscle_table_sums_to_the_whole_body_rate(example, solved, cycle, ba
         assert d.loc[d["rank"] == 1, "mean_W"].iloc[0] == d["mean_W"].max()
 
 
+def test_study_per_muscle_table_sums_to_the_results_table(demo):
+    # the study-level table of the demo: per unit and model, the muscles add up to the whole body
+    out, table = demo
+    pm = pd.read_csv(out / "per_muscle.csv")
+    assert pd.read_parquet(out / "per_muscle.parquet").shape == pm.shape
+    sums = pm.groupby(["subject", "trial", "workflow", "model"])["mean_W_per_kg"].sum()
+    for row in table.itertuples():
+        assert 2 * sums[(row.subject, row.trial, row.workflow, row.model)] == pytest.approx(
+            row.mean_W_per_kg_no_basal, rel=1e-8)
+        assert row.mean_W_per_kg - row.mean_W_per_kg_no_basal == pytest.approx(1.2, rel=1e-9)  # basal "body"
+    assert (out / "muscle_groups.csv").is_file() and (out / "data_dictionary.csv").is_file()
+
+
 def test_per_muscle_phase_energies_match_the_leg_analysis(example, solved, cycle):
     from musclemetab.analysis.per_muscle import per_muscle_table
     from musclemetab.analysis.phases import phase_shares
@@ -93,12 +109,12 @@ BH04_PROBE = dict(probe="Bhargava2004", name="BH04", use_force_dependent_shorten
 
 
 @pytest.fixture(scope="module")
-def exported(example, solved, tmp_path_factory):
+def exported(example, solved):
     from musclemetab.opensim_bridge import call
-    from musclemetab.redundancy.export import write_opensim_states
+    from musclemetab.redundancy.export import CONTROLS_FILE, STATES_FILE
 
     sol, folder = solved
-    files = write_opensim_states(folder, example.model, example.ik[TRIAL])
+    files = {"states": folder / STATES_FILE, "controls": folder / CONTROLS_FILE}  # written by the study unit
     res = metabolics_from_solution(folder, example.body_mass_kg, example.height_m, models="UM10,BH04")
     run = call("states:probes_over_states", str(example.model), str(files["states"]), str(files["controls"]),
                list(sol.muscles), res.muscle_mass_kg.tolist(), res.slow_twitch_fraction.tolist(),
@@ -148,3 +164,63 @@ def test_opensim_probes_on_the_exported_states_agree_with_um10_and_bh04(exported
     np.testing.assert_allclose(um10, run["UM10"], rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(bh04, run["BH04"], rtol=1e-6, atol=1e-9)
     assert np.max(run["UM10"]) > 50.0 and np.max(run["BH04"]) > 50.0  # not a comparison of zeros
+
+
+# ------------------------------------------------------------------------------ analyse
+def test_analyse_command_gives_what_the_study_unit_gives(example, demo, tmp_path, capsys):
+    import shutil
+
+    from musclemetab.cli import main
+
+    out, table = demo
+    unit = out / table[(table.trial == TRIAL) & (table.workflow == "effort-ten")].unit_dir.iloc[0]
+    # the command-line path: metabolics, then analyse; the solution given as the parent of its side folder
+    parent = tmp_path / "solution"
+    (parent / "r").mkdir(parents=True)
+    for name in ("solution.sto", "summary.json"):
+        shutil.copyfile(unit / name, parent / "r" / name)
+    assert main(["metabolics", "--solution", str(parent / "r"), "--mass", str(example.body_mass_kg),
+                 "--height", str(example.height_m), "--out", str(tmp_path / "met")]) == 0
+    assert main(["analyse", "--solution", str(parent), "--metabolics", str(tmp_path / "met"),
+                 "--model", str(example.model), "--ik", str(example.ik[TRIAL]), "--id", str(example.id[TRIAL]),
+                 "--out", str(tmp_path / "an")]) == 0
+    printed = capsys.readouterr().out
+    assert "side r" in printed and "estimated" in printed
+    got = pd.read_csv(tmp_path / "an" / "r" / "analysis.csv").set_index("model")
+    want = pd.read_csv(unit / "analysis.csv").set_index("model")
+    for col in ("toe_off_pct", "stance_energy_share_pct", "swing_energy_share_pct", "share_PF_pct", "share_HAB_pct"):
+        np.testing.assert_allclose(got[col], want.loc[got.index, col], rtol=1e-9, err_msg=col)
+    per = pd.read_csv(tmp_path / "an" / "per_muscle.csv")  # both sides' table (here: the right side)
+    ref = pd.read_csv(unit / "per_muscle.csv")
+    pd.testing.assert_frame_equal(per.set_index(["model", "muscle"]).sort_index(),
+                                  ref.set_index(["model", "muscle"]).sort_index(), rtol=1e-9)
+    wb = pd.read_csv(tmp_path / "an" / "r" / "whole_body.csv").set_index("model")
+    np.testing.assert_allclose(wb["mean_W_per_kg"], pd.read_csv(unit / "whole_body.csv").set_index("model")
+                               .loc[wb.index, "mean_W_per_kg"], rtol=1e-9)
+    assert (tmp_path / "an" / "r" / "muscle_groups.csv").is_file()
+
+
+# ------------------------------------------------------------------------------ data dictionary
+def test_every_column_the_demo_writes_is_in_the_data_dictionary(demo):
+    from pathlib import Path
+
+    from musclemetab.datadict import data_dictionary_markdown, describe
+    from musclemetab.io import read_storage
+
+    out, table = demo
+    unit = out / table.unit_dir.iloc[0]
+    tables = {name: pd.read_csv(out / name) for name in
+              ("results.csv", "per_muscle.csv", "muscle_groups.csv", "data_dictionary.csv", "failures.csv")}
+    tables.update({name: pd.read_csv(unit / name) for name in
+                   ("whole_body.csv", "analysis.csv", "timeseries.csv", "per_muscle.csv")})
+    tables["metabolics.parquet"] = pd.read_parquet(unit / "metabolics.parquet")
+    for name in ("states.sto", "controls.sto", "solution.sto", "metabolics.sto"):
+        tables[name] = read_storage(unit / name)
+    missing = [(name, c) for name, t in tables.items() for c in t.columns if describe(str(c)) is None]
+    assert missing == []
+    # the group key names every share column of the results
+    key = tables["muscle_groups.csv"]
+    assert set(key["column"]) == {c for c in table.columns if c.startswith("share_")}
+    # the documentation is the dictionary rendered
+    doc = Path(__file__).resolve().parents[1] / "docs" / "data_dictionary.md"
+    assert doc.read_text(encoding="utf-8") == data_dictionary_markdown()

@@ -265,3 +265,36 @@ def test_units_not_run_because_a_unit_they_need_failed_are_counted(example, tmp_
 def test_summary_line_counts_each_unit_once():
     run = StudyRun(output=Path("o"), ran=["a", "b"], skipped=["c"], failed={"b": "x"}, n_planned=3)
     assert run.summary_line().startswith("3 units: 2 run, 1 up to date; 1 failed;")
+
+
+def test_ctrl_c_on_a_real_run(example, tmp_path):
+    """``musclemetab run`` in its own process group gets SIGINT (as from a terminal) while its
+    first unit works: exit status 130, that unit interrupted, the second never started, no
+    temporary folder, no lock."""
+    out = tmp_path / "out"
+    toml = tmp_path / "study.toml"
+    toml.write_text(
+        f'output = "out"\nworkflows = ["effort-gen"]\nmodels = ["UM10"]\n[[subjects]]\nname = "s"\n'
+        f'model = "{example.model}"\nbody_mass_kg = 72.6\nheight_m = 1.743\n' + "".join(
+            f'[[subjects.trials]]\nname = "{t}"\nik = "{example.ik[t]}"\nid = "{example.id[t]}"\n'
+            for t in ("normal", "slow"))
+    )
+    proc = subprocess.Popen([sys.executable, "-m", "musclemetab.cli", "run", str(toml), "--workers", "1",
+                             "--no-progress"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not list((out / "units").rglob(".*.partial-*")) and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.1)
+        time.sleep(2.0)  # the unit is computing its geometry or solving
+        os.killpg(proc.pid, signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, (stdout, stderr)
+    assert "1 interrupted" in stdout and "musclemetab: interrupted" in stderr
+    assert "Traceback" not in stderr
+    assert sorted(p.relative_to(out).as_posix() for p in (out / "units").rglob("*")) == ["units/s", "units/s/normal"]
+    assert not (out / LOCK_FILE).exists()
+    assert pd.read_csv(out / "failures.csv").set_index("trial").loc["normal", "reason"].startswith("interrupted")

@@ -153,14 +153,14 @@ def test_pool_run_results_table(pool_run):
 
 
 def test_swing_share_recomputed_from_the_unit_files(pool_run):
-    """Stance and swing shares of the table, recomputed here from metabolics.csv."""
+    """Stance and swing shares of the table, recomputed here from metabolics.parquet."""
     import json
 
     study, run = pool_run
     row = run.results[(run.results.trial == "normal") & (run.results.model == "BH04")].iloc[0]
     folder = study.output / row.unit_dir
     cycle = json.loads((folder / "unit.json").read_text())["cycle"]
-    m = pd.read_csv(folder / "metabolics.csv")
+    m = pd.read_parquet(folder / "metabolics.parquet")
     m = m[(m.model == "BH04") & (m.component.isin(["total", "basal"]))]
     wide = m.pivot_table(index="time", columns="component", values="value_W", aggfunc="sum")
     t = wide.index.to_numpy()
@@ -194,7 +194,7 @@ def test_second_run_does_no_solver_work_and_corrupt_output_is_redone(pool_run, m
     assert len(run2.results) == 4
 
     # corrupt one output file: that unit (only) is recomputed
-    target = study.output / "units" / "sub1" / "slow" / "effort-gen" / "metabolics.csv"
+    target = study.output / "units" / "sub1" / "slow" / "effort-gen" / "per_muscle.csv"
     target.write_text(target.read_text()[:1000])
     before = pd.read_csv(study.output / "results.csv")
     run3 = run_study(study, workers=1, progress=False)
@@ -255,8 +255,12 @@ def test_dask_cluster_gives_the_process_pool_table(pool_run, example, tmp_path):
     pd.testing.assert_frame_equal(a, b, check_dtype=False, rtol=1e-8)
 
 
-def test_bad_scheduler_address_is_an_option_error(pool_run, tmp_path):
+def test_bad_scheduler_address_is_an_option_error(pool_run, tmp_path, monkeypatch):
     pytest.importorskip("distributed")
+    import musclemetab.study.runner as runner
+
+    # port 1 refuses at once; Dask retries until its connect timeout, so keep that short
+    monkeypatch.setattr(runner, "SCHEDULER_TIMEOUT_S", 0.5)
     study, _ = pool_run
     with pytest.raises(OptionError, match="scheduler"):
         run_study(study, scheduler="tcp://127.0.0.1:1", progress=False, force=True)
@@ -300,3 +304,32 @@ def test_emg_ten_in_a_study(example, tmp_path):
     assert unit_key(changed, est) != unit_key(study, est)
     assert unit_key(changed, ten, unit_key(changed, est)) != unit_key(study, ten, unit_key(study, est))
     assert unit_key(changed, gen) == unit_key(study, gen)  # EFFORT-GEN does not use EMG
+
+
+def test_emg_ten_that_does_not_converge_is_a_failure_with_ipopt_status(example, tmp_path):
+    """An EMG-TEN estimate stopped by the study's iteration limit is recorded in failures.csv with
+    IPOPT's status and its meaning (not a Python exception); the units that need it are not run."""
+    data = _study_dict(example, trials=("normal",), workflows=("emg-ten",), models=("BH04",))
+    data["subjects"][0]["emg_mapping"] = "authors"
+    data["subjects"][0]["trials"][0]["emg"] = str(example.emg["normal"])
+    data["solver"] = {"max_iter": 3}
+    study = study_from_dict(data, base="/", output=tmp_path)
+    run = run_study(study, workers=1, progress=False)
+    reason = run.failed["sub1/all trials/emg-ten"]
+    assert "Maximum_Iterations_Exceeded" in reason and "after 3 iterations" in reason
+    assert "limit was reached" in reason and "AttributeError" not in reason
+    failures = pd.read_csv(tmp_path / "failures.csv")
+    row = failures[(failures.workflow == "emg-ten") & failures.trial.isna()]
+    assert len(row) == 1 and "Maximum_Iterations_Exceeded" in row.reason.iloc[0]
+    # nothing of the failed estimate is written
+    assert not (tmp_path / "units" / "sub1" / "_emg-ten" / "parameters.json").exists()
+
+
+def test_study_solver_table_is_checked(example):
+    data = _study_dict(example)
+    data["solver"] = {"max_iter": 0}
+    with pytest.raises(OptionError, match=r"\[solver\].*max_iter"):
+        study_from_dict(data, base="/")
+    data["solver"] = {"max_iterations": 3}
+    with pytest.raises(OptionError, match="max_iterations"):
+        study_from_dict(data, base="/")

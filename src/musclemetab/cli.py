@@ -21,7 +21,9 @@ from .errors import MuscleTableWarning, MusclemetabError
 _SUBCOMMANDS = (
     ("musclemetab.cli", "add_geometry_parser"),
     ("musclemetab.redundancy.cli", "add_solve_parser"),
+    ("musclemetab.redundancy.estimate_cli", "add_estimate_parser"),
     ("musclemetab.metabolics.cli", "add_metabolics_parser"),
+    ("musclemetab.analysis.cli", "add_analyse_parser"),
     ("musclemetab.calibration.cli", "add_calibrate_parser"),
     ("musclemetab.study.cli", "add_run_parser"),
     ("musclemetab.study.cli", "add_demo_parser"),

@@ -75,6 +75,9 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
     (_STUDY, "measured_W_per_kg", "W/kg", "measured whole-body metabolic rate (indirect calorimetry), if given"),
     (_STUDY, "cycle_source", "-", "where the gait events come from (study file, ground reaction forces, or estimated)"),
     (_STUDY, "speed_source", "-", "where the walking speed comes from (study file, or estimated from the pelvis)"),
+    (_STUDY, "large_reserve", "-",
+     "true when the solve's largest reserve RMS exceeds 1 % of the peak joint moment (the muscles do not explain "
+     "the moments: check the inputs); summary.json holds reserve_share_of_peak_moment"),
     # per muscle
     (_PM, "muscle", "-", "muscle name of the model"),
     (_PM, "side", "-", "leg of the muscle: r or l ('' when the name has no side suffix)"),

@@ -354,7 +354,7 @@ def write_geometry(geom: Geometry, out_dir: str | os.PathLike) -> list[Path]:
 
     All files are written to a temporary folder first and moved into place together.
     """
-    from .io import atomic_directory, storage_from_arrays
+    from .io import atomic_directory, check_inside, storage_from_arrays
 
     out_dir = Path(out_dir)
     names = list(geom.muscles)
@@ -364,6 +364,7 @@ def write_geometry(geom: Geometry, out_dir: str | os.PathLike) -> list[Path]:
         write_storage(tmp / "muscle_tendon_lengths.sto", df, comments=["units=m"])
         written.append(out_dir / "muscle_tendon_lengths.sto")
         for j, d in enumerate(geom.dofs):
+            check_inside(tmp, f"moment_arms_{d}.sto", f"the moment arms about '{d}'")
             df = storage_from_arrays(geom.time, names=names, data=geom.moment_arms_m[:, j, :], name=f"moment_arms_{d}")
             write_storage(tmp / f"moment_arms_{d}.sto", df, comments=["units=m"])
             written.append(out_dir / f"moment_arms_{d}.sto")

@@ -117,11 +117,10 @@ def read_layout(model_path: str | os.PathLike) -> ModelLayout:
 
     Cached on disk beside the geometry cache, keyed by the model file's content.
     """
+    from .model import check_model_path
     from .opensim_bridge import call
 
-    path = Path(model_path)
-    if not path.is_file():
-        raise ModelError(f"{path}: no such model file; check the path")
+    path = check_model_path(model_path)
     raw = _cached_layout(path)
     if raw is None:
         raw = call("model_ops:model_layout", str(path))

@@ -77,6 +77,8 @@ __all__ = [
     "report_muscles",
     "study_passive_parameters",
     "tendon_literature",
+    "unplaced_muscles",
+    "warn_unplaced",
 ]
 
 MUSCLE_DENSITY_KG_PER_M3 = 1059.7
@@ -399,6 +401,16 @@ def resolve_muscles(
         ))
     _report_unplaced(unplaced, strict, warn)
     return tuple(records)
+
+
+def unplaced_muscles(names: Sequence[str], overrides=None) -> list[str]:
+    """The muscles of ``names`` that take a fallback value (not placed by table or overrides)."""
+    return [r.name for r in resolve_muscles(names, overrides=overrides, warn=False) if r.fallback]
+
+
+def warn_unplaced(names: Sequence[str]) -> None:
+    """The one :class:`MuscleTableWarning` naming every muscle in ``names`` (none: nothing)."""
+    _report_unplaced(list(names), False, True)
 
 
 def _report_unplaced(unplaced: Sequence[str], strict: bool, warn: bool) -> None:

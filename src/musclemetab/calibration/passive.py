@@ -48,7 +48,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..errors import DataMismatchError, InputFileError, MissingColumnError, OptionError, SolverError, UnknownMuscleError
-from ..muscle import fibre_width, passive_force_length, tendon_force_length
+from ..muscle import fibre_width, hill_residual, passive_force_length, tendon_force_length
 
 __all__ = [
     "CALIBRATION_JOINTS",
@@ -495,10 +495,12 @@ def solve_passive(
         lmo_mat = ca.DM(np.tile(lmo, (F, 1)))
         lm_m = lm * lmo_mat
         opti.subject_to(ca.vec(lm_m**2 - ca.DM(np.tile(w**2, (F, 1))) - proj**2) == 0)
-        lt_norm = (ca.DM(t.lmt_m) - proj) / ca.DM(np.tile(lts, (F, 1)))
-        fT = tendon_force_length(lt_norm, ca.DM(np.tile(kT, (F, 1))))
-        fpe = passive_force_length(lm, kpe_mat, s0_mat, sm_mat)
-        opti.subject_to(ca.vec(fpe * proj / lm_m - fT) == 0)
+        lts_mat, kt_mat, lmt = ca.DM(np.tile(lts, (F, 1))), ca.DM(np.tile(kT, (F, 1))), ca.DM(t.lmt_m)
+        # the Hill equilibrium of the redundancy problem at rest (activation 0, fibre velocity 0)
+        opti.subject_to(ca.vec(hill_residual(0.0, lm, 0.0, proj, lmt, optimal_fiber_length_m=lmo_mat,
+                                             tendon_slack_length_m=lts_mat, max_contraction_velocity=1.0,
+                                             kT=kt_mat, kpe=kpe_mat, s0=s0_mat, sm=sm_mat)) == 0)
+        fT = tendon_force_length((lmt - proj) / lts_mat, kt_mat)
         moment = ca.sum2(fT * ca.DM(np.tile(F0, (F, 1))) * ca.DM(t.moment_arms_m))
         opti.subject_to(moment + TOPT_NM * aT == ca.DM(t.target_Nm))
         objective = objective + ca.sumsqr(aT)

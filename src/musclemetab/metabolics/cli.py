@@ -4,7 +4,8 @@
                            [--models all|UM10,BH04,...|all,LW05,MA68] [--basal body|muscle|none]
                            [--speed M_PER_S] --out DIR
 
-Writes ``OUT/metabolics.sto``, ``OUT/metabolics.csv`` and ``OUT/whole_body.csv`` (see
+Writes ``OUT/metabolics.sto``, ``OUT/metabolics.parquet``, ``OUT/whole_body.csv`` and
+``OUT/per_muscle.csv`` (see
 :mod:`musclemetab.metabolics.solution`). One leg solved: the whole-body rate doubles it (the
 study's rule, and the output says so). ``--solution`` may also be the parent written by
 ``solve --side both`` (``PARENT/r``, ``PARENT/l``): each leg is evaluated over its own cycle
@@ -32,7 +33,7 @@ def add_metabolics_parser(subparsers) -> None:
         description=(
             "Evaluate muscle metabolic energy models on a muscle redundancy solution (the padding nodes "
             "trimmed: 5 at the start, 6 at the end), muscle by muscle and node by node. Writes "
-            "OUT/metabolics.sto (columns <model>/<muscle>/<component>, W), OUT/metabolics.csv (tidy: time, "
+            "OUT/metabolics.sto (columns <model>/<muscle>/<component>, W), OUT/metabolics.parquet (tidy: time, "
             "model, muscle, component, value_W) and OUT/whole_body.csv (one row per model: whole-body "
             f"average in W/kg). Models: the study's {', '.join(MODELS)} ('all', the default) and, when "
             f"named, {', '.join(ADDITIONAL_MODELS)}."
@@ -79,6 +80,10 @@ def add_metabolics_parser(subparsers) -> None:
 
 def metabolics_command(args) -> int:
     """Run the ``metabolics`` subcommand (``args`` from :func:`add_metabolics_parser`)."""
+    import warnings
+
+    from ..errors import MuscleTableWarning
+    from ..properties import unplaced_muscles, warn_unplaced
     from .registry import parse_models
     from .solution import metabolics_from_solution, read_solution_states, write_metabolics
 
@@ -98,14 +103,18 @@ def metabolics_command(args) -> int:
         params = read_muscle_parameters(args.model)
     legs = 1 if len(folders) > 1 else 2
     results = {}
-    for side, folder in folders.items():
-        states = read_solution_states(folder, require_success=not args.allow_failed)
-        if params is not None:
-            _note_parameter_differences(states, params, args.model)
-        results[side] = metabolics_from_solution(
-            states, args.mass, args.height, models=models, muscle_parameters=params, basal=args.basal,
-            speed_m_per_s=args.speed, legs=legs, muscle_properties=args.muscle_properties, strict=args.strict,
-        )
+    with warnings.catch_warnings():  # one warning for both legs, below
+        warnings.simplefilter("ignore", MuscleTableWarning)
+        for side, folder in folders.items():
+            states = read_solution_states(folder, require_success=not args.allow_failed)
+            if params is not None:
+                _note_parameter_differences(states, params, args.model)
+            results[side] = metabolics_from_solution(
+                states, args.mass, args.height, models=models, muscle_parameters=params, basal=args.basal,
+                speed_m_per_s=args.speed, legs=legs, muscle_properties=args.muscle_properties, strict=args.strict,
+            )
+    warn_unplaced(list(dict.fromkeys(
+        m for r in results.values() for m in unplaced_muscles(r.muscles, args.muscle_properties))))
     if legs == 2:
         (side, result), = results.items()
         files = write_metabolics(result, args.out)

@@ -233,6 +233,18 @@ def _choices_text(cfg: dict) -> str:
     )
 
 
+def _additional_text(cfg: dict, models) -> str:
+    """The additional models' settings, for the figure's caption."""
+    parts = []
+    if "LW05" in models:
+        t = cfg["lw05_stimulation_time_s"]
+        parts.append(f"LW05: stimulation time {'inf (no labile heat)' if np.isinf(t) else f'{t:g} s'} above e = 0.1, "
+                     "0 (full labile heat) below; no thermoelastic heat (constant force)")
+    if "MA68" in models:
+        parts.append("MA68: W/0.25 when shortening, -1.2 W when lengthening")
+    return "; ".join(parts) + "." if parts else ""
+
+
 def save_figure2(path: str | os.PathLike, data: dict | None = None, **config) -> Path:
     """Draw Figure 2 and save it (format from the extension, e.g. ``.png``, ``.pdf``).
 
@@ -302,6 +314,9 @@ def save_figure2(path: str | os.PathLike, data: dict | None = None, **config) ->
     axes[0, 2].set_title(f"rate over length, vbar = {ln['vbar']:+g}", fontsize=9)
     axes[0, 3].set_title("efficiency over length", fontsize=9)
     text = _choices_text(cfg)
+    extra_text = _additional_text(cfg, models)
+    if extra_text:
+        text += "\n" + extra_text
     if set(STUDY_MODELS) <= set(models):
         o = ordering_summary(data)
         text += (

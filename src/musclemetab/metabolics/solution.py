@@ -158,6 +158,26 @@ def read_solution_states(directory: str | os.PathLike, *, require_success: bool 
     )
 
 
+def states_of_solution(solution, *, require_success: bool = True) -> SolutionStates:
+    """The muscle states and parameters of an in-memory :class:`musclemetab.redundancy.Solution`
+    (the numbers its folder would hold)."""
+    if require_success and not solution.success:
+        raise solution.run_record.failure("the solve of this solution")
+    arrays = {
+        "excitation": solution.excitation, "activation": solution.activation,
+        "normalized_fiber_length": solution.lm_norm, "normalized_fiber_velocity": solution.normalized_fiber_velocity,
+        "active_force_length_multiplier": solution.active_force_length_multiplier,
+        "force_velocity_multiplier": solution.force_velocity_multiplier,
+        "passive_fiber_force_N": solution.passive_fiber_force_N,
+    }
+    p = solution.parameters.subset(solution.muscles)
+    values = zip(p.max_isometric_force_N, p.optimal_fiber_length_m, p.max_contraction_velocity)
+    params = {m: dict(zip(_PARAMETER_NAMES, (float(x) for x in v))) for m, v in zip(solution.muscles, values)}
+    return SolutionStates(time_s=np.asarray(solution.time_s, dtype=float), muscles=tuple(solution.muscles),
+                          states={k: np.asarray(v, dtype=float).T for k, v in arrays.items()}, parameters=params,
+                          source="solution object")
+
+
 def trim_slice(n_nodes: int, start: int = 5, end: int = 6) -> slice:
     """The kept nodes: drop ``start`` nodes at the beginning and ``end`` at the end.
 
@@ -290,7 +310,7 @@ class SolutionMetabolics:
 
 
 def metabolics_from_solution(
-    solution: str | os.PathLike | SolutionStates,
+    solution,
     body_mass_kg: float,
     height_m: float,
     *,
@@ -313,7 +333,7 @@ def metabolics_from_solution(
     Parameters
     ----------
     solution
-        A solution folder, or :class:`SolutionStates`.
+        A solution folder, a :class:`musclemetab.redundancy.Solution` or :class:`SolutionStates`.
     body_mass_kg, height_m
         The subject (muscle masses from the volume rule of :mod:`musclemetab.properties`;
         whole-body rate per kg of body mass).
@@ -363,9 +383,12 @@ def metabolics_from_solution(
     unknown = [k for k in model_options if k not in ALL_MODELS]
     if unknown:
         raise OptionError(f"options given for unknown model(s) {', '.join(unknown)}; known: {', '.join(ALL_MODELS)}")
-    sol = solution if isinstance(solution, SolutionStates) else read_solution_states(
-        solution, require_success=require_success
-    )
+    if isinstance(solution, SolutionStates):
+        sol = solution
+    elif hasattr(solution, "lm_norm") and hasattr(solution, "summary"):
+        sol = states_of_solution(solution, require_success=require_success)
+    else:
+        sol = read_solution_states(solution, require_success=require_success)
     muscles = sol.muscles
     if muscle_parameters is not None:
         params = _parameters_for(muscles, muscle_parameters, "model")

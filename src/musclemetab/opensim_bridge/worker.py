@@ -13,6 +13,11 @@ import sys
 
 
 def main() -> int:
+    import signal
+
+    # Ctrl-C is for the process that drives this worker (it stops asking); the worker ends
+    # when its input closes.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     proto_out = os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)  # anything printed (OpenSim's log) goes to stderr
     proto_in = sys.stdin.buffer

@@ -7,9 +7,13 @@ From inverse kinematics, inverse dynamics and muscle geometry, an optimal contro
 tendon forces that reproduce the joint moments with minimal effort.
 
 Modules: :mod:`.inputs` (filtering, splines, mesh), :mod:`.static_opt` (initial guess),
-:mod:`.problem` (the optimal control problem), :mod:`.solution` (results, files),
-:mod:`.workflows` (presets, passive and tendon parameters), :mod:`.solve` (the pipeline),
-:mod:`.emg_ten` (EMG-TEN), :mod:`.cli` (``musclemetab solve``). Importing this package does not
+:mod:`.core` (one problem: trials, goals, shared parameters; ``docs/problem.md``),
+:mod:`.problem` (solving it; the single-trial problem), :mod:`.solution` (results, files),
+:mod:`.record` (the run record), :mod:`.workflows` (presets, passive and tendon parameters),
+:mod:`.solve` (the pipeline), :mod:`.emg_ten` and :mod:`.emg_pipeline` (EMG-TEN and EMG-informed
+solves), :mod:`.estimates` (their results), :mod:`.estimate` (parameter estimation, personalised
+model), :mod:`.cli` and :mod:`.estimate_cli` (``musclemetab solve``, ``musclemetab estimate``).
+Importing this package does not
 import CasADi; solving does. OpenSim is never imported here.
 """
 

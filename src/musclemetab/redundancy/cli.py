@@ -76,7 +76,17 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--workflow", default="effort-gen", choices=("effort-gen", "effort-cal", "effort-ten", "emg-ten"),
                    help="workflow preset (default effort-gen)")
     p.add_argument("--emg", nargs="+", metavar="EMG.mot",
-                   help="emg-ten: processed, normalised EMG envelopes, one file per trial, same order as --ik")
+                   help="processed, normalised EMG envelopes, one file per trial, same order as --ik: needed by "
+                   "emg-ten; with an effort workflow an EMG-informed solve of the trials (see --emg-mode)")
+    p.add_argument("--emg-mode", choices=("constrained", "driven", "tracking"),
+                   help="with --emg: 'constrained' (each tracked excitation within --emg-tolerance of its scaled "
+                   "EMG; the default), 'driven' (equal to its scaled EMG) or 'tracking' (a cost on the "
+                   "difference, weight --emg-weight); the EMG scale factors are estimated")
+    p.add_argument("--emg-tolerance", type=float, default=0.01,
+                   help="with --emg-mode constrained: half-width of the EMG band (default 0.01)")
+    p.add_argument("--emg-weight", type=float,
+                   help="weight of the EMG tracking cost (default: 10 for emg-ten and tracking, 0 for an "
+                   "effort workflow's constrained or driven solve)")
     p.add_argument("--emg-mapping", metavar="default|authors|MAP.json",
                    help="emg-ten: EMG channels of the muscles: 'default' (vastus intermedius <- VI_a, the mean of "
                    "VL and VM), 'authors' (vastus intermedius <- ES, as in the published example results) or a "
@@ -131,13 +141,13 @@ def solve_command(args) -> int:
         raise OptionError(f"--max-iter must be at least 1, not {args.max_iter}")
     check_output_folder(args.out)
     ik, idf = _as_list(args.ik), _as_list(args.id)
-    if args.workflow == "emg-ten":
+    if args.workflow == "emg-ten" or getattr(args, "emg", None):
         return _emg_ten_command(args, ik, idf)
-    extra = [o for o, attr in (("--emg", "emg"), ("--emg-mapping", "emg_mapping"), ("--labels", "labels"))
-             if getattr(args, attr, None)]
+    extra = [o for o, attr in (("--emg-mapping", "emg_mapping"), ("--labels", "labels"), ("--emg-mode", "emg_mode"),
+                               ("--emg-weight", "emg_weight")) if getattr(args, attr, None) is not None]
     if extra:
-        raise OptionError(f"{', '.join(extra)} belong{'s' if len(extra) == 1 else ''} to --workflow emg-ten; "
-                          f"drop {'it' if len(extra) == 1 else 'them'} for {args.workflow}")
+        raise OptionError(f"{', '.join(extra)} need{'s' if len(extra) == 1 else ''} EMG: give --emg files, or "
+                          f"drop {'it' if len(extra) == 1 else 'them'}")
     if len(ik) != 1 or len(idf) > 1:
         raise OptionError(
             f"--workflow {args.workflow} solves one trial: give one --ik and one --id file (got {len(ik)} and "
@@ -230,11 +240,35 @@ def _as_list(value) -> list:
 
 
 def _emg_ten_command(args, ik: list, idf: list) -> int:
-    """``musclemetab solve --workflow emg-ten``: one NLP over all trials, then the files."""
-    from .emg_ten import solve_emg_ten
+    """``musclemetab solve --workflow emg-ten`` or ``--emg`` with an effort workflow: one NLP over
+    all trials, then the files."""
+    from .emg_ten import EmgTenSettings, solve_emg_ten
     from .inputs import DEFAULT_DOFS
     from .problem import SolverOptions, failure_advice
+    from .workflows import get_workflow, parse_tendon_stiffness
 
+    if not idf:
+        raise OptionError("EMG problems need --id: one inverse-dynamics file per trial, in the order of --ik")
+    wrong = [o for o, v in (("--external-loads", args.external_loads), ("--grf", args.grf), ("--window", args.window),
+                            ("--cycle", args.cycle), ("--exclude-muscles", getattr(args, "exclude_muscles", None)))
+             if v] + (["--side"] if args.side != "r" else [])
+    if wrong:
+        raise OptionError(f"{', '.join(wrong)} are for the single-trial solves without EMG; drop them for "
+                          f"{'--workflow emg-ten' if args.workflow == 'emg-ten' else '--emg'}")
+    mode = args.emg_mode or "constrained"
+    if args.workflow != "emg-ten":
+        wf = get_workflow(args.workflow)
+        if args.parameters or args.warm_start:
+            raise OptionError("--parameters and --warm-start cannot be used with an EMG-informed solve; give "
+                              "--tendon-stiffness MUSCLE=KT,... instead of --parameters, and drop --warm-start")
+        w_emg = args.emg_weight if args.emg_weight is not None else (10.0 if mode == "tracking" else 0.0)
+        settings = EmgTenSettings(w_emg=w_emg, w_activation=wf.w_activation, w_reserve=wf.w_reserve,
+                                  w_velocity=wf.w_velocity, emg_tolerance=args.emg_tolerance, tendon_groups=(),
+                                  emg_mode=mode)
+        return _informed_command(args, ik, idf, settings, parse_tendon_stiffness(args.tendon_stiffness)
+                                 if args.tendon_stiffness else None)
+    settings = EmgTenSettings(emg_tolerance=args.emg_tolerance, emg_mode=mode,
+                              **({"w_emg": args.emg_weight} if args.emg_weight is not None else {}))
     wrong = [o for o, v in (("--tendon-stiffness", args.tendon_stiffness), ("--parameters", args.parameters),
                             ("--warm-start", args.warm_start)) if v]
     if wrong:
@@ -242,12 +276,6 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
             f"{', '.join(wrong)} cannot be used with --workflow emg-ten (it estimates the tendon stiffness "
             "and starts from static optimisation); drop them"
         )
-    if not idf:
-        raise OptionError("--workflow emg-ten needs --id: one inverse-dynamics file per trial, in the order of --ik")
-    wrong = [o for o, v in (("--external-loads", args.external_loads), ("--grf", args.grf), ("--window", args.window),
-                            ("--cycle", args.cycle)) if v] + (["--side"] if args.side != "r" else [])
-    if wrong:
-        raise OptionError(f"{', '.join(wrong)} are for the single-trial workflows; drop them for --workflow emg-ten")
     emg = _as_list(getattr(args, "emg", None))
     if not emg:
         raise OptionError("--workflow emg-ten needs --emg: one processed EMG file per trial, in the order of --ik")
@@ -256,7 +284,7 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
     result = solve_emg_ten(
         args.model, ik, idf, emg, emg_mapping=args.emg_mapping or "default", labels=args.labels,
         passive=args.passive, dofs=dofs, options=options, cache_dir=args.cache_dir,
-        check_units=not args.skip_unit_checks,
+        check_units=not args.skip_unit_checks, settings=settings,
     )
     result.write(args.out)
     r = result.record
@@ -266,6 +294,10 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
             f"iterations): {failure_advice(r['status'])}. The unconverged result is in {args.out} with "
             "\"success\": false"
         )
+    from .estimate import write_personalised_model
+
+    model_file, _ = write_personalised_model(args.model, result.parameters,
+                                             {"tendon_stiffness": list(result.tendon_stiffness)}, args.out)
     groups = []
     for g in result.settings.tendon_groups:
         m = next((x for x in g if x in result.tendon_stiffness), None)
@@ -279,6 +311,35 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
         f"{size['variables']} variables, {size['equality_constraints']} equalities, "
         f"{size['inequality_constraints']} EMG bounds: {r['status']} in {r['iterations']} iterations, objective "
         f"{r['objective']:.6e}, solve {r['solve_time_s']:.1f} s, max moment residual "
-        f"{r['max_moment_residual_Nm']:.1e} N m; {'; '.join(groups)}; EMG scale {scales} -> {args.out}"
+        f"{r['max_moment_residual_Nm']:.1e} N m; {'; '.join(groups)}; EMG scale {scales} -> {args.out} "
+        f"(and {model_file.name})"
     )
+    return 0
+
+
+def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> int:
+    """An effort workflow's EMG-informed solve of one or more trials: one trial is written to
+    ``--out`` as a solution folder; several as one folder per trial and ``parameters.json``."""
+    from .emg_ten import solve_emg_ten
+    from .inputs import DEFAULT_DOFS
+    from .problem import SolverOptions
+
+    emg = _as_list(args.emg)
+    dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else DEFAULT_DOFS
+    result = solve_emg_ten(
+        args.model, ik, idf, emg, emg_mapping=args.emg_mapping or "default", labels=args.labels,
+        passive=args.passive, dofs=dofs, options=SolverOptions(max_iter=args.max_iter, print_level=args.print_level),
+        cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, settings=settings,
+        workflow=args.workflow, tendon_stiffness=tendon_stiffness,
+    )
+    if len(result.solutions) == 1:
+        next(iter(result.solutions.values())).write(args.out)
+    else:
+        result.write(args.out)
+    r = result.run_record
+    if not r.success:
+        raise r.failure(f"the EMG-informed {args.workflow} solve (written to {args.out})")
+    scales = ", ".join(f"{m} {v:.3g}" for m, v in result.emg_scale.items())
+    print(f"solve: {args.workflow} EMG-{settings.emg_mode} {len(result.solutions)} trial(s): {r.status} in "
+          f"{r.iterations} iterations, objective {r.objective:.6e}; EMG scale {scales} -> {args.out}")
     return 0

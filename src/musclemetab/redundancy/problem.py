@@ -45,7 +45,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import OptionError, SolverError
-from ..muscle import activation_rate, hill_residual, tendon_force_length
+from .core import Goals, TrialBlock, build_problem
 from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
 from .static_opt import InitialGuess
@@ -62,11 +62,6 @@ __all__ = [
     "set_blas_threads",
 ]
 
-ACTIVATION_BOUNDS = (0.0, 1.0)
-FIBRE_LENGTH_BOUNDS = (0.1, 1.7)
-FIBRE_VELOCITY_BOUNDS = (-10.0, 10.0)
-RESERVE_BOUNDS = (-1.0, 1.0)
-MIN_PROJECTED_LENGTH_M = 1e-4
 
 
 @dataclass(frozen=True)
@@ -83,8 +78,7 @@ class SolverOptions:
     of the Lagrangian assembled from per-interval symbolic derivatives (the Jacobian is block
     banded, the Hessian block diagonal); ``"auto"`` lets CasADi differentiate the whole mapped
     expression graph. Both compute the same derivatives; the explicit form builds and
-    evaluates faster. ``node_function`` chooses the symbolic type of the per-interval
-    constraint function used for the constraint values: ``"MX"`` (default) or ``"SX"``.
+    evaluates faster.
 
     ``tune_malloc`` raises glibc's ``malloc`` thresholds for the process before solving
     (MUMPS reallocates its work arrays every iteration). ``blas_threads`` sets the number of
@@ -102,7 +96,6 @@ class SolverOptions:
     max_iter: int = 10000
     linear_solver: str = "mumps"
     print_level: int = 0
-    node_function: str = "MX"
     derivatives: str = "explicit"
     tune_malloc: bool = True
     blas_threads: int | None = 1
@@ -111,8 +104,6 @@ class SolverOptions:
     def __post_init__(self):
         if self.derivatives not in ("explicit", "auto"):
             raise OptionError(f"derivatives must be 'explicit' or 'auto', not {self.derivatives!r}")
-        if self.node_function not in ("MX", "SX"):
-            raise OptionError(f"node_function must be 'MX' or 'SX', not {self.node_function!r}")
         for name in ("w_activation", "w_reserve", "w_velocity"):
             if getattr(self, name) < 0:
                 raise OptionError(f"the weight {name} must be non-negative, not {getattr(self, name)}")
@@ -133,7 +124,6 @@ class SolverOptions:
             "tol": self.tol,
             "max_iter": self.max_iter,
             "linear_solver": self.linear_solver,
-            "node_function": self.node_function,
             "derivatives": self.derivatives,
             "tune_malloc": self.tune_malloc,
             "blas_threads": self.blas_threads,
@@ -141,9 +131,24 @@ class SolverOptions:
         }
 
 
-@dataclass(frozen=True)
-class OcpResult:
-    """Raw optimum: states ``(N+1, M)``, controls ``(N, M)`` / ``(N, D)``, IPOPT statistics."""
+@dataclass(frozen=True, kw_only=True)
+class SolveOutcome:
+    """IPOPT's outcome of one solve (shared by all trials of a problem)."""
+
+    status: str
+    success: bool
+    iterations: int
+    solve_time_s: float
+    solve_cpu_s: float
+    build_time_s: float
+    n_variables: int
+    max_constraint_violation: float
+    function_time_s: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True, kw_only=True)
+class OcpResult(SolveOutcome):
+    """Raw optimum of one trial: states ``(N+1, M)``, controls ``(N, M)`` / ``(N, D)``, IPOPT statistics."""
 
     activation: np.ndarray
     lm_norm: np.ndarray
@@ -153,34 +158,7 @@ class OcpResult:
     vm_norm: np.ndarray
     objective: float
     objective_terms: dict
-    status: str
-    success: bool
-    iterations: int
-    solve_time_s: float
-    solve_cpu_s: float
-    build_time_s: float
-    n_variables: int
     n_constraints: int
-    max_constraint_violation: float
-    function_time_s: dict = field(default_factory=dict)
-
-
-def ipopt_statistics(result) -> dict:
-    """Status, objective and IPOPT statistics of an optimum (:class:`OcpResult` or the
-    EMG-TEN result), as recorded in ``summary.json``."""
-    return {
-        "status": result.status,
-        "success": result.success,
-        "objective": result.objective,
-        "objective_terms": result.objective_terms,
-        "iterations": result.iterations,
-        "solve_time_s": result.solve_time_s,
-        "solve_cpu_time_s": result.solve_cpu_s,
-        "build_time_s": result.build_time_s,
-        "function_evaluation_time_s": result.function_time_s,
-        "ms_per_iteration": 1e3 * result.solve_time_s / max(result.iterations, 1),
-        "max_constraint_violation": result.max_constraint_violation,
-    }
 
 
 #: IPOPT statuses that mean the constraints cannot be met (not a matter of iterations).
@@ -252,208 +230,23 @@ def set_blas_threads(n: int) -> bool:
     return True
 
 
-def _constants(params: MuscleTendonParameters, ca):
-    P = {k: ca.DM(np.asarray(v, dtype=float)) for k, v in dict(
-        lmo=params.optimal_fiber_length_m,
-        lts=params.tendon_slack_length_m,
-        vmax=params.max_contraction_velocity,
-        kT=params.tendon_stiffness,
-        kpe=params.passive_kpe,
-        s0=params.passive_s0,
-        sm=params.passive_sm,
-        f0=params.max_isometric_force_N,
-    ).items()}
-    P["w2"] = ca.DM(np.asarray(params.width_m, dtype=float) ** 2)
-    return P
-
-
-def _node_expressions(sym, M: int, D: int, h: float, P: dict, optimal_reserve_Nm: float, ca):
-    """Symbols and constraint expressions of one mesh interval (see module docstring)."""
-    a, lm, lp = sym("a", M), sym("lm", M), sym("lp", M)
-    e, aT, vm = sym("e", M), sym("aT", D), sym("vm", M)
-    a1, lm1 = sym("a1", M), sym("lm1", M)
-    lmt, rflat, mom = sym("lmt", M), sym("r", D * M), sym("id", D)
-    penn = (lm * P["lmo"]) ** 2 - P["w2"] - lp**2
-    dyn_a = a1 - a - h * activation_rate(e, a)
-    dyn_lm = lm1 - lm - h * vm
-    hill = hill_residual(
-        a, lm, vm, lp, lmt,
-        optimal_fiber_length_m=P["lmo"], tendon_slack_length_m=P["lts"],
-        max_contraction_velocity=P["vmax"], kT=P["kT"], kpe=P["kpe"], s0=P["s0"], sm=P["sm"],
-    )
-    ft = tendon_force_length((lmt - lp) / P["lts"], P["kT"])
-    R = ca.reshape(rflat, D, M)
-    moment = mom - ca.mtimes(R, P["f0"] * ft) - optimal_reserve_Nm * aT
-    syms = dict(a=a, lm=lm, lp=lp, e=e, aT=aT, vm=vm, a1=a1, lm1=lm1, lmt=lmt, r=rflat, id=mom)
-    return syms, ca.vertcat(dyn_a, dyn_lm, penn, hill, moment), penn
-
-
-def _node_functions(inputs: TrialInputs, params: MuscleTendonParameters, options: SolverOptions, ca):
-    M, D = len(inputs.muscles), len(inputs.dofs)
-    sym = ca.MX.sym if options.node_function == "MX" else ca.SX.sym
-    P = _constants(params, ca)
-    S, g, penn = _node_expressions(sym, M, D, inputs.step_s, P, options.optimal_reserve_Nm, ca)
-    order = ("a", "lm", "lp", "e", "aT", "vm", "a1", "lm1", "lmt", "r", "id")
-    node = ca.Function("node", [S[k] for k in order], [g])
-    last = ca.Function("last", [S["lm"], S["lp"]], [penn])
-    return node, last
-
-
-def _explicit_derivatives(inputs, params, options, ca, w, g, weights, data):
-    """Gradient, constraint Jacobian and (upper-triangular) Lagrangian Hessian, assembled.
-
-    Each mesh interval's constraints depend on its own node block ``z_k`` and linearly on the
-    next node's ``a, l~M``; the objective is a separable quadratic. So the Jacobian is made of
-    per-interval blocks and the Hessian of the Lagrangian is block diagonal. Per-interval
-    derivatives are computed once symbolically (SX), mapped over the mesh and their nonzeros
-    placed into the global sparse matrices: cheaper to build and to evaluate than
-    differentiating the whole mapped expression graph, and exactly the same numbers.
-    """
-    M, D, N = len(inputs.muscles), len(inputs.dofs), inputs.n_intervals
-    nz = 5 * M + D
-    P = _constants(params, ca)
-    S, gk, penn = _node_expressions(ca.SX.sym, M, D, inputs.step_s, P, options.optimal_reserve_Nm, ca)
-    z = ca.vertcat(S["a"], S["lm"], S["lp"], S["e"], S["aT"], S["vm"])
-    xn = ca.vertcat(S["a1"], S["lm1"])
-    d = ca.vertcat(S["lmt"], S["r"], S["id"])
-    lam = ca.SX.sym("lam", gk.shape[0])
-    sigma = ca.SX.sym("sigma")
-    cz = ca.DM(weights[:nz])
-    jac_node = ca.Function("jac_node", [z, xn, d], [ca.jacobian(gk, ca.vertcat(z, xn))])
-    lag = sigma * ca.dot(cz, z**2) + ca.dot(lam, gk)
-    hess_node = ca.Function("hess_node", [z, d, lam, sigma], [ca.triu(ca.hessian(lag, z)[0])])
-    xl = ca.vertcat(S["a"], S["lm"], S["lp"])
-    laml = ca.SX.sym("laml", M)
-    jac_last = ca.Function("jac_last", [xl], [ca.jacobian(penn, xl)])
-    hess_last = ca.Function("hess_last", [xl, laml, sigma],
-                            [ca.triu(ca.hessian(sigma * ca.dot(ca.DM(weights[nz * N:]), xl**2)
-                                                + ca.dot(laml, penn), xl)[0])])
-
-    Wm = ca.reshape(w[: nz * N], nz, N)
-    xN = w[nz * N:]
-    Xn = ca.horzcat(Wm[0:2 * M, 1:], xN[0:2 * M])
-    lam_f = ca.MX.sym("lam_f")
-    lam_g = ca.MX.sym("lam_g", g.shape[0])
-    ng = gk.shape[0]
-    Lg = ca.reshape(lam_g[: ng * N], ng, N)
-
-    def assemble(blocks_nz, block_sp, last_nz, last_sp, row_step, col_step, shape):
-        rb, cb = (np.asarray(v, dtype=np.int64) for v in block_sp.get_triplet())
-        rl, cl = (np.asarray(v, dtype=np.int64) for v in last_sp.get_triplet())
-        k = np.repeat(np.arange(N), rb.size)
-        rows = np.concatenate([np.tile(rb, N) + row_step * k, rl + row_step * N])
-        cols = np.concatenate([np.tile(cb, N) + col_step * k, cl + col_step * N])
-        perm = np.lexsort((rows, cols))
-        sp = ca.Sparsity.triplet(shape[0], shape[1], rows[perm].tolist(), cols[perm].tolist())
-        values = ca.vertcat(blocks_nz, last_nz)
-        if not np.array_equal(perm, np.arange(perm.size)):
-            values = values.nz[perm.tolist()]
-        return ca.MX(sp, values)
-
-    n_var, n_con = w.shape[0], g.shape[0]
-    Jb = jac_node.map(N)(Wm, Xn, data)
-    Jl = jac_last(xN)
-    jac = assemble(Jb.nz[:], jac_node.sparsity_out(0), Jl.nz[:], jac_last.sparsity_out(0), ng, nz, (n_con, n_var))
-    Hb = hess_node.map(N)(Wm, data, Lg, lam_f)
-    Hl = hess_last(xN, lam_g[ng * N:], lam_f)
-    hess = assemble(Hb.nz[:], hess_node.sparsity_out(0), Hl.nz[:], hess_last.sparsity_out(0), nz, nz, (n_var, n_var))
-    cw = ca.DM(weights)
-    p = ca.MX.sym("p", 0, 1)
-    f = ca.dot(cw, w**2)
-    return {
-        "grad_f": ca.Function("nlp_grad_f", [w, p], [f, 2 * cw * w], ["x", "p"], ["f", "grad_f_x"]),
-        "jac_g": ca.Function("nlp_jac_g", [w, p], [g, jac], ["x", "p"], ["g", "jac_g_x"]),
-        "hess_lag": ca.Function("nlp_hess_l", [w, p, lam_f, lam_g], [hess],
-                                ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"]),
-    }
-
-
-def node_bounds(M: int, D: int) -> tuple[np.ndarray, np.ndarray]:
-    """Lower and upper bounds of one node's variables ``[a, l~M, lM cos(alpha), e, reserve, v~M]``."""
-    lb = np.concatenate([
-        np.full(M, ACTIVATION_BOUNDS[0]), np.full(M, FIBRE_LENGTH_BOUNDS[0]), np.full(M, MIN_PROJECTED_LENGTH_M),
-        np.full(M, ACTIVATION_BOUNDS[0]), np.full(D, RESERVE_BOUNDS[0]), np.full(M, FIBRE_VELOCITY_BOUNDS[0]),
-    ])
-    ub = np.concatenate([
-        np.full(M, ACTIVATION_BOUNDS[1]), np.full(M, FIBRE_LENGTH_BOUNDS[1]), np.full(M, np.inf),
-        np.full(M, ACTIVATION_BOUNDS[1]), np.full(D, RESERVE_BOUNDS[1]), np.full(M, FIBRE_VELOCITY_BOUNDS[1]),
-    ])
-    return lb, ub
-
-
 def build_nlp(
     inputs: TrialInputs,
     params: MuscleTendonParameters,
     guess: InitialGuess,
     options: SolverOptions | None = None,
 ) -> dict:
-    """The NLP of the optimal control problem, without solving it.
-
-    Returns a dict with the CasADi symbols and expressions ``x``, ``f``, ``g``, the objective
-    ``terms``, the bounds and initial guess ``lbx``, ``ubx``, ``x0`` (node-major layout, see
-    the module docstring), the sizes, and, for ``derivatives="explicit"``, the functions
-    ``grad_f``, ``jac_g`` and ``hess_lag`` handed to IPOPT.
-    """
-    import casadi as ca
-
+    """The NLP of the single-trial problem, without solving it: the problem core
+    (:func:`.core.build_problem`) with one trial and the effort goals of ``options``."""
     options = options or SolverOptions()
-    if tuple(params.names) != tuple(inputs.muscles):
-        params = params.subset(inputs.muscles)
-    M, D, N = len(inputs.muscles), len(inputs.dofs), inputs.n_intervals
-    nx, nu = 3 * M, 2 * M + D
-    nz = nx + nu
-    n_var, n_con = problem_size(M, D, N)
+    return build_problem([TrialBlock("trial", inputs, guess)], params, effort_goals(options),
+                         optimal_reserve_Nm=options.optimal_reserve_Nm,
+                         explicit_derivatives=options.derivatives == "explicit")
 
-    node, last = _node_functions(inputs, params, options, ca)
-    w = ca.MX.sym("w", n_var)
-    W = ca.reshape(w[: nz * N], nz, N)
-    xN = w[nz * N:]
-    A, LM, LP = W[0:M, :], W[M:2 * M, :], W[2 * M:3 * M, :]
-    E, AT, VM = W[3 * M:4 * M, :], W[4 * M:4 * M + D, :], W[4 * M + D:, :]
-    A1 = ca.horzcat(A[:, 1:], xN[0:M])
-    LM1 = ca.horzcat(LM[:, 1:], xN[M:2 * M])
-    lmt = ca.DM(inputs.lmt_m[:N].T)
-    rr = ca.DM(inputs.moment_arms_m[:N].transpose(0, 2, 1).reshape(N, D * M).T)  # column-major D x M
-    mom = ca.DM(inputs.moments_Nm[:N].T)
-    data = ca.vertcat(lmt, rr, mom)
-    G = node.map(N)(A, LM, LP, E, AT, VM, A1, LM1, lmt, rr, mom)
-    g = ca.vertcat(ca.vec(G), last(xN[M:2 * M], xN[2 * M:3 * M]))
 
-    a_all = ca.vertcat(ca.vec(A), xN[0:M])
-    terms = {
-        "activation": options.w_activation * 0.5 * ca.sumsqr(a_all) / (N * M),
-        "excitation": options.w_activation * 0.5 * ca.sumsqr(E) / (N * M),
-        "reserve": options.w_reserve * ca.sumsqr(AT) / (N * D),
-        "fibre_velocity": options.w_velocity * ca.sumsqr(VM) / (N * M),
-    }
-    J = terms["activation"] + terms["excitation"] + terms["reserve"] + terms["fibre_velocity"]
-    # the same objective as one weighted sum of squares: J = sum(c * w^2)
-    c_node = np.concatenate([
-        np.full(M, options.w_activation * 0.5 / (N * M)), np.zeros(2 * M),
-        np.full(M, options.w_activation * 0.5 / (N * M)), np.full(D, options.w_reserve / (N * D)),
-        np.full(M, options.w_velocity / (N * M)),
-    ])
-    weights = np.concatenate([np.tile(c_node, N), c_node[:M], np.zeros(2 * M)])
-
-    # bounds and initial guess, node-major layout
-    lb_node, ub_node = node_bounds(M, D)
-    lbx = np.concatenate([np.tile(lb_node, N), lb_node[:nx]])
-    ubx = np.concatenate([np.tile(ub_node, N), ub_node[:nx]])
-    Z0 = np.vstack([
-        guess.activation[:N].T, guess.lm_norm[:N].T, guess.lm_projected_m[:N].T,
-        guess.excitation.T, guess.reserve.T, guess.vm_norm.T,
-    ])
-    x0 = np.concatenate([Z0.T.reshape(-1), guess.activation[N], guess.lm_norm[N], guess.lm_projected_m[N]])
-    if x0.size != n_var or g.shape[0] != n_con:
-        raise SolverError(f"internal error: problem size {x0.size}/{g.shape[0]}, expected {n_var}/{n_con}")
-    if not np.all(np.isfinite(x0)):
-        raise SolverError("the initial guess holds NaN or infinite values; check the muscle geometry and parameters")
-
-    out = {"x": w, "f": J, "g": g, "terms": terms, "x0": x0, "lbx": lbx, "ubx": ubx,
-           "n_variables": n_var, "n_constraints": n_con, "layout": (M, D, N, nz)}
-    if options.derivatives == "explicit":
-        out.update(_explicit_derivatives(inputs, params, options, ca, w, g, weights, data))
-    return out
+def effort_goals(options: SolverOptions) -> Goals:
+    """The effort goals (activation, excitation, reserves, fibre velocity) of ``options``."""
+    return Goals(w_activation=options.w_activation, w_reserve=options.w_reserve, w_velocity=options.w_velocity)
 
 
 #: IPOPT linear-algebra settings used with MUMPS (``SolverOptions.ipopt`` overrides them): no
@@ -499,59 +292,121 @@ def run_ipopt(solver, options: SolverOptions, x0, lbx, ubx, lbg, ubg):
             _time.perf_counter() - t0, _time.process_time() - c0)
 
 
+
+
+@dataclass(frozen=True, kw_only=True)
+class ProblemResult(SolveOutcome):
+    """Raw optimum of a problem (:func:`solve_problem`): one :class:`OcpResult` per trial (its
+    ``objective`` the trial's own terms), the factors by kind and muscle, IPOPT's outcome."""
+
+    trials: tuple[OcpResult, ...]
+    factors: dict  # kind -> {muscle: factor}
+    objective_terms: dict  # trial label -> {term: value}
+    emg_deviation: tuple[np.ndarray, ...]  # per trial (N, nEMG): e - s E
+    objective: float
+    n_equality_constraints: int
+    n_inequality_constraints: int
+    max_coupling_violation: float
+    ipopt_options: dict = field(default_factory=dict)
+
+
+def _trial_terms(goals: Goals, t: TrialBlock, Z, xl, dev, lm_us) -> dict:
+    """The objective terms of one trial at the optimum (NumPy, the formulas of :mod:`.core`)."""
+    M, D, N = len(t.inputs.muscles), len(t.inputs.dofs), t.inputs.n_intervals
+    a = np.concatenate([Z[:, 0:M].ravel(), xl[0:M]])
+    terms = {
+        "activation": goals.w_activation * 0.5 * float(np.sum(a**2)) / (N * M),
+        "excitation": goals.w_activation * 0.5 * float(np.sum(Z[:, 3 * M:4 * M] ** 2)) / (N * M),
+        "reserve": goals.w_reserve * float(np.sum(Z[:, 4 * M:4 * M + D] ** 2)) / (N * D),
+        "fibre_velocity": goals.w_velocity * float(np.sum(Z[:, 4 * M + D:] ** 2)) / (N * M),
+    }
+    if t.emg_muscles:
+        terms = {"emg_tracking": goals.w_emg * float(np.sum(dev**2)) / (len(t.emg_muscles) * N), **terms}
+    if t.fibre_muscles:
+        terms["fibre_length_tracking"] = goals.w_fibre_length * float(np.sum(lm_us**2)) / (len(t.fibre_muscles) * N)
+    return terms
+
+
+def solve_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=(), *,
+                  options: SolverOptions | None = None, coupling: str = "shared",
+                  mumps_settings: dict | None = None) -> ProblemResult:
+    """Build (:func:`.core.build_problem`) and solve a problem; never raises on
+    non-convergence (see ``success``). Errors while building raise :class:`SolverError`."""
+    import casadi as ca
+
+    options = options or SolverOptions()
+    trials, specs = list(trials), list(specs)
+    t_build = _time.perf_counter()
+    nlp = build_problem(trials, params, goals, specs, optimal_reserve_Nm=options.optimal_reserve_Nm,
+                        coupling=coupling, explicit_derivatives=options.derivatives == "explicit")
+    ipopt = ipopt_options(options, LINEAR_SOLVER_OPTIONS if mumps_settings is None else mumps_settings)
+    nlp_options = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
+    nlp_options.update({k: nlp[k] for k in ("grad_f", "jac_g", "hess_lag") if k in nlp})
+    try:
+        solver = ca.nlpsol("mrs", "ipopt", {"x": nlp["x"], "f": nlp["f"], "g": nlp["g"]}, nlp_options)
+    except RuntimeError as exc:
+        raise SolverError(f"the optimal control problem could not be built: {exc}") from None
+    build_time = _time.perf_counter() - t_build
+    x, gval, f_opt, stats, solve_time, solve_cpu = run_ipopt(
+        solver, options, nlp["x0"], nlp["lbx"], nlp["ubx"], nlp["lbg"], nlp["ubg"])
+    L = nlp["layout"]
+    viol = np.maximum(nlp["lbg"] - gval, 0.0) + np.maximum(gval - nlp["ubg"], 0.0)
+    max_viol = float(np.max(viol)) if viol.size else 0.0
+    p = x[L["P0"]:]
+    if L["p_index"] is not None:
+        p = p[L["p_index"]] if L["p_index"] else np.zeros(0)
+    factors, off = {}, L["spec_off"]
+    for i, s in enumerate(specs):
+        factors.setdefault(s.kind, {}).update({m: float(v) for m, v in zip(s.muscles, p[off[i]:off[i + 1]])})
+    outcome = dict(status=str(stats.get("return_status", "unknown")), success=bool(stats.get("success", False)),
+                   iterations=int(stats.get("iter_count", -1)), solve_time_s=solve_time, solve_cpu_s=solve_cpu,
+                   build_time_s=build_time, n_variables=nlp["n_variables"], max_constraint_violation=max_viol,
+                   function_time_s={k[len("t_wall_"):]: float(v) for k, v in stats.items()
+                                    if k.startswith("t_wall_nlp") and v})
+    ocps, devs = [], []
+    lmo = dict(zip(params.names, params.optimal_fiber_length_m))
+    for i, t in enumerate(trials):
+        d, o = L["trials"][i], L["var_off"][i]
+        M, D, N, nz = d["M"], d["D"], d["N"], d["nz"]
+        Z = x[o:o + nz * N].reshape(N, nz)
+        xl = x[o + nz * N:o + nz * N + 3 * M]
+        pos = {m: k for k, m in enumerate(t.inputs.muscles)}
+        ie = [pos[m] for m in t.emg_muscles]
+        dev = np.zeros((N, 0))
+        if ie:
+            dev = Z[:, 3 * M:4 * M][:, ie] - np.array([factors["emg_scale"][m] for m in t.emg_muscles]) * t.emg_nodes
+        iu = [pos[m] for m in t.fibre_muscles]
+        lm_us = np.zeros((N, 0))
+        if iu:
+            s_lmo = np.array([factors.get("optimal_fiber_length", {}).get(m, 1.0) for m in t.fibre_muscles])
+            l0 = np.array([lmo[m] for m in t.fibre_muscles])
+            lm_us = (Z[:, M:2 * M][:, iu] * s_lmo * l0 - t.fibre_length_nodes_m) / l0
+        terms = _trial_terms(goals, t, Z, xl, dev, lm_us)
+        ocps.append(OcpResult(
+            activation=np.vstack([Z[:, 0:M], xl[0:M]]), lm_norm=np.vstack([Z[:, M:2 * M], xl[M:2 * M]]),
+            lm_projected_m=np.vstack([Z[:, 2 * M:3 * M], xl[2 * M:]]), excitation=Z[:, 3 * M:4 * M].copy(),
+            reserve=Z[:, 4 * M:4 * M + D].copy(), vm_norm=Z[:, 4 * M + D:].copy(),
+            objective=f_opt if len(trials) == 1 else float(sum(terms.values())), objective_terms=terms,
+            n_constraints=nlp["n_equality_constraints"], **outcome))
+        devs.append(dev)
+    full = x[L["P0"]:]
+    return ProblemResult(
+        trials=tuple(ocps), factors=factors,
+        objective_terms={t.label: o.objective_terms for t, o in zip(trials, ocps)}, emg_deviation=tuple(devs), objective=f_opt,
+        n_equality_constraints=nlp["n_equality_constraints"], n_inequality_constraints=nlp["n_inequality_constraints"],
+        max_coupling_violation=float(max((abs(full[a] - full[b]) for a, b in L["pairs"]), default=0.0)),
+        ipopt_options=dict(ipopt), **outcome)
+
+
 def solve_ocp(
     inputs: TrialInputs,
     params: MuscleTendonParameters,
     guess: InitialGuess,
     options: SolverOptions | None = None,
 ) -> OcpResult:
-    """Build and solve the optimal control problem; never raises on non-convergence.
-
-    The returned ``status`` is IPOPT's return status (``Solve_Succeeded`` on success) and
-    ``success`` says whether IPOPT reported success. Errors while building the problem raise
-    :class:`SolverError`.
-    """
-    import casadi as ca
-
+    """Build and solve the single-trial problem with the effort goals of ``options``; never
+    raises on non-convergence (``status`` is IPOPT's return status, ``success`` whether IPOPT
+    reported success). Errors while building the problem raise :class:`SolverError`."""
     options = options or SolverOptions()
-    if tuple(params.names) != tuple(inputs.muscles):
-        params = params.subset(inputs.muscles)
-    t_build = _time.perf_counter()
-    nlp = build_nlp(inputs, params, guess, options)
-    M, D, N, nz = nlp["layout"]
-    n_var, n_con = nlp["n_variables"], nlp["n_constraints"]
-    w, terms = nlp["x"], nlp["terms"]
-    ipopt = ipopt_options(options, LINEAR_SOLVER_OPTIONS)
-    nlp_options = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
-    nlp_options.update({k: nlp[k] for k in ("grad_f", "jac_g", "hess_lag") if k in nlp})
-    try:
-        solver = ca.nlpsol("mrs", "ipopt", {"x": w, "f": nlp["f"], "g": nlp["g"]}, nlp_options)
-    except RuntimeError as exc:
-        raise SolverError(f"the optimal control problem could not be built: {exc}") from None
-    terms_f = ca.Function("terms", [w], list(terms.values()))
-    build_time = _time.perf_counter() - t_build
-
-    x, gval, f_opt, stats, solve_time, solve_cpu = run_ipopt(solver, options, nlp["x0"], nlp["lbx"], nlp["ubx"], 0.0, 0.0)
-    Z = x[: nz * N].reshape(N, nz)
-    xNv = x[nz * N:]
-    return OcpResult(
-        activation=np.vstack([Z[:, 0:M], xNv[0:M]]),
-        lm_norm=np.vstack([Z[:, M:2 * M], xNv[M:2 * M]]),
-        lm_projected_m=np.vstack([Z[:, 2 * M:3 * M], xNv[2 * M:3 * M]]),
-        excitation=Z[:, 3 * M:4 * M].copy(),
-        reserve=Z[:, 4 * M:4 * M + D].copy(),
-        vm_norm=Z[:, 4 * M + D:].copy(),
-        objective=f_opt,
-        objective_terms={k: float(v) for k, v in zip(terms, terms_f(x))},
-        status=str(stats.get("return_status", "unknown")),
-        success=bool(stats.get("success", False)),
-        iterations=int(stats.get("iter_count", -1)),
-        solve_time_s=solve_time,
-        solve_cpu_s=solve_cpu,
-        build_time_s=build_time,
-        n_variables=n_var,
-        n_constraints=n_con,
-        max_constraint_violation=float(np.max(np.abs(gval))) if gval.size else 0.0,
-        function_time_s={k[len("t_wall_"):]: float(v) for k, v in stats.items()
-                         if k.startswith("t_wall_nlp") and v},
-    )
+    res = solve_problem([TrialBlock("trial", inputs, guess)], params, effort_goals(options), options=options)
+    return res.trials[0]

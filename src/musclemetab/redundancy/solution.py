@@ -204,6 +204,13 @@ class Solution:
 
     # ------------------------------------------------------------------ properties
     @property
+    def run_record(self):
+        """The :class:`~.record.RunRecord` of the solve (from ``summary``)."""
+        from .record import RunRecord
+
+        return RunRecord.from_dict(self.summary)
+
+    @property
     def status(self) -> str:
         return str(self.summary.get("status", "unknown"))
 

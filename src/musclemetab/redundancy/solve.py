@@ -9,7 +9,6 @@ process never imports ``opensim``).
 from __future__ import annotations
 
 import os
-import platform
 import threading
 import time as _time
 from pathlib import Path
@@ -29,7 +28,8 @@ from .inputs import (
 )
 from .parameters import MuscleTendonParameters
 from ..errors import OptionError
-from .problem import SolverOptions, ipopt_statistics, solve_ocp
+from .problem import SolverOptions, solve_ocp
+from .record import RunRecord
 from .solution import Solution, build_solution
 from .static_opt import guess_from_solution, initial_guess, static_optimisation
 from .workflows import (
@@ -71,6 +71,28 @@ def _restrict_geometry(geometry):
     )
 
 
+def prepare_trial(geometry, params: MuscleTendonParameters, id_time_s, id_moments_Nm, *, ik_time_s=None,
+                  options: SolverOptions | None = None, sources: dict | None = None, check_units: bool = True,
+                  filter_inputs: bool = True, mesh_frequency_hz: float = MESH_FREQUENCY_HZ):
+    """Mesh inputs of one trial (muscles and DOFs the problem keeps), its parameters and the
+    static optimisation of its initial guess: ``(inputs, params, static optimisation)``."""
+    options = options or SolverOptions()
+    all_dofs = tuple(geometry.dofs)
+    geometry = _restrict_geometry(geometry)
+    if tuple(geometry.dofs) != all_dofs:
+        keep = [all_dofs.index(d) for d in geometry.dofs]
+        id_moments_Nm = np.asarray(id_moments_Nm, dtype=float).reshape(len(id_time_s), -1)[:, keep]
+    params = params.subset(geometry.muscles)
+    inputs = prepare_inputs(geometry, id_time_s, id_moments_Nm, ik_time_s=ik_time_s,
+                            filter_inputs=filter_inputs, mesh_frequency_hz=mesh_frequency_hz,
+                            sources=dict(sources or {}))
+    if check_units:
+        check_moment_magnitudes(inputs.moments_frames_Nm, inputs.dofs, inputs.moment_arms_frames_m,
+                                params.max_isometric_force_N, (sources or {}).get("id", "inverse dynamics"),
+                                options.optimal_reserve_Nm)
+    return inputs, params, static_optimisation(inputs, params)
+
+
 def solve_with_parameters(
     geometry,
     params: MuscleTendonParameters,
@@ -99,20 +121,9 @@ def solve_with_parameters(
     """
     t_start = _time.perf_counter()
     options = options or SolverOptions()
-    all_dofs = tuple(geometry.dofs)
-    geometry = _restrict_geometry(geometry)
-    if tuple(geometry.dofs) != all_dofs:
-        keep = [all_dofs.index(d) for d in geometry.dofs]
-        id_moments_Nm = np.asarray(id_moments_Nm, dtype=float).reshape(len(id_time_s), -1)[:, keep]
-    params = params.subset(geometry.muscles)
-    inputs = prepare_inputs(geometry, id_time_s, id_moments_Nm, ik_time_s=ik_time_s,
-                            filter_inputs=filter_inputs, mesh_frequency_hz=mesh_frequency_hz,
-                            sources=dict(sources or {}))
-    if check_units:
-        check_moment_magnitudes(inputs.moments_frames_Nm, inputs.dofs, inputs.moment_arms_frames_m,
-                                params.max_isometric_force_N, (sources or {}).get("id", "inverse dynamics"),
-                                options.optimal_reserve_Nm)
-    so = static_optimisation(inputs, params)
+    inputs, params, so = prepare_trial(geometry, params, id_time_s, id_moments_Nm, ik_time_s=ik_time_s,
+                                       options=options, sources=sources, check_units=check_units,
+                                       filter_inputs=filter_inputs, mesh_frequency_hz=mesh_frequency_hz)
     if warm_start is None:
         guess = initial_guess(inputs, params, so)
     else:
@@ -120,10 +131,8 @@ def solve_with_parameters(
         options = options.with_(ipopt={"mu_init": WARM_START_MU_INIT, **options.ipopt})
     t_prep = _time.perf_counter() - t_start
     ocp = solve_ocp(inputs, params, guess, options)
-    from .. import __version__
-
     summary = {
-        **ipopt_statistics(ocp),
+        **RunRecord.from_result(ocp, sources).to_dict(),
         "preparation_time_s": t_prep,
         "problem_size": {"variables": ocp.n_variables, "equality_constraints": ocp.n_constraints},
         "time_window_s": list(inputs.window_s),
@@ -140,14 +149,7 @@ def solve_with_parameters(
                               if filter_inputs else "none",
                               "mesh_intervals_per_second": mesh_frequency_hz, "interpolation": "not-a-knot cubic spline"},
         "inputs": {k: str(v) for k, v in (sources or {}).items()},
-        "software": {"musclemetab": __version__, "python": platform.python_version()},
     }
-    try:
-        import casadi
-
-        summary["software"]["casadi"] = casadi.__version__
-    except Exception:  # pragma: no cover
-        pass
     solution = build_solution(inputs, params, ocp, summary)
     solution.summary["total_time_s"] = _time.perf_counter() - t_start
     return solution

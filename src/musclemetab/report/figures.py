@@ -53,6 +53,8 @@ __all__ = [
     "whole_body_over_cycle",
     "phase_shares",
     "group_shares",
+    "per_muscle_ranked",
+    "rates_against_speed",
     "save_figure",
 ]
 
@@ -512,7 +514,7 @@ def _cycle_panels(n: int):
     return fig, fig.subplots(nrow, ncol, squeeze=False, sharex=True, sharey=True)
 
 
-def _label_cycle_panels(axes, models: Sequence[str]) -> None:
+def _label_cycle_panels(axes, models: Sequence[str], ylabel: str = "metabolic rate (W)") -> None:
     """Titles, axis labels and limits of the panels of :func:`_cycle_panels`; unused panels hidden."""
     nrow, ncol = axes.shape
     for k, ax in enumerate(axes.flat):
@@ -523,14 +525,14 @@ def _label_cycle_panels(axes, models: Sequence[str]) -> None:
         ax.set_xlim(0, 100)
         ax.set_title(m, color=model_colour(m), fontsize=11, fontweight="bold")
         if k % ncol == 0:
-            ax.set_ylabel("metabolic rate (W)")
+            ax.set_ylabel(ylabel)
         if k // ncol == nrow - 1 or k + ncol >= len(models):
             ax.set_xlabel("gait cycle (%)")
             ax.tick_params(labelbottom=True)
 
 
 def group_rates_over_cycle(timeseries, toe_off_pct: float, models: Sequence[str] | None = None,
-                           *, title: str | None = None):
+                           *, title: str | None = None, scale: float = 1.0, unit: str = "W"):
     """Metabolic rate of each muscle group over the gait cycle (W), one panel per model.
 
     ``timeseries`` is a unit's long table (``cycle_pct``, ``model``, ``series``, ``value_W``;
@@ -558,10 +560,10 @@ def group_rates_over_cycle(timeseries, toe_off_pct: float, models: Sequence[str]
             d = dm[dm["series"].astype(str) == f"group/{g}"].sort_values("cycle_pct")
             if d.empty:
                 continue
-            ax.plot(d["cycle_pct"], d["value_W"], color=group_colour(g), lw=1.3, label=g, gid=f"group:{g}")
+            ax.plot(d["cycle_pct"], scale * d["value_W"], color=group_colour(g), lw=1.3, label=g, gid=f"group:{g}")
         ax.axvline(to, color="k", lw=0.8, ls=":", label="_toe-off", gid="toe-off")
         ax.axhline(0.0, color="0.7", lw=0.6, label="_zero")
-    _label_cycle_panels(axes, models)
+    _label_cycle_panels(axes, models, f"metabolic rate ({unit})")
     from matplotlib.lines import Line2D
 
     handles = [Line2D([], [], color=group_colour(g), lw=1.5, label=f"{g} ({GROUP_NAMES.get(g, g)})") for g in groups]
@@ -575,7 +577,8 @@ def group_rates_over_cycle(timeseries, toe_off_pct: float, models: Sequence[str]
 # ------------------------------------------------------- 4. whole body over the cycle, speeds
 def whole_body_over_cycle(timeseries_by_trial: Mapping[str, object], speeds: Mapping[str, float],
                           models: Sequence[str] | None = None, *,
-                          toe_off_pct: Mapping[str, float] | None = None, title: str | None = None):
+                          toe_off_pct: Mapping[str, float] | None = None, title: str | None = None,
+                          scale: float = 1.0, unit: str = "W"):
     """Whole-body (one leg, summed muscles, no basal) metabolic rate over the cycle across speeds.
 
     ``timeseries_by_trial``: trial label -> the unit's long table (series ``whole_body``);
@@ -613,12 +616,12 @@ def whole_body_over_cycle(timeseries_by_trial: Mapping[str, object], speeds: Map
             d = tables[t][tables[t]["model"].astype(str) == m].sort_values("cycle_pct")
             if d.empty:
                 continue
-            ax.plot(d["cycle_pct"], d["value_W"], color=colour[t], lw=1.4,
+            ax.plot(d["cycle_pct"], scale * d["value_W"], color=colour[t], lw=1.4,
                     label=f"{t} ({float(speeds[t]):.2f} m/s)", gid=f"trial:{t}")
             if toe_off_pct is not None and t in toe_off_pct and np.isfinite(float(toe_off_pct[t])):
                 ax.axvline(float(toe_off_pct[t]), ymin=0.0, ymax=0.06, color=colour[t], lw=1.5,
                            label="_toe-off", gid="toe-off")
-    _label_cycle_panels(axes, models)
+    _label_cycle_panels(axes, models, f"metabolic rate ({unit})")
     from matplotlib.lines import Line2D
 
     handles = [Line2D([], [], color=colour[t], lw=1.6, label=f"{t} ({float(speeds[t]):.2f} m/s)") for t in labels]
@@ -790,6 +793,120 @@ def group_shares(results, *, workflows: Sequence[str] | None = None, models: Seq
     fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 6), fontsize=8, frameon=False)
     fig.suptitle(title or "Shares of the muscle groups in the cycle's muscle metabolic energy "
                  "(%, one leg, no basal heat; mean over subjects)", fontsize=11)
+    return fig
+
+
+# ------------------------------------------------------------- 8. rates against speed
+def rates_against_speed(results, *, workflow: str | None = None, models: Sequence[str] | None = None,
+                        title: str | None = None):
+    """Whole-body and muscle-group rates (W/kg of body mass, both legs, no basal) against speed.
+
+    One panel per model (shared axes); a black line through the whole-body rate without basal
+    heat (``mean_W_per_kg_no_basal``) at each trial and one line per group
+    (``share_<G>_pct / 100 * mean_W_per_kg_no_basal``), means over subjects at the trials' mean
+    speeds.
+    """
+    res = _ok_rows(results)
+    _require_columns(res, ("speed_m_per_s", "mean_W_per_kg_no_basal"), "the results table")
+    cols = [c for c in (f"share_{g}_pct" for g in GROUPS) if c in res.columns]
+    wfs = _ordered_workflows(res["workflow"])
+    wf = main_workflow(wfs) if workflow is None else str(workflow)
+    d = res[res["workflow"].astype(str) == wf]
+    if d.empty:
+        raise OptionError(f"workflow '{wf}' is not in the results; it has {', '.join(wfs)}")
+    if len(_unique(d["trial"].astype(str))) < 2:
+        raise OptionError("one speed only: nothing to draw against speed")
+    models = _ordered_models(d["model"]) if models is None else [str(m) for m in models]
+    fig, axes = _cycle_panels(len(models))
+    groups = [c[len("share_"):-len("_pct")] for c in cols]
+    for k, m in enumerate(models):
+        ax = axes.flat[k]
+        dm = d[d["model"].astype(str) == m].copy()
+        for g, c in zip(groups, cols):
+            dm[f"rate_{g}"] = dm[c].astype(float) / 100.0 * dm["mean_W_per_kg_no_basal"].astype(float)
+        rows = _speed_table(dm, "mean_W_per_kg_no_basal")
+        x = [r[1] for r in rows]
+        ax.plot(x, [r[2] for r in rows], color="k", lw=1.8, marker="o", ms=4, label="whole body", gid="whole-body")
+        for g in groups:
+            ys = [r[2] for r in _speed_table(dm, f"rate_{g}")]
+            ax.plot(x, ys, color=group_colour(g), lw=1.2, marker="o", ms=3, label=g, gid=f"group:{g}")
+        ax.set_xlim(min(x) - 0.05, max(x) + 0.05)
+    _label_cycle_panels(axes, models, "metabolic rate (W/kg)")
+    for k, ax in enumerate(axes.flat):
+        if k < len(models) and ax.get_xlabel():
+            ax.set_xlabel("walking speed (m/s)")
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], color="k", lw=1.8, marker="o", label="whole body (both legs, no basal)")]
+    handles += [Line2D([], [], color=group_colour(g), lw=1.2, marker="o", label=f"{g} ({GROUP_NAMES.get(g, g)})")
+                for g in groups]
+    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 6), fontsize=8, frameon=False)
+    fig.suptitle(title or f"Whole-body and muscle-group metabolic rates against walking speed ({wf}; W/kg of body "
+                 "mass, both legs, no basal heat; mean over subjects)", fontsize=11)
+    return fig
+
+
+# ------------------------------------------------------------- 7. per-muscle ranking
+def per_muscle_ranked(per_muscle, *, workflow: str | None = None, models: Sequence[str] | None = None,
+                      top: int = 15, title: str | None = None):
+    """The muscles costing most energy, ranked, across speeds (W/kg of body mass, one leg, no basal).
+
+    ``per_muscle``: the study's per-muscle table (``trial``, ``workflow``, ``model``,
+    ``muscle``, ``mean_W_per_kg``; ``speed_m_per_s`` orders the trials when present). One
+    panel per model (shared axis), the ``top`` muscles by their mean over trials (largest at
+    the top), one bar per trial coloured by speed (light = slow), means over subjects.
+    """
+    _require_columns(per_muscle, ("trial", "workflow", "model", "muscle", "mean_W_per_kg"), "the per-muscle table")
+    if len(per_muscle) == 0:
+        raise OptionError("the per-muscle table has no rows")
+    wfs = _ordered_workflows(per_muscle["workflow"])
+    wf = main_workflow(wfs) if workflow is None else str(workflow)
+    d = per_muscle[per_muscle["workflow"].astype(str) == wf]
+    if d.empty:
+        raise OptionError(f"workflow '{wf}' is not in the per-muscle table; it has {', '.join(wfs)}")
+    models = _ordered_models(d["model"]) if models is None else [str(m) for m in models]
+    trials = trial_order(d) if "speed_m_per_s" in d.columns else _unique(str(t) for t in d["trial"])
+    from matplotlib import colormaps
+
+    cmap = colormaps["viridis_r"]
+    shades = np.linspace(0.15, 0.9, len(trials)) if len(trials) > 1 else np.array([0.6])
+    colour = {t: cmap(float(x)) for t, x in zip(trials, shades)}
+    nrow, ncol = _grid(len(models))
+    fig = _new_figure(4.2 * ncol + 0.8, (0.19 * top * max(1, len(trials)) / 2 + 1.0) * nrow + 1.3,
+                      left=1.0, wspace=0.55, hspace=0.3)
+    axes = fig.subplots(nrow, ncol, squeeze=False, sharex=True)
+    height = 0.8 / max(len(trials), 1)
+    for k, m in enumerate(models):
+        ax = axes.flat[k]
+        dm = d[d["model"].astype(str) == m]
+        mean = dm.groupby(["muscle", dm["trial"].astype(str)])["mean_W_per_kg"].mean().unstack()
+        order = list(mean.mean(axis=1).sort_values(ascending=False).index[:top])
+        y = np.arange(len(order))[::-1]
+        for i, t in enumerate(trials):
+            if t not in mean.columns:
+                continue
+            vals = mean.loc[order, t].to_numpy(float)
+            ax.barh(y + 0.4 - height * (i + 0.5), vals, height=height * 0.95, color=colour[t], label=t,
+                    gid=f"trial:{t}")
+        ax.set_yticks(y, order, fontsize=7)
+        ax.set_title(m, color=model_colour(m), fontsize=11, fontweight="bold")
+        ax.grid(axis="x", color="0.9", lw=0.6)
+        ax.set_axisbelow(True)
+    for k in range(len(models), nrow * ncol):
+        axes.flat[k].set_visible(False)
+    for j in range(ncol):
+        axes[-1, j].set_xlabel("metabolic rate (W/kg, one leg, no basal)")
+        axes[-1, j].tick_params(labelbottom=True)
+    from matplotlib.patches import Patch
+
+    sp = {}
+    if "speed_m_per_s" in d.columns:
+        sp = d.assign(trial=d["trial"].astype(str)).groupby("trial")["speed_m_per_s"].mean().to_dict()
+    handles = [Patch(color=colour[t], label=f"{t} ({sp[t]:.2f} m/s)" if np.isfinite(sp.get(t, np.nan)) else t)
+               for t in trials]
+    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 8), fontsize=8, frameon=False)
+    fig.suptitle(title or f"The {top} muscles with the largest metabolic rate, across walking speeds ({wf}; "
+                 "W/kg of body mass, one leg, no basal heat; mean over subjects)", fontsize=11)
     return fig
 
 

@@ -60,6 +60,8 @@ FIGURE_NAMES = (
     "whole_body_over_cycle",
     "phase_shares",
     "group_shares",
+    "rates_against_speed",
+    "per_muscle_ranked",
 )
 
 #: Packages whose versions the report lists (OpenSim's from study.json only).
@@ -222,6 +224,17 @@ def _cycle(rec: dict, where: Path) -> tuple[float, float, float]:
     return vals
 
 
+def _body_mass(study: StudyFolder, subject) -> float | None:
+    """The subject's body mass (kg) recorded in study.json, or ``None``."""
+    subjects = study.settings.get("subjects")
+    rec = subjects.get(str(subject)) if isinstance(subjects, dict) else None
+    try:
+        mass = float((rec or {}).get("body_mass_kg"))
+    except (TypeError, ValueError):
+        return None
+    return mass if np.isfinite(mass) and mass > 0 else None
+
+
 def _read_timeseries(folder: Path):
     import pandas as pd
 
@@ -274,6 +287,8 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
         "whole_body_over_cycle": "Whole-body metabolic rate over the gait cycle across speeds",
         "phase_shares": "Stance and swing shares",
         "group_shares": "Muscle-group shares",
+        "per_muscle_ranked": "The muscles costing most energy, across speeds",
+        "rates_against_speed": "Whole-body and muscle-group rates against walking speed",
     }
 
     def attempt(name: str, build: Callable[[], tuple[object, str]]):
@@ -362,16 +377,20 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
             sp = d["speed_m_per_s"].iloc[0] if "speed_m_per_s" in d.columns else math.nan
             return ts, float(to), float(sp)
 
+        mass = _body_mass(study, subject)
+        scale, unit, legs = (2.0 / mass, "W/kg", "both legs") if mass else (1.0, "W", "one leg")
+
         def fig3():
             ts, to, _ = unit_timeseries(subject, trial, main_wf)
             fig = F.group_rates_over_cycle(
                 ts, to, [m for m in models if m in set(ts["model"].astype(str))] or None,
-                title=f"Metabolic rate of the muscle groups over the gait cycle (W, one leg, no basal heat): "
-                f"subject {subject}, trial {trial}, {main_wf}",
+                title=f"Metabolic rate of the muscle groups over the gait cycle ({unit}, {legs}, no basal heat): "
+                f"subject {subject}, trial {trial}, {main_wf}", scale=scale, unit=unit,
             )
             cap = (f"Subject {subject}, trial {trial} (preferred speed), workflow {main_wf}. Muscle metabolic "
-                   f"rates (W, one leg, without basal heat) distributed to the muscle groups by moment-arm "
-                   f"ratio; dotted line: toe-off ({to:.1f} % of the cycle).")
+                   f"rates ({unit}, {legs}: twice the simulated leg{' per kg of body mass' if mass else ''}, "
+                   "without basal heat) distributed to the muscle groups by moment-arm ratio; same axes in every "
+                   f"panel; dotted line: toe-off ({to:.1f} % of the cycle).")
             return fig, cap
 
         def fig4():
@@ -399,12 +418,13 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
             fig = F.whole_body_over_cycle(
                 tables, speeds, [m for m in models if any(m in set(x["model"].astype(str)) for x in tables.values())],
                 toe_off_pct=toes,
-                title=f"Whole-body metabolic rate over the gait cycle across speeds (W, one leg, summed muscles, "
-                f"no basal heat): subject {subject}, {main_wf}",
+                title=f"Whole-body metabolic rate over the gait cycle across speeds ({unit}, {legs}, summed "
+                f"muscles, no basal heat): subject {subject}, {main_wf}", scale=scale, unit=unit,
             )
-            cap = (f"Subject {subject}, workflow {main_wf}. Sum of the muscle metabolic rates of one leg (W, "
-                   "without basal heat) over the gait cycle, one line per walking speed; marks at the bottom: "
-                   "toe-off of each trial.")
+            cap = (f"Subject {subject}, workflow {main_wf}. Summed muscle metabolic rate ({unit}, {legs}: twice "
+                   f"the simulated leg{' per kg of body mass' if mass else ''}, without basal heat) over the gait "
+                   "cycle, one line per walking speed; same axes in every panel; marks at the bottom: toe-off of "
+                   "each trial.")
             if skipped:
                 cap += f" Not shown: {'; '.join(skipped)}."
             return fig, cap
@@ -423,6 +443,30 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
                    "heat; mean over subjects), one bar per trial (walking speed in m/s).")
             return fig, cap
 
+        def fig7():
+            import pandas as pd
+
+            path = study.path / "per_muscle.csv"
+            if not path.is_file():
+                raise OptionError("per_muscle.csv is missing: run the study with this version to get it")
+            pm = pd.read_csv(path, dtype={"subject": str, "trial": str, "workflow": str, "model": str})
+            if "speed_m_per_s" in ok.columns:
+                sp = ok.drop_duplicates(["subject", "trial"])[["subject", "trial", "speed_m_per_s"]]
+                pm = pm.merge(sp.astype({"subject": str, "trial": str}), on=["subject", "trial"], how="left")
+            fig = F.per_muscle_ranked(pm, workflow=main_wf if main_wf in set(pm["workflow"].astype(str)) else None,
+                                      models=[m for m in models if m in set(pm["model"].astype(str))] or None)
+            cap = (f"Workflow {main_wf}. The 15 muscles with the largest cycle-average metabolic rate of each model "
+                   "(W per kg of body mass, one leg, without basal heat; mean over subjects), one bar per trial "
+                   "(light: slow, dark: fast); every muscle is in per_muscle.csv.")
+            return fig, cap
+
+        def fig8():
+            fig = F.rates_against_speed(ok, workflow=main_wf, models=models)
+            cap = (f"Workflow {main_wf}. Whole-body metabolic rate without basal heat (black) and each muscle "
+                   "group's part of it (group share × whole-body rate), W per kg of body mass, both legs; means "
+                   "over subjects at each trial's mean walking speed; same axes in every panel.")
+            return fig, cap
+
         builders = {
             "excitations_fiber_lengths": fig1,
             "estimated_vs_measured": fig2,
@@ -430,6 +474,8 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
             "whole_body_over_cycle": fig4,
             "phase_shares": fig5,
             "group_shares": fig6,
+            "per_muscle_ranked": fig7,
+            "rates_against_speed": fig8,
         }
         for name in FIGURE_NAMES:
             if subject is None and name in ("excitations_fiber_lengths", "group_rates_over_cycle",

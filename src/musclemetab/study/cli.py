@@ -101,4 +101,4 @@ def demo_command(args) -> int:
         table = table.reindex(columns=sorted(table.columns, key=lambda c: (c[0], trials.index(c[1]))))
         print("\nwhole-body metabolic rate, W/kg (two legs + 1.2 W/kg basal):")
         print(table.round(2).to_string())
-    return 1 if run.failed else 0
+    return _status(run)

@@ -160,7 +160,9 @@ class Study:
 
 
 # ---------------------------------------------------------------------------------------
-_STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "subjects"}
+_STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "subjects", "solver"}
+#: keys of the study file's [solver] table (IPOPT settings of every solve)
+_SOLVER_KEYS = {"max_iter", "tol", "linear_solver"}
 _SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials",
                  "muscle_properties", "side", "dofs"}
 _TRIAL_KEYS = {
@@ -226,8 +228,27 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
     if dup:
         raise OptionError(f"{where}: subject name(s) {', '.join(dup)} used more than once; names must be unique")
     settings = {"name": name, "workflows": list(workflows), "models": list(models), "basal": basal}
+    solver = _solver(data.get("solver"), where)
+    if solver:
+        settings["solver"] = solver
     return Study(name=name, subjects=subjects, workflows=workflows, models=models, output=out,
                  basal=basal, source=source, settings=settings)
+
+
+def _solver(data, where: str) -> dict:
+    """The ``[solver]`` table: ``max_iter``, ``tol``, ``linear_solver``, checked."""
+    if data is None:
+        return {}
+    if not isinstance(data, Mapping):
+        raise OptionError(f"{where}: 'solver' must be a table such as [solver] max_iter = 3000")
+    _unknown(data, _SOLVER_KEYS, f"{where}: [solver]")
+    from ..redundancy import SolverOptions
+
+    try:
+        SolverOptions(**dict(data))
+    except (TypeError, ValueError, OptionError) as exc:
+        raise OptionError(f"{where}: [solver]: {exc}") from None
+    return dict(data)
 
 
 def _unknown(data: Mapping, allowed: set, where: str) -> None:

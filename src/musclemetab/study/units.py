@@ -163,6 +163,8 @@ def unit_key(study: Study, unit: Unit, dependency_key: str | None = None) -> str
         "subject": _subject_record(subject, unit.workflow),
         "dependency": dependency_key,
     }
+    if study.settings.get("solver"):
+        content["solver"] = study.settings["solver"]
     if unit.trial is None:
         content["trials"] = [_trial_record(t) for t in subject.trials]
     else:
@@ -365,22 +367,20 @@ def _run_estimation(study: Study, unit: Unit, tmp: Path) -> dict:
         emg_mapping=subject.emg_mapping,
         labels=[t.name for t in subject.trials],
         passive=subject.passive,
+        options=_solver_options(study),
     )
+    if not result.success:  # nothing of a failed estimate is written
+        raise result.run_record.failure(f"EMG-TEN of subject {subject.name}")
     result.write(tmp)
-    if not result.success:
-        raise _failed_solve(f"EMG-TEN of subject {subject.name}", result.record)
     return {"times": {"solve_s": time.perf_counter() - t0}}
 
 
-def _failed_solve(what: str, summary: dict):
-    from ..errors import SolverError
-    from ..redundancy.problem import failure_advice
+def _solver_options(study: Study):
+    """The study's ``[solver]`` settings as :class:`~musclemetab.redundancy.SolverOptions` (or ``None``)."""
+    from ..redundancy import SolverOptions
 
-    status = summary.get("status", "unknown")
-    return SolverError(
-        f"{what} did not converge (status {status}, {summary.get('iterations', '?')} iterations): "
-        f"{failure_advice(status)}"
-    )
+    settings = study.settings.get("solver") or {}
+    return SolverOptions(**settings) if settings else None
 
 
 def _copy_solution(source: Path, target: Path) -> None:
@@ -394,10 +394,13 @@ def _copy_solution(source: Path, target: Path) -> None:
         shutil.copyfile(source / name, target / name)
 
 
-def _cycle_source(trial: Trial) -> str:
-    """Where the trial's gait events come from (:func:`musclemetab.study.events.trial_cycle`)."""
+def _cycle_source(trial: Trial, recorded: dict | None = None) -> str:
+    """Where the trial's gait events come from (:func:`musclemetab.study.events.trial_cycle`,
+    or ``recorded``: the gait cycle the solve found, from its summary's window)."""
     if all(v is not None for v in (trial.start_s, trial.toe_off_s, trial.end_s)):
         return "study file"
+    if recorded and trial.start_s is None and trial.end_s is None:
+        return f"ground reaction forces ({recorded.get('source') or 'found by the solve'})"
     if trial.grf is not None:
         return "ground reaction forces"
     return "estimated from the IK window and the ankle moment (no ground reaction forces)"
@@ -419,10 +422,10 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
     t0 = time.perf_counter()
     if unit.workflow == EMG_TEN:
         _copy_solution(dependency / trial.name, tmp)
-        summary = Solution.load(tmp, require_success=False).summary
-        if summary.get("status") and not summary.get("success", False):
-            raise _failed_solve(f"EMG-TEN solution of trial {trial.name}", summary)
-        solve_summary = summary
+        solution = Solution.load(tmp, require_success=False)
+        if not solution.run_record.success:
+            raise solution.run_record.failure(f"EMG-TEN solution of trial {trial.name}")
+        solve_summary = solution.summary
     else:
         kwargs = {}
         if unit.workflow != "effort-gen" and subject.passive is not None:
@@ -436,14 +439,15 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
             elif isinstance(kt, (dict, str)):  # a table, or "example"
                 kwargs["tendon_stiffness"] = kt
         sol = solve_files(subject.model, trial.ik, trial.id, unit.workflow, side=subject.side, dofs=subject.dofs,
-                          external_loads=trial.external_loads, cycle=trial.cycle, **kwargs)
+                          external_loads=trial.external_loads, cycle=trial.cycle, options=_solver_options(study),
+                          **kwargs)
         from ..redundancy.cli import write_solution_folder
 
         write_solution_folder(sol, tmp)
         solve_summary = sol.summary
         times["solve_s"] = sol.summary.get("solve_time_s")
         if not sol.success:
-            raise _failed_solve(f"{unit.workflow} solve of {subject.name}/{trial.name}", sol.summary)
+            raise sol.run_record.failure(f"{unit.workflow} solve of {subject.name}/{trial.name}")
     times["solution_s"] = time.perf_counter() - t0
 
     t1 = time.perf_counter()
@@ -496,9 +500,9 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         "speed_m_per_s": speed,
         "measured_W_per_kg": measured,
         "cycle": {"start_s": cycle.start_s, "toe_off_s": cycle.toe_off_s, "end_s": cycle.end_s},
-        "cycle_source": _cycle_source(trial),
+        "cycle_source": _cycle_source(trial, recorded),
         "speed_source": "study file" if trial.speed_m_per_s is not None else (
-            "estimated from the pelvis displacement over the cycle (IK)"),
+            "not available" if speed is None else "estimated from the pelvis displacement over the cycle (IK)"),
         "toe_off_pct": float(100.0 * (cycle.toe_off_s - cycle.start_s) / (cycle.end_s - cycle.start_s)),
         "n_nodes": int(np.asarray(result.time_s).size),
         "large_reserve": bool(solve_summary.get("large_reserve", False)),

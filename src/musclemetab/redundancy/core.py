@@ -1,0 +1,502 @@
+"""The problem core: one or several trials, goals and shared parameters in one NLP (``docs/problem.md``).
+
+EFFORT-GEN/CAL/TEN are one trial with the effort goals; EMG-TEN is several trials with the EMG
+goals and shared tendon-stiffness factors. **Per trial** (muscles, DOFs and side may differ): the
+variables, bounds and constraints of the single-trial problem (:mod:`.problem`), node blocks
+``z_k = [a, l~M, lp, e, aT, v~M]_k`` then ``[a, l~M, lp]_N``, each interval's equality rows
+followed by its EMG bound rows. **Goals** (:class:`Goals`), per trial normalised by its ``N``::
+
+    wAct/2 (sum e^2 + sum a^2)/(N M) + wTres sum aT^2/(N D) + wVm sum v~M^2/(N M)
+    + wEMG sum (e - s_EMG E)^2/(nEMG N) + wUS sum ((l~M s_lMo lMo - lUS)/lMo)^2/(nUS N)
+
+and EMG bounds ``|e_k - s_EMG E_k| <= tol`` (``tol = 0``: EMG-driven). **Shared parameters**
+(:class:`ParameterSpec`): scale factors of ``kT`` (``shift(kT)`` recomputed), ``lMo`` (``w =
+lMo sin(alpha_0)`` scales with it) and ``lTs`` per muscle, and EMG scale factors, with bounds and
+couplings (one variable per coupled group, or equality rows after all trials).
+
+**Transcription.** Trials with the same muscles, DOFs and goal data form a group whose
+per-interval functions (SX: constraints, objective, Jacobian, Hessian of the Lagrangian) are
+built once and mapped over the group's nodes; their nonzeros are placed into the global sparse
+matrices handed to IPOPT (block banded Jacobian with dense factor columns; block diagonal
+Hessian with a border and a factor block summed over all nodes). Moment arms zero at every node
+of a group are removed from its expressions, and with them their structural zeros.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import DataMismatchError, OptionError, SolverError, UnknownMuscleError
+from ..muscle import activation_rate, hill_residual, tendon_force_length
+from .inputs import TrialInputs
+from .parameters import MuscleTendonParameters
+from .static_opt import InitialGuess
+
+__all__ = ["Goals", "ParameterSpec", "TrialBlock", "PARAMETER_KINDS", "build_problem", "node_bounds"]
+
+ACTIVATION_BOUNDS = (0.0, 1.0)
+FIBRE_LENGTH_BOUNDS = (0.1, 1.7)
+FIBRE_VELOCITY_BOUNDS = (-10.0, 10.0)
+RESERVE_BOUNDS = (-1.0, 1.0)
+MIN_PROJECTED_LENGTH_M = 1e-4
+#: kinds of shared scale factors; the muscle parameters a factor multiplies
+PARAMETER_KINDS = {"tendon_stiffness": "kT", "optimal_fiber_length": "lmo", "tendon_slack_length": "lts",
+                   "emg_scale": None}
+
+
+@dataclass(frozen=True)
+class Goals:
+    """Weights of the objective and the EMG bound (``None``: no bound rows)."""
+
+    w_activation: float = 1.0
+    w_reserve: float = 1000.0
+    w_velocity: float = 0.01
+    w_emg: float = 0.0
+    emg_tolerance: float | None = None
+    w_fibre_length: float = 0.0
+
+    def __post_init__(self):
+        for name in ("w_activation", "w_reserve", "w_velocity", "w_emg", "w_fibre_length"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise OptionError(f"the weight {name} must be a non-negative number, not {v!r}")
+        tol = self.emg_tolerance
+        if tol is not None and not (math.isfinite(tol) and tol >= 0):
+            raise OptionError(f"the EMG tolerance must be a non-negative number (0: EMG-driven), not {tol!r}")
+
+
+@dataclass(frozen=True)
+class ParameterSpec:
+    """Scale factors of one kind (:data:`PARAMETER_KINDS`), one per muscle, shared by all
+    trials; ``couplings`` are pairs of positions in ``muscles`` whose factors are equal."""
+
+    kind: str
+    muscles: tuple[str, ...]
+    bounds: tuple[float, float]
+    couplings: tuple[tuple[int, int], ...] = ()
+
+    def __post_init__(self):
+        if self.kind not in PARAMETER_KINDS:
+            raise OptionError(f"unknown parameter kind {self.kind!r}; use one of {', '.join(PARAMETER_KINDS)}")
+        lo, hi = (float(v) for v in self.bounds)
+        if not (0 < lo <= hi and math.isfinite(hi)):
+            raise OptionError(f"the bounds of the {self.kind} factors must be (low, high) with 0 < low <= high, "
+                              f"not {self.bounds!r}")
+        object.__setattr__(self, "bounds", (lo, hi))
+        object.__setattr__(self, "muscles", tuple(str(m) for m in self.muscles))
+        n = len(self.muscles)
+        if any(not (0 <= a < n and 0 <= b < n) for a, b in self.couplings):
+            raise OptionError(f"a coupling of the {self.kind} factors names a muscle outside {self.muscles}")
+
+
+@dataclass(frozen=True)
+class TrialBlock:
+    """One trial of a problem: mesh inputs, initial guess and goal data at nodes ``0 ... N-1``
+    (EMG ``(N, nEMG)`` of ``emg_muscles``; measured fibre lengths in m ``(N, nUS)``)."""
+
+    label: str
+    inputs: TrialInputs
+    guess: InitialGuess
+    emg_muscles: tuple[str, ...] = ()
+    emg_nodes: np.ndarray | None = None
+    fibre_muscles: tuple[str, ...] = ()
+    fibre_length_nodes_m: np.ndarray | None = None
+
+    def signature(self):
+        return (tuple(self.inputs.muscles), tuple(self.inputs.dofs), tuple(self.emg_muscles),
+                tuple(self.fibre_muscles))
+
+
+def node_bounds(M: int, D: int) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper bounds of one node's variables ``[a, l~M, lM cos(alpha), e, reserve, v~M]``."""
+    lb = np.concatenate([
+        np.full(M, ACTIVATION_BOUNDS[0]), np.full(M, FIBRE_LENGTH_BOUNDS[0]), np.full(M, MIN_PROJECTED_LENGTH_M),
+        np.full(M, ACTIVATION_BOUNDS[0]), np.full(D, RESERVE_BOUNDS[0]), np.full(M, FIBRE_VELOCITY_BOUNDS[0]),
+    ])
+    ub = np.concatenate([
+        np.full(M, ACTIVATION_BOUNDS[1]), np.full(M, FIBRE_LENGTH_BOUNDS[1]), np.full(M, np.inf),
+        np.full(M, ACTIVATION_BOUNDS[1]), np.full(D, RESERVE_BOUNDS[1]), np.full(M, FIBRE_VELOCITY_BOUNDS[1]),
+    ])
+    return lb, ub
+
+
+def _constants(params: MuscleTendonParameters, ca):
+    P = {k: ca.DM(np.asarray(v, dtype=float)) for k, v in dict(
+        lmo=params.optimal_fiber_length_m, lts=params.tendon_slack_length_m, vmax=params.max_contraction_velocity,
+        kT=params.tendon_stiffness, kpe=params.passive_kpe, s0=params.passive_s0, sm=params.passive_sm,
+        f0=params.max_isometric_force_N,
+    ).items()}
+    P["w2"] = ca.DM(np.asarray(params.width_m, dtype=float) ** 2)
+    return P
+
+
+def _node_expressions(sym, M: int, D: int, h, P: dict, optimal_reserve_Nm: float, ca):
+    """Symbols and constraint expressions of one mesh interval (:mod:`.problem`)."""
+    a, lm, lp = sym("a", M), sym("lm", M), sym("lp", M)
+    e, aT, vm = sym("e", M), sym("aT", D), sym("vm", M)
+    a1, lm1 = sym("a1", M), sym("lm1", M)
+    lmt, rflat, mom = sym("lmt", M), sym("r", D * M), sym("id", D)
+    penn = (lm * P["lmo"]) ** 2 - P["w2"] - lp**2
+    dyn_a = a1 - a - h * activation_rate(e, a)
+    dyn_lm = lm1 - lm - h * vm
+    hill = hill_residual(
+        a, lm, vm, lp, lmt,
+        optimal_fiber_length_m=P["lmo"], tendon_slack_length_m=P["lts"],
+        max_contraction_velocity=P["vmax"], kT=P["kT"], kpe=P["kpe"], s0=P["s0"], sm=P["sm"],
+    )
+    ft = tendon_force_length((lmt - lp) / P["lts"], P["kT"])
+    R = ca.reshape(rflat, D, M)
+    moment = mom - ca.mtimes(R, P["f0"] * ft) - optimal_reserve_Nm * aT
+    syms = dict(a=a, lm=lm, lp=lp, e=e, aT=aT, vm=vm, a1=a1, lm1=lm1, lmt=lmt, r=rflat, id=mom)
+    return syms, ca.vertcat(dyn_a, dyn_lm, penn, hill, moment), penn
+
+
+def _group_index(n: int, pairs) -> list[int]:
+    """Index of the shared variable of each of ``n`` factors coupled by ``pairs`` (union-find)."""
+    parent = list(range(n))
+
+    def root(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for a, b in pairs:
+        ra, rb = root(a), root(b)
+        if ra != rb:
+            parent[max(ra, rb)] = min(ra, rb)
+    roots = sorted({root(i) for i in range(n)})
+    return [roots.index(root(i)) for i in range(n)]
+
+
+def _hess_blocks(ca, expr, x, p):
+    """Upper triangle of d2/dx2, the full d2/dxdp and the upper triangle of d2/dp2."""
+    n = x.shape[0]
+    H = ca.hessian(expr, ca.vertcat(x, p))[0]
+    return ca.triu(H[:n, :n]), H[:n, n:], ca.triu(H[n:, n:])
+
+
+def _group_functions(ca, params, trial: TrialBlock, goals: Goals, Topt: float, factor_of: dict, emg_factor: list,
+                     n_full: int, p_index, zero_r):
+    """Per-interval and last-node functions (SX) of one group of trials; see the module docstring.
+
+    Node inputs: ``z`` (5M+D), ``xn = [a, l~M]`` of the next node, data ``d = [lMT, r (column-major
+    D x M), ID, EMG, lUS, h, 1/N]``, the shared variables ``p``. ``factor_of[kind]`` lists
+    ``(muscle index, factor index)``; ``emg_factor`` the factor index of each tracked muscle.
+    """
+    inp = trial.inputs
+    M, D = len(inp.muscles), len(inp.dofs)
+    nE, nU = len(trial.emg_muscles), len(trial.fibre_muscles)
+    P = _constants(params, ca)
+    p = ca.SX.sym("p", n_full if p_index is None else (max(p_index) + 1 if p_index else 0))
+    full = [p[j] for j in (p_index if p_index is not None else range(n_full))]
+    for kind, key in PARAMETER_KINDS.items():
+        if key and factor_of.get(kind):
+            v = ca.SX(P[key])
+            for i, j in factor_of[kind]:
+                v[i] = P[key][i] * full[j]
+            if key == "lmo":
+                w2 = ca.SX(P["w2"])
+                for i, j in factor_of[kind]:
+                    w2[i] = P["w2"][i] * full[j] ** 2
+                P["w2"] = w2
+            P[key] = v
+    h, inv_n = ca.SX.sym("h"), ca.SX.sym("inv_n")
+    emg, lus = ca.SX.sym("emg", nE), ca.SX.sym("lus", nU)
+    S, gk, _ = _node_expressions(ca.SX.sym, M, D, h, P, Topt, ca)
+    if len(zero_r):
+        gk = ca.substitute(gk, S["r"][list(zero_r)], ca.SX.zeros(len(zero_r)))
+    pos = {m: i for i, m in enumerate(inp.muscles)}
+    track = S["e"][[pos[m] for m in trial.emg_muscles]] - ca.vertcat(*[full[j] for j in emg_factor]) * emg \
+        if nE else ca.SX(0, 1)
+    g = ca.vertcat(gk, track) if goals.emg_tolerance is not None else gk
+    z = ca.vertcat(S["a"], S["lm"], S["lp"], S["e"], S["aT"], S["vm"])
+    xn = ca.vertcat(S["a1"], S["lm1"])
+    d = ca.vertcat(S["lmt"], S["r"], S["id"], emg, lus, h, inv_n)
+    c_base = np.concatenate([
+        np.full(M, goals.w_activation * 0.5 / M), np.zeros(2 * M), np.full(M, goals.w_activation * 0.5 / M),
+        np.full(D, goals.w_reserve / D), np.full(M, goals.w_velocity / M)])
+    cost = ca.dot(ca.DM(c_base), z**2)
+    if nE and goals.w_emg:
+        cost += (goals.w_emg / nE) * ca.sumsqr(track)
+    if nU and goals.w_fibre_length:
+        iu = [pos[m] for m in trial.fibre_muscles]
+        lmo0 = ca.DM(np.asarray(params.optimal_fiber_length_m, dtype=float)[iu])
+        cost += (goals.w_fibre_length / nU) * ca.sumsqr((S["lm"][iu] * P["lmo"][iu] - lus) / lmo0)
+    f = inv_n * cost
+    lam, sigma = ca.SX.sym("lam", g.shape[0]), ca.SX.sym("sigma")
+    cse = {"cse": True}
+    fn = {
+        "g": ca.Function("core_g", [z, xn, d, p], [g], cse),
+        "f": ca.Function("core_f", [z, d, p], [f, ca.gradient(f, z), ca.gradient(f, p)], cse),
+        # the constraint values come with the Jacobian (shared subexpressions)
+        "jac": ca.Function("core_jac", [z, xn, d, p], [g, ca.jacobian(g, ca.vertcat(z, xn, p))], cse),
+        "hess": ca.Function("core_hess", [z, d, p, lam, sigma],
+                            list(_hess_blocks(ca, sigma * f + ca.dot(lam, g), z, p)), cse),
+    }
+    # last node: pennation identity and the activation cost of a_N
+    xl = ca.SX.sym("xl", 3 * M)
+    penn = (xl[M:2 * M] * P["lmo"]) ** 2 - P["w2"] - xl[2 * M:] ** 2
+    f_last = inv_n * (goals.w_activation * 0.5 / M) * ca.sumsqr(xl[0:M])
+    lam_l = ca.SX.sym("lam_l", M)
+    fn["g_last"] = ca.Function("core_g_last", [xl, p], [penn])
+    fn["f_last"] = ca.Function("core_f_last", [xl, inv_n], [f_last, ca.gradient(f_last, xl)])
+    fn["jac_last"] = ca.Function("core_jac_last", [xl, p], [ca.jacobian(penn, ca.vertcat(xl, p))])
+    fn["hess_last"] = ca.Function("core_hess_last", [xl, p, inv_n, lam_l, sigma],
+                                  list(_hess_blocks(ca, sigma * f_last + ca.dot(lam_l, penn), xl, p)))
+    return fn
+
+
+def _triplets(sp):
+    r, c = sp.get_triplet()
+    return np.asarray(r, dtype=np.int64), np.asarray(c, dtype=np.int64)
+
+
+def _sparse(ca, shape, rows, cols, values):
+    """An MX sparse matrix from global triplets and the MX vector of their values."""
+    rows, cols = np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64)
+    perm = np.lexsort((rows, cols))
+    rs, cs = rows[perm], cols[perm]
+    if rs.size > 1 and np.any((np.diff(rs) == 0) & (np.diff(cs) == 0)):
+        raise SolverError("internal error: duplicate entries in an assembled derivative matrix")
+    sp = ca.Sparsity.triplet(int(shape[0]), int(shape[1]), rs.tolist(), cs.tolist())
+    if not np.array_equal(perm, np.arange(perm.size)):
+        values = values.nz[perm.tolist()]
+    return ca.MX(sp, values)
+
+
+def _check_trials(trials, params, specs):
+    if not trials:
+        raise OptionError("a muscle redundancy problem needs at least one trial")
+    labels = [t.label for t in trials]
+    if len(set(labels)) != len(labels):
+        raise OptionError(f"trial labels must be distinct, not {labels}")
+    names = set(params.names)
+    for t in trials:
+        N, inp = t.inputs.n_intervals, t.inputs
+        missing = [m for m in inp.muscles if m not in names]
+        if missing:
+            raise UnknownMuscleError(f"trial {t.label}: no muscle parameters for {', '.join(missing)}")
+        for what, ms, arr in (("EMG", t.emg_muscles, t.emg_nodes), ("fibre lengths", t.fibre_muscles,
+                                                                      t.fibre_length_nodes_m)):
+            bad = [m for m in ms if m not in inp.muscles]
+            if bad:
+                raise UnknownMuscleError(f"trial {t.label}: {what} of {', '.join(bad)}, which the trial's "
+                                         "problem does not have; map them to muscles of the model and side")
+            if ms and (arr is None or np.shape(arr) != (N, len(ms))):
+                raise DataMismatchError(f"trial {t.label}: {what} at the nodes has shape {np.shape(arr)}, "
+                                        f"expected ({N}, {len(ms)})")
+    have = {m for t in trials for m in t.inputs.muscles}
+    tracked = {m for t in trials for m in t.emg_muscles}
+    for s in specs:
+        pool = tracked if s.kind == "emg_scale" else have
+        bad = [m for m in s.muscles if m not in pool]
+        if bad:
+            raise UnknownMuscleError(f"{s.kind} factors of {', '.join(bad)}: no trial of the problem has "
+                                     f"{'EMG of ' if s.kind == 'emg_scale' else ''}such a muscle")
+
+
+def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=(), *, optimal_reserve_Nm=150.0,
+                  coupling: str = "shared", explicit_derivatives: bool = True) -> dict:
+    """The NLP of ``trials`` with ``goals`` and the shared factors ``specs``, without solving it.
+
+    Returns the CasADi symbols/expressions ``x``, ``f``, ``g``, the bounds ``lbx, ubx, lbg,
+    ubg``, ``x0`` (factors 1), the sizes, the ``layout`` and, with ``explicit_derivatives``,
+    the functions ``grad_f``, ``jac_g``, ``hess_lag`` handed to IPOPT.
+    """
+    import casadi as ca
+
+    trials, specs = list(trials), list(specs)
+    if coupling not in ("shared", "constraints"):
+        raise OptionError(f"coupling must be 'constraints' or 'shared', not {coupling!r}")
+    _check_trials(trials, params, specs)
+    spec_off = np.cumsum([0] + [len(s.muscles) for s in specs])
+    n_full = int(spec_off[-1])
+    pairs = [(int(spec_off[i]) + a, int(spec_off[i]) + b) for i, s in enumerate(specs) for a, b in s.couplings]
+    p_index = None
+    if coupling == "shared":
+        p_index = _group_index(n_full, pairs)
+        pairs = []
+    n_p = n_full if p_index is None else (max(p_index) + 1 if p_index else 0)
+
+    # ---- per-trial layout
+    var_off, con_off, o, r, info = [], [], 0, 0, []
+    for t in trials:
+        M, D, N = len(t.inputs.muscles), len(t.inputs.dofs), t.inputs.n_intervals
+        nb = len(t.emg_muscles) if goals.emg_tolerance is not None else 0
+        nz, ng = 5 * M + D, 4 * M + D + nb
+        var_off.append(o)
+        con_off.append(r)
+        info.append(dict(M=M, D=D, N=N, nz=nz, ng=ng, nb=nb))
+        o += nz * N + 3 * M
+        r += ng * N + M
+    P0, R0 = o, r
+    n_var, n_con = P0 + n_p, R0 + len(pairs)
+    w = ca.MX.sym("w", n_var)
+    p = w[P0:]
+    lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", n_con)
+
+    groups = {}
+    for i, t in enumerate(trials):
+        groups.setdefault(t.signature(), []).append(i)
+    g_parts = [None] * len(trials)
+    gj_parts = [None] * len(trials)
+    f_terms, grad_parts, grad_p = [], [None] * len(trials), []
+    jr, jc, jv, hr, hc, hv, hpp = [], [], [], [], [], [], []
+    for members in groups.values():
+        t0 = trials[members[0]]
+        muscles, dofs = tuple(t0.inputs.muscles), tuple(t0.inputs.dofs)
+        M, D = len(muscles), len(dofs)
+        gp = params.subset(muscles)
+        pos = {m: k for k, m in enumerate(muscles)}
+        factor_of = {s.kind: [(pos[m], int(spec_off[i]) + k) for k, m in enumerate(s.muscles) if m in pos]
+                     for i, s in enumerate(specs) if s.kind != "emg_scale"}
+        emg_pos = {m: int(spec_off[i]) + k for i, s in enumerate(specs) if s.kind == "emg_scale"
+                   for k, m in enumerate(s.muscles)}
+        missing = [m for m in t0.emg_muscles if m not in emg_pos]
+        if missing:
+            raise OptionError(f"the EMG of {', '.join(missing)} is tracked but has no EMG scale factor")
+        crosses = np.zeros((D, M), dtype=bool)
+        for i in members:
+            crosses |= np.any(trials[i].inputs.moment_arms_m != 0.0, axis=0)
+        zero_r = np.flatnonzero(~crosses.T.reshape(-1))
+        fn = _group_functions(ca, gp, t0, goals, optimal_reserve_Nm, factor_of,
+                              [emg_pos[m] for m in t0.emg_muscles], n_full, p_index, zero_r)
+        nz, ng = info[members[0]]["nz"], info[members[0]]["ng"]
+        data, zc, xc, rbn, Zs, Xns, XLs, Ls, LLs = [], [], [], [], [], [], [], [], []
+        for i in members:
+            t, N = trials[i], info[i]["N"]
+            inp = t.inputs
+            rr = inp.moment_arms_m[:N].transpose(0, 2, 1).reshape(N, D * M)
+            emg = t.emg_nodes if t.emg_muscles else np.zeros((N, 0))
+            lus = t.fibre_length_nodes_m if t.fibre_muscles else np.zeros((N, 0))
+            data.append(np.hstack([inp.lmt_m[:N], rr, inp.moments_Nm[:N], emg, lus,
+                                   np.full((N, 1), inp.step_s), np.full((N, 1), 1.0 / N)]))
+            k = np.arange(N)
+            zc.append(var_off[i] + k * nz)
+            xc.append(var_off[i] + (k + 1) * nz)
+            rbn.append(con_off[i] + k * ng)
+            Z = ca.reshape(w[var_off[i]:var_off[i] + nz * N], nz, N)
+            xl = w[var_off[i] + nz * N:var_off[i] + nz * N + 3 * M]
+            Zs.append(Z)
+            Xns.append(ca.horzcat(Z[0:2 * M, 1:], xl[0:2 * M]))
+            XLs.append(xl)
+            Ls.append(ca.reshape(lam_g[con_off[i]:con_off[i] + ng * N], ng, N))
+            LLs.append(lam_g[con_off[i] + ng * N:con_off[i] + ng * N + M])
+        n_nodes, T = sum(info[i]["N"] for i in members), len(members)
+        data = ca.DM(np.vstack(data).T)
+        zc, xc, rbn = np.concatenate(zc), np.concatenate(xc), np.concatenate(rbn)
+        last_var = np.array([var_off[i] + info[i]["N"] * nz for i in members])
+        last_con = np.array([con_off[i] + info[i]["N"] * ng for i in members])
+        inv_n = ca.DM([[1.0 / info[i]["N"]] for i in members]).T
+        Z, Xn, XL = ca.horzcat(*Zs), ca.horzcat(*Xns), ca.horzcat(*XLs)
+        bounds = [0]
+        for i in members:
+            bounds.append(bounds[-1] + info[i]["N"])
+
+        def split(mat):
+            return [ca.vec(mat[:, bounds[j]:bounds[j + 1]]) for j in range(T)]
+
+        GL = fn["g_last"].map(T)(XL, p)
+        G = split(fn["g"].map(n_nodes)(Z, Xn, data, p))
+        G_j, J_nodes = fn["jac"].map(n_nodes)(Z, Xn, data, p)
+        G_j = split(G_j)
+        for j, i in enumerate(members):
+            g_parts[i] = ca.vertcat(G[j], GL[:, j])
+            gj_parts[i] = ca.vertcat(G_j[j], GL[:, j])
+        F, Gz, Gp = fn["f"].map(n_nodes)(Z, data, p)
+        FL, GLx = fn["f_last"].map(T)(XL, inv_n)
+        f_terms += [ca.sum2(F), ca.sum2(FL)]
+        grad_p.append(ca.sum2(Gp))
+        Gz = split(Gz)
+        for j, i in enumerate(members):
+            grad_parts[i] = ca.vertcat(Gz[j], GLx[:, j])
+        # Jacobian
+        rb, cb = _triplets(fn["jac"].sparsity_out(1))
+        cmap = np.where(cb < nz, zc[:, None] + cb,
+                        np.where(cb < nz + 2 * M, xc[:, None] + (cb - nz), P0 + (cb - nz - 2 * M)))
+        jr.append((rbn[:, None] + rb).ravel())
+        jc.append(cmap.ravel())
+        jv.append(J_nodes.nz[:])
+        rl, cl = _triplets(fn["jac_last"].sparsity_out(0))
+        jr.append((last_con[:, None] + rl).ravel())
+        jc.append(np.where(cl < 3 * M, last_var[:, None] + cl, P0 + (cl - 3 * M)).ravel())
+        jv.append(fn["jac_last"].map(T)(XL, p).nz[:])
+        # Hessian of the Lagrangian
+        for (f_h, args, zcol, n) in ((fn["hess"], (Z, data, p, ca.horzcat(*Ls), lam_f), zc, n_nodes),
+                                     (fn["hess_last"], (XL, p, inv_n, ca.horzcat(*LLs), lam_f),
+                                      last_var, T)):
+            Hzz, Hzp, Hpp = f_h.map(n)(*args)
+            r1, c1 = _triplets(f_h.sparsity_out(0))
+            r2, c2 = _triplets(f_h.sparsity_out(1))
+            r3, c3 = _triplets(f_h.sparsity_out(2))
+            hr += [(zcol[:, None] + r1).ravel(), (zcol[:, None] + r2).ravel()]
+            hc += [(zcol[:, None] + c1).ravel(), np.tile(P0 + c2, n)]
+            hv += [Hzz.nz[:], Hzp.nz[:]]
+            if r3.size:
+                hpp.append(ca.MX(ca.Sparsity.triplet(n_p, n_p, r3.tolist(), c3.tolist()),
+                                 ca.sum2(ca.reshape(Hpp.nz[:], r3.size, n))))
+
+    coup = [ca.vertcat(*[p[a] - p[b] for a, b in pairs])] if pairs else []
+    g = ca.vertcat(*g_parts, *coup)
+    f = sum(f_terms[1:], f_terms[0])
+    out = {"x": w, "f": f, "g": g, "n_variables": n_var, "n_constraints": n_con,
+           "layout": dict(trials=info, var_off=var_off, con_off=con_off, P0=P0, R0=R0, n_p=n_p, n_full=n_full,
+                          p_index=p_index, pairs=pairs, spec_off=spec_off.tolist())}
+    if explicit_derivatives:
+        if pairs:
+            jr.append(np.repeat(R0 + np.arange(len(pairs)), 2))
+            jc.append(np.array([P0 + j for ab in pairs for j in ab]))
+            jv.append(ca.DM([v for _ in pairs for v in (1.0, -1.0)]))
+        jac = _sparse(ca, (n_con, n_var), np.concatenate(jr), np.concatenate(jc), ca.vertcat(*jv))
+        if hpp:
+            Hp = sum(hpp[1:], hpp[0])
+            r3, c3 = _triplets(Hp.sparsity())
+            hr.append(P0 + r3)
+            hc.append(P0 + c3)
+            hv.append(Hp.nz[:])
+        hess = _sparse(ca, (n_var, n_var), np.concatenate(hr), np.concatenate(hc), ca.vertcat(*hv))
+        grad = ca.vertcat(*grad_parts, sum(grad_p[1:], grad_p[0]) if n_p else ca.MX(0, 1))
+        pp = ca.MX.sym("p", 0, 1)
+        out.update({
+            "grad_f": ca.Function("nlp_grad_f", [w, pp], [f, grad], ["x", "p"], ["f", "grad_f_x"]),
+            "jac_g": ca.Function("nlp_jac_g", [w, pp], [ca.vertcat(*gj_parts, *coup), jac], ["x", "p"],
+                                 ["g", "jac_g_x"]),
+            "hess_lag": ca.Function("nlp_hess_l", [w, pp, lam_f, lam_g], [hess], ["x", "p", "lam_f", "lam_g"],
+                                    ["triu_hess_gamma_x_x"]),
+        })
+    out.update(_bounds_and_guess(trials, info, specs, goals, p_index, n_p, pairs))
+    if out["x0"].size != n_var or g.shape[0] != n_con:
+        raise SolverError(f"internal error: problem size {out['x0'].size}/{g.shape[0]}, expected {n_var}/{n_con}")
+    if not np.all(np.isfinite(out["x0"])):
+        raise SolverError("the initial guess holds NaN or infinite values; check the muscle geometry and parameters")
+    n_ineq = sum(d["nb"] * d["N"] for d in info)
+    out.update(n_equality_constraints=n_con - n_ineq, n_inequality_constraints=n_ineq)
+    return out
+
+
+def _bounds_and_guess(trials, info, specs, goals, p_index, n_p, pairs) -> dict:
+    lbx, ubx, x0, lbg, ubg = [], [], [], [], []
+    tol = goals.emg_tolerance or 0.0
+    for t, d in zip(trials, info):
+        M, D, N, nb, gs = d["M"], d["D"], d["N"], d["nb"], t.guess
+        lb_node, ub_node = node_bounds(M, D)
+        lbx += [np.tile(lb_node, N), lb_node[:3 * M]]
+        ubx += [np.tile(ub_node, N), ub_node[:3 * M]]
+        Z0 = np.hstack([gs.activation[:N], gs.lm_norm[:N], gs.lm_projected_m[:N],
+                        gs.excitation[:N], gs.reserve[:N], gs.vm_norm[:N]])
+        x0 += [Z0.reshape(-1), gs.activation[N], gs.lm_norm[N], gs.lm_projected_m[N]]
+        n_eq = 4 * M + D
+        lbg += [np.tile(np.concatenate([np.zeros(n_eq), np.full(nb, -tol)]), N), np.zeros(M)]
+        ubg += [np.tile(np.concatenate([np.zeros(n_eq), np.full(nb, tol)]), N), np.zeros(M)]
+    lb_p = np.concatenate([np.full(len(s.muscles), s.bounds[0]) for s in specs] or [np.zeros(0)])
+    ub_p = np.concatenate([np.full(len(s.muscles), s.bounds[1]) for s in specs] or [np.zeros(0)])
+    if p_index is not None:
+        first = [p_index.index(j) for j in range(n_p)]
+        lb_p, ub_p = lb_p[first], ub_p[first]
+    return {"lbx": np.concatenate(lbx + [lb_p]), "ubx": np.concatenate(ubx + [ub_p]),
+            "x0": np.concatenate(x0 + [np.ones(n_p)]),
+            "lbg": np.concatenate(lbg + [np.zeros(len(pairs))]), "ubg": np.concatenate(ubg + [np.zeros(len(pairs))])}

@@ -1,0 +1,188 @@
+"""Estimation of muscle-tendon parameters over one or several trials (the problem core with
+shared scale factors), and the validation re-solve with the estimates.
+
+Scale factors of the tendon stiffness ``kT``, the optimal fibre length ``lMo`` and the tendon
+slack length ``lTs`` of named muscles are variables of one problem over all trials
+(:mod:`.core`); muscles of a coupled group share one factor. Measured fibre lengths
+(ultrasound; :func:`read_fibre_lengths`: MRS file convention, millimetres) enter as the
+fibre-length tracking goal ``wUS sum ((l~M s_lMo lMo - lUS)/lMo)^2/(nUS N)``, EMG as the EMG
+goals. The estimate (:class:`EstimatedParameters`) gives the scaled parameters for a validation
+re-solve with the effort goals only (:func:`~.solve.solve_with_parameters`), as the
+MuscleRedundancySolver does after its estimation.
+
+Default bounds of the factors: ``kT`` 0.1 ... 2, ``lMo`` and ``lTs`` 0.5 ... 1.5.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from ..errors import DataMismatchError, InputFileError, OptionError, UnknownMuscleError
+from .core import Goals, ParameterSpec, TrialBlock
+from .parameters import MuscleTendonParameters
+from .problem import ProblemResult, SolverOptions, solve_problem
+
+__all__ = ["EstimatedParameters", "DEFAULT_FACTOR_BOUNDS", "estimate_parameters", "parameter_specs",
+           "fibre_length_trial", "read_fibre_lengths"]
+
+#: bounds of the scale factors by kind
+DEFAULT_FACTOR_BOUNDS = {"tendon_stiffness": (0.1, 2.0), "optimal_fiber_length": (0.5, 1.5),
+                         "tendon_slack_length": (0.5, 1.5)}
+#: the parameter field each kind of factor scales
+FIELDS = {"tendon_stiffness": "tendon_stiffness", "optimal_fiber_length": "optimal_fiber_length_m",
+          "tendon_slack_length": "tendon_slack_length_m"}
+
+
+@dataclass(frozen=True)
+class EstimatedParameters:
+    """Estimated scale factors (``{kind: {muscle: factor}}``) on ``nominal`` parameters."""
+
+    factors: dict
+    nominal: MuscleTendonParameters
+    record: dict = field(default_factory=dict)
+
+    def parameters(self) -> MuscleTendonParameters:
+        """The nominal parameters with the estimated factors applied (for a validation re-solve)."""
+        p = self.nominal
+        for kind, by_muscle in self.factors.items():
+            if kind in FIELDS:
+                base = getattr(self.nominal, FIELDS[kind])
+                p = p.replace(**{FIELDS[kind]: {m: float(base[self.nominal.names.index(m)] * s)
+                                                for m, s in by_muscle.items()}})
+        return p
+
+    def values(self) -> dict:
+        """``{kind: {muscle: estimated value}}`` (kT dimensionless, lengths in m)."""
+        est = self.parameters()
+        return {kind: {m: float(getattr(est, FIELDS[kind])[est.names.index(m)]) for m in by_muscle}
+                for kind, by_muscle in self.factors.items() if kind in FIELDS}
+
+    def to_dict(self) -> dict:
+        return {"factors": {k: dict(v) for k, v in self.factors.items()}, "values": self.values(),
+                "solve": dict(self.record)}
+
+
+def parameter_specs(estimate: Mapping[str, Sequence[str]], couple: Sequence[Sequence[str]] = (),
+                    bounds: Mapping[str, tuple[float, float]] | None = None) -> list[ParameterSpec]:
+    """Shared factors of ``estimate`` (``{kind: [muscle, ...]}``); each group of ``couple``
+    shares one factor of every kind that names two or more of its muscles."""
+    bounds = {**DEFAULT_FACTOR_BOUNDS, **(bounds or {})}
+    specs = []
+    for kind, muscles in estimate.items():
+        if kind not in FIELDS:
+            raise OptionError(f"cannot estimate '{kind}'; estimate one of {', '.join(FIELDS)}")
+        muscles = tuple(dict.fromkeys(str(m) for m in muscles))
+        pos = {m: i for i, m in enumerate(muscles)}
+        pairs = []
+        for group in couple:
+            members = [pos[m] for m in group if m in pos]
+            pairs += [(a, b) for a, b in zip(members[:-1], members[1:])]
+        specs.append(ParameterSpec(kind, muscles, bounds[kind], tuple(pairs)))
+    return specs
+
+
+def read_fibre_lengths(path) -> dict:
+    """Measured fibre lengths of an MRS-convention file (a storage file with ``time`` in s
+    and one column per muscle in mm): ``{muscle: (time s, length m)}``."""
+    from pathlib import Path
+
+    from ..io import read_storage
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputFileError(f"{path}: no such fibre-length file; check the --ultrasound paths")
+    df = read_storage(path)
+    out = {}
+    for m in df.columns:
+        v = df[m].to_numpy(dtype=float)
+        if not np.all(np.isfinite(v)) or np.any(v <= 0):
+            raise DataMismatchError(f"{path}: column {m} holds non-positive or non-finite fibre lengths; "
+                                    "give lengths in mm")
+        if np.median(v) < 5.0:
+            raise DataMismatchError(f"{path}: column {m} has a median of {np.median(v):.3g}, not a fibre length "
+                                    "in mm (MRS convention); convert metres to millimetres")
+        out[str(m)] = (df.index.to_numpy(dtype=float), v / 1000.0)
+    return out
+
+
+def fibre_length_trial(label: str, inputs, guess, fibre_lengths: Mapping[str, tuple], *,
+                       emg_muscles=(), emg_nodes=None) -> TrialBlock:
+    """A trial with measured fibre lengths (``{muscle: (time s, length m)}``, linearly
+    interpolated at the nodes ``0 ... N-1``, which they must cover)."""
+    N = inputs.n_intervals
+    t = inputs.mesh_time_s[:N]
+    unknown = [m for m in fibre_lengths if m not in inputs.muscles]
+    if unknown:
+        raise UnknownMuscleError(f"trial {label}: fibre lengths of {', '.join(unknown)}, which the problem does "
+                                 f"not have ({', '.join(inputs.muscles[:6])} ...); name model muscles")
+    cols = []
+    for m, (tm, lm) in fibre_lengths.items():
+        tm = np.asarray(tm, dtype=float)
+        if tm[0] > t[0] + 1e-9 or tm[-1] < t[-1] - 1e-9:
+            raise DataMismatchError(f"trial {label}: the fibre lengths of {m} cover {tm[0]:g}-{tm[-1]:g} s, not the "
+                                    f"window {t[0]:g}-{t[-1]:g} s; give measurements over the whole window")
+        cols.append(np.interp(t, tm, np.asarray(lm, dtype=float)))
+    return TrialBlock(label, inputs, guess, emg_muscles=tuple(emg_muscles), emg_nodes=emg_nodes,
+                      fibre_muscles=tuple(fibre_lengths), fibre_length_nodes_m=np.column_stack(cols) if cols else None)
+
+
+def estimate_parameters(trials: Sequence[TrialBlock], params: MuscleTendonParameters, specs, goals: Goals, *,
+                        options: SolverOptions | None = None, coupling: str = "shared"
+                        ) -> tuple[ProblemResult, EstimatedParameters]:
+    """Solve the problem of ``trials`` with the shared factors ``specs`` and ``goals``; returns
+    the raw result and the estimate (also when IPOPT did not converge: see ``result.success``)."""
+    if not any(s.kind in FIELDS for s in specs):
+        raise OptionError("nothing to estimate: name muscles whose tendon_stiffness, optimal_fiber_length or "
+                          "tendon_slack_length is estimated")
+    if not any(t.fibre_muscles or t.emg_muscles for t in trials):
+        raise OptionError("parameter estimation needs measurements: give fibre lengths (ultrasound) or EMG")
+    res = solve_problem(trials, params, goals, specs, options=options, coupling=coupling)
+    factors = {k: v for k, v in res.factors.items() if k in FIELDS}
+    record = {"status": res.status, "success": res.success, "iterations": res.iterations,
+              "objective": res.objective, "objective_terms": res.objective_terms,
+              "max_constraint_violation": res.max_constraint_violation,
+              "bounds": {s.kind: list(s.bounds) for s in specs}, "max_coupling_violation": res.max_coupling_violation}
+    return res, EstimatedParameters(factors=factors, nominal=params, record=record)
+
+
+def tendon_strain_at_one_norm_force(kT) -> float:
+    """Tendon strain where the tendon force-length curve of stiffness ``kT`` reaches F0
+    (``fT = 1``): ``ln(5 (1.25 - shift(kT)))/kT - 0.005``, the parameter OpenSim's muscle
+    types take for the tendon stiffness (``docs/problem.md``)."""
+    from ..muscle import tendon_length_from_force
+
+    return float(tendon_length_from_force(1.0, float(kT))) - 1.0
+
+
+def write_personalised_model(model_path, params: MuscleTendonParameters, estimated: Mapping[str, Sequence[str]],
+                             out_dir) -> tuple:
+    """Write ``out_dir/<model>_personalised.osim``: the model with the ``estimated`` values
+    (``{kind: [muscle, ...]}``) of ``params``: optimal fibre length and tendon slack length, and
+    the tendon stiffness as the tendon strain at F0 where the muscle type has that parameter
+    (Thelen2003, Millard2012, DeGrooteFregly2016; others are reported under ``not_set``).
+    Returns ``(path, {muscle: {class_name, set, not_set}})``; the file appears whole or not at all."""
+    from pathlib import Path
+
+    from ..io import atomic_path
+    from ..opensim_bridge.client import call
+
+    values = {}
+    for kind, muscles in estimated.items():
+        for m in muscles:
+            i = params.names.index(m)
+            v = values.setdefault(m, {})
+            if kind == "optimal_fiber_length":
+                v["optimal_fiber_length_m"] = float(params.optimal_fiber_length_m[i])
+            elif kind == "tendon_slack_length":
+                v["tendon_slack_length_m"] = float(params.tendon_slack_length_m[i])
+            elif kind == "tendon_stiffness":
+                v["tendon_strain_at_one_norm_force"] = tendon_strain_at_one_norm_force(params.tendon_stiffness[i])
+    model_path, out_dir = Path(model_path), Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    target = out_dir / f"{model_path.stem}_personalised.osim"
+    with atomic_path(target) as tmp:
+        report = call("personalise:write_personalised_model", str(model_path.resolve()), str(tmp), values)
+    return target, report

@@ -1,0 +1,161 @@
+"""``musclemetab estimate``: muscle-tendon parameters from measured fibre lengths over trials.
+
+Writes ``DIR/<trial>/`` (the solutions with the estimates), ``DIR/parameters.json``,
+``DIR/<model>_personalised.osim`` and, with ``--validate``, ``DIR/validation/<trial>/``: the
+effort problem re-solved with the estimated parameters.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from ..errors import OptionError
+
+__all__ = ["add_estimate_parser", "estimate_command", "parse_assignments"]
+
+WEIGHT_NAMES = {"activation": "w_activation", "reserve": "w_reserve", "velocity": "w_velocity",
+                "fibre_length": "w_fibre_length"}
+
+
+def add_estimate_parser(subparsers) -> argparse.ArgumentParser:
+    p = subparsers.add_parser(
+        "estimate", help="estimate tendon stiffness, optimal fibre and tendon slack lengths from fibre lengths",
+        description="Estimate scale factors of the tendon stiffness, optimal fibre length and tendon slack length "
+        "of named muscles over one or more trials, tracking measured fibre lengths (ultrasound), with the "
+        "effort goals of a workflow; writes the solutions, parameters.json and <model>_personalised.osim.")
+    p.add_argument("--model", required=True, metavar="M.osim")
+    p.add_argument("--ik", required=True, nargs="+", metavar="IK.mot", help="one per trial")
+    p.add_argument("--id", required=True, nargs="+", metavar="ID.sto", help="one per trial, same order")
+    p.add_argument("--ultrasound", required=True, nargs="+", metavar="US.mot",
+                   help="measured fibre lengths, one file per trial: time in s, one column per muscle in mm")
+    p.add_argument("--estimate", required=True, nargs="+", metavar="KIND=MUSCLE[,MUSCLE...]",
+                   help="kinds: tendon_stiffness, optimal_fiber_length, tendon_slack_length")
+    p.add_argument("--couple", nargs="+", default=[], metavar="MUSCLE,MUSCLE[,...]",
+                   help="muscles sharing one factor of every estimated kind")
+    p.add_argument("--bounds", nargs="+", default=[], metavar="KIND=LOW:HIGH",
+                   help="bounds of the factors (default tendon_stiffness 0.1:2, lengths 0.5:1.5)")
+    p.add_argument("--weights", metavar="NAME=W[,...]",
+                   help="activation, reserve, velocity (default: the workflow's), fibre_length (default 100)")
+    p.add_argument("--workflow", default="effort-cal", choices=("effort-gen", "effort-cal", "effort-ten"),
+                   help="muscle parameters and effort weights (default effort-cal)")
+    p.add_argument("--passive", metavar="FILE", help="calibrated passive parameters (as for solve)")
+    p.add_argument("--labels", nargs="+", metavar="NAME", help="trial names (default: the IK file stems)")
+    p.add_argument("--validate", action="store_true",
+                   help="re-solve each trial with the estimates and the effort goals only (DIR/validation)")
+    p.add_argument("--cache-dir", metavar="DIR")
+    p.add_argument("--max-iter", type=int, default=10000)
+    p.add_argument("--out", required=True, metavar="DIR")
+    p.set_defaults(func=estimate_command)
+    return p
+
+
+def parse_assignments(items, what: str, value=str) -> dict:
+    """``["key=value", ...]`` (or one comma-separated string for numbers) as a dict."""
+    out = {}
+    for item in items:
+        key, sep, val = item.partition("=")
+        if not sep or not key.strip() or not val.strip():
+            raise OptionError(f"{what}: '{item}' is not NAME=VALUE")
+        try:
+            out[key.strip()] = value(val.strip())
+        except ValueError:
+            raise OptionError(f"{what}: the value of '{key.strip()}' ({val.strip()!r}) is not valid") from None
+    return out
+
+
+def _bounds(text: str) -> tuple[float, float]:
+    lo, sep, hi = text.partition(":")
+    if not sep:
+        raise ValueError(text)
+    return float(lo), float(hi)
+
+
+def estimate_command(args) -> int:
+    from ..io import atomic_write_text, check_output_folder
+    from .core import Goals
+    from .emg_inputs import _labels
+    from .estimate import (
+        estimate_parameters,
+        fibre_length_trial,
+        parameter_specs,
+        read_fibre_lengths,
+        write_personalised_model,
+    )
+    from .problem import SolverOptions
+    from .record import RunRecord
+    from .solution import build_solution
+    from .solve import prepare_trial, solve_with_parameters
+    from .static_opt import initial_guess
+    from .workflows import get_workflow, workflow_parameters
+
+    check_output_folder(args.out)
+    n = len(args.ik)
+    if not (len(args.id) == len(args.ultrasound) == n):
+        raise OptionError(f"{n} --ik, {len(args.id)} --id and {len(args.ultrasound)} --ultrasound files; give one "
+                          "of each per trial, in the same order")
+    estimate = parse_assignments(args.estimate, "--estimate", lambda v: [m for m in v.split(",") if m])
+    bounds = parse_assignments(args.bounds, "--bounds", _bounds)
+    couple = [[m for m in g.split(",") if m] for g in args.couple]
+    specs = parameter_specs(estimate, couple, bounds)
+    wf = get_workflow(args.workflow)
+    weights = {"w_activation": wf.w_activation, "w_reserve": wf.w_reserve, "w_velocity": wf.w_velocity,
+               "w_fibre_length": 100.0}
+    for k, v in parse_assignments(args.weights.split(",") if args.weights else [], "--weights", float).items():
+        if k not in WEIGHT_NAMES:
+            raise OptionError(f"--weights: unknown weight '{k}'; use {', '.join(WEIGHT_NAMES)}")
+        weights[WEIGHT_NAMES[k]] = v
+    goals = Goals(**weights)
+    labels = _labels(args.ik, args.labels)
+    measured = [read_fibre_lengths(p) for p in args.ultrasound]
+    options = SolverOptions(max_iter=args.max_iter, w_activation=goals.w_activation, w_reserve=goals.w_reserve,
+                            w_velocity=goals.w_velocity)
+
+    from ..geometry import compute_geometry
+    from ..io import read_storage
+    from ..model import read_muscle_parameters
+    from ..layout import discover_dofs, read_layout
+    from .inputs import read_inverse_dynamics, read_kinematics
+
+    model_parameters = read_muscle_parameters(args.model)
+    trials, prepared, params = [], [], None
+    layout = read_layout(args.model)
+    for ik, idp, lab, us in zip(args.ik, args.id, labels, measured):
+        dofs = discover_dofs(layout, "r", list(read_storage(idp).columns))
+        t_ik, _ = read_kinematics(ik, dofs)
+        t_id, mom = read_inverse_dynamics(idp, dofs)
+        g = compute_geometry(args.model, ik, dofs=list(dofs), side="r", cache_dir=args.cache_dir)
+        nominal, wf_record = workflow_parameters(wf, model_parameters, g.muscles, passive=args.passive)
+        inputs, p, so = prepare_trial(g, nominal, t_id, mom, ik_time_s=t_ik, options=options,
+                                      sources={"model": args.model, "ik": ik, "id": idp})
+        params = p if params is None else params
+        trials.append(fibre_length_trial(lab, inputs, initial_guess(inputs, p, so), us))
+        prepared.append((g, nominal, t_id, mom, t_ik))
+    res, est = estimate_parameters(trials, params, specs, goals, options=options)
+    run = RunRecord.from_result(res, {"model": args.model})
+    estimated = est.parameters()
+    for t, o in zip(trials, res.trials):
+        summary = {**run.to_dict(), "objective_trial": o.objective, "objective_terms": o.objective_terms,
+                   "time_window_s": list(t.inputs.window_s), "n_intervals": t.inputs.n_intervals,
+                   "mesh_step_s": t.inputs.step_s, "optimal_reserve_Nm": options.optimal_reserve_Nm,
+                   "workflow": {"name": f"{args.workflow} estimate", "estimate": est.to_dict()["factors"]},
+                   "solver_options": options.to_dict()}
+        build_solution(t.inputs, estimated.subset(t.inputs.muscles), o, summary).write(f"{args.out}/{t.label}")
+    doc = {"format": "musclemetab.redundancy.estimated_parameters", "format_version": 1, **est.to_dict(),
+           "solve": run.to_dict(), "trials": labels}
+    if run.success:
+        path, report = write_personalised_model(args.model, estimated, estimate, args.out)
+        doc["personalised_model"] = {"path": path.name, "muscles": report}
+    atomic_write_text(f"{args.out}/parameters.json", json.dumps(doc, indent=2, default=float) + "\n")
+    if not run.success:
+        raise run.failure(f"the estimation (written to {args.out})")
+    if args.validate:
+        for lab, (g, _, t_id, mom, t_ik) in zip(labels, prepared):
+            sol = solve_with_parameters(g, estimated, t_id, mom, ik_time_s=t_ik, options=options,
+                                        workflow_record={"name": f"{args.workflow} validation"})
+            sol.write(f"{args.out}/validation/{lab}")
+            if not sol.success:
+                raise sol.run_record.failure(f"the validation re-solve of {lab}")
+    values = ", ".join(f"{k} {m} x{v:.4f}" for k, by in est.factors.items() for m, v in by.items())
+    print(f"estimate: {len(trials)} trial(s), {run.status} in {run.iterations} iterations; {values} -> {args.out}")
+    return 0

@@ -1,0 +1,263 @@
+"""Estimated parameters of a multi-trial problem: the EMG-TEN result and ``parameters.json``.
+
+**Tendon stiffness in N/mm.** ``kT`` is dimensionless; the stiffness reported in N/mm is the
+tangent slope of the tendon force-length curve where the tendon carries its maximal isometric
+force ``F0`` (``fT = 1``)::
+
+    k = dFT/dlT |_(fT = 1) = F0 kT (1.25 - shift(kT)) / lTs
+
+(``muscle_model.md`` §7: ``dFT/dlT = F0 kT exp(kT (l~T - 0.995))/(5 lTs)`` and
+``exp(kT (l~T - 0.995))/5 = fT + 0.25 - shift``). The slope at each trial's peak walking
+tendon force is reported too. The Achilles tendon stiffness is the sum over the muscles of
+the Achilles tendon in the anatomical muscle table (three tendons in parallel on the example).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..muscle import KT_GENERIC, tendon_length_from_force, tendon_stiffness_N_per_m
+from .parameters import MuscleTendonParameters
+from .solution import _jsonable
+
+__all__ = ["EMG_TEN", "EmgTenResult", "assemble_result", "PARAMETERS_FILE",
+           "tendon_stiffness_at_force_N_per_mm"]
+
+EMG_TEN = "emg-ten"
+PARAMETERS_FILE = "parameters.json"
+PARAMETERS_FORMAT = "musclemetab.redundancy.emg_ten_parameters"
+PARAMETERS_VERSION = 1
+
+
+def tendon_stiffness_at_force_N_per_mm(force_norm, max_isometric_force_N, tendon_slack_length_m, kT):
+    """Tangent slope ``dFT/dlT`` (N/mm) of the tendon curve where ``FT = force_norm F0``.
+
+    With ``force_norm = 1``: ``F0 kT (1.25 - shift(kT)) / lTs`` (the module's definition of
+    the stiffness in N/mm).
+    """
+    lt = tendon_length_from_force(np.asarray(force_norm, dtype=float), kT)
+    return tendon_stiffness_N_per_m(lt, max_isometric_force_N, tendon_slack_length_m, kT) / 1000.0
+
+
+@dataclass
+class EmgTenResult:
+    """Solutions of all trials and the estimated parameters of one EMG-TEN solve.
+
+    ``solutions`` maps the trial labels (IK file stems by default) to :class:`Solution`
+    objects in the solver's format (``summary['workflow']['name'] == 'emg-ten'``), computed
+    with the estimated tendon stiffness. ``tendon_stiffness``/``tendon_scale`` and
+    ``emg_scale`` hold the estimates by muscle; ``record`` the solve record.
+    """
+
+    solutions: dict
+    parameters: MuscleTendonParameters
+    tendon_scale: dict
+    tendon_stiffness: dict
+    emg_scale: dict
+    emg_channels: dict
+    record: dict
+    settings: object
+    trials: tuple = field(default=(), repr=False)
+
+    @property
+    def run_record(self):
+        """The :class:`~.record.RunRecord` of the solve."""
+        from .record import RunRecord
+
+        return RunRecord.from_dict(self.record)
+
+    @property
+    def success(self) -> bool:
+        return bool(self.record.get("success", False))
+
+    @property
+    def status(self) -> str:
+        return str(self.record.get("status", "unknown"))
+
+    @property
+    def objective(self) -> float:
+        return float(self.record.get("objective", math.nan))
+
+    @property
+    def iterations(self) -> int:
+        return int(self.record.get("iterations", -1))
+
+    def tendon_stiffness_N_per_mm(self) -> dict:
+        """Tangent stiffness (N/mm) at ``FT = F0`` of every muscle whose ``kT`` was estimated."""
+        p = self.parameters
+        out = {}
+        for m in self.tendon_stiffness:
+            i = p.names.index(m)
+            out[m] = float(tendon_stiffness_at_force_N_per_mm(
+                1.0, p.max_isometric_force_N[i], p.tendon_slack_length_m[i], p.tendon_stiffness[i]))
+        return out
+
+    def tendon_stiffness_at_peak_force_N_per_mm(self) -> dict:
+        """``{trial: {muscle: {peak_force_N, stiffness_N_per_mm}}}`` at each trial's peak tendon force."""
+        p = self.parameters
+        out = {}
+        for label, sol in self.solutions.items():
+            rec = {}
+            for m in self.tendon_stiffness:
+                i, j = p.names.index(m), sol.muscles.index(m)
+                peak = float(np.max(sol.tendon_force_N[:, j]))
+                rec[m] = {"peak_force_N": peak, "stiffness_N_per_mm": float(tendon_stiffness_at_force_N_per_mm(
+                    peak / p.max_isometric_force_N[i], p.max_isometric_force_N[i], p.tendon_slack_length_m[i],
+                    p.tendon_stiffness[i]))}
+            out[label] = rec
+        return out
+
+    def achilles_stiffness_N_per_mm(self) -> dict | None:
+        """Achilles tendon stiffness in N/mm: the muscles of the Achilles tendon in the
+        anatomical muscle table (triceps surae) in parallel.
+
+        ``{"at_max_isometric_force": k, "at_peak_walking_force": {trial: k}}``, or ``None``
+        when no Achilles-tendon muscle's stiffness was estimated.
+        """
+        from ..properties import tendon_groups
+
+        groups = [g for k, g in tendon_groups(list(self.tendon_stiffness)).items() if k.split("_")[0] == "achilles"]
+        if not groups:
+            return None
+        members = groups[0]
+        at_f0 = self.tendon_stiffness_N_per_mm()
+        peak = self.tendon_stiffness_at_peak_force_N_per_mm()
+        return {
+            "at_max_isometric_force": float(sum(at_f0[m] for m in members)),
+            "at_peak_walking_force": {t: float(sum(v[m]["stiffness_N_per_mm"] for m in members))
+                                      for t, v in peak.items()},
+        }
+
+    def parameters_document(self) -> dict:
+        """The content of ``parameters.json``."""
+        return _jsonable({
+            "format": PARAMETERS_FORMAT,
+            "format_version": PARAMETERS_VERSION,
+            "workflow": EMG_TEN,
+            "tendon_stiffness": dict(self.tendon_stiffness),
+            "tendon_stiffness_scale": dict(self.tendon_scale),
+            "tendon_stiffness_nominal": KT_GENERIC,
+            "tendon_stiffness_other_muscles": KT_GENERIC,
+            "tendon_stiffness_N_per_mm": self.tendon_stiffness_N_per_mm(),
+            "tendon_stiffness_N_per_mm_definition": (
+                "tangent slope dFT/dlT of the tendon force-length curve where the tendon carries its maximal "
+                "isometric force (fT = 1): F0*kT*(1.25 - shift(kT))/lTs, converted from N/m to N/mm"),
+            "tendon_stiffness_N_per_mm_at_peak_walking_force": self.tendon_stiffness_at_peak_force_N_per_mm(),
+            "achilles_tendon_stiffness_N_per_mm": self.achilles_stiffness_N_per_mm(),
+            "emg_scale": dict(self.emg_scale),
+            "emg_channels": dict(self.emg_channels),
+            "solve": dict(self.record),
+        })
+
+    def write(self, out_dir: str | os.PathLike) -> Path:
+        """Write one solution folder per trial and ``parameters.json`` into ``out_dir``.
+
+        Each folder is written atomically; ``parameters.json`` is removed first and written last
+        (atomically), so its presence means that all trial folders belong to it.
+        """
+        from ..io import atomic_write_text
+
+        out_dir = Path(out_dir)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        (out_dir / PARAMETERS_FILE).unlink(missing_ok=True)
+        for label, sol in self.solutions.items():
+            sol.write(out_dir / label)
+        text = json.dumps(self.parameters_document(), indent=2, allow_nan=True)
+        atomic_write_text(out_dir / PARAMETERS_FILE, text + "\n")
+        return out_dir
+
+
+def assemble_result(trials, params, wf_record, ocp, settings, options, t_prep, t_start,
+                    name: str = EMG_TEN) -> "EmgTenResult":
+    """The :class:`EmgTenResult` of a solved EMG-TEN problem: per-trial solutions with the
+    estimated tendon stiffness, the estimates and the solve record."""
+    import time as _time
+
+    from .record import RunRecord
+    from .solution import build_solution
+
+    tendon_scale = dict(ocp.factors.get("tendon_stiffness", {}))
+    emg_scale = dict(ocp.factors["emg_scale"])
+    kt_est = {m: float(params.tendon_stiffness[params.names.index(m)] * s) for m, s in tendon_scale.items()}
+    est_params = params.replace(tendon_stiffness=kt_est)
+    emg_channels = dict(trials[0].emg_channels)
+    run = RunRecord.from_result(ocp, {f"{t.label}/{k}": v for t in trials for k, v in t.sources.items()})
+    n_tot = sum(t.inputs.n_intervals for t in trials)
+    record = {
+        "workflow": name,
+        **run.to_dict(),
+        "preparation_time_s": t_prep,
+        "max_coupling_violation": ocp.max_coupling_violation,
+        "problem_size": {"variables": ocp.n_variables, "equality_constraints": ocp.n_equality_constraints,
+                         "inequality_constraints": ocp.n_inequality_constraints, "mesh_intervals": n_tot},
+        "trials": [{"label": t.label, "time_window_s": list(t.inputs.window_s), "n_intervals": t.inputs.n_intervals,
+                    "inputs": {k: str(v) for k, v in t.sources.items()}} for t in trials],
+        "emg_mapping": emg_channels,
+        "max_emg_deviation": {t.label: float(np.max(np.abs(d))) if d.size else 0.0
+                              for t, d in zip(trials, ocp.emg_deviation)},
+        "settings": settings.to_dict(),
+        "passive_source": wf_record.get("passive_source"),
+        "solver_options": options.to_dict(),
+        "ipopt_options": ocp.ipopt_options,
+        "initial_guess": "static optimisation (rigid tendons) per trial, reserve divided by Topt; scale factors 1",
+    }
+    workflow = {
+        "name": name,
+        "description": "EMG-informed multi-trial estimation of triceps-surae and vasti tendon stiffness"
+        if name == EMG_TEN else f"EMG-informed solve ({settings.emg_mode}) with the {name.split()[0]} muscle parameters",
+        "passive_source": wf_record.get("passive_source"),
+        "weights": settings.to_dict()["weights"],
+        "tendon_stiffness": kt_est,
+        "tendon_stiffness_scale": tendon_scale,
+        "tendon_stiffness_other_muscles": KT_GENERIC,
+        "emg_scale": emg_scale,
+        "emg_channels": emg_channels,
+        "trials": [t.label for t in trials],
+    }
+    solutions = {}
+    for t, o, dev in zip(trials, ocp.trials, ocp.emg_deviation):
+        inp = t.inputs
+        summary = {
+            **run.to_dict(),
+            "objective_trial": o.objective,
+            "objective_terms": o.objective_terms,
+            "input_hashes": {k.split("/", 1)[1]: v for k, v in run.input_hashes.items()
+                             if k.startswith(f"{t.label}/")},
+            "preparation_time_s": t_prep,
+            "problem_size": dict(record["problem_size"]),
+            "time_window_s": list(inp.window_s),
+            "n_intervals": inp.n_intervals,
+            "mesh_step_s": inp.step_s,
+            "optimal_reserve_Nm": options.optimal_reserve_Nm,
+            "static_optimisation_objective": t.static_optimisation_objective,
+            "initial_guess": record["initial_guess"],
+            "workflow": dict(workflow, trial=t.label),
+            "emg_tracking": {
+                m: {"channels": t.emg_channels[m], "scale": emg_scale[m],
+                    "max_abs_deviation": float(np.max(np.abs(dev[:, j]))) if dev.size else 0.0,
+                    "rms_deviation": float(np.sqrt(np.mean(dev[:, j] ** 2))) if dev.size else 0.0}
+                for j, m in enumerate(t.emg_muscles)
+            },
+            "emg_tolerance": settings.emg_tolerance,
+            "solver_options": options.to_dict(),
+            "input_preparation": {"filter": "butterworth 6th order 6 Hz zero-phase (MATLAB filtfilt padding)",
+                                  "mesh_intervals_per_second": 100, "interpolation": "not-a-knot cubic spline",
+                                  "emg": "linear interpolation at nodes 0..N-1"},
+            "inputs": {k: str(v) for k, v in t.sources.items()},
+        }
+        sol = build_solution(inp, est_params.subset(inp.muscles), o, summary)
+        sol.summary["total_time_s"] = _time.perf_counter() - t_start
+        solutions[t.label] = sol
+    record["max_moment_residual_Nm"] = max(s.summary["max_moment_residual_Nm"] for s in solutions.values())
+    record["max_hill_residual"] = max(s.summary["max_hill_residual"] for s in solutions.values())
+    record["total_time_s"] = _time.perf_counter() - t_start
+    return EmgTenResult(
+        solutions=solutions, parameters=est_params, tendon_scale=tendon_scale, tendon_stiffness=kt_est,
+        emg_scale=emg_scale, emg_channels=emg_channels, record=record, settings=settings, trials=tuple(trials),
+    )
