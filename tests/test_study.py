@@ -207,8 +207,8 @@ def test_failing_unit_is_reported_and_the_rest_complete(pool_run, example, tmp_p
     from musclemetab.io import read_storage, write_storage
 
     study, _ = pool_run
-    # an ID file without the knee moment
-    df = read_storage(example.id["fast"]).drop(columns=["knee_angle_r_moment"])
+    df = read_storage(example.id["fast"])  # the knee moment in N mm: refused by the unit check
+    df["knee_angle_r_moment"] *= 1000.0
     broken = tmp_path / "ID_broken.sto"
     write_storage(broken, df, in_degrees=False)
     data = _study_dict(example, trials=("slow", "normal", "fast"))

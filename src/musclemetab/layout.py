@@ -113,12 +113,18 @@ class ModelLayout:
 
 
 def read_layout(model_path: str | os.PathLike) -> ModelLayout:
-    """The model's :class:`ModelLayout`, computed by OpenSim in the worker process."""
+    """The model's :class:`ModelLayout`, computed by OpenSim in the worker process.
+
+    Cached on disk beside the geometry cache, keyed by the model file's content.
+    """
     from .model import check_model_path
     from .opensim_bridge import call
 
     path = check_model_path(model_path)
-    raw = call("model_ops:model_layout", str(path))
+    raw = _cached_layout(path)
+    if raw is None:
+        raw = call("model_ops:model_layout", str(path))
+        _store_layout(path, raw)
     return ModelLayout(
         path=str(path),
         gravity=tuple(raw["gravity"]),
@@ -128,6 +134,39 @@ def read_layout(model_path: str | os.PathLike) -> ModelLayout:
         coordinates=tuple(raw["coordinates"]),
         root_translations=dict(raw["root_translations"]),
     )
+
+
+_LAYOUT_FORMAT = 1
+
+
+def _layout_file(path: Path) -> Path:
+    from .geometry import default_cache_dir
+    from .io import file_sha256
+
+    return default_cache_dir().parent / "layout" / f"{file_sha256(path)[:32]}-{_LAYOUT_FORMAT}.json"
+
+
+def _cached_layout(path: Path) -> dict | None:
+    """The layout stored for this model content, if readable (no OpenSim work)."""
+    import json
+
+    try:
+        return json.loads(_layout_file(path).read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def _store_layout(path: Path, raw: dict) -> None:
+    import json
+
+    from .io import atomic_write_text
+
+    try:
+        target = _layout_file(path)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(target, json.dumps(raw))
+    except OSError:  # an unwritable cache only costs the next call an OpenSim run
+        pass
 
 
 def side_dofs(layout: ModelLayout, side: str) -> list[str]:
@@ -156,6 +195,8 @@ def side_dofs(layout: ModelLayout, side: str) -> list[str]:
 def discover_dofs(layout: ModelLayout, side: str, id_columns: Iterable[str] | None = None) -> list[str]:
     """The side's DOFs (:func:`side_dofs`) that the inverse dynamics holds ``<dof>_moment`` for.
 
+    The others are left out with a :class:`~musclemetab.errors.MusclemetabWarning` naming them.
+
     ``id_columns=None`` keeps them all (inverse dynamics computed by OpenSim holds every
     coordinate).
     """
@@ -164,6 +205,16 @@ def discover_dofs(layout: ModelLayout, side: str, id_columns: Iterable[str] | No
         return dofs
     cols = set(id_columns)
     kept = [d for d in dofs if f"{d}_moment" in cols]
+    missing = [d for d in dofs if d not in kept]
+    if missing and kept:
+        import warnings
+
+        from .errors import MusclemetabWarning
+
+        warnings.warn(
+            f"the inverse dynamics holds no moment for {', '.join(missing)}: solved without "
+            f"{'it' if len(missing) == 1 else 'them'} (give --dofs to choose the DOFs)", MusclemetabWarning, stacklevel=2,
+        )
     if not kept:
         raise DataMismatchError(
             f"the inverse dynamics holds no moment for the {SIDE_NAMES[side]} side's DOFs "
