@@ -74,8 +74,9 @@ def _solve_key(func, args, kwargs) -> str | None:
     """Content key of a solve call: input files by SHA-256, every other argument by value.
 
     ``cache_dir`` (where the geometry is cached) does not change the result and is left out.
-    ``None`` when an argument is neither a file, a plain value, a list/tuple/dict of those nor
-    :class:`SolverOptions` (an in-memory object such as a warm start): such calls always solve.
+    ``options=None`` and ``settings=None`` count as the defaults they stand for. ``None`` when
+    an argument is neither a file, a plain value, a list/tuple/dict of those nor a settings
+    dataclass (an in-memory object such as a warm start): such calls always solve.
     """
     import dataclasses
     import hashlib
@@ -83,6 +84,7 @@ def _solve_key(func, args, kwargs) -> str | None:
     import json
 
     from musclemetab.io.atomic import file_sha256
+    from musclemetab.redundancy.emg_ten import EmgTenSettings
     from musclemetab.redundancy.problem import SolverOptions
 
     def plain(value):
@@ -96,8 +98,8 @@ def _solve_key(func, args, kwargs) -> str | None:
             return [plain(v) for v in value]
         if isinstance(value, dict) and all(isinstance(k, str) for k in value):
             return {k: plain(v) for k, v in value.items()}
-        if isinstance(value, SolverOptions):
-            return plain(dataclasses.asdict(value))
+        if isinstance(value, (SolverOptions, EmgTenSettings)):
+            return {type(value).__name__: plain(dataclasses.asdict(value))}
         raise TypeError(type(value).__name__)
 
     bound = inspect.signature(func).bind(*args, **kwargs)
@@ -108,6 +110,8 @@ def _solve_key(func, args, kwargs) -> str | None:
             continue
         if name == "options" and value is None:
             value = SolverOptions()
+        if name == "settings" and value is None:
+            value = EmgTenSettings()
         try:
             content[name] = plain(value)
         except TypeError:

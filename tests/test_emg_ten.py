@@ -490,10 +490,12 @@ def test_cli_rejects_bad_input_on_one_line(example, tmp_path, capsys):
                  "--id", *map(str, idf[:2]), "--out", str(tmp_path / "x")])
     err = capsys.readouterr().err
     assert code == 1 and "one trial" in err
+    # an effort workflow with --emg is an EMG-informed solve (tests/test_emg_informed.py); its
+    # options are checked before any work
     code = main(["solve", "--workflow", "effort-gen", "--model", str(example.model), "--ik", str(ik[0]),
-                 "--id", str(idf[0]), "--emg", str(emg[0]), "--out", str(tmp_path / "x")])
+                 "--id", str(idf[0]), "--emg", str(emg[0]), "--parameters", "p.json", "--out", str(tmp_path / "x")])
     err = capsys.readouterr().err
-    assert code == 1 and "--emg" in err and "emg-ten" in err
+    assert code == 1 and "--parameters" in err and "EMG-informed" in err
     code = main(["solve", "--workflow", "emg-ten", "--model", str(example.model), "--ik", *map(str, ik),
                  "--id", *map(str, idf), "--emg", *map(str, emg), "--parameters", "p.json",
                  "--out", str(tmp_path / "x")])

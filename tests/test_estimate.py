@@ -114,3 +114,61 @@ def test_parameters_recovered_from_fibre_lengths_and_emg(recovery):
     assert p.tendon_stiffness[p.names.index("soleus_r")] == pytest.approx(ts[0] * 35.0, rel=1e-12)
     # the tracked fibre lengths are reproduced (RMS error below 1 % of lMo)
     assert res.objective_terms["normal"]["fibre_length_tracking"] / 100.0 < 1e-4
+
+
+def _cli(argv):
+    import contextlib
+    import io
+
+    from musclemetab.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(argv)
+    return code, out.getvalue() + err.getvalue()
+
+
+def _ultrasound(example, path, scale_mm=1.0):
+    import pandas as pd
+
+    from musclemetab.io import read_storage, write_storage
+
+    t = read_storage(example.ik["normal"]).index
+    df = pd.DataFrame({"soleus_r": np.full(len(t), 40.0 * scale_mm), "gasmed_r": np.full(len(t), 55.0 * scale_mm)},
+                      index=t)
+    write_storage(path, df, in_degrees=False)
+    return path
+
+
+@pytest.mark.opensim
+def test_estimate_command_records_a_stopped_solve(example, tmp_path):
+    """Plumbing of ``musclemetab estimate`` (3 iterations): the solutions and parameters.json are
+    written with IPOPT's status, no personalised model, exit status 1 with one line."""
+    import json
+
+    us = _ultrasound(example, tmp_path / "us.mot")
+    out = tmp_path / "est"
+    code, text = _cli(["estimate", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
+                       str(example.id["normal"]), "--ultrasound", str(us), "--estimate",
+                       "tendon_stiffness=soleus_r,gasmed_r", "--couple", "soleus_r,gasmed_r", "--max-iter", "3",
+                       "--labels", "normal", "--out", str(out)])
+    assert code == 1 and "Maximum_Iterations_Exceeded" in text and "after 3 iterations" in text
+    doc = json.loads((out / "parameters.json").read_text())
+    assert doc["solve"]["status"] == "Maximum_Iterations_Exceeded" and doc["solve"]["success"] is False
+    f = doc["factors"]["tendon_stiffness"]
+    assert set(f) == {"soleus_r", "gasmed_r"} and f["soleus_r"] == f["gasmed_r"]  # coupled
+    assert (out / "normal" / "summary.json").is_file()
+    assert not list(out.glob("*_personalised.osim"))
+
+
+def test_estimate_command_bad_input(example, tmp_path):
+    us = _ultrasound(example, tmp_path / "us_m.mot", scale_mm=1e-3)  # metres, not mm
+    base = ["estimate", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
+            str(example.id["normal"]), "--out", str(tmp_path / "o")]
+    code, text = _cli(base + ["--ultrasound", str(us), str(us), "--estimate", "tendon_stiffness=soleus_r"])
+    assert code == 1 and "--ultrasound" in text and "one of each per trial" in text
+    code, text = _cli(base + ["--ultrasound", str(us), "--estimate", "stiffness=soleus_r"])
+    assert code == 1 and "stiffness" in text and "tendon_stiffness" in text
+    code, text = _cli(base + ["--ultrasound", str(us), "--estimate", "tendon_stiffness=soleus_r"])
+    assert code == 1 and "us_m.mot" in text and "mm" in text
+    assert not (tmp_path / "o").exists()

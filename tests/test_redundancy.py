@@ -322,7 +322,7 @@ def test_warm_start_option_reaches_the_same_optimum(example, geometry_cache, sol
     out = tmp_path / "warm"
     assert main(["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]),
                  "--id", str(example.id["normal"]), "--workflow", "effort-ten", "--cache-dir", str(geometry_cache),
-                 "--warm-start", str(gen_dir), "--out", str(out)]) == 0
+                 "--tendon-stiffness", "example", "--warm-start", str(gen_dir), "--out", str(out)]) == 0
     warm = Solution.load(out)
     assert "warm start from effort-gen" in warm.summary["initial_guess"]
     assert "static optimisation" in cold.summary["initial_guess"]

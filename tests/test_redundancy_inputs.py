@@ -285,7 +285,7 @@ def test_cli_rejects_bad_input_before_solving(example, tmp_path, capsys):
         (("--workflow", "effort-ten", "--tendon-stiffness", "soleus_r:10"), {}, "muscle=kT"),
         (("--workflow", "effort-cal", "--passive", str(tmp_path / "missing.csv")), {}, "no such"),
         (("--workflow", "effort-ten", "--parameters", str(tmp_path / "missing.json")), {}, "no such"),
-        ((), {"id_": example.id["slow"]}, "do not overlap|must cover"),
+        ((), {"id_": example.id["slow"]}, "do not overlap|must cover|inside every input"),
         ((), {"id_": example.ik["normal"]}, "_moment"),
     ]
     bad_ik = tmp_path / "ik.mot"

@@ -496,6 +496,7 @@ def test_report_notes_and_failures(tmp_path):
     notes = {
         "estimated_vs_measured": "no measured metabolic rate",
         "whole_body_over_cycle": "one speed only",
+        "rates_against_speed": "one speed only",
         "excitations_fiber_lengths": "solution.sto: missing",
     }
     assert len(p.imgs) == len(FIGURE_NAMES) - len(notes)

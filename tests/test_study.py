@@ -153,14 +153,14 @@ def test_pool_run_results_table(pool_run):
 
 
 def test_swing_share_recomputed_from_the_unit_files(pool_run):
-    """Stance and swing shares of the table, recomputed here from metabolics.csv."""
+    """Stance and swing shares of the table, recomputed here from metabolics.parquet."""
     import json
 
     study, run = pool_run
     row = run.results[(run.results.trial == "normal") & (run.results.model == "BH04")].iloc[0]
     folder = study.output / row.unit_dir
     cycle = json.loads((folder / "unit.json").read_text())["cycle"]
-    m = pd.read_csv(folder / "metabolics.csv")
+    m = pd.read_parquet(folder / "metabolics.parquet")
     m = m[(m.model == "BH04") & (m.component.isin(["total", "basal"]))]
     wide = m.pivot_table(index="time", columns="component", values="value_W", aggfunc="sum")
     t = wide.index.to_numpy()
@@ -194,7 +194,7 @@ def test_second_run_does_no_solver_work_and_corrupt_output_is_redone(pool_run, m
     assert len(run2.results) == 4
 
     # corrupt one output file: that unit (only) is recomputed
-    target = study.output / "units" / "sub1" / "slow" / "effort-gen" / "metabolics.csv"
+    target = study.output / "units" / "sub1" / "slow" / "effort-gen" / "per_muscle.csv"
     target.write_text(target.read_text()[:1000])
     before = pd.read_csv(study.output / "results.csv")
     run3 = run_study(study, workers=1, progress=False)
@@ -207,8 +207,8 @@ def test_failing_unit_is_reported_and_the_rest_complete(pool_run, example, tmp_p
     from musclemetab.io import read_storage, write_storage
 
     study, _ = pool_run
-    # an ID file without the knee moment
-    df = read_storage(example.id["fast"]).drop(columns=["knee_angle_r_moment"])
+    df = read_storage(example.id["fast"])  # the knee moment in N mm: refused by the unit check
+    df["knee_angle_r_moment"] *= 1000.0
     broken = tmp_path / "ID_broken.sto"
     write_storage(broken, df, in_degrees=False)
     data = _study_dict(example, trials=("slow", "normal", "fast"))

@@ -63,6 +63,7 @@ def test_metabolics_trims_to_the_recorded_gait_cycle(tmp_path):
     np.testing.assert_allclose(res.time_s[[0, -1]], [0.62, 0.85])
 
 
+@pytest.mark.opensim
 def test_calibration_coordinates_and_trials_found_by_content(example, gait2392, tmp_path):
     from musclemetab.calibration.passive import CALIBRATION_JOINTS, calibration_dofs, trial_files
     from musclemetab.errors import InputFileError
@@ -113,6 +114,8 @@ def lumped_both(lumped_model, gait2392, tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
+@pytest.mark.opensim
 def test_lumped_2d_model_with_degroote_and_millard_muscles_both_legs(lumped_model, lumped_both, gait2392, tmp_path):
     import pandas as pd
 
@@ -141,6 +144,8 @@ def test_lumped_2d_model_with_degroote_and_millard_muscles_both_legs(lumped_mode
 
 
 # ------------------------------------------------------------------ a two-subject study
+@pytest.mark.slow
+@pytest.mark.opensim
 def test_two_subject_study_different_models_and_sides(example, gait2392, lumped_model, tmp_path, capsys):
     """The study's subject (Rajagopal model, right leg, ID file) and gait2392's subject (a lumped
     sagittal model, left leg, cycle and inverse dynamics from the ground forces) in one study file,
@@ -194,6 +199,8 @@ cycle = "auto"
     assert wkg and res[wkg[0]].between(2.6, 15.8).all()
 
 
+@pytest.mark.slow
+@pytest.mark.opensim
 def test_bad_input_no_muscles_on_the_side_and_unknown_muscles(gait2392, lumped_both, tmp_path, capsys):
     model = _build(gait2392, tmp_path / "right_only.osim", "--right-only")
     out = tmp_path / "out"

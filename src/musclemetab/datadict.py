@@ -73,8 +73,6 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
      "share of the muscle energy at instants when a muscle has no moment arm above the threshold"),
     (_STUDY, "speed_m_per_s", "m/s", "walking speed (study file, or estimated: see speed_source)"),
     (_STUDY, "measured_W_per_kg", "W/kg", "measured whole-body metabolic rate (indirect calorimetry), if given"),
-    (_STUDY, "large_reserve", "-",
-     "true when the solve's largest reserve RMS exceeds 1 % of the peak joint moment (docs/solver.md)"),
     (_STUDY, "cycle_source", "-", "where the gait events come from (study file, ground reaction forces, or estimated)"),
     (_STUDY, "speed_source", "-", "where the walking speed comes from (study file, or estimated from the pelvis)"),
     (_STUDY, "large_reserve", "-",

@@ -208,9 +208,9 @@ def compute_inverse_dynamics(
     from .opensim_bridge import call
 
     loads = external_loads if isinstance(external_loads, ExternalLoads) else read_external_loads(external_loads)
-    model_path, ik_path = Path(model_path), Path(ik_path)
-    if not model_path.is_file():
-        raise ModelError(f"{model_path}: no such model file; check the path")
+    from .model import check_model_path
+
+    model_path, ik_path = check_model_path(model_path), Path(ik_path)
     from .layout import read_layout
 
     loads.check_bodies(read_layout(model_path))

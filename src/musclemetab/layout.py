@@ -116,10 +116,9 @@ def read_layout(model_path: str | os.PathLike, *, cache_dir: str | os.PathLike |
     """The model's :class:`ModelLayout`, computed by OpenSim in the worker process and cached
     by the file's content (:func:`musclemetab.cache.cached_model_call`)."""
     from .cache import cached_model_call
+    from .model import check_model_path
 
-    path = Path(model_path)
-    if not path.is_file():
-        raise ModelError(f"{path}: no such model file; check the path")
+    path = check_model_path(model_path)
     raw = cached_model_call(path, "model_ops:model_layout", cache_dir)
     return ModelLayout(
         path=str(path),
@@ -130,6 +129,16 @@ def read_layout(model_path: str | os.PathLike, *, cache_dir: str | os.PathLike |
         coordinates=tuple(raw["coordinates"]),
         root_translations=dict(raw["root_translations"]),
     )
+
+
+_LAYOUT_FORMAT = 1
+
+
+def _layout_file(path: Path) -> Path:
+    from .geometry import default_cache_dir
+    from .io import file_sha256
+
+    return default_cache_dir().parent / "layout" / f"{file_sha256(path)[:32]}-{_LAYOUT_FORMAT}.json"
 
 
 def side_dofs(layout: ModelLayout, side: str) -> list[str]:
@@ -158,6 +167,8 @@ def side_dofs(layout: ModelLayout, side: str) -> list[str]:
 def discover_dofs(layout: ModelLayout, side: str, id_columns: Iterable[str] | None = None) -> list[str]:
     """The side's DOFs (:func:`side_dofs`) that the inverse dynamics holds ``<dof>_moment`` for.
 
+    The others are left out with a :class:`~musclemetab.errors.MusclemetabWarning` naming them.
+
     ``id_columns=None`` keeps them all (inverse dynamics computed by OpenSim holds every
     coordinate).
     """
@@ -166,6 +177,16 @@ def discover_dofs(layout: ModelLayout, side: str, id_columns: Iterable[str] | No
         return dofs
     cols = set(id_columns)
     kept = [d for d in dofs if f"{d}_moment" in cols]
+    missing = [d for d in dofs if d not in kept]
+    if missing and kept:
+        import warnings
+
+        from .errors import MusclemetabWarning
+
+        warnings.warn(
+            f"the inverse dynamics holds no moment for {', '.join(missing)}: solved without "
+            f"{'it' if len(missing) == 1 else 'them'} (give --dofs to choose the DOFs)", MusclemetabWarning, stacklevel=2,
+        )
     if not kept:
         raise DataMismatchError(
             f"the inverse dynamics holds no moment for the {SIDE_NAMES[side]} side's DOFs "

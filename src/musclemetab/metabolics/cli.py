@@ -4,7 +4,8 @@
                            [--models all|UM10,BH04,...|all,LW05,MA68] [--basal body|muscle|none]
                            [--speed M_PER_S] --out DIR
 
-Writes ``OUT/metabolics.sto``, ``OUT/metabolics.csv`` and ``OUT/whole_body.csv`` (see
+Writes ``OUT/metabolics.sto``, ``OUT/metabolics.parquet``, ``OUT/whole_body.csv`` and
+``OUT/per_muscle.csv`` (see
 :mod:`musclemetab.metabolics.solution`). One leg solved: the whole-body rate doubles it (the
 study's rule, and the output says so). ``--solution`` may also be the parent written by
 ``solve --side both`` (``PARENT/r``, ``PARENT/l``): each leg is evaluated over its own cycle
@@ -32,7 +33,7 @@ def add_metabolics_parser(subparsers) -> None:
         description=(
             "Evaluate muscle metabolic energy models on a muscle redundancy solution (the padding nodes "
             "trimmed: 5 at the start, 6 at the end), muscle by muscle and node by node. Writes "
-            "OUT/metabolics.sto (columns <model>/<muscle>/<component>, W), OUT/metabolics.csv (tidy: time, "
+            "OUT/metabolics.sto (columns <model>/<muscle>/<component>, W), OUT/metabolics.parquet (tidy: time, "
             "model, muscle, component, value_W) and OUT/whole_body.csv (one row per model: whole-body "
             f"average in W/kg). Models: the study's {', '.join(MODELS)} ('all', the default) and, when "
             f"named, {', '.join(ADDITIONAL_MODELS)}."

@@ -265,6 +265,14 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
     from .problem import failure_advice
     from .workflows import get_workflow, parse_tendon_stiffness
 
+    if not idf:
+        raise OptionError("EMG problems need --id: one inverse-dynamics file per trial, in the order of --ik")
+    wrong = [o for o, v in (("--external-loads", args.external_loads), ("--grf", args.grf), ("--window", args.window),
+                            ("--cycle", args.cycle), ("--exclude-muscles", getattr(args, "exclude_muscles", None)))
+             if v] + (["--side"] if args.side != "r" else [])
+    if wrong:
+        raise OptionError(f"{', '.join(wrong)} are for the single-trial solves without EMG; drop them for "
+                          f"{'--workflow emg-ten' if args.workflow == 'emg-ten' else '--emg'}")
     mode = args.emg_mode or "constrained"
     if args.workflow != "emg-ten":
         wf = get_workflow(args.workflow)
@@ -286,12 +294,6 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
             f"{', '.join(wrong)} cannot be used with --workflow emg-ten (it estimates the tendon stiffness "
             "and starts from static optimisation); drop them"
         )
-    if not idf:
-        raise OptionError("--workflow emg-ten needs --id: one inverse-dynamics file per trial, in the order of --ik")
-    wrong = [o for o, v in (("--external-loads", args.external_loads), ("--grf", args.grf), ("--window", args.window),
-                            ("--cycle", args.cycle)) if v] + (["--side"] if args.side != "r" else [])
-    if wrong:
-        raise OptionError(f"{', '.join(wrong)} are for the single-trial workflows; drop them for --workflow emg-ten")
     emg = _as_list(getattr(args, "emg", None))
     if not emg:
         raise OptionError("--workflow emg-ten needs --emg: one processed EMG file per trial, in the order of --ik")

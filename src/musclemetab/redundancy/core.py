@@ -1,42 +1,25 @@
-"""The problem core: one or several trials, goals and shared parameters in one NLP.
+"""The problem core: one or several trials, goals and shared parameters in one NLP (``docs/problem.md``).
 
-Every named workflow is an instance of this problem: EFFORT-GEN/CAL/TEN are one trial with
-the effort goals, EMG-TEN is several trials with the EMG goals and shared tendon-stiffness
-factors (``docs/solver.md``).
+EFFORT-GEN/CAL/TEN are one trial with the effort goals; EMG-TEN is several trials with the EMG
+goals and shared tendon-stiffness factors. **Per trial** (muscles, DOFs and side may differ): the
+variables, bounds and constraints of the single-trial problem (:mod:`.problem`), node blocks
+``z_k = [a, l~M, lp, e, aT, v~M]_k`` then ``[a, l~M, lp]_N``, each interval's equality rows
+followed by its EMG bound rows. **Goals** (:class:`Goals`), per trial normalised by its ``N``::
 
-**Per trial** (``M`` muscles, ``D`` DOFs, ``N`` mesh intervals, ``h``: see :mod:`.problem`)
-the variables, bounds and constraints of the single-trial problem: node blocks
-``z_k = [a, l~M, lp, e, aT, v~M]_k`` for ``k = 0 ... N-1``, then ``[a, l~M, lp]_N``; per
-interval the activation and fibre dynamics, the pennation identity, the Hill equilibrium and
-the joint moments, followed by the EMG bound rows of the trial; the pennation identity at node
-``N``. Trials may have different muscles, DOFs and sides.
+    wAct/2 (sum e^2 + sum a^2)/(N M) + wTres sum aT^2/(N D) + wVm sum v~M^2/(N M)
+    + wEMG sum (e - s_EMG E)^2/(nEMG N) + wUS sum ((l~M s_lMo lMo - lUS)/lMo)^2/(nUS N)
 
-**Goals** (:class:`Goals`), per trial normalised by its own ``N``::
+and EMG bounds ``|e_k - s_EMG E_k| <= tol`` (``tol = 0``: EMG-driven). **Shared parameters**
+(:class:`ParameterSpec`): scale factors of ``kT`` (``shift(kT)`` recomputed), ``lMo`` (``w =
+lMo sin(alpha_0)`` scales with it) and ``lTs`` per muscle, and EMG scale factors, with bounds and
+couplings (one variable per coupled group, or equality rows after all trials).
 
-    J_trial = wAct/2 (sum e^2 + sum a^2)/(N M) + wTres sum aT^2/(N D) + wVm sum v~M^2/(N M)
-              + wEMG sum (e - s_EMG E)^2/(nEMG N)
-              + wUS sum ((l~M s_lMo lMo - lUS)/lMo)^2/(nUS N)
-
-with ``E`` the EMG at the control nodes ``k = 0 ... N-1`` and ``lUS`` measured fibre lengths
-at the nodes ``0 ... N-1``. EMG bounds: ``-tol <= e_k - s_EMG E_k <= tol`` (``tol = 0``: the
-excitations are the scaled EMG, an EMG-driven solve).
-
-**Shared parameters** (:class:`ParameterSpec`): scale factors, one per named muscle, of the
-tendon stiffness ``kT`` (``shift(kT)`` recomputed), the optimal fibre length ``lMo`` (the
-width ``w = lMo sin(alpha_0)`` scales with it: the pennation angle at optimal length is kept)
-and the tendon slack length ``lTs``, and of the EMG of each tracked muscle; each with bounds
-and couplings (pairs of equal factors). Couplings are either one shared variable per coupled
-group (``coupling="shared"``) or equality rows (``"constraints"``). Factors apply to every
-trial that has the muscle.
-
-**Transcription.** Variables trial by trial, then the shared factors; constraints trial by
-trial, then the couplings. Trials with the same muscles, DOFs and goal data columns form a
-group whose per-interval functions (SX: constraints, objective, their Jacobian and Hessian of
-the Lagrangian) are built once and mapped over all nodes of the group; the nonzeros are placed
-into the global sparse matrices handed to IPOPT. The Jacobian is block banded with dense
-columns for the factors; the Hessian block diagonal with a border and a factor block summed
-over all nodes. Moment arms zero at every node of a group (muscles not crossing a DOF) are
-removed from its expressions, which removes their structural zeros from the derivatives.
+**Transcription.** Trials with the same muscles, DOFs and goal data form a group whose
+per-interval functions (SX: constraints, objective, Jacobian, Hessian of the Lagrangian) are
+built once and mapped over the group's nodes; their nonzeros are placed into the global sparse
+matrices handed to IPOPT (block banded Jacobian with dense factor columns; block diagonal
+Hessian with a border and a factor block summed over all nodes). Moment arms zero at every node
+of a group are removed from its expressions, and with them their structural zeros.
 """
 
 from __future__ import annotations

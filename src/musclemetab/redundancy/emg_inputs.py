@@ -140,11 +140,10 @@ def _check_models(model_path, n_trials: int) -> Path:
     paths = [Path(p) for p in _as_list(model_path, "model_path")]
     if len(paths) not in (1, n_trials):
         raise OptionError(f"{len(paths)} models for {n_trials} trials; give one model (or one per trial)")
-    for p in paths:
-        if not p.is_file():
-            from ..errors import ModelError
+    from ..model import check_model_path
 
-            raise ModelError(f"{p}: no such model file; check the path")
+    for p in paths:
+        check_model_path(p)
     digests = [file_sha256(p) for p in paths]
     for p, d in zip(paths[1:], digests[1:]):
         if d != digests[0]:
