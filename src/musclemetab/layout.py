@@ -131,16 +131,6 @@ def read_layout(model_path: str | os.PathLike, *, cache_dir: str | os.PathLike |
     )
 
 
-_LAYOUT_FORMAT = 1
-
-
-def _layout_file(path: Path) -> Path:
-    from .geometry import default_cache_dir
-    from .io import file_sha256
-
-    return default_cache_dir().parent / "layout" / f"{file_sha256(path)[:32]}-{_LAYOUT_FORMAT}.json"
-
-
 def side_dofs(layout: ModelLayout, side: str) -> list[str]:
     """Unlocked independent coordinates of the joints on ``side``, distal to proximal.
 
