@@ -1,7 +1,7 @@
 """OpenSim MocoInverse baseline for the solver benchmark (imports opensim only, never casadi).
 
 Run as a separate process by ``benchmarks/solver.py --baseline moco``; prints one JSON line.
-The set-up follows ``opensim_baselines.md`` §3 (a one-leg stand-in for a full-body
+The set-up follows ``docs/solver.md`` (a one-leg stand-in for a full-body
 MocoInverse, because the example data has no ground reaction forces):
 
 1. keep the 40 right-leg muscles, remove every other force;

@@ -3,7 +3,7 @@
 Prints the wall time from files to result (geometry cached, OpenSim worker warm), the IPOPT
 solve time and iterations, the size of the three-trial problem, the time per iteration, the
 split of the solve into NLP function evaluations and IPOPT's own work (the linear solves
-with MUMPS), the estimates against ``muscle_redundancy.md`` §6.8, and the ratio to the
+with MUMPS), the estimates against ``docs/solver.md``, and the ratio to the
 study's MATLAB run (141-206 s, 77 250 variables, 135-235 iterations).
 
 ``--count-factorizations`` re-runs the solve with IPOPT's print level 7 captured to a file and
@@ -29,7 +29,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 TRIALS = ("slow", "normal", "fast")
-# muscle_redundancy.md §6.7-§6.8 and the study's IPOPT log of the combined problem
+# docs/solver.md-§6.8 and the study's IPOPT log of the combined problem
 STUDY = {"wall_s": (141.0, 206.0), "variables": 77250, "equalities": 62002, "inequalities": 3375,
          "iterations": (135, 235)}
 STUDY_KT_SCALE = {"soleus_r": 0.303371, "vaslat_r": 0.134165}

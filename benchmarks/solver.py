@@ -8,7 +8,7 @@ evaluations and IPOPT's own work (mostly the MUMPS factorisation). Cold command-
 timed (median of ``--cold-repeat``).
 
 With ``--baseline moco`` OpenSim's MocoInverse solves the same trials on the same mesh
-(100 intervals per second, compliant tendons; set-up of ``opensim_baselines.md`` §3) in a
+(100 intervals per second, compliant tendons; set-up of ``docs/solver.md``) in a
 separate process (``benchmarks/_moco_baseline.py``; opensim and casadi cannot share a
 process), and the ratio of solve times is printed. Timings on shared machines vary by
 10-40 % from run to run: compare ratios measured in the same run.

@@ -213,24 +213,6 @@ def _stance_mean(sol, muscles, start=0.20, end=0.50):
 
 @pytest.mark.opensim
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "Stated finding of the study (analysis.md §6): with EFFORT-TEN the triceps surae work above "
-    "l~M = 1.05 in mid-late stance, with EFFORT-GEN within 0.75-1.05. A reproduction of the "
-    "EFFORT-GEN problem that matches the study's logged objective to 0.01 % gives the opposite on "
-    "the example subject's normal trial: EFFORT-GEN soleus and gastrocnemii stay above 1.05 over "
-    "20-50 % of the cycle, and the more compliant EFFORT-TEN tendons shorten the fibres "
-    "(see test_compliant_tendons_shorten_plantarflexor_fibres)."))
-def test_paper_finding_plantarflexor_fibre_lengths(solved):
-    gen, _ = solved("normal", "effort-gen")
-    ten, _ = solved("normal", "effort-ten")
-    for m, lm in _stance_mean(ten, TRICEPS_SURAE).items():
-        assert np.all(lm > 1.05), m
-    for m, lm in _stance_mean(gen, TRICEPS_SURAE).items():
-        assert np.all((lm >= 0.75) & (lm <= 1.05)), m
-
-
-@pytest.mark.opensim
-@pytest.mark.slow
 def test_compliant_tendons_shorten_plantarflexor_fibres(solved):
     """What the reproduction shows (normal trial, 40-60 % of the cycle, push-off).
 

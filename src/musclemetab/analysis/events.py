@@ -2,7 +2,7 @@
 
 The gait cycle runs from an initial contact (IC, heel strike) of the analysed foot to its
 next initial contact; stance is IC -> toe-off (TO), swing is TO -> next IC
-(``analysis.md`` §3). All times are in seconds.
+(``docs/analysis.md``). All times are in seconds.
 
 Three ways to obtain a :class:`GaitCycle`:
 
@@ -13,7 +13,7 @@ Three ways to obtain a :class:`GaitCycle`:
   threshold is usual); the default is 20 N, a parameter.
 * :func:`cycle_from_inverse_dynamics`: the fallback for data without force files, such as
   the example subject. The simulated window is the cycle padded by about five frames
-  at each end (``muscle_redundancy.md`` §3.1), so IC = window start + padding and next
+  at each end (``docs/solver.md``), so IC = window start + padding and next
   IC = window end - padding (padding 0.05 s at 100 Hz); toe-off is the instant at which
   the ankle plantarflexion moment, after its stance peak, has fallen to a small fraction
   of that peak (default 1 %). These are estimates, not measured events.
@@ -168,7 +168,7 @@ def gait_events_from_grf(
     ----------
     time_s : (T,) s, strictly increasing
     vertical_force_N : (T,) N, the analysed foot's vertical force (filter it first if noisy;
-        the study low-passes GRF at 35 Hz, ``analysis.md`` §2.2)
+        the study low-passes GRF at 35 Hz, ``docs/analysis.md``)
     threshold_N : contact threshold (N), default 20
     min_duration_s : shortest accepted contact or non-contact period (s), default 0.05
 
@@ -267,7 +267,7 @@ def cycle_from_inverse_dynamics(
 ) -> GaitCycle:
     """The gait cycle of a padded simulation window, toe-off from the ankle moment.
 
-    Fallback for data without ground reaction forces (``analysis.md`` §3):
+    Fallback for data without ground reaction forces (``docs/analysis.md``):
 
     * initial contact = ``window_s[0] + padding_s``, next initial contact =
       ``window_s[1] - padding_s`` (the IK window of the example spans the cycle plus

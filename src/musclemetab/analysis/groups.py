@@ -1,6 +1,6 @@
 """Muscle function groups and the distribution of muscle rates by moment-arm ratio.
 
-Ten groups (``analysis.md`` §4.1), two per degree of freedom, by the sign of the moment
+Ten groups (``docs/analysis.md``), two per degree of freedom, by the sign of the moment
 arm in OpenSim's convention (``r = -dl/dq``: positive when tension produces a positive
 generalised moment). For the Rajagopal / gait2392 family of models a positive coordinate
 is ankle dorsiflexion, knee flexion, hip flexion, hip adduction and hip internal rotation
@@ -17,7 +17,7 @@ DOF names are matched without their side suffix (``_r``/``_l``); other models or
 conventions are handled with the ``dof_groups`` argument (``{dof: (positive_group,
 negative_group)}``).
 
-Distribution rule (``analysis.md`` §4.2, after Uchida et al. 2016): at each instant the
+Distribution rule (``docs/analysis.md``, after Uchida et al. 2016): at each instant the
 rate of muscle ``i`` is split over the DOFs it spans in proportion to the absolute
 moment arms, and each share goes to the group given by the *instantaneous* sign of the
 moment arm::
@@ -345,7 +345,7 @@ def membership_table(
     *,
     dof_groups: Mapping[str, tuple[str, str]] | None = None,
 ):
-    """The ``analysis.md`` §4.1 table: members of each DOF's two groups, and sign-changers.
+    """The ``docs/analysis.md`` table: members of each DOF's two groups, and sign-changers.
 
     Arguments as :func:`muscle_membership`. Returns a DataFrame indexed by DOF with
     columns ``positive_group``, ``positive`` (tuple of muscles, input order),

@@ -1,4 +1,4 @@
-"""Relative metabolic cost of stance and swing (``analysis.md`` §3).
+"""Relative metabolic cost of stance and swing (``docs/analysis.md``).
 
 ::
 

@@ -2,7 +2,7 @@
 
 Repeated-measures correlation (Bland & Altman 1995a, "Calculating correlation
 coefficients with repeated observations: Part 1 -- correlation within subjects", BMJ
-310:446; Bakdash & Marusich 2017, rmcorr) as written in ``analysis.md`` §5. For subjects
+310:446; Bakdash & Marusich 2017, rmcorr) as written in ``docs/analysis.md``. For subjects
 ``s`` with paired observations ``(x_sk, y_sk)``::
 
     x~_sk = x_sk - mean_k x_sk ,  y~_sk = y_sk - mean_k y_sk     (within-subject centring)
@@ -64,7 +64,7 @@ def _vector(x, name: str) -> np.ndarray:
 
 
 def rmcorr(x, y, subject) -> RmCorr:
-    """Repeated-measures correlation of ``y`` on ``x`` (``analysis.md`` §5).
+    """Repeated-measures correlation of ``y`` on ``x`` (``docs/analysis.md``).
 
     Parameters
     ----------

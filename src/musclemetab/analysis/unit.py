@@ -5,7 +5,7 @@ together for a :class:`~musclemetab.metabolics.solution.SolutionMetabolics` (per
 rates of several models on the trimmed solver nodes) and the muscle geometry of the
 trial (moment arms at the IK frames, linearly interpolated to the nodes).
 
-Reported without basal heat by default (``analysis.md`` §3: the per-muscle basal term
+Reported without basal heat by default (``docs/analysis.md``: the per-muscle basal term
 adds a constant that dilutes phase and group differences); the phase shares with the
 per-muscle basal heat (``MetabolicRates.total``) are given alongside.
 """

@@ -4,7 +4,7 @@ Input: a solution folder (``solution.sto`` with one row per mesh node ``t_0 ... 
 columns ``/forceset/<muscle>/<quantity>``; ``summary.json`` with ``muscles`` and the
 per-muscle ``parameters`` of the solve; see :mod:`musclemetab.redundancy.solution`).
 
-Trimming (``metabolic_models.md`` §1.1): the solver's first and last nodes are padding
+Trimming (``docs/metabolics.md``): the solver's first and last nodes are padding
 (free initial and final states). The study keeps nodes ``t_5 ... t_{N-6}``
 (0-based ``slice(5, N - 5)``, ``N - 10`` samples): 5 nodes dropped at the start and 6 at
 the end (the last includes node ``N``, where the controls only repeat node ``N-1``).

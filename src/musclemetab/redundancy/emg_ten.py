@@ -2,7 +2,7 @@
 
 One optimal control problem holds, for every trial, the variables and constraints of the
 single-trial problem (:mod:`.problem`: same mesh, bounds, forward-Euler scheme and node
-conventions) plus shared parameters (``muscle_redundancy.md`` §6):
+conventions) plus shared parameters (``docs/solver.md``):
 
 ==================  =========================================  ==============================
 parameter           size                                       bounds

@@ -6,7 +6,7 @@ force ``F0`` (``fT = 1``)::
 
     k = dFT/dlT |_(fT = 1) = F0 kT (1.25 - shift(kT)) / lTs
 
-(``muscle_model.md`` §7: ``dFT/dlT = F0 kT exp(kT (l~T - 0.995))/(5 lTs)`` and
+(``docs/method.md``: ``dFT/dlT = F0 kT exp(kT (l~T - 0.995))/(5 lTs)`` and
 ``exp(kT (l~T - 0.995))/5 = fT + 0.25 - shift``). The slope at each trial's peak walking
 tendon force is reported too. The Achilles tendon stiffness is the sum over the muscles of
 the Achilles tendon in the anatomical muscle table (three tendons in parallel on the example).

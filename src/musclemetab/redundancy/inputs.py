@@ -249,7 +249,7 @@ def select_muscles(
     dofs: Sequence[str],
     threshold_m: float = MUSCLE_SELECTION_THRESHOLD_M,
 ):
-    """Muscles and DOFs of the problem (study rule, ``muscle_redundancy.md`` §1).
+    """Muscles and DOFs of the problem (study rule, ``docs/solver.md``).
 
     A muscle is kept when ``|r| > threshold`` about at least one DOF **at the first frame**
     (raw moment arms); a DOF is kept when at least one kept muscle has ``|r| > threshold``

@@ -2,7 +2,7 @@
 
 Five values come from the OpenSim model (``F0``, ``lMo``, ``lTs``, ``alpha0``, ``vmax``); the
 tendon stiffness ``kT`` and the passive force-length shape ``kPE``, ``s0``, ``sM`` come from
-the workflow (``muscle_model.md`` §2, §6, §7).
+the workflow (``docs/method.md``).
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ A solution folder holds two files:
                                         lengthening). Multiply by ``vmax`` for ``lMo/s``, by
                                         ``lMo vmax`` for m/s.
     ``tendon_force``                    ``F0 fT(l~T)`` (N), with ``lT = lMT - sqrt(lM^2 - w^2)``
-                                        from the geometry (``muscle_model.md`` §11)
+                                        from the geometry (``docs/method.md``)
     ``active_fiber_force``              ``a fL fV F0`` (N), along the fibre
     ``passive_fiber_force``             ``F0 fPE(l~M)`` (N), along the fibre
     ``active_force_length_multiplier``  ``fL(l~M)``
@@ -117,7 +117,7 @@ def derived_quantities(
     vm_norm: np.ndarray,
     lmt_m: np.ndarray,
 ) -> dict:
-    """Forces and multipliers from the states (``muscle_model.md`` §11), NumPy.
+    """Forces and multipliers from the states (``docs/method.md``), NumPy.
 
     Arrays are ``(nodes, M)``; ``vm_norm`` is ``v~M`` in lMo/s at the same nodes.
     """

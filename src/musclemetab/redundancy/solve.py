@@ -393,7 +393,7 @@ def muscles_at_fibre_length_bound(solution: Solution, tolerance: float = 1e-3) -
     In an infeasible solve these are the usual culprits: a muscle-tendon unit longer than its
     tendon slack length plus the longest fibre allowed, whose tendon cannot stretch enough.
     """
-    from .problem import FIBRE_LENGTH_BOUNDS
+    from .core import FIBRE_LENGTH_BOUNDS
 
     top = np.max(np.asarray(solution.lm_norm, dtype=float), axis=0)
     return [m for m, v in zip(solution.muscles, top) if v >= FIBRE_LENGTH_BOUNDS[1] - tolerance]

@@ -1,6 +1,6 @@
 """Static optimisation with rigid tendons: the initial guess of the optimal control problem.
 
-At every IK frame (``muscle_redundancy.md`` §4, ``muscle_model.md`` §10)::
+At every IK frame (``docs/solver.md``, ``docs/method.md``)::
 
     min  sum_m a_m^2 + 1000 sum_j ar_j^2
     s.t. ID_j = sum_m r_jm (a_m Fact_m + Fpas_m) + ar_j,    0 <= a_m <= 1

@@ -1,6 +1,6 @@
 """The time window of a solve: the IK file, an explicit ``T0:T1``, or a gait cycle from ground forces.
 
-* No window and no cycle: the whole IK file (the study's rule, ``muscle_redundancy.md`` §3.1).
+* No window and no cycle: the whole IK file (the study's rule, ``docs/solver.md``).
 * ``window=(T0, T1)``: that window; it must lie inside every input (IK, ID, ground forces),
   otherwise :class:`DataMismatchError` names the file that falls short and by how much.
 * ``cycle="auto"`` or ``cycle=N``: the first (or the N-th, from 1) complete gait cycle of the

@@ -19,7 +19,7 @@ source of every value, ``tendon_stiffness_sources``, and their kinds,
   ``kT`` through the model's maximal isometric forces and tendon slack lengths
   (``data/tendon_stiffness_literature.csv``, ``docs/muscles.md``).
 
-All three use the weights ``[wAct, wTres, wVm] = [1, 1000, 0.01]`` (``muscle_redundancy.md`` §2).
+All three use the weights ``[wAct, wTres, wVm] = [1, 1000, 0.01]`` (``docs/solver.md``).
 
 Calibrated passive parameters come from, in this order of preference:
 
@@ -76,7 +76,7 @@ EXAMPLE = "example"
 #: conventions, and overflow the exponential passive curve.
 PASSIVE_RANGES = {"kPE": (0.1, 50.0), "s0": (0.25, 4.0), "sM": (0.05, 2.0)}
 
-#: Example-subject EMG-informed tendon stiffness (``muscle_redundancy.md`` §6.8).
+#: Example-subject EMG-informed tendon stiffness (``docs/solver.md``).
 KT_TRICEPS_SURAE = 10.617977
 KT_VASTI = 4.695786
 

@@ -69,7 +69,7 @@ WORKFLOW_COLOURS = {
     "emg-ten": "#b2182b",
 }
 
-#: Muscle function groups (``analysis.md`` §4): ankle, knee, hip, then the remainder.
+#: Muscle function groups (``docs/analysis.md``): ankle, knee, hip, then the remainder.
 GROUPS = GROUPS_WITH_OTHER
 GROUP_NAMES = {**_GROUP_NAMES, OTHER: "other"}
 
@@ -263,7 +263,7 @@ def _mean_sd(values) -> tuple[float, float, int]:
 
 
 def _rmcorr(x, y, subject):
-    """Repeated-measures correlation (``analysis.md`` §5): ``(result, None)`` or ``(None, reason)``."""
+    """Repeated-measures correlation (``docs/analysis.md``): ``(result, None)`` or ``(None, reason)``."""
     from ..analysis.stats import rmcorr
 
     try:
@@ -416,7 +416,7 @@ def estimated_vs_measured(results, *, models: Sequence[str] | None = None, title
     """Estimated against measured whole-body metabolic rate (W/kg), one panel per model.
 
     Points: one per subject and trial (marker per subject, colour per workflow). Lines: the
-    repeated-measures correlation of each workflow (``analysis.md`` §5; estimated on measured),
+    repeated-measures correlation of each workflow (``docs/analysis.md``; estimated on measured),
     one parallel segment per subject over that subject's measured range; the legend gives the
     slope ``m``, ``r`` and ``p``. The dashed line is the identity. Rows with status other than
     ``ok`` or without a measured rate are left out; raises :class:`OptionError` when no row has
