@@ -28,7 +28,7 @@ A solution folder holds two files:
 ``summary.json``
     Status, objective, iterations, times, residuals, reserve RMS per DOF (and
     ``reserve_share_of_peak_moment``, the largest reserve RMS over the peak joint moment;
-    ``large_reserve`` is true, with a :class:`~musclemetab.errors.LargeReserveWarning`,
+    ``large_reserve`` is true, with a :class:`~musclemetab.errors.LargeReserveWarning` for a converged solve,
     above :data:`LARGE_RESERVE_SHARE`, 1 %), muscles, DOFs,
     the muscle parameters used, the window, ``N`` and the workflow settings.
 
@@ -390,7 +390,7 @@ def build_solution(
     peak_moment = float(np.max(np.abs(inputs.moments_Nm))) if inputs.moments_Nm.size else 0.0
     share = float(np.max(reserve_rms)) / peak_moment if peak_moment > 0 else 0.0
     large = share > LARGE_RESERVE_SHARE
-    if large:
+    if large and summary.get("success", True):  # an unconverged solve is reported as such instead
         dof = inputs.dofs[int(np.argmax(reserve_rms))]
         warnings.warn(
             f"{summary.get('inputs', {}).get('id', 'the inverse dynamics')}: the reserve about {dof} has an RMS of "
