@@ -36,8 +36,8 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
     (_STUDY, "unit_dir", "-", "the unit's folder, relative to the study folder"),
     # whole body
     (f"{_STUDY}, {_UNIT_WB}", "mean_W_per_kg", "W/kg",
-     "whole-body average metabolic rate over the gait cycle: both legs (twice the simulated leg) per kg of "
-     "body mass, with the basal heat of the basal rule"),
+     "whole-body average metabolic rate over the gait cycle: both legs (the two legs added when both "
+     "were solved, otherwise twice the simulated leg) per kg of body mass, with the basal heat of the basal rule"),
     (f"{_STUDY}, {_UNIT_WB}", "mean_W_per_kg_no_basal", "W/kg",
      "the same without any basal heat"),
     (f"{_STUDY}, {_UNIT_WB}", "one_leg_mean_W", "W",
