@@ -290,3 +290,70 @@ def test_cli_with_model(example, tmp_path, capsys):
     res = metabolics_from_solution(sol, MASS, HEIGHT, models="LW07")
     ratio = sto["LW07/soleus_r/activation_maintenance"].to_numpy() / res.rates["LW07"].activation_maintenance[0]
     np.testing.assert_allclose(ratio, 5978.474277147492 * 0.04507531830087219 / (5978.0 * 0.045), rtol=1e-9)
+
+
+# ----------------------------------------------------------------------------- basal coefficient and exponent
+def test_basal_coefficient_and_exponent_reach_the_whole_body_rate(solution_dir):
+    """OpenSim's basal rule ``basal_coefficient * m^basal_exponent`` W, worked by hand on the
+    solution's own muscle rates: only the basal heat changes."""
+    ref = metabolics_from_solution(solution_dir, MASS, HEIGHT, models=["UM10"])
+    res = metabolics_from_solution(solution_dir, MASS, HEIGHT, models=["UM10"], basal_rate_W_per_kg=1.5,
+                                   basal_exponent=0.75)
+    wb, wb0 = res.whole_body["UM10"], ref.whole_body["UM10"]
+    assert wb0.basal_W_per_kg == pytest.approx(1.2, rel=1e-15)
+    # 1.5 * 72.6^0.75 W = 1.5 * 24.8715 W = 37.3073 W over 72.6 kg = 0.513875 W/kg
+    by_hand = 1.5 * 72.6**0.75 / 72.6
+    assert by_hand == pytest.approx(0.513875, rel=1e-5)
+    assert wb.basal_W_per_kg == pytest.approx(by_hand, rel=1e-14)
+    assert wb.mean_W_per_kg == pytest.approx(wb0.mean_W_per_kg - 1.2 + by_hand, rel=1e-13)
+    assert wb.mean_W_per_kg_no_basal == wb0.mean_W_per_kg_no_basal
+    # the coefficient is also the per-muscle basal heat, W per kg of muscle mass
+    np.testing.assert_allclose(res.rates["UM10"].basal[:, 0], 1.5 * res.muscle_mass_kg, rtol=1e-14)
+    np.testing.assert_array_equal(res.rates["UM10"].total_without_basal(), ref.rates["UM10"].total_without_basal())
+    table = res.whole_body_table().set_index("model")
+    assert table.loc["UM10", "basal_W_per_kg"] == pytest.approx(by_hand, rel=1e-14)
+    # the muscle rule with another coefficient: 1.5 W per kg of each muscle's mass, both legs
+    mus = metabolics_from_solution(solution_dir, MASS, HEIGHT, models=["UM10"], basal="muscle",
+                                   basal_rate_W_per_kg=1.5)
+    assert mus.whole_body["UM10"].mean_W_per_kg == pytest.approx(
+        wb0.mean_W_per_kg_no_basal + 2 * 1.5 * mus.muscle_mass_kg.sum() / MASS, rel=1e-12)
+    with pytest.raises(OptionError, match="exponent"):
+        metabolics_from_solution(solution_dir, MASS, HEIGHT, models=["UM10"], basal="muscle", basal_exponent=0.75)
+    with pytest.raises(OptionError, match="basal coefficient"):
+        metabolics_from_solution(solution_dir, MASS, HEIGHT, models=["UM10"], basal_rate_W_per_kg=-1.0)
+
+
+def test_add_legs_adds_the_basal_rule_it_was_given(solution_dir):
+    """Both legs solved: the body rule's basal heat, with its coefficient and exponent, is added
+    once (not the default 1.2 W/kg)."""
+    from musclemetab.errors import DataMismatchError
+    from musclemetab.metabolics.solution import add_legs
+
+    kw = dict(models=["MA68"], legs=1, basal_rate_W_per_kg=2.0, basal_exponent=0.5)
+    legs = {"r": metabolics_from_solution(solution_dir, MASS, HEIGHT, **kw),
+            "l": metabolics_from_solution(solution_dir, MASS, HEIGHT, **kw)}
+    one_leg = legs["r"].whole_body["MA68"].one_leg_mean_W
+    # 2 * 72.6^0.5 W / 72.6 kg = 2 / sqrt(72.6) W/kg = 0.23473 W/kg
+    assert add_legs(legs)["MA68"] == pytest.approx(2 * one_leg / MASS + 2.0 / np.sqrt(72.6), rel=1e-13)
+    legs["l"] = metabolics_from_solution(solution_dir, MASS, HEIGHT, models=["MA68"], legs=1)
+    with pytest.raises(DataMismatchError, match="coefficient"):
+        add_legs(legs)
+
+
+def test_cli_basal_options(solution_dir, tmp_path, capsys):
+    from musclemetab.cli import main
+
+    common = ["metabolics", "--solution", str(solution_dir), "--mass", "72.6", "--height", "1.743", "--models", "UM03"]
+    assert main(common + ["--out", str(tmp_path / "a")]) == 0
+    assert main(common + ["--basal-coefficient", "1.5", "--basal-exponent", "0.75", "--out", str(tmp_path / "b")]) == 0
+    a = pd.read_csv(tmp_path / "a" / "whole_body.csv").iloc[0]
+    b = pd.read_csv(tmp_path / "b" / "whole_body.csv").iloc[0]
+    assert b["basal_W_per_kg"] == pytest.approx(1.5 * 72.6**0.75 / 72.6, rel=1e-9)
+    assert b["mean_W_per_kg"] - a["mean_W_per_kg"] == pytest.approx(1.5 * 72.6**0.75 / 72.6 - 1.2, rel=1e-8)
+    capsys.readouterr()
+    code = main(common + ["--basal", "muscle", "--basal-exponent", "0.75", "--out", str(tmp_path / "c")])
+    err = capsys.readouterr().err
+    assert code != 0 and "--basal-exponent" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "c").exists()
+    code = main(common + ["--basal-coefficient", "-1", "--out", str(tmp_path / "d")])
+    assert code != 0 and "--basal-coefficient" in capsys.readouterr().err

@@ -333,3 +333,31 @@ def test_study_solver_table_is_checked(example):
     data["solver"] = {"max_iterations": 3}
     with pytest.raises(OptionError, match="max_iterations"):
         study_from_dict(data, base="/")
+
+
+def test_study_basal_coefficient_and_exponent(example):
+    """OpenSim's basal rule in the study file: read, checked, and part of each trial unit's key
+    (a changed coefficient redoes the metabolics); absent, the keys of earlier studies stay."""
+    from musclemetab.study.units import plan_units, unit_key
+
+    plain = study_from_dict(_study_dict(example), base="/")
+    assert (plain.basal_coefficient, plain.basal_exponent) == (1.2, 1.0)
+    data = _study_dict(example)
+    data.update(basal_coefficient=1.5, basal_exponent=0.75)
+    study = study_from_dict(data, base="/")
+    assert (study.basal_coefficient, study.basal_exponent) == (1.5, 0.75)
+    unit = plan_units(study)[1][0]
+    data["basal_coefficient"] = 1.2
+    other = study_from_dict(data, base="/")
+    assert unit_key(study, unit) != unit_key(other, unit)
+    data.update(basal_exponent=1.0)
+    explicit_default = study_from_dict(data, base="/")
+    assert unit_key(explicit_default, unit) != unit_key(plain, unit)  # recorded once named
+    for bad, words in (({"basal_coefficient": -1.0}, ["basal_coefficient", "negative"]),
+                       ({"basal_exponent": "three quarters"}, ["basal_exponent", "number"]),
+                       ({"basal": "muscle", "basal_exponent": 0.75}, ["basal_exponent", "body"])):
+        data = _study_dict(example)
+        data.update(bad)
+        with pytest.raises(OptionError) as info:
+            study_from_dict(data, base="/")
+        assert all(w in str(info.value) for w in words)

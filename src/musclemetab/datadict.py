@@ -45,6 +45,9 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
     (f"{_STUDY}, {_UNIT_WB}", "basal_rule", "-",
      "basal heat rule: body (1.2 W per kg of body mass added), muscle (1.2 W per kg of muscle mass in every "
      "muscle) or none"),
+    (f"{_STUDY}, {_UNIT_WB}", "basal_W_per_kg", "W/kg",
+     "basal heat added to the whole-body rate under the body rule: basal coefficient x body mass^basal exponent "
+     "/ body mass (1.2 by default); 0 under the muscle and none rules"),
     (f"{_STUDY}, {_UNIT_WB}", "duration_s", "s", "duration the whole-body average is taken over"),
     (f"{_STUDY}, {_UNIT_WB}", "gross_cost_of_transport_J_per_kg_per_m", "J/(kg m)",
      "gross cost of transport: mean_W_per_kg (with basal heat) divided by the walking speed"),

@@ -2,6 +2,7 @@
 
     musclemetab metabolics --solution DIR|PARENT --model M.osim --mass KG --height M
                            [--models all|UM10,BH04,...|all,LW05,MA68] [--basal body|muscle|none]
+                           [--basal-coefficient 1.2] [--basal-exponent 1]
                            [--speed M_PER_S] --out DIR
 
 Writes ``OUT/metabolics.sto``, ``OUT/metabolics.parquet``, ``OUT/whole_body.csv`` and
@@ -59,6 +60,16 @@ def add_metabolics_parser(subparsers) -> None:
         help="whole-body basal heat: 1.2 W/kg of body mass (body, default, the paper), 1.2 W/kg of muscle "
         "mass in every muscle (muscle, the study's code) or none",
     )
+    p.add_argument(
+        "--basal-coefficient", type=float, default=1.2, metavar="W_PER_KG",
+        help="basal heat coefficient as OpenSim's probes write it (basal_coefficient, default 1.2): under "
+        "--basal body the basal heat is COEFFICIENT * mass^EXPONENT W; it is also the per-muscle basal heat, "
+        "W per kg of muscle mass",
+    )
+    p.add_argument(
+        "--basal-exponent", type=float, default=1.0, metavar="X",
+        help="basal heat exponent of the body mass (OpenSim's basal_exponent, default 1; --basal body only)",
+    )
     p.add_argument("--speed", type=float, metavar="M_PER_S", help="walking speed, for the cost of transport")
     p.add_argument(
         "--allow-failed", action="store_true",
@@ -93,6 +104,13 @@ def metabolics_command(args) -> int:
     check_output_folder(args.out)
     if args.speed is not None and not (np.isfinite(args.speed) and args.speed > 0):
         raise OptionError(f"--speed must be a positive number of m/s, not {args.speed}")
+    if not (np.isfinite(args.basal_coefficient) and args.basal_coefficient >= 0):
+        raise OptionError(f"--basal-coefficient must be a non-negative number of W/kg, not {args.basal_coefficient}")
+    if not np.isfinite(args.basal_exponent):
+        raise OptionError(f"--basal-exponent must be a finite number, not {args.basal_exponent}")
+    if args.basal == "muscle" and args.basal_exponent != 1:
+        raise OptionError("--basal-exponent applies to --basal body only (the muscle rule is linear in each "
+                          "muscle's mass); drop it or use --basal body")
     from pathlib import Path
 
     folders = _solution_folders(Path(args.solution))
@@ -111,6 +129,7 @@ def metabolics_command(args) -> int:
                 _note_parameter_differences(states, params, args.model)
             results[side] = metabolics_from_solution(
                 states, args.mass, args.height, models=models, muscle_parameters=params, basal=args.basal,
+                basal_rate_W_per_kg=args.basal_coefficient, basal_exponent=args.basal_exponent,
                 speed_m_per_s=args.speed, legs=legs, muscle_properties=args.muscle_properties, strict=args.strict,
             )
     warn_unplaced(list(dict.fromkeys(

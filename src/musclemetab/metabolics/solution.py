@@ -28,7 +28,7 @@ Outputs of :func:`write_metabolics` in a folder:
 ``whole_body.csv``
     one row per model: ``model``, ``mean_W_per_kg`` (both legs, basal per the rule, by
     default 1.2 W/kg of body mass), ``mean_W_per_kg_no_basal``, ``one_leg_mean_W``, then
-    ``basal_rule``, ``duration_s`` and, when a speed is given,
+    ``basal_rule``, ``basal_W_per_kg`` (the basal heat added), ``duration_s`` and, when a speed is given,
     ``gross_cost_of_transport_J_per_kg_per_m`` (with the basal heat of the rule) and
     ``net_cost_of_transport_J_per_kg_per_m`` (without basal heat).
 ``per_muscle.csv``
@@ -49,9 +49,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataMismatchError, MissingColumnError, OptionError
-from ._common import MetabolicRates
+from ._common import BASAL_RATE_W_PER_KG, MetabolicRates
 from .registry import ALL_MODELS, parse_models
-from .whole_body import BASAL_RULES, WholeBodyRate, whole_body_rate
+from .whole_body import BASAL_RULES, WholeBodyRate, check_basal_rule, whole_body_rate
 
 __all__ = [
     "SolutionStates",
@@ -286,7 +286,7 @@ class SolutionMetabolics:
 
     def whole_body_table(self):
         """One row per model: ``model``, ``mean_W_per_kg``, ``mean_W_per_kg_no_basal``,
-        ``one_leg_mean_W``, ``basal_rule``, ``duration_s`` (and the gross and net costs of
+        ``one_leg_mean_W``, ``basal_rule``, ``basal_W_per_kg``, ``duration_s`` (and the gross and net costs of
         transport when a speed was given)."""
         import pandas as pd
 
@@ -299,6 +299,7 @@ class SolutionMetabolics:
                 "mean_W_per_kg_no_basal": wb.mean_W_per_kg_no_basal,
                 "one_leg_mean_W": wb.one_leg_mean_W,
                 "basal_rule": wb.basal_rule,
+                "basal_W_per_kg": wb.basal_W_per_kg,
                 "duration_s": wb.duration_s,
             }
             if self.speed_m_per_s is not None:
@@ -327,6 +328,8 @@ def metabolics_from_solution(
     speed_m_per_s: float | None = None,
     require_success: bool = True,
     legs: int = 2,
+    basal_rate_W_per_kg: float = BASAL_RATE_W_PER_KG,
+    basal_exponent: float = 1.0,
 ) -> SolutionMetabolics:
     """Metabolic rates of every muscle of a solution, for a set of models.
 
@@ -349,6 +352,12 @@ def metabolics_from_solution(
         mass, the paper), ``"muscle"`` (1.2 W/kg of muscle mass in every muscle, the
         study's code) or ``"none"``. The per-muscle rates always carry the per-muscle
         ``basal`` component (the study's code), apart from the other components.
+    basal_rate_W_per_kg, basal_exponent
+        The basal rule as OpenSim's probes write it (``basal_coefficient``, ``basal_exponent``):
+        ``basal_rate_W_per_kg * m_body^basal_exponent`` W under the ``"body"`` rule (defaults
+        1.2 and 1: 1.2 W/kg). The coefficient is also the per-muscle basal heat, W per kg of
+        *muscle* mass (the ``basal`` component, and the ``"muscle"`` rule); the exponent
+        belongs to the ``"body"`` rule alone (another value with ``"muscle"`` is refused).
     trim
         Nodes dropped at the start and at the end. Default: for a solve over a gait cycle
         found from ground forces (``summary.json`` ``window.gait_cycle``), every node outside
@@ -379,6 +388,10 @@ def metabolics_from_solution(
     names = parse_models(models)
     if basal not in BASAL_RULES:
         raise OptionError(f"basal rule must be one of {', '.join(BASAL_RULES)}, not {basal!r}")
+    check_basal_rule(basal_rate_W_per_kg, basal_exponent)
+    if basal == "muscle" and basal_exponent != 1:
+        raise OptionError(f"the basal exponent ({basal_exponent:g}) applies to the body basal rule only: the muscle "
+                          "rule is linear in each muscle's mass; use basal 'body' or exponent 1")
     model_options = {k.upper(): dict(v) for k, v in (model_options or {}).items()}
     unknown = [k for k in model_options if k not in ALL_MODELS]
     if unknown:
@@ -433,14 +446,15 @@ def metabolics_from_solution(
     inputs.update(muscle_mass_kg=masses, slow_twitch_fraction=fst)
     rates = {}
     for name in names:
-        opts = {"basal": True}
+        opts = {"basal": True, "basal_rate_W_per_kg": float(basal_rate_W_per_kg)}
         opts.update(model_options.get(name, {}))
         try:
             rates[name] = ALL_MODELS[name](**inputs, time_s=time, **opts)
         except TypeError as exc:
             raise OptionError(f"{name}: invalid option ({exc})") from None
     wb = {
-        name: whole_body_rate(r, time, body_mass_kg, basal=basal, cycle_duration_s=cycle_duration_s, legs=legs)
+        name: whole_body_rate(r, time, body_mass_kg, basal=basal, basal_rate_W_per_kg=basal_rate_W_per_kg,
+                              basal_exponent=basal_exponent, cycle_duration_s=cycle_duration_s, legs=legs)
         for name, r in rates.items()
     }
     return SolutionMetabolics(
@@ -496,11 +510,10 @@ def add_legs(results: Mapping[str, SolutionMetabolics]) -> dict[str, float]:
     """Whole-body rate (W/kg) of both legs solved separately: the legs' cycle averages added.
 
     ``results`` maps the side (``"r"``, ``"l"``) to its :class:`SolutionMetabolics`, each
-    computed with ``legs=1`` for the same subject and basal rule. Each leg's muscles are
-    averaged over that leg's own cycle; the basal heat of the ``"body"`` rule is added once.
+    computed with ``legs=1`` for the same subject and basal rule (coefficient and exponent
+    included). Each leg's muscles are averaged over that leg's own cycle; the basal heat of the
+    ``"body"`` rule (:attr:`WholeBodyRate.basal_W_per_kg`) is added once.
     """
-    from ._common import BASAL_RATE_W_PER_KG
-
     res = list(results.values())
     if not res:
         raise OptionError("no leg to add")
@@ -508,9 +521,11 @@ def add_legs(results: Mapping[str, SolutionMetabolics]) -> dict[str, float]:
         raise OptionError("add_legs needs each leg's metabolics computed with legs=1")
     first = res[0]
     for r in res[1:]:
-        if r.body_mass_kg != first.body_mass_kg or r.basal_rule != first.basal_rule or r.models != first.models:
-            raise DataMismatchError("the legs were evaluated with different body mass, basal rule or models")
-    basal = BASAL_RATE_W_PER_KG if first.basal_rule == "body" else 0.0
+        if (r.body_mass_kg != first.body_mass_kg or r.basal_rule != first.basal_rule or r.models != first.models
+                or any(r.whole_body[m].basal_W_per_kg != first.whole_body[m].basal_W_per_kg for m in r.models)):
+            raise DataMismatchError("the legs were evaluated with different body mass, basal rule (coefficient, "
+                                    "exponent) or models; evaluate both with the same settings")
     return {
-        m: sum(r.whole_body[m].one_leg_mean_W for r in res) / first.body_mass_kg + basal for m in first.models
+        m: sum(r.whole_body[m].one_leg_mean_W for r in res) / first.body_mass_kg + first.whole_body[m].basal_W_per_kg
+        for m in first.models
     }

@@ -34,6 +34,7 @@ __all__ = [
     "cost_of_transport_J_per_kg_per_m",
     "brockway_rate_W",
     "BASAL_RULES",
+    "body_basal_W_per_kg",
     "BROCKWAY_COEFFICIENTS",
 ]
 
@@ -81,6 +82,8 @@ class WholeBodyRate:
     basal_rule: str
     body_mass_kg: float
     legs: int
+    #: whole-body basal heat added to every sample (W/kg of body mass; 0 unless the rule is ``"body"``)
+    basal_W_per_kg: float = 0.0
 
     def cost_of_transport_J_per_kg_per_m(self, speed_m_per_s: float) -> float:
         """Gross cost of transport (J/kg/m) at the walking speed (basal heat of the rule included)."""
@@ -138,8 +141,7 @@ def whole_body_rate(
         raise OptionError(f"basal rule must be one of {', '.join(BASAL_RULES)}, not {basal!r}")
     if not (np.isfinite(body_mass_kg) and body_mass_kg > 0):
         raise OptionError(f"body mass must be a positive number of kilograms, not {body_mass_kg!r}")
-    if isinstance(basal_exponent, bool) or not np.isfinite(float(basal_exponent)):
-        raise OptionError(f"basal_exponent must be a finite number, not {basal_exponent!r}")
+    check_basal_rule(basal_rate_W_per_kg, basal_exponent)
     if not (isinstance(legs, (int, np.integer)) and legs >= 1):
         raise OptionError(f"legs must be a positive whole number, not {legs!r}")
     t = np.asarray(time_s, dtype=float)
@@ -176,7 +178,7 @@ def whole_body_rate(
     duration = float(t[-1] - t[0]) if cycle_duration_s is None else float(cycle_duration_s)
     if not (np.isfinite(duration) and duration > 0):
         raise OptionError(f"cycle duration must be positive (s), not {cycle_duration_s!r}")
-    add = basal_rate_W_per_kg * body_mass_kg ** float(basal_exponent) / body_mass_kg if basal == "body" else 0.0
+    add = body_basal_W_per_kg(body_mass_kg, basal_rate_W_per_kg, basal_exponent) if basal == "body" else 0.0
     rate = legs * leg / body_mass_kg + add
     leg_mean = _trapezoid(leg, t) / duration
     mean = legs * leg_mean / body_mass_kg + add
@@ -192,7 +194,26 @@ def whole_body_rate(
         basal_rule=basal,
         body_mass_kg=float(body_mass_kg),
         legs=int(legs),
+        basal_W_per_kg=float(add),
     )
+
+
+def check_basal_rule(basal_rate_W_per_kg, basal_exponent) -> None:
+    """Raise :class:`OptionError` unless the basal coefficient (W/kg) is a non-negative number
+    and the exponent a finite number."""
+    for name, v in (("basal_rate_W_per_kg (the basal coefficient)", basal_rate_W_per_kg),
+                    ("basal_exponent", basal_exponent)):
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not np.isfinite(v):
+            raise OptionError(f"{name} must be a finite number, not {v!r}")
+    if basal_rate_W_per_kg < 0:
+        raise OptionError(f"the basal coefficient must not be negative (W/kg), not {basal_rate_W_per_kg!r}")
+
+
+def body_basal_W_per_kg(body_mass_kg: float, basal_rate_W_per_kg: float = BASAL_RATE_W_PER_KG,
+                        basal_exponent: float = 1.0) -> float:
+    """The ``"body"`` rule's basal heat per kg of body mass, as OpenSim's probes write it:
+    ``basal_coefficient * m_body^basal_exponent / m_body`` (W/kg; 1.2 with the defaults)."""
+    return float(basal_rate_W_per_kg) * float(body_mass_kg) ** float(basal_exponent) / float(body_mass_kg)
 
 
 def cost_of_transport_J_per_kg_per_m(mean_W_per_kg, speed_m_per_s):

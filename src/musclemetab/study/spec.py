@@ -7,6 +7,8 @@ A study file names everything a study needs; paths are relative to the file::
     workflows = ["effort-gen", "effort-ten"]
     models = "all"                     # or ["UM10", "BH04", ...]
     basal = "body"                     # whole-body basal rule: body | muscle | none
+    basal_coefficient = 1.2            # optional, W/kg: OpenSim's basal_coefficient (body rule:
+    basal_exponent = 1.0               #  coefficient * body mass^exponent W; muscle rule: W per kg of muscle)
 
     [[subjects]]
     name = "sub1"
@@ -150,6 +152,9 @@ class Study:
     output: Path
     basal: str = "body"
     source: Path | None = None
+    #: OpenSim's basal_coefficient (W/kg) and basal_exponent
+    basal_coefficient: float = 1.2
+    basal_exponent: float = 1.0
     settings: dict = field(default_factory=dict)
 
     def subject(self, name: str) -> Subject:
@@ -160,7 +165,8 @@ class Study:
 
 
 # ---------------------------------------------------------------------------------------
-_STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "subjects", "solver"}
+_STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "basal_coefficient", "basal_exponent", "subjects",
+               "solver"}
 #: keys of the study file's [solver] table (IPOPT settings of every solve)
 _SOLVER_KEYS = {"max_iter", "tol", "linear_solver", "linear_solver_library"}
 _SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials",
@@ -191,6 +197,7 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
     base = Path(base)
     _unknown(data, _STUDY_KEYS, where)
     from ..metabolics.registry import parse_models
+    from ..metabolics._common import BASAL_RATE_W_PER_KG
 
     name = str(data.get("name", source.stem if source else "study"))
     workflows = data.get("workflows", ["effort-gen", "effort-ten"])
@@ -215,6 +222,13 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
     basal = str(data.get("basal", "body"))
     if basal not in BASAL_RULES:
         raise OptionError(f"{where}: 'basal' must be one of {', '.join(BASAL_RULES)}, not {basal!r}")
+    basal_coefficient = _number(data.get("basal_coefficient", BASAL_RATE_W_PER_KG), where, "basal_coefficient")
+    basal_exponent = _number(data.get("basal_exponent", 1.0), where, "basal_exponent")
+    if basal_coefficient < 0:
+        raise OptionError(f"{where}: 'basal_coefficient' must not be negative (W/kg), not {basal_coefficient!r}")
+    if basal == "muscle" and basal_exponent != 1:
+        raise OptionError(f"{where}: 'basal_exponent' applies to basal = \"body\" only (the muscle rule is linear "
+                          "in each muscle's mass); remove it or set basal = \"body\"")
     out_value = data.get("output", "results")
     if output is None and (not isinstance(out_value, str) or not out_value.strip()):
         raise OptionError(f"{where}: 'output' must be a folder path (text), not {out_value!r}")
@@ -228,11 +242,14 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
     if dup:
         raise OptionError(f"{where}: subject name(s) {', '.join(dup)} used more than once; names must be unique")
     settings = {"name": name, "workflows": list(workflows), "models": list(models), "basal": basal}
+    if "basal_coefficient" in data or "basal_exponent" in data:
+        settings.update(basal_coefficient=basal_coefficient, basal_exponent=basal_exponent)
     solver = _solver(data.get("solver"), where)
     if solver:
         settings["solver"] = solver
     return Study(name=name, subjects=subjects, workflows=workflows, models=models, output=out,
-                 basal=basal, source=source, settings=settings)
+                 basal=basal, source=source, settings=settings, basal_coefficient=basal_coefficient,
+                 basal_exponent=basal_exponent)
 
 
 def _solver(data, where: str) -> dict:

@@ -171,6 +171,8 @@ def unit_key(study: Study, unit: Unit, dependency_key: str | None = None) -> str
         content["trial"] = _trial_record(subject.trial(unit.trial))
         content["models"] = list(study.models)
         content["basal"] = study.basal
+        if "basal_coefficient" in study.settings:  # absent: earlier studies keep their unit keys
+            content["basal_rule"] = [study.basal_coefficient, study.basal_exponent]
     text = json.dumps(content, sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()
 
@@ -467,6 +469,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         cycle = trial_cycle(trial, subject.side)
     result = metabolics_from_solution(
         tmp, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
+        basal_rate_W_per_kg=study.basal_coefficient, basal_exponent=study.basal_exponent,
         speed_m_per_s=speed, muscle_properties=subject.muscle_properties,
     )
     write_metabolics(result, tmp, cycle=cycle)
