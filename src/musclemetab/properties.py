@@ -54,6 +54,7 @@ __all__ = [
     "MUSCLE_DENSITY_KG_PER_M3",
     "SPECIFIC_TENSION_PA",
     "FALLBACK_SLOW_TWITCH_FRACTION",
+    "metabolic_properties",
     "MuscleRecord",
     "MuscleOverrides",
     "anatomical_table",
@@ -538,6 +539,20 @@ def slow_twitch_fraction(names: Sequence[str], default: float | None = None, ove
         )
     return np.array([default if "slow_twitch_fraction" in r.fallback else r.slow_twitch_fraction for r in recs],
                     dtype=float)
+
+
+def metabolic_properties(names: Sequence[str], body_mass_kg: float, height_m: float, max_isometric_force_N,
+                         optimal_fiber_length_m, overrides=None, strict: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Mass (kg) and slow-twitch fraction of each muscle as the metabolic models take them: the
+    volume rule of :func:`muscle_masses_kg` and :func:`slow_twitch_fraction` (0.5 for a muscle
+    the table cannot place), with ``overrides`` first. The metabolic rates of a solution and the
+    energy goal of the muscle redundancy problem both use this."""
+    overrides = as_overrides(overrides)
+    masses = muscle_masses_kg(names, body_mass_kg, height_m, max_isometric_force_N, optimal_fiber_length_m,
+                              overrides=overrides, strict=strict)
+    fst = slow_twitch_fraction(names, FALLBACK_SLOW_TWITCH_FRACTION, overrides=overrides,
+                               max_isometric_force_N=max_isometric_force_N)
+    return masses, fst
 
 
 def individualised_max_isometric_force_N(

@@ -381,9 +381,7 @@ def metabolics_from_solution(
     speed_m_per_s
         Walking speed, for the cost of transport in the whole-body table.
     """
-    from ..properties import FALLBACK_SLOW_TWITCH_FRACTION, as_overrides
-    from ..properties import muscle_masses_kg as _masses
-    from ..properties import slow_twitch_fraction as _fst
+    from ..properties import as_overrides, metabolic_properties
 
     names = parse_models(models)
     if basal not in BASAL_RULES:
@@ -436,10 +434,8 @@ def metabolics_from_solution(
 
     overrides = (as_overrides(muscle_properties).with_column("mass_kg", muscle_masses_kg)
                  .with_column("slow_twitch_fraction", slow_twitch_fractions))
-    f0 = params["max_isometric_force_N"]
-    masses = _masses(muscles, body_mass_kg, height_m, f0, params["optimal_fiber_length_m"],
-                     overrides=overrides, strict=strict)
-    fst = _fst(muscles, FALLBACK_SLOW_TWITCH_FRACTION, overrides=overrides, max_isometric_force_N=f0)
+    masses, fst = metabolic_properties(muscles, body_mass_kg, height_m, params["max_isometric_force_N"],
+                                       params["optimal_fiber_length_m"], overrides=overrides, strict=strict)
 
     inputs = dict(states)
     inputs.update(params)

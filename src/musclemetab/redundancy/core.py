@@ -8,7 +8,9 @@ followed by its EMG bound rows. **Goals** (:class:`Goals`), per trial normalised
 
     wAct/2 (sum e^2 + sum a^2)/(N M) + wTres sum aT^2/(N D) + wVm sum v~M^2/(N M)
     + wEMG sum (e - s_EMG E)^2/(nEMG N) + wUS sum ((l~M s_lMo lMo - lUS)/lMo)^2/(nUS N)
+    + wE sum_k sum_m Edot_m(e_k, a_k, l~M_k, v~M_k)/(m_body N)
 
+(the energy goal, :mod:`.energy`: a smooth metabolic model's rate without basal heat, W)
 and EMG bounds ``|e_k - s_EMG E_k| <= tol`` (``tol = 0``: EMG-driven). **Shared parameters**
 (:class:`ParameterSpec`): scale factors of ``kT`` (``shift(kT)`` recomputed), ``lMo`` (``w =
 lMo sin(alpha_0)`` scales with it) and ``lTs`` per muscle, and EMG scale factors, with bounds and
@@ -31,6 +33,7 @@ import numpy as np
 
 from ..errors import DataMismatchError, OptionError, SolverError, UnknownMuscleError
 from ..muscle import activation_rate, hill_residual, tendon_force_length
+from .energy import EnergyGoal, node_rates
 from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
 from .static_opt import InitialGuess
@@ -49,7 +52,8 @@ PARAMETER_KINDS = {"tendon_stiffness": "kT", "optimal_fiber_length": "lmo", "ten
 
 @dataclass(frozen=True)
 class Goals:
-    """Weights of the objective and the EMG bound (``None``: no bound rows)."""
+    """Weights of the objective and the EMG bound (``None``: no bound rows); ``energy``: the
+    energy goal (:class:`.energy.EnergyGoal`), or ``None``."""
 
     w_activation: float = 1.0
     w_reserve: float = 1000.0
@@ -57,6 +61,7 @@ class Goals:
     w_emg: float = 0.0
     emg_tolerance: float | None = None
     w_fibre_length: float = 0.0
+    energy: EnergyGoal | None = None
 
     def __post_init__(self):
         for name in ("w_activation", "w_reserve", "w_velocity", "w_emg", "w_fibre_length"):
@@ -66,6 +71,8 @@ class Goals:
         tol = self.emg_tolerance
         if tol is not None and not (math.isfinite(tol) and tol >= 0):
             raise OptionError(f"the EMG tolerance must be a non-negative number (0: EMG-driven), not {tol!r}")
+        if self.energy is not None and not isinstance(self.energy, EnergyGoal):
+            raise OptionError(f"the energy goal must be an EnergyGoal, not {type(self.energy).__name__}")
 
 
 @dataclass(frozen=True)
@@ -226,6 +233,12 @@ def _group_functions(ca, params, trial: TrialBlock, goals: Goals, Topt: float, f
         iu = [pos[m] for m in trial.fibre_muscles]
         lmo0 = ca.DM(np.asarray(params.optimal_fiber_length_m, dtype=float)[iu])
         cost += (goals.w_fibre_length / nU) * ca.sumsqr((S["lm"][iu] * P["lmo"][iu] - lus) / lmo0)
+    if goals.energy is not None and goals.energy.weight:
+        eg = goals.energy
+        mass, fst = eg.muscle_values(inp.muscles, params.max_isometric_force_N, params.optimal_fiber_length_m)
+        rates = node_rates(eg, S["e"], S["a"], S["lm"], S["vm"], F0=P["f0"], lMo=P["lmo"], vmax=P["vmax"],
+                           kpe=P["kpe"], s0=P["s0"], sm=P["sm"], mass=ca.DM(mass), fst=ca.DM(fst))
+        cost += (eg.weight / eg.body_mass_kg) * ca.sum1(rates)
     f = inv_n * cost
     lam, sigma = ca.SX.sym("lam", g.shape[0]), ca.SX.sym("sigma")
     cse = {"cse": True}

@@ -46,6 +46,7 @@ import numpy as np
 
 from ..errors import OptionError, SolverError
 from .core import Goals, TrialBlock, build_problem
+from .energy import EnergyGoal
 from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
 from .static_opt import InitialGuess
@@ -92,7 +93,8 @@ class SolverOptions:
     threads of the BLAS used by MUMPS (CasADi's OpenBLAS); the dense blocks here are small, so
     one thread is fastest and leaves the other cores to other solves (``None`` leaves the
     library default). ``ipopt`` holds further IPOPT options, e.g. ``{"mu_init": 1e-6}`` for a
-    warm start; anything there may change which optimum is found.
+    warm start; anything there may change which optimum is found. ``energy`` adds the energy
+    goal (:class:`.energy.EnergyGoal`) to the objective.
     """
 
     w_activation: float = 1.0
@@ -108,8 +110,11 @@ class SolverOptions:
     tune_malloc: bool = True
     blas_threads: int | None = 1
     ipopt: dict = field(default_factory=dict)
+    energy: EnergyGoal | None = None
 
     def __post_init__(self):
+        if self.energy is not None and not isinstance(self.energy, EnergyGoal):
+            raise OptionError(f"energy must be an EnergyGoal, not {type(self.energy).__name__}")
         if self.derivatives not in ("explicit", "auto"):
             raise OptionError(f"derivatives must be 'explicit' or 'auto', not {self.derivatives!r}")
         for name in ("w_activation", "w_reserve", "w_velocity"):
@@ -138,6 +143,7 @@ class SolverOptions:
             "tune_malloc": self.tune_malloc,
             "blas_threads": self.blas_threads,
             "ipopt": dict(self.ipopt),
+            **({"energy": self.energy.record()} if self.energy is not None else {}),
         }
 
 
@@ -296,8 +302,10 @@ def build_nlp(
 
 
 def effort_goals(options: SolverOptions) -> Goals:
-    """The effort goals (activation, excitation, reserves, fibre velocity) of ``options``."""
-    return Goals(w_activation=options.w_activation, w_reserve=options.w_reserve, w_velocity=options.w_velocity)
+    """The effort goals (activation, excitation, reserves, fibre velocity) of ``options``, and
+    its energy goal if it has one."""
+    return Goals(w_activation=options.w_activation, w_reserve=options.w_reserve, w_velocity=options.w_velocity,
+                 energy=options.energy)
 
 
 #: IPOPT linear-algebra settings used with MUMPS (``SolverOptions.ipopt`` overrides them): no
@@ -364,7 +372,7 @@ class ProblemResult(SolveOutcome):
     ipopt_options: dict = field(default_factory=dict)
 
 
-def _trial_terms(goals: Goals, t: TrialBlock, Z, xl, dev, lm_us) -> dict:
+def _trial_terms(goals: Goals, t: TrialBlock, Z, xl, dev, lm_us, params=None, lmo_factor=None) -> dict:
     """The objective terms of one trial at the optimum (NumPy, the formulas of :mod:`.core`)."""
     M, D, N = len(t.inputs.muscles), len(t.inputs.dofs), t.inputs.n_intervals
     a = np.concatenate([Z[:, 0:M].ravel(), xl[0:M]])
@@ -378,6 +386,12 @@ def _trial_terms(goals: Goals, t: TrialBlock, Z, xl, dev, lm_us) -> dict:
         terms = {"emg_tracking": goals.w_emg * float(np.sum(dev**2)) / (len(t.emg_muscles) * N), **terms}
     if t.fibre_muscles:
         terms["fibre_length_tracking"] = goals.w_fibre_length * float(np.sum(lm_us**2)) / (len(t.fibre_muscles) * N)
+    if goals.energy is not None:
+        from .energy import leg_rate_W_per_kg
+
+        rate = leg_rate_W_per_kg(goals.energy, params, t.inputs.muscles, Z[:, 3 * M:4 * M], Z[:, 0:M],
+                                 Z[:, M:2 * M], Z[:, 4 * M + D:], lmo_factor)
+        terms["energy"] = goals.energy.weight * float(np.mean(rate))
     return terms
 
 
@@ -435,7 +449,9 @@ def solve_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
             s_lmo = np.array([factors.get("optimal_fiber_length", {}).get(m, 1.0) for m in t.fibre_muscles])
             l0 = np.array([lmo[m] for m in t.fibre_muscles])
             lm_us = (Z[:, M:2 * M][:, iu] * s_lmo * l0 - t.fibre_length_nodes_m) / l0
-        terms = _trial_terms(goals, t, Z, xl, dev, lm_us)
+        s_all = factors.get("optimal_fiber_length", {})
+        terms = _trial_terms(goals, t, Z, xl, dev, lm_us, params,
+                             np.array([s_all.get(m, 1.0) for m in t.inputs.muscles]))
         ocps.append(OcpResult(
             activation=np.vstack([Z[:, 0:M], xl[0:M]]), lm_norm=np.vstack([Z[:, M:2 * M], xl[M:2 * M]]),
             lm_projected_m=np.vstack([Z[:, 2 * M:3 * M], xl[2 * M:]]), excitation=Z[:, 3 * M:4 * M].copy(),

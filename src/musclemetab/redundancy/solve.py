@@ -150,6 +150,14 @@ def solve_with_parameters(
                               "mesh_intervals_per_second": mesh_frequency_hz, "interpolation": "not-a-knot cubic spline"},
         "inputs": {k: str(v) for k, v in (sources or {}).items()},
     }
+    if options.energy is not None:
+        from .energy import leg_rate_W_per_kg
+
+        N = inputs.n_intervals
+        rate = leg_rate_W_per_kg(options.energy, params, inputs.muscles, ocp.excitation, ocp.activation[:N],
+                                 ocp.lm_norm[:N], ocp.vm_norm)
+        summary["energy_goal"] = {**options.energy.record(), "w_activation": options.w_activation,
+                                  "leg_mean_W_per_kg": float(np.mean(rate))}
     solution = build_solution(inputs, params, ocp, summary)
     solution.summary["total_time_s"] = _time.perf_counter() - t_start
     return solution
@@ -175,15 +183,18 @@ def solve_trial(
     """Solve one trial with a named workflow (``effort-gen``, ``effort-cal``, ``effort-ten``).
 
     See :func:`musclemetab.redundancy.workflows.workflow_parameters` for ``passive`` and the
-    tendon-stiffness arguments; the workflow's weights override those of ``options``.
+    tendon-stiffness arguments; the workflow's weights override those of ``options`` (the effort weight
+    of ``options.energy``, when it has one, overrides the workflow's).
     """
     wf = get_workflow(workflow)
     params, record = workflow_parameters(
         wf, model_parameters, _restrict_geometry(geometry).muscles, passive=passive,
         tendon_stiffness=tendon_stiffness, tendon_stiffness_file=tendon_stiffness_file,
     )
-    options = (options or SolverOptions()).with_(
-        w_activation=wf.w_activation, w_reserve=wf.w_reserve, w_velocity=wf.w_velocity
+    options = options or SolverOptions()
+    effort = options.energy.effort_weight if options.energy is not None else None
+    options = options.with_(
+        w_activation=wf.w_activation if effort is None else effort, w_reserve=wf.w_reserve, w_velocity=wf.w_velocity
     )
     return solve_with_parameters(
         geometry, params, id_time_s, id_moments_Nm, ik_time_s=ik_time_s, options=options,
