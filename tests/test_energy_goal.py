@@ -1,0 +1,189 @@
+"""The energy goal of the muscle redundancy problem (``docs/energy_objective.md``).
+
+* its value is the NumPy smooth model, evaluated here on the mesh variables with the
+  independent muscle curves of ``mrs_reference`` and summed by hand;
+* its gradient and Hessian, as assembled for IPOPT, against central finite differences;
+* one converged solve of the example's normal trial (EFFORT-CAL settings): residuals within
+  1e-4 N m, the recorded term equal to the smooth model summed over the solution, less
+  energy than the effort-minimising optimum it starts from.
+"""
+
+from __future__ import annotations
+
+import types
+
+import numpy as np
+import pytest
+from mrs_reference import fl_ref, fpe_ref, fv_ref
+
+from musclemetab.errors import OptionError
+from musclemetab.io import read_storage
+from musclemetab.redundancy import inputs as I
+from musclemetab.redundancy import workflows as W
+
+DOFS = I.DEFAULT_DOFS
+MASS, HEIGHT = 72.6, 1.743  # the example subject
+
+
+def _goal(model="UM10", weight=2.0, **kw):
+    from musclemetab.redundancy.energy import EnergyGoal
+
+    return EnergyGoal(model, weight, MASS, HEIGHT, **kw)
+
+
+def _rates_by_hand(model, smoothing, muscles, params, e, a, lm, vm):
+    """Summed smooth rate (W, no basal) per node: states ``(nodes, muscles)``, curves of
+    ``mrs_reference``, masses and slow-twitch fractions of the muscle table."""
+    from musclemetab.metabolics.smooth import smooth_rates
+    from musclemetab.properties import metabolic_properties
+
+    p = params.subset(muscles)
+    mass, fst = metabolic_properties(muscles, MASS, HEIGHT, p.max_isometric_force_N, p.optimal_fiber_length_m)
+    vbar = vm / p.max_contraction_velocity
+    f0 = p.max_isometric_force_N
+    r = smooth_rates(model, e, a, lm, vbar, fl_ref(lm), fv_ref(vbar),
+                     f0 * fpe_ref(lm, p.passive_kpe, p.passive_s0, p.passive_sm), f0, p.optimal_fiber_length_m,
+                     p.max_contraction_velocity, mass, fst, smoothing=smoothing, basal=False)
+    return r["total"].sum(axis=1)
+
+
+@pytest.fixture(scope="module")
+def small_problem(example, reference_table):
+    """The normal trial's first 31 frames (EFFORT-CAL muscles, geometry of the study's
+    MuscleAnalysis): inputs, parameters and guess, without OpenSim."""
+    from musclemetab.redundancy.static_opt import initial_guess, static_optimisation
+
+    folder = example.reference_muscle_analysis
+    L = read_storage(folder / "IK_sub1_normal_MuscleAnalysis_Length.sto")
+    names = list(L.columns)
+    r = np.stack([read_storage(folder / f"IK_sub1_normal_MuscleAnalysis_MomentArm_{d}.sto")[names].to_numpy()
+                  for d in DOFS], axis=1)
+    t = reference_table
+    model_params = types.SimpleNamespace(
+        names=list(t.index), max_isometric_force_N=t.max_isometric_force_N_sub1.to_numpy(),
+        optimal_fiber_length_m=t.optimal_fiber_length_m_sub1.to_numpy(),
+        tendon_slack_length_m=t.tendon_slack_length_m_sub1.to_numpy(),
+        pennation_angle_at_optimal_rad=t.pennation_angle_at_optimal_rad.to_numpy(),
+        max_contraction_velocity=t.max_contraction_velocity_lMo_per_s.to_numpy())
+    t_ik, _ = I.read_kinematics(example.ik["normal"])
+    t_id, mom = I.read_inverse_dynamics(example.id["normal"])
+    km, _ = I.select_muscles(names, r, DOFS)
+    muscles = [names[i] for i in km]
+    F = 31
+    geo = types.SimpleNamespace(time=L.index.to_numpy()[:F], muscles=muscles, dofs=DOFS,
+                                lmt_m=L.to_numpy()[:F, km], moment_arms_m=r[:F, :, km])
+    params, _ = W.workflow_parameters("effort-cal", model_params, muscles)
+    inp = I.prepare_inputs(geo, t_id, mom, ik_time_s=t_ik[:F])
+    return inp, params, initial_guess(inp, params, static_optimisation(inp, params))
+
+
+def _nlp(small_problem, goal):
+    from musclemetab.redundancy.problem import SolverOptions, build_nlp
+
+    inp, params, guess = small_problem
+    return build_nlp(inp, params, guess, SolverOptions(energy=goal))
+
+
+def _point(nlp, seed=3):
+    rng = np.random.default_rng(seed)
+    return np.clip(nlp["x0"] + 0.01 * rng.normal(size=nlp["x0"].size), nlp["lbx"] + 1e-3,
+                   np.minimum(nlp["ubx"], 1e3) - 1e-3)
+
+
+@pytest.mark.parametrize("model", ["UM10", "BH04", "MA68"])
+def test_goal_value_is_the_smooth_model_summed_by_hand(small_problem, model):
+    """With and without the goal, the objectives differ by ``w (1/N) sum_k sum_m Edot / m_body``."""
+    import casadi as ca
+
+    inp, params, _ = small_problem
+    goal = _goal(model, weight=2.0)
+    with_goal, without = _nlp(small_problem, goal), _nlp(small_problem, None)
+    x = _point(with_goal)
+    p = ca.DM.zeros(0, 1)
+    f1 = float(with_goal["grad_f"](x, p)[0])
+    f0 = float(without["grad_f"](x, p)[0])
+    M, D, N = len(inp.muscles), len(inp.dofs), inp.n_intervals
+    Z = x[:(5 * M + D) * N].reshape(N, 5 * M + D)
+    a, lm, e, vm = Z[:, 0:M], Z[:, M:2 * M], Z[:, 3 * M:4 * M], Z[:, 4 * M + D:]
+    by_hand = 2.0 * np.sum(_rates_by_hand(model, goal.smoothing, inp.muscles, params, e, a, lm, vm)) / (N * MASS)
+    assert by_hand > 0.1  # a real metabolic rate: W/kg of body mass, one leg
+    assert f1 - f0 == pytest.approx(by_hand, rel=1e-9)
+
+
+@pytest.mark.parametrize("model", ["UM10", "BH04"])
+def test_goal_derivatives_against_finite_differences(small_problem, model):
+    """Gradient and Hessian of the objective with the goal, as assembled for IPOPT from the
+    per-interval derivatives, against central differences along random directions."""
+    import casadi as ca
+
+    nlp = _nlp(small_problem, _goal(model, weight=2.0, effort_weight=0.0))
+    x = _point(nlp, seed=5)
+    p = ca.DM.zeros(0, 1)
+    n = x.size
+    lam = np.zeros(nlp["n_constraints"])
+
+    def f(y):
+        return float(nlp["grad_f"](y, p)[0])
+
+    def grad(y):
+        return np.asarray(nlp["grad_f"](y, p)[1]).ravel()
+
+    U = nlp["hess_lag"](x, p, 1.0, lam).sparse()  # upper triangle
+    H = (U + U.T).toarray() - np.diag(U.diagonal())
+    g = grad(x)
+    rng = np.random.default_rng(11)
+    lo, hi = nlp["lbx"], np.minimum(nlp["ubx"], 1e3)
+    for _ in range(3):
+        d = rng.normal(size=n)
+        d /= np.linalg.norm(d)
+        eps = 1e-6
+        assert np.all(x + eps * d < hi) and np.all(x - eps * d > lo)
+        fd = (f(x + eps * d) - f(x - eps * d)) / (2 * eps)
+        assert fd == pytest.approx(g @ d, rel=1e-6, abs=1e-9)
+        hd = (grad(x + eps * d) - grad(x - eps * d)) / (2 * eps)
+        np.testing.assert_allclose(H @ d, hd, rtol=1e-5, atol=1e-6 * np.max(np.abs(hd)))
+
+
+def test_energy_goal_options_are_checked():
+    with pytest.raises(OptionError, match="unknown metabolic model 'XX99'"):
+        _goal("XX99")
+    with pytest.raises(OptionError, match="weight"):
+        _goal(weight=-1.0)
+    with pytest.raises(OptionError, match="effort weight"):
+        _goal(effort_weight=float("nan"))
+    with pytest.raises(OptionError, match="smoothing"):
+        _goal(smoothing=0.0)
+    with pytest.raises(OptionError, match="kilograms"):
+        from musclemetab.redundancy.energy import EnergyGoal
+
+        EnergyGoal("UM10", 1.0, 72600.0, HEIGHT)
+
+
+@pytest.mark.opensim
+def test_energy_solve_of_the_normal_trial_converges(example):
+    """EFFORT-CAL settings, effort plus 0.001 x the UM10 goal, warm-started from the effort
+    optimum: converged, moments met, the recorded term is the smooth model over the solution,
+    and the mixed objective is lower than at the effort optimum."""
+    from musclemetab.redundancy import SolverOptions, solve_files
+
+    effort = solve_files(example.model, example.ik["normal"], example.id["normal"], "effort-cal")
+    goal = _goal("UM10", weight=1e-3)
+    sol = solve_files(example.model, example.ik["normal"], example.id["normal"], "effort-cal",
+                      options=SolverOptions(energy=goal), warm_start=effort)
+    s = sol.summary
+    assert s["success"] and s["max_moment_residual_Nm"] <= 1e-4
+    N = s["n_intervals"]
+    p = sol.parameters
+
+    def leg_W_per_kg(x):
+        return np.mean(_rates_by_hand("UM10", goal.smoothing, list(x.muscles), p, x.excitation[:N],
+                                      x.activation[:N], x.lm_norm[:N], x.vm_norm[:N])) / MASS
+
+    energy = leg_W_per_kg(sol)
+    assert s["objective_terms"]["energy"] == pytest.approx(1e-3 * energy, rel=1e-9)
+    assert s["energy_goal"]["leg_mean_W_per_kg"] == pytest.approx(energy, rel=1e-9)
+    assert s["energy_goal"]["model"] == "UM10" and s["solver_options"]["energy"]["weight"] == 1e-3
+    # less energy than the effort optimum it started from, and a lower mixed objective than there
+    assert energy < leg_W_per_kg(effort) - 0.05
+    assert s["objective"] == pytest.approx(sum(s["objective_terms"].values()), rel=1e-9)
+    assert s["objective"] < effort.summary["objective"] + 1e-3 * leg_W_per_kg(effort)
