@@ -5,7 +5,7 @@
 * its gradient and Hessian, as assembled for IPOPT, against central finite differences;
 * one converged solve of the example's normal trial (EFFORT-CAL settings): residuals within
   1e-4 N m, the recorded term equal to the smooth model summed over the solution, less
-  energy than the effort-minimising optimum it starts from.
+  energy than the effort-minimising optimum; the command line's options.
 """
 
 from __future__ import annotations
@@ -161,15 +161,15 @@ def test_energy_goal_options_are_checked():
 
 @pytest.mark.opensim
 def test_energy_solve_of_the_normal_trial_converges(example):
-    """EFFORT-CAL settings, effort plus 0.001 x the UM10 goal, warm-started from the effort
-    optimum: converged, moments met, the recorded term is the smooth model over the solution,
-    and the mixed objective is lower than at the effort optimum."""
+    """EFFORT-CAL settings, effort plus 0.001 x the UM10 goal: converged, moments met, the
+    recorded term is the smooth model over the solution, and the mixed objective is lower than
+    at the effort optimum. The command line gives the same solve."""
     from musclemetab.redundancy import SolverOptions, solve_files
 
     effort = solve_files(example.model, example.ik["normal"], example.id["normal"], "effort-cal")
     goal = _goal("UM10", weight=1e-3)
     sol = solve_files(example.model, example.ik["normal"], example.id["normal"], "effort-cal",
-                      options=SolverOptions(energy=goal), warm_start=effort)
+                      options=SolverOptions(energy=goal))
     s = sol.summary
     assert s["success"] and s["max_moment_residual_Nm"] <= 1e-4
     N = s["n_intervals"]
@@ -187,3 +187,35 @@ def test_energy_solve_of_the_normal_trial_converges(example):
     assert energy < leg_W_per_kg(effort) - 0.05
     assert s["objective"] == pytest.approx(sum(s["objective_terms"].values()), rel=1e-9)
     assert s["objective"] < effort.summary["objective"] + 1e-3 * leg_W_per_kg(effort)
+
+
+@pytest.mark.opensim
+def test_energy_goal_from_the_command_line(example, tmp_path, capsys):
+    """``solve --energy-model``: the same problem as the Python call above (one solve per
+    session), its goal in summary.json; bad combinations stop before any work."""
+    import json
+
+    from musclemetab.cli import main
+
+    base = ["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
+            str(example.id["normal"]), "--workflow", "effort-cal"]
+    out = tmp_path / "energy"
+    assert main(base + ["--energy-model", "um10", "--energy-weight", "0.001", "--mass", "72.6", "--height",
+                        "1.743", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    s = json.loads((out / "summary.json").read_text())
+    assert s["energy_goal"]["model"] == "UM10" and s["energy_goal"]["w_activation"] == 1.0
+    assert f"UM10 (smooth, one leg, no basal) {s['energy_goal']['leg_mean_W_per_kg']:.3f} W/kg" in printed
+    assert s["objective_terms"]["energy"] == pytest.approx(1e-3 * s["energy_goal"]["leg_mean_W_per_kg"], rel=1e-12)
+    for extra, words in ((["--energy-weight", "1"], ["--energy-weight", "--energy-model"]),
+                         (["--energy-model", "UM10", "--mass", "72.6"], ["--height"]),
+                         (["--energy-model", "UM99", "--mass", "72.6", "--height", "1.743"], ["UM99", "UM10"]),
+                         (["--energy-model", "UM10", "--mass", "72.6", "--height", "1.743", "--energy-smoothing",
+                           "0"], ["--energy-smoothing", "positive"]),
+                         (["--energy-model", "UM10", "--mass", "72.6", "--height", "1.743", "--effort-weight",
+                           "-1"], ["--effort-weight"])):
+        bad = tmp_path / "bad"
+        assert main(base + extra + ["--out", str(bad)]) != 0
+        err = capsys.readouterr().err
+        assert all(w in err for w in words), err
+        assert len(err.strip().splitlines()) == 1 and not bad.exists()

@@ -6,6 +6,9 @@
         --workflow effort-gen|effort-cal|effort-ten [--passive FILE] \\
         [--tendon-stiffness soleus_r=10.6,...] [--parameters parameters.json] --out DIR
 
+    musclemetab solve --model M.osim --ik IK.mot --id ID.sto --workflow effort-cal \\
+        --energy-model UM10 [--energy-weight 1] [--effort-weight 0] --mass KG --height M --out DIR
+
     musclemetab solve --workflow emg-ten --model M.osim --ik A.mot B.mot C.mot \\
         --id A.sto B.sto C.sto --emg A.mot B.mot C.mot [--emg-mapping default|authors|MAP.json] \\
         [--labels a b c] [--passive FILE] --out DIR
@@ -25,6 +28,7 @@ status, for inspection).
 from __future__ import annotations
 
 import argparse
+import math
 
 from ..errors import OptionError, SolverError, UnknownMuscleError
 
@@ -125,6 +129,22 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
                    "study's start from static optimisation")
     p.add_argument("--skip-unit-checks", action="store_true",
                    help="do not reject inverse-dynamics moments whose size looks like wrong units")
+    g = p.add_argument_group(
+        "energy goal", "effort workflows: minimise the integrated metabolic rate of a smooth energy model "
+        "(docs/energy_objective.md), alone (--effort-weight 0) or beside the effort goal")
+    g.add_argument("--energy-model", metavar="MODEL",
+                   help="smooth metabolic model of the goal: UM03, BH04, HO06, LW07, UM10, UC16, LW05 or MA68")
+    g.add_argument("--energy-weight", type=float, metavar="W",
+                   help="weight of the goal, the leg's mean metabolic rate in W/kg of body mass (default 1)")
+    g.add_argument("--effort-weight", type=float, metavar="W",
+                   help="weight of the effort goal on excitations and activations beside it (default: the "
+                   "workflow's, 1; 0: energy alone)")
+    g.add_argument("--energy-smoothing", type=float, metavar="S",
+                   help="smoothing parameter of the model's switches (default 0.01)")
+    g.add_argument("--mass", type=float, metavar="KG", help="body mass (kg), for the muscle masses and the goal's W/kg")
+    g.add_argument("--height", type=float, metavar="M", help="body height (m), for the muscle masses")
+    g.add_argument("--muscle-properties", metavar="FILE",
+                   help="CSV of per-muscle overrides of mass and slow-twitch fraction (docs/muscles.md)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.set_defaults(func=solve_command)
     return p
@@ -148,7 +168,11 @@ def solve_command(args) -> int:
         raise OptionError(f"--max-iter must be at least 1, not {args.max_iter}")
     check_output_folder(args.out)
     ik, idf = _as_list(args.ik), _as_list(args.id)
+    energy = _energy_goal(args)
     if args.workflow == "emg-ten" or getattr(args, "emg", None):
+        if energy is not None:
+            raise OptionError("--energy-model works with the effort workflows (effort-gen, effort-cal, effort-ten) "
+                              "without --emg; drop it or the EMG")
         return _emg_ten_command(args, ik, idf)
     extra = [o for o, attr in (("--emg-mapping", "emg_mapping"), ("--labels", "labels"), ("--emg-mode", "emg_mode"),
                                ("--emg-weight", "emg_weight")) if getattr(args, attr, None) is not None]
@@ -170,6 +194,8 @@ def solve_command(args) -> int:
     if args.mesh_frequency is not None and not args.mesh_frequency > 0:
         raise OptionError(f"--mesh-frequency must be positive, not {args.mesh_frequency}")
     options = _solver_options(args)
+    if energy is not None:
+        options = options.with_(energy=energy)
     warm = None
     if args.warm_start:
         from .solution import Solution
@@ -211,9 +237,52 @@ def solve_command(args) -> int:
             f"N = {s['n_intervals']}: {s['status']} in {s['iterations']} iterations, "
             f"objective {s['objective']:.6e}, solve {s['solve_time_s']:.2f} s, "
             f"max moment residual {s['max_moment_residual_Nm']:.1e} N m, max reserve RMS "
-            f"{worst_reserve:.3g} N m -> {out}"
+            f"{worst_reserve:.3g} N m{_energy_note(s)} -> {out}"
         )
     return 0
+
+
+_ENERGY_OPTIONS = (("--energy-weight", "energy_weight"), ("--effort-weight", "effort_weight"),
+                   ("--energy-smoothing", "energy_smoothing"), ("--mass", "mass"), ("--height", "height"),
+                   ("--muscle-properties", "muscle_properties"))
+
+
+def _energy_goal(args):
+    """The :class:`.energy.EnergyGoal` of the command line, or ``None`` without ``--energy-model``."""
+    from .energy import ENERGY_SMOOTHING, EnergyGoal
+
+    given = [o for o, attr in _ENERGY_OPTIONS if getattr(args, attr, None) is not None]
+    if getattr(args, "energy_model", None) is None:
+        if given:
+            raise OptionError(f"{', '.join(given)} belong{'s' if len(given) == 1 else ''} to the energy goal: give "
+                              "--energy-model MODEL (e.g. UM10), or drop them")
+        return None
+    missing = [o for o, attr in (("--mass", "mass"), ("--height", "height")) if getattr(args, attr) is None]
+    if missing:
+        raise OptionError(f"--energy-model needs the subject's {' and '.join(missing)} (kg, m) for the muscle masses")
+    for opt, attr in _ENERGY_OPTIONS[:3]:
+        v, positive = getattr(args, attr), opt == "--energy-smoothing"
+        if v is not None and not (math.isfinite(v) and (v > 0 if positive else v >= 0)):
+            raise OptionError(f"{opt} must be a {'positive' if positive else 'non-negative'} number, not {v}")
+    if args.muscle_properties is not None:
+        from ..properties import read_muscle_properties
+
+        read_muscle_properties(args.muscle_properties)  # checked before any work
+    try:
+        return EnergyGoal(args.energy_model, 1.0 if args.energy_weight is None else args.energy_weight, args.mass,
+                          args.height, effort_weight=args.effort_weight,
+                          smoothing=ENERGY_SMOOTHING if args.energy_smoothing is None else args.energy_smoothing,
+                          muscle_properties=args.muscle_properties)
+    except OptionError as exc:
+        raise OptionError(f"--energy-model: {exc}") from None
+
+
+def _energy_note(summary) -> str:
+    goal = summary.get("energy_goal")
+    if not goal:
+        return ""
+    return (f", {goal['model']} (smooth, one leg, no basal) {goal['leg_mean_W_per_kg']:.3f} W/kg of body mass "
+            f"(energy weight {goal['weight']:g}, effort weight {goal['w_activation']:g})")
 
 
 def _solver_options(args):
