@@ -361,3 +361,36 @@ def test_study_basal_coefficient_and_exponent(example):
         with pytest.raises(OptionError) as info:
             study_from_dict(data, base="/")
         assert all(w in str(info.value) for w in words)
+
+
+def test_study_energy_goal_table(example):
+    """[energy_goal]: checked, part of the effort units' keys, and the subject's own mass and
+    height in each solve's goal."""
+    from musclemetab.study.units import _solver_options, plan_units, unit_key
+
+    data = _study_dict(example, workflows=("effort-gen", "emg-ten"))
+    data["subjects"][0]["trials"][0]["emg"] = str(example.emg["slow"])
+    data["subjects"][0]["trials"][1]["emg"] = str(example.emg["normal"])
+    plain = study_from_dict(data, base="/")
+    data["energy_goal"] = {"model": "um10", "weight": 0.5, "effort_weight": 0.0}
+    study = study_from_dict(data, base="/")
+    assert study.settings["energy_goal"] == {"model": "UM10", "weight": 0.5, "effort_weight": 0.0,
+                                             "smoothing": 0.01}
+    units = plan_units(study)[1]
+    effort = next(u for u in units if u.workflow == "effort-gen")
+    emg = next(u for u in units if u.workflow == "emg-ten")
+    assert unit_key(study, effort) != unit_key(plain, effort)
+    assert unit_key(study, emg) == unit_key(plain, emg)  # EMG-TEN solves have no energy goal
+    goal = _solver_options(study, study.subject("sub1")).energy
+    assert (goal.model, goal.weight, goal.effort_weight) == ("UM10", 0.5, 0.0)
+    assert (goal.body_mass_kg, goal.height_m) == (example.body_mass_kg, example.height_m)
+    assert _solver_options(plain, plain.subject("sub1")) is None
+    for table, words in (({"weight": 1.0}, ["energy_goal", "'model' is required"]),
+                         ({"model": "UM99"}, ["energy_goal", "UM99"]),
+                         ({"model": "UM10", "weight": -2.0}, ["energy_goal", "weight"]),
+                         ({"model": "UM10", "smoothing": "small"}, ["energy_goal", "smoothing"]),
+                         ({"model": "UM10", "wieght": 1.0}, ["energy_goal", "wieght"])):
+        data["energy_goal"] = table
+        with pytest.raises(OptionError) as info:
+            study_from_dict(data, base="/")
+        assert all(w in str(info.value) for w in words), str(info.value)

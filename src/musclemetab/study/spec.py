@@ -10,6 +10,11 @@ A study file names everything a study needs; paths are relative to the file::
     basal_coefficient = 1.2            # optional, W/kg: OpenSim's basal_coefficient (body rule:
     basal_exponent = 1.0               #  coefficient * body mass^exponent W; muscle rule: W per kg of muscle)
 
+    [energy_goal]                      # optional: the effort workflows' solves minimise energy too
+    model = "UM10"                     # smooth metabolic model (docs/energy_objective.md)
+    weight = 1.0                       # weight of the leg's mean rate, W/kg of body mass
+    effort_weight = 0.0                # optional: weight of the effort goal (default: the workflow's, 1)
+
     [[subjects]]
     name = "sub1"
     model = "data/sub1.osim"
@@ -166,7 +171,9 @@ class Study:
 
 # ---------------------------------------------------------------------------------------
 _STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "basal_coefficient", "basal_exponent", "subjects",
-               "solver"}
+               "solver", "energy_goal"}
+#: keys of the study file's [energy_goal] table (the energy goal of every effort-workflow solve)
+_ENERGY_KEYS = {"model", "weight", "effort_weight", "smoothing"}
 #: keys of the study file's [solver] table (IPOPT settings of every solve)
 _SOLVER_KEYS = {"max_iter", "tol", "linear_solver", "linear_solver_library"}
 _SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials",
@@ -247,6 +254,9 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
     solver = _solver(data.get("solver"), where)
     if solver:
         settings["solver"] = solver
+    energy = _energy_goal(data.get("energy_goal"), where)
+    if energy:
+        settings["energy_goal"] = energy
     return Study(name=name, subjects=subjects, workflows=workflows, models=models, output=out,
                  basal=basal, source=source, settings=settings, basal_coefficient=basal_coefficient,
                  basal_exponent=basal_exponent)
@@ -266,6 +276,34 @@ def _solver(data, where: str) -> dict:
     except (TypeError, ValueError, OptionError) as exc:
         raise OptionError(f"{where}: [solver]: {exc}") from None
     return dict(data)
+
+
+def _energy_goal(data, where: str) -> dict:
+    """The ``[energy_goal]`` table: ``model`` (required), ``weight`` (1), ``effort_weight`` (the
+    workflow's), ``smoothing``; checked with a plausible subject."""
+    if data is None:
+        return {}
+    if not isinstance(data, Mapping):
+        raise OptionError(f"{where}: 'energy_goal' must be a table such as [energy_goal] model = \"UM10\"")
+    here = f"{where}: [energy_goal]"
+    _unknown(data, _ENERGY_KEYS, here)
+    if "model" not in data:
+        raise OptionError(f"{here}: 'model' is required (a metabolic model such as \"UM10\")")
+    for key in ("weight", "effort_weight", "smoothing"):
+        if key in data:
+            _number(data[key], here, key)
+    from ..redundancy.energy import EnergyGoal
+
+    try:
+        goal = EnergyGoal(str(data["model"]), float(data.get("weight", 1.0)), 70.0, 1.75,
+                          effort_weight=data.get("effort_weight"),
+                          **({"smoothing": float(data["smoothing"])} if "smoothing" in data else {}))
+    except OptionError as exc:
+        raise OptionError(f"{here}: {exc}") from None
+    out = {"model": goal.model, "weight": goal.weight, "smoothing": goal.smoothing}
+    if goal.effort_weight is not None:
+        out["effort_weight"] = float(goal.effort_weight)
+    return out
 
 
 def _unknown(data: Mapping, allowed: set, where: str) -> None:

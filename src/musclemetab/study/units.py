@@ -165,6 +165,8 @@ def unit_key(study: Study, unit: Unit, dependency_key: str | None = None) -> str
     }
     if study.settings.get("solver"):
         content["solver"] = study.settings["solver"]
+    if study.settings.get("energy_goal") and unit.workflow != EMG_TEN:
+        content["energy_goal"] = study.settings["energy_goal"]
     if unit.trial is None:
         content["trials"] = [_trial_record(t) for t in subject.trials]
     else:
@@ -377,11 +379,18 @@ def _run_estimation(study: Study, unit: Unit, tmp: Path) -> dict:
     return {"times": {"solve_s": time.perf_counter() - t0}}
 
 
-def _solver_options(study: Study):
-    """The study's ``[solver]`` settings as :class:`~musclemetab.redundancy.SolverOptions` (or ``None``)."""
+def _solver_options(study: Study, subject: Subject | None = None):
+    """The study's ``[solver]`` settings as :class:`~musclemetab.redundancy.SolverOptions` (or
+    ``None``), with its ``[energy_goal]`` for ``subject`` (its mass, height and muscle properties)."""
     from ..redundancy import SolverOptions
 
-    settings = study.settings.get("solver") or {}
+    settings = dict(study.settings.get("solver") or {})
+    energy = study.settings.get("energy_goal")
+    if energy and subject is not None:
+        from ..redundancy.energy import EnergyGoal
+
+        settings["energy"] = EnergyGoal(body_mass_kg=subject.body_mass_kg, height_m=subject.height_m,
+                                        muscle_properties=subject.muscle_properties, **energy)
     return SolverOptions(**settings) if settings else None
 
 
@@ -441,7 +450,8 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
             elif isinstance(kt, (dict, str)):  # a table, or "example"
                 kwargs["tendon_stiffness"] = kt
         sol = solve_files(subject.model, trial.ik, trial.id, unit.workflow, side=subject.side, dofs=subject.dofs,
-                          external_loads=trial.external_loads, cycle=trial.cycle, options=_solver_options(study),
+                          external_loads=trial.external_loads, cycle=trial.cycle,
+                          options=_solver_options(study, subject),
                           **kwargs)
         from ..redundancy.cli import write_solution_folder
 
