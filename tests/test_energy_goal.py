@@ -161,13 +161,13 @@ def test_energy_goal_options_are_checked():
 
 @pytest.mark.opensim
 def test_energy_solve_of_the_normal_trial_converges(example):
-    """EFFORT-CAL settings, effort plus 0.001 x the UM10 goal: converged, moments met, the
-    recorded term is the smooth model over the solution, and the mixed objective is lower than
-    at the effort optimum. The command line gives the same solve."""
+    """EFFORT-CAL settings, effort plus 0.001 x the UM10 goal (smoothing 0.01, a quick solve):
+    converged, moments met, the recorded term is the smooth model over the solution, and the
+    mixed objective is lower than at the effort optimum. The command line gives the same solve."""
     from musclemetab.redundancy import SolverOptions, solve_files
 
     effort = solve_files(example.model, example.ik["normal"], example.id["normal"], "effort-cal")
-    goal = _goal("UM10", weight=1e-3)
+    goal = _goal("UM10", weight=1e-3, smoothing=0.01)
     sol = solve_files(example.model, example.ik["normal"], example.id["normal"], "effort-cal",
                       options=SolverOptions(energy=goal))
     s = sol.summary
@@ -200,8 +200,8 @@ def test_energy_goal_from_the_command_line(example, tmp_path, capsys):
     base = ["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
             str(example.id["normal"]), "--workflow", "effort-cal"]
     out = tmp_path / "energy"
-    assert main(base + ["--energy-model", "um10", "--energy-weight", "0.001", "--mass", "72.6", "--height",
-                        "1.743", "--out", str(out)]) == 0
+    assert main(base + ["--energy-model", "um10", "--energy-weight", "0.001", "--energy-smoothing", "0.01",
+                        "--mass", "72.6", "--height", "1.743", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     s = json.loads((out / "summary.json").read_text())
     assert s["energy_goal"]["model"] == "UM10" and s["energy_goal"]["w_activation"] == 1.0

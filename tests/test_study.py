@@ -375,7 +375,7 @@ def test_study_energy_goal_table(example):
     data["energy_goal"] = {"model": "um10", "weight": 0.5, "effort_weight": 0.0}
     study = study_from_dict(data, base="/")
     assert study.settings["energy_goal"] == {"model": "UM10", "weight": 0.5, "effort_weight": 0.0,
-                                             "smoothing": 0.01}
+                                             "smoothing": 0.001}
     units = plan_units(study)[1]
     effort = next(u for u in units if u.workflow == "effort-gen")
     emg = next(u for u in units if u.workflow == "emg-ten")

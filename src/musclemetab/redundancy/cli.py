@@ -140,7 +140,8 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
                    help="weight of the effort goal on excitations and activations beside it (default: the "
                    "workflow's, 1; 0: energy alone)")
     g.add_argument("--energy-smoothing", type=float, metavar="S",
-                   help="smoothing parameter of the model's switches (default 0.01)")
+                   help="smoothing parameter of the model's switches (default 0.001; smaller is closer to the exact "
+                   "model and slower to solve)")
     g.add_argument("--mass", type=float, metavar="KG", help="body mass (kg), for the muscle masses and the goal's W/kg")
     g.add_argument("--height", type=float, metavar="M", help="body height (m), for the muscle masses")
     g.add_argument("--muscle-properties", metavar="FILE",

@@ -28,7 +28,7 @@ __all__ = ["EnergyGoal", "ENERGY_SMOOTHING", "node_rates", "leg_rate_W_per_kg"]
 
 #: Default smoothing parameter of the energy goal's model (dimensionless;
 #: :data:`musclemetab.metabolics.smooth.SMOOTHING` is the default of the smooth models).
-ENERGY_SMOOTHING = 1e-2
+ENERGY_SMOOTHING = 1e-3
 
 
 @dataclass(frozen=True)
