@@ -2,6 +2,7 @@
 
     python docs/scripts/energy_objective.py [--workflow effort-cal] [--goals effort,UM10:1:0,UM10:0.01:1]
                                             [--out DIR]
+    python docs/scripts/energy_objective.py --smoothing-table
 
 Each goal is ``effort`` (the workflow's effort goal alone) or ``MODEL:W:W_EFFORT`` (the energy
 goal of the smooth ``MODEL`` with weight ``W`` beside the effort goal with weight ``W_EFFORT``;
@@ -46,12 +47,38 @@ def exact_leg_mean_W_per_kg(model, sol, subject, n):
     p = sol.parameters.subset(sol.muscles)
     mass, fst = metabolic_properties(list(sol.muscles), subject.body_mass_kg, subject.height_m,
                                      p.max_isometric_force_N, p.optimal_fiber_length_m)
-    rates = ALL_MODELS[model](**{k: v[:, :n] for k, v in st.states.items()},
-                              max_isometric_force_N=p.max_isometric_force_N,
+    states = {k: v[:, :n] for k, v in st.states.items()}
+    steady = {}  # the smooth models' steady-state stimulation time and dF_CE/dt = 0
+    if model in ("BH04", "LW05"):
+        steady["stimulation_time_s"] = np.where(states["excitation"] > 0.1, np.inf, 0.0)
+    if model == "LW05":
+        steady["fiber_force_rate_N_per_s"] = np.zeros_like(states["excitation"])
+    rates = ALL_MODELS[model](**states, max_isometric_force_N=p.max_isometric_force_N,
                               optimal_fiber_length_m=p.optimal_fiber_length_m,
                               max_contraction_velocity=p.max_contraction_velocity, muscle_mass_kg=mass,
-                              slow_twitch_fraction=fst, time_s=st.time_s[:n], basal=False)
+                              slow_twitch_fraction=fst, basal=False, **(steady or {"time_s": st.time_s[:n]}))
     return float(np.mean(rates.total.sum(axis=0))) / subject.body_mass_kg
+
+
+def smoothing_table(subject, workflow) -> int:
+    import pandas as pd
+
+    from musclemetab.metabolics.smooth import SMOOTH_MODELS
+    from musclemetab.redundancy import solve_files
+    from musclemetab.redundancy.energy import EnergyGoal, leg_rate_W_per_kg
+
+    sol = solve_files(subject.model, subject.ik["normal"], subject.id["normal"], workflow)
+    n = sol.summary["n_intervals"]
+    rows = []
+    for model in SMOOTH_MODELS:
+        row = {"model": model, "exact": exact_leg_mean_W_per_kg(model, sol, subject, n)}
+        for s in (1e-2, 1e-3, 1e-4):
+            goal = EnergyGoal(model, 1.0, subject.body_mass_kg, subject.height_m, smoothing=s)
+            row[f"s={s:g}"] = float(np.mean(leg_rate_W_per_kg(goal, sol.parameters, sol.muscles, sol.excitation[:n],
+                                                              sol.activation[:n], sol.lm_norm[:n], sol.vm_norm[:n])))
+        rows.append(row)
+    print(pd.DataFrame(rows).to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+    return 0
 
 
 def main(argv=None) -> int:
@@ -66,8 +93,13 @@ def main(argv=None) -> int:
     ap.add_argument("--workflow", default="effort-cal")
     ap.add_argument("--goals", default="effort,UM10:1:0,UM10:0.01:1")
     ap.add_argument("--out", type=Path)
+    ap.add_argument("--smoothing-table", action="store_true",
+                    help="instead: every smooth model at s = 1e-2, 1e-3, 1e-4 against its exact model on the "
+                    "effort solution's nodes (leg mean, W/kg of body mass, no basal)")
     args = ap.parse_args(argv)
     ex = example_subject()
+    if args.smoothing_table:
+        return smoothing_table(ex, args.workflow)
     rows, wb_rows, act_rows = [], [], []
     for text in args.goals.split(","):
         goal = _goal(text, ex)
