@@ -48,10 +48,11 @@ def exact_leg_mean_W_per_kg(model, sol, subject, n):
     mass, fst = metabolic_properties(list(sol.muscles), subject.body_mass_kg, subject.height_m,
                                      p.max_isometric_force_N, p.optimal_fiber_length_m)
     states = {k: v[:, :n] for k, v in st.states.items()}
-    steady = {}  # the smooth models' steady-state stimulation time and dF_CE/dt = 0
-    if model in ("BH04", "LW05"):
+    steady = {}  # as the smooth models take them: steady-state stimulation time, dF_CE/dt = 0
+    if model == "BH04":  # BH04's heat off below the threshold e = 0.1
         steady["stimulation_time_s"] = np.where(states["excitation"] > 0.1, np.inf, 0.0)
     if model == "LW05":
+        steady["stimulation_time_s"] = np.full_like(states["excitation"], np.inf)
         steady["fiber_force_rate_N_per_s"] = np.zeros_like(states["excitation"])
     rates = ALL_MODELS[model](**states, max_isometric_force_N=p.max_isometric_force_N,
                               optimal_fiber_length_m=p.optimal_fiber_length_m,
