@@ -4,9 +4,9 @@
                                             [--out DIR]
     python docs/scripts/energy_objective.py --smoothing-table
 
-Each goal is ``effort`` (the workflow's effort goal alone) or ``MODEL:W:W_EFFORT`` (the energy
-goal of the smooth ``MODEL`` with weight ``W`` beside the effort goal with weight ``W_EFFORT``;
-default smoothing). Every solve starts from the static-optimisation guess (no warm start).
+Each goal is ``effort`` (the workflow's effort goal alone) or ``MODEL:W:W_EFFORT[:S]`` (the
+energy goal of the smooth ``MODEL`` with weight ``W`` beside the effort goal with weight
+``W_EFFORT``; smoothing ``S``, default the goal's). Every solve starts from the static-optimisation guess (no warm start).
 Prints, per solution: IPOPT's outcome, the moment residual, the reserves, the goal's value
 (the smooth model's leg mean in W/kg), smooth and exact UM10's leg mean over the same nodes
 (W/kg of body mass, no basal: the yardstick for every solution), the whole-body rate of every exact model (W/kg, both
@@ -32,8 +32,9 @@ def _goal(text, subject):
 
     if text == "effort":
         return None
-    model, weight, effort = text.split(":")
-    return EnergyGoal(model, float(weight), subject.body_mass_kg, subject.height_m, effort_weight=float(effort))
+    model, weight, effort, *smoothing = text.split(":")
+    return EnergyGoal(model, float(weight), subject.body_mass_kg, subject.height_m, effort_weight=float(effort),
+                      **({"smoothing": float(smoothing[0])} if smoothing else {}))
 
 
 def exact_leg_mean_W_per_kg(model, sol, subject, n):
