@@ -219,3 +219,13 @@ def test_energy_goal_from_the_command_line(example, tmp_path, capsys):
         err = capsys.readouterr().err
         assert all(w in err for w in words), err
         assert len(err.strip().splitlines()) == 1 and not bad.exists()
+
+
+def test_emg_solves_refuse_the_energy_goal():
+    from musclemetab.redundancy import SolverOptions
+    from musclemetab.redundancy.emg_pipeline import emg_ten_options
+    from musclemetab.redundancy.emg_ten import EmgTenSettings
+
+    with pytest.raises(OptionError, match="energy goal"):
+        emg_ten_options(SolverOptions(energy=_goal()), EmgTenSettings())
+    assert emg_ten_options(SolverOptions(), EmgTenSettings()).energy is None
