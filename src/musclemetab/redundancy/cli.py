@@ -233,8 +233,9 @@ def _bound_note(solution) -> str:
     at = muscles_at_fibre_length_bound(solution)
     if not at:
         return ""
-    return (f" Fibres at their longest allowed length (1.7 optimal lengths): {', '.join(at)}; if the model's "
-            f"tendon slack length is too short for them, leave them out with --exclude-muscles {' '.join(at)}.")
+    return (f" Fibres at their longest allowed length (1.7 optimal lengths, or their longest rigid-tendon length "
+            f"plus 0.05): {', '.join(at)}; if the model's tendon slack length is too short for them, leave them out "
+            f"with --exclude-muscles {' '.join(at)}.")
 
 
 def write_solution_folder(solution, out) -> None:
