@@ -262,7 +262,6 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
     """``musclemetab solve --workflow emg-ten`` or ``--emg`` with an effort workflow: one NLP over
     all trials, then the files."""
     from .emg_ten import EmgTenSettings, solve_emg_ten
-    from .inputs import DEFAULT_DOFS
     from .problem import failure_advice
     from .workflows import get_workflow, parse_tendon_stiffness
 
@@ -270,7 +269,7 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
         raise OptionError("EMG problems need --id: one inverse-dynamics file per trial, in the order of --ik")
     wrong = [o for o, v in (("--external-loads", args.external_loads), ("--grf", args.grf), ("--window", args.window),
                             ("--cycle", args.cycle), ("--exclude-muscles", getattr(args, "exclude_muscles", None)))
-             if v] + (["--side"] if args.side != "r" else [])
+             if v] + (["--side both"] if args.side == "both" else [])
     if wrong:
         raise OptionError(f"{', '.join(wrong)} are for the single-trial solves without EMG; drop them for "
                           f"{'--workflow emg-ten' if args.workflow == 'emg-ten' else '--emg'}")
@@ -298,11 +297,11 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
     emg = _as_list(getattr(args, "emg", None))
     if not emg:
         raise OptionError("--workflow emg-ten needs --emg: one processed EMG file per trial, in the order of --ik")
-    dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else DEFAULT_DOFS
+    dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else None
     options = _solver_options(args)
     result = solve_emg_ten(
         args.model, ik, idf, emg, emg_mapping=args.emg_mapping or "default", labels=args.labels,
-        passive=args.passive, dofs=dofs, options=options, cache_dir=args.cache_dir,
+        passive=args.passive, dofs=dofs, side=args.side, options=options, cache_dir=args.cache_dir,
         check_units=not args.skip_unit_checks, settings=settings,
     )
     result.write(args.out)
@@ -340,14 +339,14 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
     """An effort workflow's EMG-informed solve of one or more trials: one trial is written to
     ``--out`` as a solution folder; several as one folder per trial and ``parameters.json``."""
     from .emg_ten import solve_emg_ten
-    from .inputs import DEFAULT_DOFS
     from .problem import SolverOptions
 
     emg = _as_list(args.emg)
-    dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else DEFAULT_DOFS
+    dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else None
     result = solve_emg_ten(
         args.model, ik, idf, emg, emg_mapping=args.emg_mapping or "default", labels=args.labels,
-        passive=args.passive, dofs=dofs, options=SolverOptions(max_iter=args.max_iter, print_level=args.print_level),
+        passive=args.passive, dofs=dofs, side=args.side,
+        options=SolverOptions(max_iter=args.max_iter, print_level=args.print_level),
         cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, settings=settings,
         workflow=args.workflow, tendon_stiffness=tendon_stiffness,
     )

@@ -367,6 +367,8 @@ def _run_estimation(study: Study, unit: Unit, tmp: Path) -> dict:
         emg_mapping=subject.emg_mapping,
         labels=[t.name for t in subject.trials],
         passive=subject.passive,
+        side=subject.side,
+        dofs=subject.dofs,
         options=_solver_options(study),
     )
     if not result.success:  # nothing of a failed estimate is written
