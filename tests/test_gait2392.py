@@ -57,6 +57,38 @@ def test_gait_events_of_either_leg_from_the_external_loads(gait2392, layout):
     np.testing.assert_allclose(ev["l"].toe_offs_s, [0.788, 2.018], atol=3e-3)
 
 
+#: Kinematic events against the force-defined events of the README: 0.04 s, 2.4 frames of the
+#: 60 Hz IK. The rule places heel strike where the heel is furthest ahead of the pelvis, which
+#: on these data comes 19-28 ms before the vertical force passes 20 N (toe-offs within 3 ms);
+#: 0.04 s stays inside the study's 0.05 s padding, so a window padded around the kinematic
+#: cycle still holds the force-defined one.
+KINEMATIC_EVENT_TOLERANCE_S = 0.04
+
+
+def test_gait_events_of_either_leg_from_kinematics_alone(gait2392, layout):
+    from musclemetab.analysis.events import kinematic_gait_events
+    from musclemetab.layout import foot_bodies
+    from musclemetab.redundancy.window import resolve_window
+
+    tol = KINEMATIC_EVENT_TOLERANCE_S
+    assert foot_bodies(layout, "r") == ("calcn_r", "toes_r") and foot_bodies(layout, "l") == ("calcn_l", "toes_l")
+    ev = {s: kinematic_gait_events(gait2392.model, gait2392.ik, s, layout) for s in "rl"}
+    # README (forces, 20 N): right HS 0.618, TO 1.410, HS 1.853; left TO 0.788, HS 1.247, TO 2.018, HS 2.460;
+    # the IK runs on to 4.0 s, so a third cycle follows (no force reference there)
+    np.testing.assert_allclose(ev["r"].heel_strikes_s[:2], [0.618, 1.853], atol=tol)
+    np.testing.assert_allclose(ev["r"].toe_offs_s[0], 1.410, atol=tol)
+    np.testing.assert_allclose(ev["l"].heel_strikes_s[:2], [1.247, 2.460], atol=tol)
+    np.testing.assert_allclose(ev["l"].toe_offs_s[:2], [0.788, 2.018], atol=tol)
+    # heel strikes alternate between the legs, one stride apart
+    assert np.all(np.diff(ev["r"].heel_strikes_s) > 1.0) and np.all(np.diff(ev["l"].heel_strikes_s) > 1.0)
+    # no forces given: --cycle comes from the kinematics, and the record says so
+    w = resolve_window(gait2392.ik, side="l", cycle="auto", layout=layout)
+    assert (w.cycle["start_s"], w.cycle["end_s"]) == pytest.approx((1.247, 2.460), abs=tol)
+    assert "kinematics" in w.cycle["source"] and not w.warnings
+    with pytest.raises(DataMismatchError, match="left leg.s kinematics gives 2 complete gait cycles.*cycle 3 does not"):
+        resolve_window(gait2392.ik, side="l", cycle=3, layout=layout)
+
+
 def test_inverse_dynamics_computed_by_opensim_matches_the_stored_file(gait2392):
     """Computed ID against OpenSim's stored file over their common time (0.5-1.6 s).
 

@@ -62,6 +62,9 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
                    "force column is found by the documented name rule of musclemetab.analysis.events.read_grf)")
     p.add_argument("--side", default="r", choices=("r", "l", "both"),
                    help="leg to solve (default r); both: two independent problems written to DIR/r and DIR/l")
+    p.add_argument("--workers", type=int, default=1, metavar="N",
+                   help="with --side both: solve the two legs in N processes at once (default 1: one after the "
+                   "other; the solutions are the same)")
     p.add_argument("--window", metavar="T0:T1",
                    help="time window (s) to solve; must lie inside every input (default: the whole IK file)")
     p.add_argument("--cycle", metavar="auto|N",
@@ -138,7 +141,7 @@ def solve_command(args) -> int:
     folder with ``success: false``).
     """
     from .problem import failure_advice
-    from .solve import solve_files
+    from .solve import solve_sides
     from .window import parse_cycle, parse_window
     from .workflows import parse_tendon_stiffness
 
@@ -180,16 +183,14 @@ def solve_command(args) -> int:
 
     excluded = [m for item in (args.exclude_muscles or []) for m in item.replace(",", " ").split()]
     # every leg is solved before anything is written, so bad input on one leg leaves no output
-    solutions = {}
-    for side in sides:
-        solutions[side] = solve_files(
-            args.model, args.ik, args.id, args.workflow,
-            dofs=dofs, side=side, window=window, cycle=cycle, external_loads=args.external_loads, grf=args.grf,
-            mesh_frequency_hz=args.mesh_frequency,
-            passive=args.passive, tendon_stiffness=kt, tendon_stiffness_file=args.parameters,
-            options=options, cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, warm_start=warm,
-            exclude_muscles=excluded, exclude_missing_ok=args.side == "both",
-        )
+    solutions = solve_sides(
+        args.model, args.ik, args.id, args.workflow, sides=sides, workers=args.workers,
+        dofs=dofs, window=window, cycle=cycle, external_loads=args.external_loads, grf=args.grf,
+        mesh_frequency_hz=args.mesh_frequency,
+        passive=args.passive, tendon_stiffness=kt, tendon_stiffness_file=args.parameters,
+        options=options, cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, warm_start=warm,
+        exclude_muscles=excluded, exclude_missing_ok=args.side == "both",
+    )
     unused = [m for m in excluded if not any(m in x.summary.get("excluded_muscles", []) for x in solutions.values())]
     if unused:
         raise UnknownMuscleError(f"--exclude-muscles: {', '.join(unused)} is in neither leg's problem; check the names")

@@ -41,7 +41,7 @@ from .workflows import (
     workflow_parameters,
 )
 
-__all__ = ["solve_trial", "solve_files", "solve_with_parameters", "WARM_START_MU_INIT"]
+__all__ = ["solve_trial", "solve_files", "solve_sides", "solve_with_parameters", "WARM_START_MU_INIT"]
 
 #: Barrier parameter at the start of a warm-started solve (the default start uses IPOPT's 0.1).
 WARM_START_MU_INIT = 1e-6
@@ -363,6 +363,49 @@ def _check_id_coordinates(id_path, columns, layout) -> None:
             f"{id_path}: column {', '.join(alien[:5])}{' ...' if len(alien) > 5 else ''} is for a coordinate the "
             f"model {layout.path} lacks; the inverse dynamics must come from this model"
         )
+
+
+def _solve_files_recording_warnings(args, kwargs):
+    """:func:`solve_files` in a pool worker: the solution and the warnings it raised."""
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        solution = solve_files(*args, **kwargs)
+    return solution, [(w.category, str(w.message)) for w in caught]
+
+
+def solve_sides(model_path, ik_path, id_path, workflow: str = "effort-gen", *, sides=("r", "l"), workers: int = 1,
+                **kwargs) -> dict:
+    """:func:`solve_files` for each leg of ``sides``: ``{side: Solution}`` in the order of ``sides``.
+
+    The legs are independent problems. With ``workers`` > 1 they are solved in a pool of
+    ``min(workers, len(sides))`` processes (:func:`musclemetab.processes.spawn_pool`), each
+    with its own OpenSim worker; the warnings of a leg are raised again here, in the order of
+    ``sides``, and its errors as if it had been solved in this process. The solutions are the
+    same either way (``tests/test_gait2392.py``; time: ``benchmarks/sides.py``).
+    """
+    import warnings
+
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise OptionError(f"--workers must be a whole number of at least 1, not {workers!r}")
+    sides = tuple(sides)
+    if workers == 1 or len(sides) == 1:
+        return {side: solve_files(model_path, ik_path, id_path, workflow, side=side, **kwargs) for side in sides}
+    from ..processes import spawn_pool
+
+    pool, restore = spawn_pool(min(workers, len(sides)))
+    try:
+        futures = {side: pool.submit(_solve_files_recording_warnings, (model_path, ik_path, id_path, workflow),
+                                     {**kwargs, "side": side}) for side in sides}
+        results = {side: fut.result() for side, fut in futures.items()}
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+        restore()
+    for _, caught in results.values():
+        for category, message in caught:
+            warnings.warn(message, category, stacklevel=2)
+    return {side: solution for side, (solution, _) in results.items()}
 
 
 def _read_model_parameters(model_path, cache_dir=None):
