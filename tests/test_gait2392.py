@@ -329,3 +329,30 @@ def test_geometry_of_both_legs_against_opensims_moment_arm_solver(gait2392, tmp_
             np.testing.assert_allclose(ours, ref.moment_arms_m[:, j, :], atol=2e-3, err_msg=dof)
         lmt = read_storage(tmp_path / "g" / side / "muscle_tendon_lengths.sto")[muscles].to_numpy()[frames]
         np.testing.assert_allclose(lmt, ref.lmt_m, atol=1e-9)
+
+
+@pytest.mark.slow
+def test_both_legs_in_two_processes_give_the_same_solutions(gait2392, tmp_path, capsys):
+    """``--workers 2`` solves the legs in a pool of processes: the same solutions as one after the
+    other, bit for bit (a short window, 0.3 s, both feet on the ground part of it)."""
+    from musclemetab.redundancy import Solution
+
+    base = ["solve", "--model", gait2392.model, "--ik", gait2392.ik, "--external-loads", gait2392.external_loads,
+            "--side", "both"]
+    for w in (1, 2):
+        assert _cli(*base, "--window", "1.2:1.5", "--workers", w, "--out", tmp_path / f"w{w}") == 0
+    out = capsys.readouterr().out
+    assert out.count("Solve_Succeeded") == 4
+    for side in "rl":
+        a, b = Solution.load(tmp_path / "w1" / side), Solution.load(tmp_path / "w2" / side)
+        assert a.summary["side"] == b.summary["side"] == side
+        for k in ("excitation", "activation", "lm_norm", "vm_norm", "reserve_Nm", "tendon_force_N"):
+            np.testing.assert_array_equal(getattr(a, k), getattr(b, k), err_msg=f"{side} {k}")
+    # an error in a worker process: one line, nothing written (0.8-1.1 s: the left leg swings, its
+    # moments are below 0.2 N m/kg)
+    assert _cli(*base, "--window", "0.8:1.1", "--workers", 2, "--out", tmp_path / "bad") != 0
+    err = capsys.readouterr().err.strip().splitlines()
+    errors = [line for line in err if line.startswith("musclemetab: error:")]
+    assert len(errors) == 1 and "N m per kg" in errors[0] and not (tmp_path / "bad").exists()
+    assert _cli(*base, "--window", "1.2:1.5", "--workers", 0, "--out", tmp_path / "zero") != 0
+    assert "--workers must be a whole number of at least 1" in capsys.readouterr().err
