@@ -356,3 +356,68 @@ def test_both_legs_in_two_processes_give_the_same_solutions(gait2392, tmp_path, 
     assert len(errors) == 1 and "N m per kg" in errors[0] and not (tmp_path / "bad").exists()
     assert _cli(*base, "--window", "1.2:1.5", "--workers", 0, "--out", tmp_path / "zero") != 0
     assert "--workers must be a whole number of at least 1" in capsys.readouterr().err
+
+
+def _trials_for_gait2392(example, folder, side):
+    """The study's in-vivo passive trials in gait2392's conventions: knee flexion negative (angle and
+    target moment negated), coordinates of ``side``; file names unrelated to the coordinates."""
+    from musclemetab.io import read_storage, write_storage
+
+    folder.mkdir(parents=True, exist_ok=True)
+    for joint, files in example.calibration_trials.items():
+        for kind, path in files.items():
+            df = read_storage(path)
+            for c in ("knee_angle_r", "knee_angle_r_moment"):
+                if c in df.columns:
+                    df[c] = -df[c]
+            df = df.rename(columns={c: c.replace("_r", f"_{side}", 1) for c in df.columns})
+            write_storage(folder / f"sweep_{joint}{path.suffix}", df, in_degrees=True if kind == "motion" else None)
+    return folder
+
+
+def test_passive_calibration_refuses_trials_in_another_sign_convention(example, gait2392, tmp_path, capsys):
+    # the study's trials flex the knee positively (Rajagopal); gait2392's knee flexion is negative
+    out = tmp_path / "cal"
+    folder = example.calibration_trials["ankle"]["motion"].parent
+    assert _cli("calibrate-passive", "--model", gait2392.model, "--trials", folder, "--out", out) != 0
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "knee_angle_r spans 0 to 60 deg, outside the range of knee_angle_r" in err
+    assert "(-120 to 10 deg)" in err and "negate the knee_angle_r column" in err and not out.exists()
+
+
+@pytest.mark.slow
+def test_passive_calibration_of_the_left_leg(example, gait2392, tmp_path):
+    """``calibrate-passive --side l`` on gait2392 with the study's trials in its conventions.
+
+    Oracles: the root-finding equilibrium of single muscles (independent of the NLP), the
+    coupling groups of the anatomical table, and the least-squares property (the calibrated
+    parameters fit at least as well as the generic ones they start from).
+    """
+    from musclemetab.calibration import calibrate_passive, equilibrium_fibre_length
+
+    res = calibrate_passive(gait2392.model, _trials_for_gait2392(example, tmp_path / "trials", "l"), side="l")
+    d, cal, gen = res.data, res.calibrated, res.generic
+    assert [t.dof for t in d.trials] == ["ankle_angle_l", "knee_angle_l", "hip_flexion_l"]
+    assert len(d.muscles) == 43 and all(m.endswith("_l") for m in d.muscles)
+    assert cal.stats["success"] and gen.stats["success"]
+
+    def sse(sol):
+        return sum(float(np.sum((sol.moments_Nm[t.joint] - t.target_Nm) ** 2)) for t in d.trials)
+
+    assert sse(cal) < 0.2 * sse(gen)
+    # coupling groups from the anatomical table: the three parts of gluteus medius share (kPE, s0)
+    assert cal.parameters["glut_med1_l"] == cal.parameters["glut_med2_l"] == cal.parameters["glut_med3_l"]
+    assert cal.parameters["vas_lat_l"] == cal.parameters["vas_int_l"]
+    # rect_fem_l and tfl_l: with a rigid tendon the knee trial would stretch their fibres beyond 2
+    # optimal lengths (their bound is widened); their equilibria, as the vasti's, match root finding
+    knee = next(t for t in d.trials if t.joint == "knee")
+    for m in ("rect_fem_l", "tfl_l", "vas_lat_l"):
+        j, i = knee.muscles.index(m), d.muscles.index(m)
+        k = int(np.argmax(cal.lm_norm["knee"][:, j]))
+        kpe, s0, sm = cal.parameters[m]
+        lm, _ = equilibrium_fibre_length(
+            knee.lmt_m[k, j], optimal_fiber_length_m=d.optimal_fiber_length_m[i],
+            tendon_slack_length_m=d.tendon_slack_length_m[i],
+            pennation_angle_at_optimal_rad=d.pennation_angle_at_optimal_rad[i], kpe=kpe, s0=s0, sm=sm,
+            kT=d.tendon_stiffness[i])
+        assert cal.lm_norm["knee"][k, j] == pytest.approx(lm, abs=1e-5), m

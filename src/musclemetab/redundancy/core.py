@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import DataMismatchError, OptionError, SolverError, UnknownMuscleError
-from ..muscle import activation_rate, hill_residual, tendon_force_length
+from ..muscle import activation_rate, hill_residual, longest_fibre_length_bound, tendon_force_length
 from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
 from .static_opt import InitialGuess
@@ -137,9 +137,7 @@ def fibre_length_upper_bounds(inputs: TrialInputs, params: MuscleTendonParameter
                 width[k] *= s.bounds[0]
             else:
                 lts[k] *= s.bounds[0]
-    along = np.max(np.asarray(inputs.lmt_m, dtype=float), axis=0) - lts
-    rigid = np.sqrt(np.maximum(along, 0.0) ** 2 + width**2) / lmo
-    return np.maximum(FIBRE_LENGTH_BOUNDS[1], rigid + FIBRE_LENGTH_MARGIN)
+    return longest_fibre_length_bound(inputs.lmt_m, lts, lmo, width, FIBRE_LENGTH_BOUNDS[1], FIBRE_LENGTH_MARGIN)
 
 
 def node_bounds(M: int, D: int, lm_upper=None) -> tuple[np.ndarray, np.ndarray]:
