@@ -172,6 +172,24 @@ def test_bad_trial_input_one_line_no_output(gait2392, tmp_path, capsys):
         (["--external-loads", gait2392.external_loads, "--window", "2.0:3.0"], "ends 0.500 s before"),
         (["--external-loads", gait2392.external_loads, "--side", "l", "--cycle", "3"], "cycle 3 does not exist"),
     ]
+    # ExternalLoads naming a body the model lacks, or a data file that does not exist; forces that
+    # hold no complete gait cycle of the leg (cut at 1.5 s: one right heel strike, 0.618 s)
+    text = gait2392.external_loads.read_text()
+    (tmp_path / "body.xml").write_text(text.replace("<applied_to_body> calcn_l </applied_to_body>",
+                                                    "<applied_to_body> foot_left </applied_to_body>"))
+    (tmp_path / gait2392.grf.name).write_bytes(gait2392.grf.read_bytes())
+    (tmp_path / "missing.xml").write_text(text.replace("subject01_walk1_grf.mot", "nowhere.mot"))
+    lines = gait2392.grf.read_text().splitlines()
+    end = next(i for i, line in enumerate(lines) if line.strip().lower() == "endheader")
+    rows = [r for r in lines[end + 2:] if r.strip() and float(r.split()[0]) <= 1.5]
+    head = [f"nRows={len(rows)}" if h.startswith("nRows=") else h for h in lines[: end + 2]]
+    (tmp_path / "short.mot").write_text("\n".join(head + rows) + "\n")
+    (tmp_path / "short.xml").write_text(text.replace("subject01_walk1_grf.mot", "short.mot"))
+    cases += [
+        (["--external-loads", tmp_path / "body.xml", "--cycle", "auto"], "'foot_left' is not a body"),
+        (["--external-loads", tmp_path / "missing.xml", "--cycle", "auto"], "nowhere.mot does not exist"),
+        (["--external-loads", tmp_path / "short.xml", "--cycle", "auto"], "gives 0 complete gait cycles"),
+    ]
     for extra, message in cases:
         code = _cli("solve", "--model", gait2392.model, "--ik", gait2392.ik, *extra, "--out", out)
         err = capsys.readouterr().err.strip()
