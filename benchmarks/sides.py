@@ -13,23 +13,17 @@ from __future__ import annotations
 
 import argparse
 import os
-import subprocess
-import sys
 import tempfile
-import time
 from pathlib import Path
+
+from study import _musclemetab  # the timed command-line run of benchmarks/study.py
 
 
 def _solve(data: Path, out: Path, workers: int, env) -> float:
     args = ["solve", "--model", str(data / "subject01_simbody.osim"), "--ik", str(data / "subject01_walk1_ik.mot"),
             "--external-loads", str(data / "subject01_walk1_grf.xml"), "--cycle", "auto", "--side", "both",
             "--workers", str(workers), "--out", str(out)]
-    t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-m", "musclemetab.cli", *args], env=env, capture_output=True, text=True)
-    dt = time.perf_counter() - t0
-    if proc.returncode != 0:
-        sys.exit(f"musclemetab {' '.join(args)} failed:\n{proc.stdout}\n{proc.stderr}")
-    return dt
+    return _musclemetab(*args, env=env)
 
 
 def main(argv=None) -> int:
