@@ -441,7 +441,8 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
             elif isinstance(kt, (dict, str)):  # a table, or "example"
                 kwargs["tendon_stiffness"] = kt
         sol = solve_files(subject.model, trial.ik, trial.id, unit.workflow, side=subject.side, dofs=subject.dofs,
-                          external_loads=trial.external_loads, cycle=trial.cycle, options=_solver_options(study),
+                          external_loads=trial.external_loads, grf=trial.grf if trial.cycle is not None else None,
+                          cycle=trial.cycle, options=_solver_options(study),
                           **kwargs)
         from ..redundancy.cli import write_solution_folder
 
