@@ -34,7 +34,7 @@ def pin_threads(threads: int):
 
 
 def ignore_sigint() -> None:
-    """Pool worker start-up: Ctrl-C is handled by the task running in it, not by the idle worker."""
+    """Pool worker start-up: Ctrl-C is handled by the work running in it, not by the idle worker."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
