@@ -86,16 +86,16 @@ def _each_problem_solved_once(tmp_path_factory):
     """Each muscle redundancy problem is solved once per test run (see ``solve_memo``).
 
     The memo lives in the run's shared folder, so the parallel test workers, the study pool
-    workers (their initialiser installs it) and Dask workers (``solve_memo.install_in_worker``)
+    workers and the pools of ``solve --side both`` (their initialiser installs it) and Dask workers (``solve_memo.install_in_worker``)
     all use it.
     """
     import solve_memo
 
-    import musclemetab.study.runner as runner
+    import musclemetab.processes as processes
 
     undo = solve_memo.install(_run_root(tmp_path_factory) / "solve-memo")
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(runner, "_ignore_sigint", solve_memo.start_study_worker)
+        mp.setattr(processes, "ignore_sigint", solve_memo.start_pool_worker)
         yield
     undo()
     os.environ.pop(solve_memo.MEMO_ENV, None)

@@ -154,10 +154,10 @@ def install_in_worker() -> None:
         install(folder)
 
 
-def start_study_worker() -> None:
-    """Initialiser of a study's pool workers in the tests: the package's own initialiser,
-    then the run's memo."""
-    from musclemetab.study import runner
+def start_pool_worker() -> None:
+    """Initialiser of the package's pool workers (a study's units, the legs of ``solve --side
+    both``) in the tests: the package's own initialiser, then the run's memo."""
+    from musclemetab import processes
 
-    runner._ignore_sigint()
+    processes.ignore_sigint()
     install_in_worker()

@@ -212,6 +212,7 @@ class _Executor:
 
     def __init__(self, workers: int, scheduler: str | None):
         self.submit = self.completed = None
+        self.capacity = None  # units run at once (None: no limit)
         self._pool = self._client = None
         self._restore_env = None
         if scheduler:
@@ -232,6 +233,7 @@ class _Executor:
             self.completed = dask_completed
         elif workers > 1:
             self._pool, self._restore_env = spawn_pool(workers)
+            self.capacity = workers
             self.submit, self.completed = self._pool.submit, as_completed
 
     def interrupt(self, futures) -> None:
@@ -284,23 +286,32 @@ def _run_units(study: Study, jobs: list[tuple[Unit, str, str | None]], executor:
         except KeyboardInterrupt:  # between two units
             return records, True
         return records, False
-    futures = {executor.submit(execute_unit, study, unit, key, dep): unit for unit, key, dep in jobs}
+    # no more units submitted than the executor runs at once (a process pool queues what it is
+    # given and would start it even after Ctrl-C); a Dask cluster takes them all
+    queue = list(jobs)
+    limit = executor.capacity or len(queue)
+    futures: dict = {}
+    pending: list = []
     interrupted = False
-    pending = list(futures)
-    while pending:
+    while pending or (queue and not interrupted):
         try:
-            for fut in executor.completed(pending):
-                pending.remove(fut)
-                unit = futures[fut]
-                try:
-                    rec = fut.result()
-                except BaseException as exc:  # the worker process died, the cluster lost the task, or cancelled
-                    if interrupted:
-                        continue
-                    rec = {"status": "failed", "error": f"{type(exc).__name__}: {exc} (worker lost)"}
-                records[unit] = rec
-                interrupted = interrupted or rec.get("status") == INTERRUPTED
-                progress.update(unit.label, rec)
+            while queue and not interrupted and len(pending) < limit:
+                unit, key, dep = queue.pop(0)
+                fut = executor.submit(execute_unit, study, unit, key, dep)
+                futures[fut] = unit
+                pending.append(fut)
+            fut = next(iter(executor.completed(pending)))
+            pending.remove(fut)
+            unit = futures[fut]
+            try:
+                rec = fut.result()
+            except BaseException as exc:  # the worker process died, the cluster lost the task, or cancelled
+                if interrupted:
+                    continue
+                rec = {"status": "failed", "error": f"{type(exc).__name__}: {exc} (worker lost)"}
+            records[unit] = rec
+            interrupted = interrupted or rec.get("status") == INTERRUPTED
+            progress.update(unit.label, rec)
         except KeyboardInterrupt:
             if interrupted:  # a second Ctrl-C: stop waiting
                 break
