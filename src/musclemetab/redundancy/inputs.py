@@ -31,8 +31,8 @@ import numpy as np
 
 from ..errors import DataMismatchError, InputFileError, MissingColumnError
 
-# SciPy and pandas are imported inside the functions that use them, so that importing the
-# solver stays cheap (the command line starts the OpenSim worker first, then imports them).
+# The filter and the splines are NumPy code (musclemetab._numerics): the solve path does not
+# import SciPy. pandas is imported by the file reader when a file is read.
 
 __all__ = [
     "DEFAULT_DOFS",
@@ -149,22 +149,23 @@ def lowpass_filtfilt(
     backward, so the magnitude response is that of a ``2*order`` filter. MATLAB pads both
     ends with an odd reflection of ``3 (max(len(a), len(b)) - 1)`` samples (18 for order 6)
     and starts from steady-state initial conditions; SciPy's ``filtfilt`` does the same with
-    ``padtype='odd'`` and that ``padlen`` (SciPy's default would be 21).
+    ``padtype='odd'`` and that ``padlen`` (SciPy's default would be 21). Design and
+    filtering are :func:`musclemetab._numerics.butterworth` and :func:`~musclemetab._numerics.filtfilt`.
 
     Raises :class:`DataMismatchError` if the signal has no more samples than the padding;
     its message starts with ``what`` (the file or signal, as far as the caller knows it).
     """
-    from scipy.signal import butter, filtfilt
+    from .._numerics import butterworth, filter_padlen, filtfilt
 
     x = np.asarray(x, dtype=float)
-    b, a = butter(order, cutoff_hz / (sample_rate_hz / 2.0))
-    padlen = 3 * (max(len(a), len(b)) - 1)
+    b, a = butterworth(order, cutoff_hz / (sample_rate_hz / 2.0))
+    padlen = filter_padlen(b, a)
     if x.shape[0] <= padlen:
         raise DataMismatchError(
             f"{what} is too short: {x.shape[0]} samples, and the {order}th-order "
             f"{cutoff_hz:g} Hz zero-phase filter needs more than {padlen}; use a longer trial"
         )
-    return filtfilt(b, a, x, axis=0, padtype="odd", padlen=padlen)
+    return filtfilt(b, a, x, padlen=padlen)
 
 
 def mesh_for_window(t0: float, tf: float, mesh_frequency_hz: float = MESH_FREQUENCY_HZ) -> np.ndarray:
@@ -372,7 +373,7 @@ def prepare_inputs(
     filter_inputs
         The study filters everything (6 Hz, order 6); ``False`` skips filtering.
     """
-    from scipy.interpolate import CubicSpline
+    from .._numerics import NotAKnotSpline
 
     sources = dict(sources or {})
     g_time = np.asarray(geometry.time, dtype=float)
@@ -427,9 +428,9 @@ def prepare_inputs(
     id_frames = np.column_stack([np.interp(ik_time_s, id_time_s, id_f[:, j]) for j in range(D)])
 
     mesh = mesh_for_window(float(ik_time_s[0]), float(ik_time_s[-1]), mesh_frequency_hz)
-    lmt_spline = CubicSpline(ik_time_s, lmt_f, axis=0, bc_type="not-a-knot")
-    r_spline = CubicSpline(ik_time_s, r_f.reshape(F, D * M), axis=0, bc_type="not-a-knot")
-    id_spline = CubicSpline(ik_time_s, id_frames, axis=0, bc_type="not-a-knot")
+    lmt_spline = NotAKnotSpline(ik_time_s, lmt_f)
+    r_spline = NotAKnotSpline(ik_time_s, r_f.reshape(F, D * M))
+    id_spline = NotAKnotSpline(ik_time_s, id_frames)
     return TrialInputs(
         muscles=muscles,
         dofs=dofs,

@@ -246,7 +246,7 @@ def solve_files(
     # Model parameters and geometry come from the on-disk cache when it holds them: no
     # OpenSim work at all then. Otherwise the OpenSim worker is started as soon as it is
     # known to be needed, so that its start-up overlaps with reading the files and the
-    # imports of pandas, SciPy and CasADi; the model parameters are asked for in a
+    # imports of pandas and CasADi; the model parameters are asked for in a
     # background thread.
     from ..geometry import compute_geometry, geometry_is_cached
     from ..model import model_is_cached
@@ -313,9 +313,6 @@ def solve_files(
                              np.asarray(geometry.lmt_m)[:, kept], np.asarray(geometry.moment_arms_m)[:, :, kept])
     t_geometry = _time.perf_counter() - t0
     import casadi  # noqa: F401  (imported while the worker answers)
-    import scipy.interpolate  # noqa: F401
-    import scipy.optimize  # noqa: F401
-    import scipy.signal  # noqa: F401
 
     model_parameters = (params_request.result() if params_request is not None
                         else _read_model_parameters(model_path, cache_dir))
