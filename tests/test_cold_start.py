@@ -111,10 +111,12 @@ def test_command_imports_only_its_stage():
         assert name in help_text
 
 
-def test_solve_command_runs_without_scipy(example, geometry_cache, tmp_path):
+def test_solve_command_runs_without_scipy_or_pandas(example, geometry_cache, tmp_path):
     """A whole `musclemetab solve` (caches filled, two IPOPT iterations, folder written) in a
-    new process imports none of SciPy's signal, interpolate, optimize or stats packages: the
-    filter, the splines and the static optimisation are NumPy code (musclemetab._numerics)."""
+    new process imports none of SciPy's signal, interpolate, optimize or stats packages, nor
+    pandas: the filter, the splines and the static optimisation are NumPy code
+    (musclemetab._numerics), and the files are read and written as NumPy tables
+    (musclemetab.io.read_table)."""
     import json
 
     from musclemetab.geometry import compute_geometry
@@ -127,7 +129,7 @@ def test_solve_command_runs_without_scipy(example, geometry_cache, tmp_path):
     out = tmp_path / "out"
     argv = ["solve", "--model", str(example.model), "--ik", str(ik), "--id", str(idf), "--out", str(out),
             "--cache-dir", str(geometry_cache), "--max-iter", "2"]
-    forbidden = ("scipy.signal", "scipy.interpolate", "scipy.optimize", "scipy.stats")
+    forbidden = ("scipy.signal", "scipy.interpolate", "scipy.optimize", "scipy.stats", "pandas")
     code = (
         f"import sys; from musclemetab.cli import main; rc = main({argv!r}); "
         f"print(rc); print(sorted(m for m in {forbidden!r} + ('casadi',) if m in sys.modules))"
@@ -138,4 +140,4 @@ def test_solve_command_runs_without_scipy(example, geometry_cache, tmp_path):
     # two iterations do not converge: the command reports it (non-zero) after writing the folder
     assert lines[-2] != "0" and "did not converge" in proc.stderr
     assert json.loads((out / "summary.json").read_text())["iterations"] == 2
-    assert lines[-1] == "['casadi']"  # the problem was built and solved, without SciPy
+    assert lines[-1] == "['casadi']"  # the problem was built and solved, without SciPy and pandas

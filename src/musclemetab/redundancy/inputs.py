@@ -31,8 +31,8 @@ import numpy as np
 
 from ..errors import DataMismatchError, InputFileError, MissingColumnError
 
-# The filter and the splines are NumPy code (musclemetab._numerics): the solve path does not
-# import SciPy. pandas is imported by the file reader when a file is read.
+# The filter and the splines are NumPy code (musclemetab._numerics) and the files are read
+# into NumPy arrays (musclemetab.io.read_table): the solve path imports neither SciPy nor pandas.
 
 __all__ = [
     "DEFAULT_DOFS",
@@ -203,14 +203,14 @@ def read_kinematics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT_DOFS,
     angles_rad : (F, D) array
     """
     from ..geometry import check_kinematics
-    from ..io import read_storage
+    from ..io import read_table
 
-    ik = read_storage(path)
+    ik = read_table(path)
     in_degrees = check_kinematics(ik, dofs, check_units)
-    q = ik[list(dofs)].to_numpy(dtype=float)
+    q = np.column_stack([ik[d] for d in dofs])
     if in_degrees:
         q = np.deg2rad(q)
-    return ik.index.to_numpy(dtype=float), q
+    return ik.index.copy(), q
 
 
 def read_inverse_dynamics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT_DOFS):
@@ -221,9 +221,9 @@ def read_inverse_dynamics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT
     time_s : (T,) array
     moments_Nm : (T, D) array
     """
-    from ..io import check_time_stamps, read_storage, require_columns
+    from ..io import check_time_stamps, read_table, require_columns
 
-    table = read_storage(path)
+    table = read_table(path)
     check_time_stamps(table, "inverse dynamics")
     cols = [f"{d}_moment" for d in dofs]
     try:
@@ -235,13 +235,13 @@ def read_inverse_dynamics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT
         ) from None
     if len(table.index) < 2:
         raise InputFileError(f"{path}: the inverse-dynamics file has fewer than 2 rows")
-    moments = table[cols].to_numpy(dtype=float)
+    moments = np.column_stack([table[c] for c in cols])
     bad = ~np.isfinite(moments)
     if bad.any():
         row, col = (int(i) for i in np.argwhere(bad)[0])
         raise DataMismatchError(f"{path}: column '{cols[col]}' is {moments[row, col]:g} at data row {row + 1}; "
                                 "every moment must be finite: fix or remove the row")
-    return table.index.to_numpy(dtype=float), moments
+    return table.index.copy(), moments
 
 
 def select_muscles(

@@ -263,11 +263,11 @@ def solve_files(
 
         loads = read_external_loads(external_loads)
         loads.check_bodies(layout)
-    from ..io import read_storage
+    from ..io import read_table
 
     id_columns = None
     if id_path is not None:
-        id_columns = list(read_storage(id_path).columns)
+        id_columns = list(read_table(id_path).columns)
         _check_id_coordinates(id_path, id_columns, layout)
     if dofs:
         dofs = tuple(dofs)
