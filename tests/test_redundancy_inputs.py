@@ -50,6 +50,20 @@ def model_params(reference_table):
         max_contraction_velocity=t.max_contraction_velocity_lMo_per_s.to_numpy())
 
 
+@pytest.fixture(scope="module")
+def normal_inputs(example, ref_geometry, model_params):
+    """The normal trial's IK frame times, prepared inputs and EFFORT-GEN parameters."""
+    t_ik, _ = I.read_kinematics(example.ik["normal"])
+    t_id, mom = I.read_inverse_dynamics(example.id["normal"])
+    km, _ = I.select_muscles(ref_geometry.muscles, ref_geometry.moment_arms_m, DOFS)
+    names = [ref_geometry.muscles[i] for i in km]
+    geo = types.SimpleNamespace(time=ref_geometry.time, muscles=names, dofs=DOFS,
+                                lmt_m=ref_geometry.lmt_m[:, km], moment_arms_m=ref_geometry.moment_arms_m[:, :, km])
+    params, _ = W.workflow_parameters("effort-gen", model_params, names)
+    inp = I.prepare_inputs(geo, t_id, mom, ik_time_s=t_ik)
+    return t_ik, inp, params
+
+
 # --------------------------------------------------------------------------- preparation
 def test_mesh_of_the_three_trials(example):
     for trial, n in (("slow", 158), ("normal", 118), ("fast", 99)):
@@ -96,17 +110,10 @@ def test_id_is_filtered_on_the_full_file_then_interpolated(example, ref_geometry
 
 
 # --------------------------------------------------------------------------- static optimisation
-def test_static_optimisation_satisfies_its_kkt_conditions(example, ref_geometry, model_params):
+def test_static_optimisation_satisfies_its_kkt_conditions(normal_inputs):
     from musclemetab.redundancy.static_opt import initial_guess, rigid_tendon_forces, static_optimisation
 
-    t_ik, _ = I.read_kinematics(example.ik["normal"])
-    t_id, mom = I.read_inverse_dynamics(example.id["normal"])
-    km, _ = I.select_muscles(ref_geometry.muscles, ref_geometry.moment_arms_m, DOFS)
-    names = [ref_geometry.muscles[i] for i in km]
-    geo = types.SimpleNamespace(time=ref_geometry.time, muscles=names, dofs=DOFS,
-                                lmt_m=ref_geometry.lmt_m[:, km], moment_arms_m=ref_geometry.moment_arms_m[:, :, km])
-    params, _ = W.workflow_parameters("effort-gen", model_params, names)
-    inp = I.prepare_inputs(geo, t_id, mom, ik_time_s=t_ik)
+    _, inp, params = normal_inputs
     so = static_optimisation(inp, params)
     f_act, f_pas, _ = rigid_tendon_forces(inp.lmt_frames_m, inp.lmt_velocity_frames_m_per_s, params)
     for k in (0, 40, 60, 100):
@@ -132,23 +139,16 @@ def test_static_optimisation_satisfies_its_kkt_conditions(example, ref_geometry,
     np.testing.assert_allclose(np.abs(ft + 0.25), np.abs(so.tendon_force_norm + 0.25), rtol=1e-9)
 
 
-def test_static_optimisation_equals_scipy_bvls_at_every_frame(example, ref_geometry, model_params):
+def test_static_optimisation_equals_scipy_bvls_at_every_frame(normal_inputs):
     """The NumPy active-set minimiser against SciPy's bounded-variable least squares on the
-    example's 121 frames, and the mesh values against SciPy's not-a-knot splines."""
+    119 frames of the example's normal trial, and the mesh values against SciPy's not-a-knot splines."""
     from scipy.interpolate import CubicSpline
     from scipy.optimize import lsq_linear
 
     from musclemetab._numerics import NotAKnotSpline
     from musclemetab.redundancy.static_opt import rigid_tendon_forces, static_optimisation
 
-    t_ik, _ = I.read_kinematics(example.ik["normal"])
-    t_id, mom = I.read_inverse_dynamics(example.id["normal"])
-    km, _ = I.select_muscles(ref_geometry.muscles, ref_geometry.moment_arms_m, DOFS)
-    names = [ref_geometry.muscles[i] for i in km]
-    geo = types.SimpleNamespace(time=ref_geometry.time, muscles=names, dofs=DOFS,
-                                lmt_m=ref_geometry.lmt_m[:, km], moment_arms_m=ref_geometry.moment_arms_m[:, :, km])
-    params, _ = W.workflow_parameters("effort-gen", model_params, names)
-    inp = I.prepare_inputs(geo, t_id, mom, ik_time_s=t_ik)
+    t_ik, inp, params = normal_inputs
     mesh = inp.mesh_time_s
     mesh = np.concatenate([mesh, 0.5 * (mesh[1:] + mesh[:-1])])  # also between the frames
     for frames, nodes in ((inp.lmt_frames_m, inp.lmt_m), (inp.moments_frames_Nm, inp.moments_Nm)):
