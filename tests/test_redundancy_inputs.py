@@ -82,6 +82,8 @@ def test_filter_uses_matlab_padding():
     assert np.max(np.abs(I.lowpass_filtfilt(x, 100.0) - filtfilt(b, a, x, axis=0))) > 1e-4
     with pytest.raises(DataMismatchError, match="too short"):
         I.lowpass_filtfilt(x[:18], 100.0)
+    with pytest.raises(DataMismatchError, match="sampled at 10 Hz.*above 12 Hz"):
+        I.lowpass_filtfilt(x, 10.0, what="the IK file ik.mot")
 
 
 def test_selection_keeps_the_40_right_leg_muscles(ref_geometry, reference_table):

@@ -158,6 +158,11 @@ def lowpass_filtfilt(
     from .._numerics import butterworth, filter_padlen, filtfilt
 
     x = np.asarray(x, dtype=float)
+    if not 0.0 < cutoff_hz < sample_rate_hz / 2.0:
+        raise DataMismatchError(
+            f"{what} is sampled at {sample_rate_hz:g} Hz; the {cutoff_hz:g} Hz low-pass filter needs a "
+            f"sampling rate above {2 * cutoff_hz:g} Hz: resample the file"
+        )
     b, a = butterworth(order, cutoff_hz / (sample_rate_hz / 2.0))
     padlen = filter_padlen(b, a)
     if x.shape[0] <= padlen:
