@@ -152,8 +152,9 @@ def lowpass_filtfilt(
     ``padtype='odd'`` and that ``padlen`` (SciPy's default would be 21). Design and
     filtering are :func:`musclemetab._numerics.butterworth` and :func:`~musclemetab._numerics.filtfilt`.
 
-    Raises :class:`DataMismatchError` if the signal has no more samples than the padding;
-    its message starts with ``what`` (the file or signal, as far as the caller knows it).
+    Raises :class:`DataMismatchError` if the signal has no more samples than the padding or
+    is sampled at no more than twice the cut-off; its message starts with ``what`` (the file
+    or signal, as far as the caller knows it).
     """
     from .._numerics import butterworth, filter_padlen, filtfilt
 
