@@ -99,7 +99,8 @@ def test_command_imports_only_its_stage():
         "import sys; from musclemetab.cli import build_parser; p = build_parser('solve'); "
         "p.parse_args(['solve', '--model', 'm', '--ik', 'i', '--id', 'd', '--out', 'o']); "
         "print(sorted(m for m in ('musclemetab.study', 'musclemetab.report', 'musclemetab.metabolics', "
-        "'musclemetab.redundancy.emg_ten', 'scipy.stats', 'casadi', 'opensim') if m in sys.modules))"
+        "'musclemetab.redundancy.emg_ten', 'scipy.signal', 'scipy.interpolate', 'scipy.optimize', 'scipy.stats', "
+        "'pandas', 'casadi', 'opensim') if m in sys.modules))"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
