@@ -251,7 +251,7 @@ def solve_files(
     # Model parameters and geometry come from the on-disk cache when it holds them: no
     # OpenSim work at all then. Otherwise the OpenSim worker is started as soon as it is
     # known to be needed, so that its start-up overlaps with reading the files and the
-    # imports of pandas, SciPy and CasADi; the model parameters are asked for in a
+    # imports of pandas and CasADi; the model parameters are asked for in a
     # background thread.
     from ..geometry import compute_geometry, geometry_is_cached
     from ..model import model_is_cached
@@ -268,11 +268,11 @@ def solve_files(
 
         loads = read_external_loads(external_loads)
         loads.check_bodies(layout)
-    from ..io import read_storage
+    from ..io import read_table
 
     id_columns = None
     if id_path is not None:
-        id_columns = list(read_storage(id_path).columns)
+        id_columns = list(read_table(id_path).columns)
         _check_id_coordinates(id_path, id_columns, layout)
     if dofs:
         dofs = tuple(dofs)
@@ -318,9 +318,6 @@ def solve_files(
                              np.asarray(geometry.lmt_m)[:, kept], np.asarray(geometry.moment_arms_m)[:, :, kept])
     t_geometry = _time.perf_counter() - t0
     import casadi  # noqa: F401  (imported while the worker answers)
-    import scipy.interpolate  # noqa: F401
-    import scipy.optimize  # noqa: F401
-    import scipy.signal  # noqa: F401
 
     model_parameters = (params_request.result() if params_request is not None
                         else _read_model_parameters(model_path, cache_dir))

@@ -86,9 +86,9 @@ def parse_cycle(text) -> str | int:
 
 
 def _extent(path) -> tuple[float, float]:
-    from ..io import read_storage
+    from ..io import read_table
 
-    t = read_storage(path).index
+    t = read_table(path).index
     return float(t[0]), float(t[-1])
 
 
@@ -106,11 +106,11 @@ def resolve_window(
 ) -> TrialWindow:
     """The solve window for one leg (see the module docstring)."""
     from ..external_loads import check_inside
-    from ..io import read_storage
+    from ..io import read_table
 
     if window is not None and cycle is not None:
         raise OptionError("give either --window or --cycle, not both")
-    ik_t = read_storage(ik_path).index.to_numpy(dtype=float)
+    ik_t = read_table(ik_path).index.copy()
     inputs = [(Path(ik_path), "inverse kinematics", (float(ik_t[0]), float(ik_t[-1])))]
     if id_path is not None:
         inputs.append((Path(id_path), "inverse dynamics", _extent(id_path)))
