@@ -371,6 +371,8 @@ def _run_estimation(study: Study, unit: Unit, tmp: Path) -> dict:
         emg_mapping=subject.emg_mapping,
         labels=[t.name for t in subject.trials],
         passive=subject.passive,
+        side=subject.side,
+        dofs=subject.dofs,
         options=_solver_options(study),
     )
     if not result.success:  # nothing of a failed estimate is written
@@ -450,8 +452,8 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
             elif isinstance(kt, (dict, str)):  # a table, or "example"
                 kwargs["tendon_stiffness"] = kt
         sol = solve_files(subject.model, trial.ik, trial.id, unit.workflow, side=subject.side, dofs=subject.dofs,
-                          external_loads=trial.external_loads, cycle=trial.cycle,
-                          options=_solver_options(study, subject),
+                          external_loads=trial.external_loads, grf=trial.grf if trial.cycle is not None else None,
+                          cycle=trial.cycle, options=_solver_options(study, subject),
                           **kwargs)
         from ..redundancy.cli import write_solution_folder
 
