@@ -174,7 +174,7 @@ def unit_key(study: Study, unit: Unit, dependency_key: str | None = None) -> str
         content["models"] = list(study.models)
         content["basal"] = study.basal
         if "basal_coefficient" in study.settings:  # absent: earlier studies keep their unit keys
-            content["basal_rule"] = [study.basal_coefficient, study.basal_exponent]
+            content["basal_coefficient_exponent"] = [study.basal_coefficient, study.basal_exponent]
     text = json.dumps(content, sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()
 
