@@ -56,6 +56,8 @@ __all__ = [
     "per_muscle_ranked",
     "rates_against_speed",
     "save_figure",
+    "group_stats",
+    "stat_cell",
 ]
 
 #: One colour per metabolic model (the package's, as in the Figure-2 plot).
@@ -105,8 +107,13 @@ def _study_model_default_muscles() -> tuple[str, ...]:
     return tuple(split_side(m)[0] for m in default_muscles(names))
 
 
-#: Side-free names of the figure's muscles in the study's model (``default_muscles`` of it).
-DEFAULT_MUSCLES = _study_model_default_muscles()
+def __getattr__(name: str):
+    # DEFAULT_MUSCLES: side-free names of the figure's muscles in the study's model
+    # (``default_muscles`` of it), read from the muscle table when first asked for
+    if name == "DEFAULT_MUSCLES":
+        value = globals()["DEFAULT_MUSCLES"] = _study_model_default_muscles()
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 #: Normalised fibre lengths of the plateau of the active force-length curve (shaded).
 PLATEAU_BAND = (0.75, 1.05)
@@ -171,6 +178,15 @@ def _apply_layout(fig) -> None:
     w, h = fig.get_size_inches()
     fig.subplots_adjust(left=m["left"] / w, right=1.0 - m["right"] / w, top=1.0 - m["top"] / h,
                         bottom=m["bottom"] / h, wspace=m["wspace"], hspace=m["hspace"])
+
+
+def _panel_title(ax, text: str, **kw) -> None:
+    """A panel title at a fixed height above the panel.
+
+    A title left to matplotlib's automatic placement measures the panel's tick labels at
+    every draw to dodge them; these panels have none on top, so the measurement is skipped.
+    """
+    ax.set_title(text, y=1.0, **kw)
 
 
 def _grid(n: int, max_cols: int = 3) -> tuple[int, int]:
@@ -254,12 +270,28 @@ def main_workflow(workflows: Sequence[str]) -> str:
     return workflows[0]
 
 
-def _mean_sd(values) -> tuple[float, float, int]:
-    v = np.asarray(values, dtype=float)
-    v = v[np.isfinite(v)]
-    if v.size == 0:
-        return math.nan, math.nan, 0
-    return float(v.mean()), float(v.std(ddof=1)) if v.size > 1 else math.nan, int(v.size)
+def group_stats(df, by: Sequence[str], columns: Sequence[str]) -> dict:
+    """Mean, sample SD and count of the finite values of ``columns`` in each group of ``by``.
+
+    Returns ``{group: {column: (mean, sd, n)}}``; a group is the text of its ``by`` value
+    (one column) or the tuple of them; the SD of a group with one value is NaN. One pass
+    over the table, where a filter per cell of a results table would take one each.
+    """
+    import pandas as pd
+
+    columns = list(columns)
+    keys = {k: df[k].astype(str) for k in by}
+    values = df[columns].apply(pd.to_numeric, errors="coerce").replace([np.inf, -np.inf], np.nan)
+    grouped = values.assign(**keys).groupby(list(by), sort=False)[columns]
+    mean, sd, n = grouped.mean(), grouped.std(ddof=1), grouped.count()
+    m, s, c = mean.to_numpy(float), sd.reindex(mean.index).to_numpy(float), n.reindex(mean.index).to_numpy(int)
+    return {key: {col: (float(m[i, j]), float(s[i, j]), int(c[i, j])) for j, col in enumerate(columns)}
+            for i, key in enumerate(mean.index)}
+
+
+def stat_cell(stats: dict, key, column: str) -> tuple[float, float, int]:
+    """``(mean, sd, n)`` of ``column`` in the group ``key`` of :func:`group_stats` (NaN, NaN, 0 if absent)."""
+    return stats.get(key, {}).get(column, (math.nan, math.nan, 0))
 
 
 def _rmcorr(x, y, subject):
@@ -383,7 +415,7 @@ def excitations_and_fiber_lengths(
                 ax.axvline(to, color="k", lw=0.8, ls=":", label="_toe-off", gid="toe-off")
             ax.set_xlim(0, 100)
         ax_e.set_ylim(0, 1.02)
-        ax_e.set_title(label, fontsize=10)
+        _panel_title(ax_e, label, fontsize=10)
         if j == 0:
             ax_e.set_ylabel("excitation (-)")
             ax_l.set_ylabel("fibre length\n$l^M/l^M_o$ (-)")
@@ -478,7 +510,7 @@ def estimated_vs_measured(results, *, models: Sequence[str] | None = None, title
                 first = False
         ax.set_xlim(lim)
         ax.set_ylim(lim)
-        ax.set_title(m, color=model_colour(m), fontsize=11, fontweight="bold")
+        _panel_title(ax, m, color=model_colour(m), fontsize=11, fontweight="bold")
         ax.set_xlabel("measured (W/kg)")
         ax.set_ylabel("estimated (W/kg)")
         ax.legend(fontsize=7, loc="best", framealpha=0.8)
@@ -523,7 +555,7 @@ def _label_cycle_panels(axes, models: Sequence[str], ylabel: str = "metabolic ra
             continue
         m = models[k]
         ax.set_xlim(0, 100)
-        ax.set_title(m, color=model_colour(m), fontsize=11, fontweight="bold")
+        _panel_title(ax, m, color=model_colour(m), fontsize=11, fontweight="bold")
         if k % ncol == 0:
             ax.set_ylabel(ylabel)
         if k // ncol == nrow - 1 or k + ncol >= len(models):
@@ -636,13 +668,12 @@ def whole_body_over_cycle(timeseries_by_trial: Mapping[str, object], speeds: Map
 
 # --------------------------------------------------------------------- 5. phase shares
 def _speed_table(res, value: str):
-    """Per trial: mean speed over subjects and mean of ``value`` over subjects."""
+    """Per trial (in speed order): ``(trial, mean speed, mean, SD, n)`` of ``value`` over subjects."""
+    stats = group_stats(res, ["trial"], ["speed_m_per_s", value])
     rows = []
     for t in trial_order(res):
-        d = res[res["trial"].astype(str) == t]
-        sp = float(np.nanmean(d["speed_m_per_s"].to_numpy(float))) if d["speed_m_per_s"].notna().any() else math.nan
-        mean, sd, n = _mean_sd(d[value])
-        rows.append((t, sp, mean, sd, n))
+        sp = stat_cell(stats, t, "speed_m_per_s")[0]
+        rows.append((t, sp, *stat_cell(stats, t, value)))
     return rows
 
 
@@ -674,13 +705,13 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
     pref = res[res["trial"].astype(str) == trial]
     nw = len(workflows)
     width = 0.8 / max(nw, 1)
+    pref_stats = group_stats(pref, ["workflow", "model"], ["swing_energy_share_pct", "stance_energy_share_pct"])
     for i, w in enumerate(workflows):
         col = workflow_colour(w)
         xs, stance, swing, sd = [], [], [], []
         for j, m in enumerate(models):
-            d = pref[(pref["workflow"].astype(str) == w) & (pref["model"].astype(str) == m)]
-            sw, sw_sd, n = _mean_sd(d["swing_energy_share_pct"])
-            st, _, _ = _mean_sd(d["stance_energy_share_pct"])
+            sw, sw_sd, n = stat_cell(pref_stats, (w, m), "swing_energy_share_pct")
+            st = stat_cell(pref_stats, (w, m), "stance_energy_share_pct")[0]
             if n == 0:
                 continue
             xs.append(j - 0.4 + width * (i + 0.5))
@@ -707,7 +738,7 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
     sp = pref["speed_m_per_s"].to_numpy(float)
     if np.any(np.isfinite(sp)):
         speed_txt = f", {np.nanmean(sp):.2f} m/s"
-    ax_b.set_title(f"Stance (solid) and swing (hatched; % above the bar) at the preferred speed "
+    _panel_title(ax_b, f"Stance (solid) and swing (hatched; % above the bar) at the preferred speed "
                    f"({trial}{speed_txt})", fontsize=9)
     ax_b.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=max(1, min(nw, 6)),
                 frameon=False, title="workflow (stance solid, swing hatched)", title_fontsize=8)
@@ -732,7 +763,7 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
     ax_s.set_xlabel("walking speed (m/s)")
     ax_s.set_ylabel("swing share (%)")
     note = "" if n_speeds > 1 else " - one speed only, no trend"
-    ax_s.set_title(f"Swing share against speed ({wf_line}){note}", fontsize=9)
+    _panel_title(ax_s, f"Swing share against speed ({wf_line}){note}", fontsize=9)
     ax_s.legend(fontsize=7, frameon=False)
     fig.suptitle(title or "Relative phase cost: stance and swing shares of the muscle metabolic energy "
                  "(one leg, no basal heat)", fontsize=11)
@@ -762,6 +793,7 @@ def group_shares(results, *, workflows: Sequence[str] | None = None, models: Seq
     models = _ordered_models(res["model"]) if models is None else [str(m) for m in models]
     trials = trial_order(res)
     speeds = {t: r[1] for t, r in zip(trials, _speed_table(res, cols[0]))}
+    stats = group_stats(res, ["workflow", "model", "trial"], cols)
     panel_w = max(1.8, 0.3 * len(trials) + 0.9)
     fig = _new_figure(min(20.0, panel_w * len(models) + 1.2), 2.9 * len(workflows) + 1.8, left=0.9, bottom=1.3,
                       hspace=0.45, wspace=0.1)
@@ -770,10 +802,9 @@ def group_shares(results, *, workflows: Sequence[str] | None = None, models: Seq
     for i, w in enumerate(workflows):
         for j, m in enumerate(models):
             ax = axes[i, j]
-            d = res[(res["workflow"].astype(str) == w) & (res["model"].astype(str) == m)]
             bottom = np.zeros(len(trials))
             for g, c in zip(groups, cols):
-                vals = np.array([_mean_sd(d[d["trial"].astype(str) == t][c])[0] for t in trials])
+                vals = np.array([stat_cell(stats, (w, m, t), c)[0] for t in trials])
                 vals = np.nan_to_num(vals)
                 ax.bar(np.arange(len(trials)), vals, bottom=bottom, width=0.75, color=group_colour(g),
                        edgecolor="white", linewidth=0.4, label=g, gid=f"group:{g}")
@@ -782,7 +813,7 @@ def group_shares(results, *, workflows: Sequence[str] | None = None, models: Seq
                           rotation=90 if len(trials) > 4 else 0)
             ax.set_ylim(0, 100)
             if i == 0:
-                ax.set_title(m, color=model_colour(m), fontsize=11, fontweight="bold")
+                _panel_title(ax, m, color=model_colour(m), fontsize=11, fontweight="bold")
             if j == 0:
                 ax.set_ylabel(f"{w}\nshare (%)", color=workflow_colour(w))
             if i == len(workflows) - 1:
@@ -824,11 +855,13 @@ def rates_against_speed(results, *, workflow: str | None = None, models: Sequenc
         dm = d[d["model"].astype(str) == m].copy()
         for g, c in zip(groups, cols):
             dm[f"rate_{g}"] = dm[c].astype(float) / 100.0 * dm["mean_W_per_kg_no_basal"].astype(float)
-        rows = _speed_table(dm, "mean_W_per_kg_no_basal")
-        x = [r[1] for r in rows]
-        ax.plot(x, [r[2] for r in rows], color="k", lw=1.8, marker="o", ms=4, label="whole body", gid="whole-body")
+        order = trial_order(dm)
+        stats = group_stats(dm, ["trial"], ["speed_m_per_s", "mean_W_per_kg_no_basal"] + [f"rate_{g}" for g in groups])
+        x = [stat_cell(stats, t, "speed_m_per_s")[0] for t in order]
+        ax.plot(x, [stat_cell(stats, t, "mean_W_per_kg_no_basal")[0] for t in order], color="k", lw=1.8, marker="o",
+                ms=4, label="whole body", gid="whole-body")
         for g in groups:
-            ys = [r[2] for r in _speed_table(dm, f"rate_{g}")]
+            ys = [stat_cell(stats, t, f"rate_{g}")[0] for t in order]
             ax.plot(x, ys, color=group_colour(g), lw=1.2, marker="o", ms=3, label=g, gid=f"group:{g}")
         ax.set_xlim(min(x) - 0.05, max(x) + 0.05)
     _label_cycle_panels(axes, models, "metabolic rate (W/kg)")
@@ -889,7 +922,7 @@ def per_muscle_ranked(per_muscle, *, workflow: str | None = None, models: Sequen
             ax.barh(y + 0.4 - height * (i + 0.5), vals, height=height * 0.95, color=colour[t], label=t,
                     gid=f"trial:{t}")
         ax.set_yticks(y, order, fontsize=7)
-        ax.set_title(m, color=model_colour(m), fontsize=11, fontweight="bold")
+        _panel_title(ax, m, color=model_colour(m), fontsize=11, fontweight="bold")
         ax.grid(axis="x", color="0.9", lw=0.6)
         ax.set_axisbelow(True)
     for k in range(len(models), nrow * ncol):

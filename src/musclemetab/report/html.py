@@ -266,223 +266,264 @@ def _short(study: StudyFolder, exc: BaseException) -> str:
     return text.replace(str(study.path) + os.sep, "").replace(str(study.path.resolve()) + os.sep, "")
 
 
-def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequence[str] = ("png",)
-                 ) -> list[FigureEntry]:
+#: The title of each figure in the report.
+FIGURE_TITLES = {
+    "excitations_fiber_lengths": "Muscle excitations and normalised fibre lengths",
+    "estimated_vs_measured": "Estimated vs measured whole-body metabolic rate",
+    "group_rates_over_cycle": "Metabolic rate of the muscle groups over the gait cycle",
+    "whole_body_over_cycle": "Whole-body metabolic rate over the gait cycle across speeds",
+    "phase_shares": "Stance and swing shares",
+    "group_shares": "Muscle-group shares",
+    "per_muscle_ranked": "The muscles costing most energy, across speeds",
+    "rates_against_speed": "Whole-body and muscle-group rates against walking speed",
+}
+
+
+def _figure_builders(study: StudyFolder) -> dict[str, Callable[[], tuple[object, str]] | str]:
+    """Figure name -> a function drawing it (returning the figure and its caption), or the
+    note saying why the study's data cannot support it."""
+    from . import figures as F
+
+    ok = study.ok
+    if ok.empty:
+        return {name: "no unit of the study succeeded: nothing to draw." for name in FIGURE_NAMES}
+    workflows = [w for w in _workflows(study) if w in set(ok["workflow"].astype(str))]
+    models = [m for m in _models(study) if m in set(ok["model"].astype(str))]
+    trial = _preferred(study, ok)
+    main_wf = F.main_workflow(workflows)
+    # the subject shown in the single-unit figures: the first with the preferred trial done
+    pref = ok[ok["trial"].astype(str) == trial]
+    subject = next((s for s in _subjects(study) if s in set(pref["subject"].astype(str))), None)
+
+    def unit_rows(subject, trial=None, workflow=None):
+        d = ok[ok["subject"].astype(str) == subject]
+        if trial is not None:
+            d = d[d["trial"].astype(str) == trial]
+        if workflow is not None:
+            d = d[d["workflow"].astype(str) == workflow]
+        return d
+
+    def fig1():
+        from ..redundancy.solution import Solution
+
+        sols, cycles, skipped = {}, {}, []
+        rows = unit_rows(subject, trial)
+        for w in workflows:
+            d = rows[rows["workflow"].astype(str) == w]
+            if d.empty:
+                continue
+            folder = study.unit_folder(d.iloc[0])
+            try:
+                rec = _read_unit_json(folder)
+                cycles[w] = _cycle(rec, folder)
+                sols[w] = Solution.load(folder)
+            except MusclemetabError as exc:
+                cycles.pop(w, None)
+                skipped.append(f"{w} ({_short(study, exc)})")
+        if not sols:
+            raise OptionError(
+                f"no solution could be read for {subject}, trial {trial}"
+                + (f": {'; '.join(skipped)}" if skipped else "")
+            )
+        fig = F.excitations_and_fiber_lengths(
+            sols, cycles,
+            title=f"Muscle excitation and normalised fibre length over the gait cycle: subject {subject}, "
+            f"trial {trial}",
+        )
+        cap = (f"Subject {subject}, trial {trial} (preferred speed). Excitation (-) and fibre length "
+               "normalised by the optimal fibre length (-), one line per workflow; dotted line: toe-off; "
+               "grey band: plateau of the active force-length curve (0.75-1.05); dashed line: start of "
+               "the descending limb (1.05).")
+        if skipped:
+            cap += f" Not shown: {'; '.join(skipped)}."
+        return fig, cap
+
+    def fig2():
+        fig = F.estimated_vs_measured(ok)
+        cap = ("Whole-body average metabolic rate (W/kg of body mass, both legs, with basal heat) estimated "
+               "by each model against the measured rate, one point per subject and trial; lines: "
+               "repeated-measures correlation of each workflow (common slope m, one intercept per "
+               "subject); dashed: identity.")
+        return fig, cap
+
+    def unit_timeseries(subject, trial, workflow):
+        d = unit_rows(subject, trial, workflow)
+        if d.empty:
+            raise OptionError(f"no successful unit for {subject}, trial {trial}, workflow {workflow}")
+        folder = study.unit_folder(d.iloc[0])
+        ts = _read_timeseries(folder)
+        to = d["toe_off_pct"].iloc[0] if "toe_off_pct" in d.columns else math.nan
+        if not np.isfinite(to):
+            rec = _read_unit_json(folder)
+            s, t, e = _cycle(rec, folder)
+            to = 100.0 * (t - s) / (e - s)
+        sp = d["speed_m_per_s"].iloc[0] if "speed_m_per_s" in d.columns else math.nan
+        return ts, float(to), float(sp)
+
+    mass = _body_mass(study, subject)
+    scale, unit, legs = (2.0 / mass, "W/kg", "both legs") if mass else (1.0, "W", "one leg")
+
+    def fig3():
+        ts, to, _ = unit_timeseries(subject, trial, main_wf)
+        fig = F.group_rates_over_cycle(
+            ts, to, [m for m in models if m in set(ts["model"].astype(str))] or None,
+            title=f"Metabolic rate of the muscle groups over the gait cycle ({unit}, {legs}, no basal heat): "
+            f"subject {subject}, trial {trial}, {main_wf}", scale=scale, unit=unit,
+        )
+        cap = (f"Subject {subject}, trial {trial} (preferred speed), workflow {main_wf}. Muscle metabolic "
+               f"rates ({unit}, {legs}: twice the simulated leg{' per kg of body mass' if mass else ''}, "
+               "without basal heat) distributed to the muscle groups by moment-arm ratio; same axes in every "
+               f"panel; dotted line: toe-off ({to:.1f} % of the cycle).")
+        return fig, cap
+
+    def fig4():
+        trials = [t for t in F.trial_order(ok) if not unit_rows(subject, t, main_wf).empty]
+        if len(trials) < 2:
+            raise OptionError(
+                f"one speed only ({', '.join(trials) or 'no trial'} for subject {subject}, {main_wf}): "
+                "nothing to compare across speeds"
+            )
+        tables, speeds, toes, skipped = {}, {}, {}, []
+        for t in trials:
+            try:
+                ts, to, sp = unit_timeseries(subject, t, main_wf)
+            except MusclemetabError as exc:
+                skipped.append(f"{t} ({_short(study, exc)})")
+                continue
+            if not np.isfinite(sp):
+                skipped.append(f"{t} (no walking speed)")
+                continue
+            tables[t], speeds[t], toes[t] = ts, sp, to
+        if len(tables) < 2:
+            raise OptionError(
+                "fewer than two speeds with time series" + (f": {'; '.join(skipped)}" if skipped else "")
+            )
+        fig = F.whole_body_over_cycle(
+            tables, speeds, [m for m in models if any(m in set(x["model"].astype(str)) for x in tables.values())],
+            toe_off_pct=toes,
+            title=f"Whole-body metabolic rate over the gait cycle across speeds ({unit}, {legs}, summed "
+            f"muscles, no basal heat): subject {subject}, {main_wf}", scale=scale, unit=unit,
+        )
+        cap = (f"Subject {subject}, workflow {main_wf}. Summed muscle metabolic rate ({unit}, {legs}: twice "
+               f"the simulated leg{' per kg of body mass' if mass else ''}, without basal heat) over the gait "
+               "cycle, one line per walking speed; same axes in every panel; marks at the bottom: toe-off of "
+               "each trial.")
+        if skipped:
+            cap += f" Not shown: {'; '.join(skipped)}."
+        return fig, cap
+
+    def fig5():
+        fig = F.phase_shares(ok, trial=trial, workflow=main_wf)
+        cap = (f"Share of the cycle's muscle metabolic energy (one leg, without basal heat) spent in stance "
+               f"(initial contact to toe-off) and swing, mean over subjects (error bar: SD). Left: at the "
+               f"preferred speed (trial {trial}); right: swing share against walking speed for {main_wf}, "
+               "with the repeated-measures slope (% per m/s).")
+        return fig, cap
+
+    def fig6():
+        fig = F.group_shares(ok, workflows=workflows, models=models)
+        cap = ("Share of each muscle group in the cycle's muscle metabolic energy (%, one leg, without basal "
+               "heat; mean over subjects), one bar per trial (walking speed in m/s).")
+        return fig, cap
+
+    def fig7():
+        import pandas as pd
+
+        path = study.path / "per_muscle.csv"
+        if not path.is_file():
+            raise OptionError("per_muscle.csv is missing: run the study with this version to get it")
+        pm = pd.read_csv(path, dtype={"subject": str, "trial": str, "workflow": str, "model": str})
+        if "speed_m_per_s" in ok.columns:
+            sp = ok.drop_duplicates(["subject", "trial"])[["subject", "trial", "speed_m_per_s"]]
+            pm = pm.merge(sp.astype({"subject": str, "trial": str}), on=["subject", "trial"], how="left")
+        fig = F.per_muscle_ranked(pm, workflow=main_wf if main_wf in set(pm["workflow"].astype(str)) else None,
+                                  models=[m for m in models if m in set(pm["model"].astype(str))] or None)
+        cap = (f"Workflow {main_wf}. The 15 muscles with the largest cycle-average metabolic rate of each model "
+               "(W per kg of body mass, one leg, without basal heat; mean over subjects), one bar per trial "
+               "(light: slow, dark: fast); every muscle is in per_muscle.csv.")
+        return fig, cap
+
+    def fig8():
+        fig = F.rates_against_speed(ok, workflow=main_wf, models=models)
+        cap = (f"Workflow {main_wf}. Whole-body metabolic rate without basal heat (black) and each muscle "
+               "group's part of it (group share × whole-body rate), W per kg of body mass, both legs; means "
+               "over subjects at each trial's mean walking speed; same axes in every panel.")
+        return fig, cap
+
+    builders = {
+        "excitations_fiber_lengths": fig1,
+        "estimated_vs_measured": fig2,
+        "group_rates_over_cycle": fig3,
+        "whole_body_over_cycle": fig4,
+        "phase_shares": fig5,
+        "group_shares": fig6,
+        "per_muscle_ranked": fig7,
+        "rates_against_speed": fig8,
+    }
+    if subject is None:
+        for name in ("excitations_fiber_lengths", "group_rates_over_cycle", "whole_body_over_cycle"):
+            builders[name] = f"no successful unit for trial {trial}."
+    return builders
+
+
+def _draw_figure(study: StudyFolder, fig_dir: Path, formats: Sequence[str], name: str,
+                 build: Callable[[], tuple[object, str]] | str | None = None) -> FigureEntry:
+    """Draw and save one figure of the report (``build``: its entry of :func:`_figure_builders`,
+    made here when not given, as in a worker process)."""
+    from .figures import save_figure
+
+    if build is None:
+        build = _figure_builders(study)[name]
+    if isinstance(build, str):
+        return FigureEntry(name, FIGURE_TITLES[name], note=build)
+    try:
+        fig, caption = build()
+    except MusclemetabError as exc:
+        return FigureEntry(name, FIGURE_TITLES[name], note=_short(study, exc))
+    return FigureEntry(name, FIGURE_TITLES[name], caption=caption,
+                       paths=save_figure(fig, fig_dir, name, formats=formats))
+
+
+def default_workers() -> int:
+    """Worker processes drawing the figures by default: the cores this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
+
+
+def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequence[str] = ("png",),
+                 workers: int | None = None) -> list[FigureEntry]:
     """Draw the figures the study's data support and save them in ``fig_dir`` (``formats``:
     PNG, and SVG when asked for).
 
-    Returns one :class:`FigureEntry` per name of :data:`FIGURE_NAMES`, with the file paths or
-    the note saying why the figure is not drawn (the files of a figure not drawn are
-    removed from ``fig_dir``, so that no figure of an earlier report remains).
+    ``workers`` processes draw the figures side by side (default :func:`default_workers`;
+    1 draws them in this process; parallel drawing needs the ``fork`` start method and falls
+    back to one process where it is not available). Returns one :class:`FigureEntry` per name
+    of :data:`FIGURE_NAMES`, with the file paths or the note saying why the figure is not
+    drawn (the files of a figure not drawn are removed from ``fig_dir``, so that no figure
+    of an earlier report remains).
     """
-    from . import figures as F
+    import multiprocessing
 
     fig_dir = Path(fig_dir)
-    ok = study.ok
+    workers = default_workers() if workers is None else int(workers)
+    if workers < 1:
+        raise OptionError(f"--workers must be at least 1, not {workers}")
+    builders = _figure_builders(study)
+    drawn = [n for n in FIGURE_NAMES if not isinstance(builders[n], str)]
     entries: dict[str, FigureEntry] = {}
-    titles = {
-        "excitations_fiber_lengths": "Muscle excitations and normalised fibre lengths",
-        "estimated_vs_measured": "Estimated vs measured whole-body metabolic rate",
-        "group_rates_over_cycle": "Metabolic rate of the muscle groups over the gait cycle",
-        "whole_body_over_cycle": "Whole-body metabolic rate over the gait cycle across speeds",
-        "phase_shares": "Stance and swing shares",
-        "group_shares": "Muscle-group shares",
-        "per_muscle_ranked": "The muscles costing most energy, across speeds",
-        "rates_against_speed": "Whole-body and muscle-group rates against walking speed",
-    }
+    workers = min(workers, len(drawn))
+    if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
+        from concurrent.futures import ProcessPoolExecutor
 
-    def attempt(name: str, build: Callable[[], tuple[object, str]]):
-        try:
-            fig, caption = build()
-        except MusclemetabError as exc:
-            entries[name] = FigureEntry(name, titles[name], note=_short(study, exc))
-            return
-        entries[name] = FigureEntry(name, titles[name], caption=caption,
-                                    paths=F.save_figure(fig, fig_dir, name, formats=formats))
-
-    if ok.empty:
-        for name in FIGURE_NAMES:
-            entries[name] = FigureEntry(name, titles[name], note="no unit of the study succeeded: nothing to draw.")
-    else:
-        workflows = [w for w in _workflows(study) if w in set(ok["workflow"].astype(str))]
-        models = [m for m in _models(study) if m in set(ok["model"].astype(str))]
-        trial = _preferred(study, ok)
-        main_wf = F.main_workflow(workflows)
-        # the subject shown in the single-unit figures: the first with the preferred trial done
-        pref = ok[ok["trial"].astype(str) == trial]
-        subject = next((s for s in _subjects(study) if s in set(pref["subject"].astype(str))), None)
-
-        def unit_rows(subject, trial=None, workflow=None):
-            d = ok[ok["subject"].astype(str) == subject]
-            if trial is not None:
-                d = d[d["trial"].astype(str) == trial]
-            if workflow is not None:
-                d = d[d["workflow"].astype(str) == workflow]
-            return d
-
-        def fig1():
-            from ..redundancy.solution import Solution
-
-            sols, cycles, skipped = {}, {}, []
-            rows = unit_rows(subject, trial)
-            for w in workflows:
-                d = rows[rows["workflow"].astype(str) == w]
-                if d.empty:
-                    continue
-                folder = study.unit_folder(d.iloc[0])
-                try:
-                    rec = _read_unit_json(folder)
-                    cycles[w] = _cycle(rec, folder)
-                    sols[w] = Solution.load(folder)
-                except MusclemetabError as exc:
-                    cycles.pop(w, None)
-                    skipped.append(f"{w} ({_short(study, exc)})")
-            if not sols:
-                raise OptionError(
-                    f"no solution could be read for {subject}, trial {trial}"
-                    + (f": {'; '.join(skipped)}" if skipped else "")
-                )
-            fig = F.excitations_and_fiber_lengths(
-                sols, cycles,
-                title=f"Muscle excitation and normalised fibre length over the gait cycle: subject {subject}, "
-                f"trial {trial}",
-            )
-            cap = (f"Subject {subject}, trial {trial} (preferred speed). Excitation (-) and fibre length "
-                   "normalised by the optimal fibre length (-), one line per workflow; dotted line: toe-off; "
-                   "grey band: plateau of the active force-length curve (0.75-1.05); dashed line: start of "
-                   "the descending limb (1.05).")
-            if skipped:
-                cap += f" Not shown: {'; '.join(skipped)}."
-            return fig, cap
-
-        def fig2():
-            fig = F.estimated_vs_measured(ok)
-            cap = ("Whole-body average metabolic rate (W/kg of body mass, both legs, with basal heat) estimated "
-                   "by each model against the measured rate, one point per subject and trial; lines: "
-                   "repeated-measures correlation of each workflow (common slope m, one intercept per "
-                   "subject); dashed: identity.")
-            return fig, cap
-
-        def unit_timeseries(subject, trial, workflow):
-            d = unit_rows(subject, trial, workflow)
-            if d.empty:
-                raise OptionError(f"no successful unit for {subject}, trial {trial}, workflow {workflow}")
-            folder = study.unit_folder(d.iloc[0])
-            ts = _read_timeseries(folder)
-            to = d["toe_off_pct"].iloc[0] if "toe_off_pct" in d.columns else math.nan
-            if not np.isfinite(to):
-                rec = _read_unit_json(folder)
-                s, t, e = _cycle(rec, folder)
-                to = 100.0 * (t - s) / (e - s)
-            sp = d["speed_m_per_s"].iloc[0] if "speed_m_per_s" in d.columns else math.nan
-            return ts, float(to), float(sp)
-
-        mass = _body_mass(study, subject)
-        scale, unit, legs = (2.0 / mass, "W/kg", "both legs") if mass else (1.0, "W", "one leg")
-
-        def fig3():
-            ts, to, _ = unit_timeseries(subject, trial, main_wf)
-            fig = F.group_rates_over_cycle(
-                ts, to, [m for m in models if m in set(ts["model"].astype(str))] or None,
-                title=f"Metabolic rate of the muscle groups over the gait cycle ({unit}, {legs}, no basal heat): "
-                f"subject {subject}, trial {trial}, {main_wf}", scale=scale, unit=unit,
-            )
-            cap = (f"Subject {subject}, trial {trial} (preferred speed), workflow {main_wf}. Muscle metabolic "
-                   f"rates ({unit}, {legs}: twice the simulated leg{' per kg of body mass' if mass else ''}, "
-                   "without basal heat) distributed to the muscle groups by moment-arm ratio; same axes in every "
-                   f"panel; dotted line: toe-off ({to:.1f} % of the cycle).")
-            return fig, cap
-
-        def fig4():
-            trials = [t for t in F.trial_order(ok) if not unit_rows(subject, t, main_wf).empty]
-            if len(trials) < 2:
-                raise OptionError(
-                    f"one speed only ({', '.join(trials) or 'no trial'} for subject {subject}, {main_wf}): "
-                    "nothing to compare across speeds"
-                )
-            tables, speeds, toes, skipped = {}, {}, {}, []
-            for t in trials:
-                try:
-                    ts, to, sp = unit_timeseries(subject, t, main_wf)
-                except MusclemetabError as exc:
-                    skipped.append(f"{t} ({_short(study, exc)})")
-                    continue
-                if not np.isfinite(sp):
-                    skipped.append(f"{t} (no walking speed)")
-                    continue
-                tables[t], speeds[t], toes[t] = ts, sp, to
-            if len(tables) < 2:
-                raise OptionError(
-                    "fewer than two speeds with time series" + (f": {'; '.join(skipped)}" if skipped else "")
-                )
-            fig = F.whole_body_over_cycle(
-                tables, speeds, [m for m in models if any(m in set(x["model"].astype(str)) for x in tables.values())],
-                toe_off_pct=toes,
-                title=f"Whole-body metabolic rate over the gait cycle across speeds ({unit}, {legs}, summed "
-                f"muscles, no basal heat): subject {subject}, {main_wf}", scale=scale, unit=unit,
-            )
-            cap = (f"Subject {subject}, workflow {main_wf}. Summed muscle metabolic rate ({unit}, {legs}: twice "
-                   f"the simulated leg{' per kg of body mass' if mass else ''}, without basal heat) over the gait "
-                   "cycle, one line per walking speed; same axes in every panel; marks at the bottom: toe-off of "
-                   "each trial.")
-            if skipped:
-                cap += f" Not shown: {'; '.join(skipped)}."
-            return fig, cap
-
-        def fig5():
-            fig = F.phase_shares(ok, trial=trial, workflow=main_wf)
-            cap = (f"Share of the cycle's muscle metabolic energy (one leg, without basal heat) spent in stance "
-                   f"(initial contact to toe-off) and swing, mean over subjects (error bar: SD). Left: at the "
-                   f"preferred speed (trial {trial}); right: swing share against walking speed for {main_wf}, "
-                   "with the repeated-measures slope (% per m/s).")
-            return fig, cap
-
-        def fig6():
-            fig = F.group_shares(ok, workflows=workflows, models=models)
-            cap = ("Share of each muscle group in the cycle's muscle metabolic energy (%, one leg, without basal "
-                   "heat; mean over subjects), one bar per trial (walking speed in m/s).")
-            return fig, cap
-
-        def fig7():
-            import pandas as pd
-
-            path = study.path / "per_muscle.csv"
-            if not path.is_file():
-                raise OptionError("per_muscle.csv is missing: run the study with this version to get it")
-            pm = pd.read_csv(path, dtype={"subject": str, "trial": str, "workflow": str, "model": str})
-            if "speed_m_per_s" in ok.columns:
-                sp = ok.drop_duplicates(["subject", "trial"])[["subject", "trial", "speed_m_per_s"]]
-                pm = pm.merge(sp.astype({"subject": str, "trial": str}), on=["subject", "trial"], how="left")
-            fig = F.per_muscle_ranked(pm, workflow=main_wf if main_wf in set(pm["workflow"].astype(str)) else None,
-                                      models=[m for m in models if m in set(pm["model"].astype(str))] or None)
-            cap = (f"Workflow {main_wf}. The 15 muscles with the largest cycle-average metabolic rate of each model "
-                   "(W per kg of body mass, one leg, without basal heat; mean over subjects), one bar per trial "
-                   "(light: slow, dark: fast); every muscle is in per_muscle.csv.")
-            return fig, cap
-
-        def fig8():
-            fig = F.rates_against_speed(ok, workflow=main_wf, models=models)
-            cap = (f"Workflow {main_wf}. Whole-body metabolic rate without basal heat (black) and each muscle "
-                   "group's part of it (group share × whole-body rate), W per kg of body mass, both legs; means "
-                   "over subjects at each trial's mean walking speed; same axes in every panel.")
-            return fig, cap
-
-        builders = {
-            "excitations_fiber_lengths": fig1,
-            "estimated_vs_measured": fig2,
-            "group_rates_over_cycle": fig3,
-            "whole_body_over_cycle": fig4,
-            "phase_shares": fig5,
-            "group_shares": fig6,
-            "per_muscle_ranked": fig7,
-            "rates_against_speed": fig8,
-        }
-        for name in FIGURE_NAMES:
-            if subject is None and name in ("excitations_fiber_lengths", "group_rates_over_cycle",
-                                            "whole_body_over_cycle"):
-                entries[name] = FigureEntry(name, titles[name], note=f"no successful unit for trial {trial}.")
-                continue
-            attempt(name, builders[name])
+        # forked workers start with this process' modules (matplotlib, pandas) already imported
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as pool:
+            futures = {n: pool.submit(_draw_figure, study, fig_dir, tuple(formats), n) for n in drawn}
+            entries = {n: f.result() for n, f in futures.items()}
+    for n in FIGURE_NAMES:
+        if n not in entries:
+            entries[n] = _draw_figure(study, fig_dir, formats, n, builders[n])
     for e in entries.values():
         for ext in ("png", "svg"):
             if e.paths is None or ext not in e.paths:
@@ -505,14 +546,6 @@ def _fmt(mean: float, sd: float, digits: int) -> str:
     return f"{mean:.{digits}f}"
 
 
-def _mean_sd(values) -> tuple[float, float]:
-    v = np.asarray(values, dtype=float)
-    v = v[np.isfinite(v)]
-    if v.size == 0:
-        return math.nan, math.nan
-    return float(v.mean()), (float(v.std(ddof=1)) if v.size > 1 else math.nan)
-
-
 def _table(header: list[list[tuple[str, int]]], body: list[list[str]], n_index: int, cls: str = "") -> str:
     """HTML table; ``header`` rows of ``(text, colspan)``; the first ``n_index`` body cells are <th>."""
     out = [f'<table class="{_esc(cls)}">' if cls else "<table>", "<thead>"]
@@ -531,28 +564,34 @@ def _table(header: list[list[tuple[str, int]]], body: list[list[str]], n_index: 
 def _pivot(ok, value: str, trials: Sequence[str], labels: Sequence[str], workflows: Sequence[str],
            models: Sequence[str], digits: int) -> str:
     """Rows: trial (headed by ``labels``) × model; columns: workflow; cells: mean [SD] over subjects."""
+    from .figures import stat_cell, group_stats
+
     header = [[("trial (speed)", 1), ("model", 1)] + [(w, 1) for w in workflows]]
+    stats = group_stats(ok, ["trial", "model", "workflow"], [value])
+    present = set(zip(ok["trial"].astype(str), ok["model"].astype(str)))
     body = []
     for t, lab in zip(trials, labels):
-        dt = ok[ok["trial"].astype(str) == t]
         first = True
         for m in models:
-            dm = dt[dt["model"].astype(str) == m]
-            if dm.empty:
+            if (t, m) not in present:
                 continue
             row = [lab if first else "", m]
             first = False
             for w in workflows:
-                row.append(_fmt(*_mean_sd(dm.loc[dm["workflow"].astype(str) == w, value]), digits))
+                row.append(_fmt(*stat_cell(stats, (t, m, w), value)[:2], digits))
             body.append(row)
     return _table(header, body, 2, "results")
 
 
 def _trial_heading(ok, trials) -> list[str]:
+    from .figures import stat_cell, group_stats
+
+    if "speed_m_per_s" not in ok.columns:
+        return [str(t) for t in trials]
+    stats = group_stats(ok, ["trial"], ["speed_m_per_s"])
     out = []
     for t in trials:
-        sp = ok.loc[ok["trial"].astype(str) == t, "speed_m_per_s"] if "speed_m_per_s" in ok.columns else []
-        m, _ = _mean_sd(sp)
+        m = stat_cell(stats, t, "speed_m_per_s")[0]
         out.append(f"{t} ({m:.2f} m/s)" if np.isfinite(m) else t)
     return out
 
@@ -620,7 +659,7 @@ def _ordered(values) -> list[str]:
 
 
 def _results_section(study: StudyFolder) -> str:
-    from .figures import trial_order
+    from .figures import group_stats, stat_cell, trial_order
 
     ok = study.ok
     parts = []
@@ -651,9 +690,8 @@ def _results_section(study: StudyFolder) -> str:
                   "Whole-body average metabolic rate over the gait cycle, W per kg of body mass: both legs "
                   "(twice the simulated leg), with basal heat; rows: trial and metabolic model; columns: workflow.")
     if "measured_W_per_kg" in ok.columns and ok["measured_W_per_kg"].notna().any():
-        meas = ok.drop_duplicates(["subject", "trial"])
-        body = [["measured"] + [_fmt(*_mean_sd(meas.loc[meas["trial"].astype(str) == t, "measured_W_per_kg"]), 2)
-                                for t in trials]]
+        meas = group_stats(ok.drop_duplicates(["subject", "trial"]), ["trial"], ["measured_W_per_kg"])
+        body = [["measured"] + [_fmt(*stat_cell(meas, t, "measured_W_per_kg")[:2], 2) for t in trials]]
         parts.append("<p>Measured whole-body metabolic rate (W/kg, indirect calorimetry):</p>")
         parts.append(_table([[("", 1)] + [(lab, 1) for lab in tlabels]], body, 1, "results"))
     else:
@@ -677,17 +715,17 @@ def _results_section(study: StudyFolder) -> str:
         header = [[("trial (speed)", 1), ("model", 1)] + [(w, len(have)) for w in workflows],
                   [("", 1), ("", 1)] + [(names[c], 1) for _ in workflows for c in have]]
         body = []
+        stats = group_stats(ok, ["trial", "model", "workflow"], have)
+        present = set(zip(ok["trial"].astype(str), ok["model"].astype(str)))
         for t in trials:
             first = True
             for m in models:
-                d = ok[(ok["trial"].astype(str) == t) & (ok["model"].astype(str) == m)]
-                if d.empty:
+                if (t, m) not in present:
                     continue
                 row = [label[t] if first else "", m]
                 first = False
                 for w in workflows:
-                    dw = d[d["workflow"].astype(str) == w]
-                    row += [_fmt(*_mean_sd(dw[c]), 1) for c in have]
+                    row += [_fmt(*stat_cell(stats, (t, m, w), c)[:2], 1) for c in have]
                 body.append(row)
         parts.append(_table(header, body, 2, "results"))
 
@@ -705,14 +743,14 @@ def _results_section(study: StudyFolder) -> str:
         )
         header = [[("workflow", 1), ("model", 1), ("trial", 1)] + [(g, 1) for g, _ in gcols]]
         body = []
+        stats = group_stats(ok, ["workflow", "model", "trial"], [c for _, c in gcols])
+        present = set(zip(ok["workflow"].astype(str), ok["model"].astype(str), ok["trial"].astype(str)))
         for w in workflows:
             for m in models:
                 for t in trials:
-                    d = ok[(ok["workflow"].astype(str) == w) & (ok["model"].astype(str) == m)
-                           & (ok["trial"].astype(str) == t)]
-                    if d.empty:
+                    if (w, m, t) not in present:
                         continue
-                    body.append([w, m, label[t]] + [_fmt(*_mean_sd(d[c]), 1) for _, c in gcols])
+                    body.append([w, m, label[t]] + [_fmt(*stat_cell(stats, (w, m, t), c)[:2], 1) for _, c in gcols])
         parts.append(_table(header, body, 3, "results"))
     return "\n".join(parts)
 
@@ -970,7 +1008,8 @@ def _cached_entries(out: Path, key: str) -> list[FigureEntry] | None:
 
 
 def generate_report(study_dir: str | os.PathLike, out: str | os.PathLike | None = None, *,
-                    formats: Sequence[str] = ("png",), force: bool = False) -> tuple[Path, list[FigureEntry]]:
+                    formats: Sequence[str] = ("png",), force: bool = False,
+                    workers: int | None = None) -> tuple[Path, list[FigureEntry]]:
     """:func:`write_report`, also returning the figure entries (files written or notes)."""
     from ..io.atomic import atomic_write_text
 
@@ -986,7 +1025,7 @@ def generate_report(study_dir: str | os.PathLike, out: str | os.PathLike | None 
         if cached is not None:
             return out, cached
     fig_dir = out.parent / FIGURES_FOLDER
-    entries = make_figures(study, fig_dir, formats)
+    entries = make_figures(study, fig_dir, formats, workers)
     atomic_write_text(out, render_html(study, entries, figures_rel=FIGURES_FOLDER, key=key))
     record = {"key": key, "page": out.name, "entries": [
         {"name": e.name, "title": e.title, "caption": e.caption, "note": e.note,
@@ -996,14 +1035,14 @@ def generate_report(study_dir: str | os.PathLike, out: str | os.PathLike | None 
 
 
 def write_report(study_dir: str | os.PathLike, out: str | os.PathLike | None = None, *,
-                 formats: Sequence[str] = ("png",), force: bool = False) -> Path:
+                 formats: Sequence[str] = ("png",), force: bool = False, workers: int | None = None) -> Path:
     """Write the figures and the HTML report of a study folder; return the report's path.
 
     ``out`` is the HTML file (default ``study_dir/report.html``); the figures are written to the
     folder ``figures`` beside it (PNG; ``formats=("png", "svg")`` adds SVG). Everything is
     written atomically. The report is rebuilt only when its inputs changed (their content
     hash, :func:`report_key`, is recorded in the page and in ``figures/report.json``) or
-    when ``force`` is true. Raises :class:`InputFileError` when the folder or its
-    ``results.csv`` is missing.
+    when ``force`` is true. ``workers`` processes draw the figures (see :func:`make_figures`).
+    Raises :class:`InputFileError` when the folder or its ``results.csv`` is missing.
     """
-    return generate_report(study_dir, out, formats=formats, force=force)[0]
+    return generate_report(study_dir, out, formats=formats, force=force, workers=workers)[0]
