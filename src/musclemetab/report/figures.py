@@ -170,11 +170,26 @@ def _new_figure(width: float, height: float, **margins_in):
     return fig
 
 
+def _fewer_ticks(fig) -> None:
+    """At most five major ticks on every axis left to matplotlib's automatic locator.
+
+    Every tick is a set of lines and a text drawn and measured at each save; the default
+    locator puts up to nine on a panel of this size.
+    """
+    from matplotlib.ticker import AutoLocator, MaxNLocator
+
+    for ax in fig.axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            if type(axis.get_major_locator()) is AutoLocator:
+                axis.set_major_locator(MaxNLocator(nbins=4, steps=[1, 2, 2.5, 5, 10]))
+
+
 def _apply_layout(fig) -> None:
-    """Place the panels inside the figure's margins (see :func:`_new_figure`)."""
+    """Place the panels inside the figure's margins (see :func:`_new_figure`); fewer ticks."""
     m = getattr(fig, "_musclemetab_margins", None)
     if m is None or fig.get_layout_engine() is not None:
         return
+    _fewer_ticks(fig)
     w, h = fig.get_size_inches()
     fig.subplots_adjust(left=m["left"] / w, right=1.0 - m["right"] / w, top=1.0 - m["top"] / h,
                         bottom=m["bottom"] / h, wspace=m["wspace"], hspace=m["hspace"])
@@ -350,7 +365,8 @@ def excitations_and_fiber_lengths(
 
     Per muscle, an excitation panel (-) above a fibre-length panel (``lM/lMo``), one line per
     workflow, a vertical line at toe-off; the fibre-length panels shade the plateau of the
-    active force-length curve (0.75-1.05) and draw the start of the descending limb (1.05).
+    active force-length curve (0.75-1.05) and draw the start of the descending limb (1.05);
+    every excitation panel spans 0-1.02 and every fibre-length panel the same range.
     """
     if not solutions:
         raise OptionError("no solution given for the excitation and fibre-length figure")
@@ -393,6 +409,7 @@ def excitations_and_fiber_lengths(
     fig = _new_figure(2.6 * ncol + 0.9, 2 * 2.0 * nmrow + 1.3, left=0.95, bottom=0.8, hspace=0.25)
     axes = fig.subplots(2 * nmrow, ncol, squeeze=False, sharex=True)
     toe_offs = _unique(round(100.0 * (c[1] - c[0]) / (c[2] - c[0]), 6) for c in cyc.values())
+    lm_lims = []
     for k, (label, found) in enumerate(rows):
         i, j = divmod(k, ncol)
         ax_e, ax_l = axes[2 * i, j], axes[2 * i + 1, j]
@@ -420,7 +437,12 @@ def excitations_and_fiber_lengths(
             ax_e.set_ylabel("excitation (-)")
             ax_l.set_ylabel("fibre length\n$l^M/l^M_o$ (-)")
         lo, hi = ax_l.get_ylim()
-        ax_l.set_ylim(min(lo, PLATEAU_BAND[0] - 0.05), max(hi, DESCENDING_LIMB + 0.05))
+        lm_lims.append((min(lo, PLATEAU_BAND[0] - 0.05), max(hi, DESCENDING_LIMB + 0.05)))
+    # one fibre-length scale in every panel, so that the muscles compare at a glance
+    lm_lim = (min(lo for lo, _ in lm_lims), max(hi for _, hi in lm_lims))
+    for k in range(n):
+        i, j = divmod(k, ncol)
+        axes[2 * i + 1, j].set_ylim(*lm_lim)
     for k in range(n, nmrow * ncol):
         i, j = divmod(k, ncol)
         axes[2 * i, j].set_visible(False)

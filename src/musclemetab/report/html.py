@@ -64,8 +64,6 @@ FIGURE_NAMES = (
     "per_muscle_ranked",
 )
 
-#: Packages whose versions the report lists (OpenSim's from study.json only).
-SOFTWARE = ("musclemetab", "numpy", "scipy", "casadi", "pandas", "matplotlib", "opensim")
 
 
 
@@ -688,7 +686,7 @@ def _results_section(study: StudyFolder) -> str:
 
     pivot_section("table-whole-body", "Whole-body metabolic rate (W/kg)", "mean_W_per_kg", 2,
                   "Whole-body average metabolic rate over the gait cycle, W per kg of body mass: both legs "
-                  "(twice the simulated leg), with basal heat; rows: trial and metabolic model; columns: workflow.")
+                  f"({legs_text(study)}), with basal heat; rows: trial and metabolic model; columns: workflow.")
     if "measured_W_per_kg" in ok.columns and ok["measured_W_per_kg"].notna().any():
         meas = group_stats(ok.drop_duplicates(["subject", "trial"]), ["trial"], ["measured_W_per_kg"])
         body = [["measured"] + [_fmt(*stat_cell(meas, t, "measured_W_per_kg")[:2], 2) for t in trials]]
@@ -696,9 +694,14 @@ def _results_section(study: StudyFolder) -> str:
         parts.append(_table([[("", 1)] + [(lab, 1) for lab in tlabels]], body, 1, "results"))
     else:
         parts.append('<p class="note">No measured metabolic rate in the results.</p>')
-    pivot_section("table-cost-of-transport", "Cost of transport (J/(kg·m))", "gross_cost_of_transport_J_per_kg_per_m", 2,
-                  "Metabolic cost of transport: the whole-body rate (W/kg) divided by the walking speed (m/s), "
-                  "in J per kg of body mass per metre.")
+    pivot_section("table-cost-of-transport", "Gross cost of transport (J/(kg·m))",
+                  "gross_cost_of_transport_J_per_kg_per_m", 2,
+                  "Gross metabolic cost of transport: the whole-body rate with basal heat (W/kg) divided by the "
+                  "walking speed (m/s), in J per kg of body mass per metre.")
+    pivot_section("table-net-cost-of-transport", "Net cost of transport (J/(kg·m))",
+                  "net_cost_of_transport_J_per_kg_per_m", 2,
+                  "Net metabolic cost of transport: the whole-body rate without basal heat (W/kg) divided by the "
+                  "walking speed (m/s).")
 
     # phase shares
     parts.append('<h3 id="table-phase-shares">Stance and swing shares (%)</h3>')
@@ -810,46 +813,90 @@ def _failures_section(study: StudyFolder) -> str:
     return "\n".join(parts)
 
 
-def software_versions() -> dict[str, str]:
-    """Versions of the packages in this process, read from their metadata (none is imported)."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    from .. import __version__
-
-    out = {}
-    for name in SOFTWARE:
-        if name == "musclemetab":
-            out[name] = __version__
-            continue
-        try:
-            out[name] = version(name)
-        except PackageNotFoundError:
-            out[name] = "not installed"
-    return out
-
-
-def _installed(name: str) -> str:
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version(name)
-    except PackageNotFoundError:
-        return "not installed"
-
-
 def _software_section(study: StudyFolder) -> str:
+    from ..study.runner import software_versions
+
     run = study.settings.get("software") if isinstance(study.settings.get("software"), dict) else {}
     now = software_versions()
-    names = list(SOFTWARE) + [k for k in run if k not in SOFTWARE]
-    body = []
-    for n in names:
-        body.append([n, str(run.get(n, "not recorded by the run")), now.get(n) or _installed(n)])
+    names = list(now) + [k for k in run if k not in now]
+    body = [[n, str(run.get(n, "not recorded by the run")), now.get(n, "not installed here")] for n in names]
     parts = ['<h2 id="software">Software</h2>',
              "<p>Versions recorded by the study run (study.json) and those installed where this report was "
              "written (read from the packages' metadata; none is imported). OpenSim is used only by the study "
-             "run (muscle geometry, states export).</p>",
+             "run (muscle geometry, states export); dask and distributed only to run units on a cluster.</p>",
              _table([[("package", 1), ("study run", 1), ("report", 1)]], body, 1, "software")]
     return "\n".join(parts)
+
+
+#: Solver outcome fields of a unit's summary.json shown in the report: (key, heading, format).
+RUN_FIELDS = (
+    ("status", "solver status", "{}"),
+    ("iterations", "iterations", "{:d}"),
+    ("solve_time_s", "solve time (s)", "{:.2f}"),
+    ("max_constraint_violation", "max. constraint violation", "{:.1e}"),
+    ("max_moment_residual_Nm", "max. moment residual (N·m)", "{:.1e}"),
+    ("reserve_share_of_peak_moment", "reserve / peak moment", "{:.4f}"),
+)
+
+
+def solver_runs(study: StudyFolder) -> list[list[str]]:
+    """One row per unit of the results: subject, trial, workflow, side, then the fields of
+    :data:`RUN_FIELDS` read from the unit's ``summary.json`` (the solver's run record);
+    ``–`` where a value is not recorded, and the reason where the file cannot be read."""
+    from ..io.jsonfile import read_json_object
+
+    rows = []
+    units = study.results.drop_duplicates(["subject", "trial", "workflow"]) if not study.results.empty else []
+    for _, r in (units.iterrows() if len(units) else []):
+        head = [str(r["subject"]), str(r["trial"]), str(r["workflow"])]
+        path = study.unit_folder(r) / "summary.json"
+        try:
+            rec = read_json_object(path, missing="missing", remedy="run the unit again")
+        except MusclemetabError as exc:
+            rows.append(head + ["–", _short(study, exc)] + ["–"] * (len(RUN_FIELDS) - 1))
+            continue
+        cells = []
+        for key, _, fmt in RUN_FIELDS:
+            v = rec.get(key)
+            try:
+                cells.append("–" if v is None else fmt.format(v))
+            except (TypeError, ValueError):
+                cells.append(str(v))
+        rows.append(head + [_SIDES.get(str(rec.get("side", "r")), str(rec.get("side")))] + cells)
+    return rows
+
+
+def _runs_section(study: StudyFolder) -> str:
+    rows = solver_runs(study)
+    parts = ['<details id="solver-runs"><summary><h2>Solver runs</h2></summary>',
+             "<p>The muscle redundancy solve of every unit, from its summary.json: the solver's status, "
+             "its iterations and time, and how well the solution meets the dynamics (largest constraint "
+             "violation, largest joint-moment residual) with how much of the peak joint moment the reserve "
+             "actuators carry.</p>"]
+    if rows:
+        parts.append(_table([[("subject", 1), ("trial", 1), ("workflow", 1), ("side", 1)]
+                             + [(h, 1) for _, h, _ in RUN_FIELDS]], rows, 3, "runs"))
+    else:
+        parts.append("<p>No unit in the results.</p>")
+    parts.append("</details>")
+    return "\n".join(parts)
+
+
+_SIDES = {"r": "right", "l": "left"}
+
+
+def legs_text(study: StudyFolder) -> str:
+    """How the whole-body rate counts the legs: the solved leg of each subject, doubled."""
+    subjects = study.settings.get("subjects") if isinstance(study.settings.get("subjects"), dict) else {}
+    sides = {}
+    for name in _subjects(study):
+        rec = subjects.get(name) if isinstance(subjects.get(name), dict) else {}
+        sides.setdefault(_SIDES.get(str(rec.get("side", "r")), str(rec.get("side"))), []).append(name)
+    if len(sides) == 1:
+        side = next(iter(sides))
+        return f"one leg doubled (the {side} leg was solved)"
+    each = "; ".join(f"the {side} leg for {', '.join(names)}" for side, names in sides.items())
+    return f"one leg doubled (solved: {each})"
 
 
 def _method_section(study: StudyFolder) -> str:
@@ -860,16 +907,17 @@ def _method_section(study: StudyFolder) -> str:
         "none": "without basal heat",
     }.get(str(basal), f"basal rule '{basal}'")
     text = (
-        "For every subject, trial and workflow, muscle-tendon lengths and moment arms (m) of the right leg "
+        "For every subject, trial and workflow, muscle-tendon lengths and moment arms (m) of the solved leg "
         "were computed with OpenSim from the inverse kinematics; the muscle redundancy problem with compliant "
         "tendons was solved by direct collocation to reproduce the inverse-dynamics joint moments (N·m) with "
         "minimal effort (workflows EFFORT-GEN: generic passive and tendon properties; EFFORT-CAL: calibrated "
         "passive properties; EFFORT-TEN: calibrated passive properties and personalised tendon stiffness; "
         "EMG-TEN: EMG-informed). The metabolic models (UM03, BH04, HO06, LW07, UM10, UC16) give each muscle's "
         "metabolic rate (W) at every node of the gait cycle (initial contact to the next initial contact of the "
-        "same leg). The whole-body average rate (W/kg) is twice the one-leg sum of the muscle rates averaged "
-        f"over the cycle and divided by the body mass, {basal_txt}; the cost of transport (J/(kg·m)) is that "
-        "rate divided by the walking speed (m/s). Phase shares are the stance (initial contact to toe-off) and "
+        "same leg). The whole-body average rate (W/kg) counts both legs as "
+        f"{legs_text(study)}: twice the one-leg sum of the muscle rates averaged over the cycle, divided by the "
+        f"body mass, {basal_txt}; the gross cost of transport (J/(kg·m)) is "
+        "that rate divided by the walking speed (m/s), the net cost the same without the basal heat. Phase shares are the stance (initial contact to toe-off) and "
         "swing parts of the cycle's one-leg muscle energy (%, without basal heat). Group shares distribute "
         "each muscle's rate over the degrees of freedom it spans in proportion to the absolute moment arms, "
         "and to the group given by the sign of the moment arm (%). Estimated and measured rates, and shares "
@@ -916,6 +964,8 @@ def render_html(study: StudyFolder, entries: Sequence[FigureEntry], figures_rel:
                 key: str | None = None) -> str:
     """The report page as a string (figures embedded from the PNG files of ``entries``;
     ``key``: the content key of the inputs, recorded in the page, see :func:`report_key`)."""
+    from .. import __version__
+
     ok = study.ok
     n_units = len(study.results.drop_duplicates(["subject", "trial", "workflow"])) if not study.results.empty else 0
     n_ok = len(ok.drop_duplicates(["subject", "trial", "workflow"])) if not ok.empty else 0
@@ -928,10 +978,11 @@ def render_html(study: StudyFolder, entries: Sequence[FigureEntry], figures_rel:
                f"{drawn} of {len(entries)} figures drawn.")
     toc = "".join(f'<li><a href="#{a}">{_esc(t)}</a></li>' for a, t in (
         ("figures", "Figures"), ("results", "Results (tables)"), ("per-muscle", "Per-muscle results"),
-        ("settings", "Settings"), ("method", "Method"), ("failures", "Failures"), ("software", "Software")))
+        ("settings", "Settings"), ("method", "Method"), ("failures", "Failures"), ("solver-runs", "Solver runs"),
+        ("software", "Software")))
     body = "\n".join([
         f"<h1>{_esc(title)}</h1>",
-        f'<p class="meta">Written {_esc(when)} by musclemetab {_esc(software_versions()["musclemetab"])}; '
+        f'<p class="meta">Written {_esc(when)} by musclemetab {_esc(__version__)}; '
         "paths are relative to the study folder (the folder holding this page).</p>",
         f"<p>{_esc(summary)}</p>",
         _estimation_notes(study),
@@ -943,6 +994,7 @@ def render_html(study: StudyFolder, entries: Sequence[FigureEntry], figures_rel:
         _settings_section(study),
         _method_section(study),
         _failures_section(study),
+        _runs_section(study),
         _software_section(study),
         f'<meta name="musclemetab-report-key" content="{_esc(key)}">' if key else "",
     ])
@@ -959,8 +1011,10 @@ def report_key(study_dir: str | os.PathLike, formats: Sequence[str] = ("png",)) 
     """SHA-256 of everything the report is drawn from.
 
     The study's tables (``results.csv``, ``study.json``, ``failures.csv``, ``per_muscle.csv``),
-    every unit's ``unit.json`` (which records the hash of each of the unit's files), the
-    figure formats, the package version and the source of the report's own modules.
+    the study file ``study.json`` names as its source (``study.toml``), every unit's
+    ``unit.json`` (which records the hash of each of the unit's files, ``summary.json``
+    among them), the figure formats, the package version and the source of the report's
+    own modules.
     """
     import hashlib
 
@@ -978,7 +1032,25 @@ def report_key(study_dir: str | os.PathLike, formats: Sequence[str] = ("png",)) 
     for f in files:
         digest = file_sha256(f) if f.is_file() else "absent"
         h.update(f"{f.relative_to(path).as_posix()} {digest}\n".encode())
+    source = _study_file(path)
+    if source is not None:  # the study file the settings came from (e.g. study.toml), wherever it is
+        h.update(f"study file {file_sha256(source) if source.is_file() else 'absent'}\n".encode())
     return h.hexdigest()
+
+
+def _study_file(study_dir: Path) -> Path | None:
+    """The study file recorded as ``source`` in ``study.json`` (relative to the study folder
+    when not absolute), or ``None``."""
+    import json as _json
+
+    try:
+        source = _json.loads((study_dir / STUDY_JSON).read_text(encoding="utf-8")).get("source")
+    except (OSError, ValueError, AttributeError):
+        return None
+    if not isinstance(source, str) or not source.strip():
+        return None
+    p = Path(source)
+    return p if p.is_absolute() else study_dir / p
 
 
 def _cached_entries(out: Path, key: str) -> list[FigureEntry] | None:
