@@ -6,9 +6,10 @@ Every function takes DataFrames or solver objects, returns a :class:`matplotlib.
 :class:`~musclemetab.errors.OptionError` when its data cannot make the figure (no measured
 rates, a model absent from the table, ...); the report shows the message instead.
 
-Colours are fixed by name: each metabolic model has one colour (the same as in the Figure-2
-plot of :mod:`musclemetab.metabolics.figure2`), each workflow one colour and each muscle group
-one colour, in every figure. Names not known in advance get a colour derived from the name,
+Colours are fixed by name, from one place (:mod:`musclemetab.colours`, the Okabe-Ito palette
+that colour-blind readers can tell apart): each metabolic model has one colour (the same as in
+the Figure-2 plot of :mod:`musclemetab.metabolics.figure2`), each workflow one colour and each
+muscle group one colour, in every figure. Names not known in advance get a colour derived from the name,
 so they too keep it from one figure to the next.
 
 Units: metabolic rates in W (one leg, summed muscles, no basal heat) over the gait cycle,
@@ -30,7 +31,9 @@ import numpy as np
 
 from ..analysis.groups import GROUP_NAMES as _GROUP_NAMES
 from ..analysis.groups import GROUPS_WITH_OTHER, OTHER
-from ..metabolics.registry import MODEL_COLOURS as _MODEL_COLOURS
+from ..colours import GROUP_COLOURS as _GROUP_COLOURS
+from ..colours import MODEL_COLOURS as _MODEL_COLOURS
+from ..colours import WORKFLOW_COLOURS as _WORKFLOW_COLOURS
 from ..errors import MusclemetabError, OptionError, UnknownMuscleError
 
 __all__ = [
@@ -60,35 +63,16 @@ __all__ = [
     "stat_cell",
 ]
 
-#: One colour per metabolic model (the package's, as in the Figure-2 plot).
+#: One colour per metabolic model, per workflow and per muscle group (:mod:`musclemetab.colours`:
+#: the Okabe-Ito palette, safe for colour-blind readers).
 MODEL_COLOURS = _MODEL_COLOURS
-
-#: One colour per workflow of the muscle redundancy solver.
-WORKFLOW_COLOURS = {
-    "effort-gen": "#4d4d4d",
-    "effort-cal": "#e08214",
-    "effort-ten": "#2166ac",
-    "emg-ten": "#b2182b",
-}
+WORKFLOW_COLOURS = _WORKFLOW_COLOURS
+GROUP_COLOURS = _GROUP_COLOURS
 
 #: Muscle function groups (``docs/analysis.md``): ankle, knee, hip, then the remainder.
 GROUPS = GROUPS_WITH_OTHER
 GROUP_NAMES = {**_GROUP_NAMES, OTHER: "other"}
 
-#: One colour per group; the two groups of a degree of freedom share a hue.
-GROUP_COLOURS = {
-    "PF": "#08519c",
-    "DF": "#9ecae1",
-    "KE": "#a63603",
-    "KF": "#fdae6b",
-    "HE": "#006d2c",
-    "HF": "#a1d99b",
-    "HAD": "#a50f15",
-    "HAB": "#fc9272",
-    "HIR": "#54278f",
-    "HER": "#bcbddc",
-    "other": "#969696",
-}
 
 def default_muscles(available: Sequence[str], side: str = "r") -> list[str]:
     """Muscles of the excitation and fibre-length figure: the report list of the anatomical
@@ -202,6 +186,16 @@ def _panel_title(ax, text: str, **kw) -> None:
     every draw to dodge them; these panels have none on top, so the measurement is skipped.
     """
     ax.set_title(text, y=1.0, **kw)
+
+
+def _legend_below(fig, handles, ncol: int, fontsize: float) -> None:
+    """The figure's legend centred below the panels, the bottom margin grown to fit its rows
+    under the axis labels."""
+    rows = int(math.ceil(len(handles) / max(ncol, 1)))
+    m = getattr(fig, "_musclemetab_margins", None)
+    if m is not None:
+        m["bottom"] = max(m["bottom"], 0.55 + rows * fontsize / 72.0 * 1.7)
+    fig.legend(handles=handles, loc="lower center", ncol=ncol, fontsize=fontsize, frameon=False)
 
 
 def _grid(n: int, max_cols: int = 3) -> tuple[int, int]:
@@ -460,7 +454,7 @@ def excitations_and_fiber_lengths(
         Patch(color="0.88", label=f"plateau {PLATEAU_BAND[0]:g}-{PLATEAU_BAND[1]:g}"),
         Line2D([], [], color="0.35", lw=0.8, ls="--", label=f"descending limb > {DESCENDING_LIMB:g}"),
     ]
-    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 8), fontsize=9, frameon=False)
+    _legend_below(fig, handles, min(len(handles), 8), 9)
     fig.suptitle(title or "Muscle excitation and normalised fibre length over the gait cycle", fontsize=11)
     return fig
 
@@ -622,7 +616,7 @@ def group_rates_over_cycle(timeseries, toe_off_pct: float, models: Sequence[str]
 
     handles = [Line2D([], [], color=group_colour(g), lw=1.5, label=f"{g} ({GROUP_NAMES.get(g, g)})") for g in groups]
     handles.append(Line2D([], [], color="k", lw=0.8, ls=":", label=f"toe-off ({to:.1f} %)"))
-    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 6), fontsize=8, frameon=False)
+    _legend_below(fig, handles, min(len(handles), 6), 8)
     fig.suptitle(title or "Metabolic rate of the muscle groups over the gait cycle (one leg, no basal heat)",
                  fontsize=11)
     return fig
@@ -682,7 +676,7 @@ def whole_body_over_cycle(timeseries_by_trial: Mapping[str, object], speeds: Map
     if toe_off_pct:
         handles.append(Line2D([], [], color="0.3", lw=1.5, marker="|", ls="", markersize=9,
                               label="toe-off (marks at the bottom)"))
-    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 8), fontsize=8, frameon=False)
+    _legend_below(fig, handles, min(len(handles), 8), 8)
     fig.suptitle(title or "Whole-body metabolic rate over the gait cycle across walking speeds "
                  "(one leg, summed muscles, no basal heat)", fontsize=11)
     return fig
@@ -843,7 +837,7 @@ def group_shares(results, *, workflows: Sequence[str] | None = None, models: Seq
     from matplotlib.patches import Patch
 
     handles = [Patch(color=group_colour(g), label=f"{g} ({GROUP_NAMES.get(g, g)})") for g in groups]
-    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 6), fontsize=8, frameon=False)
+    _legend_below(fig, handles, min(len(handles), 6), 8)
     fig.suptitle(title or "Shares of the muscle groups in the cycle's muscle metabolic energy "
                  "(%, one leg, no basal heat; mean over subjects)", fontsize=11)
     return fig
@@ -895,7 +889,7 @@ def rates_against_speed(results, *, workflow: str | None = None, models: Sequenc
     handles = [Line2D([], [], color="k", lw=1.8, marker="o", label="whole body (both legs, no basal)")]
     handles += [Line2D([], [], color=group_colour(g), lw=1.2, marker="o", label=f"{g} ({GROUP_NAMES.get(g, g)})")
                 for g in groups]
-    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 6), fontsize=8, frameon=False)
+    _legend_below(fig, handles, min(len(handles), 6), 8)
     fig.suptitle(title or f"Whole-body and muscle-group metabolic rates against walking speed ({wf}; W/kg of body "
                  "mass, both legs, no basal heat; mean over subjects)", fontsize=11)
     return fig
@@ -959,7 +953,7 @@ def per_muscle_ranked(per_muscle, *, workflow: str | None = None, models: Sequen
         sp = d.assign(trial=d["trial"].astype(str)).groupby("trial")["speed_m_per_s"].mean().to_dict()
     handles = [Patch(color=colour[t], label=f"{t} ({sp[t]:.2f} m/s)" if np.isfinite(sp.get(t, np.nan)) else t)
                for t in trials]
-    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 8), fontsize=8, frameon=False)
+    _legend_below(fig, handles, min(len(handles), 8), 8)
     fig.suptitle(title or f"The {top} muscles with the largest metabolic rate, across walking speeds ({wf}; "
                  "W/kg of body mass, one leg, no basal heat; mean over subjects)", fontsize=11)
     return fig
