@@ -55,6 +55,7 @@ __all__ = [
     "group_rates_over_cycle",
     "whole_body_over_cycle",
     "phase_shares",
+    "phase_pies",
     "group_shares",
     "per_muscle_ranked",
     "rates_against_speed",
@@ -783,6 +784,83 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
     ax_s.legend(fontsize=7, frameon=False)
     fig.suptitle(title or "Relative phase cost: stance and swing shares of the muscle metabolic energy "
                  "(one leg, no basal heat)", fontsize=11)
+    return fig
+
+
+def phase_pies(results, *, workflow: str | None = None, models: Sequence[str] | None = None,
+               title: str | None = None):
+    """Stance and swing shares as pies whose area is proportional to the total cost.
+
+    One pie per model (row) and trial (column, in speed order) for ``workflow`` (default
+    :func:`main_workflow`): the stance wedge in the model's colour, the swing wedge lighter
+    (``stance_energy_share_pct``, ``swing_energy_share_pct``; one leg, no basal heat), the
+    pie's area proportional to the whole-body rate without basal heat
+    (``mean_W_per_kg_no_basal``, W/kg); means over subjects. The largest pie has radius
+    0.46 in units of the grid spacing.
+    """
+    from ..colours import lighter
+
+    res = _ok_rows(results)
+    _require_columns(res, ("stance_energy_share_pct", "swing_energy_share_pct", "mean_W_per_kg_no_basal"),
+                     "the results table")
+    if res.empty:
+        raise OptionError("no successful unit in the results")
+    wfs = _ordered_workflows(res["workflow"])
+    wf = main_workflow(wfs) if workflow is None else str(workflow)
+    d = res[res["workflow"].astype(str) == wf]
+    if d.empty:
+        raise OptionError(f"workflow '{wf}' is not in the results; it has {', '.join(wfs)}")
+    models = _ordered_models(d["model"]) if models is None else [str(m) for m in models]
+    trials = trial_order(d)
+    cols = ["stance_energy_share_pct", "swing_energy_share_pct", "mean_W_per_kg_no_basal"]
+    stats = group_stats(d, ["model", "trial"], cols + (["speed_m_per_s"] if "speed_m_per_s" in d.columns else []))
+    cost = {(m, t): stat_cell(stats, (m, t), "mean_W_per_kg_no_basal")[0] for m in models for t in trials}
+    finite = [v for v in cost.values() if np.isfinite(v) and v > 0]
+    if not finite:
+        raise OptionError("no positive whole-body rate (mean_W_per_kg_no_basal) to size the pies")
+    top = max(finite)
+    pitch = 1.3  # rows: trials; columns: models; the text under each pie fits between the rows
+    fig = _new_figure(1.5 * len(models) + 1.3, 1.5 * pitch * len(trials) + 1.1, left=1.0, right=0.2, bottom=0.3,
+                      top=0.75)
+    ax = fig.add_subplot()
+    for i, t in enumerate(trials):
+        y = pitch * (len(trials) - 1 - i)
+        for j, m in enumerate(models):
+            colour = model_colour(m)
+            st = stat_cell(stats, (m, t), "stance_energy_share_pct")[0]
+            sw = stat_cell(stats, (m, t), "swing_energy_share_pct")[0]
+            v = cost[(m, t)]
+            if not (np.isfinite(st) and np.isfinite(sw) and np.isfinite(v) and v > 0):
+                continue
+            r = 0.46 * math.sqrt(v / top)
+            wedges, *_ = ax.pie([st, sw], center=(j, y), radius=r, colors=[colour, lighter(colour, 0.6)],
+                                startangle=90, counterclock=False,
+                                wedgeprops={"linewidth": 0.6, "edgecolor": "white"})
+            wedges[0].set_gid(f"stance:{m}:{t}")
+            wedges[1].set_gid(f"swing:{m}:{t}")
+            ax.text(j, y - 0.49, f"{v:.2f} W/kg, swing {sw:.0f} %", ha="center", va="top", fontsize=6.5)
+    ax.set_aspect("equal")
+    ax.set_xlim(-0.55, len(models) - 0.45)
+    ax.set_ylim(-0.75, pitch * (len(trials) - 1) + 0.5)
+    ax.set_frame_on(False)
+    speed = "speed_m_per_s" in d.columns
+    labels = []
+    for t in trials:
+        sp = next((x for x in (stat_cell(stats, (m, t), "speed_m_per_s")[0] for m in models) if np.isfinite(x)),
+                  math.nan) if speed else math.nan
+        labels.append(f"{t}\n{sp:.2f} m/s" if np.isfinite(sp) else t)
+    ax.set_yticks([pitch * (len(trials) - 1 - i) for i in range(len(trials))], labels, fontsize=8)
+    ax.set_xticks(range(len(models)), models, fontsize=9)
+    ax.xaxis.tick_top()
+    for lab in ax.get_xticklabels():
+        lab.set_color(model_colour(lab.get_text()))
+        lab.set_fontweight("bold")
+    ax.tick_params(length=0)
+    import textwrap
+
+    heading = title or (f"Stance (dark) and swing (light) shares of the muscle energy; pie area proportional to the "
+                        f"whole-body rate without basal heat (W/kg; {wf}; mean over subjects)")
+    fig.suptitle(textwrap.fill(heading, int(12 * fig.get_figwidth())), fontsize=10)
     return fig
 
 

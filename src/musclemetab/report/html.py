@@ -59,6 +59,7 @@ FIGURE_NAMES = (
     "group_rates_over_cycle",
     "whole_body_over_cycle",
     "phase_shares",
+    "phase_pies",
     "group_shares",
     "rates_against_speed",
     "per_muscle_ranked",
@@ -271,6 +272,7 @@ FIGURE_TITLES = {
     "group_rates_over_cycle": "Metabolic rate of the muscle groups over the gait cycle",
     "whole_body_over_cycle": "Whole-body metabolic rate over the gait cycle across speeds",
     "phase_shares": "Stance and swing shares",
+    "phase_pies": "Stance and swing shares, scaled by the total cost",
     "group_shares": "Muscle-group shares",
     "per_muscle_ranked": "The muscles costing most energy, across speeds",
     "rates_against_speed": "Whole-body and muscle-group rates against walking speed",
@@ -418,6 +420,14 @@ def _figure_builders(study: StudyFolder) -> dict[str, Callable[[], tuple[object,
                "with the repeated-measures slope (% per m/s).")
         return fig, cap
 
+    def fig5b():
+        fig = F.phase_pies(ok, workflow=main_wf, models=models)
+        cap = (f"Workflow {main_wf}. Each pie splits the cycle's muscle metabolic energy (one leg, without "
+               "basal heat) into stance (dark) and swing (light); its area is proportional to the whole-body "
+               "rate without basal heat (W/kg of body mass, both legs; printed under the pie), so the pies "
+               "grow with walking speed (columns) and differ between models (rows); means over subjects.")
+        return fig, cap
+
     def fig6():
         fig = F.group_shares(ok, workflows=workflows, models=models)
         cap = ("Share of each muscle group in the cycle's muscle metabolic energy (%, one leg, without basal "
@@ -454,6 +464,7 @@ def _figure_builders(study: StudyFolder) -> dict[str, Callable[[], tuple[object,
         "group_rates_over_cycle": fig3,
         "whole_body_over_cycle": fig4,
         "phase_shares": fig5,
+        "phase_pies": fig5b,
         "group_shares": fig6,
         "per_muscle_ranked": fig7,
         "rates_against_speed": fig8,
