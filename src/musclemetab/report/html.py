@@ -839,41 +839,58 @@ def _software_section(study: StudyFolder) -> str:
     return "\n".join(parts)
 
 
-#: Solver outcome fields of a unit's summary.json shown in the report: (key, heading, format).
-RUN_FIELDS = (
-    ("status", "solver status", "{}"),
-    ("iterations", "iterations", "{:d}"),
-    ("solve_time_s", "solve time (s)", "{:.2f}"),
-    ("max_constraint_violation", "max. constraint violation", "{:.1e}"),
-    ("max_moment_residual_Nm", "max. moment residual (N·m)", "{:.1e}"),
-    ("reserve_share_of_peak_moment", "reserve / peak moment", "{:.4f}"),
+#: Columns of the solver-run table: (heading, format) of the run record's status, iterations,
+#: solve time and largest constraint violation, then of the solution's moment residual and
+#: reserve share (summary.json).
+RUN_COLUMNS = (
+    ("solver status", "{}"),
+    ("iterations", "{:d}"),
+    ("solve time (s)", "{:.2f}"),
+    ("max. constraint violation", "{:.1e}"),
+    ("max. moment residual (N·m)", "{:.1e}"),
+    ("reserve / peak moment", "{:.4f}"),
 )
 
 
 def solver_runs(study: StudyFolder) -> list[list[str]]:
-    """One row per unit of the results: subject, trial, workflow, side, then the fields of
-    :data:`RUN_FIELDS` read from the unit's ``summary.json`` (the solver's run record);
-    ``–`` where a value is not recorded, and the reason where the file cannot be read."""
+    """One row per unit of the results and of the failures: subject, trial, workflow, side,
+    then :data:`RUN_COLUMNS` from the unit's ``summary.json`` (its
+    :class:`~musclemetab.redundancy.record.RunRecord` and the solution's residuals); ``–``
+    where a value is not recorded, and why where the file cannot be read."""
     from ..io.jsonfile import read_json_object
+    from ..redundancy.record import RunRecord
 
+    units = []
+    for table in (study.results, study.failures):
+        for r in table.drop_duplicates(["subject", "trial", "workflow"]).to_dict("records") if len(table) else []:
+            key = (str(r["subject"]), str(r["trial"]), str(r["workflow"]))
+            if key not in [u[0] for u in units]:
+                units.append((key, r))
     rows = []
-    units = study.results.drop_duplicates(["subject", "trial", "workflow"]) if not study.results.empty else []
-    for _, r in (units.iterrows() if len(units) else []):
-        head = [str(r["subject"]), str(r["trial"]), str(r["workflow"])]
+    for key, r in units:
+        if not key[1] or key[1] == "nan":  # a failure of every trial of a subject: no unit folder
+            continue
         path = study.unit_folder(r) / "summary.json"
         try:
-            rec = read_json_object(path, missing="missing", remedy="run the unit again")
+            summary = read_json_object(path, missing="missing", remedy="run the unit again")
         except MusclemetabError as exc:
-            rows.append(head + ["–", _short(study, exc)] + ["–"] * (len(RUN_FIELDS) - 1))
+            rows.append(list(key) + ["–", _short(study, exc)] + ["–"] * (len(RUN_COLUMNS) - 1))
             continue
+        run = RunRecord.from_dict(summary)
+        values = (run.status, run.iterations if run.iterations >= 0 else None, run.solve_time_s,
+                  run.max_constraint_violation, summary.get("max_moment_residual_Nm"),
+                  summary.get("reserve_share_of_peak_moment"))
         cells = []
-        for key, _, fmt in RUN_FIELDS:
-            v = rec.get(key)
+        for (_, fmt), v in zip(RUN_COLUMNS, values):
+            if v is None or (isinstance(v, float) and not np.isfinite(v)):
+                cells.append("–")
+                continue
             try:
-                cells.append("–" if v is None else fmt.format(v))
+                cells.append(fmt.format(v))
             except (TypeError, ValueError):
                 cells.append(str(v))
-        rows.append(head + [_SIDES.get(str(rec.get("side", "r")), str(rec.get("side")))] + cells)
+        side = str(summary.get("side", "r"))
+        rows.append(list(key) + [_SIDES.get(side, side)] + cells)
     return rows
 
 
@@ -886,7 +903,7 @@ def _runs_section(study: StudyFolder) -> str:
              "actuators carry.</p>"]
     if rows:
         parts.append(_table([[("subject", 1), ("trial", 1), ("workflow", 1), ("side", 1)]
-                             + [(h, 1) for _, h, _ in RUN_FIELDS]], rows, 3, "runs"))
+                             + [(h, 1) for h, _ in RUN_COLUMNS]], rows, 3, "runs"))
     else:
         parts.append("<p>No unit in the results.</p>")
     parts.append("</details>")
