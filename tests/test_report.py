@@ -746,4 +746,4 @@ def test_parallel_drawing_writes_the_same_files(tmp_path):
     assert len(pages[1]) == len(FIGURE_NAMES) - 1  # every figure but the one needing solutions
     assert pages[1] == pages[2]
     with pytest.raises(OptionError, match="workers"):
-        generate_report(study, tmp_path / "w0" / "report.html", workers=0)
+        generate_report(root, tmp_path / "w0" / "report.html", workers=0)

@@ -518,7 +518,7 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
     fig_dir = Path(fig_dir)
     workers = default_workers() if workers is None else int(workers)
     if workers < 1:
-        raise OptionError(f"--workers must be at least 1, not {workers}")
+        raise OptionError(f"workers (--workers) must be at least 1, not {workers}")
     builders = _figure_builders(study)
     drawn = [n for n in FIGURE_NAMES if not isinstance(builders[n], str)]
     entries: dict[str, FigureEntry] = {}
