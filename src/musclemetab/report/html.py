@@ -54,6 +54,7 @@ REQUIRED_COLUMNS = ("subject", "trial", "workflow", "model", "status", "mean_W_p
 
 #: File names (without extension) of the figures, in the order of the report.
 FIGURE_NAMES = (
+    "figure2_soleus",
     "excitations_fiber_lengths",
     "estimated_vs_measured",
     "group_rates_over_cycle",
@@ -267,6 +268,7 @@ def _short(study: StudyFolder, exc: BaseException) -> str:
 
 #: The title of each figure in the report.
 FIGURE_TITLES = {
+    "figure2_soleus": "The metabolic models on a soleus (the paper's Figure 2)",
     "excitations_fiber_lengths": "Muscle excitations and normalised fibre lengths",
     "estimated_vs_measured": "Estimated vs measured whole-body metabolic rate",
     "group_rates_over_cycle": "Metabolic rate of the muscle groups over the gait cycle",
@@ -287,6 +289,12 @@ def _figure_builders(study: StudyFolder) -> dict[str, Callable[[], tuple[object,
     ok = study.ok
     if ok.empty:
         return {name: "no unit of the study succeeded: nothing to draw." for name in FIGURE_NAMES}
+
+    def fig_soleus():
+        from ..metabolics.figure2 import figure2
+
+        return figure2(), FIGURE2_CAPTION
+
     workflows = [w for w in _workflows(study) if w in set(ok["workflow"].astype(str))]
     models = [m for m in _models(study) if m in set(ok["model"].astype(str))]
     trial = _preferred(study, ok)
@@ -459,6 +467,7 @@ def _figure_builders(study: StudyFolder) -> dict[str, Callable[[], tuple[object,
         return fig, cap
 
     builders = {
+        "figure2_soleus": fig_soleus,
         "excitations_fiber_lengths": fig1,
         "estimated_vs_measured": fig2,
         "group_rates_over_cycle": fig3,
@@ -485,12 +494,67 @@ def _draw_figure(study: StudyFolder, fig_dir: Path, formats: Sequence[str], name
         build = _figure_builders(study)[name]
     if isinstance(build, str):
         return FigureEntry(name, FIGURE_TITLES[name], note=build)
+    cache = _figure_cache(name, formats)
+    if cache is not None and all(p.is_file() for p in cache.values()):
+        from ..io.atomic import atomic_write_bytes
+
+        paths = {fmt: atomic_write_bytes(fig_dir / f"{name}.{fmt}", p.read_bytes()) for fmt, p in cache.items()}
+        return FigureEntry(name, FIGURE_TITLES[name], caption=FIGURE2_CAPTION, paths=paths)
     try:
         fig, caption = build()
     except MusclemetabError as exc:
         return FigureEntry(name, FIGURE_TITLES[name], note=_short(study, exc))
-    return FigureEntry(name, FIGURE_TITLES[name], caption=caption,
-                       paths=save_figure(fig, fig_dir, name, formats=formats))
+    paths = save_figure(fig, fig_dir, name, formats=formats)
+    if cache is not None:
+        _store_in_cache(paths, cache)
+    return FigureEntry(name, FIGURE_TITLES[name], caption=caption, paths=paths)
+
+
+FIGURE2_CAPTION = (
+    "The metabolic rate (W) and efficiency of one soleus under each energy model, in steady states "
+    "(excitation equal to activation) at four activations: over the fibre velocity at the optimal "
+    "length and over the fibre length at a slow shortening; the last row compares the models at full "
+    "activation. The settings and the open choices are printed on the figure (docs/metabolics.md). It "
+    "depends on no data of the study: it is drawn once per version of the models and kept in the "
+    "package's cache."
+)
+
+
+def _figure_cache(name: str, formats: Sequence[str]) -> dict[str, Path] | None:
+    """The cache files of a figure that depends only on the package (Figure 2), keyed by the
+    source of the modules drawing it and the matplotlib version; ``None`` for other figures."""
+    if name != "figure2_soleus":
+        return None
+    import hashlib
+    from importlib.metadata import version
+
+    from .. import colours, metabolics, muscle
+    from ..cache import default_cache_dir
+
+    h = hashlib.sha256(f"{name} matplotlib {version('matplotlib')}\n".encode())
+    sources = [Path(colours.__file__)]
+    for package in (metabolics, muscle):
+        sources += sorted(Path(package.__file__).parent.glob("*.py"))
+    for src in sources:
+        h.update(src.name.encode() + b"\0" + src.read_bytes())
+    folder = default_cache_dir().parent / "figures"
+    return {fmt: folder / f"{name}-{h.hexdigest()[:32]}.{fmt}" for fmt in formats}
+
+
+def _store_in_cache(paths: dict, cache: dict) -> None:
+    """Copy a drawn figure's files into the cache; a cache that cannot be written is skipped."""
+    import warnings
+
+    from ..errors import CacheWarning
+    from ..io.atomic import atomic_write_bytes
+
+    try:
+        for fmt, target in cache.items():
+            target.parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_bytes(target, Path(paths[fmt]).read_bytes())
+    except OSError as exc:
+        warnings.warn(f"figure cache {target.parent}: not written ({exc}); the figure is drawn again next time",
+                      CacheWarning, stacklevel=3)
 
 
 def default_workers() -> int:
