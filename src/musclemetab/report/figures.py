@@ -896,13 +896,14 @@ def group_shares(results, *, workflows: Sequence[str] | None = None, models: Seq
     for i, w in enumerate(workflows):
         for j, m in enumerate(models):
             ax = axes[i, j]
-            bottom = np.zeros(len(trials))
-            for g, c in zip(groups, cols):
-                vals = np.array([stat_cell(stats, (w, m, t), c)[0] for t in trials])
-                vals = np.nan_to_num(vals)
-                ax.bar(np.arange(len(trials)), vals, bottom=bottom, width=0.75, color=group_colour(g),
-                       edgecolor="white", linewidth=0.4, label=g, gid=f"group:{g}")
-                bottom += vals
+            # the stacks of every trial in one call: a bar per group and trial, group by group
+            vals = np.nan_to_num([[stat_cell(stats, (w, m, t), c)[0] for t in trials] for c in cols])
+            bottoms = np.vstack([np.zeros(len(trials)), np.cumsum(vals, axis=0)[:-1]])
+            bars = ax.bar(np.tile(np.arange(len(trials)), len(groups)), vals.ravel(), bottom=bottoms.ravel(),
+                          width=0.75, color=[group_colour(g) for g in groups for _ in trials], edgecolor="white",
+                          linewidth=0.4)
+            for rect, g in zip(bars, (g for g in groups for _ in trials)):
+                rect.set_gid(f"group:{g}")
             ax.set_xticks(np.arange(len(trials)), xt, fontsize=6.5 if len(trials) > 4 else 7,
                           rotation=90 if len(trials) > 4 else 0)
             ax.set_ylim(0, 100)

@@ -566,7 +566,7 @@ def default_workers() -> int:
 
 
 def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequence[str] = ("png",),
-                 workers: int | None = None) -> list[FigureEntry]:
+                 workers: int | None = None, meanwhile: Callable[[], object] | None = None) -> list[FigureEntry]:
     """Draw the figures the study's data support and save them in ``fig_dir`` (``formats``:
     PNG, and SVG when asked for).
 
@@ -590,10 +590,19 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
     if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
         from concurrent.futures import ProcessPoolExecutor
 
-        # forked workers start with this process' modules (matplotlib, pandas) already imported
+        # forked workers start with this process' modules: import the drawing ones once, here
+        import matplotlib.backends.backend_agg  # noqa: F401
+        import matplotlib.figure  # noqa: F401
+        import matplotlib.legend  # noqa: F401
+
         with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as pool:
             futures = {n: pool.submit(_draw_figure, study, fig_dir, tuple(formats), n) for n in drawn}
+            if meanwhile is not None:
+                meanwhile()
+                meanwhile = None
             entries = {n: f.result() for n, f in futures.items()}
+    if meanwhile is not None:
+        meanwhile()
     for n in FIGURE_NAMES:
         if n not in entries:
             entries[n] = _draw_figure(study, fig_dir, formats, n, builders[n])
@@ -1052,12 +1061,30 @@ dd { margin: 0; } pre { background: #f7f7f7; padding: 0.6em; overflow-x: auto; f
 """
 
 
+def page_sections(study: StudyFolder) -> dict[str, str]:
+    """The parts of the report page that do not depend on the figures (HTML by part name):
+    estimation notes, result and per-muscle tables, settings, method, failures, solver runs
+    and software."""
+    return {
+        "notes": _estimation_notes(study),
+        "results": _results_section(study),
+        "per_muscle": _per_muscle_section(study),
+        "settings": _settings_section(study),
+        "method": _method_section(study),
+        "failures": _failures_section(study),
+        "runs": _runs_section(study),
+        "software": _software_section(study),
+    }
+
+
 def render_html(study: StudyFolder, entries: Sequence[FigureEntry], figures_rel: str = FIGURES_FOLDER,
-                key: str | None = None) -> str:
+                key: str | None = None, sections: dict[str, str] | None = None) -> str:
     """The report page as a string (figures embedded from the PNG files of ``entries``;
-    ``key``: the content key of the inputs, recorded in the page, see :func:`report_key`)."""
+    ``key``: the content key of the inputs, recorded in the page, see :func:`report_key`;
+    ``sections``: :func:`page_sections` of the study when already made)."""
     from .. import __version__
 
+    sec = page_sections(study) if sections is None else sections
     ok = study.ok
     n_units = len(study.results.drop_duplicates(["subject", "trial", "workflow"])) if not study.results.empty else 0
     n_ok = len(ok.drop_duplicates(["subject", "trial", "workflow"])) if not ok.empty else 0
@@ -1077,17 +1104,17 @@ def render_html(study: StudyFolder, entries: Sequence[FigureEntry], figures_rel:
         f'<p class="meta">Written {_esc(when)} by musclemetab {_esc(__version__)}; '
         "paths are relative to the study folder (the folder holding this page).</p>",
         f"<p>{_esc(summary)}</p>",
-        _estimation_notes(study),
+        sec["notes"],
         f"<nav><ul>{toc}</ul></nav>",
         _figures_section(entries, figures_rel),
-        f'<details id="results" open><summary><h2>Results (tables)</h2></summary>{_results_section(study)}</details>',
-        f'<details id="per-muscle"><summary><h2>Per-muscle results</h2></summary>{_per_muscle_section(study)}'
+        f'<details id="results" open><summary><h2>Results (tables)</h2></summary>{sec["results"]}</details>',
+        f'<details id="per-muscle"><summary><h2>Per-muscle results</h2></summary>{sec["per_muscle"]}'
         "</details>",
-        _settings_section(study),
-        _method_section(study),
-        _failures_section(study),
-        _runs_section(study),
-        _software_section(study),
+        sec["settings"],
+        sec["method"],
+        sec["failures"],
+        sec["runs"],
+        sec["software"],
         f'<meta name="musclemetab-report-key" content="{_esc(key)}">' if key else "",
     ])
     return (
@@ -1189,8 +1216,9 @@ def generate_report(study_dir: str | os.PathLike, out: str | os.PathLike | None 
         if cached is not None:
             return out, cached
     fig_dir = out.parent / FIGURES_FOLDER
-    entries = make_figures(study, fig_dir, formats, workers)
-    atomic_write_text(out, render_html(study, entries, figures_rel=FIGURES_FOLDER, key=key))
+    sections: dict[str, str] = {}
+    entries = make_figures(study, fig_dir, formats, workers, meanwhile=lambda: sections.update(page_sections(study)))
+    atomic_write_text(out, render_html(study, entries, figures_rel=FIGURES_FOLDER, key=key, sections=sections))
     record = {"key": key, "page": out.name, "entries": [
         {"name": e.name, "title": e.title, "caption": e.caption, "note": e.note,
          "paths": None if e.paths is None else {k: str(v) for k, v in e.paths.items()}} for e in entries]}
