@@ -452,9 +452,16 @@ def test_save_figure(tmp_path):
 
 
 # ------------------------------------------------------------------------------- report
-def test_write_report(study):
-    out = write_report(study)
+def test_write_report(study, tmp_path):
+    from musclemetab.report.html import _draw_figure, read_study_folder
+
+    out = write_report(study, workers=2)  # two worker processes draw the figures
     assert out == study / "report.html"
+    # each file is the one drawn in this process
+    folder = read_study_folder(study)
+    for name in ("excitations_fiber_lengths", "group_shares", "phase_pies"):
+        alone = _draw_figure(folder, tmp_path, ("png",), name)
+        assert Path(alone.paths["png"]).read_bytes() == (study / "figures" / f"{name}.png").read_bytes(), name
     text = out.read_text(encoding="utf-8")
     p = _parse(text)
     # one embedded figure per figure
@@ -735,15 +742,8 @@ def test_report_key_follows_the_study_file(tmp_path):
     assert f'content="{report_key(root)}"' in out.read_text(encoding="utf-8")
 
 
-def test_parallel_drawing_writes_the_same_files(tmp_path):
+def test_workers_option(study, tmp_path):
     from musclemetab.report.html import generate_report
 
-    root = make_study(tmp_path / "p", solutions=False, trials={"slow": 0.75, "fast": 1.75})
-    pages = {}
-    for workers in (1, 2):
-        out, entries = generate_report(root, tmp_path / f"w{workers}" / "report.html", workers=workers)
-        pages[workers] = {e.name: Path(e.paths["png"]).read_bytes() for e in entries if e.paths}
-    assert len(pages[1]) == len(FIGURE_NAMES) - 1  # every figure but the one needing solutions
-    assert pages[1] == pages[2]
     with pytest.raises(OptionError, match="workers"):
-        generate_report(root, tmp_path / "w0" / "report.html", workers=0)
+        generate_report(study, tmp_path / "w0" / "report.html", workers=0)
