@@ -747,3 +747,53 @@ def test_workers_option(study, tmp_path):
 
     with pytest.raises(OptionError, match="workers"):
         generate_report(study, tmp_path / "w0" / "report.html", workers=0)
+
+
+def test_measured_emg_over_the_excitations(tmp_path):
+    from musclemetab.io import write_storage
+    from musclemetab.report.html import _measured_emg, read_study_folder
+
+    root = make_study(tmp_path / "emg", trials={"normal": 1.25}, measured=False)
+    # a measured envelope: two channels for the soleus (averaged), one for the tibialis
+    t = np.arange(0.5, 1.9, 0.002)
+    sol_a = 0.2 + 0.6 * np.exp(-(((t - 1.1) / 0.08) ** 2))
+    sol_b = 0.1 + 0.5 * np.exp(-(((t - 1.1) / 0.08) ** 2))
+    ta = 0.1 + 0.3 * np.exp(-(((t - 0.7) / 0.05) ** 2))
+    write_storage(tmp_path / "emg.mot", pd.DataFrame({"SOL1": sol_a, "SOL2": sol_b, "TA": ta},
+                                                      index=pd.Index(t, name="time")), in_degrees=False)
+    (tmp_path / "map.json").write_text(json.dumps({"soleus_r": ["SOL1", "SOL2"], "tibant_r": ["TA"]}))
+    settings = json.loads((root / "study.json").read_text())
+    settings["subjects"]["s1"].update(emg_files={"normal": str(tmp_path / "emg.mot")},
+                                      emg_mapping=str(tmp_path / "map.json"))
+    (root / "study.json").write_text(json.dumps(settings))
+    study = read_study_folder(root)
+    folder = root / "units" / "s1" / "normal"
+    sols = {w: Solution.load(folder / w) for w in WORKFLOWS}
+    cycles = {w: CYCLE for w in WORKFLOWS}
+    rows = study.ok[(study.ok.subject == "s1") & (study.ok.trial == "normal")]
+    emg, label, text = _measured_emg(study, "s1", "normal", sols, cycles, rows)
+    assert set(emg) == {"soleus_r", "tibant_r"} and "peak" in label and "effort-ten" in text
+    sol = sols["effort-ten"]
+    keep = (sol.time_s >= CYCLE[0] - 1e-9) & (sol.time_s <= CYCLE[2] + 1e-9)
+    nodes = sol.time_s[keep]
+    for muscle, raw in (("soleus_r", (sol_a + sol_b) / 2), ("tibant_r", ta)):
+        pct, v = emg[muscle]
+        np.testing.assert_allclose(pct, 100 * (nodes - CYCLE[0]) / (CYCLE[2] - CYCLE[0]))
+        envelope = np.interp(nodes, t, raw)
+        peak = sol.excitation[keep, MUSCLES.index(muscle)].max()
+        np.testing.assert_allclose(v, envelope * peak / envelope.max(), rtol=1e-9)  # peak = excitation peak (file: 1e-12)
+    # an EMG-TEN unit of the trial: its scale factors and channels instead
+    unit = root / "units" / "s1" / "normal" / "emg-ten"
+    unit.mkdir()
+    (unit / "summary.json").write_text(json.dumps({"emg_tracking": {"soleus_r": {"channels": ["SOL2"], "scale": 0.8}}}))
+    rows = pd.concat([rows, rows.iloc[[0]].assign(workflow="emg-ten", unit_dir="units/s1/normal/emg-ten")])
+    emg, label, _ = _measured_emg(study, "s1", "normal", sols, cycles, rows)
+    assert set(emg) == {"soleus_r"} and "EMG-TEN" in label
+    np.testing.assert_allclose(emg["soleus_r"][1], 0.8 * np.interp(nodes, t, sol_b), rtol=1e-9)
+    # drawn in the figure: a dashed grey line over the soleus' excitation
+    fig = excitations_and_fiber_lengths(sols, cycles, muscles=["soleus_r"], emg=emg, emg_label=label)
+    line = next(ln for ln in fig.axes[0].get_lines() if ln.get_gid() == "emg")
+    np.testing.assert_allclose(line.get_ydata(), emg["soleus_r"][1])
+    # no EMG recorded for a trial: nothing drawn, the caption says so
+    emg, _, text = _measured_emg(study, "s2", "normal", sols, cycles, rows)
+    assert emg == {} and "No measured EMG" in text

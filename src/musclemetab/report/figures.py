@@ -341,6 +341,8 @@ def excitations_and_fiber_lengths(
     *,
     side: str = "r",
     title: str | None = None,
+    emg: Mapping[str, tuple[Sequence[float], Sequence[float]]] | None = None,
+    emg_label: str = "measured EMG",
 ):
     """Excitation and normalised fibre length of selected muscles over the gait cycle.
 
@@ -358,10 +360,16 @@ def excitations_and_fiber_lengths(
         report list of the anatomical muscle table); named muscles absent from every solution
         raise :class:`UnknownMuscleError`.
 
+    emg
+        Muscle column name -> ``(cycle_pct, value)``: measured EMG drawn over the excitation
+        (grey, dashed), already scaled as it should be shown; ``emg_label`` names it in the
+        legend (e.g. how it was scaled).
+
     Per muscle, an excitation panel (-) above a fibre-length panel (``lM/lMo``), one line per
     workflow, a vertical line at toe-off; the fibre-length panels shade the plateau of the
     active force-length curve (0.75-1.05) and draw the start of the descending limb (1.05);
-    every excitation panel spans 0-1.02 and every fibre-length panel the same range.
+    every excitation panel spans 0-1.02 (or up to the largest EMG shown) and every
+    fibre-length panel the same range.
     """
     if not solutions:
         raise OptionError("no solution given for the excitation and fibre-length figure")
@@ -405,6 +413,8 @@ def excitations_and_fiber_lengths(
     axes = fig.subplots(2 * nmrow, ncol, squeeze=False, sharex=True)
     toe_offs = _unique(round(100.0 * (c[1] - c[0]) / (c[2] - c[0]), 6) for c in cyc.values())
     lm_lims = []
+    # one excitation scale in every panel: 0-1, or up to the largest scaled EMG shown
+    e_top = max([1.02] + [1.02 * float(np.nanmax(v)) for _, v in (emg or {}).values() if np.size(v)])
     for k, (label, found) in enumerate(rows):
         i, j = divmod(k, ncol)
         ax_e, ax_l = axes[2 * i, j], axes[2 * i + 1, j]
@@ -422,11 +432,15 @@ def excitations_and_fiber_lengths(
             kw = dict(color=workflow_colour(w), lw=1.3, label=w, gid=f"workflow:{w}")
             ax_e.plot(pct, np.asarray(sol.excitation)[keep, idx], **kw)
             ax_l.plot(pct, np.asarray(sol.lm_norm)[keep, idx], **kw)
+        measured = (emg or {}).get(label)
+        if measured is not None:
+            ax_e.plot(np.asarray(measured[0], float), np.asarray(measured[1], float), color="0.45", lw=1.1,
+                      ls="--", label="_emg", gid="emg", zorder=1)
         for ax in (ax_e, ax_l):
             for to in toe_offs:
                 ax.axvline(to, color="k", lw=0.8, ls=":", label="_toe-off", gid="toe-off")
             ax.set_xlim(0, 100)
-        ax_e.set_ylim(0, 1.02)
+        ax_e.set_ylim(0, e_top)
         _panel_title(ax_e, label, fontsize=10)
         if j == 0:
             ax_e.set_ylabel("excitation (-)")
@@ -450,6 +464,8 @@ def excitations_and_fiber_lengths(
     from matplotlib.patches import Patch
 
     handles = [Line2D([], [], color=workflow_colour(w), lw=1.5, label=w) for w in workflows]
+    if emg:
+        handles.append(Line2D([], [], color="0.45", lw=1.1, ls="--", label=emg_label))
     handles += [
         Line2D([], [], color="k", lw=0.8, ls=":", label="toe-off"),
         Patch(color="0.88", label=f"plateau {PLATEAU_BAND[0]:g}-{PLATEAU_BAND[1]:g}"),

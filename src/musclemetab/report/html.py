@@ -266,6 +266,78 @@ def _short(study: StudyFolder, exc: BaseException) -> str:
     return text.replace(str(study.path) + os.sep, "").replace(str(study.path.resolve()) + os.sep, "")
 
 
+def _measured_emg(study: StudyFolder, subject: str, trial: str, sols: dict, cycles: dict, rows
+                  ) -> tuple[dict, str, str]:
+    """The trial's measured EMG to draw over the excitations: ``({muscle: (cycle_pct, value)},
+    legend label, caption sentence)``.
+
+    The EMG file is the one ``study.json`` records for the trial (``emg_files``), mapped to
+    the muscles by the subject's ``emg_mapping``. Scaled by the EMG-TEN factors when the
+    trial's EMG-TEN unit succeeded (each muscle's ``scale`` in its ``summary.json``, the
+    channels it tracked), otherwise so that its peak over the cycle equals the excitation's
+    peak of the workflow shown first (EFFORT-TEN when present). No EMG: an empty mapping and a
+    sentence saying why.
+    """
+    from ..emg.processing import emg_at, map_channels, read_processed_emg
+    from ..io.jsonfile import read_json_object
+    from ..redundancy.emg_inputs import mapping_for_muscles, resolve_emg_mapping
+    from .figures import main_workflow
+
+    rec = (study.settings.get("subjects") or {}).get(subject) if isinstance(study.settings.get("subjects"), dict) else None
+    path = ((rec or {}).get("emg_files") or {}).get(trial) if isinstance(rec, dict) else None
+    if not path:
+        return {}, "", "No measured EMG is recorded for this trial (study.json, emg_files)."
+    wf = main_workflow(list(sols))
+    sol, (start, _, end) = sols[wf], cycles[wf]
+    t = np.asarray(sol.time_s, float)
+    t = t[(t >= start - 1e-9) & (t <= end + 1e-9)]
+    pct = 100.0 * (t - start) / (end - start)
+    scales: dict[str, float] = {}
+    mapping: dict = {}
+    emg_rows = rows[rows["workflow"].astype(str).str.lower() == "emg-ten"]
+    if not emg_rows.empty:
+        try:
+            tracking = read_json_object(study.unit_folder(emg_rows.iloc[0]) / "summary.json").get("emg_tracking") or {}
+            mapping = {m: v["channels"] for m, v in tracking.items()}
+            scales = {m: float(v["scale"]) for m, v in tracking.items()}
+        except (MusclemetabError, KeyError, TypeError, ValueError):
+            mapping, scales = {}, {}
+    try:
+        emg_df = read_processed_emg(_resolve(study, path))
+        if not mapping:
+            named = (rec or {}).get("emg_mapping") or "default"
+            mapping = mapping_for_muscles(named, resolve_emg_mapping(named), list(sol.muscles))
+        mapping = {m: c for m, c in mapping.items() if m in sol.muscles}
+        table = emg_at(map_channels(emg_df, mapping), t)
+    except MusclemetabError as exc:
+        return {}, "", f"Measured EMG not shown: {_short(study, exc)}."
+    full_t = np.asarray(sol.time_s, float)
+    excitation = np.asarray(sol.excitation)[(full_t >= start - 1e-9) & (full_t <= end + 1e-9)]
+    out = {}
+    for m in table.columns:
+        v = table[m].to_numpy(float)
+        if scales:
+            v = scales.get(m, math.nan) * v
+        elif np.max(v) > 0:
+            v = v * (float(np.max(excitation[:, list(sol.muscles).index(m)])) / float(np.max(v)))
+        if np.all(np.isfinite(v)):
+            out[m] = (pct, v)
+    if scales:
+        return out, "measured EMG x EMG-TEN scale", (
+            "Dashed grey: the measured EMG of the muscles EMG-TEN tracked, times the scale factor EMG-TEN "
+            "estimated for each.")
+    return out, f"measured EMG, peak = {wf} excitation peak", (
+        f"Dashed grey: the measured EMG (processed envelope, mapped to the muscles by the subject's channel "
+        f"mapping), scaled so that its peak over the cycle equals the peak of the {wf} excitation (no EMG-TEN "
+        "scale factors for this trial); its shape, not its amplitude, is the measurement.")
+
+
+def _resolve(study: StudyFolder, path) -> Path:
+    """A path recorded in study.json: as given when absolute, else relative to the study folder."""
+    p = Path(str(path))
+    return p if p.is_absolute() else study.path / p
+
+
 #: The title of each figure in the report.
 FIGURE_TITLES = {
     "figure2_soleus": "The metabolic models on a soleus (the paper's Figure 2)",
@@ -333,15 +405,16 @@ def _figure_builders(study: StudyFolder) -> dict[str, Callable[[], tuple[object,
                 f"no solution could be read for {subject}, trial {trial}"
                 + (f": {'; '.join(skipped)}" if skipped else "")
             )
+        emg, emg_label, emg_text = _measured_emg(study, subject, trial, sols, cycles, rows)
         fig = F.excitations_and_fiber_lengths(
-            sols, cycles,
+            sols, cycles, emg=emg, emg_label=emg_label,
             title=f"Muscle excitation and normalised fibre length over the gait cycle: subject {subject}, "
             f"trial {trial}",
         )
         cap = (f"Subject {subject}, trial {trial} (preferred speed). Excitation (-) and fibre length "
                "normalised by the optimal fibre length (-), one line per workflow; dotted line: toe-off; "
                "grey band: plateau of the active force-length curve (0.75-1.05); dashed line: start of "
-               "the descending limb (1.05).")
+               f"the descending limb (1.05). {emg_text}")
         if skipped:
             cap += f" Not shown: {'; '.join(skipped)}."
         return fig, cap

@@ -496,6 +496,7 @@ def _write_study_json(study: Study, out: Path) -> None:
             "emg_mapping": s.emg_mapping,
             "side": s.side,
             "trials": [t.name for t in s.trials],
+            "emg_files": {t.name: str(t.emg) if t.emg else None for t in s.trials},
         }
         for s in study.subjects
     }
