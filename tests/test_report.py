@@ -797,3 +797,22 @@ def test_measured_emg_over_the_excitations(tmp_path):
     # no EMG recorded for a trial: nothing drawn, the caption says so
     emg, _, text = _measured_emg(study, "s2", "normal", sols, cycles, rows)
     assert emg == {} and "No measured EMG" in text
+
+
+def test_figure2_from_the_cache(study, tmp_path, monkeypatch):
+    from musclemetab.report import html
+
+    monkeypatch.setenv("MUSCLEMETAB_CACHE", str(tmp_path / "cache"))
+    folder = html.read_study_folder(study)
+    cache = html._figure_cache("figure2_soleus", ("png",))["png"]
+    assert cache.parent == tmp_path / "cache" / "figures" and not cache.exists()
+    first = html._draw_figure(folder, tmp_path / "a", ("png",), "figure2_soleus")
+    drawn = Path(first.paths["png"]).read_bytes()
+    assert drawn.startswith(b"\x89PNG") and cache.read_bytes() == drawn  # kept after the first drawing
+    # taken from the cache the next time: a marker written into the cache file comes back
+    cache.write_bytes(drawn + b"cached")
+    again = html._draw_figure(folder, tmp_path / "b", ("png",), "figure2_soleus")
+    assert Path(again.paths["png"]).read_bytes() == drawn + b"cached" and again.caption == first.caption
+    # one file per format under the same key; only Figure 2 is cached
+    assert html._figure_cache("figure2_soleus", ("png", "svg"))["png"] == cache
+    assert html._figure_cache("phase_shares", ("png",)) is None
