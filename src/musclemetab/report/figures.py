@@ -304,6 +304,17 @@ def stat_cell(stats: dict, key, column: str) -> tuple[float, float, int]:
     return stats.get(key, {}).get(column, (math.nan, math.nan, 0))
 
 
+def _one_workflow(table, workflow: str | None, what: str):
+    """``(workflow, its rows)``: ``workflow``, or :func:`main_workflow` of the table's when
+    ``None``; raises :class:`OptionError` when the table has no row of it."""
+    wfs = _ordered_workflows(table["workflow"])
+    wf = main_workflow(wfs) if workflow is None else str(workflow)
+    d = table[table["workflow"].astype(str) == wf]
+    if d.empty:
+        raise OptionError(f"workflow '{wf}' is not in {what}; it has {', '.join(wfs)}")
+    return wf, d
+
+
 def _rmcorr(x, y, subject):
     """Repeated-measures correlation (``docs/analysis.md``): ``(result, None)`` or ``(None, reason)``."""
     from ..analysis.stats import rmcorr
@@ -821,11 +832,7 @@ def phase_pies(results, *, workflow: str | None = None, models: Sequence[str] | 
                      "the results table")
     if res.empty:
         raise OptionError("no successful unit in the results")
-    wfs = _ordered_workflows(res["workflow"])
-    wf = main_workflow(wfs) if workflow is None else str(workflow)
-    d = res[res["workflow"].astype(str) == wf]
-    if d.empty:
-        raise OptionError(f"workflow '{wf}' is not in the results; it has {', '.join(wfs)}")
+    wf, d = _one_workflow(res, workflow, "the results")
     models = _ordered_models(d["model"]) if models is None else [str(m) for m in models]
     trials = trial_order(d)
     cols = ["stance_energy_share_pct", "swing_energy_share_pct", "mean_W_per_kg_no_basal"]
@@ -951,11 +958,7 @@ def rates_against_speed(results, *, workflow: str | None = None, models: Sequenc
     res = _ok_rows(results)
     _require_columns(res, ("speed_m_per_s", "mean_W_per_kg_no_basal"), "the results table")
     cols = [c for c in (f"share_{g}_pct" for g in GROUPS) if c in res.columns]
-    wfs = _ordered_workflows(res["workflow"])
-    wf = main_workflow(wfs) if workflow is None else str(workflow)
-    d = res[res["workflow"].astype(str) == wf]
-    if d.empty:
-        raise OptionError(f"workflow '{wf}' is not in the results; it has {', '.join(wfs)}")
+    wf, d = _one_workflow(res, workflow, "the results")
     if len(_unique(d["trial"].astype(str))) < 2:
         raise OptionError("one speed only: nothing to draw against speed")
     models = _ordered_models(d["model"]) if models is None else [str(m) for m in models]
@@ -1003,11 +1006,7 @@ def per_muscle_ranked(per_muscle, *, workflow: str | None = None, models: Sequen
     _require_columns(per_muscle, ("trial", "workflow", "model", "muscle", "mean_W_per_kg"), "the per-muscle table")
     if len(per_muscle) == 0:
         raise OptionError("the per-muscle table has no rows")
-    wfs = _ordered_workflows(per_muscle["workflow"])
-    wf = main_workflow(wfs) if workflow is None else str(workflow)
-    d = per_muscle[per_muscle["workflow"].astype(str) == wf]
-    if d.empty:
-        raise OptionError(f"workflow '{wf}' is not in the per-muscle table; it has {', '.join(wfs)}")
+    wf, d = _one_workflow(per_muscle, workflow, "the per-muscle table")
     models = _ordered_models(d["model"]) if models is None else [str(m) for m in models]
     trials = trial_order(d) if "speed_m_per_s" in d.columns else _unique(str(t) for t in d["trial"])
     from matplotlib import colormaps

@@ -419,14 +419,6 @@ def _figure_builders(study: StudyFolder) -> dict[str, Callable[[], tuple[object,
             cap += f" Not shown: {'; '.join(skipped)}."
         return fig, cap
 
-    def fig2():
-        fig = F.estimated_vs_measured(ok)
-        cap = ("Whole-body average metabolic rate (W/kg of body mass, both legs, with basal heat) estimated "
-               "by each model against the measured rate, one point per subject and trial; lines: "
-               "repeated-measures correlation of each workflow (common slope m, one intercept per "
-               "subject); dashed: identity.")
-        return fig, cap
-
     def unit_timeseries(subject, trial, workflow):
         d = unit_rows(subject, trial, workflow)
         if d.empty:
@@ -493,28 +485,6 @@ def _figure_builders(study: StudyFolder) -> dict[str, Callable[[], tuple[object,
             cap += f" Not shown: {'; '.join(skipped)}."
         return fig, cap
 
-    def fig5():
-        fig = F.phase_shares(ok, trial=trial, workflow=main_wf)
-        cap = (f"Share of the cycle's muscle metabolic energy (one leg, without basal heat) spent in stance "
-               f"(initial contact to toe-off) and swing, mean over subjects (error bar: SD). Left: at the "
-               f"preferred speed (trial {trial}); right: swing share against walking speed for {main_wf}, "
-               "with the repeated-measures slope (% per m/s).")
-        return fig, cap
-
-    def fig5b():
-        fig = F.phase_pies(ok, workflow=main_wf, models=models)
-        cap = (f"Workflow {main_wf}. Each pie splits the cycle's muscle metabolic energy (one leg, without "
-               "basal heat) into stance (dark) and swing (light); its area is proportional to the whole-body "
-               "rate without basal heat (W/kg of body mass, both legs; printed under the pie), so the pies "
-               "grow with walking speed (columns) and differ between models (rows); means over subjects.")
-        return fig, cap
-
-    def fig6():
-        fig = F.group_shares(ok, workflows=workflows, models=models)
-        cap = ("Share of each muscle group in the cycle's muscle metabolic energy (%, one leg, without basal "
-               "heat; mean over subjects), one bar per trial (walking speed in m/s).")
-        return fig, cap
-
     def fig7():
         import pandas as pd
 
@@ -532,24 +502,46 @@ def _figure_builders(study: StudyFolder) -> dict[str, Callable[[], tuple[object,
                "(light: slow, dark: fast); every muscle is in per_muscle.csv.")
         return fig, cap
 
-    def fig8():
-        fig = F.rates_against_speed(ok, workflow=main_wf, models=models)
-        cap = (f"Workflow {main_wf}. Whole-body metabolic rate without basal heat (black) and each muscle "
-               "group's part of it (group share × whole-body rate), W per kg of body mass, both legs; means "
-               "over subjects at each trial's mean walking speed; same axes in every panel.")
-        return fig, cap
+    def drawn(function, caption: str, **kwargs):
+        """A builder of a figure drawn from the successful rows alone, with a fixed caption."""
+        return lambda: (function(ok, **kwargs), caption)
 
     builders = {
         "figure2_soleus": fig_soleus,
         "excitations_fiber_lengths": fig1,
-        "estimated_vs_measured": fig2,
+        "estimated_vs_measured": drawn(
+            F.estimated_vs_measured,
+            "Whole-body average metabolic rate (W/kg of body mass, both legs, with basal heat) estimated by "
+            "each model against the measured rate, one point per subject and trial; lines: repeated-measures "
+            "correlation of each workflow (common slope m, one intercept per subject); dashed: identity."),
         "group_rates_over_cycle": fig3,
         "whole_body_over_cycle": fig4,
-        "phase_shares": fig5,
-        "phase_pies": fig5b,
-        "group_shares": fig6,
+        "phase_shares": drawn(
+            F.phase_shares,
+            "Share of the cycle's muscle metabolic energy (one leg, without basal heat) spent in stance (initial "
+            "contact to toe-off) and swing, mean over subjects (error bar: SD). Left: at the preferred speed "
+            f"(trial {trial}); right: swing share against walking speed for {main_wf}, with the "
+            "repeated-measures slope (% per m/s).",
+            trial=trial, workflow=main_wf),
+        "phase_pies": drawn(
+            F.phase_pies,
+            f"Workflow {main_wf}. Each pie splits the cycle's muscle metabolic energy (one leg, without basal "
+            "heat) into stance (dark) and swing (light); its area is proportional to the whole-body rate without "
+            "basal heat (W/kg of body mass, both legs; printed under the pie), so the pies grow with walking "
+            "speed (rows) and differ between models (columns); means over subjects.",
+            workflow=main_wf, models=models),
+        "group_shares": drawn(
+            F.group_shares,
+            "Share of each muscle group in the cycle's muscle metabolic energy (%, one leg, without basal heat; "
+            "mean over subjects), one bar per trial (walking speed in m/s).",
+            workflows=workflows, models=models),
         "per_muscle_ranked": fig7,
-        "rates_against_speed": fig8,
+        "rates_against_speed": drawn(
+            F.rates_against_speed,
+            f"Workflow {main_wf}. Whole-body metabolic rate without basal heat (black) and each muscle group's "
+            "part of it (group share × whole-body rate), W per kg of body mass, both legs; means over subjects "
+            "at each trial's mean walking speed; same axes in every panel.",
+            workflow=main_wf, models=models),
     }
     if subject is None:
         for name in ("excitations_fiber_lengths", "group_rates_over_cycle", "whole_body_over_cycle"):
