@@ -54,7 +54,6 @@ REQUIRED_COLUMNS = ("subject", "trial", "workflow", "model", "status", "mean_W_p
 
 #: File names (without extension) of the figures, in the order of the report.
 FIGURE_NAMES = (
-    "figure2_soleus",
     "excitations_fiber_lengths",
     "estimated_vs_measured",
     "group_rates_over_cycle",
@@ -64,7 +63,11 @@ FIGURE_NAMES = (
     "group_shares",
     "rates_against_speed",
     "per_muscle_ranked",
+    "figure2_soleus",
 )
+
+#: Figures handed to the worker processes first: the slowest to draw.
+_DRAW_FIRST = ("figure2_soleus", "excitations_fiber_lengths", "group_shares")
 
 
 
@@ -661,7 +664,8 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
         import matplotlib.legend  # noqa: F401
 
         with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as pool:
-            futures = {n: pool.submit(_draw_figure, study, fig_dir, tuple(formats), n) for n in drawn}
+            order = [n for n in _DRAW_FIRST if n in drawn] + [n for n in drawn if n not in _DRAW_FIRST]
+            futures = {n: pool.submit(_draw_figure, study, fig_dir, tuple(formats), n) for n in order}
             if meanwhile is not None:
                 meanwhile()
                 meanwhile = None
