@@ -563,6 +563,8 @@ def _draw_figure(study: StudyFolder, fig_dir: Path, formats: Sequence[str], name
     if isinstance(build, str):
         return FigureEntry(name, FIGURE_TITLES[name], note=build)
     cache = _figure_cache(name, formats)
+    if cache is not None:
+        formats = tuple(cache)  # PNG only: the figure is the package's (save_figure2 writes SVG or PDF)
     if cache is not None and all(p.is_file() for p in cache.values()):
         from ..io.atomic import atomic_write_bytes
 
@@ -589,8 +591,9 @@ FIGURE2_CAPTION = (
 
 
 def _figure_cache(name: str, formats: Sequence[str]) -> dict[str, Path] | None:
-    """The cache files of a figure that depends only on the package (Figure 2), keyed by the
-    source of the modules drawing it and the matplotlib version; ``None`` for other figures."""
+    """The cache file of a figure that depends only on the package (Figure 2, as PNG whatever
+    ``formats``), keyed by the source of the modules drawing it and the matplotlib version;
+    ``None`` for other figures."""
     if name != "figure2_soleus":
         return None
     import hashlib
@@ -606,7 +609,7 @@ def _figure_cache(name: str, formats: Sequence[str]) -> dict[str, Path] | None:
     for src in sources:
         h.update(src.name.encode() + b"\0" + src.read_bytes())
     folder = default_cache_dir().parent / "figures"
-    return {fmt: folder / f"{name}-{h.hexdigest()[:32]}.{fmt}" for fmt in formats}
+    return {"png": folder / f"{name}-{h.hexdigest()[:32]}.png"}
 
 
 def _store_in_cache(paths: dict, cache: dict) -> None:
