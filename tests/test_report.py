@@ -651,6 +651,16 @@ def test_rates_against_speed_values(study):
     want = (d.share_PF_pct / 100 * d.mean_W_per_kg_no_basal).groupby(d.trial).mean().loc[["slow", "normal", "fast"]]
     np.testing.assert_allclose(pf.get_ydata(), want)
     assert fig.axes[0].get_shared_y_axes().joined(fig.axes[0], fig.axes[1])
+    # the speed axis spans the trials' speeds (m/s), the same in every panel, not the cycle's 0-100 %
+    speeds = r[r.workflow == "effort-ten"].groupby("trial")["speed_m_per_s"].mean()
+    for ax in fig.axes[:2]:
+        assert ax.get_xlim() == pytest.approx((speeds.min() - 0.05, speeds.max() + 0.05))
+    assert fig.axes[-1].get_xlabel() == "walking speed (m/s)"
+    # black is the whole body's alone
+    from matplotlib.colors import to_rgb
+
+    assert to_rgb(wb.get_color()) == (0.0, 0.0, 0.0)
+    assert all(to_rgb(ln.get_color()) != (0.0, 0.0, 0.0) for ln in ax.lines if ln.get_gid() != "whole-body")
 
 
 # ------------------------------------------------------------------- pies, colours, runs

@@ -8,7 +8,7 @@ plantar- and dorsiflexors) share a hue, dark and light.
 
 from __future__ import annotations
 
-__all__ = ["OKABE_ITO", "MODEL_COLOURS", "WORKFLOW_COLOURS", "GROUP_COLOURS", "lighter"]
+__all__ = ["OKABE_ITO", "MODEL_COLOURS", "WORKFLOW_COLOURS", "GROUP_COLOURS", "lighter", "darker"]
 
 #: The Okabe-Ito palette by name.
 OKABE_ITO = {
@@ -27,6 +27,12 @@ def lighter(colour: str, amount: float = 0.5) -> str:
     """``colour`` (``#rrggbb``) mixed with white: ``amount`` 0 keeps it, 1 gives white."""
     rgb = [int(colour[i:i + 2], 16) for i in (1, 3, 5)]
     return "#" + "".join(f"{round(c + (255 - c) * amount):02X}" for c in rgb)
+
+
+def darker(colour: str, amount: float = 0.5) -> str:
+    """``colour`` (``#rrggbb``) mixed with black: ``amount`` 0 keeps it, 1 gives black."""
+    rgb = [int(colour[i:i + 2], 16) for i in (1, 3, 5)]
+    return "#" + "".join(f"{round(c * (1 - amount)):02X}" for c in rgb)
 
 
 _O = OKABE_ITO
@@ -53,7 +59,8 @@ WORKFLOW_COLOURS = {
 }
 
 #: One colour per muscle group (``docs/analysis.md``): the extensor-like group of a degree
-#: of freedom dark, its antagonist the same hue lighter; the remainder grey.
+#: of freedom dark, its antagonist the same hue lighter; the remainder grey. Black is left to
+#: the whole-body lines drawn with the groups.
 GROUP_COLOURS = {
     "PF": _O["blue"],
     "DF": _O["sky blue"],
@@ -63,7 +70,7 @@ GROUP_COLOURS = {
     "HF": lighter(_O["bluish green"], 0.55),
     "HAD": _O["reddish purple"],
     "HAB": lighter(_O["reddish purple"], 0.55),
-    "HIR": _O["black"],
+    "HIR": darker(_O["yellow"], 0.35),
     "HER": _O["yellow"],
     "other": "#999999",
 }

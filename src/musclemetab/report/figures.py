@@ -590,20 +590,22 @@ def _cycle_panels(n: int):
     return fig, fig.subplots(nrow, ncol, squeeze=False, sharex=True, sharey=True)
 
 
-def _label_cycle_panels(axes, models: Sequence[str], ylabel: str = "metabolic rate (W)") -> None:
-    """Titles, axis labels and limits of the panels of :func:`_cycle_panels`; unused panels hidden."""
+def _label_cycle_panels(axes, models: Sequence[str], ylabel: str = "metabolic rate (W)", *,
+                        xlim: tuple[float, float] = (0.0, 100.0), xlabel: str = "gait cycle (%)") -> None:
+    """Titles, axis labels and the x limits (the gait cycle, 0-100 %, unless given) of the
+    panels of :func:`_cycle_panels`; unused panels hidden."""
     nrow, ncol = axes.shape
     for k, ax in enumerate(axes.flat):
         if k >= len(models):
             ax.set_visible(False)
             continue
         m = models[k]
-        ax.set_xlim(0, 100)
+        ax.set_xlim(*xlim)
         _panel_title(ax, m, color=model_colour(m), fontsize=11, fontweight="bold")
         if k % ncol == 0:
             ax.set_ylabel(ylabel)
         if k // ncol == nrow - 1 or k + ncol >= len(models):
-            ax.set_xlabel("gait cycle (%)")
+            ax.set_xlabel(xlabel)
             ax.tick_params(labelbottom=True)
 
 
@@ -964,6 +966,7 @@ def rates_against_speed(results, *, workflow: str | None = None, models: Sequenc
     models = _ordered_models(d["model"]) if models is None else [str(m) for m in models]
     fig, axes = _cycle_panels(len(models))
     groups = [c[len("share_"):-len("_pct")] for c in cols]
+    speeds: list[float] = []
     for k, m in enumerate(models):
         ax = axes.flat[k]
         dm = d[d["model"].astype(str) == m].copy()
@@ -977,11 +980,10 @@ def rates_against_speed(results, *, workflow: str | None = None, models: Sequenc
         for g in groups:
             ys = [stat_cell(stats, t, f"rate_{g}")[0] for t in order]
             ax.plot(x, ys, color=group_colour(g), lw=1.2, marker="o", ms=3, label=g, gid=f"group:{g}")
-        ax.set_xlim(min(x) - 0.05, max(x) + 0.05)
-    _label_cycle_panels(axes, models, "metabolic rate (W/kg)")
-    for k, ax in enumerate(axes.flat):
-        if k < len(models) and ax.get_xlabel():
-            ax.set_xlabel("walking speed (m/s)")
+        speeds += [v for v in x if np.isfinite(v)]
+    # one speed axis in every panel, over the trials' speeds
+    _label_cycle_panels(axes, models, "metabolic rate (W/kg)", xlim=(min(speeds) - 0.05, max(speeds) + 0.05),
+                        xlabel="walking speed (m/s)")
     from matplotlib.lines import Line2D
 
     handles = [Line2D([], [], color="k", lw=1.8, marker="o", label="whole body (both legs, no basal)")]
