@@ -18,6 +18,7 @@ import pytest
 
 from musclemetab.errors import InputFileError, MissingColumnError, OptionError, UnknownMuscleError
 from musclemetab.redundancy import MuscleTendonParameters, Solution
+from musclemetab.redundancy.record import RunRecord
 from musclemetab.report import (
     FIGURE_NAMES,
     GROUPS,
@@ -43,6 +44,10 @@ TOE_OFF_PCT = 100.0 * (CYCLE[1] - CYCLE[0]) / (CYCLE[2] - CYCLE[0])
 
 
 # ------------------------------------------------------------------------ synthetic data
+#: iterations recorded in each workflow's synthetic run record
+ITERATIONS = {"effort-gen": 31, "effort-ten": 47}
+
+
 def make_solution(workflow: str, muscles=MUSCLES) -> Solution:
     """A solution on the mesh of the cycle plus 5 padding nodes at both ends."""
     h = 0.01
@@ -65,7 +70,9 @@ def make_solution(workflow: str, muscles=MUSCLES) -> Solution:
         vm_norm=zeros, tendon_force_N=zeros, active_fiber_force_N=zeros, passive_fiber_force_N=zeros,
         active_force_length_multiplier=np.ones((n, m)), force_velocity_multiplier=np.ones((n, m)),
         reserve_Nm=np.zeros((n, 1)), parameters=params,
-        summary={"status": "Solve_Succeeded", "success": True, "workflow": {"name": workflow}},
+        summary={**RunRecord(status="Solve_Succeeded", success=True, iterations=ITERATIONS[workflow], solve_time_s=1.25,
+                             max_constraint_violation=3e-7).to_dict(),
+                 "workflow": {"name": workflow}, "side": "r", "max_moment_residual_Nm": 2e-6},
     )
 
 
@@ -127,6 +134,8 @@ def make_study(root: Path, *, measured=True, trials=None, solutions=True, failed
                     (folder / "unit.json").write_text(json.dumps(
                         {"status": "failed", "subject": subject, "trial": trial, "workflow": workflow,
                          "error": "solver did not converge <maximum iterations>"}))
+                    (folder / "summary.json").write_text(json.dumps(RunRecord(
+                        status="Maximum_Iterations_Exceeded", success=False, iterations=3000).to_dict()))
                     failures.append({"subject": subject, "trial": trial, "workflow": workflow,
                                      "reason": "solver did not converge <maximum iterations>"})
                     continue
@@ -443,9 +452,16 @@ def test_save_figure(tmp_path):
 
 
 # ------------------------------------------------------------------------------- report
-def test_write_report(study):
-    out = write_report(study)
+def test_write_report(study, tmp_path):
+    from musclemetab.report.html import _draw_figure, read_study_folder
+
+    out = write_report(study, workers=2)  # two worker processes draw the figures
     assert out == study / "report.html"
+    # each file is the one drawn in this process
+    folder = read_study_folder(study)
+    for name in ("excitations_fiber_lengths", "group_shares", "phase_pies"):
+        alone = _draw_figure(folder, tmp_path, ("png",), name)
+        assert Path(alone.paths["png"]).read_bytes() == (study / "figures" / f"{name}.png").read_bytes(), name
     text = out.read_text(encoding="utf-8")
     p = _parse(text)
     # one embedded figure per figure
@@ -548,7 +564,8 @@ def test_cli(study, tmp_path, capsys):
     args = parser.parse_args(["report", str(study), "--out", str(tmp_path / "r.html"), "--svg"])
     assert args.func(args) == 0
     out = capsys.readouterr().out
-    assert "8 of 8 figures" in out and (tmp_path / "r.html").is_file()
+    n = len(FIGURE_NAMES)
+    assert f"{n} of {n} figures" in out and (tmp_path / "r.html").is_file()
     assert (tmp_path / "figures" / "phase_shares.svg").is_file()
     args = parser.parse_args(["report", str(tmp_path / "absent")])
     with pytest.raises(InputFileError, match="absent: no such study folder"):
@@ -571,13 +588,10 @@ def test_report_when_every_unit_failed(tmp_path):
     assert "study.json is missing" in text
 
 
-def test_report_is_rebuilt_only_when_its_inputs_change(study, tmp_path):
-    import shutil
-
+def test_report_is_rebuilt_only_when_its_inputs_change(tmp_path):
     from musclemetab.report.html import generate_report, report_key
 
-    copy = tmp_path / "copy"
-    shutil.copytree(study, copy)
+    copy = make_study(tmp_path / "copy", solutions=False, trials={"normal": 1.25})  # fewer figures to draw
     out, first = generate_report(copy)
     page = out.read_text(encoding="utf-8")
     png = copy / "figures" / "phase_shares.png"
@@ -637,3 +651,175 @@ def test_rates_against_speed_values(study):
     want = (d.share_PF_pct / 100 * d.mean_W_per_kg_no_basal).groupby(d.trial).mean().loc[["slow", "normal", "fast"]]
     np.testing.assert_allclose(pf.get_ydata(), want)
     assert fig.axes[0].get_shared_y_axes().joined(fig.axes[0], fig.axes[1])
+    # the speed axis spans the trials' speeds (m/s), the same in every panel, not the cycle's 0-100 %
+    speeds = r[r.workflow == "effort-ten"].groupby("trial")["speed_m_per_s"].mean()
+    for ax in fig.axes[:2]:
+        assert ax.get_xlim() == pytest.approx((speeds.min() - 0.05, speeds.max() + 0.05))
+    assert fig.axes[-1].get_xlabel() == "walking speed (m/s)"
+    # black is the whole body's alone
+    from matplotlib.colors import to_rgb
+
+    assert to_rgb(wb.get_color()) == (0.0, 0.0, 0.0)
+    assert all(to_rgb(ln.get_color()) != (0.0, 0.0, 0.0) for ln in ax.lines if ln.get_gid() != "whole-body")
+
+
+# ------------------------------------------------------------------- pies, colours, runs
+def test_phase_pies_area_proportional_to_cost(results):
+    from musclemetab.report.figures import phase_pies
+
+    fig = phase_pies(results, workflow="effort-ten")
+    ax = fig.axes[0]
+    wedges = {p.get_gid(): p for p in ax.patches if p.get_gid()}
+    d = results[results.workflow == "effort-ten"].groupby(["model", "trial"])[
+        ["mean_W_per_kg_no_basal", "swing_energy_share_pct", "stance_energy_share_pct"]].mean()
+    assert len(wedges) == 2 * len(d)
+    ratio = []
+    for (m, t), row in d.iterrows():
+        stance, swing = wedges[f"stance:{m}:{t}"], wedges[f"swing:{m}:{t}"]
+        assert stance.r == swing.r
+        ratio.append(np.pi * stance.r**2 / row["mean_W_per_kg_no_basal"])  # area per W/kg
+        # the swing wedge's angle is its share of the cycle's energy
+        sweep = (swing.theta2 - swing.theta1) % 360.0
+        assert sweep / 360.0 == pytest.approx(row["swing_energy_share_pct"] / 100.0, rel=1e-9)
+        assert stance.get_facecolor()[:3] != swing.get_facecolor()[:3]
+    np.testing.assert_allclose(ratio, ratio[0], rtol=1e-12)  # area proportional to the total cost
+    # the largest cost has the largest pie, of radius 0.46
+    assert max(p.r for p in wedges.values()) == pytest.approx(0.46)
+
+
+def test_palette_is_okabe_ito_and_distinct():
+    from musclemetab.colours import GROUP_COLOURS, MODEL_COLOURS, WORKFLOW_COLOURS
+    from musclemetab.metabolics.registry import ALL_MODELS
+    from musclemetab.report.figures import group_colour
+
+    # the eight colours published by Okabe and Ito (2008)
+    okabe_ito = {"#000000", "#E69F00", "#56B4E9", "#009E73", "#F0E442", "#0072B2", "#D55E00", "#CC79A7"}
+    assert set(MODEL_COLOURS) == set(ALL_MODELS)
+    assert set(MODEL_COLOURS.values()) == okabe_ito  # eight models, eight distinct colours
+    assert len(set(WORKFLOW_COLOURS.values())) == len(WORKFLOW_COLOURS) and set(WORKFLOW_COLOURS.values()) <= okabe_ito
+    groups = [group_colour(g) for g in GROUPS]
+    assert len(set(groups)) == len(groups)
+    # the lighter partner of a degree of freedom: the same hue mixed with white
+    from matplotlib.colors import to_rgb
+
+    he, hf = np.array(to_rgb(GROUP_COLOURS["HE"])), np.array(to_rgb(GROUP_COLOURS["HF"]))
+    np.testing.assert_allclose(hf, he + 0.55 * (1 - he), atol=1 / 255)
+
+
+def test_solver_runs_table_lists_every_unit(tmp_path):
+    from musclemetab.report.html import read_study_folder, solver_runs
+
+    root = make_study(tmp_path / "runs", measured=False, trials={"normal": 1.25},
+                      failed={("s2", "normal", "effort-gen")})
+    rows = {tuple(r[:3]): r[3:] for r in solver_runs(read_study_folder(root))}
+    assert len(rows) == len(SUBJECTS) * len(WORKFLOWS)
+    for (subject, trial, workflow), (side, status, iterations, time_s, violation, residual, _) in rows.items():
+        if (subject, workflow) == ("s2", "effort-gen"):
+            assert (status, iterations) == ("Maximum_Iterations_Exceeded", "3000")
+            continue
+        assert (side, status, iterations) == ("right", "Solve_Succeeded", str(ITERATIONS[workflow]))
+        assert (time_s, violation, residual) == ("1.25", "3.0e-07", "2.0e-06")
+    from musclemetab.report.html import _runs_section
+
+    runs = _runs_section(read_study_folder(root))
+    assert runs.startswith('<details id="solver-runs">') and runs.endswith("</details>")
+    assert runs.count("Solve_Succeeded") == len(SUBJECTS) * len(WORKFLOWS) - 1
+    assert "Maximum_Iterations_Exceeded" in runs
+
+
+def test_report_key_follows_the_study_file(tmp_path):
+    from musclemetab.report.html import generate_report, report_key
+
+    root = tmp_path / "toml"  # a study whose units all failed: the page alone, drawn quickly
+    root.mkdir()
+    pd.DataFrame(columns=["subject", "trial", "workflow", "model", "status", "mean_W_per_kg"]).to_csv(
+        root / "results.csv", index=False)
+    toml = tmp_path / "elsewhere" / "study.toml"
+    toml.parent.mkdir()
+    toml.write_text('name = "a"\n')
+    (root / "study.json").write_text(json.dumps({"name": "a", "source": str(toml)}))
+    out, _ = generate_report(root)
+    key = report_key(root)
+    assert f'content="{key}"' in out.read_text(encoding="utf-8")
+    generate_report(root)
+    assert report_key(root) == key
+    toml.write_text('name = "b"\n')  # the study file changes, study.json does not
+    assert report_key(root) != key
+    generate_report(root)
+    assert f'content="{report_key(root)}"' in out.read_text(encoding="utf-8")
+
+
+def test_workers_option(study, tmp_path):
+    from musclemetab.report.html import generate_report
+
+    with pytest.raises(OptionError, match="workers"):
+        generate_report(study, tmp_path / "w0" / "report.html", workers=0)
+
+
+def test_measured_emg_over_the_excitations(tmp_path):
+    from musclemetab.io import write_storage
+    from musclemetab.report.html import _measured_emg, read_study_folder
+
+    root = make_study(tmp_path / "emg", trials={"normal": 1.25}, measured=False)
+    # a measured envelope: two channels for the soleus (averaged), one for the tibialis
+    t = np.arange(0.5, 1.9, 0.002)
+    sol_a = 0.2 + 0.6 * np.exp(-(((t - 1.1) / 0.08) ** 2))
+    sol_b = 0.1 + 0.5 * np.exp(-(((t - 1.1) / 0.08) ** 2))
+    ta = 0.1 + 0.3 * np.exp(-(((t - 0.7) / 0.05) ** 2))
+    write_storage(tmp_path / "emg.mot", pd.DataFrame({"SOL1": sol_a, "SOL2": sol_b, "TA": ta},
+                                                      index=pd.Index(t, name="time")), in_degrees=False)
+    (tmp_path / "map.json").write_text(json.dumps({"soleus_r": ["SOL1", "SOL2"], "tibant_r": ["TA"]}))
+    settings = json.loads((root / "study.json").read_text())
+    settings["subjects"]["s1"].update(emg_files={"normal": str(tmp_path / "emg.mot")},
+                                      emg_mapping=str(tmp_path / "map.json"))
+    (root / "study.json").write_text(json.dumps(settings))
+    study = read_study_folder(root)
+    folder = root / "units" / "s1" / "normal"
+    sols = {w: Solution.load(folder / w) for w in WORKFLOWS}
+    cycles = {w: CYCLE for w in WORKFLOWS}
+    rows = study.ok[(study.ok.subject == "s1") & (study.ok.trial == "normal")]
+    emg, label, text = _measured_emg(study, "s1", "normal", sols, cycles, rows)
+    assert set(emg) == {"soleus_r", "tibant_r"} and "peak" in label and "effort-ten" in text
+    sol = sols["effort-ten"]
+    keep = (sol.time_s >= CYCLE[0] - 1e-9) & (sol.time_s <= CYCLE[2] + 1e-9)
+    nodes = sol.time_s[keep]
+    for muscle, raw in (("soleus_r", (sol_a + sol_b) / 2), ("tibant_r", ta)):
+        pct, v = emg[muscle]
+        np.testing.assert_allclose(pct, 100 * (nodes - CYCLE[0]) / (CYCLE[2] - CYCLE[0]))
+        envelope = np.interp(nodes, t, raw)
+        peak = sol.excitation[keep, MUSCLES.index(muscle)].max()
+        np.testing.assert_allclose(v, envelope * peak / envelope.max(), rtol=1e-9)  # peak = excitation peak (file: 1e-12)
+    # an EMG-TEN unit of the trial: its scale factors and channels instead
+    unit = root / "units" / "s1" / "normal" / "emg-ten"
+    unit.mkdir()
+    (unit / "summary.json").write_text(json.dumps({"emg_tracking": {"soleus_r": {"channels": ["SOL2"], "scale": 0.8}}}))
+    rows = pd.concat([rows, rows.iloc[[0]].assign(workflow="emg-ten", unit_dir="units/s1/normal/emg-ten")])
+    emg, label, _ = _measured_emg(study, "s1", "normal", sols, cycles, rows)
+    assert set(emg) == {"soleus_r"} and "EMG-TEN" in label
+    np.testing.assert_allclose(emg["soleus_r"][1], 0.8 * np.interp(nodes, t, sol_b), rtol=1e-9)
+    # drawn in the figure: a dashed grey line over the soleus' excitation
+    fig = excitations_and_fiber_lengths(sols, cycles, muscles=["soleus_r"], emg=emg, emg_label=label)
+    line = next(ln for ln in fig.axes[0].get_lines() if ln.get_gid() == "emg")
+    np.testing.assert_allclose(line.get_ydata(), emg["soleus_r"][1])
+    # no EMG recorded for a trial: nothing drawn, the caption says so
+    emg, _, text = _measured_emg(study, "s2", "normal", sols, cycles, rows)
+    assert emg == {} and "No measured EMG" in text
+
+
+def test_figure2_from_the_cache(study, tmp_path):
+    from musclemetab.report import html
+
+    folder = html.read_study_folder(study)
+    cache = html._figure_cache("figure2_soleus", ("png",))["png"]
+    first = html._draw_figure(folder, tmp_path / "a", ("png",), "figure2_soleus")  # drawn, or cached by a test
+    drawn = Path(first.paths["png"]).read_bytes()
+    assert drawn.startswith(b"\x89PNG") and cache.read_bytes() == drawn  # kept after the first drawing
+    # taken from the cache the next time: a marker written into the cache file comes back
+    try:
+        cache.write_bytes(drawn + b"cached")
+        again = html._draw_figure(folder, tmp_path / "b", ("png", "svg"), "figure2_soleus")
+    finally:
+        cache.write_bytes(drawn)
+    assert Path(again.paths["png"]).read_bytes() == drawn + b"cached" and again.caption == first.caption
+    assert set(again.paths) == {"png"}  # PNG only, also when the report writes SVG
+    assert html._figure_cache("phase_shares", ("png",)) is None

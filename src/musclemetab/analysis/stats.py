@@ -82,8 +82,6 @@ def rmcorr(x, y, subject) -> RmCorr:
     OptionError
         NaN or non-numeric values, or missing subject labels.
     """
-    from scipy.special import stdtr  # Student-t CDF; scipy.stats costs seconds to import
-
     xv, yv = _vector(x, "x"), _vector(y, "y")
     subj = np.asarray(subject, dtype=object)
     if subj.ndim != 1:
@@ -124,6 +122,8 @@ def rmcorr(x, y, subject) -> RmCorr:
     if abs(r) >= 1.0:
         t, p = float(np.sign(r) * np.inf), 0.0
     else:
+        from scipy.special import stdtr  # Student-t CDF (imported when needed: scipy is slow to import)
+
         t = r * np.sqrt(df / (1.0 - r * r))
         p = float(2.0 * stdtr(df, -abs(t)))
     intercepts = {s: float(my[k] - beta * mx[k]) for s, k in index.items()}

@@ -43,7 +43,8 @@ from .registry import ADDITIONAL_MODELS, ALL_MODELS, STUDY_MODELS
 #: The models drawn by :func:`save_figure2` by default: the study's six, then the others.
 FIGURE2_MODELS = STUDY_MODELS + tuple(ADDITIONAL_MODELS)
 
-__all__ = ["FIGURE2_MODELS", "FIGURE2_DEFAULTS", "figure2_data", "ordering_summary", "save_figure2", "EXAMPLE_SOLEUS_F0_N"]
+__all__ = ["FIGURE2_MODELS", "FIGURE2_DEFAULTS", "figure2_data", "figure2", "ordering_summary", "save_figure2",
+           "EXAMPLE_SOLEUS_F0_N"]
 
 #: Maximal isometric force of the example model's soleus (N).
 EXAMPLE_SOLEUS_F0_N = 5978.474277147492
@@ -246,21 +247,30 @@ def _additional_text(cfg: dict, models) -> str:
 
 
 def save_figure2(path: str | os.PathLike, data: dict | None = None, **config) -> Path:
-    """Draw Figure 2 and save it (format from the extension, e.g. ``.png``, ``.pdf``).
+    """Draw Figure 2 (:func:`figure2`) and save it (format from the extension, e.g. ``.png``,
+    ``.pdf``). The file is written atomically."""
+    from ..io import atomic_path
+
+    fig = figure2(data, **config)
+    path = Path(path)
+    suffix = path.suffix or ".png"
+    with atomic_path(path, suffix=suffix) as tmp:
+        fig.savefig(tmp, dpi=110, format=suffix.lstrip("."))
+    return path
+
+
+def figure2(data: dict | None = None, **config):
+    """Figure 2 as a matplotlib figure (Agg canvas, no ``pyplot``).
 
     Rows: one per model (default :data:`FIGURE2_MODELS`: the study's six, then LW05 and
     MA68), and a last row comparing the models at full activation (where
     the rate ordering is visible). Columns: rate and efficiency over velocity at
     ``l~M = length_plane``; rate and efficiency over length at ``vbar =
     velocity_plane_vbar``. The open choices and the ordering found are printed on the
-    figure. The file is written atomically.
+    figure. ``data``: from :func:`figure2_data` (default: computed from ``config``).
     """
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
-
-    from ..io import atomic_path
 
     if data is None:
         data = figure2_data(**{"models": FIGURE2_MODELS, **config})
@@ -272,6 +282,7 @@ def save_figure2(path: str | os.PathLike, data: dict | None = None, **config) ->
     v, ln = data["velocity"], data["length"]
     nrow = len(models) + 1
     fig = Figure(figsize=(15, 2.6 * nrow + 1.2), layout="constrained")
+    FigureCanvasAgg(fig)
     axes = fig.subplots(nrow, 4, squeeze=False)
     shades = np.linspace(0.35, 1.0, len(acts))
     for i, m in enumerate(models):
@@ -330,8 +341,4 @@ def save_figure2(path: str | os.PathLike, data: dict | None = None, **config) ->
     extra = [m for m in models if m not in STUDY_MODELS]
     what = f"{len(models)} models" + (f" ({', '.join(extra)} beside the study's)" if extra else "")
     fig.suptitle(f"Figure 2: soleus metabolic rate and efficiency, {what}\n" + wrapped, fontsize=9)
-    path = Path(path)
-    suffix = path.suffix or ".png"
-    with atomic_path(path, suffix=suffix) as tmp:
-        fig.savefig(tmp, dpi=110, format=suffix.lstrip("."))
-    return path
+    return fig

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 
+from ..colours import MODEL_COLOURS as _MODEL_COLOURS
 from ..errors import OptionError
 from ._common import PARAMETER_ARGUMENTS, STATE_ARGUMENTS, MetabolicRates
 from .bhargava import bhargava2004
@@ -14,17 +15,8 @@ from .umberger import uchida2016, umberger2003, umberger2010
 
 __all__ = ["MODELS", "STUDY_MODELS", "ADDITIONAL_MODELS", "ALL_MODELS", "MODEL_COLOURS", "get_model", "parse_models", "compute_models"]
 
-#: One plotting colour per model, shared by every figure of the package.
-MODEL_COLOURS = {
-    "UM03": "#1f77b4",
-    "BH04": "#d62728",
-    "HO06": "#2ca02c",
-    "LW07": "#9467bd",
-    "UM10": "#17becf",
-    "UC16": "#ff7f0e",
-    "LW05": "#8c564b",
-    "MA68": "#7f7f7f",
-}
+#: One plotting colour per model, shared by every figure of the package (:mod:`musclemetab.colours`).
+MODEL_COLOURS = _MODEL_COLOURS
 
 #: The study's six models by their short names, in the order of the paper's Table 2: the
 #: default model set everywhere ("all").

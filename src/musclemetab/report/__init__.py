@@ -7,7 +7,6 @@ OpenSim is never imported here.
 """
 
 from .figures import (
-    DEFAULT_MUSCLES,
     GROUP_COLOURS,
     GROUPS,
     MODEL_COLOURS,
@@ -21,6 +20,15 @@ from .figures import (
     whole_body_over_cycle,
 )
 from .html import FIGURE_NAMES, read_study_folder, write_report
+
+
+def __getattr__(name: str):
+    # DEFAULT_MUSCLES is read from the muscle table only when asked for
+    if name == "DEFAULT_MUSCLES":
+        from . import figures
+
+        return figures.DEFAULT_MUSCLES
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 __all__ = [
     "excitations_and_fiber_lengths",

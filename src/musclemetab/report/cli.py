@@ -1,6 +1,6 @@
 """``musclemetab report``: the figures and the HTML report of a study folder.
 
-    musclemetab report DIR [--out FILE]
+    musclemetab report DIR [--out FILE] [--svg] [--force] [--workers N]
 
 Writes ``DIR/figures/<name>.png`` (and ``.svg`` with ``--svg``) for every figure the data support, and
 ``DIR/report.html`` (or ``FILE``, with its figures in ``figures/`` beside it): one
@@ -36,6 +36,9 @@ def add_report_parser(subparsers) -> None:
     p.add_argument("--force", action="store_true",
                    help="redraw even when the inputs did not change (default: the report is rebuilt only when "
                    "the study's results, units or the package changed)")
+    p.add_argument("--workers", type=int, metavar="N",
+                   help="processes drawing the figures side by side (default: the idle cores, i.e. the cores this "
+                   "process may use less the load average, at least 1; 1 draws them one after the other)")
     p.set_defaults(func=report_command)
 
 
@@ -44,7 +47,8 @@ def report_command(args) -> int:
     from .html import FIGURES_FOLDER, generate_report
 
     formats = ("png", "svg") if args.svg else ("png",)
-    out, entries = generate_report(args.study_dir, args.out, formats=formats, force=args.force)
+    out, entries = generate_report(args.study_dir, args.out, formats=formats, force=args.force,
+                                  workers=args.workers)
     drawn = [e.name for e in entries if e.paths is not None]
     print(f"report: {len(drawn)} of {len(entries)} figures -> {out.parent / FIGURES_FOLDER}; page -> {out}")
     for e in entries:

@@ -6,9 +6,10 @@ Every function takes DataFrames or solver objects, returns a :class:`matplotlib.
 :class:`~musclemetab.errors.OptionError` when its data cannot make the figure (no measured
 rates, a model absent from the table, ...); the report shows the message instead.
 
-Colours are fixed by name: each metabolic model has one colour (the same as in the Figure-2
-plot of :mod:`musclemetab.metabolics.figure2`), each workflow one colour and each muscle group
-one colour, in every figure. Names not known in advance get a colour derived from the name,
+Colours are fixed by name, from one place (:mod:`musclemetab.colours`, the Okabe-Ito palette
+that colour-blind readers can tell apart): each metabolic model has one colour (the same as in
+the Figure-2 plot of :mod:`musclemetab.metabolics.figure2`), each workflow one colour and each
+muscle group one colour, in every figure. Names not known in advance get a colour derived from the name,
 so they too keep it from one figure to the next.
 
 Units: metabolic rates in W (one leg, summed muscles, no basal heat) over the gait cycle,
@@ -30,7 +31,9 @@ import numpy as np
 
 from ..analysis.groups import GROUP_NAMES as _GROUP_NAMES
 from ..analysis.groups import GROUPS_WITH_OTHER, OTHER
-from ..metabolics.registry import MODEL_COLOURS as _MODEL_COLOURS
+from ..colours import GROUP_COLOURS as _GROUP_COLOURS
+from ..colours import MODEL_COLOURS as _MODEL_COLOURS
+from ..colours import WORKFLOW_COLOURS as _WORKFLOW_COLOURS
 from ..errors import MusclemetabError, OptionError, UnknownMuscleError
 
 __all__ = [
@@ -52,41 +55,25 @@ __all__ = [
     "group_rates_over_cycle",
     "whole_body_over_cycle",
     "phase_shares",
+    "phase_pies",
     "group_shares",
     "per_muscle_ranked",
     "rates_against_speed",
     "save_figure",
+    "group_stats",
+    "stat_cell",
 ]
 
-#: One colour per metabolic model (the package's, as in the Figure-2 plot).
+#: One colour per metabolic model, per workflow and per muscle group (:mod:`musclemetab.colours`:
+#: the Okabe-Ito palette, safe for colour-blind readers).
 MODEL_COLOURS = _MODEL_COLOURS
-
-#: One colour per workflow of the muscle redundancy solver.
-WORKFLOW_COLOURS = {
-    "effort-gen": "#4d4d4d",
-    "effort-cal": "#e08214",
-    "effort-ten": "#2166ac",
-    "emg-ten": "#b2182b",
-}
+WORKFLOW_COLOURS = _WORKFLOW_COLOURS
+GROUP_COLOURS = _GROUP_COLOURS
 
 #: Muscle function groups (``docs/analysis.md``): ankle, knee, hip, then the remainder.
 GROUPS = GROUPS_WITH_OTHER
 GROUP_NAMES = {**_GROUP_NAMES, OTHER: "other"}
 
-#: One colour per group; the two groups of a degree of freedom share a hue.
-GROUP_COLOURS = {
-    "PF": "#08519c",
-    "DF": "#9ecae1",
-    "KE": "#a63603",
-    "KF": "#fdae6b",
-    "HE": "#006d2c",
-    "HF": "#a1d99b",
-    "HAD": "#a50f15",
-    "HAB": "#fc9272",
-    "HIR": "#54278f",
-    "HER": "#bcbddc",
-    "other": "#969696",
-}
 
 def default_muscles(available: Sequence[str], side: str = "r") -> list[str]:
     """Muscles of the excitation and fibre-length figure: the report list of the anatomical
@@ -105,8 +92,13 @@ def _study_model_default_muscles() -> tuple[str, ...]:
     return tuple(split_side(m)[0] for m in default_muscles(names))
 
 
-#: Side-free names of the figure's muscles in the study's model (``default_muscles`` of it).
-DEFAULT_MUSCLES = _study_model_default_muscles()
+def __getattr__(name: str):
+    # DEFAULT_MUSCLES: side-free names of the figure's muscles in the study's model
+    # (``default_muscles`` of it), read from the muscle table when first asked for
+    if name == "DEFAULT_MUSCLES":
+        value = globals()["DEFAULT_MUSCLES"] = _study_model_default_muscles()
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 #: Normalised fibre lengths of the plateau of the active force-length curve (shaded).
 PLATEAU_BAND = (0.75, 1.05)
@@ -163,14 +155,48 @@ def _new_figure(width: float, height: float, **margins_in):
     return fig
 
 
+def _fewer_ticks(fig) -> None:
+    """At most five major ticks on every axis left to matplotlib's automatic locator.
+
+    Every tick is a set of lines and a text drawn and measured at each save; the default
+    locator puts up to nine on a panel of this size.
+    """
+    from matplotlib.ticker import AutoLocator, MaxNLocator
+
+    for ax in fig.axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            if type(axis.get_major_locator()) is AutoLocator:
+                axis.set_major_locator(MaxNLocator(nbins=4, steps=[1, 2, 2.5, 5, 10]))
+
+
 def _apply_layout(fig) -> None:
-    """Place the panels inside the figure's margins (see :func:`_new_figure`)."""
+    """Place the panels inside the figure's margins (see :func:`_new_figure`); fewer ticks."""
     m = getattr(fig, "_musclemetab_margins", None)
     if m is None or fig.get_layout_engine() is not None:
         return
+    _fewer_ticks(fig)
     w, h = fig.get_size_inches()
     fig.subplots_adjust(left=m["left"] / w, right=1.0 - m["right"] / w, top=1.0 - m["top"] / h,
                         bottom=m["bottom"] / h, wspace=m["wspace"], hspace=m["hspace"])
+
+
+def _panel_title(ax, text: str, **kw) -> None:
+    """A panel title at a fixed height above the panel.
+
+    A title left to matplotlib's automatic placement measures the panel's tick labels at
+    every draw to dodge them; these panels have none on top, so the measurement is skipped.
+    """
+    ax.set_title(text, y=1.0, **kw)
+
+
+def _legend_below(fig, handles, ncol: int, fontsize: float) -> None:
+    """The figure's legend centred below the panels, the bottom margin grown to fit its rows
+    under the axis labels."""
+    rows = int(math.ceil(len(handles) / max(ncol, 1)))
+    m = getattr(fig, "_musclemetab_margins", None)
+    if m is not None:
+        m["bottom"] = max(m["bottom"], 0.55 + rows * fontsize / 72.0 * 1.7)
+    fig.legend(handles=handles, loc="lower center", ncol=ncol, fontsize=fontsize, frameon=False)
 
 
 def _grid(n: int, max_cols: int = 3) -> tuple[int, int]:
@@ -254,12 +280,39 @@ def main_workflow(workflows: Sequence[str]) -> str:
     return workflows[0]
 
 
-def _mean_sd(values) -> tuple[float, float, int]:
-    v = np.asarray(values, dtype=float)
-    v = v[np.isfinite(v)]
-    if v.size == 0:
-        return math.nan, math.nan, 0
-    return float(v.mean()), float(v.std(ddof=1)) if v.size > 1 else math.nan, int(v.size)
+def group_stats(df, by: Sequence[str], columns: Sequence[str]) -> dict:
+    """Mean, sample SD and count of the finite values of ``columns`` in each group of ``by``.
+
+    Returns ``{group: {column: (mean, sd, n)}}``; a group is the text of its ``by`` value
+    (one column) or the tuple of them; the SD of a group with one value is NaN. One pass
+    over the table, where a filter per cell of a results table would take one each.
+    """
+    import pandas as pd
+
+    columns = list(columns)
+    keys = {k: df[k].astype(str) for k in by}
+    values = df[columns].apply(pd.to_numeric, errors="coerce").replace([np.inf, -np.inf], np.nan)
+    grouped = values.assign(**keys).groupby(list(by), sort=False)[columns]
+    mean, sd, n = grouped.mean(), grouped.std(ddof=1), grouped.count()
+    m, s, c = mean.to_numpy(float), sd.reindex(mean.index).to_numpy(float), n.reindex(mean.index).to_numpy(int)
+    return {key: {col: (float(m[i, j]), float(s[i, j]), int(c[i, j])) for j, col in enumerate(columns)}
+            for i, key in enumerate(mean.index)}
+
+
+def stat_cell(stats: dict, key, column: str) -> tuple[float, float, int]:
+    """``(mean, sd, n)`` of ``column`` in the group ``key`` of :func:`group_stats` (NaN, NaN, 0 if absent)."""
+    return stats.get(key, {}).get(column, (math.nan, math.nan, 0))
+
+
+def _one_workflow(table, workflow: str | None, what: str):
+    """``(workflow, its rows)``: ``workflow``, or :func:`main_workflow` of the table's when
+    ``None``; raises :class:`OptionError` when the table has no row of it."""
+    wfs = _ordered_workflows(table["workflow"])
+    wf = main_workflow(wfs) if workflow is None else str(workflow)
+    d = table[table["workflow"].astype(str) == wf]
+    if d.empty:
+        raise OptionError(f"workflow '{wf}' is not in {what}; it has {', '.join(wfs)}")
+    return wf, d
 
 
 def _rmcorr(x, y, subject):
@@ -299,6 +352,8 @@ def excitations_and_fiber_lengths(
     *,
     side: str = "r",
     title: str | None = None,
+    emg: Mapping[str, tuple[Sequence[float], Sequence[float]]] | None = None,
+    emg_label: str = "measured EMG",
 ):
     """Excitation and normalised fibre length of selected muscles over the gait cycle.
 
@@ -316,9 +371,16 @@ def excitations_and_fiber_lengths(
         report list of the anatomical muscle table); named muscles absent from every solution
         raise :class:`UnknownMuscleError`.
 
+    emg
+        Muscle column name -> ``(cycle_pct, value)``: measured EMG drawn over the excitation
+        (grey, dashed), already scaled as it should be shown; ``emg_label`` names it in the
+        legend (e.g. how it was scaled).
+
     Per muscle, an excitation panel (-) above a fibre-length panel (``lM/lMo``), one line per
     workflow, a vertical line at toe-off; the fibre-length panels shade the plateau of the
-    active force-length curve (0.75-1.05) and draw the start of the descending limb (1.05).
+    active force-length curve (0.75-1.05) and draw the start of the descending limb (1.05);
+    every excitation panel spans 0-1.02 (or up to the largest EMG shown) and every
+    fibre-length panel the same range.
     """
     if not solutions:
         raise OptionError("no solution given for the excitation and fibre-length figure")
@@ -361,6 +423,9 @@ def excitations_and_fiber_lengths(
     fig = _new_figure(2.6 * ncol + 0.9, 2 * 2.0 * nmrow + 1.3, left=0.95, bottom=0.8, hspace=0.25)
     axes = fig.subplots(2 * nmrow, ncol, squeeze=False, sharex=True)
     toe_offs = _unique(round(100.0 * (c[1] - c[0]) / (c[2] - c[0]), 6) for c in cyc.values())
+    lm_lims = []
+    # one excitation scale in every panel: 0-1, or up to the largest scaled EMG shown
+    e_top = max([1.02] + [1.02 * float(np.nanmax(v)) for _, v in (emg or {}).values() if np.size(v)])
     for k, (label, found) in enumerate(rows):
         i, j = divmod(k, ncol)
         ax_e, ax_l = axes[2 * i, j], axes[2 * i + 1, j]
@@ -378,17 +443,26 @@ def excitations_and_fiber_lengths(
             kw = dict(color=workflow_colour(w), lw=1.3, label=w, gid=f"workflow:{w}")
             ax_e.plot(pct, np.asarray(sol.excitation)[keep, idx], **kw)
             ax_l.plot(pct, np.asarray(sol.lm_norm)[keep, idx], **kw)
+        measured = (emg or {}).get(label)
+        if measured is not None:
+            ax_e.plot(np.asarray(measured[0], float), np.asarray(measured[1], float), color="0.45", lw=1.1,
+                      ls="--", label="_emg", gid="emg", zorder=1)
         for ax in (ax_e, ax_l):
             for to in toe_offs:
                 ax.axvline(to, color="k", lw=0.8, ls=":", label="_toe-off", gid="toe-off")
             ax.set_xlim(0, 100)
-        ax_e.set_ylim(0, 1.02)
-        ax_e.set_title(label, fontsize=10)
+        ax_e.set_ylim(0, e_top)
+        _panel_title(ax_e, label, fontsize=10)
         if j == 0:
             ax_e.set_ylabel("excitation (-)")
             ax_l.set_ylabel("fibre length\n$l^M/l^M_o$ (-)")
         lo, hi = ax_l.get_ylim()
-        ax_l.set_ylim(min(lo, PLATEAU_BAND[0] - 0.05), max(hi, DESCENDING_LIMB + 0.05))
+        lm_lims.append((min(lo, PLATEAU_BAND[0] - 0.05), max(hi, DESCENDING_LIMB + 0.05)))
+    # one fibre-length scale in every panel, so that the muscles compare at a glance
+    lm_lim = (min(lo for lo, _ in lm_lims), max(hi for _, hi in lm_lims))
+    for k in range(n):
+        i, j = divmod(k, ncol)
+        axes[2 * i + 1, j].set_ylim(*lm_lim)
     for k in range(n, nmrow * ncol):
         i, j = divmod(k, ncol)
         axes[2 * i, j].set_visible(False)
@@ -401,12 +475,14 @@ def excitations_and_fiber_lengths(
     from matplotlib.patches import Patch
 
     handles = [Line2D([], [], color=workflow_colour(w), lw=1.5, label=w) for w in workflows]
+    if emg:
+        handles.append(Line2D([], [], color="0.45", lw=1.1, ls="--", label=emg_label))
     handles += [
         Line2D([], [], color="k", lw=0.8, ls=":", label="toe-off"),
         Patch(color="0.88", label=f"plateau {PLATEAU_BAND[0]:g}-{PLATEAU_BAND[1]:g}"),
         Line2D([], [], color="0.35", lw=0.8, ls="--", label=f"descending limb > {DESCENDING_LIMB:g}"),
     ]
-    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 8), fontsize=9, frameon=False)
+    _legend_below(fig, handles, min(len(handles), 8), 9)
     fig.suptitle(title or "Muscle excitation and normalised fibre length over the gait cycle", fontsize=11)
     return fig
 
@@ -478,7 +554,7 @@ def estimated_vs_measured(results, *, models: Sequence[str] | None = None, title
                 first = False
         ax.set_xlim(lim)
         ax.set_ylim(lim)
-        ax.set_title(m, color=model_colour(m), fontsize=11, fontweight="bold")
+        _panel_title(ax, m, color=model_colour(m), fontsize=11, fontweight="bold")
         ax.set_xlabel("measured (W/kg)")
         ax.set_ylabel("estimated (W/kg)")
         ax.legend(fontsize=7, loc="best", framealpha=0.8)
@@ -514,20 +590,22 @@ def _cycle_panels(n: int):
     return fig, fig.subplots(nrow, ncol, squeeze=False, sharex=True, sharey=True)
 
 
-def _label_cycle_panels(axes, models: Sequence[str], ylabel: str = "metabolic rate (W)") -> None:
-    """Titles, axis labels and limits of the panels of :func:`_cycle_panels`; unused panels hidden."""
+def _label_cycle_panels(axes, models: Sequence[str], ylabel: str = "metabolic rate (W)", *,
+                        xlim: tuple[float, float] = (0.0, 100.0), xlabel: str = "gait cycle (%)") -> None:
+    """Titles, axis labels and the x limits (the gait cycle, 0-100 %, unless given) of the
+    panels of :func:`_cycle_panels`; unused panels hidden."""
     nrow, ncol = axes.shape
     for k, ax in enumerate(axes.flat):
         if k >= len(models):
             ax.set_visible(False)
             continue
         m = models[k]
-        ax.set_xlim(0, 100)
-        ax.set_title(m, color=model_colour(m), fontsize=11, fontweight="bold")
+        ax.set_xlim(*xlim)
+        _panel_title(ax, m, color=model_colour(m), fontsize=11, fontweight="bold")
         if k % ncol == 0:
             ax.set_ylabel(ylabel)
         if k // ncol == nrow - 1 or k + ncol >= len(models):
-            ax.set_xlabel("gait cycle (%)")
+            ax.set_xlabel(xlabel)
             ax.tick_params(labelbottom=True)
 
 
@@ -568,7 +646,7 @@ def group_rates_over_cycle(timeseries, toe_off_pct: float, models: Sequence[str]
 
     handles = [Line2D([], [], color=group_colour(g), lw=1.5, label=f"{g} ({GROUP_NAMES.get(g, g)})") for g in groups]
     handles.append(Line2D([], [], color="k", lw=0.8, ls=":", label=f"toe-off ({to:.1f} %)"))
-    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 6), fontsize=8, frameon=False)
+    _legend_below(fig, handles, min(len(handles), 6), 8)
     fig.suptitle(title or "Metabolic rate of the muscle groups over the gait cycle (one leg, no basal heat)",
                  fontsize=11)
     return fig
@@ -628,7 +706,7 @@ def whole_body_over_cycle(timeseries_by_trial: Mapping[str, object], speeds: Map
     if toe_off_pct:
         handles.append(Line2D([], [], color="0.3", lw=1.5, marker="|", ls="", markersize=9,
                               label="toe-off (marks at the bottom)"))
-    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 8), fontsize=8, frameon=False)
+    _legend_below(fig, handles, min(len(handles), 8), 8)
     fig.suptitle(title or "Whole-body metabolic rate over the gait cycle across walking speeds "
                  "(one leg, summed muscles, no basal heat)", fontsize=11)
     return fig
@@ -636,13 +714,12 @@ def whole_body_over_cycle(timeseries_by_trial: Mapping[str, object], speeds: Map
 
 # --------------------------------------------------------------------- 5. phase shares
 def _speed_table(res, value: str):
-    """Per trial: mean speed over subjects and mean of ``value`` over subjects."""
+    """Per trial (in speed order): ``(trial, mean speed, mean, SD, n)`` of ``value`` over subjects."""
+    stats = group_stats(res, ["trial"], ["speed_m_per_s", value])
     rows = []
     for t in trial_order(res):
-        d = res[res["trial"].astype(str) == t]
-        sp = float(np.nanmean(d["speed_m_per_s"].to_numpy(float))) if d["speed_m_per_s"].notna().any() else math.nan
-        mean, sd, n = _mean_sd(d[value])
-        rows.append((t, sp, mean, sd, n))
+        sp = stat_cell(stats, t, "speed_m_per_s")[0]
+        rows.append((t, sp, *stat_cell(stats, t, value)))
     return rows
 
 
@@ -674,13 +751,13 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
     pref = res[res["trial"].astype(str) == trial]
     nw = len(workflows)
     width = 0.8 / max(nw, 1)
+    pref_stats = group_stats(pref, ["workflow", "model"], ["swing_energy_share_pct", "stance_energy_share_pct"])
     for i, w in enumerate(workflows):
         col = workflow_colour(w)
         xs, stance, swing, sd = [], [], [], []
         for j, m in enumerate(models):
-            d = pref[(pref["workflow"].astype(str) == w) & (pref["model"].astype(str) == m)]
-            sw, sw_sd, n = _mean_sd(d["swing_energy_share_pct"])
-            st, _, _ = _mean_sd(d["stance_energy_share_pct"])
+            sw, sw_sd, n = stat_cell(pref_stats, (w, m), "swing_energy_share_pct")
+            st = stat_cell(pref_stats, (w, m), "stance_energy_share_pct")[0]
             if n == 0:
                 continue
             xs.append(j - 0.4 + width * (i + 0.5))
@@ -707,7 +784,7 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
     sp = pref["speed_m_per_s"].to_numpy(float)
     if np.any(np.isfinite(sp)):
         speed_txt = f", {np.nanmean(sp):.2f} m/s"
-    ax_b.set_title(f"Stance (solid) and swing (hatched; % above the bar) at the preferred speed "
+    _panel_title(ax_b, f"Stance (solid) and swing (hatched; % above the bar) at the preferred speed "
                    f"({trial}{speed_txt})", fontsize=9)
     ax_b.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=max(1, min(nw, 6)),
                 frameon=False, title="workflow (stance solid, swing hatched)", title_fontsize=8)
@@ -732,10 +809,83 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
     ax_s.set_xlabel("walking speed (m/s)")
     ax_s.set_ylabel("swing share (%)")
     note = "" if n_speeds > 1 else " - one speed only, no trend"
-    ax_s.set_title(f"Swing share against speed ({wf_line}){note}", fontsize=9)
+    _panel_title(ax_s, f"Swing share against speed ({wf_line}){note}", fontsize=9)
     ax_s.legend(fontsize=7, frameon=False)
     fig.suptitle(title or "Relative phase cost: stance and swing shares of the muscle metabolic energy "
                  "(one leg, no basal heat)", fontsize=11)
+    return fig
+
+
+def phase_pies(results, *, workflow: str | None = None, models: Sequence[str] | None = None,
+               title: str | None = None):
+    """Stance and swing shares as pies whose area is proportional to the total cost.
+
+    One pie per model (row) and trial (column, in speed order) for ``workflow`` (default
+    :func:`main_workflow`): the stance wedge in the model's colour, the swing wedge lighter
+    (``stance_energy_share_pct``, ``swing_energy_share_pct``; one leg, no basal heat), the
+    pie's area proportional to the whole-body rate without basal heat
+    (``mean_W_per_kg_no_basal``, W/kg); means over subjects. The largest pie has radius
+    0.46 in units of the grid spacing.
+    """
+    from ..colours import lighter
+
+    res = _ok_rows(results)
+    _require_columns(res, ("stance_energy_share_pct", "swing_energy_share_pct", "mean_W_per_kg_no_basal"),
+                     "the results table")
+    if res.empty:
+        raise OptionError("no successful unit in the results")
+    wf, d = _one_workflow(res, workflow, "the results")
+    models = _ordered_models(d["model"]) if models is None else [str(m) for m in models]
+    trials = trial_order(d)
+    cols = ["stance_energy_share_pct", "swing_energy_share_pct", "mean_W_per_kg_no_basal"]
+    stats = group_stats(d, ["model", "trial"], cols + (["speed_m_per_s"] if "speed_m_per_s" in d.columns else []))
+    cost = {(m, t): stat_cell(stats, (m, t), "mean_W_per_kg_no_basal")[0] for m in models for t in trials}
+    finite = [v for v in cost.values() if np.isfinite(v) and v > 0]
+    if not finite:
+        raise OptionError("no positive whole-body rate (mean_W_per_kg_no_basal) to size the pies")
+    top = max(finite)
+    pitch = 1.3  # rows: trials; columns: models; the text under each pie fits between the rows
+    fig = _new_figure(1.5 * len(models) + 1.3, 1.5 * pitch * len(trials) + 1.1, left=1.0, right=0.2, bottom=0.3,
+                      top=0.75)
+    ax = fig.add_subplot()
+    for i, t in enumerate(trials):
+        y = pitch * (len(trials) - 1 - i)
+        for j, m in enumerate(models):
+            colour = model_colour(m)
+            st = stat_cell(stats, (m, t), "stance_energy_share_pct")[0]
+            sw = stat_cell(stats, (m, t), "swing_energy_share_pct")[0]
+            v = cost[(m, t)]
+            if not (np.isfinite(st) and np.isfinite(sw) and np.isfinite(v) and v > 0):
+                continue
+            r = 0.46 * math.sqrt(v / top)
+            wedges, *_ = ax.pie([st, sw], center=(j, y), radius=r, colors=[colour, lighter(colour, 0.6)],
+                                startangle=90, counterclock=False,
+                                wedgeprops={"linewidth": 0.6, "edgecolor": "white"})
+            wedges[0].set_gid(f"stance:{m}:{t}")
+            wedges[1].set_gid(f"swing:{m}:{t}")
+            ax.text(j, y - 0.49, f"{v:.2f} W/kg, swing {sw:.0f} %", ha="center", va="top", fontsize=6.5)
+    ax.set_aspect("equal")
+    ax.set_xlim(-0.55, len(models) - 0.45)
+    ax.set_ylim(-0.75, pitch * (len(trials) - 1) + 0.5)
+    ax.set_frame_on(False)
+    speed = "speed_m_per_s" in d.columns
+    labels = []
+    for t in trials:
+        sp = next((x for x in (stat_cell(stats, (m, t), "speed_m_per_s")[0] for m in models) if np.isfinite(x)),
+                  math.nan) if speed else math.nan
+        labels.append(f"{t}\n{sp:.2f} m/s" if np.isfinite(sp) else t)
+    ax.set_yticks([pitch * (len(trials) - 1 - i) for i in range(len(trials))], labels, fontsize=8)
+    ax.set_xticks(range(len(models)), models, fontsize=9)
+    ax.xaxis.tick_top()
+    for lab in ax.get_xticklabels():
+        lab.set_color(model_colour(lab.get_text()))
+        lab.set_fontweight("bold")
+    ax.tick_params(length=0)
+    import textwrap
+
+    heading = title or (f"Stance (dark) and swing (light) shares of the muscle energy; pie area proportional to the "
+                        f"whole-body rate without basal heat (W/kg; {wf}; mean over subjects)")
+    fig.suptitle(textwrap.fill(heading, int(12 * fig.get_figwidth())), fontsize=10)
     return fig
 
 
@@ -762,6 +912,7 @@ def group_shares(results, *, workflows: Sequence[str] | None = None, models: Seq
     models = _ordered_models(res["model"]) if models is None else [str(m) for m in models]
     trials = trial_order(res)
     speeds = {t: r[1] for t, r in zip(trials, _speed_table(res, cols[0]))}
+    stats = group_stats(res, ["workflow", "model", "trial"], cols)
     panel_w = max(1.8, 0.3 * len(trials) + 0.9)
     fig = _new_figure(min(20.0, panel_w * len(models) + 1.2), 2.9 * len(workflows) + 1.8, left=0.9, bottom=1.3,
                       hspace=0.45, wspace=0.1)
@@ -770,19 +921,19 @@ def group_shares(results, *, workflows: Sequence[str] | None = None, models: Seq
     for i, w in enumerate(workflows):
         for j, m in enumerate(models):
             ax = axes[i, j]
-            d = res[(res["workflow"].astype(str) == w) & (res["model"].astype(str) == m)]
-            bottom = np.zeros(len(trials))
-            for g, c in zip(groups, cols):
-                vals = np.array([_mean_sd(d[d["trial"].astype(str) == t][c])[0] for t in trials])
-                vals = np.nan_to_num(vals)
-                ax.bar(np.arange(len(trials)), vals, bottom=bottom, width=0.75, color=group_colour(g),
-                       edgecolor="white", linewidth=0.4, label=g, gid=f"group:{g}")
-                bottom += vals
+            # the stacks of every trial in one call: a bar per group and trial, group by group
+            vals = np.nan_to_num([[stat_cell(stats, (w, m, t), c)[0] for t in trials] for c in cols])
+            bottoms = np.vstack([np.zeros(len(trials)), np.cumsum(vals, axis=0)[:-1]])
+            bars = ax.bar(np.tile(np.arange(len(trials)), len(groups)), vals.ravel(), bottom=bottoms.ravel(),
+                          width=0.75, color=[group_colour(g) for g in groups for _ in trials], edgecolor="white",
+                          linewidth=0.4)
+            for rect, g in zip(bars, (g for g in groups for _ in trials)):
+                rect.set_gid(f"group:{g}")
             ax.set_xticks(np.arange(len(trials)), xt, fontsize=6.5 if len(trials) > 4 else 7,
                           rotation=90 if len(trials) > 4 else 0)
             ax.set_ylim(0, 100)
             if i == 0:
-                ax.set_title(m, color=model_colour(m), fontsize=11, fontweight="bold")
+                _panel_title(ax, m, color=model_colour(m), fontsize=11, fontweight="bold")
             if j == 0:
                 ax.set_ylabel(f"{w}\nshare (%)", color=workflow_colour(w))
             if i == len(workflows) - 1:
@@ -790,7 +941,7 @@ def group_shares(results, *, workflows: Sequence[str] | None = None, models: Seq
     from matplotlib.patches import Patch
 
     handles = [Patch(color=group_colour(g), label=f"{g} ({GROUP_NAMES.get(g, g)})") for g in groups]
-    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 6), fontsize=8, frameon=False)
+    _legend_below(fig, handles, min(len(handles), 6), 8)
     fig.suptitle(title or "Shares of the muscle groups in the cycle's muscle metabolic energy "
                  "(%, one leg, no basal heat; mean over subjects)", fontsize=11)
     return fig
@@ -809,38 +960,36 @@ def rates_against_speed(results, *, workflow: str | None = None, models: Sequenc
     res = _ok_rows(results)
     _require_columns(res, ("speed_m_per_s", "mean_W_per_kg_no_basal"), "the results table")
     cols = [c for c in (f"share_{g}_pct" for g in GROUPS) if c in res.columns]
-    wfs = _ordered_workflows(res["workflow"])
-    wf = main_workflow(wfs) if workflow is None else str(workflow)
-    d = res[res["workflow"].astype(str) == wf]
-    if d.empty:
-        raise OptionError(f"workflow '{wf}' is not in the results; it has {', '.join(wfs)}")
+    wf, d = _one_workflow(res, workflow, "the results")
     if len(_unique(d["trial"].astype(str))) < 2:
         raise OptionError("one speed only: nothing to draw against speed")
     models = _ordered_models(d["model"]) if models is None else [str(m) for m in models]
     fig, axes = _cycle_panels(len(models))
     groups = [c[len("share_"):-len("_pct")] for c in cols]
+    speeds: list[float] = []
     for k, m in enumerate(models):
         ax = axes.flat[k]
         dm = d[d["model"].astype(str) == m].copy()
         for g, c in zip(groups, cols):
             dm[f"rate_{g}"] = dm[c].astype(float) / 100.0 * dm["mean_W_per_kg_no_basal"].astype(float)
-        rows = _speed_table(dm, "mean_W_per_kg_no_basal")
-        x = [r[1] for r in rows]
-        ax.plot(x, [r[2] for r in rows], color="k", lw=1.8, marker="o", ms=4, label="whole body", gid="whole-body")
+        order = trial_order(dm)
+        stats = group_stats(dm, ["trial"], ["speed_m_per_s", "mean_W_per_kg_no_basal"] + [f"rate_{g}" for g in groups])
+        x = [stat_cell(stats, t, "speed_m_per_s")[0] for t in order]
+        ax.plot(x, [stat_cell(stats, t, "mean_W_per_kg_no_basal")[0] for t in order], color="k", lw=1.8, marker="o",
+                ms=4, label="whole body", gid="whole-body")
         for g in groups:
-            ys = [r[2] for r in _speed_table(dm, f"rate_{g}")]
+            ys = [stat_cell(stats, t, f"rate_{g}")[0] for t in order]
             ax.plot(x, ys, color=group_colour(g), lw=1.2, marker="o", ms=3, label=g, gid=f"group:{g}")
-        ax.set_xlim(min(x) - 0.05, max(x) + 0.05)
-    _label_cycle_panels(axes, models, "metabolic rate (W/kg)")
-    for k, ax in enumerate(axes.flat):
-        if k < len(models) and ax.get_xlabel():
-            ax.set_xlabel("walking speed (m/s)")
+        speeds += [v for v in x if np.isfinite(v)]
+    # one speed axis in every panel, over the trials' speeds
+    _label_cycle_panels(axes, models, "metabolic rate (W/kg)", xlim=(min(speeds) - 0.05, max(speeds) + 0.05),
+                        xlabel="walking speed (m/s)")
     from matplotlib.lines import Line2D
 
     handles = [Line2D([], [], color="k", lw=1.8, marker="o", label="whole body (both legs, no basal)")]
     handles += [Line2D([], [], color=group_colour(g), lw=1.2, marker="o", label=f"{g} ({GROUP_NAMES.get(g, g)})")
                 for g in groups]
-    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 6), fontsize=8, frameon=False)
+    _legend_below(fig, handles, min(len(handles), 6), 8)
     fig.suptitle(title or f"Whole-body and muscle-group metabolic rates against walking speed ({wf}; W/kg of body "
                  "mass, both legs, no basal heat; mean over subjects)", fontsize=11)
     return fig
@@ -859,11 +1008,7 @@ def per_muscle_ranked(per_muscle, *, workflow: str | None = None, models: Sequen
     _require_columns(per_muscle, ("trial", "workflow", "model", "muscle", "mean_W_per_kg"), "the per-muscle table")
     if len(per_muscle) == 0:
         raise OptionError("the per-muscle table has no rows")
-    wfs = _ordered_workflows(per_muscle["workflow"])
-    wf = main_workflow(wfs) if workflow is None else str(workflow)
-    d = per_muscle[per_muscle["workflow"].astype(str) == wf]
-    if d.empty:
-        raise OptionError(f"workflow '{wf}' is not in the per-muscle table; it has {', '.join(wfs)}")
+    wf, d = _one_workflow(per_muscle, workflow, "the per-muscle table")
     models = _ordered_models(d["model"]) if models is None else [str(m) for m in models]
     trials = trial_order(d) if "speed_m_per_s" in d.columns else _unique(str(t) for t in d["trial"])
     from matplotlib import colormaps
@@ -889,7 +1034,7 @@ def per_muscle_ranked(per_muscle, *, workflow: str | None = None, models: Sequen
             ax.barh(y + 0.4 - height * (i + 0.5), vals, height=height * 0.95, color=colour[t], label=t,
                     gid=f"trial:{t}")
         ax.set_yticks(y, order, fontsize=7)
-        ax.set_title(m, color=model_colour(m), fontsize=11, fontweight="bold")
+        _panel_title(ax, m, color=model_colour(m), fontsize=11, fontweight="bold")
         ax.grid(axis="x", color="0.9", lw=0.6)
         ax.set_axisbelow(True)
     for k in range(len(models), nrow * ncol):
@@ -904,7 +1049,7 @@ def per_muscle_ranked(per_muscle, *, workflow: str | None = None, models: Sequen
         sp = d.assign(trial=d["trial"].astype(str)).groupby("trial")["speed_m_per_s"].mean().to_dict()
     handles = [Patch(color=colour[t], label=f"{t} ({sp[t]:.2f} m/s)" if np.isfinite(sp.get(t, np.nan)) else t)
                for t in trials]
-    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 8), fontsize=8, frameon=False)
+    _legend_below(fig, handles, min(len(handles), 8), 8)
     fig.suptitle(title or f"The {top} muscles with the largest metabolic rate, across walking speeds ({wf}; "
                  "W/kg of body mass, one leg, no basal heat; mean over subjects)", fontsize=11)
     return fig

@@ -59,13 +59,16 @@ FIGURE_NAMES = (
     "group_rates_over_cycle",
     "whole_body_over_cycle",
     "phase_shares",
+    "phase_pies",
     "group_shares",
     "rates_against_speed",
     "per_muscle_ranked",
+    "figure2_soleus",
 )
 
-#: Packages whose versions the report lists (OpenSim's from study.json only).
-SOFTWARE = ("musclemetab", "numpy", "scipy", "casadi", "pandas", "matplotlib", "opensim")
+#: Figures handed to the worker processes first: the slowest to draw.
+_DRAW_FIRST = ("figure2_soleus", "excitations_fiber_lengths", "group_shares")
+
 
 
 
@@ -266,223 +269,433 @@ def _short(study: StudyFolder, exc: BaseException) -> str:
     return text.replace(str(study.path) + os.sep, "").replace(str(study.path.resolve()) + os.sep, "")
 
 
-def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequence[str] = ("png",)
-                 ) -> list[FigureEntry]:
+def _measured_emg(study: StudyFolder, subject: str, trial: str, sols: dict, cycles: dict, rows
+                  ) -> tuple[dict, str, str]:
+    """The trial's measured EMG to draw over the excitations: ``({muscle: (cycle_pct, value)},
+    legend label, caption sentence)``.
+
+    The EMG file is the one ``study.json`` records for the trial (``emg_files``), mapped to
+    the muscles by the subject's ``emg_mapping``. Scaled by the EMG-TEN factors when the
+    trial's EMG-TEN unit succeeded (each muscle's ``scale`` in its ``summary.json``, the
+    channels it tracked), otherwise so that its peak over the cycle equals the excitation's
+    peak of the workflow shown first (EFFORT-TEN when present). No EMG: an empty mapping and a
+    sentence saying why.
+    """
+    from ..emg.processing import emg_at, map_channels, read_processed_emg
+    from ..io.jsonfile import read_json_object
+    from ..redundancy.emg_inputs import mapping_for_muscles, resolve_emg_mapping
+    from .figures import main_workflow
+
+    rec = (study.settings.get("subjects") or {}).get(subject) if isinstance(study.settings.get("subjects"), dict) else None
+    path = ((rec or {}).get("emg_files") or {}).get(trial) if isinstance(rec, dict) else None
+    if not path:
+        return {}, "", "No measured EMG is recorded for this trial (study.json, emg_files)."
+    wf = main_workflow(list(sols))
+    sol, (start, _, end) = sols[wf], cycles[wf]
+    t = np.asarray(sol.time_s, float)
+    t = t[(t >= start - 1e-9) & (t <= end + 1e-9)]
+    pct = 100.0 * (t - start) / (end - start)
+    scales: dict[str, float] = {}
+    mapping: dict = {}
+    emg_rows = rows[rows["workflow"].astype(str).str.lower() == "emg-ten"]
+    if not emg_rows.empty:
+        try:
+            tracking = read_json_object(study.unit_folder(emg_rows.iloc[0]) / "summary.json").get("emg_tracking") or {}
+            mapping = {m: v["channels"] for m, v in tracking.items()}
+            scales = {m: float(v["scale"]) for m, v in tracking.items()}
+        except (MusclemetabError, KeyError, TypeError, ValueError):
+            mapping, scales = {}, {}
+    try:
+        emg_df = read_processed_emg(_resolve(study, path))
+        if not mapping:
+            named = (rec or {}).get("emg_mapping") or "default"
+            mapping = mapping_for_muscles(named, resolve_emg_mapping(named), list(sol.muscles))
+        mapping = {m: c for m, c in mapping.items() if m in sol.muscles}
+        table = emg_at(map_channels(emg_df, mapping), t)
+    except MusclemetabError as exc:
+        return {}, "", f"Measured EMG not shown: {_short(study, exc)}."
+    full_t = np.asarray(sol.time_s, float)
+    excitation = np.asarray(sol.excitation)[(full_t >= start - 1e-9) & (full_t <= end + 1e-9)]
+    out = {}
+    for m in table.columns:
+        v = table[m].to_numpy(float)
+        if scales:
+            v = scales.get(m, math.nan) * v
+        elif np.max(v) > 0:
+            v = v * (float(np.max(excitation[:, list(sol.muscles).index(m)])) / float(np.max(v)))
+        if np.all(np.isfinite(v)):
+            out[m] = (pct, v)
+    if scales:
+        return out, "measured EMG x EMG-TEN scale", (
+            "Dashed grey: the measured EMG of the muscles EMG-TEN tracked, times the scale factor EMG-TEN "
+            "estimated for each.")
+    return out, f"measured EMG, peak = {wf} excitation peak", (
+        f"Dashed grey: the measured EMG (processed envelope, mapped to the muscles by the subject's channel "
+        f"mapping), scaled so that its peak over the cycle equals the peak of the {wf} excitation (no EMG-TEN "
+        "scale factors for this trial); its shape, not its amplitude, is the measurement.")
+
+
+def _resolve(study: StudyFolder, path) -> Path:
+    """A path recorded in study.json: as given when absolute, else relative to the study folder."""
+    p = Path(str(path))
+    return p if p.is_absolute() else study.path / p
+
+
+#: The title of each figure in the report.
+FIGURE_TITLES = {
+    "figure2_soleus": "The metabolic models on a soleus (the paper's Figure 2)",
+    "excitations_fiber_lengths": "Muscle excitations and normalised fibre lengths",
+    "estimated_vs_measured": "Estimated vs measured whole-body metabolic rate",
+    "group_rates_over_cycle": "Metabolic rate of the muscle groups over the gait cycle",
+    "whole_body_over_cycle": "Whole-body metabolic rate over the gait cycle across speeds",
+    "phase_shares": "Stance and swing shares",
+    "phase_pies": "Stance and swing shares, scaled by the total cost",
+    "group_shares": "Muscle-group shares",
+    "per_muscle_ranked": "The muscles costing most energy, across speeds",
+    "rates_against_speed": "Whole-body and muscle-group rates against walking speed",
+}
+
+
+def _figure_builders(study: StudyFolder) -> dict[str, Callable[[], tuple[object, str]] | str]:
+    """Figure name -> a function drawing it (returning the figure and its caption), or the
+    note saying why the study's data cannot support it."""
+    from . import figures as F
+
+    ok = study.ok
+    if ok.empty:
+        return {name: "no unit of the study succeeded: nothing to draw." for name in FIGURE_NAMES}
+
+    def fig_soleus():
+        from ..metabolics.figure2 import figure2
+
+        return figure2(), FIGURE2_CAPTION
+
+    workflows = [w for w in _workflows(study) if w in set(ok["workflow"].astype(str))]
+    models = [m for m in _models(study) if m in set(ok["model"].astype(str))]
+    trial = _preferred(study, ok)
+    main_wf = F.main_workflow(workflows)
+    # the subject shown in the single-unit figures: the first with the preferred trial done
+    pref = ok[ok["trial"].astype(str) == trial]
+    subject = next((s for s in _subjects(study) if s in set(pref["subject"].astype(str))), None)
+
+    def unit_rows(subject, trial=None, workflow=None):
+        d = ok[ok["subject"].astype(str) == subject]
+        if trial is not None:
+            d = d[d["trial"].astype(str) == trial]
+        if workflow is not None:
+            d = d[d["workflow"].astype(str) == workflow]
+        return d
+
+    def fig1():
+        from ..redundancy.solution import Solution
+
+        sols, cycles, skipped = {}, {}, []
+        rows = unit_rows(subject, trial)
+        for w in workflows:
+            d = rows[rows["workflow"].astype(str) == w]
+            if d.empty:
+                continue
+            folder = study.unit_folder(d.iloc[0])
+            try:
+                rec = _read_unit_json(folder)
+                cycles[w] = _cycle(rec, folder)
+                sols[w] = Solution.load(folder)
+            except MusclemetabError as exc:
+                cycles.pop(w, None)
+                skipped.append(f"{w} ({_short(study, exc)})")
+        if not sols:
+            raise OptionError(
+                f"no solution could be read for {subject}, trial {trial}"
+                + (f": {'; '.join(skipped)}" if skipped else "")
+            )
+        emg, emg_label, emg_text = _measured_emg(study, subject, trial, sols, cycles, rows)
+        fig = F.excitations_and_fiber_lengths(
+            sols, cycles, emg=emg, emg_label=emg_label,
+            title=f"Muscle excitation and normalised fibre length over the gait cycle: subject {subject}, "
+            f"trial {trial}",
+        )
+        cap = (f"Subject {subject}, trial {trial} (preferred speed). Excitation (-) and fibre length "
+               "normalised by the optimal fibre length (-), one line per workflow; dotted line: toe-off; "
+               "grey band: plateau of the active force-length curve (0.75-1.05); dashed line: start of "
+               f"the descending limb (1.05). {emg_text}")
+        if skipped:
+            cap += f" Not shown: {'; '.join(skipped)}."
+        return fig, cap
+
+    def unit_timeseries(subject, trial, workflow):
+        d = unit_rows(subject, trial, workflow)
+        if d.empty:
+            raise OptionError(f"no successful unit for {subject}, trial {trial}, workflow {workflow}")
+        folder = study.unit_folder(d.iloc[0])
+        ts = _read_timeseries(folder)
+        to = d["toe_off_pct"].iloc[0] if "toe_off_pct" in d.columns else math.nan
+        if not np.isfinite(to):
+            rec = _read_unit_json(folder)
+            s, t, e = _cycle(rec, folder)
+            to = 100.0 * (t - s) / (e - s)
+        sp = d["speed_m_per_s"].iloc[0] if "speed_m_per_s" in d.columns else math.nan
+        return ts, float(to), float(sp)
+
+    mass = _body_mass(study, subject)
+    scale, unit, legs = (2.0 / mass, "W/kg", "both legs") if mass else (1.0, "W", "one leg")
+
+    def fig3():
+        ts, to, _ = unit_timeseries(subject, trial, main_wf)
+        fig = F.group_rates_over_cycle(
+            ts, to, [m for m in models if m in set(ts["model"].astype(str))] or None,
+            title=f"Metabolic rate of the muscle groups over the gait cycle ({unit}, {legs}, no basal heat): "
+            f"subject {subject}, trial {trial}, {main_wf}", scale=scale, unit=unit,
+        )
+        cap = (f"Subject {subject}, trial {trial} (preferred speed), workflow {main_wf}. Muscle metabolic "
+               f"rates ({unit}, {legs}: twice the simulated leg{' per kg of body mass' if mass else ''}, "
+               "without basal heat) distributed to the muscle groups by moment-arm ratio; same axes in every "
+               f"panel; dotted line: toe-off ({to:.1f} % of the cycle).")
+        return fig, cap
+
+    def fig4():
+        trials = [t for t in F.trial_order(ok) if not unit_rows(subject, t, main_wf).empty]
+        if len(trials) < 2:
+            raise OptionError(
+                f"one speed only ({', '.join(trials) or 'no trial'} for subject {subject}, {main_wf}): "
+                "nothing to compare across speeds"
+            )
+        tables, speeds, toes, skipped = {}, {}, {}, []
+        for t in trials:
+            try:
+                ts, to, sp = unit_timeseries(subject, t, main_wf)
+            except MusclemetabError as exc:
+                skipped.append(f"{t} ({_short(study, exc)})")
+                continue
+            if not np.isfinite(sp):
+                skipped.append(f"{t} (no walking speed)")
+                continue
+            tables[t], speeds[t], toes[t] = ts, sp, to
+        if len(tables) < 2:
+            raise OptionError(
+                "fewer than two speeds with time series" + (f": {'; '.join(skipped)}" if skipped else "")
+            )
+        fig = F.whole_body_over_cycle(
+            tables, speeds, [m for m in models if any(m in set(x["model"].astype(str)) for x in tables.values())],
+            toe_off_pct=toes,
+            title=f"Whole-body metabolic rate over the gait cycle across speeds ({unit}, {legs}, summed "
+            f"muscles, no basal heat): subject {subject}, {main_wf}", scale=scale, unit=unit,
+        )
+        cap = (f"Subject {subject}, workflow {main_wf}. Summed muscle metabolic rate ({unit}, {legs}: twice "
+               f"the simulated leg{' per kg of body mass' if mass else ''}, without basal heat) over the gait "
+               "cycle, one line per walking speed; same axes in every panel; marks at the bottom: toe-off of "
+               "each trial.")
+        if skipped:
+            cap += f" Not shown: {'; '.join(skipped)}."
+        return fig, cap
+
+    def fig7():
+        import pandas as pd
+
+        path = study.path / "per_muscle.csv"
+        if not path.is_file():
+            raise OptionError("per_muscle.csv is missing: run the study with this version to get it")
+        pm = pd.read_csv(path, dtype={"subject": str, "trial": str, "workflow": str, "model": str})
+        if "speed_m_per_s" in ok.columns:
+            sp = ok.drop_duplicates(["subject", "trial"])[["subject", "trial", "speed_m_per_s"]]
+            pm = pm.merge(sp.astype({"subject": str, "trial": str}), on=["subject", "trial"], how="left")
+        fig = F.per_muscle_ranked(pm, workflow=main_wf if main_wf in set(pm["workflow"].astype(str)) else None,
+                                  models=[m for m in models if m in set(pm["model"].astype(str))] or None)
+        cap = (f"Workflow {main_wf}. The 15 muscles with the largest cycle-average metabolic rate of each model "
+               "(W per kg of body mass, one leg, without basal heat; mean over subjects), one bar per trial "
+               "(light: slow, dark: fast); every muscle is in per_muscle.csv.")
+        return fig, cap
+
+    def drawn(function, caption: str, **kwargs):
+        """A builder of a figure drawn from the successful rows alone, with a fixed caption."""
+        return lambda: (function(ok, **kwargs), caption)
+
+    builders = {
+        "figure2_soleus": fig_soleus,
+        "excitations_fiber_lengths": fig1,
+        "estimated_vs_measured": drawn(
+            F.estimated_vs_measured,
+            "Whole-body average metabolic rate (W/kg of body mass, both legs, with basal heat) estimated by "
+            "each model against the measured rate, one point per subject and trial; lines: repeated-measures "
+            "correlation of each workflow (common slope m, one intercept per subject); dashed: identity."),
+        "group_rates_over_cycle": fig3,
+        "whole_body_over_cycle": fig4,
+        "phase_shares": drawn(
+            F.phase_shares,
+            "Share of the cycle's muscle metabolic energy (one leg, without basal heat) spent in stance (initial "
+            "contact to toe-off) and swing, mean over subjects (error bar: SD). Left: at the preferred speed "
+            f"(trial {trial}); right: swing share against walking speed for {main_wf}, with the "
+            "repeated-measures slope (% per m/s).",
+            trial=trial, workflow=main_wf),
+        "phase_pies": drawn(
+            F.phase_pies,
+            f"Workflow {main_wf}. Each pie splits the cycle's muscle metabolic energy (one leg, without basal "
+            "heat) into stance (dark) and swing (light); its area is proportional to the whole-body rate without "
+            "basal heat (W/kg of body mass, both legs; printed under the pie), so the pies grow with walking "
+            "speed (rows) and differ between models (columns); means over subjects.",
+            workflow=main_wf, models=models),
+        "group_shares": drawn(
+            F.group_shares,
+            "Share of each muscle group in the cycle's muscle metabolic energy (%, one leg, without basal heat; "
+            "mean over subjects), one bar per trial (walking speed in m/s).",
+            workflows=workflows, models=models),
+        "per_muscle_ranked": fig7,
+        "rates_against_speed": drawn(
+            F.rates_against_speed,
+            f"Workflow {main_wf}. Whole-body metabolic rate without basal heat (black) and each muscle group's "
+            "part of it (group share × whole-body rate), W per kg of body mass, both legs; means over subjects "
+            "at each trial's mean walking speed; same axes in every panel.",
+            workflow=main_wf, models=models),
+    }
+    if subject is None:
+        for name in ("excitations_fiber_lengths", "group_rates_over_cycle", "whole_body_over_cycle"):
+            builders[name] = f"no successful unit for trial {trial}."
+    return builders
+
+
+def _draw_figure(study: StudyFolder, fig_dir: Path, formats: Sequence[str], name: str,
+                 build: Callable[[], tuple[object, str]] | str | None = None) -> FigureEntry:
+    """Draw and save one figure of the report (``build``: its entry of :func:`_figure_builders`,
+    made here when not given, as in a worker process)."""
+    from .figures import save_figure
+
+    if build is None:
+        build = _figure_builders(study)[name]
+    if isinstance(build, str):
+        return FigureEntry(name, FIGURE_TITLES[name], note=build)
+    cache = _figure_cache(name, formats)
+    if cache is not None:
+        formats = tuple(cache)  # PNG only: the figure is the package's (save_figure2 writes SVG or PDF)
+    if cache is not None and all(p.is_file() for p in cache.values()):
+        from ..io.atomic import atomic_write_bytes
+
+        paths = {fmt: atomic_write_bytes(fig_dir / f"{name}.{fmt}", p.read_bytes()) for fmt, p in cache.items()}
+        return FigureEntry(name, FIGURE_TITLES[name], caption=FIGURE2_CAPTION, paths=paths)
+    try:
+        fig, caption = build()
+    except MusclemetabError as exc:
+        return FigureEntry(name, FIGURE_TITLES[name], note=_short(study, exc))
+    paths = save_figure(fig, fig_dir, name, formats=formats)
+    if cache is not None:
+        _store_in_cache(paths, cache)
+    return FigureEntry(name, FIGURE_TITLES[name], caption=caption, paths=paths)
+
+
+FIGURE2_CAPTION = (
+    "The metabolic rate (W) and efficiency of one soleus under each energy model, in steady states "
+    "(excitation equal to activation) at four activations: over the fibre velocity at the optimal "
+    "length and over the fibre length at a slow shortening; the last row compares the models at full "
+    "activation. The settings and the open choices are printed on the figure (docs/metabolics.md). It "
+    "depends on no data of the study: it is drawn once per version of the models and kept in the "
+    "package's cache."
+)
+
+
+def _figure_cache(name: str, formats: Sequence[str]) -> dict[str, Path] | None:
+    """The cache file of a figure that depends only on the package (Figure 2, as PNG whatever
+    ``formats``), keyed by the source of the modules drawing it and the matplotlib version;
+    ``None`` for other figures."""
+    if name != "figure2_soleus":
+        return None
+    import hashlib
+    from importlib.metadata import version
+
+    from .. import colours, metabolics, muscle
+    from ..cache import default_cache_dir
+
+    h = hashlib.sha256(f"{name} matplotlib {version('matplotlib')}\n".encode())
+    sources = [Path(colours.__file__)]
+    for package in (metabolics, muscle):
+        sources += sorted(Path(package.__file__).parent.glob("*.py"))
+    for src in sources:
+        h.update(src.name.encode() + b"\0" + src.read_bytes())
+    folder = default_cache_dir().parent / "figures"
+    return {"png": folder / f"{name}-{h.hexdigest()[:32]}.png"}
+
+
+def _store_in_cache(paths: dict, cache: dict) -> None:
+    """Copy a drawn figure's files into the cache; a cache that cannot be written is skipped."""
+    import warnings
+
+    from ..errors import CacheWarning
+    from ..io.atomic import atomic_write_bytes
+
+    try:
+        for fmt, target in cache.items():
+            target.parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_bytes(target, Path(paths[fmt]).read_bytes())
+    except OSError as exc:
+        warnings.warn(f"figure cache {target.parent}: not written ({exc}); the figure is drawn again next time",
+                      CacheWarning, stacklevel=3)
+
+
+def default_workers() -> int:
+    """Worker processes drawing the figures by default: the idle cores of those this process
+    may use, at least 1.
+
+    Idle: the cores less the processes running elsewhere at this moment (Linux:
+    ``/proc/loadavg``, whose fourth field counts the runnable processes, this one included;
+    elsewhere the one-minute load average). On a machine busy with other work, more
+    processes than idle cores only take turns: measured on two cores at a load average of
+    3.9, two workers redrew the demo's report in 7.4 s, one process in 6.3 s.
+    """
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cores = os.cpu_count() or 1
+    try:
+        with open("/proc/loadavg", encoding="ascii") as f:
+            busy = max(0, int(f.read().split()[3].split("/")[0]) - 1)
+    except (OSError, IndexError, ValueError):
+        try:
+            busy = int(round(os.getloadavg()[0]))
+        except (AttributeError, OSError):
+            busy = 0
+    return max(1, cores - busy)
+
+
+def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequence[str] = ("png",),
+                 workers: int | None = None, meanwhile: Callable[[], object] | None = None) -> list[FigureEntry]:
     """Draw the figures the study's data support and save them in ``fig_dir`` (``formats``:
     PNG, and SVG when asked for).
 
-    Returns one :class:`FigureEntry` per name of :data:`FIGURE_NAMES`, with the file paths or
-    the note saying why the figure is not drawn (the files of a figure not drawn are
-    removed from ``fig_dir``, so that no figure of an earlier report remains).
+    ``workers`` processes draw the figures side by side (default :func:`default_workers`, the
+    idle cores;
+    1 draws them in this process; parallel drawing needs the ``fork`` start method and falls
+    back to one process where it is not available). Returns one :class:`FigureEntry` per name
+    of :data:`FIGURE_NAMES`, with the file paths or the note saying why the figure is not
+    drawn (the files of a figure not drawn are removed from ``fig_dir``, so that no figure
+    of an earlier report remains).
     """
-    from . import figures as F
+    import multiprocessing
 
     fig_dir = Path(fig_dir)
-    ok = study.ok
+    workers = default_workers() if workers is None else int(workers)
+    if workers < 1:
+        raise OptionError(f"workers (--workers) must be at least 1, not {workers}")
+    builders = _figure_builders(study)
+    drawn = [n for n in FIGURE_NAMES if not isinstance(builders[n], str)]
     entries: dict[str, FigureEntry] = {}
-    titles = {
-        "excitations_fiber_lengths": "Muscle excitations and normalised fibre lengths",
-        "estimated_vs_measured": "Estimated vs measured whole-body metabolic rate",
-        "group_rates_over_cycle": "Metabolic rate of the muscle groups over the gait cycle",
-        "whole_body_over_cycle": "Whole-body metabolic rate over the gait cycle across speeds",
-        "phase_shares": "Stance and swing shares",
-        "group_shares": "Muscle-group shares",
-        "per_muscle_ranked": "The muscles costing most energy, across speeds",
-        "rates_against_speed": "Whole-body and muscle-group rates against walking speed",
-    }
+    workers = min(workers, len(drawn))
+    if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
+        from concurrent.futures import ProcessPoolExecutor
 
-    def attempt(name: str, build: Callable[[], tuple[object, str]]):
-        try:
-            fig, caption = build()
-        except MusclemetabError as exc:
-            entries[name] = FigureEntry(name, titles[name], note=_short(study, exc))
-            return
-        entries[name] = FigureEntry(name, titles[name], caption=caption,
-                                    paths=F.save_figure(fig, fig_dir, name, formats=formats))
+        # forked workers start with this process' modules: import the drawing ones once, here
+        import matplotlib.backends.backend_agg  # noqa: F401
+        import matplotlib.figure  # noqa: F401
+        import matplotlib.legend  # noqa: F401
 
-    if ok.empty:
-        for name in FIGURE_NAMES:
-            entries[name] = FigureEntry(name, titles[name], note="no unit of the study succeeded: nothing to draw.")
-    else:
-        workflows = [w for w in _workflows(study) if w in set(ok["workflow"].astype(str))]
-        models = [m for m in _models(study) if m in set(ok["model"].astype(str))]
-        trial = _preferred(study, ok)
-        main_wf = F.main_workflow(workflows)
-        # the subject shown in the single-unit figures: the first with the preferred trial done
-        pref = ok[ok["trial"].astype(str) == trial]
-        subject = next((s for s in _subjects(study) if s in set(pref["subject"].astype(str))), None)
-
-        def unit_rows(subject, trial=None, workflow=None):
-            d = ok[ok["subject"].astype(str) == subject]
-            if trial is not None:
-                d = d[d["trial"].astype(str) == trial]
-            if workflow is not None:
-                d = d[d["workflow"].astype(str) == workflow]
-            return d
-
-        def fig1():
-            from ..redundancy.solution import Solution
-
-            sols, cycles, skipped = {}, {}, []
-            rows = unit_rows(subject, trial)
-            for w in workflows:
-                d = rows[rows["workflow"].astype(str) == w]
-                if d.empty:
-                    continue
-                folder = study.unit_folder(d.iloc[0])
-                try:
-                    rec = _read_unit_json(folder)
-                    cycles[w] = _cycle(rec, folder)
-                    sols[w] = Solution.load(folder)
-                except MusclemetabError as exc:
-                    cycles.pop(w, None)
-                    skipped.append(f"{w} ({_short(study, exc)})")
-            if not sols:
-                raise OptionError(
-                    f"no solution could be read for {subject}, trial {trial}"
-                    + (f": {'; '.join(skipped)}" if skipped else "")
-                )
-            fig = F.excitations_and_fiber_lengths(
-                sols, cycles,
-                title=f"Muscle excitation and normalised fibre length over the gait cycle: subject {subject}, "
-                f"trial {trial}",
-            )
-            cap = (f"Subject {subject}, trial {trial} (preferred speed). Excitation (-) and fibre length "
-                   "normalised by the optimal fibre length (-), one line per workflow; dotted line: toe-off; "
-                   "grey band: plateau of the active force-length curve (0.75-1.05); dashed line: start of "
-                   "the descending limb (1.05).")
-            if skipped:
-                cap += f" Not shown: {'; '.join(skipped)}."
-            return fig, cap
-
-        def fig2():
-            fig = F.estimated_vs_measured(ok)
-            cap = ("Whole-body average metabolic rate (W/kg of body mass, both legs, with basal heat) estimated "
-                   "by each model against the measured rate, one point per subject and trial; lines: "
-                   "repeated-measures correlation of each workflow (common slope m, one intercept per "
-                   "subject); dashed: identity.")
-            return fig, cap
-
-        def unit_timeseries(subject, trial, workflow):
-            d = unit_rows(subject, trial, workflow)
-            if d.empty:
-                raise OptionError(f"no successful unit for {subject}, trial {trial}, workflow {workflow}")
-            folder = study.unit_folder(d.iloc[0])
-            ts = _read_timeseries(folder)
-            to = d["toe_off_pct"].iloc[0] if "toe_off_pct" in d.columns else math.nan
-            if not np.isfinite(to):
-                rec = _read_unit_json(folder)
-                s, t, e = _cycle(rec, folder)
-                to = 100.0 * (t - s) / (e - s)
-            sp = d["speed_m_per_s"].iloc[0] if "speed_m_per_s" in d.columns else math.nan
-            return ts, float(to), float(sp)
-
-        mass = _body_mass(study, subject)
-        scale, unit, legs = (2.0 / mass, "W/kg", "both legs") if mass else (1.0, "W", "one leg")
-
-        def fig3():
-            ts, to, _ = unit_timeseries(subject, trial, main_wf)
-            fig = F.group_rates_over_cycle(
-                ts, to, [m for m in models if m in set(ts["model"].astype(str))] or None,
-                title=f"Metabolic rate of the muscle groups over the gait cycle ({unit}, {legs}, no basal heat): "
-                f"subject {subject}, trial {trial}, {main_wf}", scale=scale, unit=unit,
-            )
-            cap = (f"Subject {subject}, trial {trial} (preferred speed), workflow {main_wf}. Muscle metabolic "
-                   f"rates ({unit}, {legs}: twice the simulated leg{' per kg of body mass' if mass else ''}, "
-                   "without basal heat) distributed to the muscle groups by moment-arm ratio; same axes in every "
-                   f"panel; dotted line: toe-off ({to:.1f} % of the cycle).")
-            return fig, cap
-
-        def fig4():
-            trials = [t for t in F.trial_order(ok) if not unit_rows(subject, t, main_wf).empty]
-            if len(trials) < 2:
-                raise OptionError(
-                    f"one speed only ({', '.join(trials) or 'no trial'} for subject {subject}, {main_wf}): "
-                    "nothing to compare across speeds"
-                )
-            tables, speeds, toes, skipped = {}, {}, {}, []
-            for t in trials:
-                try:
-                    ts, to, sp = unit_timeseries(subject, t, main_wf)
-                except MusclemetabError as exc:
-                    skipped.append(f"{t} ({_short(study, exc)})")
-                    continue
-                if not np.isfinite(sp):
-                    skipped.append(f"{t} (no walking speed)")
-                    continue
-                tables[t], speeds[t], toes[t] = ts, sp, to
-            if len(tables) < 2:
-                raise OptionError(
-                    "fewer than two speeds with time series" + (f": {'; '.join(skipped)}" if skipped else "")
-                )
-            fig = F.whole_body_over_cycle(
-                tables, speeds, [m for m in models if any(m in set(x["model"].astype(str)) for x in tables.values())],
-                toe_off_pct=toes,
-                title=f"Whole-body metabolic rate over the gait cycle across speeds ({unit}, {legs}, summed "
-                f"muscles, no basal heat): subject {subject}, {main_wf}", scale=scale, unit=unit,
-            )
-            cap = (f"Subject {subject}, workflow {main_wf}. Summed muscle metabolic rate ({unit}, {legs}: twice "
-                   f"the simulated leg{' per kg of body mass' if mass else ''}, without basal heat) over the gait "
-                   "cycle, one line per walking speed; same axes in every panel; marks at the bottom: toe-off of "
-                   "each trial.")
-            if skipped:
-                cap += f" Not shown: {'; '.join(skipped)}."
-            return fig, cap
-
-        def fig5():
-            fig = F.phase_shares(ok, trial=trial, workflow=main_wf)
-            cap = (f"Share of the cycle's muscle metabolic energy (one leg, without basal heat) spent in stance "
-                   f"(initial contact to toe-off) and swing, mean over subjects (error bar: SD). Left: at the "
-                   f"preferred speed (trial {trial}); right: swing share against walking speed for {main_wf}, "
-                   "with the repeated-measures slope (% per m/s).")
-            return fig, cap
-
-        def fig6():
-            fig = F.group_shares(ok, workflows=workflows, models=models)
-            cap = ("Share of each muscle group in the cycle's muscle metabolic energy (%, one leg, without basal "
-                   "heat; mean over subjects), one bar per trial (walking speed in m/s).")
-            return fig, cap
-
-        def fig7():
-            import pandas as pd
-
-            path = study.path / "per_muscle.csv"
-            if not path.is_file():
-                raise OptionError("per_muscle.csv is missing: run the study with this version to get it")
-            pm = pd.read_csv(path, dtype={"subject": str, "trial": str, "workflow": str, "model": str})
-            if "speed_m_per_s" in ok.columns:
-                sp = ok.drop_duplicates(["subject", "trial"])[["subject", "trial", "speed_m_per_s"]]
-                pm = pm.merge(sp.astype({"subject": str, "trial": str}), on=["subject", "trial"], how="left")
-            fig = F.per_muscle_ranked(pm, workflow=main_wf if main_wf in set(pm["workflow"].astype(str)) else None,
-                                      models=[m for m in models if m in set(pm["model"].astype(str))] or None)
-            cap = (f"Workflow {main_wf}. The 15 muscles with the largest cycle-average metabolic rate of each model "
-                   "(W per kg of body mass, one leg, without basal heat; mean over subjects), one bar per trial "
-                   "(light: slow, dark: fast); every muscle is in per_muscle.csv.")
-            return fig, cap
-
-        def fig8():
-            fig = F.rates_against_speed(ok, workflow=main_wf, models=models)
-            cap = (f"Workflow {main_wf}. Whole-body metabolic rate without basal heat (black) and each muscle "
-                   "group's part of it (group share × whole-body rate), W per kg of body mass, both legs; means "
-                   "over subjects at each trial's mean walking speed; same axes in every panel.")
-            return fig, cap
-
-        builders = {
-            "excitations_fiber_lengths": fig1,
-            "estimated_vs_measured": fig2,
-            "group_rates_over_cycle": fig3,
-            "whole_body_over_cycle": fig4,
-            "phase_shares": fig5,
-            "group_shares": fig6,
-            "per_muscle_ranked": fig7,
-            "rates_against_speed": fig8,
-        }
-        for name in FIGURE_NAMES:
-            if subject is None and name in ("excitations_fiber_lengths", "group_rates_over_cycle",
-                                            "whole_body_over_cycle"):
-                entries[name] = FigureEntry(name, titles[name], note=f"no successful unit for trial {trial}.")
-                continue
-            attempt(name, builders[name])
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as pool:
+            order = [n for n in _DRAW_FIRST if n in drawn] + [n for n in drawn if n not in _DRAW_FIRST]
+            futures = {n: pool.submit(_draw_figure, study, fig_dir, tuple(formats), n) for n in order}
+            if meanwhile is not None:
+                meanwhile()
+                meanwhile = None
+            entries = {n: f.result() for n, f in futures.items()}
+    if meanwhile is not None:
+        meanwhile()
+    for n in FIGURE_NAMES:
+        if n not in entries:
+            entries[n] = _draw_figure(study, fig_dir, formats, n, builders[n])
     for e in entries.values():
         for ext in ("png", "svg"):
             if e.paths is None or ext not in e.paths:
@@ -505,14 +718,6 @@ def _fmt(mean: float, sd: float, digits: int) -> str:
     return f"{mean:.{digits}f}"
 
 
-def _mean_sd(values) -> tuple[float, float]:
-    v = np.asarray(values, dtype=float)
-    v = v[np.isfinite(v)]
-    if v.size == 0:
-        return math.nan, math.nan
-    return float(v.mean()), (float(v.std(ddof=1)) if v.size > 1 else math.nan)
-
-
 def _table(header: list[list[tuple[str, int]]], body: list[list[str]], n_index: int, cls: str = "") -> str:
     """HTML table; ``header`` rows of ``(text, colspan)``; the first ``n_index`` body cells are <th>."""
     out = [f'<table class="{_esc(cls)}">' if cls else "<table>", "<thead>"]
@@ -531,28 +736,34 @@ def _table(header: list[list[tuple[str, int]]], body: list[list[str]], n_index: 
 def _pivot(ok, value: str, trials: Sequence[str], labels: Sequence[str], workflows: Sequence[str],
            models: Sequence[str], digits: int) -> str:
     """Rows: trial (headed by ``labels``) × model; columns: workflow; cells: mean [SD] over subjects."""
+    from .figures import stat_cell, group_stats
+
     header = [[("trial (speed)", 1), ("model", 1)] + [(w, 1) for w in workflows]]
+    stats = group_stats(ok, ["trial", "model", "workflow"], [value])
+    present = set(zip(ok["trial"].astype(str), ok["model"].astype(str)))
     body = []
     for t, lab in zip(trials, labels):
-        dt = ok[ok["trial"].astype(str) == t]
         first = True
         for m in models:
-            dm = dt[dt["model"].astype(str) == m]
-            if dm.empty:
+            if (t, m) not in present:
                 continue
             row = [lab if first else "", m]
             first = False
             for w in workflows:
-                row.append(_fmt(*_mean_sd(dm.loc[dm["workflow"].astype(str) == w, value]), digits))
+                row.append(_fmt(*stat_cell(stats, (t, m, w), value)[:2], digits))
             body.append(row)
     return _table(header, body, 2, "results")
 
 
 def _trial_heading(ok, trials) -> list[str]:
+    from .figures import stat_cell, group_stats
+
+    if "speed_m_per_s" not in ok.columns:
+        return [str(t) for t in trials]
+    stats = group_stats(ok, ["trial"], ["speed_m_per_s"])
     out = []
     for t in trials:
-        sp = ok.loc[ok["trial"].astype(str) == t, "speed_m_per_s"] if "speed_m_per_s" in ok.columns else []
-        m, _ = _mean_sd(sp)
+        m = stat_cell(stats, t, "speed_m_per_s")[0]
         out.append(f"{t} ({m:.2f} m/s)" if np.isfinite(m) else t)
     return out
 
@@ -620,7 +831,7 @@ def _ordered(values) -> list[str]:
 
 
 def _results_section(study: StudyFolder) -> str:
-    from .figures import trial_order
+    from .figures import group_stats, stat_cell, trial_order
 
     ok = study.ok
     parts = []
@@ -649,18 +860,22 @@ def _results_section(study: StudyFolder) -> str:
 
     pivot_section("table-whole-body", "Whole-body metabolic rate (W/kg)", "mean_W_per_kg", 2,
                   "Whole-body average metabolic rate over the gait cycle, W per kg of body mass: both legs "
-                  "(twice the simulated leg), with basal heat; rows: trial and metabolic model; columns: workflow.")
+                  f"({legs_text(study)}), with basal heat; rows: trial and metabolic model; columns: workflow.")
     if "measured_W_per_kg" in ok.columns and ok["measured_W_per_kg"].notna().any():
-        meas = ok.drop_duplicates(["subject", "trial"])
-        body = [["measured"] + [_fmt(*_mean_sd(meas.loc[meas["trial"].astype(str) == t, "measured_W_per_kg"]), 2)
-                                for t in trials]]
+        meas = group_stats(ok.drop_duplicates(["subject", "trial"]), ["trial"], ["measured_W_per_kg"])
+        body = [["measured"] + [_fmt(*stat_cell(meas, t, "measured_W_per_kg")[:2], 2) for t in trials]]
         parts.append("<p>Measured whole-body metabolic rate (W/kg, indirect calorimetry):</p>")
         parts.append(_table([[("", 1)] + [(lab, 1) for lab in tlabels]], body, 1, "results"))
     else:
         parts.append('<p class="note">No measured metabolic rate in the results.</p>')
-    pivot_section("table-cost-of-transport", "Cost of transport (J/(kg·m))", "gross_cost_of_transport_J_per_kg_per_m", 2,
-                  "Metabolic cost of transport: the whole-body rate (W/kg) divided by the walking speed (m/s), "
-                  "in J per kg of body mass per metre.")
+    pivot_section("table-cost-of-transport", "Gross cost of transport (J/(kg·m))",
+                  "gross_cost_of_transport_J_per_kg_per_m", 2,
+                  "Gross metabolic cost of transport: the whole-body rate with basal heat (W/kg) divided by the "
+                  "walking speed (m/s), in J per kg of body mass per metre.")
+    pivot_section("table-net-cost-of-transport", "Net cost of transport (J/(kg·m))",
+                  "net_cost_of_transport_J_per_kg_per_m", 2,
+                  "Net metabolic cost of transport: the whole-body rate without basal heat (W/kg) divided by the "
+                  "walking speed (m/s).")
 
     # phase shares
     parts.append('<h3 id="table-phase-shares">Stance and swing shares (%)</h3>')
@@ -677,17 +892,17 @@ def _results_section(study: StudyFolder) -> str:
         header = [[("trial (speed)", 1), ("model", 1)] + [(w, len(have)) for w in workflows],
                   [("", 1), ("", 1)] + [(names[c], 1) for _ in workflows for c in have]]
         body = []
+        stats = group_stats(ok, ["trial", "model", "workflow"], have)
+        present = set(zip(ok["trial"].astype(str), ok["model"].astype(str)))
         for t in trials:
             first = True
             for m in models:
-                d = ok[(ok["trial"].astype(str) == t) & (ok["model"].astype(str) == m)]
-                if d.empty:
+                if (t, m) not in present:
                     continue
                 row = [label[t] if first else "", m]
                 first = False
                 for w in workflows:
-                    dw = d[d["workflow"].astype(str) == w]
-                    row += [_fmt(*_mean_sd(dw[c]), 1) for c in have]
+                    row += [_fmt(*stat_cell(stats, (t, m, w), c)[:2], 1) for c in have]
                 body.append(row)
         parts.append(_table(header, body, 2, "results"))
 
@@ -705,14 +920,14 @@ def _results_section(study: StudyFolder) -> str:
         )
         header = [[("workflow", 1), ("model", 1), ("trial", 1)] + [(g, 1) for g, _ in gcols]]
         body = []
+        stats = group_stats(ok, ["workflow", "model", "trial"], [c for _, c in gcols])
+        present = set(zip(ok["workflow"].astype(str), ok["model"].astype(str), ok["trial"].astype(str)))
         for w in workflows:
             for m in models:
                 for t in trials:
-                    d = ok[(ok["workflow"].astype(str) == w) & (ok["model"].astype(str) == m)
-                           & (ok["trial"].astype(str) == t)]
-                    if d.empty:
+                    if (w, m, t) not in present:
                         continue
-                    body.append([w, m, label[t]] + [_fmt(*_mean_sd(d[c]), 1) for _, c in gcols])
+                    body.append([w, m, label[t]] + [_fmt(*stat_cell(stats, (w, m, t), c)[:2], 1) for _, c in gcols])
         parts.append(_table(header, body, 3, "results"))
     return "\n".join(parts)
 
@@ -772,46 +987,107 @@ def _failures_section(study: StudyFolder) -> str:
     return "\n".join(parts)
 
 
-def software_versions() -> dict[str, str]:
-    """Versions of the packages in this process, read from their metadata (none is imported)."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    from .. import __version__
-
-    out = {}
-    for name in SOFTWARE:
-        if name == "musclemetab":
-            out[name] = __version__
-            continue
-        try:
-            out[name] = version(name)
-        except PackageNotFoundError:
-            out[name] = "not installed"
-    return out
-
-
-def _installed(name: str) -> str:
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version(name)
-    except PackageNotFoundError:
-        return "not installed"
-
-
 def _software_section(study: StudyFolder) -> str:
+    from ..study.runner import software_versions
+
     run = study.settings.get("software") if isinstance(study.settings.get("software"), dict) else {}
     now = software_versions()
-    names = list(SOFTWARE) + [k for k in run if k not in SOFTWARE]
-    body = []
-    for n in names:
-        body.append([n, str(run.get(n, "not recorded by the run")), now.get(n) or _installed(n)])
+    names = list(now) + [k for k in run if k not in now]
+    body = [[n, str(run.get(n, "not recorded by the run")), now.get(n, "not installed here")] for n in names]
     parts = ['<h2 id="software">Software</h2>',
              "<p>Versions recorded by the study run (study.json) and those installed where this report was "
              "written (read from the packages' metadata; none is imported). OpenSim is used only by the study "
-             "run (muscle geometry, states export).</p>",
+             "run (muscle geometry, states export); dask and distributed only to run units on a cluster.</p>",
              _table([[("package", 1), ("study run", 1), ("report", 1)]], body, 1, "software")]
     return "\n".join(parts)
+
+
+#: Columns of the solver-run table: (heading, format) of the run record's status, iterations,
+#: solve time and largest constraint violation, then of the solution's moment residual and
+#: reserve share (summary.json).
+RUN_COLUMNS = (
+    ("solver status", "{}"),
+    ("iterations", "{:d}"),
+    ("solve time (s)", "{:.2f}"),
+    ("max. constraint violation", "{:.1e}"),
+    ("max. moment residual (N·m)", "{:.1e}"),
+    ("reserve / peak moment", "{:.4f}"),
+)
+
+
+def solver_runs(study: StudyFolder) -> list[list[str]]:
+    """One row per unit of the results and of the failures: subject, trial, workflow, side,
+    then :data:`RUN_COLUMNS` from the unit's ``summary.json`` (its
+    :class:`~musclemetab.redundancy.record.RunRecord` and the solution's residuals); ``–``
+    where a value is not recorded, and why where the file cannot be read."""
+    from ..io.jsonfile import read_json_object
+    from ..redundancy.record import RunRecord
+
+    units = []
+    for table in (study.results, study.failures):
+        for r in table.drop_duplicates(["subject", "trial", "workflow"]).to_dict("records") if len(table) else []:
+            key = (str(r["subject"]), str(r["trial"]), str(r["workflow"]))
+            if key not in [u[0] for u in units]:
+                units.append((key, r))
+    rows = []
+    for key, r in units:
+        if not key[1] or key[1] == "nan":  # a failure of every trial of a subject: no unit folder
+            continue
+        path = study.unit_folder(r) / "summary.json"
+        try:
+            summary = read_json_object(path, missing="missing", remedy="run the unit again")
+        except MusclemetabError as exc:
+            rows.append(list(key) + ["–", _short(study, exc)] + ["–"] * (len(RUN_COLUMNS) - 1))
+            continue
+        run = RunRecord.from_dict(summary)
+        values = (run.status, run.iterations if run.iterations >= 0 else None, run.solve_time_s,
+                  run.max_constraint_violation, summary.get("max_moment_residual_Nm"),
+                  summary.get("reserve_share_of_peak_moment"))
+        cells = []
+        for (_, fmt), v in zip(RUN_COLUMNS, values):
+            if v is None or (isinstance(v, float) and not np.isfinite(v)):
+                cells.append("–")
+                continue
+            try:
+                cells.append(fmt.format(v))
+            except (TypeError, ValueError):
+                cells.append(str(v))
+        side = str(summary.get("side", "r"))
+        rows.append(list(key) + [_SIDES.get(side, side)] + cells)
+    return rows
+
+
+def _runs_section(study: StudyFolder) -> str:
+    rows = solver_runs(study)
+    parts = ['<details id="solver-runs"><summary><h2>Solver runs</h2></summary>',
+             "<p>The muscle redundancy solve of every unit, from its summary.json: the solver's status, "
+             "its iterations and time, and how well the solution meets the dynamics (largest constraint "
+             "violation, largest joint-moment residual) with how much of the peak joint moment the reserve "
+             "actuators carry.</p>"]
+    if rows:
+        parts.append(_table([[("subject", 1), ("trial", 1), ("workflow", 1), ("side", 1)]
+                             + [(h, 1) for h, _ in RUN_COLUMNS]], rows, 3, "runs"))
+    else:
+        parts.append("<p>No unit in the results.</p>")
+    parts.append("</details>")
+    return "\n".join(parts)
+
+
+_SIDES = {"r": "right", "l": "left"}
+
+
+def legs_text(study: StudyFolder) -> str:
+    """How the whole-body rate counts the legs: the solved leg of each subject, doubled."""
+    subjects = study.settings.get("subjects") if isinstance(study.settings.get("subjects"), dict) else {}
+    sides = {}
+    for name in _subjects(study):
+        rec = subjects.get(name) if isinstance(subjects.get(name), dict) else {}
+        sides.setdefault(_SIDES.get(str(rec.get("side", "r")), str(rec.get("side"))), []).append(name)
+    if len(sides) == 1:
+        side = next(iter(sides))
+        return f"one leg doubled (the {side} leg was solved)"
+    each = "; ".join(f"the {side} leg for {', '.join(names)}" for side, names in sides.items())
+    return f"one leg doubled (solved: {each})"
 
 
 def _method_section(study: StudyFolder) -> str:
@@ -822,16 +1098,17 @@ def _method_section(study: StudyFolder) -> str:
         "none": "without basal heat",
     }.get(str(basal), f"basal rule '{basal}'")
     text = (
-        "For every subject, trial and workflow, muscle-tendon lengths and moment arms (m) of the right leg "
+        "For every subject, trial and workflow, muscle-tendon lengths and moment arms (m) of the solved leg "
         "were computed with OpenSim from the inverse kinematics; the muscle redundancy problem with compliant "
         "tendons was solved by direct collocation to reproduce the inverse-dynamics joint moments (N·m) with "
         "minimal effort (workflows EFFORT-GEN: generic passive and tendon properties; EFFORT-CAL: calibrated "
         "passive properties; EFFORT-TEN: calibrated passive properties and personalised tendon stiffness; "
         "EMG-TEN: EMG-informed). The metabolic models (UM03, BH04, HO06, LW07, UM10, UC16) give each muscle's "
         "metabolic rate (W) at every node of the gait cycle (initial contact to the next initial contact of the "
-        "same leg). The whole-body average rate (W/kg) is twice the one-leg sum of the muscle rates averaged "
-        f"over the cycle and divided by the body mass, {basal_txt}; the cost of transport (J/(kg·m)) is that "
-        "rate divided by the walking speed (m/s). Phase shares are the stance (initial contact to toe-off) and "
+        "same leg). The whole-body average rate (W/kg) counts both legs as "
+        f"{legs_text(study)}: twice the one-leg sum of the muscle rates averaged over the cycle, divided by the "
+        f"body mass, {basal_txt}; the gross cost of transport (J/(kg·m)) is "
+        "that rate divided by the walking speed (m/s), the net cost the same without the basal heat. Phase shares are the stance (initial contact to toe-off) and "
         "swing parts of the cycle's one-leg muscle energy (%, without basal heat). Group shares distribute "
         "each muscle's rate over the degrees of freedom it spans in proportion to the absolute moment arms, "
         "and to the group given by the sign of the moment arm (%). Estimated and measured rates, and shares "
@@ -874,10 +1151,30 @@ dd { margin: 0; } pre { background: #f7f7f7; padding: 0.6em; overflow-x: auto; f
 """
 
 
+def page_sections(study: StudyFolder) -> dict[str, str]:
+    """The parts of the report page that do not depend on the figures (HTML by part name):
+    estimation notes, result and per-muscle tables, settings, method, failures, solver runs
+    and software."""
+    return {
+        "notes": _estimation_notes(study),
+        "results": _results_section(study),
+        "per_muscle": _per_muscle_section(study),
+        "settings": _settings_section(study),
+        "method": _method_section(study),
+        "failures": _failures_section(study),
+        "runs": _runs_section(study),
+        "software": _software_section(study),
+    }
+
+
 def render_html(study: StudyFolder, entries: Sequence[FigureEntry], figures_rel: str = FIGURES_FOLDER,
-                key: str | None = None) -> str:
+                key: str | None = None, sections: dict[str, str] | None = None) -> str:
     """The report page as a string (figures embedded from the PNG files of ``entries``;
-    ``key``: the content key of the inputs, recorded in the page, see :func:`report_key`)."""
+    ``key``: the content key of the inputs, recorded in the page, see :func:`report_key`;
+    ``sections``: :func:`page_sections` of the study when already made)."""
+    from .. import __version__
+
+    sec = page_sections(study) if sections is None else sections
     ok = study.ok
     n_units = len(study.results.drop_duplicates(["subject", "trial", "workflow"])) if not study.results.empty else 0
     n_ok = len(ok.drop_duplicates(["subject", "trial", "workflow"])) if not ok.empty else 0
@@ -890,22 +1187,24 @@ def render_html(study: StudyFolder, entries: Sequence[FigureEntry], figures_rel:
                f"{drawn} of {len(entries)} figures drawn.")
     toc = "".join(f'<li><a href="#{a}">{_esc(t)}</a></li>' for a, t in (
         ("figures", "Figures"), ("results", "Results (tables)"), ("per-muscle", "Per-muscle results"),
-        ("settings", "Settings"), ("method", "Method"), ("failures", "Failures"), ("software", "Software")))
+        ("settings", "Settings"), ("method", "Method"), ("failures", "Failures"), ("solver-runs", "Solver runs"),
+        ("software", "Software")))
     body = "\n".join([
         f"<h1>{_esc(title)}</h1>",
-        f'<p class="meta">Written {_esc(when)} by musclemetab {_esc(software_versions()["musclemetab"])}; '
+        f'<p class="meta">Written {_esc(when)} by musclemetab {_esc(__version__)}; '
         "paths are relative to the study folder (the folder holding this page).</p>",
         f"<p>{_esc(summary)}</p>",
-        _estimation_notes(study),
+        sec["notes"],
         f"<nav><ul>{toc}</ul></nav>",
         _figures_section(entries, figures_rel),
-        f'<details id="results" open><summary><h2>Results (tables)</h2></summary>{_results_section(study)}</details>',
-        f'<details id="per-muscle"><summary><h2>Per-muscle results</h2></summary>{_per_muscle_section(study)}'
+        f'<details id="results" open><summary><h2>Results (tables)</h2></summary>{sec["results"]}</details>',
+        f'<details id="per-muscle"><summary><h2>Per-muscle results</h2></summary>{sec["per_muscle"]}'
         "</details>",
-        _settings_section(study),
-        _method_section(study),
-        _failures_section(study),
-        _software_section(study),
+        sec["settings"],
+        sec["method"],
+        sec["failures"],
+        sec["runs"],
+        sec["software"],
         f'<meta name="musclemetab-report-key" content="{_esc(key)}">' if key else "",
     ])
     return (
@@ -921,8 +1220,10 @@ def report_key(study_dir: str | os.PathLike, formats: Sequence[str] = ("png",)) 
     """SHA-256 of everything the report is drawn from.
 
     The study's tables (``results.csv``, ``study.json``, ``failures.csv``, ``per_muscle.csv``),
-    every unit's ``unit.json`` (which records the hash of each of the unit's files), the
-    figure formats, the package version and the source of the report's own modules.
+    the study file ``study.json`` names as its source (``study.toml``), every unit's
+    ``unit.json`` (which records the hash of each of the unit's files, ``summary.json``
+    among them), the figure formats, the package version and the source of the report's
+    own modules.
     """
     import hashlib
 
@@ -940,7 +1241,25 @@ def report_key(study_dir: str | os.PathLike, formats: Sequence[str] = ("png",)) 
     for f in files:
         digest = file_sha256(f) if f.is_file() else "absent"
         h.update(f"{f.relative_to(path).as_posix()} {digest}\n".encode())
+    source = _study_file(path)
+    if source is not None:  # the study file the settings came from (e.g. study.toml), wherever it is
+        h.update(f"study file {file_sha256(source) if source.is_file() else 'absent'}\n".encode())
     return h.hexdigest()
+
+
+def _study_file(study_dir: Path) -> Path | None:
+    """The study file recorded as ``source`` in ``study.json`` (relative to the study folder
+    when not absolute), or ``None``."""
+    import json as _json
+
+    try:
+        source = _json.loads((study_dir / STUDY_JSON).read_text(encoding="utf-8")).get("source")
+    except (OSError, ValueError, AttributeError):
+        return None
+    if not isinstance(source, str) or not source.strip():
+        return None
+    p = Path(source)
+    return p if p.is_absolute() else study_dir / p
 
 
 def _cached_entries(out: Path, key: str) -> list[FigureEntry] | None:
@@ -970,7 +1289,8 @@ def _cached_entries(out: Path, key: str) -> list[FigureEntry] | None:
 
 
 def generate_report(study_dir: str | os.PathLike, out: str | os.PathLike | None = None, *,
-                    formats: Sequence[str] = ("png",), force: bool = False) -> tuple[Path, list[FigureEntry]]:
+                    formats: Sequence[str] = ("png",), force: bool = False,
+                    workers: int | None = None) -> tuple[Path, list[FigureEntry]]:
     """:func:`write_report`, also returning the figure entries (files written or notes)."""
     from ..io.atomic import atomic_write_text
 
@@ -986,8 +1306,9 @@ def generate_report(study_dir: str | os.PathLike, out: str | os.PathLike | None 
         if cached is not None:
             return out, cached
     fig_dir = out.parent / FIGURES_FOLDER
-    entries = make_figures(study, fig_dir, formats)
-    atomic_write_text(out, render_html(study, entries, figures_rel=FIGURES_FOLDER, key=key))
+    sections: dict[str, str] = {}
+    entries = make_figures(study, fig_dir, formats, workers, meanwhile=lambda: sections.update(page_sections(study)))
+    atomic_write_text(out, render_html(study, entries, figures_rel=FIGURES_FOLDER, key=key, sections=sections))
     record = {"key": key, "page": out.name, "entries": [
         {"name": e.name, "title": e.title, "caption": e.caption, "note": e.note,
          "paths": None if e.paths is None else {k: str(v) for k, v in e.paths.items()}} for e in entries]}
@@ -996,14 +1317,14 @@ def generate_report(study_dir: str | os.PathLike, out: str | os.PathLike | None 
 
 
 def write_report(study_dir: str | os.PathLike, out: str | os.PathLike | None = None, *,
-                 formats: Sequence[str] = ("png",), force: bool = False) -> Path:
+                 formats: Sequence[str] = ("png",), force: bool = False, workers: int | None = None) -> Path:
     """Write the figures and the HTML report of a study folder; return the report's path.
 
     ``out`` is the HTML file (default ``study_dir/report.html``); the figures are written to the
     folder ``figures`` beside it (PNG; ``formats=("png", "svg")`` adds SVG). Everything is
     written atomically. The report is rebuilt only when its inputs changed (their content
     hash, :func:`report_key`, is recorded in the page and in ``figures/report.json``) or
-    when ``force`` is true. Raises :class:`InputFileError` when the folder or its
-    ``results.csv`` is missing.
+    when ``force`` is true. ``workers`` processes draw the figures (see :func:`make_figures`).
+    Raises :class:`InputFileError` when the folder or its ``results.csv`` is missing.
     """
-    return generate_report(study_dir, out, formats=formats, force=force)[0]
+    return generate_report(study_dir, out, formats=formats, force=force, workers=workers)[0]

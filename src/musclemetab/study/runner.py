@@ -480,7 +480,9 @@ def _write_study_json(study: Study, out: Path) -> None:
             "passive": str(s.passive) if s.passive else None,
             "tendon_stiffness": s.tendon_stiffness if not isinstance(s.tendon_stiffness, Path) else str(s.tendon_stiffness),
             "emg_mapping": s.emg_mapping,
+            "side": s.side,
             "trials": [t.name for t in s.trials],
+            "emg_files": {t.name: str(t.emg) if t.emg else None for t in s.trials},
         }
         for s in study.subjects
     }
