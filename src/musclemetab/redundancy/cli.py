@@ -260,10 +260,10 @@ def _as_list(value) -> list:
 def _emg_ten_command(args, ik: list, idf: list) -> int:
     """``musclemetab solve --workflow emg-ten`` or ``--emg`` with an effort workflow: one NLP over
     all trials, then the files."""
-    from .emg_ten import EmgTenSettings, solve_emg_ten
+    from .emg_ten import EmgTenSettings, informed_settings, solve_emg_ten
     from .inputs import DEFAULT_DOFS
     from .problem import failure_advice
-    from .workflows import get_workflow, parse_tendon_stiffness
+    from .workflows import parse_tendon_stiffness
 
     if not idf:
         raise OptionError("EMG problems need --id: one inverse-dynamics file per trial, in the order of --ik")
@@ -275,14 +275,10 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
                           f"{'--workflow emg-ten' if args.workflow == 'emg-ten' else '--emg'}")
     mode = args.emg_mode or "constrained"
     if args.workflow != "emg-ten":
-        wf = get_workflow(args.workflow)
         if args.parameters or args.warm_start:
             raise OptionError("--parameters and --warm-start cannot be used with an EMG-informed solve; give "
                               "--tendon-stiffness MUSCLE=KT,... instead of --parameters, and drop --warm-start")
-        w_emg = args.emg_weight if args.emg_weight is not None else (10.0 if mode == "tracking" else 0.0)
-        settings = EmgTenSettings(w_emg=w_emg, w_activation=wf.w_activation, w_reserve=wf.w_reserve,
-                                  w_velocity=wf.w_velocity, emg_tolerance=args.emg_tolerance, tendon_groups=(),
-                                  emg_mode=mode)
+        settings = informed_settings(args.workflow, mode, args.emg_tolerance, args.emg_weight)
         return _informed_command(args, ik, idf, settings, parse_tendon_stiffness(args.tendon_stiffness)
                                  if args.tendon_stiffness else None)
     settings = EmgTenSettings(emg_tolerance=args.emg_tolerance, emg_mode=mode,

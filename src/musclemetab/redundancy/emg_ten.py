@@ -71,6 +71,7 @@ __all__ = [
     "EmgTenTrial",
     "EmgTenResult",
     "PARAMETERS_FILE",
+    "informed_settings",
     "settings_for_muscles",
     "mapping_for_muscles",
     "resolve_emg_mapping",
@@ -179,6 +180,19 @@ class EmgTenSettings:
             "coupling": self.coupling,
             "emg_mode": self.emg_mode,
         }
+
+
+def informed_settings(workflow: str, mode: str = "constrained", tolerance: float = 0.01,
+                      w_emg: float | None = None) -> EmgTenSettings:
+    """Settings of an effort workflow's EMG-informed solve: the workflow's effort weights, the
+    EMG goals of ``mode`` (tracking weight ``w_emg``, default 10 for ``tracking`` and 0 for
+    ``constrained``/``driven``), no tendon stiffness estimated."""
+    from .workflows import get_workflow
+
+    wf = get_workflow(workflow)
+    w_emg = w_emg if w_emg is not None else (10.0 if mode == "tracking" else 0.0)
+    return EmgTenSettings(w_emg=w_emg, w_activation=wf.w_activation, w_reserve=wf.w_reserve,
+                          w_velocity=wf.w_velocity, emg_tolerance=tolerance, tendon_groups=(), emg_mode=mode)
 
 
 def settings_for_muscles(settings: EmgTenSettings | None, muscles: Sequence[str]) -> EmgTenSettings:
