@@ -334,7 +334,7 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
 def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> int:
     """An effort workflow's EMG-informed solve of one or more trials: one trial is written to
     ``--out`` as a solution folder; several as one folder per trial and ``parameters.json``."""
-    from .emg_ten import solve_emg_ten
+    from .emg_ten import emg_failure, solve_emg_ten
     from .inputs import DEFAULT_DOFS
     from .problem import SolverOptions
 
@@ -352,7 +352,7 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
         result.write(args.out)
     r = result.run_record
     if not r.success:
-        raise r.failure(f"the EMG-informed {args.workflow} solve (written to {args.out})")
+        raise emg_failure(r, settings.emg_mode, f"the EMG-informed {args.workflow} solve (written to {args.out})")
     scales = ", ".join(f"{m} {v:.3g}" for m, v in result.emg_scale.items())
     print(f"solve: {args.workflow} EMG-{settings.emg_mode} {len(result.solutions)} trial(s): {r.status} in "
           f"{r.iterations} iterations, objective {r.objective:.6e}; EMG scale {scales} -> {args.out}")

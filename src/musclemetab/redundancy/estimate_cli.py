@@ -208,7 +208,9 @@ def estimate_command(args) -> int:
         doc["personalised_model"] = {"path": path.name, "muscles": report}
     atomic_write_text(f"{args.out}/parameters.json", json.dumps(doc, indent=2, default=float) + "\n")
     if not run.success:
-        raise run.failure(f"the estimation (written to {args.out})")
+        from .emg_ten import emg_failure
+
+        raise emg_failure(run, mode if emg_files else None, f"the estimation (written to {args.out})")
     if args.validate:
         for lab, (g, _, t_id, mom, t_ik) in zip(labels, prepared):
             sol = solve_with_parameters(g, estimated, t_id, mom, ik_time_s=t_ik, options=options,

@@ -477,7 +477,9 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         solve_summary = sol.summary
         times["solve_s"] = sol.summary.get("solve_time_s")
         if not sol.success:
-            raise sol.run_record.failure(f"{unit.workflow} solve of {subject.name}/{trial.name}")
+            from ..redundancy.emg_ten import emg_failure
+
+            raise emg_failure(sol.run_record, subject.emg_mode, f"{unit.workflow} solve of {subject.name}/{trial.name}")
     times["solution_s"] = time.perf_counter() - t0
 
     t1 = time.perf_counter()
