@@ -494,6 +494,8 @@ def _write_study_json(study: Study, out: Path) -> None:
             "passive": str(s.passive) if s.passive else None,
             "tendon_stiffness": s.tendon_stiffness if not isinstance(s.tendon_stiffness, Path) else str(s.tendon_stiffness),
             "emg_mapping": s.emg_mapping,
+            **({"emg_mode": s.emg_mode, "emg_tolerance": s.emg_tolerance} if s.emg_mode else {}),
+            **({"estimate": s.estimate.to_dict()} if s.estimate is not None else {}),
             "trials": [t.name for t in s.trials],
         }
         for s in study.subjects
