@@ -28,7 +28,7 @@ import argparse
 
 from ..errors import OptionError, SolverError, UnknownMuscleError
 
-__all__ = ["add_solve_parser", "solve_command"]
+__all__ = ["add_solve_parser", "add_emg_goal_arguments", "solve_command"]
 
 
 def add_solve_parser(subparsers) -> argparse.ArgumentParser:
@@ -78,15 +78,12 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--emg", nargs="+", metavar="EMG.mot",
                    help="processed, normalised EMG envelopes, one file per trial, same order as --ik: needed by "
                    "emg-ten; with an effort workflow an EMG-informed solve of the trials (see --emg-mode)")
-    p.add_argument("--emg-mode", choices=("constrained", "driven", "tracking"),
-                   help="with --emg: 'constrained' (each tracked excitation within --emg-tolerance of its scaled "
-                   "EMG; the default), 'driven' (equal to its scaled EMG) or 'tracking' (a cost on the "
-                   "difference, weight --emg-weight); the EMG scale factors are estimated")
-    p.add_argument("--emg-tolerance", type=float, default=0.01,
-                   help="with --emg-mode constrained: half-width of the EMG band (default 0.01)")
-    p.add_argument("--emg-weight", type=float,
-                   help="weight of the EMG tracking cost (default: 10 for emg-ten and tracking, 0 for an "
-                   "effort workflow's constrained or driven solve)")
+    add_emg_goal_arguments(
+        p, "with --emg: 'constrained' (each tracked excitation within --emg-tolerance of its scaled EMG; the "
+        "default), 'driven' (equal to its scaled EMG) or 'tracking' (a cost on the difference, weight "
+        "--emg-weight); the EMG scale factors are estimated",
+        "weight of the EMG tracking cost (default: 10 for emg-ten and tracking, 0 for an effort workflow's "
+        "constrained or driven solve)")
     p.add_argument("--emg-mapping", metavar="default|authors|MAP.json",
                    help="emg-ten: EMG channels of the muscles: 'default' (vastus intermedius <- VI_a, the mean of "
                    "VL and VM), 'authors' (vastus intermedius <- ES, as in the published example results) or a "
@@ -128,6 +125,14 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.set_defaults(func=solve_command)
     return p
+
+
+def add_emg_goal_arguments(p, mode_help: str, weight_help: str) -> None:
+    """``--emg-mode``, ``--emg-tolerance`` and ``--emg-weight`` (``solve`` and ``estimate``)."""
+    p.add_argument("--emg-mode", choices=("constrained", "driven", "tracking"), help=mode_help)
+    p.add_argument("--emg-tolerance", type=float, default=0.01,
+                   help="with --emg-mode constrained: half-width of the EMG band (default 0.01)")
+    p.add_argument("--emg-weight", type=float, help=weight_help)
 
 
 def solve_command(args) -> int:

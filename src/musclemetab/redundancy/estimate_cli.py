@@ -21,6 +21,8 @@ EMG_SCALE_BOUNDS = (0.05, 2.5)
 
 
 def add_estimate_parser(subparsers) -> argparse.ArgumentParser:
+    from .cli import add_emg_goal_arguments
+
     p = subparsers.add_parser(
         "estimate", help="estimate tendon stiffness, optimal fibre and tendon slack lengths from fibre lengths",
         description="Estimate scale factors of the tendon stiffness, optimal fibre length and tendon slack length "
@@ -36,14 +38,10 @@ def add_estimate_parser(subparsers) -> argparse.ArgumentParser:
                    "without --ultrasound; at least one of the two)")
     p.add_argument("--emg-mapping", metavar="default|authors|MAP.json",
                    help="EMG channels of the muscles, as for solve (default: default)")
-    p.add_argument("--emg-mode", choices=("constrained", "driven", "tracking"),
-                   help="with --emg: 'constrained' (each tracked excitation within --emg-tolerance of its scaled "
-                   "EMG, plus the tracking cost; the default), 'driven' (equal to its scaled EMG) or 'tracking' "
-                   "(the cost only)")
-    p.add_argument("--emg-tolerance", type=float, default=0.01,
-                   help="with --emg-mode constrained: half-width of the EMG band (default 0.01)")
-    p.add_argument("--emg-weight", type=float,
-                   help="weight of the EMG tracking cost (default 10; also --weights emg=W)")
+    add_emg_goal_arguments(
+        p, "with --emg: 'constrained' (each tracked excitation within --emg-tolerance of its scaled EMG, plus the "
+        "tracking cost; the default), 'driven' (equal to its scaled EMG) or 'tracking' (the cost only)",
+        "weight of the EMG tracking cost (default 10; also --weights emg=W)")
     p.add_argument("--estimate", required=True, nargs="+", metavar="KIND=MUSCLE[,MUSCLE...]",
                    help="kinds: tendon_stiffness, optimal_fiber_length, tendon_slack_length")
     p.add_argument("--couple", nargs="+", default=[], metavar="MUSCLE,MUSCLE[,...]",
