@@ -1,4 +1,6 @@
-"""``musclemetab estimate``: muscle-tendon parameters from measured fibre lengths over trials.
+"""``musclemetab estimate``: muscle-tendon parameters from measured fibre lengths and/or EMG
+over trials (EMG: the goals of ``--emg-mode``, the EMG scale factors estimated with the others,
+coupled as in EMG-TEN).
 
 Writes ``DIR/<trial>/`` (the solutions with the estimates), ``DIR/parameters.json``,
 ``DIR/<model>_personalised.osim`` and, with ``--validate``, ``DIR/validation/<trial>/``: the
