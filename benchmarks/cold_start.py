@@ -1,4 +1,4 @@
-"""Cold start of ``musclemetab solve``: a new process against the solve time it reports.
+"""Cold start of ``musclemetab solve``: a new process against the same solve in a warm one.
 
 Runs ``musclemetab solve`` (example subject, one trial, EFFORT-GEN) in new processes with
 the geometry and model parameters cached, alternating between this source tree and, with
@@ -6,6 +6,12 @@ the geometry and model parameters cached, alternating between this source tree a
 load. Reports per tree the median wall time, the solve time IPOPT reports and the rest
 (interpreter start, imports, reading files, OpenSim if it is started, set-up, writing), and
 the process CPU time.
+
+"Warm" is the same solve repeated in one long-lived process: ``solve_files`` with the same
+arguments, called once untimed (imports done, caches hot), then ``--repeat`` times timed.
+The last table gives cold minus warm per tree: the wall times, and the "rest" (wall minus
+IPOPT's solve time, which removes the run-to-run swing of the solve itself), in wall and
+CPU seconds. That difference is what a cold command costs over a warm one.
 
     python benchmarks/cold_start.py [--trial normal] [--repeat 3] [--baseline-src OTHER/src]
 """
@@ -52,6 +58,38 @@ def cold_run(src: Path, ex, trial: str, cache: Path) -> dict:
             "rest_cpu_s": cpu - s.get("solve_cpu_time_s", float("nan"))}
 
 
+_WARM = """
+import json, sys, time
+from musclemetab.redundancy import solve_files
+model, ik, idf, repeat = sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4])
+solve_files(model, ik, idf, "effort-gen")  # imports, in-memory caches, the first solve: untimed
+runs = []
+for _ in range(repeat):
+    w0, c0 = time.perf_counter(), time.process_time()
+    sol = solve_files(model, ik, idf, "effort-gen")
+    wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+    s = sol.summary
+    runs.append({"wall_s": wall, "solve_s": s["solve_time_s"], "rest_s": wall - s["solve_time_s"], "cpu_s": cpu,
+                 "solve_cpu_s": s.get("solve_cpu_time_s", float("nan")),
+                 "rest_cpu_s": cpu - s.get("solve_cpu_time_s", float("nan"))})
+print(json.dumps(runs))
+"""
+
+
+def warm_runs(src: Path, ex, trial: str, cache: Path, repeat: int) -> list[dict]:
+    """The same solve repeated in one process (see the module docstring)."""
+    env = dict(os.environ, PYTHONPATH=str(src), MUSCLEMETAB_CACHE=str(cache))
+    proc = subprocess.run([sys.executable, "-c", _WARM, str(ex.model), str(ex.ik[trial]), str(ex.id[trial]),
+                           str(repeat)], capture_output=True, text=True, env=env)
+    if proc.returncode != 0:
+        sys.exit(f"the warm solve failed with {src}:\n{proc.stderr}")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def _median(rs: list[dict]) -> dict:
+    return {k: statistics.median(r[k] for r in rs) for k in rs[0]}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trial", default="normal", choices=("slow", "normal", "fast"))
@@ -70,11 +108,19 @@ def main(argv=None) -> int:
     for _ in range(args.repeat):
         for name, src in trees.items():
             runs[name].append(cold_run(src, ex, args.trial, cache))
-    print(f"{'tree':<10} {'wall s':>7} {'solve s':>8} {'rest s':>7} {'CPU s':>6} {'solve CPU s':>12} {'rest CPU s':>11}")
-    for name, rs in runs.items():
-        med = {k: statistics.median(r[k] for r in rs) for k in rs[0]}
-        print(f"{name:<10} {med['wall_s']:>7.2f} {med['solve_s']:>8.2f} {med['rest_s']:>7.2f} {med['cpu_s']:>6.2f} "
-              f"{med['solve_cpu_s']:>12.2f} {med['rest_cpu_s']:>11.2f}")
+    warm = {name: warm_runs(src, ex, args.trial, cache, args.repeat) for name, src in trees.items()}
+    head = f"{'wall s':>7} {'solve s':>8} {'rest s':>7} {'CPU s':>6} {'solve CPU s':>12} {'rest CPU s':>11}"
+    print(f"{'tree':<10} {'run':<5} {head}")
+    for name in trees:
+        for kind, rs in (("cold", runs[name]), ("warm", warm[name])):
+            med = _median(rs)
+            print(f"{name:<10} {kind:<5} {med['wall_s']:>7.2f} {med['solve_s']:>8.2f} {med['rest_s']:>7.2f} "
+                  f"{med['cpu_s']:>6.2f} {med['solve_cpu_s']:>12.2f} {med['rest_cpu_s']:>11.2f}")
+    print(f"\n{'tree':<10} {'cold - warm: wall s':>20} {'rest s':>7} {'rest CPU s':>11}")
+    for name in trees:
+        c, w = _median(runs[name]), _median(warm[name])
+        print(f"{name:<10} {c['wall_s'] - w['wall_s']:>20.2f} {c['rest_s'] - w['rest_s']:>7.2f} "
+              f"{c['rest_cpu_s'] - w['rest_cpu_s']:>11.2f}")
     print(f"(medians of {args.repeat}; load average at the end {' '.join(f'{x:.2f}' for x in os.getloadavg())})")
     return 0
 

@@ -57,9 +57,6 @@ def run_solver(ex, trials, workflows, cache_dir, repeat, options=None):
         compute_geometry(ex.model, ex.ik[t], cache_dir=cache_dir)
     read_muscle_parameters(ex.model, cache_dir=cache_dir)
     import casadi  # noqa: F401  (process start-up costs are measured by the cold run)
-    import scipy.interpolate  # noqa: F401
-    import scipy.optimize  # noqa: F401
-    import scipy.signal  # noqa: F401
 
     warm = time.perf_counter() - t0
     rows = []

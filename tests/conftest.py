@@ -47,14 +47,21 @@ def reference_table():
 
 @pytest.fixture(scope="session")
 def demo(tmp_path_factory):
-    """``musclemetab demo`` run once per test session: ``(output folder, results table)``."""
+    """``musclemetab demo`` run once per test run: ``(output folder, results table)``.
+
+    The parallel test processes share it: the first to ask runs it, the others wait for it
+    (a lock file) and read the same folder.
+    """
     import pandas as pd
+    import solve_memo
 
     from musclemetab.cli import main
 
-    out = tmp_path_factory.mktemp("demo")
-    code = main(["demo", "--out", str(out), "--workers", "2", "--no-progress"])
-    assert code == 0
+    out = _run_root(tmp_path_factory) / "demo"
+    with solve_memo.locked(out.with_suffix(".lock")):
+        if not (out / "results.csv").is_file():
+            code = main(["demo", "--out", str(out), "--workers", "2", "--no-progress"])
+            assert code == 0
     return out, pd.read_csv(out / "results.csv")
 
 
@@ -67,107 +74,31 @@ def geometry_cache(_isolated_cache) -> Path:
     return default_cache_dir()
 
 
-_PLAIN = (str, int, float, bool, type(None))
-
-
-def _solve_key(func, args, kwargs) -> str | None:
-    """Content key of a solve call: input files by SHA-256, every other argument by value.
-
-    ``cache_dir`` (where the geometry is cached) does not change the result and is left out.
-    ``options=None`` and ``settings=None`` count as the defaults they stand for. ``None`` when
-    an argument is neither a file, a plain value, a list/tuple/dict of those nor a settings
-    dataclass (an in-memory object such as a warm start): such calls always solve.
-    """
-    import dataclasses
-    import hashlib
-    import inspect
-    import json
-
-    from musclemetab.io.atomic import file_sha256
-    from musclemetab.redundancy.emg_ten import EmgTenSettings
-    from musclemetab.redundancy.problem import SolverOptions
-
-    def plain(value):
-        if isinstance(value, (str, os.PathLike)) and Path(value).is_file():
-            return {"sha256": file_sha256(value)}
-        if isinstance(value, os.PathLike):
-            return os.fspath(value)
-        if isinstance(value, _PLAIN):
-            return value
-        if isinstance(value, (list, tuple)):
-            return [plain(v) for v in value]
-        if isinstance(value, dict) and all(isinstance(k, str) for k in value):
-            return {k: plain(v) for k, v in value.items()}
-        if isinstance(value, (SolverOptions, EmgTenSettings)):
-            return {type(value).__name__: plain(dataclasses.asdict(value))}
-        raise TypeError(type(value).__name__)
-
-    bound = inspect.signature(func).bind(*args, **kwargs)
-    bound.apply_defaults()
-    content = {"function": f"{func.__module__}.{func.__qualname__}"}
-    for name, value in bound.arguments.items():
-        if name == "cache_dir":
-            continue
-        if name == "options" and value is None:
-            value = SolverOptions()
-        if name == "settings" and value is None:
-            value = EmgTenSettings()
-        try:
-            content[name] = plain(value)
-        except TypeError:
-            return None
-    return hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()
-
-
-def _solved_once(solve):
-    """``solve`` with its results kept for the test session (see ``_each_problem_solved_once``)."""
-    import copy
-    import warnings
-
-    results: dict = {}
-
-    @functools.wraps(solve)
-    def solve_once(*args, **kwargs):
-        key = _solve_key(solve, args, kwargs)
-        if key is None:
-            return solve(*args, **kwargs)
-        if key not in results:
-            with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always")
-                result = solve(*args, **kwargs)
-            results[key] = (result, caught)
-        result, caught = results[key]
-        for w in caught:
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-        return copy.deepcopy(result)
-
-    return solve_once
+def _run_root(tmp_path_factory) -> Path:
+    """A folder shared by every process of this test run (the parallel workers of
+    pytest-xdist included): the parent of the workers' temporary folders."""
+    base = tmp_path_factory.getbasetemp()
+    return base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
 
 
 @pytest.fixture(autouse=True, scope="session")
-def _each_problem_solved_once():
-    """Each muscle redundancy problem is solved once per test session (in this process).
+def _each_problem_solved_once(tmp_path_factory):
+    """Each muscle redundancy problem is solved once per test run (see ``solve_memo``).
 
-    The command line, the studies run in this process and the tests calling the package
-    solve the same example problems many times. :func:`solve_files` and
-    :func:`solve_emg_ten` keep their results here, keyed by the input files' content and
-    every setting (like the package's own caches); a repeated call gets a copy of the first
-    call's result and its warnings again. Calls with other inputs or settings, and calls that
-    raise, solve as usual. Worker processes of a study (``--workers 2``, Dask) solve for
-    themselves.
+    The memo lives in the run's shared folder, so the parallel test workers, the study pool
+    workers and the pools of ``solve --side both`` (their initialiser installs it) and Dask workers (``solve_memo.install_in_worker``)
+    all use it.
     """
-    import musclemetab.redundancy as redundancy
-    import musclemetab.redundancy.emg_ten as emg_ten
-    import musclemetab.redundancy.solve as solve
+    import solve_memo
 
-    solve_files = _solved_once(solve.solve_files)
-    solve_emg_ten = _solved_once(emg_ten.solve_emg_ten)
+    import musclemetab.processes as processes
+
+    undo = solve_memo.install(_run_root(tmp_path_factory) / "solve-memo")
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(solve, "solve_files", solve_files)
-        mp.setattr(redundancy, "solve_files", solve_files)
-        mp.setattr(emg_ten, "solve_emg_ten", solve_emg_ten)
-        mp.setattr(redundancy, "solve_emg_ten", solve_emg_ten)
+        mp.setattr(processes, "ignore_sigint", solve_memo.start_pool_worker)
         yield
+    undo()
+    os.environ.pop(solve_memo.MEMO_ENV, None)
 
 
 @contextlib.contextmanager
@@ -213,9 +144,24 @@ def dataset_mirror(tmp_path):
 def _isolated_cache(tmp_path_factory):
     """Keep the geometry cache of a test run out of the user's cache."""
     old = os.environ.get("MUSCLEMETAB_CACHE")
-    os.environ["MUSCLEMETAB_CACHE"] = str(tmp_path_factory.mktemp("cache"))
+    cache = _run_root(tmp_path_factory) / "cache"  # shared by the parallel workers: each trial's geometry once
+    cache.mkdir(exist_ok=True)
+    os.environ["MUSCLEMETAB_CACHE"] = str(cache)
     yield
     if old is None:
         os.environ.pop("MUSCLEMETAB_CACHE", None)
     else:
         os.environ["MUSCLEMETAB_CACHE"] = old
+
+
+#: the test modules that take longest (measured with ``--durations``), started first so that
+#: the parallel processes of a run (pytest-xdist, ``--dist loadfile``) finish together; the
+#: other modules follow in collection order
+_LONGEST_FIRST = ("test_emg_ten.py", "test_gait2392.py", "test_demo.py", "test_redundancy.py", "test_study.py",
+                  "test_report.py", "test_estimate.py")
+
+
+def pytest_collection_modifyitems(config, items):
+    """The longest test modules first (each module runs whole in one process)."""
+    rank = {name: i for i, name in enumerate(_LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))

@@ -491,6 +491,27 @@ def test_trials_from_different_models(example, tmp_path):
     assert "different models" in str(err.value) and str(other) in str(err.value)
 
 
+def test_dofs_of_the_chosen_side_are_discovered(example, tmp_path, capsys):
+    """EMG-TEN's DOFs come from the model and the ID files, like the other workflows': the study's
+    five DOFs for the example's right leg, their left counterparts for its left leg."""
+    from musclemetab.cli import main
+    from musclemetab.errors import UnknownMuscleError
+    from musclemetab.redundancy import solve_emg_ten
+    from musclemetab.redundancy.emg_pipeline import _trial_dofs
+    from musclemetab.redundancy.inputs import DEFAULT_DOFS
+
+    ik, idf, emg = _args(example)
+    assert _trial_dofs(example.model, idf, None, "r", None) == DEFAULT_DOFS
+    assert _trial_dofs(example.model, idf, None, "l", None) == tuple(d[:-1] + "l" for d in DEFAULT_DOFS)
+    # the left leg's problem is built; the example's EMG channels are mapped to right-leg muscles
+    with pytest.raises(UnknownMuscleError, match=r"soleus_r.* not among the muscles of the problem \(addbrev_l"):
+        solve_emg_ten(example.model, ik, idf, emg, side="l")
+    code = main(["solve", "--workflow", "emg-ten", "--model", str(example.model), "--ik", *map(str, ik),
+                 "--id", *map(str, idf), "--emg", *map(str, emg), "--side", "both", "--out", str(tmp_path / "x")])
+    err = capsys.readouterr().err
+    assert code == 1 and err.count("\n") == 1 and "--side both" in err and not (tmp_path / "x").exists()
+
+
 def test_cli_rejects_bad_input_on_one_line(example, tmp_path, capsys):
     from musclemetab.cli import main
 

@@ -210,11 +210,8 @@ def test_override_file(tmp_path, g2392):
 # ------------------------------------------------------------------ metabolics on a gait2392 solution
 @pytest.fixture(scope="module")
 def g2392_solution(gait2392, g2392, tmp_path_factory):
-    """EFFORT-GEN on the gait2392 right leg, 0.7-1.3 s (inside the stored ID file's 0.4-1.6 s).
-
-    ``tfl_r`` is left out: on this motion its rigid-tendon fibre length reaches 1.67-2.0 optimal
-    lengths, beyond the solver's upper bound of 1.7, which makes the problem infeasible.
-    """
+    """EFFORT-GEN on the gait2392 right leg, 0.7-1.3 s (inside the stored ID file's 0.4-1.6 s), all
+    43 muscles spanning the five DOFs (``tfl_r``'s fibre-length bound widened from the geometry)."""
     from musclemetab.geometry import compute_geometry
     from musclemetab.io import read_storage, write_storage
     from musclemetab.redundancy.inputs import read_inverse_dynamics, read_kinematics
@@ -224,10 +221,8 @@ def g2392_solution(gait2392, g2392, tmp_path_factory):
     ik = read_storage(gait2392.ik)
     write_storage(folder / "ik.mot", ik.loc[(ik.index > 0.7 - 1e-6) & (ik.index < 1.3 + 1e-6)], in_degrees=True)
     dofs = ["ankle_angle_r", "knee_angle_r", "hip_flexion_r", "hip_adduction_r", "hip_rotation_r"]
-    spanning = compute_geometry(gait2392.model, folder / "ik.mot", dofs=dofs, cache_dir=folder / "cache").muscles
-    muscles = [m for m in spanning if m != "tfl_r"]
-    geometry = compute_geometry(gait2392.model, folder / "ik.mot", dofs=dofs, muscles=muscles,
-                                cache_dir=folder / "cache")
+    geometry = compute_geometry(gait2392.model, folder / "ik.mot", dofs=dofs, cache_dir=folder / "cache")
+    muscles = list(geometry.muscles)
     ik_time, _ = read_kinematics(folder / "ik.mot", dofs)
     id_time, id_moments = read_inverse_dynamics(gait2392.id, dofs)
     sol = solve_trial(geometry, g2392.muscles, id_time, id_moments, "effort-gen", ik_time_s=ik_time)
@@ -248,7 +243,7 @@ def test_metabolics_cli_on_a_gait2392_solution(g2392_solution, g2392, tmp_path, 
 
     sol, folder, muscles, _ = g2392_solution
     assert sol.summary["success"] and sol.summary["max_moment_residual_Nm"] <= 1e-4
-    assert len(muscles) == 42
+    assert len(muscles) == 43 and "tfl_r" in muscles
     base = ["metabolics", "--solution", str(folder), "--mass", str(MASS), "--height", str(HEIGHT)]
     # --strict: one line naming the unplaced muscles, exit 1, nothing written
     assert main(base + ["--strict", "--out", str(tmp_path / "strict")]) == 1

@@ -50,6 +50,20 @@ def model_params(reference_table):
         max_contraction_velocity=t.max_contraction_velocity_lMo_per_s.to_numpy())
 
 
+@pytest.fixture(scope="module")
+def normal_inputs(example, ref_geometry, model_params):
+    """The normal trial's IK frame times, prepared inputs and EFFORT-GEN parameters."""
+    t_ik, _ = I.read_kinematics(example.ik["normal"])
+    t_id, mom = I.read_inverse_dynamics(example.id["normal"])
+    km, _ = I.select_muscles(ref_geometry.muscles, ref_geometry.moment_arms_m, DOFS)
+    names = [ref_geometry.muscles[i] for i in km]
+    geo = types.SimpleNamespace(time=ref_geometry.time, muscles=names, dofs=DOFS,
+                                lmt_m=ref_geometry.lmt_m[:, km], moment_arms_m=ref_geometry.moment_arms_m[:, :, km])
+    params, _ = W.workflow_parameters("effort-gen", model_params, names)
+    inp = I.prepare_inputs(geo, t_id, mom, ik_time_s=t_ik)
+    return t_ik, inp, params
+
+
 # --------------------------------------------------------------------------- preparation
 def test_mesh_of_the_three_trials(example):
     for trial, n in (("slow", 158), ("normal", 118), ("fast", 99)):
@@ -68,6 +82,8 @@ def test_filter_uses_matlab_padding():
     assert np.max(np.abs(I.lowpass_filtfilt(x, 100.0) - filtfilt(b, a, x, axis=0))) > 1e-4
     with pytest.raises(DataMismatchError, match="too short"):
         I.lowpass_filtfilt(x[:18], 100.0)
+    with pytest.raises(DataMismatchError, match="sampled at 10 Hz.*above 12 Hz"):
+        I.lowpass_filtfilt(x, 10.0, what="the IK file ik.mot")
 
 
 def test_selection_keeps_the_40_right_leg_muscles(ref_geometry, reference_table):
@@ -96,17 +112,10 @@ def test_id_is_filtered_on_the_full_file_then_interpolated(example, ref_geometry
 
 
 # --------------------------------------------------------------------------- static optimisation
-def test_static_optimisation_satisfies_its_kkt_conditions(example, ref_geometry, model_params):
+def test_static_optimisation_satisfies_its_kkt_conditions(normal_inputs):
     from musclemetab.redundancy.static_opt import initial_guess, rigid_tendon_forces, static_optimisation
 
-    t_ik, _ = I.read_kinematics(example.ik["normal"])
-    t_id, mom = I.read_inverse_dynamics(example.id["normal"])
-    km, _ = I.select_muscles(ref_geometry.muscles, ref_geometry.moment_arms_m, DOFS)
-    names = [ref_geometry.muscles[i] for i in km]
-    geo = types.SimpleNamespace(time=ref_geometry.time, muscles=names, dofs=DOFS,
-                                lmt_m=ref_geometry.lmt_m[:, km], moment_arms_m=ref_geometry.moment_arms_m[:, :, km])
-    params, _ = W.workflow_parameters("effort-gen", model_params, names)
-    inp = I.prepare_inputs(geo, t_id, mom, ik_time_s=t_ik)
+    _, inp, params = normal_inputs
     so = static_optimisation(inp, params)
     f_act, f_pas, _ = rigid_tendon_forces(inp.lmt_frames_m, inp.lmt_velocity_frames_m_per_s, params)
     for k in (0, 40, 60, 100):
@@ -130,6 +139,40 @@ def test_static_optimisation_satisfies_its_kkt_conditions(example, ref_geometry,
     lt = (inp.lmt_m - g.lm_projected_m) / params.tendon_slack_length_m
     ft = np.exp(35 * (lt - 0.995)) / 5 - 0.25
     np.testing.assert_allclose(np.abs(ft + 0.25), np.abs(so.tendon_force_norm + 0.25), rtol=1e-9)
+
+
+def test_static_optimisation_equals_scipy_bvls_at_every_frame(normal_inputs):
+    """The NumPy active-set minimiser against SciPy's bounded-variable least squares on the
+    119 frames of the example's normal trial, and the mesh values against SciPy's not-a-knot splines."""
+    from scipy.interpolate import CubicSpline
+    from scipy.optimize import lsq_linear
+
+    from musclemetab._numerics import NotAKnotSpline
+    from musclemetab.redundancy.static_opt import rigid_tendon_forces, static_optimisation
+
+    t_ik, inp, params = normal_inputs
+    mesh = inp.mesh_time_s
+    mesh = np.concatenate([mesh, 0.5 * (mesh[1:] + mesh[:-1])])  # also between the frames
+    for frames, nodes in ((inp.lmt_frames_m, inp.lmt_m), (inp.moments_frames_Nm, inp.moments_Nm)):
+        ref = CubicSpline(t_ik, frames, axis=0, bc_type="not-a-knot")
+        np.testing.assert_allclose(nodes, ref(inp.mesh_time_s), rtol=0, atol=1e-12 * np.max(np.abs(frames)))
+        np.testing.assert_allclose(NotAKnotSpline(t_ik, frames)(mesh), ref(mesh), rtol=0,
+                                   atol=1e-12 * np.max(np.abs(frames)))
+    np.testing.assert_allclose(inp.lmt_velocity_frames_m_per_s, CubicSpline(t_ik, inp.lmt_frames_m)(t_ik, 1),
+                               rtol=0, atol=1e-11)
+    so = static_optimisation(inp, params)
+    f_act, f_pas, _ = rigid_tendon_forces(inp.lmt_frames_m, inp.lmt_velocity_frames_m_per_s, params)
+    sw = np.sqrt(1000.0)
+    objective = 0.0
+    for k in range(t_ik.size):
+        r = inp.moment_arms_frames_m[k]
+        A, b = r * f_act[k], inp.moments_frames_Nm[k] - r @ f_pas[k]
+        ref = lsq_linear(np.vstack([np.eye(40), sw * A]), np.concatenate([np.zeros(40), sw * b]),
+                         bounds=(0.0, 1.0), method="bvls", tol=1e-12).x
+        ref = np.clip(ref, 0.0, 1.0)
+        np.testing.assert_allclose(so.activation[k], ref, rtol=0, atol=1e-9)
+        objective += ref @ ref + 1000.0 * np.sum((b - A @ ref) ** 2)
+    assert so.objective == pytest.approx(objective, rel=1e-12)
 
 
 # --------------------------------------------------------------------------- workflows

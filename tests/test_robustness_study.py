@@ -13,6 +13,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -267,34 +268,69 @@ def test_summary_line_counts_each_unit_once():
     assert run.summary_line().startswith("3 units: 2 run, 1 up to date; 1 failed;")
 
 
-def test_ctrl_c_on_a_real_run(example, tmp_path):
+@pytest.mark.parametrize("workers", [1, 2])
+def test_ctrl_c_on_a_real_run(example, tmp_path, workers):
     """``musclemetab run`` in its own process group gets SIGINT (as from a terminal) while its
-    first unit works: exit status 130, that unit interrupted, the second never started, no
-    temporary folder, no lock."""
+    first units work: exit status 130, the running units interrupted, nothing queued started,
+    no temporary folder, no lock. With ``--workers 2`` (a process pool) both trials start at
+    once and both are interrupted; the third, queued, never starts."""
     out = tmp_path / "out"
     toml = tmp_path / "study.toml"
+    trials = ("normal", "slow") if workers == 1 else ("normal", "slow", "fast")
     toml.write_text(
         f'output = "out"\nworkflows = ["effort-gen"]\nmodels = ["UM10"]\n[[subjects]]\nname = "s"\n'
         f'model = "{example.model}"\nbody_mass_kg = 72.6\nheight_m = 1.743\n' + "".join(
             f'[[subjects.trials]]\nname = "{t}"\nik = "{example.ik[t]}"\nid = "{example.id[t]}"\n'
-            for t in ("normal", "slow"))
+            for t in trials)
     )
-    proc = subprocess.Popen([sys.executable, "-m", "musclemetab.cli", "run", str(toml), "--workers", "1",
+    proc = subprocess.Popen([sys.executable, "-m", "musclemetab.cli", "run", str(toml), "--workers", str(workers),
                              "--no-progress"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)
     try:
         deadline = time.monotonic() + 120
-        while not list((out / "units").rglob(".*.partial-*")) and proc.poll() is None and time.monotonic() < deadline:
+        while (len(list((out / "units").rglob(".*.partial-*"))) < workers and proc.poll() is None
+               and time.monotonic() < deadline):
             time.sleep(0.1)
-        time.sleep(2.0)  # the unit is computing its geometry or solving
+        time.sleep(2.0)  # the units are computing their geometry or solving
         os.killpg(proc.pid, signal.SIGINT)
         stdout, stderr = proc.communicate(timeout=120)
     finally:
         if proc.poll() is None:
             proc.kill()
     assert proc.returncode == 130, (stdout, stderr)
-    assert "1 interrupted" in stdout and "musclemetab: interrupted" in stderr
+    assert f"{workers} interrupted" in stdout and "musclemetab: interrupted" in stderr
     assert "Traceback" not in stderr
-    assert sorted(p.relative_to(out).as_posix() for p in (out / "units").rglob("*")) == ["units/s", "units/s/normal"]
+    reasons = pd.read_csv(out / "failures.csv").set_index("trial")["reason"]
+    started = sorted(t for t in reasons.index if reasons[t].startswith("interrupted"))
+    assert len(started) == workers, reasons
+    assert f"{len(trials)} units: {workers} run, 0 up to date, {len(trials) - workers} not started; 0 failed" in stdout
+    assert sorted(p.relative_to(out).as_posix() for p in (out / "units").rglob("*")) == \
+        ["units/s"] + [f"units/s/{t}" for t in started]
     assert not (out / LOCK_FILE).exists()
-    assert pd.read_csv(out / "failures.csv").set_index("trial").loc["normal", "reason"].startswith("interrupted")
+
+
+def test_a_call_interrupted_mid_way_does_not_leave_its_reply_to_the_next(example, monkeypatch):
+    """Ctrl-C while the OpenSim worker computes: the next call (the next unit of a study in
+    the same pool process) gets its own reply, not the interrupted call's."""
+    from musclemetab.opensim_bridge import client
+
+    real_recv = client._recv
+    armed = []
+
+    def interrupted_recv(stream):
+        if armed:
+            armed.clear()
+            raise KeyboardInterrupt  # after the request was sent, before its reply was read
+        return real_recv(stream)
+
+    monkeypatch.setattr(client, "_recv", interrupted_recv)
+    client.call("model_ops:read_model_info", str(example.model))  # the worker is up (its "ready" read)
+    armed.append(True)
+    with pytest.raises(KeyboardInterrupt):
+        client.call("model_ops:read_time_series_table", str(example.ik["normal"]))
+    slow = client.call("model_ops:read_time_series_table", str(example.ik["slow"]))
+    from musclemetab.io.storage import read_storage
+
+    times = {t: read_storage(example.ik[t]).index.to_numpy() for t in ("normal", "slow")}
+    assert len(times["slow"]) != len(times["normal"])
+    np.testing.assert_allclose(slow["time"], times["slow"], atol=1e-9)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from musclemetab.errors import MissingColumnError, StorageFormatError, TimeColumnError
-from musclemetab.io import read_storage, require_columns, storage_from_arrays, write_storage
+from musclemetab.io import StorageTable, read_storage, read_table, require_columns, storage_from_arrays, write_storage
 
 
 def test_modern_header_ik(example):
@@ -136,6 +136,32 @@ def test_require_columns(example):
     df.loc[df.index[3], "ankle_angle_r_moment"] = np.nan
     with pytest.raises(MissingColumnError, match="NaN"):
         require_columns(df, ["ankle_angle_r_moment"])
+
+
+def test_numpy_table_holds_what_the_dataframe_holds(example, tmp_path):
+    """read_table (no pandas) and read_storage give the same numbers, names and header; the
+    checks accept both; a table written with write_storage reads back the same."""
+    for path in (example.ik["normal"], example.emg["normal"], example.calibration_trials["ankle"]["moments"]):
+        table, df = read_table(path), read_storage(path)
+        assert isinstance(table, StorageTable) and len(table) == len(df)
+        assert list(table.columns) == list(df.columns) and table.attrs == df.attrs
+        np.testing.assert_array_equal(table.index, df.index.to_numpy())
+        np.testing.assert_array_equal(table.to_numpy(), df.to_numpy())
+        np.testing.assert_array_equal(table[df.columns[1]], df[df.columns[1]].to_numpy())
+    table = read_table(example.ik["normal"])
+    assert table["hip_flexion_r"][0] == pytest.approx(34.34281872)  # first data row as printed in the file
+    with pytest.raises(MissingColumnError, match="no column 'hip_flexion_x'"):
+        table["hip_flexion_x"]
+    require_columns(table, ["knee_angle_r"])
+    with pytest.raises(MissingColumnError, match="knee_angle_x"):
+        require_columns(table, ["knee_angle_r", "knee_angle_x"])
+    table.values[2, 0] = np.nan
+    with pytest.raises(MissingColumnError, match="NaN"):
+        require_columns(table, [table.columns[0]])
+    out = write_storage(tmp_path / "t.sto", read_table(example.id["normal"]))
+    again, ref = read_table(out), read_table(example.id["normal"])
+    assert again.columns == ref.columns and again.attrs["in_degrees"] is False
+    np.testing.assert_allclose(again.to_numpy(), ref.to_numpy(), rtol=1e-11)
 
 
 def test_written_files_have_a_normal_mode(tmp_path):

@@ -7,6 +7,7 @@ import shutil
 import numpy as np
 import pandas as pd
 import pytest
+import solve_memo
 
 from musclemetab.errors import InputFileError, OptionError
 from musclemetab.study import load_study, run_study, study_from_dict
@@ -247,7 +248,8 @@ def test_dask_cluster_gives_the_process_pool_table(pool_run, example, tmp_path):
     data = _study_dict(example)
     dask_study = study_from_dict(data, base="/", output=tmp_path / "dask")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster:
+                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+        client.run(solve_memo.install_in_worker)  # the test run's solves, once (tests/solve_memo.py)
         dask_run = run_study(dask_study, scheduler=cluster.scheduler_address, progress=False)
     assert not dask_run.failed and sorted(dask_run.ran) == sorted(run.ran)
     a = run.results.drop(columns=["unit_dir"])

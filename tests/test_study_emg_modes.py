@@ -78,7 +78,8 @@ def test_emg_mode_and_estimate_plan_their_units_and_keys(example, tmp_path):
 @pytest.mark.parametrize("edit, words", [
     (lambda s: s.update(emg_mode="free"), ["emg_mode", "constrained"]),
     (lambda s: s.update(emg_tolerance=0.02), ["emg_tolerance", "emg_mode"]),
-    (lambda s: s.update(emg_mode="driven", side="l"), ["right leg", "side"]),
+    (lambda s: (s.update(emg_mode="driven"), s["trials"][0].update(cycle="auto")), ["emg_mode", "cycle", "normal"]),
+    (lambda s: s.update(estimate=ESTIMATE, side="l"), ["estimation", "right leg", "side"]),
     (lambda s: (s.update(emg_mode="driven"), s["trials"][0].pop("emg")), ["emg_mode", "'emg'", "normal"]),
     (lambda s: s.update(estimate={"estimate": {"stiffness": ["soleus_r"]}}), ["[subjects.estimate]", "stiffness",
                                                                             "tendon_stiffness"]),

@@ -40,7 +40,7 @@ import numpy as np
 from .cache import default_cache_dir, discard_entry, entry_path, existing_entry, read_entry, write_entry
 from .io.atomic import file_sha256
 from .errors import DataMismatchError, OptionError, UnknownCoordinateError
-from .io import read_storage, write_storage
+from .io import read_table, write_storage
 from .model import default_dofs
 
 __all__ = ["Geometry", "compute_geometry", "geometry_is_cached", "default_cache_dir", "write_geometry", "check_kinematics",
@@ -88,8 +88,14 @@ class Geometry:
         return Geometry(self.time, tuple(muscles), self.dofs, self.lmt_m[:, idx], self.moment_arms_m[:, :, idx], self.source)
 
 
+def _columns(table, names) -> np.ndarray:
+    """``(F, len(names))`` float array of the named columns of a DataFrame or a StorageTable."""
+    return np.column_stack([np.asarray(table[c], dtype=float) for c in names])
+
+
 def check_kinematics(ik, dofs, check_units: bool = True) -> bool:
-    """Check an IK table (from :func:`~musclemetab.io.read_storage`); return whether it is in degrees.
+    """Check an IK table (from :func:`~musclemetab.io.read_table` or
+    :func:`~musclemetab.io.read_storage`); return whether it is in degrees.
 
     Raises, naming the file and column: :class:`~musclemetab.errors.MissingColumnError` when a
     DOF column is absent; :class:`~musclemetab.errors.InputFileError` for fewer than 2 frames;
@@ -118,7 +124,7 @@ def check_kinematics(ik, dofs, check_units: bool = True) -> bool:
             f"{path}: column '{ik.columns[col]}' is {values[row, col]:g} at data row {row + 1} (t = "
             f"{ik.index[row]:g} s); every coordinate must be finite: fix or remove the frame"
         )
-    q = ik[list(dofs)].to_numpy(dtype=float)
+    q = _columns(ik, dofs)
     in_degrees = ik.attrs.get("in_degrees")
     peak_by_dof = np.max(np.abs(q), axis=0)
     peak = float(peak_by_dof.max())
@@ -133,7 +139,7 @@ def check_kinematics(ik, dofs, check_units: bool = True) -> bool:
     # The radians-as-degrees test looks at the leg's main joints too when the file has them
     # (a coupled coordinate alone, such as a knee's beta angle, moves by a few degrees).
     legs = [c for c in dict.fromkeys([*dofs, *default_dofs("r"), *default_dofs("l")]) if c in ik.columns]
-    q = ik[legs].to_numpy(dtype=float)
+    q = _columns(ik, legs)
     peak = float(np.max(np.abs(q)))
     if check_units and in_degrees and peak < MIN_PEAK_ANGLE_DEG and float(np.ptp(q, axis=0).max()) > MIN_MOTION_RANGE:
         raise DataMismatchError(
@@ -225,7 +231,7 @@ def compute_geometry(
     from .model import check_model_path
 
     check_model_path(model_path)
-    ik = read_storage(ik_path)  # validates the file before any cache lookup
+    ik = read_table(ik_path)  # validates the file before any cache lookup
     in_degrees = check_kinematics(ik, dofs, check_units)
 
     cache_file = None
@@ -234,7 +240,7 @@ def compute_geometry(
         if cache_file is not None:
             arrays, problem = read_entry(cache_file)
             if arrays is not None:
-                geom, problem = _geometry_from_entry(arrays, ik.index.to_numpy(dtype=float), dofs)
+                geom, problem = _geometry_from_entry(arrays, ik.index.copy(), dofs)
                 if geom is not None:
                     return geom
             if problem:
@@ -244,8 +250,8 @@ def compute_geometry(
     raw = call(
         "model_ops:muscle_geometry",
         str(model_path),
-        ik.index.to_numpy(),
-        {c: ik[c].to_numpy() for c in ik.columns},
+        ik.index.copy(),
+        {c: np.ascontiguousarray(ik[c]) for c in ik.columns},
         bool(in_degrees),
         dofs,
         list(muscles) if muscles else None,
@@ -272,7 +278,7 @@ def compute_geometry(
         compute_time_s=_time.perf_counter() - t0,
     )
     geom = Geometry(
-        time=ik.index.to_numpy(),
+        time=ik.index.copy(),
         muscles=tuple(raw["muscles"]),
         dofs=tuple(raw["dofs"]),
         lmt_m=raw["lmt_m"],

@@ -41,6 +41,7 @@ __all__ = [
     "check_side",
     "side_dofs",
     "discover_dofs",
+    "foot_bodies",
 ]
 
 #: A body is on a side when its origin lies this far (m) to that side of the root body's origin.
@@ -152,6 +153,39 @@ def side_dofs(layout: ModelLayout, side: str) -> list[str]:
             "choose the other side or give --dofs"
         )
     return dofs
+
+
+#: Bodies of a side whose origin lies within this height (m) of the side's lowest body origin,
+#: in the default pose, form the foot (:func:`foot_bodies`).
+FOOT_HEIGHT_M = 0.15
+#: The ground's forward axis in OpenSim models (x).
+FORWARD_AXIS = 0
+
+
+def foot_bodies(layout: ModelLayout, side: str) -> tuple[str, str]:
+    """``(heel body, toe body)`` of a side: of the side's bodies whose origin lies, in the
+    default pose, within :data:`FOOT_HEIGHT_M` of the side's lowest body origin (the foot),
+    the one whose origin is furthest back and the one furthest forward (gait2392 and the
+    Rajagopal family: ``calcn`` and ``toes``). Raises :class:`DataMismatchError` when the side
+    has no body, and when the foot has one body only (heel and toe cannot be told apart)."""
+    check_side(side)
+    g = np.asarray(layout.gravity, dtype=float)
+    up = -g / np.linalg.norm(g) if np.linalg.norm(g) > 0 else np.array([0.0, 1.0, 0.0])
+    origin = {j["child"]: np.asarray(j["child_origin_m"], dtype=float) for j in layout.joints}
+    bodies = [b for b in origin if b in layout.bodies and layout.body_side(b) == side]
+    if not bodies:
+        raise DataMismatchError(f"{layout.path}: the model has no body on the {SIDE_NAMES[side]} side")
+    height = {b: float(origin[b] @ up) for b in bodies}
+    low = min(height.values())
+    foot = [b for b in bodies if height[b] <= low + FOOT_HEIGHT_M]
+    heel = min(foot, key=lambda b: origin[b][FORWARD_AXIS])
+    toe = max(foot, key=lambda b: origin[b][FORWARD_AXIS])
+    if heel == toe:
+        raise DataMismatchError(
+            f"{layout.path}: the {SIDE_NAMES[side]} foot has one body ({heel}), so heel and toe cannot be told "
+            "apart for gait events from kinematics; give the ground forces or --window T0:T1"
+        )
+    return heel, toe
 
 
 def discover_dofs(layout: ModelLayout, side: str, id_columns: Iterable[str] | None = None) -> list[str]:

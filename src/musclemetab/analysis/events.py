@@ -11,6 +11,11 @@ Three ways to obtain a :class:`GaitCycle`:
 * :func:`cycle_from_grf`: threshold crossings of the vertical ground reaction force
   (:func:`gait_events_from_grf`). The study's threshold is not reported (a 10-20 N
   threshold is usual); the default is 20 N, a parameter.
+* :func:`gait_events_from_kinematics` (:func:`kinematic_gait_events` from a model and IK
+  file): data without forces. The coordinate-based rule of Zeni et al. (2008, Gait &
+  Posture 27:710-714): heel strike where the heel lies furthest ahead of the pelvis, toe-off
+  where the toe lies furthest behind it, along the direction of travel (the heel and toe are
+  the origins of the foot's rearmost and foremost bodies, :func:`musclemetab.layout.foot_bodies`).
 * :func:`cycle_from_inverse_dynamics`: the fallback for data without force files, such as
   the example subject. The simulated window is the cycle padded by about five frames
   at each end (``docs/solver.md``), so IC = window start + padding and next
@@ -37,6 +42,8 @@ __all__ = [
     "GaitCycle",
     "GaitEvents",
     "gait_events_from_grf",
+    "gait_events_from_kinematics",
+    "kinematic_gait_events",
     "cycle_from_grf",
     "cycle_from_inverse_dynamics",
     "cycle_from_id_file",
@@ -422,3 +429,74 @@ def read_grf(path: str | os.PathLike, column: str | None = None, *, side: str = 
         f"candidates: {', '.join(cand) or 'none'} (columns: {', '.join(map(str, df.columns[:12]))}"
         f"{' ...' if len(df.columns) > 12 else ''}). Pass column='<name>'"
     )
+
+
+#: Least prominence (m) of a heel or toe excursion relative to the pelvis that counts as a
+#: gait event in :func:`gait_events_from_kinematics` (walking gives 0.4-0.8 m).
+KINEMATIC_PROMINENCE_M = 0.1
+#: Net horizontal pelvis travel (m) below which the direction of travel is the model's +x.
+_MIN_TRAVEL_M = 0.1
+
+
+def _refined_extrema(t, x, prominence):
+    """Times of the local maxima of ``x`` (parabola through each peak and its neighbours)."""
+    from scipy.signal import find_peaks
+
+    peaks, _ = find_peaks(x, prominence=prominence)
+    out = []
+    for k in peaks:
+        y0, y1, y2 = x[k - 1], x[k], x[k + 1]
+        den = y0 - 2 * y1 + y2
+        d = 0.0 if den == 0 else 0.5 * (y0 - y2) / den
+        d = min(max(d, -0.5), 0.5)
+        out.append(float(t[k] + d * (t[k + 1] - t[k] if d > 0 else t[k] - t[k - 1])))
+    return np.array(out)
+
+
+def gait_events_from_kinematics(time_s, heel_m, toe_m, pelvis_m, up=(0.0, 1.0, 0.0),
+                                prominence_m: float = KINEMATIC_PROMINENCE_M) -> GaitEvents:
+    """Heel strikes and toe-offs of one foot from positions (Zeni et al. 2008).
+
+    ``heel_m``, ``toe_m``, ``pelvis_m``: ``(T, 3)`` positions in the ground frame (m). The
+    direction of travel is the horizontal part of the pelvis's net displacement over the
+    record (the model's +x when it travels less than 0.1 m, as on a treadmill). Heel strikes
+    are the maxima of the heel's distance ahead of the pelvis along it, toe-offs the minima
+    of the toe's; extrema less prominent than ``prominence_m`` are ignored, and so are those at
+    the first and last frame (the record may cut an excursion). Times are refined by a
+    parabola through the extreme frame and its neighbours. ``threshold_N`` of the result is
+    NaN (no force threshold).
+    """
+    t = as_time(time_s, "time_s")
+    heel, toe, pelvis = (np.asarray(a, dtype=float).reshape(t.size, 3) for a in (heel_m, toe_m, pelvis_m))
+    up = np.asarray(up, dtype=float) / np.linalg.norm(up)
+    travel = pelvis[-1] - pelvis[0]
+    travel = travel - (travel @ up) * up
+    if np.linalg.norm(travel) < _MIN_TRAVEL_M:
+        travel = np.array([1.0, 0.0, 0.0]) - up[0] * up
+    fwd = travel / np.linalg.norm(travel)
+    hs = _refined_extrema(t, (heel - pelvis) @ fwd, prominence_m)
+    to = _refined_extrema(t, -((toe - pelvis) @ fwd), prominence_m)
+    return GaitEvents(hs, to, float("nan"), 0.0)
+
+
+def kinematic_gait_events(model_path, ik_path, side: str, layout=None) -> GaitEvents:
+    """:func:`gait_events_from_kinematics` of one leg from a model and its IK file: the
+    origins of the side's heel and toe bodies and of the root body, computed by OpenSim in the
+    worker process."""
+    from ..io import read_storage
+    from ..layout import foot_bodies, read_layout
+    from ..opensim_bridge import call
+
+    layout = layout or read_layout(model_path)
+    heel, toe = foot_bodies(layout, side)
+    root = next(j["child"] for j in layout.joints if j["parent"] == layout.ground)
+    ik = read_storage(ik_path)
+    in_degrees = ik.attrs.get("in_degrees")
+    if in_degrees is None:  # no header flag: angles beyond 2 pi are degrees
+        in_degrees = bool(np.nanmax(np.abs(ik.to_numpy(dtype=float))) > 2 * np.pi)
+    raw = call("model_ops:body_origins", str(model_path), {c: ik[c].to_numpy() for c in ik.columns},
+               in_degrees, [heel, toe, root])
+    pos = np.asarray(raw["positions_m"], dtype=float)
+    g = np.asarray(layout.gravity, dtype=float)
+    up = -g if np.linalg.norm(g) > 0 else (0.0, 1.0, 0.0)
+    return gait_events_from_kinematics(ik.index.to_numpy(dtype=float), pos[:, 0], pos[:, 1], pos[:, 2], up=up)

@@ -18,7 +18,9 @@ constant-thickness pennation, ``w = lMo sin(alpha0)``):
     l~T = (lMT - lM_proj) / lTs
     T_target,k = sum_m F0_m fT_m,k r_m,k + Topt aT_k,   Topt = 150 N m
 
-with ``0.05 <= l~M <= 2``, ``lM_proj >= 1e-4 m``, ``-1 <= aT <= 1``, ``3 <= kPE <= 5``,
+with ``0.05 <= l~M <= 2`` (or, for a muscle the trial's geometry stretches further, its
+longest rigid-tendon fibre length plus 0.05: :func:`musclemetab.muscle.longest_fibre_length_bound`),
+``lM_proj >= 1e-4 m``, ``-1 <= aT <= 1``, ``3 <= kPE <= 5``,
 ``0.8 <= s0 <= 1.2``. The objective is ``J = sum_t sum_k aT_t,k^2``: least squares of the
 passive-moment error divided by 150 N m over every frame of the three trials.
 
@@ -48,7 +50,13 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..errors import DataMismatchError, InputFileError, MissingColumnError, OptionError, SolverError, UnknownMuscleError
-from ..muscle import fibre_width, hill_residual, passive_force_length, tendon_force_length
+from ..muscle import (
+    fibre_width,
+    hill_residual,
+    longest_fibre_length_bound,
+    passive_force_length,
+    tendon_force_length,
+)
 
 __all__ = [
     "CALIBRATION_JOINTS",
@@ -299,12 +307,17 @@ def load_calibration_data(
     from ..io import read_storage
     from ..model import read_muscle_parameters
 
+    from ..model import read_model
+
     joints = calibration_dofs(model_path, side)
     files = trial_files(trials, joints)
+    ranges = {c["name"]: c["range"] for c in read_model(model_path).coordinates
+              if c.get("motion_type") == "rotational"}
     out = []
     for joint, dof in joints.items():
         mot = read_storage(files[joint]["motion"])
         sto = read_storage(files[joint]["moments"])
+        _check_angle_ranges(mot, files[joint]["motion"], ranges, model_path)
         if dof not in mot.columns:
             raise MissingColumnError(
                 f"{files[joint]['motion']}: missing column {dof} (the {joint} trial's target DOF); "
@@ -367,6 +380,40 @@ def load_calibration_data(
     )
 
 
+#: Slack (deg) of :func:`_check_angle_ranges` beyond a coordinate's range in the model.
+RANGE_SLACK_DEG = 5.0
+
+
+def _check_angle_ranges(mot, path, ranges: Mapping[str, Sequence[float]], model_path) -> None:
+    """Refuse a trial whose joint angles lie outside the model's coordinate ranges.
+
+    In-vivo passive trials are defined anatomically (knee flexed 60 degrees); models differ
+    in sign conventions (knee flexion is positive in the Rajagopal family, negative in
+    gait2392), and a trial in the other convention would put the joint far outside its
+    range, where muscle geometry and passive forces mean nothing (IPOPT then reports an
+    infeasible problem). Angles are degrees unless the header says ``inDegrees=no``.
+    """
+    in_deg = mot.attrs.get("in_degrees")
+    to_deg = 1.0 if (in_deg is None or in_deg) else 180.0 / math.pi
+    for col in mot.columns:
+        if col not in ranges:
+            continue
+        lo, hi = (math.degrees(float(x)) for x in ranges[col])
+        q = mot[col].to_numpy(dtype=float) * to_deg
+        if q.min() >= lo - RANGE_SLACK_DEG and q.max() <= hi + RANGE_SLACK_DEG:
+            continue
+        flipped = (-q.max() >= lo - RANGE_SLACK_DEG) and (-q.min() <= hi + RANGE_SLACK_DEG)
+        advice = (
+            f"the trial seems to use the opposite sign convention for {col}: negate the {col} column of every "
+            f"trial's .mot and the {col}_moment column of the target moments (.sto)"
+            if flipped else f"give {col} in this model's convention and units"
+        )
+        raise DataMismatchError(
+            f"{path}: column {col} spans {q.min():.0f} to {q.max():.0f} deg, outside the range of {col} in "
+            f"{model_path} ({lo:.0f} to {hi:.0f} deg); {advice}"
+        )
+
+
 def parameter_groups(muscles: Sequence[str]) -> list[tuple[str, ...]]:
     """Muscles sharing one (kPE, s0) pair: the coupling groups P1-P10 of the anatomical
     muscle table, per side; every other muscle is its own group. Order: first appearance in
@@ -413,9 +460,9 @@ class PassiveSolution:
         return out
 
 
-def _initial_states(lmt, lts, lmo, w):
+def _initial_states(lmt, lts, lmo, w, upper):
     """Rigid-tendon guess: ``l~M = (lMT - lTs)/lMo``, ``lM_proj = sqrt((lMT - lTs)^2 - w^2)``."""
-    lm = np.clip((lmt - lts) / lmo, LM_NORM_BOUNDS[0] + 1e-3, LM_NORM_BOUNDS[1] - 1e-3)
+    lm = np.clip((lmt - lts) / lmo, LM_NORM_BOUNDS[0] + 1e-3, upper - 1e-3)
     proj = np.sqrt(np.maximum((lm * lmo) ** 2 - w**2, (2 * LM_PROJ_MIN_M) ** 2))
     return lm, proj
 
@@ -477,10 +524,12 @@ def solve_passive(
         lm = opti.variable(F, M)
         proj = opti.variable(F, M)
         aT = opti.variable(F)
-        opti.subject_to(opti.bounded(LM_NORM_BOUNDS[0], ca.vec(lm), LM_NORM_BOUNDS[1]))
+        upper = longest_fibre_length_bound(t.lmt_m, lts, lmo, w, LM_NORM_BOUNDS[1])
+        opti.subject_to(opti.bounded(LM_NORM_BOUNDS[0], ca.vec(lm), ca.vec(ca.DM(np.tile(upper, (F, 1))))))
         opti.subject_to(ca.vec(proj) >= LM_PROJ_MIN_M)
-        opti.subject_to(opti.bounded(-1, aT, 1))
-        lm0, proj0 = _initial_states(t.lmt_m, lts, lmo, w)
+        if free:  # with imposed parameters the reserve is the moment error, unbounded
+            opti.subject_to(opti.bounded(-1, aT, 1))
+        lm0, proj0 = _initial_states(t.lmt_m, lts, lmo, w, upper)
         opti.set_initial(lm, lm0)
         opti.set_initial(proj, proj0)
         opti.set_initial(aT, 0)
@@ -587,7 +636,7 @@ def equilibrium_fibre_length(
         )
 
     lo = max(LM_NORM_BOUNDS[0], w / lmo + 1e-9)
-    lm = brentq(residual, lo, LM_NORM_BOUNDS[1], xtol=1e-14)
+    lm = brentq(residual, lo, 3.0, xtol=1e-14)  # beyond any bound of the NLP
     proj = math.sqrt((lm * lmo) ** 2 - w**2)
     return lm, float(tendon_force_length((lmt_m - proj) / lts, kT))
 

@@ -10,9 +10,19 @@ from .atomic import (
     file_sha256,
 )
 from .jsonfile import read_json_object
-from .storage import check_time_stamps, read_storage, require_columns, storage_from_arrays, write_storage
+from .storage import (
+    StorageTable,
+    check_time_stamps,
+    read_storage,
+    read_table,
+    require_columns,
+    storage_from_arrays,
+    write_storage,
+)
 
 __all__ = [
+    "StorageTable",
+    "read_table",
     "read_storage",
     "write_storage",
     "require_columns",

@@ -8,8 +8,10 @@ Two header dialects occur in practice and are both read:
   ``datacolumns N``, ``datarows M``, ``range t0 t1``, then ``endheader``.
 
 The line after ``endheader`` holds the column names (the first is ``time``); the rest are
-whitespace-separated numbers. :func:`read_storage` returns a pandas DataFrame indexed by
-time, with the header metadata in ``DataFrame.attrs``:
+whitespace-separated numbers. :func:`read_table` parses and checks a file into a
+:class:`StorageTable` (NumPy arrays, no pandas: the solver's start-up reads its files this
+way); :func:`read_storage` returns the same contents as a pandas DataFrame indexed by time.
+Both carry the header metadata in ``attrs``:
 
 ``name``        the table name (first header line), or ``None``
 ``in_degrees``  ``True``/``False`` from ``inDegrees``, ``None`` when the header has none
@@ -18,7 +20,8 @@ time, with the header metadata in ``DataFrame.attrs``:
 
 Values are returned exactly as stored: no unit conversion happens here (use
 :func:`rotational_to_radians` where the caller knows which columns are angles).
-:func:`write_storage` writes an OpenSim 4 ``.sto`` atomically (temporary file, then rename).
+:func:`write_storage` writes an OpenSim 4 ``.sto`` atomically (temporary file, then rename)
+from either kind of table.
 """
 
 from __future__ import annotations
@@ -28,14 +31,19 @@ import math
 import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
+
+if TYPE_CHECKING:  # pandas is imported where a DataFrame is built
+    import pandas as pd
 
 from ..errors import MissingColumnError, StorageFormatError, TimeColumnError
 from .atomic import atomic_write_text
 
 __all__ = [
+    "StorageTable",
+    "read_table",
     "read_storage",
     "write_storage",
     "require_columns",
@@ -90,8 +98,50 @@ def _parse_header(lines: list[str], path: Path) -> dict:
     return meta
 
 
-def read_storage(path: str | os.PathLike) -> pd.DataFrame:
+class StorageTable:
+    """The contents of a storage file as NumPy arrays.
+
+    ``index`` is the time column ``(F,)`` (s), ``columns`` the data column names (``time``
+    excluded), ``values`` the data ``(F, C)``, ``attrs`` the header metadata (as for
+    :func:`read_storage`). ``table[name]`` is one column ``(F,)``, ``table.to_numpy()`` all of
+    them, and :meth:`to_dataframe` the pandas DataFrame :func:`read_storage` returns.
+    """
+
+    __slots__ = ("index", "columns", "values", "attrs", "_position")
+
+    def __init__(self, time, columns: Sequence[str], values, attrs: dict | None = None):
+        self.index = np.asarray(time, dtype=float)
+        self.columns = tuple(columns)
+        self.values = np.asarray(values, dtype=float).reshape(self.index.size, len(self.columns))
+        self.attrs = dict(attrs or {})
+        self._position = {c: j for j, c in enumerate(self.columns)}
+
+    def __len__(self) -> int:
+        return self.index.size
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        try:
+            return self.values[:, self._position[name]]
+        except KeyError:
+            raise MissingColumnError(f"{self.attrs.get('path', '<table>')}: no column '{name}'") from None
+
+    def to_numpy(self, dtype=float) -> np.ndarray:
+        return self.values.astype(dtype, copy=False)
+
+    def to_dataframe(self) -> "pd.DataFrame":
+        """A time-indexed DataFrame with the same columns and ``attrs``."""
+        import pandas as pd
+
+        df = pd.DataFrame(self.values, columns=list(self.columns), index=pd.Index(self.index, name="time"))
+        df.attrs.update(self.attrs)
+        return df
+
+
+def read_storage(path: str | os.PathLike) -> "pd.DataFrame":
     """Read an OpenSim ``.mot``/``.sto`` file into a time-indexed DataFrame.
+
+    The file is parsed and checked by :func:`read_table`; this is its
+    :meth:`StorageTable.to_dataframe`.
 
     Parameters
     ----------
@@ -102,6 +152,17 @@ def read_storage(path: str | os.PathLike) -> pd.DataFrame:
     -------
     pandas.DataFrame
         Index ``time`` (s), one float column per data column, header metadata in ``.attrs``.
+
+    Raises
+    ------
+    StorageFormatError, TimeColumnError
+        As :func:`read_table`.
+    """
+    return read_table(path).to_dataframe()
+
+
+def read_table(path: str | os.PathLike) -> StorageTable:
+    """Read an OpenSim ``.mot``/``.sto`` file into a :class:`StorageTable` (no pandas).
 
     Raises
     ------
@@ -182,14 +243,11 @@ def read_storage(path: str | os.PathLike) -> pd.DataFrame:
             f"{path}: column 'time' is not strictly increasing (data row {row}, t = {t[row - 1]:g} s)"
         )
 
-    df = pd.DataFrame(values[:, 1:], columns=names[1:], index=pd.Index(t, name="time"))
-    df.attrs.update(
-        name=meta["name"], in_degrees=meta["in_degrees"], path=str(path), header=list(header)
-    )
-    return df
+    return StorageTable(t, names[1:], values[:, 1:],
+                        dict(name=meta["name"], in_degrees=meta["in_degrees"], path=str(path), header=list(header)))
 
 
-def check_time_stamps(df: pd.DataFrame, what: str = "file") -> None:
+def check_time_stamps(df: "pd.DataFrame | StorageTable", what: str = "file") -> None:
     """Refuse a time column that cannot be seconds of a motion recording.
 
     Raises :class:`TimeColumnError` (naming the file) when the median time step is
@@ -215,9 +273,10 @@ def _is_float(x: str) -> bool:
 
 
 def require_columns(
-    df: pd.DataFrame, columns: Iterable[str], *, allow_nan: bool = False, what: str = "column"
+    df: "pd.DataFrame | StorageTable", columns: Iterable[str], *, allow_nan: bool = False, what: str = "column"
 ) -> None:
-    """Raise :class:`MissingColumnError` naming the file and every absent (or NaN) column."""
+    """Raise :class:`MissingColumnError` naming the file and every absent (or NaN) column
+    of a DataFrame or a :class:`StorageTable`."""
     source = df.attrs.get("path", "<table>")
     columns = list(columns)
     missing = [c for c in columns if c not in df.columns]
@@ -227,9 +286,14 @@ def require_columns(
             f"the file has {', '.join(map(str, df.columns[:12]))}{' ...' if len(df.columns) > 12 else ''}"
         )
     if not allow_nan:
-        bad = [c for c in columns if df[c].isna().any()]
+        bad = [c for c in columns if _has_nan(df[c])]
         if bad:
             raise MissingColumnError(f"{source}: {what} {', '.join(bad)} holds NaN values; fill or remove them")
+
+
+def _has_nan(column) -> bool:
+    isna = getattr(column, "isna", None)  # a pandas Series (any dtype) or a NumPy column
+    return bool(isna().any()) if isna is not None else bool(np.isnan(np.asarray(column, dtype=float)).any())
 
 
 def storage_from_arrays(
@@ -240,8 +304,10 @@ def storage_from_arrays(
     data: np.ndarray | None = None,
     name: str = "musclemetab",
     in_degrees: bool = False,
-) -> pd.DataFrame:
+) -> "pd.DataFrame":
     """Build a time-indexed DataFrame in the layout :func:`write_storage` expects."""
+    import pandas as pd
+
     time = np.asarray(time, dtype=float)
     if columns is not None:
         df = pd.DataFrame({k: np.asarray(v, dtype=float) for k, v in columns.items()}, index=time)
@@ -260,13 +326,14 @@ def _format(x: float) -> str:
 
 def write_storage(
     path: str | os.PathLike,
-    df: pd.DataFrame,
+    df: "pd.DataFrame | StorageTable",
     *,
     name: str | None = None,
     in_degrees: bool | None = None,
     comments: Sequence[str] = (),
 ) -> Path:
-    """Write a time-indexed DataFrame as an OpenSim 4 ``.sto`` file, atomically.
+    """Write a time-indexed DataFrame (or a :class:`StorageTable`) as an OpenSim 4 ``.sto``
+    file, atomically.
 
     The file is first written to a temporary file beside ``path`` and renamed into place,
     so a failure never leaves a half-written file. OpenSim 4.6 reads the result with

@@ -42,6 +42,7 @@ __all__ = [
     "activation_rate",
     "hill_residual",
     "fibre_width",
+    "longest_fibre_length_bound",
 ]
 
 # Active force-length: sum of three Gaussians, rows (b1, b2, b3, b4).
@@ -247,6 +248,21 @@ def fibre_width(optimal_fiber_length_m, pennation_angle_at_optimal_rad):
     import casadi as ca
 
     return optimal_fiber_length_m * ca.sin(pennation_angle_at_optimal_rad)
+
+
+def longest_fibre_length_bound(lmt_m, tendon_slack_length_m, optimal_fiber_length_m, width_m, default: float,
+                               margin: float = 0.05):
+    """Upper bound of each muscle's normalised fibre length over a motion (NumPy).
+
+    No fibre is longer than with its tendon at slack length (a shorter tendon carries no
+    force, and neither can the fibre then): ``l~M <= sqrt((lMT - lTs)^2 + w^2) / lMo``. The
+    bound is ``default``, or this rigid-tendon length at the longest ``lMT`` (rows of
+    ``lmt_m`` are frames) plus ``margin`` where that is larger, so that a box on the fibre
+    length never excludes the only equilibria of a muscle the geometry stretches further.
+    """
+    along = np.max(np.atleast_2d(np.asarray(lmt_m, dtype=float)), axis=0) - np.asarray(tendon_slack_length_m)
+    rigid = np.sqrt(np.maximum(along, 0.0) ** 2 + np.asarray(width_m) ** 2) / np.asarray(optimal_fiber_length_m)
+    return np.maximum(default, rigid + margin)
 
 
 def hill_residual(

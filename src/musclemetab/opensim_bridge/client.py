@@ -104,6 +104,11 @@ def call(target: str, *args, **kwargs):
                 f"the OpenSim worker process ended unexpectedly (exit code {code}) while running "
                 f"{target}; set MUSCLEMETAB_OPENSIM_VERBOSE=1 to see OpenSim's messages"
             ) from None
+        except BaseException:  # Ctrl-C mid-call: its reply would be read by the next call
+            _PROC.kill()
+            _PROC.wait()
+            _PROC = None
+            raise
     if status == "ok":
         return payload
     if isinstance(payload, MusclemetabError):

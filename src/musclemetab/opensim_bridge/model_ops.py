@@ -394,3 +394,32 @@ def model_layout(model_path: str) -> dict:
         coordinates=coordinates,
         root_translations=root_translations,
     )
+
+
+def body_origins(model_path: str, columns: dict, in_degrees: bool, bodies: list) -> dict:
+    """Positions (m, ground frame) of the origins of ``bodies`` along a coordinate trajectory.
+
+    Coordinates are set frame by frame as for :func:`muscle_geometry` (degrees converted,
+    coupled coordinates from their couplers, coordinates absent from ``columns`` at their
+    default). Returns ``{"positions_m": (frames, bodies, 3)}``.
+    """
+    m = _load(model_path)
+    model, state = m.model, m.state
+    body_set = model.getBodySet()
+    names = [body_set.get(i).getName() for i in range(body_set.getSize())]
+    missing = [b for b in bodies if b not in names]
+    if missing:
+        raise ModelError(f"{model_path}: the model has no body {', '.join(missing)}")
+    objs = [body_set.get(b) for b in bodies]
+    n_frames = len(next(iter(columns.values()))) if columns else 0
+    for n, c in m.coords.items():
+        c.setValue(state, c.getDefaultValue(), False)
+    out = np.zeros((n_frames, len(bodies), 3))
+    for k in range(n_frames):
+        for n, v in _frame_values(m, columns, in_degrees, k).items():
+            m.coords[n].setValue(state, v, False)
+        model.realizePosition(state)
+        for j, b in enumerate(objs):
+            p = b.getPositionInGround(state)
+            out[k, j] = (p.get(0), p.get(1), p.get(2))
+    return {"positions_m": out}

@@ -62,6 +62,9 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
                    "force column is found by the documented name rule of musclemetab.analysis.events.read_grf)")
     p.add_argument("--side", default="r", choices=("r", "l", "both"),
                    help="leg to solve (default r); both: two independent problems written to DIR/r and DIR/l")
+    p.add_argument("--workers", type=int, default=1, metavar="N",
+                   help="with --side both: solve the two legs in N processes at once (default 1: one after the "
+                   "other; the solutions are the same)")
     p.add_argument("--window", metavar="T0:T1",
                    help="time window (s) to solve; must lie inside every input (default: the whole IK file)")
     p.add_argument("--cycle", metavar="auto|N",
@@ -143,7 +146,7 @@ def solve_command(args) -> int:
     folder with ``success: false``).
     """
     from .problem import failure_advice
-    from .solve import solve_files
+    from .solve import solve_sides
     from .window import parse_cycle, parse_window
     from .workflows import parse_tendon_stiffness
 
@@ -185,16 +188,14 @@ def solve_command(args) -> int:
 
     excluded = [m for item in (args.exclude_muscles or []) for m in item.replace(",", " ").split()]
     # every leg is solved before anything is written, so bad input on one leg leaves no output
-    solutions = {}
-    for side in sides:
-        solutions[side] = solve_files(
-            args.model, args.ik, args.id, args.workflow,
-            dofs=dofs, side=side, window=window, cycle=cycle, external_loads=args.external_loads, grf=args.grf,
-            mesh_frequency_hz=args.mesh_frequency,
-            passive=args.passive, tendon_stiffness=kt, tendon_stiffness_file=args.parameters,
-            options=options, cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, warm_start=warm,
-            exclude_muscles=excluded, exclude_missing_ok=args.side == "both",
-        )
+    solutions = solve_sides(
+        args.model, args.ik, args.id, args.workflow, sides=sides, workers=args.workers,
+        dofs=dofs, window=window, cycle=cycle, external_loads=args.external_loads, grf=args.grf,
+        mesh_frequency_hz=args.mesh_frequency,
+        passive=args.passive, tendon_stiffness=kt, tendon_stiffness_file=args.parameters,
+        options=options, cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, warm_start=warm,
+        exclude_muscles=excluded, exclude_missing_ok=args.side == "both",
+    )
     unused = [m for m in excluded if not any(m in x.summary.get("excluded_muscles", []) for x in solutions.values())]
     if unused:
         raise UnknownMuscleError(f"--exclude-muscles: {', '.join(unused)} is in neither leg's problem; check the names")
@@ -238,8 +239,9 @@ def _bound_note(solution) -> str:
     at = muscles_at_fibre_length_bound(solution)
     if not at:
         return ""
-    return (f" Fibres at their longest allowed length (1.7 optimal lengths): {', '.join(at)}; if the model's "
-            f"tendon slack length is too short for them, leave them out with --exclude-muscles {' '.join(at)}.")
+    return (f" Fibres at their longest allowed length (1.7 optimal lengths, or their longest rigid-tendon length "
+            f"plus 0.05): {', '.join(at)}; if the model's tendon slack length is too short for them, leave them out "
+            f"with --exclude-muscles {' '.join(at)}.")
 
 
 def write_solution_folder(solution, out) -> None:
@@ -266,7 +268,6 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
     """``musclemetab solve --workflow emg-ten`` or ``--emg`` with an effort workflow: one NLP over
     all trials, then the files."""
     from .emg_ten import EmgTenSettings, informed_settings, solve_emg_ten
-    from .inputs import DEFAULT_DOFS
     from .problem import failure_advice
     from .workflows import parse_tendon_stiffness
 
@@ -274,7 +275,7 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
         raise OptionError("EMG problems need --id: one inverse-dynamics file per trial, in the order of --ik")
     wrong = [o for o, v in (("--external-loads", args.external_loads), ("--grf", args.grf), ("--window", args.window),
                             ("--cycle", args.cycle), ("--exclude-muscles", getattr(args, "exclude_muscles", None)))
-             if v] + (["--side"] if args.side != "r" else [])
+             if v] + (["--side both"] if args.side == "both" else [])
     if wrong:
         raise OptionError(f"{', '.join(wrong)} are for the single-trial solves without EMG; drop them for "
                           f"{'--workflow emg-ten' if args.workflow == 'emg-ten' else '--emg'}")
@@ -298,11 +299,11 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
     emg = _as_list(getattr(args, "emg", None))
     if not emg:
         raise OptionError("--workflow emg-ten needs --emg: one processed EMG file per trial, in the order of --ik")
-    dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else DEFAULT_DOFS
+    dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else None
     options = _solver_options(args)
     result = solve_emg_ten(
         args.model, ik, idf, emg, emg_mapping=args.emg_mapping or "default", labels=args.labels,
-        passive=args.passive, dofs=dofs, options=options, cache_dir=args.cache_dir,
+        passive=args.passive, dofs=dofs, side=args.side, options=options, cache_dir=args.cache_dir,
         check_units=not args.skip_unit_checks, settings=settings,
     )
     result.write(args.out)
@@ -340,14 +341,14 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
     """An effort workflow's EMG-informed solve of one or more trials: one trial is written to
     ``--out`` as a solution folder; several as one folder per trial and ``parameters.json``."""
     from .emg_ten import emg_failure, solve_emg_ten
-    from .inputs import DEFAULT_DOFS
     from .problem import SolverOptions
 
     emg = _as_list(args.emg)
-    dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else DEFAULT_DOFS
+    dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else None
     result = solve_emg_ten(
         args.model, ik, idf, emg, emg_mapping=args.emg_mapping or "default", labels=args.labels,
-        passive=args.passive, dofs=dofs, options=SolverOptions(max_iter=args.max_iter, print_level=args.print_level),
+        passive=args.passive, dofs=dofs, side=args.side,
+        options=SolverOptions(max_iter=args.max_iter, print_level=args.print_level),
         cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, settings=settings,
         workflow=args.workflow, tendon_stiffness=tendon_stiffness,
     )

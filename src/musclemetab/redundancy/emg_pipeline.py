@@ -27,7 +27,6 @@ from .emg_inputs import (
 from .emg_ten import EmgTenSettings, EmgTenTrial, settings_for_muscles, solve_emg_ten_ocp
 from .estimates import EMG_TEN, EmgTenResult, assemble_result
 from .inputs import (
-    DEFAULT_DOFS,
     check_moment_magnitudes,
     check_time_ranges,
     prepare_inputs,
@@ -50,7 +49,8 @@ def solve_emg_ten(
     emg_mapping="default",
     labels: Sequence[str] | None = None,
     passive=None,
-    dofs: Sequence[str] = DEFAULT_DOFS,
+    dofs: Sequence[str] | None = None,
+    side: str = "r",
     settings: EmgTenSettings | None = None,
     options: SolverOptions | None = None,
     cache_dir: str | os.PathLike | None = None,
@@ -76,6 +76,11 @@ def solve_emg_ten(
         Trial names (folder names in :meth:`EmgTenResult.write`); default the IK file stems.
     passive
         Calibrated passive parameters as for EFFORT-CAL (default the published calibration).
+    dofs, side
+        The leg (``"r"``/``"l"``) and its DOFs. ``dofs=None`` (default) discovers them from the
+        model as the single-trial solves do (:func:`musclemetab.layout.discover_dofs`): the
+        side's unlocked coordinates that every trial's ID file holds a moment for (for the
+        example subject the study's five right-leg DOFs).
 
     Input errors (package exceptions naming the file, channel or muscle) are raised before
     OpenSim is started: unequal numbers of IK/ID/EMG files, different models, EMG channels
@@ -102,6 +107,7 @@ def solve_emg_ten(
     settings = settings or EmgTenSettings()
     if passive is not None and not hasattr(passive, "for_muscles"):
         passive = read_passive_parameters(passive)
+    dofs = _trial_dofs(model, id_paths, dofs, side, cache_dir)
 
     # every file is checked before OpenSim is asked anything
     id_data, emg_tables, ik_times = [], [], []
@@ -120,7 +126,7 @@ def solve_emg_ten(
     from ..geometry import compute_geometry
 
     t0 = _time.perf_counter()
-    geometries = [compute_geometry(model, ik, dofs=list(dofs), side="r", cache_dir=cache_dir) for ik in ik_paths]
+    geometries = [compute_geometry(model, ik, dofs=list(dofs), side=side, cache_dir=cache_dir) for ik in ik_paths]
     t_geometry = _time.perf_counter() - t0
     model_parameters = params_request.result()
     if check_units:
@@ -140,6 +146,26 @@ def solve_emg_ten(
     )
     result.record["geometry_time_s"] = t_geometry
     return result
+
+
+def _trial_dofs(model, id_paths, dofs, side: str, cache_dir) -> tuple[str, ...]:
+    """``dofs`` checked against the model, or the side's DOFs that every ID file holds."""
+    from ..io import read_storage
+    from ..layout import check_dofs_in_model, check_side, discover_dofs, read_layout
+    from .solve import _check_id_coordinates
+
+    check_side(side)
+    layout = read_layout(model, cache_dir=cache_dir)
+    common = None
+    for idp in id_paths:
+        columns = list(read_storage(idp).columns)
+        _check_id_coordinates(idp, columns, layout)
+        common = [c for c in columns if common is None or c in common]
+    if dofs:
+        dofs = tuple(dofs)
+        check_dofs_in_model(layout, dofs)
+        return dofs
+    return tuple(discover_dofs(layout, side, common))
 
 
 def solve_emg_ten_arrays(

@@ -31,8 +31,8 @@ import numpy as np
 
 from ..errors import DataMismatchError, InputFileError, MissingColumnError
 
-# SciPy and pandas are imported inside the functions that use them, so that importing the
-# solver stays cheap (the command line starts the OpenSim worker first, then imports them).
+# The filter and the splines are NumPy code (musclemetab._numerics) and the files are read
+# into NumPy arrays (musclemetab.io.read_table): the solve path imports neither SciPy nor pandas.
 
 __all__ = [
     "DEFAULT_DOFS",
@@ -149,22 +149,29 @@ def lowpass_filtfilt(
     backward, so the magnitude response is that of a ``2*order`` filter. MATLAB pads both
     ends with an odd reflection of ``3 (max(len(a), len(b)) - 1)`` samples (18 for order 6)
     and starts from steady-state initial conditions; SciPy's ``filtfilt`` does the same with
-    ``padtype='odd'`` and that ``padlen`` (SciPy's default would be 21).
+    ``padtype='odd'`` and that ``padlen`` (SciPy's default would be 21). Design and
+    filtering are :func:`musclemetab._numerics.butterworth` and :func:`~musclemetab._numerics.filtfilt`.
 
-    Raises :class:`DataMismatchError` if the signal has no more samples than the padding;
-    its message starts with ``what`` (the file or signal, as far as the caller knows it).
+    Raises :class:`DataMismatchError` if the signal has no more samples than the padding or
+    is sampled at no more than twice the cut-off; its message starts with ``what`` (the file
+    or signal, as far as the caller knows it).
     """
-    from scipy.signal import butter, filtfilt
+    from .._numerics import butterworth, filter_padlen, filtfilt
 
     x = np.asarray(x, dtype=float)
-    b, a = butter(order, cutoff_hz / (sample_rate_hz / 2.0))
-    padlen = 3 * (max(len(a), len(b)) - 1)
+    if not 0.0 < cutoff_hz < sample_rate_hz / 2.0:
+        raise DataMismatchError(
+            f"{what} is sampled at {sample_rate_hz:g} Hz; the {cutoff_hz:g} Hz low-pass filter needs a "
+            f"sampling rate above {2 * cutoff_hz:g} Hz: resample the file"
+        )
+    b, a = butterworth(order, cutoff_hz / (sample_rate_hz / 2.0))
+    padlen = filter_padlen(b, a)
     if x.shape[0] <= padlen:
         raise DataMismatchError(
             f"{what} is too short: {x.shape[0]} samples, and the {order}th-order "
             f"{cutoff_hz:g} Hz zero-phase filter needs more than {padlen}; use a longer trial"
         )
-    return filtfilt(b, a, x, axis=0, padtype="odd", padlen=padlen)
+    return filtfilt(b, a, x, padlen=padlen)
 
 
 def mesh_for_window(t0: float, tf: float, mesh_frequency_hz: float = MESH_FREQUENCY_HZ) -> np.ndarray:
@@ -202,14 +209,14 @@ def read_kinematics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT_DOFS,
     angles_rad : (F, D) array
     """
     from ..geometry import check_kinematics
-    from ..io import read_storage
+    from ..io import read_table
 
-    ik = read_storage(path)
+    ik = read_table(path)
     in_degrees = check_kinematics(ik, dofs, check_units)
-    q = ik[list(dofs)].to_numpy(dtype=float)
+    q = np.column_stack([ik[d] for d in dofs])
     if in_degrees:
         q = np.deg2rad(q)
-    return ik.index.to_numpy(dtype=float), q
+    return ik.index.copy(), q
 
 
 def read_inverse_dynamics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT_DOFS):
@@ -220,9 +227,9 @@ def read_inverse_dynamics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT
     time_s : (T,) array
     moments_Nm : (T, D) array
     """
-    from ..io import check_time_stamps, read_storage, require_columns
+    from ..io import check_time_stamps, read_table, require_columns
 
-    table = read_storage(path)
+    table = read_table(path)
     check_time_stamps(table, "inverse dynamics")
     cols = [f"{d}_moment" for d in dofs]
     try:
@@ -234,13 +241,13 @@ def read_inverse_dynamics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT
         ) from None
     if len(table.index) < 2:
         raise InputFileError(f"{path}: the inverse-dynamics file has fewer than 2 rows")
-    moments = table[cols].to_numpy(dtype=float)
+    moments = np.column_stack([table[c] for c in cols])
     bad = ~np.isfinite(moments)
     if bad.any():
         row, col = (int(i) for i in np.argwhere(bad)[0])
         raise DataMismatchError(f"{path}: column '{cols[col]}' is {moments[row, col]:g} at data row {row + 1}; "
                                 "every moment must be finite: fix or remove the row")
-    return table.index.to_numpy(dtype=float), moments
+    return table.index.copy(), moments
 
 
 def select_muscles(
@@ -372,7 +379,7 @@ def prepare_inputs(
     filter_inputs
         The study filters everything (6 Hz, order 6); ``False`` skips filtering.
     """
-    from scipy.interpolate import CubicSpline
+    from .._numerics import NotAKnotSpline
 
     sources = dict(sources or {})
     g_time = np.asarray(geometry.time, dtype=float)
@@ -427,9 +434,9 @@ def prepare_inputs(
     id_frames = np.column_stack([np.interp(ik_time_s, id_time_s, id_f[:, j]) for j in range(D)])
 
     mesh = mesh_for_window(float(ik_time_s[0]), float(ik_time_s[-1]), mesh_frequency_hz)
-    lmt_spline = CubicSpline(ik_time_s, lmt_f, axis=0, bc_type="not-a-knot")
-    r_spline = CubicSpline(ik_time_s, r_f.reshape(F, D * M), axis=0, bc_type="not-a-knot")
-    id_spline = CubicSpline(ik_time_s, id_frames, axis=0, bc_type="not-a-knot")
+    lmt_spline = NotAKnotSpline(ik_time_s, lmt_f)
+    r_spline = NotAKnotSpline(ik_time_s, r_f.reshape(F, D * M))
+    id_spline = NotAKnotSpline(ik_time_s, id_frames)
     return TrialInputs(
         muscles=muscles,
         dofs=dofs,

@@ -6,12 +6,15 @@ Variables (``M`` muscles, ``D`` DOFs, ``N`` mesh intervals, ``h = (tf - t0)/N``)
 variable                  size        bounds
 ========================  ==========  ===================
 activation ``a``          M x (N+1)   0 ... 1
-fibre length ``l~M``      M x (N+1)   0.1 ... 1.7
+fibre length ``l~M``      M x (N+1)   0.1 ... 1.7 [#]_
 projected length ``lp``   M x (N+1)   >= 1e-4 m
 excitation ``e``          M x N       0 ... 1
 reserve ``aT``            D x N       -1 ... 1 (x Topt = 150 N m)
 fibre velocity ``v~M``    M x N       -10 ... 10 lMo/s
 ========================  ==========  ===================
+
+.. [#] or, for a muscle the geometry stretches further, its longest rigid-tendon fibre length
+   plus 0.05 (:func:`.core.fibre_length_upper_bounds`).
 
 Constraints at nodes ``k = 0 ... N-1`` (forward Euler)::
 

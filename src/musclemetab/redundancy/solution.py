@@ -251,7 +251,12 @@ class Solution:
 
     # ------------------------------------------------------------------ files
     def to_dataframe(self):
-        from ..io import storage_from_arrays
+        """The ``solution.sto`` table as a time-indexed pandas DataFrame."""
+        return self._table().to_dataframe()
+
+    def _table(self):
+        """The ``solution.sto`` table (:class:`~musclemetab.io.StorageTable`, no pandas)."""
+        from ..io import StorageTable
 
         cols: dict[str, np.ndarray] = {}
         per_quantity = {
@@ -271,7 +276,8 @@ class Solution:
                 cols[muscle_column(m, q)] = arr[:, i]
         for j, d in enumerate(self.dofs):
             cols[reserve_column(d)] = self.reserve_Nm[:, j]
-        return storage_from_arrays(self.time_s, cols, name="musclemetab muscle redundancy solution")
+        return StorageTable(self.time_s, list(cols), np.column_stack(list(cols.values())),
+                            {"name": "musclemetab muscle redundancy solution", "in_degrees": False})
 
     def write(self, directory: str | os.PathLike) -> Path:
         """Write ``solution.sto`` and ``summary.json`` into ``directory`` (atomically)."""
@@ -289,7 +295,7 @@ class Solution:
         with atomic_directory(directory) as tmp:
             write_storage(
                 tmp / SOLUTION_FILE,
-                self.to_dataframe(),
+                self._table(),
                 name="musclemetab muscle redundancy solution",
                 in_degrees=False,
                 comments=[f"status={summary.get('status', 'unknown')}",

@@ -41,7 +41,7 @@ from .workflows import (
     workflow_parameters,
 )
 
-__all__ = ["solve_trial", "solve_files", "solve_with_parameters", "WARM_START_MU_INIT"]
+__all__ = ["solve_trial", "solve_files", "solve_sides", "solve_with_parameters", "WARM_START_MU_INIT"]
 
 #: Barrier parameter at the start of a warm-started solve (the default start uses IPOPT's 0.1).
 WARM_START_MU_INIT = 1e-6
@@ -131,6 +131,9 @@ def solve_with_parameters(
         options = options.with_(ipopt={"mu_init": WARM_START_MU_INIT, **options.ipopt})
     t_prep = _time.perf_counter() - t_start
     ocp = solve_ocp(inputs, params, guess, options)
+    from .core import FIBRE_LENGTH_BOUNDS, fibre_length_upper_bounds
+
+    lm_upper = fibre_length_upper_bounds(inputs, params)
     summary = {
         **RunRecord.from_result(ocp, sources).to_dict(),
         "preparation_time_s": t_prep,
@@ -140,6 +143,8 @@ def solve_with_parameters(
         "mesh_step_s": inputs.step_s,
         "optimal_reserve_Nm": options.optimal_reserve_Nm,
         "static_optimisation_objective": so.objective,
+        "fibre_length_bounds": {"default": list(FIBRE_LENGTH_BOUNDS), "widened_upper": {
+            m: float(u) for m, u in zip(inputs.muscles, lm_upper) if u > FIBRE_LENGTH_BOUNDS[1]}},
         "initial_guess": "static optimisation (rigid tendons)" if warm_start is None else
         f"warm start from {warm_start.summary.get('workflow', {}).get('name', 'a previous solution')} "
         f"(mu_init {WARM_START_MU_INIT:g})",
@@ -246,7 +251,7 @@ def solve_files(
     # Model parameters and geometry come from the on-disk cache when it holds them: no
     # OpenSim work at all then. Otherwise the OpenSim worker is started as soon as it is
     # known to be needed, so that its start-up overlaps with reading the files and the
-    # imports of pandas, SciPy and CasADi; the model parameters are asked for in a
+    # imports of pandas and CasADi; the model parameters are asked for in a
     # background thread.
     from ..geometry import compute_geometry, geometry_is_cached
     from ..model import model_is_cached
@@ -263,11 +268,11 @@ def solve_files(
 
         loads = read_external_loads(external_loads)
         loads.check_bodies(layout)
-    from ..io import read_storage
+    from ..io import read_table
 
     id_columns = None
     if id_path is not None:
-        id_columns = list(read_storage(id_path).columns)
+        id_columns = list(read_table(id_path).columns)
         _check_id_coordinates(id_path, id_columns, layout)
     if dofs:
         dofs = tuple(dofs)
@@ -313,9 +318,6 @@ def solve_files(
                              np.asarray(geometry.lmt_m)[:, kept], np.asarray(geometry.moment_arms_m)[:, :, kept])
     t_geometry = _time.perf_counter() - t0
     import casadi  # noqa: F401  (imported while the worker answers)
-    import scipy.interpolate  # noqa: F401
-    import scipy.optimize  # noqa: F401
-    import scipy.signal  # noqa: F401
 
     model_parameters = (params_request.result() if params_request is not None
                         else _read_model_parameters(model_path, cache_dir))
@@ -360,6 +362,49 @@ def _check_id_coordinates(id_path, columns, layout) -> None:
         )
 
 
+def _solve_files_recording_warnings(args, kwargs):
+    """:func:`solve_files` in a pool worker: the solution and the warnings it raised."""
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        solution = solve_files(*args, **kwargs)
+    return solution, [(w.category, str(w.message)) for w in caught]
+
+
+def solve_sides(model_path, ik_path, id_path, workflow: str = "effort-gen", *, sides=("r", "l"), workers: int = 1,
+                **kwargs) -> dict:
+    """:func:`solve_files` for each leg of ``sides``: ``{side: Solution}`` in the order of ``sides``.
+
+    The legs are independent problems. With ``workers`` > 1 they are solved in a pool of
+    ``min(workers, len(sides))`` processes (:func:`musclemetab.processes.spawn_pool`), each
+    with its own OpenSim worker; the warnings of a leg are raised again here, in the order of
+    ``sides``, and its errors as if it had been solved in this process. The solutions are the
+    same either way (``tests/test_gait2392.py``; time: ``benchmarks/sides.py``).
+    """
+    import warnings
+
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise OptionError(f"--workers must be a whole number of at least 1, not {workers!r}")
+    sides = tuple(sides)
+    if workers == 1 or len(sides) == 1:
+        return {side: solve_files(model_path, ik_path, id_path, workflow, side=side, **kwargs) for side in sides}
+    from ..processes import spawn_pool
+
+    pool, restore = spawn_pool(min(workers, len(sides)))
+    try:
+        futures = {side: pool.submit(_solve_files_recording_warnings, (model_path, ik_path, id_path, workflow),
+                                     {**kwargs, "side": side}) for side in sides}
+        results = {side: fut.result() for side, fut in futures.items()}
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+        restore()
+    for _, caught in results.values():
+        for category, message in caught:
+            warnings.warn(message, category, stacklevel=2)
+    return {side: solution for side, (solution, _) in results.items()}
+
+
 def _read_model_parameters(model_path, cache_dir=None):
     from ..model import read_muscle_parameters
 
@@ -388,12 +433,10 @@ class _Background:
 
 
 def muscles_at_fibre_length_bound(solution: Solution, tolerance: float = 1e-3) -> list[str]:
-    """Muscles whose normalised fibre length reaches the problem's upper bound somewhere.
-
-    In an infeasible solve these are the usual culprits: a muscle-tendon unit longer than its
-    tendon slack length plus the longest fibre allowed, whose tendon cannot stretch enough.
-    """
+    """Muscles whose normalised fibre length reaches the problem's upper bound somewhere
+    (1.7, or the widened bound recorded in ``summary['fibre_length_bounds']``)."""
     from .core import FIBRE_LENGTH_BOUNDS
 
+    widened = solution.summary.get("fibre_length_bounds", {}).get("widened_upper", {})
     top = np.max(np.asarray(solution.lm_norm, dtype=float), axis=0)
-    return [m for m, v in zip(solution.muscles, top) if v >= FIBRE_LENGTH_BOUNDS[1] - tolerance]
+    return [m for m, v in zip(solution.muscles, top) if v >= widened.get(m, FIBRE_LENGTH_BOUNDS[1]) - tolerance]

@@ -7,7 +7,9 @@
   solved leg, heel strike to heel strike, from the vertical ground force of that leg
   (:func:`musclemetab.external_loads.vertical_force` with an ExternalLoads file; or a
   ground-force file whose column is chosen by :func:`musclemetab.analysis.events.read_grf`),
-  events by :func:`musclemetab.analysis.events.gait_events_from_grf` (20 N threshold). The
+  events by :func:`musclemetab.analysis.events.gait_events_from_grf` (20 N threshold); with
+  no ground forces, from the kinematics and the model
+  (:func:`musclemetab.analysis.events.kinematic_gait_events`). The
   window is the cycle plus the study's padding (:data:`PADDING_S` = 5 frames at 100 Hz at each
   end) so that the free initial and final states do not fall inside the cycle. Where the data
   end before the padding does, the padding is clipped at the edge of the data, a warning is
@@ -84,9 +86,9 @@ def parse_cycle(text) -> str | int:
 
 
 def _extent(path) -> tuple[float, float]:
-    from ..io import read_storage
+    from ..io import read_table
 
-    t = read_storage(path).index
+    t = read_table(path).index
     return float(t[0]), float(t[-1])
 
 
@@ -104,11 +106,11 @@ def resolve_window(
 ) -> TrialWindow:
     """The solve window for one leg (see the module docstring)."""
     from ..external_loads import check_inside
-    from ..io import read_storage
+    from ..io import read_table
 
     if window is not None and cycle is not None:
         raise OptionError("give either --window or --cycle, not both")
-    ik_t = read_storage(ik_path).index.to_numpy(dtype=float)
+    ik_t = read_table(ik_path).index.copy()
     inputs = [(Path(ik_path), "inverse kinematics", (float(ik_t[0]), float(ik_t[-1])))]
     if id_path is not None:
         inputs.append((Path(id_path), "inverse dynamics", _extent(id_path)))
@@ -130,7 +132,7 @@ def resolve_window(
         for path, what, (a, b) in inputs:
             check_inside((t0, t1), a, b, path, what)
     else:
-        gc, where = _cycle(side, cycle, external_loads, grf_path, layout)
+        gc, where = _cycle(side, cycle, external_loads, grf_path, layout, ik_path)
         for path, what, (a, b) in inputs:
             check_inside((gc.start_s, gc.end_s), a, b, path, f"{what} (needed for the gait cycle)")
         t0, t1 = gc.start_s - padding_s, gc.end_s + padding_s
@@ -160,8 +162,8 @@ def resolve_window(
     return TrialWindow(start, end, source, cycle_rec, pads, tuple(notes))
 
 
-def _cycle(side, cycle, external_loads, grf_path, layout):
-    from ..analysis.events import GaitCycle, gait_events_from_grf, read_grf
+def _cycle(side, cycle, external_loads, grf_path, layout, ik_path=None):
+    from ..analysis.events import GaitCycle, gait_events_from_grf, kinematic_gait_events, read_grf
 
     if external_loads is not None:
         from ..external_loads import vertical_force
@@ -172,9 +174,14 @@ def _cycle(side, cycle, external_loads, grf_path, layout):
         s = read_grf(grf_path, side=side)
         t, f = s.index.to_numpy(dtype=float), s.to_numpy(dtype=float)
         where = f"{grf_path} column {s.name}"
+    elif layout is not None and ik_path is not None:
+        ev = kinematic_gait_events(layout.path, ik_path, side, layout)
+        where = f"{ik_path} (kinematics: heel and toe relative to the pelvis)"
     else:
-        raise OptionError("--cycle needs ground forces: give --external-loads GRF.xml (or --grf GRF.mot)")
-    ev = gait_events_from_grf(t, f)
+        raise OptionError("--cycle needs ground forces (--external-loads GRF.xml or --grf GRF.mot) or the model "
+                          "for gait events from kinematics")
+    if external_loads is not None or grf_path is not None:
+        ev = gait_events_from_grf(t, f)
     hs, to = ev.heel_strikes_s, ev.toe_offs_s
     cycles = []
     for a, b in zip(hs[:-1], hs[1:]):
@@ -187,10 +194,12 @@ def _cycle(side, cycle, external_loads, grf_path, layout):
             f"heel strikes at {', '.join(f'{x:.3f}' for x in hs) or 'none'} s, toe-offs at "
             f"{', '.join(f'{x:.3f}' for x in to) or 'none'} s"
         )
+        rule = "ground force" if np.isfinite(ev.threshold_N) else "kinematics"
+        how = f", threshold {ev.threshold_N:g} N" if np.isfinite(ev.threshold_N) else ""
         raise DataMismatchError(
-            f"{where}: the {'right' if side == 'r' else 'left'} leg's ground force gives "
-            f"{len(cycles)} complete gait cycle{'s' if len(cycles) != 1 else ''} ({found}, threshold "
-            f"{ev.threshold_N:g} N), so cycle {cycle} does not exist; give --window T0:T1"
+            f"{where}: the {'right' if side == 'r' else 'left'} leg's {rule} gives "
+            f"{len(cycles)} complete gait cycle{'s' if len(cycles) != 1 else ''} ({found}{how}), so cycle "
+            f"{cycle} does not exist; give --window T0:T1"
         )
     return cycles[n - 1], where
 

@@ -47,13 +47,15 @@ import signal
 import socket
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from .. import __version__
 from ..errors import OptionError
 from ..io.atomic import atomic_path, atomic_write_text, check_output_folder
+from ..processes import THREAD_VARIABLES, spawn_pool  # noqa: F401  (THREAD_VARIABLES: public here before)
+from ..processes import pin_threads as _pin_threads  # noqa: F401
 from .spec import Study
 from .units import (
     INTERRUPTED,
@@ -205,16 +207,12 @@ def check_scheduler_address(address: str) -> str:
     return address
 
 
-def _ignore_sigint() -> None:
-    """Pool worker start-up: Ctrl-C is handled by the unit running in it, not by the idle worker."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
 class _Executor:
     """``submit``/``completed`` for the chosen executor, with ``interrupt`` and ``close``."""
 
     def __init__(self, workers: int, scheduler: str | None):
         self.submit = self.completed = None
+        self.capacity = None  # units run at once (None: no limit)
         self._pool = self._client = None
         self._restore_env = None
         if scheduler:
@@ -234,11 +232,8 @@ class _Executor:
             self.submit = lambda fn, *args: client.submit(fn, *args, pure=False)
             self.completed = dask_completed
         elif workers > 1:
-            import multiprocessing
-
-            self._restore_env = _pin_threads(max(1, (os.cpu_count() or 1) // workers))
-            self._pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                                             initializer=_ignore_sigint)
+            self._pool, self._restore_env = spawn_pool(workers)
+            self.capacity = workers
             self.submit, self.completed = self._pool.submit, as_completed
 
     def interrupt(self, futures) -> None:
@@ -264,24 +259,6 @@ class _Executor:
                 self._restore_env()
 
 
-#: environment variables that size the thread pools of BLAS/LAPACK and OpenMP libraries
-THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
-                    "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")
-
-
-def _pin_threads(threads: int):
-    """Set the thread variables the caller has not set to ``threads`` (for the worker
-    processes, which read them when their libraries load); returns a function that
-    restores the environment."""
-    added = [v for v in THREAD_VARIABLES if v not in os.environ]
-    for v in added:
-        os.environ[v] = str(threads)
-
-    def restore():
-        for v in added:
-            os.environ.pop(v, None)
-
-    return restore
 
 
 def unit_batches(study: Study) -> list[list[Unit]]:
@@ -309,23 +286,32 @@ def _run_units(study: Study, jobs: list[tuple[Unit, str, str | None]], executor:
         except KeyboardInterrupt:  # between two units
             return records, True
         return records, False
-    futures = {executor.submit(execute_unit, study, unit, key, dep): unit for unit, key, dep in jobs}
+    # no more units submitted than the executor runs at once (a process pool queues what it is
+    # given and would start it even after Ctrl-C); a Dask cluster takes them all
+    queue = list(jobs)
+    limit = executor.capacity or len(queue)
+    futures: dict = {}
+    pending: list = []
     interrupted = False
-    pending = list(futures)
-    while pending:
+    while pending or (queue and not interrupted):
         try:
-            for fut in executor.completed(pending):
-                pending.remove(fut)
-                unit = futures[fut]
-                try:
-                    rec = fut.result()
-                except BaseException as exc:  # the worker process died, the cluster lost the task, or cancelled
-                    if interrupted:
-                        continue
-                    rec = {"status": "failed", "error": f"{type(exc).__name__}: {exc} (worker lost)"}
-                records[unit] = rec
-                interrupted = interrupted or rec.get("status") == INTERRUPTED
-                progress.update(unit.label, rec)
+            while queue and not interrupted and len(pending) < limit:
+                unit, key, dep = queue.pop(0)
+                fut = executor.submit(execute_unit, study, unit, key, dep)
+                futures[fut] = unit
+                pending.append(fut)
+            fut = next(iter(executor.completed(pending)))
+            pending.remove(fut)
+            unit = futures[fut]
+            try:
+                rec = fut.result()
+            except BaseException as exc:  # the worker process died, the cluster lost the task, or cancelled
+                if interrupted:
+                    continue
+                rec = {"status": "failed", "error": f"{type(exc).__name__}: {exc} (worker lost)"}
+            records[unit] = rec
+            interrupted = interrupted or rec.get("status") == INTERRUPTED
+            progress.update(unit.label, rec)
         except KeyboardInterrupt:
             if interrupted:  # a second Ctrl-C: stop waiting
                 break

@@ -352,7 +352,7 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
         if missing:
             raise OptionError(f"{here}: the emg-ten workflow needs an 'emg' file for every trial; missing for "
                               f"{', '.join(missing)}")
-    emg_mode, emg_tolerance = _emg_mode(data, here, trials, side, dofs)
+    emg_mode, emg_tolerance = _emg_mode(data, here, trials)
     muscle_properties = _path(data.get("muscle_properties"), base, here, "muscle_properties", required=False)
     if muscle_properties is not None:
         from ..properties import read_muscle_properties
@@ -371,7 +371,7 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
     return subject
 
 
-def _emg_mode(data, here: str, trials, side, dofs) -> tuple[str | None, float]:
+def _emg_mode(data, here: str, trials) -> tuple[str | None, float]:
     """The subject's ``emg_mode`` and ``emg_tolerance``, checked against its trials."""
     mode = data.get("emg_mode")
     tol = _number(data.get("emg_tolerance"), here, "emg_tolerance")
@@ -387,10 +387,9 @@ def _emg_mode(data, here: str, trials, side, dofs) -> tuple[str | None, float]:
     if missing:
         raise OptionError(f"{here}: 'emg_mode' needs an 'emg' file for every trial; missing for {', '.join(missing)}")
     bad = [t.name for t in trials if t.id is None or t.cycle is not None]
-    if bad or side != "r" or dofs is not None:
-        raise OptionError(f"{here}: an EMG-informed solve covers the right leg over the whole IK window with the "
-                          f"trial's 'id' file; drop 'side', 'dofs' and the trials' 'cycle' (or 'emg_mode')"
-                          + (f" (trial(s) {', '.join(bad)})" if bad else ""))
+    if bad:
+        raise OptionError(f"{here}: an EMG-informed solve covers the whole IK window with the trial's 'id' file; "
+                          f"trial(s) {', '.join(bad)} have no 'id' or set 'cycle' (drop 'cycle', or 'emg_mode')")
     return mode, 0.01 if tol is None else tol
 
 

@@ -379,6 +379,8 @@ def _run_estimation(study: Study, unit: Unit, tmp: Path) -> dict:
         emg_mapping=subject.emg_mapping,
         labels=[t.name for t in subject.trials],
         passive=subject.passive,
+        side=subject.side,
+        dofs=subject.dofs,
         options=_solver_options(study),
     )
     if not result.success:  # nothing of a failed estimate is written
@@ -396,7 +398,8 @@ def _informed_solve(study: Study, subject: Subject, trial: Trial, workflow: str,
     if kwargs.get("tendon_stiffness_file") is not None:
         kt = read_tendon_stiffness_json(kwargs["tendon_stiffness_file"])
     result = solve_emg_ten(subject.model, [trial.ik], [trial.id], [trial.emg], emg_mapping=subject.emg_mapping,
-                           labels=[trial.name], passive=kwargs.get("passive"), options=_solver_options(study),
+                           labels=[trial.name], passive=kwargs.get("passive"), side=subject.side, dofs=subject.dofs,
+                           options=_solver_options(study),
                            settings=informed_settings(workflow, subject.emg_mode, subject.emg_tolerance),
                            workflow=workflow, tendon_stiffness=kt)
     return result.solutions[trial.name]
@@ -469,8 +472,8 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
             sol = _informed_solve(study, subject, trial, unit.workflow, kwargs)
         else:
             sol = solve_files(subject.model, trial.ik, trial.id, unit.workflow, side=subject.side, dofs=subject.dofs,
-                              external_loads=trial.external_loads, cycle=trial.cycle, options=_solver_options(study),
-                              **kwargs)
+                              external_loads=trial.external_loads, grf=trial.grf if trial.cycle is not None else None,
+                              cycle=trial.cycle, options=_solver_options(study), **kwargs)
         from ..redundancy.cli import write_solution_folder
 
         write_solution_folder(sol, tmp)

@@ -1,0 +1,58 @@
+"""Benchmark: ``solve --side both`` on the gait2392 subject with 1 and 2 worker processes.
+
+    python benchmarks/sides.py [--repeats 1]
+
+EFFORT-GEN of each leg's first gait cycle (found from the ground forces, inverse dynamics
+computed by OpenSim), both legs, run as a new process with ``--workers 1`` (one leg after the
+other) and ``--workers 2`` (the legs at once), after one run that fills the geometry,
+layout and inverse-dynamics caches. Prints the wall times, their ratio measured in the same
+run, and checks that both runs wrote the same solutions.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+from pathlib import Path
+
+from study import _musclemetab  # the timed command-line run of benchmarks/study.py
+
+
+def _solve(data: Path, out: Path, workers: int, env) -> float:
+    args = ["solve", "--model", str(data / "subject01_simbody.osim"), "--ik", str(data / "subject01_walk1_ik.mot"),
+            "--external-loads", str(data / "subject01_walk1_grf.xml"), "--cycle", "auto", "--side", "both",
+            "--workers", str(workers), "--out", str(out)]
+    return _musclemetab(*args, env=env)
+
+
+def main(argv=None) -> int:
+    import statistics
+
+    import numpy as np
+
+    from musclemetab.datasets import gait2392_subject01
+    from musclemetab.redundancy import Solution
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=1, help="repeats of each measurement (median reported)")
+    args = ap.parse_args(argv)
+    data = gait2392_subject01().model.parent
+    tmp = Path(tempfile.mkdtemp(prefix="musclemetab-bench-sides-"))
+    env = dict(os.environ, MUSCLEMETAB_CACHE=str(tmp / "cache"))
+    print(f"machine: {os.cpu_count()} CPUs; output under {tmp}")
+    _solve(data, tmp / "warm", 2, env)  # fill the caches
+    times = {w: statistics.median(_solve(data, tmp / f"w{w}_{i}", w, env) for i in range(args.repeats))
+             for w in (1, 2)}
+    print(f"{'workers':>8} {'wall s':>8}")
+    for w, s in times.items():
+        print(f"{w:>8} {s:>8.1f}")
+    print(f"speed-up of 2 workers over 1: {times[1] / times[2]:.2f}x")
+    same = all(np.array_equal(getattr(Solution.load(tmp / "w1_0" / side), k), getattr(Solution.load(tmp / "w2_0" / side), k))
+               for side in "rl" for k in ("activation", "lm_norm", "reserve_Nm"))
+    print(f"solutions of 1 and 2 workers identical: {same}")
+    return 0 if same else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
