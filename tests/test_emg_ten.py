@@ -142,6 +142,23 @@ def test_tendon_stiffness_matches_the_study(parameters, solutions):
 
 @pytest.mark.opensim
 @pytest.mark.slow
+def test_estimates_equal_those_before_the_problem_core(parameters):
+    """EMG-TEN as an instance of the problem core gives the objective, iteration count, tendon
+    stiffness and EMG scale factors of the version with its own builder
+    (``tests/data/pre_core_results.json``)."""
+    from pathlib import Path
+
+    ref = json.loads((Path(__file__).resolve().parent / "data" / "pre_core_results.json").read_text())["emg-ten"]
+    assert parameters["solve"]["objective"] == pytest.approx(ref["objective"], rel=1e-6)
+    assert parameters["solve"]["iterations"] == ref["iterations"]
+    for key in ("tendon_stiffness", "emg_scale"):
+        assert set(parameters[key]) == set(ref[key])
+        for m, v in ref[key].items():
+            assert parameters[key][m] == pytest.approx(v, rel=1e-6), (key, m)
+
+
+@pytest.mark.opensim
+@pytest.mark.slow
 def test_personalised_model_holds_the_tendon_stiffness(example, emg_ten, parameters):
     """The written .osim (Millard muscles) holds each estimated kT as the tendon strain at F0, the
     strain where the tendon curve reaches fT = 1 (muscle_model.md §7), read back by OpenSim."""

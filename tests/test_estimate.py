@@ -172,3 +172,61 @@ def test_estimate_command_bad_input(example, tmp_path):
     code, text = _cli(base + ["--ultrasound", str(us), "--estimate", "tendon_stiffness=soleus_r"])
     assert code == 1 and "us_m.mot" in text and "mm" in text
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.opensim
+@pytest.mark.slow
+def test_estimate_command_with_emg_recovers_the_parameters(example, generated, recovery, tmp_path):
+    """``musclemetab estimate --ultrasound ... --emg ...``: the recovery problem above from files
+    (fibre lengths in mm, the generating excitations as EMG channels TA and BF, scale fixed at 1):
+    the same factors as the Python path, hence the known changes, and the EMG written beside them."""
+    import json
+
+    import pandas as pd
+
+    from musclemetab.io import write_storage
+
+    made, measured, inputs, *_ = generated
+    _, est, _, _ = recovery
+    N = inputs.n_intervals
+    us = pd.DataFrame({m: 1000.0 * lm for m, (_, lm) in measured.items()}, index=made.time_s)
+    write_storage(tmp_path / "us.mot", us, in_degrees=False)
+    exc = made.excitation[:N, [made.muscles.index(m) for m in LMO]]
+    exc = np.vstack([exc, exc[-1]])  # the file covers the window; the last node has no control
+    emg = pd.DataFrame({"TA": exc[:, 0], "BF": exc[:, 1]}, index=made.time_s)
+    write_storage(tmp_path / "emg.mot", emg, in_degrees=False)
+    (tmp_path / "map.json").write_text(json.dumps({"tibant_r": ["TA"], "bflh_r": ["BF"]}))
+    out = tmp_path / "est"
+    code, text = _cli(["estimate", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
+                       str(example.id["normal"]), "--ultrasound", str(tmp_path / "us.mot"), "--emg",
+                       str(tmp_path / "emg.mot"), "--emg-mapping", str(tmp_path / "map.json"), "--emg-mode",
+                       "tracking", "--bounds", "emg_scale=1:1", "--estimate", "optimal_fiber_length=tibant_r,bflh_r",
+                       "tendon_stiffness=soleus_r,gasmed_r,gaslat_r", "--couple", "soleus_r,gasmed_r,gaslat_r",
+                       "--labels", "normal", "--out", str(out)])
+    assert code == 0, text
+    doc = json.loads((out / "parameters.json").read_text())
+    for kind, by in est.factors.items():
+        for m, v in by.items():
+            assert doc["factors"][kind][m] == pytest.approx(v, rel=1e-5), (kind, m)
+    for m in LMO:
+        assert doc["factors"]["optimal_fiber_length"][m] == pytest.approx(1.10, rel=0.02), m
+    assert doc["factors"]["tendon_stiffness"]["soleus_r"] == pytest.approx(0.5, rel=0.01)
+    assert doc["emg"]["mode"] == "tracking" and doc["emg"]["tolerance"] is None and doc["emg"]["weight"] == 10.0
+    assert doc["emg"]["scale"] == {"bflh_r": 1.0, "tibant_r": 1.0}
+    assert doc["emg"]["mapping"] == {"tibant_r": ["TA"], "bflh_r": ["BF"]}
+    assert (out / "normal" / "summary.json").is_file() and list(out.glob("*_personalised.osim"))
+
+
+def test_estimate_command_emg_input_errors(example, tmp_path):
+    base = ["estimate", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
+            str(example.id["normal"]), "--estimate", "tendon_stiffness=soleus_r", "--out", str(tmp_path / "o")]
+    code, text = _cli(base)
+    assert code == 1 and "--ultrasound" in text and "--emg" in text
+    code, text = _cli(base + ["--emg", str(example.emg["normal"]), str(example.emg["normal"])])
+    assert code == 1 and "--emg" in text and "one of each per trial" in text
+    us = _ultrasound(example, tmp_path / "us.mot")
+    code, text = _cli(base + ["--ultrasound", str(us), "--emg-mode", "driven"])
+    assert code == 1 and "--emg-mode" in text and "--emg files" in text
+    code, text = _cli(base + ["--emg", str(example.emg["normal"]), "--bounds", "emg=1:1"])
+    assert code == 1 and "'emg'" in text and "emg_scale" in text
+    assert not (tmp_path / "o").exists()

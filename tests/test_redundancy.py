@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -29,6 +30,7 @@ from mrs_reference import (
     params_of,
 )
 
+TEST_DATA = Path(__file__).resolve().parent / "data"
 TRIALS = ("slow", "normal", "fast")
 WORKFLOWS = ("effort-gen", "effort-cal", "effort-ten")
 # Final objectives of the study's EFFORT-GEN runs (IPOPT logs), muscle_redundancy.md §5.5.
@@ -171,6 +173,19 @@ def test_effort_gen_objective_matches_the_study(solved, trial):
     assert sol.objective == pytest.approx(REFERENCE_OBJECTIVE[trial], rel=0.03)
     # no rigid-tendon fibre of the example reaches 1.65 optimal lengths: every bound is the study's 1.7
     assert sol.summary["fibre_length_bounds"]["widened_upper"] == {}
+
+
+@pytest.mark.opensim
+@pytest.mark.slow
+@pytest.mark.parametrize("workflow", WORKFLOWS)
+@pytest.mark.parametrize("trial", TRIALS)
+def test_results_equal_those_before_the_problem_core(solved, trial, workflow):
+    """The named workflows as instances of the problem core give the objectives and IPOPT
+    iteration counts of the version with separate builders (``tests/data/pre_core_results.json``)."""
+    ref = json.loads((TEST_DATA / "pre_core_results.json").read_text())["effort"][f"{trial}/{workflow}"]
+    sol, _ = solved(trial, workflow)
+    assert sol.objective == pytest.approx(ref["objective"], rel=1e-6)
+    assert sol.summary["iterations"] == ref["iterations"]
 
 
 @pytest.mark.opensim

@@ -32,7 +32,7 @@ import math
 
 from ..errors import OptionError, SolverError, UnknownMuscleError
 
-__all__ = ["add_solve_parser", "solve_command"]
+__all__ = ["add_solve_parser", "add_emg_goal_arguments", "solve_command"]
 
 
 def add_solve_parser(subparsers) -> argparse.ArgumentParser:
@@ -85,15 +85,12 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--emg", nargs="+", metavar="EMG.mot",
                    help="processed, normalised EMG envelopes, one file per trial, same order as --ik: needed by "
                    "emg-ten; with an effort workflow an EMG-informed solve of the trials (see --emg-mode)")
-    p.add_argument("--emg-mode", choices=("constrained", "driven", "tracking"),
-                   help="with --emg: 'constrained' (each tracked excitation within --emg-tolerance of its scaled "
-                   "EMG; the default), 'driven' (equal to its scaled EMG) or 'tracking' (a cost on the "
-                   "difference, weight --emg-weight); the EMG scale factors are estimated")
-    p.add_argument("--emg-tolerance", type=float, default=0.01,
-                   help="with --emg-mode constrained: half-width of the EMG band (default 0.01)")
-    p.add_argument("--emg-weight", type=float,
-                   help="weight of the EMG tracking cost (default: 10 for emg-ten and tracking, 0 for an "
-                   "effort workflow's constrained or driven solve)")
+    add_emg_goal_arguments(
+        p, "with --emg: 'constrained' (each tracked excitation within --emg-tolerance of its scaled EMG; the "
+        "default), 'driven' (equal to its scaled EMG) or 'tracking' (a cost on the difference, weight "
+        "--emg-weight); the EMG scale factors are estimated",
+        "weight of the EMG tracking cost (default: 10 for emg-ten and tracking, 0 for an effort workflow's "
+        "constrained or driven solve)")
     p.add_argument("--emg-mapping", metavar="default|authors|MAP.json",
                    help="emg-ten: EMG channels of the muscles: 'default' (vastus intermedius <- VI_a, the mean of "
                    "VL and VM), 'authors' (vastus intermedius <- ES, as in the published example results) or a "
@@ -152,6 +149,14 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.set_defaults(func=solve_command)
     return p
+
+
+def add_emg_goal_arguments(p, mode_help: str, weight_help: str) -> None:
+    """``--emg-mode``, ``--emg-tolerance`` and ``--emg-weight`` (``solve`` and ``estimate``)."""
+    p.add_argument("--emg-mode", choices=("constrained", "driven", "tracking"), help=mode_help)
+    p.add_argument("--emg-tolerance", type=float, default=0.01,
+                   help="with --emg-mode constrained: half-width of the EMG band (default 0.01)")
+    p.add_argument("--emg-weight", type=float, help=weight_help)
 
 
 def solve_command(args) -> int:
@@ -332,9 +337,9 @@ def _as_list(value) -> list:
 def _emg_ten_command(args, ik: list, idf: list) -> int:
     """``musclemetab solve --workflow emg-ten`` or ``--emg`` with an effort workflow: one NLP over
     all trials, then the files."""
-    from .emg_ten import EmgTenSettings, solve_emg_ten
+    from .emg_ten import EmgTenSettings, informed_settings, solve_emg_ten
     from .problem import failure_advice
-    from .workflows import get_workflow, parse_tendon_stiffness
+    from .workflows import parse_tendon_stiffness
 
     if not idf:
         raise OptionError("EMG problems need --id: one inverse-dynamics file per trial, in the order of --ik")
@@ -346,14 +351,10 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
                           f"{'--workflow emg-ten' if args.workflow == 'emg-ten' else '--emg'}")
     mode = args.emg_mode or "constrained"
     if args.workflow != "emg-ten":
-        wf = get_workflow(args.workflow)
         if args.parameters or args.warm_start:
             raise OptionError("--parameters and --warm-start cannot be used with an EMG-informed solve; give "
                               "--tendon-stiffness MUSCLE=KT,... instead of --parameters, and drop --warm-start")
-        w_emg = args.emg_weight if args.emg_weight is not None else (10.0 if mode == "tracking" else 0.0)
-        settings = EmgTenSettings(w_emg=w_emg, w_activation=wf.w_activation, w_reserve=wf.w_reserve,
-                                  w_velocity=wf.w_velocity, emg_tolerance=args.emg_tolerance, tendon_groups=(),
-                                  emg_mode=mode)
+        settings = informed_settings(args.workflow, mode, args.emg_tolerance, args.emg_weight)
         return _informed_command(args, ik, idf, settings, parse_tendon_stiffness(args.tendon_stiffness)
                                  if args.tendon_stiffness else None)
     settings = EmgTenSettings(emg_tolerance=args.emg_tolerance, emg_mode=mode,
@@ -409,7 +410,7 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
 def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> int:
     """An effort workflow's EMG-informed solve of one or more trials: one trial is written to
     ``--out`` as a solution folder; several as one folder per trial and ``parameters.json``."""
-    from .emg_ten import solve_emg_ten
+    from .emg_ten import emg_failure, solve_emg_ten
     from .problem import SolverOptions
 
     emg = _as_list(args.emg)
@@ -427,7 +428,7 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
         result.write(args.out)
     r = result.run_record
     if not r.success:
-        raise r.failure(f"the EMG-informed {args.workflow} solve (written to {args.out})")
+        raise emg_failure(r, settings.emg_mode, f"the EMG-informed {args.workflow} solve (written to {args.out})")
     scales = ", ".join(f"{m} {v:.3g}" for m, v in result.emg_scale.items())
     print(f"solve: {args.workflow} EMG-{settings.emg_mode} {len(result.solutions)} trial(s): {r.status} in "
           f"{r.iterations} iterations, objective {r.objective:.6e}; EMG scale {scales} -> {args.out}")

@@ -8,10 +8,10 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..errors import DataMismatchError, InputFileError, OptionError
+from ..errors import DataMismatchError, InputFileError, OptionError, UnknownMuscleError
 from .estimates import PARAMETERS_FILE
 
-__all__ = ["resolve_emg_mapping", "mapping_for_muscles"]
+__all__ = ["resolve_emg_mapping", "mapping_for_muscles", "emg_at_nodes"]
 
 
 def resolve_emg_mapping(mapping: str | Mapping[str, Sequence[str] | str] | os.PathLike = "default") -> dict:
@@ -50,17 +50,23 @@ def resolve_emg_mapping(mapping: str | Mapping[str, Sequence[str] | str] | os.Pa
 
 def mapping_for_muscles(emg_mapping, mapping: dict, muscles: Sequence[str]) -> dict:
     """The named mappings (``default``, ``authors``) placed on other models' muscle names
-    through the anatomical muscle table when the study's names are not in the problem."""
+    through the anatomical muscle table when the study's names are not in the problem. Muscles
+    of a mapping that the problem lacks are refused (:class:`UnknownMuscleError`)."""
     from ..properties import default_emg_mapping, resolve_muscles
 
     named = isinstance(emg_mapping, str) and emg_mapping.strip().lower() in ("default", "authors")
-    if not named or set(mapping) <= set(muscles):
-        return mapping
-    out = default_emg_mapping(muscles)
-    if emg_mapping.strip().lower() == "authors":
-        out.update({r.name: ["ES"] for r in resolve_muscles(muscles, warn=False)
-                    if r.anatomical == ("vastus_intermedius",)})
-    return out
+    if named and not set(mapping) <= set(muscles):
+        mapping = default_emg_mapping(muscles)
+        if emg_mapping.strip().lower() == "authors":
+            mapping.update({r.name: ["ES"] for r in resolve_muscles(muscles, warn=False)
+                            if r.anatomical == ("vastus_intermedius",)})
+    unknown = [m for m in mapping if m not in muscles]
+    if unknown:
+        raise UnknownMuscleError(
+            f"EMG mapping: muscle{'s' if len(unknown) > 1 else ''} {', '.join(unknown)} not among the muscles of "
+            f"the problem ({', '.join(list(muscles)[:6])} ...); map channels to model muscle names such as soleus_r"
+        )
+    return mapping
 
 
 def _as_list(x, what: str) -> list:
@@ -163,3 +169,20 @@ def _require_emg_window(table, ik_time, emg_label: str, ik_label: str) -> None:
             f"{emg_label}: the EMG covers {have} but the trial window (the IK file {ik_label}) is "
             f"{t0:g}-{tf:g} s; the EMG must cover the whole window: use the EMG of the same trial, or crop the IK"
         )
+
+
+def emg_at_nodes(emg, mapping: dict, inputs, muscles: Sequence[str], what: str, ik_label: str,
+                 range_tolerance: float = 0.0) -> np.ndarray:
+    """EMG of ``muscles`` at the control nodes ``0 ... N-1`` of a trial, ``(N, len(muscles))``.
+
+    ``emg`` is a file or a time-indexed table (mapped with ``mapping`` when it is not already);
+    the EMG must cover the trial's window and lie within ``[0, 1]`` (by ``range_tolerance``)
+    there. It is linearly interpolated at the node times. Errors name ``what``.
+    """
+    table = _emg_table(emg, mapping, what)
+    t0, tf = inputs.window_s
+    _require_emg_window(table, inputs.frame_time_s, what, ik_label)
+    _check_emg_range(table, t0, tf, range_tolerance, what)
+    N = inputs.n_intervals
+    te = np.asarray(table.index, dtype=float)
+    return np.column_stack([np.interp(inputs.mesh_time_s[:N], te, table[m].to_numpy(dtype=float)) for m in muscles])

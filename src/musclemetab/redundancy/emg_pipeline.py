@@ -20,6 +20,7 @@ from .emg_inputs import (
     _emg_table,
     _labels,
     _require_emg_window,
+    emg_at_nodes,
     mapping_for_muscles,
     resolve_emg_mapping,
 )
@@ -264,12 +265,6 @@ def prepare_emg_ten_trials(
     muscles = tuple(ref.muscles)
     settings = settings_for_muscles(settings, muscles)
     mapping = mapping_for_muscles(emg_mapping, mapping, muscles)
-    unknown = [m for m in mapping if m not in muscles]
-    if unknown:
-        raise UnknownMuscleError(
-            f"EMG mapping: muscle{'s' if len(unknown) > 1 else ''} {', '.join(unknown)} not among the muscles of "
-            f"the problem ({', '.join(muscles[:6])} ...); map channels to model muscle names such as soleus_r"
-        )
     missing_kt = [m for m in settings.tendon_muscles if m not in muscles]
     if missing_kt:
         raise UnknownMuscleError(
@@ -292,15 +287,8 @@ def prepare_emg_ten_trials(
             check_moment_magnitudes(inputs.moments_frames_Nm, inputs.dofs, inputs.moment_arms_frames_m,
                                     params.max_isometric_force_N, src.get("id", f"inverse dynamics of {lab}"),
                                     options.optimal_reserve_Nm)
-        what = str(src.get("emg", f"EMG of trial {lab}"))
-        table = _emg_table(emg, mapping, what)
-        t0, tf = inputs.window_s
-        _require_emg_window(table, inputs.frame_time_s, what, str(src.get("ik", f"trial {lab}")))
-        _check_emg_range(table, t0, tf, settings.emg_range_tolerance, what)
-        N = inputs.n_intervals
-        te = np.asarray(table.index, dtype=float)
-        emg_nodes = np.column_stack([np.interp(inputs.mesh_time_s[:N], te, table[m].to_numpy(dtype=float))
-                                     for m in emg_muscles])
+        emg_nodes = emg_at_nodes(emg, mapping, inputs, emg_muscles, str(src.get("emg", f"EMG of trial {lab}")),
+                                 str(src.get("ik", f"trial {lab}")), settings.emg_range_tolerance)
         so = static_optimisation(inputs, params)
         guess = initial_guess(inputs, params, so)
         guess = replace(guess, reserve=guess.reserve / options.optimal_reserve_Nm)

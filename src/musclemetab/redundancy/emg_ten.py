@@ -71,6 +71,8 @@ __all__ = [
     "EmgTenTrial",
     "EmgTenResult",
     "PARAMETERS_FILE",
+    "informed_settings",
+    "emg_failure",
     "settings_for_muscles",
     "mapping_for_muscles",
     "resolve_emg_mapping",
@@ -179,6 +181,37 @@ class EmgTenSettings:
             "coupling": self.coupling,
             "emg_mode": self.emg_mode,
         }
+
+
+def informed_settings(workflow: str, mode: str = "constrained", tolerance: float = 0.01,
+                      w_emg: float | None = None) -> EmgTenSettings:
+    """Settings of an effort workflow's EMG-informed solve: the workflow's effort weights, the
+    EMG goals of ``mode`` (tracking weight ``w_emg``, default 10 for ``tracking`` and 0 for
+    ``constrained``/``driven``), no tendon stiffness estimated."""
+    from .workflows import get_workflow
+
+    wf = get_workflow(workflow)
+    w_emg = w_emg if w_emg is not None else (10.0 if mode == "tracking" else 0.0)
+    return EmgTenSettings(w_emg=w_emg, w_activation=wf.w_activation, w_reserve=wf.w_reserve,
+                          w_velocity=wf.w_velocity, emg_tolerance=tolerance, tendon_groups=(), emg_mode=mode)
+
+
+def emg_failure(record, mode: str, what: str):
+    """The :class:`~musclemetab.errors.SolverError` of an EMG-informed solve that did not
+    succeed (``record``: its :class:`~.record.RunRecord`). An infeasible EMG-driven solve says
+    why: with every tracked excitation fixed, the forward-Euler fibre dynamics of weakly excited
+    muscles amplify errors by orders of magnitude per mesh step (``docs/problem.md``)."""
+    from ..errors import SolverError
+    from .problem import INFEASIBLE_STATUSES
+
+    if mode != "driven" or record.status not in INFEASIBLE_STATUSES:
+        return record.failure(what)
+    return SolverError(
+        f"{what} did not converge: IPOPT status {record.status} after {record.iterations} iterations. The "
+        "EMG-driven problem is infeasible in practice: with the tracked excitations fixed to the scaled EMG, the "
+        "fibre lengths of weakly excited muscles follow an unstable recurrence on the mesh, so no iterate meets "
+        "the constraints to the solver's tolerance; more iterations will not help. Use --emg-mode constrained "
+        "with a small --emg-tolerance (0.001 converges on the example's normal trial), see docs/problem.md")
 
 
 def settings_for_muscles(settings: EmgTenSettings | None, muscles: Sequence[str]) -> EmgTenSettings:

@@ -1,4 +1,6 @@
-"""``musclemetab estimate``: muscle-tendon parameters from measured fibre lengths over trials.
+"""``musclemetab estimate``: muscle-tendon parameters from measured fibre lengths and/or EMG
+over trials (EMG: the goals of ``--emg-mode``, the EMG scale factors estimated with the others,
+coupled as in EMG-TEN).
 
 Writes ``DIR/<trial>/`` (the solutions with the estimates), ``DIR/parameters.json``,
 ``DIR/<model>_personalised.osim`` and, with ``--validate``, ``DIR/validation/<trial>/``: the
@@ -15,10 +17,14 @@ from ..errors import OptionError
 __all__ = ["add_estimate_parser", "estimate_command", "parse_assignments"]
 
 WEIGHT_NAMES = {"activation": "w_activation", "reserve": "w_reserve", "velocity": "w_velocity",
-                "fibre_length": "w_fibre_length"}
+                "fibre_length": "w_fibre_length", "emg": "w_emg"}
+#: default bounds of the EMG scale factors (those of EMG-TEN)
+EMG_SCALE_BOUNDS = (0.05, 2.5)
 
 
 def add_estimate_parser(subparsers) -> argparse.ArgumentParser:
+    from .cli import add_emg_goal_arguments
+
     p = subparsers.add_parser(
         "estimate", help="estimate tendon stiffness, optimal fibre and tendon slack lengths from fibre lengths",
         description="Estimate scale factors of the tendon stiffness, optimal fibre length and tendon slack length "
@@ -27,16 +33,27 @@ def add_estimate_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--model", required=True, metavar="M.osim")
     p.add_argument("--ik", required=True, nargs="+", metavar="IK.mot", help="one per trial")
     p.add_argument("--id", required=True, nargs="+", metavar="ID.sto", help="one per trial, same order")
-    p.add_argument("--ultrasound", required=True, nargs="+", metavar="US.mot",
+    p.add_argument("--ultrasound", nargs="+", metavar="US.mot",
                    help="measured fibre lengths, one file per trial: time in s, one column per muscle in mm")
+    p.add_argument("--emg", nargs="+", metavar="EMG.mot",
+                   help="processed, normalised EMG envelopes, one file per trial, same order as --ik (with or "
+                   "without --ultrasound; at least one of the two)")
+    p.add_argument("--emg-mapping", metavar="default|authors|MAP.json",
+                   help="EMG channels of the muscles, as for solve (default: default)")
+    add_emg_goal_arguments(
+        p, "with --emg: 'constrained' (each tracked excitation within --emg-tolerance of its scaled EMG, plus the "
+        "tracking cost; the default), 'driven' (equal to its scaled EMG) or 'tracking' (the cost only)",
+        "weight of the EMG tracking cost (default 10; also --weights emg=W)")
     p.add_argument("--estimate", required=True, nargs="+", metavar="KIND=MUSCLE[,MUSCLE...]",
                    help="kinds: tendon_stiffness, optimal_fiber_length, tendon_slack_length")
     p.add_argument("--couple", nargs="+", default=[], metavar="MUSCLE,MUSCLE[,...]",
                    help="muscles sharing one factor of every estimated kind")
     p.add_argument("--bounds", nargs="+", default=[], metavar="KIND=LOW:HIGH",
-                   help="bounds of the factors (default tendon_stiffness 0.1:2, lengths 0.5:1.5)")
+                   help="bounds of the factors (default tendon_stiffness 0.1:2, lengths 0.5:1.5, emg_scale "
+                   "0.05:2.5; emg_scale=1:1 takes the EMG as it is)")
     p.add_argument("--weights", metavar="NAME=W[,...]",
-                   help="activation, reserve, velocity (default: the workflow's), fibre_length (default 100)")
+                   help="activation, reserve, velocity (default: the workflow's), fibre_length (default 100), "
+                   "emg (default 10)")
     p.add_argument("--workflow", default="effort-cal", choices=("effort-gen", "effort-cal", "effort-ten"),
                    help="muscle parameters and effort weights (default effort-cal)")
     p.add_argument("--passive", metavar="FILE", help="calibrated passive parameters (as for solve)")
@@ -73,9 +90,10 @@ def _bounds(text: str) -> tuple[float, float]:
 
 def estimate_command(args) -> int:
     from ..io import atomic_write_text, check_output_folder
-    from .core import Goals
-    from .emg_inputs import _labels
+    from .core import Goals, ParameterSpec
+    from .emg_inputs import _labels, emg_at_nodes, mapping_for_muscles, resolve_emg_mapping
     from .estimate import (
+        FIELDS,
         estimate_parameters,
         fibre_length_trial,
         parameter_specs,
@@ -91,23 +109,46 @@ def estimate_command(args) -> int:
 
     check_output_folder(args.out)
     n = len(args.ik)
-    if not (len(args.id) == len(args.ultrasound) == n):
-        raise OptionError(f"{n} --ik, {len(args.id)} --id and {len(args.ultrasound)} --ultrasound files; give one "
-                          "of each per trial, in the same order")
+    us_files, emg_files = args.ultrasound or [], getattr(args, "emg", None) or []
+    if not (us_files or emg_files):
+        raise OptionError("estimate needs measurements: give --ultrasound (fibre lengths) or --emg files, or both")
+    counts = [("--ultrasound", len(us_files)), ("--emg", len(emg_files))]
+    if len(args.id) != n or any(k not in (0, n) for _, k in counts):
+        given = ", ".join(f"{k} {o}" for o, k in counts if k)
+        raise OptionError(f"{n} --ik, {len(args.id)} --id and {given} files; give one of each per trial, in the "
+                          "same order")
+    emg_options = [o for o, v in (("--emg-mapping", args.emg_mapping), ("--emg-mode", args.emg_mode),
+                                  ("--emg-weight", args.emg_weight)) if v is not None]
+    if emg_options and not emg_files:
+        raise OptionError(f"{', '.join(emg_options)} need EMG: give --emg files, or drop them")
     estimate = parse_assignments(args.estimate, "--estimate", lambda v: [m for m in v.split(",") if m])
     bounds = parse_assignments(args.bounds, "--bounds", _bounds)
+    bad = [k for k in bounds if k not in (*FIELDS, "emg_scale")]
+    if bad:
+        raise OptionError(f"--bounds: unknown kind '{bad[0]}'; use {', '.join((*FIELDS, 'emg_scale'))}")
     couple = [[m for m in g.split(",") if m] for g in args.couple]
     specs = parameter_specs(estimate, couple, bounds)
     wf = get_workflow(args.workflow)
     weights = {"w_activation": wf.w_activation, "w_reserve": wf.w_reserve, "w_velocity": wf.w_velocity,
-               "w_fibre_length": 100.0}
+               "w_fibre_length": 100.0, "w_emg": 10.0 if emg_files else 0.0}
     for k, v in parse_assignments(args.weights.split(",") if args.weights else [], "--weights", float).items():
         if k not in WEIGHT_NAMES:
             raise OptionError(f"--weights: unknown weight '{k}'; use {', '.join(WEIGHT_NAMES)}")
         weights[WEIGHT_NAMES[k]] = v
-    goals = Goals(**weights)
+    if args.emg_weight is not None:
+        weights["w_emg"] = args.emg_weight
+    mode = args.emg_mode or "constrained"
+    if emg_files:
+        if not (args.emg_tolerance >= 0):
+            raise OptionError(f"--emg-tolerance must be a non-negative number, not {args.emg_tolerance}")
+        if mode == "tracking" and not weights["w_emg"] > 0:
+            raise OptionError("--emg-mode tracking needs a positive EMG weight (--emg-weight)")
+    tolerance = {"constrained": args.emg_tolerance, "driven": 0.0}.get(mode) if emg_files else None
+    goals = Goals(**weights, emg_tolerance=tolerance)
     labels = _labels(args.ik, args.labels)
-    measured = [read_fibre_lengths(p) for p in args.ultrasound]
+    measured = [read_fibre_lengths(p) for p in us_files] or [{} for _ in range(n)]
+    mapping = resolve_emg_mapping(args.emg_mapping or "default") if emg_files else {}
+    emg_muscles = ()
     options = SolverOptions(max_iter=args.max_iter, w_activation=goals.w_activation, w_reserve=goals.w_reserve,
                             w_velocity=goals.w_velocity)
 
@@ -120,7 +161,7 @@ def estimate_command(args) -> int:
     model_parameters = read_muscle_parameters(args.model)
     trials, prepared, params = [], [], None
     layout = read_layout(args.model)
-    for ik, idp, lab, us in zip(args.ik, args.id, labels, measured):
+    for i, (ik, idp, lab, us) in enumerate(zip(args.ik, args.id, labels, measured)):
         dofs = discover_dofs(layout, "r", list(read_storage(idp).columns))
         t_ik, _ = read_kinematics(ik, dofs)
         t_id, mom = read_inverse_dynamics(idp, dofs)
@@ -129,26 +170,47 @@ def estimate_command(args) -> int:
         inputs, p, so = prepare_trial(g, nominal, t_id, mom, ik_time_s=t_ik, options=options,
                                       sources={"model": args.model, "ik": ik, "id": idp})
         params = p if params is None else params
-        trials.append(fibre_length_trial(lab, inputs, initial_guess(inputs, p, so), us))
+        emg = {}
+        if emg_files:
+            mapping = mapping_for_muscles(args.emg_mapping or "default", mapping, inputs.muscles)
+            emg_muscles = tuple(sorted(mapping))
+            emg = dict(emg_muscles=emg_muscles,
+                       emg_nodes=emg_at_nodes(emg_files[i], mapping, inputs, emg_muscles, str(emg_files[i]), str(ik)))
+        trials.append(fibre_length_trial(lab, inputs, initial_guess(inputs, p, so), us, **emg))
         prepared.append((g, nominal, t_id, mom, t_ik))
+    if emg_files:
+        from .emg_ten import EmgTenSettings, _coupling_pairs, settings_for_muscles
+
+        groups = settings_for_muscles(EmgTenSettings(), params.names).emg_groups
+        specs.append(ParameterSpec("emg_scale", emg_muscles, bounds.get("emg_scale", EMG_SCALE_BOUNDS),
+                                   _coupling_pairs(groups, emg_muscles, consecutive=False)))
     res, est = estimate_parameters(trials, params, specs, goals, options=options)
     run = RunRecord.from_result(res, {"model": args.model})
     estimated = est.parameters()
+    emg_record = {}
+    if emg_files:
+        emg_record = {"emg": {"mode": mode, "tolerance": tolerance, "weight": goals.w_emg, "mapping": mapping,
+                              "scale": dict(res.factors.get("emg_scale", {})),
+                              "bounds": list(bounds.get("emg_scale", EMG_SCALE_BOUNDS)),
+                              "max_deviation": {t.label: float(abs(d).max()) if d.size else 0.0
+                                                for t, d in zip(trials, res.emg_deviation)}}}
     for t, o in zip(trials, res.trials):
-        summary = {**run.to_dict(), "objective_trial": o.objective, "objective_terms": o.objective_terms,
+        summary = {**run.to_dict(), **emg_record, "objective_trial": o.objective, "objective_terms": o.objective_terms,
                    "time_window_s": list(t.inputs.window_s), "n_intervals": t.inputs.n_intervals,
                    "mesh_step_s": t.inputs.step_s, "optimal_reserve_Nm": options.optimal_reserve_Nm,
                    "workflow": {"name": f"{args.workflow} estimate", "estimate": est.to_dict()["factors"]},
                    "solver_options": options.to_dict()}
         build_solution(t.inputs, estimated.subset(t.inputs.muscles), o, summary).write(f"{args.out}/{t.label}")
     doc = {"format": "musclemetab.redundancy.estimated_parameters", "format_version": 1, **est.to_dict(),
-           "solve": run.to_dict(), "trials": labels}
+           **emg_record, "solve": run.to_dict(), "trials": labels}
     if run.success:
         path, report = write_personalised_model(args.model, estimated, estimate, args.out)
         doc["personalised_model"] = {"path": path.name, "muscles": report}
     atomic_write_text(f"{args.out}/parameters.json", json.dumps(doc, indent=2, default=float) + "\n")
     if not run.success:
-        raise run.failure(f"the estimation (written to {args.out})")
+        from .emg_ten import emg_failure
+
+        raise emg_failure(run, mode if emg_files else None, f"the estimation (written to {args.out})")
     if args.validate:
         for lab, (g, _, t_id, mom, t_ik) in zip(labels, prepared):
             sol = solve_with_parameters(g, estimated, t_id, mom, ik_time_s=t_ik, options=options,
@@ -157,5 +219,7 @@ def estimate_command(args) -> int:
             if not sol.success:
                 raise sol.run_record.failure(f"the validation re-solve of {lab}")
     values = ", ".join(f"{k} {m} x{v:.4f}" for k, by in est.factors.items() for m, v in by.items())
+    if emg_files:
+        values += "; EMG scale " + ", ".join(f"{m} {v:.3g}" for m, v in res.factors["emg_scale"].items())
     print(f"estimate: {len(trials)} trial(s), {run.status} in {run.iterations} iterations; {values} -> {args.out}")
     return 0

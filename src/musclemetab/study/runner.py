@@ -481,6 +481,8 @@ def _write_study_json(study: Study, out: Path) -> None:
             "tendon_stiffness": s.tendon_stiffness if not isinstance(s.tendon_stiffness, Path) else str(s.tendon_stiffness),
             "emg_mapping": s.emg_mapping,
             "side": s.side,
+            **({"emg_mode": s.emg_mode, "emg_tolerance": s.emg_tolerance} if s.emg_mode else {}),
+            **({"estimate": s.estimate.to_dict()} if s.estimate is not None else {}),
             "trials": [t.name for t in s.trials],
             "emg_files": {t.name: str(t.emg) if t.emg else None for t in s.trials},
         }

@@ -27,13 +27,18 @@ A study file names everything a study needs; paths are relative to the file::
                                           # subject's estimates); default: literature values
                                           # converted through the model (docs/muscles.md)
     muscle_properties = "muscles.csv"     # optional: per-muscle overrides (docs/muscles.md)
-    emg_mapping = "default"               # EMG-TEN channel mapping: default | authors
+    emg_mapping = "default"               # EMG channel mapping (EMG-TEN, emg_mode): default | authors
+    emg_mode = "constrained"              # optional: the effort workflows' solves EMG-informed
+                                          # (constrained | driven | tracking), with the trials' emg
+    emg_tolerance = 0.01                  # optional: half-width of the EMG band (constrained)
+    # [subjects.estimate]: a parameter estimation (musclemetab.study.estimation)
 
     [[subjects.trials]]
     name = "normal"
     ik = "data/IK_normal.mot"
     id = "data/ID_normal.sto"
-    emg = "data/EMG_normal.mot"           # needed by emg-ten
+    emg = "data/EMG_normal.mot"           # needed by emg-ten and emg_mode
+    ultrasound = "data/US_normal.mot"     # optional: fibre lengths (mm) for [subjects.estimate]
     grf = "data/GRF_normal.mot"           # optional: gait events from the vertical force
     grf_column = "ground_force_vy"        # optional
     grf_threshold_N = 20.0                # optional
@@ -108,10 +113,12 @@ class Trial:
     external_loads: Path | None = None
     #: ``"auto"`` or N: solve that gait cycle of the subject's side (see ``musclemetab.redundancy.window``)
     cycle: str | int | None = None
+    #: measured fibre lengths (mm, MuscleRedundancySolver convention) for the subject's estimation
+    ultrasound: Path | None = None
 
     def files(self) -> dict[str, Path]:
         out = {k: v for k, v in (("ik", self.ik), ("id", self.id), ("emg", self.emg), ("grf", self.grf),
-                                 ("external_loads", self.external_loads)) if v}
+                                 ("external_loads", self.external_loads), ("ultrasound", self.ultrasound)) if v}
         if self.external_loads is not None:
             from ..external_loads import read_external_loads
 
@@ -134,6 +141,11 @@ class Subject:
     muscle_properties: Path | None = None
     side: str = "r"
     dofs: tuple[str, ...] | None = None
+    #: ``constrained`` | ``driven`` | ``tracking``: the effort workflows' solves are EMG-informed
+    emg_mode: str | None = None
+    emg_tolerance: float = 0.01
+    #: the subject's parameter estimation (:class:`~musclemetab.study.estimation.EstimateSpec`)
+    estimate: Any = None
 
     def trial(self, name: str) -> Trial:
         for t in self.trials:
@@ -177,11 +189,11 @@ _ENERGY_KEYS = {"model", "weight", "effort_weight", "smoothing"}
 #: keys of the study file's [solver] table (IPOPT settings of every solve)
 _SOLVER_KEYS = {"max_iter", "tol", "linear_solver", "linear_solver_library"}
 _SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials",
-                 "muscle_properties", "side", "dofs"}
+                 "muscle_properties", "side", "dofs", "emg_mode", "emg_tolerance", "estimate"}
 _TRIAL_KEYS = {
     "name", "ik", "id", "emg", "grf", "grf_column", "grf_threshold_N", "speed_m_per_s",
     "measured_W_per_kg", "vo2_mL_per_s", "vco2_mL_per_s", "vo2_mL_per_min", "vco2_mL_per_min",
-    "start_s", "toe_off_s", "end_s", "external_loads", "cycle",
+    "start_s", "toe_off_s", "end_s", "external_loads", "cycle", "ultrasound",
 }
 
 
@@ -395,14 +407,45 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
         if missing:
             raise OptionError(f"{here}: the emg-ten workflow needs an 'emg' file for every trial; missing for "
                               f"{', '.join(missing)}")
+    emg_mode, emg_tolerance = _emg_mode(data, here, trials)
     muscle_properties = _path(data.get("muscle_properties"), base, here, "muscle_properties", required=False)
     if muscle_properties is not None:
         from ..properties import read_muscle_properties
 
         read_muscle_properties(muscle_properties)  # reject a bad file before anything runs
-    return Subject(name=name, model=model, body_mass_kg=mass, height_m=height, trials=trials,
-                   passive=passive, tendon_stiffness=kt, emg_mapping=mapping, muscle_properties=muscle_properties,
-                   side=side, dofs=dofs)
+    subject = Subject(name=name, model=model, body_mass_kg=mass, height_m=height, trials=trials,
+                      passive=passive, tendon_stiffness=kt, emg_mapping=mapping, muscle_properties=muscle_properties,
+                      side=side, dofs=dofs, emg_mode=emg_mode, emg_tolerance=emg_tolerance)
+    if data.get("estimate") is not None:
+        from dataclasses import replace
+
+        from .estimation import estimate_spec, estimation_trials
+
+        subject = replace(subject, estimate=estimate_spec(data["estimate"], here))
+        estimation_trials(subject, here)
+    return subject
+
+
+def _emg_mode(data, here: str, trials) -> tuple[str | None, float]:
+    """The subject's ``emg_mode`` and ``emg_tolerance``, checked against its trials."""
+    mode = data.get("emg_mode")
+    tol = _number(data.get("emg_tolerance"), here, "emg_tolerance")
+    if mode is None:
+        if tol is not None:
+            raise OptionError(f"{here}: 'emg_tolerance' needs 'emg_mode' (constrained); set it or drop the tolerance")
+        return None, 0.01
+    if mode not in ("constrained", "driven", "tracking"):
+        raise OptionError(f"{here}: 'emg_mode' must be constrained, driven or tracking, not {mode!r}")
+    if tol is not None and tol < 0:
+        raise OptionError(f"{here}: 'emg_tolerance' must be non-negative, not {tol}")
+    missing = [t.name for t in trials if t.emg is None]
+    if missing:
+        raise OptionError(f"{here}: 'emg_mode' needs an 'emg' file for every trial; missing for {', '.join(missing)}")
+    bad = [t.name for t in trials if t.id is None or t.cycle is not None]
+    if bad:
+        raise OptionError(f"{here}: an EMG-informed solve covers the whole IK window with the trial's 'id' file; "
+                          f"trial(s) {', '.join(bad)} have no 'id' or set 'cycle' (drop 'cycle', or 'emg_mode')")
+    return mode, 0.01 if tol is None else tol
 
 
 def _trial(data, base: Path, where: str) -> Trial:
@@ -440,6 +483,7 @@ def _trial(data, base: Path, where: str) -> Trial:
         end_s=num["end_s"],
         external_loads=_path(data.get("external_loads"), base, here, "external_loads", required=False),
         cycle=_cycle_key(data.get("cycle"), here),
+        ultrasound=_path(data.get("ultrasound"), base, here, "ultrasound", required=False),
     )
 
 

@@ -4,9 +4,12 @@ A *trial unit* is one subject × trial × workflow: solve the muscle redundancy 
 evaluate the metabolic models, find the gait cycle and analyse phases and muscle groups.
 An *estimation unit* is one subject's EMG-TEN problem over all its trials at once; the
 EMG-TEN trial units and EFFORT-TEN units that use the subject's own estimate depend on it.
+A subject's ``[subjects.estimate]`` table adds a parameter-estimation unit
+(:mod:`.estimation`); with the subject's ``emg_mode`` its effort workflows' trial units are
+EMG-informed solves.
 
 Every unit has a folder ``units/<subject>/<trial>/<workflow>`` (estimation:
-``units/<subject>/_emg-ten``) and, when complete, a ``unit.json`` in it recording the unit's
+``units/<subject>/_emg-ten``, parameter estimation ``units/<subject>/_estimate``) and, when complete, a ``unit.json`` in it recording the unit's
 key (a SHA-256 of everything its result depends on: input file contents, settings,
 the package version and the keys of the units it depends on), its status and the SHA-256 of
 each output file. A unit is complete when ``unit.json`` says ``ok``, its key equals the
@@ -43,6 +46,7 @@ from pathlib import Path
 from .. import __version__
 from ..errors import DataMismatchError, MusclemetabError
 from ..io.atomic import file_sha256
+from .estimation import ESTIMATE, ESTIMATE_FOLDER, run_parameter_estimation
 from .spec import EMG_TEN, Study, Subject, Trial
 
 __all__ = [
@@ -82,7 +86,7 @@ class Unit:
     @property
     def folder(self) -> Path:
         if self.trial is None:
-            return Path("units") / self.subject / ESTIMATION_FOLDER
+            return Path("units") / self.subject / (ESTIMATION_FOLDER if self.workflow == EMG_TEN else ESTIMATE_FOLDER)
         return Path("units") / self.subject / self.trial / self.workflow
 
     @property
@@ -103,6 +107,7 @@ def plan_units(study: Study) -> tuple[list[Unit], list[Unit]]:
     """The study's units in two stages: estimations first, then the trial units."""
     stage1 = [Unit(s.name, None, EMG_TEN) for s in study.subjects
               if EMG_TEN in study.workflows or s.uses_emg_ten_estimate]
+    stage1 += [Unit(s.name, None, ESTIMATE) for s in study.subjects if s.estimate is not None]
     # Workflow by workflow: parallel workers start on different trials, so a trial's
     # geometry is computed once and found in the cache by its other workflows.
     stage2 = [Unit(s.name, t.name, w) for w in study.workflows for s in study.subjects for t in s.trials]
@@ -129,8 +134,9 @@ def _trial_record(trial: Trial) -> dict:
     rec["files"] = {k: _file_hash(p) for k, p in trial.files().items()}
     for k in ("ik", "id", "emg", "grf", "external_loads"):
         rec.pop(k, None)  # paths do not matter, contents do
-    if trial.cycle is None:
-        rec.pop("cycle", None)  # absent key: earlier studies keep their unit keys
+    for k in ("cycle", "ultrasound"):
+        if rec.get(k) is None:
+            rec.pop(k, None)  # absent key: earlier studies keep their unit keys
     return rec
 
 
@@ -146,6 +152,10 @@ def _subject_record(subject: Subject, workflow: str) -> dict:
         "tendon_stiffness": kt if workflow in ("effort-ten",) else None,
         "emg_mapping": subject.emg_mapping if workflow == EMG_TEN else None,
     }
+    if subject.emg_mode is not None and workflow not in (EMG_TEN, ESTIMATE):  # absent keys: as below
+        rec.update(emg_mode=subject.emg_mode, emg_tolerance=subject.emg_tolerance, emg_mapping=subject.emg_mapping)
+    if workflow == ESTIMATE:
+        rec.update(estimate=subject.estimate.to_dict(), emg_mapping=subject.emg_mapping)
     if subject.muscle_properties is not None:  # absent key: earlier studies keep their unit keys
         rec["muscle_properties"] = _file_hash(subject.muscle_properties)
     if subject.side != "r" or subject.dofs is not None:  # absent keys: earlier studies keep their unit keys
@@ -319,7 +329,9 @@ def _execute_unit(study: Study, unit: Unit, key: str, dependency_folder: str | N
     t0 = time.perf_counter()
     interrupted = False
     try:
-        if unit.is_estimation:
+        if unit.is_estimation and unit.workflow == ESTIMATE:
+            record.update(run_parameter_estimation(study, unit, tmp))
+        elif unit.is_estimation:
             record.update(_run_estimation(study, unit, tmp))
         else:
             dep = Path(dependency_folder) if dependency_folder else None
@@ -379,6 +391,22 @@ def _run_estimation(study: Study, unit: Unit, tmp: Path) -> dict:
         raise result.run_record.failure(f"EMG-TEN of subject {subject.name}")
     result.write(tmp)
     return {"times": {"solve_s": time.perf_counter() - t0}}
+
+
+def _informed_solve(study: Study, subject: Subject, trial: Trial, workflow: str, kwargs: dict):
+    """The EMG-informed solve of one trial with an effort workflow (the subject's ``emg_mode``)."""
+    from ..redundancy.emg_ten import informed_settings, solve_emg_ten
+    from ..redundancy.workflows import read_tendon_stiffness_json
+
+    kt = kwargs.get("tendon_stiffness")
+    if kwargs.get("tendon_stiffness_file") is not None:
+        kt = read_tendon_stiffness_json(kwargs["tendon_stiffness_file"])
+    result = solve_emg_ten(subject.model, [trial.ik], [trial.id], [trial.emg], emg_mapping=subject.emg_mapping,
+                           labels=[trial.name], passive=kwargs.get("passive"), side=subject.side, dofs=subject.dofs,
+                           options=_solver_options(study),
+                           settings=informed_settings(workflow, subject.emg_mode, subject.emg_tolerance),
+                           workflow=workflow, tendon_stiffness=kt)
+    return result.solutions[trial.name]
 
 
 def _solver_options(study: Study, subject: Subject | None = None):
@@ -451,17 +479,21 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
                 kwargs["tendon_stiffness_file"] = kt
             elif isinstance(kt, (dict, str)):  # a table, or "example"
                 kwargs["tendon_stiffness"] = kt
-        sol = solve_files(subject.model, trial.ik, trial.id, unit.workflow, side=subject.side, dofs=subject.dofs,
-                          external_loads=trial.external_loads, grf=trial.grf if trial.cycle is not None else None,
-                          cycle=trial.cycle, options=_solver_options(study, subject),
-                          **kwargs)
+        if subject.emg_mode is not None:
+            sol = _informed_solve(study, subject, trial, unit.workflow, kwargs)
+        else:
+            sol = solve_files(subject.model, trial.ik, trial.id, unit.workflow, side=subject.side, dofs=subject.dofs,
+                              external_loads=trial.external_loads, grf=trial.grf if trial.cycle is not None else None,
+                              cycle=trial.cycle, options=_solver_options(study, subject), **kwargs)
         from ..redundancy.cli import write_solution_folder
 
         write_solution_folder(sol, tmp)
         solve_summary = sol.summary
         times["solve_s"] = sol.summary.get("solve_time_s")
         if not sol.success:
-            raise sol.run_record.failure(f"{unit.workflow} solve of {subject.name}/{trial.name}")
+            from ..redundancy.emg_ten import emg_failure
+
+            raise emg_failure(sol.run_record, subject.emg_mode, f"{unit.workflow} solve of {subject.name}/{trial.name}")
     times["solution_s"] = time.perf_counter() - t0
 
     t1 = time.perf_counter()

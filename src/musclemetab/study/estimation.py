@@ -1,0 +1,187 @@
+"""A subject's parameter estimation in a study: the ``[subjects.estimate]`` table and its unit.
+
+::
+
+    [subjects.estimate]
+    estimate = {tendon_stiffness = ["soleus_r", "gasmed_r", "gaslat_r"], optimal_fiber_length = ["tibant_r"]}
+    couple = [["soleus_r", "gasmed_r", "gaslat_r"]]     # optional: muscles sharing one factor
+    bounds = {tendon_stiffness = [0.1, 2.0]}            # optional (kinds, and emg_scale)
+    weights = {fibre_length = 100.0}                   # optional: activation, reserve, velocity,
+                                                       #   fibre_length, emg
+    workflow = "effort-cal"                            # optional: effort-gen | effort-cal | effort-ten
+    emg_mode = "constrained"                           # optional: track the trials' EMG too
+    validate = true                                    # optional: re-solve with the estimates
+
+The estimation runs over the subject's trials that have an ``ultrasound`` file (fibre
+lengths, ``musclemetab estimate --ultrasound``) and, with ``emg_mode``, their ``emg``; with
+``emg_mode`` and no ultrasound at all, over the trials with EMG. It is the command
+``musclemetab estimate`` on those files, written to ``units/<subject>/_estimate/``
+(``parameters.json``, ``<model>_personalised.osim``, the solutions per trial).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping
+
+from ..errors import OptionError
+
+__all__ = ["ESTIMATE", "ESTIMATE_FOLDER", "EstimateSpec", "estimate_spec", "estimation_trials",
+           "run_parameter_estimation"]
+
+#: workflow name of a subject's parameter-estimation unit, and its folder
+ESTIMATE = "estimate"
+ESTIMATE_FOLDER = "_estimate"
+EMG_MODES = ("constrained", "driven", "tracking")
+_KEYS = {"estimate", "couple", "bounds", "weights", "workflow", "emg_mode", "validate"}
+
+
+@dataclass(frozen=True)
+class EstimateSpec:
+    """What a subject's estimation unit estimates, and how (the ``musclemetab estimate`` options)."""
+
+    estimate: dict
+    couple: tuple[tuple[str, ...], ...] = ()
+    bounds: dict = field(default_factory=dict)
+    weights: dict = field(default_factory=dict)
+    workflow: str = "effort-cal"
+    emg_mode: str | None = None
+    validate: bool = False
+
+    def to_dict(self) -> dict:
+        return {"estimate": {k: list(v) for k, v in self.estimate.items()}, "couple": [list(g) for g in self.couple],
+                "bounds": {k: list(v) for k, v in self.bounds.items()}, "weights": dict(self.weights),
+                "workflow": self.workflow, "emg_mode": self.emg_mode, "validate": self.validate}
+
+
+def _names(value, here: str, key: str) -> tuple[str, ...]:
+    if not isinstance(value, list) or not value or not all(isinstance(m, str) and m for m in value):
+        raise OptionError(f"{here}: '{key}' must be a list of muscle names such as [\"soleus_r\", \"gasmed_r\"]")
+    return tuple(value)
+
+
+def estimate_spec(data, here: str) -> EstimateSpec:
+    """The checked ``[subjects.estimate]`` table (``here`` names the file and subject)."""
+    from ..redundancy.estimate import FIELDS
+    from ..redundancy.estimate_cli import WEIGHT_NAMES
+
+    here = f"{here}: [subjects.estimate]"
+    if not isinstance(data, Mapping):
+        raise OptionError(f"{here}: expected a table such as estimate = {{tendon_stiffness = [\"soleus_r\"]}}")
+    extra = sorted(set(data) - _KEYS)
+    if extra:
+        raise OptionError(f"{here}: unknown key(s) {', '.join(extra)}; allowed: {', '.join(sorted(_KEYS))}")
+    what = data.get("estimate")
+    if not isinstance(what, Mapping) or not what:
+        raise OptionError(f"{here}: 'estimate' is required: a table {{kind = [muscle, ...]}} with kinds "
+                          f"{', '.join(FIELDS)}")
+    bad = [k for k in what if k not in FIELDS]
+    if bad:
+        raise OptionError(f"{here}: cannot estimate '{bad[0]}'; estimate one of {', '.join(FIELDS)}")
+    estimate = {k: _names(v, here, f"estimate.{k}") for k, v in what.items()}
+    couple = data.get("couple", [])
+    if not isinstance(couple, list):
+        raise OptionError(f"{here}: 'couple' must be a list of muscle lists such as [[\"soleus_r\", \"gasmed_r\"]]")
+    couple = tuple(_names(g, here, "couple") for g in couple)
+    for key in ("bounds", "weights"):
+        if not isinstance(data.get(key, {}), Mapping):
+            raise OptionError(f"{here}: '{key}' must be a table such as {key} = {{tendon_stiffness = [0.1, 2.0]}}"
+                              if key == "bounds" else f"{here}: 'weights' must be a table such as weights = "
+                              "{fibre_length = 100.0}")
+    bounds = {}
+    for k, v in data.get("bounds", {}).items():
+        if k not in (*FIELDS, "emg_scale"):
+            raise OptionError(f"{here}: 'bounds': unknown kind '{k}'; use {', '.join((*FIELDS, 'emg_scale'))}")
+        ok = (isinstance(v, list) and len(v) == 2 and all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                                         and math.isfinite(x) for x in v) and 0 < v[0] <= v[1])
+        if not ok:
+            raise OptionError(f"{here}: 'bounds.{k}' must be [low, high] with 0 < low <= high, not {v!r}")
+        bounds[k] = (float(v[0]), float(v[1]))
+    weights = {}
+    for k, v in data.get("weights", {}).items():
+        if k not in WEIGHT_NAMES:
+            raise OptionError(f"{here}: 'weights': unknown weight '{k}'; use {', '.join(WEIGHT_NAMES)}")
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
+            raise OptionError(f"{here}: 'weights.{k}' must be a non-negative number, not {v!r}")
+        weights[k] = float(v)
+    workflow = data.get("workflow", "effort-cal")
+    if workflow not in ("effort-gen", "effort-cal", "effort-ten"):
+        raise OptionError(f"{here}: 'workflow' must be effort-gen, effort-cal or effort-ten, not {workflow!r}")
+    mode = data.get("emg_mode")
+    if mode is not None and mode not in EMG_MODES:
+        raise OptionError(f"{here}: 'emg_mode' must be one of {', '.join(EMG_MODES)}, not {mode!r}")
+    validate = data.get("validate", False)
+    if not isinstance(validate, bool):
+        raise OptionError(f"{here}: 'validate' must be true or false, not {validate!r}")
+    return EstimateSpec(estimate=estimate, couple=couple, bounds=bounds, weights=weights, workflow=workflow,
+                        emg_mode=mode, validate=validate)
+
+
+def estimation_trials(subject, here: str | None = None) -> list:
+    """The trials a subject's estimation uses (see the module docstring); with ``here``, a
+    subject whose trials cannot serve is refused naming it."""
+    spec = subject.estimate
+    with_us = [t for t in subject.trials if t.ultrasound is not None]
+    trials = with_us or ([t for t in subject.trials if t.emg is not None] if spec.emg_mode else [])
+    if here is not None:
+        if not trials:
+            raise OptionError(f"{here}: the estimation needs measurements: give trials an 'ultrasound' file "
+                              "(fibre lengths in mm) or set estimate.emg_mode and give them 'emg' files")
+        if spec.emg_mode:
+            missing = [t.name for t in trials if t.emg is None]
+            if missing:
+                raise OptionError(f"{here}: estimate.emg_mode needs an 'emg' file for every estimation trial; "
+                                  f"missing for {', '.join(missing)}")
+        bad = [t.name for t in trials if t.id is None or t.cycle is not None]
+        if bad:
+            raise OptionError(f"{here}: the estimation solves the trials' whole IK window with their 'id' file; "
+                              f"trial(s) {', '.join(bad)} have no 'id' or set 'cycle'")
+        if subject.side != "r" or subject.dofs is not None:
+            raise OptionError(f"{here}: the estimation solves the right leg with the DOFs of its inverse dynamics; "
+                              "drop 'side' and 'dofs', or the estimate table")
+    return trials
+
+
+def run_parameter_estimation(study, unit, tmp: Path) -> dict:
+    """The subject's estimation unit: ``musclemetab estimate`` on its trials, written to ``tmp``."""
+    import argparse
+    import contextlib
+    import io
+    import time
+
+    from ..redundancy.estimate_cli import add_estimate_parser
+
+    subject = study.subject(unit.subject)
+    spec = subject.estimate
+    trials = estimation_trials(subject)
+    argv = ["estimate", "--model", str(subject.model), "--ik", *[str(t.ik) for t in trials],
+            "--id", *[str(t.id) for t in trials], "--labels", *[t.name for t in trials],
+            "--estimate", *[f"{k}={','.join(v)}" for k, v in spec.estimate.items()],
+            "--workflow", spec.workflow, "--out", str(tmp)]
+    if any(t.ultrasound is not None for t in trials):
+        argv += ["--ultrasound", *[str(t.ultrasound) for t in trials]]
+    if spec.emg_mode:
+        argv += ["--emg", *[str(t.emg) for t in trials], "--emg-mode", spec.emg_mode,
+                 "--emg-mapping", subject.emg_mapping]
+    if spec.couple:
+        argv += ["--couple", *[",".join(g) for g in spec.couple]]
+    if spec.bounds:
+        argv += ["--bounds", *[f"{k}={lo!r}:{hi!r}" for k, (lo, hi) in spec.bounds.items()]]
+    if spec.weights:
+        argv += ["--weights", ",".join(f"{k}={v!r}" for k, v in spec.weights.items())]
+    if spec.workflow != "effort-gen" and subject.passive is not None:
+        argv += ["--passive", str(subject.passive)]
+    if spec.validate:
+        argv.append("--validate")
+    max_iter = (study.settings.get("solver") or {}).get("max_iter")
+    if max_iter is not None:
+        argv += ["--max-iter", str(max_iter)]
+    parser = argparse.ArgumentParser(prog="musclemetab")
+    add_estimate_parser(parser.add_subparsers())
+    args = parser.parse_args(argv)
+    t0 = time.perf_counter()
+    with contextlib.redirect_stdout(io.StringIO()):
+        args.func(args)
+    return {"times": {"solve_s": time.perf_counter() - t0}, "trials": [t.name for t in trials]}
