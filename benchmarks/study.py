@@ -1,6 +1,6 @@
 """Benchmark: the demo end to end, and study throughput with 1 and 2 worker processes.
 
-    python benchmarks/study.py [--repeats 1] [--study STUDY.toml]
+    python benchmarks/study.py [--repeats 1] [--study STUDY.toml | --two-subjects]
 
 1. ``musclemetab demo`` in a new process, with an empty geometry cache and an empty output
    folder: the wall time a new user waits (OpenSim worker start-up, geometry, six solves,
@@ -11,7 +11,11 @@
 3. A resumed run (nothing to do): the cost of checking that every unit is up to date.
 
 With ``--study STUDY.toml`` only 2 and 3 are measured, on that study (after one run that fills
-the geometry and inverse-dynamics caches).
+the geometry and inverse-dynamics caches). ``--two-subjects`` writes and measures a study of two
+subjects with different models and legs: the example subject's normal trial (Rajagopal model,
+right leg, ID file) and OpenSim's gait2392 subject (its own model, left leg, gait cycle and
+inverse dynamics from the ground forces), EFFORT-GEN with every study model on both legs'
+units (the left leg of gait2392 and the right leg of the example) in parallel.
 """
 
 from __future__ import annotations
@@ -38,6 +42,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=1, help="repeats of each measurement (median reported)")
     ap.add_argument("--study", metavar="STUDY.toml", help="measure this study's throughput instead of the demo's")
+    ap.add_argument("--two-subjects", action="store_true",
+                    help="measure a two-subject study (example subject and gait2392, different models and legs)")
     args = ap.parse_args(argv)
     import statistics
 
@@ -45,6 +51,8 @@ def main(argv=None) -> int:
     env = dict(os.environ)
     print(f"machine: {os.cpu_count()} CPUs; output under {tmp}")
 
+    if args.two_subjects:
+        args.study = _two_subject_study(tmp / "two-subjects.toml")
     if args.study:
         from musclemetab.study import load_study
         from musclemetab.study.units import plan_units
@@ -64,6 +72,43 @@ def main(argv=None) -> int:
 
     env["MUSCLEMETAB_CACHE"] = str(tmp / "cache0")
     return _throughput(tmp / "demo0" / "study.toml", 6, env, args.repeats)
+
+
+def _two_subject_study(path: Path) -> Path:
+    """Write the two-subject study file (data from :mod:`musclemetab.datasets`)."""
+    from musclemetab.datasets import example_subject, gait2392_subject01
+
+    ex, g = example_subject(), gait2392_subject01()
+    height_m = g.height_m or 1.8  # the data set gives no height (used for the speed normalisation only)
+    path.write_text(f"""name = "two subjects"
+output = "out"
+workflows = ["effort-gen"]
+
+[[subjects]]
+name = "example"
+model = "{ex.model}"
+body_mass_kg = {ex.body_mass_kg}
+height_m = {ex.height_m}
+
+[[subjects.trials]]
+name = "normal"
+ik = "{ex.ik['normal']}"
+id = "{ex.id['normal']}"
+
+[[subjects]]
+name = "gait2392"
+model = "{g.model}"
+body_mass_kg = {g.body_mass_kg}
+height_m = {height_m}
+side = "l"
+
+[[subjects.trials]]
+name = "walk1"
+ik = "{g.ik}"
+external_loads = "{g.external_loads}"
+cycle = "auto"
+""")
+    return path
 
 
 def _throughput(study, n_units, env, repeats) -> int:
