@@ -76,38 +76,27 @@ def main(argv=None) -> int:
 
 def _two_subject_study(path: Path) -> Path:
     """Write the two-subject study file (data from :mod:`musclemetab.datasets`)."""
+    import json
+
     from musclemetab.datasets import example_subject, gait2392_subject01
 
     ex, g = example_subject(), gait2392_subject01()
-    height_m = g.height_m or 1.8  # the data set gives no height (used for the speed normalisation only)
-    path.write_text(f"""name = "two subjects"
-output = "out"
-workflows = ["effort-gen"]
+    subjects = [
+        ({"name": "example", "model": ex.model, "body_mass_kg": ex.body_mass_kg, "height_m": ex.height_m},
+         {"name": "normal", "ik": ex.ik["normal"], "id": ex.id["normal"]}),
+        # the data set gives no height (used for the speed normalisation only): 1.8 m
+        ({"name": "gait2392", "model": g.model, "body_mass_kg": g.body_mass_kg, "height_m": g.height_m or 1.8,
+          "side": "l"},
+         {"name": "walk1", "ik": g.ik, "external_loads": g.external_loads, "cycle": "auto"}),
+    ]
 
-[[subjects]]
-name = "example"
-model = "{ex.model}"
-body_mass_kg = {ex.body_mass_kg}
-height_m = {ex.height_m}
+    def table(values: dict) -> list[str]:  # TOML values: JSON strings and numbers are valid TOML
+        return [f"{k} = {json.dumps(v if isinstance(v, (int, float)) else str(v))}" for k, v in values.items()]
 
-[[subjects.trials]]
-name = "normal"
-ik = "{ex.ik['normal']}"
-id = "{ex.id['normal']}"
-
-[[subjects]]
-name = "gait2392"
-model = "{g.model}"
-body_mass_kg = {g.body_mass_kg}
-height_m = {height_m}
-side = "l"
-
-[[subjects.trials]]
-name = "walk1"
-ik = "{g.ik}"
-external_loads = "{g.external_loads}"
-cycle = "auto"
-""")
+    lines = table({"name": "two subjects", "output": "out"}) + ['workflows = ["effort-gen"]']
+    for subject, trial in subjects:
+        lines += ["", "[[subjects]]", *table(subject), "", "[[subjects.trials]]", *table(trial)]
+    path.write_text("\n".join(lines) + "\n")
     return path
 
 
