@@ -52,12 +52,16 @@ MIN_PROJECTED_LENGTH_M = 1e-4
 #: kinds of shared scale factors; the muscle parameters a factor multiplies
 PARAMETER_KINDS = {"tendon_stiffness": "kT", "optimal_fiber_length": "lmo", "tendon_slack_length": "lts",
                    "emg_scale": None}
+#: transcriptions of the fibre dynamics: the Hill equilibrium of interval k at its start node
+#: (forward Euler) or at its end node (backward Euler)
+FIBRE_DYNAMICS = ("forward", "backward")
 
 
 @dataclass(frozen=True)
 class Goals:
     """Weights of the objective and the EMG bound (``None``: no bound rows); ``energy``: the
-    energy goal (:class:`.energy.EnergyGoal`), or ``None``."""
+    energy goal (:class:`.energy.EnergyGoal`), or ``None``; ``fibre_dynamics``: the
+    transcription of ``dl~M/dt = v~M`` (:data:`FIBRE_DYNAMICS`, ``docs/problem.md``)."""
 
     w_activation: float = 1.0
     w_reserve: float = 1000.0
@@ -66,8 +70,12 @@ class Goals:
     emg_tolerance: float | None = None
     w_fibre_length: float = 0.0
     energy: EnergyGoal | None = None
+    fibre_dynamics: str = "forward"
 
     def __post_init__(self):
+        if self.fibre_dynamics not in FIBRE_DYNAMICS:
+            raise OptionError(f"the fibre dynamics must be one of {', '.join(FIBRE_DYNAMICS)}, "
+                              f"not {self.fibre_dynamics!r}")
         for name in ("w_activation", "w_reserve", "w_velocity", "w_emg", "w_fibre_length"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
@@ -172,24 +180,25 @@ def _constants(params: MuscleTendonParameters, ca):
     return P
 
 
-def _node_expressions(sym, M: int, D: int, h, P: dict, optimal_reserve_Nm: float, ca):
-    """Symbols and constraint expressions of one mesh interval (:mod:`.problem`)."""
+def _node_expressions(sym, M: int, D: int, h, P: dict, optimal_reserve_Nm: float, ca, backward: bool = False):
+    """Symbols and constraint expressions of one mesh interval (:mod:`.problem`); with
+    ``backward`` the Hill equilibrium holds at the end node (``a1, lm1, lp1, lmt1``) with ``vm``."""
     a, lm, lp = sym("a", M), sym("lm", M), sym("lp", M)
     e, aT, vm = sym("e", M), sym("aT", D), sym("vm", M)
-    a1, lm1 = sym("a1", M), sym("lm1", M)
-    lmt, rflat, mom = sym("lmt", M), sym("r", D * M), sym("id", D)
+    a1, lm1, lp1 = sym("a1", M), sym("lm1", M), sym("lp1", M)
+    lmt, rflat, mom, lmt1 = sym("lmt", M), sym("r", D * M), sym("id", D), sym("lmt1", M)
     penn = (lm * P["lmo"]) ** 2 - P["w2"] - lp**2
     dyn_a = a1 - a - h * activation_rate(e, a)
     dyn_lm = lm1 - lm - h * vm
     hill = hill_residual(
-        a, lm, vm, lp, lmt,
+        *((a1, lm1, vm, lp1, lmt1) if backward else (a, lm, vm, lp, lmt)),
         optimal_fiber_length_m=P["lmo"], tendon_slack_length_m=P["lts"],
         max_contraction_velocity=P["vmax"], kT=P["kT"], kpe=P["kpe"], s0=P["s0"], sm=P["sm"],
     )
     ft = tendon_force_length((lmt - lp) / P["lts"], P["kT"])
     R = ca.reshape(rflat, D, M)
     moment = mom - ca.mtimes(R, P["f0"] * ft) - optimal_reserve_Nm * aT
-    syms = dict(a=a, lm=lm, lp=lp, e=e, aT=aT, vm=vm, a1=a1, lm1=lm1, lmt=lmt, r=rflat, id=mom)
+    syms = dict(a=a, lm=lm, lp=lp, e=e, aT=aT, vm=vm, a1=a1, lm1=lm1, lp1=lp1, lmt=lmt, r=rflat, id=mom, lmt1=lmt1)
     return syms, ca.vertcat(dyn_a, dyn_lm, penn, hill, moment), penn
 
 
@@ -222,8 +231,11 @@ def _group_functions(ca, params, trial: TrialBlock, goals: Goals, Topt: float, f
                      n_full: int, p_index, zero_r):
     """Per-interval and last-node functions (SX) of one group of trials; see the module docstring.
 
-    Node inputs: ``z`` (5M+D), ``xn = [a, l~M]`` of the next node, data ``d = [lMT, r (column-major
-    D x M), ID, EMG, lUS, h, 1/N]``, the shared variables ``p``. ``factor_of[kind]`` lists
+    Node inputs: ``z`` (5M+D), ``xn = [a, l~M]`` of the next node (backward fibre dynamics:
+    ``[a, l~M, lp]``), data ``d = [lMT, r (column-major D x M), ID, EMG, lUS, h, 1/N]`` (backward:
+    then ``lMT`` of the next node), the shared variables ``p``. With the backward fibre dynamics
+    the constraints are nonlinear in ``xn``: the Hessian functions take ``xn`` and return the
+    blocks of ``[z, xn]``. ``factor_of[kind]`` lists
     ``(muscle index, factor index)``; ``emg_factor`` the factor index of each tracked muscle.
     """
     inp = trial.inputs
@@ -245,7 +257,8 @@ def _group_functions(ca, params, trial: TrialBlock, goals: Goals, Topt: float, f
             P[key] = v
     h, inv_n = ca.SX.sym("h"), ca.SX.sym("inv_n")
     emg, lus = ca.SX.sym("emg", nE), ca.SX.sym("lus", nU)
-    S, gk, _ = _node_expressions(ca.SX.sym, M, D, h, P, Topt, ca)
+    backward = goals.fibre_dynamics == "backward"
+    S, gk, _ = _node_expressions(ca.SX.sym, M, D, h, P, Topt, ca, backward)
     if len(zero_r):
         gk = ca.substitute(gk, S["r"][list(zero_r)], ca.SX.zeros(len(zero_r)))
     pos = {m: i for i, m in enumerate(inp.muscles)}
@@ -253,8 +266,8 @@ def _group_functions(ca, params, trial: TrialBlock, goals: Goals, Topt: float, f
         if nE else ca.SX(0, 1)
     g = ca.vertcat(gk, track) if goals.emg_tolerance is not None else gk
     z = ca.vertcat(S["a"], S["lm"], S["lp"], S["e"], S["aT"], S["vm"])
-    xn = ca.vertcat(S["a1"], S["lm1"])
-    d = ca.vertcat(S["lmt"], S["r"], S["id"], emg, lus, h, inv_n)
+    xn = ca.vertcat(S["a1"], S["lm1"], S["lp1"]) if backward else ca.vertcat(S["a1"], S["lm1"])
+    d = ca.vertcat(S["lmt"], S["r"], S["id"], emg, lus, h, inv_n, *([S["lmt1"]] if backward else []))
     c_base = np.concatenate([
         np.full(M, goals.w_activation * 0.5 / M), np.zeros(2 * M), np.full(M, goals.w_activation * 0.5 / M),
         np.full(D, goals.w_reserve / D), np.full(M, goals.w_velocity / M)])
@@ -279,8 +292,9 @@ def _group_functions(ca, params, trial: TrialBlock, goals: Goals, Topt: float, f
         "f": ca.Function("core_f", [z, d, p], [f, ca.gradient(f, z), ca.gradient(f, p)], cse),
         # the constraint values come with the Jacobian (shared subexpressions)
         "jac": ca.Function("core_jac", [z, xn, d, p], [g, ca.jacobian(g, ca.vertcat(z, xn, p))], cse),
-        "hess": ca.Function("core_hess", [z, d, p, lam, sigma],
-                            list(_hess_blocks(ca, sigma * f + ca.dot(lam, g), z, p)), cse),
+        "hess": ca.Function("core_hess", [z, xn, d, p, lam, sigma],
+                            list(_hess_blocks(ca, sigma * f + ca.dot(lam, g), ca.vertcat(z, xn) if backward else z,
+                                              p)), cse),
     }
     # last node: pennation identity and the activation cost of a_N
     xl = ca.SX.sym("xl", 3 * M)
@@ -300,13 +314,21 @@ def _triplets(sp):
     return np.asarray(r, dtype=np.int64), np.asarray(c, dtype=np.int64)
 
 
-def _sparse(ca, shape, rows, cols, values):
-    """An MX sparse matrix from global triplets and the MX vector of their values."""
+def _sparse(ca, shape, rows, cols, values, add_duplicates: bool = False):
+    """An MX sparse matrix from global triplets and the MX vector of their values (entries at
+    one place summed with ``add_duplicates``, else refused)."""
     rows, cols = np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64)
     perm = np.lexsort((rows, cols))
     rs, cs = rows[perm], cols[perm]
-    if rs.size > 1 and np.any((np.diff(rs) == 0) & (np.diff(cs) == 0)):
+    dup = (np.diff(rs) == 0) & (np.diff(cs) == 0) if rs.size > 1 else np.zeros(0, dtype=bool)
+    if np.any(dup) and not add_duplicates:
         raise SolverError("internal error: duplicate entries in an assembled derivative matrix")
+    if np.any(dup):  # sum the entries of each place: a sparse 0/1 matrix times the values
+        place = np.concatenate([[0], np.cumsum(~dup)])
+        S = ca.DM(ca.Sparsity.triplet(int(place[-1]) + 1, perm.size, place.tolist(), perm.tolist()), 1.0)
+        values = ca.mtimes(S, values)
+        keep = np.concatenate([[True], ~dup])
+        rs, cs, perm = rs[keep], cs[keep], np.arange(int(keep.sum()))
     sp = ca.Sparsity.triplet(int(shape[0]), int(shape[1]), rs.tolist(), cs.tolist())
     if not np.array_equal(perm, np.arange(perm.size)):
         values = values.nz[perm.tolist()]
@@ -411,6 +433,8 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
         fn = _group_functions(ca, gp, t0, goals, optimal_reserve_Nm, factor_of,
                               [emg_pos[m] for m in t0.emg_muscles], n_full, p_index, zero_r)
         nz, ng = info[members[0]]["nz"], info[members[0]]["ng"]
+        backward = goals.fibre_dynamics == "backward"
+        nxn = (3 if backward else 2) * M
         data, zc, xc, rbn, Zs, Xns, XLs, Ls, LLs = [], [], [], [], [], [], [], [], []
         for i in members:
             t, N = trials[i], info[i]["N"]
@@ -418,8 +442,8 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
             rr = inp.moment_arms_m[:N].transpose(0, 2, 1).reshape(N, D * M)
             emg = t.emg_nodes if t.emg_muscles else np.zeros((N, 0))
             lus = t.fibre_length_nodes_m if t.fibre_muscles else np.zeros((N, 0))
-            data.append(np.hstack([inp.lmt_m[:N], rr, inp.moments_Nm[:N], emg, lus,
-                                   np.full((N, 1), inp.step_s), np.full((N, 1), 1.0 / N)]))
+            data.append(np.hstack([inp.lmt_m[:N], rr, inp.moments_Nm[:N], emg, lus, np.full((N, 1), inp.step_s),
+                                   np.full((N, 1), 1.0 / N), *([inp.lmt_m[1:N + 1]] if backward else [])]))
             k = np.arange(N)
             zc.append(var_off[i] + k * nz)
             xc.append(var_off[i] + (k + 1) * nz)
@@ -427,7 +451,7 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
             Z = ca.reshape(w[var_off[i]:var_off[i] + nz * N], nz, N)
             xl = w[var_off[i] + nz * N:var_off[i] + nz * N + 3 * M]
             Zs.append(Z)
-            Xns.append(ca.horzcat(Z[0:2 * M, 1:], xl[0:2 * M]))
+            Xns.append(ca.horzcat(Z[0:nxn, 1:], xl[0:nxn]))
             XLs.append(xl)
             Ls.append(ca.reshape(lam_g[con_off[i]:con_off[i] + ng * N], ng, N))
             LLs.append(lam_g[con_off[i] + ng * N:con_off[i] + ng * N + M])
@@ -462,7 +486,7 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
         # Jacobian
         rb, cb = _triplets(fn["jac"].sparsity_out(1))
         cmap = np.where(cb < nz, zc[:, None] + cb,
-                        np.where(cb < nz + 2 * M, xc[:, None] + (cb - nz), P0 + (cb - nz - 2 * M)))
+                        np.where(cb < nz + nxn, xc[:, None] + (cb - nz), P0 + (cb - nz - nxn)))
         jr.append((rbn[:, None] + rb).ravel())
         jc.append(cmap.ravel())
         jv.append(J_nodes.nz[:])
@@ -471,15 +495,20 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
         jc.append(np.where(cl < 3 * M, last_var[:, None] + cl, P0 + (cl - 3 * M)).ravel())
         jv.append(fn["jac_last"].map(T)(XL, p).nz[:])
         # Hessian of the Lagrangian
-        for (f_h, args, zcol, n) in ((fn["hess"], (Z, data, p, ca.horzcat(*Ls), lam_f), zc, n_nodes),
-                                     (fn["hess_last"], (XL, p, inv_n, ca.horzcat(*LLs), lam_f),
-                                      last_var, T)):
+        # (backward fibre dynamics: the blocks of [z_k, xn_k]; an entry of xn_k adds to node k+1's)
+        for (f_h, args, zcol, xcol, n) in (
+                (fn["hess"], (Z, Xn, data, p, ca.horzcat(*Ls), lam_f), zc, xc, n_nodes),
+                (fn["hess_last"], (XL, p, inv_n, ca.horzcat(*LLs), lam_f), last_var, last_var, T)):
             Hzz, Hzp, Hpp = f_h.map(n)(*args)
             r1, c1 = _triplets(f_h.sparsity_out(0))
             r2, c2 = _triplets(f_h.sparsity_out(1))
             r3, c3 = _triplets(f_h.sparsity_out(2))
-            hr += [(zcol[:, None] + r1).ravel(), (zcol[:, None] + r2).ravel()]
-            hc += [(zcol[:, None] + c1).ravel(), np.tile(P0 + c2, n)]
+
+            def place(i):
+                return np.where(i < nz, zcol[:, None] + i, xcol[:, None] + (i - nz)).ravel()
+
+            hr += [place(r1), place(r2)]
+            hc += [place(c1), np.tile(P0 + c2, n)]
             hv += [Hzz.nz[:], Hzp.nz[:]]
             if r3.size:
                 hpp.append(ca.MX(ca.Sparsity.triplet(n_p, n_p, r3.tolist(), c3.tolist()),
@@ -503,7 +532,8 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
             hr.append(P0 + r3)
             hc.append(P0 + c3)
             hv.append(Hp.nz[:])
-        hess = _sparse(ca, (n_var, n_var), np.concatenate(hr), np.concatenate(hc), ca.vertcat(*hv))
+        hess = _sparse(ca, (n_var, n_var), np.concatenate(hr), np.concatenate(hc), ca.vertcat(*hv),
+                       add_duplicates=goals.fibre_dynamics == "backward")
         grad = ca.vertcat(*grad_parts, sum(grad_p[1:], grad_p[0]) if n_p else ca.MX(0, 1))
         pp = ca.MX.sym("p", 0, 1)
         out.update({

@@ -57,7 +57,7 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import DataMismatchError, OptionError, UnknownMuscleError
-from .core import Goals, ParameterSpec, TrialBlock, build_problem
+from .core import FIBRE_DYNAMICS, Goals, ParameterSpec, TrialBlock, build_problem
 from .emg_inputs import mapping_for_muscles, resolve_emg_mapping
 from .estimates import EMG_TEN, PARAMETERS_FILE, EmgTenResult, tendon_stiffness_at_force_N_per_mm
 from .inputs import TrialInputs
@@ -116,6 +116,12 @@ class EmgTenSettings:
     cost ``w_emg``), ``"driven"`` (bound rows with tolerance 0: each tracked excitation is its
     scaled EMG) or ``"tracking"`` (the cost only). With ``tendon_groups`` empty no tendon
     stiffness is estimated: an EMG-informed solve of one or more trials.
+
+    ``fibre_dynamics``: the transcription of the fibre dynamics (:data:`.core.FIBRE_DYNAMICS`);
+    ``None`` (default) is ``"backward"`` in the driven mode and ``"forward"`` otherwise: with the
+    excitations fixed, the forward-Euler fibre recurrence of weakly excited muscles amplifies a
+    change of fibre length by up to 1e4 per step, the backward-Euler one damps it
+    (``docs/problem.md``).
     """
 
     w_emg: float = 10.0
@@ -131,6 +137,7 @@ class EmgTenSettings:
     emg_range_tolerance: float = 0.0
     coupling: str = "shared"
     emg_mode: str = "constrained"
+    fibre_dynamics: str | None = None
 
     def __post_init__(self):
         for name in ("w_emg", "w_activation", "w_reserve", "w_velocity"):
@@ -158,6 +165,14 @@ class EmgTenSettings:
             raise OptionError(f"the EMG mode must be one of {', '.join(EMG_MODES)}, not {self.emg_mode!r}")
         if self.emg_mode == "tracking" and not self.w_emg > 0:
             raise OptionError("the EMG mode 'tracking' needs a positive EMG weight w_emg")
+        if self.fibre_dynamics is not None and self.fibre_dynamics not in FIBRE_DYNAMICS:
+            raise OptionError(f"the fibre dynamics must be one of {', '.join(FIBRE_DYNAMICS)}, "
+                              f"not {self.fibre_dynamics!r}")
+
+    @property
+    def fibre_scheme(self) -> str:
+        """The transcription of the fibre dynamics used (``fibre_dynamics`` or the mode's default)."""
+        return self.fibre_dynamics or ("backward" if self.emg_mode == "driven" else "forward")
 
     @property
     def emg_bound(self) -> float | None:
@@ -180,6 +195,7 @@ class EmgTenSettings:
             "emg_range_tolerance": self.emg_range_tolerance,
             "coupling": self.coupling,
             "emg_mode": self.emg_mode,
+            "fibre_dynamics": self.fibre_scheme,
         }
 
 
@@ -290,7 +306,8 @@ def emg_ten_problem(trials: Sequence[EmgTenTrial], params: MuscleTendonParameter
     specs.append(ParameterSpec("emg_scale", emg_muscles, settings.emg_scale_bounds,
                                _coupling_pairs(settings.emg_groups, emg_muscles, consecutive=False)))
     goals = Goals(w_activation=settings.w_activation, w_reserve=settings.w_reserve,
-                  w_velocity=settings.w_velocity, w_emg=settings.w_emg, emg_tolerance=settings.emg_bound)
+                  w_velocity=settings.w_velocity, w_emg=settings.w_emg, emg_tolerance=settings.emg_bound,
+                  fibre_dynamics=settings.fibre_scheme)
     blocks = [TrialBlock(t.label, t.inputs, t.guess, emg_muscles=emg_muscles, emg_nodes=t.emg_nodes)
               for t in trials]
     return blocks, goals, specs
