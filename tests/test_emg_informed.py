@@ -45,6 +45,11 @@ def constrained(example, cache_dir, tmp_path_factory):
     return _solve(example, cache_dir, tmp_path_factory.mktemp("constrained") / "sol", "constrained")
 
 
+@pytest.fixture(scope="module")
+def driven(example, cache_dir, tmp_path_factory):
+    return _solve(example, cache_dir, tmp_path_factory.mktemp("driven") / "sol", "driven")
+
+
 def _deviation(example, sol):
     from musclemetab.io import read_storage
 
@@ -89,15 +94,37 @@ def test_emg_constrained_solution_satisfies_the_problem(example, constrained, ca
 
 @pytest.mark.opensim
 @pytest.mark.slow
+def test_emg_driven_excitations_equal_the_scaled_emg(example, driven, cache_dir):
+    """EMG-driven (tolerance 0) converges with the backward-Euler fibre dynamics: every tracked
+    excitation is its scaled EMG (interpolated here from the EMG file) at every control node, and
+    the problem of that scheme holds, checked with the independent equations of ``mrs_reference``."""
+    from musclemetab.geometry import compute_geometry
+
+    sol = driven
+    assert sol.success and sol.summary["workflow"]["name"] == "effort-cal emg-driven"
+    assert sol.summary["fibre_dynamics"] == "backward"
+    dev, muscles, s = _deviation(example, sol)
+    assert muscles == sorted(AUTHORS_CHANNELS)
+    assert np.max(np.abs(dev)) <= 1e-8
+    assert s[muscles.index("vaslat_r")] == pytest.approx(s[muscles.index("vasmed_r")], abs=1e-9)
+    assert np.all((s >= 0.05 - 1e-9) & (s <= 2.5 + 1e-9))
+    assert sol.summary["max_hill_residual"] < 1e-4  # recomputed with the scheme's pairing
+    g = compute_geometry(example.model, example.ik["normal"], dofs=list(DOFS), cache_dir=cache_dir)
+    t, lmt, r, mom = mesh_inputs(example, g, "normal", N)
+    check_solution_satisfies_problem(sol, t, lmt, r, mom, N, backward=True)
+
+
+@pytest.mark.opensim
+@pytest.mark.slow
 def test_fixed_excitations_make_the_fibre_recurrence_unstable(example, constrained, cache_dir):
-    """Why EMG-driven (tolerance 0) does not converge on this trial (docs/problem.md): with the
-    activation fixed, the Hill equilibrium gives the fibre velocity as a function of the fibre
-    length, and the forward-Euler step ``l_k+1 = l_k + h vmax vbar(l_k)`` multiplies a change of
-    ``l_k`` by ``g_k = 1 - h vmax (dH/dl)/(dH/dvbar)``. Worked here with the independent curves of
+    """Why EMG-driven (tolerance 0) needs the backward-Euler fibre dynamics (docs/problem.md):
+    with the activation fixed, the Hill equilibrium gives the fibre velocity as a function of the
+    fibre length, and the forward-Euler step ``l_k+1 = l_k + h vmax vbar(l_k)`` multiplies a change
+    of ``l_k`` by ``g_k = 1 - h vmax (dH/dl)/(dH/dvbar)``. Worked here with the independent curves of
     ``mrs_reference`` on the constrained solution: for the weakly excited vasti and the soleus
-    ``|g_k| > 1`` at (nearly) every node and the product exceeds 1/eps, i.e. the driven trajectories are
-    fixed by their initial fibre lengths beyond double precision. The band of the constrained
-    mode lets the excitations absorb this."""
+    ``|g_k| > 1`` at (nearly) every node and the product exceeds 1/eps, i.e. forward-Euler driven
+    trajectories are fixed by their initial fibre lengths beyond double precision. The backward
+    step ``l_k+1 = l_k + h vmax vbar(l_k+1)`` multiplies the change by ``1/(2 - g_k)``, below 1."""
     from mrs_reference import fl_ref, fpe_ref, ft_ref, fv_ref, params_of
 
     from musclemetab.geometry import compute_geometry
@@ -124,9 +151,10 @@ def test_fixed_excitations_make_the_fibre_recurrence_unstable(example, constrain
         dH_dv = (H(lm, vbar + d) - H(lm, vbar - d)) / (2 * d)
         g = 1.0 - h * P["vmax_lMo_per_s"][j] * dH_dl / dH_dv
         print(m, "nodes with |g| > 1:", int(np.sum(np.abs(g) > 1)), "of", N, "max |g|:", np.abs(g).max(),
-              "log10 prod |g|:", np.sum(np.log10(np.abs(g))))
+              "log10 prod |g|:", np.sum(np.log10(np.abs(g))), "backward max |1/(2-g)|:", np.max(np.abs(1 / (2 - g))))
         assert np.mean(np.abs(g) > 1.0) > 0.95, m
         assert np.sum(np.log10(np.abs(g))) > 16, m  # product of |g_k| above 1e16 > 1/eps
+        assert np.all(np.abs(1.0 / (2.0 - g)) < 1.0), m  # backward Euler: every step damps
 
 
 def test_an_infeasible_emg_driven_solve_says_so():
