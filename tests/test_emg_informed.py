@@ -167,6 +167,8 @@ def test_an_infeasible_emg_driven_solve_says_so():
     msg = str(emg_failure(rec, "driven", "the EMG-informed effort-cal solve"))
     assert "infeasible" in msg and "after 991 iterations" in msg and "--emg-mode constrained" in msg
     assert "--max-iter" not in msg and "more iterations will not help" in msg
+    forward = str(emg_failure(rec, "driven", "x", "forward"))  # the unstable recurrence, and the remedy
+    assert "unstable recurrence" in forward and "--fibre-dynamics" in forward and "unstable" not in msg
     stopped = RunRecord(status="Maximum_Iterations_Exceeded", success=False, iterations=3)
     assert "--max-iter" in str(emg_failure(stopped, "driven", "x"))  # a stopped solve: the limit
     assert "infeasible" in str(emg_failure(rec, "constrained", "x"))

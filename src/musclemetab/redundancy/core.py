@@ -38,8 +38,8 @@ from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
 from .static_opt import InitialGuess
 
-__all__ = ["Goals", "ParameterSpec", "TrialBlock", "PARAMETER_KINDS", "build_problem", "node_bounds",
-           "fibre_length_upper_bounds"]
+__all__ = ["Goals", "ParameterSpec", "TrialBlock", "PARAMETER_KINDS", "FIBRE_DYNAMICS", "build_problem",
+           "node_bounds", "fibre_length_upper_bounds", "check_fibre_dynamics"]
 
 ACTIVATION_BOUNDS = (0.0, 1.0)
 FIBRE_LENGTH_BOUNDS = (0.1, 1.7)
@@ -55,6 +55,18 @@ PARAMETER_KINDS = {"tendon_stiffness": "kT", "optimal_fiber_length": "lmo", "ten
 #: transcriptions of the fibre dynamics: the Hill equilibrium of interval k at its start node
 #: (forward Euler) or at its end node (backward Euler)
 FIBRE_DYNAMICS = ("forward", "backward")
+
+
+def check_fibre_dynamics(value, energy=None) -> None:
+    """Refuse a transcription of the fibre dynamics that is not one of :data:`FIBRE_DYNAMICS`,
+    and the backward one with the energy goal (whose rates pair each node's velocity with its
+    own state, the forward scheme's pairing)."""
+    if value not in FIBRE_DYNAMICS:
+        raise OptionError(f"the fibre dynamics (--fibre-dynamics) must be one of {', '.join(FIBRE_DYNAMICS)}, "
+                          f"not {value!r}")
+    if value == "backward" and energy is not None:
+        raise OptionError("the energy goal (--energy-model) needs the forward fibre dynamics; drop "
+                          "--fibre-dynamics backward or the energy goal")
 
 
 @dataclass(frozen=True)
@@ -73,9 +85,7 @@ class Goals:
     fibre_dynamics: str = "forward"
 
     def __post_init__(self):
-        if self.fibre_dynamics not in FIBRE_DYNAMICS:
-            raise OptionError(f"the fibre dynamics must be one of {', '.join(FIBRE_DYNAMICS)}, "
-                              f"not {self.fibre_dynamics!r}")
+        check_fibre_dynamics(self.fibre_dynamics, self.energy)
         for name in ("w_activation", "w_reserve", "w_velocity", "w_emg", "w_fibre_length"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):

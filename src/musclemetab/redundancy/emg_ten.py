@@ -57,7 +57,7 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import DataMismatchError, OptionError, UnknownMuscleError
-from .core import FIBRE_DYNAMICS, Goals, ParameterSpec, TrialBlock, build_problem
+from .core import Goals, ParameterSpec, TrialBlock, build_problem, check_fibre_dynamics
 from .emg_inputs import mapping_for_muscles, resolve_emg_mapping
 from .estimates import EMG_TEN, PARAMETERS_FILE, EmgTenResult, tendon_stiffness_at_force_N_per_mm
 from .inputs import TrialInputs
@@ -165,9 +165,8 @@ class EmgTenSettings:
             raise OptionError(f"the EMG mode must be one of {', '.join(EMG_MODES)}, not {self.emg_mode!r}")
         if self.emg_mode == "tracking" and not self.w_emg > 0:
             raise OptionError("the EMG mode 'tracking' needs a positive EMG weight w_emg")
-        if self.fibre_dynamics is not None and self.fibre_dynamics not in FIBRE_DYNAMICS:
-            raise OptionError(f"the fibre dynamics must be one of {', '.join(FIBRE_DYNAMICS)}, "
-                              f"not {self.fibre_dynamics!r}")
+        if self.fibre_dynamics is not None:
+            check_fibre_dynamics(self.fibre_dynamics)
 
     @property
     def fibre_scheme(self) -> str:
@@ -212,22 +211,29 @@ def informed_settings(workflow: str, mode: str = "constrained", tolerance: float
                           w_velocity=wf.w_velocity, emg_tolerance=tolerance, tendon_groups=(), emg_mode=mode)
 
 
-def emg_failure(record, mode: str, what: str):
+def emg_failure(record, mode: str, what: str, fibre_dynamics: str = "backward"):
     """The :class:`~musclemetab.errors.SolverError` of an EMG-informed solve that did not
     succeed (``record``: its :class:`~.record.RunRecord`). An infeasible EMG-driven solve says
     why: with every tracked excitation fixed, the forward-Euler fibre dynamics of weakly excited
-    muscles amplify errors by orders of magnitude per mesh step (``docs/problem.md``)."""
+    muscles amplify errors by orders of magnitude per mesh step (``docs/problem.md``); with the
+    backward-Euler ones the scaled EMG cannot explain the moments within the bounds."""
     from ..errors import SolverError
     from .problem import INFEASIBLE_STATUSES
 
     if mode != "driven" or record.status not in INFEASIBLE_STATUSES:
         return record.failure(what)
-    return SolverError(
-        f"{what} did not converge: IPOPT status {record.status} after {record.iterations} iterations. The "
-        "EMG-driven problem is infeasible in practice: with the tracked excitations fixed to the scaled EMG, the "
-        "fibre lengths of weakly excited muscles follow an unstable recurrence on the mesh, so no iterate meets "
-        "the constraints to the solver's tolerance; more iterations will not help. Use --emg-mode constrained "
-        "with a small --emg-tolerance (0.001 converges on the example's normal trial), see docs/problem.md")
+    head = (f"{what} did not converge: IPOPT status {record.status} after {record.iterations} iterations. The "
+            "EMG-driven problem is infeasible in practice: ")
+    if fibre_dynamics == "forward":
+        why = ("with the tracked excitations fixed to the scaled EMG, the forward-Euler fibre lengths of weakly "
+               "excited muscles follow an unstable recurrence on the mesh, so no iterate meets the constraints to "
+               "the solver's tolerance; more iterations will not help. Drop --fibre-dynamics forward (the driven "
+               "mode's default is backward), or use --emg-mode constrained with a small --emg-tolerance")
+    else:
+        why = ("with the tracked excitations fixed to the scaled EMG (scale factors within their bounds), the "
+               "muscles and reserves cannot meet the joint moments and muscle equilibria; more iterations will not "
+               "help. Check the EMG files and --emg-mapping, or use --emg-mode constrained with an --emg-tolerance")
+    return SolverError(head + why + ", see docs/problem.md")
 
 
 def settings_for_muscles(settings: EmgTenSettings | None, muscles: Sequence[str]) -> EmgTenSettings:

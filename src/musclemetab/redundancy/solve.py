@@ -143,7 +143,7 @@ def solve_with_parameters(
         "mesh_step_s": inputs.step_s,
         "optimal_reserve_Nm": options.optimal_reserve_Nm,
         "static_optimisation_objective": so.objective,
-        "fibre_dynamics": "forward",
+        "fibre_dynamics": options.fibre_dynamics,
         "fibre_length_bounds": {"default": list(FIBRE_LENGTH_BOUNDS), "widened_upper": {
             m: float(u) for m, u in zip(inputs.muscles, lm_upper) if u > FIBRE_LENGTH_BOUNDS[1]}},
         "initial_guess": "static optimisation (rigid tendons)" if warm_start is None else
