@@ -201,3 +201,20 @@ def test_metabolics_of_a_solution_object_equal_those_of_its_folder(example, cons
     assert list(ca) == list(cb)
     for k in ca:  # the folder holds the same states to the storage file's precision
         np.testing.assert_allclose(ca[k], cb[k], rtol=1e-7, atol=1e-9, err_msg=k)
+
+
+def test_backward_fibre_dynamics_with_the_energy_goal_is_refused(example, tmp_path):
+    """The energy goal's rates pair each node's velocity with its own state (the forward
+    scheme): ``--fibre-dynamics backward --energy-model`` is refused in one line, nothing written."""
+    from musclemetab.cli import main
+
+    argv = ["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
+            str(example.id["normal"]), "--fibre-dynamics", "backward", "--energy-model", "UM10", "--mass", "70",
+            "--height", "1.7", "--out", str(tmp_path / "x")]
+    buf = io.StringIO()
+    with contextlib.redirect_stderr(buf), contextlib.redirect_stdout(buf):
+        code = main(argv)
+    text = buf.getvalue().strip()
+    assert code != 0 and len(text.splitlines()) == 1
+    assert "--fibre-dynamics" in text and "--energy-model" in text
+    assert not (tmp_path / "x").exists()
