@@ -14,7 +14,7 @@ fibre velocity ``v~M``    M x N       -10 ... 10 lMo/s
 ========================  ==========  ===================
 
 .. [#] or, for a muscle the geometry stretches further, its longest rigid-tendon fibre length
-   plus 0.05 (:func:`.core.fibre_length_upper_bounds`).
+   plus 0.05 (:func:`.bounds.fibre_length_upper_bounds`).
 
 Constraints at nodes ``k = 0 ... N-1`` (forward Euler; with ``fibre_dynamics="backward"`` the
 Hill equilibrium holds at node ``k+1`` with ``v~M_k``, ``docs/problem.md``)::

@@ -131,7 +131,7 @@ def solve_with_parameters(
         options = options.with_(ipopt={"mu_init": WARM_START_MU_INIT, **options.ipopt})
     t_prep = _time.perf_counter() - t_start
     ocp = solve_ocp(inputs, params, guess, options)
-    from .core import FIBRE_LENGTH_BOUNDS, fibre_length_upper_bounds
+    from .bounds import FIBRE_LENGTH_BOUNDS, fibre_length_upper_bounds
 
     lm_upper = fibre_length_upper_bounds(inputs, params)
     summary = {
@@ -447,7 +447,7 @@ class _Background:
 def muscles_at_fibre_length_bound(solution: Solution, tolerance: float = 1e-3) -> list[str]:
     """Muscles whose normalised fibre length reaches the problem's upper bound somewhere
     (1.7, or the widened bound recorded in ``summary['fibre_length_bounds']``)."""
-    from .core import FIBRE_LENGTH_BOUNDS
+    from .bounds import FIBRE_LENGTH_BOUNDS
 
     widened = solution.summary.get("fibre_length_bounds", {}).get("widened_upper", {})
     top = np.max(np.asarray(solution.lm_norm, dtype=float), axis=0)
