@@ -21,7 +21,11 @@ per-interval functions (SX: constraints, objective, Jacobian, Hessian of the Lag
 built once and mapped over the group's nodes; their nonzeros are placed into the global sparse
 matrices handed to IPOPT (block banded Jacobian with dense factor columns; block diagonal
 Hessian with a border and a factor block summed over all nodes). Moment arms zero at every node
-of a group are removed from its expressions, and with them their structural zeros.
+of a group are removed from its expressions, and with them their structural zeros. The fibre
+dynamics (``Goals.fibre_dynamics``) are forward Euler with the Hill equilibrium at each
+interval's start node, or backward Euler with it at the end node: then the interval's rows are
+nonlinear in the next node's ``[a, l~M, lp]``, its Hessian blocks couple ``z_k`` with them, and
+the entries of two intervals at one place of the Hessian are summed.
 """
 
 from __future__ import annotations
