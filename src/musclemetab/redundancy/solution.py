@@ -194,7 +194,9 @@ class Solution:
     """Muscle states, controls and forces on the mesh, time-first arrays ``(N+1, M)``.
 
     Controls (``excitation``, ``vm_norm``), ``force_velocity_multiplier``,
-    ``active_fiber_force_N`` and ``reserve_Nm`` repeat node ``N-1`` at node ``N``.
+    ``active_fiber_force_N`` and ``reserve_Nm`` repeat node ``N-1`` at node ``N`` (with the
+    backward fibre dynamics ``vm_norm``, ``force_velocity_multiplier`` and
+    ``active_fiber_force_N`` are those of nodes ``1 ... N`` and node ``0`` repeats node ``1``).
     ``vm_norm`` is ``v~M`` in lMo/s (the optimisation variable); the file stores
     ``v~M/vmax`` (see :attr:`normalized_fiber_velocity`).
     """
