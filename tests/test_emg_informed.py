@@ -150,10 +150,11 @@ def test_fixed_excitations_make_the_fibre_recurrence_unstable(example, constrain
         dH_dl = (H(lm + d, vbar) - H(lm - d, vbar)) / (2 * d)
         dH_dv = (H(lm, vbar + d) - H(lm, vbar - d)) / (2 * d)
         g = 1.0 - h * P["vmax_lMo_per_s"][j] * dH_dl / dH_dv
-        print(m, "nodes with |g| > 1:", int(np.sum(np.abs(g) > 1)), "of", N, "max |g|:", np.abs(g).max(),
+        print(m, "nodes with |g| > 1:", int(np.sum(np.abs(g) > 1)), "of", N, "g from", g.min(), "to", g.max(),
               "log10 prod |g|:", np.sum(np.log10(np.abs(g))), "backward max |1/(2-g)|:", np.max(np.abs(1 / (2 - g))))
         assert np.mean(np.abs(g) > 1.0) > 0.95, m
         assert np.sum(np.log10(np.abs(g))) > 16, m  # product of |g_k| above 1e16 > 1/eps
+        assert np.all(g < 1.0), m  # lambda = (g - 1)/h < 0: the fibre dynamics are stable at every node
         assert np.all(np.abs(1.0 / (2.0 - g)) < 1.0), m  # backward Euler: every step damps
 
 
