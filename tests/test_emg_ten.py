@@ -338,10 +338,13 @@ def test_study_problem_size_with_coupling_constraints(example, geometries):
 
 # --------------------------------------------------------------------------- derivatives
 @pytest.mark.opensim
-@pytest.mark.parametrize("coupling", ["constraints", "shared"])
-def test_assembled_derivatives_equal_automatic_differentiation(example, geometries, coupling):
+@pytest.mark.parametrize("coupling, fibre_dynamics", [("constraints", "forward"), ("shared", "forward"),
+                                                      ("shared", "backward")])
+def test_assembled_derivatives_equal_automatic_differentiation(example, geometries, coupling, fibre_dynamics):
     """The hand-assembled Jacobian and Hessian of the multi-trial NLP equal CasADi's AD (two
-    short trials cut from the example, random point)."""
+    short trials cut from the example, random point), with either transcription of the fibre
+    dynamics (backward: the Hill equilibrium at the end node, second derivatives shared by two
+    intervals' blocks)."""
     import casadi as ca
     from dataclasses import replace
 
@@ -365,7 +368,7 @@ def test_assembled_derivatives_equal_automatic_differentiation(example, geometri
         trials.append(EmgTenTrial(label=lab, inputs=inp, emg_muscles=tuple(sorted(AUTHORS_CHANNELS)),
                                   emg_nodes=rng.random((n, 9)), emg_channels={}, guess=guess))
     params, _ = workflow_parameters("effort-cal", read_muscle_parameters(example.model), trials[0].inputs.muscles)
-    settings = EmgTenSettings(coupling=coupling)
+    settings = EmgTenSettings(coupling=coupling, fibre_dynamics=fibre_dynamics)
     nlp = build_emg_ten_nlp(trials, params, settings)
     x, f, g = nlp["x"], nlp["f"], nlp["g"]
     n_p = 8 if coupling == "shared" else 15

@@ -97,6 +97,11 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
                    "JSON file {\"muscle\": [\"channel\", ...]} (default: default)")
     p.add_argument("--labels", nargs="+", metavar="NAME",
                    help="emg-ten: trial names, i.e. the output sub-folders (default: the IK file stems)")
+    p.add_argument("--fibre-dynamics", choices=("forward", "backward"),
+                   help="transcription of the fibre dynamics: 'forward' Euler with the Hill equilibrium at each "
+                   "interval's start node (the study's), or 'backward' Euler with it at the end node (default: "
+                   "backward with --emg-mode driven, where the forward recurrence is unstable, else forward; "
+                   "docs/problem.md)")
     p.add_argument("--passive", metavar="FILE",
                    help="calibrated passive parameters for effort-cal/effort-ten/emg-ten: passive_parameters.csv "
                    "(muscle,kPE,s0,sM) or the study's passiveMoments.mat (default: the published "
@@ -205,6 +210,8 @@ def solve_command(args) -> int:
     options = _solver_options(args)
     if energy is not None:
         options = options.with_(energy=energy)
+    if args.fibre_dynamics:
+        options = options.with_(fibre_dynamics=args.fibre_dynamics)
     warm = None
     if args.warm_start:
         from .solution import Solution
@@ -337,6 +344,8 @@ def _as_list(value) -> list:
 def _emg_ten_command(args, ik: list, idf: list) -> int:
     """``musclemetab solve --workflow emg-ten`` or ``--emg`` with an effort workflow: one NLP over
     all trials, then the files."""
+    from dataclasses import replace
+
     from .emg_ten import EmgTenSettings, informed_settings, solve_emg_ten
     from .problem import failure_advice
     from .workflows import parse_tendon_stiffness
@@ -354,10 +363,11 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
         if args.parameters or args.warm_start:
             raise OptionError("--parameters and --warm-start cannot be used with an EMG-informed solve; give "
                               "--tendon-stiffness MUSCLE=KT,... instead of --parameters, and drop --warm-start")
-        settings = informed_settings(args.workflow, mode, args.emg_tolerance, args.emg_weight)
+        settings = replace(informed_settings(args.workflow, mode, args.emg_tolerance, args.emg_weight),
+                           fibre_dynamics=args.fibre_dynamics)
         return _informed_command(args, ik, idf, settings, parse_tendon_stiffness(args.tendon_stiffness)
                                  if args.tendon_stiffness else None)
-    settings = EmgTenSettings(emg_tolerance=args.emg_tolerance, emg_mode=mode,
+    settings = EmgTenSettings(emg_tolerance=args.emg_tolerance, emg_mode=mode, fibre_dynamics=args.fibre_dynamics,
                               **({"w_emg": args.emg_weight} if args.emg_weight is not None else {}))
     wrong = [o for o, v in (("--tendon-stiffness", args.tendon_stiffness), ("--parameters", args.parameters),
                             ("--warm-start", args.warm_start)) if v]
@@ -428,7 +438,8 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
         result.write(args.out)
     r = result.run_record
     if not r.success:
-        raise emg_failure(r, settings.emg_mode, f"the EMG-informed {args.workflow} solve (written to {args.out})")
+        raise emg_failure(r, settings.emg_mode, f"the EMG-informed {args.workflow} solve (written to {args.out})",
+                          settings.fibre_scheme)
     scales = ", ".join(f"{m} {v:.3g}" for m, v in result.emg_scale.items())
     print(f"solve: {args.workflow} EMG-{settings.emg_mode} {len(result.solutions)} trial(s): {r.status} in "
           f"{r.iterations} iterations, objective {r.objective:.6e}; EMG scale {scales} -> {args.out}")

@@ -21,7 +21,11 @@ per-interval functions (SX: constraints, objective, Jacobian, Hessian of the Lag
 built once and mapped over the group's nodes; their nonzeros are placed into the global sparse
 matrices handed to IPOPT (block banded Jacobian with dense factor columns; block diagonal
 Hessian with a border and a factor block summed over all nodes). Moment arms zero at every node
-of a group are removed from its expressions, and with them their structural zeros.
+of a group are removed from its expressions, and with them their structural zeros. The fibre
+dynamics (``Goals.fibre_dynamics``) are forward Euler with the Hill equilibrium at each
+interval's start node, or backward Euler with it at the end node: then the interval's rows are
+nonlinear in the next node's ``[a, l~M, lp]``, its Hessian blocks couple ``z_k`` with them, and
+the entries of two intervals at one place of the Hessian are summed.
 """
 
 from __future__ import annotations
@@ -32,32 +36,44 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import DataMismatchError, OptionError, SolverError, UnknownMuscleError
-from ..muscle import activation_rate, hill_residual, longest_fibre_length_bound, tendon_force_length
+from ..muscle import activation_rate, hill_residual, tendon_force_length
+from .bounds import (  # noqa: F401  (re-exported)
+    ACTIVATION_BOUNDS, FIBRE_LENGTH_BOUNDS, FIBRE_LENGTH_MARGIN, FIBRE_VELOCITY_BOUNDS, MIN_PROJECTED_LENGTH_M,
+    RESERVE_BOUNDS, bounds_and_guess, fibre_length_upper_bounds, node_bounds,
+)
 from .energy import EnergyGoal, node_rates
 from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
 from .static_opt import InitialGuess
 
-__all__ = ["Goals", "ParameterSpec", "TrialBlock", "PARAMETER_KINDS", "build_problem", "node_bounds",
-           "fibre_length_upper_bounds"]
+__all__ = ["Goals", "ParameterSpec", "TrialBlock", "PARAMETER_KINDS", "FIBRE_DYNAMICS", "build_problem",
+           "node_bounds", "fibre_length_upper_bounds", "check_fibre_dynamics"]
 
-ACTIVATION_BOUNDS = (0.0, 1.0)
-FIBRE_LENGTH_BOUNDS = (0.1, 1.7)
-#: optimal lengths added to a muscle's longest rigid-tendon fibre length where that exceeds the
-#: default upper bound less this margin (:func:`fibre_length_upper_bounds`)
-FIBRE_LENGTH_MARGIN = 0.05
-FIBRE_VELOCITY_BOUNDS = (-10.0, 10.0)
-RESERVE_BOUNDS = (-1.0, 1.0)
-MIN_PROJECTED_LENGTH_M = 1e-4
 #: kinds of shared scale factors; the muscle parameters a factor multiplies
 PARAMETER_KINDS = {"tendon_stiffness": "kT", "optimal_fiber_length": "lmo", "tendon_slack_length": "lts",
                    "emg_scale": None}
+#: transcriptions of the fibre dynamics: the Hill equilibrium of interval k at its start node
+#: (forward Euler) or at its end node (backward Euler)
+FIBRE_DYNAMICS = ("forward", "backward")
+
+
+def check_fibre_dynamics(value, energy=None) -> None:
+    """Refuse a transcription of the fibre dynamics that is not one of :data:`FIBRE_DYNAMICS`,
+    and the backward one with the energy goal (whose rates pair each node's velocity with its
+    own state, the forward scheme's pairing)."""
+    if value not in FIBRE_DYNAMICS:
+        raise OptionError(f"the fibre dynamics (--fibre-dynamics) must be one of {', '.join(FIBRE_DYNAMICS)}, "
+                          f"not {value!r}")
+    if value == "backward" and energy is not None:
+        raise OptionError("the energy goal (--energy-model) needs the forward fibre dynamics; drop "
+                          "--fibre-dynamics backward or the energy goal")
 
 
 @dataclass(frozen=True)
 class Goals:
     """Weights of the objective and the EMG bound (``None``: no bound rows); ``energy``: the
-    energy goal (:class:`.energy.EnergyGoal`), or ``None``."""
+    energy goal (:class:`.energy.EnergyGoal`), or ``None``; ``fibre_dynamics``: the
+    transcription of ``dl~M/dt = v~M`` (:data:`FIBRE_DYNAMICS`, ``docs/problem.md``)."""
 
     w_activation: float = 1.0
     w_reserve: float = 1000.0
@@ -66,8 +82,10 @@ class Goals:
     emg_tolerance: float | None = None
     w_fibre_length: float = 0.0
     energy: EnergyGoal | None = None
+    fibre_dynamics: str = "forward"
 
     def __post_init__(self):
+        check_fibre_dynamics(self.fibre_dynamics, self.energy)
         for name in ("w_activation", "w_reserve", "w_velocity", "w_emg", "w_fibre_length"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
@@ -121,47 +139,6 @@ class TrialBlock:
                 tuple(self.fibre_muscles))
 
 
-def fibre_length_upper_bounds(inputs: TrialInputs, params: MuscleTendonParameters, specs=()) -> np.ndarray:
-    """Upper bound of each muscle's normalised fibre length in one trial (``docs/problem.md``).
-
-    A fibre cannot be longer than with its tendon at slack length (a tendon shorter than its
-    slack length carries no force, so neither can the fibre): ``l~M <= l~M_rigid =
-    sqrt((lMT - lTs)^2 + w^2) / lMo``. The bound is ``FIBRE_LENGTH_BOUNDS[1]`` (1.7), or
-    ``max over the nodes of l~M_rigid + FIBRE_LENGTH_MARGIN`` where that is larger, so that the
-    box never excludes the muscle's only equilibria. With scale factors of ``lMo`` or ``lTs``
-    in ``specs`` the longest rigid-tendon length is taken at their lower bounds.
-    """
-    p = params.subset(inputs.muscles)
-    lmo = np.asarray(p.optimal_fiber_length_m, dtype=float).copy()
-    lts = np.asarray(p.tendon_slack_length_m, dtype=float).copy()
-    width = np.asarray(p.width_m, dtype=float).copy()
-    pos = {m: k for k, m in enumerate(inputs.muscles)}
-    for s in specs:
-        if s.kind in ("optimal_fiber_length", "tendon_slack_length") and s.bounds[0] < 1.0:
-            k = [pos[m] for m in s.muscles if m in pos]
-            if s.kind == "optimal_fiber_length":
-                lmo[k] *= s.bounds[0]
-                width[k] *= s.bounds[0]
-            else:
-                lts[k] *= s.bounds[0]
-    return longest_fibre_length_bound(inputs.lmt_m, lts, lmo, width, FIBRE_LENGTH_BOUNDS[1], FIBRE_LENGTH_MARGIN)
-
-
-def node_bounds(M: int, D: int, lm_upper=None) -> tuple[np.ndarray, np.ndarray]:
-    """Lower and upper bounds of one node's variables ``[a, l~M, lM cos(alpha), e, reserve, v~M]``
-    (``lm_upper``: per-muscle upper bounds of ``l~M``, default ``FIBRE_LENGTH_BOUNDS[1]``)."""
-    lm_upper = np.full(M, FIBRE_LENGTH_BOUNDS[1]) if lm_upper is None else np.asarray(lm_upper, dtype=float)
-    lb = np.concatenate([
-        np.full(M, ACTIVATION_BOUNDS[0]), np.full(M, FIBRE_LENGTH_BOUNDS[0]), np.full(M, MIN_PROJECTED_LENGTH_M),
-        np.full(M, ACTIVATION_BOUNDS[0]), np.full(D, RESERVE_BOUNDS[0]), np.full(M, FIBRE_VELOCITY_BOUNDS[0]),
-    ])
-    ub = np.concatenate([
-        np.full(M, ACTIVATION_BOUNDS[1]), lm_upper, np.full(M, np.inf),
-        np.full(M, ACTIVATION_BOUNDS[1]), np.full(D, RESERVE_BOUNDS[1]), np.full(M, FIBRE_VELOCITY_BOUNDS[1]),
-    ])
-    return lb, ub
-
-
 def _constants(params: MuscleTendonParameters, ca):
     P = {k: ca.DM(np.asarray(v, dtype=float)) for k, v in dict(
         lmo=params.optimal_fiber_length_m, lts=params.tendon_slack_length_m, vmax=params.max_contraction_velocity,
@@ -172,24 +149,25 @@ def _constants(params: MuscleTendonParameters, ca):
     return P
 
 
-def _node_expressions(sym, M: int, D: int, h, P: dict, optimal_reserve_Nm: float, ca):
-    """Symbols and constraint expressions of one mesh interval (:mod:`.problem`)."""
+def _node_expressions(sym, M: int, D: int, h, P: dict, optimal_reserve_Nm: float, ca, backward: bool = False):
+    """Symbols and constraint expressions of one mesh interval (:mod:`.problem`); with
+    ``backward`` the Hill equilibrium holds at the end node (``a1, lm1, lp1, lmt1``) with ``vm``."""
     a, lm, lp = sym("a", M), sym("lm", M), sym("lp", M)
     e, aT, vm = sym("e", M), sym("aT", D), sym("vm", M)
-    a1, lm1 = sym("a1", M), sym("lm1", M)
-    lmt, rflat, mom = sym("lmt", M), sym("r", D * M), sym("id", D)
+    a1, lm1, lp1 = sym("a1", M), sym("lm1", M), sym("lp1", M)
+    lmt, rflat, mom, lmt1 = sym("lmt", M), sym("r", D * M), sym("id", D), sym("lmt1", M)
     penn = (lm * P["lmo"]) ** 2 - P["w2"] - lp**2
     dyn_a = a1 - a - h * activation_rate(e, a)
     dyn_lm = lm1 - lm - h * vm
     hill = hill_residual(
-        a, lm, vm, lp, lmt,
+        *((a1, lm1, vm, lp1, lmt1) if backward else (a, lm, vm, lp, lmt)),
         optimal_fiber_length_m=P["lmo"], tendon_slack_length_m=P["lts"],
         max_contraction_velocity=P["vmax"], kT=P["kT"], kpe=P["kpe"], s0=P["s0"], sm=P["sm"],
     )
     ft = tendon_force_length((lmt - lp) / P["lts"], P["kT"])
     R = ca.reshape(rflat, D, M)
     moment = mom - ca.mtimes(R, P["f0"] * ft) - optimal_reserve_Nm * aT
-    syms = dict(a=a, lm=lm, lp=lp, e=e, aT=aT, vm=vm, a1=a1, lm1=lm1, lmt=lmt, r=rflat, id=mom)
+    syms = dict(a=a, lm=lm, lp=lp, e=e, aT=aT, vm=vm, a1=a1, lm1=lm1, lp1=lp1, lmt=lmt, r=rflat, id=mom, lmt1=lmt1)
     return syms, ca.vertcat(dyn_a, dyn_lm, penn, hill, moment), penn
 
 
@@ -222,8 +200,11 @@ def _group_functions(ca, params, trial: TrialBlock, goals: Goals, Topt: float, f
                      n_full: int, p_index, zero_r):
     """Per-interval and last-node functions (SX) of one group of trials; see the module docstring.
 
-    Node inputs: ``z`` (5M+D), ``xn = [a, l~M]`` of the next node, data ``d = [lMT, r (column-major
-    D x M), ID, EMG, lUS, h, 1/N]``, the shared variables ``p``. ``factor_of[kind]`` lists
+    Node inputs: ``z`` (5M+D), ``xn = [a, l~M]`` of the next node (backward fibre dynamics:
+    ``[a, l~M, lp]``), data ``d = [lMT, r (column-major D x M), ID, EMG, lUS, h, 1/N]`` (backward:
+    then ``lMT`` of the next node), the shared variables ``p``. With the backward fibre dynamics
+    the constraints are nonlinear in ``xn``: the Hessian functions take ``xn`` and return the
+    blocks of ``[z, xn]``. ``factor_of[kind]`` lists
     ``(muscle index, factor index)``; ``emg_factor`` the factor index of each tracked muscle.
     """
     inp = trial.inputs
@@ -245,7 +226,8 @@ def _group_functions(ca, params, trial: TrialBlock, goals: Goals, Topt: float, f
             P[key] = v
     h, inv_n = ca.SX.sym("h"), ca.SX.sym("inv_n")
     emg, lus = ca.SX.sym("emg", nE), ca.SX.sym("lus", nU)
-    S, gk, _ = _node_expressions(ca.SX.sym, M, D, h, P, Topt, ca)
+    backward = goals.fibre_dynamics == "backward"
+    S, gk, _ = _node_expressions(ca.SX.sym, M, D, h, P, Topt, ca, backward)
     if len(zero_r):
         gk = ca.substitute(gk, S["r"][list(zero_r)], ca.SX.zeros(len(zero_r)))
     pos = {m: i for i, m in enumerate(inp.muscles)}
@@ -253,8 +235,8 @@ def _group_functions(ca, params, trial: TrialBlock, goals: Goals, Topt: float, f
         if nE else ca.SX(0, 1)
     g = ca.vertcat(gk, track) if goals.emg_tolerance is not None else gk
     z = ca.vertcat(S["a"], S["lm"], S["lp"], S["e"], S["aT"], S["vm"])
-    xn = ca.vertcat(S["a1"], S["lm1"])
-    d = ca.vertcat(S["lmt"], S["r"], S["id"], emg, lus, h, inv_n)
+    xn = ca.vertcat(S["a1"], S["lm1"], S["lp1"]) if backward else ca.vertcat(S["a1"], S["lm1"])
+    d = ca.vertcat(S["lmt"], S["r"], S["id"], emg, lus, h, inv_n, *([S["lmt1"]] if backward else []))
     c_base = np.concatenate([
         np.full(M, goals.w_activation * 0.5 / M), np.zeros(2 * M), np.full(M, goals.w_activation * 0.5 / M),
         np.full(D, goals.w_reserve / D), np.full(M, goals.w_velocity / M)])
@@ -279,8 +261,9 @@ def _group_functions(ca, params, trial: TrialBlock, goals: Goals, Topt: float, f
         "f": ca.Function("core_f", [z, d, p], [f, ca.gradient(f, z), ca.gradient(f, p)], cse),
         # the constraint values come with the Jacobian (shared subexpressions)
         "jac": ca.Function("core_jac", [z, xn, d, p], [g, ca.jacobian(g, ca.vertcat(z, xn, p))], cse),
-        "hess": ca.Function("core_hess", [z, d, p, lam, sigma],
-                            list(_hess_blocks(ca, sigma * f + ca.dot(lam, g), z, p)), cse),
+        "hess": ca.Function("core_hess", [z, xn, d, p, lam, sigma],
+                            list(_hess_blocks(ca, sigma * f + ca.dot(lam, g), ca.vertcat(z, xn) if backward else z,
+                                              p)), cse),
     }
     # last node: pennation identity and the activation cost of a_N
     xl = ca.SX.sym("xl", 3 * M)
@@ -300,13 +283,21 @@ def _triplets(sp):
     return np.asarray(r, dtype=np.int64), np.asarray(c, dtype=np.int64)
 
 
-def _sparse(ca, shape, rows, cols, values):
-    """An MX sparse matrix from global triplets and the MX vector of their values."""
+def _sparse(ca, shape, rows, cols, values, add_duplicates: bool = False):
+    """An MX sparse matrix from global triplets and the MX vector of their values (entries at
+    one place summed with ``add_duplicates``, else refused)."""
     rows, cols = np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64)
     perm = np.lexsort((rows, cols))
     rs, cs = rows[perm], cols[perm]
-    if rs.size > 1 and np.any((np.diff(rs) == 0) & (np.diff(cs) == 0)):
+    dup = (np.diff(rs) == 0) & (np.diff(cs) == 0) if rs.size > 1 else np.zeros(0, dtype=bool)
+    if np.any(dup) and not add_duplicates:
         raise SolverError("internal error: duplicate entries in an assembled derivative matrix")
+    if np.any(dup):  # sum the entries of each place: a sparse 0/1 matrix times the values
+        place = np.concatenate([[0], np.cumsum(~dup)])
+        S = ca.DM(ca.Sparsity.triplet(int(place[-1]) + 1, perm.size, place.tolist(), perm.tolist()), 1.0)
+        values = ca.mtimes(S, values)
+        keep = np.concatenate([[True], ~dup])
+        rs, cs, perm = rs[keep], cs[keep], np.arange(int(keep.sum()))
     sp = ca.Sparsity.triplet(int(shape[0]), int(shape[1]), rs.tolist(), cs.tolist())
     if not np.array_equal(perm, np.arange(perm.size)):
         values = values.nz[perm.tolist()]
@@ -411,6 +402,8 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
         fn = _group_functions(ca, gp, t0, goals, optimal_reserve_Nm, factor_of,
                               [emg_pos[m] for m in t0.emg_muscles], n_full, p_index, zero_r)
         nz, ng = info[members[0]]["nz"], info[members[0]]["ng"]
+        backward = goals.fibre_dynamics == "backward"
+        nxn = (3 if backward else 2) * M
         data, zc, xc, rbn, Zs, Xns, XLs, Ls, LLs = [], [], [], [], [], [], [], [], []
         for i in members:
             t, N = trials[i], info[i]["N"]
@@ -418,8 +411,8 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
             rr = inp.moment_arms_m[:N].transpose(0, 2, 1).reshape(N, D * M)
             emg = t.emg_nodes if t.emg_muscles else np.zeros((N, 0))
             lus = t.fibre_length_nodes_m if t.fibre_muscles else np.zeros((N, 0))
-            data.append(np.hstack([inp.lmt_m[:N], rr, inp.moments_Nm[:N], emg, lus,
-                                   np.full((N, 1), inp.step_s), np.full((N, 1), 1.0 / N)]))
+            data.append(np.hstack([inp.lmt_m[:N], rr, inp.moments_Nm[:N], emg, lus, np.full((N, 1), inp.step_s),
+                                   np.full((N, 1), 1.0 / N), *([inp.lmt_m[1:N + 1]] if backward else [])]))
             k = np.arange(N)
             zc.append(var_off[i] + k * nz)
             xc.append(var_off[i] + (k + 1) * nz)
@@ -427,7 +420,7 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
             Z = ca.reshape(w[var_off[i]:var_off[i] + nz * N], nz, N)
             xl = w[var_off[i] + nz * N:var_off[i] + nz * N + 3 * M]
             Zs.append(Z)
-            Xns.append(ca.horzcat(Z[0:2 * M, 1:], xl[0:2 * M]))
+            Xns.append(ca.horzcat(Z[0:nxn, 1:], xl[0:nxn]))
             XLs.append(xl)
             Ls.append(ca.reshape(lam_g[con_off[i]:con_off[i] + ng * N], ng, N))
             LLs.append(lam_g[con_off[i] + ng * N:con_off[i] + ng * N + M])
@@ -462,7 +455,7 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
         # Jacobian
         rb, cb = _triplets(fn["jac"].sparsity_out(1))
         cmap = np.where(cb < nz, zc[:, None] + cb,
-                        np.where(cb < nz + 2 * M, xc[:, None] + (cb - nz), P0 + (cb - nz - 2 * M)))
+                        np.where(cb < nz + nxn, xc[:, None] + (cb - nz), P0 + (cb - nz - nxn)))
         jr.append((rbn[:, None] + rb).ravel())
         jc.append(cmap.ravel())
         jv.append(J_nodes.nz[:])
@@ -471,15 +464,20 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
         jc.append(np.where(cl < 3 * M, last_var[:, None] + cl, P0 + (cl - 3 * M)).ravel())
         jv.append(fn["jac_last"].map(T)(XL, p).nz[:])
         # Hessian of the Lagrangian
-        for (f_h, args, zcol, n) in ((fn["hess"], (Z, data, p, ca.horzcat(*Ls), lam_f), zc, n_nodes),
-                                     (fn["hess_last"], (XL, p, inv_n, ca.horzcat(*LLs), lam_f),
-                                      last_var, T)):
+        # (backward fibre dynamics: the blocks of [z_k, xn_k]; an entry of xn_k adds to node k+1's)
+        for (f_h, args, zcol, xcol, n) in (
+                (fn["hess"], (Z, Xn, data, p, ca.horzcat(*Ls), lam_f), zc, xc, n_nodes),
+                (fn["hess_last"], (XL, p, inv_n, ca.horzcat(*LLs), lam_f), last_var, last_var, T)):
             Hzz, Hzp, Hpp = f_h.map(n)(*args)
             r1, c1 = _triplets(f_h.sparsity_out(0))
             r2, c2 = _triplets(f_h.sparsity_out(1))
             r3, c3 = _triplets(f_h.sparsity_out(2))
-            hr += [(zcol[:, None] + r1).ravel(), (zcol[:, None] + r2).ravel()]
-            hc += [(zcol[:, None] + c1).ravel(), np.tile(P0 + c2, n)]
+
+            def place(i):
+                return np.where(i < nz, zcol[:, None] + i, xcol[:, None] + (i - nz)).ravel()
+
+            hr += [place(r1), place(r2)]
+            hc += [place(c1), np.tile(P0 + c2, n)]
             hv += [Hzz.nz[:], Hzp.nz[:]]
             if r3.size:
                 hpp.append(ca.MX(ca.Sparsity.triplet(n_p, n_p, r3.tolist(), c3.tolist()),
@@ -503,7 +501,8 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
             hr.append(P0 + r3)
             hc.append(P0 + c3)
             hv.append(Hp.nz[:])
-        hess = _sparse(ca, (n_var, n_var), np.concatenate(hr), np.concatenate(hc), ca.vertcat(*hv))
+        hess = _sparse(ca, (n_var, n_var), np.concatenate(hr), np.concatenate(hc), ca.vertcat(*hv),
+                       add_duplicates=goals.fibre_dynamics == "backward")
         grad = ca.vertcat(*grad_parts, sum(grad_p[1:], grad_p[0]) if n_p else ca.MX(0, 1))
         pp = ca.MX.sym("p", 0, 1)
         out.update({
@@ -513,7 +512,7 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
             "hess_lag": ca.Function("nlp_hess_l", [w, pp, lam_f, lam_g], [hess], ["x", "p", "lam_f", "lam_g"],
                                     ["triu_hess_gamma_x_x"]),
         })
-    out.update(_bounds_and_guess(trials, params, info, specs, goals, p_index, n_p, pairs))
+    out.update(bounds_and_guess(trials, params, info, specs, goals, p_index, n_p, pairs))
     if out["x0"].size != n_var or g.shape[0] != n_con:
         raise SolverError(f"internal error: problem size {out['x0'].size}/{g.shape[0]}, expected {n_var}/{n_con}")
     if not np.all(np.isfinite(out["x0"])):
@@ -521,27 +520,3 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
     n_ineq = sum(d["nb"] * d["N"] for d in info)
     out.update(n_equality_constraints=n_con - n_ineq, n_inequality_constraints=n_ineq)
     return out
-
-
-def _bounds_and_guess(trials, params, info, specs, goals, p_index, n_p, pairs) -> dict:
-    lbx, ubx, x0, lbg, ubg = [], [], [], [], []
-    tol = goals.emg_tolerance or 0.0
-    for t, d in zip(trials, info):
-        M, D, N, nb, gs = d["M"], d["D"], d["N"], d["nb"], t.guess
-        lb_node, ub_node = node_bounds(M, D, fibre_length_upper_bounds(t.inputs, params, specs))
-        lbx += [np.tile(lb_node, N), lb_node[:3 * M]]
-        ubx += [np.tile(ub_node, N), ub_node[:3 * M]]
-        Z0 = np.hstack([gs.activation[:N], gs.lm_norm[:N], gs.lm_projected_m[:N],
-                        gs.excitation[:N], gs.reserve[:N], gs.vm_norm[:N]])
-        x0 += [Z0.reshape(-1), gs.activation[N], gs.lm_norm[N], gs.lm_projected_m[N]]
-        n_eq = 4 * M + D
-        lbg += [np.tile(np.concatenate([np.zeros(n_eq), np.full(nb, -tol)]), N), np.zeros(M)]
-        ubg += [np.tile(np.concatenate([np.zeros(n_eq), np.full(nb, tol)]), N), np.zeros(M)]
-    lb_p = np.concatenate([np.full(len(s.muscles), s.bounds[0]) for s in specs] or [np.zeros(0)])
-    ub_p = np.concatenate([np.full(len(s.muscles), s.bounds[1]) for s in specs] or [np.zeros(0)])
-    if p_index is not None:
-        first = [p_index.index(j) for j in range(n_p)]
-        lb_p, ub_p = lb_p[first], ub_p[first]
-    return {"lbx": np.concatenate(lbx + [lb_p]), "ubx": np.concatenate(ubx + [ub_p]),
-            "x0": np.concatenate(x0 + [np.ones(n_p)]),
-            "lbg": np.concatenate(lbg + [np.zeros(len(pairs))]), "ubg": np.concatenate(ubg + [np.zeros(len(pairs))])}

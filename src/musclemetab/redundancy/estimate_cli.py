@@ -144,7 +144,9 @@ def estimate_command(args) -> int:
         if mode == "tracking" and not weights["w_emg"] > 0:
             raise OptionError("--emg-mode tracking needs a positive EMG weight (--emg-weight)")
     tolerance = {"constrained": args.emg_tolerance, "driven": 0.0}.get(mode) if emg_files else None
-    goals = Goals(**weights, emg_tolerance=tolerance)
+    # the driven mode transcribes the fibre dynamics with backward Euler (docs/problem.md)
+    fibre_dynamics = "backward" if emg_files and mode == "driven" else "forward"
+    goals = Goals(**weights, emg_tolerance=tolerance, fibre_dynamics=fibre_dynamics)
     labels = _labels(args.ik, args.labels)
     measured = [read_fibre_lengths(p) for p in us_files] or [{} for _ in range(n)]
     mapping = resolve_emg_mapping(args.emg_mapping or "default") if emg_files else {}
@@ -198,6 +200,7 @@ def estimate_command(args) -> int:
         summary = {**run.to_dict(), **emg_record, "objective_trial": o.objective, "objective_terms": o.objective_terms,
                    "time_window_s": list(t.inputs.window_s), "n_intervals": t.inputs.n_intervals,
                    "mesh_step_s": t.inputs.step_s, "optimal_reserve_Nm": options.optimal_reserve_Nm,
+                   "fibre_dynamics": fibre_dynamics,
                    "workflow": {"name": f"{args.workflow} estimate", "estimate": est.to_dict()["factors"]},
                    "solver_options": options.to_dict()}
         build_solution(t.inputs, estimated.subset(t.inputs.muscles), o, summary).write(f"{args.out}/{t.label}")

@@ -245,6 +245,7 @@ def assemble_result(trials, params, wf_record, ocp, settings, options, t_prep, t
                 for j, m in enumerate(t.emg_muscles)
             },
             "emg_tolerance": settings.emg_tolerance,
+            "fibre_dynamics": settings.fibre_scheme,
             "solver_options": options.to_dict(),
             "input_preparation": {"filter": "butterworth 6th order 6 Hz zero-phase (MATLAB filtfilt padding)",
                                   "mesh_intervals_per_second": 100, "interpolation": "not-a-knot cubic spline",

@@ -14,9 +14,10 @@ fibre velocity ``v~M``    M x N       -10 ... 10 lMo/s
 ========================  ==========  ===================
 
 .. [#] or, for a muscle the geometry stretches further, its longest rigid-tendon fibre length
-   plus 0.05 (:func:`.core.fibre_length_upper_bounds`).
+   plus 0.05 (:func:`.bounds.fibre_length_upper_bounds`).
 
-Constraints at nodes ``k = 0 ... N-1`` (forward Euler)::
+Constraints at nodes ``k = 0 ... N-1`` (forward Euler; with ``fibre_dynamics="backward"`` the
+Hill equilibrium holds at node ``k+1`` with ``v~M_k``, ``docs/problem.md``)::
 
     a_{k+1} - a_k - h ADyn(e_k, a_k) = 0
     l~M_{k+1} - l~M_k - h v~M_k = 0
@@ -48,7 +49,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import OptionError, SolverError
-from .core import Goals, TrialBlock, build_problem
+from .core import Goals, TrialBlock, build_problem, check_fibre_dynamics
 from .energy import EnergyGoal
 from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
@@ -97,7 +98,9 @@ class SolverOptions:
     one thread is fastest and leaves the other cores to other solves (``None`` leaves the
     library default). ``ipopt`` holds further IPOPT options, e.g. ``{"mu_init": 1e-6}`` for a
     warm start; anything there may change which optimum is found. ``energy`` adds the energy
-    goal (:class:`.energy.EnergyGoal`) to the objective.
+    goal (:class:`.energy.EnergyGoal`) to the objective. ``fibre_dynamics``: the transcription
+    of the fibre dynamics (:data:`.core.FIBRE_DYNAMICS`; ``"backward"``: the Hill equilibrium of
+    each interval at its end node, ``docs/problem.md``; not with the energy goal).
     """
 
     w_activation: float = 1.0
@@ -114,10 +117,12 @@ class SolverOptions:
     blas_threads: int | None = 1
     ipopt: dict = field(default_factory=dict)
     energy: EnergyGoal | None = None
+    fibre_dynamics: str = "forward"
 
     def __post_init__(self):
         if self.energy is not None and not isinstance(self.energy, EnergyGoal):
             raise OptionError(f"energy must be an EnergyGoal, not {type(self.energy).__name__}")
+        check_fibre_dynamics(self.fibre_dynamics, self.energy)
         if self.derivatives not in ("explicit", "auto"):
             raise OptionError(f"derivatives must be 'explicit' or 'auto', not {self.derivatives!r}")
         for name in ("w_activation", "w_reserve", "w_velocity"):
@@ -147,6 +152,7 @@ class SolverOptions:
             "blas_threads": self.blas_threads,
             "ipopt": dict(self.ipopt),
             **({"energy": self.energy.record()} if self.energy is not None else {}),
+            **({"fibre_dynamics": self.fibre_dynamics} if self.fibre_dynamics != "forward" else {}),
         }
 
 
@@ -308,7 +314,7 @@ def effort_goals(options: SolverOptions) -> Goals:
     """The effort goals (activation, excitation, reserves, fibre velocity) of ``options``, and
     its energy goal if it has one."""
     return Goals(w_activation=options.w_activation, w_reserve=options.w_reserve, w_velocity=options.w_velocity,
-                 energy=options.energy)
+                 energy=options.energy, fibre_dynamics=options.fibre_dynamics)
 
 
 #: IPOPT linear-algebra settings used with MUMPS (``SolverOptions.ipopt`` overrides them): no

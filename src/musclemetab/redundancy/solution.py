@@ -25,6 +25,9 @@ A solution folder holds two files:
     plus ``/forceset/reserve_<dof>`` (N m). Controls (excitation, fibre velocity, and what
     depends on them: ``fV`` and the active fibre force) and reserves live on the intervals,
     i.e. at nodes ``0 ... N-1``; at node ``N`` the file repeats the value of node ``N-1``.
+    With the backward fibre dynamics (``summary["fibre_dynamics"]``, ``docs/problem.md``) the
+    velocity of interval ``k`` is that of its end node: the fibre velocity, ``fV`` and the
+    active fibre force are at nodes ``1 ... N`` and node ``0`` repeats node ``1``.
 ``summary.json``
     Status, objective, iterations, times, residuals, reserve RMS per DOF (and
     ``reserve_share_of_peak_moment``, the largest reserve RMS over the peak joint moment;
@@ -98,6 +101,16 @@ CONVENTIONS = {
     "passive_fiber_force": "F0*fPE(l~M) along the fibre (not projected on the tendon)",
     "residuals": "moment residual = ID - sum(r*tendon_force) - reserve at nodes 0..N-1 (N m); "
     "hill residual = (a fL fV + fPE) cos(alpha) - fT at nodes 0..N-1 (normalised); activation "
+    "residual = a_{k+1} - a_k - h*da/dt(e_k, a_k)",
+}
+#: the conventions that differ with the backward fibre dynamics (the Hill equilibrium of each
+#: interval at its end node)
+BACKWARD_CONVENTIONS = {
+    "controls_at_last_node": "excitation and the reserves are defined at nodes 0..N-1, the row of node N repeats "
+    "node N-1; normalized_fiber_velocity, force_velocity_multiplier and active_fiber_force at nodes 1..N (the "
+    "velocity of interval k is that of its end node k+1), the row of node 0 repeats node 1",
+    "residuals": "moment residual = ID - sum(r*tendon_force) - reserve at nodes 0..N-1 (N m); "
+    "hill residual = (a fL fV + fPE) cos(alpha) - fT at nodes 1..N (normalised); activation "
     "residual = a_{k+1} - a_k - h*da/dt(e_k, a_k)",
 }
 
@@ -181,7 +194,9 @@ class Solution:
     """Muscle states, controls and forces on the mesh, time-first arrays ``(N+1, M)``.
 
     Controls (``excitation``, ``vm_norm``), ``force_velocity_multiplier``,
-    ``active_fiber_force_N`` and ``reserve_Nm`` repeat node ``N-1`` at node ``N``.
+    ``active_fiber_force_N`` and ``reserve_Nm`` repeat node ``N-1`` at node ``N`` (with the
+    backward fibre dynamics ``vm_norm``, ``force_velocity_multiplier`` and
+    ``active_fiber_force_N`` are those of nodes ``1 ... N`` and node ``0`` repeats node ``1``).
     ``vm_norm`` is ``v~M`` in lMo/s (the optimisation variable); the file stores
     ``v~M/vmax`` (see :attr:`normalized_fiber_velocity`).
     """
@@ -378,11 +393,14 @@ def build_solution(
     """Assemble a :class:`Solution` from an :class:`~.problem.OcpResult` and the trial inputs.
 
     Fills ``summary`` with residuals (moment, Hill equilibrium, activation dynamics) and
-    reserve statistics computed here in NumPy from the reported quantities.
+    reserve statistics computed here in NumPy from the reported quantities. With
+    ``summary["fibre_dynamics"] == "backward"`` the fibre velocity of interval ``k`` is placed
+    at node ``k+1`` and the Hill equilibrium checked at nodes ``1 ... N``.
     """
     N = inputs.n_intervals
     h = inputs.step_s
-    vm_nodes = _hold_last(ocp.vm_norm)
+    backward = summary.get("fibre_dynamics", "forward") == "backward"
+    vm_nodes = np.vstack([ocp.vm_norm[:1], ocp.vm_norm]) if backward else _hold_last(ocp.vm_norm)
     d = derived_quantities(params, ocp.activation, ocp.lm_norm, vm_nodes, inputs.lmt_m)
     reserve_Nm = _hold_last(ocp.reserve * summary.get("optimal_reserve_Nm", 150.0))
     # residuals at the constrained nodes 0..N-1, from the reported (geometry-based) forces
@@ -390,7 +408,8 @@ def build_solution(
     moment_res = inputs.moments_Nm[:N] - muscle_moment - reserve_Nm[:N]
     fibre = (ocp.activation * d["active_force_length_multiplier"] * d["force_velocity_multiplier"]
              + d["passive_force_length_multiplier"])
-    hill_res = (fibre * d["cos_pennation"] - d["tendon_force_norm"])[:N]
+    hill_res = (fibre * d["cos_pennation"] - d["tendon_force_norm"])[1:] if backward else \
+        (fibre * d["cos_pennation"] - d["tendon_force_norm"])[:N]
     act_res = ocp.activation[1:] - ocp.activation[:-1] - h * activation_rate(ocp.excitation, ocp.activation[:N])
     reserve_rms = np.sqrt(np.mean(ocp.reserve**2, axis=0)) * summary.get("optimal_reserve_Nm", 150.0)
     peak_moment = float(np.max(np.abs(inputs.moments_Nm))) if inputs.moments_Nm.size else 0.0
@@ -406,6 +425,8 @@ def build_solution(
             LargeReserveWarning, stacklevel=2,
         )
     summary = dict(summary)
+    if backward:
+        summary["conventions"] = {**CONVENTIONS, **BACKWARD_CONVENTIONS}
     summary.update(
         max_moment_residual_Nm=float(np.max(np.abs(moment_res))),
         max_moment_residual_by_dof_Nm=dict(zip(inputs.dofs, np.max(np.abs(moment_res), axis=0).tolist())),

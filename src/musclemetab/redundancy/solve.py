@@ -131,7 +131,7 @@ def solve_with_parameters(
         options = options.with_(ipopt={"mu_init": WARM_START_MU_INIT, **options.ipopt})
     t_prep = _time.perf_counter() - t_start
     ocp = solve_ocp(inputs, params, guess, options)
-    from .core import FIBRE_LENGTH_BOUNDS, fibre_length_upper_bounds
+    from .bounds import FIBRE_LENGTH_BOUNDS, fibre_length_upper_bounds
 
     lm_upper = fibre_length_upper_bounds(inputs, params)
     summary = {
@@ -143,6 +143,7 @@ def solve_with_parameters(
         "mesh_step_s": inputs.step_s,
         "optimal_reserve_Nm": options.optimal_reserve_Nm,
         "static_optimisation_objective": so.objective,
+        "fibre_dynamics": options.fibre_dynamics,
         "fibre_length_bounds": {"default": list(FIBRE_LENGTH_BOUNDS), "widened_upper": {
             m: float(u) for m, u in zip(inputs.muscles, lm_upper) if u > FIBRE_LENGTH_BOUNDS[1]}},
         "initial_guess": "static optimisation (rigid tendons)" if warm_start is None else
@@ -446,7 +447,7 @@ class _Background:
 def muscles_at_fibre_length_bound(solution: Solution, tolerance: float = 1e-3) -> list[str]:
     """Muscles whose normalised fibre length reaches the problem's upper bound somewhere
     (1.7, or the widened bound recorded in ``summary['fibre_length_bounds']``)."""
-    from .core import FIBRE_LENGTH_BOUNDS
+    from .bounds import FIBRE_LENGTH_BOUNDS
 
     widened = solution.summary.get("fibre_length_bounds", {}).get("widened_upper", {})
     top = np.max(np.asarray(solution.lm_norm, dtype=float), axis=0)

@@ -169,5 +169,7 @@ def guess_from_solution(solution, inputs: TrialInputs, params: MuscleTendonParam
         lm_projected_m=np.sqrt(np.maximum(lm_m**2 - params.width_m**2, 0.0)),
         excitation=solution.excitation[:N].copy(),
         reserve=solution.reserve_Nm[:N] / optimal_reserve_Nm,
-        vm_norm=solution.vm_norm[:N].copy(),
+        # the intervals' velocities: nodes 1..N with the backward fibre dynamics (docs/problem.md)
+        vm_norm=(solution.vm_norm[1:] if solution.summary.get("fibre_dynamics") == "backward"
+                 else solution.vm_norm[:N]).copy(),
     )
