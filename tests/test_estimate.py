@@ -230,3 +230,51 @@ def test_estimate_command_emg_input_errors(example, tmp_path):
     code, text = _cli(base + ["--emg", str(example.emg["normal"]), "--bounds", "emg=1:1"])
     assert code == 1 and "'emg'" in text and "emg_scale" in text
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.opensim
+@pytest.mark.slow
+def test_estimate_command_on_the_left_leg_recovers_the_tendon_stiffness(example, tmp_path):
+    """``musclemetab estimate --side l``: fibre lengths made by solving the example's left leg
+    (its DOFs discovered from the model and the ID file) with the triceps surae's tendon
+    stiffness x0.5 give that factor back (1 %, as on the right leg)."""
+    import json
+
+    import pandas as pd
+
+    from musclemetab.geometry import compute_geometry
+    from musclemetab.io import read_storage, write_storage
+    from musclemetab.layout import discover_dofs, read_layout
+    from musclemetab.model import read_muscle_parameters
+    from musclemetab.redundancy import SolverOptions
+    from musclemetab.redundancy.inputs import read_inverse_dynamics, read_kinematics
+    from musclemetab.redundancy.solve import solve_with_parameters
+    from musclemetab.redundancy.workflows import get_workflow, workflow_parameters
+
+    ts = ("soleus_l", "gasmed_l", "gaslat_l")
+    ik, idp = example.ik["normal"], example.id["normal"]
+    dofs = discover_dofs(read_layout(example.model), "l", list(read_storage(idp).columns))
+    assert dofs and all(d.endswith("_l") for d in dofs)
+    g = compute_geometry(example.model, ik, dofs=dofs, side="l", cache_dir=tmp_path / "cache")
+    t_ik, _ = read_kinematics(ik, dofs)
+    t_id, mom = read_inverse_dynamics(idp, dofs)
+    wf = get_workflow("effort-gen")
+    nominal, _ = workflow_parameters(wf, read_muscle_parameters(example.model), g.muscles)
+    truth = nominal.replace(tendon_stiffness={m: 0.5 * nominal.tendon_stiffness[nominal.names.index(m)] for m in ts})
+    made = solve_with_parameters(g, truth, t_id, mom, ik_time_s=t_ik, options=SolverOptions(
+        w_activation=wf.w_activation, w_reserve=wf.w_reserve, w_velocity=wf.w_velocity))
+    assert made.success
+    lmo = dict(zip(truth.names, truth.optimal_fiber_length_m))
+    us = pd.DataFrame({m: 1000.0 * made.lm_norm[:, made.muscles.index(m)] * lmo[m] for m in ts}, index=made.time_s)
+    write_storage(tmp_path / "us.mot", us, in_degrees=False)
+    out = tmp_path / "est"
+    code, text = _cli(["estimate", "--model", str(example.model), "--ik", str(ik), "--id", str(idp), "--side", "l",
+                       "--workflow", "effort-gen", "--ultrasound", str(tmp_path / "us.mot"), "--estimate",
+                       "tendon_stiffness=" + ",".join(ts), "--couple", ",".join(ts), "--labels", "normal",
+                       "--cache-dir", str(tmp_path / "cache"), "--out", str(out)])
+    assert code == 0, text
+    f = json.loads((out / "parameters.json").read_text())["factors"]["tendon_stiffness"]
+    assert set(f) == set(ts)
+    assert f["soleus_l"] == pytest.approx(0.5, rel=0.01)
+    summary = json.loads((out / "normal" / "summary.json").read_text())
+    assert summary["dofs"] == dofs

@@ -79,7 +79,6 @@ def test_emg_mode_and_estimate_plan_their_units_and_keys(example, tmp_path):
     (lambda s: s.update(emg_mode="free"), ["emg_mode", "constrained"]),
     (lambda s: s.update(emg_tolerance=0.02), ["emg_tolerance", "emg_mode"]),
     (lambda s: (s.update(emg_mode="driven"), s["trials"][0].update(cycle="auto")), ["emg_mode", "cycle", "normal"]),
-    (lambda s: s.update(estimate=ESTIMATE, side="l"), ["estimation", "right leg", "side"]),
     (lambda s: (s.update(emg_mode="driven"), s["trials"][0].pop("emg")), ["emg_mode", "'emg'", "normal"]),
     (lambda s: s.update(estimate={"estimate": {"stiffness": ["soleus_r"]}}), ["[subjects.estimate]", "stiffness",
                                                                             "tendon_stiffness"]),
@@ -135,6 +134,7 @@ def test_estimation_unit_runs_musclemetab_estimate_on_the_subjects_files(example
     assert seen["estimate"] == ["tendon_stiffness=soleus_r,gasmed_r"] and seen["couple"] == ["soleus_r,gasmed_r"]
     assert sorted(seen["bounds"]) == ["emg_scale=0.5:2.0", "tendon_stiffness=0.2:1.5"]
     assert seen["weights"] == "fibre_length=50.0" and seen["validate"] is True and seen["max_iter"] == 50
+    assert seen["side"] == "r" and seen["dofs"] is None  # the subject's side; DOFs discovered by the command
     folder = tmp_path / "out" / "units" / "sub1" / "_estimate"
     assert (folder / "parameters.json").is_file()
     assert json.loads((folder / "unit.json").read_text())["trials"] == ["normal"]

@@ -57,6 +57,10 @@ def add_estimate_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--workflow", default="effort-cal", choices=("effort-gen", "effort-cal", "effort-ten"),
                    help="muscle parameters and effort weights (default effort-cal)")
     p.add_argument("--passive", metavar="FILE", help="calibrated passive parameters (as for solve)")
+    p.add_argument("--side", default="r", choices=("r", "l"), help="leg whose muscles are estimated (default r)")
+    p.add_argument("--dofs", nargs="+", metavar="DOF",
+                   help="degrees of freedom (default: the side's unlocked coordinates that the inverse dynamics "
+                   "holds, as for solve)")
     p.add_argument("--labels", nargs="+", metavar="NAME", help="trial names (default: the IK file stems)")
     p.add_argument("--validate", action="store_true",
                    help="re-solve each trial with the estimates and the effort goals only (DIR/validation)")
@@ -164,10 +168,10 @@ def estimate_command(args) -> int:
     trials, prepared, params = [], [], None
     layout = read_layout(args.model)
     for i, (ik, idp, lab, us) in enumerate(zip(args.ik, args.id, labels, measured)):
-        dofs = discover_dofs(layout, "r", list(read_storage(idp).columns))
+        dofs = list(args.dofs) if args.dofs else discover_dofs(layout, args.side, list(read_storage(idp).columns))
         t_ik, _ = read_kinematics(ik, dofs)
         t_id, mom = read_inverse_dynamics(idp, dofs)
-        g = compute_geometry(args.model, ik, dofs=list(dofs), side="r", cache_dir=args.cache_dir)
+        g = compute_geometry(args.model, ik, dofs=list(dofs), side=args.side, cache_dir=args.cache_dir)
         nominal, wf_record = workflow_parameters(wf, model_parameters, g.muscles, passive=args.passive)
         inputs, p, so = prepare_trial(g, nominal, t_id, mom, ik_time_s=t_ik, options=options,
                                       sources={"model": args.model, "ik": ik, "id": idp})

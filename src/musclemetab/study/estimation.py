@@ -138,9 +138,6 @@ def estimation_trials(subject, here: str | None = None) -> list:
         if bad:
             raise OptionError(f"{here}: the estimation solves the trials' whole IK window with their 'id' file; "
                               f"trial(s) {', '.join(bad)} have no 'id' or set 'cycle'")
-        if subject.side != "r" or subject.dofs is not None:
-            raise OptionError(f"{here}: the estimation solves the right leg with the DOFs of its inverse dynamics; "
-                              "drop 'side' and 'dofs', or the estimate table")
     return trials
 
 
@@ -159,7 +156,9 @@ def run_parameter_estimation(study, unit, tmp: Path) -> dict:
     argv = ["estimate", "--model", str(subject.model), "--ik", *[str(t.ik) for t in trials],
             "--id", *[str(t.id) for t in trials], "--labels", *[t.name for t in trials],
             "--estimate", *[f"{k}={','.join(v)}" for k, v in spec.estimate.items()],
-            "--workflow", spec.workflow, "--out", str(tmp)]
+            "--workflow", spec.workflow, "--side", subject.side, "--out", str(tmp)]
+    if subject.dofs is not None:
+        argv += ["--dofs", *subject.dofs]
     if any(t.ultrasound is not None for t in trials):
         argv += ["--ultrasound", *[str(t.ultrasound) for t in trials]]
     if spec.emg_mode:
