@@ -16,6 +16,7 @@ of :mod:`.core`. Muscle masses and slow-twitch fractions come from the anatomica
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from dataclasses import dataclass, field
@@ -77,13 +78,15 @@ class EnergyGoal:
         object.__setattr__(self, "options", dict(self.options))
 
     def muscle_values(self, muscles, max_isometric_force_N, optimal_fiber_length_m):
-        """Masses (kg) and slow-twitch fractions of ``muscles`` (arrays)."""
-        from ..properties import metabolic_properties
-
-        return metabolic_properties(list(muscles), float(self.body_mass_kg), float(self.height_m),
-                                    np.asarray(max_isometric_force_N, dtype=float),
-                                    np.asarray(optimal_fiber_length_m, dtype=float),
-                                    overrides=self.muscle_properties)
+        """Masses (kg) and slow-twitch fractions of ``muscles`` (arrays). The problem, its
+        solution and its summary ask for the same muscles: they are placed (and a muscle the
+        table cannot place is warned about) once."""
+        overrides = self.muscle_properties
+        stamp = os.stat(overrides).st_mtime_ns if overrides is not None and os.path.isfile(overrides) else None
+        mass, fst = _muscle_values(tuple(muscles), float(self.body_mass_kg), float(self.height_m),
+                                   tuple(np.asarray(max_isometric_force_N, dtype=float).ravel()),
+                                   tuple(np.asarray(optimal_fiber_length_m, dtype=float).ravel()), overrides, stamp)
+        return mass.copy(), fst.copy()
 
     def record(self) -> dict:
         """The goal's settings, as ``summary.json`` records them."""
@@ -91,6 +94,15 @@ class EnergyGoal:
                 "smoothing": self.smoothing, "body_mass_kg": self.body_mass_kg, "height_m": self.height_m,
                 "muscle_properties": self.muscle_properties, "options": dict(self.options),
                 "term": "weight * (1/N) * sum over nodes k < N and muscles of Edot (W, no basal) / body mass"}
+
+
+@functools.lru_cache(maxsize=16)
+def _muscle_values(muscles, body_mass_kg, height_m, f0, lmo, overrides, overrides_stamp):
+    from ..properties import metabolic_properties
+
+    mass, fst = metabolic_properties(list(muscles), body_mass_kg, height_m, np.asarray(f0), np.asarray(lmo),
+                                     overrides=overrides)
+    return np.asarray(mass, dtype=float), np.asarray(fst, dtype=float)
 
 
 def node_rates(goal: EnergyGoal, e, a, lm, vm, *, F0, lMo, vmax, kpe, s0, sm, mass, fst):
