@@ -40,7 +40,7 @@ import numpy as np
 from .cache import default_cache_dir, discard_entry, entry_path, existing_entry, read_entry, write_entry
 from .io.atomic import file_sha256
 from .errors import DataMismatchError, OptionError, UnknownCoordinateError
-from .io import read_table, write_storage
+from .io import StorageTable, as_table, table_path, write_storage
 from .model import default_dofs
 
 __all__ = ["Geometry", "compute_geometry", "geometry_is_cached", "default_cache_dir", "write_geometry", "check_kinematics",
@@ -175,7 +175,7 @@ def geometry_is_cached(model_path, ik_path, dofs, *, cache_dir=None, muscles=Non
 
 def compute_geometry(
     model_path: str | os.PathLike,
-    ik_path: str | os.PathLike,
+    ik_path: "str | os.PathLike | StorageTable",
     dofs: list[str] | None = None,
     side: str = "r",
     muscles: list[str] | None = None,
@@ -192,8 +192,10 @@ def compute_geometry(
     model_path
         The ``.osim`` model.
     ik_path
-        The IK motion (``.mot``); rotational coordinates in degrees when its header says
-        ``inDegrees=yes`` (coupled coordinates are computed from their couplers).
+        The IK motion (``.mot``), or its :class:`~musclemetab.io.StorageTable` already read by
+        :func:`~musclemetab.io.read_table` (the cache key is the content of the file it was
+        read from); rotational coordinates in degrees when its header says ``inDegrees=yes``
+        (coupled coordinates are computed from their couplers).
     dofs
         DOFs for the moment arms; default the DOFs of ``side`` found in the model's joint
         tree (:func:`musclemetab.layout.side_dofs`; for the study's model the five of the
@@ -220,7 +222,7 @@ def compute_geometry(
 
     if method not in MOMENT_ARM_METHODS:
         raise OptionError(f"moment-arm method must be one of {', '.join(MOMENT_ARM_METHODS)}, not {method!r}")
-    model_path, ik_path = Path(model_path), Path(ik_path)
+    ik_source, model_path, ik_path = ik_path, Path(model_path), table_path(ik_path)
     if not dofs:
         from .layout import read_layout, side_dofs
 
@@ -231,7 +233,7 @@ def compute_geometry(
     from .model import check_model_path
 
     check_model_path(model_path)
-    ik = read_table(ik_path)  # validates the file before any cache lookup
+    ik = as_table(ik_source)  # validates the file before any cache lookup
     in_degrees = check_kinematics(ik, dofs, check_units)
 
     cache_file = None

@@ -480,23 +480,23 @@ def gait_events_from_kinematics(time_s, heel_m, toe_m, pelvis_m, up=(0.0, 1.0, 0
 
 
 def kinematic_gait_events(model_path, ik_path, side: str, layout=None) -> GaitEvents:
-    """:func:`gait_events_from_kinematics` of one leg from a model and its IK file: the
-    origins of the side's heel and toe bodies and of the root body, computed by OpenSim in the
-    worker process."""
-    from ..io import read_storage
+    """:func:`gait_events_from_kinematics` of one leg from a model and its IK file (or its
+    :class:`~musclemetab.io.StorageTable`, already read): the origins of the side's heel and
+    toe bodies and of the root body, computed by OpenSim in the worker process."""
+    from ..io import as_table
     from ..layout import foot_bodies, read_layout
     from ..opensim_bridge import call
 
     layout = layout or read_layout(model_path)
     heel, toe = foot_bodies(layout, side)
     root = next(j["child"] for j in layout.joints if j["parent"] == layout.ground)
-    ik = read_storage(ik_path)
+    ik = as_table(ik_path)
     in_degrees = ik.attrs.get("in_degrees")
     if in_degrees is None:  # no header flag: angles beyond 2 pi are degrees
         in_degrees = bool(np.nanmax(np.abs(ik.to_numpy(dtype=float))) > 2 * np.pi)
-    raw = call("model_ops:body_origins", str(model_path), {c: ik[c].to_numpy() for c in ik.columns},
+    raw = call("model_ops:body_origins", str(model_path), {c: np.ascontiguousarray(ik[c]) for c in ik.columns},
                in_degrees, [heel, toe, root])
     pos = np.asarray(raw["positions_m"], dtype=float)
     g = np.asarray(layout.gravity, dtype=float)
     up = -g if np.linalg.norm(g) > 0 else (0.0, 1.0, 0.0)
-    return gait_events_from_kinematics(ik.index.to_numpy(dtype=float), pos[:, 0], pos[:, 1], pos[:, 2], up=up)
+    return gait_events_from_kinematics(np.asarray(ik.index, dtype=float), pos[:, 0], pos[:, 1], pos[:, 2], up=up)

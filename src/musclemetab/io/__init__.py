@@ -12,17 +12,21 @@ from .atomic import (
 from .jsonfile import read_json_object
 from .storage import (
     StorageTable,
+    as_table,
     check_time_stamps,
     read_storage,
     read_table,
     require_columns,
     storage_from_arrays,
+    table_path,
     write_storage,
 )
 
 __all__ = [
     "StorageTable",
     "read_table",
+    "as_table",
+    "table_path",
     "read_storage",
     "write_storage",
     "require_columns",

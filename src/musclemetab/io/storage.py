@@ -44,11 +44,13 @@ from .atomic import atomic_write_text
 __all__ = [
     "StorageTable",
     "read_table",
+    "as_table",
     "read_storage",
     "write_storage",
     "require_columns",
     "storage_from_arrays",
     "check_time_stamps",
+    "table_path",
     "MAX_SAMPLE_STEP_S",
 ]
 
@@ -245,6 +247,21 @@ def read_table(path: str | os.PathLike) -> StorageTable:
 
     return StorageTable(t, names[1:], values[:, 1:],
                         dict(name=meta["name"], in_degrees=meta["in_degrees"], path=str(path), header=list(header)))
+
+
+def as_table(source: "str | os.PathLike | StorageTable") -> StorageTable:
+    """``source`` itself when it is a :class:`StorageTable` already read, else
+    :func:`read_table` of that path.
+
+    The stages of a solve take either, so that each input file is read once and the table
+    passed on; the file's path stays in ``table.attrs["path"]``.
+    """
+    return source if isinstance(source, StorageTable) else read_table(source)
+
+
+def table_path(source: "str | os.PathLike | StorageTable") -> Path:
+    """The file behind ``source``: the path itself, or the file a :class:`StorageTable` was read from."""
+    return Path(str(source.attrs.get("path", "<table>"))) if isinstance(source, StorageTable) else Path(source)
 
 
 def check_time_stamps(df: "pd.DataFrame | StorageTable", what: str = "file") -> None:

@@ -25,9 +25,12 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
-from typing import Protocol, Sequence
+from typing import TYPE_CHECKING, Protocol, Sequence
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from ..io import StorageTable
 
 from ..errors import DataMismatchError, InputFileError, MissingColumnError
 
@@ -196,8 +199,10 @@ def _sample_rate(time: np.ndarray, what: str) -> float:
     return 1.0 / mean_dt
 
 
-def read_kinematics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT_DOFS, check_units: bool = True):
-    """Read an IK ``.mot`` file: its time stamps and the DOF angles in radians.
+def read_kinematics(path: "str | os.PathLike | StorageTable", dofs: Sequence[str] = DEFAULT_DOFS,
+                    check_units: bool = True):
+    """Read an IK ``.mot`` file (or its :class:`~musclemetab.io.StorageTable`, already read by
+    :func:`~musclemetab.io.read_table`): its time stamps and the DOF angles in radians.
 
     The file is checked by :func:`musclemetab.geometry.check_kinematics`, the same check the
     geometry applies: DOF columns present, values finite, time in seconds, and angle units
@@ -209,9 +214,9 @@ def read_kinematics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT_DOFS,
     angles_rad : (F, D) array
     """
     from ..geometry import check_kinematics
-    from ..io import read_table
+    from ..io import as_table
 
-    ik = read_table(path)
+    ik = as_table(path)
     in_degrees = check_kinematics(ik, dofs, check_units)
     q = np.column_stack([ik[d] for d in dofs])
     if in_degrees:
@@ -219,17 +224,19 @@ def read_kinematics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT_DOFS,
     return ik.index.copy(), q
 
 
-def read_inverse_dynamics(path: str | os.PathLike, dofs: Sequence[str] = DEFAULT_DOFS):
-    """Read the ``<dof>_moment`` columns (N m) of an inverse-dynamics ``.sto`` file.
+def read_inverse_dynamics(path: "str | os.PathLike | StorageTable", dofs: Sequence[str] = DEFAULT_DOFS):
+    """Read the ``<dof>_moment`` columns (N m) of an inverse-dynamics ``.sto`` file (or of its
+    :class:`~musclemetab.io.StorageTable`, already read by :func:`~musclemetab.io.read_table`).
 
     Returns
     -------
     time_s : (T,) array
     moments_Nm : (T, D) array
     """
-    from ..io import check_time_stamps, read_table, require_columns
+    from ..io import as_table, check_time_stamps, require_columns, table_path
 
-    table = read_table(path)
+    table = as_table(path)
+    path = table_path(path)
     check_time_stamps(table, "inverse dynamics")
     cols = [f"{d}_moment" for d in dofs]
     try:

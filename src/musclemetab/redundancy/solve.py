@@ -282,9 +282,11 @@ def solve_files(
         loads.check_bodies(layout)
     from ..io import read_table
 
-    id_columns = None
+    # Each input file is read once; the tables go on to the window, the checks and the geometry.
+    id_table = id_columns = None
     if id_path is not None:
-        id_columns = list(read_table(id_path).columns)
+        id_table = read_table(id_path)
+        id_columns = list(id_table.columns)
         _check_id_coordinates(id_path, id_columns, layout)
     if dofs:
         dofs = tuple(dofs)
@@ -294,24 +296,26 @@ def solve_files(
     if model_cached and (id_path is None or not geometry_is_cached(model_path, ik_path, list(dofs),
                                                                    cache_dir=cache_dir)):
         start_in_background()
-    trial_window = resolve_window(ik_path, side=side, window=window, cycle=cycle, id_path=id_path,
+    ik_table = read_table(ik_path)
+    trial_window = resolve_window(ik_table, side=side, window=window, cycle=cycle, id_path=id_table,
                                   external_loads=loads, grf_path=grf, layout=layout)
     id_record = None
     if id_path is None:
         from ..external_loads import ID_COORDINATE_FILTER_HZ, compute_inverse_dynamics
 
         id_path = compute_inverse_dynamics(model_path, ik_path, loads, trial_window.start_s, trial_window.end_s)
+        id_table = read_table(id_path)
         id_record = {"computed_by": "OpenSim InverseDynamicsTool (muscles excluded)",
                      "coordinate_lowpass_hz": ID_COORDINATE_FILTER_HZ, "external_loads": str(loads.path),
                      "ground_force_data": str(loads.datafile)}
-    ik_time, _ = read_kinematics(ik_path, dofs, check_units=check_units)
-    id_time, id_moments = read_inverse_dynamics(id_path, dofs)
+    ik_time, _ = read_kinematics(ik_table, dofs, check_units=check_units)
+    id_time, id_moments = read_inverse_dynamics(id_table, dofs)
     keep = frames_in_window(ik_time, trial_window)
     ik_time = ik_time[keep]
     check_time_ranges(ik_time, id_time, ik_path, id_path)
 
     t0 = _time.perf_counter()
-    geometry = compute_geometry(model_path, ik_path, dofs=list(dofs), side=side, cache_dir=cache_dir)
+    geometry = compute_geometry(model_path, ik_table, dofs=list(dofs), side=side, cache_dir=cache_dir)
     if keep.size != len(geometry.time):
         geometry = _Geometry(np.asarray(geometry.time)[keep], geometry.muscles, geometry.dofs,
                              np.asarray(geometry.lmt_m)[keep], np.asarray(geometry.moment_arms_m)[keep])

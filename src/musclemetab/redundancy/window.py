@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataMismatchError, OptionError, WindowWarning
+from ..io import StorageTable
 
 __all__ = ["PADDING_S", "TrialWindow", "parse_window", "parse_cycle", "resolve_window", "frames_in_window"]
 
@@ -85,35 +86,40 @@ def parse_cycle(text) -> str | int:
     return n
 
 
-def _extent(path) -> tuple[float, float]:
-    from ..io import read_table
+def _extent(source) -> tuple[float, float]:
+    from ..io import as_table
 
-    t = read_table(path).index
+    t = as_table(source).index
     return float(t[0]), float(t[-1])
 
 
 def resolve_window(
-    ik_path: str | os.PathLike,
+    ik: str | os.PathLike | StorageTable,
     *,
     side: str = "r",
     window: tuple[float, float] | None = None,
     cycle: str | int | None = None,
-    id_path: str | os.PathLike | None = None,
+    id_path: str | os.PathLike | StorageTable | None = None,
     external_loads=None,
     grf_path: str | os.PathLike | None = None,
     layout=None,
     padding_s: float = PADDING_S,
 ) -> TrialWindow:
-    """The solve window for one leg (see the module docstring)."""
+    """The solve window for one leg (see the module docstring).
+
+    ``ik`` and ``id_path`` are the files or their :class:`~musclemetab.io.StorageTable`, already
+    read by :func:`~musclemetab.io.read_table` (a solve reads each file once).
+    """
     from ..external_loads import check_inside
-    from ..io import read_table
+    from ..io import as_table, table_path
 
     if window is not None and cycle is not None:
         raise OptionError("give either --window or --cycle, not both")
-    ik_t = read_table(ik_path).index.copy()
-    inputs = [(Path(ik_path), "inverse kinematics", (float(ik_t[0]), float(ik_t[-1])))]
+    ik_table = as_table(ik)
+    ik_t = ik_table.index.copy()
+    inputs = [(table_path(ik), "inverse kinematics", (float(ik_t[0]), float(ik_t[-1])))]
     if id_path is not None:
-        inputs.append((Path(id_path), "inverse dynamics", _extent(id_path)))
+        inputs.append((table_path(id_path), "inverse dynamics", _extent(id_path)))
     if external_loads is not None:
         inputs.append((external_loads.datafile, "ground forces", _extent(external_loads.datafile)))
     elif grf_path is not None:
@@ -132,7 +138,7 @@ def resolve_window(
         for path, what, (a, b) in inputs:
             check_inside((t0, t1), a, b, path, what)
     else:
-        gc, where = _cycle(side, cycle, external_loads, grf_path, layout, ik_path)
+        gc, where = _cycle(side, cycle, external_loads, grf_path, layout, ik_table)
         for path, what, (a, b) in inputs:
             check_inside((gc.start_s, gc.end_s), a, b, path, f"{what} (needed for the gait cycle)")
         t0, t1 = gc.start_s - padding_s, gc.end_s + padding_s
@@ -162,7 +168,7 @@ def resolve_window(
     return TrialWindow(start, end, source, cycle_rec, pads, tuple(notes))
 
 
-def _cycle(side, cycle, external_loads, grf_path, layout, ik_path=None):
+def _cycle(side, cycle, external_loads, grf_path, layout, ik=None):
     from ..analysis.events import GaitCycle, gait_events_from_grf, kinematic_gait_events, read_grf
 
     if external_loads is not None:
@@ -174,9 +180,11 @@ def _cycle(side, cycle, external_loads, grf_path, layout, ik_path=None):
         s = read_grf(grf_path, side=side)
         t, f = s.index.to_numpy(dtype=float), s.to_numpy(dtype=float)
         where = f"{grf_path} column {s.name}"
-    elif layout is not None and ik_path is not None:
-        ev = kinematic_gait_events(layout.path, ik_path, side, layout)
-        where = f"{ik_path} (kinematics: heel and toe relative to the pelvis)"
+    elif layout is not None and ik is not None:
+        from ..io import table_path
+
+        ev = kinematic_gait_events(layout.path, ik, side, layout)
+        where = f"{table_path(ik)} (kinematics: heel and toe relative to the pelvis)"
     else:
         raise OptionError("--cycle needs ground forces (--external-loads GRF.xml or --grf GRF.mot) or the model "
                           "for gait events from kinematics")
