@@ -288,6 +288,55 @@ def test_solution_sto_opens_in_opensim(solved):
     assert first.startswith("/forceset/")
 
 
+# --------------------------------------------------------------------------- input stage
+@pytest.mark.opensim
+def test_solve_files_reads_each_input_once_and_hands_on_the_same_arrays(example, geometries, geometry_cache,
+                                                                         monkeypatch):
+    """``solve_files`` parses the IK and the ID file once each; what it hands to the solver is
+    what the readers give when each reads its file by path."""
+    import collections
+    import inspect
+
+    import musclemetab.io as mio
+    import musclemetab.io.storage as storage
+    import musclemetab.redundancy.solve as solve
+    from musclemetab.redundancy.inputs import read_inverse_dynamics, read_kinematics
+
+    parses = collections.Counter()
+    read = storage.read_table
+
+    def counting_read(path):
+        parses[Path(path).name] += 1
+        return read(path)
+
+    handed = {}
+
+    class Handed(Exception):
+        pass
+
+    def capture(geometry, model_parameters, id_time, id_moments, workflow, **kwargs):
+        handed.update(geometry=geometry, id_time=id_time, id_moments=id_moments, ik_time=kwargs["ik_time_s"])
+        raise Handed
+
+    monkeypatch.setattr(storage, "read_table", counting_read)
+    monkeypatch.setattr(mio, "read_table", counting_read)
+    monkeypatch.setattr(solve, "solve_trial", capture)
+    with pytest.raises(Handed):  # the memo of the test run wraps solve_files: call the function itself
+        inspect.unwrap(solve.solve_files)(example.model, example.ik["normal"], example.id["normal"],
+                                          cache_dir=geometry_cache)
+    assert parses == {example.ik["normal"].name: 1, example.id["normal"].name: 1}
+    monkeypatch.undo()
+    ik_time, _ = read_kinematics(example.ik["normal"], DOFS)
+    id_time, id_moments = read_inverse_dynamics(example.id["normal"], DOFS)
+    np.testing.assert_array_equal(handed["ik_time"], ik_time)
+    np.testing.assert_array_equal(handed["id_time"], id_time)
+    np.testing.assert_array_equal(handed["id_moments"], id_moments)
+    geometry = geometries["normal"]
+    assert tuple(handed["geometry"].muscles) == tuple(geometry.muscles)
+    np.testing.assert_array_equal(handed["geometry"].lmt_m, geometry.lmt_m)
+    np.testing.assert_array_equal(handed["geometry"].moment_arms_m, geometry.moment_arms_m)
+
+
 # --------------------------------------------------------------------------- failures
 @pytest.mark.opensim
 def test_unconverged_solve_is_reported_not_hidden(example, geometry_cache, tmp_path, capsys):
