@@ -122,6 +122,46 @@ def test_malformed_files_name_the_file(tmp_path, text, error, phrase):
     assert phrase in str(info.value)
 
 
+def test_a_row_with_the_wrong_number_of_values_is_refused_naming_the_file_and_line(tmp_path):
+    path = tmp_path / "cut.sto"
+    # the header takes lines 1-6, the column names line 7, the data rows lines 8-10
+    path.write_text(GOOD.replace("0.02\t5\t6\n", "0.02\t5\n"))
+    with pytest.raises(StorageFormatError) as info:
+        read_table(path)
+    assert str(info.value).startswith(f"{path}: data row 3 (line 10, the last) has 2 values but there are 3 columns")
+    # blank lines between the rows count in the line number
+    path.write_text(GOOD.replace("0.01\t3\t4\n", "0.01\t3\t4\n\n\n").replace("0.02\t5\t6", "0.02\t5\t6\t7"))
+    with pytest.raises(StorageFormatError, match=r"data row 3 \(line 12, the last\) has 4 values"):
+        read_table(path)
+    path.write_text(GOOD.replace("0.01\t3\t4", "0.01\t3"))
+    with pytest.raises(StorageFormatError, match=r"data row 2 \(line 9\) has 2 values"):
+        read_table(path)
+
+
+def test_a_last_row_without_line_end_reads_with_a_warning(tmp_path):
+    import warnings
+
+    from musclemetab.errors import TruncatedFileWarning
+
+    path = tmp_path / "no_end.sto"
+    path.write_text(GOOD.rstrip("\n"))
+    with pytest.warns(TruncatedFileWarning) as caught:
+        table = read_table(path)
+    assert len(caught) == 1
+    assert str(caught[0].message).startswith(f"{path}: the last data row (line 10, t = 0.02 s) has no line end")
+    np.testing.assert_array_equal(table.values, [[1, 2], [3, 4], [5, 6]])
+    # cut inside the last number: the number cannot be seen to be short, the missing line end can
+    path.write_text(GOOD.replace("0.02\t5\t6\n", "0.02\t5\t6.25\n")[:-3])
+    with pytest.warns(TruncatedFileWarning, match="line 10"):
+        assert read_table(path)["b"][-1] == 6.0
+    # whole files, with Unix or Windows line ends or a blank last line, read without a warning
+    for text in (GOOD, GOOD.replace("\n", "\r\n"), GOOD + "  "):
+        path.write_bytes(text.encode())
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            np.testing.assert_array_equal(read_table(path).values, [[1, 2], [3, 4], [5, 6]])
+
+
 def test_missing_file(tmp_path):
     with pytest.raises(StorageFormatError, match="no such file"):
         read_storage(tmp_path / "absent.mot")

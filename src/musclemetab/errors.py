@@ -91,3 +91,8 @@ class MuscleTableWarning(MusclemetabWarning):
 
 class WindowWarning(MusclemetabWarning):
     """The solve window was clipped at the edge of the data (the record says where)."""
+
+
+class TruncatedFileWarning(MusclemetabWarning):
+    """A storage file's last data line has no line end: the file may have been cut inside that
+    line (a number cut short cannot be told from a whole one); the file is read as it is."""

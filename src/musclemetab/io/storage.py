@@ -29,6 +29,7 @@ from __future__ import annotations
 import io as _io
 import math
 import os
+import warnings
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -38,7 +39,7 @@ import numpy as np
 if TYPE_CHECKING:  # pandas is imported where a DataFrame is built
     import pandas as pd
 
-from ..errors import MissingColumnError, StorageFormatError, TimeColumnError
+from ..errors import MissingColumnError, StorageFormatError, TimeColumnError, TruncatedFileWarning
 from .atomic import atomic_write_text
 
 __all__ = [
@@ -170,10 +171,18 @@ def read_table(path: str | os.PathLike) -> StorageTable:
     ------
     StorageFormatError
         The file is missing, has no ``endheader`` line, no column names, non-numeric or
-        ragged rows, fewer rows than its header announces, or duplicate column names.
+        ragged rows (a row with more or fewer values than there are columns, the message
+        naming its line), fewer rows than its header announces, or duplicate column names.
     TimeColumnError
         The first column is not ``time``, holds NaN or infinite values, or is not strictly
         increasing.
+
+    Warns
+    -----
+    TruncatedFileWarning
+        The last data row has no line end (every program that writes these files ends each
+        row with one): the file may have been cut inside that row. The row is read; a number
+        cut short cannot be told from a whole one, so check the row or write the file again.
     """
     path = Path(path)
     if path.is_dir():
@@ -208,24 +217,26 @@ def read_table(path: str | os.PathLike) -> StorageTable:
     if dup:
         raise StorageFormatError(f"{path}: duplicate column names {dup}; each column must be unique")
 
-    data_lines = [ln for ln in lines[body_start + 1:] if ln.strip()]
+    # (line number in the file, from 1; text) of each data row: blank lines are skipped
+    data_lines = [(i + 1, ln) for i, ln in enumerate(lines[body_start + 1:], start=body_start + 1) if ln.strip()]
     if not data_lines:
         raise StorageFormatError(f"{path}: no data rows after the column names; the file is truncated")
     ncol = len(names)
     values = np.empty((len(data_lines), ncol), dtype=float)
-    for r, ln in enumerate(data_lines):
+    for r, (line_no, ln) in enumerate(data_lines):
         fields = ln.split()
         if len(fields) != ncol:
+            last = ", the last" if r == len(data_lines) - 1 else ""
             raise StorageFormatError(
-                f"{path}: data row {r + 1} (line {body_start + 2 + r}) has {len(fields)} values "
-                f"but there are {ncol} columns; the file is truncated or malformed"
+                f"{path}: data row {r + 1} (line {line_no}{last}) has {len(fields)} values but there are "
+                f"{ncol} columns; the file is truncated or malformed: write it again or remove the row"
             )
         try:
             values[r] = [float(x) for x in fields]
         except ValueError:
             bad = next(x for x in fields if not _is_float(x))
             raise StorageFormatError(
-                f"{path}: data row {r + 1} (line {body_start + 2 + r}) holds '{bad}', which is not a number"
+                f"{path}: data row {r + 1} (line {line_no}) holds '{bad}', which is not a number"
             ) from None
 
     n_rows = meta.get("n_rows")
@@ -245,6 +256,12 @@ def read_table(path: str | os.PathLike) -> StorageTable:
             f"{path}: column 'time' is not strictly increasing (data row {row}, t = {t[row - 1]:g} s)"
         )
 
+    if data_lines[-1][0] == len(lines) and text[-1:].splitlines() != [""]:  # no line break after the last row
+        warnings.warn(
+            f"{path}: the last data row (line {data_lines[-1][0]}, t = {t[-1]:g} s) has no line end; the file may "
+            "have been cut inside that row: check its last values, or write the file again",
+            TruncatedFileWarning, stacklevel=2,
+        )
     return StorageTable(t, names[1:], values[:, 1:],
                         dict(name=meta["name"], in_degrees=meta["in_degrees"], path=str(path), header=list(header)))
 
