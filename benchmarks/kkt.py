@@ -68,13 +68,12 @@ def build_problem(ex, trial):
     """NLP of the trial's EFFORT-GEN problem exactly as the solver builds it."""
     from musclemetab.geometry import compute_geometry
     from musclemetab.model import read_muscle_parameters
-    from musclemetab.redundancy.inputs import DEFAULT_DOFS, prepare_inputs, read_inverse_dynamics
+    from musclemetab.redundancy.inputs import DEFAULT_DOFS, prepare_inputs, read_inverse_dynamics, restrict_geometry
     from musclemetab.redundancy.problem import SolverOptions, build_nlp
-    from musclemetab.redundancy.solve import _restrict_geometry
     from musclemetab.redundancy.static_opt import initial_guess, static_optimisation
     from musclemetab.redundancy.workflows import workflow_parameters
 
-    geom = _restrict_geometry(compute_geometry(ex.model, ex.ik[trial], dofs=list(DEFAULT_DOFS)))
+    geom = restrict_geometry(compute_geometry(ex.model, ex.ik[trial], dofs=list(DEFAULT_DOFS)))
     id_time, id_mom = read_inverse_dynamics(ex.id[trial], geom.dofs)
     params, _ = workflow_parameters("effort-gen", read_muscle_parameters(ex.model), geom.muscles)
     params = params.subset(geom.muscles)

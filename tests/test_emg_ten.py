@@ -309,6 +309,24 @@ def test_effort_ten_runs_from_the_written_parameters(example, emg_ten, parameter
     np.testing.assert_array_equal(quick.parameters.tendon_stiffness, P["kT"])
 
 
+def test_coupling_pairs_of_the_study_groups_worked_by_hand():
+    """The equalities that couple the factors of a group: kT chains consecutive members, the
+    EMG scales tie each member to the first; muscles the problem lacks drop out of a group."""
+    from musclemetab.redundancy.core import coupling_pairs
+    from musclemetab.redundancy.emg_ten import EmgTenSettings
+
+    settings = EmgTenSettings()
+    kt_muscles = ("soleus_r", "gasmed_r", "gaslat_r", "vasint_r", "vaslat_r", "vasmed_r")
+    # vasti (vaslat 4, vasmed 5, vasint 3) then triceps surae (gaslat 2, gasmed 1, soleus 0), in the groups' order
+    assert coupling_pairs(settings.tendon_groups, kt_muscles, consecutive=True) == ((4, 5), (5, 3), (2, 1), (1, 0))
+    emg_muscles = ("gaslat_r", "gasmed_r", "vasint_r", "vaslat_r", "vasmed_r")  # alphabetical
+    # vasti (vaslat 3 first, vasmed 4, vasint 2) and gastrocnemii (gaslat 0 first, gasmed 1)
+    assert coupling_pairs(settings.emg_groups, emg_muscles, consecutive=False) == ((3, 4), (3, 2), (0, 1))
+    # 4 + 3 equalities, the study's count; a member the problem lacks, and a group left with one, give none
+    assert coupling_pairs([("a", "x", "b", "c"), ("d",), ("y", "d")], ("c", "b", "a", "d"), consecutive=False) == \
+        ((2, 1), (2, 0))
+
+
 @pytest.mark.opensim
 def test_study_problem_size_with_coupling_constraints(example, geometries):
     """The constraint form of the couplings is the study's NLP: 77 250 variables, 62 002

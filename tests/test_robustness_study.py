@@ -314,7 +314,7 @@ def test_a_call_interrupted_mid_way_does_not_leave_its_reply_to_the_next(example
     the same pool process) gets its own reply, not the interrupted call's."""
     from musclemetab.opensim_bridge import client
 
-    real_recv = client._recv
+    real_recv = client.receive_message
     armed = []
 
     def interrupted_recv(stream):
@@ -323,7 +323,7 @@ def test_a_call_interrupted_mid_way_does_not_leave_its_reply_to_the_next(example
             raise KeyboardInterrupt  # after the request was sent, before its reply was read
         return real_recv(stream)
 
-    monkeypatch.setattr(client, "_recv", interrupted_recv)
+    monkeypatch.setattr(client, "receive_message", interrupted_recv)
     client.call("model_ops:read_model_info", str(example.model))  # the worker is up (its "ready" read)
     armed.append(True)
     with pytest.raises(KeyboardInterrupt):

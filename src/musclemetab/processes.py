@@ -1,4 +1,5 @@
-"""Process pools of the package: the study runner's units and the legs of ``solve --side both``.
+"""Process pools of the package (the study runner's units and the legs of ``solve --side both``)
+and a call in a background thread (:class:`BackgroundCall`).
 
 Workers are started with ``spawn`` (OpenSim and CasADi cannot share a process; each worker
 starts its own OpenSim worker process when it needs one), ignore Ctrl-C while idle, and their
@@ -9,9 +10,10 @@ from __future__ import annotations
 
 import os
 import signal
+import threading
 from concurrent.futures import ProcessPoolExecutor
 
-__all__ = ["THREAD_VARIABLES", "pin_threads", "ignore_sigint", "spawn_pool"]
+__all__ = ["THREAD_VARIABLES", "pin_threads", "ignore_sigint", "spawn_pool", "BackgroundCall"]
 
 #: environment variables that size the thread pools of BLAS/LAPACK and OpenMP libraries
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
@@ -47,3 +49,27 @@ def spawn_pool(workers: int):
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                initializer=ignore_sigint)
     return pool, restore
+
+
+class BackgroundCall:
+    """Run ``func(*args)`` in a daemon thread of this process (e.g. a request to the OpenSim
+    worker while the caller reads its files); :meth:`result` waits for it and re-raises its
+    error in the caller's thread."""
+
+    def __init__(self, func, *args):
+        self._value = self._error = None
+        self._thread = threading.Thread(target=self._run, args=(func, args), daemon=True)
+        self._thread.start()
+
+    def _run(self, func, args):
+        try:
+            self._value = func(*args)
+        except BaseException as exc:  # re-raised in the caller's thread
+            self._error = exc
+
+    def result(self):
+        """The value of ``func(*args)``, once it has returned (its exception, if it raised)."""
+        self._thread.join()
+        if self._error is not None:
+            raise self._error
+        return self._value

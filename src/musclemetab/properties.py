@@ -437,7 +437,9 @@ def _report_unplaced(unplaced: Sequence[str], strict: bool, warn: bool) -> None:
 # ---------------------------------------------------------------------------------------
 
 
-def _check_subject(body_mass_kg: float, height_m: float) -> None:
+def check_subject(body_mass_kg: float, height_m: float) -> None:
+    """Raise :class:`OptionError` unless the body mass (10-400 kg) and the height (0.5-2.6 m) are
+    plausible for a person, i.e. given in kilograms and metres."""
     if not (np.isfinite(body_mass_kg) and 10.0 <= body_mass_kg <= 400.0):
         raise OptionError(f"body mass {body_mass_kg!r} kg is not plausible; give the mass in kilograms")
     if not (np.isfinite(height_m) and 0.5 <= height_m <= 2.6):
@@ -446,7 +448,7 @@ def _check_subject(body_mass_kg: float, height_m: float) -> None:
 
 def total_muscle_volume_m3(body_mass_kg: float, height_m: float) -> float:
     """Total lower-limb muscle volume, ``(47 m h + 1285) cm^3``, in m^3."""
-    _check_subject(body_mass_kg, height_m)
+    check_subject(body_mass_kg, height_m)
     return (HANDSFIELD_SLOPE_CM3_PER_KG_M * body_mass_kg * height_m + HANDSFIELD_INTERCEPT_CM3) * 1e-6
 
 

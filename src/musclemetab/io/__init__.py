@@ -9,7 +9,7 @@ from .atomic import (
     check_output_folder,
     file_sha256,
 )
-from .jsonfile import read_json_object
+from .jsonfile import json_ready, read_json_object
 from .storage import (
     StorageTable,
     as_table,
@@ -40,4 +40,5 @@ __all__ = [
     "check_output_folder",
     "check_inside",
     "read_json_object",
+    "json_ready",
 ]

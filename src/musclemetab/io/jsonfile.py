@@ -6,7 +6,11 @@ import json
 import os
 from pathlib import Path
 
+import numpy as np
+
 from ..errors import InputFileError
+
+__all__ = ["read_json_object", "json_ready"]
 
 
 def read_json_object(path: str | os.PathLike, *, missing: str = "not found", remedy: str = "") -> dict:
@@ -27,3 +31,23 @@ def read_json_object(path: str | os.PathLike, *, missing: str = "not found", rem
     if not isinstance(data, dict):
         raise InputFileError(f"{path}: a JSON object is expected, not {type(data).__name__}{tail}")
     return data
+
+
+def json_ready(x):
+    """``x`` with NumPy arrays and scalars, tuples and paths turned into the JSON types (lists,
+    floats, ints, bools, strings) and dictionary keys into strings, for :func:`json.dumps`."""
+    if isinstance(x, dict):
+        return {str(k): json_ready(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [json_ready(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return json_ready(x.tolist())
+    if isinstance(x, (np.floating,)):
+        return float(x)
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, (np.bool_,)):
+        return bool(x)
+    if isinstance(x, Path):
+        return str(x)
+    return x

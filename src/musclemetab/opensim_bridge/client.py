@@ -24,14 +24,16 @@ _PROC: subprocess.Popen | None = None
 _STARTUP_S: float | None = None
 
 
-def _send(stream, obj) -> None:
+def send_message(stream, obj) -> None:
+    """Write one message of the worker protocol: the pickle of ``obj`` after its length (8 bytes)."""
     data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
     stream.write(struct.pack(">Q", len(data)))
     stream.write(data)
     stream.flush()
 
 
-def _recv(stream):
+def receive_message(stream):
+    """Read one message written by :func:`send_message`; :class:`EOFError` when the stream ends."""
     head = stream.read(8)
     if len(head) < 8:
         raise EOFError
@@ -54,7 +56,7 @@ def _start() -> subprocess.Popen:
         env=env,
     )
     try:
-        ready = _recv(proc.stdout)
+        ready = receive_message(proc.stdout)
     except EOFError:
         proc.kill()
         raise OpenSimWorkerError(
@@ -95,8 +97,8 @@ def call(target: str, *args, **kwargs):
     with _LOCK:
         _ensure_started()
         try:
-            _send(_PROC.stdin, (target, args, kwargs))
-            status, payload = _recv(_PROC.stdout)
+            send_message(_PROC.stdin, (target, args, kwargs))
+            status, payload = receive_message(_PROC.stdout)
         except (EOFError, BrokenPipeError):
             code = _PROC.poll()
             _PROC = None

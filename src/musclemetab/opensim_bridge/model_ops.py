@@ -43,11 +43,12 @@ import opensim as osim
 
 from ..errors import ModelError, UnknownCoordinateError, UnknownMuscleError
 
-_ROTATIONAL, _TRANSLATIONAL, _COUPLED = 1, 2, 3
+#: OpenSim's ``Coordinate.MotionType`` values (``getMotionType()``)
+ROTATIONAL, TRANSLATIONAL, COUPLED = 1, 2, 3
 _MODELS: dict = {}
 
 
-class _Loaded:
+class LoadedModel:
     """A model with its initialised state and the maps used to set coordinates fast."""
 
     def __init__(self, path: str):
@@ -94,20 +95,21 @@ class _Loaded:
         return out
 
 
-def _load(path: str) -> _Loaded:
+def load_model(path: str) -> LoadedModel:
+    """The model at ``path``, loaded once while the file is unchanged (the last one is kept)."""
     path = os.path.abspath(path)
     if not os.path.isfile(path):
         raise ModelError(f"{path}: no such model file; check the path")
     key = (path, os.path.getmtime(path), os.path.getsize(path))
     if key not in _MODELS:
         _MODELS.clear()
-        _MODELS[key] = _Loaded(path)
+        _MODELS[key] = LoadedModel(path)
     return _MODELS[key]
 
 
 def read_model_info(model_path: str) -> dict:
     """Muscles (name, class, F0, lMo, lTs, alpha0, vmax), body mass, coordinates, couplers."""
-    m = _load(model_path)
+    m = load_model(model_path)
     muscles = []
     for name in m.muscle_order:
         mu = m.muscles[name]
@@ -127,7 +129,7 @@ def read_model_info(model_path: str) -> dict:
     coordinates = [
         dict(
             name=n,
-            motion_type={_ROTATIONAL: "rotational", _TRANSLATIONAL: "translational", _COUPLED: "coupled"}.get(
+            motion_type={ROTATIONAL: "rotational", TRANSLATIONAL: "translational", COUPLED: "coupled"}.get(
                 m.motion[n], "unknown"
             ),
             locked=m.locked[n],
@@ -148,13 +150,16 @@ def read_model_info(model_path: str) -> dict:
     )
 
 
-def _frame_values(m: _Loaded, columns: dict, in_degrees: bool, k: int) -> dict:
+def frame_values(m: LoadedModel, columns: dict, in_degrees: bool, k: int) -> dict:
+    """The values (rad, m) of the model's free coordinates at frame ``k`` of the motion
+    ``columns`` (``{coordinate: values}``; rotations in degrees when ``in_degrees``), and those
+    of its coupled coordinates computed from them."""
     vals = {}
     for n, col in columns.items():
-        if n not in m.coords or n in m.dependent or m.motion[n] == _COUPLED or m.locked[n]:
+        if n not in m.coords or n in m.dependent or m.motion[n] == COUPLED or m.locked[n]:
             continue
         v = float(col[k])
-        if in_degrees and m.motion[n] == _ROTATIONAL:
+        if in_degrees and m.motion[n] == ROTATIONAL:
             v = math.radians(v)
         vals[n] = v
     vals.update(m.coupled_values(vals))
@@ -193,7 +198,7 @@ def muscle_geometry(
     (frames x dofs x muscles), ``defaulted_coordinates`` (unlocked coordinates absent from
     ``columns``, held at their default value).
     """
-    m = _load(model_path)
+    m = load_model(model_path)
     for d in dofs:
         if d not in m.coords:
             raise UnknownCoordinateError(
@@ -225,7 +230,7 @@ def muscle_geometry(
         model.realizePosition(state)
 
     if muscles is None:
-        apply(_frame_values(m, columns, in_degrees, 0))
+        apply(frame_values(m, columns, in_degrees, 0))
         selected = []
         for name in m.muscle_order:
             mu = m.muscles[name]
@@ -247,7 +252,7 @@ def muscle_geometry(
     h = step_rad
     # Which muscles span which DOF: a muscle with no path point on a body the coordinate
     # moves has a moment arm of exactly zero (to round-off) at every frame.
-    apply(_frame_values(m, columns, in_degrees, 0))
+    apply(frame_values(m, columns, in_degrees, 0))
     spans = np.array(
         [[abs(mu.computeMomentArm(state, coords[d])) > 1e-12 for mu in mus] for d in dofs], dtype=bool
     ).reshape(n_dofs, n_mus)
@@ -257,7 +262,7 @@ def muscle_geometry(
         api_sets = [np.flatnonzero(spans[j] & multi_wrap) for j in range(n_dofs)]
         sets = [np.flatnonzero(spans[j] & ~multi_wrap) for j in range(n_dofs)]
     for k in range(n_frames):
-        vals = _frame_values(m, columns, in_degrees, k)
+        vals = frame_values(m, columns, in_degrees, k)
         apply(vals)
         lmt[k] = [mu.getLength(state) for mu in mus]
         if method == "velocity":
@@ -331,9 +336,9 @@ def model_layout(model_path: str) -> dict:
       one unit from its default (a translational coordinate gives its axis; a rotation about
       the body's origin gives zero).
     """
-    m = _load(model_path)
+    m = load_model(model_path)
     model, state = m.model, m.state
-    names = {_ROTATIONAL: "rotational", _TRANSLATIONAL: "translational", _COUPLED: "coupled"}
+    names = {ROTATIONAL: "rotational", TRANSLATIONAL: "translational", COUPLED: "coupled"}
     bodies = model.getBodySet()
     body_names = [bodies.get(i).getName() for i in range(bodies.getSize())]
     for n, c in m.coords.items():
@@ -403,7 +408,7 @@ def body_origins(model_path: str, columns: dict, in_degrees: bool, bodies: list)
     coupled coordinates from their couplers, coordinates absent from ``columns`` at their
     default). Returns ``{"positions_m": (frames, bodies, 3)}``.
     """
-    m = _load(model_path)
+    m = load_model(model_path)
     model, state = m.model, m.state
     body_set = model.getBodySet()
     names = [body_set.get(i).getName() for i in range(body_set.getSize())]
@@ -416,7 +421,7 @@ def body_origins(model_path: str, columns: dict, in_degrees: bool, bodies: list)
         c.setValue(state, c.getDefaultValue(), False)
     out = np.zeros((n_frames, len(bodies), 3))
     for k in range(n_frames):
-        for n, v in _frame_values(m, columns, in_degrees, k).items():
+        for n, v in frame_values(m, columns, in_degrees, k).items():
             m.coords[n].setValue(state, v, False)
         model.realizePosition(state)
         for j, b in enumerate(objs):

@@ -30,7 +30,7 @@ import numpy as np
 import opensim as osim
 
 from ..errors import DataMismatchError, UnknownMuscleError
-from .model_ops import _COUPLED, _ROTATIONAL, _load
+from .model_ops import COUPLED, ROTATIONAL, load_model
 from .probes import BHARGAVA_SWITCHES, UMBERGER_SWITCHES, _DEFAULT_OFF
 
 __all__ = ["model_states_along_motion", "probes_over_states"]
@@ -47,7 +47,7 @@ def model_states_along_motion(model_path: str, ik_time, columns: dict, in_degree
     """
     from .._numerics import NotAKnotSpline
 
-    m = _load(model_path)
+    m = load_model(model_path)
     model, state = m.model, m.state
     sv = model.getStateVariableNames()
     names = [sv.get(i) for i in range(sv.getSize())]
@@ -59,9 +59,9 @@ def model_states_along_motion(model_path: str, ik_time, columns: dict, in_degree
             f"the solution spans {times[0]:g}-{times[-1]:g} s but the IK motion only {ik_time[0]:g}-{ik_time[-1]:g} s; "
             "give the IK file of the solved trial"
         )
-    from .model_ops import _frame_values
+    from .model_ops import frame_values
 
-    frames = [_frame_values(m, columns, in_degrees, k) for k in range(ik_time.size)]
+    frames = [frame_values(m, columns, in_degrees, k) for k in range(ik_time.size)]
     values: dict[str, np.ndarray] = {}
     defaulted = []
     for n, c in m.coords.items():
@@ -79,7 +79,7 @@ def model_states_along_motion(model_path: str, ik_time, columns: dict, in_degree
     for mu in m.muscle_order:
         prefix = m.muscles[mu].getAbsolutePathString() + "/"
         muscle_states[mu] = [s for s in names if s.startswith(prefix)]
-    kinds = {_ROTATIONAL: "rotational", _COUPLED: "coupled"}
+    kinds = {ROTATIONAL: "rotational", COUPLED: "coupled"}
     return dict(
         state_names=names,
         defaults=defaults,

@@ -22,20 +22,20 @@ def main() -> int:
     os.dup2(2, 1)  # anything printed (OpenSim's log) goes to stderr
     proto_in = sys.stdin.buffer
 
-    from .client import _recv, _send
+    from .client import receive_message, send_message
 
     try:
         import opensim
 
         opensim.Logger.setLevelString("error")
     except Exception as exc:  # pragma: no cover - environment problem
-        _send(proto_out, ("failed", f"{type(exc).__name__}: {exc}"))
+        send_message(proto_out, ("failed", f"{type(exc).__name__}: {exc}"))
         return 1
-    _send(proto_out, ("ready", opensim.__version__))
+    send_message(proto_out, ("ready", opensim.__version__))
 
     while True:
         try:
-            target, args, kwargs = _recv(proto_in)
+            target, args, kwargs = receive_message(proto_in)
         except EOFError:
             return 0
         try:
@@ -48,7 +48,7 @@ def main() -> int:
             if not isinstance(exc, MusclemetabError):
                 exc = RuntimeError(f"{type(exc).__name__}: {exc}")
             result = ("error", exc)
-        _send(proto_out, result)
+        send_message(proto_out, result)
 
 
 if __name__ == "__main__":

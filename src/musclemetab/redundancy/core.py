@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 
@@ -46,7 +47,7 @@ from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
 from .static_opt import InitialGuess
 
-__all__ = ["Goals", "ParameterSpec", "TrialBlock", "PARAMETER_KINDS", "FIBRE_DYNAMICS", "build_problem",
+__all__ = ["Goals", "ParameterSpec", "coupling_pairs", "TrialBlock", "PARAMETER_KINDS", "FIBRE_DYNAMICS", "build_problem",
            "node_bounds", "fibre_length_upper_bounds", "check_fibre_dynamics"]
 
 #: kinds of shared scale factors; the muscle parameters a factor multiplies
@@ -119,6 +120,27 @@ class ParameterSpec:
         n = len(self.muscles)
         if any(not (0 <= a < n and 0 <= b < n) for a, b in self.couplings):
             raise OptionError(f"a coupling of the {self.kind} factors names a muscle outside {self.muscles}")
+
+
+def coupling_pairs(groups: Sequence[Sequence[str]], muscles: Sequence[str], consecutive: bool
+                   ) -> tuple[tuple[int, int], ...]:
+    """The :attr:`ParameterSpec.couplings` that make the factors of each group of muscles equal.
+
+    ``groups`` name muscles; those not in ``muscles`` are left out of their group. Pairs are
+    positions in ``muscles``: with ``consecutive`` each member to the next one of its group
+    (``[a, b, c]`` gives ``(a, b), (b, c)``), otherwise the group's first member to each of the
+    others (``(a, b), (a, c)``). Either way a group of ``n`` present members gives ``n - 1``
+    equalities; a group with one present member gives none.
+    """
+    pos = {n: i for i, n in enumerate(muscles)}
+    pairs = []
+    for g in groups:
+        members = [m for m in g if m in pos]
+        if consecutive:
+            pairs += [(pos[a], pos[b]) for a, b in zip(members[:-1], members[1:])]
+        else:
+            pairs += [(pos[members[0]], pos[b]) for b in members[1:]]
+    return tuple(pairs)
 
 
 @dataclass(frozen=True)

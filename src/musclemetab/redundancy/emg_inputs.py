@@ -11,7 +11,8 @@ import numpy as np
 from ..errors import DataMismatchError, InputFileError, OptionError, UnknownMuscleError
 from .estimates import PARAMETERS_FILE
 
-__all__ = ["resolve_emg_mapping", "mapping_for_muscles", "emg_at_nodes"]
+__all__ = ["resolve_emg_mapping", "mapping_for_muscles", "emg_at_nodes", "path_list", "trial_labels", "one_model",
+           "mapped_emg_table", "check_emg_window", "check_emg_range"]
 
 
 def resolve_emg_mapping(mapping: str | Mapping[str, Sequence[str] | str] | os.PathLike = "default") -> dict:
@@ -69,7 +70,9 @@ def mapping_for_muscles(emg_mapping, mapping: dict, muscles: Sequence[str]) -> d
     return mapping
 
 
-def _as_list(x, what: str) -> list:
+def path_list(x, what: str) -> list:
+    """One path or a sequence of them as a list (``None`` gives ``[]``); :class:`OptionError`
+    naming ``what`` for anything else."""
     if x is None:
         return []
     if isinstance(x, (str, os.PathLike)):
@@ -80,10 +83,12 @@ def _as_list(x, what: str) -> list:
         raise OptionError(f"{what} must be a path or a list of paths, not {x!r}") from None
 
 
-def _labels(ik_paths, labels) -> list[str]:
+def trial_labels(ik_paths, labels) -> list[str]:
+    """The trials' names, one per IK file: ``labels`` checked (as many, distinct, usable as
+    folder names, not the parameters file's name), or the IK files' stems."""
     if labels is None:
         labels = [Path(p).stem for p in ik_paths]
-    labels = [str(x) for x in _as_list(labels, "labels")]
+    labels = [str(x) for x in path_list(labels, "labels")]
     if len(labels) != len(ik_paths):
         raise OptionError(f"{len(labels)} trial labels for {len(ik_paths)} trials; give one label per trial")
     bad = [x for x in labels if not x or x in (".", "..") or "/" in x or "\\" in x]
@@ -98,7 +103,7 @@ def _labels(ik_paths, labels) -> list[str]:
     return labels
 
 
-def _check_emg_range(df, t0: float, tf: float, tol: float, what: str) -> None:
+def check_emg_range(df, t0: float, tf: float, tol: float, what: str) -> None:
     """Reject mapped EMG outside ``[0, 1]`` (by more than ``tol``) inside ``[t0, tf]``."""
     t = np.asarray(df.index, dtype=float)
     sel = (t >= t0 - 1e-9) & (t <= tf + 1e-9)
@@ -119,7 +124,7 @@ def _check_emg_range(df, t0: float, tf: float, tol: float, what: str) -> None:
             )
 
 
-def _emg_table(emg, mapping, path_label: str):
+def mapped_emg_table(emg, mapping, path_label: str):
     """Read (if a path) and map an EMG table to ``{muscle: signal}``; errors name the file."""
     from ..emg import map_channels, read_processed_emg
 
@@ -137,13 +142,13 @@ def _emg_table(emg, mapping, path_label: str):
     return map_channels(df, mapping)
 
 
-def _check_models(model_path, n_trials: int) -> Path:
+def one_model(model_path, n_trials: int) -> Path:
     """One model for all trials; a list with one path per trial must name the same model."""
     from ..io.atomic import file_sha256
 
     if isinstance(model_path, (str, os.PathLike)):
         return Path(model_path)
-    paths = [Path(p) for p in _as_list(model_path, "model_path")]
+    paths = [Path(p) for p in path_list(model_path, "model_path")]
     if len(paths) not in (1, n_trials):
         raise OptionError(f"{len(paths)} models for {n_trials} trials; give one model (or one per trial)")
     from ..model import check_model_path
@@ -160,7 +165,8 @@ def _check_models(model_path, n_trials: int) -> Path:
     return paths[0]
 
 
-def _require_emg_window(table, ik_time, emg_label: str, ik_label: str) -> None:
+def check_emg_window(table, ik_time, emg_label: str, ik_label: str) -> None:
+    """Raise :class:`DataMismatchError` unless the EMG ``table`` covers the trial's IK frames."""
     t = np.asarray(table.index, dtype=float)
     t0, tf = float(ik_time[0]), float(ik_time[-1])
     if t.size == 0 or t[0] > t0 + 1e-6 or t[-1] < tf - 1e-6:
@@ -179,10 +185,10 @@ def emg_at_nodes(emg, mapping: dict, inputs, muscles: Sequence[str], what: str, 
     the EMG must cover the trial's window and lie within ``[0, 1]`` (by ``range_tolerance``)
     there. It is linearly interpolated at the node times. Errors name ``what``.
     """
-    table = _emg_table(emg, mapping, what)
+    table = mapped_emg_table(emg, mapping, what)
     t0, tf = inputs.window_s
-    _require_emg_window(table, inputs.frame_time_s, what, ik_label)
-    _check_emg_range(table, t0, tf, range_tolerance, what)
+    check_emg_window(table, inputs.frame_time_s, what, ik_label)
+    check_emg_range(table, t0, tf, range_tolerance, what)
     N = inputs.n_intervals
     te = np.asarray(table.index, dtype=float)
     return np.column_stack([np.interp(inputs.mesh_time_s[:N], te, table[m].to_numpy(dtype=float)) for m in muscles])

@@ -14,24 +14,26 @@ import numpy as np
 
 from ..errors import DataMismatchError, OptionError, UnknownMuscleError
 from .emg_inputs import (
-    _as_list,
-    _check_emg_range,
-    _check_models,
-    _emg_table,
-    _labels,
-    _require_emg_window,
+    check_emg_range,
+    check_emg_window,
     emg_at_nodes,
+    mapped_emg_table,
     mapping_for_muscles,
+    one_model,
+    path_list,
     resolve_emg_mapping,
+    trial_labels,
 )
 from .emg_ten import EmgTenSettings, EmgTenTrial, settings_for_muscles, solve_emg_ten_ocp
 from .estimates import EMG_TEN, EmgTenResult, assemble_result
 from .inputs import (
+    check_id_coordinates,
     check_moment_magnitudes,
     check_time_ranges,
     prepare_inputs,
     read_inverse_dynamics,
     read_kinematics,
+    restrict_geometry,
 )
 from .parameters import MuscleTendonParameters
 from .problem import SolverOptions
@@ -88,12 +90,14 @@ def solve_emg_ten(
     the window, besides the IK/ID checks of the single-trial solver (columns, units, time
     ranges). Muscles of a custom mapping that the model lacks are reported after the geometry.
     """
-    from .solve import _Background, _read_model_parameters
+    from ..io import read_table
+    from ..model import read_muscle_parameters
+    from ..processes import BackgroundCall
     from .workflows import read_passive_parameters
 
-    ik_paths = _as_list(ik_paths, "ik_paths")
-    id_paths = _as_list(id_paths, "id_paths")
-    emg_paths = _as_list(emg_paths, "emg_paths")
+    ik_paths = path_list(ik_paths, "ik_paths")
+    id_paths = path_list(id_paths, "id_paths")
+    emg_paths = path_list(emg_paths, "emg_paths")
     if not ik_paths:
         raise OptionError("EMG-TEN needs at least one trial (IK, ID and EMG file)")
     if not (len(ik_paths) == len(id_paths) == len(emg_paths)):
@@ -101,32 +105,33 @@ def solve_emg_ten(
             f"{len(ik_paths)} IK, {len(id_paths)} ID and {len(emg_paths)} EMG files; give one of each per trial, "
             "in the same order"
         )
-    model = _check_models(model_path, len(ik_paths))
-    labels = _labels(ik_paths, labels)
+    model = one_model(model_path, len(ik_paths))
+    labels = trial_labels(ik_paths, labels)
     mapping = resolve_emg_mapping(emg_mapping)
     settings = settings or EmgTenSettings()
     if passive is not None and not hasattr(passive, "for_muscles"):
         passive = read_passive_parameters(passive)
-    dofs = _trial_dofs(model, id_paths, dofs, side, cache_dir)
-
-    # every file is checked before OpenSim is asked anything
-    id_data, emg_tables, ik_times = [], [], []
-    for ik, idp, emg, lab in zip(ik_paths, id_paths, emg_paths, labels):
-        ik_time, _ = read_kinematics(ik, dofs, check_units=check_units)
-        id_time, id_moments = read_inverse_dynamics(idp, dofs)
+    # each file is read once; every file is checked before OpenSim is asked anything
+    id_tables = [read_table(p) for p in id_paths]
+    dofs = _trial_dofs(model, id_tables, dofs, side, cache_dir)
+    id_data, emg_tables, ik_times, ik_tables = [], [], [], []
+    for ik, idp, id_table, emg, lab in zip(ik_paths, id_paths, id_tables, emg_paths, labels):
+        ik_tables.append(read_table(ik))
+        ik_time, _ = read_kinematics(ik_tables[-1], dofs, check_units=check_units)
+        id_time, id_moments = read_inverse_dynamics(id_table, dofs)
         check_time_ranges(ik_time, id_time, ik, idp)
-        table = _emg_table(emg, mapping, f"EMG of trial {lab}")
+        table = mapped_emg_table(emg, mapping, f"EMG of trial {lab}")
         what = str(table.attrs.get("path", f"EMG of trial {lab}"))
-        _require_emg_window(table, ik_time, what, str(ik))
-        _check_emg_range(table, float(ik_time[0]), float(ik_time[-1]), settings.emg_range_tolerance, what)
+        check_emg_window(table, ik_time, what, str(ik))
+        check_emg_range(table, float(ik_time[0]), float(ik_time[-1]), settings.emg_range_tolerance, what)
         id_data.append((id_time, id_moments))
         emg_tables.append(table)
         ik_times.append(ik_time)
-    params_request = _Background(_read_model_parameters, model)
+    params_request = BackgroundCall(read_muscle_parameters, model)
     from ..geometry import compute_geometry
 
     t0 = _time.perf_counter()
-    geometries = [compute_geometry(model, ik, dofs=list(dofs), side=side, cache_dir=cache_dir) for ik in ik_paths]
+    geometries = [compute_geometry(model, ik, dofs=list(dofs), side=side, cache_dir=cache_dir) for ik in ik_tables]
     t_geometry = _time.perf_counter() - t0
     model_parameters = params_request.result()
     if check_units:
@@ -148,18 +153,16 @@ def solve_emg_ten(
     return result
 
 
-def _trial_dofs(model, id_paths, dofs, side: str, cache_dir) -> tuple[str, ...]:
-    """``dofs`` checked against the model, or the side's DOFs that every ID file holds."""
-    from ..io import read_storage
+def _trial_dofs(model, id_tables, dofs, side: str, cache_dir) -> tuple[str, ...]:
+    """``dofs`` checked against the model, or the side's DOFs that every ID table holds."""
     from ..layout import check_dofs_in_model, check_side, discover_dofs, read_layout
-    from .solve import _check_id_coordinates
 
     check_side(side)
     layout = read_layout(model, cache_dir=cache_dir)
     common = None
-    for idp in id_paths:
-        columns = list(read_storage(idp).columns)
-        _check_id_coordinates(idp, columns, layout)
+    for table in id_tables:
+        columns = list(table.columns)
+        check_id_coordinates(table.attrs["path"], columns, layout)
         common = [c for c in columns if common is None or c in common]
     if dofs:
         dofs = tuple(dofs)
@@ -188,10 +191,8 @@ def solve_emg_ten_arrays(
     """EMG-TEN from arrays: per trial a geometry-like object, ``(ID time, ID moments)`` with
     columns in the order of ``geometry.dofs``, and an EMG table (time-indexed ``DataFrame``,
     channels as columns, or already mapped to muscles by ``musclemetab.emg.map_channels``)."""
-    from .solve import _restrict_geometry
-
     t_start = _time.perf_counter()
-    settings = settings_for_muscles(settings, _restrict_geometry(list(geometries)[0]).muscles) if geometries \
+    settings = settings_for_muscles(settings, restrict_geometry(list(geometries)[0]).muscles) if geometries \
         else (settings or EmgTenSettings())
     options = emg_ten_options(options, settings)
     trials, params, wf_record = prepare_emg_ten_trials(
@@ -233,7 +234,6 @@ def prepare_emg_ten_trials(
     """The trials of an EMG-TEN problem (mesh inputs, EMG at the nodes, initial guess), the
     muscle parameters (calibrated passive muscle, nominal ``kT``) and their record; the
     arguments are those of :func:`solve_emg_ten_arrays`. Nothing is solved."""
-    from .solve import _restrict_geometry
     from .workflows import workflow_parameters
 
     settings = settings or EmgTenSettings()
@@ -243,14 +243,14 @@ def prepare_emg_ten_trials(
     if not (n == len(id_data) == len(emg_tables)) or n == 0:
         raise OptionError(f"{n} geometries, {len(id_data)} ID and {len(emg_tables)} EMG tables; give one of each "
                           "per trial (at least one trial)")
-    labels = [f"trial_{i + 1}" for i in range(n)] if labels is None else _labels(list(range(n)), labels)
+    labels = [f"trial_{i + 1}" for i in range(n)] if labels is None else trial_labels(list(range(n)), labels)
     sources = [dict(s) for s in (sources or [{} for _ in range(n)])]
     mapping = resolve_emg_mapping(emg_mapping)
     ik_times = list(ik_times) if ik_times is not None else [None] * n
 
     # same model (hence the same muscles and DOFs) for all trials
     all_dofs = [tuple(g.dofs) for g in geometries]
-    restricted = [_restrict_geometry(g) for g in geometries]
+    restricted = [restrict_geometry(g) for g in geometries]
     ref = restricted[0]
     for lab, g in zip(labels[1:], restricted[1:]):
         if tuple(g.muscles) != tuple(ref.muscles) or tuple(g.dofs) != tuple(ref.dofs):

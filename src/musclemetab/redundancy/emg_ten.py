@@ -57,7 +57,7 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import DataMismatchError, OptionError, UnknownMuscleError
-from .core import Goals, ParameterSpec, TrialBlock, build_problem, check_fibre_dynamics
+from .core import Goals, ParameterSpec, TrialBlock, build_problem, check_fibre_dynamics, coupling_pairs
 from .emg_inputs import mapping_for_muscles, resolve_emg_mapping
 from .estimates import EMG_TEN, PARAMETERS_FILE, EmgTenResult, tendon_stiffness_at_force_N_per_mm
 from .inputs import TrialInputs
@@ -268,18 +268,6 @@ class EmgTenTrial:
     static_optimisation_objective: float = math.nan
 
 
-def _coupling_pairs(groups, names, consecutive: bool) -> tuple[tuple[int, int], ...]:
-    pos = {n: i for i, n in enumerate(names)}
-    pairs = []
-    for g in groups:
-        members = [m for m in g if m in pos]
-        if consecutive:
-            pairs += [(pos[a], pos[b]) for a, b in zip(members[:-1], members[1:])]
-        else:
-            pairs += [(pos[members[0]], pos[b]) for b in members[1:]]
-    return tuple(pairs)
-
-
 def emg_ten_problem(trials: Sequence[EmgTenTrial], params: MuscleTendonParameters,
                     settings: EmgTenSettings | None = None):
     """EMG-TEN as an instance of the problem core: ``(blocks, goals, specs)``.
@@ -308,9 +296,9 @@ def emg_ten_problem(trials: Sequence[EmgTenTrial], params: MuscleTendonParameter
     order = list(dict.fromkeys(m for t in trials for m in t.inputs.muscles))
     kt_muscles = tuple(m for m in order if m in settings.tendon_muscles)
     specs = [ParameterSpec("tendon_stiffness", kt_muscles, settings.tendon_scale_bounds,
-                           _coupling_pairs(settings.tendon_groups, kt_muscles, consecutive=True))] if kt_muscles else []
+                           coupling_pairs(settings.tendon_groups, kt_muscles, consecutive=True))] if kt_muscles else []
     specs.append(ParameterSpec("emg_scale", emg_muscles, settings.emg_scale_bounds,
-                               _coupling_pairs(settings.emg_groups, emg_muscles, consecutive=False)))
+                               coupling_pairs(settings.emg_groups, emg_muscles, consecutive=False)))
     goals = Goals(w_activation=settings.w_activation, w_reserve=settings.w_reserve,
                   w_velocity=settings.w_velocity, w_emg=settings.w_emg, emg_tolerance=settings.emg_bound,
                   fibre_dynamics=settings.fibre_scheme)

@@ -55,7 +55,7 @@ class EnergyGoal:
 
     def __post_init__(self):
         from ..metabolics.smooth import SMOOTH_MODELS
-        from ..properties import _check_subject
+        from ..properties import check_subject
 
         key = str(self.model).strip().upper()
         if key not in SMOOTH_MODELS:
@@ -72,7 +72,7 @@ class EnergyGoal:
         s = self.smoothing
         if isinstance(s, bool) or not isinstance(s, (int, float)) or not (math.isfinite(s) and s > 0):
             raise OptionError(f"energy goal: the smoothing must be a positive number, not {s!r}")
-        _check_subject(float(self.body_mass_kg), float(self.height_m))
+        check_subject(float(self.body_mass_kg), float(self.height_m))
         if isinstance(self.muscle_properties, os.PathLike):
             object.__setattr__(self, "muscle_properties", os.fspath(self.muscle_properties))
         object.__setattr__(self, "options", dict(self.options))

@@ -94,8 +94,8 @@ def _bounds(text: str) -> tuple[float, float]:
 
 def estimate_command(args) -> int:
     from ..io import atomic_write_text, check_output_folder
-    from .core import Goals, ParameterSpec
-    from .emg_inputs import _labels, emg_at_nodes, mapping_for_muscles, resolve_emg_mapping
+    from .core import Goals, ParameterSpec, coupling_pairs
+    from .emg_inputs import emg_at_nodes, mapping_for_muscles, resolve_emg_mapping, trial_labels
     from .estimate import (
         FIELDS,
         estimate_parameters,
@@ -151,7 +151,7 @@ def estimate_command(args) -> int:
     # the driven mode transcribes the fibre dynamics with backward Euler (docs/problem.md)
     fibre_dynamics = "backward" if emg_files and mode == "driven" else "forward"
     goals = Goals(**weights, emg_tolerance=tolerance, fibre_dynamics=fibre_dynamics)
-    labels = _labels(args.ik, args.labels)
+    labels = trial_labels(args.ik, args.labels)
     measured = [read_fibre_lengths(p) for p in us_files] or [{} for _ in range(n)]
     mapping = resolve_emg_mapping(args.emg_mapping or "default") if emg_files else {}
     emg_muscles = ()
@@ -185,11 +185,11 @@ def estimate_command(args) -> int:
         trials.append(fibre_length_trial(lab, inputs, initial_guess(inputs, p, so), us, **emg))
         prepared.append((g, nominal, t_id, mom, t_ik))
     if emg_files:
-        from .emg_ten import EmgTenSettings, _coupling_pairs, settings_for_muscles
+        from .emg_ten import EmgTenSettings, settings_for_muscles
 
         groups = settings_for_muscles(EmgTenSettings(), params.names).emg_groups
         specs.append(ParameterSpec("emg_scale", emg_muscles, bounds.get("emg_scale", EMG_SCALE_BOUNDS),
-                                   _coupling_pairs(groups, emg_muscles, consecutive=False)))
+                                   coupling_pairs(groups, emg_muscles, consecutive=False)))
     res, est = estimate_parameters(trials, params, specs, goals, options=options)
     run = RunRecord.from_result(res, {"model": args.model})
     estimated = est.parameters()

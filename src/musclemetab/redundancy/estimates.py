@@ -24,7 +24,7 @@ import numpy as np
 
 from ..muscle import KT_GENERIC, tendon_length_from_force, tendon_stiffness_N_per_m
 from .parameters import MuscleTendonParameters
-from .solution import _jsonable
+from ..io.jsonfile import json_ready
 
 __all__ = ["EMG_TEN", "EmgTenResult", "assemble_result", "PARAMETERS_FILE",
            "tendon_stiffness_at_force_N_per_mm"]
@@ -136,7 +136,7 @@ class EmgTenResult:
 
     def parameters_document(self) -> dict:
         """The content of ``parameters.json``."""
-        return _jsonable({
+        return json_ready({
             "format": PARAMETERS_FORMAT,
             "format_version": PARAMETERS_VERSION,
             "workflow": EMG_TEN,

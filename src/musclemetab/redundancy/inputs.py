@@ -44,6 +44,9 @@ __all__ = [
     "FILTER_ORDER",
     "MUSCLE_SELECTION_THRESHOLD_M",
     "GeometryLike",
+    "GeometryArrays",
+    "restrict_geometry",
+    "check_id_coordinates",
     "TrialInputs",
     "lowpass_filtfilt",
     "mesh_for_window",
@@ -280,6 +283,53 @@ def select_muscles(
         )
     keep_d = np.flatnonzero(np.any(np.abs(r[:, :, keep_m]) > threshold_m, axis=(0, 2)))
     return keep_m, keep_d
+
+
+class GeometryArrays:
+    """A :class:`GeometryLike` made of given arrays (a part of another geometry's frames,
+    muscles or DOFs)."""
+
+    def __init__(self, time, muscles, dofs, lmt_m, moment_arms_m):
+        self.time, self.muscles, self.dofs = time, tuple(muscles), tuple(dofs)
+        self.lmt_m, self.moment_arms_m = lmt_m, moment_arms_m
+
+
+def restrict_geometry(geometry: GeometryLike) -> GeometryLike:
+    """The geometry of the muscles and DOFs :func:`select_muscles` keeps (``geometry`` itself
+    when it keeps them all).
+
+    DOFs that no selected muscle crosses are dropped (their ID columns must be dropped too).
+    """
+    r = np.asarray(geometry.moment_arms_m, dtype=float)
+    km, kd = select_muscles(geometry.muscles, r, geometry.dofs)
+    if km.size == len(geometry.muscles) and kd.size == len(geometry.dofs):
+        return geometry
+    return GeometryArrays(
+        np.asarray(geometry.time, dtype=float),
+        [geometry.muscles[i] for i in km],
+        [geometry.dofs[j] for j in kd],
+        np.asarray(geometry.lmt_m, dtype=float)[:, km],
+        r[:, kd][:, :, km],
+    )
+
+
+def check_id_coordinates(id_path, columns: Sequence[str], layout) -> None:
+    """Raise :class:`UnknownCoordinateError` naming the file and columns when an ID column
+    (``<coordinate>_moment`` or ``<coordinate>_force``) is for a coordinate the model
+    (``layout``, :func:`musclemetab.layout.read_layout`) lacks."""
+    from ..errors import UnknownCoordinateError
+
+    coords = {c["name"] for c in layout.coordinates}
+    alien = []
+    for c in columns:
+        for suffix in ("_moment", "_force"):
+            if c.endswith(suffix) and c[: -len(suffix)] not in coords:
+                alien.append(c)
+    if alien:
+        raise UnknownCoordinateError(
+            f"{id_path}: column {', '.join(alien[:5])}{' ...' if len(alien) > 5 else ''} is for a coordinate the "
+            f"model {layout.path} lacks; the inverse dynamics must come from this model"
+        )
 
 
 def check_time_ranges(ik_time: np.ndarray, id_time: np.ndarray, ik_path="IK", id_path="ID") -> None:

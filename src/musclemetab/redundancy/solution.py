@@ -51,6 +51,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputFileError, LargeReserveWarning, MissingColumnError, SolverError
+from ..io.jsonfile import json_ready
 from ..muscle import (
     active_force_length,
     activation_rate,
@@ -306,7 +307,7 @@ class Solution:
         summary["dofs"] = list(self.dofs)
         summary["parameters"] = self.parameters.to_records()
         summary.setdefault("conventions", CONVENTIONS)
-        text = json.dumps(_jsonable(summary), indent=2, allow_nan=True)
+        text = json.dumps(json_ready(summary), indent=2, allow_nan=True)
         with atomic_directory(directory) as tmp:
             write_storage(
                 tmp / SOLUTION_FILE,
@@ -364,24 +365,6 @@ class Solution:
             parameters=params,
             summary=summary,
         )
-
-
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, (np.floating,)):
-        return float(x)
-    if isinstance(x, (np.integer,)):
-        return int(x)
-    if isinstance(x, (np.bool_,)):
-        return bool(x)
-    if isinstance(x, Path):
-        return str(x)
-    return x
 
 
 def build_solution(

@@ -9,7 +9,6 @@ process never imports ``opensim``).
 from __future__ import annotations
 
 import os
-import threading
 import time as _time
 from pathlib import Path
 from typing import Mapping, Sequence
@@ -18,16 +17,19 @@ import numpy as np
 
 from .inputs import (
     MESH_FREQUENCY_HZ,
+    GeometryArrays,
+    check_id_coordinates,
     check_moment_magnitudes,
     check_moments_per_body_mass,
     check_time_ranges,
     prepare_inputs,
     read_inverse_dynamics,
     read_kinematics,
-    select_muscles,
+    restrict_geometry,
 )
 from .parameters import MuscleTendonParameters
 from ..errors import OptionError
+from ..processes import BackgroundCall
 from .problem import SolverOptions, solve_ocp
 from .record import RunRecord
 from .solution import Solution, build_solution
@@ -47,30 +49,6 @@ __all__ = ["solve_trial", "solve_files", "solve_sides", "solve_with_parameters",
 WARM_START_MU_INIT = 1e-6
 
 
-class _Geometry:
-    def __init__(self, time, muscles, dofs, lmt_m, moment_arms_m):
-        self.time, self.muscles, self.dofs = time, tuple(muscles), tuple(dofs)
-        self.lmt_m, self.moment_arms_m = lmt_m, moment_arms_m
-
-
-def _restrict_geometry(geometry):
-    """Apply the muscle/DOF selection rule (no-op for a geometry that already follows it).
-
-    DOFs that no selected muscle crosses are dropped (their ID columns must be dropped too).
-    """
-    r = np.asarray(geometry.moment_arms_m, dtype=float)
-    km, kd = select_muscles(geometry.muscles, r, geometry.dofs)
-    if km.size == len(geometry.muscles) and kd.size == len(geometry.dofs):
-        return geometry
-    return _Geometry(
-        np.asarray(geometry.time, dtype=float),
-        [geometry.muscles[i] for i in km],
-        [geometry.dofs[j] for j in kd],
-        np.asarray(geometry.lmt_m, dtype=float)[:, km],
-        r[:, kd][:, :, km],
-    )
-
-
 def prepare_trial(geometry, params: MuscleTendonParameters, id_time_s, id_moments_Nm, *, ik_time_s=None,
                   options: SolverOptions | None = None, sources: dict | None = None, check_units: bool = True,
                   filter_inputs: bool = True, mesh_frequency_hz: float = MESH_FREQUENCY_HZ):
@@ -78,7 +56,7 @@ def prepare_trial(geometry, params: MuscleTendonParameters, id_time_s, id_moment
     static optimisation of its initial guess: ``(inputs, params, static optimisation)``."""
     options = options or SolverOptions()
     all_dofs = tuple(geometry.dofs)
-    geometry = _restrict_geometry(geometry)
+    geometry = restrict_geometry(geometry)
     if tuple(geometry.dofs) != all_dofs:
         keep = [all_dofs.index(d) for d in geometry.dofs]
         id_moments_Nm = np.asarray(id_moments_Nm, dtype=float).reshape(len(id_time_s), -1)[:, keep]
@@ -194,7 +172,7 @@ def solve_trial(
     """
     wf = get_workflow(workflow)
     params, record = workflow_parameters(
-        wf, model_parameters, _restrict_geometry(geometry).muscles, passive=passive,
+        wf, model_parameters, restrict_geometry(geometry).muscles, passive=passive,
         tendon_stiffness=tendon_stiffness, tendon_stiffness_file=tendon_stiffness_file,
     )
     options = options or SolverOptions()
@@ -272,7 +250,7 @@ def solve_files(
     model_cached = model_is_cached(model_path, cache_dir)
     if not model_cached:
         start_in_background()
-    params_request = None if model_cached else _Background(_read_model_parameters, model_path, cache_dir)
+    params_request = None if model_cached else BackgroundCall(_read_model_parameters, model_path, cache_dir)
     layout = read_layout(model_path, cache_dir=cache_dir)
     loads = None
     if external_loads is not None:
@@ -287,7 +265,7 @@ def solve_files(
     if id_path is not None:
         id_table = read_table(id_path)
         id_columns = list(id_table.columns)
-        _check_id_coordinates(id_path, id_columns, layout)
+        check_id_coordinates(id_path, id_columns, layout)
     if dofs:
         dofs = tuple(dofs)
         check_dofs_in_model(layout, dofs)
@@ -317,7 +295,7 @@ def solve_files(
     t0 = _time.perf_counter()
     geometry = compute_geometry(model_path, ik_table, dofs=list(dofs), side=side, cache_dir=cache_dir)
     if keep.size != len(geometry.time):
-        geometry = _Geometry(np.asarray(geometry.time)[keep], geometry.muscles, geometry.dofs,
+        geometry = GeometryArrays(np.asarray(geometry.time)[keep], geometry.muscles, geometry.dofs,
                              np.asarray(geometry.lmt_m)[keep], np.asarray(geometry.moment_arms_m)[keep])
     if exclude_muscles:
         from ..errors import UnknownMuscleError
@@ -330,7 +308,7 @@ def solve_files(
                 f"muscles of the problem ({', '.join(geometry.muscles[:8])}, ...); check the names and the side"
             )
         kept = [i for i, m in enumerate(geometry.muscles) if m not in set(exclude_muscles)]
-        geometry = _Geometry(np.asarray(geometry.time), [geometry.muscles[i] for i in kept], geometry.dofs,
+        geometry = GeometryArrays(np.asarray(geometry.time), [geometry.muscles[i] for i in kept], geometry.dofs,
                              np.asarray(geometry.lmt_m)[:, kept], np.asarray(geometry.moment_arms_m)[:, :, kept])
     t_geometry = _time.perf_counter() - t0
     import casadi  # noqa: F401  (imported while the worker answers)
@@ -359,23 +337,6 @@ def solve_files(
     if id_record is not None:
         solution.summary["inverse_dynamics"] = id_record
     return solution
-
-
-def _check_id_coordinates(id_path, columns, layout) -> None:
-    """Raise :class:`UnknownCoordinateError` for an ID column of a coordinate the model lacks."""
-    from ..errors import UnknownCoordinateError
-
-    coords = {c["name"] for c in layout.coordinates}
-    alien = []
-    for c in columns:
-        for suffix in ("_moment", "_force"):
-            if c.endswith(suffix) and c[: -len(suffix)] not in coords:
-                alien.append(c)
-    if alien:
-        raise UnknownCoordinateError(
-            f"{id_path}: column {', '.join(alien[:5])}{' ...' if len(alien) > 5 else ''} is for a coordinate the "
-            f"model {layout.path} lacks; the inverse dynamics must come from this model"
-        )
 
 
 def _solve_files_recording_warnings(args, kwargs):
@@ -425,27 +386,6 @@ def _read_model_parameters(model_path, cache_dir=None):
     from ..model import read_muscle_parameters
 
     return read_muscle_parameters(model_path, cache_dir=cache_dir)
-
-
-class _Background:
-    """Run ``func(*args)`` in a daemon thread; :meth:`result` waits and re-raises its error."""
-
-    def __init__(self, func, *args):
-        self._value = self._error = None
-        self._thread = threading.Thread(target=self._run, args=(func, args), daemon=True)
-        self._thread.start()
-
-    def _run(self, func, args):
-        try:
-            self._value = func(*args)
-        except BaseException as exc:  # re-raised in the caller's thread
-            self._error = exc
-
-    def result(self):
-        self._thread.join()
-        if self._error is not None:
-            raise self._error
-        return self._value
 
 
 def muscles_at_fibre_length_bound(solution: Solution, tolerance: float = 1e-3) -> list[str]:
