@@ -475,6 +475,50 @@ def test_analyse_solution_folder(tmp_path):
     assert list(summary.model) == ["UM10", "BH04"]
 
 
+@pytest.mark.opensim
+def test_analyse_basal_options_give_the_whole_body_rate_worked_by_hand(example, tmp_path, capsys):
+    """``analyse --basal-coefficient/--basal-exponent`` (the options of ``metabolics``): under the
+    body rule the basal heat is COEFFICIENT * m^EXPONENT W over m kg, added to the muscles' rate
+    without basal heat; under the muscle rule the basal part is linear in the coefficient."""
+    import pandas as pd
+
+    from musclemetab.cli import main
+
+    mass, speed = 72.6, 1.3
+    folder = _solution_folder(tmp_path / "sol")
+    base = ["analyse", "--solution", str(folder), "--model", str(example.model), "--ik", str(example.ik["normal"]),
+            "--cycle", "0.62,0.70,0.77", "--mass", str(mass), "--height", "1.743", "--models", "UM10,BH04",
+            "--speed", str(speed)]
+
+    def whole_body(name, *options):
+        assert main([*base, *options, "--out", str(tmp_path / name)]) == 0
+        return pd.read_csv(tmp_path / name / "whole_body.csv").set_index("model")
+
+    default = whole_body("default")  # whole_body.csv holds 10 significant digits
+    kleiber = whole_body("kleiber", "--basal-coefficient", "1.5", "--basal-exponent", "0.75")
+    basal = 1.5 * mass ** 0.75 / mass  # W/kg: 72.6^0.25 = sqrt(8.5206) = 2.9190, 1.5 / 2.9190 = 0.51387
+    assert basal == pytest.approx(0.51387, abs=1e-5)
+    np.testing.assert_allclose(default["basal_W_per_kg"], 1.2, rtol=1e-9)
+    np.testing.assert_allclose(kleiber["basal_W_per_kg"], basal, rtol=1e-9)
+    np.testing.assert_allclose(kleiber["mean_W_per_kg_no_basal"], default["mean_W_per_kg_no_basal"], rtol=1e-9)
+    np.testing.assert_allclose(kleiber["mean_W_per_kg"], default["mean_W_per_kg"] - 1.2 + basal, rtol=1e-9)
+    np.testing.assert_allclose(kleiber["gross_cost_of_transport_J_per_kg_per_m"], kleiber["mean_W_per_kg"] / speed,
+                               rtol=1e-9)
+    # the muscle rule: 1.2 W per kg of each muscle's mass; twice the coefficient, twice the basal part
+    muscle = whole_body("muscle", "--basal", "muscle")
+    double = whole_body("double", "--basal", "muscle", "--basal-coefficient", "2.4")
+    part = muscle["mean_W_per_kg"] - muscle["mean_W_per_kg_no_basal"]
+    assert (part > 0).all()
+    np.testing.assert_allclose(double["mean_W_per_kg"] - double["mean_W_per_kg_no_basal"], 2 * part, rtol=0,
+                               atol=1e-8)  # differences of rates near 3 W/kg written to 10 digits
+    capsys.readouterr()
+    # the exponent belongs to the body rule: refused in one line, nothing written
+    assert main([*base, "--basal", "muscle", "--basal-exponent", "0.75", "--out", str(tmp_path / "bad")]) != 0
+    err = capsys.readouterr().err.strip()
+    assert "--basal-exponent applies to --basal body only" in err and len(err.splitlines()) == 1
+    assert not (tmp_path / "bad").exists()
+
+
 # ------------------------------------------------------------------------------ statistics
 @pytest.mark.filterwarnings("ignore:The inplace keyword")
 def test_rmcorr_bland_altman_1995_example():

@@ -1,7 +1,8 @@
 """``musclemetab analyse``: phases, groups, per-muscle and whole-body results of a solved trial.
 
     musclemetab analyse --solution DIR --model M.osim --ik IK.mot (--id ID.sto | --grf GRF.mot | --cycle S,TO,E)
-                        [--metabolics DIR] [--mass KG --height M] [--models all] [--basal body]
+                        [--metabolics DIR] [--mass KG --height M] [--models all]
+                        [--basal body|muscle|none] [--basal-coefficient 1.2] [--basal-exponent 1]
                         [--speed M_PER_S] --out DIR
 
 The command-line path ``solve`` -> ``metabolics`` -> ``analyse`` gives what a study unit
@@ -31,6 +32,8 @@ SIDES = ("r", "l")
 
 
 def add_analyse_parser(subparsers) -> None:
+    from ..metabolics.cli import add_basal_arguments
+
     p = subparsers.add_parser(
         "analyse",
         help="stance/swing, muscle groups, per-muscle and whole-body results of a solved trial",
@@ -60,7 +63,7 @@ def add_analyse_parser(subparsers) -> None:
     p.add_argument("--height", type=float, metavar="M", help="body height (m)")
     p.add_argument("--models", metavar="LIST", help="'all' or a comma-separated list (default: those of --metabolics, "
                    "else all)")
-    p.add_argument("--basal", default="body", choices=("body", "muscle", "none"), help="whole-body basal heat rule")
+    add_basal_arguments(p)
     p.add_argument("--speed", type=float, metavar="M_PER_S",
                    help="walking speed (default: estimated from the pelvis displacement over the cycle)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
@@ -109,18 +112,25 @@ def _cycle(args, side: str):
 
 
 def analyse_trial(solution_dir, model, ik, cycle, body_mass_kg: float, height_m: float, out_dir, *,
-                  models="all", basal: str = "body", speed_m_per_s: float | None = None, side: str | None = None):
-    """Analyse one solution folder into ``out_dir``; returns ``(whole_body, analysis, per_muscle)`` tables."""
+                  models="all", basal: str = "body", speed_m_per_s: float | None = None, side: str | None = None,
+                  basal_rate_W_per_kg: float | None = None, basal_exponent: float = 1.0):
+    """Analyse one solution folder into ``out_dir``; returns ``(whole_body, analysis, per_muscle)`` tables.
+
+    ``basal``, ``basal_rate_W_per_kg`` (default 1.2) and ``basal_exponent``: the whole-body basal
+    rule of :func:`musclemetab.metabolics.solution.metabolics_from_solution`."""
     from ..geometry import compute_geometry
     from ..io import atomic_directory
+    from ..metabolics import BASAL_RATE_W_PER_KG
     from ..metabolics.solution import WHOLE_BODY_CSV, metabolics_from_solution
     from ..properties import split_side
     from .groups import group_key_table
     from .per_muscle import PER_MUSCLE_FILE, per_muscle_table
     from .unit import analyse_metabolics, filtered_moment_arms
 
-    result = metabolics_from_solution(solution_dir, body_mass_kg, height_m, models=models, basal=basal,
-                                      speed_m_per_s=speed_m_per_s)
+    result = metabolics_from_solution(
+        solution_dir, body_mass_kg, height_m, models=models, basal=basal, speed_m_per_s=speed_m_per_s,
+        basal_rate_W_per_kg=BASAL_RATE_W_PER_KG if basal_rate_W_per_kg is None else basal_rate_W_per_kg,
+        basal_exponent=basal_exponent)
     if side is None:
         sides = {split_side(m)[1] for m in result.muscles} - {""}
         side = sides.pop() if len(sides) == 1 else "r"
@@ -144,8 +154,10 @@ def analyse_command(args) -> int:
 
     from ..analysis.per_muscle import PER_MUSCLE_FILE
     from ..io import atomic_path
+    from ..metabolics.cli import check_basal_arguments
     from ..redundancy.solution import SOLUTION_FILE
 
+    check_basal_arguments(args)
     root = Path(args.solution)
     if (root / SOLUTION_FILE).is_file():
         jobs = [(None, root, Path(args.out))]
@@ -175,7 +187,9 @@ def analyse_command(args) -> int:
             speed = walking_speed_from_ik(args.ik, start_s=cycle.start_s, end_s=cycle.end_s)
             speed_note = "estimated from the pelvis displacement"
         whole, summary, per = analyse_trial(sol_dir, args.model, args.ik, cycle, mass, height, out, models=models,
-                                            basal=args.basal, speed_m_per_s=speed, side=side)
+                                            basal=args.basal, speed_m_per_s=speed, side=side,
+                                            basal_rate_W_per_kg=args.basal_coefficient,
+                                            basal_exponent=args.basal_exponent)
         tables.append(per)
         label = f"side {side}: " if side else ""
         print(f"analyse: {label}cycle {cycle.start_s:.3f}-{cycle.end_s:.3f} s, toe-off {cycle.toe_off_pct:.1f} % "

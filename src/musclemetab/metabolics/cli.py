@@ -21,7 +21,40 @@ import numpy as np
 
 from ..errors import OptionError
 
-__all__ = ["add_metabolics_parser", "metabolics_command"]
+__all__ = ["add_metabolics_parser", "metabolics_command", "add_basal_arguments", "check_basal_arguments"]
+
+
+def add_basal_arguments(parser) -> None:
+    """The whole-body basal heat options, ``--basal``, ``--basal-coefficient`` and
+    ``--basal-exponent``, of the commands that compute whole-body rates (``metabolics``,
+    ``analyse``); :func:`check_basal_arguments` checks their values."""
+    parser.add_argument(
+        "--basal", default="body", choices=("body", "muscle", "none"),
+        help="whole-body basal heat: 1.2 W/kg of body mass (body, default, the paper), 1.2 W/kg of muscle "
+        "mass in every muscle (muscle, the study's code) or none",
+    )
+    parser.add_argument(
+        "--basal-coefficient", type=float, default=1.2, metavar="W_PER_KG",
+        help="basal heat coefficient as OpenSim's probes write it (basal_coefficient, default 1.2): under "
+        "--basal body the basal heat is COEFFICIENT * mass^EXPONENT W; it is also the per-muscle basal heat, "
+        "W per kg of muscle mass",
+    )
+    parser.add_argument(
+        "--basal-exponent", type=float, default=1.0, metavar="X",
+        help="basal heat exponent of the body mass (OpenSim's basal_exponent, default 1; --basal body only)",
+    )
+
+
+def check_basal_arguments(args) -> None:
+    """Raise :class:`OptionError` naming the option for a basal coefficient that is not a
+    non-negative number, an exponent that is not finite, or an exponent with ``--basal muscle``."""
+    if not (np.isfinite(args.basal_coefficient) and args.basal_coefficient >= 0):
+        raise OptionError(f"--basal-coefficient must be a non-negative number of W/kg, not {args.basal_coefficient}")
+    if not np.isfinite(args.basal_exponent):
+        raise OptionError(f"--basal-exponent must be a finite number, not {args.basal_exponent}")
+    if args.basal == "muscle" and args.basal_exponent != 1:
+        raise OptionError("--basal-exponent applies to --basal body only (the muscle rule is linear in each "
+                          "muscle's mass); drop it or use --basal body")
 
 
 def add_metabolics_parser(subparsers) -> None:
@@ -55,21 +88,7 @@ def add_metabolics_parser(subparsers) -> None:
         help=f"'all' (default: the study's {', '.join(MODELS)}) or a comma-separated list of these and "
         f"{', '.join(ADDITIONAL_MODELS)}, e.g. all,LW05,MA68",
     )
-    p.add_argument(
-        "--basal", default="body", choices=("body", "muscle", "none"),
-        help="whole-body basal heat: 1.2 W/kg of body mass (body, default, the paper), 1.2 W/kg of muscle "
-        "mass in every muscle (muscle, the study's code) or none",
-    )
-    p.add_argument(
-        "--basal-coefficient", type=float, default=1.2, metavar="W_PER_KG",
-        help="basal heat coefficient as OpenSim's probes write it (basal_coefficient, default 1.2): under "
-        "--basal body the basal heat is COEFFICIENT * mass^EXPONENT W; it is also the per-muscle basal heat, "
-        "W per kg of muscle mass",
-    )
-    p.add_argument(
-        "--basal-exponent", type=float, default=1.0, metavar="X",
-        help="basal heat exponent of the body mass (OpenSim's basal_exponent, default 1; --basal body only)",
-    )
+    add_basal_arguments(p)
     p.add_argument("--speed", type=float, metavar="M_PER_S", help="walking speed, for the cost of transport")
     p.add_argument(
         "--allow-failed", action="store_true",
@@ -104,13 +123,7 @@ def metabolics_command(args) -> int:
     check_output_folder(args.out)
     if args.speed is not None and not (np.isfinite(args.speed) and args.speed > 0):
         raise OptionError(f"--speed must be a positive number of m/s, not {args.speed}")
-    if not (np.isfinite(args.basal_coefficient) and args.basal_coefficient >= 0):
-        raise OptionError(f"--basal-coefficient must be a non-negative number of W/kg, not {args.basal_coefficient}")
-    if not np.isfinite(args.basal_exponent):
-        raise OptionError(f"--basal-exponent must be a finite number, not {args.basal_exponent}")
-    if args.basal == "muscle" and args.basal_exponent != 1:
-        raise OptionError("--basal-exponent applies to --basal body only (the muscle rule is linear in each "
-                          "muscle's mass); drop it or use --basal body")
+    check_basal_arguments(args)
     from pathlib import Path
 
     folders = _solution_folders(Path(args.solution))
