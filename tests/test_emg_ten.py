@@ -203,6 +203,28 @@ def test_solution_satisfies_the_problem(example, geometries, solutions, trial):
     assert P["kPE"][i] == pytest.approx(4.999928, abs=1e-5) and P["s0"][i] == pytest.approx(1.107804, abs=1e-5)
 
 
+@pytest.mark.opensim
+@pytest.mark.slow
+@pytest.mark.parametrize("trial", TRIALS)
+def test_fibre_length_bounds_recorded_as_by_a_single_trial_solve(example, geometries, solutions, trial):
+    """Each trial's summary.json records the fibre-length bounds under ``fibre_length_bounds``, as
+    a single-trial solve does: the default box [0.1, 1.7] and the muscles whose longest
+    rigid-tendon fibre, ``max sqrt((lMT - lTs)^2 + w^2) / lMo + 0.05`` over the mesh nodes (worked
+    here from the filtered, interpolated lMT), is longer than 1.7, with that bound."""
+    sol = solutions[trial]
+    _, lmt, _, _ = mesh_inputs(example, geometries[trial], trial, N_MESH[trial])
+    P = params_of(sol)
+    w = P["lMo_m"] * np.sin(P["alpha0_rad"])
+    rigid = np.max(np.sqrt((lmt - P["lTs_m"]) ** 2 + w**2), axis=0) / P["lMo_m"] + 0.05
+    bounds = sol.summary["fibre_length_bounds"]
+    assert bounds["default"] == [0.1, 1.7]
+    widened = {m: float(b) for m, b in zip(sol.muscles, rigid) if b > 1.7}
+    assert set(bounds["widened_upper"]) == set(widened)
+    for m, b in widened.items():
+        assert bounds["widened_upper"][m] == pytest.approx(b, rel=1e-6), m
+    assert rigid.max() < 1.7  # on the example subject no muscle needs a wider bound
+
+
 def _emg_at_nodes(example, trial, t_nodes, muscles):
     from musclemetab.io import read_storage
 

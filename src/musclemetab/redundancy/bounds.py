@@ -9,7 +9,7 @@ from ..muscle import longest_fibre_length_bound
 from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
 
-__all__ = ["node_bounds", "fibre_length_upper_bounds", "bounds_and_guess"]
+__all__ = ["node_bounds", "fibre_length_upper_bounds", "fibre_length_bounds_record", "bounds_and_guess"]
 
 ACTIVATION_BOUNDS = (0.0, 1.0)
 FIBRE_LENGTH_BOUNDS = (0.1, 1.7)
@@ -45,6 +45,16 @@ def fibre_length_upper_bounds(inputs: TrialInputs, params: MuscleTendonParameter
             else:
                 lts[k] *= s.bounds[0]
     return longest_fibre_length_bound(inputs.lmt_m, lts, lmo, width, FIBRE_LENGTH_BOUNDS[1], FIBRE_LENGTH_MARGIN)
+
+
+def fibre_length_bounds_record(inputs: TrialInputs, params: MuscleTendonParameters, specs=()) -> dict:
+    """The fibre-length bounds of one trial as ``summary.json`` records them
+    (``fibre_length_bounds``): ``default``, the bounds ``[0.1, 1.7]`` of the normalised fibre
+    length, and ``widened_upper``, ``{muscle: upper bound}`` of the muscles whose bound
+    :func:`fibre_length_upper_bounds` widens (the same arguments)."""
+    upper = fibre_length_upper_bounds(inputs, params, specs)
+    return {"default": list(FIBRE_LENGTH_BOUNDS),
+            "widened_upper": {m: float(u) for m, u in zip(inputs.muscles, upper) if u > FIBRE_LENGTH_BOUNDS[1]}}
 
 
 def node_bounds(M: int, D: int, lm_upper=None) -> tuple[np.ndarray, np.ndarray]:

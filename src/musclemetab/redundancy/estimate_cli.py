@@ -94,6 +94,7 @@ def _bounds(text: str) -> tuple[float, float]:
 
 def estimate_command(args) -> int:
     from ..io import atomic_write_text, check_output_folder
+    from .bounds import fibre_length_bounds_record
     from .core import Goals, ParameterSpec, coupling_pairs
     from .emg_inputs import emg_at_nodes, mapping_for_muscles, resolve_emg_mapping, trial_labels
     from .estimate import (
@@ -205,6 +206,7 @@ def estimate_command(args) -> int:
                    "time_window_s": list(t.inputs.window_s), "n_intervals": t.inputs.n_intervals,
                    "mesh_step_s": t.inputs.step_s, "optimal_reserve_Nm": options.optimal_reserve_Nm,
                    "fibre_dynamics": fibre_dynamics,
+                   "fibre_length_bounds": fibre_length_bounds_record(t.inputs, params, specs),
                    "workflow": {"name": f"{args.workflow} estimate", "estimate": est.to_dict()["factors"]},
                    "solver_options": options.to_dict()}
         build_solution(t.inputs, estimated.subset(t.inputs.muscles), o, summary).write(f"{args.out}/{t.label}")

@@ -179,6 +179,7 @@ def assemble_result(trials, params, wf_record, ocp, settings, options, t_prep, t
     estimated tendon stiffness, the estimates and the solve record."""
     import time as _time
 
+    from .bounds import fibre_length_bounds_record
     from .record import RunRecord
     from .solution import build_solution
 
@@ -246,6 +247,8 @@ def assemble_result(trials, params, wf_record, ocp, settings, options, t_prep, t
             },
             "emg_tolerance": settings.emg_tolerance,
             "fibre_dynamics": settings.fibre_scheme,
+            # the problem's bounds: those of the nominal parameters (kT and EMG scales do not change them)
+            "fibre_length_bounds": fibre_length_bounds_record(inp, params),
             "solver_options": options.to_dict(),
             "input_preparation": {"filter": "butterworth 6th order 6 Hz zero-phase (MATLAB filtfilt padding)",
                                   "mesh_intervals_per_second": 100, "interpolation": "not-a-knot cubic spline",

@@ -109,9 +109,8 @@ def solve_with_parameters(
         options = options.with_(ipopt={"mu_init": WARM_START_MU_INIT, **options.ipopt})
     t_prep = _time.perf_counter() - t_start
     ocp = solve_ocp(inputs, params, guess, options)
-    from .bounds import FIBRE_LENGTH_BOUNDS, fibre_length_upper_bounds
+    from .bounds import fibre_length_bounds_record
 
-    lm_upper = fibre_length_upper_bounds(inputs, params)
     summary = {
         **RunRecord.from_result(ocp, sources).to_dict(),
         "preparation_time_s": t_prep,
@@ -122,8 +121,7 @@ def solve_with_parameters(
         "optimal_reserve_Nm": options.optimal_reserve_Nm,
         "static_optimisation_objective": so.objective,
         "fibre_dynamics": options.fibre_dynamics,
-        "fibre_length_bounds": {"default": list(FIBRE_LENGTH_BOUNDS), "widened_upper": {
-            m: float(u) for m, u in zip(inputs.muscles, lm_upper) if u > FIBRE_LENGTH_BOUNDS[1]}},
+        "fibre_length_bounds": fibre_length_bounds_record(inputs, params),
         "initial_guess": "static optimisation (rigid tendons)" if warm_start is None else
         f"warm start from {warm_start.summary.get('workflow', {}).get('name', 'a previous solution')} "
         f"(mu_init {WARM_START_MU_INIT:g})",
