@@ -76,14 +76,20 @@ print(json.dumps(runs))
 """
 
 
-def warm_runs(src: Path, ex, trial: str, cache: Path, repeat: int) -> list[dict]:
-    """The same solve repeated in one process (see the module docstring)."""
+def run_in_tree(code: str, src: Path, ex, trial: str, cache: Path, repeat: int, what: str):
+    """Run ``code`` in a new process with the package of ``src``, given the trial's model, IK
+    and ID files and ``repeat``; its last line of output, read as JSON."""
     env = dict(os.environ, PYTHONPATH=str(src), MUSCLEMETAB_CACHE=str(cache))
-    proc = subprocess.run([sys.executable, "-c", _WARM, str(ex.model), str(ex.ik[trial]), str(ex.id[trial]),
+    proc = subprocess.run([sys.executable, "-c", code, str(ex.model), str(ex.ik[trial]), str(ex.id[trial]),
                            str(repeat)], capture_output=True, text=True, env=env)
     if proc.returncode != 0:
-        sys.exit(f"the warm solve failed with {src}:\n{proc.stderr}")
+        sys.exit(f"{what} failed with {src}:\n{proc.stderr}")
     return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def warm_runs(src: Path, ex, trial: str, cache: Path, repeat: int) -> list[dict]:
+    """The same solve repeated in one process (see the module docstring)."""
+    return run_in_tree(_WARM, src, ex, trial, cache, repeat, "the warm solve")
 
 
 def _median(rs: list[dict]) -> dict:

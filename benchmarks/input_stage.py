@@ -16,10 +16,7 @@ the median time of the stage, how often each input file was parsed (calls of
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import statistics
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
@@ -74,15 +71,6 @@ print(json.dumps({"times_s": times, "parses": first}))
 """
 
 
-def run(src: Path, ex, trial: str, repeat: int, cache: Path) -> dict:
-    env = dict(os.environ, PYTHONPATH=str(src), MUSCLEMETAB_CACHE=str(cache))
-    proc = subprocess.run([sys.executable, "-c", _STAGE, str(ex.model), str(ex.ik[trial]), str(ex.id[trial]),
-                           str(repeat)], capture_output=True, text=True, env=env)
-    if proc.returncode != 0:
-        sys.exit(f"the input stage failed with {src}:\n{proc.stderr}")
-    return json.loads(proc.stdout.strip().splitlines()[-1])
-
-
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--baseline-src", type=Path, required=True, help="the src folder of the tree to compare with")
@@ -91,6 +79,7 @@ def main(argv=None) -> None:
     ap.add_argument("--rounds", type=int, default=3, help="processes per tree, alternating")
     args = ap.parse_args(argv)
     sys.path.insert(0, str(HERE))
+    from cold_start import run_in_tree
     from solver import _example
 
     ex = _example()
@@ -100,7 +89,7 @@ def main(argv=None) -> None:
     parses = {}
     for _ in range(args.rounds):
         for name, src in trees.items():
-            out = run(src, ex, args.trial, args.repeat, cache)
+            out = run_in_tree(_STAGE, src, ex, args.trial, cache, args.repeat, "the input stage")
             times[name] += out["times_s"]
             parses[name] = out["parses"]
     print(f"input stage of solve_files, example subject '{args.trial}', EFFORT-GEN, geometry and model cached; "
