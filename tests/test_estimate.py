@@ -186,7 +186,7 @@ def test_estimate_command_with_emg_recovers_the_parameters(example, generated, r
 
     from musclemetab.io import write_storage
 
-    made, measured, inputs, *_ = generated
+    made, measured, inputs, params, *_ = generated
     _, est, _, _ = recovery
     N = inputs.n_intervals
     us = pd.DataFrame({m: 1000.0 * lm for m, (_, lm) in measured.items()}, index=made.time_s)
@@ -215,6 +215,18 @@ def test_estimate_command_with_emg_recovers_the_parameters(example, generated, r
     assert doc["emg"]["scale"] == {"bflh_r": 1.0, "tibant_r": 1.0}
     assert doc["emg"]["mapping"] == {"tibant_r": ["TA"], "bflh_r": ["BF"]}
     assert (out / "normal" / "summary.json").is_file() and list(out.glob("*_personalised.osim"))
+    # the fibre-length bounds, recorded as a single-trial solve records them; those of the muscles whose lMo is
+    # estimated are taken at the factor's lower bound 0.5 (lMo and w halved): the longest rigid-tendon fibre,
+    # max sqrt((lMT - lTs)^2 + w^2) / lMo over the mesh nodes, plus 0.05 where that exceeds 1.7
+    bounds = json.loads((out / "normal" / "summary.json").read_text())["fibre_length_bounds"]
+    p = params.subset(inputs.muscles)
+    scale = np.array([0.5 if m in LMO else 1.0 for m in inputs.muscles])
+    lmo, w = scale * p.optimal_fiber_length_m, scale * p.optimal_fiber_length_m * np.sin(p.pennation_angle_at_optimal_rad)
+    rigid = np.max(np.sqrt((inputs.lmt_m - p.tendon_slack_length_m) ** 2 + w**2), axis=0) / lmo + 0.05
+    widened = {m: float(b) for m, b in zip(inputs.muscles, rigid) if b > 1.7}
+    assert bounds["default"] == [0.1, 1.7] and set(bounds["widened_upper"]) == set(widened) == set(LMO)
+    for m, b in widened.items():
+        assert bounds["widened_upper"][m] == pytest.approx(b, rel=1e-9), m
 
 
 def test_estimate_command_emg_input_errors(example, tmp_path):
