@@ -153,16 +153,18 @@ def solve_emg_ten(
     return result
 
 
-def _trial_dofs(model, id_tables, dofs, side: str, cache_dir) -> tuple[str, ...]:
-    """``dofs`` checked against the model, or the side's DOFs that every ID table holds."""
+def _trial_dofs(model, id_files, dofs, side: str, cache_dir) -> tuple[str, ...]:
+    """``dofs`` checked against the model, or the side's DOFs that every ID file (or its table,
+    already read) holds."""
+    from ..io import as_table, table_path
     from ..layout import check_dofs_in_model, check_side, discover_dofs, read_layout
 
     check_side(side)
     layout = read_layout(model, cache_dir=cache_dir)
     common = None
-    for table in id_tables:
-        columns = list(table.columns)
-        check_id_coordinates(table.attrs["path"], columns, layout)
+    for source in id_files:
+        columns = list(as_table(source).columns)
+        check_id_coordinates(table_path(source), columns, layout)
         common = [c for c in columns if common is None or c in common]
     if dofs:
         dofs = tuple(dofs)
