@@ -148,9 +148,15 @@ def test_lumped_2d_model_with_degroote_and_millard_muscles_both_legs(lumped_mode
 @pytest.mark.opensim
 def test_two_subject_study_different_models_and_sides(example, gait2392, tmp_path, capsys):
     """The study's subject (Rajagopal model, right leg, ID file) and gait2392's subject (its own
-    gait2392 model, left leg, cycle and inverse dynamics from the ground forces) in one study file,
-    run end to end by ``musclemetab run`` with the report."""
+    gait2392 model, both legs, each over its own cycle, inverse dynamics from the ground forces)
+    in one study file, run end to end by ``musclemetab run`` with the report.
+
+    Oracles for the row adding gait2392's legs: the whole-body rate from the legs' metabolics
+    evaluated apart (``legs=1``) and added by :func:`musclemetab.metabolics.add_legs`; the
+    stance share from both legs' per-muscle stance energies."""
     import pandas as pd
+
+    from musclemetab.metabolics.solution import add_legs, metabolics_from_solution
 
     study = tmp_path / "study.toml"
     study.write_text(f"""
@@ -175,7 +181,7 @@ name = "gait2392"
 model = "{gait2392.model}"
 body_mass_kg = {gait2392.body_mass_kg}
 height_m = 1.8
-side = "l"
+side = "both"
 
 [[subjects.trials]]
 name = "walk1"
@@ -184,18 +190,36 @@ external_loads = "{gait2392.external_loads}"
 cycle = "auto"
 """)
     assert _cli("run", study, "--workers", 2, "--report", "--no-progress") == 0
+    assert "3 units: 3 run" in capsys.readouterr().out
     out = tmp_path / "out"
     res = pd.read_csv(out / "results.csv")
     assert sorted(set(res["subject"])) == ["example", "gait2392"] and len(res) == 4
+    assert set(res.loc[res["subject"] == "example", "legs"]) == {"2 x r"}
+    assert set(res.loc[res["subject"] == "gait2392", "legs"]) == {"r + l"}
     unit = out / "units" / "gait2392" / "walk1" / "effort-gen"
-    s = json.loads((unit / "summary.json").read_text())
-    assert s["side"] == "l" and {"ankle_angle_l", "knee_angle_l", "hip_flexion_l"} <= set(s["dofs"])
-    assert all(m.endswith("_l") for m in s["muscles"]) and len(s["muscles"]) == 43
-    assert s["window"]["gait_cycle"]["start_s"] == pytest.approx(1.247, abs=3e-3)
-    assert (unit / "inverse_dynamics.sto").is_file()
+    legs = {}
+    for side, start in (("r", 0.618), ("l", 1.247)):
+        s = json.loads((unit / side / "summary.json").read_text())
+        assert s["side"] == side and {f"ankle_angle_{side}", f"knee_angle_{side}", f"hip_flexion_{side}"} <= set(s["dofs"])
+        assert all(m.endswith(f"_{side}") for m in s["muscles"]) and len(s["muscles"]) == 43
+        assert s["window"]["gait_cycle"]["start_s"] == pytest.approx(start, abs=3e-3)
+        assert (unit / side / "inverse_dynamics.sto").is_file()
+        legs[side] = metabolics_from_solution(unit / side, gait2392.body_mass_kg, 1.8, models=["UM10", "BH04"], legs=1)
+    added = add_legs(legs)
+    g = res[res["subject"] == "gait2392"].set_index("model")
+    for model, value in added.items():
+        assert g.loc[model, "mean_W_per_kg"] == pytest.approx(value, rel=1e-9)
+    pm = pd.read_csv(out / "per_muscle.csv")
+    pm = pm[pm["subject"] == "gait2392"]
+    assert set(pm["side"]) == {"r", "l"}
+    for model, rows in pm.groupby("model"):
+        stance = 100 * rows["stance_J"].sum() / (rows["stance_J"].sum() + rows["swing_J"].sum())
+        assert g.loc[model, "stance_energy_share_pct"] == pytest.approx(stance, rel=1e-6)
+    assert g["cycle_start_s"].isna().all() and g["unit_dir"].iloc[0] == "units/gait2392/walk1/effort-gen"
     ex = json.loads((out / "units" / "example" / "normal" / "effort-gen" / "summary.json").read_text())
     assert ex["side"] == "r" and len(ex["muscles"]) == 40
-    assert (out / "report.html").is_file()
+    html = (out / "report.html").read_text()
+    assert "the sum of both solved legs" in html and "the right leg doubled for example" in html
     wkg = [c for c in res.columns if "W_per_kg" in c]
     assert wkg and res[wkg[0]].between(2.6, 15.8).all()
 
