@@ -253,3 +253,21 @@ def _renamed_muscle(solution, folder):
         path = folder / name
         path.write_text(path.read_text().replace("vasti_r", "mystery_r"))
     return folder
+
+
+def test_report_adds_the_legs_time_series_on_the_cycle():
+    """Two legs' rates over their own cycles: the second leg's series, interpolated onto the first
+    leg's cycle percentages, is added (worked by hand: linear between 0 and 100 %)."""
+    import pandas as pd
+
+    from musclemetab.report.html import _add_leg_timeseries
+
+    right = pd.DataFrame({"time_s": [0.6, 1.2, 1.8], "cycle_pct": [0.0, 50.0, 100.0], "model": "UM10",
+                          "series": "whole_body", "value_W": [100.0, 200.0, 100.0]})
+    left = pd.DataFrame({"time_s": [1.2, 1.6, 2.0, 2.4], "cycle_pct": [0.0, 100 / 3, 200 / 3, 100.0],
+                         "model": "UM10", "series": "whole_body", "value_W": [30.0, 60.0, 90.0, 120.0]})
+    both = _add_leg_timeseries({"r": right, "l": left})
+    # left at 0, 50, 100 %: 30, 75, 120 W
+    assert both["value_W"].tolist() == pytest.approx([130.0, 275.0, 220.0])
+    assert both["cycle_pct"].tolist() == [0.0, 50.0, 100.0] and both["time_s"].isna().all()
+    assert _add_leg_timeseries({"": right}) is right

@@ -643,6 +643,11 @@ def collect_results(study: Study, failed: dict[str, str] | None = None):
         rows = {side: df for side, (df, _) in group.items()}
         basal = {side: _basal_energy_J(pm, df["duration_s"].iloc[0]) for side, (df, pm) in group.items()}
         frames.append(add_leg_rows(rows, basal))
+    for unit in plan_units(study)[0]:
+        rec = read_unit_record(out / unit.folder)
+        if not rec or rec.get("status") != "ok":
+            reason = (failed or {}).get(unit.label) or (rec or {}).get("error") or "not run"
+            failures.append({"subject": unit.subject, "trial": "", "workflow": unit.workflow, "reason": reason})
     table = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=list(ID_COLUMNS))
     if "measured_W_per_kg" in table:
         table["measured_W_per_kg"] = pd.to_numeric(table["measured_W_per_kg"], errors="coerce")
