@@ -408,3 +408,20 @@ def test_changing_side_replaces_only_our_unit_folders(tmp_path):
     with pytest.raises(OptionError, match="not written by musclemetab"):
         prepare_leg_folder(out, Unit("sub2", "normal", "effort-gen", "l"))
     assert (theirs / "precious.txt").read_text() == "keep me"
+
+
+def test_a_trial_without_events_or_ankle_moment_says_how_to_give_the_cycle(example, tmp_path):
+    """No ground forces, no events and an ID file without the side's ankle moment (another model's
+    naming): one error naming the trial and the column, and the ways to give the cycle."""
+    from musclemetab.errors import MissingColumnError
+    from musclemetab.io import read_storage, write_storage
+    from musclemetab.study.events import trial_cycle
+    from musclemetab.study.spec import Trial
+
+    moments = read_storage(example.id["normal"]).rename(columns={"ankle_angle_r_moment": "ankle_r_moment"})
+    id_file = tmp_path / "id.sto"
+    write_storage(id_file, moments)
+    with pytest.raises(MissingColumnError) as info:
+        trial_cycle(Trial(name="walk", ik=example.ik["normal"], id=id_file), "r")
+    for words in ("trial 'walk'", "ankle_angle_r_moment", "cycle = \"auto\"", "start_s, toe_off_s and end_s"):
+        assert words in str(info.value)
