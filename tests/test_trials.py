@@ -271,3 +271,23 @@ def test_report_adds_the_legs_time_series_on_the_cycle():
     assert both["value_W"].tolist() == pytest.approx([130.0, 275.0, 220.0])
     assert both["cycle_pct"].tolist() == [0.0, 50.0, 100.0] and both["time_s"].isna().all()
     assert _add_leg_timeseries({"": right}) is right
+
+
+def test_the_grf_column_and_threshold_reach_the_cycle_search(gait2392):
+    """gait2392's ground-force file holds the right foot (``ground_force_vy``) and the left foot
+    (``1_ground_force_vy``). Naming the left foot's column for the right side gives the left
+    foot's cycle (heel strike 1.247 s, OpenSim's stored events of the data set) instead of the
+    right foot's (0.618 s): the column is the one the cycle search reads. A contact threshold
+    above the foot's peak force finds no cycle, and says so with the threshold."""
+    from musclemetab.errors import DataMismatchError
+    from musclemetab.external_loads import read_external_loads
+    from musclemetab.redundancy.window import resolve_window
+
+    grf = read_external_loads(gait2392.external_loads).datafile
+    right = resolve_window(gait2392.ik, side="r", cycle="auto", grf_path=grf)
+    left_foot = resolve_window(gait2392.ik, side="r", cycle="auto", grf_path=grf, grf_column="1_ground_force_vy")
+    assert right.cycle["start_s"] == pytest.approx(0.618, abs=3e-3)
+    assert left_foot.cycle["start_s"] == pytest.approx(1.247, abs=3e-3)
+    assert "1_ground_force_vy" in left_foot.cycle["source"]
+    with pytest.raises(DataMismatchError, match="threshold 5000 N"):
+        resolve_window(gait2392.ik, side="r", cycle="auto", grf_path=grf, grf_threshold_N=5000.0)

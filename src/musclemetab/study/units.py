@@ -526,6 +526,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         else:
             sol = solve_files(subject.model, trial.ik, trial.id, unit.workflow, side=side, dofs=subject.dofs,
                               external_loads=trial.external_loads, grf=trial.grf if trial.cycle is not None else None,
+                              grf_column=trial.grf_column, grf_threshold_N=trial.grf_threshold_N,
                               cycle=trial.cycle, options=_solver_options(study, subject), **kwargs)
         from ..redundancy.cli import write_solution_folder
 
