@@ -291,3 +291,20 @@ def test_the_grf_column_and_threshold_reach_the_cycle_search(gait2392):
     assert "1_ground_force_vy" in left_foot.cycle["source"]
     with pytest.raises(DataMismatchError, match="threshold 5000 N"):
         resolve_window(gait2392.ik, side="r", cycle="auto", grf_path=grf, grf_threshold_N=5000.0)
+
+
+def test_kinematic_toe_off_on_treadmill_trials(example):
+    """The example subject walked on a treadmill (the pelvis barely travels): the kinematic rule's
+    toe-off against the toe-off of the ankle moment's drop (an independent signal, the study's
+    rule without forces), 0.04 s as on gait2392. Its records hold one cycle with 5 frames
+    beyond each heel strike, too few for the heel's excursion to stand out: heel strikes there
+    are not reported (an extremum needs 0.1 m of prominence on both sides)."""
+    from musclemetab.analysis.events import cycle_from_id_file, kinematic_gait_events
+    from musclemetab.io import read_storage
+
+    for trial in ("slow", "normal", "fast"):
+        t = read_storage(example.ik[trial]).index.to_numpy(float)
+        ev = kinematic_gait_events(example.model, example.ik[trial], "r")
+        moment = cycle_from_id_file(example.id[trial], window_s=(t[0], t[-1]), padding_s=0.05)
+        assert len(ev.toe_offs_s) == 1 and ev.toe_offs_s[0] == pytest.approx(moment.toe_off_s, abs=0.04), trial
+        assert all(t[0] + 0.05 < h < t[-1] - 0.05 + 1e-9 for h in ev.heel_strikes_s)
