@@ -13,9 +13,10 @@
 With ``--study STUDY.toml`` only 2 and 3 are measured, on that study (after one run that fills
 the geometry and inverse-dynamics caches). ``--two-subjects`` writes and measures a study of two
 subjects with different models and legs: the example subject's normal trial (Rajagopal model,
-right leg, ID file) and OpenSim's gait2392 subject (its own model, left leg, gait cycle and
-inverse dynamics from the ground forces), EFFORT-GEN with every study model on both legs'
-units (the left leg of gait2392 and the right leg of the example) in parallel.
+right leg, ID file) and OpenSim's gait2392 subject (its own model, ``side = "both"``: each leg
+over its own gait cycle, inverse dynamics from the ground forces, the legs added), EFFORT-GEN
+with every study model: three units (the example's right leg, gait2392's right and left legs)
+scheduled together.
 """
 
 from __future__ import annotations
@@ -86,7 +87,7 @@ def _two_subject_study(path: Path) -> Path:
          {"name": "normal", "ik": ex.ik["normal"], "id": ex.id["normal"]}),
         # the data set gives no height (used for the speed normalisation only): 1.8 m
         ({"name": "gait2392", "model": g.model, "body_mass_kg": g.body_mass_kg, "height_m": g.height_m or 1.8,
-          "side": "l"},
+          "side": "both"},
          {"name": "walk1", "ik": g.ik, "external_loads": g.external_loads, "cycle": "auto"}),
     ]
 

@@ -36,7 +36,8 @@ _PLAIN = (str, int, float, bool, type(None))
 def solve_key(func, args, kwargs) -> tuple[str, dict] | None:
     """``(key, content)`` of a solve call: input files by SHA-256, every other argument by value.
 
-    ``cache_dir`` (where the geometry is cached) does not change the result and is left out.
+    ``cache_dir`` (where the geometry is cached) does not change the result and is left out, nor
+    does ``exclude_missing_ok`` when no muscle is excluded.
     ``options=None`` and ``settings=None`` count as the defaults they stand for. ``None`` when
     an argument is neither a file, a plain value, a list/tuple/dict of those nor a settings
     dataclass (an in-memory object such as a warm start): such calls always solve.
@@ -64,8 +65,8 @@ def solve_key(func, args, kwargs) -> tuple[str, dict] | None:
     bound.apply_defaults()
     content = {"function": f"{func.__module__}.{func.__qualname__}"}
     for name, value in bound.arguments.items():
-        if name == "cache_dir":
-            continue
+        if name == "cache_dir" or (name == "exclude_missing_ok" and not bound.arguments.get("exclude_muscles")):
+            continue  # neither changes the result (the second only says how to treat exclude_muscles)
         if name == "options" and value is None:
             value = SolverOptions()
         if name == "settings" and value is None:

@@ -279,3 +279,40 @@ def test_cli(example, tmp_path, result):
     )
     with pytest.raises(InputFileError, match="no calibration trial for ankle_angle_r"):
         args.func(args)
+
+
+def test_cli_both_legs(example, tmp_path, result):
+    """``--side both`` with a folder of both legs' trials (the study's right-leg trials and their
+    copies on the left coordinates): the right leg's parameters are those of the right leg alone
+    (the left trials do not enter it); the left leg of the generic model, a mirror image of the
+    right up to small path-point differences, gets the same parameters to 1 %; both legs' rows
+    are in DIR/passive_parameters.csv. A folder with one leg's trials is refused, nothing written."""
+    from musclemetab.io import read_storage, write_storage
+
+    trials = tmp_path / "trials"
+    trials.mkdir()
+    for files in example.calibration_trials.values():
+        for kind, path in files.items():
+            df = read_storage(path)
+            write_storage(trials / path.name, df, in_degrees=True if kind == "motion" else None)
+            left = df.rename(columns={c: c.replace("_r", "_l") for c in df.columns})
+            write_storage(trials / f"mirror_{path.name}", left, in_degrees=True if kind == "motion" else None)
+    parser = argparse.ArgumentParser(prog="musclemetab")
+    add_calibrate_parser(parser.add_subparsers(dest="command"))
+    out = tmp_path / "cal"
+    args = parser.parse_args(["calibrate-passive", "--model", str(example.calibration_model), "--trials", str(trials),
+                              "--side", "both", "--out", str(out)])
+    assert args.func(args) == 0
+    right = read_passive_parameters(out / "r" / "passive_parameters.csv")
+    left = read_passive_parameters(out / "l" / "passive_parameters.csv")
+    both = read_passive_parameters(out / "passive_parameters.csv")
+    assert set(both) == set(right) | set(left) and len(both) == 80
+    for m, p in result.calibrated.parameters.items():
+        np.testing.assert_allclose(right[m], p, atol=1e-6)
+        np.testing.assert_allclose(left[m[:-2] + "_l"], p, rtol=1e-2)
+    one_leg = example.calibration_trials["ankle"]["motion"].parent
+    args = parser.parse_args(["calibrate-passive", "--model", str(example.calibration_model), "--trials",
+                              str(one_leg), "--side", "both", "--out", str(tmp_path / "none")])
+    with pytest.raises(InputFileError, match="ankle_angle_l"):
+        args.func(args)
+    assert not (tmp_path / "none").exists()

@@ -334,3 +334,94 @@ def test_a_call_interrupted_mid_way_does_not_leave_its_reply_to_the_next(example
     times = {t: read_storage(example.ik[t]).index.to_numpy() for t in ("normal", "slow")}
     assert len(times["slow"]) != len(times["normal"])
     np.testing.assert_allclose(slow["time"], times["slow"], atol=1e-9)
+
+
+# ----------------------------------------------------------------------------- side = "both"
+def _both(example, **subject_keys):
+    data = _study(example, trials=("normal",), side="both", **subject_keys)
+    data["subjects"][0]["trials"][0]["cycle"] = "auto"
+    return data
+
+
+@pytest.mark.parametrize("edit, words", [
+    (lambda d: d["subjects"][0]["trials"][0].pop("cycle"), ["side = \"both\"", "cycle = \"auto\"", "normal"]),
+    (lambda d: d["subjects"][0].update(dofs=["knee_angle_r"]), ["'dofs' names one leg's DOFs"]),
+    (lambda d: d["subjects"][0]["trials"][0].update(toe_off_s=1.0), ["toe_off_s belongs to one leg", "normal"]),
+    (lambda d: d["subjects"][0]["trials"][0].update(grf_column="ground_force_vy"), ["grf_column belongs to one leg"]),
+    (lambda d: d.update(workflows=["effort-gen", "emg-ten"]), ["the emg-ten workflow", "own subject"]),
+    (lambda d: d["subjects"][0].update(side="left"), ["'side' must be \"r\", \"l\" or \"both\"", "left"]),
+])
+def test_both_legs_refuses_what_belongs_to_one_leg(example, edit, words):
+    data = _both(example)
+    edit(data)
+    if "emg-ten" in data["workflows"]:
+        data["subjects"][0]["trials"][0]["emg"] = str(example.emg["normal"])
+    with pytest.raises(OptionError) as info:
+        study_from_dict(data, base="/")
+    assert all(w in str(info.value) for w in words), str(info.value)
+
+
+def test_both_legs_make_one_unit_per_leg_with_their_own_keys(example):
+    from musclemetab.study import plan_units
+    from musclemetab.study.units import unit_key
+
+    both = study_from_dict(_both(example), base="/", output="/tmp/out")
+    units = plan_units(both)[1]
+    assert [(u.folder.as_posix(), u.label) for u in units] == [
+        ("units/sub1/normal/effort-gen/r", "sub1/normal/effort-gen/r"),
+        ("units/sub1/normal/effort-gen/l", "sub1/normal/effort-gen/l")]
+    assert [u.leg(both) for u in units] == ["r", "l"]
+    keys = {unit_key(both, u) for u in units}
+    assert len(keys) == 2
+    # the unit of a one-sided subject keeps its folder, label and key (no side in them)
+    one = study_from_dict(_study(example, trials=("normal",)), base="/", output="/tmp/out")
+    (single,) = plan_units(one)[1]
+    assert single.side is None and single.folder.as_posix() == "units/sub1/normal/effort-gen"
+    assert unit_key(one, single) not in keys
+
+
+def test_changing_side_replaces_only_our_unit_folders(tmp_path):
+    """r -> both: the single-leg unit folder of the earlier run makes way for the legs' folders;
+    both -> r: the container of the legs' folders is replaced by the single unit's folder; a
+    folder the package did not write is never touched."""
+    from musclemetab.study.units import UNIT_FILE, prepare_leg_folder
+
+    out = tmp_path / "out"
+    single = out / "units" / "sub1" / "normal" / "effort-gen"
+    single.mkdir(parents=True)
+    for name in (MARKER_FILE, UNIT_FILE, "solution.sto"):
+        (single / name).write_text("{}")
+    prepare_leg_folder(out, Unit("sub1", "normal", "effort-gen", "r"))
+    assert (single / MARKER_FILE).is_file() and not (single / "solution.sto").exists()
+    assert [p.name for p in single.parent.iterdir()] == ["effort-gen"]
+    leg = single / "r"
+    leg.mkdir()
+    (leg / MARKER_FILE).write_text("")
+    new = single.parent / ".effort-gen.partial-1"
+    new.mkdir()
+    (new / UNIT_FILE).write_text("{}")
+    units_mod._replace_folder(new, single)  # back to one leg: the container is ours
+    assert (single / UNIT_FILE).is_file() and not (single / "r").exists()
+    theirs = out / "units" / "sub2" / "normal" / "effort-gen"
+    theirs.mkdir(parents=True)
+    (theirs / "precious.txt").write_text("keep me")
+    with pytest.raises(OptionError, match="not written by musclemetab"):
+        prepare_leg_folder(out, Unit("sub2", "normal", "effort-gen", "l"))
+    assert (theirs / "precious.txt").read_text() == "keep me"
+
+
+def test_a_trial_without_events_or_ankle_moment_says_how_to_give_the_cycle(example, tmp_path):
+    """No ground forces, no events and an ID file without the side's ankle moment (another model's
+    naming): one error naming the trial and the column, and the ways to give the cycle."""
+    from musclemetab.errors import MissingColumnError
+    from musclemetab.io import read_storage, write_storage
+    from musclemetab.study.events import trial_cycle
+    from musclemetab.study.spec import Trial
+
+    moments = read_storage(example.id["normal"]).rename(columns={"ankle_angle_r_moment": "ankle_r_moment"})
+    id_file = tmp_path / "id.sto"
+    write_storage(id_file, moments)
+    with pytest.raises(MissingColumnError) as info:
+        trial_cycle(Trial(name="walk", ik=example.ik["normal"], id=id_file), "r")
+    for words in ("trial 'walk'", "ankle_angle_r_moment", "cycle = \"auto\"", "start_s, toe_off_s and end_s"):
+        assert words in str(info.value)

@@ -108,14 +108,13 @@ def test_estimation_unit_runs_musclemetab_estimate_on_the_subjects_files(example
 
     seen = {}
 
-    def estimate(args):
-        seen.update(vars(args))
+    def estimate(model, ik, id, out, **kwargs):
+        seen.update(kwargs, model=model, ik=[str(p) for p in ik], id=[str(p) for p in id])
         from pathlib import Path
 
-        (Path(args.out) / "parameters.json").write_text("{}\n")
-        return 0
+        (Path(out) / "parameters.json").write_text("{}\n")
 
-    monkeypatch.setattr(estimate_cli, "estimate_command", estimate)
+    monkeypatch.setattr(estimate_cli, "estimate_files", estimate)
     data = _data(example, tmp_path, workflows=("effort-gen",), trials=("slow", "normal"), estimate=ESTIMATE)
     data["solver"] = {"max_iter": 50}
     study = study_from_dict(data, base="/", output=tmp_path / "out")
@@ -128,13 +127,14 @@ def test_estimation_unit_runs_musclemetab_estimate_on_the_subjects_files(example
     run = run_study(study, workers=1, progress=False)
     assert run.ran[0] == "sub1/all trials/estimate" and "sub1/all trials/estimate" not in run.failed, run.failed
     assert seen["ik"] == [str(example.ik["normal"])] and seen["id"] == [str(example.id["normal"])]
-    assert seen["labels"] == ["normal"] and seen["ultrasound"] == [str((tmp_path / "us_normal.mot").resolve())]
-    assert seen["emg"] == [str(example.emg["normal"])] and seen["emg_mode"] == "tracking"
+    assert seen["labels"] == ["normal"] and seen["ultrasound"] == [(tmp_path / "us_normal.mot").resolve()]
+    assert seen["emg"] == [example.emg["normal"]] and seen["emg_mode"] == "tracking"
     assert seen["emg_mapping"] == "authors" and seen["workflow"] == "effort-cal"
-    assert seen["estimate"] == ["tendon_stiffness=soleus_r,gasmed_r"] and seen["couple"] == ["soleus_r,gasmed_r"]
-    assert sorted(seen["bounds"]) == ["emg_scale=0.5:2.0", "tendon_stiffness=0.2:1.5"]
-    assert seen["weights"] == "fibre_length=50.0" and seen["validate"] is True and seen["max_iter"] == 50
-    assert seen["side"] == "r" and seen["dofs"] is None  # the subject's side; DOFs discovered by the command
+    assert {k: list(v) for k, v in seen["estimate"].items()} == {"tendon_stiffness": ["soleus_r", "gasmed_r"]}
+    assert [list(g) for g in seen["couple"]] == [["soleus_r", "gasmed_r"]]
+    assert seen["bounds"] == {"emg_scale": (0.5, 2.0), "tendon_stiffness": (0.2, 1.5)}
+    assert seen["weights"] == {"fibre_length": 50.0} and seen["validate"] is True and seen["max_iter"] == 50
+    assert seen["side"] == "r" and seen["dofs"] is None  # the subject's side; DOFs discovered from the model
     folder = tmp_path / "out" / "units" / "sub1" / "_estimate"
     assert (folder / "parameters.json").is_file()
     assert json.loads((folder / "unit.json").read_text())["trials"] == ["normal"]

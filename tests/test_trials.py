@@ -148,9 +148,15 @@ def test_lumped_2d_model_with_degroote_and_millard_muscles_both_legs(lumped_mode
 @pytest.mark.opensim
 def test_two_subject_study_different_models_and_sides(example, gait2392, tmp_path, capsys):
     """The study's subject (Rajagopal model, right leg, ID file) and gait2392's subject (its own
-    gait2392 model, left leg, cycle and inverse dynamics from the ground forces) in one study file,
-    run end to end by ``musclemetab run`` with the report."""
+    gait2392 model, both legs, each over its own cycle, inverse dynamics from the ground forces)
+    in one study file, run end to end by ``musclemetab run`` with the report.
+
+    Oracles for the row adding gait2392's legs: the whole-body rate from the legs' metabolics
+    evaluated apart (``legs=1``) and added by :func:`musclemetab.metabolics.add_legs`; the
+    stance share from both legs' per-muscle stance energies."""
     import pandas as pd
+
+    from musclemetab.metabolics.solution import add_legs, metabolics_from_solution
 
     study = tmp_path / "study.toml"
     study.write_text(f"""
@@ -175,7 +181,7 @@ name = "gait2392"
 model = "{gait2392.model}"
 body_mass_kg = {gait2392.body_mass_kg}
 height_m = 1.8
-side = "l"
+side = "both"
 
 [[subjects.trials]]
 name = "walk1"
@@ -184,18 +190,36 @@ external_loads = "{gait2392.external_loads}"
 cycle = "auto"
 """)
     assert _cli("run", study, "--workers", 2, "--report", "--no-progress") == 0
+    assert "3 units: 3 run" in capsys.readouterr().out
     out = tmp_path / "out"
     res = pd.read_csv(out / "results.csv")
     assert sorted(set(res["subject"])) == ["example", "gait2392"] and len(res) == 4
+    assert set(res.loc[res["subject"] == "example", "legs"]) == {"2 x r"}
+    assert set(res.loc[res["subject"] == "gait2392", "legs"]) == {"r + l"}
     unit = out / "units" / "gait2392" / "walk1" / "effort-gen"
-    s = json.loads((unit / "summary.json").read_text())
-    assert s["side"] == "l" and {"ankle_angle_l", "knee_angle_l", "hip_flexion_l"} <= set(s["dofs"])
-    assert all(m.endswith("_l") for m in s["muscles"]) and len(s["muscles"]) == 43
-    assert s["window"]["gait_cycle"]["start_s"] == pytest.approx(1.247, abs=3e-3)
-    assert (unit / "inverse_dynamics.sto").is_file()
+    legs = {}
+    for side, start in (("r", 0.618), ("l", 1.247)):
+        s = json.loads((unit / side / "summary.json").read_text())
+        assert s["side"] == side and {f"ankle_angle_{side}", f"knee_angle_{side}", f"hip_flexion_{side}"} <= set(s["dofs"])
+        assert all(m.endswith(f"_{side}") for m in s["muscles"]) and len(s["muscles"]) == 43
+        assert s["window"]["gait_cycle"]["start_s"] == pytest.approx(start, abs=3e-3)
+        assert (unit / side / "inverse_dynamics.sto").is_file()
+        legs[side] = metabolics_from_solution(unit / side, gait2392.body_mass_kg, 1.8, models=["UM10", "BH04"], legs=1)
+    added = add_legs(legs)
+    g = res[res["subject"] == "gait2392"].set_index("model")
+    for model, value in added.items():
+        assert g.loc[model, "mean_W_per_kg"] == pytest.approx(value, rel=1e-9)
+    pm = pd.read_csv(out / "per_muscle.csv")
+    pm = pm[pm["subject"] == "gait2392"]
+    assert set(pm["side"]) == {"r", "l"}
+    for model, rows in pm.groupby("model"):
+        stance = 100 * rows["stance_J"].sum() / (rows["stance_J"].sum() + rows["swing_J"].sum())
+        assert g.loc[model, "stance_energy_share_pct"] == pytest.approx(stance, rel=1e-6)
+    assert g["cycle_start_s"].isna().all() and g["unit_dir"].iloc[0] == "units/gait2392/walk1/effort-gen"
     ex = json.loads((out / "units" / "example" / "normal" / "effort-gen" / "summary.json").read_text())
     assert ex["side"] == "r" and len(ex["muscles"]) == 40
-    assert (out / "report.html").is_file()
+    html = (out / "report.html").read_text()
+    assert "the sum of both solved legs" in html and "the right leg doubled for example" in html
     wkg = [c for c in res.columns if "W_per_kg" in c]
     assert wkg and res[wkg[0]].between(2.6, 15.8).all()
 
@@ -229,3 +253,58 @@ def _renamed_muscle(solution, folder):
         path = folder / name
         path.write_text(path.read_text().replace("vasti_r", "mystery_r"))
     return folder
+
+
+def test_report_adds_the_legs_time_series_on_the_cycle():
+    """Two legs' rates over their own cycles: the second leg's series, interpolated onto the first
+    leg's cycle percentages, is added (worked by hand: linear between 0 and 100 %)."""
+    import pandas as pd
+
+    from musclemetab.report.html import _add_leg_timeseries
+
+    right = pd.DataFrame({"time_s": [0.6, 1.2, 1.8], "cycle_pct": [0.0, 50.0, 100.0], "model": "UM10",
+                          "series": "whole_body", "value_W": [100.0, 200.0, 100.0]})
+    left = pd.DataFrame({"time_s": [1.2, 1.6, 2.0, 2.4], "cycle_pct": [0.0, 100 / 3, 200 / 3, 100.0],
+                         "model": "UM10", "series": "whole_body", "value_W": [30.0, 60.0, 90.0, 120.0]})
+    both = _add_leg_timeseries({"r": right, "l": left})
+    # left at 0, 50, 100 %: 30, 75, 120 W
+    assert both["value_W"].tolist() == pytest.approx([130.0, 275.0, 220.0])
+    assert both["cycle_pct"].tolist() == [0.0, 50.0, 100.0] and both["time_s"].isna().all()
+    assert _add_leg_timeseries({"": right}) is right
+
+
+def test_the_grf_column_and_threshold_reach_the_cycle_search(gait2392):
+    """gait2392's ground-force file holds the right foot (``ground_force_vy``) and the left foot
+    (``1_ground_force_vy``). Naming the left foot's column for the right side gives the left
+    foot's cycle (heel strike 1.247 s, OpenSim's stored events of the data set) instead of the
+    right foot's (0.618 s): the column is the one the cycle search reads. A contact threshold
+    above the foot's peak force finds no cycle, and says so with the threshold."""
+    from musclemetab.errors import DataMismatchError
+    from musclemetab.external_loads import read_external_loads
+    from musclemetab.redundancy.window import resolve_window
+
+    grf = read_external_loads(gait2392.external_loads).datafile
+    right = resolve_window(gait2392.ik, side="r", cycle="auto", grf_path=grf)
+    left_foot = resolve_window(gait2392.ik, side="r", cycle="auto", grf_path=grf, grf_column="1_ground_force_vy")
+    assert right.cycle["start_s"] == pytest.approx(0.618, abs=3e-3)
+    assert left_foot.cycle["start_s"] == pytest.approx(1.247, abs=3e-3)
+    assert "1_ground_force_vy" in left_foot.cycle["source"]
+    with pytest.raises(DataMismatchError, match="threshold 5000 N"):
+        resolve_window(gait2392.ik, side="r", cycle="auto", grf_path=grf, grf_threshold_N=5000.0)
+
+
+def test_kinematic_toe_off_on_treadmill_trials(example):
+    """The example subject walked on a treadmill (the pelvis barely travels): the kinematic rule's
+    toe-off against the toe-off of the ankle moment's drop (an independent signal, the study's
+    rule without forces), 0.04 s as on gait2392. Its records hold one cycle with 5 frames
+    beyond each heel strike, too few for the heel's excursion to stand out: heel strikes there
+    are not reported (an extremum needs 0.1 m of prominence on both sides)."""
+    from musclemetab.analysis.events import cycle_from_id_file, kinematic_gait_events
+    from musclemetab.io import read_storage
+
+    for trial in ("slow", "normal", "fast"):
+        t = read_storage(example.ik[trial]).index.to_numpy(float)
+        ev = kinematic_gait_events(example.model, example.ik[trial], "r")
+        moment = cycle_from_id_file(example.id[trial], window_s=(t[0], t[-1]), padding_s=0.05)
+        assert len(ev.toe_offs_s) == 1 and ev.toe_offs_s[0] == pytest.approx(moment.toe_off_s, abs=0.04), trial
+        assert all(t[0] + 0.05 < h < t[-1] - 0.05 + 1e-9 for h in ev.heel_strikes_s)

@@ -7,7 +7,8 @@ table, :func:`write_data_dictionary` writes it as CSV (the study runner writes
 (``share_<G>_pct``: one per muscle group of ``muscle_groups.csv``).
 
 Conventions: one leg means the simulated leg's muscles; whole body means both legs (twice
-the simulated leg) per kg of body mass; "no basal" means without any basal heat.
+the simulated leg, or the two legs added when a study solves both: column ``legs``) per kg
+of body mass; "no basal" means without any basal heat.
 """
 
 from __future__ import annotations
@@ -33,7 +34,13 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
      "metabolic energy model (short name of the registry, e.g. UM10, BH04)"),
     ("failures.csv", "reason", "-", "why the unit failed (one line)"),
     (_STUDY, "status", "-", "ok for a unit whose results are in the row"),
-    (_STUDY, "unit_dir", "-", "the unit's folder, relative to the study folder"),
+    (_STUDY, "unit_dir", "-", "the unit's folder, relative to the study folder (for legs 'r + l': the folder "
+     "holding the two legs' unit folders r/ and l/)"),
+    (_STUDY, "legs", "-",
+     "how the whole-body columns count the legs: '2 x r' or '2 x l' (that leg solved, doubled) or 'r + l' (side = "
+     "both: each leg solved over its own gait cycle, the two added; one_leg_mean_W, leg_energy_J, duration_s, "
+     "toe_off_pct and speed are the legs' means, the energy shares are of both legs' energy, and the event times "
+     "are empty: each leg's are in its unit folder)"),
     # whole body
     (f"{_STUDY}, {_UNIT_WB}", "mean_W_per_kg", "W/kg",
      "whole-body average metabolic rate over the gait cycle: both legs (the two legs added when both "

@@ -36,9 +36,10 @@ def add_calibrate_parser(sub) -> None:
         "of joint angles (deg) with the same name; each trial is recognised by its only non-zero "
         "'<coordinate>_moment' column (ankle, knee or hip flexion of the side), whatever the file names",
     )
-    p.add_argument("--side", choices=("r", "l"), default="r",
+    p.add_argument("--side", choices=("r", "l", "both"), default="r",
                    help="leg (default r): its hip, knee and ankle flexion coordinates are found from the model's "
-                   "joint tree")
+                   "joint tree; both: each leg calibrated from its own trials (the folder holds both legs' "
+                   "trials), written to DIR/r and DIR/l, and both legs' parameters in DIR/passive_parameters.csv")
     p.add_argument(
         "--tendon-stiffness", nargs="+", type=_kt_item, metavar="MUSCLE=KT",
         help="override the normalised tendon stiffness of some muscles (default 20 for soleus and "
@@ -50,22 +51,34 @@ def add_calibrate_parser(sub) -> None:
 
 
 def calibrate_command(args) -> int:
-    from .passive import calibrate_passive, write_calibration
+    from pathlib import Path
+
+    from .passive import calibrate_passive, write_calibration, write_passive_parameters
 
     from ..io import check_output_folder
 
     check_output_folder(args.out)
     kt = dict(args.tendon_stiffness) if getattr(args, "tendon_stiffness", None) else None
-    result = calibrate_passive(args.model, args.trials, tendon_stiffness=kt, use_cache=not args.no_cache,
-                               side=getattr(args, "side", "r"))
-    write_calibration(result, args.out)
-    rms_g = result.generic.rms_Nm(result.data)
-    rms_c = result.calibrated.rms_Nm(result.data)
-    parts = ", ".join(f"{j} {rms_g[j]:.2f} -> {rms_c[j]:.2f}" for j in rms_c)
-    st = result.calibrated.stats
-    print(
-        f"calibrate-passive: {len(result.calibrated.parameters)} muscles, RMS passive moment error "
-        f"generic -> calibrated (N m): {parts}; IPOPT {st['return_status']} in {st['iterations']} "
-        f"iterations -> {args.out}"
-    )
+    side = getattr(args, "side", "r")
+    sides = ("r", "l") if side == "both" else (side,)
+    # every leg is calibrated before anything is written: bad trials of one leg leave no output
+    results = {s: calibrate_passive(args.model, args.trials, tendon_stiffness=kt, use_cache=not args.no_cache,
+                                    side=s) for s in sides}
+    out = Path(args.out)
+    for s, result in results.items():
+        write_calibration(result, out / s if side == "both" else out)
+    if side == "both":
+        write_passive_parameters(out / "passive_parameters.csv",
+                                 {m: p for r in results.values() for m, p in r.calibrated.parameters.items()})
+    for s, result in results.items():
+        rms_g = result.generic.rms_Nm(result.data)
+        rms_c = result.calibrated.rms_Nm(result.data)
+        parts = ", ".join(f"{j} {rms_g[j]:.2f} -> {rms_c[j]:.2f}" for j in rms_c)
+        st = result.calibrated.stats
+        where = f"{out / s} (both legs' parameters: {out / 'passive_parameters.csv'})" if side == "both" else out
+        print(
+            f"calibrate-passive: {'right' if s == 'r' else 'left'} leg, {len(result.calibrated.parameters)} muscles, "
+            f"RMS passive moment error generic -> calibrated (N m): {parts}; IPOPT {st['return_status']} in "
+            f"{st['iterations']} iterations -> {where}"
+        )
     return 0

@@ -565,6 +565,7 @@ def solve_passive(
             "tol": tol,
             "max_iter": max_iter,
             "print_level": print_level,
+            "sb": "yes",  # no banner
         },
     )
     t0 = _time.perf_counter()

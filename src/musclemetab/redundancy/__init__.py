@@ -29,6 +29,7 @@ _EXPORTS = {
     "solve_files": "solve", "solve_trial": "solve", "solve_with_parameters": "solve",
     "WORKFLOWS": "workflows", "Workflow": "workflows", "get_workflow": "workflows",
     "read_passive_parameters": "workflows", "workflow_parameters": "workflows",
+    "estimate_files": "estimate_cli", "EstimateRun": "estimate_cli",
 }
 
 
@@ -60,4 +61,6 @@ __all__ = [
     "solve_emg_ten",
     "EmgTenResult",
     "EmgTenSettings",
+    "estimate_files",
+    "EstimateRun",
 ]

@@ -64,6 +64,10 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--grf", metavar="GRF.mot",
                    help="ground-force file for --cycle when there is no ExternalLoads file (the foot's vertical "
                    "force column is found by the documented name rule of musclemetab.analysis.events.read_grf)")
+    p.add_argument("--grf-column", metavar="COLUMN",
+                   help="with --grf: the solved foot's vertical force column (default: the name rule)")
+    p.add_argument("--grf-threshold", type=float, metavar="N",
+                   help="with --cycle: contact when the vertical ground force exceeds N newtons (default 20)")
     p.add_argument("--side", default="r", choices=("r", "l", "both"),
                    help="leg to solve (default r); both: two independent problems written to DIR/r and DIR/l")
     p.add_argument("--workers", type=int, default=1, metavar="N",
@@ -201,6 +205,13 @@ def solve_command(args) -> int:
     args.ik, args.id = ik[0], (idf[0] if idf else None)
     kt = parse_tendon_stiffness(args.tendon_stiffness) if args.tendon_stiffness else None
     dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else None
+    if args.side == "both" and args.grf_column:
+        raise OptionError("--grf-column names one foot's force column; with --side both leave it out (each foot's "
+                          "column is found by the name rule) or solve the legs one at a time")
+    if args.grf_column and not args.grf:
+        raise OptionError("--grf-column names a column of the --grf file; give --grf GRF.mot, or drop it")
+    if args.grf_threshold is not None and not (math.isfinite(args.grf_threshold) and args.grf_threshold > 0):
+        raise OptionError(f"--grf-threshold must be a positive number of newtons, not {args.grf_threshold}")
     if args.side == "both" and dofs:
         raise OptionError("--dofs names one leg's DOFs; with --side both leave it out (each leg's DOFs are discovered)")
     window = parse_window(args.window) if args.window else None
@@ -225,6 +236,7 @@ def solve_command(args) -> int:
     solutions = solve_sides(
         args.model, args.ik, args.id, args.workflow, sides=sides, workers=args.workers,
         dofs=dofs, window=window, cycle=cycle, external_loads=args.external_loads, grf=args.grf,
+        grf_column=args.grf_column, grf_threshold_N=args.grf_threshold,
         mesh_frequency_hz=args.mesh_frequency,
         passive=args.passive, tendon_stiffness=kt, tendon_stiffness_file=args.parameters,
         options=options, cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, warm_start=warm,
@@ -352,7 +364,9 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
 
     if not idf:
         raise OptionError("EMG problems need --id: one inverse-dynamics file per trial, in the order of --ik")
-    wrong = [o for o, v in (("--external-loads", args.external_loads), ("--grf", args.grf), ("--window", args.window),
+    wrong = [o for o, v in (("--external-loads", args.external_loads), ("--grf", args.grf),
+                            ("--grf-column", args.grf_column), ("--grf-threshold", args.grf_threshold),
+                            ("--window", args.window),
                             ("--cycle", args.cycle), ("--exclude-muscles", getattr(args, "exclude_muscles", None)))
              if v] + (["--side both"] if args.side == "both" else [])
     if wrong:

@@ -197,6 +197,8 @@ def solve_files(
     cycle: str | int | None = None,
     external_loads: str | os.PathLike | None = None,
     grf: str | os.PathLike | None = None,
+    grf_column: str | None = None,
+    grf_threshold_N: float | None = None,
     mesh_frequency_hz: float = MESH_FREQUENCY_HZ,
     passive=None,
     tendon_stiffness: Mapping[str, float] | None = None,
@@ -212,7 +214,9 @@ def solve_files(
 
     ``side`` (``"r"``/``"l"``) chooses the leg; ``dofs`` default to the DOFs discovered from
     the model for that side (:func:`musclemetab.layout.discover_dofs`). The window is the IK
-    file, ``window=(T0, T1)`` or ``cycle="auto"|N`` (:mod:`.window`). With ``id_path=None``
+    file, ``window=(T0, T1)`` or ``cycle="auto"|N`` (:mod:`.window`; the foot's force from
+    ``external_loads`` or from ``grf``, column ``grf_column``, contact above ``grf_threshold_N``,
+    default 20 N). With ``id_path=None``
     and ``external_loads`` (an OpenSim ExternalLoads file), the inverse dynamics is computed
     by OpenSim over the window (:func:`musclemetab.external_loads.compute_inverse_dynamics`);
     its path is ``solution.summary["inputs"]["id"]``. The mesh has ``mesh_frequency_hz``
@@ -274,7 +278,8 @@ def solve_files(
         start_in_background()
     ik_table = read_table(ik_path)
     trial_window = resolve_window(ik_table, side=side, window=window, cycle=cycle, id_path=id_table,
-                                  external_loads=loads, grf_path=grf, layout=layout)
+                                  external_loads=loads, grf_path=grf, layout=layout, grf_column=grf_column,
+                                  grf_threshold_N=grf_threshold_N)
     id_record = None
     if id_path is None:
         from ..external_loads import ID_COORDINATE_FILTER_HZ, compute_inverse_dynamics

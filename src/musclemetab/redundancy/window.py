@@ -104,8 +104,13 @@ def resolve_window(
     grf_path: str | os.PathLike | None = None,
     layout=None,
     padding_s: float = PADDING_S,
+    grf_column: str | None = None,
+    grf_threshold_N: float | None = None,
 ) -> TrialWindow:
-    """The solve window for one leg (see the module docstring).
+    """The solve window for one leg (see the module docstring); ``grf_column`` names the foot's
+    vertical force column of ``grf_path`` (default: the name rule of
+    :func:`~musclemetab.analysis.events.read_grf`), ``grf_threshold_N`` the contact threshold
+    (default 20 N).
 
     ``ik`` and ``id_path`` are the files or their :class:`~musclemetab.io.StorageTable`, already
     read by :func:`~musclemetab.io.read_table` (a solve reads each file once).
@@ -138,7 +143,7 @@ def resolve_window(
         for path, what, (a, b) in inputs:
             check_inside((t0, t1), a, b, path, what)
     else:
-        gc, where = _cycle(side, cycle, external_loads, grf_path, layout, ik_table)
+        gc, where = _cycle(side, cycle, external_loads, grf_path, layout, ik_table, grf_column, grf_threshold_N)
         for path, what, (a, b) in inputs:
             check_inside((gc.start_s, gc.end_s), a, b, path, f"{what} (needed for the gait cycle)")
         t0, t1 = gc.start_s - padding_s, gc.end_s + padding_s
@@ -168,8 +173,14 @@ def resolve_window(
     return TrialWindow(start, end, source, cycle_rec, pads, tuple(notes))
 
 
-def _cycle(side, cycle, external_loads, grf_path, layout, ik=None):
-    from ..analysis.events import GaitCycle, gait_events_from_grf, kinematic_gait_events, read_grf
+def _cycle(side, cycle, external_loads, grf_path, layout, ik=None, grf_column=None, threshold_N=None):
+    from ..analysis.events import (
+        DEFAULT_GRF_THRESHOLD_N,
+        GaitCycle,
+        gait_events_from_grf,
+        kinematic_gait_events,
+        read_grf,
+    )
 
     if external_loads is not None:
         from ..external_loads import vertical_force
@@ -177,7 +188,7 @@ def _cycle(side, cycle, external_loads, grf_path, layout, ik=None):
         t, f = vertical_force(external_loads, layout, side)
         where = str(external_loads.path)
     elif grf_path is not None:
-        s = read_grf(grf_path, side=side)
+        s = read_grf(grf_path, grf_column, side=side)
         t, f = s.index.to_numpy(dtype=float), s.to_numpy(dtype=float)
         where = f"{grf_path} column {s.name}"
     elif layout is not None and ik is not None:
@@ -189,7 +200,7 @@ def _cycle(side, cycle, external_loads, grf_path, layout, ik=None):
         raise OptionError("--cycle needs ground forces (--external-loads GRF.xml or --grf GRF.mot) or the model "
                           "for gait events from kinematics")
     if external_loads is not None or grf_path is not None:
-        ev = gait_events_from_grf(t, f)
+        ev = gait_events_from_grf(t, f, DEFAULT_GRF_THRESHOLD_N if threshold_N is None else threshold_N)
     hs, to = ev.heel_strikes_s, ev.toe_offs_s
     cycles = []
     for a, b in zip(hs[:-1], hs[1:]):

@@ -89,11 +89,20 @@ class StudyFolder:
         r = self.results
         return r[r["status"].astype(str).str.lower() == "ok"]
 
-    def unit_folder(self, row) -> Path:
+    def leg_folders(self, row) -> dict[str, Path]:
+        """The row's unit folders by leg: ``{"": folder}`` for one leg solved (and doubled),
+        ``{"r": ..., "l": ...}`` for a row adding both legs (``unit_dir`` holds the legs' folders)."""
         rel = row.get("unit_dir") if hasattr(row, "get") else None
         if isinstance(rel, str) and rel.strip():
-            return self.path / rel
-        return self.path / "units" / str(row["subject"]) / str(row["trial"]) / str(row["workflow"])
+            folder = self.path / rel
+        else:
+            folder = self.path / "units" / str(row["subject"]) / str(row["trial"]) / str(row["workflow"])
+        legs = {s: folder / s for s in ("r", "l") if (folder / s / UNIT_FILE).is_file()}
+        return legs if legs and not (folder / UNIT_FILE).is_file() else {"": folder}
+
+    def unit_folder(self, row) -> Path:
+        """The row's unit folder; for a row adding both legs, the first leg's (right)."""
+        return next(iter(self.leg_folders(row).values()))
 
     @property
     def name(self) -> str:
@@ -335,6 +344,31 @@ def _measured_emg(study: StudyFolder, subject: str, trial: str, sols: dict, cycl
         "scale factors for this trial); its shape, not its amplitude, is the measurement.")
 
 
+def _solves_both_legs(study: StudyFolder, subject) -> bool:
+    """Whether ``study.json`` records ``side = "both"`` for the subject."""
+    subjects = study.settings.get("subjects")
+    rec = subjects.get(str(subject)) if isinstance(subjects, dict) else None
+    return isinstance(rec, dict) and rec.get("side") == "both"
+
+
+def _add_leg_timeseries(tables: dict):
+    """One unit's long time-series table, or both legs' added: each leg's series on its own
+    gait cycle (``cycle_pct``), the second interpolated onto the first's cycle percentages."""
+    if len(tables) == 1:
+        return next(iter(tables.values()))
+    first, *others = tables.values()
+    out = first.copy()
+    for other in others:
+        for (model, series), rows in out.groupby(["model", "series"], sort=False):
+            o = other[(other["model"] == model) & (other["series"] == series)].sort_values("cycle_pct")
+            if o.empty:
+                continue
+            out.loc[rows.index, "value_W"] += np.interp(rows["cycle_pct"].to_numpy(float),
+                                                        o["cycle_pct"].to_numpy(float), o["value_W"].to_numpy(float))
+    out["time_s"] = np.nan  # the legs' cycles have different times
+    return out
+
+
 def _resolve(study: StudyFolder, path) -> Path:
     """A path recorded in study.json: as given when absolute, else relative to the study folder."""
     p = Path(str(path))
@@ -418,6 +452,8 @@ def _figure_builders(study: StudyFolder) -> dict[str, Callable[[], tuple[object,
                "normalised by the optimal fibre length (-), one line per workflow; dotted line: toe-off; "
                "grey band: plateau of the active force-length curve (0.75-1.05); dashed line: start of "
                f"the descending limb (1.05). {emg_text}")
+        if _solves_both_legs(study, subject):
+            cap += " Both legs were solved; the right leg is shown."
         if skipped:
             cap += f" Not shown: {'; '.join(skipped)}."
         return fig, cap
@@ -426,10 +462,11 @@ def _figure_builders(study: StudyFolder) -> dict[str, Callable[[], tuple[object,
         d = unit_rows(subject, trial, workflow)
         if d.empty:
             raise OptionError(f"no successful unit for {subject}, trial {trial}, workflow {workflow}")
-        folder = study.unit_folder(d.iloc[0])
-        ts = _read_timeseries(folder)
+        folders = study.leg_folders(d.iloc[0])
+        ts = _add_leg_timeseries({s: _read_timeseries(f) for s, f in folders.items()})
         to = d["toe_off_pct"].iloc[0] if "toe_off_pct" in d.columns else math.nan
         if not np.isfinite(to):
+            folder = next(iter(folders.values()))
             rec = _read_unit_json(folder)
             s, t, e = _cycle(rec, folder)
             to = 100.0 * (t - s) / (e - s)
@@ -437,7 +474,10 @@ def _figure_builders(study: StudyFolder) -> dict[str, Callable[[], tuple[object,
         return ts, float(to), float(sp)
 
     mass = _body_mass(study, subject)
-    scale, unit, legs = (2.0 / mass, "W/kg", "both legs") if mass else (1.0, "W", "one leg")
+    both = _solves_both_legs(study, subject)
+    doubled = "the two solved legs added, each over its own cycle" if both else "twice the simulated leg"
+    scale, unit, legs = ((1.0 if both else 2.0) / mass, "W/kg", "both legs") if mass else (
+        (1.0, "W", "both legs") if both else (1.0, "W", "one leg"))
 
     def fig3():
         ts, to, _ = unit_timeseries(subject, trial, main_wf)
@@ -447,7 +487,7 @@ def _figure_builders(study: StudyFolder) -> dict[str, Callable[[], tuple[object,
             f"subject {subject}, trial {trial}, {main_wf}", scale=scale, unit=unit,
         )
         cap = (f"Subject {subject}, trial {trial} (preferred speed), workflow {main_wf}. Muscle metabolic "
-               f"rates ({unit}, {legs}: twice the simulated leg{' per kg of body mass' if mass else ''}, "
+               f"rates ({unit}, {legs}: {doubled}{' per kg of body mass' if mass else ''}, "
                "without basal heat) distributed to the muscle groups by moment-arm ratio; same axes in every "
                f"panel; dotted line: toe-off ({to:.1f} % of the cycle).")
         return fig, cap
@@ -480,8 +520,8 @@ def _figure_builders(study: StudyFolder) -> dict[str, Callable[[], tuple[object,
             title=f"Whole-body metabolic rate over the gait cycle across speeds ({unit}, {legs}, summed "
             f"muscles, no basal heat): subject {subject}, {main_wf}", scale=scale, unit=unit,
         )
-        cap = (f"Subject {subject}, workflow {main_wf}. Summed muscle metabolic rate ({unit}, {legs}: twice "
-               f"the simulated leg{' per kg of body mass' if mass else ''}, without basal heat) over the gait "
+        cap = (f"Subject {subject}, workflow {main_wf}. Summed muscle metabolic rate ({unit}, {legs}: "
+               f"{doubled}{' per kg of body mass' if mass else ''}, without basal heat) over the gait "
                "cycle, one line per walking speed; same axes in every panel; marks at the bottom: toe-off of "
                "each trial.")
         if skipped:
@@ -1030,10 +1070,10 @@ def solver_runs(study: StudyFolder) -> list[list[str]]:
             if key not in [u[0] for u in units]:
                 units.append((key, r))
     rows = []
-    for key, r in units:
-        if not key[1] or key[1] == "nan":  # a failure of every trial of a subject: no unit folder
-            continue
-        path = study.unit_folder(r) / "summary.json"
+    legs = [(key, folder) for key, r in units if key[1] and key[1] != "nan"  # else: no unit folder
+            for folder in study.leg_folders(r).values()]
+    for key, folder in legs:
+        path = folder / "summary.json"
         try:
             summary = read_json_object(path, missing="missing", remedy="run the unit again")
         except MusclemetabError as exc:
@@ -1077,17 +1117,22 @@ _SIDES = {"r": "right", "l": "left"}
 
 
 def legs_text(study: StudyFolder) -> str:
-    """How the whole-body rate counts the legs: the solved leg of each subject, doubled."""
+    """How the whole-body rate counts the legs: the solved leg of each subject doubled, or
+    the sum of both solved legs (``side = "both"``)."""
     subjects = study.settings.get("subjects") if isinstance(study.settings.get("subjects"), dict) else {}
     sides = {}
     for name in _subjects(study):
         rec = subjects.get(name) if isinstance(subjects.get(name), dict) else {}
-        sides.setdefault(_SIDES.get(str(rec.get("side", "r")), str(rec.get("side"))), []).append(name)
+        side = str(rec.get("side", "r"))
+        key = "both" if side == "both" else _SIDES.get(side, side)
+        sides.setdefault(key, []).append(name)
+    both = "the sum of both solved legs, each averaged over its own gait cycle"
     if len(sides) == 1:
         side = next(iter(sides))
-        return f"one leg doubled (the {side} leg was solved)"
-    each = "; ".join(f"the {side} leg for {', '.join(names)}" for side, names in sides.items())
-    return f"one leg doubled (solved: {each})"
+        return both if side == "both" else f"one leg doubled (the {side} leg was solved)"
+    each = "; ".join(f"{both if side == 'both' else f'the {side} leg doubled'} for {', '.join(names)}"
+                     for side, names in sides.items())
+    return f"per subject: {each}"
 
 
 def _method_section(study: StudyFolder) -> str:
@@ -1106,7 +1151,7 @@ def _method_section(study: StudyFolder) -> str:
         "EMG-TEN: EMG-informed). The metabolic models (UM03, BH04, HO06, LW07, UM10, UC16) give each muscle's "
         "metabolic rate (W) at every node of the gait cycle (initial contact to the next initial contact of the "
         "same leg). The whole-body average rate (W/kg) counts both legs as "
-        f"{legs_text(study)}: twice the one-leg sum of the muscle rates averaged over the cycle, divided by the "
+        f"{legs_text(study)} (a leg's rate: the sum of its muscles' rates averaged over its cycle), divided by the "
         f"body mass, {basal_txt}; the gross cost of transport (J/(kg·m)) is "
         "that rate divided by the walking speed (m/s), the net cost the same without the basal heat. Phase shares are the stance (initial contact to toe-off) and "
         "swing parts of the cycle's one-leg muscle energy (%, without basal heat). Group shares distribute "

@@ -142,45 +142,26 @@ def estimation_trials(subject, here: str | None = None) -> list:
 
 
 def run_parameter_estimation(study, unit, tmp: Path) -> dict:
-    """The subject's estimation unit: ``musclemetab estimate`` on its trials, written to ``tmp``."""
-    import argparse
-    import contextlib
-    import io
+    """The subject's estimation unit: :func:`~musclemetab.redundancy.estimate_cli.estimate_files`
+    (``musclemetab estimate``) on its trials, written to ``tmp``."""
     import time
 
-    from ..redundancy.estimate_cli import add_estimate_parser
+    from ..redundancy import estimate_cli
 
     subject = study.subject(unit.subject)
     spec = subject.estimate
     trials = estimation_trials(subject)
-    argv = ["estimate", "--model", str(subject.model), "--ik", *[str(t.ik) for t in trials],
-            "--id", *[str(t.id) for t in trials], "--labels", *[t.name for t in trials],
-            "--estimate", *[f"{k}={','.join(v)}" for k, v in spec.estimate.items()],
-            "--workflow", spec.workflow, "--side", subject.side, "--out", str(tmp)]
-    if subject.dofs is not None:
-        argv += ["--dofs", *subject.dofs]
-    if any(t.ultrasound is not None for t in trials):
-        argv += ["--ultrasound", *[str(t.ultrasound) for t in trials]]
-    if spec.emg_mode:
-        argv += ["--emg", *[str(t.emg) for t in trials], "--emg-mode", spec.emg_mode,
-                 "--emg-mapping", subject.emg_mapping]
-    if spec.couple:
-        argv += ["--couple", *[",".join(g) for g in spec.couple]]
-    if spec.bounds:
-        argv += ["--bounds", *[f"{k}={lo!r}:{hi!r}" for k, (lo, hi) in spec.bounds.items()]]
-    if spec.weights:
-        argv += ["--weights", ",".join(f"{k}={v!r}" for k, v in spec.weights.items())]
-    if spec.workflow != "effort-gen" and subject.passive is not None:
-        argv += ["--passive", str(subject.passive)]
-    if spec.validate:
-        argv.append("--validate")
-    max_iter = (study.settings.get("solver") or {}).get("max_iter")
-    if max_iter is not None:
-        argv += ["--max-iter", str(max_iter)]
-    parser = argparse.ArgumentParser(prog="musclemetab")
-    add_estimate_parser(parser.add_subparsers())
-    args = parser.parse_args(argv)
+    with_us = any(t.ultrasound is not None for t in trials)
     t0 = time.perf_counter()
-    with contextlib.redirect_stdout(io.StringIO()):
-        args.func(args)
+    estimate_cli.estimate_files(
+        subject.model, [t.ik for t in trials], [t.id for t in trials], tmp,
+        estimate=spec.estimate, labels=[t.name for t in trials],
+        ultrasound=[t.ultrasound for t in trials] if with_us else (),
+        emg=[t.emg for t in trials] if spec.emg_mode else (),
+        emg_mode=spec.emg_mode, emg_mapping=subject.emg_mapping if spec.emg_mode else None,
+        couple=spec.couple, bounds=spec.bounds, weights=spec.weights, workflow=spec.workflow,
+        side=subject.side, dofs=subject.dofs,
+        passive=subject.passive if spec.workflow != "effort-gen" else None,
+        max_iter=(study.settings.get("solver") or {}).get("max_iter") or 10000, validate=spec.validate,
+    )
     return {"times": {"solve_s": time.perf_counter() - t0}, "trials": [t.name for t in trials]}

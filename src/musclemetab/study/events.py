@@ -11,7 +11,8 @@ Order of preference for the cycle (initial contact, toe-off, next initial contac
    from the ankle moment of inverse dynamics (see
    :func:`musclemetab.analysis.events.cycle_from_inverse_dynamics`), the column
    ``ankle_angle_<side>_moment`` of the subject's side (the naming of the Rajagopal and
-   gait2392 families; other models give the events or ground forces).
+   gait2392 families; for other models give the trial ``cycle = "auto"``, which finds the
+   events from ground forces or from the kinematics, ground forces, or the events).
 
 Speed: the study file's ``speed_m_per_s``, else the displacement of the model's forward
 translation coordinates over the cycle (:func:`musclemetab.analysis.speed.walking_speed_from_ik`).
@@ -51,7 +52,15 @@ def trial_cycle(trial: Trial, side: str = "r") -> GaitCycle:
         found = cycle_from_grf(force.index.to_numpy(float), force.to_numpy(float),
                                threshold_N=trial.grf_threshold_N, at_time_s=trial.start_s if trial.start_s is not None else 0.5 * (t0 + tf))
     else:
-        found = cycle_from_id_file(trial.id, ankle_moment_column(side), window_s=_ik_window(trial), padding_s=PADDING_S)
+        from ..errors import MissingColumnError
+
+        try:
+            found = cycle_from_id_file(trial.id, ankle_moment_column(side), window_s=_ik_window(trial),
+                                       padding_s=PADDING_S)
+        except MissingColumnError as exc:
+            raise MissingColumnError(
+                f"trial '{trial.name}': no gait events: {exc}; give the trial cycle = \"auto\" (events from "
+                "ground forces or kinematics), a 'grf' file, or start_s, toe_off_s and end_s") from None
     start, toe_off, end = (g if g is not None else f for g, f in
                            zip(given, (found.start_s, found.toe_off_s, found.end_s)))
     return GaitCycle(start, toe_off, end)

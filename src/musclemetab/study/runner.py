@@ -50,6 +50,7 @@ import time
 from concurrent.futures import as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Mapping
 
 from .. import __version__
 from ..errors import OptionError
@@ -63,6 +64,7 @@ from .units import (
     execute_unit,
     is_complete,
     plan_units,
+    prepare_leg_folder,
     read_unit_record,
     remove_stale_partials,
     unit_folder,
@@ -85,6 +87,7 @@ SCHEDULER_TIMEOUT_S = 5
 
 #: columns of the results table that identify a row
 ID_COLUMNS = ("subject", "trial", "workflow", "model")
+_LEG_NAMES = {"r": "right", "l": "left"}
 
 
 @dataclass
@@ -368,6 +371,9 @@ def run_study(
     try:
         with study_lock(out):
             run.removed_partials = remove_stale_partials(out)
+            for stage in stages:
+                for unit in stage:
+                    prepare_leg_folder(out, unit)
             _write_study_json(study, out)
             bar = _Progress(n_total, progress, stream)
             for stage in stages:
@@ -492,42 +498,151 @@ def _write_study_json(study: Study, out: Path) -> None:
     atomic_write_text(out / STUDY_JSON, json.dumps(info, indent=2, default=str) + "\n")
 
 
+def _unit_rows(folder: Path, unit: Unit, rec: dict):
+    """One unit's rows of the results table (a row per model), as the unit wrote them."""
+    import pandas as pd
+
+    wb = pd.read_csv(folder / "whole_body.csv")
+    an = pd.read_csv(folder / "analysis.csv")
+    df = wb.merge(an, on="model", how="left", validate="one_to_one")
+    df.insert(0, "subject", unit.subject)
+    df.insert(1, "trial", unit.trial)
+    df.insert(2, "workflow", unit.workflow)
+    df["speed_m_per_s"] = rec.get("speed_m_per_s")
+    df["toe_off_pct"] = rec.get("toe_off_pct")
+    df["measured_W_per_kg"] = rec.get("measured_W_per_kg")
+    df["cycle_source"] = rec.get("cycle_source")
+    df["speed_source"] = rec.get("speed_source")
+    df["large_reserve"] = bool(rec.get("large_reserve", False))
+    df["status"] = "ok"
+    df["unit_dir"] = str(unit.folder)
+    return df
+
+
+#: results columns averaged over the legs (each leg doubled, then averaged: the legs added)
+_LEG_MEAN_COLUMNS = ("mean_W_per_kg", "mean_W_per_kg_no_basal", "one_leg_mean_W", "duration_s", "leg_energy_J",
+                     "toe_off_pct", "speed_m_per_s")
+#: per-leg events: no single value for both legs (each leg's are in its unit folder)
+_LEG_EVENT_COLUMNS = ("cycle_start_s", "toe_off_s", "cycle_end_s")
+
+
+def add_leg_rows(rows: Mapping[str, object], basal_energy_J: Mapping[str, object] | None = None):
+    """The results rows of a ``side = "both"`` subject's trial and workflow: the two legs added.
+
+    ``rows`` maps each side to its unit's rows (:func:`_unit_rows`; each leg's whole-body
+    rate is that leg doubled, over its own gait cycle); ``basal_energy_J`` each side's
+    per-muscle basal heat over its cycle (J, a number or a Series by model). Per model, the
+    combined row holds:
+
+    * the rates (``mean_W_per_kg``, ``mean_W_per_kg_no_basal``) as the mean of the two legs'
+      doubled rates, which is the sum of the legs' cycle-average rates per kg plus the basal
+      heat once: ``(2 L_r/m + B + 2 L_l/m + B) / 2 = (L_r + L_l)/m + B``;
+      ``one_leg_mean_W``, ``leg_energy_J``, ``duration_s``, ``toe_off_pct`` and the speed: the
+      legs' means;
+    * the costs of transport: the combined rates over the mean speed;
+    * the energy shares (stance, swing, muscle groups) of both legs' muscle energy:
+      each leg's share weighted by its ``leg_energy_J`` (the ``..._with_basal`` shares by
+      its energy with the per-muscle basal heat, ``leg_energy_J + basal_energy_J[side]``);
+    * the cycle's event times empty (each leg's are in its unit folder), ``large_reserve``
+      when either leg's is, the sources of both legs, ``legs = "r + l"`` and ``unit_dir`` the
+      folder holding the two legs' unit folders.
+    """
+    import numpy as np
+    import pandas as pd
+
+    sides = list(rows)
+    frames = [rows[s].set_index("model") for s in sides]
+    first = frames[0]
+    out = first.copy()
+    numeric = [c for c in first.columns if pd.api.types.is_numeric_dtype(first[c]) and c != "large_reserve"]
+    energy = [f["leg_energy_J"].astype(float) for f in frames] if "leg_energy_J" in first else None
+    basal = [(basal_energy_J or {}).get(s, 0.0) for s in sides]
+    for c in numeric:
+        values = [f[c].astype(float) for f in frames]
+        if c in _LEG_MEAN_COLUMNS:
+            out[c] = sum(values) / len(values)
+        elif c in _LEG_EVENT_COLUMNS:
+            out[c] = np.nan
+        elif c.endswith("_pct") and energy is not None:
+            weights = energy
+            if c.endswith("_with_basal_pct"):
+                weights = [e.add(b, fill_value=0.0) if isinstance(b, pd.Series) else e + b
+                           for e, b in zip(energy, basal)]
+            out[c] = sum(v * w for v, w in zip(values, weights)) / sum(weights)
+        elif c in ("gross_cost_of_transport_J_per_kg_per_m", "net_cost_of_transport_J_per_kg_per_m"):
+            continue  # below, from the combined rates
+        elif c == "measured_W_per_kg":
+            continue  # the trial's, the same for both legs
+        else:
+            out[c] = sum(values) / len(values)
+    speed = out.get("speed_m_per_s")
+    if speed is not None:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            if "gross_cost_of_transport_J_per_kg_per_m" in out:
+                out["gross_cost_of_transport_J_per_kg_per_m"] = out["mean_W_per_kg"] / speed.astype(float)
+            if "net_cost_of_transport_J_per_kg_per_m" in out:
+                out["net_cost_of_transport_J_per_kg_per_m"] = out["mean_W_per_kg_no_basal"] / speed.astype(float)
+    out["large_reserve"] = np.logical_or.reduce([f["large_reserve"].astype(bool) for f in frames])
+    for c in ("cycle_source", "speed_source"):
+        if c in out:
+            texts = [str(f[c].iloc[0]) for f in frames]
+            out[c] = texts[0] if len(set(texts)) == 1 else "; ".join(f"{s}: {t}" for s, t in zip(sides, texts))
+    out["legs"] = " + ".join(sides)
+    out["unit_dir"] = str(Path(str(first["unit_dir"].iloc[0])).parent)
+    return out.reset_index()
+
+
+def _basal_energy_J(per_muscle, duration_s):
+    """A leg's per-muscle basal heat over its cycle (J) by model, from its per-muscle table."""
+    if per_muscle is None or "basal_heat_mean_W" not in per_muscle:
+        return 0.0
+    return per_muscle.groupby("model")["basal_heat_mean_W"].sum() * float(duration_s)
+
+
 def collect_results(study: Study, failed: dict[str, str] | None = None):
-    """Gather the complete trial units of ``study`` into the results table (and write it)."""
+    """Gather the complete trial units of ``study`` into the results table (and write it).
+
+    One row per subject, trial, workflow and model; a ``side = "both"`` subject's two legs
+    give one row with the legs added (:func:`add_leg_rows`), the column ``legs`` says which
+    (``"2 x r"``: the right leg doubled; ``"r + l"``: both legs added).
+    """
     import pandas as pd
 
     from ..analysis.per_muscle import PER_MUSCLE_FILE
 
     out = Path(study.output)
     frames, failures, muscles = [], [], []
+    legs: dict[tuple, dict] = {}
     for unit in plan_units(study)[1]:
         folder = out / unit.folder
         rec = read_unit_record(folder)
+        group = legs.setdefault((unit.subject, unit.trial, unit.workflow), {})
         if not rec or rec.get("status") != "ok":
             reason = (failed or {}).get(unit.label) or (rec or {}).get("error") or "not run"
+            if unit.side:
+                reason = f"{_LEG_NAMES[unit.side]} leg: {reason}"
             failures.append({"subject": unit.subject, "trial": unit.trial, "workflow": unit.workflow, "reason": reason})
+            group[unit.side] = None
             continue
-        wb = pd.read_csv(folder / "whole_body.csv")
-        an = pd.read_csv(folder / "analysis.csv")
-        df = wb.merge(an, on="model", how="left", validate="one_to_one")
-        df.insert(0, "subject", unit.subject)
-        df.insert(1, "trial", unit.trial)
-        df.insert(2, "workflow", unit.workflow)
-        df["speed_m_per_s"] = rec.get("speed_m_per_s")
-        df["toe_off_pct"] = rec.get("toe_off_pct")
-        df["measured_W_per_kg"] = rec.get("measured_W_per_kg")
-        df["cycle_source"] = rec.get("cycle_source")
-        df["speed_source"] = rec.get("speed_source")
-        df["large_reserve"] = bool(rec.get("large_reserve", False))
-        df["status"] = "ok"
-        df["unit_dir"] = str(unit.folder)
-        frames.append(df)
-        if (folder / PER_MUSCLE_FILE).is_file():
-            pm = pd.read_csv(folder / PER_MUSCLE_FILE)
+        df = _unit_rows(folder, unit, rec)
+        pm = pd.read_csv(folder / PER_MUSCLE_FILE) if (folder / PER_MUSCLE_FILE).is_file() else None
+        group[unit.side] = (df, pm)
+        if pm is not None:
             for k, (col, val) in enumerate((("subject", unit.subject), ("trial", unit.trial),
                                             ("workflow", unit.workflow))):
                 pm.insert(k, col, val)
             muscles.append(pm)
+    for (subject, _, _), group in legs.items():
+        if any(v is None for v in group.values()):
+            continue  # a leg failed: its failure is listed; no whole-body row
+        if None in group:  # one side, doubled
+            df = group[None][0]
+            df["legs"] = f"2 x {study.subject(subject).side}"
+            frames.append(df)
+            continue
+        rows = {side: df for side, (df, _) in group.items()}
+        basal = {side: _basal_energy_J(pm, df["duration_s"].iloc[0]) for side, (df, pm) in group.items()}
+        frames.append(add_leg_rows(rows, basal))
     for unit in plan_units(study)[0]:
         rec = read_unit_record(out / unit.folder)
         if not rec or rec.get("status") != "ok":
@@ -545,7 +660,7 @@ def collect_results(study: Study, failed: dict[str, str] | None = None):
     except ImportError:  # pragma: no cover - pyarrow missing
         pass
     per_muscle = pd.concat(muscles, ignore_index=True) if muscles else pd.DataFrame(columns=list(ID_COLUMNS))
-    per_muscle = per_muscle.sort_values(list(ID_COLUMNS) + (["rank"] if "rank" in per_muscle else []),
+    per_muscle = per_muscle.sort_values(list(ID_COLUMNS) + [c for c in ("side", "rank") if c in per_muscle],
                                         kind="stable", ignore_index=True)
     with atomic_path(out / PER_MUSCLE_FILE) as tmp:
         per_muscle.to_csv(tmp, index=False, float_format="%.10g")

@@ -31,6 +31,9 @@ A study file names everything a study needs; paths are relative to the file::
     emg_mode = "constrained"              # optional: the effort workflows' solves EMG-informed
                                           # (constrained | driven | tracking), with the trials' emg
     emg_tolerance = 0.01                  # optional: half-width of the EMG band (constrained)
+    side = "r"                            # leg to solve: r | l | both (both: each leg over its own
+                                          # gait cycle, the legs' rates added; needs 'cycle')
+    dofs = ["hip_flexion_r", "knee_angle_r", "ankle_angle_r"]   # optional (r or l): default from the model
     # [subjects.estimate]: a parameter estimation (musclemetab.study.estimation)
 
     [[subjects.trials]]
@@ -42,6 +45,9 @@ A study file names everything a study needs; paths are relative to the file::
     grf = "data/GRF_normal.mot"           # optional: gait events from the vertical force
     grf_column = "ground_force_vy"        # optional
     grf_threshold_N = 20.0                # optional
+    external_loads = "data/GRF.xml"       # optional: OpenSim ExternalLoads; without 'id', inverse
+                                          # dynamics is computed from it by OpenSim
+    cycle = "auto"                        # optional: solve the first (or N-th) gait cycle of the leg
     speed_m_per_s = 1.33                  # optional: default from the pelvis in the IK file
     vo2_mL_per_min = 1050.0               # optional calorimetry (or vo2_mL_per_s / vco2_mL_per_s,
     vco2_mL_per_min = 900.0               #  or measured_W_per_kg)
@@ -67,9 +73,12 @@ from typing import Any, Mapping
 
 from ..errors import InputFileError, OptionError
 
-__all__ = ["Study", "Subject", "Trial", "load_study", "study_from_dict", "EMG_TEN", "KNOWN_WORKFLOWS"]
+__all__ = ["Study", "Subject", "Trial", "load_study", "study_from_dict", "EMG_TEN", "KNOWN_WORKFLOWS", "BOTH"]
 
 EMG_TEN = "emg-ten"
+#: ``side = "both"``: the two legs solved as independent problems, their rates added
+BOTH = "both"
+SIDES = ("r", "l", BOTH)
 KNOWN_WORKFLOWS = ("effort-gen", "effort-cal", "effort-ten", EMG_TEN)
 BASAL_RULES = ("body", "muscle", "none")
 #: Plausible human body mass, kg: outside it the number is in other units (g, lb) or a typo.
@@ -146,6 +155,11 @@ class Subject:
     emg_tolerance: float = 0.01
     #: the subject's parameter estimation (:class:`~musclemetab.study.estimation.EstimateSpec`)
     estimate: Any = None
+
+    @property
+    def sides(self) -> tuple[str, ...]:
+        """The legs solved: ``("r", "l")`` for ``side = "both"``, else the one side."""
+        return ("r", "l") if self.side == BOTH else (self.side,)
 
     def trial(self, name: str) -> Trial:
         for t in self.trials:
@@ -387,10 +401,13 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
     if mapping not in ("default", "authors"):
         raise OptionError(f"{here}: 'emg_mapping' must be default or authors, not {mapping!r}")
     side = data.get("side", "r")
-    if side not in ("r", "l"):
-        raise OptionError(f"{here}: 'side' must be \"r\" or \"l\", not {side!r}")
+    if side not in SIDES:
+        raise OptionError(f"{here}: 'side' must be \"r\", \"l\" or \"both\", not {side!r}")
     dofs = data.get("dofs")
     if dofs is not None:
+        if side == BOTH:
+            raise OptionError(f"{here}: 'dofs' names one leg's DOFs; with side = \"both\" leave it out (each leg's "
+                              "DOFs are discovered from the model), or list each leg as its own subject")
         if not isinstance(dofs, list) or not dofs or not all(isinstance(d, str) and d for d in dofs):
             raise OptionError(f"{here}: 'dofs' must be a list of coordinate names, e.g. [\"knee_angle_l\"]")
         dofs = tuple(dofs)
@@ -413,6 +430,8 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
         from ..properties import read_muscle_properties
 
         read_muscle_properties(muscle_properties)  # reject a bad file before anything runs
+    if side == BOTH:
+        _check_both_legs(data, here, trials, workflows, kt)
     subject = Subject(name=name, model=model, body_mass_kg=mass, height_m=height, trials=trials,
                       passive=passive, tendon_stiffness=kt, emg_mapping=mapping, muscle_properties=muscle_properties,
                       side=side, dofs=dofs, emg_mode=emg_mode, emg_tolerance=emg_tolerance)
@@ -424,6 +443,27 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
         subject = replace(subject, estimate=estimate_spec(data["estimate"], here))
         estimation_trials(subject, here)
     return subject
+
+
+def _check_both_legs(data, here: str, trials, workflows, kt) -> None:
+    """What ``side = "both"`` needs: each leg's own gait cycle, and no single-leg settings."""
+    one_leg = [k for k in ("emg_mode", "estimate") if data.get(k) is not None]
+    if EMG_TEN in workflows or kt == EMG_TEN:
+        one_leg.append("the emg-ten workflow" if EMG_TEN in workflows else "tendon_stiffness = \"emg-ten\"")
+    if one_leg:
+        raise OptionError(f"{here}: side = \"both\" solves effort workflows only; {', '.join(one_leg)} use one leg's "
+                          "EMG: list each leg as its own subject (side = \"r\" and side = \"l\") for them")
+    for t in trials:
+        events = [k for k in ("start_s", "toe_off_s", "end_s", "grf_column") if getattr(t, k) is not None]
+        if events:
+            raise OptionError(f"{here}, trial '{t.name}': {', '.join(events)} belong{'s' if len(events) == 1 else ''} "
+                              "to one leg; with side = \"both\" drop "
+                              f"{'it' if len(events) == 1 else 'them'} (each leg's gait cycle is found by 'cycle')")
+    missing = [t.name for t in trials if t.cycle is None]
+    if missing:
+        raise OptionError(f"{here}: side = \"both\" solves each leg over its own gait cycle; set cycle = \"auto\" in "
+                          f"trial(s) {', '.join(missing)} (heel strike to heel strike of each leg, from the ground "
+                          "forces of 'external_loads' or 'grf', or from the kinematics without them)")
 
 
 def _emg_mode(data, here: str, trials) -> tuple[str | None, float]:

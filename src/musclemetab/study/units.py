@@ -8,7 +8,11 @@ A subject's ``[subjects.estimate]`` table adds a parameter-estimation unit
 (:mod:`.estimation`); with the subject's ``emg_mode`` its effort workflows' trial units are
 EMG-informed solves.
 
-Every unit has a folder ``units/<subject>/<trial>/<workflow>`` (estimation:
+A subject with ``side = "both"`` has one trial unit per leg (``Unit.side``), scheduled with
+all the others; the study's results add the two legs (:mod:`.runner`).
+
+Every unit has a folder ``units/<subject>/<trial>/<workflow>``, ``.../<workflow>/<side>`` for
+each leg of a ``side = "both"`` subject (estimation:
 ``units/<subject>/_emg-ten``, parameter estimation ``units/<subject>/_estimate``) and, when complete, a ``unit.json`` in it recording the unit's
 key (a SHA-256 of everything its result depends on: input file contents, settings,
 the package version and the keys of the units it depends on), its status and the SHA-256 of
@@ -61,6 +65,7 @@ __all__ = [
     "MARKER_FILE",
     "unit_folder",
     "remove_stale_partials",
+    "prepare_leg_folder",
 ]
 
 UNIT_FILE = "unit.json"
@@ -73,11 +78,13 @@ TIMESERIES_FILE = "timeseries.csv"
 
 @dataclass(frozen=True)
 class Unit:
-    """One unit of work: ``trial`` is ``None`` for a subject's EMG-TEN estimation."""
+    """One unit of work: ``trial`` is ``None`` for a subject's EMG-TEN estimation; ``side`` is
+    the leg of a ``side = "both"`` subject (``None``: the subject's one side)."""
 
     subject: str
     trial: str | None
     workflow: str
+    side: str | None = None
 
     @property
     def is_estimation(self) -> bool:
@@ -87,11 +94,16 @@ class Unit:
     def folder(self) -> Path:
         if self.trial is None:
             return Path("units") / self.subject / (ESTIMATION_FOLDER if self.workflow == EMG_TEN else ESTIMATE_FOLDER)
-        return Path("units") / self.subject / self.trial / self.workflow
+        folder = Path("units") / self.subject / self.trial / self.workflow
+        return folder / self.side if self.side else folder
 
     @property
     def label(self) -> str:
-        return f"{self.subject}/{self.trial or 'all trials'}/{self.workflow}"
+        return f"{self.subject}/{self.trial or 'all trials'}/{self.workflow}" + (f"/{self.side}" if self.side else "")
+
+    def leg(self, study: Study) -> str:
+        """The leg this unit solves: its own ``side``, else its subject's."""
+        return self.side or study.subject(self.subject).side
 
     def depends_on(self, study: Study) -> "Unit | None":
         """The estimation unit this unit needs, if any."""
@@ -110,7 +122,8 @@ def plan_units(study: Study) -> tuple[list[Unit], list[Unit]]:
     stage1 += [Unit(s.name, None, ESTIMATE) for s in study.subjects if s.estimate is not None]
     # Workflow by workflow: parallel workers start on different trials, so a trial's
     # geometry is computed once and found in the cache by its other workflows.
-    stage2 = [Unit(s.name, t.name, w) for w in study.workflows for s in study.subjects for t in s.trials]
+    stage2 = [Unit(s.name, t.name, w, side if len(s.sides) > 1 else None)
+              for w in study.workflows for s in study.subjects for t in s.trials for side in s.sides]
     return stage1, stage2
 
 
@@ -169,7 +182,7 @@ def unit_key(study: Study, unit: Unit, dependency_key: str | None = None) -> str
     subject = study.subject(unit.subject)
     content = {
         "musclemetab": __version__,
-        "unit": [unit.subject, unit.trial, unit.workflow],
+        "unit": [unit.subject, unit.trial, unit.workflow] + ([unit.side] if unit.side else []),
         "subject": _subject_record(subject, unit.workflow),
         "dependency": dependency_key,
     }
@@ -273,6 +286,33 @@ def remove_stale_partials(output: Path) -> list[Path]:
     return removed
 
 
+def prepare_leg_folder(output: Path, unit: Unit) -> None:
+    """Make the folder holding a leg unit's folder (``.../<workflow>``) a container of ours.
+
+    A single-leg unit of an earlier run of the study (before its subject's ``side`` became
+    ``"both"``) in that place is removed, as any replaced unit folder of ours; a folder that
+    is not ours makes :class:`OptionError` name it. The container carries
+    :data:`MARKER_FILE`, so that a later single-leg unit may replace it. Call it before the
+    units run (it is not safe while leg units of the same container run).
+    """
+    from ..errors import OptionError
+
+    if not unit.side:
+        return
+    parent = unit_folder(Path(output), unit).parent
+    if (parent / UNIT_FILE).is_file() and _is_our_unit(parent):
+        old = parent.with_name(f".{parent.name}.old-{os.getpid()}-{time.monotonic_ns()}")
+        os.replace(parent, old)
+        shutil.rmtree(old, ignore_errors=True)
+    elif parent.exists() and not _is_ours(parent) and any(
+            p.name not in ("r", "l") and not p.name.startswith(".") for p in parent.iterdir()):
+        raise OptionError(f"{parent} exists but was not written by musclemetab (no {MARKER_FILE} in it); "
+                          "move it away or choose another output folder")
+    parent.mkdir(parents=True, exist_ok=True)
+    if not (parent / MARKER_FILE).is_file():
+        (parent / MARKER_FILE).write_text("created by musclemetab\n", encoding="utf-8")
+
+
 #: Status of a unit stopped by Ctrl-C.
 INTERRUPTED = "interrupted"
 _INTERRUPTED = threading.Event()
@@ -315,6 +355,7 @@ def _execute_unit(study: Study, unit: Unit, key: str, dependency_folder: str | N
         "subject": unit.subject,
         "trial": unit.trial,
         "workflow": unit.workflow,
+        **({"side": unit.side} if unit.side else {}),
         "error": None,
         "times": {},
     }
@@ -459,6 +500,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
 
     subject = study.subject(unit.subject)
     trial = subject.trial(unit.trial)
+    side = unit.leg(study)
     times = {}
     t0 = time.perf_counter()
     if unit.workflow == EMG_TEN:
@@ -482,8 +524,9 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         if subject.emg_mode is not None:
             sol = _informed_solve(study, subject, trial, unit.workflow, kwargs)
         else:
-            sol = solve_files(subject.model, trial.ik, trial.id, unit.workflow, side=subject.side, dofs=subject.dofs,
+            sol = solve_files(subject.model, trial.ik, trial.id, unit.workflow, side=side, dofs=subject.dofs,
                               external_loads=trial.external_loads, grf=trial.grf if trial.cycle is not None else None,
+                              grf_column=trial.grf_column, grf_threshold_N=trial.grf_threshold_N,
                               cycle=trial.cycle, options=_solver_options(study, subject), **kwargs)
         from ..redundancy.cli import write_solution_folder
 
@@ -510,7 +553,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         toe_off = trial.toe_off_s if trial.toe_off_s is not None else recorded["toe_off_s"]
         cycle = GaitCycle(recorded["start_s"], toe_off, recorded["end_s"])
     else:
-        cycle = trial_cycle(trial, subject.side)
+        cycle = trial_cycle(trial, side)
     result = metabolics_from_solution(
         tmp, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
         basal_rate_W_per_kg=study.basal_coefficient, basal_exponent=study.basal_exponent,
@@ -523,7 +566,8 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
     from ..analysis.groups import has_function_group
 
     # DOFs with no muscle function group (a subtalar or toe joint) stay out of the group analysis
-    geometry = compute_geometry(subject.model, trial.ik, dofs=[d for d in solved.dofs if has_function_group(d)])
+    geometry = compute_geometry(subject.model, trial.ik, dofs=[d for d in solved.dofs if has_function_group(d)],
+                                side=side)
     from ..analysis.unit import analyse_metabolics, filtered_moment_arms
 
     tg, r = filtered_moment_arms(geometry)
