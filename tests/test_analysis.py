@@ -511,6 +511,12 @@ def test_analyse_basal_options_give_the_whole_body_rate_worked_by_hand(example, 
     assert (part > 0).all()
     np.testing.assert_allclose(double["mean_W_per_kg"] - double["mean_W_per_kg_no_basal"], 2 * part, rtol=0,
                                atol=1e-8)  # differences of rates near 3 W/kg written to 10 digits
+    # without basal options, analyse takes those 'metabolics' recorded in its metabolics.sto
+    assert main(["metabolics", "--solution", str(folder), "--model", str(example.model), "--mass", str(mass),
+                 "--height", "1.743", "--models", "UM10,BH04", "--basal-coefficient", "1.5", "--basal-exponent",
+                 "0.75", "--out", str(tmp_path / "met")]) == 0
+    recorded = whole_body("recorded", "--metabolics", str(tmp_path / "met"))
+    np.testing.assert_allclose(recorded["mean_W_per_kg"], kleiber["mean_W_per_kg"], rtol=1e-12)
     capsys.readouterr()
     # the exponent belongs to the body rule: refused in one line, nothing written
     assert main([*base, "--basal", "muscle", "--basal-exponent", "0.75", "--out", str(tmp_path / "bad")]) != 0

@@ -15,7 +15,7 @@ and the key of the group abbreviations (``muscle_groups.csv``).
 a solution folder): each side is analysed into ``OUT/r`` and ``OUT/l`` and the per-muscle
 tables of both sides are gathered in ``OUT/per_muscle.csv``.
 
-Body mass, height and models default to those recorded in ``--metabolics``'s
+Body mass, height, models and the basal settings default to those recorded in ``--metabolics``'s
 ``metabolics.sto`` (written by ``musclemetab metabolics``); the rates are evaluated again
 from the solution (they take milliseconds) with those settings.
 """
@@ -63,7 +63,7 @@ def add_analyse_parser(subparsers) -> None:
     p.add_argument("--height", type=float, metavar="M", help="body height (m)")
     p.add_argument("--models", metavar="LIST", help="'all' or a comma-separated list (default: those of --metabolics, "
                    "else all)")
-    add_basal_arguments(p)
+    add_basal_arguments(p, recorded="--metabolics")
     p.add_argument("--speed", type=float, metavar="M_PER_S",
                    help="walking speed (default: estimated from the pelvis displacement over the cycle)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
@@ -71,7 +71,8 @@ def add_analyse_parser(subparsers) -> None:
 
 
 def _recorded_settings(folder: Path) -> dict:
-    """``models``, ``body_mass_kg``, ``height_m`` from a metabolics folder's metabolics.sto header."""
+    """``models``, ``body_mass_kg``, ``height_m`` and the basal settings from a metabolics
+    folder's metabolics.sto header."""
     from ..metabolics.solution import METABOLICS_STO
 
     path = folder / METABOLICS_STO
@@ -84,7 +85,8 @@ def _recorded_settings(folder: Path) -> dict:
             if line == "endheader":
                 break
             key, _, value = line.partition("=")
-            if key in ("models", "body_mass_kg", "height_m") and value:
+            if key in ("models", "body_mass_kg", "height_m", "basal_rule", "basal_coefficient",
+                       "basal_exponent") and value:
                 out[key] = value
     return out
 
@@ -154,10 +156,9 @@ def analyse_command(args) -> int:
 
     from ..analysis.per_muscle import PER_MUSCLE_FILE
     from ..io import atomic_path
-    from ..metabolics.cli import check_basal_arguments
+    from ..metabolics.cli import BASAL_DEFAULTS, check_basal_arguments
     from ..redundancy.solution import SOLUTION_FILE
 
-    check_basal_arguments(args)
     root = Path(args.solution)
     if (root / SOLUTION_FILE).is_file():
         jobs = [(None, root, Path(args.out))]
@@ -174,6 +175,11 @@ def analyse_command(args) -> int:
         raise OptionError("give --mass and --height (or --metabolics, the folder written by "
                           "'musclemetab metabolics', which records them)") from None
     models = args.models or recorded.get("models") or "all"
+    for key, rec, kind in (("basal", "basal_rule", str), ("basal_coefficient", "basal_coefficient", float),
+                           ("basal_exponent", "basal_exponent", float)):
+        if getattr(args, key) is None:
+            setattr(args, key, kind(recorded[rec]) if rec in recorded else BASAL_DEFAULTS[key])
+    check_basal_arguments(args)
     if args.speed is not None and not (np.isfinite(args.speed) and args.speed > 0):
         raise OptionError(f"--speed must be a positive number of m/s, not {args.speed}")
     tables = []

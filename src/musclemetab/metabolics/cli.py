@@ -24,25 +24,33 @@ from ..errors import OptionError
 __all__ = ["add_metabolics_parser", "metabolics_command", "add_basal_arguments", "check_basal_arguments"]
 
 
-def add_basal_arguments(parser) -> None:
+def add_basal_arguments(parser, recorded: str | None = None) -> None:
     """The whole-body basal heat options, ``--basal``, ``--basal-coefficient`` and
     ``--basal-exponent``, of the commands that compute whole-body rates (``metabolics``,
-    ``analyse``); :func:`check_basal_arguments` checks their values."""
+    ``analyse``); :func:`check_basal_arguments` checks their values. With ``recorded`` (where
+    the command finds earlier settings, e.g. ``"--metabolics"``) the options default to
+    ``None``: the command takes the recorded values, else :data:`BASAL_DEFAULTS`."""
+    default = (lambda key: None) if recorded else BASAL_DEFAULTS.get
+    also = f" (default: as recorded in {recorded}, else %s)" if recorded else " (default %s)"
     parser.add_argument(
-        "--basal", default="body", choices=("body", "muscle", "none"),
-        help="whole-body basal heat: 1.2 W/kg of body mass (body, default, the paper), 1.2 W/kg of muscle "
-        "mass in every muscle (muscle, the study's code) or none",
+        "--basal", default=default("basal"), choices=("body", "muscle", "none"),
+        help="whole-body basal heat: 1.2 W/kg of body mass (body, the paper), 1.2 W/kg of muscle mass in every "
+        "muscle (muscle, the study's code) or none" + also % "body",
     )
     parser.add_argument(
-        "--basal-coefficient", type=float, default=1.2, metavar="W_PER_KG",
-        help="basal heat coefficient as OpenSim's probes write it (basal_coefficient, default 1.2): under "
-        "--basal body the basal heat is COEFFICIENT * mass^EXPONENT W; it is also the per-muscle basal heat, "
-        "W per kg of muscle mass",
+        "--basal-coefficient", type=float, default=default("basal_coefficient"), metavar="W_PER_KG",
+        help="basal heat coefficient as OpenSim's probes write it (basal_coefficient): under --basal body the "
+        "basal heat is COEFFICIENT * mass^EXPONENT W; it is also the per-muscle basal heat, W per kg of muscle "
+        "mass" + also % "1.2",
     )
     parser.add_argument(
-        "--basal-exponent", type=float, default=1.0, metavar="X",
-        help="basal heat exponent of the body mass (OpenSim's basal_exponent, default 1; --basal body only)",
+        "--basal-exponent", type=float, default=default("basal_exponent"), metavar="X",
+        help="basal heat exponent of the body mass (OpenSim's basal_exponent; --basal body only)" + also % "1",
     )
+
+
+#: the basal options' defaults: the paper's 1.2 W per kg of body mass
+BASAL_DEFAULTS = {"basal": "body", "basal_coefficient": 1.2, "basal_exponent": 1.0}
 
 
 def check_basal_arguments(args) -> None:

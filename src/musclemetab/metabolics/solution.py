@@ -242,6 +242,9 @@ class SolutionMetabolics:
     basal_rule: str
     speed_m_per_s: float | None = None
     source: str = ""
+    #: the basal rule's coefficient (W/kg; of muscle mass for the per-muscle basal heat) and exponent
+    basal_rate_W_per_kg: float = BASAL_RATE_W_PER_KG
+    basal_exponent: float = 1.0
 
     def columns(self) -> dict[str, np.ndarray]:
         """``{"<model>/<muscle>/<component>": 1-D array (W)}`` in model, muscle, component order."""
@@ -467,6 +470,8 @@ def metabolics_from_solution(
         basal_rule=basal,
         speed_m_per_s=None if speed_m_per_s is None else float(speed_m_per_s),
         source=sol.source,
+        basal_rate_W_per_kg=float(basal_rate_W_per_kg),
+        basal_exponent=float(basal_exponent),
     )
 
 
@@ -486,7 +491,10 @@ def write_metabolics(result: SolutionMetabolics, out_dir: str | os.PathLike, cyc
         f"models={','.join(result.models)}",
         f"body_mass_kg={result.body_mass_kg:g}",
         f"height_m={result.height_m:g}",
-        "units=W; total includes the per-muscle basal heat (1.2 W/kg of muscle mass)",
+        f"basal_rule={result.basal_rule}",
+        f"basal_coefficient={result.basal_rate_W_per_kg:g}",
+        f"basal_exponent={result.basal_exponent:g}",
+        f"units=W; total includes the per-muscle basal heat ({result.basal_rate_W_per_kg:g} W/kg of muscle mass)",
     ]
     with atomic_directory(out_dir) as tmp:
         write_storage(tmp / METABOLICS_STO, result.to_dataframe(), name="musclemetab metabolic rates",
