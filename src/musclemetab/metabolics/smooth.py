@@ -32,7 +32,7 @@ from __future__ import annotations
 import math
 
 from ..errors import OptionError
-from ..muscle.curves import _math
+from ..muscle.curves import math_for
 from ._common import BASAL_RATE_W_PER_KG, STATE_ARGUMENTS
 from .bhargava import BHARGAVA_CONSTANTS
 from .houdijk import HOUDIJK_CONSTANTS
@@ -286,8 +286,8 @@ def smooth_rates(
               active_force_length_multiplier, force_velocity_multiplier, passive_fiber_force_N)
     params = (max_isometric_force_N, optimal_fiber_length_m, max_contraction_velocity, muscle_mass_kg,
               slow_twitch_fraction)
-    m = _math(*states, *params)
-    if m is _math():  # NumPy
+    m = math_for(*states, *params)
+    if m is math_for():  # NumPy
         import numpy as np
 
         states = tuple(np.asarray(v, dtype=float) for v in states)

@@ -25,6 +25,7 @@ import math
 import numpy as np
 
 __all__ = [
+    "math_for",
     "FL_COEFFICIENTS",
     "FV_COEFFICIENTS",
     "TAU_ACTIVATION_S",
@@ -93,8 +94,11 @@ _NUMPY = _NumpyMath()
 _CASADI = None
 
 
-def _math(*xs):
-    """The math namespace for the arguments: CasADi if any is a CasADi object, else NumPy."""
+def math_for(*xs):
+    """The math namespace for the arguments: CasADi if any is a CasADi object, else NumPy.
+
+    Every curve of this module, and the smooth energy models, are written once with it
+    (``m.exp``, ``m.tanh``, ...), so that the same body serves CasADi and NumPy."""
     global _CASADI
     for x in xs:
         if type(x).__module__.startswith("casadi"):
@@ -113,7 +117,7 @@ def active_force_length(lm_norm):
 
     ``fL(1.0) = 0.99943``, maximum ``1.00050`` at ``l~M = 1.0133``.
     """
-    m = _math(lm_norm)
+    m = math_for(lm_norm)
     lm = _arr(lm_norm, m)
     out = 0
     for b1, b2, b3, b4 in FL_COEFFICIENTS:
@@ -126,7 +130,7 @@ def force_velocity(vbar):
 
     ``fV = d1 asinh(d2 vbar + d3) + d4``; note ``fV(0) = 1.002119``, not 1.
     """
-    m = _math(vbar)
+    m = math_for(vbar)
     v = _arr(vbar, m)
     d1, d2, d3, d4 = FV_COEFFICIENTS
     return d1 * m.log((d2 * v + d3) + m.sqrt((d2 * v + d3) ** 2 + 1)) + d4
@@ -141,7 +145,7 @@ def passive_force_length(lm_norm, kpe=4.0, s0=1.0, sm=0.6):
     ``(1 - exp(-4 kPE/3)) / (exp(kPE) - 1)`` (0.018567 for kPE = 4).
     Generic parameters: ``kPE = 4, s0 = 1, sM = 0.6``.
     """
-    m = _math(lm_norm, kpe, s0, sm)
+    m = math_for(lm_norm, kpe, s0, sm)
     lm = _arr(lm_norm, m)
     kpe, s0, sm = (_arr(p, m) for p in (kpe, s0, sm))
     p1 = m.exp(kpe * (0.2 - 1.0) / 0.6) - 1.0
@@ -154,14 +158,14 @@ def tendon_shift(kT):
 
     ``shift = [exp(0.175) - exp(0.005 kT)] / 5``; zero for ``kT = 35``.
     """
-    m = _math(kT)
+    m = math_for(kT)
     k = _arr(kT, m)
     return (math.exp(35 * 0.005) - m.exp(k * 0.005)) / 5.0
 
 
 def tendon_force_length(lt_norm, kT=KT_GENERIC):
     """Normalised tendon force fT(l~T) = exp(kT (l~T - 0.995))/5 - 0.25 + shift(kT)."""
-    m = _math(lt_norm, kT)
+    m = math_for(lt_norm, kT)
     lt = _arr(lt_norm, m)
     k = _arr(kT, m)
     return m.exp(k * (lt - 0.995)) / 5.0 - 0.25 + tendon_shift(k)
@@ -231,7 +235,7 @@ def activation_rate(
     With the reference ``b = 0.1`` the switch between the two time constants is nearly
     absent (the rate is close to the mean of both); this is reproduced on purpose.
     """
-    m = _math(excitation, activation)
+    m = math_for(excitation, activation)
     e = _arr(excitation, m)
     a = _arr(activation, m)
     f = 0.5 * m.tanh(b * (e - a))
@@ -242,7 +246,7 @@ def activation_rate(
 
 def fibre_width(optimal_fiber_length_m, pennation_angle_at_optimal_rad):
     """Constant muscle thickness w = lMo sin(alpha0) (m)."""
-    m = _math(optimal_fiber_length_m, pennation_angle_at_optimal_rad)
+    m = math_for(optimal_fiber_length_m, pennation_angle_at_optimal_rad)
     if m is _NUMPY:
         return np.asarray(optimal_fiber_length_m) * np.sin(pennation_angle_at_optimal_rad)
     import casadi as ca
