@@ -212,6 +212,10 @@ def _as_float(name: str, value, model: str) -> np.ndarray:
 
 
 def _check_finite(name: str, arr: np.ndarray, model: str) -> None:
+    # one reduction over the array: a NaN or an infinity makes the sum non-finite (a sum can
+    # also overflow with finite values; the element-wise test below then finds nothing)
+    if np.isfinite(np.sum(arr)):
+        return
     finite = np.isfinite(arr)
     if finite.all():
         return
@@ -291,13 +295,12 @@ def apply_non_negativity(work, heats_other, h_sl, *, strict: bool):
     """Paper Eq. 3: where the total rate is negative, raise ``H_SL`` so the total is zero.
 
     ``strict=True`` tests ``total < 0`` (UM03), otherwise ``total <= 0`` (UC16, BH04,
-    HO06); the two differ only where the total is exactly zero, where the result is the
-    same up to rounding.
+    HO06); the two differ only where the total is exactly zero, where ``H_SL = -rest``
+    either way. With ``rest = work + heats_other``, ``total < 0`` exactly where
+    ``H_SL < -rest`` (a rounded sum has the sign of the exact sum), so the rule is
+    ``H_SL := max(H_SL, -rest)``.
     """
-    rest = work + heats_other
-    total = rest + h_sl
-    negative = total < 0 if strict else total <= 0
-    return np.where(negative, -rest, h_sl)
+    return np.maximum(h_sl, -(work + heats_other))
 
 
 def apply_minimum_heat_rate(heats, muscle_mass_kg, minimum_W_per_kg):
@@ -357,7 +360,11 @@ def recruited_slow_twitch_fraction(excitation, slow_twitch_fraction):
     f_st = np.asarray(slow_twitch_fraction, dtype=float)
     den = f_st + (1.0 - f_st) * t
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(den == 0, 1.0, f_st / den)
+        out = f_st / den
+    zero = den == 0
+    if zero.any():
+        out = np.where(zero, 1.0, out)
+    return out
 
 
 def check_flag(model: str, name: str, value) -> bool:

@@ -75,30 +75,36 @@ def _umberger_family(
     # fibre-type fractions: the muscle's, or those recruited at this excitation (UC16)
     f_st = recruited_slow_twitch_fraction(e, inp.slow_twitch_fraction) if recruitment else inp.slow_twitch_fraction
     f_ft = 1.0 - f_st
-    # velocity constants
+    # velocity constants (per muscle)
     v_max_st = v_max / SLOW_TWITCH_VMAX_RATIO
     alpha_s_st = 100.0 / v_max_st
     alpha_s_ft = 153.0 / v_max
     alpha_l = lengthening_factor * alpha_s_st
+    Sm = S * m  # W/kg -> W, with the effort scaling
 
     v_tilde = inp.normalized_fiber_velocity * v_max  # VCE~ (lMo/s), positive = lengthening
-    shortening = v_tilde <= 0  # shortening or isometric
+    A = np.maximum(e, 0.5 * (e + a))  # e where e > a, (e + a)/2 where e <= a: the larger of the two
+    # length dependence: fL above optimal length (H_SL; 0.4 + 0.6 fL for H_AM), 1 at or below
     above_optimal = l_m > 1.0
-    A = np.where(e > a, e, 0.5 * (e + a))
+    f_above = f_l * above_optimal + ~above_optimal
 
     # activation and maintenance heat
-    h_am = (128.0 * f_ft + 25.0) * A**0.6 * S * m
-    H_AM = np.where(above_optimal, (0.4 + 0.6 * f_l) * h_am, h_am)
-    # shortening and lengthening heat (W/kg)
-    v_st = np.maximum(v_tilde, -v_max_st) if values["slow_twitch_shortening_cap"] else v_tilde
-    h_shortening = -(alpha_s_st * v_st * f_st + alpha_s_ft * v_tilde * f_ft) * A**2
-    h_lengthening = alpha_l * v_tilde * A
-    h_sl = np.where(shortening, h_shortening, h_lengthening) * S * m
-    H_SL = np.where(above_optimal, f_l * h_sl, h_sl)
-    # mechanical work rate of the active fibre force (no passive force)
-    W_CE = -(a * f_l * f_v * F0) * (v_tilde * l_mo)
-    if not values["include_negative_work"]:
-        W_CE = np.where(shortening, W_CE, 0.0)
+    H_AM = (128.0 * f_ft + 25.0) * Sm * A**0.6 * (0.4 + 0.6 * f_above)
+    # shortening heat -(alpha_S_ST VCE~ f_ST + alpha_S_FT VCE~ f_FT) A^2 (VCE~ <= 0) and
+    # lengthening heat alpha_L VCE~ A (VCE~ > 0): each is >= 0 in its branch and <= 0 in the
+    # other (A >= 0), so the heat of the branch is the larger of the two
+    if values["slow_twitch_shortening_cap"]:  # the slow-twitch term stops growing beyond vmax_ST
+        v_st = np.maximum(v_tilde, -v_max_st)
+        h_shortening = -(alpha_s_st * f_st * v_st + alpha_s_ft * f_ft * v_tilde) * Sm * A * A
+    else:
+        h_shortening = -(alpha_s_st * f_st + alpha_s_ft * f_ft) * Sm * v_tilde * A * A
+    H_SL = np.maximum(h_shortening, alpha_l * Sm * v_tilde * A) * f_above
+    # mechanical work rate of the active fibre force (no passive force): -F_CE V_CE, or only
+    # where the fibre shortens (F_CE times the shortening speed max(-VCE~, 0))
+    if values["include_negative_work"]:
+        W_CE = -(a * f_l * f_v * (F0 * l_mo) * v_tilde)
+    else:
+        W_CE = a * f_l * f_v * (F0 * l_mo) * np.maximum(-v_tilde, 0.0)
 
     H_AM, H_SL = apply_minimum_heat_rate((H_AM, H_SL), m, minimum)
     if values["non_negative"]:
