@@ -291,16 +291,16 @@ def prepare_inputs(model: str, values: Mapping[str, object], check: bool = True)
     return out
 
 
-def apply_non_negativity(work, heats_other, h_sl, *, strict: bool):
-    """Paper Eq. 3: where the total rate is negative, raise ``H_SL`` so the total is zero.
+def apply_non_negativity(rest, h_sl):
+    """Paper Eq. 3: where the total rate ``rest + H_SL`` is negative, raise ``H_SL`` so that
+    the total is zero (``rest``: the work rate plus the other heats, W).
 
-    ``strict=True`` tests ``total < 0`` (UM03), otherwise ``total <= 0`` (UC16, BH04,
-    HO06); the two differ only where the total is exactly zero, where ``H_SL = -rest``
-    either way. With ``rest = work + heats_other``, ``total < 0`` exactly where
-    ``H_SL < -rest`` (a rounded sum has the sign of the exact sum), so the rule is
-    ``H_SL := max(H_SL, -rest)``.
+    The study's UM03 tests ``total < 0``, its UC16, BH04 and HO06 ``total <= 0``: the two
+    differ only where the total is exactly zero, where ``H_SL = -rest`` either way. A rounded
+    sum has the sign of the exact sum, so ``total < 0`` exactly where ``H_SL < -rest``: the
+    rule is ``H_SL := max(H_SL, -rest)``. Returns the new ``H_SL``.
     """
-    return np.maximum(h_sl, -(work + heats_other))
+    return np.maximum(h_sl, -rest)
 
 
 def apply_minimum_heat_rate(heats, muscle_mass_kg, minimum_W_per_kg):

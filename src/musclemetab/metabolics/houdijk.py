@@ -133,7 +133,7 @@ def houdijk2006(
 
     H_AM = H_A + H_M
     if non_negative:
-        H_SL = apply_non_negativity(W_CE, H_AM, H_SL, strict=False)
+        H_SL = apply_non_negativity(W_CE + H_AM, H_SL)
     B = basal_rate(inp, basal, basal_rate_W_per_kg)
     return MetabolicRates(
         model=model,

@@ -110,7 +110,7 @@ def lichtwark2007(
     W_CE = -(X * P * F0) * (v_tilde * l_mo)
 
     if non_negative:
-        H_SL = apply_non_negativity(W_CE, H_M, H_SL, strict=False)
+        H_SL = apply_non_negativity(W_CE + H_M, H_SL)
     B = basal_rate(inp, basal, basal_rate_W_per_kg)
     return MetabolicRates(
         model=model, work=W_CE, activation_maintenance=H_M, shortening_lengthening=H_SL,

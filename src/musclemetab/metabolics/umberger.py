@@ -58,7 +58,6 @@ def _umberger_family(
     *,
     lengthening_factor: float,
     recruitment: bool,
-    strict: bool,
 ) -> MetabolicRates:
     """The Umberger family's equations (module docstring) with the options of ``values``."""
     for flag in ("include_negative_work", "non_negative", "slow_twitch_shortening_cap", "basal"):
@@ -107,10 +106,11 @@ def _umberger_family(
         W_CE = a * f_l * f_v * (F0 * l_mo) * np.maximum(-v_tilde, 0.0)
 
     H_AM, H_SL = apply_minimum_heat_rate((H_AM, H_SL), m, minimum)
-    if values["non_negative"]:
-        H_SL = apply_non_negativity(W_CE, H_AM, H_SL, strict=strict)
+    rest = W_CE + H_AM
+    if values["non_negative"]:  # total < 0 (UM03) or <= 0 (UM10, UC16): the same rates
+        H_SL = apply_non_negativity(rest, H_SL)
     B = basal_rate(inp, values["basal"], values["basal_rate_W_per_kg"])
-    total = W_CE + H_AM + H_SL + B
+    total = rest + H_SL + B
     return MetabolicRates(
         model=model, work=W_CE, activation_maintenance=H_AM, shortening_lengthening=H_SL,
         basal=basal_view(B, inp.shape), total=total,
@@ -190,7 +190,7 @@ def umberger2003(
         cap commented out.
 %(options)s
     """
-    return _umberger_family("UM03", locals(), lengthening_factor=LENGTHENING_FACTOR_2003, recruitment=False, strict=True)
+    return _umberger_family("UM03", locals(), lengthening_factor=LENGTHENING_FACTOR_2003, recruitment=False)
 
 
 @model_function("UM10")
@@ -252,7 +252,7 @@ def umberger2010(
         cap commented out.
 %(options)s
     """
-    return _umberger_family("UM10", locals(), lengthening_factor=LENGTHENING_FACTOR_2010, recruitment=False, strict=False)
+    return _umberger_family("UM10", locals(), lengthening_factor=LENGTHENING_FACTOR_2010, recruitment=False)
 
 
 @model_function("UC16")
@@ -314,7 +314,7 @@ def uchida2016(
         cap commented out.
 %(options)s
     """
-    return _umberger_family("UC16", locals(), lengthening_factor=LENGTHENING_FACTOR_2003, recruitment=True, strict=False)
+    return _umberger_family("UC16", locals(), lengthening_factor=LENGTHENING_FACTOR_2003, recruitment=True)
 
 
 
