@@ -38,6 +38,7 @@ __all__ = [
     "MuscleInputs",
     "prepare_inputs",
     "apply_non_negativity",
+    "select",
     "apply_minimum_heat_rate",
     "basal_rate",
     "basal_view",
@@ -301,6 +302,14 @@ def apply_non_negativity(rest, h_sl):
     rule is ``H_SL := max(H_SL, -rest)``. Returns the new ``H_SL``.
     """
     return np.maximum(h_sl, -rest)
+
+
+def select(condition, if_true, if_false):
+    """``np.where(condition, if_true, if_false)`` for finite values, as arithmetic:
+    ``if_true * condition + if_false * ~condition`` (``x * 1 + y * 0 = x`` exactly, but for
+    the sign of a zero). ``np.where`` takes a branch per sample, whose cost grows with how
+    unpredictable the condition is; this does not."""
+    return if_true * condition + if_false * ~condition
 
 
 def apply_minimum_heat_rate(heats, muscle_mass_kg, minimum_W_per_kg):

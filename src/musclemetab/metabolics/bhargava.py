@@ -20,6 +20,7 @@ from ._common import (
     prepare_inputs,
     recruited_slow_twitch_fraction,
     recruitment_terms,
+    select,
 )
 
 __all__ = ["bhargava2004", "bhargava_stimulation_time_s", "BHARGAVA_CONSTANTS"]
@@ -214,10 +215,8 @@ def bhargava2004(
     F_iso = a * f_l * F0
     F_CE = F_iso * f_v
     F_M = F_CE + inp.passive_fiber_force_N
-    # H_SL = -alpha V_CE, alpha = 0.16 F_iso + 0.18 F_M (V_CE <= 0) or 0.157 F_M (V_CE > 0): each
-    # coefficient times its branch's indicator (1 or 0), so that one of the two terms is 0
-    shortening = minus_V_CE >= 0
-    H_SL = ((0.16 * F_iso + 0.18 * F_M) * shortening + 0.157 * F_M * ~shortening) * minus_V_CE
+    alpha = select(minus_V_CE >= 0, 0.16 * F_iso + 0.18 * F_M, 0.157 * F_M)  # V_CE <= 0, V_CE > 0
+    H_SL = alpha * minus_V_CE
     W_CE = F_CE * minus_V_CE
 
     H_A, H_M, H_SL = apply_minimum_heat_rate((H_A, H_M, H_SL), m, minimum)

@@ -15,6 +15,7 @@ from ._common import (
     check_flag,
     model_function,
     prepare_inputs,
+    select,
 )
 
 __all__ = ["lichtwark2007", "lichtwark2005", "LICHTWARK_CONSTANTS", "LICHTWARK_2005_CONSTANTS", "loess_smooth"]
@@ -212,50 +213,60 @@ def lichtwark2005(
     a, f_l, f_v = inp.activation, inp.active_force_length_multiplier, inp.force_velocity_multiplier
     v_max, l_mo, F0 = inp.max_contraction_velocity, inp.optimal_fiber_length_m, inp.max_isometric_force_N
     N0 = F0 * l_mo
-    V = -inp.normalized_fiber_velocity * v_max * l_mo  # shortening velocity (m/s)
+    V = inp.normalized_fiber_velocity * -(v_max * l_mo)  # shortening velocity (m/s)
     F_CE = a * f_l * f_v * F0
     W_CE = F_CE * V
 
-    t_stim = _lw05_stimulation_time(model, inp, time_s, stimulation_time_s, excitation_threshold)
+    labile_factor = _lw05_labile_factor(model, inp, time_s, stimulation_time_s, excitation_threshold)
     dF_dt = _lw05_force_rate(model, inp, F_CE, time_s, fiber_force_rate_N_per_s, force_smoothing_span)
 
-    h_M = a * v_max / G**2 * N0
-    (c1, c2), (r1, r2) = k["labile_amplitudes"], k["labile_rates_per_s"]
-    h_L = h_M * (c1 * np.exp(-r1 * t_stim) + c2 * np.exp(-r2 * t_stim))
-    h_S = np.where(V > 0, a * (V / l_mo) / G * N0, 0.0)
-    h_T = -k["thermoelastic"] * dF_dt * l_mo
+    h_M = a * (v_max / G**2 * N0)
+    h_L = h_M * labile_factor
+    h_S = a * np.maximum(V, 0.0) * (N0 / (G * l_mo))  # a (V/lMo)/G N0 where V > 0, else 0
+    h_T = dF_dt * (-k["thermoelastic"] * l_mo)
     h_lengthening = h_M * (k["lengthening_rest"] + k["lengthening_decaying"] * np.exp(-k["lengthening_decay"] * (f_v - 1.0)))
     lengthening = V < 0
 
-    H_AM = np.where(lengthening, h_lengthening, h_M + h_L)
-    H_SL = np.where(lengthening, 0.0, h_S) + h_T
+    H_AM = select(lengthening, h_lengthening, h_M + h_L)
+    H_SL = h_S + h_T  # h_S = 0 where lengthening
     B = basal_rate(inp, basal, basal_rate_W_per_kg)
 
-    def full(x):  # every component has the shape of the states
-        return np.broadcast_to(x, inp.shape).copy()
+    def full(x):  # every component has the shape of the states (a copy where it is broadcast)
+        return x if np.shape(x) == inp.shape else np.broadcast_to(x, inp.shape).copy()
 
     return MetabolicRates(
         model=model, work=full(W_CE), activation_maintenance=full(H_AM), shortening_lengthening=full(H_SL),
         basal=basal_view(B, inp.shape), total=full(W_CE + H_AM + H_SL + B),
-        extras={"labile": full(np.where(lengthening, 0.0, h_L)), "thermoelastic": full(h_T)},
+        extras={"labile": full(h_L * ~lengthening), "thermoelastic": full(h_T)},
     )
 
 
-def _lw05_stimulation_time(model, inp, time_s, stimulation_time_s, threshold):
-    from .bhargava import bhargava_stimulation_time_s
+def _lw05_labile_factor(model, inp, time_s, stimulation_time_s, threshold):
+    """``0.8 exp(-0.72 t_stim) + 0.175 exp(-0.022 t_stim)`` (-), with ``t_stim`` given or
+    counted from ``time_s`` as BH04 counts it (:func:`bhargava_stimulation_time_s`)."""
+    from .bhargava import _mean_sampling_interval, _stimulation_count
+
+    (c1, c2), (r1, r2) = LICHTWARK_2005_CONSTANTS["labile_amplitudes"], LICHTWARK_2005_CONSTANTS["labile_rates_per_s"]
+
+    def labile(t_stim):
+        return c1 * np.exp(-r1 * t_stim) + c2 * np.exp(-r2 * t_stim)
 
     if stimulation_time_s is not None:
         t = np.asarray(stimulation_time_s, dtype=float)
         if np.any(np.isnan(t)) or np.any(t < 0):
             raise OptionError(f"{model}: stimulation_time_s must not be NaN or negative (s)")
         _check_broadcast(model, "stimulation_time_s", t, inp.shape)
-        return t
+        return labile(t)
     if time_s is None:
         raise OptionError(
             f"{model}: the labile heat needs the time since stimulation: pass time_s (s, along the last axis) "
             "or stimulation_time_s"
         )
-    return bhargava_stimulation_time_s(np.broadcast_to(inp.excitation, inp.shape), time_s, threshold)
+    dt_mean = _mean_sampling_interval(inp.shape, time_s)
+    count = _stimulation_count(np.broadcast_to(inp.excitation, inp.shape), threshold)
+    # t_stim = count dt_mean takes one value per count of samples: the factor of each count,
+    # computed once and looked up
+    return labile(dt_mean * np.arange(inp.shape[-1] + 1))[count]
 
 
 def _lw05_force_rate(model, inp, F_CE, time_s, rate, span):

@@ -36,6 +36,7 @@ from ._common import (
     model_function,
     prepare_inputs,
     recruited_slow_twitch_fraction,
+    select,
 )
 
 __all__ = ["umberger2003", "umberger2010", "uchida2016", "AEROBIC_FACTOR", "ANAEROBIC_FACTOR"]
@@ -84,8 +85,7 @@ def _umberger_family(
     v_tilde = inp.normalized_fiber_velocity * v_max  # VCE~ (lMo/s), positive = lengthening
     A = np.maximum(e, 0.5 * (e + a))  # e where e > a, (e + a)/2 where e <= a: the larger of the two
     # length dependence: fL above optimal length (H_SL; 0.4 + 0.6 fL for H_AM), 1 at or below
-    above_optimal = l_m > 1.0
-    f_above = f_l * above_optimal + ~above_optimal
+    f_above = select(l_m > 1.0, f_l, 1.0)
 
     # activation and maintenance heat
     H_AM = (128.0 * f_ft + 25.0) * Sm * A**0.6 * (0.4 + 0.6 * f_above)
