@@ -354,7 +354,8 @@ def recruitment_terms(excitation):
     """
     t = np.tan(0.25 * np.pi * np.asarray(excitation, dtype=float))
     u_s = (2.0 * t) / (1.0 + t * t)
-    return u_s, t * u_s
+    t *= u_s  # u_f
+    return u_s, t
 
 
 def recruited_slow_twitch_fraction(excitation, slow_twitch_fraction):

@@ -250,14 +250,17 @@ def _activation_heat_decay(e, shape, time_s, stimulation_time_s, threshold):
             raise DataMismatchError(
                 f"BH04: stimulation_time_s has shape {t_stim.shape}, not broadcastable to the muscle states {shape}"
             ) from None
-    elif time_s is not None:
-        t_stim = bhargava_stimulation_time_s(np.broadcast_to(e, shape), time_s, threshold)
+    elif time_s is not None:  # t_stim = count dt_mean (bhargava_stimulation_time_s)
+        dt_mean = _mean_sampling_interval(shape, time_s)
+        count = _stimulation_count(np.broadcast_to(e, shape), threshold)
+        decay = np.exp(count * e * (-dt_mean / k["decay_time_constant_s"]))
+        return (k["decay_floor"] + decay) * (count > 0)  # 0 where t_stim = 0
     else:
         raise OptionError(
             "BH04: the activation-heat decay needs time: pass time_s (s, along the last axis) or "
             "stimulation_time_s, or set activation_heat_decay=False"
         )
-    if stimulation_time_s is not None and np.isinf(t_stim).any():
+    if np.isinf(t_stim).any():
         with np.errstate(invalid="ignore"):
             x = np.where(e == 0, 0.0, t_stim * e)  # inf * 0: no excitation, no activation heat either way
         decay = np.exp(-x / k["decay_time_constant_s"])
