@@ -100,22 +100,23 @@ def lichtwark2007(
     X = a * f_l
     v_tilde = inp.normalized_fiber_velocity * v_max  # VCE~ (lMo/s)
 
-    # maintenance heat (1/s, times N0); the branch is taken on fV, not on the velocity
+    # maintenance heat (1/s, times N0); the branch is taken on fV, not on the velocity: for
+    # fV < 1 the decay's exponent is 0 and 0.3 + 0.7 exp(0) = 1
     h_iso = gamma * v_max / G**2
-    decay = k["activation_share"] + k["force_share"] * np.exp(-k["lengthening_decay"] * v_max * (P - 1.0))
-    h_M = np.where(P < 1.0, h_iso, h_iso * decay)
-    H_M = (k["activation_share"] * a + k["force_share"] * X) * h_M * N0
+    decay = k["activation_share"] + k["force_share"] * np.exp(-k["lengthening_decay"] * v_max * np.maximum(P - 1.0, 0.0))
+    H_M = (k["activation_share"] * a + k["force_share"] * X) * decay * (h_iso * N0)
     # shortening / lengthening heat (1/s, times X N0)
-    h_SL = np.where(v_tilde <= 0, -v_tilde / G, k["lengthening_heat_factor"] * P * v_tilde)
+    h_SL = select(v_tilde <= 0, v_tilde * (-1.0 / G), k["lengthening_heat_factor"] * P * v_tilde)
     H_SL = h_SL * X * N0
-    W_CE = -(X * P * F0) * (v_tilde * l_mo)
+    W_CE = X * P * v_tilde * -(F0 * l_mo)
 
+    rest = W_CE + H_M
     if non_negative:
-        H_SL = apply_non_negativity(W_CE + H_M, H_SL)
+        H_SL = apply_non_negativity(rest, H_SL)
     B = basal_rate(inp, basal, basal_rate_W_per_kg)
     return MetabolicRates(
         model=model, work=W_CE, activation_maintenance=H_M, shortening_lengthening=H_SL,
-        basal=basal_view(B, inp.shape), total=W_CE + H_M + H_SL + B,
+        basal=basal_view(B, inp.shape), total=rest + H_SL + B,
     )
 
 
