@@ -187,8 +187,10 @@ class MetabolicRates:
         return comps[name]
 
     def total_without_basal(self) -> np.ndarray:
-        """``total - basal`` (W): the muscle's rate without any basal heat."""
-        return self.total - self.basal
+        """``work + activation_maintenance + shortening_lengthening`` (W): the muscle's rate
+        without any basal heat, ``total - basal`` but for rounding. Summed from the other
+        components, it does not depend on the basal heat at all."""
+        return self.work + self.activation_maintenance + self.shortening_lengthening
 
 
 class MuscleInputs:
