@@ -373,9 +373,8 @@ def recruited_slow_twitch_fraction(excitation, slow_twitch_fraction):
     den = f_st + (1.0 - f_st) * t
     with np.errstate(divide="ignore", invalid="ignore"):
         out = f_st / den
-    zero = den == 0
-    if zero.any():
-        out = np.where(zero, 1.0, out)
+    if not np.all(den):
+        out = np.where(den == 0, 1.0, out)
     return out
 
 

@@ -74,13 +74,18 @@ def _umberger_family(
 
     # fibre-type fractions: the muscle's, or those recruited at this excitation (UC16)
     f_st = recruited_slow_twitch_fraction(e, inp.slow_twitch_fraction) if recruitment else inp.slow_twitch_fraction
-    f_ft = 1.0 - f_st
     # velocity constants (per muscle)
     v_max_st = v_max / SLOW_TWITCH_VMAX_RATIO
     alpha_s_st = 100.0 / v_max_st
     alpha_s_ft = 153.0 / v_max
     alpha_l = lengthening_factor * alpha_s_st
     Sm = S * m  # W/kg -> W, with the effort scaling
+    # the fibre-weighted coefficients times S m, with f_FT = 1 - f_ST so that recruited fractions
+    # take one product and one sum: h_AM S m = (128 f_FT + 25) S m = (153 - 128 f_ST) S m, and
+    # of the shortening heat -(alpha_S_ST f_ST + alpha_S_FT f_FT) S m
+    #   = -(alpha_S_FT + (alpha_S_ST - alpha_S_FT) f_ST) S m
+    h_am = f_st * (-128.0 * Sm) + 153.0 * Sm
+    c_shortening = f_st * ((alpha_s_ft - alpha_s_st) * Sm) - alpha_s_ft * Sm
 
     v_tilde = inp.normalized_fiber_velocity * v_max  # VCE~ (lMo/s), positive = lengthening
     A = np.maximum(e, 0.5 * (e + a))  # e where e > a, (e + a)/2 where e <= a: the larger of the two
@@ -88,22 +93,22 @@ def _umberger_family(
     f_above = select(l_m > 1.0, f_l, 1.0)
 
     # activation and maintenance heat
-    H_AM = (128.0 * f_ft + 25.0) * Sm * A**0.6 * (0.4 + 0.6 * f_above)
+    H_AM = h_am * A**0.6 * (0.4 + 0.6 * f_above)
     # shortening heat -(alpha_S_ST VCE~ f_ST + alpha_S_FT VCE~ f_FT) A^2 (VCE~ <= 0) and
     # lengthening heat alpha_L VCE~ A (VCE~ > 0): each is >= 0 in its branch and <= 0 in the
     # other (A >= 0), so the heat of the branch is the larger of the two
     if values["slow_twitch_shortening_cap"]:  # the slow-twitch term stops growing beyond vmax_ST
         v_st = np.maximum(v_tilde, -v_max_st)
-        h_shortening = -(alpha_s_st * f_st * v_st + alpha_s_ft * f_ft * v_tilde) * Sm * A * A
+        h_shortening = -(alpha_s_st * f_st * v_st + alpha_s_ft * (1.0 - f_st) * v_tilde) * Sm * A * A
     else:
-        h_shortening = -(alpha_s_st * f_st + alpha_s_ft * f_ft) * Sm * v_tilde * A * A
+        h_shortening = c_shortening * v_tilde * A * A
     H_SL = np.maximum(h_shortening, alpha_l * Sm * v_tilde * A) * f_above
     # mechanical work rate of the active fibre force (no passive force): -F_CE V_CE, or only
     # where the fibre shortens (F_CE times the shortening speed max(-VCE~, 0))
     if values["include_negative_work"]:
-        W_CE = -(a * f_l * f_v * (F0 * l_mo) * v_tilde)
+        W_CE = a * f_l * f_v * v_tilde * -(F0 * l_mo)
     else:
-        W_CE = a * f_l * f_v * (F0 * l_mo) * np.maximum(-v_tilde, 0.0)
+        W_CE = a * f_l * f_v * np.maximum(-v_tilde, 0.0) * (F0 * l_mo)
 
     H_AM, H_SL = apply_minimum_heat_rate((H_AM, H_SL), m, minimum)
     rest = W_CE + H_AM
