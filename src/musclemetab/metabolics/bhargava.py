@@ -204,20 +204,27 @@ def bhargava2004(
         f_st = inp.slow_twitch_fraction
     f_ft = 1.0 - f_st
 
+    # work and shortening heat; the arrays that are no longer needed are freed as we go (less
+    # memory in use at once: faster for long arrays)
+    minus_V_CE = inp.normalized_fiber_velocity * -(inp.max_contraction_velocity * inp.optimal_fiber_length_m)  # m/s
+    F_iso = a * f_l * F0
+    F_CE = F_iso * f_v
+    W_CE = F_CE * minus_V_CE
+    F_M = F_CE + inp.passive_fiber_force_N
+    del F_CE
+    # H_SL = -alpha V_CE, alpha = 0.16 F_iso + 0.18 F_M (V_CE <= 0) or 0.157 F_M (V_CE > 0)
+    H_SL = select(minus_V_CE >= 0, 0.16 * F_iso + 0.18 * F_M, 0.157 * F_M) * minus_V_CE
+    del F_iso, F_M, minus_V_CE
+
+    # activation and maintenance heats
     u_s, u_f = recruitment_terms(e)
     phi = _activation_heat_decay(e, inp.shape, time_s, stimulation_time_s, excitation_threshold) \
         if activation_heat_decay else 1.0
     H_A = phi * (k["activation_fast_W_per_kg"] * m * f_ft * u_f + k["activation_slow_W_per_kg"] * m * f_st * u_s)
+    del phi
     g = np.interp(l_m, [0.5, 1.0, 1.5], [0.5, 1.0, 0.0]) if maintenance_length_dependence == "published" else l_m
     H_M = g * (k["maintenance_fast_W_per_kg"] * m * f_ft * u_f + k["maintenance_slow_W_per_kg"] * m * f_st * u_s)
-
-    minus_V_CE = inp.normalized_fiber_velocity * -(inp.max_contraction_velocity * inp.optimal_fiber_length_m)  # m/s
-    F_iso = a * f_l * F0
-    F_CE = F_iso * f_v
-    F_M = F_CE + inp.passive_fiber_force_N
-    alpha = select(minus_V_CE >= 0, 0.16 * F_iso + 0.18 * F_M, 0.157 * F_M)  # V_CE <= 0, V_CE > 0
-    H_SL = alpha * minus_V_CE
-    W_CE = F_CE * minus_V_CE
+    del u_s, u_f
 
     H_A, H_M, H_SL = apply_minimum_heat_rate((H_A, H_M, H_SL), m, minimum)
     H_AM = H_A + H_M
