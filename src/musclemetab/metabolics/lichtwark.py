@@ -214,22 +214,25 @@ def lichtwark2005(
     a, f_l, f_v = inp.activation, inp.active_force_length_multiplier, inp.force_velocity_multiplier
     v_max, l_mo, F0 = inp.max_contraction_velocity, inp.optimal_fiber_length_m, inp.max_isometric_force_N
     N0 = F0 * l_mo
+    # (the arrays that are no longer needed are freed as we go: less memory in use at once)
+    h_M = a * (v_max / G**2 * N0)
+    h_L = h_M * _lw05_labile_factor(model, inp, time_s, stimulation_time_s, excitation_threshold)
+
     V = inp.normalized_fiber_velocity * -(v_max * l_mo)  # shortening velocity (m/s)
     F_CE = a * f_l * f_v * F0
     W_CE = F_CE * V
-
-    labile_factor = _lw05_labile_factor(model, inp, time_s, stimulation_time_s, excitation_threshold)
-    dF_dt = _lw05_force_rate(model, inp, F_CE, time_s, fiber_force_rate_N_per_s, force_smoothing_span)
-
-    h_M = a * (v_max / G**2 * N0)
-    h_L = h_M * labile_factor
+    h_T = _lw05_force_rate(model, inp, F_CE, time_s, fiber_force_rate_N_per_s, force_smoothing_span) \
+        * (-k["thermoelastic"] * l_mo)
+    del F_CE
     h_S = a * np.maximum(V, 0.0) * (N0 / (G * l_mo))  # a (V/lMo)/G N0 where V > 0, else 0
-    h_T = dF_dt * (-k["thermoelastic"] * l_mo)
-    h_lengthening = h_M * (k["lengthening_rest"] + k["lengthening_decaying"] * np.exp(-k["lengthening_decay"] * (f_v - 1.0)))
-    lengthening = V < 0
-
-    H_AM = select(lengthening, h_lengthening, h_M + h_L)
     H_SL = h_S + h_T  # h_S = 0 where lengthening
+    del h_S
+    lengthening = V < 0
+    del V
+
+    h_lengthening = h_M * (k["lengthening_rest"] + k["lengthening_decaying"] * np.exp(-k["lengthening_decay"] * (f_v - 1.0)))
+    H_AM = select(lengthening, h_lengthening, h_M + h_L)
+    del h_lengthening, h_M
     B = basal_rate(inp, basal, basal_rate_W_per_kg)
 
     def full(x):  # every component has the shape of the states (a copy where it is broadcast)
