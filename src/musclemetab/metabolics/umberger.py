@@ -87,28 +87,34 @@ def _umberger_family(
     h_am = f_st * (-128.0 * Sm) + 153.0 * Sm
     c_shortening = f_st * ((alpha_s_ft - alpha_s_st) * Sm) - alpha_s_ft * Sm
 
+    # (the arrays that are no longer needed are freed as we go: less memory in use at once)
     v_tilde = inp.normalized_fiber_velocity * v_max  # VCE~ (lMo/s), positive = lengthening
-    A = np.maximum(e, 0.5 * (e + a))  # e where e > a, (e + a)/2 where e <= a: the larger of the two
-    # length dependence: fL above optimal length (H_SL; 0.4 + 0.6 fL for H_AM), 1 at or below
-    f_above = select(l_m > 1.0, f_l, 1.0)
-
-    # activation and maintenance heat
-    H_AM = h_am * A**0.6 * (0.4 + 0.6 * f_above)
-    # shortening heat -(alpha_S_ST VCE~ f_ST + alpha_S_FT VCE~ f_FT) A^2 (VCE~ <= 0) and
-    # lengthening heat alpha_L VCE~ A (VCE~ > 0): each is >= 0 in its branch and <= 0 in the
-    # other (A >= 0), so the heat of the branch is the larger of the two
-    if values["slow_twitch_shortening_cap"]:  # the slow-twitch term stops growing beyond vmax_ST
-        v_st = np.maximum(v_tilde, -v_max_st)
-        h_shortening = -(alpha_s_st * f_st * v_st + alpha_s_ft * (1.0 - f_st) * v_tilde) * Sm * A * A
-    else:
-        h_shortening = c_shortening * v_tilde * A * A
-    H_SL = np.maximum(h_shortening, alpha_l * Sm * v_tilde * A) * f_above
     # mechanical work rate of the active fibre force (no passive force): -F_CE V_CE, or only
     # where the fibre shortens (F_CE times the shortening speed max(-VCE~, 0))
     if values["include_negative_work"]:
         W_CE = a * f_l * f_v * v_tilde * -(F0 * l_mo)
     else:
         W_CE = a * f_l * f_v * np.maximum(-v_tilde, 0.0) * (F0 * l_mo)
+
+    A = np.maximum(e, 0.5 * (e + a))  # e where e > a, (e + a)/2 where e <= a: the larger of the two
+    # length dependence: fL above optimal length (H_SL; 0.4 + 0.6 fL for H_AM), 1 at or below
+    f_above = select(l_m > 1.0, f_l, 1.0)
+
+    # shortening heat -(alpha_S_ST VCE~ f_ST + alpha_S_FT VCE~ f_FT) A^2 (VCE~ <= 0) and
+    # lengthening heat alpha_L VCE~ A (VCE~ > 0): each is >= 0 in its branch and <= 0 in the
+    # other (A >= 0), so the heat of the branch is the larger of the two
+    if values["slow_twitch_shortening_cap"]:  # the slow-twitch term stops growing beyond vmax_ST
+        v_st = np.maximum(v_tilde, -v_max_st)
+        h_shortening = -(alpha_s_st * f_st * v_st + alpha_s_ft * (1.0 - f_st) * v_tilde) * Sm * A * A
+        del v_st
+    else:
+        h_shortening = c_shortening * v_tilde * A * A
+    del c_shortening
+    H_SL = np.maximum(h_shortening, alpha_l * Sm * v_tilde * A) * f_above
+    del h_shortening, v_tilde
+    # activation and maintenance heat
+    H_AM = h_am * A**0.6 * (0.4 + 0.6 * f_above)
+    del A, f_above, h_am
 
     H_AM, H_SL = apply_minimum_heat_rate((H_AM, H_SL), m, minimum)
     rest = W_CE + H_AM
