@@ -23,7 +23,8 @@ Measured in the same run, on the same states:
 
 ``--baseline-src PATH``: the models of another source tree (``PATH/src/musclemetab``, e.g. a
 ``git worktree`` of an earlier commit) are imported in the same process under another name and
-timed in the same repeats, on the same arrays; printed: this tree's time over the other
+timed in the same repeats, on the same arrays (which of the two goes first alternates from
+repeat to repeat); printed: this tree's time over the other
 tree's (new/old, < 1 is faster), median to median and best to best, and the largest
 difference of any component between the two, relative to the size of the muscle-sample's
 components (``|new - old| / max(|old|, sum of |component|)``, every component but ``total``,
@@ -212,14 +213,12 @@ def main() -> None:
         # untimed: the first call after the worker has run finds this process's caches cold
         next(iter(MODELS.values()))(**inputs, time_s=time_s)
         for name, f in MODELS.items():
-            t0 = time.perf_counter()
-            f(**inputs, time_s=time_s)
-            model_s[name].append(time.perf_counter() - t0)
-            if name in base_models:
+            calls = [(f, model_s[name])] + ([(base_models[name], base_s[name])] if name in base_models else [])
+            for func, seconds in calls[:: 1 if rep % 2 == 0 else -1]:  # which tree goes first alternates
                 t0 = time.perf_counter()
-                base_models[name](**inputs, time_s=time_s)
-                base_s[name].append(time.perf_counter() - t0)
-        for label, module in pipeline.items():
+                func(**inputs, time_s=time_s)
+                seconds.append(time.perf_counter() - t0)
+        for label, module in list(pipeline.items())[:: 1 if rep % 2 == 0 else -1]:
             t0 = time.perf_counter()
             run_pipeline(module, work_dir / f"{label}-{rep}")
             pipeline_s[label].append(time.perf_counter() - t0)
