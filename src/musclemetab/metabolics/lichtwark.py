@@ -300,7 +300,28 @@ def _lw05_force_rate(model, inp, F_CE, time_s, rate, span):
         if not 0 < span <= 1:
             raise OptionError(f"{model}: force_smoothing_span must lie in (0, 1] (a fraction of the samples), not {span}")
         force = loess_smooth(t, force, span)
-    return np.gradient(force, t, axis=-1)
+    return _time_derivative(force, t)
+
+
+def _time_derivative(y, t):
+    """``dy/dt`` along the last axis as ``numpy.gradient(y, t, axis=-1)`` computes it (the same
+    arithmetic): second-order central differences inside (three-point weights for uneven
+    steps, ``(y[i+1] - y[i-1]) / (2 dt)`` for even ones), first-order differences at both
+    ends; written into one output array."""
+    dt = np.diff(t)
+    out = np.empty(y.shape)
+    inner = out[..., 1:-1]
+    if np.all(dt == dt[0]):
+        np.subtract(y[..., 2:], y[..., :-2], out=inner)
+        inner /= 2.0 * dt[0]
+    else:
+        d1, d2 = dt[:-1], dt[1:]
+        np.multiply(y[..., :-2], -d2 / (d1 * (d1 + d2)), out=inner)
+        inner += y[..., 1:-1] * ((d2 - d1) / (d1 * d2))
+        inner += y[..., 2:] * (d1 / (d2 * (d1 + d2)))
+    out[..., 0] = (y[..., 1] - y[..., 0]) / dt[0]
+    out[..., -1] = (y[..., -1] - y[..., -2]) / dt[-1]
+    return out
 
 
 def _check_broadcast(model, name, arr, shape):
