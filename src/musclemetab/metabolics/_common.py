@@ -15,7 +15,8 @@ lengthens; the mechanical work rate ``W_CE = -F_CE V_CE`` is positive when the m
 work (shortening).
 
 Each model is one plain NumPy function whose body reads like its equations (one array
-expression per term, ``np.where`` for the branches).
+expression per term; per-muscle constants formed first; a branch as the larger of its two
+values where that is exact, or as :func:`select`; see ``docs/metabolics.md``, Speed).
 """
 
 from __future__ import annotations
