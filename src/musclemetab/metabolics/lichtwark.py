@@ -97,18 +97,22 @@ def lichtwark2007(
     a, f_l, P = inp.activation, inp.active_force_length_multiplier, inp.force_velocity_multiplier
     v_max, l_mo, F0 = inp.max_contraction_velocity, inp.optimal_fiber_length_m, inp.max_isometric_force_N
     N0 = F0 * l_mo  # N m
+    # (the arrays that are no longer needed are freed as we go: less memory in use at once)
     X = a * f_l
     v_tilde = inp.normalized_fiber_velocity * v_max  # VCE~ (lMo/s)
+    W_CE = X * P * v_tilde * -(F0 * l_mo)
+    # shortening / lengthening heat (1/s, times X N0)
+    h_SL = select(v_tilde <= 0, v_tilde * (-1.0 / G), k["lengthening_heat_factor"] * P * v_tilde)
+    del v_tilde
+    H_SL = h_SL * X * N0
+    del h_SL
 
     # maintenance heat (1/s, times N0); the branch is taken on fV, not on the velocity: for
     # fV < 1 the decay's exponent is 0 and 0.3 + 0.7 exp(0) = 1
     h_iso = gamma * v_max / G**2
     decay = k["activation_share"] + k["force_share"] * np.exp(-k["lengthening_decay"] * v_max * np.maximum(P - 1.0, 0.0))
     H_M = (k["activation_share"] * a + k["force_share"] * X) * decay * (h_iso * N0)
-    # shortening / lengthening heat (1/s, times X N0)
-    h_SL = select(v_tilde <= 0, v_tilde * (-1.0 / G), k["lengthening_heat_factor"] * P * v_tilde)
-    H_SL = h_SL * X * N0
-    W_CE = X * P * v_tilde * -(F0 * l_mo)
+    del decay, X
 
     rest = W_CE + H_M
     if non_negative:
