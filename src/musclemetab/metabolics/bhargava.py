@@ -61,11 +61,11 @@ def bhargava_stimulation_time_s(excitation, time_s, threshold: float = 0.1) -> n
         Excitation threshold (0.1).
     """
     e = np.asarray(excitation, dtype=float)
-    dt_mean = _mean_sampling_interval(e.shape, time_s)
-    return _stimulation_count(e, threshold) * dt_mean
+    dt_mean = mean_sampling_interval(e.shape, time_s)
+    return stimulation_count(e, threshold) * dt_mean
 
 
-def _mean_sampling_interval(shape: tuple[int, ...], time_s):
+def mean_sampling_interval(shape: tuple[int, ...], time_s):
     """``dt_mean = (t_last - t_first)/(n - 1)`` of ``time_s`` for excitation of ``shape``,
     after checking ``time_s`` (one value per sample of the last axis, increasing)."""
     t = np.asarray(time_s, dtype=float)
@@ -86,7 +86,7 @@ def _mean_sampling_interval(shape: tuple[int, ...], time_s):
     return (t[-1] - t[0]) / (t.size - 1)
 
 
-def _stimulation_count(e: np.ndarray, threshold) -> np.ndarray:
+def stimulation_count(e: np.ndarray, threshold) -> np.ndarray:
     """Consecutive samples with ``e > threshold`` up to each sample, along the last axis:
     ``n - n_off``, with ``n`` the 1-based sample number and ``n_off`` that of the last sample
     at or below the threshold so far (0 if none)."""
@@ -258,8 +258,8 @@ def _activation_heat_decay(e, shape, time_s, stimulation_time_s, threshold):
                 f"BH04: stimulation_time_s has shape {t_stim.shape}, not broadcastable to the muscle states {shape}"
             ) from None
     elif time_s is not None:  # t_stim = count dt_mean (bhargava_stimulation_time_s)
-        dt_mean = _mean_sampling_interval(shape, time_s)
-        count = _stimulation_count(np.broadcast_to(e, shape), threshold)
+        dt_mean = mean_sampling_interval(shape, time_s)
+        count = stimulation_count(np.broadcast_to(e, shape), threshold)
         decay = np.exp(count * e * (-dt_mean / k["decay_time_constant_s"]))
         return (k["decay_floor"] + decay) * (count > 0)  # 0 where t_stim = 0
     else:

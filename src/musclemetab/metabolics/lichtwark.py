@@ -252,7 +252,7 @@ def lichtwark2005(
 def _lw05_labile_factor(model, inp, time_s, stimulation_time_s, threshold):
     """``0.8 exp(-0.72 t_stim) + 0.175 exp(-0.022 t_stim)`` (-), with ``t_stim`` given or
     counted from ``time_s`` as BH04 counts it (:func:`bhargava_stimulation_time_s`)."""
-    from .bhargava import _mean_sampling_interval, _stimulation_count
+    from .bhargava import mean_sampling_interval, stimulation_count
 
     (c1, c2), (r1, r2) = LICHTWARK_2005_CONSTANTS["labile_amplitudes"], LICHTWARK_2005_CONSTANTS["labile_rates_per_s"]
 
@@ -270,8 +270,8 @@ def _lw05_labile_factor(model, inp, time_s, stimulation_time_s, threshold):
             f"{model}: the labile heat needs the time since stimulation: pass time_s (s, along the last axis) "
             "or stimulation_time_s"
         )
-    dt_mean = _mean_sampling_interval(inp.shape, time_s)
-    count = _stimulation_count(np.broadcast_to(inp.excitation, inp.shape), threshold)
+    dt_mean = mean_sampling_interval(inp.shape, time_s)
+    count = stimulation_count(np.broadcast_to(inp.excitation, inp.shape), threshold)
     # t_stim = count dt_mean takes one value per count of samples: the factor of each count,
     # computed once and looked up
     return labile(dt_mean * np.arange(inp.shape[-1] + 1))[count]
