@@ -1,6 +1,7 @@
 """Benchmark: metabolic energy models on a large array, against OpenSim's probes.
 
     python benchmarks/metabolics.py [--muscles 40] [--samples 50000] [--probe-states all] [--repeats 5]
+                                    [--baseline-src PATH] [--no-pipeline]
 
 Measured in the same run, on the same states:
 
@@ -20,6 +21,24 @@ Measured in the same run, on the same states:
   evaluate every state once (``--probe-states N``: only the first N states, for a quick run),
   after one untimed warm-up call on 1000 states.
 
+``--baseline-src PATH``: the models of another source tree (``PATH/src/musclemetab``, e.g. a
+``git worktree`` of an earlier commit) are imported in the same process under another name and
+timed in the same repeats, on the same arrays (which of the two goes first alternates from
+repeat to repeat); printed: this tree's time over the other
+tree's (new/old, < 1 is faster), median to median and best to best, and the largest
+difference of any component between the two, relative to the size of the muscle-sample's
+components (``|new - old| / max(|old|, sum of |component|)``, every component but ``total``,
+extras included: a heat that is the difference of two large terms is compared with them). A ratio of the same run does not depend on the
+machine's load as much as a rate does.
+
+Pipeline row (unless ``--no-pipeline``): one example trial (``normal``, EFFORT-GEN) is solved
+once (not timed; casadi in this process, OpenSim in its worker), written to a temporary
+folder, then per repeat: :func:`~musclemetab.metabolics.solution.metabolics_from_solution`
+with every model (``all,LW05,MA68``) from that folder plus
+:func:`~musclemetab.metabolics.solution.write_metabolics` (``metabolics.sto``,
+``metabolics.parquet``, ``whole_body.csv``, ``per_muscle.csv``), in ms (and against the
+other tree with ``--baseline-src``).
+
 The repeats are interleaved (per repeat: one block per probe, one untimed call, then one
 call per model), so that changes of the machine's load during the run
 affect the package and the probes alike; the untimed call absorbs the slower first call
@@ -33,7 +52,13 @@ machine vary by tens of percent from run to run.
 from __future__ import annotations
 
 import argparse
+import importlib
+import importlib.util
+import shutil
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -62,18 +87,66 @@ def _states(n_muscles: int, n_samples: int, seed: int = 0) -> dict:
     )
 
 
+def _load_baseline(path):
+    """The ``musclemetab`` package of the source tree ``path`` (``path/src/musclemetab``),
+    imported as ``_baseline_musclemetab`` beside this tree's package (relative imports inside
+    it stay in it); returns the package with ``.metabolics`` and ``.solution`` loaded."""
+    root = Path(path).resolve() / "src" / "musclemetab"
+    if not (root / "__init__.py").is_file():
+        raise SystemExit(f"--baseline-src {path}: no src/musclemetab/__init__.py there; give a source tree of the project")
+    name = "_baseline_musclemetab"
+    spec = importlib.util.spec_from_file_location(name, root / "__init__.py", submodule_search_locations=[str(root)])
+    pkg = importlib.util.module_from_spec(spec)
+    sys.modules[name] = pkg
+    spec.loader.exec_module(pkg)
+    pkg.metabolics = importlib.import_module(name + ".metabolics")
+    pkg.solution = importlib.import_module(name + ".metabolics.solution")
+    return pkg
+
+
+def _largest_difference(new, old) -> float:
+    """Largest ``|new - old|`` of any component, relative to the muscle-sample's components."""
+    cn, co = new.components(), old.components()
+    scale = sum(np.abs(v) for c, v in co.items() if c != "total")
+    worst = 0.0 if list(cn) == list(co) else np.inf
+    for c in co:
+        a, b = np.asarray(co[c]), np.asarray(cn.get(c, np.nan))
+        if a.shape != b.shape:
+            return np.inf
+        with np.errstate(invalid="ignore", divide="ignore"):
+            d = np.abs(b - a) / np.maximum(np.abs(a), scale)
+        d[(a == b) | (np.isnan(a) & np.isnan(b))] = 0.0
+        worst = max(worst, float(np.max(d, initial=0.0)) if not np.isnan(d).any() else np.inf)
+    return worst
+
+
+def _solved_trial(folder: Path) -> Path:
+    """One example trial solved (EFFORT-GEN, ``normal``) and written to ``folder``."""
+    from musclemetab.datasets import example_subject
+    from musclemetab.redundancy import solve_files
+
+    ex = example_subject()
+    solve_files(ex.model, ex.ik["normal"], ex.id["normal"], "effort-gen").write(folder)
+    return folder
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--muscles", type=int, default=40)
     ap.add_argument("--samples", type=int, default=50_000, help="samples per muscle")
     ap.add_argument("--probe-states", default="all", help="'all' (default) or the number of states for the probes")
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--baseline-src", metavar="PATH",
+                    help="another source tree (its src/musclemetab) whose models are timed in the same run")
+    ap.add_argument("--no-pipeline", action="store_true", help="skip the pipeline row (one solved example trial)")
     args = ap.parse_args()
 
     from musclemetab import opensim_bridge
     from musclemetab.datasets import example_subject
     from musclemetab.metabolics import ALL_MODELS as MODELS
 
+    base = _load_baseline(args.baseline_src) if args.baseline_src else None
+    base_models = base.metabolics.ALL_MODELS if base else {}
     inputs = _states(args.muscles, args.samples)
     n = args.muscles * args.samples
     time_s = np.linspace(0.0, 1.0, args.samples)
@@ -100,14 +173,39 @@ def main() -> None:
                                 muscle_name="soleus_r", read_muscle_quantities=False)
         return r
 
+    # the pipeline: one solved trial, its metabolics from the folder and their files
+    work_dir = Path(tempfile.mkdtemp(prefix="metabolics-bench-"))
+    pipeline = {}
+    if not args.no_pipeline:
+        from musclemetab.datasets import example_subject
+        from musclemetab.metabolics import solution as new_solution
+
+        subject = example_subject()
+        solved = _solved_trial(work_dir / "solution")
+        pipeline["this tree"] = new_solution
+        if base:
+            pipeline["baseline"] = base.solution
+
+    def run_pipeline(module, out):
+        r = module.metabolics_from_solution(solved, subject.body_mass_kg, subject.height_m, models="all,LW05,MA68")
+        module.write_metabolics(r, out)
+        return r
+
     # warm-up (not timed): worker start, OpenSim's first evaluations, thread pool, scratch arrays
     for cfg in probes.values():
         version = run_probe(cfg, slice(0, min(k, 1000)))["opensim_version"]
-    for f in MODELS.values():
-        f(**inputs, time_s=time_s)
+    differences = {}
+    for name, f in MODELS.items():
+        r = f(**inputs, time_s=time_s)
+        if name in base_models:
+            differences[name] = _largest_difference(r, base_models[name](**inputs, time_s=time_s))
+    pipeline_s = {label: [] for label in pipeline}
+    for label, module in pipeline.items():
+        run_pipeline(module, work_dir / f"warm-{label}")
 
     probe_s = {label: [] for label in probes}  # seconds per state, per block
     model_s = {name: [] for name in MODELS}  # seconds per call
+    base_s = {name: [] for name in base_models}
     for rep in range(repeats):
         for label, cfg in probes.items():
             if blocks[rep].size:
@@ -115,9 +213,15 @@ def main() -> None:
         # untimed: the first call after the worker has run finds this process's caches cold
         next(iter(MODELS.values()))(**inputs, time_s=time_s)
         for name, f in MODELS.items():
+            calls = [(f, model_s[name])] + ([(base_models[name], base_s[name])] if name in base_models else [])
+            for func, seconds in calls[:: 1 if rep % 2 == 0 else -1]:  # which tree goes first alternates
+                t0 = time.perf_counter()
+                func(**inputs, time_s=time_s)
+                seconds.append(time.perf_counter() - t0)
+        for label, module in list(pipeline.items())[:: 1 if rep % 2 == 0 else -1]:
             t0 = time.perf_counter()
-            f(**inputs, time_s=time_s)
-            model_s[name].append(time.perf_counter() - t0)
+            run_pipeline(module, work_dir / f"{label}-{rep}")
+            pipeline_s[label].append(time.perf_counter() - t0)
 
     def rates(seconds, per):
         s = np.asarray(seconds)
@@ -137,6 +241,25 @@ def main() -> None:
         med, best = rates(model_s[name], n)
         p_med, p_best = probe_rate[family[name]]
         print(f"{name:6s} {med / 1e6:19.1f} {best / 1e6:7.1f} {med / p_med:15.0f} {best / p_best:6.0f}  ({family[name]})")
+    if base_models:
+        print(f"against {args.baseline_src} (the same arrays, the same repeats): time of this tree / time of that one")
+        print(f"{'model':6s} {'new/old median':>15s} {'best':>6s} {'old x probe median':>19s} {'largest difference':>19s}")
+        for name in MODELS:
+            if name not in base_models:
+                print(f"{name:6s} (not in the baseline)")
+                continue
+            ratio = np.median(model_s[name]) / np.median(base_s[name])
+            ratio_best = np.min(model_s[name]) / np.min(base_s[name])
+            old_x = rates(base_s[name], n)[0] / probe_rate[family[name]][0]
+            print(f"{name:6s} {ratio:15.3f} {ratio_best:6.3f} {old_x:19.0f} {differences[name]:19.1e}")
+    if pipeline:
+        print("pipeline: one solved example trial (EFFORT-GEN, normal), metabolics_from_solution with all,LW05,MA68 "
+              "from its folder + write_metabolics")
+        for label, s in pipeline_s.items():
+            print(f"  {label:10s} median {1e3 * np.median(s):8.1f} ms   best {1e3 * np.min(s):8.1f} ms")
+        if len(pipeline_s) == 2:
+            print(f"  new/old median {np.median(pipeline_s['this tree']) / np.median(pipeline_s['baseline']):.3f}")
+    shutil.rmtree(work_dir, ignore_errors=True)
 
 
 if __name__ == "__main__":

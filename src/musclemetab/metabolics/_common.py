@@ -15,7 +15,8 @@ lengthens; the mechanical work rate ``W_CE = -F_CE V_CE`` is positive when the m
 work (shortening).
 
 Each model is one plain NumPy function whose body reads like its equations (one array
-expression per term, ``np.where`` for the branches).
+expression per term; per-muscle constants formed first; a branch as the larger of its two
+values where that is exact, or as :func:`select`; see ``docs/metabolics.md``, Speed).
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ __all__ = [
     "MuscleInputs",
     "prepare_inputs",
     "apply_non_negativity",
+    "select",
     "apply_minimum_heat_rate",
     "basal_rate",
     "basal_view",
@@ -186,8 +188,10 @@ class MetabolicRates:
         return comps[name]
 
     def total_without_basal(self) -> np.ndarray:
-        """``total - basal`` (W): the muscle's rate without any basal heat."""
-        return self.total - self.basal
+        """``work + activation_maintenance + shortening_lengthening`` (W): the muscle's rate
+        without any basal heat, ``total - basal`` but for rounding. Summed from the other
+        components, it does not depend on the basal heat at all."""
+        return self.work + self.activation_maintenance + self.shortening_lengthening
 
 
 class MuscleInputs:
@@ -212,6 +216,10 @@ def _as_float(name: str, value, model: str) -> np.ndarray:
 
 
 def _check_finite(name: str, arr: np.ndarray, model: str) -> None:
+    # one reduction over the array: a NaN or an infinity makes the sum non-finite (a sum can
+    # also overflow with finite values; the element-wise test below then finds nothing)
+    if np.isfinite(np.sum(arr)):
+        return
     finite = np.isfinite(arr)
     if finite.all():
         return
@@ -287,17 +295,24 @@ def prepare_inputs(model: str, values: Mapping[str, object], check: bool = True)
     return out
 
 
-def apply_non_negativity(work, heats_other, h_sl, *, strict: bool):
-    """Paper Eq. 3: where the total rate is negative, raise ``H_SL`` so the total is zero.
+def apply_non_negativity(rest, h_sl):
+    """Paper Eq. 3: where the total rate ``rest + H_SL`` is negative, raise ``H_SL`` so that
+    the total is zero (``rest``: the work rate plus the other heats, W).
 
-    ``strict=True`` tests ``total < 0`` (UM03), otherwise ``total <= 0`` (UC16, BH04,
-    HO06); the two differ only where the total is exactly zero, where the result is the
-    same up to rounding.
+    The study's UM03 tests ``total < 0``, its UC16, BH04 and HO06 ``total <= 0``: the two
+    differ only where the total is exactly zero, where ``H_SL = -rest`` either way. A rounded
+    sum has the sign of the exact sum, so ``total < 0`` exactly where ``H_SL < -rest``: the
+    rule is ``H_SL := max(H_SL, -rest)``. Returns the new ``H_SL``.
     """
-    rest = work + heats_other
-    total = rest + h_sl
-    negative = total < 0 if strict else total <= 0
-    return np.where(negative, -rest, h_sl)
+    return np.maximum(h_sl, -rest)
+
+
+def select(condition, if_true, if_false):
+    """``np.where(condition, if_true, if_false)`` for finite values, as arithmetic:
+    ``if_true * condition + if_false * ~condition`` (``x * 1 + y * 0 = x`` exactly, but for
+    the sign of a zero). ``np.where`` takes a branch per sample, whose cost grows with how
+    unpredictable the condition is; this does not."""
+    return if_true * condition + if_false * ~condition
 
 
 def apply_minimum_heat_rate(heats, muscle_mass_kg, minimum_W_per_kg):
@@ -342,7 +357,8 @@ def recruitment_terms(excitation):
     """
     t = np.tan(0.25 * np.pi * np.asarray(excitation, dtype=float))
     u_s = (2.0 * t) / (1.0 + t * t)
-    return u_s, t * u_s
+    t *= u_s  # u_f
+    return u_s, t
 
 
 def recruited_slow_twitch_fraction(excitation, slow_twitch_fraction):
@@ -357,7 +373,10 @@ def recruited_slow_twitch_fraction(excitation, slow_twitch_fraction):
     f_st = np.asarray(slow_twitch_fraction, dtype=float)
     den = f_st + (1.0 - f_st) * t
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(den == 0, 1.0, f_st / den)
+        out = f_st / den
+    if not np.all(den):
+        out = np.where(den == 0, 1.0, out)
+    return out
 
 
 def check_flag(model: str, name: str, value) -> bool:

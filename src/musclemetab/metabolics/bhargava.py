@@ -20,6 +20,7 @@ from ._common import (
     prepare_inputs,
     recruited_slow_twitch_fraction,
     recruitment_terms,
+    select,
 )
 
 __all__ = ["bhargava2004", "bhargava_stimulation_time_s", "BHARGAVA_CONSTANTS"]
@@ -60,11 +61,11 @@ def bhargava_stimulation_time_s(excitation, time_s, threshold: float = 0.1) -> n
         Excitation threshold (0.1).
     """
     e = np.asarray(excitation, dtype=float)
-    dt_mean = _mean_sampling_interval(e.shape, time_s)
-    return _stimulation_count(e, threshold) * dt_mean
+    dt_mean = mean_sampling_interval(e.shape, time_s)
+    return stimulation_count(e, threshold) * dt_mean
 
 
-def _mean_sampling_interval(shape: tuple[int, ...], time_s):
+def mean_sampling_interval(shape: tuple[int, ...], time_s):
     """``dt_mean = (t_last - t_first)/(n - 1)`` of ``time_s`` for excitation of ``shape``,
     after checking ``time_s`` (one value per sample of the last axis, increasing)."""
     t = np.asarray(time_s, dtype=float)
@@ -85,12 +86,13 @@ def _mean_sampling_interval(shape: tuple[int, ...], time_s):
     return (t[-1] - t[0]) / (t.size - 1)
 
 
-def _stimulation_count(e: np.ndarray, threshold) -> np.ndarray:
-    """Consecutive samples with ``e > threshold`` up to each sample, along the last axis."""
-    on = e > threshold
-    count = np.cumsum(on, axis=-1)
-    reset = np.maximum.accumulate(np.where(on, 0, count), axis=-1)
-    return count - reset
+def stimulation_count(e: np.ndarray, threshold) -> np.ndarray:
+    """Consecutive samples with ``e > threshold`` up to each sample, along the last axis:
+    ``n - n_off``, with ``n`` the 1-based sample number and ``n_off`` that of the last sample
+    at or below the threshold so far (0 if none)."""
+    n = np.arange(1, e.shape[-1] + 1, dtype=np.min_scalar_type(e.shape[-1]))  # the smallest type that holds n
+    n_off = np.maximum.accumulate(n * (e <= threshold), axis=-1)
+    return n - n_off
 
 
 @model_function("BH04")
@@ -202,25 +204,33 @@ def bhargava2004(
         f_st = inp.slow_twitch_fraction
     f_ft = 1.0 - f_st
 
+    # work and shortening heat; the arrays that are no longer needed are freed as we go (less
+    # memory in use at once: faster for long arrays)
+    minus_V_CE = inp.normalized_fiber_velocity * -(inp.max_contraction_velocity * inp.optimal_fiber_length_m)  # m/s
+    F_iso = a * f_l * F0
+    F_CE = F_iso * f_v
+    W_CE = F_CE * minus_V_CE
+    F_M = F_CE + inp.passive_fiber_force_N
+    del F_CE
+    # H_SL = -alpha V_CE, alpha = 0.16 F_iso + 0.18 F_M (V_CE <= 0) or 0.157 F_M (V_CE > 0)
+    H_SL = select(minus_V_CE >= 0, 0.16 * F_iso + 0.18 * F_M, 0.157 * F_M) * minus_V_CE
+    del F_iso, F_M, minus_V_CE
+
+    # activation and maintenance heats
     u_s, u_f = recruitment_terms(e)
     phi = _activation_heat_decay(e, inp.shape, time_s, stimulation_time_s, excitation_threshold) \
         if activation_heat_decay else 1.0
-    H_A = phi * m * (k["activation_fast_W_per_kg"] * f_ft * u_f + k["activation_slow_W_per_kg"] * f_st * u_s)
+    H_A = phi * (k["activation_fast_W_per_kg"] * m * f_ft * u_f + k["activation_slow_W_per_kg"] * m * f_st * u_s)
+    del phi
     g = np.interp(l_m, [0.5, 1.0, 1.5], [0.5, 1.0, 0.0]) if maintenance_length_dependence == "published" else l_m
-    H_M = g * m * (k["maintenance_fast_W_per_kg"] * f_ft * u_f + k["maintenance_slow_W_per_kg"] * f_st * u_s)
-
-    V_CE = inp.normalized_fiber_velocity * (inp.max_contraction_velocity * inp.optimal_fiber_length_m)  # m/s
-    F_iso = a * f_l * F0
-    F_CE = F_iso * f_v
-    F_M = F_CE + inp.passive_fiber_force_N
-    alpha = np.where(V_CE <= 0, 0.16 * F_iso + 0.18 * F_M, 0.157 * F_M)
-    H_SL = -alpha * V_CE
-    W_CE = -F_CE * V_CE
+    H_M = g * (k["maintenance_fast_W_per_kg"] * m * f_ft * u_f + k["maintenance_slow_W_per_kg"] * m * f_st * u_s)
+    del u_s, u_f
 
     H_A, H_M, H_SL = apply_minimum_heat_rate((H_A, H_M, H_SL), m, minimum)
     H_AM = H_A + H_M
+    rest = W_CE + H_AM
     if non_negative:
-        H_SL = apply_non_negativity(W_CE, H_AM, H_SL, strict=False)
+        H_SL = apply_non_negativity(rest, H_SL)
     B = basal_rate(inp, basal, basal_rate_W_per_kg)
     return MetabolicRates(
         model=model,
@@ -228,7 +238,7 @@ def bhargava2004(
         activation_maintenance=H_AM,
         shortening_lengthening=H_SL,
         basal=basal_view(B, inp.shape),
-        total=W_CE + H_AM + H_SL + B,
+        total=rest + H_SL + B,
         extras={"activation": H_A, "maintenance": H_M},
     )
 
@@ -247,13 +257,20 @@ def _activation_heat_decay(e, shape, time_s, stimulation_time_s, threshold):
             raise DataMismatchError(
                 f"BH04: stimulation_time_s has shape {t_stim.shape}, not broadcastable to the muscle states {shape}"
             ) from None
-    elif time_s is not None:
-        t_stim = bhargava_stimulation_time_s(np.broadcast_to(e, shape), time_s, threshold)
+    elif time_s is not None:  # t_stim = count dt_mean (bhargava_stimulation_time_s)
+        dt_mean = mean_sampling_interval(shape, time_s)
+        count = stimulation_count(np.broadcast_to(e, shape), threshold)
+        decay = np.exp(count * e * (-dt_mean / k["decay_time_constant_s"]))
+        return (k["decay_floor"] + decay) * (count > 0)  # 0 where t_stim = 0
     else:
         raise OptionError(
             "BH04: the activation-heat decay needs time: pass time_s (s, along the last axis) or "
             "stimulation_time_s, or set activation_heat_decay=False"
         )
-    with np.errstate(invalid="ignore"):
-        x = np.where(e == 0, 0.0, t_stim * e)  # inf * 0: no excitation, no activation heat either way
-    return np.where(t_stim > 0, k["decay_floor"] + np.exp(-x / k["decay_time_constant_s"]), 0.0)
+    if np.isinf(t_stim).any():
+        with np.errstate(invalid="ignore"):
+            x = np.where(e == 0, 0.0, t_stim * e)  # inf * 0: no excitation, no activation heat either way
+        decay = np.exp(-x / k["decay_time_constant_s"])
+    else:
+        decay = np.exp(t_stim * e * (-1.0 / k["decay_time_constant_s"]))
+    return (k["decay_floor"] + decay) * (t_stim > 0)  # 0 where t_stim = 0

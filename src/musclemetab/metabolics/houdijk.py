@@ -121,19 +121,28 @@ def houdijk2006(
     k4 = k["k4_fast"] * f_ft + k["k4_slow"] * f_st
     a_tilde = (k["shortening_fast"] * f_ft + k["shortening_slow"] * f_st) * F0  # N
 
-    nu_max = k3 + k4 * a
-    nu_rel = a**2
-    with np.errstate(divide="ignore"):  # nu_rel = 0: exp(-inf) = 0 and H_A = 0
-        ratio = (1.0 - np.exp(-0.25 - 18.2 / (nu_rel * nu_max))) / (1.0 - np.exp(-0.25 - 18.2 / nu_max))
-    H_A = m * h_A * nu_rel * ratio
+    # (the arrays that are no longer needed are freed as we go: less memory in use at once)
+    minus_V_CE = inp.normalized_fiber_velocity * -(inp.max_contraction_velocity * inp.optimal_fiber_length_m)  # m/s
+    X = a * f_l
+    W_CE = X * f_v * F0 * minus_V_CE
+    H_SL = a_tilde * X * np.maximum(minus_V_CE, 0.0)  # -a~ a fL V_CE where V_CE <= 0, else 0
+    del X, minus_V_CE
     H_M = m * (h_A + h_M) * a * (f_l - h_A / (h_A + h_M))
-    V_CE = inp.normalized_fiber_velocity * (inp.max_contraction_velocity * inp.optimal_fiber_length_m)  # m/s
-    H_SL = np.where(V_CE <= 0, -a_tilde * a * f_l * V_CE, 0.0)
-    W_CE = -(a * f_l * f_v * F0) * V_CE
+
+    nu_max = k3 + k4 * a
+    nu_rel = a * a
+    # ratio = [1 - exp(-0.25 - 18.2/(nu_rel nu_max))] / [1 - exp(-0.25 - 18.2/nu_max)]: each
+    # 1 - exp(x) is -expm1(x), and the two signs cancel
+    with np.errstate(divide="ignore"):  # nu_rel = 0: expm1(-inf) = -1 and H_A = 0
+        ratio = np.expm1(-0.25 - 18.2 / (nu_rel * nu_max)) / np.expm1(-0.25 - 18.2 / nu_max)
+    del nu_max
+    H_A = m * h_A * nu_rel * ratio
+    del nu_rel, ratio
 
     H_AM = H_A + H_M
+    rest = W_CE + H_AM
     if non_negative:
-        H_SL = apply_non_negativity(W_CE, H_AM, H_SL, strict=False)
+        H_SL = apply_non_negativity(rest, H_SL)
     B = basal_rate(inp, basal, basal_rate_W_per_kg)
     return MetabolicRates(
         model=model,
@@ -141,6 +150,6 @@ def houdijk2006(
         activation_maintenance=H_AM,
         shortening_lengthening=H_SL,
         basal=basal_view(B, inp.shape),
-        total=W_CE + H_AM + H_SL + B,
+        total=rest + H_SL + B,
         extras={"activation": H_A, "maintenance": H_M},
     )

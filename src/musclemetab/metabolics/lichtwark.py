@@ -15,6 +15,7 @@ from ._common import (
     check_flag,
     model_function,
     prepare_inputs,
+    select,
 )
 
 __all__ = ["lichtwark2007", "lichtwark2005", "LICHTWARK_CONSTANTS", "LICHTWARK_2005_CONSTANTS", "loess_smooth"]
@@ -96,25 +97,30 @@ def lichtwark2007(
     a, f_l, P = inp.activation, inp.active_force_length_multiplier, inp.force_velocity_multiplier
     v_max, l_mo, F0 = inp.max_contraction_velocity, inp.optimal_fiber_length_m, inp.max_isometric_force_N
     N0 = F0 * l_mo  # N m
+    # (the arrays that are no longer needed are freed as we go: less memory in use at once)
     X = a * f_l
     v_tilde = inp.normalized_fiber_velocity * v_max  # VCE~ (lMo/s)
-
-    # maintenance heat (1/s, times N0); the branch is taken on fV, not on the velocity
-    h_iso = gamma * v_max / G**2
-    decay = k["activation_share"] + k["force_share"] * np.exp(-k["lengthening_decay"] * v_max * (P - 1.0))
-    h_M = np.where(P < 1.0, h_iso, h_iso * decay)
-    H_M = (k["activation_share"] * a + k["force_share"] * X) * h_M * N0
+    W_CE = X * P * v_tilde * -(F0 * l_mo)
     # shortening / lengthening heat (1/s, times X N0)
-    h_SL = np.where(v_tilde <= 0, -v_tilde / G, k["lengthening_heat_factor"] * P * v_tilde)
+    h_SL = select(v_tilde <= 0, v_tilde * (-1.0 / G), k["lengthening_heat_factor"] * P * v_tilde)
+    del v_tilde
     H_SL = h_SL * X * N0
-    W_CE = -(X * P * F0) * (v_tilde * l_mo)
+    del h_SL
 
+    # maintenance heat (1/s, times N0); the branch is taken on fV, not on the velocity: for
+    # fV < 1 the decay's exponent is 0 and 0.3 + 0.7 exp(0) = 1
+    h_iso = gamma * v_max / G**2
+    decay = k["activation_share"] + k["force_share"] * np.exp(-k["lengthening_decay"] * v_max * np.maximum(P - 1.0, 0.0))
+    H_M = (k["activation_share"] * a + k["force_share"] * X) * decay * (h_iso * N0)
+    del decay, X
+
+    rest = W_CE + H_M
     if non_negative:
-        H_SL = apply_non_negativity(W_CE, H_M, H_SL, strict=False)
+        H_SL = apply_non_negativity(rest, H_SL)
     B = basal_rate(inp, basal, basal_rate_W_per_kg)
     return MetabolicRates(
         model=model, work=W_CE, activation_maintenance=H_M, shortening_lengthening=H_SL,
-        basal=basal_view(B, inp.shape), total=W_CE + H_M + H_SL + B,
+        basal=basal_view(B, inp.shape), total=rest + H_SL + B,
     )
 
 
@@ -212,50 +218,63 @@ def lichtwark2005(
     a, f_l, f_v = inp.activation, inp.active_force_length_multiplier, inp.force_velocity_multiplier
     v_max, l_mo, F0 = inp.max_contraction_velocity, inp.optimal_fiber_length_m, inp.max_isometric_force_N
     N0 = F0 * l_mo
-    V = -inp.normalized_fiber_velocity * v_max * l_mo  # shortening velocity (m/s)
+    # (the arrays that are no longer needed are freed as we go: less memory in use at once)
+    h_M = a * (v_max / G**2 * N0)
+    h_L = h_M * _lw05_labile_factor(model, inp, time_s, stimulation_time_s, excitation_threshold)
+
+    V = inp.normalized_fiber_velocity * -(v_max * l_mo)  # shortening velocity (m/s)
     F_CE = a * f_l * f_v * F0
     W_CE = F_CE * V
-
-    t_stim = _lw05_stimulation_time(model, inp, time_s, stimulation_time_s, excitation_threshold)
-    dF_dt = _lw05_force_rate(model, inp, F_CE, time_s, fiber_force_rate_N_per_s, force_smoothing_span)
-
-    h_M = a * v_max / G**2 * N0
-    (c1, c2), (r1, r2) = k["labile_amplitudes"], k["labile_rates_per_s"]
-    h_L = h_M * (c1 * np.exp(-r1 * t_stim) + c2 * np.exp(-r2 * t_stim))
-    h_S = np.where(V > 0, a * (V / l_mo) / G * N0, 0.0)
-    h_T = -k["thermoelastic"] * dF_dt * l_mo
-    h_lengthening = h_M * (k["lengthening_rest"] + k["lengthening_decaying"] * np.exp(-k["lengthening_decay"] * (f_v - 1.0)))
+    h_T = _lw05_force_rate(model, inp, F_CE, time_s, fiber_force_rate_N_per_s, force_smoothing_span) \
+        * (-k["thermoelastic"] * l_mo)
+    del F_CE
+    h_S = a * np.maximum(V, 0.0) * (N0 / (G * l_mo))  # a (V/lMo)/G N0 where V > 0, else 0
+    H_SL = h_S + h_T  # h_S = 0 where lengthening
+    del h_S
     lengthening = V < 0
+    del V
 
-    H_AM = np.where(lengthening, h_lengthening, h_M + h_L)
-    H_SL = np.where(lengthening, 0.0, h_S) + h_T
+    h_lengthening = h_M * (k["lengthening_rest"] + k["lengthening_decaying"] * np.exp(-k["lengthening_decay"] * (f_v - 1.0)))
+    H_AM = select(lengthening, h_lengthening, h_M + h_L)
+    del h_lengthening, h_M
     B = basal_rate(inp, basal, basal_rate_W_per_kg)
 
-    def full(x):  # every component has the shape of the states
-        return np.broadcast_to(x, inp.shape).copy()
+    def full(x):  # every component has the shape of the states (a copy where it is broadcast)
+        return x if np.shape(x) == inp.shape else np.broadcast_to(x, inp.shape).copy()
 
     return MetabolicRates(
         model=model, work=full(W_CE), activation_maintenance=full(H_AM), shortening_lengthening=full(H_SL),
         basal=basal_view(B, inp.shape), total=full(W_CE + H_AM + H_SL + B),
-        extras={"labile": full(np.where(lengthening, 0.0, h_L)), "thermoelastic": full(h_T)},
+        extras={"labile": full(h_L * ~lengthening), "thermoelastic": full(h_T)},
     )
 
 
-def _lw05_stimulation_time(model, inp, time_s, stimulation_time_s, threshold):
-    from .bhargava import bhargava_stimulation_time_s
+def _lw05_labile_factor(model, inp, time_s, stimulation_time_s, threshold):
+    """``0.8 exp(-0.72 t_stim) + 0.175 exp(-0.022 t_stim)`` (-), with ``t_stim`` given or
+    counted from ``time_s`` as BH04 counts it (:func:`bhargava_stimulation_time_s`)."""
+    from .bhargava import mean_sampling_interval, stimulation_count
+
+    (c1, c2), (r1, r2) = LICHTWARK_2005_CONSTANTS["labile_amplitudes"], LICHTWARK_2005_CONSTANTS["labile_rates_per_s"]
+
+    def labile(t_stim):
+        return c1 * np.exp(-r1 * t_stim) + c2 * np.exp(-r2 * t_stim)
 
     if stimulation_time_s is not None:
         t = np.asarray(stimulation_time_s, dtype=float)
         if np.any(np.isnan(t)) or np.any(t < 0):
             raise OptionError(f"{model}: stimulation_time_s must not be NaN or negative (s)")
         _check_broadcast(model, "stimulation_time_s", t, inp.shape)
-        return t
+        return labile(t)
     if time_s is None:
         raise OptionError(
             f"{model}: the labile heat needs the time since stimulation: pass time_s (s, along the last axis) "
             "or stimulation_time_s"
         )
-    return bhargava_stimulation_time_s(np.broadcast_to(inp.excitation, inp.shape), time_s, threshold)
+    dt_mean = mean_sampling_interval(inp.shape, time_s)
+    count = stimulation_count(np.broadcast_to(inp.excitation, inp.shape), threshold)
+    # t_stim = count dt_mean takes one value per count of samples: the factor of each count,
+    # computed once and looked up
+    return labile(dt_mean * np.arange(inp.shape[-1] + 1))[count]
 
 
 def _lw05_force_rate(model, inp, F_CE, time_s, rate, span):
@@ -285,7 +304,28 @@ def _lw05_force_rate(model, inp, F_CE, time_s, rate, span):
         if not 0 < span <= 1:
             raise OptionError(f"{model}: force_smoothing_span must lie in (0, 1] (a fraction of the samples), not {span}")
         force = loess_smooth(t, force, span)
-    return np.gradient(force, t, axis=-1)
+    return _time_derivative(force, t)
+
+
+def _time_derivative(y, t):
+    """``dy/dt`` along the last axis as ``numpy.gradient(y, t, axis=-1)`` computes it (the same
+    arithmetic): second-order central differences inside (three-point weights for uneven
+    steps, ``(y[i+1] - y[i-1]) / (2 dt)`` for even ones), first-order differences at both
+    ends; written into one output array."""
+    dt = np.diff(t)
+    out = np.empty(y.shape)
+    inner = out[..., 1:-1]
+    if np.all(dt == dt[0]):
+        np.subtract(y[..., 2:], y[..., :-2], out=inner)
+        inner /= 2.0 * dt[0]
+    else:
+        d1, d2 = dt[:-1], dt[1:]
+        np.multiply(y[..., :-2], -d2 / (d1 * (d1 + d2)), out=inner)
+        inner += y[..., 1:-1] * ((d2 - d1) / (d1 * d2))
+        inner += y[..., 2:] * (d1 / (d2 * (d1 + d2)))
+    out[..., 0] = (y[..., 1] - y[..., 0]) / dt[0]
+    out[..., -1] = (y[..., -1] - y[..., -2]) / dt[-1]
+    return out
 
 
 def _check_broadcast(model, name, arr, shape):

@@ -77,11 +77,14 @@ def margaria1968(
     inp = prepare_inputs(model, locals(), check=check)
     k = MARGARIA_CONSTANTS
     F_CE = inp.activation * inp.active_force_length_multiplier * inp.force_velocity_multiplier * inp.max_isometric_force_N
-    V_CE = inp.normalized_fiber_velocity * inp.max_contraction_velocity * inp.optimal_fiber_length_m
-    W_CE = np.broadcast_to(-F_CE * V_CE, inp.shape)
-    Edot = np.where(W_CE >= 0, W_CE / k["positive_work_efficiency"], k["negative_work_factor"] * W_CE)
+    W_CE = F_CE * inp.normalized_fiber_velocity * -(inp.max_contraction_velocity * inp.optimal_fiber_length_m)
+    if np.shape(W_CE) != inp.shape:
+        W_CE = np.broadcast_to(W_CE, inp.shape).copy()
+    # W_CE / 0.25 where W_CE >= 0, -1.2 W_CE where W_CE < 0: each is >= 0 in its branch and <= 0
+    # in the other, so the cost is the larger of the two
+    Edot = np.maximum(W_CE / k["positive_work_efficiency"], k["negative_work_factor"] * W_CE)
     B = basal_rate(inp, basal, basal_rate_W_per_kg)
     return MetabolicRates(
-        model=model, work=W_CE.copy(), activation_maintenance=np.zeros(inp.shape),
+        model=model, work=W_CE, activation_maintenance=np.zeros(inp.shape),
         shortening_lengthening=Edot - W_CE, basal=basal_view(B, inp.shape), total=Edot + B,
     )

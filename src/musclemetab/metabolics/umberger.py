@@ -36,6 +36,7 @@ from ._common import (
     model_function,
     prepare_inputs,
     recruited_slow_twitch_fraction,
+    select,
 )
 
 __all__ = ["umberger2003", "umberger2010", "uchida2016", "AEROBIC_FACTOR", "ANAEROBIC_FACTOR"]
@@ -58,7 +59,6 @@ def _umberger_family(
     *,
     lengthening_factor: float,
     recruitment: bool,
-    strict: bool,
 ) -> MetabolicRates:
     """The Umberger family's equations (module docstring) with the options of ``values``."""
     for flag in ("include_negative_work", "non_negative", "slow_twitch_shortening_cap", "basal"):
@@ -74,37 +74,54 @@ def _umberger_family(
 
     # fibre-type fractions: the muscle's, or those recruited at this excitation (UC16)
     f_st = recruited_slow_twitch_fraction(e, inp.slow_twitch_fraction) if recruitment else inp.slow_twitch_fraction
-    f_ft = 1.0 - f_st
-    # velocity constants
+    # velocity constants (per muscle)
     v_max_st = v_max / SLOW_TWITCH_VMAX_RATIO
     alpha_s_st = 100.0 / v_max_st
     alpha_s_ft = 153.0 / v_max
     alpha_l = lengthening_factor * alpha_s_st
+    Sm = S * m  # W/kg -> W, with the effort scaling
+    # the fibre-weighted coefficients times S m, with f_FT = 1 - f_ST so that recruited fractions
+    # take one product and one sum: h_AM S m = (128 f_FT + 25) S m = (153 - 128 f_ST) S m, and
+    # of the shortening heat -(alpha_S_ST f_ST + alpha_S_FT f_FT) S m
+    #   = -(alpha_S_FT + (alpha_S_ST - alpha_S_FT) f_ST) S m
+    h_am = f_st * (-128.0 * Sm) + 153.0 * Sm
+    c_shortening = f_st * ((alpha_s_ft - alpha_s_st) * Sm) - alpha_s_ft * Sm
 
+    # (the arrays that are no longer needed are freed as we go: less memory in use at once)
     v_tilde = inp.normalized_fiber_velocity * v_max  # VCE~ (lMo/s), positive = lengthening
-    shortening = v_tilde <= 0  # shortening or isometric
-    above_optimal = l_m > 1.0
-    A = np.where(e > a, e, 0.5 * (e + a))
+    # mechanical work rate of the active fibre force (no passive force): -F_CE V_CE, or only
+    # where the fibre shortens (F_CE times the shortening speed max(-VCE~, 0))
+    if values["include_negative_work"]:
+        W_CE = a * f_l * f_v * v_tilde * -(F0 * l_mo)
+    else:
+        W_CE = a * f_l * f_v * np.maximum(-v_tilde, 0.0) * (F0 * l_mo)
 
+    A = np.maximum(e, 0.5 * (e + a))  # e where e > a, (e + a)/2 where e <= a: the larger of the two
+    # length dependence: fL above optimal length (H_SL; 0.4 + 0.6 fL for H_AM), 1 at or below
+    f_above = select(l_m > 1.0, f_l, 1.0)
+
+    # shortening heat -(alpha_S_ST VCE~ f_ST + alpha_S_FT VCE~ f_FT) A^2 (VCE~ <= 0) and
+    # lengthening heat alpha_L VCE~ A (VCE~ > 0): each is >= 0 in its branch and <= 0 in the
+    # other (A >= 0), so the heat of the branch is the larger of the two
+    if values["slow_twitch_shortening_cap"]:  # the slow-twitch term stops growing beyond vmax_ST
+        v_st = np.maximum(v_tilde, -v_max_st)
+        h_shortening = -(alpha_s_st * f_st * v_st + alpha_s_ft * (1.0 - f_st) * v_tilde) * Sm * A * A
+        del v_st
+    else:
+        h_shortening = c_shortening * v_tilde * A * A
+    del c_shortening
+    H_SL = np.maximum(h_shortening, alpha_l * Sm * v_tilde * A) * f_above
+    del h_shortening, v_tilde
     # activation and maintenance heat
-    h_am = (128.0 * f_ft + 25.0) * A**0.6 * S * m
-    H_AM = np.where(above_optimal, (0.4 + 0.6 * f_l) * h_am, h_am)
-    # shortening and lengthening heat (W/kg)
-    v_st = np.maximum(v_tilde, -v_max_st) if values["slow_twitch_shortening_cap"] else v_tilde
-    h_shortening = -(alpha_s_st * v_st * f_st + alpha_s_ft * v_tilde * f_ft) * A**2
-    h_lengthening = alpha_l * v_tilde * A
-    h_sl = np.where(shortening, h_shortening, h_lengthening) * S * m
-    H_SL = np.where(above_optimal, f_l * h_sl, h_sl)
-    # mechanical work rate of the active fibre force (no passive force)
-    W_CE = -(a * f_l * f_v * F0) * (v_tilde * l_mo)
-    if not values["include_negative_work"]:
-        W_CE = np.where(shortening, W_CE, 0.0)
+    H_AM = h_am * A**0.6 * (0.4 + 0.6 * f_above)
+    del A, f_above, h_am
 
     H_AM, H_SL = apply_minimum_heat_rate((H_AM, H_SL), m, minimum)
-    if values["non_negative"]:
-        H_SL = apply_non_negativity(W_CE, H_AM, H_SL, strict=strict)
+    rest = W_CE + H_AM
+    if values["non_negative"]:  # total < 0 (UM03) or <= 0 (UM10, UC16): the same rates
+        H_SL = apply_non_negativity(rest, H_SL)
     B = basal_rate(inp, values["basal"], values["basal_rate_W_per_kg"])
-    total = W_CE + H_AM + H_SL + B
+    total = rest + H_SL + B
     return MetabolicRates(
         model=model, work=W_CE, activation_maintenance=H_AM, shortening_lengthening=H_SL,
         basal=basal_view(B, inp.shape), total=total,
@@ -184,7 +201,7 @@ def umberger2003(
         cap commented out.
 %(options)s
     """
-    return _umberger_family("UM03", locals(), lengthening_factor=LENGTHENING_FACTOR_2003, recruitment=False, strict=True)
+    return _umberger_family("UM03", locals(), lengthening_factor=LENGTHENING_FACTOR_2003, recruitment=False)
 
 
 @model_function("UM10")
@@ -246,7 +263,7 @@ def umberger2010(
         cap commented out.
 %(options)s
     """
-    return _umberger_family("UM10", locals(), lengthening_factor=LENGTHENING_FACTOR_2010, recruitment=False, strict=False)
+    return _umberger_family("UM10", locals(), lengthening_factor=LENGTHENING_FACTOR_2010, recruitment=False)
 
 
 @model_function("UC16")
@@ -308,7 +325,7 @@ def uchida2016(
         cap commented out.
 %(options)s
     """
-    return _umberger_family("UC16", locals(), lengthening_factor=LENGTHENING_FACTOR_2003, recruitment=True, strict=False)
+    return _umberger_family("UC16", locals(), lengthening_factor=LENGTHENING_FACTOR_2003, recruitment=True)
 
 
 
