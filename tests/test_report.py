@@ -806,7 +806,10 @@ def test_measured_emg_over_the_excitations(tmp_path):
     assert emg == {} and "No measured EMG" in text
 
 
-def test_figure2_from_the_cache(study, tmp_path):
+def test_figure2_from_the_cache(study, tmp_path, monkeypatch):
+    import hashlib
+
+    from musclemetab.metabolics import figure2 as figure2_module
     from musclemetab.report import html
 
     folder = html.read_study_folder(study)
@@ -814,12 +817,31 @@ def test_figure2_from_the_cache(study, tmp_path):
     first = html._draw_figure(folder, tmp_path / "a", ("png",), "figure2_soleus")  # drawn, or cached by a test
     drawn = Path(first.paths["png"]).read_bytes()
     assert drawn.startswith(b"\x89PNG") and cache.read_bytes() == drawn  # kept after the first drawing
-    # taken from the cache the next time: a marker written into the cache file comes back
-    try:
-        cache.write_bytes(drawn + b"cached")
-        again = html._draw_figure(folder, tmp_path / "b", ("png", "svg"), "figure2_soleus")
-    finally:
-        cache.write_bytes(drawn)
-    assert Path(again.paths["png"]).read_bytes() == drawn + b"cached" and again.caption == first.caption
+    # the SHA-256 of the content beside it, worked out here
+    checksum = cache.with_name(cache.name + ".sha256")
+    assert checksum.read_text().strip() == hashlib.sha256(drawn).hexdigest()
+    # taken from the cache the next time: the figure is not drawn
+    calls = []
+    real = figure2_module.figure2
+
+    def counting(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(figure2_module, "figure2", counting)
+    again = html._draw_figure(folder, tmp_path / "b", ("png", "svg"), "figure2_soleus")
+    assert calls == [] and Path(again.paths["png"]).read_bytes() == drawn and again.caption == first.caption
     assert set(again.paths) == {"png"}  # PNG only, also when the report writes SVG
+    # a truncated cache file does not match its checksum: drawn again, the copy and the cache correct
+    for damaged in (drawn[: len(drawn) // 2], drawn[:-1] + bytes([drawn[-1] ^ 1])):
+        cache.write_bytes(damaged)
+        calls.clear()
+        redrawn = html._draw_figure(folder, tmp_path / "c", ("png",), "figure2_soleus")
+        assert calls == [1]
+        assert Path(redrawn.paths["png"]).read_bytes() == drawn and cache.read_bytes() == drawn
+    # a cache file without its checksum (an earlier version's) is not trusted either
+    checksum.unlink()
+    calls.clear()
+    html._draw_figure(folder, tmp_path / "d", ("png",), "figure2_soleus")
+    assert calls == [1] and checksum.is_file()
     assert html._figure_cache("phase_shares", ("png",)) is None

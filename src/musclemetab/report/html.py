@@ -565,10 +565,11 @@ def _draw_figure(study: StudyFolder, fig_dir: Path, formats: Sequence[str], name
     cache = _figure_cache(name, formats)
     if cache is not None:
         formats = tuple(cache)  # PNG only: the figure is the package's (save_figure2 writes SVG or PDF)
-    if cache is not None and all(p.is_file() for p in cache.values()):
+    cached = _read_cache(cache) if cache is not None else None
+    if cached is not None:
         from ..io.atomic import atomic_write_bytes
 
-        paths = {fmt: atomic_write_bytes(fig_dir / f"{name}.{fmt}", p.read_bytes()) for fmt, p in cache.items()}
+        paths = {fmt: atomic_write_bytes(fig_dir / f"{name}.{fmt}", data) for fmt, data in cached.items()}
         return FigureEntry(name, FIGURE_TITLES[name], caption=FIGURE2_CAPTION, paths=paths)
     try:
         fig, caption = build()
@@ -612,17 +613,45 @@ def _figure_cache(name: str, formats: Sequence[str]) -> dict[str, Path] | None:
     return {"png": folder / f"{name}-{h.hexdigest()[:32]}.png"}
 
 
+def _checksum_file(path: Path) -> Path:
+    """The file beside a cached figure holding the SHA-256 of its content."""
+    return path.with_name(path.name + ".sha256")
+
+
+def _read_cache(cache: dict) -> dict[str, bytes] | None:
+    """The content of a figure's cache files (format -> bytes), or ``None`` when one is
+    missing or does not match the SHA-256 stored beside it (truncated, corrupted, or written
+    by a version without the checksum): the figure is then drawn again and the cache rewritten."""
+    import hashlib
+
+    out = {}
+    for fmt, path in cache.items():
+        try:
+            data = path.read_bytes()
+            expected = _checksum_file(path).read_text(encoding="ascii").strip()
+        except (OSError, UnicodeDecodeError):
+            return None
+        if hashlib.sha256(data).hexdigest() != expected:
+            return None
+        out[fmt] = data
+    return out
+
+
 def _store_in_cache(paths: dict, cache: dict) -> None:
-    """Copy a drawn figure's files into the cache; a cache that cannot be written is skipped."""
+    """Copy a drawn figure's files into the cache, each with the SHA-256 of its content
+    beside it (see :func:`_read_cache`); a cache that cannot be written is skipped."""
+    import hashlib
     import warnings
 
     from ..errors import CacheWarning
-    from ..io.atomic import atomic_write_bytes
+    from ..io.atomic import atomic_write_bytes, atomic_write_text
 
     try:
         for fmt, target in cache.items():
             target.parent.mkdir(parents=True, exist_ok=True)
-            atomic_write_bytes(target, Path(paths[fmt]).read_bytes())
+            data = Path(paths[fmt]).read_bytes()
+            atomic_write_bytes(target, data)
+            atomic_write_text(_checksum_file(target), hashlib.sha256(data).hexdigest() + "\n")
     except OSError as exc:
         warnings.warn(f"figure cache {target.parent}: not written ({exc}); the figure is drawn again next time",
                       CacheWarning, stacklevel=3)
