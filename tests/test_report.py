@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -570,6 +571,24 @@ def test_cli(study, tmp_path, capsys):
     args = parser.parse_args(["report", str(tmp_path / "absent")])
     with pytest.raises(InputFileError, match="absent: no such study folder"):
         args.func(args)
+
+
+def test_output_closed_early_ends_quietly(study):
+    """``musclemetab report DIR | head``: no traceback when the reader leaves; status 141."""
+    import subprocess
+    import sys
+
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
+    write_report(study)  # up to date: the command below only checks and prints
+    cmd = [sys.executable, "-m", "musclemetab.cli", "report", str(study)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    proc.stdout.close()  # the reader is gone before the command prints
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 141 and err == "", err
+    # as a user meets it: piped into head, which reads one line and leaves (the command may be done first)
+    r = subprocess.run(" ".join(cmd) + " | head -1; exit ${PIPESTATUS[0]}", shell=True, executable="/bin/bash",
+                       capture_output=True, text=True, env=env)
+    assert r.returncode in (0, 141) and r.stderr == "" and r.stdout.startswith("report: ")
 
 
 def test_report_when_every_unit_failed(tmp_path):
