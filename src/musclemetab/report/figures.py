@@ -222,6 +222,36 @@ def _add_bars(ax, x, y, width, height, colours, gids, **kw) -> list:
     return rects
 
 
+def _vline(ax, x: float, ymin: float = 0.0, ymax: float = 1.0, **kw):
+    """A vertical line at ``x`` (data) from ``ymin`` to ``ymax`` (fractions of the panel's
+    height), as ``ax.axvline`` draws it. ``axvline`` reads the axis limits to decide whether to
+    rescale, which recomputes the automatic limits of every panel sharing the axis: on the
+    24 shared panels of the excitation figure, a third of its drawing time."""
+    from matplotlib.lines import Line2D
+
+    line = Line2D([x, x], [ymin, ymax], transform=ax.get_xaxis_transform(which="grid"), **kw)
+    ax.add_line(line)
+    return line
+
+
+def _hline(ax, y: float, **kw):
+    """A horizontal line across the panel at ``y`` (data), as ``ax.axhline`` (see :func:`_vline`)."""
+    from matplotlib.lines import Line2D
+
+    line = Line2D([0.0, 1.0], [y, y], transform=ax.get_yaxis_transform(which="grid"), **kw)
+    ax.add_line(line)
+    return line
+
+
+def _hspan(ax, lo: float, hi: float, **kw):
+    """A band across the panel from ``lo`` to ``hi`` (data), as ``ax.axhspan`` (see :func:`_vline`)."""
+    from matplotlib.patches import Rectangle
+
+    band = Rectangle((0.0, lo), 1.0, hi - lo, transform=ax.get_yaxis_transform(which="grid"), **kw)
+    ax.add_patch(band)
+    return band
+
+
 def _bar_limits(lo: float, hi: float, start: float | None = None) -> tuple[float, float]:
     """Axis limits over bars spanning ``lo``-``hi``: 5 % of the span added on either side, as
     matplotlib's automatic limits do, but not past ``start`` (the value the bars start from)."""
@@ -469,8 +499,8 @@ def excitations_and_fiber_lengths(
     for k, (label, found) in enumerate(rows):
         i, j = divmod(k, ncol)
         ax_e, ax_l = axes[2 * i, j], axes[2 * i + 1, j]
-        ax_l.axhspan(*PLATEAU_BAND, color="0.88", zorder=0, label="_plateau", gid="plateau")
-        ax_l.axhline(DESCENDING_LIMB, color="0.35", lw=0.8, ls="--", label="_descending", gid="descending-limb")
+        _hspan(ax_l, *PLATEAU_BAND, color="0.88", zorder=0, label="_plateau", gid="plateau")
+        _hline(ax_l, DESCENDING_LIMB, color="0.35", lw=0.8, ls="--", label="_descending", gid="descending-limb")
         for w in workflows:
             if w not in found:
                 continue
@@ -492,7 +522,7 @@ def excitations_and_fiber_lengths(
                       ls="--", label="_emg", gid="emg", zorder=1)
         for ax in (ax_e, ax_l):
             for to in toe_offs:
-                ax.axvline(to, color="k", lw=0.8, ls=":", label="_toe-off", gid="toe-off")
+                _vline(ax, to, color="k", lw=0.8, ls=":", label="_toe-off", gid="toe-off")
         _panel_title(ax_e, label, fontsize=10)
         if j == 0:
             ax_e.set_ylabel("excitation (-)")
@@ -679,8 +709,8 @@ def group_rates_over_cycle(timeseries, toe_off_pct: float, models: Sequence[str]
             if d.empty:
                 continue
             ax.plot(d["cycle_pct"], scale * d["value_W"], color=group_colour(g), lw=1.3, label=g, gid=f"group:{g}")
-        ax.axvline(to, color="k", lw=0.8, ls=":", label="_toe-off", gid="toe-off")
-        ax.axhline(0.0, color="0.7", lw=0.6, label="_zero")
+        _vline(ax, to, color="k", lw=0.8, ls=":", label="_toe-off", gid="toe-off")
+        _hline(ax, 0.0, color="0.7", lw=0.6, label="_zero")
     _label_cycle_panels(axes, models, f"metabolic rate ({unit})")
     from matplotlib.lines import Line2D
 
@@ -737,7 +767,7 @@ def whole_body_over_cycle(timeseries_by_trial: Mapping[str, object], speeds: Map
             ax.plot(d["cycle_pct"], scale * d["value_W"], color=colour[t], lw=1.4,
                     label=f"{t} ({float(speeds[t]):.2f} m/s)", gid=f"trial:{t}")
             if toe_off_pct is not None and t in toe_off_pct and np.isfinite(float(toe_off_pct[t])):
-                ax.axvline(float(toe_off_pct[t]), ymin=0.0, ymax=0.06, color=colour[t], lw=1.5,
+                _vline(ax, float(toe_off_pct[t]), 0.0, 0.06, color=colour[t], lw=1.5,
                            label="_toe-off", gid="toe-off")
     _label_cycle_panels(axes, models, f"metabolic rate ({unit})")
     from matplotlib.lines import Line2D
