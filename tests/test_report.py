@@ -206,6 +206,18 @@ def _lines(ax, prefix):
     return [ln for ln in ax.get_lines() if (ln.get_gid() or "").startswith(prefix)]
 
 
+def _bars(ax, gid):
+    """``(x, y, width, height)`` of each bar named ``gid`` (its collection's polygons), in data units."""
+    out = []
+    for c in ax.collections:
+        if c.get_gid() == gid:
+            for path in c.get_paths():
+                v = path.vertices
+                lo, hi = v.min(axis=0), v.max(axis=0)
+                out.append((lo[0], lo[1], hi[0] - lo[0], hi[1] - lo[1]))
+    return out
+
+
 def _visible_axes(fig):
     return [ax for ax in fig.axes if ax.get_visible()]
 
@@ -419,16 +431,23 @@ def test_group_shares(results):
     assert len(axes) == len(WORKFLOWS) * len(MODELS)
     assert [ax.get_title() for ax in axes[:len(ORDERED)]] == list(ORDERED)
     ax = axes[len(ORDERED) - 1]  # first row: effort-gen; last column: UM10
-    pf = [p for p in ax.patches if p.get_gid() == "group:PF"]
+    pf = _bars(ax, "group:PF")
     assert len(pf) == len(TRIALS)
     d = results[(results["workflow"] == "effort-gen") & (results["model"] == "UM10")]
     exp = d.groupby("trial")["share_PF_pct"].mean().loc[["slow", "normal", "fast"]]
-    assert np.allclose([p.get_height() for p in pf], exp)
+    assert np.allclose([h for _, _, _, h in sorted(pf)], exp)  # by x: slow, normal, fast
+    from matplotlib.colors import to_rgb
+
+    from musclemetab.report.figures import group_colour
+
+    coll = next(c for c in ax.collections if c.get_gid() == "group:PF")
+    assert np.allclose(coll.get_facecolor()[:, :3], to_rgb(group_colour("PF")))
     tops = np.zeros(len(TRIALS))
     for g in GROUPS:
-        bars = [p for p in ax.patches if p.get_gid() == f"group:{g}"]
-        tops = np.maximum(tops, [p.get_y() + p.get_height() for p in bars])
+        bars = sorted(_bars(ax, f"group:{g}"))
+        tops = np.maximum(tops, [y + h for _, y, _, h in bars])
     assert np.allclose(tops, 100.0)  # the shares add up
+    assert ax.get_ylim() == (0.0, 100.0) and ax.get_xlim()[0] < -0.375 and ax.get_xlim()[1] > 2.375  # all in view
     with pytest.raises(OptionError, match="emg-ten"):
         group_shares(results, workflows=["emg-ten"])
 
@@ -647,10 +666,13 @@ def test_per_muscle_ranked_figure_values(study):
     assert [name for _, name in ticks] == ["soleus_r", "gasmed_r", "vaslat_r"]
     d = pm[(pm.workflow == "effort-ten") & (pm.model == "UM10")]
     for trial in ("slow", "normal", "fast"):
-        bars = [p for p in ax.patches if p.get_gid() == f"trial:{trial}"]
+        bars = _bars(ax, f"trial:{trial}")
         want = d[d.trial == trial].groupby("muscle")["mean_W_per_kg"].mean()
-        widths = sorted((b.get_y(), b.get_width()) for b in bars)[::-1]  # top bar first
+        widths = sorted((y, w) for _, y, w, _ in bars)[::-1]  # top bar first
         np.testing.assert_allclose([w for _, w in widths], want[["soleus_r", "gasmed_r", "vaslat_r"]], rtol=1e-12)
+        assert all(x == 0.0 for x, _, _, _ in bars)
+        # every bar in view
+        assert max(w for _, w in widths) < ax.get_xlim()[1] and ax.get_xlim()[0] == 0.0
     # one colour per trial, the same in every panel; a shared axis
     assert fig.axes[0].get_shared_x_axes().joined(fig.axes[0], fig.axes[1])
 

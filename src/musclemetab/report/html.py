@@ -694,16 +694,16 @@ def _prepare_fork() -> None:
     objects, so that the copies do not touch (and so copy) their memory pages."""
     import gc
 
-    import matplotlib.backends.backend_agg  # noqa: F401
-    import matplotlib.figure
+    import matplotlib
     import matplotlib.legend  # noqa: F401
     from PIL import PngImagePlugin  # noqa: F401
 
-    from .figures import _new_figure
+    from .figures import _new_figure  # the figure and Agg canvas modules
 
     fig = _new_figure(1.0, 1.0)
     fig.text(0.5, 0.5, "0123456789.-% (W/kg)", fontsize=9)
-    fig.canvas.draw()
+    with matplotlib.rc_context({"text.hinting": "no_hinting"}):  # as save_figure draws
+        fig.canvas.draw()
     gc.freeze()
 
 
