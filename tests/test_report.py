@@ -795,6 +795,32 @@ def test_workers_option(study, tmp_path):
 
     with pytest.raises(OptionError, match="workers"):
         generate_report(study, tmp_path / "w0" / "report.html", workers=0)
+    # the default: the cores this process may use, at most one per figure, never the load
+    from musclemetab.report.html import default_workers
+
+    cores = len(os.sched_getaffinity(0))
+    assert default_workers() == cores and default_workers(1) == 1 and default_workers(100) == cores
+
+
+def test_a_drawing_process_that_dies_leaves_no_figure_out(study, tmp_path, monkeypatch):
+    """The copy takes the first (largest) figure and dies: the report's process draws it."""
+    from musclemetab.report import html
+
+    def dies(conn, study, fig_dir, formats, order, builders, counter):
+        with counter.get_lock():
+            counter.value += 1  # claims order[0]
+        os._exit(3)
+
+    monkeypatch.setattr(html, "_child_share", dies)
+    folder = html.read_study_folder(study)
+    entries = html.make_figures(folder, tmp_path / "figs", workers=2)
+    assert [e.name for e in entries] == list(FIGURE_NAMES)
+    for e in entries:
+        assert e.paths is not None and Path(e.paths["png"]).is_file(), e.name
+    # the same files as drawn one after the other
+    for name in ("excitations_fiber_lengths", "phase_pies"):
+        alone = html._draw_figure(folder, tmp_path / "alone", ("png",), name)
+        assert Path(alone.paths["png"]).read_bytes() == (tmp_path / "figs" / f"{name}.png").read_bytes()
 
 
 def test_measured_emg_over_the_excitations(tmp_path):
