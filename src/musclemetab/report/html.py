@@ -689,22 +689,17 @@ _FIGURE2_DRAW_COST_S = 1.5
 
 
 def _prepare_fork() -> None:
-    """Load, once before forking, what every drawing process needs: the drawing modules, the
-    PNG writer, the font and its metrics; then freeze the garbage collector's view of these
-    objects, so that the copies do not touch (and so copy) their memory pages."""
-    import gc
-
+    """Load, once before forking, what every drawing process needs: the PNG writer, the font
+    and its metrics (the drawing modules are loaded by :func:`make_figures`)."""
     import matplotlib
-    import matplotlib.legend  # noqa: F401
     from PIL import PngImagePlugin  # noqa: F401
 
-    from .figures import _new_figure  # the figure and Agg canvas modules
+    from .figures import _new_figure
 
     fig = _new_figure(1.0, 1.0)
     fig.text(0.5, 0.5, "0123456789.-% (W/kg)", fontsize=9)
     with matplotlib.rc_context({"text.hinting": "no_hinting"}):  # as save_figure draws
         fig.canvas.draw()
-    gc.freeze()
 
 
 def _draw_share(study: StudyFolder, fig_dir: Path, formats: Sequence[str], order: Sequence[str], builders: dict,
@@ -762,11 +757,20 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
     formats = tuple(formats)
     entries: dict[str, FigureEntry] = {}
     children = []
-    if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
-        ctx = multiprocessing.get_context("fork")
-        counter = ctx.Value("i", 0)
-        _prepare_fork()
-        try:
+    # The objects made so far (modules, the study's tables) live until the end: frozen, the
+    # garbage collector does not go through them at every full collection while the figures'
+    # objects come and go (half a second in one process), and the forked copies do not
+    # touch (and so copy) their memory pages. Unfrozen at the end.
+    if drawn:
+        import matplotlib.backends.backend_agg  # noqa: F401  - the drawing modules among them
+        import matplotlib.figure  # noqa: F401
+        import matplotlib.legend  # noqa: F401
+    gc.freeze()
+    try:
+        if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
+            ctx = multiprocessing.get_context("fork")
+            counter = ctx.Value("i", 0)
+            _prepare_fork()
             for _ in range(workers - 1):
                 receive, send = ctx.Pipe(duplex=False)
                 child = ctx.Process(target=_child_share, args=(send, study, fig_dir, formats, order, builders,
@@ -774,9 +778,6 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
                 child.start()
                 send.close()
                 children.append((child, receive))
-        finally:
-            gc.unfreeze()
-    try:
         if meanwhile is not None:
             meanwhile()
         if children:
@@ -791,14 +792,15 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
                     entries[name] = entry
                 receive.close()
                 child.join()
+        for n in FIGURE_NAMES:
+            if entries.get(n) is None:
+                entries[n] = _draw_figure(study, fig_dir, formats, n, builders[n])
     finally:
         for child, _ in children:
             if child.is_alive():
                 child.terminate()
                 child.join()
-    for n in FIGURE_NAMES:
-        if entries.get(n) is None:
-            entries[n] = _draw_figure(study, fig_dir, formats, n, builders[n])
+        gc.unfreeze()
     for e in entries.values():
         for ext in ("png", "svg"):
             if e.paths is None or ext not in e.paths:
