@@ -303,21 +303,21 @@ def _ok_rows(results):
 
 
 def _unique(values) -> list:
-    out = []
-    for v in values:
-        if v not in out:
-            out.append(v)
-    return out
+    """The distinct values in order of appearance (of a table column: through its ``unique``,
+    not element by element)."""
+    if hasattr(values, "unique"):
+        values = values.unique()
+    return list(dict.fromkeys(values))
 
 
 def _ordered_models(names) -> list[str]:
-    names = _unique(str(n) for n in names)
+    names = _unique(str(n) for n in _unique(names))
     known = [m for m in MODEL_COLOURS if m in names]
     return known + [m for m in names if m not in known]
 
 
 def _ordered_workflows(names) -> list[str]:
-    names = _unique(str(n) for n in names)
+    names = _unique(str(n) for n in _unique(names))
     known = [w for w in WORKFLOW_COLOURS if w in names]
     return known + [w for w in names if w not in known]
 
@@ -325,7 +325,7 @@ def _ordered_workflows(names) -> list[str]:
 def trial_order(results) -> list[str]:
     """Trials ordered by mean walking speed over subjects (trials without a speed last, by name)."""
     _require_columns(results, ("trial",), "the results table")
-    trials = _unique(str(t) for t in results["trial"])
+    trials = _unique(str(t) for t in _unique(results["trial"]))
     if "speed_m_per_s" not in results.columns:
         return sorted(trials)
     speeds = results.assign(trial=results["trial"].astype(str)).groupby("trial")["speed_m_per_s"].mean()
@@ -724,7 +724,7 @@ def group_rates_over_cycle(timeseries, toe_off_pct: float, models: Sequence[str]
     to = float(toe_off_pct)
     if not (0.0 < to < 100.0):
         raise OptionError(f"toe-off must be inside the cycle (0-100 %), not {toe_off_pct}")
-    present = _unique(s.split("/", 1)[1] for s in ts["series"].astype(str))
+    present = _unique(s.split("/", 1)[1] for s in _unique(ts["series"].astype(str)))
     groups = [g for g in GROUPS if g in present] + [g for g in present if g not in GROUPS]
     fig, axes = _cycle_panels(len(models))
     for k, m in enumerate(models):
@@ -773,9 +773,10 @@ def whole_body_over_cycle(timeseries_by_trial: Mapping[str, object], speeds: Map
         tables[t] = ts[ts["series"].astype(str) == "whole_body"]
         if tables[t].empty:
             raise OptionError(f"the time series of trial {t} has no whole_body series")
-    available = _ordered_models(m for t in labels for m in tables[t]["model"].astype(str))
+    in_trial = {t: _unique(tables[t]["model"].astype(str)) for t in labels}
+    available = _ordered_models(m for t in labels for m in in_trial[t])
     models = available if models is None else [str(m) for m in models]
-    absent = [m for m in models if all(m not in set(tables[t]["model"].astype(str)) for t in labels)]
+    absent = [m for m in models if all(m not in in_trial[t] for t in labels)]
     if absent:
         raise OptionError(f"no whole-body rate for model {', '.join(absent)}")
     from matplotlib import colormaps

@@ -438,7 +438,7 @@ def _figure_builders(study: StudyFolder) -> dict[str, Callable[[], tuple[object,
     def fig3():
         ts, to, _ = unit_timeseries(subject, trial, main_wf)
         fig = F.group_rates_over_cycle(
-            ts, to, [m for m in models if m in set(ts["model"].astype(str))] or None,
+            ts, to, [m for m in models if m in set(ts["model"].astype(str).unique())] or None,
             title=f"Metabolic rate of the muscle groups over the gait cycle ({unit}, {legs}, no basal heat): "
             f"subject {subject}, trial {trial}, {main_wf}", scale=scale, unit=unit,
         )
@@ -470,8 +470,9 @@ def _figure_builders(study: StudyFolder) -> dict[str, Callable[[], tuple[object,
             raise OptionError(
                 "fewer than two speeds with time series" + (f": {'; '.join(skipped)}" if skipped else "")
             )
+        present = {v for x in tables.values() for v in x["model"].astype(str).unique()}
         fig = F.whole_body_over_cycle(
-            tables, speeds, [m for m in models if any(m in set(x["model"].astype(str)) for x in tables.values())],
+            tables, speeds, [m for m in models if m in present],
             toe_off_pct=toes,
             title=f"Whole-body metabolic rate over the gait cycle across speeds ({unit}, {legs}, summed "
             f"muscles, no basal heat): subject {subject}, {main_wf}", scale=scale, unit=unit,
@@ -494,8 +495,8 @@ def _figure_builders(study: StudyFolder) -> dict[str, Callable[[], tuple[object,
         if "speed_m_per_s" in ok.columns:
             sp = ok.drop_duplicates(["subject", "trial"])[["subject", "trial", "speed_m_per_s"]]
             pm = pm.merge(sp.astype({"subject": str, "trial": str}), on=["subject", "trial"], how="left")
-        fig = F.per_muscle_ranked(pm, workflow=main_wf if main_wf in set(pm["workflow"].astype(str)) else None,
-                                  models=[m for m in models if m in set(pm["model"].astype(str))] or None)
+        fig = F.per_muscle_ranked(pm, workflow=main_wf if main_wf in set(pm["workflow"].astype(str).unique()) else None,
+                                  models=[m for m in models if m in set(pm["model"].astype(str).unique())] or None)
         cap = (f"Workflow {main_wf}. The 15 muscles with the largest cycle-average metabolic rate of each model "
                "(W per kg of body mass, one leg, without basal heat; mean over subjects), one bar per trial "
                "(light: slow, dark: fast); every muscle is in per_muscle.csv.")
