@@ -723,9 +723,15 @@ def _draw_share(study: StudyFolder, fig_dir: Path, formats: Sequence[str], order
 
 
 def _child_share(conn, *args) -> None:
-    """A forked process's part of :func:`_draw_share`: entries sent through ``conn``."""
-    _draw_share(*args, send=lambda name, entry: conn.send((name, entry)))
-    conn.close()
+    """A forked process's part of :func:`_draw_share`: entries sent through ``conn``. Ctrl-C
+    (which reaches every process of the command) or the report's process gone end it quietly:
+    the report's process says what happened."""
+    try:
+        _draw_share(*args, send=lambda name, entry: conn.send((name, entry)))
+    except (KeyboardInterrupt, BrokenPipeError):
+        pass
+    finally:
+        conn.close()
 
 
 def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequence[str] = ("png",),
