@@ -6,17 +6,19 @@
 measurement runs a new process, as a user does:
 
 1. ``musclemetab report DIR --force`` (every figure drawn, the page written) with the default
-   worker processes (the idle cores), with ``--workers 2`` and with ``--workers 1``; with ``--baseline-src SRC`` also the same
-   command with another source tree of the package first on ``PYTHONPATH`` (e.g. a checkout
-   of an earlier version: ``git worktree add /tmp/base main`` then ``--baseline-src
-   /tmp/base/src``). Target: under 3 s on an idle 2-core machine.
+   worker processes (the usable cores), with ``--workers 2`` and with ``--workers 1``; with
+   ``--baseline-src SRC`` also the same command (default workers and ``--workers 1``) with
+   another source tree of the package first on ``PYTHONPATH`` (e.g. a checkout of an earlier
+   version: ``git worktree add /tmp/base main`` then ``--baseline-src /tmp/base/src``).
+   Target: under 3 s on an idle 2-core machine.
 2. ``musclemetab report DIR`` with nothing changed (the page is up to date: the cost of
    checking the content key).
 3. When ``DIR`` was made by ``musclemetab demo``: ``musclemetab demo --out DIR`` again, nothing
    changed (every unit up to date, the report cached). Target: under 2 s.
 
 Printed: the median and the best wall time (s) and the median processor time of the process and its
-workers (user + system, s), and the ratios to the baseline measured in the same run. The
+workers (user + system, s), and the ratios of the baseline's wall and processor times to this
+version's, with the same workers option, measured in the same run. The
 measurements alternate between the configurations so that a change in the machine's load
 affects them alike.
 """
@@ -66,7 +68,8 @@ def main(argv=None) -> int:
                "this version, --workers 2": (_env(here), ["report", folder, "--force", "--workers", "2"]),
                "this version, --workers 1": (_env(here), ["report", folder, "--force", "--workers", "1"])}
     if args.baseline_src:
-        configs["baseline"] = (_env(args.baseline_src), ["report", folder, "--force"])
+        configs["baseline, default workers"] = (_env(args.baseline_src), ["report", folder, "--force"])
+        configs["baseline, --workers 1"] = (_env(args.baseline_src), ["report", folder, "--force", "--workers", "1"])
     print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}; study folder {folder}")
     times = {k: [] for k in configs}
     for _ in range(args.repeats):
@@ -77,15 +80,18 @@ def main(argv=None) -> int:
     if (Path(folder) / "study.toml").is_file() and Path(folder).joinpath("study.json").is_file():
         times["demo again, nothing changed"] = [
             _run(["demo", "--out", folder, "--no-progress"], _env(here)) for _ in range(args.repeats)]
-    ref = statistics.median(w for w, _ in times["baseline"]) if "baseline" in times else None
+    ref = {k: (statistics.median(w for w, _ in v), statistics.median(c for _, c in v))
+           for k, v in times.items() if k.startswith("baseline")}
     print(f"{'measurement':36s} {'wall (s)':>9s} {'best':>6s} {'cpu (s)':>8s}"
-          + (f" {'baseline / this':>16s}" if ref else ""))
+          + (f" {'baseline/this: wall':>20s} {'cpu':>6s}" if ref else ""))
     for name, values in times.items():
         wall = statistics.median(w for w, _ in values)
         cpu = statistics.median(c for _, c in values)
         line = f"{name:36s} {wall:9.2f} {min(w for w, _ in values):6.2f} {cpu:8.2f}"
-        if ref and name.startswith(("this version", "baseline")):
-            line += f" {ref / wall:15.2f}x"
+        # against the baseline with the same workers option (default workers for --workers 2)
+        base = ref.get("baseline, --workers 1" if name.endswith("--workers 1") else "baseline, default workers")
+        if base and name.startswith("this version"):
+            line += f" {base[0] / wall:19.2f}x {base[1] / cpu:5.2f}x"
         print(line)
     print(f"load average after: {os.getloadavg()[0]:.2f}")
     return 0

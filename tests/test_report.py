@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -203,6 +204,18 @@ def results(study) -> pd.DataFrame:
 # ------------------------------------------------------------------------------- helpers
 def _lines(ax, prefix):
     return [ln for ln in ax.get_lines() if (ln.get_gid() or "").startswith(prefix)]
+
+
+def _bars(ax, gid):
+    """``(x, y, width, height)`` of each bar named ``gid`` (its collection's polygons), in data units."""
+    out = []
+    for c in ax.collections:
+        if c.get_gid() == gid:
+            for path in c.get_paths():
+                v = path.vertices
+                lo, hi = v.min(axis=0), v.max(axis=0)
+                out.append((lo[0], lo[1], hi[0] - lo[0], hi[1] - lo[1]))
+    return out
 
 
 def _visible_axes(fig):
@@ -418,16 +431,23 @@ def test_group_shares(results):
     assert len(axes) == len(WORKFLOWS) * len(MODELS)
     assert [ax.get_title() for ax in axes[:len(ORDERED)]] == list(ORDERED)
     ax = axes[len(ORDERED) - 1]  # first row: effort-gen; last column: UM10
-    pf = [p for p in ax.patches if p.get_gid() == "group:PF"]
+    pf = _bars(ax, "group:PF")
     assert len(pf) == len(TRIALS)
     d = results[(results["workflow"] == "effort-gen") & (results["model"] == "UM10")]
     exp = d.groupby("trial")["share_PF_pct"].mean().loc[["slow", "normal", "fast"]]
-    assert np.allclose([p.get_height() for p in pf], exp)
+    assert np.allclose([h for _, _, _, h in sorted(pf)], exp)  # by x: slow, normal, fast
+    from matplotlib.colors import to_rgb
+
+    from musclemetab.report.figures import group_colour
+
+    coll = next(c for c in ax.collections if c.get_gid() == "group:PF")
+    assert np.allclose(coll.get_facecolor()[:, :3], to_rgb(group_colour("PF")))
     tops = np.zeros(len(TRIALS))
     for g in GROUPS:
-        bars = [p for p in ax.patches if p.get_gid() == f"group:{g}"]
-        tops = np.maximum(tops, [p.get_y() + p.get_height() for p in bars])
+        bars = sorted(_bars(ax, f"group:{g}"))
+        tops = np.maximum(tops, [y + h for _, y, _, h in bars])
     assert np.allclose(tops, 100.0)  # the shares add up
+    assert ax.get_ylim() == (0.0, 100.0) and ax.get_xlim()[0] < -0.375 and ax.get_xlim()[1] > 2.375  # all in view
     with pytest.raises(OptionError, match="emg-ten"):
         group_shares(results, workflows=["emg-ten"])
 
@@ -572,6 +592,24 @@ def test_cli(study, tmp_path, capsys):
         args.func(args)
 
 
+def test_output_closed_early_ends_quietly(study):
+    """``musclemetab report DIR | head``: no traceback when the reader leaves; status 141."""
+    import subprocess
+    import sys
+
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
+    write_report(study)  # up to date: the command below only checks and prints
+    cmd = [sys.executable, "-m", "musclemetab.cli", "report", str(study)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    proc.stdout.close()  # the reader is gone before the command prints
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 141 and err == "", err
+    # as a user meets it: piped into head, which reads one line and leaves (the command may be done first)
+    r = subprocess.run(" ".join(cmd) + " | head -1; exit ${PIPESTATUS[0]}", shell=True, executable="/bin/bash",
+                       capture_output=True, text=True, env=env)
+    assert r.returncode in (0, 141) and r.stderr == "" and r.stdout.startswith("report: ")
+
+
 def test_report_when_every_unit_failed(tmp_path):
     root = tmp_path / "failed"
     root.mkdir()
@@ -628,10 +666,13 @@ def test_per_muscle_ranked_figure_values(study):
     assert [name for _, name in ticks] == ["soleus_r", "gasmed_r", "vaslat_r"]
     d = pm[(pm.workflow == "effort-ten") & (pm.model == "UM10")]
     for trial in ("slow", "normal", "fast"):
-        bars = [p for p in ax.patches if p.get_gid() == f"trial:{trial}"]
+        bars = _bars(ax, f"trial:{trial}")
         want = d[d.trial == trial].groupby("muscle")["mean_W_per_kg"].mean()
-        widths = sorted((b.get_y(), b.get_width()) for b in bars)[::-1]  # top bar first
+        widths = sorted((y, w) for _, y, w, _ in bars)[::-1]  # top bar first
         np.testing.assert_allclose([w for _, w in widths], want[["soleus_r", "gasmed_r", "vaslat_r"]], rtol=1e-12)
+        assert all(x == 0.0 for x, _, _, _ in bars)
+        # every bar in view
+        assert max(w for _, w in widths) < ax.get_xlim()[1] and ax.get_xlim()[0] == 0.0
     # one colour per trial, the same in every panel; a shared axis
     assert fig.axes[0].get_shared_x_axes().joined(fig.axes[0], fig.axes[1])
 
@@ -754,6 +795,32 @@ def test_workers_option(study, tmp_path):
 
     with pytest.raises(OptionError, match="workers"):
         generate_report(study, tmp_path / "w0" / "report.html", workers=0)
+    # the default: the cores this process may use, at most one per figure, never the load
+    from musclemetab.report.html import default_workers
+
+    cores = len(os.sched_getaffinity(0))
+    assert default_workers() == cores and default_workers(1) == 1 and default_workers(100) == cores
+
+
+def test_a_drawing_process_that_dies_leaves_no_figure_out(study, tmp_path, monkeypatch):
+    """The copy takes the first (largest) figure and dies: the report's process draws it."""
+    from musclemetab.report import html
+
+    def dies(conn, study, fig_dir, formats, order, builders, counter):
+        with counter.get_lock():
+            counter.value += 1  # claims order[0]
+        os._exit(3)
+
+    monkeypatch.setattr(html, "_child_share", dies)
+    folder = html.read_study_folder(study)
+    entries = html.make_figures(folder, tmp_path / "figs", workers=2)
+    assert [e.name for e in entries] == list(FIGURE_NAMES)
+    for e in entries:
+        assert e.paths is not None and Path(e.paths["png"]).is_file(), e.name
+    # the same files as drawn one after the other
+    for name in ("excitations_fiber_lengths", "phase_pies"):
+        alone = html._draw_figure(folder, tmp_path / "alone", ("png",), name)
+        assert Path(alone.paths["png"]).read_bytes() == (tmp_path / "figs" / f"{name}.png").read_bytes()
 
 
 def test_measured_emg_over_the_excitations(tmp_path):
@@ -806,7 +873,10 @@ def test_measured_emg_over_the_excitations(tmp_path):
     assert emg == {} and "No measured EMG" in text
 
 
-def test_figure2_from_the_cache(study, tmp_path):
+def test_figure2_from_the_cache(study, tmp_path, monkeypatch):
+    import hashlib
+
+    from musclemetab.metabolics import figure2 as figure2_module
     from musclemetab.report import html
 
     folder = html.read_study_folder(study)
@@ -814,12 +884,31 @@ def test_figure2_from_the_cache(study, tmp_path):
     first = html._draw_figure(folder, tmp_path / "a", ("png",), "figure2_soleus")  # drawn, or cached by a test
     drawn = Path(first.paths["png"]).read_bytes()
     assert drawn.startswith(b"\x89PNG") and cache.read_bytes() == drawn  # kept after the first drawing
-    # taken from the cache the next time: a marker written into the cache file comes back
-    try:
-        cache.write_bytes(drawn + b"cached")
-        again = html._draw_figure(folder, tmp_path / "b", ("png", "svg"), "figure2_soleus")
-    finally:
-        cache.write_bytes(drawn)
-    assert Path(again.paths["png"]).read_bytes() == drawn + b"cached" and again.caption == first.caption
+    # the SHA-256 of the content beside it, worked out here
+    checksum = cache.with_name(cache.name + ".sha256")
+    assert checksum.read_text().strip() == hashlib.sha256(drawn).hexdigest()
+    # taken from the cache the next time: the figure is not drawn
+    calls = []
+    real = figure2_module.figure2
+
+    def counting(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(figure2_module, "figure2", counting)
+    again = html._draw_figure(folder, tmp_path / "b", ("png", "svg"), "figure2_soleus")
+    assert calls == [] and Path(again.paths["png"]).read_bytes() == drawn and again.caption == first.caption
     assert set(again.paths) == {"png"}  # PNG only, also when the report writes SVG
+    # a truncated cache file does not match its checksum: drawn again, the copy and the cache correct
+    for damaged in (drawn[: len(drawn) // 2], drawn[:-1] + bytes([drawn[-1] ^ 1])):
+        cache.write_bytes(damaged)
+        calls.clear()
+        redrawn = html._draw_figure(folder, tmp_path / "c", ("png",), "figure2_soleus")
+        assert calls == [1]
+        assert Path(redrawn.paths["png"]).read_bytes() == drawn and cache.read_bytes() == drawn
+    # a cache file without its checksum (an earlier version's) is not trusted either
+    checksum.unlink()
+    calls.clear()
+    html._draw_figure(folder, tmp_path / "d", ("png",), "figure2_soleus")
+    assert calls == [1] and checksum.is_file()
     assert html._figure_cache("phase_shares", ("png",)) is None

@@ -37,8 +37,8 @@ def add_report_parser(subparsers) -> None:
                    help="redraw even when the inputs did not change (default: the report is rebuilt only when "
                    "the study's results, units or the package changed)")
     p.add_argument("--workers", type=int, metavar="N",
-                   help="processes drawing the figures side by side (default: the idle cores, i.e. the cores this "
-                   "process may use less the load average, at least 1; 1 draws them one after the other)")
+                   help="processes drawing the figures side by side (default: the cores this process may use, at "
+                   "most one per figure; 1 draws them one after the other in this process)")
     p.set_defaults(func=report_command)
 
 

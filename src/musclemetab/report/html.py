@@ -66,10 +66,6 @@ FIGURE_NAMES = (
     "figure2_soleus",
 )
 
-#: Figures handed to the worker processes first: the slowest to draw.
-_DRAW_FIRST = ("figure2_soleus", "excitations_fiber_lengths", "group_shares")
-
-
 
 
 # ------------------------------------------------------------------------------ reading
@@ -482,7 +478,7 @@ def _figure_builders(study: StudyFolder) -> dict[str, Callable[[], tuple[object,
     def fig3():
         ts, to, _ = unit_timeseries(subject, trial, main_wf)
         fig = F.group_rates_over_cycle(
-            ts, to, [m for m in models if m in set(ts["model"].astype(str))] or None,
+            ts, to, [m for m in models if m in set(ts["model"].astype(str).unique())] or None,
             title=f"Metabolic rate of the muscle groups over the gait cycle ({unit}, {legs}, no basal heat): "
             f"subject {subject}, trial {trial}, {main_wf}", scale=scale, unit=unit,
         )
@@ -514,8 +510,9 @@ def _figure_builders(study: StudyFolder) -> dict[str, Callable[[], tuple[object,
             raise OptionError(
                 "fewer than two speeds with time series" + (f": {'; '.join(skipped)}" if skipped else "")
             )
+        present = {v for x in tables.values() for v in x["model"].astype(str).unique()}
         fig = F.whole_body_over_cycle(
-            tables, speeds, [m for m in models if any(m in set(x["model"].astype(str)) for x in tables.values())],
+            tables, speeds, [m for m in models if m in present],
             toe_off_pct=toes,
             title=f"Whole-body metabolic rate over the gait cycle across speeds ({unit}, {legs}, summed "
             f"muscles, no basal heat): subject {subject}, {main_wf}", scale=scale, unit=unit,
@@ -538,8 +535,8 @@ def _figure_builders(study: StudyFolder) -> dict[str, Callable[[], tuple[object,
         if "speed_m_per_s" in ok.columns:
             sp = ok.drop_duplicates(["subject", "trial"])[["subject", "trial", "speed_m_per_s"]]
             pm = pm.merge(sp.astype({"subject": str, "trial": str}), on=["subject", "trial"], how="left")
-        fig = F.per_muscle_ranked(pm, workflow=main_wf if main_wf in set(pm["workflow"].astype(str)) else None,
-                                  models=[m for m in models if m in set(pm["model"].astype(str))] or None)
+        fig = F.per_muscle_ranked(pm, workflow=main_wf if main_wf in set(pm["workflow"].astype(str).unique()) else None,
+                                  models=[m for m in models if m in set(pm["model"].astype(str).unique())] or None)
         cap = (f"Workflow {main_wf}. The 15 muscles with the largest cycle-average metabolic rate of each model "
                "(W per kg of body mass, one leg, without basal heat; mean over subjects), one bar per trial "
                "(light: slow, dark: fast); every muscle is in per_muscle.csv.")
@@ -605,10 +602,11 @@ def _draw_figure(study: StudyFolder, fig_dir: Path, formats: Sequence[str], name
     cache = _figure_cache(name, formats)
     if cache is not None:
         formats = tuple(cache)  # PNG only: the figure is the package's (save_figure2 writes SVG or PDF)
-    if cache is not None and all(p.is_file() for p in cache.values()):
+    cached = _read_cache(cache) if cache is not None else None
+    if cached is not None:
         from ..io.atomic import atomic_write_bytes
 
-        paths = {fmt: atomic_write_bytes(fig_dir / f"{name}.{fmt}", p.read_bytes()) for fmt, p in cache.items()}
+        paths = {fmt: atomic_write_bytes(fig_dir / f"{name}.{fmt}", data) for fmt, data in cached.items()}
         return FigureEntry(name, FIGURE_TITLES[name], caption=FIGURE2_CAPTION, paths=paths)
     try:
         fig, caption = build()
@@ -652,45 +650,128 @@ def _figure_cache(name: str, formats: Sequence[str]) -> dict[str, Path] | None:
     return {"png": folder / f"{name}-{h.hexdigest()[:32]}.png"}
 
 
+def _checksum_file(path: Path) -> Path:
+    """The file beside a cached figure holding the SHA-256 of its content."""
+    return path.with_name(path.name + ".sha256")
+
+
+def _read_cache(cache: dict) -> dict[str, bytes] | None:
+    """The content of a figure's cache files (format -> bytes), or ``None`` when one is
+    missing or does not match the SHA-256 stored beside it (truncated, corrupted, or written
+    by a version without the checksum): the figure is then drawn again and the cache rewritten."""
+    import hashlib
+
+    out = {}
+    for fmt, path in cache.items():
+        try:
+            data = path.read_bytes()
+            expected = _checksum_file(path).read_text(encoding="ascii").strip()
+        except (OSError, UnicodeDecodeError):
+            return None
+        if hashlib.sha256(data).hexdigest() != expected:
+            return None
+        out[fmt] = data
+    return out
+
+
 def _store_in_cache(paths: dict, cache: dict) -> None:
-    """Copy a drawn figure's files into the cache; a cache that cannot be written is skipped."""
+    """Copy a drawn figure's files into the cache, each with the SHA-256 of its content
+    beside it (see :func:`_read_cache`); a cache that cannot be written is skipped."""
+    import hashlib
     import warnings
 
     from ..errors import CacheWarning
-    from ..io.atomic import atomic_write_bytes
+    from ..io.atomic import atomic_write_bytes, atomic_write_text
 
     try:
         for fmt, target in cache.items():
             target.parent.mkdir(parents=True, exist_ok=True)
-            atomic_write_bytes(target, Path(paths[fmt]).read_bytes())
+            data = Path(paths[fmt]).read_bytes()
+            atomic_write_bytes(target, data)
+            atomic_write_text(_checksum_file(target), hashlib.sha256(data).hexdigest() + "\n")
     except OSError as exc:
         warnings.warn(f"figure cache {target.parent}: not written ({exc}); the figure is drawn again next time",
                       CacheWarning, stacklevel=3)
 
 
-def default_workers() -> int:
-    """Worker processes drawing the figures by default: the idle cores of those this process
-    may use, at least 1.
+def default_workers(figures: int | None = None) -> int:
+    """Processes drawing the figures by default: the cores this process may use, at most one
+    per figure (``figures``), at least 1.
 
-    Idle: the cores less the processes running elsewhere at this moment (Linux:
-    ``/proc/loadavg``, whose fourth field counts the runnable processes, this one included;
-    elsewhere the one-minute load average). On a machine busy with other work, more
-    processes than idle cores only take turns: measured on two cores at a load average of
-    3.9, two workers redrew the demo's report in 7.4 s, one process in 6.3 s.
+    The machine's load is not read: a snapshot of it changes from one moment to the next,
+    and the load average counts the last minute's work (a report drawn just before among
+    it). Another process costs little (it starts as a copy of this one and draws its share;
+    this process draws too), so on a busy machine two processes take turns with the others
+    no slower than one.
     """
     try:
         cores = len(os.sched_getaffinity(0))
     except (AttributeError, OSError):
         cores = os.cpu_count() or 1
-    try:
-        with open("/proc/loadavg", encoding="ascii") as f:
-            busy = max(0, int(f.read().split()[3].split("/")[0]) - 1)
-    except (OSError, IndexError, ValueError):
+    return max(1, min(cores, figures if figures is not None else cores))
+
+
+#: Processor time (s) of each figure in the demo's report (drawn and saved as PNG, the least
+#: of four drawings in one process): the figures are handed out largest first, so that the
+#: processes end together.
+_DRAW_COST_S = {
+    "excitations_fiber_lengths": 0.68,
+    "per_muscle_ranked": 0.41,
+    "group_shares": 0.38,
+    "estimated_vs_measured": 0.35,  # not in the demo (no measured rates): like the panels over the cycle
+    "group_rates_over_cycle": 0.34,
+    "rates_against_speed": 0.31,
+    "whole_body_over_cycle": 0.25,
+    "phase_shares": 0.22,
+    "phase_pies": 0.16,
+    "figure2_soleus": 0.01,  # a copy from the cache after its first drawing
+}
+#: Processor time (s) of the Figure-2 plot when it is not in the cache.
+_FIGURE2_DRAW_COST_S = 3.0
+
+
+def _prepare_fork() -> None:
+    """Load, once before forking, what every drawing process needs: the PNG writer, the font
+    and its metrics (the drawing modules are loaded by :func:`make_figures`)."""
+    import matplotlib
+    from PIL import PngImagePlugin  # noqa: F401
+
+    from .figures import _new_figure
+
+    fig = _new_figure(1.0, 1.0)
+    fig.text(0.5, 0.5, "0123456789.-% (W/kg)", fontsize=9)
+    with matplotlib.rc_context({"text.hinting": "no_hinting"}):  # as save_figure draws
+        fig.canvas.draw()
+
+
+def _draw_share(study: StudyFolder, fig_dir: Path, formats: Sequence[str], order: Sequence[str], builders: dict,
+                counter, send: Callable[[str, FigureEntry | None], None]) -> None:
+    """Draw the figures of ``order`` claimed one at a time through the shared ``counter``
+    (so that every process takes the next figure when it is free); ``send`` each entry, or
+    ``None`` for a figure that raised (the report's process then draws it and raises)."""
+    while True:
+        with counter.get_lock():
+            i = counter.value
+            counter.value += 1
+        if i >= len(order):
+            return
         try:
-            busy = int(round(os.getloadavg()[0]))
-        except (AttributeError, OSError):
-            busy = 0
-    return max(1, cores - busy)
+            entry = _draw_figure(study, fig_dir, formats, order[i], builders[order[i]])
+        except Exception:  # noqa: BLE001 - drawn again where the error reaches the caller
+            entry = None
+        send(order[i], entry)
+
+
+def _child_share(conn, *args) -> None:
+    """A forked process's part of :func:`_draw_share`: entries sent through ``conn``. Ctrl-C
+    (which reaches every process of the command) or the report's process gone end it quietly:
+    the report's process says what happened."""
+    try:
+        _draw_share(*args, send=lambda name, entry: conn.send((name, entry)))
+    except (KeyboardInterrupt, BrokenPipeError):
+        pass
+    finally:
+        conn.close()
 
 
 def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequence[str] = ("png",),
@@ -698,44 +779,76 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
     """Draw the figures the study's data support and save them in ``fig_dir`` (``formats``:
     PNG, and SVG when asked for).
 
-    ``workers`` processes draw the figures side by side (default :func:`default_workers`, the
-    idle cores;
-    1 draws them in this process; parallel drawing needs the ``fork`` start method and falls
-    back to one process where it is not available). Returns one :class:`FigureEntry` per name
-    of :data:`FIGURE_NAMES`, with the file paths or the note saying why the figure is not
-    drawn (the files of a figure not drawn are removed from ``fig_dir``, so that no figure
-    of an earlier report remains).
+    ``workers`` processes draw the figures side by side (default :func:`default_workers`):
+    this process and ``workers - 1`` copies of it (the ``fork`` start method; where it is not
+    available, this process draws every figure). Each takes the next figure, largest first,
+    when it is free; this process first runs ``meanwhile`` (the page's tables). Returns one
+    :class:`FigureEntry` per name of :data:`FIGURE_NAMES`, with the file paths or the note
+    saying why the figure is not drawn (the files of a figure not drawn are removed from
+    ``fig_dir``, so that no figure of an earlier report remains).
     """
+    import gc
     import multiprocessing
 
     fig_dir = Path(fig_dir)
-    workers = default_workers() if workers is None else int(workers)
-    if workers < 1:
-        raise OptionError(f"workers (--workers) must be at least 1, not {workers}")
     builders = _figure_builders(study)
     drawn = [n for n in FIGURE_NAMES if not isinstance(builders[n], str)]
-    entries: dict[str, FigureEntry] = {}
+    workers = default_workers(len(drawn)) if workers is None else int(workers)
+    if workers < 1:
+        raise OptionError(f"workers (--workers) must be at least 1, not {workers}")
     workers = min(workers, len(drawn))
-    if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
-        from concurrent.futures import ProcessPoolExecutor
-
-        # forked workers start with this process' modules: import the drawing ones once, here
-        import matplotlib.backends.backend_agg  # noqa: F401
+    cost = dict(_DRAW_COST_S)
+    cache = _figure_cache("figure2_soleus", formats)
+    if cache is not None and not all(f.is_file() for f in cache.values()):
+        cost["figure2_soleus"] = _FIGURE2_DRAW_COST_S  # not in the cache yet: drawn
+    order = sorted(drawn, key=lambda n: -cost.get(n, 0.3))
+    formats = tuple(formats)
+    entries: dict[str, FigureEntry] = {}
+    children = []
+    # The objects made so far (modules, the study's tables) live until the end: frozen, the
+    # garbage collector does not go through them at every full collection while the figures'
+    # objects come and go (half a second in one process), and the forked copies do not
+    # touch (and so copy) their memory pages. Unfrozen at the end.
+    if drawn:
+        import matplotlib.backends.backend_agg  # noqa: F401  - the drawing modules among them
         import matplotlib.figure  # noqa: F401
         import matplotlib.legend  # noqa: F401
-
-        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as pool:
-            order = [n for n in _DRAW_FIRST if n in drawn] + [n for n in drawn if n not in _DRAW_FIRST]
-            futures = {n: pool.submit(_draw_figure, study, fig_dir, tuple(formats), n) for n in order}
-            if meanwhile is not None:
-                meanwhile()
-                meanwhile = None
-            entries = {n: f.result() for n, f in futures.items()}
-    if meanwhile is not None:
-        meanwhile()
-    for n in FIGURE_NAMES:
-        if n not in entries:
-            entries[n] = _draw_figure(study, fig_dir, formats, n, builders[n])
+    gc.freeze()
+    try:
+        if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
+            ctx = multiprocessing.get_context("fork")
+            counter = ctx.Value("i", 0)
+            _prepare_fork()
+            for _ in range(workers - 1):
+                receive, send = ctx.Pipe(duplex=False)
+                child = ctx.Process(target=_child_share, args=(send, study, fig_dir, formats, order, builders,
+                                                               counter), daemon=True)
+                child.start()
+                send.close()
+                children.append((child, receive))
+        if meanwhile is not None:
+            meanwhile()
+        if children:
+            _draw_share(study, fig_dir, formats, order, builders, counter,
+                        send=lambda name, entry: entries.__setitem__(name, entry))
+            for child, receive in children:
+                while True:
+                    try:
+                        name, entry = receive.recv()
+                    except EOFError:  # the process is done (or died: its figures are drawn below)
+                        break
+                    entries[name] = entry
+                receive.close()
+                child.join()
+        for n in FIGURE_NAMES:
+            if entries.get(n) is None:
+                entries[n] = _draw_figure(study, fig_dir, formats, n, builders[n])
+    finally:
+        for child, _ in children:
+            if child.is_alive():
+                child.terminate()
+                child.join()
+        gc.unfreeze()
     for e in entries.values():
         for ext in ("png", "svg"):
             if e.paths is None or ext not in e.paths:
