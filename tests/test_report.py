@@ -889,23 +889,28 @@ def test_figure2_from_the_cache(study, tmp_path, monkeypatch):
     assert checksum.read_text().strip() == hashlib.sha256(drawn).hexdigest()
     # taken from the cache the next time: the figure is not drawn
     calls = []
-    real = figure2_module.figure2
 
-    def counting(*args, **kwargs):
+    def counting(*args, **kwargs):  # a small stand-in: what matters below is whether it is drawn
+        from matplotlib.figure import Figure
+
         calls.append(1)
-        return real(*args, **kwargs)
+        fig = Figure(figsize=(2, 1))
+        fig.add_subplot().plot([0, 1], [1, 0])
+        return fig
 
     monkeypatch.setattr(figure2_module, "figure2", counting)
     again = html._draw_figure(folder, tmp_path / "b", ("png", "svg"), "figure2_soleus")
     assert calls == [] and Path(again.paths["png"]).read_bytes() == drawn and again.caption == first.caption
     assert set(again.paths) == {"png"}  # PNG only, also when the report writes SVG
-    # a truncated cache file does not match its checksum: drawn again, the copy and the cache correct
+    # a truncated or altered cache file does not match its checksum: drawn again, and the copy, the
+    # cache and its checksum are those of the new drawing
     for damaged in (drawn[: len(drawn) // 2], drawn[:-1] + bytes([drawn[-1] ^ 1])):
         cache.write_bytes(damaged)
         calls.clear()
-        redrawn = html._draw_figure(folder, tmp_path / "c", ("png",), "figure2_soleus")
-        assert calls == [1]
-        assert Path(redrawn.paths["png"]).read_bytes() == drawn and cache.read_bytes() == drawn
+        redrawn = Path(html._draw_figure(folder, tmp_path / "c", ("png",), "figure2_soleus").paths["png"]).read_bytes()
+        assert calls == [1] and redrawn.startswith(b"\x89PNG") and redrawn not in (drawn, damaged)
+        assert cache.read_bytes() == redrawn
+        assert checksum.read_text().strip() == hashlib.sha256(redrawn).hexdigest()
     # a cache file without its checksum (an earlier version's) is not trusted either
     checksum.unlink()
     calls.clear()
