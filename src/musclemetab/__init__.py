@@ -9,13 +9,21 @@ cannot share a process (they ship the same shared library), so OpenSim runs in a
 process (:mod:`musclemetab.opensim_bridge`) and CasADi in the caller's.
 """
 
-from importlib.metadata import PackageNotFoundError, version as _version
-
 from .errors import MusclemetabError
 
-try:
-    __version__ = _version("musclemetab")
-except PackageNotFoundError:  # pragma: no cover - running from a source tree
-    __version__ = "0+unknown"
-
 __all__ = ["MusclemetabError", "__version__"]
+
+
+def __getattr__(name):
+    # ``__version__`` is read from the installed package's metadata when first asked for:
+    # importing importlib.metadata costs a tenth of a second that most commands never need.
+    if name == "__version__":
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            value = version("musclemetab")
+        except PackageNotFoundError:  # pragma: no cover - running from a source tree
+            value = "0+unknown"
+        globals()["__version__"] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

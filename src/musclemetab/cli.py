@@ -18,7 +18,6 @@ import os
 import sys
 import warnings
 
-from . import __version__
 from .errors import MuscleTableWarning, MusclemetabError
 
 # Subcommands provided by the stages of the method: (name, module, function adding the parser).
@@ -112,6 +111,16 @@ def _show_warning(message, category, filename, lineno, file=None, line=None):
         print(warnings.formatwarning(message, category, filename, lineno, line).rstrip(), file=file or sys.stderr)
 
 
+class _Version(argparse.Action):
+    """``--version``: the package's version, read only when asked for."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        from . import __version__
+
+        print(f"musclemetab {__version__}")
+        parser.exit()
+
+
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The ``musclemetab`` parser; with ``command``, only that subcommand (its module alone is
     imported, which keeps the start of a command short)."""
@@ -119,7 +128,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         prog="musclemetab",
         description="Muscle-by-muscle, moment-by-moment metabolic energy of walking.",
     )
-    parser.add_argument("--version", action="version", version=f"musclemetab {__version__}")
+    parser.add_argument("--version", action=_Version, nargs=0, help="show the version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     names = {name for name, _, _ in _SUBCOMMANDS}

@@ -281,9 +281,9 @@ def figure2(data: dict | None = None, **config):
     acts = data["activations"]
     v, ln = data["velocity"], data["length"]
     nrow = len(models) + 1
-    fig = Figure(figsize=(15, 2.6 * nrow + 1.2), layout="constrained")
+    fig = Figure(figsize=(15, 2.6 * nrow + 1.2))  # margins set below, once the title's height is known
     FigureCanvasAgg(fig)
-    axes = fig.subplots(nrow, 4, squeeze=False)
+    axes = fig.subplots(nrow, 4, squeeze=False, sharex="col")  # each column: one abscissa
     shades = np.linspace(0.35, 1.0, len(acts))
     for i, m in enumerate(models):
         col = _COLOURS.get(m, "k")
@@ -316,10 +316,12 @@ def figure2(data: dict | None = None, **config):
     axes[last, 1].set_ylim(0, 1.2)
     axes[last, 3].set_ylim(0, 1.2)
     axes[last, 0].legend(fontsize=7, ncol=2)
-    for ax in axes[:, 0:2].ravel():
+    for ax in axes[last, 0:2]:
         ax.set_xlabel("vbar = v / (lMo vmax)  (< 0 shortening)", fontsize=8)
-    for ax in axes[:, 2:4].ravel():
+    for ax in axes[last, 2:4]:
         ax.set_xlabel("normalised fibre length", fontsize=8)
+    for ax in axes[:last].ravel():  # the abscissa is numbered on the last row only
+        ax.tick_params(labelbottom=False)
     axes[0, 0].set_title(f"rate over velocity, l~M = {v['normalized_fiber_length']:g}", fontsize=9)
     axes[0, 1].set_title("efficiency W/Edot (concentric)", fontsize=9)
     axes[0, 2].set_title(f"rate over length, vbar = {ln['vbar']:+g}", fontsize=9)
@@ -340,5 +342,11 @@ def figure2(data: dict | None = None, **config):
     wrapped = "\n".join(textwrap.fill(par, 170) for par in text.split("\n"))
     extra = [m for m in models if m not in STUDY_MODELS]
     what = f"{len(models)} models" + (f" ({', '.join(extra)} beside the study's)" if extra else "")
-    fig.suptitle(f"Figure 2: soleus metabolic rate and efficiency, {what}\n" + wrapped, fontsize=9)
+    title = f"Figure 2: soleus metabolic rate and efficiency, {what}\n" + wrapped
+    fig.suptitle(title, fontsize=9, y=1.0 - 0.1 / fig.get_figheight(), va="top")
+    # a fixed layout (a constrained layout measured every label of the 36 panels at each save:
+    # half the drawing time): the title's lines at 9 pt, then the panels
+    title_in = (title.count("\n") + 1) * 9 * 1.25 / 72 + 0.45
+    fig.subplots_adjust(left=0.07, right=0.99, bottom=0.5 / fig.get_figheight(),
+                        top=1.0 - title_in / fig.get_figheight(), wspace=0.25, hspace=0.15)
     return fig

@@ -727,7 +727,7 @@ _DRAW_COST_S = {
     "figure2_soleus": 0.01,  # a copy from the cache after its first drawing
 }
 #: Processor time (s) of the Figure-2 plot when it is not in the cache.
-_FIGURE2_DRAW_COST_S = 3.0
+_FIGURE2_DRAW_COST_S = 1.5
 
 
 def _prepare_fork() -> None:
