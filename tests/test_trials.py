@@ -308,3 +308,44 @@ def test_kinematic_toe_off_on_treadmill_trials(example):
         moment = cycle_from_id_file(example.id[trial], window_s=(t[0], t[-1]), padding_s=0.05)
         assert len(ev.toe_offs_s) == 1 and ev.toe_offs_s[0] == pytest.approx(moment.toe_off_s, abs=0.04), trial
         assert all(t[0] + 0.05 < h < t[-1] - 0.05 + 1e-9 for h in ev.heel_strikes_s)
+
+
+@pytest.mark.slow
+def test_emg_ten_of_both_legs(example, tmp_path, capsys, monkeypatch):
+    """``solve --workflow emg-ten --side both`` with a mapping naming both legs' muscles: each leg is
+    the EMG-TEN problem of that leg alone, with the mapping's entries of its muscles, written to
+    OUT/r and OUT/l. (The example's EMG is of the right leg; its left-leg entries here reuse the
+    same channels, which is enough to show how the legs are split, not a measurement.) The
+    named mappings, one leg's electrodes, are refused with both legs, in one line."""
+    from musclemetab.emg import DEFAULT_EMG_MAPPING
+    from musclemetab.redundancy import emg_ten as emg_ten_module
+
+    right = {m: list(c) for m, c in DEFAULT_EMG_MAPPING.items()}
+    both = {**right, **{m[:-2] + "_l": c for m, c in right.items()}}
+    mapping = tmp_path / "map.json"
+    mapping.write_text(json.dumps(both))
+    calls = []
+    real = emg_ten_module.solve_emg_ten
+
+    def recording(*args, **kwargs):  # the command imports it when it runs
+        calls.append(kwargs)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(emg_ten_module, "solve_emg_ten", recording)
+    out = tmp_path / "out"
+    assert _cli("solve", "--workflow", "emg-ten", "--model", example.model, "--ik", example.ik["normal"],
+                "--id", example.id["normal"], "--emg", example.emg["normal"], "--emg-mapping", mapping,
+                "--side", "both", "--out", out) == 0
+    assert [c["side"] for c in calls] == ["r", "l"]
+    assert calls[0]["emg_mapping"] == right and calls[1]["emg_mapping"] == {m: c for m, c in both.items()
+                                                                            if m.endswith("_l")}
+    for side in "rl":
+        summary = json.loads((out / side / "IK_sub1_normal" / "summary.json").read_text())
+        assert summary["success"] and (out / side / "parameters.json").is_file()
+        assert summary["side"] == side and all(m.endswith(f"_{side}") for m in summary["muscles"])
+        assert set(summary["emg_tracking"]) == {m for m in both if m.endswith(f"_{side}")}
+    capsys.readouterr()
+    assert _cli("solve", "--workflow", "emg-ten", "--model", example.model, "--ik", example.ik["normal"], "--id",
+                example.id["normal"], "--emg", example.emg["normal"], "--side", "both", "--out", tmp_path / "no") != 0
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--emg-mapping MAP.json" in err and not (tmp_path / "no").exists()

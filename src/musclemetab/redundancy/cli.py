@@ -368,7 +368,7 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
                             ("--grf-column", args.grf_column), ("--grf-threshold", args.grf_threshold),
                             ("--window", args.window),
                             ("--cycle", args.cycle), ("--exclude-muscles", getattr(args, "exclude_muscles", None)))
-             if v] + (["--side both"] if args.side == "both" else [])
+             if v]
     if wrong:
         raise OptionError(f"{', '.join(wrong)} are for the single-trial solves without EMG; drop them for "
                           f"{'--workflow emg-ten' if args.workflow == 'emg-ten' else '--emg'}")
@@ -395,23 +395,75 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
         raise OptionError("--workflow emg-ten needs --emg: one processed EMG file per trial, in the order of --ik")
     dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else None
     options = _solver_options(args)
-    result = solve_emg_ten(
-        args.model, ik, idf, emg, emg_mapping=args.emg_mapping or "default", labels=args.labels,
-        passive=args.passive, dofs=dofs, side=args.side, options=options, cache_dir=args.cache_dir,
+    legs = _leg_mappings(args, ik, dofs)
+    # every leg is solved before anything is written
+    results = {side: solve_emg_ten(
+        args.model, ik, idf, emg, emg_mapping=mapping, labels=args.labels,
+        passive=args.passive, dofs=dofs, side=side, options=options, cache_dir=args.cache_dir,
         check_units=not args.skip_unit_checks, settings=settings,
-    )
-    result.write(args.out)
+    ) for side, mapping in legs.items()}
+    for side, result in results.items():
+        _write_emg_ten(args, result, _leg_out(args, side), side)
+    return 0
+
+
+def _leg_out(args, side: str):
+    """The output folder of one leg: ``--out``, or ``--out/<side>`` with ``--side both``."""
+    from pathlib import Path
+
+    return Path(args.out) / side if args.side == "both" else Path(args.out)
+
+
+def _leg_mappings(args, ik: list, dofs) -> dict:
+    """``{side: EMG mapping}`` of the legs to solve. With ``--side both`` the mapping must be a
+    ``{muscle: [channels]}`` JSON file naming the muscles of both legs (the named mappings are
+    one leg's electrodes); each leg takes the entries of its muscles (those spanning its DOFs,
+    as its problem selects them)."""
+    from ..errors import UnknownMuscleError
+    from ..geometry import compute_geometry
+    from .emg_inputs import resolve_emg_mapping
+
+    named = args.emg_mapping is None or str(args.emg_mapping).strip().lower() in ("default", "authors")
+    if args.side != "both":
+        return {args.side: args.emg_mapping or "default"}
+    if named:
+        raise OptionError("--side both with EMG needs --emg-mapping MAP.json: a JSON object naming each leg's "
+                          "muscles and their EMG channels, e.g. {\"soleus_r\": [\"SOL_R\"], \"soleus_l\": "
+                          "[\"SOL_L\"]} (the named mappings are one leg's electrodes)")
+    if dofs:
+        raise OptionError("--dofs names one leg's DOFs; with --side both leave it out (each leg's DOFs are discovered)")
+    mapping = resolve_emg_mapping(args.emg_mapping)
+    legs, placed = {}, set()
+    for side in ("r", "l"):
+        muscles = set(compute_geometry(args.model, ik[0], side=side, cache_dir=args.cache_dir).muscles)
+        legs[side] = {m: c for m, c in mapping.items() if m in muscles}
+        placed |= set(legs[side])
+        if not legs[side]:
+            raise UnknownMuscleError(f"--emg-mapping {args.emg_mapping} names no muscle of the "
+                                     f"{'right' if side == 'r' else 'left'} leg; map its muscles to their channels")
+    unplaced = sorted(set(mapping) - placed)
+    if unplaced:
+        raise UnknownMuscleError(f"--emg-mapping {args.emg_mapping}: {', '.join(unplaced)} in neither leg's "
+                                 "muscles; check the names")
+    return legs
+
+
+def _write_emg_ten(args, result, out, side: str) -> None:
+    """Write one leg's EMG-TEN result and its personalised model to ``out``, then say what it found
+    (:class:`SolverError` after writing when it did not converge)."""
+    from .estimate import write_personalised_model
+    from .problem import failure_advice
+
+    result.write(out)
     r = result.record
     if not result.success:
         raise SolverError(
             f"the emg-ten solve did not converge (IPOPT status '{r['status']}' after {r['iterations']} "
-            f"iterations): {failure_advice(r['status'])}. The unconverged result is in {args.out} with "
+            f"iterations): {failure_advice(r['status'])}. The unconverged result is in {out} with "
             "\"success\": false"
         )
-    from .estimate import write_personalised_model
-
     model_file, _ = write_personalised_model(args.model, result.parameters,
-                                             {"tendon_stiffness": list(result.tendon_stiffness)}, args.out)
+                                             {"tendon_stiffness": list(result.tendon_stiffness)}, out)
     groups = []
     for g in result.settings.tendon_groups:
         m = next((x for x in g if x in result.tendon_stiffness), None)
@@ -421,14 +473,14 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
     scales = ", ".join(f"{m} {v:.3g}" for m, v in result.emg_scale.items())
     size = r["problem_size"]
     print(
-        f"solve: emg-ten {len(result.solutions)} trials ({', '.join(result.solutions)}), "
+        f"solve: emg-ten{' side ' + side if args.side == 'both' else ''} "
+        f"{len(result.solutions)} trials ({', '.join(result.solutions)}), "
         f"{size['variables']} variables, {size['equality_constraints']} equalities, "
         f"{size['inequality_constraints']} EMG bounds: {r['status']} in {r['iterations']} iterations, objective "
         f"{r['objective']:.6e}, solve {r['solve_time_s']:.1f} s, max moment residual "
-        f"{r['max_moment_residual_Nm']:.1e} N m; {'; '.join(groups)}; EMG scale {scales} -> {args.out} "
+        f"{r['max_moment_residual_Nm']:.1e} N m; {'; '.join(groups)}; EMG scale {scales} -> {out} "
         f"(and {model_file.name})"
     )
-    return 0
 
 
 def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> int:
@@ -439,22 +491,26 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
 
     emg = _as_list(args.emg)
     dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else None
-    result = solve_emg_ten(
-        args.model, ik, idf, emg, emg_mapping=args.emg_mapping or "default", labels=args.labels,
-        passive=args.passive, dofs=dofs, side=args.side,
+    legs = _leg_mappings(args, ik, dofs)
+    results = {side: solve_emg_ten(
+        args.model, ik, idf, emg, emg_mapping=mapping, labels=args.labels,
+        passive=args.passive, dofs=dofs, side=side,
         options=SolverOptions(max_iter=args.max_iter, print_level=args.print_level),
         cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, settings=settings,
         workflow=args.workflow, tendon_stiffness=tendon_stiffness,
-    )
-    if len(result.solutions) == 1:
-        next(iter(result.solutions.values())).write(args.out)
-    else:
-        result.write(args.out)
-    r = result.run_record
-    if not r.success:
-        raise emg_failure(r, settings.emg_mode, f"the EMG-informed {args.workflow} solve (written to {args.out})",
-                          settings.fibre_scheme)
-    scales = ", ".join(f"{m} {v:.3g}" for m, v in result.emg_scale.items())
-    print(f"solve: {args.workflow} EMG-{settings.emg_mode} {len(result.solutions)} trial(s): {r.status} in "
-          f"{r.iterations} iterations, objective {r.objective:.6e}; EMG scale {scales} -> {args.out}")
+    ) for side, mapping in legs.items()}
+    for side, result in results.items():
+        out = _leg_out(args, side)
+        if len(result.solutions) == 1:
+            next(iter(result.solutions.values())).write(out)
+        else:
+            result.write(out)
+        r = result.run_record
+        if not r.success:
+            raise emg_failure(r, settings.emg_mode, f"the EMG-informed {args.workflow} solve (written to {out})",
+                              settings.fibre_scheme)
+        scales = ", ".join(f"{m} {v:.3g}" for m, v in result.emg_scale.items())
+        leg = f" side {side}" if args.side == "both" else ""
+        print(f"solve: {args.workflow} EMG-{settings.emg_mode}{leg} {len(result.solutions)} trial(s): {r.status} in "
+              f"{r.iterations} iterations, objective {r.objective:.6e}; EMG scale {scales} -> {out}")
     return 0

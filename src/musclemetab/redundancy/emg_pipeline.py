@@ -150,6 +150,9 @@ def solve_emg_ten(
         workflow=workflow, tendon_stiffness=tendon_stiffness,
     )
     result.record["geometry_time_s"] = t_geometry
+    result.record["side"] = side
+    for solution in result.solutions.values():  # as the single-trial solve's summary records it
+        solution.summary["side"] = side
     return result
 
 
