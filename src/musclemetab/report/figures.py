@@ -155,8 +155,8 @@ def _new_figure(width: float, height: float, **margins_in):
     return fig
 
 
-def _in_view_locator():
-    """At most five major ticks, none outside the axis limits.
+def _in_view_locator(nbins: int = 4):
+    """At most ``nbins`` + 1 major ticks, none outside the axis limits.
 
     matplotlib's automatic locators also return a tick beyond each limit, and a tick object
     (two lines, two texts) is made for each before those outside are dropped at drawing.
@@ -170,11 +170,11 @@ def _in_view_locator():
             tol = 1e-9 * max(abs(vmax - vmin), 1e-300)
             return locs[(locs >= vmin - tol) & (locs <= vmax + tol)]
 
-    return InView(nbins=4, steps=[1, 2, 2.5, 5, 10])
+    return InView(nbins=nbins, steps=[1, 2, 2.5, 5, 10])
 
 
 def _fewer_ticks(fig) -> None:
-    """At most five major ticks, none outside the limits (:func:`_in_view_locator`), on every
+    """At most five (x) and six (y) major ticks, none outside the limits (:func:`_in_view_locator`), on every
     axis left to matplotlib's automatic locator.
 
     Every tick is a set of lines and a text drawn and measured at each save; the default
@@ -183,9 +183,10 @@ def _fewer_ticks(fig) -> None:
     from matplotlib.ticker import AutoLocator
 
     for ax in fig.axes:
-        for axis in (ax.xaxis, ax.yaxis):
+        # one more interval on the rate axes: 0 to 19 W/kg is numbered 0, 5, 10, 15, not 0, 10
+        for axis, nbins in ((ax.xaxis, 4), (ax.yaxis, 5)):
             if type(axis.get_major_locator()) is AutoLocator:
-                axis.set_major_locator(_in_view_locator())
+                axis.set_major_locator(_in_view_locator(nbins))
 
 
 def _apply_layout(fig) -> None:
@@ -1116,8 +1117,8 @@ def per_muscle_ranked(per_muscle, *, workflow: str | None = None, models: Sequen
     shades = np.linspace(0.15, 0.9, len(trials)) if len(trials) > 1 else np.array([0.6])
     colour = {t: cmap(float(x)) for t, x in zip(trials, shades)}
     nrow, ncol = _grid(len(models))
-    fig = _new_figure(4.2 * ncol + 0.8, (0.19 * top * max(1, len(trials)) / 2 + 1.0) * nrow + 1.3,
-                      left=1.0, wspace=0.55, hspace=0.3)
+    fig = _new_figure(4.2 * ncol + 0.8, (0.19 * top * max(1, len(trials)) / 2 + 1.0) * nrow + 1.5,
+                      left=1.0, top=0.8, wspace=0.55, hspace=0.3)
     axes = fig.subplots(nrow, ncol, squeeze=False, sharex=True)
     height = 0.8 / max(len(trials), 1)
     x_lo = x_hi = 0.0
