@@ -917,3 +917,25 @@ def test_figure2_from_the_cache(study, tmp_path, monkeypatch):
     html._draw_figure(folder, tmp_path / "d", ("png",), "figure2_soleus")
     assert calls == [1] and checksum.is_file()
     assert html._figure_cache("phase_shares", ("png",)) is None
+
+
+def test_package_figures_drawn_ahead_into_the_cache(tmp_path, monkeypatch):
+    """``draw_package_figures`` (which ``musclemetab demo`` runs while its units solve) puts the
+    Figure-2 plot into an empty cache with the SHA-256 of its content beside it, and draws nothing
+    when the cache holds it; the report then copies it (see test_figure2_from_the_cache)."""
+    import hashlib
+
+    from musclemetab.metabolics import figure2 as figure2_module
+    from musclemetab.report import html
+
+    monkeypatch.setenv("MUSCLEMETAB_CACHE", str(tmp_path / "cache"))
+    cache = html._figure_cache("figure2_soleus", ("png",))["png"]
+    assert not cache.exists()
+    html.draw_package_figures()
+    data = cache.read_bytes()
+    assert data.startswith(b"\x89PNG")
+    assert cache.with_name(cache.name + ".sha256").read_text().strip() == hashlib.sha256(data).hexdigest()
+    calls = []
+    monkeypatch.setattr(figure2_module, "figure2", lambda *a, **k: calls.append(1))
+    html.draw_package_figures()
+    assert calls == [] and cache.read_bytes() == data

@@ -650,6 +650,24 @@ def _figure_cache(name: str, formats: Sequence[str]) -> dict[str, Path] | None:
     return {"png": folder / f"{name}-{h.hexdigest()[:32]}.png"}
 
 
+def draw_package_figures() -> None:
+    """Draw the figures that depend only on the package (the Figure-2 plot) into the cache,
+    unless it holds them already; a report then copies them instead of drawing them.
+    ``musclemetab demo`` calls it while the study's units run, so that its report does not
+    wait for the plot the first time."""
+    import tempfile
+
+    from ..metabolics.figure2 import figure2
+    from .figures import save_figure
+
+    name = "figure2_soleus"
+    cache = _figure_cache(name, ("png",))
+    if _read_cache(cache) is not None:
+        return
+    with tempfile.TemporaryDirectory() as tmp:
+        _store_in_cache(save_figure(figure2(), tmp, name, formats=tuple(cache)), cache)
+
+
 def _checksum_file(path: Path) -> Path:
     """The file beside a cached figure holding the SHA-256 of its content."""
     return path.with_name(path.name + ".sha256")

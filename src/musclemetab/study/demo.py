@@ -67,12 +67,30 @@ def demo_study(out: str | os.PathLike = "musclemetab-demo", *, speeds=None,
 def run_demo(out: str | os.PathLike = "musclemetab-demo", *, workers: int | None = None, speeds=None,
              report: bool = True, progress: bool = True, force: bool = False):
     """Run the example study and write its report; returns the :class:`StudyRun`."""
+    import threading
+
     from .runner import run_study
 
     study = demo_study(out, speeds=speeds)
+    figures = None
+    if report:  # the plot that depends only on the package, drawn while the units run (once per machine)
+        from ..report.html import draw_package_figures
+
+        figures = threading.Thread(target=_quietly, args=(draw_package_figures,), daemon=True)
+        figures.start()
     run = run_study(study, workers=workers, progress=progress, force=force)
+    if figures is not None:
+        figures.join()
     if report and not run.interrupted:
         from ..report import write_report
 
         run.report = write_report(study.output)
     return run
+
+
+def _quietly(function) -> None:
+    """Run ``function``; a failure is left to the report, which then draws the figure itself."""
+    try:
+        function()
+    except Exception:  # noqa: BLE001 - the report draws the figure and says what went wrong
+        pass
