@@ -18,13 +18,13 @@ of the iterate) is solved with:
 * ``casadi-ldl``: CasADi's sparse LDL^T (symbolic analysis done once, not timed);
 * ``superlu``: SciPy's ``splu`` (ordering and factorisation timed together, as it does both);
 * ``block``: the structure-exploiting elimination. Each muscle's variables and the
-  constraints that involve only that muscle (activation dynamics, fibre kinematics,
+  constraints that involve only that muscle (activation dynamics, fiber kinematics,
   pennation identity, Hill equilibrium) form one block ordered node by node: a banded
   matrix (a time chain). The reserves and the moment equations (the only rows that couple
   muscles) form the coupling set ``C``. Each muscle block is factorised with banded LU
   (LAPACK ``dgbtrf``), its contribution ``B_m A_m^-1 B_m^T`` to the Schur complement of
   ``C`` is formed from ``A_m^-1`` applied to the unit vectors of the few local variables
-  the coupling rows touch (the projected fibre lengths, one per node), and the dense
+  the coupling rows touch (the projected fiber lengths, one per node), and the dense
   Schur complement of the ``D N`` moment rows (the reserves, a diagonal block, are
   eliminated first) is factorised with LU (``getrf``).
 

@@ -7,14 +7,14 @@ Measured in the same run, on the same states:
 
 * each model of :mod:`musclemetab.metabolics` (the study's six and the additional ones) on
   arrays of shape (muscles, samples) (default 40 x 50 000 = 2 million muscle-samples;
-  realistic states: fibre lengths, velocities and activations drawn at random, curve values
+  realistic states: fiber lengths, velocities and activations drawn at random, curve values
   from the package's curves), input checks included; ``--repeats`` timed calls after one
   untimed warm-up call;
 * OpenSim 4.6's ``Umberger2010MuscleMetabolicsProbe`` (UM10 settings) and
   ``Bhargava2004MuscleMetabolicsProbe`` (BH04 settings), each alone in a one-muscle model
   (the example soleus on a slider, rigid tendon), evaluated in the OpenSim worker process at
-  the same states (fibre length, velocity, activation and excitation of every muscle-sample,
-  in order): per state, set the fibre length, velocity, activation and excitation, realise to
+  the same states (fiber length, velocity, activation and excitation of every muscle-sample,
+  in order): per state, set the fiber length, velocity, activation and excitation, realise to
   accelerations and read the probe's output (the least work OpenSim needs to evaluate a probe
   at a given state; process start, model building and the transfer of arrays are not
   counted). The states are cut into ``--repeats`` blocks, one per repeat, so that the probes

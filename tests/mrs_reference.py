@@ -78,10 +78,10 @@ def params_of(sol):
 def check_solution_satisfies_problem(sol, t, lmt, r, mom, n, backward=False):
     """Assert the specified problem holds on the solution (muscle_redundancy.md §5): tendon
     force from the geometry, moment equilibrium and normalised Hill equilibrium at nodes
-    0..N-1 within 1e-4, forward-Euler activation dynamics and fibre kinematics, bounds.
-    With ``backward``: backward-Euler fibre kinematics, ``l_k+1 = l_k + h v_k+1``, the
+    0..N-1 within 1e-4, forward-Euler activation dynamics and fiber kinematics, bounds.
+    With ``backward``: backward-Euler fiber kinematics, ``l_k+1 = l_k + h v_k+1``, the
     velocity written at node k+1 and the Hill equilibrium at nodes 1..N.
-    Returns the parameters, the normalised fibre velocity and the projected fibre length."""
+    Returns the parameters, the normalised fiber velocity and the projected fiber length."""
     np.testing.assert_allclose(sol.time_s, t, atol=1e-9)
     P = params_of(sol)
     h = (t[-1] - t[0]) / n
@@ -99,11 +99,11 @@ def check_solution_satisfies_problem(sol, t, lmt, r, mom, n, backward=False):
 
     # Hill equilibrium at nodes 0..N-1 (normalised)
     vbar = sol.normalized_fiber_velocity
-    fibre = sol.activation * fl_ref(sol.lm_norm) * fv_ref(vbar) + fpe_ref(sol.lm_norm, P["kPE"], P["s0"], P["sM"])
-    hill = fibre * lm_proj / lm - sol.tendon_force_N / P["F0_N"]
+    fiber = sol.activation * fl_ref(sol.lm_norm) * fv_ref(vbar) + fpe_ref(sol.lm_norm, P["kPE"], P["s0"], P["sM"])
+    hill = fiber * lm_proj / lm - sol.tendon_force_N / P["F0_N"]
     assert np.max(np.abs(hill[1:] if backward else hill[:n])) < 1e-4
 
-    # activation dynamics and fibre kinematics (forward Euler) on the mesh
+    # activation dynamics and fiber kinematics (forward Euler) on the mesh
     act = sol.activation[1:] - sol.activation[:-1] - h * dadt_ref(sol.excitation[:n], sol.activation[:n])
     assert np.max(np.abs(act)) < 1e-5
     lm_step = sol.lm_norm[1:] - sol.lm_norm[:-1] - h * (vbar[1:] if backward else vbar[:n]) * P["vmax_lMo_per_s"]

@@ -21,7 +21,7 @@ from musclemetab.calibration import (
     CalibrationData,
     CalibrationTrial,
     calibrate_passive,
-    equilibrium_fibre_length,
+    equilibrium_fiber_length,
     mirror_to_left,
     parameter_groups,
     read_passive_parameters,
@@ -136,7 +136,7 @@ def test_hand_worked_single_muscle():
     np.testing.assert_allclose(sol.lm_norm["ankle"], 1.2, atol=1e-7)
     np.testing.assert_allclose(sol.moments_Nm["ankle"], F0 * fpe * r, atol=1e-4)  # 8.4828 N m
     np.testing.assert_allclose(sol.reserve_Nm["ankle"], -F0 * fpe * r, atol=1e-4)
-    lm, ft = equilibrium_fibre_length(lmt, optimal_fiber_length_m=lmo, tendon_slack_length_m=lts,
+    lm, ft = equilibrium_fiber_length(lmt, optimal_fiber_length_m=lmo, tendon_slack_length_m=lts,
                                       pennation_angle_at_optimal_rad=0.0, kT=kT)
     assert lm == pytest.approx(1.2, abs=1e-9) and ft == pytest.approx(fpe, abs=1e-9)
 
@@ -147,7 +147,7 @@ def test_generic_equilibrium_matches_root_finding(result, data):
     idx = data.index(t.muscles)
     for j, i in enumerate(idx):
         for k in range(0, t.n_frames, 7):
-            lm, _ = equilibrium_fibre_length(
+            lm, _ = equilibrium_fiber_length(
                 t.lmt_m[k, j], optimal_fiber_length_m=data.optimal_fiber_length_m[i],
                 tendon_slack_length_m=data.tendon_slack_length_m[i],
                 pennation_angle_at_optimal_rad=data.pennation_angle_at_optimal_rad[i],

@@ -95,14 +95,14 @@ def test_emg_constrained_solution_satisfies_the_problem(example, constrained, ca
 @pytest.mark.opensim
 @pytest.mark.slow
 def test_emg_driven_excitations_equal_the_scaled_emg(example, driven, cache_dir):
-    """EMG-driven (tolerance 0) converges with the backward-Euler fibre dynamics: every tracked
+    """EMG-driven (tolerance 0) converges with the backward-Euler fiber dynamics: every tracked
     excitation is its scaled EMG (interpolated here from the EMG file) at every control node, and
     the problem of that scheme holds, checked with the independent equations of ``mrs_reference``."""
     from musclemetab.geometry import compute_geometry
 
     sol = driven
     assert sol.success and sol.summary["workflow"]["name"] == "effort-cal emg-driven"
-    assert sol.summary["fibre_dynamics"] == "backward"
+    assert sol.summary["fiber_dynamics"] == "backward"
     dev, muscles, s = _deviation(example, sol)
     assert muscles == sorted(AUTHORS_CHANNELS)
     assert np.max(np.abs(dev)) <= 1e-8
@@ -116,14 +116,14 @@ def test_emg_driven_excitations_equal_the_scaled_emg(example, driven, cache_dir)
 
 @pytest.mark.opensim
 @pytest.mark.slow
-def test_fixed_excitations_make_the_fibre_recurrence_unstable(example, constrained, cache_dir):
-    """Why EMG-driven (tolerance 0) needs the backward-Euler fibre dynamics (docs/problem.md):
-    with the activation fixed, the Hill equilibrium gives the fibre velocity as a function of the
-    fibre length, and the forward-Euler step ``l_k+1 = l_k + h vmax vbar(l_k)`` multiplies a change
+def test_fixed_excitations_make_the_fiber_recurrence_unstable(example, constrained, cache_dir):
+    """Why EMG-driven (tolerance 0) needs the backward-Euler fiber dynamics (docs/problem.md):
+    with the activation fixed, the Hill equilibrium gives the fiber velocity as a function of the
+    fiber length, and the forward-Euler step ``l_k+1 = l_k + h vmax vbar(l_k)`` multiplies a change
     of ``l_k`` by ``g_k = 1 - h vmax (dH/dl)/(dH/dvbar)``. Worked here with the independent curves of
     ``mrs_reference`` on the constrained solution: for the weakly excited vasti and the soleus
     ``|g_k| > 1`` at (nearly) every node and the product exceeds 1/eps, i.e. forward-Euler driven
-    trajectories are fixed by their initial fibre lengths beyond double precision. The backward
+    trajectories are fixed by their initial fiber lengths beyond double precision. The backward
     step ``l_k+1 = l_k + h vmax vbar(l_k+1)`` multiplies the change by ``1/(2 - g_k)``, below 1."""
     from mrs_reference import fl_ref, fpe_ref, ft_ref, fv_ref, params_of
 
@@ -143,8 +143,8 @@ def test_fixed_excitations_make_the_fibre_recurrence_unstable(example, constrain
         def H(l_norm, vb):
             l_m = l_norm * lmo
             proj = np.sqrt(l_m**2 - w**2)
-            fibre = a * fl_ref(l_norm) * fv_ref(vb) + fpe_ref(l_norm, P["kPE"][j], P["s0"][j], P["sM"][j])
-            return fibre * proj / l_m - ft_ref((lmt_m - proj) / P["lTs_m"][j], P["kT"][j])
+            fiber = a * fl_ref(l_norm) * fv_ref(vb) + fpe_ref(l_norm, P["kPE"][j], P["s0"][j], P["sM"][j])
+            return fiber * proj / l_m - ft_ref((lmt_m - proj) / P["lTs_m"][j], P["kT"][j])
 
         d = 1e-7
         dH_dl = (H(lm + d, vbar) - H(lm - d, vbar)) / (2 * d)
@@ -154,7 +154,7 @@ def test_fixed_excitations_make_the_fibre_recurrence_unstable(example, constrain
               "log10 prod |g|:", np.sum(np.log10(np.abs(g))), "backward max |1/(2-g)|:", np.max(np.abs(1 / (2 - g))))
         assert np.mean(np.abs(g) > 1.0) > 0.95, m
         assert np.sum(np.log10(np.abs(g))) > 16, m  # product of |g_k| above 1e16 > 1/eps
-        assert np.all(g < 1.0), m  # lambda = (g - 1)/h < 0: the fibre dynamics are stable at every node
+        assert np.all(g < 1.0), m  # lambda = (g - 1)/h < 0: the fiber dynamics are stable at every node
         assert np.all(np.abs(1.0 / (2.0 - g)) < 1.0), m  # backward Euler: every step damps
 
 
@@ -169,7 +169,7 @@ def test_an_infeasible_emg_driven_solve_says_so():
     assert "infeasible" in msg and "after 991 iterations" in msg and "--emg-mode constrained" in msg
     assert "--max-iter" not in msg and "more iterations will not help" in msg
     forward = str(emg_failure(rec, "driven", "x", "forward"))  # the unstable recurrence, and the remedy
-    assert "unstable recurrence" in forward and "--fibre-dynamics" in forward and "unstable" not in msg
+    assert "unstable recurrence" in forward and "--fiber-dynamics" in forward and "unstable" not in msg
     stopped = RunRecord(status="Maximum_Iterations_Exceeded", success=False, iterations=3)
     assert "--max-iter" in str(emg_failure(stopped, "driven", "x"))  # a stopped solve: the limit
     assert "infeasible" in str(emg_failure(rec, "constrained", "x"))
@@ -204,18 +204,18 @@ def test_metabolics_of_a_solution_object_equal_those_of_its_folder(example, cons
         np.testing.assert_allclose(ca[k], cb[k], rtol=1e-7, atol=1e-9, err_msg=k)
 
 
-def test_backward_fibre_dynamics_with_the_energy_goal_is_refused(example, tmp_path):
+def test_backward_fiber_dynamics_with_the_energy_goal_is_refused(example, tmp_path):
     """The energy goal's rates pair each node's velocity with its own state (the forward
-    scheme): ``--fibre-dynamics backward --energy-model`` is refused in one line, nothing written."""
+    scheme): ``--fiber-dynamics backward --energy-model`` is refused in one line, nothing written."""
     from musclemetab.cli import main
 
     argv = ["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
-            str(example.id["normal"]), "--fibre-dynamics", "backward", "--energy-model", "UM10", "--mass", "70",
+            str(example.id["normal"]), "--fiber-dynamics", "backward", "--energy-model", "UM10", "--mass", "70",
             "--height", "1.7", "--out", str(tmp_path / "x")]
     buf = io.StringIO()
     with contextlib.redirect_stderr(buf), contextlib.redirect_stdout(buf):
         code = main(argv)
     text = buf.getvalue().strip()
     assert code != 0 and len(text.splitlines()) == 1
-    assert "--fibre-dynamics" in text and "--energy-model" in text
+    assert "--fiber-dynamics" in text and "--energy-model" in text
     assert not (tmp_path / "x").exists()

@@ -206,17 +206,17 @@ def test_solution_satisfies_the_problem(example, geometries, solutions, trial):
 @pytest.mark.opensim
 @pytest.mark.slow
 @pytest.mark.parametrize("trial", TRIALS)
-def test_fibre_length_bounds_recorded_as_by_a_single_trial_solve(example, geometries, solutions, trial):
-    """Each trial's summary.json records the fibre-length bounds under ``fibre_length_bounds``, as
+def test_fiber_length_bounds_recorded_as_by_a_single_trial_solve(example, geometries, solutions, trial):
+    """Each trial's summary.json records the fiber-length bounds under ``fiber_length_bounds``, as
     a single-trial solve does: the default box [0.1, 1.7] and the muscles whose longest
-    rigid-tendon fibre, ``max sqrt((lMT - lTs)^2 + w^2) / lMo + 0.05`` over the mesh nodes (worked
+    rigid-tendon fiber, ``max sqrt((lMT - lTs)^2 + w^2) / lMo + 0.05`` over the mesh nodes (worked
     here from the filtered, interpolated lMT), is longer than 1.7, with that bound."""
     sol = solutions[trial]
     _, lmt, _, _ = mesh_inputs(example, geometries[trial], trial, N_MESH[trial])
     P = params_of(sol)
     w = P["lMo_m"] * np.sin(P["alpha0_rad"])
     rigid = np.max(np.sqrt((lmt - P["lTs_m"]) ** 2 + w**2), axis=0) / P["lMo_m"] + 0.05
-    bounds = sol.summary["fibre_length_bounds"]
+    bounds = sol.summary["fiber_length_bounds"]
     assert bounds["default"] == [0.1, 1.7]
     widened = {m: float(b) for m, b in zip(sol.muscles, rigid) if b > 1.7}
     assert set(bounds["widened_upper"]) == set(widened)
@@ -378,11 +378,11 @@ def test_study_problem_size_with_coupling_constraints(example, geometries):
 
 # --------------------------------------------------------------------------- derivatives
 @pytest.mark.opensim
-@pytest.mark.parametrize("coupling, fibre_dynamics", [("constraints", "forward"), ("shared", "forward"),
+@pytest.mark.parametrize("coupling, fiber_dynamics", [("constraints", "forward"), ("shared", "forward"),
                                                       ("shared", "backward")])
-def test_assembled_derivatives_equal_automatic_differentiation(example, geometries, coupling, fibre_dynamics):
+def test_assembled_derivatives_equal_automatic_differentiation(example, geometries, coupling, fiber_dynamics):
     """The hand-assembled Jacobian and Hessian of the multi-trial NLP equal CasADi's AD (two
-    short trials cut from the example, random point), with either transcription of the fibre
+    short trials cut from the example, random point), with either transcription of the fiber
     dynamics (backward: the Hill equilibrium at the end node, second derivatives shared by two
     intervals' blocks)."""
     import casadi as ca
@@ -404,11 +404,11 @@ def test_assembled_derivatives_equal_automatic_differentiation(example, geometri
         M, D = len(inp.muscles), len(inp.dofs)
         guess = InitialGuess(activation=rng.random((n + 1, M)), lm_norm=0.8 + 0.4 * rng.random((n + 1, M)),
                              lm_projected_m=0.05 + 0.05 * rng.random((n + 1, M)), excitation=rng.random((n, M)),
-                             reserve=rng.random((n, D)) - 0.5, vm_norm=rng.random((n, M)) - 0.5)
+                             reserve=rng.random((n, D)) - 0.5, fiber_velocity_lmo_per_s=rng.random((n, M)) - 0.5)
         trials.append(EmgTenTrial(label=lab, inputs=inp, emg_muscles=tuple(sorted(AUTHORS_CHANNELS)),
                                   emg_nodes=rng.random((n, 9)), emg_channels={}, guess=guess))
     params, _ = workflow_parameters("effort-cal", read_muscle_parameters(example.model), trials[0].inputs.muscles)
-    settings = EmgTenSettings(coupling=coupling, fibre_dynamics=fibre_dynamics)
+    settings = EmgTenSettings(coupling=coupling, fiber_dynamics=fiber_dynamics)
     nlp = build_emg_ten_nlp(trials, params, settings)
     x, f, g = nlp["x"], nlp["f"], nlp["g"]
     n_p = 8 if coupling == "shared" else 15

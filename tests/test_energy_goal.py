@@ -177,7 +177,7 @@ def test_energy_solve_of_the_normal_trial_converges(example):
 
     def leg_W_per_kg(x):
         return np.mean(_rates_by_hand("UM10", goal.smoothing, list(x.muscles), p, x.excitation[:N],
-                                      x.activation[:N], x.lm_norm[:N], x.vm_norm[:N])) / MASS
+                                      x.activation[:N], x.lm_norm[:N], x.fiber_velocity_lmo_per_s[:N])) / MASS
 
     energy = leg_W_per_kg(sol)
     assert s["objective_terms"]["energy"] == pytest.approx(1e-3 * energy, rel=1e-9)

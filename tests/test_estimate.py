@@ -1,15 +1,15 @@
-"""Parameter estimation with the problem core: recovery of known changes from fibre lengths.
+"""Parameter estimation with the problem core: recovery of known changes from fiber lengths.
 
-"Measured" fibre lengths are made by solving the normal trial (EFFORT-CAL goals) with the optimal
-fibre length of tibialis anterior and biceps femoris long head x1.10 and the tendon stiffness of the
-triceps surae x0.5; the factors are then estimated back from those fibre lengths with the
+"Measured" fiber lengths are made by solving the normal trial (EFFORT-CAL goals) with the optimal
+fiber length of tibialis anterior and biceps femoris long head x1.10 and the tendon stiffness of the
+triceps surae x0.5; the factors are then estimated back from those fiber lengths with the
 unchanged model.
 
-Fibre lengths alone identify the tendon stiffness (with the fibre length and the muscle-tendon
+Fiber lengths alone identify the tendon stiffness (with the fiber length and the muscle-tendon
 length, the tendon length and hence the tendon force follow, and the moments must be met) but
-hardly the optimal fibre length: for any lMo the measured fibre length gives the same tendon
+hardly the optimal fiber length: for any lMo the measured fiber length gives the same tendon
 force and the activation absorbs the change of fL(lM/lMo); only the effort tells the factors apart
-(the fibre-only estimate ends at about 1.04 and 1.15). Adding the excitations of the generating
+(the fiber-only estimate ends at about 1.04 and 1.15). Adding the excitations of the generating
 solve as EMG of the two muscles (tracked, scale fixed at 1) pins the activation, and the
 force-length relation then gives lMo. Tolerances: kT 1 %, lMo 2 % (at the true factors the
 tracking errors are zero and the effort is that of the generating solve; the estimate moves away
@@ -57,7 +57,7 @@ def generated(example, tmp_path_factory):
 
 def _estimate(generated, with_emg: bool):
     from musclemetab.redundancy.core import Goals, ParameterSpec
-    from musclemetab.redundancy.estimate import estimate_parameters, fibre_length_trial, parameter_specs
+    from musclemetab.redundancy.estimate import estimate_parameters, fiber_length_trial, parameter_specs
 
     made, measured, inputs, params, guess, options, wf, _ = generated
     N = inputs.n_intervals
@@ -66,14 +66,14 @@ def _estimate(generated, with_emg: bool):
     if with_emg:
         emg = dict(emg_muscles=LMO, emg_nodes=made.excitation[:N, [made.muscles.index(m) for m in LMO]])
         specs.append(ParameterSpec("emg_scale", LMO, (1.0, 1.0)))
-    trial = fibre_length_trial("normal", inputs, guess, measured, **emg)
+    trial = fiber_length_trial("normal", inputs, guess, measured, **emg)
     goals = Goals(w_activation=wf.w_activation, w_reserve=wf.w_reserve, w_velocity=wf.w_velocity,
-                  w_fibre_length=100.0, w_emg=10.0 if with_emg else 0.0)
+                  w_fiber_length=100.0, w_emg=10.0 if with_emg else 0.0)
     return estimate_parameters([trial], params, specs, goals, options=options)
 
 
 @pytest.fixture(scope="module")
-def fibre_only(generated):
+def fiber_only(generated):
     return _estimate(generated, with_emg=False)
 
 
@@ -85,8 +85,8 @@ def recovery(generated):
 
 @pytest.mark.opensim
 @pytest.mark.slow
-def test_tendon_stiffness_recovered_from_fibre_lengths_alone(fibre_only):
-    res, est = fibre_only
+def test_tendon_stiffness_recovered_from_fiber_lengths_alone(fiber_only):
+    res, est = fiber_only
     assert res.success, res.status
     ts = [est.factors["tendon_stiffness"][m] for m in TS]
     assert np.ptp(ts) < 1e-9 and ts[0] == pytest.approx(0.5, rel=0.01)
@@ -94,7 +94,7 @@ def test_tendon_stiffness_recovered_from_fibre_lengths_alone(fibre_only):
 
 @pytest.mark.opensim
 @pytest.mark.slow
-def test_parameters_recovered_from_fibre_lengths_and_emg(recovery):
+def test_parameters_recovered_from_fiber_lengths_and_emg(recovery):
     res, est, nominal, made = recovery
     assert res.success, res.status
     f = est.factors
@@ -112,8 +112,8 @@ def test_parameters_recovered_from_fibre_lengths_and_emg(recovery):
             f["optimal_fiber_length"][m] * nominal.optimal_fiber_length_m[j], rel=1e-12)
     p = est.parameters()
     assert p.tendon_stiffness[p.names.index("soleus_r")] == pytest.approx(ts[0] * 35.0, rel=1e-12)
-    # the tracked fibre lengths are reproduced (RMS error below 1 % of lMo)
-    assert res.objective_terms["normal"]["fibre_length_tracking"] / 100.0 < 1e-4
+    # the tracked fiber lengths are reproduced (RMS error below 1 % of lMo)
+    assert res.objective_terms["normal"]["fiber_length_tracking"] / 100.0 < 1e-4
 
 
 def _cli(argv):
@@ -178,7 +178,7 @@ def test_estimate_command_bad_input(example, tmp_path):
 @pytest.mark.slow
 def test_estimate_command_with_emg_recovers_the_parameters(example, generated, recovery, tmp_path):
     """``musclemetab estimate --ultrasound ... --emg ...``: the recovery problem above from files
-    (fibre lengths in mm, the generating excitations as EMG channels TA and BF, scale fixed at 1):
+    (fiber lengths in mm, the generating excitations as EMG channels TA and BF, scale fixed at 1):
     the same factors as the Python path, hence the known changes, and the EMG written beside them."""
     import json
 
@@ -215,10 +215,10 @@ def test_estimate_command_with_emg_recovers_the_parameters(example, generated, r
     assert doc["emg"]["scale"] == {"bflh_r": 1.0, "tibant_r": 1.0}
     assert doc["emg"]["mapping"] == {"tibant_r": ["TA"], "bflh_r": ["BF"]}
     assert (out / "normal" / "summary.json").is_file() and list(out.glob("*_personalised.osim"))
-    # the fibre-length bounds, recorded as a single-trial solve records them; those of the muscles whose lMo is
-    # estimated are taken at the factor's lower bound 0.5 (lMo and w halved): the longest rigid-tendon fibre,
+    # the fiber-length bounds, recorded as a single-trial solve records them; those of the muscles whose lMo is
+    # estimated are taken at the factor's lower bound 0.5 (lMo and w halved): the longest rigid-tendon fiber,
     # max sqrt((lMT - lTs)^2 + w^2) / lMo over the mesh nodes, plus 0.05 where that exceeds 1.7
-    bounds = json.loads((out / "normal" / "summary.json").read_text())["fibre_length_bounds"]
+    bounds = json.loads((out / "normal" / "summary.json").read_text())["fiber_length_bounds"]
     p = params.subset(inputs.muscles)
     scale = np.array([0.5 if m in LMO else 1.0 for m in inputs.muscles])
     lmo, w = scale * p.optimal_fiber_length_m, scale * p.optimal_fiber_length_m * np.sin(p.pennation_angle_at_optimal_rad)
@@ -247,7 +247,7 @@ def test_estimate_command_emg_input_errors(example, tmp_path):
 @pytest.mark.opensim
 @pytest.mark.slow
 def test_estimate_command_on_the_left_leg_recovers_the_tendon_stiffness(example, tmp_path):
-    """``musclemetab estimate --side l``: fibre lengths made by solving the example's left leg
+    """``musclemetab estimate --side l``: fiber lengths made by solving the example's left leg
     (its DOFs discovered from the model and the ID file) with the triceps surae's tendon
     stiffness x0.5 give that factor back (1 %, as on the right leg)."""
     import json

@@ -202,7 +202,7 @@ def test_bad_trial_input_one_line_no_output(gait2392, tmp_path, capsys):
 @pytest.fixture(scope="session")
 def both_solutions(gait2392, tmp_path_factory):
     """EFFORT-GEN on each leg's gait cycle, inverse dynamics computed by OpenSim (one solve per leg),
-    every muscle kept (the fibre-length bound of tfl, rect_fem and semimem is widened)."""
+    every muscle kept (the fiber-length bound of tfl, rect_fem and semimem is widened)."""
     out = tmp_path_factory.mktemp("g2392") / "both"
     code = _cli("solve", "--model", gait2392.model, "--ik", gait2392.ik, "--external-loads",
                 gait2392.external_loads, "--cycle", "auto", "--side", "both", "--out", out)
@@ -216,10 +216,10 @@ def left_solution(both_solutions):
 
 
 @pytest.mark.slow
-def test_fibre_length_bound_widened_from_the_geometry(both_solutions, gait2392):
-    """The right tensor fasciae latae, kept: its fibre needs more than the default 1.7 optimal lengths.
+def test_fiber_length_bound_widened_from_the_geometry(both_solutions, gait2392):
+    """The right tensor fasciae latae, kept: its fiber needs more than the default 1.7 optimal lengths.
 
-    Oracle: the rigid-tendon fibre length worked by hand from OpenSim's muscle-tendon lengths
+    Oracle: the rigid-tendon fiber length worked by hand from OpenSim's muscle-tendon lengths
     (the geometry of the IK frames in the solved window) and the model's parameters:
     ``sqrt((max lMT - lTs)^2 + (lMo sin alpha0)^2) / lMo + 0.05``. Tolerance 5e-3: the solver
     takes the maximum over the filtered, spline-interpolated mesh nodes, not the raw frames.
@@ -229,7 +229,7 @@ def test_fibre_length_bound_widened_from_the_geometry(both_solutions, gait2392):
     from musclemetab.redundancy import Solution
 
     sol = Solution.load(both_solutions / "r")
-    bounds = sol.summary["fibre_length_bounds"]
+    bounds = sol.summary["fiber_length_bounds"]
     assert bounds["default"] == [0.1, 1.7]
     widened = bounds["widened_upper"]
     assert set(widened) == {"tfl_r", "rect_fem_r", "semimem_r"}
@@ -244,8 +244,8 @@ def test_fibre_length_bound_widened_from_the_geometry(both_solutions, gait2392):
         w = lmo * np.sin(p.pennation_angle_at_optimal_rad[k])
         lmt = np.max(np.asarray(geo.lmt_m)[frames, list(geo.muscles).index(m)])
         assert bound == pytest.approx(np.sqrt((lmt - lts) ** 2 + w**2) / lmo + 0.05, abs=5e-3), m
-    # the widening is used: tfl_r's fibre goes beyond 1.7 (its passive force balances the stretched
-    # tendon near 1.71) and stays inside its bound; every other fibre within the default bound
+    # the widening is used: tfl_r's fiber goes beyond 1.7 (its passive force balances the stretched
+    # tendon near 1.71) and stays inside its bound; every other fiber within the default bound
     i = sol.muscles.index("tfl_r")
     assert 1.7 < sol.lm_norm[:, i].max() < widened["tfl_r"]
     others = [j for j, m in enumerate(sol.muscles) if m not in widened]
@@ -366,7 +366,7 @@ def test_both_legs_in_two_processes_give_the_same_solutions(gait2392, tmp_path, 
     for side in "rl":
         a, b = Solution.load(tmp_path / "w1" / side), Solution.load(tmp_path / "w2" / side)
         assert a.summary["side"] == b.summary["side"] == side
-        for k in ("excitation", "activation", "lm_norm", "vm_norm", "reserve_Nm", "tendon_force_N"):
+        for k in ("excitation", "activation", "lm_norm", "fiber_velocity_lmo_per_s", "reserve_Nm", "tendon_force_N"):
             np.testing.assert_array_equal(getattr(a, k), getattr(b, k), err_msg=f"{side} {k}")
     # an error in a worker process: one line, nothing written (0.8-1.1 s: the left leg swings, its
     # moments are below 0.2 N m/kg)
@@ -413,7 +413,7 @@ def test_passive_calibration_of_the_left_leg(example, gait2392, tmp_path):
     coupling groups of the anatomical table, and the least-squares property (the calibrated
     parameters fit at least as well as the generic ones they start from).
     """
-    from musclemetab.calibration import calibrate_passive, equilibrium_fibre_length
+    from musclemetab.calibration import calibrate_passive, equilibrium_fiber_length
 
     res = calibrate_passive(gait2392.model, _trials_for_gait2392(example, tmp_path / "trials", "l"), side="l")
     d, cal, gen = res.data, res.calibrated, res.generic
@@ -428,14 +428,14 @@ def test_passive_calibration_of_the_left_leg(example, gait2392, tmp_path):
     # coupling groups from the anatomical table: the three parts of gluteus medius share (kPE, s0)
     assert cal.parameters["glut_med1_l"] == cal.parameters["glut_med2_l"] == cal.parameters["glut_med3_l"]
     assert cal.parameters["vas_lat_l"] == cal.parameters["vas_int_l"]
-    # rect_fem_l and tfl_l: with a rigid tendon the knee trial would stretch their fibres beyond 2
+    # rect_fem_l and tfl_l: with a rigid tendon the knee trial would stretch their fibers beyond 2
     # optimal lengths (their bound is widened); their equilibria, as the vasti's, match root finding
     knee = next(t for t in d.trials if t.joint == "knee")
     for m in ("rect_fem_l", "tfl_l", "vas_lat_l"):
         j, i = knee.muscles.index(m), d.muscles.index(m)
         k = int(np.argmax(cal.lm_norm["knee"][:, j]))
         kpe, s0, sm = cal.parameters[m]
-        lm, _ = equilibrium_fibre_length(
+        lm, _ = equilibrium_fiber_length(
             knee.lmt_m[k, j], optimal_fiber_length_m=d.optimal_fiber_length_m[i],
             tendon_slack_length_m=d.tendon_slack_length_m[i],
             pennation_angle_at_optimal_rad=d.pennation_angle_at_optimal_rad[i], kpe=kpe, s0=s0, sm=sm,

@@ -1,7 +1,7 @@
 """Cross-check against OpenSim 4.6's own metabolic probes on identical muscle states.
 
 OpenSim runs in the worker process (musclemetab.opensim_bridge.probes). The muscle is a
-clone of the example model's soleus on a slider (rigid tendon): fibre length and velocity
+clone of the example model's soleus on a slider (rigid tendon): fiber length and velocity
 are set exactly; the muscle quantities OpenSim used (activation, excitation, fL, fV,
 forces) are read back and fed to this package's models, so that the comparison is of the
 formulas alone. Basal heat and the 1 W/kg minimum heat rate are off on both sides; both
@@ -95,7 +95,7 @@ def test_states_are_the_ones_asked_for(probe_run):
     np.testing.assert_allclose(probe_run["normalized_fiber_velocity"], s[:, 1], atol=1e-12)
     np.testing.assert_allclose(probe_run["excitation"], s[:, 3], atol=0)
     np.testing.assert_allclose(probe_run["activation"], s[:, 2], atol=0)
-    # the work term's force is the active fibre force a fL fV F0, no passive force
+    # the work term's force is the active fiber force a fL fV F0, no passive force
     f0 = probe_run["muscle"]["max_isometric_force_N"]
     np.testing.assert_allclose(
         probe_run["active_fiber_force_N"],
@@ -155,9 +155,9 @@ def test_bhargava_decay_is_the_difference(probe_run):
     assert np.max(np.abs(ours - theirs)) > 10.0
 
 
-def test_fibre_damping_does_not_enter_opensims_fibre_force(example):
-    # Millard fibre damping with a compliant tendon: it changes the fibre velocity OpenSim
-    # solves for, but OpenSim 4.6 reports a fibre force without a damping term
+def test_fiber_damping_does_not_enter_opensims_fiber_force(example):
+    # Millard fiber damping with a compliant tendon: it changes the fiber velocity OpenSim
+    # solves for, but OpenSim 4.6 reports a fiber force without a damping term
     # (getFiberForce = active + passive), and the Bhargava probe then agrees with BH04 fed
     # the reported state.
     rng = np.random.default_rng(5)

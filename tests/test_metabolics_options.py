@@ -3,7 +3,7 @@
 Against OpenSim 4.6's probes with the same flags (in the worker, on a soleus clone with the
 study's mass and slow-twitch fraction, as tests/test_metabolics_opensim.py): the 1 W/kg
 minimum heat rate (Umberger2010 and Bhargava2004 probes, ``enforce_minimum_heat_rate_per_muscle``)
-and the effort scaling S (``aerobic_factor``). By hand: the recruited fibre fractions of
+and the effort scaling S (``aerobic_factor``). By hand: the recruited fiber fractions of
 BH04 and HO06.
 """
 
@@ -25,7 +25,7 @@ from musclemetab.opensim_bridge import call
 from test_metabolics_opensim import _inputs as _opensim_inputs
 
 # all slow-twitch: with OpenSim's activation floor of 0.01 (e = 0: A = 0.005) the Umberger
-# heat falls below 1 W/kg only for slow-twitch fibres far above optimal length
+# heat falls below 1 W/kg only for slow-twitch fibers far above optimal length
 MASS, FST = 0.476, 1.0
 SW = ("use_Bhargava_recruitment_model", "include_negative_mechanical_work", "forbid_negative_total_power")
 UMB = {"UM10": (False, False, False), "UM03": (False, True, True), "UC16": (True, True, True)}
@@ -35,7 +35,7 @@ BH = dict(probe="Bhargava2004", use_force_dependent_shortening_prop_constant=Tru
 
 
 def _states():
-    """100 states of the lowest activation, no excitation, long fibres (heat near and below
+    """100 states of the lowest activation, no excitation, long fibers (heat near and below
     1 W/kg), slow lengthening and shortening; 50 random states."""
     rng = np.random.default_rng(23)
     lm = np.concatenate([rng.uniform(1.4, 1.9, 100), rng.uniform(0.6, 1.4, 50)])
@@ -138,7 +138,7 @@ def _recruited(e, f_st):
     return f_st * u_s / (f_st * u_s + (1 - f_st) * u_f)
 
 
-def test_recruited_fibre_fractions_in_bh04_and_ho06():
+def test_recruited_fiber_fractions_in_bh04_and_ho06():
     # e = 0.5: u_s = sin(pi/4), u_f = 1 - cos(pi/4); f_ST' = 0.6 u_s / (0.6 u_s + 0.4 u_f)
     e, a, lm, fl, fv, fst, m, f0 = 0.5, 0.4, 1.1, 0.9, 0.5, 0.6, 0.5, 1000.0
     s = dict(excitation=e, activation=a, normalized_fiber_length=lm, normalized_fiber_velocity=-0.1,

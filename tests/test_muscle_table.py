@@ -211,7 +211,7 @@ def test_override_file(tmp_path, g2392):
 @pytest.fixture(scope="module")
 def g2392_solution(gait2392, g2392, tmp_path_factory):
     """EFFORT-GEN on the gait2392 right leg, 0.7-1.3 s (inside the stored ID file's 0.4-1.6 s), all
-    43 muscles spanning the five DOFs (``tfl_r``'s fibre-length bound widened from the geometry)."""
+    43 muscles spanning the five DOFs (``tfl_r``'s fiber-length bound widened from the geometry)."""
     from musclemetab.geometry import compute_geometry
     from musclemetab.io import read_storage, write_storage
     from musclemetab.redundancy.inputs import read_inverse_dynamics, read_kinematics

@@ -1,4 +1,4 @@
-"""The personalised model: estimated optimal fibre length, tendon slack length and tendon
+"""The personalised model: estimated optimal fiber length, tendon slack length and tendon
 stiffness written into a copy of the .osim, read back through OpenSim (the worker).
 
 The tendon stiffness becomes each muscle type's tendon strain at the maximal isometric force;

@@ -80,5 +80,5 @@ def test_implausible_subject_rejected():
         total_muscle_volume_m3(72600, HEIGHT)
     with pytest.raises(OptionError, match="metres"):
         total_muscle_volume_m3(MASS, 174.3)
-    with pytest.raises(OptionError, match="optimal fibre lengths"):
+    with pytest.raises(OptionError, match="optimal fiber lengths"):
         individualised_max_isometric_force_N(["soleus_r"], [0.0], MASS, HEIGHT)

@@ -171,8 +171,8 @@ def test_solution_satisfies_the_problem(example, geometries, solved, trial, work
 def test_effort_gen_objective_matches_the_study(solved, trial):
     sol, _ = solved(trial, "effort-gen")
     assert sol.objective == pytest.approx(REFERENCE_OBJECTIVE[trial], rel=0.03)
-    # no rigid-tendon fibre of the example reaches 1.65 optimal lengths: every bound is the study's 1.7
-    assert sol.summary["fibre_length_bounds"]["widened_upper"] == {}
+    # no rigid-tendon fiber of the example reaches 1.65 optimal lengths: every bound is the study's 1.7
+    assert sol.summary["fiber_length_bounds"]["widened_upper"] == {}
 
 
 @pytest.mark.opensim
@@ -219,7 +219,7 @@ def test_workflow_parameters_recorded(solved, example, passive_csv, tendon_json,
 
 
 def _stance_mean(sol, muscles, start=0.20, end=0.50):
-    """Mean normalised fibre length over a share of the gait cycle.
+    """Mean normalised fiber length over a share of the gait cycle.
 
     The IK window holds one cycle plus 5 frames (50 ms) at each end (data.md §2.3).
     """
@@ -230,12 +230,12 @@ def _stance_mean(sol, muscles, start=0.20, end=0.50):
 
 @pytest.mark.opensim
 @pytest.mark.slow
-def test_compliant_tendons_shorten_plantarflexor_fibres(solved):
+def test_compliant_tendons_shorten_plantarflexor_fibers(solved):
     """What the reproduction shows (normal trial, 40-60 % of the cycle, push-off).
 
-    With the stiffer generic tendon (kT = 35) the triceps-surae fibres stay long (above 1.05),
+    With the stiffer generic tendon (kT = 35) the triceps-surae fibers stay long (above 1.05),
     with the personalised compliant tendon (kT = 10.6) the tendon takes up more of the
-    muscle-tendon length and the fibres are shorter.
+    muscle-tendon length and the fibers are shorter.
     """
     gen, _ = solved("normal", "effort-gen")
     ten, _ = solved("normal", "effort-ten")
@@ -268,7 +268,7 @@ def test_solution_files(solved):
     assert summary["time_window_s"] == pytest.approx([0.57, 1.75])
     assert set(summary["parameters"]["soleus_r"]) == {"F0_N", "lMo_m", "lTs_m", "alpha0_rad", "vmax_lMo_per_s",
                                                       "kT", "kPE", "s0", "sM"}
-    # normalised fibre velocity is OpenSim's v/(lMo vmax): within [-1, 1]
+    # normalised fiber velocity is OpenSim's v/(lMo vmax): within [-1, 1]
     v = df[[f"/forceset/{m}/normalized_fiber_velocity" for m in sol.muscles]].to_numpy()
     assert np.max(np.abs(v)) <= 1 + 1e-9
 

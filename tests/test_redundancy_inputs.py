@@ -135,7 +135,7 @@ def test_static_optimisation_satisfies_its_kkt_conditions(normal_inputs):
     assert g.activation.shape == (n + 1, 40) and g.excitation.shape == (n, 40) and g.reserve.shape == (n, 5)
     # the reserve guess is in N m (not divided by Topt), as in the study
     np.testing.assert_allclose(g.reserve, so.reserve_Nm[:n], atol=1e-9)
-    # fibre guess from the inverted compliant tendon curve: back to the static tendon force
+    # fiber guess from the inverted compliant tendon curve: back to the static tendon force
     lt = (inp.lmt_m - g.lm_projected_m) / params.tendon_slack_length_m
     ft = np.exp(35 * (lt - 0.995)) / 5 - 0.25
     np.testing.assert_allclose(np.abs(ft + 0.25), np.abs(so.tendon_force_norm + 0.25), rtol=1e-9)
@@ -356,7 +356,7 @@ def _toy_solution():
                                passive_sm=0.6)
     x = np.linspace(0.1, 0.9, 12).reshape(6, M)
     return Solution(time_s=t, muscles=p.names, dofs=("ankle_angle_r",), excitation=x, activation=x * 0.9, lm_norm=x + 0.5,
-                    vm_norm=x - 0.5, tendon_force_N=100 * x, active_fiber_force_N=50 * x, passive_fiber_force_N=5 * x,
+                    fiber_velocity_lmo_per_s=x - 0.5, tendon_force_N=100 * x, active_fiber_force_N=50 * x, passive_fiber_force_N=5 * x,
                     active_force_length_multiplier=x, force_velocity_multiplier=x + 0.1, reserve_Nm=x[:, :1],
                     parameters=p, summary={"status": "Solve_Succeeded", "success": True, "objective": 0.1})
 
@@ -367,13 +367,13 @@ def test_solution_round_trip(tmp_path):
     sol = _toy_solution()
     sol.write(tmp_path / "s")
     back = Solution.load(tmp_path / "s")
-    for f in ("excitation", "activation", "lm_norm", "vm_norm", "tendon_force_N", "reserve_Nm"):
+    for f in ("excitation", "activation", "lm_norm", "fiber_velocity_lmo_per_s", "tendon_force_N", "reserve_Nm"):
         np.testing.assert_allclose(getattr(back, f), getattr(sol, f), rtol=1e-11)
     np.testing.assert_allclose(back.parameters.tendon_stiffness, [35, 10])
     assert back.muscles == ("a_r", "b_r") and back.objective == 0.1
     # the file holds v~M/vmax
     df = read_storage(tmp_path / "s" / "solution.sto")
-    np.testing.assert_allclose(df["/forceset/a_r/normalized_fiber_velocity"], sol.vm_norm[:, 0] / 10)
+    np.testing.assert_allclose(df["/forceset/a_r/normalized_fiber_velocity"], sol.fiber_velocity_lmo_per_s[:, 0] / 10)
 
 
 def test_solution_load_errors(tmp_path):

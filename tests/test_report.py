@@ -68,7 +68,7 @@ def make_solution(workflow: str, muscles=MUSCLES) -> Solution:
     zeros = np.zeros((n, m))
     return Solution(
         time_s=t, muscles=tuple(muscles), dofs=("ankle_angle_r",), excitation=e, activation=a, lm_norm=lm,
-        vm_norm=zeros, tendon_force_N=zeros, active_fiber_force_N=zeros, passive_fiber_force_N=zeros,
+        fiber_velocity_lmo_per_s=zeros, tendon_force_N=zeros, active_fiber_force_N=zeros, passive_fiber_force_N=zeros,
         active_force_length_multiplier=np.ones((n, m)), force_velocity_multiplier=np.ones((n, m)),
         reserve_Nm=np.zeros((n, 1)), parameters=params,
         summary={**RunRecord(status="Solve_Succeeded", success=True, iterations=ITERATIONS[workflow], solve_time_s=1.25,
@@ -271,8 +271,8 @@ def test_excitations_and_fiber_lengths():
         for ln in data:  # padding nodes dropped, the cycle in %
             x = np.asarray(ln.get_xdata())
             assert x.min() == pytest.approx(0.0, abs=1e-9) and x.max() == pytest.approx(100.0, abs=1e-9)
-    # fibre-length panels: plateau band and descending-limb line
-    fl = [ax for ax in axes if "fibre length" in ax.get_ylabel() or _lines(ax, "descending-limb")]
+    # fiber-length panels: plateau band and descending-limb line
+    fl = [ax for ax in axes if "fiber length" in ax.get_ylabel() or _lines(ax, "descending-limb")]
     assert len(fl) == 6
     for ax in fl:
         assert np.allclose(_lines(ax, "descending-limb")[0].get_ydata(), 1.05)

@@ -145,7 +145,7 @@ def test_exported_states_load_in_opensim_with_the_solution_values(exported):
     # every state variable of the model is a column of the file (OpenSim refused none)
     header = pd.read_csv(files["states"], sep="\t", skiprows=7, nrows=0).columns
     assert len(header) - 1 == run["n_state_variables"]
-    # OpenSim reads back the solution's activation, excitation and fibre length (m); the muscle
+    # OpenSim reads back the solution's activation, excitation and fiber length (m); the muscle
     # uses the activation clamped to its minimum (Millard: 0.01)
     np.testing.assert_allclose(run["activation_state"], sol.activation.T, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(run["fiber_length_state_m"], sol.fiber_length_m.T, rtol=1e-10)

@@ -15,12 +15,12 @@ from musclemetab.study.runner import unit_batches
 from musclemetab.study.units import Unit, unit_key
 
 ESTIMATE = {"estimate": {"tendon_stiffness": ["soleus_r", "gasmed_r"]}, "couple": [["soleus_r", "gasmed_r"]],
-            "bounds": {"tendon_stiffness": [0.2, 1.5], "emg_scale": [0.5, 2.0]}, "weights": {"fibre_length": 50.0},
+            "bounds": {"tendon_stiffness": [0.2, 1.5], "emg_scale": [0.5, 2.0]}, "weights": {"fiber_length": 50.0},
             "emg_mode": "tracking", "validate": True}
 
 
 def _ultrasound(example, path):
-    """Fibre lengths in mm (MuscleRedundancySolver convention) over the normal trial's IK window."""
+    """Fiber lengths in mm (MuscleRedundancySolver convention) over the normal trial's IK window."""
     from musclemetab.io import read_storage, write_storage
 
     t = read_storage(example.ik["normal"]).index
@@ -59,7 +59,7 @@ def test_emg_mode_and_estimate_plan_their_units_and_keys(example, tmp_path):
     unit = Unit("sub1", "slow", "effort-cal")
     keys = {u: unit_key(study, u) for u in (unit, est)}
     for edit, changes in ((lambda d: d.update(emg_mode="tracking", emg_tolerance=None), {unit}),
-                          (lambda d: d["estimate"]["weights"].update(fibre_length=10.0), {est}),
+                          (lambda d: d["estimate"]["weights"].update(fiber_length=10.0), {est}),
                           (lambda d: d.update(emg_mapping="default"), {unit, est})):
         changed = json.loads(json.dumps(data))
         edit(changed["subjects"][0])
@@ -87,7 +87,7 @@ def test_emg_mode_and_estimate_plan_their_units_and_keys(example, tmp_path):
     (lambda s: s.update(estimate={**ESTIMATE, "bounds": {"tendon_stiffness": [2.0, 1.0]}}),
      ["bounds.tendon_stiffness", "low <= high"]),
     (lambda s: s.update(estimate={**ESTIMATE, "weights": {"ultrasound": 1.0}}), ["weights", "ultrasound",
-                                                                                "fibre_length"]),
+                                                                                "fiber_length"]),
     (lambda s: s.update(estimate={**ESTIMATE, "colour": 1}), ["unknown key", "colour"]),
     (lambda s: (s.update(estimate={"estimate": {"tendon_stiffness": ["soleus_r"]}}), s["trials"][0].pop("ultrasound")),
      ["needs measurements", "ultrasound", "emg_mode"]),
@@ -103,7 +103,7 @@ def test_emg_mode_and_estimate_keys_are_checked(example, tmp_path, edit, words):
 
 def test_estimation_unit_runs_musclemetab_estimate_on_the_subjects_files(example, tmp_path, monkeypatch):
     """The estimation unit is ``musclemetab estimate`` with the table's options on the trials that
-    have fibre lengths (their EMG too with emg_mode); its folder is units/<subject>/_estimate."""
+    have fiber lengths (their EMG too with emg_mode); its folder is units/<subject>/_estimate."""
     import musclemetab.redundancy.estimate_cli as estimate_cli
 
     seen = {}
@@ -133,7 +133,7 @@ def test_estimation_unit_runs_musclemetab_estimate_on_the_subjects_files(example
     assert {k: list(v) for k, v in seen["estimate"].items()} == {"tendon_stiffness": ["soleus_r", "gasmed_r"]}
     assert [list(g) for g in seen["couple"]] == [["soleus_r", "gasmed_r"]]
     assert seen["bounds"] == {"emg_scale": (0.5, 2.0), "tendon_stiffness": (0.2, 1.5)}
-    assert seen["weights"] == {"fibre_length": 50.0} and seen["validate"] is True and seen["max_iter"] == 50
+    assert seen["weights"] == {"fiber_length": 50.0} and seen["validate"] is True and seen["max_iter"] == 50
     assert seen["side"] == "r" and seen["dofs"] is None  # the subject's side; DOFs discovered from the model
     folder = tmp_path / "out" / "units" / "sub1" / "_estimate"
     assert (folder / "parameters.json").is_file()
@@ -142,7 +142,7 @@ def test_estimation_unit_runs_musclemetab_estimate_on_the_subjects_files(example
 
 @pytest.mark.opensim
 def test_estimation_stopped_by_the_iteration_limit_is_a_recorded_failure(example, tmp_path):
-    """A real estimation unit (fibre lengths of soleus and gastrocnemius medialis) stopped after 3
+    """A real estimation unit (fiber lengths of soleus and gastrocnemius medialis) stopped after 3
     iterations: failures.csv holds IPOPT's status, the other units complete."""
     data = _data(example, tmp_path, workflows=("effort-gen",), estimate={
         "estimate": {"tendon_stiffness": ["soleus_r", "gasmed_r"]}, "couple": [["soleus_r", "gasmed_r"]]})

@@ -77,7 +77,7 @@ def smoothing_table(subject, workflow) -> int:
         for s in (1e-2, 1e-3, 1e-4):
             goal = EnergyGoal(model, 1.0, subject.body_mass_kg, subject.height_m, smoothing=s)
             row[f"s={s:g}"] = float(np.mean(leg_rate_W_per_kg(goal, sol.parameters, sol.muscles, sol.excitation[:n],
-                                                              sol.activation[:n], sol.lm_norm[:n], sol.vm_norm[:n])))
+                                                              sol.activation[:n], sol.lm_norm[:n], sol.fiber_velocity_lmo_per_s[:n])))
         rows.append(row)
     print(pd.DataFrame(rows).to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     return 0
@@ -120,7 +120,7 @@ def main(argv=None) -> int:
             "goal_leg_mean_W_per_kg": (s.get("energy_goal") or {}).get("leg_mean_W_per_kg", np.nan),
             "smooth_UM10_leg_mean_W_per_kg": float(np.mean(leg_rate_W_per_kg(
                 um10, sol.parameters, sol.muscles, sol.excitation[:N], sol.activation[:N], sol.lm_norm[:N],
-                sol.vm_norm[:N]))),
+                sol.fiber_velocity_lmo_per_s[:N]))),
         })
         if sol.success:
             rows[-1]["exact_UM10_leg_mean_W_per_kg"] = exact_leg_mean_W_per_kg("UM10", sol, ex, N)

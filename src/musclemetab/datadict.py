@@ -125,7 +125,7 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
     ("states.sto", "/jointset/<joint>/<coordinate>/value", "rad or m", "coordinate value from the IK motion"),
     ("states.sto", "/jointset/<joint>/<coordinate>/speed", "rad/s or m/s", "coordinate speed from the IK motion"),
     ("states.sto", "/forceset/<muscle>/activation", "-", "muscle activation (model default for muscles not solved)"),
-    ("states.sto", "/forceset/<muscle>/fiber_length", "m", "fibre length (model default for muscles not solved)"),
+    ("states.sto", "/forceset/<muscle>/fiber_length", "m", "fiber length (model default for muscles not solved)"),
     ("controls.sto", "/forceset/<muscle>", "-", "muscle excitation"),
     # keys
     ("muscle_groups.csv", "group", "-", "group abbreviation used in share_<G>_pct"),

@@ -3,8 +3,8 @@
 The ``.osim`` file is read by OpenSim in the worker process
 (:mod:`musclemetab.opensim_bridge`); this module holds the result as plain arrays.
 Only five Hill parameters are taken from the model (see ``docs/method.md`` and
-``docs/muscles.md``): maximal isometric force, optimal fibre length, tendon slack length,
-pennation angle at optimal fibre length and maximal contraction velocity (optimal lengths
+``docs/muscles.md``): maximal isometric force, optimal fiber length, tendon slack length,
+pennation angle at optimal fiber length and maximal contraction velocity (optimal lengths
 per second; OpenSim's default of 10 when the model does not give it). They are read
 through OpenSim's common ``Muscle`` interface, so every muscle class reads the same way
 (Thelen2003, Millard2012 equilibrium and acceleration, DeGrooteFregly2016, ...); the
@@ -53,7 +53,7 @@ class MuscleParameters:
     optimal_fiber_length_m: np.ndarray
     tendon_slack_length_m: np.ndarray
     pennation_angle_at_optimal_rad: np.ndarray
-    max_contraction_velocity: np.ndarray  # optimal fibre lengths per second
+    max_contraction_velocity: np.ndarray  # optimal fiber lengths per second
 
     def __len__(self) -> int:
         return len(self.names)

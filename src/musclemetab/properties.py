@@ -518,7 +518,7 @@ def muscle_masses_kg(
     if missing:
         raise UnknownMuscleError(
             f"no volume share for muscle{'s' if len(missing) > 1 else ''} {', '.join(missing)} in the anatomical "
-            "muscle table; give the model's maximal isometric forces and optimal fibre lengths (fallback rule) "
+            "muscle table; give the model's maximal isometric forces and optimal fiber lengths (fallback rule) "
             "or a muscle-properties CSV (see docs/muscles.md)"
         )
     _report_unplaced([r.name for r in recs if r.fallback], strict, True)
@@ -527,7 +527,7 @@ def muscle_masses_kg(
 
 def slow_twitch_fraction(names: Sequence[str], default: float | None = None, overrides=None,
                          max_isometric_force_N=None) -> np.ndarray:
-    """Slow-twitch fibre fraction per muscle (volume-weighted over a lumped muscle's parts).
+    """Slow-twitch fiber fraction per muscle (volume-weighted over a lumped muscle's parts).
 
     With ``default`` given, muscles absent from the table get it (the study used 0.5);
     without, they raise :class:`UnknownMuscleError`.
@@ -573,9 +573,9 @@ def individualised_max_isometric_force_N(
     """
     lmo = np.asarray(optimal_fiber_length_m, dtype=float)
     if lmo.shape != (len(names),):
-        raise OptionError(f"{len(names)} muscle names but {lmo.size} optimal fibre lengths")
+        raise OptionError(f"{len(names)} muscle names but {lmo.size} optimal fiber lengths")
     if np.any(~np.isfinite(lmo)) or np.any(lmo <= 0):
-        raise OptionError("optimal fibre lengths must be positive, in metres")
+        raise OptionError("optimal fiber lengths must be positive, in metres")
     recs = _placed_records(names, max_isometric_force_N, overrides, "volume share")
     sigma = (np.array([r.specific_tension_Pa for r in recs]) if specific_tension_Pa is None
              else float(specific_tension_Pa))

@@ -1,4 +1,4 @@
-"""Calibration of the passive fibre force-length parameters from passive joint moments.
+"""Calibration of the passive fiber force-length parameters from passive joint moments.
 
 Per muscle, the shape parameters ``kPE`` and ``s0`` of the passive curve
 
@@ -10,7 +10,7 @@ moments of all muscles spanning a joint reproduce in-vivo passive moment-angle t
 (Silder et al. 2007) at the ankle, knee and hip.
 
 Each frame of each calibration trial is an independent static equilibrium (activation 0,
-fibre velocity 0). For trial ``t``, frame ``k`` and muscle ``m`` (compliant tendon,
+fiber velocity 0). For trial ``t``, frame ``k`` and muscle ``m`` (compliant tendon,
 constant-thickness pennation, ``w = lMo sin(alpha0)``):
 
     (l~M lMo)^2 - w^2 - lM_proj^2 = 0                              (pennation)
@@ -19,7 +19,7 @@ constant-thickness pennation, ``w = lMo sin(alpha0)``):
     T_target,k = sum_m F0_m fT_m,k r_m,k + Topt aT_k,   Topt = 150 N m
 
 with ``0.05 <= l~M <= 2`` (or, for a muscle the trial's geometry stretches further, its
-longest rigid-tendon fibre length plus 0.05: :func:`musclemetab.muscle.longest_fibre_length_bound`),
+longest rigid-tendon fiber length plus 0.05: :func:`musclemetab.muscle.longest_fiber_length_bound`),
 ``lM_proj >= 1e-4 m``, ``-1 <= aT <= 1``, ``3 <= kPE <= 5``,
 ``0.8 <= s0 <= 1.2``. The objective is ``J = sum_t sum_k aT_t,k^2``: least squares of the
 passive-moment error divided by 150 N m over every frame of the three trials.
@@ -51,9 +51,9 @@ import numpy as np
 
 from ..errors import DataMismatchError, InputFileError, MissingColumnError, OptionError, SolverError, UnknownMuscleError
 from ..muscle import (
-    fibre_width,
+    fiber_width,
     hill_residual,
-    longest_fibre_length_bound,
+    longest_fiber_length_bound,
     passive_force_length,
     tendon_force_length,
 )
@@ -77,7 +77,7 @@ __all__ = [
     "parameter_groups",
     "solve_passive",
     "passive_moments",
-    "equilibrium_fibre_length",
+    "equilibrium_fiber_length",
     "calibrate_passive",
     "write_calibration",
     "read_passive_parameters",
@@ -438,7 +438,7 @@ class PassiveSolution:
 
     ``parameters``: muscle -> (kPE, s0, sM). ``moments_Nm``: joint -> (F,) muscle passive
     moment; ``reserve_Nm``: joint -> (F,) reserve moment (target - muscles);
-    ``lm_norm``: joint -> (F, M) normalised fibre lengths; ``stats``: solver status,
+    ``lm_norm``: joint -> (F, M) normalised fiber lengths; ``stats``: solver status,
     iterations, wall time.
     """
 
@@ -519,12 +519,12 @@ def solve_passive(
         F0 = data.max_isometric_force_N[idx]
         lmo = data.optimal_fiber_length_m[idx]
         lts = data.tendon_slack_length_m[idx]
-        w = np.asarray(fibre_width(lmo, data.pennation_angle_at_optimal_rad[idx]))
+        w = np.asarray(fiber_width(lmo, data.pennation_angle_at_optimal_rad[idx]))
         kT = data.tendon_stiffness[idx]
         lm = opti.variable(F, M)
         proj = opti.variable(F, M)
         aT = opti.variable(F)
-        upper = longest_fibre_length_bound(t.lmt_m, lts, lmo, w, LM_NORM_BOUNDS[1])
+        upper = longest_fiber_length_bound(t.lmt_m, lts, lmo, w, LM_NORM_BOUNDS[1])
         opti.subject_to(opti.bounded(LM_NORM_BOUNDS[0], ca.vec(lm), ca.vec(ca.DM(np.tile(upper, (F, 1))))))
         opti.subject_to(ca.vec(proj) >= LM_PROJ_MIN_M)
         if free:  # with imposed parameters the reserve is the moment error, unbounded
@@ -545,7 +545,7 @@ def solve_passive(
         lm_m = lm * lmo_mat
         opti.subject_to(ca.vec(lm_m**2 - ca.DM(np.tile(w**2, (F, 1))) - proj**2) == 0)
         lts_mat, kt_mat, lmt = ca.DM(np.tile(lts, (F, 1))), ca.DM(np.tile(kT, (F, 1))), ca.DM(t.lmt_m)
-        # the Hill equilibrium of the redundancy problem at rest (activation 0, fibre velocity 0)
+        # the Hill equilibrium of the redundancy problem at rest (activation 0, fiber velocity 0)
         opti.subject_to(ca.vec(hill_residual(0.0, lm, 0.0, proj, lmt, optimal_fiber_length_m=lmo_mat,
                                              tendon_slack_length_m=lts_mat, max_contraction_velocity=1.0,
                                              kT=kt_mat, kpe=kpe_mat, s0=s0_mat, sm=sm_mat)) == 0)
@@ -607,7 +607,7 @@ def passive_moments(data: CalibrationData, parameters: Mapping[str, Sequence[flo
     return solve_passive(data, parameters)
 
 
-def equilibrium_fibre_length(
+def equilibrium_fiber_length(
     lmt_m: float,
     *,
     optimal_fiber_length_m: float,

@@ -10,7 +10,7 @@ All models take the same arguments (see :data:`SHARED_PARAMETERS_DOC`):
   trailing (time) axes. This differs from NumPy's trailing-axis rule on purpose: a
   per-muscle array can never be matched against the time axis by accident.
 
-Sign conventions (``docs/metabolics.md``): fibre velocity is positive when the fibre
+Sign conventions (``docs/metabolics.md``): fiber velocity is positive when the fiber
 lengthens; the mechanical work rate ``W_CE = -F_CE V_CE`` is positive when the muscle does
 work (shortening).
 
@@ -62,7 +62,7 @@ BASAL_RATE_W_PER_KG = 1.2
 #: study's code does not (an option of the Umberger family and BH04).
 MINIMUM_HEAT_RATE_W_PER_KG = 1.0
 
-#: Fibre-type fractions of a model's heats (option ``fiber_fractions`` of BH04 and HO06):
+#: Fiber-type fractions of a model's heats (option ``fiber_fractions`` of BH04 and HO06):
 #: the muscle's (the study's ``option = 1``) or those recruited at the excitation (Uchida
 #: et al. 2016; the study's ``option = 2``, :func:`recruited_slow_twitch_fraction`).
 FIBER_FRACTIONS = ("constant", "recruited")
@@ -96,23 +96,23 @@ SHARED_PARAMETERS_DOC = """\
     normalized_fiber_length : array_like
         ``l~M = lM / lMo`` (-).
     normalized_fiber_velocity : array_like
-        ``vbar = v~M / vmax`` (-), fibre velocity in optimal lengths per second divided by
+        ``vbar = v~M / vmax`` (-), fiber velocity in optimal lengths per second divided by
         the maximal contraction velocity (OpenSim's definition; -1..1); positive =
-        lengthening. The fibre velocity in m/s is ``V_CE = vbar * vmax * lMo``.
+        lengthening. The fiber velocity in m/s is ``V_CE = vbar * vmax * lMo``.
     active_force_length_multiplier : array_like
         ``fL(l~M)`` (-).
     force_velocity_multiplier : array_like
         ``fV(vbar)`` (-).
     passive_fiber_force_N : array_like
-        Passive fibre force ``F0 * fPE(l~M)`` along the fibre (N).
+        Passive fiber force ``F0 * fPE(l~M)`` along the fiber (N).
     max_isometric_force_N, optimal_fiber_length_m : array_like
         ``F0`` (N) and ``lMo`` (m), per muscle.
     max_contraction_velocity : array_like
-        ``vmax`` in optimal fibre lengths per second (10 in the study), per muscle.
+        ``vmax`` in optimal fiber lengths per second (10 in the study), per muscle.
     muscle_mass_kg : array_like
         Muscle mass ``m`` (kg), per muscle.
     slow_twitch_fraction : array_like
-        Fraction of slow-twitch fibres ``f_ST`` (-), per muscle; ``f_FT = 1 - f_ST``.
+        Fraction of slow-twitch fibers ``f_ST`` (-), per muscle; ``f_FT = 1 - f_ST``.
     time_s : array_like, optional
         Time (s) along the last axis; used only by models with a time-dependent term.
     basal : bool

@@ -25,7 +25,7 @@ from ._common import (
 
 __all__ = ["bhargava2004", "bhargava_stimulation_time_s", "BHARGAVA_CONSTANTS"]
 
-#: Bhargava et al. (2004) constants: activation and maintenance heat (W/kg) per fibre
+#: Bhargava et al. (2004) constants: activation and maintenance heat (W/kg) per fiber
 #: type, time constant of the activation-heat decay (s), and the excitation threshold of
 #: the study's stimulation-time counter.
 BHARGAVA_CONSTANTS = {
@@ -128,7 +128,7 @@ def bhargava2004(
     estimating metabolic energy consumption in muscle contraction. J Biomech 37:81-88.
 
     Equations (W for one muscle; ``V_CE = vbar vmax lMo`` in m/s, negative = shortening;
-    constant fibre fractions ``f_ST``, ``f_FT = 1 - f_ST``)::
+    constant fiber fractions ``f_ST``, ``f_FT = 1 - f_ST``)::
 
         u_f = 1 - cos(pi e/2),  u_s = sin(pi e/2)
         H_A  = phi m (133 f_FT u_f + 40 f_ST u_s)

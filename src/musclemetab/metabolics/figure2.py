@@ -2,7 +2,7 @@
 panels for the additional models LW05 and MA68 beside them.
 
 Configuration (the paper's "general case"): slow-twitch fraction 0.8, mass 0.48 kg,
-optimal fibre length 4.5 cm, ``vmax`` = 10 optimal lengths per second, activation levels
+optimal fiber length 4.5 cm, ``vmax`` = 10 optimal lengths per second, activation levels
 0.01, 0.33, 0.66 and 1.00 in steady state (``e = a``), one plane at ``l~M = 1`` (rate and
 efficiency over velocity) and one at ``|vbar| = 0.1`` (over length). The curves
 ``fL``, ``fV``, ``fPE`` are the package's (:mod:`musclemetab.muscle`); efficiency is
@@ -12,7 +12,7 @@ Open choices (the paper does not state them), each a parameter of :func:`figure2
 and printed in the figure:
 
 * ``max_isometric_force_N``: default 5978.47 N, the example model's soleus, whose mass
-  (0.476 kg) and optimal fibre length (4.51 cm) are the configuration's;
+  (0.476 kg) and optimal fiber length (4.51 cm) are the configuration's;
 * ``bh04_stimulation_time_s``: BH04's activation-heat decay needs a time since stimulation
   onset that a steady state does not have. Default ``inf`` (the steady-state limit,
   ``phi = 0.06``); the study's threshold is kept (no activation heat for ``e <= 0.1``);
@@ -319,7 +319,7 @@ def figure2(data: dict | None = None, **config):
     for ax in axes[last, 0:2]:
         ax.set_xlabel("vbar = v / (lMo vmax)  (< 0 shortening)", fontsize=8)
     for ax in axes[last, 2:4]:
-        ax.set_xlabel("normalised fibre length", fontsize=8)
+        ax.set_xlabel("normalised fiber length", fontsize=8)
     for ax in axes[:last].ravel():  # the abscissa is numbered on the last row only
         ax.tick_params(labelbottom=False)
     axes[0, 0].set_title(f"rate over velocity, l~M = {v['normalized_fiber_length']:g}", fontsize=9)

@@ -20,7 +20,7 @@ from ._common import (
 
 __all__ = ["houdijk2006", "HOUDIJK_CONSTANTS"]
 
-#: Per fibre type (fast, slow): activation and maintenance heat coefficients (W/kg; Hatze's
+#: Per fiber type (fast, slow): activation and maintenance heat coefficients (W/kg; Hatze's
 #: stable heat 150 / 24.4 W/kg split 0.35 / 0.45 into activation heat), Hatze's
 #: stimulation-frequency constants k3 and k4 (1/s), and the shortening-heat coefficient
 #: (times F0).
@@ -66,7 +66,7 @@ def houdijk2006(
     model for the energy cost and efficiency of muscular contraction. J Biomech
     39:536-543 (heat terms after Hatze & Buys 1977).
 
-    Equations (W for one muscle; fibre-weighted constants with ``f_FT = 1 - f_ST``)::
+    Equations (W for one muscle; fiber-weighted constants with ``f_FT = 1 - f_ST``)::
 
         hA = 52.50 f_FT + 10.98 f_ST,  hM = 97.50 f_FT + 13.42 f_ST         (W/kg)
         k3 = 12 f_FT + 6 f_ST,  k4 = 14 f_FT + 8 f_ST,  a~ = (0.28 f_FT + 0.16 f_ST) F0
@@ -84,7 +84,7 @@ def houdijk2006(
     ``maintenance`` separately.
 
     Quirk reproduced: the maintenance heat is **negative** where ``fL < hA/(hA + hM)``
-    (0.35 for fast-twitch, 0.45 for slow-twitch fibres), i.e. far from optimal length; it
+    (0.35 for fast-twitch, 0.45 for slow-twitch fibers), i.e. far from optimal length; it
     is not clipped.
 
     Parameters
@@ -94,7 +94,7 @@ def houdijk2006(
     Other parameters
     ----------------
     fiber_fractions : {"constant", "recruited"}
-        ``f_ST`` and ``f_FT`` in the fibre-weighted constants: the muscle's (default, the
+        ``f_ST`` and ``f_FT`` in the fiber-weighted constants: the muscle's (default, the
         study's setting) or Uchida et al. (2016)'s recruited fractions at the excitation of
         each sample (the study's ``option = 2``; the excitation then enters the heats).
     non_negative : bool
@@ -114,7 +114,7 @@ def houdijk2006(
         f_st = inp.slow_twitch_fraction
     f_ft = 1.0 - f_st
 
-    # fibre-weighted constants
+    # fiber-weighted constants
     h_A = k["activation_fast_W_per_kg"] * f_ft + k["activation_slow_W_per_kg"] * f_st
     h_M = k["maintenance_fast_W_per_kg"] * f_ft + k["maintenance_slow_W_per_kg"] * f_st
     k3 = k["k3_fast"] * f_ft + k["k3_slow"] * f_st

@@ -60,7 +60,7 @@ def lichtwark2007(
     maximum muscle efficiency during locomotion? J Biomech 40:1768-1775.
 
     Equations (W for one muscle; rates in 1/s scaled by ``N0 = F0 lMo`` (N m); muscle mass
-    and fibre type are not used, except for the basal heat)::
+    and fiber type are not used, except for the basal heat)::
 
         G = 4,  gamma = 1.5,  X = a fL,  P = fV,  VCE~ = V_CE / lMo (lMo/s)
         h_M = gamma vmax / G^2                                                if P <  1
@@ -170,7 +170,7 @@ def lichtwark2005(
     208:2831-2843. The study's code holds an uncalled version with defects; the choices
     made here are listed in ``docs/metabolics.md``.
 
-    Equations (W for one muscle; ``V = -V_CE`` the fibre *shortening* velocity (m/s),
+    Equations (W for one muscle; ``V = -V_CE`` the fiber *shortening* velocity (m/s),
     ``N0 = F0 lMo`` (N m), ``G = 4``, ``vmax`` in lMo/s)::
 
         F_CE = a fL fV F0,   W_CE = F_CE V            (work rate, counted once)

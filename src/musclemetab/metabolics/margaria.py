@@ -45,14 +45,14 @@ def margaria1968(
     basal_rate_W_per_kg: float = BASAL_RATE_W_PER_KG,
     check: bool = True,
 ) -> MetabolicRates:
-    """MA68: Margaria (1968), metabolic rate from the fibre's mechanical work rate alone.
+    """MA68: Margaria (1968), metabolic rate from the fiber's mechanical work rate alone.
 
     Reference: Margaria R (1968) Positive and negative work performances and their
     efficiencies in human locomotion. Int Z Angew Physiol 25:339-351; in the form of
     Koelewijn AD, Heinrich D, van den Bogert AJ (2019) Metabolic cost calculations of gait
     using musculoskeletal energy models, a comparison study. PLoS ONE 14:e0222037.
 
-    Equations (W for one muscle; ``W_CE = -a fL fV F0 V_CE``, positive when the fibre
+    Equations (W for one muscle; ``W_CE = -a fL fV F0 V_CE``, positive when the fiber
     shortens)::
 
         Edot = W_CE / 0.25        if W_CE >= 0     (positive work, efficiency 25 %)
@@ -62,7 +62,7 @@ def margaria1968(
     Isometric contraction costs nothing (no heat model). The factor of negative work is
     -1.2 as the KU Leuven solver and Koelewijn et al. (2019) write it (a cost of 1.2 J per
     J absorbed); dividing by Margaria's efficiency of -1.2 instead would give 1/1.2.
-    Excitation, length and fibre type are not used.
+    Excitation, length and fiber type are not used.
 
     Components: ``work`` = ``W_CE``; ``shortening_lengthening`` = ``Edot - W_CE``, the heat
     the efficiency implies (3 ``W_CE`` in shortening, -2.2 ``W_CE`` in lengthening);

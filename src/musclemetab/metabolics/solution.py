@@ -8,7 +8,7 @@ Trimming (``docs/metabolics.md``): the solver's first and last nodes are padding
 (free initial and final states). The study keeps nodes ``t_5 ... t_{N-6}``
 (0-based ``slice(5, N - 5)``, ``N - 10`` samples): 5 nodes dropped at the start and 6 at
 the end (the last includes node ``N``, where the controls only repeat node ``N-1``).
-Excitation and fibre velocity at node ``k`` pair with the states at node ``k``.
+Excitation and fiber velocity at node ``k`` pair with the states at node ``k``.
 
 Muscle parameters (``F0``, ``lMo``, ``vmax``) are matched by muscle name, from the solution's
 ``summary.json`` (the values the solve used) or from a model; masses and slow-twitch

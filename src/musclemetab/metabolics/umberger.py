@@ -14,9 +14,9 @@ muscle; ``VCE~ = V_CE / lMo`` in optimal lengths per second, negative = shorteni
     h_SL =  alpha_L VCE~ A                                         if VCE~ >  0
     H_AM = h_AM A_AM S m            (x (0.4 + 0.6 fL) if lM > lMo)
     H_SL = h_SL S m                 (x fL             if lM > lMo)
-    W_CE = -F_CE V_CE,   F_CE = a fL fV F0   (no passive force, along the fibre)
+    W_CE = -F_CE V_CE,   F_CE = a fL fV F0   (no passive force, along the fiber)
 
-``f_ST'`` and ``f_FT' = 1 - f_ST'`` are the muscle's constant fibre fractions (UM03, UM10)
+``f_ST'`` and ``f_FT' = 1 - f_ST'`` are the muscle's constant fiber fractions (UM03, UM10)
 or the excitation-dependent recruited fractions (UC16).
 """
 
@@ -46,7 +46,7 @@ __all__ = ["umberger2003", "umberger2010", "uchida2016", "AEROBIC_FACTOR", "ANAE
 #: study's value and OpenSim's default), 1.0 for anaerobic activity (Umberger et al. 2003).
 AEROBIC_FACTOR = 1.5
 ANAEROBIC_FACTOR = 1.0
-#: vmax of slow-twitch fibres is vmax / 2.5.
+#: vmax of slow-twitch fibers is vmax / 2.5.
 SLOW_TWITCH_VMAX_RATIO = 2.5
 #: alpha_L = factor * alpha_S_ST: 4 in Umberger et al. (2003) (and UC16), 0.3 in Umberger (2010).
 LENGTHENING_FACTOR_2003 = 4.0
@@ -72,7 +72,7 @@ def _umberger_family(
     m, F0, l_mo, v_max = (inp.muscle_mass_kg, inp.max_isometric_force_N, inp.optimal_fiber_length_m,
                           inp.max_contraction_velocity)
 
-    # fibre-type fractions: the muscle's, or those recruited at this excitation (UC16)
+    # fiber-type fractions: the muscle's, or those recruited at this excitation (UC16)
     f_st = recruited_slow_twitch_fraction(e, inp.slow_twitch_fraction) if recruitment else inp.slow_twitch_fraction
     # velocity constants (per muscle)
     v_max_st = v_max / SLOW_TWITCH_VMAX_RATIO
@@ -80,7 +80,7 @@ def _umberger_family(
     alpha_s_ft = 153.0 / v_max
     alpha_l = lengthening_factor * alpha_s_st
     Sm = S * m  # W/kg -> W, with the effort scaling
-    # the fibre-weighted coefficients times S m, with f_FT = 1 - f_ST so that recruited fractions
+    # the fiber-weighted coefficients times S m, with f_FT = 1 - f_ST so that recruited fractions
     # take one product and one sum: h_AM S m = (128 f_FT + 25) S m = (153 - 128 f_ST) S m, and
     # of the shortening heat -(alpha_S_ST f_ST + alpha_S_FT f_FT) S m
     #   = -(alpha_S_FT + (alpha_S_ST - alpha_S_FT) f_ST) S m
@@ -89,8 +89,8 @@ def _umberger_family(
 
     # (the arrays that are no longer needed are freed as we go: less memory in use at once)
     v_tilde = inp.normalized_fiber_velocity * v_max  # VCE~ (lMo/s), positive = lengthening
-    # mechanical work rate of the active fibre force (no passive force): -F_CE V_CE, or only
-    # where the fibre shortens (F_CE times the shortening speed max(-VCE~, 0))
+    # mechanical work rate of the active fiber force (no passive force): -F_CE V_CE, or only
+    # where the fiber shortens (F_CE times the shortening speed max(-VCE~, 0))
     if values["include_negative_work"]:
         W_CE = a * f_l * f_v * v_tilde * -(F0 * l_mo)
     else:
@@ -171,7 +171,7 @@ def umberger2003(
     expenditure. Comput Methods Biomech Biomed Engin 6:99-111.
 
     Equations: the Umberger family (module :mod:`musclemetab.metabolics.umberger`) with
-    constant fibre fractions and the lengthening coefficient
+    constant fiber fractions and the lengthening coefficient
     ``alpha_L = 4 alpha_S_ST`` (100 W/kg per lMo/s for vmax = 10)::
 
         Edot = W_CE + H_AM + H_SL (+ basal)
@@ -297,7 +297,7 @@ def uchida2016(
     budget: how tendon compliance affects the metabolic cost of running. PLoS ONE
     11:e0150378.
 
-    Equations: UM03 (module :mod:`musclemetab.metabolics.umberger`) with the fibre
+    Equations: UM03 (module :mod:`musclemetab.metabolics.umberger`) with the fiber
     fractions replaced by excitation-dependent recruited fractions::
 
         u_f = 1 - cos(pi e/2),   u_s = sin(pi e/2)

@@ -7,8 +7,8 @@ CasADi.
 
 Normalisations and units (see ``docs/method.md``):
 
-* ``lm_norm``  normalised fibre length l~M = lM / lMo (-)
-* ``vbar``     fibre velocity divided by the maximal contraction velocity,
+* ``lm_norm``  normalised fiber length l~M = lM / lMo (-)
+* ``vbar``     fiber velocity divided by the maximal contraction velocity,
   vbar = v~M / vmax with v~M in optimal lengths per second; positive = lengthening
 * ``lt_norm``  normalised tendon length l~T = lT / lTs (-)
 * ``kT``       normalised tendon stiffness (-), generic 35
@@ -42,8 +42,8 @@ __all__ = [
     "tendon_stiffness_for_slope",
     "activation_rate",
     "hill_residual",
-    "fibre_width",
-    "longest_fibre_length_bound",
+    "fiber_width",
+    "longest_fiber_length_bound",
 ]
 
 # Active force-length: sum of three Gaussians, rows (b1, b2, b3, b4).
@@ -137,7 +137,7 @@ def force_velocity(vbar):
 
 
 def passive_force_length(lm_norm, kpe=4.0, s0=1.0, sm=0.6):
-    """Passive fibre force-length multiplier fPE(l~M) with per-muscle shape parameters.
+    """Passive fiber force-length multiplier fPE(l~M) with per-muscle shape parameters.
 
     ``fPE = [exp(kPE (l - s0)/sM) - 1 - P1] / P2``, ``P1 = exp(kPE (0.2 - 1)/0.6) - 1``,
     ``P2 = exp(kPE) - 1``. The 0.6 inside ``P1`` is fixed (not ``sM``), as in the reference
@@ -244,7 +244,7 @@ def activation_rate(
     return (d1 * (f + 0.5) + d2 * (0.5 - f)) * (e - a)
 
 
-def fibre_width(optimal_fiber_length_m, pennation_angle_at_optimal_rad):
+def fiber_width(optimal_fiber_length_m, pennation_angle_at_optimal_rad):
     """Constant muscle thickness w = lMo sin(alpha0) (m)."""
     m = math_for(optimal_fiber_length_m, pennation_angle_at_optimal_rad)
     if m is _NUMPY:
@@ -254,14 +254,14 @@ def fibre_width(optimal_fiber_length_m, pennation_angle_at_optimal_rad):
     return optimal_fiber_length_m * ca.sin(pennation_angle_at_optimal_rad)
 
 
-def longest_fibre_length_bound(lmt_m, tendon_slack_length_m, optimal_fiber_length_m, width_m, default: float,
+def longest_fiber_length_bound(lmt_m, tendon_slack_length_m, optimal_fiber_length_m, width_m, default: float,
                                margin: float = 0.05):
-    """Upper bound of each muscle's normalised fibre length over a motion (NumPy).
+    """Upper bound of each muscle's normalised fiber length over a motion (NumPy).
 
-    No fibre is longer than with its tendon at slack length (a shorter tendon carries no
-    force, and neither can the fibre then): ``l~M <= sqrt((lMT - lTs)^2 + w^2) / lMo``. The
+    No fiber is longer than with its tendon at slack length (a shorter tendon carries no
+    force, and neither can the fiber then): ``l~M <= sqrt((lMT - lTs)^2 + w^2) / lMo``. The
     bound is ``default``, or this rigid-tendon length at the longest ``lMT`` (rows of
-    ``lmt_m`` are frames) plus ``margin`` where that is larger, so that a box on the fibre
+    ``lmt_m`` are frames) plus ``margin`` where that is larger, so that a box on the fiber
     length never excludes the only equilibria of a muscle the geometry stretches further.
     """
     along = np.max(np.atleast_2d(np.asarray(lmt_m, dtype=float)), axis=0) - np.asarray(tendon_slack_length_m)
@@ -284,7 +284,7 @@ def hill_residual(
     s0=1.0,
     sm=0.6,
 ):
-    """Normalised force equilibrium between fibre (along the tendon) and tendon.
+    """Normalised force equilibrium between fiber (along the tendon) and tendon.
 
     ``res = [a fL(l~M) fV(v~M/vmax) + fPE(l~M)] cos(alpha) - fT(l~T)`` with
     ``cos(alpha) = lM_proj / lM`` and ``l~T = (lMT - lM_proj) / lTs``; ``v~M`` in optimal
@@ -292,7 +292,7 @@ def hill_residual(
     """
     lm_m = lm_norm * optimal_fiber_length_m
     cos_alpha = lm_projected_m / lm_m
-    fibre = activation * active_force_length(lm_norm) * force_velocity(vm_norm / max_contraction_velocity)
-    fibre = fibre + passive_force_length(lm_norm, kpe, s0, sm)
+    fiber = activation * active_force_length(lm_norm) * force_velocity(vm_norm / max_contraction_velocity)
+    fiber = fiber + passive_force_length(lm_norm, kpe, s0, sm)
     lt_norm = (lmt_m - lm_projected_m) / tendon_slack_length_m
-    return fibre * cos_alpha - tendon_force_length(lt_norm, kT)
+    return fiber * cos_alpha - tendon_force_length(lt_norm, kT)

@@ -8,9 +8,9 @@ Set-up: a one-muscle model. The muscle (a clone of a model's muscle, or a new
 that the path length is the slider coordinate; its tendon is rigid. With
 ``h = lMo sin(alpha_opt)`` (constant-thickness pennation), the muscle-tendon length
 ``lMT = lTs + sqrt(lM^2 - h^2)`` and lengthening speed ``vMT = vM lM / sqrt(lM^2 - h^2)``
-give exactly the fibre length ``lM`` and velocity ``vM`` asked for. Activation is set as a
+give exactly the fiber length ``lM`` and velocity ``vM`` asked for. Activation is set as a
 state, excitation as the muscle's control; the model is realised to accelerations and
-every probe's outputs are read, with the muscle quantities OpenSim used (fibre length and
+every probe's outputs are read, with the muscle quantities OpenSim used (fiber length and
 velocity, activation, excitation, curve multipliers, forces), so that a re-implementation
 can be fed the very same values.
 
@@ -172,15 +172,15 @@ def evaluate_probes(
         Clone this muscle of this model; or give ``muscle_parameters`` (``F0``, ``lMo``,
         ``lTs``, ``alpha_opt``, ``vmax`` by their package names) for a new Millard muscle.
     fiber_damping
-        Millard fibre damping (0 removes the damping force from the fibre force).
+        Millard fiber damping (0 removes the damping force from the fiber force).
     read_muscle_quantities
         False reads only the probes' outputs (for timing the probes alone).
     tendon_strain
-        ``None`` (default): rigid tendon, fibre length and velocity exactly as given.
-        A number: compliant tendon stretched by this strain; the fibre length is set as
+        ``None`` (default): rigid tendon, fiber length and velocity exactly as given.
+        A number: compliant tendon stretched by this strain; the fiber length is set as
         given and ``normalized_fiber_velocity`` is then the muscle-tendon lengthening
-        speed in ``lMo vmax``; OpenSim solves the fibre velocity from the force
-        equilibrium (this is the set-up in which Millard's fibre damping acts). Read
+        speed in ``lMo vmax``; OpenSim solves the fiber velocity from the force
+        equilibrium (this is the set-up in which Millard's fiber damping acts). Read
         the achieved velocity from the result.
 
     Returns

@@ -3,7 +3,7 @@
 The workflows of Luis et al. (PLoS Comput Biol 2024): the effort-based EFFORT-GEN, EFFORT-CAL
 and EFFORT-TEN, and EMG-TEN, the EMG-informed estimation of tendon stiffness over several trials.
 From inverse kinematics, inverse dynamics and muscle geometry, an optimal control problem
-(CasADi + IPOPT) finds muscle excitations, activations, fibre lengths and velocities and
+(CasADi + IPOPT) finds muscle excitations, activations, fiber lengths and velocities and
 tendon forces that reproduce the joint moments with minimal effort.
 
 Modules: :mod:`.inputs` (filtering, splines, mesh), :mod:`.static_opt` (initial guess),

@@ -5,29 +5,29 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..muscle import longest_fibre_length_bound
+from ..muscle import longest_fiber_length_bound
 from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
 
-__all__ = ["node_bounds", "fibre_length_upper_bounds", "fibre_length_bounds_record", "bounds_and_guess"]
+__all__ = ["node_bounds", "fiber_length_upper_bounds", "fiber_length_bounds_record", "bounds_and_guess"]
 
 ACTIVATION_BOUNDS = (0.0, 1.0)
-FIBRE_LENGTH_BOUNDS = (0.1, 1.7)
-#: optimal lengths added to a muscle's longest rigid-tendon fibre length where that exceeds the
-#: default upper bound less this margin (:func:`fibre_length_upper_bounds`)
-FIBRE_LENGTH_MARGIN = 0.05
-FIBRE_VELOCITY_BOUNDS = (-10.0, 10.0)
+FIBER_LENGTH_BOUNDS = (0.1, 1.7)
+#: optimal lengths added to a muscle's longest rigid-tendon fiber length where that exceeds the
+#: default upper bound less this margin (:func:`fiber_length_upper_bounds`)
+FIBER_LENGTH_MARGIN = 0.05
+FIBER_VELOCITY_BOUNDS = (-10.0, 10.0)
 RESERVE_BOUNDS = (-1.0, 1.0)
 MIN_PROJECTED_LENGTH_M = 1e-4
 
 
-def fibre_length_upper_bounds(inputs: TrialInputs, params: MuscleTendonParameters, specs=()) -> np.ndarray:
-    """Upper bound of each muscle's normalised fibre length in one trial (``docs/problem.md``).
+def fiber_length_upper_bounds(inputs: TrialInputs, params: MuscleTendonParameters, specs=()) -> np.ndarray:
+    """Upper bound of each muscle's normalised fiber length in one trial (``docs/problem.md``).
 
-    A fibre cannot be longer than with its tendon at slack length (a tendon shorter than its
-    slack length carries no force, so neither can the fibre): ``l~M <= l~M_rigid =
-    sqrt((lMT - lTs)^2 + w^2) / lMo``. The bound is ``FIBRE_LENGTH_BOUNDS[1]`` (1.7), or
-    ``max over the nodes of l~M_rigid + FIBRE_LENGTH_MARGIN`` where that is larger, so that the
+    A fiber cannot be longer than with its tendon at slack length (a tendon shorter than its
+    slack length carries no force, so neither can the fiber): ``l~M <= l~M_rigid =
+    sqrt((lMT - lTs)^2 + w^2) / lMo``. The bound is ``FIBER_LENGTH_BOUNDS[1]`` (1.7), or
+    ``max over the nodes of l~M_rigid + FIBER_LENGTH_MARGIN`` where that is larger, so that the
     box never excludes the muscle's only equilibria. With scale factors of ``lMo`` or ``lTs``
     in ``specs`` the longest rigid-tendon length is taken at their lower bounds.
     """
@@ -44,30 +44,30 @@ def fibre_length_upper_bounds(inputs: TrialInputs, params: MuscleTendonParameter
                 width[k] *= s.bounds[0]
             else:
                 lts[k] *= s.bounds[0]
-    return longest_fibre_length_bound(inputs.lmt_m, lts, lmo, width, FIBRE_LENGTH_BOUNDS[1], FIBRE_LENGTH_MARGIN)
+    return longest_fiber_length_bound(inputs.lmt_m, lts, lmo, width, FIBER_LENGTH_BOUNDS[1], FIBER_LENGTH_MARGIN)
 
 
-def fibre_length_bounds_record(inputs: TrialInputs, params: MuscleTendonParameters, specs=()) -> dict:
-    """The fibre-length bounds of one trial as ``summary.json`` records them
-    (``fibre_length_bounds``): ``default``, the bounds ``[0.1, 1.7]`` of the normalised fibre
+def fiber_length_bounds_record(inputs: TrialInputs, params: MuscleTendonParameters, specs=()) -> dict:
+    """The fiber-length bounds of one trial as ``summary.json`` records them
+    (``fiber_length_bounds``): ``default``, the bounds ``[0.1, 1.7]`` of the normalised fiber
     length, and ``widened_upper``, ``{muscle: upper bound}`` of the muscles whose bound
-    :func:`fibre_length_upper_bounds` widens (the same arguments)."""
-    upper = fibre_length_upper_bounds(inputs, params, specs)
-    return {"default": list(FIBRE_LENGTH_BOUNDS),
-            "widened_upper": {m: float(u) for m, u in zip(inputs.muscles, upper) if u > FIBRE_LENGTH_BOUNDS[1]}}
+    :func:`fiber_length_upper_bounds` widens (the same arguments)."""
+    upper = fiber_length_upper_bounds(inputs, params, specs)
+    return {"default": list(FIBER_LENGTH_BOUNDS),
+            "widened_upper": {m: float(u) for m, u in zip(inputs.muscles, upper) if u > FIBER_LENGTH_BOUNDS[1]}}
 
 
 def node_bounds(M: int, D: int, lm_upper=None) -> tuple[np.ndarray, np.ndarray]:
     """Lower and upper bounds of one node's variables ``[a, l~M, lM cos(alpha), e, reserve, v~M]``
-    (``lm_upper``: per-muscle upper bounds of ``l~M``, default ``FIBRE_LENGTH_BOUNDS[1]``)."""
-    lm_upper = np.full(M, FIBRE_LENGTH_BOUNDS[1]) if lm_upper is None else np.asarray(lm_upper, dtype=float)
+    (``lm_upper``: per-muscle upper bounds of ``l~M``, default ``FIBER_LENGTH_BOUNDS[1]``)."""
+    lm_upper = np.full(M, FIBER_LENGTH_BOUNDS[1]) if lm_upper is None else np.asarray(lm_upper, dtype=float)
     lb = np.concatenate([
-        np.full(M, ACTIVATION_BOUNDS[0]), np.full(M, FIBRE_LENGTH_BOUNDS[0]), np.full(M, MIN_PROJECTED_LENGTH_M),
-        np.full(M, ACTIVATION_BOUNDS[0]), np.full(D, RESERVE_BOUNDS[0]), np.full(M, FIBRE_VELOCITY_BOUNDS[0]),
+        np.full(M, ACTIVATION_BOUNDS[0]), np.full(M, FIBER_LENGTH_BOUNDS[0]), np.full(M, MIN_PROJECTED_LENGTH_M),
+        np.full(M, ACTIVATION_BOUNDS[0]), np.full(D, RESERVE_BOUNDS[0]), np.full(M, FIBER_VELOCITY_BOUNDS[0]),
     ])
     ub = np.concatenate([
         np.full(M, ACTIVATION_BOUNDS[1]), lm_upper, np.full(M, np.inf),
-        np.full(M, ACTIVATION_BOUNDS[1]), np.full(D, RESERVE_BOUNDS[1]), np.full(M, FIBRE_VELOCITY_BOUNDS[1]),
+        np.full(M, ACTIVATION_BOUNDS[1]), np.full(D, RESERVE_BOUNDS[1]), np.full(M, FIBER_VELOCITY_BOUNDS[1]),
     ])
     return lb, ub
 
@@ -79,11 +79,11 @@ def bounds_and_guess(trials, params, info, specs, goals, p_index, n_p, pairs) ->
     tol = goals.emg_tolerance or 0.0
     for t, d in zip(trials, info):
         M, D, N, nb, gs = d["M"], d["D"], d["N"], d["nb"], t.guess
-        lb_node, ub_node = node_bounds(M, D, fibre_length_upper_bounds(t.inputs, params, specs))
+        lb_node, ub_node = node_bounds(M, D, fiber_length_upper_bounds(t.inputs, params, specs))
         lbx += [np.tile(lb_node, N), lb_node[:3 * M]]
         ubx += [np.tile(ub_node, N), ub_node[:3 * M]]
         Z0 = np.hstack([gs.activation[:N], gs.lm_norm[:N], gs.lm_projected_m[:N],
-                        gs.excitation[:N], gs.reserve[:N], gs.vm_norm[:N]])
+                        gs.excitation[:N], gs.reserve[:N], gs.fiber_velocity_lmo_per_s[:N]])
         x0 += [Z0.reshape(-1), gs.activation[N], gs.lm_norm[N], gs.lm_projected_m[N]]
         n_eq = 4 * M + D
         lbg += [np.tile(np.concatenate([np.zeros(n_eq), np.full(nb, -tol)]), N), np.zeros(M)]

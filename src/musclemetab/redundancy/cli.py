@@ -42,7 +42,7 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
         help="muscle redundancy problem of one trial (effort workflows) or of several (emg-ten)",
         description=(
             "Solve the muscle redundancy problem with compliant tendons (De Groote et al. 2016) for "
-            "one trial: muscle excitations, activations, fibre lengths and velocities and tendon forces "
+            "one trial: muscle excitations, activations, fiber lengths and velocities and tendon forces "
             "that reproduce the inverse-dynamics moments of the five right-leg DOFs with minimal effort. "
             "Workflows: effort-gen (generic passive muscle, kT = 35), effort-cal (calibrated passive "
             "muscle), effort-ten (calibrated passive muscle and personalised triceps-surae and vasti "
@@ -81,7 +81,7 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
                    "N = the N-th complete cycle")
     p.add_argument("--exclude-muscles", nargs="+", metavar="MUSCLE",
                    help="leave these muscles out of the problem (e.g. a muscle that cannot reach force equilibrium "
-                   "within the fibre-length bounds, named by a failed solve)")
+                   "within the fiber-length bounds, named by a failed solve)")
     p.add_argument("--mesh-frequency", type=float, default=100.0, metavar="PER_S",
                    help="mesh intervals per second (default 100, the study's)")
     p.add_argument("--workflow", default="effort-gen", choices=("effort-gen", "effort-cal", "effort-ten", "emg-ten"),
@@ -101,8 +101,8 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
                    "JSON file {\"muscle\": [\"channel\", ...]} (default: default)")
     p.add_argument("--labels", nargs="+", metavar="NAME",
                    help="emg-ten: trial names, i.e. the output sub-folders (default: the IK file stems)")
-    p.add_argument("--fibre-dynamics", choices=("forward", "backward"),
-                   help="transcription of the fibre dynamics: 'forward' Euler with the Hill equilibrium at each "
+    p.add_argument("--fiber-dynamics", choices=("forward", "backward"),
+                   help="transcription of the fiber dynamics: 'forward' Euler with the Hill equilibrium at each "
                    "interval's start node (the study's), or 'backward' Euler with it at the end node (default: "
                    "backward with --emg-mode driven, where the forward recurrence is unstable, else forward; "
                    "docs/problem.md)")
@@ -221,8 +221,8 @@ def solve_command(args) -> int:
     options = _solver_options(args)
     if energy is not None:
         options = options.with_(energy=energy)
-    if args.fibre_dynamics:
-        options = options.with_(fibre_dynamics=args.fibre_dynamics)
+    if args.fiber_dynamics:
+        options = options.with_(fiber_dynamics=args.fiber_dynamics)
     warm = None
     if args.warm_start:
         from .solution import Solution
@@ -323,12 +323,12 @@ def _solver_options(args):
 
 
 def _bound_note(solution) -> str:
-    from .solve import muscles_at_fibre_length_bound
+    from .solve import muscles_at_fiber_length_bound
 
-    at = muscles_at_fibre_length_bound(solution)
+    at = muscles_at_fiber_length_bound(solution)
     if not at:
         return ""
-    return (f" Fibres at their longest allowed length (1.7 optimal lengths, or their longest rigid-tendon length "
+    return (f" Fibers at their longest allowed length (1.7 optimal lengths, or their longest rigid-tendon length "
             f"plus 0.05): {', '.join(at)}; if the model's tendon slack length is too short for them, leave them out "
             f"with --exclude-muscles {' '.join(at)}.")
 
@@ -378,10 +378,10 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
             raise OptionError("--parameters and --warm-start cannot be used with an EMG-informed solve; give "
                               "--tendon-stiffness MUSCLE=KT,... instead of --parameters, and drop --warm-start")
         settings = replace(informed_settings(args.workflow, mode, args.emg_tolerance, args.emg_weight),
-                           fibre_dynamics=args.fibre_dynamics)
+                           fiber_dynamics=args.fiber_dynamics)
         return _informed_command(args, ik, idf, settings, parse_tendon_stiffness(args.tendon_stiffness)
                                  if args.tendon_stiffness else None)
-    settings = EmgTenSettings(emg_tolerance=args.emg_tolerance, emg_mode=mode, fibre_dynamics=args.fibre_dynamics,
+    settings = EmgTenSettings(emg_tolerance=args.emg_tolerance, emg_mode=mode, fiber_dynamics=args.fiber_dynamics,
                               **({"w_emg": args.emg_weight} if args.emg_weight is not None else {}))
     wrong = [o for o, v in (("--tendon-stiffness", args.tendon_stiffness), ("--parameters", args.parameters),
                             ("--warm-start", args.warm_start)) if v]
@@ -508,7 +508,7 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
         r = result.run_record
         if not r.success:
             raise emg_failure(r, settings.emg_mode, f"the EMG-informed {args.workflow} solve (written to {out})",
-                              settings.fibre_scheme)
+                              settings.fiber_scheme)
         scales = ", ".join(f"{m} {v:.3g}" for m, v in result.emg_scale.items())
         leg = f" side {side}" if args.side == "both" else ""
         print(f"solve: {args.workflow} EMG-{settings.emg_mode}{leg} {len(result.solutions)} trial(s): {r.status} in "

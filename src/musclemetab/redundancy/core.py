@@ -21,8 +21,8 @@ per-interval functions (SX: constraints, objective, Jacobian, Hessian of the Lag
 built once and mapped over the group's nodes; their nonzeros are placed into the global sparse
 matrices handed to IPOPT (block banded Jacobian with dense factor columns; block diagonal
 Hessian with a border and a factor block summed over all nodes). Moment arms zero at every node
-of a group are removed from its expressions, and with them their structural zeros. The fibre
-dynamics (``Goals.fibre_dynamics``) are forward Euler with the Hill equilibrium at each
+of a group are removed from its expressions, and with them their structural zeros. The fiber
+dynamics (``Goals.fiber_dynamics``) are forward Euler with the Hill equilibrium at each
 interval's start node, or backward Euler with it at the end node: then the interval's rows are
 nonlinear in the next node's ``[a, l~M, lp]``, its Hessian blocks couple ``z_k`` with them, and
 the entries of two intervals at one place of the Hessian are summed.
@@ -39,55 +39,55 @@ import numpy as np
 from ..errors import DataMismatchError, OptionError, SolverError, UnknownMuscleError
 from ..muscle import activation_rate, hill_residual, tendon_force_length
 from .bounds import (  # noqa: F401  (re-exported)
-    ACTIVATION_BOUNDS, FIBRE_LENGTH_BOUNDS, FIBRE_LENGTH_MARGIN, FIBRE_VELOCITY_BOUNDS, MIN_PROJECTED_LENGTH_M,
-    RESERVE_BOUNDS, bounds_and_guess, fibre_length_upper_bounds, node_bounds,
+    ACTIVATION_BOUNDS, FIBER_LENGTH_BOUNDS, FIBER_LENGTH_MARGIN, FIBER_VELOCITY_BOUNDS, MIN_PROJECTED_LENGTH_M,
+    RESERVE_BOUNDS, bounds_and_guess, fiber_length_upper_bounds, node_bounds,
 )
 from .energy import EnergyGoal, node_rates
 from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
 from .static_opt import InitialGuess
 
-__all__ = ["Goals", "ParameterSpec", "coupling_pairs", "TrialBlock", "PARAMETER_KINDS", "FIBRE_DYNAMICS", "build_problem",
-           "node_bounds", "fibre_length_upper_bounds", "check_fibre_dynamics"]
+__all__ = ["Goals", "ParameterSpec", "coupling_pairs", "TrialBlock", "PARAMETER_KINDS", "FIBER_DYNAMICS", "build_problem",
+           "node_bounds", "fiber_length_upper_bounds", "check_fiber_dynamics"]
 
 #: kinds of shared scale factors; the muscle parameters a factor multiplies
 PARAMETER_KINDS = {"tendon_stiffness": "kT", "optimal_fiber_length": "lmo", "tendon_slack_length": "lts",
                    "emg_scale": None}
-#: transcriptions of the fibre dynamics: the Hill equilibrium of interval k at its start node
+#: transcriptions of the fiber dynamics: the Hill equilibrium of interval k at its start node
 #: (forward Euler) or at its end node (backward Euler)
-FIBRE_DYNAMICS = ("forward", "backward")
+FIBER_DYNAMICS = ("forward", "backward")
 
 
-def check_fibre_dynamics(value, energy=None) -> None:
-    """Refuse a transcription of the fibre dynamics that is not one of :data:`FIBRE_DYNAMICS`,
+def check_fiber_dynamics(value, energy=None) -> None:
+    """Refuse a transcription of the fiber dynamics that is not one of :data:`FIBER_DYNAMICS`,
     and the backward one with the energy goal (whose rates pair each node's velocity with its
     own state, the forward scheme's pairing)."""
-    if value not in FIBRE_DYNAMICS:
-        raise OptionError(f"the fibre dynamics (--fibre-dynamics) must be one of {', '.join(FIBRE_DYNAMICS)}, "
+    if value not in FIBER_DYNAMICS:
+        raise OptionError(f"the fiber dynamics (--fiber-dynamics) must be one of {', '.join(FIBER_DYNAMICS)}, "
                           f"not {value!r}")
     if value == "backward" and energy is not None:
-        raise OptionError("the energy goal (--energy-model) needs the forward fibre dynamics; drop "
-                          "--fibre-dynamics backward or the energy goal")
+        raise OptionError("the energy goal (--energy-model) needs the forward fiber dynamics; drop "
+                          "--fiber-dynamics backward or the energy goal")
 
 
 @dataclass(frozen=True)
 class Goals:
     """Weights of the objective and the EMG bound (``None``: no bound rows); ``energy``: the
-    energy goal (:class:`.energy.EnergyGoal`), or ``None``; ``fibre_dynamics``: the
-    transcription of ``dl~M/dt = v~M`` (:data:`FIBRE_DYNAMICS`, ``docs/problem.md``)."""
+    energy goal (:class:`.energy.EnergyGoal`), or ``None``; ``fiber_dynamics``: the
+    transcription of ``dl~M/dt = v~M`` (:data:`FIBER_DYNAMICS`, ``docs/problem.md``)."""
 
     w_activation: float = 1.0
     w_reserve: float = 1000.0
     w_velocity: float = 0.01
     w_emg: float = 0.0
     emg_tolerance: float | None = None
-    w_fibre_length: float = 0.0
+    w_fiber_length: float = 0.0
     energy: EnergyGoal | None = None
-    fibre_dynamics: str = "forward"
+    fiber_dynamics: str = "forward"
 
     def __post_init__(self):
-        check_fibre_dynamics(self.fibre_dynamics, self.energy)
-        for name in ("w_activation", "w_reserve", "w_velocity", "w_emg", "w_fibre_length"):
+        check_fiber_dynamics(self.fiber_dynamics, self.energy)
+        for name in ("w_activation", "w_reserve", "w_velocity", "w_emg", "w_fiber_length"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
                 raise OptionError(f"the weight {name} must be a non-negative number, not {v!r}")
@@ -146,19 +146,19 @@ def coupling_pairs(groups: Sequence[Sequence[str]], muscles: Sequence[str], cons
 @dataclass(frozen=True)
 class TrialBlock:
     """One trial of a problem: mesh inputs, initial guess and goal data at nodes ``0 ... N-1``
-    (EMG ``(N, nEMG)`` of ``emg_muscles``; measured fibre lengths in m ``(N, nUS)``)."""
+    (EMG ``(N, nEMG)`` of ``emg_muscles``; measured fiber lengths in m ``(N, nUS)``)."""
 
     label: str
     inputs: TrialInputs
     guess: InitialGuess
     emg_muscles: tuple[str, ...] = ()
     emg_nodes: np.ndarray | None = None
-    fibre_muscles: tuple[str, ...] = ()
-    fibre_length_nodes_m: np.ndarray | None = None
+    fiber_muscles: tuple[str, ...] = ()
+    fiber_length_nodes_m: np.ndarray | None = None
 
     def signature(self):
         return (tuple(self.inputs.muscles), tuple(self.inputs.dofs), tuple(self.emg_muscles),
-                tuple(self.fibre_muscles))
+                tuple(self.fiber_muscles))
 
 
 def _constants(params: MuscleTendonParameters, ca):
@@ -222,16 +222,16 @@ def _group_functions(ca, params, trial: TrialBlock, goals: Goals, Topt: float, f
                      n_full: int, p_index, zero_r):
     """Per-interval and last-node functions (SX) of one group of trials; see the module docstring.
 
-    Node inputs: ``z`` (5M+D), ``xn = [a, l~M]`` of the next node (backward fibre dynamics:
+    Node inputs: ``z`` (5M+D), ``xn = [a, l~M]`` of the next node (backward fiber dynamics:
     ``[a, l~M, lp]``), data ``d = [lMT, r (column-major D x M), ID, EMG, lUS, h, 1/N]`` (backward:
-    then ``lMT`` of the next node), the shared variables ``p``. With the backward fibre dynamics
+    then ``lMT`` of the next node), the shared variables ``p``. With the backward fiber dynamics
     the constraints are nonlinear in ``xn``: the Hessian functions take ``xn`` and return the
     blocks of ``[z, xn]``. ``factor_of[kind]`` lists
     ``(muscle index, factor index)``; ``emg_factor`` the factor index of each tracked muscle.
     """
     inp = trial.inputs
     M, D = len(inp.muscles), len(inp.dofs)
-    nE, nU = len(trial.emg_muscles), len(trial.fibre_muscles)
+    nE, nU = len(trial.emg_muscles), len(trial.fiber_muscles)
     P = _constants(params, ca)
     p = ca.SX.sym("p", n_full if p_index is None else (max(p_index) + 1 if p_index else 0))
     full = [p[j] for j in (p_index if p_index is not None else range(n_full))]
@@ -248,7 +248,7 @@ def _group_functions(ca, params, trial: TrialBlock, goals: Goals, Topt: float, f
             P[key] = v
     h, inv_n = ca.SX.sym("h"), ca.SX.sym("inv_n")
     emg, lus = ca.SX.sym("emg", nE), ca.SX.sym("lus", nU)
-    backward = goals.fibre_dynamics == "backward"
+    backward = goals.fiber_dynamics == "backward"
     S, gk, _ = _node_expressions(ca.SX.sym, M, D, h, P, Topt, ca, backward)
     if len(zero_r):
         gk = ca.substitute(gk, S["r"][list(zero_r)], ca.SX.zeros(len(zero_r)))
@@ -265,10 +265,10 @@ def _group_functions(ca, params, trial: TrialBlock, goals: Goals, Topt: float, f
     cost = ca.dot(ca.DM(c_base), z**2)
     if nE and goals.w_emg:
         cost += (goals.w_emg / nE) * ca.sumsqr(track)
-    if nU and goals.w_fibre_length:
-        iu = [pos[m] for m in trial.fibre_muscles]
+    if nU and goals.w_fiber_length:
+        iu = [pos[m] for m in trial.fiber_muscles]
         lmo0 = ca.DM(np.asarray(params.optimal_fiber_length_m, dtype=float)[iu])
-        cost += (goals.w_fibre_length / nU) * ca.sumsqr((S["lm"][iu] * P["lmo"][iu] - lus) / lmo0)
+        cost += (goals.w_fiber_length / nU) * ca.sumsqr((S["lm"][iu] * P["lmo"][iu] - lus) / lmo0)
     if goals.energy is not None and goals.energy.weight:
         eg = goals.energy
         mass, fst = eg.muscle_values(inp.muscles, params.max_isometric_force_N, params.optimal_fiber_length_m)
@@ -338,8 +338,8 @@ def _check_trials(trials, params, specs):
         missing = [m for m in inp.muscles if m not in names]
         if missing:
             raise UnknownMuscleError(f"trial {t.label}: no muscle parameters for {', '.join(missing)}")
-        for what, ms, arr in (("EMG", t.emg_muscles, t.emg_nodes), ("fibre lengths", t.fibre_muscles,
-                                                                      t.fibre_length_nodes_m)):
+        for what, ms, arr in (("EMG", t.emg_muscles, t.emg_nodes), ("fiber lengths", t.fiber_muscles,
+                                                                      t.fiber_length_nodes_m)):
             bad = [m for m in ms if m not in inp.muscles]
             if bad:
                 raise UnknownMuscleError(f"trial {t.label}: {what} of {', '.join(bad)}, which the trial's "
@@ -424,7 +424,7 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
         fn = _group_functions(ca, gp, t0, goals, optimal_reserve_Nm, factor_of,
                               [emg_pos[m] for m in t0.emg_muscles], n_full, p_index, zero_r)
         nz, ng = info[members[0]]["nz"], info[members[0]]["ng"]
-        backward = goals.fibre_dynamics == "backward"
+        backward = goals.fiber_dynamics == "backward"
         nxn = (3 if backward else 2) * M
         data, zc, xc, rbn, Zs, Xns, XLs, Ls, LLs = [], [], [], [], [], [], [], [], []
         for i in members:
@@ -432,7 +432,7 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
             inp = t.inputs
             rr = inp.moment_arms_m[:N].transpose(0, 2, 1).reshape(N, D * M)
             emg = t.emg_nodes if t.emg_muscles else np.zeros((N, 0))
-            lus = t.fibre_length_nodes_m if t.fibre_muscles else np.zeros((N, 0))
+            lus = t.fiber_length_nodes_m if t.fiber_muscles else np.zeros((N, 0))
             data.append(np.hstack([inp.lmt_m[:N], rr, inp.moments_Nm[:N], emg, lus, np.full((N, 1), inp.step_s),
                                    np.full((N, 1), 1.0 / N), *([inp.lmt_m[1:N + 1]] if backward else [])]))
             k = np.arange(N)
@@ -486,7 +486,7 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
         jc.append(np.where(cl < 3 * M, last_var[:, None] + cl, P0 + (cl - 3 * M)).ravel())
         jv.append(fn["jac_last"].map(T)(XL, p).nz[:])
         # Hessian of the Lagrangian
-        # (backward fibre dynamics: the blocks of [z_k, xn_k]; an entry of xn_k adds to node k+1's)
+        # (backward fiber dynamics: the blocks of [z_k, xn_k]; an entry of xn_k adds to node k+1's)
         for (f_h, args, zcol, xcol, n) in (
                 (fn["hess"], (Z, Xn, data, p, ca.horzcat(*Ls), lam_f), zc, xc, n_nodes),
                 (fn["hess_last"], (XL, p, inv_n, ca.horzcat(*LLs), lam_f), last_var, last_var, T)):
@@ -524,7 +524,7 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
             hc.append(P0 + c3)
             hv.append(Hp.nz[:])
         hess = _sparse(ca, (n_var, n_var), np.concatenate(hr), np.concatenate(hc), ca.vertcat(*hv),
-                       add_duplicates=goals.fibre_dynamics == "backward")
+                       add_duplicates=goals.fiber_dynamics == "backward")
         grad = ca.vertcat(*grad_parts, sum(grad_p[1:], grad_p[0]) if n_p else ca.MX(0, 1))
         pp = ca.MX.sym("p", 0, 1)
         out.update({

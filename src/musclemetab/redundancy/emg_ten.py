@@ -57,7 +57,7 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import DataMismatchError, OptionError, UnknownMuscleError
-from .core import Goals, ParameterSpec, TrialBlock, build_problem, check_fibre_dynamics, coupling_pairs
+from .core import Goals, ParameterSpec, TrialBlock, build_problem, check_fiber_dynamics, coupling_pairs
 from .emg_inputs import mapping_for_muscles, resolve_emg_mapping
 from .estimates import EMG_TEN, PARAMETERS_FILE, EmgTenResult, tendon_stiffness_at_force_N_per_mm
 from .inputs import TrialInputs
@@ -117,10 +117,10 @@ class EmgTenSettings:
     scaled EMG) or ``"tracking"`` (the cost only). With ``tendon_groups`` empty no tendon
     stiffness is estimated: an EMG-informed solve of one or more trials.
 
-    ``fibre_dynamics``: the transcription of the fibre dynamics (:data:`.core.FIBRE_DYNAMICS`);
+    ``fiber_dynamics``: the transcription of the fiber dynamics (:data:`.core.FIBER_DYNAMICS`);
     ``None`` (default) is ``"backward"`` in the driven mode and ``"forward"`` otherwise: with the
-    excitations fixed, the forward-Euler fibre recurrence of weakly excited muscles amplifies a
-    change of fibre length by up to 1e4 per step, the backward-Euler one damps it
+    excitations fixed, the forward-Euler fiber recurrence of weakly excited muscles amplifies a
+    change of fiber length by up to 1e4 per step, the backward-Euler one damps it
     (``docs/problem.md``).
     """
 
@@ -137,7 +137,7 @@ class EmgTenSettings:
     emg_range_tolerance: float = 0.0
     coupling: str = "shared"
     emg_mode: str = "constrained"
-    fibre_dynamics: str | None = None
+    fiber_dynamics: str | None = None
 
     def __post_init__(self):
         for name in ("w_emg", "w_activation", "w_reserve", "w_velocity"):
@@ -165,13 +165,13 @@ class EmgTenSettings:
             raise OptionError(f"the EMG mode must be one of {', '.join(EMG_MODES)}, not {self.emg_mode!r}")
         if self.emg_mode == "tracking" and not self.w_emg > 0:
             raise OptionError("the EMG mode 'tracking' needs a positive EMG weight w_emg")
-        if self.fibre_dynamics is not None:
-            check_fibre_dynamics(self.fibre_dynamics)
+        if self.fiber_dynamics is not None:
+            check_fiber_dynamics(self.fiber_dynamics)
 
     @property
-    def fibre_scheme(self) -> str:
-        """The transcription of the fibre dynamics used (``fibre_dynamics`` or the mode's default)."""
-        return self.fibre_dynamics or ("backward" if self.emg_mode == "driven" else "forward")
+    def fiber_scheme(self) -> str:
+        """The transcription of the fiber dynamics used (``fiber_dynamics`` or the mode's default)."""
+        return self.fiber_dynamics or ("backward" if self.emg_mode == "driven" else "forward")
 
     @property
     def emg_bound(self) -> float | None:
@@ -194,7 +194,7 @@ class EmgTenSettings:
             "emg_range_tolerance": self.emg_range_tolerance,
             "coupling": self.coupling,
             "emg_mode": self.emg_mode,
-            "fibre_dynamics": self.fibre_scheme,
+            "fiber_dynamics": self.fiber_scheme,
         }
 
 
@@ -211,10 +211,10 @@ def informed_settings(workflow: str, mode: str = "constrained", tolerance: float
                           w_velocity=wf.w_velocity, emg_tolerance=tolerance, tendon_groups=(), emg_mode=mode)
 
 
-def emg_failure(record, mode: str, what: str, fibre_dynamics: str = "backward"):
+def emg_failure(record, mode: str, what: str, fiber_dynamics: str = "backward"):
     """The :class:`~musclemetab.errors.SolverError` of an EMG-informed solve that did not
     succeed (``record``: its :class:`~.record.RunRecord`). An infeasible EMG-driven solve says
-    why: with every tracked excitation fixed, the forward-Euler fibre dynamics of weakly excited
+    why: with every tracked excitation fixed, the forward-Euler fiber dynamics of weakly excited
     muscles amplify errors by orders of magnitude per mesh step (``docs/problem.md``); with the
     backward-Euler ones the scaled EMG cannot explain the moments within the bounds."""
     from ..errors import SolverError
@@ -224,10 +224,10 @@ def emg_failure(record, mode: str, what: str, fibre_dynamics: str = "backward"):
         return record.failure(what)
     head = (f"{what} did not converge: IPOPT status {record.status} after {record.iterations} iterations. The "
             "EMG-driven problem is infeasible in practice: ")
-    if fibre_dynamics == "forward":
-        why = ("with the tracked excitations fixed to the scaled EMG, the forward-Euler fibre lengths of weakly "
+    if fiber_dynamics == "forward":
+        why = ("with the tracked excitations fixed to the scaled EMG, the forward-Euler fiber lengths of weakly "
                "excited muscles follow an unstable recurrence on the mesh, so no iterate meets the constraints to "
-               "the solver's tolerance; more iterations will not help. Drop --fibre-dynamics forward (the driven "
+               "the solver's tolerance; more iterations will not help. Drop --fiber-dynamics forward (the driven "
                "mode's default is backward), or use --emg-mode constrained with a small --emg-tolerance")
     else:
         why = ("with the tracked excitations fixed to the scaled EMG (scale factors within their bounds), the "
@@ -301,7 +301,7 @@ def emg_ten_problem(trials: Sequence[EmgTenTrial], params: MuscleTendonParameter
                                coupling_pairs(settings.emg_groups, emg_muscles, consecutive=False)))
     goals = Goals(w_activation=settings.w_activation, w_reserve=settings.w_reserve,
                   w_velocity=settings.w_velocity, w_emg=settings.w_emg, emg_tolerance=settings.emg_bound,
-                  fibre_dynamics=settings.fibre_scheme)
+                  fiber_dynamics=settings.fiber_scheme)
     blocks = [TrialBlock(t.label, t.inputs, t.guess, emg_muscles=emg_muscles, emg_nodes=t.emg_nodes)
               for t in trials]
     return blocks, goals, specs

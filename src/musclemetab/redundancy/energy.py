@@ -3,7 +3,7 @@ energy model (``docs/energy_objective.md``).
 
 At every mesh node ``k = 0 ... N-1`` the smooth model ``E`` (:mod:`musclemetab.metabolics.smooth`,
 one function for CasADi and NumPy) gives each muscle's rate from the node's states and controls:
-excitation ``e_k``, activation ``a_k``, fibre length ``l~M_k`` (``fL``, ``fPE``) and fibre
+excitation ``e_k``, activation ``a_k``, fiber length ``l~M_k`` (``fL``, ``fPE``) and fiber
 velocity ``v~M_k`` (``vbar = v~M/vmax``, ``fV``). Without basal heat (a constant), the goal is::
 
     wE * (1/N) * sum_k sum_m Edot_m(k) / m_body
@@ -37,7 +37,7 @@ class EnergyGoal:
     """Minimise the integrated metabolic rate of the smooth ``model`` with weight ``weight``.
 
     ``effort_weight``: weight of the effort goal on excitations and activations beside it
-    (``None``: the workflow's, 1; 0: energy alone, the reserve and fibre-velocity terms stay).
+    (``None``: the workflow's, 1; 0: energy alone, the reserve and fiber-velocity terms stay).
     ``body_mass_kg``, ``height_m`` and ``muscle_properties`` (an override CSV, or a mapping
     ``{muscle: {"mass_kg": ..., "slow_twitch_fraction": ...}}``) give the muscle masses and
     slow-twitch fractions by the muscle table's rules. ``options``: options of the smooth model
@@ -119,11 +119,11 @@ def node_rates(goal: EnergyGoal, e, a, lm, vm, *, F0, lMo, vmax, kpe, s0, sm, ma
     return r["total"]
 
 
-def leg_rate_W_per_kg(goal: EnergyGoal, params, muscles, excitation, activation, lm_norm, vm_norm,
+def leg_rate_W_per_kg(goal: EnergyGoal, params, muscles, excitation, activation, lm_norm, fiber_velocity_lmo_per_s,
                       lmo_factor=None) -> np.ndarray:
     """The summed smooth rate of ``muscles`` per kg of body mass (W/kg, no basal heat) at each
     node, from NumPy arrays ``(nodes, muscles)``; ``params`` the problem's
-    :class:`~.parameters.MuscleTendonParameters`, ``lmo_factor`` the optimal fibre lengths'
+    :class:`~.parameters.MuscleTendonParameters`, ``lmo_factor`` the optimal fiber lengths'
     scale factors (default 1). The goal's value is ``weight`` times its mean over nodes ``0 ... N-1``."""
     p = params.subset(list(muscles))
     mass, fst = goal.muscle_values(muscles, p.max_isometric_force_N, p.optimal_fiber_length_m)
@@ -132,7 +132,7 @@ def leg_rate_W_per_kg(goal: EnergyGoal, params, muscles, excitation, activation,
         return np.asarray(v, dtype=float).reshape(-1, 1)
 
     lmo = col(p.optimal_fiber_length_m) * (1.0 if lmo_factor is None else col(lmo_factor))
-    rates = node_rates(goal, *(np.asarray(x, dtype=float).T for x in (excitation, activation, lm_norm, vm_norm)),
+    rates = node_rates(goal, *(np.asarray(x, dtype=float).T for x in (excitation, activation, lm_norm, fiber_velocity_lmo_per_s)),
                        F0=col(p.max_isometric_force_N), lMo=lmo, vmax=col(p.max_contraction_velocity),
                        kpe=col(p.passive_kpe), s0=col(p.passive_s0), sm=col(p.passive_sm), mass=col(mass),
                        fst=col(fst))

@@ -1,11 +1,11 @@
 """Estimation of muscle-tendon parameters over one or several trials (the problem core with
 shared scale factors), and the validation re-solve with the estimates.
 
-Scale factors of the tendon stiffness ``kT``, the optimal fibre length ``lMo`` and the tendon
+Scale factors of the tendon stiffness ``kT``, the optimal fiber length ``lMo`` and the tendon
 slack length ``lTs`` of named muscles are variables of one problem over all trials
-(:mod:`.core`); muscles of a coupled group share one factor. Measured fibre lengths
-(ultrasound; :func:`read_fibre_lengths`: MRS file convention, millimetres) enter as the
-fibre-length tracking goal ``wUS sum ((l~M s_lMo lMo - lUS)/lMo)^2/(nUS N)``, EMG as the EMG
+(:mod:`.core`); muscles of a coupled group share one factor. Measured fiber lengths
+(ultrasound; :func:`read_fiber_lengths`: MRS file convention, millimetres) enter as the
+fiber-length tracking goal ``wUS sum ((l~M s_lMo lMo - lUS)/lMo)^2/(nUS N)``, EMG as the EMG
 goals. The estimate (:class:`EstimatedParameters`) gives the scaled parameters for a validation
 re-solve with the effort goals only (:func:`~.solve.solve_with_parameters`), as the
 MuscleRedundancySolver does after its estimation.
@@ -26,7 +26,7 @@ from .parameters import MuscleTendonParameters
 from .problem import ProblemResult, SolverOptions, solve_problem
 
 __all__ = ["EstimatedParameters", "DEFAULT_FACTOR_BOUNDS", "estimate_parameters", "parameter_specs",
-           "fibre_length_trial", "read_fibre_lengths"]
+           "fiber_length_trial", "read_fiber_lengths"]
 
 #: bounds of the scale factors by kind
 DEFAULT_FACTOR_BOUNDS = {"tendon_stiffness": (0.1, 2.0), "optimal_fiber_length": (0.5, 1.5),
@@ -84,8 +84,8 @@ def parameter_specs(estimate: Mapping[str, Sequence[str]], couple: Sequence[Sequ
     return specs
 
 
-def read_fibre_lengths(path) -> dict:
-    """Measured fibre lengths of an MRS-convention file (a storage file with ``time`` in s
+def read_fiber_lengths(path) -> dict:
+    """Measured fiber lengths of an MRS-convention file (a storage file with ``time`` in s
     and one column per muscle in mm): ``{muscle: (time s, length m)}``."""
     from pathlib import Path
 
@@ -93,40 +93,40 @@ def read_fibre_lengths(path) -> dict:
 
     path = Path(path)
     if not path.is_file():
-        raise InputFileError(f"{path}: no such fibre-length file; check the --ultrasound paths")
+        raise InputFileError(f"{path}: no such fiber-length file; check the --ultrasound paths")
     df = read_storage(path)
     out = {}
     for m in df.columns:
         v = df[m].to_numpy(dtype=float)
         if not np.all(np.isfinite(v)) or np.any(v <= 0):
-            raise DataMismatchError(f"{path}: column {m} holds non-positive or non-finite fibre lengths; "
+            raise DataMismatchError(f"{path}: column {m} holds non-positive or non-finite fiber lengths; "
                                     "give lengths in mm")
         if np.median(v) < 5.0:
-            raise DataMismatchError(f"{path}: column {m} has a median of {np.median(v):.3g}, not a fibre length "
+            raise DataMismatchError(f"{path}: column {m} has a median of {np.median(v):.3g}, not a fiber length "
                                     "in mm (MRS convention); convert metres to millimetres")
         out[str(m)] = (df.index.to_numpy(dtype=float), v / 1000.0)
     return out
 
 
-def fibre_length_trial(label: str, inputs, guess, fibre_lengths: Mapping[str, tuple], *,
+def fiber_length_trial(label: str, inputs, guess, fiber_lengths: Mapping[str, tuple], *,
                        emg_muscles=(), emg_nodes=None) -> TrialBlock:
-    """A trial with measured fibre lengths (``{muscle: (time s, length m)}``, linearly
+    """A trial with measured fiber lengths (``{muscle: (time s, length m)}``, linearly
     interpolated at the nodes ``0 ... N-1``, which they must cover)."""
     N = inputs.n_intervals
     t = inputs.mesh_time_s[:N]
-    unknown = [m for m in fibre_lengths if m not in inputs.muscles]
+    unknown = [m for m in fiber_lengths if m not in inputs.muscles]
     if unknown:
-        raise UnknownMuscleError(f"trial {label}: fibre lengths of {', '.join(unknown)}, which the problem does "
+        raise UnknownMuscleError(f"trial {label}: fiber lengths of {', '.join(unknown)}, which the problem does "
                                  f"not have ({', '.join(inputs.muscles[:6])} ...); name model muscles")
     cols = []
-    for m, (tm, lm) in fibre_lengths.items():
+    for m, (tm, lm) in fiber_lengths.items():
         tm = np.asarray(tm, dtype=float)
         if tm[0] > t[0] + 1e-9 or tm[-1] < t[-1] - 1e-9:
-            raise DataMismatchError(f"trial {label}: the fibre lengths of {m} cover {tm[0]:g}-{tm[-1]:g} s, not the "
+            raise DataMismatchError(f"trial {label}: the fiber lengths of {m} cover {tm[0]:g}-{tm[-1]:g} s, not the "
                                     f"window {t[0]:g}-{t[-1]:g} s; give measurements over the whole window")
         cols.append(np.interp(t, tm, np.asarray(lm, dtype=float)))
     return TrialBlock(label, inputs, guess, emg_muscles=tuple(emg_muscles), emg_nodes=emg_nodes,
-                      fibre_muscles=tuple(fibre_lengths), fibre_length_nodes_m=np.column_stack(cols) if cols else None)
+                      fiber_muscles=tuple(fiber_lengths), fiber_length_nodes_m=np.column_stack(cols) if cols else None)
 
 
 def estimate_parameters(trials: Sequence[TrialBlock], params: MuscleTendonParameters, specs, goals: Goals, *,
@@ -137,8 +137,8 @@ def estimate_parameters(trials: Sequence[TrialBlock], params: MuscleTendonParame
     if not any(s.kind in FIELDS for s in specs):
         raise OptionError("nothing to estimate: name muscles whose tendon_stiffness, optimal_fiber_length or "
                           "tendon_slack_length is estimated")
-    if not any(t.fibre_muscles or t.emg_muscles for t in trials):
-        raise OptionError("parameter estimation needs measurements: give fibre lengths (ultrasound) or EMG")
+    if not any(t.fiber_muscles or t.emg_muscles for t in trials):
+        raise OptionError("parameter estimation needs measurements: give fiber lengths (ultrasound) or EMG")
     res = solve_problem(trials, params, goals, specs, options=options, coupling=coupling)
     factors = {k: v for k, v in res.factors.items() if k in FIELDS}
     record = {"status": res.status, "success": res.success, "iterations": res.iterations,
@@ -160,7 +160,7 @@ def tendon_strain_at_one_norm_force(kT) -> float:
 def write_personalised_model(model_path, params: MuscleTendonParameters, estimated: Mapping[str, Sequence[str]],
                              out_dir) -> tuple:
     """Write ``out_dir/<model>_personalised.osim``: the model with the ``estimated`` values
-    (``{kind: [muscle, ...]}``) of ``params``: optimal fibre length and tendon slack length, and
+    (``{kind: [muscle, ...]}``) of ``params``: optimal fiber length and tendon slack length, and
     the tendon stiffness as the tendon strain at F0 where the muscle type has that parameter
     (Thelen2003, Millard2012, DeGrooteFregly2016; others are reported under ``not_set``).
     Returns ``(path, {muscle: {class_name, set, not_set}})``; the file appears whole or not at all."""

@@ -1,4 +1,4 @@
-"""``musclemetab estimate``: muscle-tendon parameters from measured fibre lengths and/or EMG
+"""``musclemetab estimate``: muscle-tendon parameters from measured fiber lengths and/or EMG
 over trials (EMG: the goals of ``--emg-mode``, the EMG scale factors estimated with the others,
 coupled as in EMG-TEN).
 
@@ -18,7 +18,7 @@ from ..errors import OptionError
 __all__ = ["add_estimate_parser", "estimate_command", "estimate_files", "EstimateRun", "parse_assignments"]
 
 WEIGHT_NAMES = {"activation": "w_activation", "reserve": "w_reserve", "velocity": "w_velocity",
-                "fibre_length": "w_fibre_length", "emg": "w_emg"}
+                "fiber_length": "w_fiber_length", "emg": "w_emg"}
 #: default bounds of the EMG scale factors (those of EMG-TEN)
 EMG_SCALE_BOUNDS = (0.05, 2.5)
 
@@ -27,15 +27,15 @@ def add_estimate_parser(subparsers) -> argparse.ArgumentParser:
     from .cli import add_emg_goal_arguments
 
     p = subparsers.add_parser(
-        "estimate", help="estimate tendon stiffness, optimal fibre and tendon slack lengths from fibre lengths",
-        description="Estimate scale factors of the tendon stiffness, optimal fibre length and tendon slack length "
-        "of named muscles over one or more trials, tracking measured fibre lengths (ultrasound), with the "
+        "estimate", help="estimate tendon stiffness, optimal fiber and tendon slack lengths from fiber lengths",
+        description="Estimate scale factors of the tendon stiffness, optimal fiber length and tendon slack length "
+        "of named muscles over one or more trials, tracking measured fiber lengths (ultrasound), with the "
         "effort goals of a workflow; writes the solutions, parameters.json and <model>_personalised.osim.")
     p.add_argument("--model", required=True, metavar="M.osim")
     p.add_argument("--ik", required=True, nargs="+", metavar="IK.mot", help="one per trial")
     p.add_argument("--id", required=True, nargs="+", metavar="ID.sto", help="one per trial, same order")
     p.add_argument("--ultrasound", nargs="+", metavar="US.mot",
-                   help="measured fibre lengths, one file per trial: time in s, one column per muscle in mm")
+                   help="measured fiber lengths, one file per trial: time in s, one column per muscle in mm")
     p.add_argument("--emg", nargs="+", metavar="EMG.mot",
                    help="processed, normalised EMG envelopes, one file per trial, same order as --ik (with or "
                    "without --ultrasound; at least one of the two)")
@@ -53,7 +53,7 @@ def add_estimate_parser(subparsers) -> argparse.ArgumentParser:
                    help="bounds of the factors (default tendon_stiffness 0.1:2, lengths 0.5:1.5, emg_scale "
                    "0.05:2.5; emg_scale=1:1 takes the EMG as it is)")
     p.add_argument("--weights", metavar="NAME=W[,...]",
-                   help="activation, reserve, velocity (default: the workflow's), fibre_length (default 100), "
+                   help="activation, reserve, velocity (default: the workflow's), fiber_length (default 100), "
                    "emg (default 10)")
     p.add_argument("--workflow", default="effort-cal", choices=("effort-gen", "effort-cal", "effort-ten"),
                    help="muscle parameters and effort weights (default effort-cal)")
@@ -146,7 +146,7 @@ def estimate_files(
     least one kind of measurement). ``estimate`` maps a kind (``tendon_stiffness``,
     ``optimal_fiber_length``, ``tendon_slack_length``) to its muscles; ``couple`` lists
     muscles sharing one factor; ``bounds`` maps a kind (or ``emg_scale``) to ``(low, high)``;
-    ``weights`` maps ``activation``, ``reserve``, ``velocity``, ``fibre_length`` and ``emg`` to
+    ``weights`` maps ``activation``, ``reserve``, ``velocity``, ``fiber_length`` and ``emg`` to
     their weights (defaults: the workflow's, 100 and 10). The other options are those of
     ``musclemetab estimate`` (``docs/problem.md``). Writes ``out/<trial>/``,
     ``out/parameters.json``, ``out/<model>_personalised.osim`` and with ``validate``
@@ -154,15 +154,15 @@ def estimate_files(
     writing) when the solve did not converge.
     """
     from ..io import atomic_write_text, check_output_folder
-    from .bounds import fibre_length_bounds_record
+    from .bounds import fiber_length_bounds_record
     from .core import Goals, ParameterSpec, coupling_pairs
     from .emg_inputs import emg_at_nodes, mapping_for_muscles, resolve_emg_mapping, trial_labels
     from .estimate import (
         FIELDS,
         estimate_parameters,
-        fibre_length_trial,
+        fiber_length_trial,
         parameter_specs,
-        read_fibre_lengths,
+        read_fiber_lengths,
         write_personalised_model,
     )
     from .problem import SolverOptions
@@ -178,7 +178,7 @@ def estimate_files(
     n = len(ik)
     us_files, emg_files = [str(p) for p in ultrasound or ()], [str(p) for p in emg or ()]
     if not (us_files or emg_files):
-        raise OptionError("estimate needs measurements: give --ultrasound (fibre lengths) or --emg files, or both")
+        raise OptionError("estimate needs measurements: give --ultrasound (fiber lengths) or --emg files, or both")
     counts = [("--ultrasound", len(us_files)), ("--emg", len(emg_files))]
     if len(id_files) != n or any(k not in (0, n) for _, k in counts):
         given = ", ".join(f"{k} {o}" for o, k in counts if k)
@@ -193,7 +193,7 @@ def estimate_files(
     specs = parameter_specs(estimate, couple, bounds)
     wf = get_workflow(workflow)
     weights = {"w_activation": wf.w_activation, "w_reserve": wf.w_reserve, "w_velocity": wf.w_velocity,
-               "w_fibre_length": 100.0, "w_emg": 10.0 if emg_files else 0.0}
+               "w_fiber_length": 100.0, "w_emg": 10.0 if emg_files else 0.0}
     for k, v in (weights_given or {}).items():
         if k not in WEIGHT_NAMES:
             raise OptionError(f"--weights: unknown weight '{k}'; use {', '.join(WEIGHT_NAMES)}")
@@ -205,11 +205,11 @@ def estimate_files(
         if mode == "tracking" and not weights["w_emg"] > 0:
             raise OptionError("--emg-mode tracking needs a positive EMG weight (--emg-weight)")
     tolerance = {"constrained": emg_tolerance, "driven": 0.0}.get(mode) if emg_files else None
-    # the driven mode transcribes the fibre dynamics with backward Euler (docs/problem.md)
-    fibre_dynamics = "backward" if emg_files and mode == "driven" else "forward"
-    goals = Goals(**weights, emg_tolerance=tolerance, fibre_dynamics=fibre_dynamics)
+    # the driven mode transcribes the fiber dynamics with backward Euler (docs/problem.md)
+    fiber_dynamics = "backward" if emg_files and mode == "driven" else "forward"
+    goals = Goals(**weights, emg_tolerance=tolerance, fiber_dynamics=fiber_dynamics)
     labels = trial_labels(ik, labels)
-    measured = [read_fibre_lengths(p) for p in us_files] or [{} for _ in range(n)]
+    measured = [read_fiber_lengths(p) for p in us_files] or [{} for _ in range(n)]
     mapping = resolve_emg_mapping(emg_mapping or "default") if emg_files else {}
     emg_muscles = ()
     options = SolverOptions(max_iter=max_iter, w_activation=goals.w_activation, w_reserve=goals.w_reserve,
@@ -239,7 +239,7 @@ def estimate_files(
             emg_muscles = tuple(sorted(mapping))
             emg = dict(emg_muscles=emg_muscles,
                        emg_nodes=emg_at_nodes(emg_files[i], mapping, inputs, emg_muscles, str(emg_files[i]), str(ik)))
-        trials.append(fibre_length_trial(lab, inputs, initial_guess(inputs, p, so), us, **emg))
+        trials.append(fiber_length_trial(lab, inputs, initial_guess(inputs, p, so), us, **emg))
         prepared.append((g, nominal, t_id, mom, t_ik))
     if emg_files:
         from .emg_ten import EmgTenSettings, settings_for_muscles
@@ -261,8 +261,8 @@ def estimate_files(
         summary = {**run.to_dict(), **emg_record, "objective_trial": o.objective, "objective_terms": o.objective_terms,
                    "time_window_s": list(t.inputs.window_s), "n_intervals": t.inputs.n_intervals,
                    "mesh_step_s": t.inputs.step_s, "optimal_reserve_Nm": options.optimal_reserve_Nm,
-                   "fibre_dynamics": fibre_dynamics,
-                   "fibre_length_bounds": fibre_length_bounds_record(t.inputs, params, specs),
+                   "fiber_dynamics": fiber_dynamics,
+                   "fiber_length_bounds": fiber_length_bounds_record(t.inputs, params, specs),
                    "workflow": {"name": f"{workflow} estimate", "estimate": est.to_dict()["factors"]},
                    "solver_options": options.to_dict()}
         build_solution(t.inputs, estimated.subset(t.inputs.muscles), o, summary).write(f"{out}/{t.label}")

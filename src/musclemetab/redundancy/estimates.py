@@ -179,7 +179,7 @@ def assemble_result(trials, params, wf_record, ocp, settings, options, t_prep, t
     estimated tendon stiffness, the estimates and the solve record."""
     import time as _time
 
-    from .bounds import fibre_length_bounds_record
+    from .bounds import fiber_length_bounds_record
     from .record import RunRecord
     from .solution import build_solution
 
@@ -246,9 +246,9 @@ def assemble_result(trials, params, wf_record, ocp, settings, options, t_prep, t
                 for j, m in enumerate(t.emg_muscles)
             },
             "emg_tolerance": settings.emg_tolerance,
-            "fibre_dynamics": settings.fibre_scheme,
+            "fiber_dynamics": settings.fiber_scheme,
             # the problem's bounds: those of the nominal parameters (kT and EMG scales do not change them)
-            "fibre_length_bounds": fibre_length_bounds_record(inp, params),
+            "fiber_length_bounds": fiber_length_bounds_record(inp, params),
             "solver_options": options.to_dict(),
             "input_preparation": {"filter": "butterworth 6th order 6 Hz zero-phase (MATLAB filtfilt padding)",
                                   "mesh_intervals_per_second": 100, "interpolation": "not-a-knot cubic spline",

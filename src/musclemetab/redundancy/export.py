@@ -10,7 +10,7 @@
       times (rad or m; rad/s or m/s), coupled coordinates from their couplers, locked ones
       at their default;
     * ``/forceset/<muscle>/activation``: the solution's activation;
-    * ``/forceset/<muscle>/fiber_length``: the solution's fibre length in metres
+    * ``/forceset/<muscle>/fiber_length``: the solution's fiber length in metres
       (``l~M lMo``) for muscles that have this state;
     * every other state (muscles not in the solution, other components): the model's
       default value.

@@ -13,7 +13,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..errors import DataMismatchError, UnknownMuscleError
-from ..muscle import fibre_width, tendon_shift
+from ..muscle import fiber_width, tendon_shift
 
 __all__ = ["MuscleTendonParameters", "PARAMETER_FIELDS"]
 
@@ -35,7 +35,7 @@ PARAMETER_FIELDS = {
 class MuscleTendonParameters:
     """Per-muscle parameters, arrays of shape ``(M,)`` in the order of ``names``.
 
-    ``max_contraction_velocity`` is in optimal fibre lengths per second; ``tendon_stiffness``
+    ``max_contraction_velocity`` is in optimal fiber lengths per second; ``tendon_stiffness``
     is the normalised ``kT`` (generic 35); ``passive_*`` are ``kPE``, ``s0``, ``sM``.
     """
 
@@ -73,8 +73,8 @@ class MuscleTendonParameters:
 
     @property
     def width_m(self) -> np.ndarray:
-        """Constant fibre-height projection ``w = lMo sin(alpha0)`` (m)."""
-        return fibre_width(self.optimal_fiber_length_m, self.pennation_angle_at_optimal_rad)
+        """Constant fiber-height projection ``w = lMo sin(alpha0)`` (m)."""
+        return fiber_width(self.optimal_fiber_length_m, self.pennation_angle_at_optimal_rad)
 
     @property
     def tendon_shift(self) -> np.ndarray:

@@ -6,17 +6,17 @@ Variables (``M`` muscles, ``D`` DOFs, ``N`` mesh intervals, ``h = (tf - t0)/N``)
 variable                  size        bounds
 ========================  ==========  ===================
 activation ``a``          M x (N+1)   0 ... 1
-fibre length ``l~M``      M x (N+1)   0.1 ... 1.7 [#]_
+fiber length ``l~M``      M x (N+1)   0.1 ... 1.7 [#]_
 projected length ``lp``   M x (N+1)   >= 1e-4 m
 excitation ``e``          M x N       0 ... 1
 reserve ``aT``            D x N       -1 ... 1 (x Topt = 150 N m)
-fibre velocity ``v~M``    M x N       -10 ... 10 lMo/s
+fiber velocity ``v~M``    M x N       -10 ... 10 lMo/s
 ========================  ==========  ===================
 
-.. [#] or, for a muscle the geometry stretches further, its longest rigid-tendon fibre length
-   plus 0.05 (:func:`.bounds.fibre_length_upper_bounds`).
+.. [#] or, for a muscle the geometry stretches further, its longest rigid-tendon fiber length
+   plus 0.05 (:func:`.bounds.fiber_length_upper_bounds`).
 
-Constraints at nodes ``k = 0 ... N-1`` (forward Euler; with ``fibre_dynamics="backward"`` the
+Constraints at nodes ``k = 0 ... N-1`` (forward Euler; with ``fiber_dynamics="backward"`` the
 Hill equilibrium holds at node ``k+1`` with ``v~M_k``, ``docs/problem.md``)::
 
     a_{k+1} - a_k - h ADyn(e_k, a_k) = 0
@@ -49,7 +49,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import OptionError, SolverError
-from .core import Goals, TrialBlock, build_problem, check_fibre_dynamics
+from .core import Goals, TrialBlock, build_problem, check_fiber_dynamics
 from .energy import EnergyGoal
 from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
@@ -98,8 +98,8 @@ class SolverOptions:
     one thread is fastest and leaves the other cores to other solves (``None`` leaves the
     library default). ``ipopt`` holds further IPOPT options, e.g. ``{"mu_init": 1e-6}`` for a
     warm start; anything there may change which optimum is found. ``energy`` adds the energy
-    goal (:class:`.energy.EnergyGoal`) to the objective. ``fibre_dynamics``: the transcription
-    of the fibre dynamics (:data:`.core.FIBRE_DYNAMICS`; ``"backward"``: the Hill equilibrium of
+    goal (:class:`.energy.EnergyGoal`) to the objective. ``fiber_dynamics``: the transcription
+    of the fiber dynamics (:data:`.core.FIBER_DYNAMICS`; ``"backward"``: the Hill equilibrium of
     each interval at its end node, ``docs/problem.md``; not with the energy goal).
     """
 
@@ -117,12 +117,12 @@ class SolverOptions:
     blas_threads: int | None = 1
     ipopt: dict = field(default_factory=dict)
     energy: EnergyGoal | None = None
-    fibre_dynamics: str = "forward"
+    fiber_dynamics: str = "forward"
 
     def __post_init__(self):
         if self.energy is not None and not isinstance(self.energy, EnergyGoal):
             raise OptionError(f"energy must be an EnergyGoal, not {type(self.energy).__name__}")
-        check_fibre_dynamics(self.fibre_dynamics, self.energy)
+        check_fiber_dynamics(self.fiber_dynamics, self.energy)
         if self.derivatives not in ("explicit", "auto"):
             raise OptionError(f"derivatives must be 'explicit' or 'auto', not {self.derivatives!r}")
         for name in ("w_activation", "w_reserve", "w_velocity"):
@@ -152,7 +152,7 @@ class SolverOptions:
             "blas_threads": self.blas_threads,
             "ipopt": dict(self.ipopt),
             **({"energy": self.energy.record()} if self.energy is not None else {}),
-            **({"fibre_dynamics": self.fibre_dynamics} if self.fibre_dynamics != "forward" else {}),
+            **({"fiber_dynamics": self.fiber_dynamics} if self.fiber_dynamics != "forward" else {}),
         }
 
 
@@ -221,7 +221,7 @@ class OcpResult(SolveOutcome):
     lm_projected_m: np.ndarray
     excitation: np.ndarray
     reserve: np.ndarray
-    vm_norm: np.ndarray
+    fiber_velocity_lmo_per_s: np.ndarray
     objective: float
     objective_terms: dict
     n_constraints: int
@@ -311,10 +311,10 @@ def build_nlp(
 
 
 def effort_goals(options: SolverOptions) -> Goals:
-    """The effort goals (activation, excitation, reserves, fibre velocity) of ``options``, and
+    """The effort goals (activation, excitation, reserves, fiber velocity) of ``options``, and
     its energy goal if it has one."""
     return Goals(w_activation=options.w_activation, w_reserve=options.w_reserve, w_velocity=options.w_velocity,
-                 energy=options.energy, fibre_dynamics=options.fibre_dynamics)
+                 energy=options.energy, fiber_dynamics=options.fiber_dynamics)
 
 
 #: IPOPT linear-algebra settings used with MUMPS (``SolverOptions.ipopt`` overrides them): no
@@ -389,12 +389,12 @@ def _trial_terms(goals: Goals, t: TrialBlock, Z, xl, dev, lm_us, params=None, lm
         "activation": goals.w_activation * 0.5 * float(np.sum(a**2)) / (N * M),
         "excitation": goals.w_activation * 0.5 * float(np.sum(Z[:, 3 * M:4 * M] ** 2)) / (N * M),
         "reserve": goals.w_reserve * float(np.sum(Z[:, 4 * M:4 * M + D] ** 2)) / (N * D),
-        "fibre_velocity": goals.w_velocity * float(np.sum(Z[:, 4 * M + D:] ** 2)) / (N * M),
+        "fiber_velocity": goals.w_velocity * float(np.sum(Z[:, 4 * M + D:] ** 2)) / (N * M),
     }
     if t.emg_muscles:
         terms = {"emg_tracking": goals.w_emg * float(np.sum(dev**2)) / (len(t.emg_muscles) * N), **terms}
-    if t.fibre_muscles:
-        terms["fibre_length_tracking"] = goals.w_fibre_length * float(np.sum(lm_us**2)) / (len(t.fibre_muscles) * N)
+    if t.fiber_muscles:
+        terms["fiber_length_tracking"] = goals.w_fiber_length * float(np.sum(lm_us**2)) / (len(t.fiber_muscles) * N)
     if goals.energy is not None:
         from .energy import leg_rate_W_per_kg
 
@@ -452,19 +452,19 @@ def solve_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
         dev = np.zeros((N, 0))
         if ie:
             dev = Z[:, 3 * M:4 * M][:, ie] - np.array([factors["emg_scale"][m] for m in t.emg_muscles]) * t.emg_nodes
-        iu = [pos[m] for m in t.fibre_muscles]
+        iu = [pos[m] for m in t.fiber_muscles]
         lm_us = np.zeros((N, 0))
         if iu:
-            s_lmo = np.array([factors.get("optimal_fiber_length", {}).get(m, 1.0) for m in t.fibre_muscles])
-            l0 = np.array([lmo[m] for m in t.fibre_muscles])
-            lm_us = (Z[:, M:2 * M][:, iu] * s_lmo * l0 - t.fibre_length_nodes_m) / l0
+            s_lmo = np.array([factors.get("optimal_fiber_length", {}).get(m, 1.0) for m in t.fiber_muscles])
+            l0 = np.array([lmo[m] for m in t.fiber_muscles])
+            lm_us = (Z[:, M:2 * M][:, iu] * s_lmo * l0 - t.fiber_length_nodes_m) / l0
         s_all = factors.get("optimal_fiber_length", {})
         terms = _trial_terms(goals, t, Z, xl, dev, lm_us, params,
                              np.array([s_all.get(m, 1.0) for m in t.inputs.muscles]))
         ocps.append(OcpResult(
             activation=np.vstack([Z[:, 0:M], xl[0:M]]), lm_norm=np.vstack([Z[:, M:2 * M], xl[M:2 * M]]),
             lm_projected_m=np.vstack([Z[:, 2 * M:3 * M], xl[2 * M:]]), excitation=Z[:, 3 * M:4 * M].copy(),
-            reserve=Z[:, 4 * M:4 * M + D].copy(), vm_norm=Z[:, 4 * M + D:].copy(),
+            reserve=Z[:, 4 * M:4 * M + D].copy(), fiber_velocity_lmo_per_s=Z[:, 4 * M + D:].copy(),
             objective=f_opt if len(trials) == 1 else float(sum(terms.values())), objective_terms=terms,
             n_constraints=nlp["n_equality_constraints"], **outcome))
         devs.append(dev)

@@ -10,24 +10,24 @@ A solution folder holds two files:
     ``excitation``                      ``e`` (-)
     ``activation``                      ``a`` (-)
     ``normalized_fiber_length``         ``l~M = lM/lMo`` (-)
-    ``normalized_fiber_velocity``       ``v~M/vmax``: fibre velocity in units of ``lMo vmax``
+    ``normalized_fiber_velocity``       ``v~M/vmax``: fiber velocity in units of ``lMo vmax``
                                         (OpenSim's definition, in [-1, 1]; positive =
                                         lengthening). Multiply by ``vmax`` for ``lMo/s``, by
                                         ``lMo vmax`` for m/s.
     ``tendon_force``                    ``F0 fT(l~T)`` (N), with ``lT = lMT - sqrt(lM^2 - w^2)``
                                         from the geometry (``docs/method.md``)
-    ``active_fiber_force``              ``a fL fV F0`` (N), along the fibre
-    ``passive_fiber_force``             ``F0 fPE(l~M)`` (N), along the fibre
+    ``active_fiber_force``              ``a fL fV F0`` (N), along the fiber
+    ``passive_fiber_force``             ``F0 fPE(l~M)`` (N), along the fiber
     ``active_force_length_multiplier``  ``fL(l~M)``
     ``force_velocity_multiplier``       ``fV(v~M/vmax)``
     ==================================  =====================================================
 
-    plus ``/forceset/reserve_<dof>`` (N m). Controls (excitation, fibre velocity, and what
-    depends on them: ``fV`` and the active fibre force) and reserves live on the intervals,
+    plus ``/forceset/reserve_<dof>`` (N m). Controls (excitation, fiber velocity, and what
+    depends on them: ``fV`` and the active fiber force) and reserves live on the intervals,
     i.e. at nodes ``0 ... N-1``; at node ``N`` the file repeats the value of node ``N-1``.
-    With the backward fibre dynamics (``summary["fibre_dynamics"]``, ``docs/problem.md``) the
-    velocity of interval ``k`` is that of its end node: the fibre velocity, ``fV`` and the
-    active fibre force are at nodes ``1 ... N`` and node ``0`` repeats node ``1``.
+    With the backward fiber dynamics (``summary["fiber_dynamics"]``, ``docs/problem.md``) the
+    velocity of interval ``k`` is that of its end node: the fiber velocity, ``fV`` and the
+    active fiber force are at nodes ``1 ... N`` and node ``0`` repeats node ``1``.
 ``summary.json``
     Status, objective, iterations, times, residuals, reserve RMS per DOF (and
     ``reserve_share_of_peak_moment``, the largest reserve RMS over the peak joint moment;
@@ -93,18 +93,18 @@ MUSCLE_QUANTITIES = (
 )
 
 CONVENTIONS = {
-    "normalized_fiber_velocity": "v~M / vmax: fibre velocity in units of lMo*vmax (OpenSim's "
+    "normalized_fiber_velocity": "v~M / vmax: fiber velocity in units of lMo*vmax (OpenSim's "
     "definition), positive = lengthening; the optimisation variable v~M (lMo/s) is this times vmax",
     "controls_at_last_node": "excitation, normalized_fiber_velocity, force_velocity_multiplier, "
     "active_fiber_force and the reserves are defined at nodes 0..N-1; the row of node N repeats node N-1",
     "tendon_force": "F0*fT(l~T) with lT = lMT - sqrt(lM^2 - w^2) from the geometry, w = lMo*sin(alpha0)",
-    "active_fiber_force": "a*fL*fV*F0 along the fibre (not projected on the tendon)",
-    "passive_fiber_force": "F0*fPE(l~M) along the fibre (not projected on the tendon)",
+    "active_fiber_force": "a*fL*fV*F0 along the fiber (not projected on the tendon)",
+    "passive_fiber_force": "F0*fPE(l~M) along the fiber (not projected on the tendon)",
     "residuals": "moment residual = ID - sum(r*tendon_force) - reserve at nodes 0..N-1 (N m); "
     "hill residual = (a fL fV + fPE) cos(alpha) - fT at nodes 0..N-1 (normalised); activation "
     "residual = a_{k+1} - a_k - h*da/dt(e_k, a_k)",
 }
-#: the conventions that differ with the backward fibre dynamics (the Hill equilibrium of each
+#: the conventions that differ with the backward fiber dynamics (the Hill equilibrium of each
 #: interval at its end node)
 BACKWARD_CONVENTIONS = {
     "controls_at_last_node": "excitation and the reserves are defined at nodes 0..N-1, the row of node N repeats "
@@ -128,12 +128,12 @@ def derived_quantities(
     params: MuscleTendonParameters,
     activation: np.ndarray,
     lm_norm: np.ndarray,
-    vm_norm: np.ndarray,
+    fiber_velocity_lmo_per_s: np.ndarray,
     lmt_m: np.ndarray,
 ) -> dict:
     """Forces and multipliers from the states (``docs/method.md``), NumPy.
 
-    Arrays are ``(nodes, M)``; ``vm_norm`` is ``v~M`` in lMo/s at the same nodes.
+    Arrays are ``(nodes, M)``; ``fiber_velocity_lmo_per_s`` is ``v~M`` in lMo/s at the same nodes.
     """
     lmo = params.optimal_fiber_length_m
     f0 = params.max_isometric_force_N
@@ -142,7 +142,7 @@ def derived_quantities(
     lt_norm = (lmt_m - lm_proj) / params.tendon_slack_length_m
     ft = tendon_force_length(lt_norm, params.tendon_stiffness)
     fl = active_force_length(lm_norm)
-    fv = force_velocity(vm_norm / params.max_contraction_velocity)
+    fv = force_velocity(fiber_velocity_lmo_per_s / params.max_contraction_velocity)
     fpe = passive_force_length(lm_norm, params.passive_kpe, params.passive_s0, params.passive_sm)
     return {
         "tendon_force_norm": ft,
@@ -194,11 +194,11 @@ def read_solution_folder(
 class Solution:
     """Muscle states, controls and forces on the mesh, time-first arrays ``(N+1, M)``.
 
-    Controls (``excitation``, ``vm_norm``), ``force_velocity_multiplier``,
+    Controls (``excitation``, ``fiber_velocity_lmo_per_s``), ``force_velocity_multiplier``,
     ``active_fiber_force_N`` and ``reserve_Nm`` repeat node ``N-1`` at node ``N`` (with the
-    backward fibre dynamics ``vm_norm``, ``force_velocity_multiplier`` and
+    backward fiber dynamics ``fiber_velocity_lmo_per_s``, ``force_velocity_multiplier`` and
     ``active_fiber_force_N`` are those of nodes ``1 ... N`` and node ``0`` repeats node ``1``).
-    ``vm_norm`` is ``v~M`` in lMo/s (the optimisation variable); the file stores
+    ``fiber_velocity_lmo_per_s`` is ``v~M`` in lMo/s (the optimisation variable); the file stores
     ``v~M/vmax`` (see :attr:`normalized_fiber_velocity`).
     """
 
@@ -208,7 +208,7 @@ class Solution:
     excitation: np.ndarray
     activation: np.ndarray
     lm_norm: np.ndarray
-    vm_norm: np.ndarray
+    fiber_velocity_lmo_per_s: np.ndarray
     tendon_force_N: np.ndarray
     active_fiber_force_N: np.ndarray
     passive_fiber_force_N: np.ndarray
@@ -244,8 +244,8 @@ class Solution:
 
     @property
     def normalized_fiber_velocity(self) -> np.ndarray:
-        """``v~M / vmax`` (OpenSim's normalised fibre velocity)."""
-        return self.vm_norm / self.parameters.max_contraction_velocity
+        """``v~M / vmax`` (OpenSim's normalised fiber velocity)."""
+        return self.fiber_velocity_lmo_per_s / self.parameters.max_contraction_velocity
 
     @property
     def fiber_length_m(self) -> np.ndarray:
@@ -253,7 +253,7 @@ class Solution:
 
     @property
     def fiber_velocity_m_per_s(self) -> np.ndarray:
-        return self.vm_norm * self.parameters.optimal_fiber_length_m
+        return self.fiber_velocity_lmo_per_s * self.parameters.optimal_fiber_length_m
 
     def muscle_index(self, name: str) -> int:
         try:
@@ -355,7 +355,7 @@ class Solution:
             excitation=block("excitation"),
             activation=block("activation"),
             lm_norm=block("normalized_fiber_length"),
-            vm_norm=block("normalized_fiber_velocity") * params.max_contraction_velocity,
+            fiber_velocity_lmo_per_s=block("normalized_fiber_velocity") * params.max_contraction_velocity,
             tendon_force_N=block("tendon_force"),
             active_fiber_force_N=block("active_fiber_force"),
             passive_fiber_force_N=block("passive_fiber_force"),
@@ -377,22 +377,22 @@ def build_solution(
 
     Fills ``summary`` with residuals (moment, Hill equilibrium, activation dynamics) and
     reserve statistics computed here in NumPy from the reported quantities. With
-    ``summary["fibre_dynamics"] == "backward"`` the fibre velocity of interval ``k`` is placed
+    ``summary["fiber_dynamics"] == "backward"`` the fiber velocity of interval ``k`` is placed
     at node ``k+1`` and the Hill equilibrium checked at nodes ``1 ... N``.
     """
     N = inputs.n_intervals
     h = inputs.step_s
-    backward = summary.get("fibre_dynamics", "forward") == "backward"
-    vm_nodes = np.vstack([ocp.vm_norm[:1], ocp.vm_norm]) if backward else _hold_last(ocp.vm_norm)
+    backward = summary.get("fiber_dynamics", "forward") == "backward"
+    vm_nodes = np.vstack([ocp.fiber_velocity_lmo_per_s[:1], ocp.fiber_velocity_lmo_per_s]) if backward else _hold_last(ocp.fiber_velocity_lmo_per_s)
     d = derived_quantities(params, ocp.activation, ocp.lm_norm, vm_nodes, inputs.lmt_m)
     reserve_Nm = _hold_last(ocp.reserve * summary.get("optimal_reserve_Nm", 150.0))
     # residuals at the constrained nodes 0..N-1, from the reported (geometry-based) forces
     muscle_moment = np.einsum("kdm,km->kd", inputs.moment_arms_m[:N], d["tendon_force_N"][:N])
     moment_res = inputs.moments_Nm[:N] - muscle_moment - reserve_Nm[:N]
-    fibre = (ocp.activation * d["active_force_length_multiplier"] * d["force_velocity_multiplier"]
+    fiber = (ocp.activation * d["active_force_length_multiplier"] * d["force_velocity_multiplier"]
              + d["passive_force_length_multiplier"])
-    hill_res = (fibre * d["cos_pennation"] - d["tendon_force_norm"])[1:] if backward else \
-        (fibre * d["cos_pennation"] - d["tendon_force_norm"])[:N]
+    hill_res = (fiber * d["cos_pennation"] - d["tendon_force_norm"])[1:] if backward else \
+        (fiber * d["cos_pennation"] - d["tendon_force_norm"])[:N]
     act_res = ocp.activation[1:] - ocp.activation[:-1] - h * activation_rate(ocp.excitation, ocp.activation[:N])
     reserve_rms = np.sqrt(np.mean(ocp.reserve**2, axis=0)) * summary.get("optimal_reserve_Nm", 150.0)
     peak_moment = float(np.max(np.abs(inputs.moments_Nm))) if inputs.moments_Nm.size else 0.0
@@ -427,7 +427,7 @@ def build_solution(
         excitation=_hold_last(ocp.excitation),
         activation=ocp.activation.copy(),
         lm_norm=ocp.lm_norm.copy(),
-        vm_norm=vm_nodes,
+        fiber_velocity_lmo_per_s=vm_nodes,
         tendon_force_N=d["tendon_force_N"],
         active_fiber_force_N=d["active_fiber_force_N"],
         passive_fiber_force_N=d["passive_fiber_force_N"],

@@ -109,7 +109,7 @@ def solve_with_parameters(
         options = options.with_(ipopt={"mu_init": WARM_START_MU_INIT, **options.ipopt})
     t_prep = _time.perf_counter() - t_start
     ocp = solve_ocp(inputs, params, guess, options)
-    from .bounds import fibre_length_bounds_record
+    from .bounds import fiber_length_bounds_record
 
     summary = {
         **RunRecord.from_result(ocp, sources).to_dict(),
@@ -120,8 +120,8 @@ def solve_with_parameters(
         "mesh_step_s": inputs.step_s,
         "optimal_reserve_Nm": options.optimal_reserve_Nm,
         "static_optimisation_objective": so.objective,
-        "fibre_dynamics": options.fibre_dynamics,
-        "fibre_length_bounds": fibre_length_bounds_record(inputs, params),
+        "fiber_dynamics": options.fiber_dynamics,
+        "fiber_length_bounds": fiber_length_bounds_record(inputs, params),
         "initial_guess": "static optimisation (rigid tendons)" if warm_start is None else
         f"warm start from {warm_start.summary.get('workflow', {}).get('name', 'a previous solution')} "
         f"(mu_init {WARM_START_MU_INIT:g})",
@@ -137,7 +137,7 @@ def solve_with_parameters(
 
         N = inputs.n_intervals
         rate = leg_rate_W_per_kg(options.energy, params, inputs.muscles, ocp.excitation, ocp.activation[:N],
-                                 ocp.lm_norm[:N], ocp.vm_norm)
+                                 ocp.lm_norm[:N], ocp.fiber_velocity_lmo_per_s)
         summary["energy_goal"] = {**options.energy.record(), "w_activation": options.w_activation,
                                   "leg_mean_W_per_kg": float(np.mean(rate))}
     solution = build_solution(inputs, params, ocp, summary)
@@ -221,7 +221,7 @@ def solve_files(
     by OpenSim over the window (:func:`musclemetab.external_loads.compute_inverse_dynamics`);
     its path is ``solution.summary["inputs"]["id"]``. The mesh has ``mesh_frequency_hz``
     intervals per second (the study's 100 by default). ``exclude_muscles`` leaves muscles out of
-    the problem (e.g. one whose fibre cannot reach force equilibrium within the bounds).
+    the problem (e.g. one whose fiber cannot reach force equilibrium within the bounds).
 
     The inputs are checked (columns, units, time ranges) before the geometry is computed.
     """
@@ -391,11 +391,11 @@ def _read_model_parameters(model_path, cache_dir=None):
     return read_muscle_parameters(model_path, cache_dir=cache_dir)
 
 
-def muscles_at_fibre_length_bound(solution: Solution, tolerance: float = 1e-3) -> list[str]:
-    """Muscles whose normalised fibre length reaches the problem's upper bound somewhere
-    (1.7, or the widened bound recorded in ``summary['fibre_length_bounds']``)."""
-    from .bounds import FIBRE_LENGTH_BOUNDS
+def muscles_at_fiber_length_bound(solution: Solution, tolerance: float = 1e-3) -> list[str]:
+    """Muscles whose normalised fiber length reaches the problem's upper bound somewhere
+    (1.7, or the widened bound recorded in ``summary['fiber_length_bounds']``)."""
+    from .bounds import FIBER_LENGTH_BOUNDS
 
-    widened = solution.summary.get("fibre_length_bounds", {}).get("widened_upper", {})
+    widened = solution.summary.get("fiber_length_bounds", {}).get("widened_upper", {})
     top = np.max(np.asarray(solution.lm_norm, dtype=float), axis=0)
-    return [m for m, v in zip(solution.muscles, top) if v >= widened.get(m, FIBRE_LENGTH_BOUNDS[1]) - tolerance]
+    return [m for m, v in zip(solution.muscles, top) if v >= widened.get(m, FIBER_LENGTH_BOUNDS[1]) - tolerance]

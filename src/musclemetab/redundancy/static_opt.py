@@ -5,7 +5,7 @@ At every IK frame (``docs/solver.md``, ``docs/method.md``)::
     min  sum_m a_m^2 + 1000 sum_j ar_j^2
     s.t. ID_j = sum_m r_jm (a_m Fact_m + Fpas_m) + ar_j,    0 <= a_m <= 1
 
-with the rigid-tendon fibre state ``lM = sqrt((lMT - lTs)^2 + w^2)``,
+with the rigid-tendon fiber state ``lM = sqrt((lMT - lTs)^2 + w^2)``,
 ``cos(alpha) = (lMT - lTs)/lM``, ``v~MT = (dlMT/dt)/lMo``,
 ``Fact = F0 fL(l~M) fV(v~MT/vmax) cos(alpha)`` and ``Fpas = F0 fPE(l~M) cos(alpha)``.
 The reserve ``ar`` (N m, ``Topt = 1``) is free in practice (bounds +-1.5e6 never bind).
@@ -18,8 +18,8 @@ the study solved the same QP with IPOPT (tolerance 1e-6).
 From the static solution the OCP guess is built on the mesh: ``a``, ``ar`` and the normalised
 tendon force ``F~T = (a fL fV + fPE) cos(alpha)`` are interpolated linearly onto the nodes, the
 tendon curve is inverted with the *compliant* ``kT`` to get ``l~T``, then
-``lM = sqrt(w^2 + (lMT - lTs l~T)^2)``; the fibre-velocity guess is the derivative of a
-not-a-knot spline through that fibre-length guess.
+``lM = sqrt(w^2 + (lMT - lTs l~T)^2)``; the fiber-velocity guess is the derivative of a
+not-a-knot spline through that fiber-length guess.
 """
 
 from __future__ import annotations
@@ -66,7 +66,7 @@ class InitialGuess:
     lm_projected_m: np.ndarray
     excitation: np.ndarray
     reserve: np.ndarray
-    vm_norm: np.ndarray
+    fiber_velocity_lmo_per_s: np.ndarray
 
 
 def rigid_tendon_forces(lmt_m, lmt_velocity_m_per_s, params: MuscleTendonParameters):
@@ -141,7 +141,7 @@ def initial_guess(inputs: TrialInputs, params: MuscleTendonParameters, so: Stati
         lm_projected_m=lm_proj_guess,
         excitation=a[:N].copy(),
         reserve=ar[:N].copy(),
-        vm_norm=vm,
+        fiber_velocity_lmo_per_s=vm,
     )
 
 
@@ -169,7 +169,7 @@ def guess_from_solution(solution, inputs: TrialInputs, params: MuscleTendonParam
         lm_projected_m=np.sqrt(np.maximum(lm_m**2 - params.width_m**2, 0.0)),
         excitation=solution.excitation[:N].copy(),
         reserve=solution.reserve_Nm[:N] / optimal_reserve_Nm,
-        # the intervals' velocities: nodes 1..N with the backward fibre dynamics (docs/problem.md)
-        vm_norm=(solution.vm_norm[1:] if solution.summary.get("fibre_dynamics") == "backward"
-                 else solution.vm_norm[:N]).copy(),
+        # the intervals' velocities: nodes 1..N with the backward fiber dynamics (docs/problem.md)
+        fiber_velocity_lmo_per_s=(solution.fiber_velocity_lmo_per_s[1:] if solution.summary.get("fiber_dynamics") == "backward"
+                 else solution.fiber_velocity_lmo_per_s[:N]).copy(),
     )

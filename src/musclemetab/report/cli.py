@@ -19,7 +19,7 @@ def add_report_parser(subparsers) -> None:
         help="figures and a self-contained HTML report of a study folder",
         description=(
             "Read a study folder written by 'musclemetab run' (study.json, results.csv, failures.csv, "
-            "units/) and write its figures (DIR/figures/<name>.png, and .svg with --svg: excitations and fibre lengths, "
+            "units/) and write its figures (DIR/figures/<name>.png, and .svg with --svg: excitations and fiber lengths, "
             "estimated vs measured rate, group rates over the cycle, whole-body rate across speeds, stance "
             "and swing shares, group shares) and one HTML page, DIR/report.html, with the settings, the "
             "method, the result tables (W/kg, J/(kg m), %), the figures embedded, the failures and the "

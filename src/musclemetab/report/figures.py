@@ -76,7 +76,7 @@ GROUP_NAMES = {**_GROUP_NAMES, OTHER: "other"}
 
 
 def default_muscles(available: Sequence[str], side: str = "r") -> list[str]:
-    """Muscles of the excitation and fibre-length figure: the report list of the anatomical
+    """Muscles of the excitation and fiber-length figure: the report list of the anatomical
     muscle table (column ``report_order``) placed on ``available`` (``side`` leg, else all)."""
     from ..properties import report_muscles, split_side
 
@@ -100,9 +100,9 @@ def __getattr__(name: str):
         return value
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
-#: Normalised fibre lengths of the plateau of the active force-length curve (shaded).
+#: Normalised fiber lengths of the plateau of the active force-length curve (shaded).
 PLATEAU_BAND = (0.75, 1.05)
-#: Normalised fibre length above which a fibre works on the descending limb.
+#: Normalised fiber length above which a fiber works on the descending limb.
 DESCENDING_LIMB = 1.05
 
 _FALLBACK = ("#1b9e77", "#d95f02", "#7570b3", "#e7298a", "#66a61e", "#e6ab02", "#a6761d",
@@ -420,7 +420,7 @@ def _p_text(p: float) -> str:
     return "p < 0.001" if p < 0.001 else f"p = {p:.3f}"
 
 
-# ---------------------------------------------------------------- 1. excitations, fibre lengths
+# ---------------------------------------------------------------- 1. excitations, fiber lengths
 def _match_muscle(name: str, available: Sequence[str], side: str) -> str | None:
     if name in available:
         return name
@@ -441,7 +441,7 @@ def excitations_and_fiber_lengths(
     emg: Mapping[str, tuple[Sequence[float], Sequence[float]]] | None = None,
     emg_label: str = "measured EMG",
 ):
-    """Excitation and normalised fibre length of selected muscles over the gait cycle.
+    """Excitation and normalised fiber length of selected muscles over the gait cycle.
 
     Parameters
     ----------
@@ -462,14 +462,14 @@ def excitations_and_fiber_lengths(
         (grey, dashed), already scaled as it should be shown; ``emg_label`` names it in the
         legend (e.g. how it was scaled).
 
-    Per muscle, an excitation panel (-) above a fibre-length panel (``lM/lMo``), one line per
-    workflow, a vertical line at toe-off; the fibre-length panels shade the plateau of the
+    Per muscle, an excitation panel (-) above a fiber-length panel (``lM/lMo``), one line per
+    workflow, a vertical line at toe-off; the fiber-length panels shade the plateau of the
     active force-length curve (0.75-1.05) and draw the start of the descending limb (1.05);
     every excitation panel spans 0-1.02 (or up to the largest EMG shown) and every
-    fibre-length panel the same range.
+    fiber-length panel the same range.
     """
     if not solutions:
-        raise OptionError("no solution given for the excitation and fibre-length figure")
+        raise OptionError("no solution given for the excitation and fiber-length figure")
     workflows = _ordered_workflows(solutions)
     missing = [w for w in workflows if w not in cycles]
     if missing:
@@ -508,8 +508,8 @@ def excitations_and_fiber_lengths(
     nmrow = int(math.ceil(n / ncol))
     fig = _new_figure(2.6 * ncol + 0.9, 2 * 2.0 * nmrow + 1.3, left=0.95, bottom=0.8, hspace=0.25)
     # only the panels drawn are made (row by row); one cycle axis in every panel, one
-    # excitation scale in every excitation panel and one fibre-length scale in every
-    # fibre-length panel: numbers on the outer panels only
+    # excitation scale in every excitation panel and one fiber-length scale in every
+    # fiber-length panel: numbers on the outer panels only
     grid = fig.add_gridspec(2 * nmrow, ncol)
     axes = np.full((2 * nmrow, ncol), None, dtype=object)
     for r in range(2 * nmrow):
@@ -553,10 +553,10 @@ def excitations_and_fiber_lengths(
         _panel_title(ax_e, label, fontsize=10)
         if j == 0:
             ax_e.set_ylabel("excitation (-)")
-            ax_l.set_ylabel("fibre length\nlᴹ/lᴹₒ (-)")  # no mathtext: its parser takes 0.15 s to start
+            ax_l.set_ylabel("fiber length\nlᴹ/lᴹₒ (-)")  # no mathtext: its parser takes 0.15 s to start
     axes[0, 0].set_xlim(0, 100)  # shared: every panel
     axes[0, 0].set_ylim(0, e_top)
-    # one fibre-length scale in every panel, so that the muscles compare at a glance: the
+    # one fiber-length scale in every panel, so that the muscles compare at a glance: the
     # data, the plateau and the descending limb with 5 % of the span on either side
     lo, hi = min(lm_data), max(lm_data)
     axes[1, 0].set_ylim(min(lo - 0.05 * (hi - lo), PLATEAU_BAND[0] - 0.05),
@@ -579,7 +579,7 @@ def excitations_and_fiber_lengths(
         Line2D([], [], color="0.35", lw=0.8, ls="--", label=f"descending limb > {DESCENDING_LIMB:g}"),
     ]
     _legend_below(fig, handles, min(len(handles), 8), 9)
-    fig.suptitle(title or "Muscle excitation and normalised fibre length over the gait cycle", fontsize=11)
+    fig.suptitle(title or "Muscle excitation and normalised fiber length over the gait cycle", fontsize=11)
     return fig
 
 

@@ -374,7 +374,7 @@ def _resolve(study: StudyFolder, path) -> Path:
 #: The title of each figure in the report.
 FIGURE_TITLES = {
     "figure2_soleus": "The metabolic models on a soleus (the paper's Figure 2)",
-    "excitations_fiber_lengths": "Muscle excitations and normalised fibre lengths",
+    "excitations_fiber_lengths": "Muscle excitations and normalised fiber lengths",
     "estimated_vs_measured": "Estimated vs measured whole-body metabolic rate",
     "group_rates_over_cycle": "Metabolic rate of the muscle groups over the gait cycle",
     "whole_body_over_cycle": "Whole-body metabolic rate over the gait cycle across speeds",
@@ -441,11 +441,11 @@ def _figure_builders(study: StudyFolder) -> dict[str, Callable[[], tuple[object,
         emg, emg_label, emg_text = _measured_emg(study, subject, trial, sols, cycles, rows)
         fig = F.excitations_and_fiber_lengths(
             sols, cycles, emg=emg, emg_label=emg_label,
-            title=f"Muscle excitation and normalised fibre length over the gait cycle: subject {subject}, "
+            title=f"Muscle excitation and normalised fiber length over the gait cycle: subject {subject}, "
             f"trial {trial}",
         )
-        cap = (f"Subject {subject}, trial {trial} (preferred speed). Excitation (-) and fibre length "
-               "normalised by the optimal fibre length (-), one line per workflow; dotted line: toe-off; "
+        cap = (f"Subject {subject}, trial {trial} (preferred speed). Excitation (-) and fiber length "
+               "normalised by the optimal fiber length (-), one line per workflow; dotted line: toe-off; "
                "grey band: plateau of the active force-length curve (0.75-1.05); dashed line: start of "
                f"the descending limb (1.05). {emg_text}")
         if _solves_both_legs(study, subject):
@@ -620,8 +620,8 @@ def _draw_figure(study: StudyFolder, fig_dir: Path, formats: Sequence[str], name
 
 FIGURE2_CAPTION = (
     "The metabolic rate (W) and efficiency of one soleus under each energy model, in steady states "
-    "(excitation equal to activation) at four activations: over the fibre velocity at the optimal "
-    "length and over the fibre length at a slow shortening; the last row compares the models at full "
+    "(excitation equal to activation) at four activations: over the fiber velocity at the optimal "
+    "length and over the fiber length at a slow shortening; the last row compares the models at full "
     "activation. The settings and the open choices are printed on the figure (docs/metabolics.md). It "
     "depends on no data of the study: it is drawn once per version of the models and kept in the "
     "package's cache."

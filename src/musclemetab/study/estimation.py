@@ -6,13 +6,13 @@
     estimate = {tendon_stiffness = ["soleus_r", "gasmed_r", "gaslat_r"], optimal_fiber_length = ["tibant_r"]}
     couple = [["soleus_r", "gasmed_r", "gaslat_r"]]     # optional: muscles sharing one factor
     bounds = {tendon_stiffness = [0.1, 2.0]}            # optional (kinds, and emg_scale)
-    weights = {fibre_length = 100.0}                   # optional: activation, reserve, velocity,
-                                                       #   fibre_length, emg
+    weights = {fiber_length = 100.0}                   # optional: activation, reserve, velocity,
+                                                       #   fiber_length, emg
     workflow = "effort-cal"                            # optional: effort-gen | effort-cal | effort-ten
     emg_mode = "constrained"                           # optional: track the trials' EMG too
     validate = true                                    # optional: re-solve with the estimates
 
-The estimation runs over the subject's trials that have an ``ultrasound`` file (fibre
+The estimation runs over the subject's trials that have an ``ultrasound`` file (fiber
 lengths, ``musclemetab estimate --ultrasound``) and, with ``emg_mode``, their ``emg``; with
 ``emg_mode`` and no ultrasound at all, over the trials with EMG. It is the command
 ``musclemetab estimate`` on those files, written to ``units/<subject>/_estimate/``
@@ -89,7 +89,7 @@ def estimate_spec(data, here: str) -> EstimateSpec:
         if not isinstance(data.get(key, {}), Mapping):
             raise OptionError(f"{here}: '{key}' must be a table such as {key} = {{tendon_stiffness = [0.1, 2.0]}}"
                               if key == "bounds" else f"{here}: 'weights' must be a table such as weights = "
-                              "{fibre_length = 100.0}")
+                              "{fiber_length = 100.0}")
     bounds = {}
     for k, v in data.get("bounds", {}).items():
         if k not in (*FIELDS, "emg_scale"):
@@ -128,7 +128,7 @@ def estimation_trials(subject, here: str | None = None) -> list:
     if here is not None:
         if not trials:
             raise OptionError(f"{here}: the estimation needs measurements: give trials an 'ultrasound' file "
-                              "(fibre lengths in mm) or set estimate.emg_mode and give them 'emg' files")
+                              "(fiber lengths in mm) or set estimate.emg_mode and give them 'emg' files")
         if spec.emg_mode:
             missing = [t.name for t in trials if t.emg is None]
             if missing:

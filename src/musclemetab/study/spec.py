@@ -41,7 +41,7 @@ A study file names everything a study needs; paths are relative to the file::
     ik = "data/IK_normal.mot"
     id = "data/ID_normal.sto"
     emg = "data/EMG_normal.mot"           # needed by emg-ten and emg_mode
-    ultrasound = "data/US_normal.mot"     # optional: fibre lengths (mm) for [subjects.estimate]
+    ultrasound = "data/US_normal.mot"     # optional: fiber lengths (mm) for [subjects.estimate]
     grf = "data/GRF_normal.mot"           # optional: gait events from the vertical force
     grf_column = "ground_force_vy"        # optional
     grf_threshold_N = 20.0                # optional
@@ -122,7 +122,7 @@ class Trial:
     external_loads: Path | None = None
     #: ``"auto"`` or N: solve that gait cycle of the subject's side (see ``musclemetab.redundancy.window``)
     cycle: str | int | None = None
-    #: measured fibre lengths (mm, MuscleRedundancySolver convention) for the subject's estimation
+    #: measured fiber lengths (mm, MuscleRedundancySolver convention) for the subject's estimation
     ultrasound: Path | None = None
 
     def files(self) -> dict[str, Path]:
