@@ -127,13 +127,12 @@ def _memoised(solve, folder: Path):
 def install(folder: str | os.PathLike) -> callable:
     """Wrap the package's solve functions with the memo in ``folder``; returns the undo."""
     import musclemetab.redundancy as redundancy
-    import musclemetab.redundancy.emg_ten as emg_ten
-    import musclemetab.redundancy.solve as solve
+    import musclemetab.redundancy.run as run
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     os.environ[MEMO_ENV] = str(folder)
-    originals = [(solve, "solve_files", solve.solve_files), (emg_ten, "solve_emg_ten", emg_ten.solve_emg_ten)]
+    originals = [(run, "solve_files", run.solve_files), (run, "solve_emg_ten", run.solve_emg_ten)]
     for module, name, func in originals:
         wrapped = _memoised(func, folder)
         setattr(module, name, wrapped)

@@ -95,6 +95,51 @@ def solutions(emg_ten):
 # --------------------------------------------------------------------------- results
 @pytest.mark.opensim
 @pytest.mark.slow
+def test_result_load_and_write_round_trip(emg_ten, parameters, solutions, tmp_path):
+    """``Result.load`` reads what the solve wrote (estimates, settings, solutions), and writing
+    the loaded result again gives the same files: the solutions byte for byte, ``parameters.json``
+    the same document (the slopes at the peak tendon forces recomputed from the 12-digit
+    forces of the files, to 1e-9)."""
+    from musclemetab.errors import InputFileError
+    from musclemetab.redundancy import EmgTenSettings, Result
+
+    out = emg_ten[0]
+    result = Result.load(out)
+    assert result.labels == TRIALS and result.success
+    assert result.tendon_scale == parameters["tendon_stiffness_scale"]
+    assert result.tendon_stiffness == pytest.approx(parameters["tendon_stiffness"], rel=1e-12)
+    assert result.emg_scale == parameters["emg_scale"] and result.emg_channels == parameters["emg_channels"]
+    assert result.settings.to_dict() == parameters["solve"]["settings"]
+    assert result.settings == EmgTenSettings(emg_mode="constrained", fiber_dynamics="forward")
+    for t in TRIALS:
+        np.testing.assert_array_equal(result.solutions[t].tendon_force_N, solutions[t].tendon_force_N)
+    again = result.write(tmp_path / "again")
+    for t in TRIALS:
+        for name in ("solution.sto", "summary.json"):
+            assert (again / t / name).read_bytes() == (out / t / name).read_bytes(), (t, name)
+
+    def same(a, b, where=""):
+        if isinstance(a, dict):
+            assert set(a) == set(b), where
+            for k in a:
+                same(a[k], b[k], f"{where}/{k}")
+        elif isinstance(a, list):
+            assert len(a) == len(b), where
+            for i, (x, y) in enumerate(zip(a, b)):
+                same(x, y, f"{where}/{i}")
+        elif isinstance(a, float):
+            assert a == pytest.approx(b, rel=1e-9, nan_ok=True), where
+        else:
+            assert a == b, where
+
+    same(json.loads((again / "parameters.json").read_text()), parameters)
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(InputFileError, match="parameters.json: no such file"):
+        Result.load(tmp_path / "empty")
+
+
+@pytest.mark.opensim
+@pytest.mark.slow
 def test_converges_with_the_study_problem_size(example, emg_ten, parameters, solutions):
     out, stdout = emg_ten
     rec = parameters["solve"]
@@ -143,14 +188,13 @@ def test_tendon_stiffness_matches_the_study(parameters, solutions):
 @pytest.mark.opensim
 @pytest.mark.slow
 def test_estimates_equal_those_before_the_problem_core(parameters):
-    """EMG-TEN as an instance of the problem core gives the objective, iteration count, tendon
-    stiffness and EMG scale factors of the version with its own builder
-    (``tests/data/pre_core_results.json``)."""
+    """EMG-TEN as an instance of the problem core gives the objective, tendon stiffness and EMG
+    scale factors of the version with its own builder (``tests/data/pre_core_results.json``; the
+    iteration count is not compared: it changes with the MUMPS/BLAS build)."""
     from pathlib import Path
 
     ref = json.loads((Path(__file__).resolve().parent / "data" / "pre_core_results.json").read_text())["emg-ten"]
     assert parameters["solve"]["objective"] == pytest.approx(ref["objective"], rel=1e-6)
-    assert parameters["solve"]["iterations"] == ref["iterations"]
     for key in ("tendon_stiffness", "emg_scale"):
         assert set(parameters[key]) == set(ref[key])
         for m, v in ref[key].items():
@@ -355,7 +399,8 @@ def test_study_problem_size_with_coupling_constraints(example, geometries):
     equalities (61 995 + 4 kT + 3 EMG couplings), 3 375 EMG bounds (§6.7). Built, not solved."""
     from musclemetab.io import read_storage
     from musclemetab.model import read_muscle_parameters
-    from musclemetab.redundancy.emg_ten import EmgTenSettings, build_emg_ten_nlp, prepare_emg_ten_trials
+    from musclemetab.redundancy.emg_pipeline import prepare_emg_ten_trials
+    from musclemetab.redundancy.emg_ten import EmgTenSettings, build_emg_ten_nlp
     from musclemetab.redundancy.inputs import read_inverse_dynamics
 
     settings = EmgTenSettings(coupling="constraints")

@@ -54,6 +54,34 @@ def test_command_line_reports_the_library_before_reading_files(tmp_path, capsys)
     assert not out.exists()
 
 
+def test_emg_informed_solve_uses_the_linear_solver(tmp_path, capsys, monkeypatch, example):
+    """An effort workflow's EMG-informed solve (``solve --emg``) hands the command line's linear
+    solver to the solve, and refuses a missing library before reading any file, as the other
+    solves do."""
+    import musclemetab.redundancy.run as run
+
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def capture(*args, options=None, **kwargs):
+        seen["options"] = options
+        raise Stop
+
+    monkeypatch.setattr(run, "solve_emg_ten", capture)
+    files = ["--model", str(example.model), "--ik", str(example.ik["normal"]), "--id", str(example.id["normal"]),
+             "--emg", str(example.emg["normal"])]
+    with pytest.raises(Stop):
+        main(["solve", "--workflow", "effort-cal", *files, "--linear-solver", "spral", "--out", str(tmp_path / "a")])
+    assert seen["options"].linear_solver == "spral"
+    code = main(["solve", "--workflow", "effort-cal", "--model", str(tmp_path / "no_model.osim"), "--ik", "ik.mot",
+                 "--id", "id.sto", "--emg", "emg.mot", "--linear-solver", "ma27", "--linear-solver-library",
+                 str(tmp_path / "nolib.so"), "--out", str(tmp_path / "b")])
+    err = capsys.readouterr().err.strip()
+    assert code == 1 and "--linear-solver" in err and "nolib.so" in err and "no_model.osim" not in err
+
+
 def test_study_key(example):
     from musclemetab.study import study_from_dict
     from musclemetab.study.units import plan_units, unit_key

@@ -23,8 +23,8 @@ from .errors import MuscleTableWarning, MusclemetabError
 # Subcommands provided by the stages of the method: (name, module, function adding the parser).
 _SUBCOMMANDS = (
     ("geometry", "musclemetab.cli", "add_geometry_parser"),
-    ("solve", "musclemetab.redundancy.cli", "add_solve_parser"),
-    ("estimate", "musclemetab.redundancy.estimate_cli", "add_estimate_parser"),
+    ("solve", "musclemetab.commands.solve", "add_solve_parser"),
+    ("estimate", "musclemetab.commands.estimate", "add_estimate_parser"),
     ("metabolics", "musclemetab.metabolics.cli", "add_metabolics_parser"),
     ("analyse", "musclemetab.analysis.cli", "add_analyse_parser"),
     ("calibrate-passive", "musclemetab.calibration.cli", "add_calibrate_parser"),

@@ -45,7 +45,7 @@ IPOPT settings are those of :class:`~.problem.SolverOptions` plus :data:`LINEAR_
 **Initial guess.** Per trial the static-optimisation guess of the single-trial problem with
 the reserve divided by ``Topt``; all scale factors 1.
 
-The estimates and ``parameters.json``: :mod:`.estimates`.
+The estimates and ``parameters.json``: :mod:`.result`.
 """
 
 from __future__ import annotations
@@ -58,33 +58,21 @@ import numpy as np
 
 from ..errors import DataMismatchError, OptionError, UnknownMuscleError
 from .core import Goals, ParameterSpec, TrialBlock, build_problem, check_fiber_dynamics, coupling_pairs
-from .emg_inputs import mapping_for_muscles, resolve_emg_mapping
-from .estimates import EMG_TEN, PARAMETERS_FILE, EmgTenResult, tendon_stiffness_at_force_N_per_mm
 from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
 from .problem import ProblemResult, SolverOptions, solve_problem
 from .static_opt import InitialGuess
 
 __all__ = [
-    "EMG_TEN",
     "EmgTenSettings",
     "EmgTenTrial",
-    "EmgTenResult",
-    "PARAMETERS_FILE",
     "informed_settings",
     "emg_failure",
     "settings_for_muscles",
-    "mapping_for_muscles",
-    "resolve_emg_mapping",
     "build_emg_ten_nlp",
     "solve_emg_ten_ocp",
     "emg_ten_problem",
-    "solve_emg_ten_arrays",
-    "prepare_emg_ten_trials",
-    "emg_ten_options",
     "LINEAR_SOLVER_OPTIONS",
-    "solve_emg_ten",
-    "tendon_stiffness_at_force_N_per_mm",
 ]
 
 #: Linear-algebra settings of IPOPT for EMG-TEN (``SolverOptions.ipopt`` overrides them):
@@ -196,6 +184,15 @@ class EmgTenSettings:
             "emg_mode": self.emg_mode,
             "fiber_dynamics": self.fiber_scheme,
         }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "EmgTenSettings":
+        """The settings :meth:`to_dict` recorded (``summary.json``, ``parameters.json``)."""
+        return cls(**d["weights"], emg_tolerance=d["emg_tolerance"],
+                   tendon_scale_bounds=tuple(d["tendon_scale_bounds"]), emg_scale_bounds=tuple(d["emg_scale_bounds"]),
+                   tendon_groups=tuple(tuple(g) for g in d["tendon_groups"]),
+                   emg_groups=tuple(tuple(g) for g in d["emg_groups"]), emg_range_tolerance=d["emg_range_tolerance"],
+                   coupling=d["coupling"], emg_mode=d["emg_mode"], fiber_dynamics=d["fiber_dynamics"])
 
 
 def informed_settings(workflow: str, mode: str = "constrained", tolerance: float = 0.01,
@@ -333,6 +330,3 @@ def solve_emg_ten_ocp(
     return solve_problem(blocks, params, goals, specs, options=options, coupling=settings.coupling,
                          mumps_settings=LINEAR_SOLVER_OPTIONS)
 
-
-# the pipeline from files or arrays (after the definitions it uses)
-from .emg_pipeline import emg_ten_options, prepare_emg_ten_trials, solve_emg_ten, solve_emg_ten_arrays  # noqa: E402
