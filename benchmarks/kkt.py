@@ -87,9 +87,9 @@ def iterate(nlp, options, k):
     """IPOPT's iterate after ``k`` iterations (0: converged) and its barrier parameter."""
     import casadi as ca
 
-    from musclemetab.redundancy.problem import LINEAR_SOLVER_OPTIONS, ipopt_options
+    from musclemetab.redundancy.problem import MUMPS_OPTIONS, ipopt_options
 
-    ipopt = ipopt_options(options.with_(max_iter=k if k > 0 else options.max_iter), LINEAR_SOLVER_OPTIONS)
+    ipopt = ipopt_options(options.with_(max_iter=k if k > 0 else options.max_iter), MUMPS_OPTIONS)
     opts = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
     opts.update({key: nlp[key] for key in ("grad_f", "jac_g", "hess_lag")})
     solver = ca.nlpsol("kkt", "ipopt", {"x": nlp["x"], "f": nlp["f"], "g": nlp["g"]}, opts)
@@ -108,9 +108,9 @@ def ipopt_linear_algebra_time(nlp, options):
 
     import casadi as ca
 
-    from musclemetab.redundancy.problem import LINEAR_SOLVER_OPTIONS, ipopt_options
+    from musclemetab.redundancy.problem import MUMPS_OPTIONS, ipopt_options
 
-    ipopt = ipopt_options(options.with_(print_level=5), LINEAR_SOLVER_OPTIONS)
+    ipopt = ipopt_options(options.with_(print_level=5), MUMPS_OPTIONS)
     ipopt["print_timing_statistics"] = "yes"
     opts = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
     opts.update({key: nlp[key] for key in ("grad_f", "jac_g", "hess_lag")})

@@ -9,7 +9,7 @@ import pytest
 from musclemetab.cli import main
 from musclemetab.errors import OptionError
 from musclemetab.redundancy.problem import (
-    LINEAR_SOLVER_OPTIONS,
+    MUMPS_OPTIONS,
     SolverOptions,
     check_linear_solver,
     ipopt_options,
@@ -33,12 +33,12 @@ def test_runtime_library_passed_to_ipopt():
     # option of the solver family
     libm = ctypes.util.find_library("m")
     assert libm
-    hsl = ipopt_options(SolverOptions(linear_solver="ma86", linear_solver_library=libm), LINEAR_SOLVER_OPTIONS)
+    hsl = ipopt_options(SolverOptions(linear_solver="ma86", linear_solver_library=libm), MUMPS_OPTIONS)
     assert hsl["linear_solver"] == "ma86" and hsl["hsllib"] == libm
     assert "min_refinement_steps" not in hsl  # the MUMPS settings stay with MUMPS
     par = ipopt_options(SolverOptions(linear_solver="pardiso", linear_solver_library=libm))
     assert par["pardisolib"] == libm and "hsllib" not in par
-    default = ipopt_options(SolverOptions(), LINEAR_SOLVER_OPTIONS)
+    default = ipopt_options(SolverOptions(), MUMPS_OPTIONS)
     assert default["linear_solver"] == "mumps" and default["min_refinement_steps"] == 0
     assert "hsllib" not in default and "pardisolib" not in default
 

@@ -15,7 +15,7 @@ from ..errors import DataMismatchError, OptionError, UnknownMuscleError
 from .emg_inputs import emg_at_nodes, mapping_for_muscles, resolve_emg_mapping, trial_labels
 from .emg_ten import EmgTenSettings, EmgTenTrial, settings_for_muscles, solve_emg_ten_ocp
 from .result import EMG_TEN, Result, assemble_result
-from .inputs import check_moment_magnitudes, prepare_inputs, restrict_geometry
+from .inputs import check_moment_magnitudes, restrict_geometry, trial_inputs
 from .parameters import MuscleTendonParameters
 from .problem import SolverOptions
 from .static_opt import initial_guess, static_optimisation
@@ -134,7 +134,7 @@ def prepare_emg_ten_trials(
             keep = [all_dofs[i].index(d) for d in g.dofs]
             id_moments = id_moments[:, keep]
         src = sources[i]
-        inputs = prepare_inputs(g, id_time, id_moments, ik_time_s=ik_times[i], sources=src)
+        inputs = trial_inputs(g, id_time, id_moments, ik_time_s=ik_times[i], sources=src)
         if check_units:
             check_moment_magnitudes(inputs.moments_frames_Nm, inputs.dofs, inputs.moment_arms_frames_m,
                                     params.max_isometric_force_N, src.get("id", f"inverse dynamics of {lab}"),

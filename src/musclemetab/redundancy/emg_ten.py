@@ -40,7 +40,7 @@ joint moments use ``kT = s_kT 35`` (symbolic) for the estimated muscles.
 **Transcription.** The problem core (:mod:`.core`): the trials' blocks of the single-trial
 problem with the EMG goals (tracking cost and bound rows after each interval's equality rows)
 and the shared factors ``[s_kT, s_EMG]`` last; couplings (constraint form) after all trials.
-IPOPT settings are those of :class:`~.problem.SolverOptions` plus :data:`LINEAR_SOLVER_OPTIONS`.
+IPOPT settings are those of :class:`~.problem.SolverOptions` plus :data:`EMG_TEN_MUMPS_OPTIONS`.
 
 **Initial guess.** Per trial the static-optimisation guess of the single-trial problem with
 the reserve divided by ``Topt``; all scale factors 1.
@@ -67,12 +67,14 @@ __all__ = [
     "EmgTenSettings",
     "EmgTenTrial",
     "informed_settings",
+    "emg_bound",
+    "fiber_scheme",
     "emg_failure",
     "settings_for_muscles",
     "build_emg_ten_nlp",
     "solve_emg_ten_ocp",
     "emg_ten_problem",
-    "LINEAR_SOLVER_OPTIONS",
+    "EMG_TEN_MUMPS_OPTIONS",
 ]
 
 #: Linear-algebra settings of IPOPT for EMG-TEN (``SolverOptions.ipopt`` overrides them):
@@ -81,8 +83,21 @@ __all__ = [
 #: solve whose residual already meets IPOPT's accuracy test (IPOPT's default is at least one
 #: step; here that saves a quarter of the solve time with identical iterates to 1e-11). They
 #: change the round-off of the KKT solves, not the problem.
-LINEAR_SOLVER_OPTIONS = {"mumps_pivot_order": 2, "min_refinement_steps": 0}
+EMG_TEN_MUMPS_OPTIONS = {"mumps_pivot_order": 2, "min_refinement_steps": 0}
 EMG_MODES = ("constrained", "driven", "tracking")
+
+
+def emg_bound(mode: str, tolerance: float) -> float | None:
+    """Half-width of the EMG bound rows of an EMG ``mode``: ``tolerance`` when constrained, 0 when
+    driven (each tracked excitation is its scaled EMG), ``None`` (no bound rows) when tracking."""
+    return {"constrained": tolerance, "driven": 0.0}.get(mode)
+
+
+def fiber_scheme(mode: str | None, fiber_dynamics: str | None = None) -> str:
+    """The transcription of the fiber dynamics: ``fiber_dynamics`` when given, else backward
+    Euler in the EMG-driven mode (the forward recurrence is unstable there, ``docs/problem.md``)
+    and forward Euler otherwise (``mode`` ``None``: no EMG)."""
+    return fiber_dynamics or ("backward" if mode == "driven" else "forward")
 
 
 @dataclass(frozen=True)
@@ -159,12 +174,12 @@ class EmgTenSettings:
     @property
     def fiber_scheme(self) -> str:
         """The transcription of the fiber dynamics used (``fiber_dynamics`` or the mode's default)."""
-        return self.fiber_dynamics or ("backward" if self.emg_mode == "driven" else "forward")
+        return fiber_scheme(self.emg_mode, self.fiber_dynamics)
 
     @property
     def emg_bound(self) -> float | None:
         """Half-width of the EMG bound rows (``None``: no bound rows)."""
-        return {"constrained": self.emg_tolerance, "driven": 0.0}.get(self.emg_mode)
+        return emg_bound(self.emg_mode, self.emg_tolerance)
 
     @property
     def tendon_muscles(self) -> tuple[str, ...]:
@@ -328,5 +343,5 @@ def solve_emg_ten_ocp(
     settings = settings_for_muscles(settings, params.names)
     blocks, goals, specs = emg_ten_problem(trials, params, settings)
     return solve_problem(blocks, params, goals, specs, options=options, coupling=settings.coupling,
-                         mumps_settings=LINEAR_SOLVER_OPTIONS)
+                         mumps_settings=EMG_TEN_MUMPS_OPTIONS)
 

@@ -322,7 +322,7 @@ def effort_goals(options: SolverOptions) -> Goals:
 #: (IPOPT's default is at least one step). On the example trials the iterations and optimum
 #: are the same and the solve about 10 % faster. It changes the round-off of the KKT solves,
 #: not the problem.
-LINEAR_SOLVER_OPTIONS = {"min_refinement_steps": 0}
+MUMPS_OPTIONS = {"min_refinement_steps": 0}
 
 
 def ipopt_options(options: SolverOptions, mumps_settings: dict | None = None) -> dict:
@@ -416,7 +416,7 @@ def solve_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
     t_build = _time.perf_counter()
     nlp = build_problem(trials, params, goals, specs, optimal_reserve_Nm=options.optimal_reserve_Nm,
                         coupling=coupling, explicit_derivatives=options.derivatives == "explicit")
-    ipopt = ipopt_options(options, LINEAR_SOLVER_OPTIONS if mumps_settings is None else mumps_settings)
+    ipopt = ipopt_options(options, MUMPS_OPTIONS if mumps_settings is None else mumps_settings)
     nlp_options = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
     nlp_options.update({k: nlp[k] for k in ("grad_f", "jac_g", "hess_lag") if k in nlp})
     try:

@@ -437,6 +437,7 @@ def estimate_files(
     from .bounds import fiber_length_bounds_record
     from .core import Goals, ParameterSpec, coupling_pairs
     from .emg_inputs import emg_at_nodes, mapping_for_muscles, resolve_emg_mapping, trial_labels
+    from .emg_ten import emg_bound, fiber_scheme
     from .estimate import (
         FIELDS,
         estimate_parameters,
@@ -484,9 +485,8 @@ def estimate_files(
             raise OptionError(f"--emg-tolerance must be a non-negative number, not {emg_tolerance}")
         if mode == "tracking" and not weights["w_emg"] > 0:
             raise OptionError("--emg-mode tracking needs a positive EMG weight (--emg-weight)")
-    tolerance = {"constrained": emg_tolerance, "driven": 0.0}.get(mode) if emg_files else None
-    # the driven mode transcribes the fiber dynamics with backward Euler (docs/problem.md)
-    fiber_dynamics = "backward" if emg_files and mode == "driven" else "forward"
+    tolerance = emg_bound(mode, emg_tolerance) if emg_files else None
+    fiber_dynamics = fiber_scheme(mode if emg_files else None)
     goals = Goals(**weights, emg_tolerance=tolerance, fiber_dynamics=fiber_dynamics)
     labels = trial_labels(ik, labels)
     measured = [read_fiber_lengths(p) for p in us_files] or [{} for _ in range(n)]

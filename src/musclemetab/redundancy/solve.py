@@ -15,7 +15,7 @@ import numpy as np
 from .inputs import (
     MESH_FREQUENCY_HZ,
     check_moment_magnitudes,
-    prepare_inputs,
+    trial_inputs,
     restrict_geometry,
 )
 from .parameters import MuscleTendonParameters
@@ -47,7 +47,7 @@ def prepare_trial(geometry, params: MuscleTendonParameters, id_time_s, id_moment
         keep = [all_dofs.index(d) for d in geometry.dofs]
         id_moments_Nm = np.asarray(id_moments_Nm, dtype=float).reshape(len(id_time_s), -1)[:, keep]
     params = params.subset(geometry.muscles)
-    inputs = prepare_inputs(geometry, id_time_s, id_moments_Nm, ik_time_s=ik_time_s,
+    inputs = trial_inputs(geometry, id_time_s, id_moments_Nm, ik_time_s=ik_time_s,
                             filter_inputs=filter_inputs, mesh_frequency_hz=mesh_frequency_hz,
                             sources=dict(sources or {}))
     if check_units:
