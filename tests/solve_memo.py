@@ -2,8 +2,9 @@
 
 The tests, the command line they call, the studies they run (in the test process, in a
 process pool or on a Dask cluster) and the parallel test workers (pytest-xdist) solve the same
-example problems many times. :func:`install` wraps :func:`musclemetab.redundancy.solve_files`
-and :func:`musclemetab.redundancy.solve_emg_ten` so that a call is solved once per test run:
+example problems many times. :func:`install` wraps :func:`musclemetab.redundancy.run.solve_files`
+and :func:`musclemetab.redundancy.run.solve_emg_ten` (the pipeline that the command line, the
+studies and Python users call) so that a call is solved once per test run:
 its result (and the warnings it gave) is pickled into a folder shared by every process of
 the run, under a key made of the input files' content (SHA-256) and every other argument by
 value, like the package's own caches. A second call with the same key gets the stored result

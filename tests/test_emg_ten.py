@@ -435,7 +435,7 @@ def test_assembled_derivatives_equal_automatic_differentiation(example, geometri
 
     from musclemetab.model import read_muscle_parameters
     from musclemetab.redundancy.emg_ten import EmgTenSettings, EmgTenTrial, build_emg_ten_nlp
-    from musclemetab.redundancy.inputs import prepare_inputs, read_inverse_dynamics
+    from musclemetab.redundancy.inputs import read_inverse_dynamics, trial_inputs
     from musclemetab.redundancy.static_opt import InitialGuess
     from musclemetab.redundancy.workflows import workflow_parameters
 
@@ -443,7 +443,7 @@ def test_assembled_derivatives_equal_automatic_differentiation(example, geometri
     trials = []
     for lab, n in (("normal", 3), ("fast", 4)):
         g = geometries[lab]
-        inp = prepare_inputs(g, *read_inverse_dynamics(example.id[lab], DOFS))
+        inp = trial_inputs(g, *read_inverse_dynamics(example.id[lab], DOFS))
         inp = replace(inp, mesh_time_s=inp.mesh_time_s[:n + 1], lmt_m=inp.lmt_m[:n + 1],
                       moment_arms_m=inp.moment_arms_m[:n + 1], moments_Nm=inp.moments_Nm[:n + 1])
         M, D = len(inp.muscles), len(inp.dofs)
@@ -585,7 +585,7 @@ def test_dofs_of_the_chosen_side_are_discovered(example, tmp_path, capsys):
     from musclemetab.cli import main
     from musclemetab.errors import UnknownMuscleError
     from musclemetab.redundancy import solve_emg_ten
-    from musclemetab.redundancy.emg_pipeline import _trial_dofs
+    from musclemetab.redundancy.run import _trial_dofs
     from musclemetab.redundancy.inputs import DEFAULT_DOFS
 
     ik, idf, emg = _args(example)
@@ -660,3 +660,30 @@ def test_unconverged_emg_ten_is_reported(example, cache_dir, geometries, tmp_pat
     assert main(["solve", "--workflow", "effort-ten", "--model", str(example.model), "--ik", str(ik[1]),
                  "--id", str(idf[1]), "--parameters", str(out / "parameters.json"), "--out", str(tmp_path / "y")]) == 1
     assert "did not converge" in capsys.readouterr().err
+
+
+def test_settings_checks_name_the_option_and_what_it_may_be():
+    """The settings types check their options alike (``redundancy._checks``): the option, the
+    allowed values or range, the value given; a weight that is not a finite number is refused
+    by every type (the solver options once let NaN through)."""
+    from musclemetab.errors import OptionError
+    from musclemetab.redundancy.core import Goals, ParameterSpec
+    from musclemetab.redundancy.emg_ten import EmgTenSettings
+    from musclemetab.redundancy.problem import SolverOptions
+
+    cases = [
+        (lambda: EmgTenSettings(coupling="joint"), "coupling must be one of 'constraints', 'shared', not 'joint'"),
+        (lambda: EmgTenSettings(emg_mode="free"), "the EMG mode must be one of 'constrained', 'driven', 'tracking'"),
+        (lambda: EmgTenSettings(w_emg=-1.0), "the weight w_emg must be a non-negative number, not -1.0"),
+        (lambda: EmgTenSettings(emg_scale_bounds=(2.0, 1.0)), "emg_scale_bounds must be (low, high) with 0 < low"),
+        (lambda: SolverOptions(w_activation=float("nan")), "the weight w_activation must be a non-negative number"),
+        (lambda: SolverOptions(derivatives="numeric"), "derivatives must be one of 'explicit', 'auto'"),
+        (lambda: Goals(emg_tolerance=-0.1), "the EMG tolerance must be a non-negative number (0: EMG-driven)"),
+        (lambda: ParameterSpec("tendon_stiffness", ("soleus_r",), (0.0, 1.0)),
+         "the bounds of the tendon_stiffness factors must be (low, high) with 0 < low <= high"),
+    ]
+    for make, message in cases:
+        with pytest.raises(OptionError) as info:
+            make()
+        assert message in str(info.value)
+    assert EmgTenSettings(emg_scale_bounds=(1, 2)).emg_scale_bounds == (1.0, 2.0)

@@ -73,7 +73,7 @@ def small_problem(example, reference_table):
     geo = types.SimpleNamespace(time=L.index.to_numpy()[:F], muscles=muscles, dofs=DOFS,
                                 lmt_m=L.to_numpy()[:F, km], moment_arms_m=r[:F, :, km])
     params, _ = W.workflow_parameters("effort-cal", model_params, muscles)
-    inp = I.prepare_inputs(geo, t_id, mom, ik_time_s=t_ik[:F])
+    inp = I.trial_inputs(geo, t_id, mom, ik_time_s=t_ik[:F])
     return inp, params, initial_guess(inp, params, static_optimisation(inp, params))
 
 

@@ -57,6 +57,7 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import DataMismatchError, OptionError, UnknownMuscleError
+from ._checks import COUPLINGS, check_factor_bounds, check_non_negative, check_option, check_weights
 from .core import Goals, ParameterSpec, TrialBlock, build_problem, check_fiber_dynamics, coupling_pairs
 from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
@@ -143,29 +144,19 @@ class EmgTenSettings:
     fiber_dynamics: str | None = None
 
     def __post_init__(self):
-        for name in ("w_emg", "w_activation", "w_reserve", "w_velocity"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0):
-                raise OptionError(f"the weight {name} must be a non-negative number, not {v!r}")
-        if not (math.isfinite(self.emg_tolerance) and self.emg_tolerance >= 0):
-            raise OptionError(f"emg_tolerance must be a non-negative number, not {self.emg_tolerance!r}")
-        if not (math.isfinite(self.emg_range_tolerance) and self.emg_range_tolerance >= 0):
-            raise OptionError(f"emg_range_tolerance must be non-negative, not {self.emg_range_tolerance!r}")
+        check_weights(self, ("w_emg", "w_activation", "w_reserve", "w_velocity"))
+        check_non_negative("emg_tolerance", self.emg_tolerance)
+        check_non_negative("emg_range_tolerance", self.emg_range_tolerance)
         for name in ("tendon_scale_bounds", "emg_scale_bounds"):
-            lo, hi = (float(v) for v in getattr(self, name))
-            if not (0 < lo <= hi and math.isfinite(hi)):
-                raise OptionError(f"{name} must be (low, high) with 0 < low <= high, not {getattr(self, name)!r}")
-            object.__setattr__(self, name, (lo, hi))
+            object.__setattr__(self, name, check_factor_bounds(name, getattr(self, name)))
         for name in ("tendon_groups", "emg_groups"):
             groups = tuple(tuple(str(m) for m in g) for g in getattr(self, name))
             flat = [m for g in groups for m in g]
             if len(set(flat)) != len(flat):
                 raise OptionError(f"{name}: a muscle appears in more than one group ({groups})")
             object.__setattr__(self, name, groups)
-        if self.coupling not in ("constraints", "shared"):
-            raise OptionError(f"coupling must be 'constraints' or 'shared', not {self.coupling!r}")
-        if self.emg_mode not in EMG_MODES:
-            raise OptionError(f"the EMG mode must be one of {', '.join(EMG_MODES)}, not {self.emg_mode!r}")
+        check_option("coupling", self.coupling, COUPLINGS)
+        check_option("the EMG mode", self.emg_mode, EMG_MODES)
         if self.emg_mode == "tracking" and not self.w_emg > 0:
             raise OptionError("the EMG mode 'tracking' needs a positive EMG weight w_emg")
         if self.fiber_dynamics is not None:

@@ -49,6 +49,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import OptionError, SolverError
+from ._checks import check_option, check_weights
 from .core import Goals, TrialBlock, build_problem, check_fiber_dynamics
 from .energy import EnergyGoal
 from .inputs import TrialInputs
@@ -123,11 +124,8 @@ class SolverOptions:
         if self.energy is not None and not isinstance(self.energy, EnergyGoal):
             raise OptionError(f"energy must be an EnergyGoal, not {type(self.energy).__name__}")
         check_fiber_dynamics(self.fiber_dynamics, self.energy)
-        if self.derivatives not in ("explicit", "auto"):
-            raise OptionError(f"derivatives must be 'explicit' or 'auto', not {self.derivatives!r}")
-        for name in ("w_activation", "w_reserve", "w_velocity"):
-            if getattr(self, name) < 0:
-                raise OptionError(f"the weight {name} must be non-negative, not {getattr(self, name)}")
+        check_option("derivatives", self.derivatives, ("explicit", "auto"))
+        check_weights(self, ("w_activation", "w_reserve", "w_velocity"))
         if self.optimal_reserve_Nm <= 0:
             raise OptionError(f"optimal_reserve_Nm must be positive, not {self.optimal_reserve_Nm}")
         if self.max_iter < 1:

@@ -25,6 +25,7 @@ import numpy as np
 
 from ..errors import OptionError
 from ..processes import BackgroundCall
+from ._docs import fill_doc
 from .emg_inputs import (
     check_emg_range,
     check_emg_window,
@@ -61,6 +62,7 @@ EMG_SCALE_BOUNDS = (0.05, 2.5)
 
 
 
+@fill_doc
 def solve_files(
     model_path: str | os.PathLike,
     ik_path: str | os.PathLike,
@@ -100,6 +102,21 @@ def solve_files(
     the problem (e.g. one whose fiber cannot reach force equilibrium within the bounds).
 
     The inputs are checked (columns, units, time ranges) before the geometry is computed.
+
+    Parameters
+    ----------
+    %(model)s
+    ik_path, id_path
+        The IK ``.mot`` and ID ``.sto`` files (``id_path=None``: from ``external_loads``).
+    workflow
+        ``effort-gen``, ``effort-cal`` or ``effort-ten`` (:mod:`.workflows`).
+    %(side_dofs)s
+    %(passive)s
+    tendon_stiffness, tendon_stiffness_file
+        EFFORT-TEN's tendon stiffness (:func:`.workflows.workflow_parameters`).
+    %(options)s
+    %(cache_dir)s
+    %(check_units)s
     """
     from ..layout import check_dofs_in_model, check_side, discover_dofs, read_layout
     from .window import frames_in_window, resolve_window
@@ -267,6 +284,7 @@ def _read_model_parameters(model_path, cache_dir=None):
     return read_muscle_parameters(model_path, cache_dir=cache_dir)
 
 
+@fill_doc
 def solve_emg_ten(
     model_path,
     ik_paths: Sequence[str | os.PathLike],
@@ -295,19 +313,15 @@ def solve_emg_ten(
     ik_paths, id_paths, emg_paths
         One file of each per trial, in the same order. EMG files hold processed, normalised
         envelopes (``musclemetab.emg.read_processed_emg``).
-    emg_mapping
-        ``"default"`` (vastus intermedius tracks ``VI_a`` = mean of VL and VM, as the study
-        describes), ``"authors"`` (vastus intermedius tracks ``ES``, as in the published example
-        results), a ``{muscle: [channels]}`` mapping or a JSON file holding one.
-    labels
-        Trial names (folder names in :meth:`.Result.write`); default the IK file stems.
-    passive
-        Calibrated passive parameters as for EFFORT-CAL (default the published calibration).
-    dofs, side
-        The leg (``"r"``/``"l"``) and its DOFs. ``dofs=None`` (default) discovers them from the
-        model as the single-trial solves do (:func:`musclemetab.layout.discover_dofs`): the
-        side's unlocked coordinates that every trial's ID file holds a moment for (for the
-        example subject the study's five right-leg DOFs).
+    %(emg_mapping)s
+    %(labels)s
+    %(passive)s
+    %(side_dofs)s
+    settings
+        :class:`~.emg_ten.EmgTenSettings`: weights, bounds, couplings, EMG mode (default the study's).
+    %(options)s
+    %(cache_dir)s
+    %(check_units)s
 
     Input errors (package exceptions naming the file, channel or muscle) are raised before
     OpenSim is started: unequal numbers of IK/ID/EMG files, different models, EMG channels
@@ -414,6 +428,7 @@ def write_solution_folder(solution, out) -> None:
 
 
 
+@fill_doc
 def estimate_files(
     model, ik, id, out, *, estimate, ultrasound=(), emg=(), labels=None, couple=(), bounds=None, weights=None,
     workflow: str = "effort-cal", side: str = "r", dofs=None, emg_mode: str | None = None,
@@ -432,6 +447,16 @@ def estimate_files(
     ``out/parameters.json``, ``out/<model>_personalised.osim`` and with ``validate``
     ``out/validation/<trial>/``; raises :class:`~musclemetab.errors.SolverError` (after
     writing) when the solve did not converge.
+
+    Parameters
+    ----------
+    %(model)s
+    %(labels)s
+    %(passive)s
+    %(side_dofs)s
+    emg_mapping
+        As for :func:`solve_emg_ten` (default ``"default"``).
+    %(cache_dir)s
     """
     from ..io import check_output_folder
     from .bounds import fiber_length_bounds_record
