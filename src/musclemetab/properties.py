@@ -482,7 +482,10 @@ def _placed_records(names, max_isometric_force_N, overrides, what: str) -> tuple
 
 def muscle_volumes_m3(names: Sequence[str], body_mass_kg: float, height_m: float,
                       max_isometric_force_N=None, overrides=None) -> np.ndarray:
-    """Volume of each muscle (m^3) from its anatomical share of the total lower-limb volume."""
+    """Volume of each muscle (m^3) from its anatomical share of the total lower-limb volume.
+
+    The table's volume: a lumped muscle named after one part (:func:`lumped_muscles`) gets that
+    part's volume here; its mass (:func:`muscle_masses_kg`) follows its force."""
     recs = _placed_records(names, max_isometric_force_N, overrides, "volume share")
     share = np.array([r.volume_percent for r in recs]) / 100.0
     return share * total_muscle_volume_m3(body_mass_kg, height_m)
@@ -687,7 +690,9 @@ def individualised_max_isometric_force_N(
     """Maximal isometric force ``sigma * V_i / lMo_i`` (N) from body mass and height.
 
     ``specific_tension_Pa`` ``None``: each muscle's table (or override) value, 0.6 MPa.
-    ``max_isometric_force_N`` (the model's) sets the split of muscles sharing a volume.
+    ``max_isometric_force_N`` (the model's) sets the split of muscles sharing a volume. The
+    volumes are the table's (:func:`muscle_volumes_m3`): place a lumped muscle named after one
+    part on all its parts (override ``anatomical_muscles``) before individualising its force.
     """
     lmo = np.asarray(optimal_fiber_length_m, dtype=float)
     if lmo.shape != (len(names),):
