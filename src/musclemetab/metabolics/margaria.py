@@ -50,8 +50,9 @@ def margaria1968(
     efficiencies in human locomotion. Int Z Angew Physiol 25:339-351. Margaria measured the
     metabolic cost of walking up and down slopes and found an efficiency (mechanical work over
     metabolic energy) of about 25 % for positive work and about -120 % for negative work; the
-    model charges each sign of the fiber's work at that efficiency, as used for muscles by
-    Koelewijn AD, Heinrich D, van den Bogert AJ (2019) PLoS ONE 14:e0222037.
+    model charges each sign of the fiber's work at that efficiency. Koelewijn AD, Heinrich D,
+    van den Bogert AJ (2019) PLoS ONE 14:e0222037 include it, applied to each muscle, in their
+    comparison of energy models for gait.
 
     Equations (W for one muscle; ``W_CE = -a fL fV F0 V_CE``, positive when the fiber
     shortens)::
