@@ -17,8 +17,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from musclemetab.analysis import analyse, cycle_from_id_file
+from musclemetab.analysis import analyse, analyse_solution_folder, cycle_from_id_file
 from musclemetab.commands import main
+from musclemetab.geometry import compute_geometry
 from musclemetab.metabolics.solution import (
     add_legs,
     metabolics_from_legs,
@@ -120,6 +121,12 @@ def test_analysis_of_a_solution_with_a_recorded_cycle_from_objects_folders_and_c
     _same_analysis(from_object, from_folder)
     _same_analysis(from_result, from_object)
     assert from_object.side == "r" and from_object.summary["cycle_end_s"].iloc[0] == cycle_r.end_s
+    # the lower-level entry, given the geometry: the same from the object and the folder
+    geometry = compute_geometry(example.model, example.ik["normal"], muscles=list(solution.muscles))
+    by_geometry = [analyse_solution_folder(s, geometry, cycle_r, mass, height, **kw) for s in (solution, folder)]
+    for a, b in zip(*by_geometry):
+        _same_table(a, b)
+    _same_table(by_geometry[0].summary, from_object.summary)
     # the commands, from the folders: the same tables (written to 10 significant digits)
     met, out = tmp_path / "met", tmp_path / "analyse"
     assert main(["metabolics", "--solution", str(folder), "--mass", str(mass), "--height", str(height),
