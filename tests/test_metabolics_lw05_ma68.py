@@ -160,7 +160,7 @@ def test_additional_models_only_when_named():
 def test_cli_models_option(tmp_path, capsys):
     from test_metabolics_solution import make_solution
 
-    from musclemetab.cli import main
+    from musclemetab.commands import main
     from musclemetab.io import read_storage
 
     sol = make_solution(tmp_path / "sol")

@@ -260,7 +260,7 @@ def test_bad_solutions(tmp_path):
 
 
 def test_cli(solution_dir, tmp_path, capsys):
-    from musclemetab.cli import main
+    from musclemetab.commands import main
 
     out = tmp_path / "cli"
     code = main(["metabolics", "--solution", str(solution_dir), "--mass", "72.6", "--height", "1.743",
@@ -276,7 +276,7 @@ def test_cli(solution_dir, tmp_path, capsys):
 
 @pytest.mark.opensim
 def test_cli_with_model(example, tmp_path, capsys):
-    from musclemetab.cli import main
+    from musclemetab.commands import main
 
     sol = make_solution(tmp_path / "sol")
     out = tmp_path / "out"
@@ -341,7 +341,7 @@ def test_add_legs_adds_the_basal_rule_it_was_given(solution_dir):
 
 
 def test_cli_basal_options(solution_dir, tmp_path, capsys):
-    from musclemetab.cli import main
+    from musclemetab.commands import main
 
     common = ["metabolics", "--solution", str(solution_dir), "--mass", "72.6", "--height", "1.743", "--models", "UM03"]
     assert main(common + ["--out", str(tmp_path / "a")]) == 0

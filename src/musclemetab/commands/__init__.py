@@ -1,12 +1,15 @@
-"""The ``musclemetab`` command.
+"""The ``musclemetab`` command line: one module per command, argparse only.
 
-Thin by design: each subcommand parses its arguments, calls the library and prints what
-it wrote. Every error, a usage error included, is printed as one line
-(``musclemetab: error: ...``) and the command exits with status 1; Ctrl-C exits with
-status 130. The package's warnings are printed as one line each,
-``musclemetab: warning: ...``. When the reader of the output goes away early
-(``musclemetab report DIR | head -1``), the command stops quietly, without a traceback, with
-status 141 (128 + SIGPIPE, what a shell reports for a Unix tool stopped that way).
+Each command module adds its parser (``add_parser``) and runs the command (``run``) by calling
+the library; it holds no method of its own, so that everything a command does can be done from
+Python as well. Nothing in the library imports this package. Options several commands share
+(the basal heat, the study runs) are in :mod:`.options`.
+
+Every error, a usage error included, is printed as one line (``musclemetab: error: ...``) and
+the command exits with status 1; Ctrl-C exits with status 130. The package's warnings are
+printed as one line each, ``musclemetab: warning: ...``. When the reader of the output goes
+away early (``musclemetab report DIR | head -1``), the command stops quietly, without a
+traceback, with status 141 (128 + SIGPIPE, what a shell reports for a Unix tool stopped that way).
 """
 
 from __future__ import annotations
@@ -18,79 +21,23 @@ import os
 import sys
 import warnings
 
-from .errors import MuscleTableWarning, MusclemetabError
+from ..errors import MuscleTableWarning, MusclemetabError
 
-# Subcommands provided by the stages of the method: (name, module, function adding the parser).
-_SUBCOMMANDS = (
-    ("geometry", "musclemetab.cli", "add_geometry_parser"),
+__all__ = ["main", "build_parser", "SUBCOMMANDS", "BROKEN_PIPE_STATUS"]
+
+#: The commands: (name, module, function adding its parser). A module is imported only when its
+#: command is run (or the full help is asked for), which keeps the start of a command short.
+SUBCOMMANDS = (
+    ("geometry", "musclemetab.commands.geometry", "add_parser"),
     ("solve", "musclemetab.redundancy.cli", "add_solve_parser"),
     ("estimate", "musclemetab.redundancy.estimate_cli", "add_estimate_parser"),
-    ("metabolics", "musclemetab.metabolics.cli", "add_metabolics_parser"),
-    ("analyse", "musclemetab.analysis.cli", "add_analyse_parser"),
-    ("calibrate-passive", "musclemetab.calibration.cli", "add_calibrate_parser"),
-    ("run", "musclemetab.study.cli", "add_run_parser"),
-    ("demo", "musclemetab.study.cli", "add_demo_parser"),
-    ("report", "musclemetab.report.cli", "add_report_parser"),
+    ("metabolics", "musclemetab.commands.metabolics", "add_parser"),
+    ("analyse", "musclemetab.commands.analyse", "add_parser"),
+    ("calibrate-passive", "musclemetab.commands.calibrate_passive", "add_parser"),
+    ("run", "musclemetab.commands.run", "add_parser"),
+    ("demo", "musclemetab.commands.demo", "add_parser"),
+    ("report", "musclemetab.commands.report", "add_parser"),
 )
-
-
-def _dof_list(text: str) -> list[str]:
-    return [d for d in text.replace(",", " ").split() if d]
-
-
-def add_geometry_parser(sub) -> None:
-    p = sub.add_parser(
-        "geometry",
-        help="muscle-tendon lengths and moment arms along an IK motion",
-        description=(
-            "Compute muscle-tendon lengths and moment arms (m) of the muscles spanning the chosen "
-            "DOFs at every frame of an inverse-kinematics motion, with OpenSim. Writes "
-            "DIR/muscle_tendon_lengths.sto and DIR/moment_arms_<dof>.sto (one column per muscle). "
-            "Results are cached: a second run on the same inputs does no OpenSim work."
-        ),
-    )
-    p.add_argument("--model", required=True, metavar="M.osim", help="OpenSim model")
-    p.add_argument("--ik", required=True, metavar="IK.mot", help="inverse kinematics motion")
-    p.add_argument(
-        "--dofs", nargs="+", metavar="DOF",
-        help="coordinates for the moment arms (default: the unlocked coordinates of the --side leg's joints, "
-        "from the model)",
-    )
-    p.add_argument("--side", default="r", choices=("r", "l", "both"),
-                   help="leg (default r); both: DIR/r and DIR/l")
-    p.add_argument("--muscles", nargs="+", metavar="MUSCLE", help="muscles (default: those spanning the DOFs)")
-    p.add_argument(
-        "--method", default="velocity", choices=("velocity", "opensim", "finite_difference"),
-        help="moment-arm method (default velocity; see the documentation)",
-    )
-    p.add_argument("--no-cache", action="store_true", help="do not read or write the geometry cache")
-    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    p.set_defaults(func=geometry_command)
-
-
-def geometry_command(args) -> int:
-    from .geometry import compute_geometry, write_geometry
-    from .io import check_output_folder
-
-    check_output_folder(args.out)
-    from pathlib import Path
-
-    from .errors import OptionError
-
-    dofs = [d for item in args.dofs for d in _dof_list(item)] if args.dofs else None
-    if args.side == "both" and (dofs or args.muscles):
-        raise OptionError("--dofs and --muscles name one leg's; with --side both leave them out")
-    sides = ("r", "l") if args.side == "both" else (args.side,)
-    geoms = {s: compute_geometry(args.model, args.ik, dofs=dofs, side=s, muscles=args.muscles,
-                                 use_cache=not args.no_cache, method=args.method) for s in sides}
-    for side, geom in geoms.items():
-        out = Path(args.out) / side if args.side == "both" else Path(args.out)
-        files = write_geometry(geom, out)
-        print(
-            f"geometry: side {side}, {len(geom.muscles)} muscles x {len(geom.dofs)} DOFs x {len(geom.time)} frames"
-            f"{' (cached)' if geom.source.get('cached') else ''} -> {out} ({len(files)} files)"
-        )
-    return 0
 
 
 class _Parser(argparse.ArgumentParser):
@@ -103,7 +50,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):
-    from .errors import MusclemetabWarning
+    from ..errors import MusclemetabWarning
 
     if issubclass(category, MusclemetabWarning):
         print(f"musclemetab: warning: {' '.join(str(message).split())}", file=file or sys.stderr)
@@ -115,7 +62,7 @@ class _Version(argparse.Action):
     """``--version``: the package's version, read only when asked for."""
 
     def __call__(self, parser, namespace, values, option_string=None):
-        from . import __version__
+        from .. import __version__
 
         print(f"musclemetab {__version__}")
         parser.exit()
@@ -131,8 +78,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     parser.add_argument("--version", action=_Version, nargs=0, help="show the version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    names = {name for name, _, _ in _SUBCOMMANDS}
-    for name, module, func in _SUBCOMMANDS:
+    names = {name for name, _, _ in SUBCOMMANDS}
+    for name, module, func in SUBCOMMANDS:
         if command in names and name != command:
             continue
         try:
@@ -210,7 +157,3 @@ def _main(argv: list[str] | None) -> int:
         return 130
     finally:
         warnings.showwarning = previous
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
