@@ -5,8 +5,8 @@
                            [--basal-coefficient 1.2] [--basal-exponent 1]
                            [--speed M_PER_S] --out DIR
 
-Writes ``OUT/metabolics.sto``, ``OUT/metabolics.parquet``, ``OUT/whole_body.csv`` and
-``OUT/per_muscle.csv`` (:func:`musclemetab.metabolics.solution.write_legs_metabolics`). One leg
+Writes ``OUT/metabolics.sto``, ``OUT/whole_body.csv`` and ``OUT/per_muscle.csv`` (and
+``OUT/metabolics.parquet`` with the ``parquet`` extra) (:func:`musclemetab.metabolics.solution.write_legs_metabolics`). One leg
 solved: the whole-body rate doubles it (the study's rule, and the output says so). ``--solution``
 may also be the parent written by ``solve --side both`` (``PARENT/r``, ``PARENT/l``): each leg
 is evaluated over its own cycle into ``OUT/r`` and ``OUT/l``, and ``OUT/whole_body.csv`` adds
@@ -33,7 +33,7 @@ def add_parser(subparsers) -> None:
             "Evaluate muscle metabolic energy models on a muscle redundancy solution (the padding nodes "
             "trimmed: 5 at the start, 6 at the end), muscle by muscle and node by node. Writes "
             "OUT/metabolics.sto (columns <model>/<muscle>/<component>, W), OUT/metabolics.parquet (tidy: time, "
-            "model, muscle, component, value_W) and OUT/whole_body.csv (one row per model: whole-body "
+            "model, muscle, component, value_W; with the parquet extra) and OUT/whole_body.csv (one row per model: whole-body "
             f"average in W/kg). Models: the study's {', '.join(MODELS)} ('all', the default) and, when "
             f"named, {', '.join(ADDITIONAL_MODELS)}."
         ),

@@ -15,7 +15,7 @@ def add_parser(sub) -> None:
             "Run every unit (subject x trial x workflow) of a TOML study file: solve, metabolic models, gait "
             "phases and muscle groups. Resumable: units whose inputs and settings are unchanged and whose "
             "outputs are complete are skipped; failed units are run again. Writes units/<subject>/<trial>/"
-            "<workflow>/, results.csv and results.parquet (one row per subject x trial x workflow x model), "
+            "<workflow>/, results.csv (and results.parquet with the parquet extra; one row per subject x trial x workflow x model), "
             "failures.csv and study.json in the study's output folder."
         ),
     )

@@ -507,15 +507,15 @@ def metabolics_from_solution(
 
 
 def write_metabolics(result: SolutionMetabolics, out_dir: str | os.PathLike, cycle=None) -> dict[str, Path]:
-    """Write ``metabolics.sto``, ``metabolics.parquet``, ``whole_body.csv`` and
-    ``per_muscle.csv`` into ``out_dir``.
+    """Write ``metabolics.sto``, ``whole_body.csv``, ``per_muscle.csv`` and, with the optional
+    ``parquet`` extra installed, ``metabolics.parquet`` into ``out_dir``.
 
     ``cycle`` (a :class:`~musclemetab.analysis.GaitCycle`) adds the stance and swing
     energies to ``per_muscle.csv``. The files are written together
     (:func:`musclemetab.io.atomic_directory`).
     """
     from ..analysis.per_muscle import PER_MUSCLE_FILE, per_muscle_table
-    from ..io import atomic_directory, write_storage
+    from ..io import atomic_directory, write_parquet, write_storage
 
     out_dir = Path(out_dir)
     comments = [
@@ -530,15 +530,17 @@ def write_metabolics(result: SolutionMetabolics, out_dir: str | os.PathLike, cyc
     with atomic_directory(out_dir) as tmp:
         write_storage(tmp / METABOLICS_STO, result.to_dataframe(), name="musclemetab metabolic rates",
                       in_degrees=False, comments=comments)
-        result.to_long().to_parquet(tmp / METABOLICS_PARQUET, index=False)
+        parquet = write_parquet(result.to_long(), tmp / METABOLICS_PARQUET)
         result.whole_body_table().to_csv(tmp / WHOLE_BODY_CSV, index=False, float_format="%.10g")
         per_muscle_table(result, cycle).to_csv(tmp / PER_MUSCLE_FILE, index=False, float_format="%.10g")
-    return {
+    files = {
         "metabolics_sto": out_dir / METABOLICS_STO,
-        "metabolics_parquet": out_dir / METABOLICS_PARQUET,
         "whole_body_csv": out_dir / WHOLE_BODY_CSV,
         "per_muscle_csv": out_dir / PER_MUSCLE_FILE,
     }
+    if parquet is not None:
+        files["metabolics_parquet"] = out_dir / METABOLICS_PARQUET
+    return files
 
 
 def add_legs(results: Mapping[str, SolutionMetabolics]) -> dict[str, float]:
