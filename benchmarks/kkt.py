@@ -68,7 +68,7 @@ def build_problem(ex, trial):
     """NLP of the trial's EFFORT-GEN problem exactly as the solver builds it."""
     from musclemetab.geometry import compute_geometry
     from musclemetab.model import read_muscle_parameters
-    from musclemetab.redundancy.inputs import DEFAULT_DOFS, prepare_inputs, read_inverse_dynamics, restrict_geometry
+    from musclemetab.redundancy.inputs import DEFAULT_DOFS, read_inverse_dynamics, restrict_geometry, trial_inputs
     from musclemetab.redundancy.problem import SolverOptions, build_nlp
     from musclemetab.redundancy.static_opt import initial_guess, static_optimisation
     from musclemetab.redundancy.workflows import workflow_parameters
@@ -77,7 +77,7 @@ def build_problem(ex, trial):
     id_time, id_mom = read_inverse_dynamics(ex.id[trial], geom.dofs)
     params, _ = workflow_parameters("effort-gen", read_muscle_parameters(ex.model), geom.muscles)
     params = params.subset(geom.muscles)
-    inputs = prepare_inputs(geom, id_time, id_mom)
+    inputs = trial_inputs(geom, id_time, id_mom)
     guess = initial_guess(inputs, params, static_optimisation(inputs, params))
     options = SolverOptions()
     return build_nlp(inputs, params, guess, options), options

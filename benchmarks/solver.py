@@ -95,7 +95,7 @@ def cold_cli(ex, trial, cache_dir, linear_solver="mumps"):
     """One ``musclemetab solve`` in a new process: wall time, the solve time it reports, and
     the time outside the solve (imports, files, problem set-up, writing)."""
     out = tempfile.mkdtemp(prefix="mm-bench-")
-    cmd = [sys.executable, "-m", "musclemetab.cli", "solve", "--model", str(ex.model), "--ik", str(ex.ik[trial]),
+    cmd = [sys.executable, "-m", "musclemetab", "solve", "--model", str(ex.model), "--ik", str(ex.ik[trial]),
            "--id", str(ex.id[trial]), "--workflow", "effort-gen", "--cache-dir", str(cache_dir),
            "--linear-solver", linear_solver, "--out", out]
     t0 = time.perf_counter()

@@ -32,7 +32,7 @@ from pathlib import Path
 
 def _musclemetab(*args, env) -> float:
     t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-m", "musclemetab.cli", *args], env=env, capture_output=True, text=True)
+    proc = subprocess.run([sys.executable, "-m", "musclemetab", *args], env=env, capture_output=True, text=True)
     dt = time.perf_counter() - t0
     if proc.returncode != 0:
         sys.exit(f"musclemetab {' '.join(args)} failed:\n{proc.stdout}\n{proc.stderr}")

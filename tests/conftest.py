@@ -55,7 +55,7 @@ def demo(tmp_path_factory):
     import pandas as pd
     import solve_memo
 
-    from musclemetab.cli import main
+    from musclemetab.commands import main
 
     out = _run_root(tmp_path_factory) / "demo"
     with solve_memo.locked(out.with_suffix(".lock")):

@@ -8,6 +8,12 @@ ankle; the 92 muscles replaced by 9 per leg (``hamstrings``, ``bifemsh``, ``glut
 of its first part and the summed maximal isometric force of its parts. The right leg's muscles
 are ``DeGrooteFregly2016Muscle``, the left leg's ``Millard2012EquilibriumMuscle``; with
 ``--right-only`` the left leg has no muscles.
+
+``python tests/opensim_models.py SOURCE.osim OUT.osim --merge KEEP=PART,PART [--merge ...]`` writes the
+model with, on each side, the muscles ``PART_r``, ``PART_l`` merged into ``KEEP_r``, ``KEEP_l``: the kept
+muscle (its path, optimal fiber length, tendon slack length, pennation, class) carries the summed
+maximal isometric force of itself and its parts, which are removed (a lumped muscle of a reduced
+model).
 """
 
 from __future__ import annotations
@@ -64,5 +70,28 @@ def lumped_sagittal(source: str, out: str, right_only: bool = False) -> None:
     model.printToXML(out)
 
 
+def merged_muscles(source: str, out: str, merges: dict[str, tuple[str, ...]]) -> None:
+    """``merges``: ``{kept muscle: (merged muscles, ...)}`` (side-free names), done on both sides."""
+    import opensim as osim
+
+    osim.Logger.setLevelString("error")
+    model = osim.Model(source)
+    forces = model.updForceSet()
+    for keep, parts in merges.items():
+        for side in "rl":
+            kept = osim.Muscle.safeDownCast(forces.get(f"{keep}_{side}"))
+            merged = [osim.Muscle.safeDownCast(forces.get(f"{p}_{side}")) for p in parts]
+            kept.setMaxIsometricForce(kept.getMaxIsometricForce() + sum(m.getMaxIsometricForce() for m in merged))
+            for p in parts:
+                forces.remove(forces.getIndex(f"{p}_{side}"))
+    model.finalizeConnections()
+    model.initSystem()
+    model.printToXML(out)
+
+
 if __name__ == "__main__":
-    lumped_sagittal(sys.argv[1], sys.argv[2], right_only="--right-only" in sys.argv[3:])
+    if "--merge" in sys.argv:
+        pairs = [sys.argv[i + 1].split("=") for i, a in enumerate(sys.argv) if a == "--merge"]
+        merged_muscles(sys.argv[1], sys.argv[2], {k: tuple(v.split(",")) for k, v in pairs})
+    else:
+        lumped_sagittal(sys.argv[1], sys.argv[2], right_only="--right-only" in sys.argv[3:])

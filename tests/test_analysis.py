@@ -482,7 +482,7 @@ def test_analyse_basal_options_give_the_whole_body_rate_worked_by_hand(example, 
     without basal heat; under the muscle rule the basal part is linear in the coefficient."""
     import pandas as pd
 
-    from musclemetab.cli import main
+    from musclemetab.commands import main
 
     mass, speed = 72.6, 1.3
     folder = _solution_folder(tmp_path / "sol")

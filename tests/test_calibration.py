@@ -28,7 +28,7 @@ from musclemetab.calibration import (
     solve_passive,
     write_calibration,
 )
-from musclemetab.calibration.cli import add_calibrate_parser
+from musclemetab.commands.calibrate_passive import add_parser as add_calibrate_parser
 from musclemetab.errors import InputFileError, MissingColumnError, UnknownMuscleError
 from musclemetab.muscle import passive_force_length, tendon_force_length, tendon_length_from_force
 

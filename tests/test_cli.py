@@ -8,7 +8,7 @@ import sys
 import pytest
 
 import musclemetab
-from musclemetab.cli import build_parser, main
+from musclemetab.commands import build_parser, main
 
 
 def _subcommands():
@@ -18,7 +18,7 @@ def _subcommands():
 
 
 def test_version():
-    r = subprocess.run([sys.executable, "-m", "musclemetab.cli", "--version"], capture_output=True, text=True)
+    r = subprocess.run([sys.executable, "-m", "musclemetab", "--version"], capture_output=True, text=True)
     assert r.returncode == 0 and r.stdout.strip() == f"musclemetab {musclemetab.__version__}"
 
 
@@ -44,6 +44,49 @@ def test_usage_error_is_one_line_and_status_1(capsys):
 
 
 def test_importing_the_package_loads_neither_opensim_nor_casadi():
-    code = "import sys, musclemetab, musclemetab.cli; print('opensim' in sys.modules, 'casadi' in sys.modules)"
+    code = "import sys, musclemetab, musclemetab.commands; print('opensim' in sys.modules, 'casadi' in sys.modules)"
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert r.stdout.split() == ["False", "False"], r.stderr
+
+
+def test_console_script_is_the_commands_main():
+    """pyproject.toml's console script names ``musclemetab.commands:main`` (what ``python -m
+    musclemetab`` runs): the installed ``musclemetab`` program and the tests run the same code."""
+    import importlib
+    import tomllib
+    from pathlib import Path
+
+    import musclemetab.commands
+
+    pyproject = Path(__file__).resolve().parents[1] / "pyproject.toml"
+    target = tomllib.loads(pyproject.read_text())["project"]["scripts"]["musclemetab"]
+    module, _, attr = target.partition(":")
+    assert getattr(importlib.import_module(module), attr) is musclemetab.commands.main
+    main_file = Path(musclemetab.__file__).with_name("__main__.py").read_text()
+    assert "from .commands import main" in main_file
+
+
+def test_no_library_module_imports_a_command_module():
+    """The command modules sit on top of the library: no module outside ``musclemetab.commands``
+    imports one (the package's own ``__main__`` aside)."""
+    import ast
+    from pathlib import Path
+
+    root = Path(musclemetab.__file__).parent
+    offending = []
+    for path in root.rglob("*.py"):
+        rel = path.relative_to(root)
+        if rel.parts[0] == "commands" or rel.name == "__main__.py":
+            continue
+        package = ["musclemetab", *rel.parts[:-1]]
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            names = []
+            if isinstance(node, ast.ImportFrom):
+                base = package[: len(package) - node.level + 1] if node.level else []
+                names = [".".join([*base, node.module or ""]).strip(".")]
+                names += [f"{names[0]}.{a.name}" for a in node.names]
+            elif isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            if any(n == "musclemetab.commands" or n.startswith("musclemetab.commands.") for n in names):
+                offending.append(str(rel))
+    assert offending == []

@@ -96,7 +96,7 @@ def test_solve_without_opensim_when_cached(example, tmp_path, monkeypatch):
 
 def test_command_imports_only_its_stage():
     code = (
-        "import sys; from musclemetab.cli import build_parser; p = build_parser('solve'); "
+        "import sys; from musclemetab.commands import build_parser; p = build_parser('solve'); "
         "p.parse_args(['solve', '--model', 'm', '--ik', 'i', '--id', 'd', '--out', 'o']); "
         "print(sorted(m for m in ('musclemetab.study', 'musclemetab.report', 'musclemetab.metabolics', "
         "'musclemetab.redundancy.emg_ten', 'scipy.signal', 'scipy.interpolate', 'scipy.optimize', 'scipy.stats', "
@@ -105,7 +105,7 @@ def test_command_imports_only_its_stage():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
     # the full parser still offers every command
-    from musclemetab.cli import build_parser
+    from musclemetab.commands import build_parser
 
     help_text = build_parser().format_help()
     for name in ("geometry", "solve", "metabolics", "calibrate-passive", "run", "demo", "report"):
@@ -132,7 +132,7 @@ def test_solve_command_runs_without_scipy_or_pandas(example, geometry_cache, tmp
             "--cache-dir", str(geometry_cache), "--max-iter", "2"]
     forbidden = ("scipy.signal", "scipy.interpolate", "scipy.optimize", "scipy.stats", "pandas")
     code = (
-        f"import sys; from musclemetab.cli import main; rc = main({argv!r}); "
+        f"import sys; from musclemetab.commands import main; rc = main({argv!r}); "
         f"print(rc); print(sorted(m for m in {forbidden!r} + ('casadi',) if m in sys.modules))"
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)

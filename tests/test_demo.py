@@ -97,7 +97,7 @@ def test_demo_report_is_self_contained(demo):
 
 
 def test_demo_second_run_is_resumed(demo, capsys):
-    from musclemetab.cli import main
+    from musclemetab.commands import main
 
     out, table = demo
     capsys.readouterr()

@@ -26,7 +26,7 @@ def cache_dir(tmp_path_factory):
 
 
 def _solve(example, cache_dir, out, mode, *extra):
-    from musclemetab.cli import main
+    from musclemetab.commands import main
 
     argv = ["solve", "--workflow", "effort-cal", "--model", str(example.model), "--ik", str(example.ik["normal"]),
             "--id", str(example.id["normal"]), "--emg", str(example.emg["normal"]), "--emg-mapping", "authors",
@@ -176,7 +176,7 @@ def test_an_infeasible_emg_driven_solve_says_so():
 
 
 def test_emg_options_without_emg_are_refused(example, tmp_path):
-    from musclemetab.cli import main
+    from musclemetab.commands import main
 
     argv = ["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
             str(example.id["normal"]), "--emg-mode", "driven", "--out", str(tmp_path / "x")]
@@ -207,7 +207,7 @@ def test_metabolics_of_a_solution_object_equal_those_of_its_folder(example, cons
 def test_backward_fiber_dynamics_with_the_energy_goal_is_refused(example, tmp_path):
     """The energy goal's rates pair each node's velocity with its own state (the forward
     scheme): ``--fiber-dynamics backward --energy-model`` is refused in one line, nothing written."""
-    from musclemetab.cli import main
+    from musclemetab.commands import main
 
     argv = ["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
             str(example.id["normal"]), "--fiber-dynamics", "backward", "--energy-model", "UM10", "--mass", "70",

@@ -63,7 +63,7 @@ def geometries(example, cache_dir):
 @pytest.fixture(scope="module")
 def emg_ten(example, geometries, cache_dir, tmp_path_factory):
     """The authors'-mapping EMG-TEN solve, through the command line; returns (folder, stdout)."""
-    from musclemetab.cli import main
+    from musclemetab.commands import main
 
     out = tmp_path_factory.mktemp("emg_ten") / "result"
     argv = ["solve", "--workflow", "emg-ten", "--model", str(example.model),
@@ -352,7 +352,7 @@ def test_tendon_stiffness_in_newton_per_mm(parameters, solutions):
 @pytest.mark.opensim
 @pytest.mark.slow
 def test_effort_ten_runs_from_the_written_parameters(example, emg_ten, parameters, cache_dir, tmp_path):
-    from musclemetab.cli import main
+    from musclemetab.commands import main
     from musclemetab.redundancy import Solution, solve_files
 
     out = tmp_path / "effort_ten"
@@ -582,7 +582,7 @@ def test_trials_from_different_models(example, tmp_path):
 def test_dofs_of_the_chosen_side_are_discovered(example, tmp_path, capsys):
     """EMG-TEN's DOFs come from the model and the ID files, like the other workflows': the study's
     five DOFs for the example's right leg, their left counterparts for its left leg."""
-    from musclemetab.cli import main
+    from musclemetab.commands import main
     from musclemetab.errors import UnknownMuscleError
     from musclemetab.redundancy import solve_emg_ten
     from musclemetab.redundancy.run import _trial_dofs
@@ -601,7 +601,7 @@ def test_dofs_of_the_chosen_side_are_discovered(example, tmp_path, capsys):
 
 
 def test_cli_rejects_bad_input_on_one_line(example, tmp_path, capsys):
-    from musclemetab.cli import main
+    from musclemetab.commands import main
 
     ik, idf, emg = _args(example)
     code = main(["solve", "--workflow", "emg-ten", "--model", str(example.model), "--ik", *map(str, ik),
@@ -645,7 +645,7 @@ def test_unconverged_parameters_are_refused(tmp_path):
 
 @pytest.mark.opensim
 def test_unconverged_emg_ten_is_reported(example, cache_dir, geometries, tmp_path, capsys):
-    from musclemetab.cli import main
+    from musclemetab.commands import main
 
     out = tmp_path / "out"
     ik, idf, emg = _args(example)

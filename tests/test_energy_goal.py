@@ -195,7 +195,7 @@ def test_energy_goal_from_the_command_line(example, tmp_path, capsys):
     session), its goal in summary.json; bad combinations stop before any work."""
     import json
 
-    from musclemetab.cli import main
+    from musclemetab.commands import main
 
     base = ["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
             str(example.id["normal"]), "--workflow", "effort-cal"]

@@ -120,7 +120,7 @@ def _cli(argv):
     import contextlib
     import io
 
-    from musclemetab.cli import main
+    from musclemetab.commands import main
 
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):

@@ -156,7 +156,7 @@ def test_external_loads_errors(gait2392, layout, tmp_path):
 
 
 def _cli(*argv):
-    from musclemetab.cli import main
+    from musclemetab.commands import main
 
     return main(list(map(str, argv)))
 

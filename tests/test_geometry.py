@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import shutil
 import subprocess
 import sys
 
@@ -146,9 +145,9 @@ def test_bad_inputs(example, tmp_path):
 
 
 def _cli(*args):
-    exe = shutil.which("musclemetab") or sys.executable
-    cmd = [exe, *args] if exe != sys.executable else [sys.executable, "-m", "musclemetab.cli", *args]
-    return subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    """The command in a new process (``python -m musclemetab``: the program the console script
+    runs, tests/test_cli.py, whatever version of the package is installed)."""
+    return subprocess.run([sys.executable, "-m", "musclemetab", *args], capture_output=True, text=True, timeout=300)
 
 
 def test_cli_geometry_writes_opensim_files(example, tmp_path, normal_geometry):

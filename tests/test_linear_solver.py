@@ -6,7 +6,7 @@ import ctypes.util
 
 import pytest
 
-from musclemetab.cli import main
+from musclemetab.commands import main
 from musclemetab.errors import OptionError
 from musclemetab.redundancy.problem import (
     MUMPS_OPTIONS,

@@ -118,16 +118,28 @@ def test_loess_smoothing_is_exact_on_quadratics_and_reduces_noise():
 
 
 # ----------------------------------------------------------------------------- MA68
-def test_ma68_positive_work_over_quarter_and_negative_work_times_minus_1_2():
-    # shortening: a = 1, vbar = -0.2 -> V_CE = -0.1 m/s, F_CE = 1000 N, W_CE = 100 W -> 400 W
+def test_ma68_efficiencies_of_margaria_1968():
+    # Margaria (1968): positive work at an efficiency W/E of 25 %, negative work at -120 %
+    # shortening: a = 1, vbar = -0.2 -> V_CE = -0.1 m/s, F_CE = 1000 N, W_CE = +100 W -> 100 / 0.25 = 400 W
     r = margaria1968(**state(0.3, 1.0, -0.2), basal=False)
     assert float(r.work) == pytest.approx(100.0, rel=1e-14)
-    assert float(r.total) == pytest.approx(100.0 / 0.25, rel=1e-14)
-    # lengthening: a = 1, fV = 1.5, vbar = +0.2 -> F_CE = 1500 N, W_CE = -150 W -> -1.2 * -150 = 180 W
-    r = margaria1968(**state(0.3, 1.0, 0.2, fv=1.5), basal=False)
-    assert float(r.work) == pytest.approx(-150.0, rel=1e-14)
-    assert float(r.total) == pytest.approx(180.0, rel=1e-14)
-    assert float(r.shortening_lengthening) == pytest.approx(330.0, rel=1e-14)  # Edot - W_CE
+    assert float(r.total) == pytest.approx(400.0, rel=1e-14)
+    assert float(r.shortening_lengthening) == pytest.approx(300.0, rel=1e-14)  # Edot - W_CE
+    # lengthening: a = 1, fV = 1, vbar = +0.2 -> W_CE = -100 W -> -100 / -1.2 = 83.33 W (not 120 W)
+    r = margaria1968(**state(0.3, 1.0, 0.2), basal=False)
+    assert float(r.work) == pytest.approx(-100.0, rel=1e-14)
+    assert float(r.total) == pytest.approx(250.0 / 3.0, rel=1e-14)  # 83.333 W
+    assert float(r.work) / float(r.total) == pytest.approx(-1.2, rel=1e-14)  # the efficiency of negative work
+    assert float(r.shortening_lengthening) == pytest.approx(100.0 + 250.0 / 3.0, rel=1e-14)
+    assert float(r.activation_maintenance) == 0.0
+    # with the basal heat (1.2 W/kg of the 0.5 kg muscle = 0.6 W) added to the same state
+    r = margaria1968(**state(0.3, 1.0, 0.2))
+    assert float(r.basal) == pytest.approx(0.6, rel=1e-14)
+    assert float(r.total) == pytest.approx(250.0 / 3.0 + 0.6, rel=1e-14)
+    # lengthening at fV = 1.5, a = 0.4: F_CE = 600 N, V_CE = +0.1 m/s, W_CE = -60 W -> 50 W
+    r = margaria1968(**state(0.3, 0.4, 0.2, fv=1.5), basal=False)
+    assert float(r.work) == pytest.approx(-60.0, rel=1e-14)
+    assert float(r.total) == pytest.approx(50.0, rel=1e-14)
     # isometric: nothing but the basal heat
     r = margaria1968(**state(1.0, 1.0, 0.0))
     assert float(r.total) == pytest.approx(1.2 * MASS, rel=1e-14)
@@ -148,7 +160,7 @@ def test_additional_models_only_when_named():
 def test_cli_models_option(tmp_path, capsys):
     from test_metabolics_solution import make_solution
 
-    from musclemetab.cli import main
+    from musclemetab.commands import main
     from musclemetab.io import read_storage
 
     sol = make_solution(tmp_path / "sol")

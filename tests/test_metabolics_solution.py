@@ -210,6 +210,29 @@ def test_files(solution_dir, tmp_path):
         assert 2 * d.mean_W.sum() / MASS == pytest.approx(wb.set_index("model").mean_W_per_kg_no_basal[model], rel=1e-9)
 
 
+def test_without_the_parquet_extra_the_csv_and_storage_files_are_the_same(solution_dir, tmp_path, monkeypatch):
+    """pyarrow is an optional extra: without it no Parquet copy is written (and a study's stale
+    copy is removed), and every other file is byte for byte what it is with it."""
+    import musclemetab.io.parquet as parquet
+    from musclemetab.study.runner import _write_parquet_copy
+
+    res = metabolics_from_solution(solution_dir, MASS, HEIGHT, models="UM10,BH04", speed_m_per_s=1.3)
+    with_extra = write_metabolics(res, tmp_path / "with")
+    monkeypatch.setattr(parquet, "parquet_available", lambda: False)
+    without = write_metabolics(res, tmp_path / "without")
+    assert "metabolics_parquet" in with_extra and "metabolics_parquet" not in without
+    assert not (tmp_path / "without" / "metabolics.parquet").exists()
+    for key, path in without.items():
+        assert path.read_bytes() == with_extra[key].read_bytes(), key
+    stale = tmp_path / "results.parquet"
+    stale.write_bytes(b"an earlier run's copy")
+    _write_parquet_copy(pd.DataFrame({"a": [1.0]}), stale)
+    assert not stale.exists()
+    monkeypatch.undo()
+    _write_parquet_copy(pd.DataFrame({"a": [1.0, 2.5]}), stale)
+    assert pd.read_parquet(stale)["a"].tolist() == [1.0, 2.5]
+
+
 def test_parameters_matched_by_name(solution_dir):
     base = metabolics_from_solution(solution_dir, MASS, HEIGHT, models="HO06")
     # a model's parameter set in another order (and with an extra muscle) gives the same rates
@@ -260,7 +283,7 @@ def test_bad_solutions(tmp_path):
 
 
 def test_cli(solution_dir, tmp_path, capsys):
-    from musclemetab.cli import main
+    from musclemetab.commands import main
 
     out = tmp_path / "cli"
     code = main(["metabolics", "--solution", str(solution_dir), "--mass", "72.6", "--height", "1.743",
@@ -276,7 +299,7 @@ def test_cli(solution_dir, tmp_path, capsys):
 
 @pytest.mark.opensim
 def test_cli_with_model(example, tmp_path, capsys):
-    from musclemetab.cli import main
+    from musclemetab.commands import main
 
     sol = make_solution(tmp_path / "sol")
     out = tmp_path / "out"
@@ -341,7 +364,7 @@ def test_add_legs_adds_the_basal_rule_it_was_given(solution_dir):
 
 
 def test_cli_basal_options(solution_dir, tmp_path, capsys):
-    from musclemetab.cli import main
+    from musclemetab.commands import main
 
     common = ["metabolics", "--solution", str(solution_dir), "--mass", "72.6", "--height", "1.743", "--models", "UM03"]
     assert main(common + ["--out", str(tmp_path / "a")]) == 0

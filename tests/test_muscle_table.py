@@ -239,7 +239,7 @@ def g2392_solution(gait2392, g2392, tmp_path_factory):
 def test_metabolics_cli_on_a_gait2392_solution(g2392_solution, g2392, tmp_path, capsys):
     import pandas as pd
 
-    from musclemetab.cli import main
+    from musclemetab.commands import main
 
     sol, folder, muscles, _ = g2392_solution
     assert sol.summary["success"] and sol.summary["max_moment_residual_Nm"] <= 1e-4

@@ -91,7 +91,7 @@ def solved(example, geometries, geometry_cache, solve_root, passive_csv, tendon_
     effort-ten takes its kT from a parameters.json (slow), the command line (normal) or the
     example subject's estimates asked for by name (fast).
     """
-    from musclemetab.cli import main
+    from musclemetab.commands import main
     from musclemetab.redundancy import Solution
 
     cache: dict = {}
@@ -340,7 +340,7 @@ def test_solve_files_reads_each_input_once_and_hands_on_the_same_arrays(example,
 # --------------------------------------------------------------------------- failures
 @pytest.mark.opensim
 def test_unconverged_solve_is_reported_not_hidden(example, geometry_cache, tmp_path, capsys):
-    from musclemetab.cli import main
+    from musclemetab.commands import main
     from musclemetab.errors import SolverError
     from musclemetab.redundancy import Solution
 
@@ -362,7 +362,7 @@ def test_unconverged_solve_is_reported_not_hidden(example, geometry_cache, tmp_p
 @pytest.mark.slow
 def test_warm_start_option_reaches_the_same_optimum(example, geometry_cache, solved, tmp_path):
     """--warm-start (an option for speed): EFFORT-TEN of the normal trial from EFFORT-GEN."""
-    from musclemetab.cli import main
+    from musclemetab.commands import main
     from musclemetab.redundancy import Solution
 
     _, gen_dir = solved("normal", "effort-gen")

@@ -314,7 +314,7 @@ def test_id_columns_time_and_units(example, tmp_path, ref_geometry, model_params
 
 
 def _cli(example, tmp_path, *extra, ik=None, id_=None):
-    from musclemetab.cli import main
+    from musclemetab.commands import main
 
     return main(["solve", "--model", str(example.model), "--ik", str(ik or example.ik["normal"]),
                  "--id", str(id_ or example.id["normal"]), "--out", str(tmp_path / "out"), *extra])

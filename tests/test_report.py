@@ -577,7 +577,7 @@ def test_report_errors(tmp_path):
 def test_cli(study, tmp_path, capsys):
     import argparse
 
-    from musclemetab.report.cli import add_report_parser
+    from musclemetab.commands.report import add_parser as add_report_parser
 
     parser = argparse.ArgumentParser(prog="musclemetab")
     add_report_parser(parser.add_subparsers(dest="command"))
@@ -599,7 +599,7 @@ def test_output_closed_early_ends_quietly(study):
 
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
     write_report(study)  # up to date: the command below only checks and prints
-    cmd = [sys.executable, "-m", "musclemetab.cli", "report", str(study)]
+    cmd = [sys.executable, "-m", "musclemetab", "report", str(study)]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
     proc.stdout.close()  # the reader is gone before the command prints
     err = proc.stderr.read().decode()

@@ -170,7 +170,7 @@ def test_opensim_probes_on_the_exported_states_agree_with_um10_and_bh04(exported
 def test_analyse_command_gives_what_the_study_unit_gives(example, demo, tmp_path, capsys):
     import shutil
 
-    from musclemetab.cli import main
+    from musclemetab.commands import main
 
     out, table = demo
     unit = out / table[(table.trial == TRIAL) & (table.workflow == "effort-ten")].unit_dir.iloc[0]

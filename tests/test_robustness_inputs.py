@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from musclemetab.cli import main
+from musclemetab.commands import main
 from musclemetab.errors import (
     CacheWarning,
     DataMismatchError,

@@ -156,7 +156,7 @@ def test_an_output_that_cannot_be_a_folder_is_refused_before_anything(example, t
 
 # ----------------------------------------------------------------------------- the lock
 def test_a_second_run_on_the_same_folder_refuses(example, tmp_path, capsys):
-    from musclemetab.cli import main
+    from musclemetab.commands import main
 
     out = tmp_path / "out"
     study = study_from_dict(_study(example), base="/", output=out)
@@ -236,7 +236,7 @@ def test_ctrl_c_marks_the_running_unit_interrupted_and_starts_nothing_new(exampl
 
 
 def test_ctrl_c_on_the_command_line_exits_130(example, tmp_path, monkeypatch, capsys):
-    from musclemetab.study.cli import _status
+    from musclemetab.commands.run import exit_status as _status
 
     def interrupted(unit, tmp):
         raise KeyboardInterrupt
@@ -283,7 +283,7 @@ def test_ctrl_c_on_a_real_run(example, tmp_path, workers):
             f'[[subjects.trials]]\nname = "{t}"\nik = "{example.ik[t]}"\nid = "{example.id[t]}"\n'
             for t in trials)
     )
-    proc = subprocess.Popen([sys.executable, "-m", "musclemetab.cli", "run", str(toml), "--workers", str(workers),
+    proc = subprocess.Popen([sys.executable, "-m", "musclemetab", "run", str(toml), "--workers", str(workers),
                              "--no-progress"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)
     try:

@@ -204,7 +204,7 @@ def test_second_run_does_no_solver_work_and_corrupt_output_is_redone(pool_run, m
 
 
 def test_failing_unit_is_reported_and_the_rest_complete(pool_run, example, tmp_path, capsys):
-    from musclemetab.cli import main
+    from musclemetab.commands import main
     from musclemetab.io import read_storage, write_storage
 
     study, _ = pool_run

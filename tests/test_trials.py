@@ -14,7 +14,7 @@ from test_metabolics_solution import HEIGHT, MASS, make_solution
 
 
 def _cli(*argv):
-    from musclemetab.cli import main
+    from musclemetab.commands import main
 
     return main(list(map(str, argv)))
 
@@ -46,9 +46,9 @@ def test_metabolics_adds_two_legs_and_doubles_one(tmp_path, capsys):
                 "--out", tmp_path / "one") == 0
     assert "whole body = 2 x the left leg" in capsys.readouterr().out
     with pytest.raises(Exception, match="neither a solution folder"):
-        from musclemetab.metabolics.cli import _solution_folders
+        from musclemetab.metabolics.solution import solution_folders
 
-        _solution_folders(tmp_path)
+        solution_folders(tmp_path)
 
 
 def test_metabolics_trims_to_the_recorded_gait_cycle(tmp_path):

@@ -89,6 +89,11 @@ class MuscleTableWarning(MusclemetabWarning):
     """Some muscles are not in the anatomical muscle table and take fallback properties."""
 
 
+class LumpedMuscleWarning(MusclemetabWarning):
+    """Some muscles' maximal isometric forces stand for several anatomical muscles (a lumped
+    muscle of a reduced model): their masses come from force and optimal fiber length."""
+
+
 class WindowWarning(MusclemetabWarning):
     """The solve window was clipped at the edge of the data (the record says where)."""
 

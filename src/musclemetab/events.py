@@ -46,6 +46,7 @@ __all__ = [
     "cycle_from_grf",
     "cycle_from_inverse_dynamics",
     "cycle_from_id_file",
+    "cycle_of_trial",
     "read_grf",
     "DEFAULT_GRF_THRESHOLD_N",
     "DEFAULT_MIN_DURATION_S",
@@ -413,6 +414,28 @@ def cycle_from_id_file(
         df.index.to_numpy(), df[col].to_numpy(), window_s, padding_s,
         toe_off_fraction=toe_off_fraction, plantarflexion_sign=plantarflexion_sign,
     )
+
+
+def cycle_of_trial(ik: str | os.PathLike, *, grf: str | os.PathLike | None = None,
+                   id_file: str | os.PathLike | None = None, side: str = "r") -> tuple[GaitCycle, str]:
+    """The gait cycle of a solved trial and where it came from: ``(cycle, source)``.
+
+    With ``grf``: the cycle of the side's vertical ground reaction force that holds the middle
+    of the IK window (:func:`cycle_from_grf`); otherwise from the inverse dynamics ``id_file``
+    and the IK window (:func:`cycle_from_id_file`: the window less the padding at each end,
+    toe-off from the ankle moment; estimated events).
+    """
+    from .io import read_storage
+
+    t = read_storage(ik).index.to_numpy(float)
+    if grf is not None:
+        force = read_grf(grf, side=side)
+        return (cycle_from_grf(force.index.to_numpy(float), force.to_numpy(float), at_time_s=0.5 * (t[0] + t[-1])),
+                "ground reaction forces")
+    if id_file is None:
+        raise OptionError("give the ground reaction forces (grf) or the inverse dynamics (id_file) of the trial")
+    return (cycle_from_id_file(id_file, side=side, window_s=(float(t[0]), float(t[-1]))),
+            "estimated from the IK window and the ankle moment (no ground reaction forces)")
 
 
 def _grf_candidates(side: str) -> list[str]:

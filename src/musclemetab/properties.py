@@ -22,6 +22,10 @@ Rules:
   muscles of the same side standing for ``a`` (split muscles share, lumped ones add);
 * slow-twitch fraction and specific tension: volume-weighted mean over the parts;
 * muscle mass ``m_i = rho * V_i`` with ``rho = 1059.7 kg/m^3``;
+* a lumped muscle of a reduced model, whose maximal isometric force stands for anatomical
+  muscles the model has no muscle for (e.g. a vastus carrying the force of all three vasti):
+  ``m_i = rho * F0_i * lMo_i / sigma_model`` with the model's own specific tension, and one
+  :class:`~musclemetab.errors.LumpedMuscleWarning` (:func:`lumped_muscles`);
 * a muscle the tables cannot place: ``m_i = F0_i / sigma * rho * lMo_i`` (the rule of
   OpenSim's metabolic probes, with the package's ``sigma = 0.6 MPa``), slow-twitch
   fraction 0.5, and one :class:`~musclemetab.errors.MuscleTableWarning` naming every such
@@ -48,7 +52,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .errors import InputFileError, MuscleTableWarning, OptionError, UnknownMuscleError
+from .errors import InputFileError, LumpedMuscleWarning, MuscleTableWarning, OptionError, UnknownMuscleError
 
 __all__ = [
     "MUSCLE_DENSITY_KG_PER_M3",
@@ -70,6 +74,8 @@ __all__ = [
     "total_muscle_volume_m3",
     "muscle_volumes_m3",
     "muscle_masses_kg",
+    "LumpedMuscle",
+    "lumped_muscles",
     "individualised_max_isometric_force_N",
     "coupling_groups",
     "tendon_groups",
@@ -89,7 +95,7 @@ HANDSFIELD_SLOPE_CM3_PER_KG_M = 47.0
 HANDSFIELD_INTERCEPT_CM3 = 1285.0
 
 _TEXT_COLUMNS = ("function_groups", "tendon", "emg_scale_group", "passive_calibration_trials",
-                 "passive_coupling_group", "emg_channel")
+                 "passive_coupling_group", "emg_channel", "lump_group")
 
 
 def _read_package_csv(name: str) -> pd.DataFrame:
@@ -476,7 +482,10 @@ def _placed_records(names, max_isometric_force_N, overrides, what: str) -> tuple
 
 def muscle_volumes_m3(names: Sequence[str], body_mass_kg: float, height_m: float,
                       max_isometric_force_N=None, overrides=None) -> np.ndarray:
-    """Volume of each muscle (m^3) from its anatomical share of the total lower-limb volume."""
+    """Volume of each muscle (m^3) from its anatomical share of the total lower-limb volume.
+
+    The table's volume: a lumped muscle named after one part (:func:`lumped_muscles`) gets that
+    part's volume here; its mass (:func:`muscle_masses_kg`) follows its force."""
     recs = _placed_records(names, max_isometric_force_N, overrides, "volume share")
     share = np.array([r.volume_percent for r in recs]) / 100.0
     return share * total_muscle_volume_m3(body_mass_kg, height_m)
@@ -496,6 +505,8 @@ def muscle_masses_kg(
     Muscles the table cannot place take ``F0 / sigma * rho * lMo`` when
     ``max_isometric_force_N`` and ``optimal_fiber_length_m`` are given (one warning naming
     them; ``strict``: an error); without them they raise :class:`UnknownMuscleError`.
+    Lumped muscles (:func:`lumped_muscles`, which needs both arrays) take
+    ``rho F0 lMo / sigma_model`` and are named in one :class:`LumpedMuscleWarning`.
     Override masses (``overrides``) are used as given.
     """
     names = list(names)
@@ -522,7 +533,117 @@ def muscle_masses_kg(
             "or a muscle-properties CSV (see docs/muscles.md)"
         )
     _report_unplaced([r.name for r in recs if r.fallback], strict, True)
+    lumps = _find_lumps(recs, forces, lmo, v_total)
+    for i, r in enumerate(recs):
+        if r.name in lumps:
+            out[i] = lumps[r.name].mass_kg
+    _report_lumps(lumps)
     return out
+
+
+@dataclass(frozen=True)
+class LumpedMuscle:
+    """A model muscle whose maximal isometric force stands for more anatomical muscles than its name.
+
+    ``own``: the anatomical muscle(s) its name places it on; ``absent``: the members of their
+    lump groups that no muscle of the same side stands for; ``force_ratio``:
+    ``F0 lMo / (sigma_model V_table)``, the force over the force its own part would have in the
+    model (1 for a muscle that is not lumped); ``threshold``: ``sqrt((V_own + V_absent) / V_own)``,
+    the ratio above which it is taken as the lump; ``mass_kg = rho F0 lMo / sigma_model``.
+    """
+
+    name: str
+    own: tuple[str, ...]
+    absent: tuple[str, ...]
+    table_mass_kg: float
+    mass_kg: float
+    force_ratio: float
+    threshold: float
+    model_specific_tension_Pa: float
+
+
+def lumped_muscles(names: Sequence[str], body_mass_kg: float, height_m: float, max_isometric_force_N,
+                   optimal_fiber_length_m, overrides=None) -> dict[str, LumpedMuscle]:
+    """The muscles of ``names`` taken as lumps of several anatomical muscles, ``{name: LumpedMuscle}``.
+
+    Reduced models represent a group of synergists (column ``lump_group`` of the anatomical
+    table: the vasti, the gastrocnemii, the hamstrings, iliacus and psoas, the dorsiflexors, the
+    adductors) by one muscle carrying their summed maximal isometric force, named after one of
+    them (a ``vas_int`` for the three vasti) or after the group (gait10dof18musc's ``vasti``,
+    which the alias table already places on all three). A muscle is taken as a lump when
+
+    * its lump group has members that no muscle of the same side (in ``names``) stands for, and
+    * its force ratio ``F0 lMo / (sigma_model V_table)`` exceeds ``sqrt(e)``, the geometric
+      midpoint between 1 (its own part alone) and ``e = (V_own + V_absent) / V_own`` (all the
+      absent members too).
+
+    ``sigma_model`` is the model's own specific tension: ``sigma`` (0.6 MPa) times the median
+    over the placed muscles of ``F0 lMo / (sigma V_table)``, 1 for a model whose forces follow
+    the volume rule (the study's), about 0.66 for gait2392's generic forces. A lump's mass is
+    ``rho F0 lMo / sigma_model`` (the rule of OpenSim's probes at the model's specific tension):
+    for summed forces and one part's ``lMo``, the parts' summed mass to the spread of their
+    ``lMo``. Muscles with an override mass, and muscles the table cannot place, are never lumps.
+    The median and the absent members are taken over the muscles resolved together (a
+    solution's muscles), as for the split rule.
+    """
+    names = list(names)
+    recs = resolve_muscles(names, max_isometric_force_N, overrides, warn=False)
+    return _find_lumps(recs, _forces(names, max_isometric_force_N), _forces(names, optimal_fiber_length_m),
+                       total_muscle_volume_m3(body_mass_kg, height_m))
+
+
+def _find_lumps(recs: Sequence[MuscleRecord], forces: Mapping[str, float], lmo: Mapping[str, float],
+                v_total: float) -> dict[str, LumpedMuscle]:
+    anat = anatomical_table()
+    usable = [r for r in recs if r.placed and r.mass_kg_override is None and r.name in forces and r.name in lmo
+              and np.isfinite(r.volume_percent) and r.volume_percent > 0]
+    if not usable:
+        return {}
+    ratio = {r.name: forces[r.name] * lmo[r.name] / (r.specific_tension_Pa * r.volume_percent / 100.0 * v_total)
+             for r in usable}
+    scale = float(np.median(list(ratio.values())))
+    if not (np.isfinite(scale) and scale > 0):
+        return {}
+    present: dict[str, set[str]] = {}
+    for r in recs:
+        present.setdefault(r.side, set()).update(r.anatomical)
+    group = dict(zip(anat.index, anat["lump_group"]))
+    volume = dict(zip(anat.index, anat["volume_percent"].to_numpy(dtype=float)))
+    out = {}
+    for r in usable:
+        groups = {group[a] for a in r.anatomical if group[a]}
+        absent = tuple(a for a in anat.index if group[a] in groups and a not in present[r.side])
+        if not absent:
+            continue
+        e = (r.volume_percent + sum(volume[a] for a in absent)) / r.volume_percent
+        rel = ratio[r.name] / scale
+        if rel > np.sqrt(e):
+            sigma_model = r.specific_tension_Pa * scale
+            out[r.name] = LumpedMuscle(
+                name=r.name, own=r.anatomical, absent=absent,
+                table_mass_kg=MUSCLE_DENSITY_KG_PER_M3 * r.volume_percent / 100.0 * v_total,
+                mass_kg=MUSCLE_DENSITY_KG_PER_M3 * forces[r.name] * lmo[r.name] / sigma_model,
+                force_ratio=rel, threshold=float(np.sqrt(e)), model_specific_tension_Pa=sigma_model,
+            )
+    return out
+
+
+def _report_lumps(lumps: Mapping[str, LumpedMuscle]) -> None:
+    if not lumps:
+        return
+    anat = anatomical_table()
+    s = "s" if len(lumps) > 1 else ""
+    each = "; ".join(
+        f"{m.name}: F0 {m.force_ratio:.2f} times its part's ({', '.join(anat.loc[list(m.own), 'name'])}; "
+        f"lump above {m.threshold:.2f}), taken to stand for {', '.join(anat.loc[list(m.absent), 'name'])} too: "
+        f"mass {m.mass_kg:.3f} kg (rho F0 lMo / {m.model_specific_tension_Pa / 1e6:.3f} MPa) instead of "
+        f"{m.table_mass_kg:.3f} kg"
+        for m in lumps.values())
+    warnings.warn(
+        f"lumped muscle{s}, maximal isometric force far above the anatomical muscle named: {each}; to choose "
+        "otherwise, give mass_kg or anatomical_muscles in a --muscle-properties CSV (see docs/muscles.md)",
+        LumpedMuscleWarning, stacklevel=3,
+    )
 
 
 def slow_twitch_fraction(names: Sequence[str], default: float | None = None, overrides=None,
@@ -569,7 +690,9 @@ def individualised_max_isometric_force_N(
     """Maximal isometric force ``sigma * V_i / lMo_i`` (N) from body mass and height.
 
     ``specific_tension_Pa`` ``None``: each muscle's table (or override) value, 0.6 MPa.
-    ``max_isometric_force_N`` (the model's) sets the split of muscles sharing a volume.
+    ``max_isometric_force_N`` (the model's) sets the split of muscles sharing a volume. The
+    volumes are the table's (:func:`muscle_volumes_m3`): place a lumped muscle named after one
+    part on all its parts (override ``anatomical_muscles``) before individualising its force.
     """
     lmo = np.asarray(optimal_fiber_length_m, dtype=float)
     if lmo.shape != (len(names),):

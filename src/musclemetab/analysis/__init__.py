@@ -9,7 +9,7 @@ Pure functions on NumPy arrays and pandas tables, SI units (s, N, N m, m, W, J):
 * :mod:`.groups` -- ten muscle function groups and the moment-arm-ratio distribution of
   each muscle's rate;
 * :mod:`.stats` -- repeated-measures correlation, Bland-Altman limits of agreement;
-* :mod:`.unit` -- all of it for one solved cycle and its metabolic rates.
+* :mod:`.unit` -- all of it for one solved cycle and its metabolic rates (:func:`analyse`).
 
 See ``docs/analysis.md`` for the methods and the choices the study leaves open.
 """
@@ -24,6 +24,7 @@ from .events import (
     cycle_from_grf,
     cycle_from_id_file,
     cycle_from_inverse_dynamics,
+    cycle_of_trial,
     gait_events_from_grf,
     read_grf,
 )
@@ -43,7 +44,15 @@ from .groups import (
 )
 from .phases import phase_shares
 from .stats import BlandAltman, RmCorr, bland_altman, rmcorr
-from .unit import MetabolicAnalysis, analyse_metabolics, analyse_solution_folder, interpolate_moment_arms
+from .unit import (
+    MetabolicAnalysis,
+    TrialAnalysis,
+    analyse,
+    analyse_metabolics,
+    analyse_solution_folder,
+    interpolate_moment_arms,
+    write_analysis,
+)
 
 __all__ = [
     "GaitCycle",
@@ -52,6 +61,7 @@ __all__ = [
     "cycle_from_grf",
     "cycle_from_inverse_dynamics",
     "cycle_from_id_file",
+    "cycle_of_trial",
     "read_grf",
     "DEFAULT_GRF_THRESHOLD_N",
     "DEFAULT_MIN_DURATION_S",
@@ -75,6 +85,9 @@ __all__ = [
     "BlandAltman",
     "bland_altman",
     "MetabolicAnalysis",
+    "TrialAnalysis",
+    "analyse",
+    "write_analysis",
     "analyse_metabolics",
     "analyse_solution_folder",
     "interpolate_moment_arms",

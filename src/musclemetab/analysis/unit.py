@@ -24,7 +24,14 @@ from .events import GaitCycle
 from .groups import DEFAULT_THRESHOLD_M, GROUPS, GROUPS_WITH_OTHER, OTHER, group_rates, group_shares, group_weights
 from .phases import phase_shares
 
-__all__ = ["MetabolicAnalysis", "analyse_metabolics", "analyse_solution_folder", "interpolate_moment_arms"]
+__all__ = ["MetabolicAnalysis", "TrialAnalysis", "analyse", "write_analysis", "analyse_metabolics",
+           "analyse_solution_folder", "interpolate_moment_arms", "ANALYSIS_FILE", "TIMESERIES_FILE",
+           "GROUP_KEY_FILE"]
+
+#: files of :func:`write_analysis` (beside ``whole_body.csv`` and ``per_muscle.csv``)
+ANALYSIS_FILE = "analysis.csv"
+TIMESERIES_FILE = "timeseries.csv"
+GROUP_KEY_FILE = "muscle_groups.csv"
 
 
 class MetabolicAnalysis(NamedTuple):
@@ -199,8 +206,23 @@ def filtered_moment_arms(geometry, filter_cutoff_hz: float | None = 6.0) -> tupl
     return tg, r
 
 
+def _metabolics_of(solution, body_mass_kg, height_m, models, metabolics_options):
+    """``solution`` if it is a metabolic result already, else its rates by
+    :func:`musclemetab.metabolics.solution.metabolics_from_solution`."""
+    if hasattr(solution, "rates") and hasattr(solution, "whole_body"):
+        if metabolics_options:
+            raise OptionError(f"{', '.join(metabolics_options)}: options of the metabolic rates, which a metabolic "
+                              "result already has; give the solution instead to evaluate them again")
+        return solution
+    from ..metabolics.solution import metabolics_from_solution
+
+    if body_mass_kg is None or height_m is None:
+        raise OptionError("give the body mass and height to evaluate the metabolic rates of a solution")
+    return metabolics_from_solution(solution, body_mass_kg, height_m, models=models, **metabolics_options)
+
+
 def analyse_solution_folder(
-    folder: str | os.PathLike,
+    folder,
     geometry,
     cycle: GaitCycle,
     body_mass_kg: float,
@@ -213,20 +235,110 @@ def analyse_solution_folder(
     coverage_tolerance_s: float | None = None,
     **metabolics_options,
 ) -> MetabolicAnalysis:
-    """:func:`analyse_metabolics` of a solver solution folder.
+    """:func:`analyse_metabolics` of a solver solution: a folder, a
+    :class:`musclemetab.redundancy.Solution` (the same numbers as its folder) or the metabolic
+    result of one (:class:`~musclemetab.metabolics.solution.SolutionMetabolics`).
 
-    The metabolic rates come from
+    The metabolic rates of a solution come from
     :func:`musclemetab.metabolics.solution.metabolics_from_solution` (``models`` and any
     ``metabolics_options`` are passed on). ``geometry`` is a
     :class:`musclemetab.geometry.Geometry` of the trial; its moment arms are low-pass
     filtered like the solver's inputs (zero-phase Butterworth, order 6, ``filter_cutoff_hz``
     = 6 Hz; ``None`` skips the filter) before interpolation to the nodes.
     """
-    from ..metabolics.solution import metabolics_from_solution
-
-    result = metabolics_from_solution(folder, body_mass_kg, height_m, models=models, **metabolics_options)
+    result = _metabolics_of(folder, body_mass_kg, height_m, models, metabolics_options)
     tg, r = filtered_moment_arms(geometry, filter_cutoff_hz)
     return analyse_metabolics(
         result, tg, r, list(geometry.dofs), list(geometry.muscles), cycle,
         threshold_m=threshold_m, dof_groups=dof_groups, coverage_tolerance_s=coverage_tolerance_s,
     )
+
+
+class TrialAnalysis(NamedTuple):
+    """What :func:`analyse` finds for one leg of a solved trial (the tables :func:`write_analysis` writes).
+
+    ``whole_body``: :meth:`SolutionMetabolics.whole_body_table` (one row per model);
+    ``summary`` and ``timeseries``: :class:`MetabolicAnalysis`; ``per_muscle``:
+    :func:`musclemetab.analysis.per_muscle.per_muscle_table`; ``metabolics``: the metabolic
+    result analysed; ``side``: the leg.
+    """
+
+    whole_body: "object"
+    summary: "object"
+    timeseries: "object"
+    per_muscle: "object"
+    metabolics: "object"
+    side: str
+
+
+def analyse(
+    solution,
+    model: str | os.PathLike,
+    ik: str | os.PathLike,
+    cycle: GaitCycle,
+    body_mass_kg: float | None = None,
+    height_m: float | None = None,
+    *,
+    models="all",
+    side: str | None = None,
+    **metabolics_options,
+) -> TrialAnalysis:
+    """Whole-body, phase, group and per-muscle results of one leg of a solved trial
+    (``musclemetab analyse``).
+
+    Parameters
+    ----------
+    solution
+        A solution folder, a :class:`musclemetab.redundancy.Solution` (the same numbers as the
+        folder it is written to) or its metabolic result
+        (:class:`~musclemetab.metabolics.solution.SolutionMetabolics`, used as it is: then
+        ``body_mass_kg``, ``height_m``, ``models`` and ``metabolics_options`` are not needed).
+    model, ik
+        The OpenSim model and the IK motion of the trial: the moment arms of the solution's
+        muscles (:func:`musclemetab.geometry.compute_geometry`, filtered like the solver's
+        inputs by :func:`filtered_moment_arms`).
+    cycle
+        The gait cycle (:class:`GaitCycle`; e.g. :func:`~musclemetab.analysis.events.cycle_of_trial`).
+    body_mass_kg, height_m, models, metabolics_options
+        Passed to :func:`musclemetab.metabolics.solution.metabolics_from_solution` (``basal``,
+        ``basal_rate_W_per_kg``, ``basal_exponent``, ``speed_m_per_s``, ...).
+    side
+        The leg; default: the one the solution recorded, else the suffix its muscles share,
+        else ``"r"``.
+    """
+    from ..geometry import compute_geometry
+    from ..properties import split_side
+    from .per_muscle import per_muscle_table
+
+    result = _metabolics_of(solution, body_mass_kg, height_m, models, metabolics_options)
+    if side is None:
+        side = getattr(result, "side", None)
+    if side is None:
+        sides = {split_side(m)[1] for m in result.muscles} - {""}
+        side = sides.pop() if len(sides) == 1 else "r"
+    geometry = compute_geometry(model, ik, side=side, muscles=list(result.muscles))
+    tg, r = filtered_moment_arms(geometry)
+    analysis = analyse_metabolics(result, tg, r, list(geometry.dofs), list(geometry.muscles), cycle)
+    return TrialAnalysis(result.whole_body_table(), analysis.summary, analysis.timeseries,
+                         per_muscle_table(result, cycle, side=side), result, side)
+
+
+def write_analysis(analysis: TrialAnalysis, out_dir: str | os.PathLike) -> dict:
+    """Write the tables of :func:`analyse` into ``out_dir``, together
+    (:func:`musclemetab.io.atomic_directory`): ``whole_body.csv``, ``analysis.csv``,
+    ``timeseries.csv``, ``per_muscle.csv`` and the key of the group abbreviations,
+    ``muscle_groups.csv``. Returns the paths by file name."""
+    from pathlib import Path
+
+    from ..io import atomic_directory
+    from ..metabolics.solution import WHOLE_BODY_CSV
+    from .groups import group_key_table
+    from .per_muscle import PER_MUSCLE_FILE
+
+    tables = {WHOLE_BODY_CSV: analysis.whole_body, ANALYSIS_FILE: analysis.summary,
+              TIMESERIES_FILE: analysis.timeseries, PER_MUSCLE_FILE: analysis.per_muscle}
+    with atomic_directory(out_dir) as tmp:
+        for name, table in tables.items():
+            table.to_csv(tmp / name, index=False, float_format="%.10g")
+        group_key_table().to_csv(tmp / GROUP_KEY_FILE, index=False)
+    return {name: Path(out_dir) / name for name in (*tables, GROUP_KEY_FILE)}

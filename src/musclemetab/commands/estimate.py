@@ -13,10 +13,10 @@ import argparse
 
 from ..errors import OptionError
 
-__all__ = ["add_estimate_parser", "estimate_command", "parse_assignments"]
+__all__ = ["add_parser", "run", "parse_assignments"]
 
 
-def add_estimate_parser(subparsers) -> argparse.ArgumentParser:
+def add_parser(subparsers) -> argparse.ArgumentParser:
     from .solve import add_emg_goal_arguments
 
     p = subparsers.add_parser(
@@ -61,7 +61,7 @@ def add_estimate_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--cache-dir", metavar="DIR")
     p.add_argument("--max-iter", type=int, default=10000)
     p.add_argument("--out", required=True, metavar="DIR")
-    p.set_defaults(func=estimate_command)
+    p.set_defaults(func=run)
     return p
 
 
@@ -86,7 +86,7 @@ def _bounds(text: str) -> tuple[float, float]:
     return float(lo), float(hi)
 
 
-def estimate_command(args) -> int:
+def run(args) -> int:
     """Run ``musclemetab estimate`` with parsed arguments: the options read, then
     :func:`~musclemetab.redundancy.run.estimate_files`; prints one line."""
     from ..redundancy.run import estimate_files
@@ -113,8 +113,8 @@ def estimate_command(args) -> int:
                        for m, v in by.items())
     if result.emg_scale:
         values += "; EMG scale " + ", ".join(f"{m} {v:.3g}" for m, v in result.emg_scale.items())
-    run = result.run_record
-    print(f"estimate: {len(result.labels)} trial(s), {run.status} in {run.iterations} iterations; {values} -> "
+    record = result.run_record
+    print(f"estimate: {len(result.labels)} trial(s), {record.status} in {record.iterations} iterations; {values} -> "
           f"{args.out}")
     return 0
 

@@ -32,10 +32,10 @@ import math
 
 from ..errors import OptionError, SolverError, UnknownMuscleError
 
-__all__ = ["add_solve_parser", "add_emg_goal_arguments", "solve_command"]
+__all__ = ["add_parser", "add_emg_goal_arguments", "run"]
 
 
-def add_solve_parser(subparsers) -> argparse.ArgumentParser:
+def add_parser(subparsers) -> argparse.ArgumentParser:
     """Add the ``solve`` subcommand to an ``argparse`` sub-parser collection."""
     p = subparsers.add_parser(
         "solve",
@@ -156,7 +156,7 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
     g.add_argument("--muscle-properties", metavar="FILE",
                    help="CSV of per-muscle overrides of mass and slow-twitch fraction (docs/muscles.md)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    p.set_defaults(func=solve_command)
+    p.set_defaults(func=run)
     return p
 
 
@@ -168,7 +168,7 @@ def add_emg_goal_arguments(p, mode_help: str, weight_help: str) -> None:
     p.add_argument("--emg-weight", type=float, help=weight_help)
 
 
-def solve_command(args) -> int:
+def run(args) -> int:
     """Run ``musclemetab solve`` with parsed arguments; returns the exit status.
 
     Raises a :class:`~musclemetab.errors.MusclemetabError` on bad input and

@@ -1,4 +1,4 @@
-"""File input and output: OpenSim storage files, JSON objects, atomic writes."""
+"""File input and output: OpenSim storage files, JSON objects, atomic writes, optional Parquet copies."""
 
 from .atomic import (
     atomic_directory,
@@ -10,6 +10,7 @@ from .atomic import (
     file_sha256,
 )
 from .jsonfile import json_ready, read_json_object
+from .parquet import parquet_available, write_parquet
 from .storage import (
     StorageTable,
     as_table,
@@ -41,4 +42,6 @@ __all__ = [
     "check_inside",
     "read_json_object",
     "json_ready",
+    "parquet_available",
+    "write_parquet",
 ]

@@ -242,7 +242,7 @@ def _additional_text(cfg: dict, models) -> str:
         parts.append(f"LW05: stimulation time {'inf (no labile heat)' if np.isinf(t) else f'{t:g} s'} above e = 0.1, "
                      "0 (full labile heat) below; no thermoelastic heat (constant force)")
     if "MA68" in models:
-        parts.append("MA68: W/0.25 when shortening, -1.2 W when lengthening")
+        parts.append("MA68: W/0.25 when shortening, W/(-1.2) when lengthening")
     return "; ".join(parts) + "." if parts else ""
 
 

@@ -212,7 +212,7 @@ def _margaria(k, x):
     W = -(x["activation"] * x["active_force_length_multiplier"] * x["force_velocity_multiplier"] * x["F0"]) * V
     P0 = x["F0"] * x["lMo"] * x["vmax"]
     w_pos = P0 * k.pos(W / P0)
-    Edot = w_pos / c["positive_work_efficiency"] + c["negative_work_factor"] * (W - w_pos)
+    Edot = w_pos / c["positive_work_efficiency"] + (W - w_pos) / c["negative_work_efficiency"]
     B = x["basal_W"]
     return {"work": W, "activation_maintenance": 0.0 * W, "shortening_lengthening": Edot - W, "basal": B,
             "total": Edot + B}

@@ -57,9 +57,16 @@ __all__ = [
     "SolutionStates",
     "SolutionMetabolics",
     "read_solution_states",
+    "states_of_solution",
     "trim_slice",
     "metabolics_from_solution",
+    "metabolics_from_legs",
     "write_metabolics",
+    "write_legs_metabolics",
+    "add_legs",
+    "solution_folders",
+    "parameter_differences",
+    "read_metabolics_settings",
     "SOLUTION_FILE",
     "SUMMARY_FILE",
     "METABOLICS_STO",
@@ -150,17 +157,30 @@ def read_solution_states(directory: str | os.PathLike, *, require_success: bool 
             rec = records.get(m)
             if isinstance(rec, Mapping) and all(k in rec for k in _SUMMARY_KEYS):
                 params[m] = {arg: float(rec[k]) for k, arg in _SUMMARY_KEYS.items()}
-    cycle = (summary.get("window") or {}).get("gait_cycle") if isinstance(summary.get("window"), Mapping) else None
-    cycle_s = (float(cycle["start_s"]), float(cycle["end_s"])) if isinstance(cycle, Mapping) else None
     return SolutionStates(
         time_s=df.index.to_numpy(dtype=float), muscles=muscles, states=states, parameters=params, source=str(directory),
-        cycle_s=cycle_s, side=summary.get("side"),
+        cycle_s=_recorded_cycle(summary), side=_recorded_side(summary),
     )
 
 
+def _recorded_cycle(summary: Mapping) -> tuple[float, float] | None:
+    """(start, end) of the gait cycle a solve recorded in its summary (``window.gait_cycle``), else None."""
+    window = summary.get("window")
+    cycle = window.get("gait_cycle") if isinstance(window, Mapping) else None
+    return (float(cycle["start_s"]), float(cycle["end_s"])) if isinstance(cycle, Mapping) else None
+
+
+def _recorded_side(summary: Mapping) -> str | None:
+    """The leg (``"r"``/``"l"``) a solve recorded in its summary, else None."""
+    side = summary.get("side")
+    return side if side in ("r", "l") else None
+
+
 def states_of_solution(solution, *, require_success: bool = True) -> SolutionStates:
-    """The muscle states and parameters of an in-memory :class:`musclemetab.redundancy.Solution`
-    (the numbers its folder would hold)."""
+    """The muscle states and parameters of an in-memory :class:`musclemetab.redundancy.Solution`:
+    what :func:`read_solution_states` reads from the folder :meth:`Solution.write` makes of it,
+    the recorded gait cycle and leg included (the folder rounds the values to 12 significant
+    digits; the object keeps them whole)."""
     if require_success and not solution.success:
         raise solution.run_record.failure("the solve of this solution")
     arrays = {
@@ -175,7 +195,18 @@ def states_of_solution(solution, *, require_success: bool = True) -> SolutionSta
     params = {m: dict(zip(_PARAMETER_NAMES, (float(x) for x in v))) for m, v in zip(solution.muscles, values)}
     return SolutionStates(time_s=np.asarray(solution.time_s, dtype=float), muscles=tuple(solution.muscles),
                           states={k: np.asarray(v, dtype=float).T for k, v in arrays.items()}, parameters=params,
-                          source="solution object")
+                          source="solution object", cycle_s=_recorded_cycle(solution.summary),
+                          side=_recorded_side(solution.summary))
+
+
+def solution_states(solution, *, require_success: bool = True) -> SolutionStates:
+    """The :class:`SolutionStates` of a solution folder, a :class:`musclemetab.redundancy.Solution`
+    or :class:`SolutionStates` (returned as it is)."""
+    if isinstance(solution, SolutionStates):
+        return solution
+    if hasattr(solution, "lm_norm") and hasattr(solution, "summary"):
+        return states_of_solution(solution, require_success=require_success)
+    return read_solution_states(solution, require_success=require_success)
 
 
 def trim_slice(n_nodes: int, start: int = 5, end: int = 6) -> slice:
@@ -245,6 +276,8 @@ class SolutionMetabolics:
     #: the basal rule's coefficient (W/kg; of muscle mass for the per-muscle basal heat) and exponent
     basal_rate_W_per_kg: float = BASAL_RATE_W_PER_KG
     basal_exponent: float = 1.0
+    #: the solved leg ("r"/"l") when the solution recorded it
+    side: str | None = None
 
     def columns(self) -> dict[str, np.ndarray]:
         """``{"<model>/<muscle>/<component>": 1-D array (W)}`` in model, muscle, component order."""
@@ -339,7 +372,9 @@ def metabolics_from_solution(
     Parameters
     ----------
     solution
-        A solution folder, a :class:`musclemetab.redundancy.Solution` or :class:`SolutionStates`.
+        A solution folder, a :class:`musclemetab.redundancy.Solution` or :class:`SolutionStates`;
+        a folder and the :class:`~musclemetab.redundancy.Solution` written to it give the same
+        rates (the recorded gait cycle and leg are honoured both ways).
     body_mass_kg, height_m
         The subject (muscle masses from the volume rule of :mod:`musclemetab.properties`;
         whole-body rate per kg of body mass).
@@ -397,12 +432,7 @@ def metabolics_from_solution(
     unknown = [k for k in model_options if k not in ALL_MODELS]
     if unknown:
         raise OptionError(f"options given for unknown model(s) {', '.join(unknown)}; known: {', '.join(ALL_MODELS)}")
-    if isinstance(solution, SolutionStates):
-        sol = solution
-    elif hasattr(solution, "lm_norm") and hasattr(solution, "summary"):
-        sol = states_of_solution(solution, require_success=require_success)
-    else:
-        sol = read_solution_states(solution, require_success=require_success)
+    sol = solution_states(solution, require_success=require_success)
     muscles = sol.muscles
     if muscle_parameters is not None:
         params = _parameters_for(muscles, muscle_parameters, "model")
@@ -472,19 +502,20 @@ def metabolics_from_solution(
         source=sol.source,
         basal_rate_W_per_kg=float(basal_rate_W_per_kg),
         basal_exponent=float(basal_exponent),
+        side=sol.side,
     )
 
 
 def write_metabolics(result: SolutionMetabolics, out_dir: str | os.PathLike, cycle=None) -> dict[str, Path]:
-    """Write ``metabolics.sto``, ``metabolics.parquet``, ``whole_body.csv`` and
-    ``per_muscle.csv`` into ``out_dir``.
+    """Write ``metabolics.sto``, ``whole_body.csv``, ``per_muscle.csv`` and, with the optional
+    ``parquet`` extra installed, ``metabolics.parquet`` into ``out_dir``.
 
     ``cycle`` (a :class:`~musclemetab.analysis.GaitCycle`) adds the stance and swing
     energies to ``per_muscle.csv``. The files are written together
     (:func:`musclemetab.io.atomic_directory`).
     """
     from ..analysis.per_muscle import PER_MUSCLE_FILE, per_muscle_table
-    from ..io import atomic_directory, write_storage
+    from ..io import atomic_directory, write_parquet, write_storage
 
     out_dir = Path(out_dir)
     comments = [
@@ -499,15 +530,17 @@ def write_metabolics(result: SolutionMetabolics, out_dir: str | os.PathLike, cyc
     with atomic_directory(out_dir) as tmp:
         write_storage(tmp / METABOLICS_STO, result.to_dataframe(), name="musclemetab metabolic rates",
                       in_degrees=False, comments=comments)
-        result.to_long().to_parquet(tmp / METABOLICS_PARQUET, index=False)
+        parquet = write_parquet(result.to_long(), tmp / METABOLICS_PARQUET)
         result.whole_body_table().to_csv(tmp / WHOLE_BODY_CSV, index=False, float_format="%.10g")
         per_muscle_table(result, cycle).to_csv(tmp / PER_MUSCLE_FILE, index=False, float_format="%.10g")
-    return {
+    files = {
         "metabolics_sto": out_dir / METABOLICS_STO,
-        "metabolics_parquet": out_dir / METABOLICS_PARQUET,
         "whole_body_csv": out_dir / WHOLE_BODY_CSV,
         "per_muscle_csv": out_dir / PER_MUSCLE_FILE,
     }
+    if parquet is not None:
+        files["metabolics_parquet"] = out_dir / METABOLICS_PARQUET
+    return files
 
 
 def add_legs(results: Mapping[str, SolutionMetabolics]) -> dict[str, float]:
@@ -533,3 +566,141 @@ def add_legs(results: Mapping[str, SolutionMetabolics]) -> dict[str, float]:
         m: sum(r.whole_body[m].one_leg_mean_W for r in res) / first.body_mass_kg + first.whole_body[m].basal_W_per_kg
         for m in first.models
     }
+
+
+def solution_folders(path: str | os.PathLike) -> dict[str, Path]:
+    """``{side: folder}`` of a solution folder (side ``"r"``/``"l"`` as its summary records it,
+    else ``""``) or of the parent of per-leg solution folders ``r/`` and ``l/`` written by
+    ``musclemetab solve --side both``.
+
+    Raises :class:`~musclemetab.errors.InputFileError` when ``path`` is neither.
+    """
+    from ..errors import InputFileError
+    from ..io import read_json_object
+
+    path = Path(path)
+    if (path / SUMMARY_FILE).is_file():
+        return {_recorded_side(read_json_object(path / SUMMARY_FILE)) or "": path}
+    found = {s: path / s for s in ("r", "l") if (path / s / SUMMARY_FILE).is_file()}
+    if not found:
+        raise InputFileError(
+            f"{path}: neither a solution folder (summary.json) nor a folder of per-leg solutions (r/, l/); "
+            "give the folder written by musclemetab solve"
+        )
+    return found
+
+
+def _legs_of(solutions) -> dict:
+    """``{side: solution}`` of a mapping, a parent folder of per-leg solutions or one solution."""
+    if isinstance(solutions, Mapping):
+        if not solutions:
+            raise OptionError("no leg's solution given")
+        return dict(solutions)
+    if isinstance(solutions, (str, os.PathLike)):
+        return solution_folders(solutions)
+    summary = getattr(solutions, "summary", None)
+    side = _recorded_side(summary) if isinstance(summary, Mapping) else getattr(solutions, "side", None)
+    return {side or "": solutions}
+
+
+def metabolics_from_legs(solutions, body_mass_kg: float, height_m: float, **options) -> dict[str, SolutionMetabolics]:
+    """Metabolic rates of the legs of a trial: ``{side: SolutionMetabolics}``.
+
+    ``solutions`` is one solution (folder, :class:`musclemetab.redundancy.Solution` or
+    :class:`SolutionStates`), the parent folder of per-leg solution folders ``r/`` and ``l/``
+    (``musclemetab solve --side both``) or a mapping ``{side: solution}`` (what
+    :func:`musclemetab.redundancy.solve_sides` returns). One leg stands for both in the
+    whole-body rate (``legs=2``); two legs are each evaluated over their own cycle with
+    ``legs=1``, for :func:`add_legs`. The other ``options`` are those of
+    :func:`metabolics_from_solution`; the muscles the anatomical muscle table cannot place are
+    named in one warning for all legs.
+    """
+    import warnings
+
+    from ..errors import MuscleTableWarning
+    from ..properties import unplaced_muscles, warn_unplaced
+
+    if "legs" in options:
+        raise OptionError("metabolics_from_legs sets legs itself (2 for one leg, 1 for each of two)")
+    legs = _legs_of(solutions)
+    results = {}
+    with warnings.catch_warnings():  # one warning for every leg, below
+        warnings.simplefilter("ignore", MuscleTableWarning)
+        for side, solution in legs.items():
+            results[side] = metabolics_from_solution(solution, body_mass_kg, height_m,
+                                                     legs=1 if len(legs) > 1 else 2, **options)
+    if not options.get("strict"):
+        warn_unplaced(list(dict.fromkeys(
+            m for r in results.values() for m in unplaced_muscles(r.muscles, options.get("muscle_properties")))))
+    return results
+
+
+def write_legs_metabolics(results: Mapping[str, SolutionMetabolics], out_dir: str | os.PathLike,
+                          cycle=None) -> dict[str, Path]:
+    """Write the results of :func:`metabolics_from_legs`: one leg as :func:`write_metabolics`
+    into ``out_dir``; two legs each into ``out_dir/<side>`` and, in ``out_dir/whole_body.csv``,
+    one row per model of the legs added (:func:`add_legs`): ``model``, ``legs`` (``r+l``),
+    ``mean_W_per_kg``, ``<side>_leg_mean_W``. Returns the files written (by name)."""
+    from ..io import atomic_write_text
+
+    out_dir = Path(out_dir)
+    if len(results) == 1:
+        (result,) = results.values()
+        return write_metabolics(result, out_dir, cycle=cycle)
+    total = add_legs(results)
+    files = {}
+    for side, result in results.items():
+        files.update({f"{side}/{k}": v for k, v in write_metabolics(result, out_dir / side, cycle=cycle).items()})
+    rows = ["model,legs,mean_W_per_kg," + ",".join(f"{s}_leg_mean_W" for s in results)]
+    for m, v in total.items():
+        rows.append(f"{m},{'+'.join(results)},{v:.10g}," + ",".join(
+            f"{r.whole_body[m].one_leg_mean_W:.10g}" for r in results.values()))
+    atomic_write_text(out_dir / WHOLE_BODY_CSV, "\n".join(rows) + "\n")
+    files["whole_body_csv"] = out_dir / WHOLE_BODY_CSV
+    return files
+
+
+def parameter_differences(states: SolutionStates, muscle_parameters, rtol: float = 1e-6) -> list[str]:
+    """The muscle parameters (``F0``, ``lMo``, ``vmax``) of ``muscle_parameters`` (a
+    :class:`musclemetab.model.MuscleParameters`) that differ from those the solve recorded, one
+    ``"<muscle> <parameter> <solution value> (solution) vs <value> (model)"`` each."""
+    pos = {n: i for i, n in enumerate(muscle_parameters.names)}
+    differ = []
+    for m, rec in states.parameters.items():
+        if m not in pos:
+            continue
+        for k, v in rec.items():
+            ref = float(np.asarray(getattr(muscle_parameters, k))[pos[m]])
+            if not np.isclose(v, ref, rtol=rtol, atol=0.0):
+                differ.append(f"{m} {k} {v:g} (solution) vs {ref:g} (model)")
+    return differ
+
+
+#: the settings :func:`write_metabolics` records in the header of metabolics.sto, and their types
+METABOLICS_SETTINGS = {"models": str, "body_mass_kg": float, "height_m": float, "basal_rule": str,
+                       "basal_coefficient": float, "basal_exponent": float}
+
+
+def read_metabolics_settings(folder: str | os.PathLike) -> dict:
+    """The settings recorded in the header of a metabolics folder's ``metabolics.sto``
+    (:func:`write_metabolics`): those of :data:`METABOLICS_SETTINGS` it holds, e.g.
+    ``{"models": "UM10,BH04", "body_mass_kg": 72.6, ..., "basal_rule": "body"}``."""
+    from ..errors import InputFileError
+
+    path = Path(folder) / METABOLICS_STO
+    if not path.is_file():
+        raise InputFileError(f"{path}: missing; give the folder written by 'musclemetab metabolics' as --metabolics")
+    out = {}
+    with path.open(encoding="utf-8", errors="replace") as f:
+        for line in f:
+            line = line.strip()
+            if line == "endheader":
+                break
+            key, _, value = line.partition("=")
+            if key in METABOLICS_SETTINGS and value:
+                try:
+                    out[key] = METABOLICS_SETTINGS[key](value)
+                except ValueError:
+                    raise InputFileError(f"{path}: '{key}={value}' in the header is not a number; write the "
+                                         "folder again with 'musclemetab metabolics'") from None
+    return out

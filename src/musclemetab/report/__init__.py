@@ -2,7 +2,8 @@
 
 :mod:`.figures` holds the figure functions (pure: tables and solutions in, a matplotlib
 figure out) and :func:`save_figure`; :mod:`.html` reads a study folder and writes
-``figures/`` and ``report.html`` (:func:`write_report`); :mod:`.cli` is ``musclemetab report``.
+``figures/`` and ``report.html`` (:func:`write_report`); ``musclemetab report`` is
+:mod:`musclemetab.commands.report`.
 OpenSim is never imported here.
 """
 

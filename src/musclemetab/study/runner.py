@@ -4,13 +4,13 @@
 complete with an unchanged key, runs the others — EMG-TEN estimations first, then the
 trial units — and gathers every complete unit into one results table:
 
-``DIR/results.csv`` and ``DIR/results.parquet``
+``DIR/results.csv`` (and ``DIR/results.parquet`` with the ``parquet`` extra)
     one row per subject × trial × workflow × model: whole-body rate (W/kg, with and
     without basal heat), cost of transport, stance and swing shares, muscle-group shares,
     toe-off (% of the cycle), speed and measured rate when the study gives calorimetry, and
     ``large_reserve`` (the solve's reserves exceed 1 % of the peak joint moment, see
     :data:`musclemetab.redundancy.solution.LARGE_RESERVE_SHARE`).
-``DIR/per_muscle.csv`` and ``DIR/per_muscle.parquet``
+``DIR/per_muscle.csv`` (and ``DIR/per_muscle.parquet`` with the ``parquet`` extra)
     one row per subject × trial × workflow × model × muscle (with its side): the
     per-muscle table of every unit (:mod:`musclemetab.analysis.per_muscle`).
 ``DIR/muscle_groups.csv``
@@ -654,18 +654,13 @@ def collect_results(study: Study, failed: dict[str, str] | None = None):
     table = table.sort_values(list(ID_COLUMNS), kind="stable", ignore_index=True)
     with atomic_path(out / RESULTS_CSV) as tmp:
         table.to_csv(tmp, index=False, float_format="%.10g")
-    try:
-        with atomic_path(out / RESULTS_PARQUET) as tmp:
-            table.to_parquet(tmp, index=False)
-    except ImportError:  # pragma: no cover - pyarrow missing
-        pass
+    _write_parquet_copy(table, out / RESULTS_PARQUET)
     per_muscle = pd.concat(muscles, ignore_index=True) if muscles else pd.DataFrame(columns=list(ID_COLUMNS))
     per_muscle = per_muscle.sort_values(list(ID_COLUMNS) + [c for c in ("side", "rank") if c in per_muscle],
                                         kind="stable", ignore_index=True)
     with atomic_path(out / PER_MUSCLE_FILE) as tmp:
         per_muscle.to_csv(tmp, index=False, float_format="%.10g")
-    with atomic_path(out / PER_MUSCLE_PARQUET) as tmp:
-        per_muscle.to_parquet(tmp, index=False)
+    _write_parquet_copy(per_muscle, out / PER_MUSCLE_PARQUET)
     from ..analysis.groups import write_group_key
     from ..datadict import write_data_dictionary
 
@@ -675,3 +670,15 @@ def collect_results(study: Study, failed: dict[str, str] | None = None):
     with atomic_path(out / FAILURES_CSV) as tmp:
         fail.to_csv(tmp, index=False)
     return table
+
+
+def _write_parquet_copy(frame, path: Path) -> None:
+    """The Parquet copy of a results table, or (without the ``parquet`` extra) no copy: an
+    earlier run's copy is removed then, so that it cannot disagree with the CSV file."""
+    from ..io.parquet import parquet_available, write_parquet
+
+    if not parquet_available():
+        path.unlink(missing_ok=True)
+        return
+    with atomic_path(path) as tmp:
+        write_parquet(frame, tmp)

@@ -9,10 +9,10 @@ self-contained page (see :mod:`musclemetab.report.html`).
 
 from __future__ import annotations
 
-__all__ = ["add_report_parser", "report_command"]
+__all__ = ["add_parser", "run"]
 
 
-def add_report_parser(subparsers) -> None:
+def add_parser(subparsers) -> None:
     """Add the ``report`` subcommand to an ``argparse`` subparsers object."""
     p = subparsers.add_parser(
         "report",
@@ -39,12 +39,12 @@ def add_report_parser(subparsers) -> None:
     p.add_argument("--workers", type=int, metavar="N",
                    help="processes drawing the figures side by side (default: the cores this process may use, at "
                    "most one per figure; 1 draws them one after the other in this process)")
-    p.set_defaults(func=report_command)
+    p.set_defaults(func=run)
 
 
-def report_command(args) -> int:
-    """Run the ``report`` subcommand (``args`` from :func:`add_report_parser`)."""
-    from .html import FIGURES_FOLDER, generate_report
+def run(args) -> int:
+    """Run ``musclemetab report`` (``args`` from :func:`add_parser`)."""
+    from ..report.html import FIGURES_FOLDER, generate_report
 
     formats = ("png", "svg") if args.svg else ("png",)
     out, entries = generate_report(args.study_dir, args.out, formats=formats, force=args.force,

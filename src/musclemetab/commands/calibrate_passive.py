@@ -1,8 +1,9 @@
-"""``musclemetab calibrate-passive``: passive force-length calibration from passive moments."""
+"""``musclemetab calibrate-passive``: passive force-length calibration from passive moments
+(:func:`musclemetab.calibration.passive.calibrate_passive`)."""
 
 from __future__ import annotations
 
-__all__ = ["add_calibrate_parser", "calibrate_command"]
+__all__ = ["add_parser", "run"]
 
 
 def _kt_item(text: str) -> tuple[str, float]:
@@ -17,7 +18,7 @@ def _kt_item(text: str) -> tuple[str, float]:
         raise argparse.ArgumentTypeError(f"'{text}' is not MUSCLE=VALUE (e.g. soleus_r=20)") from None
 
 
-def add_calibrate_parser(sub) -> None:
+def add_parser(sub) -> None:
     p = sub.add_parser(
         "calibrate-passive",
         help="calibrate passive force-length parameters (kPE, s0) from passive joint moments",
@@ -47,14 +48,14 @@ def add_calibrate_parser(sub) -> None:
     )
     p.add_argument("--no-cache", action="store_true", help="do not read or write the geometry cache")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    p.set_defaults(func=calibrate_command)
+    p.set_defaults(func=run)
 
 
-def calibrate_command(args) -> int:
+def run(args) -> int:
+    """Run ``musclemetab calibrate-passive`` (``args`` from :func:`add_parser`)."""
     from pathlib import Path
 
-    from .passive import calibrate_passive, write_calibration, write_passive_parameters
-
+    from ..calibration.passive import calibrate_passive, write_calibration, write_passive_parameters
     from ..io import check_output_folder
 
     check_output_folder(args.out)

@@ -1,0 +1,42 @@
+"""``musclemetab demo``: the example study (:func:`musclemetab.study.demo.run_demo`)."""
+
+from __future__ import annotations
+
+from .options import add_study_arguments
+from .run import exit_status, print_run
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser(
+        "demo",
+        help="the example subject at three speeds: results, figures and report",
+        description=(
+            "Run the example subject's three walking speeds with EFFORT-TEN and EFFORT-GEN and all six study "
+            "metabolic models, then write the results table, the figures and report.html. The example data "
+            "are downloaded on first use (or read from $MUSCLEMETAB_DATA)."
+        ),
+    )
+    p.add_argument("--out", default="musclemetab-demo", metavar="DIR", help="output folder (default musclemetab-demo)")
+    p.add_argument("--speeds", nargs="+", choices=("slow", "normal", "fast"), help="a subset of the speeds")
+    add_study_arguments(p)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    """Run ``musclemetab demo`` (``args`` from :func:`add_parser`)."""
+    from ..study.demo import run_demo
+
+    result = run_demo(args.out, workers=args.workers, speeds=args.speeds, progress=not args.no_progress,
+                      force=args.force)
+    print_run(result, "demo")
+    if result.interrupted:
+        return exit_status(result)
+    if not result.failed and result.results is not None and len(result.results):
+        table = result.results.pivot_table(index="model", columns=["workflow", "trial"], values="mean_W_per_kg")
+        trials = list(dict.fromkeys(result.results.sort_values("speed_m_per_s")["trial"]))  # by speed
+        table = table.reindex(columns=sorted(table.columns, key=lambda c: (c[0], trials.index(c[1]))))
+        print("\nwhole-body metabolic rate, W/kg (two legs + 1.2 W/kg basal):")
+        print(table.round(2).to_string())
+    return exit_status(result)

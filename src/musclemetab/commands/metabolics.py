@@ -1,0 +1,135 @@
+"""``musclemetab metabolics``: metabolic rates of every muscle of a solver solution.
+
+    musclemetab metabolics --solution DIR|PARENT --model M.osim --mass KG --height M
+                           [--models all|UM10,BH04,...|all,LW05,MA68] [--basal body|muscle|none]
+                           [--basal-coefficient 1.2] [--basal-exponent 1]
+                           [--speed M_PER_S] --out DIR
+
+Writes ``OUT/metabolics.sto``, ``OUT/whole_body.csv`` and ``OUT/per_muscle.csv`` (and
+``OUT/metabolics.parquet`` with the ``parquet`` extra) (:func:`musclemetab.metabolics.solution.write_legs_metabolics`). One leg
+solved: the whole-body rate doubles it (the study's rule, and the output says so). ``--solution``
+may also be the parent written by ``solve --side both`` (``PARENT/r``, ``PARENT/l``): each leg
+is evaluated over its own cycle into ``OUT/r`` and ``OUT/l``, and ``OUT/whole_body.csv`` adds
+the two legs (basal heat once); :func:`musclemetab.metabolics.solution.metabolics_from_legs`.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from .options import add_basal_arguments, check_basal_arguments, check_speed
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(subparsers) -> None:
+    """Add the ``metabolics`` subcommand to an ``argparse`` subparsers object."""
+    from ..metabolics.registry import ADDITIONAL_MODELS, MODELS
+
+    p = subparsers.add_parser(
+        "metabolics",
+        help="metabolic rates of every muscle of a solution, for several energy models",
+        description=(
+            "Evaluate muscle metabolic energy models on a muscle redundancy solution (the padding nodes "
+            "trimmed: 5 at the start, 6 at the end), muscle by muscle and node by node. Writes "
+            "OUT/metabolics.sto (columns <model>/<muscle>/<component>, W), OUT/metabolics.parquet (tidy: time, "
+            "model, muscle, component, value_W; with the parquet extra) and OUT/whole_body.csv (one row per model: whole-body "
+            f"average in W/kg). Models: the study's {', '.join(MODELS)} ('all', the default) and, when "
+            f"named, {', '.join(ADDITIONAL_MODELS)}."
+        ),
+    )
+    p.add_argument("--solution", required=True, metavar="DIR",
+                   help="solution folder (solution.sto, summary.json), or the parent of r/ and l/ written by "
+                   "solve --side both (the legs are then added instead of doubling one)")
+    p.add_argument(
+        "--model", metavar="M.osim",
+        help="OpenSim model the solution was computed with: F0, lMo and vmax are taken from it, by muscle "
+        "name (default: the values recorded in the solution's summary.json)",
+    )
+    p.add_argument("--mass", required=True, type=float, metavar="KG", help="body mass (kg)")
+    p.add_argument("--height", required=True, type=float, metavar="M", help="body height (m)")
+    p.add_argument(
+        "--models", default="all", metavar="LIST",
+        help=f"'all' (default: the study's {', '.join(MODELS)}) or a comma-separated list of these and "
+        f"{', '.join(ADDITIONAL_MODELS)}, e.g. all,LW05,MA68",
+    )
+    add_basal_arguments(p)
+    p.add_argument("--speed", type=float, metavar="M_PER_S", help="walking speed, for the cost of transport")
+    p.add_argument(
+        "--allow-failed", action="store_true",
+        help="evaluate a solution whose solve did not succeed (default: refuse)",
+    )
+    p.add_argument(
+        "--muscle-properties", metavar="FILE",
+        help="CSV of per-muscle overrides (columns muscle and any of anatomical_muscles, mass_kg, "
+        "slow_twitch_fraction, specific_tension_Pa, function_groups; docs/muscles.md)",
+    )
+    p.add_argument(
+        "--strict", action="store_true",
+        help="refuse muscles the anatomical muscle table cannot place (default: fallback mass and "
+        "slow-twitch fraction 0.5, with a warning naming them)",
+    )
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (may be the solution folder)")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    """Run ``musclemetab metabolics`` (``args`` from :func:`add_parser`)."""
+    from ..io import check_output_folder
+    from ..metabolics.registry import parse_models
+    from ..metabolics.solution import (
+        metabolics_from_legs,
+        parameter_differences,
+        read_solution_states,
+        solution_folders,
+        write_legs_metabolics,
+    )
+
+    models = parse_models(args.models)
+    check_output_folder(args.out)
+    check_speed(args.speed)
+    check_basal_arguments(args)
+    folders = solution_folders(args.solution)
+    params = None
+    if args.model:
+        from ..model import read_muscle_parameters
+
+        params = read_muscle_parameters(args.model)
+    states = {side: read_solution_states(folder, require_success=not args.allow_failed)
+              for side, folder in folders.items()}
+    if params is not None:
+        for leg in states.values():
+            _note(parameter_differences(leg, params), args.model)
+    results = metabolics_from_legs(
+        states, args.mass, args.height, models=models, muscle_parameters=params, basal=args.basal,
+        basal_rate_W_per_kg=args.basal_coefficient, basal_exponent=args.basal_exponent, speed_m_per_s=args.speed,
+        muscle_properties=args.muscle_properties, strict=args.strict,
+    )
+    files = write_legs_metabolics(results, args.out)
+    if len(results) == 1:
+        (side, result), = results.items()
+        means = ", ".join(f"{m} {result.whole_body[m].mean_W_per_kg:.2f}" for m in result.models)
+        leg = {"r": "the right leg", "l": "the left leg"}.get(side, "the solved leg")
+        print(
+            f"metabolics: {len(result.models)} models x {len(result.muscles)} muscles x {result.time_s.size} nodes "
+            f"-> {args.out} ({', '.join(p.name for p in files.values())}); whole body = 2 x {leg} "
+            f"(W/kg, basal {args.basal}): {means}"
+        )
+        return 0
+    from ..metabolics.solution import add_legs
+
+    out = files["whole_body_csv"].parent
+    means = ", ".join(f"{m} {v:.2f}" for m, v in add_legs(results).items())
+    print(f"metabolics: legs {' + '.join(results)} added (each over its own cycle) -> {out}/whole_body.csv and "
+          f"{', '.join(f'{out}/{s}' for s in results)}; whole body (W/kg, basal {args.basal}): {means}")
+    return 0
+
+
+def _note(differences: list[str], model_path) -> None:
+    """Say (on stderr) when the model's parameters differ from those the solve recorded."""
+    if differences:
+        print(
+            f"musclemetab: note: {model_path} differs from the solution's recorded parameters "
+            f"({'; '.join(differences[:3])}{' ...' if len(differences) > 3 else ''}); using the model's values",
+            file=sys.stderr,
+        )

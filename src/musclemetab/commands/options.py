@@ -1,0 +1,66 @@
+"""Options several commands share: the whole-body basal heat (``metabolics``, ``analyse``),
+the walking speed, and the running of a study (``run``, ``demo``)."""
+
+from __future__ import annotations
+
+from ..errors import OptionError
+
+__all__ = ["BASAL_DEFAULTS", "add_basal_arguments", "check_basal_arguments", "check_speed", "add_study_arguments"]
+
+#: the basal options' defaults: the paper's 1.2 W per kg of body mass
+BASAL_DEFAULTS = {"basal": "body", "basal_coefficient": 1.2, "basal_exponent": 1.0}
+
+
+def add_basal_arguments(parser, recorded: str | None = None) -> None:
+    """The whole-body basal heat options, ``--basal``, ``--basal-coefficient`` and
+    ``--basal-exponent``, of the commands that compute whole-body rates (``metabolics``,
+    ``analyse``); :func:`check_basal_arguments` checks their values. With ``recorded`` (where
+    the command finds earlier settings, e.g. ``"--metabolics"``) the options default to
+    ``None``: the command takes the recorded values, else :data:`BASAL_DEFAULTS`."""
+    default = (lambda key: None) if recorded else BASAL_DEFAULTS.get
+    also = f" (default: as recorded in {recorded}, else %s)" if recorded else " (default %s)"
+    parser.add_argument(
+        "--basal", default=default("basal"), choices=("body", "muscle", "none"),
+        help="whole-body basal heat: 1.2 W/kg of body mass (body, the paper), 1.2 W/kg of muscle mass in every "
+        "muscle (muscle, the study's code) or none" + also % "body",
+    )
+    parser.add_argument(
+        "--basal-coefficient", type=float, default=default("basal_coefficient"), metavar="W_PER_KG",
+        help="basal heat coefficient as OpenSim's probes write it (basal_coefficient): under --basal body the "
+        "basal heat is COEFFICIENT * mass^EXPONENT W; it is also the per-muscle basal heat, W per kg of muscle "
+        "mass" + also % "1.2",
+    )
+    parser.add_argument(
+        "--basal-exponent", type=float, default=default("basal_exponent"), metavar="X",
+        help="basal heat exponent of the body mass (OpenSim's basal_exponent; --basal body only)" + also % "1",
+    )
+
+
+def check_basal_arguments(args) -> None:
+    """Raise :class:`OptionError` naming the option for a basal coefficient that is not a
+    non-negative number, an exponent that is not finite, or an exponent with ``--basal muscle``."""
+    import math
+
+    if not (math.isfinite(args.basal_coefficient) and args.basal_coefficient >= 0):
+        raise OptionError(f"--basal-coefficient must be a non-negative number of W/kg, not {args.basal_coefficient}")
+    if not math.isfinite(args.basal_exponent):
+        raise OptionError(f"--basal-exponent must be a finite number, not {args.basal_exponent}")
+    if args.basal == "muscle" and args.basal_exponent != 1:
+        raise OptionError("--basal-exponent applies to --basal body only (the muscle rule is linear in each "
+                          "muscle's mass); drop it or use --basal body")
+
+
+def check_speed(speed: float | None) -> None:
+    """Raise :class:`OptionError` for a ``--speed`` that is not a positive number of m/s."""
+    import math
+
+    if speed is not None and not (math.isfinite(speed) and speed > 0):
+        raise OptionError(f"--speed must be a positive number of m/s, not {speed}")
+
+
+def add_study_arguments(parser) -> None:
+    """``--workers``, ``--force`` and ``--no-progress`` of the commands that run a study."""
+    parser.add_argument("--workers", type=int, metavar="N",
+                        help="parallel processes (default: the number of CPUs); 1 runs in this process")
+    parser.add_argument("--force", action="store_true", help="run every unit again, even those up to date")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")

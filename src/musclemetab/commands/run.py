@@ -1,0 +1,68 @@
+"""``musclemetab run``: every unit of a study file (:func:`musclemetab.study.runner.run_study`)."""
+
+from __future__ import annotations
+
+from .options import add_study_arguments
+
+__all__ = ["add_parser", "run", "print_run", "exit_status"]
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser(
+        "run",
+        help="run a study: subjects x trials x workflows x metabolic models",
+        description=(
+            "Run every unit (subject x trial x workflow) of a TOML study file: solve, metabolic models, gait "
+            "phases and muscle groups. Resumable: units whose inputs and settings are unchanged and whose "
+            "outputs are complete are skipped; failed units are run again. Writes units/<subject>/<trial>/"
+            "<workflow>/, results.csv (and results.parquet with the parquet extra; one row per subject x trial x workflow x model), "
+            "failures.csv and study.json in the study's output folder."
+        ),
+    )
+    p.add_argument("study", metavar="STUDY.toml", help="study file")
+    p.add_argument("--out", metavar="DIR", help="output folder (default: the study file's 'output')")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run on a Dask cluster (tcp://host:port); needs pip install 'musclemetab[dask]'")
+    p.add_argument("--report", action="store_true", help="also write the figures and report.html")
+    add_study_arguments(p)
+    p.set_defaults(func=run)
+
+
+def print_run(run, command: str) -> None:
+    """Print what a study run did (``command``: the command's name, first on every line)."""
+    print(f"{command}: {run.summary_line()}")
+    for label, reason in run.failed.items():
+        if label not in run.interrupted:
+            print(f"{command}: failed {label}: {reason}")
+    if run.removed_partials:
+        print(f"{command}: removed {len(run.removed_partials)} unfinished unit folder(s) left by an earlier run")
+    report = getattr(run, "report", None)
+    if report:
+        print(f"{command}: report -> {report}")
+
+
+def exit_status(run) -> int:
+    """Exit status: 130 after Ctrl-C, 1 when a unit failed, 0 otherwise."""
+    if run.interrupted:
+        import sys
+
+        print(f"musclemetab: interrupted; {len(run.interrupted)} unit(s) marked interrupted, no new unit started. "
+              "Run the same command again to finish the study", file=sys.stderr)
+        return 130
+    return 1 if run.failed else 0
+
+
+def run(args) -> int:
+    """Run ``musclemetab run`` (``args`` from :func:`add_parser`)."""
+    from ..study.runner import run_study
+    from ..study.spec import load_study
+
+    study = load_study(args.study, output=args.out)
+    result = run_study(study, workers=args.workers, scheduler=args.scheduler, force=args.force,
+                       progress=not args.no_progress)
+    if args.report and not result.interrupted:
+        from ..report import write_report
+
+        result.report = write_report(study.output)
+    print_run(result, "run")
+    return exit_status(result)
