@@ -69,7 +69,7 @@ def build_problem(ex, trial):
     from musclemetab.geometry import compute_geometry
     from musclemetab.model import read_muscle_parameters
     from musclemetab.redundancy.inputs import DEFAULT_DOFS, read_inverse_dynamics, restrict_geometry, trial_inputs
-    from musclemetab.redundancy.problem import SolverOptions, build_nlp
+    from musclemetab.redundancy.ipopt import SolverOptions, build_nlp
     from musclemetab.redundancy.static_opt import initial_guess, static_optimisation
     from musclemetab.redundancy.workflows import workflow_parameters
 
@@ -87,7 +87,7 @@ def iterate(nlp, options, k):
     """IPOPT's iterate after ``k`` iterations (0: converged) and its barrier parameter."""
     import casadi as ca
 
-    from musclemetab.redundancy.problem import MUMPS_OPTIONS, ipopt_options
+    from musclemetab.redundancy.ipopt import MUMPS_OPTIONS, ipopt_options
 
     ipopt = ipopt_options(options.with_(max_iter=k if k > 0 else options.max_iter), MUMPS_OPTIONS)
     opts = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
@@ -108,7 +108,7 @@ def ipopt_linear_algebra_time(nlp, options):
 
     import casadi as ca
 
-    from musclemetab.redundancy.problem import MUMPS_OPTIONS, ipopt_options
+    from musclemetab.redundancy.ipopt import MUMPS_OPTIONS, ipopt_options
 
     ipopt = ipopt_options(options.with_(print_level=5), MUMPS_OPTIONS)
     ipopt["print_timing_statistics"] = "yes"

@@ -45,7 +45,7 @@ def solve_key(func, args, kwargs) -> tuple[str, dict] | None:
     """
     from musclemetab.io.atomic import file_sha256
     from musclemetab.redundancy.emg_ten import EmgTenSettings
-    from musclemetab.redundancy.problem import SolverOptions
+    from musclemetab.redundancy.ipopt import SolverOptions
 
     def plain(value):
         if isinstance(value, (str, os.PathLike)) and Path(value).is_file():

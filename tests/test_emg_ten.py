@@ -378,7 +378,7 @@ def test_effort_ten_runs_from_the_written_parameters(example, emg_ten, parameter
 def test_coupling_pairs_of_the_study_groups_worked_by_hand():
     """The equalities that couple the factors of a group: kT chains consecutive members, the
     EMG scales tie each member to the first; muscles the problem lacks drop out of a group."""
-    from musclemetab.redundancy.core import coupling_pairs
+    from musclemetab.redundancy.transcription import coupling_pairs
     from musclemetab.redundancy.emg_ten import EmgTenSettings
 
     settings = EmgTenSettings()
@@ -667,9 +667,9 @@ def test_settings_checks_name_the_option_and_what_it_may_be():
     allowed values or range, the value given; a weight that is not a finite number is refused
     by every type (the solver options once let NaN through)."""
     from musclemetab.errors import OptionError
-    from musclemetab.redundancy.core import Goals, ParameterSpec
+    from musclemetab.redundancy.transcription import Goals, ParameterSpec
     from musclemetab.redundancy.emg_ten import EmgTenSettings
-    from musclemetab.redundancy.problem import SolverOptions
+    from musclemetab.redundancy.ipopt import SolverOptions
 
     cases = [
         (lambda: EmgTenSettings(coupling="joint"), "coupling must be one of 'constraints', 'shared', not 'joint'"),

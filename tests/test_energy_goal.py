@@ -78,7 +78,7 @@ def small_problem(example, reference_table):
 
 
 def _nlp(small_problem, goal):
-    from musclemetab.redundancy.problem import SolverOptions, build_nlp
+    from musclemetab.redundancy.ipopt import SolverOptions, build_nlp
 
     inp, params, guess = small_problem
     return build_nlp(inp, params, guess, SolverOptions(energy=goal))

@@ -56,7 +56,7 @@ def generated(example, tmp_path_factory):
 
 
 def _estimate(generated, with_emg: bool):
-    from musclemetab.redundancy.core import Goals, ParameterSpec
+    from musclemetab.redundancy.transcription import Goals, ParameterSpec
     from musclemetab.redundancy.estimate import estimate_parameters, fiber_length_trial, parameter_specs
 
     made, measured, inputs, params, guess, options, wf, _ = generated

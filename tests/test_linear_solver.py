@@ -8,7 +8,7 @@ import pytest
 
 from musclemetab.commands import main
 from musclemetab.errors import OptionError
-from musclemetab.redundancy.problem import (
+from musclemetab.redundancy.ipopt import (
     MUMPS_OPTIONS,
     SolverOptions,
     check_linear_solver,

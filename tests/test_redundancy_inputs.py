@@ -392,7 +392,7 @@ def test_solution_load_errors(tmp_path):
 
 
 def test_problem_size_formula():
-    from musclemetab.redundancy.problem import problem_size
+    from musclemetab.redundancy.ipopt import problem_size
 
     assert [problem_size(40, 5, n) for n in (158, 118, 99)] == [(32510, 26110), (24310, 19510), (20415, 16375)]
 
@@ -401,7 +401,7 @@ def test_explicit_derivatives_equal_automatic_ones(example, ref_geometry, model_
     """The assembled Jacobian and Hessian given to IPOPT equal CasADi's AD of the whole NLP."""
     import casadi as ca
 
-    from musclemetab.redundancy.problem import SolverOptions, build_nlp
+    from musclemetab.redundancy.ipopt import SolverOptions, build_nlp
     from musclemetab.redundancy.static_opt import initial_guess, static_optimisation
 
     t_ik, _ = I.read_kinematics(example.ik["normal"])

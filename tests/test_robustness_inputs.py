@@ -258,7 +258,7 @@ def test_messages_name_the_file_or_muscle():
 
 
 def test_infeasible_solves_are_not_told_to_raise_max_iter():
-    from musclemetab.redundancy.problem import failure_advice
+    from musclemetab.redundancy.ipopt import failure_advice
 
     for status in ("Infeasible_Problem_Detected", "Restoration_Failed"):
         text = failure_advice(status)

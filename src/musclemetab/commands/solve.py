@@ -175,7 +175,7 @@ def run(args) -> int:
     :class:`~musclemetab.errors.SolverError` when IPOPT did not converge (after writing the
     folder with ``success: false``).
     """
-    from ..redundancy.problem import failure_advice
+    from ..redundancy.ipopt import failure_advice
     from ..redundancy.run import solve_sides, write_solution_folder
     from ..redundancy.window import parse_cycle, parse_window
     from ..redundancy.workflows import parse_tendon_stiffness
@@ -313,7 +313,7 @@ def _energy_note(summary) -> str:
 
 def _solver_options(args):
     """The ``SolverOptions`` of the command line (the linear solver checked before any work)."""
-    from ..redundancy.problem import SolverOptions
+    from ..redundancy.ipopt import SolverOptions
 
     try:
         return SolverOptions(max_iter=args.max_iter, print_level=args.print_level,
@@ -348,7 +348,7 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
 
     from ..redundancy.emg_ten import EmgTenSettings, informed_settings
     from ..redundancy.run import solve_emg_ten
-    from ..redundancy.problem import failure_advice
+    from ..redundancy.ipopt import failure_advice
     from ..redundancy.workflows import parse_tendon_stiffness
 
     if not idf:
@@ -441,7 +441,7 @@ def _write_emg_ten(args, result, out, side: str) -> None:
     """Write one leg's EMG-TEN result and its personalised model to ``out``, then say what it found
     (:class:`SolverError` after writing when it did not converge)."""
     from ..redundancy.estimate import write_personalised_model
-    from ..redundancy.problem import failure_advice
+    from ..redundancy.ipopt import failure_advice
 
     result.write(out)
     r = result.record

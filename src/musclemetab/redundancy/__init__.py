@@ -8,8 +8,8 @@ tendon forces that reproduce the joint moments with minimal effort.
 
 Modules: :mod:`.run` (the pipeline from files: what the command line, the study and Python
 users call), :mod:`.inputs` (filtering, splines, mesh), :mod:`.static_opt` (initial guess),
-:mod:`.core` (one problem: trials, goals, shared parameters; ``docs/problem.md``),
-:mod:`.problem` (solving it; the single-trial problem), :mod:`.solution` (results, files),
+:mod:`.transcription` (one problem: trials, goals, shared parameters; ``docs/problem.md``),
+:mod:`.ipopt` (solving it; the single-trial problem), :mod:`.solution` (results, files),
 :mod:`.record` (the run record), :mod:`.workflows` (presets, passive and tendon parameters),
 :mod:`.solve` (one trial from arrays), :mod:`.emg_ten` and :mod:`.emg_pipeline` (EMG-TEN and
 EMG-informed solves from arrays), :mod:`.result` (their results), :mod:`.estimate`
@@ -26,7 +26,7 @@ import importlib
 _EXPORTS = {
     "Result": "result", "EmgTenResult": "result", "EmgTenSettings": "emg_ten", "solve_emg_ten": "run",
     "MuscleTendonParameters": "parameters",
-    "SolverOptions": "problem",
+    "SolverOptions": "ipopt",
     "Solution": "solution",
     "solve_files": "run", "solve_sides": "run", "solve_trial": "solve", "solve_with_parameters": "solve",
     "WORKFLOWS": "workflows", "Workflow": "workflows", "get_workflow": "workflows",

@@ -33,7 +33,7 @@ docdict = {
     Check the units of the inputs (IK angles, moments per body mass and per muscle capacity);
     ``False`` skips those checks (``--skip-unit-checks``).""",
     "options": """options
-    :class:`~.problem.SolverOptions`: IPOPT's linear solver, iteration limit, print level
+    :class:`~.ipopt.SolverOptions`: IPOPT's linear solver, iteration limit, print level
     (default ``SolverOptions()``).""",
 }
 

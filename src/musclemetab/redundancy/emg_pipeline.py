@@ -17,7 +17,7 @@ from .emg_ten import EmgTenSettings, EmgTenTrial, settings_for_muscles, solve_em
 from .result import EMG_TEN, Result, assemble_result
 from .inputs import check_moment_magnitudes, restrict_geometry, trial_inputs
 from .parameters import MuscleTendonParameters
-from .problem import SolverOptions
+from .ipopt import SolverOptions
 from .static_opt import initial_guess, static_optimisation
 
 __all__ = ["solve_emg_ten_arrays", "prepare_emg_ten_trials", "emg_ten_options"]

@@ -1,7 +1,7 @@
 """EMG-TEN: EMG-informed estimation of tendon stiffness over several trials in one NLP.
 
 One optimal control problem holds, for every trial, the variables and constraints of the
-single-trial problem (:mod:`.problem`: same mesh, bounds, forward-Euler scheme and node
+single-trial problem (:mod:`.ipopt`: same mesh, bounds, forward-Euler scheme and node
 conventions) plus shared parameters (``docs/solver.md``):
 
 ==================  =========================================  ==============================
@@ -37,10 +37,10 @@ Objective (trials summed, each normalised by its own ``N``)::
 with ``[wEMG, wAct, wTres, wVm] = [10, 0.1, 1000, 0.01]``. The Hill equilibrium and the
 joint moments use ``kT = s_kT 35`` (symbolic) for the estimated muscles.
 
-**Transcription.** The problem core (:mod:`.core`): the trials' blocks of the single-trial
+**Transcription.** The problem core (:mod:`.transcription`): the trials' blocks of the single-trial
 problem with the EMG goals (tracking cost and bound rows after each interval's equality rows)
 and the shared factors ``[s_kT, s_EMG]`` last; couplings (constraint form) after all trials.
-IPOPT settings are those of :class:`~.problem.SolverOptions` plus :data:`EMG_TEN_MUMPS_OPTIONS`.
+IPOPT settings are those of :class:`~.ipopt.SolverOptions` plus :data:`EMG_TEN_MUMPS_OPTIONS`.
 
 **Initial guess.** Per trial the static-optimisation guess of the single-trial problem with
 the reserve divided by ``Topt``; all scale factors 1.
@@ -58,10 +58,10 @@ import numpy as np
 
 from ..errors import DataMismatchError, OptionError, UnknownMuscleError
 from ._checks import COUPLINGS, check_factor_bounds, check_non_negative, check_option, check_weights
-from .core import Goals, ParameterSpec, TrialBlock, build_problem, check_fiber_dynamics, coupling_pairs
+from .transcription import Goals, ParameterSpec, TrialBlock, build_problem, check_fiber_dynamics, coupling_pairs
 from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
-from .problem import ProblemResult, SolverOptions, solve_problem
+from .ipopt import ProblemResult, SolverOptions, solve_problem
 from .static_opt import InitialGuess
 
 __all__ = [
@@ -121,7 +121,7 @@ class EmgTenSettings:
     scaled EMG) or ``"tracking"`` (the cost only). With ``tendon_groups`` empty no tendon
     stiffness is estimated: an EMG-informed solve of one or more trials.
 
-    ``fiber_dynamics``: the transcription of the fiber dynamics (:data:`.core.FIBER_DYNAMICS`);
+    ``fiber_dynamics``: the transcription of the fiber dynamics (:data:`.transcription.FIBER_DYNAMICS`);
     ``None`` (default) is ``"backward"`` in the driven mode and ``"forward"`` otherwise: with the
     excitations fixed, the forward-Euler fiber recurrence of weakly excited muscles amplifies a
     change of fiber length by up to 1e4 per step, the backward-Euler one damps it
@@ -221,7 +221,7 @@ def emg_failure(record, mode: str, what: str, fiber_dynamics: str = "backward"):
     muscles amplify errors by orders of magnitude per mesh step (``docs/problem.md``); with the
     backward-Euler ones the scaled EMG cannot explain the moments within the bounds."""
     from ..errors import SolverError
-    from .problem import INFEASIBLE_STATUSES
+    from .ipopt import INFEASIBLE_STATUSES
 
     if mode != "driven" or record.status not in INFEASIBLE_STATUSES:
         return record.failure(what)
@@ -316,7 +316,7 @@ def build_emg_ten_nlp(
     settings: EmgTenSettings | None = None,
     options: SolverOptions | None = None,
 ) -> dict:
-    """The EMG-TEN NLP over all ``trials`` (:func:`.core.build_problem`), without solving it."""
+    """The EMG-TEN NLP over all ``trials`` (:func:`.transcription.build_problem`), without solving it."""
     settings = settings_for_muscles(settings, params.names)
     options = options or SolverOptions()
     blocks, goals, specs = emg_ten_problem(trials, params, settings)

@@ -47,7 +47,7 @@ from .inputs import (
     read_inverse_dynamics,
     read_kinematics,
 )
-from .problem import SolverOptions
+from .ipopt import SolverOptions
 from .solution import Solution
 from .solve import solve_trial
 from .workflows import PassiveParameters, check_workflow_options, read_passive_parameters, read_tendon_stiffness_json
@@ -460,7 +460,7 @@ def estimate_files(
     """
     from ..io import check_output_folder
     from .bounds import fiber_length_bounds_record
-    from .core import Goals, ParameterSpec, coupling_pairs
+    from .transcription import Goals, ParameterSpec, coupling_pairs
     from .emg_inputs import emg_at_nodes, mapping_for_muscles, resolve_emg_mapping, trial_labels
     from .emg_ten import emg_bound, fiber_scheme
     from .estimate import (
@@ -471,7 +471,7 @@ def estimate_files(
         read_fiber_lengths,
         write_personalised_model,
     )
-    from .problem import SolverOptions
+    from .ipopt import SolverOptions
     from .record import RunRecord
     from .solution import build_solution
     from .solve import prepare_trial, solve_with_parameters

@@ -19,7 +19,7 @@ from .inputs import (
     restrict_geometry,
 )
 from .parameters import MuscleTendonParameters
-from .problem import SolverOptions, solve_ocp
+from .ipopt import SolverOptions, solve_ocp
 from .record import RunRecord
 from .solution import Solution, build_solution
 from .static_opt import guess_from_solution, initial_guess, static_optimisation

@@ -2,7 +2,7 @@
 
 EFFORT-GEN/CAL/TEN are one trial with the effort goals; EMG-TEN is several trials with the EMG
 goals and shared tendon-stiffness factors. **Per trial** (muscles, DOFs and side may differ): the
-variables, bounds and constraints of the single-trial problem (:mod:`.problem`), node blocks
+variables, bounds and constraints of the single-trial problem (:mod:`.ipopt`), node blocks
 ``z_k = [a, l~M, lp, e, aT, v~M]_k`` then ``[a, l~M, lp]_N``, each interval's equality rows
 followed by its EMG bound rows. **Goals** (:class:`Goals`), per trial normalised by its ``N``::
 
@@ -164,7 +164,7 @@ def _constants(params: MuscleTendonParameters, ca):
 
 
 def _node_expressions(sym, M: int, D: int, h, P: dict, optimal_reserve_Nm: float, ca, backward: bool = False):
-    """Symbols and constraint expressions of one mesh interval (:mod:`.problem`); with
+    """Symbols and constraint expressions of one mesh interval (:mod:`.ipopt`); with
     ``backward`` the Hill equilibrium holds at the end node (``a1, lm1, lp1, lmt1``) with ``vm``."""
     a, lm, lp = sym("a", M), sym("lm", M), sym("lp", M)
     e, aT, vm = sym("e", M), sym("aT", D), sym("vm", M)

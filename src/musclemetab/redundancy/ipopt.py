@@ -50,7 +50,7 @@ import numpy as np
 
 from ..errors import OptionError, SolverError
 from ._checks import check_option, check_weights
-from .core import Goals, TrialBlock, build_problem, check_fiber_dynamics
+from .transcription import Goals, TrialBlock, build_problem, check_fiber_dynamics
 from .energy import EnergyGoal
 from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
@@ -100,7 +100,7 @@ class SolverOptions:
     library default). ``ipopt`` holds further IPOPT options, e.g. ``{"mu_init": 1e-6}`` for a
     warm start; anything there may change which optimum is found. ``energy`` adds the energy
     goal (:class:`.energy.EnergyGoal`) to the objective. ``fiber_dynamics``: the transcription
-    of the fiber dynamics (:data:`.core.FIBER_DYNAMICS`; ``"backward"``: the Hill equilibrium of
+    of the fiber dynamics (:data:`.transcription.FIBER_DYNAMICS`; ``"backward"``: the Hill equilibrium of
     each interval at its end node, ``docs/problem.md``; not with the energy goal).
     """
 
@@ -301,7 +301,7 @@ def build_nlp(
     options: SolverOptions | None = None,
 ) -> dict:
     """The NLP of the single-trial problem, without solving it: the problem core
-    (:func:`.core.build_problem`) with one trial and the effort goals of ``options``."""
+    (:func:`.transcription.build_problem`) with one trial and the effort goals of ``options``."""
     options = options or SolverOptions()
     return build_problem([TrialBlock("trial", inputs, guess)], params, effort_goals(options),
                          optimal_reserve_Nm=options.optimal_reserve_Nm,
@@ -380,7 +380,7 @@ class ProblemResult(SolveOutcome):
 
 
 def _trial_terms(goals: Goals, t: TrialBlock, Z, xl, dev, lm_us, params=None, lmo_factor=None) -> dict:
-    """The objective terms of one trial at the optimum (NumPy, the formulas of :mod:`.core`)."""
+    """The objective terms of one trial at the optimum (NumPy, the formulas of :mod:`.transcription`)."""
     M, D, N = len(t.inputs.muscles), len(t.inputs.dofs), t.inputs.n_intervals
     a = np.concatenate([Z[:, 0:M].ravel(), xl[0:M]])
     terms = {
@@ -405,7 +405,7 @@ def _trial_terms(goals: Goals, t: TrialBlock, Z, xl, dev, lm_us, params=None, lm
 def solve_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=(), *,
                   options: SolverOptions | None = None, coupling: str = "shared",
                   mumps_settings: dict | None = None) -> ProblemResult:
-    """Build (:func:`.core.build_problem`) and solve a problem; never raises on
+    """Build (:func:`.transcription.build_problem`) and solve a problem; never raises on
     non-convergence (see ``success``). Errors while building raise :class:`SolverError`."""
     import casadi as ca
 
