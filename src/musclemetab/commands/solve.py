@@ -347,7 +347,7 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
     from dataclasses import replace
 
     from ..redundancy.emg_ten import EmgTenSettings, informed_settings
-    from ..redundancy.run import solve_emg_ten
+    from ..redundancy.run import emg_mappings_of_legs, solve_emg_ten
     from ..redundancy.ipopt import failure_advice
     from ..redundancy.workflows import parse_tendon_stiffness
 
@@ -384,7 +384,7 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
         raise OptionError("--workflow emg-ten needs --emg: one processed EMG file per trial, in the order of --ik")
     dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else None
     options = _solver_options(args)
-    legs = _leg_mappings(args, ik, dofs)
+    legs = emg_mappings_of_legs(args.model, ik[0], args.emg_mapping, args.side, dofs, args.cache_dir)
     # every leg is solved before anything is written
     results = {side: solve_emg_ten(
         args.model, ik, idf, emg, emg_mapping=mapping, labels=args.labels,
@@ -401,40 +401,6 @@ def _leg_out(args, side: str):
     from pathlib import Path
 
     return Path(args.out) / side if args.side == "both" else Path(args.out)
-
-
-def _leg_mappings(args, ik: list, dofs) -> dict:
-    """``{side: EMG mapping}`` of the legs to solve. With ``--side both`` the mapping must be a
-    ``{muscle: [channels]}`` JSON file naming the muscles of both legs (the named mappings are
-    one leg's electrodes); each leg takes the entries of its muscles (those spanning its DOFs,
-    as its problem selects them)."""
-    from ..errors import UnknownMuscleError
-    from ..geometry import compute_geometry
-    from ..redundancy.emg_inputs import resolve_emg_mapping
-
-    named = args.emg_mapping is None or str(args.emg_mapping).strip().lower() in ("default", "authors")
-    if args.side != "both":
-        return {args.side: args.emg_mapping or "default"}
-    if named:
-        raise OptionError("--side both with EMG needs --emg-mapping MAP.json: a JSON object naming each leg's "
-                          "muscles and their EMG channels, e.g. {\"soleus_r\": [\"SOL_R\"], \"soleus_l\": "
-                          "[\"SOL_L\"]} (the named mappings are one leg's electrodes)")
-    if dofs:
-        raise OptionError("--dofs names one leg's DOFs; with --side both leave it out (each leg's DOFs are discovered)")
-    mapping = resolve_emg_mapping(args.emg_mapping)
-    legs, placed = {}, set()
-    for side in ("r", "l"):
-        muscles = set(compute_geometry(args.model, ik[0], side=side, cache_dir=args.cache_dir).muscles)
-        legs[side] = {m: c for m, c in mapping.items() if m in muscles}
-        placed |= set(legs[side])
-        if not legs[side]:
-            raise UnknownMuscleError(f"--emg-mapping {args.emg_mapping} names no muscle of the "
-                                     f"{'right' if side == 'r' else 'left'} leg; map its muscles to their channels")
-    unplaced = sorted(set(mapping) - placed)
-    if unplaced:
-        raise UnknownMuscleError(f"--emg-mapping {args.emg_mapping}: {', '.join(unplaced)} in neither leg's "
-                                 "muscles; check the names")
-    return legs
 
 
 def _write_emg_ten(args, result, out, side: str) -> None:
@@ -476,12 +442,12 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
     """An effort workflow's EMG-informed solve of one or more trials: one trial is written to
     ``--out`` as a solution folder; several as one folder per trial and ``parameters.json``."""
     from ..redundancy.emg_ten import emg_failure
-    from ..redundancy.run import solve_emg_ten
+    from ..redundancy.run import emg_mappings_of_legs, solve_emg_ten
 
     emg = _as_list(args.emg)
     dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else None
     options = _solver_options(args)  # the linear solver checked before any work
-    legs = _leg_mappings(args, ik, dofs)
+    legs = emg_mappings_of_legs(args.model, ik[0], args.emg_mapping, args.side, dofs, args.cache_dir)
     results = {side: solve_emg_ten(
         args.model, ik, idf, emg, emg_mapping=mapping, labels=args.labels,
         passive=args.passive, dofs=dofs, side=side,

@@ -7,7 +7,8 @@ users solve.
   trials, a :class:`~.result.Result`;
 * :func:`estimate_files`: muscle-tendon parameters from fiber lengths and/or EMG over trials,
   written to a folder, a :class:`~.result.Result`;
-* :func:`write_solution_folder`: a solution and the inverse dynamics computed for it.
+* :func:`write_solution_folder`: a solution and the inverse dynamics computed for it;
+* :func:`emg_mappings_of_legs`: the EMG mapping of each leg of an EMG problem of both legs.
 
 Each reads and checks its files before OpenSim is asked anything, gets the geometry from
 :func:`musclemetab.geometry.compute_geometry` (OpenSim in its own worker process) and solves
@@ -52,8 +53,8 @@ from .solution import Solution
 from .solve import solve_trial
 from .workflows import PassiveParameters, check_workflow_options, read_passive_parameters, read_tendon_stiffness_json
 
-__all__ = ["solve_files", "solve_sides", "solve_emg_ten", "estimate_files", "write_solution_folder",
-           "WEIGHT_NAMES", "EMG_SCALE_BOUNDS"]
+__all__ = ["solve_files", "solve_sides", "solve_emg_ten", "emg_mappings_of_legs", "estimate_files",
+           "write_solution_folder", "WEIGHT_NAMES", "EMG_SCALE_BOUNDS"]
 
 WEIGHT_NAMES = {"activation": "w_activation", "reserve": "w_reserve", "velocity": "w_velocity",
                 "fiber_length": "w_fiber_length", "emg": "w_emg"}
@@ -393,6 +394,40 @@ def solve_emg_ten(
     for solution in result.solutions.values():  # as the single-trial solve's summary records it
         solution.summary["side"] = side
     return result
+
+
+def emg_mappings_of_legs(model, ik_path, emg_mapping, side: str, dofs=None, cache_dir=None) -> dict:
+    """``{side: EMG mapping}`` of the legs to solve (``side`` ``"r"``, ``"l"`` or ``"both"``).
+    With both legs the mapping must be a ``{muscle: [channels]}`` JSON file naming the muscles of
+    both legs (the named mappings are one leg's electrodes); each leg takes the entries of its
+    muscles (those spanning its DOFs, as its problem selects them, from the geometry of
+    ``ik_path``)."""
+    from ..errors import UnknownMuscleError
+    from ..geometry import compute_geometry
+
+    named = emg_mapping is None or str(emg_mapping).strip().lower() in ("default", "authors")
+    if side != "both":
+        return {side: emg_mapping or "default"}
+    if named:
+        raise OptionError("--side both with EMG needs --emg-mapping MAP.json: a JSON object naming each leg's "
+                          "muscles and their EMG channels, e.g. {\"soleus_r\": [\"SOL_R\"], \"soleus_l\": "
+                          "[\"SOL_L\"]} (the named mappings are one leg's electrodes)")
+    if dofs:
+        raise OptionError("--dofs names one leg's DOFs; with --side both leave it out (each leg's DOFs are discovered)")
+    mapping = resolve_emg_mapping(emg_mapping)
+    legs, placed = {}, set()
+    for leg in ("r", "l"):
+        muscles = set(compute_geometry(model, ik_path, side=leg, cache_dir=cache_dir).muscles)
+        legs[leg] = {m: c for m, c in mapping.items() if m in muscles}
+        placed |= set(legs[leg])
+        if not legs[leg]:
+            raise UnknownMuscleError(f"--emg-mapping {emg_mapping} names no muscle of the "
+                                     f"{'right' if leg == 'r' else 'left'} leg; map its muscles to their channels")
+    unplaced = sorted(set(mapping) - placed)
+    if unplaced:
+        raise UnknownMuscleError(f"--emg-mapping {emg_mapping}: {', '.join(unplaced)} in neither leg's "
+                                 "muscles; check the names")
+    return legs
 
 
 def _trial_dofs(model, id_files, dofs, side: str, cache_dir) -> tuple[str, ...]:
