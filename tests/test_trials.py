@@ -65,7 +65,7 @@ def test_metabolics_trims_to_the_recorded_gait_cycle(tmp_path):
 
 @pytest.mark.opensim
 def test_calibration_coordinates_and_trials_found_by_content(example, gait2392, tmp_path):
-    from musclemetab.calibration.passive import CALIBRATION_JOINTS, calibration_dofs, trial_files
+    from musclemetab.calibration.trials import CALIBRATION_JOINTS, calibration_dofs, trial_files
     from musclemetab.errors import InputFileError
 
     # the joint tree gives the study's coordinates for its model, and gait2392's left ones
