@@ -25,7 +25,7 @@ from pathlib import Path
 
 from ..errors import MusclemetabError, OptionError
 from .folder import StudyFolder
-from .plan import FIGURE2_CAPTION, FIGURE_NAMES, FIGURE_TITLES, FigurePlan, plan_figures
+from .plan import FIGURE2_CAPTION, FIGURE_NAMES, FigurePlan, plan_figures
 
 __all__ = ["FigureEntry", "make_figures", "draw_figure", "default_workers", "draw_costs", "figure_cache",
            "draw_package_figures"]
