@@ -42,7 +42,9 @@ def _example():
 def cold_run(src: Path, ex, trial: str, cache: Path) -> dict:
     out = Path(tempfile.mkdtemp(prefix="mm-cold-")) / "out"
     env = dict(os.environ, PYTHONPATH=str(src), MUSCLEMETAB_CACHE=str(cache))
-    cmd = [sys.executable, "-m", "musclemetab", "solve", "--model", str(ex.model), "--ik", str(ex.ik[trial]),
+    # the command line's entry: `python -m musclemetab` (older trees: the module musclemetab.cli)
+    entry = "musclemetab" if (src / "musclemetab" / "__main__.py").is_file() else "musclemetab.cli"
+    cmd = [sys.executable, "-m", entry, "solve", "--model", str(ex.model), "--ik", str(ex.ik[trial]),
            "--id", str(ex.id[trial]), "--workflow", "effort-gen", "--out", str(out)]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()

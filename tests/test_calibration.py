@@ -20,6 +20,7 @@ import scipy.io
 from musclemetab.calibration import (
     CalibrationData,
     CalibrationTrial,
+    PassiveCalibration,
     calibrate_passive,
     equilibrium_fiber_length,
     mirror_to_left,
@@ -29,7 +30,7 @@ from musclemetab.calibration import (
     write_calibration,
 )
 from musclemetab.commands.calibrate_passive import add_parser as add_calibrate_parser
-from musclemetab.errors import InputFileError, MissingColumnError, UnknownMuscleError
+from musclemetab.errors import InputFileError, MissingColumnError, SolverError, UnknownMuscleError
 from musclemetab.muscle import passive_force_length, tendon_force_length, tendon_length_from_force
 
 MAT_TRIAL = {"ankle": 0, "hip": 1, "knee": 2}  # order of the trials in passiveMoments.mat
@@ -214,6 +215,15 @@ def test_calibrated_parameters_close_to_published(result, authors, reference_tab
         assert len({cal[m][:2] for m in g}) == 1
 
 
+def test_solver_options_reach_ipopt(data):
+    """IPOPT's settings come from the package's SolverOptions: three iterations stop the
+    calibration, which is reported as not converged."""
+    from musclemetab.redundancy.ipopt import SolverOptions
+
+    with pytest.raises(SolverError, match="calibration NLP did not converge .IPOPT: Maximum_Iterations_Exceeded"):
+        solve_passive(data, None, options=SolverOptions(max_iter=3))
+
+
 # ------------------------------------------------------------------------ files and CLI
 
 
@@ -235,6 +245,52 @@ def test_write_and_read_outputs(result, tmp_path):
     assert not [p for p in (tmp_path / "out").iterdir() if p.name.startswith(".partial")]
     both = mirror_to_left(back)
     assert both["soleus_l"] == both["soleus_r"] and len(both) == 80
+
+
+def test_passive_calibration_round_trip(result, tmp_path):
+    """The typed folder content: written, read back (parameters to the file's 10 digits, the
+    fit summary exactly), written again byte for byte; no figure unless one is given."""
+    cal = result.record()
+    files = cal.write(tmp_path / "a")
+    assert sorted(files) == ["fit.json", "passive_parameters.csv"]
+    assert not (tmp_path / "a" / "passive_fit.png").exists()
+    back = PassiveCalibration.load(tmp_path / "a")
+    assert list(back.parameters) == list(result.calibrated.parameters) and len(back.parameters) == 40
+    for m, p in result.calibrated.parameters.items():
+        np.testing.assert_allclose(back.parameters[m], p, rtol=1e-9)
+    assert back.fit == cal.fit
+    assert back.fit["rms_calibrated_Nm"] == result.calibrated.rms_Nm(result.data)
+    assert back.fit["solver"]["calibrated"]["iterations"] == result.calibrated.stats["iterations"]
+    back.write(tmp_path / "b")
+    for name in files:
+        assert (tmp_path / "b" / name).read_bytes() == (tmp_path / "a" / name).read_bytes()
+    (tmp_path / "c").mkdir()
+    with pytest.raises(InputFileError, match="no passive_parameters.csv and no fit.json"):
+        PassiveCalibration.load(tmp_path / "c")
+
+
+def test_passive_figure_shows_every_block(result):
+    """One row per trial, one panel per block (the hip has two: its third panel is blank),
+    each with the target, generic and calibrated moments of that block's frames."""
+    from musclemetab.report.passive_figure import passive_fit_figure
+
+    d = result.data
+    fig = passive_fit_figure(d.trials, result.generic.moments_Nm, result.calibrated.moments_Nm)
+    axes = np.array(fig.axes).reshape(3, 3)
+    for r, t in enumerate(d.trials):
+        for c in range(3):
+            ax = axes[r, c]
+            if c >= len(np.unique(t.block)):
+                assert not ax.axison and not ax.lines
+                continue
+            sel = t.block == c
+            target, generic, calibrated = (line.get_ydata() for line in ax.lines)
+            np.testing.assert_array_equal(target, t.target_Nm[sel])
+            np.testing.assert_array_equal(generic, result.generic.moments_Nm[t.joint][sel])
+            np.testing.assert_array_equal(calibrated, result.calibrated.moments_Nm[t.joint][sel])
+            np.testing.assert_allclose(ax.lines[0].get_xdata(), np.degrees(t.target_angle_rad[sel]))
+            assert ax.get_title().startswith(f"{t.joint} block {c + 1} (")
+    assert [t.joint for t in d.trials] == ["ankle", "knee", "hip"]
 
 
 def test_read_passive_parameters_from_mat(example):

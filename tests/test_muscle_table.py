@@ -168,7 +168,8 @@ def test_groups_from_the_table_for_any_model_and_side(g2392):
 
 
 def test_calibration_groups_follow_the_table(g2392):
-    from musclemetab.calibration.passive import default_tendon_stiffness, parameter_groups
+    from musclemetab.calibration.problem import parameter_groups
+    from musclemetab.calibration.trials import default_tendon_stiffness
 
     names = ["glut_med1_l", "soleus_l", "glut_med2_l", "med_gas_l", "tib_ant_l", "pect_l"]
     assert parameter_groups(names) == [("glut_med1_l", "glut_med2_l"), ("soleus_l",), ("med_gas_l",),

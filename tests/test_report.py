@@ -473,14 +473,15 @@ def test_save_figure(tmp_path):
 
 # ------------------------------------------------------------------------------- report
 def test_write_report(study, tmp_path):
-    from musclemetab.report.html import _draw_figure, read_study_folder
+    from musclemetab.report.draw import draw_figure
+    from musclemetab.report.folder import read_study_folder
 
     out = write_report(study, workers=2)  # two worker processes draw the figures
     assert out == study / "report.html"
     # each file is the one drawn in this process
     folder = read_study_folder(study)
     for name in ("excitations_fiber_lengths", "group_shares", "phase_pies"):
-        alone = _draw_figure(folder, tmp_path, ("png",), name)
+        alone = draw_figure(folder, tmp_path, ("png",), name)
         assert Path(alone.paths["png"]).read_bytes() == (study / "figures" / f"{name}.png").read_bytes(), name
     text = out.read_text(encoding="utf-8")
     p = _parse(text)
@@ -627,7 +628,7 @@ def test_report_when_every_unit_failed(tmp_path):
 
 
 def test_report_is_rebuilt_only_when_its_inputs_change(tmp_path):
-    from musclemetab.report.html import generate_report, report_key
+    from musclemetab.report.build import generate_report, report_key
 
     copy = make_study(tmp_path / "copy", solutions=False, trials={"normal": 1.25})  # fewer figures to draw
     out, first = generate_report(copy)
@@ -748,7 +749,8 @@ def test_palette_is_okabe_ito_and_distinct():
 
 
 def test_solver_runs_table_lists_every_unit(tmp_path):
-    from musclemetab.report.html import read_study_folder, solver_runs
+    from musclemetab.report.folder import read_study_folder
+    from musclemetab.report.page import render_page, solver_runs
 
     root = make_study(tmp_path / "runs", measured=False, trials={"normal": 1.25},
                       failed={("s2", "normal", "effort-gen")})
@@ -760,16 +762,16 @@ def test_solver_runs_table_lists_every_unit(tmp_path):
             continue
         assert (side, status, iterations) == ("right", "Solve_Succeeded", str(ITERATIONS[workflow]))
         assert (time_s, violation, residual) == ("1.25", "3.0e-07", "2.0e-06")
-    from musclemetab.report.html import _runs_section
-
-    runs = _runs_section(read_study_folder(root))
-    assert runs.startswith('<details id="solver-runs">') and runs.endswith("</details>")
+    page = render_page(read_study_folder(root), [])  # the page without figures
+    start = page.index('<details id="solver-runs">')
+    runs = page[start:page.index("</details>", start) + len("</details>")]
+    assert _parse(runs).tables == 1
     assert runs.count("Solve_Succeeded") == len(SUBJECTS) * len(WORKFLOWS) - 1
     assert "Maximum_Iterations_Exceeded" in runs
 
 
 def test_report_key_follows_the_study_file(tmp_path):
-    from musclemetab.report.html import generate_report, report_key
+    from musclemetab.report.build import generate_report, report_key
 
     root = tmp_path / "toml"  # a study whose units all failed: the page alone, drawn quickly
     root.mkdir()
@@ -791,12 +793,12 @@ def test_report_key_follows_the_study_file(tmp_path):
 
 
 def test_workers_option(study, tmp_path):
-    from musclemetab.report.html import generate_report
+    from musclemetab.report.build import generate_report
 
     with pytest.raises(OptionError, match="workers"):
         generate_report(study, tmp_path / "w0" / "report.html", workers=0)
     # the default: the cores this process may use, at most one per figure, never the load
-    from musclemetab.report.html import default_workers
+    from musclemetab.report.draw import default_workers
 
     cores = len(os.sched_getaffinity(0))
     assert default_workers() == cores and default_workers(1) == 1 and default_workers(100) == cores
@@ -804,28 +806,30 @@ def test_workers_option(study, tmp_path):
 
 def test_a_drawing_process_that_dies_leaves_no_figure_out(study, tmp_path, monkeypatch):
     """The copy takes the first (largest) figure and dies: the report's process draws it."""
-    from musclemetab.report import html
+    from musclemetab.report import draw
+    from musclemetab.report.folder import read_study_folder
 
-    def dies(conn, study, fig_dir, formats, order, builders, counter):
+    def dies(conn, study, fig_dir, formats, order, plans, counter):
         with counter.get_lock():
             counter.value += 1  # claims order[0]
         os._exit(3)
 
-    monkeypatch.setattr(html, "_child_share", dies)
-    folder = html.read_study_folder(study)
-    entries = html.make_figures(folder, tmp_path / "figs", workers=2)
+    monkeypatch.setattr(draw, "_child_share", dies)
+    folder = read_study_folder(study)
+    entries = draw.make_figures(folder, tmp_path / "figs", workers=2)
     assert [e.name for e in entries] == list(FIGURE_NAMES)
     for e in entries:
         assert e.paths is not None and Path(e.paths["png"]).is_file(), e.name
     # the same files as drawn one after the other
     for name in ("excitations_fiber_lengths", "phase_pies"):
-        alone = html._draw_figure(folder, tmp_path / "alone", ("png",), name)
+        alone = draw.draw_figure(folder, tmp_path / "alone", ("png",), name)
         assert Path(alone.paths["png"]).read_bytes() == (tmp_path / "figs" / f"{name}.png").read_bytes()
 
 
 def test_measured_emg_over_the_excitations(tmp_path):
     from musclemetab.io import write_storage
-    from musclemetab.report.html import _measured_emg, read_study_folder
+    from musclemetab.report.folder import read_study_folder
+    from musclemetab.report.plan import measured_emg
 
     root = make_study(tmp_path / "emg", trials={"normal": 1.25}, measured=False)
     # a measured envelope: two channels for the soleus (averaged), one for the tibialis
@@ -845,7 +849,7 @@ def test_measured_emg_over_the_excitations(tmp_path):
     sols = {w: Solution.load(folder / w) for w in WORKFLOWS}
     cycles = {w: CYCLE for w in WORKFLOWS}
     rows = study.ok[(study.ok.subject == "s1") & (study.ok.trial == "normal")]
-    emg, label, text = _measured_emg(study, "s1", "normal", sols, cycles, rows)
+    emg, label, text = measured_emg(study, "s1", "normal", sols, cycles, rows)
     assert set(emg) == {"soleus_r", "tibant_r"} and "peak" in label and "effort-ten" in text
     sol = sols["effort-ten"]
     keep = (sol.time_s >= CYCLE[0] - 1e-9) & (sol.time_s <= CYCLE[2] + 1e-9)
@@ -861,7 +865,7 @@ def test_measured_emg_over_the_excitations(tmp_path):
     unit.mkdir()
     (unit / "summary.json").write_text(json.dumps({"emg_tracking": {"soleus_r": {"channels": ["SOL2"], "scale": 0.8}}}))
     rows = pd.concat([rows, rows.iloc[[0]].assign(workflow="emg-ten", unit_dir="units/s1/normal/emg-ten")])
-    emg, label, _ = _measured_emg(study, "s1", "normal", sols, cycles, rows)
+    emg, label, _ = measured_emg(study, "s1", "normal", sols, cycles, rows)
     assert set(emg) == {"soleus_r"} and "EMG-TEN" in label
     np.testing.assert_allclose(emg["soleus_r"][1], 0.8 * np.interp(nodes, t, sol_b), rtol=1e-9)
     # drawn in the figure: a dashed grey line over the soleus' excitation
@@ -869,7 +873,7 @@ def test_measured_emg_over_the_excitations(tmp_path):
     line = next(ln for ln in fig.axes[0].get_lines() if ln.get_gid() == "emg")
     np.testing.assert_allclose(line.get_ydata(), emg["soleus_r"][1])
     # no EMG recorded for a trial: nothing drawn, the caption says so
-    emg, _, text = _measured_emg(study, "s2", "normal", sols, cycles, rows)
+    emg, _, text = measured_emg(study, "s2", "normal", sols, cycles, rows)
     assert emg == {} and "No measured EMG" in text
 
 
@@ -877,11 +881,12 @@ def test_figure2_from_the_cache(study, tmp_path, monkeypatch):
     import hashlib
 
     from musclemetab.metabolics import figure2 as figure2_module
-    from musclemetab.report import html
+    from musclemetab.report import draw
+    from musclemetab.report.folder import read_study_folder
 
-    folder = html.read_study_folder(study)
-    cache = html._figure_cache("figure2_soleus", ("png",))["png"]
-    first = html._draw_figure(folder, tmp_path / "a", ("png",), "figure2_soleus")  # drawn, or cached by a test
+    folder = read_study_folder(study)
+    cache = draw.figure_cache("figure2_soleus")["png"]
+    first = draw.draw_figure(folder, tmp_path / "a", ("png",), "figure2_soleus")  # drawn, or cached by a test
     drawn = Path(first.paths["png"]).read_bytes()
     assert drawn.startswith(b"\x89PNG") and cache.read_bytes() == drawn  # kept after the first drawing
     # the SHA-256 of the content beside it, worked out here
@@ -899,7 +904,7 @@ def test_figure2_from_the_cache(study, tmp_path, monkeypatch):
         return fig
 
     monkeypatch.setattr(figure2_module, "figure2", counting)
-    again = html._draw_figure(folder, tmp_path / "b", ("png", "svg"), "figure2_soleus")
+    again = draw.draw_figure(folder, tmp_path / "b", ("png", "svg"), "figure2_soleus")
     assert calls == [] and Path(again.paths["png"]).read_bytes() == drawn and again.caption == first.caption
     assert set(again.paths) == {"png"}  # PNG only, also when the report writes SVG
     # a truncated or altered cache file does not match its checksum: drawn again, and the copy, the
@@ -907,16 +912,16 @@ def test_figure2_from_the_cache(study, tmp_path, monkeypatch):
     for damaged in (drawn[: len(drawn) // 2], drawn[:-1] + bytes([drawn[-1] ^ 1])):
         cache.write_bytes(damaged)
         calls.clear()
-        redrawn = Path(html._draw_figure(folder, tmp_path / "c", ("png",), "figure2_soleus").paths["png"]).read_bytes()
+        redrawn = Path(draw.draw_figure(folder, tmp_path / "c", ("png",), "figure2_soleus").paths["png"]).read_bytes()
         assert calls == [1] and redrawn.startswith(b"\x89PNG") and redrawn not in (drawn, damaged)
         assert cache.read_bytes() == redrawn
         assert checksum.read_text().strip() == hashlib.sha256(redrawn).hexdigest()
     # a cache file without its checksum (an earlier version's) is not trusted either
     checksum.unlink()
     calls.clear()
-    html._draw_figure(folder, tmp_path / "d", ("png",), "figure2_soleus")
+    draw.draw_figure(folder, tmp_path / "d", ("png",), "figure2_soleus")
     assert calls == [1] and checksum.is_file()
-    assert html._figure_cache("phase_shares", ("png",)) is None
+    assert draw.figure_cache("phase_shares") is None
 
 
 def test_package_figures_drawn_ahead_into_the_cache(tmp_path, monkeypatch):
@@ -926,16 +931,69 @@ def test_package_figures_drawn_ahead_into_the_cache(tmp_path, monkeypatch):
     import hashlib
 
     from musclemetab.metabolics import figure2 as figure2_module
-    from musclemetab.report import html
+    from musclemetab.report import draw
 
     monkeypatch.setenv("MUSCLEMETAB_CACHE", str(tmp_path / "cache"))
-    cache = html._figure_cache("figure2_soleus", ("png",))["png"]
+    cache = draw.figure_cache("figure2_soleus")["png"]
     assert not cache.exists()
-    html.draw_package_figures()
+    draw.draw_package_figures()
     data = cache.read_bytes()
     assert data.startswith(b"\x89PNG")
     assert cache.with_name(cache.name + ".sha256").read_text().strip() == hashlib.sha256(data).hexdigest()
     calls = []
     monkeypatch.setattr(figure2_module, "figure2", lambda *a, **k: calls.append(1))
-    html.draw_package_figures()
+    draw.draw_package_figures()
     assert calls == [] and cache.read_bytes() == data
+
+
+def test_figures_handed_out_largest_first_by_their_measured_drawing_times(tmp_path, monkeypatch):
+    """Each drawing's processor time is kept in the cache; the next report hands the figures
+    out by it, largest first, a figure never timed first of all."""
+    import json
+    import time
+
+    from matplotlib.figure import Figure
+
+    from musclemetab.metabolics import figure2 as figure2_module
+    from musclemetab.report import draw
+    from musclemetab.report.folder import read_study_folder
+
+    def small(*args, **kwargs):  # a stand-in for the 36-panel plot: only its time is read here
+        fig = Figure(figsize=(2, 1))
+        fig.add_subplot().plot([0, 1], [1, 0])
+        return fig
+
+    monkeypatch.setattr(figure2_module, "figure2", small)
+    monkeypatch.setenv("MUSCLEMETAB_CACHE", str(tmp_path / "cache"))
+    folder = read_study_folder(make_study(tmp_path / "s", solutions=False, measured=False, trials={"normal": 1.25}))
+    assert draw.draw_costs() == {}
+    t0 = time.perf_counter()
+    entries = draw.make_figures(folder, tmp_path / "a", workers=1)
+    wall = time.perf_counter() - t0
+    # every figure has a drawing function here; some end in a note (no solution, one speed): timed too
+    timed = {e.name: e.draw_s for e in entries}
+    assert entries[FIGURE_NAMES.index("excitations_fiber_lengths")].paths is None
+    costs = draw.draw_costs()
+    assert set(costs) == set(FIGURE_NAMES)  # the package's figure under its name: not in the cache yet
+    for name, seconds in timed.items():
+        assert 0 < seconds < wall and costs[name] == pytest.approx(seconds, abs=1e-4), name
+    # the package's figure is in the cache now: its copy is timed apart from its drawing
+    draw.make_figures(folder, tmp_path / "b", workers=1)
+    assert set(draw.draw_costs()) == set(FIGURE_NAMES) | {"figure2_soleus (cached)"}
+
+    # times chosen here: the order a drawing process receives is theirs, largest first
+    chosen = {n: float(i) for i, n in enumerate(FIGURE_NAMES) if n != "group_shares"}  # group_shares: never timed
+    chosen["figure2_soleus (cached)"] = chosen.pop("figure2_soleus")
+    (tmp_path / "cache" / "figures" / "draw_costs.json").write_text(json.dumps(chosen))
+    seen = tmp_path / "order.json"
+
+    def records_order(conn, study, fig_dir, formats, order, plans, counter):
+        seen.write_text(json.dumps(list(order)))
+        os._exit(0)  # draws nothing: the report's process draws every figure
+
+    monkeypatch.setattr(draw, "_child_share", records_order)
+    entries = draw.make_figures(folder, tmp_path / "c", workers=2)
+    assert [e.paths is None for e in entries] == [timed_entry.paths is None for timed_entry in
+                                                  draw.make_figures(folder, tmp_path / "d", workers=1)]
+    by_time = {n.removesuffix(" (cached)"): t for n, t in chosen.items()}
+    assert json.loads(seen.read_text()) == ["group_shares"] + sorted(by_time, key=lambda n: -by_time[n])

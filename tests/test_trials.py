@@ -65,7 +65,7 @@ def test_metabolics_trims_to_the_recorded_gait_cycle(tmp_path):
 
 @pytest.mark.opensim
 def test_calibration_coordinates_and_trials_found_by_content(example, gait2392, tmp_path):
-    from musclemetab.calibration.passive import CALIBRATION_JOINTS, calibration_dofs, trial_files
+    from musclemetab.calibration.trials import CALIBRATION_JOINTS, calibration_dofs, trial_files
     from musclemetab.errors import InputFileError
 
     # the joint tree gives the study's coordinates for its model, and gait2392's left ones
@@ -260,7 +260,7 @@ def test_report_adds_the_legs_time_series_on_the_cycle():
     leg's cycle percentages, is added (worked by hand: linear between 0 and 100 %)."""
     import pandas as pd
 
-    from musclemetab.report.html import _add_leg_timeseries
+    from musclemetab.report.folder import add_leg_timeseries as _add_leg_timeseries
 
     right = pd.DataFrame({"time_s": [0.6, 1.2, 1.8], "cycle_pct": [0.0, 50.0, 100.0], "model": "UM10",
                           "series": "whole_body", "value_W": [100.0, 200.0, 100.0]})

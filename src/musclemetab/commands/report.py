@@ -4,7 +4,7 @@
 
 Writes ``DIR/figures/<name>.png`` (and ``.svg`` with ``--svg``) for every figure the data support, and
 ``DIR/report.html`` (or ``FILE``, with its figures in ``figures/`` beside it): one
-self-contained page (see :mod:`musclemetab.report.html`).
+self-contained page (see :mod:`musclemetab.report.build`).
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ def add_parser(subparsers) -> None:
 
 def run(args) -> int:
     """Run ``musclemetab report`` (``args`` from :func:`add_parser`)."""
-    from ..report.html import FIGURES_FOLDER, generate_report
+    from ..report.build import FIGURES_FOLDER, generate_report
 
     formats = ("png", "svg") if args.svg else ("png",)
     out, entries = generate_report(args.study_dir, args.out, formats=formats, force=args.force,

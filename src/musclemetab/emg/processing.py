@@ -15,14 +15,14 @@ Raw EMG (one column per channel, volts or any unit, time-indexed DataFrame as re
 
 **Filter order convention.** "4th-order zero-lag" is read as the *effective* order after
 forward-backward filtering (the usual convention in biomechanics): a 2nd-order Butterworth
-is designed and run forward and backward (:func:`musclemetab._numerics.filtfilt`), so the amplitude
+is designed and run forward and backward (``scipy.signal.filtfilt``), so the amplitude
 response is the square of the design's,
 
     |H_ff(f)| = |H(f)|^2 = 1 / (1 + (W(f)/W(fc))^(2 n)),   W(f) = tan(pi f / fs),
 
 ``n`` = design order = effective order / 2 (digital Butterworth by bilinear transform),
 giving -6 dB (gain 0.5) at the cut-off and no phase lag. For the band-pass, ``n`` is the
-order of each edge (:func:`musclemetab._numerics.butterworth` with two cut-offs, a polynomial of
+order of each edge (``scipy.signal.butter(n, [f1, f2], 'bandpass')``, a polynomial of
 order ``2 n``) and ``W(f)/W(fc)`` becomes ``(W^2 - W1 W2) / (W (W2 - W1))``.
 ``order_means='design'`` selects the other reading (a 4th-order design run
 forward-backward, effective 8th order).
@@ -149,7 +149,7 @@ def butterworth(cutoff_hz, fs_hz: float, btype: str, order: int = FILTER_ORDER, 
     Raises :class:`DataMismatchError` when a cut-off is not below the Nyquist frequency
     ``fs/2`` and :class:`OptionError` for impossible cut-offs or orders.
     """
-    from .._numerics import butterworth as design
+    from scipy.signal import butter
 
     n = _design_order(order, order_means)
     fc = np.atleast_1d(np.asarray(cutoff_hz, dtype=float))
@@ -163,20 +163,20 @@ def butterworth(cutoff_hz, fs_hz: float, btype: str, order: int = FILTER_ORDER, 
             "EMG at a higher rate, or lower the cut-off"
         )
     wn = fc / nyq
-    return design(n, wn if wn.size == 2 else float(wn[0]), btype)
+    return butter(n, wn if wn.size == 2 else float(wn[0]), btype=btype)
 
 
 def zero_lag_filter(x: np.ndarray, b, a, what: str = "signal") -> np.ndarray:
     """Forward-backward filtering along axis 0 with MATLAB-style end padding."""
-    from .._numerics import filter_padlen, filtfilt
+    from scipy.signal import filtfilt
 
     x = np.asarray(x, dtype=float)
-    padlen = filter_padlen(b, a)
+    padlen = 3 * (max(len(a), len(b)) - 1)
     if x.shape[0] <= padlen:
         raise DataMismatchError(
             f"{what} has {x.shape[0]} samples, too short for the zero-lag filter (needs more than {padlen})"
         )
-    return filtfilt(b, a, x, padlen=padlen)
+    return filtfilt(b, a, x, axis=0, padtype="odd", padlen=padlen)
 
 
 def zero_lag_gain(f_hz, fs_hz: float, cutoff_hz, btype: str, order: int = FILTER_ORDER,

@@ -45,7 +45,7 @@ def model_states_along_motion(model_path: str, ik_time, columns: dict, in_degree
     ``defaulted_coordinates`` (unlocked, independent coordinates absent from the motion)
     and ``motion_types`` (``{coordinate: rotational|translational|coupled}``).
     """
-    from .._numerics import NotAKnotSpline
+    from scipy.interpolate import CubicSpline
 
     m = load_model(model_path)
     model, state = m.model, m.state
@@ -72,7 +72,7 @@ def model_states_along_motion(model_path: str, ik_time, columns: dict, in_degree
             values[f"{path}/value"] = np.full(times.size, c.getDefaultValue())
             values[f"{path}/speed"] = np.zeros(times.size)
             continue
-        spline = NotAKnotSpline(ik_time, np.array([f[n] for f in frames]))
+        spline = CubicSpline(ik_time, np.array([f[n] for f in frames]), bc_type="not-a-knot")
         values[f"{path}/value"] = spline(times)
         values[f"{path}/speed"] = spline(times, 1)
     muscle_states = {}

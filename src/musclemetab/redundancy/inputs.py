@@ -34,8 +34,8 @@ if TYPE_CHECKING:
 
 from ..errors import DataMismatchError, InputFileError, MissingColumnError
 
-# The filter and the splines are NumPy code (musclemetab._numerics) and the files are read
-# into NumPy arrays (musclemetab.io.read_table): the solve path imports neither SciPy nor pandas.
+# SciPy (filter, splines) is imported inside the functions that use it, so that importing the
+# solver stays cheap; the files are read into NumPy arrays (musclemetab.io.read_table).
 
 __all__ = [
     "DEFAULT_DOFS",
@@ -155,14 +155,13 @@ def lowpass_filtfilt(
     backward, so the magnitude response is that of a ``2*order`` filter. MATLAB pads both
     ends with an odd reflection of ``3 (max(len(a), len(b)) - 1)`` samples (18 for order 6)
     and starts from steady-state initial conditions; SciPy's ``filtfilt`` does the same with
-    ``padtype='odd'`` and that ``padlen`` (SciPy's default would be 21). Design and
-    filtering are :func:`musclemetab._numerics.butterworth` and :func:`~musclemetab._numerics.filtfilt`.
+    ``padtype='odd'`` and that ``padlen`` (SciPy's default would be 21).
 
     Raises :class:`DataMismatchError` if the signal has no more samples than the padding or
     is sampled at no more than twice the cut-off; its message starts with ``what`` (the file
     or signal, as far as the caller knows it).
     """
-    from .._numerics import butterworth, filter_padlen, filtfilt
+    from scipy.signal import butter, filtfilt
 
     x = np.asarray(x, dtype=float)
     if not 0.0 < cutoff_hz < sample_rate_hz / 2.0:
@@ -170,14 +169,14 @@ def lowpass_filtfilt(
             f"{what} is sampled at {sample_rate_hz:g} Hz; the {cutoff_hz:g} Hz low-pass filter needs a "
             f"sampling rate above {2 * cutoff_hz:g} Hz: resample the file"
         )
-    b, a = butterworth(order, cutoff_hz / (sample_rate_hz / 2.0))
-    padlen = filter_padlen(b, a)
+    b, a = butter(order, cutoff_hz / (sample_rate_hz / 2.0))
+    padlen = 3 * (max(len(a), len(b)) - 1)
     if x.shape[0] <= padlen:
         raise DataMismatchError(
             f"{what} is too short: {x.shape[0]} samples, and the {order}th-order "
             f"{cutoff_hz:g} Hz zero-phase filter needs more than {padlen}; use a longer trial"
         )
-    return filtfilt(b, a, x, padlen=padlen)
+    return filtfilt(b, a, x, axis=0, padtype="odd", padlen=padlen)
 
 
 def mesh_for_window(t0: float, tf: float, mesh_frequency_hz: float = MESH_FREQUENCY_HZ) -> np.ndarray:
@@ -436,7 +435,7 @@ def trial_inputs(
     filter_inputs
         The study filters everything (6 Hz, order 6); ``False`` skips filtering.
     """
-    from .._numerics import NotAKnotSpline
+    from scipy.interpolate import CubicSpline
 
     sources = dict(sources or {})
     g_time = np.asarray(geometry.time, dtype=float)
@@ -491,9 +490,9 @@ def trial_inputs(
     id_frames = np.column_stack([np.interp(ik_time_s, id_time_s, id_f[:, j]) for j in range(D)])
 
     mesh = mesh_for_window(float(ik_time_s[0]), float(ik_time_s[-1]), mesh_frequency_hz)
-    lmt_spline = NotAKnotSpline(ik_time_s, lmt_f)
-    r_spline = NotAKnotSpline(ik_time_s, r_f.reshape(F, D * M))
-    id_spline = NotAKnotSpline(ik_time_s, id_frames)
+    lmt_spline = CubicSpline(ik_time_s, lmt_f, axis=0, bc_type="not-a-knot")
+    r_spline = CubicSpline(ik_time_s, r_f.reshape(F, D * M), axis=0, bc_type="not-a-knot")
+    id_spline = CubicSpline(ik_time_s, id_frames, axis=0, bc_type="not-a-knot")
     return TrialInputs(
         muscles=muscles,
         dofs=dofs,

@@ -12,7 +12,8 @@ The reserve ``ar`` (N m, ``Topt = 1``) is free in practice (bounds +-1.5e6 never
 
 Eliminating ``ar = b - A a`` turns each frame into the bounded linear least-squares problem
 ``min ||a||^2 + 1000 ||b - A a||^2, 0 <= a <= 1``, a strictly convex QP whose unique optimum
-is computed exactly by an active-set method (:func:`musclemetab._numerics.box_least_squares`);
+is computed exactly with the bounded-variable least-squares method (Stark & Parker 1995,
+``scipy.optimize.lsq_linear(method='bvls')`` on the stacked matrix ``[I; sqrt(1000) A]``);
 the study solved the same QP with IPOPT (tolerance 1e-6).
 
 From the static solution the OCP guess is built on the mesh: ``a``, ``ar`` and the normalised
@@ -90,7 +91,7 @@ def static_optimisation(
     reserve_weight: float = RESERVE_WEIGHT_SO,
 ) -> StaticOptimisation:
     """Solve the rigid-tendon static optimisation at every IK frame (exactly)."""
-    from .._numerics import box_least_squares
+    from scipy.optimize import lsq_linear
 
     F = inputs.frame_time_s.size
     M, D = len(inputs.muscles), len(inputs.dofs)
@@ -100,11 +101,15 @@ def static_optimisation(
     act = np.zeros((F, M))
     res = np.zeros((F, D))
     total = 0.0
+    sw = np.sqrt(reserve_weight)
+    eye = np.eye(M)
     for k in range(F):
         r = inputs.moment_arms_frames_m[k]  # (D, M)
         A = r * f_act[k]
         b = inputs.moments_frames_Nm[k] - r @ f_pas[k]
-        a = box_least_squares(A, b, reserve_weight, 0.0, 1.0)
+        sol = lsq_linear(np.vstack([eye, sw * A]), np.concatenate([np.zeros(M), sw * b]),
+                         bounds=(0.0, 1.0), method="bvls", tol=1e-12)
+        a = np.clip(sol.x, 0.0, 1.0)
         act[k] = a
         res[k] = b - A @ a
         total += float(a @ a + reserve_weight * res[k] @ res[k])
@@ -118,7 +123,7 @@ def initial_guess(inputs: TrialInputs, params: MuscleTendonParameters, so: Stati
     As in the study, the reserve guess is the static-optimisation reserve in N m, not divided
     by the optimal reserve torque (only a starting point; IPOPT moves it into its bounds).
     """
-    from .._numerics import NotAKnotSpline
+    from scipy.interpolate import CubicSpline
 
     t = inputs.mesh_time_s
     N = inputs.n_intervals
@@ -133,7 +138,7 @@ def initial_guess(inputs: TrialInputs, params: MuscleTendonParameters, so: Stati
     lm_proj = inputs.lmt_m - params.tendon_slack_length_m * lt_norm
     lm_m = np.sqrt(params.width_m**2 + lm_proj**2)
     lm_norm = lm_m / params.optimal_fiber_length_m
-    vm = NotAKnotSpline(t, lm_norm)(t[:N], 1)
+    vm = CubicSpline(t, lm_norm, axis=0, bc_type="not-a-knot")(t[:N], 1)
     lm_proj_guess = np.sqrt(np.maximum(lm_m**2 - params.width_m**2, 0.0))
     return InitialGuess(
         activation=a,

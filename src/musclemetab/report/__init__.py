@@ -1,9 +1,16 @@
 """Figures and the HTML report of a study folder.
 
-:mod:`.figures` holds the figure functions (pure: tables and solutions in, a matplotlib
-figure out) and :func:`save_figure`; :mod:`.html` reads a study folder and writes
-``figures/`` and ``report.html`` (:func:`write_report`); ``musclemetab report`` is
-:mod:`musclemetab.commands.report`.
+One module per job, each using only those before it:
+
+* :mod:`.figures`: the figure functions (pure: tables and solutions in, a matplotlib figure
+  out) and :func:`save_figure`;
+* :mod:`.folder`: reading a study folder (:func:`read_study_folder`), the one reader of its layout;
+* :mod:`.plan`: which figures, in what order, from what data (:data:`FIGURE_NAMES`);
+* :mod:`.draw`: drawing them side by side in forked processes, largest first;
+* :mod:`.page`: the HTML page (the template ``templates/report.html``);
+* :mod:`.build`: :func:`write_report`, and the content key deciding whether to rebuild;
+``musclemetab report`` is :mod:`musclemetab.commands.report`.
+
 OpenSim is never imported here.
 """
 
@@ -20,7 +27,9 @@ from .figures import (
     save_figure,
     whole_body_over_cycle,
 )
-from .html import FIGURE_NAMES, read_study_folder, write_report
+from .build import write_report
+from .folder import read_study_folder
+from .plan import FIGURE_NAMES
 
 
 def __getattr__(name: str):

@@ -74,7 +74,7 @@ def run_demo(out: str | os.PathLike = "musclemetab-demo", *, workers: int | None
     study = demo_study(out, speeds=speeds)
     figures = None
     if report:  # the plot that depends only on the package, drawn while the units run (once per machine)
-        from ..report.html import draw_package_figures
+        from ..report.draw import draw_package_figures
 
         figures = threading.Thread(target=_quietly, args=(draw_package_figures,), daemon=True)
         figures.start()

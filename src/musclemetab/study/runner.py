@@ -52,7 +52,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping
 
-from .. import __version__
 from ..errors import OptionError
 from ..io.atomic import atomic_path, atomic_write_text, check_output_folder
 from ..processes import THREAD_VARIABLES, spawn_pool  # noqa: F401  (THREAD_VARIABLES: public here before)
@@ -74,14 +73,17 @@ from .units import (
 __all__ = ["run_study", "StudyRun", "collect_results", "software_versions", "study_lock", "check_scheduler_address",
            "RESULTS_CSV", "RESULTS_PARQUET", "LOCK_FILE"]
 
-RESULTS_CSV = "results.csv"
-RESULTS_PARQUET = "results.parquet"
-FAILURES_CSV = "failures.csv"
-PER_MUSCLE_PARQUET = "per_muscle.parquet"
-GROUP_KEY_CSV = "muscle_groups.csv"
-DATA_DICTIONARY_CSV = "data_dictionary.csv"
-STUDY_JSON = "study.json"
-LOCK_FILE = ".musclemetab.lock"
+from ..study_layout import (  # noqa: E402,F401  (the names of the study folder's files, defined once)
+    DATA_DICTIONARY_CSV,
+    FAILURES_CSV,
+    GROUP_KEY_CSV,
+    LOCK_FILE,
+    PER_MUSCLE_PARQUET,
+    RESULTS_CSV,
+    RESULTS_PARQUET,
+    STUDY_JSON,
+    software_versions,
+)
 #: Seconds to wait for a Dask scheduler that has a valid address.
 SCHEDULER_TIMEOUT_S = 5
 
@@ -130,19 +132,6 @@ class StudyRun:
         return (f"{self.n_units} unit{'s' if self.n_units != 1 else ''}: {', '.join(parts)}{tail}; "
                 f"{0 if self.results is None else len(self.results)} result rows "
                 f"in {self.wall_time_s:.1f} s -> {self.output}")
-
-
-def software_versions() -> dict[str, str]:
-    """Versions of the package and of the libraries its numbers depend on (no imports)."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    out = {"musclemetab": __version__, "python": sys.version.split()[0]}
-    for name in ("opensim", "casadi", "numpy", "scipy", "pandas", "matplotlib", "dask", "distributed"):
-        try:
-            out[name] = version(name)
-        except PackageNotFoundError:
-            pass
-    return out
 
 
 # ---------------------------------------------------------------------------------------

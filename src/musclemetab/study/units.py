@@ -68,12 +68,11 @@ __all__ = [
     "prepare_leg_folder",
 ]
 
-UNIT_FILE = "unit.json"
+from ..study_layout import TIMESERIES_FILE, UNIT_FILE, UNITS_FOLDER  # noqa: E402  (defined once)
 #: Marker file in every folder the package creates for a unit (and may therefore delete).
 MARKER_FILE = ".musclemetab-unit"
 ESTIMATION_FOLDER = "_emg-ten"
 ANALYSIS_FILE = "analysis.csv"
-TIMESERIES_FILE = "timeseries.csv"
 
 
 @dataclass(frozen=True)
@@ -93,8 +92,8 @@ class Unit:
     @property
     def folder(self) -> Path:
         if self.trial is None:
-            return Path("units") / self.subject / (ESTIMATION_FOLDER if self.workflow == EMG_TEN else ESTIMATE_FOLDER)
-        folder = Path("units") / self.subject / self.trial / self.workflow
+            return Path(UNITS_FOLDER) / self.subject / (ESTIMATION_FOLDER if self.workflow == EMG_TEN else ESTIMATE_FOLDER)
+        folder = Path(UNITS_FOLDER) / self.subject / self.trial / self.workflow
         return folder / self.side if self.side else folder
 
     @property

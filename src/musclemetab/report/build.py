@@ -1,0 +1,131 @@
+"""Writing the report of a study folder, and its rebuild key.
+
+:func:`write_report` reads the folder (:mod:`.folder`), draws the figures the data support
+(:mod:`.plan`, :mod:`.draw`) while it makes the page's tables, and writes the page
+(:mod:`.page`) and ``figures/report.json``. The report is rebuilt only when its inputs
+changed: :func:`report_key` is the SHA-256 of everything the report is drawn from, recorded in
+the page and in ``figures/report.json``; the same key, the page and every figure file present
+mean nothing to do. Every file is written atomically.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+from ..errors import MusclemetabError
+from .draw import FigureEntry, make_figures
+from .folder import input_files, read_study_folder
+from .page import page_tables, render_page
+
+__all__ = ["write_report", "generate_report", "report_key", "REPORT_FILE", "FIGURES_FOLDER", "REPORT_RECORD"]
+
+REPORT_FILE = "report.html"
+FIGURES_FOLDER = "figures"
+#: The record of the last report written beside its figures: key, page and figure entries.
+REPORT_RECORD = "report.json"
+
+
+def report_key(study_dir: str | os.PathLike, formats: Sequence[str] = ("png",)) -> str:
+    """SHA-256 of everything the report is drawn from.
+
+    The files of :func:`~.folder.input_files` (the study's tables, every unit's ``unit.json``,
+    which records the hash of each of the unit's files, ``summary.json`` among them, and the
+    study file ``study.json`` names as its source), the figure formats, the package version
+    and the report's own source (its modules and its page template).
+    """
+    import hashlib
+
+    from .. import __version__
+    from ..io.atomic import file_sha256
+
+    path = Path(study_dir)
+    h = hashlib.sha256()
+    h.update(f"musclemetab {__version__}; formats {','.join(formats)}\n".encode())
+    here = Path(__file__).parent
+    for src in sorted(here.glob("*.py")) + sorted((here / "templates").glob("*")):
+        h.update(src.name.encode() + b"\0" + src.read_bytes())
+    files, source = input_files(path)
+    for f in files:
+        digest = file_sha256(f) if f.is_file() else "absent"
+        h.update(f"{f.relative_to(path).as_posix()} {digest}\n".encode())
+    if source is not None:  # the study file the settings came from (e.g. study.toml), wherever it is
+        h.update(f"study file {file_sha256(source) if source.is_file() else 'absent'}\n".encode())
+    return h.hexdigest()
+
+
+def _write_record(fig_dir: Path, key: str, page: Path, entries: Sequence[FigureEntry]) -> None:
+    from ..io.atomic import atomic_write_text
+
+    record = {"key": key, "page": page.name, "entries": [
+        {"name": e.name, "title": e.title, "caption": e.caption, "note": e.note,
+         "paths": None if e.paths is None else {k: str(v) for k, v in e.paths.items()}} for e in entries]}
+    atomic_write_text(fig_dir / REPORT_RECORD, json.dumps(record, indent=1) + "\n")
+
+
+def _recorded_entries(out: Path, key: str) -> list[FigureEntry] | None:
+    """The figure entries of the report at ``out`` if it was written from inputs with ``key``
+    and its figure files are all there."""
+    from ..io.jsonfile import read_json_object
+
+    record = out.parent / FIGURES_FOLDER / REPORT_RECORD
+    if not (out.is_file() and record.is_file()):
+        return None
+    try:
+        rec = read_json_object(record, remedy="the report is rebuilt")
+    except MusclemetabError:
+        return None
+    if rec.get("key") != key or rec.get("page") != out.name:
+        return None
+    try:
+        entries = [FigureEntry(e["name"], e["title"], e.get("caption", ""),
+                               None if e.get("paths") is None else {k: Path(v) for k, v in e["paths"].items()},
+                               e.get("note")) for e in rec.get("entries") or []]
+    except (KeyError, TypeError, AttributeError):
+        return None
+    if any(e.paths is not None and not all(p.is_file() for p in e.paths.values()) for e in entries):
+        return None
+    if f'content="{key}"' not in out.read_text(encoding="utf-8", errors="replace"):
+        return None
+    return entries
+
+
+def generate_report(study_dir: str | os.PathLike, out: str | os.PathLike | None = None, *,
+                    formats: Sequence[str] = ("png",), force: bool = False,
+                    workers: int | None = None) -> tuple[Path, list[FigureEntry]]:
+    """:func:`write_report`, also returning the figure entries (files written or notes)."""
+    from ..io.atomic import atomic_write_text
+
+    study = read_study_folder(study_dir)
+    out = Path(out) if out is not None else study.path / REPORT_FILE
+    if out.is_dir():
+        out = out / REPORT_FILE
+    formats = tuple(dict.fromkeys(("png", *formats)))  # the page embeds the PNG
+    key = report_key(study.path, formats)
+    if not force:
+        recorded = _recorded_entries(out, key)
+        if recorded is not None:
+            return out, recorded
+    fig_dir = out.parent / FIGURES_FOLDER
+    tables: dict = {}
+    entries = make_figures(study, fig_dir, formats, workers, meanwhile=lambda: tables.update(page_tables(study)))
+    atomic_write_text(out, render_page(study, entries, figures_rel=FIGURES_FOLDER, key=key, tables=tables))
+    _write_record(fig_dir, key, out, entries)
+    return out, entries
+
+
+def write_report(study_dir: str | os.PathLike, out: str | os.PathLike | None = None, *,
+                 formats: Sequence[str] = ("png",), force: bool = False, workers: int | None = None) -> Path:
+    """Write the figures and the HTML report of a study folder; return the report's path.
+
+    ``out`` is the HTML file (default ``study_dir/report.html``); the figures are written to the
+    folder ``figures`` beside it (PNG; ``formats=("png", "svg")`` adds SVG). Everything is
+    written atomically. The report is rebuilt only when its inputs changed (their content
+    hash, :func:`report_key`, is recorded in the page and in ``figures/report.json``) or
+    when ``force`` is true. ``workers`` processes draw the figures (see
+    :func:`~.draw.make_figures`). Raises :class:`InputFileError` when the folder or its
+    ``results.csv`` is missing.
+    """
+    return generate_report(study_dir, out, formats=formats, force=force, workers=workers)[0]

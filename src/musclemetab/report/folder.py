@@ -1,0 +1,338 @@
+"""Reading a study folder: the one place of the report that knows its layout.
+
+:func:`read_study_folder` reads ``study.json``, ``results.csv`` and ``failures.csv``; the
+:class:`StudyFolder` it returns reads the rest on demand: the unit folders
+(``units/<subject>/<trial>/<workflow>``, one per leg for a subject solved on both sides) with
+their ``unit.json``, ``timeseries.csv`` and ``summary.json``, ``per_muscle.csv``, and what
+``study.json`` records of each subject (body mass, solved side, EMG files and mapping). The
+file names are those of :mod:`musclemetab.study_layout`. :func:`input_files` lists every
+file the report is drawn from (the content key of :mod:`.build` hashes them).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputFileError, MissingColumnError
+from ..redundancy.solution import SUMMARY_FILE
+from ..study_layout import (
+    FAILURES_CSV,
+    PER_MUSCLE_FILE,
+    RESULTS_CSV,
+    STUDY_JSON,
+    TIMESERIES_FILE,
+    UNIT_FILE,
+    UNITS_FOLDER,
+    unit_path,
+)
+
+__all__ = ["StudyFolder", "read_study_folder", "input_files", "add_leg_timeseries", "REQUIRED_COLUMNS"]
+
+#: Columns ``results.csv`` must have; the others are used when present.
+REQUIRED_COLUMNS = ("subject", "trial", "workflow", "model", "status", "mean_W_per_kg")
+_FAILURE_COLUMNS = ["subject", "trial", "workflow", "reason"]
+
+
+@dataclass
+class StudyFolder:
+    """A study folder's contents: settings, the results (all rows) and the failures; the
+    other files are read by the methods."""
+
+    path: Path
+    settings: dict
+    results: object  # pandas.DataFrame
+    failures: object  # pandas.DataFrame: subject, trial, workflow, reason
+    notes: list[str] = field(default_factory=list)
+
+    # ------------------------------------------------------------------ the tables
+    @property
+    def ok(self):
+        """Rows of the results whose status is ``ok``."""
+        r = self.results
+        return r[r["status"].astype(str).str.lower() == "ok"]
+
+    @property
+    def name(self) -> str:
+        return str(self.settings.get("name") or self.path.name)
+
+    def workflows(self) -> list[str]:
+        """The workflows of ``study.json`` in its order, then those only in the results."""
+        from .figures import _ordered_workflows
+
+        listed = [str(w) for w in self.settings.get("workflows") or []]
+        present = _ordered_workflows(self.results["workflow"].astype(str))
+        return listed + [w for w in present if w not in listed] if listed else present
+
+    def models(self) -> list[str]:
+        """The metabolic models of ``study.json`` in its order, then those only in the results."""
+        from .figures import _ordered_models
+
+        listed = self.settings.get("models")
+        present = _ordered_models(self.results["model"].astype(str))
+        if isinstance(listed, (list, tuple)) and listed:
+            listed = [str(m) for m in listed]
+            return listed + [m for m in present if m not in listed]
+        return present
+
+    def subjects(self) -> list[str]:
+        """The subjects of the results, in the order of ``study.json``."""
+        subjects = self.settings.get("subjects")
+        listed = list(subjects) if isinstance(subjects, dict) else []
+        present = _unique(self.results["subject"])
+        return [s for s in listed if s in present] + [s for s in present if s not in listed]
+
+    def preferred_trial(self, ok) -> str:
+        """``preferred_trial`` of ``study.json`` when among the rows ``ok``, else
+        :func:`musclemetab.report.figures.preferred_trial`."""
+        from .figures import preferred_trial
+
+        pt = self.settings.get("preferred_trial")
+        if isinstance(pt, str) and pt in set(ok["trial"].astype(str)):
+            return pt
+        return preferred_trial(ok)
+
+    def read_per_muscle(self):
+        """``per_muscle.csv`` as a table, or ``None`` when the study has none; raises
+        :class:`InputFileError` when it cannot be read."""
+        import pandas as pd
+
+        path = self.path / PER_MUSCLE_FILE
+        if not path.is_file():
+            return None
+        try:
+            return pd.read_csv(path, dtype={"subject": str, "trial": str, "workflow": str, "model": str})
+        except (pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError) as exc:
+            raise InputFileError(f"{PER_MUSCLE_FILE} is not readable ({exc})") from None
+
+    # ------------------------------------------------------------------ study.json
+    def subject_record(self, subject) -> dict:
+        """What ``study.json`` records of a subject (``{}`` when nothing)."""
+        subjects = self.settings.get("subjects")
+        rec = subjects.get(str(subject)) if isinstance(subjects, dict) else None
+        return rec if isinstance(rec, dict) else {}
+
+    def body_mass(self, subject) -> float | None:
+        """The subject's body mass (kg) recorded in ``study.json``, or ``None``."""
+        try:
+            mass = float(self.subject_record(subject).get("body_mass_kg"))
+        except (TypeError, ValueError):
+            return None
+        return mass if np.isfinite(mass) and mass > 0 else None
+
+    def solves_both_legs(self, subject) -> bool:
+        """Whether ``study.json`` records ``side = "both"`` for the subject."""
+        return self.subject_record(subject).get("side") == "both"
+
+    def emg_file(self, subject, trial) -> Path | None:
+        """The trial's EMG file recorded in ``study.json`` (``emg_files``), or ``None``."""
+        path = (self.subject_record(subject).get("emg_files") or {}).get(trial)
+        return self.resolve(path) if path else None
+
+    def emg_mapping(self, subject):
+        """The subject's EMG mapping recorded in ``study.json`` (a name or a file; ``"default"``)."""
+        return self.subject_record(subject).get("emg_mapping") or "default"
+
+    def resolve(self, path) -> Path:
+        """A path recorded in study.json: as given when absolute, else relative to the study folder."""
+        p = Path(str(path))
+        return p if p.is_absolute() else self.path / p
+
+    # ------------------------------------------------------------------ unit folders
+    def leg_folders(self, row) -> dict[str, Path]:
+        """The row's unit folders by leg: ``{"": folder}`` for one leg solved (and doubled),
+        ``{"r": ..., "l": ...}`` for a row adding both legs (``unit_dir`` holds the legs' folders)."""
+        rel = row.get("unit_dir") if hasattr(row, "get") else None
+        if isinstance(rel, str) and rel.strip():
+            folder = self.path / rel
+        else:
+            folder = self.path / unit_path(row["subject"], row["trial"], row["workflow"])
+        legs = {s: folder / s for s in ("r", "l") if (folder / s / UNIT_FILE).is_file()}
+        return legs if legs and not (folder / UNIT_FILE).is_file() else {"": folder}
+
+    def unit_folder(self, row) -> Path:
+        """The row's unit folder; for a row adding both legs, the first leg's (right)."""
+        return next(iter(self.leg_folders(row).values()))
+
+    def unit_cycle(self, folder: Path) -> tuple[float, float, float]:
+        """The gait cycle (start, toe-off, end; s) recorded in the unit's ``unit.json``."""
+        from ..io.jsonfile import read_json_object
+
+        rec = read_json_object(folder / UNIT_FILE, missing="missing", remedy="run the study again to rewrite it")
+        c = rec.get("cycle") or {}
+        try:
+            return float(c["start_s"]), float(c["toe_off_s"]), float(c["end_s"])
+        except (KeyError, TypeError, ValueError):
+            raise InputFileError(f"{folder / UNIT_FILE}: no gait cycle (cycle.start_s, toe_off_s, end_s)") from None
+
+    def timeseries(self, row):
+        """The row's rates over the cycle (``timeseries.csv``): of its leg, or both legs added
+        (:func:`add_leg_timeseries`)."""
+        return add_leg_timeseries({s: _read_timeseries(f) for s, f in self.leg_folders(row).items()})
+
+    def summary(self, folder: Path) -> dict:
+        """The unit's ``summary.json`` (the solver's run record and the solution's residuals)."""
+        from ..io.jsonfile import read_json_object
+
+        return read_json_object(folder / SUMMARY_FILE, missing="missing", remedy="run the unit again")
+
+    def emg_tracking(self, row) -> dict:
+        """``emg_tracking`` of the row's unit (an EMG-TEN unit): ``{muscle: {"channels", "scale"}}``."""
+        from ..io.jsonfile import read_json_object
+
+        return read_json_object(self.unit_folder(row) / SUMMARY_FILE).get("emg_tracking") or {}
+
+    def units(self) -> list[tuple[tuple[str, str, str], dict]]:
+        """``((subject, trial, workflow), row)`` of every unit of the results, then of the failures."""
+        units: dict[tuple[str, str, str], dict] = {}
+        for table in (self.results, self.failures):
+            rows = table.drop_duplicates(["subject", "trial", "workflow"]).to_dict("records") if len(table) else []
+            for r in rows:
+                units.setdefault((str(r["subject"]), str(r["trial"]), str(r["workflow"])), r)
+        return list(units.items())
+
+    # ------------------------------------------------------------------ paths as the page shows them
+    def relative(self, path) -> str:
+        """A path as the report shows it: relative to the study folder (``–`` for none)."""
+        if path is None or str(path) == "":
+            return "–"
+        p = Path(str(path))
+        if not p.is_absolute():
+            return str(p)
+        try:
+            return os.path.relpath(p, self.path.resolve())
+        except ValueError:  # another drive
+            return p.name
+
+    def short(self, exc: BaseException) -> str:
+        """An error message on one line, with paths relative to the study folder."""
+        text = " ".join(str(exc).split())
+        return text.replace(str(self.path) + os.sep, "").replace(str(self.path.resolve()) + os.sep, "")
+
+
+def _unique(values) -> list[str]:
+    return list(dict.fromkeys(values.astype(str)))
+
+
+def _read_timeseries(folder: Path):
+    import pandas as pd
+
+    p = folder / TIMESERIES_FILE
+    if not p.is_file():
+        raise InputFileError(f"{p}: missing")
+    try:
+        return pd.read_csv(p)
+    except (pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise InputFileError(f"{p}: not a readable table ({exc})") from None
+
+
+def add_leg_timeseries(tables: dict):
+    """One unit's long time-series table, or both legs' added: each leg's series on its own
+    gait cycle (``cycle_pct``), the second interpolated onto the first's cycle percentages."""
+    if len(tables) == 1:
+        return next(iter(tables.values()))
+    first, *others = tables.values()
+    out = first.copy()
+    for other in others:
+        for (model, series), rows in out.groupby(["model", "series"], sort=False):
+            o = other[(other["model"] == model) & (other["series"] == series)].sort_values("cycle_pct")
+            if o.empty:
+                continue
+            out.loc[rows.index, "value_W"] += np.interp(rows["cycle_pct"].to_numpy(float),
+                                                        o["cycle_pct"].to_numpy(float), o["value_W"].to_numpy(float))
+    out["time_s"] = np.nan  # the legs' cycles have different times
+    return out
+
+
+def read_study_folder(study_dir: str | os.PathLike) -> StudyFolder:
+    """Read ``study.json``, ``results.csv`` and ``failures.csv`` of a study folder.
+
+    Raises :class:`InputFileError` when the folder or ``results.csv`` is missing or
+    unreadable, or ``study.json`` is not JSON; :class:`MissingColumnError` when
+    ``results.csv`` lacks one of :data:`REQUIRED_COLUMNS`. A missing ``study.json`` or
+    ``failures.csv`` gives a note in the report.
+    """
+    import pandas as pd
+
+    path = Path(study_dir)
+    if not path.is_dir():
+        raise InputFileError(
+            f"{path}: no such study folder; give the output folder of 'musclemetab run' "
+            "(the folder holding results.csv and study.json)"
+        )
+    rpath = path / RESULTS_CSV
+    if not rpath.is_file():
+        raise InputFileError(
+            f"{rpath}: missing; {path} is not a finished study folder. Run the study first "
+            "('musclemetab run STUDY.toml'), or give the folder holding results.csv"
+        )
+    try:
+        results = pd.read_csv(rpath, dtype={"subject": str, "trial": str, "workflow": str, "model": str})
+    except (pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise InputFileError(f"{rpath}: not a readable results table ({exc}); run the study again") from None
+    missing = [c for c in REQUIRED_COLUMNS if c not in results.columns]
+    if missing:
+        raise MissingColumnError(
+            f"{rpath}: missing column{'s' if len(missing) > 1 else ''} {', '.join(missing)}; "
+            "the file was not written by the study runner of this version; run the study again"
+        )
+    for c in results.columns:
+        if c.endswith(("_pct", "_W_per_kg", "_per_m", "_m_per_s")) or c in ("mean_W_per_kg",):
+            results[c] = pd.to_numeric(results[c], errors="coerce")
+    notes: list[str] = []
+    settings: dict = {}
+    spath = path / STUDY_JSON
+    if spath.is_file():
+        from ..io.jsonfile import read_json_object
+
+        settings = read_json_object(spath, remedy="run the study again to rewrite it")
+    else:
+        notes.append(f"{STUDY_JSON} is missing: the settings below are taken from the results table.")
+    fpath = path / FAILURES_CSV
+    failures = pd.DataFrame(columns=_FAILURE_COLUMNS)
+    if fpath.is_file():
+        try:
+            failures = pd.read_csv(fpath, dtype=str, keep_default_na=False)
+        except pd.errors.EmptyDataError:
+            pass
+        except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+            raise InputFileError(f"{fpath}: not a readable table ({exc}); run the study again") from None
+        for c in _FAILURE_COLUMNS:
+            if c not in failures.columns:
+                failures[c] = ""
+        failures = failures[_FAILURE_COLUMNS]
+    else:
+        notes.append(f"{FAILURES_CSV} is missing: only failures recorded in the results table are listed.")
+    return StudyFolder(path=path, settings=settings, results=results, failures=failures, notes=notes)
+
+
+def study_file(study_dir: Path) -> Path | None:
+    """The study file recorded as ``source`` in ``study.json`` (relative to the study folder
+    when not absolute), or ``None``."""
+    import json
+
+    try:
+        source = json.loads((study_dir / STUDY_JSON).read_text(encoding="utf-8")).get("source")
+    except (OSError, ValueError, AttributeError):
+        return None
+    if not isinstance(source, str) or not source.strip():
+        return None
+    p = Path(source)
+    return p if p.is_absolute() else study_dir / p
+
+
+def input_files(study_dir: str | os.PathLike) -> tuple[list[Path], Path | None]:
+    """The files a report of the folder is drawn from: the study's tables (``results.csv``,
+    ``study.json``, ``failures.csv``, ``per_muscle.csv``; present or not) and every unit's
+    ``unit.json`` (which records the hash of each of the unit's files, ``summary.json`` among
+    them), in a fixed order; and the study file ``study.json`` names as its ``source`` (e.g.
+    ``study.toml``, wherever it is), or ``None``."""
+    path = Path(study_dir)
+    files = [path / n for n in (RESULTS_CSV, STUDY_JSON, FAILURES_CSV, PER_MUSCLE_FILE)]
+    units = path / UNITS_FOLDER
+    files += sorted(units.glob(f"**/{UNIT_FILE}")) if units.is_dir() else []
+    return files, study_file(path)
+
