@@ -351,19 +351,22 @@ def test_estimated_vs_measured_one_subject(results):
 
 # ----------------------------------------------------------------------------- figures 3, 4
 def test_group_rates_over_cycle():
+    """Small multiples: one panel per group (shared axes), one line per model, each line the
+    table's series of that group and model times the scale."""
     ts = make_timeseries(1.25)
-    fig = group_rates_over_cycle(ts, 61.3, ["BH04", "UM10"])
+    fig = group_rates_over_cycle(ts, 61.3, ["BH04", "UM10"], scale=0.5, unit="W/kg")
     axes = _visible_axes(fig)
-    assert [ax.get_title() for ax in axes] == ["BH04", "UM10"]
-    for ax, model in zip(axes, ["BH04", "UM10"]):
-        groups = _lines(ax, "group:")
-        assert [ln.get_gid() for ln in groups] == [f"group:{g}" for g in GROUPS]
-        pf = _lines(ax, "group:PF")[0]
-        ref = ts[(ts["model"] == model) & (ts["series"] == "group/PF")]
-        assert np.allclose(pf.get_ydata(), ref["value_W"])
+    assert [ax.get_title().split(":")[0] for ax in axes] == list(GROUPS)
+    for ax, g in zip(axes, GROUPS):
+        assert [ln.get_gid() for ln in _lines(ax, "model:")] == ["model:BH04", "model:UM10"]
+        for model in ("BH04", "UM10"):
+            ln = _lines(ax, f"model:{model}")[0]
+            ref = ts[(ts["model"] == model) & (ts["series"] == f"group/{g}")]
+            assert np.allclose(ln.get_ydata(), 0.5 * ref["value_W"])
+            assert ln.get_color().lower() == model_colour(model).lower()
         assert np.allclose(_lines(ax, "toe-off")[0].get_xdata(), 61.3)
-        assert "(W)" in ax.get_ylabel() or ax is not axes[0]
-    assert axes[0].get_ylabel() == "metabolic rate (W)"
+        assert ax.get_shared_y_axes().joined(ax, axes[0])
+    assert axes[0].get_ylabel() == "rate (W/kg)"
     with pytest.raises(OptionError, match="LW07"):
         group_rates_over_cycle(ts, 61.3, ["LW07"])
     with pytest.raises(OptionError, match="toe-off"):
@@ -551,11 +554,38 @@ def test_report_notes_and_failures(tmp_path):
 
 
 def test_stale_figures_removed(tmp_path):
-    root = make_study(tmp_path / "s", solutions=False, trials={"normal": 1.25})
-    (root / "figures").mkdir()
-    (root / "figures" / "excitations_fiber_lengths.png").write_bytes(b"old")
-    write_report(root)
+    """A figure an earlier report wrote and this one cannot draw is removed; a file of the same
+    name the report did not write (no record of it) is left alone."""
+    root = make_study(tmp_path / "s", trials={"normal": 1.25})
+    write_report(root, workers=1)
+    assert (root / "figures" / "excitations_fiber_lengths.png").is_file()
+    for folder in (root / "units").glob("*/*/*"):
+        (folder / "solution.sto").unlink()
+    write_report(root, workers=1, force=True)
     assert not (root / "figures" / "excitations_fiber_lengths.png").exists()
+    other = make_study(tmp_path / "o", solutions=False, trials={"normal": 1.25})
+    (other / "figures").mkdir()
+    (other / "figures" / "excitations_fiber_lengths.png").write_bytes(b"not the report's")
+    write_report(other, workers=1)
+    assert (other / "figures" / "excitations_fiber_lengths.png").read_bytes() == b"not the report's"
+
+
+def test_figures_never_written_through_a_symlink(tmp_path):
+    """``figures`` a symbolic link to a folder beside the output: refused with the path named,
+    nothing written or removed in the decoy folder."""
+    root = make_study(tmp_path / "s", solutions=False, trials={"normal": 1.25})
+    decoy = tmp_path / "decoy"
+    decoy.mkdir()
+    for name in ("estimated_vs_measured.png", "excitations_fiber_lengths.png", "notes.txt"):
+        (decoy / name).write_bytes(b"foreign")
+    (root / "figures").symlink_to(decoy, target_is_directory=True)
+    with pytest.raises(OptionError, match="symbolic link") as err:
+        write_report(root, workers=1)
+    assert str(root / "figures") in str(err.value)
+    assert sorted(p.name for p in decoy.iterdir()) == ["estimated_vs_measured.png",
+                                                       "excitations_fiber_lengths.png", "notes.txt"]
+    assert all(p.read_bytes() == b"foreign" for p in decoy.iterdir())
+    assert not (root / "report.html").exists()
 
 
 def test_report_errors(tmp_path):
@@ -763,9 +793,10 @@ def test_solver_runs_table_lists_every_unit(tmp_path):
         assert (side, status, iterations) == ("right", "Solve_Succeeded", str(ITERATIONS[workflow]))
         assert (time_s, violation, residual) == ("1.25", "3.0e-07", "2.0e-06")
     page = render_page(read_study_folder(root), [])  # the page without figures
-    start = page.index('<details id="solver-runs">')
+    start = page.index('<h2 id="solver-runs">')  # a heading followed by its text and table, never empty
     runs = page[start:page.index("</details>", start) + len("</details>")]
     assert _parse(runs).tables == 1
+    assert "The muscle redundancy solve of every unit" in runs
     assert runs.count("Solve_Succeeded") == len(SUBJECTS) * len(WORKFLOWS) - 1
     assert "Maximum_Iterations_Exceeded" in runs
 

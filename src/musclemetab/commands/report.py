@@ -1,6 +1,6 @@
 """``musclemetab report``: the figures and the HTML report of a study folder.
 
-    musclemetab report DIR [--out FILE] [--svg] [--force] [--workers N]
+    musclemetab report DIR [--out FILE] [--svg] [--force] [--workers N] [--models M1,M2|all]
 
 Writes ``DIR/figures/<name>.png`` (and ``.svg`` with ``--svg``) for every figure the data support, and
 ``DIR/report.html`` (or ``FILE``, with its figures in ``figures/`` beside it): one
@@ -39,6 +39,10 @@ def add_parser(subparsers) -> None:
     p.add_argument("--workers", type=int, metavar="N",
                    help="processes drawing the figures side by side (default: the cores this process may use, at "
                    "most one per figure; 1 draws them one after the other in this process)")
+    p.add_argument("--models", metavar="M1,M2",
+                   help="metabolic models the figures show, e.g. 'all,LW05,MA68' ('all': the paper's six, "
+                   "UM03, BH04, HO06, LW07, UM10, UC16; default: those six, or [report] models of the study "
+                   "file); the tables list every model of the study")
     p.set_defaults(func=run)
 
 
@@ -48,7 +52,7 @@ def run(args) -> int:
 
     formats = ("png", "svg") if args.svg else ("png",)
     out, entries = generate_report(args.study_dir, args.out, formats=formats, force=args.force,
-                                  workers=args.workers)
+                                  workers=args.workers, models=args.models)
     drawn = [e.name for e in entries if e.paths is not None]
     print(f"report: {len(drawn)} of {len(entries)} figures -> {out.parent / FIGURES_FOLDER}; page -> {out}")
     for e in entries:

@@ -708,10 +708,12 @@ def _label_cycle_panels(axes, models: Sequence[str], ylabel: str = "metabolic ra
 
 def group_rates_over_cycle(timeseries, toe_off_pct: float, models: Sequence[str] | None = None,
                            *, title: str | None = None, scale: float = 1.0, unit: str = "W"):
-    """Metabolic rate of each muscle group over the gait cycle (W), one panel per model.
+    """Metabolic rate of each muscle group over the gait cycle: small multiples, one panel per
+    group (shared axes), one line per model (its colour).
 
     ``timeseries`` is a unit's long table (``cycle_pct``, ``model``, ``series``, ``value_W``;
-    series ``group/<G>``). One line per group, a vertical line at ``toe_off_pct`` (%).
+    series ``group/<G>``), drawn times ``scale`` in ``unit``; a dotted vertical line at
+    ``toe_off_pct`` (%).
     """
     ts = _long_table(timeseries, "the time-series table")
     ts = ts[ts["series"].astype(str).str.startswith("group/")]
@@ -727,25 +729,40 @@ def group_rates_over_cycle(timeseries, toe_off_pct: float, models: Sequence[str]
         raise OptionError(f"toe-off must be inside the cycle (0-100 %), not {toe_off_pct}")
     present = _unique(s.split("/", 1)[1] for s in _unique(ts["series"].astype(str)))
     groups = [g for g in GROUPS if g in present] + [g for g in present if g not in GROUPS]
-    fig, axes = _cycle_panels(len(models))
-    for k, m in enumerate(models):
+    nrow, ncol = _grid(len(groups), 4)
+    fig = _new_figure(2.9 * ncol, 2.0 * nrow + 1.2)
+    axes = fig.subplots(nrow, ncol, squeeze=False, sharex=True, sharey=True)
+    series = ts["series"].astype(str)
+    model_col = ts["model"].astype(str)
+    for k, g in enumerate(groups):
         ax = axes.flat[k]
-        dm = ts[ts["model"].astype(str) == m]
-        for g in groups:
-            d = dm[dm["series"].astype(str) == f"group/{g}"].sort_values("cycle_pct")
+        dg = ts[series == f"group/{g}"]
+        for m in models:
+            d = dg[model_col[dg.index] == m].sort_values("cycle_pct")
             if d.empty:
                 continue
-            ax.plot(d["cycle_pct"], scale * d["value_W"], color=group_colour(g), lw=1.3, label=g, gid=f"group:{g}")
+            ax.plot(d["cycle_pct"], scale * d["value_W"], color=model_colour(m), lw=1.2, label=m,
+                    gid=f"model:{m}")
         _vline(ax, to, color="k", lw=0.8, ls=":", label="_toe-off", gid="toe-off")
         _hline(ax, 0.0, color="0.7", lw=0.6, label="_zero")
-    _label_cycle_panels(axes, models, f"metabolic rate ({unit})")
+        _panel_title(ax, f"{g}: {GROUP_NAMES.get(g, g)}", fontsize=9, gid=f"group:{g}")
+    for k, ax in enumerate(axes.flat):
+        if k >= len(groups):
+            ax.set_visible(False)
+            continue
+        if k == 0:
+            ax.set_xlim(0.0, 100.0)
+        if k % ncol == 0:
+            ax.set_ylabel(f"rate ({unit})")
+        if k + ncol >= len(groups):
+            ax.set_xlabel("gait cycle (%)")
+            ax.tick_params(labelbottom=True)
     from matplotlib.lines import Line2D
 
-    handles = [Line2D([], [], color=group_colour(g), lw=1.5, label=f"{g} ({GROUP_NAMES.get(g, g)})") for g in groups]
+    handles = [Line2D([], [], color=model_colour(m), lw=1.5, label=m) for m in models]
     handles.append(Line2D([], [], color="k", lw=0.8, ls=":", label=f"toe-off ({to:.1f} %)"))
-    _legend_below(fig, handles, min(len(handles), 6), 8)
-    fig.suptitle(title or "Metabolic rate of the muscle groups over the gait cycle (one leg, no basal heat)",
-                 fontsize=11)
+    _legend_below(fig, handles, min(len(handles), 7), 8)
+    fig.suptitle(title or "Metabolic rate of the muscle groups over the gait cycle (no basal heat)", fontsize=11)
     return fig
 
 

@@ -105,12 +105,15 @@ class Selection:
 
     @property
     def rate_scale(self) -> tuple[float, str, str, str]:
-        """``(scale, unit, legs, how)`` of the rates over the cycle: W/kg of both legs when the
-        body mass is known (one leg doubled, or both legs added), else W."""
-        how = "the two solved legs added, each over its own cycle" if self.both_legs else "twice the simulated leg"
+        """``(scale, unit, legs, how)`` of the rates over the cycle (both legs,
+        :meth:`~.folder.StudyFolder.timeseries`): W/kg when the body mass is known, else W."""
+        how = ("the two solved legs added at each instant, each leg on its own gait cycle aligned on the first "
+               "leg's heel strike" if self.both_legs else
+               "the simulated leg plus the same leg half a cycle later, standing for the other leg (a symmetric "
+               "gait)")
         if self.mass:
-            return (1.0 if self.both_legs else 2.0) / self.mass, "W/kg", "both legs", how
-        return (1.0, "W", "both legs", how) if self.both_legs else (1.0, "W", "one leg", how)
+            return 1.0 / self.mass, "W/kg", "both legs", how
+        return 1.0, "W", "both legs", how
 
 
 def select(study: StudyFolder) -> Selection:
@@ -118,8 +121,9 @@ def select(study: StudyFolder) -> Selection:
     from .figures import main_workflow
 
     ok = study.ok
+    models = [m for m in study.shown_models() if m in set(ok["model"].astype(str))]
+    ok = ok[ok["model"].astype(str).isin(models)]
     workflows = [w for w in study.workflows() if w in set(ok["workflow"].astype(str))]
-    models = [m for m in study.models() if m in set(ok["model"].astype(str))]
     trial = study.preferred_trial(ok)
     pref = ok[ok["trial"].astype(str) == trial]
     subject = next((s for s in study.subjects() if s in set(pref["subject"].astype(str))), None)
@@ -345,8 +349,9 @@ def group_rates_figure(study: StudyFolder, sel: Selection):
     )
     cap = (f"Subject {subject}, trial {trial} (preferred speed), workflow {wf}. Muscle metabolic "
            f"rates ({unit}, {legs}: {how}{_per_kg(sel)}, "
-           "without basal heat) distributed to the muscle groups by moment-arm ratio; same axes in every "
-           f"panel; dotted line: toe-off ({to:.1f} % of the cycle).")
+           "without basal heat) distributed to the muscle groups by moment-arm ratio, over the first leg's gait "
+           "cycle; one panel per muscle group, one line per metabolic model; same axes in every panel; dotted "
+           f"line: toe-off ({to:.1f} % of the cycle).")
     return fig, cap
 
 
