@@ -694,7 +694,7 @@ def test_per_muscle_ranked_figure_values(study):
     ax = fig.axes[0]
     # largest at the top, the three largest parts only
     ticks = sorted((t.get_position()[1], t.get_text()) for t in ax.get_yticklabels())[::-1]
-    assert [name for _, name in ticks] == ["soleus_r", "gasmed_r", "vaslat_r"]
+    assert [name for _, name in ticks] == ["soleus (r)", "gastrocnemius medialis (r)", "vastus lateralis (r)"]
     d = pm[(pm.workflow == "effort-ten") & (pm.model == "UM10")]
     for trial in ("slow", "normal", "fast"):
         bars = _bars(ax, f"trial:{trial}")
@@ -706,6 +706,29 @@ def test_per_muscle_ranked_figure_values(study):
         assert max(w for _, w in widths) < ax.get_xlim()[1] and ax.get_xlim()[0] == 0.0
     # one colour per trial, the same in every panel; a shared axis
     assert fig.axes[0].get_shared_x_axes().joined(fig.axes[0], fig.axes[1])
+
+
+def test_per_muscle_ranking_merges_two_model_families(study):
+    """A subject on gait2392 (``med_gas_r``, ``soleus_r``) and one on Rajagopal (``gasmed_r``,
+    ``soleus_r``): the ranking puts both names of the medial gastrocnemius in one bar, the mean
+    over the two subjects (worked by hand); a muscle of two bundles (``add_mag1_r`` +
+    ``add_mag2_r``) is their sum."""
+    from musclemetab.report.figures import harmonise_muscles, per_muscle_ranked
+
+    rows = [("a", "med_gas_r", 0.30), ("a", "soleus_r", 0.50), ("a", "add_mag1_r", 0.05), ("a", "add_mag2_r", 0.07),
+            ("b", "gasmed_r", 0.20), ("b", "soleus_r", 0.40), ("b", "addmagDist_r", 0.04), ("b", "addmagMid_r", 0.06)]
+    pm = pd.DataFrame([{"subject": s, "trial": "normal", "workflow": "effort-ten", "model": "UM10", "muscle": m,
+                        "mean_W_per_kg": v} for s, m, v in rows])
+    h = harmonise_muscles(pm).set_index(["subject", "muscle"])["mean_W_per_kg"]
+    assert h[("a", "gastrocnemius medialis (r)")] == pytest.approx(0.30)
+    assert h[("b", "gastrocnemius medialis (r)")] == pytest.approx(0.20)
+    assert h[("a", "adductor magnus (r)")] == pytest.approx(0.12)
+    fig = per_muscle_ranked(pm, top=3)
+    ax = fig.axes[0]
+    ticks = [t.get_text() for t in sorted(ax.get_yticklabels(), key=lambda t: -t.get_position()[1])]
+    assert ticks == ["soleus (r)", "gastrocnemius medialis (r)", "adductor magnus (r)"]
+    widths = sorted(((y, w) for _, y, w, _ in _bars(ax, "trial:normal")), reverse=True)
+    np.testing.assert_allclose([w for _, w in widths], [0.45, 0.25, 0.11], rtol=1e-12)
 
 
 def test_rates_against_speed_values(study):
@@ -1028,3 +1051,42 @@ def test_figures_handed_out_largest_first_by_their_measured_drawing_times(tmp_pa
                                                   draw.make_figures(folder, tmp_path / "d", workers=1)]
     by_time = {n.removesuffix(" (cached)"): t for n, t in chosen.items()}
     assert json.loads(seen.read_text()) == ["group_shares"] + sorted(by_time, key=lambda n: -by_time[n])
+
+
+def test_muscle_heat_map_holds_each_muscles_rate_over_the_cycle(tmp_path):
+    """The heat map's arrays are the unit's per-muscle rates (metabolics.sto: total - basal)
+    at the nodes inside the gait cycle, divided by the body mass, muscles ordered by group
+    (PF before KE before HE), the toe-off marked; the nodes of the padding are left out."""
+    from musclemetab.io.storage import write_storage
+    from musclemetab.report.folder import read_study_folder
+    from musclemetab.report.plan import heat_map_figure, select
+
+    root = make_study(tmp_path / "s", solutions=False, trials={"normal": 1.25})
+    folder = root / "units" / "s1" / "normal" / "effort-ten"
+    t = np.round(np.arange(CYCLE[0] - 0.05, CYCLE[2] + 0.05 + 1e-9, 0.01), 6)  # padding on both sides
+    muscles = ("glmax1_r", "soleus_r", "vaslat_r")  # HE, PF, KE: drawn PF, KE, HE
+    cols = {}
+    for k, model in enumerate(MODELS):
+        for j, mu in enumerate(muscles):
+            total = 10.0 * (k + 1) + (j + 1) * np.sin(np.pi * (t - CYCLE[0]) / (CYCLE[2] - CYCLE[0])) ** 2
+            cols[f"{model}/{mu}/total"] = total
+            cols[f"{model}/{mu}/basal"] = np.full(t.size, 0.1 * (j + 1))
+    write_storage(folder / "metabolics.sto", pd.DataFrame(cols, index=pd.Index(t, name="time")))
+    study = read_study_folder(root)
+    sel = select(study)
+    assert (sel.subject, sel.trial, sel.workflow) == ("s1", "normal", "effort-ten")
+    fig, caption = heat_map_figure(study, sel)
+    mass = SUBJECTS["s1"][0]
+    inside = (t >= CYCLE[0] - 1e-9) & (t <= CYCLE[2] + 1e-9)
+    assert "toe-off" in caption and "s1" in caption
+    panels = [ax for ax in fig.axes if ax.images]
+    assert [ax.get_title() for ax in panels] == list(MODELS)  # the order of study.json
+    for ax in panels:
+        image = ax.images[0]
+        model = ax.get_title()
+        want = np.vstack([(cols[f"{model}/{mu}/total"] - cols[f"{model}/{mu}/basal"])[inside] / mass
+                          for mu in ("soleus_r", "vaslat_r", "glmax1_r")])
+        np.testing.assert_allclose(np.asarray(image.get_array()), want, rtol=1e-9)  # the file keeps 12 digits
+        assert np.allclose(_lines(ax, "toe-off")[0].get_xdata(), TOE_OFF_PCT)
+    labels = [x.get_text() for x in panels[0].get_yticklabels()]
+    assert labels == ["soleus (r) [PF]", "vastus lateralis (r) [KE]", "gluteus maximus (r) [HE]"]

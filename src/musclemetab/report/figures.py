@@ -31,6 +31,7 @@ import numpy as np
 
 from ..analysis.groups import GROUP_NAMES as _GROUP_NAMES
 from ..analysis.groups import GROUPS_WITH_OTHER, OTHER
+from ..colours import OKABE_ITO
 from ..colours import GROUP_COLOURS as _GROUP_COLOURS
 from ..colours import MODEL_COLOURS as _MODEL_COLOURS
 from ..colours import WORKFLOW_COLOURS as _WORKFLOW_COLOURS
@@ -1118,15 +1119,18 @@ def per_muscle_ranked(per_muscle, *, workflow: str | None = None, models: Sequen
     """The muscles costing most energy, ranked, across speeds (W/kg of body mass, one leg, no basal).
 
     ``per_muscle``: the study's per-muscle table (``trial``, ``workflow``, ``model``,
-    ``muscle``, ``mean_W_per_kg``; ``speed_m_per_s`` orders the trials when present). One
-    panel per model (shared axis), the ``top`` muscles by their mean over trials (largest at
-    the top), one bar per trial coloured by speed (light = slow), means over subjects.
+    ``muscle``, ``mean_W_per_kg``; ``speed_m_per_s`` orders the trials when present). The
+    model muscles are summed into anatomical muscles per subject (:func:`harmonise_muscles`), so
+    subjects of different model families are ranked together. One panel per model (shared
+    axis), the ``top`` muscles by their mean over trials (largest at the top), one bar per
+    trial coloured by speed (light = slow), means over subjects.
     """
     _require_columns(per_muscle, ("trial", "workflow", "model", "muscle", "mean_W_per_kg"), "the per-muscle table")
     if len(per_muscle) == 0:
         raise OptionError("the per-muscle table has no rows")
     wf, d = _one_workflow(per_muscle, workflow, "the per-muscle table")
     models = _ordered_models(d["model"]) if models is None else [str(m) for m in models]
+    d = harmonise_muscles(d)
     trials = trial_order(d) if "speed_m_per_s" in d.columns else _unique(str(t) for t in d["trial"])
     from matplotlib import colormaps
 
@@ -1180,6 +1184,128 @@ def per_muscle_ranked(per_muscle, *, workflow: str | None = None, models: Sequen
     _legend_below(fig, handles, min(len(handles), 8), 8)
     fig.suptitle(title or f"The {top} muscles with the largest metabolic rate, across walking speeds ({wf}; "
                  "W/kg of body mass, one leg, no basal heat; mean over subjects)", fontsize=11)
+    return fig
+
+
+# ------------------------------------------------------------- muscles by anatomy
+def anatomical_muscles(names: Sequence[str]) -> dict[str, tuple[str, str]]:
+    """Each model muscle name -> ``(label, group)``: the label names the anatomical muscle(s)
+    of the package's muscle table (:func:`musclemetab.properties.resolve_muscles`) and the
+    side, so that the names of two model families for one muscle (``gasmed_r`` of Rajagopal
+    and ``med_gas_r`` of gait2392: ``gastrocnemius medialis (r)``) and the bundles of one
+    muscle (``addmagDist_r``, ``addmagMid_r``) share a label; ``group``: the first muscle
+    group of its function (:data:`GROUPS`; ``other`` when it has none). A name the table cannot
+    place keeps its own name. ``names`` of one model family (one subject's model)."""
+    from ..properties import anatomical_table, resolve_muscles
+
+    names = list(dict.fromkeys(str(n) for n in names))
+    anat = anatomical_table()
+    out = {}
+    for rec in resolve_muscles(names, warn=False):
+        if not rec.anatomical:
+            out[rec.name] = (rec.name, OTHER)
+            continue
+        label = " + ".join(str(anat.loc[a, "name"]) for a in rec.anatomical)
+        group = rec.function_groups[0].split("/")[0] if rec.function_groups else OTHER
+        out[rec.name] = (f"{label} ({rec.side})" if rec.side else label, group if group in GROUPS else OTHER)
+    return out
+
+
+def harmonise_muscles(per_muscle, value: str = "mean_W_per_kg"):
+    """The per-muscle table with the model muscles of each subject summed into anatomical
+    muscles (:func:`anatomical_muscles`, per subject: each subject's model family), column
+    ``muscle`` the anatomical label, ``group`` its muscle group."""
+    import pandas as pd
+
+    d = per_muscle.copy()
+    d["muscle"] = d["muscle"].astype(str)
+    by = [c for c in ("subject",) if c in d.columns]
+    parts = []
+    for _, ds in (d.groupby(by, sort=False) if by else [(None, d)]):
+        labels = anatomical_muscles(ds["muscle"].unique())
+        parts.append(ds.assign(muscle=ds["muscle"].map(lambda n: labels[n][0]),
+                               group=ds["muscle"].map(lambda n: labels[n][1])))
+    d = pd.concat(parts, ignore_index=True)
+    keys = [c for c in ("subject", "trial", "workflow", "model", "muscle", "group") if c in d.columns]
+    summed = d.groupby(keys, sort=False, dropna=False)[value].sum(min_count=1).reset_index()
+    rest = [c for c in d.columns if c not in keys and c != value]
+    if "speed_m_per_s" in rest:
+        sp = d.groupby([k for k in ("subject", "trial") if k in d.columns], sort=False)["speed_m_per_s"].first()
+        summed = summed.join(sp, on=[k for k in ("subject", "trial") if k in d.columns])
+    return summed
+
+
+def muscle_heat_map(rates: Mapping[str, object], toe_off_pct: float, models: Sequence[str] | None = None, *,
+                    scale: float = 1.0, unit: str = "W", title: str | None = None):
+    """Each muscle's metabolic rate over the gait cycle as a heat map: muscles (rows, ordered by
+    muscle group, :data:`GROUPS`, then by anatomical name) x cycle (columns), one panel per model,
+    one colour scale (a rate below -2 % of the peak sky blue); a dashed line at ``toe_off_pct`` (the
+    stance/swing boundary). Bundles of one anatomical muscle are named with their model name.
+
+    ``rates``: model -> table indexed by the cycle percentage, one column per muscle (W),
+    drawn times ``scale`` in ``unit``. The panels' images keep the drawn array
+    (``AxesImage.get_array()``: rows in the order of the tick labels, top first).
+    """
+    if not rates:
+        raise OptionError("no per-muscle rates given for the heat map")
+    models = _ordered_models(list(rates)) if models is None else [str(m) for m in models]
+    absent = [m for m in models if m not in rates]
+    if absent:
+        raise OptionError(f"no per-muscle rates for model {', '.join(absent)} (given: {', '.join(rates)})")
+    to = float(toe_off_pct)
+    if not (0.0 < to < 100.0):
+        raise OptionError(f"toe-off must be inside the cycle (0-100 %), not {toe_off_pct}")
+    muscles = list(dict.fromkeys(str(c) for m in models for c in rates[m].columns))
+    labels = anatomical_muscles(muscles)
+    rank = {g: i for i, g in enumerate(GROUPS)}
+    order = sorted(muscles, key=lambda n: (rank.get(labels[n][1], len(GROUPS)), labels[n][0], n))
+    arrays = {}
+    for m in models:
+        tab = rates[m]
+        pct = np.asarray(tab.index, float)
+        arrays[m] = (pct, scale * np.vstack([tab[n].to_numpy(float) if n in tab.columns else np.full(pct.size, np.nan)
+                                             for n in order]))
+    hi = max(float(np.nanmax(a)) for _, a in arrays.values())
+    floor = -0.02 * hi  # a rate below 2 % of the peak under zero shows apart; closer to 0 it counts as 0
+    negative = any(float(np.nanmin(a)) < floor for _, a in arrays.values())
+    from matplotlib import colormaps
+
+    cmap = colormaps["magma_r"].with_extremes(under=OKABE_ITO["sky blue"])  # a negative rate: sky blue
+    ncol = min(len(models), 3)
+    nrow = int(math.ceil(len(models) / ncol))
+    fig = _new_figure(2.4 * ncol + 3.3, (0.125 * len(order) + 0.45) * nrow + 1.0, left=2.4, right=0.9,
+                      wspace=0.06, hspace=0.1 if len(order) > 20 else 0.3)
+    axes = fig.subplots(nrow, ncol, squeeze=False, sharex=True, sharey=True)
+    image = None
+    shared = {labels[n][0] for n in order if sum(labels[x][0] == labels[n][0] for x in order) > 1}
+    names = [f"{labels[n][0].rsplit(' (', 1)[0]}: {n}" if labels[n][0] in shared else labels[n][0] for n in order]
+    for k, m in enumerate(models):
+        ax = axes.flat[k]
+        pct, a = arrays[m]
+        image = ax.imshow(a, aspect="auto", interpolation="nearest", cmap=cmap, vmin=floor, vmax=hi,
+                          extent=(float(pct[0]), float(pct[-1]), len(order) - 0.5, -0.5), gid=f"heat:{m}")
+        _vline(ax, to, color=OKABE_ITO["bluish green"], lw=1.3, ls="--", label="_toe-off", gid="toe-off")
+        _panel_title(ax, m, color=model_colour(m), fontsize=10, fontweight="bold")
+    group_of = [labels[n][1] for n in order]
+    for k, ax in enumerate(axes.flat):
+        if k >= len(models):
+            ax.set_visible(False)
+            continue
+        if k % ncol == 0:
+            ax.set_yticks(range(len(order)), [f"{t} [{labels[n][1]}]" for t, n in zip(names, order)], fontsize=7)
+        for i in range(1, len(order)):  # a thin line between the muscle groups
+            if group_of[i] != group_of[i - 1]:
+                _hline(ax, i - 0.5, color="white", lw=0.8)
+        if k + ncol >= len(models):
+            ax.set_xlabel("gait cycle (%)")
+            ax.tick_params(labelbottom=True)
+    axes[0, 0].set_xlim(0.0, 100.0)
+    cax = fig.add_axes((1 - 0.7 / fig.get_figwidth(), 0.25, 0.12 / fig.get_figwidth(), 0.5))
+    bar = fig.colorbar(image, cax=cax, extend="min" if negative else "neither")
+    bar.set_label(f"metabolic rate ({unit})" + ("; sky blue: below -2 % of the peak" if negative else ""),
+                  fontsize=8)
+    cax.tick_params(labelsize=7)
+    fig.suptitle(title or "Metabolic rate of each muscle over the gait cycle (no basal heat)", fontsize=10)
     return fig
 
 

@@ -191,6 +191,35 @@ class StudyFolder:
         two solved legs)."""
         return add_leg_timeseries({s: _read_timeseries(f) for s, f in self.leg_folders(row).items()})
 
+    def muscle_rates(self, row) -> dict:
+        """Each muscle's metabolic rate without basal heat (W) over the gait cycle of the row's
+        (first) leg, from the unit's ``metabolics.sto``: ``{model: table}``, each table indexed
+        by the cycle percentage (the nodes inside the cycle), one column per muscle
+        (``total - basal`` of the file)."""
+        from ..io.storage import read_storage
+        from ..metabolics.solution import METABOLICS_STO
+
+        folder = self.unit_folder(row)
+        start, _, end = self.unit_cycle(folder)
+        path = folder / METABOLICS_STO
+        if not path.is_file():
+            raise InputFileError(f"{path}: missing; run the unit again to write it")
+        table = read_storage(path)
+        t = np.asarray(table.index, float)
+        table = table[(t >= start - 1e-9) & (t <= end + 1e-9)]
+        pct = 100.0 * (np.asarray(table.index, float) - start) / (end - start)
+        out: dict = {}
+        for col in table.columns:
+            parts = str(col).split("/")
+            if len(parts) == 3 and parts[2] == "total" and f"{parts[0]}/{parts[1]}/basal" in table.columns:
+                out.setdefault(parts[0], {})[parts[1]] = (
+                    table[col].to_numpy(float) - table[f"{parts[0]}/{parts[1]}/basal"].to_numpy(float))
+        if not out:
+            raise InputFileError(f"{path}: no columns <model>/<muscle>/total and basal; run the unit again")
+        import pandas as pd
+
+        return {m: pd.DataFrame(v, index=pd.Index(pct, name="cycle_pct")) for m, v in out.items()}
+
     def summary(self, folder: Path) -> dict:
         """The unit's ``summary.json`` (the solver's run record and the solution's residuals)."""
         from ..io.jsonfile import read_json_object

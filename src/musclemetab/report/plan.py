@@ -30,6 +30,7 @@ FIGURE_NAMES = (
     "excitations_fiber_lengths",
     "estimated_vs_measured",
     "group_rates_over_cycle",
+    "muscle_heat_map",
     "whole_body_over_cycle",
     "phase_shares",
     "phase_pies",
@@ -46,6 +47,7 @@ FIGURE_TITLES = {
     "estimated_vs_measured": "Estimated vs measured whole-body metabolic rate",
     "group_rates_over_cycle": "Metabolic rate of the muscle groups over the gait cycle",
     "whole_body_over_cycle": "Whole-body metabolic rate over the gait cycle across speeds",
+    "muscle_heat_map": "Every muscle over the gait cycle",
     "phase_shares": "Stance and swing shares",
     "phase_pies": "Stance and swing shares, scaled by the total cost",
     "group_shares": "Muscle-group shares",
@@ -63,7 +65,7 @@ FIGURE2_CAPTION = (
 )
 
 #: The figures showing one unit of the study (the selected subject's).
-UNIT_FIGURES = ("excitations_fiber_lengths", "group_rates_over_cycle", "whole_body_over_cycle")
+UNIT_FIGURES = ("excitations_fiber_lengths", "group_rates_over_cycle", "muscle_heat_map", "whole_body_over_cycle")
 
 
 @dataclass(frozen=True)
@@ -141,6 +143,7 @@ def plan_figures(study: StudyFolder) -> dict[str, FigurePlan]:
         "estimated_vs_measured": partial(estimated_vs_measured_figure, sel),
         "group_rates_over_cycle": partial(group_rates_figure, study, sel),
         "whole_body_over_cycle": partial(whole_body_figure, study, sel),
+        "muscle_heat_map": partial(heat_map_figure, study, sel),
         "phase_shares": partial(phase_shares_figure, sel),
         "phase_pies": partial(phase_pies_figure, sel),
         "group_shares": partial(group_shares_figure, sel),
@@ -352,6 +355,36 @@ def group_rates_figure(study: StudyFolder, sel: Selection):
            "without basal heat) distributed to the muscle groups by moment-arm ratio, over the first leg's gait "
            "cycle; one panel per muscle group, one line per metabolic model; same axes in every panel; dotted "
            f"line: toe-off ({to:.1f} % of the cycle).")
+    return fig, cap
+
+
+def heat_map_figure(study: StudyFolder, sel: Selection):
+    """Every muscle of the selected unit's first leg over its gait cycle (main workflow), one
+    panel per model, from the unit's ``metabolics.sto``."""
+    from .figures import muscle_heat_map
+
+    subject, trial, wf = sel.subject, sel.trial, sel.workflow
+    d = sel.rows(subject, trial, wf)
+    if d.empty:
+        raise OptionError(f"no successful unit for {subject}, trial {trial}, workflow {wf}")
+    row = d.iloc[0]
+    rates = study.muscle_rates(row)
+    s, t, e = study.unit_cycle(study.unit_folder(row))
+    to = 100.0 * (t - s) / (e - s)
+    models = [m for m in sel.models if m in rates]
+    if not models:
+        raise OptionError(f"the unit's metabolic rates hold none of the models {', '.join(sel.models)}")
+    scale, unit = (1.0 / sel.mass, "W/kg") if sel.mass else (1.0, "W")
+    side = "the right leg" if sel.both_legs else "the simulated leg"
+    fig = muscle_heat_map(rates, to, models, scale=scale, unit=unit,
+                          title=f"Each muscle over the gait cycle ({unit}, {side}, no basal heat): "
+                          f"subject {subject}, trial {trial}, {wf}")
+    cap = (f"Subject {subject}, trial {trial} (preferred speed), workflow {wf}. Metabolic rate of each muscle of "
+           f"{side} ({unit}{_per_kg(sel)}, without basal heat) at every node of the gait cycle (initial contact "
+           "to the next initial contact), one panel per model, one colour scale; muscles ordered by muscle "
+           "group (in brackets: the first group of the muscle's function) and named by the anatomical muscle "
+           "table, bundles of one muscle by their model name; sky blue: a rate below -2 % of the peak (work "
+           f"absorbed); dashed line: toe-off ({to:.1f} %), the boundary between stance and swing.")
     return fig, cap
 
 
