@@ -407,23 +407,24 @@ def test_phase_shares(results):
         for a, m in zip(st, ORDERED):
             assert a.get_height() == pytest.approx(d[d["model"] == m]["stance_energy_share_pct"].mean())
     assert [t.get_text() for t in ax_b.get_xticklabels()] == list(ORDERED)
-    # lines: one per model, through the means over subjects of the main workflow (effort-ten)
+    # lines: one per model and subject, through the subject's trials of the main workflow (effort-ten)
     lines = _lines(ax_s, "model:")
-    assert [ln.get_gid() for ln in lines] == [f"model:{m}" for m in ORDERED]
-    assert [ln.get_color() for ln in lines] == [model_colour(m) for m in ORDERED]
+    assert [ln.get_gid() for ln in lines] == [f"model:{m}:{s}" for m in ORDERED for s in SUBJECTS]
+    assert [ln.get_color() for ln in lines] == [model_colour(m) for m in ORDERED for s in SUBJECTS]
     d = results[(results["workflow"] == "effort-ten") & (results["model"] == "BH04")]
-    means = d.groupby("trial")[["speed_m_per_s", "swing_energy_share_pct"]].mean().loc[["slow", "normal", "fast"]]
-    ln = _lines(ax_s, "model:BH04")[0]
-    assert np.allclose(ln.get_xdata(), means["speed_m_per_s"]) and np.allclose(ln.get_ydata(), means["swing_energy_share_pct"])
+    for s in SUBJECTS:
+        ds = d[d["subject"] == s].set_index("trial").loc[["slow", "normal", "fast"]]
+        ln = _lines(ax_s, f"model:BH04:{s}")[0]
+        assert np.allclose(ln.get_xdata(), ds["speed_m_per_s"]) and np.allclose(ln.get_ydata(), ds["swing_energy_share_pct"])
     assert ax_s.get_xlabel() == "walking speed (m/s)"
-    assert "%/(m/s)" in ln.get_label()
+    assert "%/(m/s)" in _lines(ax_s, "model:BH04")[0].get_label()
 
 
 def test_phase_shares_one_speed(results):
     fig = phase_shares(results[results["trial"] == "fast"])
     ax_b, ax_s = fig.axes
     assert "fast" in ax_b.get_title() and "one speed only" in ax_s.get_title()
-    assert len(_lines(ax_s, "model:")) == len(MODELS)
+    assert len(_lines(ax_s, "model:")) == len(MODELS) * len(SUBJECTS)
     with pytest.raises(OptionError, match="trial 'normal'"):
         phase_shares(results[results["trial"] == "fast"], trial="normal")
 
@@ -738,16 +739,16 @@ def test_rates_against_speed_values(study):
     fig = rates_against_speed(r, workflow="effort-ten", models=["UM10", "BH04"])
     ax = fig.axes[0]
     d = r[(r.workflow == "effort-ten") & (r.model == "UM10")]
-    means = d.groupby("trial")[["speed_m_per_s", "mean_W_per_kg_no_basal"]].mean().loc[["slow", "normal", "fast"]]
-    wb = next(ln for ln in ax.lines if ln.get_gid() == "whole-body")
-    np.testing.assert_allclose(wb.get_xdata(), means["speed_m_per_s"])
-    np.testing.assert_allclose(wb.get_ydata(), means["mean_W_per_kg_no_basal"])
-    pf = next(ln for ln in ax.lines if ln.get_gid() == "group:PF")
-    want = (d.share_PF_pct / 100 * d.mean_W_per_kg_no_basal).groupby(d.trial).mean().loc[["slow", "normal", "fast"]]
-    np.testing.assert_allclose(pf.get_ydata(), want)
+    for subject in SUBJECTS:  # each subject's own trials, in the order of its speeds
+        ds = d[d.subject == subject].set_index("trial").loc[["slow", "normal", "fast"]]
+        wb = next(ln for ln in ax.lines if ln.get_gid() == f"whole-body:{subject}")
+        np.testing.assert_allclose(wb.get_xdata(), ds["speed_m_per_s"])
+        np.testing.assert_allclose(wb.get_ydata(), ds["mean_W_per_kg_no_basal"])
+        pf = next(ln for ln in ax.lines if ln.get_gid() == f"group:PF:{subject}")
+        np.testing.assert_allclose(pf.get_ydata(), ds.share_PF_pct / 100 * ds.mean_W_per_kg_no_basal)
     assert fig.axes[0].get_shared_y_axes().joined(fig.axes[0], fig.axes[1])
     # the speed axis spans the trials' speeds (m/s), the same in every panel, not the cycle's 0-100 %
-    speeds = r[r.workflow == "effort-ten"].groupby("trial")["speed_m_per_s"].mean()
+    speeds = r[r.workflow == "effort-ten"]["speed_m_per_s"]
     for ax in fig.axes[:2]:
         assert ax.get_xlim() == pytest.approx((speeds.min() - 0.05, speeds.max() + 0.05))
     assert fig.axes[-1].get_xlabel() == "walking speed (m/s)"
@@ -755,7 +756,8 @@ def test_rates_against_speed_values(study):
     from matplotlib.colors import to_rgb
 
     assert to_rgb(wb.get_color()) == (0.0, 0.0, 0.0)
-    assert all(to_rgb(ln.get_color()) != (0.0, 0.0, 0.0) for ln in ax.lines if ln.get_gid() != "whole-body")
+    assert all(to_rgb(ln.get_color()) != (0.0, 0.0, 0.0) for ln in ax.lines
+               if not str(ln.get_gid()).startswith("whole-body"))
 
 
 # ------------------------------------------------------------------- pies, colours, runs
@@ -1090,3 +1092,23 @@ def test_muscle_heat_map_holds_each_muscles_rate_over_the_cycle(tmp_path):
         assert np.allclose(_lines(ax, "toe-off")[0].get_xdata(), TOE_OFF_PCT)
     labels = [x.get_text() for x in panels[0].get_yticklabels()]
     assert labels == ["soleus (r) [PF]", "vastus lateralis (r) [KE]", "gluteus maximus (r) [HE]"]
+
+
+def test_speed_series_never_match_trials_of_two_subjects_by_name():
+    """Subject a walked ``normal`` (1.3 m/s) and ``fast`` (1.8 m/s), subject b ``walk1`` (1.2 m/s)
+    and ``walk2`` (1.6 m/s): each subject's line runs through its own trials in the order of its
+    speeds; no line joins a's ``normal`` with b's ``walk1``."""
+    from musclemetab.report.figures import rates_against_speed
+
+    rows = [("a", "normal", 1.3, 9.6), ("a", "fast", 1.8, 12.0), ("b", "walk2", 1.6, 6.5), ("b", "walk1", 1.2, 5.0)]
+    r = pd.DataFrame([{"subject": s, "trial": t, "workflow": "effort-ten", "model": "UM10", "status": "ok",
+                       "speed_m_per_s": v, "mean_W_per_kg": w + 1.2, "mean_W_per_kg_no_basal": w, "share_PF_pct": 40.0}
+                      for s, t, v, w in rows])
+    ax = rates_against_speed(r).axes[0]
+    lines = {ln.get_gid(): ln for ln in ax.lines}
+    assert set(lines) == {"whole-body:a", "whole-body:b", "group:PF:a", "group:PF:b"}
+    assert lines["whole-body:a"].get_xdata().tolist() == [1.3, 1.8]
+    assert lines["whole-body:a"].get_ydata().tolist() == [9.6, 12.0]
+    assert lines["whole-body:b"].get_xdata().tolist() == [1.2, 1.6]  # walk1 before walk2: by speed
+    assert lines["whole-body:b"].get_ydata().tolist() == [5.0, 6.5]
+    np.testing.assert_allclose(lines["group:PF:b"].get_ydata(), [2.0, 2.6])

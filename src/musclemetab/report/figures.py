@@ -845,8 +845,9 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
     Left: at the preferred speed (``trial``, default :func:`preferred_trial`), stacked bars
     (stance solid, swing hatched, mean over subjects, error bar = SD of the swing share) per
     model (groups of bars) and workflow (bar colour). Right: swing share against walking speed
-    (m/s) for ``workflow`` (default :func:`main_workflow`), one line per model through the
-    means over subjects at each trial, subjects as small points; the legend gives the
+    (m/s) for ``workflow`` (default :func:`main_workflow`), one line per model and subject
+    through the subject's trials in the order of its speeds (line style and marker: the
+    subject; trials of different subjects never matched by name); the legend gives the
     repeated-measures slope (% per m/s) when there are two speeds or more.
     """
     res = _ok_rows(results)
@@ -912,15 +913,16 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
         if d.empty:
             continue
         col = model_colour(m)
-        ax_s.scatter(d["speed_m_per_s"], d["swing_energy_share_pct"], color=col, s=9, alpha=0.45, label="_" + m, zorder=2)
-        rows = [r for r in _speed_table(d, "swing_energy_share_pct") if np.isfinite(r[1]) and r[4] > 0]
         label = m
         if n_speeds > 1:
             rm, _ = _rmcorr(d["speed_m_per_s"], d["swing_energy_share_pct"], d["subject"].astype(str))
             if rm is not None:
                 label = f"{m}: {rm.slope:+.1f} %/(m/s), r = {rm.r:.2f}"
-        ax_s.plot([r[1] for r in rows], [r[2] for r in rows], color=col, marker="o", ms=4, lw=1.4,
-                  label=label, gid=f"model:{m}", zorder=3)
+        for i, subject in enumerate(_unique(d["subject"].astype(str))):  # never matched by trial name
+            ds = d[d["subject"].astype(str) == subject].sort_values("speed_m_per_s")
+            ax_s.plot(ds["speed_m_per_s"].to_numpy(float), ds["swing_energy_share_pct"].to_numpy(float), color=col,
+                      marker="os^Dvx"[i % 6], ms=4, lw=1.2, ls=("-", "--", ":", "-.")[i % 4],
+                      label=label if i == 0 else "_" + m, gid=f"model:{m}:{subject}", zorder=3)
     ax_s.yaxis.get_major_formatter().set_useOffset(False)
     ax_s.set_xlabel("walking speed (m/s)")
     ax_s.set_ylabel("swing share (%)")
@@ -1071,45 +1073,56 @@ def rates_against_speed(results, *, workflow: str | None = None, models: Sequenc
     """Whole-body and muscle-group rates (W/kg of body mass, both legs, no basal) against speed.
 
     One panel per model (shared axes); a black line through the whole-body rate without basal
-    heat (``mean_W_per_kg_no_basal``) at each trial and one line per group
-    (``share_<G>_pct / 100 * mean_W_per_kg_no_basal``), means over subjects at the trials' mean
-    speeds.
+    heat (``mean_W_per_kg_no_basal``) and one line per group
+    (``share_<G>_pct / 100 * mean_W_per_kg_no_basal``) through each subject's trials in the
+    order of its own walking speeds: the trials of different subjects are never matched by
+    name. Subjects differ by line style and marker (gids ``whole-body:<subject>``,
+    ``group:<G>:<subject>``).
     """
     res = _ok_rows(results)
-    _require_columns(res, ("speed_m_per_s", "mean_W_per_kg_no_basal"), "the results table")
+    _require_columns(res, ("subject", "speed_m_per_s", "mean_W_per_kg_no_basal"), "the results table")
     cols = [c for c in (f"share_{g}_pct" for g in GROUPS) if c in res.columns]
     wf, d = _one_workflow(res, workflow, "the results")
-    if len(_unique(d["trial"].astype(str))) < 2:
-        raise OptionError("one speed only: nothing to draw against speed")
+    subjects = _unique(d["subject"].astype(str))
+    per_subject = d.groupby(d["subject"].astype(str))["trial"].nunique()
+    if per_subject.max() < 2:
+        raise OptionError("one speed per subject only: nothing to draw against speed")
     models = _ordered_models(d["model"]) if models is None else [str(m) for m in models]
     fig, axes = _cycle_panels(len(models))
     groups = [c[len("share_"):-len("_pct")] for c in cols]
+    styles = {s: (("-", "--", ":", "-.")[i % 4], "os^Dvx"[i % 6]) for i, s in enumerate(subjects)}
     speeds: list[float] = []
     for k, m in enumerate(models):
         ax = axes.flat[k]
         dm = d[d["model"].astype(str) == m].copy()
         for g, c in zip(groups, cols):
             dm[f"rate_{g}"] = dm[c].astype(float) / 100.0 * dm["mean_W_per_kg_no_basal"].astype(float)
-        order = trial_order(dm)
-        stats = group_stats(dm, ["trial"], ["speed_m_per_s", "mean_W_per_kg_no_basal"] + [f"rate_{g}" for g in groups])
-        x = [stat_cell(stats, t, "speed_m_per_s")[0] for t in order]
-        ax.plot(x, [stat_cell(stats, t, "mean_W_per_kg_no_basal")[0] for t in order], color="k", lw=1.8, marker="o",
-                ms=4, label="whole body", gid="whole-body")
-        for g in groups:
-            ys = [stat_cell(stats, t, f"rate_{g}")[0] for t in order]
-            ax.plot(x, ys, color=group_colour(g), lw=1.2, marker="o", ms=3, label=g, gid=f"group:{g}")
-        speeds += [v for v in x if np.isfinite(v)]
+        for subject in subjects:
+            ds = dm[dm["subject"].astype(str) == subject].sort_values("speed_m_per_s")
+            if ds.empty:
+                continue
+            ls, mk = styles[subject]
+            x = ds["speed_m_per_s"].to_numpy(float)
+            ax.plot(x, ds["mean_W_per_kg_no_basal"].to_numpy(float), color="k", lw=1.8, ls=ls, marker=mk, ms=4,
+                    label="whole body", gid=f"whole-body:{subject}")
+            for g in groups:
+                ax.plot(x, ds[f"rate_{g}"].to_numpy(float), color=group_colour(g), lw=1.1, ls=ls, marker=mk, ms=3,
+                        label=g, gid=f"group:{g}:{subject}")
+            speeds += [v for v in x if np.isfinite(v)]
     # one speed axis in every panel, over the trials' speeds
     _label_cycle_panels(axes, models, "metabolic rate (W/kg)", xlim=(min(speeds) - 0.05, max(speeds) + 0.05),
                         xlabel="walking speed (m/s)")
     from matplotlib.lines import Line2D
 
-    handles = [Line2D([], [], color="k", lw=1.8, marker="o", label="whole body (both legs, no basal)")]
-    handles += [Line2D([], [], color=group_colour(g), lw=1.2, marker="o", label=f"{g} ({GROUP_NAMES.get(g, g)})")
+    handles = [Line2D([], [], color="k", lw=1.8, label="whole body (both legs, no basal)")]
+    handles += [Line2D([], [], color=group_colour(g), lw=1.2, label=f"{g} ({GROUP_NAMES.get(g, g)})")
                 for g in groups]
+    if len(subjects) > 1:
+        handles += [Line2D([], [], color="0.4", lw=1.2, ls=styles[s][0], marker=styles[s][1], label=f"subject {s}")
+                    for s in subjects]
     _legend_below(fig, handles, min(len(handles), 6), 8)
     fig.suptitle(title or f"Whole-body and muscle-group metabolic rates against walking speed ({wf}; W/kg of body "
-                 "mass, both legs, no basal heat; mean over subjects)", fontsize=11)
+                 "mass, both legs, no basal heat; one line per subject)", fontsize=11)
     return fig
 
 

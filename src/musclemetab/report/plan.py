@@ -203,8 +203,9 @@ def rates_against_speed_figure(sel: Selection):
 
     return rates_against_speed(sel.ok, workflow=sel.workflow, models=sel.models), (
         f"Workflow {sel.workflow}. Whole-body metabolic rate without basal heat (black) and each muscle group's "
-        "part of it (group share × whole-body rate), W per kg of body mass, both legs; means over subjects "
-        "at each trial's mean walking speed; same axes in every panel.")
+        "part of it (group share × whole-body rate), W per kg of body mass, both legs; one line per subject "
+        "through its trials in the order of its walking speeds (line style and marker: the subject); same "
+        "axes in every panel.")
 
 
 def figure2_figure():
