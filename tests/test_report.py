@@ -116,6 +116,22 @@ def _integral(pct, v, lo=0.0, hi=100.0):
 MUSCLE_PARTS = {"soleus_r": 0.3, "gasmed_r": 0.25, "vaslat_r": 0.2, "psoas_r": 0.15, "tibant_r": 0.1}
 
 
+def write_metabolics_sto(folder: Path, speed: float) -> dict:
+    """A unit's ``metabolics.sto``: each muscle's total and basal rate (W) at the cycle's nodes;
+    returns the columns written."""
+    from musclemetab.io.storage import write_storage
+
+    t = np.round(np.linspace(CYCLE[0], CYCLE[2], 41), 6)
+    phase = (t - CYCLE[0]) / (CYCLE[2] - CYCLE[0])
+    cols = {}
+    for k, model in enumerate(MODELS):
+        for j, mu in enumerate(MUSCLE_PARTS):
+            cols[f"{model}/{mu}/total"] = (k + 1) * speed * (1 + j + np.sin(np.pi * (phase + 0.1 * j)) ** 2)
+            cols[f"{model}/{mu}/basal"] = np.full(t.size, 0.1 * (j + 1))
+    write_storage(folder / "metabolics.sto", pd.DataFrame(cols, index=pd.Index(t, name="time")))
+    return cols
+
+
 def make_study(root: Path, *, measured=True, trials=None, solutions=True, failed=()) -> Path:
     """A study folder with the runner's layout; ``failed``: (subject, trial, workflow) units that failed."""
     trials = TRIALS if trials is None else trials
@@ -142,6 +158,7 @@ def make_study(root: Path, *, measured=True, trials=None, solutions=True, failed
                     continue
                 ts = make_timeseries(sp, workflow=workflow)
                 ts.to_csv(folder / "timeseries.csv", index=False)
+                write_metabolics_sto(folder, sp)
                 if solutions:
                     sol[workflow].write(folder)
                 (folder / "unit.json").write_text(json.dumps({

@@ -1086,7 +1086,7 @@ def rates_against_speed(results, *, workflow: str | None = None, models: Sequenc
     subjects = _unique(d["subject"].astype(str))
     per_subject = d.groupby(d["subject"].astype(str))["trial"].nunique()
     if per_subject.max() < 2:
-        raise OptionError("one speed per subject only: nothing to draw against speed")
+        raise OptionError("one speed only (per subject): nothing to draw against speed")
     models = _ordered_models(d["model"]) if models is None else [str(m) for m in models]
     fig, axes = _cycle_panels(len(models))
     groups = [c[len("share_"):-len("_pct")] for c in cols]
