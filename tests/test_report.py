@@ -1129,3 +1129,65 @@ def test_speed_series_never_match_trials_of_two_subjects_by_name():
     assert lines["whole-body:b"].get_xdata().tolist() == [1.2, 1.6]  # walk1 before walk2: by speed
     assert lines["whole-body:b"].get_ydata().tolist() == [5.0, 6.5]
     np.testing.assert_allclose(lines["group:PF:b"].get_ydata(), [2.0, 2.6])
+
+
+def test_the_papers_six_models_by_default_others_on_request(tmp_path, capsys):
+    """LW05 and MA68 rows in the results: left out of the figures unless asked for (``models``,
+    ``--models``, ``[report] models`` recorded in study.json); the tables keep every model; the
+    rebuild key follows the option; a model the study did not compute is refused by name."""
+    import argparse
+
+    from musclemetab.commands.report import add_parser as add_report_parser
+    from musclemetab.report.build import generate_report
+    from musclemetab.report.folder import read_study_folder
+    from musclemetab.report.plan import select
+
+    root = make_study(tmp_path / "s", solutions=False, trials={"slow": 0.75, "normal": 1.25})
+    r = pd.read_csv(root / "results.csv")
+    extra = pd.concat([r[r.model == "UM10"].assign(model=m, mean_W_per_kg=r.mean_W_per_kg + 5) for m in ("LW05", "MA68")])
+    pd.concat([r, extra]).to_csv(root / "results.csv", index=False)
+    assert select(read_study_folder(root)).models == list(MODELS)
+    assert select(read_study_folder(root, models="all,LW05")).models == [*MODELS, "LW05"]
+    assert set(select(read_study_folder(root, models="MA68")).ok["model"]) == {"MA68"}
+    with pytest.raises(OptionError, match="--models: UM03 not computed"):
+        read_study_folder(root, models="UM03")
+    out, entries = generate_report(root, workers=1)
+    pies = next(e for e in entries if e.name == "phase_pies")
+    text = out.read_text(encoding="utf-8")
+    assert "LW05" in text.split('id="results"')[1]  # the tables keep every model
+    key = text.split('name="musclemetab-report-key" content="')[1][:64]
+    assert pies.paths is not None
+    parser = argparse.ArgumentParser(prog="musclemetab")
+    add_report_parser(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(["report", str(root), "--models", "all,LW05,MA68", "--workers", "1"])
+    assert args.func(args) == 0
+    key2 = (root / "report.html").read_text(encoding="utf-8").split('name="musclemetab-report-key" content="')[1][:64]
+    assert key2 != key
+    settings = json.loads((root / "study.json").read_text())
+    settings["report"] = {"models": ["LW05"]}
+    (root / "study.json").write_text(json.dumps(settings))
+    assert select(read_study_folder(root)).models == ["LW05"]
+
+
+def test_flagged_units_and_failures_at_the_top_figures_numbered_in_page_order(tmp_path):
+    """A unit with a large reserve (results.csv flag, its share from summary.json) and a failed
+    unit are named before the figures; the figures are numbered 1, 2, ... in page order."""
+    import re
+
+    from musclemetab.report.plan import FIGURE_TITLES
+
+    root = make_study(tmp_path / "s", solutions=False, trials={"normal": 1.25}, failed={("s2", "normal", "effort-gen")})
+    r = pd.read_csv(root / "results.csv")
+    r["large_reserve"] = (r.subject == "s3") & (r.workflow == "effort-ten")
+    r.to_csv(root / "results.csv", index=False)
+    (root / "units/s3/normal/effort-ten/summary.json").write_text(json.dumps(
+        {**RunRecord(status="Solve_Succeeded", success=True, iterations=40).to_dict(),
+         "reserve_share_of_peak_moment": 0.31, "large_reserve": True}))
+    text = write_report(root, workers=1).read_text(encoding="utf-8")
+    top = text[text.index('id="attention"'):text.index('id="figures"')]
+    assert "1 unit did not succeed" in top
+    assert re.search(r"<td>s3</td><td>normal</td><td>effort-ten</td><td>large_reserve</td><td>[^<]*31\.0 %", top.replace(
+        '<th scope="row">', "<td>").replace("</th>", "</td>"))
+    numbers = [(int(n), t) for n, t in re.findall(r'<h3 id="figure-[^"]+">Figure (\d+)\. ([^<]+)</h3>', text)]
+    assert [n for n, _ in numbers] == list(range(1, len(FIGURE_NAMES) + 1))
+    assert [t for _, t in numbers] == [FIGURE_TITLES[n].replace("'", "&#39;") for n in FIGURE_NAMES]

@@ -346,8 +346,9 @@ def read_study_folder(study_dir: str | os.PathLike, models=None) -> StudyFolder:
     ``results.csv`` lacks one of :data:`REQUIRED_COLUMNS`. A missing ``study.json`` or
     ``failures.csv`` gives a note in the report. ``models`` (names, ``"UM10,LW05"`` or
     ``"all"``, see :func:`~musclemetab.metabolics.registry.parse_models`): the models the
-    figures show (default: :meth:`StudyFolder.shown_models`); raises :class:`OptionError`
-    for an unknown name or one the study did not compute.
+    figures show (default: :meth:`StudyFolder.shown_models`; ``"all"``: those of the paper's
+    six the study computed); raises :class:`OptionError` for an unknown name or a named model
+    the study did not compute.
     """
     import pandas as pd
 
@@ -405,8 +406,10 @@ def read_study_folder(study_dir: str | os.PathLike, models=None) -> StudyFolder:
         from ..metabolics.registry import parse_models
 
         asked = parse_models(models)
+        tokens = models.replace(";", ",").replace(" ", ",").split(",") if isinstance(models, str) else list(models)
+        named = [t for t in tokens if t and str(t).strip().lower() != "all"]  # 'all': the six the study has
         computed = study.models()
-        absent = [m for m in asked if m not in computed]
+        absent = [m for m in (parse_models(named) if named else []) if m not in computed]
         if absent:
             raise OptionError(
                 f"--models: {', '.join(absent)} not computed in {rpath} (the study has {', '.join(computed)}); "
