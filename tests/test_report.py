@@ -712,7 +712,7 @@ def test_per_muscle_ranked_figure_values(study):
     ax = fig.axes[0]
     # largest at the top, the three largest parts only
     ticks = sorted((t.get_position()[1], t.get_text()) for t in ax.get_yticklabels())[::-1]
-    assert [name for _, name in ticks] == ["soleus (r)", "gastrocnemius medialis (r)", "vastus lateralis (r)"]
+    assert [name for _, name in ticks] == ["soleus", "gastrocnemius medialis", "vastus lateralis"]
     d = pm[(pm.workflow == "effort-ten") & (pm.model == "UM10")]
     for trial in ("slow", "normal", "fast"):
         bars = _bars(ax, f"trial:{trial}")
@@ -741,6 +741,11 @@ def test_per_muscle_ranking_merges_two_model_families(study):
     assert h[("a", "gastrocnemius medialis (r)")] == pytest.approx(0.30)
     assert h[("b", "gastrocnemius medialis (r)")] == pytest.approx(0.20)
     assert h[("a", "adductor magnus (r)")] == pytest.approx(0.12)
+    # a subject solved on both legs: one leg is the mean of its two legs (0.2 and 0.4 W/kg)
+    legs = pd.DataFrame([{"subject": "c", "trial": "normal", "workflow": "effort-ten", "model": "UM10", "muscle": m,
+                          "side": m[-1], "mean_W_per_kg": v} for m, v in (("gasmed_r", 0.2), ("gasmed_l", 0.4))])
+    one = harmonise_muscles(legs)
+    assert one["muscle"].tolist() == ["gastrocnemius medialis"] and one["mean_W_per_kg"].tolist() == pytest.approx([0.3])
     fig = per_muscle_ranked(pm, top=3)
     ax = fig.axes[0]
     ticks = [t.get_text() for t in sorted(ax.get_yticklabels(), key=lambda t: -t.get_position()[1])]
@@ -953,7 +958,7 @@ def test_measured_emg_over_the_excitations(tmp_path):
 def test_figure2_from_the_cache(study, tmp_path, monkeypatch):
     import hashlib
 
-    from musclemetab.metabolics import figure2 as figure2_module
+    from musclemetab.report import figures as figure2_module  # figure2_compact draws the report's Figure 2
     from musclemetab.report import draw
     from musclemetab.report.folder import read_study_folder
 
@@ -976,7 +981,7 @@ def test_figure2_from_the_cache(study, tmp_path, monkeypatch):
         fig.add_subplot().plot([0, 1], [1, 0])
         return fig
 
-    monkeypatch.setattr(figure2_module, "figure2", counting)
+    monkeypatch.setattr(figure2_module, "figure2_compact", counting)
     again = draw.draw_figure(folder, tmp_path / "b", ("png", "svg"), "figure2_soleus")
     assert calls == [] and Path(again.paths["png"]).read_bytes() == drawn and again.caption == first.caption
     assert set(again.paths) == {"png"}  # PNG only, also when the report writes SVG
@@ -1003,7 +1008,7 @@ def test_package_figures_drawn_ahead_into_the_cache(tmp_path, monkeypatch):
     when the cache holds it; the report then copies it (see test_figure2_from_the_cache)."""
     import hashlib
 
-    from musclemetab.metabolics import figure2 as figure2_module
+    from musclemetab.report import figures as figure2_module  # figure2_compact draws the report's Figure 2
     from musclemetab.report import draw
 
     monkeypatch.setenv("MUSCLEMETAB_CACHE", str(tmp_path / "cache"))
@@ -1014,7 +1019,7 @@ def test_package_figures_drawn_ahead_into_the_cache(tmp_path, monkeypatch):
     assert data.startswith(b"\x89PNG")
     assert cache.with_name(cache.name + ".sha256").read_text().strip() == hashlib.sha256(data).hexdigest()
     calls = []
-    monkeypatch.setattr(figure2_module, "figure2", lambda *a, **k: calls.append(1))
+    monkeypatch.setattr(figure2_module, "figure2_compact", lambda *a, **k: calls.append(1))
     draw.draw_package_figures()
     assert calls == [] and cache.read_bytes() == data
 
@@ -1027,7 +1032,7 @@ def test_figures_handed_out_largest_first_by_their_measured_drawing_times(tmp_pa
 
     from matplotlib.figure import Figure
 
-    from musclemetab.metabolics import figure2 as figure2_module
+    from musclemetab.report import figures as figure2_module  # figure2_compact draws the report's Figure 2
     from musclemetab.report import draw
     from musclemetab.report.folder import read_study_folder
 
@@ -1036,7 +1041,7 @@ def test_figures_handed_out_largest_first_by_their_measured_drawing_times(tmp_pa
         fig.add_subplot().plot([0, 1], [1, 0])
         return fig
 
-    monkeypatch.setattr(figure2_module, "figure2", small)
+    monkeypatch.setattr(figure2_module, "figure2_compact", small)
     monkeypatch.setenv("MUSCLEMETAB_CACHE", str(tmp_path / "cache"))
     folder = read_study_folder(make_study(tmp_path / "s", solutions=False, measured=False, trials={"normal": 1.25}))
     assert draw.draw_costs() == {}
@@ -1191,3 +1196,26 @@ def test_flagged_units_and_failures_at_the_top_figures_numbered_in_page_order(tm
     numbers = [(int(n), t) for n, t in re.findall(r'<h3 id="figure-[^"]+">Figure (\d+)\. ([^<]+)</h3>', text)]
     assert [n for n, _ in numbers] == list(range(1, len(FIGURE_NAMES) + 1))
     assert [t for _, t in numbers] == [FIGURE_TITLES[n].replace("'", "&#39;") for n in FIGURE_NAMES]
+
+
+def test_figure2_compact_holds_the_models_curves_on_shared_axes():
+    """The compact Figure 2: the paper's six models in columns, each line the model's rate or
+    efficiency of figure2_data at one activation; every panel of a row shares its axes."""
+    from musclemetab.metabolics.figure2 import figure2_data
+    from musclemetab.metabolics.registry import STUDY_MODELS
+    from musclemetab.report.figures import figure2_compact
+
+    data = figure2_data(models=STUDY_MODELS, n_velocity=41, n_length=31)
+    fig = figure2_compact(data)
+    axes = np.array(fig.axes).reshape(4, len(STUDY_MODELS))
+    assert [ax.get_title() for ax in axes[0]] == list(STUDY_MODELS)
+    for j, m in enumerate(STUDY_MODELS):
+        for i, (key, plane) in enumerate((("rate_W", "velocity"), ("efficiency", "velocity"), ("rate_W", "length"),
+                                          ("efficiency", "length"))):
+            ax = axes[i, j]
+            assert ax.get_shared_y_axes().joined(ax, axes[i, 0])
+            assert ax.get_shared_x_axes().joined(ax, axes[0 if plane == "velocity" else 2, 0])
+            for k, a in enumerate(data["activations"]):
+                ln = _lines(ax, f"{key}:{plane}:{m}:a={a:g}")[0]
+                np.testing.assert_array_equal(ln.get_ydata(), data[plane][key][m][k])
+    assert axes[0, 0].get_ylim() == axes[0, 5].get_ylim()

@@ -20,8 +20,9 @@ def add_parser(subparsers) -> None:
         description=(
             "Read a study folder written by 'musclemetab run' (study.json, results.csv, failures.csv, "
             "units/) and write its figures (DIR/figures/<name>.png, and .svg with --svg: excitations and fiber lengths, "
-            "estimated vs measured rate, group rates over the cycle, whole-body rate across speeds, stance "
-            "and swing shares, group shares) and one HTML page, DIR/report.html, with the settings, the "
+            "estimated vs measured rate, group rates over the cycle, every muscle over the cycle (heat map), "
+            "whole-body rate across speeds, stance and swing shares, group shares, per-muscle ranking; the paper's "
+            "six metabolic models unless --models names others) and one HTML page, DIR/report.html, with the settings, the "
             "method, the result tables (W/kg, J/(kg m), %), the figures embedded, the failures and the "
             "software versions. A figure the data do not support is replaced by a note. The report is rebuilt only "
             "when its inputs changed (content hash)."

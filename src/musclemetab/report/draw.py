@@ -98,9 +98,10 @@ def figure_cache(name: str) -> dict[str, Path] | None:
     from importlib.metadata import version
 
     from .. import colours, metabolics, muscle
+    from . import figures, plan
 
     h = hashlib.sha256(f"{name} matplotlib {version('matplotlib')}\n".encode())
-    sources = [Path(colours.__file__)]
+    sources = [Path(colours.__file__), Path(figures.__file__), Path(plan.__file__)]
     for package in (metabolics, muscle):
         sources += sorted(Path(package.__file__).parent.glob("*.py"))
     for src in sources:

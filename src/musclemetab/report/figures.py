@@ -1151,8 +1151,8 @@ def per_muscle_ranked(per_muscle, *, workflow: str | None = None, models: Sequen
     shades = np.linspace(0.15, 0.9, len(trials)) if len(trials) > 1 else np.array([0.6])
     colour = {t: cmap(float(x)) for t, x in zip(trials, shades)}
     nrow, ncol = _grid(len(models))
-    fig = _new_figure(4.2 * ncol + 0.8, (0.19 * top * max(1, len(trials)) / 2 + 1.0) * nrow + 1.5,
-                      left=1.0, top=0.8, wspace=0.55, hspace=0.3)
+    fig = _new_figure(4.2 * ncol + 1.6, (0.19 * top * max(1, len(trials)) / 2 + 1.0) * nrow + 1.5,
+                      left=1.6, top=0.8, wspace=0.75, hspace=0.3)
     axes = fig.subplots(nrow, ncol, squeeze=False, sharex=True)
     height = 0.8 / max(len(trials), 1)
     x_lo = x_hi = 0.0
@@ -1195,8 +1195,69 @@ def per_muscle_ranked(per_muscle, *, workflow: str | None = None, models: Sequen
     handles = [Patch(color=colour[t], label=f"{t} ({sp[t]:.2f} m/s)" if np.isfinite(sp.get(t, np.nan)) else t)
                for t in trials]
     _legend_below(fig, handles, min(len(handles), 8), 8)
-    fig.suptitle(title or f"The {top} muscles with the largest metabolic rate, across walking speeds ({wf}; "
-                 "W/kg of body mass, one leg, no basal heat; mean over subjects)", fontsize=11)
+    import textwrap
+
+    fig.suptitle(textwrap.fill(title or f"The {top} muscles with the largest metabolic rate, across walking speeds "
+                               f"({wf}; W/kg of body mass, one leg, no basal heat; mean over subjects)",
+                               int(fig.get_figwidth() * 11)), fontsize=11)
+    return fig
+
+
+# ------------------------------------------------------------- the paper's Figure 2, compact
+def figure2_compact(data: dict):
+    """The paper's Figure 2 in one compact grid: columns one model each, rows the metabolic rate
+    (W) and the efficiency over the fiber velocity (at the length plane) and over the fiber length
+    (at the velocity plane); every panel of a row shares its axes, so that the models compare
+    across the row. One line per activation (light: low, dark: full).
+
+    ``data``: :func:`musclemetab.metabolics.figure2.figure2_data`.
+    """
+    models, acts = list(data["models"]), np.asarray(data["activations"], float)
+    v, ln = data["velocity"], data["length"]
+    rows = (("rate_W", v, "vbar", "rate (W)"), ("efficiency", v, "vbar", "efficiency (-)"),
+            ("rate_W", ln, "normalized_fiber_length", "rate (W)"), ("efficiency", ln, "normalized_fiber_length",
+                                                                     "efficiency (-)"))
+    ncol = len(models)
+    fig = _new_figure(1.75 * ncol + 1.0, 1.55 * len(rows) + 1.7, left=0.8, top=0.85, wspace=0.1, hspace=0.45)
+    axes = fig.subplots(len(rows), ncol, squeeze=False, sharey="row")
+    shades = np.linspace(0.3, 1.0, len(acts))
+    for j, m in enumerate(models):
+        for i, (key, plane, x, ylabel) in enumerate(rows):
+            ax = axes[i, j]
+            first = axes[0, 0] if plane is v else axes[2, 0]  # one abscissa per plane
+            if ax is not first:
+                ax.sharex(first)
+            for k, a in enumerate(acts):
+                ax.plot(plane[x], plane[key][m][k], color=model_colour(m), alpha=float(shades[k]), lw=1.1,
+                        gid=f"{key}:{'velocity' if plane is v else 'length'}:{m}:a={a:g}")
+            _hline(ax, 0.0, color="0.7", lw=0.5)
+            if j == 0:
+                ax.set_ylabel(ylabel, fontsize=8)
+            else:
+                ax.tick_params(labelleft=False)
+            ax.tick_params(labelsize=7)
+            if i == 0:
+                _panel_title(ax, m, color=model_colour(m), fontsize=10, fontweight="bold")
+    for i, (_, plane, x, _) in enumerate(rows):
+        if i in (0, 2):
+            axes[i, 0].set_xlim(float(np.min(plane[x])), float(np.max(plane[x])))
+            axes[i, 0].set_xticks([-1.0, 0.0, 1.0] if plane is v else [0.5, 1.0, 1.5])
+        if i in (1, 3):
+            axes[i, 0].set_xlabel("fiber velocity (vmax; < 0: shortening)" if plane is v
+                                  else "fiber length (optimal lengths)", fontsize=7, loc="left")
+    eff_lim = max(float(np.nanmax(data[p]["efficiency"][m])) for p in ("velocity", "length") for m in models)
+    axes[1, 0].set_ylim(0.0, min(1.0, 1.1 * eff_lim))
+    axes[3, 0].set_ylim(0.0, min(1.0, 1.1 * eff_lim))
+    cfg = data["config"]
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], color="0.2", alpha=float(sh), lw=1.5, label=f"activation {a:g}")
+               for a, sh in zip(acts, shades)]
+    _legend_below(fig, handles, len(handles), 8)
+    fig.suptitle(f"The metabolic models on one soleus in steady states (the paper's Figure 2)\nrows 1-2: over the "
+                 f"fiber velocity at l/lo = {v['normalized_fiber_length']:g}; rows 3-4: over the fiber length at "
+                 f"v = {ln['vbar']:g} vmax; slow-twitch fraction {cfg['slow_twitch_fraction']:g}, "
+                 f"{cfg['muscle_mass_kg']:g} kg", fontsize=9.5)
     return fig
 
 
@@ -1227,7 +1288,8 @@ def anatomical_muscles(names: Sequence[str]) -> dict[str, tuple[str, str]]:
 def harmonise_muscles(per_muscle, value: str = "mean_W_per_kg"):
     """The per-muscle table with the model muscles of each subject summed into anatomical
     muscles (:func:`anatomical_muscles`, per subject: each subject's model family), column
-    ``muscle`` the anatomical label, ``group`` its muscle group."""
+    ``muscle`` the anatomical label, ``group`` its muscle group. With a ``side`` column, the
+    label drops the side and a subject solved on both legs gets the mean of its legs (one leg)."""
     import pandas as pd
 
     d = per_muscle.copy()
@@ -1239,8 +1301,13 @@ def harmonise_muscles(per_muscle, value: str = "mean_W_per_kg"):
         parts.append(ds.assign(muscle=ds["muscle"].map(lambda n: labels[n][0]),
                                group=ds["muscle"].map(lambda n: labels[n][1])))
     d = pd.concat(parts, ignore_index=True)
+    if "side" in d.columns:  # a subject solved on both legs: one leg is the mean of its two
+        d["muscle"] = d["muscle"].str.replace(r" \([rl]\)$", "", regex=True)
+        d["side"] = d["side"].astype(str)
     keys = [c for c in ("subject", "trial", "workflow", "model", "muscle", "group") if c in d.columns]
-    summed = d.groupby(keys, sort=False, dropna=False)[value].sum(min_count=1).reset_index()
+    leg = keys + (["side"] if "side" in d.columns else [])
+    summed = d.groupby(leg, sort=False, dropna=False)[value].sum(min_count=1).reset_index()
+    summed = summed.groupby(keys, sort=False, dropna=False)[value].mean().reset_index()
     rest = [c for c in d.columns if c not in keys and c != value]
     if "speed_m_per_s" in rest:
         sp = d.groupby([k for k in ("subject", "trial") if k in d.columns], sort=False)["speed_m_per_s"].first()

@@ -42,7 +42,7 @@ FIGURE_NAMES = (
 
 #: The title of each figure in the report.
 FIGURE_TITLES = {
-    "figure2_soleus": "The metabolic models on a soleus (the paper's Figure 2)",
+    "figure2_soleus": "The six metabolic models on a soleus (the paper's Figure 2)",
     "excitations_fiber_lengths": "Muscle excitations and normalised fiber lengths",
     "estimated_vs_measured": "Estimated vs measured whole-body metabolic rate",
     "group_rates_over_cycle": "Metabolic rate of the muscle groups over the gait cycle",
@@ -56,12 +56,14 @@ FIGURE_TITLES = {
 }
 
 FIGURE2_CAPTION = (
-    "The metabolic rate (W) and efficiency of one soleus under each energy model, in steady states "
-    "(excitation equal to activation) at four activations: over the fiber velocity at the optimal "
-    "length and over the fiber length at a slow shortening; the last row compares the models at full "
-    "activation. The settings and the open choices are printed on the figure (docs/metabolics.md). It "
-    "depends on no data of the study: it is drawn once per version of the models and kept in the "
-    "package's cache."
+    "The metabolic rate (W) and efficiency of one soleus under each of the paper's six energy models "
+    "(columns), in steady states (excitation equal to activation) at four activations (light: low, dark: "
+    "full): over the fiber velocity at the optimal length (rows 1-2; shortening negative) and over the fiber "
+    "length at a slow shortening (rows 3-4); the panels of a row share their axes, so the models compare "
+    "across it. Efficiency: mechanical power over metabolic rate, shortening only. Settings and open "
+    "choices: docs/metabolics.md (musclemetab.metabolics.figure2.figure2 draws every model with them "
+    "printed). It depends on no data of the study: it is drawn once per version of the models and kept in "
+    "the package's cache."
 )
 
 #: The figures showing one unit of the study (the selected subject's).
@@ -209,9 +211,11 @@ def rates_against_speed_figure(sel: Selection):
 
 
 def figure2_figure():
-    from ..metabolics.figure2 import figure2
+    from ..metabolics.figure2 import figure2_data
+    from ..metabolics.registry import STUDY_MODELS
+    from .figures import figure2_compact
 
-    return figure2(), FIGURE2_CAPTION
+    return figure2_compact(figure2_data(models=STUDY_MODELS)), FIGURE2_CAPTION
 
 
 # ------------------------------------------------------------------ figures of the unit files
@@ -444,7 +448,9 @@ def per_muscle_figure(study: StudyFolder, sel: Selection):
         pm = pm.merge(sp.astype({"subject": str, "trial": str}), on=["subject", "trial"], how="left")
     fig = per_muscle_ranked(pm, workflow=wf if wf in set(pm["workflow"].astype(str).unique()) else None,
                             models=[m for m in sel.models if m in set(pm["model"].astype(str).unique())] or None)
-    cap = (f"Workflow {wf}. The 15 muscles with the largest cycle-average metabolic rate of each model "
+    cap = (f"Workflow {wf}. The 15 anatomical muscles with the largest cycle-average metabolic rate of each model "
            "(W per kg of body mass, one leg, without basal heat; mean over subjects), one bar per trial "
-           "(light: slow, dark: fast); every muscle is in per_muscle.csv.")
+           "(light: slow, dark: fast); each subject's model muscles are summed into the anatomical muscles of the "
+           "package's muscle table (bundles of one muscle together, the names of different model families "
+           "merged); every model muscle is in per_muscle.csv.")
     return fig, cap
