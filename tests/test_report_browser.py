@@ -147,42 +147,14 @@ def test_demo_report_renders_in_headless_chromium(demo, chromium, tmp_path, caps
 
 
 # ------------------------------------------------------------------ every figure, two widths, two studies
-TWO_SUBJECTS = """
-name = "two subjects"
-output = "out"
-workflows = ["effort-gen"]
-models = ["UM10", "BH04"]
-
-[[subjects]]
-name = "example"
-model = "{example.model}"
-body_mass_kg = {example.body_mass_kg}
-height_m = {example.height_m}
-
-[[subjects.trials]]
-name = "normal"
-ik = "{example.ik[normal]}"
-id = "{example.id[normal]}"
-
-[[subjects]]
-name = "gait2392"
-model = "{gait2392.model}"
-body_mass_kg = {gait2392.body_mass_kg}
-height_m = 1.8
-side = "both"
-
-[[subjects.trials]]
-name = "walk1"
-ik = "{gait2392.ik}"
-external_loads = "{gait2392.external_loads}"
-cycle = "auto"
-"""
 
 
 @pytest.fixture(scope="module")
 def two_subjects(example, gait2392, tmp_path_factory):
     """The two-subject study of tests/test_trials.py (the example subject's right leg, gait2392's
     subject on both legs, other trial names), run with its report."""
+    from test_trials import TWO_SUBJECTS
+
     from musclemetab.commands import main
 
     root = tmp_path_factory.mktemp("two_subjects")

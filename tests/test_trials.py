@@ -144,6 +144,39 @@ def test_lumped_2d_model_with_degroote_and_millard_muscles_both_legs(lumped_mode
 
 
 # ------------------------------------------------------------------ a two-subject study
+#: The two-subject study file (``str.format`` with the ``example`` and ``gait2392`` data sets).
+TWO_SUBJECTS = """
+name = "two subjects"
+output = "out"
+workflows = ["effort-gen"]
+models = ["UM10", "BH04"]
+
+[[subjects]]
+name = "example"
+model = "{example.model}"
+body_mass_kg = {example.body_mass_kg}
+height_m = {example.height_m}
+
+[[subjects.trials]]
+name = "normal"
+ik = "{example.ik[normal]}"
+id = "{example.id[normal]}"
+
+[[subjects]]
+name = "gait2392"
+model = "{gait2392.model}"
+body_mass_kg = {gait2392.body_mass_kg}
+height_m = 1.8
+side = "both"
+
+[[subjects.trials]]
+name = "walk1"
+ik = "{gait2392.ik}"
+external_loads = "{gait2392.external_loads}"
+cycle = "auto"
+"""
+
+
 @pytest.mark.slow
 @pytest.mark.opensim
 def test_two_subject_study_different_models_and_sides(example, gait2392, tmp_path, capsys):
@@ -159,36 +192,7 @@ def test_two_subject_study_different_models_and_sides(example, gait2392, tmp_pat
     from musclemetab.metabolics.solution import add_legs, metabolics_from_solution
 
     study = tmp_path / "study.toml"
-    study.write_text(f"""
-name = "two subjects"
-output = "out"
-workflows = ["effort-gen"]
-models = ["UM10", "BH04"]
-
-[[subjects]]
-name = "example"
-model = "{example.model}"
-body_mass_kg = {example.body_mass_kg}
-height_m = {example.height_m}
-
-[[subjects.trials]]
-name = "normal"
-ik = "{example.ik['normal']}"
-id = "{example.id['normal']}"
-
-[[subjects]]
-name = "gait2392"
-model = "{gait2392.model}"
-body_mass_kg = {gait2392.body_mass_kg}
-height_m = 1.8
-side = "both"
-
-[[subjects.trials]]
-name = "walk1"
-ik = "{gait2392.ik}"
-external_loads = "{gait2392.external_loads}"
-cycle = "auto"
-""")
+    study.write_text(TWO_SUBJECTS.format(example=example, gait2392=gait2392))
     assert _cli("run", study, "--workers", 2, "--report", "--no-progress") == 0
     assert "3 units: 3 run" in capsys.readouterr().out
     out = tmp_path / "out"

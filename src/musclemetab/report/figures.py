@@ -707,6 +707,20 @@ def _label_cycle_panels(axes, models: Sequence[str], ylabel: str = "metabolic ra
             ax.tick_params(labelbottom=True)
 
 
+def _models_and_toe_off(available: Sequence[str], models, toe_off_pct, what: str, having: str
+                        ) -> tuple[list[str], float]:
+    """The models to draw (``models`` or every one ``available``) and the toe-off (% of the
+    cycle); :class:`OptionError` for a model without data or a toe-off outside the cycle."""
+    models = list(available) if models is None else [str(m) for m in models]
+    absent = [m for m in models if m not in available]
+    if absent:
+        raise OptionError(f"no {what} for model {', '.join(absent)} ({having} {', '.join(available)})")
+    to = float(toe_off_pct)
+    if not (0.0 < to < 100.0):
+        raise OptionError(f"toe-off must be inside the cycle (0-100 %), not {toe_off_pct}")
+    return models, to
+
+
 def group_rates_over_cycle(timeseries, toe_off_pct: float, models: Sequence[str] | None = None,
                            *, title: str | None = None, scale: float = 1.0, unit: str = "W"):
     """Metabolic rate of each muscle group over the gait cycle: small multiples, one panel per
@@ -720,14 +734,7 @@ def group_rates_over_cycle(timeseries, toe_off_pct: float, models: Sequence[str]
     ts = ts[ts["series"].astype(str).str.startswith("group/")]
     if ts.empty:
         raise OptionError("the time-series table has no group series (group/<G>)")
-    available = _ordered_models(ts["model"])
-    models = available if models is None else [str(m) for m in models]
-    absent = [m for m in models if m not in available]
-    if absent:
-        raise OptionError(f"no group rates for model {', '.join(absent)} (the table has {', '.join(available)})")
-    to = float(toe_off_pct)
-    if not (0.0 < to < 100.0):
-        raise OptionError(f"toe-off must be inside the cycle (0-100 %), not {toe_off_pct}")
+    models, to = _models_and_toe_off(_ordered_models(ts["model"]), models, toe_off_pct, "group rates", "the table has")
     present = _unique(s.split("/", 1)[1] for s in _unique(ts["series"].astype(str)))
     groups = [g for g in GROUPS if g in present] + [g for g in present if g not in GROUPS]
     nrow, ncol = _grid(len(groups), 4)
@@ -1328,13 +1335,7 @@ def muscle_heat_map(rates: Mapping[str, object], toe_off_pct: float, models: Seq
     """
     if not rates:
         raise OptionError("no per-muscle rates given for the heat map")
-    models = _ordered_models(list(rates)) if models is None else [str(m) for m in models]
-    absent = [m for m in models if m not in rates]
-    if absent:
-        raise OptionError(f"no per-muscle rates for model {', '.join(absent)} (given: {', '.join(rates)})")
-    to = float(toe_off_pct)
-    if not (0.0 < to < 100.0):
-        raise OptionError(f"toe-off must be inside the cycle (0-100 %), not {toe_off_pct}")
+    models, to = _models_and_toe_off(_ordered_models(list(rates)), models, toe_off_pct, "per-muscle rates", "given:")
     muscles = list(dict.fromkeys(str(c) for m in models for c in rates[m].columns))
     labels = anatomical_muscles(muscles)
     rank = {g: i for i, g in enumerate(GROUPS)}
@@ -1355,7 +1356,8 @@ def muscle_heat_map(rates: Mapping[str, object], toe_off_pct: float, models: Seq
     nrow = int(math.ceil(len(models) / ncol))
     fig = _new_figure(2.4 * ncol + 3.3, (0.125 * len(order) + 0.45) * nrow + 1.0, left=2.4, right=0.9,
                       wspace=0.06, hspace=0.1 if len(order) > 20 else 0.3)
-    axes = fig.subplots(nrow, ncol, squeeze=False, sharex=True, sharey=True)
+    # the same rows in every panel (no shared y axis: the muscles' ticks are made once per row of panels)
+    axes = fig.subplots(nrow, ncol, squeeze=False, sharex=True)
     image = None
     shared = {labels[n][0] for n in order if sum(labels[x][0] == labels[n][0] for x in order) > 1}
     names = [f"{labels[n][0].rsplit(' (', 1)[0]}: {n}" if labels[n][0] in shared else labels[n][0] for n in order]
@@ -1373,6 +1375,8 @@ def muscle_heat_map(rates: Mapping[str, object], toe_off_pct: float, models: Seq
             continue
         if k % ncol == 0:
             ax.set_yticks(range(len(order)), [f"{t} [{labels[n][1]}]" for t, n in zip(names, order)], fontsize=7)
+        else:
+            ax.set_yticks([])
         for i in range(1, len(order)):  # a thin line between the muscle groups
             if group_of[i] != group_of[i - 1]:
                 _hline(ax, i - 0.5, color="white", lw=0.8)
