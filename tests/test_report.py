@@ -116,6 +116,22 @@ def _integral(pct, v, lo=0.0, hi=100.0):
 MUSCLE_PARTS = {"soleus_r": 0.3, "gasmed_r": 0.25, "vaslat_r": 0.2, "psoas_r": 0.15, "tibant_r": 0.1}
 
 
+def write_metabolics_sto(folder: Path, speed: float) -> dict:
+    """A unit's ``metabolics.sto``: each muscle's total and basal rate (W) at the cycle's nodes;
+    returns the columns written."""
+    from musclemetab.io.storage import write_storage
+
+    t = np.round(np.linspace(CYCLE[0], CYCLE[2], 41), 6)
+    phase = (t - CYCLE[0]) / (CYCLE[2] - CYCLE[0])
+    cols = {}
+    for k, model in enumerate(MODELS):
+        for j, mu in enumerate(MUSCLE_PARTS):
+            cols[f"{model}/{mu}/total"] = (k + 1) * speed * (1 + j + np.sin(np.pi * (phase + 0.1 * j)) ** 2)
+            cols[f"{model}/{mu}/basal"] = np.full(t.size, 0.1 * (j + 1))
+    write_storage(folder / "metabolics.sto", pd.DataFrame(cols, index=pd.Index(t, name="time")))
+    return cols
+
+
 def make_study(root: Path, *, measured=True, trials=None, solutions=True, failed=()) -> Path:
     """A study folder with the runner's layout; ``failed``: (subject, trial, workflow) units that failed."""
     trials = TRIALS if trials is None else trials
@@ -142,6 +158,7 @@ def make_study(root: Path, *, measured=True, trials=None, solutions=True, failed
                     continue
                 ts = make_timeseries(sp, workflow=workflow)
                 ts.to_csv(folder / "timeseries.csv", index=False)
+                write_metabolics_sto(folder, sp)
                 if solutions:
                     sol[workflow].write(folder)
                 (folder / "unit.json").write_text(json.dumps({
@@ -351,19 +368,22 @@ def test_estimated_vs_measured_one_subject(results):
 
 # ----------------------------------------------------------------------------- figures 3, 4
 def test_group_rates_over_cycle():
+    """Small multiples: one panel per group (shared axes), one line per model, each line the
+    table's series of that group and model times the scale."""
     ts = make_timeseries(1.25)
-    fig = group_rates_over_cycle(ts, 61.3, ["BH04", "UM10"])
+    fig = group_rates_over_cycle(ts, 61.3, ["BH04", "UM10"], scale=0.5, unit="W/kg")
     axes = _visible_axes(fig)
-    assert [ax.get_title() for ax in axes] == ["BH04", "UM10"]
-    for ax, model in zip(axes, ["BH04", "UM10"]):
-        groups = _lines(ax, "group:")
-        assert [ln.get_gid() for ln in groups] == [f"group:{g}" for g in GROUPS]
-        pf = _lines(ax, "group:PF")[0]
-        ref = ts[(ts["model"] == model) & (ts["series"] == "group/PF")]
-        assert np.allclose(pf.get_ydata(), ref["value_W"])
+    assert [ax.get_title().split(":")[0] for ax in axes] == list(GROUPS)
+    for ax, g in zip(axes, GROUPS):
+        assert [ln.get_gid() for ln in _lines(ax, "model:")] == ["model:BH04", "model:UM10"]
+        for model in ("BH04", "UM10"):
+            ln = _lines(ax, f"model:{model}")[0]
+            ref = ts[(ts["model"] == model) & (ts["series"] == f"group/{g}")]
+            assert np.allclose(ln.get_ydata(), 0.5 * ref["value_W"])
+            assert ln.get_color().lower() == model_colour(model).lower()
         assert np.allclose(_lines(ax, "toe-off")[0].get_xdata(), 61.3)
-        assert "(W)" in ax.get_ylabel() or ax is not axes[0]
-    assert axes[0].get_ylabel() == "metabolic rate (W)"
+        assert ax.get_shared_y_axes().joined(ax, axes[0])
+    assert axes[0].get_ylabel() == "rate (W/kg)"
     with pytest.raises(OptionError, match="LW07"):
         group_rates_over_cycle(ts, 61.3, ["LW07"])
     with pytest.raises(OptionError, match="toe-off"):
@@ -404,23 +424,24 @@ def test_phase_shares(results):
         for a, m in zip(st, ORDERED):
             assert a.get_height() == pytest.approx(d[d["model"] == m]["stance_energy_share_pct"].mean())
     assert [t.get_text() for t in ax_b.get_xticklabels()] == list(ORDERED)
-    # lines: one per model, through the means over subjects of the main workflow (effort-ten)
+    # lines: one per model and subject, through the subject's trials of the main workflow (effort-ten)
     lines = _lines(ax_s, "model:")
-    assert [ln.get_gid() for ln in lines] == [f"model:{m}" for m in ORDERED]
-    assert [ln.get_color() for ln in lines] == [model_colour(m) for m in ORDERED]
+    assert [ln.get_gid() for ln in lines] == [f"model:{m}:{s}" for m in ORDERED for s in SUBJECTS]
+    assert [ln.get_color() for ln in lines] == [model_colour(m) for m in ORDERED for s in SUBJECTS]
     d = results[(results["workflow"] == "effort-ten") & (results["model"] == "BH04")]
-    means = d.groupby("trial")[["speed_m_per_s", "swing_energy_share_pct"]].mean().loc[["slow", "normal", "fast"]]
-    ln = _lines(ax_s, "model:BH04")[0]
-    assert np.allclose(ln.get_xdata(), means["speed_m_per_s"]) and np.allclose(ln.get_ydata(), means["swing_energy_share_pct"])
+    for s in SUBJECTS:
+        ds = d[d["subject"] == s].set_index("trial").loc[["slow", "normal", "fast"]]
+        ln = _lines(ax_s, f"model:BH04:{s}")[0]
+        assert np.allclose(ln.get_xdata(), ds["speed_m_per_s"]) and np.allclose(ln.get_ydata(), ds["swing_energy_share_pct"])
     assert ax_s.get_xlabel() == "walking speed (m/s)"
-    assert "%/(m/s)" in ln.get_label()
+    assert "%/(m/s)" in _lines(ax_s, "model:BH04")[0].get_label()
 
 
 def test_phase_shares_one_speed(results):
     fig = phase_shares(results[results["trial"] == "fast"])
     ax_b, ax_s = fig.axes
     assert "fast" in ax_b.get_title() and "one speed only" in ax_s.get_title()
-    assert len(_lines(ax_s, "model:")) == len(MODELS)
+    assert len(_lines(ax_s, "model:")) == len(MODELS) * len(SUBJECTS)
     with pytest.raises(OptionError, match="trial 'normal'"):
         phase_shares(results[results["trial"] == "fast"], trial="normal")
 
@@ -551,11 +572,38 @@ def test_report_notes_and_failures(tmp_path):
 
 
 def test_stale_figures_removed(tmp_path):
-    root = make_study(tmp_path / "s", solutions=False, trials={"normal": 1.25})
-    (root / "figures").mkdir()
-    (root / "figures" / "excitations_fiber_lengths.png").write_bytes(b"old")
-    write_report(root)
+    """A figure an earlier report wrote and this one cannot draw is removed; a file of the same
+    name the report did not write (no record of it) is left alone."""
+    root = make_study(tmp_path / "s", trials={"normal": 1.25})
+    write_report(root, workers=1)
+    assert (root / "figures" / "excitations_fiber_lengths.png").is_file()
+    for folder in (root / "units").glob("*/*/*"):
+        (folder / "solution.sto").unlink()
+    write_report(root, workers=1, force=True)
     assert not (root / "figures" / "excitations_fiber_lengths.png").exists()
+    other = make_study(tmp_path / "o", solutions=False, trials={"normal": 1.25})
+    (other / "figures").mkdir()
+    (other / "figures" / "excitations_fiber_lengths.png").write_bytes(b"not the report's")
+    write_report(other, workers=1)
+    assert (other / "figures" / "excitations_fiber_lengths.png").read_bytes() == b"not the report's"
+
+
+def test_figures_never_written_through_a_symlink(tmp_path):
+    """``figures`` a symbolic link to a folder beside the output: refused with the path named,
+    nothing written or removed in the decoy folder."""
+    root = make_study(tmp_path / "s", solutions=False, trials={"normal": 1.25})
+    decoy = tmp_path / "decoy"
+    decoy.mkdir()
+    for name in ("estimated_vs_measured.png", "excitations_fiber_lengths.png", "notes.txt"):
+        (decoy / name).write_bytes(b"foreign")
+    (root / "figures").symlink_to(decoy, target_is_directory=True)
+    with pytest.raises(OptionError, match="symbolic link") as err:
+        write_report(root, workers=1)
+    assert str(root / "figures") in str(err.value)
+    assert sorted(p.name for p in decoy.iterdir()) == ["estimated_vs_measured.png",
+                                                       "excitations_fiber_lengths.png", "notes.txt"]
+    assert all(p.read_bytes() == b"foreign" for p in decoy.iterdir())
+    assert not (root / "report.html").exists()
 
 
 def test_report_errors(tmp_path):
@@ -664,7 +712,7 @@ def test_per_muscle_ranked_figure_values(study):
     ax = fig.axes[0]
     # largest at the top, the three largest parts only
     ticks = sorted((t.get_position()[1], t.get_text()) for t in ax.get_yticklabels())[::-1]
-    assert [name for _, name in ticks] == ["soleus_r", "gasmed_r", "vaslat_r"]
+    assert [name for _, name in ticks] == ["soleus", "gastrocnemius medialis", "vastus lateralis"]
     d = pm[(pm.workflow == "effort-ten") & (pm.model == "UM10")]
     for trial in ("slow", "normal", "fast"):
         bars = _bars(ax, f"trial:{trial}")
@@ -678,6 +726,34 @@ def test_per_muscle_ranked_figure_values(study):
     assert fig.axes[0].get_shared_x_axes().joined(fig.axes[0], fig.axes[1])
 
 
+def test_per_muscle_ranking_merges_two_model_families(study):
+    """A subject on gait2392 (``med_gas_r``, ``soleus_r``) and one on Rajagopal (``gasmed_r``,
+    ``soleus_r``): the ranking puts both names of the medial gastrocnemius in one bar, the mean
+    over the two subjects (worked by hand); a muscle of two bundles (``add_mag1_r`` +
+    ``add_mag2_r``) is their sum."""
+    from musclemetab.report.figures import harmonise_muscles, per_muscle_ranked
+
+    rows = [("a", "med_gas_r", 0.30), ("a", "soleus_r", 0.50), ("a", "add_mag1_r", 0.05), ("a", "add_mag2_r", 0.07),
+            ("b", "gasmed_r", 0.20), ("b", "soleus_r", 0.40), ("b", "addmagDist_r", 0.04), ("b", "addmagMid_r", 0.06)]
+    pm = pd.DataFrame([{"subject": s, "trial": "normal", "workflow": "effort-ten", "model": "UM10", "muscle": m,
+                        "mean_W_per_kg": v} for s, m, v in rows])
+    h = harmonise_muscles(pm).set_index(["subject", "muscle"])["mean_W_per_kg"]
+    assert h[("a", "gastrocnemius medialis (r)")] == pytest.approx(0.30)
+    assert h[("b", "gastrocnemius medialis (r)")] == pytest.approx(0.20)
+    assert h[("a", "adductor magnus (r)")] == pytest.approx(0.12)
+    # a subject solved on both legs: one leg is the mean of its two legs (0.2 and 0.4 W/kg)
+    legs = pd.DataFrame([{"subject": "c", "trial": "normal", "workflow": "effort-ten", "model": "UM10", "muscle": m,
+                          "side": m[-1], "mean_W_per_kg": v} for m, v in (("gasmed_r", 0.2), ("gasmed_l", 0.4))])
+    one = harmonise_muscles(legs)
+    assert one["muscle"].tolist() == ["gastrocnemius medialis"] and one["mean_W_per_kg"].tolist() == pytest.approx([0.3])
+    fig = per_muscle_ranked(pm, top=3)
+    ax = fig.axes[0]
+    ticks = [t.get_text() for t in sorted(ax.get_yticklabels(), key=lambda t: -t.get_position()[1])]
+    assert ticks == ["soleus (r)", "gastrocnemius medialis (r)", "adductor magnus (r)"]
+    widths = sorted(((y, w) for _, y, w, _ in _bars(ax, "trial:normal")), reverse=True)
+    np.testing.assert_allclose([w for _, w in widths], [0.45, 0.25, 0.11], rtol=1e-12)
+
+
 def test_rates_against_speed_values(study):
     from musclemetab.report.figures import rates_against_speed
 
@@ -685,16 +761,16 @@ def test_rates_against_speed_values(study):
     fig = rates_against_speed(r, workflow="effort-ten", models=["UM10", "BH04"])
     ax = fig.axes[0]
     d = r[(r.workflow == "effort-ten") & (r.model == "UM10")]
-    means = d.groupby("trial")[["speed_m_per_s", "mean_W_per_kg_no_basal"]].mean().loc[["slow", "normal", "fast"]]
-    wb = next(ln for ln in ax.lines if ln.get_gid() == "whole-body")
-    np.testing.assert_allclose(wb.get_xdata(), means["speed_m_per_s"])
-    np.testing.assert_allclose(wb.get_ydata(), means["mean_W_per_kg_no_basal"])
-    pf = next(ln for ln in ax.lines if ln.get_gid() == "group:PF")
-    want = (d.share_PF_pct / 100 * d.mean_W_per_kg_no_basal).groupby(d.trial).mean().loc[["slow", "normal", "fast"]]
-    np.testing.assert_allclose(pf.get_ydata(), want)
+    for subject in SUBJECTS:  # each subject's own trials, in the order of its speeds
+        ds = d[d.subject == subject].set_index("trial").loc[["slow", "normal", "fast"]]
+        wb = next(ln for ln in ax.lines if ln.get_gid() == f"whole-body:{subject}")
+        np.testing.assert_allclose(wb.get_xdata(), ds["speed_m_per_s"])
+        np.testing.assert_allclose(wb.get_ydata(), ds["mean_W_per_kg_no_basal"])
+        pf = next(ln for ln in ax.lines if ln.get_gid() == f"group:PF:{subject}")
+        np.testing.assert_allclose(pf.get_ydata(), ds.share_PF_pct / 100 * ds.mean_W_per_kg_no_basal)
     assert fig.axes[0].get_shared_y_axes().joined(fig.axes[0], fig.axes[1])
     # the speed axis spans the trials' speeds (m/s), the same in every panel, not the cycle's 0-100 %
-    speeds = r[r.workflow == "effort-ten"].groupby("trial")["speed_m_per_s"].mean()
+    speeds = r[r.workflow == "effort-ten"]["speed_m_per_s"]
     for ax in fig.axes[:2]:
         assert ax.get_xlim() == pytest.approx((speeds.min() - 0.05, speeds.max() + 0.05))
     assert fig.axes[-1].get_xlabel() == "walking speed (m/s)"
@@ -702,7 +778,8 @@ def test_rates_against_speed_values(study):
     from matplotlib.colors import to_rgb
 
     assert to_rgb(wb.get_color()) == (0.0, 0.0, 0.0)
-    assert all(to_rgb(ln.get_color()) != (0.0, 0.0, 0.0) for ln in ax.lines if ln.get_gid() != "whole-body")
+    assert all(to_rgb(ln.get_color()) != (0.0, 0.0, 0.0) for ln in ax.lines
+               if not str(ln.get_gid()).startswith("whole-body"))
 
 
 # ------------------------------------------------------------------- pies, colours, runs
@@ -763,9 +840,10 @@ def test_solver_runs_table_lists_every_unit(tmp_path):
         assert (side, status, iterations) == ("right", "Solve_Succeeded", str(ITERATIONS[workflow]))
         assert (time_s, violation, residual) == ("1.25", "3.0e-07", "2.0e-06")
     page = render_page(read_study_folder(root), [])  # the page without figures
-    start = page.index('<details id="solver-runs">')
+    start = page.index('<h2 id="solver-runs">')  # a heading followed by its text and table, never empty
     runs = page[start:page.index("</details>", start) + len("</details>")]
     assert _parse(runs).tables == 1
+    assert "The muscle redundancy solve of every unit" in runs
     assert runs.count("Solve_Succeeded") == len(SUBJECTS) * len(WORKFLOWS) - 1
     assert "Maximum_Iterations_Exceeded" in runs
 
@@ -880,7 +958,7 @@ def test_measured_emg_over_the_excitations(tmp_path):
 def test_figure2_from_the_cache(study, tmp_path, monkeypatch):
     import hashlib
 
-    from musclemetab.metabolics import figure2 as figure2_module
+    from musclemetab.report import figures as figure2_module  # figure2_compact draws the report's Figure 2
     from musclemetab.report import draw
     from musclemetab.report.folder import read_study_folder
 
@@ -903,7 +981,7 @@ def test_figure2_from_the_cache(study, tmp_path, monkeypatch):
         fig.add_subplot().plot([0, 1], [1, 0])
         return fig
 
-    monkeypatch.setattr(figure2_module, "figure2", counting)
+    monkeypatch.setattr(figure2_module, "figure2_compact", counting)
     again = draw.draw_figure(folder, tmp_path / "b", ("png", "svg"), "figure2_soleus")
     assert calls == [] and Path(again.paths["png"]).read_bytes() == drawn and again.caption == first.caption
     assert set(again.paths) == {"png"}  # PNG only, also when the report writes SVG
@@ -930,7 +1008,7 @@ def test_package_figures_drawn_ahead_into_the_cache(tmp_path, monkeypatch):
     when the cache holds it; the report then copies it (see test_figure2_from_the_cache)."""
     import hashlib
 
-    from musclemetab.metabolics import figure2 as figure2_module
+    from musclemetab.report import figures as figure2_module  # figure2_compact draws the report's Figure 2
     from musclemetab.report import draw
 
     monkeypatch.setenv("MUSCLEMETAB_CACHE", str(tmp_path / "cache"))
@@ -941,7 +1019,7 @@ def test_package_figures_drawn_ahead_into_the_cache(tmp_path, monkeypatch):
     assert data.startswith(b"\x89PNG")
     assert cache.with_name(cache.name + ".sha256").read_text().strip() == hashlib.sha256(data).hexdigest()
     calls = []
-    monkeypatch.setattr(figure2_module, "figure2", lambda *a, **k: calls.append(1))
+    monkeypatch.setattr(figure2_module, "figure2_compact", lambda *a, **k: calls.append(1))
     draw.draw_package_figures()
     assert calls == [] and cache.read_bytes() == data
 
@@ -954,7 +1032,7 @@ def test_figures_handed_out_largest_first_by_their_measured_drawing_times(tmp_pa
 
     from matplotlib.figure import Figure
 
-    from musclemetab.metabolics import figure2 as figure2_module
+    from musclemetab.report import figures as figure2_module  # figure2_compact draws the report's Figure 2
     from musclemetab.report import draw
     from musclemetab.report.folder import read_study_folder
 
@@ -963,7 +1041,7 @@ def test_figures_handed_out_largest_first_by_their_measured_drawing_times(tmp_pa
         fig.add_subplot().plot([0, 1], [1, 0])
         return fig
 
-    monkeypatch.setattr(figure2_module, "figure2", small)
+    monkeypatch.setattr(figure2_module, "figure2_compact", small)
     monkeypatch.setenv("MUSCLEMETAB_CACHE", str(tmp_path / "cache"))
     folder = read_study_folder(make_study(tmp_path / "s", solutions=False, measured=False, trials={"normal": 1.25}))
     assert draw.draw_costs() == {}
@@ -997,3 +1075,147 @@ def test_figures_handed_out_largest_first_by_their_measured_drawing_times(tmp_pa
                                                   draw.make_figures(folder, tmp_path / "d", workers=1)]
     by_time = {n.removesuffix(" (cached)"): t for n, t in chosen.items()}
     assert json.loads(seen.read_text()) == ["group_shares"] + sorted(by_time, key=lambda n: -by_time[n])
+
+
+def test_muscle_heat_map_holds_each_muscles_rate_over_the_cycle(tmp_path):
+    """The heat map's arrays are the unit's per-muscle rates (metabolics.sto: total - basal)
+    at the nodes inside the gait cycle, divided by the body mass, muscles ordered by group
+    (PF before KE before HE), the toe-off marked; the nodes of the padding are left out."""
+    from musclemetab.io.storage import write_storage
+    from musclemetab.report.folder import read_study_folder
+    from musclemetab.report.plan import heat_map_figure, select
+
+    root = make_study(tmp_path / "s", solutions=False, trials={"normal": 1.25})
+    folder = root / "units" / "s1" / "normal" / "effort-ten"
+    t = np.round(np.arange(CYCLE[0] - 0.05, CYCLE[2] + 0.05 + 1e-9, 0.01), 6)  # padding on both sides
+    muscles = ("glmax1_r", "soleus_r", "vaslat_r")  # HE, PF, KE: drawn PF, KE, HE
+    cols = {}
+    for k, model in enumerate(MODELS):
+        for j, mu in enumerate(muscles):
+            total = 10.0 * (k + 1) + (j + 1) * np.sin(np.pi * (t - CYCLE[0]) / (CYCLE[2] - CYCLE[0])) ** 2
+            cols[f"{model}/{mu}/total"] = total
+            cols[f"{model}/{mu}/basal"] = np.full(t.size, 0.1 * (j + 1))
+    write_storage(folder / "metabolics.sto", pd.DataFrame(cols, index=pd.Index(t, name="time")))
+    study = read_study_folder(root)
+    sel = select(study)
+    assert (sel.subject, sel.trial, sel.workflow) == ("s1", "normal", "effort-ten")
+    fig, caption = heat_map_figure(study, sel)
+    mass = SUBJECTS["s1"][0]
+    inside = (t >= CYCLE[0] - 1e-9) & (t <= CYCLE[2] + 1e-9)
+    assert "toe-off" in caption and "s1" in caption
+    panels = [ax for ax in fig.axes if ax.images]
+    assert [ax.get_title() for ax in panels] == list(MODELS)  # the order of study.json
+    for ax in panels:
+        image = ax.images[0]
+        model = ax.get_title()
+        want = np.vstack([(cols[f"{model}/{mu}/total"] - cols[f"{model}/{mu}/basal"])[inside] / mass
+                          for mu in ("soleus_r", "vaslat_r", "glmax1_r")])
+        np.testing.assert_allclose(np.asarray(image.get_array()), want, rtol=1e-9)  # the file keeps 12 digits
+        assert np.allclose(_lines(ax, "toe-off")[0].get_xdata(), TOE_OFF_PCT)
+    labels = [x.get_text() for x in panels[0].get_yticklabels()]
+    assert labels == ["soleus (r) [PF]", "vastus lateralis (r) [KE]", "gluteus maximus (r) [HE]"]
+
+
+def test_speed_series_never_match_trials_of_two_subjects_by_name():
+    """Subject a walked ``normal`` (1.3 m/s) and ``fast`` (1.8 m/s), subject b ``walk1`` (1.2 m/s)
+    and ``walk2`` (1.6 m/s): each subject's line runs through its own trials in the order of its
+    speeds; no line joins a's ``normal`` with b's ``walk1``."""
+    from musclemetab.report.figures import rates_against_speed
+
+    rows = [("a", "normal", 1.3, 9.6), ("a", "fast", 1.8, 12.0), ("b", "walk2", 1.6, 6.5), ("b", "walk1", 1.2, 5.0)]
+    r = pd.DataFrame([{"subject": s, "trial": t, "workflow": "effort-ten", "model": "UM10", "status": "ok",
+                       "speed_m_per_s": v, "mean_W_per_kg": w + 1.2, "mean_W_per_kg_no_basal": w, "share_PF_pct": 40.0}
+                      for s, t, v, w in rows])
+    ax = rates_against_speed(r).axes[0]
+    lines = {ln.get_gid(): ln for ln in ax.lines}
+    assert set(lines) == {"whole-body:a", "whole-body:b", "group:PF:a", "group:PF:b"}
+    assert lines["whole-body:a"].get_xdata().tolist() == [1.3, 1.8]
+    assert lines["whole-body:a"].get_ydata().tolist() == [9.6, 12.0]
+    assert lines["whole-body:b"].get_xdata().tolist() == [1.2, 1.6]  # walk1 before walk2: by speed
+    assert lines["whole-body:b"].get_ydata().tolist() == [5.0, 6.5]
+    np.testing.assert_allclose(lines["group:PF:b"].get_ydata(), [2.0, 2.6])
+
+
+def test_the_papers_six_models_by_default_others_on_request(tmp_path, capsys):
+    """LW05 and MA68 rows in the results: left out of the figures unless asked for (``models``,
+    ``--models``, ``[report] models`` recorded in study.json); the tables keep every model; the
+    rebuild key follows the option; a model the study did not compute is refused by name."""
+    import argparse
+
+    from musclemetab.commands.report import add_parser as add_report_parser
+    from musclemetab.report.build import generate_report
+    from musclemetab.report.folder import read_study_folder
+    from musclemetab.report.plan import select
+
+    root = make_study(tmp_path / "s", solutions=False, trials={"slow": 0.75, "normal": 1.25})
+    r = pd.read_csv(root / "results.csv")
+    extra = pd.concat([r[r.model == "UM10"].assign(model=m, mean_W_per_kg=r.mean_W_per_kg + 5) for m in ("LW05", "MA68")])
+    pd.concat([r, extra]).to_csv(root / "results.csv", index=False)
+    assert select(read_study_folder(root)).models == list(MODELS)
+    assert select(read_study_folder(root, models="all,LW05")).models == [*MODELS, "LW05"]
+    assert set(select(read_study_folder(root, models="MA68")).ok["model"]) == {"MA68"}
+    with pytest.raises(OptionError, match="--models: UM03 not computed"):
+        read_study_folder(root, models="UM03")
+    out, entries = generate_report(root, workers=1)
+    pies = next(e for e in entries if e.name == "phase_pies")
+    text = out.read_text(encoding="utf-8")
+    assert "LW05" in text.split('id="results"')[1]  # the tables keep every model
+    key = text.split('name="musclemetab-report-key" content="')[1][:64]
+    assert pies.paths is not None
+    parser = argparse.ArgumentParser(prog="musclemetab")
+    add_report_parser(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(["report", str(root), "--models", "all,LW05,MA68", "--workers", "1"])
+    assert args.func(args) == 0
+    key2 = (root / "report.html").read_text(encoding="utf-8").split('name="musclemetab-report-key" content="')[1][:64]
+    assert key2 != key
+    settings = json.loads((root / "study.json").read_text())
+    settings["report"] = {"models": ["LW05"]}
+    (root / "study.json").write_text(json.dumps(settings))
+    assert select(read_study_folder(root)).models == ["LW05"]
+
+
+def test_flagged_units_and_failures_at_the_top_figures_numbered_in_page_order(tmp_path):
+    """A unit with a large reserve (results.csv flag, its share from summary.json) and a failed
+    unit are named before the figures; the figures are numbered 1, 2, ... in page order."""
+    import re
+
+    from musclemetab.report.plan import FIGURE_TITLES
+
+    root = make_study(tmp_path / "s", solutions=False, trials={"normal": 1.25}, failed={("s2", "normal", "effort-gen")})
+    r = pd.read_csv(root / "results.csv")
+    r["large_reserve"] = (r.subject == "s3") & (r.workflow == "effort-ten")
+    r.to_csv(root / "results.csv", index=False)
+    (root / "units/s3/normal/effort-ten/summary.json").write_text(json.dumps(
+        {**RunRecord(status="Solve_Succeeded", success=True, iterations=40).to_dict(),
+         "reserve_share_of_peak_moment": 0.31, "large_reserve": True}))
+    text = write_report(root, workers=1).read_text(encoding="utf-8")
+    top = text[text.index('id="attention"'):text.index('id="figures"')]
+    assert "1 unit did not succeed" in top
+    assert re.search(r"<td>s3</td><td>normal</td><td>effort-ten</td><td>large_reserve</td><td>[^<]*31\.0 %", top.replace(
+        '<th scope="row">', "<td>").replace("</th>", "</td>"))
+    numbers = [(int(n), t) for n, t in re.findall(r'<h3 id="figure-[^"]+">Figure (\d+)\. ([^<]+)</h3>', text)]
+    assert [n for n, _ in numbers] == list(range(1, len(FIGURE_NAMES) + 1))
+    assert [t for _, t in numbers] == [FIGURE_TITLES[n].replace("'", "&#39;") for n in FIGURE_NAMES]
+
+
+def test_figure2_compact_holds_the_models_curves_on_shared_axes():
+    """The compact Figure 2: the paper's six models in columns, each line the model's rate or
+    efficiency of figure2_data at one activation; every panel of a row shares its axes."""
+    from musclemetab.metabolics.figure2 import figure2_data
+    from musclemetab.metabolics.registry import STUDY_MODELS
+    from musclemetab.report.figures import figure2_compact
+
+    data = figure2_data(models=STUDY_MODELS, n_velocity=41, n_length=31)
+    fig = figure2_compact(data)
+    axes = np.array(fig.axes).reshape(4, len(STUDY_MODELS))
+    assert [ax.get_title() for ax in axes[0]] == list(STUDY_MODELS)
+    for j, m in enumerate(STUDY_MODELS):
+        for i, (key, plane) in enumerate((("rate_W", "velocity"), ("efficiency", "velocity"), ("rate_W", "length"),
+                                          ("efficiency", "length"))):
+            ax = axes[i, j]
+            assert ax.get_shared_y_axes().joined(ax, axes[i, 0])
+            assert ax.get_shared_x_axes().joined(ax, axes[0 if plane == "velocity" else 2, 0])
+            for k, a in enumerate(data["activations"]):
+                ln = _lines(ax, f"{key}:{plane}:{m}:a={a:g}")[0]
+                np.testing.assert_array_equal(ln.get_ydata(), data[plane][key][m][k])
+    assert axes[0, 0].get_ylim() == axes[0, 5].get_ylim()

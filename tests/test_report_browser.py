@@ -1,10 +1,11 @@
-"""The demo's ``report.html`` opened in headless Chromium: every figure rendered, a clean console.
+"""The reports of the demo and of a two-subject study opened in headless Chromium, 1 400 and
+900 px wide: every figure rendered inside the page's width, a clean console.
 
 The browser is driven through Selenium and the system's chromedriver (Debian packages
 ``chromium`` and ``chromium-driver``; nothing is downloaded). Without them the test is
-skipped on a workstation and FAILS in CI (``CI=true``). A screenshot of the whole page is saved
-to ``$MUSCLEMETAB_ARTEFACTS`` (CI keeps that folder) or to the test's temporary folder; its
-path is printed.
+skipped on a workstation and FAILS in CI (``CI=true``). A screenshot of the whole page, and one
+of every figure at 900 px, are saved to ``$MUSCLEMETAB_ARTEFACTS`` (CI keeps that folder) or to
+the test's temporary folder; the paths are printed.
 """
 
 from __future__ import annotations
@@ -143,3 +144,82 @@ def test_demo_report_renders_in_headless_chromium(demo, chromium, tmp_path, caps
     assert pixels.shape[0] >= min(height, 16000) - 1 and pixels.shape[1] >= width - 1
     # not a blank page: the rendered figures and text vary the pixels
     assert float(np.std(pixels[..., :3])) > 0.05
+
+
+# ------------------------------------------------------------------ every figure, two widths, two studies
+
+
+@pytest.fixture(scope="module")
+def two_subjects(example, gait2392, tmp_path_factory):
+    """The two-subject study of tests/test_trials.py (the example subject's right leg, gait2392's
+    subject on both legs, other trial names), run with its report."""
+    from test_trials import TWO_SUBJECTS
+
+    from musclemetab.commands import main
+
+    root = tmp_path_factory.mktemp("two_subjects")
+    study = root / "study.toml"
+    study.write_text(TWO_SUBJECTS.format(example=example, gait2392=gait2392))
+    assert main(["run", str(study), "--workers", "2", "--report", "--no-progress"]) == 0
+    return root / "out"
+
+
+FIGURE_BOXES_JS = """
+return Array.from(document.querySelectorAll('figure img')).map(e => {
+  const r = e.getBoundingClientRect();
+  return {id: e.closest('figure').previousElementSibling.id, complete: e.complete, natural_w: e.naturalWidth,
+          box_w: r.width, box_h: r.height, left: r.left, right: r.right};
+});
+"""
+
+
+def _every_figure(driver, report: Path, width: int, shots: Path | None, prefix: str) -> list[dict]:
+    """Open ``report`` at ``width`` px; every figure decoded and inside the page; at 900 px each
+    figure's screenshot into ``shots``."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    driver.set_window_size(width, 1000)
+    driver.get(report.as_uri())
+    WebDriverWait(driver, 60).until(
+        lambda d: d.execute_script("return document.readyState === 'complete' && "
+                                   "Array.from(document.images).every(i => i.complete)"))
+    viewport = driver.execute_script("return document.documentElement.clientWidth")
+    boxes = driver.execute_script(FIGURE_BOXES_JS)
+    for b in boxes:
+        assert b["complete"] and b["natural_w"] > 0 and b["box_h"] > 0, b
+        assert b["left"] >= 0 and b["right"] <= viewport + 0.5, (width, b)  # never wider than the page
+    assert driver.execute_script("return document.documentElement.scrollWidth") <= viewport + 1
+    if shots is not None:
+        for b, element in zip(boxes, driver.find_elements(By.CSS_SELECTOR, "figure img")):
+            driver.execute_script("arguments[0].scrollIntoView()", element)
+            path = shots / f"{prefix}_{b['id'].removeprefix('figure-')}_{width}px.png"
+            path.write_bytes(element.screenshot_as_png)
+    return boxes
+
+
+@pytest.mark.slow
+@pytest.mark.opensim
+@pytest.mark.parametrize("which", ["demo", "two_subjects"])
+def test_every_figure_at_1400_and_900_px(which, request, chromium, tmp_path, capsys):
+    import re
+
+    from musclemetab.report.plan import FIGURE_NAMES
+
+    out = request.getfixturevalue("demo")[0] if which == "demo" else request.getfixturevalue("two_subjects")
+    report = out / "report.html"
+    text = report.read_text(encoding="utf-8")
+    drawn = re.findall(r'<h3 id="figure-([^"]+)">Figure \d+\.', text)
+    assert drawn == list(FIGURE_NAMES)
+    shots = _screenshot_folder(tmp_path) / f"figures_{which}"
+    shots.mkdir(parents=True, exist_ok=True)
+    wide = _every_figure(chromium, report, 1400, None, which)
+    narrow = _every_figure(chromium, report, 900, shots, which)
+    assert [b["id"] for b in wide] == [b["id"] for b in narrow] and len(narrow) == text.count("<figure>")
+    assert all(n["box_w"] <= w["box_w"] for n, w in zip(narrow, wide))
+    saved = sorted(shots.glob(f"{which}_*_900px.png"))
+    assert len(saved) == len(narrow)
+    errors = [e for e in chromium.get_log("browser") if e["level"] in ("SEVERE", "ERROR")]
+    assert not errors, errors
+    with capsys.disabled():
+        print(f"\nscreenshots of the {which} report's figures at 900 px: {shots}")

@@ -144,6 +144,39 @@ def test_lumped_2d_model_with_degroote_and_millard_muscles_both_legs(lumped_mode
 
 
 # ------------------------------------------------------------------ a two-subject study
+#: The two-subject study file (``str.format`` with the ``example`` and ``gait2392`` data sets).
+TWO_SUBJECTS = """
+name = "two subjects"
+output = "out"
+workflows = ["effort-gen"]
+models = ["UM10", "BH04"]
+
+[[subjects]]
+name = "example"
+model = "{example.model}"
+body_mass_kg = {example.body_mass_kg}
+height_m = {example.height_m}
+
+[[subjects.trials]]
+name = "normal"
+ik = "{example.ik[normal]}"
+id = "{example.id[normal]}"
+
+[[subjects]]
+name = "gait2392"
+model = "{gait2392.model}"
+body_mass_kg = {gait2392.body_mass_kg}
+height_m = 1.8
+side = "both"
+
+[[subjects.trials]]
+name = "walk1"
+ik = "{gait2392.ik}"
+external_loads = "{gait2392.external_loads}"
+cycle = "auto"
+"""
+
+
 @pytest.mark.slow
 @pytest.mark.opensim
 def test_two_subject_study_different_models_and_sides(example, gait2392, tmp_path, capsys):
@@ -159,36 +192,7 @@ def test_two_subject_study_different_models_and_sides(example, gait2392, tmp_pat
     from musclemetab.metabolics.solution import add_legs, metabolics_from_solution
 
     study = tmp_path / "study.toml"
-    study.write_text(f"""
-name = "two subjects"
-output = "out"
-workflows = ["effort-gen"]
-models = ["UM10", "BH04"]
-
-[[subjects]]
-name = "example"
-model = "{example.model}"
-body_mass_kg = {example.body_mass_kg}
-height_m = {example.height_m}
-
-[[subjects.trials]]
-name = "normal"
-ik = "{example.ik['normal']}"
-id = "{example.id['normal']}"
-
-[[subjects]]
-name = "gait2392"
-model = "{gait2392.model}"
-body_mass_kg = {gait2392.body_mass_kg}
-height_m = 1.8
-side = "both"
-
-[[subjects.trials]]
-name = "walk1"
-ik = "{gait2392.ik}"
-external_loads = "{gait2392.external_loads}"
-cycle = "auto"
-""")
+    study.write_text(TWO_SUBJECTS.format(example=example, gait2392=gait2392))
     assert _cli("run", study, "--workers", 2, "--report", "--no-progress") == 0
     assert "3 units: 3 run" in capsys.readouterr().out
     out = tmp_path / "out"
@@ -256,8 +260,11 @@ def _renamed_muscle(solution, folder):
 
 
 def test_report_adds_the_legs_time_series_on_the_cycle():
-    """Two legs' rates over their own cycles: the second leg's series, interpolated onto the first
-    leg's cycle percentages, is added (worked by hand: linear between 0 and 100 %)."""
+    """Both legs at the first leg's instants, worked by hand. Two solved legs, each on its own
+    cycle: right 0.6-1.8 s, left 1.2-2.4 s (its heel strike half a cycle later); at the right
+    leg's 0.6, 1.2 and 1.8 s the left leg is at 50, 0 and 50 % of its cycle (60 -> 90 W
+    between 33.3 and 66.7 %: 75 W; 30 W at 0 %). One solved leg: the leg plus itself half a
+    cycle later, x(p) + x(p + 50 %)."""
     import pandas as pd
 
     from musclemetab.report.folder import add_leg_timeseries as _add_leg_timeseries
@@ -267,10 +274,17 @@ def test_report_adds_the_legs_time_series_on_the_cycle():
     left = pd.DataFrame({"time_s": [1.2, 1.6, 2.0, 2.4], "cycle_pct": [0.0, 100 / 3, 200 / 3, 100.0],
                          "model": "UM10", "series": "whole_body", "value_W": [30.0, 60.0, 90.0, 120.0]})
     both = _add_leg_timeseries({"r": right, "l": left})
-    # left at 0, 50, 100 %: 30, 75, 120 W
-    assert both["value_W"].tolist() == pytest.approx([130.0, 275.0, 220.0])
-    assert both["cycle_pct"].tolist() == [0.0, 50.0, 100.0] and both["time_s"].isna().all()
-    assert _add_leg_timeseries({"": right}) is right
+    assert both["value_W"].tolist() == pytest.approx([175.0, 230.0, 175.0])
+    assert both["cycle_pct"].tolist() == [0.0, 50.0, 100.0]
+    # one leg: 100 + x(50) = 300, 200 + x(100 = 0 of the next cycle) = 300, 100 + x(150 = 50) = 300
+    assert _add_leg_timeseries({"": right})["value_W"].tolist() == pytest.approx([300.0, 300.0, 300.0])
+    # on a finer synthetic leg: a peak at 20 % gives the other leg's peak at 70 %; the cycle mean doubles
+    pct = np.linspace(0.0, 100.0, 201)
+    leg = pd.DataFrame({"time_s": 1 + pct / 100, "cycle_pct": pct, "model": "UM10", "series": "whole_body",
+                        "value_W": 10 + 50 * np.exp(-0.5 * ((pct - 20) / 4) ** 2)})
+    two = _add_leg_timeseries({"": leg})["value_W"].to_numpy()
+    assert pct[np.argmax(two[pct > 45])+np.argmax(pct > 45)] == pytest.approx(70.0)
+    assert np.mean(two[:-1]) == pytest.approx(2 * np.mean(leg["value_W"].to_numpy()[:-1]), rel=1e-9)
 
 
 def test_the_grf_column_and_threshold_reach_the_cycle_search(gait2392):

@@ -1,6 +1,6 @@
 """``musclemetab report``: the figures and the HTML report of a study folder.
 
-    musclemetab report DIR [--out FILE] [--svg] [--force] [--workers N]
+    musclemetab report DIR [--out FILE] [--svg] [--force] [--workers N] [--models M1,M2|all]
 
 Writes ``DIR/figures/<name>.png`` (and ``.svg`` with ``--svg``) for every figure the data support, and
 ``DIR/report.html`` (or ``FILE``, with its figures in ``figures/`` beside it): one
@@ -20,8 +20,9 @@ def add_parser(subparsers) -> None:
         description=(
             "Read a study folder written by 'musclemetab run' (study.json, results.csv, failures.csv, "
             "units/) and write its figures (DIR/figures/<name>.png, and .svg with --svg: excitations and fiber lengths, "
-            "estimated vs measured rate, group rates over the cycle, whole-body rate across speeds, stance "
-            "and swing shares, group shares) and one HTML page, DIR/report.html, with the settings, the "
+            "estimated vs measured rate, group rates over the cycle, every muscle over the cycle (heat map), "
+            "whole-body rate across speeds, stance and swing shares, group shares, per-muscle ranking; the paper's "
+            "six metabolic models unless --models names others) and one HTML page, DIR/report.html, with the settings, the "
             "method, the result tables (W/kg, J/(kg m), %), the figures embedded, the failures and the "
             "software versions. A figure the data do not support is replaced by a note. The report is rebuilt only "
             "when its inputs changed (content hash)."
@@ -39,6 +40,10 @@ def add_parser(subparsers) -> None:
     p.add_argument("--workers", type=int, metavar="N",
                    help="processes drawing the figures side by side (default: the cores this process may use, at "
                    "most one per figure; 1 draws them one after the other in this process)")
+    p.add_argument("--models", metavar="M1,M2",
+                   help="metabolic models the figures show, e.g. 'all,LW05,MA68' ('all': the paper's six, "
+                   "UM03, BH04, HO06, LW07, UM10, UC16; default: those six, or [report] models of the study "
+                   "file); the tables list every model of the study")
     p.set_defaults(func=run)
 
 
@@ -48,7 +53,7 @@ def run(args) -> int:
 
     formats = ("png", "svg") if args.svg else ("png",)
     out, entries = generate_report(args.study_dir, args.out, formats=formats, force=args.force,
-                                  workers=args.workers)
+                                  workers=args.workers, models=args.models)
     drawn = [e.name for e in entries if e.paths is not None]
     print(f"report: {len(drawn)} of {len(entries)} figures -> {out.parent / FIGURES_FOLDER}; page -> {out}")
     for e in entries:

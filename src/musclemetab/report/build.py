@@ -15,7 +15,7 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-from ..errors import MusclemetabError
+from ..errors import MusclemetabError, OptionError
 from .draw import FigureEntry, make_figures
 from .folder import input_files, read_study_folder
 from .page import page_tables, render_page
@@ -28,12 +28,15 @@ FIGURES_FOLDER = "figures"
 REPORT_RECORD = "report.json"
 
 
-def report_key(study_dir: str | os.PathLike, formats: Sequence[str] = ("png",)) -> str:
+def report_key(study_dir: str | os.PathLike, formats: Sequence[str] = ("png",),
+               models: Sequence[str] | None = None) -> str:
     """SHA-256 of everything the report is drawn from.
 
     The files of :func:`~.folder.input_files` (the study's tables, every unit's ``unit.json``,
     which records the hash of each of the unit's files, ``summary.json`` among them, and the
-    study file ``study.json`` names as its source), the figure formats, the package version
+    study file ``study.json`` names as its source), the figure formats, the models the figures
+    show when asked for (``models``, the option ``--models``; the default and ``[report] models``
+    follow from the source and ``study.json``), the package version
     and the report's own source (its modules and its page template).
     """
     import hashlib
@@ -44,6 +47,8 @@ def report_key(study_dir: str | os.PathLike, formats: Sequence[str] = ("png",)) 
     path = Path(study_dir)
     h = hashlib.sha256()
     h.update(f"musclemetab {__version__}; formats {','.join(formats)}\n".encode())
+    if models is not None:
+        h.update(f"models {','.join(models)}\n".encode())
     here = Path(__file__).parent
     for src in sorted(here.glob("*.py")) + sorted((here / "templates").glob("*")):
         h.update(src.name.encode() + b"\0" + src.read_bytes())
@@ -92,32 +97,69 @@ def _recorded_entries(out: Path, key: str) -> list[FigureEntry] | None:
     return entries
 
 
+def figures_folder(out: Path) -> Path:
+    """The folder of the figures beside the page ``out``: ``figures``, a real folder inside the
+    page's folder. Raises :class:`OptionError` when it is a symbolic link or leads out of the
+    page's folder (the report never writes or removes files outside its output folder)."""
+    base = out.parent
+    fig_dir = base / FIGURES_FOLDER
+    if fig_dir.is_symlink() or (fig_dir.exists() and not fig_dir.is_dir()):
+        what = f"a symbolic link to {os.readlink(fig_dir)}" if fig_dir.is_symlink() else "not a folder"
+        raise OptionError(
+            f"{fig_dir}: {what}; the report writes its figures only into a folder '{FIGURES_FOLDER}' of its own "
+            f"beside the page: remove {fig_dir} or write the page elsewhere (--out)")
+    if fig_dir.exists():
+        try:
+            fig_dir.resolve().relative_to(base.resolve())
+        except ValueError:
+            raise OptionError(f"{fig_dir}: leads out of {base} (to {fig_dir.resolve()}); the report writes only "
+                              "inside its output folder: write the page elsewhere (--out)") from None
+    return fig_dir
+
+
+def _recorded_files(fig_dir: Path) -> set[str]:
+    """The file names of the figures the last report wrote into ``fig_dir`` (its record,
+    ``report.json``); none when there is no readable record."""
+    from ..io.jsonfile import read_json_object
+
+    record = fig_dir / REPORT_RECORD
+    if not record.is_file():
+        return set()
+    try:
+        rec = read_json_object(record, remedy="the report is rebuilt")
+        return {Path(str(p)).name for e in rec.get("entries") or [] for p in (e.get("paths") or {}).values()}
+    except (MusclemetabError, AttributeError, TypeError):
+        return set()
+
+
 def generate_report(study_dir: str | os.PathLike, out: str | os.PathLike | None = None, *,
                     formats: Sequence[str] = ("png",), force: bool = False,
-                    workers: int | None = None) -> tuple[Path, list[FigureEntry]]:
+                    workers: int | None = None, models=None) -> tuple[Path, list[FigureEntry]]:
     """:func:`write_report`, also returning the figure entries (files written or notes)."""
     from ..io.atomic import atomic_write_text
 
-    study = read_study_folder(study_dir)
+    study = read_study_folder(study_dir, models=models)
     out = Path(out) if out is not None else study.path / REPORT_FILE
     if out.is_dir():
         out = out / REPORT_FILE
     formats = tuple(dict.fromkeys(("png", *formats)))  # the page embeds the PNG
-    key = report_key(study.path, formats)
+    key = report_key(study.path, formats, models=study.figure_models)
+    fig_dir = figures_folder(out)
     if not force:
         recorded = _recorded_entries(out, key)
         if recorded is not None:
             return out, recorded
-    fig_dir = out.parent / FIGURES_FOLDER
     tables: dict = {}
-    entries = make_figures(study, fig_dir, formats, workers, meanwhile=lambda: tables.update(page_tables(study)))
+    entries = make_figures(study, fig_dir, formats, workers, meanwhile=lambda: tables.update(page_tables(study)),
+                           written_before=_recorded_files(fig_dir))
     atomic_write_text(out, render_page(study, entries, figures_rel=FIGURES_FOLDER, key=key, tables=tables))
     _write_record(fig_dir, key, out, entries)
     return out, entries
 
 
 def write_report(study_dir: str | os.PathLike, out: str | os.PathLike | None = None, *,
-                 formats: Sequence[str] = ("png",), force: bool = False, workers: int | None = None) -> Path:
+                 formats: Sequence[str] = ("png",), force: bool = False, workers: int | None = None,
+                 models=None) -> Path:
     """Write the figures and the HTML report of a study folder; return the report's path.
 
     ``out`` is the HTML file (default ``study_dir/report.html``); the figures are written to the
@@ -125,7 +167,10 @@ def write_report(study_dir: str | os.PathLike, out: str | os.PathLike | None = N
     written atomically. The report is rebuilt only when its inputs changed (their content
     hash, :func:`report_key`, is recorded in the page and in ``figures/report.json``) or
     when ``force`` is true. ``workers`` processes draw the figures (see
-    :func:`~.draw.make_figures`). Raises :class:`InputFileError` when the folder or its
+    :func:`~.draw.make_figures`). ``models``: the metabolic models the figures show (names or
+    ``"all"``; default the paper's six, UM03, BH04, HO06, LW07, UM10, UC16, or ``[report]
+    models`` of the study file; LW05 and MA68 only when named); the tables list every model
+    of the study. Raises :class:`InputFileError` when the folder or its
     ``results.csv`` is missing.
     """
-    return generate_report(study_dir, out, formats=formats, force=force, workers=workers)[0]
+    return generate_report(study_dir, out, formats=formats, force=force, workers=workers, models=models)[0]

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -98,9 +98,10 @@ def figure_cache(name: str) -> dict[str, Path] | None:
     from importlib.metadata import version
 
     from .. import colours, metabolics, muscle
+    from . import figures, plan
 
     h = hashlib.sha256(f"{name} matplotlib {version('matplotlib')}\n".encode())
-    sources = [Path(colours.__file__)]
+    sources = [Path(colours.__file__), Path(figures.__file__), Path(plan.__file__)]
     for package in (metabolics, muscle):
         sources += sorted(Path(package.__file__).parent.glob("*.py"))
     for src in sources:
@@ -276,7 +277,8 @@ def _child_share(conn, *args) -> None:
 
 
 def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequence[str] = ("png",),
-                 workers: int | None = None, meanwhile: Callable[[], object] | None = None) -> list[FigureEntry]:
+                 workers: int | None = None, meanwhile: Callable[[], object] | None = None,
+                 written_before: Collection[str] = ()) -> list[FigureEntry]:
     """Draw the figures the study's data support and save them in ``fig_dir`` (``formats``:
     PNG, and SVG when asked for).
 
@@ -285,8 +287,10 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
     available, this process draws every figure). Each takes the next figure, largest first
     (:func:`draw_costs`), when it is free; this process first runs ``meanwhile`` (the page's
     tables). Returns one :class:`FigureEntry` per name of :data:`~.plan.FIGURE_NAMES`, with
-    the file paths or the note saying why the figure is not drawn (the files of a figure not
-    drawn are removed from ``fig_dir``, so that no figure of an earlier report remains).
+    the file paths or the note saying why the figure is not drawn. The files of a figure not
+    drawn are removed from ``fig_dir`` when an earlier report wrote them (``written_before``:
+    their file names, as its record lists them), so that no figure of an earlier report
+    remains; no other file is removed.
     """
     import gc
     import multiprocessing
@@ -349,10 +353,10 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
                 child.join()
         gc.unfreeze()
     _keep_costs(list(entries.values()), keys)
+    written_before = set(written_before)
     for e in entries.values():
         for ext in ("png", "svg"):
-            if e.paths is None or ext not in e.paths:
-                stale = fig_dir / f"{e.name}.{ext}"
-                if stale.is_file():
-                    stale.unlink()
+            stale = fig_dir / f"{e.name}.{ext}"
+            if (e.paths is None or ext not in e.paths) and stale.name in written_before and stale.is_file():
+                stale.unlink()
     return [entries[n] for n in FIGURE_NAMES]

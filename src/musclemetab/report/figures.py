@@ -31,6 +31,7 @@ import numpy as np
 
 from ..analysis.groups import GROUP_NAMES as _GROUP_NAMES
 from ..analysis.groups import GROUPS_WITH_OTHER, OTHER
+from ..colours import OKABE_ITO
 from ..colours import GROUP_COLOURS as _GROUP_COLOURS
 from ..colours import MODEL_COLOURS as _MODEL_COLOURS
 from ..colours import WORKFLOW_COLOURS as _WORKFLOW_COLOURS
@@ -706,46 +707,70 @@ def _label_cycle_panels(axes, models: Sequence[str], ylabel: str = "metabolic ra
             ax.tick_params(labelbottom=True)
 
 
+def _models_and_toe_off(available: Sequence[str], models, toe_off_pct, what: str, having: str
+                        ) -> tuple[list[str], float]:
+    """The models to draw (``models`` or every one ``available``) and the toe-off (% of the
+    cycle); :class:`OptionError` for a model without data or a toe-off outside the cycle."""
+    models = list(available) if models is None else [str(m) for m in models]
+    absent = [m for m in models if m not in available]
+    if absent:
+        raise OptionError(f"no {what} for model {', '.join(absent)} ({having} {', '.join(available)})")
+    to = float(toe_off_pct)
+    if not (0.0 < to < 100.0):
+        raise OptionError(f"toe-off must be inside the cycle (0-100 %), not {toe_off_pct}")
+    return models, to
+
+
 def group_rates_over_cycle(timeseries, toe_off_pct: float, models: Sequence[str] | None = None,
                            *, title: str | None = None, scale: float = 1.0, unit: str = "W"):
-    """Metabolic rate of each muscle group over the gait cycle (W), one panel per model.
+    """Metabolic rate of each muscle group over the gait cycle: small multiples, one panel per
+    group (shared axes), one line per model (its colour).
 
     ``timeseries`` is a unit's long table (``cycle_pct``, ``model``, ``series``, ``value_W``;
-    series ``group/<G>``). One line per group, a vertical line at ``toe_off_pct`` (%).
+    series ``group/<G>``), drawn times ``scale`` in ``unit``; a dotted vertical line at
+    ``toe_off_pct`` (%).
     """
     ts = _long_table(timeseries, "the time-series table")
     ts = ts[ts["series"].astype(str).str.startswith("group/")]
     if ts.empty:
         raise OptionError("the time-series table has no group series (group/<G>)")
-    available = _ordered_models(ts["model"])
-    models = available if models is None else [str(m) for m in models]
-    absent = [m for m in models if m not in available]
-    if absent:
-        raise OptionError(f"no group rates for model {', '.join(absent)} (the table has {', '.join(available)})")
-    to = float(toe_off_pct)
-    if not (0.0 < to < 100.0):
-        raise OptionError(f"toe-off must be inside the cycle (0-100 %), not {toe_off_pct}")
+    models, to = _models_and_toe_off(_ordered_models(ts["model"]), models, toe_off_pct, "group rates", "the table has")
     present = _unique(s.split("/", 1)[1] for s in _unique(ts["series"].astype(str)))
     groups = [g for g in GROUPS if g in present] + [g for g in present if g not in GROUPS]
-    fig, axes = _cycle_panels(len(models))
-    for k, m in enumerate(models):
+    nrow, ncol = _grid(len(groups), 4)
+    fig = _new_figure(2.9 * ncol, 2.0 * nrow + 1.2)
+    axes = fig.subplots(nrow, ncol, squeeze=False, sharex=True, sharey=True)
+    series = ts["series"].astype(str)
+    model_col = ts["model"].astype(str)
+    for k, g in enumerate(groups):
         ax = axes.flat[k]
-        dm = ts[ts["model"].astype(str) == m]
-        for g in groups:
-            d = dm[dm["series"].astype(str) == f"group/{g}"].sort_values("cycle_pct")
+        dg = ts[series == f"group/{g}"]
+        for m in models:
+            d = dg[model_col[dg.index] == m].sort_values("cycle_pct")
             if d.empty:
                 continue
-            ax.plot(d["cycle_pct"], scale * d["value_W"], color=group_colour(g), lw=1.3, label=g, gid=f"group:{g}")
+            ax.plot(d["cycle_pct"], scale * d["value_W"], color=model_colour(m), lw=1.2, label=m,
+                    gid=f"model:{m}")
         _vline(ax, to, color="k", lw=0.8, ls=":", label="_toe-off", gid="toe-off")
         _hline(ax, 0.0, color="0.7", lw=0.6, label="_zero")
-    _label_cycle_panels(axes, models, f"metabolic rate ({unit})")
+        _panel_title(ax, f"{g}: {GROUP_NAMES.get(g, g)}", fontsize=9, gid=f"group:{g}")
+    for k, ax in enumerate(axes.flat):
+        if k >= len(groups):
+            ax.set_visible(False)
+            continue
+        if k == 0:
+            ax.set_xlim(0.0, 100.0)
+        if k % ncol == 0:
+            ax.set_ylabel(f"rate ({unit})")
+        if k + ncol >= len(groups):
+            ax.set_xlabel("gait cycle (%)")
+            ax.tick_params(labelbottom=True)
     from matplotlib.lines import Line2D
 
-    handles = [Line2D([], [], color=group_colour(g), lw=1.5, label=f"{g} ({GROUP_NAMES.get(g, g)})") for g in groups]
+    handles = [Line2D([], [], color=model_colour(m), lw=1.5, label=m) for m in models]
     handles.append(Line2D([], [], color="k", lw=0.8, ls=":", label=f"toe-off ({to:.1f} %)"))
-    _legend_below(fig, handles, min(len(handles), 6), 8)
-    fig.suptitle(title or "Metabolic rate of the muscle groups over the gait cycle (one leg, no basal heat)",
-                 fontsize=11)
+    _legend_below(fig, handles, min(len(handles), 7), 8)
+    fig.suptitle(title or "Metabolic rate of the muscle groups over the gait cycle (no basal heat)", fontsize=11)
     return fig
 
 
@@ -827,8 +852,9 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
     Left: at the preferred speed (``trial``, default :func:`preferred_trial`), stacked bars
     (stance solid, swing hatched, mean over subjects, error bar = SD of the swing share) per
     model (groups of bars) and workflow (bar colour). Right: swing share against walking speed
-    (m/s) for ``workflow`` (default :func:`main_workflow`), one line per model through the
-    means over subjects at each trial, subjects as small points; the legend gives the
+    (m/s) for ``workflow`` (default :func:`main_workflow`), one line per model and subject
+    through the subject's trials in the order of its speeds (line style and marker: the
+    subject; trials of different subjects never matched by name); the legend gives the
     repeated-measures slope (% per m/s) when there are two speeds or more.
     """
     res = _ok_rows(results)
@@ -894,15 +920,16 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
         if d.empty:
             continue
         col = model_colour(m)
-        ax_s.scatter(d["speed_m_per_s"], d["swing_energy_share_pct"], color=col, s=9, alpha=0.45, label="_" + m, zorder=2)
-        rows = [r for r in _speed_table(d, "swing_energy_share_pct") if np.isfinite(r[1]) and r[4] > 0]
         label = m
         if n_speeds > 1:
             rm, _ = _rmcorr(d["speed_m_per_s"], d["swing_energy_share_pct"], d["subject"].astype(str))
             if rm is not None:
                 label = f"{m}: {rm.slope:+.1f} %/(m/s), r = {rm.r:.2f}"
-        ax_s.plot([r[1] for r in rows], [r[2] for r in rows], color=col, marker="o", ms=4, lw=1.4,
-                  label=label, gid=f"model:{m}", zorder=3)
+        for i, subject in enumerate(_unique(d["subject"].astype(str))):  # never matched by trial name
+            ds = d[d["subject"].astype(str) == subject].sort_values("speed_m_per_s")
+            ax_s.plot(ds["speed_m_per_s"].to_numpy(float), ds["swing_energy_share_pct"].to_numpy(float), color=col,
+                      marker="os^Dvx"[i % 6], ms=4, lw=1.2, ls=("-", "--", ":", "-.")[i % 4],
+                      label=label if i == 0 else "_" + m, gid=f"model:{m}:{subject}", zorder=3)
     ax_s.yaxis.get_major_formatter().set_useOffset(False)
     ax_s.set_xlabel("walking speed (m/s)")
     ax_s.set_ylabel("swing share (%)")
@@ -1053,45 +1080,56 @@ def rates_against_speed(results, *, workflow: str | None = None, models: Sequenc
     """Whole-body and muscle-group rates (W/kg of body mass, both legs, no basal) against speed.
 
     One panel per model (shared axes); a black line through the whole-body rate without basal
-    heat (``mean_W_per_kg_no_basal``) at each trial and one line per group
-    (``share_<G>_pct / 100 * mean_W_per_kg_no_basal``), means over subjects at the trials' mean
-    speeds.
+    heat (``mean_W_per_kg_no_basal``) and one line per group
+    (``share_<G>_pct / 100 * mean_W_per_kg_no_basal``) through each subject's trials in the
+    order of its own walking speeds: the trials of different subjects are never matched by
+    name. Subjects differ by line style and marker (gids ``whole-body:<subject>``,
+    ``group:<G>:<subject>``).
     """
     res = _ok_rows(results)
-    _require_columns(res, ("speed_m_per_s", "mean_W_per_kg_no_basal"), "the results table")
+    _require_columns(res, ("subject", "speed_m_per_s", "mean_W_per_kg_no_basal"), "the results table")
     cols = [c for c in (f"share_{g}_pct" for g in GROUPS) if c in res.columns]
     wf, d = _one_workflow(res, workflow, "the results")
-    if len(_unique(d["trial"].astype(str))) < 2:
-        raise OptionError("one speed only: nothing to draw against speed")
+    subjects = _unique(d["subject"].astype(str))
+    per_subject = d.groupby(d["subject"].astype(str))["trial"].nunique()
+    if per_subject.max() < 2:
+        raise OptionError("one speed only (per subject): nothing to draw against speed")
     models = _ordered_models(d["model"]) if models is None else [str(m) for m in models]
     fig, axes = _cycle_panels(len(models))
     groups = [c[len("share_"):-len("_pct")] for c in cols]
+    styles = {s: (("-", "--", ":", "-.")[i % 4], "os^Dvx"[i % 6]) for i, s in enumerate(subjects)}
     speeds: list[float] = []
     for k, m in enumerate(models):
         ax = axes.flat[k]
         dm = d[d["model"].astype(str) == m].copy()
         for g, c in zip(groups, cols):
             dm[f"rate_{g}"] = dm[c].astype(float) / 100.0 * dm["mean_W_per_kg_no_basal"].astype(float)
-        order = trial_order(dm)
-        stats = group_stats(dm, ["trial"], ["speed_m_per_s", "mean_W_per_kg_no_basal"] + [f"rate_{g}" for g in groups])
-        x = [stat_cell(stats, t, "speed_m_per_s")[0] for t in order]
-        ax.plot(x, [stat_cell(stats, t, "mean_W_per_kg_no_basal")[0] for t in order], color="k", lw=1.8, marker="o",
-                ms=4, label="whole body", gid="whole-body")
-        for g in groups:
-            ys = [stat_cell(stats, t, f"rate_{g}")[0] for t in order]
-            ax.plot(x, ys, color=group_colour(g), lw=1.2, marker="o", ms=3, label=g, gid=f"group:{g}")
-        speeds += [v for v in x if np.isfinite(v)]
+        for subject in subjects:
+            ds = dm[dm["subject"].astype(str) == subject].sort_values("speed_m_per_s")
+            if ds.empty:
+                continue
+            ls, mk = styles[subject]
+            x = ds["speed_m_per_s"].to_numpy(float)
+            ax.plot(x, ds["mean_W_per_kg_no_basal"].to_numpy(float), color="k", lw=1.8, ls=ls, marker=mk, ms=4,
+                    label="whole body", gid=f"whole-body:{subject}")
+            for g in groups:
+                ax.plot(x, ds[f"rate_{g}"].to_numpy(float), color=group_colour(g), lw=1.1, ls=ls, marker=mk, ms=3,
+                        label=g, gid=f"group:{g}:{subject}")
+            speeds += [v for v in x if np.isfinite(v)]
     # one speed axis in every panel, over the trials' speeds
     _label_cycle_panels(axes, models, "metabolic rate (W/kg)", xlim=(min(speeds) - 0.05, max(speeds) + 0.05),
                         xlabel="walking speed (m/s)")
     from matplotlib.lines import Line2D
 
-    handles = [Line2D([], [], color="k", lw=1.8, marker="o", label="whole body (both legs, no basal)")]
-    handles += [Line2D([], [], color=group_colour(g), lw=1.2, marker="o", label=f"{g} ({GROUP_NAMES.get(g, g)})")
+    handles = [Line2D([], [], color="k", lw=1.8, label="whole body (both legs, no basal)")]
+    handles += [Line2D([], [], color=group_colour(g), lw=1.2, label=f"{g} ({GROUP_NAMES.get(g, g)})")
                 for g in groups]
+    if len(subjects) > 1:
+        handles += [Line2D([], [], color="0.4", lw=1.2, ls=styles[s][0], marker=styles[s][1], label=f"subject {s}")
+                    for s in subjects]
     _legend_below(fig, handles, min(len(handles), 6), 8)
     fig.suptitle(title or f"Whole-body and muscle-group metabolic rates against walking speed ({wf}; W/kg of body "
-                 "mass, both legs, no basal heat; mean over subjects)", fontsize=11)
+                 "mass, both legs, no basal heat; one line per subject)", fontsize=11)
     return fig
 
 
@@ -1101,15 +1139,18 @@ def per_muscle_ranked(per_muscle, *, workflow: str | None = None, models: Sequen
     """The muscles costing most energy, ranked, across speeds (W/kg of body mass, one leg, no basal).
 
     ``per_muscle``: the study's per-muscle table (``trial``, ``workflow``, ``model``,
-    ``muscle``, ``mean_W_per_kg``; ``speed_m_per_s`` orders the trials when present). One
-    panel per model (shared axis), the ``top`` muscles by their mean over trials (largest at
-    the top), one bar per trial coloured by speed (light = slow), means over subjects.
+    ``muscle``, ``mean_W_per_kg``; ``speed_m_per_s`` orders the trials when present). The
+    model muscles are summed into anatomical muscles per subject (:func:`harmonise_muscles`), so
+    subjects of different model families are ranked together. One panel per model (shared
+    axis), the ``top`` muscles by their mean over trials (largest at the top), one bar per
+    trial coloured by speed (light = slow), means over subjects.
     """
     _require_columns(per_muscle, ("trial", "workflow", "model", "muscle", "mean_W_per_kg"), "the per-muscle table")
     if len(per_muscle) == 0:
         raise OptionError("the per-muscle table has no rows")
     wf, d = _one_workflow(per_muscle, workflow, "the per-muscle table")
     models = _ordered_models(d["model"]) if models is None else [str(m) for m in models]
+    d = harmonise_muscles(d)
     trials = trial_order(d) if "speed_m_per_s" in d.columns else _unique(str(t) for t in d["trial"])
     from matplotlib import colormaps
 
@@ -1117,8 +1158,8 @@ def per_muscle_ranked(per_muscle, *, workflow: str | None = None, models: Sequen
     shades = np.linspace(0.15, 0.9, len(trials)) if len(trials) > 1 else np.array([0.6])
     colour = {t: cmap(float(x)) for t, x in zip(trials, shades)}
     nrow, ncol = _grid(len(models))
-    fig = _new_figure(4.2 * ncol + 0.8, (0.19 * top * max(1, len(trials)) / 2 + 1.0) * nrow + 1.5,
-                      left=1.0, top=0.8, wspace=0.55, hspace=0.3)
+    fig = _new_figure(4.2 * ncol + 1.6, (0.19 * top * max(1, len(trials)) / 2 + 1.0) * nrow + 1.5,
+                      left=1.6, top=0.8, wspace=0.75, hspace=0.3)
     axes = fig.subplots(nrow, ncol, squeeze=False, sharex=True)
     height = 0.8 / max(len(trials), 1)
     x_lo = x_hi = 0.0
@@ -1161,8 +1202,194 @@ def per_muscle_ranked(per_muscle, *, workflow: str | None = None, models: Sequen
     handles = [Patch(color=colour[t], label=f"{t} ({sp[t]:.2f} m/s)" if np.isfinite(sp.get(t, np.nan)) else t)
                for t in trials]
     _legend_below(fig, handles, min(len(handles), 8), 8)
-    fig.suptitle(title or f"The {top} muscles with the largest metabolic rate, across walking speeds ({wf}; "
-                 "W/kg of body mass, one leg, no basal heat; mean over subjects)", fontsize=11)
+    import textwrap
+
+    fig.suptitle(textwrap.fill(title or f"The {top} muscles with the largest metabolic rate, across walking speeds "
+                               f"({wf}; W/kg of body mass, one leg, no basal heat; mean over subjects)",
+                               int(fig.get_figwidth() * 11)), fontsize=11)
+    return fig
+
+
+# ------------------------------------------------------------- the paper's Figure 2, compact
+def figure2_compact(data: dict):
+    """The paper's Figure 2 in one compact grid: columns one model each, rows the metabolic rate
+    (W) and the efficiency over the fiber velocity (at the length plane) and over the fiber length
+    (at the velocity plane); every panel of a row shares its axes, so that the models compare
+    across the row. One line per activation (light: low, dark: full).
+
+    ``data``: :func:`musclemetab.metabolics.figure2.figure2_data`.
+    """
+    models, acts = list(data["models"]), np.asarray(data["activations"], float)
+    v, ln = data["velocity"], data["length"]
+    rows = (("rate_W", v, "vbar", "rate (W)"), ("efficiency", v, "vbar", "efficiency (-)"),
+            ("rate_W", ln, "normalized_fiber_length", "rate (W)"), ("efficiency", ln, "normalized_fiber_length",
+                                                                     "efficiency (-)"))
+    ncol = len(models)
+    fig = _new_figure(1.75 * ncol + 1.0, 1.55 * len(rows) + 1.7, left=0.8, top=0.85, wspace=0.1, hspace=0.45)
+    axes = fig.subplots(len(rows), ncol, squeeze=False, sharey="row")
+    shades = np.linspace(0.3, 1.0, len(acts))
+    for j, m in enumerate(models):
+        for i, (key, plane, x, ylabel) in enumerate(rows):
+            ax = axes[i, j]
+            first = axes[0, 0] if plane is v else axes[2, 0]  # one abscissa per plane
+            if ax is not first:
+                ax.sharex(first)
+            for k, a in enumerate(acts):
+                ax.plot(plane[x], plane[key][m][k], color=model_colour(m), alpha=float(shades[k]), lw=1.1,
+                        gid=f"{key}:{'velocity' if plane is v else 'length'}:{m}:a={a:g}")
+            _hline(ax, 0.0, color="0.7", lw=0.5)
+            if j == 0:
+                ax.set_ylabel(ylabel, fontsize=8)
+            else:
+                ax.tick_params(labelleft=False)
+            ax.tick_params(labelsize=7)
+            if i == 0:
+                _panel_title(ax, m, color=model_colour(m), fontsize=10, fontweight="bold")
+    for i, (_, plane, x, _) in enumerate(rows):
+        if i in (0, 2):
+            axes[i, 0].set_xlim(float(np.min(plane[x])), float(np.max(plane[x])))
+            axes[i, 0].set_xticks([-1.0, 0.0, 1.0] if plane is v else [0.5, 1.0, 1.5])
+        if i in (1, 3):
+            axes[i, 0].set_xlabel("fiber velocity (vmax; < 0: shortening)" if plane is v
+                                  else "fiber length (optimal lengths)", fontsize=7, loc="left")
+    eff_lim = max(float(np.nanmax(data[p]["efficiency"][m])) for p in ("velocity", "length") for m in models)
+    axes[1, 0].set_ylim(0.0, min(1.0, 1.1 * eff_lim))
+    axes[3, 0].set_ylim(0.0, min(1.0, 1.1 * eff_lim))
+    cfg = data["config"]
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], color="0.2", alpha=float(sh), lw=1.5, label=f"activation {a:g}")
+               for a, sh in zip(acts, shades)]
+    _legend_below(fig, handles, len(handles), 8)
+    fig.suptitle(f"The metabolic models on one soleus in steady states (the paper's Figure 2)\nrows 1-2: over the "
+                 f"fiber velocity at l/lo = {v['normalized_fiber_length']:g}; rows 3-4: over the fiber length at "
+                 f"v = {ln['vbar']:g} vmax; slow-twitch fraction {cfg['slow_twitch_fraction']:g}, "
+                 f"{cfg['muscle_mass_kg']:g} kg", fontsize=9.5)
+    return fig
+
+
+# ------------------------------------------------------------- muscles by anatomy
+def anatomical_muscles(names: Sequence[str]) -> dict[str, tuple[str, str]]:
+    """Each model muscle name -> ``(label, group)``: the label names the anatomical muscle(s)
+    of the package's muscle table (:func:`musclemetab.properties.resolve_muscles`) and the
+    side, so that the names of two model families for one muscle (``gasmed_r`` of Rajagopal
+    and ``med_gas_r`` of gait2392: ``gastrocnemius medialis (r)``) and the bundles of one
+    muscle (``addmagDist_r``, ``addmagMid_r``) share a label; ``group``: the first muscle
+    group of its function (:data:`GROUPS`; ``other`` when it has none). A name the table cannot
+    place keeps its own name. ``names`` of one model family (one subject's model)."""
+    from ..properties import anatomical_table, resolve_muscles
+
+    names = list(dict.fromkeys(str(n) for n in names))
+    anat = anatomical_table()
+    out = {}
+    for rec in resolve_muscles(names, warn=False):
+        if not rec.anatomical:
+            out[rec.name] = (rec.name, OTHER)
+            continue
+        label = " + ".join(str(anat.loc[a, "name"]) for a in rec.anatomical)
+        group = rec.function_groups[0].split("/")[0] if rec.function_groups else OTHER
+        out[rec.name] = (f"{label} ({rec.side})" if rec.side else label, group if group in GROUPS else OTHER)
+    return out
+
+
+def harmonise_muscles(per_muscle, value: str = "mean_W_per_kg"):
+    """The per-muscle table with the model muscles of each subject summed into anatomical
+    muscles (:func:`anatomical_muscles`, per subject: each subject's model family), column
+    ``muscle`` the anatomical label, ``group`` its muscle group. With a ``side`` column, the
+    label drops the side and a subject solved on both legs gets the mean of its legs (one leg)."""
+    import pandas as pd
+
+    d = per_muscle.copy()
+    d["muscle"] = d["muscle"].astype(str)
+    by = [c for c in ("subject",) if c in d.columns]
+    parts = []
+    for _, ds in (d.groupby(by, sort=False) if by else [(None, d)]):
+        labels = anatomical_muscles(ds["muscle"].unique())
+        parts.append(ds.assign(muscle=ds["muscle"].map(lambda n: labels[n][0]),
+                               group=ds["muscle"].map(lambda n: labels[n][1])))
+    d = pd.concat(parts, ignore_index=True)
+    if "side" in d.columns:  # a subject solved on both legs: one leg is the mean of its two
+        d["muscle"] = d["muscle"].str.replace(r" \([rl]\)$", "", regex=True)
+        d["side"] = d["side"].astype(str)
+    keys = [c for c in ("subject", "trial", "workflow", "model", "muscle", "group") if c in d.columns]
+    leg = keys + (["side"] if "side" in d.columns else [])
+    summed = d.groupby(leg, sort=False, dropna=False)[value].sum(min_count=1).reset_index()
+    summed = summed.groupby(keys, sort=False, dropna=False)[value].mean().reset_index()
+    rest = [c for c in d.columns if c not in keys and c != value]
+    if "speed_m_per_s" in rest:
+        sp = d.groupby([k for k in ("subject", "trial") if k in d.columns], sort=False)["speed_m_per_s"].first()
+        summed = summed.join(sp, on=[k for k in ("subject", "trial") if k in d.columns])
+    return summed
+
+
+def muscle_heat_map(rates: Mapping[str, object], toe_off_pct: float, models: Sequence[str] | None = None, *,
+                    scale: float = 1.0, unit: str = "W", title: str | None = None):
+    """Each muscle's metabolic rate over the gait cycle as a heat map: muscles (rows, ordered by
+    muscle group, :data:`GROUPS`, then by anatomical name) x cycle (columns), one panel per model,
+    one colour scale (a rate below -2 % of the peak sky blue); a dashed line at ``toe_off_pct`` (the
+    stance/swing boundary). Bundles of one anatomical muscle are named with their model name.
+
+    ``rates``: model -> table indexed by the cycle percentage, one column per muscle (W),
+    drawn times ``scale`` in ``unit``. The panels' images keep the drawn array
+    (``AxesImage.get_array()``: rows in the order of the tick labels, top first).
+    """
+    if not rates:
+        raise OptionError("no per-muscle rates given for the heat map")
+    models, to = _models_and_toe_off(_ordered_models(list(rates)), models, toe_off_pct, "per-muscle rates", "given:")
+    muscles = list(dict.fromkeys(str(c) for m in models for c in rates[m].columns))
+    labels = anatomical_muscles(muscles)
+    rank = {g: i for i, g in enumerate(GROUPS)}
+    order = sorted(muscles, key=lambda n: (rank.get(labels[n][1], len(GROUPS)), labels[n][0], n))
+    arrays = {}
+    for m in models:
+        tab = rates[m]
+        pct = np.asarray(tab.index, float)
+        arrays[m] = (pct, scale * np.vstack([tab[n].to_numpy(float) if n in tab.columns else np.full(pct.size, np.nan)
+                                             for n in order]))
+    hi = max(float(np.nanmax(a)) for _, a in arrays.values())
+    floor = -0.02 * hi  # a rate below 2 % of the peak under zero shows apart; closer to 0 it counts as 0
+    negative = any(float(np.nanmin(a)) < floor for _, a in arrays.values())
+    from matplotlib import colormaps
+
+    cmap = colormaps["magma_r"].with_extremes(under=OKABE_ITO["sky blue"])  # a negative rate: sky blue
+    ncol = min(len(models), 3)
+    nrow = int(math.ceil(len(models) / ncol))
+    fig = _new_figure(2.4 * ncol + 3.3, (0.125 * len(order) + 0.45) * nrow + 1.0, left=2.4, right=0.9,
+                      wspace=0.06, hspace=0.1 if len(order) > 20 else 0.3)
+    # the same rows in every panel (no shared y axis: the muscles' ticks are made once per row of panels)
+    axes = fig.subplots(nrow, ncol, squeeze=False, sharex=True)
+    image = None
+    shared = {labels[n][0] for n in order if sum(labels[x][0] == labels[n][0] for x in order) > 1}
+    names = [f"{labels[n][0].rsplit(' (', 1)[0]}: {n}" if labels[n][0] in shared else labels[n][0] for n in order]
+    for k, m in enumerate(models):
+        ax = axes.flat[k]
+        pct, a = arrays[m]
+        image = ax.imshow(a, aspect="auto", interpolation="nearest", cmap=cmap, vmin=floor, vmax=hi,
+                          extent=(float(pct[0]), float(pct[-1]), len(order) - 0.5, -0.5), gid=f"heat:{m}")
+        _vline(ax, to, color=OKABE_ITO["bluish green"], lw=1.3, ls="--", label="_toe-off", gid="toe-off")
+        _panel_title(ax, m, color=model_colour(m), fontsize=10, fontweight="bold")
+    group_of = [labels[n][1] for n in order]
+    for k, ax in enumerate(axes.flat):
+        if k >= len(models):
+            ax.set_visible(False)
+            continue
+        if k % ncol == 0:
+            ax.set_yticks(range(len(order)), [f"{t} [{labels[n][1]}]" for t, n in zip(names, order)], fontsize=7)
+        else:
+            ax.set_yticks([])
+        for i in range(1, len(order)):  # a thin line between the muscle groups
+            if group_of[i] != group_of[i - 1]:
+                _hline(ax, i - 0.5, color="white", lw=0.8)
+        if k + ncol >= len(models):
+            ax.set_xlabel("gait cycle (%)")
+            ax.tick_params(labelbottom=True)
+    axes[0, 0].set_xlim(0.0, 100.0)
+    cax = fig.add_axes((1 - 0.7 / fig.get_figwidth(), 0.25, 0.12 / fig.get_figwidth(), 0.5))
+    bar = fig.colorbar(image, cax=cax, extend="min" if negative else "neither")
+    bar.set_label(f"metabolic rate ({unit})" + ("; sky blue: below -2 % of the peak" if negative else ""),
+                  fontsize=8)
+    cax.tick_params(labelsize=7)
+    fig.suptitle(title or "Metabolic rate of each muscle over the gait cycle (no basal heat)", fontsize=10)
     return fig
 
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputFileError, MissingColumnError
+from ..errors import InputFileError, MissingColumnError, OptionError
 from ..redundancy.solution import SUMMARY_FILE
 from ..study_layout import (
     FAILURES_CSV,
@@ -47,6 +47,8 @@ class StudyFolder:
     results: object  # pandas.DataFrame
     failures: object  # pandas.DataFrame: subject, trial, workflow, reason
     notes: list[str] = field(default_factory=list)
+    #: The models the figures show (:func:`report_models`): ``None`` for the default.
+    figure_models: list[str] | None = None
 
     # ------------------------------------------------------------------ the tables
     @property
@@ -77,6 +79,21 @@ class StudyFolder:
             listed = [str(m) for m in listed]
             return listed + [m for m in present if m not in listed]
         return present
+
+    def shown_models(self) -> list[str]:
+        """The models the figures show, in the order of :meth:`models`: those asked for
+        (``figure_models``: the report's ``--models``, else ``[report] models`` of the study
+        file as ``study.json`` records it), else the paper's six
+        (:data:`~musclemetab.metabolics.registry.STUDY_MODELS`) present; all present when none of
+        the six is."""
+        from ..metabolics.registry import STUDY_MODELS
+
+        present = self.models()
+        asked = self.figure_models if self.figure_models is not None else _recorded_report_models(self.settings)
+        if asked is None:
+            six = [m for m in present if m in STUDY_MODELS]
+            return six or present
+        return [m for m in present if m in asked]
 
     def subjects(self) -> list[str]:
         """The subjects of the results, in the order of ``study.json``."""
@@ -169,9 +186,39 @@ class StudyFolder:
             raise InputFileError(f"{folder / UNIT_FILE}: no gait cycle (cycle.start_s, toe_off_s, end_s)") from None
 
     def timeseries(self, row):
-        """The row's rates over the cycle (``timeseries.csv``): of its leg, or both legs added
-        (:func:`add_leg_timeseries`)."""
+        """The row's rates over the cycle (``timeseries.csv``) of both legs, on the first leg's
+        cycle (:func:`add_leg_timeseries`: the solved leg and itself half a cycle later, or the
+        two solved legs)."""
         return add_leg_timeseries({s: _read_timeseries(f) for s, f in self.leg_folders(row).items()})
+
+    def muscle_rates(self, row) -> dict:
+        """Each muscle's metabolic rate without basal heat (W) over the gait cycle of the row's
+        (first) leg, from the unit's ``metabolics.sto``: ``{model: table}``, each table indexed
+        by the cycle percentage (the nodes inside the cycle), one column per muscle
+        (``total - basal`` of the file)."""
+        from ..io.storage import read_storage
+        from ..metabolics.solution import METABOLICS_STO
+
+        folder = self.unit_folder(row)
+        start, _, end = self.unit_cycle(folder)
+        path = folder / METABOLICS_STO
+        if not path.is_file():
+            raise InputFileError(f"{path}: missing; run the unit again to write it")
+        table = read_storage(path)
+        t = np.asarray(table.index, float)
+        table = table[(t >= start - 1e-9) & (t <= end + 1e-9)]
+        pct = 100.0 * (np.asarray(table.index, float) - start) / (end - start)
+        out: dict = {}
+        for col in table.columns:
+            parts = str(col).split("/")
+            if len(parts) == 3 and parts[2] == "total" and f"{parts[0]}/{parts[1]}/basal" in table.columns:
+                out.setdefault(parts[0], {})[parts[1]] = (
+                    table[col].to_numpy(float) - table[f"{parts[0]}/{parts[1]}/basal"].to_numpy(float))
+        if not out:
+            raise InputFileError(f"{path}: no columns <model>/<muscle>/total and basal; run the unit again")
+        import pandas as pd
+
+        return {m: pd.DataFrame(v, index=pd.Index(pct, name="cycle_pct")) for m, v in out.items()}
 
     def summary(self, folder: Path) -> dict:
         """The unit's ``summary.json`` (the solver's run record and the solution's residuals)."""
@@ -213,6 +260,17 @@ class StudyFolder:
         return text.replace(str(self.path) + os.sep, "").replace(str(self.path.resolve()) + os.sep, "")
 
 
+def _recorded_report_models(settings: dict) -> list[str] | None:
+    """``models`` of the ``[report]`` table as ``study.json`` records it, checked; ``None``
+    when absent."""
+    from ..metabolics.registry import parse_models
+
+    report = settings.get("report")
+    if not isinstance(report, dict) or report.get("models") in (None, "", []):
+        return None
+    return parse_models(report["models"])
+
+
 def _unique(values) -> list[str]:
     return list(dict.fromkeys(values.astype(str)))
 
@@ -229,31 +287,68 @@ def _read_timeseries(folder: Path):
         raise InputFileError(f"{p}: not a readable table ({exc})") from None
 
 
+def _periodic(pct, values, at):
+    """``values`` over the cycle (``pct``, %) at the cycle percentages ``at``, the cycle
+    repeated (100 % is 0 % of the next cycle: a point at or past 100 % is left out)."""
+    pct, values = np.asarray(pct, float), np.asarray(values, float)
+    keep = pct < 100.0 - 1e-9
+    return np.interp(np.mod(np.asarray(at, float), 100.0), pct[keep], values[keep], period=100.0)
+
+
+def _cycle_times(table) -> tuple[float, float]:
+    """``(start, end)`` (s) of a leg's gait cycle from its table's ``time_s`` and ``cycle_pct``."""
+    t, p = table["time_s"].to_numpy(float), table["cycle_pct"].to_numpy(float)
+    ok = np.isfinite(t) & np.isfinite(p)
+    if np.unique(p[ok]).size < 2:
+        raise InputFileError(f"{TIMESERIES_FILE}: no times (time_s) to align the two legs' cycles on; "
+                             "run the study again to rewrite it")
+    slope, start = np.polyfit(p[ok], t[ok], 1)  # time = start + pct * (end - start) / 100
+    return float(start), float(start + 100.0 * slope)
+
+
 def add_leg_timeseries(tables: dict):
-    """One unit's long time-series table, or both legs' added: each leg's series on its own
-    gait cycle (``cycle_pct``), the second interpolated onto the first's cycle percentages."""
-    if len(tables) == 1:
-        return next(iter(tables.values()))
+    """Both legs' rates over the gait cycle of the first leg (its ``cycle_pct``): every series
+    (model, series) of the first leg plus the other leg's at the same instant.
+
+    One leg solved (one table): the other leg is the solved leg half a cycle later (a
+    symmetric gait): ``x(p) + x(p + 50 %)``, the cycle repeated. Both legs solved: the
+    other leg's own series, each leg on its own cycle (its ``time_s``), taken at the first
+    leg's instants: the other leg's phase ``((t - start) / (end - start)) mod 1``, aligned on
+    the first leg's heel strike. The cycle average of either is the sum of the legs' averages.
+    """
     first, *others = tables.values()
     out = first.copy()
+    groups = out.groupby(["model", "series"], sort=False)
+    if not others:
+        for _, rows in groups:
+            r = rows.sort_values("cycle_pct")
+            pct, v = r["cycle_pct"].to_numpy(float), r["value_W"].to_numpy(float)
+            out.loc[r.index, "value_W"] = v + _periodic(pct, v, pct + 50.0)
+        return out
+    start, end = _cycle_times(first)
     for other in others:
-        for (model, series), rows in out.groupby(["model", "series"], sort=False):
+        o_start, o_end = _cycle_times(other)
+        for (model, series), rows in groups:
             o = other[(other["model"] == model) & (other["series"] == series)].sort_values("cycle_pct")
             if o.empty:
                 continue
-            out.loc[rows.index, "value_W"] += np.interp(rows["cycle_pct"].to_numpy(float),
-                                                        o["cycle_pct"].to_numpy(float), o["value_W"].to_numpy(float))
-    out["time_s"] = np.nan  # the legs' cycles have different times
+            t = start + rows["cycle_pct"].to_numpy(float) / 100.0 * (end - start)
+            phase = 100.0 * (t - o_start) / (o_end - o_start)
+            out.loc[rows.index, "value_W"] += _periodic(o["cycle_pct"], o["value_W"], phase)
     return out
 
 
-def read_study_folder(study_dir: str | os.PathLike) -> StudyFolder:
+def read_study_folder(study_dir: str | os.PathLike, models=None) -> StudyFolder:
     """Read ``study.json``, ``results.csv`` and ``failures.csv`` of a study folder.
 
     Raises :class:`InputFileError` when the folder or ``results.csv`` is missing or
     unreadable, or ``study.json`` is not JSON; :class:`MissingColumnError` when
     ``results.csv`` lacks one of :data:`REQUIRED_COLUMNS`. A missing ``study.json`` or
-    ``failures.csv`` gives a note in the report.
+    ``failures.csv`` gives a note in the report. ``models`` (names, ``"UM10,LW05"`` or
+    ``"all"``, see :func:`~musclemetab.metabolics.registry.parse_models`): the models the
+    figures show (default: :meth:`StudyFolder.shown_models`; ``"all"``: those of the paper's
+    six the study computed); raises :class:`OptionError` for an unknown name or a named model
+    the study did not compute.
     """
     import pandas as pd
 
@@ -306,7 +401,21 @@ def read_study_folder(study_dir: str | os.PathLike) -> StudyFolder:
         failures = failures[_FAILURE_COLUMNS]
     else:
         notes.append(f"{FAILURES_CSV} is missing: only failures recorded in the results table are listed.")
-    return StudyFolder(path=path, settings=settings, results=results, failures=failures, notes=notes)
+    study = StudyFolder(path=path, settings=settings, results=results, failures=failures, notes=notes)
+    if models is not None:
+        from ..metabolics.registry import parse_models
+
+        asked = parse_models(models)
+        tokens = models.replace(";", ",").replace(" ", ",").split(",") if isinstance(models, str) else list(models)
+        named = [t for t in tokens if t and str(t).strip().lower() != "all"]  # 'all': the six the study has
+        computed = study.models()
+        absent = [m for m in (parse_models(named) if named else []) if m not in computed]
+        if absent:
+            raise OptionError(
+                f"--models: {', '.join(absent)} not computed in {rpath} (the study has {', '.join(computed)}); "
+                "name models of the study or run it with them")
+        study.figure_models = asked
+    return study
 
 
 def study_file(study_dir: Path) -> Path | None:

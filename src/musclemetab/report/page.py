@@ -247,6 +247,35 @@ def _failures(study: StudyFolder) -> Table | None:
     return Table([[("subject", 1), ("trial", 1), ("workflow", 1), ("reason", 1)]], rows, 0, "failures")
 
 
+#: Flags of a unit's record (``results.csv`` column = ``summary.json`` key) and what they say.
+FLAGS = {
+    "large_reserve": "large reserve actuators: the reserves carry a large share of the peak joint moment "
+                     "(reserve share of peak moment {reserve_share_of_peak_moment})",
+}
+
+
+def flagged_units(study: StudyFolder) -> Table | None:
+    """The successful units with a flag set (:data:`FLAGS`: a true value in ``results.csv``),
+    one row per unit and flag, or ``None``."""
+    ok = study.ok
+    rows = []
+    for flag, text in FLAGS.items():
+        if flag not in ok.columns:
+            continue
+        set_ = ok[ok[flag].astype(str).str.strip().str.lower().isin(("true", "1", "yes"))]
+        for _, r in set_.drop_duplicates(["subject", "trial", "workflow"]).iterrows():
+            try:
+                share = study.summary(study.unit_folder(r)).get("reserve_share_of_peak_moment")
+                share = f"{100 * float(share):.1f} %" if np.isfinite(float(share)) else "not recorded"
+            except (MusclemetabError, TypeError, ValueError):
+                share = "not recorded"
+            rows.append([str(r["subject"]), str(r["trial"]), str(r["workflow"]), flag,
+                         text.format(reserve_share_of_peak_moment=share)])
+    if not rows:
+        return None
+    return Table([[("subject", 1), ("trial", 1), ("workflow", 1), ("flag", 1), ("meaning", 1)]], rows, 0, "failures")
+
+
 def solver_runs(study: StudyFolder) -> list[list[str]]:
     """One row per unit of the results and of the failures: subject, trial, workflow, side,
     then :data:`RUN_COLUMNS` from the unit's ``summary.json`` (its
@@ -336,6 +365,7 @@ def page_tables(study: StudyFolder) -> dict:
         "per_muscle": _per_muscle(study),
         "settings": _settings(study),
         "failures": _failures(study),
+        "flagged": flagged_units(study),
         "runs": _runs(study),
         "software": _software(study),
     }

@@ -30,6 +30,7 @@ FIGURE_NAMES = (
     "excitations_fiber_lengths",
     "estimated_vs_measured",
     "group_rates_over_cycle",
+    "muscle_heat_map",
     "whole_body_over_cycle",
     "phase_shares",
     "phase_pies",
@@ -41,11 +42,12 @@ FIGURE_NAMES = (
 
 #: The title of each figure in the report.
 FIGURE_TITLES = {
-    "figure2_soleus": "The metabolic models on a soleus (the paper's Figure 2)",
+    "figure2_soleus": "The six metabolic models on a soleus (the paper's Figure 2)",
     "excitations_fiber_lengths": "Muscle excitations and normalised fiber lengths",
     "estimated_vs_measured": "Estimated vs measured whole-body metabolic rate",
     "group_rates_over_cycle": "Metabolic rate of the muscle groups over the gait cycle",
     "whole_body_over_cycle": "Whole-body metabolic rate over the gait cycle across speeds",
+    "muscle_heat_map": "Every muscle over the gait cycle",
     "phase_shares": "Stance and swing shares",
     "phase_pies": "Stance and swing shares, scaled by the total cost",
     "group_shares": "Muscle-group shares",
@@ -54,16 +56,18 @@ FIGURE_TITLES = {
 }
 
 FIGURE2_CAPTION = (
-    "The metabolic rate (W) and efficiency of one soleus under each energy model, in steady states "
-    "(excitation equal to activation) at four activations: over the fiber velocity at the optimal "
-    "length and over the fiber length at a slow shortening; the last row compares the models at full "
-    "activation. The settings and the open choices are printed on the figure (docs/metabolics.md). It "
-    "depends on no data of the study: it is drawn once per version of the models and kept in the "
-    "package's cache."
+    "The metabolic rate (W) and efficiency of one soleus under each of the paper's six energy models "
+    "(columns), in steady states (excitation equal to activation) at four activations (light: low, dark: "
+    "full): over the fiber velocity at the optimal length (rows 1-2; shortening negative) and over the fiber "
+    "length at a slow shortening (rows 3-4); the panels of a row share their axes, so the models compare "
+    "across it. Efficiency: mechanical power over metabolic rate, shortening only. Settings and open "
+    "choices: docs/metabolics.md (musclemetab.metabolics.figure2.figure2 draws every model with them "
+    "printed). It depends on no data of the study: it is drawn once per version of the models and kept in "
+    "the package's cache."
 )
 
 #: The figures showing one unit of the study (the selected subject's).
-UNIT_FIGURES = ("excitations_fiber_lengths", "group_rates_over_cycle", "whole_body_over_cycle")
+UNIT_FIGURES = ("excitations_fiber_lengths", "group_rates_over_cycle", "muscle_heat_map", "whole_body_over_cycle")
 
 
 @dataclass(frozen=True)
@@ -105,12 +109,15 @@ class Selection:
 
     @property
     def rate_scale(self) -> tuple[float, str, str, str]:
-        """``(scale, unit, legs, how)`` of the rates over the cycle: W/kg of both legs when the
-        body mass is known (one leg doubled, or both legs added), else W."""
-        how = "the two solved legs added, each over its own cycle" if self.both_legs else "twice the simulated leg"
+        """``(scale, unit, legs, how)`` of the rates over the cycle (both legs,
+        :meth:`~.folder.StudyFolder.timeseries`): W/kg when the body mass is known, else W."""
+        how = ("the two solved legs added at each instant, each leg on its own gait cycle aligned on the first "
+               "leg's heel strike" if self.both_legs else
+               "the simulated leg plus the same leg half a cycle later, standing for the other leg (a symmetric "
+               "gait)")
         if self.mass:
-            return (1.0 if self.both_legs else 2.0) / self.mass, "W/kg", "both legs", how
-        return (1.0, "W", "both legs", how) if self.both_legs else (1.0, "W", "one leg", how)
+            return 1.0 / self.mass, "W/kg", "both legs", how
+        return 1.0, "W", "both legs", how
 
 
 def select(study: StudyFolder) -> Selection:
@@ -118,8 +125,9 @@ def select(study: StudyFolder) -> Selection:
     from .figures import main_workflow
 
     ok = study.ok
+    models = [m for m in study.shown_models() if m in set(ok["model"].astype(str))]
+    ok = ok[ok["model"].astype(str).isin(models)]
     workflows = [w for w in study.workflows() if w in set(ok["workflow"].astype(str))]
-    models = [m for m in study.models() if m in set(ok["model"].astype(str))]
     trial = study.preferred_trial(ok)
     pref = ok[ok["trial"].astype(str) == trial]
     subject = next((s for s in study.subjects() if s in set(pref["subject"].astype(str))), None)
@@ -137,6 +145,7 @@ def plan_figures(study: StudyFolder) -> dict[str, FigurePlan]:
         "estimated_vs_measured": partial(estimated_vs_measured_figure, sel),
         "group_rates_over_cycle": partial(group_rates_figure, study, sel),
         "whole_body_over_cycle": partial(whole_body_figure, study, sel),
+        "muscle_heat_map": partial(heat_map_figure, study, sel),
         "phase_shares": partial(phase_shares_figure, sel),
         "phase_pies": partial(phase_pies_figure, sel),
         "group_shares": partial(group_shares_figure, sel),
@@ -196,14 +205,17 @@ def rates_against_speed_figure(sel: Selection):
 
     return rates_against_speed(sel.ok, workflow=sel.workflow, models=sel.models), (
         f"Workflow {sel.workflow}. Whole-body metabolic rate without basal heat (black) and each muscle group's "
-        "part of it (group share × whole-body rate), W per kg of body mass, both legs; means over subjects "
-        "at each trial's mean walking speed; same axes in every panel.")
+        "part of it (group share × whole-body rate), W per kg of body mass, both legs; one line per subject "
+        "through its trials in the order of its walking speeds (line style and marker: the subject); same "
+        "axes in every panel.")
 
 
 def figure2_figure():
-    from ..metabolics.figure2 import figure2
+    from ..metabolics.figure2 import figure2_data
+    from ..metabolics.registry import STUDY_MODELS
+    from .figures import figure2_compact
 
-    return figure2(), FIGURE2_CAPTION
+    return figure2_compact(figure2_data(models=STUDY_MODELS)), FIGURE2_CAPTION
 
 
 # ------------------------------------------------------------------ figures of the unit files
@@ -345,8 +357,39 @@ def group_rates_figure(study: StudyFolder, sel: Selection):
     )
     cap = (f"Subject {subject}, trial {trial} (preferred speed), workflow {wf}. Muscle metabolic "
            f"rates ({unit}, {legs}: {how}{_per_kg(sel)}, "
-           "without basal heat) distributed to the muscle groups by moment-arm ratio; same axes in every "
-           f"panel; dotted line: toe-off ({to:.1f} % of the cycle).")
+           "without basal heat) distributed to the muscle groups by moment-arm ratio, over the first leg's gait "
+           "cycle; one panel per muscle group, one line per metabolic model; same axes in every panel; dotted "
+           f"line: toe-off ({to:.1f} % of the cycle).")
+    return fig, cap
+
+
+def heat_map_figure(study: StudyFolder, sel: Selection):
+    """Every muscle of the selected unit's first leg over its gait cycle (main workflow), one
+    panel per model, from the unit's ``metabolics.sto``."""
+    from .figures import muscle_heat_map
+
+    subject, trial, wf = sel.subject, sel.trial, sel.workflow
+    d = sel.rows(subject, trial, wf)
+    if d.empty:
+        raise OptionError(f"no successful unit for {subject}, trial {trial}, workflow {wf}")
+    row = d.iloc[0]
+    rates = study.muscle_rates(row)
+    s, t, e = study.unit_cycle(study.unit_folder(row))
+    to = 100.0 * (t - s) / (e - s)
+    models = [m for m in sel.models if m in rates]
+    if not models:
+        raise OptionError(f"the unit's metabolic rates hold none of the models {', '.join(sel.models)}")
+    scale, unit = (1.0 / sel.mass, "W/kg") if sel.mass else (1.0, "W")
+    side = "the right leg" if sel.both_legs else "the simulated leg"
+    fig = muscle_heat_map(rates, to, models, scale=scale, unit=unit,
+                          title=f"Each muscle over the gait cycle ({unit}, {side}, no basal heat): "
+                          f"subject {subject}, trial {trial}, {wf}")
+    cap = (f"Subject {subject}, trial {trial} (preferred speed), workflow {wf}. Metabolic rate of each muscle of "
+           f"{side} ({unit}{_per_kg(sel)}, without basal heat) at every node of the gait cycle (initial contact "
+           "to the next initial contact), one panel per model, one colour scale; muscles ordered by muscle "
+           "group (in brackets: the first group of the muscle's function) and named by the anatomical muscle "
+           "table, bundles of one muscle by their model name; sky blue: a rate below -2 % of the peak (work "
+           f"absorbed); dashed line: toe-off ({to:.1f} %), the boundary between stance and swing.")
     return fig, cap
 
 
@@ -405,7 +448,9 @@ def per_muscle_figure(study: StudyFolder, sel: Selection):
         pm = pm.merge(sp.astype({"subject": str, "trial": str}), on=["subject", "trial"], how="left")
     fig = per_muscle_ranked(pm, workflow=wf if wf in set(pm["workflow"].astype(str).unique()) else None,
                             models=[m for m in sel.models if m in set(pm["model"].astype(str).unique())] or None)
-    cap = (f"Workflow {wf}. The 15 muscles with the largest cycle-average metabolic rate of each model "
+    cap = (f"Workflow {wf}. The 15 anatomical muscles with the largest cycle-average metabolic rate of each model "
            "(W per kg of body mass, one leg, without basal heat; mean over subjects), one bar per trial "
-           "(light: slow, dark: fast); every muscle is in per_muscle.csv.")
+           "(light: slow, dark: fast); each subject's model muscles are summed into the anatomical muscles of the "
+           "package's muscle table (bundles of one muscle together, the names of different model families "
+           "merged); every model muscle is in per_muscle.csv.")
     return fig, cap
