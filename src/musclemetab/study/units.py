@@ -505,10 +505,9 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
     t0 = time.perf_counter()
     if unit.workflow == EMG_TEN:
         _copy_solution(dependency / trial.name, tmp)
-        solution = Solution.load(tmp, require_success=False)
-        if not solution.run_record.success:
-            raise solution.run_record.failure(f"EMG-TEN solution of trial {trial.name}")
-        solve_summary = solution.summary
+        sol = Solution.load(tmp, require_success=False)  # the estimation unit's output: its hand-off
+        if not sol.run_record.success:
+            raise sol.run_record.failure(f"EMG-TEN solution of trial {trial.name}")
     else:
         kwargs = {}
         if unit.workflow != "effort-gen" and subject.passive is not None:
@@ -529,7 +528,6 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
                               grf_column=trial.grf_column, grf_threshold_N=trial.grf_threshold_N,
                               cycle=trial.cycle, options=_solver_options(study, subject), **kwargs)
         write_solution_folder(sol, tmp)
-        solve_summary = sol.summary
         times["solve_s"] = sol.summary.get("solve_time_s")
         if not sol.success:
             from ..redundancy.emg_ten import emg_failure
@@ -543,8 +541,9 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
     except DataMismatchError as exc:  # e.g. a treadmill trial without speed_m_per_s: no cost of transport
         warnings.warn(f"{subject.name}/{trial.name}: no walking speed ({exc})", stacklevel=2)
         speed = None
-    solved = Solution.load(tmp, require_success=False)
-    recorded = (solved.summary.get("window") or {}).get("gait_cycle")
+    # the stages after the solve take the solution object (the same numbers as its folder,
+    # tests/test_stage_paths.py); each writes its files once
+    recorded = (sol.summary.get("window") or {}).get("gait_cycle")
     if recorded and trial.start_s is None and trial.end_s is None:  # the cycle the solve found
         from ..analysis.events import GaitCycle
 
@@ -553,7 +552,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
     else:
         cycle = trial_cycle(trial, side)
     result = metabolics_from_solution(
-        tmp, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
+        sol, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
         basal_rate_W_per_kg=study.basal_coefficient, basal_exponent=study.basal_exponent,
         speed_m_per_s=speed, muscle_properties=subject.muscle_properties,
     )
@@ -564,7 +563,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
     from ..analysis.groups import has_function_group
 
     # DOFs with no muscle function group (a subtalar or toe joint) stay out of the group analysis
-    geometry = compute_geometry(subject.model, trial.ik, dofs=[d for d in solved.dofs if has_function_group(d)],
+    geometry = compute_geometry(subject.model, trial.ik, dofs=[d for d in sol.dofs if has_function_group(d)],
                                 side=side)
     from ..analysis.unit import analyse_metabolics, filtered_moment_arms
 
@@ -577,7 +576,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
     t3 = time.perf_counter()
     from ..redundancy.export import write_opensim_states
 
-    write_opensim_states(tmp, subject.model, trial.ik, tmp)
+    write_opensim_states(sol, subject.model, trial.ik, tmp)
     times["opensim_states_s"] = time.perf_counter() - t3
     measured = trial.measured_W_per_kg
     if measured is None and trial.vo2_mL_per_s is not None:
@@ -594,7 +593,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
             "not available" if speed is None else "estimated from the pelvis displacement over the cycle (IK)"),
         "toe_off_pct": float(100.0 * (cycle.toe_off_s - cycle.start_s) / (cycle.end_s - cycle.start_s)),
         "n_nodes": int(np.asarray(result.time_s).size),
-        "large_reserve": bool(solve_summary.get("large_reserve", False)),
-        "reserve_share_of_peak_moment": solve_summary.get("reserve_share_of_peak_moment"),
+        "large_reserve": bool(sol.summary.get("large_reserve", False)),
+        "reserve_share_of_peak_moment": sol.summary.get("reserve_share_of_peak_moment"),
     }
 
