@@ -47,7 +47,7 @@ def cycle(solved):
 
 @pytest.mark.parametrize("basal", ["body", "muscle"])
 def test_per_muscle_table_sums_to_the_whole_body_rate(example, solved, cycle, basal):
-    from musclemetab.analysis.per_muscle import per_muscle_table
+    from musclemetab.metabolics.per_muscle import per_muscle_table
 
     _, folder = solved
     res = metabolics_from_solution(folder, example.body_mass_kg, example.height_m, models=list(MODELS), basal=basal)
@@ -87,7 +87,7 @@ def test_study_per_muscle_table_sums_to_the_results_table(demo):
 
 
 def test_per_muscle_phase_energies_match_the_leg_analysis(example, solved, cycle):
-    from musclemetab.analysis.per_muscle import per_muscle_table
+    from musclemetab.metabolics.per_muscle import per_muscle_table
     from musclemetab.analysis.phases import phase_shares
 
     _, folder = solved

@@ -22,7 +22,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from .analysis.per_muscle import PER_MUSCLE_FILE
+from .metabolics.per_muscle import PER_MUSCLE_FILE
 
 __all__ = [
     "STUDY_JSON",

@@ -46,7 +46,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from ..errors import DataMismatchError, OptionError
-from ._common import as_signal, as_time, coverage, integrate_interval
+from ..events import as_signal, as_time, coverage, integrate_interval
 from .events import GaitCycle
 
 __all__ = [

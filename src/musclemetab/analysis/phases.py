@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import DataMismatchError
-from ._common import as_signal, as_time, coverage, integrate_interval
+from ..events import as_signal, as_time, coverage, integrate_interval
 from .events import GaitCycle
 
 __all__ = ["phase_shares"]

@@ -19,7 +19,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..errors import DataMismatchError, OptionError
-from ._common import as_time
+from ..events import as_time
 from .events import GaitCycle
 from .groups import DEFAULT_THRESHOLD_M, GROUPS, GROUPS_WITH_OTHER, OTHER, group_rates, group_shares, group_weights
 from .phases import phase_shares
@@ -308,7 +308,7 @@ def analyse(
     """
     from ..geometry import compute_geometry
     from ..properties import split_side
-    from .per_muscle import per_muscle_table
+    from ..metabolics.per_muscle import per_muscle_table
 
     result = _metabolics_of(solution, body_mass_kg, height_m, models, metabolics_options)
     if side is None:
@@ -333,7 +333,7 @@ def write_analysis(analysis: TrialAnalysis, out_dir: str | os.PathLike) -> dict:
     from ..io import atomic_directory
     from ..metabolics.solution import WHOLE_BODY_CSV
     from .groups import group_key_table
-    from .per_muscle import PER_MUSCLE_FILE
+    from ..metabolics.per_muscle import PER_MUSCLE_FILE
 
     tables = {WHOLE_BODY_CSV: analysis.whole_body, ANALYSIS_FILE: analysis.summary,
               TIMESERIES_FILE: analysis.timeseries, PER_MUSCLE_FILE: analysis.per_muscle}

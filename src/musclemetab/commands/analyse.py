@@ -88,7 +88,7 @@ def run(args) -> int:
     """Run ``musclemetab analyse`` (``args`` from :func:`add_parser`)."""
     import pandas as pd
 
-    from ..analysis.per_muscle import PER_MUSCLE_FILE
+    from ..metabolics.per_muscle import PER_MUSCLE_FILE
     from ..analysis.unit import analyse, write_analysis
     from ..io import atomic_path
     from ..metabolics.solution import read_metabolics_settings

@@ -514,7 +514,7 @@ def write_metabolics(result: SolutionMetabolics, out_dir: str | os.PathLike, cyc
     energies to ``per_muscle.csv``. The files are written together
     (:func:`musclemetab.io.atomic_directory`).
     """
-    from ..analysis.per_muscle import PER_MUSCLE_FILE, per_muscle_table
+    from .per_muscle import PER_MUSCLE_FILE, per_muscle_table
     from ..io import atomic_directory, write_parquet, write_storage
 
     out_dir = Path(out_dir)

@@ -597,7 +597,7 @@ def collect_results(study: Study, failed: dict[str, str] | None = None):
     """
     import pandas as pd
 
-    from ..analysis.per_muscle import PER_MUSCLE_FILE
+    from ..metabolics.per_muscle import PER_MUSCLE_FILE
 
     out = Path(study.output)
     frames, failures, muscles = [], [], []

@@ -30,8 +30,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..errors import DataMismatchError
-from ._common import as_time, coverage, integrate_interval
-from .events import GaitCycle
+from ..events import as_time, coverage, integrate_interval
+from ..events import GaitCycle
 
 __all__ = ["PER_MUSCLE_FILE", "PER_MUSCLE_COLUMNS", "COMPONENT_COLUMNS", "per_muscle_table"]
 
