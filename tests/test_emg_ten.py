@@ -674,9 +674,11 @@ def test_settings_checks_name_the_option_and_what_it_may_be():
     cases = [
         (lambda: EmgTenSettings(coupling="joint"), "coupling must be one of 'constraints', 'shared', not 'joint'"),
         (lambda: EmgTenSettings(emg_mode="free"), "the EMG mode must be one of 'constrained', 'driven', 'tracking'"),
-        (lambda: EmgTenSettings(w_emg=-1.0), "the weight w_emg must be a non-negative number, not -1.0"),
+        (lambda: EmgTenSettings(goals=Goals(w_emg=-1.0)), "the weight w_emg must be a non-negative number, not -1.0"),
         (lambda: EmgTenSettings(emg_scale_bounds=(2.0, 1.0)), "emg_scale_bounds must be (low, high) with 0 < low"),
-        (lambda: SolverOptions(w_activation=float("nan")), "the weight w_activation must be a non-negative number"),
+        (lambda: Goals(w_activation=float("nan")), "the weight w_activation must be a non-negative number"),
+        (lambda: EmgTenSettings(goals=Goals(energy=None, w_fiber_length=1.0)), "no fiber-length weight"),
+        (lambda: EmgTenSettings(goals={"w_emg": 1.0}), "goals must be a Goals, not dict"),
         (lambda: SolverOptions(derivatives="numeric"), "derivatives must be one of 'explicit', 'auto'"),
         (lambda: Goals(emg_tolerance=-0.1), "the EMG tolerance must be a non-negative number (0: EMG-driven)"),
         (lambda: ParameterSpec("tendon_stiffness", ("soleus_r",), (0.0, 1.0)),

@@ -42,12 +42,12 @@ def generated(example, tmp_path_factory):
     t_ik, _ = read_kinematics(example.ik["normal"], DOFS)
     t_id, mom = read_inverse_dynamics(example.id["normal"], DOFS)
     wf = get_workflow("effort-cal")
-    options = SolverOptions(w_activation=wf.w_activation, w_reserve=wf.w_reserve, w_velocity=wf.w_velocity)
+    options = SolverOptions()
     nominal, _ = workflow_parameters(wf, read_muscle_parameters(example.model), g.muscles)
     i = {m: nominal.names.index(m) for m in (*TS, *LMO)}
     truth = nominal.replace(optimal_fiber_length_m={m: 1.10 * nominal.optimal_fiber_length_m[i[m]] for m in LMO},
                             tendon_stiffness={m: 0.5 * nominal.tendon_stiffness[i[m]] for m in TS})
-    made = solve_with_parameters(g, truth, t_id, mom, ik_time_s=t_ik, options=options)
+    made = solve_with_parameters(g, truth, t_id, mom, ik_time_s=t_ik, options=options, goals=wf.goals)
     assert made.success
     lmo_true = dict(zip(truth.names, truth.optimal_fiber_length_m))
     measured = {m: (made.time_s, made.lm_norm[:, made.muscles.index(m)] * lmo_true[m]) for m in (*LMO, *TS)}
@@ -67,8 +67,7 @@ def _estimate(generated, with_emg: bool):
         emg = dict(emg_muscles=LMO, emg_nodes=made.excitation[:N, [made.muscles.index(m) for m in LMO]])
         specs.append(ParameterSpec("emg_scale", LMO, (1.0, 1.0)))
     trial = fiber_length_trial("normal", inputs, guess, measured, **emg)
-    goals = Goals(w_activation=wf.w_activation, w_reserve=wf.w_reserve, w_velocity=wf.w_velocity,
-                  w_fiber_length=100.0, w_emg=10.0 if with_emg else 0.0)
+    goals = Goals(**wf.goals.effort_weights(), w_fiber_length=100.0, w_emg=10.0 if with_emg else 0.0)
     return estimate_parameters([trial], params, specs, goals, options=options)
 
 
@@ -284,8 +283,7 @@ def test_estimate_command_on_the_left_leg_recovers_the_tendon_stiffness(example,
     wf = get_workflow("effort-gen")
     nominal, _ = workflow_parameters(wf, read_muscle_parameters(example.model), g.muscles)
     truth = nominal.replace(tendon_stiffness={m: 0.5 * nominal.tendon_stiffness[nominal.names.index(m)] for m in ts})
-    made = solve_with_parameters(g, truth, t_id, mom, ik_time_s=t_ik, options=SolverOptions(
-        w_activation=wf.w_activation, w_reserve=wf.w_reserve, w_velocity=wf.w_velocity))
+    made = solve_with_parameters(g, truth, t_id, mom, ik_time_s=t_ik, options=SolverOptions(), goals=wf.goals)
     assert made.success
     lmo = dict(zip(truth.names, truth.optimal_fiber_length_m))
     us = pd.DataFrame({m: 1000.0 * made.lm_norm[:, made.muscles.index(m)] * lmo[m] for m in ts}, index=made.time_s)

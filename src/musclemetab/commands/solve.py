@@ -346,7 +346,7 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
     all trials, then the files."""
     from dataclasses import replace
 
-    from ..redundancy.emg_ten import EmgTenSettings, informed_settings
+    from ..redundancy.emg_ten import EMG_TEN_GOALS, EmgTenSettings, informed_settings
     from ..redundancy.run import emg_mappings_of_legs, solve_emg_ten
     from ..redundancy.ipopt import failure_advice
     from ..redundancy.workflows import parse_tendon_stiffness
@@ -370,8 +370,9 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
                            fiber_dynamics=args.fiber_dynamics)
         return _informed_command(args, ik, idf, settings, parse_tendon_stiffness(args.tendon_stiffness)
                                  if args.tendon_stiffness else None)
-    settings = EmgTenSettings(emg_tolerance=args.emg_tolerance, emg_mode=mode, fiber_dynamics=args.fiber_dynamics,
-                              **({"w_emg": args.emg_weight} if args.emg_weight is not None else {}))
+    goals = EMG_TEN_GOALS if args.emg_weight is None else replace(EMG_TEN_GOALS, w_emg=args.emg_weight)
+    settings = EmgTenSettings(goals=goals, emg_tolerance=args.emg_tolerance, emg_mode=mode,
+                              fiber_dynamics=args.fiber_dynamics)
     wrong = [o for o, v in (("--tendon-stiffness", args.tendon_stiffness), ("--parameters", args.parameters),
                             ("--warm-start", args.warm_start)) if v]
     if wrong:

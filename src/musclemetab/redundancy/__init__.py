@@ -26,7 +26,7 @@ import importlib
 _EXPORTS = {
     "Result": "result", "EmgTenResult": "result", "EmgTenSettings": "emg_ten", "solve_emg_ten": "run",
     "MuscleTendonParameters": "parameters",
-    "SolverOptions": "ipopt",
+    "SolverOptions": "ipopt", "Goals": "transcription",
     "Solution": "solution",
     "solve_files": "run", "solve_sides": "run", "solve_trial": "solve", "solve_with_parameters": "solve",
     "WORKFLOWS": "workflows", "Workflow": "workflows", "get_workflow": "workflows",
@@ -51,6 +51,7 @@ def __dir__():
 __all__ = [
     "MuscleTendonParameters",
     "SolverOptions",
+    "Goals",
     "Solution",
     "solve_trial",
     "solve_files",

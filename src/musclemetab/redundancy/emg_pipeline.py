@@ -58,12 +58,12 @@ def solve_emg_ten_arrays(
 
 
 def emg_ten_options(options: SolverOptions | None, settings: EmgTenSettings) -> SolverOptions:
-    """``options`` with the weights of ``settings`` (EMG-TEN: ``wAct 0.1, wTres 1000, wVm 0.01``)."""
+    """``options`` (default ``SolverOptions()``), checked for an EMG-TEN or EMG-informed solve:
+    no energy goal (the weights are those of ``settings.goals``)."""
     if options is not None and options.energy is not None:
         raise OptionError("the energy goal is for the effort workflows' solves; EMG-TEN and EMG-informed solves "
                           "do not take it: drop SolverOptions(energy=...)")
-    return (options or SolverOptions()).with_(
-        w_activation=settings.w_activation, w_reserve=settings.w_reserve, w_velocity=settings.w_velocity)
+    return options or SolverOptions()
 
 
 def prepare_emg_ten_trials(

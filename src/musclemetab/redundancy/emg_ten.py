@@ -57,7 +57,7 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import DataMismatchError, OptionError, UnknownMuscleError
-from ._checks import COUPLINGS, check_factor_bounds, check_non_negative, check_option, check_weights
+from ._checks import COUPLINGS, check_factor_bounds, check_non_negative, check_option
 from .transcription import Goals, ParameterSpec, TrialBlock, build_problem, check_fiber_dynamics, coupling_pairs
 from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
@@ -66,6 +66,7 @@ from .static_opt import InitialGuess
 
 __all__ = [
     "EmgTenSettings",
+    "EMG_TEN_GOALS",
     "EmgTenTrial",
     "informed_settings",
     "emg_bound",
@@ -86,6 +87,8 @@ __all__ = [
 #: change the round-off of the KKT solves, not the problem.
 EMG_TEN_MUMPS_OPTIONS = {"mumps_pivot_order": 2, "min_refinement_steps": 0}
 EMG_MODES = ("constrained", "driven", "tracking")
+#: The study's EMG-TEN weights: EMG tracking 10, activation 0.1, reserve 1000, fiber velocity 0.01.
+EMG_TEN_GOALS = Goals(w_activation=0.1, w_reserve=1000.0, w_velocity=0.01, w_emg=10.0)
 
 
 def emg_bound(mode: str, tolerance: float) -> float | None:
@@ -103,7 +106,12 @@ def fiber_scheme(mode: str | None, fiber_dynamics: str | None = None) -> str:
 
 @dataclass(frozen=True)
 class EmgTenSettings:
-    """Weights, bounds and couplings of the EMG-TEN problem (defaults: the study's).
+    """Goals, bounds and couplings of the EMG-TEN problem (defaults: the study's).
+
+    ``goals``: the objective's weights (:class:`.transcription.Goals`; default
+    :data:`EMG_TEN_GOALS`, ``wEMG 10, wAct 0.1, wTres 1000, wVm 0.01``); the EMG bound and the
+    fiber dynamics of the problem come from ``emg_mode``, ``emg_tolerance`` and
+    ``fiber_dynamics`` below.
 
     ``tendon_groups``: muscles whose ``kT`` is estimated; the muscles of a group share one
     factor (couplings between consecutive members). ``emg_groups``: tracked muscles sharing one
@@ -117,7 +125,7 @@ class EmgTenSettings:
     objective, feasible set, bounds); they take different paths to the same optimum.
 
     ``emg_mode``: ``"constrained"`` (the EMG bound rows with ``emg_tolerance`` and the tracking
-    cost ``w_emg``), ``"driven"`` (bound rows with tolerance 0: each tracked excitation is its
+    cost ``goals.w_emg``), ``"driven"`` (bound rows with tolerance 0: each tracked excitation is its
     scaled EMG) or ``"tracking"`` (the cost only). With ``tendon_groups`` empty no tendon
     stiffness is estimated: an EMG-informed solve of one or more trials.
 
@@ -128,10 +136,7 @@ class EmgTenSettings:
     (``docs/problem.md``).
     """
 
-    w_emg: float = 10.0
-    w_activation: float = 0.1
-    w_reserve: float = 1000.0
-    w_velocity: float = 0.01
+    goals: Goals = EMG_TEN_GOALS
     emg_tolerance: float = 0.01
     tendon_scale_bounds: tuple[float, float] = (0.1, 1.2)
     emg_scale_bounds: tuple[float, float] = (0.05, 2.5)
@@ -144,7 +149,11 @@ class EmgTenSettings:
     fiber_dynamics: str | None = None
 
     def __post_init__(self):
-        check_weights(self, ("w_emg", "w_activation", "w_reserve", "w_velocity"))
+        if not isinstance(self.goals, Goals):
+            raise OptionError(f"goals must be a Goals, not {type(self.goals).__name__}")
+        if self.goals.energy is not None or self.goals.w_fiber_length:
+            raise OptionError("the EMG-TEN and EMG-informed goals take no energy goal and no fiber-length weight; "
+                              "drop them from goals")
         check_non_negative("emg_tolerance", self.emg_tolerance)
         check_non_negative("emg_range_tolerance", self.emg_range_tolerance)
         for name in ("tendon_scale_bounds", "emg_scale_bounds"):
@@ -157,7 +166,7 @@ class EmgTenSettings:
             object.__setattr__(self, name, groups)
         check_option("coupling", self.coupling, COUPLINGS)
         check_option("the EMG mode", self.emg_mode, EMG_MODES)
-        if self.emg_mode == "tracking" and not self.w_emg > 0:
+        if self.emg_mode == "tracking" and not self.goals.w_emg > 0:
             raise OptionError("the EMG mode 'tracking' needs a positive EMG weight w_emg")
         if self.fiber_dynamics is not None:
             check_fiber_dynamics(self.fiber_dynamics)
@@ -178,8 +187,7 @@ class EmgTenSettings:
 
     def to_dict(self) -> dict:
         return {
-            "weights": {"w_emg": self.w_emg, "w_activation": self.w_activation,
-                        "w_reserve": self.w_reserve, "w_velocity": self.w_velocity},
+            "weights": {"w_emg": self.goals.w_emg, **self.goals.effort_weights()},
             "emg_tolerance": self.emg_tolerance,
             "tendon_scale_bounds": list(self.tendon_scale_bounds),
             "emg_scale_bounds": list(self.emg_scale_bounds),
@@ -194,7 +202,7 @@ class EmgTenSettings:
     @classmethod
     def from_dict(cls, d: dict) -> "EmgTenSettings":
         """The settings :meth:`to_dict` recorded (``summary.json``, ``parameters.json``)."""
-        return cls(**d["weights"], emg_tolerance=d["emg_tolerance"],
+        return cls(goals=Goals(**d["weights"]), emg_tolerance=d["emg_tolerance"],
                    tendon_scale_bounds=tuple(d["tendon_scale_bounds"]), emg_scale_bounds=tuple(d["emg_scale_bounds"]),
                    tendon_groups=tuple(tuple(g) for g in d["tendon_groups"]),
                    emg_groups=tuple(tuple(g) for g in d["emg_groups"]), emg_range_tolerance=d["emg_range_tolerance"],
@@ -210,8 +218,8 @@ def informed_settings(workflow: str, mode: str = "constrained", tolerance: float
 
     wf = get_workflow(workflow)
     w_emg = w_emg if w_emg is not None else (10.0 if mode == "tracking" else 0.0)
-    return EmgTenSettings(w_emg=w_emg, w_activation=wf.w_activation, w_reserve=wf.w_reserve,
-                          w_velocity=wf.w_velocity, emg_tolerance=tolerance, tendon_groups=(), emg_mode=mode)
+    return EmgTenSettings(goals=Goals(**wf.goals.effort_weights(), w_emg=w_emg), emg_tolerance=tolerance,
+                          tendon_groups=(), emg_mode=mode)
 
 
 def emg_failure(record, mode: str, what: str, fiber_dynamics: str = "backward"):
@@ -275,7 +283,7 @@ def emg_ten_problem(trials: Sequence[EmgTenTrial], params: MuscleTendonParameter
                     settings: EmgTenSettings | None = None):
     """EMG-TEN as an instance of the problem core: ``(blocks, goals, specs)``.
 
-    The trials with the EMG goals (tracking cost ``w_emg``, bound ``emg_tolerance``) and the
+    The trials with the EMG goals (tracking cost ``goals.w_emg``, bound ``emg_tolerance``) and the
     shared factors ``s_kT`` of ``settings.tendon_groups`` (model order, couplings between
     consecutive members of a group) and ``s_EMG`` of the tracked muscles (alphabetical,
     couplings between the first member of an EMG group and each other one).
@@ -302,9 +310,7 @@ def emg_ten_problem(trials: Sequence[EmgTenTrial], params: MuscleTendonParameter
                            coupling_pairs(settings.tendon_groups, kt_muscles, consecutive=True))] if kt_muscles else []
     specs.append(ParameterSpec("emg_scale", emg_muscles, settings.emg_scale_bounds,
                                coupling_pairs(settings.emg_groups, emg_muscles, consecutive=False)))
-    goals = Goals(w_activation=settings.w_activation, w_reserve=settings.w_reserve,
-                  w_velocity=settings.w_velocity, w_emg=settings.w_emg, emg_tolerance=settings.emg_bound,
-                  fiber_dynamics=settings.fiber_scheme)
+    goals = replace(settings.goals, emg_tolerance=settings.emg_bound, fiber_dynamics=settings.fiber_scheme)
     blocks = [TrialBlock(t.label, t.inputs, t.guess, emg_muscles=emg_muscles, emg_nodes=t.emg_nodes)
               for t in trials]
     return blocks, goals, specs

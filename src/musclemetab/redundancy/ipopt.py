@@ -49,7 +49,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import OptionError, SolverError
-from ._checks import check_option, check_weights
+from ._checks import check_option
 from .transcription import Goals, TrialBlock, build_problem, check_fiber_dynamics
 from .energy import EnergyGoal
 from .inputs import TrialInputs
@@ -60,6 +60,8 @@ __all__ = [
     "SolverOptions",
     "OcpResult",
     "solve_ocp",
+    "solver_record",
+    "effort_goals",
     "build_nlp",
     "problem_size",
     "failure_advice",
@@ -72,10 +74,10 @@ __all__ = [
 
 @dataclass(frozen=True)
 class SolverOptions:
-    """Weights and numerical settings of the optimal control problem.
+    """Numerical settings of the optimal control problem; the objective's weights are a
+    :class:`.transcription.Goals` (``docs/solver.md``).
 
-    The defaults reproduce the study: weights ``[wAct, wTres, wVm] = [1, 1000, 0.01]``,
-    ``Topt = 150 N m``, IPOPT with exact Hessian, MUMPS, gradient-based NLP scaling,
+    The defaults reproduce the study: ``Topt = 150 N m``, IPOPT with exact Hessian, MUMPS, gradient-based NLP scaling,
     ``tol = 1e-6``, ``max_iter = 10000`` and IPOPT's default monotone barrier strategy with
     ``mu_init = 0.1`` (the problem has several local optima; other barrier settings can end
     in a different one).
@@ -104,9 +106,6 @@ class SolverOptions:
     each interval at its end node, ``docs/problem.md``; not with the energy goal).
     """
 
-    w_activation: float = 1.0
-    w_reserve: float = 1000.0
-    w_velocity: float = 0.01
     optimal_reserve_Nm: float = 150.0
     tol: float = 1e-6
     max_iter: int = 10000
@@ -125,7 +124,6 @@ class SolverOptions:
             raise OptionError(f"energy must be an EnergyGoal, not {type(self.energy).__name__}")
         check_fiber_dynamics(self.fiber_dynamics, self.energy)
         check_option("derivatives", self.derivatives, ("explicit", "auto"))
-        check_weights(self, ("w_activation", "w_reserve", "w_velocity"))
         if self.optimal_reserve_Nm <= 0:
             raise OptionError(f"optimal_reserve_Nm must be positive, not {self.optimal_reserve_Nm}")
         if self.max_iter < 1:
@@ -137,9 +135,6 @@ class SolverOptions:
 
     def to_dict(self) -> dict:
         return {
-            "w_activation": self.w_activation,
-            "w_reserve": self.w_reserve,
-            "w_velocity": self.w_velocity,
             "optimal_reserve_Nm": self.optimal_reserve_Nm,
             "tol": self.tol,
             "max_iter": self.max_iter,
@@ -299,20 +294,30 @@ def build_nlp(
     params: MuscleTendonParameters,
     guess: InitialGuess,
     options: SolverOptions | None = None,
+    goals: Goals | None = None,
 ) -> dict:
     """The NLP of the single-trial problem, without solving it: the problem core
-    (:func:`.transcription.build_problem`) with one trial and the effort goals of ``options``."""
+    (:func:`.transcription.build_problem`) with one trial and the effort goal of ``goals``
+    (default ``Goals()``)."""
     options = options or SolverOptions()
-    return build_problem([TrialBlock("trial", inputs, guess)], params, effort_goals(options),
+    return build_problem([TrialBlock("trial", inputs, guess)], params, effort_goals(goals, options),
                          optimal_reserve_Nm=options.optimal_reserve_Nm,
                          explicit_derivatives=options.derivatives == "explicit")
 
 
-def effort_goals(options: SolverOptions) -> Goals:
-    """The effort goals (activation, excitation, reserves, fiber velocity) of ``options``, and
-    its energy goal if it has one."""
-    return Goals(w_activation=options.w_activation, w_reserve=options.w_reserve, w_velocity=options.w_velocity,
-                 energy=options.energy, fiber_dynamics=options.fiber_dynamics)
+def effort_goals(goals: Goals | None, options: SolverOptions) -> Goals:
+    """The goals of a single-trial solve: the effort weights (activation, excitation, reserves,
+    fiber velocity) of ``goals`` (default ``Goals()``), the energy goal of ``options`` if it has
+    one and its fiber dynamics."""
+    weights = (goals or Goals()).effort_weights()
+    return Goals(**weights, energy=options.energy, fiber_dynamics=options.fiber_dynamics)
+
+
+def solver_record(options: SolverOptions, goals: Goals | None = None) -> dict:
+    """The ``solver_options`` record of a solve: the effort weights of ``goals`` (default
+    ``Goals()``) under ``w_activation``, ``w_reserve``, ``w_velocity``, then the numerical
+    settings of ``options``."""
+    return {**(goals or Goals()).effort_weights(), **options.to_dict()}
 
 
 #: IPOPT linear-algebra settings used with MUMPS (``SolverOptions.ipopt`` overrides them): no
@@ -480,10 +485,12 @@ def solve_ocp(
     params: MuscleTendonParameters,
     guess: InitialGuess,
     options: SolverOptions | None = None,
+    goals: Goals | None = None,
 ) -> OcpResult:
-    """Build and solve the single-trial problem with the effort goals of ``options``; never
+    """Build and solve the single-trial problem with the effort goal of ``goals`` (default
+    ``Goals()``) and the energy goal of ``options``; never
     raises on non-convergence (``status`` is IPOPT's return status, ``success`` whether IPOPT
     reported success). Errors while building the problem raise :class:`SolverError`."""
     options = options or SolverOptions()
-    res = solve_problem([TrialBlock("trial", inputs, guess)], params, effort_goals(options), options=options)
+    res = solve_problem([TrialBlock("trial", inputs, guess)], params, effort_goals(goals, options), options=options)
     return res.trials[0]

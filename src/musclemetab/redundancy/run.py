@@ -83,6 +83,7 @@ def solve_files(
     tendon_stiffness: Mapping[str, float] | None = None,
     tendon_stiffness_file=None,
     options: SolverOptions | None = None,
+    goals=None,
     cache_dir: str | os.PathLike | None = None,
     check_units: bool = True,
     warm_start: Solution | None = None,
@@ -116,6 +117,8 @@ def solve_files(
     tendon_stiffness, tendon_stiffness_file
         EFFORT-TEN's tendon stiffness (:func:`.workflows.workflow_parameters`).
     %(options)s
+    goals
+        The effort weights (:class:`.transcription.Goals`; default: the workflow's).
     %(cache_dir)s
     %(check_units)s
     """
@@ -222,7 +225,7 @@ def solve_files(
     solution = solve_trial(
         geometry, model_parameters, id_time, id_moments, wf,
         ik_time_s=ik_time, passive=passive, tendon_stiffness=tendon_stiffness,
-        tendon_stiffness_file=tendon_stiffness_file, options=options, sources=sources,
+        tendon_stiffness_file=tendon_stiffness_file, options=options, goals=goals, sources=sources,
         check_units=check_units, warm_start=warm_start, mesh_frequency_hz=mesh_frequency_hz,
     )
     solution.summary["geometry_time_s"] = t_geometry
@@ -506,7 +509,7 @@ def estimate_files(
         read_fiber_lengths,
         write_personalised_model,
     )
-    from .ipopt import SolverOptions
+    from .ipopt import SolverOptions, solver_record
     from .record import RunRecord
     from .solution import build_solution
     from .solve import prepare_trial, solve_with_parameters
@@ -533,8 +536,7 @@ def estimate_files(
     couple = [list(g) for g in couple]
     specs = parameter_specs(estimate, couple, bounds)
     wf = get_workflow(workflow)
-    weights = {"w_activation": wf.w_activation, "w_reserve": wf.w_reserve, "w_velocity": wf.w_velocity,
-               "w_fiber_length": 100.0, "w_emg": 10.0 if emg_files else 0.0}
+    weights = {**wf.goals.effort_weights(), "w_fiber_length": 100.0, "w_emg": 10.0 if emg_files else 0.0}
     for k, v in (weights_given or {}).items():
         if k not in WEIGHT_NAMES:
             raise OptionError(f"--weights: unknown weight '{k}'; use {', '.join(WEIGHT_NAMES)}")
@@ -552,8 +554,7 @@ def estimate_files(
     measured = [read_fiber_lengths(p) for p in us_files] or [{} for _ in range(n)]
     mapping = resolve_emg_mapping(emg_mapping or "default") if emg_files else {}
     emg_muscles = ()
-    options = SolverOptions(max_iter=max_iter, w_activation=goals.w_activation, w_reserve=goals.w_reserve,
-                            w_velocity=goals.w_velocity)
+    options = SolverOptions(max_iter=max_iter)
 
     from ..geometry import compute_geometry
     from ..io import read_storage
@@ -605,7 +606,7 @@ def estimate_files(
                    "fiber_dynamics": fiber_dynamics,
                    "fiber_length_bounds": fiber_length_bounds_record(t.inputs, params, specs),
                    "workflow": {"name": f"{workflow} estimate", "estimate": est.to_dict()["factors"]},
-                   "solver_options": options.to_dict()}
+                   "solver_options": solver_record(options, goals)}
         solutions[t.label] = build_solution(t.inputs, estimated.subset(t.inputs.muscles), o, summary)
     doc = {"format": ESTIMATE_FORMAT, "format_version": 1, **est.to_dict(), **emg_record, "solve": run.to_dict(),
            "trials": labels}
@@ -625,6 +626,7 @@ def estimate_files(
     if validate:
         for lab, (g, _, t_id, mom, t_ik) in zip(labels, prepared):
             sol = solve_with_parameters(g, estimated, t_id, mom, ik_time_s=t_ik, options=options,
+                                        goals=goals.effort(),
                                         workflow_record={"name": f"{workflow} validation"})
             sol.write(f"{out}/validation/{lab}")
             if not sol.success:

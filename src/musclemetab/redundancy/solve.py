@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import time as _time
+from dataclasses import replace
 from typing import Mapping
 
 import numpy as np
@@ -19,7 +20,8 @@ from .inputs import (
     restrict_geometry,
 )
 from .parameters import MuscleTendonParameters
-from .ipopt import SolverOptions, solve_ocp
+from .ipopt import SolverOptions, solve_ocp, solver_record
+from .transcription import Goals
 from .record import RunRecord
 from .solution import Solution, build_solution
 from .static_opt import guess_from_solution, initial_guess, static_optimisation
@@ -65,6 +67,7 @@ def solve_with_parameters(
     *,
     ik_time_s: np.ndarray | None = None,
     options: SolverOptions | None = None,
+    goals: Goals | None = None,
     workflow_record: dict | None = None,
     sources: dict | None = None,
     check_units: bool = True,
@@ -72,7 +75,9 @@ def solve_with_parameters(
     warm_start: Solution | None = None,
     mesh_frequency_hz: float = MESH_FREQUENCY_HZ,
 ) -> Solution:
-    """Solve the muscle redundancy problem with explicit muscle parameters.
+    """Solve the muscle redundancy problem with explicit muscle parameters, the effort weights
+    of ``goals`` (default ``Goals()``: ``[wAct, wTres, wVm] = [1, 1000, 0.01]``) and the
+    numerical settings (and energy goal) of ``options``.
 
     ``id_moments_Nm`` columns follow ``geometry.dofs``. Returns a :class:`Solution` whose
     ``summary['status']``/``success`` report IPOPT's outcome (a failed solve is returned, not
@@ -85,6 +90,7 @@ def solve_with_parameters(
     """
     t_start = _time.perf_counter()
     options = options or SolverOptions()
+    goals = goals or Goals()
     inputs, params, so = prepare_trial(geometry, params, id_time_s, id_moments_Nm, ik_time_s=ik_time_s,
                                        options=options, sources=sources, check_units=check_units,
                                        filter_inputs=filter_inputs, mesh_frequency_hz=mesh_frequency_hz)
@@ -94,7 +100,7 @@ def solve_with_parameters(
         guess = guess_from_solution(warm_start, inputs, params, options.optimal_reserve_Nm)
         options = options.with_(ipopt={"mu_init": WARM_START_MU_INIT, **options.ipopt})
     t_prep = _time.perf_counter() - t_start
-    ocp = solve_ocp(inputs, params, guess, options)
+    ocp = solve_ocp(inputs, params, guess, options, goals)
     from .bounds import fiber_length_bounds_record
 
     summary = {
@@ -112,7 +118,7 @@ def solve_with_parameters(
         f"warm start from {warm_start.summary.get('workflow', {}).get('name', 'a previous solution')} "
         f"(mu_init {WARM_START_MU_INIT:g})",
         "workflow": dict(workflow_record or {"name": "custom"}),
-        "solver_options": options.to_dict(),
+        "solver_options": solver_record(options, goals),
         "input_preparation": {"filter": "butterworth 6th order 6 Hz zero-phase (MATLAB filtfilt padding)"
                               if filter_inputs else "none",
                               "mesh_intervals_per_second": mesh_frequency_hz, "interpolation": "not-a-knot cubic spline"},
@@ -124,7 +130,7 @@ def solve_with_parameters(
         N = inputs.n_intervals
         rate = leg_rate_W_per_kg(options.energy, params, inputs.muscles, ocp.excitation, ocp.activation[:N],
                                  ocp.lm_norm[:N], ocp.fiber_velocity_lmo_per_s)
-        summary["energy_goal"] = {**options.energy.record(), "w_activation": options.w_activation,
+        summary["energy_goal"] = {**options.energy.record(), "w_activation": goals.w_activation,
                                   "leg_mean_W_per_kg": float(np.mean(rate))}
     solution = build_solution(inputs, params, ocp, summary)
     solution.summary["total_time_s"] = _time.perf_counter() - t_start
@@ -143,6 +149,7 @@ def solve_trial(
     tendon_stiffness: Mapping[str, float] | None = None,
     tendon_stiffness_file: str | os.PathLike | None = None,
     options: SolverOptions | None = None,
+    goals: Goals | None = None,
     sources: dict | None = None,
     check_units: bool = True,
     warm_start: Solution | None = None,
@@ -151,8 +158,9 @@ def solve_trial(
     """Solve one trial with a named workflow (``effort-gen``, ``effort-cal``, ``effort-ten``).
 
     See :func:`musclemetab.redundancy.workflows.workflow_parameters` for ``passive`` and the
-    tendon-stiffness arguments; the workflow's weights override those of ``options`` (the effort weight
-    of ``options.energy``, when it has one, overrides the workflow's).
+    tendon-stiffness arguments. The effort weights are those of ``goals``, by default the
+    workflow's (``Workflow.goals``); the effort weight of ``options.energy``, when it has one,
+    overrides ``w_activation``.
     """
     wf = get_workflow(workflow)
     params, record = workflow_parameters(
@@ -160,12 +168,12 @@ def solve_trial(
         tendon_stiffness=tendon_stiffness, tendon_stiffness_file=tendon_stiffness_file,
     )
     options = options or SolverOptions()
+    goals = goals or wf.goals
     effort = options.energy.effort_weight if options.energy is not None else None
-    options = options.with_(
-        w_activation=wf.w_activation if effort is None else effort, w_reserve=wf.w_reserve, w_velocity=wf.w_velocity
-    )
+    if effort is not None:
+        goals = replace(goals, w_activation=effort)
     return solve_with_parameters(
-        geometry, params, id_time_s, id_moments_Nm, ik_time_s=ik_time_s, options=options,
+        geometry, params, id_time_s, id_moments_Nm, ik_time_s=ik_time_s, options=options, goals=goals,
         workflow_record=record, sources=sources, check_units=check_units, warm_start=warm_start,
         mesh_frequency_hz=mesh_frequency_hz,
     )

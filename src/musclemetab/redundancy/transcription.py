@@ -47,8 +47,8 @@ from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
 from .static_opt import InitialGuess
 
-__all__ = ["Goals", "ParameterSpec", "coupling_pairs", "TrialBlock", "PARAMETER_KINDS", "FIBER_DYNAMICS", "build_problem",
-           "node_bounds", "fiber_length_upper_bounds", "check_fiber_dynamics"]
+__all__ = ["Goals", "EFFORT_WEIGHTS", "ParameterSpec", "coupling_pairs", "TrialBlock", "PARAMETER_KINDS",
+           "FIBER_DYNAMICS", "build_problem", "node_bounds", "fiber_length_upper_bounds", "check_fiber_dynamics"]
 
 #: kinds of shared scale factors; the muscle parameters a factor multiplies
 PARAMETER_KINDS = {"tendon_stiffness": "kT", "optimal_fiber_length": "lmo", "tendon_slack_length": "lts",
@@ -70,9 +70,15 @@ def check_fiber_dynamics(value, energy=None) -> None:
                           "--fiber-dynamics backward or the energy goal")
 
 
+#: the weights of the effort goal (activation and excitation, reserve, fiber velocity)
+EFFORT_WEIGHTS = ("w_activation", "w_reserve", "w_velocity")
+
+
 @dataclass(frozen=True)
 class Goals:
-    """Weights of the objective and the EMG bound (``None``: no bound rows); ``energy``: the
+    """The objective's weights, the one place they are held (workflow presets, EMG-TEN
+    settings and every solve take a ``Goals``; :class:`.ipopt.SolverOptions` holds numerics
+    only), and the EMG bound (``None``: no bound rows); ``energy``: the
     energy goal (:class:`.energy.EnergyGoal`), or ``None``; ``fiber_dynamics``: the
     transcription of ``dl~M/dt = v~M`` (:data:`FIBER_DYNAMICS`, ``docs/problem.md``)."""
 
@@ -87,11 +93,20 @@ class Goals:
 
     def __post_init__(self):
         check_fiber_dynamics(self.fiber_dynamics, self.energy)
-        check_weights(self, ("w_activation", "w_reserve", "w_velocity", "w_emg", "w_fiber_length"))
+        check_weights(self, (*EFFORT_WEIGHTS, "w_emg", "w_fiber_length"))
         if self.emg_tolerance is not None:
             check_non_negative("the EMG tolerance", self.emg_tolerance, " (0: EMG-driven)")
         if self.energy is not None and not isinstance(self.energy, EnergyGoal):
             raise OptionError(f"the energy goal must be an EnergyGoal, not {type(self.energy).__name__}")
+
+    def effort_weights(self) -> dict:
+        """``{"w_activation", "w_reserve", "w_velocity"}``: the weights of the effort goal (the
+        keys under which records hold them)."""
+        return {name: getattr(self, name) for name in EFFORT_WEIGHTS}
+
+    def effort(self) -> "Goals":
+        """The effort goal alone: these effort weights, no EMG, fiber-length or energy goal."""
+        return Goals(**self.effort_weights())
 
 
 @dataclass(frozen=True)

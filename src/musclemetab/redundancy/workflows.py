@@ -19,7 +19,7 @@ source of every value, ``tendon_stiffness_sources``, and their kinds,
   ``kT`` through the model's maximal isometric forces and tendon slack lengths
   (``data/tendon_stiffness_literature.csv``, ``docs/muscles.md``).
 
-All three use the weights ``[wAct, wTres, wVm] = [1, 1000, 0.01]`` (``docs/solver.md``).
+All three use the weights ``[wAct, wTres, wVm] = [1, 1000, 0.01]`` (``Workflow.goals``, ``docs/solver.md``).
 
 Calibrated passive parameters come from, in this order of preference:
 
@@ -54,6 +54,7 @@ from ..passive import (  # noqa: F401  (read_passive_parameters: a name of this 
     reference_passive_parameters,
 )
 from .parameters import MuscleTendonParameters
+from .transcription import Goals
 
 __all__ = [
     "Workflow",
@@ -82,15 +83,18 @@ KT_VASTI = 4.695786
 
 @dataclass(frozen=True)
 class Workflow:
-    """A named preset: which passive parameters and tendon stiffness, which weights."""
+    """A named preset: which passive parameters and tendon stiffness, and the objective's
+    weights (``goals``, default ``Goals()``: ``[wAct, wTres, wVm] = [1, 1000, 0.01]``)."""
 
     name: str
     passive: str  # "generic" | "calibrated"
     tendon: str  # "generic" | "personalised"
-    w_activation: float = 1.0
-    w_reserve: float = 1000.0
-    w_velocity: float = 0.01
+    goals: Goals = Goals()
     description: str = ""
+
+    def __post_init__(self):
+        if not isinstance(self.goals, Goals):
+            raise OptionError(f"the goals of workflow '{self.name}' must be a Goals, not {type(self.goals).__name__}")
 
 
 WORKFLOWS = {
@@ -296,8 +300,7 @@ def workflow_parameters(
 
     kt = np.full(len(muscles), KT_GENERIC)
     record = {"name": wf.name, "description": wf.description, "passive_source": pp.source,
-              "weights": {"w_activation": wf.w_activation, "w_reserve": wf.w_reserve,
-                          "w_velocity": wf.w_velocity}}
+              "weights": wf.goals.effort_weights()}
     if wf.tendon == "personalised":
         use_example = isinstance(tendon_stiffness, str)
         if use_example and tendon_stiffness.strip().lower() != EXAMPLE:

@@ -294,6 +294,12 @@ def _solver(data, where: str) -> dict:
         return {}
     if not isinstance(data, Mapping):
         raise OptionError(f"{where}: 'solver' must be a table such as [solver] max_iter = 3000")
+    weights = sorted(k for k in data if str(k).startswith("w_"))
+    if weights:
+        raise OptionError(f"{where}: [solver] {', '.join(weights)}: [solver] holds numerical settings only "
+                          f"({', '.join(sorted(_SOLVER_KEYS))}); the objective's weights are the workflow's: give the "
+                          "effort weight beside an energy goal as [energy_goal] effort_weight and an estimation's "
+                          "weights as [subjects.estimate] weights (docs/study.md)")
     _unknown(data, _SOLVER_KEYS, f"{where}: [solver]")
     from ..redundancy import SolverOptions
 
