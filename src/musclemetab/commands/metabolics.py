@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import sys
 
-from .options import add_basal_arguments, check_basal_arguments, check_speed
+from .options import add_basal_arguments, check_basal_arguments, check_body, check_speed
 
 __all__ = ["add_parser", "run"]
 
@@ -88,6 +88,7 @@ def run(args) -> int:
     models = parse_models(args.models)
     check_output_folder(args.out)
     check_speed(args.speed)
+    check_body(args.mass, args.height)
     check_basal_arguments(args)
     folders = solution_folders(args.solution)
     params = None
