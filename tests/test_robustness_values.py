@@ -357,3 +357,17 @@ def test_dofs_of_the_model_are_accepted(example, tmp_path):
     data = _study(example, dofs=["knee_angle_r", "ankle_angle_r"])
     study = study_from_dict(data, base="/", source=tmp_path / "study.toml", output=tmp_path / "out")
     assert study.subjects[0].dofs == ("knee_angle_r", "ankle_angle_r")
+
+
+def test_geometry_command_keeps_its_cache_in_cache_dir(example, tmp_path):
+    """``--cache-dir``: the geometry entry and the model entries it needs land there."""
+    from musclemetab.commands import main
+
+    cache = tmp_path / "cache"
+    assert main(["geometry", "--model", str(example.model), "--ik", str(example.ik["normal"]),
+                 "--dofs", "knee_angle_r", "--muscles", "soleus_r", "bflh_r", "--cache-dir", str(cache),
+                 "--out", str(tmp_path / "out")]) == 0
+    names = sorted(p.name for p in cache.iterdir())
+    assert any(not n.startswith("model-") and n.endswith(".npz") for n in names), names
+    arrays = __import__("numpy").load(cache / next(n for n in names if not n.startswith("model-")))
+    assert "checksum" in arrays.files
