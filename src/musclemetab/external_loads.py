@@ -303,7 +303,8 @@ def check_inside(window, t_first: float, t_last: float, path, what: str,
     """Raise :class:`DataMismatchError` unless ``window`` lies inside ``[t_first, t_last]``
     (give or take ``tol``, :data:`SAMPLE_TIME_TOLERANCE_S`).
 
-    The message names the file and by how much it falls short (to the microsecond).
+    The message names the file and by how much it falls short (to the microsecond when the
+    shortfall is under a millisecond).
     """
     t0, t1 = float(window[0]), float(window[1])
     short_start = t_first - t0
@@ -311,10 +312,18 @@ def check_inside(window, t_first: float, t_last: float, path, what: str,
     if short_start > tol or short_end > tol:
         parts = []
         if short_start > tol:
-            parts.append(f"starts {short_start:.6f} s after the window start {t0:.6f} s")
+            parts.append(f"starts {_seconds(short_start)} s after the window start {t0:.3f} s")
         if short_end > tol:
-            parts.append(f"ends {short_end:.6f} s before the window end {t1:.6f} s")
+            parts.append(f"ends {_seconds(short_end)} s before the window end {t1:.3f} s")
         raise DataMismatchError(
-            f"{path}: the {what} ({t_first:.6f}-{t_last:.6f} s) {' and '.join(parts)}; choose a window inside "
+            f"{path}: the {what} ({t_first:.3f}-{t_last:.3f} s) {' and '.join(parts)}; choose a window inside "
             "every input file"
         )
+
+
+def _seconds(x: float) -> str:
+    """``x`` with 3 to 6 decimals: as many as it takes to the microsecond."""
+    for digits in (3, 4, 5):
+        if abs(round(x, digits) - x) < 5e-7:
+            return f"{x:.{digits}f}"
+    return f"{x:.6f}"
