@@ -164,15 +164,21 @@ def test_muscle_properties_row_naming_no_muscle_is_refused_with_the_near_names(e
     assert not (tmp_path / "out").exists() and csv.read_text() == decoy_before
 
 
-def test_muscle_properties_row_naming_no_muscle_is_refused_by_the_tables():
-    from musclemetab.properties import resolve_muscles
+def test_muscle_properties_row_naming_no_muscle_is_refused_by_the_check():
+    from musclemetab.properties import MuscleOverrides, resolve_muscles
 
-    with pytest.raises(UnknownMuscleError, match=r"overrides: muscle row 'solues_r' \(near: soleus_r\)"):
-        resolve_muscles(["soleus_r", "gasmed_r"], overrides={"solues_r": {"slow_twitch_fraction": 0.8}})
+    typo = MuscleOverrides({"solues_r": {"slow_twitch_fraction": 0.8}}, "m.csv")
+    for tables in (False, True):
+        with pytest.raises(UnknownMuscleError, match=r"^m.csv: muscle row 'solues_r' \(near: soleus_r\)"):
+            typo.check_names(["soleus_r", "gasmed_r"], tables=tables)
     # a side-free row, or the other side's row, names the muscle
-    recs = resolve_muscles(["soleus_r"], overrides={"soleus": {"slow_twitch_fraction": 0.7},
-                                                    "soleus_l": {"slow_twitch_fraction": 0.1}}, warn=False)
-    assert recs[0].slow_twitch_fraction == 0.7
+    rows = MuscleOverrides({"soleus": {"slow_twitch_fraction": 0.7}, "soleus_l": {"slow_twitch_fraction": 0.1}})
+    rows.check_names(["soleus_r"])
+    # a muscle of the tables the solve did not include passes when only the solved muscles are known
+    MuscleOverrides({"glmax1_r": {"mass_kg": 0.3}}).check_names(["soleus_r"], tables=True)
+    with pytest.raises(UnknownMuscleError):
+        MuscleOverrides({"glmax1_r": {"mass_kg": 0.3}}).check_names(["soleus_r"])
+    assert resolve_muscles(["soleus_r"], overrides=rows, warn=False)[0].slow_twitch_fraction == 0.7
 
 
 @pytest.mark.parametrize("row, words", [
@@ -372,3 +378,35 @@ def test_geometry_command_keeps_its_cache_in_cache_dir(example, tmp_path):
     assert any(not n.startswith("model-") and n.endswith(".npz") for n in names), names
     arrays = __import__("numpy").load(cache / next(n for n in names if not n.startswith("model-")))
     assert "checksum" in arrays.files
+
+
+def test_missing_column_names_the_near_names_and_nan_the_times(gait2392, tmp_path):
+    from musclemetab.errors import MissingColumnError
+    from musclemetab.io import read_storage, require_columns
+
+    grf = read_storage(gait2392.grf)
+    with pytest.raises(MissingColumnError, match=rf"^{gait2392.grf}: missing column ground_force_yv; near names: "
+                                                 r".*ground_force_vy"):
+        require_columns(grf, ["ground_force_yv"])
+    bad = tmp_path / "grf.mot"
+    times = _edit_mot(gait2392.grf, bad, "ground_force_vy", slice(7, 9), float("nan"))
+    with pytest.raises(MissingColumnError, match=rf"^{bad}: column ground_force_vy holds NaN values "
+                                                 rf"\(at t = {times[0]:.4f}, {times[1]:.4f} s\)"):
+        require_columns(read_storage(bad), ["ground_force_vy"])
+
+
+@pytest.mark.parametrize("with_model", [False, True])
+def test_metabolics_command_refuses_a_muscle_properties_row_naming_no_muscle(demo, example, tmp_path, capsys,
+                                                                             with_model):
+    from musclemetab.commands import main
+
+    out, table = demo
+    unit = out / table[table.workflow == "effort-gen"].unit_dir.iloc[0]
+    csv = tmp_path / "m.csv"
+    csv.write_text("muscle,slow_twitch_fraction\nsolues_r,0.8\n")
+    args = ["metabolics", "--solution", str(unit), "--mass", "72.6", "--height", "1.743", "--models", "UM10",
+            "--muscle-properties", str(csv), "--out", str(tmp_path / "out")]
+    assert main(args + (["--model", str(example.model)] if with_model else [])) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{csv}: muscle row 'solues_r' (near: soleus_r" in err, err
+    assert not (tmp_path / "out").exists()

@@ -179,10 +179,16 @@ class MuscleOverrides:
     def __bool__(self) -> bool:
         return bool(self.values)
 
-    def check_names(self, names: Sequence[str]) -> None:
+    def check_names(self, names: Sequence[str], *, tables: bool = False) -> None:
         """Raise :class:`UnknownMuscleError` for a row that names none of the muscles ``names``
-        (a row matches a muscle by its name, or by its side-free name on either side)."""
+        (a row matches a muscle by its name, or by its side-free name on either side).
+
+        ``names`` must be all the model's muscles (a solve covers a subset); with ``tables``, a
+        row naming a muscle of the package's alias table passes too (for callers that know only
+        the solved muscles)."""
         bases = {split_side(n)[0].lower() for n in names}
+        if tables:
+            bases |= set(alias_table()["key"])
         unknown = [row for row in self.values if split_side(row)[0].lower() not in bases]
         if unknown:
             import difflib
@@ -353,7 +359,6 @@ def resolve_muscles(
         dup = sorted({n for n in names if names.count(n) > 1})
         raise OptionError(f"muscle names repeated: {', '.join(dup)}")
     ov = as_overrides(overrides)
-    ov.check_names(names)
     anat = anatomical_table()
     aliases = alias_table()
     family = model_family(names)
