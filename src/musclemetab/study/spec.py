@@ -57,8 +57,11 @@ Every key is checked: an unknown key, a missing file or a wrong type raises
 :class:`~musclemetab.errors.OptionError` or :class:`~musclemetab.errors.InputFileError`
 naming the file, the subject, the trial and the key. Subject and trial names become
 folder names, so they must be plain names (letters, digits, ``-``, ``_``, ``.``, not
-starting with a dot). ``body_mass_kg`` must lie in :data:`BODY_MASS_RANGE_KG` (20 to
-300 kg, a human body mass in kilograms) and ``height_m`` in 0.5 to 2.7 m.
+starting with a dot). Every numeric key is checked against :data:`NUMBER_KEYS` (its unit
+and the range of physically possible values, e.g. ``body_mass_kg`` 20 to 300 kg, a human
+body mass in kilograms); ``cycle`` is ``"auto"`` or a whole number from 1. Rows of
+``muscle_properties`` and names in ``dofs`` must name muscles and coordinates of the model.
+A study file may hold :data:`MAX_STUDY_FILE_BYTES` bytes, nested :data:`MAX_STUDY_DEPTH` deep.
 """
 
 from __future__ import annotations
