@@ -226,7 +226,7 @@ def compute_geometry(
     if not dofs:
         from .layout import read_layout, side_dofs
 
-        dofs = side_dofs(read_layout(model_path, cache_dir=cache_dir), side)
+        dofs = side_dofs(read_layout(model_path), side)
     dofs = list(dofs)
     if len(set(dofs)) != len(dofs):
         raise OptionError(f"DOF list {dofs} names a DOF twice")

@@ -36,7 +36,7 @@ def add_parser(sub) -> None:
     )
     p.add_argument("--no-cache", action="store_true", help="do not read or write the geometry cache")
     p.add_argument("--cache-dir", metavar="DIR",
-                   help="folder of the geometry and model cache (default $MUSCLEMETAB_CACHE/geometry)")
+                   help="folder of the geometry cache (default $MUSCLEMETAB_CACHE/geometry)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.set_defaults(func=run)
 
