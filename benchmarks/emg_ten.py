@@ -48,7 +48,8 @@ def _example():
 
 
 def _solve(ex, args, cache_dir, options=None):
-    from musclemetab.redundancy.emg_ten import EmgTenSettings, solve_emg_ten
+    from musclemetab.redundancy.emg_ten import EmgTenSettings
+    from musclemetab.redundancy.run import solve_emg_ten
 
     return solve_emg_ten(
         ex.model, [ex.ik[t] for t in TRIALS], [ex.id[t] for t in TRIALS], [ex.emg[t] for t in TRIALS],

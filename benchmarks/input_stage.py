@@ -38,7 +38,7 @@ def counting_read(path):
 
 
 storage.read_table = mio.read_table = counting_read  # before any module imports the name
-import musclemetab.redundancy.solve as solve
+import musclemetab.redundancy.run as run
 
 
 class Stop(Exception):
@@ -49,13 +49,13 @@ def stop(*args, **kwargs):
     raise Stop
 
 
-solve.solve_trial = stop
+run.solve_trial = stop
 model, ik, idf, repeat = sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4])
 
 
 def stage():
     try:
-        solve.solve_files(model, ik, idf, "effort-gen")
+        run.solve_files(model, ik, idf, "effort-gen")
     except Stop:
         pass
 

@@ -68,8 +68,8 @@ def build_problem(ex, trial):
     """NLP of the trial's EFFORT-GEN problem exactly as the solver builds it."""
     from musclemetab.geometry import compute_geometry
     from musclemetab.model import read_muscle_parameters
-    from musclemetab.redundancy.inputs import DEFAULT_DOFS, prepare_inputs, read_inverse_dynamics, restrict_geometry
-    from musclemetab.redundancy.problem import SolverOptions, build_nlp
+    from musclemetab.redundancy.inputs import DEFAULT_DOFS, read_inverse_dynamics, restrict_geometry, trial_inputs
+    from musclemetab.redundancy.ipopt import SolverOptions, build_nlp
     from musclemetab.redundancy.static_opt import initial_guess, static_optimisation
     from musclemetab.redundancy.workflows import workflow_parameters
 
@@ -77,7 +77,7 @@ def build_problem(ex, trial):
     id_time, id_mom = read_inverse_dynamics(ex.id[trial], geom.dofs)
     params, _ = workflow_parameters("effort-gen", read_muscle_parameters(ex.model), geom.muscles)
     params = params.subset(geom.muscles)
-    inputs = prepare_inputs(geom, id_time, id_mom)
+    inputs = trial_inputs(geom, id_time, id_mom)
     guess = initial_guess(inputs, params, static_optimisation(inputs, params))
     options = SolverOptions()
     return build_nlp(inputs, params, guess, options), options
@@ -87,9 +87,9 @@ def iterate(nlp, options, k):
     """IPOPT's iterate after ``k`` iterations (0: converged) and its barrier parameter."""
     import casadi as ca
 
-    from musclemetab.redundancy.problem import LINEAR_SOLVER_OPTIONS, ipopt_options
+    from musclemetab.redundancy.ipopt import MUMPS_OPTIONS, ipopt_options
 
-    ipopt = ipopt_options(options.with_(max_iter=k if k > 0 else options.max_iter), LINEAR_SOLVER_OPTIONS)
+    ipopt = ipopt_options(options.with_(max_iter=k if k > 0 else options.max_iter), MUMPS_OPTIONS)
     opts = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
     opts.update({key: nlp[key] for key in ("grad_f", "jac_g", "hess_lag")})
     solver = ca.nlpsol("kkt", "ipopt", {"x": nlp["x"], "f": nlp["f"], "g": nlp["g"]}, opts)
@@ -108,9 +108,9 @@ def ipopt_linear_algebra_time(nlp, options):
 
     import casadi as ca
 
-    from musclemetab.redundancy.problem import LINEAR_SOLVER_OPTIONS, ipopt_options
+    from musclemetab.redundancy.ipopt import MUMPS_OPTIONS, ipopt_options
 
-    ipopt = ipopt_options(options.with_(print_level=5), LINEAR_SOLVER_OPTIONS)
+    ipopt = ipopt_options(options.with_(print_level=5), MUMPS_OPTIONS)
     ipopt["print_timing_statistics"] = "yes"
     opts = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
     opts.update({key: nlp[key] for key in ("grad_f", "jac_g", "hess_lag")})

@@ -145,7 +145,7 @@ def main(argv=None):
     cache_dir = Path(args.cache_dir or tempfile.mkdtemp(prefix="mm-geometry-"))
     print(f"musclemetab solver benchmark: {os.cpu_count()} cores, load average "
           f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}")
-    from musclemetab.redundancy.problem import SolverOptions
+    from musclemetab.redundancy.ipopt import SolverOptions
 
     options = SolverOptions(linear_solver=args.linear_solver)
     print(f"linear solver: {args.linear_solver}")

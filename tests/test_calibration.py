@@ -218,7 +218,7 @@ def test_calibrated_parameters_close_to_published(result, authors, reference_tab
 def test_solver_options_reach_ipopt(data):
     """IPOPT's settings come from the package's SolverOptions: three iterations stop the
     calibration, which is reported as not converged."""
-    from musclemetab.redundancy.problem import SolverOptions
+    from musclemetab.redundancy.ipopt import SolverOptions
 
     with pytest.raises(SolverError, match="calibration NLP did not converge .IPOPT: Maximum_Iterations_Exceeded"):
         solve_passive(data, None, options=SolverOptions(max_iter=3))

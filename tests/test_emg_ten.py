@@ -95,6 +95,51 @@ def solutions(emg_ten):
 # --------------------------------------------------------------------------- results
 @pytest.mark.opensim
 @pytest.mark.slow
+def test_result_load_and_write_round_trip(emg_ten, parameters, solutions, tmp_path):
+    """``Result.load`` reads what the solve wrote (estimates, settings, solutions), and writing
+    the loaded result again gives the same files: the solutions byte for byte, ``parameters.json``
+    the same document (the slopes at the peak tendon forces recomputed from the 12-digit
+    forces of the files, to 1e-9)."""
+    from musclemetab.errors import InputFileError
+    from musclemetab.redundancy import EmgTenSettings, Result
+
+    out = emg_ten[0]
+    result = Result.load(out)
+    assert result.labels == TRIALS and result.success
+    assert result.tendon_scale == parameters["tendon_stiffness_scale"]
+    assert result.tendon_stiffness == pytest.approx(parameters["tendon_stiffness"], rel=1e-12)
+    assert result.emg_scale == parameters["emg_scale"] and result.emg_channels == parameters["emg_channels"]
+    assert result.settings.to_dict() == parameters["solve"]["settings"]
+    assert result.settings == EmgTenSettings(emg_mode="constrained", fiber_dynamics="forward")
+    for t in TRIALS:
+        np.testing.assert_array_equal(result.solutions[t].tendon_force_N, solutions[t].tendon_force_N)
+    again = result.write(tmp_path / "again")
+    for t in TRIALS:
+        for name in ("solution.sto", "summary.json"):
+            assert (again / t / name).read_bytes() == (out / t / name).read_bytes(), (t, name)
+
+    def same(a, b, where=""):
+        if isinstance(a, dict):
+            assert set(a) == set(b), where
+            for k in a:
+                same(a[k], b[k], f"{where}/{k}")
+        elif isinstance(a, list):
+            assert len(a) == len(b), where
+            for i, (x, y) in enumerate(zip(a, b)):
+                same(x, y, f"{where}/{i}")
+        elif isinstance(a, float):
+            assert a == pytest.approx(b, rel=1e-9, nan_ok=True), where
+        else:
+            assert a == b, where
+
+    same(json.loads((again / "parameters.json").read_text()), parameters)
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(InputFileError, match="parameters.json: no such file"):
+        Result.load(tmp_path / "empty")
+
+
+@pytest.mark.opensim
+@pytest.mark.slow
 def test_converges_with_the_study_problem_size(example, emg_ten, parameters, solutions):
     out, stdout = emg_ten
     rec = parameters["solve"]
@@ -143,14 +188,13 @@ def test_tendon_stiffness_matches_the_study(parameters, solutions):
 @pytest.mark.opensim
 @pytest.mark.slow
 def test_estimates_equal_those_before_the_problem_core(parameters):
-    """EMG-TEN as an instance of the problem core gives the objective, iteration count, tendon
-    stiffness and EMG scale factors of the version with its own builder
-    (``tests/data/pre_core_results.json``)."""
+    """EMG-TEN as an instance of the problem core gives the objective, tendon stiffness and EMG
+    scale factors of the version with its own builder (``tests/data/pre_core_results.json``; the
+    iteration count is not compared: it changes with the MUMPS/BLAS build)."""
     from pathlib import Path
 
     ref = json.loads((Path(__file__).resolve().parent / "data" / "pre_core_results.json").read_text())["emg-ten"]
     assert parameters["solve"]["objective"] == pytest.approx(ref["objective"], rel=1e-6)
-    assert parameters["solve"]["iterations"] == ref["iterations"]
     for key in ("tendon_stiffness", "emg_scale"):
         assert set(parameters[key]) == set(ref[key])
         for m, v in ref[key].items():
@@ -334,7 +378,7 @@ def test_effort_ten_runs_from_the_written_parameters(example, emg_ten, parameter
 def test_coupling_pairs_of_the_study_groups_worked_by_hand():
     """The equalities that couple the factors of a group: kT chains consecutive members, the
     EMG scales tie each member to the first; muscles the problem lacks drop out of a group."""
-    from musclemetab.redundancy.core import coupling_pairs
+    from musclemetab.redundancy.transcription import coupling_pairs
     from musclemetab.redundancy.emg_ten import EmgTenSettings
 
     settings = EmgTenSettings()
@@ -355,7 +399,8 @@ def test_study_problem_size_with_coupling_constraints(example, geometries):
     equalities (61 995 + 4 kT + 3 EMG couplings), 3 375 EMG bounds (§6.7). Built, not solved."""
     from musclemetab.io import read_storage
     from musclemetab.model import read_muscle_parameters
-    from musclemetab.redundancy.emg_ten import EmgTenSettings, build_emg_ten_nlp, prepare_emg_ten_trials
+    from musclemetab.redundancy.emg_pipeline import prepare_emg_ten_trials
+    from musclemetab.redundancy.emg_ten import EmgTenSettings, build_emg_ten_nlp
     from musclemetab.redundancy.inputs import read_inverse_dynamics
 
     settings = EmgTenSettings(coupling="constraints")
@@ -390,7 +435,7 @@ def test_assembled_derivatives_equal_automatic_differentiation(example, geometri
 
     from musclemetab.model import read_muscle_parameters
     from musclemetab.redundancy.emg_ten import EmgTenSettings, EmgTenTrial, build_emg_ten_nlp
-    from musclemetab.redundancy.inputs import prepare_inputs, read_inverse_dynamics
+    from musclemetab.redundancy.inputs import read_inverse_dynamics, trial_inputs
     from musclemetab.redundancy.static_opt import InitialGuess
     from musclemetab.redundancy.workflows import workflow_parameters
 
@@ -398,7 +443,7 @@ def test_assembled_derivatives_equal_automatic_differentiation(example, geometri
     trials = []
     for lab, n in (("normal", 3), ("fast", 4)):
         g = geometries[lab]
-        inp = prepare_inputs(g, *read_inverse_dynamics(example.id[lab], DOFS))
+        inp = trial_inputs(g, *read_inverse_dynamics(example.id[lab], DOFS))
         inp = replace(inp, mesh_time_s=inp.mesh_time_s[:n + 1], lmt_m=inp.lmt_m[:n + 1],
                       moment_arms_m=inp.moment_arms_m[:n + 1], moments_Nm=inp.moments_Nm[:n + 1])
         M, D = len(inp.muscles), len(inp.dofs)
@@ -540,7 +585,7 @@ def test_dofs_of_the_chosen_side_are_discovered(example, tmp_path, capsys):
     from musclemetab.commands import main
     from musclemetab.errors import UnknownMuscleError
     from musclemetab.redundancy import solve_emg_ten
-    from musclemetab.redundancy.emg_pipeline import _trial_dofs
+    from musclemetab.redundancy.run import _trial_dofs
     from musclemetab.redundancy.inputs import DEFAULT_DOFS
 
     ik, idf, emg = _args(example)
@@ -615,3 +660,30 @@ def test_unconverged_emg_ten_is_reported(example, cache_dir, geometries, tmp_pat
     assert main(["solve", "--workflow", "effort-ten", "--model", str(example.model), "--ik", str(ik[1]),
                  "--id", str(idf[1]), "--parameters", str(out / "parameters.json"), "--out", str(tmp_path / "y")]) == 1
     assert "did not converge" in capsys.readouterr().err
+
+
+def test_settings_checks_name_the_option_and_what_it_may_be():
+    """The settings types check their options alike (``redundancy._checks``): the option, the
+    allowed values or range, the value given; a weight that is not a finite number is refused
+    by every type (the solver options once let NaN through)."""
+    from musclemetab.errors import OptionError
+    from musclemetab.redundancy.transcription import Goals, ParameterSpec
+    from musclemetab.redundancy.emg_ten import EmgTenSettings
+    from musclemetab.redundancy.ipopt import SolverOptions
+
+    cases = [
+        (lambda: EmgTenSettings(coupling="joint"), "coupling must be one of 'constraints', 'shared', not 'joint'"),
+        (lambda: EmgTenSettings(emg_mode="free"), "the EMG mode must be one of 'constrained', 'driven', 'tracking'"),
+        (lambda: EmgTenSettings(w_emg=-1.0), "the weight w_emg must be a non-negative number, not -1.0"),
+        (lambda: EmgTenSettings(emg_scale_bounds=(2.0, 1.0)), "emg_scale_bounds must be (low, high) with 0 < low"),
+        (lambda: SolverOptions(w_activation=float("nan")), "the weight w_activation must be a non-negative number"),
+        (lambda: SolverOptions(derivatives="numeric"), "derivatives must be one of 'explicit', 'auto'"),
+        (lambda: Goals(emg_tolerance=-0.1), "the EMG tolerance must be a non-negative number (0: EMG-driven)"),
+        (lambda: ParameterSpec("tendon_stiffness", ("soleus_r",), (0.0, 1.0)),
+         "the bounds of the tendon_stiffness factors must be (low, high) with 0 < low <= high"),
+    ]
+    for make, message in cases:
+        with pytest.raises(OptionError) as info:
+            make()
+        assert message in str(info.value)
+    assert EmgTenSettings(emg_scale_bounds=(1, 2)).emg_scale_bounds == (1.0, 2.0)

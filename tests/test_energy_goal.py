@@ -73,12 +73,12 @@ def small_problem(example, reference_table):
     geo = types.SimpleNamespace(time=L.index.to_numpy()[:F], muscles=muscles, dofs=DOFS,
                                 lmt_m=L.to_numpy()[:F, km], moment_arms_m=r[:F, :, km])
     params, _ = W.workflow_parameters("effort-cal", model_params, muscles)
-    inp = I.prepare_inputs(geo, t_id, mom, ik_time_s=t_ik[:F])
+    inp = I.trial_inputs(geo, t_id, mom, ik_time_s=t_ik[:F])
     return inp, params, initial_guess(inp, params, static_optimisation(inp, params))
 
 
 def _nlp(small_problem, goal):
-    from musclemetab.redundancy.problem import SolverOptions, build_nlp
+    from musclemetab.redundancy.ipopt import SolverOptions, build_nlp
 
     inp, params, guess = small_problem
     return build_nlp(inp, params, guess, SolverOptions(energy=goal))

@@ -56,7 +56,7 @@ def generated(example, tmp_path_factory):
 
 
 def _estimate(generated, with_emg: bool):
-    from musclemetab.redundancy.core import Goals, ParameterSpec
+    from musclemetab.redundancy.transcription import Goals, ParameterSpec
     from musclemetab.redundancy.estimate import estimate_parameters, fiber_length_trial, parameter_specs
 
     made, measured, inputs, params, guess, options, wf, _ = generated
@@ -215,6 +215,17 @@ def test_estimate_command_with_emg_recovers_the_parameters(example, generated, r
     assert doc["emg"]["scale"] == {"bflh_r": 1.0, "tibant_r": 1.0}
     assert doc["emg"]["mapping"] == {"tibant_r": ["TA"], "bflh_r": ["BF"]}
     assert (out / "normal" / "summary.json").is_file() and list(out.glob("*_personalised.osim"))
+    # the folder read back as a Result, and written again: the same files
+    from musclemetab.redundancy import Result
+
+    result = Result.load(out)
+    assert result.labels == ("normal",) and result.settings is None
+    assert result.factors == {**doc["factors"], "emg_scale": doc["emg"]["scale"]}
+    assert result.emg_channels == doc["emg"]["mapping"]
+    again = result.write(tmp_path / "again")
+    assert json.loads((again / "parameters.json").read_text()) == doc
+    for name in ("solution.sto", "summary.json"):
+        assert (again / "normal" / name).read_bytes() == (out / "normal" / name).read_bytes(), name
     # the fiber-length bounds, recorded as a single-trial solve records them; those of the muscles whose lMo is
     # estimated are taken at the factor's lower bound 0.5 (lMo and w halved): the longest rigid-tendon fiber,
     # max sqrt((lMT - lTs)^2 + w^2) / lMo over the mesh nodes, plus 0.05 where that exceeds 1.7

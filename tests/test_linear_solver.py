@@ -8,8 +8,8 @@ import pytest
 
 from musclemetab.commands import main
 from musclemetab.errors import OptionError
-from musclemetab.redundancy.problem import (
-    LINEAR_SOLVER_OPTIONS,
+from musclemetab.redundancy.ipopt import (
+    MUMPS_OPTIONS,
     SolverOptions,
     check_linear_solver,
     ipopt_options,
@@ -33,12 +33,12 @@ def test_runtime_library_passed_to_ipopt():
     # option of the solver family
     libm = ctypes.util.find_library("m")
     assert libm
-    hsl = ipopt_options(SolverOptions(linear_solver="ma86", linear_solver_library=libm), LINEAR_SOLVER_OPTIONS)
+    hsl = ipopt_options(SolverOptions(linear_solver="ma86", linear_solver_library=libm), MUMPS_OPTIONS)
     assert hsl["linear_solver"] == "ma86" and hsl["hsllib"] == libm
     assert "min_refinement_steps" not in hsl  # the MUMPS settings stay with MUMPS
     par = ipopt_options(SolverOptions(linear_solver="pardiso", linear_solver_library=libm))
     assert par["pardisolib"] == libm and "hsllib" not in par
-    default = ipopt_options(SolverOptions(), LINEAR_SOLVER_OPTIONS)
+    default = ipopt_options(SolverOptions(), MUMPS_OPTIONS)
     assert default["linear_solver"] == "mumps" and default["min_refinement_steps"] == 0
     assert "hsllib" not in default and "pardisolib" not in default
 
@@ -52,6 +52,34 @@ def test_command_line_reports_the_library_before_reading_files(tmp_path, capsys)
     assert code == 1 and len(err.splitlines()) == 1
     assert "--linear-solver" in err and "nolib.so" in err and "no_model.osim" not in err
     assert not out.exists()
+
+
+def test_emg_informed_solve_uses_the_linear_solver(tmp_path, capsys, monkeypatch, example):
+    """An effort workflow's EMG-informed solve (``solve --emg``) hands the command line's linear
+    solver to the solve, and refuses a missing library before reading any file, as the other
+    solves do."""
+    import musclemetab.redundancy.run as run
+
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def capture(*args, options=None, **kwargs):
+        seen["options"] = options
+        raise Stop
+
+    monkeypatch.setattr(run, "solve_emg_ten", capture)
+    files = ["--model", str(example.model), "--ik", str(example.ik["normal"]), "--id", str(example.id["normal"]),
+             "--emg", str(example.emg["normal"])]
+    with pytest.raises(Stop):
+        main(["solve", "--workflow", "effort-cal", *files, "--linear-solver", "spral", "--out", str(tmp_path / "a")])
+    assert seen["options"].linear_solver == "spral"
+    code = main(["solve", "--workflow", "effort-cal", "--model", str(tmp_path / "no_model.osim"), "--ik", "ik.mot",
+                 "--id", "id.sto", "--emg", "emg.mot", "--linear-solver", "ma27", "--linear-solver-library",
+                 str(tmp_path / "nolib.so"), "--out", str(tmp_path / "b")])
+    err = capsys.readouterr().err.strip()
+    assert code == 1 and "--linear-solver" in err and "nolib.so" in err and "no_model.osim" not in err
 
 
 def test_study_key(example):

@@ -421,20 +421,6 @@ def test_arrays_muscles_by_time_match_scalar_evaluation():
         )
 
 
-def test_large_arrays_span_several_chunks():
-    # more samples than one evaluation chunk: results equal element-wise evaluation
-    n = 20000
-    rng = np.random.default_rng(3)
-    vb = rng.uniform(-1, 1, n)
-    s = state(rng.uniform(0, 1, n), rng.uniform(0, 1, n), rng.uniform(0.5, 1.5, n), vb,
-              rng.uniform(0, 1, n), rng.uniform(0, 1.8, n))
-    r = umberger2003(**s)
-    idx = [0, 8191, 8192, 16384, n - 1]
-    for k in idx:
-        one = umberger2003(**{key: (v[k] if np.ndim(v) else v) for key, v in s.items()})
-        assert r.total[k] == pytest.approx(float(one.total), rel=1e-13)
-
-
 def test_bad_input_errors():
     with pytest.raises(DataMismatchError, match="compatible shapes"):
         umberger2003(**{**SHORT, "activation": np.ones(3), "excitation": np.ones(4)})

@@ -59,7 +59,7 @@ def test_mesh_splines_reproduce_a_cubic():
     mom = (10.0 + 30.0 * t**3 - 12.0 * t)[:, None]
     geo = types.SimpleNamespace(time=t, muscles=("m1_r", "m2_r"), dofs=("ankle_angle_r",), lmt_m=lmt,
                                 moment_arms_m=r)
-    inp = I.prepare_inputs(geo, t, mom, ik_time_s=t, dofs=("ankle_angle_r",), filter_inputs=False)
+    inp = I.trial_inputs(geo, t, mom, ik_time_s=t, dofs=("ankle_angle_r",), filter_inputs=False)
     s = inp.mesh_time_s
     assert inp.n_intervals == 50 and not np.isin(s[1:-1], t).all()
     np.testing.assert_allclose(inp.lmt_m[:, 0], 0.30 + 0.02 * (s - 0.5) ** 3 - 0.01 * s, rtol=0, atol=1e-14)
@@ -85,7 +85,7 @@ def test_static_optimisation_one_muscle_by_hand(moment_Nm):
     r = np.full((30, 1, 1), 0.05)
     mom = np.full((30, 1), moment_Nm)
     geo = types.SimpleNamespace(time=t, muscles=("soleus_r",), dofs=("ankle_angle_r",), lmt_m=lmt, moment_arms_m=r)
-    inp = I.prepare_inputs(geo, t, mom, ik_time_s=t, dofs=("ankle_angle_r",), filter_inputs=False)
+    inp = I.trial_inputs(geo, t, mom, ik_time_s=t, dofs=("ankle_angle_r",), filter_inputs=False)
     model = types.SimpleNamespace(names=["soleus_r"], max_isometric_force_N=np.array([3500.0]),
                                   optimal_fiber_length_m=np.array([0.05]), tendon_slack_length_m=np.array([0.26]),
                                   pennation_angle_at_optimal_rad=np.array([0.4]),

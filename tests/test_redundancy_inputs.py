@@ -60,7 +60,7 @@ def normal_inputs(example, ref_geometry, model_params):
     geo = types.SimpleNamespace(time=ref_geometry.time, muscles=names, dofs=DOFS,
                                 lmt_m=ref_geometry.lmt_m[:, km], moment_arms_m=ref_geometry.moment_arms_m[:, :, km])
     params, _ = W.workflow_parameters("effort-gen", model_params, names)
-    inp = I.prepare_inputs(geo, t_id, mom, ik_time_s=t_ik)
+    inp = I.trial_inputs(geo, t_id, mom, ik_time_s=t_ik)
     return t_ik, inp, params
 
 
@@ -101,7 +101,7 @@ def test_id_is_filtered_on_the_full_file_then_interpolated(example, ref_geometry
     # an ID file longer than the IK window: filtered over its whole length
     t_long = np.concatenate([t_id[0] - 0.01 * np.arange(20, 0, -1), t_id])
     mom_long = np.vstack([np.repeat(mom[:1], 20, axis=0), mom])
-    inp = I.prepare_inputs(geo, t_long, mom_long, ik_time_s=t_ik)
+    inp = I.trial_inputs(geo, t_long, mom_long, ik_time_s=t_ik)
     b, a = butter(6, 0.12)
     expected = filtfilt(b, a, mom_long, axis=0, padtype="odd", padlen=18)[20:]
     np.testing.assert_allclose(inp.moments_frames_Nm, expected, atol=1e-9)
@@ -261,16 +261,16 @@ def test_id_columns_time_and_units(example, tmp_path, ref_geometry, model_params
     geo = types.SimpleNamespace(time=ref_geometry.time, muscles=[ref_geometry.muscles[i] for i in km], dofs=DOFS,
                                 lmt_m=ref_geometry.lmt_m[:, km], moment_arms_m=ref_geometry.moment_arms_m[:, :, km])
     with pytest.raises(DataMismatchError, match="do not overlap"):
-        I.prepare_inputs(geo, t_id + 10.0, mom, ik_time_s=t_ik)
+        I.trial_inputs(geo, t_id + 10.0, mom, ik_time_s=t_ik)
     with pytest.raises(DataMismatchError, match="must cover the whole IK window"):
-        I.prepare_inputs(geo, t_id[:60], mom[:60], ik_time_s=t_ik)
+        I.trial_inputs(geo, t_id[:60], mom[:60], ik_time_s=t_ik)
     with pytest.raises(DataMismatchError, match="geometry has 119 frames"):
-        I.prepare_inputs(geo, t_id, mom, ik_time_s=t_ik[:-1])
+        I.trial_inputs(geo, t_id, mom, ik_time_s=t_ik[:-1])
     uneven = t_id.copy()
     uneven[50:] += 0.004
     with pytest.raises(DataMismatchError, match="not evenly spaced"):
-        I.prepare_inputs(geo, uneven, mom, ik_time_s=t_ik)
-    inp = I.prepare_inputs(geo, t_id, mom, ik_time_s=t_ik)
+        I.trial_inputs(geo, uneven, mom, ik_time_s=t_ik)
+    inp = I.trial_inputs(geo, t_id, mom, ik_time_s=t_ik)
     f0 = np.asarray(model_params.max_isometric_force_N)
     I.check_moment_magnitudes(inp.moments_frames_Nm, DOFS, inp.moment_arms_frames_m, f0)
     with pytest.raises(DataMismatchError, match="N mm"):
@@ -358,7 +358,7 @@ def test_solution_load_errors(tmp_path):
 
 
 def test_problem_size_formula():
-    from musclemetab.redundancy.problem import problem_size
+    from musclemetab.redundancy.ipopt import problem_size
 
     assert [problem_size(40, 5, n) for n in (158, 118, 99)] == [(32510, 26110), (24310, 19510), (20415, 16375)]
 
@@ -367,7 +367,7 @@ def test_explicit_derivatives_equal_automatic_ones(example, ref_geometry, model_
     """The assembled Jacobian and Hessian given to IPOPT equal CasADi's AD of the whole NLP."""
     import casadi as ca
 
-    from musclemetab.redundancy.problem import SolverOptions, build_nlp
+    from musclemetab.redundancy.ipopt import SolverOptions, build_nlp
     from musclemetab.redundancy.static_opt import initial_guess, static_optimisation
 
     t_ik, _ = I.read_kinematics(example.ik["normal"])
@@ -378,7 +378,7 @@ def test_explicit_derivatives_equal_automatic_ones(example, ref_geometry, model_
     geo = types.SimpleNamespace(time=ref_geometry.time[:F], muscles=names, dofs=DOFS,
                                 lmt_m=ref_geometry.lmt_m[:F, km], moment_arms_m=ref_geometry.moment_arms_m[:F, :, km])
     params, _ = W.workflow_parameters("effort-ten", model_params, names)
-    inp = I.prepare_inputs(geo, t_id, mom, ik_time_s=t_ik[:F])
+    inp = I.trial_inputs(geo, t_id, mom, ik_time_s=t_ik[:F])
     guess = initial_guess(inp, params, static_optimisation(inp, params))
     nlp = build_nlp(inp, params, guess, SolverOptions())
     x, f, g = nlp["x"], nlp["f"], nlp["g"]

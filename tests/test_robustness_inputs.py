@@ -239,7 +239,7 @@ def test_unusable_cache_places_fall_back_to_no_cache(example, short_trial, tmp_p
 
 # ----------------------------------------------------------------------------- messages that name their source
 def test_messages_name_the_file_or_muscle():
-    from musclemetab.redundancy.inputs import lowpass_filtfilt, prepare_inputs
+    from musclemetab.redundancy.inputs import lowpass_filtfilt, trial_inputs
 
     with pytest.raises(DataMismatchError, match="the IK file a.mot is too short: 3 samples"):
         lowpass_filtfilt(np.zeros((3, 2)), 100.0, what="the IK file a.mot")
@@ -254,11 +254,11 @@ def test_messages_name_the_file_or_muscle():
     Geometry.lmt_m = Geometry.lmt_m.copy()
     Geometry.lmt_m[4, 1] = np.nan
     with pytest.raises(DataMismatchError, match="geometry of ik.mot holds NaN .* for tibant_r"):
-        prepare_inputs(Geometry, Geometry.time, np.ones((30, 1)), sources={"ik": "ik.mot"})
+        trial_inputs(Geometry, Geometry.time, np.ones((30, 1)), sources={"ik": "ik.mot"})
 
 
 def test_infeasible_solves_are_not_told_to_raise_max_iter():
-    from musclemetab.redundancy.problem import failure_advice
+    from musclemetab.redundancy.ipopt import failure_advice
 
     for status in ("Infeasible_Problem_Detected", "Restoration_Failed"):
         text = failure_advice(status)

@@ -145,7 +145,7 @@ def test_analysis_of_a_solution_with_a_recorded_cycle_from_objects_folders_and_c
 def both_legs(example, tmp_path_factory):
     """``solve --side both`` of the normal trial: ``{side: Solution}`` and the parent of their
     folders ``r/`` and ``l/``."""
-    from musclemetab.redundancy.solve import solve_sides
+    from musclemetab.redundancy.run import solve_sides
 
     solutions = solve_sides(example.model, example.ik["normal"], example.id["normal"], "effort-gen")
     parent = tmp_path_factory.mktemp("stage_paths_both") / "both"

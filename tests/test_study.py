@@ -179,17 +179,17 @@ def test_swing_share_recomputed_from_the_unit_files(pool_run):
 
 
 def test_second_run_does_no_solver_work_and_corrupt_output_is_redone(pool_run, monkeypatch):
-    import musclemetab.redundancy as redundancy
+    import musclemetab.redundancy.run as pipeline
 
     study, _ = pool_run
     calls = []
-    real = redundancy.solve_files
+    real = pipeline.solve_files
 
     def counting(*args, **kwargs):
         calls.append(args[1])
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(redundancy, "solve_files", counting)
+    monkeypatch.setattr(pipeline, "solve_files", counting)
     run2 = run_study(study, workers=1, progress=False)
     assert calls == [] and run2.ran == [] and len(run2.skipped) == 2
     assert len(run2.results) == 4

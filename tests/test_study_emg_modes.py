@@ -104,7 +104,7 @@ def test_emg_mode_and_estimate_keys_are_checked(example, tmp_path, edit, words):
 def test_estimation_unit_runs_musclemetab_estimate_on_the_subjects_files(example, tmp_path, monkeypatch):
     """The estimation unit is ``musclemetab estimate`` with the table's options on the trials that
     have fiber lengths (their EMG too with emg_mode); its folder is units/<subject>/_estimate."""
-    import musclemetab.redundancy.estimate_cli as estimate_cli
+    import musclemetab.redundancy.run as run
 
     seen = {}
 
@@ -114,7 +114,7 @@ def test_estimation_unit_runs_musclemetab_estimate_on_the_subjects_files(example
 
         (Path(out) / "parameters.json").write_text("{}\n")
 
-    monkeypatch.setattr(estimate_cli, "estimate_files", estimate)
+    monkeypatch.setattr(run, "estimate_files", estimate)
     data = _data(example, tmp_path, workflows=("effort-gen",), trials=("slow", "normal"), estimate=ESTIMATE)
     data["solver"] = {"max_iter": 50}
     study = study_from_dict(data, base="/", output=tmp_path / "out")

@@ -98,7 +98,8 @@ id = "{example.id['normal']}"
 
 
 def test_emg_ten_groups_and_mapping_for_gait2392_left_leg(g2392):
-    from musclemetab.redundancy.emg_ten import EmgTenSettings, mapping_for_muscles, settings_for_muscles
+    from musclemetab.redundancy.emg_inputs import mapping_for_muscles
+    from musclemetab.redundancy.emg_ten import EmgTenSettings, settings_for_muscles
 
     names = [n for n in g2392.names if n.endswith("_l")]
     s = settings_for_muscles(None, names)

@@ -318,20 +318,20 @@ def test_emg_ten_of_both_legs(example, tmp_path, capsys, monkeypatch):
     same channels, which is enough to show how the legs are split, not a measurement.) The
     named mappings, one leg's electrodes, are refused with both legs, in one line."""
     from musclemetab.emg import DEFAULT_EMG_MAPPING
-    from musclemetab.redundancy import emg_ten as emg_ten_module
+    from musclemetab.redundancy import run as run_module
 
     right = {m: list(c) for m, c in DEFAULT_EMG_MAPPING.items()}
     both = {**right, **{m[:-2] + "_l": c for m, c in right.items()}}
     mapping = tmp_path / "map.json"
     mapping.write_text(json.dumps(both))
     calls = []
-    real = emg_ten_module.solve_emg_ten
+    real = run_module.solve_emg_ten
 
     def recording(*args, **kwargs):  # the command imports it when it runs
         calls.append(kwargs)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(emg_ten_module, "solve_emg_ten", recording)
+    monkeypatch.setattr(run_module, "solve_emg_ten", recording)
     out = tmp_path / "out"
     assert _cli("solve", "--workflow", "emg-ten", "--model", example.model, "--ik", example.ik["normal"],
                 "--id", example.id["normal"], "--emg", example.emg["normal"], "--emg-mapping", mapping,

@@ -5,37 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import DataMismatchError, OptionError
-
-
-def as_time(time_s, what: str = "time_s", min_samples: int = 2) -> np.ndarray:
-    """A 1-D, finite, strictly increasing time axis (s)."""
-    t = np.asarray(time_s, dtype=float)
-    if t.ndim != 1:
-        raise DataMismatchError(f"{what} must be 1-D (one time per sample), not of shape {t.shape}")
-    if t.size < min_samples:
-        raise DataMismatchError(f"{what} has {t.size} samples; at least {min_samples} are needed")
-    if not np.all(np.isfinite(t)):
-        raise OptionError(f"{what} holds NaN or infinite values; give finite times in seconds")
-    if t.size > 1 and not np.all(np.diff(t) > 0):
-        k = int(np.flatnonzero(np.diff(t) <= 0)[0])
-        raise OptionError(
-            f"{what} is not strictly increasing (sample {k + 1}, t = {t[k + 1]:g} s follows {t[k]:g} s); "
-            "sort the samples and remove repeated times"
-        )
-    return t
-
-
-def as_signal(values, t: np.ndarray, what: str) -> np.ndarray:
-    """A float array whose last axis matches the time axis ``t``, without NaN."""
-    y = np.asarray(values, dtype=float)
-    if y.ndim == 0 or y.shape[-1] != t.size:
-        raise DataMismatchError(
-            f"{what} has {y.shape[-1] if y.ndim else 0} samples along its last (time) axis "
-            f"but the time axis has {t.size}"
-        )
-    if not np.all(np.isfinite(y)):
-        raise OptionError(f"{what} holds NaN or infinite values; fill or remove those samples first")
-    return y
+from ..events import as_signal, as_time  # noqa: F401  (the time-axis checks of the gait events)
 
 
 def interp_at(t: np.ndarray, y: np.ndarray, tq: float) -> np.ndarray:

@@ -23,7 +23,7 @@ from .result import CalibrationResult, parameters_csv
 from .trials import load_calibration_data
 
 if TYPE_CHECKING:
-    from ..redundancy.problem import SolverOptions
+    from ..redundancy.ipopt import SolverOptions
 
 __all__ = [
     "calibrate_passive",
@@ -74,11 +74,11 @@ def read_passive_parameters(path: str | os.PathLike) -> dict:
     Accepts the ``passive_parameters.csv`` written by :func:`write_calibration` (columns
     ``muscle,kPE,s0,sM``) or the reference implementation's ``passiveMoments.mat``
     (calibrated values of ``sim.Results.onlyParam``; ``sM = 0.6``). Parsing is done by
-    :func:`musclemetab.redundancy.workflows.read_passive_parameters` (the reader the
+    :func:`musclemetab.passive.read_passive_parameters` (the reader the
     muscle redundancy solver uses); entries with non-finite values (the MAT file's left
     leg) are left out. Use :func:`mirror_to_left` to copy right-leg values to the left leg.
     """
-    from ..redundancy.workflows import read_passive_parameters as _read
+    from ..passive import read_passive_parameters as _read
 
     values = _read(path).values
     return {

@@ -40,7 +40,7 @@ The NLP's variables are, in this order, the group parameters ``kPE``, ``s0`` (ca
 only), then per trial ``l~M``, ``lM_proj`` (frames x muscles, column by column) and ``aT``;
 every bound (the parameters', the states' and the reserve's) is a constraint row, as are the
 pennation, equilibrium and moment equations, per trial in that order. IPOPT's options come
-from :class:`musclemetab.redundancy.problem.SolverOptions`, as for every problem of the
+from :class:`musclemetab.redundancy.ipopt.SolverOptions`, as for every problem of the
 package (exact Hessian, gradient-based NLP scaling, MUMPS, ``tol = 1e-6`` by default).
 """
 
@@ -56,7 +56,7 @@ from ..muscle import fiber_width, hill_residual, longest_fiber_length_bound, ten
 from .trials import CalibrationData
 
 if TYPE_CHECKING:
-    from ..redundancy.problem import SolverOptions
+    from ..redundancy.ipopt import SolverOptions
 
 __all__ = [
     "KPE_BOUNDS",
@@ -181,7 +181,7 @@ def solve_passive(
     guess 4 and 1); with ``parameters = {muscle: (kPE, s0[, sM])}`` (covering every
     muscle of the trials) they are imposed and only the equilibrium states and reserves
     are free, which gives that parameter set's passive moments. ``options``: IPOPT's
-    settings (:class:`musclemetab.redundancy.problem.SolverOptions`: ``tol``, ``max_iter``,
+    settings (:class:`musclemetab.redundancy.ipopt.SolverOptions`: ``tol``, ``max_iter``,
     ``linear_solver``, ``print_level``, ``ipopt``, ...; default ``SolverOptions()``); the
     weights of the muscle redundancy problem in it play no part here.
 
@@ -189,7 +189,7 @@ def solve_passive(
     """
     import casadi as ca
 
-    from ..redundancy.problem import SolverOptions, ipopt_options, run_ipopt
+    from ..redundancy.ipopt import SolverOptions, ipopt_options, run_ipopt
 
     options = options or SolverOptions()
     nlp = _Nlp()

@@ -119,7 +119,7 @@ class PassiveCalibration:
     @classmethod
     def load(cls, folder: str | os.PathLike) -> PassiveCalibration:
         """Read a folder written by :meth:`write` (parameters to the file's 10 digits)."""
-        from ..redundancy.workflows import read_passive_parameters as _read
+        from ..passive import read_passive_parameters as _read
 
         folder = Path(folder)
         missing = [n for n in (PARAMETERS_FILE, FIT_FILE) if not (folder / n).is_file()]

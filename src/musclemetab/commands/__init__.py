@@ -29,8 +29,8 @@ __all__ = ["main", "build_parser", "SUBCOMMANDS", "BROKEN_PIPE_STATUS"]
 #: command is run (or the full help is asked for), which keeps the start of a command short.
 SUBCOMMANDS = (
     ("geometry", "musclemetab.commands.geometry", "add_parser"),
-    ("solve", "musclemetab.redundancy.cli", "add_solve_parser"),
-    ("estimate", "musclemetab.redundancy.estimate_cli", "add_estimate_parser"),
+    ("solve", "musclemetab.commands.solve", "add_parser"),
+    ("estimate", "musclemetab.commands.estimate", "add_parser"),
     ("metabolics", "musclemetab.commands.metabolics", "add_parser"),
     ("analyse", "musclemetab.commands.analyse", "add_parser"),
     ("calibrate-passive", "musclemetab.commands.calibrate_passive", "add_parser"),

@@ -6,14 +6,16 @@ From inverse kinematics, inverse dynamics and muscle geometry, an optimal contro
 (CasADi + IPOPT) finds muscle excitations, activations, fiber lengths and velocities and
 tendon forces that reproduce the joint moments with minimal effort.
 
-Modules: :mod:`.inputs` (filtering, splines, mesh), :mod:`.static_opt` (initial guess),
-:mod:`.core` (one problem: trials, goals, shared parameters; ``docs/problem.md``),
-:mod:`.problem` (solving it; the single-trial problem), :mod:`.solution` (results, files),
+Modules: :mod:`.run` (the pipeline from files: what the command line, the study and Python
+users call), :mod:`.inputs` (filtering, splines, mesh), :mod:`.static_opt` (initial guess),
+:mod:`.transcription` (one problem: trials, goals, shared parameters; ``docs/problem.md``),
+:mod:`.ipopt` (solving it; the single-trial problem), :mod:`.solution` (results, files),
 :mod:`.record` (the run record), :mod:`.workflows` (presets, passive and tendon parameters),
-:mod:`.solve` (the pipeline), :mod:`.emg_ten` and :mod:`.emg_pipeline` (EMG-TEN and EMG-informed
-solves), :mod:`.estimates` (their results), :mod:`.estimate` (parameter estimation, personalised
-model), :mod:`.cli` and :mod:`.estimate_cli` (``musclemetab solve``, ``musclemetab estimate``).
-Importing this package does not
+:mod:`.solve` (one trial from arrays), :mod:`.emg_ten` and :mod:`.emg_pipeline` (EMG-TEN and
+EMG-informed solves from arrays), :mod:`.result` (their results), :mod:`.estimate`
+(parameter estimation, personalised model). The commands ``musclemetab solve`` and
+``musclemetab estimate`` are :mod:`musclemetab.commands.solve` and
+:mod:`musclemetab.commands.estimate`. Importing this package does not
 import CasADi; solving does. OpenSim is never imported here.
 """
 
@@ -22,14 +24,14 @@ import importlib
 # Public names and the module that defines each: imported on first use, so that importing
 # one stage (e.g. the single-trial solve) does not import the others (e.g. EMG-TEN).
 _EXPORTS = {
-    "EmgTenResult": "emg_ten", "EmgTenSettings": "emg_ten", "solve_emg_ten": "emg_ten",
+    "Result": "result", "EmgTenResult": "result", "EmgTenSettings": "emg_ten", "solve_emg_ten": "run",
     "MuscleTendonParameters": "parameters",
-    "SolverOptions": "problem",
+    "SolverOptions": "ipopt",
     "Solution": "solution",
-    "solve_files": "solve", "solve_trial": "solve", "solve_with_parameters": "solve",
+    "solve_files": "run", "solve_sides": "run", "solve_trial": "solve", "solve_with_parameters": "solve",
     "WORKFLOWS": "workflows", "Workflow": "workflows", "get_workflow": "workflows",
     "read_passive_parameters": "workflows", "workflow_parameters": "workflows",
-    "estimate_files": "estimate_cli", "EstimateRun": "estimate_cli",
+    "estimate_files": "run", "write_solution_folder": "run",
 }
 
 
@@ -52,6 +54,8 @@ __all__ = [
     "Solution",
     "solve_trial",
     "solve_files",
+    "solve_sides",
+    "write_solution_folder",
     "solve_with_parameters",
     "WORKFLOWS",
     "Workflow",
@@ -59,8 +63,8 @@ __all__ = [
     "read_passive_parameters",
     "workflow_parameters",
     "solve_emg_ten",
+    "Result",
     "EmgTenResult",
     "EmgTenSettings",
     "estimate_files",
-    "EstimateRun",
 ]

@@ -73,7 +73,7 @@ def node_bounds(M: int, D: int, lm_upper=None) -> tuple[np.ndarray, np.ndarray]:
 
 
 def bounds_and_guess(trials, params, info, specs, goals, p_index, n_p, pairs) -> dict:
-    """Bounds of the variables and rows of a problem (:func:`.core.build_problem`: its trials and
+    """Bounds of the variables and rows of a problem (:func:`.transcription.build_problem`: its trials and
     per-trial layout ``info``) and its initial guess (the trials' guesses, factors 1)."""
     lbx, ubx, x0, lbg, ubg = [], [], [], [], []
     tol = goals.emg_tolerance or 0.0

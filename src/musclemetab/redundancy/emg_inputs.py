@@ -9,7 +9,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..errors import DataMismatchError, InputFileError, OptionError, UnknownMuscleError
-from .estimates import PARAMETERS_FILE
+from .result import PARAMETERS_FILE
 
 __all__ = ["resolve_emg_mapping", "mapping_for_muscles", "emg_at_nodes", "path_list", "trial_labels", "one_model",
            "mapped_emg_table", "check_emg_window", "check_emg_range"]

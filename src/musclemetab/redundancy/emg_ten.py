@@ -1,7 +1,7 @@
 """EMG-TEN: EMG-informed estimation of tendon stiffness over several trials in one NLP.
 
 One optimal control problem holds, for every trial, the variables and constraints of the
-single-trial problem (:mod:`.problem`: same mesh, bounds, forward-Euler scheme and node
+single-trial problem (:mod:`.ipopt`: same mesh, bounds, forward-Euler scheme and node
 conventions) plus shared parameters (``docs/solver.md``):
 
 ==================  =========================================  ==============================
@@ -37,15 +37,15 @@ Objective (trials summed, each normalised by its own ``N``)::
 with ``[wEMG, wAct, wTres, wVm] = [10, 0.1, 1000, 0.01]``. The Hill equilibrium and the
 joint moments use ``kT = s_kT 35`` (symbolic) for the estimated muscles.
 
-**Transcription.** The problem core (:mod:`.core`): the trials' blocks of the single-trial
+**Transcription.** The problem core (:mod:`.transcription`): the trials' blocks of the single-trial
 problem with the EMG goals (tracking cost and bound rows after each interval's equality rows)
 and the shared factors ``[s_kT, s_EMG]`` last; couplings (constraint form) after all trials.
-IPOPT settings are those of :class:`~.problem.SolverOptions` plus :data:`LINEAR_SOLVER_OPTIONS`.
+IPOPT settings are those of :class:`~.ipopt.SolverOptions` plus :data:`EMG_TEN_MUMPS_OPTIONS`.
 
 **Initial guess.** Per trial the static-optimisation guess of the single-trial problem with
 the reserve divided by ``Topt``; all scale factors 1.
 
-The estimates and ``parameters.json``: :mod:`.estimates`.
+The estimates and ``parameters.json``: :mod:`.result`.
 """
 
 from __future__ import annotations
@@ -57,34 +57,25 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import DataMismatchError, OptionError, UnknownMuscleError
-from .core import Goals, ParameterSpec, TrialBlock, build_problem, check_fiber_dynamics, coupling_pairs
-from .emg_inputs import mapping_for_muscles, resolve_emg_mapping
-from .estimates import EMG_TEN, PARAMETERS_FILE, EmgTenResult, tendon_stiffness_at_force_N_per_mm
+from ._checks import COUPLINGS, check_factor_bounds, check_non_negative, check_option, check_weights
+from .transcription import Goals, ParameterSpec, TrialBlock, build_problem, check_fiber_dynamics, coupling_pairs
 from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
-from .problem import ProblemResult, SolverOptions, solve_problem
+from .ipopt import ProblemResult, SolverOptions, solve_problem
 from .static_opt import InitialGuess
 
 __all__ = [
-    "EMG_TEN",
     "EmgTenSettings",
     "EmgTenTrial",
-    "EmgTenResult",
-    "PARAMETERS_FILE",
     "informed_settings",
+    "emg_bound",
+    "fiber_scheme",
     "emg_failure",
     "settings_for_muscles",
-    "mapping_for_muscles",
-    "resolve_emg_mapping",
     "build_emg_ten_nlp",
     "solve_emg_ten_ocp",
     "emg_ten_problem",
-    "solve_emg_ten_arrays",
-    "prepare_emg_ten_trials",
-    "emg_ten_options",
-    "LINEAR_SOLVER_OPTIONS",
-    "solve_emg_ten",
-    "tendon_stiffness_at_force_N_per_mm",
+    "EMG_TEN_MUMPS_OPTIONS",
 ]
 
 #: Linear-algebra settings of IPOPT for EMG-TEN (``SolverOptions.ipopt`` overrides them):
@@ -93,8 +84,21 @@ __all__ = [
 #: solve whose residual already meets IPOPT's accuracy test (IPOPT's default is at least one
 #: step; here that saves a quarter of the solve time with identical iterates to 1e-11). They
 #: change the round-off of the KKT solves, not the problem.
-LINEAR_SOLVER_OPTIONS = {"mumps_pivot_order": 2, "min_refinement_steps": 0}
+EMG_TEN_MUMPS_OPTIONS = {"mumps_pivot_order": 2, "min_refinement_steps": 0}
 EMG_MODES = ("constrained", "driven", "tracking")
+
+
+def emg_bound(mode: str, tolerance: float) -> float | None:
+    """Half-width of the EMG bound rows of an EMG ``mode``: ``tolerance`` when constrained, 0 when
+    driven (each tracked excitation is its scaled EMG), ``None`` (no bound rows) when tracking."""
+    return {"constrained": tolerance, "driven": 0.0}.get(mode)
+
+
+def fiber_scheme(mode: str | None, fiber_dynamics: str | None = None) -> str:
+    """The transcription of the fiber dynamics: ``fiber_dynamics`` when given, else backward
+    Euler in the EMG-driven mode (the forward recurrence is unstable there, ``docs/problem.md``)
+    and forward Euler otherwise (``mode`` ``None``: no EMG)."""
+    return fiber_dynamics or ("backward" if mode == "driven" else "forward")
 
 
 @dataclass(frozen=True)
@@ -117,7 +121,7 @@ class EmgTenSettings:
     scaled EMG) or ``"tracking"`` (the cost only). With ``tendon_groups`` empty no tendon
     stiffness is estimated: an EMG-informed solve of one or more trials.
 
-    ``fiber_dynamics``: the transcription of the fiber dynamics (:data:`.core.FIBER_DYNAMICS`);
+    ``fiber_dynamics``: the transcription of the fiber dynamics (:data:`.transcription.FIBER_DYNAMICS`);
     ``None`` (default) is ``"backward"`` in the driven mode and ``"forward"`` otherwise: with the
     excitations fixed, the forward-Euler fiber recurrence of weakly excited muscles amplifies a
     change of fiber length by up to 1e4 per step, the backward-Euler one damps it
@@ -140,29 +144,19 @@ class EmgTenSettings:
     fiber_dynamics: str | None = None
 
     def __post_init__(self):
-        for name in ("w_emg", "w_activation", "w_reserve", "w_velocity"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0):
-                raise OptionError(f"the weight {name} must be a non-negative number, not {v!r}")
-        if not (math.isfinite(self.emg_tolerance) and self.emg_tolerance >= 0):
-            raise OptionError(f"emg_tolerance must be a non-negative number, not {self.emg_tolerance!r}")
-        if not (math.isfinite(self.emg_range_tolerance) and self.emg_range_tolerance >= 0):
-            raise OptionError(f"emg_range_tolerance must be non-negative, not {self.emg_range_tolerance!r}")
+        check_weights(self, ("w_emg", "w_activation", "w_reserve", "w_velocity"))
+        check_non_negative("emg_tolerance", self.emg_tolerance)
+        check_non_negative("emg_range_tolerance", self.emg_range_tolerance)
         for name in ("tendon_scale_bounds", "emg_scale_bounds"):
-            lo, hi = (float(v) for v in getattr(self, name))
-            if not (0 < lo <= hi and math.isfinite(hi)):
-                raise OptionError(f"{name} must be (low, high) with 0 < low <= high, not {getattr(self, name)!r}")
-            object.__setattr__(self, name, (lo, hi))
+            object.__setattr__(self, name, check_factor_bounds(name, getattr(self, name)))
         for name in ("tendon_groups", "emg_groups"):
             groups = tuple(tuple(str(m) for m in g) for g in getattr(self, name))
             flat = [m for g in groups for m in g]
             if len(set(flat)) != len(flat):
                 raise OptionError(f"{name}: a muscle appears in more than one group ({groups})")
             object.__setattr__(self, name, groups)
-        if self.coupling not in ("constraints", "shared"):
-            raise OptionError(f"coupling must be 'constraints' or 'shared', not {self.coupling!r}")
-        if self.emg_mode not in EMG_MODES:
-            raise OptionError(f"the EMG mode must be one of {', '.join(EMG_MODES)}, not {self.emg_mode!r}")
+        check_option("coupling", self.coupling, COUPLINGS)
+        check_option("the EMG mode", self.emg_mode, EMG_MODES)
         if self.emg_mode == "tracking" and not self.w_emg > 0:
             raise OptionError("the EMG mode 'tracking' needs a positive EMG weight w_emg")
         if self.fiber_dynamics is not None:
@@ -171,12 +165,12 @@ class EmgTenSettings:
     @property
     def fiber_scheme(self) -> str:
         """The transcription of the fiber dynamics used (``fiber_dynamics`` or the mode's default)."""
-        return self.fiber_dynamics or ("backward" if self.emg_mode == "driven" else "forward")
+        return fiber_scheme(self.emg_mode, self.fiber_dynamics)
 
     @property
     def emg_bound(self) -> float | None:
         """Half-width of the EMG bound rows (``None``: no bound rows)."""
-        return {"constrained": self.emg_tolerance, "driven": 0.0}.get(self.emg_mode)
+        return emg_bound(self.emg_mode, self.emg_tolerance)
 
     @property
     def tendon_muscles(self) -> tuple[str, ...]:
@@ -196,6 +190,15 @@ class EmgTenSettings:
             "emg_mode": self.emg_mode,
             "fiber_dynamics": self.fiber_scheme,
         }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "EmgTenSettings":
+        """The settings :meth:`to_dict` recorded (``summary.json``, ``parameters.json``)."""
+        return cls(**d["weights"], emg_tolerance=d["emg_tolerance"],
+                   tendon_scale_bounds=tuple(d["tendon_scale_bounds"]), emg_scale_bounds=tuple(d["emg_scale_bounds"]),
+                   tendon_groups=tuple(tuple(g) for g in d["tendon_groups"]),
+                   emg_groups=tuple(tuple(g) for g in d["emg_groups"]), emg_range_tolerance=d["emg_range_tolerance"],
+                   coupling=d["coupling"], emg_mode=d["emg_mode"], fiber_dynamics=d["fiber_dynamics"])
 
 
 def informed_settings(workflow: str, mode: str = "constrained", tolerance: float = 0.01,
@@ -218,7 +221,7 @@ def emg_failure(record, mode: str, what: str, fiber_dynamics: str = "backward"):
     muscles amplify errors by orders of magnitude per mesh step (``docs/problem.md``); with the
     backward-Euler ones the scaled EMG cannot explain the moments within the bounds."""
     from ..errors import SolverError
-    from .problem import INFEASIBLE_STATUSES
+    from .ipopt import INFEASIBLE_STATUSES
 
     if mode != "driven" or record.status not in INFEASIBLE_STATUSES:
         return record.failure(what)
@@ -313,7 +316,7 @@ def build_emg_ten_nlp(
     settings: EmgTenSettings | None = None,
     options: SolverOptions | None = None,
 ) -> dict:
-    """The EMG-TEN NLP over all ``trials`` (:func:`.core.build_problem`), without solving it."""
+    """The EMG-TEN NLP over all ``trials`` (:func:`.transcription.build_problem`), without solving it."""
     settings = settings_for_muscles(settings, params.names)
     options = options or SolverOptions()
     blocks, goals, specs = emg_ten_problem(trials, params, settings)
@@ -331,8 +334,5 @@ def solve_emg_ten_ocp(
     settings = settings_for_muscles(settings, params.names)
     blocks, goals, specs = emg_ten_problem(trials, params, settings)
     return solve_problem(blocks, params, goals, specs, options=options, coupling=settings.coupling,
-                         mumps_settings=LINEAR_SOLVER_OPTIONS)
+                         mumps_settings=EMG_TEN_MUMPS_OPTIONS)
 
-
-# the pipeline from files or arrays (after the definitions it uses)
-from .emg_pipeline import emg_ten_options, prepare_emg_ten_trials, solve_emg_ten, solve_emg_ten_arrays  # noqa: E402

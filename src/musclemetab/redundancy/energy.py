@@ -10,7 +10,7 @@ velocity ``v~M_k`` (``vbar = v~M/vmax``, ``fV``). Without basal heat (a constant
 
 the leg's mean metabolic rate over the mesh in W/kg of body mass (rectangle rule; the
 integral ``sum_k h Edot_k`` over the duration ``N h``), normalised by ``N`` like the other goals
-of :mod:`.core`. Muscle masses and slow-twitch fractions come from the anatomical muscle table
+of :mod:`.transcription`. Muscle masses and slow-twitch fractions come from the anatomical muscle table
 (:func:`musclemetab.properties.metabolic_properties`), as for the metabolic rates of a solution.
 """
 

@@ -3,7 +3,7 @@ shared scale factors), and the validation re-solve with the estimates.
 
 Scale factors of the tendon stiffness ``kT``, the optimal fiber length ``lMo`` and the tendon
 slack length ``lTs`` of named muscles are variables of one problem over all trials
-(:mod:`.core`); muscles of a coupled group share one factor. Measured fiber lengths
+(:mod:`.transcription`); muscles of a coupled group share one factor. Measured fiber lengths
 (ultrasound; :func:`read_fiber_lengths`: MRS file convention, millimetres) enter as the
 fiber-length tracking goal ``wUS sum ((l~M s_lMo lMo - lUS)/lMo)^2/(nUS N)``, EMG as the EMG
 goals. The estimate (:class:`EstimatedParameters`) gives the scaled parameters for a validation
@@ -21,9 +21,9 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..errors import DataMismatchError, InputFileError, OptionError, UnknownMuscleError
-from .core import Goals, ParameterSpec, TrialBlock
+from .transcription import Goals, ParameterSpec, TrialBlock
 from .parameters import MuscleTendonParameters
-from .problem import ProblemResult, SolverOptions, solve_problem
+from .ipopt import ProblemResult, SolverOptions, solve_problem
 
 __all__ = ["EstimatedParameters", "DEFAULT_FACTOR_BOUNDS", "estimate_parameters", "parameter_specs",
            "fiber_length_trial", "read_fiber_lengths"]

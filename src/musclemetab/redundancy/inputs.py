@@ -53,7 +53,7 @@ __all__ = [
     "read_kinematics",
     "read_inverse_dynamics",
     "select_muscles",
-    "prepare_inputs",
+    "trial_inputs",
     "check_moment_magnitudes",
     "check_moments_per_body_mass",
     "MIN_PEAK_MOMENT_NM_PER_KG",
@@ -406,7 +406,7 @@ def check_moments_per_body_mass(
         )
 
 
-def prepare_inputs(
+def trial_inputs(
     geometry: GeometryLike,
     id_time_s: np.ndarray,
     id_moments_Nm: np.ndarray,

@@ -15,9 +15,9 @@ import platform
 from dataclasses import dataclass, field
 from pathlib import Path
 
-__all__ = ["RunRecord", "software_versions", "input_hashes"]
+__all__ = ["RunRecord", "solver_versions", "input_hashes"]
 
-def software_versions() -> dict:
+def solver_versions() -> dict:
     """Versions of musclemetab, Python and (when importable) CasADi."""
     from .. import __version__
 
@@ -61,20 +61,20 @@ class RunRecord:
 
     @property
     def message(self) -> str:
-        """What the status means and what to do (:func:`~.problem.failure_advice`)."""
-        from .problem import failure_advice
+        """What the status means and what to do (:func:`~.ipopt.failure_advice`)."""
+        from .ipopt import failure_advice
 
         return "converged" if self.success else failure_advice(self.status)
 
     @classmethod
     def from_result(cls, result, sources: dict | None = None) -> "RunRecord":
-        """From a raw optimum (:class:`~.problem.OcpResult` or :class:`~.problem.ProblemResult`)."""
+        """From a raw optimum (:class:`~.ipopt.OcpResult` or :class:`~.ipopt.ProblemResult`)."""
         return cls(
             status=result.status, success=result.success, iterations=result.iterations,
             objective=result.objective, objective_terms=dict(result.objective_terms),
             solve_time_s=result.solve_time_s, solve_cpu_time_s=result.solve_cpu_s,
             build_time_s=result.build_time_s, function_evaluation_time_s=dict(result.function_time_s),
-            max_constraint_violation=result.max_constraint_violation, software=software_versions(),
+            max_constraint_violation=result.max_constraint_violation, software=solver_versions(),
             input_hashes=input_hashes(sources or {}),
         )
 

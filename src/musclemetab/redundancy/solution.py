@@ -373,7 +373,7 @@ def build_solution(
     ocp,
     summary: dict,
 ) -> Solution:
-    """Assemble a :class:`Solution` from an :class:`~.problem.OcpResult` and the trial inputs.
+    """Assemble a :class:`Solution` from an :class:`~.ipopt.OcpResult` and the trial inputs.
 
     Fills ``summary`` with residuals (moment, Hill equilibrium, activation dynamics) and
     reserve statistics computed here in NumPy from the reported quantities. With

@@ -6,10 +6,10 @@
 * ``cycle="auto"`` or ``cycle=N``: the first (or the N-th, from 1) complete gait cycle of the
   solved leg, heel strike to heel strike, from the vertical ground force of that leg
   (:func:`musclemetab.external_loads.vertical_force` with an ExternalLoads file; or a
-  ground-force file whose column is chosen by :func:`musclemetab.analysis.events.read_grf`),
-  events by :func:`musclemetab.analysis.events.gait_events_from_grf` (20 N threshold); with
+  ground-force file whose column is chosen by :func:`musclemetab.events.read_grf`),
+  events by :func:`musclemetab.events.gait_events_from_grf` (20 N threshold); with
   no ground forces, from the kinematics and the model
-  (:func:`musclemetab.analysis.events.kinematic_gait_events`). The
+  (:func:`musclemetab.events.kinematic_gait_events`). The
   window is the cycle plus the study's padding (:data:`PADDING_S` = 5 frames at 100 Hz at each
   end) so that the free initial and final states do not fall inside the cycle. Where the data
   end before the padding does, the padding is clipped at the edge of the data, a warning is
@@ -109,7 +109,7 @@ def resolve_window(
 ) -> TrialWindow:
     """The solve window for one leg (see the module docstring); ``grf_column`` names the foot's
     vertical force column of ``grf_path`` (default: the name rule of
-    :func:`~musclemetab.analysis.events.read_grf`), ``grf_threshold_N`` the contact threshold
+    :func:`~musclemetab.events.read_grf`), ``grf_threshold_N`` the contact threshold
     (default 20 N).
 
     ``ik`` and ``id_path`` are the files or their :class:`~musclemetab.io.StorageTable`, already
@@ -174,7 +174,7 @@ def resolve_window(
 
 
 def _cycle(side, cycle, external_loads, grf_path, layout, ik=None, grf_column=None, threshold_N=None):
-    from ..analysis.events import (
+    from ..events import (
         DEFAULT_GRF_THRESHOLD_N,
         GaitCycle,
         gait_events_from_grf,

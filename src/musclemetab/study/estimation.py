@@ -65,7 +65,7 @@ def _names(value, here: str, key: str) -> tuple[str, ...]:
 def estimate_spec(data, here: str) -> EstimateSpec:
     """The checked ``[subjects.estimate]`` table (``here`` names the file and subject)."""
     from ..redundancy.estimate import FIELDS
-    from ..redundancy.estimate_cli import WEIGHT_NAMES
+    from ..redundancy.run import WEIGHT_NAMES
 
     here = f"{here}: [subjects.estimate]"
     if not isinstance(data, Mapping):
@@ -142,18 +142,18 @@ def estimation_trials(subject, here: str | None = None) -> list:
 
 
 def run_parameter_estimation(study, unit, tmp: Path) -> dict:
-    """The subject's estimation unit: :func:`~musclemetab.redundancy.estimate_cli.estimate_files`
+    """The subject's estimation unit: :func:`~musclemetab.redundancy.run.estimate_files`
     (``musclemetab estimate``) on its trials, written to ``tmp``."""
     import time
 
-    from ..redundancy import estimate_cli
+    from ..redundancy import run
 
     subject = study.subject(unit.subject)
     spec = subject.estimate
     trials = estimation_trials(subject)
     with_us = any(t.ultrasound is not None for t in trials)
     t0 = time.perf_counter()
-    estimate_cli.estimate_files(
+    run.estimate_files(
         subject.model, [t.ik for t in trials], [t.id for t in trials], tmp,
         estimate=spec.estimate, labels=[t.name for t in trials],
         ultrasound=[t.ultrasound for t in trials] if with_us else (),

@@ -411,7 +411,7 @@ def _umask() -> int:
 
 def _run_estimation(study: Study, unit: Unit, tmp: Path) -> dict:
     """EMG-TEN over all the subject's trials: per-trial solutions and parameters.json."""
-    from ..redundancy.emg_ten import solve_emg_ten
+    from ..redundancy.run import solve_emg_ten
 
     subject = study.subject(unit.subject)
     t0 = time.perf_counter()
@@ -435,7 +435,8 @@ def _run_estimation(study: Study, unit: Unit, tmp: Path) -> dict:
 
 def _informed_solve(study: Study, subject: Subject, trial: Trial, workflow: str, kwargs: dict):
     """The EMG-informed solve of one trial with an effort workflow (the subject's ``emg_mode``)."""
-    from ..redundancy.emg_ten import informed_settings, solve_emg_ten
+    from ..redundancy.emg_ten import informed_settings
+    from ..redundancy.run import solve_emg_ten
     from ..redundancy.workflows import read_tendon_stiffness_json
 
     kt = kwargs.get("tendon_stiffness")
@@ -493,7 +494,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
 
     from ..geometry import compute_geometry
     from ..metabolics.solution import metabolics_from_solution, write_metabolics
-    from ..redundancy import solve_files
+    from ..redundancy.run import solve_files, write_solution_folder
     from ..redundancy.solution import Solution
     from .events import trial_cycle, trial_speed
 
@@ -527,8 +528,6 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
                               external_loads=trial.external_loads, grf=trial.grf if trial.cycle is not None else None,
                               grf_column=trial.grf_column, grf_threshold_N=trial.grf_threshold_N,
                               cycle=trial.cycle, options=_solver_options(study, subject), **kwargs)
-        from ..redundancy.cli import write_solution_folder
-
         write_solution_folder(sol, tmp)
         solve_summary = sol.summary
         times["solve_s"] = sol.summary.get("solve_time_s")

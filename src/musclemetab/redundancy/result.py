@@ -1,4 +1,5 @@
-"""Estimated parameters of a multi-trial problem: the EMG-TEN result and ``parameters.json``.
+"""The result of a problem over one or more trials: the solutions, the parameters it estimated
+and ``parameters.json`` (:class:`Result`; EMG-TEN, EMG-informed solves and parameter estimation).
 
 **Tendon stiffness in N/mm.** ``kT`` is dimensionless; the stiffness reported in N/mm is the
 tangent slope of the tendon force-length curve where the tendon carries its maximal isometric
@@ -26,13 +27,15 @@ from ..muscle import KT_GENERIC, tendon_length_from_force, tendon_stiffness_N_pe
 from .parameters import MuscleTendonParameters
 from ..io.jsonfile import json_ready
 
-__all__ = ["EMG_TEN", "EmgTenResult", "assemble_result", "PARAMETERS_FILE",
+__all__ = ["EMG_TEN", "Result", "EmgTenResult", "assemble_result", "PARAMETERS_FILE",
            "tendon_stiffness_at_force_N_per_mm"]
 
 EMG_TEN = "emg-ten"
 PARAMETERS_FILE = "parameters.json"
 PARAMETERS_FORMAT = "musclemetab.redundancy.emg_ten_parameters"
 PARAMETERS_VERSION = 1
+#: ``format`` of the ``parameters.json`` of a parameter estimation (``musclemetab estimate``)
+ESTIMATE_FORMAT = "musclemetab.redundancy.estimated_parameters"
 
 
 def tendon_stiffness_at_force_N_per_mm(force_norm, max_isometric_force_N, tendon_slack_length_m, kT):
@@ -46,24 +49,51 @@ def tendon_stiffness_at_force_N_per_mm(force_norm, max_isometric_force_N, tendon
 
 
 @dataclass
-class EmgTenResult:
-    """Solutions of all trials and the estimated parameters of one EMG-TEN solve.
+class Result:
+    """Solutions of all trials of one problem and the parameters it estimated.
 
-    ``solutions`` maps the trial labels (IK file stems by default) to :class:`Solution`
-    objects in the solver's format (``summary['workflow']['name'] == 'emg-ten'``), computed
-    with the estimated tendon stiffness. ``tendon_stiffness``/``tendon_scale`` and
-    ``emg_scale`` hold the estimates by muscle; ``record`` the solve record.
+    ``solutions`` maps the trial labels (IK file stems by default) to :class:`~.solution.Solution`
+    objects in the solver's format, computed with the estimated parameters; ``parameters`` are
+    those parameters (the estimates applied to the nominal ones). ``factors`` holds the estimated
+    scale factors by kind and muscle (``tendon_stiffness``, ``optimal_fiber_length``,
+    ``tendon_slack_length``, ``emg_scale``); ``record`` the solve record; ``emg_channels`` the
+    EMG channels of the tracked muscles; ``settings`` the :class:`~.emg_ten.EmgTenSettings` of an
+    EMG-TEN or EMG-informed problem. ``document``: the content of ``parameters.json`` when it is
+    fixed when the result is assembled (parameter estimation); ``None`` (EMG-TEN): built from
+    the fields by :meth:`parameters_document`.
+
+    :meth:`write` writes one solution folder per trial and ``parameters.json``; :meth:`load`
+    reads them back.
     """
 
     solutions: dict
     parameters: MuscleTendonParameters
-    tendon_scale: dict
-    tendon_stiffness: dict
-    emg_scale: dict
-    emg_channels: dict
+    factors: dict
     record: dict
-    settings: object
+    emg_channels: dict = field(default_factory=dict)
+    settings: object = None
+    document: dict | None = field(default=None, repr=False)
     trials: tuple = field(default=(), repr=False)
+
+    @property
+    def labels(self) -> tuple[str, ...]:
+        return tuple(self.solutions)
+
+    @property
+    def tendon_scale(self) -> dict:
+        """Estimated scale factors of the tendon stiffness ``kT`` by muscle."""
+        return dict(self.factors.get("tendon_stiffness", {}))
+
+    @property
+    def tendon_stiffness(self) -> dict:
+        """Estimated tendon stiffness ``kT`` (dimensionless) by muscle."""
+        p = self.parameters
+        return {m: float(p.tendon_stiffness[p.names.index(m)]) for m in self.factors.get("tendon_stiffness", {})}
+
+    @property
+    def emg_scale(self) -> dict:
+        """Estimated EMG scale factors by muscle."""
+        return dict(self.factors.get("emg_scale", {}))
 
     @property
     def run_record(self):
@@ -136,6 +166,8 @@ class EmgTenResult:
 
     def parameters_document(self) -> dict:
         """The content of ``parameters.json``."""
+        if self.document is not None:
+            return json_ready(self.document)
         return json_ready({
             "format": PARAMETERS_FORMAT,
             "format_version": PARAMETERS_VERSION,
@@ -172,10 +204,66 @@ class EmgTenResult:
         atomic_write_text(out_dir / PARAMETERS_FILE, text + "\n")
         return out_dir
 
+    @classmethod
+    def load(cls, out_dir: str | os.PathLike, *, require_success: bool = True) -> "Result":
+        """Read a folder written by :meth:`write` (EMG-TEN, an EMG-informed solve of several
+        trials, or ``musclemetab estimate``).
+
+        Raises :class:`~musclemetab.errors.InputFileError` when ``parameters.json`` or a trial
+        folder is missing or is not of this package, and the solve's
+        :class:`~musclemetab.errors.SolverError` when it did not succeed (unless
+        ``require_success=False``).
+        """
+        from ..errors import InputFileError
+        from ..io.jsonfile import read_json_object
+        from .record import RunRecord
+        from .solution import Solution
+
+        out_dir = Path(out_dir)
+        path = out_dir / PARAMETERS_FILE
+        if not path.is_file():
+            raise InputFileError(f"{path}: no such file; give the folder written by an EMG-TEN solve or by "
+                                 "musclemetab estimate")
+        doc = read_json_object(path)
+        fmt = doc.get("format")
+        try:
+            record = dict(doc["solve"])
+            if fmt == PARAMETERS_FORMAT:
+                from .emg_ten import EmgTenSettings
+
+                labels = [t["label"] for t in record["trials"]]
+                factors = {"tendon_stiffness": dict(doc["tendon_stiffness_scale"]), "emg_scale": dict(doc["emg_scale"])}
+                emg_channels = {m: list(c) for m, c in doc["emg_channels"].items()}
+                settings, document = EmgTenSettings.from_dict(record["settings"]), None
+            elif fmt == ESTIMATE_FORMAT:
+                labels = list(doc["trials"])
+                factors = {k: dict(v) for k, v in doc["factors"].items()}
+                emg = doc.get("emg")
+                if emg:
+                    factors["emg_scale"] = dict(emg["scale"])
+                emg_channels = {m: list(c) for m, c in (emg or {}).get("mapping", {}).items()}
+                settings, document = None, doc
+            else:
+                raise InputFileError(f"{path}: format {fmt!r} is not a result of this package (expected "
+                                     f"{PARAMETERS_FORMAT} or {ESTIMATE_FORMAT})")
+        except (KeyError, TypeError, AttributeError) as exc:
+            raise InputFileError(f"{path}: the entry {exc} is missing or malformed; the file was not written by "
+                                 "this package") from None
+        if require_success and not record.get("success", False):
+            raise RunRecord.from_dict(record).failure(f"the solve stored in {out_dir}")
+        solutions = {lab: Solution.load(out_dir / lab, require_success=False) for lab in labels}
+        parameters = next(iter(solutions.values())).parameters if solutions else None
+        return cls(solutions=solutions, parameters=parameters, factors=factors, record=record,
+                   emg_channels=emg_channels, settings=settings, document=document)
+
+
+#: EMG-TEN's result: a :class:`Result` (the name the EMG-TEN functions are documented with).
+EmgTenResult = Result
+
 
 def assemble_result(trials, params, wf_record, ocp, settings, options, t_prep, t_start,
-                    name: str = EMG_TEN) -> "EmgTenResult":
-    """The :class:`EmgTenResult` of a solved EMG-TEN problem: per-trial solutions with the
+                    name: str = EMG_TEN) -> Result:
+    """The :class:`Result` of a solved EMG-TEN problem: per-trial solutions with the
     estimated tendon stiffness, the estimates and the solve record."""
     import time as _time
 
@@ -261,7 +349,8 @@ def assemble_result(trials, params, wf_record, ocp, settings, options, t_prep, t
     record["max_moment_residual_Nm"] = max(s.summary["max_moment_residual_Nm"] for s in solutions.values())
     record["max_hill_residual"] = max(s.summary["max_hill_residual"] for s in solutions.values())
     record["total_time_s"] = _time.perf_counter() - t_start
-    return EmgTenResult(
-        solutions=solutions, parameters=est_params, tendon_scale=tendon_scale, tendon_stiffness=kt_est,
-        emg_scale=emg_scale, emg_channels=emg_channels, record=record, settings=settings, trials=tuple(trials),
+    return Result(
+        solutions=solutions, parameters=est_params,
+        factors={"tendon_stiffness": tendon_scale, "emg_scale": emg_scale}, emg_channels=emg_channels,
+        record=record, settings=settings, trials=tuple(trials),
     )

@@ -2,7 +2,7 @@
 
 EFFORT-GEN/CAL/TEN are one trial with the effort goals; EMG-TEN is several trials with the EMG
 goals and shared tendon-stiffness factors. **Per trial** (muscles, DOFs and side may differ): the
-variables, bounds and constraints of the single-trial problem (:mod:`.problem`), node blocks
+variables, bounds and constraints of the single-trial problem (:mod:`.ipopt`), node blocks
 ``z_k = [a, l~M, lp, e, aT, v~M]_k`` then ``[a, l~M, lp]_N``, each interval's equality rows
 followed by its EMG bound rows. **Goals** (:class:`Goals`), per trial normalised by its ``N``::
 
@@ -30,7 +30,6 @@ the entries of two intervals at one place of the Hessian are summed.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -38,6 +37,7 @@ import numpy as np
 
 from ..errors import DataMismatchError, OptionError, SolverError, UnknownMuscleError
 from ..muscle import activation_rate, hill_residual, tendon_force_length
+from ._checks import COUPLINGS, check_factor_bounds, check_non_negative, check_option, check_weights
 from .bounds import (  # noqa: F401  (re-exported)
     ACTIVATION_BOUNDS, FIBER_LENGTH_BOUNDS, FIBER_LENGTH_MARGIN, FIBER_VELOCITY_BOUNDS, MIN_PROJECTED_LENGTH_M,
     RESERVE_BOUNDS, bounds_and_guess, fiber_length_upper_bounds, node_bounds,
@@ -87,13 +87,9 @@ class Goals:
 
     def __post_init__(self):
         check_fiber_dynamics(self.fiber_dynamics, self.energy)
-        for name in ("w_activation", "w_reserve", "w_velocity", "w_emg", "w_fiber_length"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0):
-                raise OptionError(f"the weight {name} must be a non-negative number, not {v!r}")
-        tol = self.emg_tolerance
-        if tol is not None and not (math.isfinite(tol) and tol >= 0):
-            raise OptionError(f"the EMG tolerance must be a non-negative number (0: EMG-driven), not {tol!r}")
+        check_weights(self, ("w_activation", "w_reserve", "w_velocity", "w_emg", "w_fiber_length"))
+        if self.emg_tolerance is not None:
+            check_non_negative("the EMG tolerance", self.emg_tolerance, " (0: EMG-driven)")
         if self.energy is not None and not isinstance(self.energy, EnergyGoal):
             raise OptionError(f"the energy goal must be an EnergyGoal, not {type(self.energy).__name__}")
 
@@ -111,11 +107,7 @@ class ParameterSpec:
     def __post_init__(self):
         if self.kind not in PARAMETER_KINDS:
             raise OptionError(f"unknown parameter kind {self.kind!r}; use one of {', '.join(PARAMETER_KINDS)}")
-        lo, hi = (float(v) for v in self.bounds)
-        if not (0 < lo <= hi and math.isfinite(hi)):
-            raise OptionError(f"the bounds of the {self.kind} factors must be (low, high) with 0 < low <= high, "
-                              f"not {self.bounds!r}")
-        object.__setattr__(self, "bounds", (lo, hi))
+        object.__setattr__(self, "bounds", check_factor_bounds(f"the bounds of the {self.kind} factors", self.bounds))
         object.__setattr__(self, "muscles", tuple(str(m) for m in self.muscles))
         n = len(self.muscles)
         if any(not (0 <= a < n and 0 <= b < n) for a, b in self.couplings):
@@ -172,7 +164,7 @@ def _constants(params: MuscleTendonParameters, ca):
 
 
 def _node_expressions(sym, M: int, D: int, h, P: dict, optimal_reserve_Nm: float, ca, backward: bool = False):
-    """Symbols and constraint expressions of one mesh interval (:mod:`.problem`); with
+    """Symbols and constraint expressions of one mesh interval (:mod:`.ipopt`); with
     ``backward`` the Hill equilibrium holds at the end node (``a1, lm1, lp1, lmt1``) with ``vm``."""
     a, lm, lp = sym("a", M), sym("lm", M), sym("lp", M)
     e, aT, vm = sym("e", M), sym("aT", D), sym("vm", M)
@@ -368,8 +360,7 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
     import casadi as ca
 
     trials, specs = list(trials), list(specs)
-    if coupling not in ("shared", "constraints"):
-        raise OptionError(f"coupling must be 'constraints' or 'shared', not {coupling!r}")
+    check_option("coupling", coupling, COUPLINGS)
     _check_trials(trials, params, specs)
     spec_off = np.cumsum([0] + [len(s.muscles) for s in specs])
     n_full = int(spec_off[-1])

@@ -49,7 +49,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import OptionError, SolverError
-from .core import Goals, TrialBlock, build_problem, check_fiber_dynamics
+from ._checks import check_option, check_weights
+from .transcription import Goals, TrialBlock, build_problem, check_fiber_dynamics
 from .energy import EnergyGoal
 from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
@@ -99,7 +100,7 @@ class SolverOptions:
     library default). ``ipopt`` holds further IPOPT options, e.g. ``{"mu_init": 1e-6}`` for a
     warm start; anything there may change which optimum is found. ``energy`` adds the energy
     goal (:class:`.energy.EnergyGoal`) to the objective. ``fiber_dynamics``: the transcription
-    of the fiber dynamics (:data:`.core.FIBER_DYNAMICS`; ``"backward"``: the Hill equilibrium of
+    of the fiber dynamics (:data:`.transcription.FIBER_DYNAMICS`; ``"backward"``: the Hill equilibrium of
     each interval at its end node, ``docs/problem.md``; not with the energy goal).
     """
 
@@ -123,11 +124,8 @@ class SolverOptions:
         if self.energy is not None and not isinstance(self.energy, EnergyGoal):
             raise OptionError(f"energy must be an EnergyGoal, not {type(self.energy).__name__}")
         check_fiber_dynamics(self.fiber_dynamics, self.energy)
-        if self.derivatives not in ("explicit", "auto"):
-            raise OptionError(f"derivatives must be 'explicit' or 'auto', not {self.derivatives!r}")
-        for name in ("w_activation", "w_reserve", "w_velocity"):
-            if getattr(self, name) < 0:
-                raise OptionError(f"the weight {name} must be non-negative, not {getattr(self, name)}")
+        check_option("derivatives", self.derivatives, ("explicit", "auto"))
+        check_weights(self, ("w_activation", "w_reserve", "w_velocity"))
         if self.optimal_reserve_Nm <= 0:
             raise OptionError(f"optimal_reserve_Nm must be positive, not {self.optimal_reserve_Nm}")
         if self.max_iter < 1:
@@ -303,7 +301,7 @@ def build_nlp(
     options: SolverOptions | None = None,
 ) -> dict:
     """The NLP of the single-trial problem, without solving it: the problem core
-    (:func:`.core.build_problem`) with one trial and the effort goals of ``options``."""
+    (:func:`.transcription.build_problem`) with one trial and the effort goals of ``options``."""
     options = options or SolverOptions()
     return build_problem([TrialBlock("trial", inputs, guess)], params, effort_goals(options),
                          optimal_reserve_Nm=options.optimal_reserve_Nm,
@@ -322,7 +320,7 @@ def effort_goals(options: SolverOptions) -> Goals:
 #: (IPOPT's default is at least one step). On the example trials the iterations and optimum
 #: are the same and the solve about 10 % faster. It changes the round-off of the KKT solves,
 #: not the problem.
-LINEAR_SOLVER_OPTIONS = {"min_refinement_steps": 0}
+MUMPS_OPTIONS = {"min_refinement_steps": 0}
 
 
 def ipopt_options(options: SolverOptions, mumps_settings: dict | None = None) -> dict:
@@ -382,7 +380,7 @@ class ProblemResult(SolveOutcome):
 
 
 def _trial_terms(goals: Goals, t: TrialBlock, Z, xl, dev, lm_us, params=None, lmo_factor=None) -> dict:
-    """The objective terms of one trial at the optimum (NumPy, the formulas of :mod:`.core`)."""
+    """The objective terms of one trial at the optimum (NumPy, the formulas of :mod:`.transcription`)."""
     M, D, N = len(t.inputs.muscles), len(t.inputs.dofs), t.inputs.n_intervals
     a = np.concatenate([Z[:, 0:M].ravel(), xl[0:M]])
     terms = {
@@ -407,7 +405,7 @@ def _trial_terms(goals: Goals, t: TrialBlock, Z, xl, dev, lm_us, params=None, lm
 def solve_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=(), *,
                   options: SolverOptions | None = None, coupling: str = "shared",
                   mumps_settings: dict | None = None) -> ProblemResult:
-    """Build (:func:`.core.build_problem`) and solve a problem; never raises on
+    """Build (:func:`.transcription.build_problem`) and solve a problem; never raises on
     non-convergence (see ``success``). Errors while building raise :class:`SolverError`."""
     import casadi as ca
 
@@ -416,7 +414,7 @@ def solve_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
     t_build = _time.perf_counter()
     nlp = build_problem(trials, params, goals, specs, optimal_reserve_Nm=options.optimal_reserve_Nm,
                         coupling=coupling, explicit_derivatives=options.derivatives == "explicit")
-    ipopt = ipopt_options(options, LINEAR_SOLVER_OPTIONS if mumps_settings is None else mumps_settings)
+    ipopt = ipopt_options(options, MUMPS_OPTIONS if mumps_settings is None else mumps_settings)
     nlp_options = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
     nlp_options.update({k: nlp[k] for k in ("grad_f", "jac_g", "hess_lag") if k in nlp})
     try:

@@ -32,10 +32,10 @@ import math
 
 from ..errors import OptionError, SolverError, UnknownMuscleError
 
-__all__ = ["add_solve_parser", "add_emg_goal_arguments", "solve_command"]
+__all__ = ["add_parser", "add_emg_goal_arguments", "run"]
 
 
-def add_solve_parser(subparsers) -> argparse.ArgumentParser:
+def add_parser(subparsers) -> argparse.ArgumentParser:
     """Add the ``solve`` subcommand to an ``argparse`` sub-parser collection."""
     p = subparsers.add_parser(
         "solve",
@@ -63,7 +63,7 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
                    "low-pass filtered at 6 Hz), written to the output folder as inverse_dynamics.sto")
     p.add_argument("--grf", metavar="GRF.mot",
                    help="ground-force file for --cycle when there is no ExternalLoads file (the foot's vertical "
-                   "force column is found by the documented name rule of musclemetab.analysis.events.read_grf)")
+                   "force column is found by the documented name rule of musclemetab.events.read_grf)")
     p.add_argument("--grf-column", metavar="COLUMN",
                    help="with --grf: the solved foot's vertical force column (default: the name rule)")
     p.add_argument("--grf-threshold", type=float, metavar="N",
@@ -156,7 +156,7 @@ def add_solve_parser(subparsers) -> argparse.ArgumentParser:
     g.add_argument("--muscle-properties", metavar="FILE",
                    help="CSV of per-muscle overrides of mass and slow-twitch fraction (docs/muscles.md)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    p.set_defaults(func=solve_command)
+    p.set_defaults(func=run)
     return p
 
 
@@ -168,17 +168,17 @@ def add_emg_goal_arguments(p, mode_help: str, weight_help: str) -> None:
     p.add_argument("--emg-weight", type=float, help=weight_help)
 
 
-def solve_command(args) -> int:
+def run(args) -> int:
     """Run ``musclemetab solve`` with parsed arguments; returns the exit status.
 
     Raises a :class:`~musclemetab.errors.MusclemetabError` on bad input and
     :class:`~musclemetab.errors.SolverError` when IPOPT did not converge (after writing the
     folder with ``success: false``).
     """
-    from .problem import failure_advice
-    from .solve import solve_sides
-    from .window import parse_cycle, parse_window
-    from .workflows import parse_tendon_stiffness
+    from ..redundancy.ipopt import failure_advice
+    from ..redundancy.run import solve_sides, write_solution_folder
+    from ..redundancy.window import parse_cycle, parse_window
+    from ..redundancy.workflows import parse_tendon_stiffness
 
     from ..io import check_output_folder
 
@@ -225,7 +225,7 @@ def solve_command(args) -> int:
         options = options.with_(fiber_dynamics=args.fiber_dynamics)
     warm = None
     if args.warm_start:
-        from .solution import Solution
+        from ..redundancy.solution import Solution
 
         warm = Solution.load(args.warm_start)
     sides = ("r", "l") if args.side == "both" else (args.side,)
@@ -275,7 +275,7 @@ _ENERGY_OPTIONS = (("--energy-weight", "energy_weight"), ("--effort-weight", "ef
 
 def _energy_goal(args):
     """The :class:`.energy.EnergyGoal` of the command line, or ``None`` without ``--energy-model``."""
-    from .energy import ENERGY_SMOOTHING, EnergyGoal
+    from ..redundancy.energy import ENERGY_SMOOTHING, EnergyGoal
 
     given = [o for o, attr in _ENERGY_OPTIONS if getattr(args, attr, None) is not None]
     if getattr(args, "energy_model", None) is None:
@@ -313,7 +313,7 @@ def _energy_note(summary) -> str:
 
 def _solver_options(args):
     """The ``SolverOptions`` of the command line (the linear solver checked before any work)."""
-    from .problem import SolverOptions
+    from ..redundancy.ipopt import SolverOptions
 
     try:
         return SolverOptions(max_iter=args.max_iter, print_level=args.print_level,
@@ -323,7 +323,7 @@ def _solver_options(args):
 
 
 def _bound_note(solution) -> str:
-    from .solve import muscles_at_fiber_length_bound
+    from ..redundancy.solve import muscles_at_fiber_length_bound
 
     at = muscles_at_fiber_length_bound(solution)
     if not at:
@@ -331,18 +331,6 @@ def _bound_note(solution) -> str:
     return (f" Fibers at their longest allowed length (1.7 optimal lengths, or their longest rigid-tendon length "
             f"plus 0.05): {', '.join(at)}; if the model's tendon slack length is too short for them, leave them out "
             f"with --exclude-muscles {' '.join(at)}.")
-
-
-def write_solution_folder(solution, out) -> None:
-    """Write a solution; inverse dynamics computed by OpenSim goes beside it as ``inverse_dynamics.sto``."""
-    from pathlib import Path
-
-    from ..io import atomic_write_bytes
-
-    solution.write(out)
-    if "inverse_dynamics" in solution.summary:
-        src = Path(solution.summary["inputs"]["id"])
-        atomic_write_bytes(Path(out) / "inverse_dynamics.sto", src.read_bytes())
 
 
 def _as_list(value) -> list:
@@ -358,9 +346,10 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
     all trials, then the files."""
     from dataclasses import replace
 
-    from .emg_ten import EmgTenSettings, informed_settings, solve_emg_ten
-    from .problem import failure_advice
-    from .workflows import parse_tendon_stiffness
+    from ..redundancy.emg_ten import EmgTenSettings, informed_settings
+    from ..redundancy.run import emg_mappings_of_legs, solve_emg_ten
+    from ..redundancy.ipopt import failure_advice
+    from ..redundancy.workflows import parse_tendon_stiffness
 
     if not idf:
         raise OptionError("EMG problems need --id: one inverse-dynamics file per trial, in the order of --ik")
@@ -395,7 +384,7 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
         raise OptionError("--workflow emg-ten needs --emg: one processed EMG file per trial, in the order of --ik")
     dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else None
     options = _solver_options(args)
-    legs = _leg_mappings(args, ik, dofs)
+    legs = emg_mappings_of_legs(args.model, ik[0], args.emg_mapping, args.side, dofs, args.cache_dir)
     # every leg is solved before anything is written
     results = {side: solve_emg_ten(
         args.model, ik, idf, emg, emg_mapping=mapping, labels=args.labels,
@@ -414,45 +403,11 @@ def _leg_out(args, side: str):
     return Path(args.out) / side if args.side == "both" else Path(args.out)
 
 
-def _leg_mappings(args, ik: list, dofs) -> dict:
-    """``{side: EMG mapping}`` of the legs to solve. With ``--side both`` the mapping must be a
-    ``{muscle: [channels]}`` JSON file naming the muscles of both legs (the named mappings are
-    one leg's electrodes); each leg takes the entries of its muscles (those spanning its DOFs,
-    as its problem selects them)."""
-    from ..errors import UnknownMuscleError
-    from ..geometry import compute_geometry
-    from .emg_inputs import resolve_emg_mapping
-
-    named = args.emg_mapping is None or str(args.emg_mapping).strip().lower() in ("default", "authors")
-    if args.side != "both":
-        return {args.side: args.emg_mapping or "default"}
-    if named:
-        raise OptionError("--side both with EMG needs --emg-mapping MAP.json: a JSON object naming each leg's "
-                          "muscles and their EMG channels, e.g. {\"soleus_r\": [\"SOL_R\"], \"soleus_l\": "
-                          "[\"SOL_L\"]} (the named mappings are one leg's electrodes)")
-    if dofs:
-        raise OptionError("--dofs names one leg's DOFs; with --side both leave it out (each leg's DOFs are discovered)")
-    mapping = resolve_emg_mapping(args.emg_mapping)
-    legs, placed = {}, set()
-    for side in ("r", "l"):
-        muscles = set(compute_geometry(args.model, ik[0], side=side, cache_dir=args.cache_dir).muscles)
-        legs[side] = {m: c for m, c in mapping.items() if m in muscles}
-        placed |= set(legs[side])
-        if not legs[side]:
-            raise UnknownMuscleError(f"--emg-mapping {args.emg_mapping} names no muscle of the "
-                                     f"{'right' if side == 'r' else 'left'} leg; map its muscles to their channels")
-    unplaced = sorted(set(mapping) - placed)
-    if unplaced:
-        raise UnknownMuscleError(f"--emg-mapping {args.emg_mapping}: {', '.join(unplaced)} in neither leg's "
-                                 "muscles; check the names")
-    return legs
-
-
 def _write_emg_ten(args, result, out, side: str) -> None:
     """Write one leg's EMG-TEN result and its personalised model to ``out``, then say what it found
     (:class:`SolverError` after writing when it did not converge)."""
-    from .estimate import write_personalised_model
-    from .problem import failure_advice
+    from ..redundancy.estimate import write_personalised_model
+    from ..redundancy.ipopt import failure_advice
 
     result.write(out)
     r = result.record
@@ -486,16 +441,17 @@ def _write_emg_ten(args, result, out, side: str) -> None:
 def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> int:
     """An effort workflow's EMG-informed solve of one or more trials: one trial is written to
     ``--out`` as a solution folder; several as one folder per trial and ``parameters.json``."""
-    from .emg_ten import emg_failure, solve_emg_ten
-    from .problem import SolverOptions
+    from ..redundancy.emg_ten import emg_failure
+    from ..redundancy.run import emg_mappings_of_legs, solve_emg_ten
 
     emg = _as_list(args.emg)
     dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else None
-    legs = _leg_mappings(args, ik, dofs)
+    options = _solver_options(args)  # the linear solver checked before any work
+    legs = emg_mappings_of_legs(args.model, ik[0], args.emg_mapping, args.side, dofs, args.cache_dir)
     results = {side: solve_emg_ten(
         args.model, ik, idf, emg, emg_mapping=mapping, labels=args.labels,
         passive=args.passive, dofs=dofs, side=side,
-        options=SolverOptions(max_iter=args.max_iter, print_level=args.print_level),
+        options=options,
         cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, settings=settings,
         workflow=args.workflow, tendon_stiffness=tendon_stiffness,
     ) for side, mapping in legs.items()}

@@ -1,0 +1,121 @@
+"""``musclemetab estimate``: muscle-tendon parameters from measured fiber lengths and/or EMG
+over trials (EMG: the goals of ``--emg-mode``, the EMG scale factors estimated with the others,
+coupled as in EMG-TEN).
+
+Writes ``DIR/<trial>/`` (the solutions with the estimates), ``DIR/parameters.json``,
+``DIR/<model>_personalised.osim`` and, with ``--validate``, ``DIR/validation/<trial>/``: the
+effort problem re-solved with the estimated parameters.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from ..errors import OptionError
+
+__all__ = ["add_parser", "run", "parse_assignments"]
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    from .solve import add_emg_goal_arguments
+
+    p = subparsers.add_parser(
+        "estimate", help="estimate tendon stiffness, optimal fiber and tendon slack lengths from fiber lengths",
+        description="Estimate scale factors of the tendon stiffness, optimal fiber length and tendon slack length "
+        "of named muscles over one or more trials, tracking measured fiber lengths (ultrasound), with the "
+        "effort goals of a workflow; writes the solutions, parameters.json and <model>_personalised.osim.")
+    p.add_argument("--model", required=True, metavar="M.osim")
+    p.add_argument("--ik", required=True, nargs="+", metavar="IK.mot", help="one per trial")
+    p.add_argument("--id", required=True, nargs="+", metavar="ID.sto", help="one per trial, same order")
+    p.add_argument("--ultrasound", nargs="+", metavar="US.mot",
+                   help="measured fiber lengths, one file per trial: time in s, one column per muscle in mm")
+    p.add_argument("--emg", nargs="+", metavar="EMG.mot",
+                   help="processed, normalised EMG envelopes, one file per trial, same order as --ik (with or "
+                   "without --ultrasound; at least one of the two)")
+    p.add_argument("--emg-mapping", metavar="default|authors|MAP.json",
+                   help="EMG channels of the muscles, as for solve (default: default)")
+    add_emg_goal_arguments(
+        p, "with --emg: 'constrained' (each tracked excitation within --emg-tolerance of its scaled EMG, plus the "
+        "tracking cost; the default), 'driven' (equal to its scaled EMG) or 'tracking' (the cost only)",
+        "weight of the EMG tracking cost (default 10; also --weights emg=W)")
+    p.add_argument("--estimate", required=True, nargs="+", metavar="KIND=MUSCLE[,MUSCLE...]",
+                   help="kinds: tendon_stiffness, optimal_fiber_length, tendon_slack_length")
+    p.add_argument("--couple", nargs="+", default=[], metavar="MUSCLE,MUSCLE[,...]",
+                   help="muscles sharing one factor of every estimated kind")
+    p.add_argument("--bounds", nargs="+", default=[], metavar="KIND=LOW:HIGH",
+                   help="bounds of the factors (default tendon_stiffness 0.1:2, lengths 0.5:1.5, emg_scale "
+                   "0.05:2.5; emg_scale=1:1 takes the EMG as it is)")
+    p.add_argument("--weights", metavar="NAME=W[,...]",
+                   help="activation, reserve, velocity (default: the workflow's), fiber_length (default 100), "
+                   "emg (default 10)")
+    p.add_argument("--workflow", default="effort-cal", choices=("effort-gen", "effort-cal", "effort-ten"),
+                   help="muscle parameters and effort weights (default effort-cal)")
+    p.add_argument("--passive", metavar="FILE", help="calibrated passive parameters (as for solve)")
+    p.add_argument("--side", default="r", choices=("r", "l"), help="leg whose muscles are estimated (default r)")
+    p.add_argument("--dofs", nargs="+", metavar="DOF",
+                   help="degrees of freedom (default: the side's unlocked coordinates that the inverse dynamics "
+                   "holds, as for solve)")
+    p.add_argument("--labels", nargs="+", metavar="NAME", help="trial names (default: the IK file stems)")
+    p.add_argument("--validate", action="store_true",
+                   help="re-solve each trial with the estimates and the effort goals only (DIR/validation)")
+    p.add_argument("--cache-dir", metavar="DIR")
+    p.add_argument("--max-iter", type=int, default=10000)
+    p.add_argument("--out", required=True, metavar="DIR")
+    p.set_defaults(func=run)
+    return p
+
+
+def parse_assignments(items, what: str, value=str) -> dict:
+    """``["key=value", ...]`` (or one comma-separated string for numbers) as a dict."""
+    out = {}
+    for item in items:
+        key, sep, val = item.partition("=")
+        if not sep or not key.strip() or not val.strip():
+            raise OptionError(f"{what}: '{item}' is not NAME=VALUE")
+        try:
+            out[key.strip()] = value(val.strip())
+        except ValueError:
+            raise OptionError(f"{what}: the value of '{key.strip()}' ({val.strip()!r}) is not valid") from None
+    return out
+
+
+def _bounds(text: str) -> tuple[float, float]:
+    lo, sep, hi = text.partition(":")
+    if not sep:
+        raise ValueError(text)
+    return float(lo), float(hi)
+
+
+def run(args) -> int:
+    """Run ``musclemetab estimate`` with parsed arguments: the options read, then
+    :func:`~musclemetab.redundancy.run.estimate_files`; prints one line."""
+    from ..redundancy.run import estimate_files
+
+    us_files, emg_files = args.ultrasound or [], getattr(args, "emg", None) or []
+    emg_options = [o for o, v in (("--emg-mapping", args.emg_mapping), ("--emg-mode", args.emg_mode),
+                                  ("--emg-weight", args.emg_weight)) if v is not None]
+    if emg_options and not emg_files:
+        raise OptionError(f"{', '.join(emg_options)} need EMG: give --emg files, or drop them")
+    weights = parse_assignments(args.weights.split(",") if args.weights else [], "--weights", float)
+    if args.emg_weight is not None:
+        weights["emg"] = args.emg_weight
+    result = estimate_files(
+        args.model, args.ik, args.id, args.out,
+        estimate=parse_assignments(args.estimate, "--estimate", lambda v: [m for m in v.split(",") if m]),
+        ultrasound=us_files, emg=emg_files, labels=args.labels,
+        couple=[[m for m in g.split(",") if m] for g in args.couple],
+        bounds=parse_assignments(args.bounds, "--bounds", _bounds), weights=weights, workflow=args.workflow,
+        side=args.side, dofs=args.dofs, emg_mode=args.emg_mode, emg_mapping=args.emg_mapping,
+        emg_tolerance=args.emg_tolerance, passive=args.passive, max_iter=args.max_iter, validate=args.validate,
+        cache_dir=args.cache_dir,
+    )
+    values = ", ".join(f"{k} {m} x{v:.4f}" for k, by in result.factors.items() if k != "emg_scale"
+                       for m, v in by.items())
+    if result.emg_scale:
+        values += "; EMG scale " + ", ".join(f"{m} {v:.3g}" for m, v in result.emg_scale.items())
+    record = result.run_record
+    print(f"estimate: {len(result.labels)} trial(s), {record.status} in {record.iterations} iterations; {values} -> "
+          f"{args.out}")
+    return 0
+
+

@@ -1,0 +1,632 @@
+"""The pipeline from files to results: the one way the command line, the study and Python
+users solve.
+
+* :func:`solve_files` / :func:`solve_sides`: one trial with an effort workflow (model, IK, ID or
+  ground forces; window or gait cycle), a :class:`~.solution.Solution`;
+* :func:`solve_emg_ten`: EMG-TEN, or an effort workflow's EMG-informed solve, over one or more
+  trials, a :class:`~.result.Result`;
+* :func:`estimate_files`: muscle-tendon parameters from fiber lengths and/or EMG over trials,
+  written to a folder, a :class:`~.result.Result`;
+* :func:`write_solution_folder`: a solution and the inverse dynamics computed for it;
+* :func:`emg_mappings_of_legs`: the EMG mapping of each leg of an EMG problem of both legs.
+
+Each reads and checks its files before OpenSim is asked anything, gets the geometry from
+:func:`musclemetab.geometry.compute_geometry` (OpenSim in its own worker process) and solves
+with the array-level functions of :mod:`.solve` and :mod:`.emg_pipeline`.
+"""
+
+from __future__ import annotations
+
+import os
+import time as _time
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from ..errors import OptionError
+from ..processes import BackgroundCall
+from ._docs import fill_doc
+from .emg_inputs import (
+    check_emg_range,
+    check_emg_window,
+    mapped_emg_table,
+    one_model,
+    path_list,
+    resolve_emg_mapping,
+    trial_labels,
+)
+from .emg_pipeline import solve_emg_ten_arrays
+from .emg_ten import EmgTenSettings
+from .result import EMG_TEN, ESTIMATE_FORMAT, Result
+from .inputs import (
+    MESH_FREQUENCY_HZ,
+    GeometryArrays,
+    check_id_coordinates,
+    check_moments_per_body_mass,
+    check_time_ranges,
+    read_inverse_dynamics,
+    read_kinematics,
+)
+from .ipopt import SolverOptions
+from .solution import Solution
+from .solve import solve_trial
+from .workflows import PassiveParameters, check_workflow_options, read_passive_parameters, read_tendon_stiffness_json
+
+__all__ = ["solve_files", "solve_sides", "solve_emg_ten", "emg_mappings_of_legs", "estimate_files",
+           "write_solution_folder", "WEIGHT_NAMES", "EMG_SCALE_BOUNDS"]
+
+WEIGHT_NAMES = {"activation": "w_activation", "reserve": "w_reserve", "velocity": "w_velocity",
+                "fiber_length": "w_fiber_length", "emg": "w_emg"}
+#: default bounds of the EMG scale factors (those of EMG-TEN)
+EMG_SCALE_BOUNDS = (0.05, 2.5)
+
+
+
+@fill_doc
+def solve_files(
+    model_path: str | os.PathLike,
+    ik_path: str | os.PathLike,
+    id_path: str | os.PathLike | None,
+    workflow: str = "effort-gen",
+    *,
+    dofs: Sequence[str] | None = None,
+    side: str = "r",
+    window: tuple[float, float] | None = None,
+    cycle: str | int | None = None,
+    external_loads: str | os.PathLike | None = None,
+    grf: str | os.PathLike | None = None,
+    grf_column: str | None = None,
+    grf_threshold_N: float | None = None,
+    mesh_frequency_hz: float = MESH_FREQUENCY_HZ,
+    passive=None,
+    tendon_stiffness: Mapping[str, float] | None = None,
+    tendon_stiffness_file=None,
+    options: SolverOptions | None = None,
+    cache_dir: str | os.PathLike | None = None,
+    check_units: bool = True,
+    warm_start: Solution | None = None,
+    exclude_muscles: Sequence[str] = (),
+    exclude_missing_ok: bool = False,
+) -> Solution:
+    """Solve from files: model ``.osim``, IK ``.mot`` and ID ``.sto`` (or ground forces).
+
+    ``side`` (``"r"``/``"l"``) chooses the leg; ``dofs`` default to the DOFs discovered from
+    the model for that side (:func:`musclemetab.layout.discover_dofs`). The window is the IK
+    file, ``window=(T0, T1)`` or ``cycle="auto"|N`` (:mod:`.window`; the foot's force from
+    ``external_loads`` or from ``grf``, column ``grf_column``, contact above ``grf_threshold_N``,
+    default 20 N). With ``id_path=None``
+    and ``external_loads`` (an OpenSim ExternalLoads file), the inverse dynamics is computed
+    by OpenSim over the window (:func:`musclemetab.external_loads.compute_inverse_dynamics`);
+    its path is ``solution.summary["inputs"]["id"]``. The mesh has ``mesh_frequency_hz``
+    intervals per second (the study's 100 by default). ``exclude_muscles`` leaves muscles out of
+    the problem (e.g. one whose fiber cannot reach force equilibrium within the bounds).
+
+    The inputs are checked (columns, units, time ranges) before the geometry is computed.
+
+    Parameters
+    ----------
+    %(model)s
+    ik_path, id_path
+        The IK ``.mot`` and ID ``.sto`` files (``id_path=None``: from ``external_loads``).
+    workflow
+        ``effort-gen``, ``effort-cal`` or ``effort-ten`` (:mod:`.workflows`).
+    %(side_dofs)s
+    %(passive)s
+    tendon_stiffness, tendon_stiffness_file
+        EFFORT-TEN's tendon stiffness (:func:`.workflows.workflow_parameters`).
+    %(options)s
+    %(cache_dir)s
+    %(check_units)s
+    """
+    from ..layout import check_dofs_in_model, check_side, discover_dofs, read_layout
+    from .window import frames_in_window, resolve_window
+
+    check_side(side)
+    if not (mesh_frequency_hz > 0 and np.isfinite(mesh_frequency_hz)):
+        raise OptionError(f"--mesh-frequency must be a positive number of intervals per second, not {mesh_frequency_hz!r}")
+    # Cheap checks of the options and parameter files first.
+    wf = check_workflow_options(workflow, passive, tendon_stiffness, tendon_stiffness_file)
+    if passive is not None and not isinstance(passive, PassiveParameters):
+        passive = read_passive_parameters(passive)
+    if tendon_stiffness_file is not None:
+        read_tendon_stiffness_json(tendon_stiffness_file)
+    if id_path is None and external_loads is None:
+        raise OptionError("give the inverse dynamics (--id ID.sto) or the ground forces to compute it "
+                          "(--external-loads GRF.xml)")
+    # Model parameters and geometry come from the on-disk cache when it holds them: no
+    # OpenSim work at all then. Otherwise the OpenSim worker is started as soon as it is
+    # known to be needed, so that its start-up overlaps with reading the files and the
+    # imports of pandas and CasADi; the model parameters are asked for in a
+    # background thread.
+    from ..geometry import compute_geometry, geometry_is_cached
+    from ..model import model_is_cached
+    from ..opensim_bridge import start_in_background
+
+    model_cached = model_is_cached(model_path, cache_dir)
+    if not model_cached:
+        start_in_background()
+    params_request = None if model_cached else BackgroundCall(_read_model_parameters, model_path, cache_dir)
+    layout = read_layout(model_path, cache_dir=cache_dir)
+    loads = None
+    if external_loads is not None:
+        from ..external_loads import read_external_loads
+
+        loads = read_external_loads(external_loads)
+        loads.check_bodies(layout)
+    from ..io import read_table
+
+    # Each input file is read once; the tables go on to the window, the checks and the geometry.
+    id_table = id_columns = None
+    if id_path is not None:
+        id_table = read_table(id_path)
+        id_columns = list(id_table.columns)
+        check_id_coordinates(id_path, id_columns, layout)
+    if dofs:
+        dofs = tuple(dofs)
+        check_dofs_in_model(layout, dofs)
+    else:
+        dofs = tuple(discover_dofs(layout, side, id_columns))
+    if model_cached and (id_path is None or not geometry_is_cached(model_path, ik_path, list(dofs),
+                                                                   cache_dir=cache_dir)):
+        start_in_background()
+    ik_table = read_table(ik_path)
+    trial_window = resolve_window(ik_table, side=side, window=window, cycle=cycle, id_path=id_table,
+                                  external_loads=loads, grf_path=grf, layout=layout, grf_column=grf_column,
+                                  grf_threshold_N=grf_threshold_N)
+    id_record = None
+    if id_path is None:
+        from ..external_loads import ID_COORDINATE_FILTER_HZ, compute_inverse_dynamics
+
+        id_path = compute_inverse_dynamics(model_path, ik_path, loads, trial_window.start_s, trial_window.end_s)
+        id_table = read_table(id_path)
+        id_record = {"computed_by": "OpenSim InverseDynamicsTool (muscles excluded)",
+                     "coordinate_lowpass_hz": ID_COORDINATE_FILTER_HZ, "external_loads": str(loads.path),
+                     "ground_force_data": str(loads.datafile)}
+    ik_time, _ = read_kinematics(ik_table, dofs, check_units=check_units)
+    id_time, id_moments = read_inverse_dynamics(id_table, dofs)
+    keep = frames_in_window(ik_time, trial_window)
+    ik_time = ik_time[keep]
+    check_time_ranges(ik_time, id_time, ik_path, id_path)
+
+    t0 = _time.perf_counter()
+    geometry = compute_geometry(model_path, ik_table, dofs=list(dofs), side=side, cache_dir=cache_dir)
+    if keep.size != len(geometry.time):
+        geometry = GeometryArrays(np.asarray(geometry.time)[keep], geometry.muscles, geometry.dofs,
+                             np.asarray(geometry.lmt_m)[keep], np.asarray(geometry.moment_arms_m)[keep])
+    if exclude_muscles:
+        from ..errors import UnknownMuscleError
+
+        unknown = [m for m in exclude_muscles if m not in geometry.muscles]
+        exclude_muscles = [m for m in exclude_muscles if m in geometry.muscles]
+        if unknown and not exclude_missing_ok:
+            raise UnknownMuscleError(
+                f"--exclude-muscles: {', '.join(unknown)} {'is' if len(unknown) == 1 else 'are'} not among the "
+                f"muscles of the problem ({', '.join(geometry.muscles[:8])}, ...); check the names and the side"
+            )
+        kept = [i for i, m in enumerate(geometry.muscles) if m not in set(exclude_muscles)]
+        geometry = GeometryArrays(np.asarray(geometry.time), [geometry.muscles[i] for i in kept], geometry.dofs,
+                             np.asarray(geometry.lmt_m)[:, kept], np.asarray(geometry.moment_arms_m)[:, :, kept])
+    t_geometry = _time.perf_counter() - t0
+    import casadi  # noqa: F401  (imported while the worker answers)
+
+    model_parameters = (params_request.result() if params_request is not None
+                        else _read_model_parameters(model_path, cache_dir))
+    if check_units:
+        from ..model import read_model
+
+        check_moments_per_body_mass(id_moments, dofs, read_model(model_path, cache_dir=cache_dir).body_mass_kg, id_path, model_path)
+    sources = {"model": Path(model_path), "ik": Path(ik_path), "id": Path(id_path)}
+    if loads is not None:
+        sources["external_loads"] = loads.path
+    solution = solve_trial(
+        geometry, model_parameters, id_time, id_moments, wf,
+        ik_time_s=ik_time, passive=passive, tendon_stiffness=tendon_stiffness,
+        tendon_stiffness_file=tendon_stiffness_file, options=options, sources=sources,
+        check_units=check_units, warm_start=warm_start, mesh_frequency_hz=mesh_frequency_hz,
+    )
+    solution.summary["geometry_time_s"] = t_geometry
+    solution.summary["side"] = side
+    if exclude_muscles:
+        solution.summary["excluded_muscles"] = list(exclude_muscles)
+    if trial_window.source != "inverse-kinematics file":
+        solution.summary["window"] = trial_window.record()
+    if id_record is not None:
+        solution.summary["inverse_dynamics"] = id_record
+    return solution
+
+
+def _solve_files_recording_warnings(args, kwargs):
+    """:func:`solve_files` in a pool worker: the solution and the warnings it raised."""
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        solution = solve_files(*args, **kwargs)
+    return solution, [(w.category, str(w.message)) for w in caught]
+
+
+def solve_sides(model_path, ik_path, id_path, workflow: str = "effort-gen", *, sides=("r", "l"), workers: int = 1,
+                **kwargs) -> dict:
+    """:func:`solve_files` for each leg of ``sides``: ``{side: Solution}`` in the order of ``sides``.
+
+    The legs are independent problems. With ``workers`` > 1 they are solved in a pool of
+    ``min(workers, len(sides))`` processes (:func:`musclemetab.processes.spawn_pool`), each
+    with its own OpenSim worker; the warnings of a leg are raised again here, in the order of
+    ``sides``, and its errors as if it had been solved in this process. The solutions are the
+    same either way (``tests/test_gait2392.py``; time: ``benchmarks/sides.py``).
+    """
+    import warnings
+
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise OptionError(f"--workers must be a whole number of at least 1, not {workers!r}")
+    sides = tuple(sides)
+    if workers == 1 or len(sides) == 1:
+        return {side: solve_files(model_path, ik_path, id_path, workflow, side=side, **kwargs) for side in sides}
+    from ..processes import spawn_pool
+
+    pool, restore = spawn_pool(min(workers, len(sides)))
+    try:
+        futures = {side: pool.submit(_solve_files_recording_warnings, (model_path, ik_path, id_path, workflow),
+                                     {**kwargs, "side": side}) for side in sides}
+        results = {side: fut.result() for side, fut in futures.items()}
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+        restore()
+    for _, caught in results.values():
+        for category, message in caught:
+            warnings.warn(message, category, stacklevel=2)
+    return {side: solution for side, (solution, _) in results.items()}
+
+
+def _read_model_parameters(model_path, cache_dir=None):
+    from ..model import read_muscle_parameters
+
+    return read_muscle_parameters(model_path, cache_dir=cache_dir)
+
+
+@fill_doc
+def solve_emg_ten(
+    model_path,
+    ik_paths: Sequence[str | os.PathLike],
+    id_paths: Sequence[str | os.PathLike],
+    emg_paths: Sequence[str | os.PathLike],
+    *,
+    emg_mapping="default",
+    labels: Sequence[str] | None = None,
+    passive=None,
+    dofs: Sequence[str] | None = None,
+    side: str = "r",
+    settings: EmgTenSettings | None = None,
+    options: SolverOptions | None = None,
+    cache_dir: str | os.PathLike | None = None,
+    check_units: bool = True,
+    workflow: str = EMG_TEN,
+    tendon_stiffness=None,
+) -> Result:
+    """EMG-TEN from files: one model, and per trial an IK ``.mot``, an ID ``.sto`` and an EMG file.
+
+    Parameters
+    ----------
+    model_path
+        The ``.osim`` model (a list with one path per trial is accepted; they must be the
+        same model).
+    ik_paths, id_paths, emg_paths
+        One file of each per trial, in the same order. EMG files hold processed, normalised
+        envelopes (``musclemetab.emg.read_processed_emg``).
+    %(emg_mapping)s
+    %(labels)s
+    %(passive)s
+    %(side_dofs)s
+    settings
+        :class:`~.emg_ten.EmgTenSettings`: weights, bounds, couplings, EMG mode (default the study's).
+    %(options)s
+    %(cache_dir)s
+    %(check_units)s
+
+    Input errors (package exceptions naming the file, channel or muscle) are raised before
+    OpenSim is started: unequal numbers of IK/ID/EMG files, different models, EMG channels
+    missing for the mapping, EMG not covering a trial's IK window, EMG outside ``[0, 1]`` in
+    the window, besides the IK/ID checks of the single-trial solver (columns, units, time
+    ranges). Muscles of a custom mapping that the model lacks are reported after the geometry.
+    """
+    from ..io import read_table
+    from ..model import read_muscle_parameters
+    from ..processes import BackgroundCall
+    from .workflows import read_passive_parameters
+
+    ik_paths = path_list(ik_paths, "ik_paths")
+    id_paths = path_list(id_paths, "id_paths")
+    emg_paths = path_list(emg_paths, "emg_paths")
+    if not ik_paths:
+        raise OptionError("EMG-TEN needs at least one trial (IK, ID and EMG file)")
+    if not (len(ik_paths) == len(id_paths) == len(emg_paths)):
+        raise OptionError(
+            f"{len(ik_paths)} IK, {len(id_paths)} ID and {len(emg_paths)} EMG files; give one of each per trial, "
+            "in the same order"
+        )
+    model = one_model(model_path, len(ik_paths))
+    labels = trial_labels(ik_paths, labels)
+    mapping = resolve_emg_mapping(emg_mapping)
+    settings = settings or EmgTenSettings()
+    if passive is not None and not hasattr(passive, "for_muscles"):
+        passive = read_passive_parameters(passive)
+    # each file is read once; every file is checked before OpenSim is asked anything
+    id_tables = [read_table(p) for p in id_paths]
+    dofs = _trial_dofs(model, id_tables, dofs, side, cache_dir)
+    id_data, emg_tables, ik_times, ik_tables = [], [], [], []
+    for ik, idp, id_table, emg, lab in zip(ik_paths, id_paths, id_tables, emg_paths, labels):
+        ik_tables.append(read_table(ik))
+        ik_time, _ = read_kinematics(ik_tables[-1], dofs, check_units=check_units)
+        id_time, id_moments = read_inverse_dynamics(id_table, dofs)
+        check_time_ranges(ik_time, id_time, ik, idp)
+        table = mapped_emg_table(emg, mapping, f"EMG of trial {lab}")
+        what = str(table.attrs.get("path", f"EMG of trial {lab}"))
+        check_emg_window(table, ik_time, what, str(ik))
+        check_emg_range(table, float(ik_time[0]), float(ik_time[-1]), settings.emg_range_tolerance, what)
+        id_data.append((id_time, id_moments))
+        emg_tables.append(table)
+        ik_times.append(ik_time)
+    params_request = BackgroundCall(read_muscle_parameters, model)
+    from ..geometry import compute_geometry
+
+    t0 = _time.perf_counter()
+    geometries = [compute_geometry(model, ik, dofs=list(dofs), side=side, cache_dir=cache_dir) for ik in ik_tables]
+    t_geometry = _time.perf_counter() - t0
+    model_parameters = params_request.result()
+    if check_units:
+        from ..model import read_model
+        from .inputs import check_moments_per_body_mass
+
+        mass = read_model(model).body_mass_kg
+        for (_, moments), idp in zip(id_data, id_paths):
+            check_moments_per_body_mass(moments, dofs, mass, idp, model)
+    sources = [{"model": Path(model), "ik": Path(ik), "id": Path(idp),
+                "emg": Path(emg) if isinstance(emg, (str, os.PathLike)) else f"EMG table of trial {lab}"}
+               for ik, idp, emg, lab in zip(ik_paths, id_paths, emg_paths, labels)]
+    result = solve_emg_ten_arrays(
+        geometries, model_parameters, id_data, emg_tables, labels=labels, ik_times=ik_times, passive=passive,
+        emg_mapping=mapping, settings=settings, options=options, sources=sources, check_units=check_units,
+        workflow=workflow, tendon_stiffness=tendon_stiffness,
+    )
+    result.record["geometry_time_s"] = t_geometry
+    result.record["side"] = side
+    for solution in result.solutions.values():  # as the single-trial solve's summary records it
+        solution.summary["side"] = side
+    return result
+
+
+def emg_mappings_of_legs(model, ik_path, emg_mapping, side: str, dofs=None, cache_dir=None) -> dict:
+    """``{side: EMG mapping}`` of the legs to solve (``side`` ``"r"``, ``"l"`` or ``"both"``).
+    With both legs the mapping must be a ``{muscle: [channels]}`` JSON file naming the muscles of
+    both legs (the named mappings are one leg's electrodes); each leg takes the entries of its
+    muscles (those spanning its DOFs, as its problem selects them, from the geometry of
+    ``ik_path``)."""
+    from ..errors import UnknownMuscleError
+    from ..geometry import compute_geometry
+
+    named = emg_mapping is None or str(emg_mapping).strip().lower() in ("default", "authors")
+    if side != "both":
+        return {side: emg_mapping or "default"}
+    if named:
+        raise OptionError("--side both with EMG needs --emg-mapping MAP.json: a JSON object naming each leg's "
+                          "muscles and their EMG channels, e.g. {\"soleus_r\": [\"SOL_R\"], \"soleus_l\": "
+                          "[\"SOL_L\"]} (the named mappings are one leg's electrodes)")
+    if dofs:
+        raise OptionError("--dofs names one leg's DOFs; with --side both leave it out (each leg's DOFs are discovered)")
+    mapping = resolve_emg_mapping(emg_mapping)
+    legs, placed = {}, set()
+    for leg in ("r", "l"):
+        muscles = set(compute_geometry(model, ik_path, side=leg, cache_dir=cache_dir).muscles)
+        legs[leg] = {m: c for m, c in mapping.items() if m in muscles}
+        placed |= set(legs[leg])
+        if not legs[leg]:
+            raise UnknownMuscleError(f"--emg-mapping {emg_mapping} names no muscle of the "
+                                     f"{'right' if leg == 'r' else 'left'} leg; map its muscles to their channels")
+    unplaced = sorted(set(mapping) - placed)
+    if unplaced:
+        raise UnknownMuscleError(f"--emg-mapping {emg_mapping}: {', '.join(unplaced)} in neither leg's "
+                                 "muscles; check the names")
+    return legs
+
+
+def _trial_dofs(model, id_files, dofs, side: str, cache_dir) -> tuple[str, ...]:
+    """``dofs`` checked against the model, or the side's DOFs that every ID file (or its table,
+    already read) holds."""
+    from ..io import as_table, table_path
+    from ..layout import check_dofs_in_model, check_side, discover_dofs, read_layout
+
+    check_side(side)
+    layout = read_layout(model, cache_dir=cache_dir)
+    common = None
+    for source in id_files:
+        columns = list(as_table(source).columns)
+        check_id_coordinates(table_path(source), columns, layout)
+        common = [c for c in columns if common is None or c in common]
+    if dofs:
+        dofs = tuple(dofs)
+        check_dofs_in_model(layout, dofs)
+        return dofs
+    return tuple(discover_dofs(layout, side, common))
+
+
+def write_solution_folder(solution, out) -> None:
+    """Write a solution; inverse dynamics computed by OpenSim goes beside it as ``inverse_dynamics.sto``."""
+    from pathlib import Path
+
+    from ..io import atomic_write_bytes
+
+    solution.write(out)
+    if "inverse_dynamics" in solution.summary:
+        src = Path(solution.summary["inputs"]["id"])
+        atomic_write_bytes(Path(out) / "inverse_dynamics.sto", src.read_bytes())
+
+
+
+@fill_doc
+def estimate_files(
+    model, ik, id, out, *, estimate, ultrasound=(), emg=(), labels=None, couple=(), bounds=None, weights=None,
+    workflow: str = "effort-cal", side: str = "r", dofs=None, emg_mode: str | None = None,
+    emg_mapping: str | None = None, emg_tolerance: float = 0.01, passive=None, max_iter: int = 10000,
+    validate: bool = False, cache_dir=None,
+) -> Result:
+    """Estimate muscle-tendon parameters over trials from files, and write them to ``out``.
+
+    ``ik``, ``id`` and ``ultrasound`` / ``emg`` hold one file per trial, in the same order (at
+    least one kind of measurement). ``estimate`` maps a kind (``tendon_stiffness``,
+    ``optimal_fiber_length``, ``tendon_slack_length``) to its muscles; ``couple`` lists
+    muscles sharing one factor; ``bounds`` maps a kind (or ``emg_scale``) to ``(low, high)``;
+    ``weights`` maps ``activation``, ``reserve``, ``velocity``, ``fiber_length`` and ``emg`` to
+    their weights (defaults: the workflow's, 100 and 10). The other options are those of
+    ``musclemetab estimate`` (``docs/problem.md``). Writes ``out/<trial>/``,
+    ``out/parameters.json``, ``out/<model>_personalised.osim`` and with ``validate``
+    ``out/validation/<trial>/``; raises :class:`~musclemetab.errors.SolverError` (after
+    writing) when the solve did not converge.
+
+    Parameters
+    ----------
+    %(model)s
+    %(labels)s
+    %(passive)s
+    %(side_dofs)s
+    emg_mapping
+        As for :func:`solve_emg_ten` (default ``"default"``).
+    %(cache_dir)s
+    """
+    from ..io import check_output_folder
+    from .bounds import fiber_length_bounds_record
+    from .transcription import Goals, ParameterSpec, coupling_pairs
+    from .emg_inputs import emg_at_nodes, mapping_for_muscles, resolve_emg_mapping, trial_labels
+    from .emg_ten import emg_bound, fiber_scheme
+    from .estimate import (
+        FIELDS,
+        estimate_parameters,
+        fiber_length_trial,
+        parameter_specs,
+        read_fiber_lengths,
+        write_personalised_model,
+    )
+    from .ipopt import SolverOptions
+    from .record import RunRecord
+    from .solution import build_solution
+    from .solve import prepare_trial, solve_with_parameters
+    from .static_opt import initial_guess
+    from .workflows import get_workflow, workflow_parameters
+
+    weights_given = weights
+    check_output_folder(out)
+    ik, id_files = [str(p) for p in ik], [str(p) for p in id]
+    n = len(ik)
+    us_files, emg_files = [str(p) for p in ultrasound or ()], [str(p) for p in emg or ()]
+    if not (us_files or emg_files):
+        raise OptionError("estimate needs measurements: give --ultrasound (fiber lengths) or --emg files, or both")
+    counts = [("--ultrasound", len(us_files)), ("--emg", len(emg_files))]
+    if len(id_files) != n or any(k not in (0, n) for _, k in counts):
+        given = ", ".join(f"{k} {o}" for o, k in counts if k)
+        raise OptionError(f"{n} --ik, {len(id_files)} --id and {given} files; give one of each per trial, in the "
+                          "same order")
+    estimate = {k: list(v) for k, v in estimate.items()}
+    bounds = {k: (float(lo), float(hi)) for k, (lo, hi) in (bounds or {}).items()}
+    bad = [k for k in bounds if k not in (*FIELDS, "emg_scale")]
+    if bad:
+        raise OptionError(f"--bounds: unknown kind '{bad[0]}'; use {', '.join((*FIELDS, 'emg_scale'))}")
+    couple = [list(g) for g in couple]
+    specs = parameter_specs(estimate, couple, bounds)
+    wf = get_workflow(workflow)
+    weights = {"w_activation": wf.w_activation, "w_reserve": wf.w_reserve, "w_velocity": wf.w_velocity,
+               "w_fiber_length": 100.0, "w_emg": 10.0 if emg_files else 0.0}
+    for k, v in (weights_given or {}).items():
+        if k not in WEIGHT_NAMES:
+            raise OptionError(f"--weights: unknown weight '{k}'; use {', '.join(WEIGHT_NAMES)}")
+        weights[WEIGHT_NAMES[k]] = float(v)
+    mode = emg_mode or "constrained"
+    if emg_files:
+        if not (emg_tolerance >= 0):
+            raise OptionError(f"--emg-tolerance must be a non-negative number, not {emg_tolerance}")
+        if mode == "tracking" and not weights["w_emg"] > 0:
+            raise OptionError("--emg-mode tracking needs a positive EMG weight (--emg-weight)")
+    tolerance = emg_bound(mode, emg_tolerance) if emg_files else None
+    fiber_dynamics = fiber_scheme(mode if emg_files else None)
+    goals = Goals(**weights, emg_tolerance=tolerance, fiber_dynamics=fiber_dynamics)
+    labels = trial_labels(ik, labels)
+    measured = [read_fiber_lengths(p) for p in us_files] or [{} for _ in range(n)]
+    mapping = resolve_emg_mapping(emg_mapping or "default") if emg_files else {}
+    emg_muscles = ()
+    options = SolverOptions(max_iter=max_iter, w_activation=goals.w_activation, w_reserve=goals.w_reserve,
+                            w_velocity=goals.w_velocity)
+
+    from ..geometry import compute_geometry
+    from ..io import read_storage
+    from ..model import read_muscle_parameters
+    from ..layout import discover_dofs, read_layout
+    from .inputs import read_inverse_dynamics, read_kinematics
+
+    model_parameters = read_muscle_parameters(model)
+    trials, prepared, params = [], [], None
+    layout = read_layout(model)
+    for i, (ik, idp, lab, us) in enumerate(zip(ik, id_files, labels, measured)):
+        dofs = list(dofs) if dofs else discover_dofs(layout, side, list(read_storage(idp).columns))
+        t_ik, _ = read_kinematics(ik, dofs)
+        t_id, mom = read_inverse_dynamics(idp, dofs)
+        g = compute_geometry(model, ik, dofs=list(dofs), side=side, cache_dir=cache_dir)
+        nominal, wf_record = workflow_parameters(wf, model_parameters, g.muscles, passive=passive)
+        inputs, p, so = prepare_trial(g, nominal, t_id, mom, ik_time_s=t_ik, options=options,
+                                      sources={"model": model, "ik": ik, "id": idp})
+        params = p if params is None else params
+        emg = {}
+        if emg_files:
+            mapping = mapping_for_muscles(emg_mapping or "default", mapping, inputs.muscles)
+            emg_muscles = tuple(sorted(mapping))
+            emg = dict(emg_muscles=emg_muscles,
+                       emg_nodes=emg_at_nodes(emg_files[i], mapping, inputs, emg_muscles, str(emg_files[i]), str(ik)))
+        trials.append(fiber_length_trial(lab, inputs, initial_guess(inputs, p, so), us, **emg))
+        prepared.append((g, nominal, t_id, mom, t_ik))
+    if emg_files:
+        from .emg_ten import EmgTenSettings, settings_for_muscles
+
+        groups = settings_for_muscles(EmgTenSettings(), params.names).emg_groups
+        specs.append(ParameterSpec("emg_scale", emg_muscles, bounds.get("emg_scale", EMG_SCALE_BOUNDS),
+                                   coupling_pairs(groups, emg_muscles, consecutive=False)))
+    res, est = estimate_parameters(trials, params, specs, goals, options=options)
+    run = RunRecord.from_result(res, {"model": model})
+    estimated = est.parameters()
+    emg_record = {}
+    if emg_files:
+        emg_record = {"emg": {"mode": mode, "tolerance": tolerance, "weight": goals.w_emg, "mapping": mapping,
+                              "scale": dict(res.factors.get("emg_scale", {})),
+                              "bounds": list(bounds.get("emg_scale", EMG_SCALE_BOUNDS)),
+                              "max_deviation": {t.label: float(abs(d).max()) if d.size else 0.0
+                                                for t, d in zip(trials, res.emg_deviation)}}}
+    solutions = {}
+    for t, o in zip(trials, res.trials):
+        summary = {**run.to_dict(), **emg_record, "objective_trial": o.objective, "objective_terms": o.objective_terms,
+                   "time_window_s": list(t.inputs.window_s), "n_intervals": t.inputs.n_intervals,
+                   "mesh_step_s": t.inputs.step_s, "optimal_reserve_Nm": options.optimal_reserve_Nm,
+                   "fiber_dynamics": fiber_dynamics,
+                   "fiber_length_bounds": fiber_length_bounds_record(t.inputs, params, specs),
+                   "workflow": {"name": f"{workflow} estimate", "estimate": est.to_dict()["factors"]},
+                   "solver_options": options.to_dict()}
+        solutions[t.label] = build_solution(t.inputs, estimated.subset(t.inputs.muscles), o, summary)
+    doc = {"format": ESTIMATE_FORMAT, "format_version": 1, **est.to_dict(), **emg_record, "solve": run.to_dict(),
+           "trials": labels}
+    if run.success:
+        path, report = write_personalised_model(model, estimated, estimate, out)
+        doc["personalised_model"] = {"path": path.name, "muscles": report}
+    factors = {k: dict(v) for k, v in est.factors.items()}
+    if emg_files:
+        factors["emg_scale"] = dict(res.factors.get("emg_scale", {}))
+    result = Result(solutions=solutions, parameters=estimated, factors=factors, record=run.to_dict(),
+                    emg_channels={m: list(c) for m, c in mapping.items()}, document=doc)
+    result.write(out)
+    if not run.success:
+        from .emg_ten import emg_failure
+
+        raise emg_failure(run, mode if emg_files else None, f"the estimation (written to {out})")
+    if validate:
+        for lab, (g, _, t_id, mom, t_ik) in zip(labels, prepared):
+            sol = solve_with_parameters(g, estimated, t_id, mom, ik_time_s=t_ik, options=options,
+                                        workflow_record={"name": f"{workflow} validation"})
+            sol.write(f"{out}/validation/{lab}")
+            if not sol.success:
+                raise sol.run_record.failure(f"the validation re-solve of {lab}")
+    return result
