@@ -12,6 +12,9 @@ file changes. Integrity rules, the same for every kind of entry:
 * a cache folder that cannot be used, or an entry that is a folder or a link, is left alone:
   the result is computed without the cache (with a :class:`CacheWarning`).
 
+Entries a caller receives as a file (inverse dynamics, a ``.sto``) carry their checksum in a
+sidecar ``<name>.sha256`` and follow the same rules.
+
 The folder is ``$MUSCLEMETAB_CACHE/geometry`` (default ``~/.cache/musclemetab/geometry``),
 or the folder a caller names (``--cache-dir``).
 """
@@ -29,7 +32,8 @@ import numpy as np
 from .errors import CacheWarning
 from .io.atomic import atomic_path
 
-__all__ = ["default_cache_dir", "content_key", "entry_path", "read_entry", "discard_entry", "write_entry"]
+__all__ = ["default_cache_dir", "content_key", "entry_path", "read_entry", "discard_entry", "write_entry",
+           "read_file_entry", "discard_file_entry", "seal_file_entry"]
 
 CHECKSUM = "checksum"
 
@@ -62,13 +66,14 @@ def _usable_folder(folder: Path, what: str) -> Path | None:
     return folder
 
 
-def entry_path(spec: dict, cache_dir: str | os.PathLike | None, what: str, prefix: str = "") -> Path | None:
+def entry_path(spec: dict, cache_dir: str | os.PathLike | None, what: str, prefix: str = "",
+               suffix: str = ".npz") -> Path | None:
     """Where the entry of ``spec`` lives, or ``None`` when the cache cannot be used (warned)."""
     folder = _usable_folder(Path(cache_dir) if cache_dir else default_cache_dir(), what)
     if folder is None:
         return None
-    path = folder / f"{prefix}{content_key(spec)}.npz"
-    if path.is_dir() or path.is_symlink():
+    path = folder / f"{prefix}{content_key(spec)}{suffix}"
+    if path.is_dir() or path.is_symlink() or _sidecar(path).is_dir():
         warnings.warn(f"{what} cache entry {path} is a folder or a link, not a file; computing without the "
                       "cache (remove it)", CacheWarning, stacklevel=3)
         return None
@@ -123,6 +128,47 @@ def write_entry(path: Path, what: str, **arrays) -> None:
     except OSError as exc:
         warnings.warn(f"could not write the {what} cache entry {path} ({exc.strerror or exc}); "
                       "continuing without caching it", CacheWarning, stacklevel=3)
+
+
+def _sidecar(path: Path) -> Path:
+    return path.with_name(path.name + ".sha256")
+
+
+def read_file_entry(path: Path) -> str:
+    """Check a file entry (a file the cache hands out by path, e.g. an inverse-dynamics ``.sto``)
+    against its SHA-256 sidecar ``<name>.sha256``: ``""`` when intact, else why not
+    (``"missing"`` when there is no entry)."""
+    from .io.atomic import file_sha256
+
+    if not path.is_file():
+        return "missing"
+    try:
+        stored = _sidecar(path).read_text(encoding="ascii").strip()
+        actual = file_sha256(path)
+    except (OSError, UnicodeDecodeError) as exc:
+        return f"has no readable checksum ({type(exc).__name__})"
+    if stored != actual:
+        return "does not match its checksum (it was modified or damaged)"
+    return ""
+
+
+def discard_file_entry(path: Path, problem: str, what: str) -> None:
+    """Delete a file entry and its checksum, with a warning saying why."""
+    warnings.warn(f"{what} cache entry {path} {problem}; deleted, computing it again", CacheWarning, stacklevel=3)
+    path.unlink(missing_ok=True)
+    _sidecar(path).unlink(missing_ok=True)
+
+
+def seal_file_entry(path: Path, what: str) -> None:
+    """Write the SHA-256 sidecar of a complete file entry (atomically); a failure is a warning."""
+    from .io.atomic import file_sha256
+
+    try:
+        with atomic_path(_sidecar(path), suffix=".sha256") as tmp:
+            Path(tmp).write_text(file_sha256(path) + "\n", encoding="ascii")
+    except OSError as exc:
+        warnings.warn(f"could not write the checksum of the {what} cache entry {path} ({exc.strerror or exc}); "
+                      "it will be computed again next time", CacheWarning, stacklevel=3)
 
 
 #: bump when a cached model result changes meaning

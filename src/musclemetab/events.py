@@ -466,7 +466,10 @@ def read_grf(path: str | os.PathLike, column: str | None = None, *, side: str = 
 
     if side not in ("r", "l"):
         raise OptionError(f"side must be 'r' or 'l', not {side!r}")
+    from .external_loads import check_force_columns
+
     df = read_storage(path)
+    check_force_columns(df, path, list(df.columns))  # NaN or inf in any column: named with its times
     if column is not None:
         require_columns(df, [column], what="vertical force column")
         return df[column].rename(column)

@@ -17,8 +17,6 @@
 
 from __future__ import annotations
 
-import hashlib
-import json
 import os
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
@@ -147,7 +145,39 @@ def read_external_loads(path: str | os.PathLike) -> ExternalLoads:
                 f"{datafile}: no column {', '.join(missing)} for ExternalForce '{f.name}' of {path}; fix the "
                 "identifiers in the XML or the column names"
             )
+        check_force_columns(table, datafile, needed, points=[c for c in needed if f.point_identifier
+                                                               and c.startswith(f.point_identifier)])
     return ExternalLoads(path=path, datafile=datafile.resolve(), forces=tuple(forces))
+
+
+#: Largest distance (m) of a centre of pressure from the lab's origin: beyond it the
+#: point columns are in other units (mm) or hold a filler value.
+MAX_POINT_DISTANCE_M = 20.0
+
+
+def check_force_columns(table, path, columns, points=()) -> None:
+    """Raise :class:`InputFileError` for a NaN or infinite value in any of ``columns``, or a
+    point (centre of pressure) column farther than :data:`MAX_POINT_DISTANCE_M` from the origin;
+    the message names the file, the column and the times."""
+    t = table.index.to_numpy(dtype=float)
+    for c in columns:
+        v = table[c].to_numpy(dtype=float)
+        bad = ~np.isfinite(v)
+        if bad.any():
+            raise InputFileError(f"{path}: column '{c}' holds {int(bad.sum())} NaN or infinite value(s) "
+                                 f"{_times(t[bad])}; fill the gaps (zeros when the foot is off the plate)")
+        if c in points:
+            far = np.abs(v) > MAX_POINT_DISTANCE_M
+            if far.any():
+                raise InputFileError(
+                    f"{path}: point column '{c}' reaches {np.abs(v).max():g} {_times(t[far])}, more than "
+                    f"{MAX_POINT_DISTANCE_M:g} m from the origin; centres of pressure must be in metres (not mm)"
+                )
+
+
+def _times(t) -> str:
+    head = ", ".join(f"{x:.4f}" for x in t[:3])
+    return f"at t = {head}{' ...' if len(t) > 3 else ''} s"
 
 
 def vertical_force(loads: ExternalLoads, layout, side: str):
@@ -197,11 +227,16 @@ def compute_inverse_dynamics(
     *,
     lowpass_cutoff_hz: float = ID_COORDINATE_FILTER_HZ,
     use_cache: bool = True,
+    cache_dir: str | os.PathLike | None = None,
 ) -> Path:
     """Inverse dynamics over ``[start_s, end_s]`` by OpenSim's InverseDynamicsTool; returns the ``.sto`` path.
 
-    The file lives in the package cache (``$MUSCLEMETAB_CACHE/inverse_dynamics``); copy it
-    where it is needed. The window must lie inside the IK motion and the ground-force data.
+    The file lives in the package cache (``$MUSCLEMETAB_CACHE/inverse_dynamics``, or
+    ``cache_dir`` when given, named ``id-<key>.sto``) with its SHA-256 checksum beside it
+    (:mod:`musclemetab.cache`): an entry that fails its checksum is deleted and computed again
+    with a :class:`~musclemetab.errors.CacheWarning`; one that is a folder is left alone and the
+    result is computed outside the cache. Copy the file where it is needed. The window must lie
+    inside the IK motion and the ground-force data.
     """
     from .io import atomic_path, read_storage
     from .io.atomic import file_sha256
@@ -223,10 +258,21 @@ def compute_inverse_dynamics(
         data=file_sha256(loads.datafile), t=[round(float(start_s), 9), round(float(end_s), 9)],
         cutoff=float(lowpass_cutoff_hz), fmt=1,
     )
-    key = hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:32]
-    out = _cache_dir() / f"{key}.sto"
-    if use_cache and out.is_file():
-        return out
+    from .cache import discard_file_entry, entry_path, read_file_entry, seal_file_entry
+
+    out = entry_path(spec, cache_dir or _cache_dir(), "inverse dynamics", prefix="id-", suffix=".sto") \
+        if use_cache else None
+    cached = out is not None
+    if cached:
+        problem = read_file_entry(out)
+        if not problem:
+            return out
+        if problem != "missing":
+            discard_file_entry(out, problem, "inverse dynamics")
+    else:
+        import tempfile
+
+        out = Path(tempfile.mkdtemp(prefix="musclemetab-id-")) / "inverse_dynamics.sto"
     # OpenSim resolves a relative <datafile> against the working directory: give it a copy of
     # the XML that names the data file by its absolute path.
     tree = ET.parse(loads.path)
@@ -242,13 +288,23 @@ def compute_inverse_dynamics(
                  float(start_s), float(end_s), str(tmp), float(lowpass_cutoff_hz))
         finally:
             xml.unlink(missing_ok=True)
+    if cached:
+        seal_file_entry(out, "inverse dynamics")
     return out
 
 
-def check_inside(window, t_first: float, t_last: float, path, what: str, tol: float = 1e-6) -> None:
-    """Raise :class:`DataMismatchError` unless ``window`` lies inside ``[t_first, t_last]``.
+#: Times closer than this (s) are the same sample: files written at different precisions
+#: (e.g. 1.5 us apart at the end of a 1 kHz record) cover the same window.
+SAMPLE_TIME_TOLERANCE_S = 1e-5
 
-    The message names the file and by how much it falls short.
+
+def check_inside(window, t_first: float, t_last: float, path, what: str,
+                 tol: float = SAMPLE_TIME_TOLERANCE_S) -> None:
+    """Raise :class:`DataMismatchError` unless ``window`` lies inside ``[t_first, t_last]``
+    (give or take ``tol``, :data:`SAMPLE_TIME_TOLERANCE_S`).
+
+    The message names the file and by how much it falls short (to the microsecond when the
+    shortfall is under a millisecond).
     """
     t0, t1 = float(window[0]), float(window[1])
     short_start = t_first - t0
@@ -256,10 +312,18 @@ def check_inside(window, t_first: float, t_last: float, path, what: str, tol: fl
     if short_start > tol or short_end > tol:
         parts = []
         if short_start > tol:
-            parts.append(f"starts {short_start:.3f} s after the window start {t0:.3f} s")
+            parts.append(f"starts {_seconds(short_start)} s after the window start {t0:.3f} s")
         if short_end > tol:
-            parts.append(f"ends {short_end:.3f} s before the window end {t1:.3f} s")
+            parts.append(f"ends {_seconds(short_end)} s before the window end {t1:.3f} s")
         raise DataMismatchError(
             f"{path}: the {what} ({t_first:.3f}-{t_last:.3f} s) {' and '.join(parts)}; choose a window inside "
             "every input file"
         )
+
+
+def _seconds(x: float) -> str:
+    """``x`` with 3 to 6 decimals: as many as it takes to the microsecond."""
+    for digits in (3, 4, 5):
+        if abs(round(x, digits) - x) < 5e-7:
+            return f"{x:.{digits}f}"
+    return f"{x:.6f}"

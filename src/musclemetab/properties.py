@@ -179,6 +179,28 @@ class MuscleOverrides:
     def __bool__(self) -> bool:
         return bool(self.values)
 
+    def check_names(self, names: Sequence[str], *, tables: bool = False) -> None:
+        """Raise :class:`UnknownMuscleError` for a row that names none of the muscles ``names``
+        (a row matches a muscle by its name, or by its side-free name on either side).
+
+        ``names`` must be all the model's muscles (a solve covers a subset); with ``tables``, a
+        row naming a muscle of the package's alias table passes too (for callers that know only
+        the solved muscles)."""
+        bases = {split_side(n)[0].lower() for n in names}
+        if tables:
+            bases |= set(alias_table()["key"])
+        unknown = [row for row in self.values if split_side(row)[0].lower() not in bases]
+        if unknown:
+            import difflib
+
+            near = {row: difflib.get_close_matches(row, list(names), n=3, cutoff=0.6) for row in unknown}
+            listed = "; ".join(f"'{row}'" + (f" (near: {', '.join(m)})" if m else "") for row, m in near.items())
+            raise UnknownMuscleError(
+                f"{self.source}: muscle row{'s' if len(unknown) > 1 else ''} {listed} name{'' if len(unknown) > 1 else 's'}"
+                f" no muscle of the model; fix the name (the model's muscles: {', '.join(list(names)[:6])}"
+                f"{', ...' if len(names) > 6 else ''})"
+            )
+
     def with_column(self, column: str, values: Mapping[str, float] | None) -> "MuscleOverrides":
         """A copy with ``{muscle: value}`` set for one column (these take precedence)."""
         if not values:
@@ -205,11 +227,21 @@ def _override_value(col: str, raw: str, where: str):
         v = float(raw)
     except ValueError:
         v = float("nan")
-    ok = np.isfinite(v) and (0.0 <= v <= 1.0 if col == "slow_twitch_fraction" else v > 0.0)
+    lo, hi, what = _OVERRIDE_RANGES[col]
+    ok = np.isfinite(v) and (lo <= v <= hi if col == "slow_twitch_fraction" else lo < v <= hi)
     if not ok:
-        what = "a fraction in [0, 1]" if col == "slow_twitch_fraction" else "a positive number (SI units)"
         raise InputFileError(f"{where}: '{raw}' is not {what}")
     return v
+
+
+#: Possible values of the numeric override columns: (low, high, what); 0 excluded but for the fraction
+_OVERRIDE_RANGES = {
+    "slow_twitch_fraction": (0.0, 1.0, "a fraction in [0, 1]"),
+    "mass_kg": (0.0, 10.0, "a muscle mass in kg (above 0, at most 10 kg; the largest human muscles weigh "
+                           "about 1 kg)"),
+    "specific_tension_Pa": (0.0, 5e6, "a specific tension in Pa (above 0, at most 5e6 Pa; the literature gives "
+                                      "1e5 to 1e6 Pa)"),
+}
 
 
 def read_muscle_properties(path: str | Path) -> MuscleOverrides:

@@ -26,7 +26,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..errors import InputFileError, OptionError
-from .options import BASAL_DEFAULTS, add_basal_arguments, check_basal_arguments, check_speed
+from .options import BASAL_DEFAULTS, add_basal_arguments, check_basal_arguments, check_body, check_speed
 
 __all__ = ["add_parser", "run", "SIDES"]
 
@@ -116,6 +116,7 @@ def run(args) -> int:
             setattr(args, key, recorded.get(rec, BASAL_DEFAULTS[key]))
     check_basal_arguments(args)
     check_speed(args.speed)
+    check_body(mass, height)
     tables = []
     for side, sol_dir, out in jobs:
         cycle, source = _cycle(args, side or "r")

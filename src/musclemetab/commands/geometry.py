@@ -35,6 +35,8 @@ def add_parser(sub) -> None:
         help="moment-arm method (default velocity; see the documentation)",
     )
     p.add_argument("--no-cache", action="store_true", help="do not read or write the geometry cache")
+    p.add_argument("--cache-dir", metavar="DIR",
+                   help="folder of the geometry cache (default $MUSCLEMETAB_CACHE/geometry)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.set_defaults(func=run)
 
@@ -53,7 +55,8 @@ def run(args) -> int:
         raise OptionError("--dofs and --muscles name one leg's; with --side both leave them out")
     sides = ("r", "l") if args.side == "both" else (args.side,)
     geoms = {s: compute_geometry(args.model, args.ik, dofs=dofs, side=s, muscles=args.muscles,
-                                 use_cache=not args.no_cache, method=args.method) for s in sides}
+                                 use_cache=not args.no_cache, method=args.method,
+                                 cache_dir=args.cache_dir) for s in sides}
     for side, geom in geoms.items():
         out = Path(args.out) / side if args.side == "both" else Path(args.out)
         files = write_geometry(geom, out)

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import sys
 
-from .options import add_basal_arguments, check_basal_arguments, check_speed
+from .options import add_basal_arguments, check_basal_arguments, check_body, check_speed
 
 __all__ = ["add_parser", "run"]
 
@@ -88,6 +88,7 @@ def run(args) -> int:
     models = parse_models(args.models)
     check_output_folder(args.out)
     check_speed(args.speed)
+    check_body(args.mass, args.height)
     check_basal_arguments(args)
     folders = solution_folders(args.solution)
     params = None
@@ -100,6 +101,12 @@ def run(args) -> int:
     if params is not None:
         for leg in states.values():
             _note(parameter_differences(leg, params), args.model)
+    if args.muscle_properties:  # a row naming no muscle would be ignored: refuse it
+        from ..properties import read_muscle_properties
+
+        solved = [m for leg in states.values() for m in leg.muscles]
+        read_muscle_properties(args.muscle_properties).check_names(
+            params.names if params is not None else solved, tables=params is None)
     results = metabolics_from_legs(
         states, args.mass, args.height, models=models, muscle_parameters=params, basal=args.basal,
         basal_rate_W_per_kg=args.basal_coefficient, basal_exponent=args.basal_exponent, speed_m_per_s=args.speed,

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 from ..errors import OptionError
 
-__all__ = ["BASAL_DEFAULTS", "add_basal_arguments", "check_basal_arguments", "check_speed", "add_study_arguments"]
+__all__ = ["BASAL_DEFAULTS", "add_basal_arguments", "check_basal_arguments", "check_speed", "check_body",
+           "add_study_arguments"]
 
 #: the basal options' defaults: the paper's 1.2 W per kg of body mass
 BASAL_DEFAULTS = {"basal": "body", "basal_coefficient": 1.2, "basal_exponent": 1.0}
@@ -39,23 +40,33 @@ def add_basal_arguments(parser, recorded: str | None = None) -> None:
 def check_basal_arguments(args) -> None:
     """Raise :class:`OptionError` naming the option for a basal coefficient that is not a
     non-negative number, an exponent that is not finite, or an exponent with ``--basal muscle``."""
-    import math
+    from ..study.spec import check_number
 
-    if not (math.isfinite(args.basal_coefficient) and args.basal_coefficient >= 0):
-        raise OptionError(f"--basal-coefficient must be a non-negative number of W/kg, not {args.basal_coefficient}")
-    if not math.isfinite(args.basal_exponent):
-        raise OptionError(f"--basal-exponent must be a finite number, not {args.basal_exponent}")
+    check_number("basal_coefficient", args.basal_coefficient, option="--basal-coefficient")
+    check_number("basal_exponent", args.basal_exponent, option="--basal-exponent")
     if args.basal == "muscle" and args.basal_exponent != 1:
         raise OptionError("--basal-exponent applies to --basal body only (the muscle rule is linear in each "
                           "muscle's mass); drop it or use --basal body")
 
 
 def check_speed(speed: float | None) -> None:
-    """Raise :class:`OptionError` for a ``--speed`` that is not a positive number of m/s."""
-    import math
+    """Raise :class:`OptionError` for a ``--speed`` that is not a walking or running speed in m/s
+    (the study file's ``speed_m_per_s`` check)."""
+    from ..study.spec import check_number
 
-    if speed is not None and not (math.isfinite(speed) and speed > 0):
-        raise OptionError(f"--speed must be a positive number of m/s, not {speed}")
+    if speed is not None:
+        check_number("speed_m_per_s", speed, option="--speed")
+
+
+def check_body(mass_kg: float | None, height_m: float | None) -> None:
+    """Raise :class:`OptionError` for a ``--mass`` or ``--height`` that is not a human one
+    (the study file's ``body_mass_kg`` and ``height_m`` checks)."""
+    from ..study.spec import check_number
+
+    if mass_kg is not None:
+        check_number("body_mass_kg", mass_kg, option="--mass")
+    if height_m is not None:
+        check_number("height_m", height_m, option="--height")
 
 
 def add_study_arguments(parser) -> None:

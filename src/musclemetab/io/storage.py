@@ -315,14 +315,28 @@ def require_columns(
     columns = list(columns)
     missing = [c for c in columns if c not in df.columns]
     if missing:
+        import difflib
+
+        near = sorted({n for c in missing for n in difflib.get_close_matches(c, list(map(str, df.columns)), n=3)})
         raise MissingColumnError(
             f"{source}: missing {what}{'s' if len(missing) > 1 else ''} {', '.join(missing)}; "
-            f"the file has {', '.join(map(str, df.columns[:12]))}{' ...' if len(df.columns) > 12 else ''}"
+            + (f"near names: {', '.join(near)}; " if near else "")
+            + f"the file has {', '.join(map(str, df.columns[:12]))}{' ...' if len(df.columns) > 12 else ''}"
         )
     if not allow_nan:
         bad = [c for c in columns if _has_nan(df[c])]
         if bad:
-            raise MissingColumnError(f"{source}: {what} {', '.join(bad)} holds NaN values; fill or remove them")
+            rows = _nan_rows(df[bad[0]])
+            times = np.asarray(df.index)[rows] if rows.size else ()
+            at = (f" (at t = {', '.join(f'{t:.4f}' for t in times[:3])}{' ...' if len(times) > 3 else ''} s)"
+                  if len(times) and np.issubdtype(np.asarray(times).dtype, np.number) else "")
+            raise MissingColumnError(f"{source}: {what} {', '.join(bad)} holds NaN values{at}; fill or remove them")
+
+
+def _nan_rows(column) -> np.ndarray:
+    isna = getattr(column, "isna", None)
+    mask = np.asarray(isna()) if isna is not None else np.isnan(np.asarray(column, dtype=float))
+    return np.flatnonzero(mask)
 
 
 def _has_nan(column) -> bool:

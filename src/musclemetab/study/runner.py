@@ -31,9 +31,10 @@ same paths). A unit failure is recorded and the other units go on.
 
 Safety: the options (``workers``, ``scheduler``) and the output folder are checked, and the
 cluster connected, before anything is written. While a run works on a study folder it holds
-the lock file ``DIR/.musclemetab.lock`` (process id, host, start time); a second run on the
+the lock file ``DIR/.musclemetab.lock`` (process id, host, boot id, start time); a second run on the
 same folder refuses with a message naming the lock. A lock left by a process that no longer
-runs (on this host) is stale and taken over. Temporary unit folders a killed run left are
+runs (on this host, since its boot) is stale and taken over atomically (one of many runs starting
+at once takes it). Temporary unit folders a killed run left are
 removed at the next run. Ctrl-C stops the run: the running units are recorded as
 ``interrupted`` (their folders stay as they were), no new unit starts, and the results table
 is written from the complete units.
@@ -410,11 +411,23 @@ def _process_alive(pid: int) -> bool:
     return True
 
 
+def _boot_id() -> str:
+    """This boot of the machine (Linux), so that a lock written before a restart is known stale."""
+    try:
+        return Path("/proc/sys/kernel/random/boot_id").read_text(encoding="ascii").strip()
+    except OSError:
+        return ""
+
+
 class study_lock:
     """Hold ``DIR/.musclemetab.lock`` while a run works on the study folder ``DIR``.
 
-    Raises :class:`OptionError` naming the lock file when another live process holds it;
-    a lock whose process (on this host) no longer exists is stale and is taken over.
+    Raises :class:`OptionError` naming the lock file when another live process holds it.
+    The lock file is created complete (written aside, then linked into place, which fails if
+    it exists). A lock whose process no longer runs (same host: the process id is gone, or the
+    machine restarted since, by its boot id) is stale and taken over: the check and the
+    replacement happen under an exclusive ``flock`` of the study folder, so of many runs
+    starting at once after a crash exactly one takes the lock.
     """
 
     def __init__(self, folder: Path):
@@ -424,29 +437,58 @@ class study_lock:
 
     def __enter__(self):
         self.folder.mkdir(parents=True, exist_ok=True)
-        info = {"pid": os.getpid(), "host": socket.gethostname(),
+        info = {"pid": os.getpid(), "host": socket.gethostname(), "boot_id": _boot_id(),
                 "started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
-        for _ in range(2):
-            try:
-                fd = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-            except FileExistsError:
-                holder = self._holder()
-                if holder is not None and holder.get("host") == info["host"] and \
-                        isinstance(holder.get("pid"), int) and not _process_alive(holder["pid"]):
-                    self.path.unlink(missing_ok=True)  # stale: its process is gone
-                    continue
-                who = (f"process {holder.get('pid')} on {holder.get('host')}, since {holder.get('started')}"
-                       if holder else "a process that did not record itself")
-                raise OptionError(
-                    f"the study folder {self.folder} is in use by another musclemetab run ({who}; lock file "
-                    f"{self.path}); wait for that run to finish, or delete the lock file if no run uses the folder"
-                ) from None
+        import tempfile
+
+        fd, tmp = tempfile.mkstemp(prefix=f"{LOCK_FILE}.", suffix=".tmp", dir=self.folder)
+        try:
+            os.fchmod(fd, 0o644)
             with os.fdopen(fd, "w", encoding="utf-8") as f:
                 json.dump(info, f)
-            self.owned = True
+            holder = self._take(tmp, info)
+        finally:
+            Path(tmp).unlink(missing_ok=True)
+        if self.owned:
             return self
-        raise OptionError(f"could not take the lock {self.path}; another run is starting on the same folder, "
-                          "try again")
+        who = (f"process {holder.get('pid')} on {holder.get('host')}, since {holder.get('started')}"
+               if holder else "a process that did not record itself")
+        raise OptionError(
+            f"the study folder {self.folder} is in use by another musclemetab run ({who}; lock file "
+            f"{self.path}); wait for that run to finish, or delete the lock file if no run uses the folder"
+        )
+
+    def _take(self, tmp: str, info: dict) -> dict | None:
+        """Put the complete lock ``tmp`` in place, or take over a stale one; the holder otherwise."""
+        import fcntl
+
+        try:
+            os.link(tmp, self.path)  # atomic: fails when a lock exists
+            self.owned = True
+            return info
+        except FileExistsError:
+            pass
+        fd = os.open(self.folder, os.O_RDONLY)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)  # one takeover at a time; released on close
+            holder = self._holder()
+            if holder is None and not self.path.exists():  # released meanwhile
+                os.link(tmp, self.path)
+                self.owned = True
+            elif self._stale(holder, info):
+                os.replace(tmp, self.path)  # the stale lock replaced in one step
+                self.owned = True
+            return holder
+        finally:
+            os.close(fd)
+
+    @staticmethod
+    def _stale(holder: dict | None, me: dict) -> bool:
+        if holder is None or holder.get("host") != me["host"] or not isinstance(holder.get("pid"), int):
+            return False
+        if holder.get("boot_id") and me["boot_id"] and holder["boot_id"] != me["boot_id"]:
+            return True  # written before the machine restarted
+        return not _process_alive(holder["pid"])
 
     def _holder(self) -> dict | None:
         try:

@@ -57,8 +57,11 @@ Every key is checked: an unknown key, a missing file or a wrong type raises
 :class:`~musclemetab.errors.OptionError` or :class:`~musclemetab.errors.InputFileError`
 naming the file, the subject, the trial and the key. Subject and trial names become
 folder names, so they must be plain names (letters, digits, ``-``, ``_``, ``.``, not
-starting with a dot). ``body_mass_kg`` must lie in :data:`BODY_MASS_RANGE_KG` (20 to
-300 kg, a human body mass in kilograms) and ``height_m`` in 0.5 to 2.7 m.
+starting with a dot). Every numeric key is checked against :data:`NUMBER_KEYS` (its unit
+and the range of physically possible values, e.g. ``body_mass_kg`` 20 to 300 kg, a human
+body mass in kilograms); ``cycle`` is ``"auto"`` or a whole number from 1. Rows of
+``muscle_properties`` and names in ``dofs`` must name muscles and coordinates of the model.
+A study file may hold :data:`MAX_STUDY_FILE_BYTES` bytes, nested :data:`MAX_STUDY_DEPTH` deep.
 """
 
 from __future__ import annotations
@@ -82,8 +85,99 @@ SIDES = ("r", "l", BOTH)
 KNOWN_WORKFLOWS = ("effort-gen", "effort-cal", "effort-ten", EMG_TEN)
 BASAL_RULES = ("body", "muscle", "none")
 #: Plausible human body mass, kg: outside it the number is in other units (g, lb) or a typo.
-BODY_MASS_RANGE_KG = (20.0, 300.0)
+BODY_MASS_RANGE_KG = (20.0, 300.0)  # NUMBER_KEYS["body_mass_kg"]
+#: Limits of a study file: its size and how deep its tables and lists nest
+MAX_STUDY_FILE_BYTES = 1_000_000
+MAX_STUDY_DEPTH = 16
 _PLAIN_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
+
+
+@dataclass(frozen=True)
+class NumberKey:
+    """A numeric key of the study file: its unit and the range of physically possible values.
+
+    ``low``/``high`` are inclusive unless ``low_open`` (the value must exceed ``low``).
+    ``integer`` keys take whole numbers only (``1.5`` and ``true`` are refused).
+    """
+
+    name: str
+    unit: str
+    low: float
+    high: float
+    help: str
+    low_open: bool = False
+    integer: bool = False
+
+    def range_text(self) -> str:
+        unit = f" {self.unit}" if self.unit else ""
+        if self.low_open:
+            return f"above {self.low:g} and at most {self.high:g}{unit}"
+        return f"from {self.low:g} to {self.high:g}{unit}"
+
+    def check(self, value, where: str, option: str | None = None) -> float | int:
+        """``value`` as a float (an int for integer keys); :class:`OptionError` naming the key
+        (or the command-line ``option``), the value and the range otherwise."""
+        name = option or f"'{self.name}'"
+        at = f"{where}: " if where else ""
+        kind = "a whole number" if self.integer else "a number"
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+                (self.integer and not isinstance(value, int)):
+            raise OptionError(f"{at}{name} must be {kind} ({self.help}, {self.range_text()}), not {value!r}")
+        if not math.isfinite(value) or not (self.low < value if self.low_open else self.low <= value) \
+                or value > self.high:
+            sign = " (it must not be negative)" if value < 0 <= self.low else ""
+            raise OptionError(f"{at}{name} = {value:g} is not {self.help}: it must be {self.range_text()}{sign}")
+        return int(value) if self.integer else float(value)
+
+
+#: Every numeric key of a study file (and the same value on the command line): name, unit,
+#: range of physically possible values, meaning. Every check of these values goes through it.
+NUMBER_KEYS: dict[str, NumberKey] = {k.name: k for k in (
+    NumberKey("body_mass_kg", "kg", 20.0, 300.0, "a human body mass in kilograms"),
+    NumberKey("height_m", "m", 0.5, 2.7, "a human height in metres"),
+    NumberKey("basal_coefficient", "W/kg", 0.0, 10.0, "a basal heat rate per kg (OpenSim's default 1.51, the "
+              "paper's 1.2)"),
+    NumberKey("basal_exponent", "", 0.0, 2.0, "an exponent of the body mass (1 linear, 0.75 Kleiber's)"),
+    NumberKey("emg_tolerance", "", 0.0, 1.0, "a half-width of the EMG band in normalised excitation"),
+    NumberKey("grf_threshold_N", "N", 0.0, 1000.0, "a contact threshold of the vertical force", low_open=True),
+    NumberKey("speed_m_per_s", "m/s", 0.0, 15.0, "a walking or running speed", low_open=True),
+    NumberKey("measured_W_per_kg", "W/kg", 0.0, 50.0, "a measured metabolic rate per kg of body mass",
+              low_open=True),
+    NumberKey("vo2_mL_per_s", "mL/s", 0.0, 150.0, "a human oxygen uptake", low_open=True),
+    NumberKey("vco2_mL_per_s", "mL/s", 0.0, 200.0, "a human carbon dioxide output", low_open=True),
+    NumberKey("vo2_mL_per_min", "mL/min", 0.0, 9000.0, "a human oxygen uptake", low_open=True),
+    NumberKey("vco2_mL_per_min", "mL/min", 0.0, 12000.0, "a human carbon dioxide output", low_open=True),
+    NumberKey("start_s", "s", -1e5, 1e5, "a time of the trial's files"),
+    NumberKey("toe_off_s", "s", -1e5, 1e5, "a time of the trial's files"),
+    NumberKey("end_s", "s", -1e5, 1e5, "a time of the trial's files"),
+    NumberKey("tendon_stiffness", "", 0.0, 1000.0, "a normalised tendon stiffness kT (the literature's 35)",
+              low_open=True),
+    NumberKey("weight", "", 0.0, 1e6, "a weight of the energy goal"),
+    NumberKey("effort_weight", "", 0.0, 1e6, "a weight of the effort goal"),
+    NumberKey("smoothing", "", 0.0, 1e6, "a smoothing parameter", low_open=True),
+    NumberKey("max_iter", "", 1, 10_000_000, "a number of IPOPT iterations", integer=True),
+    NumberKey("tol", "", 0.0, 1.0, "an IPOPT tolerance", low_open=True),
+)}
+#: ``cycle``: ``"auto"`` or the number (from 1) of the leg's gait cycle
+CYCLE_HELP = "\"auto\" or a gait cycle number (1, 2, ...)"
+
+
+def check_number(key: str, value, where: str = "", option: str | None = None) -> float | int:
+    """Check ``value`` of the numeric key ``key`` against :data:`NUMBER_KEYS`.
+
+    ``option`` names the command-line option carrying the same value (e.g. ``"--speed"``),
+    so that the command line and the study file refuse the same values with the same reason.
+    """
+    return NUMBER_KEYS[key].check(value, where, option)
+
+
+def check_cycle(value, where: str = "", option: str = "'cycle'"):
+    """``"auto"`` or a positive whole number; :class:`OptionError` for anything else
+    (``1.5``, ``true``, ``0``, ``"2"`` in a study file)."""
+    at = f"{where}: " if where else ""
+    if value == "auto" or (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
+        return value
+    raise OptionError(f"{at}{option} must be {CYCLE_HELP}, not {value!r}")
 
 
 def check_plain_name(name: str, what: str) -> str:
@@ -216,11 +310,36 @@ def load_study(path: str | os.PathLike, *, output: str | os.PathLike | None = No
     path = Path(path)
     if not path.is_file():
         raise InputFileError(f"study file {path} not found; give the path of a .toml study file")
+    size = path.stat().st_size
+    if size > MAX_STUDY_FILE_BYTES:
+        raise InputFileError(f"{path}: {size} bytes, more than a study file may hold ({MAX_STUDY_FILE_BYTES} bytes); "
+                             "give the study file, not a data file")
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputFileError(f"{path}: not a valid TOML file ({exc}); fix the syntax at the position given") from None
+    except RecursionError:
+        data = None
+    if data is None or _depth(data) > MAX_STUDY_DEPTH:
+        raise InputFileError(f"{path}: tables or lists nested more than {MAX_STUDY_DEPTH} deep, more than a study "
+                             "file has; check the file")
     return study_from_dict(data, base=path.parent, source=path, output=output)
+
+
+def _depth(data) -> int:
+    """How deep tables and lists nest in ``data`` (a scalar is 0), without recursion."""
+    deepest, stack = 0, [(data, 0)]
+    while stack:
+        value, level = stack.pop()
+        if isinstance(value, Mapping):
+            value = list(value.values())
+        if isinstance(value, list):
+            level += 1
+            deepest = max(deepest, level)
+            if level > MAX_STUDY_DEPTH:
+                return level
+            stack.extend((v, level) for v in value)
+    return deepest
 
 
 def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", source: Path | None = None,
@@ -257,8 +376,6 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
         raise OptionError(f"{where}: 'basal' must be one of {', '.join(BASAL_RULES)}, not {basal!r}")
     basal_coefficient = _number(data.get("basal_coefficient", BASAL_RATE_W_PER_KG), where, "basal_coefficient")
     basal_exponent = _number(data.get("basal_exponent", 1.0), where, "basal_exponent")
-    if basal_coefficient < 0:
-        raise OptionError(f"{where}: 'basal_coefficient' must not be negative (W/kg), not {basal_coefficient!r}")
     if basal == "muscle" and basal_exponent != 1:
         raise OptionError(f"{where}: 'basal_exponent' applies to basal = \"body\" only (the muscle rule is linear "
                           "in each muscle's mass); remove it or set basal = \"body\"")
@@ -301,6 +418,9 @@ def _solver(data, where: str) -> dict:
                           "effort weight beside an energy goal as [energy_goal] effort_weight and an estimation's "
                           "weights as [subjects.estimate] weights (docs/study.md)")
     _unknown(data, _SOLVER_KEYS, f"{where}: [solver]")
+    for key in ("max_iter", "tol"):
+        if key in data:
+            _number(data[key], f"{where}: [solver]", key)
     from ..redundancy import SolverOptions
 
     try:
@@ -362,16 +482,18 @@ def _path(value, base: Path, where: str, key: str, required: bool = True) -> Pat
     return p.resolve()
 
 
-def _number(value, where: str, key: str, positive: bool = False, required: bool = False) -> float | None:
+def _number(value, where: str, key: str, required: bool = False, table_key: str | None = None) -> float | None:
+    """The value of the numeric key ``key`` checked by :data:`NUMBER_KEYS` (``table_key``: its
+    entry there when the key's name differs, e.g. ``tendon_stiffness.soleus``)."""
     if value is None:
         if required:
-            raise OptionError(f"{where}: '{key}' is required (a number)")
+            entry = NUMBER_KEYS[table_key or key]
+            raise OptionError(f"{where}: '{key}' is required ({entry.help}, {entry.range_text()})")
         return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise OptionError(f"{where}: '{key}' must be a finite number, not {value!r}")
-    if positive and value <= 0:
-        raise OptionError(f"{where}: '{key}' must be positive, not {value!r}")
-    return float(value)
+    entry = NUMBER_KEYS[table_key or key]
+    if table_key:
+        entry = NumberKey(key, entry.unit, entry.low, entry.high, entry.help, entry.low_open, entry.integer)
+    return entry.check(value, where)
 
 
 def _subject(data, base: Path, where: str, workflows) -> Subject:
@@ -382,14 +504,8 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
         raise OptionError(f"{here}: 'name' is required")
     check_plain_name(name, f"{where}: subject name")
     model = _path(data.get("model"), base, here, "model")
-    mass = _number(data.get("body_mass_kg"), here, "body_mass_kg", positive=True, required=True)
-    height = _number(data.get("height_m"), here, "height_m", positive=True, required=True)
-    lo, hi = BODY_MASS_RANGE_KG
-    if not lo <= mass <= hi:
-        raise OptionError(f"{here}: 'body_mass_kg' = {mass:g} is not a human body mass in kilograms "
-                          f"({lo:g}-{hi:g} kg); give the mass in kg")
-    if not 0.5 < height < 2.7:
-        raise OptionError(f"{here}: 'height_m' = {height} is not a human height in metres")
+    mass = _number(data.get("body_mass_kg"), here, "body_mass_kg", required=True)
+    height = _number(data.get("height_m"), here, "height_m", required=True)
     passive = _path(data.get("passive"), base, here, "passive", required=False)
     kt = data.get("tendon_stiffness")
     if isinstance(kt, str):
@@ -400,7 +516,8 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
         else:
             kt = _path(kt, base, here, "tendon_stiffness")
     elif isinstance(kt, Mapping):
-        kt = {str(k): _number(v, here, f"tendon_stiffness.{k}", positive=True, required=True) for k, v in kt.items()}
+        kt = {str(k): _number(v, here, f"tendon_stiffness.{k}", required=True, table_key="tendon_stiffness")
+              for k, v in kt.items()}
     elif kt is not None:
         raise OptionError(f"{here}: 'tendon_stiffness' must be \"emg-ten\", \"example\", a parameters.json path or a table")
     mapping = str(data.get("emg_mapping", "default"))
@@ -432,10 +549,8 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
                               f"{', '.join(missing)}")
     emg_mode, emg_tolerance = _emg_mode(data, here, trials)
     muscle_properties = _path(data.get("muscle_properties"), base, here, "muscle_properties", required=False)
-    if muscle_properties is not None:
-        from ..properties import read_muscle_properties
-
-        read_muscle_properties(muscle_properties)  # reject a bad file before anything runs
+    if muscle_properties is not None or dofs is not None:
+        _check_model_names(model, here, muscle_properties, dofs)
     if side == BOTH:
         _check_both_legs(data, here, trials, workflows, kt)
     subject = Subject(name=name, model=model, body_mass_kg=mass, height_m=height, trials=trials,
@@ -449,6 +564,29 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
         subject = replace(subject, estimate=estimate_spec(data["estimate"], here))
         estimation_trials(subject, here)
     return subject
+
+
+def _check_model_names(model: Path, here: str, muscle_properties: Path | None, dofs) -> None:
+    """Refuse, before anything runs, muscle-properties rows and ``dofs`` that name nothing in the model."""
+    import difflib
+
+    from ..errors import UnknownCoordinateError, UnknownMuscleError
+    from ..model import read_model
+    from ..properties import read_muscle_properties
+
+    overrides = read_muscle_properties(muscle_properties) if muscle_properties is not None else None
+    info = read_model(model)
+    if overrides is not None:
+        try:
+            overrides.check_names(info.muscles.names)
+        except UnknownMuscleError as exc:
+            raise UnknownMuscleError(f"{here}: 'muscle_properties': {exc} of {model}") from None
+    coordinates = [c["name"] if isinstance(c, Mapping) else c for c in info.coordinates]
+    unknown = [d for d in dofs or () if d not in coordinates]
+    if unknown:
+        near = {d: difflib.get_close_matches(d, coordinates, n=3, cutoff=0.6) for d in unknown}
+        listed = "; ".join(f"'{d}'" + (f" (near: {', '.join(m)})" if m else "") for d, m in near.items())
+        raise UnknownCoordinateError(f"{here}: 'dofs' {listed} not a coordinate of {model}; fix the name")
 
 
 def _check_both_legs(data, here: str, trials, workflows, kt) -> None:
@@ -482,8 +620,6 @@ def _emg_mode(data, here: str, trials) -> tuple[str | None, float]:
         return None, 0.01
     if mode not in ("constrained", "driven", "tracking"):
         raise OptionError(f"{here}: 'emg_mode' must be constrained, driven or tracking, not {mode!r}")
-    if tol is not None and tol < 0:
-        raise OptionError(f"{here}: 'emg_tolerance' must be non-negative, not {tol}")
     missing = [t.name for t in trials if t.emg is None]
     if missing:
         raise OptionError(f"{here}: 'emg_mode' needs an 'emg' file for every trial; missing for {', '.join(missing)}")
@@ -509,9 +645,6 @@ def _trial(data, base: Path, where: str) -> Trial:
         vco2 = num["vco2_mL_per_min"] / 60.0
     if (vo2 is None) != (vco2 is None):
         raise OptionError(f"{here}: give both VO2 and VCO2 (Brockway's equation needs both)")
-    for key in ("speed_m_per_s", "measured_W_per_kg"):
-        if num[key] is not None and num[key] <= 0:
-            raise OptionError(f"{here}: '{key}' must be positive")
     return Trial(
         name=name,
         ik=_path(data.get("ik"), base, here, "ik"),
@@ -536,9 +669,4 @@ def _trial(data, base: Path, where: str) -> Trial:
 def _cycle_key(value, where: str):
     if value is None:
         return None
-    from ..redundancy.window import parse_cycle
-
-    try:
-        return parse_cycle(value)
-    except OptionError as exc:
-        raise OptionError(f"{where}: 'cycle': {exc}") from None
+    return check_cycle(value, where)
