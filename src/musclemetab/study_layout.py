@@ -7,7 +7,7 @@ there and ``musclemetab report`` reads, defined once for both.
     DIR/results.csv       one row per subject × trial × workflow × model
     DIR/results.parquet   the same table
     DIR/failures.csv      one row per failed unit, with its reason
-    DIR/per_muscle.csv    one row per muscle of every unit (:mod:`musclemetab.analysis.per_muscle`)
+    DIR/per_muscle.csv    one row per muscle of every unit (:mod:`musclemetab.metabolics.per_muscle`)
     DIR/units/<subject>/<trial>/<workflow>/[<side>/]
                           unit.json (the unit's record: status, gait cycle, hashes of its files),
                           timeseries.csv (rates over the cycle), solution.sto and summary.json

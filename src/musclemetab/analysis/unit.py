@@ -259,7 +259,7 @@ class TrialAnalysis(NamedTuple):
 
     ``whole_body``: :meth:`SolutionMetabolics.whole_body_table` (one row per model);
     ``summary`` and ``timeseries``: :class:`MetabolicAnalysis`; ``per_muscle``:
-    :func:`musclemetab.analysis.per_muscle.per_muscle_table`; ``metabolics``: the metabolic
+    :func:`musclemetab.metabolics.per_muscle.per_muscle_table`; ``metabolics``: the metabolic
     result analysed; ``side``: the leg.
     """
 

@@ -34,7 +34,7 @@ Outputs of :func:`write_metabolics` in a folder:
 ``per_muscle.csv``
     one row per model and muscle: cycle-average rate, W/kg, energy per cycle, share of
     the leg, stance and swing energies (given a gait cycle), components, basal heat apart
-    (:func:`musclemetab.analysis.per_muscle.per_muscle_table`).
+    (:func:`musclemetab.metabolics.per_muscle.per_muscle_table`).
 
 Every column is described in ``docs/data_dictionary.md``.
 """

@@ -12,7 +12,7 @@ trial units — and gathers every complete unit into one results table:
     :data:`musclemetab.redundancy.solution.LARGE_RESERVE_SHARE`).
 ``DIR/per_muscle.csv`` (and ``DIR/per_muscle.parquet`` with the ``parquet`` extra)
     one row per subject × trial × workflow × model × muscle (with its side): the
-    per-muscle table of every unit (:mod:`musclemetab.analysis.per_muscle`).
+    per-muscle table of every unit (:mod:`musclemetab.metabolics.per_muscle`).
 ``DIR/muscle_groups.csv``
     the key of the muscle-group abbreviations of the ``share_<G>_pct`` columns.
 ``DIR/data_dictionary.csv``
