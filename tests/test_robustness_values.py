@@ -410,3 +410,15 @@ def test_metabolics_command_refuses_a_muscle_properties_row_naming_no_muscle(dem
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"{csv}: muscle row 'solues_r' (near: soleus_r" in err, err
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("value", [1.5, True, "1.5", "x", 0, "0"])
+def test_the_solvers_cycle_option_is_never_read_as_another_cycle(value):
+    """``solve --cycle`` and Python callers: only "auto" or a whole number from 1 (1.5 or True
+    were read as cycle 1)."""
+    from musclemetab.errors import OptionError
+    from musclemetab.redundancy.window import parse_cycle
+
+    with pytest.raises(OptionError, match="cycle"):
+        parse_cycle(value)
+    assert parse_cycle("2") == 2 and parse_cycle(3) == 3 and parse_cycle("auto") == "auto"

@@ -181,7 +181,8 @@ def solve_files(
     if id_path is None:
         from ..external_loads import ID_COORDINATE_FILTER_HZ, compute_inverse_dynamics
 
-        id_path = compute_inverse_dynamics(model_path, ik_path, loads, trial_window.start_s, trial_window.end_s)
+        id_path = compute_inverse_dynamics(model_path, ik_path, loads, trial_window.start_s, trial_window.end_s,
+                                           cache_dir=cache_dir)
         id_table = read_table(id_path)
         id_record = {"computed_by": "OpenSim InverseDynamicsTool (muscles excluded)",
                      "coordinate_lowpass_hz": ID_COORDINATE_FILTER_HZ, "external_loads": str(loads.path),

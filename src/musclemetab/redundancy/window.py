@@ -77,10 +77,12 @@ def parse_cycle(text) -> str | int:
     """``"auto"`` or a cycle number from 1; :class:`OptionError` otherwise."""
     if text is None or text == "auto":
         return text
-    try:
-        n = int(text)
-    except (TypeError, ValueError):
-        raise OptionError(f"--cycle must be 'auto' or a cycle number (1, 2, ...), not {text!r}") from None
+    whole = isinstance(text, int) and not isinstance(text, bool)
+    if not whole and isinstance(text, str) and text.strip().isdigit():
+        text, whole = int(text), True
+    if not whole:  # 1.5, True, "1.5": never read as cycle 1
+        raise OptionError(f"--cycle must be 'auto' or a cycle number (1, 2, ...), not {text!r}")
+    n = int(text)
     if n < 1:
         raise OptionError(f"--cycle counts from 1, not {n}")
     return n
