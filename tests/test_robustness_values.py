@@ -422,3 +422,36 @@ def test_the_solvers_cycle_option_is_never_read_as_another_cycle(value):
     with pytest.raises(OptionError, match="cycle"):
         parse_cycle(value)
     assert parse_cycle("2") == 2 and parse_cycle(3) == 3 and parse_cycle("auto") == "auto"
+
+
+def test_passive_parameters_that_are_not_finite_are_named_as_such():
+    """kPE = inf was reported as 'no passive parameters'."""
+    import math
+
+    from musclemetab.errors import InputFileError, UnknownMuscleError
+    from musclemetab.passive import PassiveParameters
+
+    params = PassiveParameters({"soleus_r": (math.inf, 1.0, 0.6), "tibant_r": (4.0, 1.0, 0.6)}, "p.csv")
+    with pytest.raises(InputFileError, match=r"p.csv: .*soleus_r are not finite"):
+        params.for_muscles(["soleus_r", "tibant_r"])
+    with pytest.raises(UnknownMuscleError, match="no passive parameters for vaslat_r"):
+        params.for_muscles(["tibant_r", "vaslat_r"])
+    assert params.for_muscles(["tibant_r"]).tolist() == [[4.0, 1.0, 0.6]]
+
+
+def test_report_of_a_study_whose_units_all_failed_says_so(tmp_path):
+    """It was called 'not written by the study runner of this version'."""
+    from musclemetab.errors import InputFileError
+    from musclemetab.report.folder import read_study_folder
+    from musclemetab.study.runner import ID_COLUMNS
+
+    (tmp_path / "results.csv").write_text(",".join(ID_COLUMNS) + "\n")
+    (tmp_path / "failures.csv").write_text("subject,trial,workflow,reason\ns1,walk,effort-gen,IPOPT: Infeasible\n"
+                                           "s1,run,effort-gen,IPOPT: Infeasible\n")
+    decoy = tmp_path.parent / "decoy.txt"
+    decoy.write_text("keep")
+    with pytest.raises(InputFileError, match=r"no unit of the study finished \(2 units failed, e\.g\. "
+                                             r"s1/walk/effort-gen: IPOPT: Infeasible"):
+        read_study_folder(tmp_path)
+    assert decoy.read_text() == "keep" and sorted(p.name for p in tmp_path.iterdir()) == ["failures.csv",
+                                                                                         "results.csv"]

@@ -71,6 +71,13 @@ class PassiveParameters:
                 missing.append(m)
                 v = (math.nan,) * 3
             out.append(v)
+        not_finite = [m for m in missing if any(self.values.get(k) is not None for k in
+                                                (m, _mirror(m), base_name(m)) if k is not None)]
+        if not_finite:
+            raise InputFileError(
+                f"{self.source}: the passive parameters (kPE, s0, sM) of {', '.join(not_finite)} are not finite "
+                "numbers (inf or NaN); give finite values (calibrate again, or correct the file)"
+            )
         if missing:
             raise UnknownMuscleError(
                 f"{self.source}: no passive parameters for {', '.join(missing)}; the calibration must "
