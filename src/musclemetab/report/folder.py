@@ -271,22 +271,6 @@ def _recorded_report_models(settings: dict) -> list[str] | None:
     return parse_models(report["models"])
 
 
-def _failures_note(path: Path) -> str:
-    """`` (N units failed, e.g. <unit>: <reason>; see failures.csv)`` from the study's failures table."""
-    import pandas as pd
-
-    fpath = path / FAILURES_CSV
-    try:
-        failures = pd.read_csv(fpath, dtype=str).fillna("")
-    except (OSError, pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError):
-        return ""
-    if failures.empty or "reason" not in failures:
-        return ""
-    first = failures.iloc[0]
-    unit = "/".join(v for v in (first.get("subject", ""), first.get("trial", ""), first.get("workflow", "")) if v)
-    return f" ({len(failures)} unit{'s' if len(failures) > 1 else ''} failed, e.g. {unit}: {first['reason']}; see {fpath})"
-
-
 def _unique(values) -> list[str]:
     return list(dict.fromkeys(values.astype(str)))
 
@@ -384,10 +368,11 @@ def read_study_folder(study_dir: str | os.PathLike, models=None) -> StudyFolder:
         results = pd.read_csv(rpath, dtype={"subject": str, "trial": str, "workflow": str, "model": str})
     except (pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError) as exc:
         raise InputFileError(f"{rpath}: not a readable results table ({exc}); run the study again") from None
-    if results.empty:
-        raise InputFileError(f"{rpath}: no unit of the study finished{_failures_note(path)}; mend what "
-                             "failed and run the study again")
     missing = [c for c in REQUIRED_COLUMNS if c not in results.columns]
+    if results.empty:  # every unit failed: the runner writes the key columns alone; the page lists the failures
+        for c in missing:
+            results[c] = pd.Series(dtype=float if c.endswith(("_W_per_kg", "_m_per_s")) else object)
+        missing = []
     if missing:
         raise MissingColumnError(
             f"{rpath}: missing column{'s' if len(missing) > 1 else ''} {', '.join(missing)}; "
