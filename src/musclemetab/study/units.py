@@ -508,7 +508,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         solution = Solution.load(tmp, require_success=False)
         if not solution.run_record.success:
             raise solution.run_record.failure(f"EMG-TEN solution of trial {trial.name}")
-        solve_summary = solution.summary
+        solve_record = solution.record
     else:
         kwargs = {}
         if unit.workflow != "effort-gen" and subject.passive is not None:
@@ -529,8 +529,8 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
                               grf_column=trial.grf_column, grf_threshold_N=trial.grf_threshold_N,
                               cycle=trial.cycle, options=_solver_options(study, subject), **kwargs)
         write_solution_folder(sol, tmp)
-        solve_summary = sol.summary
-        times["solve_s"] = sol.summary.get("solve_time_s")
+        solve_record = sol.record
+        times["solve_s"] = sol.record.solve_time_s
         if not sol.success:
             from ..redundancy.emg_ten import emg_failure
 
@@ -544,7 +544,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         warnings.warn(f"{subject.name}/{trial.name}: no walking speed ({exc})", stacklevel=2)
         speed = None
     solved = Solution.load(tmp, require_success=False)
-    recorded = (solved.summary.get("window") or {}).get("gait_cycle")
+    recorded = solved.record.gait_cycle
     if recorded and trial.start_s is None and trial.end_s is None:  # the cycle the solve found
         from ..analysis.events import GaitCycle
 
@@ -594,7 +594,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
             "not available" if speed is None else "estimated from the pelvis displacement over the cycle (IK)"),
         "toe_off_pct": float(100.0 * (cycle.toe_off_s - cycle.start_s) / (cycle.end_s - cycle.start_s)),
         "n_nodes": int(np.asarray(result.time_s).size),
-        "large_reserve": bool(solve_summary.get("large_reserve", False)),
-        "reserve_share_of_peak_moment": solve_summary.get("reserve_share_of_peak_moment"),
+        "large_reserve": bool(solve_record.large_reserve),
+        "reserve_share_of_peak_moment": solve_record.reserve_share_of_peak_moment,
     }
 
