@@ -1,10 +1,11 @@
 """The record of one solve: status, IPOPT statistics, timings, software versions, input hashes.
 
-One :class:`RunRecord` describes every solve (one trial or several in one problem). The solver
-writes it into ``summary.json``/``parameters.json`` (:meth:`RunRecord.to_dict`), a
+:class:`RunRecord` is the IPOPT outcome of every solve (one trial or several in one problem): the
+solver writes it into ``summary.json``/``parameters.json`` (:meth:`RunRecord.to_dict`), a
 :class:`~.solution.Solution` and the EMG-TEN result give it back (``.run_record``), and the study
-runner turns a failed one into the one-line reason of ``failures.csv``
-(:meth:`RunRecord.failure`).
+runner turns a failed one into the one-line reason of ``failures.csv`` (:meth:`RunRecord.failure`).
+:class:`SolveRecord` is the whole record of one trial's solution, every entry of its
+``summary.json`` typed (``Solution.record``).
 """
 
 from __future__ import annotations

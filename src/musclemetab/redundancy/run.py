@@ -389,11 +389,11 @@ def solve_emg_ten(
         emg_mapping=mapping, settings=settings, options=options, sources=sources, check_units=check_units,
         workflow=workflow, tendon_stiffness=tendon_stiffness,
     )
-    result.record["geometry_time_s"] = t_geometry
-    result.record["side"] = side
-    for label, solution in result.solutions.items():  # as the single-trial solve's record holds it
-        result.solutions[label] = dataclasses.replace(solution, record=solution.record.with_(side=side))
-    return result
+    # the leg, in each trial's record as the single-trial solve's record holds it
+    solutions = {label: dataclasses.replace(solution, record=solution.record.with_(side=side))
+                 for label, solution in result.solutions.items()}
+    return dataclasses.replace(result, solutions=solutions,
+                               record={**result.record, "geometry_time_s": t_geometry, "side": side})
 
 
 def emg_mappings_of_legs(model, ik_path, emg_mapping, side: str, dofs=None, cache_dir=None) -> dict:

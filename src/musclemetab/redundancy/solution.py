@@ -25,7 +25,7 @@ A solution folder holds two files:
     plus ``/forceset/reserve_<dof>`` (N m). Controls (excitation, fiber velocity, and what
     depends on them: ``fV`` and the active fiber force) and reserves live on the intervals,
     i.e. at nodes ``0 ... N-1``; at node ``N`` the file repeats the value of node ``N-1``.
-    With the backward fiber dynamics (``summary["fiber_dynamics"]``, ``docs/problem.md``) the
+    With the backward fiber dynamics (``record.fiber_dynamics``, ``docs/problem.md``) the
     velocity of interval ``k`` is that of its end node: the fiber velocity, ``fV`` and the
     active fiber force are at nodes ``1 ... N`` and node ``0`` repeats node ``1``.
 ``summary.json``
@@ -33,7 +33,8 @@ A solution folder holds two files:
     ``reserve_share_of_peak_moment``, the largest reserve RMS over the peak joint moment;
     ``large_reserve`` is true, with a :class:`~musclemetab.errors.LargeReserveWarning` for a converged solve,
     above :data:`LARGE_RESERVE_SHARE`, 1 %), muscles, DOFs,
-    the muscle parameters used, the window, ``N`` and the workflow settings.
+    the muscle parameters used, the window, ``N`` and the workflow settings: the entries of
+    :attr:`Solution.record` (:class:`~.record.SolveRecord`), in the order they were recorded.
 
 Both files are written together (:func:`musclemetab.io.atomic_directory`): a reader never
 sees one without the other.
@@ -200,7 +201,9 @@ class Solution:
     backward fiber dynamics ``fiber_velocity_lmo_per_s``, ``force_velocity_multiplier`` and
     ``active_fiber_force_N`` are those of nodes ``1 ... N`` and node ``0`` repeats node ``1``).
     ``fiber_velocity_lmo_per_s`` is ``v~M`` in lMo/s (the optimisation variable); the file stores
-    ``v~M/vmax`` (see :attr:`normalized_fiber_velocity`).
+    ``v~M/vmax`` (see :attr:`normalized_fiber_velocity`). ``record`` is the solve's
+    :class:`~.record.SolveRecord` (frozen; a stage that adds an entry makes a new solution with
+    ``dataclasses.replace(solution, record=solution.record.with_(...))``).
     """
 
     time_s: np.ndarray
