@@ -249,6 +249,38 @@ def test_compliant_tendons_shorten_plantarflexor_fibers(solved):
 # --------------------------------------------------------------------------- files
 @pytest.mark.opensim
 @pytest.mark.slow
+def test_solution_record_round_trip(solved, tmp_path):
+    """A solution written and loaded gives back its record (the typed entries of ``summary.json``,
+    exactly the dictionary of the file) and its arrays (to the file's 12 digits); written again,
+    both files are the same bytes. The record's reserve statistics are those of the arrays."""
+    from musclemetab.redundancy import Solution
+
+    sol, folder = solved("normal", "effort-gen")
+    back = Solution.load(folder)
+    assert back.record == sol.file_record()
+    assert back.record.to_dict() == json.loads((folder / "summary.json").read_text())
+    rec = back.record
+    assert rec.success and rec.status == "Solve_Succeeded" and rec.side == "r"
+    assert rec.muscles == list(sol.muscles) and rec.dofs == list(DOFS) and rec.n_intervals == sol.time_s.size - 1
+    assert rec.time_window_s == pytest.approx([0.57, 1.75]) and rec.workflow_name == "effort-gen"
+    assert rec.run_record.iterations == rec.iterations > 0
+    for f in ("time_s", "excitation", "activation", "lm_norm", "fiber_velocity_lmo_per_s", "tendon_force_N",
+              "active_fiber_force_N", "passive_fiber_force_N", "reserve_Nm"):
+        a, b = getattr(back, f), getattr(sol, f)
+        np.testing.assert_allclose(a, b, rtol=1e-11, atol=1e-11 * np.max(np.abs(b)), err_msg=f)
+    # reserves (nodes 0..N-1) worked from the arrays
+    rms = np.sqrt(np.mean(sol.reserve_Nm[:-1] ** 2, axis=0))
+    assert [rec.reserve_rms_Nm[d] for d in sol.dofs] == pytest.approx(rms, rel=1e-9)
+    assert rec.reserve_max_abs_Nm == pytest.approx(dict(zip(sol.dofs, np.max(np.abs(sol.reserve_Nm), axis=0))),
+                                                   rel=1e-9)
+    assert rec.large_reserve is False and rec.reserve_share_of_peak_moment < 0.01
+    again = back.write(tmp_path / "again")
+    for name in ("solution.sto", "summary.json"):
+        assert (again / name).read_bytes() == (folder / name).read_bytes(), name
+
+
+@pytest.mark.opensim
+@pytest.mark.slow
 def test_solution_files(solved):
     from musclemetab.io import read_storage
 

@@ -7,6 +7,7 @@ without OpenSim.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import types
 
@@ -25,6 +26,7 @@ from musclemetab.errors import (
 from musclemetab.io import read_storage, write_storage
 from musclemetab.redundancy import inputs as I
 from musclemetab.redundancy import workflows as W
+from musclemetab.redundancy.record import SolveRecord
 
 DOFS = I.DEFAULT_DOFS
 
@@ -324,7 +326,7 @@ def _toy_solution():
     return Solution(time_s=t, muscles=p.names, dofs=("ankle_angle_r",), excitation=x, activation=x * 0.9, lm_norm=x + 0.5,
                     fiber_velocity_lmo_per_s=x - 0.5, tendon_force_N=100 * x, active_fiber_force_N=50 * x, passive_fiber_force_N=5 * x,
                     active_force_length_multiplier=x, force_velocity_multiplier=x + 0.1, reserve_Nm=x[:, :1],
-                    parameters=p, summary={"status": "Solve_Succeeded", "success": True, "objective": 0.1})
+                    parameters=p, record=SolveRecord.from_dict({"status": "Solve_Succeeded", "success": True, "objective": 0.1}))
 
 
 def test_solution_round_trip(tmp_path):
@@ -342,13 +344,41 @@ def test_solution_round_trip(tmp_path):
     np.testing.assert_allclose(df["/forceset/a_r/normalized_fiber_velocity"], sol.fiber_velocity_lmo_per_s[:, 0] / 10)
 
 
+def test_solution_record_entries_round_trip(tmp_path):
+    """Every kind of entry of a record (typed, optional and absent, one of a newer file) is written
+    and read back unchanged, in the file's order; a stage's added entry comes last, the rest kept."""
+    from musclemetab.redundancy.solution import Solution
+
+    entries = {"status": "Solve_Succeeded", "success": True, "objective": 0.1, "iterations": 12,
+               "objective_terms": {"activation": 0.1}, "time_window_s": [0.0, 0.5], "n_intervals": 5,
+               "workflow": {"name": "effort-gen", "passive_source": None}, "fiber_dynamics": "backward",
+               "a_newer_entry": {"x": [1, 2]}, "reserve_share_of_peak_moment": 0.002, "large_reserve": False}
+    sol = dataclasses.replace(_toy_solution(), record=SolveRecord.from_dict(entries))
+    assert sol.record.extra == {"a_newer_entry": {"x": [1, 2]}} and sol.record.side is None
+    assert "side" not in sol.record and sol.record.get("side", "absent") == "absent"
+    sol = dataclasses.replace(sol, record=sol.record.with_(side="l", n_intervals=5))
+    assert list(sol.summary) == [*entries, "side"] and sol.record.side == "l"
+    sol.write(tmp_path / "s")
+    text = (tmp_path / "s" / "summary.json").read_text()
+    back = Solution.load(tmp_path / "s")
+    assert back.record == sol.file_record()
+    assert list(back.summary) == [*entries, "side", "format", "format_version", "muscles", "dofs", "parameters",
+                                  "conventions"]
+    assert back.record.workflow == {"name": "effort-gen", "passive_source": None}
+    assert back.record.muscles == ["a_r", "b_r"] and back.record.parameters["b_r"]["kT"] == 10
+    back.write(tmp_path / "again")
+    assert (tmp_path / "again" / "summary.json").read_text() == text
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        back.record.side = "r"
+
+
 def test_solution_load_errors(tmp_path):
     from musclemetab.redundancy.solution import Solution
 
     with pytest.raises(InputFileError, match="not a solution folder"):
         Solution.load(tmp_path)
     sol = _toy_solution()
-    sol.summary.update(status="Infeasible_Problem_Detected", success=False)
+    sol = dataclasses.replace(sol, record=sol.record.with_(status="Infeasible_Problem_Detected", success=False))
     sol.write(tmp_path / "f")
     with pytest.raises(SolverError, match="Infeasible_Problem_Detected"):
         Solution.load(tmp_path / "f")

@@ -19,7 +19,7 @@ import pytest
 
 from musclemetab.errors import InputFileError, MissingColumnError, OptionError, UnknownMuscleError
 from musclemetab.redundancy import MuscleTendonParameters, Solution
-from musclemetab.redundancy.record import RunRecord
+from musclemetab.redundancy.record import RunRecord, SolveRecord
 from musclemetab.report import (
     FIGURE_NAMES,
     GROUPS,
@@ -71,9 +71,9 @@ def make_solution(workflow: str, muscles=MUSCLES) -> Solution:
         fiber_velocity_lmo_per_s=zeros, tendon_force_N=zeros, active_fiber_force_N=zeros, passive_fiber_force_N=zeros,
         active_force_length_multiplier=np.ones((n, m)), force_velocity_multiplier=np.ones((n, m)),
         reserve_Nm=np.zeros((n, 1)), parameters=params,
-        summary={**RunRecord(status="Solve_Succeeded", success=True, iterations=ITERATIONS[workflow], solve_time_s=1.25,
+        record=SolveRecord.from_dict({**RunRecord(status="Solve_Succeeded", success=True, iterations=ITERATIONS[workflow], solve_time_s=1.25,
                              max_constraint_violation=3e-7).to_dict(),
-                 "workflow": {"name": workflow}, "side": "r", "max_moment_residual_Nm": 2e-6},
+                 "workflow": {"name": workflow}, "side": "r", "max_moment_residual_Nm": 2e-6}),
     )
 
 

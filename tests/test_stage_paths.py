@@ -12,6 +12,7 @@ cycle records, and on both legs.
 from __future__ import annotations
 
 import copy
+import dataclasses
 
 import numpy as np
 import pandas as pd
@@ -82,9 +83,9 @@ def with_cycle(example, cycle_r, tmp_path_factory):
     from musclemetab.redundancy import solve_files
 
     solution = copy.deepcopy(solve_files(example.model, example.ik["normal"], example.id["normal"], "effort-gen"))
-    window = dict(solution.summary.get("window") or {})
+    window = dict(solution.record.window or {})
     window["gait_cycle"] = {"start_s": cycle_r.start_s, "toe_off_s": cycle_r.toe_off_s, "end_s": cycle_r.end_s}
-    solution.summary["window"] = window
+    solution = dataclasses.replace(solution, record=solution.record.with_(window=window))
     folder = tmp_path_factory.mktemp("stage_paths") / "solution"
     solution.write(folder)
     return solution, folder

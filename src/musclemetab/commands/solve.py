@@ -242,7 +242,7 @@ def run(args) -> int:
         options=options, cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, warm_start=warm,
         exclude_muscles=excluded, exclude_missing_ok=args.side == "both",
     )
-    unused = [m for m in excluded if not any(m in x.summary.get("excluded_muscles", []) for x in solutions.values())]
+    unused = [m for m in excluded if not any(m in (x.record.excluded_muscles or []) for x in solutions.values())]
     if unused:
         raise UnknownMuscleError(f"--exclude-muscles: {', '.join(unused)} is in neither leg's problem; check the names")
     for side, solution in solutions.items():
@@ -250,19 +250,19 @@ def run(args) -> int:
         write_solution_folder(solution, out)
     for side, solution in solutions.items():
         out = Path(args.out) / side if args.side == "both" else Path(args.out)
-        s = solution.summary
+        s = solution.record
         if not solution.success:
             raise SolverError(
-                f"the {args.workflow} solve did not converge (IPOPT status '{s['status']}' after "
-                f"{s['iterations']} iterations): {failure_advice(s['status'])}.{_bound_note(solution)} The "
+                f"the {args.workflow} solve did not converge (IPOPT status '{s.status}' after "
+                f"{s.iterations} iterations): {failure_advice(s.status)}.{_bound_note(solution)} The "
                 f"unconverged result is in {out} with \"success\": false"
             )
-        worst_reserve = max(s["reserve_rms_Nm"].values()) if s["reserve_rms_Nm"] else 0.0
+        worst_reserve = max(s.reserve_rms_Nm.values()) if s.reserve_rms_Nm else 0.0
         print(
             f"solve: {args.workflow} side {side}, {len(solution.muscles)} muscles x {len(solution.dofs)} DOFs, "
-            f"N = {s['n_intervals']}: {s['status']} in {s['iterations']} iterations, "
-            f"objective {s['objective']:.6e}, solve {s['solve_time_s']:.2f} s, "
-            f"max moment residual {s['max_moment_residual_Nm']:.1e} N m, max reserve RMS "
+            f"N = {s.n_intervals}: {s.status} in {s.iterations} iterations, "
+            f"objective {s.objective:.6e}, solve {s.solve_time_s:.2f} s, "
+            f"max moment residual {s.max_moment_residual_Nm:.1e} N m, max reserve RMS "
             f"{worst_reserve:.3g} N m{_energy_note(s)} -> {out}"
         )
     return 0
@@ -303,8 +303,8 @@ def _energy_goal(args):
         raise OptionError(f"--energy-model: {exc}") from None
 
 
-def _energy_note(summary) -> str:
-    goal = summary.get("energy_goal")
+def _energy_note(record) -> str:
+    goal = record.energy_goal
     if not goal:
         return ""
     return (f", {goal['model']} (smooth, one leg, no basal) {goal['leg_mean_W_per_kg']:.3f} W/kg of body mass "

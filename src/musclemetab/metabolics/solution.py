@@ -163,14 +163,15 @@ def read_solution_states(directory: str | os.PathLike, *, require_success: bool 
     )
 
 
-def _recorded_cycle(summary: Mapping) -> tuple[float, float] | None:
-    """(start, end) of the gait cycle a solve recorded in its summary (``window.gait_cycle``), else None."""
+def _recorded_cycle(summary) -> tuple[float, float] | None:
+    """(start, end) of the gait cycle a solve recorded in its summary (``window.gait_cycle``; the file's
+    dictionary or a :class:`~musclemetab.redundancy.record.SolveRecord`), else None."""
     window = summary.get("window")
     cycle = window.get("gait_cycle") if isinstance(window, Mapping) else None
     return (float(cycle["start_s"]), float(cycle["end_s"])) if isinstance(cycle, Mapping) else None
 
 
-def _recorded_side(summary: Mapping) -> str | None:
+def _recorded_side(summary) -> str | None:
     """The leg (``"r"``/``"l"``) a solve recorded in its summary, else None."""
     side = summary.get("side")
     return side if side in ("r", "l") else None
@@ -195,8 +196,8 @@ def states_of_solution(solution, *, require_success: bool = True) -> SolutionSta
     params = {m: dict(zip(_PARAMETER_NAMES, (float(x) for x in v))) for m, v in zip(solution.muscles, values)}
     return SolutionStates(time_s=np.asarray(solution.time_s, dtype=float), muscles=tuple(solution.muscles),
                           states={k: np.asarray(v, dtype=float).T for k, v in arrays.items()}, parameters=params,
-                          source="solution object", cycle_s=_recorded_cycle(solution.summary),
-                          side=_recorded_side(solution.summary))
+                          source="solution object", cycle_s=_recorded_cycle(solution.record),
+                          side=_recorded_side(solution.record))
 
 
 def solution_states(solution, *, require_success: bool = True) -> SolutionStates:

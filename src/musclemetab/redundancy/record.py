@@ -1,10 +1,11 @@
 """The record of one solve: status, IPOPT statistics, timings, software versions, input hashes.
 
-One :class:`RunRecord` describes every solve (one trial or several in one problem). The solver
-writes it into ``summary.json``/``parameters.json`` (:meth:`RunRecord.to_dict`), a
+:class:`RunRecord` is the IPOPT outcome of every solve (one trial or several in one problem): the
+solver writes it into ``summary.json``/``parameters.json`` (:meth:`RunRecord.to_dict`), a
 :class:`~.solution.Solution` and the EMG-TEN result give it back (``.run_record``), and the study
-runner turns a failed one into the one-line reason of ``failures.csv``
-(:meth:`RunRecord.failure`).
+runner turns a failed one into the one-line reason of ``failures.csv`` (:meth:`RunRecord.failure`).
+:class:`SolveRecord` is the whole record of one trial's solution, every entry of its
+``summary.json`` typed (``Solution.record``).
 """
 
 from __future__ import annotations
@@ -12,10 +13,10 @@ from __future__ import annotations
 import math
 import os
 import platform
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-__all__ = ["RunRecord", "solver_versions", "input_hashes"]
+__all__ = ["RunRecord", "SolveRecord", "solver_versions", "input_hashes"]
 
 def solver_versions() -> dict:
     """Versions of musclemetab, Python and (when importable) CasADi."""
@@ -104,3 +105,126 @@ class RunRecord:
 
         return SolverError(f"{what} did not converge: IPOPT status {self.status} after {self.iterations} "
                            f"iterations ({self.message})")
+
+
+_ABSENT = None
+
+
+@dataclass(frozen=True)
+class SolveRecord:
+    """Everything ``summary.json`` says about one solve, typed; built once, complete.
+
+    The fields are those the builders of a solution write (:func:`~.solve.solve_with_parameters`,
+    the EMG-TEN and estimation problems, :func:`~.solution.build_solution` for the residuals and
+    reserve statistics, :func:`~.run.solve_files` for side, window and geometry time, and
+    :meth:`~.solution.Solution.write` for the file's muscles, DOFs, parameters and conventions).
+    An optional entry the solve did not record is ``None``. ``keys`` lists the entries the record holds,
+    in the file's order; ``extra`` holds entries of other (older or newer) files, kept as read.
+    :meth:`to_dict` gives back exactly the file's dictionary and :meth:`from_dict` reads it, so that
+    a folder loads and writes again unchanged. A stage that adds an entry makes a new record
+    (:meth:`with_`).
+    """
+
+    # the IPOPT outcome (RunRecord)
+    status: str = "unknown"
+    success: bool = False
+    message: str | None = _ABSENT
+    objective: float | None = _ABSENT
+    objective_terms: dict | None = _ABSENT
+    iterations: int | None = _ABSENT
+    solve_time_s: float | None = _ABSENT
+    solve_cpu_time_s: float | None = _ABSENT
+    build_time_s: float | None = _ABSENT
+    function_evaluation_time_s: dict | None = _ABSENT
+    ms_per_iteration: float | None = _ABSENT
+    max_constraint_violation: float | None = _ABSENT
+    software: dict | None = _ABSENT
+    input_hashes: dict | None = _ABSENT
+    # the problem
+    workflow: dict | None = _ABSENT
+    objective_trial: float | None = _ABSENT
+    preparation_time_s: float | None = _ABSENT
+    problem_size: dict | None = _ABSENT
+    time_window_s: list | None = _ABSENT
+    n_intervals: int | None = _ABSENT
+    mesh_step_s: float | None = _ABSENT
+    optimal_reserve_Nm: float | None = _ABSENT
+    static_optimisation_objective: float | None = _ABSENT
+    fiber_dynamics: str | None = _ABSENT
+    fiber_length_bounds: dict | None = _ABSENT
+    initial_guess: str | None = _ABSENT
+    solver_options: dict | None = _ABSENT
+    input_preparation: dict | None = _ABSENT
+    inputs: dict | None = _ABSENT
+    energy_goal: dict | None = _ABSENT
+    emg: dict | None = _ABSENT
+    emg_tracking: dict | None = _ABSENT
+    emg_tolerance: float | None = _ABSENT
+    # the solution's residuals and reserves (build_solution)
+    conventions: dict | None = _ABSENT
+    max_moment_residual_Nm: float | None = _ABSENT
+    max_moment_residual_by_dof_Nm: dict | None = _ABSENT
+    max_hill_residual: float | None = _ABSENT
+    max_activation_dynamics_residual: float | None = _ABSENT
+    reserve_rms_Nm: dict | None = _ABSENT
+    reserve_max_abs_Nm: dict | None = _ABSENT
+    reserve_share_of_peak_moment: float | None = _ABSENT
+    large_reserve: bool | None = _ABSENT
+    # the trial (solve_files)
+    total_time_s: float | None = _ABSENT
+    geometry_time_s: float | None = _ABSENT
+    side: str | None = _ABSENT
+    excluded_muscles: list | None = _ABSENT
+    window: dict | None = _ABSENT
+    inverse_dynamics: dict | None = _ABSENT
+    # the file (Solution.write)
+    format: str | None = _ABSENT
+    format_version: int | None = _ABSENT
+    muscles: list | None = _ABSENT
+    dofs: list | None = _ABSENT
+    parameters: dict | None = _ABSENT
+    extra: dict = field(default_factory=dict)
+    keys: tuple = ()
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "SolveRecord":
+        """From a ``summary.json`` dictionary (entries that are not fields go to ``extra``)."""
+        names = set(cls.__dataclass_fields__) - {"extra", "keys"}
+        kw = {k: v for k, v in d.items() if k in names}
+        extra = {k: v for k, v in d.items() if k not in names}
+        return cls(**kw, extra=extra, keys=tuple(d))
+
+    def to_dict(self) -> dict:
+        """The ``summary.json`` dictionary (the entries of ``keys``, in that order)."""
+        return {k: (self.extra[k] if k in self.extra else getattr(self, k)) for k in self.keys}
+
+    def with_(self, **entries) -> "SolveRecord":
+        """A copy with ``entries`` set (new ones after the others, as in the file)."""
+        names = set(self.__dataclass_fields__) - {"extra", "keys"}
+        fields = {k: v for k, v in entries.items() if k in names}
+        extra = {**self.extra, **{k: v for k, v in entries.items() if k not in names}}
+        keys = self.keys + tuple(k for k in entries if k not in self.keys)
+        return replace(self, **fields, extra=extra, keys=keys)
+
+    def get(self, key: str, default=None):
+        """The entry ``key`` of the file's dictionary, ``default`` when the record has none."""
+        if key not in self.keys:
+            return default
+        return self.extra[key] if key in self.extra else getattr(self, key)
+
+    def __contains__(self, key: str) -> bool:
+        return key in self.keys
+
+    @property
+    def workflow_name(self) -> str:
+        return str((self.workflow or {}).get("name", ""))
+
+    @property
+    def gait_cycle(self) -> dict | None:
+        """The gait cycle the window was taken from (``window['gait_cycle']``), if recorded."""
+        return (self.window or {}).get("gait_cycle")
+
+    @property
+    def run_record(self) -> RunRecord:
+        """The IPOPT outcome (:class:`RunRecord`)."""
+        return RunRecord.from_dict(self.to_dict())

@@ -18,7 +18,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -345,10 +345,9 @@ def assemble_result(trials, params, wf_record, ocp, settings, options, t_prep, t
             "inputs": {k: str(v) for k, v in t.sources.items()},
         }
         sol = build_solution(inp, est_params.subset(inp.muscles), o, summary)
-        sol.summary["total_time_s"] = _time.perf_counter() - t_start
-        solutions[t.label] = sol
-    record["max_moment_residual_Nm"] = max(s.summary["max_moment_residual_Nm"] for s in solutions.values())
-    record["max_hill_residual"] = max(s.summary["max_hill_residual"] for s in solutions.values())
+        solutions[t.label] = replace(sol, record=sol.record.with_(total_time_s=_time.perf_counter() - t_start))
+    record["max_moment_residual_Nm"] = max(s.record.max_moment_residual_Nm for s in solutions.values())
+    record["max_hill_residual"] = max(s.record.max_hill_residual for s in solutions.values())
     record["total_time_s"] = _time.perf_counter() - t_start
     return Result(
         solutions=solutions, parameters=est_params,

@@ -17,6 +17,7 @@ with the array-level functions of :mod:`.solve` and :mod:`.emg_pipeline`.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time as _time
 from pathlib import Path
@@ -99,7 +100,7 @@ def solve_files(
     default 20 N). With ``id_path=None``
     and ``external_loads`` (an OpenSim ExternalLoads file), the inverse dynamics is computed
     by OpenSim over the window (:func:`musclemetab.external_loads.compute_inverse_dynamics`);
-    its path is ``solution.summary["inputs"]["id"]``. The mesh has ``mesh_frequency_hz``
+    its path is ``solution.record.inputs["id"]``. The mesh has ``mesh_frequency_hz``
     intervals per second (the study's 100 by default). ``exclude_muscles`` leaves muscles out of
     the problem (e.g. one whose fiber cannot reach force equilibrium within the bounds).
 
@@ -229,15 +230,14 @@ def solve_files(
         tendon_stiffness_file=tendon_stiffness_file, options=options, goals=goals, sources=sources,
         check_units=check_units, warm_start=warm_start, mesh_frequency_hz=mesh_frequency_hz,
     )
-    solution.summary["geometry_time_s"] = t_geometry
-    solution.summary["side"] = side
+    trial = {"geometry_time_s": t_geometry, "side": side}
     if exclude_muscles:
-        solution.summary["excluded_muscles"] = list(exclude_muscles)
+        trial["excluded_muscles"] = list(exclude_muscles)
     if trial_window.source != "inverse-kinematics file":
-        solution.summary["window"] = trial_window.record()
+        trial["window"] = trial_window.record()
     if id_record is not None:
-        solution.summary["inverse_dynamics"] = id_record
-    return solution
+        trial["inverse_dynamics"] = id_record
+    return dataclasses.replace(solution, record=solution.record.with_(**trial))
 
 
 def _solve_files_recording_warnings(args, kwargs):
@@ -393,11 +393,11 @@ def solve_emg_ten(
         emg_mapping=mapping, settings=settings, options=options, sources=sources, check_units=check_units,
         workflow=workflow, tendon_stiffness=tendon_stiffness,
     )
-    result.record["geometry_time_s"] = t_geometry
-    result.record["side"] = side
-    for solution in result.solutions.values():  # as the single-trial solve's summary records it
-        solution.summary["side"] = side
-    return result
+    # the leg, in each trial's record as the single-trial solve's record holds it
+    solutions = {label: dataclasses.replace(solution, record=solution.record.with_(side=side))
+                 for label, solution in result.solutions.items()}
+    return dataclasses.replace(result, solutions=solutions,
+                               record={**result.record, "geometry_time_s": t_geometry, "side": side})
 
 
 def emg_mappings_of_legs(model, ik_path, emg_mapping, side: str, dofs=None, cache_dir=None) -> dict:
@@ -461,8 +461,8 @@ def write_solution_folder(solution, out) -> None:
     from ..io import atomic_write_bytes
 
     solution.write(out)
-    if "inverse_dynamics" in solution.summary:
-        src = Path(solution.summary["inputs"]["id"])
+    if "inverse_dynamics" in solution.record:
+        src = Path(solution.record.inputs["id"])
         atomic_write_bytes(Path(out) / "inverse_dynamics.sto", src.read_bytes())
 
 

@@ -25,7 +25,7 @@ A solution folder holds two files:
     plus ``/forceset/reserve_<dof>`` (N m). Controls (excitation, fiber velocity, and what
     depends on them: ``fV`` and the active fiber force) and reserves live on the intervals,
     i.e. at nodes ``0 ... N-1``; at node ``N`` the file repeats the value of node ``N-1``.
-    With the backward fiber dynamics (``summary["fiber_dynamics"]``, ``docs/problem.md``) the
+    With the backward fiber dynamics (``record.fiber_dynamics``, ``docs/problem.md``) the
     velocity of interval ``k`` is that of its end node: the fiber velocity, ``fV`` and the
     active fiber force are at nodes ``1 ... N`` and node ``0`` repeats node ``1``.
 ``summary.json``
@@ -33,7 +33,8 @@ A solution folder holds two files:
     ``reserve_share_of_peak_moment``, the largest reserve RMS over the peak joint moment;
     ``large_reserve`` is true, with a :class:`~musclemetab.errors.LargeReserveWarning` for a converged solve,
     above :data:`LARGE_RESERVE_SHARE`, 1 %), muscles, DOFs,
-    the muscle parameters used, the window, ``N`` and the workflow settings.
+    the muscle parameters used, the window, ``N`` and the workflow settings: the entries of
+    :attr:`Solution.record` (:class:`~.record.SolveRecord`), in the order they were recorded.
 
 Both files are written together (:func:`musclemetab.io.atomic_directory`): a reader never
 sees one without the other.
@@ -60,6 +61,7 @@ from ..muscle import (
     tendon_force_length,
 )
 from .parameters import MuscleTendonParameters
+from .record import SolveRecord
 
 __all__ = [
     "Solution",
@@ -199,7 +201,9 @@ class Solution:
     backward fiber dynamics ``fiber_velocity_lmo_per_s``, ``force_velocity_multiplier`` and
     ``active_fiber_force_N`` are those of nodes ``1 ... N`` and node ``0`` repeats node ``1``).
     ``fiber_velocity_lmo_per_s`` is ``v~M`` in lMo/s (the optimisation variable); the file stores
-    ``v~M/vmax`` (see :attr:`normalized_fiber_velocity`).
+    ``v~M/vmax`` (see :attr:`normalized_fiber_velocity`). ``record`` is the solve's
+    :class:`~.record.SolveRecord` (frozen; a stage that adds an entry makes a new solution with
+    ``dataclasses.replace(solution, record=solution.record.with_(...))``).
     """
 
     time_s: np.ndarray
@@ -216,27 +220,30 @@ class Solution:
     force_velocity_multiplier: np.ndarray
     reserve_Nm: np.ndarray
     parameters: MuscleTendonParameters
-    summary: dict = field(default_factory=dict)
+    record: SolveRecord = field(default_factory=SolveRecord)
 
     # ------------------------------------------------------------------ properties
     @property
-    def run_record(self):
-        """The :class:`~.record.RunRecord` of the solve (from ``summary``)."""
-        from .record import RunRecord
+    def summary(self) -> dict:
+        """The record as the dictionary of ``summary.json`` (a copy: :attr:`record` is the solve's record)."""
+        return self.record.to_dict()
 
-        return RunRecord.from_dict(self.summary)
+    @property
+    def run_record(self):
+        """The :class:`~.record.RunRecord` of the solve (the IPOPT outcome of :attr:`record`)."""
+        return self.record.run_record
 
     @property
     def status(self) -> str:
-        return str(self.summary.get("status", "unknown"))
+        return str(self.record.status)
 
     @property
     def success(self) -> bool:
-        return bool(self.summary.get("success", False))
+        return bool(self.record.success)
 
     @property
     def objective(self) -> float:
-        return float(self.summary.get("objective", math.nan))
+        return math.nan if self.record.objective is None else float(self.record.objective)
 
     @property
     def n_intervals(self) -> int:
@@ -295,18 +302,21 @@ class Solution:
         return StorageTable(self.time_s, list(cols), np.column_stack(list(cols.values())),
                             {"name": "musclemetab muscle redundancy solution", "in_degrees": False})
 
+    def file_record(self) -> SolveRecord:
+        """:attr:`record` as :meth:`write` stores it: with the file's format, muscles, DOFs,
+        parameters and conventions (what :meth:`load` gives back)."""
+        rec = self.record
+        missing = {k: v for k, v in (("format", SUMMARY_FORMAT), ("format_version", SUMMARY_VERSION)) if k not in rec}
+        rec = rec.with_(**missing, muscles=list(self.muscles), dofs=list(self.dofs),
+                        parameters=self.parameters.to_records())
+        return rec if "conventions" in rec else rec.with_(conventions=CONVENTIONS)
+
     def write(self, directory: str | os.PathLike) -> Path:
         """Write ``solution.sto`` and ``summary.json`` into ``directory`` (atomically)."""
         from ..io import atomic_directory, write_storage
 
         directory = Path(directory)
-        summary = dict(self.summary)
-        summary.setdefault("format", SUMMARY_FORMAT)
-        summary.setdefault("format_version", SUMMARY_VERSION)
-        summary["muscles"] = list(self.muscles)
-        summary["dofs"] = list(self.dofs)
-        summary["parameters"] = self.parameters.to_records()
-        summary.setdefault("conventions", CONVENTIONS)
+        summary = self.file_record().to_dict()
         text = json.dumps(json_ready(summary), indent=2, allow_nan=True)
         with atomic_directory(directory) as tmp:
             write_storage(
@@ -363,7 +373,7 @@ class Solution:
             force_velocity_multiplier=block("force_velocity_multiplier"),
             reserve_Nm=df[[reserve_column(d) for d in dofs]].to_numpy(dtype=float),
             parameters=params,
-            summary=summary,
+            record=SolveRecord.from_dict(summary),
         )
 
 
@@ -375,8 +385,8 @@ def build_solution(
 ) -> Solution:
     """Assemble a :class:`Solution` from an :class:`~.ipopt.OcpResult` and the trial inputs.
 
-    Fills ``summary`` with residuals (moment, Hill equilibrium, activation dynamics) and
-    reserve statistics computed here in NumPy from the reported quantities. With
+    Its :attr:`~Solution.record` is ``summary`` (the builder's entries) with the residuals
+    (moment, Hill equilibrium, activation dynamics) and reserve statistics computed here in NumPy from the reported quantities. With
     ``summary["fiber_dynamics"] == "backward"`` the fiber velocity of interval ``k`` is placed
     at node ``k+1`` and the Hill equilibrium checked at nodes ``1 ... N``.
     """
@@ -435,5 +445,5 @@ def build_solution(
         force_velocity_multiplier=d["force_velocity_multiplier"],
         reserve_Nm=reserve_Nm,
         parameters=params,
-        summary=summary,
+        record=SolveRecord.from_dict(summary),
     )

@@ -115,7 +115,7 @@ def solve_with_parameters(
         "fiber_dynamics": options.fiber_dynamics,
         "fiber_length_bounds": fiber_length_bounds_record(inputs, params),
         "initial_guess": "static optimisation (rigid tendons)" if warm_start is None else
-        f"warm start from {warm_start.summary.get('workflow', {}).get('name', 'a previous solution')} "
+        f"warm start from {warm_start.record.workflow_name or 'a previous solution'} "
         f"(mu_init {WARM_START_MU_INIT:g})",
         "workflow": dict(workflow_record or {"name": "custom"}),
         "solver_options": solver_record(options, goals),
@@ -133,8 +133,7 @@ def solve_with_parameters(
         summary["energy_goal"] = {**options.energy.record(), "w_activation": goals.w_activation,
                                   "leg_mean_W_per_kg": float(np.mean(rate))}
     solution = build_solution(inputs, params, ocp, summary)
-    solution.summary["total_time_s"] = _time.perf_counter() - t_start
-    return solution
+    return replace(solution, record=solution.record.with_(total_time_s=_time.perf_counter() - t_start))
 
 
 def solve_trial(
@@ -184,6 +183,6 @@ def muscles_at_fiber_length_bound(solution: Solution, tolerance: float = 1e-3) -
     (1.7, or the widened bound recorded in ``summary['fiber_length_bounds']``)."""
     from .bounds import FIBER_LENGTH_BOUNDS
 
-    widened = solution.summary.get("fiber_length_bounds", {}).get("widened_upper", {})
+    widened = (solution.record.fiber_length_bounds or {}).get("widened_upper", {})
     top = np.max(np.asarray(solution.lm_norm, dtype=float), axis=0)
     return [m for m, v in zip(solution.muscles, top) if v >= widened.get(m, FIBER_LENGTH_BOUNDS[1]) - tolerance]

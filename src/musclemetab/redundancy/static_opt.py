@@ -175,6 +175,6 @@ def guess_from_solution(solution, inputs: TrialInputs, params: MuscleTendonParam
         excitation=solution.excitation[:N].copy(),
         reserve=solution.reserve_Nm[:N] / optimal_reserve_Nm,
         # the intervals' velocities: nodes 1..N with the backward fiber dynamics (docs/problem.md)
-        fiber_velocity_lmo_per_s=(solution.fiber_velocity_lmo_per_s[1:] if solution.summary.get("fiber_dynamics") == "backward"
+        fiber_velocity_lmo_per_s=(solution.fiber_velocity_lmo_per_s[1:] if solution.record.fiber_dynamics == "backward"
                  else solution.fiber_velocity_lmo_per_s[:N]).copy(),
     )

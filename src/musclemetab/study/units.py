@@ -528,7 +528,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
                               grf_column=trial.grf_column, grf_threshold_N=trial.grf_threshold_N,
                               cycle=trial.cycle, options=_solver_options(study, subject), **kwargs)
         write_solution_folder(sol, tmp)
-        times["solve_s"] = sol.summary.get("solve_time_s")
+        times["solve_s"] = sol.record.solve_time_s
         if not sol.success:
             from ..redundancy.emg_ten import emg_failure
 
@@ -543,7 +543,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         speed = None
     # the stages after the solve take the solution object (the same numbers as its folder,
     # tests/test_stage_paths.py); each writes its files once
-    recorded = (sol.summary.get("window") or {}).get("gait_cycle")
+    recorded = sol.record.gait_cycle
     if recorded and trial.start_s is None and trial.end_s is None:  # the cycle the solve found
         from ..analysis.events import GaitCycle
 
@@ -593,7 +593,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
             "not available" if speed is None else "estimated from the pelvis displacement over the cycle (IK)"),
         "toe_off_pct": float(100.0 * (cycle.toe_off_s - cycle.start_s) / (cycle.end_s - cycle.start_s)),
         "n_nodes": int(np.asarray(result.time_s).size),
-        "large_reserve": bool(sol.summary.get("large_reserve", False)),
-        "reserve_share_of_peak_moment": sol.summary.get("reserve_share_of_peak_moment"),
+        "large_reserve": bool(sol.record.large_reserve),
+        "reserve_share_of_peak_moment": sol.record.reserve_share_of_peak_moment,
     }
 
