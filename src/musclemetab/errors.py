@@ -65,6 +65,11 @@ class SolverError(MusclemetabError):
     """An optimisation problem could not be built or did not converge."""
 
 
+class ImplausibleResultError(MusclemetabError):
+    """A result with a plausibility flag, refused because strict checking was asked for
+    (``--strict``, the study file's ``strict``; ``docs/quality.md``)."""
+
+
 class OpenSimWorkerError(MusclemetabError):
     """The isolated OpenSim process failed unexpectedly."""
 
@@ -83,6 +88,10 @@ class CacheWarning(MusclemetabWarning):
 
 class LargeReserveWarning(MusclemetabWarning):
     """The reserve actuators carry a large share of a joint moment."""
+
+
+class PlausibilityWarning(MusclemetabWarning):
+    """A result has a plausibility flag (``docs/quality.md``): a value walking does not reach."""
 
 
 class MuscleTableWarning(MusclemetabWarning):

@@ -29,7 +29,7 @@ def run(args) -> int:
     from ..study.demo import run_demo
 
     result = run_demo(args.out, workers=args.workers, speeds=args.speeds, progress=not args.no_progress,
-                      force=args.force)
+                      force=args.force, strict=args.strict)
     print_run(result, "demo")
     if result.interrupted:
         return exit_status(result)

@@ -67,7 +67,9 @@ def add_parser(subparsers) -> None:
     p.add_argument(
         "--strict", action="store_true",
         help="refuse muscles the anatomical muscle table cannot place (default: fallback mass and "
-        "slow-twitch fraction 0.5, with a warning naming them)",
+        "slow-twitch fraction 0.5, with a warning naming them), and fail (exit status 1, the files written) on a "
+        "plausibility flag of the solve or of the whole-body rate against --speed (one warning line each, "
+        "docs/quality.md)",
     )
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (may be the solution folder)")
     p.set_defaults(func=run)
@@ -122,6 +124,7 @@ def run(args) -> int:
             f"-> {args.out} ({', '.join(p.name for p in files.values())}); whole body = 2 x {leg} "
             f"(W/kg, basal {args.basal}): {means}"
         )
+        _plausibility(args, folders, results)
         return 0
     from ..metabolics.solution import add_legs
 
@@ -129,7 +132,39 @@ def run(args) -> int:
     means = ", ".join(f"{m} {v:.2f}" for m, v in add_legs(results).items())
     print(f"metabolics: legs {' + '.join(results)} added (each over its own cycle) -> {out}/whole_body.csv and "
           f"{', '.join(f'{out}/{s}' for s in results)}; whole body (W/kg, basal {args.basal}): {means}")
+    _plausibility(args, folders, results)
     return 0
+
+
+def _plausibility(args, folders, results) -> None:
+    """Warn (one line each) of the solves' plausibility flags and of whole-body rates outside the
+    band of walking at ``--speed``; write them to ``OUT/plausibility.json``; with ``--strict`` fail."""
+    import json
+    from pathlib import Path
+
+    from ..io import atomic_write_text, read_json_object
+    from ..metabolics.plausibility import PLAUSIBILITY_FILE, metabolic_flags
+    from ..metabolics.solution import add_legs
+    from ..redundancy.plausibility import check_strict, flags_from_records, warn_flags
+    from ..redundancy.solution import SUMMARY_FILE
+
+    flags = []
+    for folder in folders.values():
+        solve = flags_from_records(read_json_object(Path(folder) / SUMMARY_FILE).get("plausibility"))
+        warn_flags(solve, str(folder))
+        flags += solve
+    if len(results) == 1:
+        (result,) = results.values()
+        rates = {m: result.whole_body[m].mean_W_per_kg for m in result.models}
+    else:
+        rates = add_legs(results)
+    rate_flags = metabolic_flags(rates, args.speed)
+    warn_flags(rate_flags, str(args.out))
+    flags += rate_flags
+    atomic_write_text(Path(args.out) / PLAUSIBILITY_FILE,
+                      json.dumps([f.to_dict() for f in flags], indent=2) + "\n")
+    if args.strict:
+        check_strict(flags, "metabolics --strict", written=str(args.out))
 
 
 def _note(differences: list[str], model_path) -> None:

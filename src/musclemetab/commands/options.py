@@ -70,8 +70,11 @@ def check_body(mass_kg: float | None, height_m: float | None) -> None:
 
 
 def add_study_arguments(parser) -> None:
-    """``--workers``, ``--force`` and ``--no-progress`` of the commands that run a study."""
+    """``--workers``, ``--force``, ``--no-progress`` and ``--strict`` of the commands that run a study."""
     parser.add_argument("--workers", type=int, metavar="N",
                         help="parallel processes (default: the number of CPUs); 1 runs in this process")
     parser.add_argument("--force", action="store_true", help="run every unit again, even those up to date")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--strict", action="store_true",
+                        help="a unit with a plausibility flag fails, with the flags as its reason (the study "
+                        "file's strict = true; docs/quality.md)")

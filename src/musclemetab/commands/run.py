@@ -58,6 +58,10 @@ def run(args) -> int:
     from ..study.spec import load_study
 
     study = load_study(args.study, output=args.out)
+    if args.strict:
+        from ..study.spec import strict_study
+
+        study = strict_study(study)
     result = run_study(study, workers=args.workers, scheduler=args.scheduler, force=args.force,
                        progress=not args.no_progress)
     if args.report and not result.interrupted:

@@ -138,6 +138,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    "study's start from static optimisation")
     p.add_argument("--skip-unit-checks", action="store_true",
                    help="do not reject inverse-dynamics moments whose size looks like wrong units")
+    p.add_argument("--strict", action="store_true",
+                   help="a plausibility flag (over-stretched or saturated muscles, large reserves; one warning line "
+                   "each, docs/quality.md) fails the command (exit status 1; the solution is still written)")
     g = p.add_argument_group(
         "energy goal", "effort workflows: minimise the integrated metabolic rate of a smooth energy model "
         "(docs/energy_objective.md), alone (--effort-weight 0) or beside the effort goal")
@@ -265,7 +268,22 @@ def run(args) -> int:
             f"max moment residual {s.max_moment_residual_Nm:.1e} N m, max reserve RMS "
             f"{worst_reserve:.3g} N m{_energy_note(s)} -> {out}"
         )
+    _plausibility(args, {str(Path(args.out) / side if args.side == "both" else Path(args.out)): sol
+                         for side, sol in solutions.items()})
     return 0
+
+
+def _plausibility(args, solutions) -> None:
+    """One warning line per plausibility flag of each solution (``{folder: Solution}``); with
+    ``--strict`` a flag fails the command."""
+    from ..redundancy.plausibility import check_strict, warn_flags
+
+    flags = []
+    for where, solution in solutions.items():
+        warn_flags(solution.record.flags, where)
+        flags += solution.record.flags
+    if getattr(args, "strict", False):
+        check_strict(flags, "solve --strict", written=str(args.out))
 
 
 _ENERGY_OPTIONS = (("--energy-weight", "energy_weight"), ("--effort-weight", "effort_weight"),
@@ -394,6 +412,8 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
     ) for side, mapping in legs.items()}
     for side, result in results.items():
         _write_emg_ten(args, result, _leg_out(args, side), side)
+    _plausibility(args, {f"{_leg_out(args, side)}/{label}": sol for side, result in results.items()
+                         for label, sol in result.solutions.items()})
     return 0
 
 
@@ -470,4 +490,6 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
         leg = f" side {side}" if args.side == "both" else ""
         print(f"solve: {args.workflow} EMG-{settings.emg_mode}{leg} {len(result.solutions)} trial(s): {r.status} in "
               f"{r.iterations} iterations, objective {r.objective:.6e}; EMG scale {scales} -> {out}")
+    _plausibility(args, {f"{_leg_out(args, side)}" + (f"/{label}" if len(result.solutions) > 1 else ""): sol
+                         for side, result in results.items() for label, sol in result.solutions.items()})
     return 0

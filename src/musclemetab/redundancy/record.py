@@ -170,6 +170,9 @@ class SolveRecord:
     reserve_max_abs_Nm: dict | None = _ABSENT
     reserve_share_of_peak_moment: float | None = _ABSENT
     large_reserve: bool | None = _ABSENT
+    peak_moment_by_dof_Nm: dict | None = _ABSENT
+    #: the solver-level plausibility flags (:mod:`.plausibility`), each ``Flag.to_dict()``; ``[]``: none
+    plausibility: list | None = _ABSENT
     # the trial (solve_files)
     total_time_s: float | None = _ABSENT
     geometry_time_s: float | None = _ABSENT
@@ -223,6 +226,13 @@ class SolveRecord:
     def gait_cycle(self) -> dict | None:
         """The gait cycle the window was taken from (``window['gait_cycle']``), if recorded."""
         return (self.window or {}).get("gait_cycle")
+
+    @property
+    def flags(self) -> list:
+        """The plausibility flags (:class:`~.plausibility.Flag`) the solve recorded (``[]``: none, or not checked)."""
+        from .plausibility import flags_from_records
+
+        return flags_from_records(self.plausibility)
 
     @property
     def run_record(self) -> RunRecord:

@@ -46,7 +46,7 @@ import json
 import math
 import os
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -429,8 +429,9 @@ def build_solution(
         reserve_max_abs_Nm=dict(zip(inputs.dofs, np.max(np.abs(reserve_Nm), axis=0).tolist())),
         reserve_share_of_peak_moment=share,
         large_reserve=bool(large),
+        peak_moment_by_dof_Nm=dict(zip(inputs.dofs, np.max(np.abs(inputs.moments_Nm), axis=0).tolist())),
     )
-    return Solution(
+    solution = Solution(
         time_s=inputs.mesh_time_s.copy(),
         muscles=tuple(inputs.muscles),
         dofs=tuple(inputs.dofs),
@@ -447,3 +448,7 @@ def build_solution(
         parameters=params,
         record=SolveRecord.from_dict(summary),
     )
+    from .plausibility import solution_flags  # the checks after the solve (docs/quality.md)
+
+    flags = [f.to_dict() for f in solution_flags(solution)]
+    return replace(solution, record=solution.record.with_(plausibility=flags))

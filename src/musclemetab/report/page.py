@@ -255,10 +255,12 @@ FLAGS = {
 
 
 def flagged_units(study: StudyFolder) -> Table | None:
-    """The successful units with a flag set (:data:`FLAGS`: a true value in ``results.csv``),
-    one row per unit and flag, or ``None``."""
+    """The successful units with a flag, or ``None``: one row per unit and flag, the units with
+    plausibility flags first (the ``quality`` column of ``results.csv``, ``docs/quality.md``: the
+    solve's flags with their messages from each leg's ``summary.json``, the metabolic ones
+    worked again from the row), then those with a flag of :data:`FLAGS` (a true value in ``results.csv``)."""
     ok = study.ok
-    rows = []
+    rows = _plausibility_rows(study, ok)
     for flag, text in FLAGS.items():
         if flag not in ok.columns:
             continue
@@ -274,6 +276,37 @@ def flagged_units(study: StudyFolder) -> Table | None:
     if not rows:
         return None
     return Table([[("subject", 1), ("trial", 1), ("workflow", 1), ("flag", 1), ("meaning", 1)]], rows, 0, "failures")
+
+
+#: ``quality`` values of ``results.csv`` that carry no flag
+_NO_FLAG = ("ok", "not checked", "nan", "")
+
+
+def _plausibility_rows(study: StudyFolder, ok) -> list[list[str]]:
+    """Rows of :func:`flagged_units` for the units whose ``quality`` is not ``ok``."""
+    from ..metabolics.plausibility import metabolic_flags
+    from ..redundancy.plausibility import flags_from_records
+
+    if "quality" not in ok.columns:
+        return []
+    flagged = ok[~ok["quality"].astype(str).str.strip().isin(_NO_FLAG)]
+    rows = []
+    for key, unit in flagged.groupby(["subject", "trial", "workflow"], sort=False):
+        key = [str(k) for k in key]
+        first = unit.iloc[0]
+        for side, folder in study.leg_folders(first).items():
+            try:
+                flags = flags_from_records(study.summary(folder).get("plausibility"))
+            except MusclemetabError as exc:
+                rows.append(key + ["(solve)", study.short(exc)])
+                continue
+            rows += [key + [f.code, f.message] for f in flags]
+        for _, r in unit.iterrows():
+            speed = r.get("speed_m_per_s")
+            speed = float(speed) if speed is not None and np.isfinite(float(speed)) else None
+            rows += [key + [f.code, f.message] for f in metabolic_flags(
+                {str(r["model"]): float(r["mean_W_per_kg"])}, speed, unit[unit["model"] == r["model"]])]
+    return rows
 
 
 def solver_runs(study: StudyFolder) -> list[list[str]]:
@@ -350,6 +383,7 @@ def page_tables(study: StudyFolder) -> dict:
     per-muscle tables, settings, the method's choices, failures, solver runs and software."""
     ok = study.ok
     units = ["subject", "trial", "workflow"]
+    flagged = flagged_units(study)
     return {
         "name": study.name,
         "n_subjects": len(study.subjects()),
@@ -365,7 +399,8 @@ def page_tables(study: StudyFolder) -> dict:
         "per_muscle": _per_muscle(study),
         "settings": _settings(study),
         "failures": _failures(study),
-        "flagged": flagged_units(study),
+        "flagged": flagged,
+        "n_flagged": len({tuple(r[:3]) for r in flagged.body}) if flagged is not None else 0,
         "runs": _runs(study),
         "software": _software(study),
     }

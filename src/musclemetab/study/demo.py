@@ -65,13 +65,18 @@ def demo_study(out: str | os.PathLike = "musclemetab-demo", *, speeds=None,
 
 
 def run_demo(out: str | os.PathLike = "musclemetab-demo", *, workers: int | None = None, speeds=None,
-             report: bool = True, progress: bool = True, force: bool = False):
-    """Run the example study and write its report; returns the :class:`StudyRun`."""
+             report: bool = True, progress: bool = True, force: bool = False, strict: bool = False):
+    """Run the example study and write its report; returns the :class:`StudyRun` (``strict``: a
+    unit with a plausibility flag fails, :func:`~.spec.strict_study`)."""
     import threading
 
     from .runner import run_study
 
     study = demo_study(out, speeds=speeds)
+    if strict:
+        from .spec import strict_study
+
+        study = strict_study(study)
     figures = None
     if report:  # the plot that depends only on the package, drawn while the units run (once per machine)
         from ..report.draw import draw_package_figures

@@ -9,7 +9,8 @@ trial units — and gathers every complete unit into one results table:
     without basal heat), cost of transport, stance and swing shares, muscle-group shares,
     toe-off (% of the cycle), speed and measured rate when the study gives calorimetry, and
     ``large_reserve`` (the solve's reserves exceed 1 % of the peak joint moment, see
-    :data:`musclemetab.redundancy.solution.LARGE_RESERVE_SHARE`).
+    :data:`musclemetab.redundancy.solution.LARGE_RESERVE_SHARE`) and ``quality`` (``ok`` or
+    the plausibility flags of the unit and the row, :func:`add_quality`; ``docs/quality.md``).
 ``DIR/per_muscle.csv`` (and ``DIR/per_muscle.parquet`` with the ``parquet`` extra)
     one row per subject × trial × workflow × model × muscle (with its side): the
     per-muscle table of every unit (:mod:`musclemetab.metabolics.per_muscle`).
@@ -71,7 +72,7 @@ from .units import (
     unit_key,
 )
 
-__all__ = ["run_study", "StudyRun", "collect_results", "software_versions", "study_lock", "check_scheduler_address",
+__all__ = ["run_study", "StudyRun", "collect_results", "add_quality", "software_versions", "study_lock", "check_scheduler_address",
            "RESULTS_CSV", "RESULTS_PARQUET", "LOCK_FILE"]
 
 from ..study_layout import (  # noqa: E402,F401  (the names of the study folder's files, defined once)
@@ -623,6 +624,32 @@ def add_leg_rows(rows: Mapping[str, object], basal_energy_J: Mapping[str, object
     return out.reset_index()
 
 
+def add_quality(rows, unit_records):
+    """``rows`` (one results row per model) with the column ``quality``: ``"ok"`` or the flags
+    (:func:`musclemetab.redundancy.plausibility.quality_text`) of the solve (every leg's, from the
+    ``plausibility`` of ``unit_records``) and of the row's metabolic results (its whole-body rate
+    against its speed, its negative group shares: :func:`musclemetab.metabolics.plausibility.metabolic_flags`);
+    ``"not checked"`` when a unit record has no ``plausibility`` (written by an earlier version)."""
+    import pandas as pd
+
+    from ..metabolics.plausibility import metabolic_flags
+    from ..redundancy.plausibility import flags_from_records, quality_text
+
+    if any("plausibility" not in r for r in unit_records):
+        rows["quality"] = "not checked"
+        return rows
+    solve = [f for r in unit_records for f in flags_from_records(r["plausibility"]) if f.model is None]
+    quality = []
+    for i in range(len(rows)):
+        row = rows.iloc[[i]]
+        speed = row["speed_m_per_s"].iloc[0] if "speed_m_per_s" in row else None
+        speed = float(speed) if speed is not None and pd.notna(speed) else None
+        model = str(row["model"].iloc[0])
+        quality.append(quality_text(solve + metabolic_flags({model: float(row["mean_W_per_kg"].iloc[0])}, speed, row)))
+    rows["quality"] = quality
+    return rows
+
+
 def _basal_energy_J(per_muscle, duration_s):
     """A leg's per-muscle basal heat over its cycle (J) by model, from its per-muscle table."""
     if per_muscle is None or "basal_heat_mean_W" not in per_muscle:
@@ -644,6 +671,7 @@ def collect_results(study: Study, failed: dict[str, str] | None = None):
     out = Path(study.output)
     frames, failures, muscles = [], [], []
     legs: dict[tuple, dict] = {}
+    records: dict[tuple, list] = {}  # the unit records of each results row (one per leg)
     for unit in plan_units(study)[1]:
         folder = out / unit.folder
         rec = read_unit_record(folder)
@@ -655,6 +683,7 @@ def collect_results(study: Study, failed: dict[str, str] | None = None):
             failures.append({"subject": unit.subject, "trial": unit.trial, "workflow": unit.workflow, "reason": reason})
             group[unit.side] = None
             continue
+        records.setdefault((unit.subject, unit.trial, unit.workflow), []).append(rec)
         df = _unit_rows(folder, unit, rec)
         pm = pd.read_csv(folder / PER_MUSCLE_FILE) if (folder / PER_MUSCLE_FILE).is_file() else None
         group[unit.side] = (df, pm)
@@ -663,17 +692,17 @@ def collect_results(study: Study, failed: dict[str, str] | None = None):
                                             ("workflow", unit.workflow))):
                 pm.insert(k, col, val)
             muscles.append(pm)
-    for (subject, _, _), group in legs.items():
+    for (subject, trial, workflow), group in legs.items():
         if any(v is None for v in group.values()):
             continue  # a leg failed: its failure is listed; no whole-body row
         if None in group:  # one side, doubled
             df = group[None][0]
             df["legs"] = f"2 x {study.subject(subject).side}"
-            frames.append(df)
+            frames.append(add_quality(df, records[(subject, trial, workflow)]))
             continue
         rows = {side: df for side, (df, _) in group.items()}
         basal = {side: _basal_energy_J(pm, df["duration_s"].iloc[0]) for side, (df, pm) in group.items()}
-        frames.append(add_leg_rows(rows, basal))
+        frames.append(add_quality(add_leg_rows(rows, basal), records[(subject, trial, workflow)]))
     for unit in plan_units(study)[0]:
         rec = read_unit_record(out / unit.folder)
         if not rec or rec.get("status") != "ok":

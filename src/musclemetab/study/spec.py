@@ -76,7 +76,7 @@ from typing import Any, Mapping
 
 from ..errors import InputFileError, OptionError
 
-__all__ = ["Study", "Subject", "Trial", "load_study", "study_from_dict", "EMG_TEN", "KNOWN_WORKFLOWS", "BOTH"]
+__all__ = ["Study", "Subject", "Trial", "load_study", "study_from_dict", "EMG_TEN", "KNOWN_WORKFLOWS", "BOTH", "strict_study"]
 
 EMG_TEN = "emg-ten"
 #: ``side = "both"``: the two legs solved as independent problems, their rates added
@@ -281,6 +281,8 @@ class Study:
     basal_coefficient: float = 1.2
     basal_exponent: float = 1.0
     settings: dict = field(default_factory=dict)
+    #: a unit with a plausibility flag fails (``docs/quality.md``)
+    strict: bool = False
 
     def subject(self, name: str) -> Subject:
         for s in self.subjects:
@@ -291,7 +293,7 @@ class Study:
 
 # ---------------------------------------------------------------------------------------
 _STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "basal_coefficient", "basal_exponent", "subjects",
-               "solver", "energy_goal"}
+               "solver", "energy_goal", "strict"}
 #: keys of the study file's [energy_goal] table (the energy goal of every effort-workflow solve)
 _ENERGY_KEYS = {"model", "weight", "effort_weight", "smoothing"}
 #: keys of the study file's [solver] table (IPOPT settings of every solve)
@@ -400,9 +402,21 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
     energy = _energy_goal(data.get("energy_goal"), where)
     if energy:
         settings["energy_goal"] = energy
+    strict = data.get("strict", False)
+    if not isinstance(strict, bool):
+        raise OptionError(f"{where}: 'strict' must be true or false, not {strict!r}")
+    if strict:
+        settings["strict"] = True
     return Study(name=name, subjects=subjects, workflows=workflows, models=models, output=out,
                  basal=basal, source=source, settings=settings, basal_coefficient=basal_coefficient,
-                 basal_exponent=basal_exponent)
+                 basal_exponent=basal_exponent, strict=strict)
+
+
+def strict_study(study: Study) -> Study:
+    """``study`` with strict plausibility checking (``--strict``: the study file's ``strict = true``)."""
+    from dataclasses import replace
+
+    return replace(study, strict=True, settings={**study.settings, "strict": True})
 
 
 def _solver(data, where: str) -> dict:

@@ -197,6 +197,8 @@ def unit_key(study: Study, unit: Unit, dependency_key: str | None = None) -> str
         content["basal"] = study.basal
         if "basal_coefficient" in study.settings:  # absent: earlier studies keep their unit keys
             content["basal_coefficient_exponent"] = [study.basal_coefficient, study.basal_exponent]
+        if study.strict:  # absent when false: earlier studies keep their unit keys
+            content["strict"] = True
     text = json.dumps(content, sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()
 
@@ -534,6 +536,10 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
 
             raise emg_failure(sol.run_record, subject.emg_mode, f"{unit.workflow} solve of {subject.name}/{trial.name}")
     times["solution_s"] = time.perf_counter() - t0
+    if study.strict:  # the solve's flags fail the unit before the later stages run
+        from ..redundancy.plausibility import check_strict
+
+        check_strict(sol.record.flags, unit.label)
 
     t1 = time.perf_counter()
     try:
@@ -578,6 +584,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
 
     write_opensim_states(sol, subject.model, trial.ik, tmp)
     times["opensim_states_s"] = time.perf_counter() - t3
+    flags = _plausibility(study, unit, sol, result, speed, analysis.summary)
     measured = trial.measured_W_per_kg
     if measured is None and trial.vo2_mL_per_s is not None:
         from ..metabolics.whole_body import brockway_rate_W
@@ -595,5 +602,19 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         "n_nodes": int(np.asarray(result.time_s).size),
         "large_reserve": bool(sol.record.large_reserve),
         "reserve_share_of_peak_moment": sol.record.reserve_share_of_peak_moment,
+        "plausibility": [f.to_dict() for f in flags],
     }
+
+
+def _plausibility(study: Study, unit: Unit, sol, result, speed, groups) -> list:
+    """The unit's plausibility flags: the solve's (its record) and the metabolic ones (this leg's
+    whole-body rate, doubled, against the speed; negative group rates); with the study's
+    ``strict`` a flag fails the unit (:class:`~musclemetab.errors.ImplausibleResultError`)."""
+    from ..metabolics.plausibility import metabolic_flags
+    from ..redundancy.plausibility import check_strict
+
+    flags = metabolic_flags({m: result.whole_body[m].mean_W_per_kg for m in result.models}, speed, groups)
+    if study.strict:  # the solve's flags were checked after the solve
+        check_strict(flags, unit.label)
+    return list(sol.record.flags) + flags
 

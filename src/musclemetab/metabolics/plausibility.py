@@ -1,0 +1,91 @@
+"""Plausibility checks of the metabolic results: whole-body rate against walking speed, and
+negative muscle-group rates.
+
+Pure functions giving a :class:`~musclemetab.redundancy.plausibility.Flag` (``model`` set) or
+``None``; the thresholds are documented constants, overridable by keyword. The solver-level
+checks are in :mod:`musclemetab.redundancy.plausibility`; ``docs/quality.md`` lists them all.
+
+The whole-body band is built on Ralston's regression of gross metabolic rate on walking speed
+from indirect calorimetry (Ralston HJ 1958, *Energy-speed relation and optimal speed during
+level walking*, Int Z Angew Physiol 17:277-283):
+``E = 29 + 0.0053 v^2`` cal/(kg min), ``v`` in m/min, i.e. ``E(v) = (29 + 0.0053 (60 v)^2) 4.184 / 60``
+W/kg with ``v`` in m/s (4.27 W/kg at 1.3 m/s; the study's own calorimetry at preferred speed,
+4.5 [1.1] W/kg, agrees). A model's gross whole-body rate is flagged outside
+``[RATE_BAND[0] E(v), RATE_BAND[1] E(v)]``.
+"""
+
+from __future__ import annotations
+
+from typing import Mapping
+
+import numpy as np
+
+from ..redundancy.plausibility import Flag
+
+__all__ = ["PLAUSIBILITY_FILE", "RATE_BAND", "ralston_gross_rate_W_per_kg", "whole_body_rate_flag", "negative_group_flag",
+           "metabolic_flags", "SPEED_RANGE_M_PER_S"]
+
+#: The plausible band of the gross whole-body rate, as factors of Ralston's rate at the speed.
+#: Low: half (a rate below it is below standing rest plus a little walking). High: twice, which
+#: holds the subjects' spread (the study's calorimetry: SD 24 % of the mean at preferred speed)
+#: on top of the models' known overestimation (the study's Table 2: up to 1.75 x the measured
+#: mean, LW07 with EFFORT-GEN, 7.9 against 4.5 W/kg).
+RATE_BAND = (0.5, 2.0)
+#: Speeds (m/s) over which Ralston's regression was fitted (about 0.5 to 2.0 m/s, level walking);
+#: outside them the check is not made.
+SPEED_RANGE_M_PER_S = (0.5, 2.0)
+_CAL_J = 4.184
+#: The file ``musclemetab metabolics`` writes beside ``whole_body.csv``: the flags of the solve(s)
+#: and of the whole-body rates, a JSON list of ``Flag.to_dict()`` (``[]``: none).
+PLAUSIBILITY_FILE = "plausibility.json"
+
+
+def ralston_gross_rate_W_per_kg(speed_m_per_s) -> np.ndarray:
+    """Ralston's (1958) gross metabolic rate of level walking at ``speed_m_per_s`` (W/kg)."""
+    v = 60.0 * np.asarray(speed_m_per_s, dtype=float)  # m/min
+    return (29.0 + 0.0053 * v**2) * _CAL_J / 60.0
+
+
+def whole_body_rate_flag(model: str, mean_W_per_kg: float, speed_m_per_s: float | None, *,
+                         band: tuple[float, float] = RATE_BAND) -> Flag | None:
+    """``model``'s gross whole-body rate (W/kg, with basal heat) outside ``band`` x Ralston's rate
+    at the speed; ``None`` also when the speed is unknown or outside :data:`SPEED_RANGE_M_PER_S`."""
+    if speed_m_per_s is None or not np.isfinite(speed_m_per_s) or not np.isfinite(mean_W_per_kg):
+        return None
+    if not SPEED_RANGE_M_PER_S[0] <= speed_m_per_s <= SPEED_RANGE_M_PER_S[1]:
+        return None
+    ref = float(ralston_gross_rate_W_per_kg(speed_m_per_s))
+    lo, hi = band[0] * ref, band[1] * ref
+    if lo <= mean_W_per_kg <= hi:
+        return None
+    word = "above" if mean_W_per_kg > hi else "below"
+    return Flag("metabolic_rate", f"{model}: whole-body rate {mean_W_per_kg:.2f} W/kg is {word} the band of walking "
+                f"at {speed_m_per_s:.2f} m/s, {lo:.2f}-{hi:.2f} W/kg ({band[0]:g}-{band[1]:g} x Ralston 1958, "
+                f"{ref:.2f} W/kg); look at the solver flags of the unit and at the muscles costing most",
+                {model: float(mean_W_per_kg)}, band[1] if word == "above" else band[0], model=model)
+
+
+def negative_group_flag(model: str, group_share_pct: Mapping[str, float]) -> Flag | None:
+    """Muscle groups of ``model`` whose share of the cycle's muscle energy is negative
+    (``{group: share_<G>_pct}``): the group's muscles return more energy than they spend,
+    which muscles do not (positive work costs more than negative work returns)."""
+    items = {g: float(v) for g, v in sorted(group_share_pct.items(), key=lambda kv: kv[1])
+             if np.isfinite(v) and v < 0}
+    if not items:
+        return None
+    listing = ", ".join(f"{g} {v:.1f} %" for g, v in items.items())
+    return Flag("negative_group_rate", f"{model}: negative muscle-group rates (share of the leg's muscle energy): "
+                f"{listing}; the model's negative-work term dominates these muscles' rates", items, 0.0, model=model)
+
+
+def metabolic_flags(whole_body: Mapping[str, float], speed_m_per_s: float | None,
+                    group_shares=None, *, band: tuple[float, float] = RATE_BAND) -> list[Flag]:
+    """The metabolic checks of every model: ``whole_body`` ``{model: mean_W_per_kg}``;
+    ``group_shares`` the analysis table (one row per ``model``, columns ``share_<G>_pct``), if any."""
+    flags = [whole_body_rate_flag(m, v, speed_m_per_s, band=band) for m, v in whole_body.items()]
+    if group_shares is not None and len(group_shares):
+        cols = [c for c in group_shares.columns if c.startswith("share_") and c.endswith("_pct")
+                and not c.endswith("_with_basal_pct") and c != "share_other_pct"]
+        for _, row in group_shares.iterrows():
+            flags.append(negative_group_flag(str(row["model"]), {c[6:-4]: float(row[c]) for c in cols}))
+    return [f for f in flags if f is not None]

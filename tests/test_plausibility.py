@@ -1,0 +1,121 @@
+"""Plausibility flags after the solve: each check against a case worked by hand on small arrays,
+the record's round trip, the quality column, --strict; the example subject's normal trial gives
+no flag (the gait2392 subject's flags: tests/test_gait2392.py)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from musclemetab.errors import ImplausibleResultError, PlausibilityWarning
+from musclemetab.metabolics.plausibility import (
+    metabolic_flags,
+    negative_group_flag,
+    ralston_gross_rate_W_per_kg,
+    whole_body_rate_flag,
+)
+from musclemetab.redundancy.plausibility import (
+    Flag,
+    check_strict,
+    fiber_length_flag,
+    passive_force_flag,
+    quality_text,
+    reserve_flag,
+    saturation_flag,
+    warn_flags,
+)
+from musclemetab.redundancy.record import SolveRecord
+
+
+def test_passive_force_flag_names_the_muscles_above_half_f0():
+    # peaks over the nodes, in F0: a 300/1000 = 0.30, b 600/1000 = 0.60, c 900/1500 = 0.60
+    force = np.array([[100.0, 600.0, 900.0], [300.0, 200.0, 100.0]])
+    f = passive_force_flag(["a", "b", "c"], force, np.array([1000.0, 1000.0, 1500.0]))
+    assert f.code == "passive_force" and list(f.items) == ["b", "c"]
+    assert f.items == pytest.approx({"b": 0.6, "c": 0.6}) and f.threshold == 0.5
+    assert "b 0.60" in f.message and "0.5 F0" in f.message
+    # exactly at the limit is not above it; a lower limit flags a as well
+    assert passive_force_flag(["a"], np.array([[500.0]]), np.array([1000.0])) is None
+    assert list(passive_force_flag(["a", "b", "c"], force, np.array([1000.0, 1000.0, 1500.0]), limit=0.25).items) == \
+        ["b", "c", "a"]
+
+
+def test_fiber_length_flag_beyond_the_default_bound_names_the_widened_one():
+    lm = np.array([[1.0, 1.69, 1.2], [1.3, 1.72, 1.9]])
+    f = fiber_length_flag(["a", "b", "c"], lm, widened_upper={"c": 2.05})
+    assert list(f.items) == ["c", "b"] and f.items == pytest.approx({"c": 1.9, "b": 1.72}) and f.threshold == 1.7
+    assert "c 1.90 (bound widened to 2.05)" in f.message and "b 1.72;" in f.message
+    assert fiber_length_flag(["a"], np.array([[1.7]])) is None
+
+
+def test_saturation_flag_counts_the_share_of_nodes():
+    # 20 nodes: a at >= 0.95 on 3 (15 %), b on 2 (10 %, not above), c never
+    a = np.zeros((20, 3))
+    a[:3, 0] = [0.95, 1.0, 0.97]
+    a[5:7, 1] = 1.0
+    a[:, 2] = 0.94
+    f = saturation_flag(["a", "b", "c"], a)
+    assert list(f.items) == ["a"] and f.items["a"] == pytest.approx(0.15) and "a 15%" in f.message
+    assert list(saturation_flag(["a", "b", "c"], a, limit=0.05).items) == ["a", "b"]
+    assert list(saturation_flag(["a", "b", "c"], a, level=0.9, limit=0.5).items) == ["c"]
+
+
+def test_reserve_flag_per_dof_share_of_its_peak_moment():
+    # 4 intervals + the repeated last node; RMS over the intervals: knee sqrt((9+9+16+16)/4) = 3.5355
+    r = np.array([[3.0, 0.2], [-3.0, 0.2], [4.0, -0.2], [-4.0, 0.2], [-4.0, 0.2]])
+    peaks = {"knee": 50.0, "toe": 0.1}
+    f = reserve_flag(["knee", "toe"], r, peaks)
+    # knee 3.54/50 = 7.1 % > 5 %; toe 0.2/0.1 = 200 % but 0.2 N m below the 1 N m floor
+    assert list(f.items) == ["knee"] and f.items["knee"] == pytest.approx(math.sqrt(12.5) / 50)
+    assert "knee 3.54 N m RMS = 7.1% of 50 N m" in f.message
+    assert reserve_flag(["knee", "toe"], r, {"knee": 80.0, "toe": 0.1}) is None  # 4.4 %
+    assert list(reserve_flag(["knee", "toe"], r, peaks, floor_Nm=0.1).items) == ["toe", "knee"]
+
+
+def test_ralston_rate_and_the_band_of_walking():
+    # Ralston 1958: 29 + 0.0053 v^2 cal/(kg min), v in m/min; 1.25 m/s = 75 m/min:
+    # 29 + 0.0053 * 5625 = 58.8125 cal/(kg min) = 58.8125 * 4.184 / 60 W/kg = 4.1013 W/kg
+    assert float(ralston_gross_rate_W_per_kg(1.25)) == pytest.approx(58.8125 * 4.184 / 60, rel=1e-12)
+    ref = 58.8125 * 4.184 / 60
+    assert whole_body_rate_flag("UM10", 2 * ref - 1e-6, 1.25) is None
+    high = whole_body_rate_flag("UM10", 10.8, 1.25)
+    assert high.code == "metabolic_rate" and high.model == "UM10" and "above" in high.message
+    assert f"{0.5 * ref:.2f}-{2 * ref:.2f} W/kg" in high.message
+    assert "below" in whole_body_rate_flag("BH04", 0.5 * ref - 0.01, 1.25).message
+    # no speed, or one outside Ralston's range: not checked
+    assert whole_body_rate_flag("UM10", 50.0, None) is None and whole_body_rate_flag("UM10", 50.0, 3.0) is None
+    assert whole_body_rate_flag("UM10", 10.8, 1.25, band=(0.5, 3.0)) is None
+
+
+def test_negative_group_rates_and_the_metabolic_flags_of_a_table():
+    assert negative_group_flag("UM10", {"PF": 20.0, "KE": 0.0}) is None
+    f = negative_group_flag("UM10", {"PF": 20.0, "HAD": -0.4, "KF": -2.5})
+    assert list(f.items) == ["KF", "HAD"] and "KF -2.5 %" in f.message and f.model == "UM10"
+    groups = pd.DataFrame({"model": ["UM10", "BH04"], "share_PF_pct": [30.0, 40.0], "share_KF_pct": [-1.0, 5.0],
+                           "share_other_pct": [-3.0, 0.0], "swing_energy_share_with_basal_pct": [-1.0, 1.0]})
+    flags = metabolic_flags({"UM10": 4.0, "BH04": 12.0}, 1.25, groups)
+    # BH04 above the band; UM10's KF negative (share_other and the basal-weighted phase share are not groups)
+    assert [(f.code, f.model, list(f.items)) for f in flags] == [
+        ("metabolic_rate", "BH04", ["BH04"]), ("negative_group_rate", "UM10", ["KF"])]
+    assert quality_text(flags) == "metabolic_rate(BH04); negative_group_rate(KF)"
+    assert quality_text([]) == "ok"
+
+
+def test_flags_round_trip_through_the_record_and_strict():
+    flags = [Flag("passive_force", "m", {"tfl_l": 1.98, "rect_fem_l": 1.77}, 0.5)]
+    rec = SolveRecord.from_dict({"status": "Solve_Succeeded", "success": True,
+                                 "plausibility": [f.to_dict() for f in flags]})
+    back = SolveRecord.from_dict(json.loads(json.dumps(rec.to_dict())))
+    assert back.plausibility == rec.plausibility and back.flags == flags and back.to_dict() == rec.to_dict()
+    assert "plausibility" not in back.extra
+    assert SolveRecord.from_dict({"status": "x"}).flags == []
+    with pytest.warns(PlausibilityWarning, match=r"^DIR/l: m$"):
+        warn_flags(flags, "DIR/l")
+    check_strict([], "solve")
+    with pytest.raises(ImplausibleResultError, match=r"solve --strict: implausible .*passive_force\(tfl_l rect_fem_l\)"
+                       r".* in OUT"):
+        check_strict(flags, "solve --strict", written="OUT")
