@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 
 import numpy as np
@@ -147,6 +148,11 @@ def test_pool_run_results_table(pool_run):
     # the study's trials are explained by the muscles: no large-reserve flag (the flagged case
     # is tests/test_robustness_inputs.py::test_large_reserves_are_flagged)
     assert table["large_reserve"].dtype == bool and not table["large_reserve"].any()
+    # nor any plausibility flag (docs/quality.md): the example subject's muscles and rates are walking's
+    assert (table["quality"] == "ok").all()
+    for d in set(table["unit_dir"]):
+        assert json.loads((study.output / d / "unit.json").read_text())["plausibility"] == []
+        assert json.loads((study.output / d / "summary.json").read_text())["plausibility"] == []
     # the whole-body rate of the table is the unit's whole_body.csv
     row = table[(table.trial == "normal") & (table.model == "UM10")].iloc[0]
     wb = pd.read_csv(study.output / row.unit_dir / "whole_body.csv").set_index("model")
