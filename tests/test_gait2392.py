@@ -348,7 +348,8 @@ def test_plausibility_flags_of_a_gait2392_study(both_solutions, gait2392, tmp_pa
 
 def _placed(folder):
     """A muscle-properties file placing gait2392's muscles that the anatomical table does not
-    (so that --strict refuses for the flags alone): each takes its F0-based mass and 0.5 slow twitch."""
+    (so that --strict refuses for the flags alone): 0.1 kg and slow-twitch fraction 0.5 each (these
+    four small muscles' values do not change which flags the solves raise)."""
     path = folder / "placed.csv"
     rows = [f"{m}_{s},0.1,0.5" for m in ("pect", "quad_fem", "gem", "per_tert") for s in "rl"]
     path.write_text("muscle,mass_kg,slow_twitch_fraction\n" + "\n".join(rows) + "\n")
