@@ -203,8 +203,8 @@ def test_bad_trial_input_one_line_no_output(gait2392, tmp_path, capsys):
 def both_solutions(gait2392, tmp_path_factory):
     """EFFORT-GEN on each leg's gait cycle, inverse dynamics computed by OpenSim (one solve per leg),
     every muscle kept (the fiber-length bound of tfl, rect_fem and semimem is widened). The contact
-    threshold is given as the study file's default (20 N, also the command's), so that the study of
-    test_plausibility_flags_of_a_gait2392_study makes the same solve calls (solved once: solve_memo)."""
+    threshold is given as the study file's default (20 N, also the command's), so that the
+    two-subject study (conftest) makes the same solve calls (solved once per run: solve_memo)."""
     out = tmp_path_factory.mktemp("g2392") / "both"
     code = _cli("solve", "--model", gait2392.model, "--ik", gait2392.ik, "--external-loads",
                 gait2392.external_loads, "--cycle", "auto", "--side", "both", "--grf-threshold", "20", "--out", out)
@@ -279,22 +279,23 @@ def test_both_legs_effort_gen(both_solutions):
 
 
 @pytest.mark.slow
-def test_plausibility_flags_of_a_gait2392_study(both_solutions, gait2392, tmp_path, capsys):
+def test_plausibility_flags_of_the_two_subject_study(two_subjects, both_solutions, gait2392, tmp_path, capsys):
     """The over-stretched and saturated muscles of gait2392 flagged by name: in each leg's
     summary.json (worked again here from solution.sto and the recorded F0), in the study's
     results.csv (quality) and report (at the top), and by metabolics on the command line (one
-    warning line per flag; --strict: exit status 1); a strict study fails both units.
+    warning line per flag; --strict: exit status 1); a strict study fails both units. The example
+    subject's normal trial in the same study raises no flag.
 
-    The study makes the solve calls of ``both_solutions`` (solved once per run: solve_memo).
-    Oracles: passive force over F0 and the share of nodes at activation >= 0.95 from the stored
-    arrays; the tfl and rect_fem of both legs carry 1.8-2.1 F0 passively, and the hamstrings sit at
-    full activation for 12-23 % of the cycle (docs/quality.md).
+    The two-subject study (conftest) and ``both_solutions`` make the same solve calls (solved once
+    per run: solve_memo). Oracles: passive force over F0 and the share of nodes at activation >=
+    0.95 from the stored arrays; the tfl and rect_fem of both legs carry 1.7-2.2 F0 passively and the
+    hamstrings sit at full activation for 12-23 % of the cycle (docs/quality.md).
     """
+    import re
+
     import pandas as pd
 
     from musclemetab.redundancy import Solution
-    from musclemetab.report.folder import read_study_folder
-    from musclemetab.report.page import page_tables
     from musclemetab.study import run_study, study_from_dict
     from musclemetab.study.spec import strict_study
 
@@ -306,30 +307,29 @@ def test_plausibility_flags_of_a_gait2392_study(both_solutions, gait2392, tmp_pa
         over = {m for m, v in zip(sol.muscles, share) if v > 0.5}
         assert set(flags["passive_force"].items) == over and {f"tfl_{side}", f"rect_fem_{side}"} <= over
         assert flags["passive_force"].items[f"rect_fem_{side}"] == pytest.approx(
-            share[sol.muscles.index(f"rect_fem_{side}")], rel=1e-9) and min(share[sol.muscles.index(
-                f"{m}_{side}")] for m in ("tfl", "rect_fem")) > 1.7
+            share[sol.muscles.index(f"rect_fem_{side}")], rel=1e-9)
+        assert min(share[sol.muscles.index(f"{m}_{side}")] for m in ("tfl", "rect_fem")) > 1.7
         saturated = {m for m, v in zip(sol.muscles, (sol.activation >= 0.95).mean(axis=0)) if v > 0.1}
         assert set(flags["saturated_activation"].items) == saturated and f"semimem_{side}" in saturated
         expected[side] = over, saturated
-    # the example's study, both legs, same solves
-    study = study_from_dict({
-        "name": "gait2392", "workflows": ["effort-gen"], "models": ["UM10"],
-        "subjects": [{"name": "subject01", "model": str(gait2392.model), "body_mass_kg": gait2392.body_mass_kg,
-                      "height_m": GAIT2392_HEIGHT_M, "side": "both",
-                      "trials": [{"name": "walk1", "ik": str(gait2392.ik), "external_loads": str(gait2392.external_loads),
-                                  "cycle": "auto"}]}]}, base="/", output=tmp_path / "study")
-    with pytest.warns(UserWarning):  # no walking speed (treadmill), muscles outside the anatomical table
-        run = run_study(study, workers=1, progress=False)
-    assert not run.failed
-    quality = pd.read_csv(tmp_path / "study" / "results.csv")["quality"].iloc[0]
-    entries = dict(e[:-1].split("(") for e in quality.split("; "))
-    over = expected["r"][0] | expected["l"][0]
-    assert set(entries["passive_force"].split()) == over
-    assert set(entries["saturated_activation"].split()) == expected["r"][1] | expected["l"][1]
-    flagged = page_tables(read_study_folder(tmp_path / "study"))["flagged"].body
-    passive = [r for r in flagged if r[3] == "passive_force"]
-    assert len(passive) == 2 and all(f"rect_fem_{s}" in r[4] and f"tfl_{s}" in r[4] for r, s in zip(passive, "rl"))
-    assert flagged[0][3] == "passive_force" and any(r[3] == "saturated_activation" for r in flagged)
+    # the study: gait2392's row names them all (both legs), the example's is ok
+    out, _ = two_subjects
+    results = pd.read_csv(out / "results.csv")
+    assert (results.loc[results.subject == "example", "quality"] == "ok").all()
+    for quality in results.loc[results.subject == "gait2392", "quality"]:
+        entries = dict(e[:-1].split("(") for e in quality.split("; "))
+        assert set(entries["passive_force"].split()) == expected["r"][0] | expected["l"][0]
+        assert set(entries["saturated_activation"].split()) == expected["r"][1] | expected["l"][1]
+    # the report: at the top, before the figures, one row per flag of each leg, the passive force first
+    page = (out / "report.html").read_text(encoding="utf-8")
+    top = page[page.index('id="attention"'):page.index('id="figures"')]
+    rows = re.findall(r"<tr><td>gait2392</td><td>walk1</td><td>effort-gen</td><td>(\w+)</td><td>([^<]*)</td></tr>",
+                      top.replace('<th scope="row">', "<td>").replace("</th>", "</td>"))
+    assert [c for c, _ in rows][:1] == ["passive_force"] and "example" not in top
+    passive = [text for c, text in rows if c == "passive_force"]
+    assert len(passive) == 2 and all(f"rect_fem_{s}" in t and f"tfl_{s}" in t for t, s in zip(passive, "rl"))
+    saturated = " ".join(text for c, text in rows if c == "saturated_activation")
+    assert all(m in saturated for m in expected["r"][1] | expected["l"][1])
     # the command line: one warning line per flag of each leg, then the strict failure
     code = _cli("metabolics", "--solution", both_solutions, "--mass", gait2392.body_mass_kg, "--height",
                 GAIT2392_HEIGHT_M, "--models", "UM10", "--strict", "--muscle-properties", _placed(tmp_path),
@@ -339,10 +339,17 @@ def test_plausibility_flags_of_a_gait2392_study(both_solutions, gait2392, tmp_pa
     assert len(lines) == 2 and all(f"rect_fem_{s}" in e for e, s in zip(lines, "rl"))
     assert code == 1 and err[-1].startswith("musclemetab: error: metabolics --strict: implausible result")
     assert json.loads((tmp_path / "met" / "plausibility.json").read_text())[0]["code"] == "passive_force"
-    # a strict study: both units fail after the solve, with the flags as the reason
-    run = run_study(strict_study(study), workers=1, progress=False)
-    fails = pd.read_csv(tmp_path / "study" / "failures.csv")
-    assert len(run.failed) == 2 and len(fails) == 2
+    # a strict study of the subject: both units fail after the (same) solves, the flags their reason
+    study = study_from_dict({
+        "name": "gait2392", "workflows": ["effort-gen"], "models": ["UM10"], "strict": True,
+        "subjects": [{"name": "subject01", "model": str(gait2392.model), "body_mass_kg": gait2392.body_mass_kg,
+                      "height_m": GAIT2392_HEIGHT_M, "side": "both",
+                      "trials": [{"name": "walk1", "ik": str(gait2392.ik), "external_loads": str(gait2392.external_loads),
+                                  "cycle": "auto"}]}]}, base="/", output=tmp_path / "strict")
+    assert study.strict and strict_study(study) == study
+    run = run_study(study, workers=1, progress=False)
+    fails = pd.read_csv(tmp_path / "strict" / "failures.csv")
+    assert len(run.failed) == 2 and len(fails) == 2 and len(pd.read_csv(tmp_path / "strict" / "results.csv")) == 0
     assert all("ImplausibleResultError" in r and "passive_force(" in r and "rect_fem_" in r for r in fails["reason"])
 
 

@@ -119,3 +119,17 @@ def test_flags_round_trip_through_the_record_and_strict():
     with pytest.raises(ImplausibleResultError, match=r"solve --strict: implausible .*passive_force\(tfl_l rect_fem_l\)"
                        r".* in OUT"):
         check_strict(flags, "solve --strict", written="OUT")
+
+
+def test_one_legs_rate_flags_and_their_file(tmp_path):
+    from types import SimpleNamespace
+
+    from musclemetab.metabolics.plausibility import PLAUSIBILITY_FILE, legs_rate_flags, write_plausibility
+
+    # one leg: its doubled whole-body rate as the metabolics wrote it; 10.8 W/kg at 1.25 m/s is above 2 x 4.10
+    leg = SimpleNamespace(models=("UM10", "BH04"), whole_body={"UM10": SimpleNamespace(mean_W_per_kg=10.8),
+                                                               "BH04": SimpleNamespace(mean_W_per_kg=5.0)})
+    flags = legs_rate_flags({"r": leg}, 1.25)
+    assert [(f.code, f.model) for f in flags] == [("metabolic_rate", "UM10")] and legs_rate_flags({"r": leg}, None) == []
+    path = write_plausibility(flags, tmp_path)
+    assert path.name == PLAUSIBILITY_FILE and [Flag.from_dict(d) for d in json.loads(path.read_text())] == flags

@@ -139,32 +139,19 @@ def run(args) -> int:
 def _plausibility(args, folders, results) -> None:
     """Warn (one line each) of the solves' plausibility flags and of whole-body rates outside the
     band of walking at ``--speed``; write them to ``OUT/plausibility.json``; with ``--strict`` fail."""
-    import json
-    from pathlib import Path
-
-    from ..io import atomic_write_text, read_json_object
-    from ..metabolics.plausibility import PLAUSIBILITY_FILE, metabolic_flags
-    from ..metabolics.solution import add_legs
-    from ..redundancy.plausibility import check_strict, flags_from_records, warn_flags
-    from ..redundancy.solution import SUMMARY_FILE
+    from ..metabolics.plausibility import legs_rate_flags, write_plausibility
+    from ..redundancy.plausibility import check_strict, read_flags, warn_flags
 
     flags = []
     for folder in folders.values():
-        solve = flags_from_records(read_json_object(Path(folder) / SUMMARY_FILE).get("plausibility"))
+        solve = read_flags(folder)
         warn_flags(solve, str(folder))
         flags += solve
-    if len(results) == 1:
-        (result,) = results.values()
-        rates = {m: result.whole_body[m].mean_W_per_kg for m in result.models}
-    else:
-        rates = add_legs(results)
-    rate_flags = metabolic_flags(rates, args.speed)
-    warn_flags(rate_flags, str(args.out))
-    flags += rate_flags
-    atomic_write_text(Path(args.out) / PLAUSIBILITY_FILE,
-                      json.dumps([f.to_dict() for f in flags], indent=2) + "\n")
+    rates = legs_rate_flags(results, args.speed)
+    warn_flags(rates, str(args.out))
+    write_plausibility(flags + rates, args.out)
     if args.strict:
-        check_strict(flags, "metabolics --strict", written=str(args.out))
+        check_strict(flags + rates, "metabolics --strict", written=str(args.out))
 
 
 def _note(differences: list[str], model_path) -> None:

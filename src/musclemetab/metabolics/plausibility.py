@@ -22,7 +22,7 @@ import numpy as np
 
 from ..redundancy.plausibility import Flag
 
-__all__ = ["PLAUSIBILITY_FILE", "RATE_BAND", "ralston_gross_rate_W_per_kg", "whole_body_rate_flag", "negative_group_flag",
+__all__ = ["PLAUSIBILITY_FILE", "legs_rate_flags", "write_plausibility", "RATE_BAND", "ralston_gross_rate_W_per_kg", "whole_body_rate_flag", "negative_group_flag",
            "metabolic_flags", "SPEED_RANGE_M_PER_S"]
 
 #: The plausible band of the gross whole-body rate, as factors of Ralston's rate at the speed.
@@ -89,3 +89,28 @@ def metabolic_flags(whole_body: Mapping[str, float], speed_m_per_s: float | None
         for _, row in group_shares.iterrows():
             flags.append(negative_group_flag(str(row["model"]), {c[6:-4]: float(row[c]) for c in cols}))
     return [f for f in flags if f is not None]
+
+
+def legs_rate_flags(results: Mapping, speed_m_per_s: float | None, *, band: tuple[float, float] = RATE_BAND) -> list[Flag]:
+    """The whole-body rate checks of :func:`~.solution.metabolics_from_legs`'s ``{side: SolutionMetabolics}``:
+    one leg's rate (that leg doubled), or the two legs added (:func:`~.solution.add_legs`)."""
+    from .solution import add_legs
+
+    if len(results) == 1:
+        (result,) = results.values()
+        rates = {m: result.whole_body[m].mean_W_per_kg for m in result.models}
+    else:
+        rates = add_legs(results)
+    return metabolic_flags(rates, speed_m_per_s, band=band)
+
+
+def write_plausibility(flags, out_dir):
+    """Write ``out_dir/plausibility.json`` (:data:`PLAUSIBILITY_FILE`): the flags as a JSON list."""
+    import json
+    from pathlib import Path
+
+    from ..io import atomic_write_text
+
+    path = Path(out_dir) / PLAUSIBILITY_FILE
+    atomic_write_text(path, json.dumps([f.to_dict() for f in flags], indent=2) + "\n")
+    return path
