@@ -133,3 +133,17 @@ def test_one_legs_rate_flags_and_their_file(tmp_path):
     assert [(f.code, f.model) for f in flags] == [("metabolic_rate", "UM10")] and legs_rate_flags({"r": leg}, None) == []
     path = write_plausibility(flags, tmp_path)
     assert path.name == PLAUSIBILITY_FILE and [Flag.from_dict(d) for d in json.loads(path.read_text())] == flags
+
+
+@pytest.mark.slow
+def test_the_example_study_raises_no_flag(demo):
+    """The example subject at three speeds, EFFORT-GEN and EFFORT-TEN, six models: no flag. The
+    closest is LW07's slow EFFORT-GEN rate, 5.48 W/kg against the band's top at 0.77 m/s,
+    2 x 2.80 = 5.61 W/kg (docs/quality.md); the solves' largest passive force is 0.3 F0."""
+    out, table = demo
+    assert (table["quality"] == "ok").all(), table["quality"].unique()
+    top = 2 * ralston_gross_rate_W_per_kg(table["speed_m_per_s"].to_numpy())
+    assert (table["mean_W_per_kg"] < top).all() and (table["mean_W_per_kg"] > top / 4).all()
+    for d in set(table["unit_dir"]):
+        summary = json.loads((out / d / "summary.json").read_text())
+        assert summary["plausibility"] == [] and len(summary["peak_moment_by_dof_Nm"]) == len(summary["dofs"])
