@@ -330,7 +330,14 @@ def test_plausibility_flags_of_the_two_subject_study(two_subjects, both_solution
     assert len(passive) == 2 and all(f"rect_fem_{s}" in t and f"tfl_{s}" in t for t, s in zip(passive, "rl"))
     saturated = " ".join(text for c, text in rows if c == "saturated_activation")
     assert all(m in saturated for m in expected["r"][1] | expected["l"][1])
-    # the command line: one warning line per flag of each leg, then the strict failure
+    # the command line: one warning line per flag of each leg, then the strict failure (the same solves)
+    code = _cli("solve", "--model", gait2392.model, "--ik", gait2392.ik, "--external-loads", gait2392.external_loads,
+                "--cycle", "auto", "--side", "both", "--grf-threshold", "20", "--strict", "--out", tmp_path / "solve")
+    err = capsys.readouterr().err.splitlines()
+    n_flags = sum(len(Solution.load(both_solutions / s).record.flags) for s in "rl")
+    assert code == 1 and len([e for e in err if e.startswith(f"musclemetab: warning: {tmp_path / 'solve'}")]) == n_flags
+    assert err[-1].startswith("musclemetab: error: solve --strict: implausible result refused (strict): passive_force(")
+    assert all((tmp_path / "solve" / s / "summary.json").is_file() for s in "rl")  # written, for inspection
     code = _cli("metabolics", "--solution", both_solutions, "--mass", gait2392.body_mass_kg, "--height",
                 GAIT2392_HEIGHT_M, "--models", "UM10", "--strict", "--muscle-properties", _placed(tmp_path),
                 "--out", tmp_path / "met")
