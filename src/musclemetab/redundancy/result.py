@@ -193,13 +193,19 @@ class Result:
         Each folder is written atomically; ``parameters.json`` is removed first and written last
         (atomically), so its presence means that all trial folders belong to it.
         """
-        from ..io import atomic_write_text
-
         out_dir = Path(out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
         (out_dir / PARAMETERS_FILE).unlink(missing_ok=True)
         for label, sol in self.solutions.items():
             sol.write(out_dir / label)
+        return self.write_parameters(out_dir)
+
+    def write_parameters(self, out_dir: str | os.PathLike) -> Path:
+        """Write (atomically) ``parameters.json`` alone into ``out_dir`` (e.g. again, after a
+        validation re-solve added its fit to the document)."""
+        from ..io import atomic_write_text
+
+        out_dir = Path(out_dir)
         text = json.dumps(self.parameters_document(), indent=2, allow_nan=True)
         atomic_write_text(out_dir / PARAMETERS_FILE, text + "\n")
         return out_dir
