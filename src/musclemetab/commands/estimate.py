@@ -93,21 +93,29 @@ def run(args) -> int:
     :func:`~musclemetab.redundancy.run.estimate_files`; prints one line."""
     from ..redundancy.estimate import parse_coupling
     from ..redundancy.run import estimate_files
+    from .options import emg_scale_bounds
 
     us_files, emg_files = args.ultrasound or [], getattr(args, "emg", None) or []
     emg_options = [o for o, v in (("--emg-mapping", args.emg_mapping), ("--emg-mode", args.emg_mode),
-                                  ("--emg-weight", args.emg_weight)) if v is not None]
+                                  ("--emg-weight", args.emg_weight), ("--emg-scale-bounds", args.emg_scale_bounds))
+                   if v is not None]
     if emg_options and not emg_files:
         raise OptionError(f"{', '.join(emg_options)} need EMG: give --emg files, or drop them")
     weights = parse_assignments(args.weights.split(",") if args.weights else [], "--weights", float)
     if args.emg_weight is not None:
         weights["emg"] = args.emg_weight
+    bounds = parse_assignments(args.bounds, "--bounds", _bounds)
+    scale_bounds = emg_scale_bounds(args)
+    if scale_bounds is not None:
+        if "emg_scale" in bounds:
+            raise OptionError("--emg-scale-bounds and --bounds emg_scale=... both set the EMG scale bounds; give one")
+        bounds["emg_scale"] = scale_bounds
     result = estimate_files(
         args.model, args.ik, args.id, args.out,
         estimate=parse_assignments(args.estimate, "--estimate", lambda v: [m for m in v.split(",") if m]),
         ultrasound=us_files, emg=emg_files, labels=args.labels,
         couple=[parse_coupling(g) for g in args.couple],
-        bounds=parse_assignments(args.bounds, "--bounds", _bounds), weights=weights, workflow=args.workflow,
+        bounds=bounds, weights=weights, workflow=args.workflow,
         side=args.side, dofs=args.dofs, emg_mode=args.emg_mode, emg_mapping=args.emg_mapping,
         emg_tolerance=args.emg_tolerance, passive=args.passive, max_iter=args.max_iter, validate=args.validate,
         cache_dir=args.cache_dir,

@@ -35,7 +35,7 @@ from ..errors import MusclemetabWarning, OptionError
 
 __all__ = ["CORRELATION_THRESHOLD", "SINGULAR_RCOND", "BOUND_TOLERANCE", "factors_on_bounds", "informing_muscles",
            "uninformed_factors", "check_informed", "identifiability", "warn_identifiability", "warn_on_bounds",
-           "tracking_fit"]
+           "tracking_fit", "reduced_inverse_hessian", "correlation"]
 
 #: |correlation| above which two estimated parameters are reported as not identifiable together
 #: (on the synthetic problem of ``tests/test_estimate.py`` the lMo and lTs factors of one muscle
@@ -140,16 +140,64 @@ def _labels(specs, layout) -> tuple[list[str], list[int]]:
     return labels, cols
 
 
+def reduced_inverse_hessian(H, J, x, g, lbx, ubx, lbg, ubg, lam_g, lam_x, columns) -> tuple[np.ndarray, dict]:
+    """``(K^-1)_pp``: the inverse of the reduced Hessian on the variables ``columns`` at a KKT
+    point (see the module docstring). ``H``: the full symmetric Hessian of the Lagrangian and
+    ``J`` the constraint Jacobian (SciPy sparse), ``g`` the constraint values; the other
+    arguments as IPOPT's. The variables of ``columns`` are kept free; other variables on a bound
+    (slack below its multiplier) are fixed, and constraint rows left without a free variable
+    dropped. NaN where the KKT matrix is singular. Returns ``(C, {"constraint_rows",
+    "variable_bounds"})`` (the active counts)."""
+    import scipy.sparse as sp
+    from scipy.sparse.linalg import splu
+
+    slack_g = np.minimum(np.abs(g - lbg), np.abs(ubg - g))
+    rows = np.flatnonzero((lbg == ubg) | (slack_g <= np.abs(lam_g)))
+    slack_x = np.minimum(np.abs(x - lbx), np.abs(ubx - x))
+    fixed = (lbx == ubx) | (slack_x <= np.abs(lam_x))
+    fixed[list(columns)] = False
+    free = np.flatnonzero(~fixed)
+    pos = {int(c): k for k, c in enumerate(free)}
+    A = sp.csr_matrix(J)[rows][:, free]
+    nonempty = np.diff(A.indptr) > 0  # rows of bound variables alone (e.g. a = e = 0) hold nothing
+    rows, A = rows[nonempty], A[nonempty]
+    H = sp.csc_matrix(H)
+    K = sp.bmat([[H[free][:, free], A.T], [A, None]], format="csc")
+    rhs = np.zeros((K.shape[0], len(columns)))
+    for j, c in enumerate(columns):
+        rhs[pos[int(c)], j] = 1.0
+    active = {"constraint_rows": int(rows.size), "variable_bounds": int(fixed.sum())}
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            X = splu(K).solve(rhs)
+    except RuntimeError:  # exactly singular KKT matrix
+        return np.full((len(columns), len(columns)), np.nan), active
+    C = X[[pos[int(c)] for c in columns], :]
+    return 0.5 * (C + C.T), active
+
+
+def correlation(C: np.ndarray) -> tuple[np.ndarray | None, float]:
+    """The correlation matrix of ``C`` and its reciprocal condition number (smallest over
+    largest eigenvalue); ``(None, 0)`` when ``C`` is not finite or has a non-positive diagonal."""
+    d = np.diag(C)
+    if not (np.all(np.isfinite(C)) and np.all(d > 0)):
+        return None, 0.0
+    R = C / np.sqrt(np.outer(d, d))
+    ev = np.linalg.eigvalsh(R)
+    return R, float(max(ev[0], 0.0) / ev[-1])
+
+
 def identifiability(trials, params, goals, specs, result, *, optimal_reserve_Nm: float = 150.0,
                     coupling: str = "shared", threshold: float = CORRELATION_THRESHOLD) -> dict:
     """Standard errors and correlations of the estimated factors at the optimum of ``result``
-    (a :class:`~.ipopt.ProblemResult` of the same problem; see the module docstring).
+    (a :class:`~.ipopt.ProblemResult` of the same problem; see the module docstring). A factor
+    held by equal bounds is not an estimate and is left out.
 
     Returns ``{method, parameters, factor, standard_error, correlation, residual_scale,
-    n_data, reduced_hessian_rcond, near_singular, correlated_pairs, threshold}``."""
+    reduced_hessian_rcond, near_singular, correlated_pairs, threshold, active}``."""
     import casadi as ca
     import scipy.sparse as sp
-    from scipy.sparse.linalg import splu
 
     from .transcription import build_problem
 
@@ -164,70 +212,38 @@ def identifiability(trials, params, goals, specs, result, *, optimal_reserve_Nm:
     def scipy_matrix(m):
         m = ca.DM(m)
         r, c = m.sparsity().get_triplet()
-        return sp.csc_matrix((np.asarray(m.nonzeros()), (r, c)), shape=m.shape)
+        return sp.csc_matrix((np.asarray(m.nonzeros()).reshape(-1), (r, c)), shape=m.shape)
 
     Hu = scipy_matrix(nlp["hess_lag"](x, ca.DM(0, 1), 1.0, lam_g))
     H = (Hu + Hu.T - sp.diags(Hu.diagonal())).tocsc()
     g, J = nlp["jac_g"](x, ca.DM(0, 1))
-    g, J = np.asarray(g).reshape(-1), scipy_matrix(J).tocsr()
-    lbg, ubg, lbx, ubx = nlp["lbg"], nlp["ubg"], nlp["lbx"], nlp["ubx"]
-    slack_g = np.minimum(np.abs(g - lbg), np.abs(ubg - g))
-    rows = np.flatnonzero((lbg == ubg) | (slack_g <= np.abs(lam_g)))
+    lbx, ubx = nlp["lbx"], nlp["ubx"]
     labels, pcols = _labels(specs, nlp["layout"])
-    slack_x = np.minimum(np.abs(x - lbx), np.abs(ubx - x))
-    fixed = (lbx == ubx) | (slack_x <= np.abs(lam_x))
-    P0 = nlp["layout"]["P0"]
-    fixed[P0:] = lbx[P0:] == ubx[P0:]  # a factor held by equal bounds is no estimate
-    keep = [k for k, c in enumerate(pcols) if not fixed[c]]
+    keep = [k for k, c in enumerate(pcols) if lbx[c] < ubx[c]]
     labels, pcols = [labels[k] for k in keep], [pcols[k] for k in keep]
-    free = np.flatnonzero(~fixed)
-    pos = {int(c): k for k, c in enumerate(free)}
-    A = J[rows][:, free]
-    nonempty = np.diff(A.tocsr().indptr) > 0  # rows of bound variables alone (e.g. a = e = 0) hold nothing
-    rows, A = rows[nonempty], A[nonempty]
-    K = sp.bmat([[H[free][:, free], A.T], [A, None]], format="csc")
-    rhs = np.zeros((K.shape[0], len(pcols)))
-    for j, c in enumerate(pcols):
-        rhs[pos[c], j] = 1.0
-    out = {"method": "inverse of the reduced Hessian of the Lagrangian on the parameters, (K^-1)_pp, scaled by "
-                     "s^2 = 2 J_track/(n_data - n_p) (docs/problem.md)",
-           "parameters": labels, "threshold": threshold,
-           "active": {"constraint_rows": int(rows.size), "variable_bounds": int(fixed.sum())}}
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            X = splu(K).solve(rhs)
-        C = np.array([[X[pos[c], j] for j in range(len(pcols))] for c in pcols])
-        C = 0.5 * (C + C.T)
-        ok = bool(np.all(np.isfinite(C)))
-    except RuntimeError:  # exactly singular KKT matrix
-        C, ok = np.full((len(pcols), len(pcols)), np.nan), False
+    C, active = reduced_inverse_hessian(H, scipy_matrix(J), x, np.asarray(g).reshape(-1), lbx, ubx, nlp["lbg"],
+                                        nlp["ubg"], lam_g, lam_x, pcols)
     n_data = sum(t.inputs.n_intervals * (len(t.fiber_muscles) * (goals.w_fiber_length > 0)
                                          + len(t.emg_muscles) * (goals.w_emg > 0)) for t in trials)
     j_track = sum(v for terms in result.objective_terms.values() for k, v in terms.items()
                   if k in ("fiber_length_tracking", "emg_tracking"))
     s2 = 2.0 * j_track / max(n_data - len(pcols), 1)
-    d = np.diag(C) if ok else np.full(len(pcols), np.nan)
-    positive = ok and bool(np.all(d > 0))
-    if positive:
-        R = C / np.sqrt(np.outer(d, d))
-        ev = np.linalg.eigvalsh(R)
-        rcond = float(max(ev[0], 0.0) / ev[-1])
-    else:
-        R, rcond = np.full_like(C, np.nan), 0.0
-    near_singular = (not positive) or rcond < SINGULAR_RCOND
+    R, rcond = correlation(C)
     pairs = [{"parameters": [labels[i], labels[j]], "correlation": float(R[i, j])}
              for i in range(len(labels)) for j in range(i + 1, len(labels))
-             if positive and abs(R[i, j]) > threshold]
-    x_p = {lab: float(x[c]) for lab, c in zip(labels, pcols)}
-    out.update({
-        "factor": x_p,
-        "standard_error": {lab: float(np.sqrt(s2 * d[k])) if positive else None for k, lab in enumerate(labels)},
-        "correlation": [[float(v) if np.isfinite(v) else None for v in row] for row in R],
+             if R is not None and abs(R[i, j]) > threshold]
+    return {
+        "method": "inverse of the reduced Hessian of the Lagrangian on the parameters, (K^-1)_pp, scaled by "
+                  "s^2 = 2 J_track/(n_data - n_p) (docs/problem.md)",
+        "parameters": labels, "threshold": threshold, "active": active,
+        "factor": {lab: float(x[c]) for lab, c in zip(labels, pcols)},
+        "standard_error": {lab: float(np.sqrt(s2 * C[k, k])) if R is not None else None
+                           for k, lab in enumerate(labels)},
+        "correlation": R.tolist() if R is not None else None,
         "residual_scale": {"s2": s2, "tracking_objective": j_track, "n_data": int(n_data), "n_parameters": len(pcols)},
-        "reduced_hessian_rcond": rcond, "near_singular": bool(near_singular), "correlated_pairs": pairs,
-    })
-    return out
+        "reduced_hessian_rcond": rcond, "near_singular": bool(R is None or rcond < SINGULAR_RCOND),
+        "correlated_pairs": pairs,
+    }
 
 
 def warn_identifiability(report: dict) -> None:
