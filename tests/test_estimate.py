@@ -418,6 +418,16 @@ def test_couplings_per_parameter_kind():
         parameter_specs(est, [parse_coupling("optimal_fiber_length:soleus_r,gaslat_r")])
     with pytest.raises(OptionError, match="stiffness"):
         parameter_specs(est, [parse_coupling("stiffness:soleus_r,gasmed_r")])
+    # the study file's equivalent: a {kind, muscles} table among the muscle lists
+    from musclemetab.study.estimation import estimate_spec
+
+    spec = estimate_spec({"estimate": est, "couple": [["soleus_r", "gasmed_r"], {
+        "kind": "tendon_stiffness", "muscles": ["soleus_r", "gasmed_r", "gaslat_r"]}]}, "study.toml")
+    assert [s.couplings for s in parameter_specs(spec.estimate, spec.couple)] == [((0, 1), (1, 2)), ((0, 1),)]
+    assert spec.to_dict()["couple"] == [["soleus_r", "gasmed_r"], {"kind": "tendon_stiffness",
+                                                                  "muscles": ["soleus_r", "gasmed_r", "gaslat_r"]}]
+    with pytest.raises(OptionError, match="study.toml.*'couple' table"):
+        estimate_spec({"estimate": est, "couple": [{"kind": "stiffness", "muscles": ["soleus_r"]}]}, "study.toml")
 
 
 def test_a_factor_no_measurement_informs_is_refused(generated):

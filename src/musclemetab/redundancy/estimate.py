@@ -135,7 +135,7 @@ def parameter_specs(estimate: Mapping[str, Sequence[str]], couple: Sequence = ()
                 continue
             members = [pos[m] for m in group if m in pos]
             pairs += [(a, b) for a, b in zip(members[:-1], members[1:])]
-        specs.append(ParameterSpec(kind, muscles, bounds[kind], tuple(pairs)))
+        specs.append(ParameterSpec(kind, muscles, bounds[kind], tuple(dict.fromkeys(pairs))))  # no pair twice
     return specs
 
 
