@@ -75,9 +75,11 @@ def warn_on_bounds(on_bounds: Sequence[dict]) -> None:
         shared.setdefault((b["kind"], b["factor"], b["side"]), []).append(b)
     for group in shared.values():
         b = dict(group[0], muscle=", ".join(g["muscle"] for g in group))
+        option = "--emg-scale-bounds LOW:HIGH" if b["kind"] == "emg_scale" else f"--bounds {b['kind']}=LOW:HIGH"
         warnings.warn(f"the estimated {b['kind']} factor of {b['muscle']} is on its {b['side']} bound "
                       f"({b['factor']:.4g}, bound {b['bound']:g}): the data ask for a value beyond it; widen the "
-                      "bound (--bounds) or check the data and the estimated muscles", MusclemetabWarning, stacklevel=3)
+                      f"bounds ({option}) or check the data and the estimated muscles", MusclemetabWarning,
+                      stacklevel=3)
 
 
 def informing_muscles(trials) -> set:
