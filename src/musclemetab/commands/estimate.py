@@ -4,7 +4,9 @@ coupled as in EMG-TEN).
 
 Writes ``DIR/<trial>/`` (the solutions with the estimates), ``DIR/parameters.json``,
 ``DIR/<model>_personalised.osim`` and, with ``--validate``, ``DIR/validation/<trial>/``: the
-effort problem re-solved with the estimated parameters.
+effort problem re-solved with the estimated parameters. Prints the estimates with their doubts
+(factors on bounds, standard errors and correlated pairs) and the validation fit
+(``docs/problem.md``, "Doubts of the estimates").
 """
 
 from __future__ import annotations
@@ -90,7 +92,8 @@ def _bounds(text: str) -> tuple[float, float]:
 
 def run(args) -> int:
     """Run ``musclemetab estimate`` with parsed arguments: the options read, then
-    :func:`~musclemetab.redundancy.run.estimate_files`; prints one line."""
+    :func:`~musclemetab.redundancy.run.estimate_files`; prints one line, then one per doubt
+    of the estimate and per validated trial and kind of measurement (:func:`doubt_lines`)."""
     from ..redundancy.estimate import parse_coupling
     from ..redundancy.run import estimate_files
     from .options import emg_scale_bounds

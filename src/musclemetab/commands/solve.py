@@ -351,10 +351,10 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
     from dataclasses import replace
 
     from ..redundancy.emg_ten import EMG_TEN_GOALS, EmgTenSettings, informed_settings
-    from .options import emg_scale_bounds
     from ..redundancy.run import emg_mappings_of_legs, solve_emg_ten
     from ..redundancy.ipopt import failure_advice
     from ..redundancy.workflows import parse_tendon_stiffness
+    from .options import emg_scale_bounds
 
     if not idf:
         raise OptionError("EMG problems need --id: one inverse-dynamics file per trial, in the order of --ik")
