@@ -405,6 +405,12 @@ def test_factors_on_bounds_and_uninformed_factors():
         warnings.simplefilter("always")
         assert len(check_informed(trials, specs, "warn")) == 2
     assert [w.category for w in caught] == [MusclemetabWarning] * 2 and "gasmed_r" in str(caught[1].message)
+    # EMG-TEN's trials (EMG alone) and its tendon groups, with their own advice
+    emg_only = [SimpleNamespace(emg_muscles=("gaslat_r", "soleus_r"))]
+    kt = ParameterSpec("tendon_stiffness", ("vaslat_r", "vasmed_r", "soleus_r", "gasmed_r"), (0.1, 1.2),
+                       ((0, 1), (2, 3)))
+    with pytest.raises(OptionError, match="vaslat_r is informed by no measurement.*map EMG to vaslat_r"):
+        check_informed(emg_only, [kt], remedy="map EMG to {muscle}")
 
 
 def test_couplings_per_parameter_kind():

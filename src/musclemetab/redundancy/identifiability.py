@@ -84,7 +84,7 @@ def warn_on_bounds(on_bounds: Sequence[dict]) -> None:
 
 def informing_muscles(trials) -> set:
     """Muscles with a measurement of their own: ultrasound fiber lengths or EMG in some trial."""
-    return {m for t in trials for m in (*t.fiber_muscles, *t.emg_muscles)}
+    return {m for t in trials for m in (*getattr(t, "fiber_muscles", ()), *t.emg_muscles)}
 
 
 def uninformed_factors(trials, specs) -> list[tuple[str, str]]:
@@ -107,16 +107,18 @@ def uninformed_factors(trials, specs) -> list[tuple[str, str]]:
     return out
 
 
-def check_informed(trials, specs, action: str = "error") -> list[tuple[str, str]]:
+def check_informed(trials, specs, action: str = "error", remedy: str | None = None) -> list[tuple[str, str]]:
     """Refuse (``action="error"``) or warn (``"warn"``) about factors no measurement informs
-    (:func:`uninformed_factors`); returns them."""
+    (:func:`uninformed_factors`); returns them. ``remedy`` replaces the advice of ``estimate``
+    (``{kind}`` and ``{muscle}`` are filled in)."""
     bad = uninformed_factors(trials, specs)
     if not bad:
         return bad
+    remedy = remedy or ("give its measurements, couple it (--couple {kind}:{muscle},MEASURED_MUSCLE) or drop it "
+                        "from --estimate")
     for kind, m in bad:
         text = (f"the {kind} factor of {m} is informed by no measurement: {m} has no fiber lengths or EMG of its "
-                f"own and is not coupled to a measured muscle; give its measurements, couple it "
-                f"(--couple {kind}:{m},MEASURED_MUSCLE) or drop it from --estimate")
+                f"own and is not coupled to a measured muscle; " + remedy.format(kind=kind, muscle=m))
         if action == "error":
             raise OptionError(text)
         warnings.warn(text, MusclemetabWarning, stacklevel=3)

@@ -352,14 +352,21 @@ def assemble_result(trials, params, wf_record, ocp, settings, options, t_prep, t
         }
         sol = build_solution(inp, est_params.subset(inp.muscles), o, summary)
         solutions[t.label] = replace(sol, record=sol.record.with_(total_time_s=_time.perf_counter() - t_start))
-    if ocp.success:  # factors on a bound: warned and recorded (docs/problem.md, "Doubts of the estimates")
-        from .identifiability import BOUND_TOLERANCE, factors_on_bounds, warn_on_bounds
+    if ocp.success:  # doubts, warned and recorded (docs/problem.md, "Doubts of the estimates")
+        from .identifiability import BOUND_TOLERANCE, check_informed, factors_on_bounds, warn_on_bounds
+        from .transcription import ParameterSpec, coupling_pairs
 
         on_bounds = factors_on_bounds({"tendon_stiffness": tendon_scale, "emg_scale": emg_scale},
                                       {"tendon_stiffness": settings.tendon_scale_bounds,
                                        "emg_scale": settings.emg_scale_bounds})
         warn_on_bounds(on_bounds)
-        record["doubts"] = {"on_bounds": on_bounds, "bound_tolerance": BOUND_TOLERANCE}
+        kt = tuple(tendon_scale)
+        uninformed = check_informed(trials, [ParameterSpec("tendon_stiffness", kt, settings.tendon_scale_bounds,
+                                                           coupling_pairs(settings.tendon_groups, kt, True))], "warn",
+                                    "map EMG to a muscle of its tendon group (--emg-mapping) or leave {muscle} out of "
+                                    "the tendon groups")
+        record["doubts"] = {"on_bounds": on_bounds, "bound_tolerance": BOUND_TOLERANCE,
+                            "uninformed": [{"kind": k, "muscle": m} for k, m in uninformed]}
     record["max_moment_residual_Nm"] = max(s.record.max_moment_residual_Nm for s in solutions.values())
     record["max_hill_residual"] = max(s.record.max_hill_residual for s in solutions.values())
     record["total_time_s"] = _time.perf_counter() - t_start
