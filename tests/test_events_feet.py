@@ -79,8 +79,27 @@ def test_a_column_named_for_the_wrong_foot_is_found_out(gait2392, layout, feet, 
                        layout=layout)
 
 
+def test_a_study_trial_and_analyse_check_the_foot_too(gait2392, tmp_path):
+    from musclemetab.events import cycle_of_trial
+    from musclemetab.study.events import trial_cycle
+    from musclemetab.study.spec import Trial
+
+    path = _swapped(gait2392, tmp_path)
+    ik = read_storage(gait2392.ik)
+    short = tmp_path / "ik_0.5-2.0.mot"  # its middle, 1.25 s, lies in the right foot's first cycle
+    write_storage(short, ik[ik.index <= 2.0], name="ik", in_degrees=True)
+    trial = Trial(name="walk", ik=short, id=None, grf=path)
+    with pytest.warns(WindowWarning, match="trial 'walk': .*ground_force_vy is not the right foot"):
+        cycle = trial_cycle(trial, "r", gait2392.model)
+    assert (cycle.start_s, cycle.end_s) == pytest.approx(RIGHT_HS, abs=3e-3)
+    with pytest.warns(WindowWarning, match="ground_force_vy is not the right foot"):
+        again, source = cycle_of_trial(short, grf=path, side="r", model=gait2392.model)
+    assert again == cycle and source == "ground reaction forces"
+
+
 def test_applied_to_body_is_checked_against_the_centre_of_pressure(gait2392, layout, feet, tmp_path):
-    from musclemetab.external_loads import check_feet, read_external_loads
+    from musclemetab.events import check_applied_feet as check_feet
+    from musclemetab.external_loads import read_external_loads
 
     loads = read_external_loads(gait2392.external_loads)
     assert check_feet(loads, layout, feet) == []

@@ -51,10 +51,12 @@ __all__ = [
     "grf_of_side",
     "force_columns",
     "foot_kinematics",
+    "feet_for_checks",
     "foot_of_force",
     "FootKinematics",
     "ForceFoot",
     "check_against_kinematics",
+    "check_applied_feet",
     "check_cycle_duration",
     "FOOT_DISTANCE_M",
     "HEEL_STRIKE_TOLERANCE_S",
@@ -428,11 +430,13 @@ def cycle_from_id_file(
 
 
 def cycle_of_trial(ik: str | os.PathLike, *, grf: str | os.PathLike | None = None,
-                   id_file: str | os.PathLike | None = None, side: str = "r") -> tuple[GaitCycle, str]:
+                   id_file: str | os.PathLike | None = None, side: str = "r", model=None) -> tuple[GaitCycle, str]:
     """The gait cycle of a solved trial and where it came from: ``(cycle, source)``.
 
     With ``grf``: the cycle of the side's vertical ground reaction force that holds the middle
-    of the IK window (:func:`cycle_from_grf`); otherwise from the inverse dynamics ``id_file``
+    of the IK window (:func:`cycle_from_grf`; with the ``model``, the force's foot checked against
+    its centre of pressure, :func:`grf_of_side`, and the cycle's duration,
+    :func:`check_cycle_duration`); otherwise from the inverse dynamics ``id_file``
     and the IK window (:func:`cycle_from_id_file`: the window less the padding at each end,
     toe-off from the ankle moment; estimated events).
     """
@@ -440,9 +444,21 @@ def cycle_of_trial(ik: str | os.PathLike, *, grf: str | os.PathLike | None = Non
 
     t = read_storage(ik).index.to_numpy(float)
     if grf is not None:
-        force = read_grf(grf, side=side)
-        return (cycle_from_grf(force.index.to_numpy(float), force.to_numpy(float), at_time_s=0.5 * (t[0] + t[-1])),
-                "ground reaction forces")
+        if model is None:
+            force = read_grf(grf, side=side)
+        else:
+            import warnings
+
+            from .errors import WindowWarning
+
+            feet, why = feet_for_checks(model, ik)
+            force, notes, _ = grf_of_side(grf, side, feet=feet)
+            for msg in notes + ([why] if why else []):
+                warnings.warn(msg, WindowWarning, stacklevel=2)
+        cycle = cycle_from_grf(force.index.to_numpy(float), force.to_numpy(float), at_time_s=0.5 * (t[0] + t[-1]))
+        if model is not None:
+            check_cycle_duration(cycle, where=f"{grf} column {force.name}")
+        return cycle, "ground reaction forces"
     if id_file is None:
         raise OptionError("give the ground reaction forces (grf) or the inverse dynamics (id_file) of the trial")
     return (cycle_from_id_file(id_file, side=side, window_s=(float(t[0]), float(t[-1]))),
@@ -629,6 +645,15 @@ def foot_kinematics(model_path, ik_path, layout=None, sides=("r", "l")) -> FootK
     return FootKinematics(np.asarray(ik.index, dtype=float), heel, toe, pos[:, -1], up, bodies)
 
 
+def feet_for_checks(model_path, ik_path, layout=None) -> tuple[FootKinematics | None, str]:
+    """:func:`foot_kinematics` for the checks of ground-force events, or ``(None, why)`` when the
+    model's feet cannot be told (e.g. a foot of one body): the checks are then skipped."""
+    try:
+        return foot_kinematics(model_path, ik_path, layout), ""
+    except DataMismatchError as exc:
+        return None, f"the force's foot and events are not checked against the kinematics: {exc}"
+
+
 def kinematic_gait_events(model_path, ik_path, side: str, layout=None) -> GaitEvents:
     """:func:`gait_events_from_kinematics` of one leg from a model and its IK file (or its
     :class:`~musclemetab.io.StorageTable`, already read): the origins of the side's heel and
@@ -780,6 +805,39 @@ def grf_of_side(path: str | os.PathLike, side: str, column: str | None = None, *
             f"{len(mine)} force columns lie under that foot ("
             + "; ".join(f"{c}: {ff.describe()}" for c, ff in found.items()) + "); pass --grf-column")
     return named, [], None
+
+
+def check_applied_feet(loads, layout, feet: FootKinematics) -> list[str]:
+    """The ExternalForces whose ``applied_to_body`` contradicts their centre of pressure: messages
+    for the record (empty when they agree or cannot be checked).
+
+    Each force with a point identifier, expressed in the ground, is assigned to the foot its
+    centre of pressure lies under at contact (:func:`foot_of_force`, ``feet`` the
+    :class:`FootKinematics` of both feet); a force applied to a body of the other leg is
+    reported with what was found. ``loads``: a :class:`musclemetab.external_loads.ExternalLoads`.
+    """
+    from .io import read_storage
+    from .layout import SIDE_NAMES
+
+    g = np.asarray(layout.gravity, dtype=float)
+    up = -g / np.linalg.norm(g)
+    table = read_storage(loads.datafile)
+    t = table.index.to_numpy(dtype=float)
+    notes = []
+    for f in loads.forces:
+        body_side = layout.body_side(f.body)
+        if (not f.point_identifier or body_side not in SIDE_NAMES
+                or {f.force_expressed_in_body, f.point_expressed_in_body} - {layout.ground, "ground"}):
+            continue
+        vertical = table[[f"{f.force_identifier}{a}" for a in "xyz"]].to_numpy(dtype=float) @ up
+        cop = table[[f"{f.point_identifier}{a}" for a in "xyz"]].to_numpy(dtype=float)
+        found = foot_of_force(t, vertical, cop, feet)
+        if found.side is not None and found.side != body_side:
+            notes.append(
+                f"{loads.path}: ExternalForce '{f.name}' is applied to {f.body} ({SIDE_NAMES[body_side]} leg) but its "
+                f"centre of pressure lies under the {SIDE_NAMES[found.side]} foot ({found.describe()}); check "
+                "applied_to_body and the force identifiers")
+    return notes
 
 
 def check_against_kinematics(cycle: GaitCycle, events: GaitEvents, tolerance_s: float = HEEL_STRIKE_TOLERANCE_S,

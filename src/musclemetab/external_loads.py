@@ -32,7 +32,6 @@ __all__ = [
     "ExternalLoads",
     "read_external_loads",
     "vertical_force",
-    "check_feet",
     "compute_inverse_dynamics",
 ]
 
@@ -211,40 +210,6 @@ def vertical_force(loads: ExternalLoads, layout, side: str):
         xyz = table[[f"{f.force_identifier}{a}" for a in "xyz"]].to_numpy(dtype=float)
         total += xyz @ up
     return table.index.to_numpy(dtype=float), total
-
-
-def check_feet(loads: ExternalLoads, layout, feet) -> list[str]:
-    """The ExternalForces whose ``applied_to_body`` contradicts their centre of pressure: messages
-    for the record (empty when they agree or cannot be checked).
-
-    Each force with a point identifier, expressed in the ground, is assigned to the foot its
-    centre of pressure lies under at contact (:func:`musclemetab.events.foot_of_force`, ``feet``
-    the :class:`~musclemetab.events.FootKinematics` of both feet); a force applied to a body of
-    the other leg is reported with what was found.
-    """
-    from .events import foot_of_force
-    from .io import read_storage
-    from .layout import SIDE_NAMES
-
-    g = np.asarray(layout.gravity, dtype=float)
-    up = -g / np.linalg.norm(g)
-    table = read_storage(loads.datafile)
-    t = table.index.to_numpy(dtype=float)
-    notes = []
-    for f in loads.forces:
-        body_side = layout.body_side(f.body)
-        if (not f.point_identifier or body_side not in SIDE_NAMES
-                or {f.force_expressed_in_body, f.point_expressed_in_body} - {layout.ground, "ground"}):
-            continue
-        vertical = table[[f"{f.force_identifier}{a}" for a in "xyz"]].to_numpy(dtype=float) @ up
-        cop = table[[f"{f.point_identifier}{a}" for a in "xyz"]].to_numpy(dtype=float)
-        found = foot_of_force(t, vertical, cop, feet)
-        if found.side is not None and found.side != body_side:
-            notes.append(
-                f"{loads.path}: ExternalForce '{f.name}' is applied to {f.body} ({SIDE_NAMES[body_side]} leg) but its "
-                f"centre of pressure lies under the {SIDE_NAMES[found.side]} foot ({found.describe()}); check "
-                "applied_to_body and the force identifiers")
-    return notes
 
 
 def _cache_dir() -> Path:

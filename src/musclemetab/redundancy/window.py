@@ -12,7 +12,7 @@
   (:func:`musclemetab.events.kinematic_gait_events`). With the model at hand, the foot of a
   ground force is found from its centre of pressure (:func:`musclemetab.events.grf_of_side`;
   an ExternalLoads file's ``applied_to_body`` is checked the same way,
-  :func:`musclemetab.external_loads.check_feet`), and the force's heel strikes are compared
+  :func:`musclemetab.events.check_applied_feet`), and the force's heel strikes are compared
   with the kinematic ones (within :data:`~musclemetab.events.HEEL_STRIKE_TOLERANCE_S`, 50 ms);
   disagreements are warnings, recorded like those of the padding. A cycle whose duration lies
   outside ``cycle_duration_s`` (0.8-2.0 s for walking) is refused, naming its events. The
@@ -199,21 +199,28 @@ def _cycle(side, cycle, external_loads, grf_path, layout, ik=None, grf_column=No
         GaitCycle,
         check_against_kinematics,
         check_cycle_duration,
+        feet_for_checks,
         foot_kinematics,
         gait_events_from_grf,
         grf_of_side,
     )
 
     forces = external_loads is not None or grf_path is not None
-    feet = foot_kinematics(layout.path, ik, layout) if layout is not None and ik is not None else None
-    notes = []
+    feet, notes = None, []
+    if layout is not None and ik is not None:
+        if forces:  # the checks of the force's foot and events: skipped (with a note) for a model without them
+            feet, why = feet_for_checks(layout.path, ik, layout)
+            notes += [why] if why else []
+        else:
+            feet = foot_kinematics(layout.path, ik, layout)
     if external_loads is not None:
-        from ..external_loads import check_feet, vertical_force
+        from ..events import check_applied_feet
+        from ..external_loads import vertical_force
 
         t, f = vertical_force(external_loads, layout, side)
         where = str(external_loads.path)
         if feet is not None:
-            notes += check_feet(external_loads, layout, feet)
+            notes += check_applied_feet(external_loads, layout, feet)
     elif grf_path is not None:
         s, found_notes, found = grf_of_side(grf_path, side, grf_column, feet=feet)
         notes += found_notes
