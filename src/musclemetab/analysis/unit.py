@@ -116,9 +116,9 @@ def analyse_metabolics(
         the eleven sum to 100).
 
         ``timeseries`` (pandas.DataFrame, long): ``time_s``, ``cycle_pct``, ``model``,
-        ``series``, ``value_W`` with ``series`` = ``whole_body`` (the leg's summed muscle
+        ``series``, ``value_W`` with ``series`` = ``leg_muscles`` (the leg's summed muscle
         rate without basal heat) and ``group/<G>`` for the ten groups and
-        ``group/other``, which sum to ``whole_body`` at every time.
+        ``group/other``, which sum to ``leg_muscles`` at every time.
     """
     import pandas as pd
 
@@ -172,7 +172,7 @@ def analyse_metabolics(
         row.update({f"share_{name}_pct": shares[name] for name in GROUPS})
         row["share_other_pct"] = shares[OTHER]
         rows.append(row)
-        names = ["whole_body"] + [f"group/{name}" for name in GROUPS_WITH_OTHER]
+        names = ["leg_muscles"] + [f"group/{name}" for name in GROUPS_WITH_OTHER]
         values = np.vstack([leg[None, :], g])
         frames.append(pd.DataFrame({
             "time_s": np.tile(t, len(names)),
@@ -216,8 +216,9 @@ def _metabolics_of(solution, body_mass_kg, height_m, models, metabolics_options)
         return solution
     from ..metabolics.solution import metabolics_from_solution
 
-    if body_mass_kg is None or height_m is None:
-        raise OptionError("give the body mass and height to evaluate the metabolic rates of a solution")
+    if body_mass_kg is None:
+        raise OptionError("give the body mass (and the height, or None for muscle masses from the model) to "
+                          "evaluate the metabolic rates of a solution")
     return metabolics_from_solution(solution, body_mass_kg, height_m, models=models, **metabolics_options)
 
 
@@ -226,7 +227,7 @@ def analyse_solution_folder(
     geometry,
     cycle: GaitCycle,
     body_mass_kg: float,
-    height_m: float,
+    height_m: float | None,
     models="all",
     *,
     filter_cutoff_hz: float | None = 6.0,
