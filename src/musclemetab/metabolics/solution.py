@@ -732,7 +732,9 @@ def write_legs_metabolics(results: Mapping[str, SolutionMetabolics], out_dir: st
     model of the legs added (:func:`add_legs`): ``model``, ``legs`` (``r+l``),
     ``whole_body_W_per_kg``, ``whole_body_no_basal_W_per_kg``, ``basal_rule``, ``basal_W_per_kg``,
     ``muscle_mass_rule`` and ``<side>_leg_muscles_W`` (each leg, no basal). Returns the files written (by name)."""
-    from ..io import atomic_write_text
+    import pandas as pd
+
+    from ..io import atomic_path
 
     out_dir = Path(out_dir)
     if len(results) == 1:
@@ -743,14 +745,16 @@ def write_legs_metabolics(results: Mapping[str, SolutionMetabolics], out_dir: st
     for side, result in results.items():
         files.update({f"{side}/{k}": v for k, v in write_metabolics(result, out_dir / side, cycle=cycle).items()})
     first = next(iter(results.values()))
-    rows = ["model,legs,whole_body_W_per_kg,whole_body_no_basal_W_per_kg,basal_rule,basal_W_per_kg,muscle_mass_rule,"
-            + ",".join(f"{s}_leg_muscles_W" for s in results)]
-    for m, v in total.items():
-        no_basal = sum(r.whole_body[m].leg_no_basal_mean_W for r in results.values()) / first.body_mass_kg
-        rows.append(f"{m},{'+'.join(results)},{v:.10g},{no_basal:.10g},{first.basal_rule},"
-                    f"{first.whole_body[m].basal_W_per_kg:.10g},{first.muscle_mass_rule}," + ",".join(
-                        f"{r.whole_body[m].leg_no_basal_mean_W:.10g}" for r in results.values()))
-    atomic_write_text(out_dir / WHOLE_BODY_CSV, "\n".join(rows) + "\n")
+    table = pd.DataFrame([{
+        "model": m, "legs": "+".join(results), "whole_body_W_per_kg": v,
+        "whole_body_no_basal_W_per_kg": sum(r.whole_body[m].leg_no_basal_mean_W for r in results.values())
+        / first.body_mass_kg,
+        "basal_rule": first.basal_rule, "basal_W_per_kg": first.whole_body[m].basal_W_per_kg,
+        "muscle_mass_rule": first.muscle_mass_rule,
+        **{f"{s}_leg_muscles_W": r.whole_body[m].leg_no_basal_mean_W for s, r in results.items()},
+    } for m, v in total.items()])
+    with atomic_path(out_dir / WHOLE_BODY_CSV) as tmp:
+        table.to_csv(tmp, index=False, float_format="%.10g")
     files["whole_body_csv"] = out_dir / WHOLE_BODY_CSV
     return files
 
