@@ -182,3 +182,18 @@ def test_a_heel_strike_65_ms_before_the_end_of_the_record_is_found(gait2392, fee
     tf, fz = df.index.to_numpy(float), df["ground_force_vy"].to_numpy(float)
     k = tf <= RIGHT_HS[0] + 0.065
     assert gait_events_from_grf(tf[k], fz[k]).heel_strikes_s[-1] == pytest.approx(RIGHT_HS[0], abs=3e-3)
+
+
+def test_the_solve_command_takes_the_cycle_duration_range(gait2392, tmp_path, capsys):
+    from musclemetab.commands import main
+
+    common = ["solve", "--model", str(gait2392.model), "--ik", str(gait2392.ik), "--id", str(gait2392.id),
+              "--grf", str(gait2392.grf), "--cycle", "auto", "--out", str(tmp_path / "out")]
+    # refused before any solve: the right stride of 1.234 s lies outside the range given
+    assert main(common + ["--cycle-duration", "1.3:2.0"]) == 1
+    assert "lasts 1.234 s, outside 1.3-2 s" in capsys.readouterr().err
+    assert main(common + ["--cycle-duration", "2:1"]) == 1
+    assert "--cycle-duration 2:1: T0 must be finite and before T1" in capsys.readouterr().err
+    assert main(common[:-4] + ["--out", str(tmp_path / "o"), "--cycle-duration", "0.5:2"]) == 1
+    assert "--cycle-duration bounds the --cycle" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
