@@ -68,6 +68,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="with --grf: the solved foot's vertical force column (default: the name rule)")
     p.add_argument("--grf-threshold", type=float, metavar="N",
                    help="with --cycle: contact when the vertical ground force exceeds N newtons (default 20)")
+    p.add_argument("--cycle-duration", metavar="MIN:MAX",
+                   help="with --cycle: the accepted gait-cycle durations in s (default 0.8:2.0, walking); a cycle "
+                   "outside is refused, naming its events")
     p.add_argument("--side", default="r", choices=("r", "l", "both"),
                    help="leg to solve (default r); both: two independent problems written to DIR/r and DIR/l")
     p.add_argument("--workers", type=int, default=1, metavar="N",
@@ -223,6 +226,9 @@ def run(args) -> int:
         raise OptionError("--dofs names one leg's DOFs; with --side both leave it out (each leg's DOFs are discovered)")
     window = parse_window(args.window) if args.window else None
     cycle = parse_cycle(args.cycle)
+    if args.cycle_duration and not args.cycle:
+        raise OptionError("--cycle-duration bounds the --cycle found from the events; give --cycle, or drop it")
+    cycle_duration = parse_window(args.cycle_duration, "--cycle-duration") if args.cycle_duration else None
     if args.mesh_frequency is not None and not args.mesh_frequency > 0:
         raise OptionError(f"--mesh-frequency must be positive, not {args.mesh_frequency}")
     options = _solver_options(args)
@@ -244,6 +250,7 @@ def run(args) -> int:
         args.model, args.ik, args.id, args.workflow, sides=sides, workers=args.workers,
         dofs=dofs, window=window, cycle=cycle, external_loads=args.external_loads, grf=args.grf,
         grf_column=args.grf_column, grf_threshold_N=args.grf_threshold,
+        **({"cycle_duration_s": cycle_duration} if cycle_duration else {}),
         mesh_frequency_hz=args.mesh_frequency,
         passive=args.passive, tendon_stiffness=kt, tendon_stiffness_file=args.parameters,
         options=options, cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, warm_start=warm,
@@ -378,6 +385,7 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
         raise OptionError("EMG problems need --id: one inverse-dynamics file per trial, in the order of --ik")
     wrong = [o for o, v in (("--external-loads", args.external_loads), ("--grf", args.grf),
                             ("--grf-column", args.grf_column), ("--grf-threshold", args.grf_threshold),
+                            ("--cycle-duration", getattr(args, "cycle_duration", None)),
                             ("--window", args.window),
                             ("--cycle", args.cycle), ("--exclude-muscles", getattr(args, "exclude_muscles", None)))
              if v]
