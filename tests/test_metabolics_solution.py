@@ -294,7 +294,7 @@ def test_cli(solution_dir, tmp_path, capsys):
     # the whole-body rates against Ralston's band at 1.3 m/s (docs/quality.md), from whole_body.csv
     from musclemetab.metabolics.plausibility import metabolic_flags
 
-    wb = pd.read_csv(out / "whole_body.csv").set_index("model")["mean_W_per_kg"]
+    wb = pd.read_csv(out / "whole_body.csv").set_index("model")["whole_body_W_per_kg"]
     expected = [f.to_dict() for f in metabolic_flags(wb.to_dict(), 1.3)]
     assert json.loads((out / "plausibility.json").read_text()) == json.loads(json.dumps(expected))
     code = main(["metabolics", "--solution", str(solution_dir), "--mass", "72.6", "--height", "1.743",

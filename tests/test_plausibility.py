@@ -143,7 +143,7 @@ def test_the_example_study_raises_no_flag(demo):
     out, table = demo
     assert (table["quality"] == "ok").all(), table["quality"].unique()
     top = 2 * ralston_gross_rate_W_per_kg(table["speed_m_per_s"].to_numpy())
-    assert (table["mean_W_per_kg"] < top).all() and (table["mean_W_per_kg"] > top / 4).all()
+    assert (table["whole_body_W_per_kg"] < top).all() and (table["whole_body_W_per_kg"] > top / 4).all()
     for d in set(table["unit_dir"]):
         summary = json.loads((out / d / "summary.json").read_text())
         assert summary["plausibility"] == [] and len(summary["peak_moment_by_dof_Nm"]) == len(summary["dofs"])

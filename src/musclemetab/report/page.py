@@ -305,7 +305,7 @@ def _plausibility_rows(study: StudyFolder, ok) -> list[list[str]]:
             speed = r.get("speed_m_per_s")
             speed = float(speed) if speed is not None and np.isfinite(float(speed)) else None
             rows += [key + [f.code, f.message] for f in metabolic_flags(
-                {str(r["model"]): float(r["mean_W_per_kg"])}, speed, unit[unit["model"] == r["model"]])]
+                {str(r["model"]): float(r["whole_body_W_per_kg"])}, speed, unit[unit["model"] == r["model"]])]
     return rows
 
 

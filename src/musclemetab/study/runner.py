@@ -645,7 +645,7 @@ def add_quality(rows, unit_records):
         speed = row["speed_m_per_s"].iloc[0] if "speed_m_per_s" in row else None
         speed = float(speed) if speed is not None and pd.notna(speed) else None
         model = str(row["model"].iloc[0])
-        quality.append(quality_text(solve + metabolic_flags({model: float(row["mean_W_per_kg"].iloc[0])}, speed, row)))
+        quality.append(quality_text(solve + metabolic_flags({model: float(row["whole_body_W_per_kg"].iloc[0])}, speed, row)))
     rows["quality"] = quality
     return rows
 
