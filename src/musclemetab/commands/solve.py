@@ -173,18 +173,34 @@ def run(args) -> int:
 
     Raises a :class:`~musclemetab.errors.MusclemetabError` on bad input and
     :class:`~musclemetab.errors.SolverError` when IPOPT did not converge (after writing the
-    folder with ``success: false``).
+    folder with ``success: false``). While it runs it holds the lock of the output folder
+    (``DIR/.musclemetab.lock``, :class:`~musclemetab.io.atomic.FolderLock`): a second ``solve``
+    on the same ``--out`` refuses, naming the lock.
     """
+    from ..io import check_output_folder
+    from ..io.atomic import FolderLock
+
+    from pathlib import Path
+
+    from ..io import check_output_folder
+    from ..io.atomic import FolderLock, check_replaceable
+    from ..redundancy.solution import SOLUTION_FILE, SUMMARY_FILE
+
+    check_output_folder(args.out)
+    for leg in (("r", "l") if args.side == "both" else ("",)):  # files it replaces, not folders of the user
+        check_replaceable(Path(args.out) / leg, (SOLUTION_FILE, SUMMARY_FILE, "inverse_dynamics.sto"))
+    with FolderLock(args.out, "output folder"):
+        return _solve(args)
+
+
+def _solve(args) -> int:
     from ..redundancy.ipopt import failure_advice
     from ..redundancy.run import solve_sides, write_solution_folder
     from ..redundancy.window import parse_cycle, parse_window
     from ..redundancy.workflows import parse_tendon_stiffness
 
-    from ..io import check_output_folder
-
     if args.max_iter is not None and args.max_iter < 1:
         raise OptionError(f"--max-iter must be at least 1, not {args.max_iter}")
-    check_output_folder(args.out)
     ik, idf = _as_list(args.ik), _as_list(args.id)
     energy = _energy_goal(args)
     if args.workflow == "emg-ten" or getattr(args, "emg", None):

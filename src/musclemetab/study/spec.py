@@ -295,7 +295,7 @@ _STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "basal_coeffici
 #: keys of the study file's [energy_goal] table (the energy goal of every effort-workflow solve)
 _ENERGY_KEYS = {"model", "weight", "effort_weight", "smoothing"}
 #: keys of the study file's [solver] table (IPOPT settings of every solve)
-_SOLVER_KEYS = {"max_iter", "tol", "linear_solver", "linear_solver_library"}
+_SOLVER_KEYS = {"max_iter", "tol", "linear_solver"}
 _SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials",
                  "muscle_properties", "side", "dofs", "emg_mode", "emg_tolerance", "estimate"}
 _TRIAL_KEYS = {
@@ -348,6 +348,14 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
     where = str(source) if source else "study"
     base = Path(base)
     _unknown(data, _STUDY_KEYS, where)
+    solver_table = data.get("solver")
+    if isinstance(solver_table, Mapping) and "linear_solver_library" in solver_table:  # before anything is read
+        from ..redundancy.ipopt import LIBRARY_ENV
+
+        raise OptionError(f"{where}: [solver] linear_solver_library: a study file names a linear solver, not a library "
+                          "to load (a library is native code); remove the key and give the library's path in the "
+                          f"environment variable {LIBRARY_ENV} (for one solve: musclemetab solve "
+                          "--linear-solver-library LIB)")
     from ..metabolics.registry import parse_models
     from ..metabolics._common import BASAL_RATE_W_PER_KG
 
@@ -406,7 +414,8 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
 
 
 def _solver(data, where: str) -> dict:
-    """The ``[solver]`` table: ``max_iter``, ``tol``, ``linear_solver``, ``linear_solver_library``, checked."""
+    """The ``[solver]`` table: ``max_iter``, ``tol``, ``linear_solver``, checked (the library of a
+    run-time linear solver comes from the command line or the environment, never from the file)."""
     if data is None:
         return {}
     if not isinstance(data, Mapping):
