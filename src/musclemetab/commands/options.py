@@ -6,7 +6,7 @@ from __future__ import annotations
 from ..errors import OptionError
 
 __all__ = ["BASAL_DEFAULTS", "add_basal_arguments", "check_basal_arguments", "check_speed", "check_body",
-           "add_study_arguments"]
+           "add_study_arguments", "number_option", "check_number_options", "EXCLUSIVE_OPTIONS", "check_exclusive"]
 
 #: the basal options' defaults: the paper's 1.2 W per kg of body mass
 BASAL_DEFAULTS = {"basal": "body", "basal_coefficient": 1.2, "basal_exponent": 1.0}
@@ -75,3 +75,48 @@ def add_study_arguments(parser) -> None:
                         help="parallel processes (default: the number of CPUs); 1 runs in this process")
     parser.add_argument("--force", action="store_true", help="run every unit again, even those up to date")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def number_option(parser, option: str, key: str, *, help: str, default=None, metavar: str | None = None) -> None:
+    """Add the numeric option ``option`` carrying the value of :data:`musclemetab.study.spec.NUMBER_KEYS`
+    ``[key]``: its type (whole number or number) and, in the help, its unit and range come from
+    that table, the one the study file is checked against; :func:`check_number_options` checks
+    the value against it after parsing, so both refuse the same values with the same range. To
+    declare a new numeric setting, add its row to the table and add the option with this function."""
+    from ..study.spec import NUMBER_KEYS
+
+    entry = NUMBER_KEYS[key]
+    action = parser.add_argument(option, type=int if entry.integer else float, default=default, metavar=metavar,
+                                 help=f"{help} [{entry.range_text()}]")
+    declared = dict(parser.get_default("number_options") or {})
+    declared[action.dest] = (option, key)
+    parser.set_defaults(number_options=declared)
+
+
+def check_number_options(args) -> None:
+    """Raise :class:`OptionError` naming the option, the value and the range for a value of an
+    option declared with :func:`number_option` that its table row refuses (``None``: not given)."""
+    from ..study.spec import check_number
+
+    for dest, (option, key) in (getattr(args, "number_options", None) or {}).items():
+        value = getattr(args, dest, None)
+        if value is not None:
+            check_number(key, value, option=option)
+
+
+#: Options that override each other, refused together: (option, option, why, remedy)
+EXCLUSIVE_OPTIONS = (
+    ("--grf", "--external-loads", "both give the ground forces", "give one: the ExternalLoads file already names "
+     "its force data file"),
+    ("--tendon-stiffness", "--parameters", "both give the tendon stiffness", "give one"),
+    ("--window", "--cycle", "both give the time window", "give one"),
+)
+
+
+def check_exclusive(args) -> None:
+    """Raise :class:`OptionError` when two options of :data:`EXCLUSIVE_OPTIONS` are both given."""
+    for a, b, why, remedy in EXCLUSIVE_OPTIONS:
+        given = [getattr(args, o.lstrip("-").replace("-", "_"), None) for o in (a, b)]
+        if all(v not in (None, [], False) for v in given):
+            raise OptionError(f"{a} and {b} cannot be used together ({why}); {remedy}")
+

@@ -213,10 +213,14 @@ class FolderLock:
         self.path = self.folder / LOCK_FILE
         self.what = what
         self.owned = False
-        self.created = False
+        self.created: list[Path] = []
 
     def __enter__(self):
-        self.created = not self.folder.exists()
+        self.created = []  # the folders made for the run, innermost first
+        p = self.folder.absolute()
+        while not p.exists():
+            self.created.append(p)
+            p = p.parent
         self.folder.mkdir(parents=True, exist_ok=True)
         info = {"pid": os.getpid(), "host": socket.gethostname(), "boot_id": _boot_id(),
                 "started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
@@ -284,9 +288,9 @@ class FolderLock:
             if holder is None or holder.get("pid") == os.getpid():
                 self.path.unlink(missing_ok=True)
             self.owned = False
-        if self.created:  # a folder made for the run and left empty (the run stopped before writing)
+        for d in self.created:  # folders made for the run and left empty (it stopped before writing)
             try:
-                self.folder.rmdir()
+                d.rmdir()
             except OSError:
-                pass
+                break
         return False

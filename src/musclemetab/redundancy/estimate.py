@@ -65,11 +65,33 @@ class EstimatedParameters:
                 "solve": dict(self.record)}
 
 
+def check_couplings(estimate: Mapping[str, Sequence[str]], couple: Sequence[Sequence[str]]) -> None:
+    """Raise :class:`OptionError` for a coupled group (``--couple``, ``couple``) with fewer than two
+    muscles, a muscle no kind of ``estimate`` names, or muscles estimated for different kinds
+    (a group shares one factor of each kind, so its muscles must all be estimated for it)."""
+    for group in couple:
+        group = list(dict.fromkeys(str(m) for m in group))
+        label = ",".join(group)
+        if len(group) < 2:
+            raise OptionError(f"--couple {label}: a coupled group needs two or more muscles")
+        kinds = {m: sorted(k for k, ms in estimate.items() if m in ms) for m in group}
+        alone = [m for m, k in kinds.items() if not k]
+        if alone:
+            raise OptionError(f"--couple {label}: {', '.join(alone)} is estimated for no kind (--estimate names "
+                              f"{', '.join(sorted({x for ms in estimate.values() for x in ms}))}); add it to "
+                              "--estimate or drop it from the group")
+        if len({tuple(k) for k in kinds.values()}) > 1:
+            listed = "; ".join(f"{m}: {', '.join(k)}" for m, k in kinds.items())
+            raise OptionError(f"--couple {label}: the muscles of a group share one factor of each kind, so they must "
+                              f"be estimated for the same kinds ({listed}); estimate them alike or split the group")
+
+
 def parameter_specs(estimate: Mapping[str, Sequence[str]], couple: Sequence[Sequence[str]] = (),
                     bounds: Mapping[str, tuple[float, float]] | None = None) -> list[ParameterSpec]:
     """Shared factors of ``estimate`` (``{kind: [muscle, ...]}``); each group of ``couple``
     shares one factor of every kind that names two or more of its muscles."""
     bounds = {**DEFAULT_FACTOR_BOUNDS, **(bounds or {})}
+    check_couplings(estimate, couple)
     specs = []
     for kind, muscles in estimate.items():
         if kind not in FIELDS:

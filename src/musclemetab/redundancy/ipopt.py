@@ -70,6 +70,12 @@ __all__ = [
     "INFEASIBLE_STATUSES",
     "tune_malloc",
     "set_blas_threads",
+    "check_linear_solver",
+    "exported_symbols",
+    "problem_memory_mb",
+    "check_problem_memory",
+    "MAX_PROBLEM_MEMORY_MB",
+    "LIBRARY_ENV",
 ]
 
 
@@ -340,6 +346,33 @@ def problem_size(n_muscles: int, n_dofs: int, n_intervals: int) -> tuple[int, in
     return (5 * M + D) * N + 3 * M, (4 * M + D) * N + M
 
 
+#: Memory of a problem, measured on the example trial (40 muscles, 5 DOFs): 73 MB, plus 0.47 MB
+#: per mesh interval (the peak resident memory of ``musclemetab solve`` was 202 MB with N = 118
+#: and 312 MB with N = 354), scaled by the variables per interval for other sizes.
+PROBLEM_BASE_MB = 73.0
+PROBLEM_MB_PER_INTERVAL = 0.47
+#: Largest problem built (estimated memory, MB): beyond it the mesh is refused before building
+#: (e.g. a 30 s trial at 1000 intervals per second would need about 14 GB)
+MAX_PROBLEM_MEMORY_MB = 8000.0
+
+
+def problem_memory_mb(sizes) -> float:
+    """Estimated memory (MB) of a problem over trials of ``sizes`` = ``[(muscles, DOFs, intervals), ...]``."""
+    per_interval = sum(n * (5 * m + d) / 205.0 for m, d, n in sizes)
+    return PROBLEM_BASE_MB + PROBLEM_MB_PER_INTERVAL * per_interval
+
+
+def check_problem_memory(sizes) -> None:
+    """Raise :class:`OptionError` when the problem of ``sizes`` (see :func:`problem_memory_mb`)
+    would need more than :data:`MAX_PROBLEM_MEMORY_MB`, naming the estimate and the remedy."""
+    mb = problem_memory_mb(sizes)
+    if mb > MAX_PROBLEM_MEMORY_MB:
+        n = sum(s[2] for s in sizes)
+        raise OptionError(f"the problem would have {n} mesh intervals and need about {mb / 1000:.1f} GB of memory, more "
+                          f"than the limit of {MAX_PROBLEM_MEMORY_MB / 1000:g} GB; solve a shorter window (--window, "
+                          "--cycle) or a coarser mesh (--mesh-frequency, the study's is 100 per second)")
+
+
 _MALLOC_TUNED = False
 
 
@@ -509,6 +542,7 @@ def solve_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
 
     options = options or SolverOptions()
     trials, specs = list(trials), list(specs)
+    check_problem_memory([(len(t.inputs.muscles), len(t.inputs.dofs), t.inputs.n_intervals) for t in trials])
     t_build = _time.perf_counter()
     nlp = build_problem(trials, params, goals, specs, optimal_reserve_Nm=options.optimal_reserve_Nm,
                         coupling=coupling, explicit_derivatives=options.derivatives == "explicit")

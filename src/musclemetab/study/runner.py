@@ -140,7 +140,7 @@ class _Progress:
     """A one-line progress bar on a terminal; one line per unit otherwise."""
 
     def __init__(self, total: int, enabled: bool, stream=None):
-        self.total, self.done, self.failed = total, 0, 0
+        self.total, self.done, self.failed, self.interrupted = total, 0, 0, 0
         self.enabled = enabled and total > 0
         self.stream = stream or sys.stderr
         self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
@@ -148,14 +148,17 @@ class _Progress:
 
     def update(self, label: str, record: dict) -> None:
         self.done += 1
-        self.failed += record.get("status") != "ok"
+        status = record.get("status")
+        self.failed += status not in ("ok", INTERRUPTED)
+        self.interrupted += status == INTERRUPTED
         if not self.enabled:
             return
         width = 24
         filled = int(width * self.done / self.total)
         bar = "#" * filled + "." * (width - filled)
-        state = "ok" if record.get("status") == "ok" else "FAILED"
-        line = (f"[{bar}] {self.done}/{self.total} units, {self.failed} failed, "
+        state = "ok" if status == "ok" else INTERRUPTED if status == INTERRUPTED else "FAILED"
+        stopped = f", {self.interrupted} interrupted" if self.interrupted else ""
+        line = (f"[{bar}] {self.done}/{self.total} units, {self.failed} failed{stopped}, "
                 f"{time.perf_counter() - self.t0:.0f} s | {label} {state}")
         if self.tty:
             self.stream.write("\r" + line[:160].ljust(160))

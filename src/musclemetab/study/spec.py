@@ -86,6 +86,12 @@ KNOWN_WORKFLOWS = ("effort-gen", "effort-cal", "effort-ten", EMG_TEN)
 BASAL_RULES = ("body", "muscle", "none")
 #: Plausible human body mass, kg: outside it the number is in other units (g, lb) or a typo.
 BODY_MASS_RANGE_KG = (20.0, 300.0)  # NUMBER_KEYS["body_mass_kg"]
+#: Resource bounds of a solve: the IPOPT iteration limit (ten times the study's 10000; an
+#: iteration of the example trial takes about 0.1 s) and the mesh frequency (intervals per
+#: second: below 10 the mesh cannot follow a gait cycle, above 1000 it is finer than any
+#: motion-capture rate; see also :data:`musclemetab.redundancy.ipopt.MAX_PROBLEM_MEMORY_MB`)
+MAX_ITERATIONS = 100_000
+MESH_FREQUENCY_RANGE_HZ = (10.0, 1000.0)
 #: Limits of a study file: its size and how deep its tables and lists nest
 MAX_STUDY_FILE_BYTES = 1_000_000
 MAX_STUDY_DEPTH = 16
@@ -111,7 +117,7 @@ class NumberKey:
     def range_text(self) -> str:
         unit = f" {self.unit}" if self.unit else ""
         if self.low_open:
-            return f"above {self.low:g} and at most {self.high:g}{unit}"
+            return f"above {self.low:g}{' (positive)' if self.low == 0 else ''} and at most {self.high:g}{unit}"
         return f"from {self.low:g} to {self.high:g}{unit}"
 
     def check(self, value, where: str, option: str | None = None) -> float | int:
@@ -126,7 +132,8 @@ class NumberKey:
         if not math.isfinite(value) or not (self.low < value if self.low_open else self.low <= value) \
                 or value > self.high:
             sign = " (it must not be negative)" if value < 0 <= self.low else ""
-            raise OptionError(f"{at}{name} = {value:g} is not {self.help}: it must be {self.range_text()}{sign}")
+            shown = f"{value:d}" if self.integer else f"{value:g}"
+            raise OptionError(f"{at}{name} = {shown} is not {self.help}: it must be {self.range_text()}{sign}")
         return int(value) if self.integer else float(value)
 
 
@@ -155,8 +162,14 @@ NUMBER_KEYS: dict[str, NumberKey] = {k.name: k for k in (
     NumberKey("weight", "", 0.0, 1e6, "a weight of the energy goal"),
     NumberKey("effort_weight", "", 0.0, 1e6, "a weight of the effort goal"),
     NumberKey("smoothing", "", 0.0, 1e6, "a smoothing parameter", low_open=True),
-    NumberKey("max_iter", "", 1, 10_000_000, "a number of IPOPT iterations", integer=True),
+    NumberKey("max_iter", "", 1, MAX_ITERATIONS, "a number of IPOPT iterations", integer=True),
     NumberKey("tol", "", 0.0, 1.0, "an IPOPT tolerance", low_open=True),
+    # command line only (same table, so that a row added here is checked wherever the value is given)
+    NumberKey("mesh_frequency_hz", "per s", MESH_FREQUENCY_RANGE_HZ[0], MESH_FREQUENCY_RANGE_HZ[1],
+              "a number of mesh intervals per second (the study's 100)"),
+    NumberKey("print_level", "", 0, 12, "an IPOPT print level", integer=True),
+    NumberKey("emg_weight", "", 0.0, 1e6, "a weight of the EMG tracking cost"),
+    NumberKey("workers", "", 1, 1024, "a number of worker processes", integer=True),
 )}
 #: ``cycle``: ``"auto"`` or the number (from 1) of the leg's gait cycle
 CYCLE_HELP = "\"auto\" or a gait cycle number (1, 2, ...)"
