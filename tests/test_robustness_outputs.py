@@ -282,15 +282,15 @@ def test_problem_memory_estimate_and_limit():
     assert problem_memory_mb([(20, 5, 100), (20, 5, 100)]) == pytest.approx(73 + 0.47 * 200 * 105 / 205, rel=1e-12)
     check_problem_memory([(40, 5, 1200)])  # a 1.2 s cycle at the finest mesh (1000 per s) is built
     n = int((MAX_PROBLEM_MEMORY_MB - 73) / 0.47) + 1
-    with pytest.raises(OptionError, match=rf"{n} mesh intervals .* more than the limit of 8 GB; .*--mesh-frequency"):
+    with pytest.raises(OptionError, match=rf"{n} mesh intervals and need about 8000 MB .* limit of 8000 MB; .*--mesh-frequency"):
         check_problem_memory([(40, 5, n)])
 
 
 def test_a_problem_past_the_memory_limit_is_refused_before_it_is_built(example, tmp_path, capsys, monkeypatch,
                                                                        decoy):
-    """0.3 s of the normal trial at 1000 intervals per second (N = 300, about 211 MB by the
-    estimate) against a limit lowered to 200 MB: refused with the estimate before the problem is
-    built, nothing written."""
+    """0.3 s of the normal trial at 1000 intervals per second (N = 300, 73 + 0.47 x 300 = 214 MB
+    by the estimate) against a limit lowered to 200 MB: refused with the estimate before the
+    problem is built, nothing written."""
     import musclemetab.redundancy.ipopt as ipopt
 
     monkeypatch.setattr(ipopt, "MAX_PROBLEM_MEMORY_MB", 200.0)
@@ -300,7 +300,7 @@ def test_a_problem_past_the_memory_limit_is_refused_before_it_is_built(example, 
     assert main(["solve", *_files(example), "--window", "0.6:0.9", "--mesh-frequency", "1000", "--out",
                  str(out)]) == 1
     err = _one_line_error(capsys)
-    assert "300 mesh intervals and need about 0.2 GB of memory, more than the limit of 0.2 GB" in err, err
+    assert "300 mesh intervals and need about 214 MB of memory, more than the limit of 200 MB" in err, err
     assert built == [] and not out.exists()
 
 
@@ -479,18 +479,52 @@ def test_ctrl_c_during_solve_exits_130_at_once_and_keeps_the_previous_output(exa
 
 
 def test_ctrl_c_during_report_exits_130_and_keeps_the_previous_report(demo, tmp_path, decoy):
-    """``report --force`` redraws the figures of a copy of the demo's study folder; SIGINT once it
-    has begun: status 130 within 2 s, the previous page as it was."""
+    """``report --force`` redraws the figures of a copy of the demo's study folder; SIGINT 2.5 s
+    after its start (reading the study, or drawing): status 130 within 2 s, the previous page as
+    it was."""
     folder = tmp_path / "study"
     shutil.copytree(demo[0], folder)
     page = (folder / "report.html").read_bytes()
-    start = time.time()
-
-    def drawing():
-        return any(f.stat().st_mtime > start for f in (folder / "figures").iterdir())
-
-    code, err, seconds = _interrupt(["report", str(folder), "--force"], drawing)
+    start = time.monotonic()
+    code, err, seconds = _interrupt(["report", str(folder), "--force"], lambda: time.monotonic() - start > 2.5)
     assert code == 130 and "Traceback" not in err, err
     assert err.strip().splitlines()[-1] == "musclemetab: interrupted"
     assert seconds < 2.0
     assert (folder / "report.html").read_bytes() == page
+
+
+def test_ctrl_c_while_outputs_are_moved_into_place_waits_for_the_last_one(tmp_path):
+    """SIGINT while the legs' folders are written (``solve --side both``) comes after the last
+    one: both folders new, then KeyboardInterrupt."""
+    from musclemetab.processes import sigint_deferred
+
+    legs = [tmp_path / "r", tmp_path / "l"]
+    with pytest.raises(KeyboardInterrupt):
+        with sigint_deferred():
+            for i, leg in enumerate(legs):
+                with atomic_directory(leg) as tmp:
+                    (tmp / "summary.json").write_text("new")
+                if i == 0:
+                    os.kill(os.getpid(), signal.SIGINT)
+    assert [(leg / "summary.json").read_text() for leg in legs] == ["new", "new"]
+
+
+def test_progress_labels_an_interrupted_unit_interrupted_not_failed():
+    import io
+
+    from musclemetab.study.runner import _Progress
+
+    stream = io.StringIO()
+    bar = _Progress(3, True, stream)
+    bar.update("s/a/effort-gen", {"status": "ok"})
+    bar.update("s/b/effort-gen", {"status": "interrupted"})
+    bar.update("s/c/effort-gen", {"status": "failed"})
+    lines = stream.getvalue().splitlines()
+    assert lines[1].endswith("s/b/effort-gen interrupted") and "0 failed, 1 interrupted" in lines[1]
+    assert lines[2].endswith("s/c/effort-gen FAILED") and "1 failed, 1 interrupted" in lines[2]
+
+
+def test_run_refuses_the_workers_the_table_refuses(tmp_path, capsys):
+    assert main(["run", str(tmp_path / "study.toml"), "--workers", "0"]) == 1
+    err = _one_line_error(capsys)
+    assert "--workers = 0" in err and NUMBER_KEYS["workers"].range_text() in err and "study.toml" not in err

@@ -8,12 +8,14 @@ BLAS/OpenMP thread pools are sized so that the workers together use the machine'
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import threading
 from concurrent.futures import ProcessPoolExecutor
 
-__all__ = ["THREAD_VARIABLES", "pin_threads", "ignore_sigint", "spawn_pool", "stop_pool", "BackgroundCall"]
+__all__ = ["THREAD_VARIABLES", "pin_threads", "ignore_sigint", "spawn_pool", "stop_pool", "sigint_deferred",
+           "BackgroundCall"]
 
 #: environment variables that size the thread pools of BLAS/LAPACK and OpenMP libraries
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
@@ -72,6 +74,24 @@ def stop_pool(pool) -> None:
         if proc.is_alive():
             proc.terminate()
     pool.shutdown(wait=True, cancel_futures=True)
+
+
+@contextlib.contextmanager
+def sigint_deferred():
+    """Hold Ctrl-C (SIGINT) back while the block runs (e.g. the files of several output folders
+    moved into place) and raise :class:`KeyboardInterrupt` after it, so that an interrupt leaves
+    either the previous outputs or all the new ones. Outside the main thread it does nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if caught and previous is not signal.SIG_IGN:
+        raise KeyboardInterrupt
 
 
 class BackgroundCall:

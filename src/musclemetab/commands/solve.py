@@ -255,9 +255,12 @@ def _solve(args) -> int:
     unused = [m for m in excluded if not any(m in (x.record.excluded_muscles or []) for x in solutions.values())]
     if unused:
         raise UnknownMuscleError(f"--exclude-muscles: {', '.join(unused)} is in neither leg's problem; check the names")
-    for side, solution in solutions.items():
-        out = Path(args.out) / side if args.side == "both" else Path(args.out)
-        write_solution_folder(solution, out)
+    from ..processes import sigint_deferred
+
+    with sigint_deferred():  # Ctrl-C leaves the previous legs' folders or all the new ones
+        for side, solution in solutions.items():
+            out = Path(args.out) / side if args.side == "both" else Path(args.out)
+            write_solution_folder(solution, out)
     for side, solution in solutions.items():
         out = Path(args.out) / side if args.side == "both" else Path(args.out)
         s = solution.record

@@ -18,9 +18,12 @@ from pathlib import Path
 
 from ..errors import OptionError, OutputError
 
+#: The lock file of a folder a run works on (a study's output folder, ``solve --out``)
+LOCK_FILE = ".musclemetab.lock"
+
 __all__ = ["file_sha256", "atomic_write_text", "atomic_write_bytes", "atomic_path", "atomic_directory",
            "check_output_folder", "check_inside", "check_replaceable",
-           "FolderLock"]
+           "FolderLock", "LOCK_FILE"]
 
 
 def file_sha256(path: str | os.PathLike) -> str:
@@ -207,8 +210,6 @@ class FolderLock:
     """
 
     def __init__(self, folder: Path, what: str = "study folder"):
-        from ..study_layout import LOCK_FILE
-
         self.folder = Path(folder)
         self.path = self.folder / LOCK_FILE
         self.what = what

@@ -368,8 +368,8 @@ def check_problem_memory(sizes) -> None:
     mb = problem_memory_mb(sizes)
     if mb > MAX_PROBLEM_MEMORY_MB:
         n = sum(s[2] for s in sizes)
-        raise OptionError(f"the problem would have {n} mesh intervals and need about {mb / 1000:.1f} GB of memory, more "
-                          f"than the limit of {MAX_PROBLEM_MEMORY_MB / 1000:g} GB; solve a shorter window (--window, "
+        raise OptionError(f"the problem would have {n} mesh intervals and need about {mb:.0f} MB of memory, more "
+                          f"than the limit of {MAX_PROBLEM_MEMORY_MB:.0f} MB; solve a shorter window (--window, "
                           "--cycle) or a coarser mesh (--mesh-frequency, the study's is 100 per second)")
 
 
