@@ -380,8 +380,9 @@ _CHILD = textwrap.dedent("""\
 
 def test_a_file_size_limit_is_one_line_with_the_previous_output_kept(example, tmp_path, decoy):
     """``solve`` under ``ulimit -f`` (RLIMIT_FSIZE, 64 kB; solution.sto is about 650 kB) in its
-    own process: exit 1 with one line naming the folder (not a crash by SIGXFSZ), the
-    previous output as it was, no lock, no temporary folder."""
+    own process: exit 1 with one line naming the folder (before: a traceback ending in
+    ``OSError: [Errno 27] File too large``), the previous output as it was, no lock, no
+    temporary folder."""
     out = tmp_path / "out"
     out.mkdir()
     previous = {"solution.sto": "previous solution\n", "summary.json": '{"previous": true}\n'}

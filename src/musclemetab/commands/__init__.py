@@ -18,7 +18,6 @@ import argparse
 import gc
 import importlib
 import os
-import signal
 import sys
 import warnings
 
@@ -117,11 +116,6 @@ def main(argv: list[str] | None = None) -> int:
     every object at exit (the memory returns to the system with the process), which takes
     0.2 s after a report.
     """
-    if hasattr(signal, "SIGXFSZ"):  # a file-size limit (ulimit -f) fails the write with an error naming the path
-        try:
-            signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-        except ValueError:  # not the main thread
-            pass
     try:
         try:
             return _main(argv)
