@@ -104,19 +104,21 @@ def check_number_options(args) -> None:
             check_number(key, value, option=option)
 
 
-#: Options that override each other, refused together: (option, option, why, remedy)
-EXCLUSIVE_OPTIONS = (
-    ("--grf", "--external-loads", "both give the ground forces", "give one: the ExternalLoads file already names "
-     "its force data file"),
-    ("--tendon-stiffness", "--parameters", "both give the tendon stiffness", "give one"),
-    ("--window", "--cycle", "both give the time window", "give one"),
-)
+#: Options of a command that override each other, refused together: command -> (option, option,
+#: why, remedy). A command adds its pairs here.
+EXCLUSIVE_OPTIONS = {
+    "solve": (
+        ("--grf", "--external-loads", "both give the ground forces", "give one: the ExternalLoads file already "
+         "names its force data file"),
+        ("--tendon-stiffness", "--parameters", "both give the tendon stiffness", "give one"),
+        ("--window", "--cycle", "both give the time window", "give one"),
+    ),
+}
 
 
 def check_exclusive(args) -> None:
-    """Raise :class:`OptionError` when two options of :data:`EXCLUSIVE_OPTIONS` are both given."""
-    for a, b, why, remedy in EXCLUSIVE_OPTIONS:
+    """Raise :class:`OptionError` when two options of the command's :data:`EXCLUSIVE_OPTIONS` are both given."""
+    for a, b, why, remedy in EXCLUSIVE_OPTIONS.get(getattr(args, "command", None), ()):
         given = [getattr(args, o.lstrip("-").replace("-", "_"), None) for o in (a, b)]
         if all(v not in (None, [], False) for v in given):
             raise OptionError(f"{a} and {b} cannot be used together ({why}); {remedy}")
-
