@@ -156,6 +156,16 @@ def test_names_that_match_nothing_are_errors(example, tmp_path, capsys, decoy, e
     assert not out.exists()
 
 
+def test_a_force_column_that_is_not_in_the_file_is_an_error(gait2392, tmp_path, capsys, decoy):
+    out = tmp_path / "out"
+    assert main(["solve", "--model", str(gait2392.model), "--ik", str(gait2392.ik), "--id", str(gait2392.id),
+                 "--grf", str(gait2392.grf), "--grf-column", "ground_force_vz_typo", "--cycle", "auto",
+                 "--out", str(out)]) == 1
+    err = _one_line_error(capsys)
+    assert "missing vertical force column ground_force_vz_typo" in err and "near names: " in err, err
+    assert str(gait2392.grf) in err and not out.exists()
+
+
 # ----------------------------------------------------------------------------------------------
 # 6. couplings
 
