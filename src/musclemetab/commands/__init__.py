@@ -147,6 +147,10 @@ def _main(argv: list[str] | None) -> int:
     try:
         with warnings.catch_warnings():
             warnings.showwarning = _one_line_warnings(warnings.showwarning)
+            from .options import check_exclusive, check_number_options
+
+            check_number_options(args)  # every command's numeric options, by the table of the study file
+            check_exclusive(args)
             return int(args.func(args) or 0)
     except MusclemetabError as exc:
         msg = " ".join(str(exc).split())

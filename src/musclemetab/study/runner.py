@@ -45,7 +45,6 @@ from __future__ import annotations
 import json
 import os
 import signal
-import socket
 import sys
 import time
 from concurrent.futures import as_completed
@@ -54,6 +53,7 @@ from pathlib import Path
 from typing import Mapping
 
 from ..errors import OptionError
+from ..io.atomic import FolderLock, _boot_id, _process_alive  # noqa: F401  (public here before)
 from ..io.atomic import atomic_path, atomic_write_text, check_output_folder
 from ..processes import THREAD_VARIABLES, spawn_pool  # noqa: F401  (THREAD_VARIABLES: public here before)
 from ..processes import pin_threads as _pin_threads  # noqa: F401
@@ -140,7 +140,7 @@ class _Progress:
     """A one-line progress bar on a terminal; one line per unit otherwise."""
 
     def __init__(self, total: int, enabled: bool, stream=None):
-        self.total, self.done, self.failed = total, 0, 0
+        self.total, self.done, self.failed, self.interrupted = total, 0, 0, 0
         self.enabled = enabled and total > 0
         self.stream = stream or sys.stderr
         self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
@@ -148,14 +148,17 @@ class _Progress:
 
     def update(self, label: str, record: dict) -> None:
         self.done += 1
-        self.failed += record.get("status") != "ok"
+        status = record.get("status")
+        self.failed += status not in ("ok", INTERRUPTED)
+        self.interrupted += status == INTERRUPTED
         if not self.enabled:
             return
         width = 24
         filled = int(width * self.done / self.total)
         bar = "#" * filled + "." * (width - filled)
-        state = "ok" if record.get("status") == "ok" else "FAILED"
-        line = (f"[{bar}] {self.done}/{self.total} units, {self.failed} failed, "
+        state = "ok" if status == "ok" else INTERRUPTED if status == INTERRUPTED else "FAILED"
+        stopped = f", {self.interrupted} interrupted" if self.interrupted else ""
+        line = (f"[{bar}] {self.done}/{self.total} units, {self.failed} failed{stopped}, "
                 f"{time.perf_counter() - self.t0:.0f} s | {label} {state}")
         if self.tty:
             self.stream.write("\r" + line[:160].ljust(160))
@@ -401,109 +404,7 @@ def run_study(
     return run
 
 
-def _process_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # another user's process
-        return True
-    return True
-
-
-def _boot_id() -> str:
-    """This boot of the machine (Linux), so that a lock written before a restart is known stale."""
-    try:
-        return Path("/proc/sys/kernel/random/boot_id").read_text(encoding="ascii").strip()
-    except OSError:
-        return ""
-
-
-class study_lock:
-    """Hold ``DIR/.musclemetab.lock`` while a run works on the study folder ``DIR``.
-
-    Raises :class:`OptionError` naming the lock file when another live process holds it.
-    The lock file is created complete (written aside, then linked into place, which fails if
-    it exists). A lock whose process no longer runs (same host: the process id is gone, or the
-    machine restarted since, by its boot id) is stale and taken over: the check and the
-    replacement happen under an exclusive ``flock`` of the study folder, so of many runs
-    starting at once after a crash exactly one takes the lock.
-    """
-
-    def __init__(self, folder: Path):
-        self.folder = Path(folder)
-        self.path = self.folder / LOCK_FILE
-        self.owned = False
-
-    def __enter__(self):
-        self.folder.mkdir(parents=True, exist_ok=True)
-        info = {"pid": os.getpid(), "host": socket.gethostname(), "boot_id": _boot_id(),
-                "started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
-        import tempfile
-
-        fd, tmp = tempfile.mkstemp(prefix=f"{LOCK_FILE}.", suffix=".tmp", dir=self.folder)
-        try:
-            os.fchmod(fd, 0o644)
-            with os.fdopen(fd, "w", encoding="utf-8") as f:
-                json.dump(info, f)
-            holder = self._take(tmp, info)
-        finally:
-            Path(tmp).unlink(missing_ok=True)
-        if self.owned:
-            return self
-        who = (f"process {holder.get('pid')} on {holder.get('host')}, since {holder.get('started')}"
-               if holder else "a process that did not record itself")
-        raise OptionError(
-            f"the study folder {self.folder} is in use by another musclemetab run ({who}; lock file "
-            f"{self.path}); wait for that run to finish, or delete the lock file if no run uses the folder"
-        )
-
-    def _take(self, tmp: str, info: dict) -> dict | None:
-        """Put the complete lock ``tmp`` in place, or take over a stale one; the holder otherwise."""
-        import fcntl
-
-        try:
-            os.link(tmp, self.path)  # atomic: fails when a lock exists
-            self.owned = True
-            return info
-        except FileExistsError:
-            pass
-        fd = os.open(self.folder, os.O_RDONLY)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX)  # one takeover at a time; released on close
-            holder = self._holder()
-            if holder is None and not self.path.exists():  # released meanwhile
-                os.link(tmp, self.path)
-                self.owned = True
-            elif self._stale(holder, info):
-                os.replace(tmp, self.path)  # the stale lock replaced in one step
-                self.owned = True
-            return holder
-        finally:
-            os.close(fd)
-
-    @staticmethod
-    def _stale(holder: dict | None, me: dict) -> bool:
-        if holder is None or holder.get("host") != me["host"] or not isinstance(holder.get("pid"), int):
-            return False
-        if holder.get("boot_id") and me["boot_id"] and holder["boot_id"] != me["boot_id"]:
-            return True  # written before the machine restarted
-        return not _process_alive(holder["pid"])
-
-    def _holder(self) -> dict | None:
-        try:
-            data = json.loads(self.path.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
-            return None
-        return data if isinstance(data, dict) else None
-
-    def __exit__(self, *exc):
-        if self.owned:
-            holder = self._holder()
-            if holder is None or holder.get("pid") == os.getpid():
-                self.path.unlink(missing_ok=True)
-            self.owned = False
-        return False
+study_lock = FolderLock  # the study folder's lock (the name it had before ``FolderLock``)
 
 
 def _write_study_json(study: Study, out: Path) -> None:
