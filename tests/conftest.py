@@ -66,6 +66,54 @@ def demo(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
+def two_subject_study(example, gait2392, tmp_path_factory):
+    """The two-subject study of tests/test_trials.py (the example subject's right leg, gait2392's
+    subject on both legs) run once per test run by ``musclemetab run --workers 2 --report``:
+    ``(output folder, what it printed on stdout, what it printed on stderr)``.
+
+    Its output is captured at the file descriptors, so that what the study's worker processes
+    print is in it too. The parallel test processes share it like :func:`demo`.
+    """
+    import solve_memo
+    from test_trials import TWO_SUBJECTS
+
+    from musclemetab.commands import main
+
+    root = _run_root(tmp_path_factory) / "two_subjects"
+    out = root / "out"
+    with solve_memo.locked(root.with_suffix(".lock")):
+        if not (root / "stderr.txt").is_file():
+            root.mkdir(exist_ok=True)
+            study = root / "study.toml"
+            study.write_text(TWO_SUBJECTS.format(example=example, gait2392=gait2392))
+            with _captured_fds(root / "stdout.txt", root / "stderr.txt"):
+                code = main(["run", str(study), "--workers", "2", "--report"])
+            assert code == 0, (root / "stderr.txt").read_text()
+    return out, (root / "stdout.txt").read_text(), (root / "stderr.txt").read_text()
+
+
+@contextlib.contextmanager
+def _captured_fds(stdout_file: Path, stderr_file: Path):
+    """Standard output and error of this process and of the processes it starts, into files."""
+    import sys
+
+    with open(stdout_file, "w", buffering=1) as out, open(stderr_file, "w", buffering=1) as err:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        saved = [os.dup(1), os.dup(2)]
+        try:
+            os.dup2(out.fileno(), 1)
+            os.dup2(err.fileno(), 2)
+            with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+                yield
+        finally:
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            for fd in saved:
+                os.close(fd)
+
+
+@pytest.fixture(scope="session")
 def geometry_cache(_isolated_cache) -> Path:
     """The test session's geometry cache (``$MUSCLEMETAB_CACHE/geometry``), shared by every
     test that computes the example subject's geometry: each trial goes through OpenSim once."""

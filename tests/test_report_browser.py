@@ -150,18 +150,10 @@ def test_demo_report_renders_in_headless_chromium(demo, chromium, tmp_path, caps
 
 
 @pytest.fixture(scope="module")
-def two_subjects(example, gait2392, tmp_path_factory):
+def two_subjects(two_subject_study):
     """The two-subject study of tests/test_trials.py (the example subject's right leg, gait2392's
-    subject on both legs, other trial names), run with its report."""
-    from test_trials import TWO_SUBJECTS
-
-    from musclemetab.commands import main
-
-    root = tmp_path_factory.mktemp("two_subjects")
-    study = root / "study.toml"
-    study.write_text(TWO_SUBJECTS.format(example=example, gait2392=gait2392))
-    assert main(["run", str(study), "--workers", "2", "--report", "--no-progress"]) == 0
-    return root / "out"
+    subject on both legs), run with its report (the session's ``two_subject_study``)."""
+    return two_subject_study[0]
 
 
 FIGURE_BOXES_JS = """
