@@ -15,6 +15,8 @@ from __future__ import annotations
 import io
 import json
 import re
+import time
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -23,6 +25,8 @@ import pytest
 from musclemetab.commands import main
 
 RTOL = 1e-9
+#: before any OpenSim worker of this test process ran
+_STARTED = time.time()
 #: the study's per-leg tables are read back from CSV files written with 10 significant digits
 #: before the legs are added; the command line adds the legs before writing
 CSV_RTOL = 2e-9
@@ -142,6 +146,10 @@ def test_run_prints_no_source_line_and_no_cache_file(two_subject_study):
     # the study's progress: one line per unit (not a terminal), the time left once a unit has run
     progress = [ln for ln in stderr.splitlines() if re.match(r"\[[#.]+\] \d+/3 units", ln)]
     assert len(progress) == 3 and "left |" in progress[0] and "left" not in progress[-1]
+    # OpenSim computed gait2392's inverse dynamics in the worker started from this folder, and
+    # wrote no log file there
+    log = Path.cwd() / "opensim.log"
+    assert not log.exists() or log.stat().st_mtime < _STARTED
 
 
 def test_progress_lines_throttled_by_the_clock():
@@ -184,3 +192,24 @@ def test_solve_prints_progress_while_ipopt_runs(example, tmp_path, capsys, monke
     assert iterations[:3] == [0, 1, 2] and iterations[-1] == total
     assert len(iterations) == total + 1
     assert ipopt._progress_callback(1, 1, [0.0], [0.0]) is None  # switched off after the command
+
+
+def test_study_progress_time_left_and_interrupted_units():
+    """The study's progress lines worked by hand: 4 units, 2 at once; the first run took 30 s
+    (3 units left: 30 x 3 / 2 = 45 s), one found up to date (costs nothing: 2 left, 30 s), one
+    stopped by Ctrl-C (labelled interrupted, not counted failed), one failed (the last: no time left)."""
+    from musclemetab.study.runner import _Progress
+
+    stream = io.StringIO()
+    bar = _Progress(4, True, stream, parallel=2)
+    bar.update("s/a/effort-gen", {"status": "ok", "times": {"total_s": 30.0}}, ran=True)
+    bar.update("s/b/effort-gen", {"status": "ok"})
+    bar.update("s/c/effort-gen", {"status": "interrupted", "times": {"total_s": 2.0}}, ran=True)
+    bar.update("s/d/effort-gen", {"status": "failed", "times": {"total_s": 1.0}}, ran=True)
+    lines = [re.sub(r", \d+ s", ", T s", ln, count=1) for ln in stream.getvalue().splitlines()]
+    assert lines == [
+        "[######..................] 1/4 units, 0 failed, T s, about 45 s left | s/a/effort-gen ok",
+        "[############............] 2/4 units, 0 failed, T s, about 30 s left | s/b/effort-gen ok",
+        "[##################......] 3/4 units, 0 failed, T s, about 30 s left | s/c/effort-gen interrupted",
+        "[########################] 4/4 units, 1 failed, T s | s/d/effort-gen FAILED",
+    ]
