@@ -66,30 +66,36 @@ def demo(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
-def two_subject_study(example, gait2392, tmp_path_factory):
-    """The two-subject study of tests/test_trials.py (the example subject's right leg, gait2392's
-    subject on both legs) run once per test run by ``musclemetab run --workers 2 --report``:
-    ``(output folder, what it printed on stdout, what it printed on stderr)``.
-
-    Its output is captured at the file descriptors, so that what the study's worker processes
-    print is in it too. The parallel test processes share it like :func:`demo`.
-    """
+def two_subjects(example, gait2392, tmp_path_factory):
+    """The two-subject study of ``test_trials.TWO_SUBJECTS`` (the example subject's right leg and
+    gait2392's subject on both legs) run once per test run by ``musclemetab run --report``:
+    ``(output folder, what the command printed)``. Shared by the parallel test processes like
+    :func:`demo`. What it printed on standard error (its worker processes included: captured at
+    the file descriptors) is :func:`two_subjects_stderr`."""
     import solve_memo
     from test_trials import TWO_SUBJECTS
 
     from musclemetab.commands import main
 
     root = _run_root(tmp_path_factory) / "two_subjects"
-    out = root / "out"
+    printed = root / "printed.txt"
     with solve_memo.locked(root.with_suffix(".lock")):
-        if not (root / "stderr.txt").is_file():
-            root.mkdir(exist_ok=True)
+        if not printed.is_file():
+            shutil.rmtree(root, ignore_errors=True)
+            root.mkdir()
             study = root / "study.toml"
             study.write_text(TWO_SUBJECTS.format(example=example, gait2392=gait2392))
             with _captured_fds(root / "stdout.txt", root / "stderr.txt"):
                 code = main(["run", str(study), "--workers", "2", "--report"])
             assert code == 0, (root / "stderr.txt").read_text()
-    return out, (root / "stdout.txt").read_text(), (root / "stderr.txt").read_text()
+            (root / "stdout.txt").replace(printed)
+    return root / "out", printed.read_text()
+
+
+@pytest.fixture(scope="session")
+def two_subjects_stderr(two_subjects) -> str:
+    """What ``musclemetab run`` of :func:`two_subjects` printed on standard error (warnings, progress)."""
+    return (two_subjects[0].parent / "stderr.txt").read_text()
 
 
 @contextlib.contextmanager
@@ -111,6 +117,8 @@ def _captured_fds(stdout_file: Path, stderr_file: Path):
             os.dup2(saved[1], 2)
             for fd in saved:
                 os.close(fd)
+
+
 
 
 @pytest.fixture(scope="session")

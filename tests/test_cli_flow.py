@@ -3,7 +3,7 @@
 * ``solve`` -> ``metabolics`` -> ``analyse`` on gait2392's subject (both legs, the cycle found
   from the ground forces, inverse dynamics computed by OpenSim) asks for nothing the solution
   records and gives every number the two-subject study gives for that subject (the session's
-  ``two_subject_study``, run by ``musclemetab run``; the solve memo makes the command line's
+  ``two_subjects``, run by ``musclemetab run``; the solve memo makes the command line's
   solves the study's);
 * ``musclemetab run`` prints no Python source line and no file of the package's cache;
 * a running solve prints progress lines from IPOPT's iteration callback, throttled;
@@ -69,9 +69,9 @@ def cli_flow(gait2392, tmp_path_factory):
 
 @pytest.mark.slow
 @pytest.mark.opensim
-def test_solve_metabolics_analyse_give_the_study_numbers(cli_flow, two_subject_study, capsys):
+def test_solve_metabolics_analyse_give_the_study_numbers(cli_flow, two_subjects, capsys):
     s, m, a = cli_flow
-    study, _, _ = two_subject_study
+    study, _ = two_subjects
     capsys.readouterr()
     assert main(["analyse", "--solution", str(s), "--metabolics", str(m), "--out", str(a)]) == 0
     said = capsys.readouterr()
@@ -123,7 +123,7 @@ def _header_rows(path) -> int:
 
 @pytest.mark.slow
 @pytest.mark.opensim
-def test_run_prints_no_source_line_and_no_cache_file(two_subject_study):
+def test_run_prints_no_source_line_and_no_cache_file(two_subjects, two_subjects_stderr):
     """``musclemetab run`` with two worker processes: every warning is one line
     ``musclemetab: warning: ...``; no line names a file of the package's code with a line
     number, nor a file of the package's cache (which the user never gave)."""
@@ -131,7 +131,8 @@ def test_run_prints_no_source_line_and_no_cache_file(two_subject_study):
 
     import musclemetab
 
-    out, stdout, stderr = two_subject_study
+    _, stdout = two_subjects
+    stderr = two_subjects_stderr
     text = stdout + stderr
     package = os.path.dirname(musclemetab.__file__)
     source_lines = [ln for ln in text.splitlines() if re.search(r"\.py:\d+", ln) or package in ln]

@@ -149,13 +149,6 @@ def test_demo_report_renders_in_headless_chromium(demo, chromium, tmp_path, caps
 # ------------------------------------------------------------------ every figure, two widths, two studies
 
 
-@pytest.fixture(scope="module")
-def two_subjects(two_subject_study):
-    """The two-subject study of tests/test_trials.py (the example subject's right leg, gait2392's
-    subject on both legs), run with its report (the session's ``two_subject_study``)."""
-    return two_subject_study[0]
-
-
 FIGURE_BOXES_JS = """
 return Array.from(document.querySelectorAll('figure img')).map(e => {
   const r = e.getBoundingClientRect();
@@ -198,7 +191,7 @@ def test_every_figure_at_1400_and_900_px(which, request, chromium, tmp_path, cap
 
     from musclemetab.report.plan import FIGURE_NAMES
 
-    out = request.getfixturevalue("demo")[0] if which == "demo" else request.getfixturevalue("two_subjects")
+    out = request.getfixturevalue("demo")[0] if which == "demo" else request.getfixturevalue("two_subjects")[0]
     report = out / "report.html"
     text = report.read_text(encoding="utf-8")
     drawn = re.findall(r'<h3 id="figure-([^"]+)">Figure \d+\.', text)
