@@ -393,8 +393,11 @@ def analyse(
     if side is None:
         sides = {split_side(m)[1] for m in result.muscles} - {""}
         side = sides.pop() if len(sides) == 1 else "r"
-    dofs = list(dofs) if dofs is not None else (list(recorded.dofs) if recorded.dofs is not None else None)
-    geometry = compute_geometry(model, ik, dofs=dofs, side=side, muscles=list(result.muscles))
+    muscles = list(result.muscles)
+    if dofs is None and recorded.dofs is not None:
+        # the solve's own geometry call (its DOFs, the muscles spanning them): found in the cache
+        dofs, muscles = list(recorded.dofs), None
+    geometry = compute_geometry(model, ik, dofs=list(dofs) if dofs is not None else None, side=side, muscles=muscles)
     tg, r = filtered_moment_arms(geometry)
     keep = [j for j, d in enumerate(geometry.dofs) if has_function_group(d)]
     excluded = tuple(d for d in geometry.dofs if not has_function_group(d))
