@@ -38,8 +38,12 @@ def pin_threads(threads: int):
 
 
 def ignore_sigint() -> None:
-    """Pool worker start-up: Ctrl-C is handled by the work running in it, not by the idle worker."""
+    """Pool worker start-up: Ctrl-C is handled by the work running in it, not by the idle worker;
+    warnings are printed as one line each (:func:`musclemetab.messages.install`)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    from .messages import install
+
+    install()
 
 
 class _Pool(ProcessPoolExecutor):

@@ -32,7 +32,7 @@ import argparse
 from ..errors import OptionError, SolverError, UnknownMuscleError
 from .options import number_option
 
-__all__ = ["add_parser", "add_emg_goal_arguments", "run"]
+__all__ = ["add_parser", "add_emg_goal_arguments", "run", "run_with_progress"]
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -159,7 +159,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     g.add_argument("--muscle-properties", metavar="FILE",
                    help="CSV of per-muscle overrides of mass and slow-twitch fraction (docs/muscles.md)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    p.set_defaults(func=run)
+    p.add_argument("--no-progress", action="store_true",
+                   help="no progress lines while IPOPT runs (default: one line on stderr at most every 5 s: "
+                   "iteration, objective, constraint violation, time)")
+    p.set_defaults(func=run_with_progress)
     return p
 
 
@@ -494,3 +497,14 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
         print(f"solve: {args.workflow} EMG-{settings.emg_mode}{leg} {len(result.solutions)} trial(s): {r.status} in "
               f"{r.iterations} iterations, objective {r.objective:.6e}; EMG scale {scales} -> {out}")
     return 0
+
+
+def run_with_progress(args) -> int:
+    """:func:`run` with IPOPT's progress lines on stderr (:class:`~musclemetab.redundancy.ipopt.solve_progress`)
+    unless ``--no-progress``."""
+    import contextlib
+
+    from ..redundancy.ipopt import solve_progress
+
+    with contextlib.nullcontext() if getattr(args, "no_progress", False) else solve_progress():
+        return run(args)

@@ -71,7 +71,7 @@ from .units import (
     unit_key,
 )
 
-__all__ = ["run_study", "StudyRun", "collect_results", "software_versions", "study_lock", "check_scheduler_address",
+__all__ = ["run_study", "StudyRun", "collect_results", "trial_result_rows", "add_leg_rows", "leg_basal_energy_J", "software_versions", "study_lock", "check_scheduler_address",
            "RESULTS_CSV", "RESULTS_PARQUET", "LOCK_FILE"]
 
 from ..study_layout import (  # noqa: E402,F401  (the names of the study folder's files, defined once)
@@ -137,29 +137,51 @@ class StudyRun:
 
 # ---------------------------------------------------------------------------------------
 class _Progress:
-    """A one-line progress bar on a terminal; one line per unit otherwise."""
+    """A one-line progress bar on a terminal; one line per unit otherwise.
 
-    def __init__(self, total: int, enabled: bool, stream=None):
+    Each line counts the units done, failed and interrupted, the time so far and, once a unit
+    has run, the time left: the units not done times the mean measured time of the units run so
+    far (their ``times.total_s``; units found up to date do not count), divided by the units
+    that run at once (``parallel``). A unit stopped by Ctrl-C is shown ``interrupted``, not failed.
+    """
+
+    def __init__(self, total: int, enabled: bool, stream=None, parallel: int = 1):
         self.total, self.done, self.failed, self.interrupted = total, 0, 0, 0
         self.enabled = enabled and total > 0
         self.stream = stream or sys.stderr
         self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
         self.t0 = time.perf_counter()
+        self.parallel = max(1, int(parallel or 1))
+        self.costs: list[float] = []  # measured seconds of the units run
 
-    def update(self, label: str, record: dict) -> None:
-        self.done += 1
+    def eta_s(self) -> float | None:
+        """Seconds left (estimate), or ``None`` before any unit has run."""
+        if not self.costs:
+            return None
+        left = self.total - self.done
+        if left <= 0:
+            return 0.0
+        return sum(self.costs) / len(self.costs) * left / min(self.parallel, left)
+
+    def update(self, label: str, record: dict, ran: bool = False) -> None:
         status = record.get("status")
+        self.done += 1
         self.failed += status not in ("ok", INTERRUPTED)
         self.interrupted += status == INTERRUPTED
+        cost = (record.get("times") or {}).get("total_s")
+        if ran and status == "ok" and isinstance(cost, (int, float)):
+            self.costs.append(float(cost))
         if not self.enabled:
             return
         width = 24
         filled = int(width * self.done / self.total)
         bar = "#" * filled + "." * (width - filled)
         state = "ok" if status == "ok" else INTERRUPTED if status == INTERRUPTED else "FAILED"
+        eta = self.eta_s()
+        left = f", about {_duration(eta)} left" if eta is not None and self.done < self.total else ""
         stopped = f", {self.interrupted} interrupted" if self.interrupted else ""
         line = (f"[{bar}] {self.done}/{self.total} units, {self.failed} failed{stopped}, "
-                f"{time.perf_counter() - self.t0:.0f} s | {label} {state}")
+                f"{time.perf_counter() - self.t0:.0f} s{left} | {label} {state}")
         if self.tty:
             self.stream.write("\r" + line[:160].ljust(160))
             if self.done == self.total:
@@ -167,6 +189,14 @@ class _Progress:
         else:
             self.stream.write(line + "\n")
         self.stream.flush()
+
+
+def _duration(seconds: float) -> str:
+    """``45 s``, ``3 min``, ``1 h 05 min``."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    minutes = int(round(seconds / 60))
+    return f"{minutes} min" if minutes < 60 else f"{minutes // 60} h {minutes % 60:02d} min"
 
 
 def check_scheduler_address(address: str) -> str:
@@ -276,7 +306,7 @@ def _run_units(study: Study, jobs: list[tuple[Unit, str, str | None]], executor:
             for unit, key, dep in jobs:
                 rec = execute_unit(study, unit, key, dep)
                 records[unit] = rec
-                progress.update(unit.label, rec)
+                progress.update(unit.label, rec, ran=True)
                 if rec.get("status") == INTERRUPTED:
                     return records, True
         except KeyboardInterrupt:  # between two units
@@ -307,7 +337,7 @@ def _run_units(study: Study, jobs: list[tuple[Unit, str, str | None]], executor:
                 rec = {"status": "failed", "error": f"{type(exc).__name__}: {exc} (worker lost)"}
             records[unit] = rec
             interrupted = interrupted or rec.get("status") == INTERRUPTED
-            progress.update(unit.label, rec)
+            progress.update(unit.label, rec, ran=True)
         except KeyboardInterrupt:
             if interrupted:  # a second Ctrl-C: stop waiting
                 break
@@ -368,7 +398,7 @@ def run_study(
                 for unit in stage:
                     prepare_leg_folder(out, unit)
             _write_study_json(study, out)
-            bar = _Progress(n_total, progress, stream)
+            bar = _Progress(n_total, progress, stream, parallel=workers if not scheduler else 1)
             for stage in stages:
                 jobs = []
                 for unit in stage:
@@ -434,20 +464,33 @@ def _unit_rows(folder: Path, unit: Unit, rec: dict):
     """One unit's rows of the results table (a row per model), as the unit wrote them."""
     import pandas as pd
 
-    wb = pd.read_csv(folder / "whole_body.csv")
-    an = pd.read_csv(folder / "analysis.csv")
-    df = wb.merge(an, on="model", how="left", validate="one_to_one")
+    df = trial_result_rows(
+        pd.read_csv(folder / "whole_body.csv"), pd.read_csv(folder / "analysis.csv"),
+        speed_m_per_s=rec.get("speed_m_per_s"), toe_off_pct=rec.get("toe_off_pct"),
+        measured_W_per_kg=rec.get("measured_W_per_kg"), cycle_source=rec.get("cycle_source"),
+        speed_source=rec.get("speed_source"), large_reserve=bool(rec.get("large_reserve", False)),
+        unit_dir=str(unit.folder))
     df.insert(0, "subject", unit.subject)
     df.insert(1, "trial", unit.trial)
     df.insert(2, "workflow", unit.workflow)
-    df["speed_m_per_s"] = rec.get("speed_m_per_s")
-    df["toe_off_pct"] = rec.get("toe_off_pct")
-    df["measured_W_per_kg"] = rec.get("measured_W_per_kg")
-    df["cycle_source"] = rec.get("cycle_source")
-    df["speed_source"] = rec.get("speed_source")
-    df["large_reserve"] = bool(rec.get("large_reserve", False))
+    return df
+
+
+def trial_result_rows(whole_body, analysis, *, speed_m_per_s=None, toe_off_pct=None, measured_W_per_kg=None,
+                      cycle_source=None, speed_source=None, large_reserve=False, unit_dir="."):
+    """The results rows of one leg of a trial (one per model) from its whole-body table and its
+    analysis (``whole_body.csv`` and ``analysis.csv`` of a unit, or the tables of
+    :func:`musclemetab.analysis.analyse`), with the trial's speed, toe-off, measured rate,
+    sources, reserve flag, status ``ok`` and folder (``musclemetab analyse`` writes them too)."""
+    df = whole_body.merge(analysis, on="model", how="left", validate="one_to_one")
+    df["speed_m_per_s"] = speed_m_per_s
+    df["toe_off_pct"] = toe_off_pct
+    df["measured_W_per_kg"] = measured_W_per_kg
+    df["cycle_source"] = cycle_source
+    df["speed_source"] = speed_source
+    df["large_reserve"] = bool(large_reserve)
     df["status"] = "ok"
-    df["unit_dir"] = str(unit.folder)
+    df["unit_dir"] = unit_dir
     return df
 
 
@@ -524,8 +567,9 @@ def add_leg_rows(rows: Mapping[str, object], basal_energy_J: Mapping[str, object
     return out.reset_index()
 
 
-def _basal_energy_J(per_muscle, duration_s):
-    """A leg's per-muscle basal heat over its cycle (J) by model, from its per-muscle table."""
+def leg_basal_energy_J(per_muscle, duration_s):
+    """A leg's per-muscle basal heat over its cycle (J) by model, from its per-muscle table
+    (the ``basal_energy_J`` of :func:`add_leg_rows`)."""
     if per_muscle is None or "basal_heat_mean_W" not in per_muscle:
         return 0.0
     return per_muscle.groupby("model")["basal_heat_mean_W"].sum() * float(duration_s)
@@ -573,7 +617,7 @@ def collect_results(study: Study, failed: dict[str, str] | None = None):
             frames.append(df)
             continue
         rows = {side: df for side, (df, _) in group.items()}
-        basal = {side: _basal_energy_J(pm, df["duration_s"].iloc[0]) for side, (df, pm) in group.items()}
+        basal = {side: leg_basal_energy_J(pm, df["duration_s"].iloc[0]) for side, (df, pm) in group.items()}
         frames.append(add_leg_rows(rows, basal))
     for unit in plan_units(study)[0]:
         rec = read_unit_record(out / unit.folder)
