@@ -199,7 +199,7 @@ def test_solve_prints_progress_while_ipopt_runs(example, tmp_path, capsys, monke
 def test_study_progress_time_left_and_interrupted_units():
     """The study's progress lines worked by hand: 4 units, 2 at once; the first run took 30 s
     (3 units left: 30 x 3 / 2 = 45 s), one found up to date (costs nothing: 2 left, 30 s), one
-    stopped by Ctrl-C (labelled interrupted, not counted failed), one failed (the last: no time left)."""
+    stopped by Ctrl-C (labelled and counted interrupted, not failed), one failed (the last: no time left)."""
     from musclemetab.study.runner import _Progress
 
     stream = io.StringIO()
@@ -212,6 +212,6 @@ def test_study_progress_time_left_and_interrupted_units():
     assert lines == [
         "[######..................] 1/4 units, 0 failed, T s, about 45 s left | s/a/effort-gen ok",
         "[############............] 2/4 units, 0 failed, T s, about 30 s left | s/b/effort-gen ok",
-        "[##################......] 3/4 units, 0 failed, T s, about 30 s left | s/c/effort-gen interrupted",
-        "[########################] 4/4 units, 1 failed, T s | s/d/effort-gen FAILED",
+        "[##################......] 3/4 units, 0 failed, 1 interrupted, T s, about 30 s left | s/c/effort-gen interrupted",
+        "[########################] 4/4 units, 1 failed, 1 interrupted, T s | s/d/effort-gen FAILED",
     ]

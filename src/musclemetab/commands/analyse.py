@@ -226,7 +226,7 @@ def run(args) -> int:
             table.to_csv(tmp, index=False, float_format="%.10g")
         if len(rows) > 1:
             print(f"analyse: legs {' + '.join(rows)} added -> {Path(args.out) / RESULTS_CSV}: "
-                  + ", ".join(f"{r.model} {r.mean_W_per_kg:.2f} W/kg" for r in table.itertuples()))
+                  + ", ".join(f"{r.model} {r.whole_body_W_per_kg:.2f} W/kg" for r in table.itertuples()))
     else:
         (side, table), = rows.items()
         with atomic_path(Path(args.out) / RESULTS_CSV) as tmp:
