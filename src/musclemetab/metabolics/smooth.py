@@ -291,7 +291,9 @@ def smooth_rates(
     """The smooth version of ``model``: its components (W) as NumPy arrays or CasADi
     expressions, for states and parameters of one common (broadcastable) shape.
 
-    ``options`` are those of the exact model that the smooth one has (``non_negative``;
+    ``options`` are those of the exact model that the smooth one has (``non_negative``, which
+    also takes :data:`WORK_AND_HEAT` for UM03, UM10, UC16, BH04 and HO06: the rule on the work
+    plus the shortening/lengthening heat, ``H_AM + max(W + H_SL, 0)``, without a minimum heat rate;
     Umberger family: ``include_negative_work``, ``effort_scaling``,
     ``minimum_heat_rate_W_per_kg``, ``slow_twitch_shortening_cap`` (as ``cap``); BH04:
     ``activation_heat_decay``, ``stimulation_time_s`` (a number, s), ``minimum_heat_rate_W_per_kg``;
