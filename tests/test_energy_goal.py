@@ -271,8 +271,8 @@ def test_bh04_energy_solve_does_not_saturate_the_lengthening_rectus_femoris(exam
     """BH04 goal alone (``wE = 1``, ``wAct = 0``, objective form, default smoothing), warm-started
     from the effort optimum: converged, and the rectus femoris, which lengthens while active, is
     not driven to saturation there: its peak activation at the nodes where its fiber lengthens
-    stays below 0.5 (0.29; effort optimum 0.30). The energy optimum still fully activates other
-    muscles (docs/energy_objective.md)."""
+    stays below 0.5 (0.29; effort optimum 0.30; the same solve in the model form: 1.00). The energy
+    optimum still fully activates other muscles (docs/energy_objective.md)."""
     from musclemetab.redundancy import SolverOptions, solve_files
 
     effort = solve_files(example.model, example.ik["normal"], example.id["normal"], "effort-cal")
