@@ -154,6 +154,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     number_option(g, "--energy-smoothing", "smoothing", metavar="S",
                    help="smoothing parameter of the model's switches (default 0.001; smaller is closer to the exact "
                    "model and slower to solve)")
+    g.add_argument("--energy-form", choices=("objective", "model"),
+                   help="objective (default): UM03, BH04, HO06 and UC16 with their non-negativity rule on the work "
+                   "plus shortening/lengthening heat, so that lengthening muscles pay their activation and "
+                   "maintenance heat; model: the rule on the total, as the model defines it (warns)")
     number_option(g, "--mass", "body_mass_kg", metavar="KG", help="body mass (kg), for the muscle masses and the goal's W/kg")
     number_option(g, "--height", "height_m", metavar="M", help="body height (m), for the muscle masses")
     g.add_argument("--muscle-properties", metavar="FILE",
@@ -297,7 +301,7 @@ def _solve(args) -> int:
 
 _ENERGY_OPTIONS = (("--energy-weight", "energy_weight"), ("--effort-weight", "effort_weight"),
                    ("--energy-smoothing", "energy_smoothing"), ("--mass", "mass"), ("--height", "height"),
-                   ("--muscle-properties", "muscle_properties"))
+                   ("--muscle-properties", "muscle_properties"), ("--energy-form", "energy_form"))
 
 
 def _energy_goal(args):
@@ -321,7 +325,8 @@ def _energy_goal(args):
         return EnergyGoal(args.energy_model, 1.0 if args.energy_weight is None else args.energy_weight, args.mass,
                           args.height, effort_weight=args.effort_weight,
                           smoothing=ENERGY_SMOOTHING if args.energy_smoothing is None else args.energy_smoothing,
-                          muscle_properties=args.muscle_properties)
+                          muscle_properties=args.muscle_properties,
+                          **({"form": args.energy_form} if getattr(args, "energy_form", None) else {}))
     except OptionError as exc:
         raise OptionError(f"--energy-model: {exc}") from None
 

@@ -157,6 +157,9 @@ class SolveRecord:
     input_preparation: dict | None = _ABSENT
     inputs: dict | None = _ABSENT
     energy_goal: dict | None = _ABSENT
+    #: the energy goal's form and smoothing (``EnergyGoal.form_record``): model, form, the
+    #: non-negativity rule minimised, smoothing ``s``
+    energy_form: dict | None = _ABSENT
     emg: dict | None = _ABSENT
     emg_tracking: dict | None = _ABSENT
     emg_tolerance: float | None = _ABSENT

@@ -218,7 +218,7 @@ class Study:
 _STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "basal_coefficient", "basal_exponent", "subjects",
                "solver", "energy_goal"}
 #: keys of the study file's [energy_goal] table (the energy goal of every effort-workflow solve)
-_ENERGY_KEYS = {"model", "weight", "effort_weight", "smoothing"}
+_ENERGY_KEYS = {"model", "weight", "effort_weight", "smoothing", "form"}
 #: keys of the study file's [solver] table (IPOPT settings of every solve)
 _SOLVER_KEYS = {"max_iter", "tol", "linear_solver"}
 _SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials",
@@ -378,15 +378,18 @@ def _energy_goal(data, where: str) -> dict:
     for key in ("weight", "effort_weight", "smoothing"):
         if key in data:
             _number(data[key], here, key)
-    from ..redundancy.energy import EnergyGoal
+    from ..redundancy.energy import CLAMPED_MODELS, EnergyGoal
 
     try:
         goal = EnergyGoal(str(data["model"]), float(data.get("weight", 1.0)), 70.0, 1.75,
                           effort_weight=data.get("effort_weight"),
-                          **({"smoothing": float(data["smoothing"])} if "smoothing" in data else {}))
+                          **({"smoothing": float(data["smoothing"])} if "smoothing" in data else {}),
+                          **({"form": str(data["form"])} if "form" in data else {}))
     except OptionError as exc:
         raise OptionError(f"{here}: {exc}") from None
     out = {"model": goal.model, "weight": goal.weight, "smoothing": goal.smoothing}
+    if "form" in data or goal.model in CLAMPED_MODELS:  # the form changes what these models' goals minimise
+        out["form"] = goal.form
     if goal.effort_weight is not None:
         out["effort_weight"] = float(goal.effort_weight)
     return out
