@@ -147,13 +147,19 @@ def test_forces_file_holds_every_actuator(solved, example):
     for j, d in enumerate(sol.dofs):
         np.testing.assert_allclose(forces[f"reserve_{d}"], sol.reserve_Nm[:, j], rtol=1e-10, atol=1e-9)
     # muscles outside the solution carry nothing; the left hip its inverse-dynamics moment (no right-leg
-    # muscle spans it), filtered and at the node times: within 2 N m of the raw ID file's
+    # muscle spans it), low-pass filtered as the solve filters the moments (6 Hz, 6th order Butterworth,
+    # zero phase; worked here with SciPy's own padding, so within 0.3 N m, 0.1 N m away from the ends)
+    import scipy.signal
+
     others = [c for c in forces.columns if c.endswith("_l") and not c.startswith("reserve_")]
     assert others and np.all(forces[others].to_numpy() == 0)
     raw = read_storage(example.id["normal"])
-    idm = np.interp(sol.time_s, raw.index, raw["hip_flexion_l_moment"])
-    assert np.abs(forces["reserve_hip_flexion_l"].to_numpy() - idm).max() < 2.0
-    assert np.ptp(idm) > 50.0
+    t = raw.index.to_numpy()
+    b, a = scipy.signal.butter(6, 6.0 / (0.5 / np.mean(np.diff(t))))
+    for dof, peak in (("hip_flexion_l", 100.0), ("knee_angle_l", 80.0)):
+        want = np.interp(sol.time_s, t, scipy.signal.filtfilt(b, a, raw[f"{dof}_moment"].to_numpy()))
+        gap = np.abs(forces[f"reserve_{dof}"].to_numpy() - want)
+        assert gap.max() < 0.3 and gap[10:-10].max() < 0.1 and np.ptp(want) > peak, dof
     # locked coordinates have no reserve (they are prescribed in the model)
     assert "reserve_subtalar_angle_r" not in forces.columns and "reserve_mtp_angle_r" not in forces.columns
 

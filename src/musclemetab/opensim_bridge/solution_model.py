@@ -23,6 +23,7 @@ other free coordinates (``Muscle.computeMomentArm``, only the pairs the muscle s
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 import opensim as osim
@@ -34,6 +35,30 @@ from .states import states_along_motion
 __all__ = ["solution_model", "RESERVE_PREFIX"]
 
 RESERVE_PREFIX = "reserve_"
+
+
+_CONVERTED: dict = {}
+
+
+def _with_degroote_muscles(model_path: str):
+    """A copy of the model with every muscle a ``DeGrooteFregly2016Muscle`` (OpenSim's
+    ``replaceMuscles``, about a second for 80 muscles, done once while the file is unchanged;
+    a copy takes a few milliseconds)."""
+    path = os.path.abspath(model_path)
+    if not os.path.isfile(path):
+        raise ModelError(f"{model_path}: no such model file; check the path")
+    key = (path, os.path.getmtime(path), os.path.getsize(path))
+    if key not in _CONVERTED:
+        try:
+            model = osim.Model(path)
+        except Exception as exc:
+            msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            raise ModelError(f"{model_path}: OpenSim cannot load this model ({msg}); check that it is a valid .osim "
+                             "file") from None
+        osim.DeGrooteFregly2016Muscle.replaceMuscles(model)
+        _CONVERTED.clear()
+        _CONVERTED[key] = model
+    return osim.Model(_CONVERTED[key])
 
 
 def _set_parameters(mu, p: dict) -> None:
@@ -71,20 +96,13 @@ def solution_model(model_path: str, out_path: str, parameters: dict, ik_time, co
     order), ``dependent_coordinates``, ``prescribed_coordinates`` (the locked ones) and
     ``moment_arms_m`` (``{coordinate: {muscle: array over times}}``, spanned pairs only).
     """
-    try:
-        model = osim.Model(str(model_path))
-    except Exception as exc:
-        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise ModelError(f"{model_path}: OpenSim cannot load this model ({msg}); check that it is a valid .osim "
-                         "file") from None
+    model = _with_degroote_muscles(str(model_path))
     mset = model.getMuscles()
     have = {mset.get(i).getName() for i in range(mset.getSize())}
     missing = [m for m in parameters if m not in have]
     if missing:
         raise UnknownMuscleError(f"{model_path}: no muscle {', '.join(missing)} of the solution; give the model the "
                                  "solution was solved with")
-    osim.DeGrooteFregly2016Muscle.replaceMuscles(model)
-    mset = model.getMuscles()
     for name, p in parameters.items():
         _set_parameters(osim.DeGrooteFregly2016Muscle.safeDownCast(mset.get(name)), p)
     cset = model.getCoordinateSet()
