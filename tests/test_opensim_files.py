@@ -42,22 +42,6 @@ def _solve(tmp_path, argv):
 
 
 @pytest.fixture(scope="module")
-def passive_csv(example, tmp_path_factory):
-    """The study's calibration as tests/test_redundancy.py writes it (the same bytes: the same solve)."""
-    import scipy.io
-
-    mat = scipy.io.loadmat(str(example.passive_moments_mat), squeeze_me=True, struct_as_record=False)
-    only = mat["sim"].Results.onlyParam
-    path = tmp_path_factory.mktemp("passive") / "passive_parameters.csv"
-    rows = ["muscle,kPE,s0,sM"]
-    for n, k, s in zip(only.MuscleNames, only.calParam.kpe, only.calParam.ksf):
-        if np.isfinite(k):
-            rows.append(f"{n},{float(k)!r},{float(s)!r},0.6")
-    path.write_text("\n".join(rows) + "\n")
-    return path
-
-
-@pytest.fixture(scope="module")
 def solved(example, geometry_cache, tmp_path_factory, passive_csv):
     """``solved(workflow)``: the normal trial's EFFORT-GEN or EFFORT-TEN solve, as
     tests/test_redundancy.py asks for it, and its folder."""
@@ -148,7 +132,7 @@ def test_forces_file_holds_every_actuator(solved, example):
         np.testing.assert_allclose(forces[f"reserve_{d}"], sol.reserve_Nm[:, j], rtol=1e-10, atol=1e-9)
     # muscles outside the solution carry nothing; the left hip its inverse-dynamics moment (no right-leg
     # muscle spans it), low-pass filtered as the solve filters the moments (6 Hz, 6th order Butterworth,
-    # zero phase; worked here with SciPy's own padding, so within 0.3 N m, 0.1 N m away from the ends)
+    # zero phase; worked here with SciPy's own padding, so within 0.5 N m, 0.1 N m away from the ends)
     import scipy.signal
 
     others = [c for c in forces.columns if c.endswith("_l") and not c.startswith("reserve_")]
@@ -159,7 +143,7 @@ def test_forces_file_holds_every_actuator(solved, example):
     for dof, peak in (("hip_flexion_l", 100.0), ("knee_angle_l", 80.0)):
         want = np.interp(sol.time_s, t, scipy.signal.filtfilt(b, a, raw[f"{dof}_moment"].to_numpy()))
         gap = np.abs(forces[f"reserve_{dof}"].to_numpy() - want)
-        assert gap.max() < 0.3 and gap[10:-10].max() < 0.1 and np.ptp(want) > peak, dof
+        assert gap.max() < 0.5 and gap[10:-10].max() < 0.1 and np.ptp(want) > peak, dof
     # locked coordinates have no reserve (they are prescribed in the model)
     assert "reserve_subtalar_angle_r" not in forces.columns and "reserve_mtp_angle_r" not in forces.columns
 

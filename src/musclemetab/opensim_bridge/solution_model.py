@@ -58,7 +58,9 @@ def _with_degroote_muscles(model_path: str):
         osim.DeGrooteFregly2016Muscle.replaceMuscles(model)
         _CONVERTED.clear()
         _CONVERTED[key] = model
-    return osim.Model(_CONVERTED[key])
+    model = osim.Model(_CONVERTED[key])
+    model.finalizeFromProperties()  # the copy's component lists (coordinates, muscles) are its own
+    return model
 
 
 def _set_parameters(mu, p: dict) -> None:

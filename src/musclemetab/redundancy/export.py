@@ -185,10 +185,10 @@ def _coordinates_of_window(solution, ik):
     muscle-tendon lengths (``input_preparation``)."""
     from .inputs import FILTER_CUTOFF_HZ, FILTER_ORDER, lowpass_filtfilt
 
-    t = ik.index.to_numpy(dtype=float)
+    t = np.asarray(ik.index, dtype=float)
     keep = (t >= solution.time_s[0] - 1e-6) & (t <= solution.time_s[-1] + 1e-6)
     t = t[keep]
-    columns = {c: ik[c].to_numpy(dtype=float)[keep] for c in ik.columns}
+    columns = {c: np.asarray(ik[c], dtype=float)[keep] for c in ik.columns}
     prep = solution.record.input_preparation or {}
     if t.size > 1 and str(prep.get("filter", "none")) != "none":
         fs = 1.0 / float(np.mean(np.diff(t)))
@@ -204,16 +204,16 @@ def inverse_dynamics_at(id_path, coordinates, times) -> dict:
     columns; filtered as the solve filters the moments, cubic spline at the times)."""
     from scipy.interpolate import CubicSpline
 
-    from ..io import read_storage
+    from ..io import read_table
     from .inputs import FILTER_CUTOFF_HZ, FILTER_ORDER, lowpass_filtfilt
 
-    table = read_storage(id_path)
-    t = table.index.to_numpy(dtype=float)
+    table = read_table(id_path)
+    t = np.asarray(table.index, dtype=float)
     found = {}
     for c in coordinates:
         for suffix in ("_moment", "_force"):
             if f"{c}{suffix}" in table.columns:
-                found[c] = table[f"{c}{suffix}"].to_numpy(dtype=float)
+                found[c] = np.asarray(table[f"{c}{suffix}"], dtype=float)
                 break
     if not found:
         return {}
@@ -227,14 +227,21 @@ def inverse_dynamics_at(id_path, coordinates, times) -> dict:
     return {c: at[:, j] for j, c in enumerate(names)}
 
 
+def _table(t, columns: dict, name: str):
+    from ..io import StorageTable
+
+    values = np.column_stack([np.broadcast_to(np.asarray(v, dtype=float), t.shape) for v in columns.values()])
+    return StorageTable(t, list(columns), values, {"name": name, "in_degrees": False})
+
+
 def opensim_tables(solution, model_out, model_path=None, ik_path=None, id_path=None):
     """Write the solution's model to ``model_out``; return its states, controls and forces
-    tables (pandas, indexed by time) and what the worker reported."""
-    from ..io import read_storage, storage_from_arrays
+    tables (:class:`~musclemetab.io.StorageTable`, NumPy: no pandas) and what the worker reported."""
+    from ..io import read_table
     from ..opensim_bridge import call
 
     paths = _solution_inputs(solution, model_path, ik_path, id_path)
-    ik = read_storage(paths["ik"])
+    ik = read_table(paths["ik"])
     t = np.asarray(solution.time_s, dtype=float)
     ik_t, columns = _coordinates_of_window(solution, ik)
     if ik_t.size < 2 or ik_t[0] > t[0] + 1e-6 or ik_t[-1] < t[-1] - 1e-6:
@@ -254,9 +261,8 @@ def opensim_tables(solution, model_out, model_path=None, ik_path=None, id_path=N
     for i, m in enumerate(solution.muscles):
         values[f"{paths_of[m]}/activation"] = solution.activation[:, i]
         values[f"{paths_of[m]}/normalized_tendon_force"] = norm_force[:, i]
-    states = storage_from_arrays(
-        t, {n: values[n] if n in values else np.full(t.size, d) for n, d in zip(info["state_names"], info["defaults"])},
-        name="musclemetab states")
+    states = _table(t, {n: values[n] if n in values else np.full(t.size, d)
+                        for n, d in zip(info["state_names"], info["defaults"])}, "musclemetab states")
     states.attrs["defaulted_coordinates"] = info["defaulted_coordinates"]
     # forces: muscles, then the reserves' generalised forces
     reserve_of = info["reserves"]
@@ -281,11 +287,10 @@ def opensim_tables(solution, model_out, model_path=None, ik_path=None, id_path=N
             forces_cols[a] = generalized[name_of_reserve[a]]
         else:
             forces_cols[a] = muscle_force.get(a, np.zeros(t.size))
-    forces = storage_from_arrays(t, forces_cols, name="Static Optimization")
-    controls = storage_from_arrays(
-        t, {**{paths_of[m]: solution.excitation[:, i] for i, m in enumerate(solution.muscles)},
-            **{f"/forceset/{reserve_of[c]}": generalized[c] for c in reserve_of}},
-        name="musclemetab controls")
+    forces = _table(t, forces_cols, "Static Optimization")
+    controls = _table(t, {**{paths_of[m]: solution.excitation[:, i] for i, m in enumerate(solution.muscles)},
+                          **{f"/forceset/{reserve_of[c]}": generalized[c] for c in reserve_of}},
+                      "musclemetab controls")
     info["id_coordinates"] = sorted(id_forces)
     return states, controls, forces, info
 
@@ -325,10 +330,11 @@ def write_opensim_files(solution, out_dir: str | os.PathLike | None = None, *, m
 
 
 def write_solution_opensim_files(solution, out_dir) -> dict[str, Path] | None:
-    """:func:`write_opensim_files` of a solution that names its model and IK files (a solve
-    from files); ``None`` (nothing written) for one solved from arrays alone."""
+    """:func:`write_opensim_files` of a converged solution that names its model and IK files (a
+    solve from files); ``None`` (nothing written) for one solved from arrays alone or one that
+    did not converge (its values are no solution to reproduce)."""
     inputs = solution.record.inputs or {}
-    if not (inputs.get("model") and inputs.get("ik")):
+    if not (inputs.get("model") and inputs.get("ik")) or not solution.success:
         return None
     return write_opensim_files(solution, out_dir)
 
