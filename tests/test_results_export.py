@@ -167,7 +167,7 @@ def test_opensim_probes_on_the_exported_states_agree_with_um10_and_bh04(exported
     bh04 = bhargava2004(**inp, activation_heat_decay=False, basal=False).total
     # OpenSim's DeGrooteFregly2016Muscle (explicit tendon) takes its fiber velocity from its own force
     # equilibrium, which its curves cannot meet at a few states (the velocity then leaves the
-    # force-velocity curve's -vmax..vmax, or is infinite: 184 of 4760 muscle-states); compared where it
+    # force-velocity curve's -vmax..vmax, or is infinite: a few per cent of the muscle-states); compared where it
     # stays on the curve
     v = run["normalized_fiber_velocity"]
     on_curve = np.isfinite(v) & (np.abs(v) <= 1.0)
