@@ -132,7 +132,7 @@ def test_forces_file_holds_every_actuator(solved, example):
         np.testing.assert_allclose(forces[f"reserve_{d}"], sol.reserve_Nm[:, j], rtol=1e-10, atol=1e-9)
     # muscles outside the solution carry nothing; the left hip its inverse-dynamics moment (no right-leg
     # muscle spans it), low-pass filtered as the solve filters the moments (6 Hz, 6th order Butterworth,
-    # zero phase; worked here with SciPy's own padding, so within 0.5 N m, 0.1 N m away from the ends)
+    # zero phase; worked here with SciPy's own padding, so within 0.5 N m, 0.15 N m away from the ends)
     import scipy.signal
 
     others = [c for c in forces.columns if c.endswith("_l") and not c.startswith("reserve_")]
@@ -143,7 +143,7 @@ def test_forces_file_holds_every_actuator(solved, example):
     for dof, peak in (("hip_flexion_l", 100.0), ("knee_angle_l", 80.0)):
         want = np.interp(sol.time_s, t, scipy.signal.filtfilt(b, a, raw[f"{dof}_moment"].to_numpy()))
         gap = np.abs(forces[f"reserve_{dof}"].to_numpy() - want)
-        assert gap.max() < 0.5 and gap[10:-10].max() < 0.1 and np.ptp(want) > peak, dof
+        assert gap.max() < 0.5 and gap[10:-10].max() < 0.15 and np.ptp(want) > peak, dof
     # locked coordinates have no reserve (they are prescribed in the model)
     assert "reserve_subtalar_angle_r" not in forces.columns and "reserve_mtp_angle_r" not in forces.columns
 
