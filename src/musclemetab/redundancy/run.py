@@ -491,7 +491,12 @@ def estimate_files(
     ``musclemetab estimate`` (``docs/problem.md``). Writes ``out/<trial>/``,
     ``out/parameters.json``, ``out/<model>_personalised.osim`` and with ``validate``
     ``out/validation/<trial>/``; raises :class:`~musclemetab.errors.SolverError` (after
-    writing) when the solve did not converge.
+    writing) when the solve did not converge. A group of ``couple`` may name one kind
+    (``{"kind": KIND, "muscles": [...]}`` or ``"KIND:M1,M2"``; kind ``emg_scale`` replaces the
+    EMG-TEN groups of the EMG scale factors). The doubts of the estimate (factors on bounds,
+    identifiability, widened fiber-length bounds) are warned and recorded in ``parameters.json``
+    (``doubts``); the validation re-solve's fit to the measurements (RMS, Pearson r per measured
+    muscle) under ``validation``.
 
     Parameters
     ----------
@@ -510,6 +515,7 @@ def estimate_files(
     from .emg_ten import emg_bound, fiber_scheme
     from .estimate import (
         FIELDS,
+        emg_couplings,
         estimate_parameters,
         fiber_length_trial,
         parameter_specs,
@@ -540,7 +546,7 @@ def estimate_files(
     bad = [k for k in bounds if k not in (*FIELDS, "emg_scale")]
     if bad:
         raise OptionError(f"--bounds: unknown kind '{bad[0]}'; use {', '.join((*FIELDS, 'emg_scale'))}")
-    couple = [list(g) for g in couple]
+    couple = list(couple)
     specs = parameter_specs(estimate, couple, bounds)
     wf = get_workflow(workflow)
     weights = {**wf.goals.effort_weights(), "w_fiber_length": 100.0, "w_emg": 10.0 if emg_files else 0.0}
@@ -592,7 +598,7 @@ def estimate_files(
     if emg_files:
         from .emg_ten import EmgTenSettings, settings_for_muscles
 
-        groups = settings_for_muscles(EmgTenSettings(), params.names).emg_groups
+        groups = emg_couplings(couple) or settings_for_muscles(EmgTenSettings(), params.names).emg_groups
         specs.append(ParameterSpec("emg_scale", emg_muscles, bounds.get("emg_scale", EMG_SCALE_BOUNDS),
                                    coupling_pairs(groups, emg_muscles, consecutive=False)))
     res, est = estimate_parameters(trials, params, specs, goals, options=options)
@@ -631,11 +637,20 @@ def estimate_files(
 
         raise emg_failure(run, mode if emg_files else None, f"the estimation (written to {out})")
     if validate:
-        for lab, (g, _, t_id, mom, t_ik) in zip(labels, prepared):
+        from .identifiability import tracking_fit
+
+        fits = doc["validation"] = {}
+        for t, (g, _, t_id, mom, t_ik) in zip(trials, prepared):
+            lab = t.label
             sol = solve_with_parameters(g, estimated, t_id, mom, ik_time_s=t_ik, options=options,
                                         goals=goals.effort(),
                                         workflow_record={"name": f"{workflow} validation"})
             sol.write(f"{out}/validation/{lab}")
             if not sol.success:
                 raise sol.run_record.failure(f"the validation re-solve of {lab}")
+            scale = factors.get("emg_scale", {})
+            fits[lab] = tracking_fit(
+                sol, {m: t.fiber_length_nodes_m[:, j] for j, m in enumerate(t.fiber_muscles)},
+                {m: scale[m] * t.emg_nodes[:, j] for j, m in enumerate(t.emg_muscles)})
+        result.write_parameters(out)
     return result
