@@ -322,10 +322,12 @@ def solver_record(options: SolverOptions, goals: Goals | None = None) -> dict:
 
 #: IPOPT linear-algebra settings used with MUMPS (``SolverOptions.ipopt`` overrides them): no
 #: iterative refinement of a linear solve whose residual already meets IPOPT's accuracy test
-#: (IPOPT's default is at least one step). On the example trials the iterations and optimum
-#: are the same and the solve about 10 % faster. It changes the round-off of the KKT solves,
-#: not the problem.
-MUMPS_OPTIONS = {"min_refinement_steps": 0}
+#: (IPOPT's default is at least one step), and MUMPS' pivot tolerance from 1e-4 instead of
+#: 1e-6, which spares the factorisations IPOPT repeats with a raised tolerance when a solve is
+#: not accurate enough (docs/solver.md, "Inertia corrections"). On the example trials the
+#: iterations and optimum are the same; they change the round-off of the KKT solves, not the
+#: problem.
+MUMPS_OPTIONS = {"min_refinement_steps": 0, "mumps_pivtol": 1e-4}
 
 
 def ipopt_options(options: SolverOptions, mumps_settings: dict | None = None) -> dict:
