@@ -26,6 +26,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..errors import OptionError
+from ..events import WALKING_CYCLE_DURATION_S
 from ..processes import BackgroundCall
 from ._docs import fill_doc
 from .emg_inputs import (
@@ -79,6 +80,7 @@ def solve_files(
     grf: str | os.PathLike | None = None,
     grf_column: str | None = None,
     grf_threshold_N: float | None = None,
+    cycle_duration_s: tuple[float, float] | None = WALKING_CYCLE_DURATION_S,
     mesh_frequency_hz: float = MESH_FREQUENCY_HZ,
     passive=None,
     tendon_stiffness: Mapping[str, float] | None = None,
@@ -97,7 +99,7 @@ def solve_files(
     the model for that side (:func:`musclemetab.layout.discover_dofs`). The window is the IK
     file, ``window=(T0, T1)`` or ``cycle="auto"|N`` (:mod:`.window`; the foot's force from
     ``external_loads`` or from ``grf``, column ``grf_column``, contact above ``grf_threshold_N``,
-    default 20 N). With ``id_path=None``
+    default 20 N, a cycle lasting ``cycle_duration_s``, 0.8-2.0 s by default). With ``id_path=None``
     and ``external_loads`` (an OpenSim ExternalLoads file), the inverse dynamics is computed
     by OpenSim over the window (:func:`musclemetab.external_loads.compute_inverse_dynamics`);
     its path is ``solution.record.inputs["id"]``. The mesh has ``mesh_frequency_hz``
@@ -177,7 +179,7 @@ def solve_files(
     ik_table = read_table(ik_path)
     trial_window = resolve_window(ik_table, side=side, window=window, cycle=cycle, id_path=id_table,
                                   external_loads=loads, grf_path=grf, layout=layout, grf_column=grf_column,
-                                  grf_threshold_N=grf_threshold_N)
+                                  grf_threshold_N=grf_threshold_N, cycle_duration_s=cycle_duration_s)
     id_record = None
     if id_path is None:
         from ..external_loads import ID_COORDINATE_FILTER_HZ, compute_inverse_dynamics
@@ -267,13 +269,16 @@ def solve_sides(model_path, ik_path, id_path, workflow: str = "effort-gen", *, s
     sides = tuple(sides)
     if workers == 1 or len(sides) == 1:
         return {side: solve_files(model_path, ik_path, id_path, workflow, side=side, **kwargs) for side in sides}
-    from ..processes import spawn_pool
+    from ..processes import spawn_pool, stop_pool
 
     pool, restore = spawn_pool(min(workers, len(sides)))
     try:
         futures = {side: pool.submit(_solve_files_recording_warnings, (model_path, ik_path, id_path, workflow),
                                      {**kwargs, "side": side}) for side in sides}
         results = {side: fut.result() for side, fut in futures.items()}
+    except KeyboardInterrupt:  # the legs' processes ignore Ctrl-C: stopped, not waited for
+        stop_pool(pool)
+        raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
         restore()

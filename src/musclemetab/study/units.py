@@ -539,7 +539,10 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
     try:
         speed = trial_speed(trial, subject.model)
     except DataMismatchError as exc:  # e.g. a treadmill trial without speed_m_per_s: no cost of transport
-        warnings.warn(f"{subject.name}/{trial.name}: no walking speed ({exc})", stacklevel=2)
+        from ..errors import MusclemetabWarning
+
+        warnings.warn(f"{subject.name}/{trial.name}: no walking speed, no cost of transport ({exc})",
+                      MusclemetabWarning, stacklevel=2)
         speed = None
     # the stages after the solve take the solution object (the same numbers as its folder,
     # tests/test_stage_paths.py); each writes its files once
@@ -550,7 +553,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         toe_off = trial.toe_off_s if trial.toe_off_s is not None else recorded["toe_off_s"]
         cycle = GaitCycle(recorded["start_s"], toe_off, recorded["end_s"])
     else:
-        cycle = trial_cycle(trial, side)
+        cycle = trial_cycle(trial, side, subject.model)
     result = metabolics_from_solution(
         sol, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
         basal_rate_W_per_kg=study.basal_coefficient, basal_exponent=study.basal_exponent,
