@@ -38,6 +38,24 @@ def gait2392():
 
 
 @pytest.fixture(scope="session")
+def passive_csv(example, tmp_path_factory):
+    """The study's calibration (``passiveMoments.mat``) converted to the package's
+    passive_parameters.csv format: one file per run, so that the solves given it are memoised."""
+    import numpy as np
+    import scipy.io
+
+    mat = scipy.io.loadmat(str(example.passive_moments_mat), squeeze_me=True, struct_as_record=False)
+    only = mat["sim"].Results.onlyParam
+    path = tmp_path_factory.mktemp("passive") / "passive_parameters.csv"
+    rows = ["muscle,kPE,s0,sM"]
+    for n, k, s in zip(only.MuscleNames, only.calParam.kpe, only.calParam.ksf):
+        if np.isfinite(k):
+            rows.append(f"{n},{float(k)!r},{float(s)!r},0.6")
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+@pytest.fixture(scope="session")
 def reference_table():
     """Published per-muscle values of the example subject (``tests/data/muscle_properties_reference.csv``)."""
     import pandas as pd

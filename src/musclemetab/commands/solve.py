@@ -474,7 +474,7 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
     """An effort workflow's EMG-informed solve of one or more trials: one trial is written to
     ``--out`` as a solution folder; several as one folder per trial and ``parameters.json``."""
     from ..redundancy.emg_ten import emg_failure
-    from ..redundancy.run import emg_mappings_of_legs, solve_emg_ten
+    from ..redundancy.run import emg_mappings_of_legs, solve_emg_ten, write_solution_folder
 
     emg = _as_list(args.emg)
     dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else None
@@ -490,7 +490,7 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
     for side, result in results.items():
         out = _leg_out(args, side)
         if len(result.solutions) == 1:
-            next(iter(result.solutions.values())).write(out)
+            write_solution_folder(next(iter(result.solutions.values())), out)
         else:
             result.write(out)
         r = result.run_record

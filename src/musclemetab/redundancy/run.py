@@ -459,8 +459,10 @@ def _trial_dofs(model, id_files, dofs, side: str, cache_dir) -> tuple[str, ...]:
     return tuple(discover_dofs(layout, side, common))
 
 
-def write_solution_folder(solution, out) -> None:
-    """Write a solution; inverse dynamics computed by OpenSim goes beside it as ``inverse_dynamics.sto``."""
+def write_solution_folder(solution, out, opensim_files: bool = True) -> None:
+    """Write a solution; inverse dynamics computed by OpenSim goes beside it as ``inverse_dynamics.sto``,
+    and with ``opensim_files`` the OpenSim model, states, controls and forces that reproduce it
+    (:func:`.export.write_solution_opensim_files`)."""
     from pathlib import Path
 
     from ..io import atomic_write_bytes
@@ -469,6 +471,10 @@ def write_solution_folder(solution, out) -> None:
     if "inverse_dynamics" in solution.record:
         src = Path(solution.record.inputs["id"])
         atomic_write_bytes(Path(out) / "inverse_dynamics.sto", src.read_bytes())
+    if opensim_files:
+        from .export import write_solution_opensim_files
+
+        write_solution_opensim_files(solution, out)
 
 
 

@@ -429,7 +429,7 @@ def _run_estimation(study: Study, unit: Unit, tmp: Path) -> dict:
     )
     if not result.success:  # nothing of a failed estimate is written
         raise result.run_record.failure(f"EMG-TEN of subject {subject.name}")
-    result.write(tmp)
+    result.write(tmp, opensim_files=False)  # each trial unit writes its own
     return {"times": {"solve_s": time.perf_counter() - t0}}
 
 
@@ -527,7 +527,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
                               external_loads=trial.external_loads, grf=trial.grf if trial.cycle is not None else None,
                               grf_column=trial.grf_column, grf_threshold_N=trial.grf_threshold_N,
                               cycle=trial.cycle, options=_solver_options(study, subject), **kwargs)
-        write_solution_folder(sol, tmp)
+        write_solution_folder(sol, tmp, opensim_files=False)  # written below, for every workflow
         times["solve_s"] = sol.record.solve_time_s
         if not sol.success:
             from ..redundancy.emg_ten import emg_failure
