@@ -297,3 +297,26 @@ def test_estimate_refuses_an_excluded_estimated_muscle(example, tmp_path):
         estimate_files(example.model, [example.ik["normal"]], [example.id["normal"]], tmp_path / "out",
                        estimate={"tendon_stiffness": ["soleus_r", "gasmed_r"]}, emg=[example.emg["normal"]],
                        exclude_muscles=["soleus_r"])
+
+
+def test_study_key_exclude_muscles(example):
+    """``exclude_muscles`` of a subject: kept in the spec and in the units' keys; a name the
+    model lacks is refused before anything runs."""
+    from musclemetab.errors import OptionError, UnknownMuscleError
+    from musclemetab.study.spec import study_from_dict
+    from musclemetab.study.units import _subject_record
+
+    def data(excluded):
+        return {"name": "s", "workflows": ["effort-gen"], "models": ["UM10"], "subjects": [{
+            "name": "sub1", "model": str(example.model), "body_mass_kg": example.body_mass_kg,
+            "height_m": example.height_m, "exclude_muscles": excluded,
+            "trials": [{"name": "normal", "ik": str(example.ik["normal"]), "id": str(example.id["normal"])}]}]}
+
+    subject = study_from_dict(data(["soleus_r"]), base="/").subjects[0]
+    assert subject.exclude_muscles == ("soleus_r",)
+    assert _subject_record(subject, "effort-gen")["exclude_muscles"] == ["soleus_r"]
+    assert "exclude_muscles" not in _subject_record(study_from_dict(data([]), base="/").subjects[0], "effort-gen")
+    with pytest.raises(UnknownMuscleError, match="'exclude_muscles' soleus_x not a muscle of"):
+        study_from_dict(data(["soleus_x"]), base="/")
+    with pytest.raises(OptionError, match="'exclude_muscles' must be a list"):
+        study_from_dict(data("soleus_r"), base="/")
