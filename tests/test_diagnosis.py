@@ -289,14 +289,14 @@ def test_exclude_muscles_solves_the_emg_ten_trial(example, long_soleus, geometry
     assert solution.record.max_hill_residual < 1e-5
 
 
-def test_estimate_refuses_an_excluded_estimated_muscle(example, tmp_path):
-    from musclemetab.errors import OptionError
-    from musclemetab.redundancy.run import estimate_files
+def test_estimate_refuses_an_excluded_estimated_muscle(example, tmp_path, capsys):
+    from musclemetab.commands import main
 
-    with pytest.raises(OptionError, match="--exclude-muscles soleus_r and --estimate/--couple name the same muscle"):
-        estimate_files(example.model, [example.ik["normal"]], [example.id["normal"]], tmp_path / "out",
-                       estimate={"tendon_stiffness": ["soleus_r", "gasmed_r"]}, emg=[example.emg["normal"]],
-                       exclude_muscles=["soleus_r"])
+    code = main(["estimate", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
+                 str(example.id["normal"]), "--emg", str(example.emg["normal"]), "--estimate",
+                 "tendon_stiffness=soleus_r,gasmed_r", "--exclude-muscles", "soleus_r", "--out", str(tmp_path / "o")])
+    assert code == 1
+    assert "--exclude-muscles soleus_r and --estimate/--couple name the same muscle" in capsys.readouterr().err
 
 
 def test_study_key_exclude_muscles(example):
