@@ -180,7 +180,7 @@ def test_diagnosis_round_trips_through_the_solve_record():
     summary = {"status": "Solve_Succeeded", "success": True, "diagnosis": d.to_dict()}
     record = SolveRecord.from_dict(summary)
     assert record.to_dict() == summary
-    assert record.findings.findings == d.findings and "muscle_tendon_too_short" in d.table()
+    assert record.pre_solve_diagnosis.findings == d.findings and "muscle_tendon_too_short" in d.table()
 
 
 # --------------------------------------------------------------------------- the example model

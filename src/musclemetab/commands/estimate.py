@@ -119,8 +119,8 @@ def run(args) -> int:
         values += "; EMG scale " + ", ".join(f"{m} {v:.3g}" for m, v in result.emg_scale.items())
     record = result.run_record
     for solution in result.solutions.values():
-        if solution.record.findings.findings:
-            print(solution.record.findings.table())
+        if solution.record.pre_solve_diagnosis.findings:
+            print(solution.record.pre_solve_diagnosis.table())
     print(f"estimate: {len(result.labels)} trial(s), {record.status} in {record.iterations} iterations; {values} -> "
           f"{args.out}")
     return 0

@@ -348,7 +348,7 @@ def _check_excluded_used(excluded, solutions) -> None:
 
 def _print_findings(record) -> None:
     """The diagnosis table of a solve that has findings (``summary.json``'s ``diagnosis``)."""
-    findings = record.findings
+    findings = record.pre_solve_diagnosis
     if findings.findings:
         print(findings.table())
 

@@ -228,7 +228,7 @@ class SolveRecord:
         return (self.window or {}).get("gait_cycle")
 
     @property
-    def findings(self):
+    def pre_solve_diagnosis(self):
         """The diagnosis before the solve (:class:`~.diagnosis.Diagnosis`; empty when not recorded)."""
         from .diagnosis import Diagnosis
 
