@@ -200,7 +200,7 @@ def long_soleus(example, tmp_path_factory):
 
 
 @pytest.mark.opensim
-def test_long_tendon_named_before_any_solve(example, long_soleus, geometry_cache, monkeypatch, tmp_path):
+def test_long_tendon_named_before_any_solve(example, long_soleus, geometry_cache, monkeypatch, tmp_path, capsys):
     import casadi
 
     from musclemetab.commands import main
@@ -216,8 +216,19 @@ def test_long_tendon_named_before_any_solve(example, long_soleus, geometry_cache
         solve_emg_ten(long_soleus, [example.ik["normal"]], [example.id["normal"]], [example.emg["normal"]],
                       labels=["normal"], cache_dir=geometry_cache)
     out = tmp_path / "out"
-    assert main(["solve", "--model", str(long_soleus), "--ik", str(example.ik["normal"]), "--id",
-                 str(example.id["normal"]), "--cache-dir", str(geometry_cache), "--out", str(out)]) == 1
+    trial = ["--model", str(long_soleus), "--ik", str(example.ik["normal"]), "--id", str(example.id["normal"]),
+             "--cache-dir", str(geometry_cache), "--out", str(out)]
+    assert main(["solve", *trial]) == 1
+    assert "soleus_r muscle tendon too short at 1.29-1.39 s" in capsys.readouterr().err
+    emg = ["--workflow", "emg-ten", "--emg", str(example.emg["normal"]), "--labels", "normal", "--diagnose-only"]
+    assert main(["solve", *trial, *emg]) == 1
+    said = capsys.readouterr()
+    table = [line.split() for line in said.out.splitlines()]
+    assert ["soleus_r", "muscle_tendon_too_short", "blocking", "1.29-1.39", "s", "0.322", "m", "0.3255", "m",
+            "exclude"] in [row[:10] for row in table]
+    assert "trial normal (side r) cannot be solved" in said.err
+    assert main(["solve", *trial, *emg, "--exclude-muscles", "soleus_r"]) == 0
+    assert "side r: diagnosis of normal: no findings" in capsys.readouterr().out
     assert not out.exists()
 
 

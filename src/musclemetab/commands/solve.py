@@ -83,6 +83,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="leave these muscles out of the problem (e.g. a muscle that cannot reach force equilibrium "
                    "within the fiber-length bounds, named by the diagnosis before the solve or by a failed solve); "
                    "in every workflow, with or without EMG (an excluded muscle's EMG is not used)")
+    p.add_argument("--diagnose-only", action="store_true",
+                   help="diagnose the trials (muscle-tendon lengths the fiber bounds cannot balance, vanishing "
+                   "moment arms, moments beyond the muscles; docs/solver.md), print the table and stop: nothing is "
+                   "solved or written; exit status 1 when a finding blocks the solve")
     p.add_argument("--mesh-frequency", type=float, default=100.0, metavar="PER_S",
                    help="mesh intervals per second (default 100, the study's)")
     p.add_argument("--workflow", default="effort-gen", choices=("effort-gen", "effort-cal", "effort-ten", "emg-ten"),
@@ -243,7 +247,10 @@ def run(args) -> int:
         passive=args.passive, tendon_stiffness=kt, tendon_stiffness_file=args.parameters,
         options=options, cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, warm_start=warm,
         exclude_muscles=excluded, exclude_missing_ok=args.side == "both",
+        diagnose_only=getattr(args, "diagnose_only", False),
     )
+    if getattr(args, "diagnose_only", False):
+        return _report_diagnoses(solutions)
     _check_excluded_used(excluded, solutions.values())
     for side, solution in solutions.items():
         out = Path(args.out) / side if args.side == "both" else Path(args.out)
@@ -353,6 +360,18 @@ def _print_findings(record) -> None:
         print(findings.table())
 
 
+def _report_diagnoses(by_side: dict) -> int:
+    """``--diagnose-only``: each leg's (and trial's) diagnosis table; the error of the first
+    blocking one (exit status 1), else 0."""
+    diagnoses = [(side, d) for side, ds in by_side.items() for d in (ds if isinstance(ds, list) else [ds])]
+    for side, d in diagnoses:
+        print(f"side {side}: {d.table()}")
+    for side, d in diagnoses:
+        if d.blocking:
+            raise d.error(f"trial {d.trial} (side {side})")
+    return 0
+
+
 def _violations_of(result) -> str:
     """The constraints the last iterate of a multi-trial solve left violated, per trial."""
     from ..redundancy.diagnosis import violation_text
@@ -421,7 +440,10 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
         passive=args.passive, dofs=dofs, side=side, options=options, cache_dir=args.cache_dir,
         check_units=not args.skip_unit_checks, settings=settings,
         exclude_muscles=excluded, exclude_missing_ok=args.side == "both",
+        diagnose_only=getattr(args, "diagnose_only", False),
     ) for side, mapping in legs.items()}
+    if getattr(args, "diagnose_only", False):
+        return _report_diagnoses(results)
     _check_excluded_used(excluded, [s for r in results.values() for s in r.solutions.values()])
     for side, result in results.items():
         _write_emg_ten(args, result, _leg_out(args, side), side)
@@ -489,7 +511,10 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
         cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, settings=settings,
         workflow=args.workflow, tendon_stiffness=tendon_stiffness,
         exclude_muscles=_excluded(args), exclude_missing_ok=args.side == "both",
+        diagnose_only=getattr(args, "diagnose_only", False),
     ) for side, mapping in legs.items()}
+    if getattr(args, "diagnose_only", False):
+        return _report_diagnoses(results)
     _check_excluded_used(_excluded(args), [s for r in results.values() for s in r.solutions.values()])
     for side, result in results.items():
         out = _leg_out(args, side)

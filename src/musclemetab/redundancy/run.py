@@ -90,6 +90,7 @@ def solve_files(
     warm_start: Solution | None = None,
     exclude_muscles: Sequence[str] = (),
     exclude_missing_ok: bool = False,
+    diagnose_only: bool = False,
 ) -> Solution:
     """Solve from files: model ``.osim``, IK ``.mot`` and ID ``.sto`` (or ground forces).
 
@@ -103,6 +104,10 @@ def solve_files(
     its path is ``solution.record.inputs["id"]``. The mesh has ``mesh_frequency_hz``
     intervals per second (the study's 100 by default). ``exclude_muscles`` leaves muscles out of
     the problem (e.g. one whose fiber cannot reach force equilibrium within the bounds).
+    The trial is diagnosed before the solve (:mod:`.diagnosis`: blocking findings raise
+    :class:`~.diagnosis.InfeasibleInputError`, the others warn; ``summary.json``'s
+    ``diagnosis``); with ``diagnose_only`` the :class:`~.diagnosis.Diagnosis` is returned,
+    unchecked, instead of a solution, and nothing is solved.
 
     The inputs are checked (columns, units, time ranges) before the geometry is computed.
 
@@ -214,7 +219,9 @@ def solve_files(
         sources["external_loads"] = loads.path
     diagnosis = _diagnose_files(geometry, model_parameters, id_time, id_moments, wf, ik_time, passive,
                                 tendon_stiffness, tendon_stiffness_file, options, mesh_frequency_hz,
-                                Path(ik_path).stem, sources)
+                                Path(ik_path).stem, sources, check=not diagnose_only)
+    if diagnose_only:
+        return diagnosis
     solution = solve_trial(
         geometry, model_parameters, id_time, id_moments, wf,
         ik_time_s=ik_time, passive=passive, tendon_stiffness=tendon_stiffness,
@@ -254,7 +261,7 @@ def exclude_from_geometry(geometry, exclude_muscles: Sequence[str] = (), missing
 
 
 def _diagnose_files(geometry, model_parameters, id_time, id_moments, wf, ik_time, passive, tendon_stiffness,
-                    tendon_stiffness_file, options, mesh_frequency_hz, label, sources):
+                    tendon_stiffness_file, options, mesh_frequency_hz, label, sources, check=True):
     """The diagnosis of one trial before its solve (:mod:`.diagnosis`): an
     :class:`~.diagnosis.InfeasibleInputError` for blocking findings, a warning for the others."""
     from .diagnosis import diagnose_geometry
@@ -263,10 +270,11 @@ def _diagnose_files(geometry, model_parameters, id_time, id_moments, wf, ik_time
 
     params, _ = workflow_parameters(wf, model_parameters, restrict_geometry(geometry).muscles, passive=passive,
                                     tendon_stiffness=tendon_stiffness, tendon_stiffness_file=tendon_stiffness_file)
-    return diagnose_geometry(
+    diagnosis = diagnose_geometry(
         geometry, params, id_time, id_moments, ik_time_s=ik_time, mesh_frequency_hz=mesh_frequency_hz,
         optimal_reserve_Nm=(options or SolverOptions()).optimal_reserve_Nm, trial=label,
-        sources={k: str(v) for k, v in sources.items()}).check(f"trial {label}")
+        sources={k: str(v) for k, v in sources.items()})
+    return diagnosis.check(f"trial {label}") if check else diagnosis
 
 
 def _diagnosis_record(diagnosis, solution, geometry, id_time, id_moments, ik_time,
@@ -355,6 +363,7 @@ def solve_emg_ten(
     tendon_stiffness=None,
     exclude_muscles: Sequence[str] = (),
     exclude_missing_ok: bool = False,
+    diagnose_only: bool = False,
 ) -> Result:
     """EMG-TEN from files: one model, and per trial an IK ``.mot``, an ID ``.sto`` and an EMG file.
 
@@ -380,7 +389,9 @@ def solve_emg_ten(
         used and their tendon stiffness is not estimated (each with a warning naming them).
 
     Each trial is diagnosed before the problem is built (:mod:`.diagnosis`): blocking
-    findings raise :class:`~.diagnosis.InfeasibleInputError` naming muscles and times.
+    findings raise :class:`~.diagnosis.InfeasibleInputError` naming muscles and times; with
+    ``diagnose_only`` the list of the trials' :class:`~.diagnosis.Diagnosis` is returned,
+    unchecked, and nothing is solved.
     Input errors (package exceptions naming the file, channel or muscle) are raised before
     OpenSim is started: unequal numbers of IK/ID/EMG files, different models, EMG channels
     missing for the mapping, EMG not covering a trial's IK window, EMG outside ``[0, 1]`` in
@@ -443,7 +454,9 @@ def solve_emg_ten(
         mapping = _mapping_without(mapping, excluded)
         emg_tables = [_columns_without(t, excluded) for t in emg_tables]
     diagnoses = _diagnose_emg_trials(geometries, model_parameters, id_data, ik_times, labels, passive, settings,
-                                     options, workflow, tendon_stiffness)
+                                     options, workflow, tendon_stiffness, check=not diagnose_only)
+    if diagnose_only:
+        return diagnoses
     if check_units:
         from ..model import read_model
         from .inputs import check_moments_per_body_mass
@@ -505,7 +518,7 @@ def _fiber_lengths_without(measured: dict, excluded) -> dict:
 
 
 def _diagnose_emg_trials(geometries, model_parameters, id_data, ik_times, labels, passive, settings, options,
-                         workflow, tendon_stiffness) -> list:
+                         workflow, tendon_stiffness, check=True) -> list:
     """The diagnosis of each trial of an EMG problem before it is built (the estimated tendon
     stiffness within its bounds)."""
     from .diagnosis import diagnose_geometry
@@ -521,8 +534,9 @@ def _diagnose_emg_trials(geometries, model_parameters, id_data, ik_times, labels
     kt = [m for m in settings.tendon_muscles if m in muscles]
     specs = [ParameterSpec("tendon_stiffness", tuple(kt), settings.tendon_scale_bounds)] if kt else []
     reserve = (options or SolverOptions()).optimal_reserve_Nm
-    return [diagnose_geometry(g, params, t, m, ik_time_s=ik, specs=specs, optimal_reserve_Nm=reserve, trial=lab)
-            .check(f"trial {lab}") for g, (t, m), ik, lab in zip(geometries, id_data, ik_times, labels)]
+    out = [diagnose_geometry(g, params, t, m, ik_time_s=ik, specs=specs, optimal_reserve_Nm=reserve, trial=lab)
+           for g, (t, m), ik, lab in zip(geometries, id_data, ik_times, labels)]
+    return [d.check(f"trial {d.trial}") for d in out] if check else out
 
 
 def emg_mappings_of_legs(model, ik_path, emg_mapping, side: str, dofs=None, cache_dir=None) -> dict:
