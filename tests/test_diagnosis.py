@@ -147,9 +147,24 @@ def test_moment_arm_vanishing_on_a_dof_the_table_gives_the_muscle():
     r[:, 0, 1] = 0.04  # tibant_r about the ankle
     d = diagnose(_inputs(lmt, muscles=("gasmed_r", "tibant_r"), dofs=("ankle_angle_r", "knee_angle_r"), r=r),
                  _params(("gasmed_r", "tibant_r")))
-    rows = [(f.subject, f.remedy.split(" about ")[-1], f.value, f.bound) for f in d.findings
-            if f.check == "moment_arm_vanishes"]
-    assert rows == [("gasmed_r", "ankle_angle_r", 5e-4, 1e-3), ("gasmed_r", "knee_angle_r", 0.0, 1e-3)]
+    rows = [(f.subject, f.value, f.bound) for f in d.findings if f.check == "moment_arm_vanishes"]
+    assert rows == [("gasmed_r about ankle_angle_r", 5e-4, 1e-3), ("gasmed_r about knee_angle_r", 0.0, 1e-3)]
+
+
+def test_muscle_left_out_of_the_problem_named():
+    """soleus (PF) with no moment arm about the ankle at the first frame is left out of the
+    problem (the study's selection rule, 0.1 mm); the diagnosis of the geometry names it."""
+    from musclemetab.redundancy.diagnosis import diagnose_geometry
+    from musclemetab.redundancy.inputs import GeometryArrays
+
+    t = np.arange(60) / 100.0
+    r = np.zeros((60, 1, 2))
+    r[:, 0, 0] = 0.04  # tibant_r
+    r[1:, 0, 1] = 0.03  # soleus_r: none at the first frame
+    g = GeometryArrays(t, ["tibant_r", "soleus_r"], ["ankle_angle_r"], np.full((60, 2), LTS + LMO), r)
+    d = diagnose_geometry(g, _params(("tibant_r", "soleus_r")), t, np.zeros((60, 1)), ik_time_s=t)
+    row = _only(d, "muscle_left_out")
+    assert (row.subject, row.value, row.bound, row.severity) == ("soleus_r about ankle_angle_r", 0.0, 1e-4, "warning")
 
 
 def test_unreachable_moment_against_the_hand_worked_isometric_force():

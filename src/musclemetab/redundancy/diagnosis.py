@@ -30,6 +30,10 @@ closed formula or a bisection in NumPy. Per muscle ``m`` and node ``t_k``:
     A muscle the anatomical muscle table places in a function group of a DOF of the problem
     (:mod:`musclemetab.analysis.groups`) has ``|r| <`` :data:`MOMENT_ARM_THRESHOLD_M` about it
     at every node.
+``muscle_left_out`` (warning)
+    A muscle the problem leaves out (no moment arm above 0.1 mm at the first frame,
+    :func:`.inputs.select_muscles`) though the table has it act about a DOF of the problem
+    (:func:`diagnose_geometry`).
 ``moment_unreachable`` (warning)
     Per DOF and direction, the ID moment beyond what the muscles give at full activation with
     the fiber at rest (``sum r F0 fT`` with each muscle's tendon force at its isometric
@@ -108,7 +112,7 @@ class Finding:
         return float(self.intervals[0][0]) if self.intervals else float("nan")
 
     def times_text(self) -> str:
-        return ", ".join(f"{a:.3g} s" if a == b else f"{a:.3g}-{b:.3g} s" for a, b in self.intervals)
+        return ", ".join(f"{a:g} s" if a == b else f"{a:g}-{b:g} s" for a, b in self.intervals)
 
     def to_dict(self) -> dict:
         return {"subject": self.subject, "check": self.check, "severity": self.severity,
@@ -136,9 +140,6 @@ class Diagnosis:
     @property
     def warnings(self) -> tuple:
         return tuple(f for f in self.findings if f.severity == WARNING)
-
-    def muscles(self, check: str | None = None) -> list[str]:
-        return list(dict.fromkeys(f.subject for f in self.findings if check in (None, f.check)))
 
     def table(self) -> str:
         """The findings as a readable table (one line each)."""
@@ -190,7 +191,7 @@ def _intervals(time: np.ndarray, mask: np.ndarray) -> tuple:
     breaks = np.flatnonzero(np.diff(idx) > 1)
     starts = np.concatenate([[idx[0]], idx[breaks + 1]])
     ends = np.concatenate([idx[breaks], [idx[-1]]])
-    return tuple((round(float(time[a]), 9), round(float(time[b]), 9)) for a, b in zip(starts, ends))
+    return tuple((round(float(time[a]), 6), round(float(time[b]), 6)) for a, b in zip(starts, ends))
 
 
 def _shortest_fiber(lmo, width):
@@ -217,7 +218,7 @@ def _mt_length(lm_norm, activation, vbar, p):
 def _arrays(params, muscles, lm_upper):
     p = params.subset(muscles)
     return {"lmo": p.optimal_fiber_length_m, "lts": p.tendon_slack_length_m, "w": p.width_m, "kT": p.tendon_stiffness,
-            "kpe": p.passive_kpe, "s0": p.passive_s0, "sm": p.passive_sm, "f0": p.max_isometric_force_N,
+            "kpe": p.passive_kpe, "s0": p.passive_s0, "sm": p.passive_sm,
             "vbar": FIBER_VELOCITY_BOUNDS[1] / p.max_contraction_velocity, "upper": np.asarray(lm_upper, dtype=float)}
 
 
@@ -320,7 +321,8 @@ def _moment_arm_findings(inputs, threshold) -> list[Finding]:
             biggest = np.abs(r[:, i, j])
             if biggest.max() < threshold:
                 k = int(np.argmax(biggest))
-                out.append(Finding(m, "moment_arm_vanishes", WARNING, ((float(t[0]), float(t[-1])),), float(t[k]),
+                out.append(Finding(f"{m} about {d}", "moment_arm_vanishes", WARNING, ((float(t[0]), float(t[-1])),),
+                                   float(t[k]),
                                    float(biggest[k]), float(threshold), "m", REMEDY_MOMENT_ARM.format(m=m, d=d)))
     return out
 
@@ -368,6 +370,7 @@ def diagnose_geometry(geometry, params, id_time_s, id_moments_Nm, *, ik_time_s=N
     """:func:`diagnose` from a geometry and the ID (the mesh inputs built as the solve builds them)."""
     from .inputs import MESH_FREQUENCY_HZ, restrict_geometry, trial_inputs
 
+    full = geometry
     dofs = tuple(geometry.dofs)
     geometry = restrict_geometry(geometry)
     moments = np.asarray(id_moments_Nm, dtype=float).reshape(len(id_time_s), -1)
@@ -375,7 +378,29 @@ def diagnose_geometry(geometry, params, id_time_s, id_moments_Nm, *, ik_time_s=N
         moments = moments[:, [dofs.index(d) for d in geometry.dofs]]
     inputs = trial_inputs(geometry, id_time_s, moments, ik_time_s=ik_time_s, sources=dict(sources or {}),
                           mesh_frequency_hz=mesh_frequency_hz or MESH_FREQUENCY_HZ)
-    return diagnose(inputs, params, specs=specs, optimal_reserve_Nm=optimal_reserve_Nm, trial=trial)
+    d = diagnose(inputs, params, specs=specs, optimal_reserve_Nm=optimal_reserve_Nm, trial=trial)
+    dropped = [m for m in full.muscles if m not in geometry.muscles]
+    if not dropped:
+        return d
+    return Diagnosis(tuple(_dropped_findings(full, dropped)) + d.findings, d.trial, d.thresholds)
+
+
+def _dropped_findings(geometry, dropped) -> list[Finding]:
+    """Muscles the problem leaves out (no moment arm above 0.1 mm at the first frame,
+    :func:`.inputs.select_muscles`) though the muscle table has them act about one of its DOFs."""
+    from .inputs import MUSCLE_SELECTION_THRESHOLD_M
+
+    r = np.abs(np.asarray(geometry.moment_arms_m, dtype=float))
+    t = np.asarray(geometry.time, dtype=float)
+    out = []
+    for m, spans in _spanned_dofs(dropped, list(geometry.dofs)).items():
+        j = list(geometry.muscles).index(m)
+        for d in spans:
+            i = list(geometry.dofs).index(d)
+            out.append(Finding(f"{m} about {d}", "muscle_left_out", WARNING, ((float(t[0]), float(t[0])),),
+                               float(t[0]), float(r[0, i, j]), MUSCLE_SELECTION_THRESHOLD_M, "m",
+                               REMEDY_MOMENT_ARM.format(m=m, d=d)))
+    return out
 
 
 def last_iterate_violations(solution, inputs=None) -> list[Finding]:
