@@ -47,6 +47,7 @@ constraints an unconverged solve left violated.
 
 from __future__ import annotations
 
+import functools
 import warnings
 from dataclasses import dataclass, field
 from typing import Sequence
@@ -71,7 +72,7 @@ HILL_VIOLATION = 1e-3
 #: Moment residual (N m) above which an unconverged solve names the DOF.
 MOMENT_VIOLATION_NM = 1e-2
 _GRID = 201
-_BISECTIONS = 60
+_BISECTIONS = 44
 
 REMEDY_LENGTH = ("exclude the muscle (--exclude-muscles {m}), estimate its tendon slack length (musclemetab "
                  "estimate --estimate tendon_slack_length={m}) or check the model's scaling")
@@ -204,8 +205,9 @@ def _along_tendon(lm_norm, activation, vbar, p):
     """Normalised fiber force along the tendon ``(a fL fV + fPE) cos(alpha)`` and the projection (m)."""
     lm_m = lm_norm * p["lmo"]
     proj = np.sqrt(np.maximum(lm_m**2 - p["w"] ** 2, 0.0))
-    force = activation * active_force_length(lm_norm) * force_velocity(vbar) + \
-        passive_force_length(lm_norm, p["kpe"], p["s0"], p["sm"])
+    force = passive_force_length(lm_norm, p["kpe"], p["s0"], p["sm"])
+    if activation:  # inactive: the passive force alone
+        force = force + activation * active_force_length(lm_norm) * force_velocity(vbar)
     return force * proj / lm_m, proj
 
 
@@ -276,7 +278,7 @@ def _scaled(params, specs, end: int):
     return params.replace(**values) if values else params
 
 
-def _length_findings(inputs, params, upper, specs) -> list[Finding]:
+def _length_findings(inputs, params, upper, specs, full_lm) -> list[Finding]:
     t, lmt, muscles = inputs.mesh_time_s, np.asarray(inputs.lmt_m, dtype=float), list(inputs.muscles)
     shortest, _ = length_range(_scaled(params, specs, 0), muscles, upper)
     _, longest = length_range(_scaled(params, specs, 1), muscles, upper)
@@ -288,7 +290,8 @@ def _length_findings(inputs, params, upper, specs) -> list[Finding]:
                 k = int(np.argmax(np.where(bad, np.abs(lmt[:, j] - bound), -1.0)))
                 out.append(Finding(m, check, BLOCKING, _intervals(t, bad), float(t[k]), float(lmt[k, j]),
                                    float(bound), "m", REMEDY_LENGTH.format(m=m)))
-    shortest_fiber = isometric_fiber_length(_scaled(params, specs, 1), muscles, upper, lmt, 1.0)
+    shortest_fiber = full_lm if not specs else isometric_fiber_length(_scaled(params, specs, 1), muscles, upper,
+                                                                      lmt, 1.0)
     for j, m in enumerate(muscles):
         bad = shortest_fiber[:, j] > FIBER_LENGTH_BOUNDS[1]
         if bad.any():
@@ -300,14 +303,19 @@ def _length_findings(inputs, params, upper, specs) -> list[Finding]:
 
 def _spanned_dofs(muscles, dofs) -> dict:
     """``{muscle: [DOF]}``: the DOFs of the problem whose function group the table gives the muscle."""
+    return {m: list(d) for m, d in _spanned(tuple(muscles), tuple(dofs))}
+
+
+@functools.lru_cache(maxsize=16)
+def _spanned(muscles: tuple, dofs: tuple) -> tuple:
     from ..analysis.groups import dof_group_pair, has_function_group
     from ..properties import resolve_muscles
 
-    out = {}
+    out = []
     for rec in resolve_muscles(list(muscles), warn=False):
         groups = {g for item in rec.function_groups for g in item.split("/")}
-        out[rec.name] = [d for d in dofs if has_function_group(d) and groups & set(dof_group_pair(d))]
-    return out
+        out.append((rec.name, tuple(d for d in dofs if has_function_group(d) and groups & set(dof_group_pair(d)))))
+    return tuple(out)
 
 
 def _moment_arm_findings(inputs, threshold) -> list[Finding]:
@@ -327,10 +335,11 @@ def _moment_arm_findings(inputs, threshold) -> list[Finding]:
     return out
 
 
-def _moment_findings(inputs, params, upper, reserve_Nm) -> list[Finding]:
+def _moment_findings(inputs, params, upper, reserve_Nm, full_lm) -> list[Finding]:
     muscles = list(inputs.muscles)
+    p = _arrays(params, muscles, upper)
     f0 = params.subset(muscles).max_isometric_force_N
-    full = isometric_tendon_force(params, muscles, upper, inputs.lmt_m, 1.0) * f0
+    full = _along_tendon(full_lm, 1.0, 0.0, p)[0] * f0
     rest = isometric_tendon_force(params, muscles, upper, inputs.lmt_m, 0.0) * f0
     r = np.asarray(inputs.moment_arms_m, dtype=float)
     a, b = np.einsum("kdm,km->kdm", r, full), np.einsum("kdm,km->kdm", r, rest)
@@ -357,9 +366,10 @@ def diagnose(inputs, params, *, specs=(), optimal_reserve_Nm: float = 150.0,
     params = params.subset(inputs.muscles)
     upper = fiber_length_upper_bounds(inputs, params, specs) if lm_upper is None else \
         np.broadcast_to(np.asarray(lm_upper, dtype=float), (len(inputs.muscles),))
-    findings = _length_findings(inputs, params, upper, specs)
+    full_lm = isometric_fiber_length(params, inputs.muscles, upper, inputs.lmt_m, 1.0)
+    findings = _length_findings(inputs, params, upper, specs, full_lm)
     findings += _moment_arm_findings(inputs, moment_arm_threshold_m)
-    findings += _moment_findings(inputs, params, upper, optimal_reserve_Nm)
+    findings += _moment_findings(inputs, params, upper, optimal_reserve_Nm, full_lm)
     thresholds = {"fiber_length_bounds": list(FIBER_LENGTH_BOUNDS), "fiber_velocity_bounds": list(FIBER_VELOCITY_BOUNDS),
                   "moment_arm_m": moment_arm_threshold_m, "reserve_Nm": optimal_reserve_Nm}
     return Diagnosis(tuple(findings), trial, thresholds)
