@@ -261,7 +261,8 @@ def run(args) -> int:
         if not solution.success:
             raise SolverError(
                 f"the {args.workflow} solve did not converge (IPOPT status '{s.status}' after "
-                f"{s.iterations} iterations): {failure_advice(s.status)}.{violation_text(s)}{_bound_note(solution)} The "
+                f"{s.iterations} iterations): {failure_advice(s.status)}.{violation_text(s)}"
+                f"{_bound_note(solution)} The "
                 f"unconverged result is in {out} with \"success\": false"
             )
         _print_findings(s)
@@ -374,10 +375,9 @@ def _report_diagnoses(by_side: dict) -> int:
 
 def _violations_of(result) -> str:
     """The constraints the last iterate of a multi-trial solve left violated, per trial."""
-    from ..redundancy.diagnosis import violation_text
+    from ..redundancy.diagnosis import trials_violation_text
 
-    return "".join(f" Trial {label}:{text}" for label, s in result.solutions.items()
-                   if (text := violation_text(s.record)))
+    return trials_violation_text(result.solutions)
 
 
 def _as_list(value) -> list:

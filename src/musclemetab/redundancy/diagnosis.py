@@ -59,9 +59,9 @@ from ..muscle import active_force_length, force_velocity, passive_force_length, 
 from .bounds import FIBER_LENGTH_BOUNDS, FIBER_VELOCITY_BOUNDS, MIN_PROJECTED_LENGTH_M, fiber_length_upper_bounds
 
 __all__ = ["Finding", "Diagnosis", "DiagnosisWarning", "InfeasibleInputError", "diagnose", "diagnose_geometry",
-           "last_iterate_violations", "violation_text", "length_range", "isometric_fiber_length",
-           "isometric_tendon_force", "MOMENT_ARM_THRESHOLD_M",
-           "HILL_VIOLATION", "MOMENT_VIOLATION_NM", "BLOCKING", "WARNING"]
+           "last_iterate_violations", "violation_text", "trials_violation_text", "length_range",
+           "isometric_fiber_length", "isometric_tendon_force", "MOMENT_ARM_THRESHOLD_M", "HILL_VIOLATION",
+           "MOMENT_VIOLATION_NM", "BLOCKING", "WARNING"]
 
 BLOCKING = "blocking"
 WARNING = "warning"
@@ -347,7 +347,8 @@ def _moment_findings(inputs, params, upper, reserve_Nm, full_lm) -> list[Finding
     moments, t = np.asarray(inputs.moments_Nm, dtype=float), inputs.mesh_time_s
     out = []
     for i, d in enumerate(inputs.dofs):
-        for direction, excess in (("positive", moments[:, i] - highest[:, i]), ("negative", lowest[:, i] - moments[:, i])):
+        for direction, excess in (("positive", moments[:, i] - highest[:, i]),
+                                  ("negative", lowest[:, i] - moments[:, i])):
             bad = excess > 0
             if bad.any():
                 k = int(np.argmax(excess))
@@ -370,7 +371,8 @@ def diagnose(inputs, params, *, specs=(), optimal_reserve_Nm: float = 150.0,
     findings = _length_findings(inputs, params, upper, specs, full_lm)
     findings += _moment_arm_findings(inputs, moment_arm_threshold_m)
     findings += _moment_findings(inputs, params, upper, optimal_reserve_Nm, full_lm)
-    thresholds = {"fiber_length_bounds": list(FIBER_LENGTH_BOUNDS), "fiber_velocity_bounds": list(FIBER_VELOCITY_BOUNDS),
+    thresholds = {"fiber_length_bounds": list(FIBER_LENGTH_BOUNDS),
+                  "fiber_velocity_bounds": list(FIBER_VELOCITY_BOUNDS),
                   "moment_arm_m": moment_arm_threshold_m, "reserve_Nm": optimal_reserve_Nm}
     return Diagnosis(tuple(findings), trial, thresholds)
 
@@ -459,3 +461,8 @@ def violation_text(record) -> str:
                       for f in rows[:6])
     more = f" and {len(rows) - 6} more" if len(rows) > 6 else ""
     return f" The last iterate violates: {named}{more}."
+
+
+def trials_violation_text(solutions: dict) -> str:
+    """:func:`violation_text` of each trial of a multi-trial solve (``{label: Solution}``)."""
+    return "".join(f" Trial {label}:{text}" for label, s in solutions.items() if (text := violation_text(s.record)))

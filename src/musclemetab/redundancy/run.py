@@ -256,8 +256,9 @@ def exclude_from_geometry(geometry, exclude_muscles: Sequence[str] = (), missing
             f"muscles of the problem ({', '.join(geometry.muscles[:8])}, ...); check the names and the side"
         )
     kept = [i for i, m in enumerate(geometry.muscles) if m not in set(excluded)]
-    return GeometryArrays(np.asarray(geometry.time), [geometry.muscles[i] for i in kept], geometry.dofs,
-                          np.asarray(geometry.lmt_m)[:, kept], np.asarray(geometry.moment_arms_m)[:, :, kept]), excluded
+    kept_geometry = GeometryArrays(np.asarray(geometry.time), [geometry.muscles[i] for i in kept], geometry.dofs,
+                                   np.asarray(geometry.lmt_m)[:, kept], np.asarray(geometry.moment_arms_m)[:, :, kept])
+    return kept_geometry, excluded
 
 
 def _diagnose_files(geometry, model_parameters, id_time, id_moments, wf, ik_time, passive, tendon_stiffness,
@@ -767,6 +768,13 @@ def estimate_files(
                    "solver_options": solver_record(options, goals), "diagnosis": diag.to_dict(),
                    **({"excluded_muscles": list(exclude_muscles)} if exclude_muscles else {})}
         solutions[t.label] = build_solution(t.inputs, estimated.subset(t.inputs.muscles), o, summary)
+        if not run.success:
+            from .diagnosis import last_iterate_violations
+
+            s = solutions[t.label]
+            violated = [f.to_dict() for f in last_iterate_violations(s, t.inputs)]
+            solutions[t.label] = dataclasses.replace(
+                s, record=s.record.with_(diagnosis={**diag.to_dict(), "last_iterate": violated}))
     doc = {"format": ESTIMATE_FORMAT, "format_version": 1, **est.to_dict(), **emg_record, "solve": run.to_dict(),
            "trials": labels}
     if run.success:
@@ -781,7 +789,10 @@ def estimate_files(
     if not run.success:
         from .emg_ten import emg_failure
 
-        raise emg_failure(run, mode if emg_files else None, f"the estimation (written to {out})")
+        from .diagnosis import trials_violation_text
+
+        err = emg_failure(run, mode if emg_files else None, f"the estimation (written to {out})")
+        raise type(err)(err.message + trials_violation_text(solutions))
     if validate:
         for lab, (g, _, t_id, mom, t_ik) in zip(labels, prepared):
             sol = solve_with_parameters(g, estimated, t_id, mom, ik_time_s=t_ik, options=options,
