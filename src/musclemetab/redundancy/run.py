@@ -448,8 +448,7 @@ def solve_emg_ten(
         from .emg_ten import settings_without
         from .inputs import restrict_geometry
 
-        if workflow == EMG_TEN:
-            settings = settings_without(settings, restrict_geometry(geometries[0]).muscles, exclude_muscles)
+        settings = settings_without(settings, restrict_geometry(geometries[0]).muscles, exclude_muscles)
         pairs = [exclude_from_geometry(g, exclude_muscles, exclude_missing_ok) for g in geometries]
         geometries, excluded = [g for g, _ in pairs], pairs[0][1]
         mapping = _mapping_without(mapping, excluded)
