@@ -66,6 +66,35 @@ def demo(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
+def two_subjects(example, gait2392, tmp_path_factory):
+    """The two-subject study of ``test_trials.TWO_SUBJECTS`` (the example subject's right leg and
+    gait2392's subject on both legs) run once per test run by ``musclemetab run --report``:
+    ``(output folder, what the command printed)``. Shared by the parallel test processes like
+    :func:`demo`."""
+    import io
+
+    import solve_memo
+    from test_trials import TWO_SUBJECTS
+
+    from musclemetab.commands import main
+
+    root = _run_root(tmp_path_factory) / "two_subjects"
+    printed = root / "printed.txt"
+    with solve_memo.locked(root.with_suffix(".lock")):
+        if not printed.is_file():
+            shutil.rmtree(root, ignore_errors=True)
+            root.mkdir()
+            study = root / "study.toml"
+            study.write_text(TWO_SUBJECTS.format(example=example, gait2392=gait2392))
+            buffer = io.StringIO()
+            with contextlib.redirect_stdout(buffer):
+                code = main(["run", str(study), "--workers", "2", "--report", "--no-progress"])
+            assert code == 0, buffer.getvalue()
+            printed.write_text(buffer.getvalue())
+    return root / "out", printed.read_text()
+
+
+@pytest.fixture(scope="session")
 def geometry_cache(_isolated_cache) -> Path:
     """The test session's geometry cache (``$MUSCLEMETAB_CACHE/geometry``), shared by every
     test that computes the example subject's geometry: each trial goes through OpenSim once."""

@@ -149,21 +149,6 @@ def test_demo_report_renders_in_headless_chromium(demo, chromium, tmp_path, caps
 # ------------------------------------------------------------------ every figure, two widths, two studies
 
 
-@pytest.fixture(scope="module")
-def two_subjects(example, gait2392, tmp_path_factory):
-    """The two-subject study of tests/test_trials.py (the example subject's right leg, gait2392's
-    subject on both legs, other trial names), run with its report."""
-    from test_trials import TWO_SUBJECTS
-
-    from musclemetab.commands import main
-
-    root = tmp_path_factory.mktemp("two_subjects")
-    study = root / "study.toml"
-    study.write_text(TWO_SUBJECTS.format(example=example, gait2392=gait2392))
-    assert main(["run", str(study), "--workers", "2", "--report", "--no-progress"]) == 0
-    return root / "out"
-
-
 FIGURE_BOXES_JS = """
 return Array.from(document.querySelectorAll('figure img')).map(e => {
   const r = e.getBoundingClientRect();
@@ -206,7 +191,7 @@ def test_every_figure_at_1400_and_900_px(which, request, chromium, tmp_path, cap
 
     from musclemetab.report.plan import FIGURE_NAMES
 
-    out = request.getfixturevalue("demo")[0] if which == "demo" else request.getfixturevalue("two_subjects")
+    out = request.getfixturevalue("demo")[0] if which == "demo" else request.getfixturevalue("two_subjects")[0]
     report = out / "report.html"
     text = report.read_text(encoding="utf-8")
     drawn = re.findall(r'<h3 id="figure-([^"]+)">Figure \d+\.', text)

@@ -179,7 +179,7 @@ cycle = "auto"
 
 @pytest.mark.slow
 @pytest.mark.opensim
-def test_two_subject_study_different_models_and_sides(example, gait2392, tmp_path, capsys):
+def test_two_subject_study_different_models_and_sides(two_subjects, gait2392):
     """The study's subject (Rajagopal model, right leg, ID file) and gait2392's subject (its own
     gait2392 model, both legs, each over its own cycle, inverse dynamics from the ground forces)
     in one study file, run end to end by ``musclemetab run`` with the report.
@@ -191,11 +191,8 @@ def test_two_subject_study_different_models_and_sides(example, gait2392, tmp_pat
 
     from musclemetab.metabolics.solution import add_legs, metabolics_from_solution
 
-    study = tmp_path / "study.toml"
-    study.write_text(TWO_SUBJECTS.format(example=example, gait2392=gait2392))
-    assert _cli("run", study, "--workers", 2, "--report", "--no-progress") == 0
-    assert "3 units: 3 run" in capsys.readouterr().out
-    out = tmp_path / "out"
+    out, printed = two_subjects  # the study run by ``musclemetab run --report`` (conftest)
+    assert "3 units: 3 run" in printed
     res = pd.read_csv(out / "results.csv")
     assert sorted(set(res["subject"])) == ["example", "gait2392"] and len(res) == 4
     assert set(res.loc[res["subject"] == "example", "legs"]) == {"2 x r"}
