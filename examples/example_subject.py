@@ -44,7 +44,7 @@ def main(argv=None) -> int:
         rows.append(wb)
         print(f"{speed:>6}: solved in {sol.summary['solve_time_s']:.1f} s, "
               f"{sol.summary['iterations']} iterations -> {folder}")
-    table = pd.concat(rows).pivot(index="model", columns="speed", values="mean_W_per_kg")[args.speeds]
+    table = pd.concat(rows).pivot(index="model", columns="speed", values="whole_body_W_per_kg")[args.speeds]
     print(f"\nwhole-body metabolic rate, W/kg (two legs + 1.2 W/kg basal), {args.workflow}:")
     print(table.round(2).to_string())
     return 0

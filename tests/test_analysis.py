@@ -415,11 +415,11 @@ def test_analyse_metabolics_worked_by_hand():
         assert row[f"share_{name}_pct"] == pytest.approx(HAND_SHARES.get(name, 0.0)), name
     assert row.share_other_pct == pytest.approx(12.5)
     wide = series.pivot(index="time_s", columns="series", values="value_W")
-    np.testing.assert_allclose(wide["whole_body"], [7, 7, 11])
+    np.testing.assert_allclose(wide["leg_muscles"], [7, 7, 11])
     groups = wide[[c for c in wide.columns if c.startswith("group/")]]
-    np.testing.assert_allclose(groups.sum(axis=1), wide["whole_body"])
+    np.testing.assert_allclose(groups.sum(axis=1), wide["leg_muscles"])
     np.testing.assert_allclose(wide["group/PF"], [5, 5, 8])
-    np.testing.assert_allclose(series.loc[series.series == "whole_body", "cycle_pct"], [0, 50, 100])
+    np.testing.assert_allclose(series.loc[series.series == "leg_muscles", "cycle_pct"], [0, 50, 100])
     with pytest.raises(DataMismatchError, match="B"):
         analyse_metabolics(_hand_result(), tg, r[:, :, :3], HAND_DOFS, geo_muscles[:3], cycle)
     with pytest.raises(DataMismatchError, match="moment arms only"):
@@ -500,23 +500,23 @@ def test_analyse_basal_options_give_the_whole_body_rate_worked_by_hand(example, 
     assert basal == pytest.approx(0.51387, abs=1e-5)
     np.testing.assert_allclose(default["basal_W_per_kg"], 1.2, rtol=1e-9)
     np.testing.assert_allclose(kleiber["basal_W_per_kg"], basal, rtol=1e-9)
-    np.testing.assert_allclose(kleiber["mean_W_per_kg_no_basal"], default["mean_W_per_kg_no_basal"], rtol=1e-9)
-    np.testing.assert_allclose(kleiber["mean_W_per_kg"], default["mean_W_per_kg"] - 1.2 + basal, rtol=1e-9)
-    np.testing.assert_allclose(kleiber["gross_cost_of_transport_J_per_kg_per_m"], kleiber["mean_W_per_kg"] / speed,
+    np.testing.assert_allclose(kleiber["whole_body_no_basal_W_per_kg"], default["whole_body_no_basal_W_per_kg"], rtol=1e-9)
+    np.testing.assert_allclose(kleiber["whole_body_W_per_kg"], default["whole_body_W_per_kg"] - 1.2 + basal, rtol=1e-9)
+    np.testing.assert_allclose(kleiber["gross_cost_of_transport_J_per_kg_per_m"], kleiber["whole_body_W_per_kg"] / speed,
                                rtol=1e-9)
     # the muscle rule: 1.2 W per kg of each muscle's mass; twice the coefficient, twice the basal part
     muscle = whole_body("muscle", "--basal", "muscle")
     double = whole_body("double", "--basal", "muscle", "--basal-coefficient", "2.4")
-    part = muscle["mean_W_per_kg"] - muscle["mean_W_per_kg_no_basal"]
+    part = muscle["whole_body_W_per_kg"] - muscle["whole_body_no_basal_W_per_kg"]
     assert (part > 0).all()
-    np.testing.assert_allclose(double["mean_W_per_kg"] - double["mean_W_per_kg_no_basal"], 2 * part, rtol=0,
+    np.testing.assert_allclose(double["whole_body_W_per_kg"] - double["whole_body_no_basal_W_per_kg"], 2 * part, rtol=0,
                                atol=1e-8)  # differences of rates near 3 W/kg written to 10 digits
     # without basal options, analyse takes those 'metabolics' recorded in its metabolics.sto
     assert main(["metabolics", "--solution", str(folder), "--model", str(example.model), "--mass", str(mass),
                  "--height", "1.743", "--models", "UM10,BH04", "--basal-coefficient", "1.5", "--basal-exponent",
                  "0.75", "--out", str(tmp_path / "met")]) == 0
     recorded = whole_body("recorded", "--metabolics", str(tmp_path / "met"))
-    np.testing.assert_allclose(recorded["mean_W_per_kg"], kleiber["mean_W_per_kg"], rtol=1e-12)
+    np.testing.assert_allclose(recorded["whole_body_W_per_kg"], kleiber["whole_body_W_per_kg"], rtol=1e-12)
     capsys.readouterr()
     # the exponent belongs to the body rule: refused in one line, nothing written
     assert main([*base, "--basal", "muscle", "--basal-exponent", "0.75", "--out", str(tmp_path / "bad")]) != 0

@@ -39,7 +39,7 @@ def test_demo_writes_every_unit_and_the_table(demo):
 
 def test_demo_matches_table2_ordering_and_range(demo):
     _, table = demo
-    normal = _pivot(table, "effort-ten", "mean_W_per_kg")["normal"]
+    normal = _pivot(table, "effort-ten", "whole_body_W_per_kg")["normal"]
     # the paper's ordering of the models' means (Table 2, EFFORT-TEN)
     paper_order = sorted(MODELS, key=lambda m: -TABLE2_EFFORT_TEN[m][0])
     assert list(normal.sort_values(ascending=False).index) == paper_order
@@ -56,7 +56,7 @@ def test_demo_reproduces_the_trends_with_speed(demo):
         assert (g["fast"] < g["slow"]).all(), group
     swing = _pivot(table, "effort-ten", "swing_energy_share_pct")
     assert (swing["fast"] < swing["slow"]).all()  # the swing share falls with speed
-    rate = _pivot(table, "effort-ten", "mean_W_per_kg")
+    rate = _pivot(table, "effort-ten", "whole_body_W_per_kg")
     assert (rate["slow"] < rate["normal"]).all() and (rate["normal"] < rate["fast"]).all()
 
 

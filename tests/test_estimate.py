@@ -14,6 +14,12 @@ solve as EMG of the two muscles (tracked, scale fixed at 1) pins the activation,
 force-length relation then gives lMo. Tolerances: kT 1 %, lMo 2 % (at the true factors the
 tracking errors are zero and the effort is that of the generating solve; the estimate moves away
 only as far as lowering the effort pays against the tracking costs, weights 100 and 10).
+
+The doubts of the estimates (``docs/problem.md``): with lTs estimated beside lMo the two are not
+identifiable together (correlation above the threshold at the optimum, warned), a factor bounded
+away from its truth ends on the bound (warned), a factor no measurement informs is refused, and
+the validation re-solve's fit is checked against a hand computation; the reduced-Hessian
+algebra on a least-squares problem whose answer is known in closed form.
 """
 
 from __future__ import annotations
@@ -113,6 +119,11 @@ def test_parameters_recovered_from_fiber_lengths_and_emg(recovery):
     assert p.tendon_stiffness[p.names.index("soleus_r")] == pytest.approx(ts[0] * 35.0, rel=1e-12)
     # the tracked fiber lengths are reproduced (RMS error below 1 % of lMo)
     assert res.objective_terms["normal"]["fiber_length_tracking"] / 100.0 < 1e-4
+    # with lTs known the parameters are identifiable: no pair correlates above the threshold, no factor on a bound
+    rep = est.doubts["identifiability"]
+    assert rep["correlated_pairs"] == [] and not rep["near_singular"] and est.doubts["on_bounds"] == []
+    assert rep["parameters"] == ["optimal_fiber_length:tibant_r", "optimal_fiber_length:bflh_r",
+                                 "tendon_stiffness:soleus_r,gasmed_r,gaslat_r"]  # the EMG scales are held at 1
 
 
 def _cli(argv):
@@ -199,9 +210,10 @@ def test_estimate_command_with_emg_recovers_the_parameters(example, generated, r
     code, text = _cli(["estimate", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
                        str(example.id["normal"]), "--ultrasound", str(tmp_path / "us.mot"), "--emg",
                        str(tmp_path / "emg.mot"), "--emg-mapping", str(tmp_path / "map.json"), "--emg-mode",
-                       "tracking", "--bounds", "emg_scale=1:1", "--estimate", "optimal_fiber_length=tibant_r,bflh_r",
-                       "tendon_stiffness=soleus_r,gasmed_r,gaslat_r", "--couple", "soleus_r,gasmed_r,gaslat_r",
-                       "--labels", "normal", "--out", str(out)])
+                       "tracking", "--emg-scale-bounds", "1:1", "--estimate", "optimal_fiber_length=tibant_r,bflh_r",
+                       "tendon_stiffness=soleus_r,gasmed_r,gaslat_r", "--couple",
+                       "tendon_stiffness:soleus_r,gasmed_r,gaslat_r", "--validate", "--labels", "normal",
+                       "--out", str(out)])
     assert code == 0, text
     doc = json.loads((out / "parameters.json").read_text())
     for kind, by in est.factors.items():
@@ -212,8 +224,28 @@ def test_estimate_command_with_emg_recovers_the_parameters(example, generated, r
     assert doc["factors"]["tendon_stiffness"]["soleus_r"] == pytest.approx(0.5, rel=0.01)
     assert doc["emg"]["mode"] == "tracking" and doc["emg"]["tolerance"] is None and doc["emg"]["weight"] == 10.0
     assert doc["emg"]["scale"] == {"bflh_r": 1.0, "tibant_r": 1.0}
+    assert doc["emg"]["bounds"] == [1.0, 1.0]  # --emg-scale-bounds 1:1 (as --bounds emg_scale=1:1)
     assert doc["emg"]["mapping"] == {"tibant_r": ["TA"], "bflh_r": ["BF"]}
     assert (out / "normal" / "summary.json").is_file() and list(out.glob("*_personalised.osim"))
+    # the validation re-solve's fit, against the measurements at its nodes 0 ... N-1 by hand
+    from musclemetab.redundancy.solution import Solution
+
+    val = Solution.load(out / "validation" / "normal")
+    lmo = dict(zip(val.parameters.names, val.parameters.optimal_fiber_length_m))
+    fit = doc["validation"]["normal"]
+    for m, (_, lm) in measured.items():
+        model, meas = val.lm_norm[:N, val.muscles.index(m)] * lmo[m], lm[:N]
+        rms_mm = 1000.0 * np.sqrt(sum((a - b) ** 2 for a, b in zip(model, meas)) / N)
+        dm, dd = model - model.mean(), meas - meas.mean()
+        r = float(np.sum(dm * dd) / np.sqrt(np.sum(dm**2) * np.sum(dd**2)))
+        # (the solution file holds 10 significant digits)
+        assert fit["fiber_length"][m]["rms_mm"] == pytest.approx(rms_mm, rel=1e-6), m
+        assert fit["fiber_length"][m]["r"] == pytest.approx(r, rel=1e-6), m
+        assert f"{m} RMS {rms_mm:.3g} mm r {r:.2f}" in text
+    for j, m in enumerate(LMO):
+        e = val.excitation[:N, val.muscles.index(m)]
+        assert fit["emg"][m]["rms"] == pytest.approx(np.sqrt(np.mean((e - exc[:N, j]) ** 2)), rel=1e-6), m
+    assert "standard errors: optimal_fiber_length:tibant_r" in text
     # the folder read back as a Result, and written again: the same files
     from musclemetab.redundancy import Result
 
@@ -251,6 +283,16 @@ def test_estimate_command_emg_input_errors(example, tmp_path):
     assert code == 1 and "--emg-mode" in text and "--emg files" in text
     code, text = _cli(base + ["--emg", str(example.emg["normal"]), "--bounds", "emg=1:1"])
     assert code == 1 and "'emg'" in text and "emg_scale" in text
+    code, text = _cli(base + ["--emg", str(example.emg["normal"]), "--emg-scale-bounds", "2:1"])
+    assert code == 1 and "--emg-scale-bounds" in text and "0 < LOW <= HIGH" in text
+    code, text = _cli(base + ["--emg", str(example.emg["normal"]), "--emg-scale-bounds", "0.01:5", "--bounds",
+                              "emg_scale=1:1"])
+    assert code == 1 and "--emg-scale-bounds and --bounds emg_scale" in text
+    code, text = _cli(base + ["--ultrasound", str(us), "--emg-scale-bounds", "0.01:5"])
+    assert code == 1 and "--emg-scale-bounds" in text and "--emg files" in text
+    code, text = _cli(["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
+                       str(example.id["normal"]), "--emg-scale-bounds", "0.01:5", "--out", str(tmp_path / "o")])
+    assert code == 1 and "--emg-scale-bounds needs EMG" in text
     assert not (tmp_path / "o").exists()
 
 
@@ -299,3 +341,192 @@ def test_estimate_command_on_the_left_leg_recovers_the_tendon_stiffness(example,
     assert f["soleus_l"] == pytest.approx(0.5, rel=0.01)
     summary = json.loads((out / "normal" / "summary.json").read_text())
     assert summary["dofs"] == dofs
+
+
+# ---------------------------------------------------------------------------- doubts of the estimates
+
+
+def test_reduced_inverse_hessian_of_a_least_squares_problem():
+    """``(K^-1)_pp`` at the optimum of ``min 1/2 |y - d|^2 + 1/2 z^2 + 1/2 (w - 1)^2`` subject to
+    ``y = A p``, ``z >= 1`` (active) and ``y3 + w <= 100`` (inactive): the inverse of the
+    reduced objective's Hessian ``A'A`` (worked by hand: the problem is ``min 1/2 |A p - d|^2``
+    in ``p``), whatever the multipliers of the linear rows."""
+    import scipy.sparse as sp
+
+    from musclemetab.redundancy.identifiability import correlation, reduced_inverse_hessian
+
+    A = np.array([[1.0, 1.0], [1.0, 1.05], [1.0, -1.0]])
+    d = np.array([2.0, 2.1, 0.5])
+    p = np.linalg.lstsq(A, d, rcond=None)[0]
+    y = A @ p
+    # variables [y1, y2, y3, p1, p2, z, w]; rows y - A p = 0 (3), y3 + w <= 100
+    x = np.concatenate([y, p, [1.0, 1.0]])
+    H = sp.diags([1.0, 1.0, 1.0, 0.0, 0.0, 1.0, 1.0])
+    J = sp.csr_matrix(np.vstack([np.hstack([np.eye(3), -A, np.zeros((3, 2))]), [0, 0, 1, 0, 0, 0, 1]]))
+    g = np.concatenate([np.zeros(3), [y[2] + 1.0]])
+    lam_g = np.concatenate([-(y - d), [0.0]])  # grad f + J' lam_g + lam_x = 0
+    lam_x = np.array([0, 0, 0, 0, 0, -1.0, 0])  # the bound z >= 1 pushes up
+    inf = np.inf
+    C, active = reduced_inverse_hessian(H, J, x, g, np.array([-inf] * 5 + [1.0, -inf]), np.array([inf] * 5 + [inf, 5]),
+                                        np.array([0, 0, 0, -inf]), np.array([0, 0, 0, 100.0]), lam_g, lam_x, [3, 4])
+    expected = np.linalg.inv(A.T @ A)
+    np.testing.assert_allclose(C, expected, rtol=1e-9)
+    assert active == {"constraint_rows": 3, "variable_bounds": 1}
+    R, rcond = correlation(C)
+    assert R[0, 1] == pytest.approx(expected[0, 1] / np.sqrt(expected[0, 0] * expected[1, 1]), rel=1e-9)
+    ev = np.linalg.eigvalsh(R)
+    assert rcond == pytest.approx(ev[0] / ev[1], rel=1e-9)
+
+
+def test_factors_on_bounds_and_uninformed_factors():
+    """A factor within 1e-3 of its bounds' width of a bound is on it (fixed factors are not);
+    a factor is informed by its muscle's own fiber lengths or EMG, or by coupling to such a muscle."""
+    import warnings
+    from types import SimpleNamespace
+
+    from musclemetab.errors import MusclemetabWarning, OptionError
+    from musclemetab.redundancy.identifiability import check_informed, factors_on_bounds, uninformed_factors
+    from musclemetab.redundancy.transcription import ParameterSpec
+
+    on = factors_on_bounds({"tendon_stiffness": {"soleus_r": 0.2001, "vaslat_r": 0.21},
+                            "optimal_fiber_length": {"tibant_r": 1.4999}, "emg_scale": {"tibant_r": 1.0}},
+                           {"tendon_stiffness": (0.2, 2.0), "optimal_fiber_length": (0.5, 1.5), "emg_scale": (1, 1)})
+    assert on == [{"kind": "tendon_stiffness", "muscle": "soleus_r", "factor": 0.2001, "bound": 0.2, "side": "lower"},
+                  {"kind": "optimal_fiber_length", "muscle": "tibant_r", "factor": 1.4999, "bound": 1.5,
+                   "side": "upper"}]
+    trials = [SimpleNamespace(fiber_muscles=("soleus_r",), emg_muscles=()),
+              SimpleNamespace(fiber_muscles=(), emg_muscles=("tibant_r",))]
+    specs = [ParameterSpec("tendon_stiffness", ("soleus_r", "gasmed_r", "vaslat_r"), (0.1, 2.0), ((0, 1),)),
+             ParameterSpec("optimal_fiber_length", ("tibant_r", "gasmed_r"), (0.5, 1.5))]
+    assert uninformed_factors(trials, specs) == [("tendon_stiffness", "vaslat_r"), ("optimal_fiber_length", "gasmed_r")]
+    with pytest.raises(OptionError, match="tendon_stiffness factor of vaslat_r.*--couple tendon_stiffness:vaslat_r"):
+        check_informed(trials, specs)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert len(check_informed(trials, specs, "warn")) == 2
+    assert [w.category for w in caught] == [MusclemetabWarning] * 2 and "gasmed_r" in str(caught[1].message)
+    # EMG-TEN's trials (EMG alone) and its tendon groups, with their own advice
+    emg_only = [SimpleNamespace(emg_muscles=("gaslat_r", "soleus_r"))]
+    kt = ParameterSpec("tendon_stiffness", ("vaslat_r", "vasmed_r", "soleus_r", "gasmed_r"), (0.1, 1.2),
+                       ((0, 1), (2, 3)))
+    with pytest.raises(OptionError, match="vaslat_r is informed by no measurement.*map EMG to vaslat_r"):
+        check_informed(emg_only, [kt], remedy="map EMG to {muscle}")
+
+
+def test_couplings_per_parameter_kind():
+    """``--couple tendon_stiffness:soleus_r,gasmed_r`` couples that kind alone; a plain group every kind."""
+    from musclemetab.errors import OptionError
+    from musclemetab.redundancy.estimate import emg_couplings, parameter_specs, parse_coupling
+
+    est = {"tendon_stiffness": ["soleus_r", "gasmed_r", "gaslat_r"], "optimal_fiber_length": ["soleus_r", "gasmed_r"]}
+    specs = parameter_specs(est, [parse_coupling("tendon_stiffness:soleus_r,gasmed_r,gaslat_r")])
+    assert [(s.kind, s.couplings) for s in specs] == [("tendon_stiffness", ((0, 1), (1, 2))),
+                                                      ("optimal_fiber_length", ())]
+    specs = parameter_specs(est, [parse_coupling("soleus_r,gasmed_r")])
+    assert [s.couplings for s in specs] == [((0, 1),), ((0, 1),)]
+    assert parse_coupling("emg_scale:vaslat_r,vasmed_r") == {"kind": "emg_scale", "muscles": ["vaslat_r", "vasmed_r"]}
+    assert emg_couplings([{"kind": "emg_scale", "muscles": ["vaslat_r", "vasmed_r"]}, ["a", "b"]]) == [
+        ("vaslat_r", "vasmed_r")]
+    with pytest.raises(OptionError, match="optimal_fiber_length of gaslat_r is not estimated"):
+        parameter_specs(est, [parse_coupling("optimal_fiber_length:soleus_r,gaslat_r")])
+    with pytest.raises(OptionError, match="stiffness"):
+        parameter_specs(est, [parse_coupling("stiffness:soleus_r,gasmed_r")])
+    # the study file's equivalent: a {kind, muscles} table among the muscle lists
+    from musclemetab.study.estimation import estimate_spec
+
+    spec = estimate_spec({"estimate": est, "couple": [["soleus_r", "gasmed_r"], {
+        "kind": "tendon_stiffness", "muscles": ["soleus_r", "gasmed_r", "gaslat_r"]}]}, "study.toml")
+    assert [s.couplings for s in parameter_specs(spec.estimate, spec.couple)] == [((0, 1), (1, 2)), ((0, 1),)]
+    assert spec.to_dict()["couple"] == [["soleus_r", "gasmed_r"], {"kind": "tendon_stiffness",
+                                                                  "muscles": ["soleus_r", "gasmed_r", "gaslat_r"]}]
+    with pytest.raises(OptionError, match="study.toml.*'couple' table"):
+        estimate_spec({"estimate": est, "couple": [{"kind": "stiffness", "muscles": ["soleus_r"]}]}, "study.toml")
+
+
+def test_a_factor_no_measurement_informs_is_refused(generated):
+    """Tendon stiffness of vastus lateralis with fiber lengths of the soleus alone: refused
+    before the solve, naming the muscle and the coupling that would inform it."""
+    from musclemetab.errors import OptionError
+    from musclemetab.redundancy.estimate import estimate_parameters, fiber_length_trial, parameter_specs
+    from musclemetab.redundancy.transcription import Goals
+
+    made, measured, inputs, params, guess, options, wf, _ = generated
+    trial = fiber_length_trial("normal", inputs, guess, {"soleus_r": measured["soleus_r"]})
+    with pytest.raises(OptionError, match="vaslat_r has no fiber lengths or EMG"):
+        estimate_parameters([trial], params, parameter_specs({"tendon_stiffness": ["soleus_r", "vaslat_r"]}),
+                            Goals(w_fiber_length=100.0), options=options)
+
+
+@pytest.mark.opensim
+@pytest.mark.slow
+def test_lmo_and_lts_together_are_not_identifiable(generated):
+    """The recovery problem (exact fiber lengths and EMG) with the tendon slack lengths of the two
+    muscles estimated too: fiber lengths and forces still fit, but each muscle's lMo and lTs
+    factors correlate above the threshold at the optimum, which is warned and recorded, and lMo
+    leaves the truth 1.10 by more than the 2 % it is recovered within when lTs is known."""
+    import warnings
+
+    from musclemetab.errors import MusclemetabWarning
+    from musclemetab.redundancy.estimate import estimate_parameters, fiber_length_trial, parameter_specs
+    from musclemetab.redundancy.identifiability import CORRELATION_THRESHOLD
+    from musclemetab.redundancy.transcription import Goals, ParameterSpec
+
+    made, measured, inputs, params, guess, options, wf, _ = generated
+    N = inputs.n_intervals
+    specs = parameter_specs({"optimal_fiber_length": LMO, "tendon_slack_length": LMO, "tendon_stiffness": TS},
+                            couple=[TS])
+    specs.append(ParameterSpec("emg_scale", LMO, (1.0, 1.0)))
+    trial = fiber_length_trial("normal", inputs, guess, measured, emg_muscles=LMO,
+                               emg_nodes=made.excitation[:N, [made.muscles.index(m) for m in LMO]])
+    goals = Goals(**wf.goals.effort_weights(), w_fiber_length=100.0, w_emg=10.0)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res, est = estimate_parameters([trial], params, specs, goals, options=options)
+    assert res.success, res.status
+    text = [str(w.message) for w in caught if issubclass(w.category, MusclemetabWarning)]
+    print("\n".join(text))
+    rep = est.doubts["identifiability"]
+    pairs = {tuple(p["parameters"]): p["correlation"] for p in rep["correlated_pairs"]}
+    for m in LMO:
+        r = pairs[(f"optimal_fiber_length:{m}", f"tendon_slack_length:{m}")]
+        assert abs(r) > CORRELATION_THRESHOLD
+        i, j = rep["parameters"].index(f"optimal_fiber_length:{m}"), rep["parameters"].index(f"tendon_slack_length:{m}")
+        assert rep["correlation"][i][j] == r
+        assert any(f"optimal_fiber_length:{m} and tendon_slack_length:{m} are not identifiable together" in t
+                   for t in text)
+    assert max(abs(est.factors["optimal_fiber_length"][m] - 1.10) / 1.10 for m in LMO) > 0.02
+    assert res.objective_terms["normal"]["fiber_length_tracking"] / 100.0 < 1e-4  # the fiber lengths still fit
+    assert all(v is not None and v > 0 for v in rep["standard_error"].values())
+
+
+@pytest.mark.opensim
+@pytest.mark.slow
+def test_a_factor_on_its_bound_warns(generated):
+    """The triceps surae's tendon stiffness (truth x0.5) from their fiber lengths with its factor
+    bounded at 0.6: it ends on that bound, warned once for the coupled factor and recorded; the
+    vastus lateralis, estimated with ``uninformed="warn"``, is warned about and recorded."""
+    import warnings
+
+    from musclemetab.errors import MusclemetabWarning
+    from musclemetab.redundancy.estimate import estimate_parameters, fiber_length_trial, parameter_specs
+    from musclemetab.redundancy.transcription import Goals
+
+    made, measured, inputs, params, guess, options, wf, _ = generated
+    specs = parameter_specs({"tendon_stiffness": (*TS, "vaslat_r")}, couple=[{"kind": "tendon_stiffness",
+                                                                             "muscles": TS}],
+                            bounds={"tendon_stiffness": (0.6, 2.0)})
+    trial = fiber_length_trial("normal", inputs, guess, {m: measured[m] for m in TS})
+    goals = Goals(**wf.goals.effort_weights(), w_fiber_length=100.0)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res, est = estimate_parameters([trial], params, specs, goals, options=options, uninformed="warn",
+                                       identify=False)
+    assert res.success, res.status
+    text = [str(w.message) for w in caught if issubclass(w.category, MusclemetabWarning)]
+    assert est.factors["tendon_stiffness"]["soleus_r"] == pytest.approx(0.6, abs=1e-3 * 1.4)
+    assert [b for b in est.doubts["on_bounds"] if b["muscle"] in TS] == [
+        {"kind": "tendon_stiffness", "muscle": m, "factor": est.factors["tendon_stiffness"][m], "bound": 0.6,
+         "side": "lower"} for m in TS]
+    assert sum("tendon_stiffness factor of soleus_r, gasmed_r, gaslat_r is on its lower bound" in t for t in text) == 1
+    assert est.doubts["uninformed"] == [{"kind": "tendon_stiffness", "muscle": "vaslat_r"}]
+    assert sum("tendon_stiffness factor of vaslat_r is informed by no measurement" in t for t in text) == 1

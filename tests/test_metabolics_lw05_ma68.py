@@ -170,7 +170,7 @@ def test_cli_models_option(tmp_path, capsys):
     assert code == 0
     assert "LW05" in capsys.readouterr().out
     sto = read_storage(out / "metabolics.sto")
-    assert "LW05/soleus_r/total" in sto.columns and "MA68/soleus_r/total" in sto.columns
+    assert "LW05/soleus_r/total_no_basal" in sto.columns and "MA68/soleus_r/total_no_basal" in sto.columns
     default = tmp_path / "default"
     assert main(["metabolics", "--solution", str(sol), "--mass", "72.6", "--height", "1.743", "--out", str(default)]) == 0
     cols = read_storage(default / "metabolics.sto").columns

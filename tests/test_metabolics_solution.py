@@ -185,29 +185,29 @@ def test_files(solution_dir, tmp_path):
     files = write_metabolics(res, tmp_path / "out")
     sto = read_storage(files["metabolics_sto"])
     assert sto.shape == (N - 10, 3 * (5 + 7))  # UM10: 5 components, BH04: 5 + activation, maintenance
-    assert "UM10/soleus_r/total" in sto.columns and "BH04/tibant_r/maintenance" in sto.columns
-    np.testing.assert_allclose(sto["BH04/gasmed_r/total"], res.rates["BH04"].total[1], rtol=1e-10)
+    assert "UM10/soleus_r/total_no_basal" in sto.columns and "BH04/tibant_r/maintenance" in sto.columns
+    np.testing.assert_allclose(sto["BH04/gasmed_r/total_no_basal"], res.rates["BH04"].total_without_basal()[1], rtol=1e-10)
     np.testing.assert_allclose(sto.index, res.time_s, rtol=1e-12)
     tidy = pd.read_parquet(files["metabolics_parquet"])
     assert list(tidy.columns) == ["time", "model", "muscle", "component", "value_W"]
     assert len(tidy) == (N - 10) * 3 * (5 + 7)
     row = tidy[(tidy.model == "UM10") & (tidy.muscle == "tibant_r") & (tidy.component == "basal")]
     np.testing.assert_allclose(row.value_W, 1.2 * res.muscle_mass_kg[2], rtol=1e-9)
-    pivot = tidy[(tidy.model == "BH04") & (tidy.component == "total") & (tidy.muscle == "gasmed_r")]
-    np.testing.assert_allclose(pivot.value_W, res.rates["BH04"].total[1], rtol=1e-9)
+    pivot = tidy[(tidy.model == "BH04") & (tidy.component == "total_no_basal") & (tidy.muscle == "gasmed_r")]
+    np.testing.assert_allclose(pivot.value_W, res.rates["BH04"].total_without_basal()[1], rtol=1e-9)
     wb = pd.read_csv(files["whole_body_csv"])
-    assert list(wb.columns[:4]) == ["model", "mean_W_per_kg", "mean_W_per_kg_no_basal", "one_leg_mean_W"]
+    assert list(wb.columns[:4]) == ["model", "whole_body_W_per_kg", "whole_body_no_basal_W_per_kg", "leg_muscles_W"]
     assert list(wb.model) == ["UM10", "BH04"]
-    assert wb.mean_W_per_kg.iloc[0] == pytest.approx(res.whole_body["UM10"].mean_W_per_kg, rel=1e-9)
-    assert wb.mean_W_per_kg.iloc[0] - wb.mean_W_per_kg_no_basal.iloc[0] == pytest.approx(1.2, rel=1e-9)
-    assert wb.gross_cost_of_transport_J_per_kg_per_m.iloc[1] == pytest.approx(wb.mean_W_per_kg.iloc[1] / 1.3, rel=1e-9)
+    assert wb.whole_body_W_per_kg.iloc[0] == pytest.approx(res.whole_body["UM10"].mean_W_per_kg, rel=1e-9)
+    assert wb.whole_body_W_per_kg.iloc[0] - wb.whole_body_no_basal_W_per_kg.iloc[0] == pytest.approx(1.2, rel=1e-9)
+    assert wb.gross_cost_of_transport_J_per_kg_per_m.iloc[1] == pytest.approx(wb.whole_body_W_per_kg.iloc[1] / 1.3, rel=1e-9)
     assert wb.net_cost_of_transport_J_per_kg_per_m.iloc[1] == pytest.approx(
-        wb.mean_W_per_kg_no_basal.iloc[1] / 1.3, rel=1e-9)
+        wb.whole_body_no_basal_W_per_kg.iloc[1] / 1.3, rel=1e-9)
     per = pd.read_csv(files["per_muscle_csv"])
     assert len(per) == 2 * len(MUSCLES) and per["stance_J"].isna().all()  # no gait cycle given
     for model in ("UM10", "BH04"):
         d = per[per.model == model]
-        assert 2 * d.mean_W.sum() / MASS == pytest.approx(wb.set_index("model").mean_W_per_kg_no_basal[model], rel=1e-9)
+        assert 2 * d.muscle_W.sum() / MASS == pytest.approx(wb.set_index("model").whole_body_no_basal_W_per_kg[model], rel=1e-9)
 
 
 def test_without_the_parquet_extra_the_csv_and_storage_files_are_the_same(solution_dir, tmp_path, monkeypatch):
@@ -372,7 +372,7 @@ def test_cli_basal_options(solution_dir, tmp_path, capsys):
     a = pd.read_csv(tmp_path / "a" / "whole_body.csv").iloc[0]
     b = pd.read_csv(tmp_path / "b" / "whole_body.csv").iloc[0]
     assert b["basal_W_per_kg"] == pytest.approx(1.5 * 72.6**0.75 / 72.6, rel=1e-9)
-    assert b["mean_W_per_kg"] - a["mean_W_per_kg"] == pytest.approx(1.5 * 72.6**0.75 / 72.6 - 1.2, rel=1e-8)
+    assert b["whole_body_W_per_kg"] - a["whole_body_W_per_kg"] == pytest.approx(1.5 * 72.6**0.75 / 72.6 - 1.2, rel=1e-8)
     capsys.readouterr()
     code = main(common + ["--basal", "muscle", "--basal-exponent", "0.75", "--out", str(tmp_path / "c")])
     err = capsys.readouterr().err
@@ -380,3 +380,32 @@ def test_cli_basal_options(solution_dir, tmp_path, capsys):
     assert not (tmp_path / "c").exists()
     code = main(common + ["--basal-coefficient", "-1", "--out", str(tmp_path / "d")])
     assert code != 0 and "--basal-coefficient" in capsys.readouterr().err
+
+
+def test_without_a_height_the_masses_come_from_the_model(solution_dir, tmp_path, capsys):
+    """No height: each muscle's mass is F0 / sigma * rho * lMo (OpenSim's probes' rule), worked
+    by hand; the slow-twitch fractions and the basal heat of the body rule do not change, and the
+    outputs say which mass rule was used."""
+    from musclemetab.commands import main
+    from musclemetab.metabolics.solution import MASS_RULE_MODEL, MASS_RULE_VOLUME, read_metabolics_settings
+
+    res = metabolics_from_solution(solution_dir, MASS, None, models=["UM10", "BH04"])
+    ref = metabolics_from_solution(solution_dir, MASS, HEIGHT, models=["UM10", "BH04"])
+    # soleus: 5978 N / 0.6 MPa (the table's specific tension) x 1059.7 kg/m^3 x 0.045 m = 0.47512 kg
+    assert res.muscle_mass_kg[0] == pytest.approx(5978.0 / 0.6e6 * 1059.7 * 0.045, rel=1e-12)
+    assert res.muscle_mass_kg[0] == pytest.approx(0.475118, rel=1e-5)
+    np.testing.assert_allclose(res.muscle_mass_kg, [F0[m] / 0.6e6 * 1059.7 * LMO[m] for m in MUSCLES], rtol=1e-12)
+    np.testing.assert_array_equal(res.slow_twitch_fraction, ref.slow_twitch_fraction)
+    assert not np.allclose(res.muscle_mass_kg, ref.muscle_mass_kg)  # another rule, other masses
+    assert res.whole_body["UM10"].basal_W_per_kg == ref.whole_body["UM10"].basal_W_per_kg == 1.2
+    assert (res.muscle_mass_rule, ref.muscle_mass_rule) == (MASS_RULE_MODEL, MASS_RULE_VOLUME)
+    # the command without --height, and what its files say
+    out = tmp_path / "no-height"
+    assert main(["metabolics", "--solution", str(solution_dir), "--mass", "72.6", "--models", "UM10,BH04",
+                 "--out", str(out)]) == 0
+    assert "no --height" in capsys.readouterr().err
+    wb = pd.read_csv(out / "whole_body.csv").set_index("model")
+    assert (wb["muscle_mass_rule"] == MASS_RULE_MODEL).all()
+    assert wb.loc["UM10", "whole_body_W_per_kg"] == pytest.approx(res.whole_body["UM10"].mean_W_per_kg, rel=1e-9)
+    settings = read_metabolics_settings(out)
+    assert "height_m" not in settings and settings["muscle_mass_rule"] == MASS_RULE_MODEL

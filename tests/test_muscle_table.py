@@ -258,7 +258,7 @@ def test_metabolics_cli_on_a_gait2392_solution(g2392_solution, g2392, tmp_path, 
     assert len(err) == 1 and err[0].startswith("musclemetab: warning:") and "pect_r" in err[0]
     wb = pd.read_csv(tmp_path / "out" / "whole_body.csv")
     assert sorted(wb["model"]) == sorted(["UM03", "BH04", "HO06", "LW07", "UM10", "UC16"])
-    assert np.isfinite(wb.select_dtypes("number").to_numpy()).all() and (wb["mean_W_per_kg_no_basal"] > 0).all()
+    assert np.isfinite(wb.select_dtypes("number").to_numpy()).all() and (wb["whole_body_no_basal_W_per_kg"] > 0).all()
     # the per-muscle basal heat is 1.2 W per kg of the muscle's mass: the masses by hand
     per_muscle = pd.read_csv(tmp_path / "out" / "per_muscle.csv")
     basal = per_muscle[per_muscle.model == "UM10"].set_index("muscle")["basal_heat_mean_W"]

@@ -102,7 +102,7 @@ def make_timeseries(speed: float, models=None, workflow="effort-ten") -> pd.Data
         for g, v in groups.items():
             rows.append(pd.DataFrame({"time_s": time, "cycle_pct": pct, "model": model, "series": f"group/{g}",
                                       "value_W": v}))
-        rows.append(pd.DataFrame({"time_s": time, "cycle_pct": pct, "model": model, "series": "whole_body",
+        rows.append(pd.DataFrame({"time_s": time, "cycle_pct": pct, "model": model, "series": "leg_muscles",
                                   "value_W": sum(groups.values())}))
     return pd.concat(rows, ignore_index=True)
 
@@ -169,14 +169,14 @@ def make_study(root: Path, *, measured=True, trials=None, solutions=True, failed
                 for model in MODELS:
                     d = ts[ts["model"] == model]
                     pct = d["cycle_pct"].unique()
-                    wb = d[d["series"] == "whole_body"]["value_W"].to_numpy()
+                    wb = d[d["series"] == "leg_muscles"]["value_W"].to_numpy()
                     total = _integral(pct, wb)
                     stance = 100 * _integral(pct, wb, 0, TOE_OFF_PCT) / total
                     mean_w = total / 100.0
                     row = {
                         "subject": subject, "trial": trial, "workflow": workflow, "model": model,
                         "speed_m_per_s": sp, "status": "ok",
-                        "mean_W_per_kg": 2 * mean_w / mass + 1.2, "mean_W_per_kg_no_basal": 2 * mean_w / mass,
+                        "whole_body_W_per_kg": 2 * mean_w / mass + 1.2, "whole_body_no_basal_W_per_kg": 2 * mean_w / mass,
                         "gross_cost_of_transport_J_per_kg_per_m": (2 * mean_w / mass + 1.2) / sp,
                         "stance_energy_share_pct": stance, "swing_energy_share_pct": 100 - stance,
                         "stance_energy_share_with_basal_pct": stance - 2, "swing_energy_share_with_basal_pct": 102 - stance,
@@ -190,8 +190,8 @@ def make_study(root: Path, *, measured=True, trials=None, solutions=True, failed
                     # a per-muscle table whose muscles add up to the leg: fixed proportions of mean_w
                     for k, (mu, part) in enumerate(MUSCLE_PARTS.items()):
                         muscles.append({"subject": subject, "trial": trial, "workflow": workflow, "model": model,
-                                        "muscle": mu, "side": "r", "mean_W": part * mean_w,
-                                        "mean_W_per_kg": part * mean_w / mass, "rank": k + 1})
+                                        "muscle": mu, "side": "r", "muscle_W": part * mean_w,
+                                        "muscle_W_per_kg": part * mean_w / mass, "rank": k + 1})
     pd.DataFrame(rows).to_csv(root / "results.csv", index=False)
     pd.DataFrame(muscles).to_csv(root / "per_muscle.csv", index=False)
     pd.DataFrame(failures, columns=["subject", "trial", "workflow", "reason"]).to_csv(root / "failures.csv", index=False)
@@ -339,7 +339,7 @@ def test_estimated_vs_measured(results):
             lines = _lines(ax, f"rmcorr:{w}:")
             assert len(lines) == len(SUBJECTS)  # one parallel segment per subject
             d = results[(results["model"] == model) & (results["workflow"] == w)]
-            slope, intercepts = _rmcorr_lstsq(d["measured_W_per_kg"].to_numpy(), d["mean_W_per_kg"].to_numpy(),
+            slope, intercepts = _rmcorr_lstsq(d["measured_W_per_kg"].to_numpy(), d["whole_body_W_per_kg"].to_numpy(),
                                               d["subject"].to_numpy())
             for ln in lines:
                 x, y = np.asarray(ln.get_xdata(), float), np.asarray(ln.get_ydata(), float)
@@ -389,7 +389,7 @@ def test_group_rates_over_cycle():
     with pytest.raises(OptionError, match="toe-off"):
         group_rates_over_cycle(ts, 120.0)
     with pytest.raises(OptionError, match="group"):
-        group_rates_over_cycle(ts[ts["series"] == "whole_body"], 60.0)
+        group_rates_over_cycle(ts[ts["series"] == "leg_muscles"], 60.0)
 
 
 def test_whole_body_over_cycle():
@@ -524,7 +524,7 @@ def test_write_report(study, tmp_path):
     assert "W/kg" in text and "J/(kg·m)" in text and "Measured whole-body" in text
     # values: BH04 effort-ten normal mean over subjects appears in the whole-body table
     r = pd.read_csv(study / "results.csv")
-    d = r[(r["model"] == "BH04") & (r["workflow"] == "effort-ten") & (r["trial"] == "normal")]["mean_W_per_kg"]
+    d = r[(r["model"] == "BH04") & (r["workflow"] == "effort-ten") & (r["trial"] == "normal")]["whole_body_W_per_kg"]
     assert f"{d.mean():.2f} [{d.std(ddof=1):.2f}]" in text
     # settings, escaping, software
     assert "speeds &lt;synthetic&gt; &amp; co" in text and "<synthetic>" not in text
@@ -662,7 +662,7 @@ def test_output_closed_early_ends_quietly(study):
 def test_report_when_every_unit_failed(tmp_path):
     root = tmp_path / "failed"
     root.mkdir()
-    columns = ["subject", "trial", "workflow", "model", "speed_m_per_s", "status", "mean_W_per_kg", "unit_dir"]
+    columns = ["subject", "trial", "workflow", "model", "speed_m_per_s", "status", "whole_body_W_per_kg", "unit_dir"]
     pd.DataFrame(columns=columns).to_csv(root / "results.csv", index=False)
     pd.DataFrame([{"subject": "s1", "trial": "", "workflow": "emg-ten", "reason": "EMG file missing"}]).to_csv(
         root / "failures.csv", index=False)
@@ -716,7 +716,7 @@ def test_per_muscle_ranked_figure_values(study):
     d = pm[(pm.workflow == "effort-ten") & (pm.model == "UM10")]
     for trial in ("slow", "normal", "fast"):
         bars = _bars(ax, f"trial:{trial}")
-        want = d[d.trial == trial].groupby("muscle")["mean_W_per_kg"].mean()
+        want = d[d.trial == trial].groupby("muscle")["muscle_W_per_kg"].mean()
         widths = sorted((y, w) for _, y, w, _ in bars)[::-1]  # top bar first
         np.testing.assert_allclose([w for _, w in widths], want[["soleus_r", "gasmed_r", "vaslat_r"]], rtol=1e-12)
         assert all(x == 0.0 for x, _, _, _ in bars)
@@ -736,16 +736,16 @@ def test_per_muscle_ranking_merges_two_model_families(study):
     rows = [("a", "med_gas_r", 0.30), ("a", "soleus_r", 0.50), ("a", "add_mag1_r", 0.05), ("a", "add_mag2_r", 0.07),
             ("b", "gasmed_r", 0.20), ("b", "soleus_r", 0.40), ("b", "addmagDist_r", 0.04), ("b", "addmagMid_r", 0.06)]
     pm = pd.DataFrame([{"subject": s, "trial": "normal", "workflow": "effort-ten", "model": "UM10", "muscle": m,
-                        "mean_W_per_kg": v} for s, m, v in rows])
-    h = harmonise_muscles(pm).set_index(["subject", "muscle"])["mean_W_per_kg"]
+                        "muscle_W_per_kg": v} for s, m, v in rows])
+    h = harmonise_muscles(pm).set_index(["subject", "muscle"])["muscle_W_per_kg"]
     assert h[("a", "gastrocnemius medialis (r)")] == pytest.approx(0.30)
     assert h[("b", "gastrocnemius medialis (r)")] == pytest.approx(0.20)
     assert h[("a", "adductor magnus (r)")] == pytest.approx(0.12)
     # a subject solved on both legs: one leg is the mean of its two legs (0.2 and 0.4 W/kg)
     legs = pd.DataFrame([{"subject": "c", "trial": "normal", "workflow": "effort-ten", "model": "UM10", "muscle": m,
-                          "side": m[-1], "mean_W_per_kg": v} for m, v in (("gasmed_r", 0.2), ("gasmed_l", 0.4))])
+                          "side": m[-1], "muscle_W_per_kg": v} for m, v in (("gasmed_r", 0.2), ("gasmed_l", 0.4))])
     one = harmonise_muscles(legs)
-    assert one["muscle"].tolist() == ["gastrocnemius medialis"] and one["mean_W_per_kg"].tolist() == pytest.approx([0.3])
+    assert one["muscle"].tolist() == ["gastrocnemius medialis"] and one["muscle_W_per_kg"].tolist() == pytest.approx([0.3])
     fig = per_muscle_ranked(pm, top=3)
     ax = fig.axes[0]
     ticks = [t.get_text() for t in sorted(ax.get_yticklabels(), key=lambda t: -t.get_position()[1])]
@@ -765,9 +765,9 @@ def test_rates_against_speed_values(study):
         ds = d[d.subject == subject].set_index("trial").loc[["slow", "normal", "fast"]]
         wb = next(ln for ln in ax.lines if ln.get_gid() == f"whole-body:{subject}")
         np.testing.assert_allclose(wb.get_xdata(), ds["speed_m_per_s"])
-        np.testing.assert_allclose(wb.get_ydata(), ds["mean_W_per_kg_no_basal"])
+        np.testing.assert_allclose(wb.get_ydata(), ds["whole_body_no_basal_W_per_kg"])
         pf = next(ln for ln in ax.lines if ln.get_gid() == f"group:PF:{subject}")
-        np.testing.assert_allclose(pf.get_ydata(), ds.share_PF_pct / 100 * ds.mean_W_per_kg_no_basal)
+        np.testing.assert_allclose(pf.get_ydata(), ds.share_PF_pct / 100 * ds.whole_body_no_basal_W_per_kg)
     assert fig.axes[0].get_shared_y_axes().joined(fig.axes[0], fig.axes[1])
     # the speed axis spans the trials' speeds (m/s), the same in every panel, not the cycle's 0-100 %
     speeds = r[r.workflow == "effort-ten"]["speed_m_per_s"]
@@ -790,13 +790,13 @@ def test_phase_pies_area_proportional_to_cost(results):
     ax = fig.axes[0]
     wedges = {p.get_gid(): p for p in ax.patches if p.get_gid()}
     d = results[results.workflow == "effort-ten"].groupby(["model", "trial"])[
-        ["mean_W_per_kg_no_basal", "swing_energy_share_pct", "stance_energy_share_pct"]].mean()
+        ["whole_body_no_basal_W_per_kg", "swing_energy_share_pct", "stance_energy_share_pct"]].mean()
     assert len(wedges) == 2 * len(d)
     ratio = []
     for (m, t), row in d.iterrows():
         stance, swing = wedges[f"stance:{m}:{t}"], wedges[f"swing:{m}:{t}"]
         assert stance.r == swing.r
-        ratio.append(np.pi * stance.r**2 / row["mean_W_per_kg_no_basal"])  # area per W/kg
+        ratio.append(np.pi * stance.r**2 / row["whole_body_no_basal_W_per_kg"])  # area per W/kg
         # the swing wedge's angle is its share of the cycle's energy
         sweep = (swing.theta2 - swing.theta1) % 360.0
         assert sweep / 360.0 == pytest.approx(row["swing_energy_share_pct"] / 100.0, rel=1e-9)
@@ -853,7 +853,7 @@ def test_report_key_follows_the_study_file(tmp_path):
 
     root = tmp_path / "toml"  # a study whose units all failed: the page alone, drawn quickly
     root.mkdir()
-    pd.DataFrame(columns=["subject", "trial", "workflow", "model", "status", "mean_W_per_kg"]).to_csv(
+    pd.DataFrame(columns=["subject", "trial", "workflow", "model", "status", "whole_body_W_per_kg"]).to_csv(
         root / "results.csv", index=False)
     toml = tmp_path / "elsewhere" / "study.toml"
     toml.parent.mkdir()
@@ -1124,7 +1124,7 @@ def test_speed_series_never_match_trials_of_two_subjects_by_name():
 
     rows = [("a", "normal", 1.3, 9.6), ("a", "fast", 1.8, 12.0), ("b", "walk2", 1.6, 6.5), ("b", "walk1", 1.2, 5.0)]
     r = pd.DataFrame([{"subject": s, "trial": t, "workflow": "effort-ten", "model": "UM10", "status": "ok",
-                       "speed_m_per_s": v, "mean_W_per_kg": w + 1.2, "mean_W_per_kg_no_basal": w, "share_PF_pct": 40.0}
+                       "speed_m_per_s": v, "whole_body_W_per_kg": w + 1.2, "whole_body_no_basal_W_per_kg": w, "share_PF_pct": 40.0}
                       for s, t, v, w in rows])
     ax = rates_against_speed(r).axes[0]
     lines = {ln.get_gid(): ln for ln in ax.lines}
@@ -1149,7 +1149,7 @@ def test_the_papers_six_models_by_default_others_on_request(tmp_path, capsys):
 
     root = make_study(tmp_path / "s", solutions=False, trials={"slow": 0.75, "normal": 1.25})
     r = pd.read_csv(root / "results.csv")
-    extra = pd.concat([r[r.model == "UM10"].assign(model=m, mean_W_per_kg=r.mean_W_per_kg + 5) for m in ("LW05", "MA68")])
+    extra = pd.concat([r[r.model == "UM10"].assign(model=m, whole_body_W_per_kg=r.whole_body_W_per_kg + 5) for m in ("LW05", "MA68")])
     pd.concat([r, extra]).to_csv(root / "results.csv", index=False)
     assert select(read_study_folder(root)).models == list(MODELS)
     assert select(read_study_folder(root, models="all,LW05")).models == [*MODELS, "LW05"]

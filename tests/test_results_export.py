@@ -59,18 +59,18 @@ def test_per_muscle_table_sums_to_the_whole_body_rate(example, solved, cycle, ba
         assert len(d) == len(res.muscles) and set(d["side"]) == {"r"}
         # components once: work + heats = the muscle's rate without basal heat
         parts = d[["work_mean_W", "activation_maintenance_heat_mean_W", "shortening_lengthening_heat_mean_W"]]
-        np.testing.assert_allclose(parts.sum(axis=1), d["mean_W"], rtol=1e-12, atol=1e-12)
-        leg = d["mean_W"].sum() + (d["basal_heat_mean_W"].sum() if basal == "muscle" else 0.0)
+        np.testing.assert_allclose(parts.sum(axis=1), d["muscle_W"], rtol=1e-12, atol=1e-12)
+        leg = d["muscle_W"].sum() + (d["basal_heat_mean_W"].sum() if basal == "muscle" else 0.0)
         added = 1.2 if basal == "body" else 0.0
         assert wb.legs * leg / example.body_mass_kg + added == pytest.approx(wb.mean_W_per_kg, rel=1e-12)
-        assert wb.legs * d["mean_W_per_kg"].sum() == pytest.approx(wb.mean_W_per_kg_no_basal, rel=1e-12)
+        assert wb.legs * d["muscle_W_per_kg"].sum() == pytest.approx(wb.mean_W_per_kg_no_basal, rel=1e-12)
         assert d["share_of_leg_pct"].sum() == pytest.approx(100.0)
         # basal heat of a muscle: 1.2 W per kg of its mass, never inside mean_W
         np.testing.assert_allclose(d["basal_heat_mean_W"], 1.2 * res.muscle_mass_kg, rtol=1e-12)
         # stance + swing = the energy of the sampled cycle; the phases sum to the leg's phase energy
         np.testing.assert_allclose(d["stance_J"] + d["swing_J"], d["energy_per_cycle_J"], rtol=1e-12)
         assert sorted(d["rank"]) == list(range(1, len(d) + 1))
-        assert d.loc[d["rank"] == 1, "mean_W"].iloc[0] == d["mean_W"].max()
+        assert d.loc[d["rank"] == 1, "muscle_W"].iloc[0] == d["muscle_W"].max()
 
 
 def test_study_per_muscle_table_sums_to_the_results_table(demo):
@@ -78,11 +78,11 @@ def test_study_per_muscle_table_sums_to_the_results_table(demo):
     out, table = demo
     pm = pd.read_csv(out / "per_muscle.csv")
     assert pd.read_parquet(out / "per_muscle.parquet").shape == pm.shape
-    sums = pm.groupby(["subject", "trial", "workflow", "model"])["mean_W_per_kg"].sum()
+    sums = pm.groupby(["subject", "trial", "workflow", "model"])["muscle_W_per_kg"].sum()
     for row in table.itertuples():
         assert 2 * sums[(row.subject, row.trial, row.workflow, row.model)] == pytest.approx(
-            row.mean_W_per_kg_no_basal, rel=1e-8)
-        assert row.mean_W_per_kg - row.mean_W_per_kg_no_basal == pytest.approx(1.2, rel=1e-9)  # basal "body"
+            row.whole_body_no_basal_W_per_kg, rel=1e-8)
+        assert row.whole_body_W_per_kg - row.whole_body_no_basal_W_per_kg == pytest.approx(1.2, rel=1e-9)  # basal "body"
     assert (out / "muscle_groups.csv").is_file() and (out / "data_dictionary.csv").is_file()
 
 
@@ -195,8 +195,8 @@ def test_analyse_command_gives_what_the_study_unit_gives(example, demo, tmp_path
     pd.testing.assert_frame_equal(per.set_index(["model", "muscle"]).sort_index(),
                                   ref.set_index(["model", "muscle"]).sort_index(), rtol=1e-9)
     wb = pd.read_csv(tmp_path / "an" / "r" / "whole_body.csv").set_index("model")
-    np.testing.assert_allclose(wb["mean_W_per_kg"], pd.read_csv(unit / "whole_body.csv").set_index("model")
-                               .loc[wb.index, "mean_W_per_kg"], rtol=1e-9)
+    np.testing.assert_allclose(wb["whole_body_W_per_kg"], pd.read_csv(unit / "whole_body.csv").set_index("model")
+                               .loc[wb.index, "whole_body_W_per_kg"], rtol=1e-9)
     assert (tmp_path / "an" / "r" / "muscle_groups.csv").is_file()
 
 

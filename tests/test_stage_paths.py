@@ -191,10 +191,10 @@ def test_both_legs_from_objects_and_folders(example, both_legs, tmp_path):
                  "--models", "UM10,BH04", "--out", str(met)]) == 0
     whole = pd.read_csv(met / "whole_body.csv").set_index("model")
     for m in ("UM10", "BH04"):
-        assert whole.loc[m, "mean_W_per_kg"] == pytest.approx(total_objects[m], rel=1e-9)
+        assert whole.loc[m, "whole_body_W_per_kg"] == pytest.approx(total_objects[m], rel=1e-9)
         for side in "rl":
-            assert whole.loc[m, f"{side}_leg_mean_W"] == pytest.approx(
-                from_objects[side].whole_body[m].one_leg_mean_W, rel=1e-9)
+            assert whole.loc[m, f"{side}_leg_muscles_W"] == pytest.approx(
+                from_objects[side].whole_body[m].leg_no_basal_mean_W, rel=1e-9)
     assert main(["analyse", "--solution", str(parent), "--metabolics", str(met / "r"), "--model",
                  str(example.model), "--ik", str(example.ik["normal"]), "--id", str(example.id["normal"]),
                  "--speed", str(SPEED), "--out", str(out)]) == 0

@@ -141,7 +141,7 @@ def test_pool_run_results_table(pool_run):
     assert set(table["model"]) == {"UM10", "BH04"}
     on_disk = pd.read_parquet(study.output / "results.parquet")
     pd.testing.assert_frame_equal(on_disk, pd.read_csv(study.output / "results.csv"), check_dtype=False, rtol=1e-9)
-    for col in ("mean_W_per_kg", "gross_cost_of_transport_J_per_kg_per_m", "stance_energy_share_pct", "swing_energy_share_pct", "share_PF_pct",
+    for col in ("whole_body_W_per_kg", "gross_cost_of_transport_J_per_kg_per_m", "stance_energy_share_pct", "swing_energy_share_pct", "share_PF_pct",
                 "toe_off_pct", "speed_m_per_s"):
         assert table[col].notna().all(), col
     # the study's trials are explained by the muscles: no large-reserve flag (the flagged case
@@ -150,7 +150,7 @@ def test_pool_run_results_table(pool_run):
     # the whole-body rate of the table is the unit's whole_body.csv
     row = table[(table.trial == "normal") & (table.model == "UM10")].iloc[0]
     wb = pd.read_csv(study.output / row.unit_dir / "whole_body.csv").set_index("model")
-    assert row.mean_W_per_kg == pytest.approx(wb.loc["UM10", "mean_W_per_kg"], rel=1e-12)
+    assert row.whole_body_W_per_kg == pytest.approx(wb.loc["UM10", "whole_body_W_per_kg"], rel=1e-12)
 
 
 def test_swing_share_recomputed_from_the_unit_files(pool_run):
@@ -162,10 +162,10 @@ def test_swing_share_recomputed_from_the_unit_files(pool_run):
     folder = study.output / row.unit_dir
     cycle = json.loads((folder / "unit.json").read_text())["cycle"]
     m = pd.read_parquet(folder / "metabolics.parquet")
-    m = m[(m.model == "BH04") & (m.component.isin(["total", "basal"]))]
+    m = m[(m.model == "BH04") & (m.component.isin(["total_no_basal"]))]
     wide = m.pivot_table(index="time", columns="component", values="value_W", aggfunc="sum")
     t = wide.index.to_numpy()
-    rate = (wide["total"] - wide["basal"]).to_numpy()  # one leg, without basal heat
+    rate = wide["total_no_basal"].to_numpy()  # one leg, without basal heat
 
     def energy(a, b):  # over the nodes there are: the kept nodes end 10 ms before the next contact
         a, b = max(a, t[0]), min(b, t[-1])

@@ -8,7 +8,13 @@ table, :func:`write_data_dictionary` writes it as CSV (the study runner writes
 
 Conventions: one leg means the simulated leg's muscles; whole body means both legs (twice
 the simulated leg, or the two legs added when a study solves both: column ``legs``) per kg
-of body mass; "no basal" means without any basal heat.
+of body mass; "no basal" means without any basal heat. One name has one meaning in every
+file: ``whole_body_...`` columns are both legs with the basal heat their name states,
+``leg_muscles_...`` one leg's muscles without basal heat, ``muscle_...`` one muscle without
+basal heat; a file of one leg never holds a whole-body figure. ``results.csv`` and
+``per_muscle.csv`` of earlier releases (``mean_W_per_kg``, ``mean_W_per_kg_no_basal``,
+``one_leg_mean_W``; ``mean_W``, ``mean_W_per_kg``) are read by the report through
+:data:`musclemetab.report.folder.RENAMED_RESULTS_COLUMNS`.
 """
 
 from __future__ import annotations
@@ -22,6 +28,8 @@ _STUDY = "results.csv/.parquet"
 _UNIT_WB = "whole_body.csv"
 _UNIT_AN = "analysis.csv"
 _PM = "per_muscle.csv/.parquet"
+_LEGS_WB = "whole_body.csv (metabolics, legs added)"
+_LEG = "leg_muscles.csv"
 
 #: ``(files, column, unit, description)``; ``files`` lists the tables holding the column.
 DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
@@ -30,36 +38,38 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
     (f"{_STUDY}, {_PM} (study), failures.csv", "trial", "-", "trial name of the study file"),
     (f"{_STUDY}, {_PM} (study), failures.csv", "workflow", "-",
      "muscle redundancy workflow: effort-gen, effort-cal, effort-ten or emg-ten"),
-    (f"{_STUDY}, {_UNIT_WB}, {_UNIT_AN}, {_PM}, timeseries.csv, metabolics.parquet", "model", "-",
+    (f"{_STUDY}, {_UNIT_WB}, {_UNIT_AN}, {_PM}, {_LEG}, {_LEGS_WB}, timeseries.csv, metabolics.parquet", "model", "-",
      "metabolic energy model (short name of the registry, e.g. UM10, BH04)"),
     ("failures.csv", "reason", "-", "why the unit failed (one line)"),
     (_STUDY, "status", "-", "ok for a unit whose results are in the row"),
     (_STUDY, "unit_dir", "-", "the unit's folder, relative to the study folder (for legs 'r + l': the folder "
      "holding the two legs' unit folders r/ and l/)"),
-    (_STUDY, "legs", "-",
+    (f"{_STUDY}, {_LEGS_WB}", "legs", "-",
      "how the whole-body columns count the legs: '2 x r' or '2 x l' (that leg solved, doubled) or 'r + l' (side = "
-     "both: each leg solved over its own gait cycle, the two added; one_leg_mean_W, leg_energy_J, duration_s, "
+     "both: each leg solved over its own gait cycle, the two added; leg_muscles_W, leg_energy_J, duration_s, "
      "toe_off_pct and speed are the legs' means, the energy shares are of both legs' energy, and the event times "
-     "are empty: each leg's are in its unit folder)"),
+     "are empty: each leg's are in its unit folder); 'r+l' in the metabolics command's sum of two legs"),
     # whole body
-    (f"{_STUDY}, {_UNIT_WB}", "mean_W_per_kg", "W/kg",
+    (f"{_STUDY}, {_UNIT_WB}, {_LEGS_WB}", "whole_body_W_per_kg", "W/kg",
      "whole-body average metabolic rate over the gait cycle: both legs (the two legs added when both "
      "were solved, otherwise twice the simulated leg) per kg of body mass, with the basal heat of the basal rule"),
-    (f"{_STUDY}, {_UNIT_WB}", "mean_W_per_kg_no_basal", "W/kg",
-     "the same without any basal heat"),
-    (f"{_STUDY}, {_UNIT_WB}", "one_leg_mean_W", "W",
-     "cycle-average summed rate of the simulated leg's muscles (per-muscle basal heat only under the muscle rule)"),
-    (f"{_STUDY}, {_UNIT_WB}", "basal_rule", "-",
+    (f"{_STUDY}, {_UNIT_WB}, {_LEGS_WB}", "whole_body_no_basal_W_per_kg", "W/kg",
+     "whole_body_W_per_kg without any basal heat (both legs' muscles per kg of body mass)"),
+    (f"{_STUDY}, {_UNIT_WB}, {_LEG}", "leg_muscles_W", "W",
+     "cycle-average summed rate of one leg's muscles (the simulated leg), no basal heat"),
+    (_LEG, "leg_muscles_W_per_kg", "W/kg", "leg_muscles_W per kg of body mass (one leg, no basal heat)"),
+    (_LEGS_WB, "<side>_leg_muscles_W", "W", "leg_muscles_W of that leg (r or l), over its own gait cycle"),
+    (f"{_STUDY}, {_UNIT_WB}, {_LEGS_WB}", "basal_rule", "-",
      "basal heat rule: body (1.2 W per kg of body mass added), muscle (1.2 W per kg of muscle mass in every "
      "muscle) or none"),
-    (f"{_STUDY}, {_UNIT_WB}", "basal_W_per_kg", "W/kg",
+    (f"{_STUDY}, {_UNIT_WB}, {_LEGS_WB}", "basal_W_per_kg", "W/kg",
      "basal heat added to the whole-body rate under the body rule: basal coefficient x body mass^basal exponent "
      "/ body mass (1.2 by default); 0 under the muscle and none rules"),
-    (f"{_STUDY}, {_UNIT_WB}", "duration_s", "s", "duration the whole-body average is taken over"),
+    (f"{_STUDY}, {_UNIT_WB}, {_LEG}", "duration_s", "s", "duration the cycle average is taken over"),
     (f"{_STUDY}, {_UNIT_WB}", "gross_cost_of_transport_J_per_kg_per_m", "J/(kg m)",
-     "gross cost of transport: mean_W_per_kg (with basal heat) divided by the walking speed"),
+     "gross cost of transport: whole_body_W_per_kg (with basal heat) divided by the walking speed"),
     (f"{_STUDY}, {_UNIT_WB}", "net_cost_of_transport_J_per_kg_per_m", "J/(kg m)",
-     "net cost of transport: mean_W_per_kg_no_basal divided by the walking speed"),
+     "net cost of transport: whole_body_no_basal_W_per_kg divided by the walking speed"),
     # cycle and phases
     (f"{_STUDY}, {_UNIT_AN}", "cycle_start_s", "s", "initial contact starting the gait cycle"),
     (f"{_STUDY}, {_UNIT_AN}", "toe_off_s", "s", "toe-off of the simulated leg"),
@@ -83,39 +93,44 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
      "share of the muscle energy at instants when a muscle has no moment arm above the threshold"),
     (_STUDY, "speed_m_per_s", "m/s", "walking speed (study file, or estimated: see speed_source)"),
     (_STUDY, "measured_W_per_kg", "W/kg", "measured whole-body metabolic rate (indirect calorimetry), if given"),
+    (f"{_STUDY}, {_UNIT_WB}, {_LEGS_WB}, {_LEG}", "muscle_mass_rule", "-",
+     "how the muscle masses of the metabolic models were found: 'volume (body mass, height)' (the anatomical "
+     "volume rule), or 'model (F0 / specific tension x density x lMo)' (OpenSim's probes' rule) when no height "
+     "was given"),
     (_STUDY, "cycle_source", "-", "where the gait events come from (study file, ground reaction forces, or estimated)"),
     (_STUDY, "speed_source", "-", "where the walking speed comes from (study file, or estimated from the pelvis)"),
     (_STUDY, "large_reserve", "-",
      "true when the solve's largest reserve RMS exceeds 1 % of the peak joint moment (the muscles do not explain "
      "the moments: check the inputs); summary.json holds reserve_share_of_peak_moment"),
     # per muscle
-    (_PM, "muscle", "-", "muscle name of the model"),
-    (_PM, "side", "-", "leg of the muscle: r or l ('' when the name has no side suffix)"),
-    (_PM, "mean_W", "W",
+    (f"{_PM}, metabolics.parquet", "muscle", "-", "muscle name of the model"),
+    (f"{_PM}, {_LEG}", "side", "-", "leg of the row's muscle(s): r or l ('' when a muscle name has no side suffix)"),
+    (_PM, "muscle_W", "W",
      "the muscle's cycle-average metabolic rate without basal heat (work + activation/maintenance heat + "
-     "shortening/lengthening heat); summed over a leg's muscles it is the whole-body one_leg figure"),
-    (_PM, "mean_W_per_kg", "W/kg", "mean_W per kg of body mass (this muscle of one leg)"),
+     "shortening/lengthening heat); summed over a leg's muscles it is leg_muscles_W"),
+    (_PM, "muscle_W_per_kg", "W/kg", "muscle_W per kg of body mass (this muscle of one leg, no basal heat)"),
     (_PM, "energy_per_cycle_J", "J", "the muscle's energy over the sampled gait cycle, no basal (stance_J + swing_J)"),
-    (_PM, "share_of_leg_pct", "%", "the muscle's part of its leg's summed mean_W (a leg's muscles sum to 100)"),
+    (_PM, "share_of_leg_pct", "%", "the muscle's part of its leg's summed muscle_W (a leg's muscles sum to 100)"),
     (_PM, "stance_J", "J", "the muscle's energy in stance, no basal (empty without a gait cycle)"),
     (_PM, "swing_J", "J", "the muscle's energy in swing, no basal (empty without a gait cycle)"),
     (_PM, "work_mean_W", "W", "cycle average of the mechanical work rate the model counts"),
     (_PM, "activation_maintenance_heat_mean_W", "W", "cycle average of the activation and maintenance heat rate"),
     (_PM, "shortening_lengthening_heat_mean_W", "W", "cycle average of the shortening and lengthening heat rate"),
     (_PM, "basal_heat_mean_W", "W",
-     "the muscle's basal heat (1.2 W per kg of muscle mass); apart, never inside mean_W"),
-    (_PM, "rank", "-", "rank of the muscle by mean_W within its unit and model (1 = largest)"),
+     "the muscle's basal heat (1.2 W per kg of muscle mass); apart, never inside muscle_W"),
+    (_PM, "rank", "-", "rank of the muscle by muscle_W within its unit and model (1 = largest)"),
     # time series
     ("timeseries.csv", "time_s", "s", "time of the solver node"),
     ("timeseries.csv", "cycle_pct", "%", "time in % of the gait cycle"),
-    ("timeseries.csv", "series", "-", "whole_body (summed muscles of one leg) or group/<G>"),
-    ("timeseries.csv", "value_W", "W", "metabolic rate of the series (one leg, no basal)"),
+    ("timeseries.csv", "series", "-", "leg_muscles (summed muscles of one leg) or group/<G>"),
+    ("timeseries.csv, metabolics.parquet", "value_W", "W",
+     "metabolic rate of the row's series (timeseries.csv: one leg's muscles, no basal) or component "
+     "(metabolics.parquet)"),
     ("metabolics.parquet", "time", "s", "time of the solver node (padding nodes trimmed)"),
     ("metabolics.parquet", "component", "-",
-     "work, activation_maintenance, shortening_lengthening, basal, total (total includes basal), and model "
-     "extras (e.g. BH04's activation and maintenance, which split activation_maintenance)"),
-    ("metabolics.parquet", "muscle", "-", "muscle name of the model"),
-    ("metabolics.parquet", "value_W", "W", "rate of the component"),
+     "work, activation_maintenance, shortening_lengthening, basal (the per-muscle basal heat), total_no_basal "
+     "(the sum of the first three: the muscle's rate without basal heat), and model extras (e.g. BH04's "
+     "activation and maintenance, which split activation_maintenance)"),
     ("metabolics.sto", "<model>/<muscle>/<component>", "W", "the rates of metabolics.parquet as an OpenSim storage"),
     # solver and OpenSim files
     ("solution.sto", "/forceset/<muscle>/<quantity>", "see summary.json conventions",
@@ -132,9 +147,10 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
     ("muscle_groups.csv", "name", "-", "full name of the group"),
     ("muscle_groups.csv", "dof", "-", "degree of freedom (without side suffix) the group acts about"),
     ("muscle_groups.csv", "moment_arm_sign", "-", "sign of the moment arm that puts a muscle in the group"),
-    ("muscle_groups.csv", "column", "-", "the results column of the group's share"),
     ("data_dictionary.csv", "file", "-", "tables holding the column"),
-    ("data_dictionary.csv", "column", "-", "column name (<...> stands for a family)"),
+    ("muscle_groups.csv, data_dictionary.csv", "column", "-",
+     "a column name: the results column of the group's share (muscle_groups.csv), the column described "
+     "(data_dictionary.csv; <...> stands for a family)"),
     ("data_dictionary.csv", "unit", "-", "unit of the values"),
     ("data_dictionary.csv", "description", "-", "what the column holds"),
 )
@@ -176,7 +192,12 @@ def data_dictionary_markdown() -> str:
         "written beside each study's results as `data_dictionary.csv`, from `musclemetab.datadict` (the one",
         "source; this page is rendered from it by `python -m musclemetab.datadict`). `<...>` stands for a",
         "family of columns. One leg means the simulated leg's muscles; whole body means both legs (twice the",
-        "simulated leg) per kg of body mass; no basal means without any basal heat.",
+        "simulated leg) per kg of body mass; no basal means without any basal heat. One name has one meaning",
+        "in every file: `whole_body_...` is both legs with the basal heat the name states, `leg_muscles_...`",
+        "one leg's muscles without basal heat, `muscle_...` one muscle without basal heat; a file of one leg",
+        "never holds a whole-body figure. The report reads the tables of earlier releases (`mean_W_per_kg`,",
+        "`mean_W_per_kg_no_basal`, `one_leg_mean_W`; per muscle `mean_W`, `mean_W_per_kg`) through the",
+        "mapping of `musclemetab.report.folder` ([report.md](report.md)).",
         "",
         "| file | column | unit | description |",
         "| --- | --- | --- | --- |",

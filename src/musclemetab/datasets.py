@@ -150,7 +150,7 @@ def example_subject(folder: str | os.PathLike | None = None, verify: bool = True
         A folder holding the files; default ``$MUSCLEMETAB_DATA`` if set, else the pooch
         cache (files downloaded on first use).
     verify
-        Check every local file against its SHA-256 (about 30 ms).
+        Check every local file against its SHA-256.
     """
     entries = manifest()
     root = _local_root(folder, "example_subject", entries, verify)

@@ -48,6 +48,19 @@ __all__ = [
     "cycle_from_id_file",
     "cycle_of_trial",
     "read_grf",
+    "grf_of_side",
+    "force_columns",
+    "foot_kinematics",
+    "feet_for_checks",
+    "foot_of_force",
+    "FootKinematics",
+    "ForceFoot",
+    "check_against_kinematics",
+    "check_applied_feet",
+    "check_cycle_duration",
+    "FOOT_DISTANCE_M",
+    "HEEL_STRIKE_TOLERANCE_S",
+    "WALKING_CYCLE_DURATION_S",
     "DEFAULT_GRF_THRESHOLD_N",
     "DEFAULT_MIN_DURATION_S",
     "DEFAULT_PADDING_S",
@@ -417,11 +430,13 @@ def cycle_from_id_file(
 
 
 def cycle_of_trial(ik: str | os.PathLike, *, grf: str | os.PathLike | None = None,
-                   id_file: str | os.PathLike | None = None, side: str = "r") -> tuple[GaitCycle, str]:
+                   id_file: str | os.PathLike | None = None, side: str = "r", model=None) -> tuple[GaitCycle, str]:
     """The gait cycle of a solved trial and where it came from: ``(cycle, source)``.
 
     With ``grf``: the cycle of the side's vertical ground reaction force that holds the middle
-    of the IK window (:func:`cycle_from_grf`); otherwise from the inverse dynamics ``id_file``
+    of the IK window (:func:`cycle_from_grf`; with the ``model``, the force's foot checked against
+    its centre of pressure, :func:`grf_of_side`, and the cycle's duration,
+    :func:`check_cycle_duration`); otherwise from the inverse dynamics ``id_file``
     and the IK window (:func:`cycle_from_id_file`: the window less the padding at each end,
     toe-off from the ankle moment; estimated events).
     """
@@ -429,9 +444,21 @@ def cycle_of_trial(ik: str | os.PathLike, *, grf: str | os.PathLike | None = Non
 
     t = read_storage(ik).index.to_numpy(float)
     if grf is not None:
-        force = read_grf(grf, side=side)
-        return (cycle_from_grf(force.index.to_numpy(float), force.to_numpy(float), at_time_s=0.5 * (t[0] + t[-1])),
-                "ground reaction forces")
+        if model is None:
+            force = read_grf(grf, side=side)
+        else:
+            import warnings
+
+            from .errors import WindowWarning
+
+            feet, why = feet_for_checks(model, ik)
+            force, notes, _ = grf_of_side(grf, side, feet=feet)
+            for msg in notes + ([why] if why else []):
+                warnings.warn(msg, WindowWarning, stacklevel=2)
+        cycle = cycle_from_grf(force.index.to_numpy(float), force.to_numpy(float), at_time_s=0.5 * (t[0] + t[-1]))
+        if model is not None:
+            check_cycle_duration(cycle, where=f"{grf} column {force.name}")
+        return cycle, "ground reaction forces"
     if id_file is None:
         raise OptionError("give the ground reaction forces (grf) or the inverse dynamics (id_file) of the trial")
     return (cycle_from_id_file(id_file, side=side, window_s=(float(t[0]), float(t[-1]))),
@@ -495,12 +522,35 @@ _MIN_TRAVEL_M = 0.1
 
 
 def _refined_extrema(t, x, prominence):
-    """Times of the local maxima of ``x`` (parabola through each peak and its neighbours)."""
+    """Times of the local maxima of ``x`` at least ``prominence`` high (parabola through each
+    peak and its neighbours).
+
+    The prominence of a peak is its height above the lowest point between it and the nearest
+    higher sample on each side, the smaller of the two (as :func:`scipy.signal.find_peaks`).
+    Where the record ends before any higher sample (the excursion is cut by the end or the
+    start of the record), only the other side counts: a heel strike one sample before the end
+    of the record is found as soon as the signal has turned down.
+    """
     from scipy.signal import find_peaks
 
-    peaks, _ = find_peaks(x, prominence=prominence)
+    peaks, _ = find_peaks(x)
     out = []
     for k in peaks:
+        higher_left = np.flatnonzero(x[:k] > x[k])
+        higher_right = np.flatnonzero(x[k + 1:] > x[k])
+        lb = int(higher_left[-1]) if higher_left.size else 0
+        rb = k + 1 + int(higher_right[0]) if higher_right.size else x.size - 1
+        left, right = x[k] - x[lb:k + 1].min(), x[k] - x[k:rb + 1].min()
+        if higher_left.size and not higher_right.size:
+            prom = left
+        elif higher_right.size and not higher_left.size:
+            prom = right
+        elif not higher_left.size and not higher_right.size:
+            prom = max(left, right)
+        else:
+            prom = min(left, right)
+        if prom < prominence:
+            continue
         y0, y1, y2 = x[k - 1], x[k], x[k + 1]
         den = y0 - 2 * y1 + y2
         d = 0.0 if den == 0 else 0.5 * (y0 - y2) / den
@@ -535,27 +585,298 @@ def gait_events_from_kinematics(time_s, heel_m, toe_m, pelvis_m, up=(0.0, 1.0, 0
     return GaitEvents(hs, to, float("nan"), 0.0)
 
 
-def kinematic_gait_events(model_path, ik_path, side: str, layout=None) -> GaitEvents:
-    """:func:`gait_events_from_kinematics` of one leg from a model and its IK file (or its
-    :class:`~musclemetab.io.StorageTable`, already read): the origins of the side's heel and
-    toe bodies and of the root body, computed by OpenSim in the worker process."""
+@dataclass(frozen=True)
+class FootKinematics:
+    """Origins of both feet's heel and toe bodies and of the root body along an IK record
+    (ground frame, m), as OpenSim computes them from the model: the input of
+    :func:`gait_events_from_kinematics` and :func:`foot_of_force`."""
+
+    time_s: np.ndarray
+    heel_m: dict  # side -> (T, 3)
+    toe_m: dict  # side -> (T, 3)
+    root_m: np.ndarray  # (T, 3)
+    up: np.ndarray
+    bodies: dict  # side -> (heel body, toe body)
+
+    def events(self, side: str) -> GaitEvents:
+        """:func:`gait_events_from_kinematics` of one leg."""
+        return gait_events_from_kinematics(self.time_s, self.heel_m[side], self.toe_m[side], self.root_m, up=self.up)
+
+
+#: Body positions already computed in this process, by model file and IK content (a few entries).
+_POSITIONS: dict = {}
+
+
+def foot_kinematics(model_path, ik_path, layout=None, sides=("r", "l")) -> FootKinematics:
+    """:class:`FootKinematics` of a model and its IK file (or its :class:`~musclemetab.io.StorageTable`,
+    already read): the origins of each side's heel and toe bodies
+    (:func:`musclemetab.layout.foot_bodies`) and of the root body, computed by OpenSim in the
+    worker process (one call for all of them)."""
     from .io import as_table
     from .layout import foot_bodies, read_layout
     from .opensim_bridge import call
 
     layout = layout or read_layout(model_path)
-    heel, toe = foot_bodies(layout, side)
+    bodies = {s: foot_bodies(layout, s) for s in sides}
     root = next(j["child"] for j in layout.joints if j["parent"] == layout.ground)
     ik = as_table(ik_path)
     in_degrees = ik.attrs.get("in_degrees")
     if in_degrees is None:  # no header flag: angles beyond 2 pi are degrees
         in_degrees = bool(np.nanmax(np.abs(ik.to_numpy(dtype=float))) > 2 * np.pi)
-    raw = call("model_ops:body_origins", str(model_path), {c: np.ascontiguousarray(ik[c]) for c in ik.columns},
-               in_degrees, [heel, toe, root])
-    pos = np.asarray(raw["positions_m"], dtype=float)
+    names = [b for s in sides for b in bodies[s]] + [root]
+    import hashlib
+
+    stat = os.stat(model_path)
+    key = (str(model_path), stat.st_mtime_ns, stat.st_size, tuple(ik.columns), bool(in_degrees), tuple(names),
+           hashlib.sha256(np.ascontiguousarray(ik.to_numpy(dtype=float)).tobytes()
+                          + np.asarray(ik.index, dtype=float).tobytes()).hexdigest())
+    pos = _POSITIONS.get(key)
+    if pos is None:
+        raw = call("model_ops:body_origins", str(model_path), {c: np.ascontiguousarray(ik[c]) for c in ik.columns},
+                   in_degrees, names)
+        pos = np.asarray(raw["positions_m"], dtype=float)
+        if len(_POSITIONS) >= 8:
+            _POSITIONS.pop(next(iter(_POSITIONS)))
+        _POSITIONS[key] = pos
     g = np.asarray(layout.gravity, dtype=float)
-    up = -g if np.linalg.norm(g) > 0 else (0.0, 1.0, 0.0)
-    return gait_events_from_kinematics(np.asarray(ik.index, dtype=float), pos[:, 0], pos[:, 1], pos[:, 2], up=up)
+    up = -g / np.linalg.norm(g) if np.linalg.norm(g) > 0 else np.array([0.0, 1.0, 0.0])
+    heel = {s: pos[:, 2 * i] for i, s in enumerate(sides)}
+    toe = {s: pos[:, 2 * i + 1] for i, s in enumerate(sides)}
+    return FootKinematics(np.asarray(ik.index, dtype=float), heel, toe, pos[:, -1], up, bodies)
+
+
+def feet_for_checks(model_path, ik_path, layout=None) -> tuple[FootKinematics | None, str]:
+    """:func:`foot_kinematics` for the checks of ground-force events, or ``(None, why)`` when the
+    model's feet cannot be told (e.g. a foot of one body): the checks are then skipped."""
+    try:
+        return foot_kinematics(model_path, ik_path, layout), ""
+    except DataMismatchError as exc:
+        return None, f"the force's foot and events are not checked against the kinematics: {exc}"
+
+
+def kinematic_gait_events(model_path, ik_path, side: str, layout=None) -> GaitEvents:
+    """:func:`gait_events_from_kinematics` of one leg from a model and its IK file (or its
+    :class:`~musclemetab.io.StorageTable`, already read): the origins of the side's heel and
+    toe bodies and of the root body, computed by OpenSim in the worker process."""
+    return foot_kinematics(model_path, ik_path, layout, sides=(side,)).events(side)
+
+
+# --- which foot a ground force belongs to; plausibility of the events
+
+#: A force belongs to a foot when, at contact, its centre of pressure lies at most this far
+#: (median horizontal distance, m) from the segment joining the foot's heel and toe body
+#: origins, and the other foot is at least twice as far. Walking puts the other foot
+#: 0.3-0.6 m away (step length, step width); the foot's own distance is a few cm.
+FOOT_DISTANCE_M = 0.15
+#: Heel strikes of the ground forces and of the kinematics (Zeni et al. 2008) further apart
+#: than this (s) are reported. The coordinate rule precedes force contact by 10-30 ms
+#: (gait2392 subject: 19-26 ms).
+HEEL_STRIKE_TOLERANCE_S = 0.05
+#: Gait-cycle durations (s) accepted as walking: stride times of adults range from about
+#: 0.9 s (fast) to 1.6 s (very slow); a shorter or longer "cycle" is a missed or an extra
+#: heel strike. Override per solve (``--cycle-duration MIN:MAX``).
+WALKING_CYCLE_DURATION_S = (0.8, 2.0)
+
+_SIDE = {"r": "right", "l": "left"}
+
+
+@dataclass(frozen=True)
+class ForceFoot:
+    """Which foot a ground force belongs to: ``side`` ('r', 'l' or None when the data do not
+    tell), from the median horizontal distance (m) of its centre of pressure at contact to
+    each foot (``distance_m``), over ``samples`` contact samples."""
+
+    side: str | None
+    distance_m: dict
+    samples: int
+
+    def describe(self) -> str:
+        """``"0.025 m from the right foot, 0.463 m from the left"`` (median at contact)."""
+        parts = [f"{d:.3f} m from the {_SIDE[s]} foot" for s, d in self.distance_m.items()]
+        return ", ".join(parts) + f" (median over {self.samples} contact samples)" if parts else "no contact sample"
+
+
+def _segment_distance(p, a, b, up):
+    """Horizontal distance of points ``p`` to the segments ``a``-``b`` (all ``(N, 3)``)."""
+    def flat(v):
+        return v - np.outer(v @ up, up)
+
+    ab, ap = flat(b - a), flat(p - a)
+    den = np.einsum("ij,ij->i", ab, ab)
+    u = np.clip(np.einsum("ij,ij->i", ap, ab) / np.where(den > 0, den, 1.0), 0.0, 1.0)
+    return np.linalg.norm(ap - u[:, None] * ab, axis=1)
+
+
+def foot_of_force(time_s, vertical_force_N, cop_m, feet: FootKinematics,
+                  contact_fraction: float = 0.1) -> ForceFoot:
+    """The foot under a ground force, from its centre of pressure (CoP).
+
+    At the samples where the vertical force exceeds ``contact_fraction`` of its peak (the
+    CoP is unreliable at small forces) and that lie within the kinematics, the horizontal
+    distance of the CoP from each foot's heel-toe segment (body origins interpolated to the
+    force's times) is taken; the medians decide (:data:`FOOT_DISTANCE_M`). ``cop_m``:
+    ``(T, 3)`` in the ground frame (m).
+    """
+    t = as_time(time_s, "time_s")
+    f = as_signal(vertical_force_N, t, "vertical_force_N")
+    cop = np.asarray(cop_m, dtype=float).reshape(t.size, 3)
+    tk = feet.time_s
+    on = (f > contact_fraction * max(float(np.max(f)), 0.0)) & (t >= tk[0]) & (t <= tk[-1]) & (f > 0)
+    on &= np.all(np.isfinite(cop), axis=1)
+    dist = {}
+    for s in feet.heel_m:
+        a, b = (np.stack([np.interp(t[on], tk, x[:, i]) for i in range(3)], axis=1)
+                for x in (feet.heel_m[s], feet.toe_m[s]))
+        if on.any():
+            dist[s] = float(np.median(_segment_distance(cop[on], a, b, feet.up)))
+    side = None
+    if dist:
+        near = min(dist, key=dist.get)
+        others = [d for s, d in dist.items() if s != near]
+        if dist[near] <= FOOT_DISTANCE_M and all(d >= 2 * dist[near] for d in others):
+            side = near
+    return ForceFoot(side, dist, int(on.sum()))
+
+
+def force_columns(columns) -> dict:
+    """The force sets of a ground-force table: ``{vertical column: centre-of-pressure columns
+    (x, y, z) or None}``. OpenSim's naming: force ``<P>vx, <P>vy, <P>vz`` and point
+    ``<P'>px, <P'>py, <P'>pz`` with ``<P'>`` = ``<P>`` (e.g. ``ground_force_``, ``1_ground_force_``)."""
+    cols = set(columns)
+    out = {}
+    for c in columns:
+        if c.endswith("vy") and {c[:-1] + "x", c[:-1] + "z"} <= cols:
+            p = [c[:-2] + "p" + a for a in "xyz"]
+            out[c] = p if set(p) <= cols else None
+    return out
+
+
+def grf_of_side(path: str | os.PathLike, side: str, column: str | None = None, *,
+                feet: FootKinematics | None = None):
+    """The vertical ground force of one foot, its foot found from the data when the kinematics
+    are given.
+
+    Without ``feet``: :func:`read_grf` (the column name rule, or ``column``). With ``feet``,
+    every force set of the file with a centre of pressure is assigned to the foot it lies under
+    (:func:`foot_of_force`); the column name is not trusted:
+
+    * ``column`` given and under the other foot: :class:`DataMismatchError` naming what was found;
+    * the name rule's column under the other foot while exactly one column lies under this
+      foot: that column is used, with a note saying so;
+    * no column under this foot while the name rule's one lies under the other:
+      :class:`DataMismatchError`.
+
+    Returns ``(series, notes, found)``: the force (index time, s; name = the column), the notes
+    (warnings for the record) and the :class:`ForceFoot` of the column used (None when not checked).
+    """
+    from .io import read_storage
+
+    try:
+        named = read_grf(path, column, side=side)
+    except MissingColumnError:
+        if feet is None or column is not None:
+            raise
+        named = None
+    if feet is None:
+        return named, [], None
+    df = read_storage(path)
+    t = df.index.to_numpy(dtype=float)
+    found = {c: foot_of_force(t, df[c].to_numpy(dtype=float), df[p].to_numpy(dtype=float), feet)
+             for c, p in force_columns(list(df.columns)).items() if p is not None}
+    mine = [c for c, ff in found.items() if ff.side == side]
+    other = "l" if side == "r" else "r"
+    if named is not None and named.name in found:
+        ff = found[named.name]
+        if ff.side in (side, None):
+            return named, [], ff
+        where = (f"; the {_SIDE[side]} foot's force is column {mine[0]} ({found[mine[0]].describe()})"
+                 if len(mine) == 1 else f"; no column of the file lies under the {_SIDE[side]} foot")
+        msg = (f"{path}: column {named.name} is not the {_SIDE[side]} foot's force: at contact its centre of "
+               f"pressure lies under the {_SIDE[other]} foot ({ff.describe()}){where}")
+        if column is not None or len(mine) != 1:
+            raise DataMismatchError(
+                msg + f"; give --grf-column of the {_SIDE[side]} foot's force or solve --side {other}")
+        return df[mine[0]].rename(mine[0]), [msg + f": {mine[0]} is used"], found[mine[0]]
+    if named is None:
+        if len(mine) == 1:
+            return df[mine[0]].rename(mine[0]), [], found[mine[0]]
+        raise MissingColumnError(
+            f"{path}: no column name marks the {_SIDE[side]} foot's force and "
+            f"{len(mine)} force columns lie under that foot ("
+            + "; ".join(f"{c}: {ff.describe()}" for c, ff in found.items()) + "); pass --grf-column")
+    return named, [], None
+
+
+def check_applied_feet(loads, layout, feet: FootKinematics) -> list[str]:
+    """The ExternalForces whose ``applied_to_body`` contradicts their centre of pressure: messages
+    for the record (empty when they agree or cannot be checked).
+
+    Each force with a point identifier, expressed in the ground, is assigned to the foot its
+    centre of pressure lies under at contact (:func:`foot_of_force`, ``feet`` the
+    :class:`FootKinematics` of both feet); a force applied to a body of the other leg is
+    reported with what was found. ``loads``: a :class:`musclemetab.external_loads.ExternalLoads`.
+    """
+    from .io import read_storage
+    from .layout import SIDE_NAMES
+
+    g = np.asarray(layout.gravity, dtype=float)
+    up = -g / np.linalg.norm(g)
+    table = read_storage(loads.datafile)
+    t = table.index.to_numpy(dtype=float)
+    notes = []
+    for f in loads.forces:
+        body_side = layout.body_side(f.body)
+        if (not f.point_identifier or body_side not in SIDE_NAMES
+                or {f.force_expressed_in_body, f.point_expressed_in_body} - {layout.ground, "ground"}):
+            continue
+        vertical = table[[f"{f.force_identifier}{a}" for a in "xyz"]].to_numpy(dtype=float) @ up
+        cop = table[[f"{f.point_identifier}{a}" for a in "xyz"]].to_numpy(dtype=float)
+        found = foot_of_force(t, vertical, cop, feet)
+        if found.side is not None and found.side != body_side:
+            notes.append(
+                f"{loads.path}: ExternalForce '{f.name}' is applied to {f.body} ({SIDE_NAMES[body_side]} leg) but its "
+                f"centre of pressure lies under the {SIDE_NAMES[found.side]} foot ({found.describe()}); check "
+                "applied_to_body and the force identifiers")
+    return notes
+
+
+def check_against_kinematics(cycle: GaitCycle, events: GaitEvents, tolerance_s: float = HEEL_STRIKE_TOLERANCE_S,
+                             span_s: tuple[float, float] | None = None) -> list[str]:
+    """Disagreements (messages) between the heel strikes of a force-defined ``cycle`` and the
+    kinematic heel strikes ``events`` of the same leg: each of the cycle's two heel strikes
+    that lies inside ``span_s`` (the kinematics' time span) must have a kinematic heel strike
+    within ``tolerance_s`` (:data:`HEEL_STRIKE_TOLERANCE_S`)."""
+    hs = np.asarray(events.heel_strikes_s, dtype=float)
+    notes = []
+    for what, x in (("initial contact", cycle.start_s), ("next initial contact", cycle.end_s)):
+        if span_s is not None and not (span_s[0] <= x <= span_s[1]):
+            continue
+        if hs.size == 0:
+            notes.append(f"the ground forces' {what} at {x:.3f} s has no kinematic heel strike (heel furthest ahead "
+                         "of the pelvis) to compare with: the kinematics show none")
+            continue
+        near = float(hs[np.argmin(np.abs(hs - x))])
+        if abs(near - x) > tolerance_s:
+            notes.append(
+                f"the ground forces' {what} at {x:.3f} s and the nearest kinematic heel strike at {near:.3f} s differ "
+                f"by {1000 * abs(near - x):.0f} ms, more than {1000 * tolerance_s:.0f} ms: check which foot the force "
+                "belongs to and the time axes of the two files")
+    return notes
+
+
+def check_cycle_duration(cycle: GaitCycle, duration_s=WALKING_CYCLE_DURATION_S, where: str = "") -> None:
+    """Raise :class:`DataMismatchError` unless the cycle lasts ``duration_s[0]`` to ``duration_s[1]``
+    seconds (:data:`WALKING_CYCLE_DURATION_S`); ``duration_s=None`` accepts any duration."""
+    if duration_s is None:
+        return
+    lo, hi = (float(x) for x in duration_s)
+    if not lo <= cycle.duration_s <= hi:
+        raise DataMismatchError(
+            f"{where + ': ' if where else ''}the gait cycle from the heel strike at {cycle.start_s:.3f} s (toe-off "
+            f"{cycle.toe_off_s:.3f} s) to the next at {cycle.end_s:.3f} s lasts {cycle.duration_s:.3f} s, outside "
+            f"{lo:g}-{hi:g} s, the range of walking: a heel strike is missed or an extra one found (another plate, "
+            "the other foot). Check the events, give --window T0:T1, or widen the range with --cycle-duration MIN:MAX"
+        )
 
 
 # --- integrals over (a part of) the gait cycle: shared by the per-muscle, phase and group analyses

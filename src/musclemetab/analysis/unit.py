@@ -116,9 +116,9 @@ def analyse_metabolics(
         the eleven sum to 100).
 
         ``timeseries`` (pandas.DataFrame, long): ``time_s``, ``cycle_pct``, ``model``,
-        ``series``, ``value_W`` with ``series`` = ``whole_body`` (the leg's summed muscle
+        ``series``, ``value_W`` with ``series`` = ``leg_muscles`` (the leg's summed muscle
         rate without basal heat) and ``group/<G>`` for the ten groups and
-        ``group/other``, which sum to ``whole_body`` at every time.
+        ``group/other``, which sum to ``leg_muscles`` at every time.
     """
     import pandas as pd
 
@@ -172,7 +172,7 @@ def analyse_metabolics(
         row.update({f"share_{name}_pct": shares[name] for name in GROUPS})
         row["share_other_pct"] = shares[OTHER]
         rows.append(row)
-        names = ["whole_body"] + [f"group/{name}" for name in GROUPS_WITH_OTHER]
+        names = ["leg_muscles"] + [f"group/{name}" for name in GROUPS_WITH_OTHER]
         values = np.vstack([leg[None, :], g])
         frames.append(pd.DataFrame({
             "time_s": np.tile(t, len(names)),
@@ -216,8 +216,9 @@ def _metabolics_of(solution, body_mass_kg, height_m, models, metabolics_options)
         return solution
     from ..metabolics.solution import metabolics_from_solution
 
-    if body_mass_kg is None or height_m is None:
-        raise OptionError("give the body mass and height to evaluate the metabolic rates of a solution")
+    if body_mass_kg is None:
+        raise OptionError("give the body mass (and the height, or None for muscle masses from the model) to "
+                          "evaluate the metabolic rates of a solution")
     return metabolics_from_solution(solution, body_mass_kg, height_m, models=models, **metabolics_options)
 
 
@@ -226,7 +227,7 @@ def analyse_solution_folder(
     geometry,
     cycle: GaitCycle,
     body_mass_kg: float,
-    height_m: float,
+    height_m: float | None,
     models="all",
     *,
     filter_cutoff_hz: float | None = 6.0,
@@ -257,7 +258,9 @@ def analyse_solution_folder(
 class TrialAnalysis(NamedTuple):
     """What :func:`analyse` finds for one leg of a solved trial (the tables :func:`write_analysis` writes).
 
-    ``whole_body``: :meth:`SolutionMetabolics.whole_body_table` (one row per model);
+    ``whole_body``: :meth:`SolutionMetabolics.whole_body_table` (one row per model; for a leg
+    evaluated with ``legs=1``, to be added to the other, its :meth:`~SolutionMetabolics.leg_table`:
+    no whole-body figure of one leg);
     ``summary`` and ``timeseries``: :class:`MetabolicAnalysis`; ``per_muscle``:
     :func:`musclemetab.metabolics.per_muscle.per_muscle_table`; ``metabolics``: the metabolic
     result analysed; ``side``: the leg.
@@ -319,23 +322,25 @@ def analyse(
     geometry = compute_geometry(model, ik, side=side, muscles=list(result.muscles))
     tg, r = filtered_moment_arms(geometry)
     analysis = analyse_metabolics(result, tg, r, list(geometry.dofs), list(geometry.muscles), cycle)
-    return TrialAnalysis(result.whole_body_table(), analysis.summary, analysis.timeseries,
-                         per_muscle_table(result, cycle, side=side), result, side)
+    one_leg = any(wb.legs != 2 for wb in result.whole_body.values())
+    return TrialAnalysis(result.leg_table() if one_leg else result.whole_body_table(), analysis.summary,
+                         analysis.timeseries, per_muscle_table(result, cycle, side=side), result, side)
 
 
 def write_analysis(analysis: TrialAnalysis, out_dir: str | os.PathLike) -> dict:
     """Write the tables of :func:`analyse` into ``out_dir``, together
-    (:func:`musclemetab.io.atomic_directory`): ``whole_body.csv``, ``analysis.csv``,
-    ``timeseries.csv``, ``per_muscle.csv`` and the key of the group abbreviations,
-    ``muscle_groups.csv``. Returns the paths by file name."""
+    (:func:`musclemetab.io.atomic_directory`): ``whole_body.csv`` (``leg_muscles.csv`` for a
+    leg evaluated with ``legs=1``), ``analysis.csv``, ``timeseries.csv``, ``per_muscle.csv`` and
+    the key of the group abbreviations, ``muscle_groups.csv``. Returns the paths by file name."""
     from pathlib import Path
 
     from ..io import atomic_directory
-    from ..metabolics.solution import WHOLE_BODY_CSV
+    from ..metabolics.solution import LEG_CSV, WHOLE_BODY_CSV
     from .groups import group_key_table
     from ..metabolics.per_muscle import PER_MUSCLE_FILE
 
-    tables = {WHOLE_BODY_CSV: analysis.whole_body, ANALYSIS_FILE: analysis.summary,
+    whole = WHOLE_BODY_CSV if "whole_body_W_per_kg" in analysis.whole_body.columns else LEG_CSV
+    tables = {whole: analysis.whole_body, ANALYSIS_FILE: analysis.summary,
               TIMESERIES_FILE: analysis.timeseries, PER_MUSCLE_FILE: analysis.per_muscle}
     with atomic_directory(out_dir) as tmp:
         for name, table in tables.items():

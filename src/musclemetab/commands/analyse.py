@@ -81,7 +81,7 @@ def _cycle(args, side: str):
         if len(vals) != 3:
             raise OptionError(f"--cycle must be three times in seconds, START,TOE_OFF,END, not '{args.cycle}'")
         return GaitCycle(*vals), "given on the command line"
-    return cycle_of_trial(args.ik, grf=args.grf, id_file=args.id, side=side)
+    return cycle_of_trial(args.ik, grf=args.grf, id_file=args.id, side=side, model=args.model)
 
 
 def run(args) -> int:
@@ -105,10 +105,10 @@ def run(args) -> int:
     recorded = read_metabolics_settings(args.metabolics) if args.metabolics else {}
     try:
         mass = args.mass if args.mass is not None else recorded["body_mass_kg"]
-        height = args.height if args.height is not None else recorded["height_m"]
+        height = args.height if args.height is not None else recorded.get("height_m")
     except KeyError:
-        raise OptionError("give --mass and --height (or --metabolics, the folder written by "
-                          "'musclemetab metabolics', which records them)") from None
+        raise OptionError("give --mass (and --height, or none for muscle masses from the model), or --metabolics, "
+                          "the folder written by 'musclemetab metabolics', which records them") from None
     models = args.models or recorded.get("models") or "all"
     for key, rec in (("basal", "basal_rule"), ("basal_coefficient", "basal_coefficient"),
                      ("basal_exponent", "basal_exponent")):
@@ -139,7 +139,7 @@ def run(args) -> int:
         merged = result.whole_body.merge(result.summary, on="model")
         for row in merged.itertuples():
             top = per[per.model == row.model].nsmallest(3, "rank")["muscle"].tolist()
-            print(f"  {row.model}: {row.mean_W_per_kg:.2f} W/kg, gross CoT {row.gross_cost_of_transport_J_per_kg_per_m:.2f} "
+            print(f"  {row.model}: {row.whole_body_W_per_kg:.2f} W/kg, gross CoT {row.gross_cost_of_transport_J_per_kg_per_m:.2f} "
                   f"J/(kg m), swing {row.swing_energy_share_pct:.1f} % of the leg's energy, "
                   f"PF {row.share_PF_pct:.1f} %; largest: {', '.join(top)}")
     if jobs[0][0] is not None:  # the sides' parent: one table of every side

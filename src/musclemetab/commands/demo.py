@@ -34,7 +34,7 @@ def run(args) -> int:
     if result.interrupted:
         return exit_status(result)
     if not result.failed and result.results is not None and len(result.results):
-        table = result.results.pivot_table(index="model", columns=["workflow", "trial"], values="mean_W_per_kg")
+        table = result.results.pivot_table(index="model", columns=["workflow", "trial"], values="whole_body_W_per_kg")
         trials = list(dict.fromkeys(result.results.sort_values("speed_m_per_s")["trial"]))  # by speed
         table = table.reindex(columns=sorted(table.columns, key=lambda c: (c[0], trials.index(c[1]))))
         print("\nwhole-body metabolic rate, W/kg (two legs + 1.2 W/kg basal):")

@@ -4,7 +4,9 @@ coupled as in EMG-TEN).
 
 Writes ``DIR/<trial>/`` (the solutions with the estimates), ``DIR/parameters.json``,
 ``DIR/<model>_personalised.osim`` and, with ``--validate``, ``DIR/validation/<trial>/``: the
-effort problem re-solved with the estimated parameters.
+effort problem re-solved with the estimated parameters. Prints the estimates with their doubts
+(factors on bounds, standard errors and correlated pairs) and the validation fit
+(``docs/problem.md``, "Doubts of the estimates").
 """
 
 from __future__ import annotations
@@ -40,8 +42,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "weight of the EMG tracking cost (default 10; also --weights emg=W)")
     p.add_argument("--estimate", required=True, nargs="+", metavar="KIND=MUSCLE[,MUSCLE...]",
                    help="kinds: tendon_stiffness, optimal_fiber_length, tendon_slack_length")
-    p.add_argument("--couple", nargs="+", default=[], metavar="MUSCLE,MUSCLE[,...]",
-                   help="muscles sharing one factor of every estimated kind")
+    p.add_argument("--couple", nargs="+", default=[], metavar="[KIND:]MUSCLE,MUSCLE[,...]",
+                   help="muscles sharing one factor of every estimated kind, or with KIND: of that kind alone "
+                   "(e.g. tendon_stiffness:soleus_r,gasmed_r; emg_scale:vaslat_r,vasmed_r replaces the EMG-TEN "
+                   "groups of the EMG scale factors)")
     p.add_argument("--bounds", nargs="+", default=[], metavar="KIND=LOW:HIGH",
                    help="bounds of the factors (default tendon_stiffness 0.1:2, lengths 0.5:1.5, emg_scale "
                    "0.05:2.5; emg_scale=1:1 takes the EMG as it is)")
@@ -91,23 +95,33 @@ def _bounds(text: str) -> tuple[float, float]:
 
 def run(args) -> int:
     """Run ``musclemetab estimate`` with parsed arguments: the options read, then
-    :func:`~musclemetab.redundancy.run.estimate_files`; prints one line."""
+    :func:`~musclemetab.redundancy.run.estimate_files`; prints one line, then one per doubt
+    of the estimate and per validated trial and kind of measurement (:func:`doubt_lines`)."""
+    from ..redundancy.estimate import parse_coupling
     from ..redundancy.run import estimate_files
+    from .options import emg_scale_bounds
 
     us_files, emg_files = args.ultrasound or [], getattr(args, "emg", None) or []
     emg_options = [o for o, v in (("--emg-mapping", args.emg_mapping), ("--emg-mode", args.emg_mode),
-                                  ("--emg-weight", args.emg_weight)) if v is not None]
+                                  ("--emg-weight", args.emg_weight), ("--emg-scale-bounds", args.emg_scale_bounds))
+                   if v is not None]
     if emg_options and not emg_files:
         raise OptionError(f"{', '.join(emg_options)} need EMG: give --emg files, or drop them")
     weights = parse_assignments(args.weights.split(",") if args.weights else [], "--weights", float)
     if args.emg_weight is not None:
         weights["emg"] = args.emg_weight
+    bounds = parse_assignments(args.bounds, "--bounds", _bounds)
+    scale_bounds = emg_scale_bounds(args)
+    if scale_bounds is not None:
+        if "emg_scale" in bounds:
+            raise OptionError("--emg-scale-bounds and --bounds emg_scale=... both set the EMG scale bounds; give one")
+        bounds["emg_scale"] = scale_bounds
     result = estimate_files(
         args.model, args.ik, args.id, args.out,
         estimate=parse_assignments(args.estimate, "--estimate", lambda v: [m for m in v.split(",") if m]),
         ultrasound=us_files, emg=emg_files, labels=args.labels,
-        couple=[[m for m in g.split(",") if m] for g in args.couple],
-        bounds=parse_assignments(args.bounds, "--bounds", _bounds), weights=weights, workflow=args.workflow,
+        couple=[parse_coupling(g) for g in args.couple],
+        bounds=bounds, weights=weights, workflow=args.workflow,
         side=args.side, dofs=args.dofs, emg_mode=args.emg_mode, emg_mapping=args.emg_mapping,
         emg_tolerance=args.emg_tolerance, passive=args.passive, max_iter=args.max_iter, validate=args.validate,
         cache_dir=args.cache_dir,
@@ -123,6 +137,32 @@ def run(args) -> int:
             print(solution.record.pre_solve_diagnosis.table())
     print(f"estimate: {len(result.labels)} trial(s), {record.status} in {record.iterations} iterations; {values} -> "
           f"{args.out}")
+    for line in doubt_lines(result.document or {}):
+        print(line)
     return 0
+
+
+def doubt_lines(doc: dict) -> list[str]:
+    """The lines printed about the doubts and the validation fit recorded in ``parameters.json``."""
+    doubts, lines = doc.get("doubts") or {}, []
+    for b in doubts.get("on_bounds", []):
+        lines.append(f"  on its {b['side']} bound: {b['kind']} {b['muscle']} x{b['factor']:.4g} (bound {b['bound']:g})")
+    ident = doubts.get("identifiability")
+    if ident:
+        se = ident["standard_error"]
+        lines.append("  standard errors: " + ", ".join(
+            f"{p} x{ident['factor'][p]:.4g} +- {se[p]:.2g}" if se[p] is not None else f"{p} x{ident['factor'][p]:.4g} "
+            "(undetermined)" for p in ident["parameters"]))
+        for pair in ident["correlated_pairs"]:
+            lines.append(f"  correlated: {pair['parameters'][0]} / {pair['parameters'][1]} r {pair['correlation']:+.3f}")
+        if ident["near_singular"]:
+            lines.append(f"  reduced Hessian near singular (reciprocal condition {ident['reduced_hessian_rcond']:.2g})")
+    for trial, fit in (doc.get("validation") or {}).items():
+        for kind, by_muscle in fit.items():
+            unit = "mm" if kind == "fiber_length" else ""
+            lines.append(f"  validation {trial} {kind.replace('_', ' ')}: " + ", ".join(
+                f"{m} RMS {v['rms_mm' if unit else 'rms']:.3g}{(' ' + unit) if unit else ''} r {v['r']:.2f}"
+                for m, v in by_muscle.items()))
+    return lines
 
 

@@ -1,6 +1,6 @@
 """``musclemetab metabolics``: metabolic rates of every muscle of a solver solution.
 
-    musclemetab metabolics --solution DIR|PARENT --model M.osim --mass KG --height M
+    musclemetab metabolics --solution DIR|PARENT --model M.osim --mass KG [--height M]
                            [--models all|UM10,BH04,...|all,LW05,MA68] [--basal body|muscle|none]
                            [--basal-coefficient 1.2] [--basal-exponent 1]
                            [--speed M_PER_S] --out DIR
@@ -47,7 +47,10 @@ def add_parser(subparsers) -> None:
         "name (default: the values recorded in the solution's summary.json)",
     )
     p.add_argument("--mass", required=True, type=float, metavar="KG", help="body mass (kg)")
-    p.add_argument("--height", required=True, type=float, metavar="M", help="body height (m)")
+    p.add_argument("--height", type=float, metavar="M",
+                   help="body height (m), for the muscle masses by the volume rule; without it each muscle's mass "
+                   "comes from the model, F0 / specific tension x density x lMo (as OpenSim's probes), and the "
+                   "outputs say so (muscle_mass_rule)")
     p.add_argument(
         "--models", default="all", metavar="LIST",
         help=f"'all' (default: the study's {', '.join(MODELS)}) or a comma-separated list of these and "
@@ -113,6 +116,9 @@ def run(args) -> int:
         muscle_properties=args.muscle_properties, strict=args.strict,
     )
     files = write_legs_metabolics(results, args.out)
+    if args.height is None:
+        print("musclemetab: note: no --height: muscle masses from the model (F0 / specific tension x density x lMo)",
+              file=sys.stderr)
     if len(results) == 1:
         (side, result), = results.items()
         means = ", ".join(f"{m} {result.whole_body[m].mean_W_per_kg:.2f}" for m in result.models)
@@ -128,7 +134,8 @@ def run(args) -> int:
     out = files["whole_body_csv"].parent
     means = ", ".join(f"{m} {v:.2f}" for m, v in add_legs(results).items())
     print(f"metabolics: legs {' + '.join(results)} added (each over its own cycle) -> {out}/whole_body.csv and "
-          f"{', '.join(f'{out}/{s}' for s in results)}; whole body (W/kg, basal {args.basal}): {means}")
+          f"{', '.join(f'{out}/{s}' for s in results)} (each leg's muscles, no basal); whole body (W/kg, basal "
+          f"{args.basal}): {means}")
     return 0
 
 

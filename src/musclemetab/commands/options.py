@@ -6,7 +6,7 @@ from __future__ import annotations
 from ..errors import OptionError
 
 __all__ = ["BASAL_DEFAULTS", "add_basal_arguments", "check_basal_arguments", "check_speed", "check_body",
-           "add_study_arguments"]
+           "add_study_arguments", "add_emg_scale_bounds_argument", "emg_scale_bounds"]
 
 #: the basal options' defaults: the paper's 1.2 W per kg of body mass
 BASAL_DEFAULTS = {"basal": "body", "basal_coefficient": 1.2, "basal_exponent": 1.0}
@@ -75,3 +75,29 @@ def add_study_arguments(parser) -> None:
                         help="parallel processes (default: the number of CPUs); 1 runs in this process")
     parser.add_argument("--force", action="store_true", help="run every unit again, even those up to date")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def add_emg_scale_bounds_argument(parser) -> None:
+    """``--emg-scale-bounds LOW:HIGH``: the bounds of the EMG scale factors of the commands that
+    estimate them (``solve`` with EMG, ``estimate``); :func:`emg_scale_bounds` reads it."""
+    parser.add_argument("--emg-scale-bounds", metavar="LOW:HIGH",
+                        help="with --emg: bounds of the EMG scale factors (default 0.05:2.5, EMG-TEN's; the "
+                        "MuscleRedundancySolver uses 0.01:5; 1:1 takes the EMG as it is)")
+
+
+def emg_scale_bounds(args) -> tuple[float, float] | None:
+    """The ``--emg-scale-bounds`` of ``args`` as ``(low, high)``, or ``None`` when not given;
+    :class:`OptionError` naming the option when it is not ``LOW:HIGH`` with ``0 < LOW <= HIGH``."""
+    import math
+
+    text = getattr(args, "emg_scale_bounds", None)
+    if text is None:
+        return None
+    lo, sep, hi = str(text).partition(":")
+    try:
+        bounds = (float(lo), float(hi)) if sep else None
+    except ValueError:
+        bounds = None
+    if bounds is None or not all(math.isfinite(b) for b in bounds) or not 0 < bounds[0] <= bounds[1]:
+        raise OptionError(f"--emg-scale-bounds must be LOW:HIGH with 0 < LOW <= HIGH, e.g. 0.01:5, not {text!r}")
+    return bounds

@@ -68,6 +68,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="with --grf: the solved foot's vertical force column (default: the name rule)")
     p.add_argument("--grf-threshold", type=float, metavar="N",
                    help="with --cycle: contact when the vertical ground force exceeds N newtons (default 20)")
+    p.add_argument("--cycle-duration", metavar="MIN:MAX",
+                   help="with --cycle: the accepted gait-cycle durations in s (default 0.8:2.0, walking); a cycle "
+                   "outside is refused, naming its events")
     p.add_argument("--side", default="r", choices=("r", "l", "both"),
                    help="leg to solve (default r); both: two independent problems written to DIR/r and DIR/l")
     p.add_argument("--workers", type=int, default=1, metavar="N",
@@ -166,11 +169,14 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def add_emg_goal_arguments(p, mode_help: str, weight_help: str) -> None:
-    """``--emg-mode``, ``--emg-tolerance`` and ``--emg-weight`` (``solve`` and ``estimate``)."""
+    """``--emg-mode``, ``--emg-tolerance``, ``--emg-weight`` and ``--emg-scale-bounds`` (``solve`` and ``estimate``)."""
+    from .options import add_emg_scale_bounds_argument
+
     p.add_argument("--emg-mode", choices=("constrained", "driven", "tracking"), help=mode_help)
     p.add_argument("--emg-tolerance", type=float, default=0.01,
                    help="with --emg-mode constrained: half-width of the EMG band (default 0.01)")
     p.add_argument("--emg-weight", type=float, help=weight_help)
+    add_emg_scale_bounds_argument(p)
 
 
 def run(args) -> int:
@@ -199,7 +205,8 @@ def run(args) -> int:
                               "without --emg; drop it or the EMG")
         return _emg_ten_command(args, ik, idf)
     extra = [o for o, attr in (("--emg-mapping", "emg_mapping"), ("--labels", "labels"), ("--emg-mode", "emg_mode"),
-                               ("--emg-weight", "emg_weight")) if getattr(args, attr, None) is not None]
+                               ("--emg-weight", "emg_weight"), ("--emg-scale-bounds", "emg_scale_bounds"))
+             if getattr(args, attr, None) is not None]
     if extra:
         raise OptionError(f"{', '.join(extra)} need{'s' if len(extra) == 1 else ''} EMG: give --emg files, or "
                           f"drop {'it' if len(extra) == 1 else 'them'}")
@@ -222,6 +229,9 @@ def run(args) -> int:
         raise OptionError("--dofs names one leg's DOFs; with --side both leave it out (each leg's DOFs are discovered)")
     window = parse_window(args.window) if args.window else None
     cycle = parse_cycle(args.cycle)
+    if args.cycle_duration and not args.cycle:
+        raise OptionError("--cycle-duration bounds the --cycle found from the events; give --cycle, or drop it")
+    cycle_duration = parse_window(args.cycle_duration, "--cycle-duration") if args.cycle_duration else None
     if args.mesh_frequency is not None and not args.mesh_frequency > 0:
         raise OptionError(f"--mesh-frequency must be positive, not {args.mesh_frequency}")
     options = _solver_options(args)
@@ -243,6 +253,7 @@ def run(args) -> int:
         args.model, args.ik, args.id, args.workflow, sides=sides, workers=args.workers,
         dofs=dofs, window=window, cycle=cycle, external_loads=args.external_loads, grf=args.grf,
         grf_column=args.grf_column, grf_threshold_N=args.grf_threshold,
+        **({"cycle_duration_s": cycle_duration} if cycle_duration else {}),
         mesh_frequency_hz=args.mesh_frequency,
         passive=args.passive, tendon_stiffness=kt, tendon_stiffness_file=args.parameters,
         options=options, cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, warm_start=warm,
@@ -397,11 +408,13 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
     from ..redundancy.run import emg_mappings_of_legs, solve_emg_ten
     from ..redundancy.ipopt import failure_advice
     from ..redundancy.workflows import parse_tendon_stiffness
+    from .options import emg_scale_bounds
 
     if not idf:
         raise OptionError("EMG problems need --id: one inverse-dynamics file per trial, in the order of --ik")
     wrong = [o for o, v in (("--external-loads", args.external_loads), ("--grf", args.grf),
                             ("--grf-column", args.grf_column), ("--grf-threshold", args.grf_threshold),
+                            ("--cycle-duration", getattr(args, "cycle_duration", None)),
                             ("--window", args.window),
                             ("--cycle", args.cycle))
              if v]
@@ -409,17 +422,18 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
         raise OptionError(f"{', '.join(wrong)} are for the single-trial solves without EMG; drop them for "
                           f"{'--workflow emg-ten' if args.workflow == 'emg-ten' else '--emg'}")
     mode = args.emg_mode or "constrained"
+    scale_bounds = {"emg_scale_bounds": b} if (b := emg_scale_bounds(args)) is not None else {}
     if args.workflow != "emg-ten":
         if args.parameters or args.warm_start:
             raise OptionError("--parameters and --warm-start cannot be used with an EMG-informed solve; give "
                               "--tendon-stiffness MUSCLE=KT,... instead of --parameters, and drop --warm-start")
         settings = replace(informed_settings(args.workflow, mode, args.emg_tolerance, args.emg_weight),
-                           fiber_dynamics=args.fiber_dynamics)
+                           fiber_dynamics=args.fiber_dynamics, **scale_bounds)
         return _informed_command(args, ik, idf, settings, parse_tendon_stiffness(args.tendon_stiffness)
                                  if args.tendon_stiffness else None)
     goals = EMG_TEN_GOALS if args.emg_weight is None else replace(EMG_TEN_GOALS, w_emg=args.emg_weight)
     settings = EmgTenSettings(goals=goals, emg_tolerance=args.emg_tolerance, emg_mode=mode,
-                              fiber_dynamics=args.fiber_dynamics)
+                              fiber_dynamics=args.fiber_dynamics, **scale_bounds)
     wrong = [o for o, v in (("--tendon-stiffness", args.tendon_stiffness), ("--parameters", args.parameters),
                             ("--warm-start", args.warm_start)) if v]
     if wrong:

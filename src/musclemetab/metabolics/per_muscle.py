@@ -2,25 +2,25 @@
 
 One row per model and muscle (``docs/analysis.md`` §6):
 
-``mean_W``
+``muscle_W``
     the muscle's cycle-average metabolic rate without basal heat (W), computed exactly as the
     whole-body figure averages the leg (trapezoidal integral over the kept solver nodes
     divided by the averaging duration), so that
-    ``legs * sum(mean_W) / body_mass + basal`` is the whole-body ``mean_W_per_kg`` under
-    the ``body`` basal rule, and ``legs * sum(mean_W + basal_heat_mean_W) / body_mass``
-    under the ``muscle`` rule;
-``mean_W_per_kg``
-    ``mean_W`` per kg of body mass (this leg's muscle only);
+    ``legs * sum(muscle_W) / body_mass + basal`` is the whole-body ``whole_body_W_per_kg``
+    under the ``body`` basal rule, and ``legs * sum(muscle_W + basal_heat_mean_W) / body_mass``
+    under the ``muscle`` rule, and ``sum(muscle_W)`` the leg's ``leg_muscles_W``;
+``muscle_W_per_kg``
+    ``muscle_W`` per kg of body mass (this muscle of one leg, no basal heat);
 ``energy_per_cycle_J``, ``stance_J``, ``swing_J``
     the muscle's energy (J, no basal heat) over the sampled part of the gait cycle and its
     stance (initial contact to toe-off) and swing parts (given a gait cycle; empty without);
 ``share_of_leg_pct``
-    the muscle's part of the leg's summed ``mean_W`` (%; the muscles of a leg sum to 100);
+    the muscle's part of the leg's summed ``muscle_W`` (%; the muscles of a leg sum to 100);
 ``work_mean_W``, ``activation_maintenance_heat_mean_W``, ``shortening_lengthening_heat_mean_W``
-    the components that add up to ``mean_W`` (each counted once: a model's finer split,
+    the components that add up to ``muscle_W`` (each counted once: a model's finer split,
     such as separate activation and maintenance heats, is not repeated here);
 ``basal_heat_mean_W``
-    the per-muscle basal heat (1.2 W/kg of muscle mass), apart and never inside ``mean_W``.
+    the per-muscle basal heat (1.2 W/kg of muscle mass), apart and never inside ``muscle_W``.
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ __all__ = ["PER_MUSCLE_FILE", "PER_MUSCLE_COLUMNS", "COMPONENT_COLUMNS", "per_mu
 PER_MUSCLE_FILE = "per_muscle.csv"
 
 #: The standard components of :class:`~musclemetab.metabolics.MetabolicRates` and their
-#: per-muscle column; the first three add up to ``mean_W``.
+#: per-muscle column; the first three add up to ``muscle_W``.
 COMPONENT_COLUMNS = {
     "work": "work_mean_W",
     "activation_maintenance": "activation_maintenance_heat_mean_W",
@@ -48,7 +48,7 @@ COMPONENT_COLUMNS = {
 
 #: Columns of :func:`per_muscle_table`, in order.
 PER_MUSCLE_COLUMNS = (
-    "model", "muscle", "side", "mean_W", "mean_W_per_kg", "energy_per_cycle_J", "share_of_leg_pct",
+    "model", "muscle", "side", "muscle_W", "muscle_W_per_kg", "energy_per_cycle_J", "share_of_leg_pct",
     "stance_J", "swing_J", *COMPONENT_COLUMNS.values(), "rank",
 )
 
@@ -70,7 +70,7 @@ def per_muscle_table(result, cycle: GaitCycle | None = None, *, side: str | None
         and their whole-body averages.
     cycle
         The gait cycle, for the stance/swing split and the energy per cycle; without it
-        those columns are empty (NaN) and ``energy_per_cycle_J`` is ``mean_W`` times the
+        those columns are empty (NaN) and ``energy_per_cycle_J`` is ``muscle_W`` times the
         averaging duration.
     side
         ``"r"`` or ``"l"`` for every row (default: the suffix of each muscle name, ``''``
@@ -82,7 +82,7 @@ def per_muscle_table(result, cycle: GaitCycle | None = None, *, side: str | None
     -------
     pandas.DataFrame
         One row per model and muscle with :data:`PER_MUSCLE_COLUMNS`; ``rank`` is 1 for the
-        muscle with the largest ``mean_W`` of each model.
+        muscle with the largest ``muscle_W`` of each model.
     """
     import pandas as pd
 
@@ -122,14 +122,14 @@ def per_muscle_table(result, cycle: GaitCycle | None = None, *, side: str | None
             "model": model,
             "muscle": list(result.muscles),
             "side": sides,
-            "mean_W": mean_w,
-            "mean_W_per_kg": mean_w / result.body_mass_kg,
+            "muscle_W": mean_w,
+            "muscle_W_per_kg": mean_w / result.body_mass_kg,
             "energy_per_cycle_J": energy,
             "share_of_leg_pct": 100.0 * mean_w / leg if leg != 0 else np.nan,
             "stance_J": stance,
             "swing_J": swing,
             **comps,
         })
-        df["rank"] = df["mean_W"].rank(ascending=False, method="first").astype(int)
+        df["rank"] = df["muscle_W"].rank(ascending=False, method="first").astype(int)
         frames.append(df)
     return pd.concat(frames, ignore_index=True)[list(PER_MUSCLE_COLUMNS)]

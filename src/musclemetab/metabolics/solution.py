@@ -19,18 +19,20 @@ Outputs of :func:`write_metabolics` in a folder:
 ``metabolics.sto``
     time (trimmed nodes) and one column ``<model>/<muscle>/<component>`` (W) per model,
     muscle and component (``work``, ``activation_maintenance``, ``shortening_lengthening``,
-    ``basal``, ``total``, and model extras). ``total`` includes the per-muscle basal heat
-    (1.2 W/kg of muscle mass) as the study's code computes it; ``total - basal`` is the
-    muscle's rate without basal heat.
+    ``basal``, ``total_no_basal``, and model extras). ``total_no_basal`` is the muscle's rate
+    without any basal heat (work + heats); ``basal`` is the per-muscle basal heat (1.2 W/kg of
+    muscle mass), apart: their sum is the rate with the per-muscle basal heat (the study's code).
 ``metabolics.parquet``
     the same values as a tidy table (Parquet, full precision): ``time``, ``model``,
     ``muscle``, ``component``, ``value_W``.
 ``whole_body.csv``
-    one row per model: ``model``, ``mean_W_per_kg`` (both legs, basal per the rule, by
-    default 1.2 W/kg of body mass), ``mean_W_per_kg_no_basal``, ``one_leg_mean_W``, then
-    ``basal_rule``, ``basal_W_per_kg`` (the basal heat added), ``duration_s`` and, when a speed is given,
-    ``gross_cost_of_transport_J_per_kg_per_m`` (with the basal heat of the rule) and
-    ``net_cost_of_transport_J_per_kg_per_m`` (without basal heat).
+    one row per model: ``model``, ``whole_body_W_per_kg`` (both legs, basal per the rule, by
+    default 1.2 W/kg of body mass), ``whole_body_no_basal_W_per_kg``, ``leg_muscles_W`` (one
+    leg, no basal), then ``basal_rule``, ``basal_W_per_kg`` (the basal heat added),
+    ``duration_s`` and, when a speed is given, ``gross_cost_of_transport_J_per_kg_per_m`` (with
+    the basal heat of the rule) and ``net_cost_of_transport_J_per_kg_per_m`` (without basal heat).
+    A leg evaluated for adding to the other (``legs=1``) writes ``leg_muscles.csv`` instead: its
+    muscles alone, no basal heat (:data:`LEG_CSV`).
 ``per_muscle.csv``
     one row per model and muscle: cycle-average rate, W/kg, energy per cycle, share of
     the leg, stance and swing energies (given a gait cycle), components, basal heat apart
@@ -72,12 +74,22 @@ __all__ = [
     "METABOLICS_STO",
     "METABOLICS_PARQUET",
     "WHOLE_BODY_CSV",
+    "LEG_CSV",
+    "MASS_RULE_MODEL",
+    "MASS_RULE_VOLUME",
+    "model_muscle_masses_kg",
+    "TOTAL_NO_BASAL",
 ]
 
 from ..redundancy.solution import SOLUTION_FILE, SUMMARY_FILE  # noqa: E402  (one definition of the format)
 METABOLICS_STO = "metabolics.sto"
 METABOLICS_PARQUET = "metabolics.parquet"
 WHOLE_BODY_CSV = "whole_body.csv"
+#: A leg's file when the legs are added (``legs=1``): its muscles alone, no basal heat.
+LEG_CSV = "leg_muscles.csv"
+#: The component of the files for the muscle's rate without basal heat (``MetabolicRates.total``
+#: holds the per-muscle basal heat; the files write the two apart).
+TOTAL_NO_BASAL = "total_no_basal"
 
 #: solution column quantity -> model argument
 _QUANTITIES = {
@@ -270,7 +282,7 @@ class SolutionMetabolics:
     slow_twitch_fraction: np.ndarray
     parameters: dict[str, np.ndarray]
     body_mass_kg: float
-    height_m: float
+    height_m: float | None
     basal_rule: str
     speed_m_per_s: float | None = None
     source: str = ""
@@ -280,11 +292,30 @@ class SolutionMetabolics:
     #: the solved leg ("r"/"l") when the solution recorded it
     side: str | None = None
 
+    @property
+    def muscle_mass_rule(self) -> str:
+        """How the muscle masses were found: :data:`MASS_RULE_VOLUME` (body mass and height) or
+        :data:`MASS_RULE_MODEL` (no height: the model's ``F0 / sigma * rho * lMo``)."""
+        return MASS_RULE_MODEL if self.height_m is None else MASS_RULE_VOLUME
+
+    def file_components(self, model: str) -> dict[str, np.ndarray]:
+        """The components written to the files, ``(muscles, time)`` arrays (W): those of
+        :meth:`MetabolicRates.components` with ``total`` (which holds the per-muscle basal heat)
+        replaced by :data:`TOTAL_NO_BASAL`, the rate without any basal heat."""
+        comps = {}
+        for c, arr in self.rates[model].components().items():
+            if c == "total":
+                comps[TOTAL_NO_BASAL] = np.asarray(self.rates[model].total_without_basal(), dtype=float)
+            else:
+                comps[c] = arr
+        return comps
+
     def columns(self) -> dict[str, np.ndarray]:
-        """``{"<model>/<muscle>/<component>": 1-D array (W)}`` in model, muscle, component order."""
+        """``{"<model>/<muscle>/<component>": 1-D array (W)}`` in model, muscle, component order
+        (components of :meth:`file_components`)."""
         out = {}
         for model in self.models:
-            comps = self.rates[model].components()
+            comps = self.file_components(model)
             for i, m in enumerate(self.muscles):
                 for c, arr in comps.items():
                     out[f"{model}/{m}/{c}"] = arr[i]
@@ -304,7 +335,7 @@ class SolutionMetabolics:
         t = self.time_s
         n_t = t.size
         for model in self.models:
-            comps = self.rates[model].components()
+            comps = self.file_components(model)
             names = list(comps)
             values = np.stack([comps[c] for c in names], axis=1)  # (M, C, T)
             n_m, n_c = values.shape[0], values.shape[1]
@@ -322,22 +353,27 @@ class SolutionMetabolics:
         return pd.concat(frames, ignore_index=True)
 
     def whole_body_table(self):
-        """One row per model: ``model``, ``mean_W_per_kg``, ``mean_W_per_kg_no_basal``,
-        ``one_leg_mean_W``, ``basal_rule``, ``basal_W_per_kg``, ``duration_s`` (and the gross and net costs of
-        transport when a speed was given)."""
+        """One row per model: ``model``, ``whole_body_W_per_kg``, ``whole_body_no_basal_W_per_kg``,
+        ``leg_muscles_W``, ``basal_rule``, ``basal_W_per_kg``, ``duration_s``, ``muscle_mass_rule``
+        (and the gross and net costs of transport when a speed was given). A leg evaluated for adding to the other
+        (``legs=1``) stands for no whole body: see :meth:`leg_table`."""
         import pandas as pd
 
+        if any(wb.legs != 2 for wb in self.whole_body.values()):
+            raise OptionError("a leg evaluated with legs=1 has no whole-body rate of its own: add the legs "
+                              "(add_legs, write_legs_metabolics) or use its leg_table()")
         rows = []
         for model in self.models:
             wb = self.whole_body[model]
             row = {
                 "model": model,
-                "mean_W_per_kg": wb.mean_W_per_kg,
-                "mean_W_per_kg_no_basal": wb.mean_W_per_kg_no_basal,
-                "one_leg_mean_W": wb.one_leg_mean_W,
+                "whole_body_W_per_kg": wb.mean_W_per_kg,
+                "whole_body_no_basal_W_per_kg": wb.mean_W_per_kg_no_basal,
+                "leg_muscles_W": wb.leg_no_basal_mean_W,
                 "basal_rule": wb.basal_rule,
                 "basal_W_per_kg": wb.basal_W_per_kg,
                 "duration_s": wb.duration_s,
+                "muscle_mass_rule": self.muscle_mass_rule,
             }
             if self.speed_m_per_s is not None:
                 row["gross_cost_of_transport_J_per_kg_per_m"] = wb.cost_of_transport_J_per_kg_per_m(self.speed_m_per_s)
@@ -346,11 +382,26 @@ class SolutionMetabolics:
             rows.append(row)
         return pd.DataFrame(rows)
 
+    def leg_table(self):
+        """One row per model of the solved leg's muscles alone (no basal heat): ``model``, ``side``,
+        ``leg_muscles_W``, ``leg_muscles_W_per_kg`` (per kg of body mass), ``duration_s``,
+        ``muscle_mass_rule``."""
+        import pandas as pd
+
+        return pd.DataFrame([{
+            "model": model,
+            "side": self.side or "",
+            "leg_muscles_W": self.whole_body[model].leg_no_basal_mean_W,
+            "leg_muscles_W_per_kg": self.whole_body[model].leg_no_basal_mean_W / self.body_mass_kg,
+            "duration_s": self.whole_body[model].duration_s,
+            "muscle_mass_rule": self.muscle_mass_rule,
+        } for model in self.models])
+
 
 def metabolics_from_solution(
     solution,
     body_mass_kg: float,
-    height_m: float,
+    height_m: float | None,
     *,
     models="all",
     muscle_parameters=None,
@@ -378,7 +429,9 @@ def metabolics_from_solution(
         rates (the recorded gait cycle and leg are honoured both ways).
     body_mass_kg, height_m
         The subject (muscle masses from the volume rule of :mod:`musclemetab.properties`;
-        whole-body rate per kg of body mass).
+        whole-body rate per kg of body mass). ``height_m=None``: every muscle's mass from the
+        model instead, ``F0 / sigma * rho * lMo`` (:func:`model_muscle_masses_kg`, the rule of
+        OpenSim's metabolic probes); the outputs say which rule was used (``muscle_mass_rule``).
     models
         ``"all"`` (the six study models), ``"UM10,BH04"``, ``"all,LW05,MA68"`` or a list.
     muscle_parameters
@@ -468,8 +521,17 @@ def metabolics_from_solution(
 
     overrides = (as_overrides(muscle_properties).with_column("mass_kg", muscle_masses_kg)
                  .with_column("slow_twitch_fraction", slow_twitch_fractions))
-    masses, fst = metabolic_properties(muscles, body_mass_kg, height_m, params["max_isometric_force_N"],
-                                       params["optimal_fiber_length_m"], overrides=overrides, strict=strict)
+    if height_m is None:
+        from ..properties import FALLBACK_SLOW_TWITCH_FRACTION, check_subject, slow_twitch_fraction
+
+        check_subject(float(body_mass_kg), 1.0)  # the body mass alone (1 m: any plausible height)
+        masses = model_muscle_masses_kg(muscles, params["max_isometric_force_N"], params["optimal_fiber_length_m"],
+                                        overrides)
+        fst = slow_twitch_fraction(muscles, FALLBACK_SLOW_TWITCH_FRACTION, overrides=overrides,
+                                   max_isometric_force_N=params["max_isometric_force_N"])
+    else:
+        masses, fst = metabolic_properties(muscles, body_mass_kg, height_m, params["max_isometric_force_N"],
+                                           params["optimal_fiber_length_m"], overrides=overrides, strict=strict)
 
     inputs = dict(states)
     inputs.update(params)
@@ -497,7 +559,7 @@ def metabolics_from_solution(
         slow_twitch_fraction=fst,
         parameters=params,
         body_mass_kg=float(body_mass_kg),
-        height_m=float(height_m),
+        height_m=None if height_m is None else float(height_m),
         basal_rule=basal,
         speed_m_per_s=None if speed_m_per_s is None else float(speed_m_per_s),
         source=sol.source,
@@ -505,6 +567,28 @@ def metabolics_from_solution(
         basal_exponent=float(basal_exponent),
         side=sol.side,
     )
+
+
+#: ``muscle_mass_rule`` of the outputs: masses from body mass and height (the anatomical volume rule).
+MASS_RULE_VOLUME = "volume (body mass, height)"
+#: ``muscle_mass_rule`` without a height: every mass from the model, ``F0 / sigma * rho * lMo``.
+MASS_RULE_MODEL = "model (F0 / specific tension x density x lMo)"
+
+
+def model_muscle_masses_kg(names, max_isometric_force_N, optimal_fiber_length_m, overrides=None) -> np.ndarray:
+    """Each muscle's mass (kg) from the model alone: ``F0 / sigma * rho * lMo``, the rule of
+    OpenSim's metabolic probes (``muscle mass = (F0 / specific tension) x density x lMo``), with
+    ``rho`` = 1059.7 kg/m^3 and ``sigma`` the muscle's specific tension of the anatomical muscle
+    table (0.6 MPa for a muscle it cannot place); override masses are used as given. Used when
+    no body height is given: the volume rule needs it."""
+    from ..properties import MUSCLE_DENSITY_KG_PER_M3, resolve_muscles
+
+    recs = resolve_muscles(list(names), max_isometric_force_N, overrides, warn=False)
+    f0 = np.asarray(max_isometric_force_N, dtype=float)
+    lmo = np.asarray(optimal_fiber_length_m, dtype=float)
+    return np.array([r.mass_kg_override if r.mass_kg_override is not None
+                     else f0[i] / r.specific_tension_Pa * MUSCLE_DENSITY_KG_PER_M3 * lmo[i]
+                     for i, r in enumerate(recs)])
 
 
 def write_metabolics(result: SolutionMetabolics, out_dir: str | os.PathLike, cycle=None) -> dict[str, Path]:
@@ -522,21 +606,25 @@ def write_metabolics(result: SolutionMetabolics, out_dir: str | os.PathLike, cyc
     comments = [
         f"models={','.join(result.models)}",
         f"body_mass_kg={result.body_mass_kg:g}",
-        f"height_m={result.height_m:g}",
+        *([] if result.height_m is None else [f"height_m={result.height_m:g}"]),
+        f"muscle_mass_rule={result.muscle_mass_rule}",
         f"basal_rule={result.basal_rule}",
         f"basal_coefficient={result.basal_rate_W_per_kg:g}",
         f"basal_exponent={result.basal_exponent:g}",
-        f"units=W; total includes the per-muscle basal heat ({result.basal_rate_W_per_kg:g} W/kg of muscle mass)",
+        f"units=W; total_no_basal is without basal heat, basal the per-muscle basal heat "
+        f"({result.basal_rate_W_per_kg:g} W/kg of muscle mass), apart",
     ]
     with atomic_directory(out_dir) as tmp:
         write_storage(tmp / METABOLICS_STO, result.to_dataframe(), name="musclemetab metabolic rates",
                       in_degrees=False, comments=comments)
         parquet = write_parquet(result.to_long(), tmp / METABOLICS_PARQUET)
-        result.whole_body_table().to_csv(tmp / WHOLE_BODY_CSV, index=False, float_format="%.10g")
+        one_leg = any(wb.legs != 2 for wb in result.whole_body.values())
+        table, name = (result.leg_table(), LEG_CSV) if one_leg else (result.whole_body_table(), WHOLE_BODY_CSV)
+        table.to_csv(tmp / name, index=False, float_format="%.10g")
         per_muscle_table(result, cycle).to_csv(tmp / PER_MUSCLE_FILE, index=False, float_format="%.10g")
     files = {
         "metabolics_sto": out_dir / METABOLICS_STO,
-        "whole_body_csv": out_dir / WHOLE_BODY_CSV,
+        ("leg_muscles_csv" if one_leg else "whole_body_csv"): out_dir / name,
         "per_muscle_csv": out_dir / PER_MUSCLE_FILE,
     }
     if parquet is not None:
@@ -604,7 +692,7 @@ def _legs_of(solutions) -> dict:
     return {side or "": solutions}
 
 
-def metabolics_from_legs(solutions, body_mass_kg: float, height_m: float, **options) -> dict[str, SolutionMetabolics]:
+def metabolics_from_legs(solutions, body_mass_kg: float, height_m: float | None, **options) -> dict[str, SolutionMetabolics]:
     """Metabolic rates of the legs of a trial: ``{side: SolutionMetabolics}``.
 
     ``solutions`` is one solution (folder, :class:`musclemetab.redundancy.Solution` or
@@ -639,10 +727,14 @@ def metabolics_from_legs(solutions, body_mass_kg: float, height_m: float, **opti
 def write_legs_metabolics(results: Mapping[str, SolutionMetabolics], out_dir: str | os.PathLike,
                           cycle=None) -> dict[str, Path]:
     """Write the results of :func:`metabolics_from_legs`: one leg as :func:`write_metabolics`
-    into ``out_dir``; two legs each into ``out_dir/<side>`` and, in ``out_dir/whole_body.csv``,
-    one row per model of the legs added (:func:`add_legs`): ``model``, ``legs`` (``r+l``),
-    ``mean_W_per_kg``, ``<side>_leg_mean_W``. Returns the files written (by name)."""
-    from ..io import atomic_write_text
+    into ``out_dir``; two legs each into ``out_dir/<side>`` (its muscles alone, no basal heat:
+    ``leg_muscles.csv``, no whole-body file) and, in ``out_dir/whole_body.csv``, one row per
+    model of the legs added (:func:`add_legs`): ``model``, ``legs`` (``r+l``),
+    ``whole_body_W_per_kg``, ``whole_body_no_basal_W_per_kg``, ``basal_rule``, ``basal_W_per_kg``,
+    ``muscle_mass_rule`` and ``<side>_leg_muscles_W`` (each leg, no basal). Returns the files written (by name)."""
+    import pandas as pd
+
+    from ..io import atomic_path
 
     out_dir = Path(out_dir)
     if len(results) == 1:
@@ -652,11 +744,17 @@ def write_legs_metabolics(results: Mapping[str, SolutionMetabolics], out_dir: st
     files = {}
     for side, result in results.items():
         files.update({f"{side}/{k}": v for k, v in write_metabolics(result, out_dir / side, cycle=cycle).items()})
-    rows = ["model,legs,mean_W_per_kg," + ",".join(f"{s}_leg_mean_W" for s in results)]
-    for m, v in total.items():
-        rows.append(f"{m},{'+'.join(results)},{v:.10g}," + ",".join(
-            f"{r.whole_body[m].one_leg_mean_W:.10g}" for r in results.values()))
-    atomic_write_text(out_dir / WHOLE_BODY_CSV, "\n".join(rows) + "\n")
+    first = next(iter(results.values()))
+    table = pd.DataFrame([{
+        "model": m, "legs": "+".join(results), "whole_body_W_per_kg": v,
+        "whole_body_no_basal_W_per_kg": sum(r.whole_body[m].leg_no_basal_mean_W for r in results.values())
+        / first.body_mass_kg,
+        "basal_rule": first.basal_rule, "basal_W_per_kg": first.whole_body[m].basal_W_per_kg,
+        "muscle_mass_rule": first.muscle_mass_rule,
+        **{f"{s}_leg_muscles_W": r.whole_body[m].leg_no_basal_mean_W for s, r in results.items()},
+    } for m, v in total.items()])
+    with atomic_path(out_dir / WHOLE_BODY_CSV) as tmp:
+        table.to_csv(tmp, index=False, float_format="%.10g")
     files["whole_body_csv"] = out_dir / WHOLE_BODY_CSV
     return files
 
@@ -679,7 +777,7 @@ def parameter_differences(states: SolutionStates, muscle_parameters, rtol: float
 
 #: the settings :func:`write_metabolics` records in the header of metabolics.sto, and their types
 METABOLICS_SETTINGS = {"models": str, "body_mass_kg": float, "height_m": float, "basal_rule": str,
-                       "basal_coefficient": float, "basal_exponent": float}
+                       "basal_coefficient": float, "basal_exponent": float, "muscle_mass_rule": str}
 
 
 def read_metabolics_settings(folder: str | os.PathLike) -> dict:

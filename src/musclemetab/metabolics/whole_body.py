@@ -84,6 +84,8 @@ class WholeBodyRate:
     legs: int
     #: whole-body basal heat added to every sample (W/kg of body mass; 0 unless the rule is ``"body"``)
     basal_W_per_kg: float = 0.0
+    #: cycle average of the simulated leg's summed muscle rates without any basal heat (W)
+    leg_no_basal_mean_W: float = float("nan")
 
     def cost_of_transport_J_per_kg_per_m(self, speed_m_per_s: float) -> float:
         """Gross cost of transport (J/kg/m) at the walking speed (basal heat of the rule included)."""
@@ -182,7 +184,8 @@ def whole_body_rate(
     rate = legs * leg / body_mass_kg + add
     leg_mean = _trapezoid(leg, t) / duration
     mean = legs * leg_mean / body_mass_kg + add
-    mean_nb = legs * (_trapezoid(leg_no_basal, t) / duration) / body_mass_kg
+    leg_nb_mean = _trapezoid(leg_no_basal, t) / duration
+    mean_nb = legs * leg_nb_mean / body_mass_kg
     return WholeBodyRate(
         time_s=t,
         rate_W_per_kg=rate,
@@ -195,6 +198,7 @@ def whole_body_rate(
         body_mass_kg=float(body_mass_kg),
         legs=int(legs),
         basal_W_per_kg=float(add),
+        leg_no_basal_mean_W=float(leg_nb_mean),
     )
 
 

@@ -150,13 +150,15 @@ def read_model_info(model_path: str) -> dict:
     )
 
 
-def frame_values(m: LoadedModel, columns: dict, in_degrees: bool, k: int) -> dict:
+def frame_values(m: LoadedModel, columns: dict, in_degrees: bool, k: int, *, coupled_motion: bool = False) -> dict:
     """The values (rad, m) of the model's free coordinates at frame ``k`` of the motion
     ``columns`` (``{coordinate: values}``; rotations in degrees when ``in_degrees``), and those
-    of its coupled coordinates computed from them."""
+    of its coupled coordinates computed from them. ``coupled_motion``: also set the independent
+    coordinates OpenSim reports as of coupled motion type (gait2392's pelvis translations), as
+    OpenSim does, without a degree conversion."""
     vals = {}
     for n, col in columns.items():
-        if n not in m.coords or n in m.dependent or m.motion[n] == COUPLED or m.locked[n]:
+        if n not in m.coords or n in m.dependent or (m.motion[n] == COUPLED and not coupled_motion) or m.locked[n]:
             continue
         v = float(col[k])
         if in_degrees and m.motion[n] == ROTATIONAL:
@@ -421,7 +423,7 @@ def body_origins(model_path: str, columns: dict, in_degrees: bool, bodies: list)
         c.setValue(state, c.getDefaultValue(), False)
     out = np.zeros((n_frames, len(bodies), 3))
     for k in range(n_frames):
-        for n, v in frame_values(m, columns, in_degrees, k).items():
+        for n, v in frame_values(m, columns, in_degrees, k, coupled_motion=True).items():
             m.coords[n].setValue(state, v, False)
         model.realizePosition(state)
         for j, b in enumerate(objs):

@@ -11,6 +11,16 @@ re-solve with the effort goals only (:func:`~.solve.solve_with_parameters`), as 
 MuscleRedundancySolver does after its estimation.
 
 Default bounds of the factors: ``kT`` 0.1 ... 2, ``lMo`` and ``lTs`` 0.5 ... 1.5.
+
+Couplings (:func:`parameter_specs`) are groups of muscles sharing one factor of every estimated
+kind, or of one kind (``{"kind": "tendon_stiffness", "muscles": [...]}``, on the command line
+``tendon_stiffness:soleus_r,gasmed_r``; :func:`parse_coupling`).
+
+The estimate comes with its doubts (:mod:`.identifiability`, ``docs/problem.md``): factors on
+(within :data:`~.identifiability.BOUND_TOLERANCE` of) a bound, factors of muscles no measurement
+informs (refused), fiber-length bounds widened by the factor bounds beyond
+:data:`FIBER_LENGTH_WIDENING_LIMIT`, and the standard errors and correlations at the optimum;
+each is warned (one line) and recorded under ``doubts``.
 """
 
 from __future__ import annotations
@@ -26,7 +36,8 @@ from .parameters import MuscleTendonParameters
 from .ipopt import ProblemResult, SolverOptions, solve_problem
 
 __all__ = ["EstimatedParameters", "DEFAULT_FACTOR_BOUNDS", "estimate_parameters", "parameter_specs",
-           "fiber_length_trial", "read_fiber_lengths"]
+           "fiber_length_trial", "read_fiber_lengths", "parse_coupling", "widened_fiber_bounds",
+           "FIBER_LENGTH_WIDENING_LIMIT"]
 
 #: bounds of the scale factors by kind
 DEFAULT_FACTOR_BOUNDS = {"tendon_stiffness": (0.1, 2.0), "optimal_fiber_length": (0.5, 1.5),
@@ -34,15 +45,23 @@ DEFAULT_FACTOR_BOUNDS = {"tendon_stiffness": (0.1, 2.0), "optimal_fiber_length":
 #: the parameter field each kind of factor scales
 FIELDS = {"tendon_stiffness": "tendon_stiffness", "optimal_fiber_length": "optimal_fiber_length_m",
           "tendon_slack_length": "tendon_slack_length_m"}
+#: upper bound of the normalised fiber length (optimal lengths) beyond which a widening of the
+#: fiber-length bounds by the factors' lower bounds (:func:`.bounds.fiber_length_upper_bounds`)
+#: is warned: the problem's box then admits fibers far longer than muscles reach; raise the
+#: lower bound of the ``lMo`` or ``lTs`` factor to narrow it
+FIBER_LENGTH_WIDENING_LIMIT = 3.0
 
 
 @dataclass(frozen=True)
 class EstimatedParameters:
-    """Estimated scale factors (``{kind: {muscle: factor}}``) on ``nominal`` parameters."""
+    """Estimated scale factors (``{kind: {muscle: factor}}``) on ``nominal`` parameters, the
+    solve's ``record`` and the estimate's ``doubts`` (:func:`estimate_parameters`)."""
 
     factors: dict
     nominal: MuscleTendonParameters
     record: dict = field(default_factory=dict)
+    #: what makes the estimate doubtful (:func:`estimate_parameters`)
+    doubts: dict = field(default_factory=dict)
 
     def parameters(self) -> MuscleTendonParameters:
         """The nominal parameters with the estimated factors applied (for a validation re-solve)."""
@@ -62,14 +81,48 @@ class EstimatedParameters:
 
     def to_dict(self) -> dict:
         return {"factors": {k: dict(v) for k, v in self.factors.items()}, "values": self.values(),
-                "solve": dict(self.record)}
+                "solve": dict(self.record), "doubts": dict(self.doubts)}
 
 
-def parameter_specs(estimate: Mapping[str, Sequence[str]], couple: Sequence[Sequence[str]] = (),
+def parse_coupling(text: str) -> dict:
+    """A coupling of the command line: ``"MUSCLE,MUSCLE[,...]"`` (every estimated kind) or
+    ``"KIND:MUSCLE,MUSCLE[,...]"`` (that kind alone), as ``{"kind": KIND or None, "muscles": [...]}``."""
+    kind, sep, rest = str(text).rpartition(":")
+    muscles = [m.strip() for m in (rest if sep else text).split(",") if m.strip()]
+    return {"kind": kind.strip() if sep else None, "muscles": muscles}
+
+
+def _coupling(group) -> tuple[str | None, tuple[str, ...]]:
+    if isinstance(group, str):
+        group = parse_coupling(group)
+    if isinstance(group, Mapping):
+        extra = set(group) - {"kind", "muscles"}
+        muscles = group.get("muscles")
+        if extra or not isinstance(muscles, (list, tuple)) or not all(isinstance(m, str) for m in muscles):
+            raise OptionError(f"a coupling must name its muscles, as {{kind = \"tendon_stiffness\", muscles = "
+                              f"[\"soleus_r\", \"gasmed_r\"]}}, not {dict(group)!r}")
+        kind = group.get("kind")
+        if kind is not None and kind not in (*FIELDS, "emg_scale"):
+            raise OptionError(f"a coupling of '{kind}': couple one of {', '.join((*FIELDS, 'emg_scale'))} "
+                              "(e.g. --couple tendon_stiffness:soleus_r,gasmed_r)")
+        return kind, tuple(muscles)
+    return None, tuple(str(m) for m in group)
+
+
+def parameter_specs(estimate: Mapping[str, Sequence[str]], couple: Sequence = (),
                     bounds: Mapping[str, tuple[float, float]] | None = None) -> list[ParameterSpec]:
-    """Shared factors of ``estimate`` (``{kind: [muscle, ...]}``); each group of ``couple``
-    shares one factor of every kind that names two or more of its muscles."""
+    """Shared factors of ``estimate`` (``{kind: [muscle, ...]}``). A group of ``couple`` is a
+    list of muscles sharing one factor of every kind that names two or more of them, or
+    ``{"kind": KIND, "muscles": [...]}`` (or ``"KIND:M1,M2"``) sharing the factor of ``KIND``
+    alone, all of whose muscles must be estimated in that kind."""
     bounds = {**DEFAULT_FACTOR_BOUNDS, **(bounds or {})}
+    groups = [_coupling(g) for g in couple]
+    for kind, members in groups:
+        if kind in FIELDS:
+            missing = [m for m in members if m not in estimate.get(kind, ())]
+            if missing:
+                raise OptionError(f"--couple {kind}:{','.join(members)}: the {kind} of {', '.join(missing)} is not "
+                                  f"estimated; add it to --estimate {kind}=... or drop it from the coupling")
     specs = []
     for kind, muscles in estimate.items():
         if kind not in FIELDS:
@@ -77,11 +130,35 @@ def parameter_specs(estimate: Mapping[str, Sequence[str]], couple: Sequence[Sequ
         muscles = tuple(dict.fromkeys(str(m) for m in muscles))
         pos = {m: i for i, m in enumerate(muscles)}
         pairs = []
-        for group in couple:
+        for gkind, group in groups:
+            if gkind not in (None, kind):
+                continue
             members = [pos[m] for m in group if m in pos]
             pairs += [(a, b) for a, b in zip(members[:-1], members[1:])]
-        specs.append(ParameterSpec(kind, muscles, bounds[kind], tuple(pairs)))
+        specs.append(ParameterSpec(kind, muscles, bounds[kind], tuple(dict.fromkeys(pairs))))  # no pair twice
     return specs
+
+
+def emg_couplings(couple: Sequence) -> list[tuple[str, ...]] | None:
+    """The groups of ``couple`` of kind ``emg_scale`` (muscles sharing one EMG scale factor), or
+    ``None`` when it has none (the EMG-TEN groups then apply)."""
+    groups = [members for kind, members in (_coupling(g) for g in couple) if kind == "emg_scale"]
+    return groups or None
+
+
+def widened_fiber_bounds(trials, params: MuscleTendonParameters, specs) -> dict:
+    """``{trial: {muscle: upper bound}}`` of the fiber-length bounds that the factors' lower
+    bounds widen beyond those of the nominal parameters (:func:`.bounds.fiber_length_upper_bounds`)."""
+    from .bounds import fiber_length_upper_bounds
+
+    out = {}
+    for t in trials:
+        nominal = fiber_length_upper_bounds(t.inputs, params)
+        wide = fiber_length_upper_bounds(t.inputs, params, specs)
+        moved = {m: float(u) for m, u, u0 in zip(t.inputs.muscles, wide, nominal) if u > u0}
+        if moved:
+            out[t.label] = moved
+    return out
 
 
 def read_fiber_lengths(path) -> dict:
@@ -130,22 +207,59 @@ def fiber_length_trial(label: str, inputs, guess, fiber_lengths: Mapping[str, tu
 
 
 def estimate_parameters(trials: Sequence[TrialBlock], params: MuscleTendonParameters, specs, goals: Goals, *,
-                        options: SolverOptions | None = None, coupling: str = "shared"
-                        ) -> tuple[ProblemResult, EstimatedParameters]:
+                        options: SolverOptions | None = None, coupling: str = "shared", uninformed: str = "error",
+                        identify: bool = True) -> tuple[ProblemResult, EstimatedParameters]:
     """Solve the problem of ``trials`` with the shared factors ``specs`` and ``goals``; returns
-    the raw result and the estimate (also when IPOPT did not converge: see ``result.success``)."""
+    the raw result and the estimate (also when IPOPT did not converge: see ``result.success``).
+
+    Before the solve, factors no measurement informs are refused (``uninformed="error"``) or
+    warned about (``"warn"``), and fiber-length bounds widened beyond
+    :data:`FIBER_LENGTH_WIDENING_LIMIT` are warned about; after a successful one, factors on a
+    bound and (``identify``) poorly identifiable parameters. All are recorded in the estimate's
+    ``doubts`` (``on_bounds``, ``uninformed``, ``widened_fiber_length_bounds``, ``identifiability``)."""
+    import warnings
+
+    from ..errors import MusclemetabWarning
+    from . import identifiability as ident
+
+    if uninformed not in ("error", "warn"):
+        raise OptionError(f"uninformed must be 'error' or 'warn', not {uninformed!r}")
     if not any(s.kind in FIELDS for s in specs):
         raise OptionError("nothing to estimate: name muscles whose tendon_stiffness, optimal_fiber_length or "
                           "tendon_slack_length is estimated")
     if not any(t.fiber_muscles or t.emg_muscles for t in trials):
         raise OptionError("parameter estimation needs measurements: give fiber lengths (ultrasound) or EMG")
+    options = options or SolverOptions()
+    doubts = {"uninformed": [{"kind": k, "muscle": m} for k, m in ident.check_informed(trials, specs, uninformed)]}
+    widened = widened_fiber_bounds(trials, params, specs)
+    doubts["widened_fiber_length_bounds"] = {"limit": FIBER_LENGTH_WIDENING_LIMIT, "upper": widened}
+    for label, by_muscle in widened.items():
+        beyond = {m: u for m, u in by_muscle.items() if u > FIBER_LENGTH_WIDENING_LIMIT}
+        if beyond:
+            kinds = sorted({s.kind for s in specs if s.kind in ("optimal_fiber_length", "tendon_slack_length")
+                            and set(s.muscles) & set(beyond)})
+            warnings.warn(f"trial {label}: the lower bounds of the {' and '.join(kinds)} factors widen the fiber-length "
+                          f"bounds beyond {FIBER_LENGTH_WIDENING_LIMIT:g} lMo ("
+                          + ", ".join(f"{m} {u:.2f}" for m, u in beyond.items())
+                          + "); raise those lower bounds (--bounds KIND=LOW:HIGH) to keep the fibers physiological",
+                          MusclemetabWarning, stacklevel=2)
     res = solve_problem(trials, params, goals, specs, options=options, coupling=coupling)
     factors = {k: v for k, v in res.factors.items() if k in FIELDS}
     record = {"status": res.status, "success": res.success, "iterations": res.iterations,
               "objective": res.objective, "objective_terms": res.objective_terms,
               "max_constraint_violation": res.max_constraint_violation,
               "bounds": {s.kind: list(s.bounds) for s in specs}, "max_coupling_violation": res.max_coupling_violation}
-    return res, EstimatedParameters(factors=factors, nominal=params, record=record)
+    if res.success:
+        on_bounds = ident.factors_on_bounds(res.factors, {s.kind: s.bounds for s in specs})
+        ident.warn_on_bounds(on_bounds)
+        doubts["on_bounds"] = on_bounds
+        doubts["bound_tolerance"] = ident.BOUND_TOLERANCE
+        if identify:
+            report = ident.identifiability(trials, params, goals, specs, res, coupling=coupling,
+                                           optimal_reserve_Nm=options.optimal_reserve_Nm)
+            ident.warn_identifiability(report)
+            doubts["identifiability"] = report
+    return res, EstimatedParameters(factors=factors, nominal=params, record=record, doubts=doubts)
 
 
 def tendon_strain_at_one_norm_force(kT) -> float:

@@ -322,10 +322,12 @@ def solver_record(options: SolverOptions, goals: Goals | None = None) -> dict:
 
 #: IPOPT linear-algebra settings used with MUMPS (``SolverOptions.ipopt`` overrides them): no
 #: iterative refinement of a linear solve whose residual already meets IPOPT's accuracy test
-#: (IPOPT's default is at least one step). On the example trials the iterations and optimum
-#: are the same and the solve about 10 % faster. It changes the round-off of the KKT solves,
-#: not the problem.
-MUMPS_OPTIONS = {"min_refinement_steps": 0}
+#: (IPOPT's default is at least one step), and MUMPS' pivot tolerance from 1e-4 instead of
+#: 1e-6, which spares the factorisations IPOPT repeats with a raised tolerance when a solve is
+#: not accurate enough (docs/solver.md, "Inertia corrections"). On the example trials the
+#: iterations and optimum are the same; they change the round-off of the KKT solves, not the
+#: problem.
+MUMPS_OPTIONS = {"min_refinement_steps": 0, "mumps_pivtol": 1e-4}
 
 
 def ipopt_options(options: SolverOptions, mumps_settings: dict | None = None) -> dict:
@@ -349,9 +351,11 @@ def ipopt_options(options: SolverOptions, mumps_settings: dict | None = None) ->
     return ipopt
 
 
-def run_ipopt(solver, options: SolverOptions, x0, lbx, ubx, lbg, ubg):
+def run_ipopt(solver, options: SolverOptions, x0, lbx, ubx, lbg, ubg, multipliers: dict | None = None):
     """Apply the process settings of ``options`` (``tune_malloc``, ``blas_threads``) and run
-    an IPOPT ``nlpsol``; returns ``(x, g, f, stats, wall time s, CPU time s)``."""
+    an IPOPT ``nlpsol``; returns ``(x, g, f, stats, wall time s, CPU time s)``. A dict
+    ``multipliers`` receives the optimum's ``lam_g`` and ``lam_x`` (CasADi's signs:
+    ``grad f + J' lam_g + lam_x = 0``)."""
     if options.tune_malloc:
         tune_malloc()
     if options.blas_threads is not None:
@@ -362,6 +366,8 @@ def run_ipopt(solver, options: SolverOptions, x0, lbx, ubx, lbg, ubg):
         sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
     except RuntimeError as exc:
         raise SolverError(f"IPOPT stopped with an error: {exc}") from None
+    if multipliers is not None:
+        multipliers.update(lam_g=np.asarray(sol["lam_g"]).reshape(-1), lam_x=np.asarray(sol["lam_x"]).reshape(-1))
     return (np.asarray(sol["x"]).reshape(-1), np.asarray(sol["g"]).reshape(-1), float(sol["f"]), solver.stats(),
             _time.perf_counter() - t0, _time.process_time() - c0)
 
@@ -382,6 +388,8 @@ class ProblemResult(SolveOutcome):
     n_inequality_constraints: int
     max_coupling_violation: float
     ipopt_options: dict = field(default_factory=dict)
+    #: the optimum's variables ``x`` and multipliers ``lam_g``, ``lam_x`` (:mod:`.identifiability`)
+    kkt: dict = field(default_factory=dict, repr=False, compare=False)
 
 
 def _trial_terms(goals: Goals, t: TrialBlock, Z, xl, dev, lm_us, params=None, lmo_factor=None) -> dict:
@@ -427,8 +435,9 @@ def solve_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
     except RuntimeError as exc:
         raise SolverError(f"the optimal control problem could not be built: {exc}") from None
     build_time = _time.perf_counter() - t_build
+    kkt = {}
     x, gval, f_opt, stats, solve_time, solve_cpu = run_ipopt(
-        solver, options, nlp["x0"], nlp["lbx"], nlp["ubx"], nlp["lbg"], nlp["ubg"])
+        solver, options, nlp["x0"], nlp["lbx"], nlp["ubx"], nlp["lbg"], nlp["ubg"], kkt)
     L = nlp["layout"]
     viol = np.maximum(nlp["lbg"] - gval, 0.0) + np.maximum(gval - nlp["ubg"], 0.0)
     max_viol = float(np.max(viol)) if viol.size else 0.0
@@ -477,7 +486,7 @@ def solve_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
         objective_terms={t.label: o.objective_terms for t, o in zip(trials, ocps)}, emg_deviation=tuple(devs), objective=f_opt,
         n_equality_constraints=nlp["n_equality_constraints"], n_inequality_constraints=nlp["n_inequality_constraints"],
         max_coupling_violation=float(max((abs(full[a] - full[b]) for a, b in L["pairs"]), default=0.0)),
-        ipopt_options=dict(ipopt), **outcome)
+        ipopt_options=dict(ipopt), kkt={"x": x, **kkt}, **outcome)
 
 
 def solve_ocp(

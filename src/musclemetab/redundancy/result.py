@@ -193,13 +193,19 @@ class Result:
         Each folder is written atomically; ``parameters.json`` is removed first and written last
         (atomically), so its presence means that all trial folders belong to it.
         """
-        from ..io import atomic_write_text
-
         out_dir = Path(out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
         (out_dir / PARAMETERS_FILE).unlink(missing_ok=True)
         for label, sol in self.solutions.items():
             sol.write(out_dir / label)
+        return self.write_parameters(out_dir)
+
+    def write_parameters(self, out_dir: str | os.PathLike) -> Path:
+        """Write (atomically) ``parameters.json`` alone into ``out_dir`` (e.g. again, after a
+        validation re-solve added its fit to the document)."""
+        from ..io import atomic_write_text
+
+        out_dir = Path(out_dir)
         text = json.dumps(self.parameters_document(), indent=2, allow_nan=True)
         atomic_write_text(out_dir / PARAMETERS_FILE, text + "\n")
         return out_dir
@@ -346,6 +352,21 @@ def assemble_result(trials, params, wf_record, ocp, settings, options, t_prep, t
         }
         sol = build_solution(inp, est_params.subset(inp.muscles), o, summary)
         solutions[t.label] = replace(sol, record=sol.record.with_(total_time_s=_time.perf_counter() - t_start))
+    if ocp.success:  # doubts, warned and recorded (docs/problem.md, "Doubts of the estimates")
+        from .identifiability import BOUND_TOLERANCE, check_informed, factors_on_bounds, warn_on_bounds
+        from .transcription import ParameterSpec, coupling_pairs
+
+        on_bounds = factors_on_bounds({"tendon_stiffness": tendon_scale, "emg_scale": emg_scale},
+                                      {"tendon_stiffness": settings.tendon_scale_bounds,
+                                       "emg_scale": settings.emg_scale_bounds})
+        warn_on_bounds(on_bounds)
+        kt = tuple(tendon_scale)
+        uninformed = check_informed(trials, [ParameterSpec("tendon_stiffness", kt, settings.tendon_scale_bounds,
+                                                           coupling_pairs(settings.tendon_groups, kt, True))], "warn",
+                                    "map EMG to a muscle of its tendon group (--emg-mapping) or leave {muscle} out of "
+                                    "the tendon groups")
+        record["doubts"] = {"on_bounds": on_bounds, "bound_tolerance": BOUND_TOLERANCE,
+                            "uninformed": [{"kind": k, "muscle": m} for k, m in uninformed]}
     record["max_moment_residual_Nm"] = max(s.record.max_moment_residual_Nm for s in solutions.values())
     record["max_hill_residual"] = max(s.record.max_hill_residual for s in solutions.values())
     record["total_time_s"] = _time.perf_counter() - t_start

@@ -26,6 +26,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..errors import OptionError
+from ..events import WALKING_CYCLE_DURATION_S
 from ..processes import BackgroundCall
 from ._docs import fill_doc
 from .emg_inputs import (
@@ -79,6 +80,7 @@ def solve_files(
     grf: str | os.PathLike | None = None,
     grf_column: str | None = None,
     grf_threshold_N: float | None = None,
+    cycle_duration_s: tuple[float, float] | None = WALKING_CYCLE_DURATION_S,
     mesh_frequency_hz: float = MESH_FREQUENCY_HZ,
     passive=None,
     tendon_stiffness: Mapping[str, float] | None = None,
@@ -98,7 +100,7 @@ def solve_files(
     the model for that side (:func:`musclemetab.layout.discover_dofs`). The window is the IK
     file, ``window=(T0, T1)`` or ``cycle="auto"|N`` (:mod:`.window`; the foot's force from
     ``external_loads`` or from ``grf``, column ``grf_column``, contact above ``grf_threshold_N``,
-    default 20 N). With ``id_path=None``
+    default 20 N, a cycle lasting ``cycle_duration_s``, 0.8-2.0 s by default). With ``id_path=None``
     and ``external_loads`` (an OpenSim ExternalLoads file), the inverse dynamics is computed
     by OpenSim over the window (:func:`musclemetab.external_loads.compute_inverse_dynamics`);
     its path is ``solution.record.inputs["id"]``. The mesh has ``mesh_frequency_hz``
@@ -182,7 +184,7 @@ def solve_files(
     ik_table = read_table(ik_path)
     trial_window = resolve_window(ik_table, side=side, window=window, cycle=cycle, id_path=id_table,
                                   external_loads=loads, grf_path=grf, layout=layout, grf_column=grf_column,
-                                  grf_threshold_N=grf_threshold_N)
+                                  grf_threshold_N=grf_threshold_N, cycle_duration_s=cycle_duration_s)
     id_record = None
     if id_path is None:
         from ..external_loads import ID_COORDINATE_FILTER_HZ, compute_inverse_dynamics
@@ -624,8 +626,13 @@ def estimate_files(
     ``musclemetab estimate`` (``docs/problem.md``). Writes ``out/<trial>/``,
     ``out/parameters.json``, ``out/<model>_personalised.osim`` and with ``validate``
     ``out/validation/<trial>/``; raises :class:`~musclemetab.errors.SolverError` (after
-    writing) when the solve did not converge. ``exclude_muscles`` leaves muscles out of every
-    trial (as :func:`solve_files`); one named in ``estimate`` or ``couple`` is an
+    writing) when the solve did not converge. A group of ``couple`` may name one kind
+    (``{"kind": KIND, "muscles": [...]}`` or ``"KIND:M1,M2"``; kind ``emg_scale`` replaces the
+    EMG-TEN groups of the EMG scale factors). The doubts of the estimate (factors on bounds,
+    identifiability, widened fiber-length bounds) are warned and recorded in ``parameters.json``
+    (``doubts``); the validation re-solve's fit to the measurements (RMS, Pearson r per measured
+    muscle) under ``validation``. ``exclude_muscles`` leaves muscles out of every trial (as
+    :func:`solve_files`); one named in ``estimate`` or ``couple`` is an
     :class:`~musclemetab.errors.OptionError`, its EMG and measured fiber lengths are not used
     (a warning names them). Each trial is diagnosed before the problem is built
     (:mod:`.diagnosis`, the estimated factors within their bounds).
@@ -647,6 +654,8 @@ def estimate_files(
     from .emg_ten import emg_bound, fiber_scheme
     from .estimate import (
         FIELDS,
+        _coupling,
+        emg_couplings,
         estimate_parameters,
         fiber_length_trial,
         parameter_specs,
@@ -677,9 +686,10 @@ def estimate_files(
     bad = [k for k in bounds if k not in (*FIELDS, "emg_scale")]
     if bad:
         raise OptionError(f"--bounds: unknown kind '{bad[0]}'; use {', '.join((*FIELDS, 'emg_scale'))}")
-    couple = [list(g) for g in couple]
+    couple = list(couple)
     exclude_muscles = list(exclude_muscles or ())
-    clash = [m for m in exclude_muscles if any(m in v for v in estimate.values()) or any(m in g for g in couple)]
+    coupled = {m for g in couple for m in _coupling(g)[1]}
+    clash = [m for m in exclude_muscles if any(m in v for v in estimate.values()) or m in coupled]
     if clash:
         raise OptionError(f"--exclude-muscles {' '.join(clash)} and --estimate/--couple name the same muscle"
                           f"{'s' if len(clash) > 1 else ''}: a muscle left out of the problem has no parameter to "
@@ -743,7 +753,7 @@ def estimate_files(
     if emg_files:
         from .emg_ten import EmgTenSettings, settings_for_muscles
 
-        groups = settings_for_muscles(EmgTenSettings(), params.names).emg_groups
+        groups = emg_couplings(couple) or settings_for_muscles(EmgTenSettings(), params.names).emg_groups
         specs.append(ParameterSpec("emg_scale", emg_muscles, bounds.get("emg_scale", EMG_SCALE_BOUNDS),
                                    coupling_pairs(groups, emg_muscles, consecutive=False)))
     res, est = estimate_parameters(trials, params, specs, goals, options=options)
@@ -786,18 +796,26 @@ def estimate_files(
                     emg_channels={m: list(c) for m, c in mapping.items()}, document=doc)
     result.write(out)
     if not run.success:
-        from .emg_ten import emg_failure
-
         from .diagnosis import trials_violation_text
+        from .emg_ten import emg_failure
 
         err = emg_failure(run, mode if emg_files else None, f"the estimation (written to {out})")
         raise type(err)(err.message + trials_violation_text(solutions))
     if validate:
-        for lab, (g, _, t_id, mom, t_ik) in zip(labels, prepared):
+        from .identifiability import tracking_fit
+
+        fits = doc["validation"] = {}
+        for t, (g, _, t_id, mom, t_ik) in zip(trials, prepared):
+            lab = t.label
             sol = solve_with_parameters(g, estimated, t_id, mom, ik_time_s=t_ik, options=options,
                                         goals=goals.effort(),
                                         workflow_record={"name": f"{workflow} validation"})
             sol.write(f"{out}/validation/{lab}")
             if not sol.success:
                 raise sol.run_record.failure(f"the validation re-solve of {lab}")
+            scale = factors.get("emg_scale", {})
+            fits[lab] = tracking_fit(
+                sol, {m: t.fiber_length_nodes_m[:, j] for j, m in enumerate(t.fiber_muscles)},
+                {m: scale[m] * t.emg_nodes[:, j] for j, m in enumerate(t.emg_muscles)})
+        result.write_parameters(out)
     return result

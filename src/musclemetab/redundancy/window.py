@@ -9,7 +9,13 @@
   ground-force file whose column is chosen by :func:`musclemetab.events.read_grf`),
   events by :func:`musclemetab.events.gait_events_from_grf` (20 N threshold); with
   no ground forces, from the kinematics and the model
-  (:func:`musclemetab.events.kinematic_gait_events`). The
+  (:func:`musclemetab.events.kinematic_gait_events`). With the model at hand, the foot of a
+  ground force is found from its centre of pressure (:func:`musclemetab.events.grf_of_side`;
+  an ExternalLoads file's ``applied_to_body`` is checked the same way,
+  :func:`musclemetab.events.check_applied_feet`), and the force's heel strikes are compared
+  with the kinematic ones (within :data:`~musclemetab.events.HEEL_STRIKE_TOLERANCE_S`, 50 ms);
+  disagreements are warnings, recorded like those of the padding. A cycle whose duration lies
+  outside ``cycle_duration_s`` (0.8-2.0 s for walking) is refused, naming its events. The
   window is the cycle plus the study's padding (:data:`PADDING_S` = 5 frames at 100 Hz at each
   end) so that the free initial and final states do not fall inside the cycle. Where the data
   end before the padding does, the padding is clipped at the edge of the data, a warning is
@@ -30,7 +36,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataMismatchError, OptionError, WindowWarning
+from ..events import WALKING_CYCLE_DURATION_S
 from ..io import StorageTable
+from ..layout import SIDE_NAMES
 
 __all__ = ["PADDING_S", "TrialWindow", "parse_window", "parse_cycle", "resolve_window", "frames_in_window"]
 
@@ -61,15 +69,15 @@ class TrialWindow:
         return out
 
 
-def parse_window(text: str) -> tuple[float, float]:
-    """``"T0:T1"`` (seconds) -> ``(T0, T1)``; :class:`OptionError` otherwise."""
+def parse_window(text: str, option: str = "--window") -> tuple[float, float]:
+    """``"T0:T1"`` (seconds) -> ``(T0, T1)``; :class:`OptionError` naming ``option`` otherwise."""
     try:
         a, b = str(text).split(":")
         t0, t1 = float(a), float(b)
     except ValueError:
-        raise OptionError(f"--window must be T0:T1 in seconds, e.g. 0.6:1.9, not {text!r}") from None
+        raise OptionError(f"{option} must be T0:T1 in seconds, e.g. 0.6:1.9, not {text!r}") from None
     if not (math.isfinite(t0) and math.isfinite(t1) and t0 < t1):
-        raise OptionError(f"--window {text}: T0 must be finite and before T1")
+        raise OptionError(f"{option} {text}: T0 must be finite and before T1")
     return t0, t1
 
 
@@ -108,11 +116,13 @@ def resolve_window(
     padding_s: float = PADDING_S,
     grf_column: str | None = None,
     grf_threshold_N: float | None = None,
+    cycle_duration_s: tuple[float, float] | None = WALKING_CYCLE_DURATION_S,
 ) -> TrialWindow:
     """The solve window for one leg (see the module docstring); ``grf_column`` names the foot's
     vertical force column of ``grf_path`` (default: the name rule of
     :func:`~musclemetab.events.read_grf`), ``grf_threshold_N`` the contact threshold
-    (default 20 N).
+    (default 20 N), ``cycle_duration_s`` the accepted cycle durations (default
+    :data:`~musclemetab.events.WALKING_CYCLE_DURATION_S`, 0.8-2.0 s; None: any).
 
     ``ik`` and ``id_path`` are the files or their :class:`~musclemetab.io.StorageTable`, already
     read by :func:`~musclemetab.io.read_table` (a solve reads each file once).
@@ -145,7 +155,11 @@ def resolve_window(
         for path, what, (a, b) in inputs:
             check_inside((t0, t1), a, b, path, what)
     else:
-        gc, where = _cycle(side, cycle, external_loads, grf_path, layout, ik_table, grf_column, grf_threshold_N)
+        gc, where, event_notes = _cycle(side, cycle, external_loads, grf_path, layout, ik_table, grf_column,
+                                        grf_threshold_N, cycle_duration_s)
+        for msg in event_notes:
+            notes.append(msg)
+            _warnings.warn(msg, WindowWarning, stacklevel=2)
         for path, what, (a, b) in inputs:
             check_inside((gc.start_s, gc.end_s), a, b, path, f"{what} (needed for the gait cycle)")
         t0, t1 = gc.start_s - padding_s, gc.end_s + padding_s
@@ -175,34 +189,53 @@ def resolve_window(
     return TrialWindow(start, end, source, cycle_rec, pads, tuple(notes))
 
 
-def _cycle(side, cycle, external_loads, grf_path, layout, ik=None, grf_column=None, threshold_N=None):
+def _cycle(side, cycle, external_loads, grf_path, layout, ik=None, grf_column=None, threshold_N=None,
+           duration_s=WALKING_CYCLE_DURATION_S):
+    """The gait cycle ``cycle`` of the leg, where it came from, and the notes (warnings) on its
+    events: the foot of the ground force checked against its centre of pressure, and the force's
+    heel strikes against the kinematic ones, when the model and the IK are at hand."""
     from ..events import (
         DEFAULT_GRF_THRESHOLD_N,
         GaitCycle,
+        check_against_kinematics,
+        check_cycle_duration,
+        feet_for_checks,
+        foot_kinematics,
         gait_events_from_grf,
-        kinematic_gait_events,
-        read_grf,
+        grf_of_side,
     )
 
+    forces = external_loads is not None or grf_path is not None
+    feet, notes = None, []
+    if layout is not None and ik is not None:
+        if forces:  # the checks of the force's foot and events: skipped (with a note) for a model without them
+            feet, why = feet_for_checks(layout.path, ik, layout)
+            notes += [why] if why else []
+        else:
+            feet = foot_kinematics(layout.path, ik, layout)
     if external_loads is not None:
+        from ..events import check_applied_feet
         from ..external_loads import vertical_force
 
         t, f = vertical_force(external_loads, layout, side)
         where = str(external_loads.path)
+        if feet is not None:
+            notes += check_applied_feet(external_loads, layout, feet)
     elif grf_path is not None:
-        s = read_grf(grf_path, grf_column, side=side)
+        s, found_notes, found = grf_of_side(grf_path, side, grf_column, feet=feet)
+        notes += found_notes
         t, f = s.index.to_numpy(dtype=float), s.to_numpy(dtype=float)
-        where = f"{grf_path} column {s.name}"
-    elif layout is not None and ik is not None:
+        under = "" if found is None else f", centre of pressure under the {SIDE_NAMES[side]} foot"
+        where = f"{grf_path} column {s.name}{under}"
+    elif feet is not None:
         from ..io import table_path
 
-        ev = kinematic_gait_events(layout.path, ik, side, layout)
         where = f"{table_path(ik)} (kinematics: heel and toe relative to the pelvis)"
     else:
         raise OptionError("--cycle needs ground forces (--external-loads GRF.xml or --grf GRF.mot) or the model "
                           "for gait events from kinematics")
-    if external_loads is not None or grf_path is not None:
-        ev = gait_events_from_grf(t, f, DEFAULT_GRF_THRESHOLD_N if threshold_N is None else threshold_N)
+    ev = (gait_events_from_grf(t, f, DEFAULT_GRF_THRESHOLD_N if threshold_N is None else threshold_N)
+          if forces else feet.events(side))
     hs, to = ev.heel_strikes_s, ev.toe_offs_s
     cycles = []
     for a, b in zip(hs[:-1], hs[1:]):
@@ -222,7 +255,12 @@ def _cycle(side, cycle, external_loads, grf_path, layout, ik=None, grf_column=No
             f"{len(cycles)} complete gait cycle{'s' if len(cycles) != 1 else ''} ({found}{how}), so cycle "
             f"{cycle} does not exist; give --window T0:T1"
         )
-    return cycles[n - 1], where
+    gc = cycles[n - 1]
+    check_cycle_duration(gc, duration_s, f"{where}: cycle {cycle} of the {SIDE_NAMES[side]} leg")
+    if forces and feet is not None:
+        span = (float(feet.time_s[1]), float(feet.time_s[-2]))  # an extreme needs a frame on either side
+        notes += check_against_kinematics(gc, feet.events(side), span_s=span)
+    return gc, where, notes
 
 
 def frames_in_window(time_s: np.ndarray, window: TrialWindow) -> np.ndarray:

@@ -596,8 +596,8 @@ def estimated_vs_measured(results, *, models: Sequence[str] | None = None, title
     a measured rate.
     """
     res = _ok_rows(results)
-    _require_columns(res, ("mean_W_per_kg", "measured_W_per_kg"), "the results table")
-    res = res[np.isfinite(res["measured_W_per_kg"].astype(float)) & np.isfinite(res["mean_W_per_kg"].astype(float))]
+    _require_columns(res, ("whole_body_W_per_kg", "measured_W_per_kg"), "the results table")
+    res = res[np.isfinite(res["measured_W_per_kg"].astype(float)) & np.isfinite(res["whole_body_W_per_kg"].astype(float))]
     if res.empty:
         raise OptionError(
             "no measured metabolic rate in the results (column measured_W_per_kg is empty); "
@@ -614,7 +614,7 @@ def estimated_vs_measured(results, *, models: Sequence[str] | None = None, title
     fig = _new_figure(4.3 * ncol, 4.2 * nrow + 1.0)
     axes = fig.subplots(nrow, ncol, squeeze=False)
     notes: list[str] = []
-    allv = np.concatenate([res["measured_W_per_kg"].to_numpy(float), res["mean_W_per_kg"].to_numpy(float)])
+    allv = np.concatenate([res["measured_W_per_kg"].to_numpy(float), res["whole_body_W_per_kg"].to_numpy(float)])
     lo, hi = float(np.min(allv)), float(np.max(allv))
     pad = 0.06 * max(hi - lo, 0.5)
     lim = (max(0.0, lo - pad), hi + pad)
@@ -630,10 +630,10 @@ def estimated_vs_measured(results, *, models: Sequence[str] | None = None, title
             for s in subjects:
                 ds = dw[dw["subject"].astype(str) == s]
                 if not ds.empty:
-                    ax.scatter(ds["measured_W_per_kg"], ds["mean_W_per_kg"], color=col, marker=marker[s],
+                    ax.scatter(ds["measured_W_per_kg"], ds["whole_body_W_per_kg"], color=col, marker=marker[s],
                                s=26, zorder=3, label="_" + s)
             x = dw["measured_W_per_kg"].to_numpy(float)
-            y = dw["mean_W_per_kg"].to_numpy(float)
+            y = dw["whole_body_W_per_kg"].to_numpy(float)
             subj = dw["subject"].astype(str).to_numpy()
             rm, why = _rmcorr(x, y, subj)
             if rm is None:
@@ -781,7 +781,7 @@ def whole_body_over_cycle(timeseries_by_trial: Mapping[str, object], speeds: Map
                           scale: float = 1.0, unit: str = "W"):
     """Whole-body (one leg, summed muscles, no basal) metabolic rate over the cycle across speeds.
 
-    ``timeseries_by_trial``: trial label -> the unit's long table (series ``whole_body``);
+    ``timeseries_by_trial``: trial label -> the unit's long table (series ``leg_muscles``);
     ``speeds``: trial label -> walking speed (m/s). One panel per model, one line per trial
     coloured by speed (slow = light, fast = dark); ``toe_off_pct`` (label -> %) adds a short
     mark at each trial's toe-off.
@@ -796,9 +796,9 @@ def whole_body_over_cycle(timeseries_by_trial: Mapping[str, object], speeds: Map
     tables = {}
     for t in labels:
         ts = _long_table(timeseries_by_trial[t], f"the time series of trial {t}")
-        tables[t] = ts[ts["series"].astype(str) == "whole_body"]
+        tables[t] = ts[ts["series"].astype(str) == "leg_muscles"]
         if tables[t].empty:
-            raise OptionError(f"the time series of trial {t} has no whole_body series")
+            raise OptionError(f"the time series of trial {t} has no leg_muscles series")
     in_trial = {t: _unique(tables[t]["model"].astype(str)) for t in labels}
     available = _ordered_models(m for t in labels for m in in_trial[t])
     models = available if models is None else [str(m) for m in models]
@@ -949,25 +949,25 @@ def phase_pies(results, *, workflow: str | None = None, models: Sequence[str] | 
     :func:`main_workflow`): the stance wedge in the model's colour, the swing wedge lighter
     (``stance_energy_share_pct``, ``swing_energy_share_pct``; one leg, no basal heat), the
     pie's area proportional to the whole-body rate without basal heat
-    (``mean_W_per_kg_no_basal``, W/kg); means over subjects. The largest pie has radius
+    (``whole_body_no_basal_W_per_kg``, W/kg); means over subjects. The largest pie has radius
     0.46 in units of the grid spacing.
     """
     from ..colours import lighter
 
     res = _ok_rows(results)
-    _require_columns(res, ("stance_energy_share_pct", "swing_energy_share_pct", "mean_W_per_kg_no_basal"),
+    _require_columns(res, ("stance_energy_share_pct", "swing_energy_share_pct", "whole_body_no_basal_W_per_kg"),
                      "the results table")
     if res.empty:
         raise OptionError("no successful unit in the results")
     wf, d = _one_workflow(res, workflow, "the results")
     models = _ordered_models(d["model"]) if models is None else [str(m) for m in models]
     trials = trial_order(d)
-    cols = ["stance_energy_share_pct", "swing_energy_share_pct", "mean_W_per_kg_no_basal"]
+    cols = ["stance_energy_share_pct", "swing_energy_share_pct", "whole_body_no_basal_W_per_kg"]
     stats = group_stats(d, ["model", "trial"], cols + (["speed_m_per_s"] if "speed_m_per_s" in d.columns else []))
-    cost = {(m, t): stat_cell(stats, (m, t), "mean_W_per_kg_no_basal")[0] for m in models for t in trials}
+    cost = {(m, t): stat_cell(stats, (m, t), "whole_body_no_basal_W_per_kg")[0] for m in models for t in trials}
     finite = [v for v in cost.values() if np.isfinite(v) and v > 0]
     if not finite:
-        raise OptionError("no positive whole-body rate (mean_W_per_kg_no_basal) to size the pies")
+        raise OptionError("no positive whole-body rate (whole_body_no_basal_W_per_kg) to size the pies")
     top = max(finite)
     pitch = 1.3  # rows: trials; columns: models; the text under each pie fits between the rows
     fig = _new_figure(1.5 * len(models) + 1.3, 1.5 * pitch * len(trials) + 1.1, left=1.0, right=0.2, bottom=0.3,
@@ -1080,14 +1080,14 @@ def rates_against_speed(results, *, workflow: str | None = None, models: Sequenc
     """Whole-body and muscle-group rates (W/kg of body mass, both legs, no basal) against speed.
 
     One panel per model (shared axes); a black line through the whole-body rate without basal
-    heat (``mean_W_per_kg_no_basal``) and one line per group
-    (``share_<G>_pct / 100 * mean_W_per_kg_no_basal``) through each subject's trials in the
+    heat (``whole_body_no_basal_W_per_kg``) and one line per group
+    (``share_<G>_pct / 100 * whole_body_no_basal_W_per_kg``) through each subject's trials in the
     order of its own walking speeds: the trials of different subjects are never matched by
     name. Subjects differ by line style and marker (gids ``whole-body:<subject>``,
     ``group:<G>:<subject>``).
     """
     res = _ok_rows(results)
-    _require_columns(res, ("subject", "speed_m_per_s", "mean_W_per_kg_no_basal"), "the results table")
+    _require_columns(res, ("subject", "speed_m_per_s", "whole_body_no_basal_W_per_kg"), "the results table")
     cols = [c for c in (f"share_{g}_pct" for g in GROUPS) if c in res.columns]
     wf, d = _one_workflow(res, workflow, "the results")
     subjects = _unique(d["subject"].astype(str))
@@ -1103,14 +1103,14 @@ def rates_against_speed(results, *, workflow: str | None = None, models: Sequenc
         ax = axes.flat[k]
         dm = d[d["model"].astype(str) == m].copy()
         for g, c in zip(groups, cols):
-            dm[f"rate_{g}"] = dm[c].astype(float) / 100.0 * dm["mean_W_per_kg_no_basal"].astype(float)
+            dm[f"rate_{g}"] = dm[c].astype(float) / 100.0 * dm["whole_body_no_basal_W_per_kg"].astype(float)
         for subject in subjects:
             ds = dm[dm["subject"].astype(str) == subject].sort_values("speed_m_per_s")
             if ds.empty:
                 continue
             ls, mk = styles[subject]
             x = ds["speed_m_per_s"].to_numpy(float)
-            ax.plot(x, ds["mean_W_per_kg_no_basal"].to_numpy(float), color="k", lw=1.8, ls=ls, marker=mk, ms=4,
+            ax.plot(x, ds["whole_body_no_basal_W_per_kg"].to_numpy(float), color="k", lw=1.8, ls=ls, marker=mk, ms=4,
                     label="whole body", gid=f"whole-body:{subject}")
             for g in groups:
                 ax.plot(x, ds[f"rate_{g}"].to_numpy(float), color=group_colour(g), lw=1.1, ls=ls, marker=mk, ms=3,
@@ -1139,13 +1139,13 @@ def per_muscle_ranked(per_muscle, *, workflow: str | None = None, models: Sequen
     """The muscles costing most energy, ranked, across speeds (W/kg of body mass, one leg, no basal).
 
     ``per_muscle``: the study's per-muscle table (``trial``, ``workflow``, ``model``,
-    ``muscle``, ``mean_W_per_kg``; ``speed_m_per_s`` orders the trials when present). The
+    ``muscle``, ``muscle_W_per_kg``; ``speed_m_per_s`` orders the trials when present). The
     model muscles are summed into anatomical muscles per subject (:func:`harmonise_muscles`), so
     subjects of different model families are ranked together. One panel per model (shared
     axis), the ``top`` muscles by their mean over trials (largest at the top), one bar per
     trial coloured by speed (light = slow), means over subjects.
     """
-    _require_columns(per_muscle, ("trial", "workflow", "model", "muscle", "mean_W_per_kg"), "the per-muscle table")
+    _require_columns(per_muscle, ("trial", "workflow", "model", "muscle", "muscle_W_per_kg"), "the per-muscle table")
     if len(per_muscle) == 0:
         raise OptionError("the per-muscle table has no rows")
     wf, d = _one_workflow(per_muscle, workflow, "the per-muscle table")
@@ -1166,7 +1166,7 @@ def per_muscle_ranked(per_muscle, *, workflow: str | None = None, models: Sequen
     for k, m in enumerate(models):
         ax = axes.flat[k]
         dm = d[d["model"].astype(str) == m]
-        mean = dm.groupby(["muscle", dm["trial"].astype(str)])["mean_W_per_kg"].mean().unstack()
+        mean = dm.groupby(["muscle", dm["trial"].astype(str)])["muscle_W_per_kg"].mean().unstack()
         order = list(mean.mean(axis=1).sort_values(ascending=False).index[:top])
         y = np.arange(len(order))[::-1]
         y_lo, y_hi = math.inf, -math.inf
@@ -1292,7 +1292,7 @@ def anatomical_muscles(names: Sequence[str]) -> dict[str, tuple[str, str]]:
     return out
 
 
-def harmonise_muscles(per_muscle, value: str = "mean_W_per_kg"):
+def harmonise_muscles(per_muscle, value: str = "muscle_W_per_kg"):
     """The per-muscle table with the model muscles of each subject summed into anatomical
     muscles (:func:`anatomical_muscles`, per subject: each subject's model family), column
     ``muscle`` the anatomical label, ``group`` its muscle group. With a ``side`` column, the

@@ -30,10 +30,22 @@ from ..study_layout import (
     unit_path,
 )
 
-__all__ = ["StudyFolder", "read_study_folder", "input_files", "add_leg_timeseries", "REQUIRED_COLUMNS"]
+__all__ = ["StudyFolder", "read_study_folder", "input_files", "add_leg_timeseries", "REQUIRED_COLUMNS",
+           "RENAMED_RESULTS_COLUMNS", "RENAMED_PER_MUSCLE_COLUMNS"]
 
 #: Columns ``results.csv`` must have; the others are used when present.
-REQUIRED_COLUMNS = ("subject", "trial", "workflow", "model", "status", "mean_W_per_kg")
+REQUIRED_COLUMNS = ("subject", "trial", "workflow", "model", "status", "whole_body_W_per_kg")
+#: Column names of ``results.csv`` written by earlier releases (one name then stood for
+#: rates of different scope in different files) and their names now: a study folder of an
+#: older version is read through this mapping. ``one_leg_mean_W`` held the per-muscle basal
+#: heat under the muscle basal rule: it is renamed only for rows of the other rules.
+RENAMED_RESULTS_COLUMNS = {
+    "mean_W_per_kg": "whole_body_W_per_kg",
+    "mean_W_per_kg_no_basal": "whole_body_no_basal_W_per_kg",
+    "one_leg_mean_W": "leg_muscles_W",
+}
+#: The same for ``per_muscle.csv``.
+RENAMED_PER_MUSCLE_COLUMNS = {"mean_W": "muscle_W", "mean_W_per_kg": "muscle_W_per_kg"}
 _FAILURE_COLUMNS = ["subject", "trial", "workflow", "reason"]
 
 
@@ -121,9 +133,10 @@ class StudyFolder:
         if not path.is_file():
             return None
         try:
-            return pd.read_csv(path, dtype={"subject": str, "trial": str, "workflow": str, "model": str})
+            table = pd.read_csv(path, dtype={"subject": str, "trial": str, "workflow": str, "model": str})
         except (pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError) as exc:
             raise InputFileError(f"{PER_MUSCLE_FILE} is not readable ({exc})") from None
+        return _renamed(table, RENAMED_PER_MUSCLE_COLUMNS)
 
     # ------------------------------------------------------------------ study.json
     def subject_record(self, subject) -> dict:
@@ -195,9 +208,10 @@ class StudyFolder:
         """Each muscle's metabolic rate without basal heat (W) over the gait cycle of the row's
         (first) leg, from the unit's ``metabolics.sto``: ``{model: table}``, each table indexed
         by the cycle percentage (the nodes inside the cycle), one column per muscle
-        (``total - basal`` of the file)."""
+        (``total_no_basal`` of the file; ``total - basal`` in the files of earlier releases,
+        whose ``total`` held the per-muscle basal heat)."""
         from ..io.storage import read_storage
-        from ..metabolics.solution import METABOLICS_STO
+        from ..metabolics.solution import METABOLICS_STO, TOTAL_NO_BASAL
 
         folder = self.unit_folder(row)
         start, _, end = self.unit_cycle(folder)
@@ -211,11 +225,13 @@ class StudyFolder:
         out: dict = {}
         for col in table.columns:
             parts = str(col).split("/")
-            if len(parts) == 3 and parts[2] == "total" and f"{parts[0]}/{parts[1]}/basal" in table.columns:
+            if len(parts) == 3 and parts[2] == TOTAL_NO_BASAL:
+                out.setdefault(parts[0], {})[parts[1]] = table[col].to_numpy(float)
+            elif len(parts) == 3 and parts[2] == "total" and f"{parts[0]}/{parts[1]}/basal" in table.columns:
                 out.setdefault(parts[0], {})[parts[1]] = (
                     table[col].to_numpy(float) - table[f"{parts[0]}/{parts[1]}/basal"].to_numpy(float))
         if not out:
-            raise InputFileError(f"{path}: no columns <model>/<muscle>/total and basal; run the unit again")
+            raise InputFileError(f"{path}: no columns <model>/<muscle>/{TOTAL_NO_BASAL}; run the unit again")
         import pandas as pd
 
         return {m: pd.DataFrame(v, index=pd.Index(pct, name="cycle_pct")) for m, v in out.items()}
@@ -271,6 +287,18 @@ def _recorded_report_models(settings: dict) -> list[str] | None:
     return parse_models(report["models"])
 
 
+def _renamed(table, names: dict):
+    """``table`` with the columns of an older version renamed (``names``: old -> new), unless
+    the new name is already there. ``one_leg_mean_W`` is renamed only when no row is of the
+    muscle basal rule (it then held the per-muscle basal heat); otherwise it is dropped."""
+    rename = {old: new for old, new in names.items() if old in table.columns and new not in table.columns}
+    if "one_leg_mean_W" in rename and "basal_rule" in table.columns and \
+            (table["basal_rule"].astype(str) == "muscle").any():
+        del rename["one_leg_mean_W"]
+        table = table.drop(columns="one_leg_mean_W")
+    return table.rename(columns=rename)
+
+
 def _unique(values) -> list[str]:
     return list(dict.fromkeys(values.astype(str)))
 
@@ -282,9 +310,12 @@ def _read_timeseries(folder: Path):
     if not p.is_file():
         raise InputFileError(f"{p}: missing")
     try:
-        return pd.read_csv(p)
+        table = pd.read_csv(p)
     except (pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError) as exc:
         raise InputFileError(f"{p}: not a readable table ({exc})") from None
+    if "series" in table.columns:  # earlier releases named the leg's summed muscles "whole_body"
+        table["series"] = table["series"].replace({"whole_body": "leg_muscles"})
+    return table
 
 
 def _periodic(pct, values, at):
@@ -368,6 +399,7 @@ def read_study_folder(study_dir: str | os.PathLike, models=None) -> StudyFolder:
         results = pd.read_csv(rpath, dtype={"subject": str, "trial": str, "workflow": str, "model": str})
     except (pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError) as exc:
         raise InputFileError(f"{rpath}: not a readable results table ({exc}); run the study again") from None
+    results = _renamed(results, RENAMED_RESULTS_COLUMNS)
     missing = [c for c in REQUIRED_COLUMNS if c not in results.columns]
     if results.empty:  # every unit failed: the runner writes the key columns alone; the page lists the failures
         for c in missing:
@@ -379,7 +411,7 @@ def read_study_folder(study_dir: str | os.PathLike, models=None) -> StudyFolder:
             "the file was not written by the study runner of this version; run the study again"
         )
     for c in results.columns:
-        if c.endswith(("_pct", "_W_per_kg", "_per_m", "_m_per_s")) or c in ("mean_W_per_kg",):
+        if c.endswith(("_pct", "_W_per_kg", "_per_m", "_m_per_s", "_W")):
             results[c] = pd.to_numeric(results[c], errors="coerce")
     notes: list[str] = []
     settings: dict = {}

@@ -112,7 +112,7 @@ def _results(study: StudyFolder) -> dict | None:
     labels = _trial_heading(ok, trials)
     label = dict(zip(trials, labels))
     out = {"n_subjects": len(set(ok["subject"].astype(str)))}
-    for key, value in (("whole_body", "mean_W_per_kg"), ("gross_cost", "gross_cost_of_transport_J_per_kg_per_m"),
+    for key, value in (("whole_body", "whole_body_W_per_kg"), ("gross_cost", "gross_cost_of_transport_J_per_kg_per_m"),
                        ("net_cost", "net_cost_of_transport_J_per_kg_per_m")):
         out[key] = _pivot(ok, value, trials, labels, workflows, models, 2)
     out["measured"] = None
@@ -184,7 +184,7 @@ def _per_muscle(study: StudyFolder) -> dict:
         return {"note": f"{exc}."}
     if pm is None:
         return {"note": f"{PER_MUSCLE_FILE} is missing: run the study with this version to get it."}
-    if pm.empty or "mean_W_per_kg" not in pm.columns:
+    if pm.empty or "muscle_W_per_kg" not in pm.columns:
         return {"note": f"{PER_MUSCLE_FILE} holds no rows."}
     ok = study.ok
     trials = [t for t in trial_order(ok) if t in set(pm["trial"].astype(str))] if not ok.empty else []
@@ -193,7 +193,7 @@ def _per_muscle(study: StudyFolder) -> dict:
     tables = {}
     for m in [m for m in study.models() if m in set(d["model"].astype(str))]:
         dm = d[d["model"].astype(str) == m]
-        mean = dm.groupby(["muscle", "trial"])["mean_W_per_kg"].mean().unstack("trial")
+        mean = dm.groupby(["muscle", "trial"])["muscle_W_per_kg"].mean().unstack("trial")
         cols = [t for t in trials if t in mean.columns] or list(mean.columns)
         mean = mean[cols]
         order = mean.mean(axis=1).sort_values(ascending=False).index[:TOP_MUSCLES]

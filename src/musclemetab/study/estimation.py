@@ -5,6 +5,8 @@
     [subjects.estimate]
     estimate = {tendon_stiffness = ["soleus_r", "gasmed_r", "gaslat_r"], optimal_fiber_length = ["tibant_r"]}
     couple = [["soleus_r", "gasmed_r", "gaslat_r"]]     # optional: muscles sharing one factor
+                                                       #   of every kind, or of one kind:
+                                                       #   {kind = "tendon_stiffness", muscles = [...]}
     bounds = {tendon_stiffness = [0.1, 2.0]}            # optional (kinds, and emg_scale)
     weights = {fiber_length = 100.0}                   # optional: activation, reserve, velocity,
                                                        #   fiber_length, emg
@@ -43,7 +45,7 @@ class EstimateSpec:
     """What a subject's estimation unit estimates, and how (the ``musclemetab estimate`` options)."""
 
     estimate: dict
-    couple: tuple[tuple[str, ...], ...] = ()
+    couple: tuple = ()  # muscle tuples (every kind) and "KIND:M1,M2" strings (one kind)
     bounds: dict = field(default_factory=dict)
     weights: dict = field(default_factory=dict)
     workflow: str = "effort-cal"
@@ -51,7 +53,10 @@ class EstimateSpec:
     validate: bool = False
 
     def to_dict(self) -> dict:
-        return {"estimate": {k: list(v) for k, v in self.estimate.items()}, "couple": [list(g) for g in self.couple],
+        from ..redundancy.estimate import parse_coupling
+
+        return {"estimate": {k: list(v) for k, v in self.estimate.items()},
+                "couple": [parse_coupling(g) if isinstance(g, str) else list(g) for g in self.couple],
                 "bounds": {k: list(v) for k, v in self.bounds.items()}, "weights": dict(self.weights),
                 "workflow": self.workflow, "emg_mode": self.emg_mode, "validate": self.validate}
 
@@ -60,6 +65,20 @@ def _names(value, here: str, key: str) -> tuple[str, ...]:
     if not isinstance(value, list) or not value or not all(isinstance(m, str) and m for m in value):
         raise OptionError(f"{here}: '{key}' must be a list of muscle names such as [\"soleus_r\", \"gasmed_r\"]")
     return tuple(value)
+
+
+def _coupling(group, here: str):
+    """A ``couple`` entry: a list of muscles (every kind), or ``{kind, muscles}`` (that kind),
+    held as ``"KIND:M1,M2"``."""
+    from ..redundancy.estimate import FIELDS
+
+    if not isinstance(group, Mapping):
+        return _names(group, here, "couple")
+    kinds = (*FIELDS, "emg_scale")
+    if set(group) != {"kind", "muscles"} or group["kind"] not in kinds:
+        raise OptionError(f"{here}: a 'couple' table must be {{kind = KIND, muscles = [...]}} with KIND one of "
+                          f"{', '.join(kinds)}, not {dict(group)!r}")
+    return f"{group['kind']}:{','.join(_names(group['muscles'], here, 'couple.muscles'))}"  # parse_coupling's form
 
 
 def estimate_spec(data, here: str) -> EstimateSpec:
@@ -84,7 +103,7 @@ def estimate_spec(data, here: str) -> EstimateSpec:
     couple = data.get("couple", [])
     if not isinstance(couple, list):
         raise OptionError(f"{here}: 'couple' must be a list of muscle lists such as [[\"soleus_r\", \"gasmed_r\"]]")
-    couple = tuple(_names(g, here, "couple") for g in couple)
+    couple = tuple(_coupling(g, here) for g in couple)
     for key in ("bounds", "weights"):
         if not isinstance(data.get(key, {}), Mapping):
             raise OptionError(f"{here}: '{key}' must be a table such as {key} = {{tendon_stiffness = [0.1, 2.0]}}"

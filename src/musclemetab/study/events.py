@@ -41,16 +41,34 @@ def _ik_window(trial: Trial) -> tuple[float, float]:
     return float(t[0]), float(t[-1])
 
 
-def trial_cycle(trial: Trial, side: str = "r") -> GaitCycle:
-    """The trial's gait cycle (see the module docstring for the order of preference)."""
+def trial_cycle(trial: Trial, side: str = "r", model=None) -> GaitCycle:
+    """The trial's gait cycle (see the module docstring for the order of preference). With the
+    subject's ``model``, the foot of a ``grf`` force is checked against its centre of pressure
+    (:func:`musclemetab.events.grf_of_side`, warnings for what it finds) and a cycle found from it
+    must last 0.8-2.0 s (:func:`musclemetab.events.check_cycle_duration`)."""
     given = (trial.start_s, trial.toe_off_s, trial.end_s)
     if all(v is not None for v in given):
         return GaitCycle(*given)
     if trial.grf is not None:
-        force = read_grf(trial.grf, trial.grf_column, side=side)
+        if model is not None:
+            import warnings
+
+            from ..errors import WindowWarning
+            from ..events import feet_for_checks, grf_of_side
+
+            feet, why = feet_for_checks(model, trial.ik)
+            force, notes, _ = grf_of_side(trial.grf, side, trial.grf_column, feet=feet)
+            for msg in notes + ([why] if why else []):
+                warnings.warn(f"trial '{trial.name}': {msg}", WindowWarning, stacklevel=2)
+        else:
+            force = read_grf(trial.grf, trial.grf_column, side=side)
         t0, tf = _ik_window(trial)  # the cycle that holds the middle of the simulated window
         found = cycle_from_grf(force.index.to_numpy(float), force.to_numpy(float),
                                threshold_N=trial.grf_threshold_N, at_time_s=trial.start_s if trial.start_s is not None else 0.5 * (t0 + tf))
+        if model is not None:
+            from ..events import check_cycle_duration
+
+            check_cycle_duration(found, where=f"trial '{trial.name}': {trial.grf} column {force.name}")
     else:
         from ..errors import MissingColumnError
 

@@ -551,7 +551,7 @@ def _unit_rows(folder: Path, unit: Unit, rec: dict):
 
 
 #: results columns averaged over the legs (each leg doubled, then averaged: the legs added)
-_LEG_MEAN_COLUMNS = ("mean_W_per_kg", "mean_W_per_kg_no_basal", "one_leg_mean_W", "duration_s", "leg_energy_J",
+_LEG_MEAN_COLUMNS = ("whole_body_W_per_kg", "whole_body_no_basal_W_per_kg", "leg_muscles_W", "duration_s", "leg_energy_J",
                      "toe_off_pct", "speed_m_per_s")
 #: per-leg events: no single value for both legs (each leg's are in its unit folder)
 _LEG_EVENT_COLUMNS = ("cycle_start_s", "toe_off_s", "cycle_end_s")
@@ -565,10 +565,10 @@ def add_leg_rows(rows: Mapping[str, object], basal_energy_J: Mapping[str, object
     per-muscle basal heat over its cycle (J, a number or a Series by model). Per model, the
     combined row holds:
 
-    * the rates (``mean_W_per_kg``, ``mean_W_per_kg_no_basal``) as the mean of the two legs'
+    * the rates (``whole_body_W_per_kg``, ``whole_body_no_basal_W_per_kg``) as the mean of the two legs'
       doubled rates, which is the sum of the legs' cycle-average rates per kg plus the basal
       heat once: ``(2 L_r/m + B + 2 L_l/m + B) / 2 = (L_r + L_l)/m + B``;
-      ``one_leg_mean_W``, ``leg_energy_J``, ``duration_s``, ``toe_off_pct`` and the speed: the
+      ``leg_muscles_W``, ``leg_energy_J``, ``duration_s``, ``toe_off_pct`` and the speed: the
       legs' means;
     * the costs of transport: the combined rates over the mean speed;
     * the energy shares (stance, swing, muscle groups) of both legs' muscle energy:
@@ -610,9 +610,9 @@ def add_leg_rows(rows: Mapping[str, object], basal_energy_J: Mapping[str, object
     if speed is not None:
         with np.errstate(invalid="ignore", divide="ignore"):
             if "gross_cost_of_transport_J_per_kg_per_m" in out:
-                out["gross_cost_of_transport_J_per_kg_per_m"] = out["mean_W_per_kg"] / speed.astype(float)
+                out["gross_cost_of_transport_J_per_kg_per_m"] = out["whole_body_W_per_kg"] / speed.astype(float)
             if "net_cost_of_transport_J_per_kg_per_m" in out:
-                out["net_cost_of_transport_J_per_kg_per_m"] = out["mean_W_per_kg_no_basal"] / speed.astype(float)
+                out["net_cost_of_transport_J_per_kg_per_m"] = out["whole_body_no_basal_W_per_kg"] / speed.astype(float)
     out["large_reserve"] = np.logical_or.reduce([f["large_reserve"].astype(bool) for f in frames])
     for c in ("cycle_source", "speed_source"):
         if c in out:

@@ -555,7 +555,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         toe_off = trial.toe_off_s if trial.toe_off_s is not None else recorded["toe_off_s"]
         cycle = GaitCycle(recorded["start_s"], toe_off, recorded["end_s"])
     else:
-        cycle = trial_cycle(trial, side)
+        cycle = trial_cycle(trial, side, subject.model)
     result = metabolics_from_solution(
         sol, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
         basal_rate_W_per_kg=study.basal_coefficient, basal_exponent=study.basal_exponent,

@@ -1,0 +1,291 @@
+"""Doubts of estimated parameters: factors on their bounds, parameters no measurement
+informs, and the identifiability at the optimum (``docs/problem.md``, "Doubts of the estimates").
+
+**Identifiability.** At the optimum ``x*`` of the estimation NLP (multipliers ``lam_g``,
+``lam_x``) the active set holds the equality rows, the inequality rows (EMG bounds) whose
+multiplier exceeds their slack, and the variable bounds likewise; the scale factors themselves
+are always kept free. With ``H`` the Hessian of the Lagrangian ``f + lam_g' g`` on the free
+variables and ``A`` the Jacobian of the active rows, the KKT matrix ``K = [[H, A'], [A, 0]]``
+is factorised once (sparse LU) and solved for the unit vectors of the parameters:
+``C = (K^-1)_pp = P' Z (Z' H Z)^-1 Z' P``, the inverse of the reduced Hessian (``Z`` a basis of
+the null space of ``A``) on the parameters, i.e. of the Hessian of the objective minimised over
+all other variables. With the tracked data weighted as inverse variances up to a common factor
+``s^2`` (the objective's tracking terms are ``J_track = 1/2 sum_j c_j r_j^2``, ``c_j = 2 w /
+(n N)``), the covariance of the parameters is::
+
+    Cov = s^2 C,    s^2 = 2 J_track / (n_data - n_p)
+
+(``n_data`` tracked values: nodes times tracked muscles, summed over trials and kinds;
+``n_p`` estimated parameters), the standard error ``SE_i = sqrt(Cov_ii)`` and the correlation
+``R_ij = C_ij / sqrt(C_ii C_jj)`` (independent of ``s^2``). The reduced Hessian is reported
+near singular when ``C`` has a non-positive diagonal (no strict minimum along a parameter) or
+the reciprocal condition number of ``C`` scaled to unit diagonal (that of ``R``) is below
+:data:`SINGULAR_RCOND`; a pair is poorly identifiable together when ``|R_ij| >``
+:data:`CORRELATION_THRESHOLD`.
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import Sequence
+
+import numpy as np
+
+from ..errors import MusclemetabWarning, OptionError
+
+__all__ = ["CORRELATION_THRESHOLD", "SINGULAR_RCOND", "BOUND_TOLERANCE", "factors_on_bounds", "informing_muscles",
+           "uninformed_factors", "check_informed", "identifiability", "warn_identifiability", "warn_on_bounds",
+           "tracking_fit", "reduced_inverse_hessian", "correlation"]
+
+#: |correlation| above which two estimated parameters are reported as not identifiable together
+#: (on the synthetic problem of ``tests/test_estimate.py`` the lMo and lTs factors of one muscle
+#: correlate at 0.94 and their lMo factors come back 6-8 % off the truth: 0.95 would miss them)
+CORRELATION_THRESHOLD = 0.9
+#: reciprocal condition number of the parameters' correlation matrix below which the reduced
+#: Hessian is reported near singular
+SINGULAR_RCOND = 1e-8
+#: a factor within this fraction of its bounds' width of a bound is reported on the bound
+BOUND_TOLERANCE = 1e-3
+
+
+def factors_on_bounds(factors: dict, bounds: dict, tolerance: float = BOUND_TOLERANCE) -> list[dict]:
+    """The factors (``{kind: {muscle: factor}}``) within ``tolerance`` x (high - low) of a bound
+    of their kind (``bounds``: ``{kind: (low, high)}``); a kind whose bounds are equal (a factor
+    held fixed) is left out. ``[{kind, muscle, factor, bound, side}]``."""
+    out = []
+    for kind, by_muscle in factors.items():
+        if kind not in bounds:
+            continue
+        lo, hi = (float(b) for b in bounds[kind])
+        if hi <= lo:
+            continue
+        tol = tolerance * (hi - lo)
+        for m, v in by_muscle.items():
+            for side, b in (("lower", lo), ("upper", hi)):
+                if abs(float(v) - b) <= tol:
+                    out.append({"kind": kind, "muscle": m, "factor": float(v), "bound": b, "side": side})
+    return out
+
+
+def warn_on_bounds(on_bounds: Sequence[dict]) -> None:
+    """One warning per factor on a bound (:func:`factors_on_bounds`; a factor coupled over
+    several muscles once, naming them)."""
+    shared = {}
+    for b in on_bounds:
+        shared.setdefault((b["kind"], b["factor"], b["side"]), []).append(b)
+    for group in shared.values():
+        b = dict(group[0], muscle=", ".join(g["muscle"] for g in group))
+        option = "--emg-scale-bounds LOW:HIGH" if b["kind"] == "emg_scale" else f"--bounds {b['kind']}=LOW:HIGH"
+        warnings.warn(f"the estimated {b['kind']} factor of {b['muscle']} is on its {b['side']} bound "
+                      f"({b['factor']:.4g}, bound {b['bound']:g}): the data ask for a value beyond it; widen the "
+                      f"bounds ({option}) or check the data and the estimated muscles", MusclemetabWarning,
+                      stacklevel=3)
+
+
+def informing_muscles(trials) -> set:
+    """Muscles with a measurement of their own: ultrasound fiber lengths or EMG in some trial."""
+    return {m for t in trials for m in (*getattr(t, "fiber_muscles", ()), *t.emg_muscles)}
+
+
+def uninformed_factors(trials, specs) -> list[tuple[str, str]]:
+    """``[(kind, muscle)]`` of the estimated muscle-tendon factors no measurement informs.
+
+    A factor of a muscle is *informed* when the muscle has fiber lengths or EMG of its own in
+    some trial, or its factor is coupled (one shared factor of the same kind) to one of a muscle
+    that has. Otherwise only the effort goal and the moments tell its value, and the estimate
+    is the effort optimum, not a measurement's."""
+    from .transcription import _group_index
+
+    have = informing_muscles(trials)
+    out = []
+    for s in specs:
+        if s.kind == "emg_scale":
+            continue
+        group = _group_index(len(s.muscles), s.couplings)
+        informed_groups = {group[i] for i, m in enumerate(s.muscles) if m in have}
+        out += [(s.kind, m) for i, m in enumerate(s.muscles) if group[i] not in informed_groups]
+    return out
+
+
+def check_informed(trials, specs, action: str = "error", remedy: str | None = None) -> list[tuple[str, str]]:
+    """Refuse (``action="error"``) or warn (``"warn"``) about factors no measurement informs
+    (:func:`uninformed_factors`); returns them. ``remedy`` replaces the advice of ``estimate``
+    (``{kind}`` and ``{muscle}`` are filled in)."""
+    bad = uninformed_factors(trials, specs)
+    if not bad:
+        return bad
+    remedy = remedy or ("give its measurements, couple it (--couple {kind}:{muscle},MEASURED_MUSCLE) or drop it "
+                        "from --estimate")
+    for kind, m in bad:
+        text = (f"the {kind} factor of {m} is informed by no measurement: {m} has no fiber lengths or EMG of its "
+                f"own and is not coupled to a measured muscle; " + remedy.format(kind=kind, muscle=m))
+        if action == "error":
+            raise OptionError(text)
+        warnings.warn(text, MusclemetabWarning, stacklevel=3)
+    return bad
+
+
+def _labels(specs, layout) -> tuple[list[str], list[int]]:
+    """Label and the position in ``x`` of each estimated variable (a coupled group is one)."""
+    from .transcription import _group_index
+
+    full = [(s.kind, m) for s in specs for m in s.muscles]
+    p_index, pairs, P0 = layout["p_index"], layout["pairs"], layout["P0"]
+    if p_index is None:  # coupling by constraint rows: one representative of each group
+        p_index = _group_index(len(full), pairs)
+        col = {g: full.index(full[p_index.index(g)]) for g in set(p_index)}
+    else:
+        col = {g: g for g in set(p_index)}
+    labels, cols = [], []
+    for g in sorted(set(p_index)):
+        members = [full[i] for i in range(len(full)) if p_index[i] == g]
+        labels.append(f"{members[0][0]}:{','.join(m for _, m in members)}")
+        cols.append(P0 + col[g])
+    return labels, cols
+
+
+def reduced_inverse_hessian(H, J, x, g, lbx, ubx, lbg, ubg, lam_g, lam_x, columns) -> tuple[np.ndarray, dict]:
+    """``(K^-1)_pp``: the inverse of the reduced Hessian on the variables ``columns`` at a KKT
+    point (see the module docstring). ``H``: the full symmetric Hessian of the Lagrangian and
+    ``J`` the constraint Jacobian (SciPy sparse), ``g`` the constraint values; the other
+    arguments as IPOPT's. The variables of ``columns`` are kept free; other variables on a bound
+    (slack below its multiplier) are fixed, and constraint rows left without a free variable
+    dropped. NaN where the KKT matrix is singular. Returns ``(C, {"constraint_rows",
+    "variable_bounds"})`` (the active counts)."""
+    import scipy.sparse as sp
+    from scipy.sparse.linalg import splu
+
+    slack_g = np.minimum(np.abs(g - lbg), np.abs(ubg - g))
+    rows = np.flatnonzero((lbg == ubg) | (slack_g <= np.abs(lam_g)))
+    slack_x = np.minimum(np.abs(x - lbx), np.abs(ubx - x))
+    fixed = (lbx == ubx) | (slack_x <= np.abs(lam_x))
+    fixed[list(columns)] = False
+    free = np.flatnonzero(~fixed)
+    pos = {int(c): k for k, c in enumerate(free)}
+    A = sp.csr_matrix(J)[rows][:, free]
+    nonempty = np.diff(A.indptr) > 0  # rows of bound variables alone (e.g. a = e = 0) hold nothing
+    rows, A = rows[nonempty], A[nonempty]
+    H = sp.csc_matrix(H)
+    K = sp.bmat([[H[free][:, free], A.T], [A, None]], format="csc")
+    rhs = np.zeros((K.shape[0], len(columns)))
+    for j, c in enumerate(columns):
+        rhs[pos[int(c)], j] = 1.0
+    active = {"constraint_rows": int(rows.size), "variable_bounds": int(fixed.sum())}
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            X = splu(K).solve(rhs)
+    except RuntimeError:  # exactly singular KKT matrix
+        return np.full((len(columns), len(columns)), np.nan), active
+    C = X[[pos[int(c)] for c in columns], :]
+    return 0.5 * (C + C.T), active
+
+
+def correlation(C: np.ndarray) -> tuple[np.ndarray | None, float]:
+    """The correlation matrix of ``C`` and its reciprocal condition number (smallest over
+    largest eigenvalue); ``(None, 0)`` when ``C`` is not finite or has a non-positive diagonal."""
+    d = np.diag(C)
+    if not (np.all(np.isfinite(C)) and np.all(d > 0)):
+        return None, 0.0
+    R = C / np.sqrt(np.outer(d, d))
+    ev = np.linalg.eigvalsh(R)
+    return R, float(max(ev[0], 0.0) / ev[-1])
+
+
+def identifiability(trials, params, goals, specs, result, *, optimal_reserve_Nm: float = 150.0,
+                    coupling: str = "shared", threshold: float = CORRELATION_THRESHOLD) -> dict:
+    """Standard errors and correlations of the estimated factors at the optimum of ``result``
+    (a :class:`~.ipopt.ProblemResult` of the same problem; see the module docstring). A factor
+    held by equal bounds is not an estimate and is left out.
+
+    Returns ``{method, parameters, factor, standard_error, correlation, residual_scale,
+    reduced_hessian_rcond, near_singular, correlated_pairs, threshold, active}``."""
+    import casadi as ca
+    import scipy.sparse as sp
+
+    from .transcription import build_problem
+
+    kkt = result.kkt
+    if not kkt or "lam_g" not in kkt:
+        raise OptionError("the identifiability needs the optimum's multipliers; give the ProblemResult of "
+                          "solve_problem")
+    nlp = build_problem(trials, params, goals, specs, optimal_reserve_Nm=optimal_reserve_Nm, coupling=coupling,
+                        explicit_derivatives=True)
+    x, lam_g, lam_x = kkt["x"], kkt["lam_g"], kkt["lam_x"]
+
+    def scipy_matrix(m):
+        m = ca.DM(m)
+        r, c = m.sparsity().get_triplet()
+        return sp.csc_matrix((np.asarray(m.nonzeros()).reshape(-1), (r, c)), shape=m.shape)
+
+    Hu = scipy_matrix(nlp["hess_lag"](x, ca.DM(0, 1), 1.0, lam_g))
+    H = (Hu + Hu.T - sp.diags(Hu.diagonal())).tocsc()
+    g, J = nlp["jac_g"](x, ca.DM(0, 1))
+    lbx, ubx = nlp["lbx"], nlp["ubx"]
+    labels, pcols = _labels(specs, nlp["layout"])
+    keep = [k for k, c in enumerate(pcols) if lbx[c] < ubx[c]]
+    labels, pcols = [labels[k] for k in keep], [pcols[k] for k in keep]
+    C, active = reduced_inverse_hessian(H, scipy_matrix(J), x, np.asarray(g).reshape(-1), lbx, ubx, nlp["lbg"],
+                                        nlp["ubg"], lam_g, lam_x, pcols)
+    n_data = sum(t.inputs.n_intervals * (len(t.fiber_muscles) * (goals.w_fiber_length > 0)
+                                         + len(t.emg_muscles) * (goals.w_emg > 0)) for t in trials)
+    j_track = sum(v for terms in result.objective_terms.values() for k, v in terms.items()
+                  if k in ("fiber_length_tracking", "emg_tracking"))
+    s2 = 2.0 * j_track / max(n_data - len(pcols), 1)
+    R, rcond = correlation(C)
+    pairs = [{"parameters": [labels[i], labels[j]], "correlation": float(R[i, j])}
+             for i in range(len(labels)) for j in range(i + 1, len(labels))
+             if R is not None and abs(R[i, j]) > threshold]
+    return {
+        "method": "inverse of the reduced Hessian of the Lagrangian on the parameters, (K^-1)_pp, scaled by "
+                  "s^2 = 2 J_track/(n_data - n_p) (docs/problem.md)",
+        "parameters": labels, "threshold": threshold, "active": active,
+        "factor": {lab: float(x[c]) for lab, c in zip(labels, pcols)},
+        "standard_error": {lab: float(np.sqrt(s2 * C[k, k])) if R is not None else None
+                           for k, lab in enumerate(labels)},
+        "correlation": R.tolist() if R is not None else None,
+        "residual_scale": {"s2": s2, "tracking_objective": j_track, "n_data": int(n_data), "n_parameters": len(pcols)},
+        "reduced_hessian_rcond": rcond, "near_singular": bool(R is None or rcond < SINGULAR_RCOND),
+        "correlated_pairs": pairs,
+    }
+
+
+def warn_identifiability(report: dict) -> None:
+    """One warning per correlated pair and one for a near-singular reduced Hessian."""
+    for p in report["correlated_pairs"]:
+        a, b = p["parameters"]
+        warnings.warn(f"{a} and {b} are not identifiable together: correlation {p['correlation']:+.3f} at the optimum "
+                      f"(|r| > {report['threshold']:g}); fix one of them (drop it from --estimate) or add data that "
+                      "tells them apart", MusclemetabWarning, stacklevel=3)
+    if report["near_singular"]:
+        warnings.warn(f"the reduced Hessian of the estimation is near singular (reciprocal condition "
+                      f"{report['reduced_hessian_rcond']:.2g}): some combination of the estimated parameters is not "
+                      "determined by the data; estimate fewer parameters or couple them", MusclemetabWarning,
+                      stacklevel=3)
+
+
+def tracking_fit(solution, fiber_lengths: dict | None = None, emg: dict | None = None) -> dict:
+    """RMS error and Pearson r of a solution against measured data at its nodes ``0 ... N-1``:
+    ``fiber_lengths`` ``{muscle: lengths m (N,)}`` against ``l~M lMo`` (RMS in mm) and ``emg``
+    ``{muscle: scaled EMG (N,)}`` against the excitations. ``{"fiber_length": {muscle: {rms_mm,
+    r}}, "emg": {muscle: {rms, r}}}``."""
+    p = solution.parameters
+    out = {}
+    for kind, data in (("fiber_length", fiber_lengths or {}), ("emg", emg or {})):
+        if not data:
+            continue
+        fit = {}
+        for m, meas in data.items():
+            meas = np.asarray(meas, dtype=float)
+            n = meas.size
+            j = solution.muscles.index(m)
+            if kind == "fiber_length":
+                model = solution.lm_norm[:n, j] * p.optimal_fiber_length_m[p.names.index(m)]
+                scale, key = 1000.0, "rms_mm"
+            else:
+                model, scale, key = solution.excitation[:n, j], 1.0, "rms"
+            err = model - meas
+            r = float(np.corrcoef(model, meas)[0, 1]) if np.std(model) > 0 and np.std(meas) > 0 else float("nan")
+            fit[m] = {key: float(scale * np.sqrt(np.mean(err**2))), "r": r}
+        out[kind] = fit
+    return out
