@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 
 from ..errors import OptionError
+from .options import number_option
 
 __all__ = ["add_parser", "run", "parse_assignments"]
 
@@ -66,7 +67,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--validate", action="store_true",
                    help="re-solve each trial with the estimates and the effort goals only (DIR/validation)")
     p.add_argument("--cache-dir", metavar="DIR")
-    p.add_argument("--max-iter", type=int, default=10000)
+    number_option(p, "--max-iter", "max_iter", default=10000, help="IPOPT iteration limit (default 10000)")
     p.add_argument("--out", required=True, metavar="DIR")
     p.set_defaults(func=run)
     return p

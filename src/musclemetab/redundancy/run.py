@@ -324,13 +324,16 @@ def solve_sides(model_path, ik_path, id_path, workflow: str = "effort-gen", *, s
     sides = tuple(sides)
     if workers == 1 or len(sides) == 1:
         return {side: solve_files(model_path, ik_path, id_path, workflow, side=side, **kwargs) for side in sides}
-    from ..processes import spawn_pool
+    from ..processes import spawn_pool, stop_pool
 
     pool, restore = spawn_pool(min(workers, len(sides)))
     try:
         futures = {side: pool.submit(_solve_files_recording_warnings, (model_path, ik_path, id_path, workflow),
                                      {**kwargs, "side": side}) for side in sides}
         results = {side: fut.result() for side, fut in futures.items()}
+    except KeyboardInterrupt:  # the legs' processes ignore Ctrl-C: stopped, not waited for
+        stop_pool(pool)
+        raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
         restore()

@@ -544,7 +544,10 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
     try:
         speed = trial_speed(trial, subject.model)
     except DataMismatchError as exc:  # e.g. a treadmill trial without speed_m_per_s: no cost of transport
-        warnings.warn(f"{subject.name}/{trial.name}: no walking speed ({exc})", stacklevel=2)
+        from ..errors import MusclemetabWarning
+
+        warnings.warn(f"{subject.name}/{trial.name}: no walking speed, no cost of transport ({exc})",
+                      MusclemetabWarning, stacklevel=2)
         speed = None
     # the stages after the solve take the solution object (the same numbers as its folder,
     # tests/test_stage_paths.py); each writes its files once
