@@ -84,7 +84,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    "N = the N-th complete cycle")
     p.add_argument("--exclude-muscles", nargs="+", metavar="MUSCLE",
                    help="leave these muscles out of the problem (e.g. a muscle that cannot reach force equilibrium "
-                   "within the fiber-length bounds, named by a failed solve)")
+                   "within the fiber-length bounds, named by the diagnosis before the solve or by a failed solve); "
+                   "in every workflow, with or without EMG (an excluded muscle's EMG is not used)")
+    p.add_argument("--diagnose-only", action="store_true",
+                   help="diagnose the trials (muscle-tendon lengths the fiber bounds cannot balance, vanishing "
+                   "moment arms, moments beyond the muscles; docs/solver.md), print the table and stop: nothing is "
+                   "solved or written; exit status 1 when a finding blocks the solve")
     number_option(p, "--mesh-frequency", "mesh_frequency_hz", default=100.0, metavar="PER_S",
                   help="mesh intervals per second (default 100, the study's)")
     p.add_argument("--workflow", default="effort-gen", choices=("effort-gen", "effort-cal", "effort-ten", "emg-ten"),
@@ -207,6 +212,7 @@ def run(args) -> int:
 
 
 def _solve(args) -> int:
+    from ..redundancy.diagnosis import violation_text
     from ..redundancy.ipopt import failure_advice
     from ..redundancy.run import solve_sides, write_solution_folder
     from ..redundancy.window import parse_cycle, parse_window
@@ -258,7 +264,7 @@ def _solve(args) -> int:
     sides = ("r", "l") if args.side == "both" else (args.side,)
     from pathlib import Path
 
-    excluded = [m for item in (args.exclude_muscles or []) for m in item.replace(",", " ").split()]
+    excluded = _excluded(args)
     # every leg is solved before anything is written, so bad input on one leg leaves no output
     solutions = solve_sides(
         args.model, args.ik, args.id, args.workflow, sides=sides, workers=args.workers,
@@ -269,10 +275,11 @@ def _solve(args) -> int:
         passive=args.passive, tendon_stiffness=kt, tendon_stiffness_file=args.parameters,
         options=options, cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, warm_start=warm,
         exclude_muscles=excluded, exclude_missing_ok=args.side == "both",
+        diagnose_only=getattr(args, "diagnose_only", False),
     )
-    unused = [m for m in excluded if not any(m in (x.record.excluded_muscles or []) for x in solutions.values())]
-    if unused:
-        raise UnknownMuscleError(f"--exclude-muscles: {', '.join(unused)} is in neither leg's problem; check the names")
+    if getattr(args, "diagnose_only", False):
+        return _report_diagnoses(solutions)
+    _check_excluded_used(excluded, solutions.values())
     from ..processes import sigint_deferred
 
     with sigint_deferred():  # Ctrl-C leaves the previous legs' folders or all the new ones
@@ -285,9 +292,11 @@ def _solve(args) -> int:
         if not solution.success:
             raise SolverError(
                 f"the {args.workflow} solve did not converge (IPOPT status '{s.status}' after "
-                f"{s.iterations} iterations): {failure_advice(s.status)}.{_bound_note(solution)} The "
+                f"{s.iterations} iterations): {failure_advice(s.status)}.{violation_text(s)}"
+                f"{_bound_note(solution)} The "
                 f"unconverged result is in {out} with \"success\": false"
             )
+        _print_findings(s)
         worst_reserve = max(s.reserve_rms_Nm.values()) if s.reserve_rms_Nm else 0.0
         print(
             f"solve: {args.workflow} side {side}, {len(solution.muscles)} muscles x {len(solution.dofs)} DOFs, "
@@ -361,6 +370,44 @@ def _bound_note(solution) -> str:
             f"with --exclude-muscles {' '.join(at)}.")
 
 
+def _excluded(args) -> list:
+    """The muscles of ``--exclude-muscles`` (spaces or commas between them)."""
+    return [m for item in (getattr(args, "exclude_muscles", None) or []) for m in item.replace(",", " ").split()]
+
+
+def _check_excluded_used(excluded, solutions) -> None:
+    """:class:`UnknownMuscleError` for an excluded muscle that no leg's problem had."""
+    unused = [m for m in excluded if not any(m in (x.record.excluded_muscles or []) for x in solutions)]
+    if unused:
+        raise UnknownMuscleError(f"--exclude-muscles: {', '.join(unused)} is in neither leg's problem; check the names")
+
+
+def _print_findings(record) -> None:
+    """The diagnosis table of a solve that has findings (``summary.json``'s ``diagnosis``)."""
+    findings = record.pre_solve_diagnosis
+    if findings.findings:
+        print(findings.table())
+
+
+def _report_diagnoses(by_side: dict) -> int:
+    """``--diagnose-only``: each leg's (and trial's) diagnosis table; the error of the first
+    blocking one (exit status 1), else 0."""
+    diagnoses = [(side, d) for side, ds in by_side.items() for d in (ds if isinstance(ds, list) else [ds])]
+    for side, d in diagnoses:
+        print(f"side {side}: {d.table()}")
+    for side, d in diagnoses:
+        if d.blocking:
+            raise d.error(f"trial {d.trial} (side {side})")
+    return 0
+
+
+def _violations_of(result) -> str:
+    """The constraints the last iterate of a multi-trial solve left violated, per trial."""
+    from ..redundancy.diagnosis import trials_violation_text
+
+    return trials_violation_text(result.solutions)
+
+
 def _as_list(value) -> list:
     if value is None:
         return []
@@ -386,7 +433,7 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
                             ("--grf-column", args.grf_column), ("--grf-threshold", args.grf_threshold),
                             ("--cycle-duration", getattr(args, "cycle_duration", None)),
                             ("--window", args.window),
-                            ("--cycle", args.cycle), ("--exclude-muscles", getattr(args, "exclude_muscles", None)))
+                            ("--cycle", args.cycle))
              if v]
     if wrong:
         raise OptionError(f"{', '.join(wrong)} are for the single-trial solves without EMG; drop them for "
@@ -418,11 +465,17 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
     options = _solver_options(args)
     legs = emg_mappings_of_legs(args.model, ik[0], args.emg_mapping, args.side, dofs, args.cache_dir)
     # every leg is solved before anything is written
+    excluded = _excluded(args)
     results = {side: solve_emg_ten(
         args.model, ik, idf, emg, emg_mapping=mapping, labels=args.labels,
         passive=args.passive, dofs=dofs, side=side, options=options, cache_dir=args.cache_dir,
         check_units=not args.skip_unit_checks, settings=settings,
+        exclude_muscles=excluded, exclude_missing_ok=args.side == "both",
+        diagnose_only=getattr(args, "diagnose_only", False),
     ) for side, mapping in legs.items()}
+    if getattr(args, "diagnose_only", False):
+        return _report_diagnoses(results)
+    _check_excluded_used(excluded, [s for r in results.values() for s in r.solutions.values()])
     for side, result in results.items():
         _write_emg_ten(args, result, _leg_out(args, side), side)
     return 0
@@ -446,9 +499,11 @@ def _write_emg_ten(args, result, out, side: str) -> None:
     if not result.success:
         raise SolverError(
             f"the emg-ten solve did not converge (IPOPT status '{r['status']}' after {r['iterations']} "
-            f"iterations): {failure_advice(r['status'])}. The unconverged result is in {out} with "
-            "\"success\": false"
+            f"iterations): {failure_advice(r['status'])}.{_violations_of(result)} The unconverged result is in "
+            f"{out} with \"success\": false"
         )
+    for solution in result.solutions.values():
+        _print_findings(solution.record)
     model_file, _ = write_personalised_model(args.model, result.parameters,
                                              {"tendon_stiffness": list(result.tendon_stiffness)}, out)
     groups = []
@@ -486,7 +541,12 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
         options=options,
         cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, settings=settings,
         workflow=args.workflow, tendon_stiffness=tendon_stiffness,
+        exclude_muscles=_excluded(args), exclude_missing_ok=args.side == "both",
+        diagnose_only=getattr(args, "diagnose_only", False),
     ) for side, mapping in legs.items()}
+    if getattr(args, "diagnose_only", False):
+        return _report_diagnoses(results)
+    _check_excluded_used(_excluded(args), [s for r in results.values() for s in r.solutions.values()])
     for side, result in results.items():
         out = _leg_out(args, side)
         if len(result.solutions) == 1:
@@ -495,8 +555,11 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
             result.write(out)
         r = result.run_record
         if not r.success:
-            raise emg_failure(r, settings.emg_mode, f"the EMG-informed {args.workflow} solve (written to {out})",
+            err = emg_failure(r, settings.emg_mode, f"the EMG-informed {args.workflow} solve (written to {out})",
                               settings.fiber_scheme)
+            raise type(err)(err.message + _violations_of(result))
+        for solution in result.solutions.values():
+            _print_findings(solution.record)
         scales = ", ".join(f"{m} {v:.3g}" for m, v in result.emg_scale.items())
         leg = f" side {side}" if args.side == "both" else ""
         print(f"solve: {args.workflow} EMG-{settings.emg_mode}{leg} {len(result.solutions)} trial(s): {r.status} in "

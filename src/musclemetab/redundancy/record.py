@@ -178,6 +178,9 @@ class SolveRecord:
     geometry_time_s: float | None = _ABSENT
     side: str | None = _ABSENT
     excluded_muscles: list | None = _ABSENT
+    #: the diagnosis before the solve (:mod:`.diagnosis`): ``thresholds``, ``findings`` and, for a
+    #: solve that did not converge, the constraints its last iterate left violated (``last_iterate``)
+    diagnosis: dict | None = _ABSENT
     window: dict | None = _ABSENT
     inverse_dynamics: dict | None = _ABSENT
     # the file (Solution.write)
@@ -226,6 +229,13 @@ class SolveRecord:
     def gait_cycle(self) -> dict | None:
         """The gait cycle the window was taken from (``window['gait_cycle']``), if recorded."""
         return (self.window or {}).get("gait_cycle")
+
+    @property
+    def pre_solve_diagnosis(self):
+        """The diagnosis before the solve (:class:`~.diagnosis.Diagnosis`; empty when not recorded)."""
+        from .diagnosis import Diagnosis
+
+        return Diagnosis.from_dict(self.diagnosis or {})
 
     @property
     def run_record(self) -> RunRecord:

@@ -174,6 +174,8 @@ class Subject:
     emg_tolerance: float = 0.01
     #: the subject's parameter estimation (:class:`~musclemetab.study.estimation.EstimateSpec`)
     estimate: Any = None
+    #: muscles left out of every problem of the subject (``--exclude-muscles``)
+    exclude_muscles: tuple[str, ...] = ()
 
     @property
     def sides(self) -> tuple[str, ...]:
@@ -222,7 +224,7 @@ _ENERGY_KEYS = {"model", "weight", "effort_weight", "smoothing", "form"}
 #: keys of the study file's [solver] table (IPOPT settings of every solve)
 _SOLVER_KEYS = {"max_iter", "tol", "linear_solver"}
 _SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials",
-                 "muscle_properties", "side", "dofs", "emg_mode", "emg_tolerance", "estimate"}
+                 "muscle_properties", "side", "dofs", "emg_mode", "emg_tolerance", "estimate", "exclude_muscles"}
 _TRIAL_KEYS = {
     "name", "ik", "id", "emg", "grf", "grf_column", "grf_threshold_N", "speed_m_per_s",
     "measured_W_per_kg", "vo2_mL_per_s", "vco2_mL_per_s", "vo2_mL_per_min", "vco2_mL_per_min",
@@ -471,6 +473,9 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
         if not isinstance(dofs, list) or not dofs or not all(isinstance(d, str) and d for d in dofs):
             raise OptionError(f"{here}: 'dofs' must be a list of coordinate names, e.g. [\"knee_angle_l\"]")
         dofs = tuple(dofs)
+    excluded = data.get("exclude_muscles", [])
+    if not isinstance(excluded, list) or not all(isinstance(m, str) and m for m in excluded):
+        raise OptionError(f"{here}: 'exclude_muscles' must be a list of muscle names, e.g. [\"tfl_r\"]")
     trials_data = data.get("trials")
     if not isinstance(trials_data, list) or not trials_data:
         raise OptionError(f"{here}: no trials; add [[subjects.trials]] tables with name, ik and id")
@@ -486,13 +491,14 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
                               f"{', '.join(missing)}")
     emg_mode, emg_tolerance = _emg_mode(data, here, trials)
     muscle_properties = _path(data.get("muscle_properties"), base, here, "muscle_properties", required=False)
-    if muscle_properties is not None or dofs is not None:
-        _check_model_names(model, here, muscle_properties, dofs)
+    if muscle_properties is not None or dofs is not None or excluded:
+        _check_model_names(model, here, muscle_properties, dofs, excluded)
     if side == BOTH:
         _check_both_legs(data, here, trials, workflows, kt)
     subject = Subject(name=name, model=model, body_mass_kg=mass, height_m=height, trials=trials,
                       passive=passive, tendon_stiffness=kt, emg_mapping=mapping, muscle_properties=muscle_properties,
-                      side=side, dofs=dofs, emg_mode=emg_mode, emg_tolerance=emg_tolerance)
+                      side=side, dofs=dofs, emg_mode=emg_mode, emg_tolerance=emg_tolerance,
+                      exclude_muscles=tuple(excluded))
     if data.get("estimate") is not None:
         from dataclasses import replace
 
@@ -503,8 +509,9 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
     return subject
 
 
-def _check_model_names(model: Path, here: str, muscle_properties: Path | None, dofs) -> None:
-    """Refuse, before anything runs, muscle-properties rows and ``dofs`` that name nothing in the model."""
+def _check_model_names(model: Path, here: str, muscle_properties: Path | None, dofs, excluded=()) -> None:
+    """Refuse, before anything runs, muscle-properties rows, ``dofs`` and ``exclude_muscles``
+    that name nothing in the model."""
     import difflib
 
     from ..errors import UnknownCoordinateError, UnknownMuscleError
@@ -518,6 +525,9 @@ def _check_model_names(model: Path, here: str, muscle_properties: Path | None, d
             overrides.check_names(info.muscles.names)
         except UnknownMuscleError as exc:
             raise UnknownMuscleError(f"{here}: 'muscle_properties': {exc} of {model}") from None
+    alien = [m for m in excluded if m not in info.muscles.names]
+    if alien:
+        raise UnknownMuscleError(f"{here}: 'exclude_muscles' {', '.join(alien)} not a muscle of {model}; fix the name")
     coordinates = [c["name"] if isinstance(c, Mapping) else c for c in info.coordinates]
     unknown = [d for d in dofs or () if d not in coordinates]
     if unknown:
