@@ -38,6 +38,24 @@ def gait2392():
 
 
 @pytest.fixture(scope="session")
+def passive_csv(example, tmp_path_factory):
+    """The study's calibration (``passiveMoments.mat``) converted to the package's
+    passive_parameters.csv format: one file per run, so that the solves given it are memoised."""
+    import numpy as np
+    import scipy.io
+
+    mat = scipy.io.loadmat(str(example.passive_moments_mat), squeeze_me=True, struct_as_record=False)
+    only = mat["sim"].Results.onlyParam
+    path = tmp_path_factory.mktemp("passive") / "passive_parameters.csv"
+    rows = ["muscle,kPE,s0,sM"]
+    for n, k, s in zip(only.MuscleNames, only.calParam.kpe, only.calParam.ksf):
+        if np.isfinite(k):
+            rows.append(f"{n},{float(k)!r},{float(s)!r},0.6")
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+@pytest.fixture(scope="session")
 def reference_table():
     """Published per-muscle values of the example subject (``tests/data/muscle_properties_reference.csv``)."""
     import pandas as pd
@@ -70,9 +88,8 @@ def two_subjects(example, gait2392, tmp_path_factory):
     """The two-subject study of ``test_trials.TWO_SUBJECTS`` (the example subject's right leg and
     gait2392's subject on both legs) run once per test run by ``musclemetab run --report``:
     ``(output folder, what the command printed)``. Shared by the parallel test processes like
-    :func:`demo`."""
-    import io
-
+    :func:`demo`. What it printed on standard error (its worker processes included: captured at
+    the file descriptors) is :func:`two_subjects_stderr`."""
     import solve_memo
     from test_trials import TWO_SUBJECTS
 
@@ -86,12 +103,40 @@ def two_subjects(example, gait2392, tmp_path_factory):
             root.mkdir()
             study = root / "study.toml"
             study.write_text(TWO_SUBJECTS.format(example=example, gait2392=gait2392))
-            buffer = io.StringIO()
-            with contextlib.redirect_stdout(buffer):
-                code = main(["run", str(study), "--workers", "2", "--report", "--no-progress"])
-            assert code == 0, buffer.getvalue()
-            printed.write_text(buffer.getvalue())
+            with _captured_fds(root / "stdout.txt", root / "stderr.txt"):
+                code = main(["run", str(study), "--workers", "2", "--report"])
+            assert code == 0, (root / "stderr.txt").read_text()
+            (root / "stdout.txt").replace(printed)
     return root / "out", printed.read_text()
+
+
+@pytest.fixture(scope="session")
+def two_subjects_stderr(two_subjects) -> str:
+    """What ``musclemetab run`` of :func:`two_subjects` printed on standard error (warnings, progress)."""
+    return (two_subjects[0].parent / "stderr.txt").read_text()
+
+
+@contextlib.contextmanager
+def _captured_fds(stdout_file: Path, stderr_file: Path):
+    """Standard output and error of this process and of the processes it starts, into files."""
+    import sys
+
+    with open(stdout_file, "w", buffering=1) as out, open(stderr_file, "w", buffering=1) as err:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        saved = [os.dup(1), os.dup(2)]
+        try:
+            os.dup2(out.fileno(), 1)
+            os.dup2(err.fileno(), 2)
+            with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+                yield
+        finally:
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            for fd in saved:
+                os.close(fd)
+
+
 
 
 @pytest.fixture(scope="session")

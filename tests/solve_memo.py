@@ -39,7 +39,7 @@ def solve_key(func, args, kwargs) -> tuple[str, dict] | None:
 
     ``cache_dir`` (where the geometry is cached) does not change the result and is left out, nor
     does ``exclude_missing_ok`` when no muscle is excluded.
-    ``options=None`` and ``settings=None`` count as the defaults they stand for. ``None`` when
+    ``options=None``, ``settings=None`` and ``grf_threshold_N=None`` count as the defaults they stand for. ``None`` when
     an argument is neither a file, a plain value, a list/tuple/dict of those nor a settings
     dataclass (an in-memory object such as a warm start): such calls always solve.
     """
@@ -72,6 +72,10 @@ def solve_key(func, args, kwargs) -> tuple[str, dict] | None:
             value = SolverOptions()
         if name == "settings" and value is None:
             value = EmgTenSettings()
+        if name == "grf_threshold_N" and value is None:  # the command line's "not given": the default
+            from musclemetab.events import DEFAULT_GRF_THRESHOLD_N
+
+            value = DEFAULT_GRF_THRESHOLD_N
         try:
             content[name] = plain(value)
         except TypeError:

@@ -10,13 +10,17 @@
 
 from __future__ import annotations
 
+import os
 import types
+import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
 from mrs_reference import fl_ref, fpe_ref, fv_ref
 
-from musclemetab.errors import OptionError
+from musclemetab.errors import MusclemetabWarning, OptionError
+from musclemetab.metabolics.smooth import WORK_AND_HEAT
 from musclemetab.io import read_storage
 from musclemetab.redundancy import inputs as I
 from musclemetab.redundancy import workflows as W
@@ -31,9 +35,10 @@ def _goal(model="UM10", weight=2.0, **kw):
     return EnergyGoal(model, weight, MASS, HEIGHT, **kw)
 
 
-def _rates_by_hand(model, smoothing, muscles, params, e, a, lm, vm):
+def _rates_by_hand(model, smoothing, muscles, params, e, a, lm, vm, **options):
     """Summed smooth rate (W, no basal) per node: states ``(nodes, muscles)``, curves of
-    ``mrs_reference``, masses and slow-twitch fractions of the muscle table."""
+    ``mrs_reference``, masses and slow-twitch fractions of the muscle table; ``options`` of the
+    smooth model (the objective form of UM03, BH04, HO06, UC16: ``non_negative=WORK_AND_HEAT``)."""
     from musclemetab.metabolics.smooth import smooth_rates
     from musclemetab.properties import metabolic_properties
 
@@ -43,7 +48,7 @@ def _rates_by_hand(model, smoothing, muscles, params, e, a, lm, vm):
     f0 = p.max_isometric_force_N
     r = smooth_rates(model, e, a, lm, vbar, fl_ref(lm), fv_ref(vbar),
                      f0 * fpe_ref(lm, p.passive_kpe, p.passive_s0, p.passive_sm), f0, p.optimal_fiber_length_m,
-                     p.max_contraction_velocity, mass, fst, smoothing=smoothing, basal=False)
+                     p.max_contraction_velocity, mass, fst, smoothing=smoothing, basal=False, **options)
     return r["total"].sum(axis=1)
 
 
@@ -90,13 +95,21 @@ def _point(nlp, seed=3):
                    np.minimum(nlp["ubx"], 1e3) - 1e-3)
 
 
-@pytest.mark.parametrize("model", ["UM10", "BH04", "MA68"])
-def test_goal_value_is_the_smooth_model_summed_by_hand(small_problem, model):
-    """With and without the goal, the objectives differ by ``w (1/N) sum_k sum_m Edot / m_body``."""
+VALUE_CASES = [("UM10", "objective", {}), ("BH04", "objective", {"non_negative": WORK_AND_HEAT}),
+               ("BH04", "model", {}), ("MA68", "objective", {})]
+
+
+@pytest.mark.parametrize("model, form, options", VALUE_CASES, ids=[f"{m}-{f}" for m, f, _ in VALUE_CASES])
+def test_goal_value_is_the_smooth_model_summed_by_hand(small_problem, model, form, options):
+    """With and without the goal, the objectives differ by ``w (1/N) sum_k sum_m Edot / m_body``;
+    BH04's objective form is the smooth model with its rule on the work plus the
+    shortening/lengthening heat, its model form the smooth model as defined."""
     import casadi as ca
 
     inp, params, _ = small_problem
-    goal = _goal(model, weight=2.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MusclemetabWarning)  # the model form's warning (tested below)
+        goal = _goal(model, weight=2.0, form=form)
     with_goal, without = _nlp(small_problem, goal), _nlp(small_problem, None)
     x = _point(with_goal)
     p = ca.DM.zeros(0, 1)
@@ -105,7 +118,7 @@ def test_goal_value_is_the_smooth_model_summed_by_hand(small_problem, model):
     M, D, N = len(inp.muscles), len(inp.dofs), inp.n_intervals
     Z = x[:(5 * M + D) * N].reshape(N, 5 * M + D)
     a, lm, e, vm = Z[:, 0:M], Z[:, M:2 * M], Z[:, 3 * M:4 * M], Z[:, 4 * M + D:]
-    by_hand = 2.0 * np.sum(_rates_by_hand(model, goal.smoothing, inp.muscles, params, e, a, lm, vm)) / (N * MASS)
+    by_hand = 2.0 * np.sum(_rates_by_hand(model, goal.smoothing, inp.muscles, params, e, a, lm, vm, **options)) / (N * MASS)
     assert by_hand > 0.1  # a real metabolic rate: W/kg of body mass, one leg
     assert f1 - f0 == pytest.approx(by_hand, rel=1e-9)
 
@@ -157,6 +170,65 @@ def test_energy_goal_options_are_checked():
         from musclemetab.redundancy.energy import EnergyGoal
 
         EnergyGoal("UM10", 1.0, 72600.0, HEIGHT)
+    with pytest.raises(OptionError, match="unknown form 'exact'; choose one of objective, model"):
+        _goal(form="exact")
+    with pytest.raises(OptionError, match="drop the option non_negative"):
+        _goal("BH04", options={"non_negative": False})
+
+
+def test_goal_forms_and_their_record():
+    """The objective form moves the non-negativity rule of UM03, BH04, HO06, UC16 to the work
+    plus shortening/lengthening heat; the model form keeps it and warns; the other models have
+    no rule and one form."""
+    for model in ("UM03", "BH04", "HO06", "UC16"):
+        goal = _goal(model)
+        assert goal.form == "objective" and goal.smooth_options() == {"non_negative": WORK_AND_HEAT}
+        assert goal.form_record() == {"model": model, "form": "objective", "smoothing": 1e-3,
+                                      "non_negativity": "max(W + H_SL, 0): work plus shortening/lengthening heat"}
+        with pytest.warns(MusclemetabWarning, match=f"energy goal {model} in its model form.*lengthening muscle"):
+            model_form = _goal(model, form="model")
+        assert model_form.smooth_options() == {} and model_form.form_record()["non_negativity"].startswith("max(total")
+    for model in ("UM10", "LW07", "LW05", "MA68"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # no warning in either form
+            assert _goal(model).smooth_options() == _goal(model, form="model").smooth_options() == {}
+        assert _goal(model, smoothing=1e-2).form_record()["non_negativity"] == "none (the model has none)"
+
+
+#: the metabolic models' arguments on the example's normal trial (EFFORT-GEN solution, 40
+#: muscles x 108 nodes; see tests/test_metabolics_smooth.py)
+STATES_NPZ = Path(__file__).parent / "data" / "example_normal_effort_gen_metabolic_inputs.npz"
+
+
+def test_goal_smoothing_bias_below_two_percent_on_the_example_states():
+    """At the goal's default smoothing, each model's smooth goal form summed over the example's
+    muscles and nodes is within 2 % of the exact model functions (``musclemetab.metabolics``) in
+    the same form: the model itself, or ``H_AM + max(W + H_SL, 0)`` of the model without its rule.
+    BH04 and LW05 at the steady-state stimulation time, LW05 at ``dF_CE/dt = 0``, as the goal."""
+    from musclemetab.metabolics import ALL_MODELS
+    from musclemetab.metabolics.smooth import smooth_rates
+    from musclemetab.redundancy.energy import CLAMPED_MODELS, ENERGY_SMOOTHING
+
+    data = np.load(STATES_NPZ)
+    s = {k: data[k] for k in data.files if k != "time_s"}
+    columns = {k: (v[:, None] if v.ndim == 1 else v) for k, v in s.items()}
+    assert ENERGY_SMOOTHING == 1e-3
+    for model in ALL_MODELS:
+        goal = _goal(model)
+        smooth = smooth_rates(model, **columns, smoothing=goal.smoothing, basal=False, **goal.smooth_options())
+        kw = {"basal": False}
+        if model == "BH04":  # heat off below e = 0.1, as the smooth model's gate
+            kw["stimulation_time_s"] = np.where(s["excitation"] > 0.1, np.inf, 0.0)
+        if model == "LW05":
+            kw.update(stimulation_time_s=np.inf, fiber_force_rate_N_per_s=0.0)
+        if model in CLAMPED_MODELS:
+            r = ALL_MODELS[model](**s, non_negative=False, **kw)
+            exact = r.activation_maintenance + np.maximum(r.work + r.shortening_lengthening, 0.0)
+        else:
+            exact = ALL_MODELS[model](**s, **kw).total
+        assert np.sum(exact) > 1000.0  # W summed over 108 nodes: a real rate
+        bias = np.sum(smooth["total"]) / np.sum(exact) - 1.0
+        assert abs(bias) < 0.02, (model, bias)
 
 
 @pytest.mark.opensim
@@ -183,10 +255,46 @@ def test_energy_solve_of_the_normal_trial_converges(example):
     assert s["objective_terms"]["energy"] == pytest.approx(1e-3 * energy, rel=1e-9)
     assert s["energy_goal"]["leg_mean_W_per_kg"] == pytest.approx(energy, rel=1e-9)
     assert s["energy_goal"]["model"] == "UM10" and s["solver_options"]["energy"]["weight"] == 1e-3
+    assert sol.record.energy_form == s["energy_form"] == {"model": "UM10", "form": "objective", "smoothing": 0.01,
+                                                          "non_negativity": "none (the model has none)"}
     # less energy than the effort optimum it started from, and a lower mixed objective than there
     assert energy < leg_W_per_kg(effort) - 0.05
     assert s["objective"] == pytest.approx(sum(s["objective_terms"].values()), rel=1e-9)
     assert s["objective"] < effort.summary["objective"] + 1e-3 * leg_W_per_kg(effort)
+
+
+@pytest.mark.opensim
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("MUSCLEMETAB_LONG_TESTS"),
+                    reason="1705 IPOPT iterations (about 320 s of one core): set MUSCLEMETAB_LONG_TESTS=1")
+def test_bh04_energy_solve_does_not_saturate_the_lengthening_rectus_femoris(example):
+    """BH04 goal alone (``wE = 1``, ``wAct = 0``, objective form, default smoothing), warm-started
+    from the effort optimum: converged, and the rectus femoris, which lengthens while active, is
+    not driven to saturation there: its peak activation at the nodes where its fiber lengthens
+    stays below 0.5 (0.29; effort optimum 0.30; the same solve in the model form: 1.00). The energy
+    optimum still fully activates other muscles (docs/energy_objective.md)."""
+    from musclemetab.redundancy import SolverOptions, solve_files
+
+    effort = solve_files(example.model, example.ik["normal"], example.id["normal"], "effort-cal")
+    goal = _goal("BH04", weight=1.0, effort_weight=0.0)
+    sol = solve_files(example.model, example.ik["normal"], example.id["normal"], "effort-cal",
+                      options=SolverOptions(energy=goal), warm_start=effort)
+    s = sol.summary
+    assert s["success"] and s["max_moment_residual_Nm"] <= 1e-4
+    assert sol.record.energy_form["non_negativity"].startswith("max(W + H_SL, 0)")
+
+    def lengthening_peak(x, m):
+        i = x.muscle_index(m)
+        return float(np.max(x.activation[:, i], where=x.fiber_velocity_lmo_per_s[:, i] > 0, initial=0.0))
+
+    assert lengthening_peak(effort, "recfem_r") == pytest.approx(0.30, abs=0.01)
+    assert lengthening_peak(sol, "recfem_r") < 0.5
+    # the goal did its work: less BH04 (objective form, smooth) than at the effort optimum
+    N = s["n_intervals"]
+    effort_bh04 = np.mean(_rates_by_hand("BH04", goal.smoothing, list(effort.muscles), effort.parameters,
+                                         effort.excitation[:N], effort.activation[:N], effort.lm_norm[:N],
+                                         effort.fiber_velocity_lmo_per_s[:N], non_negative=WORK_AND_HEAT)) / MASS
+    assert s["energy_goal"]["leg_mean_W_per_kg"] < effort_bh04 - 0.1
 
 
 @pytest.mark.opensim
@@ -208,6 +316,7 @@ def test_energy_goal_from_the_command_line(example, tmp_path, capsys):
     assert f"UM10 (smooth, one leg, no basal) {s['energy_goal']['leg_mean_W_per_kg']:.3f} W/kg" in printed
     assert s["objective_terms"]["energy"] == pytest.approx(1e-3 * s["energy_goal"]["leg_mean_W_per_kg"], rel=1e-12)
     for extra, words in ((["--energy-weight", "1"], ["--energy-weight", "--energy-model"]),
+                         (["--energy-form", "model"], ["--energy-form", "--energy-model"]),
                          (["--energy-model", "UM10", "--mass", "72.6"], ["--height"]),
                          (["--energy-model", "UM99", "--mass", "72.6", "--height", "1.743"], ["UM99", "UM10"]),
                          (["--energy-model", "UM10", "--mass", "72.6", "--height", "1.743", "--energy-smoothing",

@@ -28,11 +28,18 @@ def test_missing_runtime_library_is_an_option_error(tmp_path):
         SolverOptions(linear_solver="spral", linear_solver_library="libhsl.so")
 
 
-def test_runtime_library_passed_to_ipopt():
-    # any loadable shared library passes the load check; IPOPT gets its name under the
-    # option of the solver family
+def test_runtime_library_passed_to_ipopt(monkeypatch):
+    # a library that does not export the solver's functions is refused (libm is no HSL library);
+    # one that does (libm, its symbol table read as if it did) is passed to IPOPT under the option
+    # of the solver family
+    import musclemetab.redundancy.ipopt as ipopt
+
     libm = ctypes.util.find_library("m")
     assert libm
+    with pytest.raises(OptionError, match=r"ma86: .*does not export ma86_analyse_d.*not loaded"):
+        SolverOptions(linear_solver="ma86", linear_solver_library=libm)
+    every = {s for names in ipopt.LINEAR_SOLVER_SYMBOLS.values() for s in names}
+    monkeypatch.setattr(ipopt, "exported_symbols", lambda path: every)
     hsl = ipopt_options(SolverOptions(linear_solver="ma86", linear_solver_library=libm), MUMPS_OPTIONS)
     assert hsl["linear_solver"] == "ma86" and hsl["hsllib"] == libm
     assert "min_refinement_steps" not in hsl  # the MUMPS settings stay with MUMPS
@@ -95,8 +102,12 @@ def test_study_key(example):
         }
         return study_from_dict(data | extra, base="/")
 
-    with pytest.raises(OptionError, match=r"\[solver\].*ma97.*libhsl_nowhere\.so"):
+    # a study file may name a solver, not a library (native code) to load
+    with pytest.raises(OptionError, match=r"\[solver\] linear_solver_library: a study file names a linear solver, "
+                                          r"not a library.*MUSCLEMETAB_LINEAR_SOLVER_LIBRARY"):
         study(solver={"linear_solver": "ma97", "linear_solver_library": "/nowhere/libhsl_nowhere.so"})
+    with pytest.raises(OptionError, match=r"\[solver\].*ma97.*libhsl\.so"):  # not installed here
+        study(solver={"linear_solver": "ma97"})
     default, spral = study(), study(solver={"linear_solver": "spral"})
     assert spral.settings["solver"]["linear_solver"] == "spral"
     unit = plan_units(default)[1][0]

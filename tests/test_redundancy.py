@@ -57,22 +57,6 @@ def geometries(example, geometry_cache):
 
 
 @pytest.fixture(scope="session")
-def passive_csv(example, tmp_path_factory):
-    """The study's calibration converted to the package's passive_parameters.csv format."""
-    import scipy.io
-
-    mat = scipy.io.loadmat(str(example.passive_moments_mat), squeeze_me=True, struct_as_record=False)
-    only = mat["sim"].Results.onlyParam
-    path = tmp_path_factory.mktemp("passive") / "passive_parameters.csv"
-    rows = ["muscle,kPE,s0,sM"]
-    for n, k, s in zip(only.MuscleNames, only.calParam.kpe, only.calParam.ksf):
-        if np.isfinite(k):
-            rows.append(f"{n},{float(k)!r},{float(s)!r},0.6")
-    path.write_text("\n".join(rows) + "\n")
-    return path
-
-
-@pytest.fixture(scope="session")
 def tendon_json(tmp_path_factory):
     path = tmp_path_factory.mktemp("params") / "parameters.json"
     path.write_text(json.dumps({"tendon_stiffness": {
@@ -285,7 +269,8 @@ def test_solution_files(solved):
     from musclemetab.io import read_storage
 
     sol, folder = solved("normal", "effort-gen")
-    assert sorted(p.name for p in folder.iterdir()) == ["solution.sto", "summary.json"]
+    assert sorted(p.name for p in folder.iterdir()) == ["controls.sto", "forces.sto", "model.osim", "solution.sto",
+                                                        "states.sto", "summary.json"]  # docs/opensim_files.md
     df = read_storage(folder / "solution.sto")
     assert df.attrs["in_degrees"] is False
     quantities = ("excitation", "activation", "normalized_fiber_length", "normalized_fiber_velocity",

@@ -4,14 +4,16 @@
                                             [--out DIR]
     python docs/scripts/energy_objective.py --smoothing-table
 
-Each goal is ``effort`` (the workflow's effort goal alone) or ``MODEL:W:W_EFFORT[:S]`` (the
+Each goal is ``effort`` (the workflow's effort goal alone) or ``MODEL:W:W_EFFORT[:S[:FORM]]`` (the
 energy goal of the smooth ``MODEL`` with weight ``W`` beside the effort goal with weight
-``W_EFFORT``; smoothing ``S``, default the goal's). Every solve starts from the static-optimisation guess (no warm start).
+``W_EFFORT``; smoothing ``S``, default (or empty) the goal's; ``FORM`` ``objective`` (default) or
+``model``). Every solve starts from the static-optimisation guess (no warm start).
 Prints, per solution: IPOPT's outcome, the moment residual, the reserves, the goal's value
 (the smooth model's leg mean in W/kg), smooth and exact UM10's leg mean over the same nodes
 (W/kg of body mass, no basal: the yardstick for every solution), the whole-body rate of every exact model (W/kg, both
-legs, 1.2 W/kg basal heat of body mass, the metabolics stage's trimming) and the peak
-activations of the main muscles; with ``--out`` the tables are also written as CSV there.
+legs, 1.2 W/kg basal heat of body mass, the metabolics stage's trimming), the peak
+activations of the main muscles, and their peak activations at the nodes where their fibers
+lengthen; with ``--out`` the tables are also written as CSV there.
 The numbers of ``docs/energy_objective.md`` were made with the defaults.
 """
 
@@ -32,15 +34,19 @@ def _goal(text, subject):
 
     if text == "effort":
         return None
-    model, weight, effort, *smoothing = text.split(":")
+    model, weight, effort, *rest = text.split(":")
+    smoothing, form = (rest + ["", ""])[:2]
     return EnergyGoal(model, float(weight), subject.body_mass_kg, subject.height_m, effort_weight=float(effort),
-                      **({"smoothing": float(smoothing[0])} if smoothing else {}))
+                      **({"smoothing": float(smoothing)} if smoothing else {}), **({"form": form} if form else {}))
 
 
-def exact_leg_mean_W_per_kg(model, sol, subject, n):
+def exact_leg_mean_W_per_kg(model, sol, subject, n, form="model"):
     """The exact ``model``'s leg mean (W/kg of body mass, no basal) over nodes ``0 ... n-1``,
-    muscle masses and slow-twitch fractions as the goal takes them."""
+    muscle masses and slow-twitch fractions as the goal takes them; ``form="objective"``: the
+    energy goal's form, ``H_AM + max(W + H_SL, 0)`` of the model without its non-negativity rule
+    (UM03, BH04, HO06, UC16; the other models are their own objective form)."""
     from musclemetab.metabolics.registry import ALL_MODELS
+    from musclemetab.redundancy.energy import CLAMPED_MODELS
     from musclemetab.metabolics.solution import states_of_solution
     from musclemetab.properties import metabolic_properties
 
@@ -55,30 +61,46 @@ def exact_leg_mean_W_per_kg(model, sol, subject, n):
     if model == "LW05":
         steady["stimulation_time_s"] = np.full_like(states["excitation"], np.inf)
         steady["fiber_force_rate_N_per_s"] = np.zeros_like(states["excitation"])
+    unclamped = form == "objective" and model in CLAMPED_MODELS
     rates = ALL_MODELS[model](**states, max_isometric_force_N=p.max_isometric_force_N,
                               optimal_fiber_length_m=p.optimal_fiber_length_m,
                               max_contraction_velocity=p.max_contraction_velocity, muscle_mass_kg=mass,
-                              slow_twitch_fraction=fst, basal=False, **(steady or {"time_s": st.time_s[:n]}))
-    return float(np.mean(rates.total.sum(axis=0))) / subject.body_mass_kg
+                              slow_twitch_fraction=fst, basal=False, **(steady or {"time_s": st.time_s[:n]}),
+                              **({"non_negative": False} if unclamped else {}))
+    total = rates.total
+    if unclamped:
+        total = rates.activation_maintenance + np.maximum(rates.work + rates.shortening_lengthening, 0.0)
+    return float(np.mean(total.sum(axis=0))) / subject.body_mass_kg
 
 
 def smoothing_table(subject, workflow) -> int:
     import pandas as pd
 
+    import warnings
+
     from musclemetab.metabolics.smooth import SMOOTH_MODELS
     from musclemetab.redundancy import solve_files
-    from musclemetab.redundancy.energy import EnergyGoal, leg_rate_W_per_kg
+    from musclemetab.redundancy.energy import CLAMPED_MODELS, EnergyGoal, leg_rate_W_per_kg
 
     sol = solve_files(subject.model, subject.ik["normal"], subject.id["normal"], workflow)
     n = sol.summary["n_intervals"]
     rows = []
-    for model in SMOOTH_MODELS:
-        row = {"model": model, "exact": exact_leg_mean_W_per_kg(model, sol, subject, n)}
-        for s in (1e-2, 1e-3, 1e-4):
-            goal = EnergyGoal(model, 1.0, subject.body_mass_kg, subject.height_m, smoothing=s)
-            row[f"s={s:g}"] = float(np.mean(leg_rate_W_per_kg(goal, sol.parameters, sol.muscles, sol.excitation[:n],
-                                                              sol.activation[:n], sol.lm_norm[:n], sol.fiber_velocity_lmo_per_s[:n])))
-        rows.append(row)
+    for form in ("objective", "model"):
+        for model in SMOOTH_MODELS:
+            if form == "model" and model not in CLAMPED_MODELS:
+                continue  # the same as its objective form
+            exact = exact_leg_mean_W_per_kg(model, sol, subject, n, form)
+            row = {"form": form, "model": model, "exact": exact}
+            for s in (1e-2, 1e-3, 1e-4):
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")  # the model form's warning
+                    goal = EnergyGoal(model, 1.0, subject.body_mass_kg, subject.height_m, smoothing=s, form=form)
+                v = float(np.mean(leg_rate_W_per_kg(goal, sol.parameters, sol.muscles, sol.excitation[:n],
+                                                    sol.activation[:n], sol.lm_norm[:n],
+                                                    sol.fiber_velocity_lmo_per_s[:n])))
+                row[f"s={s:g}"] = v
+                row[f"bias % s={s:g}"] = 100.0 * (v / exact - 1.0)
+            rows.append(row)
     print(pd.DataFrame(rows).to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     return 0
 
@@ -97,12 +119,13 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path)
     ap.add_argument("--smoothing-table", action="store_true",
                     help="instead: every smooth model at s = 1e-2, 1e-3, 1e-4 against its exact model on the "
-                    "effort solution's nodes (leg mean, W/kg of body mass, no basal)")
+                    "effort solution's nodes (leg mean, W/kg of body mass, no basal), in the goal's objective "
+                    "form and, for UM03, BH04, HO06 and UC16, in the model form")
     args = ap.parse_args(argv)
     ex = example_subject()
     if args.smoothing_table:
         return smoothing_table(ex, args.workflow)
-    rows, wb_rows, act_rows = [], [], []
+    rows, wb_rows, act_rows, len_rows = [], [], [], []
     for text in args.goals.split(","):
         goal = _goal(text, ex)
         t0 = time.perf_counter()
@@ -124,6 +147,10 @@ def main(argv=None) -> int:
         })
         if sol.success:
             rows[-1]["exact_UM10_leg_mean_W_per_kg"] = exact_leg_mean_W_per_kg("UM10", sol, ex, N)
+            if goal is not None:  # the goal's own model, exact, in both forms
+                for form in ("objective", "model"):
+                    rows[-1][f"exact_goal_{form}_leg_mean_W_per_kg"] = exact_leg_mean_W_per_kg(goal.model, sol, ex,
+                                                                                                N, form)
         if not sol.success:
             print(f"{text}: {s['status']} (not evaluated further)")
             continue
@@ -131,9 +158,15 @@ def main(argv=None) -> int:
         wb_rows.append({"goal": text, **{m: met.whole_body[m].mean_W_per_kg for m in met.models}})
         act_rows.append({"goal": text, **{m: float(np.max(sol.activation[:, sol.muscle_index(m)]))
                                           for m in MAIN_MUSCLES if m in sol.muscles}})
+        lengthening = sol.fiber_velocity_lmo_per_s > 0
+        len_rows.append({"goal": text, **{m: float(np.max(sol.activation[:, i], initial=0.0,
+                                                            where=lengthening[:, i]))
+                                          for m in MAIN_MUSCLES if m in sol.muscles
+                                          for i in [sol.muscle_index(m)]}})
         print(f"{text}: {s['status']} in {s['iterations']} iterations, {wall:.1f} s", flush=True)
     tables = {"solves": pd.DataFrame(rows), "whole_body_W_per_kg": pd.DataFrame(wb_rows),
-              "peak_activation": pd.DataFrame(act_rows)}
+              "peak_activation": pd.DataFrame(act_rows),
+              "peak_activation_lengthening": pd.DataFrame(len_rows)}
     for name, df in tables.items():
         print(f"\n{name}\n{df.to_string(index=False, float_format=lambda v: f'{v:.4g}')}")
         if args.out:

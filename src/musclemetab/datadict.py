@@ -145,8 +145,15 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
     ("states.sto", "/jointset/<joint>/<coordinate>/value", "rad or m", "coordinate value from the IK motion"),
     ("states.sto", "/jointset/<joint>/<coordinate>/speed", "rad/s or m/s", "coordinate speed from the IK motion"),
     ("states.sto", "/forceset/<muscle>/activation", "-", "muscle activation (model default for muscles not solved)"),
-    ("states.sto", "/forceset/<muscle>/fiber_length", "m", "fiber length (model default for muscles not solved)"),
+    ("states.sto", "/forceset/<muscle>/normalized_tendon_force", "-",
+     "tendon force / F0 of the DeGrooteFregly2016Muscle of model.osim (model default for muscles not solved)"),
+    ("controls.sto", "/forceset/reserve_<coordinate>", "N m or N",
+     "control of the coordinate's reserve actuator (optimal force 1): its generalised force in forces.sto"),
     ("controls.sto", "/forceset/<muscle>", "-", "muscle excitation"),
+    ("forces.sto", "reserve_<coordinate>", "N m or N",
+     "generalised force of the reserve: the solution's reserve on a solved DOF, else ID - sum(r F); the file's "
+     "other columns, one per muscle of model.osim named as the muscle, hold its tendon force (N, 0 for muscles "
+     "not solved), as in OpenSim's static optimisation output"),
     # keys
     ("muscle_groups.csv", "group", "-", "group abbreviation used in share_<G>_pct"),
     ("muscle_groups.csv", "name", "-", "full name of the group"),

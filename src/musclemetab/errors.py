@@ -57,6 +57,10 @@ class OptionError(MusclemetabError):
     """An option or argument has an invalid value."""
 
 
+class OutputError(MusclemetabError):
+    """An output file or folder cannot be written (no permission, disk full, file-size limit)."""
+
+
 class DataMismatchError(MusclemetabError):
     """Inputs that must agree (time ranges, units, models, shapes) do not."""
 

@@ -8,12 +8,14 @@ BLAS/OpenMP thread pools are sized so that the workers together use the machine'
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import threading
 from concurrent.futures import ProcessPoolExecutor
 
-__all__ = ["THREAD_VARIABLES", "pin_threads", "ignore_sigint", "spawn_pool", "BackgroundCall"]
+__all__ = ["THREAD_VARIABLES", "pin_threads", "ignore_sigint", "spawn_pool", "stop_pool", "sigint_deferred",
+           "BackgroundCall"]
 
 #: environment variables that size the thread pools of BLAS/LAPACK and OpenMP libraries
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
@@ -36,8 +38,27 @@ def pin_threads(threads: int):
 
 
 def ignore_sigint() -> None:
-    """Pool worker start-up: Ctrl-C is handled by the work running in it, not by the idle worker."""
+    """Pool worker start-up: Ctrl-C is handled by the work running in it, not by the idle worker;
+    warnings are printed as one line each (:func:`musclemetab.messages.install`)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    from .messages import install
+
+    install()
+
+
+class _Pool(ProcessPoolExecutor):
+    """A process pool whose workers start with Ctrl-C ignored: a worker is started (by
+    ``submit``) while this process ignores SIGINT, a setting the new process inherits, so that a
+    Ctrl-C during a worker's start-up (before its initialiser runs) prints no traceback from it."""
+
+    def submit(self, *args, **kwargs):
+        if threading.current_thread() is not threading.main_thread():
+            return super().submit(*args, **kwargs)
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            return super().submit(*args, **kwargs)
+        finally:
+            signal.signal(signal.SIGINT, previous)
 
 
 def spawn_pool(workers: int):
@@ -46,9 +67,35 @@ def spawn_pool(workers: int):
     import multiprocessing
 
     restore = pin_threads(max(1, (os.cpu_count() or 1) // workers))
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=ignore_sigint)
+    pool = _Pool(max_workers=workers, mp_context=multiprocessing.get_context("spawn"), initializer=ignore_sigint)
     return pool, restore
+
+
+def stop_pool(pool) -> None:
+    """Stop a pool at once (after Ctrl-C in this process): its queued work is cancelled and its
+    worker processes, which ignore Ctrl-C, are terminated rather than waited for."""
+    for proc in list((getattr(pool, "_processes", None) or {}).values()):  # CPython's map of the workers
+        if proc.is_alive():
+            proc.terminate()
+    pool.shutdown(wait=True, cancel_futures=True)
+
+
+@contextlib.contextmanager
+def sigint_deferred():
+    """Hold Ctrl-C (SIGINT) back while the block runs (e.g. the files of several output folders
+    moved into place) and raise :class:`KeyboardInterrupt` after it, so that an interrupt leaves
+    either the previous outputs or all the new ones. Outside the main thread it does nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if caught and previous is not signal.SIG_IGN:
+        raise KeyboardInterrupt
 
 
 class BackgroundCall:

@@ -48,7 +48,7 @@ FAILURES_CSV = "failures.csv"
 PER_MUSCLE_PARQUET = "per_muscle.parquet"
 GROUP_KEY_CSV = "muscle_groups.csv"
 DATA_DICTIONARY_CSV = "data_dictionary.csv"
-LOCK_FILE = ".musclemetab.lock"
+from .io.atomic import LOCK_FILE  # noqa: E402  (defined with the lock, musclemetab.io.atomic.FolderLock)
 #: The folder holding one folder per unit: ``units/<subject>/<trial>/<workflow>``.
 UNITS_FOLDER = "units"
 #: The record of one unit, in its folder.

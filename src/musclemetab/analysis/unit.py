@@ -24,9 +24,9 @@ from .events import GaitCycle
 from .groups import DEFAULT_THRESHOLD_M, GROUPS, GROUPS_WITH_OTHER, OTHER, group_rates, group_shares, group_weights
 from .phases import phase_shares
 
-__all__ = ["MetabolicAnalysis", "TrialAnalysis", "analyse", "write_analysis", "analyse_metabolics",
-           "analyse_solution_folder", "interpolate_moment_arms", "ANALYSIS_FILE", "TIMESERIES_FILE",
-           "GROUP_KEY_FILE"]
+__all__ = ["MetabolicAnalysis", "TrialAnalysis", "RecordedTrial", "analyse", "write_analysis",
+           "analyse_metabolics", "analyse_solution_folder", "interpolate_moment_arms", "recorded_trial",
+           "recorded_cycle", "ANALYSIS_FILE", "TIMESERIES_FILE", "GROUP_KEY_FILE"]
 
 #: files of :func:`write_analysis` (beside ``whole_body.csv`` and ``per_muscle.csv``)
 ANALYSIS_FILE = "analysis.csv"
@@ -272,18 +272,78 @@ class TrialAnalysis(NamedTuple):
     per_muscle: "object"
     metabolics: "object"
     side: str
+    #: DOFs of the solution that belong to no muscle function group (a subtalar or toe joint,
+    #: :func:`~musclemetab.analysis.groups.has_function_group`): left out of the group analysis
+    excluded_dofs: tuple = ()
+
+
+class RecordedTrial(NamedTuple):
+    """What a solution records of its trial (``summary.json``; :func:`recorded_trial`).
+
+    ``model`` and ``ik``: the files it was solved from (``inputs``), ``id``: the inverse
+    dynamics it was solved with (the user's file, or the one OpenSim computed for it);
+    ``side``: the solved leg; ``cycle``: the gait cycle the solve's window was taken from
+    (``--cycle``; :func:`recorded_cycle`) and ``cycle_source`` where its events came from (the
+    words of a study's ``cycle_source``); ``dofs``: the solved DOFs. An entry the solution does
+    not record is ``None``.
+    """
+
+    model: "str | None"
+    ik: "str | None"
+    id: "str | None"
+    side: "str | None"
+    cycle: "GaitCycle | None"
+    dofs: "tuple[str, ...] | None"
+    cycle_source: "str | None" = None
+
+
+def recorded_cycle(gait_cycle: Mapping | None) -> GaitCycle | None:
+    """The :class:`GaitCycle` of a solve's recorded ``window["gait_cycle"]`` (the dictionary of
+    :attr:`musclemetab.redundancy.record.SolveRecord.gait_cycle`), or ``None`` without one."""
+    if not gait_cycle:
+        return None
+    try:
+        return GaitCycle(float(gait_cycle["start_s"]), float(gait_cycle["toe_off_s"]), float(gait_cycle["end_s"]))
+    except (KeyError, TypeError, ValueError):
+        return None
+
+
+def recorded_trial(solution) -> RecordedTrial:
+    """The trial a solution records (:class:`RecordedTrial`): ``solution`` is a solution folder
+    (its ``summary.json``), a :class:`musclemetab.redundancy.Solution` or its
+    :class:`~musclemetab.redundancy.record.SolveRecord`; anything else records nothing."""
+    from pathlib import Path
+
+    record = getattr(solution, "record", solution)
+    if isinstance(solution, (str, os.PathLike)):
+        from ..io import read_json_object
+        from ..redundancy.record import SolveRecord
+        from ..redundancy.solution import SUMMARY_FILE
+
+        path = Path(solution) / SUMMARY_FILE
+        record = SolveRecord.from_dict(read_json_object(path, missing="missing",
+                                                        remedy="give a folder written by 'musclemetab solve'"))
+    if not hasattr(record, "gait_cycle"):
+        return RecordedTrial(None, None, None, None, None, None)
+    inputs = record.inputs or {}
+    dofs = record.dofs if record.dofs is not None else getattr(solution, "dofs", None)
+    cycle = recorded_cycle(record.gait_cycle)
+    source = f"ground reaction forces ({record.gait_cycle.get('source') or 'found by the solve'})" if cycle else None
+    return RecordedTrial(inputs.get("model"), inputs.get("ik"), inputs.get("id"), record.side, cycle,
+                         tuple(dofs) if dofs is not None else None, source)
 
 
 def analyse(
     solution,
-    model: str | os.PathLike,
-    ik: str | os.PathLike,
-    cycle: GaitCycle,
+    model: str | os.PathLike | None = None,
+    ik: str | os.PathLike | None = None,
+    cycle: GaitCycle | None = None,
     body_mass_kg: float | None = None,
     height_m: float | None = None,
     *,
     models="all",
     side: str | None = None,
+    dofs: Sequence[str] | None = None,
     **metabolics_options,
 ) -> TrialAnalysis:
     """Whole-body, phase, group and per-muscle results of one leg of a solved trial
@@ -299,32 +359,56 @@ def analyse(
     model, ik
         The OpenSim model and the IK motion of the trial: the moment arms of the solution's
         muscles (:func:`musclemetab.geometry.compute_geometry`, filtered like the solver's
-        inputs by :func:`filtered_moment_arms`).
+        inputs by :func:`filtered_moment_arms`). Default: the files the solution records
+        (:func:`recorded_trial`).
     cycle
         The gait cycle (:class:`GaitCycle`; e.g. :func:`~musclemetab.analysis.events.cycle_of_trial`).
+        Default: the cycle the solve recorded (a solve over ``--cycle``).
     body_mass_kg, height_m, models, metabolics_options
         Passed to :func:`musclemetab.metabolics.solution.metabolics_from_solution` (``basal``,
         ``basal_rate_W_per_kg``, ``basal_exponent``, ``speed_m_per_s``, ...).
     side
         The leg; default: the one the solution recorded, else the suffix its muscles share,
         else ``"r"``.
+    dofs
+        The DOFs of the moment arms; default: those the solution records, else those of the
+        leg in the model (:func:`musclemetab.layout.side_dofs`). A DOF that belongs to no muscle
+        function group (a subtalar or toe joint) is left out of the group analysis and named in
+        :attr:`TrialAnalysis.excluded_dofs` (``docs/analysis.md``).
     """
+    from ..errors import OptionError as _OptionError
     from ..geometry import compute_geometry
     from ..properties import split_side
     from ..metabolics.per_muscle import per_muscle_table
+    from .groups import has_function_group
 
+    recorded = recorded_trial(solution)
+    model = model if model is not None else recorded.model
+    ik = ik if ik is not None else recorded.ik
+    cycle = cycle if cycle is not None else recorded.cycle
+    missing = [name for name, value in (("model", model), ("ik", ik), ("cycle", cycle)) if value is None]
+    if missing:
+        raise _OptionError(f"the solution records no {', '.join(missing)}: give {' and '.join(missing)} "
+                           "(the OpenSim model, the IK motion and the gait cycle of the solved trial)")
     result = _metabolics_of(solution, body_mass_kg, height_m, models, metabolics_options)
     if side is None:
-        side = getattr(result, "side", None)
+        side = getattr(result, "side", None) or recorded.side
     if side is None:
         sides = {split_side(m)[1] for m in result.muscles} - {""}
         side = sides.pop() if len(sides) == 1 else "r"
-    geometry = compute_geometry(model, ik, side=side, muscles=list(result.muscles))
+    muscles = list(result.muscles)
+    if dofs is None and recorded.dofs is not None:
+        # the solve's own geometry call (its DOFs, the muscles spanning them): found in the cache
+        dofs, muscles = list(recorded.dofs), None
+    geometry = compute_geometry(model, ik, dofs=list(dofs) if dofs is not None else None, side=side, muscles=muscles)
     tg, r = filtered_moment_arms(geometry)
-    analysis = analyse_metabolics(result, tg, r, list(geometry.dofs), list(geometry.muscles), cycle)
+    keep = [j for j, d in enumerate(geometry.dofs) if has_function_group(d)]
+    excluded = tuple(d for d in geometry.dofs if not has_function_group(d))
+    analysis = analyse_metabolics(result, tg, r[:, keep, :], [geometry.dofs[j] for j in keep],
+                                  list(geometry.muscles), cycle)
     one_leg = any(wb.legs != 2 for wb in result.whole_body.values())
     return TrialAnalysis(result.leg_table() if one_leg else result.whole_body_table(), analysis.summary,
-                         analysis.timeseries, per_muscle_table(result, cycle, side=side), result, side)
+                         analysis.timeseries, per_muscle_table(result, cycle, side=side), result, side, excluded)
 
 
 def write_analysis(analysis: TrialAnalysis, out_dir: str | os.PathLike) -> dict:

@@ -6,8 +6,9 @@ Python as well. Nothing in the library imports this package. Options several com
 (the basal heat, the study runs) are in :mod:`.options`.
 
 Every error, a usage error included, is printed as one line (``musclemetab: error: ...``) and
-the command exits with status 1; Ctrl-C exits with status 130. The package's warnings are
-printed as one line each, ``musclemetab: warning: ...``. When the reader of the output goes
+the command exits with status 1; Ctrl-C exits with status 130. Every warning is printed as one
+line, ``musclemetab: warning: ...``, without a Python source line (:mod:`musclemetab.messages`;
+the package's worker processes print theirs the same way). When the reader of the output goes
 away early (``musclemetab report DIR | head -1``), the command stops quietly, without a
 traceback, with status 141 (128 + SIGPIPE, what a shell reports for a Unix tool stopped that way).
 """
@@ -21,7 +22,7 @@ import os
 import sys
 import warnings
 
-from ..errors import MuscleTableWarning, MusclemetabError
+from ..errors import MusclemetabError
 
 __all__ = ["main", "build_parser", "SUBCOMMANDS", "BROKEN_PIPE_STATUS"]
 
@@ -47,15 +48,6 @@ class _Parser(argparse.ArgumentParser):
         msg = " ".join(str(message).split())
         sys.stderr.write(f"musclemetab: error: {msg}; see '{self.prog} --help'\n")
         sys.exit(1)
-
-
-def _show_warning(message, category, filename, lineno, file=None, line=None):
-    from ..errors import MusclemetabWarning
-
-    if issubclass(category, MusclemetabWarning):
-        print(f"musclemetab: warning: {' '.join(str(message).split())}", file=file or sys.stderr)
-    else:
-        print(warnings.formatwarning(message, category, filename, lineno, line).rstrip(), file=file or sys.stderr)
 
 
 class _Version(argparse.Action):
@@ -90,18 +82,6 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
             raise
         getattr(mod, func)(sub)
     return parser
-
-
-def _one_line_warnings(default):
-    """``warnings.showwarning`` printing package warnings as one line on stderr."""
-
-    def show(message, category, filename, lineno, file=None, line=None):
-        if issubclass(category, MuscleTableWarning):
-            print(f"musclemetab: warning: {' '.join(str(message).split())}", file=sys.stderr)
-        else:
-            default(message, category, filename, lineno, file, line)
-
-    return show
 
 
 #: Exit status when standard output is closed before the command is done (128 + SIGPIPE).
@@ -143,10 +123,16 @@ def _main(argv: list[str] | None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(argv[0] if argv else None)
     args = parser.parse_args(argv)
-    previous, warnings.showwarning = warnings.showwarning, _show_warning
+    from ..messages import show_warning
+
+    previous, warnings.showwarning = warnings.showwarning, show_warning
     try:
         with warnings.catch_warnings():
-            warnings.showwarning = _one_line_warnings(warnings.showwarning)
+            warnings.showwarning = show_warning
+            from .options import check_exclusive, check_number_options
+
+            check_number_options(args)  # every command's numeric options, by the table of the study file
+            check_exclusive(args)
             return int(args.func(args) or 0)
     except MusclemetabError as exc:
         msg = " ".join(str(exc).split())

@@ -1,20 +1,31 @@
 """``musclemetab analyse``: phases, groups, per-muscle and whole-body results of a solved trial.
 
-    musclemetab analyse --solution DIR --model M.osim --ik IK.mot (--id ID.sto | --grf GRF.mot | --cycle S,TO,E)
-                        [--metabolics DIR] [--mass KG --height M] [--models all]
+    musclemetab analyse --solution DIR [--metabolics DIR] --out DIR
+                        [--model M.osim] [--ik IK.mot] [--id ID.sto | --grf GRF.mot | --cycle S,TO,E]
+                        [--mass KG --height M] [--models all]
                         [--basal body|muscle|none] [--basal-coefficient 1.2] [--basal-exponent 1]
-                        [--speed M_PER_S] --out DIR
+                        [--speed M_PER_S]
 
 The command-line path ``solve`` -> ``metabolics`` -> ``analyse`` gives what a study unit
 gives: in ``OUT`` the whole-body table (``whole_body.csv``, with gross and net cost of
 transport), the stance/swing and muscle-group analysis (``analysis.csv``), the leg and
 group rates over the cycle (``timeseries.csv``), the per-muscle table (``per_muscle.csv``),
-and the key of the group abbreviations (``muscle_groups.csv``):
+the key of the group abbreviations (``muscle_groups.csv``) and ``results.csv``, the study's
+results rows of the trial (one per model: :func:`musclemetab.study.runner.trial_result_rows`):
 :func:`musclemetab.analysis.analyse` and :func:`musclemetab.analysis.write_analysis`.
 
+What the solution records is not asked again (:func:`musclemetab.analysis.recorded_trial`):
+the model and the IK motion it was solved from, the leg, the DOFs and the gait cycle of a
+solve over ``--cycle``; the options override them. DOFs that belong to no muscle function
+group (a subtalar or toe joint) are left out of the group analysis, with a note. The speed is
+``--speed``, else the pelvis displacement over the cycle; when the kinematics cannot give it
+(a treadmill trial) the cost of transport is left empty, with a note, as in a study.
+
 ``--solution`` may also be the parent of one folder per side (``DIR/r`` and ``DIR/l``, each
-a solution folder): each side is analysed into ``OUT/r`` and ``OUT/l`` and the per-muscle
-tables of both sides are gathered in ``OUT/per_muscle.csv``.
+a solution folder, as ``solve --side both`` writes it), and ``--metabolics`` the folder
+``metabolics`` wrote from it (``M/r``, ``M/l``): each side is analysed into ``OUT/r`` and
+``OUT/l``, the per-muscle tables of both sides are gathered in ``OUT/per_muscle.csv`` and
+``OUT/results.csv`` adds the legs as a study does (:func:`musclemetab.study.runner.add_leg_rows`).
 
 Body mass, height, models and the basal settings default to those recorded in ``--metabolics``'s
 ``metabolics.sto`` (written by ``musclemetab metabolics``); the rates are evaluated again
@@ -42,9 +53,10 @@ def add_parser(subparsers) -> None:
             "gross and net cost of transport, stance and swing energy shares, muscle-group shares and rates over "
             "the gait cycle, and one row per muscle and model (mean W, W/kg, J per cycle, share of the leg, stance "
             "and swing J, components, basal heat apart). Writes OUT/whole_body.csv, analysis.csv, timeseries.csv, "
-            "per_muscle.csv, muscle_groups.csv. DIR may hold one solution folder per side (DIR/r, DIR/l): "
-            "OUT/r and OUT/l are written and OUT/per_muscle.csv gathers both sides. Every column is described in "
-            "docs/data_dictionary.md."
+            "per_muscle.csv, muscle_groups.csv and results.csv (the study's results rows). The model, IK motion, "
+            "leg, DOFs and gait cycle the solution records are used unless given. DIR may hold one solution folder "
+            "per side (DIR/r, DIR/l; --metabolics likewise): OUT/r and OUT/l are written, OUT/per_muscle.csv gathers "
+            "both sides and OUT/results.csv adds the legs. Every column is described in docs/data_dictionary.md."
         ),
     )
     p.add_argument("--solution", required=True, metavar="DIR",
@@ -52,13 +64,18 @@ def add_parser(subparsers) -> None:
     p.add_argument("--metabolics", metavar="DIR",
                    help="folder written by 'musclemetab metabolics' (its metabolics.sto gives the body mass, height "
                    "and models when they are not given)")
-    p.add_argument("--model", required=True, metavar="M.osim", help="OpenSim model the solution was solved with")
-    p.add_argument("--ik", required=True, metavar="IK.mot", help="inverse kinematics of the trial (moment arms, speed)")
-    cyc = p.add_mutually_exclusive_group(required=True)
+    p.add_argument("--model", metavar="M.osim",
+                   help="OpenSim model the solution was solved with (default: the one its summary.json records)")
+    p.add_argument("--ik", metavar="IK.mot",
+                   help="inverse kinematics of the trial, for the moment arms and the speed (default: the one its "
+                   "summary.json records)")
+    cyc = p.add_mutually_exclusive_group()
     cyc.add_argument("--id", metavar="ID.sto", help="inverse dynamics: toe-off from the ankle moment, the cycle "
                      "from the IK window less 0.05 s at each end (estimated events)")
     cyc.add_argument("--grf", metavar="GRF.mot", help="ground reaction forces: events from the vertical force")
-    cyc.add_argument("--cycle", metavar="START,TOE_OFF,END", help="the gait events (s)")
+    cyc.add_argument("--cycle", metavar="START,TOE_OFF,END",
+                     help="the gait events (s) (default: the cycle a solve over --cycle recorded, else from the "
+                     "inverse dynamics the solution was solved with, as --id)")
     p.add_argument("--mass", type=float, metavar="KG", help="body mass (kg)")
     p.add_argument("--height", type=float, metavar="M", help="body height (m)")
     p.add_argument("--models", metavar="LIST", help="'all' or a comma-separated list (default: those of --metabolics, "
@@ -70,7 +87,8 @@ def add_parser(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def _cycle(args, side: str):
+def _cycle(args, side: str, ik, recorded):
+    """The gait cycle and where it came from: the options, else the solution's record."""
     from ..analysis.events import GaitCycle, cycle_of_trial
 
     if args.cycle:
@@ -81,18 +99,51 @@ def _cycle(args, side: str):
         if len(vals) != 3:
             raise OptionError(f"--cycle must be three times in seconds, START,TOE_OFF,END, not '{args.cycle}'")
         return GaitCycle(*vals), "given on the command line"
-    return cycle_of_trial(args.ik, grf=args.grf, id_file=args.id, side=side, model=args.model)
+    if args.grf or args.id:
+        return cycle_of_trial(ik, grf=args.grf, id_file=args.id, side=side, model=args.model or recorded.model)
+    if recorded.cycle is not None:
+        return recorded.cycle, recorded.cycle_source
+    if recorded.id is not None and Path(recorded.id).is_file():
+        return cycle_of_trial(ik, id_file=recorded.id, side=side)
+    raise OptionError("the solution records no gait cycle (it was not solved over --cycle) and no inverse dynamics "
+                      "file that still exists: give --cycle START,TOE_OFF,END, --grf GRF.mot or --id ID.sto")
+
+
+def _recorded_file(given, recorded, option: str, sol_dir) -> str:
+    """An input file: the option's, else the one the solution records (which must still exist)."""
+    if given is not None:
+        return given
+    if recorded is None:
+        raise OptionError(f"{sol_dir}: the solution records no {option[2:]} file; give {option}")
+    if not Path(recorded).is_file():
+        raise InputFileError(f"{sol_dir}: the solution was solved from {recorded}, which is not there any more; "
+                             f"give {option}")
+    return recorded
+
+
+def _metabolics_folder(root, side):
+    """The metabolics folder of one leg: ``root``, or ``root/<side>`` of a both-legs folder."""
+    from ..metabolics.solution import METABOLICS_STO
+
+    root = Path(root)
+    if side is not None and not (root / METABOLICS_STO).is_file() and (root / side / METABOLICS_STO).is_file():
+        return root / side
+    return root
 
 
 def run(args) -> int:
     """Run ``musclemetab analyse`` (``args`` from :func:`add_parser`)."""
+    import sys
+
     import pandas as pd
 
-    from ..metabolics.per_muscle import PER_MUSCLE_FILE
-    from ..analysis.unit import analyse, write_analysis
+    from ..analysis.unit import analyse, recorded_trial, write_analysis
+    from ..errors import DataMismatchError
     from ..io import atomic_path
+    from ..metabolics.per_muscle import PER_MUSCLE_FILE
     from ..metabolics.solution import read_metabolics_settings
     from ..redundancy.solution import SOLUTION_FILE
+    from ..study.runner import RESULTS_CSV, add_leg_rows, leg_basal_energy_J, trial_result_rows
 
     root = Path(args.solution)
     if (root / SOLUTION_FILE).is_file():
@@ -102,47 +153,90 @@ def run(args) -> int:
         if not jobs:
             raise InputFileError(f"{root}: no {SOLUTION_FILE} in it, nor in {root / 'r'} or {root / 'l'}; "
                                  "give a solution folder written by 'musclemetab solve'")
-    recorded = read_metabolics_settings(args.metabolics) if args.metabolics else {}
-    try:
-        mass = args.mass if args.mass is not None else recorded["body_mass_kg"]
-        height = args.height if args.height is not None else recorded.get("height_m")
-    except KeyError:
-        raise OptionError("give --mass (and --height, or none for muscle masses from the model), or --metabolics, "
-                          "the folder written by 'musclemetab metabolics', which records them") from None
-    models = args.models or recorded.get("models") or "all"
-    for key, rec in (("basal", "basal_rule"), ("basal_coefficient", "basal_coefficient"),
-                     ("basal_exponent", "basal_exponent")):
-        if getattr(args, key) is None:
-            setattr(args, key, recorded.get(rec, BASAL_DEFAULTS[key]))
-    check_basal_arguments(args)
     check_speed(args.speed)
-    check_body(mass, height)
-    tables = []
+    basal_given = {key: getattr(args, key) for key in BASAL_DEFAULTS}
+    rows, basal_J, tables = {}, {}, []
     for side, sol_dir, out in jobs:
-        cycle, source = _cycle(args, side or "r")
-        speed = args.speed
-        speed_note = "given"
+        recorded = recorded_trial(sol_dir)
+        settings = (read_metabolics_settings(_metabolics_folder(args.metabolics, side or recorded.side))
+                    if args.metabolics else {})
+        try:
+            mass = args.mass if args.mass is not None else settings["body_mass_kg"]
+            height = args.height if args.height is not None else settings.get("height_m")
+        except KeyError:
+            raise OptionError("give --mass (and --height, or none for muscle masses from the model), or "
+                              "--metabolics, the folder written by 'musclemetab metabolics', which records them") from None
+        models = args.models or settings.get("models") or "all"
+        for key, rec in (("basal", "basal_rule"), ("basal_coefficient", "basal_coefficient"),
+                         ("basal_exponent", "basal_exponent")):
+            given = basal_given[key]
+            setattr(args, key, given if given is not None else settings.get(rec, BASAL_DEFAULTS[key]))
+        check_basal_arguments(args)
+        check_body(mass, height)
+        model = _recorded_file(args.model, recorded.model, "--model", sol_dir)
+        ik = _recorded_file(args.ik, recorded.ik, "--ik", sol_dir)
+        leg = side or recorded.side or "r"
+        cycle, source = _cycle(args, leg, ik, recorded)
+        speed, speed_note = args.speed, "given"
         if speed is None:
             from ..analysis.speed import walking_speed_from_ik
 
-            speed = walking_speed_from_ik(args.ik, start_s=cycle.start_s, end_s=cycle.end_s)
-            speed_note = "estimated from the pelvis displacement"
-        result = analyse(sol_dir, args.model, args.ik, cycle, mass, height, models=models, side=side,
+            try:
+                speed = walking_speed_from_ik(ik, start_s=cycle.start_s, end_s=cycle.end_s, model=model)
+                speed_note = "estimated from the pelvis displacement over the cycle (IK)"
+            except DataMismatchError as exc:
+                speed, speed_note = None, "not available"
+                print(f"musclemetab: note: no walking speed, no cost of transport ({exc}); give --speed",
+                      file=sys.stderr)
+        result = analyse(sol_dir, model, ik, cycle, mass, height, models=models, side=side,
                          basal=args.basal, basal_rate_W_per_kg=args.basal_coefficient,
                          basal_exponent=args.basal_exponent, speed_m_per_s=speed)
         write_analysis(result, out)
         per = result.per_muscle
         tables.append(per)
+        rows[side] = trial_result_rows(result.whole_body, result.summary, speed_m_per_s=speed,
+                                       toe_off_pct=cycle.toe_off_pct, cycle_source=source,
+                                       speed_source=speed_note if speed is not None else "not available",
+                                       large_reserve=_large_reserve(sol_dir), unit_dir=side or ".")
+        basal_J[side] = leg_basal_energy_J(per, rows[side]["duration_s"].iloc[0])
         label = f"side {side}: " if side else ""
+        speed_text = f"{speed:.2f} m/s ({speed_note})" if speed is not None else "not available"
         print(f"analyse: {label}cycle {cycle.start_s:.3f}-{cycle.end_s:.3f} s, toe-off {cycle.toe_off_pct:.1f} % "
-              f"({source}); speed {speed:.2f} m/s ({speed_note}) -> {out}")
+              f"({source}); speed {speed_text} -> {out}")
+        if result.excluded_dofs:
+            print(f"  DOFs of no muscle function group, left out of the group analysis: "
+                  f"{', '.join(result.excluded_dofs)} (docs/analysis.md)")
         merged = result.whole_body.merge(result.summary, on="model")
         for row in merged.itertuples():
             top = per[per.model == row.model].nsmallest(3, "rank")["muscle"].tolist()
-            print(f"  {row.model}: {row.whole_body_W_per_kg:.2f} W/kg, gross CoT {row.gross_cost_of_transport_J_per_kg_per_m:.2f} "
-                  f"J/(kg m), swing {row.swing_energy_share_pct:.1f} % of the leg's energy, "
-                  f"PF {row.share_PF_pct:.1f} %; largest: {', '.join(top)}")
-    if jobs[0][0] is not None:  # the sides' parent: one table of every side
+            cot = row.gross_cost_of_transport_J_per_kg_per_m if hasattr(row, "gross_cost_of_transport_J_per_kg_per_m") \
+                else float("nan")
+            cot_text = f"gross CoT {cot:.2f} J/(kg m)" if speed is not None else "no CoT (no speed)"
+            print(f"  {row.model}: {row.whole_body_W_per_kg:.2f} W/kg, {cot_text}, swing {row.swing_energy_share_pct:.1f} % "
+                  f"of the leg's energy, PF {row.share_PF_pct:.1f} %; largest: {', '.join(top)}")
+    if jobs[0][0] is not None:  # the sides' parent: one table of every side, the legs added
         with atomic_path(Path(args.out) / PER_MUSCLE_FILE) as tmp:
             pd.concat(tables, ignore_index=True).to_csv(tmp, index=False, float_format="%.10g")
+        if len(rows) > 1:
+            table = add_leg_rows(rows, basal_J)
+        else:
+            (side, table), = rows.items()
+            table = table.assign(legs=f"2 x {side}")
+        with atomic_path(Path(args.out) / RESULTS_CSV) as tmp:
+            table.to_csv(tmp, index=False, float_format="%.10g")
+        if len(rows) > 1:
+            print(f"analyse: legs {' + '.join(rows)} added -> {Path(args.out) / RESULTS_CSV}: "
+                  + ", ".join(f"{r.model} {r.whole_body_W_per_kg:.2f} W/kg" for r in table.itertuples()))
+    else:
+        (side, table), = rows.items()
+        with atomic_path(Path(args.out) / RESULTS_CSV) as tmp:
+            table.assign(legs=f"2 x {recorded.side or 'r'}").to_csv(tmp, index=False, float_format="%.10g")
     return 0
+
+
+def _large_reserve(sol_dir) -> bool:
+    """Whether the solve's reserves exceed 1 % of the peak joint moment (its ``summary.json``)."""
+    from ..io import read_json_object
+    from ..redundancy.solution import SUMMARY_FILE
+
+    return bool(read_json_object(Path(sol_dir) / SUMMARY_FILE).get("large_reserve", False))

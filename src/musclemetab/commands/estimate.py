@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 
 from ..errors import OptionError
+from .options import number_option
 
 __all__ = ["add_parser", "run", "parse_assignments"]
 
@@ -60,10 +61,13 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="degrees of freedom (default: the side's unlocked coordinates that the inverse dynamics "
                    "holds, as for solve)")
     p.add_argument("--labels", nargs="+", metavar="NAME", help="trial names (default: the IK file stems)")
+    p.add_argument("--exclude-muscles", nargs="+", metavar="MUSCLE",
+                   help="leave these muscles out of every trial's problem (e.g. one the diagnosis before the solve "
+                   "names); their EMG and fiber lengths are not used; they cannot be estimated")
     p.add_argument("--validate", action="store_true",
                    help="re-solve each trial with the estimates and the effort goals only (DIR/validation)")
     p.add_argument("--cache-dir", metavar="DIR")
-    p.add_argument("--max-iter", type=int, default=10000)
+    number_option(p, "--max-iter", "max_iter", default=10000, help="IPOPT iteration limit (default 10000)")
     p.add_argument("--out", required=True, metavar="DIR")
     p.set_defaults(func=run)
     return p
@@ -122,12 +126,16 @@ def run(args) -> int:
         side=args.side, dofs=args.dofs, emg_mode=args.emg_mode, emg_mapping=args.emg_mapping,
         emg_tolerance=args.emg_tolerance, passive=args.passive, max_iter=args.max_iter, validate=args.validate,
         cache_dir=args.cache_dir,
+        exclude_muscles=[m for item in (args.exclude_muscles or []) for m in item.replace(",", " ").split()],
     )
     values = ", ".join(f"{k} {m} x{v:.4f}" for k, by in result.factors.items() if k != "emg_scale"
                        for m, v in by.items())
     if result.emg_scale:
         values += "; EMG scale " + ", ".join(f"{m} {v:.3g}" for m, v in result.emg_scale.items())
     record = result.run_record
+    for solution in result.solutions.values():
+        if solution.record.pre_solve_diagnosis.findings:
+            print(solution.record.pre_solve_diagnosis.table())
     print(f"estimate: {len(result.labels)} trial(s), {record.status} in {record.iterations} iterations; {values} -> "
           f"{args.out}")
     for line in doubt_lines(result.document or {}):

@@ -6,7 +6,8 @@ from __future__ import annotations
 from ..errors import OptionError
 
 __all__ = ["BASAL_DEFAULTS", "add_basal_arguments", "check_basal_arguments", "check_speed", "check_body",
-           "add_study_arguments", "add_emg_scale_bounds_argument", "emg_scale_bounds"]
+           "add_study_arguments", "number_option", "check_number_options", "EXCLUSIVE_OPTIONS", "check_exclusive",
+           "add_emg_scale_bounds_argument", "emg_scale_bounds"]
 
 #: the basal options' defaults: the paper's 1.2 W per kg of body mass
 BASAL_DEFAULTS = {"basal": "body", "basal_coefficient": 1.2, "basal_exponent": 1.0}
@@ -40,7 +41,7 @@ def add_basal_arguments(parser, recorded: str | None = None) -> None:
 def check_basal_arguments(args) -> None:
     """Raise :class:`OptionError` naming the option for a basal coefficient that is not a
     non-negative number, an exponent that is not finite, or an exponent with ``--basal muscle``."""
-    from ..study.spec import check_number
+    from ..settings import check_number
 
     check_number("basal_coefficient", args.basal_coefficient, option="--basal-coefficient")
     check_number("basal_exponent", args.basal_exponent, option="--basal-exponent")
@@ -52,7 +53,7 @@ def check_basal_arguments(args) -> None:
 def check_speed(speed: float | None) -> None:
     """Raise :class:`OptionError` for a ``--speed`` that is not a walking or running speed in m/s
     (the study file's ``speed_m_per_s`` check)."""
-    from ..study.spec import check_number
+    from ..settings import check_number
 
     if speed is not None:
         check_number("speed_m_per_s", speed, option="--speed")
@@ -61,7 +62,7 @@ def check_speed(speed: float | None) -> None:
 def check_body(mass_kg: float | None, height_m: float | None) -> None:
     """Raise :class:`OptionError` for a ``--mass`` or ``--height`` that is not a human one
     (the study file's ``body_mass_kg`` and ``height_m`` checks)."""
-    from ..study.spec import check_number
+    from ..settings import check_number
 
     if mass_kg is not None:
         check_number("body_mass_kg", mass_kg, option="--mass")
@@ -71,13 +72,60 @@ def check_body(mass_kg: float | None, height_m: float | None) -> None:
 
 def add_study_arguments(parser) -> None:
     """``--workers``, ``--force``, ``--no-progress`` and ``--strict`` of the commands that run a study."""
-    parser.add_argument("--workers", type=int, metavar="N",
-                        help="parallel processes (default: the number of CPUs); 1 runs in this process")
+    number_option(parser, "--workers", "workers", metavar="N",
+                  help="parallel processes (default: the number of CPUs); 1 runs in this process")
     parser.add_argument("--force", action="store_true", help="run every unit again, even those up to date")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--strict", action="store_true",
                         help="a unit with a plausibility flag fails, with the flags as its reason (the study "
                         "file's strict = true; docs/quality.md)")
+
+
+def number_option(parser, option: str, key: str, *, help: str, default=None, metavar: str | None = None) -> None:
+    """Add the numeric option ``option`` carrying the value of :data:`musclemetab.settings.NUMBER_KEYS`
+    ``[key]``: its type (whole number or number) and, in the help, its unit and range come from
+    that table, the one the study file is checked against; :func:`check_number_options` checks
+    the value against it after parsing, so both refuse the same values with the same range. To
+    declare a new numeric setting, add its row to the table and add the option with this function."""
+    from ..settings import NUMBER_KEYS
+
+    entry = NUMBER_KEYS[key]
+    action = parser.add_argument(option, type=int if entry.integer else float, default=default, metavar=metavar,
+                                 help=f"{help} [{entry.range_text()}]")
+    declared = dict(parser.get_default("number_options") or {})
+    declared[action.dest] = (option, key)
+    parser.set_defaults(number_options=declared)
+
+
+def check_number_options(args) -> None:
+    """Raise :class:`OptionError` naming the option, the value and the range for a value of an
+    option declared with :func:`number_option` that its table row refuses (``None``: not given)."""
+    from ..settings import check_number
+
+    for dest, (option, key) in (getattr(args, "number_options", None) or {}).items():
+        value = getattr(args, dest, None)
+        if value is not None:
+            check_number(key, value, option=option)
+
+
+#: Options of a command that override each other, refused together: command -> (option, option,
+#: why, remedy). A command adds its pairs here.
+EXCLUSIVE_OPTIONS = {
+    "solve": (
+        ("--grf", "--external-loads", "both give the ground forces", "give one: the ExternalLoads file already "
+         "names its force data file"),
+        ("--tendon-stiffness", "--parameters", "both give the tendon stiffness", "give one"),
+        ("--window", "--cycle", "both give the time window", "give one"),
+    ),
+}
+
+
+def check_exclusive(args) -> None:
+    """Raise :class:`OptionError` when two options of the command's :data:`EXCLUSIVE_OPTIONS` are both given."""
+    for a, b, why, remedy in EXCLUSIVE_OPTIONS.get(getattr(args, "command", None), ()):
+        given = [getattr(args, o.lstrip("-").replace("-", "_"), None) for o in (a, b)]
+        if all(v not in (None, [], False) for v in given):
+            raise OptionError(f"{a} and {b} cannot be used together ({why}); {remedy}")
 
 
 def add_emg_scale_bounds_argument(parser) -> None:

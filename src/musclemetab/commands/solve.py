@@ -28,11 +28,11 @@ status, for inspection).
 from __future__ import annotations
 
 import argparse
-import math
 
 from ..errors import OptionError, SolverError, UnknownMuscleError
+from .options import number_option
 
-__all__ = ["add_parser", "add_emg_goal_arguments", "run"]
+__all__ = ["add_parser", "add_emg_goal_arguments", "run", "run_with_progress"]
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -66,15 +66,15 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    "force column is found by the documented name rule of musclemetab.events.read_grf)")
     p.add_argument("--grf-column", metavar="COLUMN",
                    help="with --grf: the solved foot's vertical force column (default: the name rule)")
-    p.add_argument("--grf-threshold", type=float, metavar="N",
-                   help="with --cycle: contact when the vertical ground force exceeds N newtons (default 20)")
+    number_option(p, "--grf-threshold", "grf_threshold_N", metavar="N",
+                  help="with --cycle: contact when the vertical ground force exceeds N newtons (default 20)")
     p.add_argument("--cycle-duration", metavar="MIN:MAX",
                    help="with --cycle: the accepted gait-cycle durations in s (default 0.8:2.0, walking); a cycle "
                    "outside is refused, naming its events")
     p.add_argument("--side", default="r", choices=("r", "l", "both"),
                    help="leg to solve (default r); both: two independent problems written to DIR/r and DIR/l")
-    p.add_argument("--workers", type=int, default=1, metavar="N",
-                   help="with --side both: solve the two legs in N processes at once (default 1: one after the "
+    number_option(p, "--workers", "workers", default=1, metavar="N",
+                  help="with --side both: solve the two legs in N processes at once (default 1: one after the "
                    "other; the solutions are the same)")
     p.add_argument("--window", metavar="T0:T1",
                    help="time window (s) to solve; must lie inside every input (default: the whole IK file)")
@@ -84,9 +84,14 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    "N = the N-th complete cycle")
     p.add_argument("--exclude-muscles", nargs="+", metavar="MUSCLE",
                    help="leave these muscles out of the problem (e.g. a muscle that cannot reach force equilibrium "
-                   "within the fiber-length bounds, named by a failed solve)")
-    p.add_argument("--mesh-frequency", type=float, default=100.0, metavar="PER_S",
-                   help="mesh intervals per second (default 100, the study's)")
+                   "within the fiber-length bounds, named by the diagnosis before the solve or by a failed solve); "
+                   "in every workflow, with or without EMG (an excluded muscle's EMG is not used)")
+    p.add_argument("--diagnose-only", action="store_true",
+                   help="diagnose the trials (muscle-tendon lengths the fiber bounds cannot balance, vanishing "
+                   "moment arms, moments beyond the muscles; docs/solver.md), print the table and stop: nothing is "
+                   "solved or written; exit status 1 when a finding blocks the solve")
+    number_option(p, "--mesh-frequency", "mesh_frequency_hz", default=100.0, metavar="PER_S",
+                  help="mesh intervals per second (default 100, the study's)")
     p.add_argument("--workflow", default="effort-gen", choices=("effort-gen", "effort-cal", "effort-ten", "emg-ten"),
                    help="workflow preset (default effort-gen)")
     p.add_argument("--emg", nargs="+", metavar="EMG.mot",
@@ -126,7 +131,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    "the leg's joints that the inverse dynamics holds, e.g. ankle_angle_r knee_angle_r "
                    "hip_flexion_r hip_adduction_r hip_rotation_r for the study's model)")
     p.add_argument("--cache-dir", metavar="DIR", help="geometry cache folder (default: the package's)")
-    p.add_argument("--max-iter", type=int, default=10000, help="IPOPT iteration limit (default 10000)")
+    number_option(p, "--max-iter", "max_iter", default=10000, help="IPOPT iteration limit (default 10000)")
     p.add_argument("--linear-solver", default="mumps", metavar="NAME",
                    help="IPOPT's linear solver: mumps (default) or spral (built in), ma27/ma57/ma77/ma86/ma97 (HSL) "
                    "or pardiso (loaded at run time from --linear-solver-library); another solver can end in "
@@ -134,7 +139,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--linear-solver-library", metavar="LIB",
                    help="library IPOPT loads the linear solver from (default libhsl.so for the HSL solvers, "
                    "libpardiso.so for pardiso, on the library search path)")
-    p.add_argument("--print-level", type=int, default=0, help="IPOPT print level 0-12 (default 0)")
+    number_option(p, "--print-level", "print_level", default=0, help="IPOPT print level (default 0)")
     p.add_argument("--warm-start", metavar="DIR",
                    help="start from the solution in DIR (same trial, e.g. another workflow) with IPOPT's "
                    "barrier parameter at 1e-6: faster, but may end in another local optimum than the "
@@ -149,20 +154,27 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "(docs/energy_objective.md), alone (--effort-weight 0) or beside the effort goal")
     g.add_argument("--energy-model", metavar="MODEL",
                    help="smooth metabolic model of the goal: UM03, BH04, HO06, LW07, UM10, UC16, LW05 or MA68")
-    g.add_argument("--energy-weight", type=float, metavar="W",
+    number_option(g, "--energy-weight", "weight", metavar="W",
                    help="weight of the goal, the leg's mean metabolic rate in W/kg of body mass (default 1)")
-    g.add_argument("--effort-weight", type=float, metavar="W",
+    number_option(g, "--effort-weight", "effort_weight", metavar="W",
                    help="weight of the effort goal on excitations and activations beside it (default: the "
                    "workflow's, 1; 0: energy alone)")
-    g.add_argument("--energy-smoothing", type=float, metavar="S",
+    number_option(g, "--energy-smoothing", "smoothing", metavar="S",
                    help="smoothing parameter of the model's switches (default 0.001; smaller is closer to the exact "
                    "model and slower to solve)")
-    g.add_argument("--mass", type=float, metavar="KG", help="body mass (kg), for the muscle masses and the goal's W/kg")
-    g.add_argument("--height", type=float, metavar="M", help="body height (m), for the muscle masses")
+    g.add_argument("--energy-form", choices=("objective", "model"),
+                   help="objective (default): UM03, BH04, HO06 and UC16 with their non-negativity rule on the work "
+                   "plus shortening/lengthening heat, so that lengthening muscles pay their activation and "
+                   "maintenance heat; model: the rule on the total, as the model defines it (warns)")
+    number_option(g, "--mass", "body_mass_kg", metavar="KG", help="body mass (kg), for the muscle masses and the goal's W/kg")
+    number_option(g, "--height", "height_m", metavar="M", help="body height (m), for the muscle masses")
     g.add_argument("--muscle-properties", metavar="FILE",
                    help="CSV of per-muscle overrides of mass and slow-twitch fraction (docs/muscles.md)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    p.set_defaults(func=run)
+    p.add_argument("--no-progress", action="store_true",
+                   help="no progress lines while IPOPT runs (default: one line on stderr at most every 5 s: "
+                   "iteration, objective, constraint violation, time)")
+    p.set_defaults(func=run_with_progress)
     return p
 
 
@@ -171,9 +183,9 @@ def add_emg_goal_arguments(p, mode_help: str, weight_help: str) -> None:
     from .options import add_emg_scale_bounds_argument
 
     p.add_argument("--emg-mode", choices=("constrained", "driven", "tracking"), help=mode_help)
-    p.add_argument("--emg-tolerance", type=float, default=0.01,
-                   help="with --emg-mode constrained: half-width of the EMG band (default 0.01)")
-    p.add_argument("--emg-weight", type=float, help=weight_help)
+    number_option(p, "--emg-tolerance", "emg_tolerance", default=0.01,
+                  help="with --emg-mode constrained: half-width of the EMG band (default 0.01)")
+    number_option(p, "--emg-weight", "emg_weight", help=weight_help)
     add_emg_scale_bounds_argument(p)
 
 
@@ -182,18 +194,33 @@ def run(args) -> int:
 
     Raises a :class:`~musclemetab.errors.MusclemetabError` on bad input and
     :class:`~musclemetab.errors.SolverError` when IPOPT did not converge (after writing the
-    folder with ``success: false``).
+    folder with ``success: false``). While it runs it holds the lock of the output folder
+    (``DIR/.musclemetab.lock``, :class:`~musclemetab.io.atomic.FolderLock`): a second ``solve``
+    on the same ``--out`` refuses, naming the lock.
     """
+    from ..io import check_output_folder
+    from ..io.atomic import FolderLock
+
+    from pathlib import Path
+
+    from ..io import check_output_folder
+    from ..io.atomic import FolderLock, check_replaceable
+    from ..redundancy.solution import SOLUTION_FILE, SUMMARY_FILE
+
+    check_output_folder(args.out)
+    for leg in (("r", "l") if args.side == "both" else ("",)):  # files it replaces, not folders of the user
+        check_replaceable(Path(args.out) / leg, (SOLUTION_FILE, SUMMARY_FILE, "inverse_dynamics.sto"))
+    with FolderLock(args.out, "output folder"):
+        return _solve(args)
+
+
+def _solve(args) -> int:
+    from ..redundancy.diagnosis import violation_text
     from ..redundancy.ipopt import failure_advice
     from ..redundancy.run import solve_sides, write_solution_folder
     from ..redundancy.window import parse_cycle, parse_window
     from ..redundancy.workflows import parse_tendon_stiffness
 
-    from ..io import check_output_folder
-
-    if args.max_iter is not None and args.max_iter < 1:
-        raise OptionError(f"--max-iter must be at least 1, not {args.max_iter}")
-    check_output_folder(args.out)
     ik, idf = _as_list(args.ik), _as_list(args.id)
     energy = _energy_goal(args)
     if args.workflow == "emg-ten" or getattr(args, "emg", None):
@@ -220,8 +247,6 @@ def run(args) -> int:
                           "column is found by the name rule) or solve the legs one at a time")
     if args.grf_column and not args.grf:
         raise OptionError("--grf-column names a column of the --grf file; give --grf GRF.mot, or drop it")
-    if args.grf_threshold is not None and not (math.isfinite(args.grf_threshold) and args.grf_threshold > 0):
-        raise OptionError(f"--grf-threshold must be a positive number of newtons, not {args.grf_threshold}")
     if args.side == "both" and dofs:
         raise OptionError("--dofs names one leg's DOFs; with --side both leave it out (each leg's DOFs are discovered)")
     window = parse_window(args.window) if args.window else None
@@ -229,8 +254,6 @@ def run(args) -> int:
     if args.cycle_duration and not args.cycle:
         raise OptionError("--cycle-duration bounds the --cycle found from the events; give --cycle, or drop it")
     cycle_duration = parse_window(args.cycle_duration, "--cycle-duration") if args.cycle_duration else None
-    if args.mesh_frequency is not None and not args.mesh_frequency > 0:
-        raise OptionError(f"--mesh-frequency must be positive, not {args.mesh_frequency}")
     options = _solver_options(args)
     if energy is not None:
         options = options.with_(energy=energy)
@@ -244,7 +267,7 @@ def run(args) -> int:
     sides = ("r", "l") if args.side == "both" else (args.side,)
     from pathlib import Path
 
-    excluded = [m for item in (args.exclude_muscles or []) for m in item.replace(",", " ").split()]
+    excluded = _excluded(args)
     # every leg is solved before anything is written, so bad input on one leg leaves no output
     solutions = solve_sides(
         args.model, args.ik, args.id, args.workflow, sides=sides, workers=args.workers,
@@ -255,22 +278,28 @@ def run(args) -> int:
         passive=args.passive, tendon_stiffness=kt, tendon_stiffness_file=args.parameters,
         options=options, cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, warm_start=warm,
         exclude_muscles=excluded, exclude_missing_ok=args.side == "both",
+        diagnose_only=getattr(args, "diagnose_only", False),
     )
-    unused = [m for m in excluded if not any(m in (x.record.excluded_muscles or []) for x in solutions.values())]
-    if unused:
-        raise UnknownMuscleError(f"--exclude-muscles: {', '.join(unused)} is in neither leg's problem; check the names")
-    for side, solution in solutions.items():
-        out = Path(args.out) / side if args.side == "both" else Path(args.out)
-        write_solution_folder(solution, out)
+    if getattr(args, "diagnose_only", False):
+        return _report_diagnoses(solutions)
+    _check_excluded_used(excluded, solutions.values())
+    from ..processes import sigint_deferred
+
+    with sigint_deferred():  # Ctrl-C leaves the previous legs' folders or all the new ones
+        for side, solution in solutions.items():
+            out = Path(args.out) / side if args.side == "both" else Path(args.out)
+            write_solution_folder(solution, out)
     for side, solution in solutions.items():
         out = Path(args.out) / side if args.side == "both" else Path(args.out)
         s = solution.record
         if not solution.success:
             raise SolverError(
                 f"the {args.workflow} solve did not converge (IPOPT status '{s.status}' after "
-                f"{s.iterations} iterations): {failure_advice(s.status)}.{_bound_note(solution)} The "
+                f"{s.iterations} iterations): {failure_advice(s.status)}.{violation_text(s)}"
+                f"{_bound_note(solution)} The "
                 f"unconverged result is in {out} with \"success\": false"
             )
+        _print_findings(s)
         worst_reserve = max(s.reserve_rms_Nm.values()) if s.reserve_rms_Nm else 0.0
         print(
             f"solve: {args.workflow} side {side}, {len(solution.muscles)} muscles x {len(solution.dofs)} DOFs, "
@@ -299,7 +328,7 @@ def _plausibility(args, solutions) -> None:
 
 _ENERGY_OPTIONS = (("--energy-weight", "energy_weight"), ("--effort-weight", "effort_weight"),
                    ("--energy-smoothing", "energy_smoothing"), ("--mass", "mass"), ("--height", "height"),
-                   ("--muscle-properties", "muscle_properties"))
+                   ("--muscle-properties", "muscle_properties"), ("--energy-form", "energy_form"))
 
 
 def _energy_goal(args):
@@ -315,10 +344,6 @@ def _energy_goal(args):
     missing = [o for o, attr in (("--mass", "mass"), ("--height", "height")) if getattr(args, attr) is None]
     if missing:
         raise OptionError(f"--energy-model needs the subject's {' and '.join(missing)} (kg, m) for the muscle masses")
-    for opt, attr in _ENERGY_OPTIONS[:3]:
-        v, positive = getattr(args, attr), opt == "--energy-smoothing"
-        if v is not None and not (math.isfinite(v) and (v > 0 if positive else v >= 0)):
-            raise OptionError(f"{opt} must be a {'positive' if positive else 'non-negative'} number, not {v}")
     if args.muscle_properties is not None:
         from ..properties import read_muscle_properties
 
@@ -327,7 +352,8 @@ def _energy_goal(args):
         return EnergyGoal(args.energy_model, 1.0 if args.energy_weight is None else args.energy_weight, args.mass,
                           args.height, effort_weight=args.effort_weight,
                           smoothing=ENERGY_SMOOTHING if args.energy_smoothing is None else args.energy_smoothing,
-                          muscle_properties=args.muscle_properties)
+                          muscle_properties=args.muscle_properties,
+                          **({"form": args.energy_form} if getattr(args, "energy_form", None) else {}))
     except OptionError as exc:
         raise OptionError(f"--energy-model: {exc}") from None
 
@@ -362,6 +388,44 @@ def _bound_note(solution) -> str:
             f"with --exclude-muscles {' '.join(at)}.")
 
 
+def _excluded(args) -> list:
+    """The muscles of ``--exclude-muscles`` (spaces or commas between them)."""
+    return [m for item in (getattr(args, "exclude_muscles", None) or []) for m in item.replace(",", " ").split()]
+
+
+def _check_excluded_used(excluded, solutions) -> None:
+    """:class:`UnknownMuscleError` for an excluded muscle that no leg's problem had."""
+    unused = [m for m in excluded if not any(m in (x.record.excluded_muscles or []) for x in solutions)]
+    if unused:
+        raise UnknownMuscleError(f"--exclude-muscles: {', '.join(unused)} is in neither leg's problem; check the names")
+
+
+def _print_findings(record) -> None:
+    """The diagnosis table of a solve that has findings (``summary.json``'s ``diagnosis``)."""
+    findings = record.pre_solve_diagnosis
+    if findings.findings:
+        print(findings.table())
+
+
+def _report_diagnoses(by_side: dict) -> int:
+    """``--diagnose-only``: each leg's (and trial's) diagnosis table; the error of the first
+    blocking one (exit status 1), else 0."""
+    diagnoses = [(side, d) for side, ds in by_side.items() for d in (ds if isinstance(ds, list) else [ds])]
+    for side, d in diagnoses:
+        print(f"side {side}: {d.table()}")
+    for side, d in diagnoses:
+        if d.blocking:
+            raise d.error(f"trial {d.trial} (side {side})")
+    return 0
+
+
+def _violations_of(result) -> str:
+    """The constraints the last iterate of a multi-trial solve left violated, per trial."""
+    from ..redundancy.diagnosis import trials_violation_text
+
+    return trials_violation_text(result.solutions)
+
+
 def _as_list(value) -> list:
     if value is None:
         return []
@@ -387,7 +451,7 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
                             ("--grf-column", args.grf_column), ("--grf-threshold", args.grf_threshold),
                             ("--cycle-duration", getattr(args, "cycle_duration", None)),
                             ("--window", args.window),
-                            ("--cycle", args.cycle), ("--exclude-muscles", getattr(args, "exclude_muscles", None)))
+                            ("--cycle", args.cycle))
              if v]
     if wrong:
         raise OptionError(f"{', '.join(wrong)} are for the single-trial solves without EMG; drop them for "
@@ -419,11 +483,17 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
     options = _solver_options(args)
     legs = emg_mappings_of_legs(args.model, ik[0], args.emg_mapping, args.side, dofs, args.cache_dir)
     # every leg is solved before anything is written
+    excluded = _excluded(args)
     results = {side: solve_emg_ten(
         args.model, ik, idf, emg, emg_mapping=mapping, labels=args.labels,
         passive=args.passive, dofs=dofs, side=side, options=options, cache_dir=args.cache_dir,
         check_units=not args.skip_unit_checks, settings=settings,
+        exclude_muscles=excluded, exclude_missing_ok=args.side == "both",
+        diagnose_only=getattr(args, "diagnose_only", False),
     ) for side, mapping in legs.items()}
+    if getattr(args, "diagnose_only", False):
+        return _report_diagnoses(results)
+    _check_excluded_used(excluded, [s for r in results.values() for s in r.solutions.values()])
     for side, result in results.items():
         _write_emg_ten(args, result, _leg_out(args, side), side)
     _plausibility(args, {f"{_leg_out(args, side)}/{label}": sol for side, result in results.items()
@@ -449,9 +519,11 @@ def _write_emg_ten(args, result, out, side: str) -> None:
     if not result.success:
         raise SolverError(
             f"the emg-ten solve did not converge (IPOPT status '{r['status']}' after {r['iterations']} "
-            f"iterations): {failure_advice(r['status'])}. The unconverged result is in {out} with "
-            "\"success\": false"
+            f"iterations): {failure_advice(r['status'])}.{_violations_of(result)} The unconverged result is in "
+            f"{out} with \"success\": false"
         )
+    for solution in result.solutions.values():
+        _print_findings(solution.record)
     model_file, _ = write_personalised_model(args.model, result.parameters,
                                              {"tendon_stiffness": list(result.tendon_stiffness)}, out)
     groups = []
@@ -477,7 +549,7 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
     """An effort workflow's EMG-informed solve of one or more trials: one trial is written to
     ``--out`` as a solution folder; several as one folder per trial and ``parameters.json``."""
     from ..redundancy.emg_ten import emg_failure
-    from ..redundancy.run import emg_mappings_of_legs, solve_emg_ten
+    from ..redundancy.run import emg_mappings_of_legs, solve_emg_ten, write_solution_folder
 
     emg = _as_list(args.emg)
     dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else None
@@ -489,17 +561,25 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
         options=options,
         cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, settings=settings,
         workflow=args.workflow, tendon_stiffness=tendon_stiffness,
+        exclude_muscles=_excluded(args), exclude_missing_ok=args.side == "both",
+        diagnose_only=getattr(args, "diagnose_only", False),
     ) for side, mapping in legs.items()}
+    if getattr(args, "diagnose_only", False):
+        return _report_diagnoses(results)
+    _check_excluded_used(_excluded(args), [s for r in results.values() for s in r.solutions.values()])
     for side, result in results.items():
         out = _leg_out(args, side)
         if len(result.solutions) == 1:
-            next(iter(result.solutions.values())).write(out)
+            write_solution_folder(next(iter(result.solutions.values())), out)
         else:
             result.write(out)
         r = result.run_record
         if not r.success:
-            raise emg_failure(r, settings.emg_mode, f"the EMG-informed {args.workflow} solve (written to {out})",
+            err = emg_failure(r, settings.emg_mode, f"the EMG-informed {args.workflow} solve (written to {out})",
                               settings.fiber_scheme)
+            raise type(err)(err.message + _violations_of(result))
+        for solution in result.solutions.values():
+            _print_findings(solution.record)
         scales = ", ".join(f"{m} {v:.3g}" for m, v in result.emg_scale.items())
         leg = f" side {side}" if args.side == "both" else ""
         print(f"solve: {args.workflow} EMG-{settings.emg_mode}{leg} {len(result.solutions)} trial(s): {r.status} in "
@@ -507,3 +587,14 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
     _plausibility(args, {f"{_leg_out(args, side)}" + (f"/{label}" if len(result.solutions) > 1 else ""): sol
                          for side, result in results.items() for label, sol in result.solutions.items()})
     return 0
+
+
+def run_with_progress(args) -> int:
+    """:func:`run` with IPOPT's progress lines on stderr (:class:`~musclemetab.redundancy.ipopt.solve_progress`)
+    unless ``--no-progress``."""
+    import contextlib
+
+    from ..redundancy.ipopt import solve_progress
+
+    with contextlib.nullcontext() if getattr(args, "no_progress", False) else solve_progress():
+        return run(args)

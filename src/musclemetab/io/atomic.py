@@ -7,14 +7,23 @@ file, or the complete new one.
 from __future__ import annotations
 
 import contextlib
+import json
 import os
+import socket
+import time
 import shutil
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
+from ..errors import OptionError, OutputError
+
+#: The lock file of a folder a run works on (a study's output folder, ``solve --out``)
+LOCK_FILE = ".musclemetab.lock"
+
 __all__ = ["file_sha256", "atomic_write_text", "atomic_write_bytes", "atomic_path", "atomic_directory",
-           "check_output_folder", "check_inside"]
+           "check_output_folder", "check_inside", "check_replaceable",
+           "FolderLock", "LOCK_FILE"]
 
 
 def file_sha256(path: str | os.PathLike) -> str:
@@ -70,21 +79,53 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
 def atomic_directory(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary directory; on success, its files are moved into ``path``.
 
+    An :class:`OSError` while writing (permission, disk full, file-size limit) is raised as
+    :class:`~musclemetab.errors.OutputError` naming ``path``; the temporary directory is removed.
+
     Use it when one step writes several files that belong together: if the step fails
     none of them appears in ``path``. Files already in ``path`` and not rewritten stay.
     """
     path = Path(path)
-    path.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=".partial-", dir=path))
+    tmp = None
     try:
+        path.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=".partial-", dir=path))
         yield tmp
-        for item in sorted(tmp.iterdir()):
-            target = path / item.name
-            if target.is_dir() and not item.is_dir():
-                shutil.rmtree(target)
-            os.replace(item, target)
+        items = sorted(tmp.iterdir())
+        check_replaceable(path, [item.name for item in items if not item.is_dir()])
+        for item in items:
+            os.replace(item, path / item.name)
+    except OSError as exc:
+        raise output_error(exc, path) from None
     finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+def output_error(exc: OSError, path: str | os.PathLike) -> OutputError:
+    """The :class:`~musclemetab.errors.OutputError` of a failed write into ``path``: one line
+    naming the folder, the reason (no permission, disk full, file-size limit) and the remedy."""
+    import errno
+
+    reason = {errno.ENOSPC: "the disk is full", errno.EDQUOT: "the disk quota is exhausted",
+              errno.EFBIG: "a file would exceed the file-size limit (ulimit -f)",
+              errno.EACCES: "permission denied", errno.EPERM: "permission denied",
+              errno.EROFS: "the file system is read-only"}.get(exc.errno, exc.strerror or str(exc))
+    return OutputError(f"cannot write the output folder {path} ({reason}); the files of this step were not written "
+                       "(the folder keeps what it held): free space or choose a folder you can write to, and run again")
+
+
+def check_replaceable(folder: str | os.PathLike, names) -> None:
+    """Raise :class:`~musclemetab.errors.OptionError` naming the path when one of the files
+    ``names`` that the package is about to write into ``folder`` exists there as a folder
+    (or a link to one): the package replaces its own files, never deletes a folder it did not
+    write. Checked for every name before any file is moved, so nothing is half written."""
+    from ..errors import OptionError, OutputError
+
+    taken = [Path(folder) / n for n in names if (Path(folder) / n).is_dir()]
+    if taken:
+        raise OptionError(f"{taken[0]} is a folder, where musclemetab writes its file {taken[0].name}; it is not "
+                          "removed: move it away or choose another output folder")
 
 
 def check_output_folder(path: str | os.PathLike, option: str = "--out") -> Path:
@@ -94,7 +135,7 @@ def check_output_folder(path: str | os.PathLike, option: str = "--out") -> Path:
     existing file, lies below a file, or cannot be created or written to. The check
     creates nothing that stays: folders it had to create to try are removed again.
     """
-    from ..errors import OptionError
+    from ..errors import OptionError, OutputError
 
     path = Path(path)
     if path.exists() and not path.is_dir():
@@ -127,7 +168,7 @@ def check_output_folder(path: str | os.PathLike, option: str = "--out") -> Path:
 
 def check_inside(root: str | os.PathLike, path: str | os.PathLike, what: str = "output") -> Path:
     """``path`` resolved; :class:`~musclemetab.errors.OptionError` unless it lies inside ``root``."""
-    from ..errors import OptionError
+    from ..errors import OptionError, OutputError
 
     root_r = Path(root).resolve()
     p = Path(path)
@@ -136,3 +177,121 @@ def check_inside(root: str | os.PathLike, path: str | os.PathLike, what: str = "
         raise OptionError(f"{what} {p} would be written outside the output folder {root_r}; "
                           "use plain names without '..' or '/'")
     return p
+
+
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
+
+
+def _boot_id() -> str:
+    """This boot of the machine (Linux), so that a lock written before a restart is known stale."""
+    try:
+        return Path("/proc/sys/kernel/random/boot_id").read_text(encoding="ascii").strip()
+    except OSError:
+        return ""
+
+
+class FolderLock:
+    """Hold ``DIR/.musclemetab.lock`` while a run works on the folder ``DIR`` (a study's output
+    folder, or the ``--out`` of ``solve``); ``what`` names the folder in the messages.
+
+    Raises :class:`OptionError` naming the lock file when another live process holds it.
+    The lock file is created complete (written aside, then linked into place, which fails if
+    it exists). A lock whose process no longer runs (same host: the process id is gone, or the
+    machine restarted since, by its boot id) is stale and taken over: the check and the
+    replacement happen under an exclusive ``flock`` of the study folder, so of many runs
+    starting at once after a crash exactly one takes the lock.
+    """
+
+    def __init__(self, folder: Path, what: str = "study folder"):
+        self.folder = Path(folder)
+        self.path = self.folder / LOCK_FILE
+        self.what = what
+        self.owned = False
+        self.created: list[Path] = []
+
+    def __enter__(self):
+        self.created = []  # the folders made for the run, innermost first
+        p = self.folder.absolute()
+        while not p.exists():
+            self.created.append(p)
+            p = p.parent
+        self.folder.mkdir(parents=True, exist_ok=True)
+        info = {"pid": os.getpid(), "host": socket.gethostname(), "boot_id": _boot_id(),
+                "started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+        import tempfile
+
+        fd, tmp = tempfile.mkstemp(prefix=f"{self.path.name}.", suffix=".tmp", dir=self.folder)
+        try:
+            os.fchmod(fd, 0o644)
+            with os.fdopen(fd, "w", encoding="utf-8") as f:
+                json.dump(info, f)
+            holder = self._take(tmp, info)
+        finally:
+            Path(tmp).unlink(missing_ok=True)
+        if self.owned:
+            return self
+        who = (f"process {holder.get('pid')} on {holder.get('host')}, since {holder.get('started')}"
+               if holder else "a process that did not record itself")
+        raise OptionError(
+            f"the {self.what} {self.folder} is in use by another musclemetab run ({who}; lock file "
+            f"{self.path}); wait for that run to finish, or delete the lock file if no run uses the folder"
+        )
+
+    def _take(self, tmp: str, info: dict) -> dict | None:
+        """Put the complete lock ``tmp`` in place, or take over a stale one; the holder otherwise."""
+        import fcntl
+
+        try:
+            os.link(tmp, self.path)  # atomic: fails when a lock exists
+            self.owned = True
+            return info
+        except FileExistsError:
+            pass
+        fd = os.open(self.folder, os.O_RDONLY)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)  # one takeover at a time; released on close
+            holder = self._holder()
+            if holder is None and not self.path.exists():  # released meanwhile
+                os.link(tmp, self.path)
+                self.owned = True
+            elif self._stale(holder, info):
+                os.replace(tmp, self.path)  # the stale lock replaced in one step
+                self.owned = True
+            return holder
+        finally:
+            os.close(fd)
+
+    @staticmethod
+    def _stale(holder: dict | None, me: dict) -> bool:
+        if holder is None or holder.get("host") != me["host"] or not isinstance(holder.get("pid"), int):
+            return False
+        if holder.get("boot_id") and me["boot_id"] and holder["boot_id"] != me["boot_id"]:
+            return True  # written before the machine restarted
+        return not _process_alive(holder["pid"])
+
+    def _holder(self) -> dict | None:
+        try:
+            data = json.loads(self.path.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return None
+        return data if isinstance(data, dict) else None
+
+    def __exit__(self, *exc):
+        if self.owned:
+            holder = self._holder()
+            if holder is None or holder.get("pid") == os.getpid():
+                self.path.unlink(missing_ok=True)
+            self.owned = False
+        for d in self.created:  # folders made for the run and left empty (it stopped before writing)
+            try:
+                d.rmdir()
+            except OSError:
+                break
+        return False

@@ -40,10 +40,14 @@ from .lichtwark import LICHTWARK_2005_CONSTANTS, LICHTWARK_CONSTANTS
 from .margaria import MARGARIA_CONSTANTS
 from .umberger import AEROBIC_FACTOR, LENGTHENING_FACTOR_2003, LENGTHENING_FACTOR_2010, SLOW_TWITCH_VMAX_RATIO
 
-__all__ = ["SMOOTHING", "SMOOTH_MODELS", "smooth_rates"]
+__all__ = ["SMOOTHING", "SMOOTH_MODELS", "WORK_AND_HEAT", "smooth_rates"]
 
 #: Default smoothing parameter ``s`` (dimensionless).
 SMOOTHING = 1e-4
+#: ``non_negative=WORK_AND_HEAT``: the non-negativity rule of UM03, BH04, HO06 and UC16 applied
+#: to the work plus the shortening/lengthening heat instead of the total (the energy goal's form,
+#: ``docs/energy_objective.md``): ``Edot = H_AM + max(W + H_SL, 0)``.
+WORK_AND_HEAT = "work-and-heat"
 
 
 class _Smooth:
@@ -101,17 +105,41 @@ def _umberger(k, x, *, lengthening_factor, include_negative_work, recruitment, n
         v_st = -v_max_st + v_max * k.pos(vbar + 1.0 / SLOW_TWITCH_VMAX_RATIO)
     h_short = -(alpha_s_st * v_st * f_st + alpha_s_ft * v_tilde * f_ft) * A**2
     h_long = alpha_l * v_tilde * A
-    h_sl = k.select(-vbar, h_short, h_long) * S * mass
-    H_SL = h_sl * (1.0 + above * (f_l - 1.0))
-    W = -(a * f_l * f_v * F0) * (v_tilde * l_mo)
+    H_SL = k.select(-vbar, h_short, h_long) * S * mass * (1.0 + above * (f_l - 1.0))
+    force = a * f_l * f_v * F0
+    W = -force * (v_tilde * l_mo)
     if not include_negative_work:
         W = W * k.step(-vbar)
+    if non_negative == WORK_AND_HEAT:
+        # max(W + H_SL, 0): shortening, both terms are >= 0; lengthening, W + H_SL = VCE~ c with
+        # c = alpha_L A f_SL - F_CE lMo of either sign, so max(W + H_SL, 0) = VCE~ max(c, 0), c
+        # smoothed in units of F0 lMo
+        f_sl = S * mass * (1.0 + above * (f_l - 1.0))
+        if include_negative_work:
+            N0 = F0 * l_mo
+            net_long = v_tilde * N0 * k.pos((alpha_l * A * f_sl - force * l_mo) / N0)
+        else:
+            net_long = h_long * f_sl
+        return _close(k, x, W, [H_AM, H_SL], non_negative, minimum_heat_rate_W_per_kg,
+                      work_and_heat=k.select(-vbar, W + h_short * f_sl, net_long))
     return _close(k, x, W, [H_AM, H_SL], non_negative, minimum_heat_rate_W_per_kg)
 
 
-def _close(k, x, W, heats, non_negative, minimum):
-    """Minimum heat rate, non-negativity and basal heat, smoothly; returns the components."""
+def _close(k, x, W, heats, non_negative, minimum, work_and_heat=None):
+    """Minimum heat rate, non-negativity and basal heat, smoothly; returns the components.
+
+    ``non_negative``: False, True (the total raised to 0) or :data:`WORK_AND_HEAT` (the work
+    plus the shortening/lengthening heat raised to 0: ``work_and_heat``, their smooth
+    ``max(W + H_SL, 0)``, replaces ``W + H_SL``)."""
     P0 = x["F0"] * x["lMo"] * x["vmax"]
+    if non_negative == WORK_AND_HEAT:
+        if minimum:
+            raise OptionError("the non-negativity of the work and shortening/lengthening heat does not take "
+                              "minimum_heat_rate_W_per_kg; give one of the two")
+        H_AM = heats[0] if len(heats) == 2 else heats[0] + heats[1]
+        B = x["basal_W"]
+        return {"work": W, "activation_maintenance": H_AM, "shortening_lengthening": work_and_heat - W, "basal": B,
+                "total": H_AM + work_and_heat + B}
     if minimum:
         floor = minimum * x["mass"]
         heat = sum(heats)
@@ -148,7 +176,10 @@ def _bhargava(k, x, *, non_negative, activation_heat_decay, stimulation_time_s, 
     F_CE = F_iso * f_v
     F_M = F_CE + fpe
     H_SL = -k.select(-vbar, 0.16 * F_iso + 0.18 * F_M, 0.157 * F_M) * V
-    return _close(k, x, -F_CE * V, [H_A, H_M, H_SL], non_negative, minimum_heat_rate_W_per_kg)
+    # W + H_SL = -(F_CE + alpha) V: >= 0 shortening, <= 0 lengthening, so max(W + H_SL, 0) is its
+    # shortening branch
+    net = k.step(-vbar) * -(F_CE + 0.16 * F_iso + 0.18 * F_M) * V if non_negative == WORK_AND_HEAT else None
+    return _close(k, x, -F_CE * V, [H_A, H_M, H_SL], non_negative, minimum_heat_rate_W_per_kg, work_and_heat=net)
 
 
 def _houdijk(k, x, *, non_negative):
@@ -169,7 +200,10 @@ def _houdijk(k, x, *, non_negative):
     H_M = mass * (h_A + h_M) * a * (f_l - h_A / (h_A + h_M))
     V = vbar * x["vmax"] * x["lMo"]
     H_SL = -a_tilde * a * f_l * V * k.step(-vbar)
-    return _close(k, x, -(a * f_l * f_v * F0) * V, [H_A + H_M, H_SL], non_negative, None)
+    W = -(a * f_l * f_v * F0) * V
+    # W + H_SL: >= 0 shortening, W <= 0 lengthening, so max(W + H_SL, 0) is its shortening branch
+    net = k.step(-vbar) * (W - a_tilde * a * f_l * V) if non_negative == WORK_AND_HEAT else None
+    return _close(k, x, W, [H_A + H_M, H_SL], non_negative, None, work_and_heat=net)
 
 
 def _lichtwark2007(k, x, *, non_negative):
@@ -210,8 +244,7 @@ def _margaria(k, x):
     c = MARGARIA_CONSTANTS
     V = x["normalized_fiber_velocity"] * x["vmax"] * x["lMo"]
     W = -(x["activation"] * x["active_force_length_multiplier"] * x["force_velocity_multiplier"] * x["F0"]) * V
-    P0 = x["F0"] * x["lMo"] * x["vmax"]
-    w_pos = P0 * k.pos(W / P0)
+    w_pos = W * k.step(-x["normalized_fiber_velocity"])  # max(W, 0): W = -F_CE V has the sign of -V
     Edot = w_pos / c["positive_work_efficiency"] + (W - w_pos) / c["negative_work_efficiency"]
     B = x["basal_W"]
     return {"work": W, "activation_maintenance": 0.0 * W, "shortening_lengthening": Edot - W, "basal": B,
@@ -258,7 +291,9 @@ def smooth_rates(
     """The smooth version of ``model``: its components (W) as NumPy arrays or CasADi
     expressions, for states and parameters of one common (broadcastable) shape.
 
-    ``options`` are those of the exact model that the smooth one has (``non_negative``;
+    ``options`` are those of the exact model that the smooth one has (``non_negative``, which
+    also takes :data:`WORK_AND_HEAT` for UM03, UM10, UC16, BH04 and HO06: the rule on the work
+    plus the shortening/lengthening heat, ``H_AM + max(W + H_SL, 0)``, without a minimum heat rate;
     Umberger family: ``include_negative_work``, ``effort_scaling``,
     ``minimum_heat_rate_W_per_kg``, ``slow_twitch_shortening_cap`` (as ``cap``); BH04:
     ``activation_heat_decay``, ``stimulation_time_s`` (a number, s), ``minimum_heat_rate_W_per_kg``;
@@ -282,6 +317,11 @@ def smooth_rates(
     if unknown:
         raise OptionError(f"{key}: the smooth model has no option {', '.join(unknown)}; options: {', '.join(allowed)}")
     opts.update(options)
+    if "non_negative" in opts and not (isinstance(opts["non_negative"], bool) or opts["non_negative"] == WORK_AND_HEAT):
+        raise OptionError(f"{key}: non_negative must be True, False or '{WORK_AND_HEAT}', not {opts['non_negative']!r}")
+    if opts.get("non_negative") == WORK_AND_HEAT and func is _lichtwark2007:
+        raise OptionError(f"{key}: non_negative='{WORK_AND_HEAT}' needs a model with a shortening/lengthening heat "
+                          "that the work can cancel (UM03, UM10, UC16, BH04, HO06)")
     states = (excitation, activation, normalized_fiber_length, normalized_fiber_velocity,
               active_force_length_multiplier, force_velocity_multiplier, passive_fiber_force_N)
     params = (max_isometric_force_N, optimal_fiber_length_m, max_contraction_velocity, muscle_mass_kg,

@@ -8,7 +8,7 @@ NumPy arrays back through :func:`call`. The worker starts on first use (its star
 about half a second, is paid once per calling process) and stops when the caller exits.
 
 Functions run in the worker live in the modules of this package that import ``opensim``
-(:mod:`.model_ops`, :mod:`.probes`); call them by name::
+(:mod:`.model_ops`, :mod:`.probes`, :mod:`.states`, :mod:`.solution_model`, ...); call them by name::
 
     from musclemetab.opensim_bridge import call
     info = call("model_ops:read_model_info", "model.osim")

@@ -22,6 +22,8 @@ from ..errors import MusclemetabError, OpenSimWorkerError
 _LOCK = threading.Lock()
 _PROC: subprocess.Popen | None = None
 _STARTUP_S: float | None = None
+#: the worker being started (before it reports ready), so that an exit during its start stops it
+_STARTING: subprocess.Popen | None = None
 
 
 def send_message(stream, obj) -> None:
@@ -45,10 +47,10 @@ def receive_message(stream):
 
 
 def _start() -> subprocess.Popen:
-    global _STARTUP_S
+    global _STARTUP_S, _STARTING
     t0 = time.perf_counter()
     env = dict(os.environ)
-    proc = subprocess.Popen(
+    proc = _STARTING = subprocess.Popen(
         [sys.executable, "-m", "musclemetab.opensim_bridge.worker"],
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
@@ -124,9 +126,15 @@ def worker_startup_s() -> float | None:
 
 
 def shutdown() -> None:
-    """Stop the worker process (it is restarted on the next call)."""
+    """Stop the worker process (it is restarted on the next call). When another thread is
+    starting it or waiting for a reply (an exit after Ctrl-C), the process is killed at once."""
     global _PROC
-    with _LOCK:
+    if not _LOCK.acquire(timeout=0.2):
+        starting = _STARTING
+        if starting is not None and starting.poll() is None:
+            starting.kill()
+        return
+    try:
         if _PROC is not None and _PROC.poll() is None:
             try:
                 _PROC.stdin.close()
@@ -134,6 +142,8 @@ def shutdown() -> None:
             except Exception:  # pragma: no cover - best effort
                 _PROC.kill()
         _PROC = None
+    finally:
+        _LOCK.release()
 
 
 atexit.register(shutdown)

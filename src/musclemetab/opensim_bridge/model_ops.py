@@ -49,11 +49,12 @@ _MODELS: dict = {}
 
 
 class LoadedModel:
-    """A model with its initialised state and the maps used to set coordinates fast."""
+    """A model with its initialised state and the maps used to set coordinates fast
+    (``model``: an ``opensim.Model`` already in memory, read from ``path`` and changed)."""
 
-    def __init__(self, path: str):
+    def __init__(self, path: str, model=None):
         try:
-            model = osim.Model(path)
+            model = osim.Model(path) if model is None else model
             state = model.initSystem()
         except Exception as exc:
             msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__

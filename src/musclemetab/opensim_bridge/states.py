@@ -6,7 +6,8 @@ every state variable's name (``/jointset/<joint>/<coord>/value|speed``,
 the coordinate values (model units: rad or m) and speeds of the IK motion at given times.
 Coordinates are set as :mod:`.model_ops` sets them: rotational values from degrees when the
 file says so, coupled coordinates from their coupler functions, locked coordinates at
-their default. Values at the requested times come from a cubic spline through the IK
+their default, independent coordinates of a nonlinear joint motion (OpenSim's "coupled"
+motion type without a coupler, such as gait2392's pelvis translations) as the file gives them. Values at the requested times come from a cubic spline through the IK
 frames; speeds are its derivative.
 
 :func:`probes_over_states` loads a states file with
@@ -33,7 +34,7 @@ from ..errors import DataMismatchError, UnknownMuscleError
 from .model_ops import COUPLED, ROTATIONAL, load_model
 from .probes import BHARGAVA_SWITCHES, UMBERGER_SWITCHES, _DEFAULT_OFF
 
-__all__ = ["model_states_along_motion", "probes_over_states"]
+__all__ = ["model_states_along_motion", "states_along_motion", "probes_over_states"]
 
 
 def model_states_along_motion(model_path: str, ik_time, columns: dict, in_degrees: bool, times) -> dict:
@@ -45,9 +46,13 @@ def model_states_along_motion(model_path: str, ik_time, columns: dict, in_degree
     ``defaulted_coordinates`` (unlocked, independent coordinates absent from the motion)
     and ``motion_types`` (``{coordinate: rotational|translational|coupled}``).
     """
+    return states_along_motion(load_model(model_path), ik_time, columns, in_degrees, times)
+
+
+def states_along_motion(m, ik_time, columns: dict, in_degrees: bool, times) -> dict:
+    """:func:`model_states_along_motion` of a loaded model (:class:`.model_ops.LoadedModel`)."""
     from scipy.interpolate import CubicSpline
 
-    m = load_model(model_path)
     model, state = m.model, m.state
     sv = model.getStateVariableNames()
     names = [sv.get(i) for i in range(sv.getSize())]
@@ -62,6 +67,14 @@ def model_states_along_motion(model_path: str, ik_time, columns: dict, in_degree
     from .model_ops import frame_values
 
     frames = [frame_values(m, columns, in_degrees, k) for k in range(ik_time.size)]
+    # independent coordinates of nonlinear joint motion (gait2392's pelvis translations) are
+    # the motion's too, in the file's units as OpenSim's tools take them (only rotational
+    # coordinates are converted from degrees)
+    nonlinear = [n for n in m.coords if m.motion[n] == COUPLED and n not in m.dependent and not m.locked[n]
+                 and n in columns]
+    for k, f in enumerate(frames):
+        for n in nonlinear:
+            f[n] = float(columns[n][k])
     values: dict[str, np.ndarray] = {}
     defaulted = []
     for n, c in m.coords.items():
@@ -103,8 +116,9 @@ def probes_over_states(model_path: str, states_path: str, controls_path: str, mu
     allowances; a file OpenSim refuses raises its error. Returns per probe
     ``<name>`` -> array ``(muscles, states)`` of the per-muscle totals (W), the muscle
     quantities OpenSim used as arrays ``(muscles, states)``, the muscle parameters and the
-    state times. ``activation_state`` and ``fiber_length_state_m`` are the state variables as
-    loaded (``activation`` is the muscle's, clamped to its minimum activation).
+    state times. ``activation_state``, ``fiber_length_state_m`` and
+    ``normalized_tendon_force_state`` are the state variables as loaded (NaN for a muscle
+    without that state; ``activation`` is the muscle's, clamped to its minimum activation).
     """
     model = osim.Model(str(model_path))
     mset = model.getMuscles()
@@ -170,7 +184,12 @@ def probes_over_states(model_path: str, states_path: str, controls_path: str, mu
         "passive_fiber_force_N": "getPassiveFiberForce",
         "fiber_length_m": "getFiberLength",
     }
-    state_vars = {"activation_state": "activation", "fiber_length_state_m": "fiber_length"}
+    state_vars = {"activation_state": "activation", "fiber_length_state_m": "fiber_length",
+                  "normalized_tendon_force_state": "normalized_tendon_force"}
+    sv_names = model.getStateVariableNames()
+    sv_names = {sv_names.get(i) for i in range(sv_names.getSize())}
+    has_state = [{key: f"{mu.getAbsolutePathString()}/{sv}" in sv_names for key, sv in state_vars.items()}
+                 for mu in mus]
     out = {key: np.empty((len(mus), n)) for key in (*getters, *state_vars)}
     labels = {}
     for name, pr in made:
@@ -210,7 +229,7 @@ def probes_over_states(model_path: str, states_path: str, controls_path: str, mu
             for key, g in getters.items():
                 out[key][i, s] = getattr(mu, g)(state)
             for key, sv in state_vars.items():
-                out[key][i, s] = mu.getStateVariableValue(state, sv)
+                out[key][i, s] = mu.getStateVariableValue(state, sv) if has_state[i][key] else math.nan
         for name, pr in made:
             vals = pr.getProbeOutputs(state)
             by_label = {labels[name][i]: vals.get(i) for i in range(vals.size())}

@@ -2,7 +2,9 @@
 
 It imports ``opensim`` once, then serves calls from :mod:`.client` until its input closes.
 OpenSim writes log messages to standard output; the protocol stream is therefore a
-duplicate of the original stdout, and file descriptor 1 is pointed at stderr.
+duplicate of the original stdout, and file descriptor 1 is pointed at stderr. OpenSim's log is
+kept to errors and its log file (``opensim.log``, which OpenSim otherwise writes into the
+working folder) is switched off.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ def main() -> int:
         import opensim
 
         opensim.Logger.setLevelString("error")
+        opensim.Logger.removeFileSink()  # no opensim.log in the user's working folder
     except Exception as exc:  # pragma: no cover - environment problem
         send_message(proto_out, ("failed", f"{type(exc).__name__}: {exc}"))
         return 1

@@ -73,6 +73,7 @@ __all__ = [
     "fiber_scheme",
     "emg_failure",
     "settings_for_muscles",
+    "settings_without",
     "build_emg_ten_nlp",
     "solve_emg_ten_ocp",
     "emg_ten_problem",
@@ -262,6 +263,32 @@ def settings_for_muscles(settings: EmgTenSettings | None, muscles: Sequence[str]
     if settings.emg_groups == default.emg_groups and not {m for g in settings.emg_groups for m in g} <= present:
         changes["emg_groups"] = tuple(emg_scale_groups(muscles).values())
     return replace(settings, **changes) if changes else settings
+
+
+def settings_without(settings: EmgTenSettings | None, muscles: Sequence[str], excluded: Sequence[str]) -> EmgTenSettings:
+    """``settings`` for the problem's ``muscles`` (:func:`settings_for_muscles`, before the
+    exclusion) with the ``excluded`` muscles taken out of the tendon and EMG scale groups: the
+    group's other members keep their shared factor; a group left empty is dropped. A
+    :class:`~musclemetab.errors.MusclemetabWarning` names the muscles whose tendon stiffness is
+    then not estimated."""
+    import warnings
+
+    from ..errors import MusclemetabWarning
+
+    settings = settings_for_muscles(settings, muscles)
+    gone = set(excluded)
+    dropped = [m for m in settings.tendon_muscles if m in gone]
+    if not gone & ({m for g in settings.tendon_groups for m in g} | {m for g in settings.emg_groups for m in g}):
+        return settings
+    if dropped:
+        warnings.warn(f"--exclude-muscles {' '.join(dropped)}: the tendon stiffness of {', '.join(dropped)} is not "
+                      "estimated (the muscle is out of the problem); the other muscles of its tendon group share "
+                      "their factor", MusclemetabWarning, stacklevel=3)
+
+    def keep(groups):
+        return tuple(g for g in (tuple(m for m in grp if m not in gone) for grp in groups) if g)
+
+    return replace(settings, tendon_groups=keep(settings.tendon_groups), emg_groups=keep(settings.emg_groups))
 
 
 # ----------------------------------------------------------------------------- problem

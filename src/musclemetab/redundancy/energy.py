@@ -12,6 +12,13 @@ the leg's mean metabolic rate over the mesh in W/kg of body mass (rectangle rule
 integral ``sum_k h Edot_k`` over the duration ``N h``), normalised by ``N`` like the other goals
 of :mod:`.transcription`. Muscle masses and slow-twitch fractions come from the anatomical muscle table
 (:func:`musclemetab.properties.metabolic_properties`), as for the metabolic rates of a solution.
+
+UM03, BH04, HO06 and UC16 raise a negative total to zero (Umberger et al. 2003, Eq. 3), which
+makes a muscle that absorbs more work than its heat cost nothing at any activation. The goal's
+default form (``form="objective"``) applies that rule to the work plus the
+shortening/lengthening heat, ``Edot = H_AM + max(W + H_SL, 0)``: equal to the model wherever
+``W + H_SL >= 0`` (every shortening state), larger by at most the activation and maintenance
+heat ``H_AM`` while lengthening, which a lengthening muscle thus always pays.
 """
 
 from __future__ import annotations
@@ -25,11 +32,19 @@ import numpy as np
 
 from ..errors import OptionError
 
-__all__ = ["EnergyGoal", "ENERGY_SMOOTHING", "node_rates", "leg_rate_W_per_kg"]
+__all__ = ["EnergyGoal", "ENERGY_SMOOTHING", "GOAL_FORMS", "CLAMPED_MODELS", "node_rates", "leg_rate_W_per_kg"]
 
 #: Default smoothing parameter of the energy goal's model (dimensionless;
 #: :data:`musclemetab.metabolics.smooth.SMOOTHING` is the default of the smooth models).
 ENERGY_SMOOTHING = 1e-3
+#: The models whose total is raised to zero where it is negative (non-negativity rule,
+#: Umberger et al. 2003 Eq. 3): a muscle that absorbs more work than its heat costs nothing.
+CLAMPED_MODELS = ("UM03", "BH04", "HO06", "UC16")
+#: The goal's forms of a model: ``"objective"`` (default) applies the non-negativity rule of the
+#: models of :data:`CLAMPED_MODELS` to the work plus the shortening/lengthening heat, so that the
+#: activation and maintenance heat is always paid; ``"model"`` keeps the model's rule on the
+#: total. The other models have no rule: both forms are the model.
+GOAL_FORMS = ("objective", "model")
 
 
 @dataclass(frozen=True)
@@ -41,7 +56,11 @@ class EnergyGoal:
     ``body_mass_kg``, ``height_m`` and ``muscle_properties`` (an override CSV, or a mapping
     ``{muscle: {"mass_kg": ..., "slow_twitch_fraction": ...}}``) give the muscle masses and
     slow-twitch fractions by the muscle table's rules. ``options``: options of the smooth model
-    (:func:`musclemetab.metabolics.smooth.smooth_rates`).
+    (:func:`musclemetab.metabolics.smooth.smooth_rates`) other than ``non_negative``, which
+    ``form`` sets (:data:`GOAL_FORMS`): ``"objective"`` (default) minimises
+    ``H_AM + max(W + H_SL, 0)`` for UM03, BH04, HO06 and UC16 instead of their
+    ``max(W + H_AM + H_SL, 0)``, whose zero cost of lengthening muscles lets the optimum
+    saturate them; ``"model"`` keeps the model's rule and warns for those four.
     """
 
     model: str
@@ -52,6 +71,7 @@ class EnergyGoal:
     smoothing: float = ENERGY_SMOOTHING
     muscle_properties: str | None = None
     options: dict = field(default_factory=dict)
+    form: str = "objective"
 
     def __post_init__(self):
         from ..metabolics.smooth import SMOOTH_MODELS
@@ -76,6 +96,40 @@ class EnergyGoal:
         if isinstance(self.muscle_properties, os.PathLike):
             object.__setattr__(self, "muscle_properties", os.fspath(self.muscle_properties))
         object.__setattr__(self, "options", dict(self.options))
+        if self.form not in GOAL_FORMS:
+            raise OptionError(f"energy goal: unknown form {self.form!r}; choose one of {', '.join(GOAL_FORMS)} "
+                              "(docs/energy_objective.md)")
+        if "non_negative" in self.options:
+            raise OptionError(f"energy goal {key}: the form sets the non-negativity rule; drop the option "
+                              f"non_negative and give form='objective' or form='model'")
+        if self.form == "model" and key in CLAMPED_MODELS:
+            import warnings
+
+            from ..errors import MusclemetabWarning
+
+            warnings.warn(f"energy goal {key} in its model form: the model raises a negative total to zero, so a "
+                          "lengthening muscle that absorbs more work than its heat costs nothing and the optimum "
+                          "may activate it fully; form='objective' keeps its activation and maintenance heat "
+                          "(docs/energy_objective.md)", MusclemetabWarning, stacklevel=3)
+
+    @property
+    def non_negative(self):
+        """The smooth model's ``non_negative`` option for this form (``None``: the model's own)."""
+        from ..metabolics.smooth import WORK_AND_HEAT
+
+        return WORK_AND_HEAT if self.form == "objective" and self.model in CLAMPED_MODELS else None
+
+    def smooth_options(self) -> dict:
+        """The options given to :func:`~musclemetab.metabolics.smooth.smooth_rates`."""
+        nn = self.non_negative
+        return {**self.options, **({"non_negative": nn} if nn is not None else {})}
+
+    def form_record(self) -> dict:
+        """Which energy form and smoothing the goal minimises, as the run record keeps it."""
+        nn = self.non_negative
+        rule = ("max(W + H_SL, 0): work plus shortening/lengthening heat" if nn is not None else
+                "max(total, 0): the model's" if self.model in CLAMPED_MODELS else "none (the model has none)")
+        return {"model": self.model, "form": self.form, "non_negativity": rule, "smoothing": self.smoothing}
 
     def muscle_values(self, muscles, max_isometric_force_N, optimal_fiber_length_m):
         """Masses (kg) and slow-twitch fractions of ``muscles`` (arrays). The problem, its
@@ -92,7 +146,7 @@ class EnergyGoal:
         """The goal's settings, as ``summary.json`` records them."""
         return {"model": self.model, "weight": self.weight, "effort_weight": self.effort_weight,
                 "smoothing": self.smoothing, "body_mass_kg": self.body_mass_kg, "height_m": self.height_m,
-                "muscle_properties": self.muscle_properties, "options": dict(self.options),
+                "muscle_properties": self.muscle_properties, "options": dict(self.options), "form": self.form,
                 "term": "weight * (1/N) * sum over nodes k < N and muscles of Edot (W, no basal) / body mass"}
 
 
@@ -115,7 +169,7 @@ def node_rates(goal: EnergyGoal, e, a, lm, vm, *, F0, lMo, vmax, kpe, s0, sm, ma
     vbar = vm / vmax
     r = smooth_rates(goal.model, e, a, lm, vbar, active_force_length(lm), force_velocity(vbar),
                      F0 * passive_force_length(lm, kpe, s0, sm), F0, lMo, vmax, mass, fst,
-                     smoothing=goal.smoothing, basal=False, **goal.options)
+                     smoothing=goal.smoothing, basal=False, **goal.smooth_options())
     return r["total"]
 
 

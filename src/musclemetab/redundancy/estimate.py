@@ -109,6 +109,31 @@ def _coupling(group) -> tuple[str | None, tuple[str, ...]]:
     return None, tuple(str(m) for m in group)
 
 
+def check_couplings(estimate: Mapping[str, Sequence[str]], groups) -> None:
+    """Raise :class:`OptionError` for a coupled group (``--couple``, ``couple``; ``groups`` as
+    ``(kind or None, muscles)``) with fewer than two muscles, or, for a group of every estimated
+    kind, with a muscle no kind of ``estimate`` names or muscles estimated for different kinds
+    (the group shares one factor of each kind, so its muscles must all be estimated for it)."""
+    for kind, group in groups:
+        group = list(dict.fromkeys(str(m) for m in group))
+        label = f"{kind + ':' if kind else ''}{','.join(group)}"
+        if len(group) < 2:
+            raise OptionError(f"--couple {label}: a coupled group needs two or more muscles")
+        if kind is not None:
+            continue
+        kinds = {m: sorted(k for k, ms in estimate.items() if m in ms) for m in group}
+        alone = [m for m, k in kinds.items() if not k]
+        if alone:
+            raise OptionError(f"--couple {label}: {', '.join(alone)} is estimated for no kind (--estimate names "
+                              f"{', '.join(sorted({x for ms in estimate.values() for x in ms}))}); add it to "
+                              "--estimate or drop it from the group")
+        if len({tuple(k) for k in kinds.values()}) > 1:
+            listed = "; ".join(f"{m}: {', '.join(k)}" for m, k in kinds.items())
+            raise OptionError(f"--couple {label}: the muscles of a group share one factor of each kind, so they must "
+                              f"be estimated for the same kinds ({listed}); estimate them alike, split the group or "
+                              "couple one kind (KIND:MUSCLE,MUSCLE)")
+
+
 def parameter_specs(estimate: Mapping[str, Sequence[str]], couple: Sequence = (),
                     bounds: Mapping[str, tuple[float, float]] | None = None) -> list[ParameterSpec]:
     """Shared factors of ``estimate`` (``{kind: [muscle, ...]}``). A group of ``couple`` is a
@@ -117,6 +142,7 @@ def parameter_specs(estimate: Mapping[str, Sequence[str]], couple: Sequence = ()
     alone, all of whose muscles must be estimated in that kind."""
     bounds = {**DEFAULT_FACTOR_BOUNDS, **(bounds or {})}
     groups = [_coupling(g) for g in couple]
+    check_couplings(estimate, groups)
     for kind, members in groups:
         if kind in FIELDS:
             missing = [m for m in members if m not in estimate.get(kind, ())]

@@ -1,24 +1,41 @@
-"""OpenSim-ready files of a solution: ``states.sto`` and ``controls.sto``.
+"""OpenSim files that reproduce a solution: a model, its states, controls and forces.
 
+Written into a solution folder by :func:`write_opensim_files` (``docs/opensim_files.md``):
+
+``model.osim``
+    the solved model with every muscle a ``DeGrooteFregly2016Muscle`` (OpenSim's own De
+    Groote et al. 2016 muscle); the solved muscles carry the solution's parameters (F0, lMo,
+    lTs, pennation, vmax as they are; kT and the passive parameters through the strains at
+    which the solution's curves reach one normalised force, :func:`opensim_muscle_parameters`;
+    no fiber damping). Locked coordinates are prescribed at the value they are locked at;
+    every other coordinate has a ``CoordinateActuator`` ``reserve_<coordinate>`` of optimal
+    force 1. Where a parameter has no exact counterpart the file says so in a comment.
 ``states.sto``
-    one row per mesh node and one column per state variable of the model, named as
-    OpenSim names them, in the model's units, so that
-    ``StatesTrajectory.createFromStatesTable(model, TimeSeriesTable("states.sto"))``
-    accepts it without allowing missing or extra columns:
-
-    * ``/jointset/<joint>/<coordinate>/value`` and ``.../speed``: the IK motion at the node
-      times (rad or m; rad/s or m/s), coupled coordinates from their couplers, locked ones
-      at their default;
-    * ``/forceset/<muscle>/activation``: the solution's activation;
-    * ``/forceset/<muscle>/fiber_length``: the solution's fiber length in metres
-      (``l~M lMo``) for muscles that have this state;
-    * every other state (muscles not in the solution, other components): the model's
-      default value.
+    one row per mesh node and one column per state variable of ``model.osim``, so that
+    ``StatesTrajectory.createFromStatesTable(model, TimeSeriesTable("states.sto"))`` accepts it
+    with no missing or extra columns and no assembly: coordinate values and speeds of the IK
+    motion at the node times (rad or m; rad/s or m/s; coupled coordinates from their couplers,
+    locked ones at their value); ``/forceset/<muscle>/activation`` and
+    ``/forceset/<muscle>/normalized_tendon_force`` (``tendon force / F0``; a slack tendon
+    below OpenSim's curve, :data:`SLACK_TENDON_FORCE`, at OpenSim's force for the solution's
+    tendon length) of the solution;
+    the model's default for every other state.
 ``controls.sto``
-    the muscles' excitations, one column per muscle named by its path
-    (``/forceset/<muscle>``), at the same times.
+    the muscles' excitations (``/forceset/<muscle>``) and the reserves' controls
+    (``/forceset/reserve_<coordinate>``, the generalised forces of ``forces.sto``).
+``forces.sto``
+    the actuator forces in the format of OpenSim's static optimisation output, as
+    ``JointReaction``'s ``forces_file`` wants them (one column per actuator of ``model.osim``,
+    labelled with the actuator's name): the solved muscles' tendon forces (N), zero for the
+    other muscles, and the generalised forces of the reserves: the solution's reserve on a
+    solved DOF; on every other free coordinate the inverse dynamics less what the solved
+    muscles apply to it (``ID - sum(r F)``), so that muscles and reserves together give every
+    coordinate its inverse-dynamics force.
 
-The model work runs in the OpenSim worker (:mod:`musclemetab.opensim_bridge.states`).
+The coordinates are those the solve used: the IK frames of the solved window, low-pass
+filtered as the solve filtered the muscle-tendon lengths (``input_preparation`` in
+``summary.json``) and interpolated with not-a-knot cubic splines. The model work runs in the
+OpenSim worker (:mod:`musclemetab.opensim_bridge.solution_model`).
 """
 
 from __future__ import annotations
@@ -28,71 +45,333 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DataMismatchError
+from ..errors import DataMismatchError, InputFileError
 
-__all__ = ["STATES_FILE", "CONTROLS_FILE", "opensim_states_table", "write_opensim_states"]
+__all__ = ["STATES_FILE", "CONTROLS_FILE", "FORCES_FILE", "MODEL_FILE", "OPENSIM_FILES",
+           "tendon_strain_at_one_norm_force", "passive_fiber_strain_at_one_norm_force",
+           "opensim_muscle_parameters", "normalized_tendon_force_state", "inverse_dynamics_at", "opensim_tables", "write_opensim_files", "write_solution_opensim_files",
+           "write_opensim_states", "joint_reaction"]
 
 STATES_FILE = "states.sto"
 CONTROLS_FILE = "controls.sto"
+FORCES_FILE = "forces.sto"
+MODEL_FILE = "model.osim"
+OPENSIM_FILES = (MODEL_FILE, STATES_FILE, CONTROLS_FILE, FORCES_FILE)
 
 
-def opensim_states_table(solution, model_path, ik_path):
-    """The states and controls tables (pandas, indexed by time) of a :class:`Solution`."""
-    import pandas as pd
+def tendon_strain_at_one_norm_force(kT):
+    """The tendon strain at which the package's tendon curve reaches one normalised force.
 
-    from ..io import read_storage, storage_from_arrays
+    ``fT(l~T) = exp(kT (l~T - 0.995))/5 - 0.25 + shift(kT) = 1`` gives
+    ``l~T = 0.995 + ln(5 (1.25 - shift(kT)))/kT``; the strain is ``l~T - 1``
+    (0.047362 for the generic ``kT = 35``). OpenSim's DeGrooteFregly2016Muscle takes it as
+    ``tendon_strain_at_one_norm_force``; its curve ``0.2 (exp(k (l~T - 1)) - 1)``,
+    ``k = ln 6 / strain``, passes through the same point but is not the same curve.
+    """
+    from ..muscle import tendon_shift
+
+    k = np.asarray(kT, dtype=float)
+    return 0.995 + np.log(5.0 * (1.25 - tendon_shift(k))) / k - 1.0
+
+
+def passive_fiber_strain_at_one_norm_force(kpe, s0, sm):
+    """The fiber strain at which the package's passive curve reaches one normalised force.
+
+    ``fPE(l~M) = [exp(kPE (l~M - s0)/sM) - 1 - P1]/P2 = 1`` with ``P1 = exp(-4 kPE/3) - 1``,
+    ``P2 = exp(kPE) - 1`` gives ``l~M = s0 + (sM/kPE) ln(exp(kPE) - 1 + exp(-4 kPE/3))``; the
+    strain is ``l~M - 1`` (0.597233 for the generic 4, 1, 0.6). OpenSim's
+    DeGrooteFregly2016Muscle takes it as ``passive_fiber_strain_at_one_norm_force``; its
+    curve has the fixed ``kPE = 4`` and no ``s0``.
+    """
+    kpe, s0, sm = (np.asarray(x, dtype=float) for x in (kpe, s0, sm))
+    return s0 + (sm / kpe) * np.log(np.exp(kpe) - 1.0 + np.exp(-4.0 * kpe / 3.0)) - 1.0
+
+
+def opensim_muscle_parameters(params) -> dict:
+    """``{muscle: DeGrooteFregly2016Muscle property values}`` of a
+    :class:`~.parameters.MuscleTendonParameters` (the mapping of ``docs/opensim_files.md``)."""
+    from ..muscle import TAU_ACTIVATION_S, TAU_DEACTIVATION_S
+
+    strain_t = tendon_strain_at_one_norm_force(params.tendon_stiffness)
+    strain_p = passive_fiber_strain_at_one_norm_force(params.passive_kpe, params.passive_s0, params.passive_sm)
+    bad = [params.names[i] for i in np.flatnonzero(~(strain_t > 0) | ~(strain_p > 0))]
+    if bad:
+        raise DataMismatchError(
+            f"the tendon or passive curve of {', '.join(bad)} reaches one normalised force before its slack or "
+            "optimal length (a strain at one normalised force of zero or less), which OpenSim's "
+            "DeGrooteFregly2016Muscle cannot represent; check the tendon stiffness and passive parameters"
+        )
+    out = {}
+    for i, m in enumerate(params.names):
+        out[m] = dict(
+            max_isometric_force_N=float(params.max_isometric_force_N[i]),
+            optimal_fiber_length_m=float(params.optimal_fiber_length_m[i]),
+            tendon_slack_length_m=float(params.tendon_slack_length_m[i]),
+            pennation_angle_at_optimal_rad=float(params.pennation_angle_at_optimal_rad[i]),
+            max_contraction_velocity=float(params.max_contraction_velocity[i]),
+            tendon_strain_at_one_norm_force=float(strain_t[i]),
+            passive_fiber_strain_at_one_norm_force=float(strain_p[i]),
+            activation_time_constant_s=TAU_ACTIVATION_S,
+            deactivation_time_constant_s=TAU_DEACTIVATION_S,
+        )
+    return out
+
+
+#: OpenSim's DeGrooteFregly2016Muscle tendon curve ``0.2 (exp(k (l~T - 1)) - 1)`` stays above
+#: -0.2; a solution's slack tendon (the package's curve goes down to ``-0.25 + shift(kT)``)
+#: below this normalised force is written as OpenSim's force at the solution's tendon length
+SLACK_TENDON_FORCE = -0.19
+
+
+def normalized_tendon_force_state(solution) -> np.ndarray:
+    """The ``normalized_tendon_force`` states of a solution ``(nodes, muscles)``: its tendon
+    force over F0; where that is below :data:`SLACK_TENDON_FORCE` (a slack tendon, beyond the
+    range of OpenSim's curve), OpenSim's curve at the solution's tendon length."""
+    from ..muscle import tendon_length_from_force
+
+    p = solution.parameters
+    f = np.asarray(solution.tendon_force_N, dtype=float) / p.max_isometric_force_N
+    slack = f < SLACK_TENDON_FORCE
+    if slack.any():
+        strain = tendon_strain_at_one_norm_force(p.tendon_stiffness)
+        k = np.broadcast_to(np.log(6.0) / strain, f.shape)
+        lt = tendon_length_from_force(f, p.tendon_stiffness)
+        f = np.where(slack, 0.2 * (np.exp(k * (lt - 1.0)) - 1.0), f)
+    return f
+
+
+def _model_comments(solution, model_path) -> dict:
+    p = solution.parameters
+    comments = {"": (
+        f"Model of a musclemetab muscle redundancy solution ({solution.record.workflow_name or 'solve'}, "
+        f"{solution.time_s[0]:g}-{solution.time_s[-1]:g} s), made from {Path(model_path).name}. Every muscle is "
+        "OpenSim's DeGrooteFregly2016Muscle (OpenSim's replaceMuscles); the solved muscles carry the solution's "
+        "parameters. No exact counterpart in this class: the tendon curve (kT and its shift) and the passive "
+        "curve (kPE, s0, sM) are given by the strains at which the solution's curves reach one normalised force "
+        "(the curves differ in shape away from that point); OpenSim's active force-length and force-velocity "
+        "constants differ from the solution's (fL(1) = 1 and fV(0) = 1 instead of 0.99943 and 1.00212) and its "
+        "activation dynamics switches between the time constants with tanh(10 (e - a)) instead of "
+        "tanh(0.1 (e - a)). Locked coordinates are prescribed at the value they are locked at. "
+        "reserve_<coordinate>: CoordinateActuators of optimal force 1 (the reserves and the remaining "
+        "generalised forces of forces.sto). See docs/opensim_files.md of musclemetab."
+    )}
+    strain_t = tendon_strain_at_one_norm_force(p.tendon_stiffness)
+    strain_p = passive_fiber_strain_at_one_norm_force(p.passive_kpe, p.passive_s0, p.passive_sm)
+    for i, m in enumerate(p.names):
+        comments[m] = (
+            f"solved: kT {p.tendon_stiffness[i]:.6g} -> tendon_strain_at_one_norm_force {strain_t[i]:.6g}; "
+            f"passive kPE {p.passive_kpe[i]:.6g}, s0 {p.passive_s0[i]:.6g}, sM {p.passive_sm[i]:.6g} -> "
+            f"passive_fiber_strain_at_one_norm_force {strain_p[i]:.6g} (no exact counterpart: same strain at "
+            "one normalised force, other curve shape)"
+        )
+    return comments
+
+
+def _solution_inputs(solution, model_path, ik_path, id_path):
+    inputs = dict(solution.record.inputs or {})
+    paths = {"model": model_path or inputs.get("model"), "ik": ik_path or inputs.get("ik"),
+             "id": id_path or inputs.get("id")}
+    for key, option in (("model", "model_path"), ("ik", "ik_path")):
+        if not paths[key]:
+            raise InputFileError(f"the solution does not name its {key} file (summary.json 'inputs'); give {option}")
+    for key, path in paths.items():
+        if path and not Path(path).is_file():
+            raise InputFileError(f"{path}: the solution's {key} file is missing; give the file it was solved with")
+    return paths
+
+
+def _coordinates_of_window(solution, ik):
+    """The IK columns over the frames of the solved window, filtered as the solve filtered the
+    muscle-tendon lengths (``input_preparation``)."""
+    from .inputs import FILTER_CUTOFF_HZ, FILTER_ORDER, lowpass_filtfilt
+
+    t = np.asarray(ik.index, dtype=float)
+    keep = (t >= solution.time_s[0] - 1e-6) & (t <= solution.time_s[-1] + 1e-6)
+    t = t[keep]
+    columns = {c: np.asarray(ik[c], dtype=float)[keep] for c in ik.columns}
+    prep = solution.record.input_preparation or {}
+    if t.size > 1 and str(prep.get("filter", "none")) != "none":
+        fs = 1.0 / float(np.mean(np.diff(t)))
+        names = list(columns)
+        filtered = lowpass_filtfilt(np.column_stack([columns[c] for c in names]), fs, FILTER_CUTOFF_HZ,
+                                    FILTER_ORDER, what=f"the IK motion of {solution.record.inputs.get('ik', '')}")
+        columns = {c: filtered[:, j] for j, c in enumerate(names)}
+    return t, columns
+
+
+def inverse_dynamics_at(id_path, coordinates, times) -> dict:
+    """``{coordinate: inverse-dynamics force at times}`` (``<coordinate>_moment`` or ``_force``
+    columns; filtered as the solve filters the moments, cubic spline at the times)."""
+    from scipy.interpolate import CubicSpline
+
+    from ..io import read_table
+    from .inputs import FILTER_CUTOFF_HZ, FILTER_ORDER, lowpass_filtfilt
+
+    table = read_table(id_path)
+    t = np.asarray(table.index, dtype=float)
+    found = {}
+    for c in coordinates:
+        for suffix in ("_moment", "_force"):
+            if f"{c}{suffix}" in table.columns:
+                found[c] = np.asarray(table[f"{c}{suffix}"], dtype=float)
+                break
+    if not found:
+        return {}
+    names = list(found)
+    values = np.column_stack([found[c] for c in names])
+    if t.size > 13:
+        values = lowpass_filtfilt(values, 1.0 / float(np.mean(np.diff(t))), FILTER_CUTOFF_HZ, FILTER_ORDER,
+                                  what=f"the inverse dynamics {id_path}")
+    spline = CubicSpline(t, values, axis=0, bc_type="not-a-knot")
+    at = spline(np.clip(times, t[0], t[-1]))
+    return {c: at[:, j] for j, c in enumerate(names)}
+
+
+def _table(t, columns: dict, name: str):
+    from ..io import StorageTable
+
+    values = np.column_stack([np.broadcast_to(np.asarray(v, dtype=float), t.shape) for v in columns.values()])
+    return StorageTable(t, list(columns), values, {"name": name, "in_degrees": False})
+
+
+def opensim_tables(solution, model_out, model_path=None, ik_path=None, id_path=None):
+    """Write the solution's model to ``model_out``; return its states, controls and forces
+    tables (:class:`~musclemetab.io.StorageTable`, NumPy: no pandas) and what the worker reported."""
+    from ..io import read_table
     from ..opensim_bridge import call
 
-    ik = read_storage(ik_path)
+    paths = _solution_inputs(solution, model_path, ik_path, id_path)
+    ik = read_table(paths["ik"])
     t = np.asarray(solution.time_s, dtype=float)
-    info = call(
-        "states:model_states_along_motion", str(model_path), ik.index.to_numpy(dtype=float),
-        {c: ik[c].to_numpy(dtype=float) for c in ik.columns}, bool(ik.attrs.get("in_degrees")), t,
-    )
-    paths = info["muscle_paths"]
-    unknown = [m for m in solution.muscles if m not in paths]
-    if unknown:
+    ik_t, columns = _coordinates_of_window(solution, ik)
+    if ik_t.size < 2 or ik_t[0] > t[0] + 1e-6 or ik_t[-1] < t[-1] - 1e-6:
         raise DataMismatchError(
-            f"{model_path}: no muscle {', '.join(unknown)} of the solution; give the model the solution was solved with"
+            f"the solution spans {t[0]:g}-{t[-1]:g} s but the IK motion {paths['ik']} does not; give the IK file of "
+            "the solved trial"
         )
+    params = solution.parameters
+    info = call("solution_model:solution_model", str(paths["model"]), str(model_out),
+                opensim_muscle_parameters(params), ik_t, columns, bool(ik.attrs.get("in_degrees")), t,
+                list(solution.dofs), _model_comments(solution, paths["model"]))
+    paths_of = info["muscle_paths"]
+    # states
     values = dict(info["values"])
-    lm_m = solution.fiber_length_m
-    with_length = set(info["muscles_with_fiber_length"])
+    tendon = np.asarray(solution.tendon_force_N, dtype=float)
+    norm_force = normalized_tendon_force_state(solution)
     for i, m in enumerate(solution.muscles):
-        values[f"{paths[m]}/activation"] = solution.activation[:, i]
-        if m in with_length:
-            values[f"{paths[m]}/fiber_length"] = lm_m[:, i]
-    columns = {}
-    for name, default in zip(info["state_names"], info["defaults"]):
-        columns[name] = values[name] if name in values else np.full(t.size, default)
-    states = storage_from_arrays(t, columns, name="musclemetab states")
-    controls = storage_from_arrays(
-        t, {paths[m]: solution.excitation[:, i] for i, m in enumerate(solution.muscles)}, name="musclemetab controls"
-    )
+        values[f"{paths_of[m]}/activation"] = solution.activation[:, i]
+        values[f"{paths_of[m]}/normalized_tendon_force"] = norm_force[:, i]
+    states = _table(t, {n: values[n] if n in values else np.full(t.size, d)
+                        for n, d in zip(info["state_names"], info["defaults"])}, "musclemetab states")
     states.attrs["defaulted_coordinates"] = info["defaulted_coordinates"]
-    assert isinstance(states, pd.DataFrame)
-    return states, controls
+    # forces: muscles, then the reserves' generalised forces
+    reserve_of = info["reserves"]
+    solved_dofs = list(solution.dofs)
+    unknown = [d for d in solved_dofs if d not in reserve_of]
+    if unknown:
+        raise DataMismatchError(f"{paths['model']}: no free coordinate {', '.join(unknown)} of the solution; give "
+                                "the model the solution was solved with")
+    others = [c for c in reserve_of if c not in solved_dofs]
+    id_forces = inverse_dynamics_at(paths["id"], others, t) if paths["id"] else {}
+    muscle_force = {m: tendon[:, i] for i, m in enumerate(solution.muscles)}
+    generalized = {d: solution.reserve_Nm[:, j] for j, d in enumerate(solved_dofs)}
+    for c in others:
+        g = np.array(id_forces.get(c, np.zeros(t.size)), dtype=float)
+        for m, r in info["moment_arms_m"].get(c, {}).items():
+            g = g - np.asarray(r) * muscle_force[m]
+        generalized[c] = g
+    forces_cols = {}
+    name_of_reserve = {v: k for k, v in reserve_of.items()}
+    for a in info["actuators"]:
+        if a in name_of_reserve:
+            forces_cols[a] = generalized[name_of_reserve[a]]
+        else:
+            forces_cols[a] = muscle_force.get(a, np.zeros(t.size))
+    forces = _table(t, forces_cols, "Static Optimization")
+    controls = _table(t, {**{paths_of[m]: solution.excitation[:, i] for i, m in enumerate(solution.muscles)},
+                          **{f"/forceset/{reserve_of[c]}": generalized[c] for c in reserve_of}},
+                      "musclemetab controls")
+    info["id_coordinates"] = sorted(id_forces)
+    return states, controls, forces, info
 
 
-def write_opensim_states(solution, model_path, ik_path, out_dir: str | os.PathLike | None = None) -> dict[str, Path]:
-    """Write ``states.sto`` and ``controls.sto`` of a solution (a :class:`Solution` or its folder).
+def write_opensim_files(solution, out_dir: str | os.PathLike | None = None, *, model_path=None, ik_path=None,
+                        id_path=None) -> dict[str, Path]:
+    """Write ``model.osim``, ``states.sto``, ``controls.sto`` and ``forces.sto`` of a solution
+    (a :class:`~.solution.Solution` or its folder) into ``out_dir`` (default: the solution
+    folder), all four together (atomically).
 
-    ``out_dir`` defaults to the solution folder. Both files are written together, atomically.
+    The model, IK and ID files default to those the solution names (``summary.json``
+    ``inputs``); without an ID file the reserves of the coordinates outside the problem are
+    ``-sum(r F)`` alone.
     """
     from ..io import atomic_directory, write_storage
     from .solution import Solution
 
     if not isinstance(solution, Solution):
         folder = Path(solution)
-        solution = Solution.load(folder)
+        solution = Solution.load(folder, require_success=False)
         out_dir = folder if out_dir is None else out_dir
     if out_dir is None:
-        raise DataMismatchError("give the folder to write states.sto and controls.sto into (out_dir)")
+        raise DataMismatchError("give the folder to write the OpenSim files into (out_dir)")
     out_dir = Path(out_dir)
-    states, controls = opensim_states_table(solution, model_path, ik_path)
     with atomic_directory(out_dir) as tmp:
+        states, controls, forces, _ = opensim_tables(solution, tmp / MODEL_FILE, model_path, ik_path, id_path)
         write_storage(tmp / STATES_FILE, states, name="musclemetab states", in_degrees=False,
-                      comments=["OpenSim states of the muscle redundancy solution (SI units: rad, m, rad/s, m/s)"])
+                      comments=[f"OpenSim states of the muscle redundancy solution for {MODEL_FILE} (SI units: rad, "
+                                "m, rad/s, m/s)"])
         write_storage(tmp / CONTROLS_FILE, controls, name="musclemetab controls", in_degrees=False,
-                      comments=["muscle excitations of the muscle redundancy solution"])
-    return {"states": out_dir / STATES_FILE, "controls": out_dir / CONTROLS_FILE}
+                      comments=[f"muscle excitations and reserve controls of the solution for {MODEL_FILE}"])
+        write_storage(tmp / FORCES_FILE, forces, name="Static Optimization", in_degrees=False,
+                      comments=[f"actuator forces of the solution (N; reserves N m or N) for {MODEL_FILE}, in the "
+                                "format of OpenSim's static optimisation output"])
+    return {"model": out_dir / MODEL_FILE, "states": out_dir / STATES_FILE, "controls": out_dir / CONTROLS_FILE,
+            "forces": out_dir / FORCES_FILE}
+
+
+def write_solution_opensim_files(solution, out_dir) -> dict[str, Path] | None:
+    """:func:`write_opensim_files` of a converged solution that names its model and IK files (a
+    solve from files); ``None`` (nothing written) for one solved from arrays alone or one that
+    did not converge (its values are no solution to reproduce)."""
+    inputs = solution.record.inputs or {}
+    if not (inputs.get("model") and inputs.get("ik")) or not solution.success:
+        return None
+    return write_opensim_files(solution, out_dir)
+
+
+def write_opensim_states(solution, model_path, ik_path, out_dir: str | os.PathLike | None = None) -> dict[str, Path]:
+    """:func:`write_opensim_files` with the model and IK files given first (the study's call)."""
+    return write_opensim_files(solution, out_dir, model_path=model_path, ik_path=ik_path)
+
+
+def joint_reaction(folder, joints, out_dir, external_loads=None, frame: str = "child") -> dict:
+    """OpenSim's ``JointReaction`` analysis over a solution folder's OpenSim files.
+
+    Runs ``AnalyzeTool`` on ``model.osim`` over ``states.sto`` with ``forces.sto`` as the
+    analysis' ``forces_file`` and the trial's ``external_loads`` (an ExternalLoads XML; its data
+    file may be relative to the XML). Returns ``time_s`` and ``forces``: ``{joint: (states, 3)}``,
+    the force (N) on the joint's child body expressed in the child's frame (``frame="child"``)
+    or the ground's (``"ground"``); OpenSim's output files are in ``out_dir``.
+    """
+    import xml.etree.ElementTree as ET
+
+    from ..opensim_bridge import call
+
+    folder, out_dir = Path(folder), Path(out_dir)
+    missing = [name for name in OPENSIM_FILES if not (folder / name).is_file()]
+    if missing:
+        raise InputFileError(f"{folder}: no {', '.join(missing)}; write them with write_opensim_files")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    xml = None
+    if external_loads is not None:
+        from ..external_loads import read_external_loads
+
+        loads = read_external_loads(external_loads)
+        tree = ET.parse(loads.path)  # the data file by its absolute path: OpenSim resolves it from the cwd
+        root = tree.getroot()
+        (root if root.tag == "ExternalLoads" else root.find(".//ExternalLoads")).find("datafile").text = str(
+            loads.datafile)
+        xml = out_dir / "external_loads.xml"
+        tree.write(xml)
+    return call("solution_model:joint_reaction", str(folder / MODEL_FILE), str(folder / STATES_FILE),
+                str(folder / FORCES_FILE), list(joints), str(out_dir), None if xml is None else str(xml), "child", frame)

@@ -43,6 +43,8 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import os
+import struct
 import time as _time
 from dataclasses import dataclass, field, replace
 
@@ -68,6 +70,14 @@ __all__ = [
     "INFEASIBLE_STATUSES",
     "tune_malloc",
     "set_blas_threads",
+    "check_linear_solver",
+    "exported_symbols",
+    "problem_memory_mb",
+    "check_problem_memory",
+    "MAX_PROBLEM_MEMORY_MB",
+    "LIBRARY_ENV",
+    "solve_progress",
+    "PROGRESS_INTERVAL_S",
 ]
 
 
@@ -91,9 +101,10 @@ class SolverOptions:
     ``linear_solver`` is IPOPT's solver of the KKT systems: ``"mumps"`` (default) and
     ``"spral"`` are part of CasADi's IPOPT; ``"ma27"``, ``"ma57"``, ``"ma77"``, ``"ma86"``,
     ``"ma97"`` (HSL) and ``"pardiso"`` (pardiso-project.org) are loaded by IPOPT at run time
-    from ``linear_solver_library`` (default ``libhsl.so`` / ``libpardiso.so`` on the library
-    search path); the library is loaded when the options are made, so a missing one is
-    reported before any problem is built. Another solver can end in another local optimum.
+    from ``linear_solver_library`` (else the environment variable :data:`LIBRARY_ENV`, else
+    ``libhsl.so`` / ``libpardiso.so`` on the library search path); when the options are made the
+    library's symbol table is checked and only then is it loaded, so a missing or foreign one is
+    reported before any problem is built (:func:`check_linear_solver`). Another solver can end in another local optimum.
 
     ``tune_malloc`` raises glibc's ``malloc`` thresholds for the process before solving
     (MUMPS reallocates its work arrays every iteration). ``blas_threads`` sets the number of
@@ -162,12 +173,85 @@ RUNTIME_LINEAR_SOLVERS = {
 }
 
 
+#: Environment variable naming the library of a run-time linear solver, for runs whose options
+#: come from a study file (which may name a solver but not a library).
+LIBRARY_ENV = "MUSCLEMETAB_LINEAR_SOLVER_LIBRARY"
+#: Symbols the library of each run-time solver must export (IPOPT's HSL and Pardiso loaders
+#: look them up); Fortran names with or without the trailing underscore.
+LINEAR_SOLVER_SYMBOLS = {
+    "ma27": ("ma27ad_", "ma27bd_", "ma27cd_"),
+    "ma57": ("ma57ad_", "ma57bd_", "ma57cd_"),
+    "ma77": ("ma77_open_d", "ma77_factor_d", "ma77_solve_d"),
+    "ma86": ("ma86_analyse_d", "ma86_factor_d", "ma86_solve_d"),
+    "ma97": ("ma97_analyse_d", "ma97_factor_d", "ma97_solve_d"),
+    "pardiso": ("pardisoinit", "pardiso"),
+}
+#: Folders searched for a library given by file name only (after ``LD_LIBRARY_PATH``)
+LIBRARY_FOLDERS = ("/usr/local/lib", "/usr/lib/x86_64-linux-gnu", "/usr/lib64", "/usr/lib", "/lib/x86_64-linux-gnu",
+                   "/lib64", "/lib")
+
+
+def linear_solver_library(name: str, library: str | None = None) -> str | None:
+    """The library IPOPT loads the run-time solver ``name`` from: ``library`` (the command
+    line), else the environment variable :data:`LIBRARY_ENV`, else the default file name of its
+    family (``libhsl.so``, ``libpardiso.so``); ``None`` for the built-in solvers."""
+    if name not in RUNTIME_LINEAR_SOLVERS:
+        return None
+    return library or os.environ.get(LIBRARY_ENV) or RUNTIME_LINEAR_SOLVERS[name][1]
+
+
+def exported_symbols(path) -> set[str]:
+    """Names of the functions and data a shared library (ELF) exports, read from its dynamic
+    symbol table (``.dynsym``) without loading it; :class:`ValueError` when the file is not
+    an ELF shared library."""
+    with open(path, "rb") as f:
+        data = f.read()
+    if data[:4] != b"\x7fELF" or data[4] not in (1, 2) or data[5] not in (1, 2):
+        raise ValueError("not an ELF file")
+    is64, end = data[4] == 2, "<" if data[5] == 1 else ">"
+    if struct.unpack_from(end + "H", data, 16)[0] != 3:  # e_type ET_DYN
+        raise ValueError("not a shared library")
+    if is64:
+        shoff, = struct.unpack_from(end + "Q", data, 0x28)
+        shentsize, shnum = struct.unpack_from(end + "HH", data, 0x3A)
+        sh_fmt, sym_fmt = end + "IIQQQQIIQQ", end + "IBBHQQ"
+    else:
+        shoff, = struct.unpack_from(end + "I", data, 0x20)
+        shentsize, shnum = struct.unpack_from(end + "HH", data, 0x2E)
+        sh_fmt, sym_fmt = end + "IIIIIIIIII", end + "IIIBBH"
+    sections = [struct.unpack_from(sh_fmt, data, shoff + i * shentsize) for i in range(shnum)]
+    names = set()
+    for sec in sections:
+        if sec[1] != 11:  # SHT_DYNSYM
+            continue
+        offset, size, link, entsize = sec[4], sec[5], sec[6], sec[9]
+        strtab = sections[link][4]
+        for k in range(size // entsize if entsize else 0):
+            fields = struct.unpack_from(sym_fmt, data, offset + k * entsize)
+            st_name, info, shndx = (fields[0], fields[1], fields[3]) if is64 else (fields[0], fields[3], fields[5])
+            if shndx == 0 or (info >> 4) not in (1, 2):  # undefined, or not global/weak
+                continue
+            stop = data.index(b"\0", strtab + st_name)
+            names.add(data[strtab + st_name:stop].decode("utf-8", "replace"))
+    return names
+
+
+def _find_library(lib: str) -> str | None:
+    """``lib`` when it is a path; a file name looked up in ``LD_LIBRARY_PATH`` and :data:`LIBRARY_FOLDERS`."""
+    if os.sep in lib:
+        return lib if os.path.isfile(lib) else None
+    folders = [d for d in os.environ.get("LD_LIBRARY_PATH", "").split(os.pathsep) if d] + list(LIBRARY_FOLDERS)
+    return next((os.path.join(d, lib) for d in folders if os.path.isfile(os.path.join(d, lib))), None)
+
+
 def check_linear_solver(name: str, library: str | None = None) -> None:
     """Raise :class:`OptionError` unless IPOPT can use the linear solver ``name``.
 
-    For the solvers IPOPT loads at run time, the library (``library`` or the default name on
-    the search path) is loaded here, so that a missing one is reported before the problem
-    is built.
+    For the solvers IPOPT loads at run time, the library (:func:`linear_solver_library`) is
+    found, its dynamic symbol table read (:func:`exported_symbols`) and, only when it exports
+    the solver's functions (:data:`LINEAR_SOLVER_SYMBOLS`), loaded here: a missing or foreign
+    library is reported before the problem is built, and no code of a library that is not
+    the solver's runs.
     """
     if name in BUILTIN_LINEAR_SOLVERS:
         if library is not None:
@@ -178,16 +262,29 @@ def check_linear_solver(name: str, library: str | None = None) -> None:
             f"linear solver {name!r} is unknown; choose one of "
             f"{', '.join(BUILTIN_LINEAR_SOLVERS + tuple(RUNTIME_LINEAR_SOLVERS))}"
         )
-    option, default = RUNTIME_LINEAR_SOLVERS[name]
-    lib = library or default
+    option, _ = RUNTIME_LINEAR_SOLVERS[name]
+    lib = linear_solver_library(name, library)
+    what = "the HSL library (www.hsl.rl.ac.uk/ipopt)" if option == "hsllib" else "the Pardiso library"
+    remedy = (f"install {what} and give its path as the linear-solver library (--linear-solver-library, or the "
+              f"environment variable {LIBRARY_ENV}), or use mumps or spral")
+    path = _find_library(lib)
+    if path is None:
+        raise OptionError(f"linear solver {name}: IPOPT loads it from {lib}, which cannot be loaded (no such file"
+                          f"{'' if os.sep in lib else ' on the library search path'}); {remedy}")
     try:
-        ctypes.CDLL(lib)
+        symbols = exported_symbols(path)
+    except (OSError, ValueError, IndexError, struct.error) as exc:
+        raise OptionError(f"linear solver {name}: IPOPT loads it from {lib}, which cannot be loaded (not a readable "
+                          f"shared library: {exc}); {remedy}") from None
+    missing = [s for s in LINEAR_SOLVER_SYMBOLS[name] if not {s, s.rstrip("_"), s + "_"} & symbols]
+    if missing:
+        raise OptionError(f"linear solver {name}: {lib} does not export {', '.join(missing)}, so it is not {what} "
+                          f"and was not loaded; {remedy}")
+    try:
+        ctypes.CDLL(path)
     except OSError as exc:
-        what = "the HSL library (www.hsl.rl.ac.uk/ipopt)" if option == "hsllib" else "the Pardiso library"
-        raise OptionError(
-            f"linear solver {name}: IPOPT loads it from {lib}, which cannot be loaded ({exc}); install {what} "
-            f"and give its path as the linear-solver library (--linear-solver-library), or use mumps or spral"
-        ) from None
+        raise OptionError(f"linear solver {name}: IPOPT loads it from {lib}, which cannot be loaded ({exc}); "
+                          f"{remedy}") from None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -236,6 +333,10 @@ def failure_advice(status: str) -> str:
     if status in ("Invalid_Number_Detected", "Error_In_Step_Computation"):
         return ("the solver met NaN or infinite values; check the inputs and parameters for extreme values "
                 "(passive parameters, tendon stiffness, moments)")
+    if status == "Invalid_Option":
+        return ("IPOPT refused an option: most often it could not load the linear solver's library (the "
+                "linear-solver library, or the environment variable " + LIBRARY_ENV + "); check that library, or "
+                "use mumps")
     if status in ("User_Requested_Stop", "NonIpopt_Exception_Thrown"):
         return "the solve was stopped (interrupt or an error in a callback); run it again"
     return "check the inputs (units, time ranges, parameters)"
@@ -245,6 +346,33 @@ def problem_size(n_muscles: int, n_dofs: int, n_intervals: int) -> tuple[int, in
     """Number of variables and equality constraints (``205 N + 120`` and ``165 N + 40`` for 40/5)."""
     M, D, N = n_muscles, n_dofs, n_intervals
     return (5 * M + D) * N + 3 * M, (4 * M + D) * N + M
+
+
+#: Memory of a problem, measured on the example trial (40 muscles, 5 DOFs): 73 MB, plus 0.47 MB
+#: per mesh interval (the peak resident memory of ``musclemetab solve`` was 202 MB with N = 118
+#: and 312 MB with N = 354), scaled by the variables per interval for other sizes.
+PROBLEM_BASE_MB = 73.0
+PROBLEM_MB_PER_INTERVAL = 0.47
+#: Largest problem built (estimated memory, MB): beyond it the mesh is refused before building
+#: (e.g. a 30 s trial at 1000 intervals per second would need about 14 GB)
+MAX_PROBLEM_MEMORY_MB = 8000.0
+
+
+def problem_memory_mb(sizes) -> float:
+    """Estimated memory (MB) of a problem over trials of ``sizes`` = ``[(muscles, DOFs, intervals), ...]``."""
+    per_interval = sum(n * (5 * m + d) / 205.0 for m, d, n in sizes)
+    return PROBLEM_BASE_MB + PROBLEM_MB_PER_INTERVAL * per_interval
+
+
+def check_problem_memory(sizes) -> None:
+    """Raise :class:`OptionError` when the problem of ``sizes`` (see :func:`problem_memory_mb`)
+    would need more than :data:`MAX_PROBLEM_MEMORY_MB`, naming the estimate and the remedy."""
+    mb = problem_memory_mb(sizes)
+    if mb > MAX_PROBLEM_MEMORY_MB:
+        n = sum(s[2] for s in sizes)
+        raise OptionError(f"the problem would have {n} mesh intervals and need about {mb:.0f} MB of memory, more "
+                          f"than the limit of {MAX_PROBLEM_MEMORY_MB:.0f} MB; solve a shorter window (--window, "
+                          "--cycle) or a coarser mesh (--mesh-frequency, the study's is 100 per second)")
 
 
 _MALLOC_TUNED = False
@@ -343,12 +471,119 @@ def ipopt_options(options: SolverOptions, mumps_settings: dict | None = None) ->
         "sb": "yes",  # no banner
     }
     if options.linear_solver in RUNTIME_LINEAR_SOLVERS:
-        option, default = RUNTIME_LINEAR_SOLVERS[options.linear_solver]
-        ipopt[option] = options.linear_solver_library or default
+        option, _ = RUNTIME_LINEAR_SOLVERS[options.linear_solver]
+        ipopt[option] = linear_solver_library(options.linear_solver, options.linear_solver_library)
     if options.linear_solver == "mumps" and mumps_settings:
         ipopt.update(mumps_settings)
     ipopt.update(options.ipopt)
     return ipopt
+
+
+#: Seconds between two progress lines of a running solve (:func:`solve_progress`).
+PROGRESS_INTERVAL_S = 5.0
+_PROGRESS: dict = {"stream": None, "interval_s": None}
+
+
+class solve_progress:
+    """While this context is active, every IPOPT solve of this process writes a progress line
+    at most every ``interval_s`` seconds (default :data:`PROGRESS_INTERVAL_S`) to ``stream``
+    (default standard error)::
+
+        musclemetab: solving: iteration 40, objective 2.7012e-01, constraint violation 3.1e-05, 21 s
+
+    The line comes from IPOPT's iteration callback (CasADi's ``iteration_callback`` option):
+    the iteration number, the objective and the largest violation of a constraint's bounds
+    (unscaled, at the current iterate) and the time since the solve started. It does not change
+    the solve: the callback only reads the iterate. ``musclemetab solve`` uses it unless given
+    ``--no-progress``; the legs of ``solve --side both --workers 2`` solve in other processes and
+    print no progress lines.
+    """
+
+    def __init__(self, interval_s: float | None = None, stream=None):
+        self.interval_s, self.stream = interval_s, stream
+        self._previous = None
+
+    def __enter__(self):
+        self._previous = dict(_PROGRESS)
+        _PROGRESS.update(stream=self.stream, interval_s=PROGRESS_INTERVAL_S if self.interval_s is None
+                         else float(self.interval_s))
+        return self
+
+    def __exit__(self, *exc):
+        _PROGRESS.clear()
+        _PROGRESS.update(self._previous)
+        return False
+
+
+class ProgressLines:
+    """Writes the progress lines of :func:`solve_progress` for one solve: :meth:`iteration` is
+    called with each iterate; a line is written when ``interval_s`` has passed since the start
+    or the last line (``clock``: seconds, default :func:`time.perf_counter`)."""
+
+    def __init__(self, lbg, ubg, interval_s: float, stream=None, clock=None):
+        import sys
+
+        self.lbg, self.ubg = np.asarray(lbg, dtype=float).reshape(-1), np.asarray(ubg, dtype=float).reshape(-1)
+        self.interval_s = float(interval_s)
+        self.stream = stream if stream is not None else sys.stderr
+        self.clock = clock or _time.perf_counter
+        self.t0 = self.last = self.clock()
+        self.count = 0
+        self.lines = 0
+
+    def iteration(self, f, g) -> None:
+        """One IPOPT iterate: objective ``f`` and constraint values ``g``."""
+        self.count += 1
+        now = self.clock()
+        if now - self.last < self.interval_s:
+            return
+        self.last = now
+        g = np.asarray(g, dtype=float).reshape(-1)
+        viol = float(np.max(np.maximum(self.lbg - g, 0.0) + np.maximum(g - self.ubg, 0.0))) if g.size else 0.0
+        # IPOPT calls back once for the starting point (iteration 0)
+        self.stream.write(f"musclemetab: solving: iteration {self.count - 1}, objective {float(f):.4e}, "
+                          f"constraint violation {viol:.1e}, {now - self.t0:.0f} s\n")
+        self.stream.flush()
+        self.lines += 1
+
+
+def _progress_callback(n_x: int, n_g: int, lbg, ubg):
+    """The CasADi ``iteration_callback`` of :func:`solve_progress`, or ``None`` when it is off."""
+    if _PROGRESS.get("interval_s") is None:
+        return None
+    import casadi as ca
+
+    lines = ProgressLines(lbg, ubg, _PROGRESS["interval_s"], _PROGRESS.get("stream"))
+
+    class _Callback(ca.Callback):
+        def __init__(self):
+            ca.Callback.__init__(self)
+            self.construct("musclemetab_progress", {})
+
+        def get_n_in(self):
+            return ca.nlpsol_n_out()
+
+        def get_n_out(self):
+            return 1
+
+        def get_name_in(self, i):
+            return ca.nlpsol_out(i)
+
+        def get_name_out(self, i):
+            return "ret"
+
+        def get_sparsity_in(self, i):
+            n = ca.nlpsol_out(i)
+            size = {"f": 1, "x": n_x, "lam_x": n_x, "g": n_g, "lam_g": n_g}.get(n, 0)
+            return ca.Sparsity.dense(size, 1)
+
+        def eval(self, arg):
+            names = [ca.nlpsol_out(i) for i in range(ca.nlpsol_n_out())]
+            values = dict(zip(names, arg))
+            lines.iteration(float(values["f"]), np.asarray(values["g"]).reshape(-1))
+            return [0]
+
+    return _Callback()
 
 
 def run_ipopt(solver, options: SolverOptions, x0, lbx, ubx, lbg, ubg, multipliers: dict | None = None):
@@ -424,12 +659,16 @@ def solve_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
 
     options = options or SolverOptions()
     trials, specs = list(trials), list(specs)
+    check_problem_memory([(len(t.inputs.muscles), len(t.inputs.dofs), t.inputs.n_intervals) for t in trials])
     t_build = _time.perf_counter()
     nlp = build_problem(trials, params, goals, specs, optimal_reserve_Nm=options.optimal_reserve_Nm,
                         coupling=coupling, explicit_derivatives=options.derivatives == "explicit")
     ipopt = ipopt_options(options, MUMPS_OPTIONS if mumps_settings is None else mumps_settings)
     nlp_options = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
     nlp_options.update({k: nlp[k] for k in ("grad_f", "jac_g", "hess_lag") if k in nlp})
+    callback = _progress_callback(int(nlp["x"].numel()), int(nlp["g"].numel()), nlp["lbg"], nlp["ubg"])
+    if callback is not None:  # kept referenced until the solve is done
+        nlp_options["iteration_callback"] = callback
     try:
         solver = ca.nlpsol("mrs", "ipopt", {"x": nlp["x"], "f": nlp["f"], "g": nlp["g"]}, nlp_options)
     except RuntimeError as exc:

@@ -157,6 +157,9 @@ class SolveRecord:
     input_preparation: dict | None = _ABSENT
     inputs: dict | None = _ABSENT
     energy_goal: dict | None = _ABSENT
+    #: the energy goal's form and smoothing (``EnergyGoal.form_record``): model, form, the
+    #: non-negativity rule minimised, smoothing ``s``
+    energy_form: dict | None = _ABSENT
     emg: dict | None = _ABSENT
     emg_tracking: dict | None = _ABSENT
     emg_tolerance: float | None = _ABSENT
@@ -178,6 +181,9 @@ class SolveRecord:
     geometry_time_s: float | None = _ABSENT
     side: str | None = _ABSENT
     excluded_muscles: list | None = _ABSENT
+    #: the diagnosis before the solve (:mod:`.diagnosis`): ``thresholds``, ``findings`` and, for a
+    #: solve that did not converge, the constraints its last iterate left violated (``last_iterate``)
+    diagnosis: dict | None = _ABSENT
     window: dict | None = _ABSENT
     inverse_dynamics: dict | None = _ABSENT
     # the file (Solution.write)
@@ -233,6 +239,13 @@ class SolveRecord:
         from .plausibility import flags_from_records
 
         return flags_from_records(self.plausibility)
+
+    @property
+    def pre_solve_diagnosis(self):
+        """The diagnosis before the solve (:class:`~.diagnosis.Diagnosis`; empty when not recorded)."""
+        from .diagnosis import Diagnosis
+
+        return Diagnosis.from_dict(self.diagnosis or {})
 
     @property
     def run_record(self) -> RunRecord:

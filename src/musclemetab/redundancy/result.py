@@ -187,17 +187,24 @@ class Result:
             "solve": dict(self.record),
         })
 
-    def write(self, out_dir: str | os.PathLike) -> Path:
+    def write(self, out_dir: str | os.PathLike, opensim_files: bool = True) -> Path:
         """Write one solution folder per trial and ``parameters.json`` into ``out_dir``.
 
         Each folder is written atomically; ``parameters.json`` is removed first and written last
-        (atomically), so its presence means that all trial folders belong to it.
+        (atomically), so its presence means that all trial folders belong to it. With
+        ``opensim_files`` each trial folder also gets the OpenSim model, states, controls and
+        forces of its solution (:func:`.export.write_solution_opensim_files`; trials solved
+        from files).
         """
+        from .export import write_solution_opensim_files
+
         out_dir = Path(out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
         (out_dir / PARAMETERS_FILE).unlink(missing_ok=True)
         for label, sol in self.solutions.items():
             sol.write(out_dir / label)
+            if opensim_files:
+                write_solution_opensim_files(sol, out_dir / label)
         return self.write_parameters(out_dir)
 
     def write_parameters(self, out_dir: str | os.PathLike) -> Path:

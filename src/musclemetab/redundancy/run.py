@@ -92,6 +92,7 @@ def solve_files(
     warm_start: Solution | None = None,
     exclude_muscles: Sequence[str] = (),
     exclude_missing_ok: bool = False,
+    diagnose_only: bool = False,
 ) -> Solution:
     """Solve from files: model ``.osim``, IK ``.mot`` and ID ``.sto`` (or ground forces).
 
@@ -105,6 +106,10 @@ def solve_files(
     its path is ``solution.record.inputs["id"]``. The mesh has ``mesh_frequency_hz``
     intervals per second (the study's 100 by default). ``exclude_muscles`` leaves muscles out of
     the problem (e.g. one whose fiber cannot reach force equilibrium within the bounds).
+    The trial is diagnosed before the solve (:mod:`.diagnosis`: blocking findings raise
+    :class:`~.diagnosis.InfeasibleInputError`, the others warn; ``summary.json``'s
+    ``diagnosis``); with ``diagnose_only`` the :class:`~.diagnosis.Diagnosis` is returned,
+    unchecked, instead of a solution, and nothing is solved.
 
     The inputs are checked (columns, units, time ranges) before the geometry is computed.
 
@@ -201,19 +206,7 @@ def solve_files(
     if keep.size != len(geometry.time):
         geometry = GeometryArrays(np.asarray(geometry.time)[keep], geometry.muscles, geometry.dofs,
                              np.asarray(geometry.lmt_m)[keep], np.asarray(geometry.moment_arms_m)[keep])
-    if exclude_muscles:
-        from ..errors import UnknownMuscleError
-
-        unknown = [m for m in exclude_muscles if m not in geometry.muscles]
-        exclude_muscles = [m for m in exclude_muscles if m in geometry.muscles]
-        if unknown and not exclude_missing_ok:
-            raise UnknownMuscleError(
-                f"--exclude-muscles: {', '.join(unknown)} {'is' if len(unknown) == 1 else 'are'} not among the "
-                f"muscles of the problem ({', '.join(geometry.muscles[:8])}, ...); check the names and the side"
-            )
-        kept = [i for i, m in enumerate(geometry.muscles) if m not in set(exclude_muscles)]
-        geometry = GeometryArrays(np.asarray(geometry.time), [geometry.muscles[i] for i in kept], geometry.dofs,
-                             np.asarray(geometry.lmt_m)[:, kept], np.asarray(geometry.moment_arms_m)[:, :, kept])
+    geometry, exclude_muscles = exclude_from_geometry(geometry, exclude_muscles, exclude_missing_ok)
     t_geometry = _time.perf_counter() - t0
     import casadi  # noqa: F401  (imported while the worker answers)
 
@@ -226,13 +219,20 @@ def solve_files(
     sources = {"model": Path(model_path), "ik": Path(ik_path), "id": Path(id_path)}
     if loads is not None:
         sources["external_loads"] = loads.path
+    diagnosis = _diagnose_files(geometry, model_parameters, id_time, id_moments, wf, ik_time, passive,
+                                tendon_stiffness, tendon_stiffness_file, options, mesh_frequency_hz,
+                                Path(ik_path).stem, sources, check=not diagnose_only)
+    if diagnose_only:
+        return diagnosis
     solution = solve_trial(
         geometry, model_parameters, id_time, id_moments, wf,
         ik_time_s=ik_time, passive=passive, tendon_stiffness=tendon_stiffness,
         tendon_stiffness_file=tendon_stiffness_file, options=options, goals=goals, sources=sources,
         check_units=check_units, warm_start=warm_start, mesh_frequency_hz=mesh_frequency_hz,
     )
-    trial = {"geometry_time_s": t_geometry, "side": side}
+    trial = {"geometry_time_s": t_geometry, "side": side,
+             "diagnosis": _diagnosis_record(diagnosis, solution, geometry, id_time, id_moments, ik_time,
+                                            mesh_frequency_hz)}
     if exclude_muscles:
         trial["excluded_muscles"] = list(exclude_muscles)
     if trial_window.source != "inverse-kinematics file":
@@ -240,6 +240,61 @@ def solve_files(
     if id_record is not None:
         trial["inverse_dynamics"] = id_record
     return dataclasses.replace(solution, record=solution.record.with_(**trial))
+
+
+def exclude_from_geometry(geometry, exclude_muscles: Sequence[str] = (), missing_ok: bool = False):
+    """``(geometry without the muscles of exclude_muscles, the excluded muscles it had)``;
+    :class:`~musclemetab.errors.UnknownMuscleError` for a name the geometry lacks (unless
+    ``missing_ok``: a muscle of the other leg)."""
+    if not exclude_muscles:
+        return geometry, []
+    from ..errors import UnknownMuscleError
+
+    unknown = [m for m in exclude_muscles if m not in geometry.muscles]
+    excluded = [m for m in exclude_muscles if m in geometry.muscles]
+    if unknown and not missing_ok:
+        raise UnknownMuscleError(
+            f"--exclude-muscles: {', '.join(unknown)} {'is' if len(unknown) == 1 else 'are'} not among the "
+            f"muscles of the problem ({', '.join(geometry.muscles[:8])}, ...); check the names and the side"
+        )
+    kept = [i for i, m in enumerate(geometry.muscles) if m not in set(excluded)]
+    kept_geometry = GeometryArrays(np.asarray(geometry.time), [geometry.muscles[i] for i in kept], geometry.dofs,
+                                   np.asarray(geometry.lmt_m)[:, kept], np.asarray(geometry.moment_arms_m)[:, :, kept])
+    return kept_geometry, excluded
+
+
+def _diagnose_files(geometry, model_parameters, id_time, id_moments, wf, ik_time, passive, tendon_stiffness,
+                    tendon_stiffness_file, options, mesh_frequency_hz, label, sources, check=True):
+    """The diagnosis of one trial before its solve (:mod:`.diagnosis`): an
+    :class:`~.diagnosis.InfeasibleInputError` for blocking findings, a warning for the others."""
+    from .diagnosis import diagnose_geometry
+    from .inputs import restrict_geometry
+    from .workflows import workflow_parameters
+
+    params, _ = workflow_parameters(wf, model_parameters, restrict_geometry(geometry).muscles, passive=passive,
+                                    tendon_stiffness=tendon_stiffness, tendon_stiffness_file=tendon_stiffness_file)
+    diagnosis = diagnose_geometry(
+        geometry, params, id_time, id_moments, ik_time_s=ik_time, mesh_frequency_hz=mesh_frequency_hz,
+        optimal_reserve_Nm=(options or SolverOptions()).optimal_reserve_Nm, trial=label,
+        sources={k: str(v) for k, v in sources.items()})
+    return diagnosis.check(f"trial {label}") if check else diagnosis
+
+
+def _diagnosis_record(diagnosis, solution, geometry, id_time, id_moments, ik_time,
+                      mesh_frequency_hz=MESH_FREQUENCY_HZ) -> dict:
+    """``summary.json``'s ``diagnosis``: the findings before the solve and, when the solve did
+    not converge, the constraints its last iterate left violated (``last_iterate``)."""
+    record = diagnosis.to_dict()
+    if not solution.success:
+        from .diagnosis import last_iterate_violations
+        from .inputs import restrict_geometry, trial_inputs
+
+        g = restrict_geometry(geometry)
+        moments = np.asarray(id_moments, dtype=float).reshape(len(id_time), -1)
+        moments = moments[:, [list(geometry.dofs).index(d) for d in g.dofs]]
+        inputs = trial_inputs(g, id_time, moments, ik_time_s=ik_time, mesh_frequency_hz=mesh_frequency_hz)
+        record["last_iterate"] = [f.to_dict() for f in last_iterate_violations(solution, inputs)]
+    return record
 
 
 def _solve_files_recording_warnings(args, kwargs):
@@ -269,13 +324,16 @@ def solve_sides(model_path, ik_path, id_path, workflow: str = "effort-gen", *, s
     sides = tuple(sides)
     if workers == 1 or len(sides) == 1:
         return {side: solve_files(model_path, ik_path, id_path, workflow, side=side, **kwargs) for side in sides}
-    from ..processes import spawn_pool
+    from ..processes import spawn_pool, stop_pool
 
     pool, restore = spawn_pool(min(workers, len(sides)))
     try:
         futures = {side: pool.submit(_solve_files_recording_warnings, (model_path, ik_path, id_path, workflow),
                                      {**kwargs, "side": side}) for side in sides}
         results = {side: fut.result() for side, fut in futures.items()}
+    except KeyboardInterrupt:  # the legs' processes ignore Ctrl-C: stopped, not waited for
+        stop_pool(pool)
+        raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
         restore()
@@ -309,6 +367,9 @@ def solve_emg_ten(
     check_units: bool = True,
     workflow: str = EMG_TEN,
     tendon_stiffness=None,
+    exclude_muscles: Sequence[str] = (),
+    exclude_missing_ok: bool = False,
+    diagnose_only: bool = False,
 ) -> Result:
     """EMG-TEN from files: one model, and per trial an IK ``.mot``, an ID ``.sto`` and an EMG file.
 
@@ -329,7 +390,14 @@ def solve_emg_ten(
     %(options)s
     %(cache_dir)s
     %(check_units)s
+    exclude_muscles
+        Muscles left out of the problem (as :func:`solve_files`). Their EMG channels are not
+        used and their tendon stiffness is not estimated (each with a warning naming them).
 
+    Each trial is diagnosed before the problem is built (:mod:`.diagnosis`): blocking
+    findings raise :class:`~.diagnosis.InfeasibleInputError` naming muscles and times; with
+    ``diagnose_only`` the list of the trials' :class:`~.diagnosis.Diagnosis` is returned,
+    unchecked, and nothing is solved.
     Input errors (package exceptions naming the file, channel or muscle) are raised before
     OpenSim is started: unequal numbers of IK/ID/EMG files, different models, EMG channels
     missing for the mapping, EMG not covering a trial's IK window, EMG outside ``[0, 1]`` in
@@ -380,6 +448,20 @@ def solve_emg_ten(
     geometries = [compute_geometry(model, ik, dofs=list(dofs), side=side, cache_dir=cache_dir) for ik in ik_tables]
     t_geometry = _time.perf_counter() - t0
     model_parameters = params_request.result()
+    excluded = []
+    if exclude_muscles:
+        from .emg_ten import settings_without
+        from .inputs import restrict_geometry
+
+        settings = settings_without(settings, restrict_geometry(geometries[0]).muscles, exclude_muscles)
+        pairs = [exclude_from_geometry(g, exclude_muscles, exclude_missing_ok) for g in geometries]
+        geometries, excluded = [g for g, _ in pairs], pairs[0][1]
+        mapping = _mapping_without(mapping, excluded)
+        emg_tables = [_columns_without(t, excluded) for t in emg_tables]
+    diagnoses = _diagnose_emg_trials(geometries, model_parameters, id_data, ik_times, labels, passive, settings,
+                                     options, workflow, tendon_stiffness, check=not diagnose_only)
+    if diagnose_only:
+        return diagnoses
     if check_units:
         from ..model import read_model
         from .inputs import check_moments_per_body_mass
@@ -396,10 +478,70 @@ def solve_emg_ten(
         workflow=workflow, tendon_stiffness=tendon_stiffness,
     )
     # the leg, in each trial's record as the single-trial solve's record holds it
-    solutions = {label: dataclasses.replace(solution, record=solution.record.with_(side=side))
+    trial_entries = {label: {"side": side, "diagnosis": _diagnosis_record(diagnosis, solution, g, t, m, ik),
+                             **({"excluded_muscles": list(excluded)} if excluded else {})}
+                     for (label, solution), diagnosis, g, (t, m), ik in zip(result.solutions.items(), diagnoses,
+                                                                          geometries, id_data, ik_times)}
+    solutions = {label: dataclasses.replace(solution, record=solution.record.with_(**trial_entries[label]))
                  for label, solution in result.solutions.items()}
     return dataclasses.replace(result, solutions=solutions,
                                record={**result.record, "geometry_time_s": t_geometry, "side": side})
+
+
+def _mapping_without(mapping: dict, excluded: Sequence[str]) -> dict:
+    """The EMG mapping without the excluded muscles (a warning names those that had EMG)."""
+    import warnings
+
+    from ..errors import MusclemetabWarning
+
+    dropped = [m for m in mapping if m in set(excluded)]
+    if dropped:
+        warnings.warn(f"--exclude-muscles {' '.join(dropped)}: the EMG of {', '.join(dropped)} "
+                      f"({', '.join(c for m in dropped for c in mapping[m])}) is not used (the muscle is out of the "
+                      "problem)", MusclemetabWarning, stacklevel=3)
+    return {m: c for m, c in mapping.items() if m not in set(excluded)}
+
+
+def _columns_without(table, excluded):
+    """An EMG table mapped to muscles without the excluded muscles' columns (its attributes kept)."""
+    out = table.drop(columns=[c for c in excluded if c in table.columns])
+    out.attrs.update(table.attrs)
+    return out
+
+
+def _fiber_lengths_without(measured: dict, excluded) -> dict:
+    """Measured fiber lengths without the excluded muscles (a warning names those dropped)."""
+    import warnings
+
+    from ..errors import MusclemetabWarning
+
+    dropped = [m for m in measured if m in set(excluded)]
+    if dropped:
+        warnings.warn(f"--exclude-muscles {' '.join(dropped)}: the measured fiber lengths of {', '.join(dropped)} "
+                      "are not used (the muscle is out of the problem)", MusclemetabWarning, stacklevel=3)
+    return {m: v for m, v in measured.items() if m not in set(excluded)}
+
+
+def _diagnose_emg_trials(geometries, model_parameters, id_data, ik_times, labels, passive, settings, options,
+                         workflow, tendon_stiffness, check=True) -> list:
+    """The diagnosis of each trial of an EMG problem before it is built (the estimated tendon
+    stiffness within its bounds)."""
+    from .diagnosis import diagnose_geometry
+    from .emg_ten import settings_for_muscles
+    from .inputs import restrict_geometry
+    from .transcription import ParameterSpec
+    from .workflows import workflow_parameters
+
+    muscles = restrict_geometry(geometries[0]).muscles
+    settings = settings_for_muscles(settings or EmgTenSettings(), muscles)
+    params, _ = workflow_parameters("effort-cal" if workflow == EMG_TEN else workflow, model_parameters, muscles,
+                                    passive=passive, tendon_stiffness=tendon_stiffness)
+    kt = [m for m in settings.tendon_muscles if m in muscles]
+    specs = [ParameterSpec("tendon_stiffness", tuple(kt), settings.tendon_scale_bounds)] if kt else []
+    reserve = (options or SolverOptions()).optimal_reserve_Nm
+    out = [diagnose_geometry(g, params, t, m, ik_time_s=ik, specs=specs, optimal_reserve_Nm=reserve, trial=lab)
+           for g, (t, m), ik, lab in zip(geometries, id_data, ik_times, labels)]
+    return [d.check(f"trial {d.trial}") for d in out] if check else out
 
 
 def emg_mappings_of_legs(model, ik_path, emg_mapping, side: str, dofs=None, cache_dir=None) -> dict:
@@ -456,8 +598,10 @@ def _trial_dofs(model, id_files, dofs, side: str, cache_dir) -> tuple[str, ...]:
     return tuple(discover_dofs(layout, side, common))
 
 
-def write_solution_folder(solution, out) -> None:
-    """Write a solution; inverse dynamics computed by OpenSim goes beside it as ``inverse_dynamics.sto``."""
+def write_solution_folder(solution, out, opensim_files: bool = True) -> None:
+    """Write a solution; inverse dynamics computed by OpenSim goes beside it as ``inverse_dynamics.sto``,
+    and with ``opensim_files`` the OpenSim model, states, controls and forces that reproduce it
+    (:func:`.export.write_solution_opensim_files`)."""
     from pathlib import Path
 
     from ..io import atomic_write_bytes
@@ -466,6 +610,10 @@ def write_solution_folder(solution, out) -> None:
     if "inverse_dynamics" in solution.record:
         src = Path(solution.record.inputs["id"])
         atomic_write_bytes(Path(out) / "inverse_dynamics.sto", src.read_bytes())
+    if opensim_files:
+        from .export import write_solution_opensim_files
+
+        write_solution_opensim_files(solution, out)
 
 
 
@@ -474,7 +622,7 @@ def estimate_files(
     model, ik, id, out, *, estimate, ultrasound=(), emg=(), labels=None, couple=(), bounds=None, weights=None,
     workflow: str = "effort-cal", side: str = "r", dofs=None, emg_mode: str | None = None,
     emg_mapping: str | None = None, emg_tolerance: float = 0.01, passive=None, max_iter: int = 10000,
-    validate: bool = False, cache_dir=None,
+    validate: bool = False, cache_dir=None, exclude_muscles=(),
 ) -> Result:
     """Estimate muscle-tendon parameters over trials from files, and write them to ``out``.
 
@@ -492,7 +640,11 @@ def estimate_files(
     EMG-TEN groups of the EMG scale factors). The doubts of the estimate (factors on bounds,
     identifiability, widened fiber-length bounds) are warned and recorded in ``parameters.json``
     (``doubts``); the validation re-solve's fit to the measurements (RMS, Pearson r per measured
-    muscle) under ``validation``.
+    muscle) under ``validation``. ``exclude_muscles`` leaves muscles out of every trial (as
+    :func:`solve_files`); one named in ``estimate`` or ``couple`` is an
+    :class:`~musclemetab.errors.OptionError`, its EMG and measured fiber lengths are not used
+    (a warning names them). Each trial is diagnosed before the problem is built
+    (:mod:`.diagnosis`, the estimated factors within their bounds).
 
     Parameters
     ----------
@@ -511,6 +663,7 @@ def estimate_files(
     from .emg_ten import emg_bound, fiber_scheme
     from .estimate import (
         FIELDS,
+        _coupling,
         emg_couplings,
         estimate_parameters,
         fiber_length_trial,
@@ -543,6 +696,13 @@ def estimate_files(
     if bad:
         raise OptionError(f"--bounds: unknown kind '{bad[0]}'; use {', '.join((*FIELDS, 'emg_scale'))}")
     couple = list(couple)
+    exclude_muscles = list(exclude_muscles or ())
+    coupled = {m for g in couple for m in _coupling(g)[1]}
+    clash = [m for m in exclude_muscles if any(m in v for v in estimate.values()) or m in coupled]
+    if clash:
+        raise OptionError(f"--exclude-muscles {' '.join(clash)} and --estimate/--couple name the same muscle"
+                          f"{'s' if len(clash) > 1 else ''}: a muscle left out of the problem has no parameter to "
+                          "estimate; drop it from one of them")
     specs = parameter_specs(estimate, couple, bounds)
     wf = get_workflow(workflow)
     weights = {**wf.goals.effort_weights(), "w_fiber_length": 100.0, "w_emg": 10.0 if emg_files else 0.0}
@@ -562,6 +722,9 @@ def estimate_files(
     labels = trial_labels(ik, labels)
     measured = [read_fiber_lengths(p) for p in us_files] or [{} for _ in range(n)]
     mapping = resolve_emg_mapping(emg_mapping or "default") if emg_files else {}
+    if exclude_muscles:
+        mapping = _mapping_without(mapping, exclude_muscles)
+        measured = [_fiber_lengths_without(us, exclude_muscles) for us in measured]
     emg_muscles = ()
     options = SolverOptions(max_iter=max_iter)
 
@@ -572,14 +735,19 @@ def estimate_files(
     from .inputs import read_inverse_dynamics, read_kinematics
 
     model_parameters = read_muscle_parameters(model)
-    trials, prepared, params = [], [], None
+    trials, prepared, params, diagnoses = [], [], None, []
     layout = read_layout(model)
     for i, (ik, idp, lab, us) in enumerate(zip(ik, id_files, labels, measured)):
         dofs = list(dofs) if dofs else discover_dofs(layout, side, list(read_storage(idp).columns))
         t_ik, _ = read_kinematics(ik, dofs)
         t_id, mom = read_inverse_dynamics(idp, dofs)
         g = compute_geometry(model, ik, dofs=list(dofs), side=side, cache_dir=cache_dir)
+        g, _ = exclude_from_geometry(g, exclude_muscles)
         nominal, wf_record = workflow_parameters(wf, model_parameters, g.muscles, passive=passive)
+        from .diagnosis import diagnose_geometry
+
+        diagnoses.append(diagnose_geometry(g, nominal, t_id, mom, ik_time_s=t_ik, specs=specs, trial=lab,
+                                           optimal_reserve_Nm=options.optimal_reserve_Nm).check(f"trial {lab}"))
         inputs, p, so = prepare_trial(g, nominal, t_id, mom, ik_time_s=t_ik, options=options,
                                       sources={"model": model, "ik": ik, "id": idp})
         params = p if params is None else params
@@ -608,15 +776,23 @@ def estimate_files(
                               "max_deviation": {t.label: float(abs(d).max()) if d.size else 0.0
                                                 for t, d in zip(trials, res.emg_deviation)}}}
     solutions = {}
-    for t, o in zip(trials, res.trials):
+    for t, o, diag in zip(trials, res.trials, diagnoses):
         summary = {**run.to_dict(), **emg_record, "objective_trial": o.objective, "objective_terms": o.objective_terms,
                    "time_window_s": list(t.inputs.window_s), "n_intervals": t.inputs.n_intervals,
                    "mesh_step_s": t.inputs.step_s, "optimal_reserve_Nm": options.optimal_reserve_Nm,
                    "fiber_dynamics": fiber_dynamics,
                    "fiber_length_bounds": fiber_length_bounds_record(t.inputs, params, specs),
                    "workflow": {"name": f"{workflow} estimate", "estimate": est.to_dict()["factors"]},
-                   "solver_options": solver_record(options, goals)}
+                   "solver_options": solver_record(options, goals), "diagnosis": diag.to_dict(),
+                   **({"excluded_muscles": list(exclude_muscles)} if exclude_muscles else {})}
         solutions[t.label] = build_solution(t.inputs, estimated.subset(t.inputs.muscles), o, summary)
+        if not run.success:
+            from .diagnosis import last_iterate_violations
+
+            s = solutions[t.label]
+            violated = [f.to_dict() for f in last_iterate_violations(s, t.inputs)]
+            solutions[t.label] = dataclasses.replace(
+                s, record=s.record.with_(diagnosis={**diag.to_dict(), "last_iterate": violated}))
     doc = {"format": ESTIMATE_FORMAT, "format_version": 1, **est.to_dict(), **emg_record, "solve": run.to_dict(),
            "trials": labels}
     if run.success:
@@ -629,9 +805,11 @@ def estimate_files(
                     emg_channels={m: list(c) for m, c in mapping.items()}, document=doc)
     result.write(out)
     if not run.success:
+        from .diagnosis import trials_violation_text
         from .emg_ten import emg_failure
 
-        raise emg_failure(run, mode if emg_files else None, f"the estimation (written to {out})")
+        err = emg_failure(run, mode if emg_files else None, f"the estimation (written to {out})")
+        raise type(err)(err.message + trials_violation_text(solutions))
     if validate:
         from .identifiability import tracking_fit
 

@@ -377,6 +377,19 @@ class Solution:
         )
 
 
+def _moments_source(inputs: dict) -> str:
+    """How a message names the inverse dynamics of a solve: the ID file the user gave, or, for
+    the moments computed from ground forces (a file of the package's cache, beside its
+    checksum ``<name>.sha256``, which the user never named), the trial they were computed for."""
+    id_path = inputs.get("id")
+    if not id_path:
+        return "the inverse dynamics"
+    path = Path(str(id_path))
+    if inputs.get("external_loads") and path.with_name(path.name + ".sha256").is_file():
+        return f"the inverse dynamics computed from {inputs.get('ik', 'the IK motion')} and {inputs['external_loads']}"
+    return str(id_path)
+
+
 def build_solution(
     inputs,
     params: MuscleTendonParameters,
@@ -411,7 +424,7 @@ def build_solution(
     if large and summary.get("success", True):  # an unconverged solve is reported as such instead
         dof = inputs.dofs[int(np.argmax(reserve_rms))]
         warnings.warn(
-            f"{summary.get('inputs', {}).get('id', 'the inverse dynamics')}: the reserve about {dof} has an RMS of "
+            f"{_moments_source(summary.get('inputs') or {})}: the reserve about {dof} has an RMS of "
             f"{float(np.max(reserve_rms)):.3g} N m, {100 * share:.2g} % of the peak joint moment ({peak_moment:.4g} "
             f"N m), above {100 * LARGE_RESERVE_SHARE:g} %: the muscles do not explain the moments; check the "
             "moments' scale and that the inverse dynamics belongs to this model and trial",

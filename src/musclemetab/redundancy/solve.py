@@ -132,6 +132,7 @@ def solve_with_parameters(
                                  ocp.lm_norm[:N], ocp.fiber_velocity_lmo_per_s)
         summary["energy_goal"] = {**options.energy.record(), "w_activation": goals.w_activation,
                                   "leg_mean_W_per_kg": float(np.mean(rate))}
+        summary["energy_form"] = options.energy.form_record()
     solution = build_solution(inputs, params, ocp, summary)
     return replace(solution, record=solution.record.with_(total_time_s=_time.perf_counter() - t_start))
 

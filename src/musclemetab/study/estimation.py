@@ -182,5 +182,6 @@ def run_parameter_estimation(study, unit, tmp: Path) -> dict:
         side=subject.side, dofs=subject.dofs,
         passive=subject.passive if spec.workflow != "effort-gen" else None,
         max_iter=(study.settings.get("solver") or {}).get("max_iter") or 10000, validate=spec.validate,
+        exclude_muscles=subject.exclude_muscles,
     )
     return {"times": {"solve_s": time.perf_counter() - t0}, "trials": [t.name for t in trials]}

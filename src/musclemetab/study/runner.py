@@ -46,7 +46,6 @@ from __future__ import annotations
 import json
 import os
 import signal
-import socket
 import sys
 import time
 from concurrent.futures import as_completed
@@ -55,6 +54,7 @@ from pathlib import Path
 from typing import Mapping
 
 from ..errors import OptionError
+from ..io.atomic import FolderLock, _boot_id, _process_alive  # noqa: F401  (public here before)
 from ..io.atomic import atomic_path, atomic_write_text, check_output_folder
 from ..processes import THREAD_VARIABLES, spawn_pool  # noqa: F401  (THREAD_VARIABLES: public here before)
 from ..processes import pin_threads as _pin_threads  # noqa: F401
@@ -72,7 +72,7 @@ from .units import (
     unit_key,
 )
 
-__all__ = ["run_study", "StudyRun", "collect_results", "add_quality", "software_versions", "study_lock", "check_scheduler_address",
+__all__ = ["run_study", "StudyRun", "collect_results", "add_quality", "trial_result_rows", "add_leg_rows", "leg_basal_energy_J", "software_versions", "study_lock", "check_scheduler_address",
            "RESULTS_CSV", "RESULTS_PARQUET", "LOCK_FILE"]
 
 from ..study_layout import (  # noqa: E402,F401  (the names of the study folder's files, defined once)
@@ -138,26 +138,51 @@ class StudyRun:
 
 # ---------------------------------------------------------------------------------------
 class _Progress:
-    """A one-line progress bar on a terminal; one line per unit otherwise."""
+    """A one-line progress bar on a terminal; one line per unit otherwise.
 
-    def __init__(self, total: int, enabled: bool, stream=None):
-        self.total, self.done, self.failed = total, 0, 0
+    Each line counts the units done, failed and interrupted, the time so far and, once a unit
+    has run, the time left: the units not done times the mean measured time of the units run so
+    far (their ``times.total_s``; units found up to date do not count), divided by the units
+    that run at once (``parallel``). A unit stopped by Ctrl-C is shown ``interrupted``, not failed.
+    """
+
+    def __init__(self, total: int, enabled: bool, stream=None, parallel: int = 1):
+        self.total, self.done, self.failed, self.interrupted = total, 0, 0, 0
         self.enabled = enabled and total > 0
         self.stream = stream or sys.stderr
         self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
         self.t0 = time.perf_counter()
+        self.parallel = max(1, int(parallel or 1))
+        self.costs: list[float] = []  # measured seconds of the units run
 
-    def update(self, label: str, record: dict) -> None:
+    def eta_s(self) -> float | None:
+        """Seconds left (estimate), or ``None`` before any unit has run."""
+        if not self.costs:
+            return None
+        left = self.total - self.done
+        if left <= 0:
+            return 0.0
+        return sum(self.costs) / len(self.costs) * left / min(self.parallel, left)
+
+    def update(self, label: str, record: dict, ran: bool = False) -> None:
+        status = record.get("status")
         self.done += 1
-        self.failed += record.get("status") != "ok"
+        self.failed += status not in ("ok", INTERRUPTED)
+        self.interrupted += status == INTERRUPTED
+        cost = (record.get("times") or {}).get("total_s")
+        if ran and status == "ok" and isinstance(cost, (int, float)):
+            self.costs.append(float(cost))
         if not self.enabled:
             return
         width = 24
         filled = int(width * self.done / self.total)
         bar = "#" * filled + "." * (width - filled)
-        state = "ok" if record.get("status") == "ok" else "FAILED"
-        line = (f"[{bar}] {self.done}/{self.total} units, {self.failed} failed, "
-                f"{time.perf_counter() - self.t0:.0f} s | {label} {state}")
+        state = "ok" if status == "ok" else INTERRUPTED if status == INTERRUPTED else "FAILED"
+        eta = self.eta_s()
+        left = f", about {_duration(eta)} left" if eta is not None and self.done < self.total else ""
+        stopped = f", {self.interrupted} interrupted" if self.interrupted else ""
+        line = (f"[{bar}] {self.done}/{self.total} units, {self.failed} failed{stopped}, "
+                f"{time.perf_counter() - self.t0:.0f} s{left} | {label} {state}")
         if self.tty:
             self.stream.write("\r" + line[:160].ljust(160))
             if self.done == self.total:
@@ -165,6 +190,14 @@ class _Progress:
         else:
             self.stream.write(line + "\n")
         self.stream.flush()
+
+
+def _duration(seconds: float) -> str:
+    """``45 s``, ``3 min``, ``1 h 05 min``."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    minutes = int(round(seconds / 60))
+    return f"{minutes} min" if minutes < 60 else f"{minutes // 60} h {minutes % 60:02d} min"
 
 
 def check_scheduler_address(address: str) -> str:
@@ -274,7 +307,7 @@ def _run_units(study: Study, jobs: list[tuple[Unit, str, str | None]], executor:
             for unit, key, dep in jobs:
                 rec = execute_unit(study, unit, key, dep)
                 records[unit] = rec
-                progress.update(unit.label, rec)
+                progress.update(unit.label, rec, ran=True)
                 if rec.get("status") == INTERRUPTED:
                     return records, True
         except KeyboardInterrupt:  # between two units
@@ -305,7 +338,7 @@ def _run_units(study: Study, jobs: list[tuple[Unit, str, str | None]], executor:
                 rec = {"status": "failed", "error": f"{type(exc).__name__}: {exc} (worker lost)"}
             records[unit] = rec
             interrupted = interrupted or rec.get("status") == INTERRUPTED
-            progress.update(unit.label, rec)
+            progress.update(unit.label, rec, ran=True)
         except KeyboardInterrupt:
             if interrupted:  # a second Ctrl-C: stop waiting
                 break
@@ -366,7 +399,7 @@ def run_study(
                 for unit in stage:
                     prepare_leg_folder(out, unit)
             _write_study_json(study, out)
-            bar = _Progress(n_total, progress, stream)
+            bar = _Progress(n_total, progress, stream, parallel=workers if not scheduler else 1)
             for stage in stages:
                 jobs = []
                 for unit in stage:
@@ -402,109 +435,7 @@ def run_study(
     return run
 
 
-def _process_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # another user's process
-        return True
-    return True
-
-
-def _boot_id() -> str:
-    """This boot of the machine (Linux), so that a lock written before a restart is known stale."""
-    try:
-        return Path("/proc/sys/kernel/random/boot_id").read_text(encoding="ascii").strip()
-    except OSError:
-        return ""
-
-
-class study_lock:
-    """Hold ``DIR/.musclemetab.lock`` while a run works on the study folder ``DIR``.
-
-    Raises :class:`OptionError` naming the lock file when another live process holds it.
-    The lock file is created complete (written aside, then linked into place, which fails if
-    it exists). A lock whose process no longer runs (same host: the process id is gone, or the
-    machine restarted since, by its boot id) is stale and taken over: the check and the
-    replacement happen under an exclusive ``flock`` of the study folder, so of many runs
-    starting at once after a crash exactly one takes the lock.
-    """
-
-    def __init__(self, folder: Path):
-        self.folder = Path(folder)
-        self.path = self.folder / LOCK_FILE
-        self.owned = False
-
-    def __enter__(self):
-        self.folder.mkdir(parents=True, exist_ok=True)
-        info = {"pid": os.getpid(), "host": socket.gethostname(), "boot_id": _boot_id(),
-                "started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
-        import tempfile
-
-        fd, tmp = tempfile.mkstemp(prefix=f"{LOCK_FILE}.", suffix=".tmp", dir=self.folder)
-        try:
-            os.fchmod(fd, 0o644)
-            with os.fdopen(fd, "w", encoding="utf-8") as f:
-                json.dump(info, f)
-            holder = self._take(tmp, info)
-        finally:
-            Path(tmp).unlink(missing_ok=True)
-        if self.owned:
-            return self
-        who = (f"process {holder.get('pid')} on {holder.get('host')}, since {holder.get('started')}"
-               if holder else "a process that did not record itself")
-        raise OptionError(
-            f"the study folder {self.folder} is in use by another musclemetab run ({who}; lock file "
-            f"{self.path}); wait for that run to finish, or delete the lock file if no run uses the folder"
-        )
-
-    def _take(self, tmp: str, info: dict) -> dict | None:
-        """Put the complete lock ``tmp`` in place, or take over a stale one; the holder otherwise."""
-        import fcntl
-
-        try:
-            os.link(tmp, self.path)  # atomic: fails when a lock exists
-            self.owned = True
-            return info
-        except FileExistsError:
-            pass
-        fd = os.open(self.folder, os.O_RDONLY)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX)  # one takeover at a time; released on close
-            holder = self._holder()
-            if holder is None and not self.path.exists():  # released meanwhile
-                os.link(tmp, self.path)
-                self.owned = True
-            elif self._stale(holder, info):
-                os.replace(tmp, self.path)  # the stale lock replaced in one step
-                self.owned = True
-            return holder
-        finally:
-            os.close(fd)
-
-    @staticmethod
-    def _stale(holder: dict | None, me: dict) -> bool:
-        if holder is None or holder.get("host") != me["host"] or not isinstance(holder.get("pid"), int):
-            return False
-        if holder.get("boot_id") and me["boot_id"] and holder["boot_id"] != me["boot_id"]:
-            return True  # written before the machine restarted
-        return not _process_alive(holder["pid"])
-
-    def _holder(self) -> dict | None:
-        try:
-            data = json.loads(self.path.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
-            return None
-        return data if isinstance(data, dict) else None
-
-    def __exit__(self, *exc):
-        if self.owned:
-            holder = self._holder()
-            if holder is None or holder.get("pid") == os.getpid():
-                self.path.unlink(missing_ok=True)
-            self.owned = False
-        return False
+study_lock = FolderLock  # the study folder's lock (the name it had before ``FolderLock``)
 
 
 def _write_study_json(study: Study, out: Path) -> None:
@@ -534,20 +465,33 @@ def _unit_rows(folder: Path, unit: Unit, rec: dict):
     """One unit's rows of the results table (a row per model), as the unit wrote them."""
     import pandas as pd
 
-    wb = pd.read_csv(folder / "whole_body.csv")
-    an = pd.read_csv(folder / "analysis.csv")
-    df = wb.merge(an, on="model", how="left", validate="one_to_one")
+    df = trial_result_rows(
+        pd.read_csv(folder / "whole_body.csv"), pd.read_csv(folder / "analysis.csv"),
+        speed_m_per_s=rec.get("speed_m_per_s"), toe_off_pct=rec.get("toe_off_pct"),
+        measured_W_per_kg=rec.get("measured_W_per_kg"), cycle_source=rec.get("cycle_source"),
+        speed_source=rec.get("speed_source"), large_reserve=bool(rec.get("large_reserve", False)),
+        unit_dir=str(unit.folder))
     df.insert(0, "subject", unit.subject)
     df.insert(1, "trial", unit.trial)
     df.insert(2, "workflow", unit.workflow)
-    df["speed_m_per_s"] = rec.get("speed_m_per_s")
-    df["toe_off_pct"] = rec.get("toe_off_pct")
-    df["measured_W_per_kg"] = rec.get("measured_W_per_kg")
-    df["cycle_source"] = rec.get("cycle_source")
-    df["speed_source"] = rec.get("speed_source")
-    df["large_reserve"] = bool(rec.get("large_reserve", False))
+    return df
+
+
+def trial_result_rows(whole_body, analysis, *, speed_m_per_s=None, toe_off_pct=None, measured_W_per_kg=None,
+                      cycle_source=None, speed_source=None, large_reserve=False, unit_dir="."):
+    """The results rows of one leg of a trial (one per model) from its whole-body table and its
+    analysis (``whole_body.csv`` and ``analysis.csv`` of a unit, or the tables of
+    :func:`musclemetab.analysis.analyse`), with the trial's speed, toe-off, measured rate,
+    sources, reserve flag, status ``ok`` and folder (``musclemetab analyse`` writes them too)."""
+    df = whole_body.merge(analysis, on="model", how="left", validate="one_to_one")
+    df["speed_m_per_s"] = speed_m_per_s
+    df["toe_off_pct"] = toe_off_pct
+    df["measured_W_per_kg"] = measured_W_per_kg
+    df["cycle_source"] = cycle_source
+    df["speed_source"] = speed_source
+    df["large_reserve"] = bool(large_reserve)
     df["status"] = "ok"
-    df["unit_dir"] = str(unit.folder)
+    df["unit_dir"] = unit_dir
     return df
 
 
@@ -650,8 +594,9 @@ def add_quality(rows, unit_records):
     return rows
 
 
-def _basal_energy_J(per_muscle, duration_s):
-    """A leg's per-muscle basal heat over its cycle (J) by model, from its per-muscle table."""
+def leg_basal_energy_J(per_muscle, duration_s):
+    """A leg's per-muscle basal heat over its cycle (J) by model, from its per-muscle table
+    (the ``basal_energy_J`` of :func:`add_leg_rows`)."""
     if per_muscle is None or "basal_heat_mean_W" not in per_muscle:
         return 0.0
     return per_muscle.groupby("model")["basal_heat_mean_W"].sum() * float(duration_s)
@@ -701,7 +646,7 @@ def collect_results(study: Study, failed: dict[str, str] | None = None):
             frames.append(add_quality(df, records[(subject, trial, workflow)]))
             continue
         rows = {side: df for side, (df, _) in group.items()}
-        basal = {side: _basal_energy_J(pm, df["duration_s"].iloc[0]) for side, (df, pm) in group.items()}
+        basal = {side: leg_basal_energy_J(pm, df["duration_s"].iloc[0]) for side, (df, pm) in group.items()}
         frames.append(add_quality(add_leg_rows(rows, basal), records[(subject, trial, workflow)]))
     for unit in plan_units(study)[0]:
         rec = read_unit_record(out / unit.folder)

@@ -66,7 +66,6 @@ A study file may hold :data:`MAX_STUDY_FILE_BYTES` bytes, nested :data:`MAX_STUD
 
 from __future__ import annotations
 
-import math
 import os
 import re
 import tomllib
@@ -75,6 +74,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from ..errors import InputFileError, OptionError
+from ..settings import MAX_ITERATIONS, MESH_FREQUENCY_RANGE_HZ, NUMBER_KEYS, NumberKey, check_number  # noqa: F401
 
 __all__ = ["Study", "Subject", "Trial", "load_study", "study_from_dict", "EMG_TEN", "KNOWN_WORKFLOWS", "BOTH", "strict_study"]
 
@@ -92,83 +92,8 @@ MAX_STUDY_DEPTH = 16
 _PLAIN_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
 
 
-@dataclass(frozen=True)
-class NumberKey:
-    """A numeric key of the study file: its unit and the range of physically possible values.
-
-    ``low``/``high`` are inclusive unless ``low_open`` (the value must exceed ``low``).
-    ``integer`` keys take whole numbers only (``1.5`` and ``true`` are refused).
-    """
-
-    name: str
-    unit: str
-    low: float
-    high: float
-    help: str
-    low_open: bool = False
-    integer: bool = False
-
-    def range_text(self) -> str:
-        unit = f" {self.unit}" if self.unit else ""
-        if self.low_open:
-            return f"above {self.low:g} and at most {self.high:g}{unit}"
-        return f"from {self.low:g} to {self.high:g}{unit}"
-
-    def check(self, value, where: str, option: str | None = None) -> float | int:
-        """``value`` as a float (an int for integer keys); :class:`OptionError` naming the key
-        (or the command-line ``option``), the value and the range otherwise."""
-        name = option or f"'{self.name}'"
-        at = f"{where}: " if where else ""
-        kind = "a whole number" if self.integer else "a number"
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or \
-                (self.integer and not isinstance(value, int)):
-            raise OptionError(f"{at}{name} must be {kind} ({self.help}, {self.range_text()}), not {value!r}")
-        if not math.isfinite(value) or not (self.low < value if self.low_open else self.low <= value) \
-                or value > self.high:
-            sign = " (it must not be negative)" if value < 0 <= self.low else ""
-            raise OptionError(f"{at}{name} = {value:g} is not {self.help}: it must be {self.range_text()}{sign}")
-        return int(value) if self.integer else float(value)
-
-
-#: Every numeric key of a study file (and the same value on the command line): name, unit,
-#: range of physically possible values, meaning. Every check of these values goes through it.
-NUMBER_KEYS: dict[str, NumberKey] = {k.name: k for k in (
-    NumberKey("body_mass_kg", "kg", 20.0, 300.0, "a human body mass in kilograms"),
-    NumberKey("height_m", "m", 0.5, 2.7, "a human height in metres"),
-    NumberKey("basal_coefficient", "W/kg", 0.0, 10.0, "a basal heat rate per kg (OpenSim's default 1.51, the "
-              "paper's 1.2)"),
-    NumberKey("basal_exponent", "", 0.0, 2.0, "an exponent of the body mass (1 linear, 0.75 Kleiber's)"),
-    NumberKey("emg_tolerance", "", 0.0, 1.0, "a half-width of the EMG band in normalised excitation"),
-    NumberKey("grf_threshold_N", "N", 0.0, 1000.0, "a contact threshold of the vertical force", low_open=True),
-    NumberKey("speed_m_per_s", "m/s", 0.0, 15.0, "a walking or running speed", low_open=True),
-    NumberKey("measured_W_per_kg", "W/kg", 0.0, 50.0, "a measured metabolic rate per kg of body mass",
-              low_open=True),
-    NumberKey("vo2_mL_per_s", "mL/s", 0.0, 150.0, "a human oxygen uptake", low_open=True),
-    NumberKey("vco2_mL_per_s", "mL/s", 0.0, 200.0, "a human carbon dioxide output", low_open=True),
-    NumberKey("vo2_mL_per_min", "mL/min", 0.0, 9000.0, "a human oxygen uptake", low_open=True),
-    NumberKey("vco2_mL_per_min", "mL/min", 0.0, 12000.0, "a human carbon dioxide output", low_open=True),
-    NumberKey("start_s", "s", -1e5, 1e5, "a time of the trial's files"),
-    NumberKey("toe_off_s", "s", -1e5, 1e5, "a time of the trial's files"),
-    NumberKey("end_s", "s", -1e5, 1e5, "a time of the trial's files"),
-    NumberKey("tendon_stiffness", "", 0.0, 1000.0, "a normalised tendon stiffness kT (the literature's 35)",
-              low_open=True),
-    NumberKey("weight", "", 0.0, 1e6, "a weight of the energy goal"),
-    NumberKey("effort_weight", "", 0.0, 1e6, "a weight of the effort goal"),
-    NumberKey("smoothing", "", 0.0, 1e6, "a smoothing parameter", low_open=True),
-    NumberKey("max_iter", "", 1, 10_000_000, "a number of IPOPT iterations", integer=True),
-    NumberKey("tol", "", 0.0, 1.0, "an IPOPT tolerance", low_open=True),
-)}
 #: ``cycle``: ``"auto"`` or the number (from 1) of the leg's gait cycle
 CYCLE_HELP = "\"auto\" or a gait cycle number (1, 2, ...)"
-
-
-def check_number(key: str, value, where: str = "", option: str | None = None) -> float | int:
-    """Check ``value`` of the numeric key ``key`` against :data:`NUMBER_KEYS`.
-
-    ``option`` names the command-line option carrying the same value (e.g. ``"--speed"``),
-    so that the command line and the study file refuse the same values with the same reason.
-    """
-    return NUMBER_KEYS[key].check(value, where, option)
 
 
 def check_cycle(value, where: str = "", option: str = "'cycle'"):
@@ -249,6 +174,8 @@ class Subject:
     emg_tolerance: float = 0.01
     #: the subject's parameter estimation (:class:`~musclemetab.study.estimation.EstimateSpec`)
     estimate: Any = None
+    #: muscles left out of every problem of the subject (``--exclude-muscles``)
+    exclude_muscles: tuple[str, ...] = ()
 
     @property
     def sides(self) -> tuple[str, ...]:
@@ -295,11 +222,11 @@ class Study:
 _STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "basal_coefficient", "basal_exponent", "subjects",
                "solver", "energy_goal", "strict"}
 #: keys of the study file's [energy_goal] table (the energy goal of every effort-workflow solve)
-_ENERGY_KEYS = {"model", "weight", "effort_weight", "smoothing"}
+_ENERGY_KEYS = {"model", "weight", "effort_weight", "smoothing", "form"}
 #: keys of the study file's [solver] table (IPOPT settings of every solve)
-_SOLVER_KEYS = {"max_iter", "tol", "linear_solver", "linear_solver_library"}
+_SOLVER_KEYS = {"max_iter", "tol", "linear_solver"}
 _SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials",
-                 "muscle_properties", "side", "dofs", "emg_mode", "emg_tolerance", "estimate"}
+                 "muscle_properties", "side", "dofs", "emg_mode", "emg_tolerance", "estimate", "exclude_muscles"}
 _TRIAL_KEYS = {
     "name", "ik", "id", "emg", "grf", "grf_column", "grf_threshold_N", "speed_m_per_s",
     "measured_W_per_kg", "vo2_mL_per_s", "vco2_mL_per_s", "vo2_mL_per_min", "vco2_mL_per_min",
@@ -350,6 +277,14 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
     where = str(source) if source else "study"
     base = Path(base)
     _unknown(data, _STUDY_KEYS, where)
+    solver_table = data.get("solver")
+    if isinstance(solver_table, Mapping) and "linear_solver_library" in solver_table:  # before anything is read
+        from ..redundancy.ipopt import LIBRARY_ENV
+
+        raise OptionError(f"{where}: [solver] linear_solver_library: a study file names a linear solver, not a library "
+                          "to load (a library is native code); remove the key and give the library's path in the "
+                          f"environment variable {LIBRARY_ENV} (for one solve: musclemetab solve "
+                          "--linear-solver-library LIB)")
     from ..metabolics.registry import parse_models
     from ..metabolics._common import BASAL_RATE_W_PER_KG
 
@@ -420,7 +355,8 @@ def strict_study(study: Study) -> Study:
 
 
 def _solver(data, where: str) -> dict:
-    """The ``[solver]`` table: ``max_iter``, ``tol``, ``linear_solver``, ``linear_solver_library``, checked."""
+    """The ``[solver]`` table: ``max_iter``, ``tol``, ``linear_solver``, checked (the library of a
+    run-time linear solver comes from the command line or the environment, never from the file)."""
     if data is None:
         return {}
     if not isinstance(data, Mapping):
@@ -458,15 +394,18 @@ def _energy_goal(data, where: str) -> dict:
     for key in ("weight", "effort_weight", "smoothing"):
         if key in data:
             _number(data[key], here, key)
-    from ..redundancy.energy import EnergyGoal
+    from ..redundancy.energy import CLAMPED_MODELS, EnergyGoal
 
     try:
         goal = EnergyGoal(str(data["model"]), float(data.get("weight", 1.0)), 70.0, 1.75,
                           effort_weight=data.get("effort_weight"),
-                          **({"smoothing": float(data["smoothing"])} if "smoothing" in data else {}))
+                          **({"smoothing": float(data["smoothing"])} if "smoothing" in data else {}),
+                          **({"form": str(data["form"])} if "form" in data else {}))
     except OptionError as exc:
         raise OptionError(f"{here}: {exc}") from None
     out = {"model": goal.model, "weight": goal.weight, "smoothing": goal.smoothing}
+    if "form" in data or goal.model in CLAMPED_MODELS:  # the form changes what these models' goals minimise
+        out["form"] = goal.form
     if goal.effort_weight is not None:
         out["effort_weight"] = float(goal.effort_weight)
     return out
@@ -548,6 +487,9 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
         if not isinstance(dofs, list) or not dofs or not all(isinstance(d, str) and d for d in dofs):
             raise OptionError(f"{here}: 'dofs' must be a list of coordinate names, e.g. [\"knee_angle_l\"]")
         dofs = tuple(dofs)
+    excluded = data.get("exclude_muscles", [])
+    if not isinstance(excluded, list) or not all(isinstance(m, str) and m for m in excluded):
+        raise OptionError(f"{here}: 'exclude_muscles' must be a list of muscle names, e.g. [\"tfl_r\"]")
     trials_data = data.get("trials")
     if not isinstance(trials_data, list) or not trials_data:
         raise OptionError(f"{here}: no trials; add [[subjects.trials]] tables with name, ik and id")
@@ -563,13 +505,14 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
                               f"{', '.join(missing)}")
     emg_mode, emg_tolerance = _emg_mode(data, here, trials)
     muscle_properties = _path(data.get("muscle_properties"), base, here, "muscle_properties", required=False)
-    if muscle_properties is not None or dofs is not None:
-        _check_model_names(model, here, muscle_properties, dofs)
+    if muscle_properties is not None or dofs is not None or excluded:
+        _check_model_names(model, here, muscle_properties, dofs, excluded)
     if side == BOTH:
         _check_both_legs(data, here, trials, workflows, kt)
     subject = Subject(name=name, model=model, body_mass_kg=mass, height_m=height, trials=trials,
                       passive=passive, tendon_stiffness=kt, emg_mapping=mapping, muscle_properties=muscle_properties,
-                      side=side, dofs=dofs, emg_mode=emg_mode, emg_tolerance=emg_tolerance)
+                      side=side, dofs=dofs, emg_mode=emg_mode, emg_tolerance=emg_tolerance,
+                      exclude_muscles=tuple(excluded))
     if data.get("estimate") is not None:
         from dataclasses import replace
 
@@ -580,8 +523,9 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
     return subject
 
 
-def _check_model_names(model: Path, here: str, muscle_properties: Path | None, dofs) -> None:
-    """Refuse, before anything runs, muscle-properties rows and ``dofs`` that name nothing in the model."""
+def _check_model_names(model: Path, here: str, muscle_properties: Path | None, dofs, excluded=()) -> None:
+    """Refuse, before anything runs, muscle-properties rows, ``dofs`` and ``exclude_muscles``
+    that name nothing in the model."""
     import difflib
 
     from ..errors import UnknownCoordinateError, UnknownMuscleError
@@ -595,6 +539,9 @@ def _check_model_names(model: Path, here: str, muscle_properties: Path | None, d
             overrides.check_names(info.muscles.names)
         except UnknownMuscleError as exc:
             raise UnknownMuscleError(f"{here}: 'muscle_properties': {exc} of {model}") from None
+    alien = [m for m in excluded if m not in info.muscles.names]
+    if alien:
+        raise UnknownMuscleError(f"{here}: 'exclude_muscles' {', '.join(alien)} not a muscle of {model}; fix the name")
     coordinates = [c["name"] if isinstance(c, Mapping) else c for c in info.coordinates]
     unknown = [d for d in dofs or () if d not in coordinates]
     if unknown:

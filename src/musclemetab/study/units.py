@@ -170,6 +170,8 @@ def _subject_record(subject: Subject, workflow: str) -> dict:
         rec.update(estimate=subject.estimate.to_dict(), emg_mapping=subject.emg_mapping)
     if subject.muscle_properties is not None:  # absent key: earlier studies keep their unit keys
         rec["muscle_properties"] = _file_hash(subject.muscle_properties)
+    if subject.exclude_muscles:  # absent key: earlier studies keep their unit keys
+        rec["exclude_muscles"] = list(subject.exclude_muscles)
     if subject.side != "r" or subject.dofs is not None:  # absent keys: earlier studies keep their unit keys
         rec["side"] = subject.side
         rec["dofs"] = list(subject.dofs) if subject.dofs is not None else None
@@ -428,10 +430,11 @@ def _run_estimation(study: Study, unit: Unit, tmp: Path) -> dict:
         side=subject.side,
         dofs=subject.dofs,
         options=_solver_options(study),
+        exclude_muscles=subject.exclude_muscles,
     )
     if not result.success:  # nothing of a failed estimate is written
         raise result.run_record.failure(f"EMG-TEN of subject {subject.name}")
-    result.write(tmp)
+    result.write(tmp, opensim_files=False)  # each trial unit writes its own
     return {"times": {"solve_s": time.perf_counter() - t0}}
 
 
@@ -448,7 +451,7 @@ def _informed_solve(study: Study, subject: Subject, trial: Trial, workflow: str,
                            labels=[trial.name], passive=kwargs.get("passive"), side=subject.side, dofs=subject.dofs,
                            options=_solver_options(study),
                            settings=informed_settings(workflow, subject.emg_mode, subject.emg_tolerance),
-                           workflow=workflow, tendon_stiffness=kt)
+                           workflow=workflow, tendon_stiffness=kt, exclude_muscles=subject.exclude_muscles)
     return result.solutions[trial.name]
 
 
@@ -528,8 +531,10 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
             sol = solve_files(subject.model, trial.ik, trial.id, unit.workflow, side=side, dofs=subject.dofs,
                               external_loads=trial.external_loads, grf=trial.grf if trial.cycle is not None else None,
                               grf_column=trial.grf_column, grf_threshold_N=trial.grf_threshold_N,
-                              cycle=trial.cycle, options=_solver_options(study, subject), **kwargs)
-        write_solution_folder(sol, tmp)
+                              cycle=trial.cycle, options=_solver_options(study, subject),
+                              exclude_muscles=subject.exclude_muscles, exclude_missing_ok=subject.side == "both",
+                              **kwargs)
+        write_solution_folder(sol, tmp, opensim_files=False)  # written below, for every workflow
         times["solve_s"] = sol.record.solve_time_s
         if not sol.success:
             from ..redundancy.emg_ten import emg_failure
@@ -545,7 +550,10 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
     try:
         speed = trial_speed(trial, subject.model)
     except DataMismatchError as exc:  # e.g. a treadmill trial without speed_m_per_s: no cost of transport
-        warnings.warn(f"{subject.name}/{trial.name}: no walking speed ({exc})", stacklevel=2)
+        from ..errors import MusclemetabWarning
+
+        warnings.warn(f"{subject.name}/{trial.name}: no walking speed, no cost of transport ({exc})",
+                      MusclemetabWarning, stacklevel=2)
         speed = None
     # the stages after the solve take the solution object (the same numbers as its folder,
     # tests/test_stage_paths.py); each writes its files once

@@ -1,0 +1,57 @@
+"""How the package's warnings reach a person: one line each on standard error.
+
+A warning the command line shows (and one raised in a worker process the package started:
+a study's units, the legs of ``solve --side both``) is printed as one line::
+
+    musclemetab: warning: <message>
+
+with the message's white space collapsed; a warning of another library raised while the
+package runs names its category (``musclemetab: warning: RuntimeWarning: ...``). No Python
+source line and no file path of the package's code is printed: a warning says what was
+found in the user's data and what to do, not where in the package it was noticed. In a
+Python session the warnings keep Python's own format unless :func:`install` is called.
+"""
+
+from __future__ import annotations
+
+import sys
+import warnings
+
+__all__ = ["PREFIX", "warning_line", "show_warning", "install"]
+
+#: first words of every warning line
+PREFIX = "musclemetab: warning: "
+
+
+def warning_line(message, category=UserWarning) -> str:
+    """The one line of a warning (no trailing newline)."""
+    from .errors import MusclemetabWarning
+
+    text = " ".join(str(message).split())
+    if not issubclass(category, MusclemetabWarning) and category is not UserWarning:
+        text = f"{category.__name__}: {text}"
+    return PREFIX + text
+
+
+def show_warning(message, category, filename=None, lineno=None, file=None, line=None) -> None:
+    """A replacement for :func:`warnings.showwarning` printing :func:`warning_line`."""
+    stream = file if file is not None else sys.stderr
+    if stream is None:  # no standard error (pythonw): nothing to print to
+        return
+    try:
+        stream.write(warning_line(message, category) + "\n")
+        stream.flush()
+    except OSError:  # the reader went away
+        pass
+
+
+def install() -> callable:
+    """Print every warning of this process as one line (:func:`show_warning`); returns the
+    function restoring the previous ``warnings.showwarning``."""
+    previous = warnings.showwarning
+    warnings.showwarning = show_warning
+
+    def restore():
+        warnings.showwarning = previous
+
+    return restore

@@ -1,0 +1,217 @@
+"""The command line goes as far as a study does, and says what it is doing while it runs.
+
+* ``solve`` -> ``metabolics`` -> ``analyse`` on gait2392's subject (both legs, the cycle found
+  from the ground forces, inverse dynamics computed by OpenSim) asks for nothing the solution
+  records and gives every number the two-subject study gives for that subject (the session's
+  ``two_subjects``, run by ``musclemetab run``; the solve memo makes the command line's
+  solves the study's);
+* ``musclemetab run`` prints no Python source line and no file of the package's cache;
+* a running solve prints progress lines from IPOPT's iteration callback, throttled;
+* the study's progress lines carry an estimate of the time left.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import re
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from musclemetab.commands import main
+
+RTOL = 1e-9
+#: before any OpenSim worker of this test process ran
+_STARTED = time.time()
+#: the study's per-leg tables are read back from CSV files written with 10 significant digits
+#: before the legs are added; the command line adds the legs before writing
+CSV_RTOL = 2e-9
+
+
+def _compare(got: pd.DataFrame, want: pd.DataFrame, keys: list[str], what: str, rtol: float = RTOL) -> int:
+    """Every column the two tables share, row by row in the order of ``keys`` (numbers within
+    ``rtol``, or within ``rtol`` of the column's largest magnitude; text equal); returns the
+    number of finite numbers compared."""
+    got = got.sort_values(keys, kind="stable", ignore_index=True)
+    want = want.sort_values(keys, kind="stable", ignore_index=True)
+    assert len(got) == len(want), what
+    n = 0
+    for c in got.columns.intersection(want.columns):
+        a, b = got[c], want[c]
+        if pd.api.types.is_numeric_dtype(a) and pd.api.types.is_numeric_dtype(b) and a.dtype != bool:
+            x, y = a.to_numpy(float), b.to_numpy(float)
+            scale = float(np.nanmax(np.abs(y))) if np.isfinite(y).any() else 0.0
+            # a value near zero within rtol of the column's largest (a group's rate of 6e-4 W among
+            # rates of 150 W differs by 3e-11 W between the solution object and its folder)
+            np.testing.assert_allclose(x, y, rtol=rtol, atol=rtol * scale, equal_nan=True, err_msg=f"{what}: {c}")
+            n += int(np.isfinite(x).sum())
+        else:
+            assert a.astype(str).tolist() == b.astype(str).tolist(), f"{what}: {c}"
+    return n
+
+
+@pytest.fixture(scope="module")
+def cli_flow(gait2392, tmp_path_factory):
+    """solve (both legs, cycle auto), metabolics (UM10, BH04; mass; height 1.8 m as in the study
+    file), analyse with nothing but the two folders."""
+    root = tmp_path_factory.mktemp("cli_flow")
+    s, m, a = root / "S", root / "M", root / "A"
+    assert main(["solve", "--model", str(gait2392.model), "--ik", str(gait2392.ik), "--external-loads",
+                 str(gait2392.external_loads), "--side", "both", "--cycle", "auto", "--out", str(s)]) == 0
+    assert main(["metabolics", "--solution", str(s), "--mass", str(gait2392.body_mass_kg), "--height", "1.8",
+                 "--models", "UM10,BH04", "--out", str(m)]) == 0
+    return s, m, a
+
+
+@pytest.mark.slow
+@pytest.mark.opensim
+def test_solve_metabolics_analyse_give_the_study_numbers(cli_flow, two_subjects, capsys):
+    s, m, a = cli_flow
+    study, _ = two_subjects
+    capsys.readouterr()
+    assert main(["analyse", "--solution", str(s), "--metabolics", str(m), "--out", str(a)]) == 0
+    said = capsys.readouterr()
+    # the DOFs 'solve' chose that belong to no muscle group are named, not a stop
+    assert "left out of the group analysis: mtp_angle_r, subtalar_angle_r" in said.out
+    assert "left out of the group analysis: mtp_angle_l, subtalar_angle_l" in said.out
+    assert "no walking speed" in said.err  # a treadmill trial: no cost of transport, as in the study
+
+    unit = study / "units" / "gait2392" / "walk1" / "effort-gen"
+    n = 0
+    for side in "rl":
+        # the solutions: the study's unit solved the same problem
+        got = pd.read_csv(s / side / "solution.sto", sep="\t", skiprows=_header_rows(s / side / "solution.sto"))
+        want = pd.read_csv(unit / side / "solution.sto", sep="\t", skiprows=_header_rows(unit / side / "solution.sto"))
+        n += _compare(got, want, ["time"], f"solution.sto {side}")
+        rec = json.loads((s / side / "summary.json").read_text())
+        assert rec["window"]["gait_cycle"] == json.loads((unit / side / "summary.json").read_text())["window"]["gait_cycle"]
+        for name in ("whole_body.csv", "analysis.csv", "per_muscle.csv"):
+            keys = ["model", "muscle"] if name == "per_muscle.csv" else ["model"]
+            n += _compare(pd.read_csv(a / side / name), pd.read_csv(unit / side / name), keys, f"{side}/{name}")
+        n += _compare(pd.read_csv(a / side / "timeseries.csv"), pd.read_csv(unit / side / "timeseries.csv"),
+                      ["model", "series", "time_s"], f"{side}/timeseries.csv")
+    # the study's results rows of the subject: the legs added the same way
+    results = pd.read_csv(study / "results.csv")
+    want = results[results["subject"] == "gait2392"].drop(columns=["subject", "trial", "workflow", "unit_dir"])
+    got = pd.read_csv(a / "results.csv").drop(columns=["unit_dir"])
+    # the columns of the study's results, less the costs of transport it has for the other subject
+    # (no speed here: empty in the study's rows too)
+    assert set(got.columns) <= set(want.columns)
+    assert all(want[c].isna().all() for c in set(want.columns) - set(got.columns))
+    n += _compare(got, want, ["model"], "results.csv", rtol=CSV_RTOL)
+    per = pd.read_csv(study / "per_muscle.csv")
+    per = per[per["subject"] == "gait2392"].drop(columns=["subject", "trial", "workflow"])
+    n += _compare(pd.read_csv(a / "per_muscle.csv"), per, ["model", "side", "muscle"], "per_muscle.csv")
+    # metabolics' whole body (the legs added) is the study's
+    whole = pd.read_csv(m / "whole_body.csv").set_index("model")
+    study_rows = results[results["subject"] == "gait2392"].set_index("model")
+    np.testing.assert_allclose(whole["whole_body_W_per_kg"], study_rows.loc[whole.index, "whole_body_W_per_kg"],
+                               rtol=CSV_RTOL)
+    assert n > 10000  # every number of the tables, not a handful
+
+
+def _header_rows(path) -> int:
+    with open(path, encoding="utf-8") as f:
+        for i, line in enumerate(f):
+            if line.strip() == "endheader":
+                return i + 1
+    raise AssertionError(f"{path}: no endheader")
+
+
+@pytest.mark.slow
+@pytest.mark.opensim
+def test_run_prints_no_source_line_and_no_cache_file(two_subjects, two_subjects_stderr):
+    """``musclemetab run`` with two worker processes: every warning is one line
+    ``musclemetab: warning: ...``; no line names a file of the package's code with a line
+    number, nor a file of the package's cache (which the user never gave)."""
+    import os
+
+    import musclemetab
+
+    _, stdout = two_subjects
+    stderr = two_subjects_stderr
+    text = stdout + stderr
+    package = os.path.dirname(musclemetab.__file__)
+    source_lines = [ln for ln in text.splitlines() if re.search(r"\.py:\d+", ln) or package in ln]
+    assert source_lines == []
+    warnings_said = [ln for ln in stderr.splitlines() if "warning" in ln.lower()]
+    assert warnings_said and all(ln.startswith("musclemetab: warning: ") for ln in warnings_said)
+    # gait2392's knee reserve is large: said, naming the trial's files, not the cached inverse dynamics
+    reserve = [ln for ln in warnings_said if "the reserve about knee_angle" in ln]
+    assert reserve and all("subject01_walk1_grf.xml" in ln for ln in reserve)
+    cache = os.environ["MUSCLEMETAB_CACHE"]
+    assert cache not in text
+    # the study's progress: one line per unit (not a terminal), the time left once a unit has run
+    progress = [ln for ln in stderr.splitlines() if re.match(r"\[[#.]+\] \d+/3 units", ln)]
+    assert len(progress) == 3 and "left |" in progress[0] and "left" not in progress[-1]
+    # OpenSim computed gait2392's inverse dynamics in the worker started from this folder, and
+    # wrote no log file there
+    log = Path.cwd() / "opensim.log"
+    assert not log.exists() or log.stat().st_mtime < _STARTED
+
+
+def test_progress_lines_throttled_by_the_clock():
+    """:class:`ProgressLines` with a clock worked by hand: a solve of 12 s, one iterate a second
+    (IPOPT's first call back is the starting point, iteration 0), lines at most every 5 s: at
+    5 s and at 10 s, i.e. at least one line before a solve of more than 10 s ends."""
+    from musclemetab.redundancy.ipopt import PROGRESS_INTERVAL_S, ProgressLines
+
+    assert PROGRESS_INTERVAL_S == 5.0
+    now = [100.0]
+    stream = io.StringIO()
+    lines = ProgressLines(lbg=[0.0, -1.0], ubg=[0.0, 1.0], interval_s=PROGRESS_INTERVAL_S, stream=stream,
+                          clock=lambda: now[0])
+    for k in range(13):  # iterates at 0, 1, ..., 12 s
+        now[0] = 100.0 + k
+        lines.iteration(f=10.0 / (k + 1), g=[1e-3 / (k + 1), 2.0])  # second constraint 1.0 above its bound
+    printed = stream.getvalue().splitlines()
+    assert printed == [
+        "musclemetab: solving: iteration 5, objective 1.6667e+00, constraint violation 1.0e+00, 5 s",
+        "musclemetab: solving: iteration 10, objective 9.0909e-01, constraint violation 1.0e+00, 10 s",
+    ]
+
+
+@pytest.mark.opensim
+def test_solve_prints_progress_while_ipopt_runs(example, tmp_path, capsys, monkeypatch):
+    """``musclemetab solve`` of a short window (a problem no other test solves, so IPOPT runs)
+    with the throttle at 0 s: a line for every iterate, the last of them before the final
+    iteration IPOPT reports; no callback outside the command (``--no-progress``, a Python session)."""
+    import musclemetab.redundancy.ipopt as ipopt
+
+    monkeypatch.setattr(ipopt, "PROGRESS_INTERVAL_S", 0.0)
+    out = tmp_path / "s"
+    argv = ["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
+            str(example.id["normal"]), "--window", "0.6:0.85", "--out", str(out)]
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    iterations = [int(x) for x in re.findall(r"^musclemetab: solving: iteration (\d+), objective \S+, "
+                                             r"constraint violation \S+, \d+ s$", err, flags=re.M)]
+    total = json.loads((out / "summary.json").read_text())["iterations"]
+    assert iterations[:3] == [0, 1, 2] and iterations[-1] == total
+    assert len(iterations) == total + 1
+    assert ipopt._progress_callback(1, 1, [0.0], [0.0]) is None  # switched off after the command
+
+
+def test_study_progress_time_left_and_interrupted_units():
+    """The study's progress lines worked by hand: 4 units, 2 at once; the first run took 30 s
+    (3 units left: 30 x 3 / 2 = 45 s), one found up to date (costs nothing: 2 left, 30 s), one
+    stopped by Ctrl-C (labelled and counted interrupted, not failed), one failed (the last: no time left)."""
+    from musclemetab.study.runner import _Progress
+
+    stream = io.StringIO()
+    bar = _Progress(4, True, stream, parallel=2)
+    bar.update("s/a/effort-gen", {"status": "ok", "times": {"total_s": 30.0}}, ran=True)
+    bar.update("s/b/effort-gen", {"status": "ok"})
+    bar.update("s/c/effort-gen", {"status": "interrupted", "times": {"total_s": 2.0}}, ran=True)
+    bar.update("s/d/effort-gen", {"status": "failed", "times": {"total_s": 1.0}}, ran=True)
+    lines = [re.sub(r", \d+ s", ", T s", ln, count=1) for ln in stream.getvalue().splitlines()]
+    assert lines == [
+        "[######..................] 1/4 units, 0 failed, T s, about 45 s left | s/a/effort-gen ok",
+        "[############............] 2/4 units, 0 failed, T s, about 30 s left | s/b/effort-gen ok",
+        "[##################......] 3/4 units, 0 failed, 1 interrupted, T s, about 30 s left | s/c/effort-gen interrupted",
+        "[########################] 4/4 units, 1 failed, 1 interrupted, T s | s/d/effort-gen FAILED",
+    ]

@@ -1,0 +1,213 @@
+"""The OpenSim files of a solution folder reproduce the solution in OpenSim.
+
+Each solve here is one another test module solves with the same options (the session's solve
+memo gives it for free); the command line then writes ``model.osim``, ``states.sto``,
+``controls.sto`` and ``forces.sto`` beside the solution. Oracles: OpenSim itself (its
+``DeGrooteFregly2016Muscle`` evaluated over the states, its ``JointReaction`` analysis), the
+solution's own ``solution.sto``, the curve equations of docs/opensim_files.md worked here, and
+the knee forces measured in instrumented knee implants (Kutzner et al. 2010, J Biomech
+43:2164-2173: level walking, peak resultant force 2.61 body weights on average over five
+subjects).
+
+Tolerances (docs/opensim_files.md gives the measured values):
+
+* the tendon force OpenSim computes from ``states.sto`` is the solution's to 1e-9 F0 (the
+  state is the normalised tendon force), except EFFORT-TEN's few slack tendons below OpenSim's
+  curve (written at OpenSim's force for the solution's tendon length: within 0.05 F0);
+* OpenSim's tendon force at the solution's fiber length (OpenSim's geometry and tendon curve)
+  within 0.07 F0 at every node, 0.012 F0 rms: the tendon curves meet at one normalised force
+  only (up to 0.04 F0 apart at the same length) and OpenSim's muscle-tendon lengths at the
+  filtered coordinates are within 0.7 mm of the solve's filtered lengths;
+* the fiber length OpenSim derives within 0.03 lMo (EFFORT-GEN) and 0.06 lMo (EFFORT-TEN, kT
+  10.6 and 4.7: compliant tendons, where the curves differ most near slack).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.opensim
+
+KT_TS, KT_VA = 10.617977, 4.695786  # as tests/test_redundancy.py
+
+
+def _solve(tmp_path, argv):
+    from musclemetab.commands import main
+    from musclemetab.redundancy import Solution
+
+    out = tmp_path / "solution"
+    assert main([*argv, "--out", str(out)]) == 0
+    return Solution.load(out), out
+
+
+@pytest.fixture(scope="module")
+def solved(example, geometry_cache, tmp_path_factory, passive_csv):
+    """``solved(workflow)``: the normal trial's EFFORT-GEN or EFFORT-TEN solve, as
+    tests/test_redundancy.py asks for it, and its folder."""
+    cache = {}
+
+    def run(workflow):
+        if workflow not in cache:
+            argv = ["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
+                    str(example.id["normal"]), "--workflow", workflow, "--cache-dir", str(geometry_cache)]
+            if workflow == "effort-ten":
+                argv += ["--tendon-stiffness", f"soleus_r={KT_TS},gasmed={KT_TS},gaslat_r={KT_TS},"
+                         f"vasint_r={KT_VA},vaslat_r={KT_VA},vasmed_r={KT_VA}", "--passive", str(passive_csv)]
+            cache[workflow] = _solve(tmp_path_factory.mktemp(workflow), argv)
+        return cache[workflow]
+
+    return run
+
+
+def test_strains_at_one_normalised_force_worked_by_hand():
+    from musclemetab.muscle import passive_force_length, tendon_force_length
+    from musclemetab.redundancy.export import passive_fiber_strain_at_one_norm_force, tendon_strain_at_one_norm_force
+
+    # kT 35: exp(35 (l - 0.995)) / 5 - 0.25 = 1 -> l = 0.995 + ln(6.25)/35
+    assert tendon_strain_at_one_norm_force(35.0) == pytest.approx(0.995 + np.log(6.25) / 35 - 1, rel=1e-12)
+    # generic passive: exp(4 (l - 1)/0.6) = exp(4) - 1 + exp(-16/3)
+    assert passive_fiber_strain_at_one_norm_force(4.0, 1.0, 0.6) == pytest.approx(
+        0.15 * np.log(np.exp(4) - 1 + np.exp(-16 / 3)), rel=1e-12)
+    for kt in (4.7, 10.6, 35.0, 60.0):  # the package's curves reach one normalised force there
+        assert tendon_force_length(1 + tendon_strain_at_one_norm_force(kt), kt) == pytest.approx(1.0, rel=1e-12)
+    for kpe, s0 in ((3.0, 0.8), (4.0, 1.0), (5.0, 1.2)):
+        e = passive_fiber_strain_at_one_norm_force(kpe, s0, 0.6)
+        assert passive_force_length(1 + e, kpe, s0, 0.6) == pytest.approx(1.0, rel=1e-12)
+
+
+@pytest.mark.parametrize("workflow", ["effort-gen", "effort-ten"])
+def test_opensim_reproduces_the_solution(solved, workflow):
+    from musclemetab.opensim_bridge import call
+    from musclemetab.redundancy.export import tendon_strain_at_one_norm_force
+
+    sol, folder = solved(workflow)
+    p = sol.parameters
+    f0 = p.max_isometric_force_N[:, None]
+    got = call("solution_model:muscles_over_states", str(folder / "model.osim"), str(folder / "states.sto"),
+               list(sol.muscles), sol.fiber_length_m.T)
+    # loaded with no assembly, no missing or extra column: every state finite, the node times
+    assert got["n_nan_states"] == 0
+    np.testing.assert_allclose(got["time_s"], sol.time_s, atol=1e-12)
+    np.testing.assert_allclose(got["activation"], sol.activation.T, rtol=1e-9, atol=1e-12)
+    ft = sol.tendon_force_N.T
+    err = np.abs(got["tendon_force_N"] - ft) / f0
+    slack = ft / f0 < -0.19
+    assert err[~slack].max() < 1e-9
+    assert slack.sum() <= (0 if workflow == "effort-gen" else 3)  # a few slack nodes after EFFORT-TEN
+    if slack.any():  # OpenSim's curve at the solution's tendon length there
+        assert err[slack].max() < 0.05
+    # OpenSim's geometry and tendon curve at the solution's fiber lengths
+    at_fiber = np.abs(got["tendon_force_at_fiber_length_N"] - ft) / f0
+    assert at_fiber.max() < 0.07 and np.sqrt(np.mean(at_fiber**2)) < 0.012
+    # the fiber length OpenSim derives from the tendon force
+    lm_err = np.abs(got["fiber_length_m"] - sol.fiber_length_m.T) / p.optimal_fiber_length_m[:, None]
+    assert lm_err.max() < (0.03 if workflow == "effort-gen" else 0.06)
+    # the model carries the solution's parameters: F0 and the tendon strain of the soleus
+    i = sol.muscles.index("soleus_r")
+    text = (folder / "model.osim").read_text()
+    block = text[text.index('<DeGrooteFregly2016Muscle name="soleus_r">'):]
+    block = block[: block.index("</DeGrooteFregly2016Muscle>")]
+    strain = float(block.split("<tendon_strain_at_one_norm_force>")[1].split("<")[0])
+    assert strain == pytest.approx(float(tendon_strain_at_one_norm_force(p.tendon_stiffness[i])), rel=1e-12)
+    assert float(block.split("<max_isometric_force>")[1].split("<")[0]) == pytest.approx(p.max_isometric_force_N[i])
+    assert "<fiber_damping>0</fiber_damping>" in block
+    assert f"kT {p.tendon_stiffness[i]:.6g}" in text  # the comment on the mapping
+    if workflow == "effort-ten":  # the personalised tendon: the soleus' peak force, not the generic model's
+        assert p.tendon_stiffness[i] == pytest.approx(KT_TS)
+        assert got["tendon_force_N"][i].max() == pytest.approx(ft[i].max(), rel=1e-9)
+
+
+def test_forces_file_holds_every_actuator(solved, example):
+    from musclemetab.io import read_storage
+
+    sol, folder = solved("effort-gen")
+    forces = read_storage(folder / "forces.sto")
+    controls = read_storage(folder / "controls.sto")
+    np.testing.assert_allclose(forces.index, sol.time_s, atol=1e-12)
+    for i, m in enumerate(sol.muscles):
+        np.testing.assert_allclose(forces[m], sol.tendon_force_N[:, i], rtol=1e-10)
+        np.testing.assert_allclose(controls[f"/forceset/{m}"], sol.excitation[:, i], rtol=1e-10, atol=1e-12)
+    for j, d in enumerate(sol.dofs):
+        np.testing.assert_allclose(forces[f"reserve_{d}"], sol.reserve_Nm[:, j], rtol=1e-10, atol=1e-9)
+    # muscles outside the solution carry nothing; the left hip its inverse-dynamics moment (no right-leg
+    # muscle spans it), low-pass filtered as the solve filters the moments (6 Hz, 6th order Butterworth,
+    # zero phase; worked here with SciPy's own padding, so within 0.5 N m, 0.15 N m away from the ends)
+    import scipy.signal
+
+    others = [c for c in forces.columns if c.endswith("_l") and not c.startswith("reserve_")]
+    assert others and np.all(forces[others].to_numpy() == 0)
+    raw = read_storage(example.id["normal"])
+    t = raw.index.to_numpy()
+    b, a = scipy.signal.butter(6, 6.0 / (0.5 / np.mean(np.diff(t))))
+    for dof, peak in (("hip_flexion_l", 100.0), ("knee_angle_l", 80.0)):
+        want = np.interp(sol.time_s, t, scipy.signal.filtfilt(b, a, raw[f"{dof}_moment"].to_numpy()))
+        gap = np.abs(forces[f"reserve_{dof}"].to_numpy() - want)
+        assert gap.max() < 0.5 and gap[10:-10].max() < 0.15 and np.ptp(want) > peak, dof
+    # locked coordinates have no reserve (they are prescribed in the model)
+    assert "reserve_subtalar_angle_r" not in forces.columns and "reserve_mtp_angle_r" not in forces.columns
+
+
+@pytest.fixture(scope="module")
+def gait2392_right(gait2392, tmp_path_factory):
+    """EFFORT-GEN on the right leg of gait2392, inverse dynamics computed by OpenSim from the
+    ground forces (the right leg of tests/test_gait2392.py's both-leg solve)."""
+    return _solve(tmp_path_factory.mktemp("g2392"), [
+        "solve", "--model", str(gait2392.model), "--ik", str(gait2392.ik), "--external-loads",
+        str(gait2392.external_loads), "--cycle", "auto", "--side", "r"])
+
+
+def test_knee_contact_force_from_opensim_joint_reaction(gait2392, gait2392_right, tmp_path):
+    """OpenSim's JointReaction over the solution's files, with the trial's ground forces.
+
+    Oracle 1 (Newton's second law): with the muscles' forces set to zero and every coordinate's
+    inverse-dynamics force on its reserve, the knee force on the tibia, the ground force and the
+    weight of the shank and foot (masses from the model file) add up to the shank and foot's
+    mass times their acceleration: within 0.15 body weights at every stance node, 0.06 rms
+    (measured 0.10 and 0.04). Oracle 2: with the solution's forces, the knee's axial force
+    peaks within 2-8 body weights in stance. Measured: 7.1 body weights at 1.22 s (push-off),
+    where the knee-crossing muscles of this EFFORT-GEN solution carry 6.2 body weights
+    (gastrocnemius medialis 1.44 kN, semimembranosus, rectus femoris, tensor fasciae latae,
+    biceps short head): above the 2.61 body weights that instrumented knee implants measured on
+    average in level walking (Kutzner et al. 2010), as models without ligaments that minimise
+    effort often are.
+    """
+    import shutil
+    import xml.etree.ElementTree as ET
+
+    from musclemetab.io import read_storage, write_storage
+    from musclemetab.model import read_model
+    from musclemetab.redundancy.export import inverse_dynamics_at, joint_reaction
+
+    sol, folder = gait2392_right
+    weight = read_model(gait2392.model).body_mass_kg * 9.80665
+    grf = read_storage(gait2392.grf)
+    ground = np.column_stack([np.interp(sol.time_s, grf.index, grf[f"ground_force_v{a}"]) for a in "xyz"])
+    stance = ground[:, 1] > 200.0
+    assert stance.sum() > 50
+    # 1: no muscles, the inverse dynamics on the reserves
+    bare = tmp_path / "no_muscles"
+    shutil.copytree(folder, bare)
+    forces = read_storage(bare / "forces.sto")
+    reserves = [c for c in forces.columns if c.startswith("reserve_")]
+    id_at = inverse_dynamics_at(folder / "inverse_dynamics.sto", [c[len("reserve_"):] for c in reserves], sol.time_s)
+    for c in forces.columns:
+        forces[c] = id_at[c[len("reserve_"):]] if c in reserves else 0.0
+    write_storage(bare / "forces.sto", forces, name="Static Optimization", in_degrees=False)
+    f = joint_reaction(bare, ["knee_r"], tmp_path / "jr0", external_loads=gait2392.external_loads,
+                       frame="ground")["forces"]["knee_r"]
+    root = ET.parse(gait2392.model).getroot()
+    mass = {b.get("name"): float(b.find("mass").text) for b in root.iter("Body")}
+    shank_foot_N = 9.80665 * sum(mass[b] for b in ("tibia_r", "talus_r", "calcn_r", "toes_r"))
+    residual = np.linalg.norm(f + ground - [0.0, shank_foot_N, 0.0], axis=1)[stance] / weight
+    assert residual.max() < 0.15 and np.sqrt(np.mean(residual**2)) < 0.06, residual.max()
+    # 2: the solution's forces
+    res = joint_reaction(folder, ["knee_r"], tmp_path / "jr", external_loads=gait2392.external_loads)
+    np.testing.assert_allclose(res["time_s"], sol.time_s, atol=1e-9)
+    f = res["forces"]["knee_r"]  # on the tibia, in the tibia's frame: y along its long axis
+    assert np.all(np.isfinite(f))
+    axial = -f[:, 1] / weight  # compression positive, body weights
+    peak = float(axial.max())
+    assert 2.0 < peak < 8.0, peak
+    # the peak falls in stance (right heel strike 0.618 s, toe-off 1.410 s: README of the data)
+    assert 0.618 < float(res["time_s"][int(np.argmax(axial))]) < 1.410

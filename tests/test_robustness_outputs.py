@@ -1,0 +1,541 @@
+"""Reliability of the command line and its outputs: numeric settings declared once (the study
+file's table) for ``solve`` and ``estimate``, options that override each other, couplings,
+run-time libraries never named by a study file and loaded only after their symbols are read,
+resource bounds, outputs (a user's folder never deleted, a lock on ``solve --out``, write
+errors as one line), and Ctrl-C.
+
+Each refusal is one line naming the option, key, path or muscle; a decoy file beside the
+output folder shows that nothing is written outside it."""
+
+from __future__ import annotations
+
+import errno
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from musclemetab.commands import build_parser, main
+from musclemetab.errors import OptionError, OutputError
+from musclemetab.io.atomic import FolderLock, atomic_directory
+from musclemetab.study.spec import NUMBER_KEYS, study_from_dict
+
+TESTS = Path(__file__).resolve().parent
+DECOY_TEXT = "a file of the user beside the output folder\n"
+
+
+@pytest.fixture()
+def decoy(tmp_path):
+    """A file beside the output folders of a test; it must stay as it is."""
+    path = tmp_path / "decoy.txt"
+    path.write_text(DECOY_TEXT)
+    yield path
+    assert path.read_text() == DECOY_TEXT
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == []  # no temporary left beside
+
+
+def _files(example, trial="normal"):
+    return ["--model", str(example.model), "--ik", str(example.ik[trial]), "--id", str(example.id[trial])]
+
+
+def _one_line_error(capsys) -> str:
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("musclemetab: error: "), err
+    return err
+
+
+# ----------------------------------------------------------------------------------------------
+# 1. numeric settings: one table for the study file and the command line
+
+#: (command, option, key, a value the table refuses)
+REFUSED = [
+    ("solve", "--mesh-frequency", "mesh_frequency_hz", "0"),
+    ("solve", "--mesh-frequency", "mesh_frequency_hz", "5000"),
+    ("solve", "--max-iter", "max_iter", "0"),
+    ("solve", "--max-iter", "max_iter", "1000000"),
+    ("solve", "--print-level", "print_level", "13"),
+    ("solve", "--grf-threshold", "grf_threshold_N", "-5"),
+    ("solve", "--emg-tolerance", "emg_tolerance", "2"),
+    ("solve", "--emg-weight", "emg_weight", "-1"),
+    ("solve", "--energy-weight", "weight", "nan"),
+    ("solve", "--effort-weight", "effort_weight", "-1"),
+    ("solve", "--energy-smoothing", "smoothing", "0"),
+    ("solve", "--mass", "body_mass_kg", "72600"),
+    ("solve", "--height", "height_m", "174.3"),
+    ("solve", "--workers", "workers", "0"),
+    ("estimate", "--max-iter", "max_iter", "0"),
+    ("estimate", "--emg-tolerance", "emg_tolerance", "-0.5"),
+]
+
+
+@pytest.mark.parametrize("command, option, key, value", REFUSED)
+def test_command_line_numbers_are_checked_by_the_study_files_table(tmp_path, capsys, decoy, command, option, key,
+                                                                   value):
+    out = tmp_path / "out"
+    args = [command, "--model", str(tmp_path / "no_model.osim"), "--ik", "ik.mot", "--id", "id.sto", option, value,
+            "--out", str(out)]
+    if command == "estimate":
+        args += ["--estimate", "tendon_stiffness=soleus_r"]
+    assert main(args) == 1
+    err = _one_line_error(capsys)
+    assert f"{option} = " in err and NUMBER_KEYS[key].range_text() in err, err
+    assert "no_model.osim" not in err  # refused before any file is read
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("option, key, where, value", [
+    ("--grf-threshold", "grf_threshold_N", "trial", -5.0),
+    ("--emg-tolerance", "emg_tolerance", "subject", 2.0),
+    ("--max-iter", "max_iter", "solver", 0),
+])
+def test_study_file_and_command_line_refuse_the_same_value_with_the_same_range(example, tmp_path, capsys, option, key,
+                                                                               where, value):
+    data = {"workflows": ["effort-gen"], "models": ["UM10"],
+            "subjects": [{"name": "s", "model": str(example.model), "body_mass_kg": 72.6, "height_m": 1.743,
+                          "trials": [{"name": "normal", "ik": str(example.ik["normal"]),
+                                      "id": str(example.id["normal"])}]}]}
+    if where == "trial":
+        data["subjects"][0]["trials"][0][key] = value
+    elif where == "subject":
+        data["subjects"][0].update(emg_mode="constrained", emg_tolerance=value)
+        data["subjects"][0]["trials"][0]["emg"] = str(example.emg["normal"])
+    else:
+        data["solver"] = {key: value}
+    with pytest.raises(OptionError) as info:
+        study_from_dict(data, base="/", output=tmp_path / "study")
+    assert main(["solve", *_files(example), option, str(value), "--out", str(tmp_path / "out")]) == 1
+    err = _one_line_error(capsys)
+    expected = NUMBER_KEYS[key].range_text()
+    assert expected in str(info.value) and expected in err
+    assert f"'{key}' = " in str(info.value) and f"{option} = " in err
+
+
+@pytest.mark.parametrize("command", ["solve", "estimate"])
+def test_every_numeric_option_is_declared_in_the_table(command):
+    """Every option of ``solve`` and ``estimate`` that takes a number goes through the table
+    (:func:`musclemetab.commands.options.number_option`), and its help shows the range."""
+    parser = build_parser(command)
+    sub = next(a for a in parser._actions if a.dest == "command").choices[command]
+    declared = sub.get_default("number_options")
+    numeric = {a.dest: a for a in sub._actions if a.type in (int, float)}
+    assert numeric and set(numeric) == set(declared)
+    for dest, (option, key) in declared.items():
+        assert option in numeric[dest].option_strings
+        assert NUMBER_KEYS[key].range_text() in numeric[dest].help
+
+
+@pytest.mark.parametrize("extra, named", [
+    (["--grf", "GRF.mot", "--external-loads", "GRF.xml"], ("--grf", "--external-loads")),
+    (["--tendon-stiffness", "soleus_r=10", "--parameters", "p.json"], ("--tendon-stiffness", "--parameters")),
+    (["--window", "0.5:1.0", "--cycle", "auto"], ("--window", "--cycle")),
+])
+def test_options_that_override_each_other_are_refused_together(tmp_path, capsys, decoy, extra, named):
+    out = tmp_path / "out"
+    assert main(["solve", "--model", "m.osim", "--ik", "ik.mot", "--id", "id.sto", *extra, "--out", str(out)]) == 1
+    err = _one_line_error(capsys)
+    assert f"{named[0]} and {named[1]} cannot be used together" in err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("extra, words", [
+    (["--dofs", "knee_angle_x"], ["--dofs", "knee_angle_x", "knee_angle_r"]),
+    (["--exclude-muscles", "soleus_x"], ["--exclude-muscles", "soleus_x"]),
+])
+def test_names_that_match_nothing_are_errors(example, tmp_path, capsys, decoy, extra, words):
+    out = tmp_path / "out"
+    assert main(["solve", *_files(example), *extra, "--out", str(out)]) == 1
+    err = _one_line_error(capsys)
+    assert all(w in err for w in words), err
+    assert not out.exists()
+
+
+def test_a_force_column_that_is_not_in_the_file_is_an_error(gait2392, tmp_path, capsys, decoy):
+    out = tmp_path / "out"
+    assert main(["solve", "--model", str(gait2392.model), "--ik", str(gait2392.ik), "--id", str(gait2392.id),
+                 "--grf", str(gait2392.grf), "--grf-column", "ground_force_vz_typo", "--cycle", "auto",
+                 "--out", str(out)]) == 1
+    err = _one_line_error(capsys)
+    assert "missing vertical force column ground_force_vz_typo" in err and "near names: " in err, err
+    assert str(gait2392.grf) in err and not out.exists()
+
+
+# ----------------------------------------------------------------------------------------------
+# 6. couplings
+
+@pytest.mark.parametrize("estimate, couple, words", [
+    (["tendon_stiffness=soleus_r"], ["soleus_r,gasmed_x"], ["gasmed_x is estimated for no kind", "--estimate"]),
+    (["tendon_stiffness=soleus_r,gasmed_r", "optimal_fiber_length=soleus_r"], ["soleus_r,gasmed_r"],
+     ["estimated for the same kinds", "soleus_r: optimal_fiber_length, tendon_stiffness", "gasmed_r: tendon_stiffness"]),
+    (["tendon_stiffness=soleus_r"], ["soleus_r"], ["two or more muscles"]),
+])
+def test_couplings_must_name_muscles_estimated_alike(example, tmp_path, capsys, decoy, estimate, couple, words):
+    out = tmp_path / "out"
+    code = main(["estimate", *_files(example), "--ultrasound", str(tmp_path / "us.mot"), "--estimate", *estimate,
+                 "--couple", *couple, "--out", str(out)])
+    err = _one_line_error(capsys)
+    assert code == 1 and f"--couple {couple[0]}" in err and all(w in err for w in words), err
+    assert not out.exists()
+
+
+# ----------------------------------------------------------------------------------------------
+# 2. no native code from data
+
+DECOY_SOURCE = textwrap.dedent("""\
+    #include <stdio.h>
+    #include <stdlib.h>
+    __attribute__((constructor)) static void loaded(void) {
+        const char *path = getenv("MUSCLEMETAB_TEST_DECOY");
+        FILE *f = path ? fopen(path, "w") : NULL;
+        if (f) { fputs("the decoy library was loaded", f); fclose(f); }
+    }
+    int ma27_lookalike(void) { return 0; }
+    """)
+
+
+@pytest.fixture()
+def decoy_library(tmp_path, monkeypatch):
+    """``(library, witness)``: a shared library whose constructor writes ``witness`` when it is
+    loaded (built with ``cc``; without a compiler, a file named like one), and ``ctypes.CDLL``
+    watched: the test fails if anything loads it."""
+    import ctypes
+
+    lib, witness = tmp_path / "libdecoy.so", tmp_path / "decoy_was_loaded"
+    source = tmp_path / "decoy.c"
+    source.write_text(DECOY_SOURCE)
+    if shutil.which("cc"):
+        subprocess.run(["cc", "-shared", "-fPIC", "-o", str(lib), str(source)], check=True)
+    else:
+        lib.write_bytes(b"\x7fELF not a library")
+    monkeypatch.setenv("MUSCLEMETAB_TEST_DECOY", str(witness))
+    loads = []
+    real = ctypes.CDLL
+
+    def watched(name, *args, **kwargs):
+        if Path(str(name)).name == lib.name:
+            loads.append(name)
+        return real(name, *args, **kwargs)
+
+    monkeypatch.setattr(ctypes, "CDLL", watched)
+    yield lib, witness
+    assert loads == [] and not witness.exists()
+
+
+def test_a_study_file_naming_a_library_is_refused_before_anything_is_loaded(example, tmp_path, capsys,
+                                                                            decoy_library):
+    lib, _ = decoy_library
+    toml = tmp_path / "study.toml"
+    toml.write_text(f'output = "out"\nworkflows = ["effort-gen"]\nmodels = ["UM10"]\n'
+                    f'[solver]\nlinear_solver = "ma27"\nlinear_solver_library = "{lib}"\n'
+                    f'[[subjects]]\nname = "s"\nmodel = "{tmp_path / "not_read.osim"}"\nbody_mass_kg = 72.6\n'
+                    f'height_m = 1.743\n[[subjects.trials]]\nname = "t"\nik = "ik.mot"\nid = "id.sto"\n')
+    assert main(["run", str(toml), "--no-progress"]) == 1
+    err = _one_line_error(capsys)
+    assert "[solver] linear_solver_library" in err and "not a library" in err
+    assert "MUSCLEMETAB_LINEAR_SOLVER_LIBRARY" in err and "not_read.osim" not in err
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("given", ["option", "environment"])
+def test_a_library_without_the_solvers_symbols_is_not_loaded(tmp_path, capsys, monkeypatch, decoy_library, given):
+    lib, _ = decoy_library
+    extra = ["--linear-solver-library", str(lib)] if given == "option" else []
+    if given == "environment":
+        monkeypatch.setenv("MUSCLEMETAB_LINEAR_SOLVER_LIBRARY", str(lib))
+    out = tmp_path / "out"
+    assert main(["solve", "--model", "m.osim", "--ik", "ik.mot", "--id", "id.sto", "--linear-solver", "ma27", *extra,
+                 "--out", str(out)]) == 1
+    err = _one_line_error(capsys)
+    assert str(lib) in err and "ma27" in err
+    if shutil.which("cc"):
+        assert "does not export ma27ad_, ma27bd_, ma27cd_" in err and "was not loaded" in err
+    assert not out.exists()
+
+
+def test_the_symbol_reader_reads_a_real_library():
+    """The dynamic symbols of the C library as Python's ctypes finds them: functions every
+    libc exports, and no undefined import among them."""
+    import ctypes.util
+
+    from musclemetab.redundancy.ipopt import _find_library, exported_symbols
+
+    libc = _find_library(ctypes.util.find_library("c"))
+    symbols = exported_symbols(libc)
+    assert {"malloc", "free", "printf", "fopen"} <= symbols
+    assert all(hasattr(ctypes.CDLL(libc), name) for name in ("malloc", "fopen"))
+    with pytest.raises(ValueError, match="not an ELF file"):
+        exported_symbols(__file__)
+
+
+def test_an_ipopt_status_of_a_failed_library_load_is_reported_as_such():
+    """IPOPT ends with ``Invalid_Option`` when it cannot load the linear solver's library (CasADi 3.6,
+    ``linear_solver=ma27, hsllib=/nonexistent``): the advice says so, not 'check the inputs'."""
+    from musclemetab.redundancy.ipopt import failure_advice
+
+    advice = failure_advice("Invalid_Option")
+    assert "could not load the linear solver's library" in advice and "MUSCLEMETAB_LINEAR_SOLVER_LIBRARY" in advice
+
+
+# ----------------------------------------------------------------------------------------------
+# 3. resource bounds
+
+def test_problem_memory_estimate_and_limit():
+    from musclemetab.redundancy.ipopt import MAX_PROBLEM_MEMORY_MB, check_problem_memory, problem_memory_mb
+
+    assert problem_memory_mb([(40, 5, 118)]) == pytest.approx(73 + 0.47 * 118, rel=1e-12)  # the measured problem
+    assert problem_memory_mb([(20, 5, 100), (20, 5, 100)]) == pytest.approx(73 + 0.47 * 200 * 105 / 205, rel=1e-12)
+    check_problem_memory([(40, 5, 1200)])  # a 1.2 s cycle at the finest mesh (1000 per s) is built
+    n = int((MAX_PROBLEM_MEMORY_MB - 73) / 0.47) + 1
+    with pytest.raises(OptionError, match=rf"{n} mesh intervals and need about 8000 MB .* limit of 8000 MB; .*--mesh-frequency"):
+        check_problem_memory([(40, 5, n)])
+
+
+def test_a_problem_past_the_memory_limit_is_refused_before_it_is_built(example, tmp_path, capsys, monkeypatch,
+                                                                       decoy):
+    """0.3 s of the normal trial at 1000 intervals per second (N = 300, 73 + 0.47 x 300 = 214 MB
+    by the estimate) against a limit lowered to 200 MB: refused with the estimate before the
+    problem is built, nothing written."""
+    import musclemetab.redundancy.ipopt as ipopt
+
+    monkeypatch.setattr(ipopt, "MAX_PROBLEM_MEMORY_MB", 200.0)
+    built = []
+    monkeypatch.setattr(ipopt, "build_problem", lambda *a, **k: built.append(1))
+    out = tmp_path / "out"
+    assert main(["solve", *_files(example), "--window", "0.6:0.9", "--mesh-frequency", "1000", "--out",
+                 str(out)]) == 1
+    err = _one_line_error(capsys)
+    assert "300 mesh intervals and need about 214 MB of memory, more than the limit of 200 MB" in err, err
+    assert built == [] and not out.exists()
+
+
+# ----------------------------------------------------------------------------------------------
+# 4. outputs
+
+@pytest.mark.parametrize("name", ["summary.json", "solution.sto"])
+def test_a_user_folder_where_solve_writes_a_file_is_never_deleted(example, tmp_path, capsys, decoy, name):
+    out = tmp_path / "out"
+    (out / name).mkdir(parents=True)
+    (out / name / "notes.txt").write_text("mine")
+    assert main(["solve", *_files(example), "--out", str(out)]) == 1
+    err = _one_line_error(capsys)
+    assert f"{out / name} is a folder" in err and "not removed" in err
+    assert (out / name / "notes.txt").read_text() == "mine"
+    assert sorted(p.name for p in out.iterdir()) == [name]  # no lock, no temporary folder left
+
+
+def test_atomic_directory_refuses_to_replace_a_folder_before_moving_anything(tmp_path, decoy):
+    out = tmp_path / "out"
+    (out / "b.txt").mkdir(parents=True)
+    (out / "b.txt" / "keep").write_text("mine")
+    (out / "a.txt").write_text("old")
+    with pytest.raises(OptionError, match=r"b\.txt is a folder.*not removed"):
+        with atomic_directory(out) as tmp:
+            (tmp / "a.txt").write_text("new")
+            (tmp / "b.txt").write_text("new")
+    assert (out / "a.txt").read_text() == "old" and (out / "b.txt" / "keep").read_text() == "mine"
+    assert sorted(p.name for p in out.iterdir()) == ["a.txt", "b.txt"]
+
+
+@pytest.mark.parametrize("code, words", [
+    (errno.ENOSPC, "the disk is full"),
+    (errno.EROFS, "the file system is read-only"),
+    (errno.EACCES, "permission denied"),
+    (errno.EFBIG, "a file would exceed the file-size limit (ulimit -f)"),
+])
+@pytest.mark.parametrize("when", ["writing", "moving"])
+def test_write_errors_are_one_line_naming_the_folder(tmp_path, monkeypatch, decoy, code, words, when):
+    """A full disk, a folder made read-only mid-run, a file-size limit: raised while the files
+    are written (into the temporary folder) or moved into place; the old files stay."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "a.txt").write_text("old")
+    if when == "moving":
+        def failing_replace(src, dst):
+            raise OSError(code, os.strerror(code), str(dst))
+
+        monkeypatch.setattr(os, "replace", failing_replace)
+    with pytest.raises(OutputError) as info:
+        with atomic_directory(out) as tmp:
+            (tmp / "a.txt").write_text("new")
+            if when == "writing":
+                raise OSError(code, os.strerror(code), str(tmp / "b.txt"))
+    message = str(info.value)
+    assert f"cannot write the output folder {out} ({words});" in message and "\n" not in message
+    assert (out / "a.txt").read_text() == "old" and sorted(p.name for p in out.iterdir()) == ["a.txt"]
+
+
+_CHILD = textwrap.dedent("""\
+    import resource, sys
+    sys.path.insert(0, {tests!r})
+    import solve_memo
+    import musclemetab.redundancy.run as run
+    solve_memo.install({memo!r})  # the solve of the test run (stored with no limit)
+    write = run.write_solution_folder
+
+    def limited(*args):  # the limit from the writing of the output on
+        resource.setrlimit(resource.RLIMIT_FSIZE, ({limit}, {limit}))
+        return write(*args)
+
+    run.write_solution_folder = limited
+    from musclemetab.commands import main
+    sys.exit(main({args!r}))
+    """)
+
+
+def test_a_file_size_limit_is_one_line_with_the_previous_output_kept(example, tmp_path, decoy):
+    """``solve`` under ``ulimit -f`` (RLIMIT_FSIZE, 64 kB; solution.sto is about 650 kB) in its
+    own process: exit 1 with one line naming the folder (before: a traceback ending in
+    ``OSError: [Errno 27] File too large``), the previous output as it was, no lock, no
+    temporary folder."""
+    out = tmp_path / "out"
+    out.mkdir()
+    previous = {"solution.sto": "previous solution\n", "summary.json": '{"previous": true}\n'}
+    for name, text in previous.items():
+        (out / name).write_text(text)
+    memo = os.environ.get("MUSCLEMETAB_TEST_SOLVE_MEMO", str(tmp_path / "memo"))
+    code = _CHILD.format(tests=str(TESTS), memo=memo, limit=64 * 1024,
+                         args=["solve", *_files(example), "--out", str(out)])
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    err = proc.stderr.strip().splitlines()
+    assert proc.returncode == 1, proc.stderr
+    assert err[-1] == (f"musclemetab: error: cannot write the output folder {out} (a file would exceed the file-size "
+                       "limit (ulimit -f)); the files of this step were not written (the folder keeps what it held): "
+                       "free space or choose a folder you can write to, and run again")
+    assert {p.name: p.read_text() for p in out.iterdir()} == previous
+
+
+def test_a_second_solve_on_the_same_output_folder_refuses(example, tmp_path, capsys, decoy):
+    """Another process holds ``--out`` (as a running ``solve`` does): ``solve`` refuses, naming the
+    lock and the process, and leaves the lock and the folder as they were."""
+    out = tmp_path / "out"
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys, time\nfrom musclemetab.io.atomic import FolderLock\n"
+         f"with FolderLock({str(out)!r}, 'output folder'):\n    print('held', flush=True)\n    sys.stdin.read()"],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        lock = json.loads((out / ".musclemetab.lock").read_text())
+        assert main(["solve", *_files(example), "--out", str(out)]) == 1
+        err = _one_line_error(capsys)
+        assert f"the output folder {out} is in use by another musclemetab run (process {holder.pid}" in err
+        assert json.loads((out / ".musclemetab.lock").read_text()) == lock
+    finally:
+        holder.communicate("", timeout=30)
+    assert holder.returncode == 0 and not out.exists()  # the holder made the folder and left it empty
+
+
+def test_the_lock_of_solve_is_released_and_an_empty_folder_removed_on_an_error(tmp_path, capsys, decoy):
+    out = tmp_path / "new" / "out"
+    assert main(["solve", "--model", str(tmp_path / "no_model.osim"), "--ik", "ik.mot", "--id", "id.sto",
+                 "--out", str(out)]) == 1
+    assert "no_model.osim" in _one_line_error(capsys)
+    assert not (tmp_path / "new").exists()
+    (tmp_path / "kept").mkdir()
+    with FolderLock(tmp_path / "kept") as lock:  # a folder that existed stays, empty
+        assert lock.path.is_file()
+    assert list((tmp_path / "kept").iterdir()) == []
+
+
+# ----------------------------------------------------------------------------------------------
+# 5. Ctrl-C
+
+def _interrupt(args, ready, timeout=120.0):
+    """Start ``python -m musclemetab ARGS`` in its own process group, wait until ``ready()`` (or
+    the process ends), send SIGINT to the group as a terminal would; ``(status, stderr, seconds
+    from the signal to the exit)``."""
+    proc = subprocess.Popen([sys.executable, "-m", "musclemetab", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + timeout
+        while not ready() and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        t0 = time.monotonic()
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+        return proc.returncode, err, time.monotonic() - t0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+
+
+@pytest.mark.parametrize("side", ["r", "both"])
+def test_ctrl_c_during_solve_exits_130_at_once_and_keeps_the_previous_output(example, tmp_path, decoy, side):
+    """A finer mesh (300 per s) than any other test solves, so the solve is still running when the
+    signal comes (after the lock is taken, i.e. past the option checks)."""
+    out = tmp_path / "out"
+    legs = [out / "r", out / "l"] if side == "both" else [out]
+    previous = {}
+    for leg in legs:
+        leg.mkdir(parents=True, exist_ok=True)
+        for name in ("solution.sto", "summary.json"):
+            (leg / name).write_text(f"previous {leg.name} {name}\n")
+            previous[leg / name] = (leg / name).read_text()
+    args = ["solve", *_files(example), "--mesh-frequency", "300", "--side", side, "--out", str(out)]
+    if side == "both":
+        args[1:7] = _files(example)
+        args += ["--cycle", "auto", "--workers", "2"]
+    lock = out / ".musclemetab.lock"
+    code, err, seconds = _interrupt(args, lambda: lock.exists() and time.sleep(1.5) is None)
+    assert code == 130, err
+    assert err.strip().splitlines()[-1] == "musclemetab: interrupted" and "Traceback" not in err
+    assert seconds < 2.0
+    assert {p: p.read_text() for p in previous} == previous
+    assert not lock.exists() and not list(out.rglob(".partial-*"))
+
+
+def test_ctrl_c_during_report_exits_130_and_keeps_the_previous_report(demo, tmp_path, decoy):
+    """``report --force`` redraws the figures of a copy of the demo's study folder; SIGINT 2.5 s
+    after its start (reading the study, or drawing): status 130 within 2 s, the previous page as
+    it was."""
+    folder = tmp_path / "study"
+    shutil.copytree(demo[0], folder)
+    page = (folder / "report.html").read_bytes()
+    start = time.monotonic()
+    code, err, seconds = _interrupt(["report", str(folder), "--force"], lambda: time.monotonic() - start > 2.5)
+    assert code == 130 and "Traceback" not in err, err
+    assert err.strip().splitlines()[-1] == "musclemetab: interrupted"
+    assert seconds < 2.0
+    assert (folder / "report.html").read_bytes() == page
+
+
+def test_ctrl_c_while_outputs_are_moved_into_place_waits_for_the_last_one(tmp_path):
+    """SIGINT while the legs' folders are written (``solve --side both``) comes after the last
+    one: both folders new, then KeyboardInterrupt."""
+    from musclemetab.processes import sigint_deferred
+
+    legs = [tmp_path / "r", tmp_path / "l"]
+    with pytest.raises(KeyboardInterrupt):
+        with sigint_deferred():
+            for i, leg in enumerate(legs):
+                with atomic_directory(leg) as tmp:
+                    (tmp / "summary.json").write_text("new")
+                if i == 0:
+                    os.kill(os.getpid(), signal.SIGINT)
+    assert [(leg / "summary.json").read_text() for leg in legs] == ["new", "new"]
+
+
+def test_progress_labels_an_interrupted_unit_interrupted_not_failed():
+    import io
+
+    from musclemetab.study.runner import _Progress
+
+    stream = io.StringIO()
+    bar = _Progress(3, True, stream)
+    bar.update("s/a/effort-gen", {"status": "ok"})
+    bar.update("s/b/effort-gen", {"status": "interrupted"})
+    bar.update("s/c/effort-gen", {"status": "failed"})
+    lines = stream.getvalue().splitlines()
+    assert lines[1].endswith("s/b/effort-gen interrupted") and "0 failed, 1 interrupted" in lines[1]
+    assert lines[2].endswith("s/c/effort-gen FAILED") and "1 failed, 1 interrupted" in lines[2]
+
+
+def test_run_refuses_the_workers_the_table_refuses(tmp_path, capsys):
+    assert main(["run", str(tmp_path / "study.toml"), "--workers", "0"]) == 1
+    err = _one_line_error(capsys)
+    assert "--workers = 0" in err and NUMBER_KEYS["workers"].range_text() in err and "study.toml" not in err
