@@ -1077,6 +1077,33 @@ def test_figures_handed_out_largest_first_by_their_measured_drawing_times(tmp_pa
     assert json.loads(seen.read_text()) == ["group_shares"] + sorted(by_time, key=lambda n: -by_time[n])
 
 
+def test_muscle_heat_map_one_row_of_panels_per_trial_by_speed(tmp_path):
+    """With several trials the heat map has one row of panels per trial, ordered by walking
+    speed (not by name), one panel per model titled ``trial: model``; each panel's array is
+    that trial's per-muscle rates (metabolics.sto: total - basal, divided by the body mass)."""
+    from musclemetab.report.folder import read_study_folder
+    from musclemetab.report.plan import heat_map_figure, select
+
+    trials = {"b_fast": 1.75, "a_slow": 0.75}  # names sort against speed
+    root = make_study(tmp_path / "s", solutions=False, trials=trials)
+    study = read_study_folder(root)
+    sel = select(study)
+    fig, caption = heat_map_figure(study, sel)
+    panels = [ax for ax in fig.axes if ax.images]
+    assert [ax.get_title() for ax in panels] == [f"{t}: {m}" for t in ("a_slow", "b_fast") for m in MODELS]
+    assert "one row of panels per trial (a_slow, b_fast" in caption
+    mass = SUBJECTS[sel.subject][0]
+    for ax in panels:
+        trial, model = ax.get_title().split(": ")
+        cols = write_metabolics_sto(tmp_path / "cols", trials[trial] * (1 + 0.04 * list(SUBJECTS).index(sel.subject)))
+        order = [x.get_text() for x in panels[0].get_yticklabels()]
+        assert len(order) == len(MUSCLE_PARTS)
+        want = np.vstack([cols[f"{model}/{mu}/total"] - cols[f"{model}/{mu}/basal"] for mu in MUSCLE_PARTS]) / mass
+        got = np.asarray(ax.images[0].get_array())
+        # the same rows, in the figure's muscle-group order
+        np.testing.assert_allclose(np.sort(got, axis=0), np.sort(want, axis=0), rtol=1e-9)
+
+
 def test_muscle_heat_map_holds_each_muscles_rate_over_the_cycle(tmp_path):
     """The heat map's arrays are the unit's per-muscle rates (metabolics.sto: total - basal)
     at the nodes inside the gait cycle, divided by the body mass, muscles ordered by group

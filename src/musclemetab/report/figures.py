@@ -1322,55 +1322,65 @@ def harmonise_muscles(per_muscle, value: str = "muscle_W_per_kg"):
     return summed
 
 
-def muscle_heat_map(rates: Mapping[str, object], toe_off_pct: float, models: Sequence[str] | None = None, *,
+def muscle_heat_map(rates: Mapping[str, object], toe_off_pct, models: Sequence[str] | None = None, *,
                     scale: float = 1.0, unit: str = "W", title: str | None = None):
     """Each muscle's metabolic rate over the gait cycle as a heat map: muscles (rows, ordered by
-    muscle group, :data:`GROUPS`, then by anatomical name) x cycle (columns), one panel per model,
-    one colour scale (a rate below -2 % of the peak sky blue); a dashed line at ``toe_off_pct`` (the
-    stance/swing boundary). Bundles of one anatomical muscle are named with their model name.
+    muscle group, :data:`GROUPS`, then by anatomical name) x cycle (columns), one panel per trial
+    and model, one colour scale (a rate below -2 % of the peak sky blue); a dashed line at the
+    toe-off (the stance/swing boundary). Bundles of one anatomical muscle are named with their
+    model name.
 
-    ``rates``: model -> table indexed by the cycle percentage, one column per muscle (W),
-    drawn times ``scale`` in ``unit``. The panels' images keep the drawn array
-    (``AxesImage.get_array()``: rows in the order of the tick labels, top first).
+    ``rates``: model -> table indexed by the cycle percentage, one column per muscle (W), for one
+    trial (``toe_off_pct`` a number; panels titled by model); or trial -> such a mapping, for
+    several (``toe_off_pct`` a number or trial -> number; one row of panels per trial, in the
+    given order, titled ``trial: model``). Drawn times ``scale`` in ``unit``. The panels' images
+    keep the drawn array (``AxesImage.get_array()``: rows in the order of the tick labels, top
+    first).
     """
     if not rates:
         raise OptionError("no per-muscle rates given for the heat map")
-    models, to = _models_and_toe_off(_ordered_models(list(rates)), models, toe_off_pct, "per-muscle rates", "given:")
-    muscles = list(dict.fromkeys(str(c) for m in models for c in rates[m].columns))
+    several = all(isinstance(v, Mapping) for v in rates.values())
+    per_trial = {str(t): r for t, r in rates.items()} if several else {"": rates}
+    panels = []  # (title, model, cycle %, array rows in `order` later, toe-off %)
+    for trial, by_model in per_trial.items():
+        if not by_model:
+            raise OptionError(f"no per-muscle rates given for the heat map of trial {trial}")
+        to_pct = toe_off_pct[trial] if isinstance(toe_off_pct, Mapping) else toe_off_pct
+        ms, to = _models_and_toe_off(_ordered_models(list(by_model)), models, to_pct, "per-muscle rates", "given:")
+        panels += [(f"{trial}: {m}" if several else m, m, by_model[m], to) for m in ms]
+    muscles = list(dict.fromkeys(str(c) for _, _, tab, _ in panels for c in tab.columns))
     labels = anatomical_muscles(muscles)
     rank = {g: i for i, g in enumerate(GROUPS)}
     order = sorted(muscles, key=lambda n: (rank.get(labels[n][1], len(GROUPS)), labels[n][0], n))
-    arrays = {}
-    for m in models:
-        tab = rates[m]
+    arrays = []
+    for _, _, tab, _ in panels:
         pct = np.asarray(tab.index, float)
-        arrays[m] = (pct, scale * np.vstack([tab[n].to_numpy(float) if n in tab.columns else np.full(pct.size, np.nan)
-                                             for n in order]))
-    hi = max(float(np.nanmax(a)) for _, a in arrays.values())
+        arrays.append((pct, scale * np.vstack([tab[n].to_numpy(float) if n in tab.columns else np.full(pct.size, np.nan)
+                                               for n in order])))
+    hi = max(float(np.nanmax(a)) for _, a in arrays)
     floor = -0.02 * hi  # a rate below 2 % of the peak under zero shows apart; closer to 0 it counts as 0
-    negative = any(float(np.nanmin(a)) < floor for _, a in arrays.values())
+    negative = any(float(np.nanmin(a)) < floor for _, a in arrays)
     from matplotlib import colormaps
 
     cmap = colormaps["magma_r"].with_extremes(under=OKABE_ITO["sky blue"])  # a negative rate: sky blue
-    ncol = min(len(models), 3)
-    nrow = int(math.ceil(len(models) / ncol))
+    per_row = len(panels) // len(per_trial)
+    ncol = per_row if several else min(per_row, 3)
+    nrow = int(math.ceil(len(panels) / ncol))
     fig = _new_figure(2.4 * ncol + 3.3, (0.125 * len(order) + 0.45) * nrow + 1.0, left=2.4, right=0.9,
-                      wspace=0.06, hspace=0.1 if len(order) > 20 else 0.3)
+                      wspace=0.06, hspace=0.1 if len(order) > 20 and not several else 0.3)
     # the same rows in every panel (no shared y axis: the muscles' ticks are made once per row of panels)
     axes = fig.subplots(nrow, ncol, squeeze=False, sharex=True)
     image = None
     shared = {labels[n][0] for n in order if sum(labels[x][0] == labels[n][0] for x in order) > 1}
     names = [f"{labels[n][0].rsplit(' (', 1)[0]}: {n}" if labels[n][0] in shared else labels[n][0] for n in order]
-    for k, m in enumerate(models):
-        ax = axes.flat[k]
-        pct, a = arrays[m]
+    for ax, (head, m, _, to), (pct, a) in zip(axes.flat, panels, arrays):
         image = ax.imshow(a, aspect="auto", interpolation="nearest", cmap=cmap, vmin=floor, vmax=hi,
-                          extent=(float(pct[0]), float(pct[-1]), len(order) - 0.5, -0.5), gid=f"heat:{m}")
+                          extent=(float(pct[0]), float(pct[-1]), len(order) - 0.5, -0.5), gid=f"heat:{head}")
         _vline(ax, to, color=OKABE_ITO["bluish green"], lw=1.3, ls="--", label="_toe-off", gid="toe-off")
-        _panel_title(ax, m, color=model_colour(m), fontsize=10, fontweight="bold")
+        _panel_title(ax, head, color=model_colour(m), fontsize=10, fontweight="bold")
     group_of = [labels[n][1] for n in order]
     for k, ax in enumerate(axes.flat):
-        if k >= len(models):
+        if k >= len(panels):
             ax.set_visible(False)
             continue
         if k % ncol == 0:
@@ -1380,7 +1390,7 @@ def muscle_heat_map(rates: Mapping[str, object], toe_off_pct: float, models: Seq
         for i in range(1, len(order)):  # a thin line between the muscle groups
             if group_of[i] != group_of[i - 1]:
                 _hline(ax, i - 0.5, color="white", lw=0.8)
-        if k + ncol >= len(models):
+        if k + ncol >= len(panels):
             ax.set_xlabel("gait cycle (%)")
             ax.tick_params(labelbottom=True)
     axes[0, 0].set_xlim(0.0, 100.0)

@@ -364,32 +364,53 @@ def group_rates_figure(study: StudyFolder, sel: Selection):
 
 
 def heat_map_figure(study: StudyFolder, sel: Selection):
-    """Every muscle of the selected unit's first leg over its gait cycle (main workflow), one
-    panel per model, from the unit's ``metabolics.sto``."""
+    """Every muscle of the selected subject's first leg over its gait cycle (main workflow), one
+    row of panels per trial (ordered by walking speed), one panel per model, from the units'
+    ``metabolics.sto``."""
     from .figures import muscle_heat_map
 
-    subject, trial, wf = sel.subject, sel.trial, sel.workflow
-    d = sel.rows(subject, trial, wf)
+    subject, wf = sel.subject, sel.workflow
+    d = sel.rows(subject, workflow=wf)
     if d.empty:
-        raise OptionError(f"no successful unit for {subject}, trial {trial}, workflow {wf}")
-    row = d.iloc[0]
-    rates = study.muscle_rates(row)
-    s, t, e = study.unit_cycle(study.unit_folder(row))
-    to = 100.0 * (t - s) / (e - s)
-    models = [m for m in sel.models if m in rates]
-    if not models:
-        raise OptionError(f"the unit's metabolic rates hold none of the models {', '.join(sel.models)}")
+        raise OptionError(f"no successful unit for {subject}, workflow {wf}")
+    trials = list(dict.fromkeys(d["trial"].astype(str)))
+    if "speed_m_per_s" in d.columns:  # by walking speed; trials without one keep the study's order, last
+        speed = d.groupby(d["trial"].astype(str))["speed_m_per_s"].median()
+        study_order = list(trials)
+
+        def by_speed(trial):
+            v = float(speed.get(trial, math.nan))
+            return (0, v) if not math.isnan(v) else (1, study_order.index(trial))
+
+        trials.sort(key=by_speed)
+    rates, toe_off = {}, {}
+    for trial in trials:
+        row = d[d["trial"].astype(str) == trial].iloc[0]
+        by_model = study.muscle_rates(row)
+        by_model = {m: by_model[m] for m in sel.models if m in by_model}
+        if not by_model:
+            raise OptionError(f"the metabolic rates of trial {trial} hold none of the models "
+                              f"{', '.join(sel.models)}")
+        s, t, e = study.unit_cycle(study.unit_folder(row))
+        rates[trial], toe_off[trial] = by_model, 100.0 * (t - s) / (e - s)
+    models = list(dict.fromkeys(m for by_model in rates.values() for m in by_model))
     scale, unit = (1.0 / sel.mass, "W/kg") if sel.mass else (1.0, "W")
     side = "the right leg" if sel.both_legs else "the simulated leg"
-    fig = muscle_heat_map(rates, to, models, scale=scale, unit=unit,
+    several = len(trials) > 1
+    fig = muscle_heat_map(rates if several else rates[trials[0]], toe_off if several else toe_off[trials[0]],
+                          models, scale=scale, unit=unit,
                           title=f"Each muscle over the gait cycle ({unit}, {side}, no basal heat): "
-                          f"subject {subject}, trial {trial}, {wf}")
-    cap = (f"Subject {subject}, trial {trial} (preferred speed), workflow {wf}. Metabolic rate of each muscle of "
-           f"{side} ({unit}{_per_kg(sel)}, without basal heat) at every node of the gait cycle (initial contact "
-           "to the next initial contact), one panel per model, one colour scale; muscles ordered by muscle "
-           "group (in brackets: the first group of the muscle's function) and named by the anatomical muscle "
-           "table, bundles of one muscle by their model name; sky blue: a rate below -2 % of the peak (work "
-           f"absorbed); dashed line: toe-off ({to:.1f} %), the boundary between stance and swing.")
+                          f"subject {subject}, {'trials ' + ', '.join(trials) if several else 'trial ' + trials[0]}, {wf}")
+    marks = ", ".join(f"{tr} {to:.1f} %" for tr, to in toe_off.items())
+    cap = (f"Subject {subject}, workflow {wf}; "
+           + (f"one row of panels per trial ({', '.join(trials)}; by walking speed where known), "
+              if several else f"trial {trials[0]}, ")
+           + f"one panel per model. Metabolic rate of each muscle of {side} ({unit}{_per_kg(sel)}, without "
+           "basal heat) at every node of the gait cycle (initial contact to the next initial contact), one "
+           "colour scale for every panel; muscles ordered by muscle group (in brackets: the first group of the "
+           "muscle's function) and named by the anatomical muscle table, bundles of one muscle by their model "
+           f"name; sky blue: a rate below -2 % of the peak (work absorbed); dashed line: toe-off ({marks}), the "
+           "boundary between stance and swing.")
     return fig, cap
 
 
