@@ -121,7 +121,7 @@ def test_every_numeric_key_of_the_study_file_is_in_the_table():
 
     numeric = {k for k in spec._TRIAL_KEYS if k.endswith(("_s", "_per_s", "_per_min", "_per_kg", "_N"))}
     numeric |= {"body_mass_kg", "height_m", "emg_tolerance", "basal_coefficient", "basal_exponent",
-                "tendon_stiffness", "max_iter", "tol"} | (spec._ENERGY_KEYS - {"model"})
+                "tendon_stiffness", "max_iter", "tol"} | (spec._ENERGY_KEYS - {"model", "form"})
     assert numeric <= set(NUMBER_KEYS)
     for k in NUMBER_KEYS.values():  # a usual value passes, the bounds are ordered
         assert k.low < k.high and k.help

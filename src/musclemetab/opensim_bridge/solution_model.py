@@ -55,7 +55,9 @@ def _with_degroote_muscles(model_path: str):
             msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
             raise ModelError(f"{model_path}: OpenSim cannot load this model ({msg}); check that it is a valid .osim "
                              "file") from None
-        osim.DeGrooteFregly2016Muscle.replaceMuscles(model)
+        # muscles already of the class (and any class OpenSim cannot convert) are kept as they are:
+        # the solved ones are checked below
+        osim.DeGrooteFregly2016Muscle.replaceMuscles(model, True)
         _CONVERTED.clear()
         _CONVERTED[key] = model
     model = osim.Model(_CONVERTED[key])
@@ -106,7 +108,12 @@ def solution_model(model_path: str, out_path: str, parameters: dict, ik_time, co
         raise UnknownMuscleError(f"{model_path}: no muscle {', '.join(missing)} of the solution; give the model the "
                                  "solution was solved with")
     for name, p in parameters.items():
-        _set_parameters(osim.DeGrooteFregly2016Muscle.safeDownCast(mset.get(name)), p)
+        muscle = osim.DeGrooteFregly2016Muscle.safeDownCast(mset.get(name))
+        if muscle is None:
+            raise ModelError(f"{model_path}: OpenSim cannot turn muscle {name} ({mset.get(name).getConcreteClassName()}) "
+                             "into a DeGrooteFregly2016Muscle, so no OpenSim model of the solution is written for it; "
+                             "solve with a model of Millard, Thelen or DeGroote-Fregly muscles")
+        _set_parameters(muscle, p)
     cset = model.getCoordinateSet()
     locked, prescribed = {}, []
     for i in range(cset.getSize()):
