@@ -229,11 +229,13 @@ def _isolated_cache(tmp_path_factory):
 
 
 #: the test modules that take longest (measured with ``--durations``), started first so that
-#: the parallel processes of a run (pytest-xdist, ``--dist loadfile``) finish together; the
-#: other modules follow in collection order
-_LONGEST_FIRST = ("test_emg_ten.py", "test_gait2392.py", "test_trials.py", "test_demo.py", "test_redundancy.py",
-                  "test_study.py", "test_report.py", "test_robustness_values.py", "test_estimate.py",
-                  "test_report_browser.py")
+#: the parallel processes of a run (pytest-xdist, ``--dist loadfile``) finish together, the
+#: ones that make the shared fixtures (``demo``, ``two_subjects``) early; the other modules
+#: follow in collection order
+_LONGEST_FIRST = ("test_emg_ten.py", "test_demo.py", "test_trials.py", "test_gait2392.py", "test_estimate.py",
+                  "test_report.py", "test_redundancy.py", "test_study.py", "test_robustness_outputs.py",
+                  "test_robustness_values.py", "test_calibration.py", "test_weights.py", "test_energy_goal.py",
+                  "test_emg_informed.py", "test_report_browser.py", "test_diagnosis.py", "test_opensim_files.py")
 
 
 def pytest_collection_modifyitems(config, items):
