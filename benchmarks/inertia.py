@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import re
 import sys
 import tempfile
 import time
@@ -79,22 +78,10 @@ def use_variant(variant: str):
     transcription._node_expressions = node_expressions
 
 
-_ITERATION = re.compile(r"^\s*(\d+)r?\s+[-+0-9.e]+\s+[0-9.e+-]+\s+[0-9.e+-]+\s+[-0-9.]+\s+[0-9.e+-]+\s+(\S+)\s")
-_EXCESS = re.compile(r"negevals_ = (\d+), but numberOfNegEVals = (\d+)")
-
-
-def count_factorisations(log: str) -> dict:
-    """Factorisations and inertia corrections in an IPOPT log written at print level 6."""
-    ok = log.count("Factorization successful.")
-    wrong_inertia = log.count("Factorization failed with retval = 2")
-    perturbed = sum(1 for line in log.splitlines() if (m := _ITERATION.match(line)) and m.group(2) != "-")
-    excess = [int(a) - int(b) for a, b in _EXCESS.findall(log)]
-    return {"factorisations": ok + wrong_inertia, "wrong_inertia": wrong_inertia,
-            "perturbed_iterations": perturbed, "max_excess_negative": max(excess, default=0)}
-
-
 def solve_counted(solve, options: dict) -> dict:
     """Run ``solve(ipopt_options)`` with IPOPT's detailed log in a temporary file; counts and results."""
+    from kkt import count_factorisations
+
     from musclemetab.redundancy.ipopt import SolverOptions
 
     with tempfile.TemporaryDirectory() as tmp:

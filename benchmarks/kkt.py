@@ -29,7 +29,7 @@ of the iterate) is solved with:
   symmetric-indefinite factorisation that would also give its inertia are printed apart.
 
 The reference is MUMPS inside IPOPT over the full solve: the factorisations counted in IPOPT's
-detailed log (:func:`inertia.count_factorisations`) and IPOPT's time outside the NLP functions
+detailed log (:func:`count_factorisations`) and IPOPT's time outside the NLP functions
 per factorisation, an upper bound of one factorisation (IPOPT's own timers book neither of its
 factorisations: IPOPT 3.14 has MUMPS factorise and solve in one call).
 
@@ -42,6 +42,7 @@ Times are the median of ``--repeat`` runs; the residual is
 from __future__ import annotations
 
 import argparse
+import re
 import os
 import statistics
 import sys
@@ -105,6 +106,20 @@ def iterate(nlp, options, k):
             mu, int(st["iter_count"]))
 
 
+_ITERATION = re.compile(r"^\s*(\d+)r?\s+[-+0-9.e]+\s+[0-9.e+-]+\s+[0-9.e+-]+\s+[-0-9.]+\s+[0-9.e+-]+\s+(\S+)\s")
+_EXCESS = re.compile(r"negevals_ = (\d+), but numberOfNegEVals = (\d+)")
+
+
+def count_factorisations(log: str) -> dict:
+    """Factorisations and inertia corrections in an IPOPT log written at print level 6."""
+    ok = log.count("Factorization successful.")
+    wrong_inertia = log.count("Factorization failed with retval = 2")
+    perturbed = sum(1 for line in log.splitlines() if (m := _ITERATION.match(line)) and m.group(2) != "-")
+    excess = [int(a) - int(b) for a, b in _EXCESS.findall(log)]
+    return {"factorisations": ok + wrong_inertia, "wrong_inertia": wrong_inertia,
+            "perturbed_iterations": perturbed, "max_excess_negative": max(excess, default=0)}
+
+
 def ipopt_linear_algebra_time(nlp, options):
     """What MUMPS costs inside IPOPT over a full solve: the number of factorisations (counted
     in IPOPT's detailed log, those refused for wrong inertia included) and the time IPOPT
@@ -117,9 +132,6 @@ def ipopt_linear_algebra_time(nlp, options):
     import tempfile
 
     import casadi as ca
-
-    sys.path.insert(0, str(HERE))
-    from inertia import count_factorisations
 
     from musclemetab.redundancy.ipopt import MUMPS_OPTIONS, ipopt_options
 

@@ -34,7 +34,6 @@ __all__ = [
     "reserve_flag",
     "solution_flags",
     "flags_from_records",
-    "read_flags",
     "quality_text",
     "warn_flags",
     "check_strict",
@@ -196,16 +195,6 @@ def solution_flags(solution, *, passive_limit: float = PASSIVE_FORCE_LIMIT,
 def flags_from_records(records) -> list[Flag]:
     """Flags from their dictionaries (``summary.json``'s or ``unit.json``'s ``plausibility``)."""
     return [Flag.from_dict(d) for d in (records or [])]
-
-
-def read_flags(folder) -> list[Flag]:
-    """The flags a solution folder's ``summary.json`` recorded (``[]``: none, or not checked)."""
-    from pathlib import Path
-
-    from ..io import read_json_object
-    from .solution import SUMMARY_FILE
-
-    return flags_from_records(read_json_object(Path(folder) / SUMMARY_FILE).get("plausibility"))
 
 
 def quality_text(flags: Sequence[Flag]) -> str:

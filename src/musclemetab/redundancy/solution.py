@@ -71,6 +71,7 @@ __all__ = [
     "muscle_column",
     "reserve_column",
     "derived_quantities",
+    "read_flags",
 ]
 
 SOLUTION_FILE = "solution.sto"
@@ -388,6 +389,15 @@ def _moments_source(inputs: dict) -> str:
     if inputs.get("external_loads") and path.with_name(path.name + ".sha256").is_file():
         return f"the inverse dynamics computed from {inputs.get('ik', 'the IK motion')} and {inputs['external_loads']}"
     return str(id_path)
+
+
+def read_flags(folder) -> list:
+    """The plausibility flags (:class:`~.plausibility.Flag`) a solution folder's ``summary.json``
+    recorded (``[]``: none, or not checked)."""
+    from ..io import read_json_object
+    from .plausibility import flags_from_records
+
+    return flags_from_records(read_json_object(Path(folder) / SUMMARY_FILE).get("plausibility"))
 
 
 def build_solution(
