@@ -198,9 +198,6 @@ def run(args) -> int:
     (``DIR/.musclemetab.lock``, :class:`~musclemetab.io.atomic.FolderLock`): a second ``solve``
     on the same ``--out`` refuses, naming the lock.
     """
-    from ..io import check_output_folder
-    from ..io.atomic import FolderLock
-
     from pathlib import Path
 
     from ..io import check_output_folder
