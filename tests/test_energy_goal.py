@@ -10,7 +10,6 @@
 
 from __future__ import annotations
 
-import os
 import types
 import warnings
 from pathlib import Path
@@ -261,40 +260,6 @@ def test_energy_solve_of_the_normal_trial_converges(example):
     assert energy < leg_W_per_kg(effort) - 0.05
     assert s["objective"] == pytest.approx(sum(s["objective_terms"].values()), rel=1e-9)
     assert s["objective"] < effort.summary["objective"] + 1e-3 * leg_W_per_kg(effort)
-
-
-@pytest.mark.opensim
-@pytest.mark.slow
-@pytest.mark.skipif(not os.environ.get("MUSCLEMETAB_LONG_TESTS"),
-                    reason="1705 IPOPT iterations (about 320 s of one core): set MUSCLEMETAB_LONG_TESTS=1")
-def test_bh04_energy_solve_does_not_saturate_the_lengthening_rectus_femoris(example):
-    """BH04 goal alone (``wE = 1``, ``wAct = 0``, objective form, default smoothing), warm-started
-    from the effort optimum: converged, and the rectus femoris, which lengthens while active, is
-    not driven to saturation there: its peak activation at the nodes where its fiber lengthens
-    stays below 0.5 (0.29; effort optimum 0.30; the same solve in the model form: 1.00). The energy
-    optimum still fully activates other muscles (docs/energy_objective.md)."""
-    from musclemetab.redundancy import SolverOptions, solve_files
-
-    effort = solve_files(example.model, example.ik["normal"], example.id["normal"], "effort-cal")
-    goal = _goal("BH04", weight=1.0, effort_weight=0.0)
-    sol = solve_files(example.model, example.ik["normal"], example.id["normal"], "effort-cal",
-                      options=SolverOptions(energy=goal), warm_start=effort)
-    s = sol.summary
-    assert s["success"] and s["max_moment_residual_Nm"] <= 1e-4
-    assert sol.record.energy_form["non_negativity"].startswith("max(W + H_SL, 0)")
-
-    def lengthening_peak(x, m):
-        i = x.muscle_index(m)
-        return float(np.max(x.activation[:, i], where=x.fiber_velocity_lmo_per_s[:, i] > 0, initial=0.0))
-
-    assert lengthening_peak(effort, "recfem_r") == pytest.approx(0.30, abs=0.01)
-    assert lengthening_peak(sol, "recfem_r") < 0.5
-    # the goal did its work: less BH04 (objective form, smooth) than at the effort optimum
-    N = s["n_intervals"]
-    effort_bh04 = np.mean(_rates_by_hand("BH04", goal.smoothing, list(effort.muscles), effort.parameters,
-                                         effort.excitation[:N], effort.activation[:N], effort.lm_norm[:N],
-                                         effort.fiber_velocity_lmo_per_s[:N], non_negative=WORK_AND_HEAT)) / MASS
-    assert s["energy_goal"]["leg_mean_W_per_kg"] < effort_bh04 - 0.1
 
 
 @pytest.mark.opensim
