@@ -445,12 +445,20 @@ def test_the_lock_of_solve_is_released_and_an_empty_folder_removed_on_an_error(t
 # ----------------------------------------------------------------------------------------------
 # 5. Ctrl-C
 
+def _sigint_as_in_a_terminal():
+    """SIGINT's default disposition, as a command started from a terminal has it (a test run
+    started in the background of a non-interactive shell inherits SIGINT ignored, and Python
+    then installs no KeyboardInterrupt handler)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _interrupt(args, ready, timeout=120.0):
     """Start ``python -m musclemetab ARGS`` in its own process group, wait until ``ready()`` (or
     the process ends), send SIGINT to the group as a terminal would; ``(status, stderr, seconds
     from the signal to the exit)``."""
     proc = subprocess.Popen([sys.executable, "-m", "musclemetab", *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+                            stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=_sigint_as_in_a_terminal)
     try:
         deadline = time.monotonic() + timeout
         while not ready() and proc.poll() is None and time.monotonic() < deadline:
@@ -510,13 +518,17 @@ def test_ctrl_c_while_outputs_are_moved_into_place_waits_for_the_last_one(tmp_pa
     from musclemetab.processes import sigint_deferred
 
     legs = [tmp_path / "r", tmp_path / "l"]
-    with pytest.raises(KeyboardInterrupt):
-        with sigint_deferred():
-            for i, leg in enumerate(legs):
-                with atomic_directory(leg) as tmp:
-                    (tmp / "summary.json").write_text("new")
-                if i == 0:
-                    os.kill(os.getpid(), signal.SIGINT)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a terminal (see above)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with sigint_deferred():
+                for i, leg in enumerate(legs):
+                    with atomic_directory(leg) as tmp:
+                        (tmp / "summary.json").write_text("new")
+                    if i == 0:
+                        os.kill(os.getpid(), signal.SIGINT)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     assert [(leg / "summary.json").read_text() for leg in legs] == ["new", "new"]
 
 
