@@ -17,6 +17,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+import threading
 import time
 from pathlib import Path
 
@@ -495,6 +496,42 @@ def test_ctrl_c_during_solve_exits_130_at_once_and_keeps_the_previous_output(exa
     assert seconds < 2.0
     assert {p: p.read_text() for p in previous} == previous
     assert not lock.exists() and not list(out.rglob(".partial-*"))
+
+
+def test_ctrl_c_while_ipopt_iterates_exits_130_not_as_a_failed_solve(example, tmp_path, decoy):
+    """CasADi stops IPOPT on Ctrl-C and returns a failure status; the command must take it for
+    the interrupt it is (status 130, previous output kept), not for a solve that did not
+    converge (status 1, the unconverged iterate written over the output). The signal is sent
+    once IPOPT's progress line shows that it iterates."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "summary.json").write_text("previous\n")
+    args = ["solve", *_files(example), "--mesh-frequency", "300", "--out", str(out)]
+    proc = subprocess.Popen([sys.executable, "-m", "musclemetab", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=_sigint_as_in_a_terminal)
+    lines, iterating = [], threading.Event()
+
+    def read():
+        for line in proc.stderr:
+            lines.append(line)
+            if "solving: iteration" in line:
+                iterating.set()
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    try:
+        assert iterating.wait(120), "".join(lines)
+        os.killpg(proc.pid, signal.SIGINT)
+        proc.wait(timeout=60)
+        reader.join(10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    err = "".join(lines)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "musclemetab: interrupted" and "did not converge" not in err
+    assert (out / "summary.json").read_text() == "previous\n" and not (out / "solution.sto").exists()
 
 
 def test_ctrl_c_during_report_exits_130_and_keeps_the_previous_report(demo, tmp_path, decoy):

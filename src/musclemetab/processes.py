@@ -15,7 +15,7 @@ import threading
 from concurrent.futures import ProcessPoolExecutor
 
 __all__ = ["THREAD_VARIABLES", "pin_threads", "ignore_sigint", "spawn_pool", "stop_pool", "sigint_deferred",
-           "BackgroundCall"]
+           "sigint_noted", "BackgroundCall"]
 
 #: environment variables that size the thread pools of BLAS/LAPACK and OpenMP libraries
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
@@ -95,6 +95,32 @@ def sigint_deferred():
     finally:
         signal.signal(signal.SIGINT, previous)
     if caught and previous is not signal.SIG_IGN:
+        raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def sigint_noted():
+    """Run native code that stops itself on Ctrl-C (IPOPT through CasADi, which then returns a
+    failure status instead of raising) and raise :class:`KeyboardInterrupt` after it when
+    Ctrl-C came, so that the interrupt is not taken for a failed solve. The handler in place
+    (Python's default, or a study unit's) is still called when the signal comes. Outside the
+    main thread, or with Ctrl-C ignored (an idle pool worker), it does nothing."""
+    previous = signal.getsignal(signal.SIGINT) if threading.current_thread() is threading.main_thread() else None
+    if not callable(previous):
+        yield
+        return
+    caught = []
+
+    def note(signum, frame):
+        caught.append(signum)
+        previous(signum, frame)
+
+    signal.signal(signal.SIGINT, note)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if caught:
         raise KeyboardInterrupt
 
 

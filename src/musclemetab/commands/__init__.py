@@ -98,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     """
     try:
         try:
-            return _main(argv)
+            status = _main(argv)
         finally:  # write out what is buffered while a closed pipe can still be caught here
             sys.stdout.flush()
     except BrokenPipeError:
@@ -107,6 +107,35 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if argv is None:
             gc.freeze()
+    if argv is None and status == INTERRUPTED_STATUS:
+        _end_interrupted()
+    return status
+
+
+#: Exit status after Ctrl-C (128 + SIGINT).
+INTERRUPTED_STATUS = 130
+
+
+def _end_interrupted() -> None:
+    """End the program after Ctrl-C with status 130, Ctrl-C ignored from here on.
+
+    The interpreter is ended here rather than by returning: a KeyboardInterrupt that ran
+    through an import (SciPy's modules import each other while the signal comes) can leave the
+    interpreter marked as stopped by an unhandled interrupt, and it then ends itself by SIGINT
+    (status -2 to the caller) although the interrupt was handled. The exit functions run and
+    the output is flushed first, as at a normal exit.
+    """
+    import atexit
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(INTERRUPTED_STATUS)
 
 
 def _silence_stdout() -> None:
@@ -140,6 +169,6 @@ def _main(argv: list[str] | None) -> int:
         return 1
     except KeyboardInterrupt:  # pragma: no cover
         print("musclemetab: interrupted", file=sys.stderr)
-        return 130
+        return INTERRUPTED_STATUS
     finally:
         warnings.showwarning = previous

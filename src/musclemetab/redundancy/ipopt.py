@@ -51,6 +51,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import OptionError, SolverError
+from ..processes import sigint_noted
 from ._checks import check_option
 from .transcription import Goals, TrialBlock, build_problem, check_fiber_dynamics
 from .energy import EnergyGoal
@@ -598,7 +599,8 @@ def run_ipopt(solver, options: SolverOptions, x0, lbx, ubx, lbg, ubg, multiplier
     t0 = _time.perf_counter()
     c0 = _time.process_time()
     try:
-        sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+        with sigint_noted():  # Ctrl-C stops IPOPT with a failure status: raised as an interrupt
+            sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
     except RuntimeError as exc:
         raise SolverError(f"IPOPT stopped with an error: {exc}") from None
     if multipliers is not None:
