@@ -21,6 +21,9 @@ def add_parser(sub) -> None:
     p.add_argument("--out", default="musclemetab-demo", metavar="DIR", help="output folder (default musclemetab-demo)")
     p.add_argument("--speeds", nargs="+", choices=("slow", "normal", "fast"), help="a subset of the speeds")
     add_study_arguments(p)
+    from ..study.uncertainty import add_uncertainty_arguments
+
+    add_uncertainty_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -28,8 +31,11 @@ def run(args) -> int:
     """Run ``musclemetab demo`` (``args`` from :func:`add_parser`)."""
     from ..study.demo import run_demo
 
+    from ..study.uncertainty import apply_uncertainty_arguments
+
     result = run_demo(args.out, workers=args.workers, speeds=args.speeds, progress=not args.no_progress,
-                      force=args.force, strict=args.strict)
+                      force=args.force, strict=args.strict,
+                      adjust=lambda study: apply_uncertainty_arguments(study, args))
     print_run(result, "demo")
     if result.interrupted:
         return exit_status(result)

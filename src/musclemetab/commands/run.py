@@ -25,6 +25,9 @@ def add_parser(sub) -> None:
                    help="run on a Dask cluster (tcp://host:port); needs pip install 'musclemetab[dask]'")
     p.add_argument("--report", action="store_true", help="also write the figures and report.html")
     add_study_arguments(p)
+    from ..study.uncertainty import add_uncertainty_arguments
+
+    add_uncertainty_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -62,6 +65,9 @@ def run(args) -> int:
         from ..study.spec import strict_study
 
         study = strict_study(study)
+    from ..study.uncertainty import apply_uncertainty_arguments
+
+    study = apply_uncertainty_arguments(study, args)
     result = run_study(study, workers=args.workers, scheduler=args.scheduler, force=args.force,
                        progress=not args.no_progress)
     if args.report and not result.interrupted:

@@ -15,6 +15,11 @@ A study file names everything a study needs; paths are relative to the file::
     weight = 1.0                       # weight of the leg's mean rate, W/kg of body mass
     effort_weight = 0.0                # optional: weight of the effort goal (default: the workflow's, 1)
 
+    [uncertainty]                      # optional: uncertainty bands (docs/uncertainty.md)
+    samples = 64                       # samples of every trial unit (0: none)
+    seed = 1                           # seed of the Sobol' sequence
+    priors = "priors.csv"              # optional: rows replacing the package's priors
+
     [[subjects]]
     name = "sub1"
     model = "data/sub1.osim"
@@ -35,6 +40,7 @@ A study file names everything a study needs; paths are relative to the file::
                                           # gait cycle, the legs' rates added; needs 'cycle')
     dofs = ["hip_flexion_r", "knee_angle_r", "ankle_angle_r"]   # optional (r or l): default from the model
     # [subjects.estimate]: a parameter estimation (musclemetab.study.estimation)
+
 
     [[subjects.trials]]
     name = "normal"
@@ -220,7 +226,7 @@ class Study:
 
 # ---------------------------------------------------------------------------------------
 _STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "basal_coefficient", "basal_exponent", "subjects",
-               "solver", "energy_goal", "strict"}
+               "solver", "energy_goal", "strict", "uncertainty"}
 #: keys of the study file's [energy_goal] table (the energy goal of every effort-workflow solve)
 _ENERGY_KEYS = {"model", "weight", "effort_weight", "smoothing", "form"}
 #: keys of the study file's [solver] table (IPOPT settings of every solve)
@@ -337,6 +343,12 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
     energy = _energy_goal(data.get("energy_goal"), where)
     if energy:
         settings["energy_goal"] = energy
+    if data.get("uncertainty") is not None:  # [uncertainty]: samples of every trial unit
+        from .uncertainty import uncertainty_settings
+
+        uncertainty = uncertainty_settings(data["uncertainty"], base, where)
+        if uncertainty:
+            settings["uncertainty"] = uncertainty
     strict = data.get("strict", False)
     if not isinstance(strict, bool):
         raise OptionError(f"{where}: 'strict' must be true or false, not {strict!r}")

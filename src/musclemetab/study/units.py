@@ -72,6 +72,8 @@ from ..study_layout import TIMESERIES_FILE, UNIT_FILE, UNITS_FOLDER  # noqa: E40
 #: Marker file in every folder the package creates for a unit (and may therefore delete).
 MARKER_FILE = ".musclemetab-unit"
 ESTIMATION_FOLDER = "_emg-ten"
+#: folder of a trial unit's uncertainty samples (in the unit's folder)
+SAMPLES_FOLDER = "samples"
 ANALYSIS_FILE = "analysis.csv"
 
 
@@ -84,6 +86,8 @@ class Unit:
     trial: str | None
     workflow: str
     side: str | None = None
+    #: the number of an uncertainty sample of the trial unit (:mod:`.uncertainty`), else ``None``
+    sample: int | None = None
 
     @property
     def is_estimation(self) -> bool:
@@ -94,11 +98,13 @@ class Unit:
         if self.trial is None:
             return Path(UNITS_FOLDER) / self.subject / (ESTIMATION_FOLDER if self.workflow == EMG_TEN else ESTIMATE_FOLDER)
         folder = Path(UNITS_FOLDER) / self.subject / self.trial / self.workflow
-        return folder / self.side if self.side else folder
+        folder = folder / self.side if self.side else folder
+        return folder if self.sample is None else folder / SAMPLES_FOLDER / f"{self.sample:04d}"
 
     @property
     def label(self) -> str:
-        return f"{self.subject}/{self.trial or 'all trials'}/{self.workflow}" + (f"/{self.side}" if self.side else "")
+        return (f"{self.subject}/{self.trial or 'all trials'}/{self.workflow}" + (f"/{self.side}" if self.side else "")
+                + (f"/sample {self.sample}" if self.sample is not None else ""))
 
     def leg(self, study: Study) -> str:
         """The leg this unit solves: its own ``side``, else its subject's."""
@@ -108,6 +114,8 @@ class Unit:
         """The estimation unit this unit needs, if any."""
         if self.trial is None:
             return None
+        if self.sample is not None:  # the trial unit it samples
+            return Unit(self.subject, self.trial, self.workflow, self.side)
         subject = study.subject(self.subject)
         if self.workflow == EMG_TEN or (self.workflow == "effort-ten" and subject.uses_emg_ten_estimate):
             return Unit(self.subject, None, EMG_TEN)
@@ -180,6 +188,10 @@ def _subject_record(subject: Subject, workflow: str) -> dict:
 
 def unit_key(study: Study, unit: Unit, dependency_key: str | None = None) -> str:
     """SHA-256 of everything the unit's result depends on."""
+    if unit.sample is not None:  # the sampled unit's key, the priors, the seed and the sample's number
+        from .uncertainty import sample_key
+
+        return sample_key(study, unit, dependency_key)
     subject = study.subject(unit.subject)
     content = {
         "musclemetab": __version__,
@@ -359,6 +371,7 @@ def _execute_unit(study: Study, unit: Unit, key: str, dependency_folder: str | N
         "trial": unit.trial,
         "workflow": unit.workflow,
         **({"side": unit.side} if unit.side else {}),
+        **({"sample": unit.sample} if unit.sample is not None else {}),
         "error": None,
         "times": {},
     }
@@ -377,6 +390,10 @@ def _execute_unit(study: Study, unit: Unit, key: str, dependency_folder: str | N
             record.update(run_parameter_estimation(study, unit, tmp))
         elif unit.is_estimation:
             record.update(_run_estimation(study, unit, tmp))
+        elif unit.sample is not None:
+            from .uncertainty import run_sample
+
+            record.update(run_sample(study, unit, tmp, Path(dependency_folder)))
         else:
             dep = Path(dependency_folder) if dependency_folder else None
             record.update(_run_trial(study, unit, tmp, dep))
