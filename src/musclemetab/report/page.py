@@ -397,6 +397,7 @@ def page_tables(study: StudyFolder) -> dict:
         "basal": str(study.settings.get("basal", "body")),
         "results": _results(study),
         "per_muscle": _per_muscle(study),
+        "uncertainty": _uncertainty(study),
         "settings": _settings(study),
         "failures": _failures(study),
         "flagged": flagged,
@@ -404,6 +405,12 @@ def page_tables(study: StudyFolder) -> dict:
         "runs": _runs(study),
         "software": _software(study),
     }
+
+
+def _uncertainty(study: StudyFolder) -> dict | None:
+    from .uncertainty import uncertainty_section
+
+    return uncertainty_section(study)
 
 
 # ------------------------------------------------------------------ the page
