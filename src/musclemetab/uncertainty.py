@@ -44,7 +44,7 @@ from .errors import InputFileError, UnknownMuscleError
 
 __all__ = ["Prior", "Priors", "Draw", "read_priors", "default_priors", "draw", "band", "BAND_SUFFIXES",
            "MUSCLE_PARAMETERS", "SOLVE_PARAMETERS", "GLOBAL_PARAMETERS", "PARAMETERS", "DISTRIBUTIONS",
-           "PRIORS_FILE", "zero_priors", "MIN_NORMAL_FACTOR", "adapted_start", "band_table", "with_bands"]
+           "PRIORS_FILE", "DEFAULT_SEED", "zero_priors", "MIN_NORMAL_FACTOR", "adapted_start", "band_table", "with_bands"]
 
 PRIORS_FILE = "uncertainty_priors.csv"
 #: solve parameter -> field of MuscleTendonParameters
@@ -62,6 +62,8 @@ MUSCLE_PARAMETERS = (*SOLVE_PARAMETERS, "muscle_mass", "slow_twitch_fraction")
 GLOBAL_PARAMETERS = ("height",)
 PARAMETERS = (*MUSCLE_PARAMETERS, *GLOBAL_PARAMETERS)
 DISTRIBUTIONS = ("lognormal", "normal")
+#: the seed of the samples when none is given
+DEFAULT_SEED = 1
 #: a normal factor never goes below this (a property stays positive)
 MIN_NORMAL_FACTOR = 0.05
 #: the column suffixes of a band: 5 %, median, 95 %

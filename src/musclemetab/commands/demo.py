@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from .options import add_study_arguments
-from .run import exit_status, print_run
+from .run import add_uncertainty_arguments, apply_uncertainty_arguments, exit_status, print_run
 
 __all__ = ["add_parser", "run"]
 
@@ -21,8 +21,6 @@ def add_parser(sub) -> None:
     p.add_argument("--out", default="musclemetab-demo", metavar="DIR", help="output folder (default musclemetab-demo)")
     p.add_argument("--speeds", nargs="+", choices=("slow", "normal", "fast"), help="a subset of the speeds")
     add_study_arguments(p)
-    from ..study.uncertainty import add_uncertainty_arguments
-
     add_uncertainty_arguments(p)
     p.set_defaults(func=run)
 
@@ -30,8 +28,6 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     """Run ``musclemetab demo`` (``args`` from :func:`add_parser`)."""
     from ..study.demo import run_demo
-
-    from ..study.uncertainty import apply_uncertainty_arguments
 
     result = run_demo(args.out, workers=args.workers, speeds=args.speeds, progress=not args.no_progress,
                       force=args.force, strict=args.strict,

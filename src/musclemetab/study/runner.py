@@ -662,14 +662,15 @@ def collect_results(study: Study, failed: dict[str, str] | None = None):
     table = table.sort_values(list(ID_COLUMNS), kind="stable", ignore_index=True)
     from .uncertainty import add_study_bands  # the uncertainty bands, when the study has samples
 
-    table = add_study_bands(study, table, "results")
+    builders = (trial_result_rows, add_leg_rows, leg_basal_energy_J)
+    table = add_study_bands(study, table, "results", builders)
     with atomic_path(out / RESULTS_CSV) as tmp:
         table.to_csv(tmp, index=False, float_format="%.10g")
     _write_parquet_copy(table, out / RESULTS_PARQUET)
     per_muscle = pd.concat(muscles, ignore_index=True) if muscles else pd.DataFrame(columns=list(ID_COLUMNS))
     per_muscle = per_muscle.sort_values(list(ID_COLUMNS) + [c for c in ("side", "rank") if c in per_muscle],
                                         kind="stable", ignore_index=True)
-    per_muscle = add_study_bands(study, per_muscle, "per_muscle")
+    per_muscle = add_study_bands(study, per_muscle, "per_muscle", builders)
     with atomic_path(out / PER_MUSCLE_FILE) as tmp:
         per_muscle.to_csv(tmp, index=False, float_format="%.10g")
     _write_parquet_copy(per_muscle, out / PER_MUSCLE_PARQUET)

@@ -229,6 +229,8 @@ _STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "basal_coeffici
                "solver", "energy_goal", "strict", "uncertainty"}
 #: keys of the study file's [energy_goal] table (the energy goal of every effort-workflow solve)
 _ENERGY_KEYS = {"model", "weight", "effort_weight", "smoothing", "form"}
+#: keys of the study file's [uncertainty] table (docs/uncertainty.md)
+_UNCERTAINTY_KEYS = {"samples", "seed", "priors"}
 #: keys of the study file's [solver] table (IPOPT settings of every solve)
 _SOLVER_KEYS = {"max_iter", "tol", "linear_solver"}
 _SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials",
@@ -343,12 +345,9 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
     energy = _energy_goal(data.get("energy_goal"), where)
     if energy:
         settings["energy_goal"] = energy
-    if data.get("uncertainty") is not None:  # [uncertainty]: samples of every trial unit
-        from .uncertainty import uncertainty_settings
-
-        uncertainty = uncertainty_settings(data["uncertainty"], base, where)
-        if uncertainty:
-            settings["uncertainty"] = uncertainty
+    uncertainty = _uncertainty(data.get("uncertainty"), base, where)
+    if uncertainty:  # [uncertainty]: samples of every trial unit (musclemetab.study.uncertainty)
+        settings["uncertainty"] = uncertainty
     strict = data.get("strict", False)
     if not isinstance(strict, bool):
         raise OptionError(f"{where}: 'strict' must be true or false, not {strict!r}")
@@ -421,6 +420,27 @@ def _energy_goal(data, where: str) -> dict:
     if goal.effort_weight is not None:
         out["effort_weight"] = float(goal.effort_weight)
     return out
+
+
+def _uncertainty(data, base: Path, where: str) -> dict:
+    """The ``[uncertainty]`` table checked: ``{"samples", "seed"[, "priors"]}`` (``{}`` for none or 0 samples)."""
+    if data is None:
+        return {}
+    if not isinstance(data, Mapping):
+        raise OptionError(f"{where}: 'uncertainty' must be a table such as [uncertainty] samples = 64, seed = 1")
+    here = f"{where}: [uncertainty]"
+    _unknown(data, _UNCERTAINTY_KEYS, here)
+    if "samples" not in data:
+        raise OptionError(f"{here}: 'samples' is required (the number of samples of every trial unit, e.g. 64)")
+    from ..uncertainty import DEFAULT_SEED, read_priors
+
+    out = {"samples": _number(data["samples"], here, "samples"), "seed": _number(data.get("seed", DEFAULT_SEED),
+                                                                                here, "seed")}
+    priors = _path(data.get("priors"), base, here, "priors", required=False)
+    if priors is not None:
+        read_priors(priors)  # checked now, before anything runs
+        out["priors"] = str(priors)
+    return out if out["samples"] else {}
 
 
 def _unknown(data: Mapping, allowed: set, where: str) -> None:

@@ -189,7 +189,7 @@ def _subject_record(subject: Subject, workflow: str) -> dict:
 def unit_key(study: Study, unit: Unit, dependency_key: str | None = None) -> str:
     """SHA-256 of everything the unit's result depends on."""
     if unit.sample is not None:  # the sampled unit's key, the priors, the seed and the sample's number
-        from .uncertainty import sample_key
+        from .samples import sample_key
 
         return sample_key(study, unit, dependency_key)
     subject = study.subject(unit.subject)
@@ -390,10 +390,15 @@ def _execute_unit(study: Study, unit: Unit, key: str, dependency_folder: str | N
             record.update(run_parameter_estimation(study, unit, tmp))
         elif unit.is_estimation:
             record.update(_run_estimation(study, unit, tmp))
-        elif unit.sample is not None:
-            from .uncertainty import run_sample
+        elif unit.sample is not None:  # an uncertainty sample of the trial unit in dependency_folder
+            from .samples import run_sample
 
-            record.update(run_sample(study, unit, tmp, Path(dependency_folder)))
+            subject = study.subject(unit.subject)
+            estimation = Path(study.output) / Unit(unit.subject, None, EMG_TEN).folder
+            record.update(run_sample(study, unit, tmp, Path(dependency_folder),
+                                     options=_solver_options(study, subject),
+                                     arguments=solve_arguments(subject, unit.workflow, estimation),
+                                     analysis_file=ANALYSIS_FILE))
         else:
             dep = Path(dependency_folder) if dependency_folder else None
             record.update(_run_trial(study, unit, tmp, dep))
@@ -510,6 +515,23 @@ def _cycle_source(trial: Trial, recorded: dict | None = None) -> str:
     return "estimated from the IK window and the ankle moment (no ground reaction forces)"
 
 
+def solve_arguments(subject: Subject, workflow: str, estimation: Path | None) -> dict:
+    """The personalisation arguments of a trial's solve with ``workflow``: the subject's passive
+    calibration and tendon stiffness (``estimation``: the folder of the subject's EMG-TEN estimate)."""
+    kwargs = {}
+    if workflow != "effort-gen" and subject.passive is not None:
+        kwargs["passive"] = subject.passive
+    if workflow == "effort-ten":
+        kt = subject.tendon_stiffness
+        if subject.uses_emg_ten_estimate:
+            kwargs["tendon_stiffness_file"] = estimation / "parameters.json"
+        elif isinstance(kt, Path):
+            kwargs["tendon_stiffness_file"] = kt
+        elif isinstance(kt, (dict, str)):  # a table, or "example"
+            kwargs["tendon_stiffness"] = kt
+    return kwargs
+
+
 def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> dict:
     """Solve (or take the EMG-TEN solution), metabolics, gait cycle, phases and groups."""
     import numpy as np
@@ -531,17 +553,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         if not sol.run_record.success:
             raise sol.run_record.failure(f"EMG-TEN solution of trial {trial.name}")
     else:
-        kwargs = {}
-        if unit.workflow != "effort-gen" and subject.passive is not None:
-            kwargs["passive"] = subject.passive
-        if unit.workflow == "effort-ten":
-            kt = subject.tendon_stiffness
-            if subject.uses_emg_ten_estimate:
-                kwargs["tendon_stiffness_file"] = dependency / "parameters.json"
-            elif isinstance(kt, Path):
-                kwargs["tendon_stiffness_file"] = kt
-            elif isinstance(kt, (dict, str)):  # a table, or "example"
-                kwargs["tendon_stiffness"] = kt
+        kwargs = solve_arguments(subject, unit.workflow, dependency)
         if subject.emg_mode is not None:
             sol = _informed_solve(study, subject, trial, unit.workflow, kwargs)
         else:
