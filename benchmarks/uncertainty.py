@@ -84,7 +84,8 @@ def warm_against_cold(ex, n: int) -> None:
         ratios.append(ratio)
         print(f"{k:>6} {cold.record.iterations:>8} {cold.record.solve_time_s:>8.2f} {warm.record.iterations:>8} "
               f"{warm.record.solve_time_s:>8.2f} {ratio:>6.2f} {cold.objective:>11.6g} / {warm.objective:<11.6g}")
-    print(f"mean solve time of a warm-started sample / cold solve: {sum(ratios) / len(ratios):.2f} (target <= 0.5)")
+    print(f"mean solve time of a warm-started sample / cold solve: {sum(ratios) / len(ratios):.2f} (target <= 0.5)",
+          flush=True)
 
 
 def _study(ex, root: Path, samples: int, seed: int) -> Path:
@@ -125,12 +126,13 @@ def coverage(ex, root: Path, bands_out: Path, truths: int, workers: int) -> None
     import numpy as np
     import pandas as pd
 
+    from musclemetab.study.runner import add_leg_rows, leg_basal_energy_J, trial_result_rows
     from musclemetab.study.spec import load_study
-    from musclemetab.study.uncertainty import _sample_tables
+    from musclemetab.study.uncertainty import sample_tables
 
     path = _study(ex, root / "truths", truths, 2)
     _run(path, workers)
-    truth_wb, truth_pm = _sample_tables(load_study(path))
+    truth_wb, truth_pm = sample_tables(load_study(path), trial_result_rows, add_leg_rows, leg_basal_energy_J)
     results = pd.read_csv(bands_out / "results.csv").set_index("model")
     per_muscle = pd.read_csv(bands_out / "per_muscle.csv").set_index(["model", "muscle"])
     print(f"\ncoverage of the nominal model's 5-95 % bands over {truth_wb['sample'].nunique()} converged truths "

@@ -132,7 +132,8 @@ def test_study_file_uncertainty_table(tmp_path, example):
 def test_command_line_options(tmp_path, example):
     from musclemetab.commands import build_parser
     from musclemetab.study.spec import load_study
-    from musclemetab.study.uncertainty import apply_uncertainty_arguments, sample_units
+    from musclemetab.commands.run import apply_uncertainty_arguments
+    from musclemetab.study.uncertainty import sample_units
 
     _zero_priors_csv(tmp_path / "zero.csv")
     path = tmp_path / "study.toml"
@@ -248,7 +249,7 @@ def test_report_draws_the_bands(zero_study):
 
     from musclemetab.report.figures import group_shares, phase_shares
     from musclemetab.report.folder import read_study_folder
-    from musclemetab.report.uncertainty import uncertainty_section
+    from musclemetab.report.page import uncertainty_section
 
     study, _ = zero_study
     folder = read_study_folder(study.output)
