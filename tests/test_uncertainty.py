@@ -267,3 +267,16 @@ def test_report_draws_the_bands(zero_study):
     fig2 = group_shares(folder.ok)
     assert any(str(a.get_gid()).startswith("band:groups:effort-gen:UM10") for ax in fig2.axes for a in ax.get_children())
     plt.close("all")
+
+
+def test_a_legs_samples_live_in_its_leg_unit(tmp_path):
+    """A sample of a leg unit (side = both) is a folder inside that leg's unit folder, which the run
+    prepares for the leg unit alone (the sample's parent is the leg unit, replaced as a whole)."""
+    from musclemetab.study.units import Unit, prepare_leg_folder
+
+    sample = Unit("sub", "walk", "effort-gen", "l", sample=3)
+    assert sample.folder == Path("units/sub/walk/effort-gen/l/samples/0003")
+    assert sample.label == "sub/walk/effort-gen/l/sample 3"
+    prepare_leg_folder(tmp_path, sample)
+    assert not any(tmp_path.iterdir())
+    assert sample.depends_on(None) == Unit("sub", "walk", "effort-gen", "l")

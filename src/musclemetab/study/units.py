@@ -312,7 +312,7 @@ def prepare_leg_folder(output: Path, unit: Unit) -> None:
     """
     from ..errors import OptionError
 
-    if not unit.side:
+    if not unit.side or unit.sample is not None:  # a sample's folder is inside its leg unit's
         return
     parent = unit_folder(Path(output), unit).parent
     if (parent / UNIT_FILE).is_file() and _is_our_unit(parent):
