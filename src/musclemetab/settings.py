@@ -99,7 +99,7 @@ NUMBER_KEYS: dict[str, NumberKey] = {k.name: k for k in (
     NumberKey("workers", "", 1, 1024, "a number of worker processes", integer=True),
     # [uncertainty] (and --uncertainty, --uncertainty-seed)
     NumberKey("samples", "", 0, 100_000, "a number of uncertainty samples per trial unit", integer=True),
-    NumberKey("seed", "", 0, 2**32 - 1, "a seed of the uncertainty samples", integer=True),
+    NumberKey("seed", "", 0, 1_000_000, "a seed of the uncertainty samples", integer=True),
 )}
 def check_number(key: str, value, where: str = "", option: str | None = None) -> float | int:
     """Check ``value`` of the numeric key ``key`` against :data:`NUMBER_KEYS`.
