@@ -133,6 +133,7 @@ def _metabolics_folder(root, side):
 
 def run(args) -> int:
     """Run ``musclemetab analyse`` (``args`` from :func:`add_parser`)."""
+    import json
     import sys
 
     import pandas as pd
@@ -155,7 +156,7 @@ def run(args) -> int:
                                  "give a solution folder written by 'musclemetab solve'")
     check_speed(args.speed)
     basal_given = {key: getattr(args, key) for key in BASAL_DEFAULTS}
-    rows, basal_J, tables = {}, {}, []
+    rows, basal_J, tables, legs = {}, {}, [], []
     for side, sol_dir, out in jobs:
         recorded = recorded_trial(sol_dir)
         settings = (read_metabolics_settings(_metabolics_folder(args.metabolics, side or recorded.side))
@@ -192,6 +193,13 @@ def run(args) -> int:
                          basal=args.basal, basal_rate_W_per_kg=args.basal_coefficient,
                          basal_exponent=args.basal_exponent, speed_m_per_s=speed)
         write_analysis(result, out)
+        met_dir = _metabolics_folder(args.metabolics, side or recorded.side) if args.metabolics else None
+        legs.append({"side": leg, "folder": side or ".", "solution": str(Path(sol_dir).resolve()),
+                     "metabolics": str(Path(met_dir).resolve()) if met_dir else None, "model": str(model),
+                     "ik": str(ik), "cycle": {"start_s": cycle.start_s, "toe_off_s": cycle.toe_off_s,
+                                              "end_s": cycle.end_s}, "cycle_source": source,
+                     "body_mass_kg": float(mass), "height_m": None if height is None else float(height),
+                     "basal": args.basal})
         per = result.per_muscle
         tables.append(per)
         rows[side] = trial_result_rows(result.whole_body, result.summary, speed_m_per_s=speed,
@@ -231,6 +239,11 @@ def run(args) -> int:
         (side, table), = rows.items()
         with atomic_path(Path(args.out) / RESULTS_CSV) as tmp:
             table.assign(legs=f"2 x {recorded.side or 'r'}").to_csv(tmp, index=False, float_format="%.10g")
+    from ..analysis.unit import ANALYSE_RECORD
+    from ..io.atomic import atomic_write_text
+
+    atomic_write_text(Path(args.out) / ANALYSE_RECORD, json.dumps(
+        {"format": "musclemetab analyse", "format_version": 1, "legs": legs}, indent=1) + "\n")
     return 0
 
 
