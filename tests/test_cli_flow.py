@@ -121,6 +121,17 @@ def test_solve_metabolics_analyse_give_the_study_numbers(cli_flow, two_subjects,
     assert "8 of 11 figures" in capsys.readouterr().out  # the study's figures of one trial and one speed
     n_report = _report_tables_are_the_studys(a, study)
     assert n_report > 5000
+    # a folder that is neither a study nor an analyse output: one line naming it and what to pass
+    for folder, said in ((a / "r", f"{a / 'r'}: one leg of the analyse output folder {a}, whose analyse.json "
+                          f"records both legs: pass {a}"),
+                         (s, f"{s / 'results.csv'}: missing; {s} is neither a finished study folder nor an analyse "
+                          "output folder. Run the study first ('musclemetab run STUDY.toml') and pass its output "
+                          "folder (holding results.csv), or pass the output folders of 'musclemetab analyse --out'")):
+        assert main(["report", str(folder)]) == 1
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and said in err
+    assert main(["report", str(a), str(a)]) == 1  # several folders, one page: where?
+    assert "give --out FILE" in capsys.readouterr().err
 
 
 def _report_tables_are_the_studys(a: Path, study: Path) -> int:

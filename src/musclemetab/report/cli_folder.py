@@ -124,15 +124,16 @@ def _not_readable(path: Path) -> str:
     """Why ``path`` is neither a study folder nor an ``analyse`` folder, and what to pass."""
     from ..analysis.unit import ANALYSE_RECORD
 
+    if path.is_dir() and path.name in ("r", "l") and is_analyse_folder(path.parent):
+        return (f"{path}: one leg of the analyse output folder {path.parent}, whose {ANALYSE_RECORD} records both "
+                f"legs: pass {path.parent}")
+    if path.is_dir() and _analysed(path):
+        return (f"{path}: analysed by an earlier version, which left no {ANALYSE_RECORD} naming the solution and "
+                "metabolics folders: run 'musclemetab analyse' again")
     what = "no such folder" if not path.is_dir() else "neither a study folder (results.csv, study.json)" \
         f" nor an analyse output folder ({ANALYSE_RECORD})"
-    hint = ""
-    if path.is_dir() and path.name in ("r", "l") and is_analyse_folder(path.parent):
-        hint = f" but one leg of the analyse folder {path.parent}: pass {path.parent}"
-    elif path.is_dir() and _analysed(path):
-        hint = f" but analysed by an earlier version, which left no {ANALYSE_RECORD}: run 'musclemetab analyse' again"
-    return (f"{path}: {what}{hint}; pass the output folder of 'musclemetab run STUDY.toml', or one or more "
-            "output folders of 'musclemetab analyse --out'")
+    return (f"{path}: {what}; pass the output folder of 'musclemetab run STUDY.toml', or one or more output "
+            "folders of 'musclemetab analyse --out'")
 
 
 def read_report_input(paths, models=None) -> StudyFolder:
