@@ -12,7 +12,9 @@ transport), the stance/swing and muscle-group analysis (``analysis.csv``), the l
 group rates over the cycle (``timeseries.csv``), the per-muscle table (``per_muscle.csv``),
 the key of the group abbreviations (``muscle_groups.csv``) and ``results.csv``, the study's
 results rows of the trial (one per model: :func:`musclemetab.study.runner.trial_result_rows`):
-:func:`musclemetab.analysis.analyse` and :func:`musclemetab.analysis.write_analysis`.
+:func:`musclemetab.analysis.analyse` and :func:`musclemetab.analysis.write_analysis`; and
+``analyse.json``, each leg's solution and metabolics folders, cycle, body mass and height, from
+which ``musclemetab report OUT`` draws the page a study gives (:mod:`musclemetab.report.cli_folder`).
 
 What the solution records is not asked again (:func:`musclemetab.analysis.recorded_trial`):
 the model and the IK motion it was solved from, the leg, the DOFs and the gait cycle of a
@@ -53,7 +55,8 @@ def add_parser(subparsers) -> None:
             "gross and net cost of transport, stance and swing energy shares, muscle-group shares and rates over "
             "the gait cycle, and one row per muscle and model (mean W, W/kg, J per cycle, share of the leg, stance "
             "and swing J, components, basal heat apart). Writes OUT/whole_body.csv, analysis.csv, timeseries.csv, "
-            "per_muscle.csv, muscle_groups.csv and results.csv (the study's results rows). The model, IK motion, "
+            "per_muscle.csv, muscle_groups.csv, results.csv (the study's results rows) and analyse.json (the solution "
+            "and metabolics folders of each leg, for 'musclemetab report OUT'). The model, IK motion, "
             "leg, DOFs and gait cycle the solution records are used unless given. DIR may hold one solution folder "
             "per side (DIR/r, DIR/l; --metabolics likewise): OUT/r and OUT/l are written, OUT/per_muscle.csv gathers "
             "both sides and OUT/results.csv adds the legs. Every column is described in docs/data_dictionary.md."
