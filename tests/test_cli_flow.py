@@ -6,7 +6,8 @@
   session's ``two_subjects``, run by ``musclemetab run --report``; the solve memo makes the
   command line's solves the study's), the report's tables included;
 * ``musclemetab run`` prints no Python source line and no file of the package's cache;
-* a running solve prints progress lines from IPOPT's iteration callback, throttled;
+* a running solve prints progress lines from IPOPT's iteration callback, throttled, also when
+  its legs are solved in two processes (each line labelled with its leg);
 * the study's progress lines carry an estimate of the time left.
 """
 
@@ -306,6 +307,27 @@ def test_solve_prints_progress_while_ipopt_runs(example, tmp_path, capsys, monke
     assert iterations[:3] == [0, 1, 2] and iterations[-1] == total
     assert len(iterations) == total + 1
     assert ipopt._progress_callback(1, 1, [0.0], [0.0]) is None  # switched off after the command
+
+
+@pytest.mark.opensim
+@pytest.mark.slow
+def test_solve_both_legs_in_two_processes_prints_each_legs_progress(example, tmp_path, capfd):
+    """``solve --side both --workers 2`` on a fine mesh (500 Hz over 0.25 s, N = 125: a problem no
+    other test solves, IPOPT iterating for longer than 5 s): the legs' pool processes print
+    IPOPT's progress line every 5 s, as a plain solve does, labelled with the leg, on the
+    command's standard error, before the leg's last iteration."""
+    out = tmp_path / "s"
+    assert main(["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
+                 str(example.id["normal"]), "--window", "0.6:0.85", "--mesh-frequency", "500", "--side", "both",
+                 "--workers", "2", "--out", str(out)]) == 0
+    err = capfd.readouterr().err
+    lines = re.findall(r"^musclemetab: solving side ([rl]): iteration (\d+), objective \S+, "
+                       r"constraint violation \S+, (\d+) s$", err, flags=re.M)
+    assert lines, err
+    total = {side: json.loads((out / side / "summary.json").read_text())["iterations"] for side in "rl"}
+    assert all(int(iteration) <= total[side] and int(seconds) >= 5 for side, iteration, seconds in lines)
+    assert any(int(iteration) < total[side] for side, iteration, _ in lines)  # while IPOPT still iterated
+    assert not re.search(r"^musclemetab: solving: ", err, flags=re.M)  # every line names its leg
 
 
 def test_study_progress_time_left_and_interrupted_units():

@@ -11,7 +11,7 @@ report's figures and tables are drawn from it as from a study folder:
 * one unit per folder: subject the model's file name, trial the IK file's name (with the
   folder's name when two folders share both), workflow the solve's;
 * the results rows: the folder's ``results.csv`` (the study's columns, the legs added), with
-  the ``quality`` a study gives (:func:`musclemetab.study.runner.add_quality` of the legs'
+  the ``quality`` a study gives (:func:`musclemetab.metabolics.plausibility.add_quality` of the legs'
   ``summary.json``);
 * the per-muscle table: the folder's ``per_muscle.csv``;
 * the settings ``study.json`` would record: the subjects' model, body mass, height and legs.
@@ -189,7 +189,7 @@ def read_analyse_folders(paths, models=None) -> AnalyseFolders:
 
     from ..analysis.unit import ANALYSE_RECORD
     from ..io.jsonfile import read_json_object
-    from ..study.runner import add_quality
+    from ..metabolics.plausibility import add_quality
 
     paths = [Path(p) for p in ([paths] if isinstance(paths, (str, os.PathLike)) else paths)]
     remedy = "run 'musclemetab analyse' again to rewrite it"
