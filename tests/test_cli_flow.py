@@ -133,6 +133,18 @@ def test_solve_metabolics_analyse_give_the_study_numbers(cli_flow, two_subjects,
         assert err.count("\n") == 1 and said in err
     assert main(["report", str(a), str(a)]) == 1  # several folders, one page: where?
     assert "give --out FILE" in capsys.readouterr().err
+    # several analyse folders: one study of their trials (the same trial twice: named apart by folder)
+    import shutil
+
+    from musclemetab.report.cli_folder import read_report_input
+    from musclemetab.report.page import page_tables
+
+    again = shutil.copytree(a, a.parent / "A again", ignore=shutil.ignore_patterns("figures", "report.html"))
+    both = read_report_input([a, again])
+    assert list(both.ok["trial"].drop_duplicates()) == ["subject01_walk1_ik", "subject01_walk1_ik (A again)"]
+    assert both.settings["subjects"]["subject01_simbody"]["trials"] == list(both.ok["trial"].drop_duplicates())
+    rows = page_tables(both)["results"]["whole_body"].body
+    assert len(rows) == 4 and [r[1:] for r in rows[:2]] == [r[1:] for r in rows[2:]]
 
 
 def _report_tables_are_the_studys(a: Path, study: Path) -> int:
