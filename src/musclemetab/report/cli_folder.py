@@ -247,7 +247,10 @@ def read_analyse_folders(paths, models=None) -> AnalyseFolders:
     settings = {"name": paths[0].name if len(paths) == 1 else f"{len(paths)} analyse folders",
                 "workflows": list(dict.fromkeys(k[2] for k in keys)),
                 "models": list(dict.fromkeys(results["model"].astype(str))),  # as metabolics --models gave them
-                "basal": basal, "subjects": subjects, "software": software}
+                "basal": basal, "subjects": subjects, "software": software,
+                "analyse_folders": {str(p): {side or "one leg": {"solution": str(leg.solution),
+                                                                 "metabolics": leg.metabolics and str(leg.metabolics)}
+                                             for side, leg in units[k].items()} for p, k in zip(paths, keys)}}
     base = paths[0] if len(paths) == 1 else Path(os.path.commonpath([p.resolve() for p in paths]))
     study = AnalyseFolders(path=base, settings=settings, results=results,
                            failures=pd.DataFrame(columns=_FAILURE_COLUMNS), notes=notes, sources=paths,
