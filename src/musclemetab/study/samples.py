@@ -73,7 +73,7 @@ def run_sample(study: Study, unit, tmp: Path, nominal_folder: Path, *, options=N
     ``nominal_folder``) into ``tmp``; ``options`` and ``arguments`` are the trial unit's solver options
     and personalisation arguments (passive calibration, tendon stiffness), ``analysis_file`` the name
     of its analysis table."""
-    from ..analysis.events import GaitCycle
+    from ..events import GaitCycle
     from ..analysis.groups import has_function_group
     from ..analysis.unit import analyse_metabolics, filtered_moment_arms
     from ..geometry import compute_geometry
