@@ -64,6 +64,32 @@ def test_saturation_flag_counts_the_share_of_nodes():
     assert list(saturation_flag(["a", "b", "c"], a, level=0.9, limit=0.5).items) == ["c"]
 
 
+def test_saturation_share_counts_the_gait_cycle_not_its_padding():
+    """A 1.1 s window on a 100 Hz mesh (111 nodes): a 1.0 s cycle padded by 0.05 s at each end.
+    Muscle a is saturated over the padding alone (5 + 6 nodes): not flagged; b over 12 nodes of the
+    cycle, 12 % of its 100 nodes (t = 0.05 ... 1.04 s): flagged at 0.12, where a share over every
+    node would give 12/111 = 10.8 %; c over 10 cycle nodes (10 %, not above) and the padding: not
+    flagged, where every node would give 21/111 = 18.9 %."""
+    from musclemetab.redundancy.plausibility import cycle_nodes
+
+    t = np.round(np.arange(111) * 0.01, 10)
+    act = np.full((111, 3), 0.2)
+    act[:5, 0] = act[-6:, 0] = 1.0
+    act[40:52, 1] = 0.96
+    act[:5, 2] = act[-6:, 2] = act[60:70, 2] = 0.99
+    inside = cycle_nodes(t)
+    assert inside.sum() == 100 and t[inside][0] == pytest.approx(0.05) and t[inside][-1] == pytest.approx(1.04)
+    f = saturation_flag(["a", "b", "c"], act, in_cycle=inside)
+    assert list(f.items) == ["b"] and f.items["b"] == pytest.approx(0.12) and "of the gait cycle" in f.message
+    assert list(saturation_flag(["a", "b", "c"], act).items) == ["c", "b"]  # the padding counted: other muscles
+    # a recorded gait cycle (a solve over --cycle): its nodes, ends included; b's 12 nodes of 0.31 ... 0.90 s
+    rec = cycle_nodes(t, (0.31, 0.90))
+    assert rec.sum() == 60 and saturation_flag(["a", "b", "c"], act, in_cycle=rec).items == pytest.approx(
+        {"b": 12 / 60, "c": 10 / 60})
+    # a window too short for its padding is taken whole
+    assert cycle_nodes(t[:10]).all()
+
+
 def test_reserve_flag_per_dof_share_of_its_peak_moment():
     # 4 intervals + the repeated last node; RMS over the intervals: knee sqrt((9+9+16+16)/4) = 3.5355
     r = np.array([[3.0, 0.2], [-3.0, 0.2], [4.0, -0.2], [-4.0, 0.2], [-4.0, 0.2]])

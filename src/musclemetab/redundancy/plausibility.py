@@ -20,6 +20,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .bounds import FIBER_LENGTH_BOUNDS
+from .window import PADDING_S
 
 __all__ = [
     "Flag",
@@ -31,8 +32,10 @@ __all__ = [
     "passive_force_flag",
     "fiber_length_flag",
     "saturation_flag",
+    "cycle_nodes",
     "reserve_flag",
     "solution_flags",
+    "solution_cycle_nodes",
     "flags_from_records",
     "quality_text",
     "warn_flags",
@@ -47,8 +50,8 @@ __all__ = [
 PASSIVE_FORCE_LIMIT = 0.5
 #: Activation counted as saturated (the upper bound is 1).
 SATURATION_ACTIVATION = 0.95
-#: Share of the solved nodes at :data:`SATURATION_ACTIVATION` or more above which a muscle is
-#: flagged. Walking EMG of the leg muscles peaks well below maximal voluntary contraction (about
+#: Share of the gait cycle's nodes (the padding around it left out, :func:`cycle_nodes`) at
+#: :data:`SATURATION_ACTIVATION` or more above which a muscle is flagged. Walking EMG of the leg muscles peaks well below maximal voluntary contraction (about
 #: 20-60 % MVC at preferred speed, e.g. Winter 1991, *The biomechanics and motor control of human
 #: gait*); a muscle near full activation for more than a tenth of the cycle is not walking.
 SATURATION_SHARE_LIMIT = 0.10
@@ -133,17 +136,42 @@ def fiber_length_flag(muscles: Sequence[str], lm_norm, *, bound: float = FIBER_L
                 "lTs + 1.7 lMo: check the model's scaling of the optimal fiber and tendon slack lengths", items, bound)
 
 
+def cycle_nodes(time_s, cycle_s: tuple[float, float] | None = None, *, padding_s: float = PADDING_S) -> np.ndarray:
+    """The nodes of the gait cycle among the solved ones (a boolean mask of ``time_s``).
+
+    ``cycle_s``: the cycle ``(start, end)`` a solve over ``--cycle`` recorded
+    (``summary.json`` ``window.gait_cycle``); its nodes from ``start`` to ``end``. Without it the
+    solved window is the cycle padded by :data:`~.window.PADDING_S` (0.05 s) at each end, the
+    study's rule: the nodes from ``t_0 + 0.05 s`` up to, not including, ``t_N - 0.05 s`` (the
+    cycle's last instant is its first again); on the study's 100 Hz mesh the nodes the metabolic
+    rates are averaged over (:func:`musclemetab.metabolics.solution.trim_slice`, 5 and 6 nodes
+    dropped). A window too short to hold its padding is taken whole.
+    """
+    t = np.asarray(time_s, dtype=float)
+    eps = 1e-9
+    if cycle_s is not None:
+        mask = (t >= cycle_s[0] - eps) & (t <= cycle_s[1] + eps)
+    elif t.size:
+        mask = (t >= t[0] + padding_s - eps) & (t < t[-1] - padding_s - eps)
+    else:
+        mask = np.zeros(0, dtype=bool)
+    return mask if mask.sum() >= 2 else np.ones(t.size, dtype=bool)
+
+
 def saturation_flag(muscles: Sequence[str], activation, *, level: float = SATURATION_ACTIVATION,
-                    limit: float = SATURATION_SHARE_LIMIT) -> Flag | None:
-    """Muscles whose activation is ``level`` or more at more than ``limit`` of the nodes
-    (``activation``: ``(nodes, muscles)`` on a uniform mesh, so a share of nodes is a share of time)."""
+                    limit: float = SATURATION_SHARE_LIMIT, in_cycle=None) -> Flag | None:
+    """Muscles whose activation is ``level`` or more at more than ``limit`` of the gait cycle's nodes
+    (``activation``: ``(nodes, muscles)`` on a uniform mesh, so a share of nodes is a share of time;
+    ``in_cycle``: the cycle's nodes, :func:`cycle_nodes`; default every node)."""
     a = np.asarray(activation, dtype=float)
+    if in_cycle is not None:
+        a = a[np.asarray(in_cycle, dtype=bool)]
     share = np.mean(a >= level, axis=0) if a.size else np.zeros(len(muscles))
     items = _worst(muscles, share, share > limit)
     if not items:
         return None
     return Flag("saturated_activation", f"{len(items)} muscle{'s' if len(items) != 1 else ''} at activation >= "
-                f"{level:g} for more than {100 * limit:g} % of the solved time (share of the time): "
+                f"{level:g} for more than {100 * limit:g} % of the gait cycle (share of the cycle): "
                 f"{_listing(items, '{:.0%}')}; the muscles are too weak for the moments (maximal isometric forces, "
                 "model scaling) or the moments too large", items, limit)
 
@@ -184,12 +212,20 @@ def solution_flags(solution, *, passive_limit: float = PASSIVE_FORCE_LIMIT,
                            solution.parameters.max_isometric_force_N, limit=passive_limit),
         fiber_length_flag(solution.muscles, solution.lm_norm,
                           widened_upper=(rec.fiber_length_bounds or {}).get("widened_upper")),
-        saturation_flag(solution.muscles, solution.activation, level=saturation_level, limit=saturation_limit),
+        saturation_flag(solution.muscles, solution.activation, level=saturation_level, limit=saturation_limit,
+                        in_cycle=solution_cycle_nodes(solution)),
     ]
     peaks = rec.get("peak_moment_by_dof_Nm")
     if peaks:
         flags.append(reserve_flag(solution.dofs, solution.reserve_Nm, peaks, limit=reserve_limit))
     return [f for f in flags if f is not None]
+
+
+def solution_cycle_nodes(solution) -> np.ndarray:
+    """:func:`cycle_nodes` of a :class:`~.solution.Solution`: its recorded gait cycle, else its
+    window less the padding."""
+    cycle = solution.record.gait_cycle
+    return cycle_nodes(solution.time_s, (float(cycle["start_s"]), float(cycle["end_s"])) if cycle else None)
 
 
 def flags_from_records(records) -> list[Flag]:
