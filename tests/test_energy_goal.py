@@ -282,7 +282,7 @@ def test_energy_goal_from_the_command_line(example, tmp_path, capsys):
     assert s["objective_terms"]["energy"] == pytest.approx(1e-3 * s["energy_goal"]["leg_mean_W_per_kg"], rel=1e-12)
     for extra, words in ((["--energy-weight", "1"], ["--energy-weight", "--energy-model"]),
                          (["--energy-form", "model"], ["--energy-form", "--energy-model"]),
-                         (["--energy-model", "UM10", "--mass", "72.6"], ["--height"]),
+                         (["--energy-model", "UM10", "--height", "1.743"], ["--mass"]),  # the height is optional
                          (["--energy-model", "UM99", "--mass", "72.6", "--height", "1.743"], ["UM99", "UM10"]),
                          (["--energy-model", "UM10", "--mass", "72.6", "--height", "1.743", "--energy-smoothing",
                            "0"], ["--energy-smoothing", "positive"]),

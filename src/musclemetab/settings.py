@@ -68,7 +68,7 @@ class NumberKey:
 #: range of physically possible values, meaning. Every check of these values goes through it.
 NUMBER_KEYS: dict[str, NumberKey] = {k.name: k for k in (
     NumberKey("body_mass_kg", "kg", 20.0, 300.0, "a human body mass in kilograms"),
-    NumberKey("height_m", "m", 0.5, 2.7, "a human height in metres"),
+    NumberKey("height_m", "m", 0.5, 2.7, "a human height in metres"),  # optional: muscle masses from the model
     NumberKey("basal_coefficient", "W/kg", 0.0, 10.0, "a basal heat rate per kg (OpenSim's default 1.51, the "
               "paper's 1.2)"),
     NumberKey("basal_exponent", "", 0.0, 2.0, "an exponent of the body mass (1 linear, 0.75 Kleiber's)"),

@@ -78,6 +78,8 @@ __all__ = [
     "MASS_RULE_MODEL",
     "MASS_RULE_VOLUME",
     "model_muscle_masses_kg",
+    "muscle_masses_and_fractions",
+    "mass_rule",
     "TOTAL_NO_BASAL",
 ]
 
@@ -296,7 +298,7 @@ class SolutionMetabolics:
     def muscle_mass_rule(self) -> str:
         """How the muscle masses were found: :data:`MASS_RULE_VOLUME` (body mass and height) or
         :data:`MASS_RULE_MODEL` (no height: the model's ``F0 / sigma * rho * lMo``)."""
-        return MASS_RULE_MODEL if self.height_m is None else MASS_RULE_VOLUME
+        return mass_rule(self.height_m)
 
     def file_components(self, model: str) -> dict[str, np.ndarray]:
         """The components written to the files, ``(muscles, time)`` arrays (W): those of
@@ -473,7 +475,7 @@ def metabolics_from_solution(
     speed_m_per_s
         Walking speed, for the cost of transport in the whole-body table.
     """
-    from ..properties import as_overrides, metabolic_properties
+    from ..properties import as_overrides
 
     names = parse_models(models)
     if basal not in BASAL_RULES:
@@ -521,17 +523,8 @@ def metabolics_from_solution(
 
     overrides = (as_overrides(muscle_properties).with_column("mass_kg", muscle_masses_kg)
                  .with_column("slow_twitch_fraction", slow_twitch_fractions))
-    if height_m is None:
-        from ..properties import FALLBACK_SLOW_TWITCH_FRACTION, check_subject, slow_twitch_fraction
-
-        check_subject(float(body_mass_kg), 1.0)  # the body mass alone (1 m: any plausible height)
-        masses = model_muscle_masses_kg(muscles, params["max_isometric_force_N"], params["optimal_fiber_length_m"],
-                                        overrides)
-        fst = slow_twitch_fraction(muscles, FALLBACK_SLOW_TWITCH_FRACTION, overrides=overrides,
-                                   max_isometric_force_N=params["max_isometric_force_N"])
-    else:
-        masses, fst = metabolic_properties(muscles, body_mass_kg, height_m, params["max_isometric_force_N"],
-                                           params["optimal_fiber_length_m"], overrides=overrides, strict=strict)
+    masses, fst = muscle_masses_and_fractions(muscles, body_mass_kg, height_m, params["max_isometric_force_N"],
+                                              params["optimal_fiber_length_m"], overrides, strict=strict)
 
     inputs = dict(states)
     inputs.update(params)
@@ -573,6 +566,32 @@ def metabolics_from_solution(
 MASS_RULE_VOLUME = "volume (body mass, height)"
 #: ``muscle_mass_rule`` without a height: every mass from the model, ``F0 / sigma * rho * lMo``.
 MASS_RULE_MODEL = "model (F0 / specific tension x density x lMo)"
+
+
+def muscle_masses_and_fractions(names, body_mass_kg: float, height_m: float | None, max_isometric_force_N,
+                                optimal_fiber_length_m, overrides=None, *, strict: bool = False):
+    """Each muscle's mass (kg) and slow-twitch fraction as the metabolic models and the energy
+    goal take them: with a height the anatomical volume rule
+    (:func:`musclemetab.properties.metabolic_properties`, :data:`MASS_RULE_VOLUME`); without one
+    (``height_m=None``) the model's ``F0 / sigma * rho * lMo`` (:func:`model_muscle_masses_kg`,
+    :data:`MASS_RULE_MODEL`), the body mass checked alone. The height enters nothing else."""
+    from ..properties import (FALLBACK_SLOW_TWITCH_FRACTION, as_overrides, check_subject, metabolic_properties,
+                              slow_twitch_fraction)
+
+    overrides = as_overrides(overrides)
+    if height_m is not None:
+        return metabolic_properties(list(names), body_mass_kg, height_m, max_isometric_force_N,
+                                    optimal_fiber_length_m, overrides=overrides, strict=strict)
+    check_subject(float(body_mass_kg), 1.0)  # the body mass alone (1 m: any plausible height)
+    masses = model_muscle_masses_kg(names, max_isometric_force_N, optimal_fiber_length_m, overrides)
+    fst = slow_twitch_fraction(list(names), FALLBACK_SLOW_TWITCH_FRACTION, overrides=overrides,
+                               max_isometric_force_N=max_isometric_force_N)
+    return masses, fst
+
+
+def mass_rule(height_m: float | None) -> str:
+    """``muscle_mass_rule`` of the outputs: :data:`MASS_RULE_VOLUME` with a height, else :data:`MASS_RULE_MODEL`."""
+    return MASS_RULE_MODEL if height_m is None else MASS_RULE_VOLUME
 
 
 def model_muscle_masses_kg(names, max_isometric_force_N, optimal_fiber_length_m, overrides=None) -> np.ndarray:

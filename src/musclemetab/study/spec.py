@@ -19,7 +19,8 @@ A study file names everything a study needs; paths are relative to the file::
     name = "sub1"
     model = "data/sub1.osim"
     body_mass_kg = 72.6
-    height_m = 1.743
+    height_m = 1.743                      # optional: without it each muscle's mass comes from the
+                                          # model, F0 / specific tension x density x lMo (muscle_mass_rule)
     passive = "data/passiveMoments.mat"   # optional: calibration for effort-cal / effort-ten
     tendon_stiffness = "emg-ten"          # optional, effort-ten: "emg-ten" (the subject's own
                                           # EMG-TEN estimate), a parameters.json, a table
@@ -161,7 +162,9 @@ class Subject:
     name: str
     model: Path
     body_mass_kg: float
-    height_m: float
+    #: ``None``: no height; the muscle masses of the metabolic models and of the energy goal come
+    #: from the model (``muscle_mass_rule``), the height entering nothing else
+    height_m: float | None
     trials: tuple[Trial, ...]
     passive: Path | None = None
     tendon_stiffness: str | Path | Mapping[str, float] | None = None
@@ -458,7 +461,7 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
     check_plain_name(name, f"{where}: subject name")
     model = _path(data.get("model"), base, here, "model")
     mass = _number(data.get("body_mass_kg"), here, "body_mass_kg", required=True)
-    height = _number(data.get("height_m"), here, "height_m", required=True)
+    height = _number(data.get("height_m"), here, "height_m")  # optional: the muscle masses from the model
     passive = _path(data.get("passive"), base, here, "passive", required=False)
     kt = data.get("tendon_stiffness")
     if isinstance(kt, str):
