@@ -173,3 +173,76 @@ def test_the_example_study_raises_no_flag(demo):
     for d in set(table["unit_dir"]):
         summary = json.loads((out / d / "summary.json").read_text())
         assert summary["plausibility"] == [] and len(summary["peak_moment_by_dof_Nm"]) == len(summary["dofs"])
+
+
+@pytest.mark.opensim
+def test_analyse_prints_records_and_enforces_the_flags(example, tmp_path, capsys):
+    """``analyse`` on a two-muscle solution folder (``tests/test_analysis.py``) whose summary.json
+    records a passive-force flag, at 2.0 m/s: Ralston's rate there is (29 + 0.0053 x 120^2) x
+    4.184/60 = 7.344 W/kg, the band's floor 3.672 W/kg, above the two muscles' whole-body rate,
+    which is flagged for every model. One warning line per flag, ``plausibility.json``, the
+    ``quality`` column; ``--strict``: exit status 1 after the files are written."""
+    from test_analysis import _solution_folder
+
+    from musclemetab.commands import main
+
+    folder = _solution_folder(tmp_path / "sol")
+    summary = json.loads((folder / "summary.json").read_text())
+    solve_flag = Flag("passive_force", "passive fiber force above 0.5 F0 (peak, in F0): soleus_r 0.61", {"soleus_r": 0.61},
+                      0.5)
+    (folder / "summary.json").write_text(json.dumps({**summary, "plausibility": [solve_flag.to_dict()]}))
+    base = ["analyse", "--solution", str(folder), "--model", str(example.model), "--ik", str(example.ik["normal"]),
+            "--cycle", "0.62,0.70,0.77", "--mass", "72.6", "--height", "1.743", "--models", "UM10,BH04",
+            "--speed", "2.0"]
+    out = tmp_path / "an"
+    assert main([*base, "--out", str(out)]) == 0
+    err = [line for line in capsys.readouterr().err.splitlines()
+           if line.startswith((f"musclemetab: warning: {folder}", f"musclemetab: warning: {out}"))]
+    wb = pd.read_csv(out / "whole_body.csv").set_index("model")
+    floor = 0.5 * (29 + 0.0053 * 120.0**2) * 4.184 / 60
+    assert floor == pytest.approx(3.672, abs=1e-3) and (wb["whole_body_W_per_kg"] < floor).all()
+    assert err[0] == f"musclemetab: warning: {folder}: {solve_flag.message}"
+    assert [e.split(": ")[3] for e in err[1:]] == ["UM10", "BH04"] and all("below the band" in e for e in err[1:])
+    recorded = [Flag.from_dict(d) for d in json.loads((out / "plausibility.json").read_text())]
+    assert recorded[0] == solve_flag and [(f.code, f.model) for f in recorded[1:]] == [
+        ("metabolic_rate", "UM10"), ("metabolic_rate", "BH04")]
+    results = pd.read_csv(out / "results.csv").set_index("model")
+    assert results.loc["UM10", "quality"] == "passive_force(soleus_r); metabolic_rate(UM10)"
+    assert main([*base, "--strict", "--out", str(tmp_path / "strict")]) == 1
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert last.startswith("musclemetab: error: analyse --strict: implausible result refused (strict): passive_force(")
+    assert (tmp_path / "strict" / "plausibility.json").is_file()
+    # at a speed whose band holds the rates, the solve's flag alone
+    assert main([*base[:-1], "0.8", "--out", str(tmp_path / "slow")]) == 0
+    assert pd.read_csv(tmp_path / "slow" / "results.csv")["quality"].tolist() == ["passive_force(soleus_r)"] * 2
+
+
+def test_estimate_prints_the_flags_of_its_solutions(monkeypatch, tmp_path, capsys):
+    """``estimate`` prints one warning line per flag of each trial's solution (as recorded in its
+    summary.json), and of a validation re-solve's folder; ``--strict`` fails after the output."""
+    from types import SimpleNamespace
+
+    import musclemetab.redundancy.run as run_module
+    from musclemetab.commands import main
+    from musclemetab.redundancy.record import SolveRecord
+
+    flag = Flag("saturated_activation", "1 muscle at activation >= 0.95 ...: soleus_r 20%", {"soleus_r": 0.2}, 0.1)
+    other = Flag("reserve", "reserve above 5% ...: knee_angle_r", {"knee_angle_r": 0.07}, 0.05)
+    record = SolveRecord.from_dict({"status": "Solve_Succeeded", "success": True, "plausibility": [flag.to_dict()]})
+    clean = SolveRecord.from_dict({"status": "Solve_Succeeded", "success": True, "plausibility": []})
+    (tmp_path / "out" / "validation" / "fast").mkdir(parents=True)
+    (tmp_path / "out" / "validation" / "fast" / "summary.json").write_text(
+        json.dumps({"plausibility": [other.to_dict()]}))
+    result = SimpleNamespace(factors={"tendon_stiffness": {"soleus_r": 0.5}}, emg_scale={}, labels=("slow", "fast"),
+                             run_record=SimpleNamespace(status="Solve_Succeeded", iterations=12), document={},
+                             solutions={"slow": SimpleNamespace(record=record), "fast": SimpleNamespace(record=clean)})
+    monkeypatch.setattr(run_module, "estimate_files", lambda *a, **k: result)
+    argv = ["estimate", "--model", "m.osim", "--ik", "a.mot", "b.mot", "--id", "a.sto", "b.sto", "--ultrasound",
+            "a.mot", "b.mot", "--estimate", "tendon_stiffness=soleus_r", "--validate", "--out", str(tmp_path / "out")]
+    assert main(argv) == 0
+    err = [e for e in capsys.readouterr().err.splitlines() if e.startswith("musclemetab: warning:")]
+    assert err == [f"musclemetab: warning: {tmp_path / 'out' / 'slow'}: {flag.message}",
+                   f"musclemetab: warning: {tmp_path / 'out' / 'validation' / 'fast'}: {other.message}"]
+    assert main([*argv, "--strict"]) == 1
+    assert "estimate --strict: implausible result refused (strict): saturated_activation(soleus_r); reserve(" \
+        in capsys.readouterr().err

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..redundancy.plausibility import Flag
 
-__all__ = ["PLAUSIBILITY_FILE", "legs_rate_flags", "write_plausibility", "RATE_BAND", "ralston_gross_rate_W_per_kg", "whole_body_rate_flag", "negative_group_flag",
+__all__ = ["PLAUSIBILITY_FILE", "legs_rate_flags", "results_rows_flags", "write_plausibility", "RATE_BAND", "ralston_gross_rate_W_per_kg", "whole_body_rate_flag", "negative_group_flag",
            "metabolic_flags", "SPEED_RANGE_M_PER_S"]
 
 #: The plausible band of the gross whole-body rate, as factors of Ralston's rate at the speed.
@@ -89,6 +89,22 @@ def metabolic_flags(whole_body: Mapping[str, float], speed_m_per_s: float | None
         for _, row in group_shares.iterrows():
             flags.append(negative_group_flag(str(row["model"]), {c[6:-4]: float(row[c]) for c in cols}))
     return [f for f in flags if f is not None]
+
+
+def results_rows_flags(rows, *, band: tuple[float, float] = RATE_BAND) -> list[Flag]:
+    """The metabolic checks of a results table (``results.csv``: one row per ``model``, with
+    ``whole_body_W_per_kg``, ``speed_m_per_s`` and the group shares ``share_<G>_pct``), row by row:
+    what the ``quality`` column of each row adds to the solve's flags."""
+    import pandas as pd
+
+    flags = []
+    for i in range(len(rows)):
+        row = rows.iloc[[i]]
+        speed = row["speed_m_per_s"].iloc[0] if "speed_m_per_s" in row else None
+        speed = float(speed) if speed is not None and pd.notna(speed) else None
+        flags += metabolic_flags({str(row["model"].iloc[0]): float(row["whole_body_W_per_kg"].iloc[0])}, speed, row,
+                                 band=band)
+    return flags
 
 
 def legs_rate_flags(results: Mapping, speed_m_per_s: float | None, *, band: tuple[float, float] = RATE_BAND) -> list[Flag]:
