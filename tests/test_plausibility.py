@@ -90,6 +90,36 @@ def test_saturation_share_counts_the_gait_cycle_not_its_padding():
     assert cycle_nodes(t[:10]).all()
 
 
+def test_saturation_while_lengthening_counts_the_cycle_nodes_where_both_hold():
+    """100 cycle nodes and 5 + 6 padding nodes. a: full activation on 30 cycle nodes, lengthening on
+    3 of them (3 %: flagged), shortening on the rest; b: full activation on 10 nodes, lengthening
+    on 2 (2 %, not above the limit); c: lengthening at full activation in the padding alone (not
+    flagged); d: lengthening throughout at activation 0.94 (below the level)."""
+    from musclemetab.redundancy.plausibility import (LENGTHENING_SATURATION_SHARE_LIMIT, cycle_nodes,
+                                                     lengthening_saturation_flag)
+
+    t = np.round(np.arange(111) * 0.01, 10)
+    act, vel = np.full((111, 4), 0.2), np.full((111, 4), -0.5)
+    act[20:50, 0] = 1.0
+    vel[30:33, 0] = 0.4
+    act[60:70, 1] = 0.97
+    vel[60:62, 1] = 0.1
+    act[:5, 2] = act[-6:, 2] = 1.0
+    vel[:5, 2] = vel[-6:, 2] = 1.0
+    act[:, 3], vel[:, 3] = 0.94, 1.0
+    inside = cycle_nodes(t)
+    f = lengthening_saturation_flag(["a", "b", "c", "d"], act, vel, in_cycle=inside)
+    assert LENGTHENING_SATURATION_SHARE_LIMIT == 0.02 and f.code == "saturated_lengthening"
+    assert f.items == pytest.approx({"a": 0.03}) and "a 3%" in f.message and "lengthens" in f.message
+    assert list(lengthening_saturation_flag(["a", "b", "c", "d"], act, vel, in_cycle=inside, limit=0.01).items) == \
+        ["a", "b"]
+    assert list(lengthening_saturation_flag(["a", "b", "c", "d"], act, vel, limit=0.01).items) == ["c", "a", "b"]
+    assert lengthening_saturation_flag(["a", "b", "c", "d"], act, vel, in_cycle=inside, level=0.9).items == \
+        pytest.approx({"d": 1.0, "a": 0.03})
+    # a solve whose muscles never lengthen at full activation (saturated while shortening only)
+    assert lengthening_saturation_flag(["a"], act[:, :1], -np.abs(vel[:, :1]), in_cycle=inside) is None
+
+
 def test_reserve_flag_per_dof_share_of_its_peak_moment():
     # 4 intervals + the repeated last node; RMS over the intervals: knee sqrt((9+9+16+16)/4) = 3.5355
     r = np.array([[3.0, 0.2], [-3.0, 0.2], [4.0, -0.2], [-4.0, 0.2], [-4.0, 0.2]])

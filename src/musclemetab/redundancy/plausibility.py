@@ -27,11 +27,13 @@ __all__ = [
     "PASSIVE_FORCE_LIMIT",
     "SATURATION_ACTIVATION",
     "SATURATION_SHARE_LIMIT",
+    "LENGTHENING_SATURATION_SHARE_LIMIT",
     "RESERVE_SHARE_LIMIT",
     "RESERVE_FLOOR_NM",
     "passive_force_flag",
     "fiber_length_flag",
     "saturation_flag",
+    "lengthening_saturation_flag",
     "cycle_nodes",
     "reserve_flag",
     "solution_flags",
@@ -55,6 +57,13 @@ SATURATION_ACTIVATION = 0.95
 #: 20-60 % MVC at preferred speed, e.g. Winter 1991, *The biomechanics and motor control of human
 #: gait*); a muscle near full activation for more than a tenth of the cycle is not walking.
 SATURATION_SHARE_LIMIT = 0.10
+#: Share of the gait cycle's nodes at which a muscle is at :data:`SATURATION_ACTIVATION` or more
+#: *while its fiber lengthens* above which it is flagged: two nodes of the study's 100-node
+#: cycle. Lengthening leg muscles in walking act as brakes at low activation (Winter 1991); at
+#: the effort optimum of the example subject no muscle comes near full activation while it
+#: lengthens, whereas an energy goal's optimum can drive lengthening muscles to it, their force
+#: being cheap in the models' heat while they lengthen (``docs/energy_objective.md``).
+LENGTHENING_SATURATION_SHARE_LIMIT = 0.02
 #: Reserve RMS of a DOF as a share of the peak absolute inverse-dynamics moment of that DOF
 #: above which the DOF is flagged. Reserves should add little to the muscles' moments (Hicks et
 #: al. 2015, J Biomech Eng 137:020905, who ask for reserve moments small against the net joint
@@ -176,6 +185,28 @@ def saturation_flag(muscles: Sequence[str], activation, *, level: float = SATURA
                 "model scaling) or the moments too large", items, limit)
 
 
+def lengthening_saturation_flag(muscles: Sequence[str], activation, fiber_velocity, *,
+                                level: float = SATURATION_ACTIVATION,
+                                limit: float = LENGTHENING_SATURATION_SHARE_LIMIT, in_cycle=None) -> Flag | None:
+    """Muscles whose activation is ``level`` or more *while their fiber lengthens* (fiber velocity
+    above 0) at more than ``limit`` of the gait cycle's nodes (``activation``, ``fiber_velocity``:
+    ``(nodes, muscles)``; ``in_cycle``: :func:`cycle_nodes`, default every node)."""
+    a, v = np.asarray(activation, dtype=float), np.asarray(fiber_velocity, dtype=float)
+    if in_cycle is not None:
+        keep = np.asarray(in_cycle, dtype=bool)
+        a, v = a[keep], v[keep]
+    share = np.mean((a >= level) & (v > 0), axis=0) if a.size else np.zeros(len(muscles))
+    items = _worst(muscles, share, share > limit)
+    if not items:
+        return None
+    return Flag("saturated_lengthening", f"{len(items)} muscle{'s' if len(items) != 1 else ''} at activation >= "
+                f"{level:g} while the fiber lengthens, over more than {100 * limit:g} % of the gait cycle (share of "
+                f"the cycle): {_listing(items, '{:.0%}')}; walking does not brake at full activation: an energy goal's "
+                "optimum uses the models' low cost of lengthening muscles (keep the effort goal beside it, "
+                "--effort-weight; docs/energy_objective.md), otherwise the muscles are too weak for the moments",
+                items, limit)
+
+
 def reserve_flag(dofs: Sequence[str], reserve_Nm, peak_moment_by_dof_Nm: Mapping[str, float], *,
                  limit: float = RESERVE_SHARE_LIMIT, floor_Nm: float = RESERVE_FLOOR_NM) -> Flag | None:
     """DOFs whose reserve RMS exceeds ``limit`` x the DOF's peak absolute inverse-dynamics moment
@@ -207,13 +238,16 @@ def solution_flags(solution, *, passive_limit: float = PASSIVE_FORCE_LIMIT,
     solves) and is left out without it; the fiber-length check uses its ``fiber_length_bounds``.
     """
     rec = solution.record
+    in_cycle = solution_cycle_nodes(solution)
     flags = [
         passive_force_flag(solution.muscles, solution.passive_fiber_force_N,
                            solution.parameters.max_isometric_force_N, limit=passive_limit),
         fiber_length_flag(solution.muscles, solution.lm_norm,
                           widened_upper=(rec.fiber_length_bounds or {}).get("widened_upper")),
         saturation_flag(solution.muscles, solution.activation, level=saturation_level, limit=saturation_limit,
-                        in_cycle=solution_cycle_nodes(solution)),
+                        in_cycle=in_cycle),
+        lengthening_saturation_flag(solution.muscles, solution.activation, solution.fiber_velocity_lmo_per_s,
+                                    level=saturation_level, in_cycle=in_cycle),
     ]
     peaks = rec.get("peak_moment_by_dof_Nm")
     if peaks:
