@@ -28,8 +28,9 @@ __all__ = ["PLAUSIBILITY_FILE", "legs_rate_flags", "results_rows_flags", "write_
 #: The plausible band of the gross whole-body rate, as factors of Ralston's rate at the speed.
 #: Low: half (a rate below it is below standing rest plus a little walking). High: twice, which
 #: holds the subjects' spread (the study's calorimetry: SD 24 % of the mean at preferred speed)
-#: on top of the models' known overestimation (the study's Table 2: up to 1.75 x the measured
-#: mean, LW07 with EFFORT-GEN, 7.9 against 4.5 W/kg).
+#: on top of the models' known overestimation with the effort workflows (Luis et al. 2024,
+#: Table 2: up to 1.76 x the measured mean, LW07 with EFFORT-GEN, 7.9 against 4.5 W/kg); their
+#: EMG-TEN rates reach 2.7 x (LW07, 12.2 W/kg) and lie above it (``docs/quality.md``).
 RATE_BAND = (0.5, 2.0)
 #: Speeds (m/s) over which Ralston's regression was fitted (about 0.5 to 2.0 m/s, level walking);
 #: outside them the check is not made.
