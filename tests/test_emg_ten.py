@@ -727,6 +727,8 @@ def ankle_emg_ten(example, reference_table):
     import types
     from dataclasses import replace
 
+    from test_energy_goal import reference_model_parameters
+
     from musclemetab.io import read_storage
     from musclemetab.redundancy import inputs as I
     from musclemetab.redundancy import workflows as W
@@ -740,12 +742,7 @@ def ankle_emg_ten(example, reference_table):
     r = read_storage(folder / "IK_sub1_normal_MuscleAnalysis_MomentArm_ankle_angle_r.sto")[names].to_numpy()[:, None]
     keep, _ = I.select_muscles(names, r, ("ankle_angle_r",))
     muscles = [names[i] for i in keep]
-    model = types.SimpleNamespace(
-        names=list(t.index), max_isometric_force_N=t.max_isometric_force_N_sub1.to_numpy(),
-        optimal_fiber_length_m=t.optimal_fiber_length_m_sub1.to_numpy(),
-        tendon_slack_length_m=t.tendon_slack_length_m_sub1.to_numpy(),
-        pennation_angle_at_optimal_rad=t.pennation_angle_at_optimal_rad.to_numpy(),
-        max_contraction_velocity=t.max_contraction_velocity_lMo_per_s.to_numpy())
+    model = reference_model_parameters(t)
     t_ik, _ = I.read_kinematics(example.ik["normal"])
     t_id, mom = I.read_inverse_dynamics(example.id["normal"])
     geo = types.SimpleNamespace(time=lengths.index.to_numpy()[:F], muscles=muscles, dofs=("ankle_angle_r",),

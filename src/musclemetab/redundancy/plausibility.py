@@ -167,16 +167,21 @@ def cycle_nodes(time_s, cycle_s: tuple[float, float] | None = None, *, padding_s
     return mask if mask.sum() >= 2 else np.ones(t.size, dtype=bool)
 
 
+def _share_above(muscles: Sequence[str], at, in_cycle, limit: float) -> dict:
+    """``{muscle: share}`` of the muscles whose share of the cycle's nodes where ``at`` holds
+    (``(nodes, muscles)`` booleans; ``in_cycle`` the cycle's nodes, default all) exceeds ``limit``."""
+    if in_cycle is not None:
+        at = at[np.asarray(in_cycle, dtype=bool)]
+    share = np.mean(at, axis=0) if at.size else np.zeros(len(muscles))
+    return _worst(muscles, share, share > limit)
+
+
 def saturation_flag(muscles: Sequence[str], activation, *, level: float = SATURATION_ACTIVATION,
                     limit: float = SATURATION_SHARE_LIMIT, in_cycle=None) -> Flag | None:
     """Muscles whose activation is ``level`` or more at more than ``limit`` of the gait cycle's nodes
     (``activation``: ``(nodes, muscles)`` on a uniform mesh, so a share of nodes is a share of time;
     ``in_cycle``: the cycle's nodes, :func:`cycle_nodes`; default every node)."""
-    a = np.asarray(activation, dtype=float)
-    if in_cycle is not None:
-        a = a[np.asarray(in_cycle, dtype=bool)]
-    share = np.mean(a >= level, axis=0) if a.size else np.zeros(len(muscles))
-    items = _worst(muscles, share, share > limit)
+    items = _share_above(muscles, np.asarray(activation, dtype=float) >= level, in_cycle, limit)
     if not items:
         return None
     return Flag("saturated_activation", f"{len(items)} muscle{'s' if len(items) != 1 else ''} at activation >= "
@@ -191,12 +196,8 @@ def lengthening_saturation_flag(muscles: Sequence[str], activation, fiber_veloci
     """Muscles whose activation is ``level`` or more *while their fiber lengthens* (fiber velocity
     above 0) at more than ``limit`` of the gait cycle's nodes (``activation``, ``fiber_velocity``:
     ``(nodes, muscles)``; ``in_cycle``: :func:`cycle_nodes`, default every node)."""
-    a, v = np.asarray(activation, dtype=float), np.asarray(fiber_velocity, dtype=float)
-    if in_cycle is not None:
-        keep = np.asarray(in_cycle, dtype=bool)
-        a, v = a[keep], v[keep]
-    share = np.mean((a >= level) & (v > 0), axis=0) if a.size else np.zeros(len(muscles))
-    items = _worst(muscles, share, share > limit)
+    at = (np.asarray(activation, dtype=float) >= level) & (np.asarray(fiber_velocity, dtype=float) > 0)
+    items = _share_above(muscles, at, in_cycle, limit)
     if not items:
         return None
     return Flag("saturated_lengthening", f"{len(items)} muscle{'s' if len(items) != 1 else ''} at activation >= "
