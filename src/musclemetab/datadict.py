@@ -104,7 +104,7 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
      "the moments: check the inputs); summary.json holds reserve_share_of_peak_moment"),
     (_STUDY, "quality", "-",
      "ok, or the unit's plausibility flags as code(names ...) joined by '; ': passive_force, fiber_length, "
-     "saturated_activation, reserve (the solve's, every leg's: muscles or DOFs named), metabolic_rate (the row's "
+     "saturated_activation, saturated_lengthening, reserve (the solve's, every leg's: muscles or DOFs named), metabolic_rate (the row's "
      "whole-body rate outside 0.5-2 x Ralston's 1958 rate at its speed), negative_group_rate (groups named); 'not "
      "checked' for a unit run by an earlier version; thresholds and sources in docs/quality.md"),
     # per muscle
