@@ -11,7 +11,7 @@ velocity ``v~M_k`` (``vbar = v~M/vmax``, ``fV``). Without basal heat (a constant
 the leg's mean metabolic rate over the mesh in W/kg of body mass (rectangle rule; the
 integral ``sum_k h Edot_k`` over the duration ``N h``), normalised by ``N`` like the other goals
 of :mod:`.transcription`. Muscle masses and slow-twitch fractions are those of the metabolic rates
-of a solution (:func:`musclemetab.metabolics.solution.muscle_masses_and_fractions`): the anatomical
+of a solution (:func:`musclemetab.metabolics.masses.muscle_masses_and_fractions`): the anatomical
 muscle table's volume rule with the body height, the model's ``F0 / sigma * rho * lMo`` without it.
 
 UM03, BH04, HO06 and UC16 raise a negative total to zero (Umberger et al. 2003, Eq. 3), which
@@ -149,7 +149,7 @@ class EnergyGoal:
     def record(self) -> dict:
         """The goal's settings, as ``summary.json`` records them (without a height also the
         ``muscle_mass_rule``; a goal with one records what it always did)."""
-        from ..metabolics.solution import mass_rule
+        from ..metabolics.masses import mass_rule
 
         return {"model": self.model, "weight": self.weight, "effort_weight": self.effort_weight,
                 "smoothing": self.smoothing, "body_mass_kg": self.body_mass_kg, "height_m": self.height_m,
@@ -160,7 +160,7 @@ class EnergyGoal:
 
 @functools.lru_cache(maxsize=16)
 def _muscle_values(muscles, body_mass_kg, height_m, f0, lmo, overrides, overrides_stamp):
-    from ..metabolics.solution import muscle_masses_and_fractions
+    from ..metabolics.masses import muscle_masses_and_fractions
 
     mass, fst = muscle_masses_and_fractions(list(muscles), body_mass_kg, height_m, np.asarray(f0), np.asarray(lmo),
                                             overrides)
