@@ -164,13 +164,21 @@ def reduced_inverse_hessian(H, J, x, g, lbx, ubx, lbg, ubg, lam_g, lam_x, column
     pos = {int(c): k for k, c in enumerate(free)}
     A = sp.csr_matrix(J)[rows][:, free]
     nonempty = np.diff(A.indptr) > 0  # rows of bound variables alone (e.g. a = e = 0) hold nothing
-    rows, A = rows[nonempty], A[nonempty]
+    # an inequality row whose only free variables are the parameters (an EMG band row whose
+    # excitation sits on its bound) would hold a parameter by a bound, not by the data: a
+    # degenerate corner (both the bound and the row active), left out like the rows above
+    params = {pos[int(c)] for c in columns}
+    others = A[:, [k for k in range(free.size) if k not in params]].tocsr()
+    degenerate = (lbg[rows] < ubg[rows]) & (np.diff(others.indptr) == 0)
+    keep = nonempty & ~degenerate
+    rows, A = rows[keep], A[keep]
     H = sp.csc_matrix(H)
     K = sp.bmat([[H[free][:, free], A.T], [A, None]], format="csc")
     rhs = np.zeros((K.shape[0], len(columns)))
     for j, c in enumerate(columns):
         rhs[pos[int(c)], j] = 1.0
-    active = {"constraint_rows": int(rows.size), "variable_bounds": int(fixed.sum())}
+    active = {"constraint_rows": int(rows.size), "variable_bounds": int(fixed.sum()),
+              "degenerate_rows_left_out": int((nonempty & degenerate).sum())}
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
