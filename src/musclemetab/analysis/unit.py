@@ -20,18 +20,21 @@ import numpy as np
 
 from ..errors import DataMismatchError, OptionError
 from ..events import as_time
-from .events import GaitCycle
+from ..events import GaitCycle
 from .groups import DEFAULT_THRESHOLD_M, GROUPS, GROUPS_WITH_OTHER, OTHER, group_rates, group_shares, group_weights
 from .phases import phase_shares
 
 __all__ = ["MetabolicAnalysis", "TrialAnalysis", "RecordedTrial", "analyse", "write_analysis",
            "analyse_metabolics", "analyse_solution_folder", "interpolate_moment_arms", "recorded_trial",
-           "recorded_cycle", "ANALYSIS_FILE", "TIMESERIES_FILE", "GROUP_KEY_FILE"]
+           "recorded_cycle", "ANALYSIS_FILE", "TIMESERIES_FILE", "GROUP_KEY_FILE", "ANALYSE_RECORD"]
 
 #: files of :func:`write_analysis` (beside ``whole_body.csv`` and ``per_muscle.csv``)
 ANALYSIS_FILE = "analysis.csv"
 TIMESERIES_FILE = "timeseries.csv"
 GROUP_KEY_FILE = "muscle_groups.csv"
+#: The record ``musclemetab analyse`` leaves in its output folder: the solution and metabolics
+#: folders of each leg, the gait cycle, body mass and height (read by :mod:`musclemetab.report`).
+ANALYSE_RECORD = "analyse.json"
 
 
 class MetabolicAnalysis(NamedTuple):
@@ -362,7 +365,7 @@ def analyse(
         inputs by :func:`filtered_moment_arms`). Default: the files the solution records
         (:func:`recorded_trial`).
     cycle
-        The gait cycle (:class:`GaitCycle`; e.g. :func:`~musclemetab.analysis.events.cycle_of_trial`).
+        The gait cycle (:class:`GaitCycle`; e.g. :func:`~musclemetab.events.cycle_of_trial`).
         Default: the cycle the solve recorded (a solve over ``--cycle``).
     body_mass_kg, height_m, models, metabolics_options
         Passed to :func:`musclemetab.metabolics.solution.metabolics_from_solution` (``basal``,

@@ -297,11 +297,18 @@ def _diagnosis_record(diagnosis, solution, geometry, id_time, id_moments, ik_tim
     return record
 
 
-def _solve_files_recording_warnings(args, kwargs):
-    """:func:`solve_files` in a pool worker: the solution and the warnings it raised."""
+def _solve_files_recording_warnings(args, kwargs, progress_s=None):
+    """:func:`solve_files` in a pool worker: the solution and the warnings it raised; with
+    ``progress_s`` the progress lines every ``progress_s`` seconds on this process's standard
+    error (the caller's), labelled with the leg (:class:`~.ipopt.solve_progress`)."""
+    import contextlib
     import warnings
 
-    with warnings.catch_warnings(record=True) as caught:
+    from .ipopt import solve_progress
+
+    progress = contextlib.nullcontext() if progress_s is None else \
+        solve_progress(progress_s, label=f" side {kwargs.get('side')}")
+    with warnings.catch_warnings(record=True) as caught, progress:
         warnings.simplefilter("always")
         solution = solve_files(*args, **kwargs)
     return solution, [(w.category, str(w.message)) for w in caught]
@@ -314,7 +321,8 @@ def solve_sides(model_path, ik_path, id_path, workflow: str = "effort-gen", *, s
     The legs are independent problems. With ``workers`` > 1 they are solved in a pool of
     ``min(workers, len(sides))`` processes (:func:`musclemetab.processes.spawn_pool`), each
     with its own OpenSim worker; the warnings of a leg are raised again here, in the order of
-    ``sides``, and its errors as if it had been solved in this process. The solutions are the
+    ``sides``, and its errors as if it had been solved in this process; while progress lines are
+    on here (:class:`~.ipopt.solve_progress`) each leg writes its own, labelled with the leg. The solutions are the
     same either way (``tests/test_gait2392.py``; time: ``benchmarks/sides.py``).
     """
     import warnings
@@ -326,10 +334,12 @@ def solve_sides(model_path, ik_path, id_path, workflow: str = "effort-gen", *, s
         return {side: solve_files(model_path, ik_path, id_path, workflow, side=side, **kwargs) for side in sides}
     from ..processes import spawn_pool, stop_pool
 
+    from .ipopt import progress_interval
+
     pool, restore = spawn_pool(min(workers, len(sides)))
     try:
         futures = {side: pool.submit(_solve_files_recording_warnings, (model_path, ik_path, id_path, workflow),
-                                     {**kwargs, "side": side}) for side in sides}
+                                     {**kwargs, "side": side}, progress_interval()) for side in sides}
         results = {side: fut.result() for side, fut in futures.items()}
     except KeyboardInterrupt:  # the legs' processes ignore Ctrl-C: stopped, not waited for
         stop_pool(pool)
@@ -729,18 +739,19 @@ def estimate_files(
     options = SolverOptions(max_iter=max_iter)
 
     from ..geometry import compute_geometry
-    from ..io import read_storage
+    from ..io import read_table
     from ..model import read_muscle_parameters
-    from ..layout import discover_dofs, read_layout
     from .inputs import read_inverse_dynamics, read_kinematics
 
     model_parameters = read_muscle_parameters(model)
     trials, prepared, params, diagnoses = [], [], None, []
-    layout = read_layout(model)
     for i, (ik, idp, lab, us) in enumerate(zip(ik, id_files, labels, measured)):
-        dofs = list(dofs) if dofs else discover_dofs(layout, side, list(read_storage(idp).columns))
+        id_table = read_table(idp)
+        # the first trial's DOFs (or the given ones) for every trial, each ID file checked as solve_files does
+        dofs = list(_trial_dofs(model, [id_table], dofs, side, cache_dir))
         t_ik, _ = read_kinematics(ik, dofs)
-        t_id, mom = read_inverse_dynamics(idp, dofs)
+        t_id, mom = read_inverse_dynamics(id_table, dofs)
+        check_time_ranges(t_ik, t_id, ik, idp)
         g = compute_geometry(model, ik, dofs=list(dofs), side=side, cache_dir=cache_dir)
         g, _ = exclude_from_geometry(g, exclude_muscles)
         nominal, wf_record = workflow_parameters(wf, model_parameters, g.muscles, passive=passive)
