@@ -56,7 +56,7 @@ def solve_emg_ten_arrays(
     ocp = solve_emg_ten_ocp(trials, params, settings, options)
     name = EMG_TEN if workflow == EMG_TEN else f"{workflow} emg-{settings.emg_mode}"
     result = assemble_result(trials, params, wf_record, ocp, settings, options, t_prep, t_start, name=name)
-    if ocp.success and settings.goals.w_emg > 0:
+    if ocp.success and name == EMG_TEN and settings.goals.w_emg > 0:  # the estimate's doubts
         record_identifiability(result, trials, params, settings, options, ocp)
     return result
 
