@@ -99,6 +99,10 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
      "was given"),
     (_STUDY, "cycle_source", "-", "where the gait events come from (study file, ground reaction forces, or estimated)"),
     (_STUDY, "speed_source", "-", "where the walking speed comes from (study file, or estimated from the pelvis)"),
+    (_STUDY, "solve_start", "-",
+     "how the unit's solve started: 'cold' (static optimisation), 'warm from <workflow>' (the same trial's solution of "
+     "the workflow before it), or 'cold: <reason>' when a planned warm start was not used or did not succeed "
+     "(docs/study.md, warm-started chains); legs that differ are named"),
     (_STUDY, "large_reserve", "-",
      "true when the solve's largest reserve RMS exceeds 1 % of the peak joint moment (the muscles do not explain "
      "the moments: check the inputs); summary.json holds reserve_share_of_peak_moment"),
