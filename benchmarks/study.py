@@ -114,14 +114,33 @@ def _validation_study(path: Path) -> Path:
                                       "tendon_stiffness": "example"})]
     for speed in SPEEDS:
         lines += ["", "[[subjects.trials]]", *table({"name": speed, "ik": ex.ik[speed], "id": ex.id[speed]})]
+    passive = _gait2392_passive(g.model, path.parent / "gait2392_passive.csv")
     lines += ["", "[[subjects]]", *table({"name": "gait2392", "model": g.model, "body_mass_kg": g.body_mass_kg,
-                                          "height_m": g.height_m or 1.8, "side": "both"}),
+                                          "height_m": g.height_m or 1.8, "side": "both", "passive": passive}),
               "[subjects.tendon_stiffness]",
-              *[f"{m}_{s} = 20" for s in ("r", "l") for m in ("soleus", "med_gas", "lat_gas")],
+              *[f"{m} = 20" for m in ("soleus", "med_gas", "lat_gas")],  # both legs' (base names)
               "", "[[subjects.trials]]",
               *table({"name": "walk1", "ik": g.ik, "external_loads": g.external_loads, "cycle": "auto"})]
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _gait2392_passive(model, path: Path) -> Path:
+    """A passive calibration for gait2392's muscles (the data set has none): the published
+    calibration where a muscle has the same name in the Rajagopal model, the generic parameters
+    elsewhere, so that its EFFORT-CAL differs from EFFORT-GEN."""
+    from musclemetab.model import read_muscle_parameters
+    from musclemetab.passive import GENERIC_KPE, GENERIC_S0, GENERIC_SM, reference_passive_parameters
+
+    names = list(read_muscle_parameters(model).names)
+    published = reference_passive_parameters()
+    rows = ["muscle,kPE,s0,sM"]
+    for m in names:
+        kpe, s0, sm = published.lookup(m) or (GENERIC_KPE, GENERIC_S0, GENERIC_SM)
+        rows.append(f"{m},{kpe!r},{s0!r},{sm!r}")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(rows) + "\n")
     return path
 
 

@@ -64,6 +64,9 @@ def test_a_unit_waits_for_the_solution_it_starts_from(example):
     waiting.discard(batch[1])  # normal's EFFORT-GEN finished: normal's EFFORT-TEN starts
     assert jobs[2:][_next_ready(jobs[2:], waiting)][0] == Unit("sub1", "normal", "effort-ten")
     assert _next_ready(jobs[:2], waiting) == 0  # a unit with no source is always ready
+    # a study file listing EFFORT-TEN first: its units still come after the EFFORT-GEN units they start from
+    batches = unit_batches(_study(example, ["effort-ten", "effort-gen"]))
+    assert [u.workflow for u in batches[0]] == ["effort-gen", "effort-gen", "effort-ten", "effort-ten"]
 
 
 @pytest.mark.slow

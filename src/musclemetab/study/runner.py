@@ -61,6 +61,7 @@ from ..processes import pin_threads as _pin_threads  # noqa: F401
 from .spec import Study
 from .units import (
     INTERRUPTED,
+    WARM_CHAIN,
     Unit,
     execute_unit,
     is_complete,
@@ -291,8 +292,12 @@ class _Executor:
 def unit_batches(study: Study) -> list[list[Unit]]:
     """The units in the order they are submitted: every unit that needs no EMG-TEN estimate
     (all subjects, trials, sides and workflows together) with the estimations, longest
-    first; then the units that use an estimate, once the estimations are done."""
+    first; then the units that use an estimate, once the estimations are done. With warm
+    starts, the effort workflows are ordered as their chain (:data:`~.units.WARM_CHAIN`), so
+    that a unit comes after the unit whose solution it starts from."""
     stage1, stage2 = plan_units(study)
+    if study.warm_start:
+        stage2.sort(key=lambda u: WARM_CHAIN.index(u.workflow) if u.workflow in WARM_CHAIN else -1)  # stable
     independent = [u for u in stage2 if u.depends_on(study) is None]
     dependent = [u for u in stage2 if u.depends_on(study) is not None]
     return [b for b in (stage1 + independent, dependent) if b]
