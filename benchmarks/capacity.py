@@ -14,7 +14,9 @@ projected wall time and memory of a 1000-trial study on 8, 64 and 512 cores.
    (planning, key, submission, the unit's folder and record, the result sent back): run with
    ``--workers 1`` (in process), a process pool of 2 and a Dask ``LocalCluster`` of 2 worker
    processes (one thread each). The wall time per unit of each is the executor's cost per unit,
-   with nothing else in it.
+   with nothing else in it; the CPU time of the calling process per unit (with Dask, the
+   scheduler's too: a ``LocalCluster`` runs it in the calling process) is the serial part that
+   more cores do not shorten.
 3. The projection of a 1000-trial study (2000 units: EFFORT-GEN then EFFORT-TEN warm-started, the
    demo's units) on 8, 64 and 512 cores, one worker process per core: wall time =
    units x CPU per unit / cores + the serial parts (planning and gathering per unit, the
@@ -132,9 +134,9 @@ def executor_overhead(tmp: Path, n: int) -> dict:
     run_study(study, workers=1, progress=False)  # the model's names and the file hashes: read once
     for label, kwargs in (("in process (--workers 1)", {"workers": 1}),
                           ("process pool of 2 (--workers 2)", {"workers": 2})):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         run = run_study(study, force=True, progress=False, **kwargs)
-        result[label] = (time.perf_counter() - t0) / n
+        result[label] = ((time.perf_counter() - t0) / n, (time.process_time() - c0) / n)
         assert len(run.failed) == n
     try:
         from distributed import LocalCluster
@@ -142,9 +144,9 @@ def executor_overhead(tmp: Path, n: int) -> dict:
         return result
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         run_study(study, scheduler=cluster.scheduler_address, force=True, progress=False)  # workers import
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()  # the scheduler runs in this process: its CPU counts
         run = run_study(study, scheduler=cluster.scheduler_address, force=True, progress=False)
-        result["Dask LocalCluster, 2 worker processes"] = (time.perf_counter() - t0) / n
+        result["Dask LocalCluster, 2 worker processes"] = ((time.perf_counter() - t0) / n, (time.process_time() - c0) / n)
         assert len(run.failed) == n
     return result
 
@@ -152,7 +154,8 @@ def executor_overhead(tmp: Path, n: int) -> dict:
 def projection(unit: dict, overhead: dict, trials: int = 1000, units_per_trial: int = 2) -> list[tuple]:
     """3.: ``[(cores, wall h, memory GiB)]`` for a study of ``trials`` x ``units_per_trial`` units."""
     n = trials * units_per_trial
-    sched = overhead.get("Dask LocalCluster, 2 worker processes", overhead.get("process pool of 2 (--workers 2)", 0.0))
+    # the calling process's CPU per unit (the Dask scheduler's included): the part no added core shortens
+    sched = overhead.get("Dask LocalCluster, 2 worker processes", overhead.get("process pool of 2 (--workers 2)"))[1]
     rows = []
     for cores in (8, 64, 512):
         # every unit's CPU spread over the cores (a trial's chain is 2 units deep, 1000 chains: no core idles
@@ -183,8 +186,9 @@ def main(argv=None) -> int:
           f"({1000 * unit['gather_wall_s']:.1f} ms wall) per unit")
     overhead = executor_overhead(tmp, args.small_units)
     print(f"\n2. cost per unit of the executors ({args.small_units} units that fail at once)")
-    for label, s in overhead.items():
-        print(f"   {label:<40} {1000 * s:8.1f} ms per unit")
+    print(f"   {'executor':<40} {'wall ms':>8} {'calling process CPU ms':>23}  (per unit)")
+    for label, (wall, cpu) in overhead.items():
+        print(f"   {label:<40} {1000 * wall:8.1f} {1000 * cpu:23.1f}")
     print("\n3. a 1000-trial study (2000 units: EFFORT-GEN -> EFFORT-TEN), one worker process per core")
     print(f"   {'cores':>6} {'wall h':>8} {'of it serial h':>15} {'memory GiB':>11}")
     for cores, wall_h, mem, _, serial_h in projection(unit, overhead):
