@@ -22,7 +22,7 @@ scheduled together.
    the demo's study and a validation study of both shared subjects with the whole chain
    EFFORT-GEN -> EFFORT-CAL -> EFFORT-TEN (the example subject's three trials with its passive
    calibration and tendon stiffness; gait2392's subject on both legs, its triceps surae's
-   tendons at kT = 20), each run with the default warm starts and with ``--cold-start``. Prints
+   tendons at kT = 20), each run with ``--warm-start`` and with ``--cold-start``. Prints
    per unit how it started, IPOPT's iterations and CPU time (``solve_cpu_time_s``, plus a failed
    warm attempt's), the objective's relative difference, and for each study the total IPOPT
    CPU time warm over cold (target: at most 0.6x over the warm-started units) and the largest
@@ -203,7 +203,7 @@ def _warm_against_cold(tmp: Path, env) -> int:
     for name, study in studies.items():
         outs = {}
         for start in ("cold", "warm"):
-            flags = ["--cold-start"] if start == "cold" else []
+            flags = ["--cold-start"] if start == "cold" else ["--warm-start"]
             out = tmp / f"{'demo' if study is None else 'validation'}-{start}"
             if study is None:
                 _musclemetab("demo", "--out", str(out), "--workers", "2", "--no-progress", *flags, env=env)

@@ -2,9 +2,10 @@
 solution of the workflow before it, agrees with the cold solve within docs/study.md's tolerance,
 and falls back to a cold solve when the warm start cannot be used.
 
-The demo (``demo`` fixture, run once per test run) is the warm study: its EFFORT-TEN units start
-from EFFORT-GEN. One unit is run again cold and compared; the whole comparison on both shared
-subjects and every unit is ``python benchmarks/study.py --warm``.
+Warm starts are opt-in (``[solver] warm_start = true``, ``--warm-start``). The demo (``demo``
+fixture, run once per test run) is cold; one of its EFFORT-TEN units is run again warm-started from
+the demo's EFFORT-GEN solution and compared; the whole comparison on both shared subjects and every
+unit is ``python benchmarks/study.py --warm``.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import pytest
 from musclemetab.errors import OptionError
 from musclemetab.study import study_from_dict
 from musclemetab.study.runner import _next_ready, unit_batches
-from musclemetab.study.spec import cold_start_study, load_study
+from musclemetab.study.spec import load_study, warm_start_study
 from musclemetab.study.units import Unit, _chain_solve, execute_unit, unit_key
 
 #: docs/study.md, "Warm-started chains": objectives relative, rates relative, shares in points
@@ -37,26 +38,26 @@ def _study(example, workflows, solver=None, **subject):
 
 
 def test_chain_order_keys_and_the_switch(example):
-    study = _study(example, ["effort-ten", "effort-gen", "effort-cal"], passive=str(example.passive_moments_mat))
+    passive = str(example.passive_moments_mat)
+    study = _study(example, ["effort-ten", "effort-gen", "effort-cal"], solver={"warm_start": True}, passive=passive)
     gen, cal, ten = (Unit("sub1", "normal", w) for w in ("effort-gen", "effort-cal", "effort-ten"))
     # the chain's order is GEN -> CAL -> TEN whatever the file's order; without CAL, TEN starts from GEN
-    assert gen.warm_source(study) is None
+    assert study.warm_start and gen.warm_source(study) is None
     assert cal.warm_source(study) == gen and ten.warm_source(study) == cal
-    assert ten.warm_source(_study(example, ["effort-gen", "effort-ten"])) == gen
-    # a warm unit's key holds its source's key; a cold study's keys are those of a study without the switch
-    cold = cold_start_study(study)
-    assert cold.warm_start is False and ten.warm_source(cold) is None
-    explicit = _study(example, ["effort-ten", "effort-gen", "effort-cal"], solver={"warm_start": False},
-                      passive=str(example.passive_moments_mat))
-    assert unit_key(explicit, ten) == unit_key(cold, ten) != unit_key(study, ten, None, unit_key(study, cal))
-    assert unit_key(study, gen) == unit_key(cold, gen)  # the chain's first unit starts cold either way
-    assert "warm_start" not in json.dumps(explicit.settings.get("solver", {}))  # not an IPOPT setting
+    assert ten.warm_source(warm_start_study(_study(example, ["effort-gen", "effort-ten"]), True)) == gen
+    # cold is the default; a cold study's keys are those of a study without the key
+    plain = _study(example, ["effort-ten", "effort-gen", "effort-cal"], passive=passive)
+    cold = warm_start_study(study, False)
+    assert not plain.warm_start and ten.warm_source(plain) is None and ten.warm_source(cold) is None
+    assert unit_key(plain, ten) == unit_key(cold, ten) != unit_key(study, ten, None, unit_key(study, cal))
+    assert unit_key(study, gen) == unit_key(plain, gen)  # the chain's first unit starts cold either way
+    assert "warm_start" not in study.settings.get("solver", {})  # not an IPOPT setting
     with pytest.raises(OptionError, match=r"\[solver\]: 'warm_start' must be true or false"):
         _study(example, ["effort-gen"], solver={"warm_start": "yes"})
 
 
 def test_a_unit_waits_for_the_solution_it_starts_from(example):
-    study = _study(example, ["effort-gen", "effort-ten"])
+    study = _study(example, ["effort-gen", "effort-ten"], solver={"warm_start": True})
     (batch,) = unit_batches(study)
     jobs = [(u, "", None, None, u.warm_source(study)) for u in batch]
     waiting = {u for u, *_ in jobs}
@@ -65,40 +66,40 @@ def test_a_unit_waits_for_the_solution_it_starts_from(example):
     assert jobs[2:][_next_ready(jobs[2:], waiting)][0] == Unit("sub1", "normal", "effort-ten")
     assert _next_ready(jobs[:2], waiting) == 0  # a unit with no source is always ready
     # a study file listing EFFORT-TEN first: its units still come after the EFFORT-GEN units they start from
-    batches = unit_batches(_study(example, ["effort-ten", "effort-gen"]))
+    batches = unit_batches(_study(example, ["effort-ten", "effort-gen"], solver={"warm_start": True}))
     assert [u.workflow for u in batches[0]] == ["effort-gen", "effort-gen", "effort-ten", "effort-ten"]
 
 
 @pytest.mark.slow
 @pytest.mark.opensim
-def test_warm_demo_unit_agrees_with_its_cold_solve(demo, tmp_path):
-    """The demo's normal-speed EFFORT-TEN unit started from its EFFORT-GEN solution, against the same
-    unit run cold (its own folder, same study settings): objective, every whole-body rate and the
-    group shares within the stated tolerance; each record says how it started."""
+def test_warm_unit_agrees_with_the_demo_cold_unit(demo, tmp_path):
+    """The demo's normal-speed EFFORT-TEN unit (cold, the default) against the same unit run again,
+    warm-started from the demo's EFFORT-GEN solution (its own folder, same study settings):
+    objective, every whole-body rate and the group shares within the stated tolerance; each record
+    says how it started."""
     out, table = demo
-    unit = Unit("sub1", "normal", "effort-ten")
-    warm_rec = json.loads((out / unit.folder / "unit.json").read_text())
-    assert warm_rec["start"] == "warm from effort-gen"
-    assert set(table[table.workflow == "effort-ten"].solve_start) == {"warm from effort-gen"}
-    assert set(table[table.workflow == "effort-gen"].solve_start) == {"cold"}
-    warm_summary = json.loads((out / unit.folder / "summary.json").read_text())
-    assert warm_summary["initial_guess"].lower().startswith("warm start from effort-gen")
-
-    cold_study = cold_start_study(load_study(out / "study.toml", output=tmp_path))
-    cold_rec = execute_unit(cold_study, unit, unit_key(cold_study, unit))
-    assert cold_rec["status"] == "ok", cold_rec.get("error")
-    assert cold_rec["start"] == "cold"
-    cold_summary = json.loads((tmp_path / unit.folder / "summary.json").read_text())
+    assert set(table.solve_start) == {"cold"}
+    unit, gen = Unit("sub1", "normal", "effort-ten"), Unit("sub1", "normal", "effort-gen")
+    cold_summary = json.loads((out / unit.folder / "summary.json").read_text())
     assert cold_summary["initial_guess"] == "static optimisation (rigid tendons)"
+
+    warm_study = warm_start_study(load_study(out / "study.toml", output=tmp_path), True)
+    assert unit.warm_source(warm_study) == gen
+    key = unit_key(warm_study, unit, None, unit_key(warm_study, gen))
+    warm_rec = execute_unit(warm_study, unit, key, None, str(out / gen.folder))
+    assert warm_rec["status"] == "ok", warm_rec.get("error")
+    assert warm_rec["start"] == "warm from effort-gen"
+    warm_summary = json.loads((tmp_path / unit.folder / "summary.json").read_text())
+    assert warm_summary["initial_guess"].lower().startswith("warm start from effort-gen")
     assert warm_summary["objective"] == pytest.approx(cold_summary["objective"], rel=OBJECTIVE_RTOL)
     assert warm_summary["iterations"] < cold_summary["iterations"]
 
-    warm_wb = pd.read_csv(out / unit.folder / "whole_body.csv").set_index("model")
-    cold_wb = pd.read_csv(tmp_path / unit.folder / "whole_body.csv").set_index("model")
+    warm_wb = pd.read_csv(tmp_path / unit.folder / "whole_body.csv").set_index("model")
+    cold_wb = pd.read_csv(out / unit.folder / "whole_body.csv").set_index("model")
     for column in ("whole_body_W_per_kg", "whole_body_no_basal_W_per_kg", "leg_muscles_W"):
         assert warm_wb[column].to_numpy() == pytest.approx(cold_wb[column].to_numpy(), rel=RATE_RTOL), column
-    warm_an = pd.read_csv(out / unit.folder / "analysis.csv").set_index("model")
-    cold_an = pd.read_csv(tmp_path / unit.folder / "analysis.csv").set_index("model")
+    warm_an = pd.read_csv(tmp_path / unit.folder / "analysis.csv").set_index("model")
+    cold_an = pd.read_csv(out / unit.folder / "analysis.csv").set_index("model")
     shares = [c for c in warm_an.columns if c.endswith("_pct")]
     assert shares
     assert (warm_an[shares] - cold_an[shares]).abs().to_numpy().max() <= SHARE_ATOL_PCT
@@ -108,7 +109,7 @@ def test_warm_demo_unit_agrees_with_its_cold_solve(demo, tmp_path):
 @pytest.mark.opensim
 def test_a_warm_start_that_does_not_fit_falls_back_to_cold(demo, example):
     """A source solution over another mesh (the slow trial's, offered to the normal trial) is not
-    used: the unit solves cold (the same solve as the cold unit above) and the record says why;
+    used: the unit solves cold (the demo's own solve) and the record says why;
     a source unit that did not succeed gives a cold start too."""
     from musclemetab.redundancy.run import solve_files
 

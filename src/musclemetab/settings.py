@@ -110,12 +110,13 @@ def check_number(key: str, value, where: str = "", option: str | None = None) ->
 
 @dataclass(frozen=True)
 class SwitchKey:
-    """A true/false key of the study file: its default, its meaning and the command-line option
-    that turns it off (``off_option``) or on."""
+    """A true/false key of the study file: its default, its meaning and the command-line options
+    that turn it on (``on_option``) and off (``off_option``) whatever the file says."""
 
     name: str
     default: bool
     help: str
+    on_option: str | None = None
     off_option: str | None = None
 
     def check(self, value, where: str) -> bool:
@@ -128,9 +129,9 @@ class SwitchKey:
 
 #: Every true/false key of a study file: name, default, meaning, command-line option.
 SWITCH_KEYS: dict[str, SwitchKey] = {k.name: k for k in (
-    SwitchKey("warm_start", True, "[solver] warm_start: start each effort solve of a trial from the solve of the "
-              "workflow before it (EFFORT-GEN -> EFFORT-CAL -> EFFORT-TEN); false: every solve from static "
-              "optimisation", off_option="--cold-start"),
+    SwitchKey("warm_start", False, "[solver] warm_start: start each effort solve of a trial from the solve of the "
+              "workflow before it (EFFORT-GEN -> EFFORT-CAL -> EFFORT-TEN); false (the default): every solve from "
+              "static optimisation", on_option="--warm-start", off_option="--cold-start"),
 )}
 
 

@@ -77,7 +77,7 @@ from ..errors import InputFileError, OptionError
 from ..settings import MAX_ITERATIONS, MESH_FREQUENCY_RANGE_HZ, NUMBER_KEYS, NumberKey, check_number  # noqa: F401
 
 __all__ = ["Study", "Subject", "Trial", "load_study", "study_from_dict", "EMG_TEN", "KNOWN_WORKFLOWS", "BOTH", "strict_study",
-           "cold_start_study"]
+           "warm_start_study"]
 
 EMG_TEN = "emg-ten"
 #: ``side = "both"``: the two legs solved as independent problems, their rates added
@@ -365,12 +365,12 @@ def strict_study(study: Study) -> Study:
     return replace(study, strict=True, settings={**study.settings, "strict": True})
 
 
-def cold_start_study(study: Study) -> Study:
-    """``study`` with every solve started from static optimisation (``--cold-start``: the study
-    file's ``[solver] warm_start = false``)."""
+def warm_start_study(study: Study, warm_start: bool) -> Study:
+    """``study`` with warm-started chains on or off (``--warm-start``/``--cold-start``: the study
+    file's ``[solver] warm_start = true|false``)."""
     from dataclasses import replace
 
-    return replace(study, settings={**study.settings, "warm_start": False})
+    return replace(study, settings={**study.settings, "warm_start": bool(warm_start)})
 
 
 def _solver(data, where: str) -> dict:
