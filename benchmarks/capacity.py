@@ -95,7 +95,7 @@ def per_unit(tmp: Path, env) -> dict:
     env = dict(env, MUSCLEMETAB_CACHE=str(tmp / "cache-units"))
     study = demo_study(tmp / "units", models="all")
     n = sum(len(s) for s in plan_units(study))
-    wall, cpu, peak = _measured_run(["run", str(study.source), "--workers", "1", "--no-progress"], env)
+    wall, cpu, peak = _measured_run(["run", str(study.source), "--workers", "1", "--no-progress", "--warm-start"], env)
     ipopt = []
     for f in sorted((tmp / "units" / "units").rglob("summary.json")):
         ipopt.append(float(json.loads(f.read_text())["solve_cpu_time_s"]))
