@@ -73,8 +73,8 @@ POLISH_TOL = 1e-10
 POLISH_MU_INIT = 1e-7
 SENSITIVITY_CSV = "sensitivity.csv"
 #: the columns of ``sensitivity.csv`` (``docs/data_dictionary.md``)
-SENSITIVITY_COLUMNS = ("trial", "rank", "parameter", "muscle", "value", "model", "rate", "rate_value",
-                       "d_rate_d_log_p", "change_per_1pct", "relative_change_per_1pct")
+SENSITIVITY_COLUMNS = ("solution", "parameter_rank", "parameter", "muscle", "parameter_value", "model", "rate",
+                       "rate_value", "d_rate_d_log_p", "change_per_1pct", "relative_change_per_1pct")
 
 
 def _symbolic_parameters(ca, params, s):
@@ -270,7 +270,7 @@ class Sensitivity:
 
     def table(self):
         """Long table, one row per parameter, muscle, model and rate (:data:`SENSITIVITY_COLUMNS`,
-        ``rank`` empty)."""
+        ``parameter_rank`` 0: see :func:`ranked_table`)."""
         import pandas as pd
 
         frames = []
@@ -282,15 +282,15 @@ class Sensitivity:
             nominal = np.concatenate([[self.nominal_whole_body[model]], self.nominal_per_muscle[model]])
             deriv = np.vstack([self.whole_body[model][None, :], self.per_muscle[model]])  # (1+M, P)
             frames.append(pd.DataFrame({
-                "trial": self.trial, "parameter": np.tile(names, len(rates)), "muscle": np.tile(owners, len(rates)),
-                "value": np.tile(self.values, len(rates)), "model": model, "rate": np.repeat(rates, P),
+                "solution": self.trial, "parameter": np.tile(names, len(rates)),
+                "muscle": np.tile(owners, len(rates)), "parameter_value": np.tile(self.values, len(rates)), "model": model, "rate": np.repeat(rates, P),
                 "rate_value": np.repeat(nominal, P), "d_rate_d_log_p": deriv.reshape(-1)}))
         df = pd.concat(frames, ignore_index=True)
         df["change_per_1pct"] = df["d_rate_d_log_p"] / 100.0
         with np.errstate(divide="ignore", invalid="ignore"):
             df["relative_change_per_1pct"] = np.where(df["rate_value"] != 0, df["change_per_1pct"] / df["rate_value"],
                                                       np.nan)
-        df["rank"] = 0
+        df["parameter_rank"] = 0
         return df[list(SENSITIVITY_COLUMNS)]
 
 
@@ -514,18 +514,19 @@ def sensitivity_of_folder(folder, *, body_mass_kg: float, height_m: float | None
 
 def ranked_table(sensitivities: Sequence[Sensitivity], top: int | None = None):
     """The parameters that move a result most: the rows of each :meth:`Sensitivity.table`
-    ranked within each trial, model and rate by ``|d_rate_d_log_p|`` (1: largest), the
-    whole-body rows first; ``top`` keeps that many rows of each trial, model and rate."""
+    ranked within each solution, model and rate by ``|d_rate_d_log_p|`` (``parameter_rank`` 1:
+    largest), the whole-body rows first; ``top`` keeps that many rows of each solution, model
+    and rate."""
     import pandas as pd
 
     df = pd.concat([s.table() for s in sensitivities], ignore_index=True)
     df["_abs"] = df["d_rate_d_log_p"].abs()
     df["_wb"] = df["rate"] != "whole_body"
-    df = df.sort_values(["trial", "model", "_wb", "rate", "_abs"], ascending=[True, True, True, True, False],
+    df = df.sort_values(["solution", "model", "_wb", "rate", "_abs"], ascending=[True, True, True, True, False],
                         kind="stable")
-    df["rank"] = df.groupby(["trial", "model", "rate"]).cumcount() + 1
+    df["parameter_rank"] = df.groupby(["solution", "model", "rate"]).cumcount() + 1
     if top is not None:
-        df = df[df["rank"] <= int(top)]
+        df = df[df["parameter_rank"] <= int(top)]
     return df.drop(columns=["_abs", "_wb"]).reset_index(drop=True)
 
 
