@@ -36,7 +36,7 @@ def test_parameter_derivatives_are_those_of_the_problem(normal):
     parameter scaled by 1 +- 1e-6 (constraints and Lagrangian gradient at the same point)."""
     import casadi as ca
 
-    from musclemetab.redundancy.sensitivity import PARAMETERS, _columns, _scaled, parameter_derivatives
+    from musclemetab.redundancy.sensitivity import PARAMETERS, _scaled, parameter_derivatives
     from musclemetab.redundancy.static_opt import guess_from_solution
     from musclemetab.redundancy.transcription import TrialBlock, build_problem
 
@@ -48,10 +48,9 @@ def test_parameter_derivatives_are_those_of_the_problem(normal):
     x = sens.x
     pairs = [("lMo", "soleus_r"), ("alpha0", "gasmed_r")]
     ng = 4 * len(params.names) + len(prob.inputs.dofs)
-    dL, dg = parameter_derivatives(prob.inputs, params, prob.goals, 150.0, x, lam, ng)
-    _, cols = _columns(params, pairs)
+    dL, dg = parameter_derivatives(prob.inputs, params, prob.goals, 150.0, x, lam, ng, pairs)
     h = 1e-6
-    for (p, m), c in zip(pairs, cols):
+    for c, (p, m) in enumerate(pairs):
         values = []
         for sign in (1, -1):
             scale = np.zeros(len(params.names))

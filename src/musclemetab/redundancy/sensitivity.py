@@ -77,21 +77,23 @@ SENSITIVITY_COLUMNS = ("solution", "parameter_rank", "parameter", "muscle", "par
                        "rate_value", "d_rate_d_log_p", "change_per_1pct", "relative_change_per_1pct")
 
 
-def _symbolic_parameters(ca, params, s):
+def _symbolic_parameters(ca, params, s, columns):
     """The problem's parameter dictionary (:func:`.transcription._constants`) as expressions of
-    ``s`` (``len(PARAMETERS) x M`` symbols): each parameter ``p0 (1 + s)``."""
-    M = len(params.names)
-    val = {name: ca.DM(np.asarray(getattr(params, f), dtype=float)) * (1 + s[i * M:(i + 1) * M])
-           for i, (name, f) in enumerate(PARAMETERS.items())}
+    the symbols ``s``, one per ``(parameter, muscle)`` of ``columns``: that parameter
+    ``p0 (1 + s)``, the others their values."""
+    rel = {name: ca.SX.zeros(len(params.names)) for name in PARAMETERS}
+    for j, (name, muscle) in enumerate(columns):
+        rel[name][params.names.index(muscle)] = s[j]
+    val = {name: ca.DM(np.asarray(getattr(params, f), dtype=float)) * (1 + rel[name]) for name, f in PARAMETERS.items()}
     width = val["lMo"] * ca.sin(val["alpha0"])
     return {"lmo": val["lMo"], "lts": val["lTs"], "vmax": val["vmax"], "kT": val["kT"], "kpe": val["kPE"],
             "s0": val["s0"], "sm": val["sM"], "f0": val["F0"], "w2": width ** 2}
 
 
-def parameter_derivatives(inputs, params, goals, optimal_reserve_Nm, x, lam_g, n_rows_per_interval):
+def parameter_derivatives(inputs, params, goals, optimal_reserve_Nm, x, lam_g, n_rows_per_interval, columns):
     """``(d grad_z L / ds, dg / ds)`` (SciPy sparse, variables x parameters and rows x
     parameters) of a single-trial problem at ``(x, lam_g)``, ``s`` the relative changes of the
-    parameters (:data:`PARAMETERS`, muscle fastest): per log of each parameter."""
+    parameters ``columns`` (``[(parameter, muscle)]``, :data:`PARAMETERS`): per log of each."""
     import casadi as ca
     import scipy.sparse as sp
 
@@ -99,9 +101,9 @@ def parameter_derivatives(inputs, params, goals, optimal_reserve_Nm, x, lam_g, n
     from .transcription import _node_expressions
 
     M, D, N = len(inputs.muscles), len(inputs.dofs), inputs.n_intervals
-    n_s = len(PARAMETERS) * M
+    n_s = len(columns)
     s = ca.SX.sym("s", n_s)
-    P = _symbolic_parameters(ca, params, s)
+    P = _symbolic_parameters(ca, params, s, columns)
     h = ca.SX.sym("h")
     S, gk, _ = _node_expressions(ca.SX.sym, M, D, h, P, optimal_reserve_Nm, ca)
     z = ca.vertcat(S["a"], S["lm"], S["lp"], S["e"], S["aT"], S["vm"])
@@ -295,20 +297,17 @@ class Sensitivity:
 
 
 def _columns(params, parameters):
-    """``[(parameter, muscle)]`` and their positions among the symbols of :func:`parameter_derivatives`."""
-    M = len(params.names)
-    names = list(PARAMETERS)
+    """``[(parameter, muscle)]`` checked (default: every parameter of every muscle)."""
     if parameters is None:
-        parameters = [(p, m) for p in names for m in params.names]
-    out, cols = [], []
+        parameters = [(p, m) for p in PARAMETERS for m in params.names]
+    out = []
     for p, m in parameters:
         if p not in PARAMETERS:
             raise OptionError(f"unknown muscle parameter {p!r}; use one of {', '.join(PARAMETERS)}")
         if m not in params.names:
             raise OptionError(f"no muscle {m!r} in the problem; its muscles are {', '.join(params.names[:6])} ...")
         out.append((p, m))
-        cols.append(names.index(p) * M + params.names.index(m))
-    return out, cols
+    return out
 
 
 def _guess_of(x, inputs):
@@ -360,7 +359,7 @@ def trial_sensitivity(solution, inputs, params, goals, *, body_mass_kg: float, h
         raise OptionError("the sensitivities need the forward fiber dynamics; solve without --fiber-dynamics "
                           "backward")
     params = params.subset(inputs.muscles)
-    chosen, cols = _columns(params, parameters)
+    chosen = _columns(params, parameters)
     guess = guess_from_solution(solution, inputs, params, optimal_reserve_Nm)
     if kkt is None:
         kkt = polish(inputs, params, goals, guess, optimal_reserve_Nm=optimal_reserve_Nm, trial=trial or "trial").kkt
@@ -368,8 +367,8 @@ def trial_sensitivity(solution, inputs, params, goals, *, body_mass_kg: float, h
                         optimal_reserve_Nm=optimal_reserve_Nm, explicit_derivatives=True)
     x = np.asarray(kkt["x"], dtype=float)
     ng = nlp["layout"]["trials"][0]["ng"]
-    dL, dg = parameter_derivatives(inputs, params, goals, optimal_reserve_Nm, x, np.asarray(kkt["lam_g"]), ng)
-    dx, active = state_sensitivities(nlp, kkt, dL[:, cols], dg[:, cols])
+    dL, dg = parameter_derivatives(inputs, params, goals, optimal_reserve_Nm, x, np.asarray(kkt["lam_g"]), ng, chosen)
+    dx, active = state_sensitivities(nlp, kkt, dL, dg)
     metabolics = dict(body_mass_kg=body_mass_kg, height_m=height_m, models=models, **metabolic_options)
     record = solution.summary
     with warnings.catch_warnings():
@@ -405,7 +404,7 @@ def finite_difference(inputs, params, goals, x, parameter: str, muscle: str, rec
     import warnings
 
     params = params.subset(inputs.muscles)
-    _, _ = _columns(params, [(parameter, muscle)])
+    _columns(params, [(parameter, muscle)])  # the names checked
     out = []
     for sign in (1.0, -1.0):
         scale = np.zeros(len(params.names))
