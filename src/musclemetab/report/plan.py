@@ -231,7 +231,6 @@ def figure2_figure():
 def excitations_figure(study: StudyFolder, sel: Selection):
     """Excitations and fiber lengths of the selected subject's preferred trial, one line per
     workflow, with the measured EMG (:func:`measured_emg`)."""
-    from ..redundancy.solution import Solution
     from .figures import excitations_and_fiber_lengths
 
     subject, trial = sel.subject, sel.trial
@@ -244,7 +243,7 @@ def excitations_figure(study: StudyFolder, sel: Selection):
         folder = study.unit_folder(d.iloc[0])
         try:
             cycles[w] = study.unit_cycle(folder)
-            sols[w] = Solution.load(folder)
+            sols[w] = study.load_solution(folder)
         except MusclemetabError as exc:
             cycles.pop(w, None)
             skipped.append(f"{w} ({study.short(exc)})")
