@@ -17,7 +17,7 @@ PAIRS = [("lTs", "soleus_r"), ("kT", "vaslat_r"), ("F0", "vaslat_r"), ("sM", "so
 
 @pytest.fixture(scope="module")
 def normal(example, tmp_path_factory):
-    """The normal trial's EFFORT-GEN solution (the session's solve), its folder, the rebuilt
+    """The normal trial's EFFORT-GEN solution (solved once per test run), its folder, the rebuilt
     problem and the sensitivities of UM10 and BH04 to :data:`PAIRS`."""
     from musclemetab.redundancy import solve_files
     from musclemetab.redundancy.sensitivity import problem_of_solution, trial_sensitivity
