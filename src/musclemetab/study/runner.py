@@ -10,7 +10,7 @@ trial units — and gathers every complete unit into one results table:
     toe-off (% of the cycle), speed and measured rate when the study gives calorimetry, and
     ``large_reserve`` (the solve's reserves exceed 1 % of the peak joint moment, see
     :data:`musclemetab.redundancy.solution.LARGE_RESERVE_SHARE`) and ``quality`` (``ok`` or
-    the plausibility flags of the unit and the row, :func:`add_quality`; ``docs/quality.md``).
+    the plausibility flags of the unit and the row, :func:`~musclemetab.metabolics.plausibility.add_quality`; ``docs/quality.md``).
 ``DIR/per_muscle.csv`` (and ``DIR/per_muscle.parquet`` with the ``parquet`` extra)
     one row per subject × trial × workflow × model × muscle (with its side): the
     per-muscle table of every unit (:mod:`musclemetab.metabolics.per_muscle`).
@@ -54,6 +54,7 @@ from pathlib import Path
 from typing import Mapping
 
 from ..errors import OptionError
+from ..metabolics.plausibility import add_quality
 from ..io.atomic import FolderLock, _boot_id, _process_alive  # noqa: F401  (public here before)
 from ..io.atomic import atomic_path, atomic_write_text, check_output_folder
 from ..processes import THREAD_VARIABLES, spawn_pool  # noqa: F401  (THREAD_VARIABLES: public here before)
@@ -592,32 +593,6 @@ def add_leg_rows(rows: Mapping[str, object], basal_energy_J: Mapping[str, object
     out["legs"] = " + ".join(sides)
     out["unit_dir"] = str(Path(str(first["unit_dir"].iloc[0])).parent)
     return out.reset_index()
-
-
-def add_quality(rows, unit_records):
-    """``rows`` (one results row per model) with the column ``quality``: ``"ok"`` or the flags
-    (:func:`musclemetab.redundancy.plausibility.quality_text`) of the solve (every leg's, from the
-    ``plausibility`` of ``unit_records``) and of the row's metabolic results (its whole-body rate
-    against its speed, its negative group shares: :func:`musclemetab.metabolics.plausibility.metabolic_flags`);
-    ``"not checked"`` when a unit record has no ``plausibility`` (written by an earlier version)."""
-    import pandas as pd
-
-    from ..metabolics.plausibility import metabolic_flags
-    from ..redundancy.plausibility import flags_from_records, quality_text
-
-    if any("plausibility" not in r for r in unit_records):
-        rows["quality"] = "not checked"
-        return rows
-    solve = [f for r in unit_records for f in flags_from_records(r["plausibility"]) if f.model is None]
-    quality = []
-    for i in range(len(rows)):
-        row = rows.iloc[[i]]
-        speed = row["speed_m_per_s"].iloc[0] if "speed_m_per_s" in row else None
-        speed = float(speed) if speed is not None and pd.notna(speed) else None
-        model = str(row["model"].iloc[0])
-        quality.append(quality_text(solve + metabolic_flags({model: float(row["whole_body_W_per_kg"].iloc[0])}, speed, row)))
-    rows["quality"] = quality
-    return rows
 
 
 def leg_basal_energy_J(per_muscle, duration_s):
