@@ -38,6 +38,7 @@ FIGURE_NAMES = (
     "group_shares",
     "rates_against_speed",
     "per_muscle_ranked",
+    "structural_spread",
     "figure2_soleus",
 )
 
@@ -54,6 +55,7 @@ FIGURE_TITLES = {
     "group_shares": "Muscle-group shares",
     "per_muscle_ranked": "The muscles costing most energy, across speeds",
     "rates_against_speed": "Whole-body and muscle-group rates against walking speed",
+    "structural_spread": "Structural spread: energy models, workflows and trials",
 }
 
 FIGURE2_CAPTION = (
@@ -152,6 +154,7 @@ def plan_figures(study: StudyFolder) -> dict[str, FigurePlan]:
         "group_shares": partial(group_shares_figure, sel),
         "rates_against_speed": partial(rates_against_speed_figure, sel),
         "per_muscle_ranked": partial(per_muscle_figure, study, sel),
+        "structural_spread": partial(spread_figure, sel),
         "figure2_soleus": figure2_figure,
     }
     plans = {}
@@ -210,6 +213,12 @@ def rates_against_speed_figure(sel: Selection):
         "part of it (group share × whole-body rate), W per kg of body mass, both legs; one line per subject "
         "through its trials in the order of its walking speeds (line style and marker: the subject); same "
         "axes in every panel." + band_caption(sel.ok, "whole_body_no_basal_W_per_kg"))
+
+
+def spread_figure(sel: Selection):
+    from .spread_figure import spread_caption, spread_figure
+
+    return spread_figure(sel.ok), spread_caption()
 
 
 def figure2_figure():

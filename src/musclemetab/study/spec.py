@@ -24,7 +24,8 @@ A study file names everything a study needs; paths are relative to the file::
     name = "sub1"
     model = "data/sub1.osim"
     body_mass_kg = 72.6
-    height_m = 1.743
+    height_m = 1.743                      # optional: without it each muscle's mass comes from the
+                                          # model, F0 / specific tension x density x lMo (muscle_mass_rule)
     passive = "data/passiveMoments.mat"   # optional: calibration for effort-cal / effort-ten
     tendon_stiffness = "emg-ten"          # optional, effort-ten: "emg-ten" (the subject's own
                                           # EMG-TEN estimate), a parameters.json, a table
@@ -82,7 +83,8 @@ from typing import Any, Mapping
 from ..errors import InputFileError, OptionError
 from ..settings import MAX_ITERATIONS, MESH_FREQUENCY_RANGE_HZ, NUMBER_KEYS, NumberKey, check_number  # noqa: F401
 
-__all__ = ["Study", "Subject", "Trial", "load_study", "study_from_dict", "EMG_TEN", "KNOWN_WORKFLOWS", "BOTH", "strict_study"]
+__all__ = ["Study", "Subject", "Trial", "load_study", "study_from_dict", "EMG_TEN", "KNOWN_WORKFLOWS", "BOTH", "strict_study",
+           "warm_start_study"]
 
 EMG_TEN = "emg-ten"
 #: ``side = "both"``: the two legs solved as independent problems, their rates added
@@ -167,7 +169,9 @@ class Subject:
     name: str
     model: Path
     body_mass_kg: float
-    height_m: float
+    #: ``None``: no height; the muscle masses of the metabolic models and of the energy goal come
+    #: from the model (``muscle_mass_rule``), the height entering nothing else
+    height_m: float | None
     trials: tuple[Trial, ...]
     passive: Path | None = None
     tendon_stiffness: str | Path | Mapping[str, float] | None = None
@@ -217,6 +221,14 @@ class Study:
     #: a unit with a plausibility flag fails (``docs/quality.md``)
     strict: bool = False
 
+    @property
+    def warm_start(self) -> bool:
+        """Whether a trial's effort solves start from the solve of the workflow before them
+        (the study file's ``[solver] warm_start``, default true; ``docs/study.md``)."""
+        from ..settings import SWITCH_KEYS
+
+        return bool(self.settings.get("warm_start", SWITCH_KEYS["warm_start"].default))
+
     def subject(self, name: str) -> Subject:
         for s in self.subjects:
             if s.name == name:
@@ -232,7 +244,7 @@ _ENERGY_KEYS = {"model", "weight", "effort_weight", "smoothing", "form"}
 #: keys of the study file's [uncertainty] table (docs/uncertainty.md)
 _UNCERTAINTY_KEYS = {"samples", "seed", "priors"}
 #: keys of the study file's [solver] table (IPOPT settings of every solve)
-_SOLVER_KEYS = {"max_iter", "tol", "linear_solver"}
+_SOLVER_KEYS = {"max_iter", "tol", "linear_solver", "warm_start"}
 _SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials",
                  "muscle_properties", "side", "dofs", "emg_mode", "emg_tolerance", "estimate", "exclude_muscles"}
 _TRIAL_KEYS = {
@@ -340,6 +352,8 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
     if "basal_coefficient" in data or "basal_exponent" in data:
         settings.update(basal_coefficient=basal_coefficient, basal_exponent=basal_exponent)
     solver = _solver(data.get("solver"), where)
+    if "warm_start" in solver:  # how the solves start, not an IPOPT setting: kept beside [solver]
+        settings["warm_start"] = solver.pop("warm_start")
     if solver:
         settings["solver"] = solver
     energy = _energy_goal(data.get("energy_goal"), where)
@@ -365,9 +379,17 @@ def strict_study(study: Study) -> Study:
     return replace(study, strict=True, settings={**study.settings, "strict": True})
 
 
+def warm_start_study(study: Study, warm_start: bool) -> Study:
+    """``study`` with warm-started chains on or off (``--warm-start``/``--cold-start``: the study
+    file's ``[solver] warm_start = true|false``)."""
+    from dataclasses import replace
+
+    return replace(study, settings={**study.settings, "warm_start": bool(warm_start)})
+
+
 def _solver(data, where: str) -> dict:
-    """The ``[solver]`` table: ``max_iter``, ``tol``, ``linear_solver``, checked (the library of a
-    run-time linear solver comes from the command line or the environment, never from the file)."""
+    """The ``[solver]`` table: ``max_iter``, ``tol``, ``linear_solver`` and ``warm_start``, checked (the
+    library of a run-time linear solver comes from the command line or the environment, never from the file)."""
     if data is None:
         return {}
     if not isinstance(data, Mapping):
@@ -382,10 +404,14 @@ def _solver(data, where: str) -> dict:
     for key in ("max_iter", "tol"):
         if key in data:
             _number(data[key], f"{where}: [solver]", key)
+    if "warm_start" in data:
+        from ..settings import check_switch
+
+        check_switch("warm_start", data["warm_start"], f"{where}: [solver]")
     from ..redundancy import SolverOptions
 
     try:
-        SolverOptions(**dict(data))
+        SolverOptions(**{k: v for k, v in data.items() if k != "warm_start"})
     except (TypeError, ValueError, OptionError) as exc:
         raise OptionError(f"{where}: [solver]: {exc}") from None
     return dict(data)
@@ -490,7 +516,7 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
     check_plain_name(name, f"{where}: subject name")
     model = _path(data.get("model"), base, here, "model")
     mass = _number(data.get("body_mass_kg"), here, "body_mass_kg", required=True)
-    height = _number(data.get("height_m"), here, "height_m", required=True)
+    height = _number(data.get("height_m"), here, "height_m")  # optional: the muscle masses from the model
     passive = _path(data.get("passive"), base, here, "passive", required=False)
     kt = data.get("tendon_stiffness")
     if isinstance(kt, str):
