@@ -116,9 +116,9 @@ def test_solve_command_imports_scipy_when_it_filters(example, geometry_cache, tm
     """Importing the solver imports no SciPy; a whole `musclemetab solve` (caches filled, two
     IPOPT iterations, folder written) in a new process imports SciPy's signal (the low-pass
     filter), interpolate (the mesh splines) and optimize (the static optimisation) when it
-    prepares the trial, and pandas only for the package's muscle table, which the diagnosis
-    before the solve reads (the files are read and written as NumPy tables,
-    musclemetab.io.read_table)."""
+    prepares the trial, and no pandas: the files are read and written as NumPy tables
+    (musclemetab.io.read_table) and the package's muscle table, which the diagnosis before the
+    solve reads, with the csv module."""
     import json
 
     from musclemetab.geometry import compute_geometry
@@ -145,4 +145,4 @@ def test_solve_command_imports_scipy_when_it_filters(example, geometry_cache, tm
     # two iterations do not converge: the command reports it (non-zero) after writing the folder
     assert lines[-2] != "0" and "did not converge" in proc.stderr
     assert json.loads((out / "summary.json").read_text())["iterations"] == 2
-    assert lines[-1] == "['casadi', 'pandas', 'scipy.interpolate', 'scipy.optimize', 'scipy.signal']"
+    assert lines[-1] == "['casadi', 'scipy.interpolate', 'scipy.optimize', 'scipy.signal']"
