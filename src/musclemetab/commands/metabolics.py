@@ -83,6 +83,7 @@ def run(args) -> int:
     from ..io import check_output_folder
     from ..metabolics.registry import parse_models
     from ..metabolics.solution import (
+        check_metabolics_outputs,
         metabolics_from_legs,
         parameter_differences,
         read_solution_states,
@@ -96,6 +97,7 @@ def run(args) -> int:
     check_body(args.mass, args.height)
     check_basal_arguments(args)
     folders = solution_folders(args.solution)
+    check_metabolics_outputs(args.out, folders)
     params = None
     if args.model:
         from ..model import read_muscle_parameters
