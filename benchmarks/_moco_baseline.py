@@ -319,10 +319,10 @@ def main(argv=None):
     os.chdir(workdir)  # Moco writes its own files into the working directory
     try:
         study, reduced, info = build(args.model, args.ik, args.id, args.mesh_interval, args.tendons, workdir)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()  # CPU time of every thread of the process
         sol = study.solve()
-        solve_s = time.perf_counter() - t0
-        out = dict(info, tendons=args.tendons, mesh_interval=args.mesh_interval, solve_s=solve_s,
+        solve_s, solve_cpu_s = time.perf_counter() - t0, time.process_time() - c0
+        out = dict(info, tendons=args.tendons, mesh_interval=args.mesh_interval, solve_s=solve_s, solve_cpu_s=solve_cpu_s,
                    success=bool(sol.success()), status=sol.getStatus(), iterations=int(sol.getNumIterations()),
                    objective=float(sol.getObjective()))
         try:

@@ -10,7 +10,7 @@ timed (median of ``--cold-repeat``).
 With ``--baseline moco`` OpenSim's MocoInverse solves the same trials on the same mesh
 (100 intervals per second, compliant tendons; set-up of ``docs/solver.md``) in a
 separate process (``benchmarks/_moco_baseline.py``; opensim and casadi cannot share a
-process), and the ratio of solve times is printed. Timings on shared machines vary by
+process), and the ratios of solve times (wall and CPU, with the load average) are printed. Timings on shared machines vary by
 10-40 % from run to run: compare ratios measured in the same run.
 
 Usage::
@@ -192,6 +192,11 @@ def main(argv=None):
             print(f"  ratio MocoInverse solve / musclemetab solve ({ours['workflow']}): "
                   f"{m['solve_s'] / ours['solve_s']:.1f}x; set-up+solve vs files->solution: "
                   f"{(m['solve_s'] + m['setup_s']) / ours['files_to_solution_s']:.1f}x")
+            if m.get("solve_cpu_s") and ours.get("solve_cpu_s"):
+                print(f"  CPU-time ratio MocoInverse solve / musclemetab solve: "
+                      f"{m['solve_cpu_s'] / ours['solve_cpu_s']:.1f}x ({m['solve_cpu_s']:.1f} / "
+                      f"{ours['solve_cpu_s']:.2f} CPU s; load average now "
+                      f"{' '.join(f'{x:.2f}' for x in os.getloadavg())})")
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=2))
     return 0

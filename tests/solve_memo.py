@@ -9,8 +9,9 @@ its result (and the warnings it gave) is pickled into a folder shared by every p
 the run, under a key made of the input files' content (SHA-256) and every other argument by
 value, like the package's own caches. A second call with the same key gets the stored result
 and its warnings again; a call that is being solved by another process waits for it (one
-lock file per key). Calls with in-memory arguments (a warm start, say), and calls that raise,
-solve as usual and are not stored. Beside each pickle a ``.json`` file says what the key
+lock file per key). A warm start (a :class:`~musclemetab.redundancy.solution.Solution`) counts by
+the content of its pickle. Calls with other in-memory arguments, and calls that raise, solve as
+usual and are not stored. Beside each pickle a ``.json`` file says what the key
 stands for.
 """
 
@@ -41,11 +42,12 @@ def solve_key(func, args, kwargs) -> tuple[str, dict] | None:
     does ``exclude_missing_ok`` when no muscle is excluded.
     ``options=None``, ``settings=None`` and ``grf_threshold_N=None`` count as the defaults they stand for. ``None`` when
     an argument is neither a file, a plain value, a list/tuple/dict of those nor a settings
-    dataclass (an in-memory object such as a warm start): such calls always solve.
+    dataclass or a warm-start solution (another in-memory object): such calls always solve.
     """
     from musclemetab.io.atomic import file_sha256
     from musclemetab.redundancy.emg_ten import EmgTenSettings
     from musclemetab.redundancy.ipopt import SolverOptions
+    from musclemetab.redundancy.solution import Solution
 
     def plain(value):
         if isinstance(value, (str, os.PathLike)) and Path(value).is_file():
@@ -60,6 +62,8 @@ def solve_key(func, args, kwargs) -> tuple[str, dict] | None:
             return {k: plain(v) for k, v in value.items()}
         if isinstance(value, (SolverOptions, EmgTenSettings)):
             return {type(value).__name__: plain(dataclasses.asdict(value))}
+        if isinstance(value, Solution):  # a warm start: by the content of its pickle
+            return {"Solution": hashlib.sha256(pickle.dumps(value)).hexdigest()}
         raise TypeError(type(value).__name__)
 
     bound = inspect.signature(func).bind(*args, **kwargs)

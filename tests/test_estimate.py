@@ -530,3 +530,30 @@ def test_a_factor_on_its_bound_warns(generated):
     assert sum("tendon_stiffness factor of soleus_r, gasmed_r, gaslat_r is on its lower bound" in t for t in text) == 1
     assert est.doubts["uninformed"] == [{"kind": "tendon_stiffness", "muscle": "vaslat_r"}]
     assert sum("tendon_stiffness factor of vaslat_r is informed by no measurement" in t for t in text) == 1
+
+
+@pytest.mark.parametrize("damage", ["ends early", "alien column"])
+def test_estimate_checks_each_inverse_dynamics_file_as_solve_does(example, tmp_path, damage):
+    """An ID file that ends before its IK file, or holds a moment of a coordinate the model lacks,
+    is refused by ``estimate_files`` before anything is solved, with the error (and file) that
+    ``solve_files`` gives for it."""
+    from musclemetab.errors import DataMismatchError, UnknownCoordinateError
+    from musclemetab.io import read_storage, write_storage
+    from musclemetab.redundancy.run import estimate_files, solve_files
+
+    table = read_storage(example.id["normal"])
+    if damage == "ends early":
+        table = table[table.index <= table.index[-1] - 0.1]
+        error, match = DataMismatchError, r"bad_id\.sto covers .* the ID must cover the whole IK window"
+    else:
+        table = table.assign(tail_angle_moment=0.0)
+        error, match = UnknownCoordinateError, r"bad_id\.sto: column tail_angle_moment is for a coordinate the model"
+    bad = tmp_path / "bad_id.sto"
+    write_storage(bad, table, name="inverse dynamics")
+    with pytest.raises(error, match=match):
+        estimate_files(example.model, [example.ik["normal"]], [bad], tmp_path / "est",
+                       estimate={"tendon_stiffness": ["soleus_r"]}, emg=[example.emg["normal"]])
+    assert not (tmp_path / "est").exists()
+    if damage == "alien column":  # the solve's check, the same line (the window crops the IK there)
+        with pytest.raises(error, match=match):
+            solve_files(example.model, example.ik["normal"], bad, "effort-gen")

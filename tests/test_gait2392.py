@@ -45,7 +45,7 @@ def test_sides_and_dofs_from_the_joint_tree(layout, example):
 
 
 def test_gait_events_of_either_leg_from_the_external_loads(gait2392, layout):
-    from musclemetab.analysis.events import gait_events_from_grf
+    from musclemetab.events import gait_events_from_grf
     from musclemetab.external_loads import read_external_loads, vertical_force
 
     loads = read_external_loads(gait2392.external_loads)
@@ -66,7 +66,7 @@ KINEMATIC_EVENT_TOLERANCE_S = 0.04
 
 
 def test_gait_events_of_either_leg_from_kinematics_alone(gait2392, layout):
-    from musclemetab.analysis.events import kinematic_gait_events
+    from musclemetab.events import kinematic_gait_events
     from musclemetab.layout import foot_bodies
     from musclemetab.redundancy.window import resolve_window
 
@@ -381,7 +381,7 @@ PLAUSIBLE_W_PER_KG = (4.1 - 3 * 0.5, 12.2 + 3 * 1.2)
 
 @pytest.mark.slow
 def test_metabolics_phases_and_groups_of_both_legs(both_solutions, gait2392):
-    from musclemetab.analysis.events import GaitCycle
+    from musclemetab.events import GaitCycle
     from musclemetab.analysis.unit import analyse_solution_folder
     from musclemetab.geometry import compute_geometry
     from musclemetab.analysis.groups import has_function_group  # subtalar and mtp: no function group

@@ -276,7 +276,7 @@ def test_centre_of_pressure_in_millimetres_is_refused(gait2392, tmp_path):
 
 
 def test_nan_in_a_ground_force_file_is_refused_naming_column_and_times(gait2392, tmp_path):
-    from musclemetab.analysis.events import read_grf
+    from musclemetab.events import read_grf
 
     bad = tmp_path / "grf.mot"
     times = _edit_mot(gait2392.grf, bad, "ground_force_vy", slice(50, 52), float("inf"))

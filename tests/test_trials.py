@@ -329,7 +329,7 @@ def test_kinematic_toe_off_on_treadmill_trials(example):
     end of the record needs its prominence on one side only), each within 50 ms before the
     study's initial contacts (the IK window less 0.05 s at each end), as on gait2392 the
     kinematic heel strike precedes the force's by 19-28 ms."""
-    from musclemetab.analysis.events import cycle_from_id_file, kinematic_gait_events
+    from musclemetab.events import cycle_from_id_file, kinematic_gait_events
     from musclemetab.io import read_storage
 
     for trial in ("slow", "normal", "fast"):

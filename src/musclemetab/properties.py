@@ -41,6 +41,7 @@ never by position.
 
 from __future__ import annotations
 
+import csv
 import functools
 import warnings
 from collections.abc import Mapping, Sequence
@@ -50,7 +51,6 @@ from importlib import resources
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from .errors import InputFileError, LumpedMuscleWarning, MuscleTableWarning, OptionError, UnknownMuscleError
 
@@ -98,39 +98,72 @@ _TEXT_COLUMNS = ("function_groups", "tendon", "emg_scale_group", "passive_calibr
                  "passive_coupling_group", "emg_channel", "lump_group")
 
 
-def _read_package_csv(name: str) -> pd.DataFrame:
-    with resources.files("musclemetab").joinpath(f"data/{name}").open() as f:
-        return pd.read_csv(f, comment="#", keep_default_na=False, na_values=[""], dtype=str)
+_NUMBER_COLUMNS = ("volume_percent", "slow_twitch_fraction", "specific_tension_Pa", "report_order")
+
+
+def _read_package_csv(name: str) -> list[dict[str, str]]:
+    """The rows of a package table (``#`` lines are comments), each ``{column: text}``.
+
+    Read with the standard library's :mod:`csv`, so that placing muscles (which every solve
+    does) does not import pandas; :func:`anatomical_table` and :func:`alias_table` give the
+    same rows as data frames."""
+    with resources.files("musclemetab").joinpath(f"data/{name}").open(encoding="utf-8") as f:
+        return list(csv.DictReader(line for line in f if not line.startswith("#")))
 
 
 @functools.lru_cache(maxsize=1)
-def anatomical_table() -> pd.DataFrame:
-    """Anatomical muscles (side-free ids), indexed by ``anatomical_muscle``."""
-    df = _read_package_csv("anatomical_muscles.csv")
-    for col in ("volume_percent", "slow_twitch_fraction", "specific_tension_Pa", "report_order"):
-        df[col] = pd.to_numeric(df[col])
-    for col in _TEXT_COLUMNS:
-        df[col] = df[col].fillna("")
-    return df.set_index("anatomical_muscle")
+def _anatomical_rows() -> dict[str, dict]:
+    """``{anatomical_muscle: {column: value}}`` in table order: numbers as floats (NaN when
+    empty), text as strings ("" when empty)."""
+    rows = {}
+    for row in _read_package_csv("anatomical_muscles.csv"):
+        key = row.pop("anatomical_muscle")
+        rows[key] = {c: (float(v) if v.strip() else float("nan")) if c in _NUMBER_COLUMNS else v
+                     for c, v in row.items()}
+    return rows
+
+
+@dataclass(frozen=True)
+class _Alias:
+    model_name: str
+    key: str  # lower-case model name
+    anatomical: tuple[str, ...]
+    families: tuple[str, ...]
+    volume_share: float  # NaN: split by maximal isometric force
 
 
 @functools.lru_cache(maxsize=1)
-def alias_table() -> pd.DataFrame:
-    """Model muscle names (side-free) per family -> anatomical muscle(s) and explicit share.
-
-    Columns: ``model_name``, ``key`` (lower-case name), ``anatomical`` (tuple of ids),
-    ``families`` (tuple), ``volume_share`` (float or NaN).
-    """
-    df = _read_package_csv("muscle_aliases.csv")
-    anat = anatomical_table()
-    df["anatomical"] = [tuple(s.split()) for s in df["anatomical_muscles"]]
-    bad = sorted({a for t in df["anatomical"] for a in t if a not in anat.index})
+def _aliases() -> tuple[_Alias, ...]:
+    anat = _anatomical_rows()
+    out = tuple(_Alias(r["model_name"], r["model_name"].lower(), tuple(r["anatomical_muscles"].split()),
+                       tuple(r["family"].split()), float(Fraction(r["volume_share"])) if r["volume_share"] else np.nan)
+                for r in _read_package_csv("muscle_aliases.csv"))
+    bad = sorted({a for r in out for a in r.anatomical if a not in anat})
     if bad:  # pragma: no cover - package data consistency (tested)
         raise OptionError(f"muscle_aliases.csv names unknown anatomical muscles {', '.join(bad)}")
-    df["families"] = [tuple(s.split()) for s in df["family"]]
-    df["key"] = df["model_name"].str.lower()
-    df["volume_share"] = [float(Fraction(s)) if isinstance(s, str) and s else np.nan for s in df["volume_share"]]
+    return out
+
+
+def anatomical_table():
+    """Anatomical muscles (side-free ids), a :class:`pandas.DataFrame` indexed by ``anatomical_muscle``."""
+    import pandas as pd
+
+    df = pd.DataFrame.from_dict(_anatomical_rows(), orient="index")
+    df.index.name = "anatomical_muscle"
     return df
+
+
+def alias_table():
+    """Model muscle names (side-free) per family -> anatomical muscle(s) and explicit share.
+
+    A :class:`pandas.DataFrame`, columns: ``model_name``, ``key`` (lower-case name),
+    ``anatomical`` (tuple of ids), ``families`` (tuple), ``volume_share`` (float or NaN).
+    """
+    import pandas as pd
+
+    return pd.DataFrame([{"model_name": a.model_name, "anatomical_muscles": " ".join(a.anatomical),
+                          "family": " ".join(a.families), "volume_share": a.volume_share, "anatomical": a.anatomical,
+                          "families": a.families, "key": a.key} for a in _aliases()])
 
 
 def split_side(name: str) -> tuple[str, str]:
@@ -143,11 +176,11 @@ def split_side(name: str) -> tuple[str, str]:
 def model_family(names: Sequence[str]) -> str:
     """The alias family that places most of ``names`` (ties: the family with fewer names)."""
     keys = {split_side(n)[0].lower() for n in names}
-    aliases = alias_table()
+    aliases = _aliases()
     best, best_score = "", (0, 0)
-    families = list(dict.fromkeys(f for fs in aliases["families"] for f in fs))
+    families = list(dict.fromkeys(f for a in aliases for f in a.families))
     for fam in families:
-        in_fam = {k for k, fs in zip(aliases["key"], aliases["families"]) if fam in fs}
+        in_fam = {a.key for a in aliases if fam in a.families}
         score = (len(keys & in_fam), -len(in_fam))
         if score[0] and score > best_score:
             best, best_score = fam, score
@@ -188,7 +221,7 @@ class MuscleOverrides:
         the solved muscles)."""
         bases = {split_side(n)[0].lower() for n in names}
         if tables:
-            bases |= set(alias_table()["key"])
+            bases |= {a.key for a in _aliases()}
         unknown = [row for row in self.values if split_side(row)[0].lower() not in bases]
         if unknown:
             import difflib
@@ -214,11 +247,11 @@ class MuscleOverrides:
 def _override_value(col: str, raw: str, where: str):
     if col == "anatomical_muscles":
         ids = tuple(raw.split())
-        unknown = [a for a in ids if a not in anatomical_table().index]
+        unknown = [a for a in ids if a not in _anatomical_rows()]
         if unknown:
             raise InputFileError(
                 f"{where}: unknown anatomical muscle {', '.join(unknown)}; use ids of the package table "
-                f"(e.g. {', '.join(anatomical_table().index[:3])}; see docs/muscles.md)"
+                f"(e.g. {', '.join(list(_anatomical_rows())[:3])}; see docs/muscles.md)"
             )
         return ids
     if col == "function_groups":
@@ -255,6 +288,8 @@ def read_muscle_properties(path: str | Path) -> MuscleOverrides:
     path = Path(path)
     if not path.is_file():
         raise InputFileError(f"{path}: no such muscle-properties file; check the --muscle-properties path")
+    import pandas as pd
+
     try:
         df = pd.read_csv(path, comment="#", dtype=str, keep_default_na=False, skipinitialspace=True)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
@@ -359,14 +394,12 @@ def resolve_muscles(
         dup = sorted({n for n in names if names.count(n) > 1})
         raise OptionError(f"muscle names repeated: {', '.join(dup)}")
     ov = as_overrides(overrides)
-    anat = anatomical_table()
-    aliases = alias_table()
+    anat = _anatomical_rows()
     family = model_family(names)
     lookup: dict[str, tuple[tuple[str, ...], float]] = {}
-    for key, ids, fams, share in zip(aliases["key"], aliases["anatomical"], aliases["families"],
-                                     aliases["volume_share"]):
-        if key not in lookup or family in fams:
-            lookup[key] = (ids, share)
+    for a in _aliases():
+        if a.key not in lookup or family in a.families:
+            lookup[a.key] = (a.anatomical, a.volume_share)
     forces = _forces(names, max_isometric_force_N)
 
     placement: dict[str, tuple[tuple[str, ...], float]] = {}
@@ -403,23 +436,27 @@ def resolve_muscles(
         side = split_side(n)[1]
         fb: list[str] = []
         if ids:
-            rows = anat.loc[list(ids)]
+            rows = [anat[a] for a in ids]
+
+            def column(c):
+                return [r[c] for r in rows]
+
             frac = tuple(fraction(n, a) for a in ids)
-            vol = np.array(frac) * rows["volume_percent"].to_numpy(dtype=float)
-            wvol = np.where(np.isnan(vol), rows["volume_percent"].to_numpy(dtype=float), vol)
+            vol = np.array(frac) * np.array(column("volume_percent"), dtype=float)
+            wvol = np.where(np.isnan(vol), np.array(column("volume_percent"), dtype=float), vol)
             w = wvol / wvol.sum() if wvol.sum() > 0 else np.full(len(ids), 1.0 / len(ids))
             vp = float(vol.sum())
-            fst = float(w @ rows["slow_twitch_fraction"].to_numpy(dtype=float))
-            sigma = float(w @ rows["specific_tension_Pa"].to_numpy(dtype=float))
+            fst = float(w @ np.array(column("slow_twitch_fraction"), dtype=float))
+            sigma = float(w @ np.array(column("specific_tension_Pa"), dtype=float))
             groups: list[str] = []
-            for g in " ".join(rows["function_groups"]).split():
+            for g in " ".join(column("function_groups")).split():
                 if g not in groups:
                     groups.append(g)
-            tendon = _common(list(rows["tendon"]))
-            emg_group = _common(list(rows["emg_scale_group"]))
-            coupling = _common(list(rows["passive_coupling_group"]))
-            trials = "+".join(dict.fromkeys(t for s in rows["passive_calibration_trials"] for t in s.split("+") if t))
-            channels = tuple(c for c in rows["emg_channel"] if c)
+            tendon = _common(column("tendon"))
+            emg_group = _common(column("emg_scale_group"))
+            coupling = _common(column("passive_coupling_group"))
+            trials = "+".join(dict.fromkeys(t for s in column("passive_calibration_trials") for t in s.split("+") if t))
+            channels = tuple(c for c in column("emg_channel") if c)
         else:
             frac, vp, fst, sigma, groups = (), float("nan"), FALLBACK_SLOW_TWITCH_FRACTION, SPECIFIC_TENSION_PA, []
             tendon = emg_group = coupling = trials = ""
@@ -626,7 +663,7 @@ def lumped_muscles(names: Sequence[str], body_mass_kg: float, height_m: float, m
 
 def _find_lumps(recs: Sequence[MuscleRecord], forces: Mapping[str, float], lmo: Mapping[str, float],
                 v_total: float) -> dict[str, LumpedMuscle]:
-    anat = anatomical_table()
+    anat = _anatomical_rows()
     usable = [r for r in recs if r.placed and r.mass_kg_override is None and r.name in forces and r.name in lmo
               and np.isfinite(r.volume_percent) and r.volume_percent > 0]
     if not usable:
@@ -639,12 +676,12 @@ def _find_lumps(recs: Sequence[MuscleRecord], forces: Mapping[str, float], lmo: 
     present: dict[str, set[str]] = {}
     for r in recs:
         present.setdefault(r.side, set()).update(r.anatomical)
-    group = dict(zip(anat.index, anat["lump_group"]))
-    volume = dict(zip(anat.index, anat["volume_percent"].to_numpy(dtype=float)))
+    group = {a: row["lump_group"] for a, row in anat.items()}
+    volume = {a: row["volume_percent"] for a, row in anat.items()}
     out = {}
     for r in usable:
         groups = {group[a] for a in r.anatomical if group[a]}
-        absent = tuple(a for a in anat.index if group[a] in groups and a not in present[r.side])
+        absent = tuple(a for a in anat if group[a] in groups and a not in present[r.side])
         if not absent:
             continue
         e = (r.volume_percent + sum(volume[a] for a in absent)) / r.volume_percent
@@ -663,11 +700,11 @@ def _find_lumps(recs: Sequence[MuscleRecord], forces: Mapping[str, float], lmo: 
 def _report_lumps(lumps: Mapping[str, LumpedMuscle]) -> None:
     if not lumps:
         return
-    anat = anatomical_table()
+    anat = _anatomical_rows()
     s = "s" if len(lumps) > 1 else ""
     each = "; ".join(
-        f"{m.name}: F0 {m.force_ratio:.2f} times its part's ({', '.join(anat.loc[list(m.own), 'name'])}; "
-        f"lump above {m.threshold:.2f}), taken to stand for {', '.join(anat.loc[list(m.absent), 'name'])} too: "
+        f"{m.name}: F0 {m.force_ratio:.2f} times its part's ({', '.join(anat[a]['name'] for a in m.own)}; "
+        f"lump above {m.threshold:.2f}), taken to stand for {', '.join(anat[a]['name'] for a in m.absent)} too: "
         f"mass {m.mass_kg:.3f} kg (rho F0 lMo / {m.model_specific_tension_Pa / 1e6:.3f} MPa) instead of "
         f"{m.table_mass_kg:.3f} kg"
         for m in lumps.values())
@@ -746,7 +783,7 @@ def individualised_max_isometric_force_N(
 def _grouped(names: Sequence[str], attr: str) -> dict[str, tuple[str, ...]]:
     """``{group_side: muscles}`` for a record attribute, members in table order then name."""
     recs = resolve_muscles(names, warn=False)
-    order = {a: i for i, a in enumerate(anatomical_table().index)}
+    order = {a: i for i, a in enumerate(_anatomical_rows())}
     out: dict[str, list[MuscleRecord]] = {}
     for r in recs:
         g = getattr(r, attr)
@@ -780,11 +817,10 @@ def report_muscles(names: Sequence[str]) -> list[str]:
     """The report's default muscle list for a model: per listed anatomical muscle (table
     ``report_order``), the middle one of the model muscles standing for it."""
     recs = resolve_muscles(names, warn=False)
-    anat = anatomical_table()
+    anat = _anatomical_rows()
     out = []
-    for a in anat.index[np.argsort(anat["report_order"].to_numpy(), kind="stable")]:
-        if not np.isfinite(anat.at[a, "report_order"]):
-            continue
+    listed = [a for a in anat if np.isfinite(anat[a]["report_order"])]
+    for a in sorted(listed, key=lambda a: anat[a]["report_order"]):
         for side in dict.fromkeys(r.side for r in recs):
             parts = [r.name for r in recs if r.side == side and a in r.anatomical]
             if parts and parts[(len(parts) - 1) // 2] not in out:
@@ -795,16 +831,14 @@ def report_muscles(names: Sequence[str]) -> list[str]:
 @functools.lru_cache(maxsize=1)
 def tendon_literature() -> dict[str, tuple[float, float, str]]:
     """``{tendon: (stiffness_N_per_mm, reference_force_fraction, source)}`` (EFFORT-TEN default)."""
-    df = _read_package_csv("tendon_stiffness_literature.csv")
-    return {t: (float(k), float(f), s) for t, k, f, s in
-            zip(df["tendon"], df["stiffness_N_per_mm"], df["reference_force_fraction"], df["source"])}
+    return {r["tendon"]: (float(r["stiffness_N_per_mm"]), float(r["reference_force_fraction"]), r["source"])
+            for r in _read_package_csv("tendon_stiffness_literature.csv")}
 
 
 @functools.lru_cache(maxsize=1)
 def study_passive_parameters() -> dict[str, tuple[float, float]]:
     """Published calibrated ``(kPE, s0)`` of the study's example subject, by side-free name."""
-    df = _read_package_csv("study_passive_parameters.csv")
-    return {m: (float(k), float(s)) for m, k, s in zip(df["muscle"], df["kpe"], df["s0"])}
+    return {r["muscle"]: (float(r["kpe"]), float(r["s0"])) for r in _read_package_csv("study_passive_parameters.csv")}
 
 
 # ---------------------------------------------------------------------------------------
@@ -813,7 +847,7 @@ def study_passive_parameters() -> dict[str, tuple[float, float]]:
 
 
 @functools.lru_cache(maxsize=1)
-def property_table() -> pd.DataFrame:
+def property_table():
     """The study's model's muscles (side-free names) with their resolved properties.
 
     A view of the anatomical table through the Rajagopal aliases: ``anatomical_name``,
@@ -821,14 +855,15 @@ def property_table() -> pd.DataFrame:
     ``tendon_stiffness_group``, ``passive_calibration_trials``, ``passive_coupling_group``,
     ``emg_channel``, ``kpe_calibrated_reference``, ``s0_calibrated_reference``.
     """
-    aliases = alias_table()
-    names = [n for n, fs in zip(aliases["model_name"], aliases["families"]) if "rajagopal" in fs]
-    anat = anatomical_table()
+    import pandas as pd
+
+    names = [a.model_name for a in _aliases() if "rajagopal" in a.families]
+    anat = _anatomical_rows()
     passive = study_passive_parameters()
     rows = []
     for r in resolve_muscles(names, warn=False):
         rows.append(dict(
-            muscle=r.name, anatomical_name=" + ".join(anat.loc[list(r.anatomical), "name"]),
+            muscle=r.name, anatomical_name=" + ".join(anat[a]["name"] for a in r.anatomical),
             slow_twitch_fraction=r.slow_twitch_fraction, volume_percent=r.volume_percent,
             function_groups=" ".join(r.function_groups),
             tendon_stiffness_group={"achilles": "PF", "patellar": "VA"}.get(r.tendon, ""),

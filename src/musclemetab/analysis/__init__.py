@@ -3,8 +3,10 @@ statistics.
 
 Pure functions on NumPy arrays and pandas tables, SI units (s, N, N m, m, W, J):
 
-* :mod:`.events` -- :class:`GaitCycle`; events from vertical ground reaction forces or,
-  without forces, from the padded simulation window and the ankle moment;
+* gait events and the cycle (:class:`GaitCycle`; from vertical ground reaction forces or,
+  without forces, from the padded simulation window and the ankle moment) are defined in
+  :mod:`musclemetab.events`, where the solver's window takes them from; their names are
+  importable from here too;
 * :mod:`.phases` -- relative metabolic cost of stance and swing;
 * :mod:`.groups` -- ten muscle function groups and the moment-arm-ratio distribution of
   each muscle's rate;
@@ -14,7 +16,7 @@ Pure functions on NumPy arrays and pandas tables, SI units (s, N, N m, m, W, J):
 See ``docs/analysis.md`` for the methods and the choices the study leaves open.
 """
 
-from .events import (
+from ..events import (
     DEFAULT_GRF_THRESHOLD_N,
     DEFAULT_MIN_DURATION_S,
     DEFAULT_PADDING_S,

@@ -47,7 +47,7 @@ import numpy as np
 
 from ..errors import DataMismatchError, OptionError
 from ..events import as_signal, as_time, coverage, integrate_interval
-from .events import GaitCycle
+from ..events import GaitCycle
 
 __all__ = [
     "GROUPS",

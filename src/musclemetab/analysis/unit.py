@@ -20,7 +20,7 @@ import numpy as np
 
 from ..errors import DataMismatchError, OptionError
 from ..events import as_time
-from .events import GaitCycle
+from ..events import GaitCycle
 from .groups import DEFAULT_THRESHOLD_M, GROUPS, GROUPS_WITH_OTHER, OTHER, group_rates, group_shares, group_weights
 from .phases import phase_shares
 
@@ -364,7 +364,7 @@ def analyse(
         inputs by :func:`filtered_moment_arms`). Default: the files the solution records
         (:func:`recorded_trial`).
     cycle
-        The gait cycle (:class:`GaitCycle`; e.g. :func:`~musclemetab.analysis.events.cycle_of_trial`).
+        The gait cycle (:class:`GaitCycle`; e.g. :func:`~musclemetab.events.cycle_of_trial`).
         Default: the cycle the solve recorded (a solve over ``--cycle``).
     body_mass_kg, height_m, models, metabolics_options
         Passed to :func:`musclemetab.metabolics.solution.metabolics_from_solution` (``basal``,

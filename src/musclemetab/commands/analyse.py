@@ -89,7 +89,7 @@ def add_parser(subparsers) -> None:
 
 def _cycle(args, side: str, ik, recorded):
     """The gait cycle and where it came from: the options, else the solution's record."""
-    from ..analysis.events import GaitCycle, cycle_of_trial
+    from ..events import GaitCycle, cycle_of_trial
 
     if args.cycle:
         try:

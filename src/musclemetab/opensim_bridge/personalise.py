@@ -41,7 +41,7 @@ def _muscles(model, names, path):
     return {n: ms.get(n) for n in names}
 
 
-def write_personalised_model(model_path: str, out_path: str, values: dict) -> dict:
+def write_model_with_parameters(model_path: str, out_path: str, values: dict) -> dict:
     """Write ``out_path``: ``model_path`` with ``values`` (``{muscle: {optimal_fiber_length_m,
     tendon_slack_length_m, tendon_strain_at_one_norm_force}}``, each optional) set. Returns per
     muscle what was set and which values the muscle type could not take."""

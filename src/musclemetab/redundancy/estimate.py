@@ -324,5 +324,5 @@ def write_personalised_model(model_path, params: MuscleTendonParameters, estimat
     out_dir.mkdir(parents=True, exist_ok=True)
     target = out_dir / f"{model_path.stem}_personalised.osim"
     with atomic_path(target, mark=True) as tmp:
-        report = call("personalise:write_personalised_model", str(model_path.resolve()), str(tmp), values)
+        report = call("personalise:write_model_with_parameters", str(model_path.resolve()), str(tmp), values)
     return target, report

@@ -746,18 +746,19 @@ def estimate_files(
     options = SolverOptions(max_iter=max_iter)
 
     from ..geometry import compute_geometry
-    from ..io import read_storage
+    from ..io import read_table
     from ..model import read_muscle_parameters
-    from ..layout import discover_dofs, read_layout
     from .inputs import read_inverse_dynamics, read_kinematics
 
     model_parameters = read_muscle_parameters(model)
     trials, prepared, params, diagnoses = [], [], None, []
-    layout = read_layout(model)
     for i, (ik, idp, lab, us) in enumerate(zip(ik, id_files, labels, measured)):
-        dofs = list(dofs) if dofs else discover_dofs(layout, side, list(read_storage(idp).columns))
+        id_table = read_table(idp)
+        # the first trial's DOFs (or the given ones) for every trial, each ID file checked as solve_files does
+        dofs = list(_trial_dofs(model, [id_table], dofs, side, cache_dir))
         t_ik, _ = read_kinematics(ik, dofs)
-        t_id, mom = read_inverse_dynamics(idp, dofs)
+        t_id, mom = read_inverse_dynamics(id_table, dofs)
+        check_time_ranges(t_ik, t_id, ik, idp)
         g = compute_geometry(model, ik, dofs=list(dofs), side=side, cache_dir=cache_dir)
         g, _ = exclude_from_geometry(g, exclude_muscles)
         nominal, wf_record = workflow_parameters(wf, model_parameters, g.muscles, passive=passive)

@@ -9,7 +9,7 @@ Order of preference for the cycle (initial contact, toe-off, next initial contac
 3. otherwise: the cycle is the IK window less 0.05 s of padding at both ends (the
    example data carry five extra frames at 100 Hz at each end) and toe-off is found
    from the ankle moment of inverse dynamics (see
-   :func:`musclemetab.analysis.events.cycle_from_inverse_dynamics`), the column
+   :func:`musclemetab.events.cycle_from_inverse_dynamics`), the column
    ``ankle_angle_<side>_moment`` of the subject's side (the naming of the Rajagopal and
    gait2392 families; for other models give the trial ``cycle = "auto"``, which finds the
    events from ground forces or from the kinematics, ground forces, or the events).
@@ -20,7 +20,7 @@ translation coordinates over the cycle (:func:`musclemetab.analysis.speed.walkin
 
 from __future__ import annotations
 
-from ..analysis.events import GaitCycle, cycle_from_grf, cycle_from_id_file, read_grf
+from ..events import GaitCycle, cycle_from_grf, cycle_from_id_file, read_grf
 from ..analysis.speed import walking_speed_from_ik
 from .spec import Trial
 

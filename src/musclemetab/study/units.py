@@ -591,7 +591,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
     # tests/test_stage_paths.py); each writes its files once
     recorded = sol.record.gait_cycle
     if recorded and trial.start_s is None and trial.end_s is None:  # the cycle the solve found
-        from ..analysis.events import GaitCycle
+        from ..events import GaitCycle
 
         toe_off = trial.toe_off_s if trial.toe_off_s is not None else recorded["toe_off_s"]
         cycle = GaitCycle(recorded["start_s"], toe_off, recorded["end_s"])
