@@ -162,7 +162,8 @@ def generate_report(study_dir: str | os.PathLike, out: str | os.PathLike | None 
 def _check_report_files(out: Path, fig_dir: Path) -> None:
     """Refuse (:class:`OptionError` naming the file), before any figure is drawn, a page or record
     file in the report's place that the package did not write or that was changed since
-    (:func:`musclemetab.io.atomic.check_replaceable`; the figures: :func:`~.draw.make_figures`)."""
+    (:func:`musclemetab.io.atomic.check_replaceable`; a figure's file is checked when the figure
+    is saved, :func:`~.draw.make_figures`)."""
     from ..io.atomic import check_replaceable
 
     check_replaceable(out.parent, [out.name])

@@ -292,8 +292,8 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
     drawn are removed from ``fig_dir`` when an earlier report wrote them (``written_before``:
     their file names, as its record lists them, and ``fig_dir``'s list of the package's files
     holds them unchanged), so that no figure of an earlier report remains; no other file is
-    removed. A file in the place of a figure to draw that the package did not write, or that
-    was changed since, is refused (:class:`OptionError` naming it) before any is drawn.
+    removed. A file in the place of a drawn figure that the package did not write, or that was
+    changed since, is not replaced (:class:`OptionError` naming it, when the figure is saved).
     """
     import gc
     import multiprocessing
@@ -305,10 +305,6 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
     if workers < 1:
         raise OptionError(f"workers (--workers) must be at least 1, not {workers}")
     workers = min(workers, len(drawn))
-    from ..io.atomic import check_replaceable
-
-    # a file in the place of a figure to draw that the package did not write: refused before any is drawn
-    check_replaceable(fig_dir, [f"{n}.{fmt}" for n in drawn for fmt in formats])
     keys = {n: _cost_key(n) for n in drawn}
     costs = draw_costs()
     order = sorted(drawn, key=lambda n: -costs.get(keys[n], math.inf))  # stable: never drawn first, in page order
