@@ -1,12 +1,13 @@
 """The command line goes as far as a study does, and says what it is doing while it runs.
 
-* ``solve`` -> ``metabolics`` -> ``analyse`` on gait2392's subject (both legs, the cycle found
-  from the ground forces, inverse dynamics computed by OpenSim) asks for nothing the solution
-  records and gives every number the two-subject study gives for that subject (the session's
-  ``two_subjects``, run by ``musclemetab run``; the solve memo makes the command line's
-  solves the study's);
+* ``solve`` -> ``metabolics`` -> ``analyse`` -> ``report`` on gait2392's subject (both legs,
+  the cycle found from the ground forces, inverse dynamics computed by OpenSim) asks for nothing
+  the solution records and gives every number the two-subject study gives for that subject (the
+  session's ``two_subjects``, run by ``musclemetab run --report``; the solve memo makes the
+  command line's solves the study's), the report's tables included;
 * ``musclemetab run`` prints no Python source line and no file of the package's cache;
-* a running solve prints progress lines from IPOPT's iteration callback, throttled;
+* a running solve prints progress lines from IPOPT's iteration callback, throttled, also when
+  its legs are solved in two processes (each line labelled with its leg);
 * the study's progress lines carry an estimate of the time left.
 """
 
@@ -116,6 +117,127 @@ def test_solve_metabolics_analyse_give_the_study_numbers(cli_flow, two_subjects,
                                rtol=CSV_RTOL)
     assert n > 10000  # every number of the tables, not a handful
 
+    # report: the analyse folder (and through it S and M) gives the tables the study's report gives
+    assert main(["report", str(a)]) == 0
+    assert "8 of 11 figures" in capsys.readouterr().out  # the study's figures of one trial and one speed
+    n_report = _report_tables_are_the_studys(a, study)
+    assert n_report > 5000
+    # a folder that is neither a study nor an analyse output: one line naming it and what to pass
+    for folder, said in ((a / "r", f"{a / 'r'}: one leg of the analyse output folder {a}, whose analyse.json "
+                          f"records both legs: pass {a}"),
+                         (s, f"{s / 'results.csv'}: missing; {s} is neither a finished study folder nor an analyse "
+                          "output folder. Run the study first ('musclemetab run STUDY.toml') and pass its output "
+                          "folder (holding results.csv), or pass the output folders of 'musclemetab analyse --out'")):
+        assert main(["report", str(folder)]) == 1
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and said in err
+    assert main(["report", str(a), str(a)]) == 1  # several folders, one page: where?
+    assert "give --out FILE" in capsys.readouterr().err
+    # several analyse folders: one study of their trials (the same trial twice: named apart by folder)
+    import shutil
+
+    from musclemetab.report.cli_folder import read_report_input
+    from musclemetab.report.page import page_tables
+
+    again = shutil.copytree(a, a.parent / "A again", ignore=shutil.ignore_patterns("figures", "report.html"))
+    both = read_report_input([a, again])
+    assert list(both.ok["trial"].drop_duplicates()) == ["subject01_walk1_ik", "subject01_walk1_ik (A again)"]
+    assert both.settings["subjects"]["subject01_simbody"]["trials"] == list(both.ok["trial"].drop_duplicates())
+    rows = page_tables(both)["results"]["whole_body"].body
+    assert len(rows) == 4 and [r[1:] for r in rows[:2]] == [r[1:] for r in rows[2:]]
+
+
+def _report_tables_are_the_studys(a: Path, study: Path) -> int:
+    """The report of the analyse folder ``a`` against the study's report, gait2392's rows: the
+    data the report is drawn from (results rows with the study's ``quality``, per-muscle rows,
+    both legs' rates over the cycle, each muscle's rate, the cycles) number by number, then the
+    tables on the two pages cell by cell (the study's trial ``walk1`` is the command line's
+    ``subject01_walk1_ik``: the IK file's name); returns the number of numbers compared."""
+    from musclemetab.report.cli_folder import read_report_input
+    from musclemetab.report.page import page_tables
+
+    cli, st = read_report_input(a), read_report_input(study)
+    labels = ["subject", "trial", "workflow"]
+    assert cli.ok[labels].drop_duplicates().values.tolist() == [["subject01_simbody", "subject01_walk1_ik",
+                                                                  "effort-gen"]]
+    mine = st.ok[st.ok["subject"] == "gait2392"]
+    # the results rows: every column of the study's, `quality` (the plausibility flags) included
+    got = cli.ok.drop(columns=labels + ["unit_dir"])
+    want = mine.drop(columns=labels + ["unit_dir"])
+    assert set(got.columns) <= set(want.columns) and "quality" in got.columns
+    n = _compare(got, want, ["model"], "report: results", rtol=CSV_RTOL)
+    pm = st.read_per_muscle()
+    n += _compare(cli.read_per_muscle().drop(columns=labels), pm[pm["subject"] == "gait2392"].drop(columns=labels),
+                  ["model", "side", "muscle"], "report: per-muscle")
+    row_c, row_s = cli.ok.iloc[0], mine.iloc[0]
+    assert list(cli.leg_folders(row_c)) == list(st.leg_folders(row_s)) == ["r", "l"]
+    for fc, fs in zip(cli.leg_folders(row_c).values(), st.leg_folders(row_s).values()):
+        np.testing.assert_allclose(cli.unit_cycle(fc), st.unit_cycle(fs), rtol=RTOL)
+        assert cli.summary(fc)["iterations"] == st.summary(fs)["iterations"]
+    # the other leg is interpolated at the first leg's instants, its phase worked from the
+    # files' times (10 significant digits; the left leg's differ by 1e-9 s in the last digit):
+    # where the rate changes by 5e3 W/s that is 5e-6 W of 1000 W
+    n += _compare(cli.timeseries(row_c), st.timeseries(row_s), ["model", "series", "time_s"],
+                  "report: both legs over the cycle", rtol=1e-8)
+    rates_c, rates_s = cli.muscle_rates(row_c), st.muscle_rates(row_s)
+    assert list(rates_c) == list(rates_s) == ["UM10", "BH04"]
+    for m in rates_c:
+        pd.testing.assert_frame_equal(rates_c[m], rates_s[m], rtol=RTOL)
+        n += rates_c[m].size
+    # the pages' tables: the study's rows of gait2392's trial, without the trial's or subject's name
+    tc, ts = page_tables(cli), page_tables(st)
+    page = _page_rows(a / "report.html")
+    for name, label in (("whole_body", 0), ("phase_shares", 0), ("group_shares", 2)):
+        got, want = tc["results"][name].body, _rows_of_trial(ts["results"][name].body, label, "walk1")
+        assert [r[:label] + r[label + 1:] for r in got] == [r[:label] + r[label + 1:] for r in want], name
+        assert all(r in page for r in got), name
+        n += sum(len(r) - 3 for r in got)
+    for name in ("runs", "flagged"):
+        got, want = tc[name].body, [r for r in ts[name].body if r[0] == "gait2392"]
+        assert [r[3:] for r in got] == [r[3:] for r in want] and len(got) >= 2, name
+        assert all(r in page for r in got), name
+    return n
+
+
+def _rows_of_trial(body: list, label: int, trial: str) -> list:
+    """The rows of a results table of the page whose trial column (``label``) is ``trial``; the
+    tables with the trial first name it on its first row only."""
+    rows, current = [], None
+    for r in body:
+        current = r[label] if (r[label] or label) else current
+        if current == trial:
+            rows.append(r)
+    return rows
+
+
+def _page_rows(path: Path) -> list[list[str]]:
+    """Every row of every table of an HTML page, as the text of its cells."""
+    from html.parser import HTMLParser
+
+    class Rows(HTMLParser):
+        def __init__(self):
+            super().__init__()
+            self.rows, self.cell = [], None
+
+        def handle_starttag(self, tag, attrs):
+            if tag == "tr":
+                self.rows.append([])
+            elif tag in ("td", "th"):
+                self.cell = ""
+
+        def handle_endtag(self, tag):
+            if tag in ("td", "th") and self.cell is not None:
+                self.rows[-1].append(self.cell)
+                self.cell = None
+
+        def handle_data(self, data):
+            if self.cell is not None:
+                self.cell += data
+
+    parser = Rows()
+    parser.feed(path.read_text(encoding="utf-8"))
+    return parser.rows
+
 
 def _header_rows(path) -> int:
     with open(path, encoding="utf-8") as f:
@@ -197,6 +319,28 @@ def test_solve_prints_progress_while_ipopt_runs(example, tmp_path, capsys, monke
     assert iterations[:3] == [0, 1, 2] and iterations[-1] == total
     assert len(iterations) == total + 1
     assert ipopt._progress_callback(1, 1, [0.0], [0.0]) is None  # switched off after the command
+
+
+@pytest.mark.opensim
+def test_solve_both_legs_in_two_processes_prints_each_legs_progress(example, tmp_path, capfd, monkeypatch):
+    """``solve --side both --workers 2`` of a short window (0.6-0.9 s, a problem no other test
+    solves, so IPOPT runs in each leg's pool process) with the throttle at 0 s: each leg's
+    process prints a line for every iterate, labelled with the leg, on the command's standard
+    error: the interval in force in the command reaches the legs' processes."""
+    import musclemetab.redundancy.ipopt as ipopt
+
+    monkeypatch.setattr(ipopt, "PROGRESS_INTERVAL_S", 0.0)
+    out = tmp_path / "s"
+    assert main(["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
+                 str(example.id["normal"]), "--window", "0.6:0.9", "--side", "both",
+                 "--workers", "2", "--out", str(out)]) == 0
+    err = capfd.readouterr().err
+    lines = re.findall(r"^musclemetab: solving side ([rl]): iteration (\d+), objective \S+, "
+                       r"constraint violation \S+, \d+ s$", err, flags=re.M)
+    total = {side: json.loads((out / side / "summary.json").read_text())["iterations"] for side in "rl"}
+    for side in "rl":
+        assert [int(i) for s, i in lines if s == side] == list(range(total[side] + 1)), err
+    assert not re.search(r"^musclemetab: solving: ", err, flags=re.M)  # every line names its leg
 
 
 def test_study_progress_time_left_and_interrupted_units():

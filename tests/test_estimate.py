@@ -151,11 +151,17 @@ def _ultrasound(example, path, scale_mm=1.0):
 
 
 @pytest.mark.opensim
-def test_estimate_command_records_a_stopped_solve(example, tmp_path):
+def test_estimate_command_records_a_stopped_solve(example, tmp_path, monkeypatch):
     """Plumbing of ``musclemetab estimate`` (3 iterations): the solutions and parameters.json are
-    written with IPOPT's status, no personalised model, exit status 1 with one line."""
+    written with IPOPT's status, no personalised model, no OpenSim files (no solution to
+    reproduce), exit status 1 with one line; IPOPT's progress lines while it runs (the
+    throttle at 0 s: one per iterate, the starting point and the 3 iterations)."""
     import json
+    import re
 
+    import musclemetab.redundancy.ipopt as ipopt
+
+    monkeypatch.setattr(ipopt, "PROGRESS_INTERVAL_S", 0.0)
     us = _ultrasound(example, tmp_path / "us.mot")
     out = tmp_path / "est"
     code, text = _cli(["estimate", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
@@ -168,7 +174,8 @@ def test_estimate_command_records_a_stopped_solve(example, tmp_path):
     f = doc["factors"]["tendon_stiffness"]
     assert set(f) == {"soleus_r", "gasmed_r"} and f["soleus_r"] == f["gasmed_r"]  # coupled
     assert (out / "normal" / "summary.json").is_file()
-    assert not list(out.glob("*_personalised.osim"))
+    assert not list(out.glob("*_personalised.osim")) and not (out / "normal" / "model.osim").exists()
+    assert re.findall(r"^musclemetab: solving: iteration (\d+), ", text, flags=re.M) == ["0", "1", "2", "3"]
 
 
 def test_estimate_command_bad_input(example, tmp_path):
@@ -227,6 +234,20 @@ def test_estimate_command_with_emg_recovers_the_parameters(example, generated, r
     assert doc["emg"]["bounds"] == [1.0, 1.0]  # --emg-scale-bounds 1:1 (as --bounds emg_scale=1:1)
     assert doc["emg"]["mapping"] == {"tibant_r": ["TA"], "bflh_r": ["BF"]}
     assert (out / "normal" / "summary.json").is_file() and list(out.glob("*_personalised.osim"))
+    # the OpenSim files of a solve folder, in the trial's folder and its validation's: the model
+    # carries the solution's (estimated) optimal fiber lengths
+    import xml.etree.ElementTree as ET
+
+    from musclemetab.redundancy.export import OPENSIM_FILES
+    from musclemetab.redundancy.solution import Solution
+
+    for folder in (out / "normal", out / "validation" / "normal"):
+        assert all((folder / f).is_file() for f in OPENSIM_FILES), folder
+        sol = Solution.load(folder)
+        lmo = dict(zip(sol.parameters.names, sol.parameters.optimal_fiber_length_m))
+        muscles = {m.get("name"): m for m in ET.parse(folder / "model.osim").iter("DeGrooteFregly2016Muscle")}
+        for m in LMO:
+            assert float(muscles[m].findtext("optimal_fiber_length")) == pytest.approx(lmo[m], rel=1e-9), (folder, m)
     # the validation re-solve's fit, against the measurements at its nodes 0 ... N-1 by hand
     from musclemetab.redundancy.solution import Solution
 

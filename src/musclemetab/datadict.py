@@ -30,6 +30,7 @@ _UNIT_AN = "analysis.csv"
 _PM = "per_muscle.csv/.parquet"
 _LEGS_WB = "whole_body.csv (metabolics, legs added)"
 _LEG = "leg_muscles.csv"
+_SENS = "sensitivity.csv"
 
 #: ``(files, column, unit, description)``; ``files`` lists the tables holding the column.
 DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
@@ -38,7 +39,8 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
     (f"{_STUDY}, {_PM} (study), failures.csv", "trial", "-", "trial name of the study file"),
     (f"{_STUDY}, {_PM} (study), failures.csv", "workflow", "-",
      "muscle redundancy workflow: effort-gen, effort-cal, effort-ten or emg-ten"),
-    (f"{_STUDY}, {_UNIT_WB}, {_UNIT_AN}, {_PM}, {_LEG}, {_LEGS_WB}, timeseries.csv, metabolics.parquet", "model", "-",
+    (f"{_STUDY}, {_UNIT_WB}, {_UNIT_AN}, {_PM}, {_LEG}, {_LEGS_WB}, timeseries.csv, metabolics.parquet, {_SENS}", "model",
+     "-",
      "metabolic energy model (short name of the registry, e.g. UM10, BH04)"),
     ("failures.csv", "reason", "-", "why the unit failed or was stopped (one line)"),
     (f"{_STUDY}, failures.csv", "status", "-", "results: ok for a unit whose results are in the row; failures.csv: "
@@ -101,6 +103,10 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
      "was given"),
     (_STUDY, "cycle_source", "-", "where the gait events come from (study file, ground reaction forces, or estimated)"),
     (_STUDY, "speed_source", "-", "where the walking speed comes from (study file, or estimated from the pelvis)"),
+    (_STUDY, "solve_start", "-",
+     "how the unit's solve started: 'cold' (static optimisation), 'warm from <workflow>' (the same trial's solution of "
+     "the workflow before it), or 'cold: <reason>' when a planned warm start was not used or did not succeed "
+     "(docs/study.md, warm-started chains); legs that differ are named"),
     (_STUDY, "large_reserve", "-",
      "true when the solve's largest reserve RMS exceeds 1 % of the peak joint moment (the muscles do not explain "
      "the moments: check the inputs); summary.json holds reserve_share_of_peak_moment"),
@@ -110,7 +116,7 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
      "whole-body rate outside 0.5-2 x Ralston's 1958 rate at its speed), negative_group_rate (groups named); 'not "
      "checked' for a unit run by an earlier version; thresholds and sources in docs/quality.md"),
     # per muscle
-    (f"{_PM}, metabolics.parquet", "muscle", "-", "muscle name of the model"),
+    (f"{_PM}, metabolics.parquet, {_SENS}", "muscle", "-", "muscle name of the model"),
     (f"{_PM}, {_LEG}", "side", "-", "leg of the row's muscle(s): r or l ('' when a muscle name has no side suffix)"),
     (_PM, "muscle_W", "W",
      "the muscle's cycle-average metabolic rate without basal heat (work + activation/maintenance heat + "
@@ -167,6 +173,22 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
      "(data_dictionary.csv; <...> stands for a family)"),
     ("data_dictionary.csv", "unit", "-", "unit of the values"),
     ("data_dictionary.csv", "description", "-", "what the column holds"),
+    # sensitivities of the rates to the muscle parameters (musclemetab metabolics --sensitivity)
+    (_SENS, "solution", "-", "the solution folder (its name) whose rates the row's sensitivity is of"),
+    (_SENS, "parameter_rank", "-", "rank of the parameter by |d_rate_d_log_p| within its solution, model and rate "
+     "(1 = moves the rate most)"),
+    (_SENS, "parameter", "-", "muscle parameter: F0 (maximal isometric force), lMo (optimal fiber length), lTs "
+     "(tendon slack length), kT (tendon stiffness), kPE, s0, sM (passive force-length), vmax (maximal contraction "
+     "velocity), alpha0 (pennation angle at optimal fiber length)"),
+    (_SENS, "parameter_value", "SI", "the parameter's value in the solve (N, m, -, lMo/s or rad)"),
+    (_SENS, "rate", "-", "the reported rate: whole_body (whole_body_W_per_kg) or a muscle's name (its muscle_W)"),
+    (_SENS, "rate_value", "W/kg or W", "the rate at the optimum (W/kg for whole_body, W for a muscle)"),
+    (_SENS, "d_rate_d_log_p", "W/kg or W", "derivative of the rate per log of the parameter, p dR/dp, at the optimum: "
+     "the implicit-function theorem on the KKT system with the active set fixed, plus the rate formula's own "
+     "dependence on the parameter (docs/uncertainty.md, Sensitivities)"),
+    (_SENS, "change_per_1pct", "W/kg or W", "d_rate_d_log_p / 100: the rate's change when the parameter grows by 1 %"),
+    (_SENS, "relative_change_per_1pct", "-", "change_per_1pct / rate_value: the rate's relative change per 1 % of "
+     "the parameter (empty where the rate is 0)"),
 )
 
 

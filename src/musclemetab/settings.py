@@ -15,7 +15,8 @@ from dataclasses import dataclass
 
 from .errors import OptionError
 
-__all__ = ["NumberKey", "NUMBER_KEYS", "check_number", "MAX_ITERATIONS", "MESH_FREQUENCY_RANGE_HZ"]
+__all__ = ["NumberKey", "NUMBER_KEYS", "check_number", "SwitchKey", "SWITCH_KEYS", "check_switch", "MAX_ITERATIONS",
+           "MESH_FREQUENCY_RANGE_HZ"]
 
 #: Resource bounds of a solve: the IPOPT iteration limit (ten times the study's 10000; an
 #: iteration of the example trial takes about 0.1 s) and the mesh frequency (intervals per
@@ -105,3 +106,35 @@ def check_number(key: str, value, where: str = "", option: str | None = None) ->
     so that the command line and the study file refuse the same values with the same reason.
     """
     return NUMBER_KEYS[key].check(value, where, option)
+
+
+@dataclass(frozen=True)
+class SwitchKey:
+    """A true/false key of the study file: its default, its meaning and the command-line options
+    that turn it on (``on_option``) and off (``off_option``) whatever the file says."""
+
+    name: str
+    default: bool
+    help: str
+    on_option: str | None = None
+    off_option: str | None = None
+
+    def check(self, value, where: str) -> bool:
+        """``value`` as a bool; :class:`OptionError` naming the key and the remedy otherwise."""
+        if not isinstance(value, bool):
+            at = f"{where}: " if where else ""
+            raise OptionError(f"{at}'{self.name}' must be true or false ({self.help}), not {value!r}")
+        return value
+
+
+#: Every true/false key of a study file: name, default, meaning, command-line option.
+SWITCH_KEYS: dict[str, SwitchKey] = {k.name: k for k in (
+    SwitchKey("warm_start", False, "[solver] warm_start: start each effort solve of a trial from the solve of the "
+              "workflow before it (EFFORT-GEN -> EFFORT-CAL -> EFFORT-TEN); false (the default): every solve from "
+              "static optimisation", on_option="--warm-start", off_option="--cold-start"),
+)}
+
+
+def check_switch(key: str, value, where: str = "") -> bool:
+    """Check ``value`` of the true/false key ``key`` against :data:`SWITCH_KEYS`."""
+    return SWITCH_KEYS[key].check(value, where)

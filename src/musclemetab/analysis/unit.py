@@ -26,7 +26,7 @@ from .phases import phase_shares
 
 __all__ = ["MetabolicAnalysis", "TrialAnalysis", "RecordedTrial", "analyse", "write_analysis",
            "analyse_metabolics", "analyse_solution_folder", "interpolate_moment_arms", "recorded_trial",
-           "recorded_cycle", "ANALYSIS_FILE", "TIMESERIES_FILE", "GROUP_KEY_FILE"]
+           "recorded_cycle", "ANALYSIS_FILE", "TIMESERIES_FILE", "GROUP_KEY_FILE", "ANALYSE_RECORD"]
 
 #: files of :func:`write_analysis` (beside ``whole_body.csv`` and ``per_muscle.csv``)
 ANALYSIS_FILE = "analysis.csv"
@@ -34,6 +34,9 @@ TIMESERIES_FILE = "timeseries.csv"
 GROUP_KEY_FILE = "muscle_groups.csv"
 #: The files :func:`write_analysis` may write into a folder (one of the two whole-body tables)
 ANALYSIS_FILES = ("whole_body.csv", "leg_muscles.csv", ANALYSIS_FILE, TIMESERIES_FILE, "per_muscle.csv", GROUP_KEY_FILE)
+#: The record ``musclemetab analyse`` leaves in its output folder: the solution and metabolics
+#: folders of each leg, the gait cycle, body mass and height (read by :mod:`musclemetab.report`).
+ANALYSE_RECORD = "analyse.json"
 
 
 class MetabolicAnalysis(NamedTuple):

@@ -12,7 +12,9 @@ transport), the stance/swing and muscle-group analysis (``analysis.csv``), the l
 group rates over the cycle (``timeseries.csv``), the per-muscle table (``per_muscle.csv``),
 the key of the group abbreviations (``muscle_groups.csv``) and ``results.csv``, the study's
 results rows of the trial (one per model: :func:`musclemetab.study.runner.trial_result_rows`):
-:func:`musclemetab.analysis.analyse` and :func:`musclemetab.analysis.write_analysis`.
+:func:`musclemetab.analysis.analyse` and :func:`musclemetab.analysis.write_analysis`; and
+``analyse.json``, each leg's solution and metabolics folders, cycle, body mass and height, from
+which ``musclemetab report OUT`` draws the page a study gives (:mod:`musclemetab.report.cli_folder`).
 
 What the solution records is not asked again (:func:`musclemetab.analysis.recorded_trial`):
 the model and the IK motion it was solved from, the leg, the DOFs and the gait cycle of a
@@ -53,7 +55,8 @@ def add_parser(subparsers) -> None:
             "gross and net cost of transport, stance and swing energy shares, muscle-group shares and rates over "
             "the gait cycle, and one row per muscle and model (mean W, W/kg, J per cycle, share of the leg, stance "
             "and swing J, components, basal heat apart). Writes OUT/whole_body.csv, analysis.csv, timeseries.csv, "
-            "per_muscle.csv, muscle_groups.csv and results.csv (the study's results rows). The model, IK motion, "
+            "per_muscle.csv, muscle_groups.csv, results.csv (the study's results rows) and analyse.json (the solution "
+            "and metabolics folders of each leg, for 'musclemetab report OUT'). The model, IK motion, "
             "leg, DOFs and gait cycle the solution records are used unless given. DIR may hold one solution folder "
             "per side (DIR/r, DIR/l; --metabolics likewise): OUT/r and OUT/l are written, OUT/per_muscle.csv gathers "
             "both sides and OUT/results.csv adds the legs. Every column is described in docs/data_dictionary.md."
@@ -133,6 +136,7 @@ def _metabolics_folder(root, side):
 
 def run(args) -> int:
     """Run ``musclemetab analyse`` (``args`` from :func:`add_parser`)."""
+    import json
     import sys
 
     import pandas as pd
@@ -161,7 +165,7 @@ def run(args) -> int:
         check_replaceable(out, ANALYSIS_FILES)
     check_replaceable(Path(args.out), [RESULTS_CSV] + ([PER_MUSCLE_FILE] if jobs[0][0] is not None else []))
     basal_given = {key: getattr(args, key) for key in BASAL_DEFAULTS}
-    rows, basal_J, tables = {}, {}, []
+    rows, basal_J, tables, legs = {}, {}, [], []
     for side, sol_dir, out in jobs:
         recorded = recorded_trial(sol_dir)
         settings = (read_metabolics_settings(_metabolics_folder(args.metabolics, side or recorded.side))
@@ -198,6 +202,13 @@ def run(args) -> int:
                          basal=args.basal, basal_rate_W_per_kg=args.basal_coefficient,
                          basal_exponent=args.basal_exponent, speed_m_per_s=speed)
         write_analysis(result, out)
+        met_dir = _metabolics_folder(args.metabolics, side or recorded.side) if args.metabolics else None
+        legs.append({"side": leg, "folder": side or ".", "solution": str(Path(sol_dir).resolve()),
+                     "metabolics": str(Path(met_dir).resolve()) if met_dir else None, "model": str(model),
+                     "ik": str(ik), "cycle": {"start_s": cycle.start_s, "toe_off_s": cycle.toe_off_s,
+                                              "end_s": cycle.end_s}, "cycle_source": source,
+                     "body_mass_kg": float(mass), "height_m": None if height is None else float(height),
+                     "basal": args.basal})
         per = result.per_muscle
         tables.append(per)
         rows[side] = trial_result_rows(result.whole_body, result.summary, speed_m_per_s=speed,
@@ -237,6 +248,11 @@ def run(args) -> int:
         (side, table), = rows.items()
         with atomic_path(Path(args.out) / RESULTS_CSV, mark=True) as tmp:
             table.assign(legs=f"2 x {recorded.side or 'r'}").to_csv(tmp, index=False, float_format="%.10g")
+    from ..analysis.unit import ANALYSE_RECORD
+    from ..io.atomic import atomic_write_text
+
+    atomic_write_text(Path(args.out) / ANALYSE_RECORD, json.dumps(
+        {"format": "musclemetab analyse", "format_version": 1, "legs": legs}, indent=1) + "\n")
     return 0
 
 

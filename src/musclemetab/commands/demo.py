@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from .options import add_study_arguments
-from .run import exit_status, print_run
+from .run import add_warm_start_arguments, exit_status, print_run
 
 __all__ = ["add_parser", "run"]
 
@@ -20,6 +20,7 @@ def add_parser(sub) -> None:
     )
     p.add_argument("--out", default="musclemetab-demo", metavar="DIR", help="output folder (default musclemetab-demo)")
     p.add_argument("--speeds", nargs="+", choices=("slow", "normal", "fast"), help="a subset of the speeds")
+    add_warm_start_arguments(p)
     add_study_arguments(p)
     p.set_defaults(func=run)
 
@@ -29,7 +30,7 @@ def run(args) -> int:
     from ..study.demo import run_demo
 
     result = run_demo(args.out, workers=args.workers, speeds=args.speeds, progress=not args.no_progress,
-                      force=args.force, strict=args.strict)
+                      force=args.force, strict=args.strict, warm_start=bool(args.warm_start))
     print_run(result, "demo")
     if result.interrupted:
         return exit_status(result)

@@ -4,7 +4,10 @@ coupled as in EMG-TEN).
 
 Writes ``DIR/<trial>/`` (the solutions with the estimates), ``DIR/parameters.json``,
 ``DIR/<model>_personalised.osim`` and, with ``--validate``, ``DIR/validation/<trial>/``: the
-effort problem re-solved with the estimated parameters. Prints the estimates with their doubts
+effort problem re-solved with the estimated parameters. Each converged trial folder, and each
+validation folder, also holds the OpenSim files of a solve folder (``model.osim``,
+``states.sto``, ``controls.sto``, ``forces.sto``; ``docs/opensim_files.md``). IPOPT's progress
+lines go to stderr every 5 s unless ``--no-progress``. Prints the estimates with their doubts
 (factors on bounds, standard errors and correlated pairs) and the validation fit
 (``docs/problem.md``, "Doubts of the estimates").
 """
@@ -16,11 +19,11 @@ import argparse
 from ..errors import OptionError
 from .options import number_option
 
-__all__ = ["add_parser", "run", "parse_assignments"]
+__all__ = ["add_parser", "run", "run_with_progress", "parse_assignments"]
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
-    from .solve import add_emg_goal_arguments
+    from .solve import add_emg_goal_arguments, add_progress_argument
 
     p = subparsers.add_parser(
         "estimate", help="estimate tendon stiffness, optimal fiber and tendon slack lengths from fiber lengths",
@@ -69,7 +72,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--cache-dir", metavar="DIR")
     number_option(p, "--max-iter", "max_iter", default=10000, help="IPOPT iteration limit (default 10000)")
     p.add_argument("--out", required=True, metavar="DIR")
-    p.set_defaults(func=run)
+    add_progress_argument(p)
+    p.set_defaults(func=run_with_progress)
     return p
 
 
@@ -143,6 +147,7 @@ def _estimate(args) -> int:
         cache_dir=args.cache_dir,
         exclude_muscles=[m for item in (args.exclude_muscles or []) for m in item.replace(",", " ").split()],
     )
+    _write_opensim_files(args, result.labels)
     values = ", ".join(f"{k} {m} x{v:.4f}" for k, by in result.factors.items() if k != "emg_scale"
                        for m, v in by.items())
     if result.emg_scale:
@@ -156,6 +161,30 @@ def _estimate(args) -> int:
     for line in doubt_lines(result.document or {}):
         print(line)
     return 0
+
+
+def _write_opensim_files(args, labels) -> None:
+    """The OpenSim files of every trial's solution folder and of its validation re-solve
+    (``model.osim``, ``states.sto``, ``controls.sto``, ``forces.sto``, as a solve folder has:
+    :func:`~musclemetab.redundancy.export.write_opensim_files`, from the trial's IK and ID files)."""
+    from pathlib import Path
+
+    from ..redundancy.export import write_opensim_files
+    from ..redundancy.solution import SOLUTION_FILE
+
+    for label, ik, idf in zip(labels, args.ik, args.id):
+        for folder in (Path(args.out) / label, Path(args.out) / "validation" / label):
+            if (folder / SOLUTION_FILE).is_file():
+                write_opensim_files(folder, model_path=args.model, ik_path=ik, id_path=idf)
+
+
+def run_with_progress(args) -> int:
+    """:func:`run` with IPOPT's progress lines on stderr unless ``--no-progress``
+    (:func:`~musclemetab.commands.solve.progress_lines`)."""
+    from .solve import progress_lines
+
+    with progress_lines(args):
+        return run(args)
 
 
 def doubt_lines(doc: dict) -> list[str]:

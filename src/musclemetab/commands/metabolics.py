@@ -74,6 +74,14 @@ def add_parser(subparsers) -> None:
         "plausibility flag of the solve or of the whole-body rate against --speed (one warning line each, "
         "docs/quality.md)",
     )
+    p.add_argument(
+        "--sensitivity", nargs="?", const="all", metavar="PARAMETERS",
+        help="also write OUT/sensitivity.csv: the derivative of each rate (whole body and each muscle, each model) "
+        "per log of each muscle parameter at the optimum, ranked (docs/uncertainty.md, Sensitivities). The problem "
+        "is rebuilt from the files summary.json names and re-solved once at a tight tolerance. PARAMETERS: 'all' "
+        "(default: F0,lMo,lTs,kT,kPE,s0,sM,vmax,alpha0) or a comma-separated list of them; effort workflows, one "
+        "leg's solution folder; a few minutes for all parameters of 40 muscles",
+    )
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (may be the solution folder)")
     p.set_defaults(func=run)
 
@@ -98,6 +106,7 @@ def run(args) -> int:
     check_basal_arguments(args)
     folders = solution_folders(args.solution)
     check_metabolics_outputs(args.out, folders)
+    sensitivity = _sensitivity_parameters(args.sensitivity, folders)
     params = None
     if args.model:
         from ..model import read_muscle_parameters
@@ -133,6 +142,8 @@ def run(args) -> int:
             f"(W/kg, basal {args.basal}): {means}"
         )
         _plausibility(args, folders, results)
+        if sensitivity is not None:
+            _write_sensitivity(args, folders[side], sensitivity, models)
         return 0
     from ..metabolics.solution import add_legs
 
@@ -143,6 +154,43 @@ def run(args) -> int:
           f"{args.basal}): {means}")
     _plausibility(args, folders, results)
     return 0
+
+
+def _sensitivity_parameters(value, folders) -> list | None:
+    """The parameter names of ``--sensitivity`` (``None`` without it), checked before any work."""
+    if value is None:
+        return None
+    from ..errors import OptionError
+    from ..redundancy.sensitivity import PARAMETERS
+
+    if len(folders) != 1:
+        raise OptionError("--sensitivity takes one leg's solution folder (e.g. PARENT/r), not the parent of both legs")
+    names = list(PARAMETERS) if value.strip().lower() == "all" else [v.strip() for v in value.split(",") if v.strip()]
+    bad = [n for n in names if n not in PARAMETERS]
+    if bad or not names:
+        raise OptionError(f"--sensitivity: unknown muscle parameter(s) {', '.join(bad) or repr(value)}; give 'all' or "
+                          f"a comma-separated list of {', '.join(PARAMETERS)}")
+    return names
+
+
+def _write_sensitivity(args, folder, names, models) -> None:
+    """``OUT/sensitivity.csv`` of the solution ``folder`` (:mod:`musclemetab.redundancy.sensitivity`)."""
+    from pathlib import Path
+
+    from ..redundancy.sensitivity import problem_of_solution, trial_sensitivity, write_sensitivity
+
+    prob = problem_of_solution(folder)
+    pairs = [(n, m) for n in names for m in prob.inputs.muscles]
+    sens = trial_sensitivity(prob.solution, prob.inputs, prob.params, prob.goals, body_mass_kg=args.mass,
+                             height_m=args.height, models=models, parameters=pairs,
+                             optimal_reserve_Nm=prob.optimal_reserve_Nm, trial=Path(folder).resolve().name,
+                             basal=args.basal, basal_rate_W_per_kg=args.basal_coefficient,
+                             basal_exponent=args.basal_exponent, muscle_properties=args.muscle_properties)
+    path = write_sensitivity([sens], args.out)
+    top = max(((p, m, mod, float(sens.whole_body[mod][j])) for mod in sens.models
+               for j, (p, m) in enumerate(sens.parameters)), key=lambda r: abs(r[3]))
+    print(f"sensitivity: {len(pairs)} parameters x {len(sens.models)} models -> {path}; largest: whole-body {top[2]} "
+          f"{top[3] / 100:+.3g} W/kg per 1 % of {top[0]} of {top[1]}")
 
 
 def _plausibility(args, folders, results) -> None:

@@ -1,10 +1,14 @@
-"""``musclemetab report``: the figures and the HTML report of a study folder.
+"""``musclemetab report``: the figures and the HTML report of a study folder, or of the
+command line's ``analyse`` output folders.
 
     musclemetab report DIR [--out FILE] [--svg] [--force] [--workers N] [--models M1,M2|all]
+    musclemetab report A [A2 ...] [--out FILE] ...
 
 Writes ``DIR/figures/<name>.png`` (and ``.svg`` with ``--svg``) for every figure the data support, and
 ``DIR/report.html`` (or ``FILE``, with its figures in ``figures/`` beside it): one
-self-contained page (see :mod:`musclemetab.report.build`).
+self-contained page (see :mod:`musclemetab.report.build`). Output folders of ``musclemetab
+analyse`` (with the solution and metabolics folders they record) give the page a study of
+their trials would give (:mod:`musclemetab.report.cli_folder`); several of them need ``--out``.
 """
 
 from __future__ import annotations
@@ -16,7 +20,7 @@ def add_parser(subparsers) -> None:
     """Add the ``report`` subcommand to an ``argparse`` subparsers object."""
     p = subparsers.add_parser(
         "report",
-        help="figures and a self-contained HTML report of a study folder",
+        help="figures and a self-contained HTML report of a study folder or of analyse output folders",
         description=(
             "Read a study folder written by 'musclemetab run' (study.json, results.csv, failures.csv, "
             "units/) and write its figures (DIR/figures/<name>.png, and .svg with --svg: excitations and fiber lengths, "
@@ -25,10 +29,15 @@ def add_parser(subparsers) -> None:
             "six metabolic models unless --models names others) and one HTML page, DIR/report.html, with the settings, the "
             "method, the result tables (W/kg, J/(kg m), %), the figures embedded, the failures and the "
             "software versions. A figure the data do not support is replaced by a note. The report is rebuilt only "
-            "when its inputs changed (content hash)."
+            "when its inputs changed (content hash). Instead of a study folder, give one or more output folders of "
+            "'musclemetab analyse' (of one leg, or the parent of r/ and l/): the solution and metabolics folders "
+            "each records are read with it, and the page shows what a study of those trials shows (subject: the "
+            "model file's name; trial: the IK file's name); several folders need --out."
         ),
     )
-    p.add_argument("study_dir", metavar="DIR", help="study folder (holding results.csv)")
+    p.add_argument("study_dir", metavar="DIR", nargs="+",
+                   help="study folder (holding results.csv and study.json), or one or more output folders of "
+                   "'musclemetab analyse' (holding analyse.json)")
     p.add_argument(
         "--out", metavar="FILE",
         help="HTML file to write (default DIR/report.html); the figures go to a folder 'figures' beside it",

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from .options import add_study_arguments
 
-__all__ = ["add_parser", "run", "print_run", "exit_status"]
+__all__ = ["add_parser", "run", "print_run", "exit_status", "add_warm_start_arguments"]
 
 
 def add_parser(sub) -> None:
@@ -24,8 +24,23 @@ def add_parser(sub) -> None:
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="run on a Dask cluster (tcp://host:port); needs pip install 'musclemetab[dask]'")
     p.add_argument("--report", action="store_true", help="also write the figures and report.html")
+    add_warm_start_arguments(p)
     add_study_arguments(p)
     p.set_defaults(func=run)
+
+
+def add_warm_start_arguments(p) -> None:
+    """``--warm-start``/``--cold-start``: the study file's ``[solver] warm_start`` (``run`` and ``demo``)."""
+    from ..settings import SWITCH_KEYS
+
+    key = SWITCH_KEYS["warm_start"]
+    group = p.add_mutually_exclusive_group()
+    group.add_argument(key.on_option, dest="warm_start", action="store_const", const=True, default=None,
+                       help="start a trial's EFFORT-CAL and EFFORT-TEN solves from the solution of the workflow "
+                            "before them, as the study file's [solver] warm_start = true: about half the solver "
+                            "time of those units; the results may differ (another local optimum, docs/study.md)")
+    group.add_argument(key.off_option, dest="warm_start", action="store_const", const=False,
+                       help="start every solve from static optimisation (the default), as [solver] warm_start = false")
 
 
 def print_run(run, command: str) -> None:
@@ -62,6 +77,10 @@ def run(args) -> int:
         from ..study.spec import strict_study
 
         study = strict_study(study)
+    if args.warm_start is not None:
+        from ..study.spec import warm_start_study
+
+        study = warm_start_study(study, args.warm_start)
     result = run_study(study, workers=args.workers, scheduler=args.scheduler, force=args.force,
                        progress=not args.no_progress)
     if args.report and not result.interrupted:

@@ -32,7 +32,8 @@ import argparse
 from ..errors import OptionError, SolverError, UnknownMuscleError
 from .options import number_option
 
-__all__ = ["add_parser", "add_emg_goal_arguments", "run", "run_with_progress"]
+__all__ = ["add_parser", "add_emg_goal_arguments", "add_progress_argument", "run", "run_with_progress",
+           "progress_lines"]
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -171,11 +172,16 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     g.add_argument("--muscle-properties", metavar="FILE",
                    help="CSV of per-muscle overrides of mass and slow-twitch fraction (docs/muscles.md)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    p.add_argument("--no-progress", action="store_true",
-                   help="no progress lines while IPOPT runs (default: one line on stderr at most every 5 s: "
-                   "iteration, objective, constraint violation, time)")
+    add_progress_argument(p, "; with --side both --workers 2 each leg's, 'solving side r: ...'")
     p.set_defaults(func=run_with_progress)
     return p
+
+
+def add_progress_argument(p, more: str = "") -> None:
+    """``--no-progress`` (:func:`progress_lines`)."""
+    p.add_argument("--no-progress", action="store_true",
+                   help="no progress lines while IPOPT runs (default: one line on stderr at most every 5 s: "
+                   f"iteration, objective, constraint violation, time{more})")
 
 
 def add_emg_goal_arguments(p, mode_help: str, weight_help: str) -> None:
@@ -626,12 +632,17 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
     return 0
 
 
-def run_with_progress(args) -> int:
-    """:func:`run` with IPOPT's progress lines on stderr (:class:`~musclemetab.redundancy.ipopt.solve_progress`)
-    unless ``--no-progress``."""
+def progress_lines(args):
+    """IPOPT's progress lines on stderr while the block runs (:class:`~musclemetab.redundancy.ipopt.solve_progress`),
+    unless ``--no-progress`` (a context manager)."""
     import contextlib
 
     from ..redundancy.ipopt import solve_progress
 
-    with contextlib.nullcontext() if getattr(args, "no_progress", False) else solve_progress():
+    return contextlib.nullcontext() if getattr(args, "no_progress", False) else solve_progress()
+
+
+def run_with_progress(args) -> int:
+    """:func:`run` with IPOPT's progress lines on stderr unless ``--no-progress`` (:func:`progress_lines`)."""
+    with progress_lines(args):
         return run(args)

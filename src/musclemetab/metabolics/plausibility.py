@@ -23,7 +23,7 @@ import numpy as np
 from ..redundancy.plausibility import Flag
 
 __all__ = ["PLAUSIBILITY_FILE", "legs_rate_flags", "write_plausibility", "RATE_BAND", "ralston_gross_rate_W_per_kg", "whole_body_rate_flag", "negative_group_flag",
-           "metabolic_flags", "SPEED_RANGE_M_PER_S"]
+           "metabolic_flags", "add_quality", "SPEED_RANGE_M_PER_S"]
 
 #: The plausible band of the gross whole-body rate, as factors of Ralston's rate at the speed.
 #: Low: half (a rate below it is below standing rest plus a little walking). High: twice, which
@@ -114,3 +114,28 @@ def write_plausibility(flags, out_dir):
     path = Path(out_dir) / PLAUSIBILITY_FILE
     atomic_write_text(path, json.dumps([f.to_dict() for f in flags], indent=2) + "\n", mark=True)
     return path
+
+
+def add_quality(rows, unit_records):
+    """``rows`` (one results row per model) with the column ``quality``: ``"ok"`` or the flags
+    (:func:`musclemetab.redundancy.plausibility.quality_text`) of the solve (every leg's, from the
+    ``plausibility`` of ``unit_records``) and of the row's metabolic results (its whole-body rate
+    against its speed, its negative group shares: :func:`musclemetab.metabolics.plausibility.metabolic_flags`);
+    ``"not checked"`` when a unit record has no ``plausibility`` (written by an earlier version)."""
+    import pandas as pd
+
+    from ..redundancy.plausibility import flags_from_records, quality_text
+
+    if any("plausibility" not in r for r in unit_records):
+        rows["quality"] = "not checked"
+        return rows
+    solve = [f for r in unit_records for f in flags_from_records(r["plausibility"]) if f.model is None]
+    quality = []
+    for i in range(len(rows)):
+        row = rows.iloc[[i]]
+        speed = row["speed_m_per_s"].iloc[0] if "speed_m_per_s" in row else None
+        speed = float(speed) if speed is not None and pd.notna(speed) else None
+        model = str(row["model"].iloc[0])
+        quality.append(quality_text(solve + metabolic_flags({model: float(row["whole_body_W_per_kg"].iloc[0])}, speed, row)))
+    rows["quality"] = quality
+    return rows

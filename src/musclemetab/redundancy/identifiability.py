@@ -35,7 +35,7 @@ from ..errors import MusclemetabWarning, OptionError
 
 __all__ = ["CORRELATION_THRESHOLD", "SINGULAR_RCOND", "BOUND_TOLERANCE", "factors_on_bounds", "informing_muscles",
            "uninformed_factors", "check_informed", "identifiability", "warn_identifiability", "warn_on_bounds",
-           "tracking_fit", "reduced_inverse_hessian", "correlation"]
+           "tracking_fit", "reduced_inverse_hessian", "correlation", "KKTSystem", "lagrangian_derivatives"]
 
 #: |correlation| above which two estimated parameters are reported as not identifiable together
 #: (on the synthetic problem of ``tests/test_estimate.py`` the lMo and lTs factors of one muscle
@@ -144,41 +144,84 @@ def _labels(specs, layout) -> tuple[list[str], list[int]]:
     return labels, cols
 
 
+class KKTSystem:
+    """The KKT matrix ``K = [[H_ff, A'], [A, 0]]`` at a KKT point, factorised once (sparse LU).
+
+    ``free``: the variables kept free (those not on an active bound), ``rows``: the active
+    constraint rows (equalities, and inequalities whose slack is below their multiplier) that
+    hold a free variable; :meth:`solve` solves ``K y = rhs`` (``None`` when ``K`` is exactly
+    singular). ``active``: ``{"constraint_rows", "variable_bounds"}``, the active counts.
+    ``bound_slack``: a variable closer than this to a bound is on it whatever its multiplier
+    (a weakly active bound, whose multiplier vanishes with the barrier parameter)."""
+
+    def __init__(self, H, J, x, g, lbx, ubx, lbg, ubg, lam_g, lam_x, keep_free=(), bound_slack: float = 0.0):
+        import scipy.sparse as sp
+        from scipy.sparse.linalg import splu
+
+        slack_g = np.minimum(np.abs(g - lbg), np.abs(ubg - g))
+        rows = np.flatnonzero((lbg == ubg) | (slack_g <= np.abs(lam_g)))
+        slack_x = np.minimum(np.abs(x - lbx), np.abs(ubx - x))
+        fixed = (lbx == ubx) | (slack_x <= np.abs(lam_x)) | (slack_x <= bound_slack)
+        fixed[list(keep_free)] = False
+        self.free = np.flatnonzero(~fixed)
+        self.position = {int(c): k for k, c in enumerate(self.free)}
+        A = sp.csr_matrix(J)[rows][:, self.free]
+        nonempty = np.diff(A.indptr) > 0  # rows of bound variables alone (e.g. a = e = 0) hold nothing
+        self.rows, A = rows[nonempty], A[nonempty]
+        H = sp.csc_matrix(H)
+        self.matrix = sp.bmat([[H[self.free][:, self.free], A.T], [A, None]], format="csc")
+        self.active = {"constraint_rows": int(self.rows.size), "variable_bounds": int(fixed.sum())}
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                self._lu = splu(self.matrix)
+        except RuntimeError:  # exactly singular KKT matrix
+            self._lu = None
+
+    @property
+    def size(self) -> int:
+        return self.matrix.shape[0]
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray | None:
+        """``K^-1 rhs`` (``rhs`` of :attr:`size` rows), or ``None`` when ``K`` is singular."""
+        return None if self._lu is None else self._lu.solve(np.asarray(rhs, dtype=float))
+
+
+def lagrangian_derivatives(nlp: dict, x, lam_g):
+    """The full symmetric Hessian of the Lagrangian ``f + lam_g' g``, the constraint Jacobian
+    (SciPy sparse) and the constraint values at ``x`` of a problem built with explicit
+    derivatives (:func:`.transcription.build_problem`)."""
+    import casadi as ca
+    import scipy.sparse as sp
+
+    def scipy_matrix(m):
+        m = ca.DM(m)
+        r, c = m.sparsity().get_triplet()
+        return sp.csc_matrix((np.asarray(m.nonzeros()).reshape(-1), (r, c)), shape=m.shape)
+
+    Hu = scipy_matrix(nlp["hess_lag"](x, ca.DM(0, 1), 1.0, lam_g))
+    H = (Hu + Hu.T - sp.diags(Hu.diagonal())).tocsc()
+    g, J = nlp["jac_g"](x, ca.DM(0, 1))
+    return H, scipy_matrix(J), np.asarray(g).reshape(-1)
+
+
 def reduced_inverse_hessian(H, J, x, g, lbx, ubx, lbg, ubg, lam_g, lam_x, columns) -> tuple[np.ndarray, dict]:
     """``(K^-1)_pp``: the inverse of the reduced Hessian on the variables ``columns`` at a KKT
     point (see the module docstring). ``H``: the full symmetric Hessian of the Lagrangian and
     ``J`` the constraint Jacobian (SciPy sparse), ``g`` the constraint values; the other
     arguments as IPOPT's. The variables of ``columns`` are kept free; other variables on a bound
     (slack below its multiplier) are fixed, and constraint rows left without a free variable
-    dropped. NaN where the KKT matrix is singular. Returns ``(C, {"constraint_rows",
-    "variable_bounds"})`` (the active counts)."""
-    import scipy.sparse as sp
-    from scipy.sparse.linalg import splu
-
-    slack_g = np.minimum(np.abs(g - lbg), np.abs(ubg - g))
-    rows = np.flatnonzero((lbg == ubg) | (slack_g <= np.abs(lam_g)))
-    slack_x = np.minimum(np.abs(x - lbx), np.abs(ubx - x))
-    fixed = (lbx == ubx) | (slack_x <= np.abs(lam_x))
-    fixed[list(columns)] = False
-    free = np.flatnonzero(~fixed)
-    pos = {int(c): k for k, c in enumerate(free)}
-    A = sp.csr_matrix(J)[rows][:, free]
-    nonempty = np.diff(A.indptr) > 0  # rows of bound variables alone (e.g. a = e = 0) hold nothing
-    rows, A = rows[nonempty], A[nonempty]
-    H = sp.csc_matrix(H)
-    K = sp.bmat([[H[free][:, free], A.T], [A, None]], format="csc")
-    rhs = np.zeros((K.shape[0], len(columns)))
+    dropped (:class:`KKTSystem`). NaN where the KKT matrix is singular. Returns ``(C,
+    {"constraint_rows", "variable_bounds"})`` (the active counts)."""
+    kkt = KKTSystem(H, J, x, g, lbx, ubx, lbg, ubg, lam_g, lam_x, keep_free=columns)
+    rhs = np.zeros((kkt.size, len(columns)))
     for j, c in enumerate(columns):
-        rhs[pos[int(c)], j] = 1.0
-    active = {"constraint_rows": int(rows.size), "variable_bounds": int(fixed.sum())}
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            X = splu(K).solve(rhs)
-    except RuntimeError:  # exactly singular KKT matrix
-        return np.full((len(columns), len(columns)), np.nan), active
-    C = X[[pos[int(c)] for c in columns], :]
-    return 0.5 * (C + C.T), active
+        rhs[kkt.position[int(c)], j] = 1.0
+    X = kkt.solve(rhs)
+    if X is None:
+        return np.full((len(columns), len(columns)), np.nan), kkt.active
+    C = X[[kkt.position[int(c)] for c in columns], :]
+    return 0.5 * (C + C.T), kkt.active
 
 
 def correlation(C: np.ndarray) -> tuple[np.ndarray | None, float]:
@@ -200,9 +243,6 @@ def identifiability(trials, params, goals, specs, result, *, optimal_reserve_Nm:
 
     Returns ``{method, parameters, factor, standard_error, correlation, residual_scale,
     reduced_hessian_rcond, near_singular, correlated_pairs, threshold, active}``."""
-    import casadi as ca
-    import scipy.sparse as sp
-
     from .transcription import build_problem
 
     kkt = result.kkt
@@ -212,21 +252,12 @@ def identifiability(trials, params, goals, specs, result, *, optimal_reserve_Nm:
     nlp = build_problem(trials, params, goals, specs, optimal_reserve_Nm=optimal_reserve_Nm, coupling=coupling,
                         explicit_derivatives=True)
     x, lam_g, lam_x = kkt["x"], kkt["lam_g"], kkt["lam_x"]
-
-    def scipy_matrix(m):
-        m = ca.DM(m)
-        r, c = m.sparsity().get_triplet()
-        return sp.csc_matrix((np.asarray(m.nonzeros()).reshape(-1), (r, c)), shape=m.shape)
-
-    Hu = scipy_matrix(nlp["hess_lag"](x, ca.DM(0, 1), 1.0, lam_g))
-    H = (Hu + Hu.T - sp.diags(Hu.diagonal())).tocsc()
-    g, J = nlp["jac_g"](x, ca.DM(0, 1))
+    H, J, g = lagrangian_derivatives(nlp, x, lam_g)
     lbx, ubx = nlp["lbx"], nlp["ubx"]
     labels, pcols = _labels(specs, nlp["layout"])
     keep = [k for k, c in enumerate(pcols) if lbx[c] < ubx[c]]
     labels, pcols = [labels[k] for k in keep], [pcols[k] for k in keep]
-    C, active = reduced_inverse_hessian(H, scipy_matrix(J), x, np.asarray(g).reshape(-1), lbx, ubx, nlp["lbg"],
-                                        nlp["ubg"], lam_g, lam_x, pcols)
+    C, active = reduced_inverse_hessian(H, J, x, g, lbx, ubx, nlp["lbg"], nlp["ubg"], lam_g, lam_x, pcols)
     n_data = sum(t.inputs.n_intervals * (len(t.fiber_muscles) * (goals.w_fiber_length > 0)
                                          + len(t.emg_muscles) * (goals.w_emg > 0)) for t in trials)
     j_track = sum(v for terms in result.objective_terms.values() for k, v in terms.items()

@@ -78,6 +78,7 @@ __all__ = [
     "MAX_PROBLEM_MEMORY_MB",
     "LIBRARY_ENV",
     "solve_progress",
+    "progress_interval",
     "PROGRESS_INTERVAL_S",
 ]
 
@@ -482,7 +483,7 @@ def ipopt_options(options: SolverOptions, mumps_settings: dict | None = None) ->
 
 #: Seconds between two progress lines of a running solve (:func:`solve_progress`).
 PROGRESS_INTERVAL_S = 5.0
-_PROGRESS: dict = {"stream": None, "interval_s": None}
+_PROGRESS: dict = {"stream": None, "interval_s": None, "label": ""}
 
 
 class solve_progress:
@@ -495,19 +496,20 @@ class solve_progress:
     The line comes from IPOPT's iteration callback (CasADi's ``iteration_callback`` option):
     the iteration number, the objective and the largest violation of a constraint's bounds
     (unscaled, at the current iterate) and the time since the solve started. It does not change
-    the solve: the callback only reads the iterate. ``musclemetab solve`` uses it unless given
-    ``--no-progress``; the legs of ``solve --side both --workers 2`` solve in other processes and
-    print no progress lines.
+    the solve: the callback only reads the iterate. ``musclemetab solve`` and ``estimate`` use it
+    unless given ``--no-progress``; the legs of ``solve --side both --workers 2``, solved in other
+    processes, turn it on there with the interval of this process (:func:`progress_interval`)
+    and ``label`` naming the leg (``musclemetab: solving side l: iteration 40, ...``).
     """
 
-    def __init__(self, interval_s: float | None = None, stream=None):
-        self.interval_s, self.stream = interval_s, stream
+    def __init__(self, interval_s: float | None = None, stream=None, label: str = ""):
+        self.interval_s, self.stream, self.label = interval_s, stream, label
         self._previous = None
 
     def __enter__(self):
         self._previous = dict(_PROGRESS)
         _PROGRESS.update(stream=self.stream, interval_s=PROGRESS_INTERVAL_S if self.interval_s is None
-                         else float(self.interval_s))
+                         else float(self.interval_s), label=self.label)
         return self
 
     def __exit__(self, *exc):
@@ -516,12 +518,19 @@ class solve_progress:
         return False
 
 
+def progress_interval() -> float | None:
+    """The interval (s) of the progress lines :func:`solve_progress` turned on in this process,
+    or ``None`` when they are off."""
+    return _PROGRESS.get("interval_s")
+
+
 class ProgressLines:
     """Writes the progress lines of :func:`solve_progress` for one solve: :meth:`iteration` is
     called with each iterate; a line is written when ``interval_s`` has passed since the start
-    or the last line (``clock``: seconds, default :func:`time.perf_counter`)."""
+    or the last line (``clock``: seconds, default :func:`time.perf_counter`); ``label`` follows
+    ``solving`` (e.g. `` side r``)."""
 
-    def __init__(self, lbg, ubg, interval_s: float, stream=None, clock=None):
+    def __init__(self, lbg, ubg, interval_s: float, stream=None, clock=None, label: str = ""):
         import sys
 
         self.lbg, self.ubg = np.asarray(lbg, dtype=float).reshape(-1), np.asarray(ubg, dtype=float).reshape(-1)
@@ -531,6 +540,7 @@ class ProgressLines:
         self.t0 = self.last = self.clock()
         self.count = 0
         self.lines = 0
+        self.label = label
 
     def iteration(self, f, g) -> None:
         """One IPOPT iterate: objective ``f`` and constraint values ``g``."""
@@ -542,7 +552,7 @@ class ProgressLines:
         g = np.asarray(g, dtype=float).reshape(-1)
         viol = float(np.max(np.maximum(self.lbg - g, 0.0) + np.maximum(g - self.ubg, 0.0))) if g.size else 0.0
         # IPOPT calls back once for the starting point (iteration 0)
-        self.stream.write(f"musclemetab: solving: iteration {self.count - 1}, objective {float(f):.4e}, "
+        self.stream.write(f"musclemetab: solving{self.label}: iteration {self.count - 1}, objective {float(f):.4e}, "
                           f"constraint violation {viol:.1e}, {now - self.t0:.0f} s\n")
         self.stream.flush()
         self.lines += 1
@@ -554,7 +564,7 @@ def _progress_callback(n_x: int, n_g: int, lbg, ubg):
         return None
     import casadi as ca
 
-    lines = ProgressLines(lbg, ubg, _PROGRESS["interval_s"], _PROGRESS.get("stream"))
+    lines = ProgressLines(lbg, ubg, _PROGRESS["interval_s"], _PROGRESS.get("stream"), label=_PROGRESS.get("label", ""))
 
     class _Callback(ca.Callback):
         def __init__(self):

@@ -297,11 +297,18 @@ def _diagnosis_record(diagnosis, solution, geometry, id_time, id_moments, ik_tim
     return record
 
 
-def _solve_files_recording_warnings(args, kwargs):
-    """:func:`solve_files` in a pool worker: the solution and the warnings it raised."""
+def _solve_files_recording_warnings(args, kwargs, progress_s=None):
+    """:func:`solve_files` in a pool worker: the solution and the warnings it raised; with
+    ``progress_s`` the progress lines every ``progress_s`` seconds on this process's standard
+    error (the caller's), labelled with the leg (:class:`~.ipopt.solve_progress`)."""
+    import contextlib
     import warnings
 
-    with warnings.catch_warnings(record=True) as caught:
+    from .ipopt import solve_progress
+
+    progress = contextlib.nullcontext() if progress_s is None else \
+        solve_progress(progress_s, label=f" side {kwargs.get('side')}")
+    with warnings.catch_warnings(record=True) as caught, progress:
         warnings.simplefilter("always")
         solution = solve_files(*args, **kwargs)
     return solution, [(w.category, str(w.message)) for w in caught]
@@ -314,7 +321,8 @@ def solve_sides(model_path, ik_path, id_path, workflow: str = "effort-gen", *, s
     The legs are independent problems. With ``workers`` > 1 they are solved in a pool of
     ``min(workers, len(sides))`` processes (:func:`musclemetab.processes.spawn_pool`), each
     with its own OpenSim worker; the warnings of a leg are raised again here, in the order of
-    ``sides``, and its errors as if it had been solved in this process. The solutions are the
+    ``sides``, and its errors as if it had been solved in this process; while progress lines are
+    on here (:class:`~.ipopt.solve_progress`) each leg writes its own, labelled with the leg. The solutions are the
     same either way (``tests/test_gait2392.py``; time: ``benchmarks/sides.py``).
     """
     import warnings
@@ -326,10 +334,12 @@ def solve_sides(model_path, ik_path, id_path, workflow: str = "effort-gen", *, s
         return {side: solve_files(model_path, ik_path, id_path, workflow, side=side, **kwargs) for side in sides}
     from ..processes import spawn_pool, stop_pool
 
+    from .ipopt import progress_interval
+
     pool, restore = spawn_pool(min(workers, len(sides)))
     try:
         futures = {side: pool.submit(_solve_files_recording_warnings, (model_path, ik_path, id_path, workflow),
-                                     {**kwargs, "side": side}) for side in sides}
+                                     {**kwargs, "side": side}, progress_interval()) for side in sides}
         results = {side: fut.result() for side, fut in futures.items()}
     except KeyboardInterrupt:  # the legs' processes ignore Ctrl-C: stopped, not waited for
         stop_pool(pool)

@@ -5,6 +5,8 @@ One module per job, each using only those before it:
 * :mod:`.figures`: the figure functions (pure: tables and solutions in, a matplotlib figure
   out) and :func:`save_figure`;
 * :mod:`.folder`: reading a study folder (:func:`read_study_folder`), the one reader of its layout;
+* :mod:`.cli_folder`: reading the output folders of ``musclemetab analyse`` into the same
+  :class:`~.folder.StudyFolder` (:func:`~.cli_folder.read_report_input` decides which);
 * :mod:`.plan`: which figures, in what order, from what data (:data:`FIGURE_NAMES`);
 * :mod:`.draw`: drawing them side by side in forked processes, largest first;
 * :mod:`.page`: the HTML page (the template ``templates/report.html``);

@@ -17,7 +17,8 @@ from pathlib import Path
 
 from ..errors import MusclemetabError, OptionError
 from .draw import FigureEntry, make_figures
-from .folder import input_files, read_study_folder
+from .cli_folder import read_report_input
+from .folder import StudyFolder
 from .page import page_tables, render_page
 
 __all__ = ["write_report", "generate_report", "report_key", "REPORT_FILE", "FIGURES_FOLDER", "REPORT_RECORD"]
@@ -28,13 +29,15 @@ FIGURES_FOLDER = "figures"
 REPORT_RECORD = "report.json"
 
 
-def report_key(study_dir: str | os.PathLike, formats: Sequence[str] = ("png",),
-               models: Sequence[str] | None = None) -> str:
+def report_key(study, formats: Sequence[str] = ("png",), models: Sequence[str] | None = None) -> str:
     """SHA-256 of everything the report is drawn from.
 
-    The files of :func:`~.folder.input_files` (the study's tables, every unit's ``unit.json``,
+    ``study``: a study folder (its path) or what :func:`~.cli_folder.read_report_input` read.
+    The files of its :meth:`~.folder.StudyFolder.report_inputs` (of a study, :func:`~.folder.input_files`:
+    the study's tables, every unit's ``unit.json``,
     which records the hash of each of the unit's files, ``summary.json`` among them, and the
-    study file ``study.json`` names as its source), the figure formats, the models the figures
+    study file ``study.json`` names as its source; of ``analyse`` folders, their tables and
+    records and the legs' solution and metabolics files), the figure formats, the models the figures
     show when asked for (``models``, the option ``--models``; the default and ``[report] models``
     follow from the source and ``study.json``), the package version
     and the report's own source (its modules and its page template).
@@ -44,7 +47,8 @@ def report_key(study_dir: str | os.PathLike, formats: Sequence[str] = ("png",),
     from .. import __version__
     from ..io.atomic import file_sha256
 
-    path = Path(study_dir)
+    if not isinstance(study, StudyFolder):
+        study = StudyFolder(path=Path(study), settings={}, results=None, failures=None)
     h = hashlib.sha256()
     h.update(f"musclemetab {__version__}; formats {','.join(formats)}\n".encode())
     if models is not None:
@@ -52,12 +56,8 @@ def report_key(study_dir: str | os.PathLike, formats: Sequence[str] = ("png",),
     here = Path(__file__).parent
     for src in sorted(here.glob("*.py")) + sorted((here / "templates").glob("*")):
         h.update(src.name.encode() + b"\0" + src.read_bytes())
-    files, source = input_files(path)
-    for f in files:
-        digest = file_sha256(f) if f.is_file() else "absent"
-        h.update(f"{f.relative_to(path).as_posix()} {digest}\n".encode())
-    if source is not None:  # the study file the settings came from (e.g. study.toml), wherever it is
-        h.update(f"study file {file_sha256(source) if source.is_file() else 'absent'}\n".encode())
+    for name, f in study.report_inputs():  # with a study's, the study file its settings came from
+        h.update(f"{name} {file_sha256(f) if f.is_file() else 'absent'}\n".encode())
     return h.hexdigest()
 
 
@@ -132,18 +132,21 @@ def _recorded_files(fig_dir: Path) -> set[str]:
         return set()
 
 
-def generate_report(study_dir: str | os.PathLike, out: str | os.PathLike | None = None, *,
+def generate_report(study_dir, out: str | os.PathLike | None = None, *,
                     formats: Sequence[str] = ("png",), force: bool = False,
                     workers: int | None = None, models=None) -> tuple[Path, list[FigureEntry]]:
     """:func:`write_report`, also returning the figure entries (files written or notes)."""
     from ..io.atomic import atomic_write_text
 
-    study = read_study_folder(study_dir, models=models)
+    study = read_report_input(study_dir, models=models)
+    if out is None and len(study.sources) > 1:
+        raise OptionError(f"the report of {len(study.sources)} analyse folders goes to one page: give --out FILE "
+                          "(the figures go to a folder 'figures' beside it)")
     out = Path(out) if out is not None else study.path / REPORT_FILE
     if out.is_dir():
         out = out / REPORT_FILE
     formats = tuple(dict.fromkeys(("png", *formats)))  # the page embeds the PNG
-    key = report_key(study.path, formats, models=study.figure_models)
+    key = report_key(study, formats, models=study.figure_models)
     fig_dir = figures_folder(out)
     if not force:
         recorded = _recorded_entries(out, key)
@@ -170,12 +173,15 @@ def _check_report_files(out: Path, fig_dir: Path) -> None:
     check_replaceable(fig_dir, [REPORT_RECORD])
 
 
-def write_report(study_dir: str | os.PathLike, out: str | os.PathLike | None = None, *,
+def write_report(study_dir, out: str | os.PathLike | None = None, *,
                  formats: Sequence[str] = ("png",), force: bool = False, workers: int | None = None,
                  models=None) -> Path:
     """Write the figures and the HTML report of a study folder; return the report's path.
 
-    ``out`` is the HTML file (default ``study_dir/report.html``); the figures are written to the
+    ``study_dir`` is a study folder, or one or more output folders of ``musclemetab analyse``
+    (a list; :func:`~.cli_folder.read_report_input`), reported as a study of their trials.
+    ``out`` is the HTML file (default ``study_dir/report.html``; required for several analyse
+    folders); the figures are written to the
     folder ``figures`` beside it (PNG; ``formats=("png", "svg")`` adds SVG). Everything is
     written atomically. The report is rebuilt only when its inputs changed (their content
     hash, :func:`report_key`, is recorded in the page and in ``figures/report.json``) or

@@ -30,7 +30,7 @@ from ..study_layout import (
     unit_path,
 )
 
-__all__ = ["StudyFolder", "read_study_folder", "input_files", "add_leg_timeseries", "REQUIRED_COLUMNS",
+__all__ = ["StudyFolder", "read_study_folder", "with_figure_models", "input_files", "add_leg_timeseries", "REQUIRED_COLUMNS",
            "RENAMED_RESULTS_COLUMNS", "RENAMED_PER_MUSCLE_COLUMNS"]
 
 #: Columns ``results.csv`` must have; the others are used when present.
@@ -61,6 +61,8 @@ class StudyFolder:
     notes: list[str] = field(default_factory=list)
     #: The models the figures show (:func:`report_models`): ``None`` for the default.
     figure_models: list[str] | None = None
+    #: The folders read: the study folder, or the ``analyse`` output folders (:mod:`.cli_folder`).
+    sources: list[Path] = field(default_factory=list)
 
     # ------------------------------------------------------------------ the tables
     @property
@@ -187,6 +189,20 @@ class StudyFolder:
         """The row's unit folder; for a row adding both legs, the first leg's (right)."""
         return next(iter(self.leg_folders(row).values()))
 
+    def solution_folder(self, folder: Path) -> Path:
+        """The folder of a leg's solution (``solution.sto``, ``summary.json``): the unit folder itself."""
+        return folder
+
+    def metabolics_folder(self, folder: Path) -> Path:
+        """The folder of a leg's ``metabolics.sto``: the unit folder itself."""
+        return folder
+
+    def load_solution(self, folder: Path):
+        """The :class:`~musclemetab.redundancy.solution.Solution` of a leg's unit folder."""
+        from ..redundancy.solution import Solution
+
+        return Solution.load(self.solution_folder(folder))
+
     def unit_cycle(self, folder: Path) -> tuple[float, float, float]:
         """The gait cycle (start, toe-off, end; s) recorded in the unit's ``unit.json``."""
         from ..io.jsonfile import read_json_object
@@ -215,7 +231,7 @@ class StudyFolder:
 
         folder = self.unit_folder(row)
         start, _, end = self.unit_cycle(folder)
-        path = folder / METABOLICS_STO
+        path = self.metabolics_folder(folder) / METABOLICS_STO
         if not path.is_file():
             raise InputFileError(f"{path}: missing; run the unit again to write it")
         table = read_storage(path)
@@ -240,13 +256,12 @@ class StudyFolder:
         """The unit's ``summary.json`` (the solver's run record and the solution's residuals)."""
         from ..io.jsonfile import read_json_object
 
-        return read_json_object(folder / SUMMARY_FILE, missing="missing", remedy="run the unit again")
+        return read_json_object(self.solution_folder(folder) / SUMMARY_FILE, missing="missing",
+                                remedy="run the unit again")
 
     def emg_tracking(self, row) -> dict:
         """``emg_tracking`` of the row's unit (an EMG-TEN unit): ``{muscle: {"channels", "scale"}}``."""
-        from ..io.jsonfile import read_json_object
-
-        return read_json_object(self.unit_folder(row) / SUMMARY_FILE).get("emg_tracking") or {}
+        return self.summary(self.unit_folder(row)).get("emg_tracking") or {}
 
     def units(self) -> list[tuple[tuple[str, str, str], dict]]:
         """``((subject, trial, workflow), row)`` of every unit of the results, then of the failures."""
@@ -256,6 +271,13 @@ class StudyFolder:
             for r in rows:
                 units.setdefault((str(r["subject"]), str(r["trial"]), str(r["workflow"])), r)
         return list(units.items())
+
+    def report_inputs(self) -> list[tuple[str, Path]]:
+        """``(name, path)`` of every file the report is drawn from (:func:`input_files`; the
+        content key of :mod:`.build` hashes them)."""
+        files, source = input_files(self.path)
+        named = [(f.relative_to(self.path).as_posix(), f) for f in files]
+        return named + ([("study file", source)] if source is not None else [])
 
     # ------------------------------------------------------------------ paths as the page shows them
     def relative(self, path) -> str:
@@ -386,14 +408,15 @@ def read_study_folder(study_dir: str | os.PathLike, models=None) -> StudyFolder:
     path = Path(study_dir)
     if not path.is_dir():
         raise InputFileError(
-            f"{path}: no such study folder; give the output folder of 'musclemetab run' "
-            "(the folder holding results.csv and study.json)"
+            f"{path}: no such study folder or analyse output folder; pass the output folder of 'musclemetab run' "
+            "(the folder holding results.csv and study.json) or of 'musclemetab analyse --out' (holding analyse.json)"
         )
     rpath = path / RESULTS_CSV
     if not rpath.is_file():
         raise InputFileError(
-            f"{rpath}: missing; {path} is not a finished study folder. Run the study first "
-            "('musclemetab run STUDY.toml'), or give the folder holding results.csv"
+            f"{rpath}: missing; {path} is neither a finished study folder nor an analyse output folder. Run the "
+            "study first ('musclemetab run STUDY.toml') and pass its output folder (holding results.csv), or pass "
+            "the output folders of 'musclemetab analyse --out' (holding analyse.json)"
         )
     try:
         results = pd.read_csv(rpath, dtype={"subject": str, "trial": str, "workflow": str, "model": str})
@@ -437,20 +460,29 @@ def read_study_folder(study_dir: str | os.PathLike, models=None) -> StudyFolder:
         failures = failures[_FAILURE_COLUMNS]
     else:
         notes.append(f"{FAILURES_CSV} is missing: only failures recorded in the results table are listed.")
-    study = StudyFolder(path=path, settings=settings, results=results, failures=failures, notes=notes)
-    if models is not None:
-        from ..metabolics.registry import parse_models
+    study = StudyFolder(path=path, settings=settings, results=results, failures=failures, notes=notes,
+                        sources=[path])
+    return with_figure_models(study, models, rpath)
 
-        asked = parse_models(models)
-        tokens = models.replace(";", ",").replace(" ", ",").split(",") if isinstance(models, str) else list(models)
-        named = [t for t in tokens if t and str(t).strip().lower() != "all"]  # 'all': the six the study has
-        computed = study.models()
-        absent = [m for m in (parse_models(named) if named else []) if m not in computed]
-        if absent:
-            raise OptionError(
-                f"--models: {', '.join(absent)} not computed in {rpath} (the study has {', '.join(computed)}); "
-                "name models of the study or run it with them")
-        study.figure_models = asked
+
+def with_figure_models(study: StudyFolder, models, where) -> StudyFolder:
+    """``study`` with the models its figures show set from ``models`` (the report's
+    ``--models``; ``None``: the default); raises :class:`OptionError` for an unknown name or a
+    named model not computed in ``where`` (the results it read)."""
+    if models is None:
+        return study
+    from ..metabolics.registry import parse_models
+
+    asked = parse_models(models)
+    tokens = models.replace(";", ",").replace(" ", ",").split(",") if isinstance(models, str) else list(models)
+    named = [t for t in tokens if t and str(t).strip().lower() != "all"]  # 'all': the six the study has
+    computed = study.models()
+    absent = [m for m in (parse_models(named) if named else []) if m not in computed]
+    if absent:
+        raise OptionError(
+            f"--models: {', '.join(absent)} not computed in {where} (the study has {', '.join(computed)}); "
+            "name models of the study or run it with them")
+    study.figure_models = asked
     return study
 
 

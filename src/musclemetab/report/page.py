@@ -155,7 +155,30 @@ def _results(study: StudyFolder) -> dict | None:
                 for w in workflows for m in models for t in trials if (w, m, t) in present]
         out["group_shares"] = Table([[("workflow", 1), ("model", 1), ("trial", 1)] + [(g, 1) for g, _ in gcols]],
                                     body, 3, "results")
+    out["spread"] = _spread(ok)
     return out
+
+
+def _spread(ok) -> Table:
+    """The structural spread of each subject's trial (:func:`musclemetab.analysis.spread.structural_spread`):
+    the whole-body rate and each group's part of it, the ranges across models, workflows, trials."""
+    from ..analysis.spread import WHOLE_BODY, structural_spread
+
+    spread = structural_spread(ok)
+    names = {WHOLE_BODY: "whole body"}
+    body = []
+    last = None
+    for r in spread.itertuples(index=False):
+        unit = (r.subject, r.trial)
+        q = names.get(r.quantity, r.quantity[len("group_"):-len("_W_per_kg")] if r.quantity.startswith("group_")
+                      else r.quantity)
+        body.append([f"{r.subject} {r.trial}" if unit != last else "", q, _fmt(r.mean_W_per_kg, np.nan, 2)]
+                    + [_fmt(v, np.nan, 2) for v in (r.range_across_models_W_per_kg, r.range_across_workflows_W_per_kg,
+                                                   r.range_across_trials_W_per_kg)] + [r.largest or "–"])
+        last = unit
+    header = [[("subject, trial", 1), ("quantity", 1), ("mean", 1), ("range across models", 1),
+               ("range across workflows", 1), ("range across trials", 1), ("largest", 1)]]
+    return Table(header, body, 2, "results")
 
 
 def _estimation_notes(study: StudyFolder) -> list[str]:

@@ -37,6 +37,7 @@ FIGURE_NAMES = (
     "group_shares",
     "rates_against_speed",
     "per_muscle_ranked",
+    "structural_spread",
     "figure2_soleus",
 )
 
@@ -53,6 +54,7 @@ FIGURE_TITLES = {
     "group_shares": "Muscle-group shares",
     "per_muscle_ranked": "The muscles costing most energy, across speeds",
     "rates_against_speed": "Whole-body and muscle-group rates against walking speed",
+    "structural_spread": "Structural spread: energy models, workflows and trials",
 }
 
 FIGURE2_CAPTION = (
@@ -151,6 +153,7 @@ def plan_figures(study: StudyFolder) -> dict[str, FigurePlan]:
         "group_shares": partial(group_shares_figure, sel),
         "rates_against_speed": partial(rates_against_speed_figure, sel),
         "per_muscle_ranked": partial(per_muscle_figure, study, sel),
+        "structural_spread": partial(spread_figure, sel),
         "figure2_soleus": figure2_figure,
     }
     plans = {}
@@ -210,6 +213,12 @@ def rates_against_speed_figure(sel: Selection):
         "axes in every panel.")
 
 
+def spread_figure(sel: Selection):
+    from .spread_figure import spread_caption, spread_figure
+
+    return spread_figure(sel.ok), spread_caption()
+
+
 def figure2_figure():
     from ..metabolics.figure2 import figure2_data
     from ..metabolics.registry import STUDY_MODELS
@@ -222,7 +231,6 @@ def figure2_figure():
 def excitations_figure(study: StudyFolder, sel: Selection):
     """Excitations and fiber lengths of the selected subject's preferred trial, one line per
     workflow, with the measured EMG (:func:`measured_emg`)."""
-    from ..redundancy.solution import Solution
     from .figures import excitations_and_fiber_lengths
 
     subject, trial = sel.subject, sel.trial
@@ -235,7 +243,7 @@ def excitations_figure(study: StudyFolder, sel: Selection):
         folder = study.unit_folder(d.iloc[0])
         try:
             cycles[w] = study.unit_cycle(folder)
-            sols[w] = Solution.load(folder)
+            sols[w] = study.load_solution(folder)
         except MusclemetabError as exc:
             cycles.pop(w, None)
             skipped.append(f"{w} ({study.short(exc)})")

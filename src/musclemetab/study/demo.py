@@ -65,9 +65,11 @@ def demo_study(out: str | os.PathLike = "musclemetab-demo", *, speeds=None,
 
 
 def run_demo(out: str | os.PathLike = "musclemetab-demo", *, workers: int | None = None, speeds=None,
-             report: bool = True, progress: bool = True, force: bool = False, strict: bool = False):
+             report: bool = True, progress: bool = True, force: bool = False, strict: bool = False,
+             warm_start: bool = False):
     """Run the example study and write its report; returns the :class:`StudyRun` (``strict``: a
-    unit with a plausibility flag fails, :func:`~.spec.strict_study`)."""
+    unit with a plausibility flag fails, :func:`~.spec.strict_study`; ``warm_start``: EFFORT-TEN
+    starts from the trial's EFFORT-GEN solution, :func:`~.spec.warm_start_study`)."""
     import threading
 
     from .runner import run_study
@@ -77,6 +79,10 @@ def run_demo(out: str | os.PathLike = "musclemetab-demo", *, workers: int | None
         from .spec import strict_study
 
         study = strict_study(study)
+    if warm_start:
+        from .spec import warm_start_study
+
+        study = warm_start_study(study, True)
     figures = None
     if report:  # the plot that depends only on the package, drawn while the units run (once per machine)
         from ..report.draw import draw_package_figures

@@ -10,7 +10,7 @@ trial units — and gathers every complete unit into one results table:
     toe-off (% of the cycle), speed and measured rate when the study gives calorimetry, and
     ``large_reserve`` (the solve's reserves exceed 1 % of the peak joint moment, see
     :data:`musclemetab.redundancy.solution.LARGE_RESERVE_SHARE`) and ``quality`` (``ok`` or
-    the plausibility flags of the unit and the row, :func:`add_quality`; ``docs/quality.md``).
+    the plausibility flags of the unit and the row, :func:`~musclemetab.metabolics.plausibility.add_quality`; ``docs/quality.md``).
 ``DIR/per_muscle.csv`` (and ``DIR/per_muscle.parquet`` with the ``parquet`` extra)
     one row per subject × trial × workflow × model × muscle (with its side): the
     per-muscle table of every unit (:mod:`musclemetab.metabolics.per_muscle`).
@@ -54,6 +54,7 @@ from pathlib import Path
 from typing import Mapping
 
 from ..errors import OptionError
+from ..metabolics.plausibility import add_quality
 from ..io.atomic import FolderLock, _boot_id, _process_alive  # noqa: F401  (public here before)
 from ..io.atomic import atomic_path, atomic_write_text, check_output_folder
 from ..processes import THREAD_VARIABLES, spawn_pool  # noqa: F401  (THREAD_VARIABLES: public here before)
@@ -61,6 +62,7 @@ from ..processes import pin_threads as _pin_threads  # noqa: F401
 from .spec import Study
 from .units import (
     INTERRUPTED,
+    WARM_CHAIN,
     Unit,
     execute_unit,
     is_complete,
@@ -291,21 +293,36 @@ class _Executor:
 def unit_batches(study: Study) -> list[list[Unit]]:
     """The units in the order they are submitted: every unit that needs no EMG-TEN estimate
     (all subjects, trials, sides and workflows together) with the estimations, longest
-    first; then the units that use an estimate, once the estimations are done."""
+    first; then the units that use an estimate, once the estimations are done. With warm
+    starts, the effort workflows are ordered as their chain (:data:`~.units.WARM_CHAIN`), so
+    that a unit comes after the unit whose solution it starts from."""
     stage1, stage2 = plan_units(study)
+    if study.warm_start:
+        stage2.sort(key=lambda u: WARM_CHAIN.index(u.workflow) if u.workflow in WARM_CHAIN else -1)  # stable
     independent = [u for u in stage2 if u.depends_on(study) is None]
     dependent = [u for u in stage2 if u.depends_on(study) is not None]
     return [b for b in (stage1 + independent, dependent) if b]
 
 
-def _run_units(study: Study, jobs: list[tuple[Unit, str, str | None]], executor: _Executor,
-               progress: _Progress) -> tuple[dict, bool]:
-    """Run ``(unit, key, dependency folder)`` jobs; returns ``({unit: record}, interrupted)``."""
+def _next_ready(queue: list, waiting: set) -> int | None:
+    """The index of the first job of ``queue`` whose warm-start source is not in ``waiting``
+    (the units of this batch not finished yet), or ``None``."""
+    for i, job in enumerate(queue):
+        if job[4] is None or job[4] not in waiting:
+            return i
+    return None
+
+
+def _run_units(study: Study, jobs: list[tuple[Unit, str, str | None, str | None, Unit | None]],
+               executor: _Executor, progress: _Progress) -> tuple[dict, bool]:
+    """Run ``(unit, key, dependency folder, warm-start folder, warm-start unit)`` jobs; a job starts
+    once its warm-start unit (when it is one of ``jobs``) has finished. Returns
+    ``({unit: record}, interrupted)``."""
     records = {}
     if executor.submit is None:
         try:
-            for unit, key, dep in jobs:
-                rec = execute_unit(study, unit, key, dep)
+            for unit, key, dep, warm, _ in jobs:  # a warm-start unit comes before the units it starts
+                rec = execute_unit(study, unit, key, dep, warm)
                 records[unit] = rec
                 progress.update(unit.label, rec, ran=True)
                 if rec.get("status") == INTERRUPTED:
@@ -319,17 +336,24 @@ def _run_units(study: Study, jobs: list[tuple[Unit, str, str | None]], executor:
     limit = executor.capacity or len(queue)
     futures: dict = {}
     pending: list = []
+    waiting = {job[0] for job in jobs}  # the units of this batch not finished
     interrupted = False
     while pending or (queue and not interrupted):
         try:
             while queue and not interrupted and len(pending) < limit:
-                unit, key, dep = queue.pop(0)
-                fut = executor.submit(execute_unit, study, unit, key, dep)
+                i = _next_ready(queue, waiting)
+                if i is None:
+                    if pending:
+                        break  # every job left waits for a running unit's solution
+                    i = 0  # cannot happen (a warm-start source is planned before its units): run in order
+                unit, key, dep, warm, _ = queue.pop(i)
+                fut = executor.submit(execute_unit, study, unit, key, dep, warm)
                 futures[fut] = unit
                 pending.append(fut)
             fut = next(iter(executor.completed(pending)))
             pending.remove(fut)
             unit = futures[fut]
+            waiting.discard(unit)
             try:
                 rec = fut.result()
             except BaseException as exc:  # the worker process died, the cluster lost the task, or cancelled
@@ -405,7 +429,8 @@ def run_study(
                 for unit in stage:
                     dep = unit.depends_on(study)
                     dep_key = keys.get(dep) if dep is not None else None
-                    keys[unit] = key = unit_key(study, unit, dep_key)
+                    warm = unit.warm_source(study)
+                    keys[unit] = key = unit_key(study, unit, dep_key, keys.get(warm) if warm is not None else None)
                     if dep is not None and dep.label in run.failed:
                         rec = {"status": "failed", "error": f"needs {dep.label}, which failed"}
                         run.failed[unit.label] = rec["error"]
@@ -416,7 +441,8 @@ def run_study(
                         run.skipped.append(unit.label)
                         bar.update(unit.label, {"status": "ok"})
                         continue
-                    jobs.append((unit, key, str(out / dep.folder) if dep is not None else None))
+                    jobs.append((unit, key, str(out / dep.folder) if dep is not None else None,
+                                 str(out / warm.folder) if warm is not None else None, warm))
                 records, stopped = _run_units(study, jobs, executor, bar)
                 for unit, rec in records.items():
                     run.ran.append(unit.label)
@@ -471,6 +497,7 @@ def _unit_rows(folder: Path, unit: Unit, rec: dict):
         measured_W_per_kg=rec.get("measured_W_per_kg"), cycle_source=rec.get("cycle_source"),
         speed_source=rec.get("speed_source"), large_reserve=bool(rec.get("large_reserve", False)),
         unit_dir=str(unit.folder))
+    df["solve_start"] = rec.get("start") or "cold"  # a record without it: a unit of an earlier version, cold
     df.insert(0, "subject", unit.subject)
     df.insert(1, "trial", unit.trial)
     df.insert(2, "workflow", unit.workflow)
@@ -559,39 +586,13 @@ def add_leg_rows(rows: Mapping[str, object], basal_energy_J: Mapping[str, object
             if "net_cost_of_transport_J_per_kg_per_m" in out:
                 out["net_cost_of_transport_J_per_kg_per_m"] = out["whole_body_no_basal_W_per_kg"] / speed.astype(float)
     out["large_reserve"] = np.logical_or.reduce([f["large_reserve"].astype(bool) for f in frames])
-    for c in ("cycle_source", "speed_source"):
+    for c in ("cycle_source", "speed_source", "solve_start"):
         if c in out:
             texts = [str(f[c].iloc[0]) for f in frames]
             out[c] = texts[0] if len(set(texts)) == 1 else "; ".join(f"{s}: {t}" for s, t in zip(sides, texts))
     out["legs"] = " + ".join(sides)
     out["unit_dir"] = str(Path(str(first["unit_dir"].iloc[0])).parent)
     return out.reset_index()
-
-
-def add_quality(rows, unit_records):
-    """``rows`` (one results row per model) with the column ``quality``: ``"ok"`` or the flags
-    (:func:`musclemetab.redundancy.plausibility.quality_text`) of the solve (every leg's, from the
-    ``plausibility`` of ``unit_records``) and of the row's metabolic results (its whole-body rate
-    against its speed, its negative group shares: :func:`musclemetab.metabolics.plausibility.metabolic_flags`);
-    ``"not checked"`` when a unit record has no ``plausibility`` (written by an earlier version)."""
-    import pandas as pd
-
-    from ..metabolics.plausibility import metabolic_flags
-    from ..redundancy.plausibility import flags_from_records, quality_text
-
-    if any("plausibility" not in r for r in unit_records):
-        rows["quality"] = "not checked"
-        return rows
-    solve = [f for r in unit_records for f in flags_from_records(r["plausibility"]) if f.model is None]
-    quality = []
-    for i in range(len(rows)):
-        row = rows.iloc[[i]]
-        speed = row["speed_m_per_s"].iloc[0] if "speed_m_per_s" in row else None
-        speed = float(speed) if speed is not None and pd.notna(speed) else None
-        model = str(row["model"].iloc[0])
-        quality.append(quality_text(solve + metabolic_flags({model: float(row["whole_body_W_per_kg"].iloc[0])}, speed, row)))
-    rows["quality"] = quality
-    return rows
 
 
 def leg_basal_energy_J(per_muscle, duration_s):

@@ -76,7 +76,8 @@ from typing import Any, Mapping
 from ..errors import InputFileError, OptionError
 from ..settings import MAX_ITERATIONS, MESH_FREQUENCY_RANGE_HZ, NUMBER_KEYS, NumberKey, check_number  # noqa: F401
 
-__all__ = ["Study", "Subject", "Trial", "load_study", "study_from_dict", "EMG_TEN", "KNOWN_WORKFLOWS", "BOTH", "strict_study"]
+__all__ = ["Study", "Subject", "Trial", "load_study", "study_from_dict", "EMG_TEN", "KNOWN_WORKFLOWS", "BOTH", "strict_study",
+           "warm_start_study"]
 
 EMG_TEN = "emg-ten"
 #: ``side = "both"``: the two legs solved as independent problems, their rates added
@@ -211,6 +212,14 @@ class Study:
     #: a unit with a plausibility flag fails (``docs/quality.md``)
     strict: bool = False
 
+    @property
+    def warm_start(self) -> bool:
+        """Whether a trial's effort solves start from the solve of the workflow before them
+        (the study file's ``[solver] warm_start``, default true; ``docs/study.md``)."""
+        from ..settings import SWITCH_KEYS
+
+        return bool(self.settings.get("warm_start", SWITCH_KEYS["warm_start"].default))
+
     def subject(self, name: str) -> Subject:
         for s in self.subjects:
             if s.name == name:
@@ -224,7 +233,7 @@ _STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "basal_coeffici
 #: keys of the study file's [energy_goal] table (the energy goal of every effort-workflow solve)
 _ENERGY_KEYS = {"model", "weight", "effort_weight", "smoothing", "form"}
 #: keys of the study file's [solver] table (IPOPT settings of every solve)
-_SOLVER_KEYS = {"max_iter", "tol", "linear_solver"}
+_SOLVER_KEYS = {"max_iter", "tol", "linear_solver", "warm_start"}
 _SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials",
                  "muscle_properties", "side", "dofs", "emg_mode", "emg_tolerance", "estimate", "exclude_muscles"}
 _TRIAL_KEYS = {
@@ -332,6 +341,8 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
     if "basal_coefficient" in data or "basal_exponent" in data:
         settings.update(basal_coefficient=basal_coefficient, basal_exponent=basal_exponent)
     solver = _solver(data.get("solver"), where)
+    if "warm_start" in solver:  # how the solves start, not an IPOPT setting: kept beside [solver]
+        settings["warm_start"] = solver.pop("warm_start")
     if solver:
         settings["solver"] = solver
     energy = _energy_goal(data.get("energy_goal"), where)
@@ -354,9 +365,17 @@ def strict_study(study: Study) -> Study:
     return replace(study, strict=True, settings={**study.settings, "strict": True})
 
 
+def warm_start_study(study: Study, warm_start: bool) -> Study:
+    """``study`` with warm-started chains on or off (``--warm-start``/``--cold-start``: the study
+    file's ``[solver] warm_start = true|false``)."""
+    from dataclasses import replace
+
+    return replace(study, settings={**study.settings, "warm_start": bool(warm_start)})
+
+
 def _solver(data, where: str) -> dict:
-    """The ``[solver]`` table: ``max_iter``, ``tol``, ``linear_solver``, checked (the library of a
-    run-time linear solver comes from the command line or the environment, never from the file)."""
+    """The ``[solver]`` table: ``max_iter``, ``tol``, ``linear_solver`` and ``warm_start``, checked (the
+    library of a run-time linear solver comes from the command line or the environment, never from the file)."""
     if data is None:
         return {}
     if not isinstance(data, Mapping):
@@ -371,10 +390,14 @@ def _solver(data, where: str) -> dict:
     for key in ("max_iter", "tol"):
         if key in data:
             _number(data[key], f"{where}: [solver]", key)
+    if "warm_start" in data:
+        from ..settings import check_switch
+
+        check_switch("warm_start", data["warm_start"], f"{where}: [solver]")
     from ..redundancy import SolverOptions
 
     try:
-        SolverOptions(**dict(data))
+        SolverOptions(**{k: v for k, v in data.items() if k != "warm_start"})
     except (TypeError, ValueError, OptionError) as exc:
         raise OptionError(f"{where}: [solver]: {exc}") from None
     return dict(data)

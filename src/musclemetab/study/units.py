@@ -66,6 +66,7 @@ __all__ = [
     "unit_folder",
     "remove_stale_partials",
     "prepare_leg_folder",
+    "WARM_CHAIN",
 ]
 
 from ..study_layout import TIMESERIES_FILE, UNIT_FILE, UNITS_FOLDER  # noqa: E402  (defined once)
@@ -73,6 +74,9 @@ from ..study_layout import TIMESERIES_FILE, UNIT_FILE, UNITS_FOLDER  # noqa: E40
 MARKER_FILE = ".musclemetab-unit"
 ESTIMATION_FOLDER = "_emg-ten"
 ANALYSIS_FILE = "analysis.csv"
+#: The effort workflows in the order a trial's warm-started solves run: each starts from the
+#: solution of the one before it in the study (``docs/study.md``, "Warm-started chains").
+WARM_CHAIN = ("effort-gen", "effort-cal", "effort-ten")
 
 
 @dataclass(frozen=True)
@@ -112,6 +116,18 @@ class Unit:
         if self.workflow == EMG_TEN or (self.workflow == "effort-ten" and subject.uses_emg_ten_estimate):
             return Unit(self.subject, None, EMG_TEN)
         return None
+
+    def warm_source(self, study: Study) -> "Unit | None":
+        """The unit whose solution this unit's solve starts from, if any: with the study's
+        ``warm_start``, the same subject, trial and leg with the workflow before this one in
+        :data:`WARM_CHAIN` among the study's workflows. EMG-informed solves (the subject's
+        ``emg_mode``), EMG-TEN and estimations start cold."""
+        if self.trial is None or not study.warm_start or self.workflow not in WARM_CHAIN:
+            return None
+        if study.subject(self.subject).emg_mode is not None:
+            return None
+        before = [w for w in WARM_CHAIN[:WARM_CHAIN.index(self.workflow)] if w in study.workflows]
+        return Unit(self.subject, self.trial, before[-1], self.side) if before else None
 
 
 def plan_units(study: Study) -> tuple[list[Unit], list[Unit]]:
@@ -178,8 +194,9 @@ def _subject_record(subject: Subject, workflow: str) -> dict:
     return rec
 
 
-def unit_key(study: Study, unit: Unit, dependency_key: str | None = None) -> str:
-    """SHA-256 of everything the unit's result depends on."""
+def unit_key(study: Study, unit: Unit, dependency_key: str | None = None, warm_key: str | None = None) -> str:
+    """SHA-256 of everything the unit's result depends on (``warm_key``: the key of the unit whose
+    solution it starts from, :meth:`Unit.warm_source`)."""
     subject = study.subject(unit.subject)
     content = {
         "musclemetab": __version__,
@@ -189,6 +206,8 @@ def unit_key(study: Study, unit: Unit, dependency_key: str | None = None) -> str
     }
     if study.settings.get("solver"):
         content["solver"] = study.settings["solver"]
+    if warm_key is not None:  # absent for a cold start: cold studies keep their unit keys
+        content["warm_start"] = warm_key
     if study.settings.get("energy_goal") and unit.workflow != EMG_TEN:
         content["energy_goal"] = study.settings["energy_goal"]
     if unit.trial is None:
@@ -362,8 +381,13 @@ def _on_sigint(signum, frame):
     raise KeyboardInterrupt
 
 
-def execute_unit(study: Study, unit: Unit, key: str, dependency_folder: str | None = None) -> dict:
+def execute_unit(study: Study, unit: Unit, key: str, dependency_folder: str | None = None,
+                 warm_folder: str | None = None) -> dict:
     """Run one unit and write its folder; returns its record (never raises).
+
+    ``warm_folder``: the folder of the unit whose solution the solve starts from
+    (:meth:`Unit.warm_source`); the solve starts cold when that unit did not succeed, and is
+    solved again cold when the warm-started solve does not succeed (the record's ``start``).
 
     Ctrl-C (SIGINT) during the unit gives a record with ``status = "interrupted"`` and
     leaves the unit's folder as it was, even when the solver caught the interrupt and
@@ -376,13 +400,14 @@ def execute_unit(study: Study, unit: Unit, key: str, dependency_folder: str | No
     if threading.current_thread() is threading.main_thread():
         previous = signal.signal(signal.SIGINT, _on_sigint)
     try:
-        return _execute_unit(study, unit, key, dependency_folder)
+        return _execute_unit(study, unit, key, dependency_folder, warm_folder)
     finally:
         if previous is not None:
             signal.signal(signal.SIGINT, previous)
 
 
-def _execute_unit(study: Study, unit: Unit, key: str, dependency_folder: str | None = None) -> dict:
+def _execute_unit(study: Study, unit: Unit, key: str, dependency_folder: str | None = None,
+                  warm_folder: str | None = None) -> dict:
     record = {
         "status": "failed",
         "key": key,
@@ -410,7 +435,7 @@ def _execute_unit(study: Study, unit: Unit, key: str, dependency_folder: str | N
             record.update(_run_estimation(study, unit, tmp))
         else:
             dep = Path(dependency_folder) if dependency_folder else None
-            record.update(_run_trial(study, unit, tmp, dep))
+            record.update(_run_trial(study, unit, tmp, dep, Path(warm_folder) if warm_folder else None))
         record["status"] = "ok"
     except KeyboardInterrupt:
         interrupted = True
@@ -525,8 +550,9 @@ def _cycle_source(trial: Trial, recorded: dict | None = None) -> str:
     return "estimated from the IK window and the ankle moment (no ground reaction forces)"
 
 
-def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> dict:
-    """Solve (or take the EMG-TEN solution), metabolics, gait cycle, phases and groups."""
+def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, warm: Path | None = None) -> dict:
+    """Solve (or take the EMG-TEN solution), metabolics, gait cycle, phases and groups; ``warm``: the
+    folder of the unit whose solution the solve starts from (:func:`_chain_solve`)."""
     import numpy as np
 
     from ..geometry import compute_geometry
@@ -539,6 +565,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
     trial = subject.trial(unit.trial)
     side = unit.leg(study)
     times = {}
+    start = COLD
     t0 = time.perf_counter()
     if unit.workflow == EMG_TEN:
         _copy_solution(dependency / trial.name, tmp)
@@ -560,12 +587,16 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         if subject.emg_mode is not None:
             sol = _informed_solve(study, subject, trial, unit.workflow, kwargs)
         else:
-            sol = solve_files(subject.model, trial.ik, trial.id, unit.workflow, side=side, dofs=subject.dofs,
-                              external_loads=trial.external_loads, grf=trial.grf if trial.cycle is not None else None,
-                              grf_column=trial.grf_column, grf_threshold_N=trial.grf_threshold_N,
-                              cycle=trial.cycle, options=_solver_options(study, subject),
-                              exclude_muscles=subject.exclude_muscles, exclude_missing_ok=subject.side == "both",
-                              **kwargs)
+            def solve(warm_start=None):
+                return solve_files(subject.model, trial.ik, trial.id, unit.workflow, side=side, dofs=subject.dofs,
+                                   external_loads=trial.external_loads,
+                                   grf=trial.grf if trial.cycle is not None else None,
+                                   grf_column=trial.grf_column, grf_threshold_N=trial.grf_threshold_N,
+                                   cycle=trial.cycle, options=_solver_options(study, subject),
+                                   exclude_muscles=subject.exclude_muscles, exclude_missing_ok=subject.side == "both",
+                                   **({"warm_start": warm_start} if warm_start is not None else {}), **kwargs)
+
+            sol, start = _chain_solve(solve, unit.warm_source(study), warm, times)
         write_solution_folder(sol, tmp, opensim_files=False)  # written below, for every workflow
         times["solve_s"] = sol.record.solve_time_s
         if not sol.success:
@@ -632,6 +663,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         measured = float(brockway_rate_W(trial.vo2_mL_per_s, trial.vco2_mL_per_s)) / subject.body_mass_kg
     return {
         "times": times,
+        "start": start,
         "speed_m_per_s": speed,
         "measured_W_per_kg": measured,
         "cycle": {"start_s": cycle.start_s, "toe_off_s": cycle.toe_off_s, "end_s": cycle.end_s},
@@ -644,6 +676,48 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None) -> 
         "reserve_share_of_peak_moment": sol.record.reserve_share_of_peak_moment,
         "plausibility": [f.to_dict() for f in flags],
     }
+
+
+#: The record's ``start`` of a solve started from static optimisation with no warm start planned.
+COLD = "cold"
+
+
+def _chain_solve(solve, source: Unit | None, folder: Path | None, times: dict):
+    """``(solution, start)``: ``solve(warm_start)`` started from the solution in ``folder`` (the
+    unit ``source``), with the fallback of ``docs/study.md`` ("Warm-started chains"):
+
+    * no ``source``: a cold solve, start ``"cold"``;
+    * ``source`` did not succeed (no ``ok`` record in ``folder``) or its solution has another
+      mesh, muscles or DOFs than this problem: a cold solve, start ``"cold: ..."`` saying why;
+    * the warm-started solve did not succeed (IPOPT's status): solved again cold, start
+      ``"cold: ... solved again cold"`` with the warm attempt's status and iterations (its
+      time in ``times["warm_attempt_s"]``);
+    * otherwise start ``"warm from <workflow>"``.
+    """
+    from ..errors import DataMismatchError, InputFileError, SolverError
+    from ..redundancy.solution import Solution
+
+    if source is None:
+        return solve(), COLD
+    rec = read_unit_record(folder) if folder is not None else None
+    if not rec or rec.get("status") != "ok":
+        return solve(), f"cold: {source.workflow} did not succeed, no warm start"
+    try:
+        previous = Solution.load(folder)
+    except (InputFileError, SolverError, OSError) as exc:
+        return solve(), f"cold: the solution of {source.workflow} cannot be read ({' '.join(str(exc).split())})"
+    t0 = time.perf_counter()
+    try:
+        sol = solve(previous)
+    except DataMismatchError as exc:  # another mesh (another gait cycle found), muscles or DOFs
+        return solve(), f"cold: the solution of {source.workflow} does not fit this problem ({exc})"
+    if sol.success:
+        return sol, f"warm from {source.workflow}"
+    times["warm_attempt_s"] = time.perf_counter() - t0
+    times["warm_attempt_ipopt_cpu_s"] = sol.record.solve_cpu_time_s
+    failed = sol.run_record
+    return solve(), (f"cold: the warm start from {source.workflow} did not succeed (IPOPT status {failed.status} "
+                     f"after {failed.iterations} iterations); solved again cold")
 
 
 def _plausibility(study: Study, unit: Unit, sol, result, speed, groups) -> list:
