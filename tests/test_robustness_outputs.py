@@ -577,7 +577,7 @@ def test_a_unit_folder_holding_a_file_the_package_did_not_write_is_not_replaced(
     from musclemetab.study import run_study
     from musclemetab.study import units as units_mod
 
-    def failing(study, unit, tmp, dep):  # a unit that writes a file, then fails on its input
+    def failing(study, unit, tmp, *dependencies):  # a unit that writes a file, then fails on its input
         (tmp / "solution.sto").write_text("half")
         raise InputFileError("a broken input of the test")
 
@@ -786,7 +786,7 @@ def test_an_interrupted_unit_is_labelled_interrupted_apart_from_the_failures(exa
         return
     calls = []
 
-    def trial(study, unit, tmp, dep):
+    def trial(study, unit, tmp, *dependencies):
         calls.append(unit.label)
         if len(calls) == 1:
             raise InputFileError("a broken input of the test")
