@@ -101,9 +101,7 @@ def test_solve_metabolics_analyse_give_the_study_numbers(cli_flow, two_subjects,
     got = pd.read_csv(a / "results.csv").drop(columns=["unit_dir"])
     # the columns of the study's results, less the costs of transport it has for the other subject
     # (no speed here: empty in the study's rows too)
-    # (and less the study's `quality` column: `analyse` does not judge plausibility, `solve` and
-    # `metabolics` print the flags)
-    want = want.drop(columns=["quality"])
+    # (the `quality` column too: `analyse` judges plausibility as the study does)
     assert set(got.columns) <= set(want.columns)
     assert all(want[c].isna().all() for c in set(want.columns) - set(got.columns))
     n += _compare(got, want, ["model"], "results.csv", rtol=CSV_RTOL)

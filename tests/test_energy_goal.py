@@ -51,6 +51,17 @@ def _rates_by_hand(model, smoothing, muscles, params, e, a, lm, vm, **options):
     return r["total"].sum(axis=1)
 
 
+def reference_model_parameters(t):
+    """The example subject's muscle parameters of the published table (``reference_table``), as
+    a model's parameters (names, F0, lMo, lTs, pennation, vmax)."""
+    return types.SimpleNamespace(
+        names=list(t.index), max_isometric_force_N=t.max_isometric_force_N_sub1.to_numpy(),
+        optimal_fiber_length_m=t.optimal_fiber_length_m_sub1.to_numpy(),
+        tendon_slack_length_m=t.tendon_slack_length_m_sub1.to_numpy(),
+        pennation_angle_at_optimal_rad=t.pennation_angle_at_optimal_rad.to_numpy(),
+        max_contraction_velocity=t.max_contraction_velocity_lMo_per_s.to_numpy())
+
+
 @pytest.fixture(scope="module")
 def small_problem(example, reference_table):
     """The normal trial's first 31 frames (EFFORT-CAL muscles, geometry of the study's
@@ -62,13 +73,7 @@ def small_problem(example, reference_table):
     names = list(L.columns)
     r = np.stack([read_storage(folder / f"IK_sub1_normal_MuscleAnalysis_MomentArm_{d}.sto")[names].to_numpy()
                   for d in DOFS], axis=1)
-    t = reference_table
-    model_params = types.SimpleNamespace(
-        names=list(t.index), max_isometric_force_N=t.max_isometric_force_N_sub1.to_numpy(),
-        optimal_fiber_length_m=t.optimal_fiber_length_m_sub1.to_numpy(),
-        tendon_slack_length_m=t.tendon_slack_length_m_sub1.to_numpy(),
-        pennation_angle_at_optimal_rad=t.pennation_angle_at_optimal_rad.to_numpy(),
-        max_contraction_velocity=t.max_contraction_velocity_lMo_per_s.to_numpy())
+    model_params = reference_model_parameters(reference_table)
     t_ik, _ = I.read_kinematics(example.ik["normal"])
     t_id, mom = I.read_inverse_dynamics(example.id["normal"])
     km, _ = I.select_muscles(names, r, DOFS)
@@ -282,7 +287,7 @@ def test_energy_goal_from_the_command_line(example, tmp_path, capsys):
     assert s["objective_terms"]["energy"] == pytest.approx(1e-3 * s["energy_goal"]["leg_mean_W_per_kg"], rel=1e-12)
     for extra, words in ((["--energy-weight", "1"], ["--energy-weight", "--energy-model"]),
                          (["--energy-form", "model"], ["--energy-form", "--energy-model"]),
-                         (["--energy-model", "UM10", "--mass", "72.6"], ["--height"]),
+                         (["--energy-model", "UM10", "--height", "1.743"], ["--mass"]),  # the height is optional
                          (["--energy-model", "UM99", "--mass", "72.6", "--height", "1.743"], ["UM99", "UM10"]),
                          (["--energy-model", "UM10", "--mass", "72.6", "--height", "1.743", "--energy-smoothing",
                            "0"], ["--energy-smoothing", "positive"]),

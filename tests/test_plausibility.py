@@ -64,6 +64,62 @@ def test_saturation_flag_counts_the_share_of_nodes():
     assert list(saturation_flag(["a", "b", "c"], a, level=0.9, limit=0.5).items) == ["c"]
 
 
+def test_saturation_share_counts_the_gait_cycle_not_its_padding():
+    """A 1.1 s window on a 100 Hz mesh (111 nodes): a 1.0 s cycle padded by 0.05 s at each end.
+    Muscle a is saturated over the padding alone (5 + 6 nodes): not flagged; b over 12 nodes of the
+    cycle, 12 % of its 100 nodes (t = 0.05 ... 1.04 s): flagged at 0.12, where a share over every
+    node would give 12/111 = 10.8 %; c over 10 cycle nodes (10 %, not above) and the padding: not
+    flagged, where every node would give 21/111 = 18.9 %."""
+    from musclemetab.redundancy.plausibility import cycle_nodes
+
+    t = np.round(np.arange(111) * 0.01, 10)
+    act = np.full((111, 3), 0.2)
+    act[:5, 0] = act[-6:, 0] = 1.0
+    act[40:52, 1] = 0.96
+    act[:5, 2] = act[-6:, 2] = act[60:70, 2] = 0.99
+    inside = cycle_nodes(t)
+    assert inside.sum() == 100 and t[inside][0] == pytest.approx(0.05) and t[inside][-1] == pytest.approx(1.04)
+    f = saturation_flag(["a", "b", "c"], act, in_cycle=inside)
+    assert list(f.items) == ["b"] and f.items["b"] == pytest.approx(0.12) and "of the gait cycle" in f.message
+    assert list(saturation_flag(["a", "b", "c"], act).items) == ["c", "b"]  # the padding counted: other muscles
+    # a recorded gait cycle (a solve over --cycle): its nodes, ends included; b's 12 nodes of 0.31 ... 0.90 s
+    rec = cycle_nodes(t, (0.31, 0.90))
+    assert rec.sum() == 60 and saturation_flag(["a", "b", "c"], act, in_cycle=rec).items == pytest.approx(
+        {"b": 12 / 60, "c": 10 / 60})
+    # a window too short for its padding is taken whole
+    assert cycle_nodes(t[:10]).all()
+
+
+def test_saturation_while_lengthening_counts_the_cycle_nodes_where_both_hold():
+    """100 cycle nodes and 5 + 6 padding nodes. a: full activation on 30 cycle nodes, lengthening on
+    3 of them (3 %: flagged), shortening on the rest; b: full activation on 10 nodes, lengthening
+    on 2 (2 %, not above the limit); c: lengthening at full activation in the padding alone (not
+    flagged); d: lengthening throughout at activation 0.94 (below the level)."""
+    from musclemetab.redundancy.plausibility import (LENGTHENING_SATURATION_SHARE_LIMIT, cycle_nodes,
+                                                     lengthening_saturation_flag)
+
+    t = np.round(np.arange(111) * 0.01, 10)
+    act, vel = np.full((111, 4), 0.2), np.full((111, 4), -0.5)
+    act[20:50, 0] = 1.0
+    vel[30:33, 0] = 0.4
+    act[60:70, 1] = 0.97
+    vel[60:62, 1] = 0.1
+    act[:5, 2] = act[-6:, 2] = 1.0
+    vel[:5, 2] = vel[-6:, 2] = 1.0
+    act[:, 3], vel[:, 3] = 0.94, 1.0
+    inside = cycle_nodes(t)
+    f = lengthening_saturation_flag(["a", "b", "c", "d"], act, vel, in_cycle=inside)
+    assert LENGTHENING_SATURATION_SHARE_LIMIT == 0.02 and f.code == "saturated_lengthening"
+    assert f.items == pytest.approx({"a": 0.03}) and "a 3%" in f.message and "lengthens" in f.message
+    assert list(lengthening_saturation_flag(["a", "b", "c", "d"], act, vel, in_cycle=inside, limit=0.01).items) == \
+        ["a", "b"]
+    assert list(lengthening_saturation_flag(["a", "b", "c", "d"], act, vel, limit=0.01).items) == ["c", "a", "b"]
+    assert lengthening_saturation_flag(["a", "b", "c", "d"], act, vel, in_cycle=inside, level=0.9).items == \
+        pytest.approx({"d": 1.0, "a": 0.03})
+    # a solve whose muscles never lengthen at full activation (saturated while shortening only)
+    assert lengthening_saturation_flag(["a"], act[:, :1], -np.abs(vel[:, :1]), in_cycle=inside) is None
+
+
 def test_reserve_flag_per_dof_share_of_its_peak_moment():
     # 4 intervals + the repeated last node; RMS over the intervals: knee sqrt((9+9+16+16)/4) = 3.5355
     r = np.array([[3.0, 0.2], [-3.0, 0.2], [4.0, -0.2], [-4.0, 0.2], [-4.0, 0.2]])
@@ -147,3 +203,76 @@ def test_the_example_study_raises_no_flag(demo):
     for d in set(table["unit_dir"]):
         summary = json.loads((out / d / "summary.json").read_text())
         assert summary["plausibility"] == [] and len(summary["peak_moment_by_dof_Nm"]) == len(summary["dofs"])
+
+
+@pytest.mark.opensim
+def test_analyse_prints_records_and_enforces_the_flags(example, tmp_path, capsys):
+    """``analyse`` on a two-muscle solution folder (``tests/test_analysis.py``) whose summary.json
+    records a passive-force flag, at 2.0 m/s: Ralston's rate there is (29 + 0.0053 x 120^2) x
+    4.184/60 = 7.344 W/kg, the band's floor 3.672 W/kg, above the two muscles' whole-body rate,
+    which is flagged for every model. One warning line per flag, ``plausibility.json``, the
+    ``quality`` column; ``--strict``: exit status 1 after the files are written."""
+    from test_analysis import _solution_folder
+
+    from musclemetab.commands import main
+
+    folder = _solution_folder(tmp_path / "sol")
+    summary = json.loads((folder / "summary.json").read_text())
+    solve_flag = Flag("passive_force", "passive fiber force above 0.5 F0 (peak, in F0): soleus_r 0.61", {"soleus_r": 0.61},
+                      0.5)
+    (folder / "summary.json").write_text(json.dumps({**summary, "plausibility": [solve_flag.to_dict()]}))
+    base = ["analyse", "--solution", str(folder), "--model", str(example.model), "--ik", str(example.ik["normal"]),
+            "--cycle", "0.62,0.70,0.77", "--mass", "72.6", "--height", "1.743", "--models", "UM10,BH04",
+            "--speed", "2.0"]
+    out = tmp_path / "an"
+    assert main([*base, "--out", str(out)]) == 0
+    err = [line for line in capsys.readouterr().err.splitlines()
+           if line.startswith((f"musclemetab: warning: {folder}", f"musclemetab: warning: {out}"))]
+    wb = pd.read_csv(out / "whole_body.csv").set_index("model")
+    floor = 0.5 * (29 + 0.0053 * 120.0**2) * 4.184 / 60
+    assert floor == pytest.approx(3.672, abs=1e-3) and (wb["whole_body_W_per_kg"] < floor).all()
+    assert err[0] == f"musclemetab: warning: {folder}: {solve_flag.message}"
+    assert [e.split(": ")[3] for e in err[1:]] == ["UM10", "BH04"] and all("below the band" in e for e in err[1:])
+    recorded = [Flag.from_dict(d) for d in json.loads((out / "plausibility.json").read_text())]
+    assert recorded[0] == solve_flag and [(f.code, f.model) for f in recorded[1:]] == [
+        ("metabolic_rate", "UM10"), ("metabolic_rate", "BH04")]
+    results = pd.read_csv(out / "results.csv").set_index("model")
+    assert results.loc["UM10", "quality"] == "passive_force(soleus_r); metabolic_rate(UM10)"
+    assert main([*base, "--strict", "--out", str(tmp_path / "strict")]) == 1
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert last.startswith("musclemetab: error: analyse --strict: implausible result refused (strict): passive_force(")
+    assert (tmp_path / "strict" / "plausibility.json").is_file()
+    # at a speed whose band holds the rates, the solve's flag alone
+    assert main([*base[:-1], "0.8", "--out", str(tmp_path / "slow")]) == 0
+    assert pd.read_csv(tmp_path / "slow" / "results.csv")["quality"].tolist() == ["passive_force(soleus_r)"] * 2
+
+
+def test_estimate_prints_the_flags_of_its_solutions(monkeypatch, tmp_path, capsys):
+    """``estimate`` prints one warning line per flag of each trial's solution (as recorded in its
+    summary.json), and of a validation re-solve's folder; ``--strict`` fails after the output."""
+    from types import SimpleNamespace
+
+    import musclemetab.redundancy.run as run_module
+    from musclemetab.commands import main
+    from musclemetab.redundancy.record import SolveRecord
+
+    flag = Flag("saturated_activation", "1 muscle at activation >= 0.95 ...: soleus_r 20%", {"soleus_r": 0.2}, 0.1)
+    other = Flag("reserve", "reserve above 5% ...: knee_angle_r", {"knee_angle_r": 0.07}, 0.05)
+    record = SolveRecord.from_dict({"status": "Solve_Succeeded", "success": True, "plausibility": [flag.to_dict()]})
+    clean = SolveRecord.from_dict({"status": "Solve_Succeeded", "success": True, "plausibility": []})
+    (tmp_path / "out" / "validation" / "fast").mkdir(parents=True)
+    (tmp_path / "out" / "validation" / "fast" / "summary.json").write_text(
+        json.dumps({"plausibility": [other.to_dict()]}))
+    result = SimpleNamespace(factors={"tendon_stiffness": {"soleus_r": 0.5}}, emg_scale={}, labels=("slow", "fast"),
+                             run_record=SimpleNamespace(status="Solve_Succeeded", iterations=12), document={},
+                             solutions={"slow": SimpleNamespace(record=record), "fast": SimpleNamespace(record=clean)})
+    monkeypatch.setattr(run_module, "estimate_files", lambda *a, **k: result)
+    argv = ["estimate", "--model", "m.osim", "--ik", "a.mot", "b.mot", "--id", "a.sto", "b.sto", "--ultrasound",
+            "a.mot", "b.mot", "--estimate", "tendon_stiffness=soleus_r", "--validate", "--out", str(tmp_path / "out")]
+    assert main(argv) == 0
+    err = [e for e in capsys.readouterr().err.splitlines() if e.startswith("musclemetab: warning:")]
+    assert err == [f"musclemetab: warning: {tmp_path / 'out' / 'slow'}: {flag.message}",
+                   f"musclemetab: warning: {tmp_path / 'out' / 'validation' / 'fast'}: {other.message}"]
+    assert main([*argv, "--strict"]) == 1
+    assert "estimate --strict: implausible result refused (strict): saturated_activation(soleus_r); reserve(" \
+        in capsys.readouterr().err

@@ -1,19 +1,21 @@
 """Effort- vs energy-minimising solutions of the example subject's normal trial.
 
     python docs/scripts/energy_objective.py [--workflow effort-cal] [--goals effort,UM10:1:0,UM10:0.01:1]
-                                            [--out DIR]
+                                            [--warm-start] [--out DIR]
     python docs/scripts/energy_objective.py --smoothing-table
 
 Each goal is ``effort`` (the workflow's effort goal alone) or ``MODEL:W:W_EFFORT[:S[:FORM]]`` (the
 energy goal of the smooth ``MODEL`` with weight ``W`` beside the effort goal with weight
 ``W_EFFORT``; smoothing ``S``, default (or empty) the goal's; ``FORM`` ``objective`` (default) or
-``model``). Every solve starts from the static-optimisation guess (no warm start).
+``model``). Every solve starts from the static-optimisation guess; with ``--warm-start`` each energy
+goal starts from the solution of ``effort`` (give it first).
 Prints, per solution: IPOPT's outcome, the moment residual, the reserves, the goal's value
 (the smooth model's leg mean in W/kg), smooth and exact UM10's leg mean over the same nodes
 (W/kg of body mass, no basal: the yardstick for every solution), the whole-body rate of every exact model (W/kg, both
 legs, 1.2 W/kg basal heat of body mass, the metabolics stage's trimming), the peak
 activations of the main muscles, and their peak activations at the nodes where their fibers
-lengthen; with ``--out`` the tables are also written as CSV there.
+lengthen; with ``--out`` the tables are also written as CSV there, and each solution folder
+(``OUT/<goal with : as _>``).
 The numbers of ``docs/energy_objective.md`` were made with the defaults.
 """
 
@@ -117,6 +119,9 @@ def main(argv=None) -> int:
     ap.add_argument("--workflow", default="effort-cal")
     ap.add_argument("--goals", default="effort,UM10:1:0,UM10:0.01:1")
     ap.add_argument("--out", type=Path)
+    ap.add_argument("--warm-start", action="store_true",
+                    help="start each energy goal from the solution of the goal 'effort' (listed first) instead of "
+                    "the static-optimisation guess")
     ap.add_argument("--smoothing-table", action="store_true",
                     help="instead: every smooth model at s = 1e-2, 1e-3, 1e-4 against its exact model on the "
                     "effort solution's nodes (leg mean, W/kg of body mass, no basal), in the goal's objective "
@@ -126,12 +131,18 @@ def main(argv=None) -> int:
     if args.smoothing_table:
         return smoothing_table(ex, args.workflow)
     rows, wb_rows, act_rows, len_rows = [], [], [], []
+    effort = None
     for text in args.goals.split(","):
         goal = _goal(text, ex)
         t0 = time.perf_counter()
         sol = solve_files(ex.model, ex.ik["normal"], ex.id["normal"], args.workflow,
-                          options=SolverOptions(energy=goal) if goal else None)
+                          options=SolverOptions(energy=goal) if goal else None,
+                          **({"warm_start": effort} if args.warm_start and goal and effort is not None else {}))
+        if goal is None:
+            effort = sol
         wall = time.perf_counter() - t0
+        if args.out:  # the solution folder, for a closer look (musclemetab metabolics, plausibility)
+            sol.write(args.out / text.replace(":", "_"))
         s = sol.summary
         N = s["n_intervals"]
         um10 = EnergyGoal("UM10", 1.0, ex.body_mass_kg, ex.height_m)  # the same yardstick for every solution

@@ -112,11 +112,11 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
      "the moments: check the inputs); summary.json holds reserve_share_of_peak_moment"),
     (_STUDY, "quality", "-",
      "ok, or the unit's plausibility flags as code(names ...) joined by '; ': passive_force, fiber_length, "
-     "saturated_activation, reserve (the solve's, every leg's: muscles or DOFs named), metabolic_rate (the row's "
+     "saturated_activation, saturated_lengthening, reserve (the solve's, every leg's: muscles or DOFs named), metabolic_rate (the row's "
      "whole-body rate outside 0.5-2 x Ralston's 1958 rate at its speed), negative_group_rate (groups named); 'not "
      "checked' for a unit run by an earlier version; thresholds and sources in docs/quality.md"),
     # per muscle
-    (f"{_PM}, metabolics.parquet, {_SENS}", "muscle", "-", "muscle name of the model"),
+    (f"{_PM}, metabolics.parquet, {_SENS}, factors.csv", "muscle", "-", "muscle name of the model"),
     (f"{_PM}, {_LEG}", "side", "-", "leg of the row's muscle(s): r or l ('' when a muscle name has no side suffix)"),
     (_PM, "muscle_W", "W",
      "the muscle's cycle-average metabolic rate without basal heat (work + activation/maintenance heat + "
@@ -132,6 +132,24 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
     (_PM, "basal_heat_mean_W", "W",
      "the muscle's basal heat (1.2 W per kg of muscle mass); apart, never inside muscle_W"),
     (_PM, "rank", "-", "rank of the muscle by muscle_W within its unit and model (1 = largest)"),
+    # uncertainty bands (docs/uncertainty.md)
+    (f"{_STUDY}, {_PM}", "<rate>_p05", "as <rate>",
+     "5 % quantile of the column <rate> (a rate, energy, cost of transport or energy share) over the converged "
+     "uncertainty samples of the row's trial unit (study file [uncertainty], --uncertainty N): beside each rate when the "
+     "study has samples"),
+    (f"{_STUDY}, {_PM}", "<rate>_p50", "as <rate>", "median of <rate> over the converged uncertainty samples"),
+    (f"{_STUDY}, {_PM}", "<rate>_p95", "as <rate>", "95 % quantile of <rate> over the converged uncertainty samples"),
+    (f"{_STUDY}, {_PM}", "uncertainty_samples", "-",
+     "number of converged uncertainty samples behind the row's bands (a sample whose solve did not converge is left "
+     "out; with side = both, a sample counts when both legs converged)"),
+    *(("factors.csv", name, "-", f"factor of an uncertainty sample on the muscle's {what} (priors: docs/uncertainty.md)")
+      for name, what in (("F0", "maximal isometric force"), ("lMo", "optimal fiber length"),
+                         ("lTs", "tendon slack length"), ("kT", "tendon stiffness"),
+                         ("kPE", "passive force-length stiffness kPE"), ("s0", "passive force-length shift s0"),
+                         ("sM", "passive force-length strain sM"), ("muscle_mass", "mass (metabolic models)"),
+                         ("slow_twitch_fraction", "slow-twitch fraction (metabolic models; the result clipped to 0-1)"))),
+    ("factors.csv", "height", "-", "factor of an uncertainty sample on the subject's height (muscle-volume rule), the "
+     "same on every row"),
     # time series
     ("timeseries.csv", "time_s", "s", "time of the solver node"),
     ("timeseries.csv", "cycle_pct", "%", "time in % of the gait cycle"),

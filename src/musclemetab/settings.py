@@ -69,7 +69,7 @@ class NumberKey:
 #: range of physically possible values, meaning. Every check of these values goes through it.
 NUMBER_KEYS: dict[str, NumberKey] = {k.name: k for k in (
     NumberKey("body_mass_kg", "kg", 20.0, 300.0, "a human body mass in kilograms"),
-    NumberKey("height_m", "m", 0.5, 2.7, "a human height in metres"),
+    NumberKey("height_m", "m", 0.5, 2.7, "a human height in metres"),  # optional: muscle masses from the model
     NumberKey("basal_coefficient", "W/kg", 0.0, 10.0, "a basal heat rate per kg (OpenSim's default 1.51, the "
               "paper's 1.2)"),
     NumberKey("basal_exponent", "", 0.0, 2.0, "an exponent of the body mass (1 linear, 0.75 Kleiber's)"),
@@ -98,6 +98,9 @@ NUMBER_KEYS: dict[str, NumberKey] = {k.name: k for k in (
     NumberKey("print_level", "", 0, 12, "an IPOPT print level", integer=True),
     NumberKey("emg_weight", "", 0.0, 1e6, "a weight of the EMG tracking cost"),
     NumberKey("workers", "", 1, 1024, "a number of worker processes", integer=True),
+    # [uncertainty] (and --uncertainty, --uncertainty-seed)
+    NumberKey("samples", "", 0, 100_000, "a number of uncertainty samples per trial unit", integer=True),
+    NumberKey("seed", "", 0, 1_000_000, "a seed of the uncertainty samples", integer=True),
 )}
 def check_number(key: str, value, where: str = "", option: str | None = None) -> float | int:
     """Check ``value`` of the numeric key ``key`` against :data:`NUMBER_KEYS`.

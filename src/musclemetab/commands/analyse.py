@@ -4,7 +4,7 @@
                         [--model M.osim] [--ik IK.mot] [--id ID.sto | --grf GRF.mot | --cycle S,TO,E]
                         [--mass KG --height M] [--models all]
                         [--basal body|muscle|none] [--basal-coefficient 1.2] [--basal-exponent 1]
-                        [--speed M_PER_S]
+                        [--speed M_PER_S] [--strict]
 
 The command-line path ``solve`` -> ``metabolics`` -> ``analyse`` gives what a study unit
 gives: in ``OUT`` the whole-body table (``whole_body.csv``, with gross and net cost of
@@ -28,6 +28,11 @@ a solution folder, as ``solve --side both`` writes it), and ``--metabolics`` the
 ``metabolics`` wrote from it (``M/r``, ``M/l``): each side is analysed into ``OUT/r`` and
 ``OUT/l``, the per-muscle tables of both sides are gathered in ``OUT/per_muscle.csv`` and
 ``OUT/results.csv`` adds the legs as a study does (:func:`musclemetab.study.runner.add_leg_rows`).
+
+The plausibility flags (``docs/quality.md``) of the solve(s) and of the results rows (each
+model's whole-body rate against the speed, negative group shares) are printed as one
+``musclemetab: warning:`` line each, written to ``OUT/plausibility.json`` and summed up in the
+``quality`` column of ``results.csv``, as in a study; ``--strict`` makes a flag a failure.
 
 Body mass, height, models and the basal settings default to those recorded in ``--metabolics``'s
 ``metabolics.sto`` (written by ``musclemetab metabolics``); the rates are evaluated again
@@ -86,6 +91,9 @@ def add_parser(subparsers) -> None:
     add_basal_arguments(p, recorded="--metabolics")
     p.add_argument("--speed", type=float, metavar="M_PER_S",
                    help="walking speed (default: estimated from the pelvis displacement over the cycle)")
+    p.add_argument("--strict", action="store_true",
+                   help="a plausibility flag of the solve or of a whole-body rate (one warning line each, "
+                   "docs/quality.md) fails the command (exit status 1; the files are still written)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.set_defaults(func=run)
 
@@ -146,7 +154,8 @@ def run(args) -> int:
     from ..io import atomic_path
     from ..metabolics.per_muscle import PER_MUSCLE_FILE
     from ..metabolics.solution import read_metabolics_settings
-    from ..redundancy.solution import SOLUTION_FILE
+    from ..redundancy.solution import SOLUTION_FILE, read_flags
+    from ..metabolics.plausibility import add_quality
     from ..study.runner import RESULTS_CSV, add_leg_rows, leg_basal_energy_J, trial_result_rows
 
     root = Path(args.solution)
@@ -165,7 +174,7 @@ def run(args) -> int:
         check_replaceable(out, ANALYSIS_FILES)
     check_replaceable(Path(args.out), [RESULTS_CSV] + ([PER_MUSCLE_FILE] if jobs[0][0] is not None else []))
     basal_given = {key: getattr(args, key) for key in BASAL_DEFAULTS}
-    rows, basal_J, tables, legs = {}, {}, [], []
+    rows, basal_J, tables, legs, solve_flags = {}, {}, [], [], {}
     for side, sol_dir, out in jobs:
         recorded = recorded_trial(sol_dir)
         settings = (read_metabolics_settings(_metabolics_folder(args.metabolics, side or recorded.side))
@@ -216,6 +225,7 @@ def run(args) -> int:
                                        speed_source=speed_note if speed is not None else "not available",
                                        large_reserve=_large_reserve(sol_dir), unit_dir=side or ".")
         basal_J[side] = leg_basal_energy_J(per, rows[side]["duration_s"].iloc[0])
+        solve_flags[str(sol_dir)] = read_flags(sol_dir)
         label = f"side {side}: " if side else ""
         speed_text = f"{speed:.2f} m/s ({speed_note})" if speed is not None else "not available"
         print(f"analyse: {label}cycle {cycle.start_s:.3f}-{cycle.end_s:.3f} s, toe-off {cycle.toe_off_pct:.1f} % "
@@ -239,6 +249,7 @@ def run(args) -> int:
         else:
             (side, table), = rows.items()
             table = table.assign(legs=f"2 x {side}")
+        table = add_quality(table, [{"plausibility": [f.to_dict() for f in fl]} for fl in solve_flags.values()])
         with atomic_path(Path(args.out) / RESULTS_CSV, mark=True) as tmp:
             table.to_csv(tmp, index=False, float_format="%.10g")
         if len(rows) > 1:
@@ -246,14 +257,36 @@ def run(args) -> int:
                   + ", ".join(f"{r.model} {r.whole_body_W_per_kg:.2f} W/kg" for r in table.itertuples()))
     else:
         (side, table), = rows.items()
+        table = add_quality(table.assign(legs=f"2 x {recorded.side or 'r'}"),
+                            [{"plausibility": [f.to_dict() for f in fl]} for fl in solve_flags.values()])
         with atomic_path(Path(args.out) / RESULTS_CSV, mark=True) as tmp:
-            table.assign(legs=f"2 x {recorded.side or 'r'}").to_csv(tmp, index=False, float_format="%.10g")
+            table.to_csv(tmp, index=False, float_format="%.10g")
     from ..analysis.unit import ANALYSE_RECORD
     from ..io.atomic import atomic_write_text
 
     atomic_write_text(Path(args.out) / ANALYSE_RECORD, json.dumps(
         {"format": "musclemetab analyse", "format_version": 1, "legs": legs}, indent=1) + "\n")
+    _plausibility(args, solve_flags, table)
     return 0
+
+
+def _plausibility(args, solve_flags, table) -> None:
+    """Warn (one line each) of the solves' plausibility flags (``{folder: [Flag]}``) and of the
+    results rows' metabolic ones (each model's whole-body rate against its speed, its negative
+    group shares; the ``quality`` column of ``results.csv``); write them all to
+    ``OUT/plausibility.json``; with ``--strict`` fail."""
+    from ..metabolics.plausibility import results_rows_flags, write_plausibility
+    from ..redundancy.plausibility import check_strict, warn_flags
+
+    flags = []
+    for folder, found in solve_flags.items():
+        warn_flags(found, folder)
+        flags += found
+    rates = results_rows_flags(table)
+    warn_flags(rates, str(args.out))
+    write_plausibility(flags + rates, args.out)
+    if args.strict:
+        check_strict(flags + rates, "analyse --strict", written=str(args.out))
 
 
 def _large_reserve(sol_dir) -> bool:

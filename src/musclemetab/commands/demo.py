@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from .options import add_study_arguments
-from .run import add_warm_start_arguments, exit_status, print_run
+from .run import add_uncertainty_arguments, add_warm_start_arguments, apply_uncertainty_arguments, exit_status, print_run
 
 __all__ = ["add_parser", "run"]
 
@@ -22,6 +22,7 @@ def add_parser(sub) -> None:
     p.add_argument("--speeds", nargs="+", choices=("slow", "normal", "fast"), help="a subset of the speeds")
     add_warm_start_arguments(p)
     add_study_arguments(p)
+    add_uncertainty_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -30,7 +31,8 @@ def run(args) -> int:
     from ..study.demo import run_demo
 
     result = run_demo(args.out, workers=args.workers, speeds=args.speeds, progress=not args.no_progress,
-                      force=args.force, strict=args.strict, warm_start=bool(args.warm_start))
+                      force=args.force, strict=args.strict, warm_start=bool(args.warm_start),
+                      adjust=lambda study: apply_uncertainty_arguments(study, args))
     print_run(result, "demo")
     if result.interrupted:
         return exit_status(result)

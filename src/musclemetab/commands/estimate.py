@@ -9,7 +9,9 @@ validation folder, also holds the OpenSim files of a solve folder (``model.osim`
 ``states.sto``, ``controls.sto``, ``forces.sto``; ``docs/opensim_files.md``). IPOPT's progress
 lines go to stderr every 5 s unless ``--no-progress``. Prints the estimates with their doubts
 (factors on bounds, standard errors and correlated pairs) and the validation fit
-(``docs/problem.md``, "Doubts of the estimates").
+(``docs/problem.md``, "Doubts of the estimates"), then one ``musclemetab: warning:`` line per
+plausibility flag of a trial's solution (``docs/quality.md``; each recorded in the trial's
+``summary.json``); ``--strict`` makes a flag a failure.
 """
 
 from __future__ import annotations
@@ -69,6 +71,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    "names); their EMG and fiber lengths are not used; they cannot be estimated")
     p.add_argument("--validate", action="store_true",
                    help="re-solve each trial with the estimates and the effort goals only (DIR/validation)")
+    p.add_argument("--strict", action="store_true",
+                   help="a plausibility flag of a trial's solution (over-stretched or saturated muscles, large "
+                   "reserves; one warning line each, docs/quality.md) fails the command (exit status 1; the files "
+                   "are still written)")
     p.add_argument("--cache-dir", metavar="DIR")
     number_option(p, "--max-iter", "max_iter", default=10000, help="IPOPT iteration limit (default 10000)")
     p.add_argument("--out", required=True, metavar="DIR")
@@ -160,7 +166,30 @@ def _estimate(args) -> int:
           f"{args.out}")
     for line in doubt_lines(result.document or {}):
         print(line)
+    _plausibility(args, result)
     return 0
+
+
+def _plausibility(args, result) -> None:
+    """One warning line per plausibility flag of each trial's solution (recorded in its
+    ``summary.json``) and, with ``--validate``, of each validation re-solve; with ``--strict``
+    a flag fails the command."""
+    from pathlib import Path
+
+    from ..redundancy.plausibility import check_strict, warn_flags
+    from ..redundancy.solution import SUMMARY_FILE, read_flags
+
+    flags = []
+    for label, solution in result.solutions.items():
+        warn_flags(solution.record.flags, str(Path(args.out) / label))
+        flags += solution.record.flags
+        check = Path(args.out) / "validation" / label
+        if args.validate and (check / SUMMARY_FILE).is_file():
+            found = read_flags(check)
+            warn_flags(found, str(check))
+            flags += found
+    if args.strict:
+        check_strict(flags, "estimate --strict", written=str(args.out))
 
 
 def _write_opensim_files(args, labels) -> None:

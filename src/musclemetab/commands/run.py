@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from .options import add_study_arguments
 
-__all__ = ["add_parser", "run", "print_run", "exit_status", "add_warm_start_arguments"]
+__all__ = ["add_parser", "run", "print_run", "exit_status", "add_warm_start_arguments", "add_uncertainty_arguments",
+           "apply_uncertainty_arguments"]
 
 
 def add_parser(sub) -> None:
@@ -26,6 +27,7 @@ def add_parser(sub) -> None:
     p.add_argument("--report", action="store_true", help="also write the figures and report.html")
     add_warm_start_arguments(p)
     add_study_arguments(p)
+    add_uncertainty_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -41,6 +43,32 @@ def add_warm_start_arguments(p) -> None:
                             "time of those units; the results may differ (another local optimum, docs/study.md)")
     group.add_argument(key.off_option, dest="warm_start", action="store_const", const=False,
                        help="start every solve from static optimisation (the default), as [solver] warm_start = false")
+
+
+def add_uncertainty_arguments(parser) -> None:
+    """``--uncertainty N``, ``--uncertainty-seed SEED`` and ``--uncertainty-priors FILE`` of the
+    commands that run a study (``run``, ``demo``); :func:`apply_uncertainty_arguments` applies them."""
+    from .options import number_option
+
+    number_option(parser, "--uncertainty", "samples", metavar="N",
+                  help="uncertainty bands: N samples of the muscle properties for every trial (the study file's "
+                  "[uncertainty] samples; 0: none; docs/uncertainty.md)")
+    number_option(parser, "--uncertainty-seed", "seed", metavar="SEED",
+                  help="seed of the uncertainty samples (default: the study file's, else 1)")
+    parser.add_argument("--uncertainty-priors", metavar="FILE",
+                        help="CSV of priors (parameter,distribution,spread,muscle,source) replacing the package's rows")
+
+
+def apply_uncertainty_arguments(study, args):
+    """``study`` with the ``--uncertainty...`` options of ``args`` (checked) applied."""
+    from ..study.uncertainty import with_uncertainty
+    from .options import check_number_options
+
+    check_number_options(args)
+    samples, seed, priors = (getattr(args, k, None) for k in ("uncertainty", "uncertainty_seed", "uncertainty_priors"))
+    if samples is None and seed is None and priors is None:
+        return study
+    return with_uncertainty(study, samples, seed, priors)
 
 
 def print_run(run, command: str) -> None:
@@ -81,6 +109,7 @@ def run(args) -> int:
         from ..study.spec import warm_start_study
 
         study = warm_start_study(study, args.warm_start)
+    study = apply_uncertainty_arguments(study, args)
     result = run_study(study, workers=args.workers, scheduler=args.scheduler, force=args.force,
                        progress=not args.no_progress)
     if args.report and not result.interrupted:

@@ -7,7 +7,7 @@
         [--tendon-stiffness soleus_r=10.6,...] [--parameters parameters.json] --out DIR
 
     musclemetab solve --model M.osim --ik IK.mot --id ID.sto --workflow effort-cal \\
-        --energy-model UM10 [--energy-weight 1] [--effort-weight 0] --mass KG --height M --out DIR
+        --energy-model UM10 [--energy-weight 1] [--effort-weight 0] --mass KG [--height M] --out DIR
 
     musclemetab solve --workflow emg-ten --model M.osim --ik A.mot B.mot C.mot \\
         --id A.sto B.sto C.sto --emg A.mot B.mot C.mot [--emg-mapping default|authors|MAP.json] \\
@@ -168,7 +168,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    "plus shortening/lengthening heat, so that lengthening muscles pay their activation and "
                    "maintenance heat; model: the rule on the total, as the model defines it (warns)")
     number_option(g, "--mass", "body_mass_kg", metavar="KG", help="body mass (kg), for the muscle masses and the goal's W/kg")
-    number_option(g, "--height", "height_m", metavar="M", help="body height (m), for the muscle masses")
+    number_option(g, "--height", "height_m", metavar="M", help="body height (m), for the muscle masses by the "
+                  "volume rule (without it: each muscle's mass from the model, F0 / specific tension x density x lMo)")
     g.add_argument("--muscle-properties", metavar="FILE",
                    help="CSV of per-muscle overrides of mass and slow-twitch fraction (docs/muscles.md)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
@@ -368,9 +369,9 @@ def _energy_goal(args):
             raise OptionError(f"{', '.join(given)} belong{'s' if len(given) == 1 else ''} to the energy goal: give "
                               "--energy-model MODEL (e.g. UM10), or drop them")
         return None
-    missing = [o for o, attr in (("--mass", "mass"), ("--height", "height")) if getattr(args, attr) is None]
-    if missing:
-        raise OptionError(f"--energy-model needs the subject's {' and '.join(missing)} (kg, m) for the muscle masses")
+    if args.mass is None:
+        raise OptionError("--energy-model needs the subject's --mass (kg) for the goal's W/kg and the muscle masses "
+                          "(with --height by the volume rule, without it from the model's F0 and lMo)")
     if args.muscle_properties is not None:
         from ..properties import read_muscle_properties
 

@@ -22,14 +22,16 @@ import numpy as np
 
 from ..redundancy.plausibility import Flag
 
-__all__ = ["PLAUSIBILITY_FILE", "legs_rate_flags", "write_plausibility", "RATE_BAND", "ralston_gross_rate_W_per_kg", "whole_body_rate_flag", "negative_group_flag",
-           "metabolic_flags", "add_quality", "SPEED_RANGE_M_PER_S"]
+__all__ = ["PLAUSIBILITY_FILE", "legs_rate_flags", "results_rows_flags", "write_plausibility", "RATE_BAND",
+           "ralston_gross_rate_W_per_kg", "whole_body_rate_flag", "negative_group_flag", "metabolic_flags", "add_quality",
+           "SPEED_RANGE_M_PER_S"]
 
 #: The plausible band of the gross whole-body rate, as factors of Ralston's rate at the speed.
 #: Low: half (a rate below it is below standing rest plus a little walking). High: twice, which
 #: holds the subjects' spread (the study's calorimetry: SD 24 % of the mean at preferred speed)
-#: on top of the models' known overestimation (the study's Table 2: up to 1.75 x the measured
-#: mean, LW07 with EFFORT-GEN, 7.9 against 4.5 W/kg).
+#: on top of the models' known overestimation with the effort workflows (Luis et al. 2024,
+#: Table 2: up to 1.76 x the measured mean, LW07 with EFFORT-GEN, 7.9 against 4.5 W/kg); their
+#: EMG-TEN rates reach 2.7 x (LW07, 12.2 W/kg) and lie above it (``docs/quality.md``).
 RATE_BAND = (0.5, 2.0)
 #: Speeds (m/s) over which Ralston's regression was fitted (about 0.5 to 2.0 m/s, level walking);
 #: outside them the check is not made.
@@ -91,6 +93,23 @@ def metabolic_flags(whole_body: Mapping[str, float], speed_m_per_s: float | None
     return [f for f in flags if f is not None]
 
 
+def results_rows_flags(rows, *, band: tuple[float, float] = RATE_BAND) -> list[Flag]:
+    """The metabolic checks of a results table (``results.csv``: one row per ``model``, with
+    ``whole_body_W_per_kg``, ``speed_m_per_s`` and the group shares ``share_<G>_pct``), row by row:
+    what the ``quality`` column of each row adds to the solve's flags."""
+    return [f for i in range(len(rows)) for f in _row_flags(rows.iloc[[i]], band)]
+
+
+def _row_flags(row, band: tuple[float, float] = RATE_BAND) -> list[Flag]:
+    """The metabolic flags of one results row (a one-row table)."""
+    import pandas as pd
+
+    speed = row["speed_m_per_s"].iloc[0] if "speed_m_per_s" in row else None
+    speed = float(speed) if speed is not None and pd.notna(speed) else None
+    return metabolic_flags({str(row["model"].iloc[0]): float(row["whole_body_W_per_kg"].iloc[0])}, speed, row,
+                           band=band)
+
+
 def legs_rate_flags(results: Mapping, speed_m_per_s: float | None, *, band: tuple[float, float] = RATE_BAND) -> list[Flag]:
     """The whole-body rate checks of :func:`~.solution.metabolics_from_legs`'s ``{side: SolutionMetabolics}``:
     one leg's rate (that leg doubled), or the two legs added (:func:`~.solution.add_legs`)."""
@@ -122,20 +141,11 @@ def add_quality(rows, unit_records):
     ``plausibility`` of ``unit_records``) and of the row's metabolic results (its whole-body rate
     against its speed, its negative group shares: :func:`musclemetab.metabolics.plausibility.metabolic_flags`);
     ``"not checked"`` when a unit record has no ``plausibility`` (written by an earlier version)."""
-    import pandas as pd
-
     from ..redundancy.plausibility import flags_from_records, quality_text
 
     if any("plausibility" not in r for r in unit_records):
         rows["quality"] = "not checked"
         return rows
     solve = [f for r in unit_records for f in flags_from_records(r["plausibility"]) if f.model is None]
-    quality = []
-    for i in range(len(rows)):
-        row = rows.iloc[[i]]
-        speed = row["speed_m_per_s"].iloc[0] if "speed_m_per_s" in row else None
-        speed = float(speed) if speed is not None and pd.notna(speed) else None
-        model = str(row["model"].iloc[0])
-        quality.append(quality_text(solve + metabolic_flags({model: float(row["whole_body_W_per_kg"].iloc[0])}, speed, row)))
-    rows["quality"] = quality
+    rows["quality"] = [quality_text(solve + _row_flags(rows.iloc[[i]])) for i in range(len(rows))]
     return rows

@@ -52,6 +52,8 @@ import numpy as np
 
 from ..errors import DataMismatchError, MissingColumnError, OptionError
 from ._common import BASAL_RATE_W_PER_KG, MetabolicRates
+from .masses import (  # noqa: F401  (the rules' names, importable from here as before)
+    MASS_RULE_MODEL, MASS_RULE_VOLUME, mass_rule, model_muscle_masses_kg, muscle_masses_and_fractions)
 from .registry import ALL_MODELS, parse_models
 from .whole_body import BASAL_RULES, WholeBodyRate, check_basal_rule, whole_body_rate
 
@@ -312,7 +314,7 @@ class SolutionMetabolics:
     def muscle_mass_rule(self) -> str:
         """How the muscle masses were found: :data:`MASS_RULE_VOLUME` (body mass and height) or
         :data:`MASS_RULE_MODEL` (no height: the model's ``F0 / sigma * rho * lMo``)."""
-        return MASS_RULE_MODEL if self.height_m is None else MASS_RULE_VOLUME
+        return mass_rule(self.height_m)
 
     def file_components(self, model: str) -> dict[str, np.ndarray]:
         """The components written to the files, ``(muscles, time)`` arrays (W): those of
@@ -489,7 +491,7 @@ def metabolics_from_solution(
     speed_m_per_s
         Walking speed, for the cost of transport in the whole-body table.
     """
-    from ..properties import as_overrides, metabolic_properties
+    from ..properties import as_overrides
 
     names = parse_models(models)
     if basal not in BASAL_RULES:
@@ -537,17 +539,8 @@ def metabolics_from_solution(
 
     overrides = (as_overrides(muscle_properties).with_column("mass_kg", muscle_masses_kg)
                  .with_column("slow_twitch_fraction", slow_twitch_fractions))
-    if height_m is None:
-        from ..properties import FALLBACK_SLOW_TWITCH_FRACTION, check_subject, slow_twitch_fraction
-
-        check_subject(float(body_mass_kg), 1.0)  # the body mass alone (1 m: any plausible height)
-        masses = model_muscle_masses_kg(muscles, params["max_isometric_force_N"], params["optimal_fiber_length_m"],
-                                        overrides)
-        fst = slow_twitch_fraction(muscles, FALLBACK_SLOW_TWITCH_FRACTION, overrides=overrides,
-                                   max_isometric_force_N=params["max_isometric_force_N"])
-    else:
-        masses, fst = metabolic_properties(muscles, body_mass_kg, height_m, params["max_isometric_force_N"],
-                                           params["optimal_fiber_length_m"], overrides=overrides, strict=strict)
+    masses, fst = muscle_masses_and_fractions(muscles, body_mass_kg, height_m, params["max_isometric_force_N"],
+                                              params["optimal_fiber_length_m"], overrides, strict=strict)
 
     inputs = dict(states)
     inputs.update(params)
@@ -583,28 +576,6 @@ def metabolics_from_solution(
         basal_exponent=float(basal_exponent),
         side=sol.side,
     )
-
-
-#: ``muscle_mass_rule`` of the outputs: masses from body mass and height (the anatomical volume rule).
-MASS_RULE_VOLUME = "volume (body mass, height)"
-#: ``muscle_mass_rule`` without a height: every mass from the model, ``F0 / sigma * rho * lMo``.
-MASS_RULE_MODEL = "model (F0 / specific tension x density x lMo)"
-
-
-def model_muscle_masses_kg(names, max_isometric_force_N, optimal_fiber_length_m, overrides=None) -> np.ndarray:
-    """Each muscle's mass (kg) from the model alone: ``F0 / sigma * rho * lMo``, the rule of
-    OpenSim's metabolic probes (``muscle mass = (F0 / specific tension) x density x lMo``), with
-    ``rho`` = 1059.7 kg/m^3 and ``sigma`` the muscle's specific tension of the anatomical muscle
-    table (0.6 MPa for a muscle it cannot place); override masses are used as given. Used when
-    no body height is given: the volume rule needs it."""
-    from ..properties import MUSCLE_DENSITY_KG_PER_M3, resolve_muscles
-
-    recs = resolve_muscles(list(names), max_isometric_force_N, overrides, warn=False)
-    f0 = np.asarray(max_isometric_force_N, dtype=float)
-    lmo = np.asarray(optimal_fiber_length_m, dtype=float)
-    return np.array([r.mass_kg_override if r.mass_kg_override is not None
-                     else f0[i] / r.specific_tension_Pa * MUSCLE_DENSITY_KG_PER_M3 * lmo[i]
-                     for i, r in enumerate(recs)])
 
 
 def write_metabolics(result: SolutionMetabolics, out_dir: str | os.PathLike, cycle=None) -> dict[str, Path]:

@@ -1,7 +1,8 @@
 """EMG-TEN and EMG-informed solves from arrays (:func:`musclemetab.redundancy.run.solve_emg_ten`
 reads the files): trials prepared (mesh
 inputs, EMG at the nodes, initial guess), the problem of :mod:`.emg_ten` solved, the result
-assembled (:mod:`.result`)."""
+assembled (:mod:`.result`), with the standard errors and correlations of the estimated factors
+(:func:`record_identifiability`)."""
 
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ from .parameters import MuscleTendonParameters
 from .ipopt import SolverOptions
 from .static_opt import initial_guess, static_optimisation
 
-__all__ = ["solve_emg_ten_arrays", "prepare_emg_ten_trials", "emg_ten_options"]
+__all__ = ["solve_emg_ten_arrays", "prepare_emg_ten_trials", "emg_ten_options", "record_identifiability"]
 
 
 def solve_emg_ten_arrays(
@@ -54,7 +55,34 @@ def solve_emg_ten_arrays(
     t_prep = _time.perf_counter() - t_start
     ocp = solve_emg_ten_ocp(trials, params, settings, options)
     name = EMG_TEN if workflow == EMG_TEN else f"{workflow} emg-{settings.emg_mode}"
-    return assemble_result(trials, params, wf_record, ocp, settings, options, t_prep, t_start, name=name)
+    result = assemble_result(trials, params, wf_record, ocp, settings, options, t_prep, t_start, name=name)
+    if ocp.success and name == EMG_TEN and settings.goals.w_emg > 0:  # the estimate's doubts
+        record_identifiability(result, trials, params, settings, options, ocp)
+    return result
+
+
+def record_identifiability(result: Result, trials, params, settings: EmgTenSettings, options: SolverOptions,
+                           ocp) -> dict:
+    """The standard errors and correlations of the estimated factors (tendon stiffness, EMG
+    scales) at the optimum ``ocp`` of the EMG-TEN problem of ``trials``
+    (:func:`.identifiability.identifiability`, as for ``estimate``: the inverse of the reduced
+    Hessian on the factors, scaled by the EMG tracking residual); warned (a pair with
+    ``|r| > 0.9``, a near-singular reduced Hessian) and recorded in ``result.record["doubts"]
+    ["identifiability"]`` (``parameters.json``, ``solve.doubts``). The time it took is recorded
+    as ``identifiability_time_s``. Needs a tracking cost (``goals.w_emg > 0``): its residual
+    gives the scale of the standard errors."""
+    from .emg_ten import emg_ten_problem
+    from .identifiability import identifiability, warn_identifiability
+
+    t0 = _time.perf_counter()
+    blocks, goals, specs = emg_ten_problem(trials, params, settings)
+    report = identifiability(blocks, params, goals, specs, ocp, optimal_reserve_Nm=options.optimal_reserve_Nm,
+                             coupling=settings.coupling)
+    warn_identifiability(report, remedy="couple them (EmgTenSettings tendon_groups / emg_groups) or take one as "
+                         "known (a tendon group left out of the estimation)")
+    report["identifiability_time_s"] = _time.perf_counter() - t0
+    result.record.setdefault("doubts", {})["identifiability"] = report
+    return report
 
 
 def emg_ten_options(options: SolverOptions | None, settings: EmgTenSettings) -> SolverOptions:

@@ -10,8 +10,9 @@ velocity ``v~M_k`` (``vbar = v~M/vmax``, ``fV``). Without basal heat (a constant
 
 the leg's mean metabolic rate over the mesh in W/kg of body mass (rectangle rule; the
 integral ``sum_k h Edot_k`` over the duration ``N h``), normalised by ``N`` like the other goals
-of :mod:`.transcription`. Muscle masses and slow-twitch fractions come from the anatomical muscle table
-(:func:`musclemetab.properties.metabolic_properties`), as for the metabolic rates of a solution.
+of :mod:`.transcription`. Muscle masses and slow-twitch fractions are those of the metabolic rates
+of a solution (:func:`musclemetab.metabolics.masses.muscle_masses_and_fractions`): the anatomical
+muscle table's volume rule with the body height, the model's ``F0 / sigma * rho * lMo`` without it.
 
 UM03, BH04, HO06 and UC16 raise a negative total to zero (Umberger et al. 2003, Eq. 3), which
 makes a muscle that absorbs more work than its heat cost nothing at any activation. The goal's
@@ -55,7 +56,9 @@ class EnergyGoal:
     (``None``: the workflow's, 1; 0: energy alone, the reserve and fiber-velocity terms stay).
     ``body_mass_kg``, ``height_m`` and ``muscle_properties`` (an override CSV, or a mapping
     ``{muscle: {"mass_kg": ..., "slow_twitch_fraction": ...}}``) give the muscle masses and
-    slow-twitch fractions by the muscle table's rules. ``options``: options of the smooth model
+    slow-twitch fractions by the muscle table's rules; ``height_m=None``: every mass from the
+    model, ``F0 / sigma * rho * lMo``, as ``musclemetab metabolics`` without ``--height``
+    (``muscle_mass_rule`` in the record). ``options``: options of the smooth model
     (:func:`musclemetab.metabolics.smooth.smooth_rates`) other than ``non_negative``, which
     ``form`` sets (:data:`GOAL_FORMS`): ``"objective"`` (default) minimises
     ``H_AM + max(W + H_SL, 0)`` for UM03, BH04, HO06 and UC16 instead of their
@@ -66,7 +69,7 @@ class EnergyGoal:
     model: str
     weight: float
     body_mass_kg: float
-    height_m: float
+    height_m: float | None
     effort_weight: float | None = None
     smoothing: float = ENERGY_SMOOTHING
     muscle_properties: str | None = None
@@ -92,7 +95,7 @@ class EnergyGoal:
         s = self.smoothing
         if isinstance(s, bool) or not isinstance(s, (int, float)) or not (math.isfinite(s) and s > 0):
             raise OptionError(f"energy goal: the smoothing must be a positive number, not {s!r}")
-        check_subject(float(self.body_mass_kg), float(self.height_m))
+        check_subject(float(self.body_mass_kg), 1.0 if self.height_m is None else float(self.height_m))
         if isinstance(self.muscle_properties, os.PathLike):
             object.__setattr__(self, "muscle_properties", os.fspath(self.muscle_properties))
         object.__setattr__(self, "options", dict(self.options))
@@ -137,25 +140,30 @@ class EnergyGoal:
         table cannot place is warned about) once."""
         overrides = self.muscle_properties
         stamp = os.stat(overrides).st_mtime_ns if overrides is not None and os.path.isfile(overrides) else None
-        mass, fst = _muscle_values(tuple(muscles), float(self.body_mass_kg), float(self.height_m),
+        mass, fst = _muscle_values(tuple(muscles), float(self.body_mass_kg),
+                                   None if self.height_m is None else float(self.height_m),
                                    tuple(np.asarray(max_isometric_force_N, dtype=float).ravel()),
                                    tuple(np.asarray(optimal_fiber_length_m, dtype=float).ravel()), overrides, stamp)
         return mass.copy(), fst.copy()
 
     def record(self) -> dict:
-        """The goal's settings, as ``summary.json`` records them."""
+        """The goal's settings, as ``summary.json`` records them (without a height also the
+        ``muscle_mass_rule``; a goal with one records what it always did)."""
+        from ..metabolics.masses import mass_rule
+
         return {"model": self.model, "weight": self.weight, "effort_weight": self.effort_weight,
                 "smoothing": self.smoothing, "body_mass_kg": self.body_mass_kg, "height_m": self.height_m,
+                **({"muscle_mass_rule": mass_rule(None)} if self.height_m is None else {}),
                 "muscle_properties": self.muscle_properties, "options": dict(self.options), "form": self.form,
                 "term": "weight * (1/N) * sum over nodes k < N and muscles of Edot (W, no basal) / body mass"}
 
 
 @functools.lru_cache(maxsize=16)
 def _muscle_values(muscles, body_mass_kg, height_m, f0, lmo, overrides, overrides_stamp):
-    from ..properties import metabolic_properties
+    from ..metabolics.masses import muscle_masses_and_fractions
 
-    mass, fst = metabolic_properties(list(muscles), body_mass_kg, height_m, np.asarray(f0), np.asarray(lmo),
-                                     overrides=overrides)
+    mass, fst = muscle_masses_and_fractions(list(muscles), body_mass_kg, height_m, np.asarray(f0), np.asarray(lmo),
+                                            overrides)
     return np.asarray(mass, dtype=float), np.asarray(fst, dtype=float)
 
 

@@ -281,13 +281,14 @@ def identifiability(trials, params, goals, specs, result, *, optimal_reserve_Nm:
     }
 
 
-def warn_identifiability(report: dict) -> None:
-    """One warning per correlated pair and one for a near-singular reduced Hessian."""
+def warn_identifiability(report: dict, remedy: str = "fix one of them (drop it from --estimate)") -> None:
+    """One warning per correlated pair and one for a near-singular reduced Hessian (``remedy``:
+    what to do about a pair, besides adding data that tells them apart)."""
     for p in report["correlated_pairs"]:
         a, b = p["parameters"]
         warnings.warn(f"{a} and {b} are not identifiable together: correlation {p['correlation']:+.3f} at the optimum "
-                      f"(|r| > {report['threshold']:g}); fix one of them (drop it from --estimate) or add data that "
-                      "tells them apart", MusclemetabWarning, stacklevel=3)
+                      f"(|r| > {report['threshold']:g}); {remedy} or add data that tells them apart",
+                      MusclemetabWarning, stacklevel=3)
     if report["near_singular"]:
         warnings.warn(f"the reduced Hessian of the estimation is near singular (reciprocal condition "
                       f"{report['reduced_hessian_rcond']:.2g}): some combination of the estimated parameters is not "

@@ -20,19 +20,24 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .bounds import FIBER_LENGTH_BOUNDS
+from .window import PADDING_S
 
 __all__ = [
     "Flag",
     "PASSIVE_FORCE_LIMIT",
     "SATURATION_ACTIVATION",
     "SATURATION_SHARE_LIMIT",
+    "LENGTHENING_SATURATION_SHARE_LIMIT",
     "RESERVE_SHARE_LIMIT",
     "RESERVE_FLOOR_NM",
     "passive_force_flag",
     "fiber_length_flag",
     "saturation_flag",
+    "lengthening_saturation_flag",
+    "cycle_nodes",
     "reserve_flag",
     "solution_flags",
+    "solution_cycle_nodes",
     "flags_from_records",
     "quality_text",
     "warn_flags",
@@ -47,11 +52,18 @@ __all__ = [
 PASSIVE_FORCE_LIMIT = 0.5
 #: Activation counted as saturated (the upper bound is 1).
 SATURATION_ACTIVATION = 0.95
-#: Share of the solved nodes at :data:`SATURATION_ACTIVATION` or more above which a muscle is
-#: flagged. Walking EMG of the leg muscles peaks well below maximal voluntary contraction (about
+#: Share of the gait cycle's nodes (the padding around it left out, :func:`cycle_nodes`) at
+#: :data:`SATURATION_ACTIVATION` or more above which a muscle is flagged. Walking EMG of the leg muscles peaks well below maximal voluntary contraction (about
 #: 20-60 % MVC at preferred speed, e.g. Winter 1991, *The biomechanics and motor control of human
 #: gait*); a muscle near full activation for more than a tenth of the cycle is not walking.
 SATURATION_SHARE_LIMIT = 0.10
+#: Share of the gait cycle's nodes at which a muscle is at :data:`SATURATION_ACTIVATION` or more
+#: *while its fiber lengthens* above which it is flagged: two nodes of the study's 100-node
+#: cycle. Lengthening leg muscles in walking act as brakes at low activation (Winter 1991); at
+#: the effort optimum of the example subject no muscle comes near full activation while it
+#: lengthens, whereas an energy goal's optimum can drive lengthening muscles to it, their force
+#: being cheap in the models' heat while they lengthen (``docs/energy_objective.md``).
+LENGTHENING_SATURATION_SHARE_LIMIT = 0.02
 #: Reserve RMS of a DOF as a share of the peak absolute inverse-dynamics moment of that DOF
 #: above which the DOF is flagged. Reserves should add little to the muscles' moments (Hicks et
 #: al. 2015, J Biomech Eng 137:020905, who ask for reserve moments small against the net joint
@@ -133,19 +145,67 @@ def fiber_length_flag(muscles: Sequence[str], lm_norm, *, bound: float = FIBER_L
                 "lTs + 1.7 lMo: check the model's scaling of the optimal fiber and tendon slack lengths", items, bound)
 
 
+def cycle_nodes(time_s, cycle_s: tuple[float, float] | None = None, *, padding_s: float = PADDING_S) -> np.ndarray:
+    """The nodes of the gait cycle among the solved ones (a boolean mask of ``time_s``).
+
+    ``cycle_s``: the cycle ``(start, end)`` a solve over ``--cycle`` recorded
+    (``summary.json`` ``window.gait_cycle``); its nodes from ``start`` to ``end``. Without it the
+    solved window is the cycle padded by :data:`~.window.PADDING_S` (0.05 s) at each end, the
+    study's rule: the nodes from ``t_0 + 0.05 s`` up to, not including, ``t_N - 0.05 s`` (the
+    cycle's last instant is its first again); on the study's 100 Hz mesh the nodes the metabolic
+    rates are averaged over (:func:`musclemetab.metabolics.solution.trim_slice`, 5 and 6 nodes
+    dropped). A window too short to hold its padding is taken whole.
+    """
+    t = np.asarray(time_s, dtype=float)
+    eps = 1e-9
+    if cycle_s is not None:
+        mask = (t >= cycle_s[0] - eps) & (t <= cycle_s[1] + eps)
+    elif t.size:
+        mask = (t >= t[0] + padding_s - eps) & (t < t[-1] - padding_s - eps)
+    else:
+        mask = np.zeros(0, dtype=bool)
+    return mask if mask.sum() >= 2 else np.ones(t.size, dtype=bool)
+
+
+def _share_above(muscles: Sequence[str], at, in_cycle, limit: float) -> dict:
+    """``{muscle: share}`` of the muscles whose share of the cycle's nodes where ``at`` holds
+    (``(nodes, muscles)`` booleans; ``in_cycle`` the cycle's nodes, default all) exceeds ``limit``."""
+    if in_cycle is not None:
+        at = at[np.asarray(in_cycle, dtype=bool)]
+    share = np.mean(at, axis=0) if at.size else np.zeros(len(muscles))
+    return _worst(muscles, share, share > limit)
+
+
 def saturation_flag(muscles: Sequence[str], activation, *, level: float = SATURATION_ACTIVATION,
-                    limit: float = SATURATION_SHARE_LIMIT) -> Flag | None:
-    """Muscles whose activation is ``level`` or more at more than ``limit`` of the nodes
-    (``activation``: ``(nodes, muscles)`` on a uniform mesh, so a share of nodes is a share of time)."""
-    a = np.asarray(activation, dtype=float)
-    share = np.mean(a >= level, axis=0) if a.size else np.zeros(len(muscles))
-    items = _worst(muscles, share, share > limit)
+                    limit: float = SATURATION_SHARE_LIMIT, in_cycle=None) -> Flag | None:
+    """Muscles whose activation is ``level`` or more at more than ``limit`` of the gait cycle's nodes
+    (``activation``: ``(nodes, muscles)`` on a uniform mesh, so a share of nodes is a share of time;
+    ``in_cycle``: the cycle's nodes, :func:`cycle_nodes`; default every node)."""
+    items = _share_above(muscles, np.asarray(activation, dtype=float) >= level, in_cycle, limit)
     if not items:
         return None
     return Flag("saturated_activation", f"{len(items)} muscle{'s' if len(items) != 1 else ''} at activation >= "
-                f"{level:g} for more than {100 * limit:g} % of the solved time (share of the time): "
+                f"{level:g} for more than {100 * limit:g} % of the gait cycle (share of the cycle): "
                 f"{_listing(items, '{:.0%}')}; the muscles are too weak for the moments (maximal isometric forces, "
                 "model scaling) or the moments too large", items, limit)
+
+
+def lengthening_saturation_flag(muscles: Sequence[str], activation, fiber_velocity, *,
+                                level: float = SATURATION_ACTIVATION,
+                                limit: float = LENGTHENING_SATURATION_SHARE_LIMIT, in_cycle=None) -> Flag | None:
+    """Muscles whose activation is ``level`` or more *while their fiber lengthens* (fiber velocity
+    above 0) at more than ``limit`` of the gait cycle's nodes (``activation``, ``fiber_velocity``:
+    ``(nodes, muscles)``; ``in_cycle``: :func:`cycle_nodes`, default every node)."""
+    at = (np.asarray(activation, dtype=float) >= level) & (np.asarray(fiber_velocity, dtype=float) > 0)
+    items = _share_above(muscles, at, in_cycle, limit)
+    if not items:
+        return None
+    return Flag("saturated_lengthening", f"{len(items)} muscle{'s' if len(items) != 1 else ''} at activation >= "
+                f"{level:g} while the fiber lengthens, over more than {100 * limit:g} % of the gait cycle (share of "
+                f"the cycle): {_listing(items, '{:.0%}')}; walking does not brake at full activation: an energy goal's "
+                "optimum uses the models' low cost of lengthening muscles (keep the effort goal beside it, "
+                "--effort-weight; docs/energy_objective.md), otherwise the muscles are too weak for the moments",
+                items, limit)
 
 
 def reserve_flag(dofs: Sequence[str], reserve_Nm, peak_moment_by_dof_Nm: Mapping[str, float], *,
@@ -179,17 +239,28 @@ def solution_flags(solution, *, passive_limit: float = PASSIVE_FORCE_LIMIT,
     solves) and is left out without it; the fiber-length check uses its ``fiber_length_bounds``.
     """
     rec = solution.record
+    in_cycle = solution_cycle_nodes(solution)
     flags = [
         passive_force_flag(solution.muscles, solution.passive_fiber_force_N,
                            solution.parameters.max_isometric_force_N, limit=passive_limit),
         fiber_length_flag(solution.muscles, solution.lm_norm,
                           widened_upper=(rec.fiber_length_bounds or {}).get("widened_upper")),
-        saturation_flag(solution.muscles, solution.activation, level=saturation_level, limit=saturation_limit),
+        saturation_flag(solution.muscles, solution.activation, level=saturation_level, limit=saturation_limit,
+                        in_cycle=in_cycle),
+        lengthening_saturation_flag(solution.muscles, solution.activation, solution.fiber_velocity_lmo_per_s,
+                                    level=saturation_level, in_cycle=in_cycle),
     ]
     peaks = rec.get("peak_moment_by_dof_Nm")
     if peaks:
         flags.append(reserve_flag(solution.dofs, solution.reserve_Nm, peaks, limit=reserve_limit))
     return [f for f in flags if f is not None]
+
+
+def solution_cycle_nodes(solution) -> np.ndarray:
+    """:func:`cycle_nodes` of a :class:`~.solution.Solution`: its recorded gait cycle, else its
+    window less the padding."""
+    cycle = solution.record.gait_cycle
+    return cycle_nodes(solution.time_s, (float(cycle["start_s"]), float(cycle["end_s"])) if cycle else None)
 
 
 def flags_from_records(records) -> list[Flag]:

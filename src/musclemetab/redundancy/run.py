@@ -93,6 +93,7 @@ def solve_files(
     exclude_muscles: Sequence[str] = (),
     exclude_missing_ok: bool = False,
     diagnose_only: bool = False,
+    parameter_transform=None,
 ) -> Solution:
     """Solve from files: model ``.osim``, IK ``.mot`` and ID ``.sto`` (or ground forces).
 
@@ -109,7 +110,8 @@ def solve_files(
     The trial is diagnosed before the solve (:mod:`.diagnosis`: blocking findings raise
     :class:`~.diagnosis.InfeasibleInputError`, the others warn; ``summary.json``'s
     ``diagnosis``); with ``diagnose_only`` the :class:`~.diagnosis.Diagnosis` is returned,
-    unchecked, instead of a solution, and nothing is solved.
+    unchecked, instead of a solution, and nothing is solved. ``parameter_transform``: see
+    :func:`.solve.solve_trial`.
 
     The inputs are checked (columns, units, time ranges) before the geometry is computed.
 
@@ -229,6 +231,7 @@ def solve_files(
         ik_time_s=ik_time, passive=passive, tendon_stiffness=tendon_stiffness,
         tendon_stiffness_file=tendon_stiffness_file, options=options, goals=goals, sources=sources,
         check_units=check_units, warm_start=warm_start, mesh_frequency_hz=mesh_frequency_hz,
+        parameter_transform=parameter_transform,
     )
     trial = {"geometry_time_s": t_geometry, "side": side,
              "diagnosis": _diagnosis_record(diagnosis, solution, geometry, id_time, id_moments, ik_time,

@@ -154,19 +154,24 @@ def solve_trial(
     check_units: bool = True,
     warm_start: Solution | None = None,
     mesh_frequency_hz: float = MESH_FREQUENCY_HZ,
+    parameter_transform=None,
 ) -> Solution:
     """Solve one trial with a named workflow (``effort-gen``, ``effort-cal``, ``effort-ten``).
 
     See :func:`musclemetab.redundancy.workflows.workflow_parameters` for ``passive`` and the
     tendon-stiffness arguments. The effort weights are those of ``goals``, by default the
     workflow's (``Workflow.goals``); the effort weight of ``options.energy``, when it has one,
-    overrides ``w_activation``.
+    overrides ``w_activation``. ``parameter_transform`` (a function of the workflow's
+    :class:`MuscleTendonParameters`) gives the parameters solved with instead (e.g. a sample of
+    :mod:`musclemetab.uncertainty`).
     """
     wf = get_workflow(workflow)
     params, record = workflow_parameters(
         wf, model_parameters, restrict_geometry(geometry).muscles, passive=passive,
         tendon_stiffness=tendon_stiffness, tendon_stiffness_file=tendon_stiffness_file,
     )
+    if parameter_transform is not None:
+        params = parameter_transform(params)
     options = options or SolverOptions()
     goals = goals or wf.goals
     effort = options.energy.effort_weight if options.energy is not None else None

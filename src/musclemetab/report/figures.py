@@ -291,6 +291,9 @@ def _bar_limits(lo: float, hi: float, start: float | None = None) -> tuple[float
     return a, b
 
 
+from .uncertainty import has_band, shade_band  # noqa: E402  (the uncertainty bands, when the study has them)
+
+
 def _require_columns(df, columns: Sequence[str], what: str) -> None:
     missing = [c for c in columns if c not in df.columns]
     if missing:
@@ -897,6 +900,14 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
         sd = np.array(sd)
         if np.any(np.isfinite(sd)):
             ax_b.errorbar(xs, stance, yerr=np.nan_to_num(sd), fmt="none", ecolor="k", elinewidth=0.8, capsize=2)
+        if has_band(pref, "stance_energy_share_pct"):  # uncertainty samples: the stance share's 5-95 % band
+            band = group_stats(pref, ["workflow", "model"], ["stance_energy_share_pct_p05", "stance_energy_share_pct_p95"])
+            lo = [stat_cell(band, (w, m), "stance_energy_share_pct_p05")[0] for m in models
+                  if stat_cell(pref_stats, (w, m), "swing_energy_share_pct")[2]]
+            hi = [stat_cell(band, (w, m), "stance_energy_share_pct_p95")[0] for m in models
+                  if stat_cell(pref_stats, (w, m), "swing_energy_share_pct")[2]]
+            ax_b.bar(xs, np.subtract(hi, lo), bottom=lo, width=width * 0.35, color="white", alpha=0.6,
+                     edgecolor="0.3", lw=0.6, gid=f"band:stance:{w}")
         for x, s in zip(xs, swing):
             ax_b.text(x, 101.0, f"{s:.0f}", ha="center", va="bottom", fontsize=6.5, rotation=90)
     ax_b.set_xticks(range(len(models)), models)
@@ -930,6 +941,9 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
             ax_s.plot(ds["speed_m_per_s"].to_numpy(float), ds["swing_energy_share_pct"].to_numpy(float), color=col,
                       marker="os^Dvx"[i % 6], ms=4, lw=1.2, ls=("-", "--", ":", "-.")[i % 4],
                       label=label if i == 0 else "_" + m, gid=f"model:{m}:{subject}", zorder=3)
+            if has_band(ds, "swing_energy_share_pct"):
+                shade_band(ax_s, ds["speed_m_per_s"], ds["swing_energy_share_pct_p05"], ds["swing_energy_share_pct_p95"],
+                           col, f"band:swing:{m}:{subject}")
     ax_s.yaxis.get_major_formatter().set_useOffset(False)
     ax_s.set_xlabel("walking speed (m/s)")
     ax_s.set_ylabel("swing share (%)")
@@ -1055,6 +1069,14 @@ def group_shares(results, *, workflows: Sequence[str] | None = None, models: Seq
             bottoms = np.vstack([np.zeros(len(trials)), np.cumsum(vals, axis=0)[:-1]])
             _add_bars(ax, np.tile(np.arange(len(trials)), len(groups)) - width / 2, bottoms.ravel(), width,
                       vals.ravel(), colours, gids, edgecolor="white", linewidth=0.4)
+            if has_band(res, cols[0]):  # uncertainty samples: each share's 5-95 % band at its segment's top
+                band = group_stats(res, ["workflow", "model", "trial"], [c + s for c in cols for s in ("_p05", "_p95")])
+                lo = np.array([[stat_cell(band, (w, m, t), c + "_p05")[0] for t in trials] for c in cols])
+                hi = np.array([[stat_cell(band, (w, m, t), c + "_p95")[0] for t in trials] for c in cols])
+                ok = np.isfinite(lo) & np.isfinite(hi)
+                x = np.tile(np.arange(len(trials)), (len(groups), 1))
+                ax.bar(x[ok], (hi - lo)[ok], bottom=(bottoms + lo)[ok], width=width * 0.3, color="k", alpha=0.35, lw=0,
+                       gid=f"band:groups:{w}:{m}")
             if i == 0:
                 _panel_title(ax, m, color=model_colour(m), fontsize=11, fontweight="bold")
             if j == 0:
@@ -1112,6 +1134,9 @@ def rates_against_speed(results, *, workflow: str | None = None, models: Sequenc
             x = ds["speed_m_per_s"].to_numpy(float)
             ax.plot(x, ds["whole_body_no_basal_W_per_kg"].to_numpy(float), color="k", lw=1.8, ls=ls, marker=mk, ms=4,
                     label="whole body", gid=f"whole-body:{subject}")
+            if has_band(ds, "whole_body_no_basal_W_per_kg"):  # uncertainty samples: their 5-95 % band
+                shade_band(ax, x, ds["whole_body_no_basal_W_per_kg_p05"], ds["whole_body_no_basal_W_per_kg_p95"], "k",
+                           f"band:whole-body:{subject}")
             for g in groups:
                 ax.plot(x, ds[f"rate_{g}"].to_numpy(float), color=group_colour(g), lw=1.1, ls=ls, marker=mk, ms=3,
                         label=g, gid=f"group:{g}:{subject}")

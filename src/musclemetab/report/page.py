@@ -23,7 +23,7 @@ from ..analysis.groups import GROUPS_WITH_OTHER as GROUPS
 from ..errors import MusclemetabError
 from .folder import StudyFolder
 
-__all__ = ["Table", "page_tables", "render_page", "solver_runs", "legs_text", "RUN_COLUMNS", "TEMPLATE"]
+__all__ = ["Table", "page_tables", "render_page", "solver_runs", "legs_text", "uncertainty_section", "RUN_COLUMNS", "TEMPLATE"]
 
 #: The page's template (package data of :mod:`musclemetab.report`).
 TEMPLATE = "report.html"
@@ -432,6 +432,7 @@ def page_tables(study: StudyFolder) -> dict:
         "basal": str(study.settings.get("basal", "body")),
         "results": _results(study),
         "per_muscle": _per_muscle(study),
+        "uncertainty": uncertainty_section(study),
         "settings": _settings(study),
         "failures": _failures(study),
         "interrupted": _interrupted(study),
@@ -440,6 +441,69 @@ def page_tables(study: StudyFolder) -> dict:
         "runs": _runs(study),
         "software": _software(study),
     }
+
+
+def _interval(row, column: str, digits: int = 3) -> str:
+    """``value [5 %, 95 %]`` of ``column`` in ``row`` (the value alone without a band)."""
+    value = float(row[column])
+    if not np.isfinite(value):
+        return "–"
+    lo, hi = float(row.get(f"{column}_p05", np.nan)), float(row.get(f"{column}_p95", np.nan))
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        return f"{value:.{digits}f}"
+    return f"{value:.{digits}f} [{lo:.{digits}f}, {hi:.{digits}f}]"
+
+
+def uncertainty_section(study: StudyFolder) -> dict | None:
+    """The report's uncertainty section, or ``None`` for a study without bands: the samples and
+    seed, the priors (a table), the whole-body rates and the top muscles of each model with their
+    5-95 % intervals."""
+    from ..uncertainty import GLOBAL_PARAMETERS, read_priors
+    from .figures import main_workflow, trial_order
+    from .uncertainty import has_band
+
+    ok = study.ok
+    if ok.empty or not has_band(ok, "whole_body_W_per_kg"):
+        return None
+    settings = study.settings.get("uncertainty") if isinstance(study.settings.get("uncertainty"), dict) else {}
+    priors_path = settings.get("priors")
+    note = None
+    try:
+        priors = read_priors(priors_path)
+    except Exception as exc:  # noqa: BLE001 - a moved priors file: the package's table is shown, said so
+        priors, note = read_priors(), f"the study's priors file could not be read ({exc}); the package's are shown"
+    rows = [[r.parameter, r.distribution, f"{r.spread:g}",
+             r.muscle or ("the subject" if r.parameter in GLOBAL_PARAMETERS else "every muscle"), r.source]
+            for r in priors.rows]
+    priors_table = Table([[("parameter", 1), ("distribution", 1), ("spread", 1), ("muscle", 1), ("source", 1)]],
+                         rows, 1, "settings")
+    trials = trial_order(ok)
+    wb_rows = []
+    for (wf, model), d in ok.groupby([ok["workflow"].astype(str), ok["model"].astype(str)], sort=False):
+        d = d.groupby(d["trial"].astype(str)).mean(numeric_only=True)
+        wb_rows.append([wf, model] + [_interval(d.loc[t], "whole_body_W_per_kg") if t in d.index else "–" for t in trials])
+    whole_body = Table([[("workflow", 1), ("model", 1)] + [(t, 1) for t in trials]], wb_rows, 2, "results")
+    muscles = {}
+    pm = study.read_per_muscle()
+    if pm is not None and "muscle_W_per_kg_p05" in pm.columns:
+        wf = main_workflow(list(dict.fromkeys(pm["workflow"].astype(str))))
+        d = pm[pm["workflow"].astype(str) == wf]
+        cols = ["muscle_W_per_kg", "muscle_W_per_kg_p05", "muscle_W_per_kg_p95"]
+        for m in [m for m in study.models() if m in set(d["model"].astype(str))]:
+            dm = d[d["model"].astype(str) == m].groupby(["muscle", "trial"])[cols].mean()
+            ts = [t for t in trials if t in set(dm.index.get_level_values("trial"))]
+            order = dm["muscle_W_per_kg"].groupby("muscle").mean().sort_values(ascending=False).index[:TOP_MUSCLES]
+            body = [[mu] + [_interval(dm.loc[(mu, t)], "muscle_W_per_kg") if (mu, t) in dm.index else "–" for t in ts]
+                    for mu in order]
+            muscles[m] = Table([[("muscle", 1)] + [(t, 1) for t in ts]], body, 1, "results")
+        muscles_workflow = wf
+    else:
+        muscles_workflow = None
+    n = ok["uncertainty_samples"].to_numpy(float) if "uncertainty_samples" in ok else np.array([np.nan])
+    return {"samples": int(settings.get("samples", 0) or np.nanmax(n)), "seed": settings.get("seed"),
+            "converged": f"{int(np.nanmin(n))}-{int(np.nanmax(n))}" if np.nanmin(n) != np.nanmax(n) else f"{int(n[0])}",
+            "priors": priors_table, "priors_source": priors.source, "note": note, "whole_body": whole_body,
+            "muscles": muscles, "muscles_workflow": muscles_workflow, "top": TOP_MUSCLES}
 
 
 # ------------------------------------------------------------------ the page

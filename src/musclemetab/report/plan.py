@@ -21,6 +21,7 @@ import numpy as np
 
 from ..errors import MusclemetabError, OptionError
 from .folder import StudyFolder
+from .uncertainty import band_caption
 
 __all__ = ["FIGURE_NAMES", "FIGURE_TITLES", "FIGURE2_CAPTION", "FigurePlan", "Selection", "select",
            "plan_figures", "measured_emg"]
@@ -182,7 +183,7 @@ def phase_shares_figure(sel: Selection):
         "Share of the cycle's muscle metabolic energy (one leg, without basal heat) spent in stance (initial "
         "contact to toe-off) and swing, mean over subjects (error bar: SD). Left: at the preferred speed "
         f"(trial {sel.trial}); right: swing share against walking speed for {sel.workflow}, with the "
-        "repeated-measures slope (% per m/s).")
+        "repeated-measures slope (% per m/s)." + band_caption(sel.ok, "stance_energy_share_pct"))
 
 
 def phase_pies_figure(sel: Selection):
@@ -200,7 +201,8 @@ def group_shares_figure(sel: Selection):
 
     return group_shares(sel.ok, workflows=sel.workflows, models=sel.models), (
         "Share of each muscle group in the cycle's muscle metabolic energy (%, one leg, without basal heat; "
-        "mean over subjects), one bar per trial (walking speed in m/s).")
+        "mean over subjects), one bar per trial (walking speed in m/s)."
+        + band_caption(sel.ok, "share_PF_pct").replace("Shaded:", "Grey strip at the top of each segment:"))
 
 
 def rates_against_speed_figure(sel: Selection):
@@ -210,7 +212,7 @@ def rates_against_speed_figure(sel: Selection):
         f"Workflow {sel.workflow}. Whole-body metabolic rate without basal heat (black) and each muscle group's "
         "part of it (group share × whole-body rate), W per kg of body mass, both legs; one line per subject "
         "through its trials in the order of its walking speeds (line style and marker: the subject); same "
-        "axes in every panel.")
+        "axes in every panel." + band_caption(sel.ok, "whole_body_no_basal_W_per_kg"))
 
 
 def spread_figure(sel: Selection):

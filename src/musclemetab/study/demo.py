@@ -66,10 +66,11 @@ def demo_study(out: str | os.PathLike = "musclemetab-demo", *, speeds=None,
 
 def run_demo(out: str | os.PathLike = "musclemetab-demo", *, workers: int | None = None, speeds=None,
              report: bool = True, progress: bool = True, force: bool = False, strict: bool = False,
-             warm_start: bool = False):
+             warm_start: bool = False, adjust=None):
     """Run the example study and write its report; returns the :class:`StudyRun` (``strict``: a
     unit with a plausibility flag fails, :func:`~.spec.strict_study`; ``warm_start``: EFFORT-TEN
-    starts from the trial's EFFORT-GEN solution, :func:`~.spec.warm_start_study`)."""
+    starts from the trial's EFFORT-GEN solution, :func:`~.spec.warm_start_study`; ``adjust``: a
+    function of the study giving the study run, e.g. with uncertainty samples, :mod:`.uncertainty`)."""
     import threading
 
     from .runner import run_study
@@ -83,6 +84,8 @@ def run_demo(out: str | os.PathLike = "musclemetab-demo", *, workers: int | None
         from .spec import warm_start_study
 
         study = warm_start_study(study, True)
+    if adjust is not None:
+        study = adjust(study)
     figures = None
     if report:  # the plot that depends only on the package, drawn while the units run (once per machine)
         from ..report.draw import draw_package_figures

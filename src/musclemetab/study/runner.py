@@ -293,15 +293,18 @@ class _Executor:
 def unit_batches(study: Study) -> list[list[Unit]]:
     """The units in the order they are submitted: every unit that needs no EMG-TEN estimate
     (all subjects, trials, sides and workflows together) with the estimations, longest
-    first; then the units that use an estimate, once the estimations are done. With warm
-    starts, the effort workflows are ordered as their chain (:data:`~.units.WARM_CHAIN`), so
-    that a unit comes after the unit whose solution it starts from."""
+    first; then the units that use an estimate, once the estimations are done (with warm
+    starts, the effort workflows are ordered as their chain, :data:`~.units.WARM_CHAIN`, so
+    that a unit comes after the unit whose solution it starts from); then the uncertainty
+    samples of the trial units (:mod:`.uncertainty`)."""
     stage1, stage2 = plan_units(study)
     if study.warm_start:
         stage2.sort(key=lambda u: WARM_CHAIN.index(u.workflow) if u.workflow in WARM_CHAIN else -1)  # stable
     independent = [u for u in stage2 if u.depends_on(study) is None]
     dependent = [u for u in stage2 if u.depends_on(study) is not None]
-    return [b for b in (stage1 + independent, dependent) if b]
+    from .uncertainty import sample_units  # the uncertainty samples, once their trial units are done
+
+    return [b for b in (stage1 + independent, dependent, sample_units(study)) if b]
 
 
 def _next_ready(queue: list, waiting: set) -> int | None:
@@ -669,12 +672,17 @@ def collect_results(study: Study, failed: dict[str, str] | None = None, interrup
     if "measured_W_per_kg" in table:
         table["measured_W_per_kg"] = pd.to_numeric(table["measured_W_per_kg"], errors="coerce")
     table = table.sort_values(list(ID_COLUMNS), kind="stable", ignore_index=True)
+    from .uncertainty import add_study_bands  # the uncertainty bands, when the study has samples
+
+    builders = (trial_result_rows, add_leg_rows, leg_basal_energy_J)
+    table = add_study_bands(study, table, "results", builders)
     with atomic_path(out / RESULTS_CSV) as tmp:
         table.to_csv(tmp, index=False, float_format="%.10g")
     _write_parquet_copy(table, out / RESULTS_PARQUET)
     per_muscle = pd.concat(muscles, ignore_index=True) if muscles else pd.DataFrame(columns=list(ID_COLUMNS))
     per_muscle = per_muscle.sort_values(list(ID_COLUMNS) + [c for c in ("side", "rank") if c in per_muscle],
                                         kind="stable", ignore_index=True)
+    per_muscle = add_study_bands(study, per_muscle, "per_muscle", builders)
     with atomic_path(out / PER_MUSCLE_FILE) as tmp:
         per_muscle.to_csv(tmp, index=False, float_format="%.10g")
     _write_parquet_copy(per_muscle, out / PER_MUSCLE_PARQUET)

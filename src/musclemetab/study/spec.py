@@ -15,11 +15,17 @@ A study file names everything a study needs; paths are relative to the file::
     weight = 1.0                       # weight of the leg's mean rate, W/kg of body mass
     effort_weight = 0.0                # optional: weight of the effort goal (default: the workflow's, 1)
 
+    [uncertainty]                      # optional: uncertainty bands (docs/uncertainty.md)
+    samples = 64                       # samples of every trial unit (0: none)
+    seed = 1                           # seed of the Sobol' sequence
+    priors = "priors.csv"              # optional: rows replacing the package's priors
+
     [[subjects]]
     name = "sub1"
     model = "data/sub1.osim"
     body_mass_kg = 72.6
-    height_m = 1.743
+    height_m = 1.743                      # optional: without it each muscle's mass comes from the
+                                          # model, F0 / specific tension x density x lMo (muscle_mass_rule)
     passive = "data/passiveMoments.mat"   # optional: calibration for effort-cal / effort-ten
     tendon_stiffness = "emg-ten"          # optional, effort-ten: "emg-ten" (the subject's own
                                           # EMG-TEN estimate), a parameters.json, a table
@@ -35,6 +41,7 @@ A study file names everything a study needs; paths are relative to the file::
                                           # gait cycle, the legs' rates added; needs 'cycle')
     dofs = ["hip_flexion_r", "knee_angle_r", "ankle_angle_r"]   # optional (r or l): default from the model
     # [subjects.estimate]: a parameter estimation (musclemetab.study.estimation)
+
 
     [[subjects.trials]]
     name = "normal"
@@ -162,7 +169,9 @@ class Subject:
     name: str
     model: Path
     body_mass_kg: float
-    height_m: float
+    #: ``None``: no height; the muscle masses of the metabolic models and of the energy goal come
+    #: from the model (``muscle_mass_rule``), the height entering nothing else
+    height_m: float | None
     trials: tuple[Trial, ...]
     passive: Path | None = None
     tendon_stiffness: str | Path | Mapping[str, float] | None = None
@@ -229,9 +238,11 @@ class Study:
 
 # ---------------------------------------------------------------------------------------
 _STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "basal_coefficient", "basal_exponent", "subjects",
-               "solver", "energy_goal", "strict"}
+               "solver", "energy_goal", "strict", "uncertainty"}
 #: keys of the study file's [energy_goal] table (the energy goal of every effort-workflow solve)
 _ENERGY_KEYS = {"model", "weight", "effort_weight", "smoothing", "form"}
+#: keys of the study file's [uncertainty] table (docs/uncertainty.md)
+_UNCERTAINTY_KEYS = {"samples", "seed", "priors"}
 #: keys of the study file's [solver] table (IPOPT settings of every solve)
 _SOLVER_KEYS = {"max_iter", "tol", "linear_solver", "warm_start"}
 _SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials",
@@ -348,6 +359,9 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
     energy = _energy_goal(data.get("energy_goal"), where)
     if energy:
         settings["energy_goal"] = energy
+    uncertainty = _uncertainty(data.get("uncertainty"), base, where)
+    if uncertainty:  # [uncertainty]: samples of every trial unit (musclemetab.study.uncertainty)
+        settings["uncertainty"] = uncertainty
     strict = data.get("strict", False)
     if not isinstance(strict, bool):
         raise OptionError(f"{where}: 'strict' must be true or false, not {strict!r}")
@@ -434,6 +448,27 @@ def _energy_goal(data, where: str) -> dict:
     return out
 
 
+def _uncertainty(data, base: Path, where: str) -> dict:
+    """The ``[uncertainty]`` table checked: ``{"samples", "seed"[, "priors"]}`` (``{}`` for none or 0 samples)."""
+    if data is None:
+        return {}
+    if not isinstance(data, Mapping):
+        raise OptionError(f"{where}: 'uncertainty' must be a table such as [uncertainty] samples = 64, seed = 1")
+    here = f"{where}: [uncertainty]"
+    _unknown(data, _UNCERTAINTY_KEYS, here)
+    if "samples" not in data:
+        raise OptionError(f"{here}: 'samples' is required (the number of samples of every trial unit, e.g. 64)")
+    from ..uncertainty import DEFAULT_SEED, read_priors
+
+    out = {"samples": _number(data["samples"], here, "samples"), "seed": _number(data.get("seed", DEFAULT_SEED),
+                                                                                here, "seed")}
+    priors = _path(data.get("priors"), base, here, "priors", required=False)
+    if priors is not None:
+        read_priors(priors)  # checked now, before anything runs
+        out["priors"] = str(priors)
+    return out if out["samples"] else {}
+
+
 def _unknown(data: Mapping, allowed: set, where: str) -> None:
     if not isinstance(data, Mapping):
         raise OptionError(f"{where}: expected a table, got {type(data).__name__}")
@@ -481,7 +516,7 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
     check_plain_name(name, f"{where}: subject name")
     model = _path(data.get("model"), base, here, "model")
     mass = _number(data.get("body_mass_kg"), here, "body_mass_kg", required=True)
-    height = _number(data.get("height_m"), here, "height_m", required=True)
+    height = _number(data.get("height_m"), here, "height_m")  # optional: the muscle masses from the model
     passive = _path(data.get("passive"), base, here, "passive", required=False)
     kt = data.get("tendon_stiffness")
     if isinstance(kt, str):

@@ -73,6 +73,8 @@ from ..study_layout import TIMESERIES_FILE, UNIT_FILE, UNITS_FOLDER  # noqa: E40
 #: Marker file in every folder the package creates for a unit (and may therefore delete).
 MARKER_FILE = ".musclemetab-unit"
 ESTIMATION_FOLDER = "_emg-ten"
+#: folder of a trial unit's uncertainty samples (in the unit's folder)
+SAMPLES_FOLDER = "samples"
 ANALYSIS_FILE = "analysis.csv"
 #: The effort workflows in the order a trial's warm-started solves run: each starts from the
 #: solution of the one before it in the study (``docs/study.md``, "Warm-started chains").
@@ -88,6 +90,8 @@ class Unit:
     trial: str | None
     workflow: str
     side: str | None = None
+    #: the number of an uncertainty sample of the trial unit (:mod:`.uncertainty`), else ``None``
+    sample: int | None = None
 
     @property
     def is_estimation(self) -> bool:
@@ -98,11 +102,13 @@ class Unit:
         if self.trial is None:
             return Path(UNITS_FOLDER) / self.subject / (ESTIMATION_FOLDER if self.workflow == EMG_TEN else ESTIMATE_FOLDER)
         folder = Path(UNITS_FOLDER) / self.subject / self.trial / self.workflow
-        return folder / self.side if self.side else folder
+        folder = folder / self.side if self.side else folder
+        return folder if self.sample is None else folder / SAMPLES_FOLDER / f"{self.sample:04d}"
 
     @property
     def label(self) -> str:
-        return f"{self.subject}/{self.trial or 'all trials'}/{self.workflow}" + (f"/{self.side}" if self.side else "")
+        return (f"{self.subject}/{self.trial or 'all trials'}/{self.workflow}" + (f"/{self.side}" if self.side else "")
+                + (f"/sample {self.sample}" if self.sample is not None else ""))
 
     def leg(self, study: Study) -> str:
         """The leg this unit solves: its own ``side``, else its subject's."""
@@ -112,6 +118,8 @@ class Unit:
         """The estimation unit this unit needs, if any."""
         if self.trial is None:
             return None
+        if self.sample is not None:  # the trial unit it samples
+            return Unit(self.subject, self.trial, self.workflow, self.side)
         subject = study.subject(self.subject)
         if self.workflow == EMG_TEN or (self.workflow == "effort-ten" and subject.uses_emg_ten_estimate):
             return Unit(self.subject, None, EMG_TEN)
@@ -122,7 +130,7 @@ class Unit:
         ``warm_start``, the same subject, trial and leg with the workflow before this one in
         :data:`WARM_CHAIN` among the study's workflows. EMG-informed solves (the subject's
         ``emg_mode``), EMG-TEN and estimations start cold."""
-        if self.trial is None or not study.warm_start or self.workflow not in WARM_CHAIN:
+        if self.trial is None or self.sample is not None or not study.warm_start or self.workflow not in WARM_CHAIN:
             return None
         if study.subject(self.subject).emg_mode is not None:
             return None
@@ -197,6 +205,10 @@ def _subject_record(subject: Subject, workflow: str) -> dict:
 def unit_key(study: Study, unit: Unit, dependency_key: str | None = None, warm_key: str | None = None) -> str:
     """SHA-256 of everything the unit's result depends on (``warm_key``: the key of the unit whose
     solution it starts from, :meth:`Unit.warm_source`)."""
+    if unit.sample is not None:  # the sampled unit's key, the priors, the seed and the sample's number
+        from .samples import sample_key
+
+        return sample_key(study, unit, dependency_key)
     subject = study.subject(unit.subject)
     content = {
         "musclemetab": __version__,
@@ -350,7 +362,7 @@ def prepare_leg_folder(output: Path, unit: Unit) -> None:
     """
     from ..errors import OptionError
 
-    if not unit.side:
+    if not unit.side or unit.sample is not None:  # a sample's folder is inside its leg unit's
         return
     parent = unit_folder(Path(output), unit).parent
     if (parent / UNIT_FILE).is_file() and _is_our_unit(parent):
@@ -415,6 +427,7 @@ def _execute_unit(study: Study, unit: Unit, key: str, dependency_folder: str | N
         "trial": unit.trial,
         "workflow": unit.workflow,
         **({"side": unit.side} if unit.side else {}),
+        **({"sample": unit.sample} if unit.sample is not None else {}),
         "error": None,
         "times": {},
     }
@@ -433,6 +446,15 @@ def _execute_unit(study: Study, unit: Unit, key: str, dependency_folder: str | N
             record.update(run_parameter_estimation(study, unit, tmp))
         elif unit.is_estimation:
             record.update(_run_estimation(study, unit, tmp))
+        elif unit.sample is not None:  # an uncertainty sample of the trial unit in dependency_folder
+            from .samples import run_sample
+
+            subject = study.subject(unit.subject)
+            estimation = Path(study.output) / Unit(unit.subject, None, EMG_TEN).folder
+            record.update(run_sample(study, unit, tmp, Path(dependency_folder),
+                                     options=_solver_options(study, subject),
+                                     arguments=solve_arguments(subject, unit.workflow, estimation),
+                                     analysis_file=ANALYSIS_FILE))
         else:
             dep = Path(dependency_folder) if dependency_folder else None
             record.update(_run_trial(study, unit, tmp, dep, Path(warm_folder) if warm_folder else None))
@@ -550,6 +572,23 @@ def _cycle_source(trial: Trial, recorded: dict | None = None) -> str:
     return "estimated from the IK window and the ankle moment (no ground reaction forces)"
 
 
+def solve_arguments(subject: Subject, workflow: str, estimation: Path | None) -> dict:
+    """The personalisation arguments of a trial's solve with ``workflow``: the subject's passive
+    calibration and tendon stiffness (``estimation``: the folder of the subject's EMG-TEN estimate)."""
+    kwargs = {}
+    if workflow != "effort-gen" and subject.passive is not None:
+        kwargs["passive"] = subject.passive
+    if workflow == "effort-ten":
+        kt = subject.tendon_stiffness
+        if subject.uses_emg_ten_estimate:
+            kwargs["tendon_stiffness_file"] = estimation / "parameters.json"
+        elif isinstance(kt, Path):
+            kwargs["tendon_stiffness_file"] = kt
+        elif isinstance(kt, (dict, str)):  # a table, or "example"
+            kwargs["tendon_stiffness"] = kt
+    return kwargs
+
+
 def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, warm: Path | None = None) -> dict:
     """Solve (or take the EMG-TEN solution), metabolics, gait cycle, phases and groups; ``warm``: the
     folder of the unit whose solution the solve starts from (:func:`_chain_solve`)."""
@@ -573,17 +612,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
         if not sol.run_record.success:
             raise sol.run_record.failure(f"EMG-TEN solution of trial {trial.name}")
     else:
-        kwargs = {}
-        if unit.workflow != "effort-gen" and subject.passive is not None:
-            kwargs["passive"] = subject.passive
-        if unit.workflow == "effort-ten":
-            kt = subject.tendon_stiffness
-            if subject.uses_emg_ten_estimate:
-                kwargs["tendon_stiffness_file"] = dependency / "parameters.json"
-            elif isinstance(kt, Path):
-                kwargs["tendon_stiffness_file"] = kt
-            elif isinstance(kt, (dict, str)):  # a table, or "example"
-                kwargs["tendon_stiffness"] = kt
+        kwargs = solve_arguments(subject, unit.workflow, dependency)
         if subject.emg_mode is not None:
             sol = _informed_solve(study, subject, trial, unit.workflow, kwargs)
         else:

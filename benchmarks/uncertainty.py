@@ -1,0 +1,177 @@
+"""Uncertainty samples: their cost, and the coverage of their bands (docs/uncertainty.md).
+
+Three parts, on the example subject's normal trial with EFFORT-GEN (``--parts`` picks some):
+
+``warm``
+    For samples 0 .. ``--compare``-1 of the package's priors: the solve of the sampled
+    parameters from the static-optimisation guess (cold) and warm-started from the nominal
+    solution adapted to them (:func:`musclemetab.uncertainty.adapted_start`, as a study's
+    samples are). Prints IPOPT's iterations and solve time of each and the mean ratio warm / cold.
+``study``
+    ``musclemetab run`` of a one-trial study with ``--uncertainty N`` (default 64) on
+    ``--workers`` processes (default 2): the wall time of the samples (the nominal unit run
+    before, not timed) and the band of the whole-body rate.
+``coverage``
+    Synthetic truths: ``--truths`` (default 30) further samples with another seed stand for
+    subjects whose parameters are drawn from the prior; each one's rates (whole body per model,
+    and per muscle) are compared with the bands of the nominal model from the ``study`` part.
+    Prints the share of truths inside the 5-95 % band (stated rate 90 %), per model and over
+    the muscles.
+
+    python benchmarks/uncertainty.py [--parts warm study coverage] [--samples 64] [--truths 30]
+        [--compare 4] [--workers 2] [--out DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+MODELS = ["UM10", "BH04", "UC16", "LW07"]
+
+STUDY = """name = "uncertainty benchmark"
+output = "out"
+workflows = ["effort-gen"]
+models = {models}
+
+[uncertainty]
+samples = {samples}
+seed = {seed}
+
+[[subjects]]
+name = "sub1"
+model = "{model}"
+body_mass_kg = {mass}
+height_m = {height}
+
+[[subjects.trials]]
+name = "normal"
+ik = "{ik}"
+id = "{id}"
+"""
+
+
+def _example():
+    sys.path.insert(0, str(HERE))
+    from solver import _example as example  # the benchmarks' one way to locate the example data
+
+    return example()
+
+
+def warm_against_cold(ex, n: int) -> None:
+    from musclemetab.redundancy.run import solve_files
+    from musclemetab.uncertainty import adapted_start, draw, read_priors
+
+    args = (ex.model, ex.ik["normal"], ex.id["normal"], "effort-gen")
+    nominal = solve_files(*args)
+    print(f"nominal solve: {nominal.record.iterations} iterations, {nominal.record.solve_time_s:.2f} s")
+    priors = read_priors()
+    ratios = []
+    print(f"{'sample':>6} {'cold it':>8} {'cold s':>8} {'warm it':>8} {'warm s':>8} {'ratio':>6} {'objective cold / warm':>24}")
+    for k in range(n):
+        factors = draw(priors, nominal.muscles, k, 1)
+        cold = solve_files(*args, parameter_transform=factors.parameters)
+        warm = solve_files(*args, parameter_transform=factors.parameters,
+                           warm_start=adapted_start(nominal, factors.parameters(nominal.parameters)))
+        ratio = warm.record.solve_time_s / cold.record.solve_time_s
+        ratios.append(ratio)
+        print(f"{k:>6} {cold.record.iterations:>8} {cold.record.solve_time_s:>8.2f} {warm.record.iterations:>8} "
+              f"{warm.record.solve_time_s:>8.2f} {ratio:>6.2f} {cold.objective:>11.6g} / {warm.objective:<11.6g}")
+    print(f"mean solve time of a warm-started sample / cold solve: {sum(ratios) / len(ratios):.2f} (target <= 0.5)",
+          flush=True)
+
+
+def _study(ex, root: Path, samples: int, seed: int) -> Path:
+    root.mkdir(parents=True, exist_ok=True)
+    path = root / "study.toml"
+    path.write_text(STUDY.format(models=str(MODELS).replace("'", '"'), samples=samples, seed=seed, model=ex.model,
+                                 mass=ex.body_mass_kg, height=ex.height_m, ik=ex.ik["normal"], id=ex.id["normal"]))
+    return path
+
+
+def _run(path: Path, workers: int, extra=()) -> float:
+    env = dict(os.environ, PYTHONPATH=str(HERE.parent / "src"))
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "musclemetab", "run", str(path), "--workers", str(workers),
+                           "--no-progress", *extra], capture_output=True, text=True, env=env)
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        sys.exit(f"musclemetab run {path} failed:\n{proc.stdout}\n{proc.stderr[-3000:]}")
+    return wall
+
+
+def study_time(ex, root: Path, samples: int, workers: int) -> Path:
+    path = _study(ex, root / "bands", samples, 1)
+    nominal = _run(path, workers, ["--uncertainty", "0"])  # the trial unit alone
+    wall = _run(path, workers)
+    import pandas as pd
+
+    results = pd.read_csv(path.parent / "out" / "results.csv")
+    print(f"trial unit alone: {nominal:.1f} s; then {samples} samples of it on {workers} workers: {wall:.1f} s wall "
+          f"({wall / samples:.2f} s per sample)")
+    cols = ["model", "whole_body_W_per_kg", "whole_body_W_per_kg_p05", "whole_body_W_per_kg_p50",
+            "whole_body_W_per_kg_p95", "uncertainty_samples"]
+    print(results[cols].round(3).to_string(index=False))
+    return path.parent / "out"
+
+
+def coverage(ex, root: Path, bands_out: Path, truths: int, workers: int) -> None:
+    import numpy as np
+    import pandas as pd
+
+    from musclemetab.study.runner import add_leg_rows, leg_basal_energy_J, trial_result_rows
+    from musclemetab.study.spec import load_study
+    from musclemetab.study.uncertainty import sample_tables
+
+    path = _study(ex, root / "truths", truths, 2)
+    _run(path, workers)
+    truth_wb, truth_pm = sample_tables(load_study(path), trial_result_rows, add_leg_rows, leg_basal_energy_J)
+    results = pd.read_csv(bands_out / "results.csv").set_index("model")
+    per_muscle = pd.read_csv(bands_out / "per_muscle.csv").set_index(["model", "muscle"])
+    print(f"\ncoverage of the nominal model's 5-95 % bands over {truth_wb['sample'].nunique()} converged truths "
+          "(stated 90 %):")
+    for model in MODELS:
+        t = truth_wb[truth_wb["model"] == model]["whole_body_W_per_kg"].to_numpy()
+        lo, hi = results.loc[model, "whole_body_W_per_kg_p05"], results.loc[model, "whole_body_W_per_kg_p95"]
+        inside = np.mean((t >= lo) & (t <= hi))
+        print(f"  {model} whole body: {100 * inside:.0f} % inside [{lo:.3f}, {hi:.3f}] W/kg "
+              f"(nominal {results.loc[model, 'whole_body_W_per_kg']:.3f}; truths {t.min():.3f}-{t.max():.3f})")
+    for model in MODELS:
+        t = truth_pm[truth_pm["model"] == model].set_index(["model", "muscle"])
+        b = per_muscle.loc[t.index]
+        inside = (t["muscle_W"].to_numpy() >= b["muscle_W_p05"].to_numpy()) & \
+                 (t["muscle_W"].to_numpy() <= b["muscle_W_p95"].to_numpy())
+        print(f"  {model} per muscle (muscle_W, {inside.size} truth x muscle pairs): {100 * inside.mean():.0f} % inside")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--parts", nargs="+", default=["warm", "study", "coverage"], choices=("warm", "study", "coverage"))
+    ap.add_argument("--samples", type=int, default=64)
+    ap.add_argument("--truths", type=int, default=30)
+    ap.add_argument("--compare", type=int, default=4)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--out", help="folder for the studies (default: a new temporary folder)")
+    args = ap.parse_args()
+    warnings.simplefilter("ignore")
+    ex = _example()
+    root = Path(args.out or tempfile.mkdtemp(prefix="mm-uncertainty-"))
+    print(f"studies in {root}")
+    if "warm" in args.parts:
+        warm_against_cold(ex, args.compare)
+    bands = root / "bands" / "out"
+    if "study" in args.parts:
+        bands = study_time(ex, root, args.samples, args.workers)
+    if "coverage" in args.parts:
+        coverage(ex, root, bands, args.truths, args.workers)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,135 @@
+"""One uncertainty sample of a trial unit: its key and its run (:mod:`.uncertainty` plans the
+samples and gathers their bands; ``docs/uncertainty.md``).
+
+Sample ``k`` of a trial unit draws the factors of sample ``k`` (:func:`musclemetab.uncertainty.draw`),
+solves the trial again with the muscle-tendon parameters multiplied by them, warm-started from the
+trial unit's solution adapted to them (:func:`musclemetab.uncertainty.adapted_start`: the same tendon
+forces; :func:`musclemetab.redundancy.run.solve_files`, ``warm_start`` and ``parameter_transform``),
+evaluates every metabolic model of the study with the sampled muscle masses, slow-twitch fractions
+and height, and writes ``whole_body.csv``, ``analysis.csv`` and ``per_muscle.csv`` (the trial unit's
+columns) and ``factors.csv`` (the factors of every muscle). A sample whose solve does not converge is
+recorded (``converged: false``) and left out of the bands. Its key is the trial unit's key, the
+priors' values, the seed and ``k``.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import time
+from pathlib import Path
+from typing import Mapping
+
+from ..errors import OptionError
+from ..uncertainty import DEFAULT_SEED
+from .spec import Study
+
+__all__ = ["study_priors", "sample_key", "run_sample", "FACTORS_FILE", "METHOD"]
+
+FACTORS_FILE = "factors.csv"
+#: the sampling rule, part of every sample's key
+METHOD = "sobol (owen scrambling) -> inverse normal cdf; factors of musclemetab.uncertainty"
+
+
+@functools.lru_cache(maxsize=8)
+def _priors(path: str | None, mtime_ns: int | None):
+    from ..uncertainty import read_priors
+
+    return read_priors(path)
+
+
+def study_priors(study: Study):
+    """The :class:`~musclemetab.uncertainty.Priors` of the study (the package's, with its file's rows)."""
+    path = (study.settings.get("uncertainty") or {}).get("priors")
+    return _priors(path, Path(path).stat().st_mtime_ns if path else None)
+
+
+def sample_key(study: Study, unit, nominal_key: str | None) -> str:
+    """SHA-256 of what sample ``unit.sample`` depends on: its trial unit's key, the priors' values,
+    the seed and the sampling rule."""
+    from .. import __version__
+
+    settings = study.settings.get("uncertainty") or {}
+    content = {"musclemetab": __version__, "trial_unit": nominal_key, "sample": int(unit.sample),
+               "seed": int(settings.get("seed", DEFAULT_SEED)), "priors": study_priors(study).digest(),
+               "method": METHOD}
+    return hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()
+
+
+def _record(folder: Path) -> dict:
+    """The trial unit's ``unit.json`` (empty when absent or unreadable)."""
+    from ..study_layout import UNIT_FILE
+
+    try:
+        return json.loads((Path(folder) / UNIT_FILE).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+
+
+def run_sample(study: Study, unit, tmp: Path, nominal_folder: Path, *, options=None, arguments: Mapping | None = None,
+               analysis_file: str = "analysis.csv") -> dict:
+    """Solve and evaluate sample ``unit.sample`` (a :class:`~.units.Unit`) of its trial unit (folder
+    ``nominal_folder``) into ``tmp``; ``options`` and ``arguments`` are the trial unit's solver options
+    and personalisation arguments (passive calibration, tendon stiffness), ``analysis_file`` the name
+    of its analysis table."""
+    from ..events import GaitCycle
+    from ..analysis.groups import has_function_group
+    from ..analysis.unit import analyse_metabolics, filtered_moment_arms
+    from ..geometry import compute_geometry
+    from ..metabolics.per_muscle import PER_MUSCLE_FILE, per_muscle_table
+    from ..metabolics.solution import WHOLE_BODY_CSV, metabolics_from_solution
+    from ..properties import metabolic_properties
+    from ..redundancy import run as redundancy_run
+    from ..redundancy.solution import Solution
+    from ..uncertainty import adapted_start, draw
+
+    nominal = _record(nominal_folder)
+    if nominal.get("status") != "ok":
+        raise OptionError(f"{nominal_folder}: the trial unit of {unit.label} has no result; run the study again")
+    subject = study.subject(unit.subject)
+    trial = subject.trial(unit.trial)
+    side = unit.leg(study)
+    settings = study.settings.get("uncertainty") or {}
+    t0 = time.perf_counter()
+    start = Solution.load(nominal_folder)
+    factors = draw(study_priors(study), start.muscles, unit.sample, int(settings.get("seed", DEFAULT_SEED)))
+    factors.table().to_csv(tmp / FACTORS_FILE, index=False, float_format="%.17g")
+    sol = redundancy_run.solve_files(
+        subject.model, trial.ik, trial.id, unit.workflow, side=side, dofs=subject.dofs,
+        external_loads=trial.external_loads, grf=trial.grf if trial.cycle is not None else None,
+        grf_column=trial.grf_column, grf_threshold_N=trial.grf_threshold_N, cycle=trial.cycle,
+        options=options, exclude_muscles=subject.exclude_muscles,
+        exclude_missing_ok=subject.side == "both", warm_start=adapted_start(start, factors.parameters(start.parameters)),
+        parameter_transform=factors.parameters,
+        **dict(arguments or {}))
+    times = {"solve_s": sol.record.solve_time_s, "solution_s": time.perf_counter() - t0}
+    record = {"times": times, "converged": bool(sol.success), "solve_status": sol.status,
+              "iterations": sol.record.get("iterations"),
+              "height_factor": factors.height}
+    if not sol.success:  # recorded, left out of the bands
+        return record
+    t1 = time.perf_counter()
+    params = sol.parameters.subset(sol.muscles)
+    masses, fst = metabolic_properties(list(sol.muscles), subject.body_mass_kg, subject.height_m * factors.height,
+                                       params.max_isometric_force_N, params.optimal_fiber_length_m,
+                                       overrides=subject.muscle_properties)
+    masses, fst = factors.metabolic_properties(masses, fst)
+    speed = nominal.get("speed_m_per_s")
+    result = metabolics_from_solution(
+        sol, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
+        basal_rate_W_per_kg=study.basal_coefficient, basal_exponent=study.basal_exponent, speed_m_per_s=speed,
+        muscle_properties=subject.muscle_properties, muscle_masses_kg=dict(zip(sol.muscles, masses.tolist())),
+        slow_twitch_fractions=dict(zip(sol.muscles, fst.tolist())))
+    cycle = GaitCycle(**{k: float(v) for k, v in nominal["cycle"].items()})
+    result.whole_body_table().to_csv(tmp / WHOLE_BODY_CSV, index=False, float_format="%.10g")
+    per_muscle_table(result, cycle).to_csv(tmp / PER_MUSCLE_FILE, index=False, float_format="%.10g")
+    geometry = compute_geometry(subject.model, trial.ik, dofs=[d for d in sol.dofs if has_function_group(d)],
+                                side=side)
+    tg, r = filtered_moment_arms(geometry)
+    analysis = analyse_metabolics(result, tg, r, list(geometry.dofs), list(geometry.muscles), cycle)
+    analysis.summary.to_csv(tmp / analysis_file, index=False, float_format="%.10g")
+    times["metabolics_s"] = time.perf_counter() - t1
+    record.update(speed_m_per_s=speed, toe_off_pct=nominal.get("toe_off_pct"),
+                  whole_body_W_per_kg={m: float(result.whole_body[m].mean_W_per_kg) for m in result.models})
+    return record

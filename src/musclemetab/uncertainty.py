@@ -1,0 +1,375 @@
+"""Uncertainty bands of the metabolic estimates: priors of the muscle properties, their samples
+and the bands of the rates (``docs/uncertainty.md``).
+
+Priors (:func:`read_priors`)
+    One row per property: ``F0``, ``lMo``, ``lTs``, ``kT``, ``kPE``, ``s0``, ``sM`` (the
+    muscle-tendon parameters of the solve, :class:`~musclemetab.redundancy.parameters.MuscleTendonParameters`),
+    ``muscle_mass`` and ``slow_twitch_fraction`` (the metabolic models' muscle properties) and
+    ``height`` (the subject's, in the muscle-volume rule of :mod:`musclemetab.properties`), each
+    with a ``distribution`` of a multiplicative factor and its ``spread``:
+
+    * ``lognormal``: factor ``exp(spread z)`` (``spread`` is the SD of the log of the factor);
+    * ``normal``: factor ``max(1 + spread z, 0.05)``;
+
+    ``z`` standard normal. The package's table is ``data/uncertainty_priors.csv``; a CSV of the
+    same columns (``--uncertainty-priors FILE``) replaces rows by parameter and muscle (an empty
+    ``muscle``: every muscle; a model muscle name or a side-free name: that muscle). A spread of 0
+    keeps the property at its nominal value. Slow-twitch fractions are clipped to [0, 1] after the factor.
+
+Samples (:func:`draw`)
+    Sample ``k`` of a trial takes point ``k`` of a scrambled Sobol' sequence (Owen scrambling,
+    :class:`scipy.stats.qmc.Sobol`) of dimension ``9 M + 1`` (nine factors per muscle, in the order
+    of :data:`MUSCLE_PARAMETERS` then muscle, and the height) with the study's seed, mapped to
+    standard normal ``z`` by the inverse normal CDF. The point depends on the seed, the muscles and
+    ``k`` only: a sample is the same whatever the number of samples asked for, on any worker.
+
+Bands (:func:`band`)
+    The median and the 5 and 95 % quantiles (``numpy.quantile``, linear interpolation) of a rate
+    over the converged samples.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from .errors import InputFileError, UnknownMuscleError
+
+__all__ = ["Prior", "Priors", "Draw", "read_priors", "default_priors", "draw", "band", "BAND_SUFFIXES",
+           "MUSCLE_PARAMETERS", "SOLVE_PARAMETERS", "GLOBAL_PARAMETERS", "PARAMETERS", "DISTRIBUTIONS",
+           "PRIORS_FILE", "DEFAULT_SEED", "zero_priors", "MIN_NORMAL_FACTOR", "adapted_start", "band_table", "with_bands"]
+
+PRIORS_FILE = "uncertainty_priors.csv"
+#: solve parameter -> field of MuscleTendonParameters
+SOLVE_PARAMETERS = {
+    "F0": "max_isometric_force_N",
+    "lMo": "optimal_fiber_length_m",
+    "lTs": "tendon_slack_length_m",
+    "kT": "tendon_stiffness",
+    "kPE": "passive_kpe",
+    "s0": "passive_s0",
+    "sM": "passive_sm",
+}
+#: per-muscle parameters, in the order of the sample's dimensions
+MUSCLE_PARAMETERS = (*SOLVE_PARAMETERS, "muscle_mass", "slow_twitch_fraction")
+GLOBAL_PARAMETERS = ("height",)
+PARAMETERS = (*MUSCLE_PARAMETERS, *GLOBAL_PARAMETERS)
+DISTRIBUTIONS = ("lognormal", "normal")
+#: the seed of the samples when none is given
+DEFAULT_SEED = 1
+#: a normal factor never goes below this (a property stays positive)
+MIN_NORMAL_FACTOR = 0.05
+#: the column suffixes of a band: 5 %, median, 95 %
+BAND_SUFFIXES = ("_p05", "_p50", "_p95")
+_COLUMNS = ("parameter", "distribution", "spread", "muscle", "source")
+#: the largest spread accepted (a lognormal factor of e^2 per SD is no prior)
+MAX_SPREAD = 2.0
+
+
+@dataclass(frozen=True)
+class Prior:
+    """One row of the priors: the ``parameter``'s factor distribution and spread, for ``muscle``
+    (``""``: every muscle), and where the number comes from."""
+
+    parameter: str
+    distribution: str
+    spread: float
+    muscle: str = ""
+    source: str = ""
+
+    def factor(self, z):
+        """The factor for standard normal ``z`` (array or number)."""
+        z = np.asarray(z, dtype=float)
+        if self.distribution == "lognormal":
+            return np.exp(self.spread * z)
+        return np.maximum(1.0 + self.spread * z, MIN_NORMAL_FACTOR)
+
+
+@dataclass(frozen=True)
+class Priors:
+    """The prior table: rows by ``(parameter, muscle)``; ``source`` names where it was read."""
+
+    rows: tuple[Prior, ...]
+    source: str = "package table"
+    files: tuple[str, ...] = field(default=(), compare=False)
+
+    def prior(self, parameter: str, muscle: str = "") -> Prior:
+        """The row for ``parameter`` of ``muscle``: its own row, else its side-free name's, else the
+        parameter's row for every muscle."""
+        from .properties import split_side
+
+        rows = {(r.parameter, r.muscle): r for r in self.rows}
+        for key in (muscle, split_side(muscle)[0] if muscle else None, ""):
+            if key is not None and (parameter, key) in rows:
+                return rows[(parameter, key)]
+        return Prior(parameter, "lognormal", 0.0, "", "not in the table: no spread")
+
+    def check_muscles(self, muscles: Sequence[str]) -> None:
+        """:class:`UnknownMuscleError` for a row naming no muscle of ``muscles`` (by name or side-free name)."""
+        from .properties import split_side
+
+        known = set(muscles) | {split_side(m)[0] for m in muscles}
+        unknown = sorted({r.muscle for r in self.rows if r.muscle and r.muscle not in known})
+        if unknown:
+            raise UnknownMuscleError(
+                f"{self.source}: muscle{'s' if len(unknown) > 1 else ''} {', '.join(unknown)} of the uncertainty "
+                f"priors name{'' if len(unknown) > 1 else 's'} no muscle of the problem "
+                f"({', '.join(list(muscles)[:6])}{', ...' if len(muscles) > 6 else ''}); fix the name or leave the "
+                "'muscle' cell empty for every muscle")
+
+    def table(self):
+        """The rows as a pandas table (the columns of the CSV)."""
+        import pandas as pd
+
+        return pd.DataFrame([[r.parameter, r.distribution, r.spread, r.muscle, r.source] for r in self.rows],
+                            columns=list(_COLUMNS))
+
+    def digest(self) -> str:
+        """SHA-256 of the rows' values (what a sample's result depends on; not the sources' text)."""
+        content = sorted((r.parameter, r.distribution, repr(float(r.spread)), r.muscle) for r in self.rows)
+        return hashlib.sha256(json.dumps(content).encode()).hexdigest()
+
+    @property
+    def all_zero(self) -> bool:
+        return all(r.spread == 0 for r in self.rows)
+
+
+def _read_rows(text_source, where: str) -> list[Prior]:
+    import pandas as pd
+
+    try:
+        df = pd.read_csv(text_source, comment="#", dtype=str, keep_default_na=False, skipinitialspace=True)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise InputFileError(f"{where}: not a readable CSV ({str(exc).splitlines()[0]}); expected columns "
+                             f"{','.join(_COLUMNS)}") from None
+    missing = [c for c in ("parameter", "spread") if c not in df.columns]
+    extra = [c for c in df.columns if c not in _COLUMNS]
+    if missing or extra:
+        what = f"no column {', '.join(missing)}" if missing else f"unknown column {', '.join(extra)}"
+        raise InputFileError(f"{where}: {what}; the columns are {','.join(_COLUMNS)} (distribution, muscle and "
+                             "source may be left out)")
+    rows, seen = [], set()
+    for i, row in df.iterrows():
+        line = f"{where}: line {i + 2}"
+        name = str(row["parameter"]).strip()
+        if name not in PARAMETERS:
+            import difflib
+
+            near = difflib.get_close_matches(name, PARAMETERS, n=1)
+            raise InputFileError(f"{line}: unknown parameter '{name}'{f' (did you mean {near[0]}?)' if near else ''}; "
+                                 f"the parameters are {', '.join(PARAMETERS)}")
+        dist = str(row.get("distribution", "") or "lognormal").strip().lower() or "lognormal"
+        if dist not in DISTRIBUTIONS:
+            raise InputFileError(f"{line}: distribution '{dist}' of {name} is not one of {', '.join(DISTRIBUTIONS)}")
+        raw = str(row["spread"]).strip()
+        try:
+            spread = float(raw)
+        except ValueError:
+            spread = math.nan
+        if not (math.isfinite(spread) and 0.0 <= spread <= MAX_SPREAD):
+            raise InputFileError(f"{line}: spread '{raw}' of {name} must be a number from 0 to {MAX_SPREAD:g} (the SD "
+                                 "of the factor's log for lognormal, of the factor for normal)")
+        muscle = str(row.get("muscle", "") or "").strip()
+        if muscle and name in GLOBAL_PARAMETERS:
+            raise InputFileError(f"{line}: {name} is the subject's, not a muscle's; leave the 'muscle' cell empty")
+        if (name, muscle) in seen:
+            raise InputFileError(f"{line}: {name}{f' of {muscle}' if muscle else ''} appears twice; give one line each")
+        seen.add((name, muscle))
+        rows.append(Prior(name, dist, spread, muscle, str(row.get("source", "") or "").strip()))
+    return rows
+
+
+def default_priors() -> Priors:
+    """The package's priors (``data/uncertainty_priors.csv``)."""
+    from importlib import resources
+
+    with resources.files("musclemetab").joinpath(f"data/{PRIORS_FILE}").open() as f:
+        return Priors(tuple(_read_rows(f, f"musclemetab/data/{PRIORS_FILE}")), "package table")
+
+
+def read_priors(path: str | os.PathLike | None = None) -> Priors:
+    """The package's priors with the rows of the CSV ``path`` in place of theirs (same parameter
+    and muscle); :class:`InputFileError` naming the file, line and value for an unknown parameter
+    or distribution or a spread out of range."""
+    base = default_priors()
+    if path is None:
+        return base
+    path = Path(path)
+    if not path.is_file():
+        raise InputFileError(f"{path}: no such uncertainty-priors file; check the --uncertainty-priors path "
+                             f"(columns {','.join(_COLUMNS)})")
+    own = _read_rows(path, str(path))
+    keys = {(r.parameter, r.muscle) for r in own}
+    rows = tuple(r for r in base.rows if (r.parameter, r.muscle) not in keys) + tuple(own)
+    return Priors(rows, str(path), (str(path),))
+
+
+def zero_priors() -> Priors:
+    """The package's priors with every spread 0 (the bands collapse to the nominal result)."""
+    from dataclasses import replace
+
+    return Priors(tuple(replace(r, spread=0.0) for r in default_priors().rows), "all spreads zero")
+
+
+@dataclass(frozen=True)
+class Draw:
+    """The factors of one sample: ``factors[parameter]`` an array over ``muscles`` (per-muscle
+    parameters) and ``height`` a number."""
+
+    index: int
+    muscles: tuple[str, ...]
+    factors: dict
+    height: float
+
+    def parameters(self, params):
+        """``params`` (:class:`~musclemetab.redundancy.parameters.MuscleTendonParameters`, any
+        muscles of this draw) with the solve parameters multiplied by their factors."""
+        from .redundancy.parameters import PARAMETER_FIELDS, MuscleTendonParameters
+
+        pos = {m: i for i, m in enumerate(self.muscles)}
+        missing = [n for n in params.names if n not in pos]
+        if missing:
+            from .errors import DataMismatchError
+
+            raise DataMismatchError(f"the sample has no factors for muscle(s) {', '.join(missing)}")
+        idx = np.array([pos[n] for n in params.names], dtype=int)
+        kw = {f: np.asarray(getattr(params, f), dtype=float).copy() for f in PARAMETER_FIELDS}
+        for p, fname in SOLVE_PARAMETERS.items():
+            kw[fname] = kw[fname] * self.factors[p][idx]
+        return MuscleTendonParameters(names=params.names, sources={**params.sources, "uncertainty sample": self.index},
+                                      **kw)
+
+    def metabolic_properties(self, masses_kg, slow_twitch):
+        """Muscle masses and slow-twitch fractions (arrays over this draw's muscles) with their factors."""
+        return (np.asarray(masses_kg, dtype=float) * self.factors["muscle_mass"],
+                np.clip(np.asarray(slow_twitch, dtype=float) * self.factors["slow_twitch_fraction"], 0.0, 1.0))
+
+    def table(self):
+        """One row per muscle, one column per factor (and the height factor on every row)."""
+        import pandas as pd
+
+        df = pd.DataFrame({"muscle": list(self.muscles), **{p: self.factors[p] for p in MUSCLE_PARAMETERS}})
+        df["height"] = self.height
+        return df
+
+
+def sobol_normal(dimension: int, index: int, seed: int) -> np.ndarray:
+    """Point ``index`` of the scrambled Sobol' sequence of ``dimension`` with ``seed``, as standard normal values."""
+    import warnings
+
+    from scipy.stats import norm, qmc
+
+    engine = qmc.Sobol(dimension, scramble=True, seed=int(seed))
+    if index:
+        engine.fast_forward(int(index))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # balance of a single point: not asked for
+        u = engine.random(1)[0]
+    return norm.ppf(np.clip(u, 1e-12, 1.0 - 1e-12))
+
+
+def draw(priors: Priors, muscles: Sequence[str], index: int, seed: int) -> Draw:
+    """The factors of sample ``index`` for ``muscles`` (module doc)."""
+    muscles = tuple(muscles)
+    priors.check_muscles(muscles)
+    m = len(muscles)
+    z = sobol_normal(len(MUSCLE_PARAMETERS) * m + len(GLOBAL_PARAMETERS), index, seed)
+    factors = {}
+    for j, p in enumerate(MUSCLE_PARAMETERS):
+        zj = z[j * m:(j + 1) * m]
+        factors[p] = np.array([float(priors.prior(p, mu).factor(zk)) for mu, zk in zip(muscles, zj)])
+    height = float(priors.prior("height").factor(z[-1]))
+    return Draw(int(index), muscles, factors, height)
+
+
+def band(values) -> tuple[float, float, float]:
+    """``(5 %, median, 95 %)`` of the finite ``values`` (NaN when there are none)."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    if not v.size:
+        return (math.nan, math.nan, math.nan)
+    q = np.quantile(v, [0.05, 0.5, 0.95])
+    return float(q[0]), float(q[1]), float(q[2])
+
+
+def band_table(samples, keys: Sequence[str], columns: Sequence[str]):
+    """The bands of ``columns`` of the table ``samples`` (one row per sample and key), one row per
+    key: ``<column>_p05``, ``_p50``, ``_p95`` and ``uncertainty_samples`` (the number of samples)."""
+    import pandas as pd
+
+    rows = []
+    cols = [c for c in columns if c in samples]
+    for key, group in samples.groupby(list(keys), sort=False, dropna=False):
+        key = key if isinstance(key, tuple) else (key,)
+        row = dict(zip(keys, key))
+        row["uncertainty_samples"] = int(len(group))
+        for c in cols:
+            lo, mid, hi = band(pd.to_numeric(group[c], errors="coerce"))
+            row[c + "_p05"], row[c + "_p50"], row[c + "_p95"] = lo, mid, hi
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def with_bands(table, bands, keys: Sequence[str]):
+    """``table`` with the band columns of ``bands`` beside each rate and ``uncertainty_samples``
+    (0 for rows without samples)."""
+    import pandas as pd
+
+    if bands is None or not len(bands):
+        out = table.copy()
+        out["uncertainty_samples"] = 0
+        return out
+    merged = table.merge(bands, on=list(keys), how="left", validate="many_to_one")
+    merged["uncertainty_samples"] = pd.to_numeric(merged["uncertainty_samples"]).fillna(0).astype(int)
+    order = []
+    for c in table.columns:
+        order.append(c)
+        order += [c + s for s in BAND_SUFFIXES if c + s in merged]
+    order.append("uncertainty_samples")
+    return merged[order]
+
+
+def adapted_start(solution, params):
+    """A warm start for the problem with the parameters ``params``, from ``solution`` (solved with
+    its own parameters on the same mesh): the same tendon forces (N), so that the moments stay
+    balanced, with the fiber states that give them under ``params``.
+
+    The musculotendon length follows from the solution (``lMT = sqrt(lM^2 - w^2) + lTs l~T``, with
+    ``l~T`` the inverse of the tendon curve at its force); under ``params`` the tendon takes
+    ``l~T = fT^-1(FT / F0)``, the fiber ``lM = sqrt((lMT - lTs l~T)^2 + w^2)`` (``l~M`` within
+    0.2-1.6), its velocity the derivative of a not-a-knot spline through ``l~M``, and the activation
+    the Hill equilibrium ``a = (F~T / cos(alpha) - fPE) / (fL fV)`` within [0, 1] (the excitation
+    the same). A starting point only: the solve finds the optimum.
+    """
+    from dataclasses import replace
+
+    from scipy.interpolate import CubicSpline
+
+    from .muscle import active_force_length, force_velocity, passive_force_length, tendon_length_from_force
+
+    p0 = solution.parameters.subset(solution.muscles)
+    p1 = params.subset(solution.muscles)
+    force = np.asarray(solution.tendon_force_N, dtype=float)
+    lm0 = np.asarray(solution.lm_norm, dtype=float) * p0.optimal_fiber_length_m
+    lmt = (np.sqrt(np.maximum(lm0**2 - p0.width_m**2, 0.0))
+           + p0.tendon_slack_length_m * tendon_length_from_force(force / p0.max_isometric_force_N, p0.tendon_stiffness))
+    ft = force / p1.max_isometric_force_N
+    along = lmt - p1.tendon_slack_length_m * tendon_length_from_force(ft, p1.tendon_stiffness)
+    lm_norm = np.clip(np.sqrt(np.maximum(along, 0.0)**2 + p1.width_m**2) / p1.optimal_fiber_length_m, 0.2, 1.6)
+    lm = lm_norm * p1.optimal_fiber_length_m
+    cos_alpha = np.sqrt(np.maximum(lm**2 - p1.width_m**2, 1e-12)) / lm
+    velocity = CubicSpline(solution.time_s, lm_norm, axis=0, bc_type="not-a-knot")(solution.time_s, 1)
+    fl = active_force_length(lm_norm)
+    fv = force_velocity(velocity / p1.max_contraction_velocity)
+    fpe = passive_force_length(lm_norm, p1.passive_kpe, p1.passive_s0, p1.passive_sm)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        activation = np.nan_to_num(np.clip((ft / cos_alpha - fpe) / (fl * fv), 0.0, 1.0), nan=0.0)
+    return replace(solution, lm_norm=lm_norm, activation=activation, excitation=activation.copy(),
+                   fiber_velocity_lmo_per_s=velocity, parameters=p1)

@@ -1,0 +1,282 @@
+"""Uncertainty bands: the priors, the samples' factors, the warm start adapted to a sample, the
+samples as study units (resumable, the same on one and two workers), the bands of results.csv and
+per_muscle.csv (collapsing to the nominal result with every spread zero) and the report's bands.
+
+One study (the example subject's normal trial, EFFORT-GEN, two models, two samples with every
+spread zero) is run once on two worker processes; its samples are the only solves here.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from musclemetab.errors import InputFileError, OptionError, UnknownMuscleError
+from musclemetab.uncertainty import (
+    MUSCLE_PARAMETERS,
+    band,
+    default_priors,
+    draw,
+    read_priors,
+)
+
+STUDY = """name = "uncertainty"
+output = "out"
+workflows = ["effort-gen"]
+models = ["UM10", "BH04"]
+
+[uncertainty]
+samples = 2
+seed = 7
+priors = "zero.csv"
+
+[[subjects]]
+name = "sub1"
+model = "{ex.model}"
+body_mass_kg = {ex.body_mass_kg}
+height_m = {ex.height_m}
+
+[[subjects.trials]]
+name = "normal"
+ik = "{ex.ik[normal]}"
+id = "{ex.id[normal]}"
+"""
+
+
+def _zero_priors_csv(path: Path) -> Path:
+    rows = ["parameter,spread"] + [f"{p},0" for p in (*MUSCLE_PARAMETERS, "height")]
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+# ------------------------------------------------------------------------------------- priors
+def test_package_priors_name_every_parameter_with_a_source():
+    priors = default_priors()
+    assert {r.parameter for r in priors.rows} == {*MUSCLE_PARAMETERS, "height"}
+    assert all(r.source and r.spread > 0 for r in priors.rows)
+    assert priors.prior("kT", "soleus_r").distribution == "lognormal"
+
+
+def test_priors_file_replaces_rows_and_refuses_unknown_names(tmp_path):
+    own = tmp_path / "own.csv"
+    own.write_text("parameter,distribution,spread,muscle\nkT,lognormal,0.5,soleus\nF0,normal,0.1,\n")
+    priors = read_priors(own)
+    assert priors.prior("kT", "soleus_r").spread == 0.5  # the side-free row covers both sides
+    assert priors.prior("kT", "gasmed_r").spread == default_priors().prior("kT").spread
+    assert priors.prior("F0", "gasmed_r").distribution == "normal"
+    bad = tmp_path / "bad.csv"
+    bad.write_text("parameter,spread\ntendon_stifness,0.3\n")
+    with pytest.raises(InputFileError, match=r"bad.csv: line 2: unknown parameter 'tendon_stifness'"):
+        read_priors(bad)
+    bad.write_text("parameter,spread,colour\nkT,0.3,red\n")
+    with pytest.raises(InputFileError, match="unknown column colour"):
+        read_priors(bad)
+    bad.write_text("parameter,spread\nkT,-0.1\n")
+    with pytest.raises(InputFileError, match="spread '-0.1' of kT"):
+        read_priors(bad)
+    own.write_text("parameter,spread,muscle\nkT,0.5,solues\n")
+    with pytest.raises(UnknownMuscleError, match="solues"):
+        draw(read_priors(own), ["soleus_r", "gasmed_r"], 0, 1)
+
+
+# ------------------------------------------------------------------------------------- samples
+def test_sample_factors_are_sobol_points_through_the_normal_quantile():
+    """Factor = exp(spread z) (lognormal) or 1 + spread z (normal), z the inverse normal CDF of the
+    sample's point of the scrambled Sobol' sequence, computed here from scipy's whole sequence."""
+    from scipy.stats import norm, qmc
+
+    muscles = ["soleus_r", "gasmed_r", "vaslat_r"]
+    priors = default_priors()
+    points = qmc.Sobol(len(MUSCLE_PARAMETERS) * 3 + 1, scramble=True, seed=5).random(8)
+    for k in (0, 5):
+        d = draw(priors, muscles, k, 5)
+        z = norm.ppf(points[k])
+        s = priors.prior("F0").spread
+        np.testing.assert_allclose(d.factors["F0"], np.exp(s * z[0:3]), rtol=1e-12)
+        j = MUSCLE_PARAMETERS.index("slow_twitch_fraction")
+        np.testing.assert_allclose(d.factors["slow_twitch_fraction"],
+                                   1 + priors.prior("slow_twitch_fraction").spread * z[3 * j:3 * j + 3], rtol=1e-12)
+        assert d.height == pytest.approx(1 + priors.prior("height").spread * z[-1], rel=1e-12)
+    # another seed, other factors; the same seed, the same factors in any process
+    assert not np.allclose(draw(priors, muscles, 5, 6).factors["F0"], draw(priors, muscles, 5, 5).factors["F0"])
+
+
+def test_band_is_the_5_50_95_quantiles():
+    # 0, 1, ..., 100: the 5 % quantile with linear interpolation is 5 (worked by hand: position 0.05 x 100)
+    assert band(np.arange(101.0)) == (5.0, 50.0, 95.0)
+    assert band([2.0, np.nan, 4.0]) == (2.1, 3.0, 3.9)
+    assert all(math.isnan(v) for v in band([np.nan]))
+
+
+def test_study_file_uncertainty_table(tmp_path, example):
+    from musclemetab.study.spec import load_study
+
+    _zero_priors_csv(tmp_path / "zero.csv")
+    path = tmp_path / "study.toml"
+    path.write_text(STUDY.format(ex=example))
+    study = load_study(path)
+    assert study.settings["uncertainty"] == {"samples": 2, "seed": 7, "priors": str((tmp_path / "zero.csv").resolve())}
+    path.write_text(STUDY.format(ex=example).replace("seed = 7", "seed = 7\nsampels = 3"))
+    with pytest.raises(OptionError, match=r"\[uncertainty\]: unknown key\(s\) sampels"):
+        load_study(path)
+    path.write_text(STUDY.format(ex=example).replace("samples = 2", "samples = -2"))
+    with pytest.raises(OptionError, match="'samples' = -2 is not a number of uncertainty samples"):
+        load_study(path)
+
+
+def test_command_line_options(tmp_path, example):
+    from musclemetab.commands import build_parser
+    from musclemetab.study.spec import load_study
+    from musclemetab.commands.run import apply_uncertainty_arguments
+    from musclemetab.study.uncertainty import sample_units
+
+    _zero_priors_csv(tmp_path / "zero.csv")
+    path = tmp_path / "study.toml"
+    path.write_text(STUDY.format(ex=example))
+    study = load_study(path)
+    args = build_parser("run").parse_args(["run", str(path), "--uncertainty", "5", "--uncertainty-seed", "3"])
+    changed = apply_uncertainty_arguments(study, args)
+    assert changed.settings["uncertainty"]["samples"] == 5 and changed.settings["uncertainty"]["seed"] == 3
+    assert [u.sample for u in sample_units(changed)] == [0, 1, 2, 3, 4]
+    none = apply_uncertainty_arguments(study, build_parser("run").parse_args(["run", str(path), "--uncertainty", "0"]))
+    assert "uncertainty" not in none.settings and sample_units(none) == []
+    with pytest.raises(OptionError, match="--uncertainty = -1"):
+        apply_uncertainty_arguments(study, build_parser("run").parse_args(["run", str(path), "--uncertainty", "-1"]))
+
+
+# ------------------------------------------------------------------------------------- the study
+@pytest.fixture(scope="module")
+def zero_study(example, tmp_path_factory):
+    from musclemetab.study.runner import run_study
+    from musclemetab.study.spec import load_study
+
+    root = tmp_path_factory.mktemp("uncertainty")
+    _zero_priors_csv(root / "zero.csv")
+    (root / "study.toml").write_text(STUDY.format(ex=example))
+    study = load_study(root / "study.toml")
+    run = run_study(study, workers=2, progress=False)
+    assert not run.failed, run.failed
+    return study, run
+
+
+def test_zero_spreads_collapse_the_bands_to_the_nominal_result(zero_study):
+    study, run = zero_study
+    out = Path(study.output)
+    results = pd.read_csv(out / "results.csv")
+    per_muscle = pd.read_csv(out / "per_muscle.csv")
+    assert (results["uncertainty_samples"] == 2).all() and (per_muscle["uncertainty_samples"] == 2).all()
+    # the columns of a band stand beside the rate
+    cols = list(results.columns)
+    i = cols.index("whole_body_W_per_kg")
+    assert cols[i + 1:i + 4] == ["whole_body_W_per_kg_p05", "whole_body_W_per_kg_p50", "whole_body_W_per_kg_p95"]
+    # the samples solve the nominal problem again (warm-started): the bands are the nominal values
+    # to the solver's tolerance
+    for c in ("whole_body_W_per_kg", "stance_energy_share_pct", "share_PF_pct"):
+        for s in ("_p05", "_p50", "_p95"):
+            np.testing.assert_allclose(results[c + s], results[c], rtol=1e-4, atol=1e-4)
+    big = per_muscle["muscle_W"] > 1.0
+    np.testing.assert_allclose(per_muscle.loc[big, "muscle_W_p95"], per_muscle.loc[big, "muscle_W"], rtol=2e-3)
+    # every factor of the samples is 1
+    factors = pd.read_csv(out / "units/sub1/normal/effort-gen/samples/0001/factors.csv")
+    assert (factors.drop(columns="muscle").to_numpy() == 1.0).all()
+    # every column is in the data dictionary, for its file
+    from test_datadict_columns import undocumented
+
+    assert not undocumented(out / "results.csv", results.columns)
+    assert not undocumented(out / "per_muscle.csv", per_muscle.columns)
+    assert not undocumented(out / "factors.csv", factors.columns)
+
+
+def test_samples_are_resumable_and_the_same_in_this_process(zero_study):
+    """A sample run again in this process (one worker) gives the files its pool worker wrote, bit for
+    bit; a second run finds every unit up to date."""
+    from musclemetab.study.runner import run_study
+    from musclemetab.study.units import execute_unit, read_unit_record, unit_key
+    from musclemetab.study.uncertainty import sample_units
+
+    study, run = zero_study
+    out = Path(study.output)
+    assert len(run.ran) == 3  # the trial unit and its two samples
+    again = run_study(study, workers=1, progress=False)
+    assert again.ran == [] and len(again.skipped) == 3
+    unit = sample_units(study)[1]
+    folder = out / unit.folder
+    before = read_unit_record(folder)["outputs"]
+    nominal = unit.depends_on(study)
+    key = unit_key(study, unit, unit_key(study, nominal))
+    assert key == read_unit_record(folder)["key"]
+    rec = execute_unit(study, unit, key, str(out / nominal.folder))
+    assert rec["status"] == "ok" and rec["converged"]
+    assert rec["outputs"] == before
+
+
+def test_adapted_start_keeps_the_tendon_forces(zero_study):
+    """The warm start of a sample keeps the nominal tendon forces under the sample's parameters: the
+    forces recomputed from its fiber lengths (derived_quantities) equal the solution's; with the
+    solution's own parameters it gives back the solution's fiber lengths."""
+    from musclemetab.redundancy.solution import Solution, derived_quantities
+    from musclemetab.muscle import tendon_length_from_force
+    from musclemetab.uncertainty import adapted_start
+
+    study, _ = zero_study
+    sol = Solution.load(Path(study.output) / "units/sub1/normal/effort-gen")
+    p0 = sol.parameters.subset(sol.muscles)
+    same = adapted_start(sol, p0)
+    inside = (sol.lm_norm > 0.2) & (sol.lm_norm < 1.6)
+    np.testing.assert_allclose(same.lm_norm[inside], sol.lm_norm[inside], rtol=1e-8)
+    factors = draw(default_priors(), sol.muscles, 3, 1)
+    p1 = factors.parameters(p0)
+    start = adapted_start(sol, p1)
+    lm0 = sol.lm_norm * p0.optimal_fiber_length_m
+    lmt = np.sqrt(lm0**2 - p0.width_m**2) + p0.tendon_slack_length_m * tendon_length_from_force(
+        sol.tendon_force_N / p0.max_isometric_force_N, p0.tendon_stiffness)
+    d = derived_quantities(p1, start.activation, start.lm_norm, start.fiber_velocity_lmo_per_s, lmt)
+    ok = (start.lm_norm > 0.2 + 1e-9) & (start.lm_norm < 1.6 - 1e-9) & (sol.tendon_force_N > 1.0)
+    assert ok.mean() > 0.9
+    np.testing.assert_allclose(d["tendon_force_N"][ok], sol.tendon_force_N[ok], rtol=1e-6)
+
+
+def test_report_draws_the_bands(zero_study):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from musclemetab.report.figures import group_shares, phase_shares
+    from musclemetab.report.folder import read_study_folder
+    from musclemetab.report.page import uncertainty_section
+
+    study, _ = zero_study
+    folder = read_study_folder(study.output)
+    section = uncertainty_section(folder)
+    assert section["samples"] == 2 and section["seed"] == 7 and section["converged"] == "2"
+    row = folder.ok[folder.ok["model"] == "UM10"].iloc[0]
+    cell = section["whole_body"].body[[r[1] for r in section["whole_body"].body].index("UM10")][2]
+    assert cell.startswith(f"{row['whole_body_W_per_kg']:.3f} [")
+    assert [r[0] for r in section["priors"].body] == [r.parameter for r in read_priors(
+        json.loads((Path(study.output) / "study.json").read_text())["uncertainty"]["priors"]).rows]
+    assert "[" in section["muscles"]["UM10"].body[0][1]
+    fig = phase_shares(folder.ok)
+    gids = {a.get_gid() for ax in fig.axes for a in ax.get_children()}
+    assert "band:stance:effort-gen" in gids and "band:swing:UM10:sub1" in gids
+    fig2 = group_shares(folder.ok)
+    assert any(str(a.get_gid()).startswith("band:groups:effort-gen:UM10") for ax in fig2.axes for a in ax.get_children())
+    plt.close("all")
+
+
+def test_a_legs_samples_live_in_its_leg_unit(tmp_path):
+    """A sample of a leg unit (side = both) is a folder inside that leg's unit folder, which the run
+    prepares for the leg unit alone (the sample's parent is the leg unit, replaced as a whole)."""
+    from musclemetab.study.units import Unit, prepare_leg_folder
+
+    sample = Unit("sub", "walk", "effort-gen", "l", sample=3)
+    assert sample.folder == Path("units/sub/walk/effort-gen/l/samples/0003")
+    assert sample.label == "sub/walk/effort-gen/l/sample 3"
+    prepare_leg_folder(tmp_path, sample)
+    assert not any(tmp_path.iterdir())
+    assert sample.depends_on(None) == Unit("sub", "walk", "effort-gen", "l")
