@@ -151,7 +151,7 @@ def test_converges_with_the_study_problem_size(example, emg_ten, parameters, sol
     assert rec["problem_size"]["variables"] == 77250 - 7
     assert rec["problem_size"]["equality_constraints"] == 62002 - 7
     assert rec["problem_size"]["inequality_constraints"] == 3375
-    assert sorted(p.name for p in out.iterdir()) == sorted([*TRIALS, "parameters.json",
+    assert sorted(p.name for p in out.iterdir()) == sorted([*TRIALS, "parameters.json", ".musclemetab-files",
                                                             f"{example.model.stem}_personalised.osim"])
     for t in TRIALS:
         s = solutions[t].summary
@@ -656,7 +656,8 @@ def test_unconverged_emg_ten_is_reported(example, cache_dir, geometries, tmp_pat
     assert code == 1 and "did not converge" in err and "Maximum_Iterations_Exceeded" in err
     doc = json.loads((out / "parameters.json").read_text())
     assert doc["solve"]["success"] is False
-    assert sorted(p.name for p in out.iterdir()) == sorted([p.stem for p in ik] + ["parameters.json"])
+    assert sorted(p.name for p in out.iterdir()) == sorted([p.stem for p in ik] + ["parameters.json",
+                                                                                ".musclemetab-files"])
     assert main(["solve", "--workflow", "effort-ten", "--model", str(example.model), "--ik", str(ik[1]),
                  "--id", str(idf[1]), "--parameters", str(out / "parameters.json"), "--out", str(tmp_path / "y")]) == 1
     assert "did not converge" in capsys.readouterr().err

@@ -269,8 +269,8 @@ def test_solution_files(solved):
     from musclemetab.io import read_storage
 
     sol, folder = solved("normal", "effort-gen")
-    assert sorted(p.name for p in folder.iterdir()) == ["controls.sto", "forces.sto", "model.osim", "solution.sto",
-                                                        "states.sto", "summary.json"]  # docs/opensim_files.md
+    assert sorted(p.name for p in folder.iterdir()) == [".musclemetab-files", "controls.sto", "forces.sto", "model.osim",
+                                                        "solution.sto", "states.sto", "summary.json"]  # docs/opensim_files.md
     df = read_storage(folder / "solution.sto")
     assert df.attrs["in_degrees"] is False
     quantities = ("excitation", "activation", "normalized_fiber_length", "normalized_fiber_velocity",

@@ -487,7 +487,7 @@ def test_save_figure(tmp_path):
     assert set(paths) == {"png", "svg"}
     assert paths["png"].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert b"<svg" in paths["svg"].read_bytes()[:2000]
-    assert sorted(p.name for p in (tmp_path / "figs").iterdir()) == ["groups.png", "groups.svg"]
+    assert sorted(p.name for p in (tmp_path / "figs").iterdir()) == [".musclemetab-files", "groups.png", "groups.svg"]
     with pytest.raises(OptionError):
         save_figure(fig, tmp_path, "../x")
 
@@ -540,7 +540,7 @@ def test_write_report(study, tmp_path):
         assert f"<th scope=\"row\">{pkg}</th>" in text and ver in text
     assert "Method" in text and "None: every unit of the study succeeded" in text
     # atomic: no temporary file left anywhere
-    leftovers = [q for q in study.rglob(".*") if q.name.startswith(".")]
+    leftovers = [q for q in study.rglob(".*") if q.name.startswith(".") and q.name != ".musclemetab-files"]
     assert leftovers == []
 
 

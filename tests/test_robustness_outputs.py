@@ -25,7 +25,7 @@ import pytest
 
 from musclemetab.commands import build_parser, main
 from musclemetab.errors import OptionError, OutputError
-from musclemetab.io.atomic import FolderLock, atomic_directory
+from musclemetab.io.atomic import FILES_MANIFEST, FolderLock, atomic_directory, written_files
 from musclemetab.study.spec import NUMBER_KEYS, study_from_dict
 
 TESTS = Path(__file__).resolve().parent
@@ -50,6 +50,15 @@ def _one_line_error(capsys) -> str:
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and err.startswith("musclemetab: error: "), err
     return err
+
+
+def _previous_output(folder: Path, files: dict[str, str]) -> dict[Path, str]:
+    """``files`` (name -> text) written into ``folder`` as the package writes its outputs (listed
+    in ``.musclemetab-files``), as a previous run would have left them; ``{path: text}``."""
+    with atomic_directory(folder, mark=True) as tmp:
+        for name, text in files.items():
+            (tmp / name).write_text(text)
+    return {folder / name: text for name, text in files.items()}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -395,10 +404,9 @@ def test_a_file_size_limit_is_one_line_with_the_previous_output_kept(example, tm
     ``OSError: [Errno 27] File too large``), the previous output as it was, no lock, no
     temporary folder."""
     out = tmp_path / "out"
-    out.mkdir()
     previous = {"solution.sto": "previous solution\n", "summary.json": '{"previous": true}\n'}
-    for name, text in previous.items():
-        (out / name).write_text(text)
+    _previous_output(out, previous)
+    listed = (out / FILES_MANIFEST).read_text()
     memo = os.environ.get("MUSCLEMETAB_TEST_SOLVE_MEMO", str(tmp_path / "memo"))
     code = _CHILD.format(tests=str(TESTS), memo=memo, limit=64 * 1024,
                          args=["solve", *_files(example), "--out", str(out)])
@@ -408,13 +416,17 @@ def test_a_file_size_limit_is_one_line_with_the_previous_output_kept(example, tm
     assert err[-1] == (f"musclemetab: error: cannot write the output folder {out} (a file would exceed the file-size "
                        "limit (ulimit -f)); the files of this step were not written (the folder keeps what it held): "
                        "free space or choose a folder you can write to, and run again")
-    assert {p.name: p.read_text() for p in out.iterdir()} == previous
+    assert {p.name: p.read_text() for p in out.iterdir()} == {**previous, FILES_MANIFEST: listed}
 
 
-def test_a_second_solve_on_the_same_output_folder_refuses(example, tmp_path, capsys, decoy):
-    """Another process holds ``--out`` (as a running ``solve`` does): ``solve`` refuses, naming the
-    lock and the process, and leaves the lock and the folder as they were."""
+@pytest.mark.parametrize("command", ["solve", "estimate"])
+def test_a_second_run_on_the_same_output_folder_refuses(example, tmp_path, capsys, decoy, command):
+    """Another process holds ``--out`` (as a running ``solve`` or ``estimate`` does): the command
+    refuses, naming the lock and the process, before it reads any input, and leaves the lock and
+    the folder as they were."""
     out = tmp_path / "out"
+    extra = ["--estimate", "tendon_stiffness=soleus_r", "--ultrasound", str(tmp_path / "not_read.mot")] \
+        if command == "estimate" else []
     holder = subprocess.Popen(
         [sys.executable, "-c", "import sys, time\nfrom musclemetab.io.atomic import FolderLock\n"
          f"with FolderLock({str(out)!r}, 'output folder'):\n    print('held', flush=True)\n    sys.stdin.read()"],
@@ -422,9 +434,10 @@ def test_a_second_solve_on_the_same_output_folder_refuses(example, tmp_path, cap
     try:
         assert holder.stdout.readline().strip() == "held"
         lock = json.loads((out / ".musclemetab.lock").read_text())
-        assert main(["solve", *_files(example), "--out", str(out)]) == 1
+        assert main([command, *_files(example), *extra, "--out", str(out)]) == 1
         err = _one_line_error(capsys)
         assert f"the output folder {out} is in use by another musclemetab run (process {holder.pid}" in err
+        assert f"lock file {out / '.musclemetab.lock'}" in err and "not_read.mot" not in err
         assert json.loads((out / ".musclemetab.lock").read_text()) == lock
     finally:
         holder.communicate("", timeout=30)
@@ -441,6 +454,150 @@ def test_the_lock_of_solve_is_released_and_an_empty_folder_removed_on_an_error(t
     with FolderLock(tmp_path / "kept") as lock:  # a folder that existed stays, empty
         assert lock.path.is_file()
     assert list((tmp_path / "kept").iterdir()) == []
+
+
+def test_the_list_of_written_files_is_what_sha256sum_checks_and_survives_a_failed_move(tmp_path, monkeypatch):
+    """``.musclemetab-files`` lists each file the package placed with its SHA-256 in the format of
+    ``sha256sum`` (checked by that program, or by hashlib without it). A move that fails half-way
+    leaves the old file, which the list still knows (old and new SHA-256 both listed), so the next
+    run replaces it."""
+    import hashlib
+
+    out = tmp_path / "out"
+    _previous_output(out, {"a.txt": "old a\n", "b.txt": "old b\n"})
+    with atomic_directory(out, mark=True) as tmp:  # the package's own files: replaced, listed anew
+        (tmp / "a.txt").write_text("new a\n")
+    if shutil.which("sha256sum"):
+        check = subprocess.run(["sha256sum", "--check", "--strict", FILES_MANIFEST], cwd=out, capture_output=True,
+                               text=True)
+        assert check.returncode == 0 and check.stdout.splitlines() == ["a.txt: OK", "b.txt: OK"], check
+    listed = written_files(out)
+    assert listed == {n: {hashlib.sha256((out / n).read_bytes()).hexdigest()} for n in ("a.txt", "b.txt")}
+    real = os.replace
+
+    def failing(src, dst):
+        if Path(dst).name == "a.txt":
+            raise OSError(errno.EIO, os.strerror(errno.EIO), str(dst))
+        return real(src, dst)
+
+    monkeypatch.setattr(os, "replace", failing)
+    with pytest.raises(OutputError):
+        with atomic_directory(out, mark=True) as tmp:
+            (tmp / "a.txt").write_text("newer a\n")
+    monkeypatch.setattr(os, "replace", real)
+    assert (out / "a.txt").read_text() == "new a\n" and len(written_files(out)["a.txt"]) == 2
+    with atomic_directory(out, mark=True) as tmp:
+        (tmp / "a.txt").write_text("newest a\n")
+    assert written_files(out)["a.txt"] == {hashlib.sha256(b"newest a\n").hexdigest()}
+
+
+def _demo_unit(demo) -> Path:
+    """A solved unit folder of the demo study (solution, metabolics and analysis files)."""
+    return next(p.parent for p in sorted((demo[0] / "units").rglob("summary.json")))
+
+
+def _user_file_case(case, example, demo, tmp_path):
+    """``(command line, the file in the way, the words of the refusal)`` of one command of
+    :func:`test_a_file_the_package_did_not_write_is_never_replaced`."""
+    out = tmp_path / "out"
+    not_ours = "was not written by musclemetab ({} has no .musclemetab-files"
+    if case == "solve":
+        return ["solve", *_files(example), "--out", str(out)], out / "solution.sto", not_ours.format(out)
+    if case == "solve --side both":
+        _previous_output(out / "l", {"summary.json": "{}\n"})  # a folder of the package, listed
+        return (["solve", *_files(example), "--side", "both", "--cycle", "auto", "--out", str(out)],
+                out / "l" / "states.sto", f"was not written by musclemetab (not listed in {out / 'l' / FILES_MANIFEST})")
+    if case == "solve --workflow emg-ten":
+        return (["solve", "--workflow", "emg-ten", *_files(example), "--emg", str(example.emg["normal"]),
+                 "--labels", "normal", "--out", str(out)], out / "normal" / "summary.json",
+                not_ours.format(out / "normal"))
+    if case == "estimate":
+        _previous_output(out, {"parameters.json": "{}\n"})
+        return (["estimate", *_files(example), "--ultrasound", str(tmp_path / "not_read.mot"), "--estimate",
+                 "tendon_stiffness=soleus_r", "--out", str(out)], out / "parameters.json",
+                "was changed since musclemetab wrote it")
+    unit = _demo_unit(demo)
+    if case == "metabolics":
+        return (["metabolics", "--solution", str(unit), "--model", str(example.model), "--mass", "72.6",
+                 "--out", str(out)], out / "per_muscle.csv", not_ours.format(out))
+    if case == "analyse":
+        return ["analyse", "--solution", str(unit), "--out", str(out)], out / "analysis.csv", not_ours.format(out)
+    study = tmp_path / "study"  # report: the page of the demo's study, changed by the user
+    shutil.copytree(demo[0], study)
+    return (["report", str(study), "--force"], study / "report.html", "was changed since musclemetab wrote it")
+
+
+@pytest.mark.parametrize("case", ["solve", "solve --side both", "solve --workflow emg-ten", "estimate", "metabolics",
+                                  "analyse", "report"])
+def test_a_file_the_package_did_not_write_is_never_replaced(example, demo, tmp_path, capsys, decoy, case):
+    """A file of the user under one of the package's output names (or the package's file, changed
+    since): the command refuses in one line naming the file and the remedy, before its work,
+    and the file and its folder stay as they were (no lock, no temporary, no list added)."""
+    args, path, words = _user_file_case(case, example, demo, tmp_path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("the user's own file\n")
+    before = {p: p.read_bytes() for p in path.parent.iterdir() if p.is_file()}
+    started = time.monotonic()
+    assert main(args) == 1
+    err = _one_line_error(capsys)
+    assert f"{path} {words}" in err, err
+    assert err.endswith("it is not replaced: move the file away, or choose another output folder (--out)"), err
+    assert {p: p.read_bytes() for p in path.parent.iterdir() if p.is_file()} == before
+    assert time.monotonic() - started < 10.0  # refused before the solve, the metabolic models or the figures
+
+
+def test_the_files_the_package_wrote_are_replaced_and_listed_anew(example, demo, tmp_path, capsys):
+    """``metabolics`` into a copy of a demo unit folder (its files listed by the study): the
+    package's files are replaced, the list holds their new SHA-256 (hashlib), the others stay."""
+    import hashlib
+
+    unit = tmp_path / "unit"
+    shutil.copytree(_demo_unit(demo), unit)
+    solution = (unit / "solution.sto").read_bytes()
+    (unit / "per_muscle.csv").write_text("")  # not the file the study listed: refused ...
+    assert main(["metabolics", "--solution", str(unit), "--model", str(example.model), "--mass", "72.6",
+                 "--out", str(unit)]) == 1
+    assert f"{unit / 'per_muscle.csv'} was changed since musclemetab wrote it" in _one_line_error(capsys)
+    shutil.copy(_demo_unit(demo) / "per_muscle.csv", unit / "per_muscle.csv")  # ... the listed one is replaced
+    assert main(["metabolics", "--solution", str(unit), "--model", str(example.model), "--mass", "72.6",
+                 "--out", str(unit)]) == 0
+    listed = written_files(unit)
+    for name in ("metabolics.sto", "per_muscle.csv", "whole_body.csv", "plausibility.json", "solution.sto"):
+        assert listed[name] == {hashlib.sha256((unit / name).read_bytes()).hexdigest()}, name
+    assert (unit / "solution.sto").read_bytes() == solution
+
+
+@pytest.mark.parametrize("put, replaced", [("notes.txt", False), ("solution.sto", True)])
+def test_a_unit_folder_holding_a_file_the_package_did_not_write_is_not_replaced(example, tmp_path, monkeypatch, put,
+                                                                                 replaced):
+    """A unit's folder lists its files; run again, the unit's folder is replaced only when every
+    file in it is listed: a file of the user (notes) makes the unit fail naming it, and stays; a
+    listed output the user changed is redone, as resuming does (docs/study.md)."""
+    from musclemetab.errors import InputFileError
+    from musclemetab.study import run_study
+    from musclemetab.study import units as units_mod
+
+    def failing(study, unit, tmp, *dependencies):  # a unit that writes a file, then fails on its input
+        (tmp / "solution.sto").write_text("half")
+        raise InputFileError("a broken input of the test")
+
+    monkeypatch.setattr(units_mod, "_run_trial", failing)
+    data = {"workflows": ["effort-gen"], "models": ["UM10"],
+            "subjects": [{"name": "s", "model": str(example.model), "body_mass_kg": 72.6, "height_m": 1.743,
+                          "trials": [{"name": "normal", "ik": str(example.ik["normal"]),
+                                      "id": str(example.id["normal"])}]}]}
+    study = study_from_dict(data, base="/", output=tmp_path / "study")
+    run_study(study, workers=1, progress=False)
+    folder = tmp_path / "study" / "units" / "s" / "normal" / "effort-gen"
+    assert set(written_files(folder)) == {"solution.sto", "unit.json", units_mod.MARKER_FILE}
+    (folder / put).write_text("the user's")
+    run = run_study(study, workers=1, progress=False)
+    reason = run.failed["s/normal/effort-gen"]
+    if replaced:
+        assert reason == "InputFileError: a broken input of the test" and (folder / put).read_text() == "half"
+    else:
+        assert f"{folder / put} was not written by musclemetab" in reason and "move the file away" in reason
+        assert (folder / put).read_text() == "the user's" and (folder / "solution.sto").read_text() == "half"
 
 
 # ----------------------------------------------------------------------------------------------
@@ -473,22 +630,10 @@ def _interrupt(args, ready, timeout=120.0):
             proc.kill()
 
 
-@pytest.mark.parametrize("side", ["r", "both"])
-def test_ctrl_c_during_solve_exits_130_at_once_and_keeps_the_previous_output(example, tmp_path, decoy, side):
-    """A finer mesh (300 per s) than any other test solves, so the solve is still running when the
-    signal comes (after the lock is taken, i.e. past the option checks)."""
-    out = tmp_path / "out"
-    legs = [out / "r", out / "l"] if side == "both" else [out]
-    previous = {}
-    for leg in legs:
-        leg.mkdir(parents=True, exist_ok=True)
-        for name in ("solution.sto", "summary.json"):
-            (leg / name).write_text(f"previous {leg.name} {name}\n")
-            previous[leg / name] = (leg / name).read_text()
-    args = ["solve", *_files(example), "--mesh-frequency", "300", "--side", side, "--out", str(out)]
-    if side == "both":
-        args[1:7] = _files(example)
-        args += ["--cycle", "auto", "--workers", "2"]
+def _interrupt_holding_the_lock(args, out: Path, previous: dict) -> None:
+    """:func:`_interrupt` 1.5 s after the command took the lock of ``out`` (past its option
+    checks, at work): status 130 within 2 s with ``musclemetab: interrupted`` and no traceback,
+    the ``previous`` files (``{path: text}``) as they were, no lock, no temporary folder."""
     lock = out / ".musclemetab.lock"
     code, err, seconds = _interrupt(args, lambda: lock.exists() and time.sleep(1.5) is None)
     assert code == 130, err
@@ -498,14 +643,30 @@ def test_ctrl_c_during_solve_exits_130_at_once_and_keeps_the_previous_output(exa
     assert not lock.exists() and not list(out.rglob(".partial-*"))
 
 
+@pytest.mark.parametrize("side", ["r", "both"])
+def test_ctrl_c_during_solve_exits_130_at_once_and_keeps_the_previous_output(example, tmp_path, decoy, side):
+    """A finer mesh (300 per s) than any other test solves, so the solve is still running when the
+    signal comes (after the lock is taken, i.e. past the option checks)."""
+    out = tmp_path / "out"
+    legs = [out / "r", out / "l"] if side == "both" else [out]
+    previous = {}
+    for leg in legs:
+        previous.update(_previous_output(leg, {name: f"previous {leg.name} {name}\n"
+                                               for name in ("solution.sto", "summary.json")}))
+    args = ["solve", *_files(example), "--mesh-frequency", "300", "--side", side, "--out", str(out)]
+    if side == "both":
+        args[1:7] = _files(example)
+        args += ["--cycle", "auto", "--workers", "2"]
+    _interrupt_holding_the_lock(args, out, previous)
+
+
 def test_ctrl_c_while_ipopt_iterates_exits_130_not_as_a_failed_solve(example, tmp_path, decoy):
     """CasADi stops IPOPT on Ctrl-C and returns a failure status; the command must take it for
     the interrupt it is (status 130, previous output kept), not for a solve that did not
     converge (status 1, the unconverged iterate written over the output). The signal is sent
     once IPOPT's progress line shows that it iterates."""
     out = tmp_path / "out"
-    out.mkdir()
-    (out / "summary.json").write_text("previous\n")
+    _previous_output(out, {"summary.json": "previous\n"})
     args = ["solve", *_files(example), "--mesh-frequency", "300", "--out", str(out)]
     proc = subprocess.Popen([sys.executable, "-m", "musclemetab", *args], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, start_new_session=True,
@@ -567,6 +728,117 @@ def test_ctrl_c_while_outputs_are_moved_into_place_waits_for_the_last_one(tmp_pa
     finally:
         signal.signal(signal.SIGINT, previous)
     assert [(leg / "summary.json").read_text() for leg in legs] == ["new", "new"]
+
+
+@pytest.mark.parametrize("workflow", ["emg-ten", "effort-gen"])
+def test_ctrl_c_during_an_emg_solve_exits_130_and_keeps_the_previous_output(example, tmp_path, decoy, workflow):
+    """EMG-TEN, and the EMG-informed solve of an effort workflow: SIGINT 1.5 s after the lock is
+    taken (the solve running) gives status 130 within 2 s and the previous output as it was."""
+    out = tmp_path / "out"
+    previous = _previous_output(out, {"parameters.json": "previous\n", "summary.json": "previous\n"})
+    args = ["solve", "--workflow", workflow, *_files(example), "--emg", str(example.emg["normal"]), "--labels",
+            "normal", "--out", str(out)]
+    _interrupt_holding_the_lock(args, out, previous)
+    assert sorted(p.name for p in out.iterdir()) == [FILES_MANIFEST, "parameters.json", "summary.json"]
+
+
+def test_ctrl_c_during_estimate_exits_130_at_once_and_keeps_the_previous_output(example, tmp_path, decoy):
+    """``estimate`` (the soleus' tendon stiffness from constant fiber lengths): SIGINT 1.5 s after
+    it holds the lock gives status 130 within 2 s, the previous parameters and personalised model
+    as they were."""
+    from musclemetab.io import read_storage, write_storage
+
+    import pandas as pd
+
+    inputs = tmp_path / "inputs"
+    inputs.mkdir()
+    t = read_storage(example.ik["normal"]).index
+    write_storage(inputs / "us.mot", pd.DataFrame({"soleus_r": [40.0] * len(t)}, index=t), in_degrees=False)
+    out = tmp_path / "out"
+    previous = _previous_output(out, {"parameters.json": "previous\n",
+                                      f"{example.model.stem}_personalised.osim": "previous\n"})
+    args = ["estimate", *_files(example), "--ultrasound", str(inputs / "us.mot"), "--estimate",
+            "tendon_stiffness=soleus_r", "--labels", "normal", "--out", str(out)]
+    _interrupt_holding_the_lock(args, out, previous)
+    assert not (out / "normal").exists()
+
+
+@pytest.mark.parametrize("view", ["failures.csv", "report", "data dictionary"])
+def test_an_interrupted_unit_is_labelled_interrupted_apart_from_the_failures(example, tmp_path, monkeypatch, view):
+    """A study of three trials whose first unit fails on its input and whose second gets Ctrl-C
+    (as in tests/test_robustness_study.py): the third is never reached. ``failures.csv`` says
+    ``failed`` for the first and ``interrupted`` for the others; the report lists the first under
+    "Failures" and the others under their own heading "Interrupted"; the data dictionary
+    documents the column."""
+    import re
+
+    import pandas as pd
+
+    from musclemetab.errors import InputFileError
+    from musclemetab.study import run_study
+    from musclemetab.study import units as units_mod
+
+    if view == "data dictionary":
+        from musclemetab.datadict import DATA_DICTIONARY
+
+        (entry,) = [e for e in DATA_DICTIONARY if e[1] == "status"]
+        assert "failures.csv" in entry[0] and "failed" in entry[3] and "interrupted" in entry[3]
+        return
+    calls = []
+
+    def trial(study, unit, tmp, *dependencies):
+        calls.append(unit.label)
+        if len(calls) == 1:
+            raise InputFileError("a broken input of the test")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(units_mod, "_run_trial", trial)
+    data = {"workflows": ["effort-gen"], "models": ["UM10"],
+            "subjects": [{"name": "s", "model": str(example.model), "body_mass_kg": 72.6, "height_m": 1.743,
+                          "trials": [{"name": t, "ik": str(example.ik[t]), "id": str(example.id[t])}
+                                     for t in ("slow", "normal", "fast")]}]}
+    out = tmp_path / "study"
+    run = run_study(study_from_dict(data, base="/", output=out), workers=1, progress=False)
+    assert calls == ["s/slow/effort-gen", "s/normal/effort-gen"] and run.interrupted == ["s/normal/effort-gen"]
+    failures = pd.read_csv(out / "failures.csv", keep_default_na=False).set_index("trial")
+    assert list(failures.columns) == ["subject", "workflow", "status", "reason"]
+    assert failures["status"].to_dict() == {"slow": "failed", "normal": "interrupted", "fast": "interrupted"}
+    if view == "report":
+        from musclemetab.report.folder import read_study_folder
+        from musclemetab.report.page import render_page
+
+        html = render_page(read_study_folder(out), [])
+        failed = html.split('<h2 id="failures">')[1].split("<h2")[0]
+        stopped = html.split('<h2 id="interrupted">Interrupted</h2>')[1].split("<h2")[0]
+        rows = lambda part: re.findall(r"<td[^>]*>(slow|normal|fast)</td>", part)  # noqa: E731
+        assert rows(failed) == ["slow"] and "a broken input of the test" in failed
+        assert rows(stopped) == ["normal", "fast"] and "2 units did not finish" in stopped
+        assert 'href="#interrupted"' in html
+
+
+def test_a_ctrl_c_swallowed_on_its_way_is_raised_before_anything_is_written():
+    """Ctrl-C that Python code swallows on its way (an interrupt running through an import guarded
+    by ``except ImportError``) inside ``solve``'s or ``estimate``'s :func:`sigint_noted` block is
+    raised before the outputs are written: the writing block does not run; the next one does."""
+    from musclemetab.processes import sigint_deferred, sigint_noted
+
+    written = []
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a terminal (see above)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with sigint_noted():
+                try:
+                    os.kill(os.getpid(), signal.SIGINT)
+                    time.sleep(1.0)
+                except KeyboardInterrupt:
+                    pass  # swallowed
+                with sigint_deferred():
+                    written.append("new outputs")
+        with sigint_deferred():
+            written.append("the next command's outputs")
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert written == ["the next command's outputs"]
 
 
 def test_progress_labels_an_interrupted_unit_interrupted_not_failed():

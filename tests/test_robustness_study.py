@@ -195,7 +195,7 @@ def test_a_stale_lock_of_a_dead_process_is_taken_over(tmp_path):
 def _count_calls(monkeypatch, behaviour):
     calls = []
 
-    def fake_trial(study, unit, tmp, dep):
+    def fake_trial(study, unit, tmp, *dependencies):
         calls.append(unit.label)
         return behaviour(unit, tmp)
 

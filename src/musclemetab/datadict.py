@@ -42,8 +42,10 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
     (f"{_STUDY}, {_UNIT_WB}, {_UNIT_AN}, {_PM}, {_LEG}, {_LEGS_WB}, timeseries.csv, metabolics.parquet, {_SENS}", "model",
      "-",
      "metabolic energy model (short name of the registry, e.g. UM10, BH04)"),
-    ("failures.csv", "reason", "-", "why the unit failed (one line)"),
-    (_STUDY, "status", "-", "ok for a unit whose results are in the row"),
+    ("failures.csv", "reason", "-", "why the unit failed or was stopped (one line)"),
+    (f"{_STUDY}, failures.csv", "status", "-", "results: ok for a unit whose results are in the row; failures.csv: "
+     "failed (the unit did not succeed) or interrupted (stopped by Ctrl-C, or not reached by a run that Ctrl-C "
+     "stopped; its previous folder is kept and the next run does it)"),
     (_STUDY, "unit_dir", "-", "the unit's folder, relative to the study folder (for legs 'r + l': the folder "
      "holding the two legs' unit folders r/ and l/)"),
     (f"{_STUDY}, {_LEGS_WB}", "legs", "-",

@@ -80,14 +80,30 @@ def stop_pool(pool) -> None:
     pool.shutdown(wait=True, cancel_futures=True)
 
 
+#: Set when a :func:`sigint_noted` block saw Ctrl-C that was not raised yet (an interrupt that
+#: Python code or a library swallowed, e.g. one that ran through an import guarded by
+#: ``except ImportError``); cleared when it is raised.
+_NOTED = threading.Event()
+
+
+def _raise_noted() -> None:
+    """Raise :class:`KeyboardInterrupt` for a Ctrl-C noted earlier and not raised (swallowed)."""
+    if _NOTED.is_set():
+        _NOTED.clear()
+        raise KeyboardInterrupt
+
+
 @contextlib.contextmanager
 def sigint_deferred():
     """Hold Ctrl-C (SIGINT) back while the block runs (e.g. the files of several output folders
     moved into place) and raise :class:`KeyboardInterrupt` after it, so that an interrupt leaves
-    either the previous outputs or all the new ones. Outside the main thread it does nothing."""
+    either the previous outputs or all the new ones. A Ctrl-C noted by an enclosing
+    :func:`sigint_noted` block and swallowed on its way is raised before the block (nothing is
+    written). Outside the main thread it does nothing."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
+    _raise_noted()
     caught = []
     previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
     try:
@@ -103,16 +119,19 @@ def sigint_noted():
     """Run native code that stops itself on Ctrl-C (IPOPT through CasADi, which then returns a
     failure status instead of raising) and raise :class:`KeyboardInterrupt` after it when
     Ctrl-C came, so that the interrupt is not taken for a failed solve. The handler in place
-    (Python's default, or a study unit's) is still called when the signal comes. Outside the
+    (Python's default, or a study unit's) is still called when the signal comes. A Ctrl-C
+    noted by an enclosing block and swallowed on its way is raised on entry. Outside the
     main thread, or with Ctrl-C ignored (an idle pool worker), it does nothing."""
     previous = signal.getsignal(signal.SIGINT) if threading.current_thread() is threading.main_thread() else None
     if not callable(previous):
         yield
         return
+    _raise_noted()
     caught = []
 
     def note(signum, frame):
         caught.append(signum)
+        _NOTED.set()
         previous(signum, frame)
 
     signal.signal(signal.SIGINT, note)
@@ -120,6 +139,8 @@ def sigint_noted():
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
+        if caught:
+            _NOTED.clear()  # raised below, or already on its way out of the block
     if caught:
         raise KeyboardInterrupt
 

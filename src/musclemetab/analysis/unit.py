@@ -32,6 +32,8 @@ __all__ = ["MetabolicAnalysis", "TrialAnalysis", "RecordedTrial", "analyse", "wr
 ANALYSIS_FILE = "analysis.csv"
 TIMESERIES_FILE = "timeseries.csv"
 GROUP_KEY_FILE = "muscle_groups.csv"
+#: The files :func:`write_analysis` may write into a folder (one of the two whole-body tables)
+ANALYSIS_FILES = ("whole_body.csv", "leg_muscles.csv", ANALYSIS_FILE, TIMESERIES_FILE, "per_muscle.csv", GROUP_KEY_FILE)
 #: The record ``musclemetab analyse`` leaves in its output folder: the solution and metabolics
 #: folders of each leg, the gait cycle, body mass and height (read by :mod:`musclemetab.report`).
 ANALYSE_RECORD = "analyse.json"
@@ -429,7 +431,7 @@ def write_analysis(analysis: TrialAnalysis, out_dir: str | os.PathLike) -> dict:
     whole = WHOLE_BODY_CSV if "whole_body_W_per_kg" in analysis.whole_body.columns else LEG_CSV
     tables = {whole: analysis.whole_body, ANALYSIS_FILE: analysis.summary,
               TIMESERIES_FILE: analysis.timeseries, PER_MUSCLE_FILE: analysis.per_muscle}
-    with atomic_directory(out_dir) as tmp:
+    with atomic_directory(out_dir, mark=True) as tmp:
         for name, table in tables.items():
             table.to_csv(tmp / name, index=False, float_format="%.10g")
         group_key_table().to_csv(tmp / GROUP_KEY_FILE, index=False)

@@ -167,6 +167,12 @@ def run(args) -> int:
             raise InputFileError(f"{root}: no {SOLUTION_FILE} in it, nor in {root / 'r'} or {root / 'l'}; "
                                  "give a solution folder written by 'musclemetab solve'")
     check_speed(args.speed)
+    from ..analysis.unit import ANALYSIS_FILES
+    from ..io.atomic import check_replaceable
+
+    for side, _, out in jobs:  # a file of the user, or changed since written, is not replaced: refused before any work
+        check_replaceable(out, ANALYSIS_FILES)
+    check_replaceable(Path(args.out), [RESULTS_CSV] + ([PER_MUSCLE_FILE] if jobs[0][0] is not None else []))
     basal_given = {key: getattr(args, key) for key in BASAL_DEFAULTS}
     rows, basal_J, tables, legs, solve_flags = {}, {}, [], [], {}
     for side, sol_dir, out in jobs:
@@ -236,7 +242,7 @@ def run(args) -> int:
             print(f"  {row.model}: {row.whole_body_W_per_kg:.2f} W/kg, {cot_text}, swing {row.swing_energy_share_pct:.1f} % "
                   f"of the leg's energy, PF {row.share_PF_pct:.1f} %; largest: {', '.join(top)}")
     if jobs[0][0] is not None:  # the sides' parent: one table of every side, the legs added
-        with atomic_path(Path(args.out) / PER_MUSCLE_FILE) as tmp:
+        with atomic_path(Path(args.out) / PER_MUSCLE_FILE, mark=True) as tmp:
             pd.concat(tables, ignore_index=True).to_csv(tmp, index=False, float_format="%.10g")
         if len(rows) > 1:
             table = add_leg_rows(rows, basal_J)
@@ -244,7 +250,7 @@ def run(args) -> int:
             (side, table), = rows.items()
             table = table.assign(legs=f"2 x {side}")
         table = add_quality(table, [{"plausibility": [f.to_dict() for f in fl]} for fl in solve_flags.values()])
-        with atomic_path(Path(args.out) / RESULTS_CSV) as tmp:
+        with atomic_path(Path(args.out) / RESULTS_CSV, mark=True) as tmp:
             table.to_csv(tmp, index=False, float_format="%.10g")
         if len(rows) > 1:
             print(f"analyse: legs {' + '.join(rows)} added -> {Path(args.out) / RESULTS_CSV}: "
@@ -253,7 +259,7 @@ def run(args) -> int:
         (side, table), = rows.items()
         table = add_quality(table.assign(legs=f"2 x {recorded.side or 'r'}"),
                             [{"plausibility": [f.to_dict() for f in fl]} for fl in solve_flags.values()])
-        with atomic_path(Path(args.out) / RESULTS_CSV) as tmp:
+        with atomic_path(Path(args.out) / RESULTS_CSV, mark=True) as tmp:
             table.to_csv(tmp, index=False, float_format="%.10g")
     from ..analysis.unit import ANALYSE_RECORD
     from ..io.atomic import atomic_write_text

@@ -107,7 +107,22 @@ def _bounds(text: str) -> tuple[float, float]:
 def run(args) -> int:
     """Run ``musclemetab estimate`` with parsed arguments: the options read, then
     :func:`~musclemetab.redundancy.run.estimate_files`; prints one line, then one per doubt
-    of the estimate and per validated trial and kind of measurement (:func:`doubt_lines`)."""
+    of the estimate and per validated trial and kind of measurement (:func:`doubt_lines`).
+
+    While it runs it holds the lock of the output folder (``DIR/.musclemetab.lock``,
+    :class:`~musclemetab.io.atomic.FolderLock`), as ``solve`` does: a second run on the same
+    ``--out`` refuses, naming the lock and the process."""
+    from ..io import check_output_folder
+    from ..io.atomic import FolderLock
+
+    from ..processes import sigint_noted
+
+    check_output_folder(args.out)
+    with FolderLock(args.out, "output folder"), sigint_noted():  # Ctrl-C raised even if swallowed on its way
+        return _estimate(args)
+
+
+def _estimate(args) -> int:
     from ..redundancy.estimate import parse_coupling
     from ..redundancy.run import estimate_files
     from .options import emg_scale_bounds

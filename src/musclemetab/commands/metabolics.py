@@ -91,6 +91,7 @@ def run(args) -> int:
     from ..io import check_output_folder
     from ..metabolics.registry import parse_models
     from ..metabolics.solution import (
+        check_metabolics_outputs,
         metabolics_from_legs,
         parameter_differences,
         read_solution_states,
@@ -104,6 +105,7 @@ def run(args) -> int:
     check_body(args.mass, args.height)
     check_basal_arguments(args)
     folders = solution_folders(args.solution)
+    check_metabolics_outputs(args.out, folders)
     sensitivity = _sensitivity_parameters(args.sensitivity, folders)
     params = None
     if args.model:

@@ -205,17 +205,41 @@ def run(args) -> int:
     (``DIR/.musclemetab.lock``, :class:`~musclemetab.io.atomic.FolderLock`): a second ``solve``
     on the same ``--out`` refuses, naming the lock.
     """
-    from pathlib import Path
-
     from ..io import check_output_folder
-    from ..io.atomic import FolderLock, check_replaceable
-    from ..redundancy.solution import SOLUTION_FILE, SUMMARY_FILE
+    from ..io.atomic import FolderLock
+    from ..processes import sigint_noted
 
     check_output_folder(args.out)
-    for leg in (("r", "l") if args.side == "both" else ("",)):  # files it replaces, not folders of the user
-        check_replaceable(Path(args.out) / leg, (SOLUTION_FILE, SUMMARY_FILE, "inverse_dynamics.sto"))
-    with FolderLock(args.out, "output folder"):
+    _check_outputs(args)
+    with FolderLock(args.out, "output folder"), sigint_noted():  # Ctrl-C raised even if swallowed on its way
         return _solve(args)
+
+
+def _check_outputs(args) -> None:
+    """Refuse (:class:`OptionError` naming the file), before any work, a ``--out`` where a file the
+    command writes would replace a folder, or a file the package did not write (or that was
+    changed since): the solution folders of the legs, with EMG of the trials, and the
+    parameters and personalised model of an EMG-TEN solve."""
+    from pathlib import Path
+
+    from ..io.atomic import check_replaceable
+    from ..redundancy.emg_inputs import trial_labels
+    from ..redundancy.result import PARAMETERS_FILE
+    from ..redundancy.run import check_solution_folders
+
+    if getattr(args, "diagnose_only", False):
+        return  # writes nothing
+    ik = _as_list(args.ik)
+    emg_ten, emg = args.workflow == "emg-ten", bool(getattr(args, "emg", None))
+    for leg in (("r", "l") if args.side == "both" else ("",)):
+        out = Path(args.out) / leg
+        if (emg_ten or emg) and (emg_ten or len(ik) > 1):
+            labels = trial_labels(ik, args.labels)
+            check_replaceable(out, [PARAMETERS_FILE] + ([f"{Path(args.model).stem}_personalised.osim"] if emg_ten
+                                                       else []))
+            check_solution_folders(out / label for label in labels)
+        else:
+            check_solution_folders([out])
 
 
 def _solve(args) -> int:
@@ -498,8 +522,12 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
     if getattr(args, "diagnose_only", False):
         return _report_diagnoses(results)
     _check_excluded_used(excluded, [s for r in results.values() for s in r.solutions.values()])
+    from ..processes import sigint_deferred
+
+    with sigint_deferred():  # Ctrl-C leaves the previous legs' folders or all the new ones
+        models = {side: _write_emg_ten(args, result, _leg_out(args, side)) for side, result in results.items()}
     for side, result in results.items():
-        _write_emg_ten(args, result, _leg_out(args, side), side)
+        _emg_ten_done(args, result, _leg_out(args, side), side, models[side])
     _plausibility(args, {f"{_leg_out(args, side)}/{label}": sol for side, result in results.items()
                          for label, sol in result.solutions.items()})
     return 0
@@ -512,13 +540,23 @@ def _leg_out(args, side: str):
     return Path(args.out) / side if args.side == "both" else Path(args.out)
 
 
-def _write_emg_ten(args, result, out, side: str) -> None:
-    """Write one leg's EMG-TEN result and its personalised model to ``out``, then say what it found
-    (:class:`SolverError` after writing when it did not converge)."""
+def _write_emg_ten(args, result, out):
+    """Write one leg's EMG-TEN result to ``out`` and, when it converged, its personalised model
+    (returned; ``None`` otherwise)."""
     from ..redundancy.estimate import write_personalised_model
-    from ..redundancy.ipopt import failure_advice
 
     result.write(out)
+    if not result.success:
+        return None
+    model_file, _ = write_personalised_model(args.model, result.parameters,
+                                             {"tendon_stiffness": list(result.tendon_stiffness)}, out)
+    return model_file
+
+
+def _emg_ten_done(args, result, out, side: str, model_file) -> None:
+    """Say what one leg's EMG-TEN solve found (:class:`SolverError` when it did not converge)."""
+    from ..redundancy.ipopt import failure_advice
+
     r = result.record
     if not result.success:
         raise SolverError(
@@ -528,8 +566,6 @@ def _write_emg_ten(args, result, out, side: str) -> None:
         )
     for solution in result.solutions.values():
         _print_findings(solution.record)
-    model_file, _ = write_personalised_model(args.model, result.parameters,
-                                             {"tendon_stiffness": list(result.tendon_stiffness)}, out)
     groups = []
     for g in result.settings.tendon_groups:
         m = next((x for x in g if x in result.tendon_stiffness), None)
@@ -571,12 +607,16 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
     if getattr(args, "diagnose_only", False):
         return _report_diagnoses(results)
     _check_excluded_used(_excluded(args), [s for r in results.values() for s in r.solutions.values()])
+    from ..processes import sigint_deferred
+
+    with sigint_deferred():  # Ctrl-C leaves the previous legs' folders or all the new ones
+        for side, result in results.items():
+            if len(result.solutions) == 1:
+                write_solution_folder(next(iter(result.solutions.values())), _leg_out(args, side))
+            else:
+                result.write(_leg_out(args, side))
     for side, result in results.items():
         out = _leg_out(args, side)
-        if len(result.solutions) == 1:
-            write_solution_folder(next(iter(result.solutions.values())), out)
-        else:
-            result.write(out)
         r = result.run_record
         if not r.success:
             err = emg_failure(r, settings.emg_mode, f"the EMG-informed {args.workflow} solve (written to {out})",

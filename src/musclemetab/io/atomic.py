@@ -20,10 +20,13 @@ from ..errors import OptionError, OutputError
 
 #: The lock file of a folder a run works on (a study's output folder, ``solve --out``)
 LOCK_FILE = ".musclemetab.lock"
+#: The list of the output files the package wrote into a folder, one ``SHA-256  name`` line
+#: each (the format of ``sha256sum``, so ``sha256sum -c .musclemetab-files`` checks them)
+FILES_MANIFEST = ".musclemetab-files"
 
 __all__ = ["file_sha256", "atomic_write_text", "atomic_write_bytes", "atomic_path", "atomic_directory",
-           "check_output_folder", "check_inside", "check_replaceable",
-           "FolderLock", "LOCK_FILE"]
+           "check_output_folder", "check_inside", "check_replaceable", "written_files", "is_written",
+           "FolderLock", "LOCK_FILE", "FILES_MANIFEST"]
 
 
 def file_sha256(path: str | os.PathLike) -> str:
@@ -44,8 +47,12 @@ def _umask() -> int:
 
 
 @contextlib.contextmanager
-def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; rename it onto ``path`` if the block succeeds."""
+def atomic_path(path: str | os.PathLike, suffix: str | None = None, *, mark: bool = False) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; rename it onto ``path`` if the block succeeds.
+
+    With ``mark`` (an output file of the package) the file is listed in the folder's
+    :data:`FILES_MANIFEST`, and a file already at ``path`` is replaced only when that list
+    holds it unchanged (:func:`check_replaceable`)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(
@@ -57,26 +64,29 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
         yield tmp_path
         if tmp_path.exists():
             os.chmod(tmp_path, 0o666 & ~_umask())  # mkstemp makes 0600; give a normal file's mode
-        os.replace(tmp_path, path)
+        if mark:
+            _replace_marked(path.parent, {path.name: tmp_path})
+        else:
+            os.replace(tmp_path, path)
     finally:
         if tmp_path.exists():
             tmp_path.unlink()
 
 
-def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
-    with atomic_path(path) as tmp:
+def atomic_write_bytes(path: str | os.PathLike, data: bytes, *, mark: bool = False) -> Path:
+    with atomic_path(path, mark=mark) as tmp:
         tmp.write_bytes(data)
     return Path(path)
 
 
-def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
-    with atomic_path(path) as tmp:
+def atomic_write_text(path: str | os.PathLike, text: str, *, mark: bool = False) -> Path:
+    with atomic_path(path, mark=mark) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return Path(path)
 
 
 @contextlib.contextmanager
-def atomic_directory(path: str | os.PathLike) -> Iterator[Path]:
+def atomic_directory(path: str | os.PathLike, *, mark: bool = False) -> Iterator[Path]:
     """Yield a temporary directory; on success, its files are moved into ``path``.
 
     An :class:`OSError` while writing (permission, disk full, file-size limit) is raised as
@@ -84,6 +94,9 @@ def atomic_directory(path: str | os.PathLike) -> Iterator[Path]:
 
     Use it when one step writes several files that belong together: if the step fails
     none of them appears in ``path``. Files already in ``path`` and not rewritten stay.
+    A file is never moved onto a folder; with ``mark`` (output files of the package) the
+    files are listed in the folder's :data:`FILES_MANIFEST` and none replaces a file that the
+    list does not hold unchanged (:func:`check_replaceable`, checked for all before any moves).
     """
     path = Path(path)
     tmp = None
@@ -92,7 +105,11 @@ def atomic_directory(path: str | os.PathLike) -> Iterator[Path]:
         tmp = Path(tempfile.mkdtemp(prefix=".partial-", dir=path))
         yield tmp
         items = sorted(tmp.iterdir())
-        check_replaceable(path, [item.name for item in items if not item.is_dir()])
+        if mark:
+            _replace_marked(path, {item.name: item for item in items if not item.is_dir()})
+            items = [item for item in items if item.is_dir()]
+        else:
+            check_replaceable(path, [item.name for item in items if not item.is_dir()], files=False)
         for item in items:
             os.replace(item, path / item.name)
     except OSError as exc:
@@ -100,6 +117,78 @@ def atomic_directory(path: str | os.PathLike) -> Iterator[Path]:
     finally:
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
+
+
+def written_files(folder: str | os.PathLike) -> dict[str, set[str]]:
+    """The files the package listed in ``folder``'s :data:`FILES_MANIFEST`: name -> the SHA-256
+    values it was written with (two while a replacement was under way); ``{}`` without a list.
+    Lines that are not ``<64 hex digits>  <name>`` are ignored."""
+    try:
+        text = (Path(folder) / FILES_MANIFEST).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return {}
+    listed: dict[str, set[str]] = {}
+    for line in text.splitlines():
+        digest, sep, name = line.partition("  ")
+        if sep and len(digest) == 64 and all(c in "0123456789abcdef" for c in digest) and name:
+            listed.setdefault(name, set()).add(digest)
+    return listed
+
+
+def is_written(folder: str | os.PathLike, name: str) -> bool:
+    """Whether ``folder/name`` is a file the package wrote and nobody changed since (listed in the
+    folder's :data:`FILES_MANIFEST` with its present SHA-256)."""
+    path = Path(folder) / name
+    if path.is_symlink() or not path.is_file():
+        return False
+    return file_sha256(path) in written_files(folder).get(name, ())
+
+
+@contextlib.contextmanager
+def _folder_flock(folder: Path):
+    """An exclusive ``flock`` of ``folder`` (one process at a time updates its list of files)."""
+    import fcntl
+
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # releases the flock
+
+
+def _write_manifest(folder: Path, listed: dict[str, set[str]]) -> None:
+    lines = [f"{digest}  {name}\n" for name in sorted(listed) for digest in sorted(listed[name])]
+    fd, tmp = tempfile.mkstemp(prefix=f"{FILES_MANIFEST}.", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.writelines(lines)
+        os.chmod(tmp, 0o666 & ~_umask())
+        os.replace(tmp, folder / FILES_MANIFEST)
+    finally:
+        Path(tmp).unlink(missing_ok=True)
+
+
+def _replace_marked(folder: Path, new: dict[str, Path]) -> None:
+    """Move the files ``new`` (name -> the complete file) into ``folder`` as output files of
+    the package: refused as a whole (:func:`check_replaceable`) when one would replace a file
+    the package did not write; listed in :data:`FILES_MANIFEST` with their SHA-256 first (the
+    old value kept until the move is done, so that a run killed in between leaves a folder
+    whose files are all still known)."""
+    folder = Path(folder)
+    digests = {name: file_sha256(src) for name, src in new.items()}
+    with _folder_flock(folder):
+        check_replaceable(folder, list(new))
+        listed = written_files(folder)
+        listed = {n: d for n, d in listed.items() if (folder / n).is_file()}  # files removed since: dropped
+        for name, digest in digests.items():
+            listed[name] = listed.get(name, set()) | {digest}
+        _write_manifest(folder, listed)
+        for name, src in new.items():
+            os.replace(src, folder / name)
+        for name, digest in digests.items():
+            listed[name] = {digest}
+        _write_manifest(folder, listed)
 
 
 def output_error(exc: OSError, path: str | os.PathLike) -> OutputError:
@@ -115,17 +204,39 @@ def output_error(exc: OSError, path: str | os.PathLike) -> OutputError:
                        "(the folder keeps what it held): free space or choose a folder you can write to, and run again")
 
 
-def check_replaceable(folder: str | os.PathLike, names) -> None:
+def check_replaceable(folder: str | os.PathLike, names, *, files: bool = True) -> None:
     """Raise :class:`~musclemetab.errors.OptionError` naming the path when one of the files
     ``names`` that the package is about to write into ``folder`` exists there as a folder
     (or a link to one): the package replaces its own files, never deletes a folder it did not
-    write. Checked for every name before any file is moved, so nothing is half written."""
-    from ..errors import OptionError, OutputError
+    write. With ``files``, also when one exists as a file (or a link) that ``folder``'s
+    :data:`FILES_MANIFEST` does not list with its present SHA-256: a file of the user, or one
+    changed since the package wrote it, is never replaced (a folder written before the
+    package kept the list has none: its files are not taken for the package's). Checked for
+    every name before any file is moved, so nothing is half written."""
+    from ..errors import OptionError
 
-    taken = [Path(folder) / n for n in names if (Path(folder) / n).is_dir()]
+    folder = Path(folder)
+    taken = [folder / n for n in names if (folder / n).is_dir()]
     if taken:
         raise OptionError(f"{taken[0]} is a folder, where musclemetab writes its file {taken[0].name}; it is not "
                           "removed: move it away or choose another output folder")
+    if not files:
+        return
+    present = [n for n in names if (folder / n).exists() or (folder / n).is_symlink()]
+    if not present:
+        return
+    listed = written_files(folder)
+    for name in present:
+        path = folder / name
+        if path.is_symlink() or name not in listed:
+            why = (f"not listed in {folder / FILES_MANIFEST}" if listed or (folder / FILES_MANIFEST).exists() else
+                   f"{folder} has no {FILES_MANIFEST}, the list of the files musclemetab wrote there")
+            raise OptionError(f"{path} was not written by musclemetab ({why}); it is not replaced: move the file "
+                              "away, or choose another output folder (--out)")
+        if file_sha256(path) not in listed[name]:
+            raise OptionError(f"{path} was changed since musclemetab wrote it (its SHA-256 is not the one in "
+                              f"{folder / FILES_MANIFEST}); it is not replaced: move the file away, or choose "
+                              "another output folder (--out)")
 
 
 def check_output_folder(path: str | os.PathLike, option: str = "--out") -> Path:

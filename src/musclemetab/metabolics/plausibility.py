@@ -131,7 +131,7 @@ def write_plausibility(flags, out_dir):
     from ..io import atomic_write_text
 
     path = Path(out_dir) / PLAUSIBILITY_FILE
-    atomic_write_text(path, json.dumps([f.to_dict() for f in flags], indent=2) + "\n")
+    atomic_write_text(path, json.dumps([f.to_dict() for f in flags], indent=2) + "\n", mark=True)
     return path
 
 

@@ -89,6 +89,22 @@ METABOLICS_PARQUET = "metabolics.parquet"
 WHOLE_BODY_CSV = "whole_body.csv"
 #: A leg's file when the legs are added (``legs=1``): its muscles alone, no basal heat.
 LEG_CSV = "leg_muscles.csv"
+
+
+def check_metabolics_outputs(out_dir, sides) -> None:
+    """Refuse (:class:`~musclemetab.errors.OptionError` naming the file), before any work, an
+    ``out_dir`` where a file of :func:`write_legs_metabolics` for the legs ``sides`` (and
+    ``plausibility.json``) would replace a folder, or a file the package did not write or that
+    was changed since (:func:`musclemetab.io.atomic.check_replaceable`)."""
+    from ..io.atomic import check_replaceable
+    from .per_muscle import PER_MUSCLE_FILE
+    from .plausibility import PLAUSIBILITY_FILE
+
+    out_dir, sides = Path(out_dir), list(sides)
+    files = (METABOLICS_STO, METABOLICS_PARQUET, WHOLE_BODY_CSV, LEG_CSV, PER_MUSCLE_FILE)
+    for folder in ([out_dir] if len(sides) <= 1 else [out_dir / s for s in sides]):
+        check_replaceable(folder, files)
+    check_replaceable(out_dir, [PLAUSIBILITY_FILE] + ([WHOLE_BODY_CSV] if len(sides) > 1 else []))
 #: The component of the files for the muscle's rate without basal heat (``MetabolicRates.total``
 #: holds the per-muscle basal heat; the files write the two apart).
 TOTAL_NO_BASAL = "total_no_basal"
@@ -585,7 +601,7 @@ def write_metabolics(result: SolutionMetabolics, out_dir: str | os.PathLike, cyc
         f"units=W; total_no_basal is without basal heat, basal the per-muscle basal heat "
         f"({result.basal_rate_W_per_kg:g} W/kg of muscle mass), apart",
     ]
-    with atomic_directory(out_dir) as tmp:
+    with atomic_directory(out_dir, mark=True) as tmp:
         write_storage(tmp / METABOLICS_STO, result.to_dataframe(), name="musclemetab metabolic rates",
                       in_degrees=False, comments=comments)
         parquet = write_parquet(result.to_long(), tmp / METABOLICS_PARQUET)
@@ -724,7 +740,7 @@ def write_legs_metabolics(results: Mapping[str, SolutionMetabolics], out_dir: st
         "muscle_mass_rule": first.muscle_mass_rule,
         **{f"{s}_leg_muscles_W": r.whole_body[m].leg_no_basal_mean_W for s, r in results.items()},
     } for m, v in total.items()])
-    with atomic_path(out_dir / WHOLE_BODY_CSV) as tmp:
+    with atomic_path(out_dir / WHOLE_BODY_CSV, mark=True) as tmp:
         table.to_csv(tmp, index=False, float_format="%.10g")
     files["whole_body_csv"] = out_dir / WHOLE_BODY_CSV
     return files

@@ -323,6 +323,6 @@ def write_personalised_model(model_path, params: MuscleTendonParameters, estimat
     model_path, out_dir = Path(model_path), Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     target = out_dir / f"{model_path.stem}_personalised.osim"
-    with atomic_path(target) as tmp:
+    with atomic_path(target, mark=True) as tmp:
         report = call("personalise:write_model_with_parameters", str(model_path.resolve()), str(tmp), values)
     return target, report

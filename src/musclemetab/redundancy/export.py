@@ -315,7 +315,7 @@ def write_opensim_files(solution, out_dir: str | os.PathLike | None = None, *, m
     if out_dir is None:
         raise DataMismatchError("give the folder to write the OpenSim files into (out_dir)")
     out_dir = Path(out_dir)
-    with atomic_directory(out_dir) as tmp:
+    with atomic_directory(out_dir, mark=True) as tmp:
         states, controls, forces, _ = opensim_tables(solution, tmp / MODEL_FILE, model_path, ik_path, id_path)
         write_storage(tmp / STATES_FILE, states, name="musclemetab states", in_degrees=False,
                       comments=[f"OpenSim states of the muscle redundancy solution for {MODEL_FILE} (SI units: rad, "

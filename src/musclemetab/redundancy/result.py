@@ -198,8 +198,11 @@ class Result:
         """
         from .export import write_solution_opensim_files
 
+        from ..io.atomic import check_replaceable
+
         out_dir = Path(out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
+        check_replaceable(out_dir, [PARAMETERS_FILE])  # a parameters.json of the user is not removed
         (out_dir / PARAMETERS_FILE).unlink(missing_ok=True)
         for label, sol in self.solutions.items():
             sol.write(out_dir / label)
@@ -214,7 +217,7 @@ class Result:
 
         out_dir = Path(out_dir)
         text = json.dumps(self.parameters_document(), indent=2, allow_nan=True)
-        atomic_write_text(out_dir / PARAMETERS_FILE, text + "\n")
+        atomic_write_text(out_dir / PARAMETERS_FILE, text + "\n", mark=True)
         return out_dir
 
     @classmethod

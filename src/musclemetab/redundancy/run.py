@@ -611,6 +611,22 @@ def _trial_dofs(model, id_files, dofs, side: str, cache_dir) -> tuple[str, ...]:
     return tuple(discover_dofs(layout, side, common))
 
 
+#: The files a solution folder may hold (:func:`write_solution_folder`): each replaced only when
+#: the package wrote it (:func:`musclemetab.io.atomic.check_replaceable`)
+SOLUTION_FOLDER_FILES = ("solution.sto", "summary.json", "inverse_dynamics.sto", "model.osim", "states.sto",
+                         "controls.sto", "forces.sto")
+
+
+def check_solution_folders(folders) -> None:
+    """Check, before anything is written, that none of the files of a solution folder
+    (:data:`SOLUTION_FOLDER_FILES`) in any of ``folders`` would replace a file the package did not
+    write, nor a folder (:class:`~musclemetab.errors.OptionError` naming the first)."""
+    from ..io.atomic import check_replaceable
+
+    for folder in folders:
+        check_replaceable(folder, SOLUTION_FOLDER_FILES)
+
+
 def write_solution_folder(solution, out, opensim_files: bool = True) -> None:
     """Write a solution; inverse dynamics computed by OpenSim goes beside it as ``inverse_dynamics.sto``,
     and with ``opensim_files`` the OpenSim model, states, controls and forces that reproduce it
@@ -622,7 +638,7 @@ def write_solution_folder(solution, out, opensim_files: bool = True) -> None:
     solution.write(out)
     if "inverse_dynamics" in solution.record:
         src = Path(solution.record.inputs["id"])
-        atomic_write_bytes(Path(out) / "inverse_dynamics.sto", src.read_bytes())
+        atomic_write_bytes(Path(out) / "inverse_dynamics.sto", src.read_bytes(), mark=True)
     if opensim_files:
         from .export import write_solution_opensim_files
 
@@ -733,6 +749,7 @@ def estimate_files(
     fiber_dynamics = fiber_scheme(mode if emg_files else None)
     goals = Goals(**weights, emg_tolerance=tolerance, fiber_dynamics=fiber_dynamics)
     labels = trial_labels(ik, labels)
+    _check_estimate_outputs(out, model, labels, validate)
     measured = [read_fiber_lengths(p) for p in us_files] or [{} for _ in range(n)]
     mapping = resolve_emg_mapping(emg_mapping or "default") if emg_files else {}
     if exclude_muscles:
@@ -809,36 +826,59 @@ def estimate_files(
                 s, record=s.record.with_(diagnosis={**diag.to_dict(), "last_iterate": violated}))
     doc = {"format": ESTIMATE_FORMAT, "format_version": 1, **est.to_dict(), **emg_record, "solve": run.to_dict(),
            "trials": labels}
-    if run.success:
-        path, report = write_personalised_model(model, estimated, estimate, out)
-        doc["personalised_model"] = {"path": path.name, "muscles": report}
     factors = {k: dict(v) for k, v in est.factors.items()}
     if emg_files:
         factors["emg_scale"] = dict(res.factors.get("emg_scale", {}))
-    result = Result(solutions=solutions, parameters=estimated, factors=factors, record=run.to_dict(),
-                    emg_channels={m: list(c) for m, c in mapping.items()}, document=doc)
-    result.write(out)
+    validation, fits, failed = {}, {}, None  # the validation re-solves, before anything is written
+    if validate and run.success:
+        from .identifiability import tracking_fit
+
+        for t, (g, _, t_id, mom, t_ik) in zip(trials, prepared):
+            lab = t.label
+            sol = validation[lab] = solve_with_parameters(g, estimated, t_id, mom, ik_time_s=t_ik, options=options,
+                                                          goals=goals.effort(),
+                                                          workflow_record={"name": f"{workflow} validation"})
+            if not sol.success:
+                failed = sol.run_record.failure(f"the validation re-solve of {lab}")
+                break
+            scale = factors.get("emg_scale", {})
+            fits[lab] = tracking_fit(
+                sol, {m: t.fiber_length_nodes_m[:, j] for j, m in enumerate(t.fiber_muscles)},
+                {m: scale[m] * t.emg_nodes[:, j] for j, m in enumerate(t.emg_muscles)})
+    from ..processes import sigint_deferred
+
+    with sigint_deferred():  # Ctrl-C leaves the previous output or all the new one
+        if run.success:
+            path, report = write_personalised_model(model, estimated, estimate, out)
+            doc["personalised_model"] = {"path": path.name, "muscles": report}
+        if validate and run.success and failed is None:
+            doc["validation"] = fits
+        result = Result(solutions=solutions, parameters=estimated, factors=factors, record=run.to_dict(),
+                        emg_channels={m: list(c) for m, c in mapping.items()}, document=doc)
+        result.write(out)
+        for lab, sol in validation.items():
+            sol.write(f"{out}/validation/{lab}")
     if not run.success:
         from .diagnosis import trials_violation_text
         from .emg_ten import emg_failure
 
         err = emg_failure(run, mode if emg_files else None, f"the estimation (written to {out})")
         raise type(err)(err.message + trials_violation_text(solutions))
-    if validate:
-        from .identifiability import tracking_fit
-
-        fits = doc["validation"] = {}
-        for t, (g, _, t_id, mom, t_ik) in zip(trials, prepared):
-            lab = t.label
-            sol = solve_with_parameters(g, estimated, t_id, mom, ik_time_s=t_ik, options=options,
-                                        goals=goals.effort(),
-                                        workflow_record={"name": f"{workflow} validation"})
-            sol.write(f"{out}/validation/{lab}")
-            if not sol.success:
-                raise sol.run_record.failure(f"the validation re-solve of {lab}")
-            scale = factors.get("emg_scale", {})
-            fits[lab] = tracking_fit(
-                sol, {m: t.fiber_length_nodes_m[:, j] for j, m in enumerate(t.fiber_muscles)},
-                {m: scale[m] * t.emg_nodes[:, j] for j, m in enumerate(t.emg_muscles)})
-        result.write_parameters(out)
+    if failed is not None:
+        raise failed
     return result
+
+
+def _check_estimate_outputs(out, model, labels, validate: bool) -> None:
+    """Refuse, before any work, an ``out`` where a file of the estimate (``parameters.json``, the
+    personalised model, the trials' and with ``validate`` the validation's solution folders) would
+    replace a folder, or a file the package did not write (:class:`OptionError` naming it)."""
+    from pathlib import Path
+
+    from ..io.atomic import check_replaceable
+    from .result import PARAMETERS_FILE
+
+    out = Path(out)
+    check_replaceable(out, [PARAMETERS_FILE, f"{Path(model).stem}_personalised.osim"])
+    check_solution_folders([out / lab for lab in labels] + ([out / "validation" / lab for lab in labels]
+                                                           if validate else []))

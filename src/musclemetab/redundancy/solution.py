@@ -319,7 +319,7 @@ class Solution:
         directory = Path(directory)
         summary = self.file_record().to_dict()
         text = json.dumps(json_ready(summary), indent=2, allow_nan=True)
-        with atomic_directory(directory) as tmp:
+        with atomic_directory(directory, mark=True) as tmp:
             write_storage(
                 tmp / SOLUTION_FILE,
                 self._table(),

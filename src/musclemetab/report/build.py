@@ -67,7 +67,7 @@ def _write_record(fig_dir: Path, key: str, page: Path, entries: Sequence[FigureE
     record = {"key": key, "page": page.name, "entries": [
         {"name": e.name, "title": e.title, "caption": e.caption, "note": e.note,
          "paths": None if e.paths is None else {k: str(v) for k, v in e.paths.items()}} for e in entries]}
-    atomic_write_text(fig_dir / REPORT_RECORD, json.dumps(record, indent=1) + "\n")
+    atomic_write_text(fig_dir / REPORT_RECORD, json.dumps(record, indent=1) + "\n", mark=True)
 
 
 def _recorded_entries(out: Path, key: str) -> list[FigureEntry] | None:
@@ -152,12 +152,25 @@ def generate_report(study_dir, out: str | os.PathLike | None = None, *,
         recorded = _recorded_entries(out, key)
         if recorded is not None:
             return out, recorded
+    _check_report_files(out, fig_dir)
     tables: dict = {}
     entries = make_figures(study, fig_dir, formats, workers, meanwhile=lambda: tables.update(page_tables(study)),
                            written_before=_recorded_files(fig_dir))
-    atomic_write_text(out, render_page(study, entries, figures_rel=FIGURES_FOLDER, key=key, tables=tables))
+    atomic_write_text(out, render_page(study, entries, figures_rel=FIGURES_FOLDER, key=key, tables=tables),
+                      mark=True)
     _write_record(fig_dir, key, out, entries)
     return out, entries
+
+
+def _check_report_files(out: Path, fig_dir: Path) -> None:
+    """Refuse (:class:`OptionError` naming the file), before any figure is drawn, a page or record
+    file in the report's place that the package did not write or that was changed since
+    (:func:`musclemetab.io.atomic.check_replaceable`; a figure's file is checked when the figure
+    is saved, :func:`~.draw.make_figures`)."""
+    from ..io.atomic import check_replaceable
+
+    check_replaceable(out.parent, [out.name])
+    check_replaceable(fig_dir, [REPORT_RECORD])
 
 
 def write_report(study_dir, out: str | os.PathLike | None = None, *,

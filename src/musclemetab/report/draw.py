@@ -68,7 +68,8 @@ def draw_figure(study: StudyFolder, fig_dir: Path, formats: Sequence[str], name:
         if cached is not None:
             from ..io.atomic import atomic_write_bytes
 
-            paths = {fmt: atomic_write_bytes(Path(fig_dir) / f"{name}.{fmt}", data) for fmt, data in cached.items()}
+            paths = {fmt: atomic_write_bytes(Path(fig_dir) / f"{name}.{fmt}", data, mark=True)
+                     for fmt, data in cached.items()}
             return FigureEntry(name, plan.title, caption=FIGURE2_CAPTION, paths=paths,
                                draw_s=time.process_time() - start)
     try:
@@ -289,8 +290,10 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
     tables). Returns one :class:`FigureEntry` per name of :data:`~.plan.FIGURE_NAMES`, with
     the file paths or the note saying why the figure is not drawn. The files of a figure not
     drawn are removed from ``fig_dir`` when an earlier report wrote them (``written_before``:
-    their file names, as its record lists them), so that no figure of an earlier report
-    remains; no other file is removed.
+    their file names, as its record lists them, and ``fig_dir``'s list of the package's files
+    holds them unchanged), so that no figure of an earlier report remains; no other file is
+    removed. A file in the place of a drawn figure that the package did not write, or that was
+    changed since, is not replaced (:class:`OptionError` naming it, when the figure is saved).
     """
     import gc
     import multiprocessing
@@ -353,10 +356,13 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
                 child.join()
         gc.unfreeze()
     _keep_costs(list(entries.values()), keys)
+    from ..io.atomic import is_written
+
     written_before = set(written_before)
     for e in entries.values():
         for ext in ("png", "svg"):
             stale = fig_dir / f"{e.name}.{ext}"
-            if (e.paths is None or ext not in e.paths) and stale.name in written_before and stale.is_file():
-                stale.unlink()
+            if (e.paths is None or ext not in e.paths) and stale.name in written_before and is_written(fig_dir,
+                                                                                                      stale.name):
+                stale.unlink()  # the package's file, unchanged (a file put in its place stays)
     return [entries[n] for n in FIGURE_NAMES]

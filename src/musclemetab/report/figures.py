@@ -1462,7 +1462,7 @@ def save_figure(fig, out_dir: str | os.PathLike, name: str, *, dpi: int = 110,
         for fmt in formats:
             buf = io.BytesIO()
             fig.savefig(buf, format=fmt, dpi=dpi, metadata=meta[fmt], **extra[fmt])
-            paths[fmt] = atomic_write_bytes(out_dir / f"{name}.{fmt}", buf.getvalue())
+            paths[fmt] = atomic_write_bytes(out_dir / f"{name}.{fmt}", buf.getvalue(), mark=True)
     if "matplotlib.pyplot" in sys.modules:
         sys.modules["matplotlib.pyplot"].close(fig)
     return paths

@@ -46,7 +46,7 @@ RENAMED_RESULTS_COLUMNS = {
 }
 #: The same for ``per_muscle.csv``.
 RENAMED_PER_MUSCLE_COLUMNS = {"mean_W": "muscle_W", "mean_W_per_kg": "muscle_W_per_kg"}
-_FAILURE_COLUMNS = ["subject", "trial", "workflow", "reason"]
+_FAILURE_COLUMNS = ["subject", "trial", "workflow", "status", "reason"]
 
 
 @dataclass
@@ -57,7 +57,7 @@ class StudyFolder:
     path: Path
     settings: dict
     results: object  # pandas.DataFrame
-    failures: object  # pandas.DataFrame: subject, trial, workflow, reason
+    failures: object  # pandas.DataFrame: subject, trial, workflow, status (failed, interrupted), reason
     notes: list[str] = field(default_factory=list)
     #: The models the figures show (:func:`report_models`): ``None`` for the default.
     figure_models: list[str] | None = None
@@ -456,7 +456,7 @@ def read_study_folder(study_dir: str | os.PathLike, models=None) -> StudyFolder:
             raise InputFileError(f"{fpath}: not a readable table ({exc}); run the study again") from None
         for c in _FAILURE_COLUMNS:
             if c not in failures.columns:
-                failures[c] = ""
+                failures[c] = "failed" if c == "status" else ""  # status: written since interrupts are told apart
         failures = failures[_FAILURE_COLUMNS]
     else:
         notes.append(f"{FAILURES_CSV} is missing: only failures recorded in the results table are listed.")

@@ -252,14 +252,26 @@ def _settings(study: StudyFolder) -> dict:
             "other": json.dumps(other, indent=2, default=str) if other else None}
 
 
+def _interrupted(study: StudyFolder) -> Table | None:
+    """The units a run stopped by Ctrl-C did not finish (``failures.csv`` with status
+    ``interrupted``; their previous folders are kept), or ``None``."""
+    rows = [[str(r["subject"]), str(r["trial"]) or "(all trials)", str(r["workflow"]), str(r["reason"])]
+            for _, r in study.failures.iterrows() if str(r["status"]) == "interrupted"]
+    if not rows:
+        return None
+    return Table([[("subject", 1), ("trial", 1), ("workflow", 1), ("reason", 1)]], rows, 0, "failures")
+
+
 def _failures(study: StudyFolder) -> Table | None:
-    """The units that did not succeed (``failures.csv``, then the results' status), or ``None``."""
+    """The units that did not succeed (``failures.csv``, then the results' status), or ``None``;
+    the interrupted ones apart (:func:`_interrupted`)."""
     rows = []
     seen = set()
     for _, r in study.failures.iterrows():
         key = (str(r["subject"]), str(r["trial"]), str(r["workflow"]))
         seen.add(key)
-        rows.append([key[0], key[1] or "(all trials)", key[2], str(r["reason"])])
+        if str(r["status"]) != "interrupted":
+            rows.append([key[0], key[1] or "(all trials)", key[2], str(r["reason"])])
     bad = study.results[study.results["status"].astype(str).str.lower() != "ok"]
     for _, r in bad.drop_duplicates(["subject", "trial", "workflow"]).iterrows():
         key = (str(r["subject"]), str(r["trial"]), str(r["workflow"]))
@@ -423,6 +435,7 @@ def page_tables(study: StudyFolder) -> dict:
         "uncertainty": uncertainty_section(study),
         "settings": _settings(study),
         "failures": _failures(study),
+        "interrupted": _interrupted(study),
         "flagged": flagged,
         "n_flagged": len({tuple(r[:3]) for r in flagged.body}) if flagged is not None else 0,
         "runs": _runs(study),

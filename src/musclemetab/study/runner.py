@@ -457,7 +457,7 @@ def run_study(
                     if not run.interrupted:
                         run.interrupted.append("(between units)")
                     break
-            run.results = collect_results(study, failed=run.failed)
+            run.results = collect_results(study, failed=run.failed, interrupted=run.interrupted)
     finally:
         executor.close()
     run.wall_time_s = time.perf_counter() - t0
@@ -606,12 +606,15 @@ def leg_basal_energy_J(per_muscle, duration_s):
     return per_muscle.groupby("model")["basal_heat_mean_W"].sum() * float(duration_s)
 
 
-def collect_results(study: Study, failed: dict[str, str] | None = None):
+def collect_results(study: Study, failed: dict[str, str] | None = None, interrupted=()):
     """Gather the complete trial units of ``study`` into the results table (and write it).
 
     One row per subject, trial, workflow and model; a ``side = "both"`` subject's two legs
     give one row with the legs added (:func:`add_leg_rows`), the column ``legs`` says which
-    (``"2 x r"``: the right leg doubled; ``"r + l"``: both legs added).
+    (``"2 x r"``: the right leg doubled; ``"r + l"``: both legs added). The units without a
+    result go to ``failures.csv`` with their ``status``: ``interrupted`` for those stopped by
+    Ctrl-C (labels ``interrupted``) and, when the run was interrupted, those it did not reach;
+    ``failed`` for the others.
     """
     import pandas as pd
 
@@ -619,6 +622,12 @@ def collect_results(study: Study, failed: dict[str, str] | None = None):
 
     out = Path(study.output)
     frames, failures, muscles = [], [], []
+    interrupted = set(interrupted)
+
+    def status(unit, reason) -> str:
+        stopped = unit.label in interrupted or (bool(interrupted) and reason == "not run")
+        return INTERRUPTED if stopped else "failed"
+
     legs: dict[tuple, dict] = {}
     records: dict[tuple, list] = {}  # the unit records of each results row (one per leg)
     for unit in plan_units(study)[1]:
@@ -629,7 +638,8 @@ def collect_results(study: Study, failed: dict[str, str] | None = None):
             reason = (failed or {}).get(unit.label) or (rec or {}).get("error") or "not run"
             if unit.side:
                 reason = f"{_LEG_NAMES[unit.side]} leg: {reason}"
-            failures.append({"subject": unit.subject, "trial": unit.trial, "workflow": unit.workflow, "reason": reason})
+            failures.append({"subject": unit.subject, "trial": unit.trial, "workflow": unit.workflow,
+                             "status": status(unit, reason), "reason": reason})
             group[unit.side] = None
             continue
         records.setdefault((unit.subject, unit.trial, unit.workflow), []).append(rec)
@@ -656,7 +666,8 @@ def collect_results(study: Study, failed: dict[str, str] | None = None):
         rec = read_unit_record(out / unit.folder)
         if not rec or rec.get("status") != "ok":
             reason = (failed or {}).get(unit.label) or (rec or {}).get("error") or "not run"
-            failures.append({"subject": unit.subject, "trial": "", "workflow": unit.workflow, "reason": reason})
+            failures.append({"subject": unit.subject, "trial": "", "workflow": unit.workflow,
+                             "status": status(unit, reason), "reason": reason})
     table = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=list(ID_COLUMNS))
     if "measured_W_per_kg" in table:
         table["measured_W_per_kg"] = pd.to_numeric(table["measured_W_per_kg"], errors="coerce")
@@ -680,7 +691,7 @@ def collect_results(study: Study, failed: dict[str, str] | None = None):
 
     write_group_key(out / GROUP_KEY_CSV)
     write_data_dictionary(out / DATA_DICTIONARY_CSV)
-    fail = pd.DataFrame(failures, columns=["subject", "trial", "workflow", "reason"])
+    fail = pd.DataFrame(failures, columns=["subject", "trial", "workflow", "status", "reason"])
     with atomic_path(out / FAILURES_CSV) as tmp:
         fail.to_csv(tmp, index=False)
     return table

@@ -49,7 +49,7 @@ from pathlib import Path
 
 from .. import __version__
 from ..errors import DataMismatchError, MusclemetabError
-from ..io.atomic import file_sha256
+from ..io.atomic import FILES_MANIFEST, file_sha256
 from .estimation import ESTIMATE, ESTIMATE_FOLDER, run_parameter_estimation
 from .spec import EMG_TEN, Study, Subject, Trial
 
@@ -264,8 +264,33 @@ def _outputs(folder: Path) -> dict[str, str]:
     return {
         str(p.relative_to(folder)): file_sha256(p)
         for p in sorted(folder.rglob("*"))
-        if p.is_file() and p.name not in (UNIT_FILE, MARKER_FILE)
+        if p.is_file() and p.name not in (UNIT_FILE, MARKER_FILE, FILES_MANIFEST)
     }
+
+
+def _list_unit_files(tmp: Path) -> None:
+    """Write ``tmp/.musclemetab-files``: every file of the unit folder about to be put in
+    place (the failed unit's too), by its path in the folder, with its SHA-256."""
+    lines = [f"{file_sha256(p)}  {p.relative_to(tmp).as_posix()}\n" for p in sorted(tmp.rglob("*"))
+             if p.is_file() and p.name != FILES_MANIFEST]
+    (tmp / FILES_MANIFEST).write_text("".join(lines), encoding="utf-8")
+
+
+def _foreign_file(folder: Path) -> Path | None:
+    """A file in the unit folder ``folder`` that the package did not put there: not in the
+    folder's :data:`~musclemetab.io.atomic.FILES_MANIFEST`, nor the package's marker and lists.
+    A listed file changed since is the package's (the run redoes a unit whose outputs were
+    altered); a folder without the list (written before the package kept it) has none."""
+    from ..io.atomic import written_files
+
+    if not (folder / FILES_MANIFEST).is_file() or folder.is_symlink():
+        return None
+    listed = written_files(folder)
+    for p in sorted(folder.rglob("*")):
+        if (p.is_file() or p.is_symlink()) and p.name not in (UNIT_FILE, MARKER_FILE, FILES_MANIFEST) \
+                and p.relative_to(folder).as_posix() not in listed:
+            return p
+    return None
 
 
 def unit_folder(output: Path, unit: Unit) -> Path:
@@ -295,6 +320,12 @@ def _replace_folder(tmp: Path, folder: Path) -> None:
             raise OptionError(
                 f"{folder} exists but was not written by musclemetab (no {MARKER_FILE} in it); "
                 "move it away or choose another output folder"
+            )
+        foreign = _foreign_file(folder)
+        if foreign is not None:
+            raise OptionError(
+                f"{foreign} was not written by musclemetab (not listed in {folder / FILES_MANIFEST}); the unit's "
+                "folder is not replaced: move the file away, or choose another output folder"
             )
         old = folder.with_name(f".{folder.name}.old-{os.getpid()}-{time.monotonic_ns()}")
         os.replace(folder, old)
@@ -446,6 +477,7 @@ def _execute_unit(study: Study, unit: Unit, key: str, dependency_folder: str | N
     try:
         record["outputs"] = _outputs(tmp) if record["status"] == "ok" else {}
         (tmp / UNIT_FILE).write_text(json.dumps(record, indent=2, default=str) + "\n", encoding="utf-8")
+        _list_unit_files(tmp)
         os.chmod(tmp, 0o777 & ~_umask())
         _replace_folder(tmp, folder)
     except (OSError, MusclemetabError) as exc:
