@@ -496,6 +496,16 @@ def _demo_unit(demo) -> Path:
     return next(p.parent for p in sorted((demo[0] / "units").rglob("summary.json")))
 
 
+DEMO_STUDY_FILE = "study.toml"  # what ``musclemetab demo`` writes into its folder (``output = "."``)
+
+
+def _demo_copy(demo, tmp_path) -> Path:
+    """A copy of the demo's study folder (its units complete: run again, none is solved)."""
+    study = tmp_path / "study"
+    shutil.copytree(demo[0], study)
+    return study
+
+
 def _user_file_case(case, example, demo, tmp_path):
     """``(command line, the file in the way, the words of the refusal)`` of one command of
     :func:`test_a_file_the_package_did_not_write_is_never_replaced`."""
@@ -516,7 +526,27 @@ def _user_file_case(case, example, demo, tmp_path):
         return (["estimate", *_files(example), "--ultrasound", str(tmp_path / "not_read.mot"), "--estimate",
                  "tendon_stiffness=soleus_r", "--out", str(out)], out / "parameters.json",
                 "was changed since musclemetab wrote it")
+    if case == "geometry":
+        return (["geometry", "--model", str(tmp_path / "not_read.osim"), "--ik", str(tmp_path / "not_read.mot"),
+                 "--out", str(out)], out / "muscle_tendon_lengths.sto", not_ours.format(out))
+    if case == "calibrate-passive --side both":
+        _previous_output(out, {"fit.json": "{}\n"})  # a folder of the package, listed
+        return (["calibrate-passive", "--model", str(tmp_path / "not_read.osim"), "--trials",
+                 str(tmp_path / "not_read"), "--side", "both", "--out", str(out)], out / "passive_parameters.csv",
+                f"was not written by musclemetab (not listed in {out / FILES_MANIFEST})")
+    if case == "calibrate-passive":
+        return (["calibrate-passive", "--model", str(tmp_path / "not_read.osim"), "--trials",
+                 str(tmp_path / "not_read"), "--out", str(out)], out / "fit.json", not_ours.format(out))
+    if case == "run (the study's root)":
+        study = _demo_copy(demo, tmp_path)
+        return (["run", str(study / DEMO_STUDY_FILE), "--no-progress"], study / "failures.csv",
+                "was changed since musclemetab wrote it")
     unit = _demo_unit(demo)
+    if case == "metabolics --sensitivity":
+        return (["metabolics", "--solution", str(unit), "--model", str(example.model), "--mass", "72.6",
+                 "--sensitivity", "--out", str(out)], out / "sensitivity.csv", not_ours.format(out))
+    if case == "analyse (analyse.json)":
+        return ["analyse", "--solution", str(unit), "--out", str(out)], out / "analyse.json", not_ours.format(out)
     if case == "metabolics":
         return (["metabolics", "--solution", str(unit), "--model", str(example.model), "--mass", "72.6",
                  "--out", str(out)], out / "per_muscle.csv", not_ours.format(out))
@@ -528,7 +558,9 @@ def _user_file_case(case, example, demo, tmp_path):
 
 
 @pytest.mark.parametrize("case", ["solve", "solve --side both", "solve --workflow emg-ten", "estimate", "metabolics",
-                                  "analyse", "report"])
+                                  "metabolics --sensitivity", "analyse", "analyse (analyse.json)", "report",
+                                  "geometry", "calibrate-passive", "calibrate-passive --side both",
+                                  "run (the study's root)"])
 def test_a_file_the_package_did_not_write_is_never_replaced(example, demo, tmp_path, capsys, decoy, case):
     """A file of the user under one of the package's output names (or the package's file, changed
     since): the command refuses in one line naming the file and the remedy, before its work,
@@ -565,6 +597,79 @@ def test_the_files_the_package_wrote_are_replaced_and_listed_anew(example, demo,
     for name in ("metabolics.sto", "per_muscle.csv", "whole_body.csv", "plausibility.json", "solution.sto"):
         assert listed[name] == {hashlib.sha256((unit / name).read_bytes()).hexdigest()}, name
     assert (unit / "solution.sto").read_bytes() == solution
+
+
+def _tiny_outputs(case, out: Path) -> list[str]:
+    """Write ``case``'s outputs into ``out`` with the package's writer, from small made-up numbers
+    (no solve, no OpenSim); the names written."""
+    import numpy as np
+
+    if case == "geometry":
+        from musclemetab.geometry import Geometry, write_geometry
+
+        t = np.linspace(0.0, 0.1, 3)
+        geom = Geometry(time=t, muscles=("soleus_r", "tibant_r"), dofs=("ankle_angle_r",),
+                        lmt_m=np.array([[0.30, 0.35], [0.31, 0.34], [0.32, 0.33]]),
+                        moment_arms_m=np.full((3, 1, 2), 0.04), source={})
+        return [p.name for p in write_geometry(geom, out)]
+    if case == "calibrate-passive":
+        from musclemetab.calibration import PassiveCalibration, write_passive_parameters
+
+        written = PassiveCalibration({"soleus_r": (2.0, 0.1, 0.6)}, {"rms_Nm": {"ankle": 0.5}}).write(out)
+        both = write_passive_parameters(out.parent / "passive_parameters.csv", {"soleus_r": (2.0, 0.1, 0.6),
+                                                                                "soleus_l": (2.1, 0.1, 0.6)})
+        return [*written, f"../{both.name}"]
+    from musclemetab.redundancy.sensitivity import Sensitivity, write_sensitivity
+
+    sens = Sensitivity(trial="t", muscles=("soleus_r",), models=("UM10",), parameters=[("lMo", "soleus_r")],
+                       values=np.array([0.05]), nominal_whole_body={"UM10": 3.0},
+                       nominal_per_muscle={"UM10": np.array([12.0])}, whole_body={"UM10": np.array([0.7])},
+                       per_muscle={"UM10": np.array([[9.0]])})
+    return [write_sensitivity([sens], out).name]
+
+
+@pytest.mark.parametrize("case", ["geometry", "calibrate-passive", "metabolics --sensitivity"])
+def test_the_writers_replace_their_own_files_and_refuse_the_users(tmp_path, case):
+    """Written twice into one folder: the second replaces the first without complaint (the list
+    holds each file with its present SHA-256, hashlib); a file the user changed since is then
+    refused by the next write, naming it, and stays."""
+    import hashlib
+
+    out = tmp_path / "out"
+    names = _tiny_outputs(case, out)
+    first = {n: (out / n).read_bytes() for n in names}
+    assert _tiny_outputs(case, out) == names
+    for n in names:
+        folder = (out / n).parent
+        assert (out / n).read_bytes() == first[n]
+        assert written_files(folder)[Path(n).name] == {hashlib.sha256(first[n]).hexdigest()}, n
+    mine = out / names[0]
+    mine.write_text("the user's own file\n")
+    with pytest.raises(OptionError, match=f"{mine} was changed since musclemetab wrote it.*move the file away"):
+        _tiny_outputs(case, out)
+    assert mine.read_text() == "the user's own file\n"
+
+
+def test_a_study_run_again_replaces_the_files_of_its_root(demo, tmp_path, capsys):
+    """The demo's study run again on a copy (its units complete, none solved): the root's files
+    are replaced without complaint, the same bytes (what the units hold did not change), listed
+    with their SHA-256 (hashlib); the units' folders are untouched."""
+    import hashlib
+
+    from musclemetab.study.runner import study_root_files
+
+    study = _demo_copy(demo, tmp_path)
+    before = {p.relative_to(study): p.read_bytes() for p in study.rglob("*") if p.is_file()}
+    assert main(["run", str(study / DEMO_STUDY_FILE), "--no-progress"]) == 0
+    listed = written_files(study)
+    for name in study_root_files():
+        if (study / name).is_file():
+            assert listed[name] == {hashlib.sha256((study / name).read_bytes()).hexdigest()}, name
+    assert {"results.csv", "failures.csv", "study.json", "muscle_groups.csv", "data_dictionary.csv"} <= set(listed)
+    for name in ("results.csv", "per_muscle.csv", "failures.csv", "muscle_groups.csv", "data_dictionary.csv"):
+        assert (study / name).read_bytes() == before[Path(name)], name
+    units = {p: b for p, b in before.items() if p.parts[0] == "units"}
+    assert {p.relative_to(study): p.read_bytes() for p in (study / "units").rglob("*") if p.is_file()} == units
 
 
 @pytest.mark.parametrize("put, replaced", [("notes.txt", False), ("solution.sto", True)])

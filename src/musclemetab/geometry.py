@@ -315,14 +315,15 @@ def _geometry_from_entry(z: dict, ik_time: np.ndarray, dofs) -> tuple[Geometry |
 def write_geometry(geom: Geometry, out_dir: str | os.PathLike) -> list[Path]:
     """Write ``muscle_tendon_lengths.sto`` and ``moment_arms_<dof>.sto`` (m) into ``out_dir``.
 
-    All files are written to a temporary folder first and moved into place together.
+    All files are written to a temporary folder first and moved into place together, listed in
+    the folder's ``.musclemetab-files``: a file the package did not write is not replaced.
     """
     from .io import atomic_directory, check_inside, storage_from_arrays
 
     out_dir = Path(out_dir)
     names = list(geom.muscles)
     written = []
-    with atomic_directory(out_dir) as tmp:
+    with atomic_directory(out_dir, mark=True) as tmp:
         df = storage_from_arrays(geom.time, names=names, data=geom.lmt_m, name="muscle_tendon_lengths")
         write_storage(tmp / "muscle_tendon_lengths.sto", df, comments=["units=m"])
         written.append(out_dir / "muscle_tendon_lengths.sto")

@@ -62,10 +62,11 @@ def write_calibration(result: CalibrationResult, out_dir: str | os.PathLike) -> 
 
 
 def write_passive_parameters(path: str | os.PathLike, parameters: Mapping[str, Sequence[float]]) -> Path:
-    """Write ``muscle,kPE,s0,sM`` (one row per muscle, names with side suffix), atomically."""
+    """Write ``muscle,kPE,s0,sM`` (one row per muscle, names with side suffix), atomically, listed
+    in the folder's ``.musclemetab-files`` (a file the package did not write is not replaced)."""
     from ..io import atomic_write_text
 
-    return atomic_write_text(path, parameters_csv(parameters))
+    return atomic_write_text(path, parameters_csv(parameters), mark=True)
 
 
 def read_passive_parameters(path: str | os.PathLike) -> dict:

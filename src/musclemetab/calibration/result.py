@@ -101,12 +101,13 @@ class PassiveCalibration:
     def write(self, out_dir: str | os.PathLike, figure=None) -> dict[str, Path]:
         """Write :data:`PARAMETERS_FILE` and :data:`FIT_FILE` (and :data:`FIGURE_FILE` from
         ``figure``, a matplotlib figure, when given) into ``out_dir`` atomically: the folder
-        appears complete or not at all. Returns ``{file name: path}``."""
+        appears complete or not at all, its files listed in the folder's ``.musclemetab-files``
+        (a file the package did not write is not replaced). Returns ``{file name: path}``."""
         from ..io import atomic_directory
 
         out_dir = Path(out_dir)
         names = [PARAMETERS_FILE, FIT_FILE]
-        with atomic_directory(out_dir) as tmp:
+        with atomic_directory(out_dir, mark=True) as tmp:
             (tmp / PARAMETERS_FILE).write_text(parameters_csv(self.parameters), encoding="utf-8")
             (tmp / FIT_FILE).write_text(json.dumps(self.fit, indent=2) + "\n", encoding="utf-8")
             if figure is not None:

@@ -172,7 +172,11 @@ def run(args) -> int:
 
     for side, _, out in jobs:  # a file of the user, or changed since written, is not replaced: refused before any work
         check_replaceable(out, ANALYSIS_FILES)
-    check_replaceable(Path(args.out), [RESULTS_CSV] + ([PER_MUSCLE_FILE] if jobs[0][0] is not None else []))
+    from ..analysis.unit import ANALYSE_RECORD
+    from ..metabolics.plausibility import PLAUSIBILITY_FILE
+
+    check_replaceable(Path(args.out), [RESULTS_CSV, ANALYSE_RECORD, PLAUSIBILITY_FILE]
+                      + ([PER_MUSCLE_FILE] if jobs[0][0] is not None else []))
     basal_given = {key: getattr(args, key) for key in BASAL_DEFAULTS}
     rows, basal_J, tables, legs, solve_flags = {}, {}, [], [], {}
     for side, sol_dir, out in jobs:
@@ -261,11 +265,10 @@ def run(args) -> int:
                             [{"plausibility": [f.to_dict() for f in fl]} for fl in solve_flags.values()])
         with atomic_path(Path(args.out) / RESULTS_CSV, mark=True) as tmp:
             table.to_csv(tmp, index=False, float_format="%.10g")
-    from ..analysis.unit import ANALYSE_RECORD
     from ..io.atomic import atomic_write_text
 
     atomic_write_text(Path(args.out) / ANALYSE_RECORD, json.dumps(
-        {"format": "musclemetab analyse", "format_version": 1, "legs": legs}, indent=1) + "\n")
+        {"format": "musclemetab analyse", "format_version": 1, "legs": legs}, indent=1) + "\n", mark=True)
     _plausibility(args, solve_flags, table)
     return 0
 

@@ -62,6 +62,7 @@ def run(args) -> int:
     kt = dict(args.tendon_stiffness) if getattr(args, "tendon_stiffness", None) else None
     side = getattr(args, "side", "r")
     sides = ("r", "l") if side == "both" else (side,)
+    _check_outputs(Path(args.out), side)
     # every leg is calibrated before anything is written: bad trials of one leg leave no output
     results = {s: calibrate_passive(args.model, args.trials, tendon_stiffness=kt, use_cache=not args.no_cache,
                                     side=s) for s in sides}
@@ -83,3 +84,16 @@ def run(args) -> int:
             f"{st['iterations']} iterations -> {where}"
         )
     return 0
+
+
+def _check_outputs(out, side) -> None:
+    """Refuse, before the calibration, an output folder where a file of the user (or one changed
+    since the package wrote it) stands under the name of an output (:func:`check_replaceable`)."""
+    from ..calibration.result import FIGURE_FILE, FIT_FILE, PARAMETERS_FILE
+    from ..io.atomic import check_replaceable
+
+    names = [PARAMETERS_FILE, FIT_FILE, FIGURE_FILE]
+    for folder in ([out / "r", out / "l"] if side == "both" else [out]):
+        check_replaceable(folder, names)
+    if side == "both":
+        check_replaceable(out, [PARAMETERS_FILE])

@@ -54,6 +54,11 @@ def run(args) -> int:
     if args.side == "both" and (dofs or args.muscles):
         raise OptionError("--dofs and --muscles name one leg's; with --side both leave them out")
     sides = ("r", "l") if args.side == "both" else (args.side,)
+    from ..io.atomic import check_replaceable
+
+    for side in sides:  # a file of the user under an output's name is refused before the work
+        out = Path(args.out) / side if args.side == "both" else Path(args.out)
+        check_replaceable(out, ["muscle_tendon_lengths.sto"] + [f"moment_arms_{d}.sto" for d in dofs or ()])
     geoms = {s: compute_geometry(args.model, args.ik, dofs=dofs, side=s, muscles=args.muscles,
                                  use_cache=not args.no_cache, method=args.method,
                                  cache_dir=args.cache_dir) for s in sides}

@@ -107,6 +107,11 @@ def run(args) -> int:
     folders = solution_folders(args.solution)
     check_metabolics_outputs(args.out, folders)
     sensitivity = _sensitivity_parameters(args.sensitivity, folders)
+    if sensitivity is not None:
+        from ..io.atomic import check_replaceable
+        from ..redundancy.sensitivity import SENSITIVITY_CSV
+
+        check_replaceable(args.out, [SENSITIVITY_CSV])
     params = None
     if args.model:
         from ..model import read_muscle_parameters

@@ -531,11 +531,13 @@ def ranked_table(sensitivities: Sequence[Sensitivity], top: int | None = None):
 
 def write_sensitivity(sensitivities: Sequence[Sensitivity], out: str | os.PathLike, top: int | None = None) -> Path:
     """Write :func:`ranked_table` as ``sensitivity.csv`` in the folder ``out`` (or to the file
-    ``out`` when it ends in ``.csv``); returns its path."""
+    ``out`` when it ends in ``.csv``), listed in the folder's ``.musclemetab-files`` (a file the
+    package did not write is not replaced, :func:`musclemetab.io.atomic.check_replaceable`);
+    returns its path."""
     from ..io.atomic import atomic_write_text
 
     out = Path(out)
     path = out if out.suffix == ".csv" else out / SENSITIVITY_CSV
     path.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(path, ranked_table(sensitivities, top).to_csv(index=False, float_format="%.10g"))
+    atomic_write_text(path, ranked_table(sensitivities, top).to_csv(index=False, float_format="%.10g"), mark=True)
     return path

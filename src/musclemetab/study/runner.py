@@ -56,7 +56,7 @@ from typing import Mapping
 from ..errors import OptionError
 from ..metabolics.plausibility import add_quality
 from ..io.atomic import FolderLock, _boot_id, _process_alive  # noqa: F401  (public here before)
-from ..io.atomic import atomic_path, atomic_write_text, check_output_folder
+from ..io.atomic import atomic_directory, atomic_path, atomic_write_text, check_output_folder, check_replaceable
 from ..processes import THREAD_VARIABLES, spawn_pool  # noqa: F401  (THREAD_VARIABLES: public here before)
 from ..processes import pin_threads as _pin_threads  # noqa: F401
 from .spec import Study
@@ -416,6 +416,7 @@ def run_study(
         for unit in stage:
             unit_folder(out, unit)
     check_output_folder(out, "the study's output folder")
+    check_replaceable(out, study_root_files())  # a file of the user there is refused before any unit runs
     run = StudyRun(output=out, n_planned=n_total)
     keys: dict[Unit, str] = {}
     executor = _Executor(workers, scheduler)
@@ -487,7 +488,18 @@ def _write_study_json(study: Study, out: Path) -> None:
         for s in study.subjects
     }
     info["software"] = software_versions()
-    atomic_write_text(out / STUDY_JSON, json.dumps(info, indent=2, default=str) + "\n")
+    atomic_write_text(out / STUDY_JSON, json.dumps(info, indent=2, default=str) + "\n", mark=True)
+
+
+def study_root_files() -> list[str]:
+    """The files the runner writes at the study's output root (:func:`_write_study_json`,
+    :func:`collect_results`): each is listed in the root's
+    :data:`~musclemetab.io.atomic.FILES_MANIFEST` and replaces only a file the list holds
+    unchanged (:func:`musclemetab.io.atomic.check_replaceable`)."""
+    from ..metabolics.per_muscle import PER_MUSCLE_FILE
+
+    return [STUDY_JSON, RESULTS_CSV, RESULTS_PARQUET, PER_MUSCLE_FILE, PER_MUSCLE_PARQUET, GROUP_KEY_CSV,
+            DATA_DICTIONARY_CSV, FAILURES_CSV]
 
 
 def _unit_rows(folder: Path, unit: Unit, rec: dict):
@@ -676,24 +688,29 @@ def collect_results(study: Study, failed: dict[str, str] | None = None, interrup
 
     builders = (trial_result_rows, add_leg_rows, leg_basal_energy_J)
     table = add_study_bands(study, table, "results", builders)
-    with atomic_path(out / RESULTS_CSV) as tmp:
-        table.to_csv(tmp, index=False, float_format="%.10g")
-    _write_parquet_copy(table, out / RESULTS_PARQUET)
     per_muscle = pd.concat(muscles, ignore_index=True) if muscles else pd.DataFrame(columns=list(ID_COLUMNS))
     per_muscle = per_muscle.sort_values(list(ID_COLUMNS) + [c for c in ("side", "rank") if c in per_muscle],
                                         kind="stable", ignore_index=True)
     per_muscle = add_study_bands(study, per_muscle, "per_muscle", builders)
-    with atomic_path(out / PER_MUSCLE_FILE) as tmp:
-        per_muscle.to_csv(tmp, index=False, float_format="%.10g")
-    _write_parquet_copy(per_muscle, out / PER_MUSCLE_PARQUET)
     from ..analysis.groups import write_group_key
     from ..datadict import write_data_dictionary
+    from ..io.parquet import parquet_available
 
-    write_group_key(out / GROUP_KEY_CSV)
-    write_data_dictionary(out / DATA_DICTIONARY_CSV)
     fail = pd.DataFrame(failures, columns=["subject", "trial", "workflow", "status", "reason"])
-    with atomic_path(out / FAILURES_CSV) as tmp:
-        fail.to_csv(tmp, index=False)
+    parquet = parquet_available()
+    if not parquet:  # an earlier run's copies would disagree with the CSV files: removed (if the package's)
+        check_replaceable(out, [RESULTS_PARQUET, PER_MUSCLE_PARQUET])
+    with atomic_directory(out, mark=True) as tmp:  # the root's files, listed in its FILES_MANIFEST
+        table.to_csv(tmp / RESULTS_CSV, index=False, float_format="%.10g")
+        per_muscle.to_csv(tmp / PER_MUSCLE_FILE, index=False, float_format="%.10g")
+        _write_parquet_copy(table, tmp / RESULTS_PARQUET)
+        _write_parquet_copy(per_muscle, tmp / PER_MUSCLE_PARQUET)
+        write_group_key(tmp / GROUP_KEY_CSV)
+        write_data_dictionary(tmp / DATA_DICTIONARY_CSV)
+        fail.to_csv(tmp / FAILURES_CSV, index=False)
+    if not parquet:  # checked above: the package's own copies
+        for name in (RESULTS_PARQUET, PER_MUSCLE_PARQUET):
+            (out / name).unlink(missing_ok=True)
     return table
 
 
