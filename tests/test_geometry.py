@@ -155,7 +155,8 @@ def test_cli_geometry_writes_opensim_files(example, tmp_path, normal_geometry):
     r = _cli("geometry", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--out", str(out))
     assert r.returncode == 0, r.stderr
     names = sorted(p.name for p in out.iterdir())
-    assert names == sorted(["muscle_tendon_lengths.sto"] + [f"moment_arms_{d}.sto" for d in DOFS])
+    assert names == sorted([".musclemetab-files", "muscle_tendon_lengths.sto"]
+                           + [f"moment_arms_{d}.sto" for d in DOFS])
     lengths = read_storage(out / "muscle_tendon_lengths.sto")
     assert list(lengths.columns) == RIGHT_LEG
     np.testing.assert_allclose(lengths.to_numpy(), normal_geometry.lmt_m, rtol=1e-11)
