@@ -22,6 +22,7 @@ import numpy as np
 from ..analysis.groups import GROUPS_WITH_OTHER as GROUPS
 from ..errors import MusclemetabError
 from .folder import StudyFolder
+from .sensitivity import sensitivity_section
 
 __all__ = ["Table", "page_tables", "render_page", "solver_runs", "legs_text", "uncertainty_section", "RUN_COLUMNS", "TEMPLATE"]
 
@@ -433,6 +434,7 @@ def page_tables(study: StudyFolder) -> dict:
         "results": _results(study),
         "per_muscle": _per_muscle(study),
         "uncertainty": uncertainty_section(study),
+        "sensitivity": sensitivity_section(study),
         "settings": _settings(study),
         "failures": _failures(study),
         "interrupted": _interrupted(study),
