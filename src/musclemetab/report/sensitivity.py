@@ -19,7 +19,7 @@ import numpy as np
 from ..errors import InputFileError
 from ..redundancy.sensitivity import SENSITIVITY_COLUMNS, SENSITIVITY_CSV
 
-__all__ = ["TOP_TABLE", "TOP_FIGURE", "FIGURE_MODEL", "unit_sensitivities", "whole_body_ranking",
+__all__ = ["HEADER", "TOP_TABLE", "TOP_FIGURE", "FIGURE_MODEL", "unit_sensitivities", "whole_body_ranking",
            "sensitivity_figure", "sensitivity_section"]
 
 #: Parameters of each model in a unit's ranked table.
@@ -29,6 +29,9 @@ TOP_FIGURE = 15
 #: The model of the figure when the study has it (Umberger 2010), else the first model shown.
 FIGURE_MODEL = "UM10"
 _WHOLE_BODY = "whole_body"
+#: The columns of a unit's ranked table.
+HEADER = ("model", "rank", "parameter", "muscle", "value (SI)", "change per 1 % (W/kg)",
+          "change per 1 % (% of the rate)")
 
 
 def unit_sensitivities(study) -> list[tuple[str, object]]:
@@ -102,11 +105,9 @@ def _png(fig) -> str:
 
 def sensitivity_section(study) -> dict | None:
     """The report's sensitivity section, or ``None`` when no unit folder holds ``sensitivity.csv``:
-    per unit a ranked :class:`~.page.Table` (rank, parameter, muscle, model, value, change per 1 %
-    in W/kg and in % of the rate), the figure of the first unit with :data:`FIGURE_MODEL` (a PNG,
-    base64) and its caption."""
-    from .page import Table
-
+    per unit its ``label`` and a ranked table, ``header`` and ``body`` rows (model, rank, parameter,
+    muscle, value, change per 1 % in W/kg and in % of the rate; :mod:`.page` makes the HTML table),
+    the figure of the first unit with :data:`FIGURE_MODEL` (a PNG, base64) and its caption."""
     tables = unit_sensitivities(study)
     if not tables:
         return None
@@ -121,9 +122,7 @@ def sensitivity_section(study) -> dict | None:
             rel = float(r.relative_change_per_1pct)
             body.append([str(r.model), f"{rank:d}", str(r.parameter), str(r.muscle), f"{float(r.parameter_value):.4g}",
                          f"{float(r.change_per_1pct):+.4f}", f"{100 * rel:+.3f}" if np.isfinite(rel) else "–"])
-        units.append({"label": label, "table": Table(
-            [[("model", 1), ("rank", 1), ("parameter", 1), ("muscle", 1), ("value (SI)", 1),
-              ("change per 1 % (W/kg)", 1), ("change per 1 % (% of the rate)", 1)]], body, 2, "results")})
+        units.append({"label": label, "header": HEADER, "body": body})
     model = FIGURE_MODEL if FIGURE_MODEL in models else models[0]
     label, table = next(((lb, t) for lb, t in tables if model in set(t["model"].astype(str))), tables[0])
     ranking = whole_body_ranking(table, [model], TOP_FIGURE)
