@@ -62,7 +62,7 @@ def add_uncertainty_arguments(parser) -> None:
     parser.add_argument(SWITCH_KEYS["sensitivity"].on_option, dest="sensitivity", action="store_true",
                         help="each effort trial unit also writes sensitivity.csv, the derivative of each rate per "
                         "log of each muscle parameter at the optimum, and the report ranks them (the study file's "
-                        "[uncertainty] sensitivity = true; one leg, forward fiber dynamics; a few minutes per unit of 40 muscles; "
+                        "[uncertainty] sensitivity = true; one leg, forward fiber dynamics; about a minute per unit of 40 muscles; "
                         "docs/uncertainty.md)")
 
 
