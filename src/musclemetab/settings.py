@@ -135,6 +135,10 @@ SWITCH_KEYS: dict[str, SwitchKey] = {k.name: k for k in (
     SwitchKey("warm_start", False, "[solver] warm_start: start each effort solve of a trial from the solve of the "
               "workflow before it (EFFORT-GEN -> EFFORT-CAL -> EFFORT-TEN); false (the default): every solve from "
               "static optimisation", on_option="--warm-start", off_option="--cold-start"),
+    SwitchKey("sensitivity", False, "[uncertainty] sensitivity: each effort trial unit (one leg, forward fiber "
+              "dynamics, no EMG or energy goal) also writes sensitivity.csv, the derivative of each rate per log of "
+              "each muscle parameter at the optimum (docs/uncertainty.md, Sensitivities); false (the default): not",
+              on_option="--sensitivity"),
 )}
 
 

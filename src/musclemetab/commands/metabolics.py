@@ -180,18 +180,12 @@ def _sensitivity_parameters(value, folders) -> list | None:
 
 def _write_sensitivity(args, folder, names, models) -> None:
     """``OUT/sensitivity.csv`` of the solution ``folder`` (:mod:`musclemetab.redundancy.sensitivity`)."""
-    from pathlib import Path
+    from ..redundancy.sensitivity import write_folder_sensitivity
 
-    from ..redundancy.sensitivity import problem_of_solution, trial_sensitivity, write_sensitivity
-
-    prob = problem_of_solution(folder)
-    pairs = [(n, m) for n in names for m in prob.inputs.muscles]
-    sens = trial_sensitivity(prob.solution, prob.inputs, prob.params, prob.goals, body_mass_kg=args.mass,
-                             height_m=args.height, models=models, parameters=pairs,
-                             optimal_reserve_Nm=prob.optimal_reserve_Nm, trial=Path(folder).resolve().name,
-                             basal=args.basal, basal_rate_W_per_kg=args.basal_coefficient,
-                             basal_exponent=args.basal_exponent, muscle_properties=args.muscle_properties)
-    path = write_sensitivity([sens], args.out)
+    path, sens = write_folder_sensitivity(folder, args.out, names=names, body_mass_kg=args.mass, height_m=args.height,
+                                          models=models, basal=args.basal, basal_rate_W_per_kg=args.basal_coefficient,
+                                          basal_exponent=args.basal_exponent, muscle_properties=args.muscle_properties)
+    pairs = sens.parameters
     top = max(((p, m, mod, float(sens.whole_body[mod][j])) for mod in sens.models
                for j, (p, m) in enumerate(sens.parameters)), key=lambda r: abs(r[3]))
     print(f"sensitivity: {len(pairs)} parameters x {len(sens.models)} models -> {path}; largest: whole-body {top[2]} "

@@ -46,7 +46,7 @@ def add_warm_start_arguments(p) -> None:
 
 
 def add_uncertainty_arguments(parser) -> None:
-    """``--uncertainty N``, ``--uncertainty-seed SEED`` and ``--uncertainty-priors FILE`` of the
+    """``--uncertainty N``, ``--uncertainty-seed SEED``, ``--uncertainty-priors FILE`` and ``--sensitivity`` of the
     commands that run a study (``run``, ``demo``); :func:`apply_uncertainty_arguments` applies them."""
     from .options import number_option
 
@@ -57,14 +57,25 @@ def add_uncertainty_arguments(parser) -> None:
                   help="seed of the uncertainty samples (default: the study file's, else 1)")
     parser.add_argument("--uncertainty-priors", metavar="FILE",
                         help="CSV of priors (parameter,distribution,spread,muscle,source) replacing the package's rows")
+    from ..settings import SWITCH_KEYS
+
+    parser.add_argument(SWITCH_KEYS["sensitivity"].on_option, dest="sensitivity", action="store_true",
+                        help="each effort trial unit also writes sensitivity.csv, the derivative of each rate per "
+                        "log of each muscle parameter at the optimum, and the report ranks them (the study file's "
+                        "[uncertainty] sensitivity = true; one leg, forward fiber dynamics; about a minute per unit of 40 muscles; "
+                        "docs/uncertainty.md)")
 
 
 def apply_uncertainty_arguments(study, args):
-    """``study`` with the ``--uncertainty...`` options of ``args`` (checked) applied."""
+    """``study`` with the ``--uncertainty...`` and ``--sensitivity`` options of ``args`` (checked) applied."""
     from ..study.uncertainty import with_uncertainty
     from .options import check_number_options
 
     check_number_options(args)
+    if getattr(args, "sensitivity", False):
+        from ..study.spec import sensitivity_study
+
+        study = sensitivity_study(study, True)
     samples, seed, priors = (getattr(args, k, None) for k in ("uncertainty", "uncertainty_seed", "uncertainty_priors"))
     if samples is None and seed is None and priors is None:
         return study

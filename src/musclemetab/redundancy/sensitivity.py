@@ -53,7 +53,7 @@ from ..errors import DataMismatchError, OptionError, SolverError
 
 __all__ = ["PARAMETERS", "RATE_STEP", "BOUND_SLACK", "POLISH_TOL", "POLISH_MU_INIT", "Sensitivity", "polish",
            "finite_difference", "parameter_derivatives", "state_sensitivities", "trial_sensitivity", "problem_of_solution",
-           "sensitivity_of_folder", "ranked_table", "write_sensitivity", "SENSITIVITY_CSV", "SENSITIVITY_COLUMNS"]
+           "sensitivity_of_folder", "ranked_table", "write_sensitivity", "write_folder_sensitivity", "SENSITIVITY_CSV", "SENSITIVITY_COLUMNS"]
 
 #: parameter -> field of :class:`.parameters.MuscleTendonParameters`
 PARAMETERS = {"F0": "max_isometric_force_N", "lMo": "optimal_fiber_length_m", "lTs": "tendon_slack_length_m",
@@ -541,3 +541,18 @@ def write_sensitivity(sensitivities: Sequence[Sensitivity], out: str | os.PathLi
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_text(path, ranked_table(sensitivities, top).to_csv(index=False, float_format="%.10g"), mark=True)
     return path
+
+
+def write_folder_sensitivity(folder, out: str | os.PathLike, *, names: Sequence[str] | None = None,
+                             trial: str | None = None, cache_dir=None, **options) -> tuple[Path, Sensitivity]:
+    """``sensitivity.csv`` (:func:`write_sensitivity`) in ``out`` of the solution ``folder``: each
+    parameter of ``names`` (default every one of :data:`PARAMETERS`) of every muscle of the solve,
+    ``options`` those of :func:`trial_sensitivity` (body mass, height, models, metabolic options).
+    ``trial`` names the solution in the table (default: the folder's name). Returns the file's
+    path and the :class:`Sensitivity`."""
+    prob = problem_of_solution(folder, cache_dir=cache_dir)
+    pairs = [(n, m) for n in (PARAMETERS if names is None else names) for m in prob.inputs.muscles]
+    sens = trial_sensitivity(prob.solution, prob.inputs, prob.params, prob.goals, parameters=pairs,
+                             optimal_reserve_Nm=prob.optimal_reserve_Nm,
+                             trial=trial if trial is not None else Path(folder).resolve().name, **options)
+    return write_sensitivity([sens], out), sens

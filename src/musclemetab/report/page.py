@@ -433,6 +433,7 @@ def page_tables(study: StudyFolder) -> dict:
         "results": _results(study),
         "per_muscle": _per_muscle(study),
         "uncertainty": uncertainty_section(study),
+        "sensitivity": _sensitivity(study),
         "settings": _settings(study),
         "failures": _failures(study),
         "interrupted": _interrupted(study),
@@ -441,6 +442,17 @@ def page_tables(study: StudyFolder) -> dict:
         "runs": _runs(study),
         "software": _software(study),
     }
+
+
+def _sensitivity(study: StudyFolder) -> dict | None:
+    """The sensitivity section (:func:`.sensitivity.sensitivity_section`) with a :class:`Table` per unit."""
+    from .sensitivity import sensitivity_section
+
+    section = sensitivity_section(study)
+    if section is not None:
+        for u in section["units"]:
+            u["table"] = Table([[(h, 1) for h in u.pop("header")]], u.pop("body"), 2, "results")
+    return section
 
 
 def _interval(row, column: str, digits: int = 3) -> str:

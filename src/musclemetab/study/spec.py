@@ -19,6 +19,8 @@ A study file names everything a study needs; paths are relative to the file::
     samples = 64                       # samples of every trial unit (0: none)
     seed = 1                           # seed of the Sobol' sequence
     priors = "priors.csv"              # optional: rows replacing the package's priors
+    sensitivity = true                 # optional: each effort trial unit writes sensitivity.csv
+                                       #  (default false; samples may then be left out)
 
     [[subjects]]
     name = "sub1"
@@ -84,7 +86,7 @@ from ..errors import InputFileError, OptionError
 from ..settings import MAX_ITERATIONS, MESH_FREQUENCY_RANGE_HZ, NUMBER_KEYS, NumberKey, check_number  # noqa: F401
 
 __all__ = ["Study", "Subject", "Trial", "load_study", "study_from_dict", "EMG_TEN", "KNOWN_WORKFLOWS", "BOTH", "strict_study",
-           "warm_start_study"]
+           "warm_start_study", "sensitivity_study"]
 
 EMG_TEN = "emg-ten"
 #: ``side = "both"``: the two legs solved as independent problems, their rates added
@@ -229,6 +231,14 @@ class Study:
 
         return bool(self.settings.get("warm_start", SWITCH_KEYS["warm_start"].default))
 
+    @property
+    def sensitivity(self) -> bool:
+        """Whether each effort trial unit writes ``sensitivity.csv`` (the study file's
+        ``[uncertainty] sensitivity``, default false; ``docs/study.md``)."""
+        from ..settings import SWITCH_KEYS
+
+        return bool(self.settings.get("sensitivity", SWITCH_KEYS["sensitivity"].default))
+
     def subject(self, name: str) -> Subject:
         for s in self.subjects:
             if s.name == name:
@@ -242,7 +252,7 @@ _STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "basal_coeffici
 #: keys of the study file's [energy_goal] table (the energy goal of every effort-workflow solve)
 _ENERGY_KEYS = {"model", "weight", "effort_weight", "smoothing", "form"}
 #: keys of the study file's [uncertainty] table (docs/uncertainty.md)
-_UNCERTAINTY_KEYS = {"samples", "seed", "priors"}
+_UNCERTAINTY_KEYS = {"samples", "seed", "priors", "sensitivity"}
 #: keys of the study file's [solver] table (IPOPT settings of every solve)
 _SOLVER_KEYS = {"max_iter", "tol", "linear_solver", "warm_start"}
 _SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials",
@@ -359,6 +369,8 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
     energy = _energy_goal(data.get("energy_goal"), where)
     if energy:
         settings["energy_goal"] = energy
+    if _sensitivity(data.get("uncertainty"), where):  # [uncertainty] sensitivity = true
+        settings["sensitivity"] = True
     uncertainty = _uncertainty(data.get("uncertainty"), base, where)
     if uncertainty:  # [uncertainty]: samples of every trial unit (musclemetab.study.uncertainty)
         settings["uncertainty"] = uncertainty
@@ -448,14 +460,35 @@ def _energy_goal(data, where: str) -> dict:
     return out
 
 
+def _sensitivity(data, where: str) -> bool:
+    """The ``[uncertainty]`` table's ``sensitivity`` switch, checked (false when absent)."""
+    if not isinstance(data, Mapping) or "sensitivity" not in data:
+        return False
+    from ..settings import check_switch
+
+    return check_switch("sensitivity", data["sensitivity"], f"{where}: [uncertainty]")
+
+
+def sensitivity_study(study: Study, sensitivity: bool) -> Study:
+    """``study`` with the sensitivities of its effort trial units on or off (``--sensitivity``: the
+    study file's ``[uncertainty] sensitivity = true``)."""
+    from dataclasses import replace
+
+    settings = {k: v for k, v in study.settings.items() if k != "sensitivity"}
+    return replace(study, settings={**settings, "sensitivity": True} if sensitivity else settings)
+
+
 def _uncertainty(data, base: Path, where: str) -> dict:
-    """The ``[uncertainty]`` table checked: ``{"samples", "seed"[, "priors"]}`` (``{}`` for none or 0 samples)."""
+    """The ``[uncertainty]`` table checked: ``{"samples", "seed"[, "priors"]}`` (``{}`` for none or 0 samples;
+    its ``sensitivity`` switch: :func:`_sensitivity`)."""
     if data is None:
         return {}
     if not isinstance(data, Mapping):
         raise OptionError(f"{where}: 'uncertainty' must be a table such as [uncertainty] samples = 64, seed = 1")
     here = f"{where}: [uncertainty]"
     _unknown(data, _UNCERTAINTY_KEYS, here)
+    if "sensitivity" in data and set(data) <= {"sensitivity"}:
+        return {}  # the sensitivities alone: no samples
     if "samples" not in data:
         raise OptionError(f"{here}: 'samples' is required (the number of samples of every trial unit, e.g. 64)")
     from ..uncertainty import DEFAULT_SEED, read_priors

@@ -48,7 +48,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from .. import __version__
-from ..errors import DataMismatchError, MusclemetabError
+from ..errors import DataMismatchError, MusclemetabError, OptionError
 from ..io.atomic import FILES_MANIFEST, file_sha256
 from .estimation import ESTIMATE, ESTIMATE_FOLDER, run_parameter_estimation
 from .spec import EMG_TEN, Study, Subject, Trial
@@ -67,6 +67,9 @@ __all__ = [
     "remove_stale_partials",
     "prepare_leg_folder",
     "WARM_CHAIN",
+    "SENSITIVITY_WORKFLOWS",
+    "sensitivity_skipped",
+    "unit_sensitivity",
 ]
 
 from ..study_layout import TIMESERIES_FILE, UNIT_FILE, UNITS_FOLDER  # noqa: E402  (defined once)
@@ -232,6 +235,8 @@ def unit_key(study: Study, unit: Unit, dependency_key: str | None = None, warm_k
             content["basal_coefficient_exponent"] = [study.basal_coefficient, study.basal_exponent]
         if study.strict:  # absent when false: earlier studies keep their unit keys
             content["strict"] = True
+        if study.sensitivity:  # absent when false: earlier studies keep their unit keys
+            content["sensitivity"] = True
     text = json.dumps(content, sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()
 
@@ -684,6 +689,10 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
 
     write_opensim_states(sol, subject.model, trial.ik, tmp)
     times["opensim_states_s"] = time.perf_counter() - t3
+    if study.sensitivity:
+        t4 = time.perf_counter()
+        sensitivity = unit_sensitivity(study, unit, tmp)
+        times["sensitivity_s"] = time.perf_counter() - t4
     flags = _plausibility(study, unit, sol, result, speed, analysis.summary)
     measured = trial.measured_W_per_kg
     if measured is None and trial.vo2_mL_per_s is not None:
@@ -704,7 +713,49 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
         "large_reserve": bool(sol.record.large_reserve),
         "reserve_share_of_peak_moment": sol.record.reserve_share_of_peak_moment,
         "plausibility": [f.to_dict() for f in flags],
+        **({"sensitivity": sensitivity} if study.sensitivity else {}),
     }
+
+
+#: The workflows whose trial units write ``sensitivity.csv`` with the study's ``[uncertainty]
+#: sensitivity`` (the effort workflows: :func:`musclemetab.redundancy.sensitivity.problem_of_solution`).
+SENSITIVITY_WORKFLOWS = ("effort-gen", "effort-cal", "effort-ten")
+
+
+def sensitivity_skipped(study: Study, unit: Unit) -> str | None:
+    """Why the trial ``unit`` writes no ``sensitivity.csv`` (``None``: it writes one): the
+    sensitivities are those of one leg's effort solve with the forward fiber dynamics."""
+    if unit.trial is None or unit.sample is not None:
+        return "not a trial unit"
+    if unit.workflow not in SENSITIVITY_WORKFLOWS:
+        return f"the sensitivities are computed for the effort workflows ({', '.join(SENSITIVITY_WORKFLOWS)}), " \
+               f"not {unit.workflow}"
+    if study.subject(unit.subject).emg_mode is not None:
+        return "the solve is EMG-informed (emg_mode): the sensitivities are computed for the effort goal alone"
+    if study.settings.get("energy_goal"):
+        return "the solve has an energy goal ([energy_goal]): the sensitivities are computed for the effort goal alone"
+    return None
+
+
+def unit_sensitivity(study: Study, unit: Unit, folder: Path) -> dict:
+    """Write ``sensitivity.csv`` of the trial ``unit``'s solution in ``folder`` (the function of
+    ``musclemetab metabolics --sensitivity``, every parameter of every muscle, the study's models
+    and basal rule); returns the unit record's ``sensitivity``: the file and its size, or why it
+    was skipped (:func:`sensitivity_skipped`, or a case the sensitivities refuse)."""
+    from ..redundancy.sensitivity import write_folder_sensitivity
+
+    reason = sensitivity_skipped(study, unit)
+    if reason is not None:
+        return {"skipped": reason}
+    subject = study.subject(unit.subject)
+    try:
+        path, sens = write_folder_sensitivity(
+            folder, folder, trial=unit.trial, body_mass_kg=subject.body_mass_kg, height_m=subject.height_m,
+            models=list(study.models), basal=study.basal, basal_rate_W_per_kg=study.basal_coefficient,
+            basal_exponent=study.basal_exponent, muscle_properties=subject.muscle_properties)
+    except OptionError as exc:  # a case the sensitivities do not support (e.g. backward fiber dynamics)
+        return {"skipped": " ".join(str(exc).split())}
+    return {"file": Path(path).name, "parameters": len(sens.parameters), "models": list(sens.models)}
 
 
 #: The record's ``start`` of a solve started from static optimisation with no warm start planned.
