@@ -296,6 +296,11 @@ def _solve(args) -> int:
     from pathlib import Path
 
     excluded = _excluded(args)
+    # the solution folder gets OpenSim's files of the solution, which the OpenSim worker writes:
+    # its start-up (a separate process) overlaps with the solve instead of following it
+    from ..opensim_bridge import start_in_background
+
+    start_in_background()
     # every leg is solved before anything is written, so bad input on one leg leaves no output
     solutions = solve_sides(
         args.model, args.ik, args.id, args.workflow, sides=sides, workers=args.workers,
