@@ -965,3 +965,30 @@ def test_run_refuses_the_workers_the_table_refuses(tmp_path, capsys):
     assert main(["run", str(tmp_path / "study.toml"), "--workers", "0"]) == 1
     err = _one_line_error(capsys)
     assert "--workers = 0" in err and NUMBER_KEYS["workers"].range_text() in err and "study.toml" not in err
+
+
+def test_an_error_that_ctrl_c_caused_is_reported_as_the_interrupt(monkeypatch, capsys, tmp_path, decoy):
+    """Ctrl-C during the import of a compiled module can come back as that import's ImportError
+    (the interrupt its context): the command says it was interrupted and exits 130, without a
+    traceback; an ImportError of its own (no interrupt behind it) is not taken for one."""
+    import musclemetab.commands.geometry as geometry
+    from musclemetab.commands import main
+
+    def interrupted_import(args):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt:
+            raise ImportError("numpy.core.multiarray failed to import")
+
+    monkeypatch.setattr(geometry, "run", interrupted_import)
+    argv = ["geometry", "--model", "m.osim", "--ik", "ik.mot", "--out", str(tmp_path / "g")]
+    assert main(argv) == 130
+    assert capsys.readouterr().err == "musclemetab: interrupted\n"
+
+    def broken_import(args):
+        raise ImportError("no module named foo")
+
+    monkeypatch.setattr(geometry, "run", broken_import)
+    with pytest.raises(ImportError, match="foo"):
+        main(argv)
+    assert not (tmp_path / "g").exists()

@@ -116,6 +116,19 @@ def main(argv: list[str] | None = None) -> int:
 INTERRUPTED_STATUS = 130
 
 
+def _caused_by_interrupt(exc: BaseException) -> bool:
+    """Whether ``exc`` was raised while a KeyboardInterrupt was being handled (its cause or
+    context, at any depth): an error that Ctrl-C turned into another (e.g. the ImportError of
+    a compiled module whose import the interrupt stopped)."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        seen.add(id(exc))
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
 def _end_interrupted() -> None:
     """End the program after Ctrl-C with status 130, Ctrl-C ignored from here on.
 
@@ -168,6 +181,12 @@ def _main(argv: list[str] | None) -> int:
         print(f"musclemetab: error: {msg}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:  # pragma: no cover
+        print("musclemetab: interrupted", file=sys.stderr)
+        return INTERRUPTED_STATUS
+    except Exception as exc:
+        if not _caused_by_interrupt(exc):
+            raise
+        # Ctrl-C during an import of a compiled module comes back as that import's error
         print("musclemetab: interrupted", file=sys.stderr)
         return INTERRUPTED_STATUS
     finally:
