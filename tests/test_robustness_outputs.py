@@ -992,3 +992,20 @@ def test_an_error_that_ctrl_c_caused_is_reported_as_the_interrupt(monkeypatch, c
     with pytest.raises(ImportError, match="foo"):
         main(argv)
     assert not (tmp_path / "g").exists()
+
+
+def test_demo_never_writes_over_a_study_file_of_the_user(tmp_path, decoy):
+    """``demo`` writes ``OUT/study.toml``: over its own earlier one (listed in the folder's
+    file list) without complaint, over a file of the user of that name never (one line naming it)."""
+    from musclemetab.errors import MusclemetabError
+    from musclemetab.study.demo import demo_study
+
+    out = tmp_path / "demo"
+    demo_study(out, speeds=["normal"])
+    first = (out / "study.toml").read_text()
+    demo_study(out, speeds=["normal", "fast"])  # its own file: replaced
+    assert (out / "study.toml").read_text() != first and "fast" in (out / "study.toml").read_text()
+    (out / "study.toml").write_text("# my own study\n")
+    with pytest.raises(MusclemetabError, match=r"study\.toml"):
+        demo_study(out, speeds=["normal"])
+    assert (out / "study.toml").read_text() == "# my own study\n"

@@ -60,7 +60,7 @@ def demo_study(out: str | os.PathLike = "musclemetab-demo", *, speeds=None,
             f"emg = {_toml_string(ex.emg[s])}",
         ]
     path = out / "study.toml"
-    atomic_write_text(path, "\n".join(lines) + "\n")
+    atomic_write_text(path, "\n".join(lines) + "\n", mark=True)  # never over a study.toml of the user
     return load_study(path)
 
 
