@@ -43,13 +43,9 @@ def ref_geometry(example):
 
 @pytest.fixture(scope="module")
 def model_params(reference_table):
-    t = reference_table
-    return types.SimpleNamespace(
-        names=list(t.index), max_isometric_force_N=t.max_isometric_force_N_sub1.to_numpy(),
-        optimal_fiber_length_m=t.optimal_fiber_length_m_sub1.to_numpy(),
-        tendon_slack_length_m=t.tendon_slack_length_m_sub1.to_numpy(),
-        pennation_angle_at_optimal_rad=t.pennation_angle_at_optimal_rad.to_numpy(),
-        max_contraction_velocity=t.max_contraction_velocity_lMo_per_s.to_numpy())
+    from test_energy_goal import reference_model_parameters
+
+    return reference_model_parameters(reference_table)
 
 
 @pytest.fixture(scope="module")
