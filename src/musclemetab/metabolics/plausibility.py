@@ -21,6 +21,7 @@ from typing import Mapping
 import numpy as np
 
 from ..redundancy.plausibility import Flag
+from .solution import PLAUSIBILITY_FILE, add_legs
 
 __all__ = ["PLAUSIBILITY_FILE", "legs_rate_flags", "results_rows_flags", "write_plausibility", "RATE_BAND",
            "ralston_gross_rate_W_per_kg", "whole_body_rate_flag", "negative_group_flag", "metabolic_flags", "add_quality",
@@ -37,9 +38,6 @@ RATE_BAND = (0.5, 2.0)
 #: outside them the check is not made.
 SPEED_RANGE_M_PER_S = (0.5, 2.0)
 _CAL_J = 4.184
-#: The file ``musclemetab metabolics`` writes beside ``whole_body.csv``: the flags of the solve(s)
-#: and of the whole-body rates, a JSON list of ``Flag.to_dict()`` (``[]``: none).
-PLAUSIBILITY_FILE = "plausibility.json"
 
 
 def ralston_gross_rate_W_per_kg(speed_m_per_s) -> np.ndarray:
@@ -113,8 +111,6 @@ def _row_flags(row, band: tuple[float, float] = RATE_BAND) -> list[Flag]:
 def legs_rate_flags(results: Mapping, speed_m_per_s: float | None, *, band: tuple[float, float] = RATE_BAND) -> list[Flag]:
     """The whole-body rate checks of :func:`~.solution.metabolics_from_legs`'s ``{side: SolutionMetabolics}``:
     one leg's rate (that leg doubled), or the two legs added (:func:`~.solution.add_legs`)."""
-    from .solution import add_legs
-
     if len(results) == 1:
         (result,) = results.values()
         rates = {m: result.whole_body[m].mean_W_per_kg for m in result.models}

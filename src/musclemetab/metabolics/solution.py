@@ -87,6 +87,10 @@ from ..redundancy.solution import SOLUTION_FILE, SUMMARY_FILE  # noqa: E402  (on
 METABOLICS_STO = "metabolics.sto"
 METABOLICS_PARQUET = "metabolics.parquet"
 WHOLE_BODY_CSV = "whole_body.csv"
+#: The file ``musclemetab metabolics`` writes beside ``whole_body.csv``: the flags of the solve(s)
+#: and of the whole-body rates, a JSON list of ``Flag.to_dict()`` (``[]``: none; written by
+#: :func:`musclemetab.metabolics.plausibility.write_plausibility`).
+PLAUSIBILITY_FILE = "plausibility.json"
 #: A leg's file when the legs are added (``legs=1``): its muscles alone, no basal heat.
 LEG_CSV = "leg_muscles.csv"
 
@@ -98,7 +102,6 @@ def check_metabolics_outputs(out_dir, sides) -> None:
     was changed since (:func:`musclemetab.io.atomic.check_replaceable`)."""
     from ..io.atomic import check_replaceable
     from .per_muscle import PER_MUSCLE_FILE
-    from .plausibility import PLAUSIBILITY_FILE
 
     out_dir, sides = Path(out_dir), list(sides)
     files = (METABOLICS_STO, METABOLICS_PARQUET, WHOLE_BODY_CSV, LEG_CSV, PER_MUSCLE_FILE)
