@@ -215,6 +215,34 @@ def test_samples_are_resumable_and_the_same_in_this_process(zero_study):
     assert rec["outputs"] == before
 
 
+def test_samples_on_a_dask_cluster_give_the_process_pool_bands(zero_study, example, tmp_path):
+    """The same study on a local Dask cluster of two worker processes: the trial unit and its
+    samples run there as on the process pool, and results.csv (bands included) and
+    per_muscle.csv are the pool's."""
+    distributed = pytest.importorskip("distributed")
+    import solve_memo
+
+    from musclemetab.study.runner import run_study
+    from musclemetab.study.spec import load_study
+
+    study, run = zero_study
+    _zero_priors_csv(tmp_path / "zero.csv")
+    (tmp_path / "study.toml").write_text(STUDY.format(ex=example))
+    dask_study = load_study(tmp_path / "study.toml")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+        client.run(solve_memo.install_in_worker)  # the test run's solves, once (tests/solve_memo.py)
+        dask_run = run_study(dask_study, scheduler=cluster.scheduler_address, progress=False)
+    assert not dask_run.failed and sorted(dask_run.ran) == sorted(run.ran)
+    assert sorted(dask_run.ran) == ["sub1/normal/effort-gen", "sub1/normal/effort-gen/sample 0",
+                                    "sub1/normal/effort-gen/sample 1"]
+    for name in ("results.csv", "per_muscle.csv"):
+        a = pd.read_csv(Path(study.output) / name).drop(columns=["unit_dir"], errors="ignore")
+        b = pd.read_csv(Path(dask_study.output) / name).drop(columns=["unit_dir"], errors="ignore")
+        assert any(c.endswith("_p95") for c in b.columns)
+        pd.testing.assert_frame_equal(a, b, check_dtype=False, rtol=1e-8)
+
+
 def test_adapted_start_keeps_the_tendon_forces(zero_study):
     """The warm start of a sample keeps the nominal tendon forces under the sample's parameters: the
     forces recomputed from its fiber lengths (derived_quantities) equal the solution's; with the
