@@ -96,6 +96,17 @@ class LoadedModel:
         return out
 
 
+def model_muscles(model, names, path, remedy: str) -> dict:
+    """``{name: muscle}`` of ``model`` (an ``osim.Model``) for ``names``; a name the model lacks
+    raises :class:`UnknownMuscleError` naming the model file ``path`` and ``remedy``."""
+    ms = model.getMuscles()
+    have = {ms.get(i).getName() for i in range(ms.getSize())}
+    missing = [n for n in names if n not in have]
+    if missing:
+        raise UnknownMuscleError(f"{path}: the model has no muscle {', '.join(missing)}; {remedy}")
+    return {n: ms.get(n) for n in names}
+
+
 def load_model(path: str) -> LoadedModel:
     """The model at ``path``, loaded once while the file is unchanged (the last one is kept)."""
     path = os.path.abspath(path)

@@ -12,7 +12,8 @@ import os
 
 import opensim as osim
 
-from ..errors import ModelError, UnknownMuscleError
+from ..errors import ModelError
+from .model_ops import model_muscles
 
 
 def _tendon_strain(mu):
@@ -32,13 +33,7 @@ def _tendon_strain(mu):
 
 
 def _muscles(model, names, path):
-    ms = model.getMuscles()
-    have = {ms.get(i).getName() for i in range(ms.getSize())}
-    missing = [n for n in names if n not in have]
-    if missing:
-        raise UnknownMuscleError(f"{path}: the model has no muscle {', '.join(missing)}; estimate muscles of "
-                                 "this model")
-    return {n: ms.get(n) for n in names}
+    return model_muscles(model, names, path, "estimate muscles of this model")
 
 
 def write_model_with_parameters(model_path: str, out_path: str, values: dict) -> dict:

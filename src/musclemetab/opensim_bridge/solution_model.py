@@ -29,7 +29,7 @@ import numpy as np
 import opensim as osim
 
 from ..errors import ModelError, UnknownMuscleError
-from .model_ops import LoadedModel
+from .model_ops import LoadedModel, model_muscles
 from .states import states_along_motion
 
 __all__ = ["solution_model", "RESERVE_PREFIX"]
@@ -101,16 +101,12 @@ def solution_model(model_path: str, out_path: str, parameters: dict, ik_time, co
     ``moment_arms_m`` (``{coordinate: {muscle: array over times}}``, spanned pairs only).
     """
     model = _with_degroote_muscles(str(model_path))
-    mset = model.getMuscles()
-    have = {mset.get(i).getName() for i in range(mset.getSize())}
-    missing = [m for m in parameters if m not in have]
-    if missing:
-        raise UnknownMuscleError(f"{model_path}: no muscle {', '.join(missing)} of the solution; give the model the "
-                                 "solution was solved with")
+    muscles = model_muscles(model, list(parameters), model_path,
+                            "give the model the solution was solved with")
     for name, p in parameters.items():
-        muscle = osim.DeGrooteFregly2016Muscle.safeDownCast(mset.get(name))
+        muscle = osim.DeGrooteFregly2016Muscle.safeDownCast(muscles[name])
         if muscle is None:
-            raise ModelError(f"{model_path}: OpenSim cannot turn muscle {name} ({mset.get(name).getConcreteClassName()}) "
+            raise ModelError(f"{model_path}: OpenSim cannot turn muscle {name} ({muscles[name].getConcreteClassName()}) "
                              "into a DeGrooteFregly2016Muscle, so no OpenSim model of the solution is written for it; "
                              "solve with a model of Millard, Thelen or DeGroote-Fregly muscles")
         _set_parameters(muscle, p)
