@@ -39,7 +39,8 @@ def solve_key(func, args, kwargs) -> tuple[str, dict] | None:
     """``(key, content)`` of a solve call: input files by SHA-256, every other argument by value.
 
     ``cache_dir`` (where the geometry is cached) does not change the result and is left out, nor
-    does ``exclude_missing_ok`` when no muscle is excluded.
+    does ``exclude_missing_ok`` when no muscle is excluded, nor ``before_solve`` (work started
+    beside the solve; a stored result does not call it).
     ``options=None``, ``settings=None`` and ``grf_threshold_N=None`` count as the defaults they stand for. ``None`` when
     an argument is neither a file, a plain value, a list/tuple/dict of those nor a settings
     dataclass or a warm-start solution (another in-memory object): such calls always solve.
@@ -70,8 +71,9 @@ def solve_key(func, args, kwargs) -> tuple[str, dict] | None:
     bound.apply_defaults()
     content = {"function": f"{func.__module__}.{func.__qualname__}"}
     for name, value in bound.arguments.items():
-        if name == "cache_dir" or (name == "exclude_missing_ok" and not bound.arguments.get("exclude_muscles")):
-            continue  # neither changes the result (the second only says how to treat exclude_muscles)
+        if name in ("cache_dir", "before_solve") or (name == "exclude_missing_ok"
+                                                      and not bound.arguments.get("exclude_muscles")):
+            continue  # none changes the result (exclude_missing_ok only says how to treat exclude_muscles)
         if name == "options" and value is None:
             value = SolverOptions()
         if name == "settings" and value is None:

@@ -148,6 +148,58 @@ def test_forces_file_holds_every_actuator(solved, example):
     assert "reserve_subtalar_angle_r" not in forces.columns and "reserve_mtp_angle_r" not in forces.columns
 
 
+def test_files_are_the_same_with_the_model_work_done_during_the_solve(solved, example, geometry_cache, tmp_path,
+                                                                    monkeypatch):
+    """``musclemetab solve`` has the OpenSim worker prepare the solution's model while IPOPT
+    solves (``solve_files``' ``before_solve`` calls ``prepare_opensim_files``); a write that finds
+    the prepared model only writes it. The problem ``before_solve`` is told of is the solution's
+    (mesh, parameters, DOFs), and the files are byte for byte those of a write that does all the
+    model work itself."""
+    from pathlib import Path
+
+    from musclemetab.opensim_bridge import call
+    from musclemetab.redundancy import run
+    from musclemetab.redundancy.export import OPENSIM_FILES, prepare_opensim_files, write_opensim_files
+
+    _, folder = solved("effort-gen")  # written by the command, with the model prepared during its solve
+    args = (example.model, example.ik["normal"], example.id["normal"], "effort-gen")
+    sol = run.solve_files(*args, cache_dir=geometry_cache)  # the command's solution (the session's memo)
+    told = {}
+
+    class Stop(Exception):
+        pass
+
+    def stop(*args, **kwargs):
+        raise Stop
+
+    monkeypatch.setattr(run, "solve_trial", stop)  # the problem up to IPOPT, not solved again
+    with pytest.raises(Stop):
+        getattr(run.solve_files, "__wrapped__", run.solve_files)(
+            *args, cache_dir=geometry_cache, before_solve=lambda **outline: told.update(outline))
+    np.testing.assert_array_equal(told["time_s"], sol.time_s)
+    assert tuple(told["dofs"]) == tuple(sol.dofs) and told["parameters"].names == sol.parameters.names
+    from musclemetab.redundancy.parameters import PARAMETER_FIELDS
+
+    for field in PARAMETER_FIELDS:
+        np.testing.assert_array_equal(getattr(told["parameters"], field), getattr(sol.parameters, field), field)
+
+    prepare_opensim_files(**told)
+    prepared = call("solution_model:prepared_models")  # (waits for the preparation)
+    write_opensim_files(sol, tmp_path / "prepared")
+    assert call("solution_model:prepared_models") == prepared  # the write found the model prepared
+    # the same model file under another path: nothing prepared for it, all the work in the write
+    model = Path(sol.record.inputs["model"])
+    copy = tmp_path / "copy" / model.name
+    copy.parent.mkdir()
+    copy.write_bytes(model.read_bytes())
+    write_opensim_files(sol, tmp_path / "unprepared", model_path=copy)
+    assert call("solution_model:prepared_models")[-1] not in prepared
+    for name in OPENSIM_FILES:
+        unprepared = (tmp_path / "unprepared" / name).read_bytes()
+        assert (tmp_path / "prepared" / name).read_bytes() == unprepared, name
+        assert (folder / name).read_bytes() == unprepared, name
+
+
 @pytest.fixture(scope="module")
 def gait2392_right(gait2392, tmp_path_factory):
     """EFFORT-GEN on the right leg of gait2392, inverse dynamics computed by OpenSim from the

@@ -297,8 +297,11 @@ def _solve(args) -> int:
 
     excluded = _excluded(args)
     # the solution folder gets OpenSim's files of the solution, which the OpenSim worker writes:
-    # its start-up (a separate process) overlaps with the solve instead of following it
+    # its start-up (a separate process) and the model work that needs no solution values
+    # (prepare_opensim_files, asked for once each leg's problem is known) overlap with the solve
+    # instead of following it
     from ..opensim_bridge import start_in_background
+    from ..redundancy.export import prepare_opensim_files
 
     start_in_background()
     # every leg is solved before anything is written, so bad input on one leg leaves no output
@@ -311,7 +314,7 @@ def _solve(args) -> int:
         passive=args.passive, tendon_stiffness=kt, tendon_stiffness_file=args.parameters,
         options=options, cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, warm_start=warm,
         exclude_muscles=excluded, exclude_missing_ok=args.side == "both",
-        diagnose_only=getattr(args, "diagnose_only", False),
+        diagnose_only=getattr(args, "diagnose_only", False), before_solve=prepare_opensim_files,
     )
     if getattr(args, "diagnose_only", False):
         return _report_diagnoses(solutions)

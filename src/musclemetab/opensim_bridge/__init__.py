@@ -14,6 +14,6 @@ Functions run in the worker live in the modules of this package that import ``op
     info = call("model_ops:read_model_info", "model.osim")
 """
 
-from .client import call, shutdown, start_in_background, worker_startup_s
+from .client import call, call_in_background, shutdown, start_in_background, worker_startup_s
 
-__all__ = ["call", "shutdown", "start_in_background", "worker_startup_s"]
+__all__ = ["call", "call_in_background", "shutdown", "start_in_background", "worker_startup_s"]

@@ -120,6 +120,23 @@ def call(target: str, *args, **kwargs):
     raise OpenSimWorkerError(f"OpenSim failed in {target}: {payload}")
 
 
+def call_in_background(target: str, *args, **kwargs) -> None:
+    """Run ``module:function`` in the worker from a background thread of this process, for work
+    done ahead whose result the worker keeps (e.g. :func:`.solution_model.prepare_solution_model`
+    while the caller solves); nobody reads its result. The worker is a separate process, so the
+    work runs beside the caller's. The next :func:`call` waits until its reply is in (one call at a
+    time: each reply is read by the thread that sent the request). A failure is ignored: the call
+    that needs the work does it again and reports it."""
+
+    def run():
+        try:
+            call(target, *args, **kwargs)
+        except Exception:  # done again, and reported, by the call that needs it
+            pass
+
+    threading.Thread(target=run, daemon=True).start()
+
+
 def worker_startup_s() -> float | None:
     """Seconds the worker took to start (process start plus ``import opensim``), if started."""
     return _STARTUP_S

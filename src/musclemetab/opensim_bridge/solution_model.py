@@ -18,12 +18,18 @@ Along the solution's node times it returns the state names and defaults of that 
 coordinate values and speeds of the IK motion (as :mod:`.states` computes them; locked
 coordinates at their value), and the moment arms of the solved muscles about the model's
 other free coordinates (``Muscle.computeMomentArm``, only the pairs the muscle spans).
+
+None of this needs the solution's values: :func:`prepare_solution_model` does it while the
+solution is solved and keeps the model for the :func:`solution_model` call with the same inputs,
+which then only writes the file.
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
+import pickle
 
 import numpy as np
 import opensim as osim
@@ -32,7 +38,7 @@ from ..errors import ModelError, UnknownMuscleError
 from .model_ops import LoadedModel, model_muscles
 from .states import states_along_motion
 
-__all__ = ["solution_model", "RESERVE_PREFIX"]
+__all__ = ["solution_model", "prepare_solution_model", "prepared_models", "RESERVE_PREFIX"]
 
 RESERVE_PREFIX = "reserve_"
 
@@ -83,6 +89,51 @@ def _set_parameters(mu, p: dict) -> None:
     mu.set_tendon_compliance_dynamics_mode("explicit")
 
 
+#: models prepared by :func:`prepare_solution_model` (or written by :func:`solution_model`),
+#: by :func:`_inputs_key`: the last few, e.g. both legs of a ``--side both`` solve
+_PREPARED: dict = {}
+_PREPARED_KEEP = 2
+
+
+def _inputs_key(model_path: str, parameters: dict, ik_time, columns: dict, in_degrees: bool, times,
+                solved_dofs) -> str:
+    """A digest of everything the prepared model depends on (the model file by path, time of
+    change and size; the values of every other input)."""
+    path = os.path.abspath(model_path)
+    stat = (os.path.getmtime(path), os.path.getsize(path)) if os.path.isfile(path) else None
+    data = pickle.dumps((path, stat, parameters, np.asarray(ik_time, dtype=float),
+                         {c: np.asarray(v, dtype=float) for c, v in columns.items()}, bool(in_degrees),
+                         np.asarray(times, dtype=float), list(solved_dofs)), protocol=pickle.HIGHEST_PROTOCOL)
+    return hashlib.sha256(data).hexdigest()
+
+
+def prepare_solution_model(model_path: str, parameters: dict, ik_time, columns: dict, in_degrees: bool, times,
+                           solved_dofs: list = ()) -> None:
+    """Do the work of :func:`solution_model` that needs no solution values, and keep its result
+    for the next :func:`solution_model` call with the same inputs: the model's conversion, the
+    muscle parameters, the reserves, the states along the motion and the moment arms. Asked for
+    while the solution is solved (the parameters and the mesh are known before), so that after
+    the solve only the file is written."""
+    _prepared(model_path, parameters, ik_time, columns, in_degrees, times, solved_dofs)
+
+
+def prepared_models() -> list:
+    """The digests (:func:`_inputs_key`) of the models kept, oldest first: which inputs a
+    :func:`solution_model` call finds prepared."""
+    return list(_PREPARED)
+
+
+def _prepared(model_path, parameters, ik_time, columns, in_degrees, times, solved_dofs):
+    """``(model, info)`` of :func:`_prepare`, from :data:`_PREPARED` when the inputs are the same."""
+    key = _inputs_key(model_path, parameters, ik_time, columns, in_degrees, times, solved_dofs)
+    if key not in _PREPARED:
+        entry = _prepare(model_path, parameters, ik_time, columns, in_degrees, times, solved_dofs)
+        while len(_PREPARED) >= _PREPARED_KEEP:
+            _PREPARED.pop(next(iter(_PREPARED)))
+        _PREPARED[key] = entry
+    return _PREPARED[key]
+
+
 def solution_model(model_path: str, out_path: str, parameters: dict, ik_time, columns: dict, in_degrees: bool,
                    times, solved_dofs: list = (), comments: dict | None = None) -> dict:
     """Write the solution's model to ``out_path``; its states and moment arms along ``times``.
@@ -99,7 +150,19 @@ def solution_model(model_path: str, out_path: str, parameters: dict, ik_time, co
     ``reserves`` (``{coordinate: actuator name}``), ``actuators`` (names in the model's
     order), ``dependent_coordinates``, ``prescribed_coordinates`` (the locked ones) and
     ``moment_arms_m`` (``{coordinate: {muscle: array over times}}``, spanned pairs only).
+    The model work is that of :func:`prepare_solution_model` with the same inputs when it ran
+    before (done once).
     """
+    model, info = _prepared(str(model_path), parameters, ik_time, columns, in_degrees, times, solved_dofs)
+    model.printToXML(str(out_path))
+    if comments:
+        _add_comments(str(out_path), comments)
+    return dict(info)
+
+
+def _prepare(model_path: str, parameters: dict, ik_time, columns: dict, in_degrees: bool, times,
+             solved_dofs) -> tuple:
+    """The solution's model (not written) and what :func:`solution_model` returns."""
     model = _with_degroote_muscles(str(model_path))
     muscles = model_muscles(model, list(parameters), model_path,
                             "give the model the solution was solved with")
@@ -165,9 +228,6 @@ def solution_model(model_path: str, out_path: str, parameters: dict, ik_time, co
         for c, n in spans:
             arms[c][n][k] = mus[n].computeMomentArm(state, m.coords[c])
     acts = model.getActuators()
-    model.printToXML(str(out_path))
-    if comments:
-        _add_comments(str(out_path), comments)
     info.update(
         reserves=reserves,
         actuators=[acts.get(i).getName() for i in range(acts.getSize())],
@@ -175,7 +235,7 @@ def solution_model(model_path: str, out_path: str, parameters: dict, ik_time, co
         prescribed_coordinates=prescribed,
         moment_arms_m=arms,
     )
-    return info
+    return model, info
 
 
 def _spans(model, muscle, coordinate: str, m: LoadedModel) -> bool:

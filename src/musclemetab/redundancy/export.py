@@ -35,7 +35,9 @@ Written into a solution folder by :func:`write_opensim_files` (``docs/opensim_fi
 The coordinates are those the solve used: the IK frames of the solved window, low-pass
 filtered as the solve filtered the muscle-tendon lengths (``input_preparation`` in
 ``summary.json``) and interpolated with not-a-knot cubic splines. The model work runs in the
-OpenSim worker (:mod:`musclemetab.opensim_bridge.solution_model`).
+OpenSim worker (:mod:`musclemetab.opensim_bridge.solution_model`); :func:`prepare_opensim_files`
+starts the part that needs no solution values while the solution is being solved (``musclemetab
+solve`` does), so that after the solve only the solution's values are placed and the files written.
 """
 
 from __future__ import annotations
@@ -49,7 +51,8 @@ from ..errors import DataMismatchError, InputFileError
 
 __all__ = ["STATES_FILE", "CONTROLS_FILE", "FORCES_FILE", "MODEL_FILE", "OPENSIM_FILES",
            "tendon_strain_at_one_norm_force", "passive_fiber_strain_at_one_norm_force",
-           "opensim_muscle_parameters", "normalized_tendon_force_state", "inverse_dynamics_at", "opensim_tables", "write_opensim_files", "write_solution_opensim_files",
+           "opensim_muscle_parameters", "normalized_tendon_force_state", "inverse_dynamics_at", "opensim_tables",
+           "prepare_opensim_files", "write_opensim_files", "write_solution_opensim_files",
            "write_opensim_states", "joint_reaction"]
 
 STATES_FILE = "states.sto"
@@ -180,23 +183,59 @@ def _solution_inputs(solution, model_path, ik_path, id_path):
     return paths
 
 
-def _coordinates_of_window(solution, ik):
-    """The IK columns over the frames of the solved window, filtered as the solve filtered the
-    muscle-tendon lengths (``input_preparation``)."""
+def _coordinates_of_window(time_s, filtered: bool, ik, ik_path):
+    """The IK columns over the frames of the solved window ``time_s``, filtered as the solve
+    filtered the muscle-tendon lengths (``filtered``: ``input_preparation``'s filter)."""
     from .inputs import FILTER_CUTOFF_HZ, FILTER_ORDER, lowpass_filtfilt
 
     t = np.asarray(ik.index, dtype=float)
-    keep = (t >= solution.time_s[0] - 1e-6) & (t <= solution.time_s[-1] + 1e-6)
+    keep = (t >= time_s[0] - 1e-6) & (t <= time_s[-1] + 1e-6)
     t = t[keep]
     columns = {c: np.asarray(ik[c], dtype=float)[keep] for c in ik.columns}
-    prep = solution.record.input_preparation or {}
-    if t.size > 1 and str(prep.get("filter", "none")) != "none":
+    if t.size > 1 and filtered:
         fs = 1.0 / float(np.mean(np.diff(t)))
         names = list(columns)
-        filtered = lowpass_filtfilt(np.column_stack([columns[c] for c in names]), fs, FILTER_CUTOFF_HZ,
-                                    FILTER_ORDER, what=f"the IK motion of {solution.record.inputs.get('ik', '')}")
-        columns = {c: filtered[:, j] for j, c in enumerate(names)}
+        filtered_values = lowpass_filtfilt(np.column_stack([columns[c] for c in names]), fs, FILTER_CUTOFF_HZ,
+                                           FILTER_ORDER, what=f"the IK motion of {ik_path}")
+        columns = {c: filtered_values[:, j] for j, c in enumerate(names)}
     return t, columns
+
+
+def _model_inputs(model_path, ik_path, time_s, filtered: bool, parameters, dofs):
+    """The inputs of the OpenSim worker's model work
+    (:func:`musclemetab.opensim_bridge.solution_model.prepare_solution_model`) for a solution
+    over the mesh ``time_s`` with ``parameters`` (:class:`~.parameters.MuscleTendonParameters`)
+    and the solved ``dofs``."""
+    from ..io import read_table
+
+    ik = read_table(ik_path)
+    t = np.asarray(time_s, dtype=float)
+    ik_t, columns = _coordinates_of_window(t, filtered, ik, ik_path)
+    if ik_t.size < 2 or ik_t[0] > t[0] + 1e-6 or ik_t[-1] < t[-1] - 1e-6:
+        raise DataMismatchError(
+            f"the solution spans {t[0]:g}-{t[-1]:g} s but the IK motion {ik_path} does not; give the IK file of "
+            "the solved trial"
+        )
+    return (str(model_path), opensim_muscle_parameters(parameters), ik_t, columns, bool(ik.attrs.get("in_degrees")),
+            t, list(dofs))
+
+
+def prepare_opensim_files(model_path, ik_path, time_s, parameters, dofs, filtered: bool = True) -> None:
+    """Start the OpenSim work of :func:`write_opensim_files` that needs no solution values, for a
+    solution about to be solved over the mesh ``time_s`` with ``parameters`` and the solved
+    ``dofs`` (the IK filtered as the solve filters it when ``filtered``): the OpenSim worker
+    converts the model, sets the parameters, adds the reserves and computes the states and moment
+    arms along the motion while this process solves, and keeps the result for the files of that
+    solution (:func:`musclemetab.opensim_bridge.call_in_background`). Nothing is written and the
+    files are the same with or without it; bad input is left to the write, which reports it."""
+    from ..errors import MusclemetabError
+    from ..opensim_bridge import call_in_background
+
+    try:
+        args = _model_inputs(model_path, ik_path, time_s, filtered, parameters, dofs)
+    except (MusclemetabError, OSError):
+        return
+    call_in_background("solution_model:prepare_solution_model", *args)
 
 
 def inverse_dynamics_at(id_path, coordinates, times) -> dict:
@@ -237,22 +276,15 @@ def _table(t, columns: dict, name: str):
 def opensim_tables(solution, model_out, model_path=None, ik_path=None, id_path=None):
     """Write the solution's model to ``model_out``; return its states, controls and forces
     tables (:class:`~musclemetab.io.StorageTable`, NumPy: no pandas) and what the worker reported."""
-    from ..io import read_table
     from ..opensim_bridge import call
 
     paths = _solution_inputs(solution, model_path, ik_path, id_path)
-    ik = read_table(paths["ik"])
     t = np.asarray(solution.time_s, dtype=float)
-    ik_t, columns = _coordinates_of_window(solution, ik)
-    if ik_t.size < 2 or ik_t[0] > t[0] + 1e-6 or ik_t[-1] < t[-1] - 1e-6:
-        raise DataMismatchError(
-            f"the solution spans {t[0]:g}-{t[-1]:g} s but the IK motion {paths['ik']} does not; give the IK file of "
-            "the solved trial"
-        )
-    params = solution.parameters
-    info = call("solution_model:solution_model", str(paths["model"]), str(model_out),
-                opensim_muscle_parameters(params), ik_t, columns, bool(ik.attrs.get("in_degrees")), t,
-                list(solution.dofs), _model_comments(solution, paths["model"]))
+    filtered = str((solution.record.input_preparation or {}).get("filter", "none")) != "none"
+    model, parameters, ik_t, columns, in_degrees, _, dofs = _model_inputs(
+        paths["model"], paths["ik"], t, filtered, solution.parameters, solution.dofs)
+    info = call("solution_model:solution_model", model, str(model_out), parameters, ik_t, columns, in_degrees, t,
+                dofs, _model_comments(solution, paths["model"]))
     paths_of = info["muscle_paths"]
     # states
     values = dict(info["values"])

@@ -94,6 +94,7 @@ def solve_files(
     exclude_missing_ok: bool = False,
     diagnose_only: bool = False,
     parameter_transform=None,
+    before_solve=None,
 ) -> Solution:
     """Solve from files: model ``.osim``, IK ``.mot`` and ID ``.sto`` (or ground forces).
 
@@ -111,7 +112,11 @@ def solve_files(
     :class:`~.diagnosis.InfeasibleInputError`, the others warn; ``summary.json``'s
     ``diagnosis``); with ``diagnose_only`` the :class:`~.diagnosis.Diagnosis` is returned,
     unchecked, instead of a solution, and nothing is solved. ``parameter_transform``: see
-    :func:`.solve.solve_trial`.
+    :func:`.solve.solve_trial`. ``before_solve``: a function called, once the problem is known and
+    before IPOPT starts, with the keywords ``model_path``, ``ik_path``, ``time_s`` (the mesh),
+    ``parameters`` (the muscles' :class:`~.parameters.MuscleTendonParameters`) and ``dofs`` of the
+    solution to come, e.g. :func:`.export.prepare_opensim_files` (``musclemetab solve``); not
+    called with ``parameter_transform``.
 
     The inputs are checked (columns, units, time ranges) before the geometry is computed.
 
@@ -221,11 +226,18 @@ def solve_files(
     sources = {"model": Path(model_path), "ik": Path(ik_path), "id": Path(id_path)}
     if loads is not None:
         sources["external_loads"] = loads.path
-    diagnosis = _diagnose_files(geometry, model_parameters, id_time, id_moments, wf, ik_time, passive,
-                                tendon_stiffness, tendon_stiffness_file, options, mesh_frequency_hz,
-                                Path(ik_path).stem, sources, check=not diagnose_only)
+    diagnosis, params = _diagnose_files(geometry, model_parameters, id_time, id_moments, wf, ik_time, passive,
+                                        tendon_stiffness, tendon_stiffness_file, options, mesh_frequency_hz,
+                                        Path(ik_path).stem, sources, check=not diagnose_only)
     if diagnose_only:
         return diagnosis
+    if before_solve is not None and parameter_transform is None:
+        from .inputs import mesh_for_window, restrict_geometry
+
+        solved = restrict_geometry(geometry)
+        before_solve(model_path=model_path, ik_path=ik_path, parameters=params.subset(solved.muscles),
+                     time_s=mesh_for_window(float(ik_time[0]), float(ik_time[-1]), mesh_frequency_hz),
+                     dofs=tuple(solved.dofs))
     solution = solve_trial(
         geometry, model_parameters, id_time, id_moments, wf,
         ik_time_s=ik_time, passive=passive, tendon_stiffness=tendon_stiffness,
@@ -269,7 +281,8 @@ def exclude_from_geometry(geometry, exclude_muscles: Sequence[str] = (), missing
 def _diagnose_files(geometry, model_parameters, id_time, id_moments, wf, ik_time, passive, tendon_stiffness,
                     tendon_stiffness_file, options, mesh_frequency_hz, label, sources, check=True):
     """The diagnosis of one trial before its solve (:mod:`.diagnosis`): an
-    :class:`~.diagnosis.InfeasibleInputError` for blocking findings, a warning for the others."""
+    :class:`~.diagnosis.InfeasibleInputError` for blocking findings, a warning for the others;
+    ``(diagnosis, the workflow's parameters of the problem's muscles)``."""
     from .diagnosis import diagnose_geometry
     from .inputs import restrict_geometry
     from .workflows import workflow_parameters
@@ -280,7 +293,7 @@ def _diagnose_files(geometry, model_parameters, id_time, id_moments, wf, ik_time
         geometry, params, id_time, id_moments, ik_time_s=ik_time, mesh_frequency_hz=mesh_frequency_hz,
         optimal_reserve_Nm=(options or SolverOptions()).optimal_reserve_Nm, trial=label,
         sources={k: str(v) for k, v in sources.items()})
-    return diagnosis.check(f"trial {label}") if check else diagnosis
+    return (diagnosis.check(f"trial {label}") if check else diagnosis), params
 
 
 def _diagnosis_record(diagnosis, solution, geometry, id_time, id_moments, ik_time,
@@ -326,7 +339,8 @@ def solve_sides(model_path, ik_path, id_path, workflow: str = "effort-gen", *, s
     with its own OpenSim worker; the warnings of a leg are raised again here, in the order of
     ``sides``, and its errors as if it had been solved in this process; while progress lines are
     on here (:class:`~.ipopt.solve_progress`) each leg writes its own, labelled with the leg. The solutions are the
-    same either way (``tests/test_gait2392.py``; time: ``benchmarks/sides.py``).
+    same either way (``tests/test_gait2392.py``; time: ``benchmarks/sides.py``). A ``before_solve``
+    function (:func:`solve_files`) is called for legs solved in this process only.
     """
     import warnings
 
@@ -335,6 +349,7 @@ def solve_sides(model_path, ik_path, id_path, workflow: str = "effort-gen", *, s
     sides = tuple(sides)
     if workers == 1 or len(sides) == 1:
         return {side: solve_files(model_path, ik_path, id_path, workflow, side=side, **kwargs) for side in sides}
+    kwargs.pop("before_solve", None)  # it would run in the leg's process, not in this one
     from ..processes import spawn_pool, stop_pool
 
     from .ipopt import progress_interval
