@@ -146,3 +146,19 @@ def test_solve_command_imports_scipy_when_it_filters(example, geometry_cache, tm
     assert lines[-2] != "0" and "did not converge" in proc.stderr
     assert json.loads((out / "summary.json").read_text())["iterations"] == 2
     assert lines[-1] == "['casadi', 'scipy.interpolate', 'scipy.optimize', 'scipy.signal']"
+
+
+def test_work_sent_ahead_leaves_each_reply_to_its_caller(tmp_path):
+    """``call_in_background`` (the solution's model prepared while IPOPT solves): its failure is
+    ignored, and the calls after it get their own replies, in order."""
+    from musclemetab.errors import ModelError
+    from musclemetab.opensim_bridge import call, call_in_background
+
+    missing = str(tmp_path / "no_model.osim")
+    args = ({"soleus_r": {}}, [0.0, 1.0], {"ankle_angle_r": [0.0, 0.0]}, False, [0.0, 1.0], ["ankle_angle_r"])
+    call_in_background("solution_model:prepare_solution_model", missing, *args)
+    before = call("solution_model:prepared_models")  # the list, not the background call's error
+    assert isinstance(before, list)
+    with pytest.raises(ModelError, match="no_model.osim: no such model file"):  # the same work, asked for
+        call("solution_model:solution_model", missing, str(tmp_path / "m.osim"), *args)
+    assert call("solution_model:prepared_models") == before  # nothing kept of the failures

@@ -1,6 +1,8 @@
 """The OpenSim worker process (``python -m musclemetab.opensim_bridge.worker``).
 
-It imports ``opensim`` once, then serves calls from :mod:`.client` until its input closes.
+It imports ``opensim`` once, then serves calls from :mod:`.client` until its input closes, and
+then ends at once (``os._exit``: every call has finished its files, and freeing the models it
+keeps would take the caller's exit a few tenths of a second).
 OpenSim writes log messages to standard output; the protocol stream is therefore a
 duplicate of the original stdout, and file descriptor 1 is pointed at stderr. OpenSim's log is
 kept to errors and its log file (``opensim.log``, which OpenSim otherwise writes into the
@@ -39,8 +41,9 @@ def main() -> int:
     while True:
         try:
             target, args, kwargs = receive_message(proto_in)
-        except EOFError:
-            return 0
+        except EOFError:  # the caller is done: end at once, without tearing down OpenSim's models
+            sys.stderr.flush()
+            os._exit(0)
         try:
             mod_name, func_name = target.split(":")
             mod = importlib.import_module(f"musclemetab.opensim_bridge.{mod_name}")
