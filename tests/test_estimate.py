@@ -399,6 +399,34 @@ def test_reduced_inverse_hessian_of_a_least_squares_problem():
     assert rcond == pytest.approx(ev[0] / ev[1], rel=1e-9)
 
 
+def test_kkt_system_with_dense_variables_taken_apart_solves_as_a_dense_solve():
+    """``KKTSystem(..., apart=...)`` (block elimination over a Schur complement) solves ``K y = r``
+    as NumPy's dense solve of the whole KKT matrix does; with a constraint row on the variables
+    taken apart alone (a coupling ``p1 = p2``: the rest of ``K`` is singular) it factorises ``K``
+    whole, with the same answer."""
+    import scipy.sparse as sp
+
+    from musclemetab.redundancy.identifiability import KKTSystem
+
+    rng = np.random.default_rng(3)
+    n = 12
+    L = rng.standard_normal((n, n))
+    H = sp.csc_matrix(L @ L.T + n * np.eye(n))
+    inf = np.full(n, np.inf)
+    coupling = np.eye(n)[10] - np.eye(n)[11]
+    for rows, split in ((rng.standard_normal((5, n)), True), (np.vstack([rng.standard_normal((4, n)), coupling]), False)):
+        J = sp.csr_matrix(rows)
+        m = rows.shape[0]
+        zeros = np.zeros(m)
+        K = np.block([[H.toarray(), rows.T], [rows, np.zeros((m, m))]])
+        r = rng.standard_normal((n + m, 3))
+        whole = KKTSystem(H, J, np.zeros(n), zeros, -inf, inf, zeros, zeros, zeros, np.zeros(n))
+        apart = KKTSystem(H, J, np.zeros(n), zeros, -inf, inf, zeros, zeros, zeros, np.zeros(n), apart=[10, 11])
+        assert (apart._schur is not None) == split
+        for system in (whole, apart):
+            np.testing.assert_allclose(system.solve(r), np.linalg.solve(K, r), rtol=1e-10, atol=1e-12)
+
+
 def test_factors_on_bounds_and_uninformed_factors():
     """A factor within 1e-3 of its bounds' width of a bound is on it (fixed factors are not);
     a factor is informed by its muscle's own fiber lengths or EMG, or by coupling to such a muscle."""
