@@ -33,8 +33,9 @@ LMO = ("tibant_r", "bflh_r")
 
 
 @pytest.fixture(scope="module")
-def generated(example, tmp_path_factory):
-    """The generating solve with the changed parameters and the unchanged model's trial."""
+def generated(example, geometry_cache):
+    """The generating solve with the changed parameters and the unchanged model's trial (its
+    geometry from the test run's cache: OpenSim once per trial)."""
     from musclemetab.geometry import compute_geometry
     from musclemetab.model import read_muscle_parameters
     from musclemetab.redundancy import SolverOptions
@@ -44,7 +45,7 @@ def generated(example, tmp_path_factory):
     from musclemetab.redundancy.workflows import get_workflow, workflow_parameters
 
     g = compute_geometry(example.model, example.ik["normal"], dofs=list(DOFS),
-                         cache_dir=tmp_path_factory.mktemp("estimate_geometry"))
+                         cache_dir=geometry_cache)
     t_ik, _ = read_kinematics(example.ik["normal"], DOFS)
     t_id, mom = read_inverse_dynamics(example.id["normal"], DOFS)
     wf = get_workflow("effort-cal")
@@ -319,7 +320,7 @@ def test_estimate_command_emg_input_errors(example, tmp_path):
 
 @pytest.mark.opensim
 @pytest.mark.slow
-def test_estimate_command_on_the_left_leg_recovers_the_tendon_stiffness(example, tmp_path):
+def test_estimate_command_on_the_left_leg_recovers_the_tendon_stiffness(example, geometry_cache, tmp_path):
     """``musclemetab estimate --side l``: fiber lengths made by solving the example's left leg
     (its DOFs discovered from the model and the ID file) with the triceps surae's tendon
     stiffness x0.5 give that factor back (1 %, as on the right leg)."""
@@ -340,7 +341,7 @@ def test_estimate_command_on_the_left_leg_recovers_the_tendon_stiffness(example,
     ik, idp = example.ik["normal"], example.id["normal"]
     dofs = discover_dofs(read_layout(example.model), "l", list(read_storage(idp).columns))
     assert dofs and all(d.endswith("_l") for d in dofs)
-    g = compute_geometry(example.model, ik, dofs=dofs, side="l", cache_dir=tmp_path / "cache")
+    g = compute_geometry(example.model, ik, dofs=dofs, side="l", cache_dir=geometry_cache)
     t_ik, _ = read_kinematics(ik, dofs)
     t_id, mom = read_inverse_dynamics(idp, dofs)
     wf = get_workflow("effort-gen")
@@ -355,7 +356,7 @@ def test_estimate_command_on_the_left_leg_recovers_the_tendon_stiffness(example,
     code, text = _cli(["estimate", "--model", str(example.model), "--ik", str(ik), "--id", str(idp), "--side", "l",
                        "--workflow", "effort-gen", "--ultrasound", str(tmp_path / "us.mot"), "--estimate",
                        "tendon_stiffness=" + ",".join(ts), "--couple", ",".join(ts), "--labels", "normal",
-                       "--cache-dir", str(tmp_path / "cache"), "--out", str(out)])
+                       "--cache-dir", str(geometry_cache), "--out", str(out)])
     assert code == 0, text
     f = json.loads((out / "parameters.json").read_text())["factors"]["tendon_stiffness"]
     assert set(f) == set(ts)
