@@ -133,6 +133,13 @@ def test_result_load_and_write_round_trip(emg_ten, parameters, solutions, tmp_pa
             assert a == b, where
 
     same(json.loads((again / "parameters.json").read_text()), parameters)
+    # the solve record is typed (ProblemRecord) and gives back the file's section entry for entry
+    from musclemetab.redundancy.record import ProblemRecord
+
+    assert isinstance(result.record, ProblemRecord) and list(result.record.to_dict()) == list(parameters["solve"])
+    assert result.record.iterations == parameters["solve"]["iterations"] == result.iterations
+    assert result.record.trials == parameters["solve"]["trials"] and not result.record.extra
+    assert Result.load(again).record == result.record
     (tmp_path / "empty").mkdir()
     with pytest.raises(InputFileError, match="parameters.json: no such file"):
         Result.load(tmp_path / "empty")
@@ -803,7 +810,7 @@ def test_emg_ten_standard_errors_agree_with_finite_differences_of_the_value_func
     assert ocp.success
     result = assemble_result([trial], params, {}, ocp, settings(), options, 0.0, 0.0)
     report = record_identifiability(result, [trial], params, settings(), options, ocp)
-    assert result.record["doubts"]["identifiability"] is report
+    assert result.record.doubts["identifiability"] is report
     p = np.array([ocp.factors["tendon_stiffness"]["soleus_r"], ocp.factors["emg_scale"]["soleus_r"]])
     assert 0.15 < p[0] < 1.0 and 0.6 < p[1] < 1.0  # inside their bounds
     assert report["parameters"][0].startswith("tendon_stiffness:") and report["parameters"][1].startswith("emg_scale:")

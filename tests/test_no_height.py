@@ -108,5 +108,11 @@ def test_energy_goal_without_height_takes_the_model_masses(tmp_path):
     heavier = EnergyGoal("UM10", 1.0, 72.6, None, muscle_properties=csv)  # an override mass is used as given
     np.testing.assert_allclose(heavier.muscle_values(muscles, f0, lmo)[0], [2 * mass[0], *mass[1:]], rtol=1e-12)
     assert np.all(leg_rate_W_per_kg(heavier, params, list(muscles), *states) > with_model)
+    # the same override as a mapping gives the same masses; the goal keeps its own copy
+    given = {"soleus_r": {"mass_kg": float(2 * mass[0])}}
+    as_mapping = EnergyGoal("UM10", 1.0, 72.6, None, muscle_properties=given)
+    given["soleus_r"]["mass_kg"] = 99.0
+    np.testing.assert_array_equal(as_mapping.muscle_values(muscles, f0, lmo)[0], heavier.muscle_values(muscles, f0, lmo)[0])
+    assert as_mapping.record()["muscle_properties"] == {"soleus_r": {"mass_kg": float(2 * mass[0])}}
     with pytest.raises(OptionError, match="kilograms"):
         EnergyGoal("UM10", 1.0, 72600.0, None)

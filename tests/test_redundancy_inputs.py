@@ -441,3 +441,36 @@ def test_tendon_stiffness_file_for_both_legs(model_params, tmp_path):
     p.write_text(json.dumps({"tendon_stiffness": {"soleos_r": 9.0}}))
     with pytest.raises(UnknownMuscleError, match="soleos_r"):
         W.workflow_parameters("effort-ten", model_params, ["soleus_r"], tendon_stiffness_file=p)
+
+
+def test_problem_record_round_trips_a_results_parameters_file(tmp_path):
+    """The ``solve`` section of a result's ``parameters.json`` (EMG-TEN's format) is typed by
+    :class:`ProblemRecord`: written by :meth:`Result.write` and read by :meth:`Result.load` entry for
+    entry in the file's order, a newer file's entry kept; the result's outcome comes from it; a
+    record that did not succeed is refused by ``load`` with IPOPT's status."""
+    from musclemetab.errors import SolverError
+    from musclemetab.redundancy import EmgTenSettings, Result
+    from musclemetab.redundancy.record import ProblemRecord
+
+    settings = EmgTenSettings()
+    entries = {"workflow": "emg-ten", "status": "Solve_Succeeded", "success": True, "objective": 0.034,
+               "iterations": 133, "trials": [{"label": "walk", "time_window_s": [0.0, 0.5], "n_intervals": 5,
+                                              "inputs": {}}],
+               "settings": settings.to_dict(), "doubts": {"on_bounds": [], "uninformed": []},
+               "a_newer_entry": [1, 2]}
+    record = ProblemRecord.from_dict(entries)
+    assert record.extra == {"a_newer_entry": [1, 2]} and record.side is None and "side" not in record
+    record = record.with_(side="r", geometry_time_s=1.5)
+    assert list(record.to_dict()) == [*entries, "side", "geometry_time_s"] and record.side == "r"
+    result = Result(solutions={"walk": _toy_solution()}, parameters=_toy_solution().parameters,
+                    factors={"tendon_stiffness": {}, "emg_scale": {}}, record=record, settings=settings)
+    assert (result.success, result.status, result.objective, result.iterations) == (True, "Solve_Succeeded", 0.034, 133)
+    result.write(tmp_path / "r", opensim_files=False)
+    back = Result.load(tmp_path / "r")
+    assert back.record == record and back.labels == ("walk",) and back.settings.to_dict() == settings.to_dict()
+    failed = record.with_(status="Maximum_Iterations_Exceeded", success=False)
+    Result(solutions=result.solutions, parameters=result.parameters, factors=result.factors, record=failed,
+           settings=settings).write(tmp_path / "f", opensim_files=False)
+    with pytest.raises(SolverError, match="Maximum_Iterations_Exceeded"):
+        Result.load(tmp_path / "f")
+    assert Result.load(tmp_path / "f", require_success=False).record == failed

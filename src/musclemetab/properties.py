@@ -86,6 +86,10 @@ __all__ = [
     "tendon_literature",
     "unplaced_muscles",
     "warn_unplaced",
+    "GROUPS",
+    "DOF_GROUPS",
+    "dof_group_pair",
+    "has_function_group",
 ]
 
 MUSCLE_DENSITY_KG_PER_M3 = 1059.7
@@ -885,3 +889,53 @@ def muscle_property(names: Sequence[str], column: str) -> np.ndarray:
     if missing:
         raise UnknownMuscleError(f"no {column} for muscles {', '.join(missing)} in the muscle property table")
     return table.loc[base, column].to_numpy()
+
+
+# ---------------------------------------------------------------------------------------
+# Function groups of the DOFs
+# ---------------------------------------------------------------------------------------
+
+#: the muscle function groups (the ``function_groups`` of the muscle table, and the groups the
+#: analysis assigns by moment arm)
+GROUPS = ("PF", "DF", "KE", "KF", "HE", "HF", "HAD", "HAB", "HIR", "HER")
+#: DOF name without side suffix -> (group of positive moment arms, group of negative ones)
+DOF_GROUPS = {
+    "ankle_angle": ("DF", "PF"),
+    "knee_angle": ("KF", "KE"),
+    "hip_flexion": ("HF", "HE"),
+    "hip_adduction": ("HAD", "HAB"),
+    "hip_rotation": ("HIR", "HER"),
+}
+
+
+def dof_group_pair(dof: str, dof_groups: Mapping[str, tuple[str, str]] | None = None) -> tuple[str, str]:
+    """``(positive_group, negative_group)`` of a DOF (exact name, else name less ``_r``/``_l``)."""
+    table = dict(DOF_GROUPS)
+    if dof_groups:
+        table.update(dof_groups)
+    if dof in table:
+        pair = table[dof]
+    else:
+        stem = dof[:-2] if dof.endswith(("_r", "_l")) else dof
+        if stem not in table:
+            raise OptionError(
+                f"DOF '{dof}' belongs to no muscle group; known DOFs: {', '.join(DOF_GROUPS)} (with _r/_l). "
+                "Pass dof_groups={dof: (positive_group, negative_group)} or leave the DOF out"
+            )
+        pair = table[stem]
+    pair = tuple(pair)
+    bad = [g for g in pair if g not in GROUPS]
+    if len(pair) != 2 or bad:
+        raise OptionError(
+            f"the groups of DOF '{dof}' must be two of {', '.join(GROUPS)}, not {pair!r}"
+        )
+    return pair  # type: ignore[return-value]
+
+
+def has_function_group(dof: str, dof_groups: Mapping[str, tuple[str, str]] | None = None) -> bool:
+    """Whether :func:`dof_group_pair` places the DOF (a subtalar or toe joint has no group)."""
+    try:
+        dof_group_pair(dof, dof_groups)
+    except OptionError:
+        return False
+    return True

@@ -48,6 +48,7 @@ import numpy as np
 from ..errors import DataMismatchError, OptionError
 from ..events import as_signal, as_time, coverage, integrate_interval
 from ..events import GaitCycle
+from ..properties import DOF_GROUPS, GROUPS, dof_group_pair, has_function_group
 
 __all__ = [
     "GROUPS",
@@ -67,7 +68,6 @@ __all__ = [
     "write_group_key",
 ]
 
-GROUPS = ("PF", "DF", "KE", "KF", "HE", "HF", "HAD", "HAB", "HIR", "HER")
 OTHER = "other"
 GROUPS_WITH_OTHER = GROUPS + (OTHER,)
 GROUP_NAMES = {
@@ -83,49 +83,8 @@ GROUP_NAMES = {
     "HER": "hip external rotators",
     OTHER: "no moment arm above the threshold",
 }
-#: DOF name without side suffix -> (group of positive moment arms, group of negative ones)
-DOF_GROUPS = {
-    "ankle_angle": ("DF", "PF"),
-    "knee_angle": ("KF", "KE"),
-    "hip_flexion": ("HF", "HE"),
-    "hip_adduction": ("HAD", "HAB"),
-    "hip_rotation": ("HIR", "HER"),
-}
 #: Moment arms at or below this magnitude (m) count as zero.
 DEFAULT_THRESHOLD_M = 1e-3
-
-
-def dof_group_pair(dof: str, dof_groups: Mapping[str, tuple[str, str]] | None = None) -> tuple[str, str]:
-    """``(positive_group, negative_group)`` of a DOF (exact name, else name less ``_r``/``_l``)."""
-    table = dict(DOF_GROUPS)
-    if dof_groups:
-        table.update(dof_groups)
-    if dof in table:
-        pair = table[dof]
-    else:
-        stem = dof[:-2] if dof.endswith(("_r", "_l")) else dof
-        if stem not in table:
-            raise OptionError(
-                f"DOF '{dof}' belongs to no muscle group; known DOFs: {', '.join(DOF_GROUPS)} (with _r/_l). "
-                "Pass dof_groups={dof: (positive_group, negative_group)} or leave the DOF out"
-            )
-        pair = table[stem]
-    pair = tuple(pair)
-    bad = [g for g in pair if g not in GROUPS]
-    if len(pair) != 2 or bad:
-        raise OptionError(
-            f"the groups of DOF '{dof}' must be two of {', '.join(GROUPS)}, not {pair!r}"
-        )
-    return pair  # type: ignore[return-value]
-
-
-def has_function_group(dof: str, dof_groups: Mapping[str, tuple[str, str]] | None = None) -> bool:
-    """Whether :func:`dof_group_pair` places the DOF (a subtalar or toe joint has no group)."""
-    try:
-        dof_group_pair(dof, dof_groups)
-    except OptionError:
-        return False
-    return True
 
 
 def _moment_arms(moment_arms_m, dofs) -> tuple[np.ndarray, list[str]]:

@@ -565,8 +565,8 @@ def _emg_ten_done(args, result, out, side: str, model_file) -> None:
     r = result.record
     if not result.success:
         raise SolverError(
-            f"the emg-ten solve did not converge (IPOPT status '{r['status']}' after {r['iterations']} "
-            f"iterations): {failure_advice(r['status'])}.{_violations_of(result)} The unconverged result is in "
+            f"the emg-ten solve did not converge (IPOPT status '{r.status}' after {r.iterations} "
+            f"iterations): {failure_advice(r.status)}.{_violations_of(result)} The unconverged result is in "
             f"{out} with \"success\": false"
         )
     for solution in result.solutions.values():

@@ -28,7 +28,7 @@ closed formula or a bisection in NumPy. Per muscle ``m`` and node ``t_k``:
     length (the rigid-tendon estimate ``sqrt((lMT - lTs)^2 + w^2)/lMo`` is an upper bound of it).
 ``moment_arm_vanishes`` (warning)
     A muscle the anatomical muscle table places in a function group of a DOF of the problem
-    (:mod:`musclemetab.analysis.groups`) has ``|r| <`` :data:`MOMENT_ARM_THRESHOLD_M` about it
+    (:func:`musclemetab.properties.dof_group_pair`) has ``|r| <`` :data:`MOMENT_ARM_THRESHOLD_M` about it
     at every node.
 ``muscle_left_out`` (warning)
     A muscle the problem leaves out (no moment arm above 0.1 mm at the first frame,
@@ -308,7 +308,7 @@ def _spanned_dofs(muscles, dofs) -> dict:
 
 @functools.lru_cache(maxsize=16)
 def _spanned(muscles: tuple, dofs: tuple) -> tuple:
-    from ..analysis.groups import dof_group_pair, has_function_group
+    from ..properties import dof_group_pair, has_function_group
     from ..properties import resolve_muscles
 
     out = []

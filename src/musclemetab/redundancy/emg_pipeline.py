@@ -67,7 +67,7 @@ def record_identifiability(result: Result, trials, params, settings: EmgTenSetti
     scales) at the optimum ``ocp`` of the EMG-TEN problem of ``trials``
     (:func:`.identifiability.identifiability`, as for ``estimate``: the inverse of the reduced
     Hessian on the factors, scaled by the EMG tracking residual); warned (a pair with
-    ``|r| > 0.9``, a near-singular reduced Hessian) and recorded in ``result.record["doubts"]
+    ``|r| > 0.9``, a near-singular reduced Hessian) and recorded in ``result.record.doubts
     ["identifiability"]`` (``parameters.json``, ``solve.doubts``). The time it took is recorded
     as ``identifiability_time_s``. Needs a tracking cost (``goals.w_emg > 0``): its residual
     gives the scale of the standard errors."""
@@ -81,7 +81,7 @@ def record_identifiability(result: Result, trials, params, settings: EmgTenSetti
     warn_identifiability(report, remedy="couple them (EmgTenSettings tendon_groups / emg_groups) or take one as "
                          "known (a tendon group left out of the estimation)")
     report["identifiability_time_s"] = _time.perf_counter() - t0
-    result.record.setdefault("doubts", {})["identifiability"] = report
+    result.record = result.record.with_(doubts={**(result.record.doubts or {}), "identifiability": report})
     return report
 
 

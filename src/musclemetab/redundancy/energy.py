@@ -28,6 +28,7 @@ import functools
 import math
 import os
 from dataclasses import dataclass, field
+from typing import Mapping
 
 import numpy as np
 
@@ -72,7 +73,7 @@ class EnergyGoal:
     height_m: float | None
     effort_weight: float | None = None
     smoothing: float = ENERGY_SMOOTHING
-    muscle_properties: str | None = None
+    muscle_properties: str | Mapping | None = None
     options: dict = field(default_factory=dict)
     form: str = "objective"
 
@@ -98,6 +99,9 @@ class EnergyGoal:
         check_subject(float(self.body_mass_kg), 1.0 if self.height_m is None else float(self.height_m))
         if isinstance(self.muscle_properties, os.PathLike):
             object.__setattr__(self, "muscle_properties", os.fspath(self.muscle_properties))
+        elif isinstance(self.muscle_properties, Mapping):  # a copy: the goal does not change with the caller's
+            object.__setattr__(self, "muscle_properties",
+                               {str(m): dict(v) for m, v in self.muscle_properties.items()})
         object.__setattr__(self, "options", dict(self.options))
         if self.form not in GOAL_FORMS:
             raise OptionError(f"energy goal: unknown form {self.form!r}; choose one of {', '.join(GOAL_FORMS)} "
@@ -139,6 +143,14 @@ class EnergyGoal:
         solution and its summary ask for the same muscles: they are placed (and a muscle the
         table cannot place is warned about) once."""
         overrides = self.muscle_properties
+        if isinstance(overrides, Mapping):  # a mapping of the caller: nothing to cache it by
+            from ..metabolics.masses import muscle_masses_and_fractions
+
+            mass, fst = muscle_masses_and_fractions(
+                list(muscles), float(self.body_mass_kg), None if self.height_m is None else float(self.height_m),
+                np.asarray(max_isometric_force_N, dtype=float).ravel(),
+                np.asarray(optimal_fiber_length_m, dtype=float).ravel(), overrides)
+            return np.asarray(mass, dtype=float), np.asarray(fst, dtype=float)
         stamp = os.stat(overrides).st_mtime_ns if overrides is not None and os.path.isfile(overrides) else None
         mass, fst = _muscle_values(tuple(muscles), float(self.body_mass_kg),
                                    None if self.height_m is None else float(self.height_m),

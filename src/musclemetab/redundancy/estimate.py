@@ -34,6 +34,7 @@ from ..errors import DataMismatchError, InputFileError, OptionError, UnknownMusc
 from .transcription import Goals, ParameterSpec, TrialBlock
 from .parameters import MuscleTendonParameters
 from .ipopt import ProblemResult, SolverOptions, solve_problem
+from .record import ProblemRecord
 
 __all__ = ["EstimatedParameters", "DEFAULT_FACTOR_BOUNDS", "estimate_parameters", "parameter_specs",
            "fiber_length_trial", "read_fiber_lengths", "parse_coupling", "widened_fiber_bounds",
@@ -59,7 +60,7 @@ class EstimatedParameters:
 
     factors: dict
     nominal: MuscleTendonParameters
-    record: dict = field(default_factory=dict)
+    record: ProblemRecord = field(default_factory=ProblemRecord)
     #: what makes the estimate doubtful (:func:`estimate_parameters`)
     doubts: dict = field(default_factory=dict)
 
@@ -81,7 +82,7 @@ class EstimatedParameters:
 
     def to_dict(self) -> dict:
         return {"factors": {k: dict(v) for k, v in self.factors.items()}, "values": self.values(),
-                "solve": dict(self.record), "doubts": dict(self.doubts)}
+                "solve": self.record.to_dict(), "doubts": dict(self.doubts)}
 
 
 def parse_coupling(text: str) -> dict:
@@ -285,7 +286,8 @@ def estimate_parameters(trials: Sequence[TrialBlock], params: MuscleTendonParame
                                            optimal_reserve_Nm=options.optimal_reserve_Nm)
             ident.warn_identifiability(report)
             doubts["identifiability"] = report
-    return res, EstimatedParameters(factors=factors, nominal=params, record=record, doubts=doubts)
+    return res, EstimatedParameters(factors=factors, nominal=params, record=ProblemRecord.from_dict(record),
+                                    doubts=doubts)
 
 
 def tendon_strain_at_one_norm_force(kT) -> float:

@@ -5,7 +5,8 @@ solver writes it into ``summary.json``/``parameters.json`` (:meth:`RunRecord.to_
 :class:`~.solution.Solution` and the EMG-TEN result give it back (``.run_record``), and the study
 runner turns a failed one into the one-line reason of ``failures.csv`` (:meth:`RunRecord.failure`).
 :class:`SolveRecord` is the whole record of one trial's solution, every entry of its
-``summary.json`` typed (``Solution.record``).
+``summary.json`` typed (``Solution.record``); :class:`ProblemRecord` the record of a problem over
+one or more trials, the ``solve`` section of ``parameters.json`` typed (``Result.record``).
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import platform
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-__all__ = ["RunRecord", "SolveRecord", "solver_versions", "input_hashes"]
+__all__ = ["RunRecord", "SolveRecord", "ProblemRecord", "solver_versions", "input_hashes"]
 
 def solver_versions() -> dict:
     """Versions of musclemetab, Python and (when importable) CasADi."""
@@ -110,20 +111,55 @@ class RunRecord:
 _ABSENT = None
 
 
-@dataclass(frozen=True)
-class SolveRecord:
-    """Everything ``summary.json`` says about one solve, typed; built once, complete.
+class _FileRecord:
+    """The round trip of a typed record to the JSON dictionary it was read from or is written as:
+    the dataclass fields are the known entries, ``extra`` holds the others (older or newer
+    files, kept as read) and ``keys`` the file's order of entries, so that :meth:`to_dict`
+    gives back exactly the dictionary :meth:`from_dict` read. A stage that adds an entry makes a
+    new record (:meth:`with_`)."""
 
-    The fields are those the builders of a solution write (:func:`~.solve.solve_with_parameters`,
-    the EMG-TEN and estimation problems, :func:`~.solution.build_solution` for the residuals and
-    reserve statistics, :func:`~.run.solve_files` for side, window and geometry time, and
-    :meth:`~.solution.Solution.write` for the file's muscles, DOFs, parameters and conventions).
-    An optional entry the solve did not record is ``None``. ``keys`` lists the entries the record holds,
-    in the file's order; ``extra`` holds entries of other (older or newer) files, kept as read.
-    :meth:`to_dict` gives back exactly the file's dictionary and :meth:`from_dict` reads it, so that
-    a folder loads and writes again unchanged. A stage that adds an entry makes a new record
-    (:meth:`with_`).
-    """
+    @classmethod
+    def _entry_names(cls) -> set:
+        return set(cls.__dataclass_fields__) - {"extra", "keys"}
+
+    @classmethod
+    def from_dict(cls, d: dict):
+        """From the file's dictionary (entries that are not fields go to ``extra``)."""
+        names = cls._entry_names()
+        kw = {k: v for k, v in d.items() if k in names}
+        extra = {k: v for k, v in d.items() if k not in names}
+        return cls(**kw, extra=extra, keys=tuple(d))
+
+    def to_dict(self) -> dict:
+        """The file's dictionary (the entries of ``keys``, in that order)."""
+        return {k: (self.extra[k] if k in self.extra else getattr(self, k)) for k in self.keys}
+
+    def with_(self, **entries):
+        """A copy with ``entries`` set (new ones after the others, as in the file)."""
+        names = self._entry_names()
+        fields = {k: v for k, v in entries.items() if k in names}
+        extra = {**self.extra, **{k: v for k, v in entries.items() if k not in names}}
+        keys = self.keys + tuple(k for k in entries if k not in self.keys)
+        return replace(self, **fields, extra=extra, keys=keys)
+
+    def get(self, key: str, default=None):
+        """The entry ``key`` of the file's dictionary, ``default`` when the record has none."""
+        if key not in self.keys:
+            return default
+        return self.extra[key] if key in self.extra else getattr(self, key)
+
+    def __contains__(self, key: str) -> bool:
+        return key in self.keys
+
+    @property
+    def run_record(self) -> RunRecord:
+        """The IPOPT outcome (:class:`RunRecord`)."""
+        return RunRecord.from_dict(self.to_dict())
+
+
+@dataclass(frozen=True)
+class _OutcomeRecord(_FileRecord):
+    """The entries of :class:`RunRecord` (IPOPT's outcome) that every solve record holds."""
 
     # the IPOPT outcome (RunRecord)
     status: str = "unknown"
@@ -140,6 +176,23 @@ class SolveRecord:
     max_constraint_violation: float | None = _ABSENT
     software: dict | None = _ABSENT
     input_hashes: dict | None = _ABSENT
+
+
+@dataclass(frozen=True)
+class SolveRecord(_OutcomeRecord):
+    """Everything ``summary.json`` says about one solve, typed; built once, complete.
+
+    The fields are those the builders of a solution write (:func:`~.solve.solve_with_parameters`,
+    the EMG-TEN and estimation problems, :func:`~.solution.build_solution` for the residuals and
+    reserve statistics, :func:`~.run.solve_files` for side, window and geometry time, and
+    :meth:`~.solution.Solution.write` for the file's muscles, DOFs, parameters and conventions).
+    An optional entry the solve did not record is ``None``. ``keys`` lists the entries the record holds,
+    in the file's order; ``extra`` holds entries of other (older or newer) files, kept as read.
+    :meth:`to_dict` gives back exactly the file's dictionary and :meth:`from_dict` reads it, so that
+    a folder loads and writes again unchanged. A stage that adds an entry makes a new record
+    (:meth:`with_`).
+    """
+
     # the problem
     workflow: dict | None = _ABSENT
     objective_trial: float | None = _ABSENT
@@ -195,35 +248,6 @@ class SolveRecord:
     extra: dict = field(default_factory=dict)
     keys: tuple = ()
 
-    @classmethod
-    def from_dict(cls, d: dict) -> "SolveRecord":
-        """From a ``summary.json`` dictionary (entries that are not fields go to ``extra``)."""
-        names = set(cls.__dataclass_fields__) - {"extra", "keys"}
-        kw = {k: v for k, v in d.items() if k in names}
-        extra = {k: v for k, v in d.items() if k not in names}
-        return cls(**kw, extra=extra, keys=tuple(d))
-
-    def to_dict(self) -> dict:
-        """The ``summary.json`` dictionary (the entries of ``keys``, in that order)."""
-        return {k: (self.extra[k] if k in self.extra else getattr(self, k)) for k in self.keys}
-
-    def with_(self, **entries) -> "SolveRecord":
-        """A copy with ``entries`` set (new ones after the others, as in the file)."""
-        names = set(self.__dataclass_fields__) - {"extra", "keys"}
-        fields = {k: v for k, v in entries.items() if k in names}
-        extra = {**self.extra, **{k: v for k, v in entries.items() if k not in names}}
-        keys = self.keys + tuple(k for k in entries if k not in self.keys)
-        return replace(self, **fields, extra=extra, keys=keys)
-
-    def get(self, key: str, default=None):
-        """The entry ``key`` of the file's dictionary, ``default`` when the record has none."""
-        if key not in self.keys:
-            return default
-        return self.extra[key] if key in self.extra else getattr(self, key)
-
-    def __contains__(self, key: str) -> bool:
-        return key in self.keys
-
     @property
     def workflow_name(self) -> str:
         return str((self.workflow or {}).get("name", ""))
@@ -247,7 +271,43 @@ class SolveRecord:
 
         return Diagnosis.from_dict(self.diagnosis or {})
 
-    @property
-    def run_record(self) -> RunRecord:
-        """The IPOPT outcome (:class:`RunRecord`)."""
-        return RunRecord.from_dict(self.to_dict())
+
+@dataclass(frozen=True)
+class ProblemRecord(_OutcomeRecord):
+    """The ``solve`` section of ``parameters.json``: the record of one problem over one or more
+    trials (EMG-TEN, an EMG-informed solve of several trials, ``musclemetab estimate``), typed
+    like :class:`SolveRecord` (``Result.record``, ``EstimatedParameters.record``).
+
+    The IPOPT outcome (:class:`RunRecord`), the problem (``problem_size``, ``trials``, the EMG
+    mapping and deviations, ``settings``, solver and IPOPT options, the factors' ``bounds``), the
+    estimate's ``doubts`` (factors on bounds, uninformed factors, identifiability) and the
+    worst residuals over the trials. An entry the problem did not record is ``None``.
+    """
+
+    workflow: str | None = _ABSENT
+    # the problem
+    preparation_time_s: float | None = _ABSENT
+    max_coupling_violation: float | None = _ABSENT
+    problem_size: dict | None = _ABSENT
+    #: ``[{"label", "time_window_s", "n_intervals", "inputs"}]``, one per trial
+    trials: list | None = _ABSENT
+    emg_mapping: dict | None = _ABSENT
+    max_emg_deviation: dict | None = _ABSENT
+    #: the :class:`~.emg_ten.EmgTenSettings` as a dictionary (EMG-TEN and EMG-informed problems)
+    settings: dict | None = _ABSENT
+    passive_source: str | None = _ABSENT
+    solver_options: dict | None = _ABSENT
+    ipopt_options: dict | None = _ABSENT
+    initial_guess: str | None = _ABSENT
+    #: ``{kind: [low, high]}`` of the estimated factors (parameter estimation)
+    bounds: dict | None = _ABSENT
+    #: what makes the estimates doubtful: factors on bounds, uninformed factors, identifiability
+    doubts: dict | None = _ABSENT
+    # the worst over the trials' solutions, and the files
+    max_moment_residual_Nm: float | None = _ABSENT
+    max_hill_residual: float | None = _ABSENT
+    total_time_s: float | None = _ABSENT
+    geometry_time_s: float | None = _ABSENT
+    side: str | None = _ABSENT
+    extra: dict = field(default_factory=dict)
+    keys: tuple = ()

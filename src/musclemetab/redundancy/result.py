@@ -25,6 +25,7 @@ import numpy as np
 
 from ..muscle import KT_GENERIC, tendon_length_from_force, tendon_stiffness_N_per_m
 from .parameters import MuscleTendonParameters
+from .record import ProblemRecord
 from ..io.jsonfile import json_ready
 
 __all__ = ["EMG_TEN", "Result", "EmgTenResult", "assemble_result", "PARAMETERS_FILE",
@@ -56,7 +57,8 @@ class Result:
     objects in the solver's format, computed with the estimated parameters; ``parameters`` are
     those parameters (the estimates applied to the nominal ones). ``factors`` holds the estimated
     scale factors by kind and muscle (``tendon_stiffness``, ``optimal_fiber_length``,
-    ``tendon_slack_length``, ``emg_scale``); ``record`` the solve record; ``emg_channels`` the
+    ``tendon_slack_length``, ``emg_scale``); ``record`` the solve record
+    (:class:`~.record.ProblemRecord`); ``emg_channels`` the
     EMG channels of the tracked muscles; ``settings`` the :class:`~.emg_ten.EmgTenSettings` of an
     EMG-TEN or EMG-informed problem. ``document``: the content of ``parameters.json`` when it is
     fixed when the result is assembled (parameter estimation); ``None`` (EMG-TEN): built from
@@ -69,7 +71,7 @@ class Result:
     solutions: dict
     parameters: MuscleTendonParameters
     factors: dict
-    record: dict
+    record: ProblemRecord
     emg_channels: dict = field(default_factory=dict)
     settings: object = None
     document: dict | None = field(default=None, repr=False)
@@ -98,25 +100,23 @@ class Result:
     @property
     def run_record(self):
         """The :class:`~.record.RunRecord` of the solve."""
-        from .record import RunRecord
-
-        return RunRecord.from_dict(self.record)
+        return self.record.run_record
 
     @property
     def success(self) -> bool:
-        return bool(self.record.get("success", False))
+        return bool(self.record.success)
 
     @property
     def status(self) -> str:
-        return str(self.record.get("status", "unknown"))
+        return str(self.record.status)
 
     @property
     def objective(self) -> float:
-        return float(self.record.get("objective", math.nan))
+        return math.nan if self.record.objective is None else float(self.record.objective)
 
     @property
     def iterations(self) -> int:
-        return int(self.record.get("iterations", -1))
+        return -1 if self.record.iterations is None else int(self.record.iterations)
 
     def tendon_stiffness_N_per_mm(self) -> dict:
         """Tangent stiffness (N/mm) at ``FT = F0`` of every muscle whose ``kT`` was estimated."""
@@ -184,7 +184,7 @@ class Result:
             "achilles_tendon_stiffness_N_per_mm": self.achilles_stiffness_N_per_mm(),
             "emg_scale": dict(self.emg_scale),
             "emg_channels": dict(self.emg_channels),
-            "solve": dict(self.record),
+            "solve": self.record.to_dict(),
         })
 
     def write(self, out_dir: str | os.PathLike, opensim_files: bool = True) -> Path:
@@ -232,7 +232,6 @@ class Result:
         """
         from ..errors import InputFileError
         from ..io.jsonfile import read_json_object
-        from .record import RunRecord
         from .solution import Solution
 
         out_dir = Path(out_dir)
@@ -243,14 +242,14 @@ class Result:
         doc = read_json_object(path)
         fmt = doc.get("format")
         try:
-            record = dict(doc["solve"])
+            record = ProblemRecord.from_dict(dict(doc["solve"]))
             if fmt == PARAMETERS_FORMAT:
                 from .emg_ten import EmgTenSettings
 
-                labels = [t["label"] for t in record["trials"]]
+                labels = [t["label"] for t in record.trials]
                 factors = {"tendon_stiffness": dict(doc["tendon_stiffness_scale"]), "emg_scale": dict(doc["emg_scale"])}
                 emg_channels = {m: list(c) for m, c in doc["emg_channels"].items()}
-                settings, document = EmgTenSettings.from_dict(record["settings"]), None
+                settings, document = EmgTenSettings.from_dict(record.settings), None
             elif fmt == ESTIMATE_FORMAT:
                 labels = list(doc["trials"])
                 factors = {k: dict(v) for k, v in doc["factors"].items()}
@@ -265,8 +264,8 @@ class Result:
         except (KeyError, TypeError, AttributeError) as exc:
             raise InputFileError(f"{path}: the entry {exc} is missing or malformed; the file was not written by "
                                  "this package") from None
-        if require_success and not record.get("success", False):
-            raise RunRecord.from_dict(record).failure(f"the solve stored in {out_dir}")
+        if require_success and not record.success:
+            raise record.run_record.failure(f"the solve stored in {out_dir}")
         solutions = {lab: Solution.load(out_dir / lab, require_success=False) for lab in labels}
         parameters = next(iter(solutions.values())).parameters if solutions else None
         return cls(solutions=solutions, parameters=parameters, factors=factors, record=record,
@@ -383,5 +382,5 @@ def assemble_result(trials, params, wf_record, ocp, settings, options, t_prep, t
     return Result(
         solutions=solutions, parameters=est_params,
         factors={"tendon_stiffness": tendon_scale, "emg_scale": emg_scale}, emg_channels=emg_channels,
-        record=record, settings=settings, trials=tuple(trials),
+        record=ProblemRecord.from_dict(record), settings=settings, trials=tuple(trials),
     )

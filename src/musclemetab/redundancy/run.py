@@ -498,7 +498,7 @@ def solve_emg_ten(
     solutions = {label: dataclasses.replace(solution, record=solution.record.with_(**trial_entries[label]))
                  for label, solution in result.solutions.items()}
     return dataclasses.replace(result, solutions=solutions,
-                               record={**result.record, "geometry_time_s": t_geometry, "side": side})
+                               record=result.record.with_(geometry_time_s=t_geometry, side=side))
 
 
 def _mapping_without(mapping: dict, excluded: Sequence[str]) -> dict:
@@ -701,7 +701,7 @@ def estimate_files(
         write_personalised_model,
     )
     from .ipopt import SolverOptions, solver_record
-    from .record import RunRecord
+    from .record import ProblemRecord, RunRecord
     from .solution import build_solution
     from .solve import prepare_trial, solve_with_parameters
     from .static_opt import initial_guess
@@ -853,7 +853,8 @@ def estimate_files(
             doc["personalised_model"] = {"path": path.name, "muscles": report}
         if validate and run.success and failed is None:
             doc["validation"] = fits
-        result = Result(solutions=solutions, parameters=estimated, factors=factors, record=run.to_dict(),
+        result = Result(solutions=solutions, parameters=estimated, factors=factors,
+                        record=ProblemRecord.from_dict(run.to_dict()),
                         emg_channels={m: list(c) for m, c in mapping.items()}, document=doc)
         result.write(out)
         for lab, sol in validation.items():
