@@ -81,13 +81,13 @@ def structural_spread(results):
     values = spread_values(results)
     keys = ["subject", "trial", "quantity"]
     g = values.groupby(keys, sort=False)
+    mean = g["value_W_per_kg"].mean()  # its index: the groups in the order of the table
     df = pd.DataFrame({
         "n_models": g["model"].nunique(), "n_workflows": g["workflow"].nunique(),
-        "mean_W_per_kg": g["value_W_per_kg"].mean(), "min_W_per_kg": g["value_W_per_kg"].min(),
-        "max_W_per_kg": g["value_W_per_kg"].max(),
+        "mean_W_per_kg": mean, "min_W_per_kg": g["value_W_per_kg"].min(), "max_W_per_kg": g["value_W_per_kg"].max(),
         "range_across_models_W_per_kg": _mean_ranges(values, keys, ["workflow"], "model"),
         "range_across_workflows_W_per_kg": _mean_ranges(values, keys, ["model"], "workflow"),
-    }, index=g["value_W_per_kg"].mean().index)
+    }, index=mean.index)
     trials = _mean_ranges(values, ["subject", "quantity"], ["workflow", "model"], "trial")
     df["range_across_trials_W_per_kg"] = trials.reindex(
         pd.MultiIndex.from_arrays([df.index.get_level_values("subject"), df.index.get_level_values("quantity")])
