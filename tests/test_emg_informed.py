@@ -21,8 +21,9 @@ AUTHORS_CHANNELS = {"bflh_r": "BF", "semiten_r": "ST", "vaslat_r": "VL", "vasmed
 
 
 @pytest.fixture(scope="module")
-def cache_dir(tmp_path_factory):
-    return tmp_path_factory.mktemp("informed_geometry")
+def cache_dir(geometry_cache):
+    """The test run's geometry cache: the normal trial through OpenSim once per run."""
+    return geometry_cache
 
 
 def _solve(example, cache_dir, out, mode, *extra):

@@ -598,9 +598,10 @@ def test_dofs_of_the_chosen_side_are_discovered(example, tmp_path, capsys):
     ik, idf, emg = _args(example)
     assert _trial_dofs(example.model, idf, None, "r", None) == DEFAULT_DOFS
     assert _trial_dofs(example.model, idf, None, "l", None) == tuple(d[:-1] + "l" for d in DEFAULT_DOFS)
-    # the left leg's problem is built; the example's EMG channels are mapped to right-leg muscles
+    # the left leg's problem is built (one trial: each trial's DOFs are found alike, checked above);
+    # the example's EMG channels are mapped to right-leg muscles
     with pytest.raises(UnknownMuscleError, match=r"soleus_r.* not among the muscles of the problem \(addbrev_l"):
-        solve_emg_ten(example.model, ik, idf, emg, side="l")
+        solve_emg_ten(example.model, ik[1:2], idf[1:2], emg[1:2], side="l")
     code = main(["solve", "--workflow", "emg-ten", "--model", str(example.model), "--ik", *map(str, ik),
                  "--id", *map(str, idf), "--emg", *map(str, emg), "--side", "both", "--out", str(tmp_path / "x")])
     err = capsys.readouterr().err
@@ -652,10 +653,13 @@ def test_unconverged_parameters_are_refused(tmp_path):
 
 @pytest.mark.opensim
 def test_unconverged_emg_ten_is_reported(example, cache_dir, geometries, tmp_path, capsys):
+    """An EMG-TEN stopped by the iteration limit (the normal trial alone, two iterations): exit
+    status 1, IPOPT's status on standard error, the trial's folder and parameters.json written
+    with ``success: false``, and EFFORT-TEN refuses those parameters."""
     from musclemetab.commands import main
 
     out = tmp_path / "out"
-    ik, idf, emg = _args(example)
+    ik, idf, emg = ([example.ik["normal"]], [example.id["normal"]], [example.emg["normal"]])
     code = main(["solve", "--workflow", "emg-ten", "--model", str(example.model), "--ik", *map(str, ik),
                  "--id", *map(str, idf), "--emg", *map(str, emg), "--max-iter", "2", "--cache-dir", str(cache_dir),
                  "--out", str(out)])
@@ -665,8 +669,8 @@ def test_unconverged_emg_ten_is_reported(example, cache_dir, geometries, tmp_pat
     assert doc["solve"]["success"] is False
     assert sorted(p.name for p in out.iterdir()) == sorted([p.stem for p in ik] + ["parameters.json",
                                                                                 ".musclemetab-files"])
-    assert main(["solve", "--workflow", "effort-ten", "--model", str(example.model), "--ik", str(ik[1]),
-                 "--id", str(idf[1]), "--parameters", str(out / "parameters.json"), "--out", str(tmp_path / "y")]) == 1
+    assert main(["solve", "--workflow", "effort-ten", "--model", str(example.model), "--ik", str(ik[0]),
+                 "--id", str(idf[0]), "--parameters", str(out / "parameters.json"), "--out", str(tmp_path / "y")]) == 1
     assert "did not converge" in capsys.readouterr().err
 
 

@@ -33,8 +33,9 @@ LMO = ("tibant_r", "bflh_r")
 
 
 @pytest.fixture(scope="module")
-def generated(example, tmp_path_factory):
-    """The generating solve with the changed parameters and the unchanged model's trial."""
+def generated(example, geometry_cache):
+    """The generating solve with the changed parameters and the unchanged model's trial (its
+    geometry from the test run's cache: OpenSim once per trial)."""
     from musclemetab.geometry import compute_geometry
     from musclemetab.model import read_muscle_parameters
     from musclemetab.redundancy import SolverOptions
@@ -44,7 +45,7 @@ def generated(example, tmp_path_factory):
     from musclemetab.redundancy.workflows import get_workflow, workflow_parameters
 
     g = compute_geometry(example.model, example.ik["normal"], dofs=list(DOFS),
-                         cache_dir=tmp_path_factory.mktemp("estimate_geometry"))
+                         cache_dir=geometry_cache)
     t_ik, _ = read_kinematics(example.ik["normal"], DOFS)
     t_id, mom = read_inverse_dynamics(example.id["normal"], DOFS)
     wf = get_workflow("effort-cal")
@@ -319,7 +320,7 @@ def test_estimate_command_emg_input_errors(example, tmp_path):
 
 @pytest.mark.opensim
 @pytest.mark.slow
-def test_estimate_command_on_the_left_leg_recovers_the_tendon_stiffness(example, tmp_path):
+def test_estimate_command_on_the_left_leg_recovers_the_tendon_stiffness(example, geometry_cache, tmp_path):
     """``musclemetab estimate --side l``: fiber lengths made by solving the example's left leg
     (its DOFs discovered from the model and the ID file) with the triceps surae's tendon
     stiffness x0.5 give that factor back (1 %, as on the right leg)."""
@@ -340,7 +341,7 @@ def test_estimate_command_on_the_left_leg_recovers_the_tendon_stiffness(example,
     ik, idp = example.ik["normal"], example.id["normal"]
     dofs = discover_dofs(read_layout(example.model), "l", list(read_storage(idp).columns))
     assert dofs and all(d.endswith("_l") for d in dofs)
-    g = compute_geometry(example.model, ik, dofs=dofs, side="l", cache_dir=tmp_path / "cache")
+    g = compute_geometry(example.model, ik, dofs=dofs, side="l", cache_dir=geometry_cache)
     t_ik, _ = read_kinematics(ik, dofs)
     t_id, mom = read_inverse_dynamics(idp, dofs)
     wf = get_workflow("effort-gen")
@@ -355,7 +356,7 @@ def test_estimate_command_on_the_left_leg_recovers_the_tendon_stiffness(example,
     code, text = _cli(["estimate", "--model", str(example.model), "--ik", str(ik), "--id", str(idp), "--side", "l",
                        "--workflow", "effort-gen", "--ultrasound", str(tmp_path / "us.mot"), "--estimate",
                        "tendon_stiffness=" + ",".join(ts), "--couple", ",".join(ts), "--labels", "normal",
-                       "--cache-dir", str(tmp_path / "cache"), "--out", str(out)])
+                       "--cache-dir", str(geometry_cache), "--out", str(out)])
     assert code == 0, text
     f = json.loads((out / "parameters.json").read_text())["factors"]["tendon_stiffness"]
     assert set(f) == set(ts)
@@ -397,6 +398,34 @@ def test_reduced_inverse_hessian_of_a_least_squares_problem():
     assert R[0, 1] == pytest.approx(expected[0, 1] / np.sqrt(expected[0, 0] * expected[1, 1]), rel=1e-9)
     ev = np.linalg.eigvalsh(R)
     assert rcond == pytest.approx(ev[0] / ev[1], rel=1e-9)
+
+
+def test_kkt_system_with_dense_variables_taken_apart_solves_as_a_dense_solve():
+    """``KKTSystem(..., apart=...)`` (block elimination over a Schur complement) solves ``K y = r``
+    as NumPy's dense solve of the whole KKT matrix does; with a constraint row on the variables
+    taken apart alone (a coupling ``p1 = p2``: the rest of ``K`` is singular) it factorises ``K``
+    whole, with the same answer."""
+    import scipy.sparse as sp
+
+    from musclemetab.redundancy.identifiability import KKTSystem
+
+    rng = np.random.default_rng(3)
+    n = 12
+    L = rng.standard_normal((n, n))
+    H = sp.csc_matrix(L @ L.T + n * np.eye(n))
+    inf = np.full(n, np.inf)
+    coupling = np.eye(n)[10] - np.eye(n)[11]
+    for rows, split in ((rng.standard_normal((5, n)), True), (np.vstack([rng.standard_normal((4, n)), coupling]), False)):
+        J = sp.csr_matrix(rows)
+        m = rows.shape[0]
+        zeros = np.zeros(m)
+        K = np.block([[H.toarray(), rows.T], [rows, np.zeros((m, m))]])
+        r = rng.standard_normal((n + m, 3))
+        whole = KKTSystem(H, J, np.zeros(n), zeros, -inf, inf, zeros, zeros, zeros, np.zeros(n))
+        apart = KKTSystem(H, J, np.zeros(n), zeros, -inf, inf, zeros, zeros, zeros, np.zeros(n), apart=[10, 11])
+        assert (apart._schur is not None) == split
+        for system in (whole, apart):
+            np.testing.assert_allclose(system.solve(r), np.linalg.solve(K, r), rtol=1e-10, atol=1e-12)
 
 
 def test_factors_on_bounds_and_uninformed_factors():

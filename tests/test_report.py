@@ -84,12 +84,12 @@ def _bump(pct, centre, width, height):
 WORKFLOW_SCALE = {"effort-gen": 1.2, "effort-cal": 1.1, "emg-ten": 1.5}
 
 
-def make_timeseries(speed: float, models=None, workflow="effort-ten") -> pd.DataFrame:
-    """Group rates (W) over the cycle: early-stance, pre-swing and swing peaks that change with speed."""
+def timeseries_arrays(speed: float, models=None, workflow="effort-ten") -> tuple[np.ndarray, dict]:
+    """Group rates (W) over the cycle: early-stance, pre-swing and swing peaks that change with speed;
+    ``(cycle %, {model: {series: rates}})``, the series ``group/<G>`` and ``leg_muscles`` (their sum)."""
     models = MODELS if models is None else models
     pct = np.linspace(0.0, 100.0, 51)
-    time = CYCLE[0] + pct / 100 * (CYCLE[2] - CYCLE[0])
-    rows = []
+    out = {}
     for k, model in enumerate(models):
         scale = (1.0 + 0.15 * k) * WORKFLOW_SCALE.get(workflow, 1.0)
         groups = {}
@@ -99,12 +99,25 @@ def make_timeseries(speed: float, models=None, workflow="effort-ten") -> pd.Data
                 + speed**2 * _bump(pct, 55, 5, 30 if g in ("PF", "HAB") else 5)
                 + _bump(pct, 75, 6, 18 if g in ("HF", "HAD", "KE") else 2) + 1.0
             )
-        for g, v in groups.items():
-            rows.append(pd.DataFrame({"time_s": time, "cycle_pct": pct, "model": model, "series": f"group/{g}",
-                                      "value_W": v}))
-        rows.append(pd.DataFrame({"time_s": time, "cycle_pct": pct, "model": model, "series": "leg_muscles",
-                                  "value_W": sum(groups.values())}))
-    return pd.concat(rows, ignore_index=True)
+        out[model] = {**{f"group/{g}": v for g, v in groups.items()}, "leg_muscles": sum(groups.values())}
+    return pct, out
+
+
+def timeseries_table(pct, series: dict) -> pd.DataFrame:
+    """The time-series table (``timeseries.csv``) of :func:`timeseries_arrays`."""
+    time = CYCLE[0] + pct / 100 * (CYCLE[2] - CYCLE[0])
+    pairs = [(model, name) for model, by_name in series.items() for name in by_name]
+    n = pct.size
+    return pd.DataFrame({
+        "time_s": np.tile(time, len(pairs)), "cycle_pct": np.tile(pct, len(pairs)),
+        "model": np.repeat([m for m, _ in pairs], n), "series": np.repeat([s for _, s in pairs], n),
+        "value_W": np.concatenate([series[m][s] for m, s in pairs]),
+    })
+
+
+def make_timeseries(speed: float, models=None, workflow="effort-ten") -> pd.DataFrame:
+    """:func:`timeseries_arrays` as the time-series table."""
+    return timeseries_table(*timeseries_arrays(speed, models, workflow))
 
 
 def _integral(pct, v, lo=0.0, hi=100.0):
@@ -156,8 +169,8 @@ def make_study(root: Path, *, measured=True, trials=None, solutions=True, failed
                     failures.append({"subject": subject, "trial": trial, "workflow": workflow,
                                      "reason": "solver did not converge <maximum iterations>"})
                     continue
-                ts = make_timeseries(sp, workflow=workflow)
-                ts.to_csv(folder / "timeseries.csv", index=False)
+                pct, series = timeseries_arrays(sp, workflow=workflow)
+                timeseries_table(pct, series).to_csv(folder / "timeseries.csv", index=False)
                 write_metabolics_sto(folder, sp)
                 if solutions:
                     sol[workflow].write(folder)
@@ -167,9 +180,7 @@ def make_study(root: Path, *, measured=True, trials=None, solutions=True, failed
                     "times": {},
                 }))
                 for model in MODELS:
-                    d = ts[ts["model"] == model]
-                    pct = d["cycle_pct"].unique()
-                    wb = d[d["series"] == "leg_muscles"]["value_W"].to_numpy()
+                    wb = series[model]["leg_muscles"]
                     total = _integral(pct, wb)
                     stance = 100 * _integral(pct, wb, 0, TOE_OFF_PCT) / total
                     mean_w = total / 100.0
@@ -182,7 +193,7 @@ def make_study(root: Path, *, measured=True, trials=None, solutions=True, failed
                         "stance_energy_share_with_basal_pct": stance - 2, "swing_energy_share_with_basal_pct": 102 - stance,
                     }
                     for g in GROUPS:
-                        gv = d[d["series"] == f"group/{g}"]["value_W"].to_numpy()
+                        gv = series[model][f"group/{g}"]
                         row[f"share_{g}_pct"] = 100 * _integral(pct, gv) / total
                     row.update(toe_off_pct=TOE_OFF_PCT, measured_W_per_kg=meas if measured else math.nan,
                                unit_dir=str(rel))
@@ -237,6 +248,43 @@ def _bars(ax, gid):
 
 def _visible_axes(fig):
     return [ax for ax in fig.axes if ax.get_visible()]
+
+
+#: The functions drawing the report's figures (module, names): each turns the data the
+#: report's plan (:mod:`musclemetab.report.plan`) read and checked into a matplotlib figure.
+DRAWING_FUNCTIONS = (
+    ("musclemetab.report.figures", ("excitations_and_fiber_lengths", "estimated_vs_measured", "group_rates_over_cycle",
+                                    "muscle_heat_map", "whole_body_over_cycle", "phase_shares", "phase_pies",
+                                    "group_shares", "rates_against_speed", "per_muscle_ranked", "figure2_compact")),
+    ("musclemetab.report.spread_figure", ("spread_figure",)),
+)
+
+
+def small_figures(monkeypatch, tmp_path, keep=()):
+    """Every drawing function but those named in ``keep`` draws a small figure holding its name
+    instead (one line of text, saved in about 10 ms where the report's figures take a second
+    each), for the tests of the report's mechanics (files, rebuild key, page order,
+    drawing processes). The plan still reads every unit file a figure needs and still
+    raises the notes of missing files and single speeds. The package's cache is the test's own
+    (``tmp_path/cache``), so that no small figure stands for the real Figure 2 in the cache and
+    no drawing time of one is kept for the real figures."""
+    import importlib
+
+    def small(name):
+        def draw(*args, **kwargs):
+            from matplotlib.figure import Figure
+
+            fig = Figure(figsize=(2.0, 0.3))
+            fig.text(0.02, 0.3, name, fontsize=6)
+            return fig
+
+        return draw
+
+    for module, names in DRAWING_FUNCTIONS:
+        for name in names:
+            if name not in keep:
+                monkeypatch.setattr(importlib.import_module(module), name, small(name))
+    monkeypatch.setenv("MUSCLEMETAB_CACHE", str(tmp_path / "cache"))
 
 
 class _Parser(HTMLParser):
@@ -571,9 +619,10 @@ def test_report_notes_and_failures(tmp_path):
     assert str(root) not in text.split('id="failures"')[0].split('id="method"')[1]  # notes name relative paths
 
 
-def test_stale_figures_removed(tmp_path):
+def test_stale_figures_removed(tmp_path, monkeypatch):
     """A figure an earlier report wrote and this one cannot draw is removed; a file of the same
     name the report did not write (no record of it) is left alone."""
+    small_figures(monkeypatch, tmp_path)
     root = make_study(tmp_path / "s", trials={"normal": 1.25})
     write_report(root, workers=1)
     assert (root / "figures" / "excitations_fiber_lengths.png").is_file()
@@ -617,16 +666,18 @@ def test_report_errors(tmp_path):
     pd.DataFrame({"subject": ["s1"], "trial": ["normal"]}).to_csv(bad / "results.csv", index=False)
     with pytest.raises(MissingColumnError, match="workflow"):
         write_report(bad)
-    ok = make_study(tmp_path / "j", solutions=False)
+    ok = make_study(tmp_path / "j", solutions=False, trials={"normal": 1.25})
     (ok / "study.json").write_text("{not json")
     with pytest.raises(InputFileError, match="study.json"):
         write_report(ok)
 
 
-def test_cli(study, tmp_path, capsys):
+def test_cli(study, tmp_path, capsys, monkeypatch):
     import argparse
 
     from musclemetab.commands.report import add_parser as add_report_parser
+
+    small_figures(monkeypatch, tmp_path)
 
     parser = argparse.ArgumentParser(prog="musclemetab")
     add_report_parser(parser.add_subparsers(dest="command"))
@@ -675,8 +726,10 @@ def test_report_when_every_unit_failed(tmp_path):
     assert "study.json is missing" in text
 
 
-def test_report_is_rebuilt_only_when_its_inputs_change(tmp_path):
+def test_report_is_rebuilt_only_when_its_inputs_change(tmp_path, monkeypatch):
     from musclemetab.report.build import generate_report, report_key
+
+    small_figures(monkeypatch, tmp_path)
 
     copy = make_study(tmp_path / "copy", solutions=False, trials={"normal": 1.25})  # fewer figures to draw
     out, first = generate_report(copy)
@@ -893,6 +946,8 @@ def test_a_drawing_process_that_dies_leaves_no_figure_out(study, tmp_path, monke
         os._exit(3)
 
     monkeypatch.setattr(draw, "_child_share", dies)
+    # each small figure holds its name (a file in another's place differs); the pies drawn for real
+    small_figures(monkeypatch, tmp_path, keep=("phase_pies",))
     folder = read_study_folder(study)
     entries = draw.make_figures(folder, tmp_path / "figs", workers=2)
     assert [e.name for e in entries] == list(FIGURE_NAMES)
@@ -1030,19 +1085,10 @@ def test_figures_handed_out_largest_first_by_their_measured_drawing_times(tmp_pa
     import json
     import time
 
-    from matplotlib.figure import Figure
-
-    from musclemetab.report import figures as figure2_module  # figure2_compact draws the report's Figure 2
     from musclemetab.report import draw
     from musclemetab.report.folder import read_study_folder
 
-    def small(*args, **kwargs):  # a stand-in for the 36-panel plot: only its time is read here
-        fig = Figure(figsize=(2, 1))
-        fig.add_subplot().plot([0, 1], [1, 0])
-        return fig
-
-    monkeypatch.setattr(figure2_module, "figure2_compact", small)
-    monkeypatch.setenv("MUSCLEMETAB_CACHE", str(tmp_path / "cache"))
+    small_figures(monkeypatch, tmp_path)  # only the figures' drawing times are read here
     folder = read_study_folder(make_study(tmp_path / "s", solutions=False, measured=False, trials={"normal": 1.25}))
     assert draw.draw_costs() == {}
     t0 = time.perf_counter()
@@ -1163,7 +1209,7 @@ def test_speed_series_never_match_trials_of_two_subjects_by_name():
     np.testing.assert_allclose(lines["group:PF:b"].get_ydata(), [2.0, 2.6])
 
 
-def test_the_papers_six_models_by_default_others_on_request(tmp_path, capsys):
+def test_the_papers_six_models_by_default_others_on_request(tmp_path, capsys, monkeypatch):
     """LW05 and MA68 rows in the results: left out of the figures unless asked for (``models``,
     ``--models``, ``[report] models`` recorded in study.json); the tables keep every model; the
     rebuild key follows the option; a model the study did not compute is refused by name."""
@@ -1174,6 +1220,7 @@ def test_the_papers_six_models_by_default_others_on_request(tmp_path, capsys):
     from musclemetab.report.folder import read_study_folder
     from musclemetab.report.plan import select
 
+    small_figures(monkeypatch, tmp_path, keep=("phase_pies",))  # the pies of the default models are drawn
     root = make_study(tmp_path / "s", solutions=False, trials={"slow": 0.75, "normal": 1.25})
     r = pd.read_csv(root / "results.csv")
     extra = pd.concat([r[r.model == "UM10"].assign(model=m, whole_body_W_per_kg=r.whole_body_W_per_kg + 5) for m in ("LW05", "MA68")])
@@ -1201,13 +1248,14 @@ def test_the_papers_six_models_by_default_others_on_request(tmp_path, capsys):
     assert select(read_study_folder(root)).models == ["LW05"]
 
 
-def test_flagged_units_and_failures_at_the_top_figures_numbered_in_page_order(tmp_path):
+def test_flagged_units_and_failures_at_the_top_figures_numbered_in_page_order(tmp_path, monkeypatch):
     """A unit with a large reserve (results.csv flag, its share from summary.json) and a failed
     unit are named before the figures; the figures are numbered 1, 2, ... in page order."""
     import re
 
     from musclemetab.report.plan import FIGURE_TITLES
 
+    small_figures(monkeypatch, tmp_path)
     root = make_study(tmp_path / "s", solutions=False, trials={"normal": 1.25}, failed={("s2", "normal", "effort-gen")})
     r = pd.read_csv(root / "results.csv")
     r["large_reserve"] = (r.subject == "s3") & (r.workflow == "effort-ten")

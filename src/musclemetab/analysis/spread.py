@@ -64,13 +64,13 @@ def spread_values(results):
     return pd.concat(frames, ignore_index=True)
 
 
-def _mean_range(values, within, across):
-    """Mean over the groups of ``within`` of (max - min over ``across``), groups with two or
-    more values of ``across`` only; NaN when there are none."""
-    g = values.groupby(list(within))["value_W_per_kg"]
-    n = values.groupby(list(within))[across].nunique()
-    r = (g.max() - g.min())[n >= 2]
-    return float(r.mean()) if len(r) else float("nan")
+def _mean_ranges(values, by, within, across):
+    """For each group of ``by``: the mean over its groups of ``within`` of (max - min over
+    ``across``), groups with two or more values of ``across`` only; a group of ``by`` without
+    such groups is absent (NaN when looked up). All groups at once: one pass over the table."""
+    g = values.groupby([*by, *within], sort=False)
+    r = (g["value_W_per_kg"].max() - g["value_W_per_kg"].min())[g[across].nunique() >= 2]
+    return r.groupby(level=list(range(len(by))), sort=False).mean()
 
 
 def structural_spread(results):
@@ -79,25 +79,28 @@ def structural_spread(results):
     import pandas as pd
 
     values = spread_values(results)
-    rows = []
-    trials_of = {}
-    for (subject, quantity), v in values.groupby(["subject", "quantity"], sort=False):
-        trials_of[(subject, quantity)] = _mean_range(v, ("workflow", "model"), "trial")
-    for (subject, trial, quantity), v in values.groupby(["subject", "trial", "quantity"], sort=False):
-        ranges = {"energy model": _mean_range(v, ("workflow",), "model"),
-                  "workflow": _mean_range(v, ("model",), "workflow"),
-                  "trials": trials_of[(subject, quantity)]}
-        known = {k: r for k, r in ranges.items() if np.isfinite(r)}
-        rows.append({
-            "subject": subject, "trial": trial, "quantity": quantity, "n_models": int(v["model"].nunique()),
-            "n_workflows": int(v["workflow"].nunique()), "mean_W_per_kg": float(v["value_W_per_kg"].mean()),
-            "min_W_per_kg": float(v["value_W_per_kg"].min()), "max_W_per_kg": float(v["value_W_per_kg"].max()),
-            "range_across_models_W_per_kg": ranges["energy model"],
-            "range_across_workflows_W_per_kg": ranges["workflow"],
-            "range_across_trials_W_per_kg": ranges["trials"],
-            "largest": max(known, key=known.get) if known else "",
-        })
-    df = pd.DataFrame(rows, columns=list(SPREAD_COLUMNS))
+    keys = ["subject", "trial", "quantity"]
+    g = values.groupby(keys, sort=False)
+    mean = g["value_W_per_kg"].mean()  # its index: the groups in the order of the table
+    df = pd.DataFrame({
+        "n_models": g["model"].nunique(), "n_workflows": g["workflow"].nunique(),
+        "mean_W_per_kg": mean, "min_W_per_kg": g["value_W_per_kg"].min(), "max_W_per_kg": g["value_W_per_kg"].max(),
+        "range_across_models_W_per_kg": _mean_ranges(values, keys, ["workflow"], "model"),
+        "range_across_workflows_W_per_kg": _mean_ranges(values, keys, ["model"], "workflow"),
+    }, index=mean.index)
+    trials = _mean_ranges(values, ["subject", "quantity"], ["workflow", "model"], "trial")
+    df["range_across_trials_W_per_kg"] = trials.reindex(
+        pd.MultiIndex.from_arrays([df.index.get_level_values("subject"), df.index.get_level_values("quantity")])
+    ).to_numpy()
+    df = df.reset_index()
+    named = {"energy model": "range_across_models_W_per_kg", "workflow": "range_across_workflows_W_per_kg",
+             "trials": "range_across_trials_W_per_kg"}
+    largest = []
+    for ranges in zip(*(df[c].to_numpy(float) for c in named.values())):
+        known = {k: r for k, r in zip(named, ranges) if np.isfinite(r)}
+        largest.append(max(known, key=known.get) if known else "")
+    df["largest"] = largest
+    df = df.astype({"n_models": int, "n_workflows": int})[list(SPREAD_COLUMNS)]
     order = {q: i for i, q in enumerate(dict.fromkeys([WHOLE_BODY, *values["quantity"]]))}
     first = {k: i for i, k in enumerate(dict.fromkeys(zip(df["subject"], df["trial"])))}
     df["_o"] = [first[(s, t)] * 1000 + order[q] for s, t, q in zip(df["subject"], df["trial"], df["quantity"])]

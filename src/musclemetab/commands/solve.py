@@ -581,14 +581,14 @@ def _emg_ten_done(args, result, out, side: str, model_file) -> None:
             groups.append(f"{'/'.join(x[:-2] if x.endswith(('_r', '_l')) else x for x in g)} "
                           f"kT {result.tendon_stiffness[m]:.4g} (x{result.tendon_scale[m]:.4f})")
     scales = ", ".join(f"{m} {v:.3g}" for m, v in result.emg_scale.items())
-    size = r["problem_size"]
+    size = r.problem_size
     print(
         f"solve: emg-ten{' side ' + side if args.side == 'both' else ''} "
         f"{len(result.solutions)} trials ({', '.join(result.solutions)}), "
         f"{size['variables']} variables, {size['equality_constraints']} equalities, "
-        f"{size['inequality_constraints']} EMG bounds: {r['status']} in {r['iterations']} iterations, objective "
-        f"{r['objective']:.6e}, solve {r['solve_time_s']:.1f} s, max moment residual "
-        f"{r['max_moment_residual_Nm']:.1e} N m; {'; '.join(groups)}; EMG scale {scales} -> {out} "
+        f"{size['inequality_constraints']} EMG bounds: {r.status} in {r.iterations} iterations, objective "
+        f"{r.objective:.6e}, solve {r.solve_time_s:.1f} s, max moment residual "
+        f"{r.max_moment_residual_Nm:.1e} N m; {'; '.join(groups)}; EMG scale {scales} -> {out} "
         f"(and {model_file.name})"
     )
 

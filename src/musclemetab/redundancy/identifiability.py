@@ -6,10 +6,14 @@ informs, and the identifiability at the optimum (``docs/problem.md``, "Doubts of
 multiplier exceeds their slack, and the variable bounds likewise; the scale factors themselves
 are always kept free. With ``H`` the Hessian of the Lagrangian ``f + lam_g' g`` on the free
 variables and ``A`` the Jacobian of the active rows, the KKT matrix ``K = [[H, A'], [A, 0]]``
-is factorised once (sparse LU) and solved for the unit vectors of the parameters:
+is solved for the unit vectors of the parameters:
 ``C = (K^-1)_pp = P' Z (Z' H Z)^-1 Z' P``, the inverse of the reduced Hessian (``Z`` a basis of
 the null space of ``A``) on the parameters, i.e. of the Hessian of the objective minimised over
-all other variables. With the tracked data weighted as inverse variances up to a common factor
+all other variables. The parameters' rows and columns of ``K`` are dense (a factor enters every
+node of every trial), so they are taken apart: with ``K = [[B, E], [E', K_pp]]`` (``B`` the KKT
+matrix with the parameters held fixed, factorised once by sparse LU) ``C = S^-1`` where ``S = K_pp
+- E' B^-1 E`` is the Schur complement, as small as the number of parameters (block elimination:
+the same ``C`` as a factorisation of the whole ``K``, whose fill the dense rows more than double). With the tracked data weighted as inverse variances up to a common factor
 ``s^2`` (the objective's tracking terms are ``J_track = 1/2 sum_j c_j r_j^2``, ``c_j = 2 w /
 (n N)``), the covariance of the parameters is::
 
@@ -152,11 +156,18 @@ class KKTSystem:
     hold a free variable; :meth:`solve` solves ``K y = rhs`` (``None`` when ``K`` is exactly
     singular). ``active``: ``{"constraint_rows", "variable_bounds"}``, the active counts.
     ``bound_slack``: a variable closer than this to a bound is on it whatever its multiplier
-    (a weakly active bound, whose multiplier vanishes with the barrier parameter)."""
+    (a weakly active bound, whose multiplier vanishes with the barrier parameter).
 
-    def __init__(self, H, J, x, g, lbx, ubx, lbg, ubg, lam_g, lam_x, keep_free=(), bound_slack: float = 0.0):
+    ``apart``: free variables with dense rows and columns (e.g. estimated parameters) kept out of
+    the sparse factorisation: ``K = [[B, E], [E', K_aa]]`` over (the others, these), ``B``
+    factorised and the Schur complement ``S = K_aa - E' B^-1 E`` formed once; ``K y = r`` is then
+    solved by block elimination, ``y_a = S^-1 (r_a - E' B^-1 r_b)``, ``y_b = B^-1 (r_b - E y_a)``.
+    Where ``B`` is exactly singular (a constraint row on those variables alone) ``K`` is factorised
+    whole."""
+
+    def __init__(self, H, J, x, g, lbx, ubx, lbg, ubg, lam_g, lam_x, keep_free=(), bound_slack: float = 0.0,
+                 apart=()):
         import scipy.sparse as sp
-        from scipy.sparse.linalg import splu
 
         slack_g = np.minimum(np.abs(g - lbg), np.abs(ubg - g))
         rows = np.flatnonzero((lbg == ubg) | (slack_g <= np.abs(lam_g)))
@@ -171,12 +182,24 @@ class KKTSystem:
         H = sp.csc_matrix(H)
         self.matrix = sp.bmat([[H[self.free][:, self.free], A.T], [A, None]], format="csc")
         self.active = {"constraint_rows": int(self.rows.size), "variable_bounds": int(fixed.sum())}
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                self._lu = splu(self.matrix)
-        except RuntimeError:  # exactly singular KKT matrix
-            self._lu = None
+        self._schur = None
+        if len(apart):
+            self._schur = self._split([self.position[int(c)] for c in apart])
+        self._lu = None if self._schur is not None else _factorised(self.matrix)
+
+    def _split(self, apart: list[int]):
+        """``(others, apart, LU of B, B^-1 E, E, S)`` of the block elimination, or ``None`` where
+        ``B`` is exactly singular."""
+        K = self.matrix
+        a = np.asarray(apart, dtype=int)
+        b = np.setdiff1d(np.arange(K.shape[0]), a)
+        lu = _factorised(K[b][:, b].tocsc())
+        if lu is None:
+            return None
+        E = K[b][:, a].toarray()
+        Y = lu.solve(E)
+        S = K[a][:, a].toarray() - E.T @ Y
+        return b, a, lu, Y, E, S
 
     @property
     def size(self) -> int:
@@ -184,7 +207,31 @@ class KKTSystem:
 
     def solve(self, rhs: np.ndarray) -> np.ndarray | None:
         """``K^-1 rhs`` (``rhs`` of :attr:`size` rows), or ``None`` when ``K`` is singular."""
-        return None if self._lu is None else self._lu.solve(np.asarray(rhs, dtype=float))
+        rhs = np.asarray(rhs, dtype=float)
+        if self._schur is None:
+            return None if self._lu is None else self._lu.solve(rhs)
+        b, a, lu, Y, E, S = self._schur
+        z = lu.solve(rhs[b])
+        try:
+            ya = np.linalg.solve(S, rhs[a] - E.T @ z)
+        except np.linalg.LinAlgError:  # exactly singular Schur complement: K singular
+            return None
+        y = np.empty_like(rhs)
+        y[a] = ya
+        y[b] = z - Y @ ya
+        return y
+
+
+def _factorised(matrix):
+    """SuperLU factors of a sparse square ``matrix``, or ``None`` when it is exactly singular."""
+    from scipy.sparse.linalg import splu
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return splu(matrix)
+    except RuntimeError:  # exactly singular
+        return None
 
 
 def lagrangian_derivatives(nlp: dict, x, lam_g):
@@ -209,11 +256,12 @@ def reduced_inverse_hessian(H, J, x, g, lbx, ubx, lbg, ubg, lam_g, lam_x, column
     """``(K^-1)_pp``: the inverse of the reduced Hessian on the variables ``columns`` at a KKT
     point (see the module docstring). ``H``: the full symmetric Hessian of the Lagrangian and
     ``J`` the constraint Jacobian (SciPy sparse), ``g`` the constraint values; the other
-    arguments as IPOPT's. The variables of ``columns`` are kept free; other variables on a bound
+    arguments as IPOPT's. The variables of ``columns`` are kept free, and taken apart of the
+    sparse factorisation (Schur complement); other variables on a bound
     (slack below its multiplier) are fixed, and constraint rows left without a free variable
     dropped (:class:`KKTSystem`). NaN where the KKT matrix is singular. Returns ``(C,
     {"constraint_rows", "variable_bounds"})`` (the active counts)."""
-    kkt = KKTSystem(H, J, x, g, lbx, ubx, lbg, ubg, lam_g, lam_x, keep_free=columns)
+    kkt = KKTSystem(H, J, x, g, lbx, ubx, lbg, ubg, lam_g, lam_x, keep_free=columns, apart=columns)
     rhs = np.zeros((kkt.size, len(columns)))
     for j, c in enumerate(columns):
         rhs[kkt.position[int(c)], j] = 1.0
