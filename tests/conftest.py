@@ -229,13 +229,17 @@ def _isolated_cache(tmp_path_factory):
 
 
 #: the test modules that take longest (measured with ``--durations``), started first so that
-#: the parallel processes of a run (pytest-xdist, ``--dist loadfile``) finish together, the
-#: ones that make the shared fixtures (``demo``, ``two_subjects``) early; the other modules
-#: follow in collection order
-_LONGEST_FIRST = ("test_emg_ten.py", "test_demo.py", "test_trials.py", "test_gait2392.py", "test_estimate.py",
-                  "test_report.py", "test_redundancy.py", "test_study.py", "test_robustness_outputs.py",
-                  "test_robustness_values.py", "test_calibration.py", "test_weights.py", "test_energy_goal.py",
-                  "test_emg_informed.py", "test_report_browser.py", "test_diagnosis.py", "test_opensim_files.py")
+#: the parallel processes of a run (pytest-xdist, ``--dist loadfile`` with
+#: ``--no-loadscope-reorder``: modules handed out in this order, not by their number of tests)
+#: finish together; ``test_demo.py`` makes the shared ``demo`` fixture at the start, while the
+#: other process solves EMG-TEN, so that no module waits for it later; the other modules follow
+#: in collection order
+_LONGEST_FIRST = ("test_emg_ten.py", "test_demo.py", "test_gait2392.py", "test_estimate.py",
+                  "test_robustness_outputs.py", "test_study.py", "test_redundancy.py", "test_robustness_values.py",
+                  "test_report.py", "test_uncertainty.py", "test_calibration.py", "test_weights.py",
+                  "test_emg_informed.py", "test_energy_goal.py", "test_cli_flow.py", "test_report_browser.py",
+                  "test_trials.py", "test_geometry.py", "test_diagnosis.py", "test_sensitivity.py",
+                  "test_robustness_study.py", "test_stage_paths.py", "test_opensim_files.py")
 
 
 def pytest_collection_modifyitems(config, items):
