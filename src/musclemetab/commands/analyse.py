@@ -279,7 +279,7 @@ def _plausibility(args, solve_flags, table) -> None:
     group shares; the ``quality`` column of ``results.csv``); write them all to
     ``OUT/plausibility.json``; with ``--strict`` fail."""
     from ..metabolics.plausibility import results_rows_flags, write_plausibility
-    from ..redundancy.plausibility import check_strict, warn_flags
+    from ..quality import check_strict, warn_flags
 
     flags = []
     for folder, found in solve_flags.items():

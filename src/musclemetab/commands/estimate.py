@@ -176,7 +176,7 @@ def _plausibility(args, result) -> None:
     a flag fails the command."""
     from pathlib import Path
 
-    from ..redundancy.plausibility import check_strict, warn_flags
+    from ..quality import check_strict, warn_flags
     from ..redundancy.solution import SUMMARY_FILE, read_flags
 
     flags = []

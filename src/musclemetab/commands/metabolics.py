@@ -196,7 +196,7 @@ def _plausibility(args, folders, results) -> None:
     """Warn (one line each) of the solves' plausibility flags and of whole-body rates outside the
     band of walking at ``--speed``; write them to ``OUT/plausibility.json``; with ``--strict`` fail."""
     from ..metabolics.plausibility import legs_rate_flags, write_plausibility
-    from ..redundancy.plausibility import check_strict, warn_flags
+    from ..quality import check_strict, warn_flags
     from ..redundancy.solution import read_flags
 
     flags = []

@@ -352,7 +352,7 @@ def _solve(args) -> int:
 def _plausibility(args, solutions) -> None:
     """One warning line per plausibility flag of each solution (``{folder: Solution}``); with
     ``--strict`` a flag fails the command."""
-    from ..redundancy.plausibility import check_strict, warn_flags
+    from ..quality import check_strict, warn_flags
 
     flags = []
     for where, solution in solutions.items():

@@ -1,7 +1,7 @@
 """Plausibility checks of the metabolic results: whole-body rate against walking speed, and
 negative muscle-group rates.
 
-Pure functions giving a :class:`~musclemetab.redundancy.plausibility.Flag` (``model`` set) or
+Pure functions giving a :class:`~musclemetab.quality.Flag` (``model`` set) or
 ``None``; the thresholds are documented constants, overridable by keyword. The solver-level
 checks are in :mod:`musclemetab.redundancy.plausibility`; ``docs/quality.md`` lists them all.
 
@@ -20,7 +20,7 @@ from typing import Mapping
 
 import numpy as np
 
-from ..redundancy.plausibility import Flag
+from ..quality import Flag
 from .solution import PLAUSIBILITY_FILE, add_legs
 
 __all__ = ["PLAUSIBILITY_FILE", "legs_rate_flags", "results_rows_flags", "write_plausibility", "RATE_BAND",
@@ -133,11 +133,11 @@ def write_plausibility(flags, out_dir):
 
 def add_quality(rows, unit_records):
     """``rows`` (one results row per model) with the column ``quality``: ``"ok"`` or the flags
-    (:func:`musclemetab.redundancy.plausibility.quality_text`) of the solve (every leg's, from the
+    (:func:`musclemetab.quality.quality_text`) of the solve (every leg's, from the
     ``plausibility`` of ``unit_records``) and of the row's metabolic results (its whole-body rate
     against its speed, its negative group shares: :func:`musclemetab.metabolics.plausibility.metabolic_flags`);
     ``"not checked"`` when a unit record has no ``plausibility`` (written by an earlier version)."""
-    from ..redundancy.plausibility import flags_from_records, quality_text
+    from ..quality import flags_from_records, quality_text
 
     if any("plausibility" not in r for r in unit_records):
         rows["quality"] = "not checked"

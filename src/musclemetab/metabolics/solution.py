@@ -83,7 +83,7 @@ __all__ = [
     "TOTAL_NO_BASAL",
 ]
 
-from ..redundancy.solution import SOLUTION_FILE, SUMMARY_FILE  # noqa: E402  (one definition of the format)
+from ..io.solution_folder import SOLUTION_FILE, SUMMARY_FILE  # noqa: E402  (one definition of the format)
 METABOLICS_STO = "metabolics.sto"
 METABOLICS_PARQUET = "metabolics.parquet"
 WHOLE_BODY_CSV = "whole_body.csv"
@@ -166,7 +166,7 @@ def read_solution_states(directory: str | os.PathLike, *, require_success: bool 
     SolverError
         The summary says the solve did not succeed (unless ``require_success=False``).
     """
-    from ..redundancy.solution import read_solution_folder
+    from ..io.solution_folder import read_solution_folder
 
     directory = Path(directory)
     spath, jpath = directory / SOLUTION_FILE, directory / SUMMARY_FILE

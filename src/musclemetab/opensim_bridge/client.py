@@ -158,6 +158,12 @@ def shutdown() -> None:
                 _PROC.wait(timeout=5)
             except Exception:  # pragma: no cover - best effort
                 _PROC.kill()
+        if _PROC is not None:  # the worker's end of the pipes: closed, not left to the garbage collector
+            for pipe in (_PROC.stdin, _PROC.stdout):
+                try:
+                    pipe.close()
+                except Exception:  # pragma: no cover - best effort
+                    pass
         _PROC = None
     finally:
         _LOCK.release()

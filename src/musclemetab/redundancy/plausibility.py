@@ -4,7 +4,8 @@ A solve can converge to a solution that balances the joint moments but is not a 
 muscle state of walking (a fiber stretched far beyond its optimal length carrying the moment
 passively, muscles fully active over much of the cycle, reserves doing the muscles' work).
 Each check is a small pure function of arrays with its threshold a documented constant (a
-keyword overrides it) and gives a :class:`Flag`, or ``None`` when nothing is implausible.
+keyword overrides it) and gives a :class:`~musclemetab.quality.Flag`, or ``None`` when nothing is
+implausible.
 :func:`solution_flags` runs them all on a :class:`~.solution.Solution`; the solve records the
 result in ``summary.json`` (``plausibility``, :class:`~.record.SolveRecord`). The metabolic
 checks (whole-body rate against walking speed, negative muscle-group rates) are in
@@ -14,11 +15,11 @@ and its source.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
 import numpy as np
 
+from ..quality import Flag, check_strict, flags_from_records, quality_text, warn_flags
 from .bounds import FIBER_LENGTH_BOUNDS
 from .window import PADDING_S
 
@@ -75,30 +76,6 @@ RESERVE_SHARE_LIMIT = 0.05
 #: reserve far below what any joint's reserve may be (OpenSim's guidance for reserve actuators
 #: rates peaks up to 10 N m as good).
 RESERVE_FLOOR_NM = 1.0
-
-
-@dataclass(frozen=True)
-class Flag:
-    """One implausible finding: ``code`` (short, for tables), ``message`` (one line naming the
-    muscles, DOFs or models, their values and the threshold), ``items`` (``{name: value}``, the
-    worst first), ``threshold`` and, for a metabolic flag, the energy ``model``."""
-
-    code: str
-    message: str
-    items: dict = field(default_factory=dict)
-    threshold: float | None = None
-    model: str | None = None
-
-    def to_dict(self) -> dict:
-        out = {"code": self.code, "message": self.message, "items": dict(self.items), "threshold": self.threshold}
-        if self.model is not None:
-            out["model"] = self.model
-        return out
-
-    @classmethod
-    def from_dict(cls, d: Mapping) -> "Flag":
-        return cls(code=str(d["code"]), message=str(d.get("message", "")), items=dict(d.get("items") or {}),
-                   threshold=d.get("threshold"), model=d.get("model"))
 
 
 def _worst(names: Sequence[str], values: np.ndarray, mask: np.ndarray) -> dict:
@@ -261,44 +238,3 @@ def solution_cycle_nodes(solution) -> np.ndarray:
     window less the padding."""
     cycle = solution.record.gait_cycle
     return cycle_nodes(solution.time_s, (float(cycle["start_s"]), float(cycle["end_s"])) if cycle else None)
-
-
-def flags_from_records(records) -> list[Flag]:
-    """Flags from their dictionaries (``summary.json``'s or ``unit.json``'s ``plausibility``)."""
-    return [Flag.from_dict(d) for d in (records or [])]
-
-
-def quality_text(flags: Sequence[Flag]) -> str:
-    """The ``quality`` column: ``"ok"``, or the flags as ``code(name name ...)`` joined by ``"; "``,
-    one entry per code in the order of first appearance, the names of its flags (every leg's) together."""
-    if not flags:
-        return "ok"
-    names: dict[str, list[str]] = {}
-    for f in flags:
-        listed = names.setdefault(f.code, [])
-        listed += [n for n in f.items if n not in listed]
-    return "; ".join(f"{code}({' '.join(n)})" if n else code for code, n in names.items())
-
-
-def warn_flags(flags: Sequence[Flag], where: str) -> None:
-    """One :class:`~musclemetab.errors.PlausibilityWarning` per flag, ``"<where>: <message>"``
-    (the command line prints each as one ``musclemetab: warning:`` line)."""
-    import warnings
-
-    from ..errors import PlausibilityWarning
-
-    for f in flags:
-        warnings.warn(f"{where}: {f.message}", PlausibilityWarning, stacklevel=2)
-
-
-def check_strict(flags: Sequence[Flag], where: str, written: str | None = None) -> None:
-    """Raise :class:`~musclemetab.errors.ImplausibleResultError` naming the flags (strict checking)."""
-    if not flags:
-        return
-    from ..errors import ImplausibleResultError
-
-    note = f"; the result is in {written} for inspection" if written else ""
-    raise ImplausibleResultError(
-        f"{where}: implausible result refused (strict): {quality_text(flags)}{note}; see the warnings, "
-        "docs/quality.md, or run without strict checking"
-    )

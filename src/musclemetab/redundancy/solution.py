@@ -53,6 +53,7 @@ import numpy as np
 
 from ..errors import InputFileError, LargeReserveWarning, MissingColumnError, SolverError
 from ..io.jsonfile import json_ready
+from ..io.solution_folder import SOLUTION_FILE, SUMMARY_FILE, read_solution_folder
 from ..muscle import (
     active_force_length,
     activation_rate,
@@ -74,8 +75,6 @@ __all__ = [
     "read_flags",
 ]
 
-SOLUTION_FILE = "solution.sto"
-SUMMARY_FILE = "summary.json"
 SUMMARY_FORMAT = "musclemetab.redundancy.solution"
 SUMMARY_VERSION = 1
 #: Largest reserve RMS (over DOFs), as a share of the peak joint moment (over DOFs and
@@ -162,35 +161,6 @@ def derived_quantities(
 
 def _hold_last(x: np.ndarray) -> np.ndarray:
     return np.vstack([x, x[-1:]])
-
-
-def read_solution_folder(
-    directory: str | os.PathLike, *, require_success: bool = True, required_keys=("muscles",)
-):
-    """Read ``solution.sto`` and ``summary.json`` of a solution folder, checked.
-
-    Returns ``(table, summary)``. Raises :class:`InputFileError` when a file is missing, the
-    summary is not JSON or lacks one of ``required_keys``; :class:`SolverError` when the
-    stored solve did not succeed (unless ``require_success=False``).
-    """
-    from ..io import read_json_object, read_storage
-
-    directory = Path(directory)
-    spath, jpath = directory / SOLUTION_FILE, directory / SUMMARY_FILE
-    for p in (spath, jpath):
-        if not p.is_file():
-            raise InputFileError(f"{p}: missing; {directory} is not a solution folder (run 'musclemetab solve')")
-    summary = read_json_object(jpath, remedy="solve again")
-    for key in required_keys:
-        if not summary.get(key):
-            raise InputFileError(f"{jpath}: no '{key}' entry; the summary is incomplete, solve again")
-    if require_success and not summary.get("success", False):
-        raise SolverError(
-            f"{directory}: the stored solve did not succeed (status '{summary.get('status')}'); "
-            "its values are not a solution. Solve again, or to inspect it anyway use --allow-failed "
-            "(musclemetab metabolics) or require_success=False (Python)"
-        )
-    return read_storage(spath), summary
 
 
 @dataclass

@@ -320,7 +320,7 @@ _NO_FLAG = ("ok", "not checked", "nan", "")
 def _plausibility_rows(study: StudyFolder, ok) -> list[list[str]]:
     """Rows of :func:`flagged_units` for the units whose ``quality`` is not ``ok``."""
     from ..metabolics.plausibility import metabolic_flags
-    from ..redundancy.plausibility import flags_from_records
+    from ..quality import flags_from_records
 
     if "quality" not in ok.columns:
         return []

@@ -639,7 +639,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
             raise emg_failure(sol.run_record, subject.emg_mode, f"{unit.workflow} solve of {subject.name}/{trial.name}")
     times["solution_s"] = time.perf_counter() - t0
     if study.strict:  # the solve's flags fail the unit before the later stages run
-        from ..redundancy.plausibility import check_strict
+        from ..quality import check_strict
 
         check_strict(sol.record.flags, unit.label)
 
@@ -805,7 +805,7 @@ def _plausibility(study: Study, unit: Unit, sol, result, speed, groups) -> list:
     whole-body rate, doubled, against the speed; negative group rates); with the study's
     ``strict`` a flag fails the unit (:class:`~musclemetab.errors.ImplausibleResultError`)."""
     from ..metabolics.plausibility import metabolic_flags
-    from ..redundancy.plausibility import check_strict
+    from ..quality import check_strict
 
     flags = metabolic_flags({m: result.whole_body[m].mean_W_per_kg for m in result.models}, speed, groups)
     if study.strict:  # the solve's flags were checked after the solve
