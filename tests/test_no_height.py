@@ -114,5 +114,10 @@ def test_energy_goal_without_height_takes_the_model_masses(tmp_path):
     given["soleus_r"]["mass_kg"] = 99.0
     np.testing.assert_array_equal(as_mapping.muscle_values(muscles, f0, lmo)[0], heavier.muscle_values(muscles, f0, lmo)[0])
     assert as_mapping.record()["muscle_properties"] == {"soleus_r": {"mass_kg": float(2 * mass[0])}}
+    # checked as a CSV's rows are, when the goal is made: the muscle and column named
+    with pytest.raises(OptionError, match="muscle 'soleus_r', column 'mass_kg'"):
+        EnergyGoal("UM10", 1.0, 72.6, None, muscle_properties={"soleus_r": {"mass_kg": -1.0}})
+    with pytest.raises(OptionError, match="muscle 'soleus_r': unknown column mas_kg"):
+        EnergyGoal("UM10", 1.0, 72.6, None, muscle_properties={"soleus_r": {"mas_kg": 1.0}})
     with pytest.raises(OptionError, match="kilograms"):
         EnergyGoal("UM10", 1.0, 72600.0, None)

@@ -248,12 +248,12 @@ class MuscleOverrides:
         return MuscleOverrides(merged, self.source)
 
 
-def _override_value(col: str, raw: str, where: str):
+def _override_value(col: str, raw: str, where: str, error=InputFileError):
     if col == "anatomical_muscles":
         ids = tuple(raw.split())
         unknown = [a for a in ids if a not in _anatomical_rows()]
         if unknown:
-            raise InputFileError(
+            raise error(
                 f"{where}: unknown anatomical muscle {', '.join(unknown)}; use ids of the package table "
                 f"(e.g. {', '.join(list(_anatomical_rows())[:3])}; see docs/muscles.md)"
             )
@@ -267,7 +267,7 @@ def _override_value(col: str, raw: str, where: str):
     lo, hi, what = _OVERRIDE_RANGES[col]
     ok = np.isfinite(v) and (lo <= v <= hi if col == "slow_twitch_fraction" else lo < v <= hi)
     if not ok:
-        raise InputFileError(f"{where}: '{raw}' is not {what}")
+        raise error(f"{where}: '{raw}' is not {what}")
     return v
 
 
@@ -328,7 +328,28 @@ def as_overrides(overrides) -> MuscleOverrides:
         return overrides
     if isinstance(overrides, (str, Path)):
         return read_muscle_properties(overrides)
-    return MuscleOverrides({k: dict(v) for k, v in overrides.items()}, "overrides")
+    return MuscleOverrides(_mapping_rows(overrides), "muscle properties")
+
+
+def _mapping_rows(overrides: Mapping) -> dict:
+    """``{muscle: {column: value}}`` given in Python, checked as a CSV's rows are (the columns of
+    :func:`read_muscle_properties`, their ranges; ``anatomical_muscles`` and ``function_groups``
+    as a space-separated string or a sequence of names): :class:`OptionError` naming the muscle."""
+    rows = {}
+    for name, row in overrides.items():
+        if not isinstance(row, Mapping):
+            raise OptionError(f"muscle properties: the entry of muscle '{name}' must map columns to values "
+                              f"(e.g. {{'mass_kg': 0.5}}), not {row!r}")
+        extra = [c for c in row if c not in _OVERRIDE_COLUMNS]
+        if extra:
+            raise OptionError(f"muscle properties: muscle '{name}': unknown column{'s' if len(extra) > 1 else ''} "
+                              f"{', '.join(map(str, extra))}; allowed: {', '.join(_OVERRIDE_COLUMNS)}")
+        rows[str(name)] = {
+            c: _override_value(c, " ".join(map(str, v)) if isinstance(v, (list, tuple)) else str(v).strip(),
+                               f"muscle properties: muscle '{name}', column '{c}'", OptionError)
+            for c, v in row.items()
+        }
+    return rows
 
 
 # ---------------------------------------------------------------------------------------

@@ -99,9 +99,11 @@ class EnergyGoal:
         check_subject(float(self.body_mass_kg), 1.0 if self.height_m is None else float(self.height_m))
         if isinstance(self.muscle_properties, os.PathLike):
             object.__setattr__(self, "muscle_properties", os.fspath(self.muscle_properties))
-        elif isinstance(self.muscle_properties, Mapping):  # a copy: the goal does not change with the caller's
-            object.__setattr__(self, "muscle_properties",
-                               {str(m): dict(v) for m, v in self.muscle_properties.items()})
+        elif isinstance(self.muscle_properties, Mapping):  # checked now, and a copy: not the caller's to change
+            from ..properties import as_overrides
+
+            checked = as_overrides(self.muscle_properties)
+            object.__setattr__(self, "muscle_properties", {m: dict(v) for m, v in checked.values.items()})
         object.__setattr__(self, "options", dict(self.options))
         if self.form not in GOAL_FORMS:
             raise OptionError(f"energy goal: unknown form {self.form!r}; choose one of {', '.join(GOAL_FORMS)} "
