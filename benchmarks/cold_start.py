@@ -13,7 +13,15 @@ The last table gives cold minus warm per tree: the wall times, and the "rest" (w
 IPOPT's solve time, which removes the run-to-run swing of the solve itself), in wall and
 CPU seconds. That difference is what a cold command costs over a warm one.
 
+``--dependencies`` measures instead what no change of the package can remove from a cold
+solve: in ``--repeat`` new interpreters (of this Python, so of its installed SciPy), the
+import of NumPy, of CasADi with its IPOPT plugin loaded (a one-variable ``nlpsol``), and of
+``scipy.signal`` and ``scipy.interpolate`` (the inputs' filter and splines, needed before IPOPT
+starts), each timed, with their sum as a share of the 1.5 s a cold command may add to a solve.
+Run it with the Pythons of two environments to compare SciPy versions.
+
     python benchmarks/cold_start.py [--trial normal] [--repeat 3] [--baseline-src OTHER/src]
+    python benchmarks/cold_start.py --dependencies [--repeat 5]
 """
 
 from __future__ import annotations
@@ -94,6 +102,49 @@ def warm_runs(src: Path, ex, trial: str, cache: Path, repeat: int) -> list[dict]
     return run_in_tree(_WARM, src, ex, trial, cache, repeat, "the warm solve")
 
 
+#: what a cold command may spend beyond the solve itself (seconds)
+COLD_BUDGET_S = 1.5
+
+_DEPENDENCIES = """
+import json, time
+t0 = time.perf_counter()
+import numpy
+t1 = time.perf_counter()
+import casadi
+x = casadi.SX.sym("x")
+casadi.nlpsol("s", "ipopt", {"x": x, "f": x * x}, {"ipopt": {"print_level": 0}, "print_time": False})
+t2 = time.perf_counter()
+import scipy.interpolate, scipy.signal
+t3 = time.perf_counter()
+import scipy
+print(json.dumps({"scipy": scipy.__version__, "numpy_s": t1 - t0, "casadi_ipopt_s": t2 - t1, "scipy_s": t3 - t2}))
+"""
+
+
+def dependency_floor(repeat: int) -> int:
+    """The imports a cold solve cannot avoid, in ``repeat`` new interpreters (``--dependencies``)."""
+    runs = []
+    for _ in range(repeat):
+        proc = subprocess.run([sys.executable, "-c", _DEPENDENCIES], capture_output=True, text=True)
+        if proc.returncode != 0:
+            sys.exit(f"the imports failed:\n{proc.stderr}")
+        runs.append(json.loads(proc.stdout.strip().splitlines()[-1]))
+    version = runs[0].pop("scipy")
+    for r in runs[1:]:
+        r.pop("scipy")
+    for r in runs:
+        r["total_s"] = r["numpy_s"] + r["casadi_ipopt_s"] + r["scipy_s"]
+    med = _median(runs)
+    print(f"imports a cold solve needs: {os.cpu_count()} cores, load average "
+          f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}; SciPy {version}, Python {sys.version.split()[0]}")
+    print(f"{'numpy s':>8} {'casadi+ipopt s':>15} {'scipy.signal+interpolate s':>27} {'total s':>8} {'total / budget':>15}")
+    print(f"{med['numpy_s']:>8.2f} {med['casadi_ipopt_s']:>15.2f} {med['scipy_s']:>27.2f} {med['total_s']:>8.2f} "
+          f"{med['total_s'] / COLD_BUDGET_S:>15.2f}")
+    print(f"(medians of {repeat}; totals {min(r['total_s'] for r in runs):.2f}-{max(r['total_s'] for r in runs):.2f} s; "
+          f"budget {COLD_BUDGET_S:g} s)")
+    return 0
+
+
 def _median(rs: list[dict]) -> dict:
     return {k: statistics.median(r[k] for r in rs) for k in rs[0]}
 
@@ -103,7 +154,11 @@ def main(argv=None) -> int:
     ap.add_argument("--trial", default="normal", choices=("slow", "normal", "fast"))
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--baseline-src", type=Path, help="another source tree (its src folder) to compare with")
+    ap.add_argument("--dependencies", action="store_true",
+                    help="time only the imports of NumPy, CasADi (with IPOPT) and SciPy that a cold solve needs")
     args = ap.parse_args(argv)
+    if args.dependencies:
+        return dependency_floor(args.repeat)
     ex = _example()
     trees = {"this tree": HERE.parent / "src"}
     if args.baseline_src:
