@@ -434,8 +434,11 @@ def test_passive_parameters_that_are_not_finite_are_named_as_such():
     params = PassiveParameters({"soleus_r": (math.inf, 1.0, 0.6), "tibant_r": (4.0, 1.0, 0.6)}, "p.csv")
     with pytest.raises(InputFileError, match=r"p.csv: .*soleus_r are not finite"):
         params.for_muscles(["soleus_r", "tibant_r"])
-    with pytest.raises(UnknownMuscleError, match="no passive parameters for vaslat_r"):
+    with pytest.raises(UnknownMuscleError, match="no passive parameters for vaslat_r") as info:
         params.for_muscles(["tibant_r", "vaslat_r"])
+    # the remedy: a calibration of this model's muscles by the command that makes one, or no calibration
+    assert "musclemetab calibrate-passive --model MODEL --trials FOLDER" in str(info.value)
+    assert "--passive DIR/passive_parameters.csv" in str(info.value) and "effort-gen" in str(info.value)
     assert params.for_muscles(["tibant_r"]).tolist() == [[4.0, 1.0, 0.6]]
 
 

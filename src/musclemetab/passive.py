@@ -81,7 +81,9 @@ class PassiveParameters:
         if missing:
             raise UnknownMuscleError(
                 f"{self.source}: no passive parameters for {', '.join(missing)}; the calibration must "
-                "cover every muscle of the problem (or use the effort-gen workflow)"
+                "cover every muscle of the problem: calibrate this model's passive muscles (musclemetab "
+                "calibrate-passive --model MODEL --trials FOLDER --out DIR, then --passive DIR/passive_parameters.csv), "
+                "or use the effort-gen workflow"
             )
         return np.array(out, dtype=float)
 
