@@ -220,3 +220,50 @@ def test_backward_fiber_dynamics_with_the_energy_goal_is_refused(example, tmp_pa
     assert code != 0 and len(text.splitlines()) == 1
     assert "--fiber-dynamics" in text and "--energy-model" in text
     assert not (tmp_path / "x").exists()
+
+
+@pytest.mark.opensim
+@pytest.mark.slow
+def test_opensim_model_prepared_while_ipopt_solves(example, constrained, cache_dir, tmp_path, monkeypatch):
+    """An EMG-informed solve tells ``before_solve`` (the command line's ``prepare_opensim_files``)
+    the solution's mesh, muscle parameters and DOFs before IPOPT starts, so that the OpenSim
+    worker prepares the solution's model while IPOPT solves and the write finds it prepared;
+    EMG-TEN, whose tendon stiffness is known only after its solve, tells nothing."""
+    from musclemetab.opensim_bridge import call
+    from musclemetab.redundancy import emg_pipeline, run
+    from musclemetab.redundancy.emg_ten import informed_settings
+    from musclemetab.redundancy.export import prepare_opensim_files, write_opensim_files
+    from musclemetab.redundancy.parameters import PARAMETER_FIELDS
+
+    class Stop(Exception):
+        pass
+
+    def stop(*args, **kwargs):
+        raise Stop
+
+    files = ([example.ik["normal"]], [example.id["normal"]], [example.emg["normal"]])
+    informed = dict(emg_mapping="authors", workflow="effort-cal", cache_dir=cache_dir,
+                    settings=informed_settings("effort-cal", "constrained"))
+    # the command line's solution (the session's memo: the problem of the `constrained` fixture)
+    sol = next(iter(run.solve_emg_ten(example.model, *files, **informed).solutions.values()))
+    np.testing.assert_allclose(sol.excitation, constrained.excitation, rtol=1e-9, atol=1e-12)  # (its file: 12 digits)
+    monkeypatch.setattr(emg_pipeline, "solve_emg_ten_ocp", stop)  # the problem up to IPOPT, not solved again
+    solve = getattr(run.solve_emg_ten, "__wrapped__", run.solve_emg_ten)
+    told = []
+    with pytest.raises(Stop):
+        solve(example.model, *files, **informed, before_solve=lambda **o: told.append(o))
+    assert len(told) == 1
+    outline = told[0]
+    np.testing.assert_array_equal(outline["time_s"], sol.time_s)
+    assert tuple(outline["dofs"]) == tuple(sol.dofs) and outline["parameters"].names == sol.parameters.names
+    for field in PARAMETER_FIELDS:
+        np.testing.assert_array_equal(getattr(outline["parameters"], field), getattr(sol.parameters, field), field)
+    assert str(outline["model_path"]) == sol.record.inputs["model"] and str(outline["ik_path"]) == sol.record.inputs["ik"]
+    prepare_opensim_files(**outline)
+    prepared = call("solution_model:prepared_models")  # (waits for the preparation)
+    write_opensim_files(sol, tmp_path / "files")
+    assert call("solution_model:prepared_models") == prepared  # the write found the model prepared
+    told.clear()
+    with pytest.raises(Stop):
+        solve(example.model, *files, emg_mapping="authors", cache_dir=cache_dir, before_solve=lambda **o: told.append(o))
+    assert told == []

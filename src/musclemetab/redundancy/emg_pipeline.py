@@ -40,10 +40,13 @@ def solve_emg_ten_arrays(
     check_units: bool = True,
     workflow: str = EMG_TEN,
     tendon_stiffness=None,
+    before_solve=None,
 ) -> Result:
     """EMG-TEN from arrays: per trial a geometry-like object, ``(ID time, ID moments)`` with
     columns in the order of ``geometry.dofs``, and an EMG table (time-indexed ``DataFrame``,
-    channels as columns, or already mapped to muscles by ``musclemetab.emg.map_channels``)."""
+    channels as columns, or already mapped to muscles by ``musclemetab.emg.map_channels``).
+    ``before_solve``: see :func:`.run.solve_emg_ten` (called for the trials whose ``sources``
+    name their model and IK files)."""
     t_start = _time.perf_counter()
     settings = settings_for_muscles(settings, restrict_geometry(list(geometries)[0]).muscles) if geometries \
         else (settings or EmgTenSettings())
@@ -53,6 +56,12 @@ def solve_emg_ten_arrays(
         emg_mapping=emg_mapping, settings=settings, options=options, sources=sources, check_units=check_units,
         workflow="effort-cal" if workflow == EMG_TEN else workflow, tendon_stiffness=tendon_stiffness)
     t_prep = _time.perf_counter() - t_start
+    if before_solve is not None and workflow != EMG_TEN:  # the solutions' muscle parameters are known
+        for trial in trials:
+            if trial.sources.get("model") and trial.sources.get("ik"):
+                before_solve(model_path=trial.sources["model"], ik_path=trial.sources["ik"],
+                             parameters=params.subset(trial.inputs.muscles), time_s=trial.inputs.mesh_time_s,
+                             dofs=tuple(trial.inputs.dofs))
     ocp = solve_emg_ten_ocp(trials, params, settings, options)
     name = EMG_TEN if workflow == EMG_TEN else f"{workflow} emg-{settings.emg_mode}"
     result = assemble_result(trials, params, wf_record, ocp, settings, options, t_prep, t_start, name=name)

@@ -398,6 +398,7 @@ def solve_emg_ten(
     exclude_muscles: Sequence[str] = (),
     exclude_missing_ok: bool = False,
     diagnose_only: bool = False,
+    before_solve=None,
 ) -> Result:
     """EMG-TEN from files: one model, and per trial an IK ``.mot``, an ID ``.sto`` and an EMG file.
 
@@ -425,7 +426,10 @@ def solve_emg_ten(
     Each trial is diagnosed before the problem is built (:mod:`.diagnosis`): blocking
     findings raise :class:`~.diagnosis.InfeasibleInputError` naming muscles and times; with
     ``diagnose_only`` the list of the trials' :class:`~.diagnosis.Diagnosis` is returned,
-    unchecked, and nothing is solved.
+    unchecked, and nothing is solved. ``before_solve``: called for each trial as by
+    :func:`solve_files`, once the problem is known and before IPOPT starts, when the solve
+    estimates no muscle parameter (an EMG-informed solve of an effort workflow; not EMG-TEN,
+    whose tendon stiffness is known only after the solve).
     Input errors (package exceptions naming the file, channel or muscle) are raised before
     OpenSim is started: unequal numbers of IK/ID/EMG files, different models, EMG channels
     missing for the mapping, EMG not covering a trial's IK window, EMG outside ``[0, 1]`` in
@@ -503,7 +507,7 @@ def solve_emg_ten(
     result = solve_emg_ten_arrays(
         geometries, model_parameters, id_data, emg_tables, labels=labels, ik_times=ik_times, passive=passive,
         emg_mapping=mapping, settings=settings, options=options, sources=sources, check_units=check_units,
-        workflow=workflow, tendon_stiffness=tendon_stiffness,
+        workflow=workflow, tendon_stiffness=tendon_stiffness, before_solve=before_solve,
     )
     # the leg, in each trial's record as the single-trial solve's record holds it
     trial_entries = {label: {"side": side, "diagnosis": _diagnosis_record(diagnosis, solution, g, t, m, ik),
