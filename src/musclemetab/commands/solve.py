@@ -603,11 +603,14 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
     dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else None
     options = _solver_options(args)  # the linear solver checked before any work
     legs = emg_mappings_of_legs(args.model, ik[0], args.emg_mapping, args.side, dofs, args.cache_dir)
-    # as for a solve without EMG: the OpenSim worker prepares the solutions' models while IPOPT solves
+    # as for a solve without EMG: the OpenSim worker prepares a solution's model while IPOPT solves.
+    # Only for one trial a leg: the worker keeps the last two prepared models, so the trials of a
+    # multi-trial solve would push each other out before their files are written (work done twice)
     from ..opensim_bridge import start_in_background
     from ..redundancy.export import prepare_opensim_files
 
     start_in_background()
+    ahead = prepare_opensim_files if len(ik) == 1 else None
     results = {side: solve_emg_ten(
         args.model, ik, idf, emg, emg_mapping=mapping, labels=args.labels,
         passive=args.passive, dofs=dofs, side=side,
@@ -615,7 +618,7 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
         cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, settings=settings,
         workflow=args.workflow, tendon_stiffness=tendon_stiffness,
         exclude_muscles=_excluded(args), exclude_missing_ok=args.side == "both",
-        diagnose_only=getattr(args, "diagnose_only", False), before_solve=prepare_opensim_files,
+        diagnose_only=getattr(args, "diagnose_only", False), before_solve=ahead,
     ) for side, mapping in legs.items()}
     if getattr(args, "diagnose_only", False):
         return _report_diagnoses(results)
