@@ -393,3 +393,52 @@ def test_warm_start_option_reaches_the_same_optimum(example, geometry_cache, sol
     assert "static optimisation" in cold.summary["initial_guess"]
     assert warm.objective == pytest.approx(cold.objective, rel=1e-4)
     assert warm.summary["max_moment_residual_Nm"] < 1e-4
+
+
+@pytest.mark.opensim
+@pytest.mark.slow
+def test_problems_of_one_structure_share_their_functions(solved):
+    """The per-interval functions (the symbolic derivatives) are built once per process for
+    problems of one structure: the fast trial's EFFORT-CAL problem, built after the normal
+    trial's EFFORT-GEN problem (other mesh, data, passive parameters), reuses the normal
+    trial's functions with its own muscle values, and its NLP (objective, constraints and their
+    derivatives at the initial guess, random multipliers) equals the one built afresh. Other
+    goals build their own."""
+    import dataclasses
+
+    import casadi as ca
+
+    from musclemetab.redundancy import transcription as tr
+    from musclemetab.redundancy.sensitivity import problem_of_solution
+    from musclemetab.redundancy.static_opt import guess_from_solution
+
+    def problem(trial, workflow, **goals):
+        prob = problem_of_solution(solved(trial, workflow)[1])
+        params = prob.params.subset(prob.inputs.muscles)
+        guess = guess_from_solution(prob.solution, prob.inputs, params)
+        return tr.build_problem([tr.TrialBlock("t", prob.inputs, guess)], params,
+                                dataclasses.replace(prob.goals, **goals))
+
+    def values(nlp):
+        x, none = nlp["x0"], ca.DM(0, 1)
+        lam = np.random.default_rng(1).normal(size=nlp["lbg"].size)
+        f, grad = nlp["grad_f"](x, none)
+        g, jac = nlp["jac_g"](x, none)
+        hess = nlp["hess_lag"](x, none, 1.0, lam)
+        return [np.asarray(v).ravel() for v in (f, grad, g)] + [np.asarray(m.nonzeros()) for m in (jac, hess)]
+
+    tr._shared_group_functions.cache_clear()
+    problem("normal", "effort-gen")
+    shared = values(problem("fast", "effort-cal"))
+    info = tr._shared_group_functions.cache_info()
+    assert (info.misses, info.hits) == (1, 1)
+    tr._shared_group_functions.cache_clear()
+    fresh = values(problem("fast", "effort-cal"))
+    assert tr._shared_group_functions.cache_info().misses == 1
+    for a, b in zip(shared, fresh, strict=True):
+        np.testing.assert_array_equal(a, b)
+    gen = values(problem("fast", "effort-gen"))  # the muscle values are the problem's: other passive curves
+    assert not np.array_equal(gen[2], fresh[2])
+    assert tr._shared_group_functions.cache_info().hits == 1
+    problem("fast", "effort-gen", w_reserve=500.0)  # other goals: other functions
+    assert tr._shared_group_functions.cache_info().misses == 2

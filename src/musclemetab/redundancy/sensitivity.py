@@ -78,7 +78,7 @@ SENSITIVITY_COLUMNS = ("solution", "parameter_rank", "parameter", "muscle", "par
 
 
 def _symbolic_parameters(ca, params, s, columns):
-    """The problem's parameter dictionary (:func:`.transcription._constants`) as expressions of
+    """The problem's muscle values (:data:`.transcription.MUSCLE_VALUES`) as expressions of
     the symbols ``s``, one per ``(parameter, muscle)`` of ``columns``: that parameter
     ``p0 (1 + s)``, the others their values."""
     rel = {name: ca.SX.zeros(len(params.names)) for name in PARAMETERS}

@@ -18,7 +18,9 @@ couplings (one variable per coupled group, or equality rows after all trials).
 
 **Transcription.** Trials with the same muscles, DOFs and goal data form a group whose
 per-interval functions (SX: constraints, objective, Jacobian, Hessian of the Lagrangian) are
-built once and mapped over the group's nodes; their nonzeros are placed into the global sparse
+built once per process for each :class:`GroupStructure` (the muscle values enter as an input,
+like the node data: :func:`group_functions`, ``docs/solver.md``) and mapped over the group's
+nodes; their nonzeros are placed into the global sparse
 matrices handed to IPOPT (block banded Jacobian with dense factor columns; block diagonal
 Hessian with a border and a factor block summed over all nodes). Moment arms zero at every node
 of a group are removed from its expressions, and with them their structural zeros. The fiber
@@ -30,6 +32,7 @@ the entries of two intervals at one place of the Hessian are summed.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -48,7 +51,8 @@ from .parameters import MuscleTendonParameters
 from .static_opt import InitialGuess
 
 __all__ = ["Goals", "EFFORT_WEIGHTS", "ParameterSpec", "coupling_pairs", "TrialBlock", "PARAMETER_KINDS",
-           "FIBER_DYNAMICS", "build_problem", "node_bounds", "fiber_length_upper_bounds", "check_fiber_dynamics"]
+           "FIBER_DYNAMICS", "build_problem", "node_bounds", "fiber_length_upper_bounds", "check_fiber_dynamics",
+           "GroupStructure", "group_functions", "MUSCLE_VALUES"]
 
 #: kinds of shared scale factors; the muscle parameters a factor multiplies
 PARAMETER_KINDS = {"tendon_stiffness": "kT", "optimal_fiber_length": "lmo", "tendon_slack_length": "lts",
@@ -168,14 +172,18 @@ class TrialBlock:
                 tuple(self.fiber_muscles))
 
 
-def _constants(params: MuscleTendonParameters, ca):
-    P = {k: ca.DM(np.asarray(v, dtype=float)) for k, v in dict(
+#: the muscle values the per-interval functions take as their input ``q``: these rows of
+#: :func:`_muscle_values`, one entry per muscle each (``w2``: the squared fiber width ``lMo sin(alpha_0)``)
+MUSCLE_VALUES = ("lmo", "lts", "vmax", "kT", "kpe", "s0", "sm", "f0", "w2")
+
+
+def _muscle_values(params: MuscleTendonParameters) -> np.ndarray:
+    """The input ``q`` of a group's functions: :data:`MUSCLE_VALUES` of ``params``' muscles, row by row."""
+    rows = dict(
         lmo=params.optimal_fiber_length_m, lts=params.tendon_slack_length_m, vmax=params.max_contraction_velocity,
         kT=params.tendon_stiffness, kpe=params.passive_kpe, s0=params.passive_s0, sm=params.passive_sm,
-        f0=params.max_isometric_force_N,
-    ).items()}
-    P["w2"] = ca.DM(np.asarray(params.width_m, dtype=float) ** 2)
-    return P
+        f0=params.max_isometric_force_N, w2=np.asarray(params.width_m, dtype=float) ** 2)
+    return np.concatenate([np.asarray(rows[k], dtype=float).reshape(-1) for k in MUSCLE_VALUES])
 
 
 def _node_expressions(sym, M: int, D: int, h, P: dict, optimal_reserve_Nm: float, ca, backward: bool = False):
@@ -225,23 +233,63 @@ def _hess_blocks(ca, expr, x, p):
     return ca.triu(H[:n, :n]), H[:n, n:], ca.triu(H[n:, n:])
 
 
-def _group_functions(ca, params, trial: TrialBlock, goals: Goals, Topt: float, factor_of: dict, emg_factor: list,
-                     n_full: int, p_index, zero_r):
+@dataclass(frozen=True)
+class GroupStructure:
+    """What a group's per-interval functions depend on besides the values they are called with:
+    sizes, the positions of tracked muscles, the goals, the factors' places, the moment arms
+    removed as zero. Groups of equal structure (any trial length, muscle values, data) share
+    their functions (:func:`group_functions`)."""
+
+    n_muscles: int
+    n_dofs: int
+    emg_index: tuple[int, ...]  # positions of the EMG-tracked muscles among the group's muscles
+    fiber_index: tuple[int, ...]  # positions of the muscles with measured fiber lengths
+    goals: Goals
+    optimal_reserve_Nm: float
+    factor_of: tuple  # ((kind, ((muscle position, factor index), ...)), ...)
+    emg_factor: tuple[int, ...]  # factor index of each tracked muscle
+    n_full: int
+    p_index: tuple[int, ...] | None
+    zero_r: tuple[int, ...]  # entries of the column-major D x M moment arms that are zero at every node
+
+
+def group_functions(structure: GroupStructure, energy_values=None) -> dict:
+    """The per-interval and last-node functions of a group (:func:`_group_functions`), built once
+    per process for each :class:`GroupStructure` (the symbolic derivatives are most of a
+    problem's build time, ``docs/solver.md``). With the energy goal they are built for the
+    problem: its muscle masses and slow-twitch fractions (``energy_values``) are constants."""
+    if structure.goals.energy is not None:
+        return _group_functions(structure, energy_values)
+    return _shared_group_functions(structure)
+
+
+@functools.lru_cache(maxsize=8)
+def _shared_group_functions(structure: GroupStructure) -> dict:
+    return _group_functions(structure)
+
+
+def _group_functions(structure: GroupStructure, energy_values=None) -> dict:
     """Per-interval and last-node functions (SX) of one group of trials; see the module docstring.
 
     Node inputs: ``z`` (5M+D), ``xn = [a, l~M]`` of the next node (backward fiber dynamics:
     ``[a, l~M, lp]``), data ``d = [lMT, r (column-major D x M), ID, EMG, lUS, h, 1/N]`` (backward:
-    then ``lMT`` of the next node), the shared variables ``p``. With the backward fiber dynamics
+    then ``lMT`` of the next node), the shared variables ``p``, the muscle values ``q``
+    (:func:`_muscle_values`). With the backward fiber dynamics
     the constraints are nonlinear in ``xn``: the Hessian functions take ``xn`` and return the
     blocks of ``[z, xn]``. ``factor_of[kind]`` lists
     ``(muscle index, factor index)``; ``emg_factor`` the factor index of each tracked muscle.
     """
-    inp = trial.inputs
-    M, D = len(inp.muscles), len(inp.dofs)
-    nE, nU = len(trial.emg_muscles), len(trial.fiber_muscles)
-    P = _constants(params, ca)
-    p = ca.SX.sym("p", n_full if p_index is None else (max(p_index) + 1 if p_index else 0))
-    full = [p[j] for j in (p_index if p_index is not None else range(n_full))]
+    import casadi as ca
+
+    st = structure
+    goals, M, D = st.goals, st.n_muscles, st.n_dofs
+    nE, nU = len(st.emg_index), len(st.fiber_index)
+    q = ca.SX.sym("q", len(MUSCLE_VALUES) * M)
+    P = {k: q[i * M:(i + 1) * M] for i, k in enumerate(MUSCLE_VALUES)}
+    lmo0 = P["lmo"]
+    p = ca.SX.sym("p", st.n_full if st.p_index is None else (max(st.p_index) + 1 if st.p_index else 0))
+    full = [p[j] for j in (st.p_index if st.p_index is not None else range(st.n_full))]
+    factor_of = dict(st.factor_of)
     for kind, key in PARAMETER_KINDS.items():
         if key and factor_of.get(kind):
             v = ca.SX(P[key])
@@ -256,11 +304,10 @@ def _group_functions(ca, params, trial: TrialBlock, goals: Goals, Topt: float, f
     h, inv_n = ca.SX.sym("h"), ca.SX.sym("inv_n")
     emg, lus = ca.SX.sym("emg", nE), ca.SX.sym("lus", nU)
     backward = goals.fiber_dynamics == "backward"
-    S, gk, _ = _node_expressions(ca.SX.sym, M, D, h, P, Topt, ca, backward)
-    if len(zero_r):
-        gk = ca.substitute(gk, S["r"][list(zero_r)], ca.SX.zeros(len(zero_r)))
-    pos = {m: i for i, m in enumerate(inp.muscles)}
-    track = S["e"][[pos[m] for m in trial.emg_muscles]] - ca.vertcat(*[full[j] for j in emg_factor]) * emg \
+    S, gk, _ = _node_expressions(ca.SX.sym, M, D, h, P, st.optimal_reserve_Nm, ca, backward)
+    if len(st.zero_r):
+        gk = ca.substitute(gk, S["r"][list(st.zero_r)], ca.SX.zeros(len(st.zero_r)))
+    track = S["e"][list(st.emg_index)] - ca.vertcat(*[full[j] for j in st.emg_factor]) * emg \
         if nE else ca.SX(0, 1)
     g = ca.vertcat(gk, track) if goals.emg_tolerance is not None else gk
     z = ca.vertcat(S["a"], S["lm"], S["lp"], S["e"], S["aT"], S["vm"])
@@ -273,12 +320,11 @@ def _group_functions(ca, params, trial: TrialBlock, goals: Goals, Topt: float, f
     if nE and goals.w_emg:
         cost += (goals.w_emg / nE) * ca.sumsqr(track)
     if nU and goals.w_fiber_length:
-        iu = [pos[m] for m in trial.fiber_muscles]
-        lmo0 = ca.DM(np.asarray(params.optimal_fiber_length_m, dtype=float)[iu])
-        cost += (goals.w_fiber_length / nU) * ca.sumsqr((S["lm"][iu] * P["lmo"][iu] - lus) / lmo0)
+        iu = list(st.fiber_index)
+        cost += (goals.w_fiber_length / nU) * ca.sumsqr((S["lm"][iu] * P["lmo"][iu] - lus) / lmo0[iu])
     if goals.energy is not None and goals.energy.weight:
         eg = goals.energy
-        mass, fst = eg.muscle_values(inp.muscles, params.max_isometric_force_N, params.optimal_fiber_length_m)
+        mass, fst = energy_values
         rates = node_rates(eg, S["e"], S["a"], S["lm"], S["vm"], F0=P["f0"], lMo=P["lmo"], vmax=P["vmax"],
                            kpe=P["kpe"], s0=P["s0"], sm=P["sm"], mass=ca.DM(mass), fst=ca.DM(fst))
         cost += (eg.weight / eg.body_mass_kg) * ca.sum1(rates)
@@ -286,11 +332,11 @@ def _group_functions(ca, params, trial: TrialBlock, goals: Goals, Topt: float, f
     lam, sigma = ca.SX.sym("lam", g.shape[0]), ca.SX.sym("sigma")
     cse = {"cse": True}
     fn = {
-        "g": ca.Function("core_g", [z, xn, d, p], [g], cse),
-        "f": ca.Function("core_f", [z, d, p], [f, ca.gradient(f, z), ca.gradient(f, p)], cse),
+        "g": ca.Function("core_g", [z, xn, d, p, q], [g], cse),
+        "f": ca.Function("core_f", [z, d, p, q], [f, ca.gradient(f, z), ca.gradient(f, p)], cse),
         # the constraint values come with the Jacobian (shared subexpressions)
-        "jac": ca.Function("core_jac", [z, xn, d, p], [g, ca.jacobian(g, ca.vertcat(z, xn, p))], cse),
-        "hess": ca.Function("core_hess", [z, xn, d, p, lam, sigma],
+        "jac": ca.Function("core_jac", [z, xn, d, p, q], [g, ca.jacobian(g, ca.vertcat(z, xn, p))], cse),
+        "hess": ca.Function("core_hess", [z, xn, d, p, q, lam, sigma],
                             list(_hess_blocks(ca, sigma * f + ca.dot(lam, g), ca.vertcat(z, xn) if backward else z,
                                               p)), cse),
     }
@@ -299,10 +345,10 @@ def _group_functions(ca, params, trial: TrialBlock, goals: Goals, Topt: float, f
     penn = (xl[M:2 * M] * P["lmo"]) ** 2 - P["w2"] - xl[2 * M:] ** 2
     f_last = inv_n * (goals.w_activation * 0.5 / M) * ca.sumsqr(xl[0:M])
     lam_l = ca.SX.sym("lam_l", M)
-    fn["g_last"] = ca.Function("core_g_last", [xl, p], [penn])
+    fn["g_last"] = ca.Function("core_g_last", [xl, p, q], [penn])
     fn["f_last"] = ca.Function("core_f_last", [xl, inv_n], [f_last, ca.gradient(f_last, xl)])
-    fn["jac_last"] = ca.Function("core_jac_last", [xl, p], [ca.jacobian(penn, ca.vertcat(xl, p))])
-    fn["hess_last"] = ca.Function("core_hess_last", [xl, p, inv_n, lam_l, sigma],
+    fn["jac_last"] = ca.Function("core_jac_last", [xl, p, q], [ca.jacobian(penn, ca.vertcat(xl, p))])
+    fn["hess_last"] = ca.Function("core_hess_last", [xl, p, q, inv_n, lam_l, sigma],
                                   list(_hess_blocks(ca, sigma * f_last + ca.dot(lam_l, penn), xl, p)))
     return fn
 
@@ -427,8 +473,17 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
         for i in members:
             crosses |= np.any(trials[i].inputs.moment_arms_m != 0.0, axis=0)
         zero_r = np.flatnonzero(~crosses.T.reshape(-1))
-        fn = _group_functions(ca, gp, t0, goals, optimal_reserve_Nm, factor_of,
-                              [emg_pos[m] for m in t0.emg_muscles], n_full, p_index, zero_r)
+        structure = GroupStructure(
+            n_muscles=M, n_dofs=D, emg_index=tuple(pos[m] for m in t0.emg_muscles),
+            fiber_index=tuple(pos[m] for m in t0.fiber_muscles), goals=goals,
+            optimal_reserve_Nm=float(optimal_reserve_Nm),
+            factor_of=tuple((kind, tuple(pairs)) for kind, pairs in factor_of.items()),
+            emg_factor=tuple(emg_pos[m] for m in t0.emg_muscles), n_full=n_full,
+            p_index=None if p_index is None else tuple(p_index), zero_r=tuple(int(i) for i in zero_r))
+        energy_values = goals.energy.muscle_values(muscles, gp.max_isometric_force_N, gp.optimal_fiber_length_m) \
+            if goals.energy is not None and goals.energy.weight else None
+        fn = group_functions(structure, energy_values)
+        qv = ca.DM(_muscle_values(gp))
         nz, ng = info[members[0]]["nz"], info[members[0]]["ng"]
         backward = goals.fiber_dynamics == "backward"
         nxn = (3 if backward else 2) * M
@@ -466,14 +521,14 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
         def split(mat):
             return [ca.vec(mat[:, bounds[j]:bounds[j + 1]]) for j in range(T)]
 
-        GL = fn["g_last"].map(T)(XL, p)
-        G = split(fn["g"].map(n_nodes)(Z, Xn, data, p))
-        G_j, J_nodes = fn["jac"].map(n_nodes)(Z, Xn, data, p)
+        GL = fn["g_last"].map(T)(XL, p, qv)
+        G = split(fn["g"].map(n_nodes)(Z, Xn, data, p, qv))
+        G_j, J_nodes = fn["jac"].map(n_nodes)(Z, Xn, data, p, qv)
         G_j = split(G_j)
         for j, i in enumerate(members):
             g_parts[i] = ca.vertcat(G[j], GL[:, j])
             gj_parts[i] = ca.vertcat(G_j[j], GL[:, j])
-        F, Gz, Gp = fn["f"].map(n_nodes)(Z, data, p)
+        F, Gz, Gp = fn["f"].map(n_nodes)(Z, data, p, qv)
         FL, GLx = fn["f_last"].map(T)(XL, inv_n)
         f_terms += [ca.sum2(F), ca.sum2(FL)]
         grad_p.append(ca.sum2(Gp))
@@ -490,12 +545,12 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
         rl, cl = _triplets(fn["jac_last"].sparsity_out(0))
         jr.append((last_con[:, None] + rl).ravel())
         jc.append(np.where(cl < 3 * M, last_var[:, None] + cl, P0 + (cl - 3 * M)).ravel())
-        jv.append(fn["jac_last"].map(T)(XL, p).nz[:])
+        jv.append(fn["jac_last"].map(T)(XL, p, qv).nz[:])
         # Hessian of the Lagrangian
         # (backward fiber dynamics: the blocks of [z_k, xn_k]; an entry of xn_k adds to node k+1's)
         for (f_h, args, zcol, xcol, n) in (
-                (fn["hess"], (Z, Xn, data, p, ca.horzcat(*Ls), lam_f), zc, xc, n_nodes),
-                (fn["hess_last"], (XL, p, inv_n, ca.horzcat(*LLs), lam_f), last_var, last_var, T)):
+                (fn["hess"], (Z, Xn, data, p, qv, ca.horzcat(*Ls), lam_f), zc, xc, n_nodes),
+                (fn["hess_last"], (XL, p, qv, inv_n, ca.horzcat(*LLs), lam_f), last_var, last_var, T)):
             Hzz, Hzp, Hpp = f_h.map(n)(*args)
             r1, c1 = _triplets(f_h.sparsity_out(0))
             r2, c2 = _triplets(f_h.sparsity_out(1))
