@@ -98,8 +98,8 @@ def iterate(nlp, options, k):
     ipopt = ipopt_options(options.with_(max_iter=k if k > 0 else options.max_iter), MUMPS_OPTIONS)
     opts = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
     opts.update({key: nlp[key] for key in ("grad_f", "jac_g", "hess_lag")})
-    solver = ca.nlpsol("kkt", "ipopt", {"x": nlp["x"], "f": nlp["f"], "g": nlp["g"]}, opts)
-    sol = solver(x0=nlp["x0"], lbx=nlp["lbx"], ubx=nlp["ubx"], lbg=nlp["lbg"], ubg=nlp["ubg"])
+    solver = ca.nlpsol("kkt", "ipopt", {"x": nlp["x"], "p": nlp["p"], "f": nlp["f"], "g": nlp["g"]}, opts)
+    sol = solver(x0=nlp["x0"], p=nlp["p_values"], lbx=nlp["lbx"], ubx=nlp["ubx"], lbg=nlp["lbg"], ubg=nlp["ubg"])
     st = solver.stats()
     mu = float(st["iterations"]["mu"][-1])
     return (np.asarray(sol["x"]).ravel(), np.asarray(sol["lam_g"]).ravel(), np.asarray(sol["lam_x"]).ravel(),
@@ -141,9 +141,9 @@ def ipopt_linear_algebra_time(nlp, options):
         ipopt.update({"output_file": str(log), "file_print_level": 6})
         opts = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
         opts.update({key: nlp[key] for key in ("grad_f", "jac_g", "hess_lag")})
-        solver = ca.nlpsol("kkt_timing", "ipopt", {"x": nlp["x"], "f": nlp["f"], "g": nlp["g"]}, opts)
+        solver = ca.nlpsol("kkt_timing", "ipopt", {"x": nlp["x"], "p": nlp["p"], "f": nlp["f"], "g": nlp["g"]}, opts)
         t0 = time.perf_counter()
-        solver(x0=nlp["x0"], lbx=nlp["lbx"], ubx=nlp["ubx"], lbg=nlp["lbg"], ubg=nlp["ubg"])
+        solver(x0=nlp["x0"], p=nlp["p_values"], lbx=nlp["lbx"], ubx=nlp["ubx"], lbg=nlp["lbg"], ubg=nlp["ubg"])
         total = time.perf_counter() - t0
         counts = count_factorisations(log.read_text())
     st = solver.stats()
@@ -164,11 +164,11 @@ def _csc(dm):
 def kkt_matrix(nlp, x, lam_g, lam_x, mu):
     """The primal-dual KKT matrix of the iterate and its right-hand side (the KKT residual)."""
     lbx, ubx = np.asarray(nlp["lbx"], float).ravel(), np.asarray(nlp["ubx"], float).ravel()
-    jf = nlp["jac_g"](x, [])
+    jf = nlp["jac_g"](x, nlp["p_values"])
     g, J = np.asarray(jf[0]).ravel(), _csc(jf[1])
-    hu = _csc(nlp["hess_lag"](x, [], 1.0, lam_g))  # upper triangle
+    hu = _csc(nlp["hess_lag"](x, nlp["p_values"], 1.0, lam_g))  # upper triangle
     H = hu + sp.triu(hu, 1).T
-    grad = np.asarray(nlp["grad_f"](x, [])[1]).ravel()
+    grad = np.asarray(nlp["grad_f"](x, nlp["p_values"])[1]).ravel()
     zl, zu = np.maximum(-lam_x, 0.0), np.maximum(lam_x, 0.0)
     sigma = np.zeros_like(x)
     lo, up = np.isfinite(lbx), np.isfinite(ubx)

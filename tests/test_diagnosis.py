@@ -219,6 +219,7 @@ def test_long_tendon_named_before_any_solve(example, long_soleus, geometry_cache
     import casadi
 
     from musclemetab.commands import main
+    from musclemetab.redundancy import ipopt
     from musclemetab.redundancy.diagnosis import InfeasibleInputError
     from musclemetab.redundancy.run import solve_emg_ten
 
@@ -226,6 +227,7 @@ def test_long_tendon_named_before_any_solve(example, long_soleus, geometry_cache
         raise AssertionError("IPOPT was called")
 
     monkeypatch.setattr(casadi, "nlpsol", no_ipopt)
+    monkeypatch.setattr(ipopt, "run_ipopt", no_ipopt)  # a solver kept from an earlier solve of the process
     with pytest.raises(InfeasibleInputError, match=r"trial normal cannot be solved: soleus_r muscle tendon too short "
                                                    r"at 1\.29-1\.39 s .*shortest admissible 0\.3255 m"):
         solve_emg_ten(long_soleus, [example.ik["normal"]], [example.id["normal"]], [example.emg["normal"]],

@@ -472,16 +472,17 @@ def test_assembled_derivatives_equal_automatic_differentiation(example, geometri
     lam = rng.standard_normal(g.shape[0])
     sigma = 0.7
     lam_g = ca.MX.sym("lam_g", g.shape[0])
-    ad_jac = ca.Function("j", [x], [ca.jacobian(g, x)])
-    ad_grad = ca.Function("gr", [x], [ca.gradient(f, x)])
-    ad_hess = ca.Function("h", [x, lam_g], [ca.triu(ca.hessian(sigma * f + ca.dot(lam_g, g), x)[0])])
-    f_val, grad = nlp["grad_f"](x0, [])
-    g_val, jac = nlp["jac_g"](x0, [])
-    hess = nlp["hess_lag"](x0, [], sigma, lam)
-    np.testing.assert_allclose(np.array(grad).ravel(), np.array(ad_grad(x0)).ravel(), rtol=1e-10, atol=1e-10)
-    np.testing.assert_allclose(ca.DM(jac).full(), ad_jac(x0).full(), rtol=1e-10, atol=1e-9)
-    np.testing.assert_allclose(ca.DM(hess).full(), ad_hess(x0, lam).full(), rtol=1e-9, atol=1e-8)
-    assert float(f_val) == pytest.approx(float(ca.Function("f", [x], [f])(x0)), rel=1e-12)
+    p, pv = nlp["p"], nlp["p_values"]
+    ad_jac = ca.Function("j", [x, p], [ca.jacobian(g, x)])
+    ad_grad = ca.Function("gr", [x, p], [ca.gradient(f, x)])
+    ad_hess = ca.Function("h", [x, p, lam_g], [ca.triu(ca.hessian(sigma * f + ca.dot(lam_g, g), x)[0])])
+    f_val, grad = nlp["grad_f"](x0, pv)
+    g_val, jac = nlp["jac_g"](x0, pv)
+    hess = nlp["hess_lag"](x0, pv, sigma, lam)
+    np.testing.assert_allclose(np.array(grad).ravel(), np.array(ad_grad(x0, pv)).ravel(), rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(ca.DM(jac).full(), ad_jac(x0, pv).full(), rtol=1e-10, atol=1e-9)
+    np.testing.assert_allclose(ca.DM(hess).full(), ad_hess(x0, pv, lam).full(), rtol=1e-9, atol=1e-8)
+    assert float(f_val) == pytest.approx(float(ca.Function("f", [x, p], [f])(x0, pv)), rel=1e-12)
 
 
 # --------------------------------------------------------------------------- bad inputs

@@ -108,7 +108,6 @@ def test_goal_value_is_the_smooth_model_summed_by_hand(small_problem, model, for
     """With and without the goal, the objectives differ by ``w (1/N) sum_k sum_m Edot / m_body``;
     BH04's objective form is the smooth model with its rule on the work plus the
     shortening/lengthening heat, its model form the smooth model as defined."""
-    import casadi as ca
 
     inp, params, _ = small_problem
     with warnings.catch_warnings():
@@ -116,9 +115,8 @@ def test_goal_value_is_the_smooth_model_summed_by_hand(small_problem, model, for
         goal = _goal(model, weight=2.0, form=form)
     with_goal, without = _nlp(small_problem, goal), _nlp(small_problem, None)
     x = _point(with_goal)
-    p = ca.DM.zeros(0, 1)
-    f1 = float(with_goal["grad_f"](x, p)[0])
-    f0 = float(without["grad_f"](x, p)[0])
+    f1 = float(with_goal["grad_f"](x, with_goal["p_values"])[0])
+    f0 = float(without["grad_f"](x, without["p_values"])[0])
     M, D, N = len(inp.muscles), len(inp.dofs), inp.n_intervals
     Z = x[:(5 * M + D) * N].reshape(N, 5 * M + D)
     a, lm, e, vm = Z[:, 0:M], Z[:, M:2 * M], Z[:, 3 * M:4 * M], Z[:, 4 * M + D:]
@@ -131,11 +129,10 @@ def test_goal_value_is_the_smooth_model_summed_by_hand(small_problem, model, for
 def test_goal_derivatives_against_finite_differences(small_problem, model):
     """Gradient and Hessian of the objective with the goal, as assembled for IPOPT from the
     per-interval derivatives, against central differences along random directions."""
-    import casadi as ca
 
     nlp = _nlp(small_problem, _goal(model, weight=2.0, effort_weight=0.0))
     x = _point(nlp, seed=5)
-    p = ca.DM.zeros(0, 1)
+    p = nlp["p_values"]
     n = x.size
     lam = np.zeros(nlp["n_constraints"])
 

@@ -399,14 +399,13 @@ def test_warm_start_option_reaches_the_same_optimum(example, geometry_cache, sol
 @pytest.mark.slow
 def test_problems_of_one_structure_share_their_functions(solved):
     """The per-interval functions (the symbolic derivatives) are built once per process for
-    problems of one structure: the fast trial's EFFORT-CAL problem, built after the normal
-    trial's EFFORT-GEN problem (other mesh, data, passive parameters), reuses the normal
-    trial's functions with its own muscle values, and its NLP (objective, constraints and their
-    derivatives at the initial guess, random multipliers) equals the one built afresh. Other
-    goals build their own."""
+    problems of one structure, the whole symbolic NLP once for problems of one structure and
+    mesh: the fast trial's EFFORT-CAL problem, built after the normal trial's EFFORT-GEN problem
+    (other mesh, data, passive parameters), reuses the normal trial's per-interval functions
+    with its own values, and its NLP (objective, constraints and their derivatives at the initial
+    guess, random multipliers) equals the one built afresh; the fast trial's EFFORT-GEN problem
+    reuses the whole NLP of its EFFORT-CAL problem with its own values. Other goals build their own."""
     import dataclasses
-
-    import casadi as ca
 
     from musclemetab.redundancy import transcription as tr
     from musclemetab.redundancy.sensitivity import problem_of_solution
@@ -420,25 +419,65 @@ def test_problems_of_one_structure_share_their_functions(solved):
                                 dataclasses.replace(prob.goals, **goals))
 
     def values(nlp):
-        x, none = nlp["x0"], ca.DM(0, 1)
+        x, p = nlp["x0"], nlp["p_values"]
         lam = np.random.default_rng(1).normal(size=nlp["lbg"].size)
-        f, grad = nlp["grad_f"](x, none)
-        g, jac = nlp["jac_g"](x, none)
-        hess = nlp["hess_lag"](x, none, 1.0, lam)
+        f, grad = nlp["grad_f"](x, p)
+        g, jac = nlp["jac_g"](x, p)
+        hess = nlp["hess_lag"](x, p, 1.0, lam)
         return [np.asarray(v).ravel() for v in (f, grad, g)] + [np.asarray(m.nonzeros()) for m in (jac, hess)]
 
-    tr._shared_group_functions.cache_clear()
+    def built():  # (per-interval functions, whole NLPs) built, and reused
+        a, b = tr._shared_group_functions.cache_info(), tr.symbolic_problem.cache_info()
+        return (a.misses, b.misses), (a.hits, b.hits)
+
+    def clear():
+        tr._shared_group_functions.cache_clear()
+        tr.symbolic_problem.cache_clear()
+
+    for pair in (("normal", "effort-gen"), ("fast", "effort-cal"), ("fast", "effort-gen")):
+        solved(*pair)  # the solves first: they build problems too
+    clear()
     problem("normal", "effort-gen")
     shared = values(problem("fast", "effort-cal"))
-    info = tr._shared_group_functions.cache_info()
-    assert (info.misses, info.hits) == (1, 1)
-    tr._shared_group_functions.cache_clear()
+    assert built() == ((1, 2), (1, 0))
+    gen = values(problem("fast", "effort-gen"))  # the fast trial's mesh again: its NLP, other values
+    assert built() == ((1, 2), (1, 1))
+    assert not np.array_equal(gen[2], shared[2])  # the passive curves differ
+    clear()
     fresh = values(problem("fast", "effort-cal"))
-    assert tr._shared_group_functions.cache_info().misses == 1
+    assert built() == ((1, 1), (0, 0))
     for a, b in zip(shared, fresh, strict=True):
         np.testing.assert_array_equal(a, b)
-    gen = values(problem("fast", "effort-gen"))  # the muscle values are the problem's: other passive curves
-    assert not np.array_equal(gen[2], fresh[2])
-    assert tr._shared_group_functions.cache_info().hits == 1
     problem("fast", "effort-gen", w_reserve=500.0)  # other goals: other functions
-    assert tr._shared_group_functions.cache_info().misses == 2
+    assert built() == ((2, 2), (0, 0))
+
+
+@pytest.mark.opensim
+@pytest.mark.slow
+def test_problems_of_one_size_share_their_solver(solved):
+    """Problems of one structure and mesh (the fast trial's EFFORT-CAL and EFFORT-TEN: other
+    muscle values) share their NLP and IPOPT's solver object within a process. The solver that
+    has just solved EFFORT-CAL, given EFFORT-TEN's values, finds the optimum of the command line's
+    EFFORT-TEN solve (a process of its own, whose solver was new): the same objective to 1e-9."""
+    from musclemetab.redundancy import ipopt
+    from musclemetab.redundancy import transcription as tr
+    from musclemetab.redundancy.sensitivity import problem_of_solution
+    from musclemetab.redundancy.static_opt import initial_guess, static_optimisation
+
+    def solve(workflow):
+        prob = problem_of_solution(solved("fast", workflow)[1])
+        params = prob.params.subset(prob.inputs.muscles)
+        guess = initial_guess(prob.inputs, params, static_optimisation(prob.inputs, params))
+        return ipopt.solve_problem([tr.TrialBlock("trial", prob.inputs, guess)], params, prob.goals,
+                                   options=ipopt.SolverOptions(optimal_reserve_Nm=prob.optimal_reserve_Nm))
+
+    for workflow in ("effort-cal", "effort-ten"):
+        solved("fast", workflow)  # the command line's solves first: they use the solver cache too
+    ipopt._shared_solver.cache_clear()
+    cal = solve("effort-cal")
+    ten = solve("effort-ten")
+    assert ipopt._shared_solver.cache_info().hits == 1
+    assert cal.success and ten.success
+    assert cal.objective == pytest.approx(solved("fast", "effort-cal")[0].objective, rel=1e-9)
+    assert ten.objective == pytest.approx(solved("fast", "effort-ten")[0].objective, rel=1e-9)
+    assert abs(ten.objective - cal.objective) > 1e-3 * cal.objective  # two problems, not one answer twice

@@ -413,13 +413,13 @@ def test_explicit_derivatives_equal_automatic_ones(example, ref_geometry, model_
                  np.minimum(nlp["ubx"], 1e3) - 1e-3)
     lam = rng.normal(size=g.shape[0])
     sigma = 0.7
-    p = ca.DM.zeros(0, 1)
+    p = nlp["p_values"]
     f_e, grad_e = nlp["grad_f"](x0, p)
     g_e, jac_e = nlp["jac_g"](x0, p)
     hess_e = nlp["hess_lag"](x0, p, sigma, lam)
-    auto = ca.Function("auto", [x], [f, ca.gradient(f, x), g, ca.jacobian(g, x),
+    auto = ca.Function("auto", [x, nlp["p"]], [f, ca.gradient(f, x), g, ca.jacobian(g, x),
                                      ca.triu(ca.hessian(sigma * f + ca.dot(ca.DM(lam), g), x)[0])])
-    f_a, grad_a, g_a, jac_a, hess_a = auto(x0)
+    f_a, grad_a, g_a, jac_a, hess_a = auto(x0, p)
     assert float(f_e) == pytest.approx(float(f_a), rel=1e-12)
     np.testing.assert_allclose(np.asarray(grad_e).ravel(), np.asarray(grad_a).ravel(), rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(np.asarray(g_e).ravel(), np.asarray(g_a).ravel(), rtol=1e-12, atol=1e-12)

@@ -57,8 +57,8 @@ def test_parameter_derivatives_are_those_of_the_problem(normal):
             scale[params.names.index(m)] = sign * h
             nlp = build_problem([TrialBlock("t", prob.inputs, guess)], _scaled(params, {PARAMETERS[p]: scale}),
                                 prob.goals)
-            g, J = nlp["jac_g"](x, ca.DM(0, 1))
-            grad = nlp["grad_f"](x, ca.DM(0, 1))[1]
+            g, J = nlp["jac_g"](x, nlp["p_values"])
+            grad = nlp["grad_f"](x, nlp["p_values"])[1]
             values.append((np.asarray(g).ravel(), np.asarray(grad + ca.mtimes(J.T, ca.DM(lam))).ravel()))
         fd_g = (values[0][0] - values[1][0]) / (2 * h)
         fd_L = (values[0][1] - values[1][1]) / (2 * h)

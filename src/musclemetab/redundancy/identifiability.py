@@ -246,9 +246,9 @@ def lagrangian_derivatives(nlp: dict, x, lam_g):
         r, c = m.sparsity().get_triplet()
         return sp.csc_matrix((np.asarray(m.nonzeros()).reshape(-1), (r, c)), shape=m.shape)
 
-    Hu = scipy_matrix(nlp["hess_lag"](x, ca.DM(0, 1), 1.0, lam_g))
+    Hu = scipy_matrix(nlp["hess_lag"](x, nlp["p_values"], 1.0, lam_g))
     H = (Hu + Hu.T - sp.diags(Hu.diagonal())).tocsc()
-    g, J = nlp["jac_g"](x, ca.DM(0, 1))
+    g, J = nlp["jac_g"](x, nlp["p_values"])
     return H, scipy_matrix(J), np.asarray(g).reshape(-1)
 
 

@@ -42,6 +42,7 @@ matrix banded.
 from __future__ import annotations
 
 import ctypes
+import functools
 import ctypes.util
 import os
 import struct
@@ -597,11 +598,11 @@ def _progress_callback(n_x: int, n_g: int, lbg, ubg):
     return _Callback()
 
 
-def run_ipopt(solver, options: SolverOptions, x0, lbx, ubx, lbg, ubg, multipliers: dict | None = None):
+def run_ipopt(solver, options: SolverOptions, x0, lbx, ubx, lbg, ubg, multipliers: dict | None = None, p=None):
     """Apply the process settings of ``options`` (``tune_malloc``, ``blas_threads``) and run
-    an IPOPT ``nlpsol``; returns ``(x, g, f, stats, wall time s, CPU time s)``. A dict
-    ``multipliers`` receives the optimum's ``lam_g`` and ``lam_x`` (CasADi's signs:
-    ``grad f + J' lam_g + lam_x = 0``)."""
+    an IPOPT ``nlpsol`` (with the NLP parameter's values ``p``, if it has one); returns ``(x, g,
+    f, stats, wall time s, CPU time s)``. A dict ``multipliers`` receives the optimum's
+    ``lam_g`` and ``lam_x`` (CasADi's signs: ``grad f + J' lam_g + lam_x = 0``)."""
     if options.tune_malloc:
         tune_malloc()
     if options.blas_threads is not None:
@@ -610,7 +611,7 @@ def run_ipopt(solver, options: SolverOptions, x0, lbx, ubx, lbg, ubg, multiplier
     c0 = _time.process_time()
     try:
         with sigint_noted():  # Ctrl-C stops IPOPT with a failure status: raised as an interrupt
-            sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+            sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, **({} if p is None else {"p": p}))
     except RuntimeError as exc:
         raise SolverError(f"IPOPT stopped with an error: {exc}") from None
     if multipliers is not None:
@@ -662,13 +663,46 @@ def _trial_terms(goals: Goals, t: TrialBlock, Z, xl, dev, lm_us, params=None, lm
     return terms
 
 
+def nlp_solver(nlp: dict, ipopt: dict, callback=None):
+    """IPOPT's ``nlpsol`` of a built problem (:func:`.transcription.build_problem`) with the IPOPT
+    options ``ipopt`` and a progress ``callback`` (or ``None``). Problems of one structure
+    (:func:`.transcription.symbolic_problem`) solved with the same options share one solver
+    object within a process (the last one is kept), as they share their NLP; a problem with the
+    energy goal or progress lines gets its own."""
+    shared = callback is None and nlp["structure"].groups[0].structure.goals.energy is None
+    if shared:
+        try:
+            return _shared_solver(nlp["structure"], tuple(sorted(ipopt.items())))
+        except TypeError:  # an IPOPT option value that cannot be a key (a list, say): its own solver
+            pass
+    return _new_solver(nlp, ipopt, callback)
+
+
+@functools.lru_cache(maxsize=1)
+def _shared_solver(structure, ipopt: tuple):
+    from .transcription import symbolic_problem
+
+    return _new_solver(symbolic_problem(structure), dict(ipopt))
+
+
+def _new_solver(nlp: dict, ipopt: dict, callback=None):
+    import casadi as ca
+
+    nlp_options = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
+    nlp_options.update({k: nlp[k] for k in ("grad_f", "jac_g", "hess_lag") if k in nlp})
+    if callback is not None:  # kept referenced by the solver until the solve is done
+        nlp_options["iteration_callback"] = callback
+    try:
+        return ca.nlpsol("mrs", "ipopt", {"x": nlp["x"], "p": nlp["p"], "f": nlp["f"], "g": nlp["g"]}, nlp_options)
+    except RuntimeError as exc:
+        raise SolverError(f"the optimal control problem could not be built: {exc}") from None
+
+
 def solve_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=(), *,
                   options: SolverOptions | None = None, coupling: str = "shared",
                   mumps_settings: dict | None = None) -> ProblemResult:
     """Build (:func:`.transcription.build_problem`) and solve a problem; never raises on
     non-convergence (see ``success``). Errors while building raise :class:`SolverError`."""
-    import casadi as ca
-
     options = options or SolverOptions()
     trials, specs = list(trials), list(specs)
     check_problem_memory([(len(t.inputs.muscles), len(t.inputs.dofs), t.inputs.n_intervals) for t in trials])
@@ -676,19 +710,12 @@ def solve_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
     nlp = build_problem(trials, params, goals, specs, optimal_reserve_Nm=options.optimal_reserve_Nm,
                         coupling=coupling, explicit_derivatives=options.derivatives == "explicit")
     ipopt = ipopt_options(options, MUMPS_OPTIONS if mumps_settings is None else mumps_settings)
-    nlp_options = {"ipopt": ipopt, "print_time": False, "error_on_fail": False}
-    nlp_options.update({k: nlp[k] for k in ("grad_f", "jac_g", "hess_lag") if k in nlp})
     callback = _progress_callback(int(nlp["x"].numel()), int(nlp["g"].numel()), nlp["lbg"], nlp["ubg"])
-    if callback is not None:  # kept referenced until the solve is done
-        nlp_options["iteration_callback"] = callback
-    try:
-        solver = ca.nlpsol("mrs", "ipopt", {"x": nlp["x"], "f": nlp["f"], "g": nlp["g"]}, nlp_options)
-    except RuntimeError as exc:
-        raise SolverError(f"the optimal control problem could not be built: {exc}") from None
+    solver = nlp_solver(nlp, ipopt, callback)
     build_time = _time.perf_counter() - t_build
     kkt = {}
     x, gval, f_opt, stats, solve_time, solve_cpu = run_ipopt(
-        solver, options, nlp["x0"], nlp["lbx"], nlp["ubx"], nlp["lbg"], nlp["ubg"], kkt)
+        solver, options, nlp["x0"], nlp["lbx"], nlp["ubx"], nlp["lbg"], nlp["ubg"], kkt, p=nlp["p_values"])
     L = nlp["layout"]
     viol = np.maximum(nlp["lbg"] - gval, 0.0) + np.maximum(gval - nlp["ubg"], 0.0)
     max_viol = float(np.max(viol)) if viol.size else 0.0

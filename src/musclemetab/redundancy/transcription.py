@@ -22,7 +22,9 @@ built once per process for each :class:`GroupStructure` (the muscle values enter
 like the node data: :func:`group_functions`, ``docs/solver.md``) and mapped over the group's
 nodes; their nonzeros are placed into the global sparse
 matrices handed to IPOPT (block banded Jacobian with dense factor columns; block diagonal
-Hessian with a border and a factor block summed over all nodes). Moment arms zero at every node
+Hessian with a border and a factor block summed over all nodes). The node data and muscle
+values are the NLP's parameter ``p``: the symbolic NLP is built once per process for each
+:class:`ProblemStructure` (:func:`symbolic_problem`). Moment arms zero at every node
 of a group are removed from its expressions, and with them their structural zeros. The fiber
 dynamics (``Goals.fiber_dynamics``) are forward Euler with the Hill equilibrium at each
 interval's start node, or backward Euler with it at the end node: then the interval's rows are
@@ -410,16 +412,44 @@ def _check_trials(trials, params, specs):
                                      f"{'EMG of ' if s.kind == 'emg_scale' else ''}such a muscle")
 
 
+@dataclass(frozen=True)
+class GroupPlan:
+    """One group of trials in a :class:`ProblemStructure`: its per-interval functions'
+    structure, its trials (positions in the problem) and their mesh intervals."""
+
+    structure: GroupStructure
+    members: tuple[int, ...]
+    n_intervals: tuple[int, ...]
+    n_data: int  # rows of the group's node data d (:func:`_group_functions`)
+
+
+@dataclass(frozen=True)
+class ProblemStructure:
+    """All the symbolic NLP depends on: the trials' sizes, the groups, the shared factors'
+    places. Problems of equal structure (same sizes and muscle sets: the workflows of one trial,
+    its uncertainty samples) have the same NLP with other parameter values (node data, muscle
+    values) and share it (:func:`symbolic_problem`)."""
+
+    sizes: tuple[tuple[int, int, int, int], ...]  # per trial (M, D, N, EMG bound rows per interval)
+    groups: tuple[GroupPlan, ...]
+    n_full: int
+    p_index: tuple[int, ...] | None
+    pairs: tuple[tuple[int, int], ...]
+    spec_off: tuple[int, ...]
+    explicit_derivatives: bool
+
+
 def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=(), *, optimal_reserve_Nm=150.0,
                   coupling: str = "shared", explicit_derivatives: bool = True) -> dict:
     """The NLP of ``trials`` with ``goals`` and the shared factors ``specs``, without solving it.
 
-    Returns the CasADi symbols/expressions ``x``, ``f``, ``g``, the bounds ``lbx, ubx, lbg,
-    ubg``, ``x0`` (factors 1), the sizes, the ``layout`` and, with ``explicit_derivatives``,
-    the functions ``grad_f``, ``jac_g``, ``hess_lag`` handed to IPOPT.
+    Returns the CasADi symbols/expressions ``x``, ``f``, ``g`` and the NLP parameter ``p``
+    (the groups' node data and muscle values) with its values ``p_values``, the bounds ``lbx,
+    ubx, lbg, ubg``, ``x0`` (factors 1), the sizes, the ``layout``, the ``structure``
+    (:class:`ProblemStructure`) and, with ``explicit_derivatives``, the functions ``grad_f``,
+    ``jac_g``, ``hess_lag`` (inputs ``x, p, ...``) handed to IPOPT. The symbolic part is built
+    once per process for each structure (:func:`symbolic_problem`), except with the energy goal.
     """
-    import casadi as ca
-
     trials, specs = list(trials), list(specs)
     check_option("coupling", coupling, COUPLINGS)
     _check_trials(trials, params, specs)
@@ -430,33 +460,17 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
     if coupling == "shared":
         p_index = _group_index(n_full, pairs)
         pairs = []
-    n_p = n_full if p_index is None else (max(p_index) + 1 if p_index else 0)
-
-    # ---- per-trial layout
-    var_off, con_off, o, r, info = [], [], 0, 0, []
+    backward = goals.fiber_dynamics == "backward"
+    sizes = []
     for t in trials:
-        M, D, N = len(t.inputs.muscles), len(t.inputs.dofs), t.inputs.n_intervals
         nb = len(t.emg_muscles) if goals.emg_tolerance is not None else 0
-        nz, ng = 5 * M + D, 4 * M + D + nb
-        var_off.append(o)
-        con_off.append(r)
-        info.append(dict(M=M, D=D, N=N, nz=nz, ng=ng, nb=nb))
-        o += nz * N + 3 * M
-        r += ng * N + M
-    P0, R0 = o, r
-    n_var, n_con = P0 + n_p, R0 + len(pairs)
-    w = ca.MX.sym("w", n_var)
-    p = w[P0:]
-    lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", n_con)
+        sizes.append((len(t.inputs.muscles), len(t.inputs.dofs), t.inputs.n_intervals, nb))
 
-    groups = {}
+    grouped = {}
     for i, t in enumerate(trials):
-        groups.setdefault(t.signature(), []).append(i)
-    g_parts = [None] * len(trials)
-    gj_parts = [None] * len(trials)
-    f_terms, grad_parts, grad_p = [], [None] * len(trials), []
-    jr, jc, jv, hr, hc, hv, hpp = [], [], [], [], [], [], []
-    for members in groups.values():
+        grouped.setdefault(t.signature(), []).append(i)
+    groups, values, energy = [], [], []
+    for members in grouped.values():
         t0 = trials[members[0]]
         muscles, dofs = tuple(t0.inputs.muscles), tuple(t0.inputs.dofs)
         M, D = len(muscles), len(dofs)
@@ -477,25 +491,94 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
             n_muscles=M, n_dofs=D, emg_index=tuple(pos[m] for m in t0.emg_muscles),
             fiber_index=tuple(pos[m] for m in t0.fiber_muscles), goals=goals,
             optimal_reserve_Nm=float(optimal_reserve_Nm),
-            factor_of=tuple((kind, tuple(pairs)) for kind, pairs in factor_of.items()),
+            factor_of=tuple((kind, tuple(pairs_)) for kind, pairs_ in factor_of.items()),
             emg_factor=tuple(emg_pos[m] for m in t0.emg_muscles), n_full=n_full,
             p_index=None if p_index is None else tuple(p_index), zero_r=tuple(int(i) for i in zero_r))
-        energy_values = goals.energy.muscle_values(muscles, gp.max_isometric_force_N, gp.optimal_fiber_length_m) \
-            if goals.energy is not None and goals.energy.weight else None
-        fn = group_functions(structure, energy_values)
-        qv = ca.DM(_muscle_values(gp))
-        nz, ng = info[members[0]]["nz"], info[members[0]]["ng"]
-        backward = goals.fiber_dynamics == "backward"
-        nxn = (3 if backward else 2) * M
-        data, zc, xc, rbn, Zs, Xns, XLs, Ls, LLs = [], [], [], [], [], [], [], [], []
+        energy.append(goals.energy.muscle_values(muscles, gp.max_isometric_force_N, gp.optimal_fiber_length_m)
+                      if goals.energy is not None and goals.energy.weight else None)
+        data = []
         for i in members:
-            t, N = trials[i], info[i]["N"]
+            t, N = trials[i], trials[i].inputs.n_intervals
             inp = t.inputs
             rr = inp.moment_arms_m[:N].transpose(0, 2, 1).reshape(N, D * M)
             emg = t.emg_nodes if t.emg_muscles else np.zeros((N, 0))
             lus = t.fiber_length_nodes_m if t.fiber_muscles else np.zeros((N, 0))
             data.append(np.hstack([inp.lmt_m[:N], rr, inp.moments_Nm[:N], emg, lus, np.full((N, 1), inp.step_s),
                                    np.full((N, 1), 1.0 / N), *([inp.lmt_m[1:N + 1]] if backward else [])]))
+        data = np.vstack(data)  # (nodes, n_data): the parameter holds its transpose, column-major
+        values += [data.reshape(-1), _muscle_values(gp)]
+        groups.append(GroupPlan(structure=structure, members=tuple(members),
+                                n_intervals=tuple(sizes[i][2] for i in members), n_data=int(data.shape[1])))
+    structure = ProblemStructure(sizes=tuple(sizes), groups=tuple(groups), n_full=n_full,
+                                 p_index=None if p_index is None else tuple(p_index), pairs=tuple(pairs),
+                                 spec_off=tuple(int(v) for v in spec_off), explicit_derivatives=explicit_derivatives)
+    if goals.energy is None:
+        out = dict(symbolic_problem(structure))
+    else:  # the energy goal's muscle masses are constants of its functions: built for this problem
+        out = _symbolic_problem(structure, tuple(energy))
+    L = out["layout"]
+    out.update(p_values=np.concatenate(values) if values else np.zeros(0), structure=structure)
+    out.update(bounds_and_guess(trials, params, L["trials"], specs, goals, p_index, L["n_p"], pairs))
+    n_var, n_con = out["n_variables"], out["n_constraints"]
+    if out["x0"].size != n_var or out["g"].shape[0] != n_con or out["p_values"].size != out["p"].numel():
+        raise SolverError(f"internal error: problem size {out['x0'].size}/{out['g'].shape[0]}, expected {n_var}/{n_con}")
+    if not np.all(np.isfinite(out["x0"])):
+        raise SolverError("the initial guess holds NaN or infinite values; check the muscle geometry and parameters")
+    n_ineq = sum(d["nb"] * d["N"] for d in L["trials"])
+    out.update(n_equality_constraints=n_con - n_ineq, n_inequality_constraints=n_ineq)
+    return out
+
+
+@functools.lru_cache(maxsize=4)
+def symbolic_problem(structure: ProblemStructure) -> dict:
+    """The symbolic NLP of a :class:`ProblemStructure` (no energy goal), built once per process:
+    ``x``, ``p``, ``f``, ``g``, the sizes, the ``layout`` and the explicit derivative functions.
+    Do not change the dictionary it returns (:func:`build_problem` copies it)."""
+    return _symbolic_problem(structure)
+
+
+def _symbolic_problem(structure: ProblemStructure, energy_values=None) -> dict:
+    import casadi as ca
+
+    st = structure
+    info, var_off, con_off, o, r = [], [], [], 0, 0
+    for M, D, N, nb in st.sizes:
+        nz, ng = 5 * M + D, 4 * M + D + nb
+        var_off.append(o)
+        con_off.append(r)
+        info.append(dict(M=M, D=D, N=N, nz=nz, ng=ng, nb=nb))
+        o += nz * N + 3 * M
+        r += ng * N + M
+    P0, R0 = o, r
+    n_full, p_index, pairs = st.n_full, st.p_index, list(st.pairs)
+    n_p = n_full if p_index is None else (max(p_index) + 1 if p_index else 0)
+    n_var, n_con = P0 + n_p, R0 + len(pairs)
+    w = ca.MX.sym("w", n_var)
+    p = w[P0:]
+    lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", n_con)
+    n_values = sum(sum(g.n_intervals) * g.n_data + len(MUSCLE_VALUES) * g.structure.n_muscles for g in st.groups)
+    values = ca.MX.sym("p", n_values)  # the NLP parameter: each group's node data, then its muscle values
+
+    g_parts = [None] * len(st.sizes)
+    gj_parts = [None] * len(st.sizes)
+    f_terms, grad_parts, grad_p = [], [None] * len(st.sizes), []
+    jr, jc, jv, hr, hc, hv, hpp = [], [], [], [], [], [], []
+    v_off = 0
+    for gi, group in enumerate(st.groups):
+        members = list(group.members)
+        M, D = group.structure.n_muscles, group.structure.n_dofs
+        fn = group_functions(group.structure, None if energy_values is None else energy_values[gi])
+        nz, ng = info[members[0]]["nz"], info[members[0]]["ng"]
+        backward = group.structure.goals.fiber_dynamics == "backward"
+        nxn = (3 if backward else 2) * M
+        n_nodes, T = sum(group.n_intervals), len(members)
+        data = ca.reshape(values[v_off:v_off + n_nodes * group.n_data], group.n_data, n_nodes)
+        v_off += n_nodes * group.n_data
+        qv = values[v_off:v_off + len(MUSCLE_VALUES) * M]
+        v_off += len(MUSCLE_VALUES) * M
+        zc, xc, rbn, Zs, Xns, XLs, Ls, LLs = [], [], [], [], [], [], [], []
+        for i in members:
+            N = info[i]["N"]
             k = np.arange(N)
             zc.append(var_off[i] + k * nz)
             xc.append(var_off[i] + (k + 1) * nz)
@@ -507,8 +590,6 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
             XLs.append(xl)
             Ls.append(ca.reshape(lam_g[con_off[i]:con_off[i] + ng * N], ng, N))
             LLs.append(lam_g[con_off[i] + ng * N:con_off[i] + ng * N + M])
-        n_nodes, T = sum(info[i]["N"] for i in members), len(members)
-        data = ca.DM(np.vstack(data).T)
         zc, xc, rbn = np.concatenate(zc), np.concatenate(xc), np.concatenate(rbn)
         last_var = np.array([var_off[i] + info[i]["N"] * nz for i in members])
         last_con = np.array([con_off[i] + info[i]["N"] * ng for i in members])
@@ -571,8 +652,10 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
     f = sum(f_terms[1:], f_terms[0])
     out = {"x": w, "f": f, "g": g, "n_variables": n_var, "n_constraints": n_con,
            "layout": dict(trials=info, var_off=var_off, con_off=con_off, P0=P0, R0=R0, n_p=n_p, n_full=n_full,
-                          p_index=p_index, pairs=pairs, spec_off=spec_off.tolist())}
-    if explicit_derivatives:
+                          p_index=None if p_index is None else list(p_index), pairs=pairs,
+                          spec_off=list(st.spec_off)),
+           "p": values}
+    if st.explicit_derivatives:
         if pairs:
             jr.append(np.repeat(R0 + np.arange(len(pairs)), 2))
             jc.append(np.array([P0 + j for ab in pairs for j in ab]))
@@ -585,21 +668,13 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
             hc.append(P0 + c3)
             hv.append(Hp.nz[:])
         hess = _sparse(ca, (n_var, n_var), np.concatenate(hr), np.concatenate(hc), ca.vertcat(*hv),
-                       add_duplicates=goals.fiber_dynamics == "backward")
+                       add_duplicates=st.groups[0].structure.goals.fiber_dynamics == "backward")
         grad = ca.vertcat(*grad_parts, sum(grad_p[1:], grad_p[0]) if n_p else ca.MX(0, 1))
-        pp = ca.MX.sym("p", 0, 1)
         out.update({
-            "grad_f": ca.Function("nlp_grad_f", [w, pp], [f, grad], ["x", "p"], ["f", "grad_f_x"]),
-            "jac_g": ca.Function("nlp_jac_g", [w, pp], [ca.vertcat(*gj_parts, *coup), jac], ["x", "p"],
+            "grad_f": ca.Function("nlp_grad_f", [w, values], [f, grad], ["x", "p"], ["f", "grad_f_x"]),
+            "jac_g": ca.Function("nlp_jac_g", [w, values], [ca.vertcat(*gj_parts, *coup), jac], ["x", "p"],
                                  ["g", "jac_g_x"]),
-            "hess_lag": ca.Function("nlp_hess_l", [w, pp, lam_f, lam_g], [hess], ["x", "p", "lam_f", "lam_g"],
+            "hess_lag": ca.Function("nlp_hess_l", [w, values, lam_f, lam_g], [hess], ["x", "p", "lam_f", "lam_g"],
                                     ["triu_hess_gamma_x_x"]),
         })
-    out.update(bounds_and_guess(trials, params, info, specs, goals, p_index, n_p, pairs))
-    if out["x0"].size != n_var or g.shape[0] != n_con:
-        raise SolverError(f"internal error: problem size {out['x0'].size}/{g.shape[0]}, expected {n_var}/{n_con}")
-    if not np.all(np.isfinite(out["x0"])):
-        raise SolverError("the initial guess holds NaN or infinite values; check the muscle geometry and parameters")
-    n_ineq = sum(d["nb"] * d["N"] for d in info)
-    out.update(n_equality_constraints=n_con - n_ineq, n_inequality_constraints=n_ineq)
     return out
