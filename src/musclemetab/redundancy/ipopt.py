@@ -42,8 +42,8 @@ matrix banded.
 from __future__ import annotations
 
 import ctypes
-import functools
 import ctypes.util
+import functools
 import os
 import struct
 import time as _time

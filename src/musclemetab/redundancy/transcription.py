@@ -34,6 +34,7 @@ the entries of two intervals at one place of the Hessian are summed.
 
 from __future__ import annotations
 
+import copy
 import functools
 from dataclasses import dataclass
 from typing import Sequence
@@ -512,8 +513,9 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
     structure = ProblemStructure(sizes=tuple(sizes), groups=tuple(groups), n_full=n_full,
                                  p_index=None if p_index is None else tuple(p_index), pairs=tuple(pairs),
                                  spec_off=tuple(int(v) for v in spec_off), explicit_derivatives=explicit_derivatives)
-    if goals.energy is None:
+    if goals.energy is None:  # the process's shared NLP: its layout copied, so that no caller changes the shared one
         out = dict(symbolic_problem(structure))
+        out["layout"] = copy.deepcopy(out["layout"])
     else:  # the energy goal's muscle masses are constants of its functions: built for this problem
         out = _symbolic_problem(structure, tuple(energy))
     L = out["layout"]
