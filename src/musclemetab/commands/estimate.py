@@ -19,7 +19,7 @@ from __future__ import annotations
 import argparse
 
 from ..errors import OptionError
-from .options import number_option
+from .options import add_stop_argument, number_option
 
 __all__ = ["add_parser", "run", "run_with_progress", "parse_assignments"]
 
@@ -77,6 +77,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    "are still written)")
     p.add_argument("--cache-dir", metavar="DIR")
     number_option(p, "--max-iter", "max_iter", default=10000, help="IPOPT iteration limit (default 10000)")
+    add_stop_argument(p)
     p.add_argument("--out", required=True, metavar="DIR")
     add_progress_argument(p)
     p.set_defaults(func=run_with_progress)
@@ -142,6 +143,8 @@ def _estimate(args) -> int:
         if "emg_scale" in bounds:
             raise OptionError("--emg-scale-bounds and --bounds emg_scale=... both set the EMG scale bounds; give one")
         bounds["emg_scale"] = scale_bounds
+    from ..redundancy.ipopt import SolverOptions
+
     result = estimate_files(
         args.model, args.ik, args.id, args.out,
         estimate=parse_assignments(args.estimate, "--estimate", lambda v: [m for m in v.split(",") if m]),
@@ -149,7 +152,8 @@ def _estimate(args) -> int:
         couple=[parse_coupling(g) for g in args.couple],
         bounds=bounds, weights=weights, workflow=args.workflow,
         side=args.side, dofs=args.dofs, emg_mode=args.emg_mode, emg_mapping=args.emg_mapping,
-        emg_tolerance=args.emg_tolerance, passive=args.passive, max_iter=args.max_iter, validate=args.validate,
+        emg_tolerance=args.emg_tolerance, passive=args.passive, validate=args.validate,
+        options=SolverOptions(max_iter=args.max_iter, stop=args.stop),
         cache_dir=args.cache_dir,
         exclude_muscles=[m for item in (args.exclude_muscles or []) for m in item.replace(",", " ").split()],
     )

@@ -7,7 +7,7 @@ from ..errors import OptionError
 
 __all__ = ["BASAL_DEFAULTS", "add_basal_arguments", "check_basal_arguments", "check_speed", "check_body",
            "add_study_arguments", "number_option", "check_number_options", "EXCLUSIVE_OPTIONS", "check_exclusive",
-           "add_emg_scale_bounds_argument", "emg_scale_bounds"]
+           "add_emg_scale_bounds_argument", "emg_scale_bounds", "add_stop_argument"]
 
 #: the basal options' defaults: the paper's 1.2 W per kg of body mass
 BASAL_DEFAULTS = {"basal": "body", "basal_coefficient": 1.2, "basal_exponent": 1.0}
@@ -152,3 +152,14 @@ def emg_scale_bounds(args) -> tuple[float, float] | None:
     if bounds is None or not all(math.isfinite(b) for b in bounds) or not 0 < bounds[0] <= bounds[1]:
         raise OptionError(f"--emg-scale-bounds must be LOW:HIGH with 0 < LOW <= HIGH, e.g. 0.01:5, not {text!r}")
     return bounds
+
+
+def add_stop_argument(parser) -> None:
+    """``--stop optimum|authors``: where IPOPT stops (:data:`musclemetab.redundancy.ipopt.STOPS`)."""
+    from ..redundancy.stops import DEFAULT_STOP, STOPS
+
+    parser.add_argument(
+        "--stop", default=DEFAULT_STOP, choices=tuple(STOPS),
+        help="where the solver stops: optimum (default; the optimum of the problem, IPOPT tolerance 1e-8 with the "
+        "adaptive barrier parameter) or authors (the study's settings, tolerance 1e-6 with the monotone barrier, "
+        "whose rates lie 4-18 %% above the optimum's; to reproduce the paper's numbers; docs/solver.md)")

@@ -30,7 +30,7 @@ from __future__ import annotations
 import argparse
 
 from ..errors import OptionError, SolverError, UnknownMuscleError
-from .options import number_option
+from .options import add_stop_argument, number_option
 
 __all__ = ["add_parser", "add_emg_goal_arguments", "add_progress_argument", "run", "run_with_progress",
            "progress_lines"]
@@ -133,6 +133,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    "hip_flexion_r hip_adduction_r hip_rotation_r for the study's model)")
     p.add_argument("--cache-dir", metavar="DIR", help="geometry cache folder (default: the package's)")
     number_option(p, "--max-iter", "max_iter", default=10000, help="IPOPT iteration limit (default 10000)")
+    add_stop_argument(p)
     p.add_argument("--linear-solver", default="mumps", metavar="NAME",
                    help="IPOPT's linear solver: mumps (default) or spral (built in), ma27/ma57/ma77/ma86/ma97 (HSL) "
                    "or pardiso (loaded at run time from --linear-solver-library); another solver can end in "
@@ -407,7 +408,7 @@ def _solver_options(args):
     from ..redundancy.ipopt import SolverOptions
 
     try:
-        return SolverOptions(max_iter=args.max_iter, print_level=args.print_level,
+        return SolverOptions(max_iter=args.max_iter, print_level=args.print_level, stop=args.stop,
                              linear_solver=args.linear_solver, linear_solver_library=args.linear_solver_library)
     except OptionError as exc:
         raise OptionError(f"--linear-solver: {exc}") from None

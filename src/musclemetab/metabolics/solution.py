@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -233,14 +233,40 @@ def states_of_solution(solution, *, require_success: bool = True) -> SolutionSta
                           side=_recorded_side(solution.record))
 
 
+#: How far outside [0, 1] an activation or excitation may lie and still be taken as on its
+#: bound (clipped): IPOPT relaxes bounds by up to 1e-8 (relative) and a file rounds to 12
+#: digits; farther out the solution is refused
+CONTROL_BOUND_TOLERANCE = 1e-6
+
+
+def controls_in_bounds(states: SolutionStates) -> SolutionStates:
+    """``states`` with the excitations and activations clipped to [0, 1] when they lie at most
+    :data:`CONTROL_BOUND_TOLERANCE` outside (``0 ** 0.6`` where ``(-4e-9) ** 0.6`` is NaN);
+    :class:`DataMismatchError` naming the muscle when one lies farther out."""
+    out = dict(states.states)
+    for name in ("excitation", "activation"):
+        x = np.asarray(out[name], dtype=float)
+        low, high = np.nanmin(x, axis=1), np.nanmax(x, axis=1)
+        bad = np.flatnonzero((low < -CONTROL_BOUND_TOLERANCE) | (high > 1 + CONTROL_BOUND_TOLERANCE))
+        if bad.size:
+            i = int(bad[0])
+            raise DataMismatchError(
+                f"{states.source}: the {name} of {states.muscles[i]} spans {low[i]:.6g} to {high[i]:.6g}, outside "
+                f"[0, 1] by more than {CONTROL_BOUND_TOLERANCE:g}"
+                f"{f' ({bad.size} muscles in all)' if bad.size > 1 else ''}; an activation or excitation is a share of "
+                "the maximum: check the file (column order, units)")
+        out[name] = np.clip(x, 0.0, 1.0)
+    return replace(states, states=out)
+
+
 def solution_states(solution, *, require_success: bool = True) -> SolutionStates:
     """The :class:`SolutionStates` of a solution folder, a :class:`musclemetab.redundancy.Solution`
-    or :class:`SolutionStates` (returned as it is)."""
+    or :class:`SolutionStates`, their excitations and activations in [0, 1] (:func:`controls_in_bounds`)."""
     if isinstance(solution, SolutionStates):
-        return solution
+        return controls_in_bounds(solution)
     if hasattr(solution, "lm_norm") and hasattr(solution, "summary"):
-        return states_of_solution(solution, require_success=require_success)
-    return read_solution_states(solution, require_success=require_success)
+        return controls_in_bounds(states_of_solution(solution, require_success=require_success))
+    return controls_in_bounds(read_solution_states(solution, require_success=require_success))
 
 
 def trim_slice(n_nodes: int, start: int = 5, end: int = 6) -> slice:

@@ -21,6 +21,7 @@ import numpy as np
 
 from ..quality import Flag, check_strict, flags_from_records, quality_text, warn_flags
 from .bounds import FIBER_LENGTH_BOUNDS
+from .convergence import unconverged_rates_flag
 from .window import PADDING_S
 
 __all__ = [
@@ -230,6 +231,7 @@ def solution_flags(solution, *, passive_limit: float = PASSIVE_FORCE_LIMIT,
     peaks = rec.get("peak_moment_by_dof_Nm")
     if peaks:
         flags.append(reserve_flag(solution.dofs, solution.reserve_Nm, peaks, limit=reserve_limit))
+    flags.append(unconverged_rates_flag(rec.get("convergence")))
     return [f for f in flags if f is not None]
 
 

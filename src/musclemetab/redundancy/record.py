@@ -176,6 +176,9 @@ class _OutcomeRecord(_FileRecord):
     max_constraint_violation: float | None = _ABSENT
     software: dict | None = _ABSENT
     input_hashes: dict | None = _ABSENT
+    #: how converged the rates are (:func:`~.convergence.convergence_record`): stop, tolerance,
+    #: final barrier parameter, the share of each model's rate carried by muscles that are off
+    convergence: dict | None = _ABSENT
 
 
 @dataclass(frozen=True)

@@ -670,7 +670,7 @@ def estimate_files(
     model, ik, id, out, *, estimate, ultrasound=(), emg=(), labels=None, couple=(), bounds=None, weights=None,
     workflow: str = "effort-cal", side: str = "r", dofs=None, emg_mode: str | None = None,
     emg_mapping: str | None = None, emg_tolerance: float = 0.01, passive=None, max_iter: int = 10000,
-    validate: bool = False, cache_dir=None, exclude_muscles=(),
+    validate: bool = False, cache_dir=None, exclude_muscles=(), options: SolverOptions | None = None,
 ) -> Result:
     """Estimate muscle-tendon parameters over trials from files, and write them to ``out``.
 
@@ -775,7 +775,7 @@ def estimate_files(
         mapping = _mapping_without(mapping, exclude_muscles)
         measured = [_fiber_lengths_without(us, exclude_muscles) for us in measured]
     emg_muscles = ()
-    options = SolverOptions(max_iter=max_iter)
+    options = options if options is not None else SolverOptions(max_iter=max_iter)
 
     from ..geometry import compute_geometry
     from ..io import read_table

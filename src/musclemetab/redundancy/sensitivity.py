@@ -331,8 +331,8 @@ def polish(inputs, params, goals, guess, *, optimal_reserve_Nm: float = 150.0, t
     from .ipopt import SolverOptions, solve_problem
     from .transcription import TrialBlock
 
-    options = SolverOptions(tol=POLISH_TOL, optimal_reserve_Nm=optimal_reserve_Nm,
-                            ipopt={"mu_init": POLISH_MU_INIT})
+    options = SolverOptions(stop="authors", tol=POLISH_TOL, optimal_reserve_Nm=optimal_reserve_Nm,
+                            ipopt={"mu_init": POLISH_MU_INIT})  # the monotone barrier from a small mu
     res = solve_problem([TrialBlock(trial, inputs, guess)], params, goals, options=options)
     if not res.success:
         raise SolverError(f"{trial}: the re-solve at tolerance {POLISH_TOL:g} from the optimum ended with "

@@ -441,7 +441,13 @@ def build_solution(
         parameters=params,
         record=SolveRecord.from_dict(summary),
     )
+    from .convergence import convergence_record
     from .plausibility import solution_flags  # the checks after the solve (docs/quality.md)
 
+    opts = summary.get("solver_options") or {}
+    solution = replace(solution, record=solution.record.with_(convergence=convergence_record(
+        solution, stop=opts.get("stop"), tolerance=opts.get("tol"),
+        final_barrier_parameter=getattr(ocp, "final_barrier_parameter", None),
+        w_activation=float(opts.get("w_activation", 1.0)))))
     flags = [f.to_dict() for f in solution_flags(solution)]
     return replace(solution, record=solution.record.with_(plausibility=flags))

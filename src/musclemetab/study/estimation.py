@@ -181,7 +181,14 @@ def run_parameter_estimation(study, unit, tmp: Path) -> dict:
         couple=spec.couple, bounds=spec.bounds, weights=spec.weights, workflow=spec.workflow,
         side=subject.side, dofs=subject.dofs,
         passive=subject.passive if spec.workflow != "effort-gen" else None,
-        max_iter=(study.settings.get("solver") or {}).get("max_iter") or 10000, validate=spec.validate,
+        options=_estimation_options(study), validate=spec.validate,
         exclude_muscles=subject.exclude_muscles,
     )
     return {"times": {"solve_s": time.perf_counter() - t0}, "trials": [t.name for t in trials]}
+
+
+def _estimation_options(study):
+    """The study's ``[solver]`` settings (stop, tolerance, iterations, linear solver) for its estimation."""
+    from ..redundancy import SolverOptions
+
+    return SolverOptions(**{k: v for k, v in (study.settings.get("solver") or {}).items() if k != "warm_start"})

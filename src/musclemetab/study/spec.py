@@ -254,7 +254,7 @@ _ENERGY_KEYS = {"model", "weight", "effort_weight", "smoothing", "form"}
 #: keys of the study file's [uncertainty] table (docs/uncertainty.md)
 _UNCERTAINTY_KEYS = {"samples", "seed", "priors", "sensitivity"}
 #: keys of the study file's [solver] table (IPOPT settings of every solve)
-_SOLVER_KEYS = {"max_iter", "tol", "linear_solver", "warm_start"}
+_SOLVER_KEYS = {"max_iter", "tol", "stop", "linear_solver", "warm_start"}
 _SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials",
                  "muscle_properties", "side", "dofs", "emg_mode", "emg_tolerance", "estimate", "exclude_muscles"}
 _TRIAL_KEYS = {
@@ -400,7 +400,7 @@ def warm_start_study(study: Study, warm_start: bool) -> Study:
 
 
 def _solver(data, where: str) -> dict:
-    """The ``[solver]`` table: ``max_iter``, ``tol``, ``linear_solver`` and ``warm_start``, checked (the
+    """The ``[solver]`` table: ``max_iter``, ``tol``, ``stop``, ``linear_solver`` and ``warm_start``, checked (the
     library of a run-time linear solver comes from the command line or the environment, never from the file)."""
     if data is None:
         return {}

@@ -1,0 +1,19 @@
+"""Where the solver stops: the named IPOPT settings of :class:`.ipopt.SolverOptions` (``stop``).
+
+A module of its own, without imports, so that the command line can offer the names without
+loading the solver (``docs/solver.md``, "Where the solver stops").
+"""
+
+__all__ = ["STOPS", "DEFAULT_STOP"]
+
+#: Where IPOPT stops: the IPOPT options of each named stop (``SolverOptions.stop``;
+#: ``docs/solver.md``, "Where the solver stops"). ``optimum``: the optimum of the stated problem
+#: (the rates within 1 % of those at tolerance 1e-10 on the example subject's six units and
+#: both legs of gait2392, at no more IPOPT time than ``authors``); ``authors``: the settings of
+#: Luis et al. (2024), whose stop leaves the activations of inactive muscles about 1e-4 above
+#: zero.
+STOPS = {
+    "optimum": {"tol": 1e-8, "mu_strategy": "adaptive"},
+    "authors": {"tol": 1e-6, "mu_strategy": "monotone"},
+}
+DEFAULT_STOP = "optimum"
