@@ -2,6 +2,7 @@
 of re-solves (``docs/uncertainty.md``, "Sensitivities").
 
     python benchmarks/sensitivity.py NORMAL_SOLUTION_FOLDER [STEP]
+    python benchmarks/sensitivity.py NORMAL_SOLUTION_FOLDER [STEP] --default-resolves
 
 NORMAL_SOLUTION_FOLDER: ``musclemetab solve --workflow effort-gen`` of the example subject's
 normal trial. For F0, lMo, lTs, kT of soleus and vastus lateralis and the UM10 and BH04 rates:
@@ -10,6 +11,12 @@ normal trial. For F0, lMo, lTs, kT of soleus and vastus lateralis and the UM10 a
 R(p (1 - h))] / 2h`` from two re-solves from that optimum at tolerance 1e-10
 (:func:`~musclemetab.redundancy.sensitivity.finite_difference`), ``h`` = STEP (default 1e-3):
 the whole-body rate (W/kg) and the muscle's own rate (W), per unit log of the parameter.
+
+``--default-resolves``: the finite differences instead come from cold solves of the trial with
+the package's default settings (``solve_files`` from the files the folder's ``summary.json``
+names, the parameter scaled through ``parameter_transform``), for the soleus ``lTs`` and the
+vastus lateralis ``kT`` rows (step 1e-2 for ``kT``, whose derivative is small): the check that
+the sensitivities at the default solve are those of the default solves.
 """
 
 import sys
@@ -44,5 +51,50 @@ def main(folder, step=1e-3):
     print(f"largest |KKT - FD| / (5 % |FD| + 0.01 W/kg) of the whole-body rates: {worst:.2f}")
 
 
+def default_resolves(folder, step=1e-3):
+    import dataclasses
+    import warnings
+
+    import numpy as np
+
+    from musclemetab.metabolics.solution import metabolics_from_solution
+    from musclemetab.redundancy import solve_files
+    from musclemetab.redundancy.sensitivity import PARAMETERS
+
+    prob = problem_of_solution(folder)
+    pairs = [("lTs", "soleus_r", step), ("kT", "vaslat_r", max(step, 1e-2))]
+    sens = trial_sensitivity(prob.solution, prob.inputs, prob.params, prob.goals, body_mass_kg=MASS, height_m=HEIGHT,
+                             models=MODELS, parameters=[(p, m) for p, m, _ in pairs])
+    files = prob.solution.summary["inputs"]
+    workflow = prob.solution.summary["workflow"]["name"]
+
+    def rates(p, m, factor):
+        def transform(params):
+            i = params.names.index(m)
+            values = np.asarray(getattr(params, PARAMETERS[p]), dtype=float).copy()
+            values[i] *= factor
+            return dataclasses.replace(params, **{PARAMETERS[p]: values})
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            sol = solve_files(files["model"], files["ik"], files["id"], workflow, parameter_transform=transform)
+        met = metabolics_from_solution(sol, MASS, HEIGHT, models=MODELS)
+        return {k: met.whole_body[k].mean_W_per_kg for k in met.models}
+
+    print("| parameter | muscle | step | model | whole body KKT | whole body FD (default re-solves) | difference |")
+    print("|---|---|---|---|---|---|---|")
+    worst = 0.0
+    for p, m, h in pairs:
+        up, down = rates(p, m, 1 + h), rates(p, m, 1 - h)
+        for model in up:
+            fd = (up[model] - down[model]) / (2 * h)
+            k = sens.derivative(model, p, m)
+            worst = max(worst, abs(k - fd) / abs(fd))
+            print(f"| {p} | {m} | {h:g} | {model} | {k:+.4f} | {fd:+.4f} | {100 * (k / fd - 1):+.1f} % |")
+    print(f"largest |KKT - FD| / |FD|: {100 * worst:.1f} %")
+
+
 if __name__ == "__main__":
-    main(sys.argv[1], *(float(a) for a in sys.argv[2:3]))
+    args = [a for a in sys.argv[1:] if a != "--default-resolves"]
+    run = default_resolves if "--default-resolves" in sys.argv else main
+    run(args[0], *(float(a) for a in args[1:2]))

@@ -62,14 +62,15 @@ def geometries(example, cache_dir):
 
 @pytest.fixture(scope="module")
 def emg_ten(example, geometries, cache_dir, tmp_path_factory):
-    """The authors'-mapping EMG-TEN solve, through the command line; returns (folder, stdout)."""
+    """The authors'-mapping EMG-TEN solve, through the command line, with the study's stop
+    (``--stop authors``: its estimates are compared with the study's); returns (folder, stdout)."""
     from musclemetab.commands import main
 
     out = tmp_path_factory.mktemp("emg_ten") / "result"
     argv = ["solve", "--workflow", "emg-ten", "--model", str(example.model),
             "--ik", *[str(example.ik[t]) for t in TRIALS], "--id", *[str(example.id[t]) for t in TRIALS],
             "--emg", *[str(example.emg[t]) for t in TRIALS], "--emg-mapping", "authors",
-            "--labels", *TRIALS, "--cache-dir", str(cache_dir), "--out", str(out)]
+            "--labels", *TRIALS, "--stop", "authors", "--cache-dir", str(cache_dir), "--out", str(out)]
     import contextlib
     import io
 

@@ -67,7 +67,9 @@ def tendon_json(tmp_path_factory):
 
 @pytest.fixture(scope="session")
 def solved(example, geometries, geometry_cache, solve_root, passive_csv, tendon_json):
-    """``solved(trial, workflow)`` -> (Solution, folder); each pair is solved at most once.
+    """``solved(trial, workflow)`` -> (Solution, folder); each pair is solved at most once, with
+    the study's stop (``--stop authors``: these solves are compared with the study's logs and the
+    package's results before the stop had a name).
 
     The calibration and tendon-stiffness sources vary over the trials so that every input
     path is exercised while solving the same problems: effort-cal uses the study's .mat for
@@ -85,7 +87,7 @@ def solved(example, geometries, geometry_cache, solve_root, passive_csv, tendon_
         if key not in cache:
             out = solve_root / f"{trial}_{workflow}"
             argv = ["solve", "--model", str(example.model), "--ik", str(example.ik[trial]),
-                    "--id", str(example.id[trial]), "--workflow", workflow,
+                    "--id", str(example.id[trial]), "--workflow", workflow, "--stop", "authors",
                     "--cache-dir", str(geometry_cache), "--out", str(out)]
             if workflow == "effort-cal":
                 argv += {"slow": ["--passive", str(example.passive_moments_mat)],

@@ -19,10 +19,10 @@ at the last iterate), ``off_level`` (``a_mu`` above), ``largest_off_activation``
 activation or excitation below it) and ``rate_residue``: for each energy model of the study, the
 share of the leg's muscle rate (basal heat left out) that the activations and excitations below
 ``a_mu`` carry, i.e. by how much the rate falls when they are set to zero, as they are at the
-optimum. It estimates how far the rates lie above the optimum's from below: on the example
-subject at the study's stop 7.7 % (UM10, normal speed, EFFORT-GEN) and 8.1 % (slow, EFFORT-TEN)
-against 9.7 % and 15.5 % measured by re-solving at tolerance 1e-10; at the default stop at most
-0.3 %. ``max_rate_residue`` is the largest share; above :data:`UNCONVERGED_RATE_SHARE` the
+optimum. It estimates how far the rates lie above the optimum's: on the example subject at the
+study's stop 10.8 % for UM10 on the normal trial with EFFORT-GEN and 18.7 % (UM03) on the slow
+trial with EFFORT-TEN, against 10.7 % and 18.1 % measured by re-solving at tolerance 1e-10; at the
+default stop at most 0.15 %. ``max_rate_residue`` is the largest share; above :data:`UNCONVERGED_RATE_SHARE` the
 solution gets the plausibility flag ``unconverged_rates`` (:func:`unconverged_rates_flag`).
 """
 
