@@ -22,6 +22,7 @@ from musclemetab.emg import (
     read_processed_emg,
     rectify,
     require_window,
+    sample_rate_hz,
     shift_time,
     zero_lag_gain,
 )
@@ -145,8 +146,12 @@ def test_nyquist_and_sampling_errors():
     with pytest.raises(DataMismatchError, match=r"above 800 Hz \(Nyquist\).*500 Hz"):
         process_raw_emg(raw)
     t2 = np.sort(np.r_[np.arange(0, 1, 1e-3), 0.5005])
-    with pytest.raises(DataMismatchError, match="not uniformly sampled"):
+    with pytest.raises(DataMismatchError, match="not evenly spaced"):
         process_raw_emg(_table(t2, TA=np.sin(t2)))
+    # 1500 Hz written with four decimals (steps of 0.6 and 0.7 ms): the rounded stamps of that rate
+    t3 = np.round(np.arange(0, 2, 1 / 1500.0), 4)
+    assert set(np.round(np.diff(t3), 6)) == {0.0006, 0.0007}
+    assert sample_rate_hz(_table(t3, TA=np.sin(t3))) == pytest.approx(1500.0, rel=1e-5)
     bad = _table(np.arange(0, 1, 1e-3), TA=np.r_[np.nan, np.zeros(999)])
     with pytest.raises(DataMismatchError, match="TA hold NaN"):
         process_raw_emg(bad)

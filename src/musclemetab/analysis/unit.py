@@ -198,15 +198,12 @@ def filtered_moment_arms(geometry, filter_cutoff_hz: float | None = 6.0) -> tupl
     if filter_cutoff_hz is not None:
         from ..redundancy.inputs import FILTER_ORDER, lowpass_filtfilt
 
-        dt = np.diff(tg)
-        if not np.allclose(dt, dt[0], rtol=1e-6, atol=1e-9):
-            raise DataMismatchError(
-                "the geometry's frames are not evenly spaced, so its moment arms cannot be filtered; "
-                "resample the IK file or pass filter_cutoff_hz=None"
-            )
+        from ..io import constant_rate
+
         shape = r.shape
         what = f"the moment arms along {getattr(geometry, 'source', {}).get('ik', 'the IK motion')}"
-        r = lowpass_filtfilt(r.reshape(shape[0], -1), 1.0 / dt[0], float(filter_cutoff_hz), FILTER_ORDER,
+        fs = constant_rate(tg, f"{what} (the geometry's frames; pass filter_cutoff_hz=None not to filter)")[1]
+        r = lowpass_filtfilt(r.reshape(shape[0], -1), fs, float(filter_cutoff_hz), FILTER_ORDER,
                              what=what).reshape(shape)
     return tg, r
 

@@ -82,7 +82,6 @@ LOWPASS_HZ = 6.0
 FILTER_ORDER = 4  # effective order of each zero-lag filter (see module docstring)
 EMG_RANGE_TOLERANCE = 0.10
 _ORDER_MEANINGS = ("effective", "design")
-_UNIFORM_RTOL = 0.01
 
 #: Muscles whose EMG is tracked in the study (right leg).
 EMG_TRACKED_MUSCLES = (
@@ -113,19 +112,12 @@ def _source(df: pd.DataFrame) -> str:
 
 
 def sample_rate_hz(df: pd.DataFrame) -> float:
-    """Sampling rate (Hz) of a time-indexed table; the sampling must be uniform (1 %)."""
-    t = np.asarray(df.index, dtype=float)
-    if t.size < 2:
-        raise DataMismatchError(f"{_source(df)}: EMG has {t.size} sample(s); a signal is needed")
-    dt = np.diff(t)
-    mean_dt = float(np.mean(dt))
-    if mean_dt <= 0 or np.max(np.abs(dt - mean_dt)) > _UNIFORM_RTOL * mean_dt:
-        k = int(np.argmax(np.abs(dt - mean_dt)))
-        raise DataMismatchError(
-            f"{_source(df)}: EMG is not uniformly sampled (step {dt[k]:g} s at t = {t[k]:g} s, mean "
-            f"{mean_dt:g} s); resample it to a constant rate before filtering"
-        )
-    return 1.0 / mean_dt
+    """Sampling rate (Hz) of a time-indexed table, which must be sampled at a constant rate;
+    time stamps rounded from one (e.g. to the millisecond) are accepted
+    (:func:`musclemetab.io.constant_rate`: the rate is their least-squares fit)."""
+    from ..io import constant_rate
+
+    return constant_rate(df.index, f"{_source(df)}: EMG")[1]
 
 
 def _design_order(order: int, order_means: str) -> int:

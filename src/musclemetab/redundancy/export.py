@@ -186,6 +186,7 @@ def _solution_inputs(solution, model_path, ik_path, id_path):
 def _coordinates_of_window(time_s, filtered: bool, ik, ik_path):
     """The IK columns over the frames of the solved window ``time_s``, filtered as the solve
     filtered the muscle-tendon lengths (``filtered``: ``input_preparation``'s filter)."""
+    from ..io import constant_rate
     from .inputs import FILTER_CUTOFF_HZ, FILTER_ORDER, lowpass_filtfilt
 
     t = np.asarray(ik.index, dtype=float)
@@ -193,7 +194,7 @@ def _coordinates_of_window(time_s, filtered: bool, ik, ik_path):
     t = t[keep]
     columns = {c: np.asarray(ik[c], dtype=float)[keep] for c in ik.columns}
     if t.size > 1 and filtered:
-        fs = 1.0 / float(np.mean(np.diff(t)))
+        fs = constant_rate(t, f"the IK motion of {ik_path}")[1]
         names = list(columns)
         filtered_values = lowpass_filtfilt(np.column_stack([columns[c] for c in names]), fs, FILTER_CUTOFF_HZ,
                                            FILTER_ORDER, what=f"the IK motion of {ik_path}")
@@ -243,7 +244,7 @@ def inverse_dynamics_at(id_path, coordinates, times) -> dict:
     columns; filtered as the solve filters the moments, cubic spline at the times)."""
     from scipy.interpolate import CubicSpline
 
-    from ..io import read_table
+    from ..io import constant_rate, read_table
     from .inputs import FILTER_CUTOFF_HZ, FILTER_ORDER, lowpass_filtfilt
 
     table = read_table(id_path)
@@ -259,8 +260,8 @@ def inverse_dynamics_at(id_path, coordinates, times) -> dict:
     names = list(found)
     values = np.column_stack([found[c] for c in names])
     if t.size > 13:
-        values = lowpass_filtfilt(values, 1.0 / float(np.mean(np.diff(t))), FILTER_CUTOFF_HZ, FILTER_ORDER,
-                                  what=f"the inverse dynamics {id_path}")
+        what = f"the inverse dynamics {id_path}"
+        values = lowpass_filtfilt(values, constant_rate(t, what)[1], FILTER_CUTOFF_HZ, FILTER_ORDER, what=what)
     spline = CubicSpline(t, values, axis=0, bc_type="not-a-knot")
     at = spline(np.clip(times, t[0], t[-1]))
     return {c: at[:, j] for j, c in enumerate(names)}

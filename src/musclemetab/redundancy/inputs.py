@@ -191,14 +191,11 @@ def mesh_for_window(t0: float, tf: float, mesh_frequency_hz: float = MESH_FREQUE
 
 
 def _sample_rate(time: np.ndarray, what: str) -> float:
-    dt = np.diff(time)
-    mean_dt = float(np.mean(dt))
-    if np.max(np.abs(dt - mean_dt)) > 0.01 * mean_dt + 1e-9:
-        raise DataMismatchError(
-            f"{what}: the time stamps are not evenly spaced (steps {dt.min():.6g}-{dt.max():.6g} s); "
-            "the low-pass filter needs a constant sampling rate: resample the file"
-        )
-    return 1.0 / mean_dt
+    """The constant sampling rate (Hz) of ``time``; rounded stamps of one are accepted
+    (:func:`musclemetab.io.constant_rate`)."""
+    from ..io import constant_rate
+
+    return constant_rate(time, what)[1]
 
 
 def read_kinematics(path: "str | os.PathLike | StorageTable", dofs: Sequence[str] = DEFAULT_DOFS,
