@@ -162,12 +162,13 @@ def _cli(*argv):
 
 
 def test_bad_trial_input_one_line_no_output(gait2392, tmp_path, capsys):
-    # a DOF in the ID data the model lacks: the example subject's ID against the gait2392 model
+    # the knee's moment asked for but absent
     id_alien = tmp_path / "id.sto"
-    id_alien.write_text(gait2392.id.read_text().replace("lumbar_rotation_moment", "elbow_flex_r_moment"))
+    id_alien.write_text(gait2392.id.read_text().replace("knee_angle_r_moment", "knee_angle_r_torque"))
     out = tmp_path / "out"
     cases = [
-        (["--id", id_alien], "elbow_flex_r_moment is for a coordinate the model"),
+        (["--id", id_alien, "--dofs", "knee_angle_r", "hip_flexion_r", "--window", "0.6:1.4"],
+         "missing inverse-dynamics column knee_angle_r_moment"),
         (["--id", gait2392.id, "--dofs", "knee_angle_r", "wrist_flex_r"], "has no coordinate wrist_flex_r"),
         (["--external-loads", gait2392.external_loads, "--window", "2.0:3.0"], "ends 0.500 s before"),
         (["--external-loads", gait2392.external_loads, "--side", "l", "--cycle", "3"], "cycle 3 does not exist"),
