@@ -32,7 +32,8 @@ import argparse
 from ..errors import OptionError, SolverError, UnknownMuscleError
 from .options import number_option
 
-__all__ = ["add_parser", "add_emg_goal_arguments", "add_progress_argument", "run", "run_with_progress",
+__all__ = ["add_parser", "add_emg_goal_arguments", "add_emg_processing_argument", "emg_files",
+           "add_progress_argument", "run", "run_with_progress",
            "progress_lines"]
 
 
@@ -96,8 +97,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--workflow", default="effort-gen", choices=("effort-gen", "effort-cal", "effort-ten", "emg-ten"),
                    help="workflow preset (default effort-gen)")
     p.add_argument("--emg", nargs="+", metavar="EMG.mot",
-                   help="processed, normalised EMG envelopes, one file per trial, same order as --ik: needed by "
-                   "emg-ten; with an effort workflow an EMG-informed solve of the trials (see --emg-mode)")
+                   help="processed, normalised EMG envelopes (or raw EMG with --emg-processing raw), one file per "
+                   "trial, same order as --ik: needed by emg-ten; with an effort workflow an EMG-informed solve of "
+                   "the trials (see --emg-mode)")
+    add_emg_processing_argument(p)
     add_emg_goal_arguments(
         p, "with --emg: 'constrained' (each tracked excitation within --emg-tolerance of its scaled EMG; the "
         "default), 'driven' (equal to its scaled EMG) or 'tracking' (a cost on the difference, weight "
@@ -183,6 +186,21 @@ def add_progress_argument(p, more: str = "") -> None:
     p.add_argument("--no-progress", action="store_true",
                    help="no progress lines while IPOPT runs (default: one line on stderr at most every 5 s: "
                    f"iteration, objective, constraint violation, time{more})")
+
+
+def add_emg_processing_argument(p) -> None:
+    """``--emg-processing envelope|raw`` (``solve`` and ``estimate``)."""
+    p.add_argument("--emg-processing", choices=("envelope", "raw"), default="envelope",
+                   help="how the --emg files are read: 'envelope' (default) processed, normalised envelopes used as "
+                   "stored; 'raw' raw (signed) EMG, processed here: zero-lag band-pass 20-400 Hz, full-wave "
+                   "rectification, zero-lag low-pass 6 Hz, normalised to each channel's peak in the file")
+
+
+def emg_files(args) -> list:
+    """The ``--emg`` files, each marked with ``--emg-processing`` (:func:`musclemetab.emg.emg_source`)."""
+    from ..emg import emg_source
+
+    return [emg_source(p, getattr(args, "emg_processing", "envelope")) for p in _as_list(getattr(args, "emg", None))]
 
 
 def add_emg_goal_arguments(p, mode_help: str, weight_help: str) -> None:
@@ -512,7 +530,7 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
             f"{', '.join(wrong)} cannot be used with --workflow emg-ten (it estimates the tendon stiffness "
             "and starts from static optimisation); drop them"
         )
-    emg = _as_list(getattr(args, "emg", None))
+    emg = emg_files(args)
     if not emg:
         raise OptionError("--workflow emg-ten needs --emg: one processed EMG file per trial, in the order of --ik")
     dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else None
@@ -599,7 +617,7 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
     from ..redundancy.emg_ten import emg_failure
     from ..redundancy.run import emg_mappings_of_legs, solve_emg_ten, write_solution_folder
 
-    emg = _as_list(args.emg)
+    emg = emg_files(args)
     dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else None
     options = _solver_options(args)  # the linear solver checked before any work
     legs = emg_mappings_of_legs(args.model, ik[0], args.emg_mapping, args.side, dofs, args.cache_dir)

@@ -125,14 +125,16 @@ def check_emg_range(df, t0: float, tf: float, tol: float, what: str) -> None:
 
 
 def mapped_emg_table(emg, mapping, path_label: str):
-    """Read (if a path) and map an EMG table to ``{muscle: signal}``; errors name the file."""
-    from ..emg import map_channels, read_processed_emg
+    """Read (if a path: raw EMG processed when it is a :class:`~musclemetab.emg.RawEmgPath`,
+    :func:`~musclemetab.emg.read_emg`) and map an EMG table to ``{muscle: signal}``; errors
+    name the file."""
+    from ..emg import map_channels, read_emg
 
     if isinstance(emg, (str, os.PathLike)):
         p = Path(emg)
         if not p.is_file():
             raise InputFileError(f"{p}: no such EMG file; check the --emg paths")
-        df = read_processed_emg(p)
+        df = read_emg(emg)
     else:
         df = emg.copy()
         df.attrs.update(emg.attrs)

@@ -730,7 +730,8 @@ def estimate_files(
     check_output_folder(out)
     ik, id_files = [str(p) for p in ik], [str(p) for p in id]
     n = len(ik)
-    us_files, emg_files = [str(p) for p in ultrasound or ()], [str(p) for p in emg or ()]
+    us_files = [str(p) for p in ultrasound or ()]
+    emg_files = [p if isinstance(p, os.PathLike) else str(p) for p in emg or ()]  # a RawEmgPath stays one
     if not (us_files or emg_files):
         raise OptionError("estimate needs measurements: give --ultrasound (fiber lengths) or --emg files, or both")
     counts = [("--ultrasound", len(us_files)), ("--emg", len(emg_files))]

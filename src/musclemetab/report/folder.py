@@ -160,9 +160,14 @@ class StudyFolder:
         return self.subject_record(subject).get("side") == "both"
 
     def emg_file(self, subject, trial) -> Path | None:
-        """The trial's EMG file recorded in ``study.json`` (``emg_files``), or ``None``."""
-        path = (self.subject_record(subject).get("emg_files") or {}).get(trial)
-        return self.resolve(path) if path else None
+        """The trial's EMG file recorded in ``study.json`` (``emg_files``), or ``None``; a
+        :class:`~musclemetab.emg.RawEmgPath` when its ``emg_processing`` is ``raw``."""
+        from ..emg import emg_source
+
+        record = self.subject_record(subject)
+        path = (record.get("emg_files") or {}).get(trial)
+        return emg_source(self.resolve(path), (record.get("emg_processing") or {}).get(trial, "envelope")) \
+            if path else None
 
     def emg_mapping(self, subject):
         """The subject's EMG mapping recorded in ``study.json`` (a name or a file; ``"default"``)."""
