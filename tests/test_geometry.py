@@ -220,3 +220,18 @@ def test_locked_knee_follows_the_motion_and_is_refused_by_name(example, tmp_path
         solve_files(locked, example.ik["normal"], example.id["normal"], window=(0.6, 0.8), cache_dir=tmp_path)
     # locked coordinates the motion holds at their value (the example's subtalar and mtp) pass
     assert compute_geometry(example.model, example.ik["normal"], cache_dir=tmp_path).dofs == tuple(DOFS)
+
+
+def test_a_message_lists_ten_names_and_counts_the_rest(example):
+    """150 000 unknown muscle names gave an error line of close to a megabyte: every message
+    listing names shows the first ten and how many more (messages.name_list)."""
+    from musclemetab.messages import name_list
+
+    assert name_list(["a", "b"]) == "a, b"
+    assert name_list([f"m{i}" for i in range(12)]) == "m0, m1, m2, m3, m4, m5, m6, m7, m8, m9 ... and 2 more"
+    names = [f"mystery{i}_r" for i in range(150_000)]
+    with pytest.raises(UnknownMuscleError) as info:
+        compute_geometry(example.model, example.ik["normal"], muscles=names, use_cache=False)
+    text = str(info.value)
+    assert "mystery0_r, mystery1_r" in text and text.count("mystery") == 10
+    assert "... and 149 990 more" in text and len(text) < 500

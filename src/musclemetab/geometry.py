@@ -231,15 +231,16 @@ def compute_geometry(
 
     ik_source, model_path, ik_path = ik_path, Path(model_path), table_path(ik_path)
     check_model_path(model_path)
-    ik = as_table(ik_source)  # validates the file before any cache lookup
-    layout = read_layout(model_path, cache_dir=cache_dir)
+    layout = None
     if not dofs:
+        layout = read_layout(model_path)
         dofs = side_dofs(layout, side)
     dofs = list(dofs)
     if len(set(dofs)) != len(dofs):
         raise OptionError(f"DOF list {dofs} names a DOF twice")
+    ik = as_table(ik_source)  # validates the file before any cache lookup
     in_degrees = check_kinematics(ik, dofs, check_units)
-    check_locked_coordinates(layout, side, ik, in_degrees)
+    check_locked_coordinates(layout or read_layout(model_path, cache_dir=cache_dir), side, ik, in_degrees)
 
     cache_file = None
     if use_cache:

@@ -36,6 +36,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from .errors import DataMismatchError, ModelError, OptionError
+from .messages import name_list
 
 __all__ = [
     "SIDE_OFFSET_M",
@@ -258,7 +259,7 @@ def discover_dofs(layout: ModelLayout, side: str, id_columns: Iterable[str] | No
         from .errors import MusclemetabWarning
 
         warnings.warn(
-            f"the inverse dynamics holds no moment for {', '.join(missing)}: solved without "
+            f"the inverse dynamics holds no moment for {name_list(missing)}: solved without "
             f"{'it' if len(missing) == 1 else 'them'} (give --dofs to choose the DOFs)", MusclemetabWarning, stacklevel=2,
         )
     if not kept:
@@ -277,12 +278,12 @@ def check_dofs_in_model(layout: ModelLayout, dofs: Sequence[str], where: str = "
     missing = [d for d in dofs if d not in coords]
     if missing:
         raise UnknownCoordinateError(
-            f"{where}: the model {layout.path} has no coordinate {', '.join(missing)}; its unlocked coordinates: "
+            f"{where}: the model {layout.path} has no coordinate {name_list(missing)}; its unlocked coordinates: "
             f"{', '.join(n for n, c in coords.items() if not c['locked'])}"
         )
     fixed = [d for d in dofs if coords[d]["locked"] or coords[d]["dependent"]]
     if fixed:
         raise UnknownCoordinateError(
-            f"{where}: coordinate {', '.join(fixed)} of {layout.path} is locked or coupled and cannot be a "
+            f"{where}: coordinate {name_list(fixed)} of {layout.path} is locked or coupled and cannot be a "
             "degree of freedom; drop it"
         )

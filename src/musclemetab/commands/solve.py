@@ -30,6 +30,7 @@ from __future__ import annotations
 import argparse
 
 from ..errors import OptionError, SolverError, UnknownMuscleError
+from ..messages import name_list
 from .options import number_option
 
 __all__ = ["add_parser", "add_emg_goal_arguments", "add_emg_processing_argument", "emg_files",
@@ -278,7 +279,7 @@ def _solve(args) -> int:
                                ("--emg-weight", "emg_weight"), ("--emg-scale-bounds", "emg_scale_bounds"))
              if getattr(args, attr, None) is not None]
     if extra:
-        raise OptionError(f"{', '.join(extra)} need{'s' if len(extra) == 1 else ''} EMG: give --emg files, or "
+        raise OptionError(f"{name_list(extra)} need{'s' if len(extra) == 1 else ''} EMG: give --emg files, or "
                           f"drop {'it' if len(extra) == 1 else 'them'}")
     if len(ik) != 1 or len(idf) > 1:
         raise OptionError(
@@ -451,7 +452,7 @@ def _check_excluded_used(excluded, solutions) -> None:
     """:class:`UnknownMuscleError` for an excluded muscle that no leg's problem had."""
     unused = [m for m in excluded if not any(m in (x.record.excluded_muscles or []) for x in solutions)]
     if unused:
-        raise UnknownMuscleError(f"--exclude-muscles: {', '.join(unused)} is in neither leg's problem; check the names")
+        raise UnknownMuscleError(f"--exclude-muscles: {name_list(unused)} is in neither leg's problem; check the names")
 
 
 def _print_findings(record) -> None:
@@ -508,7 +509,7 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
                             ("--cycle", args.cycle))
              if v]
     if wrong:
-        raise OptionError(f"{', '.join(wrong)} are for the single-trial solves without EMG; drop them for "
+        raise OptionError(f"{name_list(wrong)} are for the single-trial solves without EMG; drop them for "
                           f"{'--workflow emg-ten' if args.workflow == 'emg-ten' else '--emg'}")
     mode = args.emg_mode or "constrained"
     scale_bounds = {"emg_scale_bounds": b} if (b := emg_scale_bounds(args)) is not None else {}
@@ -527,7 +528,7 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
                             ("--warm-start", args.warm_start)) if v]
     if wrong:
         raise OptionError(
-            f"{', '.join(wrong)} cannot be used with --workflow emg-ten (it estimates the tendon stiffness "
+            f"{name_list(wrong)} cannot be used with --workflow emg-ten (it estimates the tendon stiffness "
             "and starts from static optimisation); drop them"
         )
     emg = emg_files(args)

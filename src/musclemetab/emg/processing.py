@@ -73,6 +73,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import DataMismatchError, InputFileError, MissingColumnError, OptionError
+from ..messages import name_list
 
 __all__ = [
     "BANDPASS_HZ",
@@ -256,7 +257,7 @@ def normalise(df: pd.DataFrame, maximum: str | Mapping[str, float] = "peak") -> 
         bad = [c for c in df.columns if not peak[c] > 0]
         if bad:
             raise DataMismatchError(
-                f"{_source(df)}: EMG channel{'s' if len(bad) > 1 else ''} {', '.join(map(str, bad))} "
+                f"{_source(df)}: EMG channel{'s' if len(bad) > 1 else ''} {name_list(bad)} "
                 "never rise above zero; cannot normalise to the trial's peak (check the channel)"
             )
         scale = peak
@@ -265,13 +266,13 @@ def normalise(df: pd.DataFrame, maximum: str | Mapping[str, float] = "peak") -> 
         if missing:
             raise OptionError(
                 f"no normalisation maximum for EMG channel{'s' if len(missing) > 1 else ''} "
-                f"{', '.join(map(str, missing))}; give one per channel (or use 'peak')"
+                f"{name_list(missing)}; give one per channel (or use 'peak')"
             )
         bad = [c for c in df.columns if not (np.isfinite(float(maximum[c])) and float(maximum[c]) > 0)]
         if bad:
             raise OptionError(
                 f"normalisation maximum must be positive; it is not for channel{'s' if len(bad) > 1 else ''} "
-                f"{', '.join(map(str, bad))}"
+                f"{name_list(bad)}"
             )
         scale = pd.Series({c: float(maximum[c]) for c in df.columns})
     out = df / scale
@@ -311,8 +312,8 @@ def _select(df: pd.DataFrame, channels: Sequence[str] | None) -> pd.DataFrame:
     missing = [c for c in channels if c not in df.columns]
     if missing:
         raise MissingColumnError(
-            f"{_source(df)}: missing EMG channel{'s' if len(missing) > 1 else ''} {', '.join(missing)}; "
-            f"the file has {', '.join(map(str, df.columns))}"
+            f"{_source(df)}: missing EMG channel{'s' if len(missing) > 1 else ''} {name_list(missing)}; "
+            f"the file has {name_list(df.columns)}"
         )
     out = df[channels]
     out.attrs.update(df.attrs)
@@ -357,7 +358,7 @@ def process_raw_emg(
     vals = df.to_numpy(dtype=float)
     if np.isnan(vals).any():
         bad = [str(c) for c in df.columns[np.isnan(vals).any(axis=0)]]
-        raise DataMismatchError(f"{_source(df)}: EMG channel{'s' if len(bad) > 1 else ''} {', '.join(bad)} hold NaN; "
+        raise DataMismatchError(f"{_source(df)}: EMG channel{'s' if len(bad) > 1 else ''} {name_list(bad)} hold NaN; "
                                 "fill or remove the gaps before processing")
     fs = sample_rate_hz(df)
     y = bandpass(df, band_hz, order, order_means, fs)
@@ -429,7 +430,7 @@ def read_processed_emg(path: str | os.PathLike) -> pd.DataFrame:
     vals = df.to_numpy(dtype=float)
     if np.isnan(vals).any():
         bad = [str(c) for c in df.columns[np.isnan(vals).any(axis=0)]]
-        raise InputFileError(f"{path}: EMG channel{'s' if len(bad) > 1 else ''} {', '.join(bad)} hold NaN")
+        raise InputFileError(f"{path}: EMG channel{'s' if len(bad) > 1 else ''} {name_list(bad)} hold NaN")
     return df
 
 
@@ -451,8 +452,8 @@ def map_channels(emg_df: pd.DataFrame, mapping: Mapping[str, Sequence[str]]) -> 
     if missing:
         users = [m for m, cs in norm.items() if any(c in missing for c in cs)]
         raise MissingColumnError(
-            f"{_source(emg_df)}: missing EMG channel{'s' if len(missing) > 1 else ''} {', '.join(missing)} "
-            f"(mapped to {', '.join(users)}); the file has {', '.join(map(str, emg_df.columns))}"
+            f"{_source(emg_df)}: missing EMG channel{'s' if len(missing) > 1 else ''} {name_list(missing)} "
+            f"(mapped to {name_list(users)}); the file has {name_list(emg_df.columns)}"
         )
     out = pd.DataFrame(
         {m: emg_df[cs].to_numpy(dtype=float).mean(axis=1) for m, cs in norm.items()}, index=emg_df.index

@@ -51,6 +51,7 @@ if TYPE_CHECKING:  # pandas is imported where a DataFrame is built
     import pandas as pd
 
 from ..errors import DataMismatchError, MissingColumnError, StorageFormatError, TimeColumnError, TruncatedFileWarning
+from ..messages import name_list
 from .atomic import atomic_write_text
 
 __all__ = [
@@ -251,7 +252,7 @@ def read_table(path: str | os.PathLike) -> StorageTable:
     if path.is_dir():
         raise StorageFormatError(f"{path} is a folder, not a file; give the path of the .mot/.sto file in it")
     try:
-        text = path.read_text(encoding="utf-8", errors="replace")
+        text = path.read_text(encoding="utf-8-sig", errors="replace")  # with or without a byte-order mark
     except FileNotFoundError:
         raise StorageFormatError(f"{path}: no such file; check the path") from None
     except OSError as exc:
@@ -387,7 +388,7 @@ def require_columns(
 
         near = sorted({n for c in missing for n in difflib.get_close_matches(c, list(map(str, df.columns)), n=3)})
         raise MissingColumnError(
-            f"{source}: missing {what}{'s' if len(missing) > 1 else ''} {', '.join(missing)}; "
+            f"{source}: missing {what}{'s' if len(missing) > 1 else ''} {name_list(missing)}; "
             + (f"near names: {', '.join(near)}; " if near else "")
             + f"the file has {', '.join(map(str, df.columns[:12]))}{' ...' if len(df.columns) > 12 else ''}"
         )
@@ -398,7 +399,7 @@ def require_columns(
             times = np.asarray(df.index)[rows] if rows.size else ()
             at = (f" (at t = {', '.join(f'{t:.4f}' for t in times[:3])}{' ...' if len(times) > 3 else ''} s)"
                   if len(times) and np.issubdtype(np.asarray(times).dtype, np.number) else "")
-            raise MissingColumnError(f"{source}: {what} {', '.join(bad)} holds NaN values{at}; fill or remove them")
+            raise MissingColumnError(f"{source}: {what} {name_list(bad)} holds NaN values{at}; fill or remove them")
 
 
 def _nan_rows(column) -> np.ndarray:

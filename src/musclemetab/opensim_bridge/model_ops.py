@@ -42,6 +42,7 @@ import numpy as np
 import opensim as osim
 
 from ..errors import ModelError, UnknownCoordinateError, UnknownMuscleError
+from ..messages import name_list
 
 #: OpenSim's ``Coordinate.MotionType`` values (``getMotionType()``)
 ROTATIONAL, TRANSLATIONAL, COUPLED = 1, 2, 3
@@ -109,7 +110,7 @@ def model_muscles(model, names, path, remedy: str) -> dict:
     have = {ms.get(i).getName() for i in range(ms.getSize())}
     missing = [n for n in names if n not in have]
     if missing:
-        raise UnknownMuscleError(f"{path}: the model has no muscle {', '.join(missing)}; {remedy}")
+        raise UnknownMuscleError(f"{path}: the model has no muscle {name_list(missing)}; {remedy}")
     return {n: ms.get(n) for n in names}
 
 
@@ -265,7 +266,7 @@ def muscle_geometry(
         unknown = [x for x in muscles if x not in m.muscles]
         if unknown:
             raise UnknownMuscleError(
-                f"{model_path}: the model has no muscle {', '.join(unknown)}; "
+                f"{model_path}: the model has no muscle {name_list(unknown)}; "
                 "check the names (they carry the side suffix, e.g. soleus_r)"
             )
     mus = [m.muscles[x] for x in muscles]
@@ -438,7 +439,7 @@ def body_origins(model_path: str, columns: dict, in_degrees: bool, bodies: list)
     names = [body_set.get(i).getName() for i in range(body_set.getSize())]
     missing = [b for b in bodies if b not in names]
     if missing:
-        raise ModelError(f"{model_path}: the model has no body {', '.join(missing)}")
+        raise ModelError(f"{model_path}: the model has no body {name_list(missing)}")
     objs = [body_set.get(b) for b in bodies]
     n_frames = len(next(iter(columns.values()))) if columns else 0
     for n, c in m.coords.items():

@@ -9,6 +9,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..errors import DataMismatchError, InputFileError, OptionError, UnknownMuscleError
+from ..messages import name_list
 from .result import PARAMETERS_FILE
 
 __all__ = ["resolve_emg_mapping", "mapping_for_muscles", "emg_at_nodes", "path_list", "trial_labels", "one_model",
@@ -64,7 +65,7 @@ def mapping_for_muscles(emg_mapping, mapping: dict, muscles: Sequence[str]) -> d
     unknown = [m for m in mapping if m not in muscles]
     if unknown:
         raise UnknownMuscleError(
-            f"EMG mapping: muscle{'s' if len(unknown) > 1 else ''} {', '.join(unknown)} not among the muscles of "
+            f"EMG mapping: muscle{'s' if len(unknown) > 1 else ''} {name_list(unknown)} not among the muscles of "
             f"the problem ({', '.join(list(muscles)[:6])} ...); map channels to model muscle names such as soleus_r"
         )
     return mapping
@@ -96,7 +97,7 @@ def trial_labels(ik_paths, labels) -> list[str]:
         raise OptionError(f"trial label {bad[0]!r} cannot name a folder; use plain names")
     dup = sorted({x for x in labels if labels.count(x) > 1})
     if dup:
-        raise OptionError(f"trial label{'s' if len(dup) > 1 else ''} {', '.join(dup)} used twice (IK files with "
+        raise OptionError(f"trial label{'s' if len(dup) > 1 else ''} {name_list(dup)} used twice (IK files with "
                           "the same name?); give distinct labels")
     if PARAMETERS_FILE in labels:
         raise OptionError(f"'{PARAMETERS_FILE}' cannot be a trial label")

@@ -48,6 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataMismatchError, InputFileError
+from ..messages import name_list
 
 __all__ = ["STATES_FILE", "CONTROLS_FILE", "FORCES_FILE", "MODEL_FILE", "OPENSIM_FILES",
            "tendon_strain_at_one_norm_force", "passive_fiber_strain_at_one_norm_force",
@@ -100,7 +101,7 @@ def opensim_muscle_parameters(params) -> dict:
     bad = [params.names[i] for i in np.flatnonzero(~(strain_t > 0) | ~(strain_p > 0))]
     if bad:
         raise DataMismatchError(
-            f"the tendon or passive curve of {', '.join(bad)} reaches one normalised force before its slack or "
+            f"the tendon or passive curve of {name_list(bad)} reaches one normalised force before its slack or "
             "optimal length (a strain at one normalised force of zero or less), which OpenSim's "
             "DeGrooteFregly2016Muscle cannot represent; check the tendon stiffness and passive parameters"
         )
@@ -302,7 +303,7 @@ def opensim_tables(solution, model_out, model_path=None, ik_path=None, id_path=N
     solved_dofs = list(solution.dofs)
     unknown = [d for d in solved_dofs if d not in reserve_of]
     if unknown:
-        raise DataMismatchError(f"{paths['model']}: no free coordinate {', '.join(unknown)} of the solution; give "
+        raise DataMismatchError(f"{paths['model']}: no free coordinate {name_list(unknown)} of the solution; give "
                                 "the model the solution was solved with")
     others = [c for c in reserve_of if c not in solved_dofs]
     id_forces = inverse_dynamics_at(paths["id"], others, t) if paths["id"] else {}
@@ -393,7 +394,7 @@ def joint_reaction(folder, joints, out_dir, external_loads=None, frame: str = "c
     folder, out_dir = Path(folder), Path(out_dir)
     missing = [name for name in OPENSIM_FILES if not (folder / name).is_file()]
     if missing:
-        raise InputFileError(f"{folder}: no {', '.join(missing)}; write them with write_opensim_files")
+        raise InputFileError(f"{folder}: no {name_list(missing)}; write them with write_opensim_files")
     out_dir.mkdir(parents=True, exist_ok=True)
     xml = None
     if external_loads is not None:

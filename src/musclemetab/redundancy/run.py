@@ -27,6 +27,7 @@ import numpy as np
 
 from ..errors import OptionError
 from ..events import WALKING_CYCLE_DURATION_S
+from ..messages import name_list
 from ..processes import BackgroundCall
 from ._docs import fill_doc
 from .emg_inputs import (
@@ -605,7 +606,7 @@ def emg_mappings_of_legs(model, ik_path, emg_mapping, side: str, dofs=None, cach
                                      f"{'right' if leg == 'r' else 'left'} leg; map its muscles to their channels")
     unplaced = sorted(set(mapping) - placed)
     if unplaced:
-        raise UnknownMuscleError(f"--emg-mapping {emg_mapping}: {', '.join(unplaced)} in neither leg's "
+        raise UnknownMuscleError(f"--emg-mapping {emg_mapping}: {name_list(unplaced)} in neither leg's "
                                  "muscles; check the names")
     return legs
 
