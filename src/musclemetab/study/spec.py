@@ -750,8 +750,6 @@ def _trial(data, base: Path, where: str, emg_processing: str = "envelope") -> Tr
             f"{'it' if len(forces) == 1 else 'they'} would be ignored; keep 'external_loads' or 'grf' (with "
             "'grf_column'), not both"
         )
-    if data.get("grf_column") is not None and data.get("grf") is None:
-        raise OptionError(f"{here}: 'grf_column' names a column of the 'grf' file; give 'grf' or drop 'grf_column'")
     return Trial(
         name=name,
         ik=_path(data.get("ik"), base, here, "ik"),
