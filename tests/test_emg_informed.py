@@ -273,3 +273,42 @@ def test_opensim_model_prepared_while_ipopt_solves(example, constrained, cache_d
     with pytest.raises(Stop):
         solve(example.model, *files, emg_mapping="authors", cache_dir=cache_dir, before_solve=lambda **o: told.append(o))
     assert told == []
+
+
+def test_raw_emg_read_with_emg_processing_raw(example, cache_dir, tmp_path):
+    """Raw EMG built by construction from the example's envelopes E (each channel a carrier of
+    amplitude max(E, 0), signed, on an offset, at 2 kHz) is refused as envelopes (it leaves
+    [0, 1]) and read with ``--emg-processing raw`` (the study file's ``emg_processing``) as its
+    envelope: max(E, 0) through the 6 Hz low-pass (the envelope's own filter), over its peak,
+    within 0.02 over the trial's window (a channel peaking at the file's end differs there)."""
+    import pandas as pd
+
+    from musclemetab.commands import main
+    from musclemetab.emg import RawEmgPath, lowpass, read_processed_emg
+    from musclemetab.io import read_storage, write_storage
+    from musclemetab.redundancy.emg_inputs import mapped_emg_table, resolve_emg_mapping
+
+    env = read_processed_emg(example.emg["normal"]).clip(lower=0.0)
+    t = np.arange(env.index[0], env.index[-1], 1 / 2000.0)
+    raw = pd.DataFrame({c: np.interp(t, env.index, env[c]) * np.sin(2 * np.pi * (90 + 5 * j) * t + j) - 0.05
+                        for j, c in enumerate(env.columns)}, index=pd.Index(t, name="time"))
+    path = write_storage(tmp_path / "raw_emg.mot", raw)
+    mapping = resolve_emg_mapping("authors")
+    got = mapped_emg_table(RawEmgPath(path), mapping, "raw")
+    smooth = lowpass(pd.DataFrame({c: np.interp(t, env.index, env[c]) for c in env.columns}, index=raw.index))
+    expected = mapped_emg_table(smooth / smooth.max(), mapping, "envelopes")
+    ik_t = read_storage(example.ik["normal"]).index.to_numpy()
+    for m in AUTHORS_CHANNELS:
+        a = np.interp(ik_t, got.index, got[m])
+        b = np.interp(ik_t, expected.index, expected[m])
+        assert np.max(np.abs(a - b)) < 0.02, m
+    base = ["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
+            str(example.id["normal"]), "--emg", str(path), "--emg-mapping", "authors", "--emg-mode", "constrained",
+            "--cache-dir", str(cache_dir), "--diagnose-only", "--out", str(tmp_path / "out")]
+    for extra, ok in (([], False), (["--emg-processing", "raw"], True)):
+        buf = io.StringIO()
+        with contextlib.redirect_stderr(buf), contextlib.redirect_stdout(buf):
+            code = main(base + extra)
+        assert (code == 0) == ok, buf.getvalue()
+        if not ok:
+            assert "outside [0, 1]" in buf.getvalue()

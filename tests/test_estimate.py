@@ -582,28 +582,37 @@ def test_a_factor_on_its_bound_warns(generated):
     assert sum("tendon_stiffness factor of vaslat_r is informed by no measurement" in t for t in text) == 1
 
 
-@pytest.mark.parametrize("damage", ["ends early", "alien column"])
+@pytest.mark.parametrize("damage", ["ends early", "needed moment missing"])
 def test_estimate_checks_each_inverse_dynamics_file_as_solve_does(example, tmp_path, damage):
-    """An ID file that ends before its IK file, or holds a moment of a coordinate the model lacks,
-    is refused by ``estimate_files`` before anything is solved, with the error (and file) that
-    ``solve_files`` gives for it."""
-    from musclemetab.errors import DataMismatchError, UnknownCoordinateError
+    """An ID file that ends before its IK file, or lacks the moment of a DOF asked for, is
+    refused by ``estimate_files`` before anything is solved, with the error (and file) that
+    ``solve_files`` gives for it. Columns for coordinates the model lacks are not needed:
+    ignored with a warning naming them."""
+    from musclemetab.errors import DataMismatchError, MissingColumnError, MusclemetabWarning
     from musclemetab.io import read_storage, write_storage
     from musclemetab.redundancy.run import estimate_files, solve_files
 
-    table = read_storage(example.id["normal"])
+    table = read_storage(example.id["normal"]).assign(knee_vv_r_moment=0.0, arm_flex_moment=0.0)
+    dofs = ["ankle_angle_r", "knee_angle_r", "hip_flexion_r"]
     if damage == "ends early":
         table = table[table.index <= table.index[-1] - 0.1]
         error, match = DataMismatchError, r"bad_id\.sto covers .* the ID must cover the whole IK window"
     else:
-        table = table.assign(tail_angle_moment=0.0)
-        error, match = UnknownCoordinateError, r"bad_id\.sto: column tail_angle_moment is for a coordinate the model"
+        table = table.drop(columns="knee_angle_r_moment")
+        error, match = MissingColumnError, r"bad_id\.sto.*knee_angle_r_moment"
     bad = tmp_path / "bad_id.sto"
     write_storage(bad, table, name="inverse dynamics")
-    with pytest.raises(error, match=match):
-        estimate_files(example.model, [example.ik["normal"]], [bad], tmp_path / "est",
+    alien = r"bad_id\.sto: columns knee_vv_r_moment, arm_flex_moment are for coordinates the model .* ignored"
+    with pytest.raises(error, match=match), pytest.warns(MusclemetabWarning, match=alien):
+        estimate_files(example.model, [example.ik["normal"]], [bad], tmp_path / "est", dofs=dofs,
                        estimate={"tendon_stiffness": ["soleus_r"]}, emg=[example.emg["normal"]])
     assert not (tmp_path / "est").exists()
-    if damage == "alien column":  # the solve's check, the same line (the window crops the IK there)
+    if damage != "ends early":  # the solve's check, the same line (the window crops the IK there)
         with pytest.raises(error, match=match):
-            solve_files(example.model, example.ik["normal"], bad, "effort-gen")
+            solve_files(example.model, example.ik["normal"], bad, "effort-gen", dofs=dofs)
+        # with the DOFs' moments present, the columns of coordinates the model lacks are no obstacle
+        write_storage(bad, read_storage(example.id["normal"]).assign(knee_vv_r_moment=0.0, arm_flex_moment=0.0))
+        with pytest.warns(MusclemetabWarning, match=alien):
+            diagnosis = solve_files(example.model, example.ik["normal"], bad, "effort-gen", dofs=dofs,
+                                    window=(0.6, 0.9), diagnose_only=True)
+        assert not diagnosis.blocking

@@ -162,12 +162,13 @@ def _cli(*argv):
 
 
 def test_bad_trial_input_one_line_no_output(gait2392, tmp_path, capsys):
-    # a DOF in the ID data the model lacks: the example subject's ID against the gait2392 model
+    # the knee's moment asked for but absent
     id_alien = tmp_path / "id.sto"
-    id_alien.write_text(gait2392.id.read_text().replace("lumbar_rotation_moment", "elbow_flex_r_moment"))
+    id_alien.write_text(gait2392.id.read_text().replace("knee_angle_r_moment", "knee_angle_r_torque"))
     out = tmp_path / "out"
     cases = [
-        (["--id", id_alien], "elbow_flex_r_moment is for a coordinate the model"),
+        (["--id", id_alien, "--dofs", "knee_angle_r", "hip_flexion_r", "--window", "0.6:1.4"],
+         "missing inverse-dynamics column knee_angle_r_moment"),
         (["--id", gait2392.id, "--dofs", "knee_angle_r", "wrist_flex_r"], "has no coordinate wrist_flex_r"),
         (["--external-loads", gait2392.external_loads, "--window", "2.0:3.0"], "ends 0.500 s before"),
         (["--external-loads", gait2392.external_loads, "--side", "l", "--cycle", "3"], "cycle 3 does not exist"),
@@ -543,3 +544,53 @@ def test_passive_calibration_of_the_left_leg(example, gait2392, tmp_path):
             pennation_angle_at_optimal_rad=d.pennation_angle_at_optimal_rad[i], kpe=kpe, s0=s0, sm=sm,
             kT=d.tendon_stiffness[i])
         assert cal.lm_norm["knee"][k, j] == pytest.approx(lm, abs=1e-5), m
+
+
+def test_time_stamps_rounded_to_the_millisecond_read_as_the_constant_rate(gait2392, tmp_path):
+    """OpenSim's tools round time to the millisecond: the 60 Hz IK then steps by 16 and 17 ms,
+    and the ID's stamps too. Such files give the inputs of the files with exact stamps, and a
+    truly uneven file (a frame dropped) is still refused."""
+    import pandas as pd
+
+    from musclemetab.geometry import compute_geometry
+    from musclemetab.io import read_storage, read_table, write_storage
+    from musclemetab.redundancy.inputs import GeometryArrays, read_inverse_dynamics, read_kinematics, trial_inputs
+
+    dofs = ["knee_angle_r", "hip_flexion_r"]
+
+    def rounded(path, name):
+        df = read_storage(path)
+        df.index = pd.Index(np.round(df.index.to_numpy(), 3), name="time")
+        return write_storage(tmp_path / name, df, in_degrees=df.attrs["in_degrees"])
+
+    ik_rounded, id_rounded = rounded(gait2392.ik, "ik_ms.mot"), rounded(gait2392.id, "id_ms.sto")
+    lines = ik_rounded.read_text().splitlines()
+    written = [float(line.split()[0]) for line in lines[lines.index("endheader") + 2:] if line.strip()]
+    assert set(np.round(np.diff(written), 6)) == {0.016, 0.017}
+    inputs = []
+    for ik_path, id_path in ((gait2392.ik, gait2392.id), (ik_rounded, id_rounded)):
+        ik = read_table(ik_path)
+        t_ik, _ = read_kinematics(ik, dofs)
+        t_id, moments = read_inverse_dynamics(read_table(id_path), dofs)
+        g = compute_geometry(gait2392.model, ik, dofs=dofs, muscles=["semiten_r", "vas_int_r", "rect_fem_r"],
+                             cache_dir=tmp_path)
+        keep = (t_ik > 0.708) & (t_ik < 1.308)  # between frames
+        window = GeometryArrays(t_ik[keep], g.muscles, g.dofs, g.lmt_m[keep], g.moment_arms_m[keep])
+        inputs.append(trial_inputs(window, t_id, moments, ik_time_s=t_ik[keep]))
+    exact, from_rounded = inputs
+    # the rate fitted to the rounded stamps: within 4 microseconds of the exact stamps
+    np.testing.assert_allclose(from_rounded.frame_time_s, exact.frame_time_s, rtol=0, atol=4e-6)
+    np.testing.assert_allclose(from_rounded.mesh_time_s, exact.mesh_time_s, rtol=0, atol=4e-6)
+    np.testing.assert_allclose(from_rounded.lmt_frames_m, exact.lmt_frames_m, rtol=0, atol=1e-6)  # m, filtered
+    np.testing.assert_allclose(from_rounded.lmt_m, exact.lmt_m, rtol=0, atol=1e-6)  # m
+    np.testing.assert_allclose(from_rounded.moment_arms_m, exact.moment_arms_m, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(from_rounded.moments_Nm, exact.moments_Nm, rtol=0, atol=0.05)  # of up to 100 N m
+    # one frame dropped: no rounding explains it
+    df = read_storage(gait2392.ik)
+    df = df[df.index < 1.5].drop(index=df.index[40])
+    dropped = read_table(write_storage(tmp_path / "dropped.mot", df, in_degrees=True))
+    with pytest.raises(DataMismatchError, match=r"dropped\.mot: the time stamps are not evenly spaced"):
+        trial_inputs(GeometryArrays(dropped.index, ["m"], ["knee_angle_r"], np.ones((len(dropped), 1)),
+                                    np.ones((len(dropped), 1, 1))),
+                     *read_inverse_dynamics(gait2392.id, ["knee_angle_r"]), ik_time_s=dropped.index,
+                     sources={"ik": dropped.attrs["path"]})

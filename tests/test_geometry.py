@@ -181,3 +181,57 @@ def test_cli_errors_one_line_no_output(example, tmp_path, args, phrase):
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("musclemetab: error:") and phrase in lines[0]
     assert not out.exists() or not any(out.iterdir())
+
+
+def _locked_knee_model(example, folder):
+    """The example model with ``<locked>true</locked>`` on knee_angle_r (nothing else changed)."""
+    text = example.model.read_text()
+    start = text.index('<Coordinate name="knee_angle_r">')
+    end = text.index("</Coordinate>", start)
+    block = text[start:end]
+    assert block.count("<locked>false</locked>") == 1
+    path = folder / "locked_knee.osim"
+    path.write_text(text[:start] + block.replace("<locked>false</locked>", "<locked>true</locked>") + text[end:])
+    return path
+
+
+def test_locked_knee_follows_the_motion_and_is_refused_by_name(example, tmp_path):
+    """A model locking knee_angle_r: the muscle paths still take the IK's knee angle (lengths
+    equal OpenSim 4.1's MuscleAnalysis of the unlocked model along the same motion, which the
+    authors stored), and the geometry and the solve refuse the motion, naming the knee, instead
+    of dropping the knee and its muscles in silence."""
+    from musclemetab.errors import DataMismatchError
+    from musclemetab.io import read_table
+    from musclemetab.opensim_bridge import call
+    from musclemetab.redundancy.run import solve_files
+
+    locked = _locked_knee_model(example, tmp_path)
+    ik = read_table(example.ik["normal"])
+    muscles = ["semiten_r", "bfsh_r", "vasmed_r", "recfem_r"]
+    raw = call("model_ops:muscle_geometry", str(locked), ik.index.copy(),
+               {c: np.ascontiguousarray(ik[c]) for c in ik.columns}, True, ["hip_flexion_r"], muscles)
+    ref = read_storage(example.reference_muscle_analysis / "IK_sub1_normal_MuscleAnalysis_Length.sto")
+    diff = np.abs(ref[muscles].to_numpy() - raw["lmt_m"])
+    assert diff.max() < 0.1e-3, f"largest length difference {diff.max() * 1e3:.4f} mm"
+    assert np.ptp(ik["knee_angle_r"]) > 50  # the motion flexes the knee by more than 50 deg
+    with pytest.raises(DataMismatchError, match=r"locks knee_angle_r \(locked at 0 deg; the motion takes it over"):
+        compute_geometry(locked, example.ik["normal"], cache_dir=tmp_path)
+    with pytest.raises(DataMismatchError, match="knee_angle_r"):
+        solve_files(locked, example.ik["normal"], example.id["normal"], window=(0.6, 0.8), cache_dir=tmp_path)
+    # locked coordinates the motion holds at their value (the example's subtalar and mtp) pass
+    assert compute_geometry(example.model, example.ik["normal"], cache_dir=tmp_path).dofs == tuple(DOFS)
+
+
+def test_a_message_lists_ten_names_and_counts_the_rest(example):
+    """150 000 unknown muscle names gave an error line of close to a megabyte: every message
+    listing names shows the first ten and how many more (messages.name_list)."""
+    from musclemetab.messages import name_list
+
+    assert name_list(["a", "b"]) == "a, b"
+    assert name_list([f"m{i}" for i in range(12)]) == "m0, m1, m2, m3, m4, m5, m6, m7, m8, m9 ... and 2 more"
+    names = [f"mystery{i}_r" for i in range(150_000)]
+    with pytest.raises(UnknownMuscleError) as info:
+        compute_geometry(example.model, example.ik["normal"], muscles=names, use_cache=False)
+    text = str(info.value)
+    assert "mystery0_r, mystery1_r" in text and text.count("mystery") == 10
+    assert "... and 149 990 more" in text and len(text) < 500

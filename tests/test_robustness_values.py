@@ -457,3 +457,19 @@ def test_report_of_a_study_whose_units_all_failed_says_so(tmp_path):
     text = write_report(root).read_text(encoding="utf-8")
     assert "No unit of the study succeeded" in text and "IPOPT: Infeasible" in text
     assert decoy.read_text() == "keep" and sorted(p.name for p in tmp_path.iterdir()) == ["decoy.txt", "study"]
+
+
+def test_the_documented_ranges_are_the_checked_ones():
+    """docs/study.md's table of the numeric keys gives, for every key, the range the study file's
+    check (``NUMBER_KEYS``) applies: no row promises what the code refuses (``[solver] max_iter``
+    up to 1e7 while the check stops at 1e5)."""
+    import re
+
+    text = (Path(__file__).parents[1] / "docs" / "study.md").read_text()
+    rows = re.findall(r"^\| `(?:\[\w+\] )?([a-z_0-9]+)(?:\.<muscle>)?` \| [^|]* \| ([^|]+) \|", text, re.M)
+    assert len(rows) >= 15
+    for name, documented in rows:
+        key = NUMBER_KEYS[name]
+        checked = key.range_text().replace(" (positive)", "")
+        checked = checked[: -len(f" {key.unit}")] if key.unit else checked
+        assert documented.strip() == checked + (" (whole number)" if key.integer else ""), name

@@ -150,3 +150,27 @@ def test_ranked_table_and_command_line(normal, tmp_path, capsys):
     assert path.name == "sensitivity.csv" and len(csv) == len(df)
     got = csv[(csv.model == "BH04") & (csv.rate == "soleus_r") & (csv.parameter == "lTs")].iloc[0]
     assert got.d_rate_d_log_p == pytest.approx(sens.derivative("BH04", "lTs", "soleus_r", rate="soleus_r"), rel=1e-9)
+
+
+def test_sensitivity_of_a_failed_solve_is_refused_without_pointing_to_allow_failed(normal, tmp_path, capsys):
+    """``metabolics --sensitivity --allow-failed`` on a failed solve told the user to pass
+    ``--allow-failed``: the sensitivities are derivatives at an optimum the solve did not reach,
+    so the option is refused before any work, saying so; the rates alone are still computed."""
+    import json
+    import shutil
+
+    from musclemetab.commands import main
+
+    folder, _, _ = normal
+    failed = shutil.copytree(folder, tmp_path / "failed")
+    summary = json.loads((failed / "summary.json").read_text())
+    summary.update(success=False, status="Maximum_Iterations_Exceeded")
+    (failed / "summary.json").write_text(json.dumps(summary))
+    base = ["metabolics", "--solution", str(failed), "--mass", "72.6", "--height", "1.743"]
+    for extra in (["--allow-failed"], []):
+        assert main(base + ["--sensitivity", "F0", *extra, "--out", str(tmp_path / "s")]) != 0
+        err = capsys.readouterr().err
+        assert "--sensitivity: the stored solve" in err and "Maximum_Iterations_Exceeded" in err
+        assert "use --allow-failed" not in err and not (tmp_path / "s").exists()
+    assert main(base + ["--allow-failed", "--out", str(tmp_path / "m")]) == 0
+    assert (tmp_path / "m" / "whole_body.csv").is_file()

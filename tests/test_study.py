@@ -402,3 +402,100 @@ def test_study_energy_goal_table(example):
         with pytest.raises(OptionError) as info:
             study_from_dict(data, base="/")
         assert all(w in str(info.value) for w in words), str(info.value)
+
+
+def test_emg_processing_key_marks_raw_emg(example):
+    """``emg_processing = "raw"`` (subject, or a trial overriding it) makes the trial's EMG a raw
+    EMG path, which every reader of the trial's EMG processes (``musclemetab.emg.read_emg``);
+    another word is refused naming the key."""
+    import pickle
+
+    from musclemetab.emg import RawEmgPath
+    from musclemetab.errors import OptionError
+
+    data = _study_dict(example, trials=("slow", "normal"))
+    subject = data["subjects"][0]
+    for t in subject["trials"]:
+        t["emg"] = str(example.emg[t["name"]])
+    subject["emg_processing"] = "raw"
+    subject["trials"][1]["emg_processing"] = "envelope"
+    s = study_from_dict(data).subject("sub1")
+    slow, normal = (s.trial(n) for n in ("slow", "normal"))
+    assert isinstance(slow.emg, RawEmgPath) and str(slow.emg) == str(example.emg["slow"])
+    assert isinstance(pickle.loads(pickle.dumps(slow.emg)), RawEmgPath)  # as it travels to a worker process
+    assert not isinstance(normal.emg, RawEmgPath) and normal.emg == example.emg["normal"]
+    # the processing is part of what a unit's result depends on
+    from musclemetab.study.units import _trial_record
+
+    assert _trial_record(slow)["emg_processing"] == "raw" and "emg_processing" not in _trial_record(normal)
+    subject["trials"][1]["emg_processing"] = "rectified"
+    with pytest.raises(OptionError, match="trial 'normal'.*'emg_processing' must be envelope or raw, not 'rectified'"):
+        study_from_dict(data)
+
+
+@pytest.mark.parametrize("keys", [("grf",), ("grf_column",), ("grf", "grf_column")])
+def test_trial_with_external_loads_and_grf_is_refused(example, gait2392, keys):
+    """``external_loads`` gives the ground forces; a ``grf`` or ``grf_column`` beside it would be
+    ignored (``solve`` refuses the pair too), so the study refuses it naming the trial and keys."""
+    from musclemetab.errors import OptionError
+
+    data = _study_dict(example, trials=("normal",))
+    trial = data["subjects"][0]["trials"][0]
+    trial["external_loads"] = str(gait2392.external_loads)
+    values = {"grf": str(gait2392.grf), "grf_column": "ground_force_vy"}
+    trial.update({k: values[k] for k in keys})
+    named = " and ".join(f"'{k}'" for k in keys)
+    with pytest.raises(OptionError, match=f"trial 'normal': 'external_loads' and {named} both give the ground forces"):
+        study_from_dict(data)
+    del trial["external_loads"]
+    if "grf" in keys:
+        assert study_from_dict(data).subject("sub1").trial("normal").grf == gait2392.grf
+
+
+def test_report_table_gives_the_figures_models(example):
+    """The ``[report]`` table docs/report.md describes: ``models`` checked when the study file is
+    read, kept in the settings ``study.json`` records, read back by the report."""
+    from musclemetab.errors import OptionError
+    from musclemetab.metabolics.registry import STUDY_MODELS
+    from musclemetab.report.folder import _recorded_report_models
+
+    data = _study_dict(example, trials=("normal",))
+    data["report"] = {"models": ["all", "LW05"]}
+    study = study_from_dict(data)
+    assert study.settings["report"] == {"models": ["all", "LW05"]}
+    assert _recorded_report_models(study.settings) == [*STUDY_MODELS, "LW05"]
+    data["report"] = {"models": "UM10,XX99"}
+    with pytest.raises(OptionError, match=r"\[report\]: models: unknown metabolic model .XX99."):
+        study_from_dict(data)
+    data["report"] = {"model": "UM10"}
+    with pytest.raises(OptionError, match=r"\[report\]: unknown key\(s\) model"):
+        study_from_dict(data)
+
+
+def test_files_with_a_byte_order_mark_are_read(example, tmp_path):
+    """Windows editors start UTF-8 files with a byte-order mark: a study file, a JSON mapping and
+    a storage file saved so are read as without it (the study file gave "Invalid statement
+    (line 1, column 1)")."""
+    import json
+
+    from musclemetab.io import read_json_object, read_table
+
+    text = f"""name = "bom"
+[[subjects]]
+name = "sub1"
+model = "{example.model}"
+body_mass_kg = 72.6
+[[subjects.trials]]
+name = "normal"
+ik = "{example.ik['normal']}"
+id = "{example.id['normal']}"
+"""
+    (tmp_path / "bom.toml").write_text(text, encoding="utf-8-sig")
+    assert (tmp_path / "bom.toml").read_bytes()[:3] == b"\xef\xbb\xbf"
+    assert load_study(tmp_path / "bom.toml").subject("sub1").trial("normal").ik == example.ik["normal"]
+    (tmp_path / "map.json").write_text(json.dumps({"soleus_r": ["SO"]}), encoding="utf-8-sig")
+    assert read_json_object(tmp_path / "map.json") == {"soleus_r": ["SO"]}
+    (tmp_path / "bom.sto").write_text(example.id["normal"].read_text(), encoding="utf-8-sig")
+    a, b = read_table(example.id["normal"]), read_table(tmp_path / "bom.sto")
+    assert a.attrs["name"] == b.attrs["name"] and a.columns == b.columns
+    np.testing.assert_array_equal(a.values, b.values)

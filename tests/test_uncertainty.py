@@ -308,3 +308,18 @@ def test_a_legs_samples_live_in_its_leg_unit(tmp_path):
     prepare_leg_folder(tmp_path, sample)
     assert not any(tmp_path.iterdir())
     assert sample.depends_on(None) == Unit("sub", "walk", "effort-gen", "l")
+
+
+def test_priors_naming_an_unknown_muscle_are_refused_when_the_study_starts(example, tmp_path):
+    """A priors file naming a muscle no subject's model has is refused by ``run_study`` before
+    any unit runs (nothing written), naming the file, the muscle and the model; a sample found it
+    only when it ran."""
+    from musclemetab.study import load_study, run_study
+
+    (tmp_path / "zero.csv").write_text("parameter,spread,muscle\nkT,0.3,soleus\nkT,0.2,solues_r\n")
+    (tmp_path / "study.toml").write_text(STUDY.format(ex=example))
+    study = load_study(tmp_path / "study.toml")
+    with pytest.raises(UnknownMuscleError, match=r"zero\.csv: muscle solues_r of the uncertainty priors names no "
+                                                 r"muscle of subject sub1's model"):
+        run_study(study, workers=1, progress=False)
+    assert not (tmp_path / "out").exists()

@@ -172,7 +172,7 @@ def seal_file_entry(path: Path, what: str) -> None:
 
 
 #: bump when a cached model result changes meaning
-MODEL_CACHE_FORMAT = 1
+MODEL_CACHE_FORMAT = 2  # 2: the layout's coordinates carry their default value
 
 
 def _model_spec(path: Path, target: str) -> dict:

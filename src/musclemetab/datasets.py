@@ -27,6 +27,7 @@ from urllib.parse import quote
 
 from .io.atomic import file_sha256
 from .errors import DatasetError
+from .messages import name_list
 
 __all__ = [
     "ExampleSubject",
@@ -135,7 +136,7 @@ def _local_root(folder, dataset: str, entries: dict, verify: bool) -> Path | Non
         bad = [n for n, (sha, _) in entries.items() if _sha256(root / n) != sha]
         if bad:
             raise DatasetError(
-                f"{root}: file{'s' if len(bad) > 1 else ''} {', '.join(bad)} differ from the published "
+                f"{root}: file{'s' if len(bad) > 1 else ''} {name_list(bad)} differ from the published "
                 f"{dataset} data (SHA-256 mismatch); restore the original files"
             )
     return root

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import DataMismatchError, InputFileError, MissingColumnError, ModelError
+from .messages import name_list
 
 __all__ = [
     "ID_COORDINATE_FILTER_HZ",
@@ -142,7 +143,7 @@ def read_external_loads(path: str | os.PathLike) -> ExternalLoads:
         missing = [c for c in needed if c not in table.columns]
         if missing:
             raise MissingColumnError(
-                f"{datafile}: no column {', '.join(missing)} for ExternalForce '{f.name}' of {path}; fix the "
+                f"{datafile}: no column {name_list(missing)} for ExternalForce '{f.name}' of {path}; fix the "
                 "identifiers in the XML or the column names"
             )
         check_force_columns(table, datafile, needed, points=[c for c in needed if f.point_identifier

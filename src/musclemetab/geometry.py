@@ -46,7 +46,7 @@ from .model import default_dofs
 __all__ = ["Geometry", "compute_geometry", "geometry_is_cached", "default_cache_dir", "write_geometry", "check_kinematics",
            "GEOMETRY_FORMAT"]
 
-GEOMETRY_FORMAT = 3  # bump when the cached content changes meaning
+GEOMETRY_FORMAT = 4  # bump when the cached content changes meaning (4: locked coordinates follow the IK)
 #: Rotations in radians beyond this are not joint angles (model ranges are below pi).
 MAX_PLAUSIBLE_ANGLE_RAD = math.pi
 #: With ``inDegrees=yes``, DOF angles all below this many "degrees" while the joints move
@@ -215,6 +215,10 @@ def compute_geometry(
         The IK file is malformed.
     ModelError, UnknownCoordinateError, UnknownMuscleError
         The model cannot be loaded or lacks a DOF or muscle.
+    DataMismatchError
+        The motion moves a coordinate of ``side``'s leg that the model locks
+        (:func:`musclemetab.layout.check_locked_coordinates`). Locked coordinates the motion
+        holds still are set to the motion's values like the others.
     MissingColumnError
         The IK file lacks a DOF column.
     """
@@ -222,19 +226,21 @@ def compute_geometry(
 
     if method not in MOMENT_ARM_METHODS:
         raise OptionError(f"moment-arm method must be one of {', '.join(MOMENT_ARM_METHODS)}, not {method!r}")
-    ik_source, model_path, ik_path = ik_path, Path(model_path), table_path(ik_path)
-    if not dofs:
-        from .layout import read_layout, side_dofs
+    from .layout import check_locked_coordinates, read_layout, side_dofs
+    from .model import check_model_path
 
-        dofs = side_dofs(read_layout(model_path), side)
+    ik_source, model_path, ik_path = ik_path, Path(model_path), table_path(ik_path)
+    check_model_path(model_path)
+    layout = None
+    if not dofs:
+        layout = read_layout(model_path)
+        dofs = side_dofs(layout, side)
     dofs = list(dofs)
     if len(set(dofs)) != len(dofs):
         raise OptionError(f"DOF list {dofs} names a DOF twice")
-    from .model import check_model_path
-
-    check_model_path(model_path)
     ik = as_table(ik_source)  # validates the file before any cache lookup
     in_degrees = check_kinematics(ik, dofs, check_units)
+    check_locked_coordinates(layout or read_layout(model_path, cache_dir=cache_dir), side, ik, in_degrees)
 
     cache_file = None
     if use_cache:

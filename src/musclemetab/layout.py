@@ -14,7 +14,9 @@ Rules (documented in ``docs/trials.md``):
   joints whose child body is on that side, ordered from the most distal joint to the most
   proximal, and within a joint in the joint's own order (for the lower-limb models this is
   ankle, knee, then the hip's flexion, adduction and rotation, the study's order). Locked
-  arms and coupled coordinates (the Rajagopal knee's ``knee_angle_r_beta``) drop out.
+  arms and coupled coordinates (the Rajagopal knee's ``knee_angle_r_beta``) drop out. A
+  motion that moves a locked coordinate of the side's joints is refused, naming it
+  (:func:`check_locked_coordinates`): a locked knee would drop the knee and the vasti.
   :func:`discover_dofs` then keeps those the inverse dynamics holds a ``<dof>_moment``
   column for; the muscle selection (``|moment arm| > 1e-4 m``) drops DOFs no muscle spans.
 * **Forward coordinate.** The coordinates of the joint(s) attached to the ground whose unit
@@ -25,6 +27,7 @@ Rules (documented in ``docs/trials.md``):
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,6 +36,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from .errors import DataMismatchError, ModelError, OptionError
+from .messages import name_list
 
 __all__ = [
     "SIDE_OFFSET_M",
@@ -41,6 +45,7 @@ __all__ = [
     "check_side",
     "side_dofs",
     "discover_dofs",
+    "check_locked_coordinates",
     "foot_bodies",
 ]
 
@@ -138,21 +143,67 @@ def side_dofs(layout: ModelLayout, side: str) -> list[str]:
     Raises :class:`DataMismatchError` when the model has no such coordinate (e.g. no leg on
     that side).
     """
-    check_side(side)
     coords = {c["name"]: c for c in layout.coordinates}
-    on_side = [j for j in layout.joints if j["child"] in layout.bodies and layout.body_side(j["child"]) == side]
-    # stable sort: deepest joint first, model order among equals
-    on_side = sorted(on_side, key=lambda j: -j["depth"])
-    dofs = [
-        n for j in on_side for n in j["coordinates"]
-        if n in coords and not coords[n]["locked"] and not coords[n]["dependent"]
-    ]
+    dofs = [n for n in _side_coordinates(layout, side) if not coords[n]["locked"]]
     if not dofs:
         raise DataMismatchError(
             f"{layout.path}: the model has no unlocked joint on the {SIDE_NAMES[side]} side (side '{side}'); "
             "choose the other side or give --dofs"
         )
     return dofs
+
+
+def _side_coordinates(layout: ModelLayout, side: str) -> list[str]:
+    """Independent (not coupler-driven) coordinates of the joints on ``side``, locked or not,
+    distal to proximal."""
+    check_side(side)
+    coords = {c["name"]: c for c in layout.coordinates}
+    on_side = [j for j in layout.joints if j["child"] in layout.bodies and layout.body_side(j["child"]) == side]
+    # stable sort: deepest joint first, model order among equals
+    on_side = sorted(on_side, key=lambda j: -j["depth"])
+    return [n for j in on_side for n in j["coordinates"] if n in coords and not coords[n]["dependent"]]
+
+
+#: How far (rad for a rotation, m for a translation) the motion may take a locked coordinate
+#: from the value the model locks it at (:func:`check_locked_coordinates`); IK files hold
+#: eight decimals of a degree, and OpenSim's IK writes a locked coordinate's value exactly.
+LOCKED_TOLERANCE = 1e-4
+
+
+def check_locked_coordinates(layout: ModelLayout, side: str, ik, in_degrees: bool) -> None:
+    """Refuse a motion that moves a coordinate the model locks on ``side``'s leg.
+
+    A locked coordinate is no degree of freedom: the moment arms about it, its moment and the
+    muscles that cross only its joint (a locked knee drops the vasti) would be left out of the
+    geometry and the solve, and the other muscles balanced at a pose the model cannot take. Raises :class:`DataMismatchError`
+    naming each coordinate of the side's joints that the model locks and that the motion
+    ``ik`` (a :class:`~musclemetab.io.StorageTable`; rotations in degrees when ``in_degrees``)
+    takes further than :data:`LOCKED_TOLERANCE` from the value it is locked at (its default
+    value), and saying what to do. A locked coordinate the motion holds at that value (as
+    OpenSim's IK of the same model writes it), or leaves out, is fine.
+    """
+    coords = {c["name"]: c for c in layout.coordinates}
+    ik_path = ik.attrs.get("path", "the IK motion")
+    moved = []
+    for n in _side_coordinates(layout, side):
+        c = coords[n]
+        if not c["locked"] or n not in ik.columns:
+            continue
+        rotational = c["motion_type"] == "rotational"
+        q = np.asarray(ik[n], dtype=float)
+        q = np.deg2rad(q) if in_degrees and rotational else q
+        held = float(c.get("default_value", 0.0))
+        if float(np.max(np.abs(q - held))) > LOCKED_TOLERANCE:
+            unit, scale = ("deg", math.degrees(1.0)) if rotational else ("m", 1.0)
+            moved.append(f"{n} (locked at {held * scale:.4g} {unit}; the motion takes it over "
+                         f"{q.min() * scale:.4g} to {q.max() * scale:.4g} {unit})")
+    if moved:
+        raise DataMismatchError(
+            f"{ik_path}: the model {layout.path} locks {'; '.join(moved)}. A locked coordinate is no degree of "
+            f"freedom, so its moment and the muscles that cross only its joint would be left out; "
+            "unlock it in the model (<locked>false</locked> in its Coordinate) or give the motion computed "
+            "with this model"
+        )
 
 
 #: Bodies of a side whose origin lies within this height (m) of the side's lowest body origin,
@@ -208,7 +259,7 @@ def discover_dofs(layout: ModelLayout, side: str, id_columns: Iterable[str] | No
         from .errors import MusclemetabWarning
 
         warnings.warn(
-            f"the inverse dynamics holds no moment for {', '.join(missing)}: solved without "
+            f"the inverse dynamics holds no moment for {name_list(missing)}: solved without "
             f"{'it' if len(missing) == 1 else 'them'} (give --dofs to choose the DOFs)", MusclemetabWarning, stacklevel=2,
         )
     if not kept:
@@ -227,12 +278,12 @@ def check_dofs_in_model(layout: ModelLayout, dofs: Sequence[str], where: str = "
     missing = [d for d in dofs if d not in coords]
     if missing:
         raise UnknownCoordinateError(
-            f"{where}: the model {layout.path} has no coordinate {', '.join(missing)}; its unlocked coordinates: "
+            f"{where}: the model {layout.path} has no coordinate {name_list(missing)}; its unlocked coordinates: "
             f"{', '.join(n for n, c in coords.items() if not c['locked'])}"
         )
     fixed = [d for d in dofs if coords[d]["locked"] or coords[d]["dependent"]]
     if fixed:
         raise UnknownCoordinateError(
-            f"{where}: coordinate {', '.join(fixed)} of {layout.path} is locked or coupled and cannot be a "
+            f"{where}: coordinate {name_list(fixed)} of {layout.path} is locked or coupled and cannot be a "
             "degree of freedom; drop it"
         )

@@ -17,10 +17,23 @@ from __future__ import annotations
 import sys
 import warnings
 
-__all__ = ["PREFIX", "warning_line", "show_warning", "install"]
+__all__ = ["PREFIX", "NAMES_SHOWN", "name_list", "warning_line", "show_warning", "install"]
 
 #: first words of every warning line
 PREFIX = "musclemetab: warning: "
+#: names a message lists before it counts the rest (:func:`name_list`)
+NAMES_SHOWN = 10
+
+
+def name_list(names, shown: int = NAMES_SHOWN, sep: str = ", ") -> str:
+    """The names (muscles, columns, channels, keys...) a message lists: the first ``shown``,
+    joined by ``sep``, and a count of the others (``a, b, ... and 149 990 more``), so that a
+    message stays one readable line however many names the input holds."""
+    names = [str(n) for n in names]
+    if len(names) <= shown:
+        return sep.join(names)
+    rest = f"{len(names) - shown:,}".replace(",", " ")
+    return f"{sep.join(names[:shown])} ... and {rest} more"
 
 
 def warning_line(message, category=UserWarning) -> str:

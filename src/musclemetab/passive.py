@@ -20,6 +20,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .errors import InputFileError, MissingColumnError, UnknownMuscleError
+from .messages import name_list
 
 __all__ = ["PassiveParameters", "read_passive_parameters", "generic_passive_parameters",
            "reference_passive_parameters", "base_name", "PASSIVE_RANGES"]
@@ -75,12 +76,12 @@ class PassiveParameters:
                                                 (m, _mirror(m), base_name(m)) if k is not None)]
         if not_finite:
             raise InputFileError(
-                f"{self.source}: the passive parameters (kPE, s0, sM) of {', '.join(not_finite)} are not finite "
+                f"{self.source}: the passive parameters (kPE, s0, sM) of {name_list(not_finite)} are not finite "
                 "numbers (inf or NaN); give finite values (calibrate again, or correct the file)"
             )
         if missing:
             raise UnknownMuscleError(
-                f"{self.source}: no passive parameters for {', '.join(missing)}; the calibration must "
+                f"{self.source}: no passive parameters for {name_list(missing)}; the calibration must "
                 "cover every muscle of the problem: calibrate this model's passive muscles (musclemetab "
                 "calibrate-passive --model MODEL --trials FOLDER --out DIR, then --passive DIR/passive_parameters.csv), "
                 "or use the effort-gen workflow"
@@ -119,7 +120,7 @@ def read_passive_parameters(path: str | os.PathLike) -> PassiveParameters:
 
 def _read_passive_csv(path: Path) -> PassiveParameters:
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")  # with or without a byte-order mark
     except (OSError, UnicodeDecodeError) as exc:
         raise InputFileError(f"{path}: cannot be read ({exc})") from None
     lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
@@ -129,7 +130,7 @@ def _read_passive_csv(path: Path) -> PassiveParameters:
     missing = [c for c in need if c not in cols]
     if missing:
         raise MissingColumnError(
-            f"{path}: missing column{'s' if len(missing) > 1 else ''} {', '.join(missing)}; a passive "
+            f"{path}: missing column{'s' if len(missing) > 1 else ''} {name_list(missing)}; a passive "
             f"parameter table has columns muscle,kPE,s0,sM (found {', '.join(cols) or 'none'})"
         )
     values = {}

@@ -53,6 +53,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputFileError, LumpedMuscleWarning, MuscleTableWarning, OptionError, UnknownMuscleError
+from .messages import name_list
 
 __all__ = [
     "MUSCLE_DENSITY_KG_PER_M3",
@@ -144,7 +145,7 @@ def _aliases() -> tuple[_Alias, ...]:
                 for r in _read_package_csv("muscle_aliases.csv"))
     bad = sorted({a for r in out for a in r.anatomical if a not in anat})
     if bad:  # pragma: no cover - package data consistency (tested)
-        raise OptionError(f"muscle_aliases.csv names unknown anatomical muscles {', '.join(bad)}")
+        raise OptionError(f"muscle_aliases.csv names unknown anatomical muscles {name_list(bad)}")
     return out
 
 
@@ -254,7 +255,7 @@ def _override_value(col: str, raw: str, where: str, error=InputFileError):
         unknown = [a for a in ids if a not in _anatomical_rows()]
         if unknown:
             raise error(
-                f"{where}: unknown anatomical muscle {', '.join(unknown)}; use ids of the package table "
+                f"{where}: unknown anatomical muscle {name_list(unknown)}; use ids of the package table "
                 f"(e.g. {', '.join(list(_anatomical_rows())[:3])}; see docs/muscles.md)"
             )
         return ids
@@ -303,7 +304,7 @@ def read_muscle_properties(path: str | Path) -> MuscleOverrides:
     extra = [c for c in df.columns if c != "muscle" and c not in _OVERRIDE_COLUMNS]
     if extra:
         raise InputFileError(
-            f"{path}: unknown column{'s' if len(extra) > 1 else ''} {', '.join(extra)}; "
+            f"{path}: unknown column{'s' if len(extra) > 1 else ''} {name_list(extra)}; "
             f"allowed: muscle,{','.join(_OVERRIDE_COLUMNS)}"
         )
     values: dict[str, dict] = {}
@@ -343,7 +344,7 @@ def _mapping_rows(overrides: Mapping) -> dict:
         extra = [c for c in row if c not in _OVERRIDE_COLUMNS]
         if extra:
             raise OptionError(f"muscle properties: muscle '{name}': unknown column{'s' if len(extra) > 1 else ''} "
-                              f"{', '.join(map(str, extra))}; allowed: {', '.join(_OVERRIDE_COLUMNS)}")
+                              f"{name_list(extra)}; allowed: {', '.join(_OVERRIDE_COLUMNS)}")
         rows[str(name)] = {
             c: _override_value(c, " ".join(map(str, v)) if isinstance(v, (list, tuple)) else str(v).strip(),
                                f"muscle properties: muscle '{name}', column '{c}'", OptionError)
@@ -417,7 +418,7 @@ def resolve_muscles(
     names = list(names)
     if len(set(names)) != len(names):
         dup = sorted({n for n in names if names.count(n) > 1})
-        raise OptionError(f"muscle names repeated: {', '.join(dup)}")
+        raise OptionError(f"muscle names repeated: {name_list(dup)}")
     ov = as_overrides(overrides)
     anat = _anatomical_rows()
     family = model_family(names)
@@ -522,11 +523,11 @@ def _report_unplaced(unplaced: Sequence[str], strict: bool, warn: bool) -> None:
            "muscle,mass_kg,slow_twitch_fraction; see docs/muscles.md)")
     if strict:
         raise UnknownMuscleError(
-            f"muscle{s} {', '.join(unplaced)} not in the anatomical muscle table (--strict); {how}"
+            f"muscle{s} {name_list(unplaced)} not in the anatomical muscle table (--strict); {how}"
         )
     if warn:
         warnings.warn(
-            f"muscle{s} {', '.join(unplaced)} not in the anatomical muscle table: mass from F0/specific "
+            f"muscle{s} {name_list(unplaced)} not in the anatomical muscle table: mass from F0/specific "
             f"tension x density x lMo, slow-twitch fraction 0.5; to override, {how}",
             MuscleTableWarning, stacklevel=3,
         )
@@ -568,7 +569,7 @@ def _placed_records(names, max_isometric_force_N, overrides, what: str) -> tuple
     missing = [r.name for r in recs if not r.placed]
     if missing:
         raise UnknownMuscleError(
-            f"no {what} for muscle{'s' if len(missing) > 1 else ''} {', '.join(missing)}: not in the anatomical "
+            f"no {what} for muscle{'s' if len(missing) > 1 else ''} {name_list(missing)}: not in the anatomical "
             "muscle table; place them with a muscle-properties CSV (column anatomical_muscles) or see docs/muscles.md"
         )
     return recs
@@ -622,7 +623,7 @@ def muscle_masses_kg(
             missing.append(r.name)
     if missing:
         raise UnknownMuscleError(
-            f"no volume share for muscle{'s' if len(missing) > 1 else ''} {', '.join(missing)} in the anatomical "
+            f"no volume share for muscle{'s' if len(missing) > 1 else ''} {name_list(missing)} in the anatomical "
             "muscle table; give the model's maximal isometric forces and optimal fiber lengths (fallback rule) "
             "or a muscle-properties CSV (see docs/muscles.md)"
         )
@@ -751,7 +752,7 @@ def slow_twitch_fraction(names: Sequence[str], default: float | None = None, ove
     missing = [r.name for r in recs if "slow_twitch_fraction" in r.fallback]
     if missing and default is None:
         raise UnknownMuscleError(
-            f"no slow-twitch fraction for muscle{'s' if len(missing) > 1 else ''} {', '.join(missing)} in the "
+            f"no slow-twitch fraction for muscle{'s' if len(missing) > 1 else ''} {name_list(missing)} in the "
             "anatomical muscle table; give one in a muscle-properties CSV (see docs/muscles.md)"
         )
     return np.array([default if "slow_twitch_fraction" in r.fallback else r.slow_twitch_fraction for r in recs],
@@ -908,7 +909,7 @@ def muscle_property(names: Sequence[str], column: str) -> np.ndarray:
     base = [split_side(n)[0] for n in names]
     missing = [n for n, b in zip(names, base) if b not in table.index]
     if missing:
-        raise UnknownMuscleError(f"no {column} for muscles {', '.join(missing)} in the muscle property table")
+        raise UnknownMuscleError(f"no {column} for muscles {name_list(missing)} in the muscle property table")
     return table.loc[base, column].to_numpy()
 
 

@@ -41,6 +41,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .errors import InputFileError, UnknownMuscleError
+from .messages import name_list
 
 __all__ = ["Prior", "Priors", "Draw", "read_priors", "default_priors", "draw", "band", "BAND_SUFFIXES",
            "MUSCLE_PARAMETERS", "SOLVE_PARAMETERS", "GLOBAL_PARAMETERS", "PARAMETERS", "DISTRIBUTIONS",
@@ -111,18 +112,18 @@ class Priors:
                 return rows[(parameter, key)]
         return Prior(parameter, "lognormal", 0.0, "", "not in the table: no spread")
 
-    def check_muscles(self, muscles: Sequence[str]) -> None:
-        """:class:`UnknownMuscleError` for a row naming no muscle of ``muscles`` (by name or side-free name)."""
+    def check_muscles(self, muscles: Sequence[str], of: str = "the problem") -> None:
+        """:class:`UnknownMuscleError` for a row naming no muscle of ``muscles`` (by name or
+        side-free name); the message calls them the muscles ``of`` (the problem, a model)."""
         from .properties import split_side
 
         known = set(muscles) | {split_side(m)[0] for m in muscles}
         unknown = sorted({r.muscle for r in self.rows if r.muscle and r.muscle not in known})
         if unknown:
             raise UnknownMuscleError(
-                f"{self.source}: muscle{'s' if len(unknown) > 1 else ''} {', '.join(unknown)} of the uncertainty "
-                f"priors name{'' if len(unknown) > 1 else 's'} no muscle of the problem "
-                f"({', '.join(list(muscles)[:6])}{', ...' if len(muscles) > 6 else ''}); fix the name or leave the "
-                "'muscle' cell empty for every muscle")
+                f"{self.source}: muscle{'s' if len(unknown) > 1 else ''} {name_list(unknown)} of the uncertainty "
+                f"priors name{'' if len(unknown) > 1 else 's'} no muscle of {of} "
+                f"({name_list(muscles, 6)}); fix the name or leave the 'muscle' cell empty for every muscle")
 
     def table(self):
         """The rows as a pandas table (the columns of the CSV)."""
@@ -152,7 +153,7 @@ def _read_rows(text_source, where: str) -> list[Prior]:
     missing = [c for c in ("parameter", "spread") if c not in df.columns]
     extra = [c for c in df.columns if c not in _COLUMNS]
     if missing or extra:
-        what = f"no column {', '.join(missing)}" if missing else f"unknown column {', '.join(extra)}"
+        what = f"no column {name_list(missing)}" if missing else f"unknown column {name_list(extra)}"
         raise InputFileError(f"{where}: {what}; the columns are {','.join(_COLUMNS)} (distribution, muscle and "
                              "source may be left out)")
     rows, seen = [], set()
@@ -238,7 +239,7 @@ class Draw:
         if missing:
             from .errors import DataMismatchError
 
-            raise DataMismatchError(f"the sample has no factors for muscle(s) {', '.join(missing)}")
+            raise DataMismatchError(f"the sample has no factors for muscle(s) {name_list(missing)}")
         idx = np.array([pos[n] for n in params.names], dtype=int)
         kw = {f: np.asarray(getattr(params, f), dtype=float).copy() for f in PARAMETER_FIELDS}
         for p, fname in SOLVE_PARAMETERS.items():

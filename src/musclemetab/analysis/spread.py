@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MissingColumnError
+from ..messages import name_list
 
 __all__ = ["WHOLE_BODY", "SPREAD_COLUMNS", "spread_values", "structural_spread", "read_results"]
 
@@ -51,7 +52,7 @@ def spread_values(results):
 
     missing = [c for c in (*_KEYS, WHOLE_BODY) if c not in results.columns]
     if missing:
-        raise MissingColumnError(f"the results table has no column {', '.join(missing)}; give a study's results.csv")
+        raise MissingColumnError(f"the results table has no column {name_list(missing)}; give a study's results.csv")
     ok = results[results["status"].astype(str) == "ok"] if "status" in results.columns else results
     keys = {k: ok[k].astype(str).to_numpy() for k in _KEYS}
     frames = [pd.DataFrame({**keys, "quantity": WHOLE_BODY, "value_W_per_kg": ok[WHOLE_BODY].to_numpy(float)})]

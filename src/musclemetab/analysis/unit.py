@@ -21,6 +21,7 @@ import numpy as np
 from ..errors import DataMismatchError, OptionError
 from ..events import as_time
 from ..events import GaitCycle
+from ..messages import name_list
 from .groups import DEFAULT_THRESHOLD_M, GROUPS, GROUPS_WITH_OTHER, OTHER, group_rates, group_shares, group_weights
 from .phases import phase_shares
 
@@ -73,7 +74,7 @@ def _match_muscles(wanted: Sequence[str], available: Sequence[str]) -> list[int]
     missing = [m for m in wanted if m not in pos]
     if missing:
         raise DataMismatchError(
-            f"no moment arms for muscle{'s' if len(missing) > 1 else ''} {', '.join(missing)} of the metabolic "
+            f"no moment arms for muscle{'s' if len(missing) > 1 else ''} {name_list(missing)} of the metabolic "
             f"rates; the geometry has {', '.join(list(available)[:8])}{' ...' if len(available) > 8 else ''}. "
             "Compute the geometry for the solution's muscles (same model)"
         )
@@ -143,7 +144,7 @@ def analyse_metabolics(
     unknown = [m for m in chosen if m not in result.rates]
     if unknown:
         raise OptionError(
-            f"model{'s' if len(unknown) > 1 else ''} {', '.join(unknown)} not in the result; it has "
+            f"model{'s' if len(unknown) > 1 else ''} {name_list(unknown)} not in the result; it has "
             f"{', '.join(result.models)}"
         )
     pct = cycle.percent(t)
@@ -198,15 +199,12 @@ def filtered_moment_arms(geometry, filter_cutoff_hz: float | None = 6.0) -> tupl
     if filter_cutoff_hz is not None:
         from ..redundancy.inputs import FILTER_ORDER, lowpass_filtfilt
 
-        dt = np.diff(tg)
-        if not np.allclose(dt, dt[0], rtol=1e-6, atol=1e-9):
-            raise DataMismatchError(
-                "the geometry's frames are not evenly spaced, so its moment arms cannot be filtered; "
-                "resample the IK file or pass filter_cutoff_hz=None"
-            )
+        from ..io import constant_rate
+
         shape = r.shape
         what = f"the moment arms along {getattr(geometry, 'source', {}).get('ik', 'the IK motion')}"
-        r = lowpass_filtfilt(r.reshape(shape[0], -1), 1.0 / dt[0], float(filter_cutoff_hz), FILTER_ORDER,
+        fs = constant_rate(tg, f"{what} (the geometry's frames; pass filter_cutoff_hz=None not to filter)")[1]
+        r = lowpass_filtfilt(r.reshape(shape[0], -1), fs, float(filter_cutoff_hz), FILTER_ORDER,
                              what=what).reshape(shape)
     return tg, r
 
@@ -393,7 +391,7 @@ def analyse(
     cycle = cycle if cycle is not None else recorded.cycle
     missing = [name for name, value in (("model", model), ("ik", ik), ("cycle", cycle)) if value is None]
     if missing:
-        raise _OptionError(f"the solution records no {', '.join(missing)}: give {' and '.join(missing)} "
+        raise _OptionError(f"the solution records no {name_list(missing)}: give {' and '.join(missing)} "
                            "(the OpenSim model, the IK motion and the gait cycle of the solved trial)")
     result = _metabolics_of(solution, body_mass_kg, height_m, models, metabolics_options)
     if side is None:

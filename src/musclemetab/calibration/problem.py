@@ -52,6 +52,7 @@ from typing import TYPE_CHECKING, Mapping, Sequence
 import numpy as np
 
 from ..errors import SolverError, UnknownMuscleError
+from ..messages import name_list
 from ..muscle import fiber_width, hill_residual, longest_fiber_length_bound, tendon_force_length
 from .trials import CalibrationData
 
@@ -161,7 +162,7 @@ def _imposed(data: CalibrationData, parameters: Mapping[str, Sequence[float]]):
     missing = [m for m in data.muscles if m not in parameters]
     if missing:
         raise UnknownMuscleError(
-            f"no passive parameters for {', '.join(missing)}; the calibration trials involve these muscles"
+            f"no passive parameters for {name_list(missing)}; the calibration trials involve these muscles"
         )
     kpe_of = {m: float(parameters[m][0]) for m in data.muscles}
     s0_of = {m: float(parameters[m][1]) for m in data.muscles}

@@ -27,6 +27,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..errors import DataMismatchError, InputFileError, MissingColumnError, OptionError, UnknownMuscleError
+from ..messages import name_list
 
 __all__ = [
     "CALIBRATION_JOINTS",
@@ -168,7 +169,7 @@ def trial_files(trials: str | os.PathLike | Mapping, dofs: Mapping[str, str] | N
     missing = [str(p) for j in out.values() for p in j.values() if not p.is_file()]
     if missing:
         raise InputFileError(
-            f"missing calibration trial file{'s' if len(missing) > 1 else ''} {', '.join(missing)}; each trial "
+            f"missing calibration trial file{'s' if len(missing) > 1 else ''} {name_list(missing)}; each trial "
             "is a .mot of joint angles (deg) and a .sto of target passive moments (N m)"
         )
     return out
@@ -263,13 +264,13 @@ def load_calibration_data(
         if dof not in mot.columns:
             raise MissingColumnError(
                 f"{files[joint]['motion']}: missing column {dof} (the {joint} trial's target DOF); "
-                f"the file has {', '.join(mot.columns)}"
+                f"the file has {name_list(mot.columns)}"
             )
         mcol = f"{dof}_moment"
         if mcol not in sto.columns:
             raise MissingColumnError(
                 f"{files[joint]['moments']}: missing column {mcol} (target passive moment, N m); "
-                f"the file has {', '.join(sto.columns)}"
+                f"the file has {name_list(sto.columns)}"
             )
         if len(mot) != len(sto) or not np.allclose(mot.index.to_numpy(), sto.index.to_numpy(), atol=1e-6):
             raise DataMismatchError(
@@ -280,7 +281,7 @@ def load_calibration_data(
         scale = math.pi / 180.0 if (in_deg is None or in_deg) else 1.0
         names = tuple(mot.columns)
         angles = mot.to_numpy(dtype=float) * scale
-        geom = compute_geometry(model_path, files[joint]["motion"], dofs=[dof], use_cache=use_cache)
+        geom = compute_geometry(model_path, files[joint]["motion"], dofs=[dof], side=side, use_cache=use_cache)
         if geom.lmt_m.shape[0] != len(mot):
             raise DataMismatchError(f"geometry of {files[joint]['motion']} has {geom.lmt_m.shape[0]} frames, not {len(mot)}")
         out.append(
@@ -305,7 +306,7 @@ def load_calibration_data(
         unknown = [m for m in tendon_stiffness if m not in union]
         if unknown:
             raise UnknownMuscleError(
-                f"tendon stiffness given for {', '.join(unknown)}, which no calibration trial involves; "
+                f"tendon stiffness given for {name_list(unknown)}, which no calibration trial involves; "
                 f"the trials involve {', '.join(union[:6])} ..."
             )
         for m, v in tendon_stiffness.items():

@@ -25,7 +25,7 @@ __all__ = ["add_parser", "run", "run_with_progress", "parse_assignments"]
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
-    from .solve import add_emg_goal_arguments, add_progress_argument
+    from .solve import add_emg_goal_arguments, add_emg_processing_argument, add_progress_argument
 
     p = subparsers.add_parser(
         "estimate", help="estimate tendon stiffness, optimal fiber and tendon slack lengths from fiber lengths",
@@ -38,8 +38,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--ultrasound", nargs="+", metavar="US.mot",
                    help="measured fiber lengths, one file per trial: time in s, one column per muscle in mm")
     p.add_argument("--emg", nargs="+", metavar="EMG.mot",
-                   help="processed, normalised EMG envelopes, one file per trial, same order as --ik (with or "
-                   "without --ultrasound; at least one of the two)")
+                   help="processed, normalised EMG envelopes (or raw EMG with --emg-processing raw), one file per "
+                   "trial, same order as --ik (with or without --ultrasound; at least one of the two)")
+    add_emg_processing_argument(p)
     p.add_argument("--emg-mapping", metavar="default|authors|MAP.json",
                    help="EMG channels of the muscles, as for solve (default: default)")
     add_emg_goal_arguments(
@@ -127,8 +128,9 @@ def _estimate(args) -> int:
     from ..redundancy.estimate import parse_coupling
     from ..redundancy.run import estimate_files
     from .options import emg_scale_bounds
+    from .solve import emg_files as marked_emg_files
 
-    us_files, emg_files = args.ultrasound or [], getattr(args, "emg", None) or []
+    us_files, emg_files = args.ultrasound or [], marked_emg_files(args)
     emg_options = [o for o, v in (("--emg-mapping", args.emg_mapping), ("--emg-mode", args.emg_mode),
                                   ("--emg-weight", args.emg_weight), ("--emg-scale-bounds", args.emg_scale_bounds))
                    if v is not None]

@@ -175,6 +175,20 @@ def _sensitivity_parameters(value, folders) -> list | None:
     if bad or not names:
         raise OptionError(f"--sensitivity: unknown muscle parameter(s) {', '.join(bad) or repr(value)}; give 'all' or "
                           f"a comma-separated list of {', '.join(PARAMETERS)}")
+    # the sensitivities are derivatives at the optimum: a failed solve has none, --allow-failed or not
+    from pathlib import Path
+
+    from ..io import read_json_object
+    from ..io.solution_folder import SUMMARY_FILE
+
+    folder, = folders.values()
+    summary = read_json_object(Path(folder) / SUMMARY_FILE, remedy="solve again")
+    if not summary.get("success", False):
+        raise OptionError(
+            f"--sensitivity: the stored solve of {folder} did not succeed (status '{summary.get('status')}'), and "
+            "the sensitivities are derivatives at the optimum, which a failed solve has not reached (--allow-failed "
+            "lets its rates be computed, not its sensitivities); solve again, or drop --sensitivity"
+        )
     return names
 
 

@@ -30,9 +30,11 @@ from __future__ import annotations
 import argparse
 
 from ..errors import OptionError, SolverError, UnknownMuscleError
+from ..messages import name_list
 from .options import add_stop_argument, number_option
 
-__all__ = ["add_parser", "add_emg_goal_arguments", "add_progress_argument", "run", "run_with_progress",
+__all__ = ["add_parser", "add_emg_goal_arguments", "add_emg_processing_argument", "emg_files",
+           "add_progress_argument", "run", "run_with_progress",
            "progress_lines"]
 
 
@@ -96,8 +98,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--workflow", default="effort-gen", choices=("effort-gen", "effort-cal", "effort-ten", "emg-ten"),
                    help="workflow preset (default effort-gen)")
     p.add_argument("--emg", nargs="+", metavar="EMG.mot",
-                   help="processed, normalised EMG envelopes, one file per trial, same order as --ik: needed by "
-                   "emg-ten; with an effort workflow an EMG-informed solve of the trials (see --emg-mode)")
+                   help="processed, normalised EMG envelopes (or raw EMG with --emg-processing raw), one file per "
+                   "trial, same order as --ik: needed by emg-ten; with an effort workflow an EMG-informed solve of "
+                   "the trials (see --emg-mode)")
+    add_emg_processing_argument(p)
     add_emg_goal_arguments(
         p, "with --emg: 'constrained' (each tracked excitation within --emg-tolerance of its scaled EMG; the "
         "default), 'driven' (equal to its scaled EMG) or 'tracking' (a cost on the difference, weight "
@@ -186,6 +190,21 @@ def add_progress_argument(p, more: str = "") -> None:
                    f"iteration, objective, constraint violation, time{more})")
 
 
+def add_emg_processing_argument(p) -> None:
+    """``--emg-processing envelope|raw`` (``solve`` and ``estimate``)."""
+    p.add_argument("--emg-processing", choices=("envelope", "raw"), default="envelope",
+                   help="how the --emg files are read: 'envelope' (default) processed, normalised envelopes used as "
+                   "stored; 'raw' raw (signed) EMG, processed here: zero-lag band-pass 20-400 Hz, full-wave "
+                   "rectification, zero-lag low-pass 6 Hz, normalised to each channel's peak in the file")
+
+
+def emg_files(args) -> list:
+    """The ``--emg`` files, each marked with ``--emg-processing`` (:func:`musclemetab.emg.emg_source`)."""
+    from ..emg import emg_source
+
+    return [emg_source(p, getattr(args, "emg_processing", "envelope")) for p in _as_list(getattr(args, "emg", None))]
+
+
 def add_emg_goal_arguments(p, mode_help: str, weight_help: str) -> None:
     """``--emg-mode``, ``--emg-tolerance``, ``--emg-weight`` and ``--emg-scale-bounds`` (``solve`` and ``estimate``)."""
     from .options import add_emg_scale_bounds_argument
@@ -261,7 +280,7 @@ def _solve(args) -> int:
                                ("--emg-weight", "emg_weight"), ("--emg-scale-bounds", "emg_scale_bounds"))
              if getattr(args, attr, None) is not None]
     if extra:
-        raise OptionError(f"{', '.join(extra)} need{'s' if len(extra) == 1 else ''} EMG: give --emg files, or "
+        raise OptionError(f"{name_list(extra)} need{'s' if len(extra) == 1 else ''} EMG: give --emg files, or "
                           f"drop {'it' if len(extra) == 1 else 'them'}")
     if len(ik) != 1 or len(idf) > 1:
         raise OptionError(
@@ -434,7 +453,7 @@ def _check_excluded_used(excluded, solutions) -> None:
     """:class:`UnknownMuscleError` for an excluded muscle that no leg's problem had."""
     unused = [m for m in excluded if not any(m in (x.record.excluded_muscles or []) for x in solutions)]
     if unused:
-        raise UnknownMuscleError(f"--exclude-muscles: {', '.join(unused)} is in neither leg's problem; check the names")
+        raise UnknownMuscleError(f"--exclude-muscles: {name_list(unused)} is in neither leg's problem; check the names")
 
 
 def _print_findings(record) -> None:
@@ -491,7 +510,7 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
                             ("--cycle", args.cycle))
              if v]
     if wrong:
-        raise OptionError(f"{', '.join(wrong)} are for the single-trial solves without EMG; drop them for "
+        raise OptionError(f"{name_list(wrong)} are for the single-trial solves without EMG; drop them for "
                           f"{'--workflow emg-ten' if args.workflow == 'emg-ten' else '--emg'}")
     mode = args.emg_mode or "constrained"
     scale_bounds = {"emg_scale_bounds": b} if (b := emg_scale_bounds(args)) is not None else {}
@@ -510,10 +529,10 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
                             ("--warm-start", args.warm_start)) if v]
     if wrong:
         raise OptionError(
-            f"{', '.join(wrong)} cannot be used with --workflow emg-ten (it estimates the tendon stiffness "
+            f"{name_list(wrong)} cannot be used with --workflow emg-ten (it estimates the tendon stiffness "
             "and starts from static optimisation); drop them"
         )
-    emg = _as_list(getattr(args, "emg", None))
+    emg = emg_files(args)
     if not emg:
         raise OptionError("--workflow emg-ten needs --emg: one processed EMG file per trial, in the order of --ik")
     dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else None
@@ -600,7 +619,7 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
     from ..redundancy.emg_ten import emg_failure
     from ..redundancy.run import emg_mappings_of_legs, solve_emg_ten, write_solution_folder
 
-    emg = _as_list(args.emg)
+    emg = emg_files(args)
     dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else None
     options = _solver_options(args)  # the linear solver checked before any work
     legs = emg_mappings_of_legs(args.model, ik[0], args.emg_mapping, args.side, dofs, args.cache_dir)

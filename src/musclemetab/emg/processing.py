@@ -28,7 +28,28 @@ order ``2 n``) and ``W(f)/W(fc)`` becomes ``(W^2 - W1 W2) / (W (W2 - W1))``.
 forward-backward, effective 8th order).
 
 Padding at the ends follows MATLAB's ``filtfilt``: odd reflection of
-``3 (max(len(a), len(b)) - 1)`` samples with steady-state initial conditions.
+``3 (max(len(a), len(b)) - 1)`` samples with steady-state initial conditions. The envelope's
+low-pass (step 3) is the exception: the rectified signal is not odd about its end values (an
+odd reflection of ``|x|`` about a small end value is negative, and drove the envelope of a
+signed raw record below zero at its ends), so it is extended by its mirror image (even
+reflection) over one period of the cut-off, ``round(fs / 6 Hz)`` samples. On a 100 Hz carrier
+of known amplitude, on a DC offset and a drift, the normalised envelope is the amplitude's to
+0.1 % away from the ends and 6 % at them (``tests/test_emg.py``).
+
+**Defaults and sources.** Band-pass 20-400 Hz, full-wave rectification and a 6 Hz low-pass
+(effective 4th order, zero lag) are the processing of the reference study's EMG (Luis et al.
+2024, ``docs/method.md``); 20 Hz removes movement artefact and 400 Hz lies below the Nyquist
+frequency of the usual 1-2 kHz recordings, as the SENIAM recommendations (Hermens et al. 2000,
+J Electromyogr Kinesiol 10:361-374) and De Luca (1997, J Appl Biomech 13:135-163) advise; the
+6 Hz linear envelope is the usual gait envelope (Winter 2009, Biomechanics and Motor Control
+of Human Movement, 4th ed.). The normalisation defaults to the trial's own peak; give
+``maximum`` (the envelope peak of a maximal voluntary contraction) when one was recorded.
+
+**Files.** :func:`read_emg` reads an EMG file as processed envelopes (``"envelope"``, the
+default: used as stored) or as raw EMG processed here with these defaults (``"raw"``), the
+``--emg-processing`` option of ``musclemetab solve`` and ``estimate`` and the study file's
+``emg_processing`` key. :func:`emg_source` marks a path with its processing
+(:class:`RawEmgPath` for raw EMG), so that every reader of the trial's EMG processes it alike.
 
 **Range check.** A low-pass filtered rectified signal rings: Butterworth step responses
 overshoot, so an envelope under- or overshoots by a fraction of any abrupt change of
@@ -52,6 +73,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import DataMismatchError, InputFileError, MissingColumnError, OptionError
+from ..messages import name_list
 
 __all__ = [
     "BANDPASS_HZ",
@@ -71,6 +93,10 @@ __all__ = [
     "shift_time",
     "process_raw_emg",
     "read_processed_emg",
+    "EMG_PROCESSING",
+    "RawEmgPath",
+    "emg_source",
+    "read_emg",
     "map_channels",
     "require_window",
     "emg_at",
@@ -82,7 +108,6 @@ LOWPASS_HZ = 6.0
 FILTER_ORDER = 4  # effective order of each zero-lag filter (see module docstring)
 EMG_RANGE_TOLERANCE = 0.10
 _ORDER_MEANINGS = ("effective", "design")
-_UNIFORM_RTOL = 0.01
 
 #: Muscles whose EMG is tracked in the study (right leg).
 EMG_TRACKED_MUSCLES = (
@@ -113,19 +138,12 @@ def _source(df: pd.DataFrame) -> str:
 
 
 def sample_rate_hz(df: pd.DataFrame) -> float:
-    """Sampling rate (Hz) of a time-indexed table; the sampling must be uniform (1 %)."""
-    t = np.asarray(df.index, dtype=float)
-    if t.size < 2:
-        raise DataMismatchError(f"{_source(df)}: EMG has {t.size} sample(s); a signal is needed")
-    dt = np.diff(t)
-    mean_dt = float(np.mean(dt))
-    if mean_dt <= 0 or np.max(np.abs(dt - mean_dt)) > _UNIFORM_RTOL * mean_dt:
-        k = int(np.argmax(np.abs(dt - mean_dt)))
-        raise DataMismatchError(
-            f"{_source(df)}: EMG is not uniformly sampled (step {dt[k]:g} s at t = {t[k]:g} s, mean "
-            f"{mean_dt:g} s); resample it to a constant rate before filtering"
-        )
-    return 1.0 / mean_dt
+    """Sampling rate (Hz) of a time-indexed table, which must be sampled at a constant rate;
+    time stamps rounded from one (e.g. to the millisecond) are accepted
+    (:func:`musclemetab.io.constant_rate`: the rate is their least-squares fit)."""
+    from ..io import constant_rate
+
+    return constant_rate(df.index, f"{_source(df)}: EMG")[1]
 
 
 def _design_order(order: int, order_means: str) -> int:
@@ -166,17 +184,20 @@ def butterworth(cutoff_hz, fs_hz: float, btype: str, order: int = FILTER_ORDER, 
     return butter(n, wn if wn.size == 2 else float(wn[0]), btype=btype)
 
 
-def zero_lag_filter(x: np.ndarray, b, a, what: str = "signal") -> np.ndarray:
-    """Forward-backward filtering along axis 0 with MATLAB-style end padding."""
+def zero_lag_filter(x: np.ndarray, b, a, what: str = "signal", padtype: str = "odd",
+                    padlen: int | None = None) -> np.ndarray:
+    """Forward-backward filtering along axis 0 with end padding: MATLAB-style by default
+    (odd reflection of ``3 (max(len(a), len(b)) - 1)`` samples), else ``padtype`` and
+    ``padlen`` as ``scipy.signal.filtfilt`` takes them."""
     from scipy.signal import filtfilt
 
     x = np.asarray(x, dtype=float)
-    padlen = 3 * (max(len(a), len(b)) - 1)
+    padlen = 3 * (max(len(a), len(b)) - 1) if padlen is None else int(padlen)
     if x.shape[0] <= padlen:
         raise DataMismatchError(
             f"{what} has {x.shape[0]} samples, too short for the zero-lag filter (needs more than {padlen})"
         )
-    return filtfilt(b, a, x, axis=0, padtype="odd", padlen=padlen)
+    return filtfilt(b, a, x, axis=0, padtype=padtype, padlen=padlen)
 
 
 def zero_lag_gain(f_hz, fs_hz: float, cutoff_hz, btype: str, order: int = FILTER_ORDER,
@@ -197,10 +218,11 @@ def zero_lag_gain(f_hz, fs_hz: float, cutoff_hz, btype: str, order: int = FILTER
     return 1.0 / (1.0 + ratio ** (2 * n))
 
 
-def _filter_df(df: pd.DataFrame, cutoff, btype: str, order: int, order_means: str, fs_hz: float | None):
+def _filter_df(df: pd.DataFrame, cutoff, btype: str, order: int, order_means: str, fs_hz: float | None,
+               **padding):
     fs = sample_rate_hz(df) if fs_hz is None else float(fs_hz)
     b, a = butterworth(cutoff, fs, btype, order, order_means)
-    y = zero_lag_filter(df.to_numpy(dtype=float), b, a, what=f"{_source(df)}: EMG")
+    y = zero_lag_filter(df.to_numpy(dtype=float), b, a, what=f"{_source(df)}: EMG", **padding)
     out = pd.DataFrame(y, index=df.index, columns=df.columns)
     out.attrs.update(df.attrs)
     return out
@@ -235,7 +257,7 @@ def normalise(df: pd.DataFrame, maximum: str | Mapping[str, float] = "peak") -> 
         bad = [c for c in df.columns if not peak[c] > 0]
         if bad:
             raise DataMismatchError(
-                f"{_source(df)}: EMG channel{'s' if len(bad) > 1 else ''} {', '.join(map(str, bad))} "
+                f"{_source(df)}: EMG channel{'s' if len(bad) > 1 else ''} {name_list(bad)} "
                 "never rise above zero; cannot normalise to the trial's peak (check the channel)"
             )
         scale = peak
@@ -244,13 +266,13 @@ def normalise(df: pd.DataFrame, maximum: str | Mapping[str, float] = "peak") -> 
         if missing:
             raise OptionError(
                 f"no normalisation maximum for EMG channel{'s' if len(missing) > 1 else ''} "
-                f"{', '.join(map(str, missing))}; give one per channel (or use 'peak')"
+                f"{name_list(missing)}; give one per channel (or use 'peak')"
             )
         bad = [c for c in df.columns if not (np.isfinite(float(maximum[c])) and float(maximum[c]) > 0)]
         if bad:
             raise OptionError(
                 f"normalisation maximum must be positive; it is not for channel{'s' if len(bad) > 1 else ''} "
-                f"{', '.join(map(str, bad))}"
+                f"{name_list(bad)}"
             )
         scale = pd.Series({c: float(maximum[c]) for c in df.columns})
     out = df / scale
@@ -290,8 +312,8 @@ def _select(df: pd.DataFrame, channels: Sequence[str] | None) -> pd.DataFrame:
     missing = [c for c in channels if c not in df.columns]
     if missing:
         raise MissingColumnError(
-            f"{_source(df)}: missing EMG channel{'s' if len(missing) > 1 else ''} {', '.join(missing)}; "
-            f"the file has {', '.join(map(str, df.columns))}"
+            f"{_source(df)}: missing EMG channel{'s' if len(missing) > 1 else ''} {name_list(missing)}; "
+            f"the file has {name_list(df.columns)}"
         )
     out = df[channels]
     out.attrs.update(df.attrs)
@@ -336,12 +358,15 @@ def process_raw_emg(
     vals = df.to_numpy(dtype=float)
     if np.isnan(vals).any():
         bad = [str(c) for c in df.columns[np.isnan(vals).any(axis=0)]]
-        raise DataMismatchError(f"{_source(df)}: EMG channel{'s' if len(bad) > 1 else ''} {', '.join(bad)} hold NaN; "
+        raise DataMismatchError(f"{_source(df)}: EMG channel{'s' if len(bad) > 1 else ''} {name_list(bad)} hold NaN; "
                                 "fill or remove the gaps before processing")
     fs = sample_rate_hz(df)
     y = bandpass(df, band_hz, order, order_means, fs)
     y = rectify(y)
-    y = lowpass(y, lowpass_hz, order, order_means, fs)
+    # the rectified signal is not odd about its end values: mirrored (even reflection) over one
+    # period of the cut-off, so that the padding is a rectified signal too (module docstring)
+    y = _filter_df(y, lowpass_hz, "lowpass", order, order_means, fs, padtype="even",
+                   padlen=min(len(y) - 1, int(round(fs / lowpass_hz))))
     y = normalise(y, maximum)
     _check_range(y, float(range_tolerance))
     if delay_s:
@@ -352,6 +377,44 @@ def process_raw_emg(
         delay_s=float(delay_s), fs_hz=fs,
     )
     return y
+
+
+#: How an EMG file is read (:func:`read_emg`): processed envelopes as stored, or raw EMG
+EMG_PROCESSING = ("envelope", "raw")
+
+
+class RawEmgPath(type(Path())):
+    """The path of a raw EMG file: :func:`read_emg` processes it into normalised envelopes
+    (:func:`process_raw_emg`, its defaults). A path otherwise; pickles as itself."""
+
+
+def emg_source(path, processing: str = "envelope"):
+    """``path`` marked with how it is read: a :class:`RawEmgPath` for ``"raw"``, the path
+    itself for ``"envelope"``; :class:`OptionError` for another word."""
+    if processing not in EMG_PROCESSING:
+        raise OptionError(f"EMG processing must be {' or '.join(EMG_PROCESSING)}, not {processing!r}")
+    if path is None or processing == "envelope":
+        return path
+    return RawEmgPath(path)
+
+
+def read_emg(path: str | os.PathLike, processing: str | None = None) -> pd.DataFrame:
+    """An EMG file as normalised envelopes: raw EMG (``processing="raw"``, or a
+    :class:`RawEmgPath`) through :func:`process_raw_emg` with its defaults, processed
+    envelopes (``"envelope"``, the default for a plain path) as stored
+    (:func:`read_processed_emg`). The table's ``attrs["processing"]`` says which."""
+    from ..io import read_storage
+
+    if processing is None:
+        processing = "raw" if isinstance(path, RawEmgPath) else "envelope"
+    if processing not in EMG_PROCESSING:
+        raise OptionError(f"EMG processing must be {' or '.join(EMG_PROCESSING)}, not {processing!r}")
+    if processing == "envelope":
+        return read_processed_emg(path)
+    df = read_storage(Path(path))
+    env = process_raw_emg(df)
+    env.attrs.update(path=str(path))
+    return env
 
 
 def read_processed_emg(path: str | os.PathLike) -> pd.DataFrame:
@@ -367,7 +430,7 @@ def read_processed_emg(path: str | os.PathLike) -> pd.DataFrame:
     vals = df.to_numpy(dtype=float)
     if np.isnan(vals).any():
         bad = [str(c) for c in df.columns[np.isnan(vals).any(axis=0)]]
-        raise InputFileError(f"{path}: EMG channel{'s' if len(bad) > 1 else ''} {', '.join(bad)} hold NaN")
+        raise InputFileError(f"{path}: EMG channel{'s' if len(bad) > 1 else ''} {name_list(bad)} hold NaN")
     return df
 
 
@@ -389,8 +452,8 @@ def map_channels(emg_df: pd.DataFrame, mapping: Mapping[str, Sequence[str]]) -> 
     if missing:
         users = [m for m, cs in norm.items() if any(c in missing for c in cs)]
         raise MissingColumnError(
-            f"{_source(emg_df)}: missing EMG channel{'s' if len(missing) > 1 else ''} {', '.join(missing)} "
-            f"(mapped to {', '.join(users)}); the file has {', '.join(map(str, emg_df.columns))}"
+            f"{_source(emg_df)}: missing EMG channel{'s' if len(missing) > 1 else ''} {name_list(missing)} "
+            f"(mapped to {name_list(users)}); the file has {name_list(emg_df.columns)}"
         )
     out = pd.DataFrame(
         {m: emg_df[cs].to_numpy(dtype=float).mean(axis=1) for m, cs in norm.items()}, index=emg_df.index

@@ -23,7 +23,7 @@ def read_json_object(path: str | os.PathLike, *, missing: str = "not found", rem
     path = Path(path)
     tail = f"; {remedy}" if remedy else ""
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
+        data = json.loads(path.read_text(encoding="utf-8-sig"))  # with or without a byte-order mark
     except FileNotFoundError:
         raise InputFileError(f"{path}: {missing}") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:

@@ -20,6 +20,17 @@ Both carry the header metadata in ``attrs``:
 
 Values are returned exactly as stored: no unit conversion happens here (use
 :func:`rotational_to_radians` where the caller knows which columns are angles).
+
+**Rounded time stamps.** OpenSim's tools write time with a fixed number of decimals: IK at
+60 Hz rounded to the millisecond steps by 16 and 17 ms. A time column whose stamps all lie
+within :func:`rounding_tolerance_s` (half a millisecond plus 1 % of the step, at most a
+quarter of the step) of the constant rate fitted to them (least squares of time against
+sample index, :func:`constant_rate`) is read as that constant rate: :func:`read_table`
+replaces the stamps by the fitted ones (the largest change is within the tolerance; stamps
+already within :data:`EXACT_TIME_TOLERANCE_S` of it are kept as written). A time column
+further from any constant rate is read as it is, and refused (naming the file, the stamp
+and its distance) only where a constant rate is needed: the zero-lag filters of the IK, the
+inverse dynamics and the EMG.
 :func:`write_storage` writes an OpenSim 4 ``.sto`` atomically (temporary file, then rename)
 from either kind of table.
 """
@@ -39,7 +50,8 @@ import numpy as np
 if TYPE_CHECKING:  # pandas is imported where a DataFrame is built
     import pandas as pd
 
-from ..errors import MissingColumnError, StorageFormatError, TimeColumnError, TruncatedFileWarning
+from ..errors import DataMismatchError, MissingColumnError, StorageFormatError, TimeColumnError, TruncatedFileWarning
+from ..messages import name_list
 from .atomic import atomic_write_text
 
 __all__ = [
@@ -52,12 +64,64 @@ __all__ = [
     "storage_from_arrays",
     "check_time_stamps",
     "table_path",
+    "constant_rate",
+    "rounding_tolerance_s",
     "MAX_SAMPLE_STEP_S",
+    "ROUNDING_S",
+    "EXACT_TIME_TOLERANCE_S",
 ]
 
 #: A time step this long (a sampling rate of 2 Hz or less) is not a motion recording in
 #: seconds: the time column is in milliseconds or counts frames.
 MAX_SAMPLE_STEP_S = 0.5
+#: Time stamps rounded to the millisecond lie up to half of one from the exact ones.
+ROUNDING_S = 0.5e-3
+#: Stamps this close (s) to their fitted constant rate are kept as written: the precision of
+#: the decimals a file holds (OpenSim writes eight).
+EXACT_TIME_TOLERANCE_S = 1e-7
+
+
+def rounding_tolerance_s(step_s: float) -> float:
+    """How far (s) a time stamp may lie from a constant rate of step ``step_s`` and be taken
+    as that rate rounded: :data:`ROUNDING_S` plus 1 % of the step (the fitted rate's own
+    error), at most a quarter of the step (a stamp further off is a sample out of place)."""
+    return min(ROUNDING_S + 0.01 * step_s, 0.25 * step_s)
+
+
+def _fit_constant_rate(t: np.ndarray) -> tuple[np.ndarray, float, int, float]:
+    """``(fitted stamps t0 + k step, step, index of the stamp furthest from them, its
+    distance)``: least squares of time against sample index ``k``."""
+    k = np.arange(t.size, dtype=float)
+    kc = k - k.mean()
+    step = float(kc @ (t - t.mean()) / (kc @ kc))
+    fitted = t.mean() + step * kc
+    far = int(np.argmax(np.abs(t - fitted)))
+    return fitted, step, far, float(abs(t[far] - fitted[far]))
+
+
+def constant_rate(time, what: str = "the file") -> tuple[np.ndarray, float]:
+    """``(time stamps, sampling rate in Hz)`` of a signal that must be sampled at a constant rate.
+
+    The rate is the least-squares fit of the stamps against their index. Stamps within
+    :func:`rounding_tolerance_s` of it are rounded stamps of that rate: the fitted stamps are
+    returned in their place (``time`` itself when it is within
+    :data:`EXACT_TIME_TOLERANCE_S`). Raises :class:`DataMismatchError`, its message starting
+    with ``what``, for fewer than two stamps and for a stamp further off (a dropped or
+    repeated sample, a gap, a changed rate): the zero-lag filters need a constant rate.
+    """
+    t = np.asarray(time, dtype=float)
+    if t.size < 2:
+        raise DataMismatchError(f"{what} has {t.size} sample(s); a signal sampled at a constant rate is needed")
+    fitted, step, far, off = _fit_constant_rate(t)
+    tol = rounding_tolerance_s(step)
+    if not step > 0 or off > tol:
+        raise DataMismatchError(
+            f"{what}: the time stamps are not evenly spaced: t = {t[far]:.6g} s (sample {far + 1}) lies "
+            f"{off * 1e3:.3g} ms from the constant rate fitted to them ({1 / step if step > 0 else 0:.6g} Hz), "
+            f"and rounding explains at most {tol * 1e3:.3g} ms; the zero-lag filter needs a constant sampling "
+            "rate: resample the file"
+        )
+    return (t if off <= EXACT_TIME_TOLERANCE_S else fitted), 1.0 / step
 
 
 def _parse_header(lines: list[str], path: Path) -> dict:
@@ -188,7 +252,7 @@ def read_table(path: str | os.PathLike) -> StorageTable:
     if path.is_dir():
         raise StorageFormatError(f"{path} is a folder, not a file; give the path of the .mot/.sto file in it")
     try:
-        text = path.read_text(encoding="utf-8", errors="replace")
+        text = path.read_text(encoding="utf-8-sig", errors="replace")  # with or without a byte-order mark
     except FileNotFoundError:
         raise StorageFormatError(f"{path}: no such file; check the path") from None
     except OSError as exc:
@@ -256,6 +320,11 @@ def read_table(path: str | os.PathLike) -> StorageTable:
             f"{path}: column 'time' is not strictly increasing (data row {row}, t = {t[row - 1]:g} s)"
         )
 
+    if t.size > 2:  # rounded stamps of a constant rate are read as that rate (module docstring)
+        fitted, step, _, off = _fit_constant_rate(t)
+        if EXACT_TIME_TOLERANCE_S < off <= rounding_tolerance_s(step):
+            t = values[:, 0] = fitted
+
     if data_lines[-1][0] == len(lines) and text[-1:].splitlines() != [""]:  # no line break after the last row
         warnings.warn(
             f"{path}: the last data row (line {data_lines[-1][0]}, t = {t[-1]:g} s) has no line end; the file may "
@@ -319,7 +388,7 @@ def require_columns(
 
         near = sorted({n for c in missing for n in difflib.get_close_matches(c, list(map(str, df.columns)), n=3)})
         raise MissingColumnError(
-            f"{source}: missing {what}{'s' if len(missing) > 1 else ''} {', '.join(missing)}; "
+            f"{source}: missing {what}{'s' if len(missing) > 1 else ''} {name_list(missing)}; "
             + (f"near names: {', '.join(near)}; " if near else "")
             + f"the file has {', '.join(map(str, df.columns[:12]))}{' ...' if len(df.columns) > 12 else ''}"
         )
@@ -330,7 +399,7 @@ def require_columns(
             times = np.asarray(df.index)[rows] if rows.size else ()
             at = (f" (at t = {', '.join(f'{t:.4f}' for t in times[:3])}{' ...' if len(times) > 3 else ''} s)"
                   if len(times) and np.issubdtype(np.asarray(times).dtype, np.number) else "")
-            raise MissingColumnError(f"{source}: {what} {', '.join(bad)} holds NaN values{at}; fill or remove them")
+            raise MissingColumnError(f"{source}: {what} {name_list(bad)} holds NaN values{at}; fill or remove them")
 
 
 def _nan_rows(column) -> np.ndarray:

@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import OptionError
+from ..messages import name_list
 from ..muscle import active_force_length, force_velocity, passive_force_length
 from .registry import MODEL_COLOURS as _COLOURS
 from .registry import ADDITIONAL_MODELS, ALL_MODELS, STUDY_MODELS
@@ -135,7 +136,7 @@ def figure2_data(models=STUDY_MODELS, **config) -> dict:
     unknown = set(config) - set(FIGURE2_DEFAULTS)
     if unknown:
         raise OptionError(
-            f"unknown Figure-2 option(s) {', '.join(sorted(unknown))}; options: {', '.join(FIGURE2_DEFAULTS)}"
+            f"unknown Figure-2 option(s) {name_list(sorted(unknown))}; options: {', '.join(FIGURE2_DEFAULTS)}"
         )
     cfg = {**FIGURE2_DEFAULTS, **config}
     models = [m.upper() for m in models]
@@ -341,7 +342,7 @@ def figure2(data: dict | None = None, **config):
 
     wrapped = "\n".join(textwrap.fill(par, 170) for par in text.split("\n"))
     extra = [m for m in models if m not in STUDY_MODELS]
-    what = f"{len(models)} models" + (f" ({', '.join(extra)} beside the study's)" if extra else "")
+    what = f"{len(models)} models" + (f" ({name_list(extra)} beside the study's)" if extra else "")
     title = f"Figure 2: soleus metabolic rate and efficiency, {what}\n" + wrapped
     fig.suptitle(title, fontsize=9, y=1.0 - 0.1 / fig.get_figheight(), va="top")
     # a fixed layout (a constrained layout measured every label of the 36 panels at each save:

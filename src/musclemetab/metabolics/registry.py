@@ -6,6 +6,7 @@ from collections.abc import Iterable, Mapping
 
 from ..colours import MODEL_COLOURS as _MODEL_COLOURS
 from ..errors import OptionError
+from ..messages import name_list
 from ._common import PARAMETER_ARGUMENTS, STATE_ARGUMENTS, MetabolicRates
 from .bhargava import bhargava2004
 from .houdijk import houdijk2006
@@ -96,11 +97,11 @@ def compute_models(
     names = parse_models(models)
     missing = [k for k in STATE_ARGUMENTS + PARAMETER_ARGUMENTS if k not in inputs]
     if missing:
-        raise OptionError(f"metabolic models need {', '.join(missing)}; they are missing from the inputs")
+        raise OptionError(f"metabolic models need {name_list(missing)}; they are missing from the inputs")
     options = dict(options or {})
     unknown = [k for k in options if k.upper() not in ALL_MODELS]
     if unknown:
-        raise OptionError(f"options given for unknown model(s) {', '.join(unknown)}; known: {', '.join(ALL_MODELS)}")
+        raise OptionError(f"options given for unknown model(s) {name_list(unknown)}; known: {', '.join(ALL_MODELS)}")
     args = {k: inputs[k] for k in STATE_ARGUMENTS + PARAMETER_ARGUMENTS}
     out = {}
     for name in names:

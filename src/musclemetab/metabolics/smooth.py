@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 
 from ..errors import OptionError
+from ..messages import name_list
 from ..muscle.curves import math_for
 from ._common import BASAL_RATE_W_PER_KG, STATE_ARGUMENTS
 from .bhargava import BHARGAVA_CONSTANTS
@@ -315,7 +316,7 @@ def smooth_rates(
     allowed = [k for k in opts if k not in ("lengthening_factor", "recruitment")]
     unknown = sorted(set(options) - set(allowed))
     if unknown:
-        raise OptionError(f"{key}: the smooth model has no option {', '.join(unknown)}; options: {', '.join(allowed)}")
+        raise OptionError(f"{key}: the smooth model has no option {name_list(unknown)}; options: {', '.join(allowed)}")
     opts.update(options)
     if "non_negative" in opts and not (isinstance(opts["non_negative"], bool) or opts["non_negative"] == WORK_AND_HEAT):
         raise OptionError(f"{key}: non_negative must be True, False or '{WORK_AND_HEAT}', not {opts['non_negative']!r}")

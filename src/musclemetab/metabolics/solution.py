@@ -84,6 +84,7 @@ __all__ = [
 ]
 
 from ..io.solution_folder import SOLUTION_FILE, SUMMARY_FILE  # noqa: E402  (one definition of the format)
+from ..messages import name_list
 METABOLICS_STO = "metabolics.sto"
 METABOLICS_PARQUET = "metabolics.parquet"
 WHOLE_BODY_CSV = "whole_body.csv"
@@ -292,7 +293,7 @@ def _parameters_for(muscles: Sequence[str], source, what: str) -> dict[str, np.n
         missing = [m for m in muscles if m not in pos]
         if missing:
             raise DataMismatchError(
-                f"the {what} has no parameters for muscle{'s' if len(missing) > 1 else ''} {', '.join(missing)}; "
+                f"the {what} has no parameters for muscle{'s' if len(missing) > 1 else ''} {name_list(missing)}; "
                 "check that the model is the one the solution was computed with"
             )
         idx = [pos[m] for m in muscles]
@@ -300,7 +301,7 @@ def _parameters_for(muscles: Sequence[str], source, what: str) -> dict[str, np.n
     missing = [m for m in muscles if m not in source]
     if missing:
         raise DataMismatchError(
-            f"the {what} has no parameters for muscle{'s' if len(missing) > 1 else ''} {', '.join(missing)}; "
+            f"the {what} has no parameters for muscle{'s' if len(missing) > 1 else ''} {name_list(missing)}; "
             "give the model (.osim) the solution was computed with"
         )
     out = {}
@@ -532,7 +533,7 @@ def metabolics_from_solution(
     model_options = {k.upper(): dict(v) for k, v in (model_options or {}).items()}
     unknown = [k for k in model_options if k not in ALL_MODELS]
     if unknown:
-        raise OptionError(f"options given for unknown model(s) {', '.join(unknown)}; known: {', '.join(ALL_MODELS)}")
+        raise OptionError(f"options given for unknown model(s) {name_list(unknown)}; known: {', '.join(ALL_MODELS)}")
     sol = solution_states(solution, require_success=require_success)
     muscles = sol.muscles
     if muscle_parameters is not None:

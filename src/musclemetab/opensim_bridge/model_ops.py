@@ -42,6 +42,7 @@ import numpy as np
 import opensim as osim
 
 from ..errors import ModelError, UnknownCoordinateError, UnknownMuscleError
+from ..messages import name_list
 
 #: OpenSim's ``Coordinate.MotionType`` values (``getMotionType()``)
 ROTATIONAL, TRANSLATIONAL, COUPLED = 1, 2, 3
@@ -55,6 +56,12 @@ class LoadedModel:
     def __init__(self, path: str, model=None):
         try:
             model = osim.Model(path) if model is None else model
+            cset = model.getCoordinateSet()
+            # locks as the file gives them; this process's copy is unlocked, so that every
+            # coordinate follows the motion (OpenSim refuses a new value for a locked one)
+            locked = {cset.get(i).getName(): bool(cset.get(i).get_locked()) for i in range(cset.getSize())}
+            for i in range(cset.getSize()):
+                cset.get(i).set_locked(False)
             state = model.initSystem()
         except Exception as exc:
             msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
@@ -66,7 +73,7 @@ class LoadedModel:
         cset = model.getCoordinateSet()
         self.coords = {cset.get(i).getName(): cset.get(i) for i in range(cset.getSize())}
         self.motion = {n: int(c.getMotionType()) for n, c in self.coords.items()}
-        self.locked = {n: bool(c.get_locked()) for n, c in self.coords.items()}
+        self.locked = locked
         self.couplers = []  # (dependent, [independents], function, scale)
         cons = model.getConstraintSet()
         for i in range(cons.getSize()):
@@ -103,7 +110,7 @@ def model_muscles(model, names, path, remedy: str) -> dict:
     have = {ms.get(i).getName() for i in range(ms.getSize())}
     missing = [n for n in names if n not in have]
     if missing:
-        raise UnknownMuscleError(f"{path}: the model has no muscle {', '.join(missing)}; {remedy}")
+        raise UnknownMuscleError(f"{path}: the model has no muscle {name_list(missing)}; {remedy}")
     return {n: ms.get(n) for n in names}
 
 
@@ -163,14 +170,17 @@ def read_model_info(model_path: str) -> dict:
 
 
 def frame_values(m: LoadedModel, columns: dict, in_degrees: bool, k: int, *, coupled_motion: bool = False) -> dict:
-    """The values (rad, m) of the model's free coordinates at frame ``k`` of the motion
+    """The values (rad, m) of the model's independent coordinates at frame ``k`` of the motion
     ``columns`` (``{coordinate: values}``; rotations in degrees when ``in_degrees``), and those
     of its coupled coordinates computed from them. ``coupled_motion``: also set the independent
     coordinates OpenSim reports as of coupled motion type (gait2392's pelvis translations), as
-    OpenSim does, without a degree conversion."""
+    OpenSim does, without a degree conversion. A coordinate the model locks follows the motion
+    like the others (:class:`LoadedModel` unlocks this process's copy): the muscle paths are
+    those of the pose the motion gives, and a solve refuses a motion that moves a locked
+    coordinate of the solved leg (:func:`musclemetab.layout.check_locked_coordinates`)."""
     vals = {}
     for n, col in columns.items():
-        if n not in m.coords or n in m.dependent or (m.motion[n] == COUPLED and not coupled_motion) or m.locked[n]:
+        if n not in m.coords or n in m.dependent or (m.motion[n] == COUPLED and not coupled_motion):
             continue
         v = float(col[k])
         if in_degrees and m.motion[n] == ROTATIONAL:
@@ -256,7 +266,7 @@ def muscle_geometry(
         unknown = [x for x in muscles if x not in m.muscles]
         if unknown:
             raise UnknownMuscleError(
-                f"{model_path}: the model has no muscle {', '.join(unknown)}; "
+                f"{model_path}: the model has no muscle {name_list(unknown)}; "
                 "check the names (they carry the side suffix, e.g. soleus_r)"
             )
     mus = [m.muscles[x] for x in muscles]
@@ -344,7 +354,8 @@ def model_layout(model_path: str) -> dict:
       child and the ground), ``child_origin_m`` (position of the child body's origin in the
       ground frame at the default pose), ``coordinates`` (names, joint order);
     * ``coordinates``: one dict per coordinate: ``name``, ``joint``, ``locked``,
-      ``dependent`` (driven by a coupler), ``motion_type``;
+      ``dependent`` (driven by a coupler), ``motion_type``, ``default_value`` (rad or m; the
+      value a locked coordinate is held at);
     * ``root_translations``: for each coordinate of the joint(s) attached to the ground, the
       displacement (m, ground frame) of the child body's origin when that coordinate grows by
       one unit from its default (a translational coordinate gives its axis; a rotation about
@@ -389,7 +400,7 @@ def model_layout(model_path: str) -> dict:
     joint_of = {c: j["name"] for j in joints for c in j["coordinates"]}
     coordinates = [
         dict(name=n, joint=joint_of.get(n, ""), locked=m.locked[n], dependent=n in m.dependent,
-             motion_type=names.get(m.motion[n], "unknown"))
+             motion_type=names.get(m.motion[n], "unknown"), default_value=m.coords[n].getDefaultValue())
         for n in m.coords
     ]
     root_translations = {}
@@ -428,7 +439,7 @@ def body_origins(model_path: str, columns: dict, in_degrees: bool, bodies: list)
     names = [body_set.get(i).getName() for i in range(body_set.getSize())]
     missing = [b for b in bodies if b not in names]
     if missing:
-        raise ModelError(f"{model_path}: the model has no body {', '.join(missing)}")
+        raise ModelError(f"{model_path}: the model has no body {name_list(missing)}")
     objs = [body_set.get(b) for b in bodies]
     n_frames = len(next(iter(columns.values()))) if columns else 0
     for n, c in m.coords.items():

@@ -35,6 +35,7 @@ import numpy as np
 import opensim as osim
 
 from ..errors import ModelError, UnknownMuscleError
+from ..messages import name_list
 from .model_ops import LoadedModel, model_muscles
 from .states import states_along_motion
 
@@ -320,7 +321,7 @@ def muscles_over_states(model_path: str, states_path: str, muscles: list, fiber_
     mset = model.getMuscles()
     missing = [mu for mu in muscles if mset.getIndex(mu) < 0]
     if missing:
-        raise UnknownMuscleError(f"{model_path}: no muscle {', '.join(missing)}")
+        raise UnknownMuscleError(f"{model_path}: no muscle {name_list(missing)}")
     model.initSystem()
     table = osim.TimeSeriesTable(str(states_path))
     traj = osim.StatesTrajectory.createFromStatesTable(model, table)

@@ -31,6 +31,7 @@ import numpy as np
 import opensim as osim
 
 from ..errors import DataMismatchError, UnknownMuscleError
+from ..messages import name_list
 from .model_ops import COUPLED, ROTATIONAL, load_model
 from .probes import BHARGAVA_SWITCHES, UMBERGER_SWITCHES, _DEFAULT_OFF
 
@@ -124,7 +125,7 @@ def probes_over_states(model_path: str, states_path: str, controls_path: str, mu
     mset = model.getMuscles()
     missing = [mu for mu in muscles if mset.getIndex(mu) < 0]
     if missing:
-        raise UnknownMuscleError(f"{model_path}: no muscle {', '.join(missing)}")
+        raise UnknownMuscleError(f"{model_path}: no muscle {name_list(missing)}")
     # only the muscles evaluated apply force: the others' dynamics are not computed
     wanted = set(muscles)
     for i in range(mset.getSize()):

@@ -9,6 +9,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..errors import DataMismatchError, InputFileError, OptionError, UnknownMuscleError
+from ..messages import name_list
 from .result import PARAMETERS_FILE
 
 __all__ = ["resolve_emg_mapping", "mapping_for_muscles", "emg_at_nodes", "path_list", "trial_labels", "one_model",
@@ -64,7 +65,7 @@ def mapping_for_muscles(emg_mapping, mapping: dict, muscles: Sequence[str]) -> d
     unknown = [m for m in mapping if m not in muscles]
     if unknown:
         raise UnknownMuscleError(
-            f"EMG mapping: muscle{'s' if len(unknown) > 1 else ''} {', '.join(unknown)} not among the muscles of "
+            f"EMG mapping: muscle{'s' if len(unknown) > 1 else ''} {name_list(unknown)} not among the muscles of "
             f"the problem ({', '.join(list(muscles)[:6])} ...); map channels to model muscle names such as soleus_r"
         )
     return mapping
@@ -96,7 +97,7 @@ def trial_labels(ik_paths, labels) -> list[str]:
         raise OptionError(f"trial label {bad[0]!r} cannot name a folder; use plain names")
     dup = sorted({x for x in labels if labels.count(x) > 1})
     if dup:
-        raise OptionError(f"trial label{'s' if len(dup) > 1 else ''} {', '.join(dup)} used twice (IK files with "
+        raise OptionError(f"trial label{'s' if len(dup) > 1 else ''} {name_list(dup)} used twice (IK files with "
                           "the same name?); give distinct labels")
     if PARAMETERS_FILE in labels:
         raise OptionError(f"'{PARAMETERS_FILE}' cannot be a trial label")
@@ -125,14 +126,16 @@ def check_emg_range(df, t0: float, tf: float, tol: float, what: str) -> None:
 
 
 def mapped_emg_table(emg, mapping, path_label: str):
-    """Read (if a path) and map an EMG table to ``{muscle: signal}``; errors name the file."""
-    from ..emg import map_channels, read_processed_emg
+    """Read (if a path: raw EMG processed when it is a :class:`~musclemetab.emg.RawEmgPath`,
+    :func:`~musclemetab.emg.read_emg`) and map an EMG table to ``{muscle: signal}``; errors
+    name the file."""
+    from ..emg import map_channels, read_emg
 
     if isinstance(emg, (str, os.PathLike)):
         p = Path(emg)
         if not p.is_file():
             raise InputFileError(f"{p}: no such EMG file; check the --emg paths")
-        df = read_processed_emg(p)
+        df = read_emg(emg)
     else:
         df = emg.copy()
         df.attrs.update(emg.attrs)

@@ -13,6 +13,7 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import DataMismatchError, OptionError, UnknownMuscleError
+from ..messages import name_list
 from .emg_inputs import emg_at_nodes, mapping_for_muscles, resolve_emg_mapping, trial_labels
 from .emg_ten import EmgTenSettings, EmgTenTrial, settings_for_muscles, solve_emg_ten_ocp
 from .result import EMG_TEN, Result, assemble_result
@@ -157,7 +158,7 @@ def prepare_emg_ten_trials(
     missing_kt = [m for m in settings.tendon_muscles if m not in muscles]
     if missing_kt:
         raise UnknownMuscleError(
-            f"the tendon stiffness of {', '.join(missing_kt)} is to be estimated but the problem has no such muscle "
+            f"the tendon stiffness of {name_list(missing_kt)} is to be estimated but the problem has no such muscle "
             f"({', '.join(muscles[:6])} ...); change EmgTenSettings.tendon_groups"
         )
     params, wf_record = workflow_parameters(workflow, model_parameters, muscles, passive=passive,

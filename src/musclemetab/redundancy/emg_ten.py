@@ -57,6 +57,7 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import DataMismatchError, OptionError, UnknownMuscleError
+from ..messages import name_list
 from ._checks import COUPLINGS, check_factor_bounds, check_non_negative, check_option
 from .transcription import Goals, ParameterSpec, TrialBlock, build_problem, check_fiber_dynamics, coupling_pairs
 from .inputs import TrialInputs
@@ -281,7 +282,7 @@ def settings_without(settings: EmgTenSettings | None, muscles: Sequence[str], ex
     if not gone & ({m for g in settings.tendon_groups for m in g} | {m for g in settings.emg_groups for m in g}):
         return settings
     if dropped:
-        warnings.warn(f"--exclude-muscles {' '.join(dropped)}: the tendon stiffness of {', '.join(dropped)} is not "
+        warnings.warn(f"--exclude-muscles {' '.join(dropped)}: the tendon stiffness of {name_list(dropped)} is not "
                       "estimated (the muscle is out of the problem); the other muscles of its tendon group share "
                       "their factor", MusclemetabWarning, stacklevel=3)
 
@@ -329,7 +330,7 @@ def emg_ten_problem(trials: Sequence[EmgTenTrial], params: MuscleTendonParameter
     missing = [m for m in settings.tendon_muscles if m not in have]
     if missing:
         raise UnknownMuscleError(
-            f"muscle{'s' if len(missing) > 1 else ''} {', '.join(missing)} of the EMG-TEN settings "
+            f"muscle{'s' if len(missing) > 1 else ''} {name_list(missing)} of the EMG-TEN settings "
             f"not among the muscles of the problem ({', '.join(muscles[:6])} ...)")
     order = list(dict.fromkeys(m for t in trials for m in t.inputs.muscles))
     kt_muscles = tuple(m for m in order if m in settings.tendon_muscles)

@@ -31,6 +31,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..errors import DataMismatchError, InputFileError, OptionError, UnknownMuscleError
+from ..messages import name_list
 from .transcription import Goals, ParameterSpec, TrialBlock
 from .parameters import MuscleTendonParameters
 from .ipopt import ProblemResult, SolverOptions, solve_problem
@@ -148,7 +149,7 @@ def parameter_specs(estimate: Mapping[str, Sequence[str]], couple: Sequence = ()
         if kind in FIELDS:
             missing = [m for m in members if m not in estimate.get(kind, ())]
             if missing:
-                raise OptionError(f"--couple {kind}:{','.join(members)}: the {kind} of {', '.join(missing)} is not "
+                raise OptionError(f"--couple {kind}:{','.join(members)}: the {kind} of {name_list(missing)} is not "
                                   f"estimated; add it to --estimate {kind}=... or drop it from the coupling")
     specs = []
     for kind, muscles in estimate.items():
@@ -220,7 +221,7 @@ def fiber_length_trial(label: str, inputs, guess, fiber_lengths: Mapping[str, tu
     t = inputs.mesh_time_s[:N]
     unknown = [m for m in fiber_lengths if m not in inputs.muscles]
     if unknown:
-        raise UnknownMuscleError(f"trial {label}: fiber lengths of {', '.join(unknown)}, which the problem does "
+        raise UnknownMuscleError(f"trial {label}: fiber lengths of {name_list(unknown)}, which the problem does "
                                  f"not have ({', '.join(inputs.muscles[:6])} ...); name model muscles")
     cols = []
     for m, (tm, lm) in fiber_lengths.items():

@@ -48,6 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataMismatchError, InputFileError
+from ..messages import name_list
 
 __all__ = ["STATES_FILE", "CONTROLS_FILE", "FORCES_FILE", "MODEL_FILE", "OPENSIM_FILES",
            "tendon_strain_at_one_norm_force", "passive_fiber_strain_at_one_norm_force",
@@ -100,7 +101,7 @@ def opensim_muscle_parameters(params) -> dict:
     bad = [params.names[i] for i in np.flatnonzero(~(strain_t > 0) | ~(strain_p > 0))]
     if bad:
         raise DataMismatchError(
-            f"the tendon or passive curve of {', '.join(bad)} reaches one normalised force before its slack or "
+            f"the tendon or passive curve of {name_list(bad)} reaches one normalised force before its slack or "
             "optimal length (a strain at one normalised force of zero or less), which OpenSim's "
             "DeGrooteFregly2016Muscle cannot represent; check the tendon stiffness and passive parameters"
         )
@@ -186,6 +187,7 @@ def _solution_inputs(solution, model_path, ik_path, id_path):
 def _coordinates_of_window(time_s, filtered: bool, ik, ik_path):
     """The IK columns over the frames of the solved window ``time_s``, filtered as the solve
     filtered the muscle-tendon lengths (``filtered``: ``input_preparation``'s filter)."""
+    from ..io import constant_rate
     from .inputs import FILTER_CUTOFF_HZ, FILTER_ORDER, lowpass_filtfilt
 
     t = np.asarray(ik.index, dtype=float)
@@ -193,7 +195,7 @@ def _coordinates_of_window(time_s, filtered: bool, ik, ik_path):
     t = t[keep]
     columns = {c: np.asarray(ik[c], dtype=float)[keep] for c in ik.columns}
     if t.size > 1 and filtered:
-        fs = 1.0 / float(np.mean(np.diff(t)))
+        fs = constant_rate(t, f"the IK motion of {ik_path}")[1]
         names = list(columns)
         filtered_values = lowpass_filtfilt(np.column_stack([columns[c] for c in names]), fs, FILTER_CUTOFF_HZ,
                                            FILTER_ORDER, what=f"the IK motion of {ik_path}")
@@ -243,7 +245,7 @@ def inverse_dynamics_at(id_path, coordinates, times) -> dict:
     columns; filtered as the solve filters the moments, cubic spline at the times)."""
     from scipy.interpolate import CubicSpline
 
-    from ..io import read_table
+    from ..io import constant_rate, read_table
     from .inputs import FILTER_CUTOFF_HZ, FILTER_ORDER, lowpass_filtfilt
 
     table = read_table(id_path)
@@ -259,8 +261,8 @@ def inverse_dynamics_at(id_path, coordinates, times) -> dict:
     names = list(found)
     values = np.column_stack([found[c] for c in names])
     if t.size > 13:
-        values = lowpass_filtfilt(values, 1.0 / float(np.mean(np.diff(t))), FILTER_CUTOFF_HZ, FILTER_ORDER,
-                                  what=f"the inverse dynamics {id_path}")
+        what = f"the inverse dynamics {id_path}"
+        values = lowpass_filtfilt(values, constant_rate(t, what)[1], FILTER_CUTOFF_HZ, FILTER_ORDER, what=what)
     spline = CubicSpline(t, values, axis=0, bc_type="not-a-knot")
     at = spline(np.clip(times, t[0], t[-1]))
     return {c: at[:, j] for j, c in enumerate(names)}
@@ -301,7 +303,7 @@ def opensim_tables(solution, model_out, model_path=None, ik_path=None, id_path=N
     solved_dofs = list(solution.dofs)
     unknown = [d for d in solved_dofs if d not in reserve_of]
     if unknown:
-        raise DataMismatchError(f"{paths['model']}: no free coordinate {', '.join(unknown)} of the solution; give "
+        raise DataMismatchError(f"{paths['model']}: no free coordinate {name_list(unknown)} of the solution; give "
                                 "the model the solution was solved with")
     others = [c for c in reserve_of if c not in solved_dofs]
     id_forces = inverse_dynamics_at(paths["id"], others, t) if paths["id"] else {}
@@ -392,7 +394,7 @@ def joint_reaction(folder, joints, out_dir, external_loads=None, frame: str = "c
     folder, out_dir = Path(folder), Path(out_dir)
     missing = [name for name in OPENSIM_FILES if not (folder / name).is_file()]
     if missing:
-        raise InputFileError(f"{folder}: no {', '.join(missing)}; write them with write_opensim_files")
+        raise InputFileError(f"{folder}: no {name_list(missing)}; write them with write_opensim_files")
     out_dir.mkdir(parents=True, exist_ok=True)
     xml = None
     if external_loads is not None:

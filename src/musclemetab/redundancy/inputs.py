@@ -191,14 +191,11 @@ def mesh_for_window(t0: float, tf: float, mesh_frequency_hz: float = MESH_FREQUE
 
 
 def _sample_rate(time: np.ndarray, what: str) -> float:
-    dt = np.diff(time)
-    mean_dt = float(np.mean(dt))
-    if np.max(np.abs(dt - mean_dt)) > 0.01 * mean_dt + 1e-9:
-        raise DataMismatchError(
-            f"{what}: the time stamps are not evenly spaced (steps {dt.min():.6g}-{dt.max():.6g} s); "
-            "the low-pass filter needs a constant sampling rate: resample the file"
-        )
-    return 1.0 / mean_dt
+    """The constant sampling rate (Hz) of ``time``; rounded stamps of one are accepted
+    (:func:`musclemetab.io.constant_rate`)."""
+    from ..io import constant_rate
+
+    return constant_rate(time, what)[1]
 
 
 def read_kinematics(path: "str | os.PathLike | StorageTable", dofs: Sequence[str] = DEFAULT_DOFS,
@@ -313,10 +310,16 @@ def restrict_geometry(geometry: GeometryLike) -> GeometryLike:
 
 
 def check_id_coordinates(id_path, columns: Sequence[str], layout) -> None:
-    """Raise :class:`UnknownCoordinateError` naming the file and columns when an ID column
-    (``<coordinate>_moment`` or ``<coordinate>_force``) is for a coordinate the model
-    (``layout``, :func:`musclemetab.layout.read_layout`) lacks."""
-    from ..errors import UnknownCoordinateError
+    """Warn (:class:`~musclemetab.errors.MusclemetabWarning`, naming the file and columns)
+    when ID columns (``<coordinate>_moment`` or ``<coordinate>_force``) are for coordinates
+    the model (``layout``, :func:`musclemetab.layout.read_layout`) lacks: they are ignored
+    (inverse dynamics of a model with more coordinates, e.g. arms or a knee's
+    varus-valgus). Only the solved DOFs' moments are needed, and a missing one is refused
+    where they are read (:func:`read_inverse_dynamics`)."""
+    import warnings
+
+    from ..errors import MusclemetabWarning
+    from ..messages import name_list
 
     coords = {c["name"] for c in layout.coordinates}
     alien = []
@@ -325,9 +328,10 @@ def check_id_coordinates(id_path, columns: Sequence[str], layout) -> None:
             if c.endswith(suffix) and c[: -len(suffix)] not in coords:
                 alien.append(c)
     if alien:
-        raise UnknownCoordinateError(
-            f"{id_path}: column {', '.join(alien[:5])}{' ...' if len(alien) > 5 else ''} is for a coordinate the "
-            f"model {layout.path} lacks; the inverse dynamics must come from this model"
+        warnings.warn(
+            f"{id_path}: {'column' if len(alien) == 1 else 'columns'} {name_list(alien)} "
+            f"{'is' if len(alien) == 1 else 'are'} for coordinates the model {layout.path} lacks and "
+            "ignored; check that the inverse dynamics comes from this subject", MusclemetabWarning, stacklevel=2,
         )
 
 

@@ -13,6 +13,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..errors import DataMismatchError, UnknownMuscleError
+from ..messages import name_list
 from ..muscle import fiber_width, tendon_shift
 
 __all__ = ["MuscleTendonParameters", "PARAMETER_FIELDS"]
@@ -62,14 +63,14 @@ class MuscleTendonParameters:
                 raise DataMismatchError(f"muscle parameter '{name}' has {arr.size} values for {m} muscles")
             if not np.all(np.isfinite(arr)):
                 bad = [self.names[i] for i in np.flatnonzero(~np.isfinite(arr))]
-                raise DataMismatchError(f"muscle parameter '{name}' is not finite for {', '.join(bad)}")
+                raise DataMismatchError(f"muscle parameter '{name}' is not finite for {name_list(bad)}")
             object.__setattr__(self, name, arr)
         for name in ("max_isometric_force_N", "optimal_fiber_length_m", "tendon_slack_length_m",
                      "max_contraction_velocity", "tendon_stiffness", "passive_kpe", "passive_sm"):
             arr = getattr(self, name)
             if np.any(arr <= 0):
                 bad = [self.names[i] for i in np.flatnonzero(arr <= 0)]
-                raise DataMismatchError(f"muscle parameter '{name}' must be positive; it is not for {', '.join(bad)}")
+                raise DataMismatchError(f"muscle parameter '{name}' must be positive; it is not for {name_list(bad)}")
 
     @property
     def width_m(self) -> np.ndarray:
@@ -85,7 +86,7 @@ class MuscleTendonParameters:
         missing = [n for n in names if n not in pos]
         if missing:
             raise UnknownMuscleError(
-                f"no parameters for muscle{'s' if len(missing) > 1 else ''} {', '.join(missing)}; "
+                f"no parameters for muscle{'s' if len(missing) > 1 else ''} {name_list(missing)}; "
                 f"the parameter set has {', '.join(self.names[:6])}{' ...' if len(self.names) > 6 else ''}"
             )
         return np.array([pos[n] for n in names], dtype=int)

@@ -27,6 +27,7 @@ import numpy as np
 
 from ..errors import OptionError
 from ..events import WALKING_CYCLE_DURATION_S
+from ..messages import name_list
 from ..processes import BackgroundCall
 from ._docs import fill_doc
 from .emg_inputs import (
@@ -605,7 +606,7 @@ def emg_mappings_of_legs(model, ik_path, emg_mapping, side: str, dofs=None, cach
                                      f"{'right' if leg == 'r' else 'left'} leg; map its muscles to their channels")
     unplaced = sorted(set(mapping) - placed)
     if unplaced:
-        raise UnknownMuscleError(f"--emg-mapping {emg_mapping}: {', '.join(unplaced)} in neither leg's "
+        raise UnknownMuscleError(f"--emg-mapping {emg_mapping}: {name_list(unplaced)} in neither leg's "
                                  "muscles; check the names")
     return legs
 
@@ -730,7 +731,8 @@ def estimate_files(
     check_output_folder(out)
     ik, id_files = [str(p) for p in ik], [str(p) for p in id]
     n = len(ik)
-    us_files, emg_files = [str(p) for p in ultrasound or ()], [str(p) for p in emg or ()]
+    us_files = [str(p) for p in ultrasound or ()]
+    emg_files = [p if isinstance(p, os.PathLike) else str(p) for p in emg or ()]  # a RawEmgPath stays one
     if not (us_files or emg_files):
         raise OptionError("estimate needs measurements: give --ultrasound (fiber lengths) or --emg files, or both")
     counts = [("--ultrasound", len(us_files)), ("--emg", len(emg_files))]

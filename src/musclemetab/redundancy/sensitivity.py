@@ -50,6 +50,7 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import DataMismatchError, OptionError, SolverError
+from ..messages import name_list
 
 __all__ = ["PARAMETERS", "RATE_STEP", "BOUND_SLACK", "POLISH_TOL", "POLISH_MU_INIT", "Sensitivity", "polish",
            "finite_difference", "parameter_derivatives", "state_sensitivities", "trial_sensitivity", "problem_of_solution",
@@ -467,7 +468,7 @@ def problem_of_solution(solution, cache_dir: str | os.PathLike | None = None) ->
     files = rec.get("inputs") or {}
     missing = [k for k in ("model", "ik", "id") if not files.get(k) or not Path(files[k]).is_file()]
     if missing:
-        raise DataMismatchError(f"{where}: the {', '.join(missing)} file(s) its summary.json names "
+        raise DataMismatchError(f"{where}: the {name_list(missing)} file(s) its summary.json names "
                                 f"({', '.join(str(files.get(k)) for k in missing)}) cannot be found; the sensitivities "
                                 "rebuild the problem from them: solve again where the files are")
     dofs = list(solution.dofs)
@@ -478,7 +479,7 @@ def problem_of_solution(solution, cache_dir: str | os.PathLike | None = None) ->
     geo = compute_geometry(files["model"], ik_table, dofs=dofs, side=rec.get("side", "r"), cache_dir=cache_dir)
     absent = [m for m in solution.muscles if m not in geo.muscles]
     if absent:
-        raise DataMismatchError(f"{where}: the model has no muscle {', '.join(absent)} of the solution")
+        raise DataMismatchError(f"{where}: the model has no muscle {name_list(absent)} of the solution")
     cols = [list(geo.muscles).index(m) for m in solution.muscles]
     rows = [list(geo.dofs).index(d) for d in dofs]
     geometry = GeometryArrays(np.asarray(geo.time)[keep], list(solution.muscles), dofs,

@@ -45,6 +45,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..errors import InputFileError, OptionError, UnknownMuscleError
+from ..messages import name_list
 from ..muscle import KT_GENERIC
 from ..passive import (  # noqa: F401  (read_passive_parameters: a name of this package too)
     PassiveParameters,
@@ -229,7 +230,7 @@ def _apply_by_name(muscles: Sequence[str], table: Mapping[str, float], what: str
             resolved[m] = float(value)
     if unknown and strict:
         raise UnknownMuscleError(
-            f"{what}: muscle{'s' if len(unknown) > 1 else ''} {', '.join(unknown)} not among the muscles "
+            f"{what}: muscle{'s' if len(unknown) > 1 else ''} {name_list(unknown)} not among the muscles "
             f"of this problem ({', '.join(muscles[:6])}{' ...' if len(muscles) > 6 else ''})"
         )
     return resolved
@@ -352,7 +353,7 @@ def _model_arrays(model_parameters, muscles: Sequence[str]) -> dict:
     missing = [m for m in muscles if m not in pos]
     if missing:
         raise UnknownMuscleError(
-            f"the model parameters have no muscle{'s' if len(missing) > 1 else ''} {', '.join(missing)}; "
+            f"the model parameters have no muscle{'s' if len(missing) > 1 else ''} {name_list(missing)}; "
             "the geometry and the parameters must come from the same model"
         )
     idx = np.array([pos[m] for m in muscles], dtype=int)

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import InputFileError, OptionError
+from ..messages import name_list
 from ..study_layout import PER_MUSCLE_FILE, RESULTS_CSV, STUDY_JSON, TIMESERIES_FILE, UNITS_FOLDER
 from .folder import (
     RENAMED_PER_MUSCLE_COLUMNS,
@@ -222,7 +223,7 @@ def read_analyse_folders(paths, models=None) -> AnalyseFolders:
         missing = [c for c in REQUIRED_COLUMNS if c not in table.columns]
         if missing:
             raise InputFileError(f"{path / RESULTS_CSV}: missing column{'s' if len(missing) > 1 else ''} "
-                                 f"{', '.join(missing)}; {remedy}")
+                                 f"{name_list(missing)}; {remedy}")
         rows.append(add_quality(table, list(summaries.values())))
         pm = _renamed(_read_table(path / PER_MUSCLE_FILE, "per-muscle table"), RENAMED_PER_MUSCLE_COLUMNS)
         for k, (col, val) in enumerate(zip(("subject", "trial", "workflow"), key)):

@@ -36,6 +36,7 @@ from ..colours import GROUP_COLOURS as _GROUP_COLOURS
 from ..colours import MODEL_COLOURS as _MODEL_COLOURS
 from ..colours import WORKFLOW_COLOURS as _WORKFLOW_COLOURS
 from ..errors import MusclemetabError, OptionError, UnknownMuscleError
+from ..messages import name_list
 
 __all__ = [
     "MODEL_COLOURS",
@@ -297,7 +298,7 @@ from .uncertainty import has_band, shade_band  # noqa: E402  (the uncertainty ba
 def _require_columns(df, columns: Sequence[str], what: str) -> None:
     missing = [c for c in columns if c not in df.columns]
     if missing:
-        raise OptionError(f"{what} lacks the column{'s' if len(missing) > 1 else ''} {', '.join(missing)}")
+        raise OptionError(f"{what} lacks the column{'s' if len(missing) > 1 else ''} {name_list(missing)}")
 
 
 def _ok_rows(results):
@@ -477,7 +478,7 @@ def excitations_and_fiber_lengths(
     workflows = _ordered_workflows(solutions)
     missing = [w for w in workflows if w not in cycles]
     if missing:
-        raise OptionError(f"no gait cycle (start, toe-off, end) given for workflow {', '.join(missing)}")
+        raise OptionError(f"no gait cycle (start, toe-off, end) given for workflow {name_list(missing)}")
     cyc = {}
     for w in workflows:
         vals = tuple(float(v) for v in cycles[w])
@@ -609,7 +610,7 @@ def estimated_vs_measured(results, *, models: Sequence[str] | None = None, title
     models = _ordered_models(res["model"]) if models is None else [str(m) for m in models]
     absent = [m for m in models if m not in set(res["model"].astype(str))]
     if absent:
-        raise OptionError(f"no measured comparison for model {', '.join(absent)}")
+        raise OptionError(f"no measured comparison for model {name_list(absent)}")
     workflows = _ordered_workflows(res["workflow"])
     subjects = _unique(str(s) for s in res["subject"])
     marker = {s: _MARKERS[i % len(_MARKERS)] for i, s in enumerate(subjects)}
@@ -717,7 +718,7 @@ def _models_and_toe_off(available: Sequence[str], models, toe_off_pct, what: str
     models = list(available) if models is None else [str(m) for m in models]
     absent = [m for m in models if m not in available]
     if absent:
-        raise OptionError(f"no {what} for model {', '.join(absent)} ({having} {', '.join(available)})")
+        raise OptionError(f"no {what} for model {name_list(absent)} ({having} {', '.join(available)})")
     to = float(toe_off_pct)
     if not (0.0 < to < 100.0):
         raise OptionError(f"toe-off must be inside the cycle (0-100 %), not {toe_off_pct}")
@@ -794,7 +795,7 @@ def whole_body_over_cycle(timeseries_by_trial: Mapping[str, object], speeds: Map
     labels = list(timeseries_by_trial)
     missing = [t for t in labels if t not in speeds or not np.isfinite(float(speeds[t]))]
     if missing:
-        raise OptionError(f"no walking speed given for trial {', '.join(map(str, missing))}")
+        raise OptionError(f"no walking speed given for trial {name_list(missing)}")
     labels.sort(key=lambda t: float(speeds[t]))
     tables = {}
     for t in labels:
@@ -807,7 +808,7 @@ def whole_body_over_cycle(timeseries_by_trial: Mapping[str, object], speeds: Map
     models = available if models is None else [str(m) for m in models]
     absent = [m for m in models if all(m not in in_trial[t] for t in labels)]
     if absent:
-        raise OptionError(f"no whole-body rate for model {', '.join(absent)}")
+        raise OptionError(f"no whole-body rate for model {name_list(absent)}")
     from matplotlib import colormaps
 
     cmap = colormaps["viridis_r"]
@@ -1047,7 +1048,7 @@ def group_shares(results, *, workflows: Sequence[str] | None = None, models: Seq
     workflows = all_wf if workflows is None else [str(w) for w in workflows]
     absent = [w for w in workflows if w not in all_wf]
     if absent:
-        raise OptionError(f"workflow {', '.join(absent)} is not in the results; it has {', '.join(all_wf)}")
+        raise OptionError(f"workflow {name_list(absent)} is not in the results; it has {', '.join(all_wf)}")
     models = _ordered_models(res["model"]) if models is None else [str(m) for m in models]
     trials = trial_order(res)
     speeds = {t: r[1] for t, r in zip(trials, _speed_table(res, cols[0]))}

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputFileError, MissingColumnError, OptionError
+from ..messages import name_list
 from ..redundancy.solution import SUMMARY_FILE
 from ..study_layout import (
     FAILURES_CSV,
@@ -160,9 +161,14 @@ class StudyFolder:
         return self.subject_record(subject).get("side") == "both"
 
     def emg_file(self, subject, trial) -> Path | None:
-        """The trial's EMG file recorded in ``study.json`` (``emg_files``), or ``None``."""
-        path = (self.subject_record(subject).get("emg_files") or {}).get(trial)
-        return self.resolve(path) if path else None
+        """The trial's EMG file recorded in ``study.json`` (``emg_files``), or ``None``; a
+        :class:`~musclemetab.emg.RawEmgPath` when its ``emg_processing`` is ``raw``."""
+        from ..emg import emg_source
+
+        record = self.subject_record(subject)
+        path = (record.get("emg_files") or {}).get(trial)
+        return emg_source(self.resolve(path), (record.get("emg_processing") or {}).get(trial, "envelope")) \
+            if path else None
 
     def emg_mapping(self, subject):
         """The subject's EMG mapping recorded in ``study.json`` (a name or a file; ``"default"``)."""
@@ -430,7 +436,7 @@ def read_study_folder(study_dir: str | os.PathLike, models=None) -> StudyFolder:
         missing = []
     if missing:
         raise MissingColumnError(
-            f"{rpath}: missing column{'s' if len(missing) > 1 else ''} {', '.join(missing)}; "
+            f"{rpath}: missing column{'s' if len(missing) > 1 else ''} {name_list(missing)}; "
             "the file was not written by the study runner of this version; run the study again"
         )
     for c in results.columns:
@@ -480,7 +486,7 @@ def with_figure_models(study: StudyFolder, models, where) -> StudyFolder:
     absent = [m for m in (parse_models(named) if named else []) if m not in computed]
     if absent:
         raise OptionError(
-            f"--models: {', '.join(absent)} not computed in {where} (the study has {', '.join(computed)}); "
+            f"--models: {name_list(absent)} not computed in {where} (the study has {', '.join(computed)}); "
             "name models of the study or run it with them")
     study.figure_models = asked
     return study

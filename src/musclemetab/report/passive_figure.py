@@ -16,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..messages import name_list
+
 __all__ = ["passive_fit_figure", "save_passive_fit_figure", "PASSIVE_FIT_DPI"]
 
 #: Resolution of the PNG (dots per inch).
@@ -56,7 +58,7 @@ def passive_fit_figure(trials: Sequence, generic_Nm: Mapping[str, np.ndarray], c
             ax.plot(q[sel], calibrated_Nm[t.joint][sel], "C3-", label="calibrated")
             fixed = [f"{_short(n)} {float(np.round(np.degrees(t.angles_rad[sel][0, i]))) + 0.0:.0f}°"
                      for i, n in enumerate(t.angle_names) if n != t.dof]
-            ax.set_title(f"{t.joint} block {c + 1} ({', '.join(fixed)})", fontsize=9)
+            ax.set_title(f"{t.joint} block {c + 1} ({name_list(fixed)})", fontsize=9)
             ax.set_xlabel(f"{t.dof} (deg)")
             ax.set_ylabel("passive moment (N m)")
             ax.grid(alpha=0.3)

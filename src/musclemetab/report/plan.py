@@ -282,7 +282,7 @@ def measured_emg(study: StudyFolder, subject: str, trial: str, sols: dict, cycle
     otherwise so that its peak over the cycle equals the excitation's peak of the workflow
     shown first (EFFORT-TEN when present). No EMG: an empty mapping and a sentence saying why.
     """
-    from ..emg import emg_at, map_channels, read_processed_emg
+    from ..emg import emg_at, map_channels, read_emg
     from ..redundancy.emg_inputs import mapping_for_muscles, resolve_emg_mapping
     from .figures import main_workflow
 
@@ -306,7 +306,7 @@ def measured_emg(study: StudyFolder, subject: str, trial: str, sols: dict, cycle
         except (MusclemetabError, KeyError, TypeError, ValueError):
             mapping, scales = {}, {}
     try:
-        emg_df = read_processed_emg(path)
+        emg_df = read_emg(path)
         if not mapping:
             named = study.emg_mapping(subject)
             mapping = mapping_for_muscles(named, resolve_emg_mapping(named), list(sol.muscles))

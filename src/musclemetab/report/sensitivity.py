@@ -17,6 +17,7 @@ import io
 import numpy as np
 
 from ..errors import InputFileError
+from ..messages import name_list
 from ..redundancy.sensitivity import SENSITIVITY_COLUMNS, SENSITIVITY_CSV
 
 __all__ = ["HEADER", "TOP_TABLE", "TOP_FIGURE", "FIGURE_MODEL", "unit_sensitivities", "whole_body_ranking",
@@ -49,7 +50,7 @@ def unit_sensitivities(study) -> list[tuple[str, object]]:
             table = pd.read_csv(path)
             missing = [c for c in SENSITIVITY_COLUMNS if c not in table.columns]
             if missing:
-                raise InputFileError(f"{path}: no column(s) {', '.join(missing)}; write it again with "
+                raise InputFileError(f"{path}: no column(s) {name_list(missing)}; write it again with "
                                      "musclemetab run --sensitivity (or metabolics --sensitivity)")
             label = f"{subject} / {trial} / {workflow}" + (f" ({leg} leg)" if leg else "")
             out.append((label, table))

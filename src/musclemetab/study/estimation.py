@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Mapping
 
 from ..errors import OptionError
+from ..messages import name_list
 
 __all__ = ["ESTIMATE", "ESTIMATE_FOLDER", "EstimateSpec", "estimate_spec", "estimation_trials",
            "run_parameter_estimation"]
@@ -91,7 +92,7 @@ def estimate_spec(data, here: str) -> EstimateSpec:
         raise OptionError(f"{here}: expected a table such as estimate = {{tendon_stiffness = [\"soleus_r\"]}}")
     extra = sorted(set(data) - _KEYS)
     if extra:
-        raise OptionError(f"{here}: unknown key(s) {', '.join(extra)}; allowed: {', '.join(sorted(_KEYS))}")
+        raise OptionError(f"{here}: unknown key(s) {name_list(extra)}; allowed: {', '.join(sorted(_KEYS))}")
     what = data.get("estimate")
     if not isinstance(what, Mapping) or not what:
         raise OptionError(f"{here}: 'estimate' is required: a table {{kind = [muscle, ...]}} with kinds "
@@ -152,11 +153,11 @@ def estimation_trials(subject, here: str | None = None) -> list:
             missing = [t.name for t in trials if t.emg is None]
             if missing:
                 raise OptionError(f"{here}: estimate.emg_mode needs an 'emg' file for every estimation trial; "
-                                  f"missing for {', '.join(missing)}")
+                                  f"missing for {name_list(missing)}")
         bad = [t.name for t in trials if t.id is None or t.cycle is not None]
         if bad:
             raise OptionError(f"{here}: the estimation solves the trials' whole IK window with their 'id' file; "
-                              f"trial(s) {', '.join(bad)} have no 'id' or set 'cycle'")
+                              f"trial(s) {name_list(bad)} have no 'id' or set 'cycle'")
     return trials
 
 

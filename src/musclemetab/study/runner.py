@@ -415,6 +415,9 @@ def run_study(
     for stage in stages:
         for unit in stage:
             unit_folder(out, unit)
+    from .samples import check_priors_muscles
+
+    check_priors_muscles(study)
     check_output_folder(out, "the study's output folder")
     check_replaceable(out, study_root_files())  # a file of the user there is refused before any unit runs
     run = StudyRun(output=out, n_planned=n_total)
@@ -469,6 +472,8 @@ study_lock = FolderLock  # the study folder's lock (the name it had before ``Fol
 
 
 def _write_study_json(study: Study, out: Path) -> None:
+    from ..emg import RawEmgPath
+
     info = dict(study.settings)
     info["source"] = str(study.source) if study.source else None
     info["subjects"] = {
@@ -484,6 +489,8 @@ def _write_study_json(study: Study, out: Path) -> None:
             **({"estimate": s.estimate.to_dict()} if s.estimate is not None else {}),
             "trials": [t.name for t in s.trials],
             "emg_files": {t.name: str(t.emg) if t.emg else None for t in s.trials},
+            "emg_processing": {t.name: "raw" if isinstance(t.emg, RawEmgPath) else "envelope"
+                               for t in s.trials if t.emg},
         }
         for s in study.subjects
     }

@@ -45,6 +45,20 @@ def study_priors(study: Study):
     return _priors(path, Path(path).stat().st_mtime_ns if path else None)
 
 
+def check_priors_muscles(study: Study) -> None:
+    """Refuse, before any unit runs, a priors file of the study (``[uncertainty] priors``,
+    ``--uncertainty-priors``) with a row naming no muscle of a subject's model
+    (:class:`~musclemetab.errors.UnknownMuscleError` naming the file, the muscle and the model);
+    a sample would otherwise find it only when it runs."""
+    if not (study.settings.get("uncertainty") or {}).get("priors"):
+        return
+    from ..model import read_model
+
+    priors = study_priors(study)
+    for subject in study.subjects:
+        priors.check_muscles(read_model(subject.model).muscles.names, f"subject {subject.name}'s model {subject.model}")
+
+
 def sample_key(study: Study, unit, nominal_key: str | None) -> str:
     """SHA-256 of what sample ``unit.sample`` depends on: its trial unit's key, the priors' values,
     the seed and the sampling rule."""

@@ -39,6 +39,9 @@ A study file names everything a study needs; paths are relative to the file::
     emg_mode = "constrained"              # optional: the effort workflows' solves EMG-informed
                                           # (constrained | driven | tracking), with the trials' emg
     emg_tolerance = 0.01                  # optional: half-width of the EMG band (constrained)
+    emg_processing = "envelope"           # optional: the trials' emg files are processed envelopes
+                                          # (envelope, default) or raw EMG processed by the package
+                                          # (raw: musclemetab.emg.process_raw_emg); a trial may say too
     side = "r"                            # leg to solve: r | l | both (both: each leg over its own
                                           # gait cycle, the legs' rates added; needs 'cycle')
     dofs = ["hip_flexion_r", "knee_angle_r", "ankle_angle_r"]   # optional (r or l): default from the model
@@ -50,6 +53,7 @@ A study file names everything a study needs; paths are relative to the file::
     ik = "data/IK_normal.mot"
     id = "data/ID_normal.sto"
     emg = "data/EMG_normal.mot"           # needed by emg-ten and emg_mode
+    emg_processing = "raw"                # optional: this trial's emg (default the subject's)
     ultrasound = "data/US_normal.mot"     # optional: fiber lengths (mm) for [subjects.estimate]
     grf = "data/GRF_normal.mot"           # optional: gait events from the vertical force
     grf_column = "ground_force_vy"        # optional
@@ -83,6 +87,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from ..errors import InputFileError, OptionError
+from ..messages import name_list
 from ..settings import MAX_ITERATIONS, MESH_FREQUENCY_RANGE_HZ, NUMBER_KEYS, NumberKey, check_number  # noqa: F401
 
 __all__ = ["Study", "Subject", "Trial", "load_study", "study_from_dict", "EMG_TEN", "KNOWN_WORKFLOWS", "BOTH", "strict_study",
@@ -248,7 +253,7 @@ class Study:
 
 # ---------------------------------------------------------------------------------------
 _STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "basal_coefficient", "basal_exponent", "subjects",
-               "solver", "energy_goal", "strict", "uncertainty"}
+               "solver", "energy_goal", "strict", "uncertainty", "report"}
 #: keys of the study file's [energy_goal] table (the energy goal of every effort-workflow solve)
 _ENERGY_KEYS = {"model", "weight", "effort_weight", "smoothing", "form"}
 #: keys of the study file's [uncertainty] table (docs/uncertainty.md)
@@ -256,11 +261,12 @@ _UNCERTAINTY_KEYS = {"samples", "seed", "priors", "sensitivity"}
 #: keys of the study file's [solver] table (IPOPT settings of every solve)
 _SOLVER_KEYS = {"max_iter", "tol", "stop", "linear_solver", "warm_start"}
 _SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials",
-                 "muscle_properties", "side", "dofs", "emg_mode", "emg_tolerance", "estimate", "exclude_muscles"}
+                 "muscle_properties", "side", "dofs", "emg_mode", "emg_tolerance", "estimate", "exclude_muscles",
+                 "emg_processing"}
 _TRIAL_KEYS = {
     "name", "ik", "id", "emg", "grf", "grf_column", "grf_threshold_N", "speed_m_per_s",
     "measured_W_per_kg", "vo2_mL_per_s", "vco2_mL_per_s", "vo2_mL_per_min", "vco2_mL_per_min",
-    "start_s", "toe_off_s", "end_s", "external_loads", "cycle", "ultrasound",
+    "start_s", "toe_off_s", "end_s", "external_loads", "cycle", "ultrasound", "emg_processing",
 }
 
 
@@ -274,7 +280,7 @@ def load_study(path: str | os.PathLike, *, output: str | os.PathLike | None = No
         raise InputFileError(f"{path}: {size} bytes, more than a study file may hold ({MAX_STUDY_FILE_BYTES} bytes); "
                              "give the study file, not a data file")
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        data = tomllib.loads(path.read_text(encoding="utf-8-sig"))  # a byte-order mark (Windows editors) is no TOML
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputFileError(f"{path}: not a valid TOML file ({exc}); fix the syntax at the position given") from None
     except RecursionError:
@@ -357,7 +363,7 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
     names = [s.name for s in subjects]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
-        raise OptionError(f"{where}: subject name(s) {', '.join(dup)} used more than once; names must be unique")
+        raise OptionError(f"{where}: subject name(s) {name_list(dup)} used more than once; names must be unique")
     settings = {"name": name, "workflows": list(workflows), "models": list(models), "basal": basal}
     if "basal_coefficient" in data or "basal_exponent" in data:
         settings.update(basal_coefficient=basal_coefficient, basal_exponent=basal_exponent)
@@ -374,6 +380,9 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
     uncertainty = _uncertainty(data.get("uncertainty"), base, where)
     if uncertainty:  # [uncertainty]: samples of every trial unit (musclemetab.study.uncertainty)
         settings["uncertainty"] = uncertainty
+    report = _report(data.get("report"), where)
+    if report:  # [report] models: the report's figures (docs/report.md)
+        settings["report"] = report
     strict = data.get("strict", False)
     if not isinstance(strict, bool):
         raise OptionError(f"{where}: 'strict' must be true or false, not {strict!r}")
@@ -478,6 +487,30 @@ def sensitivity_study(study: Study, sensitivity: bool) -> Study:
     return replace(study, settings={**settings, "sensitivity": True} if sensitivity else settings)
 
 
+def _report(data, where: str) -> dict:
+    """The ``[report]`` table checked: ``{"models": ...}`` (the metabolic models of the report's
+    figures, as its ``--models`` takes them: ``"all,LW05"`` or a list); ``{}`` for none."""
+    if data is None:
+        return {}
+    here = f"{where}: [report]"
+    if not isinstance(data, Mapping):
+        raise OptionError(f"{where}: 'report' must be a table such as [report] models = [\"all\", \"LW05\"]")
+    _unknown(data, {"models"}, here)
+    models = data.get("models")
+    if models is None:
+        return {}
+    if not (isinstance(models, str) or (isinstance(models, list) and all(isinstance(m, str) for m in models))):
+        raise OptionError(f"{here}: 'models' must be a list of model names such as [\"all\", \"LW05\"], not {models!r}")
+    from ..errors import MusclemetabError
+    from ..metabolics.registry import parse_models
+
+    try:
+        parse_models(models)
+    except MusclemetabError as exc:
+        raise OptionError(f"{here}: models: {exc}") from None
+    return {"models": models if isinstance(models, str) else list(models)}
+
+
 def _uncertainty(data, base: Path, where: str) -> dict:
     """The ``[uncertainty]`` table checked: ``{"samples", "seed"[, "priors"]}`` (``{}`` for none or 0 samples;
     its ``sensitivity`` switch: :func:`_sensitivity`)."""
@@ -507,7 +540,7 @@ def _unknown(data: Mapping, allowed: set, where: str) -> None:
         raise OptionError(f"{where}: expected a table, got {type(data).__name__}")
     extra = sorted(set(data) - allowed)
     if extra:
-        raise OptionError(f"{where}: unknown key(s) {', '.join(extra)}; allowed: {', '.join(sorted(allowed))}")
+        raise OptionError(f"{where}: unknown key(s) {name_list(extra)}; allowed: {', '.join(sorted(allowed))}")
 
 
 def _path(value, base: Path, where: str, key: str, required: bool = True) -> Path | None:
@@ -584,16 +617,17 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
     trials_data = data.get("trials")
     if not isinstance(trials_data, list) or not trials_data:
         raise OptionError(f"{here}: no trials; add [[subjects.trials]] tables with name, ik and id")
-    trials = tuple(_trial(t, base, here) for t in trials_data)
+    processing = _emg_processing(data, here, "envelope")
+    trials = tuple(_trial(t, base, here, processing) for t in trials_data)
     names = [t.name for t in trials]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
-        raise OptionError(f"{here}: trial name(s) {', '.join(dup)} used more than once")
+        raise OptionError(f"{here}: trial name(s) {name_list(dup)} used more than once")
     if EMG_TEN in workflows or kt == EMG_TEN:
         missing = [t.name for t in trials if t.emg is None]
         if missing:
             raise OptionError(f"{here}: the emg-ten workflow needs an 'emg' file for every trial; missing for "
-                              f"{', '.join(missing)}")
+                              f"{name_list(missing)}")
     emg_mode, emg_tolerance = _emg_mode(data, here, trials)
     muscle_properties = _path(data.get("muscle_properties"), base, here, "muscle_properties", required=False)
     if muscle_properties is not None or dofs is not None or excluded:
@@ -658,7 +692,7 @@ def _check_both_legs(data, here: str, trials, workflows, kt) -> None:
     missing = [t.name for t in trials if t.cycle is None]
     if missing:
         raise OptionError(f"{here}: side = \"both\" solves each leg over its own gait cycle; set cycle = \"auto\" in "
-                          f"trial(s) {', '.join(missing)} (heel strike to heel strike of each leg, from the ground "
+                          f"trial(s) {name_list(missing)} (heel strike to heel strike of each leg, from the ground "
                           "forces of 'external_loads' or 'grf', or from the kinematics without them)")
 
 
@@ -674,15 +708,27 @@ def _emg_mode(data, here: str, trials) -> tuple[str | None, float]:
         raise OptionError(f"{here}: 'emg_mode' must be constrained, driven or tracking, not {mode!r}")
     missing = [t.name for t in trials if t.emg is None]
     if missing:
-        raise OptionError(f"{here}: 'emg_mode' needs an 'emg' file for every trial; missing for {', '.join(missing)}")
+        raise OptionError(f"{here}: 'emg_mode' needs an 'emg' file for every trial; missing for {name_list(missing)}")
     bad = [t.name for t in trials if t.id is None or t.cycle is not None]
     if bad:
         raise OptionError(f"{here}: an EMG-informed solve covers the whole IK window with the trial's 'id' file; "
-                          f"trial(s) {', '.join(bad)} have no 'id' or set 'cycle' (drop 'cycle', or 'emg_mode')")
+                          f"trial(s) {name_list(bad)} have no 'id' or set 'cycle' (drop 'cycle', or 'emg_mode')")
     return mode, 0.01 if tol is None else tol
 
 
-def _trial(data, base: Path, where: str) -> Trial:
+def _emg_processing(data, here: str, default: str) -> str:
+    """The ``emg_processing`` key (``envelope`` or ``raw``; ``default`` when absent)."""
+    from ..emg import EMG_PROCESSING
+
+    value = data.get("emg_processing", default) if isinstance(data, Mapping) else default
+    if value not in EMG_PROCESSING:
+        raise OptionError(f"{here}: 'emg_processing' must be {' or '.join(EMG_PROCESSING)}, not {value!r}")
+    return value
+
+
+def _trial(data, base: Path, where: str, emg_processing: str = "envelope") -> Trial:
+    from ..emg import emg_source
+
     name = str(data.get("name", "")) if isinstance(data, Mapping) else ""
     here = f"{where}, trial '{name or '?'}'"
     _unknown(data, _TRIAL_KEYS, here)
@@ -697,11 +743,19 @@ def _trial(data, base: Path, where: str) -> Trial:
         vco2 = num["vco2_mL_per_min"] / 60.0
     if (vo2 is None) != (vco2 is None):
         raise OptionError(f"{here}: give both VO2 and VCO2 (Brockway's equation needs both)")
+    forces = [k for k in ("grf", "grf_column") if data.get(k) is not None]
+    if data.get("external_loads") is not None and forces:
+        raise OptionError(
+            f"{here}: 'external_loads' and {' and '.join(repr(k) for k in forces)} both give the ground forces, and "
+            f"{'it' if len(forces) == 1 else 'they'} would be ignored; keep 'external_loads' or 'grf' (with "
+            "'grf_column'), not both"
+        )
     return Trial(
         name=name,
         ik=_path(data.get("ik"), base, here, "ik"),
         id=_path(data.get("id"), base, here, "id", required=data.get("external_loads") is None),
-        emg=_path(data.get("emg"), base, here, "emg", required=False),
+        emg=emg_source(_path(data.get("emg"), base, here, "emg", required=False),
+                       _emg_processing(data, here, emg_processing)),
         grf=_path(data.get("grf"), base, here, "grf", required=False),
         grf_column=data.get("grf_column"),
         grf_threshold_N=num["grf_threshold_N"] if num["grf_threshold_N"] is not None else 20.0,
