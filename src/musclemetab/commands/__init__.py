@@ -11,6 +11,10 @@ line, ``musclemetab: warning: ...``, without a Python source line (:mod:`musclem
 the package's worker processes print theirs the same way). When the reader of the output goes
 away early (``musclemetab report DIR | head -1``), the command stops quietly, without a
 traceback, with status 141 (128 + SIGPIPE, what a shell reports for a Unix tool stopped that way).
+An output stream that cannot be written otherwise (closed, ``2>&-``; full, ``>/dev/full``) never
+stops the computation: the lines are lost, the command runs to its end, and a standard output
+that could not be written makes the exit status 1 with one line saying so on standard error
+(when that can be written); no traceback.
 """
 
 from __future__ import annotations
@@ -96,6 +100,9 @@ def main(argv: list[str] | None = None) -> int:
     every object at exit (the memory returns to the system with the process), which takes
     0.2 s after a report.
     """
+    _occupy_closed_descriptors()
+    real = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = out, _ = _GuardedOutput(sys.stdout, pipe_stops=True), _GuardedOutput(sys.stderr)
     try:
         try:
             status = _main(argv)
@@ -105,8 +112,15 @@ def main(argv: list[str] | None = None) -> int:
         _silence_stdout()
         return BROKEN_PIPE_STATUS
     finally:
+        sys.stdout, sys.stderr = real
         if argv is None:
             gc.freeze()
+    if out.error is not None:
+        _silence_stdout()  # what stays buffered is not written again at exit
+        _GuardedOutput(sys.stderr).write(
+            f"musclemetab: error: standard output could not be written ({out.error}), so the command's "
+            "messages are lost; run it again with standard output to a terminal or a file that can be written\n")
+        status = status or 1
     if argv is None and status == INTERRUPTED_STATUS:
         _end_interrupted()
     return status
@@ -149,6 +163,56 @@ def _end_interrupted() -> None:
         except (OSError, ValueError):
             pass
     os._exit(INTERRUPTED_STATUS)
+
+
+class _GuardedOutput:
+    """Standard output or error as the commands write to it: a write or flush that fails (the
+    stream closed or full) is dropped and its reason kept in :attr:`error`, never raised, so that
+    no message stops a computation. With ``pipe_stops`` a reader gone away (``BrokenPipeError``)
+    is raised still, which ends the command quietly with status 141 (:func:`main`)."""
+
+    def __init__(self, stream, pipe_stops: bool = False):
+        self._stream, self._pipe_stops, self.error = stream, pipe_stops, None
+
+    def _guarded(self, method: str, *args):
+        if self._stream is None:
+            self.error = self.error or "it is closed"
+            return len(args[0]) if args else None
+        try:
+            return getattr(self._stream, method)(*args)
+        except BrokenPipeError:
+            if self._pipe_stops:
+                raise
+            self.error = self.error or "its reader went away"
+        except (OSError, ValueError) as exc:  # full (OSError), closed (ValueError)
+            self.error = self.error or (exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc))
+        return len(args[0]) if args else None
+
+    def write(self, text):
+        return self._guarded("write", text)
+
+    def flush(self):
+        self._guarded("flush")
+
+    def __getattr__(self, name):  # fileno, isatty, encoding...: the stream's own
+        return getattr(self._stream, name)
+
+
+def _occupy_closed_descriptors() -> None:
+    """Open the null device on standard input, output or error when they are closed (``2>&-``),
+    so that no file the command opens takes their number and receives what the compiled
+    libraries (OpenSim, IPOPT) print to them."""
+    for fd in (0, 1, 2):
+        try:
+            os.fstat(fd)
+        except OSError:
+            try:
+                null = os.open(os.devnull, os.O_RDWR)
+                if null != fd:
+                    os.dup2(null, fd)
+                    os.close(null)
+            except OSError:
+                pass
 
 
 def _silence_stdout() -> None:

@@ -55,6 +55,7 @@ from typing import Mapping
 
 from ..errors import OptionError
 from ..metabolics.plausibility import add_quality
+from ..messages import write_quietly
 from ..io.atomic import FolderLock, _boot_id, _process_alive  # noqa: F401  (public here before)
 from ..io.atomic import atomic_directory, atomic_path, atomic_write_text, check_output_folder, check_replaceable
 from ..processes import THREAD_VARIABLES, spawn_pool  # noqa: F401  (THREAD_VARIABLES: public here before)
@@ -152,7 +153,10 @@ class _Progress:
         self.total, self.done, self.failed, self.interrupted = total, 0, 0, 0
         self.enabled = enabled and total > 0
         self.stream = stream or sys.stderr
-        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        try:
+            self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        except ValueError:  # a closed stream: its lines are lost (write_quietly)
+            self.tty = False
         self.t0 = time.perf_counter()
         self.parallel = max(1, int(parallel or 1))
         self.costs: list[float] = []  # measured seconds of the units run
@@ -185,13 +189,8 @@ class _Progress:
         stopped = f", {self.interrupted} interrupted" if self.interrupted else ""
         line = (f"[{bar}] {self.done}/{self.total} units, {self.failed} failed{stopped}, "
                 f"{time.perf_counter() - self.t0:.0f} s{left} | {label} {state}")
-        if self.tty:
-            self.stream.write("\r" + line[:160].ljust(160))
-            if self.done == self.total:
-                self.stream.write("\n")
-        else:
-            self.stream.write(line + "\n")
-        self.stream.flush()
+        text = "\r" + line[:160].ljust(160) + ("\n" if self.done == self.total else "") if self.tty else line + "\n"
+        write_quietly(self.stream, text)  # a closed or full stream loses the line, not the study
 
 
 def _duration(seconds: float) -> str:
