@@ -15,7 +15,7 @@ import threading
 from concurrent.futures import ProcessPoolExecutor
 
 __all__ = ["THREAD_VARIABLES", "pin_threads", "ignore_sigint", "spawn_pool", "stop_pool", "sigint_deferred",
-           "sigint_noted", "BackgroundCall"]
+           "sigint_noted", "sigterm_as_sigint", "terminated", "BackgroundCall"]
 
 #: environment variables that size the thread pools of BLAS/LAPACK and OpenMP libraries
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
@@ -143,6 +143,46 @@ def sigint_noted():
             _NOTED.clear()  # raised below, or already on its way out of the block
     if caught:
         raise KeyboardInterrupt
+
+
+#: Set when SIGTERM came while a :func:`sigterm_as_sigint` block ran.
+_TERMINATED = threading.Event()
+
+
+def terminated() -> bool:
+    """Whether the interrupt being handled came from SIGTERM (a batch scheduler stopping the
+    job, ``kill PID``) rather than Ctrl-C."""
+    return _TERMINATED.is_set()
+
+
+@contextlib.contextmanager
+def sigterm_as_sigint():
+    """While the block runs, SIGTERM is handled as Ctrl-C: the SIGINT handler in place is called
+    (a study unit's, :func:`sigint_noted`'s, Python's default raising
+    :class:`KeyboardInterrupt`), so that the work stops the way Ctrl-C stops it: the pool's
+    workers interrupted and ended, the running units marked interrupted, nothing half-written.
+    :func:`terminated` then says the stop came from SIGTERM (the command line's status is 143,
+    128 + SIGTERM, instead of 130). With SIGINT ignored (a process started in the background
+    of a shell script inherits that), SIGTERM raises :class:`KeyboardInterrupt` all the same.
+    Outside the main thread it does nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def on_sigterm(signum, frame):
+        _TERMINATED.set()
+        handler = signal.getsignal(signal.SIGINT)
+        if callable(handler):
+            handler(signal.SIGINT, frame)
+        else:
+            raise KeyboardInterrupt
+
+    _TERMINATED.clear()
+    previous = signal.signal(signal.SIGTERM, on_sigterm)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 class BackgroundCall:

@@ -6,7 +6,9 @@ Python as well. Nothing in the library imports this package. Options several com
 (the basal heat, the study runs) are in :mod:`.options`.
 
 Every error, a usage error included, is printed as one line (``musclemetab: error: ...``) and
-the command exits with status 1; Ctrl-C exits with status 130. Every warning is printed as one
+the command exits with status 1; Ctrl-C exits with status 130, SIGTERM (a batch scheduler
+stopping the job) stops the work the same way (workers ended, units marked interrupted) with
+status 143. Every warning is printed as one
 line, ``musclemetab: warning: ...``, without a Python source line (:mod:`musclemetab.messages`;
 the package's worker processes print theirs the same way). When the reader of the output goes
 away early (``musclemetab report DIR | head -1``), the command stops quietly, without a
@@ -121,13 +123,25 @@ def main(argv: list[str] | None = None) -> int:
             f"musclemetab: error: standard output could not be written ({out.error}), so the command's "
             "messages are lost; run it again with standard output to a terminal or a file that can be written\n")
         status = status or 1
-    if argv is None and status == INTERRUPTED_STATUS:
-        _end_interrupted()
+    if argv is None and status in (INTERRUPTED_STATUS, TERMINATED_STATUS):
+        _end_interrupted(status)
     return status
 
 
 #: Exit status after Ctrl-C (128 + SIGINT).
 INTERRUPTED_STATUS = 130
+#: Exit status after SIGTERM (128 + SIGTERM), which stops a command as Ctrl-C does.
+TERMINATED_STATUS = 143
+
+
+def interrupted_status() -> int:
+    """The exit status of a command stopped by Ctrl-C (130) or SIGTERM (143), and its line on
+    standard error (``musclemetab: interrupted`` or ``musclemetab: terminated``) printed."""
+    from ..processes import terminated
+
+    stopped = terminated()
+    print(f"musclemetab: {'terminated' if stopped else 'interrupted'}", file=sys.stderr)
+    return TERMINATED_STATUS if stopped else INTERRUPTED_STATUS
 
 
 def _caused_by_interrupt(exc: BaseException) -> bool:
@@ -143,8 +157,8 @@ def _caused_by_interrupt(exc: BaseException) -> bool:
     return False
 
 
-def _end_interrupted() -> None:
-    """End the program after Ctrl-C with status 130, Ctrl-C ignored from here on.
+def _end_interrupted(status: int = INTERRUPTED_STATUS) -> None:
+    """End the program after Ctrl-C or SIGTERM with ``status`` (130 or 143), Ctrl-C ignored from here on.
 
     The interpreter is ended here rather than by returning: a KeyboardInterrupt that ran
     through an import (SciPy's modules import each other while the signal comes) can leave the
@@ -162,7 +176,7 @@ def _end_interrupted() -> None:
             stream.flush()
         except (OSError, ValueError):
             pass
-    os._exit(INTERRUPTED_STATUS)
+    os._exit(status)
 
 
 class _GuardedOutput:
@@ -239,19 +253,20 @@ def _main(argv: list[str] | None) -> int:
 
             check_number_options(args)  # every command's numeric options, by the table of the study file
             check_exclusive(args)
-            return int(args.func(args) or 0)
+            from ..processes import sigterm_as_sigint
+
+            with sigterm_as_sigint():  # a batch scheduler's SIGTERM stops the work as Ctrl-C does
+                return int(args.func(args) or 0)
     except MusclemetabError as exc:
         msg = " ".join(str(exc).split())
         print(f"musclemetab: error: {msg}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:  # pragma: no cover
-        print("musclemetab: interrupted", file=sys.stderr)
-        return INTERRUPTED_STATUS
+        return interrupted_status()
     except Exception as exc:
         if not _caused_by_interrupt(exc):
             raise
         # Ctrl-C during an import of a compiled module comes back as that import's error
-        print("musclemetab: interrupted", file=sys.stderr)
-        return INTERRUPTED_STATUS
+        return interrupted_status()
     finally:
         warnings.showwarning = previous
