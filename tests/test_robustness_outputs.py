@@ -800,6 +800,35 @@ def test_ctrl_c_while_ipopt_iterates_exits_130_not_as_a_failed_solve(example, tm
     assert (out / "summary.json").read_text() == "previous\n" and not (out / "solution.sto").exists()
 
 
+@pytest.mark.opensim
+def test_ctrl_c_while_ipopt_iterates_prints_one_line_and_none_of_casadi(example, tmp_path, capfd, monkeypatch):
+    """SIGINT delivered while IPOPT computes (10 ms after its third iterate; a window no other
+    test solves, so IPOPT runs): CasADi catches the interrupt in a function evaluation or the
+    iteration callback and writes its own warning line about it (``CasADi - ... WARNING(
+    "KeyboardInterruptException") [...]``); the command's standard error holds its one line,
+    ``musclemetab: interrupted``, after the progress lines and nothing of CasADi's."""
+    import musclemetab.redundancy.ipopt as ipopt
+
+    monkeypatch.setattr(ipopt, "PROGRESS_INTERVAL_S", 0.0)
+    real = ipopt.ProgressLines.iteration
+
+    def iteration(self, f, g):
+        real(self, f, g)
+        if self.count == 3:  # the signal comes while IPOPT computes the next iterate
+            threading.Timer(0.01, os.kill, (os.getpid(), signal.SIGINT)).start()
+
+    monkeypatch.setattr(ipopt.ProgressLines, "iteration", iteration)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a terminal (see above)
+    try:
+        status = main(["solve", *_files(example), "--window", "0.64:0.86", "--out", str(tmp_path / "s")])
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    err = capfd.readouterr().err.splitlines()
+    assert status == 130, err
+    assert err[-1] == "musclemetab: interrupted", err
+    assert all(line.startswith("musclemetab: solving: iteration ") for line in err[:-1]), err
+
+
 def test_ctrl_c_during_report_exits_130_and_keeps_the_previous_report(demo, tmp_path, decoy):
     """``report --force`` redraws the figures of a copy of the demo's study folder; SIGINT 2.5 s
     after its start (reading the study, or drawing): status 130 within 2 s, the previous page as

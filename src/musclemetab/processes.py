@@ -114,6 +114,42 @@ def sigint_deferred():
         raise KeyboardInterrupt
 
 
+class _InterruptLinesDropped:
+    """Standard error while :func:`sigint_noted` runs native code: the line CasADi writes for
+    the interrupt it caught in a callback (``CasADi - <time> WARNING("KeyboardInterruptException")
+    [...]``) is dropped, so that Ctrl-C ends a command with its own one line
+    (``musclemetab: interrupted``); every other line passes."""
+
+    def __init__(self, stream):
+        self._stream, self._line = stream, ""
+
+    def write(self, text):  # CasADi writes its line in pieces: each line is held until it is whole
+        self._line += text
+        *lines, self._line = self._line.split("\n")
+        for line in lines:
+            if "KeyboardInterruptException" not in line:
+                self._stream.write(line + "\n")
+        return len(text)
+
+    def flush(self):
+        if self._line and not self._line.startswith("CasADi"):  # a partial line of another writer
+            self._stream.write(self._line)
+            self._line = ""
+        self._stream.flush()
+
+    def close_block(self):
+        """What is held when the block ends, written unless it is the interrupt's line."""
+        line, self._line = self._line, ""
+        if line and "KeyboardInterruptException" not in line:
+            try:
+                self._stream.write(line)
+            except (OSError, ValueError):  # a closed or full stream loses the line (messages.write_quietly)
+                pass
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
 @contextlib.contextmanager
 def sigint_noted():
     """Run native code that stops itself on Ctrl-C (IPOPT through CasADi, which then returns a
@@ -135,9 +171,16 @@ def sigint_noted():
         previous(signum, frame)
 
     signal.signal(signal.SIGINT, note)
+    import sys
+
+    stderr = sys.stderr
+    filtered = sys.stderr = _InterruptLinesDropped(stderr) if stderr is not None else None
     try:
         yield
     finally:
+        sys.stderr = stderr
+        if filtered is not None:
+            filtered.close_block()
         signal.signal(signal.SIGINT, previous)
         if caught:
             _NOTED.clear()  # raised below, or already on its way out of the block

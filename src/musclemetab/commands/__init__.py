@@ -48,9 +48,51 @@ SUBCOMMANDS = (
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with the package's error convention: one line, exit status 1."""
+    """argparse with the package's error convention: one line, exit status 1.
+
+    An option the command does not know is named as such, with the closest option it does know
+    (``--modle``: "did you mean --model?", :func:`difflib.get_close_matches`), before any
+    required option it hid is said to be missing, and the line points to the command's own
+    ``--help``."""
+
+    _args: list = []
+
+    def parse_known_args(self, args=None, namespace=None):
+        self._args = list(sys.argv[1:] if args is None else args)  # what this parser (or command) was given
+        return super().parse_known_args(args, namespace)
+
+    def _command_parser(self):
+        """The parser of the command named by the arguments (for the top-level parser), or ``None``."""
+        actions = self._subparsers._group_actions if self._subparsers is not None else ()
+        for action in actions:
+            if self._args and isinstance(action.choices, dict) and self._args[0] in action.choices:
+                return action.choices[self._args[0]]
+        return None
+
+    def _unknown_options(self) -> list[str]:
+        """Each option given that this parser does not know (nor abbreviates), with the closest it knows."""
+        import difflib
+
+        known = [o for o in self._option_string_actions if o.startswith("--")]
+        unknown = []
+        for token in self._args:
+            if token == "--":
+                break
+            name = token.split("=", 1)[0]
+            if (not name.startswith("-") or self._negative_number_matcher.match(name)
+                    or name in self._option_string_actions or (name.startswith("--") and any(o.startswith(name) for o in known))):
+                continue
+            close = difflib.get_close_matches(name, known, n=1)
+            unknown.append(f"{name} (did you mean {close[0]}?)" if close else name)
+        return unknown
 
     def error(self, message):  # noqa: D401 - argparse's hook
+        command = self._command_parser()
+        if command is not None and command is not self:  # an argument the command refused: its parser says so
+            command.error(message)
+        unknown = self._unknown_options()
+        if unknown:
+            message = f"unrecognized option{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}"
         msg = " ".join(str(message).split())
         sys.stderr.write(f"musclemetab: error: {msg}; see '{self.prog} --help'\n")
         sys.exit(1)
