@@ -16,6 +16,8 @@ from musclemetab.metabolics.plausibility import (
     metabolic_flags,
     negative_group_flag,
     ralston_gross_rate_W_per_kg,
+    results_rows_flags,
+    SPEED_FREE_UPPER_W_PER_KG,
     whole_body_rate_flag,
 )
 from musclemetab.redundancy.plausibility import (
@@ -142,9 +144,24 @@ def test_ralston_rate_and_the_band_of_walking():
     assert high.code == "metabolic_rate" and high.model == "UM10" and "above" in high.message
     assert f"{0.5 * ref:.2f}-{2 * ref:.2f} W/kg" in high.message
     assert "below" in whole_body_rate_flag("BH04", 0.5 * ref - 0.01, 1.25).message
-    # no speed, or one outside Ralston's range: not checked
-    assert whole_body_rate_flag("UM10", 50.0, None) is None and whole_body_rate_flag("UM10", 50.0, 3.0) is None
+    # a speed outside Ralston's range: not checked
+    assert whole_body_rate_flag("UM10", 50.0, 3.0) is None
     assert whole_body_rate_flag("UM10", 10.8, 1.25, band=(0.5, 3.0)) is None
+
+
+def test_without_a_speed_a_rate_above_the_fastest_walking_is_flagged():
+    """No speed (a treadmill trial without one, gait2392's trial): the rate is held against
+    Ralston's gross rate at 2.0 m/s, the top of his range: 29 + 0.0053 x 120^2 = 105.32
+    cal/(kg min) = 105.32 x 4.184 / 60 = 7.3443 W/kg. gait2392's UM10 rate, 10.76 W/kg
+    (docs/quality.md), is flagged; a rate at it is not; a results row without a speed likewise."""
+    bound = 105.32 * 4.184 / 60
+    assert whole_body_rate_flag("UM10", bound - 1e-9, None) is None
+    high = whole_body_rate_flag("UM10", 10.76, None)
+    assert high.code == "metabolic_rate" and high.model == "UM10" and high.threshold == pytest.approx(bound, rel=1e-12)
+    assert "10.76 W/kg is above 7.34 W/kg" in high.message and "speed is unknown" in high.message
+    assert whole_body_rate_flag("UM10", 10.76, float("nan")).code == "metabolic_rate"
+    rows = pd.DataFrame({"model": ["UM10", "BH04"], "whole_body_W_per_kg": [10.76, 6.0], "speed_m_per_s": [None, None]})
+    assert quality_text(results_rows_flags(rows)) == "metabolic_rate(UM10)"
 
 
 def test_negative_group_rates_and_the_metabolic_flags_of_a_table():
@@ -186,7 +203,10 @@ def test_one_legs_rate_flags_and_their_file(tmp_path):
     leg = SimpleNamespace(models=("UM10", "BH04"), whole_body={"UM10": SimpleNamespace(mean_W_per_kg=10.8),
                                                                "BH04": SimpleNamespace(mean_W_per_kg=5.0)})
     flags = legs_rate_flags({"r": leg}, 1.25)
-    assert [(f.code, f.model) for f in flags] == [("metabolic_rate", "UM10")] and legs_rate_flags({"r": leg}, None) == []
+    assert [(f.code, f.model) for f in flags] == [("metabolic_rate", "UM10")]
+    # without a speed: above the speed-free bound, 7.34 W/kg, as well
+    assert [(f.code, f.threshold) for f in legs_rate_flags({"r": leg}, None)] == [("metabolic_rate",
+                                                                                    SPEED_FREE_UPPER_W_PER_KG)]
     path = write_plausibility(flags, tmp_path)
     assert path.name == PLAUSIBILITY_FILE and [Flag.from_dict(d) for d in json.loads(path.read_text())] == flags
 
