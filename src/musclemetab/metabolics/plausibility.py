@@ -27,7 +27,8 @@ from .solution import PLAUSIBILITY_FILE, add_legs
 
 __all__ = ["PLAUSIBILITY_FILE", "legs_rate_flags", "results_rows_flags", "write_plausibility", "RATE_BAND",
            "ralston_gross_rate_W_per_kg", "whole_body_rate_flag", "negative_group_flag", "metabolic_flags", "add_quality",
-           "SPEED_RANGE_M_PER_S", "SPEED_FREE_UPPER_W_PER_KG"]
+           "SPEED_RANGE_M_PER_S", "SPEED_FREE_UPPER_W_PER_KG", "is_gait_cycle", "excluded_muscles_flag",
+           "gait_cycle_flag"]
 
 #: The plausible band of the gross whole-body rate, as factors of Ralston's rate at the speed.
 #: Low: half (a rate below it is below standing rest plus a little walking). High: twice, which
@@ -99,6 +100,44 @@ def negative_group_flag(model: str, group_share_pct: Mapping[str, float]) -> Fla
                 f"{listing}; the model's negative-work term dominates these muscles' rates", items, 0.0, model=model)
 
 
+def is_gait_cycle(duration_s: float, named_by_events: bool = True) -> bool:
+    """Whether rates averaged over ``duration_s`` seconds are a gait cycle's: gait events bound the
+    span (``named_by_events``: not a solve over an explicit ``--window`` taken as it is) and its
+    duration lies within walking's, 0.8-2.0 s (:data:`musclemetab.events.WALKING_CYCLE_DURATION_S`)."""
+    from ..events import WALKING_CYCLE_DURATION_S
+
+    lo, hi = WALKING_CYCLE_DURATION_S
+    return bool(named_by_events) and bool(np.isfinite(duration_s)) and lo <= float(duration_s) <= hi
+
+
+def gait_cycle_flag(start_s, end_s, duration_s: float, named_by_events: bool) -> Flag | None:
+    """The rates of a results row averaged over a span that is not one gait cycle
+    (:func:`is_gait_cycle`): a window no gait event bounds, or one of a duration walking's
+    cycle does not have; ``None`` for a gait cycle."""
+    if is_gait_cycle(duration_s, named_by_events):
+        return None
+    from ..events import WALKING_CYCLE_DURATION_S
+
+    span = f"{start_s:g}-{end_s:g} s" if np.isfinite(start_s) and np.isfinite(end_s) else f"{duration_s:g} s"
+    why = ("no gait event bounds it (a solve over --window)" if not named_by_events else
+           f"its duration {duration_s:.3g} s is outside walking's {WALKING_CYCLE_DURATION_S[0]:g}-"
+           f"{WALKING_CYCLE_DURATION_S[1]:g} s")
+    return Flag("not_a_gait_cycle", f"the rates are averaged over {span}, which is not shown to be one gait cycle: "
+                f"{why}; give analyse --cycle START,TOE_OFF,END or --grf, or solve over --cycle, for a gait cycle's "
+                "rates", {span: float(duration_s)}, None)
+
+
+def excluded_muscles_flag(names) -> Flag | None:
+    """Rates that leave out the muscles a solve excluded (``--exclude-muscles``): the leg's and
+    the whole body's rates are those of the other muscles; ``None`` when none was excluded."""
+    names = [n for n in (names or ()) if n]
+    if not names:
+        return None
+    return Flag("excluded_muscles", f"the rates leave out {len(names)} muscle{'s' if len(names) != 1 else ''} the "
+                f"solve excluded ({', '.join(names)}): the leg's and the whole body's rates are those of the other "
+                "muscles", {n: 1.0 for n in names}, None)
+
+
 def metabolic_flags(whole_body: Mapping[str, float], speed_m_per_s: float | None,
                     group_shares=None, *, band: tuple[float, float] = RATE_BAND) -> list[Flag]:
     """The metabolic checks of every model: ``whole_body`` ``{model: mean_W_per_kg}``;
@@ -125,8 +164,19 @@ def _row_flags(row, band: tuple[float, float] = RATE_BAND) -> list[Flag]:
 
     speed = row["speed_m_per_s"].iloc[0] if "speed_m_per_s" in row else None
     speed = float(speed) if speed is not None and pd.notna(speed) else None
-    return metabolic_flags({str(row["model"].iloc[0]): float(row["whole_body_W_per_kg"].iloc[0])}, speed, row,
-                           band=band)
+    flags = metabolic_flags({str(row["model"].iloc[0]): float(row["whole_body_W_per_kg"].iloc[0])}, speed, row,
+                            band=band)
+    if "gait_cycle" in row and not bool(row["gait_cycle"].iloc[0]):
+        def value(c):
+            return float(row[c].iloc[0]) if c in row and pd.notna(row[c].iloc[0]) else float("nan")
+
+        # a duration walking's cycle has: no gait event bounds the span; otherwise its duration is said
+        named = not is_gait_cycle(value("duration_s"))
+        flags.append(gait_cycle_flag(value("cycle_start_s"), value("cycle_end_s"), value("duration_s"), named))
+    if "excluded_muscles" in row:
+        text = row["excluded_muscles"].iloc[0]
+        flags.append(excluded_muscles_flag(str(text).split() if isinstance(text, str) else ()))
+    return [f for f in flags if f is not None]
 
 
 def legs_rate_flags(results: Mapping, speed_m_per_s: float | None, *, band: tuple[float, float] = RATE_BAND) -> list[Flag]:
