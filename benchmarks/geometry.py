@@ -30,7 +30,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trial", default="normal", choices=("slow", "normal", "fast"))
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--quick", action="store_true", help="one run (seconds; the test suite runs it so)")
     args = ap.parse_args()
+    if args.quick:
+        args.repeats = 1
 
     from musclemetab import opensim_bridge
     from musclemetab.datasets import example_subject

@@ -230,7 +230,8 @@ def test_analyse_prints_records_and_enforces_the_flags(example, tmp_path, capsys
     """``analyse`` on a two-muscle solution folder (``tests/test_analysis.py``) whose summary.json
     records a passive-force flag, at 2.0 m/s: Ralston's rate there is (29 + 0.0053 x 120^2) x
     4.184/60 = 7.344 W/kg, the band's floor 3.672 W/kg, above the two muscles' whole-body rate,
-    which is flagged for every model. One warning line per flag, ``plausibility.json``, the
+    which is flagged for every model; the cycle, 0.15 s, is no gait cycle's (walking's last
+    0.8-2.0 s), which every row says too. One warning line per flag, ``plausibility.json``, the
     ``quality`` column; ``--strict``: exit status 1 after the files are written."""
     from test_analysis import _solution_folder
 
@@ -252,19 +253,24 @@ def test_analyse_prints_records_and_enforces_the_flags(example, tmp_path, capsys
     floor = 0.5 * (29 + 0.0053 * 120.0**2) * 4.184 / 60
     assert floor == pytest.approx(3.672, abs=1e-3) and (wb["whole_body_W_per_kg"] < floor).all()
     assert err[0] == f"musclemetab: warning: {folder}: {solve_flag.message}"
-    assert [e.split(": ")[3] for e in err[1:]] == ["UM10", "BH04"] and all("below the band" in e for e in err[1:])
+    rates = [e for e in err[1:] if "below the band" in e]
+    assert [e.split(": ")[3] for e in rates] == ["UM10", "BH04"]
+    cycle = [e for e in err[1:] if "not shown to be one gait cycle" in e]
+    # the same message for both rows: Python's warnings print it once
+    assert len(cycle) == 1 and "0.62-0.77 s" in cycle[0] and "duration 0.15 s" in cycle[0]
     recorded = [Flag.from_dict(d) for d in json.loads((out / "plausibility.json").read_text())]
     assert recorded[0] == solve_flag and [(f.code, f.model) for f in recorded[1:]] == [
-        ("metabolic_rate", "UM10"), ("metabolic_rate", "BH04")]
+        ("metabolic_rate", "UM10"), ("not_a_gait_cycle", None), ("metabolic_rate", "BH04"), ("not_a_gait_cycle", None)]
     results = pd.read_csv(out / "results.csv").set_index("model")
-    assert results.loc["UM10", "quality"] == "passive_force(soleus_r); metabolic_rate(UM10)"
+    assert results.loc["UM10", "quality"] == "passive_force(soleus_r); metabolic_rate(UM10); not_a_gait_cycle(0.62-0.77 s)"
     assert main([*base, "--strict", "--out", str(tmp_path / "strict")]) == 1
     last = capsys.readouterr().err.strip().splitlines()[-1]
     assert last.startswith("musclemetab: error: analyse --strict: implausible result refused (strict): passive_force(")
     assert (tmp_path / "strict" / "plausibility.json").is_file()
     # at a speed whose band holds the rates, the solve's flag alone
     assert main([*base[:-1], "0.8", "--out", str(tmp_path / "slow")]) == 0
-    assert pd.read_csv(tmp_path / "slow" / "results.csv")["quality"].tolist() == ["passive_force(soleus_r)"] * 2
+    assert pd.read_csv(tmp_path / "slow" / "results.csv")["quality"].tolist() == [
+        "passive_force(soleus_r); not_a_gait_cycle(0.62-0.77 s)"] * 2
 
 
 def test_estimate_prints_the_flags_of_its_solutions(monkeypatch, tmp_path, capsys):
