@@ -261,9 +261,10 @@ def test_knee_contact_force_from_opensim_joint_reaction(gait2392, gait2392_right
     from musclemetab.redundancy.export import inverse_dynamics_at, joint_reaction
 
     sol, folder = gait2392_right
+    t = sol.time_s[:-1]  # the files' nodes: those where the Hill equilibrium holds (docs/opensim_files.md)
     weight = read_model(gait2392.model).body_mass_kg * 9.80665
     grf = read_storage(gait2392.grf)
-    ground = np.column_stack([np.interp(sol.time_s, grf.index, grf[f"ground_force_v{a}"]) for a in "xyz"])
+    ground = np.column_stack([np.interp(t, grf.index, grf[f"ground_force_v{a}"]) for a in "xyz"])
     stance = ground[:, 1] > 200.0
     assert stance.sum() > 50
     # 1: no muscles, the inverse dynamics on the reserves
@@ -271,7 +272,7 @@ def test_knee_contact_force_from_opensim_joint_reaction(gait2392, gait2392_right
     shutil.copytree(folder, bare)
     forces = read_storage(bare / "forces.sto")
     reserves = [c for c in forces.columns if c.startswith("reserve_")]
-    id_at = inverse_dynamics_at(folder / "inverse_dynamics.sto", [c[len("reserve_"):] for c in reserves], sol.time_s)
+    id_at = inverse_dynamics_at(folder / "inverse_dynamics.sto", [c[len("reserve_"):] for c in reserves], t)
     for c in forces.columns:
         forces[c] = id_at[c[len("reserve_"):]] if c in reserves else 0.0
     write_storage(bare / "forces.sto", forces, name="Static Optimization", in_degrees=False)
@@ -284,7 +285,7 @@ def test_knee_contact_force_from_opensim_joint_reaction(gait2392, gait2392_right
     assert residual.max() < 0.15 and np.sqrt(np.mean(residual**2)) < 0.06, residual.max()
     # 2: the solution's forces
     res = joint_reaction(folder, ["knee_r"], tmp_path / "jr", external_loads=gait2392.external_loads)
-    np.testing.assert_allclose(res["time_s"], sol.time_s, atol=1e-9)
+    np.testing.assert_allclose(res["time_s"], t, atol=1e-9)
     f = res["forces"]["knee_r"]  # on the tibia, in the tibia's frame: y along its long axis
     assert np.all(np.isfinite(f))
     axial = -f[:, 1] / weight  # compression positive, body weights
