@@ -445,7 +445,10 @@ def cycle_of_trial(ik: str | os.PathLike, *, grf: str | os.PathLike | None = Non
     """
     from .io import read_storage
 
-    t = np.asarray(window_s, dtype=float) if window_s is not None else read_storage(ik).index.to_numpy(float)
+    t = read_storage(ik).index.to_numpy(float)
+    part = window_s is not None and (abs(window_s[0] - t[0]) > 1e-6 or abs(window_s[1] - t[-1]) > 1e-6)
+    if window_s is not None:
+        t = np.asarray(window_s, dtype=float)
     if grf is not None:
         if model is None:
             force = read_grf(grf, side=side)
@@ -465,7 +468,7 @@ def cycle_of_trial(ik: str | os.PathLike, *, grf: str | os.PathLike | None = Non
     if id_file is None:
         raise OptionError("give the ground reaction forces (grf) or the inverse dynamics (id_file) of the trial")
     return (cycle_from_id_file(id_file, side=side, window_s=(float(t[0]), float(t[-1]))),
-            f"estimated from the {'solved' if window_s is not None else 'IK'} window and the ankle moment "
+            f"estimated from the {'solved' if part else 'IK'} window and the ankle moment "
             "(no ground reaction forces)")
 
 
