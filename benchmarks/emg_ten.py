@@ -13,7 +13,11 @@ correction); the printing itself costs a little time, so this run is not the tim
 Usage::
 
     python benchmarks/emg_ten.py [--mapping authors|default] [--coupling constraints|shared]
-        [--repeat 1] [--count-factorizations] [--json results.json]
+        [--repeat 1] [--count-factorizations] [--json results.json] [--quick]
+
+``--quick``: each trial cut to 0.2 s of its motion (IK, ID and EMG files written cropped
+to a temporary folder), so that the whole path runs in seconds (the test suite runs it so);
+its times say nothing of the full problem's.
 """
 
 from __future__ import annotations
@@ -47,12 +51,33 @@ def _example():
     return example_subject()
 
 
+#: seconds of each trial kept by ``--quick`` (after the first 0.05 s of its motion)
+QUICK_SECONDS = 0.2
+
+
+def _cropped(ex, folder: Path):
+    """``{kind: {trial: path}}`` of the IK, ID and EMG files of each trial cut to
+    :data:`QUICK_SECONDS` of its motion (``--quick``), written into ``folder``."""
+    from musclemetab.io import read_storage, write_storage
+
+    out = {"ik": {}, "id": {}, "emg": {}}
+    for t in TRIALS:
+        t0 = float(read_storage(ex.ik[t]).index[0]) + 0.05
+        for kind, path in (("ik", ex.ik[t]), ("id", ex.id[t]), ("emg", ex.emg[t])):
+            table = read_storage(path)
+            keep = table[(table.index >= t0 - 1e-9) & (table.index <= t0 + QUICK_SECONDS + 1e-9)]
+            out[kind][t] = folder / Path(path).name
+            write_storage(out[kind][t], keep, in_degrees=bool(table.attrs.get("in_degrees")))
+    return out
+
+
 def _solve(ex, args, cache_dir, options=None):
     from musclemetab.redundancy.emg_ten import EmgTenSettings
     from musclemetab.redundancy.run import solve_emg_ten
 
+    files = args.files
     return solve_emg_ten(
-        ex.model, [ex.ik[t] for t in TRIALS], [ex.id[t] for t in TRIALS], [ex.emg[t] for t in TRIALS],
+        ex.model, [files["ik"][t] for t in TRIALS], [files["id"][t] for t in TRIALS], [files["emg"][t] for t in TRIALS],
         emg_mapping=args.mapping, labels=TRIALS, settings=EmgTenSettings(coupling=args.coupling),
         options=options, cache_dir=cache_dir,
     )
@@ -77,7 +102,7 @@ def count_factorizations(ex, args, cache_dir) -> dict:
     per_iter = [int(x) for x in re.findall(r"Number of trial factorizations performed: (\d+)", text)]
     return {"factorizations": sum(per_iter), "iterations": result.iterations,
             "per_iteration_histogram": {k: per_iter.count(k) for k in sorted(set(per_iter))},
-            "solve_time_s_print_level_7": result.record["solve_time_s"]}
+            "solve_time_s_print_level_7": result.record.solve_time_s}
 
 
 def main(argv=None) -> int:
@@ -89,15 +114,18 @@ def main(argv=None) -> int:
     p.add_argument("--repeat", type=int, default=1)
     p.add_argument("--count-factorizations", action="store_true")
     p.add_argument("--json", metavar="FILE")
+    p.add_argument("--quick", action="store_true", help=f"each trial cut to {QUICK_SECONDS} s (seconds in all)")
     args = p.parse_args(argv)
 
     ex = _example()
     cache_dir = Path(tempfile.mkdtemp(prefix="emg_ten_bench_"))
+    args.files = (_cropped(ex, cache_dir) if args.quick else
+                  {"ik": dict(ex.ik), "id": dict(ex.id), "emg": dict(ex.emg)})
     from musclemetab.geometry import compute_geometry
     from musclemetab.model import read_muscle_parameters
 
     for t in TRIALS:  # geometry cache and OpenSim worker warm (not timed)
-        compute_geometry(ex.model, ex.ik[t], cache_dir=cache_dir)
+        compute_geometry(ex.model, args.files["ik"][t], cache_dir=cache_dir)
     read_muscle_parameters(ex.model)
     import casadi  # noqa: F401
 
@@ -107,7 +135,7 @@ def main(argv=None) -> int:
         result = _solve(ex, args, cache_dir)
         runs.append((time.perf_counter() - t0, time.process_time() - c0, result))
     wall, cpu, result = min(runs, key=lambda r: r[0])
-    r = result.record
+    r = result.record.to_dict()  # the problem's record (ProblemRecord), as parameters.json holds it
     fun = sum(r["function_evaluation_time_s"].values())
     size = r["problem_size"]
     row = {
@@ -133,8 +161,9 @@ def main(argv=None) -> int:
     row["other_form"] = {"coupling": other, "variables": nlp["n_variables"],
                          "equalities": nlp["n_equality_constraints"], "inequalities": nlp["n_inequality_constraints"]}
 
-    print(f"EMG-TEN, example subject, trials {', '.join(TRIALS)} (N = 158 + 118 + 99), mapping {args.mapping}, "
-          f"couplings as {args.coupling}")
+    sizes = " + ".join(str(t["n_intervals"]) for t in r.get("trials") or [] if "n_intervals" in t) or "?"
+    print(f"EMG-TEN, example subject, trials {', '.join(TRIALS)} (N = {sizes}), mapping {args.mapping}, "
+          f"couplings as {args.coupling}{f' (--quick: {QUICK_SECONDS} s of each)' if args.quick else ''}")
     print(f"  status {r['status']}, {r['iterations']} iterations, objective {r['objective']:.6e}")
     print(f"  problem: {size['variables']} variables, {size['equality_constraints']} equality and "
           f"{size['inequality_constraints']} inequality constraints (study: {STUDY['variables']}, "

@@ -30,7 +30,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trial", default="normal", choices=("slow", "normal", "fast"))
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--quick", action="store_true",
+                    help="one run over the trial's first 10 frames (seconds; the test suite runs it so)")
     args = ap.parse_args()
+    if args.quick:
+        args.repeats = 1
 
     from musclemetab import opensim_bridge
     from musclemetab.datasets import example_subject
@@ -41,6 +45,12 @@ def main() -> None:
     ex = example_subject()
     ik_path = ex.ik[args.trial]
     ik = read_storage(ik_path)
+    if args.quick:  # the first 10 frames, for AnalyzeTool and musclemetab alike
+        from musclemetab.io import write_storage
+
+        ik, ik_path = ik.iloc[:10], Path(tempfile.mkdtemp(prefix="geometry_bench_")) / Path(ik_path).name
+        write_storage(ik_path, ik, in_degrees=bool(read_storage(ex.ik[args.trial]).attrs.get("in_degrees")))
+        ik = read_storage(ik_path)
     dofs = default_dofs("r")
 
     base_runs, cold_runs, start_runs, cached_runs, load_runs = [], [], [], [], []

@@ -73,11 +73,19 @@ print(json.dumps({"times_s": times, "parses": first}))
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--baseline-src", type=Path, required=True, help="the src folder of the tree to compare with")
+    ap.add_argument("--baseline-src", type=Path, help="the src folder of the tree to compare with (required "
+                    "unless --quick)")
     ap.add_argument("--trial", default="normal", choices=("slow", "normal", "fast"))
     ap.add_argument("--repeat", type=int, default=50, help="timed runs of the stage per process")
     ap.add_argument("--rounds", type=int, default=3, help="processes per tree, alternating")
+    ap.add_argument("--quick", action="store_true",
+                    help="this tree against itself (unless --baseline-src), one round of 3 runs (the test suite runs "
+                    "it so)")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.baseline_src, args.repeat, args.rounds = args.baseline_src or HERE.parent / "src", 3, 1
+    if args.baseline_src is None:
+        ap.error("--baseline-src is required (or --quick)")
     sys.path.insert(0, str(HERE))
     from cold_start import run_in_tree
     from solver import _example

@@ -349,7 +349,11 @@ def main(argv=None):
                     help="IPOPT iterations before the matrix is taken (0: the converged iterate)")
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--no-superlu", action="store_true", help="skip SciPy's SuperLU (slow)")
+    ap.add_argument("--quick", action="store_true",
+                    help="the first iterate alone, one repeat, no SuperLU (the test suite runs it so)")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.iterations, args.repeat, args.no_superlu = [1], 1, True
     ex = _example()
     print(f"KKT benchmark: {os.cpu_count()} cores, load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     print(f"{'matrix':<26} {'method':<26} {'factorise+solve ms':>19} {'residual':>10}")

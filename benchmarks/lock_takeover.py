@@ -70,7 +70,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--starts", type=int, default=2, help="processes starting at once in each round")
     ap.add_argument("--rounds", type=int, default=300)
+    ap.add_argument("--quick", action="store_true", help="3 rounds of 2 starts (seconds; the test suite runs it so)")
     args = ap.parse_args()
+    if args.quick:
+        args.starts, args.rounds = 2, 3
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         held = [holders_after_crash(Path(tmp) / f"round{r}", args.starts) for r in range(args.rounds)]

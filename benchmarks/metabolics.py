@@ -139,7 +139,12 @@ def main() -> None:
     ap.add_argument("--baseline-src", metavar="PATH",
                     help="another source tree (its src/musclemetab) whose models are timed in the same run")
     ap.add_argument("--no-pipeline", action="store_true", help="skip the pipeline row (one solved example trial)")
+    ap.add_argument("--quick", action="store_true",
+                    help="4 muscles x 500 samples, 200 probe states, one repeat, no pipeline row (seconds; the test "
+                    "suite runs it so)")
     args = ap.parse_args()
+    if args.quick:
+        args.muscles, args.samples, args.probe_states, args.repeats, args.no_pipeline = 4, 500, "200", 1, True
 
     from musclemetab import opensim_bridge
     from musclemetab.datasets import example_subject

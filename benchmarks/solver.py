@@ -139,7 +139,12 @@ def main(argv=None):
     p.add_argument("--cold-repeat", type=int, default=3, help="cold command-line runs (median reported)")
     p.add_argument("--linear-solver", default="mumps", help="IPOPT's linear solver (default mumps)")
     p.add_argument("--json", help="write all figures to this file")
+    p.add_argument("--quick", action="store_true",
+                   help="the normal trial's EFFORT-GEN alone, one solve and one cold run, no baseline (the test "
+                   "suite runs it so)")
     args = p.parse_args(argv)
+    if args.quick:
+        args.trials, args.workflows, args.repeat, args.cold_repeat, args.baseline = ["normal"], ["effort-gen"], 1, 1, None
 
     ex = _example()
     cache_dir = Path(args.cache_dir or tempfile.mkdtemp(prefix="mm-geometry-"))

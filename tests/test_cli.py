@@ -43,6 +43,27 @@ def test_usage_error_is_one_line_and_status_1(capsys):
     assert err.count("\n") == 1 and err.startswith("musclemetab: error: ") and "--out" in err
 
 
+@pytest.mark.parametrize("argv, line", [
+    (["geometry", "--modle", "m.osim", "--ik", "ik.mot", "--out", "o"],
+     "unrecognized option --modle (did you mean --model?); see 'musclemetab geometry --help'"),
+    (["solve", "--model", "m.osim", "--ik", "ik.mot", "--out", "o", "--sdie", "l"],
+     "unrecognized option --sdie (did you mean --side?); see 'musclemetab solve --help'"),
+    (["report", "DIR", "--quux"], "unrecognized option --quux; see 'musclemetab report --help'"),
+    (["analyse", "--solutoin", "S", "--metabolcs", "M", "--out", "o"],
+     "unrecognized options --solutoin (did you mean --solution?), --metabolcs (did you mean --metabolics?); "
+     "see 'musclemetab analyse --help'"),
+])
+def test_an_unknown_option_names_the_closest_known_one_and_the_commands_help(argv, line, capsys):
+    """A misspelt option is named as unknown with the command's closest option (it used to say only
+    "the following arguments are required: --model", hiding the cause), and the line points to
+    the command's own help (an unknown option after the command's required ones pointed to the
+    top-level help)."""
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    assert info.value.code == 1
+    assert capsys.readouterr().err.splitlines() == [f"musclemetab: error: {line}"]
+
+
 def test_importing_the_package_loads_neither_opensim_nor_casadi():
     code = "import sys, musclemetab, musclemetab.commands; print('opensim' in sys.modules, 'casadi' in sys.modules)"
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)

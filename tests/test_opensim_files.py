@@ -11,9 +11,12 @@ subjects).
 
 Tolerances (docs/opensim_files.md gives the measured values):
 
+* the files hold the nodes where the solution's Hill equilibrium holds, every node but the last
+  (``N``, reached by the forward Euler step without an equilibrium: its tendon force can be
+  compressive);
 * the tendon force OpenSim computes from ``states.sto`` is the solution's to 1e-9 F0 (the
-  state is the normalised tendon force), except EFFORT-TEN's few slack tendons below OpenSim's
-  curve (written at OpenSim's force for the solution's tendon length: within 0.05 F0);
+  state is the normalised tendon force), except a slack tendon below OpenSim's curve (written at
+  OpenSim's force for the solution's tendon length: within 0.05 F0);
 * OpenSim's tendon force at the solution's fiber length (OpenSim's geometry and tendon curve)
   within 0.07 F0 at every node, 0.012 F0 rms: the tendon curves meet at one normalised force
   only (up to 0.04 F0 apart at the same length) and OpenSim's muscle-tendon lengths at the
@@ -85,23 +88,23 @@ def test_opensim_reproduces_the_solution(solved, workflow):
     p = sol.parameters
     f0 = p.max_isometric_force_N[:, None]
     got = call("solution_model:muscles_over_states", str(folder / "model.osim"), str(folder / "states.sto"),
-               list(sol.muscles), sol.fiber_length_m.T)
-    # loaded with no assembly, no missing or extra column: every state finite, the node times
+               list(sol.muscles), sol.fiber_length_m[:-1].T)
+    # loaded with no assembly, no missing or extra column: every state finite, the node times but the last
     assert got["n_nan_states"] == 0
-    np.testing.assert_allclose(got["time_s"], sol.time_s, atol=1e-12)
-    np.testing.assert_allclose(got["activation"], sol.activation.T, rtol=1e-9, atol=1e-12)
-    ft = sol.tendon_force_N.T
+    np.testing.assert_allclose(got["time_s"], sol.time_s[:-1], atol=1e-12)
+    np.testing.assert_allclose(got["activation"], sol.activation[:-1].T, rtol=1e-9, atol=1e-12)
+    ft = sol.tendon_force_N[:-1].T
     err = np.abs(got["tendon_force_N"] - ft) / f0
     slack = ft / f0 < -0.19
     assert err[~slack].max() < 1e-9
-    assert slack.sum() <= (0 if workflow == "effort-gen" else 3)  # a few slack nodes after EFFORT-TEN
+    assert slack.sum() == 0  # the slack tendons were those of the last node, which the files leave out
     if slack.any():  # OpenSim's curve at the solution's tendon length there
         assert err[slack].max() < 0.05
     # OpenSim's geometry and tendon curve at the solution's fiber lengths
     at_fiber = np.abs(got["tendon_force_at_fiber_length_N"] - ft) / f0
     assert at_fiber.max() < 0.07 and np.sqrt(np.mean(at_fiber**2)) < 0.012
     # the fiber length OpenSim derives from the tendon force
-    lm_err = np.abs(got["fiber_length_m"] - sol.fiber_length_m.T) / p.optimal_fiber_length_m[:, None]
+    lm_err = np.abs(got["fiber_length_m"] - sol.fiber_length_m[:-1].T) / p.optimal_fiber_length_m[:, None]
     assert lm_err.max() < (0.03 if workflow == "effort-gen" else 0.06)
     # the model carries the solution's parameters: F0 and the tendon strain of the soleus
     i = sol.muscles.index("soleus_r")
@@ -124,12 +127,12 @@ def test_forces_file_holds_every_actuator(solved, example):
     sol, folder = solved("effort-gen")
     forces = read_storage(folder / "forces.sto")
     controls = read_storage(folder / "controls.sto")
-    np.testing.assert_allclose(forces.index, sol.time_s, atol=1e-12)
+    np.testing.assert_allclose(forces.index, sol.time_s[:-1], atol=1e-12)
     for i, m in enumerate(sol.muscles):
-        np.testing.assert_allclose(forces[m], sol.tendon_force_N[:, i], rtol=1e-10)
-        np.testing.assert_allclose(controls[f"/forceset/{m}"], sol.excitation[:, i], rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(forces[m], sol.tendon_force_N[:-1, i], rtol=1e-10)
+        np.testing.assert_allclose(controls[f"/forceset/{m}"], sol.excitation[:-1, i], rtol=1e-10, atol=1e-12)
     for j, d in enumerate(sol.dofs):
-        np.testing.assert_allclose(forces[f"reserve_{d}"], sol.reserve_Nm[:, j], rtol=1e-10, atol=1e-9)
+        np.testing.assert_allclose(forces[f"reserve_{d}"], sol.reserve_Nm[:-1, j], rtol=1e-10, atol=1e-9)
     # muscles outside the solution carry nothing; the left hip its inverse-dynamics moment (no right-leg
     # muscle spans it), low-pass filtered as the solve filters the moments (6 Hz, 6th order Butterworth,
     # zero phase; worked here with SciPy's own padding, so within 0.5 N m, 0.15 N m away from the ends)
@@ -141,11 +144,37 @@ def test_forces_file_holds_every_actuator(solved, example):
     t = raw.index.to_numpy()
     b, a = scipy.signal.butter(6, 6.0 / (0.5 / np.mean(np.diff(t))))
     for dof, peak in (("hip_flexion_l", 100.0), ("knee_angle_l", 80.0)):
-        want = np.interp(sol.time_s, t, scipy.signal.filtfilt(b, a, raw[f"{dof}_moment"].to_numpy()))
+        want = np.interp(sol.time_s[:-1], t, scipy.signal.filtfilt(b, a, raw[f"{dof}_moment"].to_numpy()))
         gap = np.abs(forces[f"reserve_{dof}"].to_numpy() - want)
         assert gap.max() < 0.5 and gap[10:-10].max() < 0.15 and np.ptp(want) > peak, dof
     # locked coordinates have no reserve (they are prescribed in the model)
     assert "reserve_subtalar_angle_r" not in forces.columns and "reserve_mtp_angle_r" not in forces.columns
+
+
+def test_a_short_window_solve_hands_opensim_no_pushing_tendon(example, tmp_path):
+    """A short window (0.6-0.85 s, as tests/test_cli_flow.py solves it): the solution's last node,
+    which the forward Euler step reaches without a Hill equilibrium, carries compressive tendon
+    forces (the package's tendon curve below slack); ``forces.sto`` and the normalised tendon
+    forces of ``states.sto`` hold the nodes where the equilibrium holds, every force of a muscle
+    positive, and their headers say which nodes and why."""
+    from musclemetab.io import read_storage
+
+    sol, folder = _solve(tmp_path, ["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]),
+                                    "--id", str(example.id["normal"]), "--window", "0.6:0.85", "--no-progress"])
+    f0 = sol.parameters.max_isometric_force_N
+    assert (sol.tendon_force_N[-1] / f0).min() < -0.05 and (sol.tendon_force_N[:-1] / f0).min() > 0
+    forces = read_storage(folder / "forces.sto")
+    np.testing.assert_allclose(forces.index, sol.time_s[:-1], atol=1e-12)
+    muscle = forces[list(sol.muscles)].to_numpy()
+    assert muscle.min() > 0, muscle.min()
+    states = read_storage(folder / "states.sto")
+    norm = states[[c for c in states.columns if c.endswith("/normalized_tendon_force")
+                   and c.split("/")[-2] in sol.muscles]].to_numpy()
+    assert norm.shape == (sol.time_s.size - 1, len(sol.muscles)) and norm.min() > 0
+    n = sol.time_s.size
+    for name in ("forces.sto", "states.sto", "controls.sto"):
+        head = (folder / name).read_text().split("endheader")[0]
+        assert f"nodes 0-{n - 2} of the solution's {n}" in head and f"node {n - 1} (0.85 s)" in head, name
 
 
 def test_files_are_the_same_with_the_model_work_done_during_the_solve(solved, example, geometry_cache, tmp_path,
@@ -232,9 +261,10 @@ def test_knee_contact_force_from_opensim_joint_reaction(gait2392, gait2392_right
     from musclemetab.redundancy.export import inverse_dynamics_at, joint_reaction
 
     sol, folder = gait2392_right
+    t = sol.time_s[:-1]  # the files' nodes: those where the Hill equilibrium holds (docs/opensim_files.md)
     weight = read_model(gait2392.model).body_mass_kg * 9.80665
     grf = read_storage(gait2392.grf)
-    ground = np.column_stack([np.interp(sol.time_s, grf.index, grf[f"ground_force_v{a}"]) for a in "xyz"])
+    ground = np.column_stack([np.interp(t, grf.index, grf[f"ground_force_v{a}"]) for a in "xyz"])
     stance = ground[:, 1] > 200.0
     assert stance.sum() > 50
     # 1: no muscles, the inverse dynamics on the reserves
@@ -242,7 +272,7 @@ def test_knee_contact_force_from_opensim_joint_reaction(gait2392, gait2392_right
     shutil.copytree(folder, bare)
     forces = read_storage(bare / "forces.sto")
     reserves = [c for c in forces.columns if c.startswith("reserve_")]
-    id_at = inverse_dynamics_at(folder / "inverse_dynamics.sto", [c[len("reserve_"):] for c in reserves], sol.time_s)
+    id_at = inverse_dynamics_at(folder / "inverse_dynamics.sto", [c[len("reserve_"):] for c in reserves], t)
     for c in forces.columns:
         forces[c] = id_at[c[len("reserve_"):]] if c in reserves else 0.0
     write_storage(bare / "forces.sto", forces, name="Static Optimization", in_degrees=False)
@@ -255,7 +285,7 @@ def test_knee_contact_force_from_opensim_joint_reaction(gait2392, gait2392_right
     assert residual.max() < 0.15 and np.sqrt(np.mean(residual**2)) < 0.06, residual.max()
     # 2: the solution's forces
     res = joint_reaction(folder, ["knee_r"], tmp_path / "jr", external_loads=gait2392.external_loads)
-    np.testing.assert_allclose(res["time_s"], sol.time_s, atol=1e-9)
+    np.testing.assert_allclose(res["time_s"], t, atol=1e-9)
     f = res["forces"]["knee_r"]  # on the tibia, in the tibia's frame: y along its long axis
     assert np.all(np.isfinite(f))
     axial = -f[:, 1] / weight  # compression positive, body weights

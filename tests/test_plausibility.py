@@ -16,6 +16,8 @@ from musclemetab.metabolics.plausibility import (
     metabolic_flags,
     negative_group_flag,
     ralston_gross_rate_W_per_kg,
+    results_rows_flags,
+    SPEED_FREE_UPPER_W_PER_KG,
     whole_body_rate_flag,
 )
 from musclemetab.redundancy.plausibility import (
@@ -142,9 +144,24 @@ def test_ralston_rate_and_the_band_of_walking():
     assert high.code == "metabolic_rate" and high.model == "UM10" and "above" in high.message
     assert f"{0.5 * ref:.2f}-{2 * ref:.2f} W/kg" in high.message
     assert "below" in whole_body_rate_flag("BH04", 0.5 * ref - 0.01, 1.25).message
-    # no speed, or one outside Ralston's range: not checked
-    assert whole_body_rate_flag("UM10", 50.0, None) is None and whole_body_rate_flag("UM10", 50.0, 3.0) is None
+    # a speed outside Ralston's range: not checked
+    assert whole_body_rate_flag("UM10", 50.0, 3.0) is None
     assert whole_body_rate_flag("UM10", 10.8, 1.25, band=(0.5, 3.0)) is None
+
+
+def test_without_a_speed_a_rate_above_the_fastest_walking_is_flagged():
+    """No speed (a treadmill trial without one, gait2392's trial): the rate is held against
+    Ralston's gross rate at 2.0 m/s, the top of his range: 29 + 0.0053 x 120^2 = 105.32
+    cal/(kg min) = 105.32 x 4.184 / 60 = 7.3443 W/kg. gait2392's UM10 rate, 10.76 W/kg
+    (docs/quality.md), is flagged; a rate at it is not; a results row without a speed likewise."""
+    bound = 105.32 * 4.184 / 60
+    assert whole_body_rate_flag("UM10", bound - 1e-9, None) is None
+    high = whole_body_rate_flag("UM10", 10.76, None)
+    assert high.code == "metabolic_rate" and high.model == "UM10" and high.threshold == pytest.approx(bound, rel=1e-12)
+    assert "10.76 W/kg is above 7.34 W/kg" in high.message and "speed is unknown" in high.message
+    assert whole_body_rate_flag("UM10", 10.76, float("nan")).code == "metabolic_rate"
+    rows = pd.DataFrame({"model": ["UM10", "BH04"], "whole_body_W_per_kg": [10.76, 6.0], "speed_m_per_s": [None, None]})
+    assert quality_text(results_rows_flags(rows)) == "metabolic_rate(UM10)"
 
 
 def test_negative_group_rates_and_the_metabolic_flags_of_a_table():
@@ -186,7 +203,10 @@ def test_one_legs_rate_flags_and_their_file(tmp_path):
     leg = SimpleNamespace(models=("UM10", "BH04"), whole_body={"UM10": SimpleNamespace(mean_W_per_kg=10.8),
                                                                "BH04": SimpleNamespace(mean_W_per_kg=5.0)})
     flags = legs_rate_flags({"r": leg}, 1.25)
-    assert [(f.code, f.model) for f in flags] == [("metabolic_rate", "UM10")] and legs_rate_flags({"r": leg}, None) == []
+    assert [(f.code, f.model) for f in flags] == [("metabolic_rate", "UM10")]
+    # without a speed: above the speed-free bound, 7.34 W/kg, as well
+    assert [(f.code, f.threshold) for f in legs_rate_flags({"r": leg}, None)] == [("metabolic_rate",
+                                                                                    SPEED_FREE_UPPER_W_PER_KG)]
     path = write_plausibility(flags, tmp_path)
     assert path.name == PLAUSIBILITY_FILE and [Flag.from_dict(d) for d in json.loads(path.read_text())] == flags
 
@@ -210,7 +230,8 @@ def test_analyse_prints_records_and_enforces_the_flags(example, tmp_path, capsys
     """``analyse`` on a two-muscle solution folder (``tests/test_analysis.py``) whose summary.json
     records a passive-force flag, at 2.0 m/s: Ralston's rate there is (29 + 0.0053 x 120^2) x
     4.184/60 = 7.344 W/kg, the band's floor 3.672 W/kg, above the two muscles' whole-body rate,
-    which is flagged for every model. One warning line per flag, ``plausibility.json``, the
+    which is flagged for every model; the cycle, 0.15 s, is no gait cycle's (walking's last
+    0.8-2.0 s), which every row says too. One warning line per flag, ``plausibility.json``, the
     ``quality`` column; ``--strict``: exit status 1 after the files are written."""
     from test_analysis import _solution_folder
 
@@ -232,19 +253,24 @@ def test_analyse_prints_records_and_enforces_the_flags(example, tmp_path, capsys
     floor = 0.5 * (29 + 0.0053 * 120.0**2) * 4.184 / 60
     assert floor == pytest.approx(3.672, abs=1e-3) and (wb["whole_body_W_per_kg"] < floor).all()
     assert err[0] == f"musclemetab: warning: {folder}: {solve_flag.message}"
-    assert [e.split(": ")[3] for e in err[1:]] == ["UM10", "BH04"] and all("below the band" in e for e in err[1:])
+    rates = [e for e in err[1:] if "below the band" in e]
+    assert [e.split(": ")[3] for e in rates] == ["UM10", "BH04"]
+    cycle = [e for e in err[1:] if "not shown to be one gait cycle" in e]
+    # the same message for both rows: Python's warnings print it once
+    assert len(cycle) == 1 and "0.62-0.77 s" in cycle[0] and "duration 0.15 s" in cycle[0]
     recorded = [Flag.from_dict(d) for d in json.loads((out / "plausibility.json").read_text())]
     assert recorded[0] == solve_flag and [(f.code, f.model) for f in recorded[1:]] == [
-        ("metabolic_rate", "UM10"), ("metabolic_rate", "BH04")]
+        ("metabolic_rate", "UM10"), ("not_a_gait_cycle", None), ("metabolic_rate", "BH04"), ("not_a_gait_cycle", None)]
     results = pd.read_csv(out / "results.csv").set_index("model")
-    assert results.loc["UM10", "quality"] == "passive_force(soleus_r); metabolic_rate(UM10)"
+    assert results.loc["UM10", "quality"] == "passive_force(soleus_r); metabolic_rate(UM10); not_a_gait_cycle(0.62-0.77 s)"
     assert main([*base, "--strict", "--out", str(tmp_path / "strict")]) == 1
     last = capsys.readouterr().err.strip().splitlines()[-1]
     assert last.startswith("musclemetab: error: analyse --strict: implausible result refused (strict): passive_force(")
     assert (tmp_path / "strict" / "plausibility.json").is_file()
     # at a speed whose band holds the rates, the solve's flag alone
     assert main([*base[:-1], "0.8", "--out", str(tmp_path / "slow")]) == 0
-    assert pd.read_csv(tmp_path / "slow" / "results.csv")["quality"].tolist() == ["passive_force(soleus_r)"] * 2
+    assert pd.read_csv(tmp_path / "slow" / "results.csv")["quality"].tolist() == [
+        "passive_force(soleus_r); not_a_gait_cycle(0.62-0.77 s)"] * 2
 
 
 def test_estimate_prints_the_flags_of_its_solutions(monkeypatch, tmp_path, capsys):

@@ -726,6 +726,25 @@ def test_report_when_every_unit_failed(tmp_path):
     assert "study.json is missing" in text
 
 
+@pytest.mark.parametrize("cut", ["within the last row", "after the header"])
+def test_a_results_table_cut_short_is_refused_naming_it(tmp_path, capsys, cut):
+    """``results.csv`` cut short (a full disk, a copy stopped part-way) within its last row, or
+    down to its header while ``failures.csv`` names no failed unit (every unit failing is the
+    one way to a table without rows): ``musclemetab report`` refuses with one line naming the
+    file and what to do, status 1, no page (it used to write "0 of 0 units succeeded", status 0)."""
+    from musclemetab.commands import main
+
+    root = make_study(tmp_path / "s", solutions=False, trials={"normal": 1.25})
+    path = root / "results.csv"
+    text = path.read_text()
+    path.write_text(text[:-5] if cut == "within the last row" else text.splitlines(keepends=True)[0])
+    assert main(["report", str(root)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"musclemetab: error: {path}: ") and len(err.splitlines()) == 1, err
+    assert ("cut short" in err and "run the same 'musclemetab run STUDY.toml' again" in err), err
+    assert not (root / "report.html").exists()
+
+
 def test_report_is_rebuilt_only_when_its_inputs_change(tmp_path, monkeypatch):
     from musclemetab.report.build import generate_report, report_key
 

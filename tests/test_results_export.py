@@ -139,11 +139,18 @@ def _inputs(run, res):
 
 
 def test_exported_states_load_in_opensim_with_the_solution_values(exported):
-    sol, files, _, run = exported
+    from types import SimpleNamespace
+
+    full, files, _, run = exported
+    # the files hold the nodes where the Hill equilibrium holds, every node but the last (docs/opensim_files.md)
+    sol = SimpleNamespace(time_s=full.time_s[:-1], activation=full.activation[:-1], excitation=full.excitation[:-1],
+                          tendon_force_N=full.tendon_force_N[:-1], fiber_length_m=full.fiber_length_m[:-1],
+                          parameters=full.parameters)
     assert run["n_states"] == sol.time_s.size and not run["failed_states"]
     np.testing.assert_allclose(run["time_s"], sol.time_s, atol=1e-12)
     # every state variable of the model is a column of the file (OpenSim refused none)
-    header = pd.read_csv(files["states"], sep="\t", skiprows=7, nrows=0).columns
+    head = files["states"].read_text().splitlines()
+    header = pd.read_csv(files["states"], sep="\t", skiprows=head.index("endheader") + 1, nrows=0).columns
     assert len(header) - 1 == run["n_state_variables"]
     # OpenSim reads back the solution's activation, excitation and normalised tendon force into the
     # model's DeGrooteFregly2016Muscles, and derives fiber lengths within 0.03 lMo of the solution's

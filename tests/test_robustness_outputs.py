@@ -800,6 +800,35 @@ def test_ctrl_c_while_ipopt_iterates_exits_130_not_as_a_failed_solve(example, tm
     assert (out / "summary.json").read_text() == "previous\n" and not (out / "solution.sto").exists()
 
 
+@pytest.mark.opensim
+def test_ctrl_c_while_ipopt_iterates_prints_one_line_and_none_of_casadi(example, tmp_path, capfd, monkeypatch):
+    """SIGINT delivered while IPOPT computes (10 ms after its third iterate; a window no other
+    test solves, so IPOPT runs): CasADi catches the interrupt in a function evaluation or the
+    iteration callback and writes its own warning line about it (``CasADi - ... WARNING(
+    "KeyboardInterruptException") [...]``); the command's standard error holds its one line,
+    ``musclemetab: interrupted``, after the progress lines and nothing of CasADi's."""
+    import musclemetab.redundancy.ipopt as ipopt
+
+    monkeypatch.setattr(ipopt, "PROGRESS_INTERVAL_S", 0.0)
+    real = ipopt.ProgressLines.iteration
+
+    def iteration(self, f, g):
+        real(self, f, g)
+        if self.count == 3:  # the signal comes while IPOPT computes the next iterate
+            threading.Timer(0.01, os.kill, (os.getpid(), signal.SIGINT)).start()
+
+    monkeypatch.setattr(ipopt.ProgressLines, "iteration", iteration)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a terminal (see above)
+    try:
+        status = main(["solve", *_files(example), "--window", "0.64:0.86", "--out", str(tmp_path / "s")])
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    err = capfd.readouterr().err.splitlines()
+    assert status == 130, err
+    assert err[-1] == "musclemetab: interrupted", err
+    assert all(line.startswith("musclemetab: solving: iteration ") for line in err[:-1]), err
+
+
 def test_ctrl_c_during_report_exits_130_and_keeps_the_previous_report(demo, tmp_path, decoy):
     """``report --force`` redraws the figures of a copy of the demo's study folder; SIGINT 2.5 s
     after its start (reading the study, or drawing): status 130 within 2 s, the previous page as
@@ -1009,3 +1038,69 @@ def test_demo_never_writes_over_a_study_file_of_the_user(tmp_path, decoy):
     with pytest.raises(MusclemetabError, match=r"study\.toml"):
         demo_study(out, speeds=["normal"])
     assert (out / "study.toml").read_text() == "# my own study\n"
+
+
+# ----------------------------------------------------------------------------------------------
+# 6. output streams that fail
+
+#: ``python -c`` running the command line with a progress line for every IPOPT iterate (throttle 0 s)
+_EVERY_ITERATE = ("import sys; import musclemetab.redundancy.ipopt as ipopt; ipopt.PROGRESS_INTERVAL_S = 0.0; "
+                  "from musclemetab.commands import main; sys.argv[0] = 'musclemetab'; sys.exit(main())")
+
+
+def _closing(fd: int):
+    """A ``preexec_fn`` starting the command with descriptor ``fd`` closed (``2>&-``)."""
+    return lambda: os.close(fd)
+
+
+@pytest.mark.opensim
+def test_a_closed_standard_error_never_stops_a_solve(example, tmp_path):
+    """``solve ... 2>&-`` with a progress line due at every iterate (a window no other test
+    solves, so IPOPT runs): the lines are lost, the solve converges and the command exits 0
+    (the progress callback failing on the write used to stop IPOPT at its first line with
+    User_Requested_Stop, and the command blamed the constraints)."""
+    out = tmp_path / "s"
+    proc = subprocess.run([sys.executable, "-c", _EVERY_ITERATE, "solve", *_files(example), "--window",
+                           "0.62:0.84", "--out", str(out)], stdout=subprocess.PIPE, text=True,
+                          preexec_fn=_closing(2), timeout=300)
+    summary = json.loads((out / "summary.json").read_text())
+    assert proc.returncode == 0 and summary["status"] == "Solve_Succeeded", proc.stdout
+    assert summary["iterations"] > 1 and "Solve_Succeeded" in proc.stdout
+
+
+@pytest.mark.opensim
+@pytest.mark.parametrize("stdout", ["full", "closed"])
+def test_a_standard_output_that_cannot_be_written_is_exit_1_without_a_traceback(example, tmp_path, stdout):
+    """``geometry ... >/dev/full`` and ``>&-``: the geometry is computed and written, the report
+    line is lost; status 1 with one line on standard error saying why, no traceback."""
+    out = tmp_path / "g"
+    with open(os.devnull if stdout == "closed" else "/dev/full", "w") as sink:
+        proc = subprocess.run([sys.executable, "-m", "musclemetab", "geometry", "--model", str(example.model),
+                               "--ik", str(example.ik["normal"]), "--out", str(out)], stdout=sink,
+                              stderr=subprocess.PIPE, text=True, timeout=300,
+                              preexec_fn=_closing(1) if stdout == "closed" else None)
+    reason = "it is closed" if stdout == "closed" else "No space left on device"
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert proc.stderr.splitlines() == [
+        f"musclemetab: error: standard output could not be written ({reason}), so the command's messages are "
+        "lost; run it again with standard output to a terminal or a file that can be written"]
+    assert (out / "muscle_tendon_lengths.sto").is_file()
+
+
+def test_progress_lines_to_a_full_or_closed_stream_are_lost_without_an_exception():
+    """The progress writers of a solve and of a study, given a full stream (``/dev/full``), a
+    closed one and none (``sys.stderr`` of ``2>&-``): no exception, no line counted."""
+    from musclemetab.redundancy.ipopt import ProgressLines
+    from musclemetab.study.runner import _Progress
+
+    closed = open(os.devnull, "w")
+    closed.close()
+    full = open("/dev/full", "w")
+    for stream in (full, closed, None):
+        lines = ProgressLines([0.0], [0.0], 0.0, stream=stream)
+        lines.stream = stream
+        lines.iteration(1.0, [0.0])
+        assert lines.count == 1 and lines.lines == 0
+        _Progress(1, True, stream).update("s/a/effort-gen", {"status": "ok"})
+    with pytest.raises(OSError):  # what the writers could not write is still in its buffer
+        full.close()

@@ -425,3 +425,70 @@ def test_a_trial_without_events_or_ankle_moment_says_how_to_give_the_cycle(examp
         trial_cycle(Trial(name="walk", ik=example.ik["normal"], id=id_file), "r")
     for words in ("trial 'walk'", "ankle_angle_r_moment", "cycle = \"auto\"", "start_s, toe_off_s and end_s"):
         assert words in str(info.value)
+
+
+def _descendants(pid: int) -> set[int]:
+    """The processes below ``pid`` (children, theirs...), from /proc."""
+    children: dict[int, list[int]] = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            text = stat.read_text()
+        except OSError:  # ended meanwhile
+            continue
+        ppid = int(text[text.rindex(")") + 2:].split()[1])
+        children.setdefault(ppid, []).append(int(stat.parent.name))
+    found, todo = set(), [pid]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            if child not in found:
+                found.add(child)
+                todo.append(child)
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"  # a zombie has ended
+    except OSError:
+        return False
+
+
+def test_sigterm_stops_a_run_as_ctrl_c_does_and_leaves_no_process(example, tmp_path):
+    """``musclemetab run --workers 2`` gets SIGTERM (what a batch scheduler sends, to the main
+    process alone) while its two units work: exit status 143, the running units marked
+    interrupted, and no process of its tree (the two pool workers, their OpenSim workers,
+    multiprocessing's resource tracker) still running 5 s later."""
+    out = tmp_path / "out"
+    toml = tmp_path / "study.toml"
+    toml.write_text(
+        f'output = "out"\nworkflows = ["effort-gen"]\nmodels = ["UM10"]\n[[subjects]]\nname = "s"\n'
+        f'model = "{example.model}"\nbody_mass_kg = 72.6\nheight_m = 1.743\n' + "".join(
+            f'[[subjects.trials]]\nname = "{t}"\nik = "{example.ik[t]}"\nid = "{example.id[t]}"\n'
+            for t in ("normal", "slow", "fast")))
+    proc = subprocess.Popen([sys.executable, "-m", "musclemetab", "run", str(toml), "--workers", "2",
+                             "--no-progress"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    tree: set[int] = set()
+    try:
+        deadline = time.monotonic() + 120
+        while (len(list((out / "units").rglob(".*.partial-*"))) < 2 and proc.poll() is None
+               and time.monotonic() < deadline):
+            time.sleep(0.1)
+        time.sleep(1.0)  # the units are computing their geometry or solving
+        tree = _descendants(proc.pid)
+        os.kill(proc.pid, signal.SIGTERM)
+        stdout, stderr = proc.communicate(timeout=120)
+        time.sleep(5.0)
+        left = sorted(p for p in tree if _alive(p))
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        for p in tree:  # what the command left, ended by the test
+            if _alive(p):
+                os.kill(p, signal.SIGKILL)
+    assert len(tree) >= 3, tree  # two workers and the resource tracker at least
+    assert left == [], (left, stderr)
+    assert proc.returncode == 143, (stdout, stderr)
+    assert "musclemetab: terminated" in stderr and "Traceback" not in stderr
+    reasons = pd.read_csv(out / "failures.csv").set_index("trial")["reason"]
+    assert sum(r.startswith("interrupted") for r in reasons) == 2, reasons

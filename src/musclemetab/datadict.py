@@ -110,10 +110,19 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
     (_STUDY, "large_reserve", "-",
      "true when the solve's largest reserve RMS exceeds 1 % of the peak joint moment (the muscles do not explain "
      "the moments: check the inputs); summary.json holds reserve_share_of_peak_moment"),
+    (_STUDY, "excluded_muscles", "-",
+     "the muscles the solve left out (--exclude-muscles, the study file's exclude_muscles), names separated by "
+     "spaces, both legs' for legs added; empty when none: the row's rates are those of the other muscles "
+     "(flag excluded_muscles)"),
+    (_STUDY, "gait_cycle", "-",
+     "true when the rates are averaged over one gait cycle: gait events bound the span (not a solve over an explicit "
+     "--window analysed without a cycle of its own) and its duration (duration_s) lies within walking's 0.8-2.0 s; "
+     "false raises the flag not_a_gait_cycle"),
     (_STUDY, "quality", "-",
      "ok, or the unit's plausibility flags as code(names ...) joined by '; ': passive_force, fiber_length, "
      "saturated_activation, saturated_lengthening, reserve (the solve's, every leg's: muscles or DOFs named), metabolic_rate (the row's "
-     "whole-body rate outside 0.5-2 x Ralston's 1958 rate at its speed), negative_group_rate (groups named); 'not "
+     "whole-body rate outside 0.5-2 x Ralston's 1958 rate at its speed, or above 7.34 W/kg without a speed), "
+     "negative_group_rate (groups named), not_a_gait_cycle (the span named), excluded_muscles (muscles named); 'not "
      "checked' for a unit run by an earlier version; thresholds and sources in docs/quality.md"),
     # per muscle
     (f"{_PM}, metabolics.parquet, {_SENS}, factors.csv", "muscle", "-", "muscle name of the model"),

@@ -430,7 +430,8 @@ def cycle_from_id_file(
 
 
 def cycle_of_trial(ik: str | os.PathLike, *, grf: str | os.PathLike | None = None,
-                   id_file: str | os.PathLike | None = None, side: str = "r", model=None) -> tuple[GaitCycle, str]:
+                   id_file: str | os.PathLike | None = None, side: str = "r", model=None,
+                   window_s: tuple[float, float] | None = None) -> tuple[GaitCycle, str]:
     """The gait cycle of a solved trial and where it came from: ``(cycle, source)``.
 
     With ``grf``: the cycle of the side's vertical ground reaction force that holds the middle
@@ -438,11 +439,16 @@ def cycle_of_trial(ik: str | os.PathLike, *, grf: str | os.PathLike | None = Non
     its centre of pressure, :func:`grf_of_side`, and the cycle's duration,
     :func:`check_cycle_duration`); otherwise from the inverse dynamics ``id_file``
     and the IK window (:func:`cycle_from_id_file`: the window less the padding at each end,
-    toe-off from the ankle moment; estimated events).
+    toe-off from the ankle moment; estimated events). ``window_s``: the window the solve
+    recorded (``summary.json`` ``time_window_s``), which stands for the IK window: a solve over
+    part of the IK file has its cycle in that part.
     """
     from .io import read_storage
 
     t = read_storage(ik).index.to_numpy(float)
+    part = window_s is not None and (abs(window_s[0] - t[0]) > 1e-6 or abs(window_s[1] - t[-1]) > 1e-6)
+    if window_s is not None:
+        t = np.asarray(window_s, dtype=float)
     if grf is not None:
         if model is None:
             force = read_grf(grf, side=side)
@@ -462,7 +468,8 @@ def cycle_of_trial(ik: str | os.PathLike, *, grf: str | os.PathLike | None = Non
     if id_file is None:
         raise OptionError("give the ground reaction forces (grf) or the inverse dynamics (id_file) of the trial")
     return (cycle_from_id_file(id_file, side=side, window_s=(float(t[0]), float(t[-1]))),
-            "estimated from the IK window and the ankle moment (no ground reaction forces)")
+            f"estimated from the {'solved' if part else 'IK'} window and the ankle moment "
+            "(no ground reaction forces)")
 
 
 def _grf_candidates(side: str) -> list[str]:

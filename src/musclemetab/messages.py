@@ -17,7 +17,7 @@ from __future__ import annotations
 import sys
 import warnings
 
-__all__ = ["PREFIX", "NAMES_SHOWN", "name_list", "warning_line", "show_warning", "install"]
+__all__ = ["PREFIX", "NAMES_SHOWN", "name_list", "warning_line", "show_warning", "install", "write_quietly"]
 
 #: first words of every warning line
 PREFIX = "musclemetab: warning: "
@@ -48,14 +48,25 @@ def warning_line(message, category=UserWarning) -> str:
 
 def show_warning(message, category, filename=None, lineno=None, file=None, line=None) -> None:
     """A replacement for :func:`warnings.showwarning` printing :func:`warning_line`."""
-    stream = file if file is not None else sys.stderr
-    if stream is None:  # no standard error (pythonw): nothing to print to
-        return
+    write_quietly(file if file is not None else sys.stderr, warning_line(message, category) + "\n")
+
+
+def write_quietly(stream, text: str) -> bool:
+    """Write ``text`` to ``stream`` and flush it; ``False`` when it could not be written.
+
+    A message is never worth a computation: a stream that is missing (``None``: standard error
+    closed, ``2>&-``, or pythonw), closed, full (``2>/dev/full``) or whose reader went away is
+    passed over without an exception, so that a progress line or a warning cannot stop a
+    solve or a study.
+    """
+    if stream is None:
+        return False
     try:
-        stream.write(warning_line(message, category) + "\n")
+        stream.write(text)
         stream.flush()
-    except OSError:  # the reader went away
-        pass
+    except (OSError, ValueError):  # full, or the reader went away (OSError); closed (ValueError)
+        return False
+    return True
 
 
 def install() -> callable:

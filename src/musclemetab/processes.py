@@ -15,7 +15,7 @@ import threading
 from concurrent.futures import ProcessPoolExecutor
 
 __all__ = ["THREAD_VARIABLES", "pin_threads", "ignore_sigint", "spawn_pool", "stop_pool", "sigint_deferred",
-           "sigint_noted", "BackgroundCall"]
+           "sigint_noted", "sigterm_as_sigint", "terminated", "BackgroundCall"]
 
 #: environment variables that size the thread pools of BLAS/LAPACK and OpenMP libraries
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
@@ -114,6 +114,42 @@ def sigint_deferred():
         raise KeyboardInterrupt
 
 
+class _InterruptLinesDropped:
+    """Standard error while :func:`sigint_noted` runs native code: the line CasADi writes for
+    the interrupt it caught in a callback (``CasADi - <time> WARNING("KeyboardInterruptException")
+    [...]``) is dropped, so that Ctrl-C ends a command with its own one line
+    (``musclemetab: interrupted``); every other line passes."""
+
+    def __init__(self, stream):
+        self._stream, self._line = stream, ""
+
+    def write(self, text):  # CasADi writes its line in pieces: each line is held until it is whole
+        self._line += text
+        *lines, self._line = self._line.split("\n")
+        for line in lines:
+            if "KeyboardInterruptException" not in line:
+                self._stream.write(line + "\n")
+        return len(text)
+
+    def flush(self):
+        if self._line and not self._line.startswith("CasADi"):  # a partial line of another writer
+            self._stream.write(self._line)
+            self._line = ""
+        self._stream.flush()
+
+    def close_block(self):
+        """What is held when the block ends, written unless it is the interrupt's line."""
+        line, self._line = self._line, ""
+        if line and "KeyboardInterruptException" not in line:
+            try:
+                self._stream.write(line)
+            except (OSError, ValueError):  # a closed or full stream loses the line (messages.write_quietly)
+                pass
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
 @contextlib.contextmanager
 def sigint_noted():
     """Run native code that stops itself on Ctrl-C (IPOPT through CasADi, which then returns a
@@ -135,14 +171,61 @@ def sigint_noted():
         previous(signum, frame)
 
     signal.signal(signal.SIGINT, note)
+    import sys
+
+    stderr = sys.stderr
+    filtered = sys.stderr = _InterruptLinesDropped(stderr) if stderr is not None else None
     try:
         yield
     finally:
+        sys.stderr = stderr
+        if filtered is not None:
+            filtered.close_block()
         signal.signal(signal.SIGINT, previous)
         if caught:
             _NOTED.clear()  # raised below, or already on its way out of the block
     if caught:
         raise KeyboardInterrupt
+
+
+#: Set when SIGTERM came while a :func:`sigterm_as_sigint` block ran.
+_TERMINATED = threading.Event()
+
+
+def terminated() -> bool:
+    """Whether the interrupt being handled came from SIGTERM (a batch scheduler stopping the
+    job, ``kill PID``) rather than Ctrl-C."""
+    return _TERMINATED.is_set()
+
+
+@contextlib.contextmanager
+def sigterm_as_sigint():
+    """While the block runs, SIGTERM is handled as Ctrl-C: the SIGINT handler in place is called
+    (a study unit's, :func:`sigint_noted`'s, Python's default raising
+    :class:`KeyboardInterrupt`), so that the work stops the way Ctrl-C stops it: the pool's
+    workers interrupted and ended, the running units marked interrupted, nothing half-written.
+    :func:`terminated` then says the stop came from SIGTERM (the command line's status is 143,
+    128 + SIGTERM, instead of 130). With SIGINT ignored (a process started in the background
+    of a shell script inherits that), SIGTERM raises :class:`KeyboardInterrupt` all the same.
+    Outside the main thread it does nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def on_sigterm(signum, frame):
+        _TERMINATED.set()
+        handler = signal.getsignal(signal.SIGINT)
+        if callable(handler):
+            handler(signal.SIGINT, frame)
+        else:
+            raise KeyboardInterrupt
+
+    _TERMINATED.clear()
+    previous = signal.signal(signal.SIGTERM, on_sigterm)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 class BackgroundCall:

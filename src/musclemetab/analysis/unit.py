@@ -287,8 +287,9 @@ class RecordedTrial(NamedTuple):
     dynamics it was solved with (the user's file, or the one OpenSim computed for it);
     ``side``: the solved leg; ``cycle``: the gait cycle the solve's window was taken from
     (``--cycle``; :func:`recorded_cycle`) and ``cycle_source`` where its events came from (the
-    words of a study's ``cycle_source``); ``dofs``: the solved DOFs. An entry the solution does
-    not record is ``None``.
+    words of a study's ``cycle_source``); ``dofs``: the solved DOFs; ``window_s``: the solved
+    window ``(start, end)`` and ``window_source`` what chose it (``"--window"``, a gait cycle, or
+    ``None`` for the whole IK file). An entry the solution does not record is ``None``.
     """
 
     model: "str | None"
@@ -298,6 +299,47 @@ class RecordedTrial(NamedTuple):
     cycle: "GaitCycle | None"
     dofs: "tuple[str, ...] | None"
     cycle_source: "str | None" = None
+    window_s: "tuple[float, float] | None" = None
+    window_source: "str | None" = None
+
+    @property
+    def window_named_by_events(self) -> bool:
+        """Whether gait events bound the solved window: a solve over a gait cycle (``--cycle``) or
+        over the whole IK file (which holds one cycle and its padding, the study's rule), not over
+        an explicit ``--window`` that nothing shows to be one gait cycle."""
+        return self.cycle is not None or self.window_source != "--window"
+
+
+def recorded_excluded_muscles(solution) -> list[str]:
+    """The muscles the solve left out (``--exclude-muscles``; ``summary.json``
+    ``excluded_muscles``) of a solution folder, :class:`~musclemetab.redundancy.Solution` or
+    its record; ``[]`` when none."""
+    record = getattr(solution, "record", solution)
+    if isinstance(solution, (str, os.PathLike)):
+        from pathlib import Path
+
+        from ..io import read_json_object
+        from ..redundancy.solution import SUMMARY_FILE
+
+        return list(read_json_object(Path(solution) / SUMMARY_FILE).get("excluded_muscles") or [])
+    return list(getattr(record, "excluded_muscles", None) or [])
+
+
+def _averaged_by_default(recorded: RecordedTrial, cycle: GaitCycle) -> bool:
+    """Whether the metabolic rates of the solution are averaged over ``cycle`` without being told
+    (:func:`musclemetab.metabolics.solution.metabolics_from_solution`): the gait cycle the solve
+    recorded, else the solved window less the padding at each end (its nodes up to, not including,
+    the window's end less the padding: the study's rule); ``False`` when the solution records
+    neither (an earlier version's), so that the cycle is given."""
+    from ..redundancy.window import PADDING_S
+
+    if recorded.cycle is not None:
+        span = (recorded.cycle.start_s, recorded.cycle.end_s)
+    elif recorded.window_s is not None:
+        span = (recorded.window_s[0] + PADDING_S, recorded.window_s[1] - PADDING_S)
+    else:
+        return False
+    return abs(span[0] - cycle.start_s) < 1e-6 and abs(span[1] - cycle.end_s) < 1e-6
 
 
 def recorded_cycle(gait_cycle: Mapping | None) -> GaitCycle | None:
@@ -332,8 +374,10 @@ def recorded_trial(solution) -> RecordedTrial:
     dofs = record.dofs if record.dofs is not None else getattr(solution, "dofs", None)
     cycle = recorded_cycle(record.gait_cycle)
     source = f"ground reaction forces ({record.gait_cycle.get('source') or 'found by the solve'})" if cycle else None
+    window = record.time_window_s
     return RecordedTrial(inputs.get("model"), inputs.get("ik"), inputs.get("id"), record.side, cycle,
-                         tuple(dofs) if dofs is not None else None, source)
+                         tuple(dofs) if dofs is not None else None, source,
+                         (float(window[0]), float(window[1])) if window else None, (record.window or {}).get("source"))
 
 
 def analyse(
@@ -393,6 +437,9 @@ def analyse(
     if missing:
         raise _OptionError(f"the solution records no {name_list(missing)}: give {' and '.join(missing)} "
                            "(the OpenSim model, the IK motion and the gait cycle of the solved trial)")
+    if (not (hasattr(solution, "rates") and hasattr(solution, "whole_body")) and "trim" not in metabolics_options
+            and not _averaged_by_default(recorded, cycle)):  # the rates over the cycle the analysis names
+        metabolics_options = {**metabolics_options, "cycle_s": (cycle.start_s, cycle.end_s)}
     result = _metabolics_of(solution, body_mass_kg, height_m, models, metabolics_options)
     if side is None:
         side = getattr(result, "side", None) or recorded.side

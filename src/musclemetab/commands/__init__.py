@@ -6,11 +6,17 @@ Python as well. Nothing in the library imports this package. Options several com
 (the basal heat, the study runs) are in :mod:`.options`.
 
 Every error, a usage error included, is printed as one line (``musclemetab: error: ...``) and
-the command exits with status 1; Ctrl-C exits with status 130. Every warning is printed as one
+the command exits with status 1; Ctrl-C exits with status 130, SIGTERM (a batch scheduler
+stopping the job) stops the work the same way (workers ended, units marked interrupted) with
+status 143. Every warning is printed as one
 line, ``musclemetab: warning: ...``, without a Python source line (:mod:`musclemetab.messages`;
 the package's worker processes print theirs the same way). When the reader of the output goes
 away early (``musclemetab report DIR | head -1``), the command stops quietly, without a
 traceback, with status 141 (128 + SIGPIPE, what a shell reports for a Unix tool stopped that way).
+An output stream that cannot be written otherwise (closed, ``2>&-``; full, ``>/dev/full``) never
+stops the computation: the lines are lost, the command runs to its end, and a standard output
+that could not be written makes the exit status 1 with one line saying so on standard error
+(when that can be written); no traceback.
 """
 
 from __future__ import annotations
@@ -42,9 +48,51 @@ SUBCOMMANDS = (
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with the package's error convention: one line, exit status 1."""
+    """argparse with the package's error convention: one line, exit status 1.
+
+    An option the command does not know is named as such, with the closest option it does know
+    (``--modle``: "did you mean --model?", :func:`difflib.get_close_matches`), before any
+    required option it hid is said to be missing, and the line points to the command's own
+    ``--help``."""
+
+    _args: list = []
+
+    def parse_known_args(self, args=None, namespace=None):
+        self._args = list(sys.argv[1:] if args is None else args)  # what this parser (or command) was given
+        return super().parse_known_args(args, namespace)
+
+    def _command_parser(self):
+        """The parser of the command named by the arguments (for the top-level parser), or ``None``."""
+        actions = self._subparsers._group_actions if self._subparsers is not None else ()
+        for action in actions:
+            if self._args and isinstance(action.choices, dict) and self._args[0] in action.choices:
+                return action.choices[self._args[0]]
+        return None
+
+    def _unknown_options(self) -> list[str]:
+        """Each option given that this parser does not know (nor abbreviates), with the closest it knows."""
+        import difflib
+
+        known = [o for o in self._option_string_actions if o.startswith("--")]
+        unknown = []
+        for token in self._args:
+            if token == "--":
+                break
+            name = token.split("=", 1)[0]
+            if (not name.startswith("-") or self._negative_number_matcher.match(name)
+                    or name in self._option_string_actions or (name.startswith("--") and any(o.startswith(name) for o in known))):
+                continue
+            close = difflib.get_close_matches(name, known, n=1)
+            unknown.append(f"{name} (did you mean {close[0]}?)" if close else name)
+        return unknown
 
     def error(self, message):  # noqa: D401 - argparse's hook
+        command = self._command_parser()
+        if command is not None and command is not self:  # an argument the command refused: its parser says so
+            command.error(message)
+        unknown = self._unknown_options()
+        if unknown:
+            message = f"unrecognized option{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}"
         msg = " ".join(str(message).split())
         sys.stderr.write(f"musclemetab: error: {msg}; see '{self.prog} --help'\n")
         sys.exit(1)
@@ -96,6 +144,9 @@ def main(argv: list[str] | None = None) -> int:
     every object at exit (the memory returns to the system with the process), which takes
     0.2 s after a report.
     """
+    _occupy_closed_descriptors()
+    real = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = out, _ = _GuardedOutput(sys.stdout, pipe_stops=True), _GuardedOutput(sys.stderr)
     try:
         try:
             status = _main(argv)
@@ -105,15 +156,34 @@ def main(argv: list[str] | None = None) -> int:
         _silence_stdout()
         return BROKEN_PIPE_STATUS
     finally:
+        sys.stdout, sys.stderr = real
         if argv is None:
             gc.freeze()
-    if argv is None and status == INTERRUPTED_STATUS:
-        _end_interrupted()
+    if out.error is not None:
+        _silence_stdout()  # what stays buffered is not written again at exit
+        _GuardedOutput(sys.stderr).write(
+            f"musclemetab: error: standard output could not be written ({out.error}), so the command's "
+            "messages are lost; run it again with standard output to a terminal or a file that can be written\n")
+        status = status or 1
+    if argv is None and status in (INTERRUPTED_STATUS, TERMINATED_STATUS):
+        _end_interrupted(status)
     return status
 
 
 #: Exit status after Ctrl-C (128 + SIGINT).
 INTERRUPTED_STATUS = 130
+#: Exit status after SIGTERM (128 + SIGTERM), which stops a command as Ctrl-C does.
+TERMINATED_STATUS = 143
+
+
+def interrupted_status() -> int:
+    """The exit status of a command stopped by Ctrl-C (130) or SIGTERM (143), and its line on
+    standard error (``musclemetab: interrupted`` or ``musclemetab: terminated``) printed."""
+    from ..processes import terminated
+
+    stopped = terminated()
+    print(f"musclemetab: {'terminated' if stopped else 'interrupted'}", file=sys.stderr)
+    return TERMINATED_STATUS if stopped else INTERRUPTED_STATUS
 
 
 def _caused_by_interrupt(exc: BaseException) -> bool:
@@ -129,8 +199,8 @@ def _caused_by_interrupt(exc: BaseException) -> bool:
     return False
 
 
-def _end_interrupted() -> None:
-    """End the program after Ctrl-C with status 130, Ctrl-C ignored from here on.
+def _end_interrupted(status: int = INTERRUPTED_STATUS) -> None:
+    """End the program after Ctrl-C or SIGTERM with ``status`` (130 or 143), Ctrl-C ignored from here on.
 
     The interpreter is ended here rather than by returning: a KeyboardInterrupt that ran
     through an import (SciPy's modules import each other while the signal comes) can leave the
@@ -148,7 +218,57 @@ def _end_interrupted() -> None:
             stream.flush()
         except (OSError, ValueError):
             pass
-    os._exit(INTERRUPTED_STATUS)
+    os._exit(status)
+
+
+class _GuardedOutput:
+    """Standard output or error as the commands write to it: a write or flush that fails (the
+    stream closed or full) is dropped and its reason kept in :attr:`error`, never raised, so that
+    no message stops a computation. With ``pipe_stops`` a reader gone away (``BrokenPipeError``)
+    is raised still, which ends the command quietly with status 141 (:func:`main`)."""
+
+    def __init__(self, stream, pipe_stops: bool = False):
+        self._stream, self._pipe_stops, self.error = stream, pipe_stops, None
+
+    def _guarded(self, method: str, *args):
+        if self._stream is None:
+            self.error = self.error or "it is closed"
+            return len(args[0]) if args else None
+        try:
+            return getattr(self._stream, method)(*args)
+        except BrokenPipeError:
+            if self._pipe_stops:
+                raise
+            self.error = self.error or "its reader went away"
+        except (OSError, ValueError) as exc:  # full (OSError), closed (ValueError)
+            self.error = self.error or (exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc))
+        return len(args[0]) if args else None
+
+    def write(self, text):
+        return self._guarded("write", text)
+
+    def flush(self):
+        self._guarded("flush")
+
+    def __getattr__(self, name):  # fileno, isatty, encoding...: the stream's own
+        return getattr(self._stream, name)
+
+
+def _occupy_closed_descriptors() -> None:
+    """Open the null device on standard input, output or error when they are closed (``2>&-``),
+    so that no file the command opens takes their number and receives what the compiled
+    libraries (OpenSim, IPOPT) print to them."""
+    for fd in (0, 1, 2):
+        try:
+            os.fstat(fd)
+        except OSError:
+            try:
+                null = os.open(os.devnull, os.O_RDWR)
+                if null != fd:
+                    os.dup2(null, fd)
+                    os.close(null)
+            except OSError:
+                pass
 
 
 def _silence_stdout() -> None:
@@ -175,19 +295,20 @@ def _main(argv: list[str] | None) -> int:
 
             check_number_options(args)  # every command's numeric options, by the table of the study file
             check_exclusive(args)
-            return int(args.func(args) or 0)
+            from ..processes import sigterm_as_sigint
+
+            with sigterm_as_sigint():  # a batch scheduler's SIGTERM stops the work as Ctrl-C does
+                return int(args.func(args) or 0)
     except MusclemetabError as exc:
         msg = " ".join(str(exc).split())
         print(f"musclemetab: error: {msg}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:  # pragma: no cover
-        print("musclemetab: interrupted", file=sys.stderr)
-        return INTERRUPTED_STATUS
+        return interrupted_status()
     except Exception as exc:
         if not _caused_by_interrupt(exc):
             raise
         # Ctrl-C during an import of a compiled module comes back as that import's error
-        print("musclemetab: interrupted", file=sys.stderr)
-        return INTERRUPTED_STATUS
+        return interrupted_status()
     finally:
         warnings.showwarning = previous

@@ -110,12 +110,13 @@ def _cycle(args, side: str, ik, recorded):
         if len(vals) != 3:
             raise OptionError(f"--cycle must be three times in seconds, START,TOE_OFF,END, not '{args.cycle}'")
         return GaitCycle(*vals), "given on the command line"
-    if args.grf or args.id:
-        return cycle_of_trial(ik, grf=args.grf, id_file=args.id, side=side, model=args.model or recorded.model)
+    if args.grf or args.id:  # within the window the solve recorded
+        return cycle_of_trial(ik, grf=args.grf, id_file=args.id, side=side, model=args.model or recorded.model,
+                              window_s=recorded.window_s)
     if recorded.cycle is not None:
         return recorded.cycle, recorded.cycle_source
     if recorded.id is not None and Path(recorded.id).is_file():
-        return cycle_of_trial(ik, id_file=recorded.id, side=side)
+        return cycle_of_trial(ik, id_file=recorded.id, side=side, window_s=recorded.window_s)
     raise OptionError("the solution records no gait cycle (it was not solved over --cycle) and no inverse dynamics "
                       "file that still exists: give --cycle START,TOE_OFF,END, --grf GRF.mot or --id ID.sto")
 
@@ -149,7 +150,7 @@ def run(args) -> int:
 
     import pandas as pd
 
-    from ..analysis.unit import analyse, recorded_trial, write_analysis
+    from ..analysis.unit import analyse, recorded_excluded_muscles, recorded_trial, write_analysis
     from ..errors import DataMismatchError
     from ..io import atomic_path
     from ..metabolics.per_muscle import PER_MUSCLE_FILE
@@ -227,7 +228,9 @@ def run(args) -> int:
         rows[side] = trial_result_rows(result.whole_body, result.summary, speed_m_per_s=speed,
                                        toe_off_pct=cycle.toe_off_pct, cycle_source=source,
                                        speed_source=speed_note if speed is not None else "not available",
-                                       large_reserve=_large_reserve(sol_dir), unit_dir=side or ".")
+                                       large_reserve=_large_reserve(sol_dir), unit_dir=side or ".",
+                                       excluded_muscles=recorded_excluded_muscles(sol_dir),
+                                       named_by_events=bool(args.cycle or args.grf) or recorded.window_named_by_events)
         basal_J[side] = leg_basal_energy_J(per, rows[side]["duration_s"].iloc[0])
         solve_flags[str(sol_dir)] = read_flags(sol_dir)
         label = f"side {side}: " if side else ""

@@ -96,13 +96,16 @@ def print_run(run, command: str) -> None:
 
 
 def exit_status(run) -> int:
-    """Exit status: 130 after Ctrl-C, 1 when a unit failed, 0 otherwise."""
+    """Exit status: 130 after Ctrl-C (143 after SIGTERM), 1 when a unit failed, 0 otherwise."""
     if run.interrupted:
         import sys
 
-        print(f"musclemetab: interrupted; {len(run.interrupted)} unit(s) marked interrupted, no new unit started. "
-              "Run the same command again to finish the study", file=sys.stderr)
-        return 130
+        from . import INTERRUPTED_STATUS, TERMINATED_STATUS
+        from ..processes import terminated
+
+        print(f"musclemetab: {'terminated' if terminated() else 'interrupted'}; {len(run.interrupted)} unit(s) "
+              "marked interrupted, no new unit started. Run the same command again to finish the study", file=sys.stderr)
+        return TERMINATED_STATUS if terminated() else INTERRUPTED_STATUS
     return 1 if run.failed else 0
 
 

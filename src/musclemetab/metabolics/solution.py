@@ -466,6 +466,7 @@ def metabolics_from_solution(
     legs: int = 2,
     basal_rate_W_per_kg: float = BASAL_RATE_W_PER_KG,
     basal_exponent: float = 1.0,
+    cycle_s: tuple[float, float] | None = None,
 ) -> SolutionMetabolics:
     """Metabolic rates of every muscle of a solution, for a set of models.
 
@@ -499,9 +500,15 @@ def metabolics_from_solution(
         *muscle* mass (the ``basal`` component, and the ``"muscle"`` rule); the exponent
         belongs to the ``"body"`` rule alone (another value with ``"muscle"`` is refused).
     trim
-        Nodes dropped at the start and at the end. Default: for a solve over a gait cycle
-        found from ground forces (``summary.json`` ``window.gait_cycle``), every node outside
-        that cycle; otherwise the study's (5, 6).
+        Nodes dropped at the start and at the end. Default: every node outside the gait cycle
+        ``cycle_s``; else, for a solve over a gait cycle found from ground forces
+        (``summary.json`` ``window.gait_cycle``), every node outside that cycle; otherwise the
+        study's (5, 6).
+    cycle_s
+        ``(start, end)`` (s) of the gait cycle the rates are averaged over (the cycle an analysis
+        names, :func:`musclemetab.analysis.analyse`); the solved nodes must cover it (to within
+        1.5 mesh steps at either end, :func:`musclemetab.events.coverage`), otherwise
+        :class:`DataMismatchError`.
     legs
         Legs the solved muscles stand for in the whole-body rate: 2 (one leg solved, doubled)
         or 1 (each leg solved; add the legs, see :func:`add_legs`).
@@ -551,8 +558,14 @@ def metabolics_from_solution(
             raise DataMismatchError(
                 f"solution state '{arg}' has shape {arr.shape}; expected (muscles, nodes) = ({len(muscles)}, {n_nodes})"
             )
-    if trim is None and sol.cycle_s is not None:
-        inside = np.flatnonzero((sol.time_s >= sol.cycle_s[0] - 1e-9) & (sol.time_s <= sol.cycle_s[1] + 1e-9))
+    if trim is None and cycle_s is not None:
+        from ..events import coverage
+
+        coverage(sol.time_s, float(cycle_s[0]), float(cycle_s[1]), None,
+                 f"{sol.source or 'the solution'}: the solved nodes")
+    span = cycle_s if cycle_s is not None else sol.cycle_s
+    if trim is None and span is not None:
+        inside = np.flatnonzero((sol.time_s >= span[0] - 1e-9) & (sol.time_s <= span[1] + 1e-9))
         keep = trim_slice(n_nodes, int(inside[0]), n_nodes - 1 - int(inside[-1]))
     else:
         keep = trim_slice(n_nodes, *(trim if trim is not None else (5, 6)))

@@ -11,7 +11,9 @@ Written into a solution folder by :func:`write_opensim_files` (``docs/opensim_fi
     every other coordinate has a ``CoordinateActuator`` ``reserve_<coordinate>`` of optimal
     force 1. Where a parameter has no exact counterpart the file says so in a comment.
 ``states.sto``
-    one row per mesh node and one column per state variable of ``model.osim``, so that
+    one row per mesh node at which the solution's Hill equilibrium holds (:func:`equilibrium_nodes`:
+    every node but the last, ``N``, with the forward fiber dynamics) and one column per state
+    variable of ``model.osim``, so that
     ``StatesTrajectory.createFromStatesTable(model, TimeSeriesTable("states.sto"))`` accepts it
     with no missing or extra columns and no assembly: coordinate values and speeds of the IK
     motion at the node times (rad or m; rad/s or m/s; coupled coordinates from their couplers,
@@ -24,13 +26,20 @@ Written into a solution folder by :func:`write_opensim_files` (``docs/opensim_fi
     the muscles' excitations (``/forceset/<muscle>``) and the reserves' controls
     (``/forceset/reserve_<coordinate>``, the generalised forces of ``forces.sto``).
 ``forces.sto``
-    the actuator forces in the format of OpenSim's static optimisation output, as
+    the actuator forces at the same nodes, in the format of OpenSim's static optimisation output, as
     ``JointReaction``'s ``forces_file`` wants them (one column per actuator of ``model.osim``,
     labelled with the actuator's name): the solved muscles' tendon forces (N), zero for the
     other muscles, and the generalised forces of the reserves: the solution's reserve on a
     solved DOF; on every other free coordinate the inverse dynamics less what the solved
     muscles apply to it (``ID - sum(r F)``), so that muscles and reserves together give every
     coordinate its inverse-dynamics force.
+
+Every file holds the nodes :func:`equilibrium_nodes` gives, and says so in its header. At the
+node the forward Euler step reaches last (``N``) the transcription constrains no Hill
+equilibrium: its fiber length is the step from node ``N-1`` and its tendon force is whatever
+the tendon curve gives there, down to a slack, compressive value (-0.22 F0 on the example's fast
+trial), which OpenSim and ``JointReaction`` would take for a pushing tendon. The solution keeps
+that node (its arrays are the optimum's); the files leave it out.
 
 The coordinates are those the solve used: the IK frames of the solved window, low-pass
 filtered as the solve filtered the muscle-tendon lengths (``input_preparation`` in
@@ -50,7 +59,7 @@ import numpy as np
 from ..errors import DataMismatchError, InputFileError
 from ..messages import name_list
 
-__all__ = ["STATES_FILE", "CONTROLS_FILE", "FORCES_FILE", "MODEL_FILE", "OPENSIM_FILES",
+__all__ = ["STATES_FILE", "CONTROLS_FILE", "FORCES_FILE", "MODEL_FILE", "OPENSIM_FILES", "equilibrium_nodes",
            "tendon_strain_at_one_norm_force", "passive_fiber_strain_at_one_norm_force",
            "opensim_muscle_parameters", "normalized_tendon_force_state", "inverse_dynamics_at", "opensim_tables",
            "prepare_opensim_files", "write_opensim_files", "write_solution_opensim_files",
@@ -268,11 +277,20 @@ def inverse_dynamics_at(id_path, coordinates, times) -> dict:
     return {c: at[:, j] for j, c in enumerate(names)}
 
 
-def _table(t, columns: dict, name: str):
+def equilibrium_nodes(solution) -> slice:
+    """The nodes of ``solution`` at which its Hill equilibrium (tendon force = fiber force along
+    the tendon) holds: ``0 ... N-1`` with the forward fiber dynamics, ``1 ... N`` with the backward
+    (``summary.json`` ``fiber_dynamics``). The OpenSim files hold these nodes alone."""
+    n = np.asarray(solution.time_s).size
+    backward = (solution.record.get("fiber_dynamics") or "forward") == "backward"
+    return slice(1, n) if backward else slice(0, n - 1)
+
+
+def _table(t, columns: dict, name: str, rows: slice = slice(None)):
     from ..io import StorageTable
 
     values = np.column_stack([np.broadcast_to(np.asarray(v, dtype=float), t.shape) for v in columns.values()])
-    return StorageTable(t, list(columns), values, {"name": name, "in_degrees": False})
+    return StorageTable(t[rows], list(columns), values[rows], {"name": name, "in_degrees": False})
 
 
 def opensim_tables(solution, model_out, model_path=None, ik_path=None, id_path=None):
@@ -295,8 +313,9 @@ def opensim_tables(solution, model_out, model_path=None, ik_path=None, id_path=N
     for i, m in enumerate(solution.muscles):
         values[f"{paths_of[m]}/activation"] = solution.activation[:, i]
         values[f"{paths_of[m]}/normalized_tendon_force"] = norm_force[:, i]
+    rows = equilibrium_nodes(solution)  # the model work runs on every node; the files hold these
     states = _table(t, {n: values[n] if n in values else np.full(t.size, d)
-                        for n, d in zip(info["state_names"], info["defaults"])}, "musclemetab states")
+                        for n, d in zip(info["state_names"], info["defaults"])}, "musclemetab states", rows)
     states.attrs["defaulted_coordinates"] = info["defaulted_coordinates"]
     # forces: muscles, then the reserves' generalised forces
     reserve_of = info["reserves"]
@@ -321,10 +340,10 @@ def opensim_tables(solution, model_out, model_path=None, ik_path=None, id_path=N
             forces_cols[a] = generalized[name_of_reserve[a]]
         else:
             forces_cols[a] = muscle_force.get(a, np.zeros(t.size))
-    forces = _table(t, forces_cols, "Static Optimization")
+    forces = _table(t, forces_cols, "Static Optimization", rows)
     controls = _table(t, {**{paths_of[m]: solution.excitation[:, i] for i, m in enumerate(solution.muscles)},
                           **{f"/forceset/{reserve_of[c]}": generalized[c] for c in reserve_of}},
-                      "musclemetab controls")
+                      "musclemetab controls", rows)
     info["id_coordinates"] = sorted(id_forces)
     return states, controls, forces, info
 
@@ -349,16 +368,23 @@ def write_opensim_files(solution, out_dir: str | os.PathLike | None = None, *, m
     if out_dir is None:
         raise DataMismatchError("give the folder to write the OpenSim files into (out_dir)")
     out_dir = Path(out_dir)
+    rows = equilibrium_nodes(solution)
+    n = np.asarray(solution.time_s).size
+    first, last = range(n)[rows][0], range(n)[rows][-1]
+    left_out = n - 1 if last < n - 1 else 0
+    nodes = (f"nodes {first}-{last} of the solution's {n} ({solution.time_s[first]:g}-{solution.time_s[last]:g} s), "
+             f"those where its Hill equilibrium holds; node {left_out} ({solution.time_s[left_out]:g} s), which the "
+             "fiber dynamics reaches without an equilibrium (its tendon force can be slack, compressive), is left out")
     with atomic_directory(out_dir, mark=True) as tmp:
         states, controls, forces, _ = opensim_tables(solution, tmp / MODEL_FILE, model_path, ik_path, id_path)
         write_storage(tmp / STATES_FILE, states, name="musclemetab states", in_degrees=False,
                       comments=[f"OpenSim states of the muscle redundancy solution for {MODEL_FILE} (SI units: rad, "
-                                "m, rad/s, m/s)"])
+                                "m, rad/s, m/s)", nodes])
         write_storage(tmp / CONTROLS_FILE, controls, name="musclemetab controls", in_degrees=False,
-                      comments=[f"muscle excitations and reserve controls of the solution for {MODEL_FILE}"])
+                      comments=[f"muscle excitations and reserve controls of the solution for {MODEL_FILE}", nodes])
         write_storage(tmp / FORCES_FILE, forces, name="Static Optimization", in_degrees=False,
                       comments=[f"actuator forces of the solution (N; reserves N m or N) for {MODEL_FILE}, in the "
-                                "format of OpenSim's static optimisation output"])
+                                "format of OpenSim's static optimisation output", nodes])
     return {"model": out_dir / MODEL_FILE, "states": out_dir / STATES_FILE, "controls": out_dir / CONTROLS_FILE,
             "forces": out_dir / FORCES_FILE}
 

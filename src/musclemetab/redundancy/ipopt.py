@@ -575,11 +575,12 @@ class ProgressLines:
         self.last = now
         g = np.asarray(g, dtype=float).reshape(-1)
         viol = float(np.max(np.maximum(self.lbg - g, 0.0) + np.maximum(g - self.ubg, 0.0))) if g.size else 0.0
-        # IPOPT calls back once for the starting point (iteration 0)
-        self.stream.write(f"musclemetab: solving{self.label}: iteration {self.count - 1}, objective {float(f):.4e}, "
-                          f"constraint violation {viol:.1e}, {now - self.t0:.0f} s\n")
-        self.stream.flush()
-        self.lines += 1
+        # IPOPT calls back once for the starting point (iteration 0); a stream that cannot be
+        # written (closed, full) loses the line, never the solve
+        from ..messages import write_quietly
+
+        self.lines += write_quietly(self.stream, f"musclemetab: solving{self.label}: iteration {self.count - 1}, "
+                                    f"objective {float(f):.4e}, constraint violation {viol:.1e}, {now - self.t0:.0f} s\n")
 
 
 def _progress_callback(n_x: int, n_g: int, lbg, ubg):

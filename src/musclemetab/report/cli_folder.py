@@ -158,14 +158,11 @@ def read_report_input(paths, models=None) -> StudyFolder:
 
 
 def _read_table(path: Path, what: str):
-    import pandas as pd
+    from ..io.csvfile import read_csv_file
 
     if not path.is_file():
         raise InputFileError(f"{path}: missing; run 'musclemetab analyse' again to write it")
-    try:
-        return pd.read_csv(path, dtype={"model": str, "muscle": str, "side": str})
-    except (pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError) as exc:
-        raise InputFileError(f"{path}: not a readable {what} ({exc}); run 'musclemetab analyse' again") from None
+    return read_csv_file(path, "run 'musclemetab analyse' again", what, dtype={"model": str, "muscle": str, "side": str})
 
 
 def _leg_record(rec: dict, path: Path, record: Path) -> tuple[str, LegFiles, dict]:

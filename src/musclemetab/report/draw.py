@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import os
+import signal
 import time
 from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
@@ -274,6 +275,7 @@ def _child_share(conn, *args) -> None:
     except (KeyboardInterrupt, BrokenPipeError):
         pass
     finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C arriving now has nothing left to stop
         conn.close()
 
 

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputFileError, MissingColumnError, OptionError
+from ..io.csvfile import read_csv_file
 from ..messages import name_list
 from ..redundancy.solution import SUMMARY_FILE
 from ..study_layout import (
@@ -135,10 +136,8 @@ class StudyFolder:
         path = self.path / PER_MUSCLE_FILE
         if not path.is_file():
             return None
-        try:
-            table = pd.read_csv(path, dtype={"subject": str, "trial": str, "workflow": str, "model": str})
-        except (pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError) as exc:
-            raise InputFileError(f"{PER_MUSCLE_FILE} is not readable ({exc})") from None
+        table = read_csv_file(path, "run the study again to rewrite it", dtype={"subject": str, "trial": str,
+                                                                               "workflow": str, "model": str})
         return _renamed(table, RENAMED_PER_MUSCLE_COLUMNS)
 
     # ------------------------------------------------------------------ study.json
@@ -337,10 +336,7 @@ def _read_timeseries(folder: Path):
     p = folder / TIMESERIES_FILE
     if not p.is_file():
         raise InputFileError(f"{p}: missing")
-    try:
-        table = pd.read_csv(p)
-    except (pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError) as exc:
-        raise InputFileError(f"{p}: not a readable table ({exc})") from None
+    table = read_csv_file(p, "run the study again to rewrite it")
     if "series" in table.columns:  # earlier releases named the leg's summed muscles "whole_body"
         table["series"] = table["series"].replace({"whole_body": "leg_muscles"})
     return table
@@ -400,8 +396,9 @@ def add_leg_timeseries(tables: dict):
 def read_study_folder(study_dir: str | os.PathLike, models=None) -> StudyFolder:
     """Read ``study.json``, ``results.csv`` and ``failures.csv`` of a study folder.
 
-    Raises :class:`InputFileError` when the folder or ``results.csv`` is missing or
-    unreadable, or ``study.json`` is not JSON; :class:`MissingColumnError` when
+    Raises :class:`InputFileError` when the folder or ``results.csv`` is missing,
+    unreadable or cut short (its last line incomplete; or no row while ``failures.csv`` names
+    no failed unit), or ``study.json`` is not JSON; :class:`MissingColumnError` when
     ``results.csv`` lacks one of :data:`REQUIRED_COLUMNS`. A missing ``study.json`` or
     ``failures.csv`` gives a note in the report. ``models`` (names, ``"UM10,LW05"`` or
     ``"all"``, see :func:`~musclemetab.metabolics.registry.parse_models`): the models the
@@ -424,10 +421,10 @@ def read_study_folder(study_dir: str | os.PathLike, models=None) -> StudyFolder:
             "study first ('musclemetab run STUDY.toml') and pass its output folder (holding results.csv), or pass "
             "the output folders of 'musclemetab analyse --out' (holding analyse.json)"
         )
-    try:
-        results = pd.read_csv(rpath, dtype={"subject": str, "trial": str, "workflow": str, "model": str})
-    except (pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError) as exc:
-        raise InputFileError(f"{rpath}: not a readable results table ({exc}); run the study again") from None
+    rerun = ("run the same 'musclemetab run STUDY.toml' again: it writes the table anew from the units' folders "
+             "(complete units are not solved again)")
+    results = read_csv_file(rpath, rerun, "results table",
+                            dtype={"subject": str, "trial": str, "workflow": str, "model": str})
     results = _renamed(results, RENAMED_RESULTS_COLUMNS)
     missing = [c for c in REQUIRED_COLUMNS if c not in results.columns]
     if results.empty:  # every unit failed: the runner writes the key columns alone; the page lists the failures
@@ -454,18 +451,17 @@ def read_study_folder(study_dir: str | os.PathLike, models=None) -> StudyFolder:
     fpath = path / FAILURES_CSV
     failures = pd.DataFrame(columns=_FAILURE_COLUMNS)
     if fpath.is_file():
-        try:
-            failures = pd.read_csv(fpath, dtype=str, keep_default_na=False)
-        except pd.errors.EmptyDataError:
-            pass
-        except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-            raise InputFileError(f"{fpath}: not a readable table ({exc}); run the study again") from None
+        if fpath.stat().st_size:
+            failures = read_csv_file(fpath, rerun, dtype=str, keep_default_na=False)
         for c in _FAILURE_COLUMNS:
             if c not in failures.columns:
                 failures[c] = "failed" if c == "status" else ""  # status: written since interrupts are told apart
         failures = failures[_FAILURE_COLUMNS]
     else:
         notes.append(f"{FAILURES_CSV} is missing: only failures recorded in the results table are listed.")
+    if results.empty and failures.empty:  # every unit failed gives no row, but then failures.csv names them
+        raise InputFileError(f"{rpath}: holds no unit's row and {fpath} names no failed unit: the table was cut "
+                             f"short; {rerun}")
     study = StudyFolder(path=path, settings=settings, results=results, failures=failures, notes=notes,
                         sources=[path])
     return with_figure_models(study, models, rpath)

@@ -17,6 +17,7 @@ import io
 import numpy as np
 
 from ..errors import InputFileError
+from ..io.csvfile import read_csv_file
 from ..messages import name_list
 from ..redundancy.sensitivity import SENSITIVITY_COLUMNS, SENSITIVITY_CSV
 
@@ -39,15 +40,13 @@ def unit_sensitivities(study) -> list[tuple[str, object]]:
     """``(label, table)`` of every ``sensitivity.csv`` in the unit folders of the study's results
     (a :class:`~.folder.StudyFolder`), in the order of the results; ``label``: subject / trial /
     workflow (and leg). Raises :class:`InputFileError` naming a file that lacks the columns."""
-    import pandas as pd
-
     out = []
     for (subject, trial, workflow), row in study.units():
         for leg, folder in study.leg_folders(row).items():
             path = folder / SENSITIVITY_CSV
             if not path.is_file():
                 continue
-            table = pd.read_csv(path)
+            table = read_csv_file(path, "write it again with musclemetab run --sensitivity (or metabolics --sensitivity)")
             missing = [c for c in SENSITIVITY_COLUMNS if c not in table.columns]
             if missing:
                 raise InputFileError(f"{path}: no column(s) {name_list(missing)}; write it again with "

@@ -55,6 +55,7 @@ from typing import Mapping
 
 from ..errors import OptionError
 from ..metabolics.plausibility import add_quality
+from ..messages import write_quietly
 from ..io.atomic import FolderLock, _boot_id, _process_alive  # noqa: F401  (public here before)
 from ..io.atomic import atomic_directory, atomic_path, atomic_write_text, check_output_folder, check_replaceable
 from ..processes import THREAD_VARIABLES, spawn_pool  # noqa: F401  (THREAD_VARIABLES: public here before)
@@ -152,7 +153,10 @@ class _Progress:
         self.total, self.done, self.failed, self.interrupted = total, 0, 0, 0
         self.enabled = enabled and total > 0
         self.stream = stream or sys.stderr
-        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        try:
+            self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        except ValueError:  # a closed stream: its lines are lost (write_quietly)
+            self.tty = False
         self.t0 = time.perf_counter()
         self.parallel = max(1, int(parallel or 1))
         self.costs: list[float] = []  # measured seconds of the units run
@@ -185,13 +189,8 @@ class _Progress:
         stopped = f", {self.interrupted} interrupted" if self.interrupted else ""
         line = (f"[{bar}] {self.done}/{self.total} units, {self.failed} failed{stopped}, "
                 f"{time.perf_counter() - self.t0:.0f} s{left} | {label} {state}")
-        if self.tty:
-            self.stream.write("\r" + line[:160].ljust(160))
-            if self.done == self.total:
-                self.stream.write("\n")
-        else:
-            self.stream.write(line + "\n")
-        self.stream.flush()
+        text = "\r" + line[:160].ljust(160) + ("\n" if self.done == self.total else "") if self.tty else line + "\n"
+        write_quietly(self.stream, text)  # a closed or full stream loses the line, not the study
 
 
 def _duration(seconds: float) -> str:
@@ -518,7 +517,7 @@ def _unit_rows(folder: Path, unit: Unit, rec: dict):
         speed_m_per_s=rec.get("speed_m_per_s"), toe_off_pct=rec.get("toe_off_pct"),
         measured_W_per_kg=rec.get("measured_W_per_kg"), cycle_source=rec.get("cycle_source"),
         speed_source=rec.get("speed_source"), large_reserve=bool(rec.get("large_reserve", False)),
-        unit_dir=str(unit.folder))
+        unit_dir=str(unit.folder), excluded_muscles=rec.get("excluded_muscles"))
     df["solve_start"] = rec.get("start") or "cold"  # a record without it: a unit of an earlier version, cold
     df.insert(0, "subject", unit.subject)
     df.insert(1, "trial", unit.trial)
@@ -527,11 +526,21 @@ def _unit_rows(folder: Path, unit: Unit, rec: dict):
 
 
 def trial_result_rows(whole_body, analysis, *, speed_m_per_s=None, toe_off_pct=None, measured_W_per_kg=None,
-                      cycle_source=None, speed_source=None, large_reserve=False, unit_dir="."):
+                      cycle_source=None, speed_source=None, large_reserve=False, unit_dir=".", excluded_muscles=None,
+                      named_by_events=True):
     """The results rows of one leg of a trial (one per model) from its whole-body table and its
     analysis (``whole_body.csv`` and ``analysis.csv`` of a unit, or the tables of
     :func:`musclemetab.analysis.analyse`), with the trial's speed, toe-off, measured rate,
-    sources, reserve flag, status ``ok`` and folder (``musclemetab analyse`` writes them too)."""
+    sources, reserve flag, status ``ok`` and folder (``musclemetab analyse`` writes them too).
+
+    ``excluded_muscles``: the muscles the solve left out (column ``excluded_muscles``, their names
+    separated by spaces, ``""`` when none). ``named_by_events``: whether gait events bound the
+    span the rates are averaged over (``False`` for a solve over an explicit ``--window`` analysed
+    without a cycle of its own); with the span's duration (``duration_s``) inside walking's
+    0.8-2.0 s it gives the column ``gait_cycle`` (:func:`is_gait_cycle`). Both columns raise a
+    plausibility flag in the ``quality`` column (``docs/quality.md``)."""
+    from ..metabolics.plausibility import is_gait_cycle
+
     df = whole_body.merge(analysis, on="model", how="left", validate="one_to_one")
     df["speed_m_per_s"] = speed_m_per_s
     df["toe_off_pct"] = toe_off_pct
@@ -539,6 +548,9 @@ def trial_result_rows(whole_body, analysis, *, speed_m_per_s=None, toe_off_pct=N
     df["cycle_source"] = cycle_source
     df["speed_source"] = speed_source
     df["large_reserve"] = bool(large_reserve)
+    df["excluded_muscles"] = " ".join(excluded_muscles or ())
+    df["gait_cycle"] = [is_gait_cycle(d, named_by_events) for d in df["duration_s"]] if "duration_s" in df else \
+        bool(named_by_events)
     df["status"] = "ok"
     df["unit_dir"] = unit_dir
     return df
@@ -579,7 +591,8 @@ def add_leg_rows(rows: Mapping[str, object], basal_energy_J: Mapping[str, object
     frames = [rows[s].set_index("model") for s in sides]
     first = frames[0]
     out = first.copy()
-    numeric = [c for c in first.columns if pd.api.types.is_numeric_dtype(first[c]) and c != "large_reserve"]
+    numeric = [c for c in first.columns if pd.api.types.is_numeric_dtype(first[c])
+               and c not in ("large_reserve", "gait_cycle")]
     energy = [f["leg_energy_J"].astype(float) for f in frames] if "leg_energy_J" in first else None
     basal = [(basal_energy_J or {}).get(s, 0.0) for s in sides]
     for c in numeric:
@@ -608,6 +621,11 @@ def add_leg_rows(rows: Mapping[str, object], basal_energy_J: Mapping[str, object
             if "net_cost_of_transport_J_per_kg_per_m" in out:
                 out["net_cost_of_transport_J_per_kg_per_m"] = out["whole_body_no_basal_W_per_kg"] / speed.astype(float)
     out["large_reserve"] = np.logical_or.reduce([f["large_reserve"].astype(bool) for f in frames])
+    if "gait_cycle" in first:  # each leg over a gait cycle of its own
+        out["gait_cycle"] = np.logical_and.reduce([f["gait_cycle"].astype(bool) for f in frames])
+    if "excluded_muscles" in first:
+        names = [n for f in frames for n in str(f["excluded_muscles"].fillna("").iloc[0]).split()]
+        out["excluded_muscles"] = " ".join(dict.fromkeys(names))
     for c in ("cycle_source", "speed_source", "solve_start"):
         if c in out:
             texts = [str(f[c].iloc[0]) for f in frames]

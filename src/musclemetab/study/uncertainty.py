@@ -108,7 +108,8 @@ def sample_tables(study: Study, trial_result_rows: Callable, add_leg_rows: Calla
             group[unit.side] = None
             continue
         rows = trial_result_rows(pd.read_csv(folder / "whole_body.csv"), pd.read_csv(folder / "analysis.csv"),
-                                 speed_m_per_s=rec.get("speed_m_per_s"), toe_off_pct=rec.get("toe_off_pct"))
+                                 speed_m_per_s=rec.get("speed_m_per_s"), toe_off_pct=rec.get("toe_off_pct"),
+                                 excluded_muscles=study.subject(unit.subject).exclude_muscles)
         pm = pd.read_csv(folder / PER_MUSCLE_FILE)
         group[unit.side] = (rows, pm)
         for k, (col, val) in enumerate((("subject", unit.subject), ("trial", unit.trial),

@@ -715,6 +715,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
         "toe_off_pct": float(100.0 * (cycle.toe_off_s - cycle.start_s) / (cycle.end_s - cycle.start_s)),
         "n_nodes": int(np.asarray(result.time_s).size),
         "large_reserve": bool(sol.record.large_reserve),
+        "excluded_muscles": list(sol.record.excluded_muscles or []),
         "reserve_share_of_peak_moment": sol.record.reserve_share_of_peak_moment,
         "plausibility": [f.to_dict() for f in flags],
         **({"sensitivity": sensitivity} if study.sensitivity else {}),
