@@ -7,10 +7,16 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Markers", "Plate", "LabTrial", "UP", "horizontal"]
+__all__ = ["Markers", "Plate", "LabTrial", "UP", "horizontal", "RMS_LIMIT_M", "MAX_LIMIT_M"]
 
 #: OpenSim's vertical axis (y) in its ground frame.
 UP = np.array([0.0, 1.0, 0.0])
+
+#: OpenSim's best practice for marker errors (Hicks et al. 2015, J Biomech Eng 137:020905): the
+#: RMS marker error of a pose stays under 2 cm ...
+RMS_LIMIT_M = 0.02
+#: ... and its largest marker error under 4 cm
+MAX_LIMIT_M = 0.04
 
 
 def horizontal(xyz: np.ndarray) -> np.ndarray:

@@ -1,0 +1,120 @@
+"""Scaling and inverse kinematics from markers, against OpenSim's own outputs of gait2392 subject01.
+
+OpenSim's pipeline of this subject (``MUSCLEMETAB_DATA/gait2392_subject01``): the generic model, the
+static and walking trials (``.trc``), OpenSim's ScaleTool and IK setups, and what OpenSim made of them
+(``subject01_simbody.osim``, ``subject01_walk1_ik.mot``). Each OpenSim run is made once per test run
+(the package's cache, shared by the test processes); the chain's command is in test_prepare.py.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+import warnings
+
+import numpy as np
+import pytest
+
+from musclemetab.errors import DataMismatchError, InputFileError, MarkerErrorWarning
+from musclemetab.mocap.scaling import choose_measurements, estimate_height, scale_model
+
+pytestmark = pytest.mark.opensim
+
+
+@pytest.fixture(scope="module")
+def scaled(gait2392):
+    """gait2392 scaled with OpenSim's setup (the generic model named in its place)."""
+    with pytest.warns(MarkerErrorWarning, match="Top.Head"):
+        return scale_model(gait2392.generic_model, gait2392.static, 72.6, setup=gait2392.scale_setup)
+
+
+def _masses(text: str) -> dict:
+    return {k: float(v) for k, v in re.findall(r'<Body name="(\w+)">.*?<mass>([^<]+)</mass>', text, re.S)}
+
+
+def test_static_marker_errors_are_opensims(scaled):
+    """RMS, maximum and worst marker of the static pose: the numbers OpenSim's ScaleTool prints."""
+    from conftest import TEST_DATA
+
+    ref = json.loads((TEST_DATA / "gait2392_scale_reference.json").read_text())
+    s = scaled.record["static_summary"]
+    assert s["rms_m"] == pytest.approx(ref["static_rms_m"], rel=1e-6)
+    assert s["max_m"] == pytest.approx(ref["static_max_m"], rel=1e-6)
+    assert s["worst_marker"] == ref["static_worst_marker"]
+    squared = sum(e["error_m"] ** 2 for e in scaled.marker_errors)  # unweighted, as OpenSim adds them
+    assert squared == pytest.approx(ref["static_total_squared_error_m2"], rel=1e-6)
+
+
+def test_scaled_model_is_opensims(scaled, gait2392, tmp_path):
+    """Body masses and segment lengths (joint to joint) equal those of OpenSim's scaled model of the
+    same subject and setup (subject01_simbody.osim); the mass is the subject's."""
+    from musclemetab.layout import read_layout
+
+    ours, theirs = _masses(scaled.model_text), _masses(gait2392.model.read_text())
+    assert ours.keys() == theirs.keys()
+    for body, m in theirs.items():
+        assert ours[body] == pytest.approx(m, rel=1e-6), body
+    assert sum(ours.values()) == pytest.approx(72.6, rel=1e-9)
+    (tmp_path / "model.osim").write_text(scaled.model_text)
+    a, b = read_layout(tmp_path / "model.osim"), read_layout(gait2392.model)
+    origin = lambda lay: {j["child"]: np.array(j["child_origin_m"]) for j in lay.joints}  # noqa: E731
+    oa, ob = origin(a), origin(b)
+    for parent, child in (("femur_r", "tibia_r"), ("tibia_r", "talus_r"), ("pelvis", "femur_l"), ("calcn_l", "toes_l")):
+        assert np.linalg.norm(oa[parent] - oa[child]) == pytest.approx(np.linalg.norm(ob[parent] - ob[child]), abs=1e-5)
+
+
+def test_height_from_the_static_markers(scaled, gait2392):
+    """The head-top marker's height: 1.814 m, against the 1803.4 mm the setup records (for
+    information; the head marker sits on the hair)."""
+    assert scaled.record["height_from"] == "Top.Head"
+    assert scaled.record["height_m"] == pytest.approx(1.8034, abs=0.015)
+    h, marker = estimate_height(gait2392.static, (1.0, 2.0))
+    assert (h, marker) == (scaled.record["height_m"], "Top.Head")
+
+
+def test_setup_files_resolved_against_its_folder_nothing_written_there(gait2392, tmp_path, monkeypatch):
+    """A copy of the inputs in a folder of their own, the work started elsewhere: the setup's
+    relative marker-set file is found beside the setup, and nothing is added to that folder."""
+    inputs = tmp_path / "inputs"
+    inputs.mkdir()
+    for p in (gait2392.generic_model, gait2392.static, gait2392.scale_setup, gait2392.scale_marker_set):
+        shutil.copy(p, inputs)
+    before = sorted(p.name for p in inputs.iterdir())
+    elsewhere = tmp_path / "cwd"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    with pytest.warns(MarkerErrorWarning):
+        res = scale_model(inputs / gait2392.generic_model.name, inputs / gait2392.static.name, 72.6,
+                          setup=inputs / gait2392.scale_setup.name, use_cache=False)
+    assert res.record["marker_set"] == str((inputs / "gait2392_Scale_MarkerSet.xml").resolve())
+    assert sorted(p.name for p in inputs.iterdir()) == before
+    assert list(elsewhere.iterdir()) == []
+    (inputs / "gait2392_Scale_MarkerSet.xml").unlink()
+    with pytest.raises(InputFileError, match="gait2392_Scale_MarkerSet.xml"):
+        scale_model(inputs / gait2392.generic_model.name, inputs / gait2392.static.name, 72.6,
+                    setup=inputs / gait2392.scale_setup.name)
+
+
+def test_scaling_without_a_setup_uses_the_shipped_measurements(gait2392):
+    """Without a setup: the gait2392 family's measurements, chosen by the marker names; every body
+    scaled; the subject's mass."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MarkerErrorWarning)
+        res = scale_model(gait2392.generic_model, gait2392.static, 72.6, marker_set=gait2392.scale_marker_set)
+    assert res.record["family"] == "gait2392" and res.record["unscaled_bodies"] == []
+    assert {m["name"] for m in res.record["measurements"]} >= {"pelvis", "thigh_r", "shank_l", "foot_r", "torso"}
+    assert sum(_masses(res.model_text).values()) == pytest.approx(72.6, rel=1e-9)
+    factors = res.record["scale_factors"]
+    assert all(0.8 < factors[b][0] < 1.3 for b in ("pelvis", "femur_r", "tibia_l", "calcn_r", "torso"))
+
+
+def test_family_chosen_by_marker_names():
+    rajagopal = ["RASI", "LASI", "RPSI", "LPSI", "RKNE", "RANK", "RHEE", "RFMH", "LKNE", "LANK"]
+    family, meas, unscaled = choose_measurements(rajagopal, rajagopal + ["X"], ["pelvis", "femur_r", "tibia_r",
+                                                                             "talus_r", "calcn_r", "toes_r", "torso"])
+    assert family == "rajagopal"
+    assert {m["name"] for m in meas} == {"pelvis", "thigh_r", "shank_r", "foot_r"}
+    assert unscaled == ["torso"]
+    with pytest.raises(DataMismatchError, match="--scale-setup"):
+        choose_measurements(["A", "B"], ["A", "B"], ["pelvis"])
