@@ -118,3 +118,85 @@ def test_family_chosen_by_marker_names():
     assert unscaled == ["torso"]
     with pytest.raises(DataMismatchError, match="--scale-setup"):
         choose_measurements(["A", "B"], ["A", "B"], ["pelvis"])
+
+
+#: RMS difference (degrees) allowed from OpenSim's stored IK of the walk (subject01_walk1_ik.mot):
+#: OpenSim 4.6's own ScaleTool and InverseKinematicsTool with these setups give 0.3-1.8 degrees for
+#: hip flexion, knee and ankle and up to 6.9 for hip adduction and rotation
+SAGITTAL_DEG, OTHER_DEG = 2.0, 8.0
+
+
+def _ik_difference(ik_text: str, reference, tmp_path) -> dict:
+    from musclemetab.io import read_storage
+
+    path = tmp_path / "ik.mot"
+    path.write_text(ik_text)
+    ours = read_storage(path)
+    ref = read_storage(reference).reindex(ours.index, method="nearest", tolerance=1e-3)
+    return {c: float(np.sqrt(np.mean((ours[c] - ref[c]) ** 2))) for c in ours.columns if c in ref.columns}
+
+
+@pytest.fixture(scope="module")
+def walked(scaled, gait2392, tmp_path_factory):
+    from musclemetab.mocap.kinematics import inverse_kinematics
+
+    model = tmp_path_factory.mktemp("scaled") / "model.osim"
+    model.write_text(scaled.model_text)
+    with pytest.warns(MarkerErrorWarning, match="R.Acromium"):
+        return inverse_kinematics(model, gait2392.markers, setup=gait2392.ik_setup)
+
+
+def test_ik_with_opensims_setups_matches_opensims_ik(walked, gait2392, tmp_path):
+    diff = _ik_difference(walked.ik_text, gait2392.ik, tmp_path)
+    for side in "rl":
+        for c in ("hip_flexion", "knee_angle", "ankle_angle"):
+            assert diff[f"{c}_{side}"] < SAGITTAL_DEG, (c, side, diff[f"{c}_{side}"])
+        for c in ("hip_adduction", "hip_rotation"):
+            assert diff[f"{c}_{side}"] < OTHER_DEG, (c, side, diff[f"{c}_{side}"])
+    assert walked.record["time_range"] == [0.5, 2.5]  # the setup's
+
+
+def test_ik_marker_errors_written_and_flagged(walked, tmp_path):
+    """Per frame: OpenSim's RMS and maximum, the marker at the maximum, and the flag of OpenSim's
+    best practice (RMS above 2 cm or maximum above 4 cm); this walk's right acromion marker is 7-8 cm
+    off in every frame (weight 0.5 in OpenSim's setup)."""
+    import csv
+
+    files = walked.write(tmp_path)
+    rows = list(csv.DictReader(open(files["ik_marker_errors"])))
+    assert len(rows) == 121
+    for r in rows:
+        rms, mx = float(r["rms_m"]), float(r["max_m"])
+        assert r["above_best_practice"] == str(int(rms > 0.02 or mx > 0.04))
+        assert 0 < rms <= mx
+    assert {r["worst_marker"] for r in rows} == {"R.Acromium"}
+    assert 0.07 < min(float(r["max_m"]) for r in rows) < max(float(r["max_m"]) for r in rows) < 0.09
+    s = walked.record["summary"]
+    assert s["flagged_frames"] == 121 and s["worst_marker"] == "R.Acromium"
+
+
+def test_ik_without_setups(gait2392, tmp_path):
+    """Scaled without a setup and IK with every shared marker at weight 1 (0.5-1.5 s): hip flexion and
+    knee within 5 degrees RMS of OpenSim's pipeline, the ankle within 7 (measured: hip 3.8/4.7, knee
+    1.5/2.9, ankle 6.0/4.2 right/left; the setups' coordinate tasks hold the subtalar joint, which the
+    defaults leave to the markers, 12-18 degrees from OpenSim's)."""
+    from musclemetab.mocap.kinematics import inverse_kinematics
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MarkerErrorWarning)
+        res = scale_model(gait2392.generic_model, gait2392.static, 72.6, marker_set=gait2392.scale_marker_set)
+        (tmp_path / "m.osim").write_text(res.model_text)
+        ik = inverse_kinematics(tmp_path / "m.osim", gait2392.markers, time_range=(0.5, 1.5))
+    diff = _ik_difference(ik.ik_text, gait2392.ik, tmp_path)
+    for side in "rl":
+        for c, limit in (("hip_flexion", 5.0), ("knee_angle", 5.0), ("ankle_angle", 7.0)):
+            assert diff[f"{c}_{side}"] < limit, (c, side, diff[f"{c}_{side}"])
+    assert ik.record["weights"] == {n: 1.0 for n in ik.record["weights"]} and len(ik.record["weights"]) >= 30
+
+
+def test_ik_time_range_outside_the_markers_is_refused(scaled, gait2392, tmp_path):
+    from musclemetab.mocap.kinematics import inverse_kinematics
+
+    (tmp_path / "m.osim").write_text(scaled.model_text)
+    with pytest.raises(DataMismatchError, match="not inside the marker data"):
+        inverse_kinematics(tmp_path / "m.osim", gait2392.markers, time_range=(5.0, 6.0), use_cache=False)
