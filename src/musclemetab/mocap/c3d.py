@@ -130,7 +130,7 @@ def read_c3d(path: str | os.PathLike, *, up: str = "auto", forward: str = "auto"
                             centre=rot @ centre, corners=corners @ rot.T))
     _check_surfaces(plates, path)
     flipped = _orient_forces(plates, path)
-    markers = Markers(time=time, names=names, xyz=lab_xyz @ rot.T)
+    markers = Markers(time=time, names=names, xyz=lab_xyz @ rot.T, data_rate_hz=rate or None)
     notes = {"source": str(path), "marker_rate_hz": rate, "analog_rate_hz": a_rate,
              "marker_units": (_param(params, "POINT", "UNITS") or ["mm"])[0],
              "lab_up": _axis_name(up_v), "lab_forward": _axis_name(fwd_v), "forces_reversed": flipped}

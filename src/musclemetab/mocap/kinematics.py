@@ -5,7 +5,10 @@
 coordinate weights, accuracy, constraint weight and time range; a relative coordinate file
 resolved against the setup's folder) or, without one, every marker the model and the trial share
 with weight 1 over the whole trial (accuracy 1e-5, OpenSim's default). The model, the marker file
-and the outputs are the caller's; nothing is written next to the user's files.
+and the outputs are the caller's; nothing is written next to the user's files. A marker file
+whose times are its stated rate's grid rounded (OpenSim's gait2392 trials: 0.017, 0.033 ... at
+60 Hz) is given to the tool on the exact grid, so that the IK is evenly sampled, as the solver's
+filter needs (the record gives the largest shift, ``times_restored_s``).
 
 Every frame's RMS and maximum marker error are OpenSim's; the worst marker is the one at the
 maximum. A frame is flagged when its RMS exceeds :data:`RMS_LIMIT_M` (2 cm) or its maximum
@@ -37,7 +40,7 @@ from .trial import MAX_LIMIT_M, RMS_LIMIT_M
 __all__ = ["IKResult", "inverse_kinematics", "RMS_LIMIT_M", "MAX_LIMIT_M", "MarkerErrorWarning"]
 
 #: bump when a cached IK result changes meaning
-IK_CACHE_FORMAT = 1
+IK_CACHE_FORMAT = 2
 
 
 @dataclass
@@ -94,8 +97,9 @@ def _cache_dir() -> Path:
 def inverse_kinematics(model: str | os.PathLike, markers: str | os.PathLike, *,
                        setup: str | os.PathLike | None = None, time_range: tuple | None = None,
                        use_cache: bool = True, cache_dir: str | os.PathLike | None = None,
-                       warn: bool = True) -> IKResult:
-    """IK of ``markers`` (``.trc`` or ``.c3d``) with ``model`` (module docstring)."""
+                       warn: bool = True, source: str | None = None) -> IKResult:
+    """IK of ``markers`` (``.trc`` or ``.c3d``) with ``model`` (module docstring); ``source``: the
+    file the warnings name (default ``markers``)."""
     from ..cache import discard_entry, entry_path, read_entry, write_entry
     from ..io.atomic import file_sha256
     from ..model import check_model_path
@@ -131,7 +135,7 @@ def inverse_kinematics(model: str | os.PathLike, markers: str | os.PathLike, *,
             write_entry(entry, "inverse kinematics", ik=np.array(result.ik_text),
                         errors=np.array(json.dumps(result.errors)), record=np.array(json.dumps(result.record)))
     if warn:
-        warn_flagged(result.record["summary"], str(markers))
+        warn_flagged(result.record["summary"], source or str(markers))
     return result
 
 
@@ -145,6 +149,13 @@ def _run(model: Path, markers: Path, setup, time_range, call) -> IKResult:
 
             trc = write_trc(tmp / f"{markers.stem}.trc", read_c3d(markers).markers)
         trial = read_trc(trc)
+        grid = trial.uniform_time()
+        if grid is not None:  # times rounded in the file: OpenSim's IK would keep them, the solver refuses them
+            from .trc import write_trc
+
+            shift = float(np.max(np.abs(trial.time - grid)))
+            trial.time = grid
+            trc = write_trc(tmp / "markers_uniform_time.trc", trial)
         t0, t1 = float(trial.time[0]), float(trial.time[-1])
         kwargs = {}
         if setup:
@@ -168,6 +179,7 @@ def _run(model: Path, markers: Path, setup, time_range, call) -> IKResult:
         res = call("lab:inverse_kinematics", str(model.resolve()), str(Path(trc).resolve()), str(tmp), **kwargs)
         errors = {k: res[k] for k in ("time", "rms_m", "max_m", "worst_marker")}
         record = {"model": str(model.resolve()), "markers": str(markers.resolve()),
+                  "times_restored_s": shift if grid is not None else 0.0,
                   "setup": kwargs.get("setup"), "time_range": [res["start_s"], res["end_s"]],
                   "weights": kwargs.get("marker_weights", "setup"), "summary": summarise(errors)}
         return IKResult(Path(res["ik"]).read_text(encoding="utf-8"), errors, record)

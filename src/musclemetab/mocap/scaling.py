@@ -215,10 +215,11 @@ def _static_trc(static: Path, tmp: Path) -> Path:
 def scale_model(generic_model: str | os.PathLike, static: str | os.PathLike, mass_kg: float, *,
                 setup: str | os.PathLike | None = None, marker_set: str | os.PathLike | None = None,
                 height_m: float | None = None, use_cache: bool = True,
-                cache_dir: str | os.PathLike | None = None) -> ScaleResult:
+                cache_dir: str | os.PathLike | None = None, source: str | None = None) -> ScaleResult:
     """Scale ``generic_model`` to the static trial (``.trc`` or ``.c3d``) with body mass ``mass_kg``
     (module docstring). ``marker_set``: a marker-set file added to the model (OpenSim's
     ``marker_set_file``), for a generic model without markers; a setup's own is used otherwise.
+    ``source``: the file the warnings name (default ``static``).
     """
     from ..cache import discard_entry, entry_path, read_entry, write_entry
     from ..model import check_model_path
@@ -268,7 +269,7 @@ def scale_model(generic_model: str | os.PathLike, static: str | os.PathLike, mas
                         record=np.array(json.dumps(result.record)))
     s = result.record["static_summary"]
     if s["rms_m"] > RMS_LIMIT_M or s["max_m"] > MAX_LIMIT_M:
-        warnings.warn(f"{static}: the scaled model's markers in the static pose are {100 * s['rms_m']:.1f} cm RMS and "
+        warnings.warn(f"{source or static}: the scaled model's markers in the static pose are {100 * s['rms_m']:.1f} cm RMS and "
                       f"up to {100 * s['max_m']:.1f} cm ({s['worst_marker']}) from the experimental ones, above OpenSim's "
                       f"best practice ({100 * RMS_LIMIT_M:g} cm RMS, {100 * MAX_LIMIT_M:g} cm maximum): check the "
                       "measurements and that marker's placement (static_marker_errors.csv)",

@@ -71,7 +71,11 @@ def read_trc(path: str | os.PathLike) -> Markers:
     if np.any(np.diff(time) <= 0):
         raise InputFileError(f"{path}: the times are not increasing")
     xyz = data[:, 2:].reshape(len(time), len(names), 3) * LENGTH_UNITS[unit]
-    return Markers(time=time, names=names, xyz=xyz)
+    try:
+        rate = float(header.get("DataRate", "")) or None
+    except ValueError:
+        rate = None
+    return Markers(time=time, names=names, xyz=xyz, data_rate_hz=rate)
 
 
 def write_trc(path: str | os.PathLike, markers: Markers) -> Path:

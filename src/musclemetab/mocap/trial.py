@@ -26,15 +26,29 @@ def horizontal(xyz: np.ndarray) -> np.ndarray:
 
 @dataclass
 class Markers:
-    """Marker trajectories: ``xyz`` (frames x markers x 3) in metres, NaN where a marker is missing."""
+    """Marker trajectories: ``xyz`` (frames x markers x 3) in metres, NaN where a marker is missing;
+    ``data_rate_hz``: the sampling rate the file states, when it states one."""
 
     time: np.ndarray
     names: list[str]
     xyz: np.ndarray
+    data_rate_hz: float | None = None
 
     @property
     def rate_hz(self) -> float:
+        if self.data_rate_hz:
+            return float(self.data_rate_hz)
         return float(1.0 / np.median(np.diff(self.time))) if len(self.time) > 1 else 0.0
+
+    def uniform_time(self) -> np.ndarray | None:
+        """The frames' times on the stated rate's grid (first time + i / rate) when the file's
+        times are that grid rounded (off by less than a quarter frame, e.g. 0.017 for 1/60 s),
+        ``None`` when they are the grid already or not a rounding of it."""
+        if not self.data_rate_hz or len(self.time) < 2:
+            return None
+        grid = self.time[0] + np.arange(len(self.time)) / self.data_rate_hz
+        off = float(np.max(np.abs(self.time - grid)))
+        return grid if 1e-7 < off < 0.25 / self.data_rate_hz else None
 
     def marker(self, name: str) -> np.ndarray:
         return self.xyz[:, self.names.index(name), :]

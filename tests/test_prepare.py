@@ -1,0 +1,105 @@
+"""``musclemetab prepare``: generic model, static and walking markers -> scaled model and IK, then the
+solver's inputs. OpenSim's gait2392 subject01 with OpenSim's setups (the ``gait2392_prepared``
+fixture), against what OpenSim made of the same files: ``subject01_walk1_ik.mot`` and the inverse
+dynamics ``subject01_walk1_id.sto``."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from musclemetab.commands import main
+from musclemetab.io import read_storage
+
+pytestmark = pytest.mark.opensim
+
+
+def test_prepare_writes_the_model_ik_and_marker_errors(gait2392_prepared):
+    inputs, out = gait2392_prepared
+    for name in ("model.osim", "ik.mot", "ik_marker_errors.csv", "static_marker_errors.csv", "static_pose.sto",
+                 "prepare.json"):
+        assert (out / name).is_file(), name
+    rec = json.loads((out / "prepare.json").read_text())
+    assert rec["mass_kg"] == 72.6 and rec["height_from"] == "Top.Head"
+    assert rec["ik"]["time_range"] == [0.5, 2.5] and rec["ik"]["summary"]["frames"] == 121
+
+
+def test_prepared_ik_matches_opensims(gait2392_prepared, gait2392):
+    """Within 2 degrees RMS of OpenSim's IK for hip flexion, knee and ankle and 8 for hip adduction and
+    rotation, on OpenSim's time grid (0.5 s + i/60: the trial's rounded times restored)."""
+    _, out = gait2392_prepared
+    ours = read_storage(out / "ik.mot")
+    ref = read_storage(gait2392.ik)
+    ref = ref.loc[ours.index[0] - 1e-9: ours.index[-1] + 1e-9]
+    assert len(ref) == len(ours) == 121
+    assert np.allclose(ours.index.to_numpy(), ref.index.to_numpy(), atol=1e-6)
+    for side in "rl":
+        for c, limit in (("hip_flexion", 2), ("knee_angle", 2), ("ankle_angle", 2), ("hip_adduction", 8),
+                         ("hip_rotation", 8)):
+            d = ours[f"{c}_{side}"].to_numpy() - ref[f"{c}_{side}"].to_numpy()
+            assert np.sqrt(np.mean(d ** 2)) < limit, (c, side)
+
+
+def test_inputs_folder_untouched_and_nothing_in_the_working_folder(gait2392_prepared, gait2392):
+    inputs, out = gait2392_prepared
+    assert sorted(p.name for p in inputs.iterdir()) == sorted(
+        p.name for p in (gait2392.generic_model, gait2392.static, gait2392.markers, gait2392.scale_setup,
+                         gait2392.scale_marker_set, gait2392.ik_setup))
+    assert list((inputs.parent / "cwd").iterdir()) == []
+    assert not (out / "opensim.log").exists()
+
+
+def test_inverse_dynamics_of_the_prepared_model_matches_opensims(gait2392_prepared, gait2392):
+    """The solver's next step: OpenSim's inverse dynamics of the prepared model and IK with the trial's
+    ground forces (as ``solve --external-loads`` computes it) against OpenSim's stored inverse
+    dynamics of the same subject: hip, knee and ankle moments within 3 N m RMS (measured 0.2-2.0,
+    peaks 42-128 N m)."""
+    from musclemetab.external_loads import compute_inverse_dynamics
+
+    _, out = gait2392_prepared
+    ours = read_storage(compute_inverse_dynamics(out / "model.osim", out / "ik.mot", gait2392.external_loads, 0.6, 1.5))
+    ref = read_storage(gait2392.id).reindex(ours.index, method="nearest", tolerance=2e-3)
+    cols = [c for c in ours.columns if c.startswith(("hip_", "knee_", "ankle_"))]
+    assert len(cols) == 10
+    for c in cols:
+        assert np.sqrt(np.mean((ours[c] - ref[c]) ** 2)) < 3.0, c
+
+
+def test_prepare_again_is_found_in_the_cache(gait2392_prepared, tmp_path, capsys, monkeypatch):
+    """A second run with the same inputs (another output folder) takes scaling and IK from the cache,
+    without OpenSim: the same files."""
+    import musclemetab.opensim_bridge as bridge
+
+    def no_opensim(target, *a, **k):
+        raise AssertionError(f"OpenSim called: {target}")
+
+    monkeypatch.setattr(bridge, "call", no_opensim)
+    inputs, out = gait2392_prepared
+    assert main(["prepare", "--model", str(inputs / "gait2392_thelen2003muscle.osim"), "--static",
+                 str(inputs / "subject01_static.trc"), "--markers", str(inputs / "subject01_walk1.trc"), "--mass",
+                 "72.6", "--scale-setup", str(inputs / "subject01_Setup_Scale.xml"), "--ik-setup",
+                 str(inputs / "subject01_Setup_IK.xml"), "--out", str(tmp_path / "again")]) == 0
+    for name in ("model.osim", "ik.mot", "ik_marker_errors.csv", "static_marker_errors.csv"):
+        assert (tmp_path / "again" / name).read_bytes() == (out / name).read_bytes()
+    captured = capsys.readouterr()
+    assert "IK 121 frames 0.500-2.500 s" in captured.out
+    assert "121 of 121 IK frames exceed OpenSim's best practice" in captured.err  # warned again from the cache
+
+
+@pytest.mark.parametrize("change, message", [
+    (("--static", "missing.trc"), "missing.trc: no such static trial"),
+    (("--mass", "-3"), "--mass"),
+    (("--window", "2:1"), "--window 2:1: T0 must be finite and before T1"),
+])
+def test_bad_input_one_line_nothing_written(gait2392, tmp_path, capsys, change, message):
+    args = {"--model": str(gait2392.generic_model), "--static": str(gait2392.static),
+            "--markers": str(gait2392.markers), "--mass": "72.6"}
+    key, value = change
+    args[key] = str(tmp_path / value) if value.endswith(".trc") else value
+    argv = ["prepare", *[x for kv in args.items() for x in kv], "--out", str(tmp_path / "out")]
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]
+    assert not (tmp_path / "out").exists()
