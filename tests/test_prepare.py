@@ -103,3 +103,103 @@ def test_bad_input_one_line_nothing_written(gait2392, tmp_path, capsys, change, 
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0]
     assert not (tmp_path / "out").exists()
+
+
+MARKER_STUDY = """
+name = "from markers"
+output = "out"
+workflows = ["effort-gen"]
+models = ["UM10"]
+
+[[subjects]]
+name = "{name}"
+{model}
+body_mass_kg = 72.6
+height_m = 1.8
+
+[[subjects.trials]]
+name = "walk1"
+{kinematics}
+external_loads = "{loads}"
+cycle = "auto"
+"""
+
+
+@pytest.mark.slow
+def test_study_from_markers_runs_to_results(gait2392_prepared, gait2392, tmp_path, capsys):
+    """A study file with a generic model, a static trial, the walk's markers and its ground forces only
+    (no IK, no ID): the study scales, computes IK (into prepared/), has OpenSim compute the ID and
+    runs to results.csv. Its model and IK are those of ``musclemetab prepare`` byte for byte, and its
+    results those of the same study given the prepared files as 'model' and 'ik' (one solve: the
+    memo); run again, nothing is redone."""
+    import pandas as pd
+
+    inputs, prepared = gait2392_prepared
+    study = tmp_path / "markers.toml"
+    study.write_text(MARKER_STUDY.format(
+        name="s01", loads=gait2392.external_loads,
+        model=f'generic_model = "{inputs / "gait2392_thelen2003muscle.osim"}"\n'
+              f'static = "{inputs / "subject01_static.trc"}"\nscale_setup = "{inputs / "subject01_Setup_Scale.xml"}"',
+        kinematics=f'markers = "{inputs / "subject01_walk1.trc"}"\nik_setup = "{inputs / "subject01_Setup_IK.xml"}"'))
+    files = tmp_path / "files.toml"
+    files.write_text(MARKER_STUDY.format(name="s01", loads=gait2392.external_loads,
+                                         model=f'model = "{prepared / "model.osim"}"',
+                                         kinematics=f'ik = "{prepared / "ik.mot"}"'))
+    assert main(["run", str(study), "--workers", "1", "--no-progress"]) == 0
+    out = tmp_path / "out"
+    for name in ("model.osim", "static_marker_errors.csv"):
+        assert (out / "prepared" / "s01" / name).read_bytes() == (prepared / name).read_bytes()
+    for name in ("ik.mot", "ik_marker_errors.csv"):
+        assert (out / "prepared" / "s01" / "walk1" / name).read_bytes() == (prepared / name).read_bytes()
+    ours = pd.read_csv(out / "results.csv")
+    assert len(ours) == 1 and 3 < ours["whole_body_W_per_kg"].iloc[0] < 12
+    assert main(["run", str(files), "--workers", "1", "--no-progress", "--out", str(tmp_path / "ref")]) == 0
+    row = pd.read_csv(tmp_path / "ref" / "results.csv").iloc[0]
+    for c in ("whole_body_W_per_kg", "leg_muscles_W", "cycle_start_s", "cycle_end_s", "stance_energy_share_pct"):
+        assert ours[c].iloc[0] == pytest.approx(row[c], rel=1e-9), c
+    capsys.readouterr()
+    assert main(["run", str(study), "--workers", "1", "--no-progress"]) == 0
+    assert "0 run, 1 up to date" in capsys.readouterr().out
+
+
+
+def test_study_keys_of_markers_checked_when_read(gait2392, walking2_c3d, tmp_path):
+    """The keys of a study from markers, and their conflicts, refused when the file is read; where the
+    study's own files will be."""
+    from musclemetab.errors import OptionError
+    from musclemetab.study.spec import study_from_dict
+
+    def study(subject: dict, trial: dict):
+        data = {"name": "s", "output": str(tmp_path / "out"), "workflows": ["effort-gen"], "models": ["UM10"],
+                "subjects": [{"name": "s01", "body_mass_kg": 72.6, **subject,
+                              "trials": [{"name": "walk1", **trial}]}]}
+        return study_from_dict(data, base=tmp_path)
+
+    generic = {"generic_model": str(gait2392.generic_model), "static": str(gait2392.static)}
+    walk = {"markers": str(gait2392.markers), "external_loads": str(gait2392.external_loads)}
+    s = study(generic, walk).subjects[0]
+    assert s.model == tmp_path / "out" / "prepared" / "s01" / "model.osim"
+    assert s.trials[0].ik == tmp_path / "out" / "prepared" / "s01" / "walk1" / "ik.mot"
+    assert s.trials[0].external_loads == gait2392.external_loads.resolve()
+    for subject, trial, message in (
+        ({**generic, "model": str(gait2392.model)}, walk, "not both"),
+        ({"model": str(gait2392.model), "static": str(gait2392.static)}, walk, "'static' scale a 'generic_model'"),
+        ({"generic_model": str(gait2392.generic_model)}, walk, "'static' is required"),
+        (generic, {**walk, "ik": str(gait2392.ik)}, "give 'ik' or 'markers'"),
+        (generic, {"ik": str(gait2392.ik), "ik_setup": str(gait2392.ik_setup), "id": str(gait2392.id)},
+         "'ik_setup' needs 'markers'"),
+        (generic, {"markers": str(gait2392.markers)}, "'id' is required"),
+    ):
+        with pytest.raises(OptionError, match=message):
+            study(subject, trial)
+    # a C3D trial with force plates and no forces given: its ExternalLoads will be the study's own
+    c3d = study({"model": str(gait2392.model)}, {"markers": str(walking2_c3d)}).subjects[0].trials[0]
+    assert c3d.external_loads == tmp_path / "out" / "prepared" / "s01" / "walk1" / "markers_grf.xml"
+    assert c3d.ik == tmp_path / "out" / "prepared" / "s01" / "walk1" / "ik.mot"
+
+
+@pytest.fixture(scope="module")
+def walking2_c3d():
+    from musclemetab.datasets import c3d_walking
+
+    return c3d_walking()

@@ -40,7 +40,7 @@ from .trial import MAX_LIMIT_M, RMS_LIMIT_M
 __all__ = ["IKResult", "inverse_kinematics", "RMS_LIMIT_M", "MAX_LIMIT_M", "MarkerErrorWarning"]
 
 #: bump when a cached IK result changes meaning
-IK_CACHE_FORMAT = 2
+IK_CACHE_FORMAT = 3
 
 
 @dataclass
@@ -182,9 +182,29 @@ def _run(model: Path, markers: Path, setup, time_range, call) -> IKResult:
                   "times_restored_s": shift if grid is not None else 0.0,
                   "setup": kwargs.get("setup"), "time_range": [res["start_s"], res["end_s"]],
                   "weights": kwargs.get("marker_weights", "setup"), "summary": summarise(errors)}
-        return IKResult(Path(res["ik"]).read_text(encoding="utf-8"), errors, record)
+        text = Path(res["ik"]).read_text(encoding="utf-8")
+        if grid is not None:
+            text = _exact_times(text, grid)
+        return IKResult(text, errors, record)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _exact_times(text: str, grid: np.ndarray) -> str:
+    """OpenSim's IK text with each frame's time replaced by the grid time it was given, in full
+    precision (OpenSim writes 8 decimals, steps then differ by 1e-8 s)."""
+    lines = text.splitlines(keepends=True)
+    try:
+        start = next(i for i, line in enumerate(lines) if line.strip().lower() == "endheader") + 2
+    except StopIteration:
+        return text
+    for i in range(start, len(lines)):
+        head, sep, rest = lines[i].lstrip().partition("\t")
+        if not sep:
+            continue
+        t = grid[int(np.argmin(np.abs(grid - float(head))))]
+        lines[i] = f"{t:.12g}\t{rest}"
+    return "".join(lines)
 
 
 def _ik_time_range(setup: Path):

@@ -92,6 +92,6 @@ def write_trc(path: str | os.PathLike, markers: Markers) -> Path:
     flat = markers.xyz.reshape(n, 3 * m)
     for i in range(n):
         vals = "\t".join("NaN" if not math.isfinite(v) else f"{v:.6f}" for v in flat[i])
-        buf.write(f"{i + 1}\t{markers.time[i]:.6f}\t{vals}\n")
+        buf.write(f"{i + 1}\t{markers.time[i]:.10g}\t{vals}\n")
     atomic_write_text(path, buf.getvalue())
     return path
