@@ -272,7 +272,8 @@ def _isolated_cache(tmp_path_factory):
 _LONGEST_FIRST = ("test_emg_ten.py", "test_demo.py", "test_gait2392.py", "test_estimate.py",
                   "test_robustness_outputs.py", "test_study.py", "test_redundancy.py", "test_robustness_values.py",
                   "test_report.py", "test_uncertainty.py", "test_calibration.py", "test_weights.py",
-                  "test_emg_informed.py", "test_energy_goal.py", "test_cli_flow.py", "test_report_browser.py",
+                  "test_emg_informed.py", "test_energy_goal.py", "test_prepare.py", "test_cli_flow.py",
+                  "test_report_browser.py", "test_scale_ik.py",
                   "test_trials.py", "test_geometry.py", "test_diagnosis.py", "test_sensitivity.py",
                   "test_robustness_study.py", "test_stage_paths.py", "test_opensim_files.py")
 

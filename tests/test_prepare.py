@@ -203,3 +203,104 @@ def walking2_c3d():
     from musclemetab.datasets import c3d_walking
 
     return c3d_walking()
+
+
+def _gait2392_as_c3d(gait2392, path):
+    """OpenSim's gait2392 walk (markers at 60 Hz, 0-2.483 s, and its two ground-force sets at
+    600 Hz) written as a lab would export it: a C3D file in mm, z up, the forces as two type-2 plates'
+    analog channels (force and moment in each plate's own frame, z down), the left foot's forces on
+    plate 1 and the right's on plate 2, the plates side by side (plate 1 on the left: lab y > 20 mm)."""
+    import ezc3d
+    from ezc3d import ezc3d as swig
+
+    from musclemetab.mocap import read_trc
+
+    markers = read_trc(gait2392.markers)
+    grf = read_storage(gait2392.grf)
+    n, ratio = 150, 10
+    to_lab = np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]], float)  # OpenSim (x fwd, y up, z right) -> lab (z up)
+    c = ezc3d.c3d()
+    c["parameters"]["POINT"]["RATE"]["value"] = [60.0]
+    c["parameters"]["POINT"]["LABELS"]["value"] = tuple(markers.names)
+    c["parameters"]["POINT"]["UNITS"]["value"] = ["mm"]
+    pts = np.ones((4, len(markers.names), n))
+    pts[:3] = np.transpose(markers.xyz[:n] @ to_lab.T * 1000, (2, 1, 0))
+    c["data"]["points"] = pts
+    c["parameters"]["ANALOG"]["RATE"]["value"] = [600.0]
+    c["parameters"]["ANALOG"]["LABELS"]["value"] = tuple(f"{a}{k}" for k in (1, 2) for a in ("Fx", "Fy", "Fz", "Mx", "My", "Mz"))
+    c["parameters"]["ANALOG"]["UNITS"]["value"] = ("N", "N", "N", "Nmm", "Nmm", "Nmm") * 2
+    rows = slice(0, n * ratio)
+    plate_of = {"1_": 0, "": 1}  # the left foot's forces on plate 1
+    surface = -7.5  # mm: the centres of pressure's height in the file (py = -0.0075 m)
+    corners = np.zeros((3, 4, 2))
+    analog = np.zeros((1, 12, n * ratio))
+    flip = np.diag([1.0, -1.0, -1.0])  # plate frame: x along the lab's, z down (corners' order below)
+    for prefix, k in plate_of.items():
+        y0, y1 = (20.0, 600.0) if k == 0 else (-600.0, 20.0)
+        corners[:, :, k] = np.array([[1500, y0, surface], [-500, y0, surface], [-500, y1, surface], [1500, y1, surface]]).T
+        centre = corners[:, :, k].mean(axis=1)
+        f = grf[[f"{prefix}ground_force_v{a}" for a in "xyz"]].to_numpy()[rows] @ to_lab.T
+        p = grf[[f"{prefix}ground_force_p{a}" for a in "xyz"]].to_numpy()[rows] @ to_lab.T * 1000
+        free = grf[f"{prefix}ground_torque_y"].to_numpy()[rows] * 1000
+        m = np.cross(p - centre, f) + free[:, None] * np.array([0, 0, 1.0])
+        analog[0, 6 * k:6 * k + 3] = (f @ flip.T).T
+        analog[0, 6 * k + 3:6 * k + 6] = (m @ flip.T).T
+    c["data"]["analogs"] = analog
+    for name, value in (("USED", np.array([2.0])), ("TYPE", np.array([2.0, 2.0])),
+                        ("CHANNEL", np.arange(1.0, 13.0).reshape(2, 6).T), ("ZERO", np.array([0.0, 0.0]))):
+        c.add_parameter("FORCE_PLATFORM", name, value)
+        c["parameters"]["FORCE_PLATFORM"][name]["type"] = swig.INT
+    c.add_parameter("FORCE_PLATFORM", "CORNERS", corners)
+    c.add_parameter("FORCE_PLATFORM", "ORIGIN", np.zeros((3, 2)))
+    c.write(str(path))
+    return path
+
+
+@pytest.fixture(scope="module")
+def c3d_prepared(gait2392, tmp_path_factory):
+    import warnings
+
+    from musclemetab.errors import MarkerErrorWarning
+
+    root = tmp_path_factory.mktemp("c3d")
+    walk = _gait2392_as_c3d(gait2392, root / "walk1.c3d")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MarkerErrorWarning)
+        assert main(["prepare", "--model", str(gait2392.generic_model), "--static", str(gait2392.static),
+                     "--markers", str(walk), "--mass", "72.6", "--scale-setup", str(gait2392.scale_setup),
+                     "--ik-setup", str(gait2392.ik_setup), "--out", str(root / "out")]) == 0
+    return root / "out"
+
+
+def test_c3d_walk_plates_given_to_their_feet_as_opensim_does(c3d_prepared, gait2392):
+    """The C3D's plates, left foot on plate 1: each given to its foot from the data, as OpenSim's own
+    ExternalLoads of this trial applies the two force sets (left on calcn_l, right on calcn_r); the
+    forces and centres of pressure those of OpenSim's file."""
+    from musclemetab.external_loads import read_external_loads
+
+    rec = json.loads((c3d_prepared / "prepare.json").read_text())
+    assert {c["plate"]: c["side"] for c in rec["c3d"]["contacts"]} == {1: "l", 2: "r"}
+    assert not any(c["two_feet"] for c in rec["c3d"]["contacts"])
+    loads = read_external_loads(c3d_prepared / "markers_grf.xml")
+    theirs = {f.body: f.force_identifier for f in read_external_loads(gait2392.external_loads).forces}
+    ours = read_storage(loads.datafile)
+    ref = read_storage(gait2392.grf)
+    for f in loads.forces:
+        t = ours.index.to_numpy()
+        on = ours[f"{f.force_identifier}y"].to_numpy() > 100
+        r = ref.reindex(t, method="nearest", tolerance=1e-3)
+        for a in "xyz":
+            assert np.allclose(ours[f"{f.force_identifier}{a}"].to_numpy()[on],
+                               r[f"{theirs[f.body]}{a}"].to_numpy()[on], atol=0.05), (f.body, a)
+            pid, their_p = f.point_identifier, theirs[f.body].replace("_v", "_p")
+            assert np.allclose(ours[f"{pid}{a}"].to_numpy()[on], r[f"{their_p}{a}"].to_numpy()[on], atol=2e-3), (f.body, a)
+
+
+def test_c3d_walk_ik_matches_the_trc_walk(c3d_prepared, gait2392_prepared):
+    """IK from the C3D's markers equals IK from the TRC within 0.2 degrees (the same markers, stored as
+    32-bit floats in the C3D, solved to the setup's accuracy, 1e-5; measured 0.12 at most)."""
+    _, from_trc = gait2392_prepared
+    a, b = read_storage(c3d_prepared / "ik.mot"), read_storage(from_trc / "ik.mot")
+    b = b.reindex(a.index, method="nearest", tolerance=1e-6)
+    assert len(a) == 120  # 0.5-2.483 s: the setup's 0.5-2.5 s clipped to the file
+    assert np.abs(a.to_numpy() - b.to_numpy()).max() < 0.2

@@ -161,8 +161,8 @@ def _up_axis(params, plates_raw, path) -> np.ndarray:
         if np.linalg.norm(normal) > 0:
             i = int(np.argmax(np.abs(normal)))
             v = np.zeros(3)
-            fv = force[:, i]
-            v[i] = 1.0 if fv[np.abs(fv) > 20.0].mean(initial=0.0) >= 0 else -1.0
+            loaded = force[np.abs(force[:, i]) > 20.0, i]
+            v[i] = 1.0 if loaded.size == 0 or loaded.mean() >= 0 else -1.0
             return v
     return np.array([0.0, 0.0, 1.0])
 
