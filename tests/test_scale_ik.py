@@ -200,3 +200,29 @@ def test_ik_time_range_outside_the_markers_is_refused(scaled, gait2392, tmp_path
     (tmp_path / "m.osim").write_text(scaled.model_text)
     with pytest.raises(DataMismatchError, match="not inside the marker data"):
         inverse_kinematics(tmp_path / "m.osim", gait2392.markers, time_range=(5.0, 6.0), use_cache=False)
+
+
+def test_cached_texts_are_computed_once_and_again_when_damaged(tmp_path):
+    """The cache of scaling and IK results: computed once, read back, and a damaged entry or one
+    lacking a text deleted with a warning and computed again."""
+    from musclemetab.cache import cached_texts, entry_path
+    from musclemetab.errors import CacheWarning
+
+    calls = []
+
+    def compute():
+        calls.append(1)
+        return {"a": "text\n", "b": '{"x": 1}'}
+
+    spec = {"what": "test", "n": 1}
+    get = lambda: cached_texts(spec, tmp_path, "test", "t-", compute, ("a", "b"))  # noqa: E731
+    assert get() == {"a": "text\n", "b": '{"x": 1}'} and len(calls) == 1
+    assert get() == {"a": "text\n", "b": '{"x": 1}'} and len(calls) == 1
+    entry = entry_path(spec, tmp_path, "test", prefix="t-")
+    entry.write_bytes(entry.read_bytes()[:-20])
+    with pytest.warns(CacheWarning, match="cannot be read|checksum"):
+        assert get()["a"] == "text\n"
+    assert len(calls) == 2
+    with pytest.warns(CacheWarning, match="does not hold a test result"):
+        cached_texts(spec, tmp_path, "test", "t-", lambda: {**compute(), "c": "3"}, ("a", "b", "c"))
+    assert len(calls) == 3

@@ -100,7 +100,7 @@ def inverse_kinematics(model: str | os.PathLike, markers: str | os.PathLike, *,
                        warn: bool = True, source: str | None = None) -> IKResult:
     """IK of ``markers`` (``.trc`` or ``.c3d``) with ``model`` (module docstring); ``source``: the
     file the warnings name (default ``markers``)."""
-    from ..cache import discard_entry, entry_path, read_entry, write_entry
+    from ..cache import cached_texts
     from ..io.atomic import file_sha256
     from ..model import check_model_path
     from ..opensim_bridge import call
@@ -117,23 +117,13 @@ def inverse_kinematics(model: str | os.PathLike, markers: str | os.PathLike, *,
     spec = {"fmt": IK_CACHE_FORMAT, "model": file_sha256(model), "markers": file_sha256(markers),
             "setup": file_sha256(setup) if setup else None, "coords": [file_sha256(p) for p in coords],
             "window": list(time_range) if time_range else None}
-    entry = entry_path(spec, cache_dir or _cache_dir(), "inverse kinematics", prefix="ik-") if use_cache else None
-    result = None
-    if entry is not None:
-        arrays, problem = read_entry(entry)
-        if arrays is not None:
-            try:
-                result = IKResult(str(arrays["ik"]), json.loads(str(arrays["errors"])),
-                                  json.loads(str(arrays["record"])))
-            except (KeyError, ValueError):
-                problem = "does not hold an IK result"
-        if problem:
-            discard_entry(entry, problem, "inverse kinematics")
-    if result is None:
-        result = _run(model, markers, setup, time_range, call)
-        if entry is not None:
-            write_entry(entry, "inverse kinematics", ik=np.array(result.ik_text),
-                        errors=np.array(json.dumps(result.errors)), record=np.array(json.dumps(result.record)))
+    def compute():
+        r = _run(model, markers, setup, time_range, call)
+        return {"ik": r.ik_text, "errors": json.dumps(r.errors), "record": json.dumps(r.record)}
+
+    texts = cached_texts(spec, cache_dir or _cache_dir(), "inverse kinematics", "ik-", compute,
+                         ("ik", "errors", "record"), use_cache)
+    result = IKResult(texts["ik"], json.loads(texts["errors"]), json.loads(texts["record"]))
     if warn:
         warn_flagged(result.record["summary"], source or str(markers))
     return result

@@ -221,7 +221,7 @@ def scale_model(generic_model: str | os.PathLike, static: str | os.PathLike, mas
     ``marker_set_file``), for a generic model without markers; a setup's own is used otherwise.
     ``source``: the file the warnings name (default ``static``).
     """
-    from ..cache import discard_entry, entry_path, read_entry, write_entry
+    from ..cache import cached_texts
     from ..model import check_model_path
 
     generic_model = check_model_path(generic_model)
@@ -251,22 +251,13 @@ def scale_model(generic_model: str | os.PathLike, static: str | os.PathLike, mas
             **{k: _sha(p) for k, p in inputs.items()},
             "coords": sorted(_sha(p) for k, p in referenced.items() if k.startswith("coordinate_file")),
             "measurements": None if setup else json.dumps(measurement_sets(), sort_keys=True)}
-    entry = entry_path(spec, cache_dir or _cache_dir(), "scaling", prefix="scale-") if use_cache else None
-    result = None
-    if entry is not None:
-        arrays, problem = read_entry(entry)
-        if arrays is not None:
-            try:
-                result = ScaleResult(str(arrays["model"]), str(arrays["pose"]), json.loads(str(arrays["record"])))
-            except (KeyError, ValueError):
-                problem = "does not hold a scaling result"
-        if problem:
-            discard_entry(entry, problem, "scaling")
-    if result is None:
-        result = _scale(generic_model, static, mass_kg, setup, marker_set, height_m)
-        if entry is not None:
-            write_entry(entry, "scaling", model=np.array(result.model_text), pose=np.array(result.static_pose_text),
-                        record=np.array(json.dumps(result.record)))
+    def compute():
+        r = _scale(generic_model, static, mass_kg, setup, marker_set, height_m)
+        return {"model": r.model_text, "pose": r.static_pose_text, "record": json.dumps(r.record)}
+
+    texts = cached_texts(spec, cache_dir or _cache_dir(), "scaling", "scale-", compute, ("model", "pose", "record"),
+                         use_cache)
+    result = ScaleResult(texts["model"], texts["pose"], json.loads(texts["record"]))
     s = result.record["static_summary"]
     if s["rms_m"] > RMS_LIMIT_M or s["max_m"] > MAX_LIMIT_M:
         warnings.warn(f"{source or static}: the scaled model's markers in the static pose are {100 * s['rms_m']:.1f} cm RMS and "
