@@ -23,6 +23,11 @@ def test_prepare_writes_the_model_ik_and_marker_errors(gait2392_prepared):
         assert (out / name).is_file(), name
     rec = json.loads((out / "prepare.json").read_text())
     assert rec["mass_kg"] == 72.6 and rec["height_from"] == "Top.Head"
+    import pandas as pd
+    from test_datadict_columns import undocumented
+
+    for name in ("ik_marker_errors.csv", "static_marker_errors.csv"):  # columns in the data dictionary
+        assert not undocumented(out / name, pd.read_csv(out / name, nrows=1).columns)
     assert rec["ik"]["time_range"] == [0.5, 2.5] and rec["ik"]["summary"]["frames"] == 121
 
 
