@@ -226,3 +226,26 @@ def test_cached_texts_are_computed_once_and_again_when_damaged(tmp_path):
     with pytest.warns(CacheWarning, match="does not hold a test result"):
         cached_texts(spec, tmp_path, "test", "t-", lambda: {**compute(), "c": "3"}, ("a", "b", "c"))
     assert len(calls) == 3
+
+
+def test_rajagopal_family_recovers_a_known_scale(example, tmp_path):
+    """Without a setup, on the Rajagopal family: a static trial made of the example model's own
+    markers (default pose) 10 % farther from the origin, every marker distance 1.1 times the
+    model's, gives every body the shipped measurements cover the scale factor 1.1."""
+    from musclemetab.mocap import Markers, write_trc
+    from musclemetab.opensim_bridge import call
+
+    pos = call("lab:model_marker_positions", str(example.model))
+    names = [n for n in pos if not n.endswith(("_ground", "_cgm24"))]
+    xyz = np.array([pos[n] for n in names]) * 1.1
+    time = np.arange(10) / 100
+    trc = write_trc(tmp_path / "static.trc", Markers(time=time, names=names, xyz=np.repeat(xyz[None], 10, axis=0)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MarkerErrorWarning)
+        res = scale_model(example.model, trc, 75.0, use_cache=False)
+    assert res.record["family"] == "rajagopal"
+    factors = res.record["scale_factors"]
+    scaled = [b for m in res.record["measurements"] for b in m["bodies"]]
+    assert {"pelvis", "femur_r", "tibia_l", "calcn_r", "torso"} <= set(scaled)
+    for body in scaled:
+        assert factors[body] == pytest.approx([1.1, 1.1, 1.1], rel=1e-6), body

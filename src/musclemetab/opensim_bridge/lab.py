@@ -303,3 +303,16 @@ def inverse_kinematics(model_path: str, trc_path: str, out_dir: str, *, setup: s
         "max_m": err[:, cols.index("marker_error_max")].tolist(), "worst_marker": worst, "worst_m": worst_m,
         "markers": names, "start_s": float(tool.getStartTime()), "end_s": float(tool.getEndTime()),
     }
+
+
+def model_marker_positions(model_path: str) -> dict:
+    """``{marker: [x, y, z]}`` (m, ground frame) of a model's markers in its default pose."""
+    model = osim.Model(os.path.abspath(model_path))
+    state = model.initSystem()
+    model.realizePosition(state)
+    out = {}
+    for i in range(model.getMarkerSet().getSize()):
+        m = model.getMarkerSet().get(i)
+        p = m.getLocationInGround(state)
+        out[m.getName()] = [p.get(0), p.get(1), p.get(2)]
+    return out
