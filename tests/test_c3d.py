@@ -234,6 +234,9 @@ def test_foot_markers_recognised_by_name():
     pig = foot_marker_sets(["RHEE", "RTOE", "LHEE", "LTOE", "LMMAL", "RMT5", "calc_r"])
     assert pig["r"]["heel"] == ["RHEE", "calc_r"] and pig["r"]["fore"] == ["RTOE", "RMT5"]
     assert pig["l"] == {"heel": ["LHEE"], "fore": ["LTOE"]}
+    rajagopal = foot_marker_sets(["RHEE", "RFMH", "RVMH", "LHEE", "LFMH", "LVMH", "RANK", "RMED", "LM5"])
+    assert rajagopal["r"] == {"heel": ["RHEE"], "fore": ["RFMH", "RVMH"]}
+    assert rajagopal["l"] == {"heel": ["LHEE"], "fore": ["LFMH", "LVMH", "LM5"]}
 
 
 def test_no_foot_markers_is_an_error_naming_the_option():

@@ -110,15 +110,15 @@ def _role(rest: str) -> str | None:
     key = re.sub(r"[^A-Z0-9]", "", rest.upper())
     if key.startswith(("HEE", "CAL")):
         return "heel"
-    if key.startswith(("TOE", "HAL", "MIDFOOT", "FOREFOOT")) or re.match(r"^(MT|MET|MTH|MH|META)\d", key) \
-            or re.match(r"^(MT|MET)[HP]?\d?$", key):
+    if key.startswith(("TOE", "HAL", "MIDFOOT", "FOREFOOT", "FMH", "VMH")) \
+            or re.match(r"^(MT|MET|MTH|MH|META|M)\d", key) or re.match(r"^(MT|MET)[HP]?\d?$", key):
         return "fore"
     return None
 
 
 def foot_marker_sets(names: list[str], given: dict | None = None) -> dict[str, dict[str, list[str]]]:
     """``{side: {"heel": [...], "fore": [...]}}`` from the marker names (``RHEE``/``RCAL``/``R.Heel``
-    heel; ``RTOE``/``RMT2``/``R.Toe.Tip``/``R.Midfoot.Sup`` forefoot), or from ``given``
+    heel; ``RTOE``/``RMT2``/``RFMH``/``RVMH``/``R.Toe.Tip``/``R.Midfoot.Sup`` forefoot), or from ``given``
     (``{side: [heel marker, other foot markers...]}``)."""
     out = {s: {"heel": [], "fore": []} for s in SIDES}
     if given:
