@@ -84,6 +84,9 @@ def test_setup_files_resolved_against_its_folder_nothing_written_there(gait2392,
     elsewhere = tmp_path / "cwd"
     elsewhere.mkdir()
     monkeypatch.chdir(elsewhere)
+    from musclemetab.opensim_bridge import shutdown
+
+    shutdown()  # the OpenSim worker starts again in this working folder
     with pytest.warns(MarkerErrorWarning):
         res = scale_model(inputs / gait2392.generic_model.name, inputs / gait2392.static.name, 72.6,
                           setup=inputs / gait2392.scale_setup.name, use_cache=False)
