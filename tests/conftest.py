@@ -148,6 +148,41 @@ def geometry_cache(_isolated_cache) -> Path:
     return default_cache_dir()
 
 
+@pytest.fixture(scope="session")
+def gait2392_prepared(gait2392, tmp_path_factory):
+    """``musclemetab prepare`` of OpenSim's gait2392 subject01 with OpenSim's scaling and IK setups,
+    run on a copy of the inputs in a folder of their own from another working folder: ``(inputs,
+    out)``. Scaling and IK go through OpenSim once per test run (the package's cache, shared by
+    the test processes and tests/test_scale_ik.py)."""
+    import warnings
+
+    from musclemetab.commands import main
+    from musclemetab.errors import MarkerErrorWarning
+
+    root = tmp_path_factory.mktemp("prepare")
+    inputs = root / "inputs"
+    inputs.mkdir()
+    for p in (gait2392.generic_model, gait2392.static, gait2392.markers, gait2392.scale_setup,
+              gait2392.scale_marker_set, gait2392.ik_setup):
+        shutil.copy(p, inputs)
+    cwd = root / "cwd"
+    cwd.mkdir()
+    out = root / "out"
+    old = os.getcwd()
+    os.chdir(cwd)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", MarkerErrorWarning)  # OpenSim's own setups exceed the limits
+            status = main(["prepare", "--model", str(inputs / gait2392.generic_model.name),
+                           "--static", str(inputs / gait2392.static.name), "--markers", str(inputs / gait2392.markers.name),
+                           "--mass", "72.6", "--scale-setup", str(inputs / gait2392.scale_setup.name),
+                           "--ik-setup", str(inputs / gait2392.ik_setup.name), "--out", str(out)])
+    finally:
+        os.chdir(old)
+    assert status == 0
+    return inputs, out
+
+
 def _run_root(tmp_path_factory) -> Path:
     """A folder shared by every process of this test run (the parallel workers of
     pytest-xdist included): the parent of the workers' temporary folders."""
@@ -237,7 +272,8 @@ def _isolated_cache(tmp_path_factory):
 _LONGEST_FIRST = ("test_emg_ten.py", "test_demo.py", "test_gait2392.py", "test_estimate.py",
                   "test_robustness_outputs.py", "test_study.py", "test_redundancy.py", "test_robustness_values.py",
                   "test_report.py", "test_uncertainty.py", "test_calibration.py", "test_weights.py",
-                  "test_emg_informed.py", "test_energy_goal.py", "test_stop.py", "test_cli_flow.py", "test_report_browser.py",
+                  "test_emg_informed.py", "test_energy_goal.py", "test_prepare.py", "test_stop.py", "test_cli_flow.py",
+                  "test_report_browser.py", "test_scale_ik.py",
                   "test_trials.py", "test_geometry.py", "test_diagnosis.py", "test_sensitivity.py",
                   "test_robustness_study.py", "test_stage_paths.py", "test_opensim_files.py")
 

@@ -33,7 +33,7 @@ from .errors import CacheWarning
 from .io.atomic import atomic_path
 
 __all__ = ["default_cache_dir", "content_key", "entry_path", "read_entry", "discard_entry", "write_entry",
-           "read_file_entry", "discard_file_entry", "seal_file_entry"]
+           "read_file_entry", "discard_file_entry", "seal_file_entry", "cached_texts"]
 
 CHECKSUM = "checksum"
 
@@ -169,6 +169,26 @@ def seal_file_entry(path: Path, what: str) -> None:
     except OSError as exc:
         warnings.warn(f"could not write the checksum of the {what} cache entry {path} ({exc.strerror or exc}); "
                       "it will be computed again next time", CacheWarning, stacklevel=3)
+
+
+def cached_texts(spec: dict, cache_dir: str | os.PathLike, what: str, prefix: str, compute, keys,
+                 use_cache: bool = True) -> dict[str, str]:
+    """Named texts (a file's text, a JSON record ...) that ``compute()`` returns as a dict, cached
+    together as one entry under the key of ``spec``; an entry lacking one of ``keys`` is deleted with
+    a :class:`CacheWarning` and computed again, like any entry that fails its checksum."""
+    entry = entry_path(spec, cache_dir, what, prefix=prefix) if use_cache else None
+    if entry is not None:
+        arrays, problem = read_entry(entry)
+        if arrays is not None:
+            if set(keys) <= set(arrays):
+                return {k: str(arrays[k]) for k in keys}
+            problem = f"does not hold a {what} result"
+        if problem:
+            discard_entry(entry, problem, what)
+    texts = compute()
+    if entry is not None:
+        write_entry(entry, what, **{k: np.array(texts[k]) for k in keys})
+    return texts
 
 
 #: bump when a cached model result changes meaning

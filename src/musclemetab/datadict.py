@@ -160,7 +160,8 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
     ("factors.csv", "height", "-", "factor of an uncertainty sample on the subject's height (muscle-volume rule), the "
      "same on every row"),
     # time series
-    ("timeseries.csv", "time_s", "s", "time of the solver node"),
+    ("timeseries.csv, ik_marker_errors.csv", "time_s", "s",
+     "time: of the solver node (timeseries.csv), of the marker frame (ik_marker_errors.csv)"),
     ("timeseries.csv", "cycle_pct", "%", "time in % of the gait cycle"),
     ("timeseries.csv", "series", "-", "leg_muscles (summed muscles of one leg) or group/<G>"),
     ("timeseries.csv, metabolics.parquet", "value_W", "W",
@@ -216,6 +217,17 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
     (_SENS, "change_per_1pct", "W/kg or W", "d_rate_d_log_p / 100: the rate's change when the parameter grows by 1 %"),
     (_SENS, "relative_change_per_1pct", "-", "change_per_1pct / rate_value: the rate's relative change per 1 % of "
      "the parameter (empty where the rate is 0)"),
+    # marker errors of scaling and inverse kinematics (musclemetab prepare, a study from markers)
+    ("ik_marker_errors.csv", "rms_m", "m", "RMS marker error of the IK frame (OpenSim's InverseKinematicsTool)"),
+    ("ik_marker_errors.csv", "max_m", "m", "largest marker error of the IK frame"),
+    ("ik_marker_errors.csv", "worst_marker", "-", "the marker of the frame's largest error"),
+    ("ik_marker_errors.csv", "above_best_practice", "-",
+     "1 when the frame's RMS exceeds 2 cm or its largest error 4 cm (OpenSim's best practice), else 0"),
+    ("static_marker_errors.csv", "marker", "-", "a marker of the marker placement (scaling's static pose)"),
+    ("static_marker_errors.csv", "error_m", "m",
+     "distance of the scaled model's marker, in the static pose, from the experimental marker averaged over the "
+     "static trial's time range (before the marker placer moves it)"),
+    ("static_marker_errors.csv", "weight", "-", "the marker's weight in the marker placement"),
 )
 
 

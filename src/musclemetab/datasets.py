@@ -1,6 +1,6 @@
-"""Example data: the study's subject at three speeds, and OpenSim's gait2392 subject.
+"""Example data: the study's subject at three speeds, OpenSim's gait2392 subject, a C3D trial.
 
-Two data sets, neither part of this package, each downloaded on first use with pooch from a
+Three data sets, none part of this package, each downloaded on first use with pooch from a
 pinned commit of its public repository and checked against SHA-256 hashes:
 
 * :func:`example_subject`: the subject published with the reference study (repository
@@ -9,11 +9,14 @@ pinned commit of its public repository and checked against SHA-256 hashes:
 * :func:`gait2392_subject01`: OpenSim's own walking example (repository
   ``opensim-org/opensim-models``, Apache-2.0; ``data/gait2392_subject01_manifest.txt``);
   gait2392 model with Thelen muscles, both legs, 60 Hz IK, ground forces and an ExternalLoads
-  file, and an ID file that covers no complete gait cycle.
+  file, and an ID file that covers no complete gait cycle; the lab's markers (static and walking
+  trials, ``.trc``), the generic model and OpenSim's scaling and IK setups;
+* :func:`c3d_walking`: a walking trial as a motion-capture lab exports it (C3D, markers and
+  force-plate channels) from OpenSim's test suite (``opensim-org/opensim-core``, Apache-2.0).
 
 Set ``MUSCLEMETAB_DATA`` to a folder that already holds the files (offline machines, test
 systems) and no download happens. The folder may hold one data set's files directly, or one
-sub-folder per data set named ``example_subject`` and ``gait2392_subject01``. Files found
+sub-folder per data set named ``example_subject``, ``gait2392_subject01`` and ``c3d_walking``. Files found
 there are checked against the same hashes.
 """
 
@@ -34,6 +37,7 @@ __all__ = [
     "example_subject",
     "Gait2392Subject",
     "gait2392_subject01",
+    "c3d_walking",
     "manifest",
     "SOURCE_COMMIT",
     "SOURCE_REPOSITORY",
@@ -189,6 +193,12 @@ class Gait2392Subject:
     external_loads: Path
     id_setup: Path
     id: Path
+    generic_model: Path | None = None
+    static: Path | None = None
+    markers: Path | None = None
+    scale_setup: Path | None = None
+    scale_marker_set: Path | None = None
+    ik_setup: Path | None = None
     body_mass_kg: float = 72.6
     height_m: float | None = None
 
@@ -211,4 +221,28 @@ def gait2392_subject01(folder: str | os.PathLike | None = None, verify: bool = T
         external_loads=root / "subject01_walk1_grf.xml",
         id_setup=root / "subject01_Setup_InverseDynamics.xml",
         id=root / "subject01_walk1_id.sto",
+        generic_model=root / "gait2392_thelen2003muscle.osim",
+        static=root / "subject01_static.trc",
+        markers=root / "subject01_walk1.trc",
+        scale_setup=root / "subject01_Setup_Scale.xml",
+        scale_marker_set=root / "gait2392_Scale_MarkerSet.xml",
+        ik_setup=root / "subject01_Setup_IK.xml",
     )
+
+
+OPENSIM_CORE_REPOSITORY = "opensim-org/opensim-core"
+OPENSIM_CORE_COMMIT = "0435b081dc383498e217f92ca63bb97616145c14"
+_OPENSIM_CORE_URL = f"https://raw.githubusercontent.com/{OPENSIM_CORE_REPOSITORY}/{OPENSIM_CORE_COMMIT}/"
+
+
+def c3d_walking(folder: str | os.PathLike | None = None, verify: bool = True) -> Path:
+    """Path of ``walking2.c3d``, a walking trial of OpenSim's test suite (repository
+    ``opensim-org/opensim-core``, Apache-2.0; ``data/c3d_walking_manifest.txt``): 44 markers at
+    250 Hz and two force plates at 2000 Hz in one C3D file. Parameters are those of
+    :func:`example_subject`; with ``$MUSCLEMETAB_DATA`` set, the file is looked for there or in
+    its sub-folder ``c3d_walking``."""
+    entries = manifest("c3d_walking")
+    root = _local_root(folder, "c3d_walking", entries, verify)
+    if root is None:
+        root = _fetch_all(entries, "c3d_walking", OPENSIM_CORE_REPOSITORY, OPENSIM_CORE_COMMIT, _OPENSIM_CORE_URL)
+    return root / "walking2.c3d"

@@ -107,6 +107,11 @@ class LumpedMuscleWarning(MusclemetabWarning):
     muscle of a reduced model): their masses come from force and optimal fiber length."""
 
 
+class MarkerErrorWarning(MusclemetabWarning):
+    """Marker errors of inverse kinematics or of a static pose exceed OpenSim's best-practice
+    limits (RMS 2 cm, maximum 4 cm; ``docs/lab_data.md``)."""
+
+
 class WindowWarning(MusclemetabWarning):
     """The solve window was clipped at the edge of the data (the record says where)."""
 

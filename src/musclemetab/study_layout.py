@@ -8,6 +8,9 @@ there and ``musclemetab report`` reads, defined once for both.
     DIR/results.parquet   the same table
     DIR/failures.csv      one row per failed unit, with its reason
     DIR/per_muscle.csv    one row per muscle of every unit (:mod:`musclemetab.metabolics.per_muscle`)
+    DIR/prepared/<subject>/  the subject's model scaled from its static trial (model.osim, marker
+                          errors, prepare.json) and, per trial from markers, <trial>/ik.mot,
+                          ik_marker_errors.csv (and a C3D trial's ground forces)
     DIR/units/<subject>/<trial>/<workflow>/[<side>/]
                           unit.json (the unit's record: status, gait cycle, hashes of its files),
                           timeseries.csv (rates over the cycle), solution.sto and summary.json
@@ -35,6 +38,8 @@ __all__ = [
     "DATA_DICTIONARY_CSV",
     "LOCK_FILE",
     "UNITS_FOLDER",
+    "PREPARED_FOLDER",
+    "prepared_path",
     "UNIT_FILE",
     "TIMESERIES_FILE",
     "unit_path",
@@ -55,6 +60,17 @@ UNITS_FOLDER = "units"
 UNIT_FILE = "unit.json"
 #: The unit's metabolic rates over the gait cycle (long table), in its folder.
 TIMESERIES_FILE = "timeseries.csv"
+
+
+#: The folder of what the study makes from markers: ``prepared/<subject>/[<trial>/]``.
+PREPARED_FOLDER = "prepared"
+
+
+def prepared_path(subject: str, trial: str | None = None) -> Path:
+    """The folder of a subject's scaled model (or, with ``trial``, of the trial's IK), relative to
+    the study folder."""
+    base = Path(PREPARED_FOLDER) / str(subject)
+    return base / str(trial) if trial is not None else base
 
 
 def unit_path(subject: str, trial: str, workflow: str) -> Path:

@@ -35,6 +35,8 @@ __all__ = ["main", "build_parser", "SUBCOMMANDS", "BROKEN_PIPE_STATUS"]
 #: The commands: (name, module, function adding its parser). A module is imported only when its
 #: command is run (or the full help is asked for), which keeps the start of a command short.
 SUBCOMMANDS = (
+    ("c3d", "musclemetab.commands.c3d", "add_parser"),
+    ("prepare", "musclemetab.commands.prepare", "add_parser"),
     ("geometry", "musclemetab.commands.geometry", "add_parser"),
     ("solve", "musclemetab.commands.solve", "add_parser"),
     ("estimate", "musclemetab.commands.estimate", "add_parser"),

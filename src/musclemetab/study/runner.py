@@ -425,6 +425,9 @@ def run_study(
     try:
         with study_lock(out):
             run.removed_partials = remove_stale_partials(out)
+            from .lab import prepare_study
+
+            study = prepare_study(study)  # models scaled and IK computed from markers, into prepared/
             for stage in stages:
                 for unit in stage:
                     prepare_leg_folder(out, unit)
@@ -490,6 +493,9 @@ def _write_study_json(study: Study, out: Path) -> None:
             "emg_files": {t.name: str(t.emg) if t.emg else None for t in s.trials},
             "emg_processing": {t.name: "raw" if isinstance(t.emg, RawEmgPath) else "envelope"
                                for t in s.trials if t.emg},
+            **({"generic_model": str(s.generic_model), "static": str(s.static)} if s.generic_model else {}),
+            **({"markers": {t.name: str(t.markers) for t in s.trials if t.markers}}
+               if any(t.markers for t in s.trials) else {}),
         }
         for s in study.subjects
     }

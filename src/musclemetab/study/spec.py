@@ -46,12 +46,22 @@ A study file names everything a study needs; paths are relative to the file::
                                           # gait cycle, the legs' rates added; needs 'cycle')
     dofs = ["hip_flexion_r", "knee_angle_r", "ankle_angle_r"]   # optional (r or l): default from the model
     # [subjects.estimate]: a parameter estimation (musclemetab.study.estimation)
+    # instead of 'model', a generic model the study scales (docs/lab_data.md):
+    # generic_model = "data/gait2392.osim"
+    # static = "data/static.trc"          # the static trial (.trc or .c3d)
+    # scale_setup = "data/Setup_Scale.xml"  # optional: OpenSim ScaleTool setup
+    # marker_set = "data/MarkerSet.xml"   # optional: markers added to the generic model
 
 
     [[subjects.trials]]
     name = "normal"
     ik = "data/IK_normal.mot"
     id = "data/ID_normal.sto"
+    # instead of 'ik', the trial's markers (.trc or .c3d), IK computed by OpenSim:
+    # markers = "data/walk.trc"
+    # ik_setup = "data/Setup_IK.xml"      # optional: OpenSim InverseKinematicsTool setup
+    # (a .c3d with force plates also gives the ground forces when neither 'id' nor
+    #  'external_loads' is given)
     emg = "data/EMG_normal.mot"           # needed by emg-ten and emg_mode
     emg_processing = "raw"                # optional: this trial's emg (default the subject's)
     ultrasound = "data/US_normal.mot"     # optional: fiber lengths (mm) for [subjects.estimate]
@@ -158,10 +168,14 @@ class Trial:
     cycle: str | int | None = None
     #: measured fiber lengths (mm, MuscleRedundancySolver convention) for the subject's estimation
     ultrasound: Path | None = None
+    #: the markers the IK is computed from (``ik`` is then the study's own, under ``prepared/``)
+    markers: Path | None = None
+    ik_setup: Path | None = None
 
     def files(self) -> dict[str, Path]:
         out = {k: v for k, v in (("ik", self.ik), ("id", self.id), ("emg", self.emg), ("grf", self.grf),
-                                 ("external_loads", self.external_loads), ("ultrasound", self.ultrasound)) if v}
+                                 ("external_loads", self.external_loads), ("ultrasound", self.ultrasound),
+                                 ("markers", self.markers), ("ik_setup", self.ik_setup)) if v}
         if self.external_loads is not None:
             from ..external_loads import read_external_loads
 
@@ -193,6 +207,11 @@ class Subject:
     estimate: Any = None
     #: muscles left out of every problem of the subject (``--exclude-muscles``)
     exclude_muscles: tuple[str, ...] = ()
+    #: the generic model the study scales to ``static`` (``model`` is then the study's own)
+    generic_model: Path | None = None
+    static: Path | None = None
+    scale_setup: Path | None = None
+    marker_set: Path | None = None
 
     @property
     def sides(self) -> tuple[str, ...]:
@@ -262,11 +281,13 @@ _UNCERTAINTY_KEYS = {"samples", "seed", "priors", "sensitivity"}
 _SOLVER_KEYS = {"max_iter", "tol", "stop", "linear_solver", "warm_start"}
 _SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials",
                  "muscle_properties", "side", "dofs", "emg_mode", "emg_tolerance", "estimate", "exclude_muscles",
-                 "emg_processing"}
+                 "emg_processing", "generic_model", "static", "scale_setup", "marker_set"}
+#: subject keys of a generic model the study scales
+_SCALING_KEYS = ("static", "scale_setup", "marker_set")
 _TRIAL_KEYS = {
     "name", "ik", "id", "emg", "grf", "grf_column", "grf_threshold_N", "speed_m_per_s",
     "measured_W_per_kg", "vo2_mL_per_s", "vco2_mL_per_s", "vo2_mL_per_min", "vco2_mL_per_min",
-    "start_s", "toe_off_s", "end_s", "external_loads", "cycle", "ultrasound", "emg_processing",
+    "start_s", "toe_off_s", "end_s", "external_loads", "cycle", "ultrasound", "emg_processing", "markers", "ik_setup",
 }
 
 
@@ -388,9 +409,33 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
         raise OptionError(f"{where}: 'strict' must be true or false, not {strict!r}")
     if strict:
         settings["strict"] = True
+    subjects = tuple(_planned_files(s, out) for s in subjects)
     return Study(name=name, subjects=subjects, workflows=workflows, models=models, output=out,
                  basal=basal, source=source, settings=settings, basal_coefficient=basal_coefficient,
                  basal_exponent=basal_exponent, strict=strict)
+
+
+def _planned_files(subject: Subject, out: Path) -> Subject:
+    """The subject with the files the study makes from markers named where they will be
+    (``prepared/`` in the study folder, :func:`musclemetab.study.lab.prepare_study`): the scaled
+    model, each trial's IK, a C3D trial's ExternalLoads."""
+    from dataclasses import replace
+
+    from ..study_layout import prepared_path
+
+    if subject.generic_model is None and not any(t.markers for t in subject.trials):
+        return subject
+    trials = []
+    for t in subject.trials:
+        if t.markers is not None:
+            folder = out / prepared_path(subject.name, t.name)
+            loads = t.external_loads
+            if loads is None and t.id is None and t.grf is None:
+                loads = folder / "markers_grf.xml"  # from the C3D's force plates (checked by _trial)
+            t = replace(t, ik=folder / "ik.mot", external_loads=loads)
+        trials.append(t)
+    model = out / prepared_path(subject.name) / "model.osim" if subject.generic_model is not None else subject.model
+    return replace(subject, model=model, trials=tuple(trials))
 
 
 def strict_study(study: Study) -> Study:
@@ -580,7 +625,20 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
     if not name:
         raise OptionError(f"{here}: 'name' is required")
     check_plain_name(name, f"{where}: subject name")
-    model = _path(data.get("model"), base, here, "model")
+    generic = _path(data.get("generic_model"), base, here, "generic_model", required=False)
+    if generic is not None:
+        if data.get("model") is not None:
+            raise OptionError(f"{here}: give 'model' (a model of the subject) or 'generic_model' with 'static' (scaled "
+                              "by the study), not both")
+        scaling = {k: _path(data.get(k), base, here, k, required=k == "static") for k in _SCALING_KEYS}
+        model = None
+    else:
+        given = [k for k in _SCALING_KEYS if data.get(k) is not None]
+        if given:
+            raise OptionError(f"{here}: {', '.join(repr(k) for k in given)} scale a 'generic_model'; add it (and drop "
+                              "'model'), or drop them")
+        scaling = {}
+        model = _path(data.get("model"), base, here, "model")
     mass = _number(data.get("body_mass_kg"), here, "body_mass_kg", required=True)
     height = _number(data.get("height_m"), here, "height_m")  # optional: the muscle masses from the model
     passive = _path(data.get("passive"), base, here, "passive", required=False)
@@ -631,13 +689,13 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
     emg_mode, emg_tolerance = _emg_mode(data, here, trials)
     muscle_properties = _path(data.get("muscle_properties"), base, here, "muscle_properties", required=False)
     if muscle_properties is not None or dofs is not None or excluded:
-        _check_model_names(model, here, muscle_properties, dofs, excluded)
+        _check_model_names(model or generic, here, muscle_properties, dofs, excluded)  # scaling keeps the names
     if side == BOTH:
         _check_both_legs(data, here, trials, workflows, kt)
     subject = Subject(name=name, model=model, body_mass_kg=mass, height_m=height, trials=trials,
                       passive=passive, tendon_stiffness=kt, emg_mapping=mapping, muscle_properties=muscle_properties,
                       side=side, dofs=dofs, emg_mode=emg_mode, emg_tolerance=emg_tolerance,
-                      exclude_muscles=tuple(excluded))
+                      exclude_muscles=tuple(excluded), generic_model=generic, **scaling)
     if data.get("estimate") is not None:
         from dataclasses import replace
 
@@ -750,10 +808,16 @@ def _trial(data, base: Path, where: str, emg_processing: str = "envelope") -> Tr
             f"{'it' if len(forces) == 1 else 'they'} would be ignored; keep 'external_loads' or 'grf' (with "
             "'grf_column'), not both"
         )
+    markers = _path(data.get("markers"), base, here, "markers", required=False)
+    if markers is not None and data.get("ik") is not None:
+        raise OptionError(f"{here}: give 'ik' or 'markers' (IK computed by the study), not both")
+    if markers is None and data.get("ik_setup") is not None:
+        raise OptionError(f"{here}: 'ik_setup' needs 'markers'; add the trial's markers or drop it")
+    c3d_forces = markers is not None and markers.suffix.lower() == ".c3d" and data.get("grf") is None
     return Trial(
         name=name,
-        ik=_path(data.get("ik"), base, here, "ik"),
-        id=_path(data.get("id"), base, here, "id", required=data.get("external_loads") is None),
+        ik=_path(data.get("ik"), base, here, "ik") if markers is None else None,
+        id=_path(data.get("id"), base, here, "id", required=data.get("external_loads") is None and not c3d_forces),
         emg=emg_source(_path(data.get("emg"), base, here, "emg", required=False),
                        _emg_processing(data, here, emg_processing)),
         grf=_path(data.get("grf"), base, here, "grf", required=False),
@@ -769,6 +833,8 @@ def _trial(data, base: Path, where: str, emg_processing: str = "envelope") -> Tr
         external_loads=_path(data.get("external_loads"), base, here, "external_loads", required=False),
         cycle=_cycle_key(data.get("cycle"), here),
         ultrasound=_path(data.get("ultrasound"), base, here, "ultrasound", required=False),
+        markers=markers,
+        ik_setup=_path(data.get("ik_setup"), base, here, "ik_setup", required=False),
     )
 
 

@@ -1,0 +1,253 @@
+"""Force plates: offsets, foot contacts, and which foot stands on each.
+
+* :func:`remove_offsets`: a plate that is not zeroed reads a constant force and moment while
+  unloaded (walking2.c3d: -14 N and -20 N). The offset is the median of each component over the
+  samples where the plate is unloaded (vertical force within :data:`CONTACT_THRESHOLD_N` of the
+  plate's lowest readings) and is subtracted from every sample.
+* :func:`assign_feet`: each contact of a plate (a run of samples whose vertical force exceeds
+  :data:`CONTACT_THRESHOLD_N`) goes to the foot nearest to the centre of pressure, by the data,
+  never by the plate's number: at every marker frame of the contact, the horizontal distance from
+  the centre of pressure to each foot (the segments from its heel marker to its other foot
+  markers) is measured; the foot nearest at most of the contact's vertical impulse takes it. A
+  contact where the other foot is nearest for more than :data:`TWO_FEET_SHARE` of the impulse, or
+  where both feet stand on the plate at once (a marker of each foot over the plate, moving
+  slower than :data:`STANDING_SPEED_M_S`, for :data:`TWO_FEET_MIN_S` or longer), is flagged: it
+  carries both feet, its force cannot be split between them, and it is given to the foot nearer
+  for most of it with a warning; the record says so (``two_feet``).
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from ..errors import DataMismatchError, MusclemetabWarning, OptionError
+from .trial import Markers, Plate, horizontal
+
+__all__ = ["CONTACT_THRESHOLD_N", "PlateContact", "remove_offsets", "contacts", "foot_marker_sets",
+           "assign_feet", "TwoFeetWarning"]
+
+#: vertical force (N) above which a plate is loaded (the package's gait-event threshold)
+CONTACT_THRESHOLD_N = 20.0
+#: runs of load shorter than this (s) are noise, not contacts
+MIN_CONTACT_S = 0.02
+#: share of a contact's impulse at which the other foot's presence flags it
+TWO_FEET_SHARE = 0.10
+#: a foot over a plate and slower than this (m/s) stands on it
+STANDING_SPEED_M_S = 0.3
+#: both feet standing on one plate this long (s) flag the contact
+TWO_FEET_MIN_S = 0.02
+#: the nearest foot must be this close (m) to the centre of pressure
+MAX_FOOT_DISTANCE_M = 0.25
+
+SIDES = ("r", "l")
+_SIDE_WORDS = {"r": ("R", "RIGHT"), "l": ("L", "LEFT")}
+
+
+class TwoFeetWarning(MusclemetabWarning):
+    """A force-plate contact carries both feet at once: its force is given to one foot."""
+
+
+@dataclass
+class PlateContact:
+    """One contact of a plate: its time span, the foot given it and the evidence."""
+
+    plate: int
+    start_s: float
+    end_s: float
+    side: str
+    share: dict
+    two_feet: bool
+    peak_vertical_n: float
+    impulse_ns: float
+    how: str = "centre of pressure"
+
+    def record(self) -> dict:
+        return asdict(self)
+
+
+def remove_offsets(plate: Plate, threshold_n: float = CONTACT_THRESHOLD_N) -> bool:
+    """Subtract the unloaded reading of every component (module docstring); ``False`` when the
+    plate is never unloaded for long enough (a tenth of a second), and nothing is changed."""
+    fv = plate.vertical()
+    low = np.median(np.sort(fv)[: max(1, len(fv) // 10)])
+    quiet = np.abs(fv - low) < threshold_n / 2
+    rate = 1.0 / np.median(np.diff(plate.time)) if len(plate.time) > 1 else 1.0
+    if quiet.sum() < 0.1 * rate or low > threshold_n:
+        return False
+    plate.offset_force = np.median(plate.force[quiet], axis=0)
+    plate.offset_moment = np.median(plate.moment[quiet], axis=0)
+    plate.force = plate.force - plate.offset_force
+    plate.moment = plate.moment - plate.offset_moment
+    return True
+
+
+def contacts(plate: Plate, threshold_n: float = CONTACT_THRESHOLD_N) -> list[tuple[int, int]]:
+    """Index ranges ``[i0, i1)`` of the plate's contacts."""
+    on = plate.vertical() > threshold_n
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], on.astype(int), [0]])))
+    runs = list(zip(edges[::2], edges[1::2]))
+    dt = float(np.median(np.diff(plate.time))) if len(plate.time) > 1 else 1.0
+    return [(int(a), int(b)) for a, b in runs if (b - a) * dt >= MIN_CONTACT_S]
+
+
+def _split_name(name: str) -> tuple[str | None, str]:
+    """``(side, rest)`` of a marker name: ``RHEE``, ``R.Heel``, ``Right_Heel``, ``heel_r``."""
+    m = re.match(r"^(right|left)[._\s-]*(.+)$", name, re.I) or re.match(r"^([RL])(?:[._\s-]+|(?=[A-Z0-9]))(.+)$",
+                                                                          name)
+    if m:
+        return ("r" if m.group(1)[0] in "rR" else "l"), m.group(2)
+    m = re.match(r"^(.+?)[._\s-]+(r|l|right|left)$", name, re.I)
+    if m:
+        return ("r" if m.group(2)[0] in "rR" else "l"), m.group(1)
+    return None, name
+
+
+def _role(rest: str) -> str | None:
+    key = re.sub(r"[^A-Z0-9]", "", rest.upper())
+    if key.startswith(("HEE", "CAL")):
+        return "heel"
+    if key.startswith(("TOE", "HAL", "MIDFOOT", "FOREFOOT", "FMH", "VMH")) \
+            or re.match(r"^(MT|MET|MTH|MH|META|M)\d", key) or re.match(r"^(MT|MET)[HP]?\d?$", key):
+        return "fore"
+    return None
+
+
+def foot_marker_sets(names: list[str], given: dict | None = None) -> dict[str, dict[str, list[str]]]:
+    """``{side: {"heel": [...], "fore": [...]}}`` from the marker names (``RHEE``/``RCAL``/``R.Heel``
+    heel; ``RTOE``/``RMT2``/``RFMH``/``RVMH``/``R.Toe.Tip``/``R.Midfoot.Sup`` forefoot), or from ``given``
+    (``{side: [heel marker, other foot markers...]}``)."""
+    out = {s: {"heel": [], "fore": []} for s in SIDES}
+    if given:
+        for side, items in given.items():
+            missing = [n for n in items if n not in names]
+            if missing:
+                raise OptionError(f"foot markers {', '.join(missing)} are not in the file's markers")
+            out[side] = {"heel": [items[0]], "fore": list(items[1:])}
+        return out
+    for n in names:
+        side, rest = _split_name(n)
+        role = _role(rest) if side else None
+        if role:
+            out[side][role].append(n)
+    return out
+
+
+def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distance (rows) from points ``p`` to segments ``a``-``b`` (2-D, rows)."""
+    ab = b - a
+    t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12), 0, 1)
+    return np.linalg.norm(p - (a + t[:, None] * ab), axis=1)
+
+
+def _foot_distance(cop_h: np.ndarray, markers: Markers, feet: dict, frames: np.ndarray) -> np.ndarray:
+    d = np.full(len(frames), np.inf)
+    for heel in feet["heel"]:
+        a = horizontal(markers.marker(heel)[frames])
+        for fore in feet["fore"]:
+            b = horizontal(markers.marker(fore)[frames])
+            dist = _segment_distance(cop_h, a, b)
+            d = np.fmin(d, np.where(np.isfinite(dist), dist, np.inf))
+    return d
+
+
+def _inside(points_h: np.ndarray, corners_h: np.ndarray) -> np.ndarray:
+    """Whether horizontal points lie inside the plate's (convex) outline."""
+    c = corners_h
+    centre = c.mean(axis=0)
+    inside = np.ones(len(points_h), dtype=bool)
+    for i in range(len(c)):
+        a, b = c[i], c[(i + 1) % len(c)]
+        edge = b - a
+        side_centre = np.sign(edge[0] * (centre - a)[1] - edge[1] * (centre - a)[0])
+        cross = edge[0] * (points_h[:, 1] - a[1]) - edge[1] * (points_h[:, 0] - a[0])
+        inside &= np.sign(cross) * side_centre >= 0
+    return inside & np.all(np.isfinite(points_h), axis=1)
+
+
+def _standing(markers: Markers, feet: dict, plate: Plate) -> np.ndarray:
+    """Per marker frame: a marker of the foot lies over the plate and moves slower than
+    :data:`STANDING_SPEED_M_S`."""
+    names = feet["heel"] + feet["fore"]
+    out = np.zeros(len(markers.time), dtype=bool)
+    corners_h = horizontal(plate.corners)
+    for n in names:
+        xyz = markers.marker(n)
+        speed = np.linalg.norm(np.gradient(xyz, markers.time, axis=0), axis=1) if len(markers.time) > 2 \
+            else np.zeros(len(markers.time))
+        out |= _inside(horizontal(xyz), corners_h) & (speed < STANDING_SPEED_M_S)
+    return out
+
+
+def assign_feet(plates: list[Plate], markers: Markers, *, feet: dict | None = None,
+                plate_feet: dict | None = None, threshold_n: float = CONTACT_THRESHOLD_N,
+                source: str = "") -> list[PlateContact]:
+    """The contacts of every plate with the foot each is given (module docstring).
+
+    ``feet``: ``{side: {"heel": [...], "fore": [...]}}`` (default :func:`foot_marker_sets` of the
+    marker names); ``plate_feet``: ``{plate number: side}`` to give whole plates by hand (the
+    record says ``how="given"``).
+
+    Raises :class:`DataMismatchError` when a foot has no heel or no forefoot marker, or no foot
+    is near a contact's centre of pressure (markers missing).
+    """
+    feet = feet or foot_marker_sets(markers.names)
+    plate_feet = {int(k): v for k, v in (plate_feet or {}).items()}
+    need = [p for p in plates if p.number not in plate_feet]
+    for side in SIDES:
+        if need and (not feet[side]["heel"] or not feet[side]["fore"]):
+            raise DataMismatchError(
+                f"{source}: no {'heel' if not feet[side]['heel'] else 'toe'} marker of the "
+                f"{'right' if side == 'r' else 'left'} foot is recognised among the markers "
+                f"({', '.join(markers.names[:12])}{' ...' if len(markers.names) > 12 else ''}); name the foot "
+                "markers (--foot-markers r=RHEE,RTOE l=LHEE,LTOE) or the plates' feet (--plate-feet 1=r,2=l)"
+            )
+    out = []
+    for plate in plates:
+        cop, _ = plate.centre_of_pressure(threshold_n)
+        fv = plate.vertical()
+        standing = {s: _standing(markers, feet[s], plate) for s in SIDES} if plate.number not in plate_feet else {}
+        for i0, i1 in contacts(plate, threshold_n):
+            t0, t1 = float(plate.time[i0]), float(plate.time[i1 - 1])
+            dt = float(np.median(np.diff(plate.time)))
+            base = dict(plate=plate.number, start_s=t0, end_s=t1, peak_vertical_n=float(fv[i0:i1].max()),
+                        impulse_ns=float(fv[i0:i1].sum() * dt))
+            if plate.number in plate_feet:
+                side = plate_feet[plate.number]
+                out.append(PlateContact(side=side, share={side: 1.0}, two_feet=False, how="given", **base))
+                continue
+            frames = np.flatnonzero((markers.time >= t0) & (markers.time <= t1))
+            if len(frames) == 0:  # a contact shorter than a marker frame: the nearest frame
+                frames = np.array([int(np.argmin(np.abs(markers.time - 0.5 * (t0 + t1))))])
+            idx = np.clip(np.searchsorted(plate.time, markers.time[frames]), i0, i1 - 1)
+            cop_h = horizontal(cop[idx])
+            w = fv[idx]
+            dist = np.vstack([_foot_distance(cop_h, markers, feet[s], frames) for s in SIDES])
+            near = np.argmin(dist, axis=0)
+            known = np.isfinite(dist.min(axis=0)) & (dist.min(axis=0) <= MAX_FOOT_DISTANCE_M)
+            if not known.any():
+                raise DataMismatchError(
+                    f"{source}: no foot marker lies within {MAX_FOOT_DISTANCE_M:g} m of force plate {plate.number}'s "
+                    f"centre of pressure during its contact at {t0:.3f}-{t1:.3f} s (foot markers missing?); give the "
+                    "plates' feet (--plate-feet 1=r,2=l)"
+                )
+            total = float(w[known].sum())
+            share = {s: float(w[known & (near == k)].sum() / total) for k, s in enumerate(SIDES)}
+            side = max(share, key=share.get)
+            both = standing["r"][frames] & standing["l"][frames]
+            rate = markers.rate_hz or 1.0
+            two = min(share.values()) > TWO_FEET_SHARE or both.sum() / rate >= TWO_FEET_MIN_S
+            contact = PlateContact(side=side, share=share, two_feet=bool(two), **base)
+            if two:
+                warnings.warn(
+                    f"{source}: force plate {plate.number} carries both feet at once during its contact at "
+                    f"{t0:.3f}-{t1:.3f} s (the centre of pressure is nearer the right foot for "
+                    f"{100 * share['r']:.0f} % and the left for {100 * share['l']:.0f} % of the impulse"
+                    f"{'; both feet stand on it' if both.any() else ''}); its force cannot be split and is applied to "
+                    f"the {'right' if side == 'r' else 'left'} foot: leave the gait cycles that hold it out",
+                    TwoFeetWarning, stacklevel=2)
+            out.append(contact)
+    return out
