@@ -1,9 +1,9 @@
 """The main job: ``musclemetab demo`` on the example subject, against the paper's findings.
 
 The demo runs the three speeds with EFFORT-TEN and EFFORT-GEN and the six study models.
-Its numbers are checked against what the study published (``analysis.md`` §7): Table 2's
-ordering of the models and their means within two between-subject SDs (one subject here,
-eight in the paper), and the reported trends of the phase and group shares with speed.
+Its numbers are checked against what the study published: Table 2's ordering of the models
+(their means are checked at the study's stop, in ``test_redundancy.py``), and the reported
+trends of the phase and group shares with speed.
 The demo is run once per test session (the ``demo`` fixture of ``conftest.py``); the report
 it writes is also opened in a browser (``test_report_browser.py``).
 """
@@ -37,14 +37,18 @@ def test_demo_writes_every_unit_and_the_table(demo):
             assert (out / unit / name).is_file(), (unit, name)
 
 
-def test_demo_matches_table2_ordering_and_range(demo):
+def test_demo_matches_table2_ordering(demo):
+    """The paper's ordering of the models' means (Table 2, EFFORT-TEN). The demo solves to the
+    optimum, whose rates lie 4-10 % below those of the study's stop at this speed
+    (docs/solver.md, "Where the solver stops"); the means themselves are compared at the
+    study's stop, where the paper's numbers were made (``tests/test_redundancy.py``,
+    ``test_effort_ten_rates_within_table2_at_the_study_stop``)."""
     _, table = demo
     normal = _pivot(table, "effort-ten", "whole_body_W_per_kg")["normal"]
-    # the paper's ordering of the models' means (Table 2, EFFORT-TEN)
     paper_order = sorted(MODELS, key=lambda m: -TABLE2_EFFORT_TEN[m][0])
     assert list(normal.sort_values(ascending=False).index) == paper_order
-    for model, (mean, sd) in TABLE2_EFFORT_TEN.items():
-        assert abs(normal[model] - mean) <= 2 * sd, (model, normal[model])
+    # every unit at the optimum: none flagged unconverged_rates (docs/quality.md)
+    assert not table["quality"].astype(str).str.contains("unconverged_rates").any()
 
 
 def test_demo_reproduces_the_trends_with_speed(demo):

@@ -161,6 +161,26 @@ def test_effort_gen_objective_matches_the_study(solved, trial):
     assert sol.summary["fiber_length_bounds"]["widened_upper"] == {}
 
 
+#: Table 2 of the study, EFFORT-TEN at the preferred speed: mean [SD] over 8 subjects, W/kg.
+TABLE2_EFFORT_TEN = {"UM03": (6.4, 0.5), "BH04": (5.0, 0.6), "HO06": (4.3, 0.5),
+                     "LW07": (7.7, 0.9), "UM10": (7.2, 0.6), "UC16": (4.5, 0.5)}
+
+
+@pytest.mark.opensim
+def test_effort_ten_rates_within_table2_at_the_study_stop(example, solved):
+    """At the study's stop (where the paper's numbers were made) the example subject's normal
+    EFFORT-TEN rates lie within two between-subject SDs of Table 2's means (one subject here,
+    eight in the paper)."""
+    from musclemetab.metabolics.solution import metabolics_from_solution
+
+    sol, _ = solved("normal", "effort-ten")
+    assert sol.record.solver_options["stop"] == "authors"
+    met = metabolics_from_solution(sol, example.body_mass_kg, example.height_m, models="all")
+    for model, (mean, sd) in TABLE2_EFFORT_TEN.items():
+        rate = met.whole_body[model].mean_W_per_kg
+        assert abs(rate - mean) <= 2 * sd, (model, rate)
+
+
 @pytest.mark.opensim
 @pytest.mark.slow
 @pytest.mark.parametrize("workflow", WORKFLOWS)
