@@ -400,7 +400,8 @@ def test_unconverged_solve_is_reported_not_hidden(example, geometry_cache, tmp_p
 @pytest.mark.opensim
 @pytest.mark.slow
 def test_warm_start_option_reaches_the_same_optimum(example, geometry_cache, solved, tmp_path):
-    """--warm-start (an option for speed): EFFORT-TEN of the normal trial from EFFORT-GEN."""
+    """--warm-start (an option for speed): EFFORT-TEN of the normal trial from EFFORT-GEN, both
+    with the study's stop, as the cold solves of this module."""
     from musclemetab.commands import main
     from musclemetab.redundancy import Solution
 
@@ -409,7 +410,8 @@ def test_warm_start_option_reaches_the_same_optimum(example, geometry_cache, sol
     out = tmp_path / "warm"
     assert main(["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]),
                  "--id", str(example.id["normal"]), "--workflow", "effort-ten", "--cache-dir", str(geometry_cache),
-                 "--tendon-stiffness", "example", "--warm-start", str(gen_dir), "--out", str(out)]) == 0
+                 "--tendon-stiffness", "example", "--warm-start", str(gen_dir), "--stop", "authors",
+                 "--out", str(out)]) == 0
     warm = Solution.load(out)
     assert "warm start from effort-gen" in warm.summary["initial_guess"]
     assert "static optimisation" in cold.summary["initial_guess"]

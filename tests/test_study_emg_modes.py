@@ -133,7 +133,7 @@ def test_estimation_unit_runs_musclemetab_estimate_on_the_subjects_files(example
     assert {k: list(v) for k, v in seen["estimate"].items()} == {"tendon_stiffness": ["soleus_r", "gasmed_r"]}
     assert [list(g) for g in seen["couple"]] == [["soleus_r", "gasmed_r"]]
     assert seen["bounds"] == {"emg_scale": (0.5, 2.0), "tendon_stiffness": (0.2, 1.5)}
-    assert seen["weights"] == {"fiber_length": 50.0} and seen["validate"] is True and seen["max_iter"] == 50
+    assert seen["weights"] == {"fiber_length": 50.0} and seen["validate"] is True and seen["options"].max_iter == 50
     assert seen["side"] == "r" and seen["dofs"] is None  # the subject's side; DOFs discovered from the model
     folder = tmp_path / "out" / "units" / "sub1" / "_estimate"
     assert (folder / "parameters.json").is_file()
