@@ -169,16 +169,19 @@ def test_exported_states_load_in_opensim_with_the_solution_values(exported):
 
 def test_opensim_probes_on_the_exported_states_agree_with_um10_and_bh04(exported):
     _, _, res, run = exported
-    inp = _inputs(run, res)
-    um10 = umberger2010(**inp, slow_twitch_shortening_cap=True, basal=False).total
-    bh04 = bhargava2004(**inp, activation_heat_decay=False, basal=False).total
     # OpenSim's DeGrooteFregly2016Muscle (explicit tendon) takes its fiber velocity from its own force
-    # equilibrium, which its curves cannot meet at a few states (the velocity then leaves the
-    # force-velocity curve's -vmax..vmax, or is infinite: a few per cent of the muscle-states); compared where it
-    # stays on the curve
+    # equilibrium, which its curves cannot meet at some states: where the muscle is off (activation 0 at
+    # the optimum: no active force to balance the tendon's) and at a few others (the velocity then leaves
+    # the force-velocity curve's -vmax..vmax, or is infinite); compared where it stays on the curve, which
+    # is most states of the muscles in use
     v = run["normalized_fiber_velocity"]
     on_curve = np.isfinite(v) & (np.abs(v) <= 1.0)
-    assert on_curve.mean() > 0.9
+    in_use = np.asarray(run["activation"]) > 1e-3
+    assert on_curve[in_use].mean() > 0.9
+    inp = _inputs(run, res)
+    inp["normalized_fiber_velocity"] = np.where(on_curve, v, 0.0)  # the package's models take finite values
+    um10 = umberger2010(**inp, slow_twitch_shortening_cap=True, basal=False).total
+    bh04 = bhargava2004(**inp, activation_heat_decay=False, basal=False).total
     np.testing.assert_allclose(um10[on_curve], run["UM10"][on_curve], rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(bh04[on_curve], run["BH04"][on_curve], rtol=1e-6, atol=1e-9)
     assert np.max(run["UM10"][on_curve]) > 50.0 and np.max(run["BH04"][on_curve]) > 50.0  # not zeros
