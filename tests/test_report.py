@@ -927,6 +927,8 @@ def test_report_key_follows_the_study_file(tmp_path):
     root.mkdir()
     pd.DataFrame(columns=["subject", "trial", "workflow", "model", "status", "whole_body_W_per_kg"]).to_csv(
         root / "results.csv", index=False)
+    pd.DataFrame([{"subject": "s1", "trial": "t", "workflow": "effort-gen", "reason": "an input of the test"}]).to_csv(
+        root / "failures.csv", index=False)  # the failed units, as the runner lists them
     toml = tmp_path / "elsewhere" / "study.toml"
     toml.parent.mkdir()
     toml.write_text('name = "a"\n')

@@ -319,7 +319,7 @@ _NO_FLAG = ("ok", "not checked", "nan", "")
 
 def _plausibility_rows(study: StudyFolder, ok) -> list[list[str]]:
     """Rows of :func:`flagged_units` for the units whose ``quality`` is not ``ok``."""
-    from ..metabolics.plausibility import metabolic_flags
+    from ..metabolics.plausibility import results_rows_flags
     from ..quality import flags_from_records
 
     if "quality" not in ok.columns:
@@ -336,11 +336,7 @@ def _plausibility_rows(study: StudyFolder, ok) -> list[list[str]]:
                 rows.append(key + ["(solve)", study.short(exc)])
                 continue
             rows += [key + [f.code, f.message] for f in flags]
-        for _, r in unit.iterrows():
-            speed = r.get("speed_m_per_s")
-            speed = float(speed) if speed is not None and np.isfinite(float(speed)) else None
-            rows += [key + [f.code, f.message] for f in metabolic_flags(
-                {str(r["model"]): float(r["whole_body_W_per_kg"])}, speed, unit[unit["model"] == r["model"]])]
+        rows += [key + [f.code, f.message] for f in results_rows_flags(unit)]  # the rows' own, as in quality
     return rows
 
 

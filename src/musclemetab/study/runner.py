@@ -540,7 +540,7 @@ def trial_result_rows(whole_body, analysis, *, speed_m_per_s=None, toe_off_pct=N
     sources, reserve flag, status ``ok`` and folder (``musclemetab analyse`` writes them too).
 
     ``excluded_muscles``: the muscles the solve left out (column ``excluded_muscles``, their names
-    separated by spaces, ``""`` when none). ``named_by_events``: whether gait events bound the
+    separated by spaces, empty (NaN) when none). ``named_by_events``: whether gait events bound the
     span the rates are averaged over (``False`` for a solve over an explicit ``--window`` analysed
     without a cycle of its own); with the span's duration (``duration_s``) inside walking's
     0.8-2.0 s it gives the column ``gait_cycle`` (:func:`is_gait_cycle`). Both columns raise a
@@ -554,7 +554,7 @@ def trial_result_rows(whole_body, analysis, *, speed_m_per_s=None, toe_off_pct=N
     df["cycle_source"] = cycle_source
     df["speed_source"] = speed_source
     df["large_reserve"] = bool(large_reserve)
-    df["excluded_muscles"] = " ".join(excluded_muscles or ())
+    df["excluded_muscles"] = " ".join(excluded_muscles or ()) or float("nan")  # empty, as the CSV reads back
     df["gait_cycle"] = [is_gait_cycle(d, named_by_events) for d in df["duration_s"]] if "duration_s" in df else \
         bool(named_by_events)
     df["status"] = "ok"
@@ -631,7 +631,7 @@ def add_leg_rows(rows: Mapping[str, object], basal_energy_J: Mapping[str, object
         out["gait_cycle"] = np.logical_and.reduce([f["gait_cycle"].astype(bool) for f in frames])
     if "excluded_muscles" in first:
         names = [n for f in frames for n in str(f["excluded_muscles"].fillna("").iloc[0]).split()]
-        out["excluded_muscles"] = " ".join(dict.fromkeys(names))
+        out["excluded_muscles"] = " ".join(dict.fromkeys(names)) or float("nan")
     for c in ("cycle_source", "speed_source", "solve_start"):
         if c in out:
             texts = [str(f[c].iloc[0]) for f in frames]
