@@ -31,10 +31,11 @@ pytestmark = pytest.mark.opensim
 RHO = MUSCLE_DENSITY_KG_PER_M3
 MERGES = {"vasint": ("vaslat", "vasmed"), "gasmed": ("gaslat",)}
 #: largest relative difference of a whole-body rate (W/kg) between the lumped and the unlumped
-#: model on the normal trial, EFFORT-GEN (measured: 3.3 % for MA68, 2.4 % at most for the others;
-#: UM03 and UM10, the most mass-dependent, 0.45 % and 0.15 %)
-WHOLE_BODY_TOLERANCE = 0.035
-MASS_DEPENDENT_TOLERANCE = 0.006
+#: model on the normal trial, EFFORT-GEN, both solved to the optimum (measured: 4.2 % for MA68,
+#: 3.0 % at most for the others; UM03 and UM10, the most mass-dependent, 0.76 % and 1.16 %; at the
+#: study's stop, whose activation residue hid part of the difference: 3.3 %, 2.4 %, 0.45 % and 0.15 %)
+WHOLE_BODY_TOLERANCE = 0.05
+MASS_DEPENDENT_TOLERANCE = 0.015
 
 
 @pytest.fixture(scope="session")
@@ -195,7 +196,7 @@ def test_lumped_model_whole_body_rates_match_the_full_model(whole_body):
     full, lumped = whole_body["full"].whole_body, whole_body["lumped"].whole_body
     assert list(full) == list(lumped) and len(full) == 8
     rel = {m: lumped[m].mean_W_per_kg / full[m].mean_W_per_kg - 1.0 for m in full}
-    assert max(abs(r) for r in rel.values()) <= WHOLE_BODY_TOLERANCE, rel
+    assert max(abs(r) for r in rel.values()) <= WHOLE_BODY_TOLERANCE, ", ".join(f"{m} {r:+.4f}" for m, r in rel.items())
     for m in ("UM03", "UM10"):
         assert abs(rel[m]) <= MASS_DEPENDENT_TOLERANCE, (m, rel[m])
         # with the namesakes' masses (0.29 kg for three vasti) the mass-based models fall 7 % short
