@@ -713,8 +713,13 @@ def metabolics_from_legs(solutions, body_mass_kg: float, height_m: float | None,
             results[side] = metabolics_from_solution(solution, body_mass_kg, height_m,
                                                      legs=1 if len(legs) > 1 else 2, **options)
     if not options.get("strict"):
+        from ..properties import as_overrides
+
+        overrides = (as_overrides(options.get("muscle_properties"))
+                     .with_column("mass_kg", options.get("muscle_masses_kg"))
+                     .with_column("slow_twitch_fraction", options.get("slow_twitch_fractions")))
         warn_unplaced(list(dict.fromkeys(
-            m for r in results.values() for m in unplaced_muscles(r.muscles, options.get("muscle_properties")))))
+            m for r in results.values() for m in unplaced_muscles(r.muscles, overrides))))
     return results
 
 

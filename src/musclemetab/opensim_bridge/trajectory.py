@@ -60,9 +60,19 @@ def set_locked_coordinates(locked, state, s: int) -> None:
             c.setLocked(state, True)
 
 
+def _opensim_message(exc, n: int = 4) -> str:
+    """OpenSim's message of ``exc`` without the C++ signature and the source line: its first
+    ``n`` lines (e.g. the first missing columns), on one line."""
+    text = str(exc).strip()
+    if "': " in text and text.startswith("std::exception"):
+        text = text.split("': ", 1)[1]
+    lines = [x.strip() for x in text.splitlines() if x.strip() and not x.strip().startswith("Thrown at")]
+    return "; ".join(lines[:n]) + (" ..." if len(lines) > n else "")
+
+
 def _model_probes(model):
-    """The model's metabolic probes: ``[(name, probe, {muscle: parameters}, switches)]``; each
-    probe set to report per muscle."""
+    """The model's metabolic probes: ``[(name, probe, kind, switches)]``; each probe set to
+    report per muscle."""
     out = []
     pset = model.getProbeSet()
     for i in range(pset.getSize()):
@@ -72,9 +82,7 @@ def _model_probes(model):
         cls, switches = _PROBES[kind]
         pr = cls.safeDownCast(model.updProbeSet().get(i))
         pr.set_report_total_metabolics_only(False)
-        pset_m = getattr(pr, f"get_{kind}_MetabolicMuscleParameterSet")()
-        names = [pset_m.get(j).getName() for j in range(pset_m.getSize())]
-        out.append((pr.getName(), pr, names, kind, {k: bool(getattr(pr, f"get_{k}")()) for k in switches}))
+        out.append((pr.getName(), pr, kind, {k: bool(getattr(pr, f"get_{k}")()) for k in switches}))
     return out
 
 
@@ -83,7 +91,7 @@ def _read_controls(controls_path):
         table = osim.TimeSeriesTable(str(controls_path))
     except RuntimeError as exc:
         raise InputFileError(f"{controls_path}: OpenSim cannot read the controls file "
-                             f"({str(exc).strip().splitlines()[-1]})") from None
+                             f"({_opensim_message(exc)})") from None
     return table, [str(x) for x in table.getColumnLabels()]
 
 
@@ -123,7 +131,7 @@ def muscles_along_states(model_path: str, states_path: str, controls_path: str |
     try:
         model = osim.Model(str(model_path))
     except RuntimeError as exc:
-        raise ModelError(f"{model_path}: OpenSim cannot load the model ({str(exc).strip().splitlines()[-1]})") from None
+        raise ModelError(f"{model_path}: OpenSim cannot load the model ({_opensim_message(exc)})") from None
     probes = _model_probes(model)
     mset = model.getMuscles()
     mus = [mset.get(i) for i in range(mset.getSize()) if mset.get(i).get_appliesForce()]
@@ -148,16 +156,16 @@ def muscles_along_states(model_path: str, states_path: str, controls_path: str |
         sto = osim.Storage(str(states_path))
     except RuntimeError as exc:
         raise InputFileError(f"{states_path}: OpenSim cannot read the states file "
-                             f"({str(exc).strip().splitlines()[-1]})") from None
+                             f"({_opensim_message(exc)})") from None
     if sto.isInDegrees():
         model.getSimbodyEngine().convertDegreesToRadians(sto)
     try:
         traj = osim.StatesTrajectory.createFromStatesStorage(model, sto, False, True, False)
     except RuntimeError as exc:
         raise DataMismatchError(
-            f"{states_path}: OpenSim cannot load these states into {model_path} "
-            f"({str(exc).strip().splitlines()[-1][:300]}); every state variable of the model must be a column "
-            "(the states file of a simulation of this model: CMC, Moco or forward dynamics)") from None
+            f"{states_path}: OpenSim cannot load these states into {model_path} ({_opensim_message(exc)}); every "
+            "state variable of the model must be a column (the states file of a simulation of this model: CMC, "
+            "Moco or forward dynamics)") from None
     n = traj.getSize()
     times = np.array([traj.get(s).getTime() for s in range(n)])
     labels = sto.getColumnLabels()
@@ -169,8 +177,10 @@ def muscles_along_states(model_path: str, states_path: str, controls_path: str |
         if c.get_locked():
             col = osim.ArrayDouble()
             label = f"{c.getAbsolutePathString()}/value"
-            found = sto.getDataColumn(label if label in labels else f"{c.getName()}", col)
-            locked.append((c, [col.get(k) for k in range(col.getSize())] if found else [c.getDefaultValue()] * n))
+            if label in labels or c.getName() in labels:
+                sto.getDataColumn(label if label in labels else c.getName(), col)
+            locked.append((c, [col.get(k) for k in range(col.getSize())] if col.getSize() == n
+                              else [c.getDefaultValue()] * n))
     sv = model.getStateVariableNames()
     sv = {sv.get(i) for i in range(sv.getSize())}
     if controls_path is not None:
@@ -189,11 +199,16 @@ def muscles_along_states(model_path: str, states_path: str, controls_path: str |
         k += acts.get(i).numControls()
     control_of = [index[m.getAbsolutePathString()] for m in mus]
     out = {key: np.full((len(mus), n), np.nan) for key in MUSCLE_GETTERS}
-    probe_out = [{mu: np.full(n, np.nan) for mu in names} for _, _, names, _, _ in probes]
+    # the muscles of each probe, from its per-muscle output labels <probe>_<muscle> (its parameter
+    # set is not reachable from Python)
+    all_names = {mset.get(i).getName() for i in range(mset.getSize())}
     labels_of = []
-    for _, pr, _, _, _ in probes:
+    for j, (name, pr, kind, switches) in enumerate(probes):
         lab = pr.getProbeOutputLabels()
         labels_of.append([lab.get(i) for i in range(lab.getSize())])
+        names = [x[len(name) + 1:] for x in labels_of[j] if x[len(name) + 1:] in all_names]
+        probes[j] = (name, pr, names, kind, switches)
+    probe_out = [{mu: np.full(n, np.nan) for mu in names} for _, _, names, _, _ in probes]
     failed = []
     for s in range(n):
         state = traj.get(s)
@@ -207,7 +222,7 @@ def muscles_along_states(model_path: str, states_path: str, controls_path: str |
         try:
             model.realizeDynamics(state)
         except RuntimeError as exc:  # a muscle whose equilibrium OpenSim cannot solve here
-            failed.append((float(times[s]), str(exc).strip().splitlines()[-1][:200]))
+            failed.append((float(times[s]), _opensim_message(exc, 2)))
             continue
         for i, m in enumerate(mus):
             for key, g in MUSCLE_GETTERS.items():
@@ -240,7 +255,8 @@ def muscles_along_states(model_path: str, states_path: str, controls_path: str |
     probe_info = []
     for j, (name, pr, names, kind, switches) in enumerate(probes):
         probe_info.append(dict(name=name, kind=kind, switches=switches, rates=probe_out[j], muscles={
-            mu: dict(slow_twitch_fraction=pr.getRatioSlowTwitchFibers(mu), specific_tension_Pa=pr.getSpecificTension(mu),
+            mu: dict(slow_twitch_fraction=pr.getRatioSlowTwitchFibers(mu),
+                     specific_tension_Pa=pr.getSpecificTension(mu),
                      density_kg_per_m3=pr.getDensity(mu), muscle_mass_kg=pr.getMuscleMass(mu),
                      provided_mass=bool(pr.isUsingProvidedMass(mu)))
             for mu in names}))
