@@ -170,6 +170,9 @@ def test_command_refuses_states_without_a_model(thelen, tmp_path, capsys):
     _, states = thelen
     code = main(["metabolics", "--states", str(states), "--mass", "72.6", "--out", str(tmp_path / "o")])
     assert code != 0 and "--states needs --model" in capsys.readouterr().err
+    code = main(["metabolics", "--solution", str(tmp_path), "--controls", str(states), "--mass", "72.6",
+                 "--out", str(tmp_path / "o")])
+    assert code != 0 and "--controls goes with --states" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
 
 
