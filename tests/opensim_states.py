@@ -1,7 +1,7 @@
 """OpenSim inputs of tests/test_metabolics_states.py, made with OpenSim's API (run as a script in its
 own process: OpenSim only).
 
-``python tests/opensim_states.py probes MODEL.osim OUT.osim`` writes the model with an
+``python tests/opensim_states.py probes MODEL.osim OUT.osim [--rigid-left]`` writes the model with an
 ``Umberger2010MuscleMetabolicsProbe`` named ``UM10`` (Bhargava recruitment, negative work and
 forbidding negative power off: the UM10 settings of docs/metabolics.md section 6) and a
 ``Bhargava2004MuscleMetabolicsProbe`` named ``BH04`` (force-dependent shortening constant on,
@@ -9,6 +9,8 @@ maintenance length dependence = identity, negative work on, negative power forbi
 muscle; basal heat and the minimum heat rate off. Slow-twitch ratio 0.3 + 0.5 k / (n - 1) for the
 k-th of the model's n muscles; OpenSim's default specific tension (0.25 MPa) and density
 (1059.7 kg/m^3), so that the probes compute each mass, except the first muscle's, provided as 0.321 kg.
+With ``--rigid-left`` the left leg's muscles (names ending ``_l``) ignore tendon compliance (no
+fiber-length state: their fiber length and velocity from the model's geometry).
 
 ``python tests/opensim_states.py thelen MODEL.osim IK.mot OUT.sto T0 T1 N`` writes the states of
 ``N`` equally spaced times from ``T0`` to ``T1`` of the IK motion: coordinates and speeds (a cubic
@@ -33,12 +35,15 @@ def activation(k: int, t):
     return 0.02 + 0.5 * (1 + np.sin(k + 5 * np.asarray(t))) / 2
 
 
-def add_probes(source: str, out: str) -> None:
+def add_probes(source: str, out: str, rigid_left: bool = False) -> None:
     import opensim as osim
 
     model = osim.Model(source)
     mset = model.getMuscles()
     names = [mset.get(i).getName() for i in range(mset.getSize())]
+    for i in range(mset.getSize()):
+        if rigid_left and names[i].endswith("_l"):
+            mset.get(i).set_ignore_tendon_compliance(True)
     um = osim.Umberger2010MuscleMetabolicsProbe(True, True, True, True)
     um.setName("UM10")
     bh = osim.Bhargava2004MuscleMetabolicsProbe(True, True, True, True, True)
@@ -110,6 +115,6 @@ if __name__ == "__main__":
     osim_log = __import__("opensim").Logger
     osim_log.setLevelString("error")
     if sys.argv[1] == "probes":
-        add_probes(sys.argv[2], sys.argv[3])
+        add_probes(sys.argv[2], sys.argv[3], "--rigid-left" in sys.argv[4:])
     else:
         thelen_states(sys.argv[2], sys.argv[3], sys.argv[4], float(sys.argv[5]), float(sys.argv[6]), int(sys.argv[7]))

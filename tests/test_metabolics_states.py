@@ -8,6 +8,9 @@ one provided mass):
 * gait2392 (Thelen2003Muscle, 92 muscles, both legs): states made in OpenSim from the IK motion
   (0.6-0.7 s, 6 states), activations set by formula, fiber lengths from OpenSim's equilibrium;
   no controls file (excitation = activation);
+* gait2392 lumped to 9 muscles per leg (tests/opensim_models.py): DeGrooteFregly2016 on the
+  right (compliant tendon, normalised tendon force states), Millard2012 with a rigid tendon on
+  the left (fiber length and velocity from the geometry); states made likewise;
 * the example subject's exported solution (the session's ``demo`` fixture, preferred speed,
   EFFORT-GEN): ``model.osim`` (DeGrooteFregly2016Muscle, normalised tendon force states),
   ``states.sto`` and ``controls.sto``.
@@ -115,6 +118,28 @@ def test_thelen_states_agree_with_opensims_probes(thelen):
     assert not read.clamped.any()
     res, ours, masses, fst = _evaluate(read)
     assert set(res) == {"r", "l"}  # both legs' muscles, added
+    _probe_masses_worked_here(read, masses, fst)
+    _agree_with_probes(read, ours, np.ones(read.clamped.shape, dtype=bool))
+
+
+def test_degroote_and_rigid_millard_states_agree_with_opensims_probes(gait2392, tmp_path):
+    from musclemetab.metabolics.opensim_states import read_opensim_states
+
+    lumped, model, states = tmp_path / "lumped.osim", tmp_path / "probes.osim", tmp_path / "states.sto"
+    subprocess.run([sys.executable, str(SCRIPT.with_name("opensim_models.py")), str(gait2392.model), str(lumped)],
+                   check=True, capture_output=True)
+    _run("probes", lumped, model, "--rigid-left")
+    _run("thelen", model, gait2392.ik, states, 0.6, 0.7, 6)
+    header = next(line for line in states.read_text().splitlines() if line.startswith("time"))
+    assert header.count("/normalized_tendon_force") == 9 and "/fiber_length" not in header
+    read = read_opensim_states(model, states)
+    assert read.muscle_classes == ("DeGrooteFregly2016Muscle",) * 9 + ("Millard2012EquilibriumMuscle",) * 9
+    s = read.states
+    want = np.array([script.activation(k, s.time_s) for k in range(len(s.muscles))])
+    np.testing.assert_allclose(s.states["activation"], want, rtol=1e-9)
+    assert np.abs(s.states["normalized_fiber_velocity"][9:]).max() > 0.1  # the rigid tendons' fibers move
+    assert not read.clamped.any()
+    _, ours, masses, fst = _evaluate(read)
     _probe_masses_worked_here(read, masses, fst)
     _agree_with_probes(read, ours, np.ones(read.clamped.shape, dtype=bool))
 
