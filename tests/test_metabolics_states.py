@@ -187,6 +187,14 @@ def test_command_records_the_probes_parameters(thelen, tmp_path, capsys):
     assert set(a["legs"]) == {"r+l"}
     # 0.25 MPa against the tables' 0.6 MPa: heavier muscles, more heat
     assert (a["whole_body_no_basal_W_per_kg"] > 1.2 * b["whole_body_no_basal_W_per_kg"]).all()
+    # a --muscle-properties row wins over the probes (the per-muscle basal heat is 1.2 W per kg of mass)
+    (tmp_path / "m.csv").write_text("muscle,mass_kg\nsoleus,1.5\n")
+    assert main([*argv, "--muscle-properties", str(tmp_path / "m.csv"), "--out", str(tmp_path / "csv")]) == 0
+    pm = pd.read_csv(tmp_path / "csv" / "r" / "per_muscle.csv").set_index(["model", "muscle"])
+    pa = pd.read_csv(tmp_path / "probes" / "r" / "per_muscle.csv").set_index(["model", "muscle"])
+    assert pm.loc[("UM10", "soleus_r"), "basal_heat_mean_W"] == pytest.approx(1.2 * 1.5, rel=1e-9)
+    assert pm.loc[("UM10", "glut_med1_r"), "basal_heat_mean_W"] == pytest.approx(1.2 * script.PROVIDED_MASS_KG, rel=1e-9)
+    assert pa.loc[("UM10", "soleus_r"), "basal_heat_mean_W"] != pytest.approx(1.8, rel=1e-3)
 
 
 def test_command_refuses_states_without_a_model(thelen, tmp_path, capsys):

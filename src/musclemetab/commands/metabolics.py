@@ -201,11 +201,15 @@ def _run_states(args, models) -> int:
     used = ""
     if args.muscle_parameters == "probes":
         masses, fractions, used = probe_muscle_properties(read)
-        masses, fractions = masses or None, fractions or None
-    if args.muscle_properties:
+    if args.muscle_properties:  # its rows win over the probes' values
         from ..properties import read_muscle_properties
 
-        read_muscle_properties(args.muscle_properties).check_names(list(read.states.muscles), tables=False)
+        overrides = read_muscle_properties(args.muscle_properties)
+        overrides.check_names([*read.states.muscles, *read.skipped_muscles])
+        for values, column in ((masses, "mass_kg"), (fractions, "slow_twitch_fraction")):
+            for m in [m for m in (values or {}) if overrides.for_muscle(m).get(column) is not None]:
+                del values[m]
+    masses, fractions = masses or None, fractions or None
     results = metabolics_from_legs(
         legs, args.mass, args.height, models=models, trim=(0, 0), basal=args.basal,
         basal_rate_W_per_kg=args.basal_coefficient, basal_exponent=args.basal_exponent, speed_m_per_s=args.speed,
