@@ -32,10 +32,11 @@ def add_parser(subparsers) -> None:
 
     p = subparsers.add_parser(
         "metabolics",
-        help="metabolic rates of every muscle of a solution, for several energy models",
+        help="metabolic rates of every muscle of a solution or an OpenSim motion, for several energy models",
         description=(
             "Evaluate muscle metabolic energy models on a muscle redundancy solution (the padding nodes "
-            "trimmed: 5 at the start, 6 at the end), muscle by muscle and node by node. Writes "
+            "trimmed: 5 at the start, 6 at the end) or on an OpenSim states file of a model (--states: every state, "
+            "OpenSim's own muscle dynamics), muscle by muscle and node by node. Writes "
             "OUT/metabolics.sto (columns <model>/<muscle>/<component>, W), OUT/metabolics.parquet (tidy: time, "
             "model, muscle, component, value_W; with the parquet extra) and OUT/whole_body.csv (one row per model: whole-body "
             f"average in W/kg). Models: the study's {', '.join(MODELS)} ('all', the default) and, when "
