@@ -1,6 +1,8 @@
 """``musclemetab metabolics``: metabolic rates of every muscle of a solver solution.
 
-    musclemetab metabolics --solution DIR|PARENT --model M.osim --mass KG [--height M]
+    musclemetab metabolics --solution DIR|PARENT | --states FILE [--controls FILE]
+                           [--muscle-parameters probes|package]
+                           --model M.osim --mass KG [--height M]
                            [--models all|UM10,BH04,...|all,LW05,MA68] [--basal body|muscle|none]
                            [--basal-coefficient 1.2] [--basal-exponent 1]
                            [--speed M_PER_S] --out DIR
@@ -11,6 +13,8 @@ solved: the whole-body rate doubles it (the study's rule, and the output says so
 may also be the parent written by ``solve --side both`` (``PARENT/r``, ``PARENT/l``): each leg
 is evaluated over its own cycle into ``OUT/r`` and ``OUT/l``, and ``OUT/whole_body.csv`` adds
 the two legs (basal heat once); :func:`musclemetab.metabolics.solution.metabolics_from_legs`.
+``--states`` evaluates an OpenSim states file of ``--model`` instead
+(:mod:`musclemetab.metabolics.opensim_states`).
 """
 
 from __future__ import annotations
@@ -28,19 +32,33 @@ def add_parser(subparsers) -> None:
 
     p = subparsers.add_parser(
         "metabolics",
-        help="metabolic rates of every muscle of a solution, for several energy models",
+        help="metabolic rates of every muscle of a solution or an OpenSim motion, for several energy models",
         description=(
             "Evaluate muscle metabolic energy models on a muscle redundancy solution (the padding nodes "
-            "trimmed: 5 at the start, 6 at the end), muscle by muscle and node by node. Writes "
+            "trimmed: 5 at the start, 6 at the end) or on an OpenSim states file of a model (--states: every state, "
+            "OpenSim's own muscle dynamics), muscle by muscle and node by node. Writes "
             "OUT/metabolics.sto (columns <model>/<muscle>/<component>, W), OUT/metabolics.parquet (tidy: time, "
             "model, muscle, component, value_W; with the parquet extra) and OUT/whole_body.csv (one row per model: whole-body "
             f"average in W/kg). Models: the study's {', '.join(MODELS)} ('all', the default) and, when "
             f"named, {', '.join(ADDITIONAL_MODELS)}."
         ),
     )
-    p.add_argument("--solution", required=True, metavar="DIR",
-                   help="solution folder (solution.sto, summary.json), or the parent of r/ and l/ written by "
-                   "solve --side both (the legs are then added instead of doubling one)")
+    source = p.add_mutually_exclusive_group(required=True)
+    source.add_argument("--solution", metavar="DIR",
+                        help="solution folder (solution.sto, summary.json), or the parent of r/ and l/ written by "
+                        "solve --side both (the legs are then added instead of doubling one)")
+    source.add_argument("--states", metavar="FILE",
+                        help="an OpenSim states file of --model (CMC, Moco or forward dynamics states.sto): every "
+                        "muscle's fiber velocity, force-length and force-velocity multipliers, passive force and "
+                        "activation from OpenSim's own muscle dynamics at each state (docs/metabolics.md, Energy "
+                        "of an OpenSim motion); every state kept, no padding trimmed")
+    p.add_argument("--controls", metavar="FILE",
+                   help="with --states: the simulation's controls file (muscle excitations, columns /forceset/<muscle> "
+                   "or <muscle>); the model's muscles it lacks are not evaluated. Without it excitation = activation")
+    p.add_argument("--muscle-parameters", choices=("probes", "package"), default="probes",
+                   help="with --states and a model carrying OpenSim metabolic probes: 'probes' (default) takes each "
+                   "muscle's mass and slow-twitch ratio from the model's probes (its specific tension, density, "
+                   "provided masses), so that the package and OpenSim agree; 'package' keeps the package's tables")
     p.add_argument(
         "--model", metavar="M.osim",
         help="OpenSim model the solution was computed with: F0, lMo and vmax are taken from it, by muscle "
@@ -104,6 +122,12 @@ def run(args) -> int:
     check_speed(args.speed)
     check_body(args.mass, args.height)
     check_basal_arguments(args)
+    if args.states is not None:
+        return _run_states(args, models)
+    if args.controls is not None:
+        from ..errors import OptionError
+
+        raise OptionError("--controls goes with --states (a solution folder carries its excitations)")
     folders = solution_folders(args.solution)
     check_metabolics_outputs(args.out, folders)
     sensitivity = _sensitivity_parameters(args.sensitivity, folders)
@@ -158,6 +182,69 @@ def run(args) -> int:
           f"{', '.join(f'{out}/{s}' for s in results)} (each leg's muscles, no basal); whole body (W/kg, basal "
           f"{args.basal}): {means}")
     _plausibility(args, folders, results)
+    return 0
+
+
+def _run_states(args, models) -> int:
+    """``musclemetab metabolics --states FILE --model M.osim``: the energy of an OpenSim motion."""
+    from ..errors import OptionError
+    from ..metabolics.opensim_states import probe_muscle_properties, read_opensim_states, split_sides
+    from ..metabolics.solution import check_metabolics_outputs, metabolics_from_legs, write_legs_metabolics
+
+    if not args.model:
+        raise OptionError("--states needs --model: the OpenSim model the states belong to")
+    if args.sensitivity is not None:
+        raise OptionError("--sensitivity needs a solution folder (--solution), not --states")
+    read = read_opensim_states(args.model, args.states, args.controls)
+    legs = split_sides(read.states)
+    check_metabolics_outputs(args.out, legs)
+    masses = fractions = None
+    used = ""
+    if args.muscle_parameters == "probes":
+        masses, fractions, used = probe_muscle_properties(read)
+    if args.muscle_properties:  # its rows win over the probes' values
+        from ..properties import read_muscle_properties
+
+        overrides = read_muscle_properties(args.muscle_properties)
+        overrides.check_names([*read.states.muscles, *read.skipped_muscles])
+        for values, column in ((masses, "mass_kg"), (fractions, "slow_twitch_fraction")):
+            for m in [m for m in (values or {}) if overrides.for_muscle(m).get(column) is not None]:
+                del values[m]
+    masses, fractions = masses or None, fractions or None
+    results = metabolics_from_legs(
+        legs, args.mass, args.height, models=models, trim=(0, 0), basal=args.basal,
+        basal_rate_W_per_kg=args.basal_coefficient, basal_exponent=args.basal_exponent, speed_m_per_s=args.speed,
+        muscle_properties=args.muscle_properties, strict=args.strict, muscle_masses_kg=masses,
+        slow_twitch_fractions=fractions,
+    )
+    if used:
+        for r in results.values():
+            r.muscle_parameters = f"OpenSim metabolic probes of the model: {used}"
+        print(f"musclemetab: note: muscle masses and slow-twitch ratios from the model's metabolic probes ({used}); "
+              "--muscle-parameters package for the package's tables", file=sys.stderr)
+    files = write_legs_metabolics(results, args.out)
+    n_cl = int(read.clamped.sum()) if read.clamped is not None else 0
+    if n_cl:
+        act = read.states.states["activation"][read.clamped]
+        print(f"musclemetab: note: {n_cl} of {read.clamped.size} muscle-states of DeGrooteFregly2016 muscles have a "
+              f"fiber velocity off the force-velocity curve in OpenSim (activation there up to {act.max():.3g}); "
+              "taken at the curve's bound", file=sys.stderr)
+    excitation = ("from " + str(args.controls)) if read.excitation_source == "controls" else "= activation"
+    skipped = f", {len(read.skipped_muscles)} muscles without controls skipped" if read.skipped_muscles else ""
+    first = next(iter(results.values()))
+    if len(results) == 1:
+        (side, result), = results.items()
+        whole = f"whole body = 2 x the {'right' if side == 'r' else 'left' if side == 'l' else 'evaluated'} leg"
+        means = ", ".join(f"{m} {result.whole_body[m].mean_W_per_kg:.2f}" for m in result.models)
+    else:
+        from ..metabolics.solution import add_legs
+
+        whole = f"legs {' + '.join(results)} added"
+        means = ", ".join(f"{m} {v:.2f}" for m, v in add_legs(results).items())
+    print(f"metabolics: {len(first.models)} models x {len(read.states.muscles)} muscles x {read.states.time_s.size} "
+          f"states of {args.states} (excitation {excitation}{skipped}) -> {args.out} "
+          f"({', '.join(sorted({p.name for p in files.values()}))}); {whole} (W/kg, basal {args.basal}): {means}")
+    _plausibility(args, {}, results)
     return 0
 
 

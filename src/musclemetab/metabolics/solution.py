@@ -339,6 +339,9 @@ class SolutionMetabolics:
     basal_exponent: float = 1.0
     #: the solved leg ("r"/"l") when the solution recorded it
     side: str | None = None
+    #: where the masses and slow-twitch fractions came from when not the package's own tables
+    #: (e.g. the model's OpenSim metabolic probes), recorded in the header of ``metabolics.sto``
+    muscle_parameters: str = ""
 
     @property
     def muscle_mass_rule(self) -> str:
@@ -641,6 +644,7 @@ def write_metabolics(result: SolutionMetabolics, out_dir: str | os.PathLike, cyc
         f"basal_rule={result.basal_rule}",
         f"basal_coefficient={result.basal_rate_W_per_kg:g}",
         f"basal_exponent={result.basal_exponent:g}",
+        *([f"muscle_parameters={result.muscle_parameters}"] if result.muscle_parameters else []),
         f"units=W; total_no_basal is without basal heat, basal the per-muscle basal heat "
         f"({result.basal_rate_W_per_kg:g} W/kg of muscle mass), apart",
     ]
@@ -749,8 +753,13 @@ def metabolics_from_legs(solutions, body_mass_kg: float, height_m: float | None,
             results[side] = metabolics_from_solution(solution, body_mass_kg, height_m,
                                                      legs=1 if len(legs) > 1 else 2, **options)
     if not options.get("strict"):
+        from ..properties import as_overrides
+
+        overrides = (as_overrides(options.get("muscle_properties"))
+                     .with_column("mass_kg", options.get("muscle_masses_kg"))
+                     .with_column("slow_twitch_fraction", options.get("slow_twitch_fractions")))
         warn_unplaced(list(dict.fromkeys(
-            m for r in results.values() for m in unplaced_muscles(r.muscles, options.get("muscle_properties")))))
+            m for r in results.values() for m in unplaced_muscles(r.muscles, overrides))))
     return results
 
 
@@ -807,7 +816,8 @@ def parameter_differences(states: SolutionStates, muscle_parameters, rtol: float
 
 #: the settings :func:`write_metabolics` records in the header of metabolics.sto, and their types
 METABOLICS_SETTINGS = {"models": str, "body_mass_kg": float, "height_m": float, "basal_rule": str,
-                       "basal_coefficient": float, "basal_exponent": float, "muscle_mass_rule": str}
+                       "basal_coefficient": float, "basal_exponent": float, "muscle_mass_rule": str,
+                       "muscle_parameters": str}
 
 
 def read_metabolics_settings(folder: str | os.PathLike) -> dict:

@@ -34,6 +34,7 @@ from ..errors import DataMismatchError, UnknownMuscleError
 from ..messages import name_list
 from .model_ops import COUPLED, ROTATIONAL, load_model
 from .probes import BHARGAVA_SWITCHES, UMBERGER_SWITCHES, _DEFAULT_OFF
+from .trajectory import MUSCLE_GETTERS, set_locked_coordinates
 
 __all__ = ["model_states_along_motion", "states_along_motion", "probes_over_states"]
 
@@ -175,16 +176,7 @@ def probes_over_states(model_path: str, states_path: str, controls_path: str, mu
         col_of[index[lab]] = j
     n = traj.getSize()
     mus = [mset.get(mu) for mu in muscles]
-    getters = {
-        "normalized_fiber_length": "getNormalizedFiberLength",
-        "normalized_fiber_velocity": "getNormalizedFiberVelocity",
-        "activation": "getActivation",
-        "excitation": "getExcitation",
-        "active_force_length_multiplier": "getActiveForceLengthMultiplier",
-        "force_velocity_multiplier": "getForceVelocityMultiplier",
-        "passive_fiber_force_N": "getPassiveFiberForce",
-        "fiber_length_m": "getFiberLength",
-    }
+    getters = MUSCLE_GETTERS
     state_vars = {"activation_state": "activation", "fiber_length_state_m": "fiber_length",
                   "normalized_tendon_force_state": "normalized_tendon_force"}
     sv_names = model.getStateVariableNames()
@@ -209,11 +201,7 @@ def probes_over_states(model_path: str, states_path: str, controls_path: str, mu
     for s in range(n):
         state = traj.get(s)
         times[s] = state.getTime()
-        for c, col in locked:  # createFromStatesTable leaves locked coordinates at NaN
-            if math.isnan(c.getValue(state)):
-                c.setLocked(state, False)
-                c.setValue(state, float(col[s]), False)
-                c.setLocked(state, True)
+        set_locked_coordinates(locked, state, s)  # createFromStatesTable leaves them at NaN
         model.realizeVelocity(state)
         controls = model.updControls(state)
         for ci, j in col_of.items():

@@ -1,0 +1,132 @@
+"""Metabolic rates of every muscle along an OpenSim states trajectory (``docs/metabolics.md``,
+section "Energy of an OpenSim motion").
+
+:func:`read_opensim_states` turns a states file of a model (a CMC, Moco or forward-dynamics
+``states.sto``) into the :class:`~musclemetab.metabolics.solution.SolutionStates` the package's
+solutions give: OpenSim realises every state to ``Dynamics`` in the OpenSim worker
+(:func:`musclemetab.opensim_bridge.trajectory.muscles_along_states`) and its own muscle
+dynamics give the fiber length and velocity, the force-length and force-velocity multipliers,
+the passive fiber force, activation and excitation (from the controls file; without one,
+excitation = activation). ``F0``, ``lMo`` and ``vmax`` are the model's. So the per-muscle and
+whole-body tables follow from :func:`~musclemetab.metabolics.solution.metabolics_from_legs`.
+
+When the model carries OpenSim metabolic probes (``Umberger2010MuscleMetabolicsProbe``,
+``Bhargava2004MuscleMetabolicsProbe``), :func:`probe_muscle_properties` gives their per-muscle
+slow-twitch ratios and the masses they use (provided, or ``F0 / specific tension x density x
+lMo`` with the probe's specific tension and density), so that this package and OpenSim evaluate
+the same muscles.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import DataMismatchError, OptionError
+from .solution import SolutionStates
+
+__all__ = ["OpenSimStates", "read_opensim_states", "probe_muscle_properties", "split_sides",
+           "MUSCLE_PARAMETER_SOURCES"]
+
+#: ``--muscle-parameters``: the model's probes' (when it has any) or the package's own tables
+MUSCLE_PARAMETER_SOURCES = ("probes", "package")
+_QUANTITIES = ("excitation", "activation", "normalized_fiber_length", "normalized_fiber_velocity",
+               "active_force_length_multiplier", "force_velocity_multiplier", "passive_fiber_force_N")
+
+
+@dataclass
+class OpenSimStates:
+    """The muscle states of an OpenSim states file (:func:`read_opensim_states`)."""
+
+    states: SolutionStates
+    #: per metabolic probe of the model: ``name``, ``kind``, ``switches``, ``muscles`` (per-muscle
+    #: parameters) and ``rates`` (OpenSim's per-muscle output at every state, W)
+    probes: list = field(default_factory=list)
+    #: ``(muscles, states)``: a DeGrooteFregly2016Muscle's fiber velocity off its curve, set to the bound
+    clamped: np.ndarray | None = None
+    skipped_muscles: tuple[str, ...] = ()
+    #: ``"controls"`` (from the controls file) or ``"activation"`` (excitation = activation)
+    excitation_source: str = "activation"
+    muscle_classes: tuple[str, ...] = ()
+    #: OpenSim's fiber velocity (m/s), ``(muscles, states)``
+    fiber_velocity_m_per_s: np.ndarray | None = None
+
+
+def read_opensim_states(model: str | os.PathLike, states: str | os.PathLike,
+                        controls: str | os.PathLike | None = None) -> OpenSimStates:
+    """The muscle states of every muscle of ``model`` along the states file ``states``, from
+    OpenSim's muscle dynamics (see the module's description).
+
+    ``controls``: the simulation's controls file (columns ``/forceset/<muscle>`` or
+    ``<muscle>``, interpolated to the state times); the model's muscles it has no column for
+    are not evaluated. Without it every muscle's excitation is its activation.
+
+    Raises
+    ------
+    DataMismatchError
+        OpenSim cannot load the states into the model, or cannot realise a state.
+    """
+    from ..opensim_bridge import call
+
+    got = call("trajectory:muscles_along_states", str(model), str(states),
+               None if controls is None else str(controls))
+    if got["failed_states"]:
+        t, msg = got["failed_states"][0]
+        raise DataMismatchError(
+            f"{states}: OpenSim cannot realise the model's muscles at {len(got['failed_states'])} state(s), first at "
+            f"t = {t:g} s ({msg}); check that the states belong to {model}")
+    muscles = tuple(got["muscles"])
+    p = got["parameters"]
+    params = {m: {k: float(p[k][i]) for k in ("max_isometric_force_N", "optimal_fiber_length_m",
+                                             "max_contraction_velocity")} for i, m in enumerate(muscles)}
+    sol = SolutionStates(time_s=np.asarray(got["time_s"], dtype=float), muscles=muscles,
+                         states={k: np.asarray(got[k], dtype=float) for k in _QUANTITIES}, parameters=params,
+                         source=str(states))
+    return OpenSimStates(states=sol, probes=list(got["probes"]), clamped=np.asarray(got["clamped"], dtype=bool),
+                         skipped_muscles=tuple(got["skipped_muscles"]), excitation_source=got["excitation_source"],
+                         muscle_classes=tuple(got["muscle_classes"]),
+                         fiber_velocity_m_per_s=np.asarray(got["fiber_velocity_m_per_s"], dtype=float))
+
+
+def probe_muscle_properties(read: OpenSimStates) -> tuple[dict, dict, str]:
+    """``(masses, slow_twitch_fractions, description)`` by muscle from the model's metabolic
+    probes (the first probe naming a muscle gives its values): the mass each probe uses
+    (provided, or ``F0 / specific tension x density x lMo`` with its specific tension and
+    density) and its slow-twitch ratio. Empty when the model has no metabolic probe."""
+    masses, fst, used = {}, {}, []
+    for pr in read.probes:
+        n = 0
+        for m, rec in pr["muscles"].items():
+            if m in read.states.muscles and m not in masses:
+                masses[m], fst[m] = float(rec["muscle_mass_kg"]), float(rec["slow_twitch_fraction"])
+                n += 1
+        if n:
+            sig = sorted({f"{rec['specific_tension_Pa'] / 1e6:g}" for rec in pr["muscles"].values()})
+            used.append(f"{pr['kind']} '{pr['name']}' ({n} muscles, specific tension {'/'.join(sig)} MPa)")
+    return masses, fst, "; ".join(used)
+
+
+def split_sides(states: SolutionStates) -> dict[str, SolutionStates]:
+    """``{side: states}`` of the muscles of each leg (names ending ``_r``, ``_l``): one leg stands
+    for both in the whole-body rate, two legs are added (:func:`~musclemetab.metabolics.solution.metabolics_from_legs`).
+    A muscle of neither leg among the muscles of two legs is refused."""
+    sides = {m: m[-1] if m.endswith(("_r", "_l")) else "" for m in states.muscles}
+    present = sorted(set(sides.values()), reverse=True)
+    if len(present) == 1:
+        return {present[0]: SolutionStates(**{**states.__dict__, "side": present[0] or None})}
+    if "" in present:
+        odd = [m for m, s in sides.items() if not s]
+        raise OptionError(f"{states.source}: muscle{'s' if len(odd) > 1 else ''} {', '.join(odd[:6])} belong to "
+                          "neither leg (no _r/_l ending) while the others cover both legs; the whole-body rate adds "
+                          "the legs: give a controls file of the leg muscles alone")
+    out = {}
+    for side in present:
+        idx = [i for i, m in enumerate(states.muscles) if sides[m] == side]
+        names = tuple(states.muscles[i] for i in idx)
+        out[side] = SolutionStates(time_s=states.time_s, muscles=names,
+                                   states={k: v[idx] for k, v in states.states.items()},
+                                   parameters={m: states.parameters[m] for m in names}, source=states.source,
+                                   side=side)
+    return out

@@ -1,0 +1,220 @@
+"""``musclemetab metabolics --states``: the energy of an OpenSim motion, against OpenSim's own probes.
+
+Two states files of two muscle models, each with OpenSim's ``Umberger2010MuscleMetabolicsProbe``
+(UM10 settings) and ``Bhargava2004MuscleMetabolicsProbe`` (BH04 settings) added to the model by
+tests/opensim_states.py (per-muscle slow-twitch ratios, OpenSim's specific tension 0.25 MPa,
+one provided mass):
+
+* gait2392 (Thelen2003Muscle, 92 muscles, both legs): states made in OpenSim from the IK motion
+  (0.6-0.7 s, 6 states), activations set by formula, fiber lengths from OpenSim's equilibrium;
+  no controls file (excitation = activation);
+* gait2392 lumped to 9 muscles per leg (tests/opensim_models.py): DeGrooteFregly2016 on the
+  right (compliant tendon, normalised tendon force states), Millard2012 with a rigid tendon on
+  the left (fiber length and velocity from the geometry); states made likewise;
+* the example subject's exported solution (the session's ``demo`` fixture, preferred speed,
+  EFFORT-GEN): ``model.osim`` (DeGrooteFregly2016Muscle, normalised tendon force states),
+  ``states.sto`` and ``controls.sto``.
+
+Oracles: the activations set, the probes' per-muscle outputs (the package's UM10 with the
+slow-twitch cap and BH04 without the activation-heat decay, docs/metabolics.md section 6, fed the
+probes' masses and ratios, agree to 1e-6 relative wherever OpenSim's fiber velocity stays on its
+force-velocity curve), the probe's mass rule worked here (``F0 / 0.25 MPa x 1059.7 kg/m^3 x lMo``).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.opensim
+
+SCRIPT = Path(__file__).with_name("opensim_states.py")
+sys.path.insert(0, str(SCRIPT.parent))
+import opensim_states as script  # noqa: E402
+
+OPTIONS = {"UM10": {"slow_twitch_shortening_cap": True}, "BH04": {"activation_heat_decay": False}}
+
+
+def _run(*args):
+    subprocess.run([sys.executable, str(SCRIPT), *map(str, args)], check=True, capture_output=True)
+
+
+@pytest.fixture(scope="module")
+def thelen(gait2392, tmp_path_factory):
+    folder = tmp_path_factory.mktemp("thelen")
+    model, states = folder / "probes.osim", folder / "states.sto"
+    _run("probes", gait2392.model, model)
+    _run("thelen", model, gait2392.ik, states, 0.6, 0.7, 6)
+    return model, states
+
+
+@pytest.fixture(scope="module")
+def dgf(demo, tmp_path_factory):
+    out, table = demo
+    folder = out / table[(table.trial == "normal") & (table.workflow == "effort-gen")].unit_dir.iloc[0]
+    model = tmp_path_factory.mktemp("dgf") / "probes.osim"
+    _run("probes", folder / "model.osim", model)
+    return model, folder / "states.sto", folder / "controls.sto", folder
+
+
+def _evaluate(read, body_mass_kg=72.6):
+    from musclemetab.metabolics.opensim_states import probe_muscle_properties, split_sides
+    from musclemetab.metabolics.solution import metabolics_from_legs
+
+    masses, fst, _ = probe_muscle_properties(read)
+    res = metabolics_from_legs(split_sides(read.states), body_mass_kg, None, models="UM10,BH04", trim=(0, 0),
+                               muscle_masses_kg=masses, slow_twitch_fractions=fst, model_options=OPTIONS)
+    ours = {}
+    for r in res.values():
+        for model in r.models:
+            rate = r.rates[model].total_without_basal()
+            ours.setdefault(model, {}).update({m: rate[i] for i, m in enumerate(r.muscles)})
+    return res, ours, masses, fst
+
+
+def _agree_with_probes(read, ours, keep):
+    probes = {p["name"]: p for p in read.probes}
+    for model in ("UM10", "BH04"):
+        theirs = np.array([probes[model]["rates"][m] for m in read.states.muscles])
+        mine = np.array([ours[model][m] for m in read.states.muscles])
+        np.testing.assert_allclose(mine[keep], theirs[keep], rtol=1e-6, atol=1e-9)
+        assert theirs[keep].max() > 20.0  # not zeros
+
+
+def _probe_masses_worked_here(read, masses, fst):
+    # the evaluated muscles come first in the model (the one leg of a solution's model, then the other)
+    muscles = read.states.muscles
+    n_model = len(muscles) + len(read.skipped_muscles)
+    for k, m in enumerate(muscles):
+        p = read.states.parameters[m]
+        want = script.PROVIDED_MASS_KG if k == 0 else (
+            p["max_isometric_force_N"] / 0.25e6 * 1059.7 * p["optimal_fiber_length_m"])
+        assert masses[m] == pytest.approx(want, rel=1e-12)
+        assert fst[m] == pytest.approx(script.slow_twitch(k, n_model), rel=1e-12)
+
+
+@pytest.mark.filterwarnings("error::musclemetab.errors.MuscleTableWarning")  # the probes place every muscle
+def test_thelen_states_agree_with_opensims_probes(thelen):
+    from musclemetab.metabolics.opensim_states import read_opensim_states
+
+    model, states = thelen
+    read = read_opensim_states(model, states)
+    s = read.states
+    assert len(s.muscles) == 92 and set(read.muscle_classes) == {"Thelen2003Muscle"}
+    np.testing.assert_allclose(s.time_s, np.linspace(0.6, 0.7, 6), atol=1e-12)
+    want = np.array([script.activation(k, s.time_s) for k in range(len(s.muscles))])
+    np.testing.assert_allclose(s.states["activation"], want, rtol=1e-9)  # the activations set
+    assert read.excitation_source == "activation"
+    np.testing.assert_array_equal(s.states["excitation"], s.states["activation"])
+    lmo = np.array([s.parameters[m]["optimal_fiber_length_m"] for m in s.muscles])[:, None]
+    vmax = np.array([s.parameters[m]["max_contraction_velocity"] for m in s.muscles])[:, None]
+    np.testing.assert_allclose(s.states["normalized_fiber_velocity"], read.fiber_velocity_m_per_s / (lmo * vmax),
+                               rtol=1e-9, atol=1e-12)
+    assert np.abs(s.states["normalized_fiber_velocity"]).max() > 0.05  # the motion moves the fibers
+    assert not read.clamped.any()
+    res, ours, masses, fst = _evaluate(read)
+    assert set(res) == {"r", "l"}  # both legs' muscles, added
+    _probe_masses_worked_here(read, masses, fst)
+    _agree_with_probes(read, ours, np.ones(read.clamped.shape, dtype=bool))
+
+
+def test_degroote_and_rigid_millard_states_agree_with_opensims_probes(gait2392, tmp_path):
+    from musclemetab.metabolics.opensim_states import read_opensim_states
+
+    lumped, model, states = tmp_path / "lumped.osim", tmp_path / "probes.osim", tmp_path / "states.sto"
+    subprocess.run([sys.executable, str(SCRIPT.with_name("opensim_models.py")), str(gait2392.model), str(lumped)],
+                   check=True, capture_output=True)
+    _run("probes", lumped, model, "--rigid-left")
+    _run("thelen", model, gait2392.ik, states, 0.6, 0.7, 6)
+    header = next(line for line in states.read_text().splitlines() if line.startswith("time"))
+    assert header.count("/normalized_tendon_force") == 9 and "/fiber_length" not in header
+    read = read_opensim_states(model, states)
+    assert read.muscle_classes == ("DeGrooteFregly2016Muscle",) * 9 + ("Millard2012EquilibriumMuscle",) * 9
+    s = read.states
+    want = np.array([script.activation(k, s.time_s) for k in range(len(s.muscles))])
+    np.testing.assert_allclose(s.states["activation"], want, rtol=1e-9)
+    assert np.abs(s.states["normalized_fiber_velocity"][9:]).max() > 0.1  # the rigid tendons' fibers move
+    assert not read.clamped.any()
+    _, ours, masses, fst = _evaluate(read)
+    _probe_masses_worked_here(read, masses, fst)
+    _agree_with_probes(read, ours, np.ones(read.clamped.shape, dtype=bool))
+
+
+def test_exported_degroote_states_agree_with_opensims_probes(dgf):
+    from musclemetab.metabolics.opensim_states import read_opensim_states
+    from musclemetab.redundancy import Solution
+
+    model, states, controls, folder = dgf
+    sol = Solution.load(folder)
+    read = read_opensim_states(model, states, controls)
+    assert read.states.muscles == tuple(sol.muscles) and len(read.skipped_muscles) == 40  # the left leg
+    assert set(read.muscle_classes) == {"DeGrooteFregly2016Muscle"}
+    np.testing.assert_allclose(read.states.states["activation"], sol.activation.T, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(read.states.states["excitation"], sol.excitation.T, rtol=1e-9, atol=1e-12)
+    # off the force-velocity curve (set to the bound) at few muscle-states, mostly all but inactive
+    # (measured: 362 of 4760, 90 % of them below activation 0.0023; docs/metabolics.md section 4.1)
+    act = read.states.states["activation"]
+    assert read.clamped.mean() < 0.1 and np.quantile(act[read.clamped], 0.9) < 0.01
+    res, ours, masses, fst = _evaluate(read)
+    assert set(res) == {"r"}
+    _probe_masses_worked_here(read, masses, fst)
+    keep = ~read.clamped
+    _agree_with_probes(read, ours, keep)
+
+
+def test_command_records_the_probes_parameters(thelen, tmp_path, capsys):
+    import pandas as pd
+
+    from musclemetab.commands import main
+    from musclemetab.metabolics.solution import read_metabolics_settings
+
+    model, states = thelen
+    argv = ["metabolics", "--states", str(states), "--model", str(model), "--mass", "72.6", "--models", "UM10,BH04"]
+    assert main([*argv, "--out", str(tmp_path / "probes")]) == 0
+    err = capsys.readouterr().err
+    assert "from the model's metabolic probes" in err and "0.25 MPa" in err
+    rec = read_metabolics_settings(tmp_path / "probes" / "r")["muscle_parameters"]  # each leg's folder
+    assert "Umberger2010MuscleMetabolicsProbe 'UM10' (92 muscles, specific tension 0.25 MPa)" in rec
+    assert main([*argv, "--muscle-parameters", "package", "--out", str(tmp_path / "package")]) == 0
+    assert "metabolic probes" not in capsys.readouterr().err
+    assert "muscle_parameters" not in read_metabolics_settings(tmp_path / "package" / "l")
+    a = pd.read_csv(tmp_path / "probes" / "whole_body.csv").set_index("model")
+    b = pd.read_csv(tmp_path / "package" / "whole_body.csv").set_index("model")
+    assert set(a["legs"]) == {"r+l"}
+    # 0.25 MPa against the tables' 0.6 MPa: heavier muscles, more heat
+    assert (a["whole_body_no_basal_W_per_kg"] > 1.2 * b["whole_body_no_basal_W_per_kg"]).all()
+    # a --muscle-properties row wins over the probes (the per-muscle basal heat is 1.2 W per kg of mass)
+    (tmp_path / "m.csv").write_text("muscle,mass_kg\nsoleus,1.5\n")
+    assert main([*argv, "--muscle-properties", str(tmp_path / "m.csv"), "--out", str(tmp_path / "csv")]) == 0
+    pm = pd.read_csv(tmp_path / "csv" / "r" / "per_muscle.csv").set_index(["model", "muscle"])
+    pa = pd.read_csv(tmp_path / "probes" / "r" / "per_muscle.csv").set_index(["model", "muscle"])
+    assert pm.loc[("UM10", "soleus_r"), "basal_heat_mean_W"] == pytest.approx(1.2 * 1.5, rel=1e-9)
+    assert pm.loc[("UM10", "glut_med1_r"), "basal_heat_mean_W"] == pytest.approx(1.2 * script.PROVIDED_MASS_KG, rel=1e-9)
+    assert pa.loc[("UM10", "soleus_r"), "basal_heat_mean_W"] != pytest.approx(1.8, rel=1e-3)
+
+
+def test_command_refuses_states_without_a_model(thelen, tmp_path, capsys):
+    from musclemetab.commands import main
+
+    _, states = thelen
+    code = main(["metabolics", "--states", str(states), "--mass", "72.6", "--out", str(tmp_path / "o")])
+    assert code != 0 and "--states needs --model" in capsys.readouterr().err
+    code = main(["metabolics", "--solution", str(tmp_path), "--controls", str(states), "--mass", "72.6",
+                 "--out", str(tmp_path / "o")])
+    assert code != 0 and "--controls goes with --states" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+def test_command_refuses_states_of_another_model(thelen, dgf, tmp_path, capsys):
+    from musclemetab.commands import main
+
+    _, states = thelen
+    code = main(["metabolics", "--states", str(states), "--model", str(dgf[0]), "--mass", "72.6",
+                 "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert code != 0 and "OpenSim cannot load these states" in err and "missing from the data" in err
+    assert "/jointset/walker_knee_r/knee_angle_r/value" in err and not (tmp_path / "o").exists()
