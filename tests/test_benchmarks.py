@@ -27,6 +27,8 @@ EXPECTED = {
                    r"^  study's MATLAB run: 141-206 s, 135-235 iterations -> this run takes [\d.]+-[\d.]+ of its time "
                    r"\([\d.]+-[\d.]+x faster; IPOPT time\)$"],
     "input_stage.py": [r"^  this tree\s+[\d.]+ ms   files parsed: ", r"^  ratio this tree / baseline: [\d.]+$"],
+    "stop.py": [r"^  authors\s+\d+ iterations, IPOPT CPU", r"^  optimum\s+\d+ iterations, IPOPT CPU",
+                r"^  IPOPT CPU optimum / authors: [\d.]+x$"],
     "solver.py": [r"^normal effort-gen N=\d+ Solve_Succeeded", r"^time split: NLP function evaluations \d+ %",
                   r"^cold 'musclemetab solve' \(normal, effort-gen"],
 }
