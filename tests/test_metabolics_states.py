@@ -153,12 +153,15 @@ def test_exported_degroote_states_agree_with_opensims_probes(dgf):
     read = read_opensim_states(model, states, controls)
     assert read.states.muscles == tuple(sol.muscles) and len(read.skipped_muscles) == 40  # the left leg
     assert set(read.muscle_classes) == {"DeGrooteFregly2016Muscle"}
-    np.testing.assert_allclose(read.states.states["activation"], sol.activation.T, rtol=1e-9, atol=1e-12)
-    np.testing.assert_allclose(read.states.states["excitation"], sol.excitation.T, rtol=1e-9, atol=1e-12)
-    # off the force-velocity curve (set to the bound) at few muscle-states, mostly all but inactive
-    # (measured: 362 of 4760, 90 % of them below activation 0.0023; docs/metabolics.md section 4.1)
+    # the exported files hold the nodes where the Hill equilibrium holds: every node but the last
+    n = read.states.states["activation"].shape[1]
+    assert n == len(sol.time_s) - 1
+    np.testing.assert_allclose(read.states.states["activation"], sol.activation[:n].T, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(read.states.states["excitation"], sol.excitation[:n].T, rtol=1e-9, atol=1e-12)
+    # off the force-velocity curve (set to the bound) where a muscle is all but inactive: at the optimum the
+    # muscles that are off have no active force to balance the tendon's; few states of the muscles in use
     act = read.states.states["activation"]
-    assert read.clamped.mean() < 0.1 and np.quantile(act[read.clamped], 0.9) < 0.01
+    assert read.clamped[act > 1e-3].mean() < 0.1 and np.quantile(act[read.clamped], 0.9) < 0.01
     res, ours, masses, fst = _evaluate(read)
     assert set(res) == {"r"}
     _probe_masses_worked_here(read, masses, fst)

@@ -179,7 +179,9 @@ def test_opensim_probes_on_the_exported_states_agree_with_um10_and_bh04(exported
     in_use = np.asarray(run["activation"]) > 1e-3
     assert on_curve[in_use].mean() > 0.9
     inp = _inputs(run, res)
-    inp["normalized_fiber_velocity"] = np.where(on_curve, v, 0.0)  # the package's models take finite values
+    for k in ("normalized_fiber_velocity", "force_velocity_multiplier", "passive_fiber_force_N",
+              "active_force_length_multiplier", "normalized_fiber_length"):  # OpenSim's NaN off the curve
+        inp[k] = np.where(on_curve, np.asarray(inp[k], dtype=float), 0.0)  # the package's models take finite values
     um10 = umberger2010(**inp, slow_twitch_shortening_cap=True, basal=False).total
     bh04 = bhargava2004(**inp, activation_heat_decay=False, basal=False).total
     np.testing.assert_allclose(um10[on_curve], run["UM10"][on_curve], rtol=1e-6, atol=1e-9)

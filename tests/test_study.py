@@ -288,12 +288,15 @@ def test_emg_ten_in_a_study(example, tmp_path):
                        models=("BH04",))
     data["subjects"][0]["tendon_stiffness"] = "emg-ten"
     data["subjects"][0]["emg_mapping"] = "authors"
+    data["solver"] = {"stop": "authors"}  # the study's stop: its estimate is compared with the study's
     for t in data["subjects"][0]["trials"]:
         t["emg"] = str(example.emg[t["name"]])
     study = study_from_dict(data, base="/", output=tmp_path)
     run = run_study(study, workers=1, progress=False)
     assert not run.failed, run.failed
     assert run.ran[0] == "sub1/all trials/emg-ten" and len(run.ran) == 7
+    summary = json.loads((tmp_path / "units" / "sub1" / "normal" / "effort-ten" / "summary.json").read_text())
+    assert summary["solver_options"]["stop"] == "authors"
     params = json.loads((tmp_path / "units" / "sub1" / "_emg-ten" / "parameters.json").read_text())
     kt = params["tendon_stiffness"]
     # the study's published EMG-TEN estimate with the authors' channel mapping (§6.8)
