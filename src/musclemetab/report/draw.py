@@ -269,7 +269,10 @@ def _draw_share(study: StudyFolder, fig_dir: Path, formats: Sequence[str], order
 def _child_share(conn, *args) -> None:
     """A forked process's part of :func:`_draw_share`: entries sent through ``conn``. Ctrl-C
     (which reaches every process of the command) or the report's process gone end it quietly:
-    the report's process says what happened."""
+    the report's process says what happened. SIGTERM (the report's process ending its copies)
+    ends it as the operating system does: the forked copy does not keep the report's process's
+    handler, which would stop it with a traceback."""
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     try:
         _draw_share(*args, send=lambda name, entry: conn.send((name, entry)))
     except (KeyboardInterrupt, BrokenPipeError):
