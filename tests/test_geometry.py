@@ -235,3 +235,26 @@ def test_a_message_lists_ten_names_and_counts_the_rest(example):
     text = str(info.value)
     assert "mystery0_r, mystery1_r" in text and text.count("mystery") == 10
     assert "... and 149 990 more" in text and len(text) < 500
+
+
+def test_every_message_naming_muscles_lists_ten_and_counts_the_rest():
+    """The same rule where the package names muscles of a problem: excluded names it lacks, a
+    muscle a solution lacks, muscles without parameters, EMG and factors of unknown muscles."""
+    import numpy as np
+
+    from musclemetab.redundancy.inputs import GeometryArrays
+    from musclemetab.redundancy.run import exclude_from_geometry
+    from musclemetab.redundancy.solution import Solution
+
+    muscles = [f"m{i}_r" for i in range(40)]
+    geometry = GeometryArrays(np.linspace(0, 1, 5), muscles, ["knee_angle_r"], np.ones((5, 40)), np.zeros((5, 1, 40)))
+    wrong = [f"x{i}_r" for i in range(25)]
+    with pytest.raises(UnknownMuscleError) as info:
+        exclude_from_geometry(geometry, wrong)
+    text = str(info.value)
+    assert text.count("x") - text.count("exclude") == 10 and "... and 15 more" in text
+    sol = Solution.__new__(Solution)
+    object.__setattr__(sol, "muscles", muscles)
+    with pytest.raises(UnknownMuscleError) as info:
+        sol.muscle_index("nothing_r")
+    assert str(info.value).count("_r") == 11 and "... and 30 more" in str(info.value)

@@ -558,7 +558,7 @@ def _check_split(recs: Sequence[MuscleRecord]) -> None:
     need = [r.name for r in recs if r.placed and np.isnan(r.volume_percent)]
     if need:
         raise OptionError(
-            f"muscles {', '.join(need)} share an anatomical muscle's volume in proportion to maximal isometric "
+            f"muscles {name_list(need)} share an anatomical muscle's volume in proportion to maximal isometric "
             "force; give the model's forces (max_isometric_force_N)"
         )
 

@@ -49,6 +49,7 @@ from ..errors import DataMismatchError, OptionError
 from ..events import as_signal, as_time, coverage, integrate_interval
 from ..events import GaitCycle
 from ..properties import DOF_GROUPS, GROUPS, dof_group_pair, has_function_group
+from ..messages import name_list
 
 __all__ = [
     "GROUPS",
@@ -96,7 +97,7 @@ def _moment_arms(moment_arms_m, dofs) -> tuple[np.ndarray, list[str]]:
         )
     if r.shape[1] != len(dofs):
         raise DataMismatchError(
-            f"moment_arms_m has {r.shape[1]} DOFs along axis 1 but {len(dofs)} DOF names were given ({', '.join(dofs)})"
+            f"moment_arms_m has {r.shape[1]} DOFs along axis 1 but {len(dofs)} DOF names were given ({name_list(dofs)})"
         )
     if len(set(dofs)) != len(dofs):
         raise OptionError(f"DOF list {dofs} names a DOF twice")

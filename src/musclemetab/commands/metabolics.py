@@ -22,6 +22,7 @@ from __future__ import annotations
 import sys
 
 from .options import add_basal_arguments, check_basal_arguments, check_body, check_speed
+from ..messages import name_list
 
 __all__ = ["add_parser", "run"]
 
@@ -260,7 +261,7 @@ def _sensitivity_parameters(value, folders) -> list | None:
     names = list(PARAMETERS) if value.strip().lower() == "all" else [v.strip() for v in value.split(",") if v.strip()]
     bad = [n for n in names if n not in PARAMETERS]
     if bad or not names:
-        raise OptionError(f"--sensitivity: unknown muscle parameter(s) {', '.join(bad) or repr(value)}; give 'all' or "
+        raise OptionError(f"--sensitivity: unknown muscle parameter(s) {name_list(bad) or repr(value)}; give 'all' or "
                           f"a comma-separated list of {', '.join(PARAMETERS)}")
     # the sensitivities are derivatives at the optimum: a failed solve has none, --allow-failed or not
     from pathlib import Path

@@ -440,8 +440,8 @@ def _bound_note(solution) -> str:
     if not at:
         return ""
     return (f" Fibers at their longest allowed length (1.7 optimal lengths, or their longest rigid-tendon length "
-            f"plus 0.05): {', '.join(at)}; if the model's tendon slack length is too short for them, leave them out "
-            f"with --exclude-muscles {' '.join(at)}.")
+            f"plus 0.05): {name_list(at)}; if the model's tendon slack length is too short for them, leave them out "
+            f"with --exclude-muscles {name_list(at, sep=' ')}.")
 
 
 def _excluded(args) -> list:

@@ -24,6 +24,7 @@ import numpy as np
 
 from ..quality import Flag
 from .solution import PLAUSIBILITY_FILE, add_legs
+from ..messages import name_list
 
 __all__ = ["PLAUSIBILITY_FILE", "legs_rate_flags", "results_rows_flags", "write_plausibility", "RATE_BAND",
            "ralston_gross_rate_W_per_kg", "whole_body_rate_flag", "negative_group_flag", "metabolic_flags", "add_quality",
@@ -134,7 +135,7 @@ def excluded_muscles_flag(names) -> Flag | None:
     if not names:
         return None
     return Flag("excluded_muscles", f"the rates leave out {len(names)} muscle{'s' if len(names) != 1 else ''} the "
-                f"solve excluded ({', '.join(names)}): the leg's and the whole body's rates are those of the other "
+                f"solve excluded ({name_list(names)}): the leg's and the whole body's rates are those of the other "
                 "muscles", {n: 1.0 for n in names}, None)
 
 

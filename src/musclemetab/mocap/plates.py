@@ -26,6 +26,7 @@ import numpy as np
 
 from ..errors import DataMismatchError, MusclemetabWarning, OptionError
 from .trial import Markers, Plate, horizontal
+from ..messages import name_list
 
 __all__ = ["CONTACT_THRESHOLD_N", "PlateContact", "remove_offsets", "contacts", "foot_marker_sets",
            "assign_feet", "TwoFeetWarning"]
@@ -125,7 +126,7 @@ def foot_marker_sets(names: list[str], given: dict | None = None) -> dict[str, d
         for side, items in given.items():
             missing = [n for n in items if n not in names]
             if missing:
-                raise OptionError(f"foot markers {', '.join(missing)} are not in the file's markers")
+                raise OptionError(f"foot markers {name_list(missing)} are not in the file's markers")
             out[side] = {"heel": [items[0]], "fore": list(items[1:])}
         return out
     for n in names:

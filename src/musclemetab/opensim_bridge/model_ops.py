@@ -241,7 +241,7 @@ def muscle_geometry(
     ]
     if any(d not in columns for d in dofs):
         raise UnknownCoordinateError(
-            f"the motion has no column for {', '.join(d for d in dofs if d not in columns)}"
+            f"the motion has no column for {name_list([d for d in dofs if d not in columns])}"
         )
     model, state = m.model, m.state
     coords = m.coords

@@ -126,7 +126,7 @@ def check_couplings(estimate: Mapping[str, Sequence[str]], groups) -> None:
         kinds = {m: sorted(k for k, ms in estimate.items() if m in ms) for m in group}
         alone = [m for m, k in kinds.items() if not k]
         if alone:
-            raise OptionError(f"--couple {label}: {', '.join(alone)} is estimated for no kind (--estimate names "
+            raise OptionError(f"--couple {label}: {name_list(alone)} is estimated for no kind (--estimate names "
                               f"{', '.join(sorted({x for ms in estimate.values() for x in ms}))}); add it to "
                               "--estimate or drop it from the group")
         if len({tuple(k) for k in kinds.values()}) > 1:

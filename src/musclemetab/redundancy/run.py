@@ -270,7 +270,7 @@ def exclude_from_geometry(geometry, exclude_muscles: Sequence[str] = (), missing
     excluded = [m for m in exclude_muscles if m in geometry.muscles]
     if unknown and not missing_ok:
         raise UnknownMuscleError(
-            f"--exclude-muscles: {', '.join(unknown)} {'is' if len(unknown) == 1 else 'are'} not among the "
+            f"--exclude-muscles: {name_list(unknown)} {'is' if len(unknown) == 1 else 'are'} not among the "
             f"muscles of the problem ({', '.join(geometry.muscles[:8])}, ...); check the names and the side"
         )
     kept = [i for i, m in enumerate(geometry.muscles) if m not in set(excluded)]
@@ -529,8 +529,8 @@ def _mapping_without(mapping: dict, excluded: Sequence[str]) -> dict:
 
     dropped = [m for m in mapping if m in set(excluded)]
     if dropped:
-        warnings.warn(f"--exclude-muscles {' '.join(dropped)}: the EMG of {', '.join(dropped)} "
-                      f"({', '.join(c for m in dropped for c in mapping[m])}) is not used (the muscle is out of the "
+        warnings.warn(f"--exclude-muscles {name_list(dropped, sep=' ')}: the EMG of {name_list(dropped)} "
+                      f"({name_list([c for m in dropped for c in mapping[m]])}) is not used (the muscle is out of the "
                       "problem)", MusclemetabWarning, stacklevel=3)
     return {m: c for m, c in mapping.items() if m not in set(excluded)}
 
@@ -550,7 +550,7 @@ def _fiber_lengths_without(measured: dict, excluded) -> dict:
 
     dropped = [m for m in measured if m in set(excluded)]
     if dropped:
-        warnings.warn(f"--exclude-muscles {' '.join(dropped)}: the measured fiber lengths of {', '.join(dropped)} "
+        warnings.warn(f"--exclude-muscles {name_list(dropped, sep=' ')}: the measured fiber lengths of {name_list(dropped)} "
                       "are not used (the muscle is out of the problem)", MusclemetabWarning, stacklevel=3)
     return {m: v for m, v in measured.items() if m not in set(excluded)}
 
@@ -750,7 +750,7 @@ def estimate_files(
     coupled = {m for g in couple for m in _coupling(g)[1]}
     clash = [m for m in exclude_muscles if any(m in v for v in estimate.values()) or m in coupled]
     if clash:
-        raise OptionError(f"--exclude-muscles {' '.join(clash)} and --estimate/--couple name the same muscle"
+        raise OptionError(f"--exclude-muscles {name_list(clash, sep=' ')} and --estimate/--couple name the same muscle"
                           f"{'s' if len(clash) > 1 else ''}: a muscle left out of the problem has no parameter to "
                           "estimate; drop it from one of them")
     specs = parameter_specs(estimate, couple, bounds)

@@ -469,7 +469,7 @@ def problem_of_solution(solution, cache_dir: str | os.PathLike | None = None) ->
     missing = [k for k in ("model", "ik", "id") if not files.get(k) or not Path(files[k]).is_file()]
     if missing:
         raise DataMismatchError(f"{where}: the {name_list(missing)} file(s) its summary.json names "
-                                f"({', '.join(str(files.get(k)) for k in missing)}) cannot be found; the sensitivities "
+                                f"({name_list([files.get(k) for k in missing])}) cannot be found; the sensitivities "
                                 "rebuild the problem from them: solve again where the files are")
     dofs = list(solution.dofs)
     ik_table = read_table(files["ik"])

@@ -63,6 +63,7 @@ from ..muscle import (
 )
 from .parameters import MuscleTendonParameters
 from .record import SolveRecord
+from ..messages import name_list
 
 __all__ = [
     "Solution",
@@ -240,7 +241,7 @@ class Solution:
             from ..errors import UnknownMuscleError
 
             raise UnknownMuscleError(
-                f"muscle '{name}' is not in this solution; it has {', '.join(self.muscles)}"
+                f"muscle '{name}' is not in this solution; it has {name_list(self.muscles)}"
             ) from None
 
     # ------------------------------------------------------------------ files

@@ -42,6 +42,7 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import DataMismatchError, OptionError, SolverError, UnknownMuscleError
+from ..messages import name_list
 from ..muscle import activation_rate, hill_residual, tendon_force_length
 from ._checks import COUPLINGS, check_factor_bounds, check_non_negative, check_option, check_weights
 from .bounds import (  # noqa: F401  (re-exported)
@@ -393,12 +394,12 @@ def _check_trials(trials, params, specs):
         N, inp = t.inputs.n_intervals, t.inputs
         missing = [m for m in inp.muscles if m not in names]
         if missing:
-            raise UnknownMuscleError(f"trial {t.label}: no muscle parameters for {', '.join(missing)}")
+            raise UnknownMuscleError(f"trial {t.label}: no muscle parameters for {name_list(missing)}")
         for what, ms, arr in (("EMG", t.emg_muscles, t.emg_nodes), ("fiber lengths", t.fiber_muscles,
                                                                       t.fiber_length_nodes_m)):
             bad = [m for m in ms if m not in inp.muscles]
             if bad:
-                raise UnknownMuscleError(f"trial {t.label}: {what} of {', '.join(bad)}, which the trial's "
+                raise UnknownMuscleError(f"trial {t.label}: {what} of {name_list(bad)}, which the trial's "
                                          "problem does not have; map them to muscles of the model and side")
             if ms and (arr is None or np.shape(arr) != (N, len(ms))):
                 raise DataMismatchError(f"trial {t.label}: {what} at the nodes has shape {np.shape(arr)}, "
@@ -409,7 +410,7 @@ def _check_trials(trials, params, specs):
         pool = tracked if s.kind == "emg_scale" else have
         bad = [m for m in s.muscles if m not in pool]
         if bad:
-            raise UnknownMuscleError(f"{s.kind} factors of {', '.join(bad)}: no trial of the problem has "
+            raise UnknownMuscleError(f"{s.kind} factors of {name_list(bad)}: no trial of the problem has "
                                      f"{'EMG of ' if s.kind == 'emg_scale' else ''}such a muscle")
 
 
@@ -483,7 +484,7 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
                    for k, m in enumerate(s.muscles)}
         missing = [m for m in t0.emg_muscles if m not in emg_pos]
         if missing:
-            raise OptionError(f"the EMG of {', '.join(missing)} is tracked but has no EMG scale factor")
+            raise OptionError(f"the EMG of {name_list(missing)} is tracked but has no EMG scale factor")
         crosses = np.zeros((D, M), dtype=bool)
         for i in members:
             crosses |= np.any(trials[i].inputs.moment_arms_m != 0.0, axis=0)
