@@ -293,3 +293,48 @@ def test_knee_contact_force_from_opensim_joint_reaction(gait2392, gait2392_right
     assert 2.0 < peak < 8.0, peak
     # the peak falls in stance (right heel strike 0.618 s, toe-off 1.410 s: README of the data)
     assert 0.618 < float(res["time_s"][int(np.argmax(axial))]) < 1.410
+
+
+def test_a_locked_coordinate_the_motion_moves_follows_it_in_the_written_model(example, tmp_path):
+    """A model locking knee_angle_l, solved on the right leg: the geometry takes the left knee
+    at the IK's angle, so the written model prescribes the left knee along the motion (not at
+    its locked 0 deg) and the states hold the IK's angle; OpenSim, given the written model and
+    a state at a node time, puts the knee where the IK does. The subtalar and mtp joints, which
+    the motion holds at their locked value, stay constant."""
+    import opensim as osim
+
+    from musclemetab.io import read_table
+    from musclemetab.opensim_bridge import call
+
+    text = example.model.read_text()
+    start = text.index('<Coordinate name="knee_angle_l">')
+    end = text.index("</Coordinate>", start)
+    block = text[start:end]
+    assert block.count("<locked>false</locked>") == 1
+    model = tmp_path / "locked_left_knee.osim"
+    model.write_text(text[:start] + block.replace("<locked>false</locked>", "<locked>true</locked>") + text[end:])
+    ik = read_table(example.ik["normal"])
+    times = np.linspace(0.6, 0.8, 21)
+    soleus = {"max_isometric_force_N": 3000.0, "optimal_fiber_length_m": 0.05, "tendon_slack_length_m": 0.25,
+              "pennation_angle_at_optimal_rad": 0.4, "max_contraction_velocity": 10.0,
+              "tendon_strain_at_one_norm_force": 0.049, "passive_fiber_strain_at_one_norm_force": 0.6,
+              "activation_time_constant_s": 0.015, "deactivation_time_constant_s": 0.06}
+    out = tmp_path / "model.osim"
+    info = call("solution_model:solution_model", str(model), str(out), {"soleus_r": soleus},
+                np.asarray(ik.index, dtype=float),
+                {c: np.ascontiguousarray(ik[c]) for c in ik.columns}, True, times, ["ankle_angle_r"])
+    want = np.deg2rad(np.interp(times, np.asarray(ik.index, dtype=float), np.asarray(ik["knee_angle_l"], dtype=float)))
+    assert np.ptp(want) > 0.3  # the left knee moves by more than 17 deg over the window
+    knee = [k for k in info["values"] if k.endswith("/knee_angle_l/value")][0]
+    np.testing.assert_allclose(info["values"][knee], want, atol=2e-3)
+    assert "knee_angle_l" in info["prescribed_coordinates"]
+    subtalar = [k for k in info["values"] if k.endswith("/subtalar_angle_l/value")][0]
+    assert np.ptp(info["values"][subtalar]) == 0
+    written = osim.Model(str(out))
+    written.initSystem()
+    function = written.getCoordinateSet().get("knee_angle_l").getPrescribedFunction()
+    for k in range(times.size):
+        assert function.calcValue(osim.Vector(1, float(times[k]))) == pytest.approx(info["values"][knee][k], rel=1e-5, abs=1e-9)
+    # (the model file keeps 6 significant digits) held at the ends outside the window: the model
+    # assembles at time 0
+    assert function.calcValue(osim.Vector(1, 0.0)) == pytest.approx(info["values"][knee][0], abs=1e-9)

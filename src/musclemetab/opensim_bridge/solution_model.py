@@ -7,10 +7,12 @@ with, in OpenSim's own classes, and writes it:
   solved muscle gets the solution's parameters (``docs/opensim_files.md`` gives the mapping:
   F0, lMo, lTs, pennation, vmax as they are; the tendon and passive curves through their
   strain at one normalised force; fiber damping 0; activation time constants 15/60 ms);
-* every locked coordinate becomes a coordinate prescribed at the constant value it was
-  locked at (OpenSim 4.6's ``StatesTrajectory.createFromStatesTable`` cannot set a locked
-  coordinate and leaves it NaN; a prescribed one it sets, and dynamics holds it as the lock
-  did);
+* every locked coordinate becomes a prescribed coordinate (OpenSim 4.6's
+  ``StatesTrajectory.createFromStatesTable`` cannot set a locked coordinate and leaves it NaN;
+  a prescribed one it sets, and dynamics holds it as the lock did): at the constant value it
+  was locked at, or, when the motion moves it (a locked coordinate off the solved leg, whose
+  muscle paths the geometry took at the motion's values), along the motion's values at the
+  node times;
 * every other coordinate gets a ``CoordinateActuator`` ``reserve_<coordinate>`` of optimal
   force 1, so that its control is the generalised force (N m or N) in the forces file.
 
@@ -175,7 +177,7 @@ def _prepare(model_path: str, parameters: dict, ik_time, columns: dict, in_degre
                              "solve with a model of Millard, Thelen or DeGroote-Fregly muscles")
         _set_parameters(muscle, p)
     cset = model.getCoordinateSet()
-    locked, prescribed = {}, []
+    locked, prescribed, follows = {}, [], {}
     for i in range(cset.getSize()):
         c = cset.get(i)
         locked[c.getName()] = bool(c.get_locked())
@@ -183,7 +185,12 @@ def _prepare(model_path: str, parameters: dict, ik_time, columns: dict, in_degre
             c.set_locked(False)
             c.setDefaultLocked(False)
             c.set_prescribed(True)
-            c.setPrescribedFunction(osim.Constant(c.getDefaultValue()))
+            moved = _locked_motion(c, ik_time, columns, in_degrees, times)
+            if moved is None:
+                c.setPrescribedFunction(osim.Constant(c.getDefaultValue()))
+            else:  # the motion moves it (off the solved leg): the model and states follow the motion
+                c.setPrescribedFunction(_held_outside(times, moved))
+                follows[c.getName()] = moved
             prescribed.append(c.getName())
     dependent = set()
     cons = model.getConstraintSet()
@@ -206,7 +213,8 @@ def _prepare(model_path: str, parameters: dict, ik_time, columns: dict, in_degre
     model.setName(model.getName() + "_solution")
     model.finalizeConnections()
     m = LoadedModel(str(model_path), model=model)
-    m.locked.update(locked)  # held at the value they are locked at, as in the solved model
+    # held at the value they are locked at, as in the solved model, unless the motion moves them
+    m.locked.update({n: v and n not in follows for n, v in locked.items()})
     info = states_along_motion(m, ik_time, columns, in_degrees, times)
     # moment arms of the solved muscles about the other free coordinates, at the node times
     coords = [c for c in m.coords if not locked[c] and c not in dependent and c not in set(solved_dofs)]
@@ -237,6 +245,39 @@ def _prepare(model_path: str, parameters: dict, ik_time, columns: dict, in_degre
         moment_arms_m=arms,
     )
     return model, info
+
+
+def _locked_motion(c, ik_time, columns: dict, in_degrees: bool, times):
+    """The values (model units) at ``times`` of a locked coordinate ``c`` that the motion takes
+    further than :data:`~musclemetab.layout.LOCKED_TOLERANCE` from the value it is locked at, or
+    None (held by the motion, or not in it). The geometry of a solve follows the motion there
+    (:mod:`.model_ops`), so the written model prescribes the same values."""
+    from scipy.interpolate import CubicSpline
+
+    from ..layout import LOCKED_TOLERANCE
+
+    name = c.getName()
+    if name not in columns:
+        return None
+    q = np.asarray(columns[name], dtype=float)
+    if in_degrees and c.getMotionType() == osim.Coordinate.Rotational:
+        q = np.deg2rad(q)
+    if float(np.max(np.abs(q - c.getDefaultValue()))) <= LOCKED_TOLERANCE:
+        return None
+    return CubicSpline(np.asarray(ik_time, dtype=float), q, bc_type="not-a-knot")(np.asarray(times, dtype=float))
+
+
+def _held_outside(times, values):
+    """OpenSim function through ``values`` at ``times``: linear between the nodes (the states
+    are written at the nodes), held at the end values outside them, so that the model assembles
+    at any time (a spline's extrapolation at time 0 took a knee out of its range)."""
+    times = np.asarray(times, dtype=float)
+    f = osim.PiecewiseLinearFunction()
+    f.addPoint(float(times[0]) - 1e6, float(values[0]))
+    for t, q in zip(times, values):
+        f.addPoint(float(t), float(q))
+    f.addPoint(float(times[-1]) + 1e6, float(values[-1]))
+    return f
 
 
 def _spans(model, muscle, coordinate: str, m: LoadedModel) -> bool:
