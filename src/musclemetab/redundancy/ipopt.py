@@ -69,6 +69,7 @@ __all__ = [
     "solve_ocp",
     "solver_record",
     "effort_goals",
+    "single_trial_goals",
     "build_nlp",
     "problem_size",
     "failure_advice",
@@ -458,12 +459,37 @@ def build_nlp(
                          explicit_derivatives=options.derivatives == "explicit")
 
 
+def single_trial_goals(goals: Goals | None, options: SolverOptions) -> tuple[Goals, SolverOptions]:
+    """``(goals, options)`` of a single-trial solve, agreeing on the energy goal and the fiber
+    dynamics, which either may carry: the one that sets them (not ``None`` / not ``"forward"``)
+    gives them to both, so that the solve and its record use what the user asked for; two
+    different energy goals are an :class:`~musclemetab.errors.OptionError`. A single-trial solve
+    has no EMG or measured fiber lengths: ``goals`` asking to track them
+    (``w_emg``, ``emg_tolerance``, ``w_fiber_length``) is an error saying where they are
+    tracked (:func:`~musclemetab.redundancy.solve_emg_ten`, :func:`~musclemetab.redundancy.estimate_files`)."""
+    goals = goals or Goals()
+    tracked = [f"{name}={getattr(goals, name)}" for name, unset in (("w_emg", 0.0), ("emg_tolerance", None),
+                                                                     ("w_fiber_length", 0.0))
+               if getattr(goals, name) != unset]
+    if tracked:
+        raise OptionError(f"the goals ask to track measurements ({', '.join(tracked)}) but a single-trial solve has "
+                          "no EMG or measured fiber lengths; track EMG with solve_emg_ten (musclemetab solve --emg) "
+                          "and fiber lengths with estimate_files (musclemetab estimate), or leave these goals out")
+    energy = goals.energy if goals.energy is not None else options.energy
+    if goals.energy is not None and options.energy is not None and goals.energy != options.energy:
+        raise OptionError("the goals and the solver options name different energy goals; give it in one of them")
+    dynamics = goals.fiber_dynamics if goals.fiber_dynamics != "forward" else options.fiber_dynamics
+    goals = replace(goals, energy=energy, fiber_dynamics=dynamics)
+    if (options.energy, options.fiber_dynamics) != (energy, dynamics):
+        options = options.with_(energy=energy, fiber_dynamics=dynamics)
+    return goals, options
+
+
 def effort_goals(goals: Goals | None, options: SolverOptions) -> Goals:
-    """The goals of a single-trial solve: the effort weights (activation, excitation, reserves,
-    fiber velocity) of ``goals`` (default ``Goals()``), the energy goal of ``options`` if it has
-    one and its fiber dynamics."""
-    weights = (goals or Goals()).effort_weights()
-    return Goals(**weights, energy=options.energy, fiber_dynamics=options.fiber_dynamics)
+    """The goals of a single-trial solve (:func:`single_trial_goals`): the effort weights
+    (activation, excitation, reserves, fiber velocity) of ``goals`` (default ``Goals()``) with
+    the energy goal and the fiber dynamics that ``goals`` or ``options`` set."""
+    return single_trial_goals(goals, options)[0]
 
 
 def solver_record(options: SolverOptions, goals: Goals | None = None) -> dict:

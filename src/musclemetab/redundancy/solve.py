@@ -20,7 +20,7 @@ from .inputs import (
     restrict_geometry,
 )
 from .parameters import MuscleTendonParameters
-from .ipopt import SolverOptions, solve_ocp, solver_record
+from .ipopt import SolverOptions, single_trial_goals, solve_ocp, solver_record
 from .transcription import Goals
 from .record import RunRecord
 from .solution import Solution, build_solution
@@ -89,8 +89,7 @@ def solve_with_parameters(
     warm-started solve may end in another one (``summary['initial_guess']`` records it).
     """
     t_start = _time.perf_counter()
-    options = options or SolverOptions()
-    goals = goals or Goals()
+    goals, options = single_trial_goals(goals, options or SolverOptions())
     inputs, params, so = prepare_trial(geometry, params, id_time_s, id_moments_Nm, ik_time_s=ik_time_s,
                                        options=options, sources=sources, check_units=check_units,
                                        filter_inputs=filter_inputs, mesh_frequency_hz=mesh_frequency_hz)
@@ -172,9 +171,8 @@ def solve_trial(
     )
     if parameter_transform is not None:
         params = parameter_transform(params)
-    options = options or SolverOptions()
-    goals = goals or wf.goals
-    effort = options.energy.effort_weight if options.energy is not None else None
+    goals, options = single_trial_goals(goals or wf.goals, options or SolverOptions())
+    effort = goals.energy.effort_weight if goals.energy is not None else None
     if effort is not None:
         goals = replace(goals, w_activation=effort)
     return solve_with_parameters(
