@@ -31,16 +31,29 @@ def walking2():
 @pytest.fixture(scope="module")
 def converted(walking2, tmp_path_factory):
     out = tmp_path_factory.mktemp("c3d")
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")  # this trial's plates each carry one foot: no warning
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")  # this trial's plates each carry one foot: no two-feet warning
         record = convert_c3d(walking2, out)
-    return out, record
+    assert [type(w.message).__name__ for w in caught] == ["PartlyOffPlateWarning"], [str(w.message) for w in caught]
+    return out, record, str(caught[0].message)
+
+
+def test_a_foot_partly_off_its_plate_is_flagged(converted):
+    """walking2's left heel lands behind plate 2 (its heel marker comes to rest 0.16-0.18 m behind
+    the plate's edge before the plate is loaded, the load arriving under the forefoot): the
+    contact is flagged partly off, by the heel marker; plate 1, which holds the right foot whole,
+    is not."""
+    record, message = converted[1], converted[2]
+    off = {c["plate"]: c["partly_off"] for c in record["contacts"]}
+    assert off[1] is None
+    assert off[2]["marker"] == "LCAL" and 0.14 < off[2]["outside_m"] < 0.2 and 2.1 < off[2]["time_s"] < 2.25
+    assert "left foot stands partly off force plate 2" in message and "LCAL" in message
 
 
 def test_markers_in_opensim_frame_and_metres(walking2, converted):
     import ezc3d
 
-    out, record = converted
+    out, record, _ = converted
     markers = read_trc(out / "walking2.trc")
     assert len(markers.names) == 44 and markers.rate_hz == pytest.approx(250.0)
     raw = ezc3d.c3d(str(walking2))["data"]["points"]  # mm, lab frame x forward, y left, z up
@@ -62,7 +75,7 @@ def test_markers_in_opensim_frame_and_metres(walking2, converted):
 def test_opensim_reads_the_written_files(converted):
     from musclemetab.opensim_bridge import call
 
-    out, record = converted
+    out, record, _ = converted
     seen = call("lab:read_lab_files", str(out / "walking2.trc"), str(out / "walking2_grf.xml"))
     assert seen["units"] == "m" and seen["frames"] == 1249 and len(seen["markers"]) == 44
     assert {(f["name"], f["body"]) for f in seen["forces"]} == {("plate1_r", "calcn_r"), ("plate2_l", "calcn_l")}
@@ -76,7 +89,7 @@ def test_opensim_reads_the_written_files(converted):
 def test_each_plate_is_given_the_foot_standing_on_it(converted):
     """Plate 1 is stepped on by the right foot, plate 2 by the left: the heel marker of that foot
     stands still (under 0.3 m/s) over the plate in mid-contact, the other foot's swings past."""
-    out, record = converted
+    out, record, _ = converted
     markers = read_trc(out / "walking2.trc")
     by_plate = {c["plate"]: c for c in record["contacts"]}
     assert by_plate[1]["side"] == "r" and by_plate[2]["side"] == "l"
@@ -107,7 +120,7 @@ def test_centre_of_pressure_matches_ezc3d(walking2):
 
 
 def test_offsets_removed(converted, walking2):
-    out, record = converted
+    out, record, _ = converted
     offsets = {p["number"]: p["offset_force_n"][1] for p in record["plates"]}
     trial = read_c3d(walking2)
     for plate in trial.plates:  # unloaded in the first second: the raw reading is the offset
@@ -138,7 +151,7 @@ def test_total_vertical_force_is_body_weight(converted):
     the stride time, the stride timed by the right heel marker (1.0 s)."""
     from musclemetab.io import read_storage
 
-    out, record = converted
+    out, record, _ = converted
     markers = read_trc(out / "walking2.trc")
     grf = read_storage(out / "walking2_grf.mot")
     t = grf.index.to_numpy()
@@ -262,3 +275,87 @@ def test_command_line(walking2, tmp_path, capsys):
     assert not (tmp_path / "p").exists()
     assert main(["c3d", str(tmp_path / "none.c3d"), "--out", str(tmp_path / "q")]) == 1
     assert "no such C3D file" in capsys.readouterr().err
+
+
+def _c3d_with_emg(path, units=("mV", "uV")):
+    """A C3D file as a lab with EMG writes it: 4 markers at 100 Hz (mm), one type-2 force plate
+    and two EMG channels at 2000 Hz, 2 s. Each EMG channel is a 100 Hz carrier whose amplitude
+    ``A(t)`` varies slowly (a known envelope): ``A(t) = 1 + 0.8 sin(2 pi t)`` (channel 1, in
+    ``units[0]``) and ``2 + cos(pi t)`` (channel 2). The plate's channels come first, the EMG's
+    after them, as labs order them."""
+    import ezc3d
+    from ezc3d import ezc3d as swig
+
+    rate, n = 2000.0, 4000
+    t = np.arange(n) / rate
+    c = ezc3d.c3d()
+    c["parameters"]["POINT"]["RATE"]["value"] = [100.0]
+    c["parameters"]["POINT"]["LABELS"]["value"] = ("RHEE", "RTOE", "LHEE", "LTOE")
+    c["parameters"]["POINT"]["UNITS"]["value"] = ["mm"]
+    pts = np.ones((4, 4, n // 20))
+    pts[:3] = np.array([[0, 100, 0], [200, 100, 0], [0, -100, 0], [200, -100, 0]], float).T[:, :, None] \
+        + np.arange(n // 20)[None, None, :] * np.array([10.0, 0, 0])[:, None, None]
+    c["data"]["points"] = pts
+    amp = np.vstack([1 + 0.8 * np.sin(2 * np.pi * t), 2 + np.cos(np.pi * t)])
+    emg = amp * np.sin(2 * np.pi * 100 * t)
+    analog = np.zeros((1, 8, n))
+    analog[0, 2] = -700.0  # the plate's Fz (plate frame, z down): a foot standing on it
+    analog[0, 6:] = emg
+    c["parameters"]["ANALOG"]["RATE"]["value"] = [rate]
+    c["parameters"]["ANALOG"]["LABELS"]["value"] = ("Fx1", "Fy1", "Fz1", "Mx1", "My1", "Mz1", "EMG_SOL", "EMG_TA")
+    c["parameters"]["ANALOG"]["UNITS"]["value"] = ("N", "N", "N", "Nmm", "Nmm", "Nmm", *units)
+    c["data"]["analogs"] = analog
+    for name, value in (("USED", np.array([1.0])), ("TYPE", np.array([2.0])), ("CHANNEL", np.arange(1.0, 7.0)[:, None]),
+                        ("ZERO", np.array([0.0, 0.0]))):
+        c.add_parameter("FORCE_PLATFORM", name, value)
+        c["parameters"]["FORCE_PLATFORM"][name]["type"] = swig.INT
+    corners = np.array([[600, 300, 0], [0, 300, 0], [0, -300, 0], [600, -300, 0]], float).T[:, :, None]
+    c.add_parameter("FORCE_PLATFORM", "CORNERS", corners)
+    c.add_parameter("FORCE_PLATFORM", "ORIGIN", np.zeros((3, 1)))
+    c.write(str(path))
+    return t, emg, amp
+
+
+def test_emg_from_a_c3d_files_analog_channels(tmp_path):
+    """The analog channels that are not the plates' are the EMG: read in volts (mV and uV as the
+    file says), processed from raw into the envelope the carriers were given (away from the ends,
+    as for a .sto of raw EMG in tests/test_emg.py), and written by the conversion as a raw EMG
+    file that reads back the same."""
+    from musclemetab.emg import read_emg
+    from musclemetab.emg.processing import RawEmgPath
+    from musclemetab.errors import InputFileError, MissingColumnError
+    from musclemetab.io import read_storage
+    from musclemetab.mocap.c3d import read_c3d_analogs
+
+    path = tmp_path / "walk_emg.c3d"
+    t, emg, amp = _c3d_with_emg(path)
+    raw = read_c3d_analogs(path)
+    assert list(raw.columns) == ["EMG_SOL", "EMG_TA"]  # the plate's six channels left out
+    np.testing.assert_allclose(raw.index.to_numpy(), t, atol=1e-12)
+    np.testing.assert_allclose(raw["EMG_SOL"].to_numpy(), emg[0] * 1e-3, rtol=1e-5, atol=1e-9)  # mV -> V
+    np.testing.assert_allclose(raw["EMG_TA"].to_numpy(), emg[1] * 1e-6, rtol=1e-5, atol=1e-12)  # uV -> V
+    assert raw.attrs["units"] == {"EMG_SOL": "V", "EMG_TA": "V"}
+    env = read_emg(RawEmgPath(path))
+    inner = (env.index > 0.3) & (env.index < 1.7)
+    for k, channel in enumerate(("EMG_SOL", "EMG_TA")):
+        want = np.interp(env.index[inner], t, amp[k]) / amp[k].max()
+        assert np.abs(env[channel].to_numpy()[inner] - want).max() < 0.01, channel
+    with pytest.raises(MissingColumnError, match="EMG_GM"):
+        read_c3d_analogs(path, channels=["EMG_GM"])
+    out = tmp_path / "out"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        record = convert_c3d(path, out)
+    assert record["emg_channels"] == ["EMG_SOL", "EMG_TA"]
+    written = read_storage(out / "walk_emg_emg.sto")
+    np.testing.assert_allclose(written["EMG_SOL"].to_numpy(), raw["EMG_SOL"].to_numpy(), rtol=1e-6, atol=1e-12)
+    np.testing.assert_allclose(written.index.to_numpy(), t, atol=1e-9)
+
+
+def test_a_c3d_without_emg_says_so(walking2, converted):
+    from musclemetab.errors import InputFileError
+    from musclemetab.mocap.c3d import read_c3d_analogs
+
+    with pytest.raises(InputFileError, match="no analog channel besides the force plates'"):
+        read_c3d_analogs(walking2)
+    assert "emg" not in converted[1]["files"] and "emg_channels" not in converted[1]

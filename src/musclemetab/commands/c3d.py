@@ -60,10 +60,11 @@ def add_parser(sub) -> None:
         description=(
             "Read markers and force plates from a C3D file, turn them into OpenSim's frame (y up) and units "
             "(m, N, N m), and write DIR/<name>.trc, DIR/<name>_grf.mot (force, centre of pressure and free "
-            "moment of each plate under each foot), DIR/<name>_grf.xml (ExternalLoads) and DIR/<name>_c3d.json "
-            "(the record: frame, offsets, contacts and their feet). Each plate contact is given to the foot "
-            "standing on it, from the centre of pressure and the foot markers; a plate under both feet at once is "
-            "flagged. See docs/lab_data.md."
+            "moment of each plate under each foot), DIR/<name>_grf.xml (ExternalLoads), DIR/<name>_emg.sto (the "
+            "analog channels other than the plates': raw EMG, read with --emg-processing raw) and "
+            "DIR/<name>_c3d.json (the record: frame, offsets, contacts and their feet). Each plate contact is given "
+            "to the foot standing on it, from the centre of pressure and the foot markers; a plate under both feet "
+            "at once and a foot partly off its plate are flagged. See docs/lab_data.md."
         ),
     )
     p.add_argument("c3d", metavar="FILE.c3d", help="the C3D file")
@@ -79,6 +80,7 @@ def run(args) -> int:
     from pathlib import Path
 
     from ..io import check_output_folder
+    from ..messages import name_list
     from ..mocap import convert_c3d
 
     check_output_folder(args.out)
@@ -87,6 +89,8 @@ def run(args) -> int:
     name = Path(args.c3d).stem
     feet = ", ".join(f"plate {c['plate']} {c['start_s']:.3f}-{c['end_s']:.3f} s: "
                      f"{'right' if c['side'] == 'r' else 'left'}{' (both feet!)' if c['two_feet'] else ''}"
+                     f"{' (partly off!)' if c.get('partly_off') else ''}"
                      for c in record["contacts"]) or "no force plate"
-    print(f"c3d: {name}: {feet} -> {args.out}")
+    emg = f"; EMG channels {name_list(record['emg_channels'])}" if record.get("emg_channels") else ""
+    print(f"c3d: {name}: {feet}{emg} -> {args.out}")
     return 0

@@ -45,7 +45,8 @@ J Electromyogr Kinesiol 10:361-374) and De Luca (1997, J Appl Biomech 13:135-163
 of Human Movement, 4th ed.). The normalisation defaults to the trial's own peak; give
 ``maximum`` (the envelope peak of a maximal voluntary contraction) when one was recorded.
 
-**Files.** :func:`read_emg` reads an EMG file as processed envelopes (``"envelope"``, the
+**Files.** :func:`read_emg` reads an EMG file (a ``.sto``/``.mot`` table, or a C3D file's analog
+channels other than the force plates') as processed envelopes (``"envelope"``, the
 default: used as stored) or as raw EMG processed here with these defaults (``"raw"``), the
 ``--emg-processing`` option of ``musclemetab solve`` and ``estimate`` and the study file's
 ``emg_processing`` key. :func:`emg_source` marks a path with its processing
@@ -403,18 +404,29 @@ def read_emg(path: str | os.PathLike, processing: str | None = None) -> pd.DataF
     :class:`RawEmgPath`) through :func:`process_raw_emg` with its defaults, processed
     envelopes (``"envelope"``, the default for a plain path) as stored
     (:func:`read_processed_emg`). The table's ``attrs["processing"]`` says which."""
-    from ..io import read_storage
-
     if processing is None:
         processing = "raw" if isinstance(path, RawEmgPath) else "envelope"
     if processing not in EMG_PROCESSING:
         raise OptionError(f"EMG processing must be {' or '.join(EMG_PROCESSING)}, not {processing!r}")
     if processing == "envelope":
         return read_processed_emg(path)
-    df = read_storage(Path(path))
+    df = _read_signals(path)
     env = process_raw_emg(df)
     env.attrs.update(path=str(path))
     return env
+
+
+def _read_signals(path) -> pd.DataFrame:
+    """The channels of an EMG file: a storage file's columns, or a C3D file's analog channels
+    other than the force plates' (:func:`musclemetab.mocap.c3d.read_c3d_analogs`)."""
+    from ..io import read_storage
+
+    path = Path(path)
+    if path.suffix.lower() == ".c3d":
+        from ..mocap.c3d import read_c3d_analogs
+
+        return read_c3d_analogs(path)
+    return read_storage(path)
 
 
 def read_processed_emg(path: str | os.PathLike) -> pd.DataFrame:
@@ -423,10 +435,8 @@ def read_processed_emg(path: str | os.PathLike) -> pd.DataFrame:
     Only structure is checked (readable, numeric, no NaN); see the module docstring for
     why values slightly outside [0, 1] are kept.
     """
-    from ..io import read_storage
-
     path = Path(path)
-    df = read_storage(path)
+    df = _read_signals(path)
     vals = df.to_numpy(dtype=float)
     if np.isnan(vals).any():
         bad = [str(c) for c in df.columns[np.isnan(vals).any(axis=0)]]

@@ -12,6 +12,9 @@ own ``C3DFileAdapter`` is not part of the ``opensim`` wheel. What this module ad
   else the normal of the plates' surfaces, else the lab's z; the walking direction is the
   horizontal axis along which the markers' mean moves farthest (over 0.5 m), else the file's
   ``POINT:X_SCREEN`` axis, else the lab's x. Both can be given.
+
+:func:`read_c3d_analogs` reads the analog channels that are not force-plate channels (EMG) as a
+table of raw signals, in volts when the file says V, mV or uV.
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ import numpy as np
 from ..errors import DataMismatchError, InputFileError, MusclemetabWarning, OptionError
 from .trial import UP, LabTrial, Markers, Plate
 
-__all__ = ["read_c3d", "lab_rotation", "LENGTH_UNITS"]
+__all__ = ["read_c3d", "read_c3d_analogs", "lab_rotation", "LENGTH_UNITS", "VOLTAGE_UNITS"]
 
 #: metres per unit of length
 LENGTH_UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
@@ -211,3 +214,74 @@ def _orient_forces(plates: list[Plate], path) -> bool:
                       "the plates and reversed into the ground's force on the feet", MusclemetabWarning, stacklevel=3)
         return True
     return False
+
+
+#: volts per unit of an analog channel (EMG amplifiers write V, mV or uV)
+VOLTAGE_UNITS = {"v": 1.0, "mv": 1e-3, "uv": 1e-6, "µv": 1e-6, "μv": 1e-6}
+
+
+def read_c3d_analogs(path: str | os.PathLike, channels=None) -> "pd.DataFrame":
+    """The analog channels of a C3D file that are not force-plate channels (EMG, usually), as a
+    time-indexed table (s) at the analog rate, one column per channel label.
+
+    Channels whose ``ANALOG:UNITS`` is a voltage (V, mV, uV) are converted to volts; others are
+    kept in the file's units (EMG is normalised after processing, so the unit does not change
+    the envelope); ``attrs["units"]`` holds each column's unit after conversion. The force
+    plates' channels (``FORCE_PLATFORM:CHANNEL``) are left out. ``channels``: labels to keep
+    (default all); a label the file lacks raises
+    :class:`~musclemetab.errors.MissingColumnError` naming it.
+
+    Raises
+    ------
+    InputFileError
+        The file is missing or unreadable, or has no analog channel besides the plates'.
+    """
+    import pandas as pd
+
+    from ..errors import MissingColumnError
+    from ..messages import name_list
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputFileError(f"{path}: no such C3D file; check the path")
+    import ezc3d
+
+    try:
+        c3d = ezc3d.c3d(str(path))
+    except Exception as exc:
+        raise InputFileError(f"{path}: not a readable C3D file ({type(exc).__name__}: {exc})") from None
+    params, head = c3d["parameters"], c3d["header"]
+    labels = [str(n).strip() for n in (_param(params, "ANALOG", "LABELS") or [])]
+    units = [str(u).strip() for u in (_param(params, "ANALOG", "UNITS") or [])]
+    units = (units + [""] * len(labels))[:len(labels)]
+    data = np.asarray(c3d["data"]["analogs"], dtype=float)
+    data = data.reshape(data.shape[-2], data.shape[-1]) if data.size else np.zeros((0, 0))
+    plate_channels = np.asarray(_param(params, "FORCE_PLATFORM", "CHANNEL") if "FORCE_PLATFORM" in params else [],
+                                dtype=float).ravel()
+    on_plates = {int(c) - 1 for c in plate_channels if c > 0}
+    keep = [i for i in range(min(len(labels), data.shape[0])) if i not in on_plates]
+    if channels is not None:
+        by_label = {labels[i]: i for i in keep}
+        missing = [c for c in channels if c not in by_label]
+        if missing:
+            raise MissingColumnError(f"{path}: no analog channel {name_list(missing)} besides the force plates'; the "
+                                     f"file has {name_list([labels[i] for i in keep]) or 'none'}")
+        keep = [by_label[c] for c in channels]
+    if not keep:
+        raise InputFileError(f"{path}: no analog channel besides the force plates' (no EMG in this file); give the "
+                             "EMG as a .sto/.mot file")
+    rate = float(head["analogs"]["frame_rate"] or 0.0)
+    first = int(head["points"]["first_frame"])
+    point_rate = float(head["points"]["frame_rate"] or 0.0)
+    if rate <= 0:
+        raise InputFileError(f"{path}: the analog rate is {rate:g} Hz; the file's header is damaged")
+    start = first / point_rate if point_rate > 0 else 0.0
+    time = start + np.arange(data.shape[1]) / rate
+    columns, out_units = {}, {}
+    for i in keep:
+        scale = VOLTAGE_UNITS.get(units[i].lower())
+        columns[labels[i]] = data[i] * (scale if scale is not None else 1.0)
+        out_units[labels[i]] = "V" if scale is not None else units[i]
+    df = pd.DataFrame(columns, index=pd.Index(time, name="time"))
+    df.attrs.update(path=str(path), units=out_units, analog_rate_hz=rate)
+    return df

@@ -105,12 +105,25 @@ def model_foot_bodies(model) -> dict:
     return {s: foot_bodies(layout, s)[0] for s in ("r", "l")}
 
 
+def _analog_channels(path):
+    """The C3D file's analog channels other than the force plates' (raw EMG), or ``None``."""
+    from ..errors import InputFileError
+    from .c3d import read_c3d_analogs
+
+    try:
+        return read_c3d_analogs(path)
+    except InputFileError:
+        return None
+
+
 def convert_c3d(path: str | os.PathLike, out: str | os.PathLike, *, stem: str | None = None, model=None,
                 up: str = "auto", forward: str = "auto", feet: dict | None = None,
                 plate_feet: dict | None = None, offsets: bool = True,
                 threshold_n: float = CONTACT_THRESHOLD_N) -> dict:
     """Convert a C3D file into ``<stem>.trc`` (markers, m), and when it has force plates
-    ``<stem>_grf.mot`` and ``<stem>_grf.xml`` (ExternalLoads), plus ``<stem>_c3d.json`` (the
+    ``<stem>_grf.mot`` and ``<stem>_grf.xml`` (ExternalLoads), when it has other analog channels
+    ``<stem>_emg.sto`` (those raw signals, volts where the file says V/mV/uV: EMG to be read with
+    ``--emg-processing raw``), plus ``<stem>_c3d.json`` (the
     record: frame, offsets, every contact and its foot, flags), all written together into ``out``.
     Returns the record (with the paths under ``"files"``).
     """
@@ -146,6 +159,16 @@ def convert_c3d(path: str | os.PathLike, out: str | os.PathLike, *, stem: str | 
             _, forces = ground_force_table(trial.plates, contacts, threshold_n)
             record["forces"] = [{"name": f"plate{n}_{s}", "prefix": pre, "plate": n, "side": s, "body": bodies[s]}
                                 for pre, n, s in forces]
+        emg = _analog_channels(path)
+        if emg is not None:
+            from ..io import write_storage
+
+            write_storage(Path(tmp) / f"{stem}_emg.sto", emg, name=f"{stem}_emg",
+                          comments=[f"raw analog channels of {Path(path).name} other than the force plates', "
+                                    f"{emg.attrs['analog_rate_hz']:g} Hz, units "
+                                    + ", ".join(f"{c} {u or '?'}" for c, u in emg.attrs["units"].items())])
+            files["emg"] = str(Path(out) / f"{stem}_emg.sto")
+            record["emg_channels"] = list(emg.columns)
         record["files"] = files
         (Path(tmp) / f"{stem}_c3d.json").write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
     return record

@@ -14,6 +14,11 @@
   slower than :data:`STANDING_SPEED_M_S`, for :data:`TWO_FEET_MIN_S` or longer), is flagged: it
   carries both feet, its force cannot be split between them, and it is given to the foot nearer
   for most of it with a warning; the record says so (``two_feet``).
+* A contact whose foot stands partly off the plate is flagged too (``partly_off``): while the
+  foot stands (a marker of it slower than :data:`STANDING_SPEED_M_S`) from
+  :data:`LANDING_S` before the plate is loaded to the contact's end, one of its markers at rest lies
+  more than :data:`OFF_PLATE_M` outside the plate's outline, so part of the foot's load is
+  elsewhere (the floor, another plate) and the plate's force is not the whole foot's.
 """
 
 from __future__ import annotations
@@ -29,7 +34,7 @@ from .trial import Markers, Plate, horizontal
 from ..messages import name_list
 
 __all__ = ["CONTACT_THRESHOLD_N", "PlateContact", "remove_offsets", "contacts", "foot_marker_sets",
-           "assign_feet", "TwoFeetWarning"]
+           "assign_feet", "TwoFeetWarning", "PartlyOffPlateWarning"]
 
 #: vertical force (N) above which a plate is loaded (the package's gait-event threshold)
 CONTACT_THRESHOLD_N = 20.0
@@ -43,6 +48,12 @@ STANDING_SPEED_M_S = 0.3
 TWO_FEET_MIN_S = 0.02
 #: the nearest foot must be this close (m) to the centre of pressure
 MAX_FOOT_DISTANCE_M = 0.25
+#: a marker of the standing foot this far (m) outside the plate's outline puts the foot partly off
+#: it (the heel and toe markers sit within about 2 cm of the sole's outline, seen from above)
+OFF_PLATE_M = 0.04
+#: how long (s) before a plate is loaded its foot is looked at: a heel landing off the plate lands
+#: before the plate feels the forefoot
+LANDING_S = 0.1
 
 SIDES = ("r", "l")
 _SIDE_WORDS = {"r": ("R", "RIGHT"), "l": ("L", "LEFT")}
@@ -50,6 +61,10 @@ _SIDE_WORDS = {"r": ("R", "RIGHT"), "l": ("L", "LEFT")}
 
 class TwoFeetWarning(MusclemetabWarning):
     """A force-plate contact carries both feet at once: its force is given to one foot."""
+
+
+class PartlyOffPlateWarning(MusclemetabWarning):
+    """A foot stands partly off the force plate that carries it: the plate misses part of its load."""
 
 
 @dataclass
@@ -65,6 +80,7 @@ class PlateContact:
     peak_vertical_n: float
     impulse_ns: float
     how: str = "centre of pressure"
+    partly_off: dict | None = None
 
     def record(self) -> dict:
         return asdict(self)
@@ -183,6 +199,39 @@ def _standing(markers: Markers, feet: dict, plate: Plate) -> np.ndarray:
     return out
 
 
+def _outside_by(points_h: np.ndarray, corners_h: np.ndarray) -> np.ndarray:
+    """Horizontal distance (m) of points outside the plate's outline (0 inside, NaN unknown)."""
+    d = np.full(len(points_h), np.inf)
+    for i in range(len(corners_h)):
+        a = np.tile(corners_h[i], (len(points_h), 1))
+        b = np.tile(corners_h[(i + 1) % len(corners_h)], (len(points_h), 1))
+        d = np.fmin(d, _segment_distance(points_h, a, b))
+    out = np.where(_inside(points_h, corners_h), 0.0, d)
+    return np.where(np.all(np.isfinite(points_h), axis=1), out, np.nan)
+
+
+def partly_off(markers: Markers, foot: dict, plate: Plate, t0: float, t1: float) -> dict | None:
+    """Where the foot ``foot`` (``{"heel": [...], "fore": [...]}``) stands partly off ``plate``
+    during its contact ``t0``-``t1`` (module docstring): ``{"marker", "time_s", "outside_m"}`` of
+    the standing marker farthest outside, or ``None``."""
+    frames = np.flatnonzero((markers.time >= t0 - LANDING_S) & (markers.time <= t1))
+    if len(frames) < 3 or len(markers.time) < 3:
+        return None
+    corners_h = horizontal(plate.corners)
+    worst = None
+    for name in foot["heel"] + foot["fore"]:
+        xyz = markers.marker(name)
+        speed = np.linalg.norm(np.gradient(xyz, markers.time, axis=0), axis=1)[frames]
+        outside = _outside_by(horizontal(xyz[frames]), corners_h)
+        at_rest = (speed < STANDING_SPEED_M_S) & np.isfinite(outside)
+        if not at_rest.any():
+            continue
+        k = int(np.argmax(np.where(at_rest, outside, -1.0)))
+        if outside[k] > OFF_PLATE_M and (worst is None or outside[k] > worst["outside_m"]):
+            worst = {"marker": name, "time_s": float(markers.time[frames[k]]), "outside_m": float(outside[k])}
+    return worst
+
+
 def assign_feet(plates: list[Plate], markers: Markers, *, feet: dict | None = None,
                 plate_feet: dict | None = None, threshold_n: float = CONTACT_THRESHOLD_N,
                 source: str = "") -> list[PlateContact]:
@@ -241,7 +290,15 @@ def assign_feet(plates: list[Plate], markers: Markers, *, feet: dict | None = No
             both = standing["r"][frames] & standing["l"][frames]
             rate = markers.rate_hz or 1.0
             two = min(share.values()) > TWO_FEET_SHARE or both.sum() / rate >= TWO_FEET_MIN_S
-            contact = PlateContact(side=side, share=share, two_feet=bool(two), **base)
+            off = partly_off(markers, feet[side], plate, t0, t1)
+            contact = PlateContact(side=side, share=share, two_feet=bool(two), partly_off=off, **base)
+            if off is not None:
+                warnings.warn(
+                    f"{source}: the {'right' if side == 'r' else 'left'} foot stands partly off force plate "
+                    f"{plate.number} during its contact at {t0:.3f}-{t1:.3f} s (marker {off['marker']} at rest "
+                    f"{100 * off['outside_m']:.0f} cm outside the plate at {off['time_s']:.3f} s): the plate misses "
+                    "part of the foot's load; leave the gait cycles that hold this contact out",
+                    PartlyOffPlateWarning, stacklevel=2)
             if two:
                 warnings.warn(
                     f"{source}: force plate {plate.number} carries both feet at once during its contact at "
