@@ -309,3 +309,54 @@ def test_c3d_walk_ik_matches_the_trc_walk(c3d_prepared, gait2392_prepared):
     b = b.reindex(a.index, method="nearest", tolerance=1e-6)
     assert len(a) == 120  # 0.5-2.483 s: the setup's 0.5-2.5 s clipped to the file
     assert np.abs(a.to_numpy() - b.to_numpy()).max() < 0.2
+
+
+@pytest.mark.slow
+def test_study_from_a_c3d_file_alone_runs_to_results(c3d_prepared, gait2392_prepared, gait2392, tmp_path):
+    """A study whose walking trial is a C3D file alone (markers and force plates; no IK, no ID, no
+    ground-force file): the plates' forces are given to the feet, OpenSim computes the ID, and the
+    rate is that of the same walk given as OpenSim's .trc and ground-force files (IK within 0.2 deg,
+    forces within 0.05 N of them: within 1 %)."""
+    import pandas as pd
+
+    inputs, prepared = gait2392_prepared
+    walk = c3d_prepared.parent / "walk1.c3d"
+    study = tmp_path / "c3d.toml"
+    study.write_text(f'''
+name = "from a C3D file"
+output = "out"
+workflows = ["effort-gen"]
+models = ["UM10"]
+
+[[subjects]]
+name = "s01"
+generic_model = "{inputs / "gait2392_thelen2003muscle.osim"}"
+static = "{inputs / "subject01_static.trc"}"
+scale_setup = "{inputs / "subject01_Setup_Scale.xml"}"
+body_mass_kg = 72.6
+height_m = 1.8
+
+[[subjects.trials]]
+name = "walk1"
+markers = "{walk}"
+ik_setup = "{inputs / "subject01_Setup_IK.xml"}"
+cycle = "auto"
+''')
+    files = tmp_path / "files.toml"
+    files.write_text(MARKER_STUDY.format(name="s01", loads=gait2392.external_loads,
+                                         model=f'model = "{prepared / "model.osim"}"',
+                                         kinematics=f'ik = "{prepared / "ik.mot"}"'))
+    import warnings
+
+    from musclemetab.errors import MarkerErrorWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MarkerErrorWarning)
+        assert main(["run", str(study), "--workers", "1", "--no-progress"]) == 0
+    ours = pd.read_csv(tmp_path / "out" / "results.csv").iloc[0]
+    assert (tmp_path / "out" / "prepared" / "s01" / "walk1").is_dir()
+    assert main(["run", str(files), "--workers", "1", "--no-progress", "--out", str(tmp_path / "ref")]) == 0
+    ref = pd.read_csv(tmp_path / "ref" / "results.csv").iloc[0]
+    assert ours["cycle_start_s"] == pytest.approx(ref["cycle_start_s"], abs=0.005)
+    assert ours["cycle_end_s"] == pytest.approx(ref["cycle_end_s"], abs=0.005)
+    assert ours["whole_body_W_per_kg"] == pytest.approx(ref["whole_body_W_per_kg"], rel=0.01)
