@@ -50,7 +50,11 @@ def solve_key(func, args, kwargs) -> tuple[str, dict] | None:
     from musclemetab.redundancy.ipopt import SolverOptions
     from musclemetab.redundancy.solution import Solution
 
+    from musclemetab.emg import RawEmgPath, processing_record
+
     def plain(value):
+        if isinstance(value, RawEmgPath) and value.is_file():  # raw EMG: its processing is part of the key
+            return {"sha256": file_sha256(value), "emg_processing": processing_record(value)}
         if isinstance(value, (str, os.PathLike)) and Path(value).is_file():
             return {"sha256": file_sha256(value)}
         if isinstance(value, os.PathLike):

@@ -228,3 +228,74 @@ def test_signed_raw_emg_with_offset_and_drift_gives_its_envelope():
         noise = amplitude * np.random.default_rng(7).standard_normal(t.size) - 2.0
         env = process_raw_emg(_table(t, TA=noise))["TA"].to_numpy()
         assert np.corrcoef(env[inner], amplitude[inner])[0, 1] > 0.8
+
+
+def test_every_raw_processing_step_is_an_option(example, tmp_path, capsys):
+    """Raw EMG processed with other settings than the defaults, by the command line and in a study,
+    against answers worked from the filter formulas: two channels, a 100 Hz and a 30 Hz carrier of
+    known amplitude A(t) on a DC offset. The envelope of |A sin| is 2A/pi times the band-pass gain
+    at the carrier's frequency; normalised to a given maximum (a CSV file) it keeps that scale, and
+    a 50-400 Hz band-pass passes the 100 Hz channel (gain ~1) and cuts the 30 Hz one (gain
+    :func:`zero_lag_gain` at 30 Hz). The delay shifts the time axis by itself."""
+    import json
+    import pickle
+
+    from musclemetab.commands import main
+    from musclemetab.emg import EmgProcessing, RawEmgPath, emg_source, processing_record
+    from musclemetab.io import read_storage, write_storage
+    from musclemetab.study.spec import study_from_dict
+
+    fs = 2000.0
+    t = np.arange(0, 3, 1 / fs)
+    amplitude = 0.5 + 0.4 * np.sin(2 * np.pi * t + 0.3)
+    raw = _table(t, FAST=amplitude * np.sin(2 * np.pi * 100 * t) + 1.0, SLOW=amplitude * np.sin(2 * np.pi * 30 * t) - 2.0)
+    write_storage(tmp_path / "raw.sto", raw)
+    (tmp_path / "max.csv").write_text("channel,maximum\nFAST,1.0\nSLOW,1.0\n")
+    argv = ["emg", str(tmp_path / "raw.sto"), "--emg-band", "50:400", "--emg-maximum", str(tmp_path / "max.csv"),
+            "--emg-delay", "0.05", "--emg-lowpass", "5", "--out", str(tmp_path / "out")]
+    assert main(argv) == 0
+    env = read_storage(tmp_path / "out" / "raw_envelopes.sto")
+    np.testing.assert_allclose(env.index.to_numpy(), t + 0.05, atol=1e-9)
+    inner = (t > 0.3) & (t < t[-1] - 0.3)
+    envelope = 2 * amplitude / np.pi
+    # to 6e-3 (0.6 % of the channel's scale; the default band and low-pass give the same 5e-3 with a
+    # given maximum: the envelope of a rectified modulated carrier)
+    np.testing.assert_allclose(env["FAST"].to_numpy()[inner], envelope[inner] * zero_lag_gain(100, fs, (50, 400),
+                                                                                                "bandpass"), atol=6e-3)
+    cut = float(zero_lag_gain(30, fs, (50, 400), "bandpass"))
+    assert 0.05 < cut < 0.5
+    np.testing.assert_allclose(env["SLOW"].to_numpy()[inner], envelope[inner] * cut, atol=6e-3 * cut)
+    record = json.loads((tmp_path / "out" / "raw_envelopes.json").read_text())
+    assert record["processing"]["band_hz"] == [50.0, 400.0] and record["processing"]["maximum"] == {"FAST": 1.0,
+                                                                                                      "SLOW": 1.0}
+    # the same settings on solve's --emg give the same envelopes: the settings ride with the path
+    settings = EmgProcessing(band_hz=(50, 400), lowpass_hz=5.0, maximum={"FAST": 1.0, "SLOW": 1.0}, delay_s=0.05)
+    marked = emg_source(tmp_path / "raw.sto", settings)
+    assert isinstance(marked, RawEmgPath) and pickle.loads(pickle.dumps(marked)).processing == settings
+    from musclemetab.emg import read_emg
+
+    np.testing.assert_allclose(read_emg(marked).to_numpy(), env.to_numpy(), atol=1e-9)
+    assert processing_record(marked) == {"band_hz": [50.0, 400.0], "lowpass_hz": 5.0,
+                                         "maximum": {"FAST": 1.0, "SLOW": 1.0}, "delay_s": 0.05}
+    assert processing_record(emg_source(tmp_path / "raw.sto", "raw")) == "raw"  # the defaults: earlier records
+    assert EmgProcessing.from_record(processing_record(marked)) == settings
+    # a study's emg_processing table
+    data = {"name": "s", "workflows": ["effort-gen"], "models": ["UM10"],
+            "subjects": [{"name": "sub1", "model": str(example.model), "body_mass_kg": 72.6,
+                          "emg_processing": {"band_hz": [50, 400], "lowpass_hz": 5},
+                          "trials": [{"name": "normal", "ik": str(example.ik["normal"]), "id": str(example.id["normal"]),
+                                      "emg": str(tmp_path / "raw.sto")}]}]}
+    trial = study_from_dict(data, base=tmp_path, output=tmp_path / "study").subjects[0].trials[0]
+    assert trial.emg.processing == EmgProcessing(band_hz=(50, 400), lowpass_hz=5.0)
+    data["subjects"][0]["emg_processing"] = {"bandpass": [50, 400]}
+    with pytest.raises(OptionError, match="unknown raw-EMG setting.*bandpass"):
+        study_from_dict(data, base=tmp_path, output=tmp_path / "study")
+    # settings of raw EMG given for envelopes: one line, nothing solved
+    capsys.readouterr()
+    assert main(["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
+                 str(example.id["normal"]), "--emg", str(example.emg["normal"]), "--emg-band", "10:450",
+                 "--out", str(tmp_path / "solve")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--emg-band" in err[0] and "--emg-processing raw" in err[0]
+    with pytest.raises(OptionError, match="LOW < HIGH"):
+        EmgProcessing(band_hz=(400, 20))

@@ -432,7 +432,7 @@ def test_emg_processing_key_marks_raw_emg(example):
 
     assert _trial_record(slow)["emg_processing"] == "raw" and "emg_processing" not in _trial_record(normal)
     subject["trials"][1]["emg_processing"] = "rectified"
-    with pytest.raises(OptionError, match="trial 'normal'.*'emg_processing' must be envelope or raw, not 'rectified'"):
+    with pytest.raises(OptionError, match="trial 'normal'.*'emg_processing' must be envelope or raw or a table of raw-EMG settings.*not 'rectified'"):
         study_from_dict(data)
 
 

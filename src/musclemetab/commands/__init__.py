@@ -36,6 +36,7 @@ __all__ = ["main", "build_parser", "SUBCOMMANDS", "BROKEN_PIPE_STATUS"]
 #: command is run (or the full help is asked for), which keeps the start of a command short.
 SUBCOMMANDS = (
     ("c3d", "musclemetab.commands.c3d", "add_parser"),
+    ("emg", "musclemetab.commands.emg", "add_parser"),
     ("prepare", "musclemetab.commands.prepare", "add_parser"),
     ("geometry", "musclemetab.commands.geometry", "add_parser"),
     ("solve", "musclemetab.commands.solve", "add_parser"),

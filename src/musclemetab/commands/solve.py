@@ -191,18 +191,96 @@ def add_progress_argument(p, more: str = "") -> None:
 
 
 def add_emg_processing_argument(p) -> None:
-    """``--emg-processing envelope|raw`` (``solve`` and ``estimate``)."""
+    """``--emg-processing envelope|raw`` and the raw processing's settings (``solve``,
+    ``estimate`` and ``emg``)."""
     p.add_argument("--emg-processing", choices=("envelope", "raw"), default="envelope",
                    help="how the --emg files are read: 'envelope' (default) processed, normalised envelopes used as "
-                   "stored; 'raw' raw (signed) EMG, processed here: zero-lag band-pass 20-400 Hz, full-wave "
-                   "rectification, zero-lag low-pass 6 Hz, normalised to each channel's peak in the file")
+                   "stored; 'raw' raw (signed) EMG (a .sto/.mot table, or a C3D file's analog channels), processed "
+                   "here: zero-lag band-pass 20-400 Hz, full-wave rectification, zero-lag low-pass 6 Hz, normalised "
+                   "to each channel's peak in the file (each step set by the options below)")
+    add_raw_emg_arguments(p)
+
+
+def add_raw_emg_arguments(p) -> None:
+    """The settings of the raw EMG processing (:class:`musclemetab.emg.EmgProcessing`)."""
+    p.add_argument("--emg-band", metavar="LOW:HIGH", help="raw EMG: the band-pass edges in Hz (default 20:400)")
+    p.add_argument("--emg-lowpass", type=float, metavar="HZ", help="raw EMG: the envelope's low-pass cut-off (default 6)")
+    p.add_argument("--emg-order", type=int, metavar="N",
+                   help="raw EMG: the effective order of each zero-lag filter (default 4: a 2nd-order design run "
+                   "forward and backward)")
+    p.add_argument("--emg-maximum", metavar="peak|MAX.csv",
+                   help="raw EMG: normalise to each channel's peak in the file (default) or to the maxima of a CSV "
+                   "file with columns channel,maximum (e.g. the envelope peaks of maximal voluntary contractions, in "
+                   "the raw signal's units)")
+    p.add_argument("--emg-delay", type=float, metavar="S",
+                   help="raw EMG: electromechanical delay added to the EMG's time (s, default 0)")
+
+
+def raw_emg_processing(args):
+    """The :class:`musclemetab.emg.EmgProcessing` of the ``--emg-*`` options, ``None`` when none
+    is given; :class:`~musclemetab.errors.OptionError` when they are given for envelopes."""
+    from ..emg import EmgProcessing
+    from ..errors import OptionError
+
+    given = {k: getattr(args, f"emg_{k}", None) for k in ("band", "lowpass", "order", "maximum", "delay")}
+    given = {k: v for k, v in given.items() if v is not None}
+    if not given:
+        return None
+    if getattr(args, "emg_processing", "raw") != "raw":
+        raise OptionError(f"{', '.join(f'--emg-{k}' for k in given)} set(s) the processing of raw EMG: add "
+                          "--emg-processing raw, or drop them for processed envelopes")
+    settings = {}
+    if "band" in given:
+        low, sep, high = str(given["band"]).partition(":")
+        try:
+            settings["band_hz"] = (float(low), float(high))
+        except ValueError:
+            raise OptionError(f"--emg-band '{given['band']}' must be LOW:HIGH in Hz, e.g. 20:400") from None
+    if "lowpass" in given:
+        settings["lowpass_hz"] = given["lowpass"]
+    if "order" in given:
+        settings["order"] = given["order"]
+    if "delay" in given:
+        settings["delay_s"] = given["delay"]
+    if "maximum" in given and given["maximum"] != "peak":
+        settings["maximum"] = _emg_maxima(given["maximum"])
+    return EmgProcessing(**settings)
+
+
+def _emg_maxima(path) -> dict:
+    """``{channel: maximum}`` of a CSV file with columns channel,maximum."""
+    import csv
+    from pathlib import Path
+
+    from ..errors import InputFileError
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputFileError(f"--emg-maximum {path}: no such file; give 'peak' or a CSV file of channel,maximum")
+    with path.open(newline="", encoding="utf-8") as f:
+        rows = list(csv.DictReader(f))
+    if not rows or not {"channel", "maximum"} <= set(rows[0]):
+        raise InputFileError(f"{path}: the EMG maxima need the columns channel,maximum (one row per channel)")
+    out = {}
+    for i, r in enumerate(rows, start=2):
+        try:
+            out[r["channel"].strip()] = float(r["maximum"])
+        except (TypeError, ValueError):
+            raise InputFileError(f"{path}: line {i}: maximum {r['maximum']!r} of channel {r['channel']!r} is not a "
+                                 "number") from None
+    return out
 
 
 def emg_files(args) -> list:
-    """The ``--emg`` files, each marked with ``--emg-processing`` (:func:`musclemetab.emg.emg_source`)."""
+    """The ``--emg`` files, each marked with ``--emg-processing`` and the raw processing's
+    settings (:func:`musclemetab.emg.emg_source`)."""
     from ..emg import emg_source
 
-    return [emg_source(p, getattr(args, "emg_processing", "envelope")) for p in _as_list(getattr(args, "emg", None))]
+    processing = getattr(args, "emg_processing", "envelope")
+    settings = raw_emg_processing(args)
+    if settings is not None:
+        processing = settings
+    return [emg_source(p, processing) for p in _as_list(getattr(args, "emg", None))]
 
 
 def add_emg_goal_arguments(p, mode_help: str, weight_help: str) -> None:

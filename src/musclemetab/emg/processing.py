@@ -68,6 +68,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -95,9 +96,12 @@ __all__ = [
     "process_raw_emg",
     "read_processed_emg",
     "EMG_PROCESSING",
+    "EmgProcessing",
     "RawEmgPath",
     "emg_source",
+    "processing_record",
     "read_emg",
+    "read_emg_signals",
     "map_channels",
     "require_window",
     "emg_at",
@@ -384,19 +388,114 @@ def process_raw_emg(
 EMG_PROCESSING = ("envelope", "raw")
 
 
+@dataclass(frozen=True)
+class EmgProcessing:
+    """The settings of :func:`process_raw_emg` a raw EMG file is processed with, every step an
+    option: the band-pass edges (Hz), the envelope's low-pass cut-off (Hz), the filters' order
+    and what it means (``"effective"`` or ``"design"``, module docstring), the normalisation
+    (``"peak"``: each channel's own peak; or ``{channel: maximum}`` in the envelope's units, e.g.
+    the envelope peaks of maximal voluntary contractions) and the electromechanical delay (s).
+    The defaults are the module's (band-pass 20-400 Hz, low-pass 6 Hz, 4th order, peak, no delay).
+
+    :meth:`record` is ``"raw"`` for the defaults and the changed settings otherwise;
+    :meth:`from_record` reads either back (``"raw"``, a mapping of these names)."""
+
+    band_hz: tuple[float, float] = BANDPASS_HZ
+    lowpass_hz: float = LOWPASS_HZ
+    order: int = FILTER_ORDER
+    order_means: str = "effective"
+    maximum: object = "peak"
+    delay_s: float = 0.0
+
+    def __post_init__(self):
+        band = tuple(float(x) for x in self.band_hz) if isinstance(self.band_hz, (list, tuple)) else ()
+        if len(band) != 2 or not 0 < band[0] < band[1]:
+            raise OptionError(f"the EMG band-pass (--emg-band, band_hz) must be two frequencies LOW:HIGH in Hz with "
+                              f"0 < LOW < HIGH, not {self.band_hz!r}")
+        object.__setattr__(self, "band_hz", band)
+        if not (isinstance(self.lowpass_hz, (int, float)) and self.lowpass_hz > 0):
+            raise OptionError(f"the EMG envelope's low-pass (--emg-lowpass, lowpass_hz) must be a frequency above 0 Hz, "
+                              f"not {self.lowpass_hz!r}")
+        if not (isinstance(self.order, int) and self.order >= 1) or (self.order_means == "effective" and self.order % 2):
+            raise OptionError(f"the EMG filters' order (--emg-order, order) must be a positive whole number, even for "
+                              f"the effective order of a zero-lag filter, not {self.order!r}")
+        if self.order_means not in _ORDER_MEANINGS:
+            raise OptionError(f"order_means must be {' or '.join(_ORDER_MEANINGS)}, not {self.order_means!r}")
+        if isinstance(self.maximum, Mapping):
+            bad = {k: v for k, v in self.maximum.items() if not (isinstance(v, (int, float)) and v > 0)}
+            if bad:
+                raise OptionError(f"the EMG maxima (--emg-maximum) must be positive numbers per channel, not {bad!r}")
+            object.__setattr__(self, "maximum", {str(k): float(v) for k, v in self.maximum.items()})
+        elif self.maximum != "peak":
+            raise OptionError(f"the EMG normalisation (--emg-maximum, maximum) must be 'peak' or a maximum per channel "
+                              f"(a CSV file of channel,maximum), not {self.maximum!r}")
+        if not isinstance(self.delay_s, (int, float)) or not 0 <= self.delay_s < 1:
+            raise OptionError(f"the electromechanical delay (--emg-delay, delay_s) must be from 0 to 1 s, "
+                              f"not {self.delay_s!r}")
+
+    def settings(self) -> dict:
+        """The keyword arguments of :func:`process_raw_emg`."""
+        return dict(band_hz=self.band_hz, lowpass_hz=float(self.lowpass_hz), order=self.order,
+                    order_means=self.order_means, maximum=self.maximum, delay_s=float(self.delay_s))
+
+    def record(self):
+        """``"raw"`` for the defaults, else ``{setting: value}`` of the settings that differ."""
+        default = EmgProcessing().settings()
+        changed = {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.settings().items() if v != default[k]}
+        return changed or "raw"
+
+    @classmethod
+    def from_record(cls, value, where: str = "EMG processing") -> "EmgProcessing":
+        if isinstance(value, cls):
+            return value
+        if value == "raw":
+            return cls()
+        if not isinstance(value, Mapping):
+            raise OptionError(f"{where} must be 'envelope', 'raw' or a table of raw-EMG settings, not {value!r}")
+        fields = {f for f in cls.__dataclass_fields__}
+        unknown = [k for k in value if k not in fields]
+        if unknown:
+            raise OptionError(f"{where}: unknown raw-EMG setting(s) {name_list(unknown)}; the settings are "
+                              f"{', '.join(sorted(fields))}")
+        return cls(**dict(value))
+
+
 class RawEmgPath(type(Path())):
     """The path of a raw EMG file: :func:`read_emg` processes it into normalised envelopes
-    (:func:`process_raw_emg`, its defaults). A path otherwise; pickles as itself."""
+    (:func:`process_raw_emg` with :attr:`processing`, an :class:`EmgProcessing`; default its
+    defaults). A path otherwise; pickles as itself with its settings."""
+
+    processing: EmgProcessing = EmgProcessing()
+
+    def with_processing(self, processing: EmgProcessing) -> "RawEmgPath":
+        new = RawEmgPath(self)
+        if processing != EmgProcessing():
+            new.processing = processing
+        return new
+
+    def __reduce__(self):
+        return (_raw_emg_path, (str(self), self.processing))
 
 
-def emg_source(path, processing: str = "envelope"):
-    """``path`` marked with how it is read: a :class:`RawEmgPath` for ``"raw"``, the path
-    itself for ``"envelope"``; :class:`OptionError` for another word."""
-    if processing not in EMG_PROCESSING:
+def _raw_emg_path(path: str, processing: EmgProcessing) -> RawEmgPath:
+    return RawEmgPath(path).with_processing(processing)
+
+
+def emg_source(path, processing="envelope"):
+    """``path`` marked with how it is read: the path itself for ``"envelope"``, a
+    :class:`RawEmgPath` for raw EMG (``"raw"``, an :class:`EmgProcessing` or its
+    :meth:`~EmgProcessing.record`); :class:`OptionError` for another word."""
+    if isinstance(processing, str) and processing not in EMG_PROCESSING:
         raise OptionError(f"EMG processing must be {' or '.join(EMG_PROCESSING)}, not {processing!r}")
     if path is None or processing == "envelope":
         return path
-    return RawEmgPath(path)
+    return RawEmgPath(path).with_processing(EmgProcessing.from_record(processing))
+
+
+def processing_record(path):
+    """How an EMG file is read, as records hold it: ``"envelope"``, ``"raw"`` or the changed
+    raw-EMG settings (:meth:`EmgProcessing.record`)."""
+    return path.processing.record() if isinstance(path, RawEmgPath) else "envelope"
 
 
 def read_emg(path: str | os.PathLike, processing: str | None = None) -> pd.DataFrame:
@@ -410,13 +509,14 @@ def read_emg(path: str | os.PathLike, processing: str | None = None) -> pd.DataF
         raise OptionError(f"EMG processing must be {' or '.join(EMG_PROCESSING)}, not {processing!r}")
     if processing == "envelope":
         return read_processed_emg(path)
-    df = _read_signals(path)
-    env = process_raw_emg(df)
+    df = read_emg_signals(path)
+    settings = path.processing if isinstance(path, RawEmgPath) else EmgProcessing()
+    env = process_raw_emg(df, **settings.settings())
     env.attrs.update(path=str(path))
     return env
 
 
-def _read_signals(path) -> pd.DataFrame:
+def read_emg_signals(path) -> pd.DataFrame:
     """The channels of an EMG file: a storage file's columns, or a C3D file's analog channels
     other than the force plates' (:func:`musclemetab.mocap.c3d.read_c3d_analogs`)."""
     from ..io import read_storage
@@ -436,7 +536,7 @@ def read_processed_emg(path: str | os.PathLike) -> pd.DataFrame:
     why values slightly outside [0, 1] are kept.
     """
     path = Path(path)
-    df = _read_signals(path)
+    df = read_emg_signals(path)
     vals = df.to_numpy(dtype=float)
     if np.isnan(vals).any():
         bad = [str(c) for c in df.columns[np.isnan(vals).any(axis=0)]]

@@ -474,7 +474,7 @@ study_lock = FolderLock  # the study folder's lock (the name it had before ``Fol
 
 
 def _write_study_json(study: Study, out: Path) -> None:
-    from ..emg import RawEmgPath
+    from ..emg import processing_record
 
     info = dict(study.settings)
     info["source"] = str(study.source) if study.source else None
@@ -491,8 +491,7 @@ def _write_study_json(study: Study, out: Path) -> None:
             **({"estimate": s.estimate.to_dict()} if s.estimate is not None else {}),
             "trials": [t.name for t in s.trials],
             "emg_files": {t.name: str(t.emg) if t.emg else None for t in s.trials},
-            "emg_processing": {t.name: "raw" if isinstance(t.emg, RawEmgPath) else "envelope"
-                               for t in s.trials if t.emg},
+            "emg_processing": {t.name: processing_record(t.emg) for t in s.trials if t.emg},
             **({"generic_model": str(s.generic_model), "static": str(s.static)} if s.generic_model else {}),
             **({"markers": {t.name: str(t.markers) for t in s.trials if t.markers}}
                if any(t.markers for t in s.trials) else {}),

@@ -41,7 +41,9 @@ A study file names everything a study needs; paths are relative to the file::
     emg_tolerance = 0.01                  # optional: half-width of the EMG band (constrained)
     emg_processing = "envelope"           # optional: the trials' emg files are processed envelopes
                                           # (envelope, default) or raw EMG processed by the package
-                                          # (raw: musclemetab.emg.process_raw_emg); a trial may say too
+                                          # (raw: musclemetab.emg.process_raw_emg); a trial may say too;
+                                          # a table sets the raw processing, e.g. {band_hz = [10, 450],
+                                          # lowpass_hz = 4, order = 4, delay_s = 0.04}
     side = "r"                            # leg to solve: r | l | both (both: each leg over its own
                                           # gait cycle, the legs' rates added; needs 'cycle')
     dofs = ["hip_flexion_r", "knee_angle_r", "ankle_angle_r"]   # optional (r or l): default from the model
@@ -774,17 +776,21 @@ def _emg_mode(data, here: str, trials) -> tuple[str | None, float]:
     return mode, 0.01 if tol is None else tol
 
 
-def _emg_processing(data, here: str, default: str) -> str:
-    """The ``emg_processing`` key (``envelope`` or ``raw``; ``default`` when absent)."""
-    from ..emg import EMG_PROCESSING
+def _emg_processing(data, here: str, default):
+    """The ``emg_processing`` key (``envelope``, ``raw``, or a table of raw-EMG settings:
+    :class:`~musclemetab.emg.EmgProcessing`; ``default`` when absent)."""
+    from ..emg import EMG_PROCESSING, EmgProcessing
 
     value = data.get("emg_processing", default) if isinstance(data, Mapping) else default
-    if value not in EMG_PROCESSING:
-        raise OptionError(f"{here}: 'emg_processing' must be {' or '.join(EMG_PROCESSING)}, not {value!r}")
+    if isinstance(value, Mapping):
+        return EmgProcessing.from_record(value, f"{here}: 'emg_processing'")
+    if value not in EMG_PROCESSING and not isinstance(value, EmgProcessing):
+        raise OptionError(f"{here}: 'emg_processing' must be {' or '.join(EMG_PROCESSING)} or a table of raw-EMG "
+                          f"settings (band_hz, lowpass_hz, order, maximum, delay_s), not {value!r}")
     return value
 
 
-def _trial(data, base: Path, where: str, emg_processing: str = "envelope") -> Trial:
+def _trial(data, base: Path, where: str, emg_processing="envelope") -> Trial:
     from ..emg import emg_source
 
     name = str(data.get("name", "")) if isinstance(data, Mapping) else ""

@@ -176,10 +176,10 @@ def _trial_record(trial: Trial) -> dict:
     for k in ("cycle", "ultrasound"):
         if rec.get(k) is None:
             rec.pop(k, None)  # absent key: earlier studies keep their unit keys
-    from ..emg import RawEmgPath
+    from ..emg import RawEmgPath, processing_record
 
     if isinstance(trial.emg, RawEmgPath):  # raw EMG processed by the package (absent: envelopes, earlier keys)
-        rec["emg_processing"] = "raw"
+        rec["emg_processing"] = processing_record(trial.emg)
     return rec
 
 
