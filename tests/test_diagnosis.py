@@ -196,6 +196,10 @@ def test_diagnosis_round_trips_through_the_solve_record():
     record = SolveRecord.from_dict(summary)
     assert record.to_dict() == summary
     assert record.pre_solve_diagnosis.findings == d.findings and "muscle_tendon_too_short" in d.table()
+    # a stage adds an entry by its name; a misspelt one is refused, not written unread
+    assert record.with_(side="l").to_dict() == {**summary, "side": "l"}
+    with pytest.raises(TypeError, match="no entry 'sides'"):
+        record.with_(sides="l")
 
 
 # --------------------------------------------------------------------------- the example model

@@ -135,12 +135,16 @@ class _FileRecord:
         return {k: (self.extra[k] if k in self.extra else getattr(self, k)) for k in self.keys}
 
     def with_(self, **entries):
-        """A copy with ``entries`` set (new ones after the others, as in the file)."""
+        """A copy with ``entries`` set (new ones after the others, as in the file). Only the
+        record's fields may be set: an unknown name (a typo) raises :class:`TypeError` instead of
+        becoming an entry nobody reads; entries of other files stay in ``extra`` as read."""
         names = self._entry_names()
-        fields = {k: v for k, v in entries.items() if k in names}
-        extra = {**self.extra, **{k: v for k, v in entries.items() if k not in names}}
+        unknown = sorted(k for k in entries if k not in names)
+        if unknown:
+            raise TypeError(f"{type(self).__name__} has no entry {', '.join(map(repr, unknown))}; its entries are "
+                            f"{', '.join(sorted(names))}")
         keys = self.keys + tuple(k for k in entries if k not in self.keys)
-        return replace(self, **fields, extra=extra, keys=keys)
+        return replace(self, **entries, keys=keys)
 
     def get(self, key: str, default=None):
         """The entry ``key`` of the file's dictionary, ``default`` when the record has none."""
