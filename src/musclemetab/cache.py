@@ -209,10 +209,13 @@ def model_call_is_cached(model_path: str | os.PathLike, target: str, cache_dir=N
         return False
 
 
-def cached_model_call(model_path: str | os.PathLike, target: str, cache_dir=None, use_cache: bool = True) -> dict:
+def cached_model_call(model_path: str | os.PathLike, target: str, cache_dir=None, use_cache: bool = True, *,
+                      compute) -> dict:
     """The result of the OpenSim worker function ``target`` (``"module:function"``) applied to
-    the model file alone, cached by the file's content. The result must be JSON data; it is
-    returned in its JSON form (tuples become lists) whether computed now or read back."""
+    the model file alone, ``compute(target, path)`` (the OpenSim bridge's ``call``, given by
+    the caller: the cache sits below the bridge), cached by the file's content. The result must
+    be JSON data; it is returned in its JSON form (tuples become lists) whether computed now or
+    read back."""
     path = Path(model_path)
     entry = entry_path(_model_spec(path, target), cache_dir, "model", prefix="model-") if use_cache else None
     if entry is not None:
@@ -224,9 +227,7 @@ def cached_model_call(model_path: str | os.PathLike, target: str, cache_dir=None
                 problem = "does not hold a model result"
         if problem:
             discard_entry(entry, problem, "model")
-    from .opensim_bridge import call
-
-    text = json.dumps(call(target, str(path)))
+    text = json.dumps(compute(target, str(path)))
     if entry is not None:
         write_entry(entry, "model", result=np.array(text))
     return json.loads(text)

@@ -37,6 +37,7 @@ import numpy as np
 
 from .errors import DataMismatchError, ModelError, OptionError
 from .messages import name_list
+from .settings import LOCKED_TOLERANCE
 
 __all__ = [
     "SIDE_OFFSET_M",
@@ -122,10 +123,11 @@ def read_layout(model_path: str | os.PathLike, *, cache_dir: str | os.PathLike |
     """The model's :class:`ModelLayout`, computed by OpenSim in the worker process and cached
     by the file's content (:func:`musclemetab.cache.cached_model_call`)."""
     from .cache import cached_model_call
+    from .opensim_bridge import call
     from .model import check_model_path
 
     path = check_model_path(model_path)
-    raw = cached_model_call(path, "model_ops:model_layout", cache_dir)
+    raw = cached_model_call(path, "model_ops:model_layout", cache_dir, compute=call)
     return ModelLayout(
         path=str(path),
         gravity=tuple(raw["gravity"]),
@@ -164,10 +166,6 @@ def _side_coordinates(layout: ModelLayout, side: str) -> list[str]:
     return [n for j in on_side for n in j["coordinates"] if n in coords and not coords[n]["dependent"]]
 
 
-#: How far (rad for a rotation, m for a translation) the motion may take a locked coordinate
-#: from the value the model locks it at (:func:`check_locked_coordinates`); IK files hold
-#: eight decimals of a degree, and OpenSim's IK writes a locked coordinate's value exactly.
-LOCKED_TOLERANCE = 1e-4
 
 
 def check_locked_coordinates(layout: ModelLayout, side: str, ik, in_degrees: bool) -> None:

@@ -141,12 +141,13 @@ def read_model(model_path: str | os.PathLike, *, cache_dir: str | os.PathLike | 
     does not start OpenSim.
     """
     from .cache import cached_model_call
+    from .opensim_bridge import call
 
     path = check_model_path(model_path)
     key = (str(path.resolve()), path.stat().st_mtime_ns, path.stat().st_size)
     if key in _CACHE:
         return _CACHE[key]
-    raw = cached_model_call(path, "model_ops:read_model_info", cache_dir, use_cache)
+    raw = cached_model_call(path, "model_ops:read_model_info", cache_dir, use_cache, compute=call)
     raw["path"] = str(path.resolve())
     ms = raw["muscles"]
     if not ms:

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from .errors import OptionError
 
 __all__ = ["NumberKey", "NUMBER_KEYS", "check_number", "SwitchKey", "SWITCH_KEYS", "check_switch", "MAX_ITERATIONS",
-           "MESH_FREQUENCY_RANGE_HZ"]
+           "MESH_FREQUENCY_RANGE_HZ", "LOCKED_TOLERANCE"]
 
 #: Resource bounds of a solve: the IPOPT iteration limit (ten times the study's 10000; an
 #: iteration of the example trial takes about 0.1 s) and the mesh frequency (intervals per
@@ -24,6 +24,11 @@ __all__ = ["NumberKey", "NUMBER_KEYS", "check_number", "SwitchKey", "SWITCH_KEYS
 #: motion-capture rate; see also :data:`musclemetab.redundancy.ipopt.MAX_PROBLEM_MEMORY_MB`)
 MAX_ITERATIONS = 100_000
 MESH_FREQUENCY_RANGE_HZ = (10.0, 1000.0)
+#: How far (rad for a rotation, m for a translation) a motion may take a locked coordinate from
+#: the value the model locks it at and still hold it (musclemetab.layout.check_locked_coordinates,
+#: the solution's OpenSim model); IK files hold eight decimals of a degree, and OpenSim's IK
+#: writes a locked coordinate's value exactly.
+LOCKED_TOLERANCE = 1e-4
 
 
 @dataclass(frozen=True)

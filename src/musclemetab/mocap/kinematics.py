@@ -167,7 +167,8 @@ def _run(model: Path, markers: Path, setup, time_range, call) -> IKResult:
                                     f"marker data ({t0:.3f}-{t1:.3f} s)")
         kwargs["time_range"] = window
         res = call("lab:inverse_kinematics", str(model.resolve()), str(Path(trc).resolve()), str(tmp), **kwargs)
-        errors = {k: res[k] for k in ("time", "rms_m", "max_m", "worst_marker")}
+        errors = {k: res[k] for k in ("time", "rms_m", "max_m")}
+        errors["worst_marker"] = worst_markers(read_trc(trc), res["time"], res["markers"], res["model_marker_m"])
         record = {"model": str(model.resolve()), "markers": str(markers.resolve()),
                   "times_restored_s": shift if grid is not None else 0.0,
                   "setup": kwargs.get("setup"), "time_range": [res["start_s"], res["end_s"]],
@@ -178,6 +179,23 @@ def _run(model: Path, markers: Path, setup, time_range, call) -> IKResult:
         return IKResult(text, errors, record)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def worst_markers(markers, time, names, model_marker_m) -> list[str]:
+    """Per IK frame at ``time``, the marker (of ``names``, the trial has it) farthest from its
+    model marker (``model_marker_m``: frames x markers x 3, OpenSim's marker locations)."""
+    worst = []
+    for i, ti in enumerate(time):
+        k = int(np.argmin(np.abs(markers.time - ti)))
+        best, best_e = "", -1.0
+        for j, n in enumerate(names):
+            if n not in markers.names:
+                continue
+            e = float(np.linalg.norm(model_marker_m[i, j] - markers.marker(n)[k]))
+            if np.isfinite(e) and e > best_e:
+                best, best_e = n, e
+        worst.append(best)
+    return worst
 
 
 def _exact_times(text: str, grid: np.ndarray) -> str:

@@ -302,15 +302,31 @@ def _scale(generic_model: Path, static: Path, mass_kg: float, setup, marker_set,
         res = call("lab:scale_model", str(generic_model.resolve()), str(Path(trc).resolve()), float(mass_kg),
                    str(tmp), **kwargs)
         height, marker = (float(height_m), "given") if height_m else estimate_height(trc, res["time_range"])
+        errors = static_marker_errors(read_trc(trc), res["static_model_markers"], res["time_range"])
         record.update(mass_kg=res["mass_kg"], height_m=height, height_from=marker, time_range=res["time_range"],
                       scale_factors={k: v for k, v in res["scale_factors"].items() if not k.endswith("_offset")},
-                      static_marker_errors=res["static_marker_errors"],
-                      static_summary=marker_error_summary(res["static_marker_errors"]))
+                      static_marker_errors=errors, static_summary=marker_error_summary(errors))
         result = ScaleResult(Path(res["model"]).read_text(encoding="utf-8"),
                              Path(res["static_pose"]).read_text(encoding="utf-8"), record)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return result
+
+
+def static_marker_errors(markers, model_markers: list, window) -> list:
+    """``[{"marker", "error_m", "weight"}]``: the distance of each model marker in the static
+    pose (``[{"marker", "position_m", "weight"}]``, OpenSim's) from its experimental position
+    averaged over ``window`` (as OpenSim's marker placer averages it), the errors OpenSim's
+    ScaleTool reports; markers the trial lacks are left out."""
+    sel = (markers.time >= window[0] - 1e-9) & (markers.time <= window[1] + 1e-9)
+    out = []
+    for m in model_markers:
+        if m["marker"] not in markers.names:
+            continue
+        exp = np.nanmean(markers.marker(m["marker"])[sel], axis=0)
+        out.append({"marker": m["marker"], "error_m": float(np.linalg.norm(np.asarray(m["position_m"]) - exp)),
+                    "weight": m["weight"]})
+    return out
 
 
 def _setup_time_range(setup: Path):

@@ -125,7 +125,8 @@ def scale_model(generic_model: str, static_trc: str, mass_kg: float, out_dir: st
     scale factors by body, and the static pose's marker errors: the distance of every weighted
     marker of the scaled model (before the marker placer moves its markers onto the
     experimental ones) in the pose the placer found from its experimental position averaged over
-    ``time_range``, the errors OpenSim's ScaleTool reports.
+    ``time_range`` (the errors OpenSim's ScaleTool reports) are measured by the caller from the
+    model's markers in that pose (``static_model_markers``).
     """
     folder = os.path.dirname(os.path.abspath(setup)) if setup else ""
     tool = osim.ScaleTool(os.path.abspath(setup)) if setup else osim.ScaleTool()
@@ -187,7 +188,7 @@ def scale_model(generic_model: str, static_trc: str, mass_kg: float, out_dir: st
         "model": model_out, "static_pose": pose_out, "scale_set": os.path.join(out_dir, "scale_set.xml"),
         "marker_set": ms_file, "time_range": list(window), "mass_kg": float(tool.getSubjectMass()),
         "scale_factors": _scale_factors(os.path.join(out_dir, "scale_set.xml")),
-        "static_marker_errors": static_marker_errors(scaled_only, pose_out, static, window, weights),
+        "static_model_markers": static_model_markers(scaled_only, pose_out, weights),
         "setup_model_file": gmm.getModelFileName(),
     }
 
@@ -204,14 +205,10 @@ def _scale_factors(path: str) -> dict:
     return out
 
 
-def static_marker_errors(model_path: str, pose_path: str, trc_path: str, window, weights: dict) -> list:
-    """``[{"marker", "error_m", "weight"}]``: the distance of each weighted marker of ``model_path``,
-    in the static pose, from its experimental position averaged over ``window`` (as the marker
-    placer averages it)."""
-    import numpy as np
-
-    from ..mocap.trc import read_trc
-
+def static_model_markers(model_path: str, pose_path: str, weights: dict) -> list:
+    """``[{"marker", "position_m", "weight"}]``: where each weighted marker of ``model_path`` (that
+    the model has) lies in ground in the static pose of ``pose_path``; the caller measures the
+    static marker errors against the experimental markers (:mod:`musclemetab.mocap.scaling`)."""
     model = osim.Model(os.path.abspath(model_path))
     state = model.initSystem()
     pose = osim.TimeSeriesTable(os.path.abspath(pose_path))
@@ -223,17 +220,13 @@ def static_marker_errors(model_path: str, pose_path: str, trc_path: str, window,
         if key in labels:
             coord.setValue(state, row[labels.index(key)], False)
     model.realizePosition(state)
-    markers = read_trc(trc_path)
-    sel = (markers.time >= window[0] - 1e-9) & (markers.time <= window[1] + 1e-9)
     out = []
     mset = model.getMarkerSet()
     for name, w in weights.items():
-        if name not in markers.names or not mset.contains(name):
+        if not mset.contains(name):
             continue
-        exp = np.nanmean(markers.marker(name)[sel], axis=0)
         p = mset.get(name).getLocationInGround(state)
-        err = float(np.linalg.norm(np.array([p.get(0), p.get(1), p.get(2)]) - exp))
-        out.append({"marker": name, "error_m": err, "weight": w})
+        out.append({"marker": name, "position_m": [p.get(0), p.get(1), p.get(2)], "weight": w})
     return out
 
 
@@ -241,7 +234,8 @@ def inverse_kinematics(model_path: str, trc_path: str, out_dir: str, *, setup: s
                        marker_weights: dict | None = None, time_range: tuple | None = None,
                        accuracy: float | None = None) -> dict:
     """OpenSim's InverseKinematicsTool on a marker file; writes ``ik.mot`` (degrees) into ``out_dir``
-    and returns, per frame, OpenSim's RMS and maximum marker error and the marker of the maximum.
+    and returns, per frame, OpenSim's RMS and maximum marker error and where the model's markers
+    are (``model_marker_m``: frames x markers x 3, the caller finds the worst marker).
 
     With ``setup`` (an InverseKinematicsTool XML) its marker and coordinate tasks, accuracy and
     constraint weight are used and its coordinate file resolved against its folder; the model, the
@@ -280,28 +274,13 @@ def inverse_kinematics(model_path: str, trc_path: str, out_dir: str, *, setup: s
     locs = osim.TimeSeriesTable(os.path.join(out_dir, f"{name}_ik_model_marker_locations.sto"))
     labels = list(locs.getColumnLabels())
     loc = locs.getMatrix().to_numpy()
-    from ..mocap.trc import read_trc
-
-    markers = read_trc(trc_path)
     t = np.asarray(errors.getIndependentColumn(), dtype=float)
     names = list(dict.fromkeys(c[:-3] for c in labels if c.endswith(("_tx", "_ty", "_tz"))))
-    worst, worst_m = [], []
-    for i, ti in enumerate(t):
-        k = int(np.argmin(np.abs(markers.time - ti)))
-        best, best_e = "", -1.0
-        for n in names:
-            if n not in markers.names:
-                continue
-            model_p = np.array([loc[i, labels.index(f"{n}_t{a}")] for a in "xyz"])
-            e = float(np.linalg.norm(model_p - markers.marker(n)[k]))
-            if np.isfinite(e) and e > best_e:
-                best, best_e = n, e
-        worst.append(best)
-        worst_m.append(best_e)
     return {
         "ik": out, "time": t.tolist(), "rms_m": err[:, cols.index("marker_error_RMS")].tolist(),
-        "max_m": err[:, cols.index("marker_error_max")].tolist(), "worst_marker": worst, "worst_m": worst_m,
-        "markers": names, "start_s": float(tool.getStartTime()), "end_s": float(tool.getEndTime()),
+        "max_m": err[:, cols.index("marker_error_max")].tolist(), "markers": names,
+        "model_marker_m": np.stack([loc[:, [labels.index(f"{n}_t{a}") for a in "xyz"]] for n in names], axis=1),
+        "start_s": float(tool.getStartTime()), "end_s": float(tool.getEndTime()),
     }
 
 

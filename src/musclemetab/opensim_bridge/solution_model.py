@@ -249,12 +249,12 @@ def _prepare(model_path: str, parameters: dict, ik_time, columns: dict, in_degre
 
 def _locked_motion(c, ik_time, columns: dict, in_degrees: bool, times):
     """The values (model units) at ``times`` of a locked coordinate ``c`` that the motion takes
-    further than :data:`~musclemetab.layout.LOCKED_TOLERANCE` from the value it is locked at, or
+    further than :data:`~musclemetab.settings.LOCKED_TOLERANCE` from the value it is locked at, or
     None (held by the motion, or not in it). The geometry of a solve follows the motion there
     (:mod:`.model_ops`), so the written model prescribes the same values."""
     from scipy.interpolate import CubicSpline
 
-    from ..layout import LOCKED_TOLERANCE
+    from ..settings import LOCKED_TOLERANCE
 
     name = c.getName()
     if name not in columns:

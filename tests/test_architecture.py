@@ -1,0 +1,81 @@
+"""The package's layers (docs/architecture.md, "Which package may import which"): every import of
+the package's own modules, at the top of a module or inside a function, goes to its own
+package or to a layer below; none runs back up."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+SRC = Path(__file__).resolve().parent.parent / "src" / "musclemetab"
+
+#: the layers from the bottom up, as docs/architecture.md lists them
+LAYERS = [
+    {"errors", "muscle", "colours"},
+    {"settings", "messages", "quality", "__init__"},
+    {"io", "properties", "processes", "opensim_bridge"},
+    {"cache", "datasets", "datadict", "passive"},
+    {"model"},
+    {"layout"},
+    {"geometry", "mocap"},
+    {"external_loads", "emg"},
+    {"events"},
+    {"metabolics"},
+    {"redundancy", "study_layout"},
+    {"analysis", "uncertainty"},
+    {"report"},
+    {"study", "calibration"},
+    {"commands"},
+    {"__main__"},
+]
+LAYER = {name: i for i, names in enumerate(LAYERS) for name in names}
+
+
+def _unit(path: Path) -> str:
+    """The top-level module or package of the package a file belongs to."""
+    return path.relative_to(SRC).parts[0].removesuffix(".py")
+
+
+def _imports(path: Path):
+    """(line, top-level unit of the package) of every import of the package's own modules."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    package = path.relative_to(SRC).parent.parts  # the file's package inside musclemetab
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package[: len(package) - (node.level - 1)] if node.level > 1 else package
+                parts = [*base, *(node.module.split(".") if node.module else [])]
+                if not parts:  # "from . import x" at the top: x itself
+                    for alias in node.names:
+                        yield node.lineno, alias.name
+                    continue
+                yield node.lineno, parts[0]
+            elif node.module and node.module.split(".")[0] == "musclemetab":
+                parts = node.module.split(".")[1:]
+                if parts:
+                    yield node.lineno, parts[0]
+                else:
+                    for alias in node.names:
+                        yield node.lineno, alias.name
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                parts = alias.name.split(".")
+                if parts[0] == "musclemetab" and len(parts) > 1:
+                    yield node.lineno, parts[1]
+
+
+def test_every_module_is_in_a_layer():
+    units = {_unit(p) for p in SRC.rglob("*.py")}
+    assert units <= set(LAYER), f"modules without a layer: {sorted(units - set(LAYER))} (docs/architecture.md)"
+
+
+def test_no_import_runs_back_up():
+    up = []
+    for path in sorted(SRC.rglob("*.py")):
+        here = _unit(path)
+        for line, target in _imports(path):
+            if target == here or target not in LAYER:
+                continue
+            if LAYER[target] > LAYER[here]:
+                up.append(f"{path.relative_to(SRC)}:{line} imports {target}")
+    assert not up, "imports that run back up: " + "; ".join(up)
