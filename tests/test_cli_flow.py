@@ -312,8 +312,9 @@ def test_solve_prints_progress_while_ipopt_runs(example, tmp_path, capsys, monke
     with the throttle at 0 s: a line for every iterate, the last of them before the final
     iteration IPOPT reports; no callback outside the command (``--no-progress``, a Python session)."""
     import musclemetab.redundancy.ipopt as ipopt
+    import musclemetab.redundancy.progress as progress
 
-    monkeypatch.setattr(ipopt, "PROGRESS_INTERVAL_S", 0.0)
+    monkeypatch.setattr(progress, "PROGRESS_INTERVAL_S", 0.0)
     out = tmp_path / "s"
     argv = ["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
             str(example.id["normal"]), "--window", "0.6:0.85", "--out", str(out)]
@@ -334,8 +335,9 @@ def test_solve_both_legs_in_two_processes_prints_each_legs_progress(example, tmp
     process prints a line for every iterate, labelled with the leg, on the command's standard
     error: the interval in force in the command reaches the legs' processes."""
     import musclemetab.redundancy.ipopt as ipopt
+    import musclemetab.redundancy.progress as progress
 
-    monkeypatch.setattr(ipopt, "PROGRESS_INTERVAL_S", 0.0)
+    monkeypatch.setattr(progress, "PROGRESS_INTERVAL_S", 0.0)
     out = tmp_path / "s"
     assert main(["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
                  str(example.id["normal"]), "--window", "0.6:0.9", "--side", "both",

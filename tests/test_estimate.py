@@ -160,9 +160,9 @@ def test_estimate_command_records_a_stopped_solve(example, tmp_path, monkeypatch
     import json
     import re
 
-    import musclemetab.redundancy.ipopt as ipopt
+    import musclemetab.redundancy.progress as progress
 
-    monkeypatch.setattr(ipopt, "PROGRESS_INTERVAL_S", 0.0)
+    monkeypatch.setattr(progress, "PROGRESS_INTERVAL_S", 0.0)
     us = _ultrasound(example, tmp_path / "us.mot")
     out = tmp_path / "est"
     code, text = _cli(["estimate", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",

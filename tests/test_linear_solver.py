@@ -33,13 +33,14 @@ def test_runtime_library_passed_to_ipopt(monkeypatch):
     # one that does (libm, its symbol table read as if it did) is passed to IPOPT under the option
     # of the solver family
     import musclemetab.redundancy.ipopt as ipopt
+    import musclemetab.redundancy.linear_solvers as linear_solvers
 
     libm = ctypes.util.find_library("m")
     assert libm
     with pytest.raises(OptionError, match=r"ma86: .*does not export ma86_analyse_d.*not loaded"):
         SolverOptions(linear_solver="ma86", linear_solver_library=libm)
     every = {s for names in ipopt.LINEAR_SOLVER_SYMBOLS.values() for s in names}
-    monkeypatch.setattr(ipopt, "exported_symbols", lambda path: every)
+    monkeypatch.setattr(linear_solvers, "exported_symbols", lambda path: every)
     hsl = ipopt_options(SolverOptions(linear_solver="ma86", linear_solver_library=libm), MUMPS_OPTIONS)
     assert hsl["linear_solver"] == "ma86" and hsl["hsllib"] == libm
     assert "min_refinement_steps" not in hsl  # the MUMPS settings stay with MUMPS

@@ -312,8 +312,9 @@ def test_a_problem_past_the_memory_limit_is_refused_before_it_is_built(example, 
     by the estimate) against a limit lowered to 200 MB: refused with the estimate before the
     problem is built, nothing written."""
     import musclemetab.redundancy.ipopt as ipopt
+    import musclemetab.redundancy.resources as resources
 
-    monkeypatch.setattr(ipopt, "MAX_PROBLEM_MEMORY_MB", 200.0)
+    monkeypatch.setattr(resources, "MAX_PROBLEM_MEMORY_MB", 200.0)
     built = []
     monkeypatch.setattr(ipopt, "build_problem", lambda *a, **k: built.append(1))
     out = tmp_path / "out"
@@ -808,8 +809,9 @@ def test_ctrl_c_while_ipopt_iterates_prints_one_line_and_none_of_casadi(example,
     "KeyboardInterruptException") [...]``); the command's standard error holds its one line,
     ``musclemetab: interrupted``, after the progress lines and nothing of CasADi's."""
     import musclemetab.redundancy.ipopt as ipopt
+    import musclemetab.redundancy.progress as progress
 
-    monkeypatch.setattr(ipopt, "PROGRESS_INTERVAL_S", 0.0)
+    monkeypatch.setattr(progress, "PROGRESS_INTERVAL_S", 0.0)
     real = ipopt.ProgressLines.iteration
 
     def iteration(self, f, g):
@@ -1044,7 +1046,7 @@ def test_demo_never_writes_over_a_study_file_of_the_user(tmp_path, decoy):
 # 6. output streams that fail
 
 #: ``python -c`` running the command line with a progress line for every IPOPT iterate (throttle 0 s)
-_EVERY_ITERATE = ("import sys; import musclemetab.redundancy.ipopt as ipopt; ipopt.PROGRESS_INTERVAL_S = 0.0; "
+_EVERY_ITERATE = ("import sys; import musclemetab.redundancy.progress as progress; progress.PROGRESS_INTERVAL_S = 0.0; "
                   "from musclemetab.commands import main; sys.argv[0] = 'musclemetab'; sys.exit(main())")
 
 

@@ -41,11 +41,7 @@ matrix banded.
 
 from __future__ import annotations
 
-import ctypes
-import ctypes.util
 import functools
-import os
-import struct
 import time as _time
 from dataclasses import dataclass, field, replace
 
@@ -60,6 +56,15 @@ from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
 from .static_opt import InitialGuess
 from .stops import DEFAULT_STOP, STOPS
+from .linear_solvers import (  # noqa: F401  (re-exported)
+    BUILTIN_LINEAR_SOLVERS, LIBRARY_ENV, LINEAR_SOLVER_SYMBOLS, RUNTIME_LINEAR_SOLVERS, check_linear_solver,
+    exported_symbols, linear_solver_library,
+)
+from .progress import PROGRESS_INTERVAL_S, ProgressLines, progress_interval, solve_progress  # noqa: F401
+from .progress import _progress_callback
+from .resources import (  # noqa: F401  (re-exported)
+    MAX_PROBLEM_MEMORY_MB, check_problem_memory, problem_memory_mb, problem_size, set_blas_threads, tune_malloc,
+)
 
 __all__ = [
     "SolverOptions",
@@ -184,133 +189,6 @@ class SolverOptions:
         }
 
 
-#: IPOPT's linear solvers: built into CasADi's IPOPT, or loaded at run time from a library
-#: (IPOPT option naming the library, default file name).
-BUILTIN_LINEAR_SOLVERS = ("mumps", "spral")
-RUNTIME_LINEAR_SOLVERS = {
-    "ma27": ("hsllib", "libhsl.so"),
-    "ma57": ("hsllib", "libhsl.so"),
-    "ma77": ("hsllib", "libhsl.so"),
-    "ma86": ("hsllib", "libhsl.so"),
-    "ma97": ("hsllib", "libhsl.so"),
-    "pardiso": ("pardisolib", "libpardiso.so"),
-}
-
-
-#: Environment variable naming the library of a run-time linear solver, for runs whose options
-#: come from a study file (which may name a solver but not a library).
-LIBRARY_ENV = "MUSCLEMETAB_LINEAR_SOLVER_LIBRARY"
-#: Symbols the library of each run-time solver must export (IPOPT's HSL and Pardiso loaders
-#: look them up); Fortran names with or without the trailing underscore.
-LINEAR_SOLVER_SYMBOLS = {
-    "ma27": ("ma27ad_", "ma27bd_", "ma27cd_"),
-    "ma57": ("ma57ad_", "ma57bd_", "ma57cd_"),
-    "ma77": ("ma77_open_d", "ma77_factor_d", "ma77_solve_d"),
-    "ma86": ("ma86_analyse_d", "ma86_factor_d", "ma86_solve_d"),
-    "ma97": ("ma97_analyse_d", "ma97_factor_d", "ma97_solve_d"),
-    "pardiso": ("pardisoinit", "pardiso"),
-}
-#: Folders searched for a library given by file name only (after ``LD_LIBRARY_PATH``)
-LIBRARY_FOLDERS = ("/usr/local/lib", "/usr/lib/x86_64-linux-gnu", "/usr/lib64", "/usr/lib", "/lib/x86_64-linux-gnu",
-                   "/lib64", "/lib")
-
-
-def linear_solver_library(name: str, library: str | None = None) -> str | None:
-    """The library IPOPT loads the run-time solver ``name`` from: ``library`` (the command
-    line), else the environment variable :data:`LIBRARY_ENV`, else the default file name of its
-    family (``libhsl.so``, ``libpardiso.so``); ``None`` for the built-in solvers."""
-    if name not in RUNTIME_LINEAR_SOLVERS:
-        return None
-    return library or os.environ.get(LIBRARY_ENV) or RUNTIME_LINEAR_SOLVERS[name][1]
-
-
-def exported_symbols(path) -> set[str]:
-    """Names of the functions and data a shared library (ELF) exports, read from its dynamic
-    symbol table (``.dynsym``) without loading it; :class:`ValueError` when the file is not
-    an ELF shared library."""
-    with open(path, "rb") as f:
-        data = f.read()
-    if data[:4] != b"\x7fELF" or data[4] not in (1, 2) or data[5] not in (1, 2):
-        raise ValueError("not an ELF file")
-    is64, end = data[4] == 2, "<" if data[5] == 1 else ">"
-    if struct.unpack_from(end + "H", data, 16)[0] != 3:  # e_type ET_DYN
-        raise ValueError("not a shared library")
-    if is64:
-        shoff, = struct.unpack_from(end + "Q", data, 0x28)
-        shentsize, shnum = struct.unpack_from(end + "HH", data, 0x3A)
-        sh_fmt, sym_fmt = end + "IIQQQQIIQQ", end + "IBBHQQ"
-    else:
-        shoff, = struct.unpack_from(end + "I", data, 0x20)
-        shentsize, shnum = struct.unpack_from(end + "HH", data, 0x2E)
-        sh_fmt, sym_fmt = end + "IIIIIIIIII", end + "IIIBBH"
-    sections = [struct.unpack_from(sh_fmt, data, shoff + i * shentsize) for i in range(shnum)]
-    names = set()
-    for sec in sections:
-        if sec[1] != 11:  # SHT_DYNSYM
-            continue
-        offset, size, link, entsize = sec[4], sec[5], sec[6], sec[9]
-        strtab = sections[link][4]
-        for k in range(size // entsize if entsize else 0):
-            fields = struct.unpack_from(sym_fmt, data, offset + k * entsize)
-            st_name, info, shndx = (fields[0], fields[1], fields[3]) if is64 else (fields[0], fields[3], fields[5])
-            if shndx == 0 or (info >> 4) not in (1, 2):  # undefined, or not global/weak
-                continue
-            stop = data.index(b"\0", strtab + st_name)
-            names.add(data[strtab + st_name:stop].decode("utf-8", "replace"))
-    return names
-
-
-def _find_library(lib: str) -> str | None:
-    """``lib`` when it is a path; a file name looked up in ``LD_LIBRARY_PATH`` and :data:`LIBRARY_FOLDERS`."""
-    if os.sep in lib:
-        return lib if os.path.isfile(lib) else None
-    folders = [d for d in os.environ.get("LD_LIBRARY_PATH", "").split(os.pathsep) if d] + list(LIBRARY_FOLDERS)
-    return next((os.path.join(d, lib) for d in folders if os.path.isfile(os.path.join(d, lib))), None)
-
-
-def check_linear_solver(name: str, library: str | None = None) -> None:
-    """Raise :class:`OptionError` unless IPOPT can use the linear solver ``name``.
-
-    For the solvers IPOPT loads at run time, the library (:func:`linear_solver_library`) is
-    found, its dynamic symbol table read (:func:`exported_symbols`) and, only when it exports
-    the solver's functions (:data:`LINEAR_SOLVER_SYMBOLS`), loaded here: a missing or foreign
-    library is reported before the problem is built, and no code of a library that is not
-    the solver's runs.
-    """
-    if name in BUILTIN_LINEAR_SOLVERS:
-        if library is not None:
-            raise OptionError(f"linear solver {name} is built into IPOPT; drop the linear-solver library {library!r}")
-        return
-    if name not in RUNTIME_LINEAR_SOLVERS:
-        raise OptionError(
-            f"linear solver {name!r} is unknown; choose one of "
-            f"{', '.join(BUILTIN_LINEAR_SOLVERS + tuple(RUNTIME_LINEAR_SOLVERS))}"
-        )
-    option, _ = RUNTIME_LINEAR_SOLVERS[name]
-    lib = linear_solver_library(name, library)
-    what = "the HSL library (www.hsl.rl.ac.uk/ipopt)" if option == "hsllib" else "the Pardiso library"
-    remedy = (f"install {what} and give its path as the linear-solver library (--linear-solver-library, or the "
-              f"environment variable {LIBRARY_ENV}), or use mumps or spral")
-    path = _find_library(lib)
-    if path is None:
-        raise OptionError(f"linear solver {name}: IPOPT loads it from {lib}, which cannot be loaded (no such file"
-                          f"{'' if os.sep in lib else ' on the library search path'}); {remedy}")
-    try:
-        symbols = exported_symbols(path)
-    except (OSError, ValueError, IndexError, struct.error) as exc:
-        raise OptionError(f"linear solver {name}: IPOPT loads it from {lib}, which cannot be loaded (not a readable "
-                          f"shared library: {exc}); {remedy}") from None
-    missing = [s for s in LINEAR_SOLVER_SYMBOLS[name] if not {s, s.rstrip("_"), s + "_"} & symbols]
-    if missing:
-        raise OptionError(f"linear solver {name}: {lib} does not export {', '.join(missing)}, so it is not {what} "
-                          f"and was not loaded; {remedy}")
-    try:
-        ctypes.CDLL(path)
-    except OSError as exc:
-        raise OptionError(f"linear solver {name}: IPOPT loads it from {lib}, which cannot be loaded ({exc}); "
-                          f"{remedy}") from None
-
-
 @dataclass(frozen=True, kw_only=True)
 class SolveOutcome:
     """IPOPT's outcome of one solve (shared by all trials of a problem)."""
@@ -366,81 +244,6 @@ def failure_advice(status: str) -> str:
     if status in ("User_Requested_Stop", "NonIpopt_Exception_Thrown"):
         return "the solve was stopped (interrupt or an error in a callback); run it again"
     return "check the inputs (units, time ranges, parameters)"
-
-
-def problem_size(n_muscles: int, n_dofs: int, n_intervals: int) -> tuple[int, int]:
-    """Number of variables and equality constraints (``205 N + 120`` and ``165 N + 40`` for 40/5)."""
-    M, D, N = n_muscles, n_dofs, n_intervals
-    return (5 * M + D) * N + 3 * M, (4 * M + D) * N + M
-
-
-#: Memory of a problem, measured on the example trial (40 muscles, 5 DOFs): 73 MB, plus 0.47 MB
-#: per mesh interval (the peak resident memory of ``musclemetab solve`` was 202 MB with N = 118
-#: and 312 MB with N = 354), scaled by the variables per interval for other sizes.
-PROBLEM_BASE_MB = 73.0
-PROBLEM_MB_PER_INTERVAL = 0.47
-#: Largest problem built (estimated memory, MB): beyond it the mesh is refused before building
-#: (e.g. a 30 s trial at 1000 intervals per second would need about 14 GB)
-MAX_PROBLEM_MEMORY_MB = 8000.0
-
-
-def problem_memory_mb(sizes) -> float:
-    """Estimated memory (MB) of a problem over trials of ``sizes`` = ``[(muscles, DOFs, intervals), ...]``."""
-    per_interval = sum(n * (5 * m + d) / 205.0 for m, d, n in sizes)
-    return PROBLEM_BASE_MB + PROBLEM_MB_PER_INTERVAL * per_interval
-
-
-def check_problem_memory(sizes) -> None:
-    """Raise :class:`OptionError` when the problem of ``sizes`` (see :func:`problem_memory_mb`)
-    would need more than :data:`MAX_PROBLEM_MEMORY_MB`, naming the estimate and the remedy."""
-    mb = problem_memory_mb(sizes)
-    if mb > MAX_PROBLEM_MEMORY_MB:
-        n = sum(s[2] for s in sizes)
-        raise OptionError(f"the problem would have {n} mesh intervals and need about {mb:.0f} MB of memory, more "
-                          f"than the limit of {MAX_PROBLEM_MEMORY_MB:.0f} MB; solve a shorter window (--window, "
-                          "--cycle) or a coarser mesh (--mesh-frequency, the study's is 100 per second)")
-
-
-_MALLOC_TUNED = False
-
-
-def tune_malloc(threshold_bytes: int = 512 * 1024 * 1024) -> bool:
-    """Raise glibc's mmap/trim thresholds so freed work arrays are reused, not unmapped.
-
-    Equivalent to ``MALLOC_MMAP_THRESHOLD_``/``MALLOC_TRIM_THRESHOLD_``/``MALLOC_TOP_PAD_``
-    in the environment, set at run time with ``mallopt``. Returns ``False`` (and does
-    nothing) where glibc is not available.
-    """
-    global _MALLOC_TUNED
-    if _MALLOC_TUNED:
-        return True
-    try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        mallopt = libc.mallopt
-    except (OSError, AttributeError):
-        return False
-    M_TRIM_THRESHOLD, M_TOP_PAD, M_MMAP_THRESHOLD = -1, -2, -3
-    ok = bool(mallopt(M_MMAP_THRESHOLD, min(threshold_bytes, 2**31 - 1)))
-    ok &= bool(mallopt(M_TRIM_THRESHOLD, min(2 * threshold_bytes, 2**31 - 1)))
-    ok &= bool(mallopt(M_TOP_PAD, 64 * 1024 * 1024))
-    _MALLOC_TUNED = ok
-    return ok
-
-
-def set_blas_threads(n: int) -> bool:
-    """Set the thread count of CasADi's bundled OpenBLAS (used by MUMPS).
-
-    Acts on the library instance already loaded by the IPOPT plugin (found by its soname);
-    returns ``False`` when it is not loaded or has no such function.
-    """
-    import os
-
-    try:
-        lib = ctypes.CDLL("libcasadi-tp-openblas.so.0", mode=getattr(os, "RTLD_NOLOAD", 4) | os.RTLD_LOCAL)
-        lib.openblas_set_num_threads(int(n))
-    except (OSError, AttributeError):
-        return False
-    return True
 
 
 def build_nlp(
@@ -529,123 +332,6 @@ def ipopt_options(options: SolverOptions, mumps_settings: dict | None = None) ->
         ipopt.update(mumps_settings)
     ipopt.update(options.ipopt)
     return ipopt
-
-
-#: Seconds between two progress lines of a running solve (:func:`solve_progress`).
-PROGRESS_INTERVAL_S = 5.0
-_PROGRESS: dict = {"stream": None, "interval_s": None, "label": ""}
-
-
-class solve_progress:
-    """While this context is active, every IPOPT solve of this process writes a progress line
-    at most every ``interval_s`` seconds (default :data:`PROGRESS_INTERVAL_S`) to ``stream``
-    (default standard error)::
-
-        musclemetab: solving: iteration 40, objective 2.7012e-01, constraint violation 3.1e-05, 21 s
-
-    The line comes from IPOPT's iteration callback (CasADi's ``iteration_callback`` option):
-    the iteration number, the objective and the largest violation of a constraint's bounds
-    (unscaled, at the current iterate) and the time since the solve started. It does not change
-    the solve: the callback only reads the iterate. ``musclemetab solve`` and ``estimate`` use it
-    unless given ``--no-progress``; the legs of ``solve --side both --workers 2``, solved in other
-    processes, turn it on there with the interval of this process (:func:`progress_interval`)
-    and ``label`` naming the leg (``musclemetab: solving side l: iteration 40, ...``).
-    """
-
-    def __init__(self, interval_s: float | None = None, stream=None, label: str = ""):
-        self.interval_s, self.stream, self.label = interval_s, stream, label
-        self._previous = None
-
-    def __enter__(self):
-        self._previous = dict(_PROGRESS)
-        _PROGRESS.update(stream=self.stream, interval_s=PROGRESS_INTERVAL_S if self.interval_s is None
-                         else float(self.interval_s), label=self.label)
-        return self
-
-    def __exit__(self, *exc):
-        _PROGRESS.clear()
-        _PROGRESS.update(self._previous)
-        return False
-
-
-def progress_interval() -> float | None:
-    """The interval (s) of the progress lines :func:`solve_progress` turned on in this process,
-    or ``None`` when they are off."""
-    return _PROGRESS.get("interval_s")
-
-
-class ProgressLines:
-    """Writes the progress lines of :func:`solve_progress` for one solve: :meth:`iteration` is
-    called with each iterate; a line is written when ``interval_s`` has passed since the start
-    or the last line (``clock``: seconds, default :func:`time.perf_counter`); ``label`` follows
-    ``solving`` (e.g. `` side r``)."""
-
-    def __init__(self, lbg, ubg, interval_s: float, stream=None, clock=None, label: str = ""):
-        import sys
-
-        self.lbg, self.ubg = np.asarray(lbg, dtype=float).reshape(-1), np.asarray(ubg, dtype=float).reshape(-1)
-        self.interval_s = float(interval_s)
-        self.stream = stream if stream is not None else sys.stderr
-        self.clock = clock or _time.perf_counter
-        self.t0 = self.last = self.clock()
-        self.count = 0
-        self.lines = 0
-        self.label = label
-
-    def iteration(self, f, g) -> None:
-        """One IPOPT iterate: objective ``f`` and constraint values ``g``."""
-        self.count += 1
-        now = self.clock()
-        if now - self.last < self.interval_s:
-            return
-        self.last = now
-        g = np.asarray(g, dtype=float).reshape(-1)
-        viol = float(np.max(np.maximum(self.lbg - g, 0.0) + np.maximum(g - self.ubg, 0.0))) if g.size else 0.0
-        # IPOPT calls back once for the starting point (iteration 0); a stream that cannot be
-        # written (closed, full) loses the line, never the solve
-        from ..messages import write_quietly
-
-        self.lines += write_quietly(self.stream, f"musclemetab: solving{self.label}: iteration {self.count - 1}, "
-                                    f"objective {float(f):.4e}, constraint violation {viol:.1e}, {now - self.t0:.0f} s\n")
-
-
-def _progress_callback(n_x: int, n_g: int, lbg, ubg):
-    """The CasADi ``iteration_callback`` of :func:`solve_progress`, or ``None`` when it is off."""
-    if _PROGRESS.get("interval_s") is None:
-        return None
-    import casadi as ca
-
-    lines = ProgressLines(lbg, ubg, _PROGRESS["interval_s"], _PROGRESS.get("stream"), label=_PROGRESS.get("label", ""))
-
-    class _Callback(ca.Callback):
-        def __init__(self):
-            ca.Callback.__init__(self)
-            self.construct("musclemetab_progress", {})
-
-        def get_n_in(self):
-            return ca.nlpsol_n_out()
-
-        def get_n_out(self):
-            return 1
-
-        def get_name_in(self, i):
-            return ca.nlpsol_out(i)
-
-        def get_name_out(self, i):
-            return "ret"
-
-        def get_sparsity_in(self, i):
-            n = ca.nlpsol_out(i)
-            size = {"f": 1, "x": n_x, "lam_x": n_x, "g": n_g, "lam_g": n_g}.get(n, 0)
-            return ca.Sparsity.dense(size, 1)
-
-        def eval(self, arg):
-            names = [ca.nlpsol_out(i) for i in range(ca.nlpsol_n_out())]
-            values = dict(zip(names, arg))
-            lines.iteration(float(values["f"]), np.asarray(values["g"]).reshape(-1))
-            return [0]
-
-    return _Callback()
 
 
 def run_ipopt(solver, options: SolverOptions, x0, lbx, ubx, lbg, ubg, multipliers: dict | None = None, p=None):
