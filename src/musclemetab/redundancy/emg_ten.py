@@ -110,7 +110,7 @@ def fiber_scheme(mode: str | None, fiber_dynamics: str | None = None) -> str:
 class EmgTenSettings:
     """Goals, bounds and couplings of the EMG-TEN problem (defaults: the study's).
 
-    ``goals``: the objective's weights (:class:`.transcription.Goals`; default
+    ``goals``: the objective's weights (:class:`.goals.Goals`; default
     :data:`EMG_TEN_GOALS`, ``wEMG 10, wAct 0.1, wTres 1000, wVm 0.01``); the EMG bound and the
     fiber dynamics of the problem come from ``emg_mode``, ``emg_tolerance`` and
     ``fiber_dynamics`` below.
@@ -131,7 +131,7 @@ class EmgTenSettings:
     scaled EMG) or ``"tracking"`` (the cost only). With ``tendon_groups`` empty no tendon
     stiffness is estimated: an EMG-informed solve of one or more trials.
 
-    ``fiber_dynamics``: the transcription of the fiber dynamics (:data:`.transcription.FIBER_DYNAMICS`);
+    ``fiber_dynamics``: the transcription of the fiber dynamics (:data:`.goals.FIBER_DYNAMICS`);
     ``None`` (default) is ``"backward"`` in the driven mode and ``"forward"`` otherwise: with the
     excitations fixed, the forward-Euler fiber recurrence of weakly excited muscles amplifies a
     change of fiber length by up to 1e4 per step, the backward-Euler one damps it

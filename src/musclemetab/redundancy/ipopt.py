@@ -99,7 +99,7 @@ __all__ = [
 @dataclass(frozen=True)
 class SolverOptions:
     """Numerical settings of the optimal control problem; the objective's weights are a
-    :class:`.transcription.Goals` (``docs/solver.md``).
+    :class:`.goals.Goals` (``docs/solver.md``).
 
     ``stop`` names where IPOPT stops (:data:`STOPS`, ``docs/solver.md``): ``"optimum"`` (default)
     at the optimum of the problem (tolerance 1e-8 with IPOPT's adaptive barrier parameter: the
@@ -132,7 +132,7 @@ class SolverOptions:
     library default). ``ipopt`` holds further IPOPT options, e.g. ``{"mu_init": 1e-6}`` for a
     warm start; anything there may change which optimum is found. ``energy`` adds the energy
     goal (:class:`.energy.EnergyGoal`) to the objective. ``fiber_dynamics``: the transcription
-    of the fiber dynamics (:data:`.transcription.FIBER_DYNAMICS`; ``"backward"``: the Hill equilibrium of
+    of the fiber dynamics (:data:`.goals.FIBER_DYNAMICS`; ``"backward"``: the Hill equilibrium of
     each interval at its end node, ``docs/problem.md``; not with the energy goal).
     """
 

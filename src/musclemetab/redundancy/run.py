@@ -134,7 +134,7 @@ def solve_files(
         EFFORT-TEN's tendon stiffness (:func:`.workflows.workflow_parameters`).
     %(options)s
     goals
-        The effort weights (:class:`.transcription.Goals`; default: the workflow's).
+        The effort weights (:class:`.goals.Goals`; default: the workflow's).
     %(cache_dir)s
     %(check_units)s
     """
