@@ -63,6 +63,8 @@ MUSCLE_EFFICIENCY = 0.41
 MAX_TORQUE_NM_PER_KG = 5.0
 #: a profile whose largest torque stays below this is refused as normalised (N m/kg)
 MIN_PEAK_TORQUE_NM = 1.0
+#: how much of the solve window a time profile may miss at either end (rounded time stamps), s
+_COVER_TOLERANCE_S = 5e-4
 #: the low-pass filter of the joint angles before their velocities are taken (the solver's)
 _VELOCITY_FILTER_HZ = 6.0
 
@@ -104,12 +106,12 @@ class AssistanceProfile:
         return gain * out
 
 
-def check_gain(gain, where: str = "--assistance-gain") -> float:
-    """The gain as a finite float (:class:`OptionError` otherwise; 0 is allowed: no assistance)."""
-    if isinstance(gain, bool) or not isinstance(gain, (int, float)) or not np.isfinite(gain):
-        raise OptionError(f"{where} must be a finite number (the factor on the device torque, 1 = as in the file), "
-                          f"not {gain!r}")
-    return float(gain)
+def check_gain(gain, where: str = "", option: str | None = "--assistance-gain") -> float:
+    """The gain as a float within :data:`musclemetab.settings.NUMBER_KEYS` ``["assistance_gain"]``
+    (:class:`OptionError` naming ``option``, or the study key, otherwise; 0: no assistance)."""
+    from .settings import check_number
+
+    return float(check_number("assistance_gain", gain, where, option))
 
 
 def _header_lines(path: Path) -> list[str]:
@@ -204,7 +206,7 @@ def _check_profile(profile: AssistanceProfile, dofs: Sequence[str], side: str | 
                           "solve that DOF (--dofs)")
     if profile.axis == "time_s":
         t0, tf = window_s
-        tol = 1e-6 + 0.5 * (float(np.min(np.diff(profile.x))) if profile.x.size > 1 else 0.0)
+        tol = _COVER_TOLERANCE_S
         if profile.x[0] > t0 + tol or profile.x[-1] < tf - tol:
             raise DataMismatchError(
                 f"{profile.path}: the assistance profile covers {profile.x[0]:g}-{profile.x[-1]:g} s but the solve "

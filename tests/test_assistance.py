@@ -1,0 +1,162 @@
+"""Assistive devices (``docs/assistance.md``): the device torque taken off the inverse-dynamics
+moments, its sign convention, its work, the profile files and their errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from musclemetab.assistance import (
+    CYCLE_AXIS_HEADER,
+    apply_assistance,
+    augmentation_factor_W_per_kg,
+    device_work,
+    plantarflexion_assistance,
+    read_assistance,
+)
+from musclemetab.errors import DataMismatchError, InputFileError, OptionError, UnknownCoordinateError
+from musclemetab.io import read_table, storage_from_arrays, write_storage
+
+#: a short window of the normal trial's push-off (toe-off about 1.28 s), where the ankle moment peaks
+SIGN_WINDOW = (1.05, 1.25)
+PLANTARFLEXORS = ("soleus_r", "gasmed_r", "gaslat_r")
+
+
+def _write_profile(path, x, columns, header=()):
+    write_storage(path, storage_from_arrays(x, columns), comments=list(header))
+    return path
+
+
+# ---------------------------------------------------------------------------- files, no solve
+def test_plantarflexion_profile_peaks_at_the_given_percent_with_the_given_torque(tmp_path):
+    """The generator's file: 0.2 N m/kg x 72.6 kg = 14.52 N m of plantarflexion (negative
+    ankle_angle_r) at 50 % of the cycle, zero before 25 % and after 62.5 %, over the cycle."""
+    p = plantarflexion_assistance(tmp_path / "pf.sto", 72.6)
+    assert CYCLE_AXIS_HEADER in p.read_text()
+    prof = read_assistance(p)
+    assert prof.axis == "cycle_pct" and prof.coordinates == ("ankle_angle_r",)
+    x, tau = prof.x, prof.torque_Nm[:, 0]
+    assert tau[np.argmin(tau)] == pytest.approx(-14.52) and x[np.argmin(tau)] == pytest.approx(50.0)
+    assert np.all(tau[(x < 25) | (x > 62.5)] == 0) and np.all(tau <= 0)
+    # mapped onto a cycle 0.62-1.70 s: 50 % is 1.16 s; 110 % wraps to 10 % (zero)
+    at = prof.torque_at([1.16, 0.62 + 1.1 * 1.08], ["ankle_angle_r", "knee_angle_r"], 2.0, (0.62, 1.70))
+    assert at.tolist() == [[pytest.approx(-29.04), 0.0], [0.0, 0.0]]
+
+
+def test_csv_profile_over_time_and_over_the_cycle(tmp_path):
+    (tmp_path / "t.csv").write_text("time,knee_angle_r_moment\n0,1\n1,3\n")
+    prof = read_assistance(tmp_path / "t.csv")
+    assert prof.axis == "time_s" and prof.coordinates == ("knee_angle_r",)
+    assert prof.torque_at([0.5, 2.0], ["knee_angle_r"]).ravel().tolist() == [2.0, 3.0]  # held after its end
+    (tmp_path / "c.csv").write_text("cycle_pct,knee_angle_r\n0,0\n50,10\n100,0\n")
+    prof = read_assistance(tmp_path / "c.csv")
+    assert prof.axis == "cycle_pct"
+    assert prof.torque_at([1.5, 2.5], ["knee_angle_r"], cycle_s=(1.0, 2.0)).ravel().tolist() == [10.0, 10.0]
+
+
+def test_bad_profiles_are_refused_naming_file_and_column(tmp_path):
+    moments = np.zeros((11, 2))
+    t = np.linspace(0.5, 1.5, 11)
+    dofs = ["ankle_angle_r", "knee_angle_r"]
+    model = dofs + ["hip_flexion_r", "ankle_angle_l"]
+    kw = dict(window_s=(0.6, 1.4), side="r", model_coordinates=model, body_mass_kg=70.0)
+    ok = _write_profile(tmp_path / "ok.sto", [0.5, 1.5], {"ankle_angle_r": [-10.0, -10.0], "ankle_angle_l": [5, 5]})
+    out = apply_assistance(t, moments, dofs, read_assistance(ok), 0.5, **kw)  # the left column: the left leg's
+    assert np.allclose(out[:, 0], 5.0) and np.allclose(out[:, 1], 0.0)
+    bad = _write_profile(tmp_path / "typo.sto", [0.5, 1.5], {"ankle_angel_r": [1.0, 2.0]})
+    with pytest.raises(UnknownCoordinateError, match=r"typo\.sto: column 'ankle_angel_r'.*near: ankle_angle_r"):
+        apply_assistance(t, moments, dofs, read_assistance(bad), 1.0, **kw)
+    hip = _write_profile(tmp_path / "hip.sto", [0.5, 1.5], {"hip_flexion_r": [10.0, 20.0]})
+    with pytest.raises(OptionError, match=r"hip\.sto: column 'hip_flexion_r' is not a DOF of this problem"):
+        apply_assistance(t, moments, dofs, read_assistance(hip), 1.0, **kw)
+    short = _write_profile(tmp_path / "short.sto", [0.7, 1.5], {"ankle_angle_r": [10.0, 20.0]})
+    with pytest.raises(DataMismatchError, match=r"short\.sto: the assistance profile covers 0\.7-1\.5 s but the solve "
+                                                r"window is 0\.6-1\.4 s"):
+        apply_assistance(t, moments, dofs, read_assistance(short), 1.0, **kw)
+    per_kg = _write_profile(tmp_path / "perkg.sto", [0.5, 1.5], {"ankle_angle_r": [-0.2, 0.0]})
+    with pytest.raises(DataMismatchError, match=r"perkg\.sto: .*'ankle_angle_r'.*normalised to body mass"):
+        apply_assistance(t, moments, dofs, read_assistance(per_kg), 1.0, **kw)
+    nmm = _write_profile(tmp_path / "nmm.sto", [0.5, 1.5], {"ankle_angle_r": [-14000.0, 0.0]})
+    with pytest.raises(DataMismatchError, match=r"nmm\.sto: column 'ankle_angle_r' reaches.*not N mm"):
+        apply_assistance(t, moments, dofs, read_assistance(nmm), 1.0, **kw)
+    pct = _write_profile(tmp_path / "pct.sto", [0.0, 120.0], {"ankle_angle_r": [1.0, 2.0]}, [CYCLE_AXIS_HEADER])
+    with pytest.raises(DataMismatchError, match=r"pct\.sto: a profile over the gait cycle runs from 0 to 100 %"):
+        read_assistance(pct)
+    (tmp_path / "nan.csv").write_text("time,ankle_angle_r\n0,1\n1,nan\n")
+    with pytest.raises(InputFileError, match=r"nan\.csv: column 'ankle_angle_r' is nan at data row 2"):
+        read_assistance(tmp_path / "nan.csv")
+    with pytest.raises(OptionError, match="--assistance-gain = nan is not a factor on the device torque"):
+        apply_assistance(t, moments, dofs, read_assistance(ok), float("nan"), **kw)
+
+
+def test_device_work_of_a_constant_torque_on_a_sine_motion(tmp_path):
+    """Hand-worked: a constant torque tau about a joint moving as q = A sin(2 pi t / T) over one
+    period does tau * 2A of positive work (q rising from -A to A) and -tau * 2A of negative work
+    (q falling from A to -A); mean powers over T. Augmentation factor: (P+ - |P-|)/0.41."""
+    tau, amp, period = 10.0, 0.3, 1.0
+    t = np.arange(0.0, 3.0 + 1e-9, 0.01)
+    q = amp * np.sin(2 * np.pi * t / period)[:, None]
+    prof = read_assistance(_write_profile(tmp_path / "c.sto", [0.0, 3.0], {"knee_angle_r": [tau, tau]}))
+    work = device_work(prof, 1.0, ["knee_angle_r"], t, q, (1.0 + 0.25, 2.0 + 0.25))  # q from A down and up again
+    assert work["positive_work_J"] == pytest.approx(tau * 2 * amp, rel=2e-3)
+    assert work["negative_work_J"] == pytest.approx(-tau * 2 * amp, rel=2e-3)
+    assert work["mean_positive_power_W"] == pytest.approx(tau * 2 * amp / period, rel=2e-3)
+    half = device_work(prof, 0.5, ["knee_angle_r"], t, q, (1.25, 2.25))
+    assert half["positive_work_J"] == pytest.approx(0.5 * work["positive_work_J"])
+    assert augmentation_factor_W_per_kg(0.1, -0.02) == pytest.approx(0.08 / 0.41)
+    assert augmentation_factor_W_per_kg(0.1, -0.02, carried_cost_W_per_kg=0.05) == pytest.approx(0.08 / 0.41 - 0.05)
+
+
+# ---------------------------------------------------------------------------- the sign convention
+@pytest.fixture(scope="module")
+def ankle_device(example, tmp_path_factory):
+    """A 'device' whose torque is the ID ankle moment itself (the ID file's samples, column
+    ankle_angle_r_moment)."""
+    id_table = read_table(example.id["normal"])
+    path = tmp_path_factory.mktemp("device") / "ankle_id.sto"
+    return _write_profile(path, id_table.index, {"ankle_angle_r_moment": id_table["ankle_angle_r_moment"]})
+
+
+@pytest.mark.opensim
+def test_a_device_supplying_the_ankle_moment_silences_the_ankle_muscles(example, ankle_device, tmp_path):
+    """Sign convention: a device torque equal to the ID ankle moment (gain 1) leaves the ankle's net moment to no one: the triceps surae, which supply the push-off's
+    plantarflexion moment unassisted, fall below 15 % of their unassisted activity (time
+    integral of the activations; what stays balances the stretched muscles' passive force) and
+    the ankle reserve grows by no more than 0.5 N m; with the opposite sign (gain -1) they supply
+    twice the moment and are more active than unassisted."""
+    from musclemetab.redundancy.run import solve_files
+
+    files = (example.model, example.ik["normal"], example.id["normal"], "effort-gen")
+    free = solve_files(*files, window=SIGN_WINDOW)
+    held = solve_files(*files, window=SIGN_WINDOW, assistance=ankle_device)
+    against = solve_files(*files, window=SIGN_WINDOW, assistance=ankle_device, assistance_gain=-1.0)
+    def triceps(sol):  # the time integral of the triceps surae's activations
+        return float(np.trapezoid(sol.activation[:, [sol.muscles.index(m) for m in PLANTARFLEXORS]].sum(axis=1),
+                                  sol.time_s))
+
+    activity = {"free": triceps(free), "held": triceps(held), "against": triceps(against)}
+    assert activity["held"] < 0.15 * activity["free"], activity
+    assert activity["against"] > 1.5 * activity["free"], activity
+    assert held.record.reserve_max_abs_Nm["ankle_angle_r"] <= free.record.reserve_max_abs_Nm["ankle_angle_r"] + 0.5
+    device = held.record.get("assistance")
+    assert device["gain"] == 1.0 and device["dofs"] == ["ankle_angle_r"] and device["axis"] == "time_s"
+    # the device's recorded torque is the ID's ankle moment at the nodes
+    id_table = read_table(example.id["normal"])
+    assert np.allclose(device["torque_Nm"]["ankle_angle_r"],
+                       np.interp(held.time_s, id_table.index, id_table["ankle_angle_r_moment"]))
+
+
+def test_solve_command_refuses_a_bad_device_in_one_line(example, tmp_path, capsys):
+    """``musclemetab solve --assistance``: a column naming no coordinate of the model is one error
+    line naming the file and the column, status 1, nothing written; a gain without a device too."""
+    from musclemetab.commands import main
+
+    bad = _write_profile(tmp_path / "device.sto", [0.5, 2.0], {"ankle_angel_r": [-10.0, -10.0]})
+    base = ["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id", str(example.id["normal"]),
+            "--window", "1.05:1.25", "--no-progress"]
+    assert main(base + ["--assistance", str(bad), "--out", str(tmp_path / "a")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{bad}: column 'ankle_angel_r' names no coordinate of the model" in err[0], err
+    assert not (tmp_path / "a" / "solution.sto").exists()
+    assert main(base + ["--assistance-gain", "2", "--out", str(tmp_path / "b")]) == 1
+    assert "--assistance-gain belongs to a device: give --assistance DEVICE.sto" in capsys.readouterr().err
