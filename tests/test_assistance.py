@@ -160,3 +160,68 @@ def test_solve_command_refuses_a_bad_device_in_one_line(example, tmp_path, capsy
     assert not (tmp_path / "a" / "solution.sto").exists()
     assert main(base + ["--assistance-gain", "2", "--out", str(tmp_path / "b")]) == 1
     assert "--assistance-gain belongs to a device: give --assistance DEVICE.sto" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------------- a study's gain sweep
+GAINS = (0.5, 1.0, 1.5)
+TRICEPS = ("soleus_r", "gasmed_r", "gaslat_r")
+
+
+def _assisted_study(example, profile, out, **assistance):
+    from musclemetab.study import study_from_dict
+
+    trial = {"name": "normal", "ik": str(example.ik["normal"]), "id": str(example.id["normal"]),
+             "assistance": {"file": str(profile), **assistance}}
+    return study_from_dict({"name": "exo", "workflows": ["effort-gen"], "models": ["UM10", "BH04"],
+                            "subjects": [{"name": "sub1", "model": str(example.model),
+                                          "body_mass_kg": example.body_mass_kg, "height_m": example.height_m,
+                                          "trials": [trial]}]}, base="/", output=out)
+
+
+@pytest.fixture(scope="module")
+def exo_study(example, tmp_path_factory):
+    """The example subject's normal trial unassisted and with the documented plantarflexion profile
+    (0.2 N m/kg at 50 % of the cycle) at gains 0.5, 1 and 1.5: a study of four units."""
+    from musclemetab.study.runner import run_study
+
+    root = tmp_path_factory.mktemp("exo")
+    profile = plantarflexion_assistance(root / "plantarflexion.sto", example.body_mass_kg, peak_Nm_per_kg=0.2,
+                                        peak_percent=50.0)
+    study = _assisted_study(example, profile, root / "study", gains=list(GAINS))
+    run = run_study(study, workers=1, progress=False)
+    assert not run.failed, run.failed
+    return study
+
+
+@pytest.mark.opensim
+def test_plantarflexion_assistance_saves_triceps_energy_and_the_sweep_is_monotone(exo_study):
+    """The documented example: the triceps surae's energy falls at every gain and model; the
+    whole-body saving and the device's positive work grow with the gain (the work in proportion
+    to it: the power is the torque times the IK's velocity); the saving is the unassisted row's
+    rate less the assisted row's; the muscles' changes add up to the leg's, as do the phases'."""
+    import pandas as pd
+
+    out = exo_study.output
+    results = pd.read_csv(out / "results.csv")
+    assisted = results[results["assisted_from"].notna()].sort_values(["model", "assistance_gain"])
+    assert set(results["trial"]) == {"normal"} | {f"normal_assist-{g:g}" for g in GAINS}
+    assert (assisted["assisted_from"] == "normal").all()
+    assert assisted["solve_start"].str.startswith("warm from normal (effort-gen)").all()
+    for model, rows in assisted.groupby("model"):
+        free = results[(results["trial"] == "normal") & (results["model"] == model)].iloc[0]
+        assert rows["metabolic_saving_W_per_kg"].tolist() == pytest.approx(
+            (free["whole_body_W_per_kg"] - rows["whole_body_W_per_kg"]).tolist())
+        assert np.all(np.diff(rows["metabolic_saving_W_per_kg"]) > 0) and rows["metabolic_saving_W_per_kg"].min() > 0
+        work = rows["device_positive_work_J"].to_numpy()
+        assert np.all(np.diff(work) > 0) and work == pytest.approx(work[1] * np.asarray(GAINS), rel=1e-9)
+        assert rows["augmentation_factor_W_per_kg"].tolist() == pytest.approx(
+            ((rows["device_positive_power_W_per_kg"] - rows["device_negative_power_W_per_kg"].abs()) / 0.41).tolist())
+    breakdown = pd.read_csv(out / "assistance.csv")
+    muscles = breakdown[breakdown["level"] == "muscle"]
+    triceps = muscles[muscles["part"].isin(TRICEPS)]
+    assert len(triceps) == 3 * len(GAINS) * 2 and (triceps["change_J"] < 0).all(), triceps
+    for (trial, model), rows in breakdown.groupby(["trial", "model"]):
+        leg = rows[rows["level"] == "leg"]["change_J"].iloc[0]
+        assert rows[rows["level"] == "muscle"]["change_J"].sum() == pytest.approx(leg, rel=1e-6, abs=1e-9)
+        assert rows[rows["level"] == "phase"]["change_J"].sum() == pytest.approx(leg, rel=1e-6, abs=1e-9)
+        assert rows[rows["level"] == "group"]["change_J"].sum() == pytest.approx(leg, rel=1e-6, abs=1e-9)

@@ -44,7 +44,7 @@ import threading
 import time
 import traceback
 import warnings
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from .. import __version__
@@ -131,11 +131,18 @@ class Unit:
     def warm_source(self, study: Study) -> "Unit | None":
         """The unit whose solution this unit's solve starts from, if any: with the study's
         ``warm_start``, the same subject, trial and leg with the workflow before this one in
-        :data:`WARM_CHAIN` among the study's workflows. EMG-informed solves (the subject's
-        ``emg_mode``), EMG-TEN and estimations start cold."""
-        if self.trial is None or self.sample is not None or not study.warm_start or self.workflow not in WARM_CHAIN:
+        :data:`WARM_CHAIN` among the study's workflows; an assisted trial's solve (its
+        ``assisted_from``), whatever ``warm_start`` says, from the unassisted trial's solve with the same
+        workflow. EMG-informed solves (the subject's ``emg_mode``), EMG-TEN and estimations start cold."""
+        if self.trial is None or self.sample is not None or self.workflow not in WARM_CHAIN:
             return None
-        if study.subject(self.subject).emg_mode is not None:
+        subject = study.subject(self.subject)
+        if subject.emg_mode is not None:
+            return None
+        assisted_from = subject.trial(self.trial).assisted_from
+        if assisted_from is not None:  # an assisted solve starts from the unassisted one (docs/assistance.md)
+            return Unit(self.subject, assisted_from, self.workflow, self.side)
+        if not study.warm_start:
             return None
         before = [w for w in WARM_CHAIN[:WARM_CHAIN.index(self.workflow)] if w in study.workflows]
         return Unit(self.subject, self.trial, before[-1], self.side) if before else None
@@ -171,11 +178,13 @@ def _file_hash(path: Path | None) -> str | None:
 def _trial_record(trial: Trial) -> dict:
     rec = {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(trial).items()}
     rec["files"] = {k: _file_hash(p) for k, p in trial.files().items()}
-    for k in ("ik", "id", "emg", "grf", "external_loads"):
+    for k in ("ik", "id", "emg", "grf", "external_loads", "assistance"):
         rec.pop(k, None)  # paths do not matter, contents do
-    for k in ("cycle", "ultrasound"):
+    for k in ("cycle", "ultrasound", "assisted_from"):
         if rec.get(k) is None:
             rec.pop(k, None)  # absent key: earlier studies keep their unit keys
+    if trial.assistance is None:
+        rec.pop("assistance_gain", None)
     from ..emg import RawEmgPath
 
     if isinstance(trial.emg, RawEmgPath):  # raw EMG processed by the package (absent: envelopes, earlier keys)
@@ -462,7 +471,9 @@ def _execute_unit(study: Study, unit: Unit, key: str, dependency_folder: str | N
             estimation = Path(study.output) / Unit(unit.subject, None, EMG_TEN).folder
             record.update(run_sample(study, unit, tmp, Path(dependency_folder),
                                      options=_solver_options(study, subject),
-                                     arguments=solve_arguments(subject, unit.workflow, estimation),
+                                     arguments={**solve_arguments(subject, unit.workflow, estimation),
+                                                **_device_arguments(subject.trial(unit.trial), unit.leg(study),
+                                                                    subject.model)},
                                      analysis_file=ANALYSIS_FILE))
         else:
             dep = Path(dependency_folder) if dependency_folder else None
@@ -625,6 +636,8 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
         if subject.emg_mode is not None:
             sol = _informed_solve(study, subject, trial, unit.workflow, kwargs)
         else:
+            device = _device_arguments(trial, side, subject.model)
+
             def solve(warm_start=None):
                 return solve_files(subject.model, trial.ik, trial.id, unit.workflow, side=side, dofs=subject.dofs,
                                    external_loads=trial.external_loads,
@@ -632,9 +645,10 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
                                    grf_column=trial.grf_column, grf_threshold_N=trial.grf_threshold_N,
                                    cycle=trial.cycle, options=_solver_options(study, subject),
                                    exclude_muscles=subject.exclude_muscles, exclude_missing_ok=subject.side == "both",
-                                   **({"warm_start": warm_start} if warm_start is not None else {}), **kwargs)
+                                   **({"warm_start": warm_start} if warm_start is not None else {}), **device,
+                                   **kwargs)
 
-            sol, start = _chain_solve(solve, unit.warm_source(study), warm, times)
+            sol, start = _chain_solve(solve, unit.warm_source(study), warm, times, trial.name)
         write_solution_folder(sol, tmp, opensim_files=False)  # written below, for every workflow
         times["solve_s"] = sol.record.solve_time_s
         if not sol.success:
@@ -719,7 +733,33 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
         "reserve_share_of_peak_moment": sol.record.reserve_share_of_peak_moment,
         "plausibility": [f.to_dict() for f in flags],
         **({"sensitivity": sensitivity} if study.sensitivity else {}),
+        **({"assistance": _device_record(trial, sol, subject.body_mass_kg)} if trial.assistance is not None else {}),
     }
+
+
+def _device_arguments(trial: Trial, side: str, model) -> dict:
+    """The ``solve_files`` keywords of an assisted trial: the profile, its gain and the gait cycle a
+    profile over the cycle is mapped onto (the trial's, :func:`.events.trial_cycle`; with ``cycle``
+    the solve's own)."""
+    if trial.assistance is None:
+        return {}
+    out = {"assistance": trial.assistance, "assistance_gain": trial.assistance_gain}
+    if trial.cycle is None:
+        from .events import trial_cycle
+
+        c = trial_cycle(trial, side, model)
+        out["assistance_cycle_s"] = (c.start_s, c.end_s)
+    return out
+
+
+def _device_record(trial: Trial, sol, body_mass_kg: float) -> dict:
+    """The unit record's ``assistance``: the unassisted trial, the file, the gain and the device's
+    work over the gait cycle (this leg's device; ``summary.json`` holds its torque and power)."""
+    device = sol.record.get("assistance") or {}
+    keys = ("gain", "axis", "dofs", "cycle_s", "positive_work_J", "negative_work_J", "net_work_J",
+            "mean_positive_power_W", "mean_negative_power_W", "duration_s")
+    return {"assisted_from": trial.assisted_from, "file": Path(trial.assistance).name,
+            **{k: device.get(k) for k in keys}, "body_mass_kg": body_mass_kg}
 
 
 #: The workflows whose trial units write ``sensitivity.csv`` with the study's ``[uncertainty]
@@ -767,7 +807,7 @@ def unit_sensitivity(study: Study, unit: Unit, folder: Path) -> dict:
 COLD = "cold"
 
 
-def _chain_solve(solve, source: Unit | None, folder: Path | None, times: dict):
+def _chain_solve(solve, source: Unit | None, folder: Path | None, times: dict, trial: str | None = None):
     """``(solution, start)``: ``solve(warm_start)`` started from the solution in ``folder`` (the
     unit ``source``), with the fallback of ``docs/study.md`` ("Warm-started chains"):
 
@@ -784,6 +824,8 @@ def _chain_solve(solve, source: Unit | None, folder: Path | None, times: dict):
 
     if source is None:
         return solve(), COLD
+    if trial is not None and source.trial != trial:  # an assisted trial's unassisted solve
+        source = replace(source, workflow=f"{source.trial} ({source.workflow})")
     rec = read_unit_record(folder) if folder is not None else None
     if not rec or rec.get("status") != "ok":
         return solve(), f"cold: {source.workflow} did not succeed, no warm start"
