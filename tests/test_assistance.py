@@ -3,6 +3,8 @@ moments, its sign convention, its work, the profile files and their errors."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -225,3 +227,16 @@ def test_plantarflexion_assistance_saves_triceps_energy_and_the_sweep_is_monoton
         assert rows[rows["level"] == "muscle"]["change_J"].sum() == pytest.approx(leg, rel=1e-6, abs=1e-9)
         assert rows[rows["level"] == "phase"]["change_J"].sum() == pytest.approx(leg, rel=1e-6, abs=1e-9)
         assert rows[rows["level"] == "group"]["change_J"].sum() == pytest.approx(leg, rel=1e-6, abs=1e-9)
+
+
+def test_the_report_draws_the_assistance_figure(exo_study, tmp_path):
+    """A study with assisted trials gets the assistance figure after the others (a study without
+    them has none: tests/test_report.py counts FIGURE_NAMES)."""
+    from musclemetab.report.draw import draw_figure
+    from musclemetab.report.folder import read_study_folder
+    from musclemetab.report.plan import FIGURE_NAMES, plan_figures
+
+    folder = read_study_folder(exo_study.output)
+    assert list(plan_figures(folder)) == [*FIGURE_NAMES, "assistance"]
+    entry = draw_figure(folder, tmp_path, ("png",), "assistance")
+    assert entry.paths and Path(entry.paths["png"]).stat().st_size > 10_000, entry
