@@ -240,3 +240,42 @@ def test_the_report_draws_the_assistance_figure(exo_study, tmp_path):
     assert list(plan_figures(folder)) == [*FIGURE_NAMES, "assistance"]
     entry = draw_figure(folder, tmp_path, ("png",), "assistance")
     assert entry.paths and Path(entry.paths["png"]).stat().st_size > 10_000, entry
+
+
+# ---------------------------------------------------------------------------- a study trial's `states`
+@pytest.mark.opensim
+def test_a_study_trial_of_opensim_states_gives_the_numbers_of_the_command(exo_study, example, tmp_path):
+    """A trial with ``states`` (and ``controls``) of the subject's model: one unit (workflow
+    "states") whose whole-body and per-muscle tables are those ``musclemetab metabolics --states``
+    writes for the same files (the states and controls OpenSim files of the unassisted unit,
+    its model.osim), and a results row with the phases and groups."""
+    import pandas as pd
+
+    from musclemetab.commands import main
+    from musclemetab.study import study_from_dict
+    from musclemetab.study.runner import run_study
+
+    unit = exo_study.output / "units" / "sub1" / "normal" / "effort-gen"
+    trial = {"name": "normal", "ik": str(example.ik["normal"]), "id": str(example.id["normal"]),
+             "states": str(unit / "states.sto"), "controls": str(unit / "controls.sto")}
+    study = study_from_dict({"name": "states", "workflows": ["effort-gen", "effort-ten"], "models": ["UM10", "BH04"],
+                             "subjects": [{"name": "sub1", "model": str(unit / "model.osim"),
+                                           "body_mass_kg": example.body_mass_kg, "height_m": example.height_m,
+                                           "trials": [trial]}]}, base="/", output=tmp_path / "study")
+    run = run_study(study, workers=1, progress=False)
+    assert not run.failed and len(run.ran) == 1, (run.failed, run.ran)
+    assert main(["metabolics", "--states", str(unit / "states.sto"), "--controls", str(unit / "controls.sto"),
+                 "--model", str(unit / "model.osim"), "--mass", str(example.body_mass_kg), "--height",
+                 str(example.height_m), "--models", "UM10,BH04", "--out", str(tmp_path / "cli")]) == 0
+    folder = tmp_path / "study" / "units" / "sub1" / "normal" / "states"
+    cli = pd.read_csv(tmp_path / "cli" / "whole_body.csv").set_index("model")
+    mine = pd.read_csv(folder / "whole_body.csv").set_index("model")
+    pd.testing.assert_frame_equal(mine[cli.columns], cli)  # the study adds the costs of transport (its speed)
+    # the rates (energy_per_cycle_J is over the study's gait cycle, the command's over every state)
+    cols = ["model", "muscle", "muscle_W", "muscle_W_per_kg", "share_of_leg_pct", "work_mean_W"]
+    pd.testing.assert_frame_equal(pd.read_csv(folder / "per_muscle.csv")[cols],
+                                  pd.read_csv(tmp_path / "cli" / "per_muscle.csv")[cols])
+    results = pd.read_csv(tmp_path / "study" / "results.csv").set_index("model")
+    assert set(results["workflow"]) == {"states"}
+    assert results.loc["UM10", "whole_body_W_per_kg"] == pytest.approx(cli.loc["UM10", "whole_body_W_per_kg"])
+    assert results.loc["UM10", "share_PF_pct"] > 0

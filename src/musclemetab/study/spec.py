@@ -80,6 +80,10 @@ A study file names everything a study needs; paths are relative to the file::
                                           # trial solved unassisted and once per gain, as the trials
                                           # <name>_assist-<gain> (a study-level [assistance] table of the
                                           # same form applies to every trial without its own)
+    # states = "data/states.sto"          # optional: an OpenSim states file of the subject's model
+    # controls = "data/controls.sto"      # (and its controls): the trial's rates from them, as
+                                          # `musclemetab metabolics --states` gives them; one unit,
+                                          # workflow "states", instead of a solve per workflow
 
 Every key is checked: an unknown key, a missing file or a wrong type raises
 :class:`~musclemetab.errors.OptionError` or :class:`~musclemetab.errors.InputFileError`
@@ -181,12 +185,16 @@ class Trial:
     assistance_gain: float = 1.0
     #: the unassisted trial this assisted trial is compared with (the same files, no device)
     assisted_from: str | None = None
+    #: an OpenSim states file of the subject's model (and its controls): the rates from them, no solve
+    states: Path | None = None
+    controls: Path | None = None
 
     def files(self) -> dict[str, Path]:
         out = {k: v for k, v in (("ik", self.ik), ("id", self.id), ("emg", self.emg), ("grf", self.grf),
                                  ("external_loads", self.external_loads), ("ultrasound", self.ultrasound),
                                  ("markers", self.markers), ("ik_setup", self.ik_setup),
-                                 ("assistance", self.assistance)) if v}
+                                 ("assistance", self.assistance), ("states", self.states),
+                                 ("controls", self.controls)) if v}
         if self.external_loads is not None:
             from ..external_loads import read_external_loads
 
@@ -301,8 +309,10 @@ _TRIAL_KEYS = {
     "name", "ik", "id", "emg", "grf", "grf_column", "grf_threshold_N", "speed_m_per_s",
     "measured_W_per_kg", "vo2_mL_per_s", "vco2_mL_per_s", "vo2_mL_per_min", "vco2_mL_per_min",
     "start_s", "toe_off_s", "end_s", "external_loads", "cycle", "ultrasound", "emg_processing", "markers", "ik_setup",
-    "assistance",
+    "assistance", "states", "controls",
 }
+#: the workflow of a trial whose rates come from an OpenSim states file (its ``states`` key)
+STATES = "states"
 
 
 def load_study(path: str | os.PathLike, *, output: str | os.PathLike | None = None) -> Study:
@@ -832,10 +842,17 @@ def _trial(data, base: Path, where: str, emg_processing: str = "envelope") -> Tr
     if markers is None and data.get("ik_setup") is not None:
         raise OptionError(f"{here}: 'ik_setup' needs 'markers'; add the trial's markers or drop it")
     c3d_forces = markers is not None and markers.suffix.lower() == ".c3d" and data.get("grf") is None
+    states = _path(data.get("states"), base, here, "states", required=False)
+    if states is None and data.get("controls") is not None:
+        raise OptionError(f"{here}: 'controls' goes with 'states' (an OpenSim states file); add it or drop 'controls'")
+    if states is not None and data.get("assistance") is not None:
+        raise OptionError(f"{here}: 'states' gives the trial's muscle states, and 'assistance' needs a solve; "
+                          "drop one of them")
     return Trial(
         name=name,
         ik=_path(data.get("ik"), base, here, "ik") if markers is None else None,
-        id=_path(data.get("id"), base, here, "id", required=data.get("external_loads") is None and not c3d_forces),
+        id=_path(data.get("id"), base, here, "id", required=data.get("external_loads") is None and not c3d_forces
+                 and states is None),
         emg=emg_source(_path(data.get("emg"), base, here, "emg", required=False),
                        _emg_processing(data, here, emg_processing)),
         grf=_path(data.get("grf"), base, here, "grf", required=False),
@@ -853,6 +870,8 @@ def _trial(data, base: Path, where: str, emg_processing: str = "envelope") -> Tr
         ultrasound=_path(data.get("ultrasound"), base, here, "ultrasound", required=False),
         markers=markers,
         ik_setup=_path(data.get("ik_setup"), base, here, "ik_setup", required=False),
+        states=states,
+        controls=_path(data.get("controls"), base, here, "controls", required=False),
     )
 
 

@@ -51,7 +51,7 @@ from .. import __version__
 from ..errors import DataMismatchError, MusclemetabError, OptionError
 from ..io.atomic import FILES_MANIFEST, file_sha256
 from .estimation import ESTIMATE, ESTIMATE_FOLDER, run_parameter_estimation
-from .spec import EMG_TEN, Study, Subject, Trial
+from .spec import EMG_TEN, STATES, Study, Subject, Trial
 
 __all__ = [
     "Unit",
@@ -156,7 +156,11 @@ def plan_units(study: Study) -> tuple[list[Unit], list[Unit]]:
     # Workflow by workflow: parallel workers start on different trials, so a trial's
     # geometry is computed once and found in the cache by its other workflows.
     stage2 = [Unit(s.name, t.name, w, side if len(s.sides) > 1 else None)
-              for w in study.workflows for s in study.subjects for t in s.trials for side in s.sides]
+              for w in study.workflows for s in study.subjects for t in s.trials for side in s.sides
+              if t.states is None]
+    # a trial of an OpenSim states file: one unit, its rates from the states (no solve)
+    stage2 += [Unit(s.name, t.name, STATES, side if len(s.sides) > 1 else None)
+               for s in study.subjects for t in s.trials for side in s.sides if t.states is not None]
     return stage1, stage2
 
 
@@ -178,7 +182,7 @@ def _file_hash(path: Path | None) -> str | None:
 def _trial_record(trial: Trial) -> dict:
     rec = {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(trial).items()}
     rec["files"] = {k: _file_hash(p) for k, p in trial.files().items()}
-    for k in ("ik", "id", "emg", "grf", "external_loads", "assistance"):
+    for k in ("ik", "id", "emg", "grf", "external_loads", "assistance", "states", "controls"):
         rec.pop(k, None)  # paths do not matter, contents do
     for k in ("cycle", "ultrasound", "assisted_from"):
         if rec.get(k) is None:
@@ -626,7 +630,10 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
     times = {}
     start = COLD
     t0 = time.perf_counter()
-    if unit.workflow == EMG_TEN:
+    sol = states = None
+    if unit.workflow == STATES:  # the rates of an OpenSim states file: no solve
+        states = _states_metabolics(study, subject, trial, side)
+    elif unit.workflow == EMG_TEN:
         _copy_solution(dependency / trial.name, tmp)
         sol = Solution.load(tmp, require_success=False)  # the estimation unit's output: its hand-off
         if not sol.run_record.success:
@@ -656,7 +663,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
 
             raise emg_failure(sol.run_record, subject.emg_mode, f"{unit.workflow} solve of {subject.name}/{trial.name}")
     times["solution_s"] = time.perf_counter() - t0
-    if study.strict:  # the solve's flags fail the unit before the later stages run
+    if study.strict and sol is not None:  # the solve's flags fail the unit before the later stages run
         from ..quality import check_strict
 
         check_strict(sol.record.flags, unit.label)
@@ -672,7 +679,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
         speed = None
     # the stages after the solve take the solution object (the same numbers as its folder,
     # tests/test_stage_paths.py); each writes its files once
-    recorded = sol.record.gait_cycle
+    recorded = sol.record.gait_cycle if sol is not None else None
     if recorded and trial.start_s is None and trial.end_s is None:  # the cycle the solve found
         from ..events import GaitCycle
 
@@ -680,7 +687,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
         cycle = GaitCycle(recorded["start_s"], toe_off, recorded["end_s"])
     else:
         cycle = trial_cycle(trial, side, subject.model)
-    result = metabolics_from_solution(
+    result = states(speed) if states is not None else metabolics_from_solution(
         sol, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
         basal_rate_W_per_kg=study.basal_coefficient, basal_exponent=study.basal_exponent,
         speed_m_per_s=speed, muscle_properties=subject.muscle_properties,
@@ -692,7 +699,8 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
     from ..analysis.groups import has_function_group
 
     # DOFs with no muscle function group (a subtalar or toe joint) stay out of the group analysis
-    geometry = compute_geometry(subject.model, trial.ik, dofs=[d for d in sol.dofs if has_function_group(d)],
+    dofs = sol.dofs if sol is not None else _model_dofs(subject, side)
+    geometry = compute_geometry(subject.model, trial.ik, dofs=[d for d in dofs if has_function_group(d)],
                                 side=side)
     from ..analysis.unit import analyse_metabolics, filtered_moment_arms
 
@@ -702,11 +710,12 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
     analysis.timeseries.to_csv(tmp / TIMESERIES_FILE, index=False, float_format="%.10g")
     times["analysis_s"] = time.perf_counter() - t2
 
-    t3 = time.perf_counter()
-    from ..redundancy.export import write_opensim_states
+    if sol is not None:  # a states trial's OpenSim files are its own
+        t3 = time.perf_counter()
+        from ..redundancy.export import write_opensim_states
 
-    write_opensim_states(sol, subject.model, trial.ik, tmp)
-    times["opensim_states_s"] = time.perf_counter() - t3
+        write_opensim_states(sol, subject.model, trial.ik, tmp)
+        times["opensim_states_s"] = time.perf_counter() - t3
     if study.sensitivity:
         t4 = time.perf_counter()
         sensitivity = unit_sensitivity(study, unit, tmp)
@@ -728,13 +737,47 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
             "not available" if speed is None else "estimated from the pelvis displacement over the cycle (IK)"),
         "toe_off_pct": float(100.0 * (cycle.toe_off_s - cycle.start_s) / (cycle.end_s - cycle.start_s)),
         "n_nodes": int(np.asarray(result.time_s).size),
-        "large_reserve": bool(sol.record.large_reserve),
-        "excluded_muscles": list(sol.record.excluded_muscles or []),
-        "reserve_share_of_peak_moment": sol.record.reserve_share_of_peak_moment,
+        "large_reserve": bool(sol.record.large_reserve) if sol is not None else False,
+        "excluded_muscles": list(sol.record.excluded_muscles or []) if sol is not None else [],
+        "reserve_share_of_peak_moment": sol.record.reserve_share_of_peak_moment if sol is not None else None,
+        **({"states": {"file": str(trial.states), "controls": str(trial.controls) if trial.controls else None}}
+           if states is not None else {}),
         "plausibility": [f.to_dict() for f in flags],
         **({"sensitivity": sensitivity} if study.sensitivity else {}),
         **({"assistance": _device_record(trial, sol, subject.body_mass_kg)} if trial.assistance is not None else {}),
     }
+
+
+def _states_metabolics(study: Study, subject: Subject, trial: Trial, side: str):
+    """A function of the walking speed giving the trial's metabolic rates of ``side`` from its
+    OpenSim states file, as ``musclemetab metabolics --states`` computes them
+    (:func:`musclemetab.metabolics.opensim_states.states_metabolics`: the model's probes' muscle
+    masses when it has any). The states are read (by OpenSim) at once, before the speed is known."""
+    from ..metabolics.opensim_states import read_opensim_states, split_sides, states_metabolics
+
+    read = read_opensim_states(subject.model, trial.states, trial.controls)
+    legs = split_sides(read.states)
+    if side not in legs:
+        raise DataMismatchError(f"{trial.states}: no muscle of the {'right' if side == 'r' else 'left'} leg "
+                                f"(the subject's side); it has the legs {', '.join(legs)}")
+
+    def rates(speed):
+        results, _ = states_metabolics(
+            read, {side: legs[side]}, subject.body_mass_kg, subject.height_m, models=list(study.models),
+            basal=study.basal, basal_rate_W_per_kg=study.basal_coefficient, basal_exponent=study.basal_exponent,
+            speed_m_per_s=speed, muscle_properties=subject.muscle_properties)
+        return results[side]
+
+    return rates
+
+
+def _model_dofs(subject: Subject, side: str) -> list[str]:
+    """The subject's DOFs of ``side`` (its ``dofs``, else those discovered from the model)."""
+    if subject.dofs is not None:
+        return list(subject.dofs)
+    from ..layout import discover_dofs, read_layout
+
+    return list(discover_dofs(read_layout(subject.model), side, None))
 
 
 def _device_arguments(trial: Trial, side: str, model) -> dict:
@@ -857,5 +900,5 @@ def _plausibility(study: Study, unit: Unit, sol, result, speed, groups) -> list:
     flags = metabolic_flags({m: result.whole_body[m].mean_W_per_kg for m in result.models}, speed, groups)
     if study.strict:  # the solve's flags were checked after the solve
         check_strict(flags, unit.label)
-    return list(sol.record.flags) + flags
+    return (list(sol.record.flags) if sol is not None else []) + flags
 
