@@ -120,8 +120,9 @@ def ankle_device(example, tmp_path_factory):
 
 
 @pytest.mark.opensim
-def test_a_device_supplying_the_ankle_moment_silences_the_ankle_muscles(example, ankle_device, tmp_path):
-    """Sign convention: a device torque equal to the ID ankle moment (gain 1) leaves the ankle's net moment to no one: the triceps surae, which supply the push-off's
+def test_a_device_supplying_the_ankle_moment_silences_the_ankle_muscles(example, ankle_device):
+    """Sign convention: a device torque equal to the ID ankle moment (gain 1) leaves the ankle's net
+    moment to no one: the triceps surae, which supply the push-off's
     plantarflexion moment unassisted, fall below 15 % of their unassisted activity (time
     integral of the activations; what stays balances the stretched muscles' passive force) and
     the ankle reserve grows by no more than 0.5 N m. Had the device been added to the ID moment
@@ -152,7 +153,8 @@ def test_solve_command_refuses_a_bad_device_in_one_line(example, tmp_path, capsy
     from musclemetab.commands import main
 
     bad = _write_profile(tmp_path / "device.sto", [0.5, 2.0], {"ankle_angel_r": [-10.0, -10.0]})
-    base = ["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id", str(example.id["normal"]),
+    base = ["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
+            str(example.id["normal"]),
             "--window", "1.05:1.25", "--no-progress"]
     assert main(base + ["--assistance", str(bad), "--out", str(tmp_path / "a")]) == 1
     err = capsys.readouterr().err.strip().splitlines()
@@ -227,6 +229,7 @@ def test_plantarflexion_assistance_saves_triceps_energy_and_the_sweep_is_monoton
         assert rows[rows["level"] == "group"]["change_J"].sum() == pytest.approx(leg, rel=1e-6, abs=1e-9)
 
 
+@pytest.mark.opensim
 def test_the_report_draws_the_assistance_figure(exo_study, tmp_path):
     """A study with assisted trials gets the assistance figure after the others (a study without
     them has none: tests/test_report.py counts FIGURE_NAMES)."""

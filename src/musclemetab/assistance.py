@@ -287,10 +287,9 @@ def assistance_record(profile: AssistanceProfile, gain: float, dofs: Sequence[st
     assisted = [d for d in dofs if d in profile.coordinates]
     mesh = np.asarray(mesh_time_s, dtype=float)
     tau = profile.torque_at(mesh, assisted, gain, cycle_s)
-    power = np.sum(tau * _angular_velocity(ik_time_s, np.asarray(angles_rad)[:, [list(dofs).index(d) for d in assisted]],
-                                           mesh), axis=1) if assisted else np.zeros(mesh.size)
-    work = device_work(profile, gain, assisted, ik_time_s,
-                       np.asarray(angles_rad)[:, [list(dofs).index(d) for d in assisted]], cycle_s) if assisted else \
+    q = np.asarray(angles_rad)[:, [list(dofs).index(d) for d in assisted]]
+    power = np.sum(tau * _angular_velocity(ik_time_s, q, mesh), axis=1) if assisted else np.zeros(mesh.size)
+    work = device_work(profile, gain, assisted, ik_time_s, q, cycle_s) if assisted else \
         {"positive_work_J": 0.0, "negative_work_J": 0.0, "net_work_J": 0.0, "mean_positive_power_W": 0.0,
          "mean_negative_power_W": 0.0, "duration_s": float(cycle_s[1] - cycle_s[0])}
     return {"file": str(profile.path), "gain": float(gain), "axis": profile.axis, "dofs": assisted,
@@ -343,4 +342,5 @@ def plantarflexion_assistance(path: str | os.PathLike, body_mass_kg: float, *, p
     return write_storage(path, table, comments=[
         CYCLE_AXIS_HEADER,
         f"# plantarflexion assistance: peak {peak_Nm_per_kg:g} N m/kg x {mass:g} kg at {peak_percent:g} % of the "
-        f"gait cycle, from {onset_percent:g} to {offset_percent:g} %; the time column is % of the cycle, torque in N m"])
+        f"gait cycle, from {onset_percent:g} to {offset_percent:g} %; the time column is % of the cycle, torque in "
+        "N m"])
