@@ -270,7 +270,8 @@ def _isolated_cache(tmp_path_factory):
 #: other process solves EMG-TEN, so that no module waits for it later; the other modules follow
 #: in collection order
 _LONGEST_FIRST = ("test_emg_ten.py", "test_demo.py", "test_gait2392.py", "test_estimate.py",
-                  "test_robustness_outputs.py", "test_study.py", "test_redundancy.py", "test_robustness_values.py",
+                  "test_robustness_outputs.py", "test_study.py", "test_assistance.py", "test_redundancy.py",
+                  "test_robustness_values.py",
                   "test_report.py", "test_uncertainty.py", "test_calibration.py", "test_weights.py",
                   "test_emg_informed.py", "test_energy_goal.py", "test_prepare.py", "test_stop.py", "test_cli_flow.py",
                   "test_report_browser.py", "test_scale_ik.py",

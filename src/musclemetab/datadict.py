@@ -31,15 +31,17 @@ _PM = "per_muscle.csv/.parquet"
 _LEGS_WB = "whole_body.csv (metabolics, legs added)"
 _LEG = "leg_muscles.csv"
 _SENS = "sensitivity.csv"
+_ASSIST = "assistance.csv"
 
 #: ``(files, column, unit, description)``; ``files`` lists the tables holding the column.
 DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
     # identifiers
-    (f"{_STUDY}, {_PM} (study), failures.csv", "subject", "-", "subject name of the study file"),
-    (f"{_STUDY}, {_PM} (study), failures.csv", "trial", "-", "trial name of the study file"),
-    (f"{_STUDY}, {_PM} (study), failures.csv", "workflow", "-",
+    (f"{_STUDY}, {_PM} (study), failures.csv, {_ASSIST}", "subject", "-", "subject name of the study file"),
+    (f"{_STUDY}, {_PM} (study), failures.csv, {_ASSIST}", "trial", "-", "trial name of the study file"),
+    (f"{_STUDY}, {_PM} (study), failures.csv, {_ASSIST}", "workflow", "-",
      "muscle redundancy workflow: effort-gen, effort-cal, effort-ten or emg-ten"),
-    (f"{_STUDY}, {_UNIT_WB}, {_UNIT_AN}, {_PM}, {_LEG}, {_LEGS_WB}, timeseries.csv, metabolics.parquet, {_SENS}", "model",
+    (f"{_STUDY}, {_UNIT_WB}, {_UNIT_AN}, {_PM}, {_LEG}, {_LEGS_WB}, timeseries.csv, metabolics.parquet, {_SENS}, "
+     f"{_ASSIST}", "model",
      "-",
      "metabolic energy model (short name of the registry, e.g. UM10, BH04)"),
     ("failures.csv", "reason", "-", "why the unit failed or was stopped (one line)"),
@@ -228,6 +230,41 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
      "distance of the scaled model's marker, in the static pose, from the experimental marker averaged over the "
      "static trial's time range (before the marker placer moves it)"),
     ("static_marker_errors.csv", "weight", "-", "the marker's weight in the marker placement"),
+    # assistive devices (docs/assistance.md); results.csv: empty in the rows of unassisted trials
+    (f"{_STUDY}, {_ASSIST}", "assisted_from", "-",
+     "an assisted trial (<trial>_assist-<gain>, a device's torque taken off the ID moments): the unassisted "
+     "trial it is compared with (the same files, no device)"),
+    (f"{_STUDY}, {_ASSIST}", "assistance_gain", "-", "the factor on the device torque of the assistance profile"),
+    (_STUDY, "device_positive_work_J", "J",
+     "positive work of the device over the gait cycle (torque x joint angular velocity from the IK; one leg's device)"),
+    (_STUDY, "device_negative_work_J", "J",
+     "negative work of the device over the gait cycle (<= 0; energy it absorbs; one leg's device)"),
+    (_STUDY, "device_positive_work_J_per_kg", "J/kg", "device_positive_work_J per kg of body mass"),
+    (_STUDY, "device_negative_work_J_per_kg", "J/kg", "device_negative_work_J per kg of body mass"),
+    (_STUDY, "device_positive_power_W_per_kg", "W/kg",
+     "the device's average positive power over the gait cycle, both legs per kg of body mass (counted as "
+     "whole_body_W_per_kg counts the legs)"),
+    (_STUDY, "device_negative_power_W_per_kg", "W/kg",
+     "the device's average negative power over the gait cycle (<= 0), both legs per kg of body mass"),
+    (_STUDY, "metabolic_saving_W_per_kg", "W/kg",
+     "whole_body_W_per_kg of the unassisted trial less that of the assisted trial (positive: the device saves "
+     "metabolic energy)"),
+    (_STUDY, "metabolic_saving_pct", "%", "metabolic_saving_W_per_kg in % of the unassisted whole_body_W_per_kg"),
+    (_STUDY, "saving_per_positive_work", "-",
+     "metabolic_saving_W_per_kg / device_positive_power_W_per_kg: metabolic energy saved per joule of positive "
+     "device work"),
+    (_STUDY, "augmentation_factor_W_per_kg", "W/kg",
+     "(device_positive_power_W_per_kg - |device_negative_power_W_per_kg|) / 0.41, the augmentation factor of "
+     "Mooney, Rouse & Herr 2014 without a carried mass"),
+    (_ASSIST, "level", "-", "what the row's part is: leg (the leg's muscles), phase (stance, swing), group (a muscle "
+     "function group of muscle_groups.csv, or other) or muscle"),
+    (_ASSIST, "part", "-", "the leg, phase, group or muscle of the row"),
+    (_ASSIST, "unassisted_J", "J", "the part's metabolic energy over the gait cycle in the unassisted trial (one leg, "
+     "no basal heat; the legs' mean for legs 'r + l')"),
+    (_ASSIST, "assisted_J", "J", "the part's metabolic energy over the gait cycle in the assisted trial (as "
+     "unassisted_J)"),
+    (_ASSIST, "change_J", "J", "assisted_J - unassisted_J (negative: the device saves)"),
+    (_ASSIST, "change_pct", "%", "change_J in % of unassisted_J"),
 )
 
 

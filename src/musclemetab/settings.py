@@ -78,6 +78,8 @@ NUMBER_KEYS: dict[str, NumberKey] = {k.name: k for k in (
     NumberKey("basal_coefficient", "W/kg", 0.0, 10.0, "a basal heat rate per kg (OpenSim's default 1.51, the "
               "paper's 1.2)"),
     NumberKey("basal_exponent", "", 0.0, 2.0, "an exponent of the body mass (1 linear, 0.75 Kleiber's)"),
+    NumberKey("assistance_gain", "", -10.0, 10.0, "a factor on the device torque of an assistance profile (1: as in "
+              "the file; negative: the device acts the other way)"),
     NumberKey("emg_tolerance", "", 0.0, 1.0, "a half-width of the EMG band in normalised excitation"),
     NumberKey("grf_threshold_N", "N", 0.0, 1000.0, "a contact threshold of the vertical force", low_open=True),
     NumberKey("speed_m_per_s", "m/s", 0.0, 15.0, "a walking or running speed", low_open=True),

@@ -189,8 +189,8 @@ def run(args) -> int:
 def _run_states(args, models) -> int:
     """``musclemetab metabolics --states FILE --model M.osim``: the energy of an OpenSim motion."""
     from ..errors import OptionError
-    from ..metabolics.opensim_states import probe_muscle_properties, read_opensim_states, split_sides
-    from ..metabolics.solution import check_metabolics_outputs, metabolics_from_legs, write_legs_metabolics
+    from ..metabolics.opensim_states import read_opensim_states, split_sides, states_metabolics
+    from ..metabolics.solution import check_metabolics_outputs, write_legs_metabolics
 
     if not args.model:
         raise OptionError("--states needs --model: the OpenSim model the states belong to")
@@ -199,28 +199,11 @@ def _run_states(args, models) -> int:
     read = read_opensim_states(args.model, args.states, args.controls)
     legs = split_sides(read.states)
     check_metabolics_outputs(args.out, legs)
-    masses = fractions = None
-    used = ""
-    if args.muscle_parameters == "probes":
-        masses, fractions, used = probe_muscle_properties(read)
-    if args.muscle_properties:  # its rows win over the probes' values
-        from ..properties import read_muscle_properties
-
-        overrides = read_muscle_properties(args.muscle_properties)
-        overrides.check_names([*read.states.muscles, *read.skipped_muscles])
-        for values, column in ((masses, "mass_kg"), (fractions, "slow_twitch_fraction")):
-            for m in [m for m in (values or {}) if overrides.for_muscle(m).get(column) is not None]:
-                del values[m]
-    masses, fractions = masses or None, fractions or None
-    results = metabolics_from_legs(
-        legs, args.mass, args.height, models=models, trim=(0, 0), basal=args.basal,
+    results, used = states_metabolics(
+        read, legs, args.mass, args.height, models=models, basal=args.basal,
         basal_rate_W_per_kg=args.basal_coefficient, basal_exponent=args.basal_exponent, speed_m_per_s=args.speed,
-        muscle_properties=args.muscle_properties, strict=args.strict, muscle_masses_kg=masses,
-        slow_twitch_fractions=fractions,
-    )
+        muscle_properties=args.muscle_properties, strict=args.strict, muscle_parameters=args.muscle_parameters)
     if used:
-        for r in results.values():
-            r.muscle_parameters = f"OpenSim metabolic probes of the model: {used}"
         print(f"musclemetab: note: muscle masses and slow-twitch ratios from the model's metabolic probes ({used}); "
               "--muscle-parameters package for the package's tables", file=sys.stderr)
     files = write_legs_metabolics(results, args.out)

@@ -177,6 +177,18 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                   "volume rule (without it: each muscle's mass from the model, F0 / specific tension x density x lMo)")
     g.add_argument("--muscle-properties", metavar="FILE",
                    help="CSV of per-muscle overrides of mass and slow-twitch fraction (docs/muscles.md)")
+    a = p.add_argument_group(
+        "assistive device", "effort workflows: a device's joint torque taken off the inverse-dynamics moments before the "
+        "muscles are solved (docs/assistance.md)")
+    a.add_argument("--assistance", metavar="DEVICE.sto",
+                   help="device torque profile (.sto/.mot/.csv): a column per coordinate (N m; positive in the "
+                   "coordinate's positive direction, as the ID moment), over time (s) or over the gait cycle (%%); the "
+                   "muscles supply ID - gain x device")
+    number_option(a, "--assistance-gain", "assistance_gain", metavar="G",
+                  help="factor on the device torque (default 1)")
+    a.add_argument("--assistance-cycle", metavar="T0:T1",
+                   help="the gait cycle (s) a profile over the cycle is mapped onto (default: the cycle of --cycle, "
+                   "else the solve window)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     add_progress_argument(p, "; with --side both --workers 2 each leg's, 'solving side r: ...'")
     p.set_defaults(func=run_with_progress)
@@ -353,7 +365,11 @@ def _solve(args) -> int:
         if energy is not None:
             raise OptionError("--energy-model works with the effort workflows (effort-gen, effort-cal, effort-ten) "
                               "without --emg; drop it or the EMG")
+        if getattr(args, "assistance", None):
+            raise OptionError("--assistance works with the effort workflows (effort-gen, effort-cal, effort-ten) "
+                              "without --emg; drop it or the EMG")
         return _emg_ten_command(args, ik, idf)
+    assistance = _assistance(args)
     extra = [o for o, attr in (("--emg-mapping", "emg_mapping"), ("--labels", "labels"), ("--emg-mode", "emg_mode"),
                                ("--emg-weight", "emg_weight"), ("--emg-scale-bounds", "emg_scale_bounds"))
              if getattr(args, attr, None) is not None]
@@ -412,7 +428,7 @@ def _solve(args) -> int:
         passive=args.passive, tendon_stiffness=kt, tendon_stiffness_file=args.parameters,
         options=options, cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, warm_start=warm,
         exclude_muscles=excluded, exclude_missing_ok=args.side == "both",
-        diagnose_only=getattr(args, "diagnose_only", False), before_solve=prepare_opensim_files,
+        diagnose_only=getattr(args, "diagnose_only", False), before_solve=prepare_opensim_files, **assistance,
     )
     if getattr(args, "diagnose_only", False):
         return _report_diagnoses(solutions)
@@ -440,11 +456,40 @@ def _solve(args) -> int:
             f"N = {s.n_intervals}: {s.status} in {s.iterations} iterations, "
             f"objective {s.objective:.6e}, solve {s.solve_time_s:.2f} s, "
             f"max moment residual {s.max_moment_residual_Nm:.1e} N m, max reserve RMS "
-            f"{worst_reserve:.3g} N m{_energy_note(s)} -> {out}"
+            f"{worst_reserve:.3g} N m{_energy_note(s)}{_device_note(s)} -> {out}"
         )
     _plausibility(args, {str(Path(args.out) / side if args.side == "both" else Path(args.out)): sol
                          for side, sol in solutions.items()})
     return 0
+
+
+def _assistance(args) -> dict:
+    """The ``solve_files`` keywords of ``--assistance``, ``--assistance-gain`` and ``--assistance-cycle``."""
+    from ..redundancy.window import parse_window
+
+    path = getattr(args, "assistance", None)
+    gain, cycle = getattr(args, "assistance_gain", None), getattr(args, "assistance_cycle", None)
+    if path is None:
+        given = [o for o, v in (("--assistance-gain", gain), ("--assistance-cycle", cycle)) if v is not None]
+        if given:
+            raise OptionError(f"{', '.join(given)} belong{'s' if len(given) == 1 else ''} to a device: give "
+                              "--assistance DEVICE.sto, or drop them")
+        return {}
+    from ..assistance import check_gain
+
+    out = {"assistance": path, "assistance_gain": check_gain(1.0 if gain is None else gain)}
+    if cycle is not None:
+        out["assistance_cycle_s"] = parse_window(cycle, "--assistance-cycle")
+    return out
+
+
+def _device_note(record) -> str:
+    """``, device +W J / -W J per cycle`` of an assisted solve's record (empty otherwise)."""
+    device = record.get("assistance")
+    if not device:
+        return ""
+    return (f", device (gain {device['gain']:g}) {device['positive_work_J']:.3g} J positive / "
+            f"{device['negative_work_J']:.3g} J negative work per cycle")
 
 
 def _plausibility(args, solutions) -> None:

@@ -28,7 +28,7 @@ from ..errors import DataMismatchError, OptionError
 from .solution import SolutionStates
 
 __all__ = ["OpenSimStates", "read_opensim_states", "probe_muscle_properties", "split_sides",
-           "MUSCLE_PARAMETER_SOURCES"]
+           "MUSCLE_PARAMETER_SOURCES", "states_metabolics"]
 
 #: ``--muscle-parameters``: the model's probes' (when it has any) or the package's own tables
 MUSCLE_PARAMETER_SOURCES = ("probes", "package")
@@ -130,3 +130,38 @@ def split_sides(states: SolutionStates) -> dict[str, SolutionStates]:
                                    parameters={m: states.parameters[m] for m in names}, source=states.source,
                                    side=side)
     return out
+
+
+def states_metabolics(read: OpenSimStates, legs: dict, body_mass_kg: float, height_m: float | None, *,
+                      muscle_parameters: str = "probes", muscle_properties=None, **options) -> tuple[dict, str]:
+    """The metabolic rates of the legs ``legs`` (:func:`split_sides` of ``read.states``, or some of
+    them) of an OpenSim states file (``musclemetab metabolics --states`` and a study trial's
+    ``states``): ``({side: SolutionMetabolics}, the probes used)``. With ``muscle_parameters =
+    "probes"`` the muscle masses and slow-twitch ratios are those of the model's metabolic probes
+    (:func:`probe_muscle_properties`; ``""`` when it has none), the rows of ``muscle_properties``
+    winning over them; the ``options`` are those of
+    :func:`~musclemetab.metabolics.solution.metabolics_from_legs` (every state is evaluated: no
+    trimming)."""
+    from .solution import metabolics_from_legs
+
+    if muscle_parameters not in MUSCLE_PARAMETER_SOURCES:
+        raise OptionError(f"muscle parameters must be {' or '.join(MUSCLE_PARAMETER_SOURCES)}, not "
+                          f"{muscle_parameters!r}")
+    masses = fractions = None
+    used = ""
+    if muscle_parameters == "probes":
+        masses, fractions, used = probe_muscle_properties(read)
+    if muscle_properties:  # its rows win over the probes' values
+        from ..properties import read_muscle_properties
+
+        overrides = read_muscle_properties(muscle_properties)
+        overrides.check_names([*read.states.muscles, *read.skipped_muscles])
+        for values, column in ((masses, "mass_kg"), (fractions, "slow_twitch_fraction")):
+            for m in [m for m in (values or {}) if overrides.for_muscle(m).get(column) is not None]:
+                del values[m]
+    results = metabolics_from_legs(legs, body_mass_kg, height_m, trim=(0, 0), muscle_properties=muscle_properties,
+                                   muscle_masses_kg=masses or None, slow_twitch_fractions=fractions or None, **options)
+    if used:
+        for r in results.values():
+            r.muscle_parameters = f"OpenSim metabolic probes of the model: {used}"
+    return results, used

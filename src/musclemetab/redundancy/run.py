@@ -96,6 +96,9 @@ def solve_files(
     diagnose_only: bool = False,
     parameter_transform=None,
     before_solve=None,
+    assistance: str | os.PathLike | None = None,
+    assistance_gain: float = 1.0,
+    assistance_cycle_s: tuple[float, float] | None = None,
 ) -> Solution:
     """Solve from files: model ``.osim``, IK ``.mot`` and ID ``.sto`` (or ground forces).
 
@@ -117,7 +120,11 @@ def solve_files(
     before IPOPT starts, with the keywords ``model_path``, ``ik_path``, ``time_s`` (the mesh),
     ``parameters`` (the muscles' :class:`~.parameters.MuscleTendonParameters`) and ``dofs`` of the
     solution to come, e.g. :func:`.export.prepare_opensim_files` (``musclemetab solve``); not
-    called with ``parameter_transform``.
+    called with ``parameter_transform``. ``assistance``: a device torque profile
+    (:mod:`musclemetab.assistance`, ``docs/assistance.md``) times ``assistance_gain`` taken off the
+    ID moments before the solve; a profile over the gait cycle is mapped onto the cycle of
+    ``cycle`` when the window comes from one, else onto ``assistance_cycle_s`` (start, end in s),
+    else onto the window; ``summary.json``'s ``assistance`` records it with the device's work.
 
     The inputs are checked (columns, units, time ranges) before the geometry is computed.
 
@@ -203,11 +210,16 @@ def solve_files(
         id_record = {"computed_by": "OpenSim InverseDynamicsTool (muscles excluded)",
                      "coordinate_lowpass_hz": ID_COORDINATE_FILTER_HZ, "external_loads": str(loads.path),
                      "ground_force_data": str(loads.datafile)}
-    ik_time, _ = read_kinematics(ik_table, dofs, check_units=check_units)
+    ik_time, ik_angles = read_kinematics(ik_table, dofs, check_units=check_units)
     id_time, id_moments = read_inverse_dynamics(id_table, dofs)
     keep = frames_in_window(ik_time, trial_window)
-    ik_time = ik_time[keep]
+    ik_time, ik_angles = ik_time[keep], ik_angles[keep]
     check_time_ranges(ik_time, id_time, ik_path, id_path)
+    device, file_moments = None, id_moments
+    if assistance is not None:  # the muscles supply what the device does not (musclemetab.assistance)
+        id_moments, device = _assisted_moments(assistance, assistance_gain, assistance_cycle_s, trial_window, layout,
+                                               model_path, cache_dir, side, dofs, id_time, id_moments,
+                                               check_units)
 
     t0 = _time.perf_counter()
     geometry = compute_geometry(model_path, ik_table, dofs=list(dofs), side=side, cache_dir=cache_dir)
@@ -223,7 +235,7 @@ def solve_files(
     if check_units:
         from ..model import read_model
 
-        check_moments_per_body_mass(id_moments, dofs, read_model(model_path, cache_dir=cache_dir).body_mass_kg, id_path, model_path)
+        check_moments_per_body_mass(file_moments, dofs, read_model(model_path, cache_dir=cache_dir).body_mass_kg, id_path, model_path)
     sources = {"model": Path(model_path), "ik": Path(ik_path), "id": Path(id_path)}
     if loads is not None:
         sources["external_loads"] = loads.path
@@ -255,7 +267,34 @@ def solve_files(
         trial["window"] = trial_window.record()
     if id_record is not None:
         trial["inverse_dynamics"] = id_record
+    if device is not None:
+        from ..assistance import assistance_record
+
+        profile, cycle_s, cycle_source = device
+        trial["assistance"] = assistance_record(profile, assistance_gain, dofs, ik_time, ik_angles, solution.time_s,
+                                                cycle_s, cycle_source)
     return dataclasses.replace(solution, record=solution.record.with_(**trial))
+
+
+def _assisted_moments(path, gain, cycle_s, trial_window, layout, model_path, cache_dir, side, dofs, id_time,
+                      id_moments, check_units):
+    """``(moments less the device torque, (profile, gait cycle, its source))`` of :func:`solve_files`."""
+    from ..assistance import apply_assistance, read_assistance
+    from ..model import read_model
+
+    profile = read_assistance(path)
+    if trial_window.cycle is not None:
+        cycle_s, source = (trial_window.cycle["start_s"], trial_window.cycle["end_s"]), "gait cycle of the solve"
+    elif cycle_s is not None:
+        cycle_s, source = (float(cycle_s[0]), float(cycle_s[1])), "given"
+    else:
+        cycle_s, source = (trial_window.start_s, trial_window.end_s), "solve window"
+    mass = read_model(model_path, cache_dir=cache_dir).body_mass_kg if check_units else None
+    moments = apply_assistance(id_time, id_moments, dofs, profile, gain,
+                               window_s=(trial_window.start_s, trial_window.end_s), cycle_s=cycle_s, side=side,
+                               model_coordinates=[c["name"] for c in layout.coordinates], body_mass_kg=mass,
+                               check_units=check_units)
+    return moments, (profile, cycle_s, source)
 
 
 def exclude_from_geometry(geometry, exclude_muscles: Sequence[str] = (), missing_ok: bool = False):

@@ -26,7 +26,7 @@ from pathlib import Path
 
 from ..errors import MusclemetabError, OptionError
 from .folder import StudyFolder
-from .plan import FIGURE2_CAPTION, FIGURE_NAMES, FigurePlan, plan_figures
+from .plan import FIGURE2_CAPTION, FigurePlan, plan_figures
 
 __all__ = ["FigureEntry", "make_figures", "draw_figure", "default_workers", "draw_costs", "figure_cache",
            "draw_package_figures"]
@@ -292,7 +292,7 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
     this process and ``workers - 1`` copies of it (the ``fork`` start method; where it is not
     available, this process draws every figure). Each takes the next figure, largest first
     (:func:`draw_costs`), when it is free; this process first runs ``meanwhile`` (the page's
-    tables). Returns one :class:`FigureEntry` per name of :data:`~.plan.FIGURE_NAMES`, with
+    tables). Returns one :class:`FigureEntry` per figure of :func:`~.plan.plan_figures`, with
     the file paths or the note saying why the figure is not drawn. The files of a figure not
     drawn are removed from ``fig_dir`` when an earlier report wrote them (``written_before``:
     their file names, as its record lists them, and ``fig_dir``'s list of the package's files
@@ -305,7 +305,7 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
 
     fig_dir = Path(fig_dir)
     plans = plan_figures(study)
-    drawn = [n for n in FIGURE_NAMES if plans[n].draw is not None]
+    drawn = [n for n in plans if plans[n].draw is not None]
     workers = default_workers(len(drawn)) if workers is None else int(workers)
     if workers < 1:
         raise OptionError(f"workers (--workers) must be at least 1, not {workers}")
@@ -351,7 +351,7 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
                     entries[name] = entry
                 receive.close()
                 child.join()
-        for n in FIGURE_NAMES:
+        for n in plans:
             if entries.get(n) is None:
                 entries[n] = draw_figure(study, fig_dir, formats, n, plans[n])
     finally:
@@ -370,4 +370,4 @@ def make_figures(study: StudyFolder, fig_dir: str | os.PathLike, formats: Sequen
             if (e.paths is None or ext not in e.paths) and stale.name in written_before and is_written(fig_dir,
                                                                                                       stale.name):
                 stale.unlink()  # the package's file, unchanged (a file put in its place stays)
-    return [entries[n] for n in FIGURE_NAMES]
+    return [entries[n] for n in plans]

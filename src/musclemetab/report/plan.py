@@ -56,7 +56,11 @@ FIGURE_TITLES = {
     "per_muscle_ranked": "The muscles costing most energy, across speeds",
     "rates_against_speed": "Whole-body and muscle-group rates against walking speed",
     "structural_spread": "Structural spread: energy models, workflows and trials",
+    "assistance": "Assisted walking: metabolic saving against device work",
 }
+#: Figures drawn only when the study's data hold what they show (after :data:`FIGURE_NAMES`):
+#: ``assistance`` for a study with assisted trials (:mod:`.assistance_figure`).
+OPTIONAL_FIGURES = ("assistance",)
 
 FIGURE2_CAPTION = (
     "The metabolic rate (W) and efficiency of one soleus under each of the paper's six energy models "
@@ -139,7 +143,8 @@ def select(study: StudyFolder) -> Selection:
 
 
 def plan_figures(study: StudyFolder) -> dict[str, FigurePlan]:
-    """Figure name -> its :class:`FigurePlan`, in the order of :data:`FIGURE_NAMES`."""
+    """Figure name -> its :class:`FigurePlan`, in the order of :data:`FIGURE_NAMES`, then those
+    of :data:`OPTIONAL_FIGURES` the study's data hold."""
     if study.ok.empty:
         return {n: FigurePlan(n, note="no unit of the study succeeded: nothing to draw.") for n in FIGURE_NAMES}
     sel = select(study)
@@ -163,6 +168,10 @@ def plan_figures(study: StudyFolder) -> dict[str, FigurePlan]:
             plans[name] = FigurePlan(name, note=f"no successful unit for trial {sel.trial}.")
         else:
             plans[name] = FigurePlan(name, draw=draws[name])
+    from .assistance_figure import has_assistance
+
+    if has_assistance(sel.ok):
+        plans["assistance"] = FigurePlan("assistance", draw=partial(assistance_figure, study, sel))
     return plans
 
 
@@ -219,6 +228,13 @@ def spread_figure(sel: Selection):
     from .spread_figure import spread_caption, spread_figure
 
     return spread_figure(sel.ok), spread_caption()
+
+
+def assistance_figure(study: StudyFolder, sel: Selection):
+    from .assistance_figure import assistance_caption, assistance_figure
+
+    return assistance_figure(sel.ok, study.path, sel.workflow if sel.workflow in set(sel.ok["workflow"]) else None,
+                             sel.models), assistance_caption()
 
 
 def figure2_figure():

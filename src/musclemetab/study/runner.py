@@ -509,8 +509,10 @@ def study_root_files() -> list[str]:
     unchanged (:func:`musclemetab.io.atomic.check_replaceable`)."""
     from ..metabolics.per_muscle import PER_MUSCLE_FILE
 
+    from ..analysis.assistance import ASSISTANCE_CSV
+
     return [STUDY_JSON, RESULTS_CSV, RESULTS_PARQUET, PER_MUSCLE_FILE, PER_MUSCLE_PARQUET, GROUP_KEY_CSV,
-            DATA_DICTIONARY_CSV, FAILURES_CSV]
+            DATA_DICTIONARY_CSV, FAILURES_CSV, ASSISTANCE_CSV]
 
 
 def _unit_rows(folder: Path, unit: Unit, rec: dict):
@@ -524,6 +526,11 @@ def _unit_rows(folder: Path, unit: Unit, rec: dict):
         speed_source=rec.get("speed_source"), large_reserve=bool(rec.get("large_reserve", False)),
         unit_dir=str(unit.folder), excluded_muscles=rec.get("excluded_muscles"))
     df["solve_start"] = rec.get("start") or "cold"  # a record without it: a unit of an earlier version, cold
+    if rec.get("assistance"):  # an assisted trial: its device (musclemetab.analysis.assistance)
+        from ..analysis.assistance import device_columns
+
+        for column, value in device_columns(rec["assistance"]).items():
+            df[column] = value
     df.insert(0, "subject", unit.subject)
     df.insert(1, "trial", unit.trial)
     df.insert(2, "workflow", unit.workflow)
@@ -714,6 +721,9 @@ def collect_results(study: Study, failed: dict[str, str] | None = None, interrup
     if "measured_W_per_kg" in table:
         table["measured_W_per_kg"] = pd.to_numeric(table["measured_W_per_kg"], errors="coerce")
     table = table.sort_values(list(ID_COLUMNS), kind="stable", ignore_index=True)
+    from ..analysis.assistance import ASSISTANCE_CSV, add_assistance_changes, assistance_breakdown
+
+    table = add_assistance_changes(table)  # assisted trials against their unassisted trial
     from .uncertainty import add_study_bands  # the uncertainty bands, when the study has samples
 
     builders = (trial_result_rows, add_leg_rows, leg_basal_energy_J)
@@ -728,8 +738,11 @@ def collect_results(study: Study, failed: dict[str, str] | None = None, interrup
 
     fail = pd.DataFrame(failures, columns=["subject", "trial", "workflow", "status", "reason"])
     parquet = parquet_available()
+    assisted = "assisted_from" in table and bool(table["assisted_from"].notna().any())
     if not parquet:  # an earlier run's copies would disagree with the CSV files: removed (if the package's)
         check_replaceable(out, [RESULTS_PARQUET, PER_MUSCLE_PARQUET])
+    if not assisted:  # an earlier run's breakdown would not be of this study: removed (if the package's)
+        check_replaceable(out, [ASSISTANCE_CSV])
     with atomic_directory(out, mark=True) as tmp:  # the root's files, listed in its FILES_MANIFEST
         table.to_csv(tmp / RESULTS_CSV, index=False, float_format="%.10g")
         per_muscle.to_csv(tmp / PER_MUSCLE_FILE, index=False, float_format="%.10g")
@@ -738,9 +751,13 @@ def collect_results(study: Study, failed: dict[str, str] | None = None, interrup
         write_group_key(tmp / GROUP_KEY_CSV)
         write_data_dictionary(tmp / DATA_DICTIONARY_CSV)
         fail.to_csv(tmp / FAILURES_CSV, index=False)
+        if assisted:
+            assistance_breakdown(table, per_muscle).to_csv(tmp / ASSISTANCE_CSV, index=False, float_format="%.10g")
     if not parquet:  # checked above: the package's own copies
         for name in (RESULTS_PARQUET, PER_MUSCLE_PARQUET):
             (out / name).unlink(missing_ok=True)
+    if not assisted:
+        (out / ASSISTANCE_CSV).unlink(missing_ok=True)
     return table
 
 

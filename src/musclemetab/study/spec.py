@@ -77,6 +77,15 @@ A study file names everything a study needs; paths are relative to the file::
     vo2_mL_per_min = 1050.0               # optional calorimetry (or vo2_mL_per_s / vco2_mL_per_s,
     vco2_mL_per_min = 900.0               #  or measured_W_per_kg)
     toe_off_s = 1.29                      # optional event overrides (start_s, toe_off_s, end_s)
+    assistance = "data/exo.sto"           # optional: a device torque profile (docs/assistance.md); or a
+                                          # table {file = "data/exo.sto", gains = [0.5, 1.0, 1.5]}: the
+                                          # trial solved unassisted and once per gain, as the trials
+                                          # <name>_assist-<gain> (a study-level [assistance] table of the
+                                          # same form applies to every trial without its own)
+    # states = "data/states.sto"          # optional: an OpenSim states file of the subject's model
+    # controls = "data/controls.sto"      # (and its controls): the trial's rates from them, as
+                                          # `musclemetab metabolics --states` gives them; one unit,
+                                          # workflow "states", instead of a solve per workflow
 
 Every key is checked: an unknown key, a missing file or a wrong type raises
 :class:`~musclemetab.errors.OptionError` or :class:`~musclemetab.errors.InputFileError`
@@ -173,11 +182,21 @@ class Trial:
     #: the markers the IK is computed from (``ik`` is then the study's own, under ``prepared/``)
     markers: Path | None = None
     ik_setup: Path | None = None
+    #: a device torque profile taken off the ID moments (``docs/assistance.md``), times ``assistance_gain``
+    assistance: Path | None = None
+    assistance_gain: float = 1.0
+    #: the unassisted trial this assisted trial is compared with (the same files, no device)
+    assisted_from: str | None = None
+    #: an OpenSim states file of the subject's model (and its controls): the rates from them, no solve
+    states: Path | None = None
+    controls: Path | None = None
 
     def files(self) -> dict[str, Path]:
         out = {k: v for k, v in (("ik", self.ik), ("id", self.id), ("emg", self.emg), ("grf", self.grf),
                                  ("external_loads", self.external_loads), ("ultrasound", self.ultrasound),
-                                 ("markers", self.markers), ("ik_setup", self.ik_setup)) if v}
+                                 ("markers", self.markers), ("ik_setup", self.ik_setup),
+                                 ("assistance", self.assistance), ("states", self.states),
+                                 ("controls", self.controls)) if v}
         if self.external_loads is not None:
             from ..external_loads import read_external_loads
 
@@ -274,7 +293,9 @@ class Study:
 
 # ---------------------------------------------------------------------------------------
 _STUDY_KEYS = {"name", "output", "workflows", "models", "basal", "basal_coefficient", "basal_exponent", "subjects",
-               "solver", "energy_goal", "strict", "uncertainty", "report"}
+               "solver", "energy_goal", "strict", "uncertainty", "report", "assistance"}
+#: keys of an ``assistance`` table (of a trial, or of the study: every trial's)
+_ASSISTANCE_KEYS = {"file", "gain", "gains"}
 #: keys of the study file's [energy_goal] table (the energy goal of every effort-workflow solve)
 _ENERGY_KEYS = {"model", "weight", "effort_weight", "smoothing", "form"}
 #: keys of the study file's [uncertainty] table (docs/uncertainty.md)
@@ -290,7 +311,10 @@ _TRIAL_KEYS = {
     "name", "ik", "id", "emg", "grf", "grf_column", "grf_threshold_N", "speed_m_per_s",
     "measured_W_per_kg", "vo2_mL_per_s", "vco2_mL_per_s", "vo2_mL_per_min", "vco2_mL_per_min",
     "start_s", "toe_off_s", "end_s", "external_loads", "cycle", "ultrasound", "emg_processing", "markers", "ik_setup",
+    "assistance", "states", "controls",
 }
+#: the workflow of a trial whose rates come from an OpenSim states file (its ``states`` key)
+STATES = "states"
 
 
 def load_study(path: str | os.PathLike, *, output: str | os.PathLike | None = None) -> Study:
@@ -382,7 +406,8 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
     subjects_data = data.get("subjects")
     if not isinstance(subjects_data, list) or not subjects_data:
         raise OptionError(f"{where}: no subjects; add at least one [[subjects]] table with its [[subjects.trials]]")
-    subjects = tuple(_subject(s, base, where, workflows) for s in subjects_data)
+    assistance = _assistance(data.get("assistance"), base, f"{where}: [assistance]")
+    subjects = tuple(_subject(s, base, where, workflows, assistance) for s in subjects_data)
     names = [s.name for s in subjects]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
@@ -620,7 +645,7 @@ def _number(value, where: str, key: str, required: bool = False, table_key: str 
     return entry.check(value, where)
 
 
-def _subject(data, base: Path, where: str, workflows) -> Subject:
+def _subject(data, base: Path, where: str, workflows, assistance=None) -> Subject:
     name = str(data.get("name", "")) if isinstance(data, Mapping) else ""
     here = f"{where}: subject '{name or '?'}'"
     _unknown(data, _SUBJECT_KEYS, here)
@@ -678,7 +703,10 @@ def _subject(data, base: Path, where: str, workflows) -> Subject:
     if not isinstance(trials_data, list) or not trials_data:
         raise OptionError(f"{here}: no trials; add [[subjects.trials]] tables with name, ik and id")
     processing = _emg_processing(data, here, "envelope")
-    trials = tuple(_trial(t, base, here, processing) for t in trials_data)
+    trials = tuple(a for t in trials_data for a in _assisted_trials(_trial(t, base, here, processing), t, base, here,
+                                                                    assistance))
+    if any(t.assistance is not None for t in trials):
+        _check_assisted_subject(data, here, workflows)
     names = [t.name for t in trials]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
@@ -820,10 +848,17 @@ def _trial(data, base: Path, where: str, emg_processing="envelope") -> Trial:
     if markers is None and data.get("ik_setup") is not None:
         raise OptionError(f"{here}: 'ik_setup' needs 'markers'; add the trial's markers or drop it")
     c3d_forces = markers is not None and markers.suffix.lower() == ".c3d" and data.get("grf") is None
+    states = _path(data.get("states"), base, here, "states", required=False)
+    if states is None and data.get("controls") is not None:
+        raise OptionError(f"{here}: 'controls' goes with 'states' (an OpenSim states file); add it or drop 'controls'")
+    if states is not None and data.get("assistance") is not None:
+        raise OptionError(f"{here}: 'states' gives the trial's muscle states, and 'assistance' needs a solve; "
+                          "drop one of them")
     return Trial(
         name=name,
         ik=_path(data.get("ik"), base, here, "ik") if markers is None else None,
-        id=_path(data.get("id"), base, here, "id", required=data.get("external_loads") is None and not c3d_forces),
+        id=_path(data.get("id"), base, here, "id", required=data.get("external_loads") is None and not c3d_forces
+                 and states is None),
         emg=emg_source(_path(data.get("emg"), base, here, "emg", required=False),
                        _emg_processing(data, here, emg_processing)),
         grf=_path(data.get("grf"), base, here, "grf", required=False),
@@ -841,7 +876,63 @@ def _trial(data, base: Path, where: str, emg_processing="envelope") -> Trial:
         ultrasound=_path(data.get("ultrasound"), base, here, "ultrasound", required=False),
         markers=markers,
         ik_setup=_path(data.get("ik_setup"), base, here, "ik_setup", required=False),
+        states=states,
+        controls=_path(data.get("controls"), base, here, "controls", required=False),
     )
+
+
+def _assistance(value, base: Path, here: str) -> tuple[Path, tuple[float, ...]] | None:
+    """An ``assistance`` key: a profile's path (gain 1) or a table ``{file, gain}`` or ``{file,
+    gains = [...]}``; ``(path, gains)`` or ``None``."""
+    from ..assistance import check_gain, read_assistance
+
+    if value is None:
+        return None
+    if isinstance(value, str):
+        path, gains = _path(value, base, here, "assistance"), (1.0,)
+    elif isinstance(value, Mapping):
+        _unknown(value, _ASSISTANCE_KEYS, here)
+        path = _path(value.get("file"), base, here, "assistance.file")
+        if "gain" in value and "gains" in value:
+            raise OptionError(f"{here}: give 'gain' (one solve) or 'gains' (a sweep), not both")
+        gains = value.get("gains", [value.get("gain", 1.0)])
+        if not isinstance(gains, list) or not gains:
+            raise OptionError(f"{here}: 'gains' must be a list of numbers, e.g. [0.5, 1.0, 1.5]")
+        gains = tuple(check_gain(g, here, "'gain'") for g in gains)
+        if len(set(gains)) != len(gains):
+            raise OptionError(f"{here}: 'gains' lists a gain more than once: {list(gains)}")
+    else:
+        raise OptionError(f"{here}: 'assistance' must be a profile's path or a table {{file = \"exo.sto\", gains = "
+                          f"[0.5, 1.0]}}, not {value!r}")
+    read_assistance(path)  # checked now, before anything runs
+    return path, gains
+
+
+def _assisted_trials(trial: Trial, data, base: Path, where: str, default) -> list[Trial]:
+    """The trial, and with an ``assistance`` key (its own, else the study's ``default``) one
+    assisted trial per gain, named ``<trial>_assist-<gain>``."""
+    from dataclasses import replace
+
+    spec = _assistance(data.get("assistance"), base, f"{where}, trial '{trial.name}': 'assistance'") \
+        if isinstance(data, Mapping) and data.get("assistance") is not None else default
+    if spec is None:
+        return [trial]
+    path, gains = spec
+    return [trial] + [replace(trial, name=check_plain_name(f"{trial.name}_assist-{g:g}", f"{where}: trial name"),
+                              assistance=path, assistance_gain=g, assisted_from=trial.name) for g in gains]
+
+
+def _check_assisted_subject(data, here: str, workflows) -> None:
+    """Assistance is solved with the effort workflows, one trial at a time."""
+    given = [k for k in ("emg_mode", "estimate") if data.get(k) is not None]
+    if EMG_TEN in workflows:
+        given.append("the emg-ten workflow")
+    if str(data.get("tendon_stiffness", "")).strip().lower() == EMG_TEN:
+        given.append("tendon_stiffness = \"emg-ten\"")
+    if given:
+        raise OptionError(f"{here}: 'assistance' is solved with the effort workflows (effort-gen, effort-cal, "
+                          f"effort-ten) one trial at a time; {', '.join(given)} solve the subject's trials together: "
+                          "put the assisted trials in a subject of their own without them")
 
 
 def _cycle_key(value, where: str):

@@ -27,7 +27,7 @@ from typing import Callable
 
 from ..errors import OptionError
 from ..uncertainty import DEFAULT_SEED
-from .spec import EMG_TEN, Study
+from .spec import EMG_TEN, STATES, Study
 from .units import Unit, plan_units, read_unit_record
 
 __all__ = ["with_uncertainty", "sample_units", "is_sampled", "add_study_bands", "RESULT_BAND_COLUMNS",
@@ -74,7 +74,7 @@ def with_uncertainty(study: Study, samples: int | None = None, seed: int | None 
 def is_sampled(study: Study, unit: Unit) -> bool:
     """Whether a trial unit has uncertainty samples: an effort workflow solved from its files."""
     subject = study.subject(unit.subject)
-    return unit.trial is not None and unit.workflow != EMG_TEN and subject.emg_mode is None
+    return unit.trial is not None and unit.workflow not in (EMG_TEN, STATES) and subject.emg_mode is None
 
 
 def sample_units(study: Study) -> list[Unit]:

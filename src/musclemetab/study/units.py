@@ -44,14 +44,14 @@ import threading
 import time
 import traceback
 import warnings
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from .. import __version__
 from ..errors import DataMismatchError, MusclemetabError, OptionError
 from ..io.atomic import FILES_MANIFEST, file_sha256
 from .estimation import ESTIMATE, ESTIMATE_FOLDER, run_parameter_estimation
-from .spec import EMG_TEN, Study, Subject, Trial
+from .spec import EMG_TEN, STATES, Study, Subject, Trial
 
 __all__ = [
     "Unit",
@@ -131,11 +131,18 @@ class Unit:
     def warm_source(self, study: Study) -> "Unit | None":
         """The unit whose solution this unit's solve starts from, if any: with the study's
         ``warm_start``, the same subject, trial and leg with the workflow before this one in
-        :data:`WARM_CHAIN` among the study's workflows. EMG-informed solves (the subject's
-        ``emg_mode``), EMG-TEN and estimations start cold."""
-        if self.trial is None or self.sample is not None or not study.warm_start or self.workflow not in WARM_CHAIN:
+        :data:`WARM_CHAIN` among the study's workflows; an assisted trial's solve (its
+        ``assisted_from``), whatever ``warm_start`` says, from the unassisted trial's solve with the same
+        workflow. EMG-informed solves (the subject's ``emg_mode``), EMG-TEN and estimations start cold."""
+        if self.trial is None or self.sample is not None or self.workflow not in WARM_CHAIN:
             return None
-        if study.subject(self.subject).emg_mode is not None:
+        subject = study.subject(self.subject)
+        if subject.emg_mode is not None:
+            return None
+        assisted_from = subject.trial(self.trial).assisted_from
+        if assisted_from is not None:  # an assisted solve starts from the unassisted one (docs/assistance.md)
+            return Unit(self.subject, assisted_from, self.workflow, self.side)
+        if not study.warm_start:
             return None
         before = [w for w in WARM_CHAIN[:WARM_CHAIN.index(self.workflow)] if w in study.workflows]
         return Unit(self.subject, self.trial, before[-1], self.side) if before else None
@@ -149,7 +156,11 @@ def plan_units(study: Study) -> tuple[list[Unit], list[Unit]]:
     # Workflow by workflow: parallel workers start on different trials, so a trial's
     # geometry is computed once and found in the cache by its other workflows.
     stage2 = [Unit(s.name, t.name, w, side if len(s.sides) > 1 else None)
-              for w in study.workflows for s in study.subjects for t in s.trials for side in s.sides]
+              for w in study.workflows for s in study.subjects for t in s.trials for side in s.sides
+              if t.states is None]
+    # a trial of an OpenSim states file: one unit, its rates from the states (no solve)
+    stage2 += [Unit(s.name, t.name, STATES, side if len(s.sides) > 1 else None)
+               for s in study.subjects for t in s.trials for side in s.sides if t.states is not None]
     return stage1, stage2
 
 
@@ -171,11 +182,13 @@ def _file_hash(path: Path | None) -> str | None:
 def _trial_record(trial: Trial) -> dict:
     rec = {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(trial).items()}
     rec["files"] = {k: _file_hash(p) for k, p in trial.files().items()}
-    for k in ("ik", "id", "emg", "grf", "external_loads"):
+    for k in ("ik", "id", "emg", "grf", "external_loads", "assistance", "states", "controls"):
         rec.pop(k, None)  # paths do not matter, contents do
-    for k in ("cycle", "ultrasound"):
+    for k in ("cycle", "ultrasound", "assisted_from"):
         if rec.get(k) is None:
             rec.pop(k, None)  # absent key: earlier studies keep their unit keys
+    if trial.assistance is None:
+        rec.pop("assistance_gain", None)
     from ..emg import RawEmgPath, processing_record
 
     if isinstance(trial.emg, RawEmgPath):  # raw EMG processed by the package (absent: envelopes, earlier keys)
@@ -462,7 +475,9 @@ def _execute_unit(study: Study, unit: Unit, key: str, dependency_folder: str | N
             estimation = Path(study.output) / Unit(unit.subject, None, EMG_TEN).folder
             record.update(run_sample(study, unit, tmp, Path(dependency_folder),
                                      options=_solver_options(study, subject),
-                                     arguments=solve_arguments(subject, unit.workflow, estimation),
+                                     arguments={**solve_arguments(subject, unit.workflow, estimation),
+                                                **_device_arguments(subject.trial(unit.trial), unit.leg(study),
+                                                                    subject.model)},
                                      analysis_file=ANALYSIS_FILE))
         else:
             dep = Path(dependency_folder) if dependency_folder else None
@@ -615,7 +630,10 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
     times = {}
     start = COLD
     t0 = time.perf_counter()
-    if unit.workflow == EMG_TEN:
+    sol = states = None
+    if unit.workflow == STATES:  # the rates of an OpenSim states file: no solve
+        states = _states_metabolics(study, subject, trial, side)
+    elif unit.workflow == EMG_TEN:
         _copy_solution(dependency / trial.name, tmp)
         sol = Solution.load(tmp, require_success=False)  # the estimation unit's output: its hand-off
         if not sol.run_record.success:
@@ -625,6 +643,8 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
         if subject.emg_mode is not None:
             sol = _informed_solve(study, subject, trial, unit.workflow, kwargs)
         else:
+            device = _device_arguments(trial, side, subject.model)
+
             def solve(warm_start=None):
                 return solve_files(subject.model, trial.ik, trial.id, unit.workflow, side=side, dofs=subject.dofs,
                                    external_loads=trial.external_loads,
@@ -632,9 +652,10 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
                                    grf_column=trial.grf_column, grf_threshold_N=trial.grf_threshold_N,
                                    cycle=trial.cycle, options=_solver_options(study, subject),
                                    exclude_muscles=subject.exclude_muscles, exclude_missing_ok=subject.side == "both",
-                                   **({"warm_start": warm_start} if warm_start is not None else {}), **kwargs)
+                                   **({"warm_start": warm_start} if warm_start is not None else {}), **device,
+                                   **kwargs)
 
-            sol, start = _chain_solve(solve, unit.warm_source(study), warm, times)
+            sol, start = _chain_solve(solve, unit.warm_source(study), warm, times, trial.name)
         write_solution_folder(sol, tmp, opensim_files=False)  # written below, for every workflow
         times["solve_s"] = sol.record.solve_time_s
         if not sol.success:
@@ -642,7 +663,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
 
             raise emg_failure(sol.run_record, subject.emg_mode, f"{unit.workflow} solve of {subject.name}/{trial.name}")
     times["solution_s"] = time.perf_counter() - t0
-    if study.strict:  # the solve's flags fail the unit before the later stages run
+    if study.strict and sol is not None:  # the solve's flags fail the unit before the later stages run
         from ..quality import check_strict
 
         check_strict(sol.record.flags, unit.label)
@@ -658,7 +679,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
         speed = None
     # the stages after the solve take the solution object (the same numbers as its folder,
     # tests/test_stage_paths.py); each writes its files once
-    recorded = sol.record.gait_cycle
+    recorded = sol.record.gait_cycle if sol is not None else None
     if recorded and trial.start_s is None and trial.end_s is None:  # the cycle the solve found
         from ..events import GaitCycle
 
@@ -666,7 +687,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
         cycle = GaitCycle(recorded["start_s"], toe_off, recorded["end_s"])
     else:
         cycle = trial_cycle(trial, side, subject.model)
-    result = metabolics_from_solution(
+    result = states(speed) if states is not None else metabolics_from_solution(
         sol, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
         basal_rate_W_per_kg=study.basal_coefficient, basal_exponent=study.basal_exponent,
         speed_m_per_s=speed, muscle_properties=subject.muscle_properties,
@@ -678,7 +699,8 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
     from ..analysis.groups import has_function_group
 
     # DOFs with no muscle function group (a subtalar or toe joint) stay out of the group analysis
-    geometry = compute_geometry(subject.model, trial.ik, dofs=[d for d in sol.dofs if has_function_group(d)],
+    dofs = sol.dofs if sol is not None else _model_dofs(subject, side)
+    geometry = compute_geometry(subject.model, trial.ik, dofs=[d for d in dofs if has_function_group(d)],
                                 side=side)
     from ..analysis.unit import analyse_metabolics, filtered_moment_arms
 
@@ -688,11 +710,12 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
     analysis.timeseries.to_csv(tmp / TIMESERIES_FILE, index=False, float_format="%.10g")
     times["analysis_s"] = time.perf_counter() - t2
 
-    t3 = time.perf_counter()
-    from ..redundancy.export import write_opensim_states
+    if sol is not None:  # a states trial's OpenSim files are its own
+        t3 = time.perf_counter()
+        from ..redundancy.export import write_opensim_states
 
-    write_opensim_states(sol, subject.model, trial.ik, tmp)
-    times["opensim_states_s"] = time.perf_counter() - t3
+        write_opensim_states(sol, subject.model, trial.ik, tmp)
+        times["opensim_states_s"] = time.perf_counter() - t3
     if study.sensitivity:
         t4 = time.perf_counter()
         sensitivity = unit_sensitivity(study, unit, tmp)
@@ -714,12 +737,72 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
             "not available" if speed is None else "estimated from the pelvis displacement over the cycle (IK)"),
         "toe_off_pct": float(100.0 * (cycle.toe_off_s - cycle.start_s) / (cycle.end_s - cycle.start_s)),
         "n_nodes": int(np.asarray(result.time_s).size),
-        "large_reserve": bool(sol.record.large_reserve),
-        "excluded_muscles": list(sol.record.excluded_muscles or []),
-        "reserve_share_of_peak_moment": sol.record.reserve_share_of_peak_moment,
+        "large_reserve": bool(sol.record.large_reserve) if sol is not None else False,
+        "excluded_muscles": list(sol.record.excluded_muscles or []) if sol is not None else [],
+        "reserve_share_of_peak_moment": sol.record.reserve_share_of_peak_moment if sol is not None else None,
+        **({"states": {"file": str(trial.states), "controls": str(trial.controls) if trial.controls else None}}
+           if states is not None else {}),
         "plausibility": [f.to_dict() for f in flags],
         **({"sensitivity": sensitivity} if study.sensitivity else {}),
+        **({"assistance": _device_record(trial, sol, subject.body_mass_kg)} if trial.assistance is not None else {}),
     }
+
+
+def _states_metabolics(study: Study, subject: Subject, trial: Trial, side: str):
+    """A function of the walking speed giving the trial's metabolic rates of ``side`` from its
+    OpenSim states file, as ``musclemetab metabolics --states`` computes them
+    (:func:`musclemetab.metabolics.opensim_states.states_metabolics`: the model's probes' muscle
+    masses when it has any). The states are read (by OpenSim) at once, before the speed is known."""
+    from ..metabolics.opensim_states import read_opensim_states, split_sides, states_metabolics
+
+    read = read_opensim_states(subject.model, trial.states, trial.controls)
+    legs = split_sides(read.states)
+    if side not in legs:
+        raise DataMismatchError(f"{trial.states}: no muscle of the {'right' if side == 'r' else 'left'} leg "
+                                f"(the subject's side); it has the legs {', '.join(legs)}")
+
+    def rates(speed):
+        results, _ = states_metabolics(
+            read, {side: legs[side]}, subject.body_mass_kg, subject.height_m, models=list(study.models),
+            basal=study.basal, basal_rate_W_per_kg=study.basal_coefficient, basal_exponent=study.basal_exponent,
+            speed_m_per_s=speed, muscle_properties=subject.muscle_properties)
+        return results[side]
+
+    return rates
+
+
+def _model_dofs(subject: Subject, side: str) -> list[str]:
+    """The subject's DOFs of ``side`` (its ``dofs``, else those discovered from the model)."""
+    if subject.dofs is not None:
+        return list(subject.dofs)
+    from ..layout import discover_dofs, read_layout
+
+    return list(discover_dofs(read_layout(subject.model), side, None))
+
+
+def _device_arguments(trial: Trial, side: str, model) -> dict:
+    """The ``solve_files`` keywords of an assisted trial: the profile, its gain and the gait cycle a
+    profile over the cycle is mapped onto (the trial's, :func:`.events.trial_cycle`; with ``cycle``
+    the solve's own)."""
+    if trial.assistance is None:
+        return {}
+    out = {"assistance": trial.assistance, "assistance_gain": trial.assistance_gain}
+    if trial.cycle is None:
+        from .events import trial_cycle
+
+        c = trial_cycle(trial, side, model)
+        out["assistance_cycle_s"] = (c.start_s, c.end_s)
+    return out
+
+
+def _device_record(trial: Trial, sol, body_mass_kg: float) -> dict:
+    """The unit record's ``assistance``: the unassisted trial, the file, the gain and the device's
+    work over the gait cycle (this leg's device; ``summary.json`` holds its torque and power)."""
+    device = sol.record.get("assistance") or {}
+    keys = ("gain", "axis", "dofs", "cycle_s", "positive_work_J", "negative_work_J", "net_work_J",
+            "mean_positive_power_W", "mean_negative_power_W", "duration_s")
+    return {"assisted_from": trial.assisted_from, "file": Path(trial.assistance).name,
+            **{k: device.get(k) for k in keys}, "body_mass_kg": body_mass_kg}
 
 
 #: The workflows whose trial units write ``sensitivity.csv`` with the study's ``[uncertainty]
@@ -767,7 +850,7 @@ def unit_sensitivity(study: Study, unit: Unit, folder: Path) -> dict:
 COLD = "cold"
 
 
-def _chain_solve(solve, source: Unit | None, folder: Path | None, times: dict):
+def _chain_solve(solve, source: Unit | None, folder: Path | None, times: dict, trial: str | None = None):
     """``(solution, start)``: ``solve(warm_start)`` started from the solution in ``folder`` (the
     unit ``source``), with the fallback of ``docs/study.md`` ("Warm-started chains"):
 
@@ -784,6 +867,8 @@ def _chain_solve(solve, source: Unit | None, folder: Path | None, times: dict):
 
     if source is None:
         return solve(), COLD
+    if trial is not None and source.trial != trial:  # an assisted trial's unassisted solve
+        source = replace(source, workflow=f"{source.trial} ({source.workflow})")
     rec = read_unit_record(folder) if folder is not None else None
     if not rec or rec.get("status") != "ok":
         return solve(), f"cold: {source.workflow} did not succeed, no warm start"
@@ -815,5 +900,5 @@ def _plausibility(study: Study, unit: Unit, sol, result, speed, groups) -> list:
     flags = metabolic_flags({m: result.whole_body[m].mean_W_per_kg for m in result.models}, speed, groups)
     if study.strict:  # the solve's flags were checked after the solve
         check_strict(flags, unit.label)
-    return list(sol.record.flags) + flags
+    return (list(sol.record.flags) if sol is not None else []) + flags
 
