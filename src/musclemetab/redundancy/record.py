@@ -246,6 +246,7 @@ class SolveRecord(_OutcomeRecord):
     diagnosis: dict | None = _ABSENT
     window: dict | None = _ABSENT
     inverse_dynamics: dict | None = _ABSENT
+    assistance: dict | None = _ABSENT
     # the file (Solution.write)
     format: str | None = _ABSENT
     format_version: int | None = _ABSENT
