@@ -73,7 +73,7 @@ def _cropped(ex, folder: Path):
 
 def _solve(ex, args, cache_dir, options=None):
     from musclemetab.redundancy.emg_ten import EmgTenSettings
-    from musclemetab.redundancy.run import solve_emg_ten
+    from musclemetab.redundancy.emg_run import solve_emg_ten
 
     files = args.files
     return solve_emg_ten(

@@ -3,7 +3,7 @@
 The tests, the command line they call, the studies they run (in the test process, in a
 process pool or on a Dask cluster) and the parallel test workers (pytest-xdist) solve the same
 example problems many times. :func:`install` wraps :func:`musclemetab.redundancy.run.solve_files`
-and :func:`musclemetab.redundancy.run.solve_emg_ten` (the pipeline that the command line, the
+and :func:`musclemetab.redundancy.emg_run.solve_emg_ten` (the pipeline that the command line, the
 studies and Python users call) so that a call is solved once per test run:
 its result (and the warnings it gave) is pickled into a folder shared by every process of
 the run, under a key made of the input files' content (SHA-256) and every other argument by
@@ -142,12 +142,13 @@ def _memoised(solve, folder: Path):
 def install(folder: str | os.PathLike) -> callable:
     """Wrap the package's solve functions with the memo in ``folder``; returns the undo."""
     import musclemetab.redundancy as redundancy
+    import musclemetab.redundancy.emg_run as emg_run
     import musclemetab.redundancy.run as run
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     os.environ[MEMO_ENV] = str(folder)
-    originals = [(run, "solve_files", run.solve_files), (run, "solve_emg_ten", run.solve_emg_ten)]
+    originals = [(run, "solve_files", run.solve_files), (emg_run, "solve_emg_ten", emg_run.solve_emg_ten)]
     for module, name, func in originals:
         wrapped = _memoised(func, folder)
         setattr(module, name, wrapped)

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from musclemetab.assistance import (
+from musclemetab.redundancy.assistance import (
     CYCLE_AXIS_HEADER,
     apply_assistance,
     augmentation_factor_W_per_kg,

@@ -225,7 +225,7 @@ def test_long_tendon_named_before_any_solve(example, long_soleus, geometry_cache
     from musclemetab.commands import main
     from musclemetab.redundancy import ipopt
     from musclemetab.redundancy.diagnosis import InfeasibleInputError
-    from musclemetab.redundancy.run import solve_emg_ten
+    from musclemetab.redundancy.emg_run import solve_emg_ten
 
     def no_ipopt(*a, **k):
         raise AssertionError("IPOPT was called")
@@ -295,7 +295,7 @@ def test_exclude_muscles_solves_the_emg_ten_trial(example, long_soleus, geometry
     """Without the soleus the trial solves; its EMG is not used and the Achilles tendon's
     stiffness is the two gastrocnemii's (warnings say so); the EMG band holds."""
     from musclemetab.errors import MusclemetabWarning
-    from musclemetab.redundancy.run import solve_emg_ten
+    from musclemetab.redundancy.emg_run import solve_emg_ten
 
     with pytest.warns(MusclemetabWarning) as caught:
         result = solve_emg_ten(long_soleus, [example.ik["normal"]], [example.id["normal"]], [example.emg["normal"]],

@@ -232,7 +232,7 @@ def test_opensim_model_prepared_while_ipopt_solves(example, constrained, cache_d
     import warnings
 
     from musclemetab.opensim_bridge import call
-    from musclemetab.redundancy import emg_pipeline, run
+    from musclemetab.redundancy import emg_pipeline, emg_run
     from musclemetab.redundancy.emg_ten import informed_settings
     from musclemetab.redundancy.export import prepare_opensim_files, write_opensim_files
     from musclemetab.redundancy.parameters import PARAMETER_FIELDS
@@ -250,10 +250,10 @@ def test_opensim_model_prepared_while_ipopt_solves(example, constrained, cache_d
     # warnings that solve gives (caught here, not passed on)
     with warnings.catch_warnings(record=True):
         warnings.simplefilter("always")
-        sol = next(iter(run.solve_emg_ten(example.model, *files, **informed).solutions.values()))
+        sol = next(iter(emg_run.solve_emg_ten(example.model, *files, **informed).solutions.values()))
     np.testing.assert_allclose(sol.excitation, constrained.excitation, rtol=1e-9, atol=1e-12)  # (its file: 12 digits)
     monkeypatch.setattr(emg_pipeline, "solve_emg_ten_ocp", stop)  # the problem up to IPOPT, not solved again
-    solve = getattr(run.solve_emg_ten, "__wrapped__", run.solve_emg_ten)
+    solve = getattr(emg_run.solve_emg_ten, "__wrapped__", emg_run.solve_emg_ten)
     told = []
     with pytest.raises(Stop):
         solve(example.model, *files, **informed, before_solve=lambda **o: told.append(o))

@@ -590,7 +590,8 @@ def test_estimate_checks_each_inverse_dynamics_file_as_solve_does(example, tmp_p
     ignored with a warning naming them."""
     from musclemetab.errors import DataMismatchError, MissingColumnError, MusclemetabWarning
     from musclemetab.io import read_storage, write_storage
-    from musclemetab.redundancy.run import estimate_files, solve_files
+    from musclemetab.redundancy.estimate_run import estimate_files
+    from musclemetab.redundancy.run import solve_files
 
     table = read_storage(example.id["normal"]).assign(knee_vv_r_moment=0.0, arm_flex_moment=0.0)
     dofs = ["ankle_angle_r", "knee_angle_r", "hip_flexion_r"]

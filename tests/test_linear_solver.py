@@ -66,7 +66,7 @@ def test_emg_informed_solve_uses_the_linear_solver(tmp_path, capsys, monkeypatch
     """An effort workflow's EMG-informed solve (``solve --emg``) hands the command line's linear
     solver to the solve, and refuses a missing library before reading any file, as the other
     solves do."""
-    import musclemetab.redundancy.run as run
+    import musclemetab.redundancy.emg_run as run
 
     seen = {}
 

@@ -278,7 +278,7 @@ def test_estimate_prints_the_flags_of_its_solutions(monkeypatch, tmp_path, capsy
     summary.json), and of a validation re-solve's folder; ``--strict`` fails after the output."""
     from types import SimpleNamespace
 
-    import musclemetab.redundancy.run as run_module
+    import musclemetab.redundancy.estimate_run as run_module
     from musclemetab.commands import main
     from musclemetab.redundancy.record import SolveRecord
 

@@ -104,7 +104,7 @@ def test_emg_mode_and_estimate_keys_are_checked(example, tmp_path, edit, words):
 def test_estimation_unit_runs_musclemetab_estimate_on_the_subjects_files(example, tmp_path, monkeypatch):
     """The estimation unit is ``musclemetab estimate`` with the table's options on the trials that
     have fiber lengths (their EMG too with emg_mode); its folder is units/<subject>/_estimate."""
-    import musclemetab.redundancy.run as run
+    import musclemetab.redundancy.estimate_run as run
 
     seen = {}
 

@@ -366,7 +366,7 @@ def test_emg_ten_of_both_legs(example, tmp_path, capsys, monkeypatch):
     IPOPT run is stopped after three iterations, and the command reports that after writing both
     legs.) The named mappings, one leg's electrodes, are refused with both legs, in one line."""
     from musclemetab.emg import DEFAULT_EMG_MAPPING
-    from musclemetab.redundancy import run as run_module
+    from musclemetab.redundancy import emg_run as run_module
 
     right = {m: list(c) for m, c in DEFAULT_EMG_MAPPING.items()}
     both = {**right, **{m[:-2] + "_l": c for m, c in right.items()}}

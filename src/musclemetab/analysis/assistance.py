@@ -64,7 +64,7 @@ def add_assistance_changes(table):
     """``table`` (the results table) with :data:`CHANGE_COLUMNS` for its assisted rows (NaN for
     the others, and for an assisted row whose unassisted row is missing); unchanged when it has
     no assisted row."""
-    from ..assistance import augmentation_factor_W_per_kg
+    from ..redundancy.assistance import augmentation_factor_W_per_kg
 
     if "assisted_from" not in table or not table["assisted_from"].notna().any():
         return table

@@ -108,7 +108,7 @@ def _bounds(text: str) -> tuple[float, float]:
 
 def run(args) -> int:
     """Run ``musclemetab estimate`` with parsed arguments: the options read, then
-    :func:`~musclemetab.redundancy.run.estimate_files`; prints one line, then one per doubt
+    :func:`~musclemetab.redundancy.estimate_run.estimate_files`; prints one line, then one per doubt
     of the estimate and per validated trial and kind of measurement (:func:`doubt_lines`).
 
     While it runs it holds the lock of the output folder (``DIR/.musclemetab.lock``,
@@ -126,7 +126,7 @@ def run(args) -> int:
 
 def _estimate(args) -> int:
     from ..redundancy.estimate import parse_coupling
-    from ..redundancy.run import estimate_files
+    from ..redundancy.estimate_run import estimate_files
     from .options import emg_scale_bounds
     from .solve import emg_files as marked_emg_files
 

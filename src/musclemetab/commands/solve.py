@@ -475,7 +475,7 @@ def _assistance(args) -> dict:
             raise OptionError(f"{', '.join(given)} belong{'s' if len(given) == 1 else ''} to a device: give "
                               "--assistance DEVICE.sto, or drop them")
         return {}
-    from ..assistance import check_gain
+    from ..redundancy.assistance import check_gain
 
     out = {"assistance": path, "assistance_gain": check_gain(1.0 if gain is None else gain)}
     if cycle is not None:
@@ -619,7 +619,7 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
     from dataclasses import replace
 
     from ..redundancy.emg_ten import EMG_TEN_GOALS, EmgTenSettings, informed_settings
-    from ..redundancy.run import emg_mappings_of_legs, solve_emg_ten
+    from ..redundancy.emg_run import emg_mappings_of_legs, solve_emg_ten
     from ..redundancy.ipopt import failure_advice
     from ..redundancy.workflows import parse_tendon_stiffness
     from .options import emg_scale_bounds
@@ -740,7 +740,8 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
     """An effort workflow's EMG-informed solve of one or more trials: one trial is written to
     ``--out`` as a solution folder; several as one folder per trial and ``parameters.json``."""
     from ..redundancy.emg_ten import emg_failure
-    from ..redundancy.run import emg_mappings_of_legs, solve_emg_ten, write_solution_folder
+    from ..redundancy.emg_run import emg_mappings_of_legs, solve_emg_ten
+    from ..redundancy.run import write_solution_folder
 
     emg = emg_files(args)
     dofs = tuple(d for item in args.dofs for d in item.replace(",", " ").split()) if args.dofs else None

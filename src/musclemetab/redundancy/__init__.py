@@ -24,14 +24,14 @@ import importlib
 # Public names and the module that defines each: imported on first use, so that importing
 # one stage (e.g. the single-trial solve) does not import the others (e.g. EMG-TEN).
 _EXPORTS = {
-    "Result": "result", "EmgTenResult": "result", "EmgTenSettings": "emg_ten", "solve_emg_ten": "run",
+    "Result": "result", "EmgTenResult": "result", "EmgTenSettings": "emg_ten", "solve_emg_ten": "emg_run",
     "MuscleTendonParameters": "parameters",
     "SolverOptions": "ipopt", "Goals": "transcription",
     "Solution": "solution",
     "solve_files": "run", "solve_sides": "run", "solve_trial": "solve", "solve_with_parameters": "solve",
     "WORKFLOWS": "workflows", "Workflow": "workflows", "get_workflow": "workflows",
     "read_passive_parameters": "workflows", "workflow_parameters": "workflows",
-    "estimate_files": "run", "write_solution_folder": "run",
+    "estimate_files": "estimate_run", "write_solution_folder": "run",
 }
 
 

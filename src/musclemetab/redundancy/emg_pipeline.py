@@ -1,4 +1,4 @@
-"""EMG-TEN and EMG-informed solves from arrays (:func:`musclemetab.redundancy.run.solve_emg_ten`
+"""EMG-TEN and EMG-informed solves from arrays (:func:`musclemetab.redundancy.emg_run.solve_emg_ten`
 reads the files): trials prepared (mesh
 inputs, EMG at the nodes, initial guess), the problem of :mod:`.emg_ten` solved, the result
 assembled (:mod:`.result`), with the standard errors and correlations of the estimated factors
@@ -46,7 +46,7 @@ def solve_emg_ten_arrays(
     """EMG-TEN from arrays: per trial a geometry-like object, ``(ID time, ID moments)`` with
     columns in the order of ``geometry.dofs``, and an EMG table (time-indexed ``DataFrame``,
     channels as columns, or already mapped to muscles by ``musclemetab.emg.map_channels``).
-    ``before_solve``: see :func:`.run.solve_emg_ten` (called for the trials whose ``sources``
+    ``before_solve``: see :func:`.emg_run.solve_emg_ten` (called for the trials whose ``sources``
     name their model and IK files)."""
     t_start = _time.perf_counter()
     settings = settings_for_muscles(settings, restrict_geometry(list(geometries)[0]).muscles) if geometries \

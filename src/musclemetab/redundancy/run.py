@@ -3,12 +3,12 @@ users solve.
 
 * :func:`solve_files` / :func:`solve_sides`: one trial with an effort workflow (model, IK, ID or
   ground forces; window or gait cycle), a :class:`~.solution.Solution`;
-* :func:`solve_emg_ten`: EMG-TEN, or an effort workflow's EMG-informed solve, over one or more
-  trials, a :class:`~.result.Result`;
-* :func:`estimate_files`: muscle-tendon parameters from fiber lengths and/or EMG over trials,
-  written to a folder, a :class:`~.result.Result`;
-* :func:`write_solution_folder`: a solution and the inverse dynamics computed for it;
-* :func:`emg_mappings_of_legs`: the EMG mapping of each leg of an EMG problem of both legs.
+* :func:`.emg_run.solve_emg_ten`: EMG-TEN, or an effort workflow's EMG-informed solve, over one
+  or more trials, a :class:`~.result.Result` (and :func:`.emg_run.emg_mappings_of_legs`);
+* :func:`.estimate_run.estimate_files`: muscle-tendon parameters from fiber lengths and/or EMG
+  over trials, written to a folder, a :class:`~.result.Result`;
+* :func:`write_solution_folder`: a solution and the inverse dynamics computed for it; the helpers
+  the three share (muscles left out, the trial's DOFs, the diagnosis record).
 
 Each reads and checks its files before OpenSim is asked anything, gets the geometry from
 :func:`musclemetab.geometry.compute_geometry` (OpenSim in its own worker process) and solves
@@ -30,18 +30,6 @@ from ..events import WALKING_CYCLE_DURATION_S
 from ..messages import name_list
 from ..processes import BackgroundCall
 from ._docs import fill_doc
-from .emg_inputs import (
-    check_emg_range,
-    check_emg_window,
-    mapped_emg_table,
-    one_model,
-    path_list,
-    resolve_emg_mapping,
-    trial_labels,
-)
-from .emg_pipeline import solve_emg_ten_arrays
-from .emg_ten import EmgTenSettings
-from .result import EMG_TEN, ESTIMATE_FORMAT, Result
 from .inputs import (
     MESH_FREQUENCY_HZ,
     GeometryArrays,
@@ -56,14 +44,13 @@ from .solution import Solution
 from .solve import solve_trial
 from .workflows import PassiveParameters, check_workflow_options, read_passive_parameters, read_tendon_stiffness_json
 
-__all__ = ["solve_files", "solve_sides", "solve_emg_ten", "emg_mappings_of_legs", "estimate_files",
-           "write_solution_folder", "WEIGHT_NAMES", "EMG_SCALE_BOUNDS"]
+__all__ = ["solve_files", "solve_sides", "write_solution_folder", "check_solution_folders", "exclude_from_geometry",
+           "WEIGHT_NAMES", "EMG_SCALE_BOUNDS"]
 
 WEIGHT_NAMES = {"activation": "w_activation", "reserve": "w_reserve", "velocity": "w_velocity",
                 "fiber_length": "w_fiber_length", "emg": "w_emg"}
 #: default bounds of the EMG scale factors (those of EMG-TEN)
 EMG_SCALE_BOUNDS = (0.05, 2.5)
-
 
 
 @fill_doc
@@ -121,7 +108,7 @@ def solve_files(
     ``parameters`` (the muscles' :class:`~.parameters.MuscleTendonParameters`) and ``dofs`` of the
     solution to come, e.g. :func:`.export.prepare_opensim_files` (``musclemetab solve``); not
     called with ``parameter_transform``. ``assistance``: a device torque profile
-    (:mod:`musclemetab.assistance`, ``docs/assistance.md``) times ``assistance_gain`` taken off the
+    (:mod:`musclemetab.redundancy.assistance`, ``docs/assistance.md``) times ``assistance_gain`` taken off the
     ID moments before the solve; a profile over the gait cycle is mapped onto the cycle of
     ``cycle`` when the window comes from one, else onto ``assistance_cycle_s`` (start, end in s),
     else onto the window; ``summary.json``'s ``assistance`` records it with the device's work.
@@ -216,7 +203,7 @@ def solve_files(
     ik_time, ik_angles = ik_time[keep], ik_angles[keep]
     check_time_ranges(ik_time, id_time, ik_path, id_path)
     device, file_moments = None, id_moments
-    if assistance is not None:  # the muscles supply what the device does not (musclemetab.assistance)
+    if assistance is not None:  # the muscles supply what the device does not (musclemetab.redundancy.assistance)
         id_moments, device = _assisted_moments(assistance, assistance_gain, assistance_cycle_s, trial_window, layout,
                                                model_path, cache_dir, side, dofs, id_time, id_moments,
                                                check_units)
@@ -268,7 +255,7 @@ def solve_files(
     if id_record is not None:
         trial["inverse_dynamics"] = id_record
     if device is not None:
-        from ..assistance import assistance_record
+        from .assistance import assistance_record
 
         profile, cycle_s, cycle_source = device
         trial["assistance"] = assistance_record(profile, assistance_gain, dofs, ik_time, ik_angles, solution.time_s,
@@ -279,7 +266,7 @@ def solve_files(
 def _assisted_moments(path, gain, cycle_s, trial_window, layout, model_path, cache_dir, side, dofs, id_time,
                       id_moments, check_units):
     """``(moments less the device torque, (profile, gait cycle, its source))`` of :func:`solve_files`."""
-    from ..assistance import apply_assistance, read_assistance
+    from .assistance import apply_assistance, read_assistance
     from ..model import read_model
 
     profile = read_assistance(path)
@@ -417,149 +404,6 @@ def _read_model_parameters(model_path, cache_dir=None):
     return read_muscle_parameters(model_path, cache_dir=cache_dir)
 
 
-@fill_doc
-def solve_emg_ten(
-    model_path,
-    ik_paths: Sequence[str | os.PathLike],
-    id_paths: Sequence[str | os.PathLike],
-    emg_paths: Sequence[str | os.PathLike],
-    *,
-    emg_mapping="default",
-    labels: Sequence[str] | None = None,
-    passive=None,
-    dofs: Sequence[str] | None = None,
-    side: str = "r",
-    settings: EmgTenSettings | None = None,
-    options: SolverOptions | None = None,
-    cache_dir: str | os.PathLike | None = None,
-    check_units: bool = True,
-    workflow: str = EMG_TEN,
-    tendon_stiffness=None,
-    exclude_muscles: Sequence[str] = (),
-    exclude_missing_ok: bool = False,
-    diagnose_only: bool = False,
-    before_solve=None,
-) -> Result:
-    """EMG-TEN from files: one model, and per trial an IK ``.mot``, an ID ``.sto`` and an EMG file.
-
-    Parameters
-    ----------
-    model_path
-        The ``.osim`` model (a list with one path per trial is accepted; they must be the
-        same model).
-    ik_paths, id_paths, emg_paths
-        One file of each per trial, in the same order. EMG files hold processed, normalised
-        envelopes (``musclemetab.emg.read_processed_emg``).
-    %(emg_mapping)s
-    %(labels)s
-    %(passive)s
-    %(side_dofs)s
-    settings
-        :class:`~.emg_ten.EmgTenSettings`: weights, bounds, couplings, EMG mode (default the study's).
-    %(options)s
-    %(cache_dir)s
-    %(check_units)s
-    exclude_muscles
-        Muscles left out of the problem (as :func:`solve_files`). Their EMG channels are not
-        used and their tendon stiffness is not estimated (each with a warning naming them).
-
-    Each trial is diagnosed before the problem is built (:mod:`.diagnosis`): blocking
-    findings raise :class:`~.diagnosis.InfeasibleInputError` naming muscles and times; with
-    ``diagnose_only`` the list of the trials' :class:`~.diagnosis.Diagnosis` is returned,
-    unchecked, and nothing is solved. ``before_solve``: called for each trial as by
-    :func:`solve_files`, once the problem is known and before IPOPT starts, when the solve
-    estimates no muscle parameter (an EMG-informed solve of an effort workflow; not EMG-TEN,
-    whose tendon stiffness is known only after the solve).
-    Input errors (package exceptions naming the file, channel or muscle) are raised before
-    OpenSim is started: unequal numbers of IK/ID/EMG files, different models, EMG channels
-    missing for the mapping, EMG not covering a trial's IK window, EMG outside ``[0, 1]`` in
-    the window, besides the IK/ID checks of the single-trial solver (columns, units, time
-    ranges). Muscles of a custom mapping that the model lacks are reported after the geometry.
-    """
-    from ..io import read_table
-    from ..model import read_muscle_parameters
-    from ..processes import BackgroundCall
-    from .workflows import read_passive_parameters
-
-    ik_paths = path_list(ik_paths, "ik_paths")
-    id_paths = path_list(id_paths, "id_paths")
-    emg_paths = path_list(emg_paths, "emg_paths")
-    if not ik_paths:
-        raise OptionError("EMG-TEN needs at least one trial (IK, ID and EMG file)")
-    if not (len(ik_paths) == len(id_paths) == len(emg_paths)):
-        raise OptionError(
-            f"{len(ik_paths)} IK, {len(id_paths)} ID and {len(emg_paths)} EMG files; give one of each per trial, "
-            "in the same order"
-        )
-    model = one_model(model_path, len(ik_paths))
-    labels = trial_labels(ik_paths, labels)
-    mapping = resolve_emg_mapping(emg_mapping)
-    settings = settings or EmgTenSettings()
-    if passive is not None and not hasattr(passive, "for_muscles"):
-        passive = read_passive_parameters(passive)
-    # each file is read once; every file is checked before OpenSim is asked anything
-    id_tables = [read_table(p) for p in id_paths]
-    dofs = _trial_dofs(model, id_tables, dofs, side, cache_dir)
-    id_data, emg_tables, ik_times, ik_tables = [], [], [], []
-    for ik, idp, id_table, emg, lab in zip(ik_paths, id_paths, id_tables, emg_paths, labels):
-        ik_tables.append(read_table(ik))
-        ik_time, _ = read_kinematics(ik_tables[-1], dofs, check_units=check_units)
-        id_time, id_moments = read_inverse_dynamics(id_table, dofs)
-        check_time_ranges(ik_time, id_time, ik, idp)
-        table = mapped_emg_table(emg, mapping, f"EMG of trial {lab}")
-        what = str(table.attrs.get("path", f"EMG of trial {lab}"))
-        check_emg_window(table, ik_time, what, str(ik))
-        check_emg_range(table, float(ik_time[0]), float(ik_time[-1]), settings.emg_range_tolerance, what)
-        id_data.append((id_time, id_moments))
-        emg_tables.append(table)
-        ik_times.append(ik_time)
-    params_request = BackgroundCall(read_muscle_parameters, model)
-    from ..geometry import compute_geometry
-
-    t0 = _time.perf_counter()
-    geometries = [compute_geometry(model, ik, dofs=list(dofs), side=side, cache_dir=cache_dir) for ik in ik_tables]
-    t_geometry = _time.perf_counter() - t0
-    model_parameters = params_request.result()
-    excluded = []
-    if exclude_muscles:
-        from .emg_ten import settings_without
-        from .inputs import restrict_geometry
-
-        settings = settings_without(settings, restrict_geometry(geometries[0]).muscles, exclude_muscles)
-        pairs = [exclude_from_geometry(g, exclude_muscles, exclude_missing_ok) for g in geometries]
-        geometries, excluded = [g for g, _ in pairs], pairs[0][1]
-        mapping = _mapping_without(mapping, excluded)
-        emg_tables = [_columns_without(t, excluded) for t in emg_tables]
-    diagnoses = _diagnose_emg_trials(geometries, model_parameters, id_data, ik_times, labels, passive, settings,
-                                     options, workflow, tendon_stiffness, check=not diagnose_only)
-    if diagnose_only:
-        return diagnoses
-    if check_units:
-        from ..model import read_model
-        from .inputs import check_moments_per_body_mass
-
-        mass = read_model(model).body_mass_kg
-        for (_, moments), idp in zip(id_data, id_paths):
-            check_moments_per_body_mass(moments, dofs, mass, idp, model)
-    sources = [{"model": Path(model), "ik": Path(ik), "id": Path(idp),
-                "emg": Path(emg) if isinstance(emg, (str, os.PathLike)) else f"EMG table of trial {lab}"}
-               for ik, idp, emg, lab in zip(ik_paths, id_paths, emg_paths, labels)]
-    result = solve_emg_ten_arrays(
-        geometries, model_parameters, id_data, emg_tables, labels=labels, ik_times=ik_times, passive=passive,
-        emg_mapping=mapping, settings=settings, options=options, sources=sources, check_units=check_units,
-        workflow=workflow, tendon_stiffness=tendon_stiffness, before_solve=before_solve,
-    )
-    # the leg, in each trial's record as the single-trial solve's record holds it
-    trial_entries = {label: {"side": side, "diagnosis": _diagnosis_record(diagnosis, solution, g, t, m, ik),
-                             **({"excluded_muscles": list(excluded)} if excluded else {})}
-                     for (label, solution), diagnosis, g, (t, m), ik in zip(result.solutions.items(), diagnoses,
-                                                                          geometries, id_data, ik_times)}
-    solutions = {label: dataclasses.replace(solution, record=solution.record.with_(**trial_entries[label]))
-                 for label, solution in result.solutions.items()}
-    return dataclasses.replace(result, solutions=solutions,
-                               record=result.record.with_(geometry_time_s=t_geometry, side=side))
-
-
 def _mapping_without(mapping: dict, excluded: Sequence[str]) -> dict:
     """The EMG mapping without the excluded muscles (a warning names those that had EMG)."""
     import warnings
@@ -574,13 +418,6 @@ def _mapping_without(mapping: dict, excluded: Sequence[str]) -> dict:
     return {m: c for m, c in mapping.items() if m not in set(excluded)}
 
 
-def _columns_without(table, excluded):
-    """An EMG table mapped to muscles without the excluded muscles' columns (its attributes kept)."""
-    out = table.drop(columns=[c for c in excluded if c in table.columns])
-    out.attrs.update(table.attrs)
-    return out
-
-
 def _fiber_lengths_without(measured: dict, excluded) -> dict:
     """Measured fiber lengths without the excluded muscles (a warning names those dropped)."""
     import warnings
@@ -592,62 +429,6 @@ def _fiber_lengths_without(measured: dict, excluded) -> dict:
         warnings.warn(f"--exclude-muscles {name_list(dropped, sep=' ')}: the measured fiber lengths of {name_list(dropped)} "
                       "are not used (the muscle is out of the problem)", MusclemetabWarning, stacklevel=3)
     return {m: v for m, v in measured.items() if m not in set(excluded)}
-
-
-def _diagnose_emg_trials(geometries, model_parameters, id_data, ik_times, labels, passive, settings, options,
-                         workflow, tendon_stiffness, check=True) -> list:
-    """The diagnosis of each trial of an EMG problem before it is built (the estimated tendon
-    stiffness within its bounds)."""
-    from .diagnosis import diagnose_geometry
-    from .emg_ten import settings_for_muscles
-    from .inputs import restrict_geometry
-    from .transcription import ParameterSpec
-    from .workflows import workflow_parameters
-
-    muscles = restrict_geometry(geometries[0]).muscles
-    settings = settings_for_muscles(settings or EmgTenSettings(), muscles)
-    params, _ = workflow_parameters("effort-cal" if workflow == EMG_TEN else workflow, model_parameters, muscles,
-                                    passive=passive, tendon_stiffness=tendon_stiffness)
-    kt = [m for m in settings.tendon_muscles if m in muscles]
-    specs = [ParameterSpec("tendon_stiffness", tuple(kt), settings.tendon_scale_bounds)] if kt else []
-    reserve = (options or SolverOptions()).optimal_reserve_Nm
-    out = [diagnose_geometry(g, params, t, m, ik_time_s=ik, specs=specs, optimal_reserve_Nm=reserve, trial=lab)
-           for g, (t, m), ik, lab in zip(geometries, id_data, ik_times, labels)]
-    return [d.check(f"trial {d.trial}") for d in out] if check else out
-
-
-def emg_mappings_of_legs(model, ik_path, emg_mapping, side: str, dofs=None, cache_dir=None) -> dict:
-    """``{side: EMG mapping}`` of the legs to solve (``side`` ``"r"``, ``"l"`` or ``"both"``).
-    With both legs the mapping must be a ``{muscle: [channels]}`` JSON file naming the muscles of
-    both legs (the named mappings are one leg's electrodes); each leg takes the entries of its
-    muscles (those spanning its DOFs, as its problem selects them, from the geometry of
-    ``ik_path``)."""
-    from ..errors import UnknownMuscleError
-    from ..geometry import compute_geometry
-
-    named = emg_mapping is None or str(emg_mapping).strip().lower() in ("default", "authors")
-    if side != "both":
-        return {side: emg_mapping or "default"}
-    if named:
-        raise OptionError("--side both with EMG needs --emg-mapping MAP.json: a JSON object naming each leg's "
-                          "muscles and their EMG channels, e.g. {\"soleus_r\": [\"SOL_R\"], \"soleus_l\": "
-                          "[\"SOL_L\"]} (the named mappings are one leg's electrodes)")
-    if dofs:
-        raise OptionError("--dofs names one leg's DOFs; with --side both leave it out (each leg's DOFs are discovered)")
-    mapping = resolve_emg_mapping(emg_mapping)
-    legs, placed = {}, set()
-    for leg in ("r", "l"):
-        muscles = set(compute_geometry(model, ik_path, side=leg, cache_dir=cache_dir).muscles)
-        legs[leg] = {m: c for m, c in mapping.items() if m in muscles}
-        placed |= set(legs[leg])
-        if not legs[leg]:
-            raise UnknownMuscleError(f"--emg-mapping {emg_mapping} names no muscle of the "
-                                     f"{'right' if leg == 'r' else 'left'} leg; map its muscles to their channels")
-    unplaced = sorted(set(mapping) - placed)
-    if unplaced:
-        raise UnknownMuscleError(f"--emg-mapping {emg_mapping}: {name_list(unplaced)} in neither leg's "
-                                 "muscles; check the names")
-    return legs
 
 
 def _trial_dofs(model, id_files, dofs, side: str, cache_dir) -> tuple[str, ...]:
@@ -704,242 +485,3 @@ def write_solution_folder(solution, out, opensim_files: bool = True) -> None:
         write_solution_opensim_files(solution, out)
 
 
-
-@fill_doc
-def estimate_files(
-    model, ik, id, out, *, estimate, ultrasound=(), emg=(), labels=None, couple=(), bounds=None, weights=None,
-    workflow: str = "effort-cal", side: str = "r", dofs=None, emg_mode: str | None = None,
-    emg_mapping: str | None = None, emg_tolerance: float = 0.01, passive=None, max_iter: int = 10000,
-    validate: bool = False, cache_dir=None, exclude_muscles=(), options: SolverOptions | None = None,
-) -> Result:
-    """Estimate muscle-tendon parameters over trials from files, and write them to ``out``.
-
-    ``ik``, ``id`` and ``ultrasound`` / ``emg`` hold one file per trial, in the same order (at
-    least one kind of measurement). ``estimate`` maps a kind (``tendon_stiffness``,
-    ``optimal_fiber_length``, ``tendon_slack_length``) to its muscles; ``couple`` lists
-    muscles sharing one factor; ``bounds`` maps a kind (or ``emg_scale``) to ``(low, high)``;
-    ``weights`` maps ``activation``, ``reserve``, ``velocity``, ``fiber_length`` and ``emg`` to
-    their weights (defaults: the workflow's, 100 and 10). The other options are those of
-    ``musclemetab estimate`` (``docs/problem.md``). Writes ``out/<trial>/``,
-    ``out/parameters.json``, ``out/<model>_personalised.osim`` and with ``validate``
-    ``out/validation/<trial>/``; raises :class:`~musclemetab.errors.SolverError` (after
-    writing) when the solve did not converge. A group of ``couple`` may name one kind
-    (``{"kind": KIND, "muscles": [...]}`` or ``"KIND:M1,M2"``; kind ``emg_scale`` replaces the
-    EMG-TEN groups of the EMG scale factors). The doubts of the estimate (factors on bounds,
-    identifiability, widened fiber-length bounds) are warned and recorded in ``parameters.json``
-    (``doubts``); the validation re-solve's fit to the measurements (RMS, Pearson r per measured
-    muscle) under ``validation``. ``exclude_muscles`` leaves muscles out of every trial (as
-    :func:`solve_files`); one named in ``estimate`` or ``couple`` is an
-    :class:`~musclemetab.errors.OptionError`, its EMG and measured fiber lengths are not used
-    (a warning names them). Each trial is diagnosed before the problem is built
-    (:mod:`.diagnosis`, the estimated factors within their bounds).
-
-    Parameters
-    ----------
-    %(model)s
-    %(labels)s
-    %(passive)s
-    %(side_dofs)s
-    emg_mapping
-        As for :func:`solve_emg_ten` (default ``"default"``).
-    %(cache_dir)s
-    """
-    from ..io import check_output_folder
-    from .bounds import fiber_length_bounds_record
-    from .transcription import Goals, ParameterSpec, coupling_pairs
-    from .emg_inputs import emg_at_nodes, mapping_for_muscles, resolve_emg_mapping, trial_labels
-    from .emg_ten import emg_bound, fiber_scheme
-    from .estimate import (
-        FIELDS,
-        _coupling,
-        emg_couplings,
-        estimate_parameters,
-        fiber_length_trial,
-        parameter_specs,
-        read_fiber_lengths,
-        write_personalised_model,
-    )
-    from .ipopt import SolverOptions, solver_record
-    from .record import ProblemRecord, RunRecord
-    from .solution import build_solution
-    from .solve import prepare_trial, solve_with_parameters
-    from .static_opt import initial_guess
-    from .workflows import get_workflow, workflow_parameters
-
-    weights_given = weights
-    check_output_folder(out)
-    ik, id_files = [str(p) for p in ik], [str(p) for p in id]
-    n = len(ik)
-    us_files = [str(p) for p in ultrasound or ()]
-    emg_files = [p if isinstance(p, os.PathLike) else str(p) for p in emg or ()]  # a RawEmgPath stays one
-    if not (us_files or emg_files):
-        raise OptionError("estimate needs measurements: give --ultrasound (fiber lengths) or --emg files, or both")
-    counts = [("--ultrasound", len(us_files)), ("--emg", len(emg_files))]
-    if len(id_files) != n or any(k not in (0, n) for _, k in counts):
-        given = ", ".join(f"{k} {o}" for o, k in counts if k)
-        raise OptionError(f"{n} --ik, {len(id_files)} --id and {given} files; give one of each per trial, in the "
-                          "same order")
-    estimate = {k: list(v) for k, v in estimate.items()}
-    bounds = {k: (float(lo), float(hi)) for k, (lo, hi) in (bounds or {}).items()}
-    bad = [k for k in bounds if k not in (*FIELDS, "emg_scale")]
-    if bad:
-        raise OptionError(f"--bounds: unknown kind '{bad[0]}'; use {', '.join((*FIELDS, 'emg_scale'))}")
-    couple = list(couple)
-    exclude_muscles = list(exclude_muscles or ())
-    coupled = {m for g in couple for m in _coupling(g)[1]}
-    clash = [m for m in exclude_muscles if any(m in v for v in estimate.values()) or m in coupled]
-    if clash:
-        raise OptionError(f"--exclude-muscles {name_list(clash, sep=' ')} and --estimate/--couple name the same muscle"
-                          f"{'s' if len(clash) > 1 else ''}: a muscle left out of the problem has no parameter to "
-                          "estimate; drop it from one of them")
-    specs = parameter_specs(estimate, couple, bounds)
-    wf = get_workflow(workflow)
-    weights = {**wf.goals.effort_weights(), "w_fiber_length": 100.0, "w_emg": 10.0 if emg_files else 0.0}
-    for k, v in (weights_given or {}).items():
-        if k not in WEIGHT_NAMES:
-            raise OptionError(f"--weights: unknown weight '{k}'; use {', '.join(WEIGHT_NAMES)}")
-        weights[WEIGHT_NAMES[k]] = float(v)
-    mode = emg_mode or "constrained"
-    if emg_files:
-        if not (emg_tolerance >= 0):
-            raise OptionError(f"--emg-tolerance must be a non-negative number, not {emg_tolerance}")
-        if mode == "tracking" and not weights["w_emg"] > 0:
-            raise OptionError("--emg-mode tracking needs a positive EMG weight (--emg-weight)")
-    tolerance = emg_bound(mode, emg_tolerance) if emg_files else None
-    fiber_dynamics = fiber_scheme(mode if emg_files else None)
-    goals = Goals(**weights, emg_tolerance=tolerance, fiber_dynamics=fiber_dynamics)
-    labels = trial_labels(ik, labels)
-    _check_estimate_outputs(out, model, labels, validate)
-    measured = [read_fiber_lengths(p) for p in us_files] or [{} for _ in range(n)]
-    mapping = resolve_emg_mapping(emg_mapping or "default") if emg_files else {}
-    if exclude_muscles:
-        mapping = _mapping_without(mapping, exclude_muscles)
-        measured = [_fiber_lengths_without(us, exclude_muscles) for us in measured]
-    emg_muscles = ()
-    options = options if options is not None else SolverOptions(max_iter=max_iter)
-
-    from ..geometry import compute_geometry
-    from ..io import read_table
-    from ..model import read_muscle_parameters
-    from .inputs import read_inverse_dynamics, read_kinematics
-
-    model_parameters = read_muscle_parameters(model)
-    trials, prepared, params, diagnoses = [], [], None, []
-    for i, (ik, idp, lab, us) in enumerate(zip(ik, id_files, labels, measured)):
-        id_table = read_table(idp)
-        # the first trial's DOFs (or the given ones) for every trial, each ID file checked as solve_files does
-        dofs = list(_trial_dofs(model, [id_table], dofs, side, cache_dir))
-        t_ik, _ = read_kinematics(ik, dofs)
-        t_id, mom = read_inverse_dynamics(id_table, dofs)
-        check_time_ranges(t_ik, t_id, ik, idp)
-        g = compute_geometry(model, ik, dofs=list(dofs), side=side, cache_dir=cache_dir)
-        g, _ = exclude_from_geometry(g, exclude_muscles)
-        nominal, wf_record = workflow_parameters(wf, model_parameters, g.muscles, passive=passive)
-        from .diagnosis import diagnose_geometry
-
-        diagnoses.append(diagnose_geometry(g, nominal, t_id, mom, ik_time_s=t_ik, specs=specs, trial=lab,
-                                           optimal_reserve_Nm=options.optimal_reserve_Nm).check(f"trial {lab}"))
-        inputs, p, so = prepare_trial(g, nominal, t_id, mom, ik_time_s=t_ik, options=options,
-                                      sources={"model": model, "ik": ik, "id": idp})
-        params = p if params is None else params
-        emg = {}
-        if emg_files:
-            mapping = mapping_for_muscles(emg_mapping or "default", mapping, inputs.muscles)
-            emg_muscles = tuple(sorted(mapping))
-            emg = dict(emg_muscles=emg_muscles,
-                       emg_nodes=emg_at_nodes(emg_files[i], mapping, inputs, emg_muscles, str(emg_files[i]), str(ik)))
-        trials.append(fiber_length_trial(lab, inputs, initial_guess(inputs, p, so), us, **emg))
-        prepared.append((g, nominal, t_id, mom, t_ik))
-    if emg_files:
-        from .emg_ten import EmgTenSettings, settings_for_muscles
-
-        groups = emg_couplings(couple) or settings_for_muscles(EmgTenSettings(), params.names).emg_groups
-        specs.append(ParameterSpec("emg_scale", emg_muscles, bounds.get("emg_scale", EMG_SCALE_BOUNDS),
-                                   coupling_pairs(groups, emg_muscles, consecutive=False)))
-    res, est = estimate_parameters(trials, params, specs, goals, options=options)
-    run = RunRecord.from_result(res, {"model": model})
-    estimated = est.parameters()
-    emg_record = {}
-    if emg_files:
-        emg_record = {"emg": {"mode": mode, "tolerance": tolerance, "weight": goals.w_emg, "mapping": mapping,
-                              "scale": dict(res.factors.get("emg_scale", {})),
-                              "bounds": list(bounds.get("emg_scale", EMG_SCALE_BOUNDS)),
-                              "max_deviation": {t.label: float(abs(d).max()) if d.size else 0.0
-                                                for t, d in zip(trials, res.emg_deviation)}}}
-    solutions = {}
-    for t, o, diag in zip(trials, res.trials, diagnoses):
-        summary = {**run.to_dict(), **emg_record, "objective_trial": o.objective, "objective_terms": o.objective_terms,
-                   "time_window_s": list(t.inputs.window_s), "n_intervals": t.inputs.n_intervals,
-                   "mesh_step_s": t.inputs.step_s, "optimal_reserve_Nm": options.optimal_reserve_Nm,
-                   "fiber_dynamics": fiber_dynamics,
-                   "fiber_length_bounds": fiber_length_bounds_record(t.inputs, params, specs),
-                   "workflow": {"name": f"{workflow} estimate", "estimate": est.to_dict()["factors"]},
-                   "solver_options": solver_record(options, goals), "diagnosis": diag.to_dict(),
-                   **({"excluded_muscles": list(exclude_muscles)} if exclude_muscles else {})}
-        solutions[t.label] = build_solution(t.inputs, estimated.subset(t.inputs.muscles), o, summary)
-        if not run.success:
-            from .diagnosis import last_iterate_violations
-
-            s = solutions[t.label]
-            violated = [f.to_dict() for f in last_iterate_violations(s, t.inputs)]
-            solutions[t.label] = dataclasses.replace(
-                s, record=s.record.with_(diagnosis={**diag.to_dict(), "last_iterate": violated}))
-    doc = {"format": ESTIMATE_FORMAT, "format_version": 1, **est.to_dict(), **emg_record, "solve": run.to_dict(),
-           "trials": labels}
-    factors = {k: dict(v) for k, v in est.factors.items()}
-    if emg_files:
-        factors["emg_scale"] = dict(res.factors.get("emg_scale", {}))
-    validation, fits, failed = {}, {}, None  # the validation re-solves, before anything is written
-    if validate and run.success:
-        from .identifiability import tracking_fit
-
-        for t, (g, _, t_id, mom, t_ik) in zip(trials, prepared):
-            lab = t.label
-            sol = validation[lab] = solve_with_parameters(g, estimated, t_id, mom, ik_time_s=t_ik, options=options,
-                                                          goals=goals.effort(),
-                                                          workflow_record={"name": f"{workflow} validation"})
-            if not sol.success:
-                failed = sol.run_record.failure(f"the validation re-solve of {lab}")
-                break
-            scale = factors.get("emg_scale", {})
-            fits[lab] = tracking_fit(
-                sol, {m: t.fiber_length_nodes_m[:, j] for j, m in enumerate(t.fiber_muscles)},
-                {m: scale[m] * t.emg_nodes[:, j] for j, m in enumerate(t.emg_muscles)})
-    from ..processes import sigint_deferred
-
-    with sigint_deferred():  # Ctrl-C leaves the previous output or all the new one
-        if run.success:
-            path, report = write_personalised_model(model, estimated, estimate, out)
-            doc["personalised_model"] = {"path": path.name, "muscles": report}
-        if validate and run.success and failed is None:
-            doc["validation"] = fits
-        result = Result(solutions=solutions, parameters=estimated, factors=factors,
-                        record=ProblemRecord.from_dict(run.to_dict()),
-                        emg_channels={m: list(c) for m, c in mapping.items()}, document=doc)
-        result.write(out)
-        for lab, sol in validation.items():
-            sol.write(f"{out}/validation/{lab}")
-    if not run.success:
-        from .diagnosis import trials_violation_text
-        from .emg_ten import emg_failure
-
-        err = emg_failure(run, mode if emg_files else None, f"the estimation (written to {out})")
-        raise type(err)(err.message + trials_violation_text(solutions))
-    if failed is not None:
-        raise failed
-    return result
-
-
-def _check_estimate_outputs(out, model, labels, validate: bool) -> None:
-    """Refuse, before any work, an ``out`` where a file of the estimate (``parameters.json``, the
-    personalised model, the trials' and with ``validate`` the validation's solution folders) would
-    replace a folder, or a file the package did not write (:class:`OptionError` naming it)."""
-    from pathlib import Path
-
-    from ..io.atomic import check_replaceable
-    from .result import PARAMETERS_FILE
-
-    out = Path(out)
-    check_replaceable(out, [PARAMETERS_FILE, f"{Path(model).stem}_personalised.osim"])
-    check_solution_folders([out / lab for lab in labels] + ([out / "validation" / lab for lab in labels]
-                                                           if validate else []))

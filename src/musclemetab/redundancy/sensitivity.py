@@ -487,8 +487,8 @@ def problem_of_solution(solution, cache_dir: str | os.PathLike | None = None) ->
                               np.asarray(geo.moment_arms_m)[keep][:, rows][:, :, cols])
     id_time, id_moments = read_inverse_dynamics(read_table(files["id"]), dofs)
     device = rec.get("assistance")
-    if device:  # an assisted solve: the muscles' moments are the ID's less the device's (musclemetab.assistance)
-        from ..assistance import read_assistance
+    if device:  # an assisted solve: the muscles' moments are the ID's less the device's (musclemetab.redundancy.assistance)
+        from .assistance import read_assistance
 
         id_moments = id_moments - read_assistance(device["file"]).torque_at(id_time, dofs, device["gain"],
                                                                             tuple(device["cycle_s"]))

@@ -162,11 +162,11 @@ def estimation_trials(subject, here: str | None = None) -> list:
 
 
 def run_parameter_estimation(study, unit, tmp: Path) -> dict:
-    """The subject's estimation unit: :func:`~musclemetab.redundancy.run.estimate_files`
+    """The subject's estimation unit: :func:`~musclemetab.redundancy.estimate_run.estimate_files`
     (``musclemetab estimate``) on its trials, written to ``tmp``."""
     import time
 
-    from ..redundancy import run
+    from ..redundancy import estimate_run as run
 
     subject = study.subject(unit.subject)
     spec = subject.estimate

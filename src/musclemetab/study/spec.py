@@ -884,7 +884,7 @@ def _trial(data, base: Path, where: str, emg_processing="envelope") -> Trial:
 def _assistance(value, base: Path, here: str) -> tuple[Path, tuple[float, ...]] | None:
     """An ``assistance`` key: a profile's path (gain 1) or a table ``{file, gain}`` or ``{file,
     gains = [...]}``; ``(path, gains)`` or ``None``."""
-    from ..assistance import check_gain, read_assistance
+    from ..redundancy.assistance import check_gain, read_assistance
 
     if value is None:
         return None

@@ -518,7 +518,7 @@ def _umask() -> int:
 
 def _run_estimation(study: Study, unit: Unit, tmp: Path) -> dict:
     """EMG-TEN over all the subject's trials: per-trial solutions and parameters.json."""
-    from ..redundancy.run import solve_emg_ten
+    from ..redundancy.emg_run import solve_emg_ten
 
     subject = study.subject(unit.subject)
     t0 = time.perf_counter()
@@ -544,7 +544,7 @@ def _run_estimation(study: Study, unit: Unit, tmp: Path) -> dict:
 def _informed_solve(study: Study, subject: Subject, trial: Trial, workflow: str, kwargs: dict):
     """The EMG-informed solve of one trial with an effort workflow (the subject's ``emg_mode``)."""
     from ..redundancy.emg_ten import informed_settings
-    from ..redundancy.run import solve_emg_ten
+    from ..redundancy.emg_run import solve_emg_ten
     from ..redundancy.workflows import read_tendon_stiffness_json
 
     kt = kwargs.get("tendon_stiffness")

@@ -46,7 +46,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .errors import DataMismatchError, InputFileError, MissingColumnError, OptionError, UnknownCoordinateError
+from ..errors import DataMismatchError, InputFileError, MissingColumnError, OptionError, UnknownCoordinateError
 
 __all__ = ["AssistanceProfile", "read_assistance", "CYCLE_AXIS_HEADER", "CYCLE_COLUMN", "MUSCLE_EFFICIENCY",
            "MAX_TORQUE_NM_PER_KG", "MIN_PEAK_TORQUE_NM", "apply_assistance", "device_work", "assistance_record",
@@ -109,7 +109,7 @@ class AssistanceProfile:
 def check_gain(gain, where: str = "", option: str | None = "--assistance-gain") -> float:
     """The gain as a float within :data:`musclemetab.settings.NUMBER_KEYS` ``["assistance_gain"]``
     (:class:`OptionError` naming ``option``, or the study key, otherwise; 0: no assistance)."""
-    from .settings import check_number
+    from ..settings import check_number
 
     return float(check_number("assistance_gain", gain, where, option))
 
@@ -134,7 +134,7 @@ def read_assistance(path: str | os.PathLike) -> AssistanceProfile:
     if not path.is_file():
         raise InputFileError(f"assistance profile {path} not found; give the path of a .sto, .mot or .csv file")
     if path.suffix.lower() == ".csv":
-        from .io.csvfile import read_csv_file
+        from ..io.csvfile import read_csv_file
 
         df = read_csv_file(path, "write it again as a CSV table with a time or cycle_pct column", "assistance profile")
         if df.shape[1] < 2:
@@ -155,7 +155,7 @@ def read_assistance(path: str | os.PathLike) -> AssistanceProfile:
         if not (np.all(np.isfinite(x)) and np.all(np.diff(x) > 0)):
             raise InputFileError(f"{path}: column '{first}' must increase strictly, with finite values")
     else:
-        from .io import read_table
+        from ..io import read_table
 
         table = read_table(path)
         axis = "cycle_pct" if CYCLE_AXIS_HEADER in _header_lines(path) else "time_s"
@@ -251,8 +251,8 @@ def _angular_velocity(ik_time_s, angles_rad, at_s) -> np.ndarray:
     (zero lag, as the solver's inputs) and differentiated through a not-a-knot cubic spline."""
     from scipy.interpolate import CubicSpline
 
-    from .io import constant_rate
-    from .redundancy.inputs import lowpass_filtfilt
+    from ..io import constant_rate
+    from .inputs import lowpass_filtfilt
 
     t = np.asarray(ik_time_s, dtype=float)
     q = np.asarray(angles_rad, dtype=float)
@@ -323,7 +323,7 @@ def plantarflexion_assistance(path: str | os.PathLike, body_mass_kg: float, *, p
     stance). ``plantarflexion_sign`` is the sign of a plantarflexion torque about ``dof``
     (-1 for the Rajagopal and gait2392 families, where positive ``ankle_angle`` is
     dorsiflexion)."""
-    from .io import storage_from_arrays, write_storage
+    from ..io import storage_from_arrays, write_storage
 
     mass = float(body_mass_kg)
     if not (0 <= onset_percent < peak_percent < offset_percent <= 100):
