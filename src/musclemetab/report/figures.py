@@ -192,14 +192,110 @@ def _fewer_ticks(fig) -> None:
 
 
 def _apply_layout(fig) -> None:
-    """Place the panels inside the figure's margins (see :func:`_new_figure`); fewer ticks."""
+    """Place the panels inside the figure's margins (see :func:`_new_figure`); fewer ticks.
+
+    The texts are fitted first (:func:`_fit_texts`): the figure's title wrapped to the
+    figure's width, the legend below the panels given as many columns as fit, the panel
+    titles wrapped to their panel, and the margins grown to hold them and the tick labels
+    of fixed text (muscle or trial names), so that no text is cut by the figure's edge or
+    drawn over another (:func:`~.layout_check.figure_problems` checks it)."""
     m = getattr(fig, "_musclemetab_margins", None)
     if m is None or fig.get_layout_engine() is not None:
         return
     _fewer_ticks(fig)
+    _adjust(fig, m)
+    _fit_texts(fig, m)
+
+
+def _adjust(fig, m) -> None:
     w, h = fig.get_size_inches()
     fig.subplots_adjust(left=m["left"] / w, right=1.0 - m["right"] / w, top=1.0 - m["top"] / h,
                         bottom=m["bottom"] / h, wspace=m["wspace"], hspace=m["hspace"])
+
+
+def _wrap_to(text, width_px: float, renderer) -> int:
+    """Wrap a text artist at its spaces so that each line is at most ``width_px`` wide (a
+    word longer than that stays whole; its own line breaks kept); returns its number of lines."""
+    if text.get_window_extent(renderer).width <= width_px:
+        return str(text.get_text()).count("\n") + 1
+    lines: list[str] = []
+    for para in str(text.get_text()).split("\n"):
+        line = ""
+        for word in para.split(" "):
+            longer = f"{line} {word}" if line else word
+            text.set_text(longer)
+            if line and text.get_window_extent(renderer).width > width_px:
+                lines.append(line)
+                line = word
+            else:
+                line = longer
+        lines.append(line)
+    text.set_text("\n".join(lines))
+    return len(lines)
+
+
+def _fit_texts(fig, m) -> None:
+    """See :func:`_apply_layout`: wrap the titles, fit the legend's columns, grow the margins."""
+    renderer = fig.canvas.get_renderer()
+    px = fig.dpi
+    w_in, h_in = fig.get_size_inches()
+    changed = False
+    # the figure's legend below the panels: as many columns as fit in the figure's width
+    below = getattr(fig, "_musclemetab_legend", None)
+    if below is not None:
+        legend, handles, ncol, fontsize = below
+        while ncol > 1 and legend.get_window_extent(renderer).width > (w_in - 0.2) * px:
+            ncol -= 1
+            legend.remove()
+            legend = fig.legend(handles=handles, loc="lower center", ncol=ncol, fontsize=fontsize, frameon=False)
+        fig._musclemetab_legend = (legend, handles, ncol, fontsize)
+        need = legend.get_window_extent(renderer).height / px + 0.55
+        if need > m["bottom"]:
+            m["bottom"], changed = need, True
+    # the tick labels of fixed text on the outer panels (names): the left margin holds them and the axis label
+    visible = [ax for ax in fig.axes if ax.get_visible() and ax.get_label() != "<colorbar>"]
+    need_left = 0.0
+    for ax in visible:
+        if ax.get_subplotspec() is None or not ax.get_subplotspec().is_first_col():
+            continue
+        labels = [t for t in ax.get_yticklabels() if t.get_visible() and t.get_text()]
+        if not labels or ax.yaxis.get_ticks_position() == "right":
+            continue
+        wide = max(t.get_window_extent(renderer).width for t in labels) / px
+        ylab = ax.yaxis.label
+        extra = ylab.get_window_extent(renderer).width / px + 0.1 if ylab.get_text() else 0.0
+        need_left = max(need_left, wide + extra + 0.2)
+    if need_left > m["left"]:
+        m["left"], changed = need_left, True
+    if changed:
+        _adjust(fig, m)
+    # panel titles wrapped to their panel; the top margin holds the figure's title above the
+    # top row's titles (and tick labels drawn on top)
+    top_row = 0.0
+    for ax in visible:
+        ax_w = ax.get_window_extent(renderer).width
+        title = ax.title
+        if title.get_text():
+            _wrap_to(title, ax_w + 0.5 * m["wspace"] * ax_w, renderer)
+        spec = ax.get_subplotspec()
+        if spec is not None and spec.is_first_row():
+            high = title.get_window_extent(renderer).height / px + 0.08 if title.get_text() else 0.0
+            if ax.xaxis.get_ticks_position() in ("top", "unknown") or getattr(ax.xaxis, "_musclemetab_top", False):
+                labels = [t for t in ax.get_xticklabels() if t.get_text()]
+                if labels:
+                    high += max(t.get_window_extent(renderer).height for t in labels) / px + 0.1
+            top_row = max(top_row, high)
+    sup = getattr(fig, "_suptitle", None)
+    sup_h = 0.0
+    if sup is not None and sup.get_text():
+        _wrap_to(sup, (w_in - 0.3) * px, renderer)
+        sup.set_y(1.0 - 0.08 / h_in)
+        sup.set_va("top")
+        sup_h = sup.get_window_extent(renderer).height / px + 0.08
+    need_top = sup_h + top_row + 0.1
+    if need_top > m["top"]:
+        m["top"] = need_top
+        _adjust(fig, m)
 
 
 def _panel_title(ax, text: str, **kw) -> None:
@@ -218,7 +314,8 @@ def _legend_below(fig, handles, ncol: int, fontsize: float) -> None:
     m = getattr(fig, "_musclemetab_margins", None)
     if m is not None:
         m["bottom"] = max(m["bottom"], 0.55 + rows * fontsize / 72.0 * 1.7)
-    fig.legend(handles=handles, loc="lower center", ncol=ncol, fontsize=fontsize, frameon=False)
+    legend = fig.legend(handles=handles, loc="lower center", ncol=ncol, fontsize=fontsize, frameon=False)
+    fig._musclemetab_legend = (legend, handles, ncol, fontsize)  # its columns fitted when saved (_fit_texts)
 
 
 def _grid(n: int, max_cols: int = 3) -> tuple[int, int]:
@@ -1300,9 +1397,10 @@ def anatomical_muscles(names: Sequence[str]) -> dict[str, tuple[str, str]]:
     of the package's muscle table (:func:`musclemetab.properties.resolve_muscles`) and the
     side, so that the names of two model families for one muscle (``gasmed_r`` of Rajagopal
     and ``med_gas_r`` of gait2392: ``gastrocnemius medialis (r)``) and the bundles of one
-    muscle (``addmagDist_r``, ``addmagMid_r``) share a label; ``group``: the first muscle
-    group of its function (:data:`GROUPS`; ``other`` when it has none). A name the table cannot
-    place keeps its own name. ``names`` of one model family (one subject's model)."""
+    muscle (``addmagDist_r``, ``addmagMid_r``) share a label; ``group``: the muscle group of
+    its main action (``primary_group`` of the muscle table; :data:`GROUPS`; ``other`` when it
+    has none). A name the table cannot place keeps its own name. ``names`` of one model family
+    (one subject's model)."""
     from ..properties import anatomical_table, resolve_muscles
 
     names = list(dict.fromkeys(str(n) for n in names))
@@ -1313,8 +1411,21 @@ def anatomical_muscles(names: Sequence[str]) -> dict[str, tuple[str, str]]:
             out[rec.name] = (rec.name, OTHER)
             continue
         label = " + ".join(str(anat.loc[a, "name"]) for a in rec.anatomical)
-        group = rec.function_groups[0].split("/")[0] if rec.function_groups else OTHER
+        group = rec.primary_group or OTHER
         out[rec.name] = (f"{label} ({rec.side})" if rec.side else label, group if group in GROUPS else OTHER)
+    return out
+
+
+def muscle_names(names: Sequence[str]) -> dict[str, str]:
+    """Each model muscle name -> the name the report gives it: the anatomical muscle of the
+    package's muscle table with the model's name, ``"soleus (soleus_r)"``, ``"adductor magnus
+    (addmagDist_r)"`` (:func:`anatomical_muscles`); a muscle the table cannot place keeps its
+    model name. The figures and the page's tables name a model muscle so."""
+    labels = anatomical_muscles(names)
+    out = {}
+    for n, (label, _) in labels.items():
+        anat = label.rsplit(" (", 1)[0] if label != n else ""
+        out[n] = f"{anat} ({n})" if anat else n
     return out
 
 
@@ -1351,10 +1462,11 @@ def harmonise_muscles(per_muscle, value: str = "muscle_W_per_kg"):
 def muscle_heat_map(rates: Mapping[str, object], toe_off_pct, models: Sequence[str] | None = None, *,
                     scale: float = 1.0, unit: str = "W", title: str | None = None):
     """Each muscle's metabolic rate over the gait cycle as a heat map: muscles (rows, ordered by
-    muscle group, :data:`GROUPS`, then by anatomical name) x cycle (columns), one panel per trial
-    and model, one colour scale (a rate below -2 % of the peak sky blue); a dashed line at the
-    toe-off (the stance/swing boundary). Bundles of one anatomical muscle are named with their
-    model name.
+    the muscle group of their main action, :data:`GROUPS`, then by anatomical name) x cycle
+    (columns), one panel per trial and model; one colour scale per row of panels (a trial),
+    with its colour bar beside the row (a rate below -2 % of the row's peak sky blue); a dashed
+    line at the toe-off (the stance/swing boundary). Muscles are named by
+    :func:`muscle_names` (the anatomical muscle with the model's name), tagged with their group.
 
     ``rates``: model -> table indexed by the cycle percentage, one column per muscle (W), for one
     trial (``toe_off_pct`` a number; panels titled by model); or trial -> such a mapping, for
@@ -1367,65 +1479,76 @@ def muscle_heat_map(rates: Mapping[str, object], toe_off_pct, models: Sequence[s
         raise OptionError("no per-muscle rates given for the heat map")
     several = all(isinstance(v, Mapping) for v in rates.values())
     per_trial = {str(t): r for t, r in rates.items()} if several else {"": rates}
-    panels = []  # (title, model, cycle %, array rows in `order` later, toe-off %)
+    rows: list[list] = []  # per trial: [(title, model, table, toe-off %)]
     for trial, by_model in per_trial.items():
         if not by_model:
             raise OptionError(f"no per-muscle rates given for the heat map of trial {trial}")
         to_pct = toe_off_pct[trial] if isinstance(toe_off_pct, Mapping) else toe_off_pct
         ms, to = _models_and_toe_off(_ordered_models(list(by_model)), models, to_pct, "per-muscle rates", "given:")
-        panels += [(f"{trial}: {m}" if several else m, m, by_model[m], to) for m in ms]
+        rows.append([(f"{trial}: {m}" if several else m, m, by_model[m], to) for m in ms])
+    panels = [p for row in rows for p in row]
     muscles = list(dict.fromkeys(str(c) for _, _, tab, _ in panels for c in tab.columns))
     labels = anatomical_muscles(muscles)
     rank = {g: i for i, g in enumerate(GROUPS)}
     order = sorted(muscles, key=lambda n: (rank.get(labels[n][1], len(GROUPS)), labels[n][0], n))
-    arrays = []
-    for _, _, tab, _ in panels:
+    names = muscle_names(order)
+    group_of = [labels[n][1] for n in order]
+
+    def array(tab):
         pct = np.asarray(tab.index, float)
-        arrays.append((pct, scale * np.vstack([tab[n].to_numpy(float) if n in tab.columns else np.full(pct.size, np.nan)
-                                               for n in order])))
-    hi = max(float(np.nanmax(a)) for _, a in arrays)
-    floor = -0.02 * hi  # a rate below 2 % of the peak under zero shows apart; closer to 0 it counts as 0
-    negative = any(float(np.nanmin(a)) < floor for _, a in arrays)
+        return pct, scale * np.vstack([tab[n].to_numpy(float) if n in tab.columns else np.full(pct.size, np.nan)
+                                       for n in order])
+
+    arrays = [[array(tab) for _, _, tab, _ in row] for row in rows]
     from matplotlib import colormaps
 
     cmap = colormaps["magma_r"].with_extremes(under=OKABE_ITO["sky blue"])  # a negative rate: sky blue
-    per_row = len(panels) // len(per_trial)
-    ncol = per_row if several else min(per_row, 3)
-    nrow = int(math.ceil(len(panels) / ncol))
-    fig = _new_figure(2.4 * ncol + 3.3, (0.125 * len(order) + 0.45) * nrow + 1.0, left=2.4, right=0.9,
-                      wspace=0.06, hspace=0.1 if len(order) > 20 and not several else 0.3)
-    # the same rows in every panel (no shared y axis: the muscles' ticks are made once per row of panels)
-    axes = fig.subplots(nrow, ncol, squeeze=False, sharex=True)
-    image = None
-    shared = {labels[n][0] for n in order if sum(labels[x][0] == labels[n][0] for x in order) > 1}
-    names = [f"{labels[n][0].rsplit(' (', 1)[0]}: {n}" if labels[n][0] in shared else labels[n][0] for n in order]
-    for ax, (head, m, _, to), (pct, a) in zip(axes.flat, panels, arrays):
-        image = ax.imshow(a, aspect="auto", interpolation="nearest", cmap=cmap, vmin=floor, vmax=hi,
-                          extent=(float(pct[0]), float(pct[-1]), len(order) - 0.5, -0.5), gid=f"heat:{head}")
-        _vline(ax, to, color=OKABE_ITO["bluish green"], lw=1.3, ls="--", label="_toe-off", gid="toe-off")
-        _panel_title(ax, head, color=model_colour(m), fontsize=10, fontweight="bold")
-    group_of = [labels[n][1] for n in order]
-    for k, ax in enumerate(axes.flat):
-        if k >= len(panels):
-            ax.set_visible(False)
-            continue
-        if k % ncol == 0:
-            ax.set_yticks(range(len(order)), [f"{t} [{labels[n][1]}]" for t, n in zip(names, order)], fontsize=7)
-        else:
-            ax.set_yticks([])
-        for i in range(1, len(order)):  # a thin line between the muscle groups
-            if group_of[i] != group_of[i - 1]:
-                _hline(ax, i - 0.5, color="white", lw=0.8)
-        if k + ncol >= len(panels):
-            ax.set_xlabel("gait cycle (%)")
-            ax.tick_params(labelbottom=True)
-    axes[0, 0].set_xlim(0.0, 100.0)
-    cax = fig.add_axes((1 - 0.7 / fig.get_figwidth(), 0.25, 0.12 / fig.get_figwidth(), 0.5))
-    bar = fig.colorbar(image, cax=cax, extend="min" if negative else "neither")
-    bar.set_label(f"metabolic rate ({unit})" + ("; sky blue: below -2 % of the peak" if negative else ""),
-                  fontsize=8)
-    cax.tick_params(labelsize=7)
-    fig.suptitle(title or "Metabolic rate of each muscle over the gait cycle (no basal heat)", fontsize=10)
+    ncol = max(len(r) for r in rows) if several else min(len(rows[0]), 3)
+    grid_rows = [(i, row[k:k + ncol], arr[k:k + ncol]) for i, (row, arr) in enumerate(zip(rows, arrays))
+                 for k in range(0, len(row), ncol)]
+    nrow = len(grid_rows)
+    row_in = 0.16 * len(order)
+    fig = _new_figure(1.7 * ncol + 3.9, (row_in + 0.45) * nrow + 1.0, left=2.7, right=0.95, wspace=0.08,
+                      hspace=0.45 / row_in * 1.0 + 0.04)
+    grid = fig.add_gridspec(nrow, ncol + 1, width_ratios=[1.0] * ncol + [0.07])
+    first = None
+    negative_any = False
+    for r, (i, row, arr) in enumerate(grid_rows):
+        # one colour scale per trial: its peak (and its floor, -2 % of it, under which a rate shows apart)
+        hi = max(float(np.nanmax(a)) for _, a in arrays[i])
+        floor = -0.02 * hi
+        negative = any(float(np.nanmin(a)) < floor for _, a in arrays[i])
+        negative_any |= negative
+        image = None
+        for j, ((head, m, _, to), (pct, a)) in enumerate(zip(row, arr)):
+            ax = fig.add_subplot(grid[r, j], sharex=first)
+            first = first or ax
+            image = ax.imshow(a, aspect="auto", interpolation="nearest", cmap=cmap, vmin=floor, vmax=hi,
+                              extent=(float(pct[0]), float(pct[-1]), len(order) - 0.5, -0.5), gid=f"heat:{head}")
+            _vline(ax, to, color=OKABE_ITO["bluish green"], lw=1.3, ls="--", label="_toe-off", gid="toe-off")
+            _panel_title(ax, head, color=model_colour(m), fontsize=10, fontweight="bold")
+            if j == 0:
+                ax.set_yticks(range(len(order)), [f"{t} [{g}]" for t, g in zip((names[n] for n in order), group_of)],
+                              fontsize=8)
+            else:
+                ax.set_yticks([])
+            for k in range(1, len(order)):  # a thin line between the muscle groups
+                if group_of[k] != group_of[k - 1]:
+                    _hline(ax, k - 0.5, color="white", lw=0.8)
+            if r == nrow - 1:
+                ax.set_xlabel("gait cycle (%)")
+            else:
+                ax.tick_params(labelbottom=False)
+        cax = fig.add_subplot(grid[r, ncol])
+        bar = fig.colorbar(image, cax=cax, extend="min" if negative else "neither")
+        bar.set_label(f"{'rate' if several else 'metabolic rate'} ({unit})", fontsize=8)
+        cax.tick_params(labelsize=7)
+    first.set_xlim(0.0, 100.0)
+    first.set_xticks([25, 50, 75])  # none at the edges, where the next panel's would meet it
+    heading = title or "Metabolic rate of each muscle over the gait cycle (no basal heat)"
+    if negative_any:
+        heading += "; sky blue: a rate below -2 % of the peak"
+    fig.suptitle(heading, fontsize=10)
     return fig
 
 
@@ -1450,6 +1573,9 @@ def save_figure(fig, out_dir: str | os.PathLike, name: str, *, dpi: int = 110,
     out_dir = Path(out_dir)
     if not isinstance(fig.canvas, FigureCanvasAgg):
         FigureCanvasAgg(fig)
+    # drawn at the saved resolution: what the figure measures afterwards (its texts' boxes,
+    # :func:`~.layout_check.figure_problems`) is what the files show
+    fig.set_dpi(dpi)
     _apply_layout(fig)
     import matplotlib
 
