@@ -146,8 +146,8 @@ def test_solve_metabolics_analyse_give_the_study_numbers(cli_flow, two_subjects,
 
     again = shutil.copytree(a, a.parent / "A again", ignore=shutil.ignore_patterns("figures", "report.html"))
     both = read_report_input([a, again])
-    assert list(both.ok["trial"].drop_duplicates()) == ["subject01_walk1_ik", "subject01_walk1_ik (A again)"]
-    assert both.settings["subjects"]["subject01_simbody"]["trials"] == list(both.ok["trial"].drop_duplicates())
+    assert list(both.ok["trial"].drop_duplicates()) == ["walk1", "walk1 (A again)"]
+    assert both.settings["subjects"]["subject01"]["trials"] == list(both.ok["trial"].drop_duplicates())
     rows = page_tables(both)["results"]["whole_body"].body
     assert len(rows) == 4 and [r[1:] for r in rows[:2]] == [r[1:] for r in rows[2:]]
 
@@ -157,14 +157,14 @@ def _report_tables_are_the_studys(a: Path, study: Path) -> int:
     data the report is drawn from (results rows with the study's ``quality``, per-muscle rows,
     both legs' rates over the cycle, each muscle's rate, the cycles) number by number, then the
     tables on the two pages cell by cell (the study's trial ``walk1`` is the command line's
-    ``subject01_walk1_ik``: the IK file's name); returns the number of numbers compared."""
+    ``walk1``, from the IK file's name ``subject01_walk1_ik``); returns the number of numbers compared."""
     from musclemetab.report.cli_folder import read_report_input
     from musclemetab.report.page import page_tables
 
     cli, st = read_report_input(a), read_report_input(study)
     labels = ["subject", "trial", "workflow"]
-    assert cli.ok[labels].drop_duplicates().values.tolist() == [["subject01_simbody", "subject01_walk1_ik",
-                                                                  "effort-gen"]]
+    assert cli.ok[labels].drop_duplicates().values.tolist() == [["subject01", "walk1", "effort-gen"]]
+    assert cli.settings["name"] == "subject subject01, trial walk1"
     mine = st.ok[st.ok["subject"] == "gait2392"]
     # the results rows: every column of the study's, `quality` (the plausibility flags) included
     got = cli.ok.drop(columns=labels + ["unit_dir"])

@@ -243,12 +243,12 @@ def _fit_texts(fig, m) -> None:
     # the figure's legend below the panels: as many columns as fit in the figure's width
     below = getattr(fig, "_musclemetab_legend", None)
     if below is not None:
-        legend, handles, ncol, fontsize = below
+        legend, handles, ncol, kw = below
         while ncol > 1 and legend.get_window_extent(renderer).width > (w_in - 0.2) * px:
             ncol -= 1
             legend.remove()
-            legend = fig.legend(handles=handles, loc="lower center", ncol=ncol, fontsize=fontsize, frameon=False)
-        fig._musclemetab_legend = (legend, handles, ncol, fontsize)
+            legend = fig.legend(handles=handles, ncol=ncol, **kw)
+        fig._musclemetab_legend = (legend, handles, ncol, kw)
         need = legend.get_window_extent(renderer).height / px + 0.55
         if need > m["bottom"]:
             m["bottom"], changed = need, True
@@ -307,15 +307,17 @@ def _panel_title(ax, text: str, **kw) -> None:
     ax.set_title(text, y=1.0, **kw)
 
 
-def _legend_below(fig, handles, ncol: int, fontsize: float) -> None:
-    """The figure's legend centred below the panels, the bottom margin grown to fit its rows
-    under the axis labels."""
+def _legend_below(fig, handles, ncol: int, fontsize: float, **kw) -> None:
+    """The figure's legend centred below the panels (``kw``: more of ``fig.legend``'s
+    options, e.g. its title), the bottom margin grown to fit its rows under the axis labels;
+    when saved, given as many columns as fit in the figure's width (:func:`_fit_texts`)."""
     rows = int(math.ceil(len(handles) / max(ncol, 1)))
     m = getattr(fig, "_musclemetab_margins", None)
     if m is not None:
         m["bottom"] = max(m["bottom"], 0.55 + rows * fontsize / 72.0 * 1.7)
-    legend = fig.legend(handles=handles, loc="lower center", ncol=ncol, fontsize=fontsize, frameon=False)
-    fig._musclemetab_legend = (legend, handles, ncol, fontsize)  # its columns fitted when saved (_fit_texts)
+    kw = {"loc": "lower center", "fontsize": fontsize, "frameon": False, **kw}
+    legend = fig.legend(handles=handles, ncol=ncol, **kw)
+    fig._musclemetab_legend = (legend, handles, ncol, kw)
 
 
 def _grid(n: int, max_cols: int = 3) -> tuple[int, int]:
@@ -625,6 +627,7 @@ def excitations_and_fiber_lengths(
     lm_data = [PLATEAU_BAND[0], DESCENDING_LIMB]
     # one excitation scale in every panel: 0-1, or up to the largest scaled EMG shown
     e_top = max([1.02] + [1.02 * float(np.nanmax(v)) for _, v in (emg or {}).values() if np.size(v)])
+    names = muscle_names([label for label, _ in rows])  # the anatomical muscle with the model's name
     for k, (label, found) in enumerate(rows):
         i, j = divmod(k, ncol)
         ax_e, ax_l = axes[2 * i, j], axes[2 * i + 1, j]
@@ -652,7 +655,7 @@ def excitations_and_fiber_lengths(
         for ax in (ax_e, ax_l):
             for to in toe_offs:
                 _vline(ax, to, color="k", lw=0.8, ls=":", label="_toe-off", gid="toe-off")
-        _panel_title(ax_e, label, fontsize=10)
+        _panel_title(ax_e, names[label], fontsize=9)
         if j == 0:
             ax_e.set_ylabel("excitation (-)")
             ax_l.set_ylabel("fiber length\nlᴹ/lᴹₒ (-)")  # no mathtext: its parser takes 0.15 s to start
@@ -762,8 +765,7 @@ def estimated_vs_measured(results, *, models: Sequence[str] | None = None, title
         from matplotlib.lines import Line2D
 
         handles = [Line2D([], [], ls="", marker=marker[s], color="0.3", label=s) for s in subjects]
-        fig.legend(handles=handles, loc="lower center", ncol=min(len(subjects), 10), fontsize=8,
-                   frameon=False, title="subject", title_fontsize=8)
+        _legend_below(fig, handles, min(len(subjects), 10), 8, title="subject", title_fontsize=8)
     heading = title or ("Estimated vs measured whole-body metabolic rate (W/kg, with basal heat); "
                         "lines: repeated-measures correlation")
     if notes:  # why a correlation is missing, once per distinct reason
@@ -829,14 +831,19 @@ def group_rates_over_cycle(timeseries, toe_off_pct: float, models: Sequence[str]
 
     ``timeseries`` is a unit's long table (``cycle_pct``, ``model``, ``series``, ``value_W``;
     series ``group/<G>``), drawn times ``scale`` in ``unit``; a dotted vertical line at
-    ``toe_off_pct`` (%).
+    ``toe_off_pct`` (%). A group whose rate is zero throughout has no panel.
     """
     ts = _long_table(timeseries, "the time-series table")
     ts = ts[ts["series"].astype(str).str.startswith("group/")]
     if ts.empty:
         raise OptionError("the time-series table has no group series (group/<G>)")
     models, to = _models_and_toe_off(_ordered_models(ts["model"]), models, toe_off_pct, "group rates", "the table has")
-    present = _unique(s.split("/", 1)[1] for s in _unique(ts["series"].astype(str)))
+    # the groups with energy at some instant (a group no muscle belongs to, e.g. other with
+    # every DOF of the muscles solved, is left out: an empty panel)
+    peak = ts.assign(v=ts["value_W"].abs()).groupby(ts["series"].astype(str))["v"].max()
+    present = _unique(s.split("/", 1)[1] for s in _unique(ts["series"].astype(str)) if peak.get(s, 0.0) > 0.0)
+    if not present:
+        raise OptionError("every muscle group's rate is zero in the time-series table")
     groups = [g for g in GROUPS if g in present] + [g for g in present if g not in GROUPS]
     nrow, ncol = _grid(len(groups), 4)
     fig = _new_figure(2.9 * ncol, 2.0 * nrow + 1.2)
@@ -952,11 +959,16 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
 
     Left: at the preferred speed (``trial``, default :func:`preferred_trial`), stacked bars
     (stance solid, swing hatched, mean over subjects, error bar = SD of the swing share) per
-    model (groups of bars) and workflow (bar colour). Right: swing share against walking speed
-    (m/s) for ``workflow`` (default :func:`main_workflow`), one line per model and subject
-    through the subject's trials in the order of its speeds (line style and marker: the
-    subject; trials of different subjects never matched by name); the legend gives the
-    repeated-measures slope (% per m/s) when there are two speeds or more.
+    model (groups of bars) and workflow (bar colour); the error bar only where a cell has two
+    subjects or more. Right, when the workflow has two speeds or more: swing share against
+    walking speed (m/s) for ``workflow`` (default :func:`main_workflow`), one line per model
+    and subject through the subject's trials in the order of its speeds (line style and marker:
+    the subject; trials of different subjects never matched by name); the legend gives the
+    repeated-measures slope (% per m/s) where it can be estimated.
+
+    ``fig.shown`` says what was drawn, for the caption: ``{"sd": error bars drawn, "speeds":
+    number of speeds of the workflow (the right panel when 2 or more), "slopes": models whose
+    slope the legend gives}``.
     """
     res = _ok_rows(results)
     _require_columns(res, ("stance_energy_share_pct", "swing_energy_share_pct", "speed_m_per_s"), "the results table")
@@ -970,9 +982,16 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
     wf_line = main_workflow(workflows) if workflow is None else str(workflow)
     if wf_line not in workflows:
         raise OptionError(f"workflow '{wf_line}' is not in the results; it has {', '.join(workflows)}")
-    fig = _new_figure(min(15.0, max(10.0, 0.5 * len(models) * max(1, len(workflows)) + 6.0)), 5.4,
+    dl = res[res["workflow"].astype(str) == wf_line]
+    n_speeds = len(_unique(dl["trial"].astype(str)))
+    bars_w = 0.5 * len(models) * max(1, len(workflows)) + 2.5
+    fig = _new_figure(min(15.0, max(10.0, bars_w + 3.5)) if n_speeds > 1 else min(10.0, max(6.5, bars_w)), 5.4,
                       bottom=1.2, top=0.75)
-    ax_b, ax_s = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.5, 1.0]})
+    if n_speeds > 1:
+        ax_b, ax_s = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.5, 1.0]})
+    else:  # one speed: no trend to draw, no panel
+        ax_b, ax_s = fig.subplots(1, 1), None
+    shown = {"sd": False, "speeds": n_speeds, "slopes": []}
     pref = res[res["trial"].astype(str) == trial]
     nw = len(workflows)
     width = 0.8 / max(nw, 1)
@@ -998,6 +1017,7 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
         sd = np.array(sd)
         if np.any(np.isfinite(sd)):
             ax_b.errorbar(xs, stance, yerr=np.nan_to_num(sd), fmt="none", ecolor="k", elinewidth=0.8, capsize=2)
+            shown["sd"] = True
         if has_band(pref, "stance_energy_share_pct"):  # uncertainty samples: the stance share's 5-95 % band
             band = group_stats(pref, ["workflow", "model"], ["stance_energy_share_pct_p05", "stance_energy_share_pct_p95"])
             lo = [stat_cell(band, (w, m), "stance_energy_share_pct_p05")[0] for m in models
@@ -1017,23 +1037,27 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
     sp = pref["speed_m_per_s"].to_numpy(float)
     if np.any(np.isfinite(sp)):
         speed_txt = f", {np.nanmean(sp):.2f} m/s"
-    _panel_title(ax_b, f"Stance (solid) and swing (hatched; % above the bar) at the preferred speed "
-                   f"({trial}{speed_txt})", fontsize=9)
+    where = (f"at the preferred speed ({trial}{speed_txt})" if len(trial_order(res)) > 1
+             else f"of trial {trial}{speed_txt}")  # one trial: its speed is no one's preference
+    _panel_title(ax_b, f"Stance (solid) and swing (hatched; % above the bar) {where}", fontsize=9)
     ax_b.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=max(1, min(nw, 6)),
                 frameon=False, title="workflow (stance solid, swing hatched)", title_fontsize=8)
 
-    dl = res[res["workflow"].astype(str) == wf_line]
-    n_speeds = len(_unique(dl["trial"].astype(str)))
+    fig.shown = shown
+    if ax_s is None:
+        fig.suptitle(title or "Relative phase cost: stance and swing shares of the muscle metabolic energy "
+                     "(one leg, no basal heat)", fontsize=11)
+        return fig
     for k, m in enumerate(models):
         d = dl[dl["model"].astype(str) == m]
         if d.empty:
             continue
         col = model_colour(m)
         label = m
-        if n_speeds > 1:
-            rm, _ = _rmcorr(d["speed_m_per_s"], d["swing_energy_share_pct"], d["subject"].astype(str))
-            if rm is not None:
-                label = f"{m}: {rm.slope:+.1f} %/(m/s), r = {rm.r:.2f}"
+        rm, _ = _rmcorr(d["speed_m_per_s"], d["swing_energy_share_pct"], d["subject"].astype(str))
+        if rm is not None:
+            label = f"{m}: {rm.slope:+.1f} %/(m/s), r = {rm.r:.2f}"
+            shown["slopes"].append(m)
         for i, subject in enumerate(_unique(d["subject"].astype(str))):  # never matched by trial name
             ds = d[d["subject"].astype(str) == subject].sort_values("speed_m_per_s")
             ax_s.plot(ds["speed_m_per_s"].to_numpy(float), ds["swing_energy_share_pct"].to_numpy(float), color=col,
@@ -1045,8 +1069,7 @@ def phase_shares(results, *, trial: str | None = None, workflow: str | None = No
     ax_s.yaxis.get_major_formatter().set_useOffset(False)
     ax_s.set_xlabel("walking speed (m/s)")
     ax_s.set_ylabel("swing share (%)")
-    note = "" if n_speeds > 1 else " - one speed only, no trend"
-    _panel_title(ax_s, f"Swing share against speed ({wf_line}){note}", fontsize=9)
+    _panel_title(ax_s, f"Swing share against speed ({wf_line})", fontsize=9)
     ax_s.legend(fontsize=7, frameon=False)
     fig.suptitle(title or "Relative phase cost: stance and swing shares of the muscle metabolic energy "
                  "(one leg, no basal heat)", fontsize=11)
@@ -1151,7 +1174,7 @@ def group_shares(results, *, workflows: Sequence[str] | None = None, models: Seq
     speeds = {t: r[1] for t, r in zip(trials, _speed_table(res, cols[0]))}
     stats = group_stats(res, ["workflow", "model", "trial"], cols)
     panel_w = max(1.8, 0.3 * len(trials) + 0.9)
-    fig = _new_figure(min(20.0, panel_w * len(models) + 1.2), 2.9 * len(workflows) + 1.8, left=0.9, bottom=1.3,
+    fig = _new_figure(min(20.0, max(6.5, panel_w * len(models) + 1.2)), 2.9 * len(workflows) + 1.8, left=0.9, bottom=1.3,
                       hspace=0.45, wspace=0.1)
     # the same trials and scale in every panel: numbers on the outer panels only
     axes = fig.subplots(len(workflows), len(models), squeeze=False, sharex=True, sharey=True)
@@ -1173,8 +1196,11 @@ def group_shares(results, *, workflows: Sequence[str] | None = None, models: Seq
                 hi = np.array([[stat_cell(band, (w, m, t), c + "_p95")[0] for t in trials] for c in cols])
                 ok = np.isfinite(lo) & np.isfinite(hi)
                 x = np.tile(np.arange(len(trials)), (len(groups), 1))
-                ax.bar(x[ok], (hi - lo)[ok], bottom=(bottoms + lo)[ok], width=width * 0.3, color="k", alpha=0.35, lw=0,
-                       gid=f"band:groups:{w}:{m}")
+                # a thin whisker from the 5 % to the 95 % value, at the segment's top (where its share ends)
+                whisk = ax.errorbar(x[ok], (bottoms + vals)[ok], yerr=np.vstack([(vals - lo)[ok], (hi - vals)[ok]]).clip(0),
+                                    fmt="none", ecolor="0.15", elinewidth=0.7, capsize=1.5, capthick=0.7)
+                for part in whisk.lines[2]:
+                    part.set_gid(f"band:groups:{w}:{m}")
             if i == 0:
                 _panel_title(ax, m, color=model_colour(m), fontsize=11, fontweight="bold")
             if j == 0:
@@ -1199,12 +1225,14 @@ def rates_against_speed(results, *, workflow: str | None = None, models: Sequenc
                         title: str | None = None):
     """Whole-body and muscle-group rates (W/kg of body mass, both legs, no basal) against speed.
 
-    One panel per model (shared axes); a black line through the whole-body rate without basal
-    heat (``whole_body_no_basal_W_per_kg``) and one line per group
-    (``share_<G>_pct / 100 * whole_body_no_basal_W_per_kg``) through each subject's trials in the
-    order of its own walking speeds: the trials of different subjects are never matched by
-    name. Subjects differ by line style and marker (gids ``whole-body:<subject>``,
-    ``group:<G>:<subject>``).
+    Per model two panels, one above the other: the whole-body rate without basal heat
+    (``whole_body_no_basal_W_per_kg``, black) and, on a scale of its own, one line per group
+    (``share_<G>_pct / 100 * whole_body_no_basal_W_per_kg``), so that the groups' rates, a
+    tenth of the whole body's, are not pressed flat under it; the panels of a kind share their
+    axes. Lines go through each subject's trials in the order of its own walking speeds: the
+    trials of different subjects are never matched by name. Subjects differ by line style and
+    marker (gids ``whole-body:<subject>``, ``group:<G>:<subject>``). Groups without energy in
+    any row (all shares zero) are not drawn.
     """
     res = _ok_rows(results)
     _require_columns(res, ("subject", "speed_m_per_s", "whole_body_no_basal_W_per_kg"), "the results table")
@@ -1215,12 +1243,19 @@ def rates_against_speed(results, *, workflow: str | None = None, models: Sequenc
     if per_subject.max() < 2:
         raise OptionError("one speed only (per subject): nothing to draw against speed")
     models = _ordered_models(d["model"]) if models is None else [str(m) for m in models]
-    fig, axes = _cycle_panels(len(models))
+    cols = [c for c in cols if np.nanmax(np.abs(d[c].to_numpy(float)), initial=0.0) > 0.0]
     groups = [c[len("share_"):-len("_pct")] for c in cols]
+    nrow, ncol = _grid(len(models))
+    fig = _new_figure(4.4 * ncol, 4.6 * nrow + 1.0, hspace=0.3)
+    grid = fig.add_gridspec(2 * nrow, ncol, height_ratios=[1.0, 1.3] * nrow)
     styles = {s: (("-", "--", ":", "-.")[i % 4], "os^Dvx"[i % 6]) for i, s in enumerate(subjects)}
     speeds: list[float] = []
+    first_w = first_g = None
     for k, m in enumerate(models):
-        ax = axes.flat[k]
+        i, j = divmod(k, ncol)
+        ax_w = fig.add_subplot(grid[2 * i, j], sharex=first_w, sharey=first_w)
+        ax_g = fig.add_subplot(grid[2 * i + 1, j], sharex=ax_w if first_g is None else first_g, sharey=first_g)
+        first_w, first_g = first_w or ax_w, first_g or ax_g
         dm = d[d["model"].astype(str) == m].copy()
         for g, c in zip(groups, cols):
             dm[f"rate_{g}"] = dm[c].astype(float) / 100.0 * dm["whole_body_no_basal_W_per_kg"].astype(float)
@@ -1230,18 +1265,29 @@ def rates_against_speed(results, *, workflow: str | None = None, models: Sequenc
                 continue
             ls, mk = styles[subject]
             x = ds["speed_m_per_s"].to_numpy(float)
-            ax.plot(x, ds["whole_body_no_basal_W_per_kg"].to_numpy(float), color="k", lw=1.8, ls=ls, marker=mk, ms=4,
-                    label="whole body", gid=f"whole-body:{subject}")
+            ax_w.plot(x, ds["whole_body_no_basal_W_per_kg"].to_numpy(float), color="k", lw=1.8, ls=ls, marker=mk,
+                      ms=4, label="whole body", gid=f"whole-body:{subject}")
             if has_band(ds, "whole_body_no_basal_W_per_kg"):  # uncertainty samples: their 5-95 % band
-                shade_band(ax, x, ds["whole_body_no_basal_W_per_kg_p05"], ds["whole_body_no_basal_W_per_kg_p95"], "k",
-                           f"band:whole-body:{subject}")
+                shade_band(ax_w, x, ds["whole_body_no_basal_W_per_kg_p05"], ds["whole_body_no_basal_W_per_kg_p95"],
+                           "k", f"band:whole-body:{subject}")
             for g in groups:
-                ax.plot(x, ds[f"rate_{g}"].to_numpy(float), color=group_colour(g), lw=1.1, ls=ls, marker=mk, ms=3,
-                        label=g, gid=f"group:{g}:{subject}")
+                ax_g.plot(x, ds[f"rate_{g}"].to_numpy(float), color=group_colour(g), lw=1.1, ls=ls, marker=mk, ms=3,
+                          label=g, gid=f"group:{g}:{subject}")
             speeds += [v for v in x if np.isfinite(v)]
+        _panel_title(ax_w, m, color=model_colour(m), fontsize=11, fontweight="bold")
+        ax_w.tick_params(labelbottom=False)
+        if j == 0:
+            ax_w.set_ylabel("whole body\n(W/kg)")
+            ax_g.set_ylabel("muscle groups\n(W/kg)")
+        else:
+            ax_w.tick_params(labelleft=False)
+            ax_g.tick_params(labelleft=False)
+        if k + ncol >= len(models):
+            ax_g.set_xlabel("walking speed (m/s)")
+        else:
+            ax_g.tick_params(labelbottom=False)
     # one speed axis in every panel, over the trials' speeds
-    _label_cycle_panels(axes, models, "metabolic rate (W/kg)", xlim=(min(speeds) - 0.05, max(speeds) + 0.05),
-                        xlabel="walking speed (m/s)")
+    first_w.set_xlim(min(speeds) - 0.05, max(speeds) + 0.05)
     from matplotlib.lines import Line2D
 
     handles = [Line2D([], [], color="k", lw=1.8, label="whole body (both legs, no basal)")]
@@ -1371,13 +1417,15 @@ def figure2_compact(data: dict):
     for i, (_, plane, x, _) in enumerate(rows):
         if i in (0, 2):
             axes[i, 0].set_xlim(float(np.min(plane[x])), float(np.max(plane[x])))
-            axes[i, 0].set_xticks([-1.0, 0.0, 1.0] if plane is v else [0.5, 1.0, 1.5])
+            # none at the panels' edges, where the next panel's would meet it
+            axes[i, 0].set_xticks([-0.5, 0.0, 0.5] if plane is v else [0.75, 1.0, 1.25])
         if i in (1, 3):
             axes[i, 0].set_xlabel("fiber velocity (vmax; < 0: shortening)" if plane is v
                                   else "fiber length (optimal lengths)", fontsize=7, loc="left")
     eff_lim = max(float(np.nanmax(data[p]["efficiency"][m])) for p in ("velocity", "length") for m in models)
-    axes[1, 0].set_ylim(0.0, min(1.0, 1.1 * eff_lim))
-    axes[3, 0].set_ylim(0.0, min(1.0, 1.1 * eff_lim))
+    # every curve inside its panel (HO06's efficiency exceeds 1 at low activation off the plateau)
+    axes[1, 0].set_ylim(0.0, 1.05 * eff_lim)
+    axes[3, 0].set_ylim(0.0, 1.05 * eff_lim)
     cfg = data["config"]
     from matplotlib.lines import Line2D
 
