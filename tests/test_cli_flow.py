@@ -125,6 +125,16 @@ def test_solve_metabolics_analyse_give_the_study_numbers(cli_flow, two_subjects,
     not_drawn = re.findall(r"^  not drawn: (\w+): ", printed, flags=re.M)
     # the figures of one trial at one speed: all but those that compare trials, speeds or measurements
     assert drawn == planned - len(not_drawn) and "rates_against_speed" in not_drawn and drawn >= 8
+    # every text of every figure drawn inside the figure and clear of the others
+    # (layout_check.figure_problems of each figure as saved; the Figure-2 plot: test_figure_layout.py)
+    record = json.loads((a / "figures" / "report.json").read_text())
+    checked = {e["name"]: e["layout_problems"] for e in record["entries"] if e["paths"] is not None}
+    assert len(checked) == drawn and {n: p for n, p in checked.items() if p} == {}
+    with capsys.disabled():
+        print(f"\nlayout checked, one-trial command-line report: {', '.join(checked)}")
+    # no speed known, one trial: the captions claim neither a preferred speed nor a speed shading
+    captions = " ".join(e["caption"] for e in record["entries"])
+    assert "preferred speed" not in captions and "light: slow" not in captions
     n_report = _report_tables_are_the_studys(a, study)
     assert n_report > 5000
     # a folder that is neither a study nor an analyse output: one line naming it and what to pass

@@ -1555,7 +1555,7 @@ def muscle_heat_map(rates: Mapping[str, object], toe_off_pct, models: Sequence[s
     grid_rows = [(i, row[k:k + ncol], arr[k:k + ncol]) for i, (row, arr) in enumerate(zip(rows, arrays))
                  for k in range(0, len(row), ncol)]
     nrow = len(grid_rows)
-    row_in = 0.16 * len(order)
+    row_in = max(0.16 * len(order), 1.6)  # a few muscles: the colour bar still tall enough for its numbers
     fig = _new_figure(1.7 * ncol + 3.9, (row_in + 0.45) * nrow + 1.0, left=2.7, right=0.95, wspace=0.08,
                       hspace=0.45 / row_in * 1.0 + 0.04)
     grid = fig.add_gridspec(nrow, ncol + 1, width_ratios=[1.0] * ncol + [0.07])
