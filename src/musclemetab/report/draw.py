@@ -109,7 +109,8 @@ def figure_cache(name: str) -> dict[str, Path] | None:
     from . import figures, plan
 
     h = hashlib.sha256(f"{name} matplotlib {version('matplotlib')}\n".encode())
-    sources = [Path(colours.__file__), Path(figures.__file__), Path(plan.__file__)]
+    here = Path(figures.__file__).parent  # the figure modules (figures.py gathers fig_*.py)
+    sources = [Path(colours.__file__), *sorted(here.glob("fig*.py")), Path(plan.__file__)]
     for package in (metabolics, muscle):
         sources += sorted(Path(package.__file__).parent.glob("*.py"))
     for src in sources:
