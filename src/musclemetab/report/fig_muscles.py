@@ -87,11 +87,11 @@ def per_muscle_ranked(per_muscle, *, workflow: str | None = None, models: Sequen
     handles = [Patch(color=colour[t], label=f"{t} ({sp[t]:.2f} m/s)" if np.isfinite(sp.get(t, np.nan)) else t)
                for t in trials]
     _legend_below(fig, handles, min(len(handles), 8), 8)
-    import textwrap
-
-    fig.suptitle(textwrap.fill(title or f"The {top} muscles with the largest metabolic rate, across walking speeds "
-                               f"({wf}; W/kg of body mass, one leg, no basal heat; mean over subjects)",
-                               int(fig.get_figwidth() * 11)), fontsize=11)
+    several = "subject" in d.columns and d["subject"].astype(str).nunique() > 1
+    fig.suptitle(title or f"The {top} muscles with the largest metabolic rate"
+                 + (", across walking speeds" if len(trials) > 1 else f", trial {trials[0]}" if trials else "")
+                 + f" ({wf}; W/kg of body mass, one leg, no basal heat" + ("; mean over subjects)" if several else ")"),
+                 fontsize=11)
     return fig
 
 

@@ -21,6 +21,11 @@ from .fig_layout import _new_figure, _panel_title, _legend_below, _grid, _add_ba
 from .uncertainty import has_band, shade_band
 
 
+def _over_subjects(table) -> str:
+    """``"; mean over subjects"`` for a title, when the table has two subjects or more."""
+    return "; mean over subjects" if table["subject"].astype(str).nunique() > 1 else ""
+
+
 # --------------------------------------------------------------------- 5. phase shares
 def _speed_table(res, value: str):
     """Per trial (in speed order): ``(trial, mean speed, mean, SD, n)`` of ``value`` over subjects."""
@@ -222,7 +227,7 @@ def phase_pies(results, *, workflow: str | None = None, models: Sequence[str] | 
     import textwrap
 
     heading = title or (f"Stance (dark) and swing (light) shares of the muscle energy; pie area proportional to the "
-                        f"whole-body rate without basal heat (W/kg; {wf}; mean over subjects)")
+                        f"whole-body rate without basal heat (W/kg; {wf}{_over_subjects(d)})")
     fig.suptitle(textwrap.fill(heading, int(12 * fig.get_figwidth())), fontsize=10)
     return fig
 
@@ -286,15 +291,18 @@ def group_shares(results, *, workflows: Sequence[str] | None = None, models: Seq
             if i == len(workflows) - 1:
                 ax.set_xticks(np.arange(len(trials)), xt, fontsize=6.5 if len(trials) > 4 else 7,
                               rotation=90 if len(trials) > 4 else 0)
-                ax.set_xlabel("trial, speed (m/s)", fontsize=8)
+                ax.set_xlabel("trial, speed (m/s)" if any(np.isfinite(speeds[t]) for t in trials) else "trial",
+                              fontsize=8)
     axes[0, 0].set_ylim(0, 100)
     axes[0, 0].set_xlim(*_bar_limits(-width / 2, len(trials) - 1 + width / 2))
     from matplotlib.patches import Patch
 
-    handles = [Patch(color=group_colour(g), label=f"{g} ({GROUP_NAMES.get(g, g)})") for g in groups]
+    # the groups with a share somewhere (an empty `other` has no entry)
+    handles = [Patch(color=group_colour(g), label=f"{g} ({GROUP_NAMES.get(g, g)})") for g, c in zip(groups, cols)
+               if np.nanmax(np.abs(res[c].to_numpy(float)), initial=0.0) > 0.0]
     _legend_below(fig, handles, min(len(handles), 6), 8)
     fig.suptitle(title or "Shares of the muscle groups in the cycle's muscle metabolic energy "
-                 "(%, one leg, no basal heat; mean over subjects)", fontsize=11)
+                 f"(%, one leg, no basal heat{_over_subjects(res)})", fontsize=11)
     return fig
 
 
