@@ -125,6 +125,16 @@ def test_solve_metabolics_analyse_give_the_study_numbers(cli_flow, two_subjects,
     not_drawn = re.findall(r"^  not drawn: (\w+): ", printed, flags=re.M)
     # the figures of one trial at one speed: all but those that compare trials, speeds or measurements
     assert drawn == planned - len(not_drawn) and "rates_against_speed" in not_drawn and drawn >= 8
+    # every text of every figure drawn inside the figure and clear of the others
+    # (layout_check.figure_problems of each figure as saved; the Figure-2 plot: test_figure_layout.py)
+    record = json.loads((a / "figures" / "report.json").read_text())
+    checked = {e["name"]: e["layout_problems"] for e in record["entries"] if e["paths"] is not None}
+    assert len(checked) == drawn and {n: p for n, p in checked.items() if p} == {}
+    with capsys.disabled():
+        print(f"\nlayout checked, one-trial command-line report: {', '.join(checked)}")
+    # no speed known, one trial: the captions claim neither a preferred speed nor a speed shading
+    captions = " ".join(e["caption"] for e in record["entries"])
+    assert "preferred speed" not in captions and "light: slow" not in captions
     n_report = _report_tables_are_the_studys(a, study)
     assert n_report > 5000
     # a folder that is neither a study nor an analyse output: one line naming it and what to pass
@@ -146,8 +156,8 @@ def test_solve_metabolics_analyse_give_the_study_numbers(cli_flow, two_subjects,
 
     again = shutil.copytree(a, a.parent / "A again", ignore=shutil.ignore_patterns("figures", "report.html"))
     both = read_report_input([a, again])
-    assert list(both.ok["trial"].drop_duplicates()) == ["subject01_walk1_ik", "subject01_walk1_ik (A again)"]
-    assert both.settings["subjects"]["subject01_simbody"]["trials"] == list(both.ok["trial"].drop_duplicates())
+    assert list(both.ok["trial"].drop_duplicates()) == ["walk1", "walk1 (A again)"]
+    assert both.settings["subjects"]["subject01"]["trials"] == list(both.ok["trial"].drop_duplicates())
     rows = page_tables(both)["results"]["whole_body"].body
     assert len(rows) == 4 and [r[1:] for r in rows[:2]] == [r[1:] for r in rows[2:]]
 
@@ -157,14 +167,14 @@ def _report_tables_are_the_studys(a: Path, study: Path) -> int:
     data the report is drawn from (results rows with the study's ``quality``, per-muscle rows,
     both legs' rates over the cycle, each muscle's rate, the cycles) number by number, then the
     tables on the two pages cell by cell (the study's trial ``walk1`` is the command line's
-    ``subject01_walk1_ik``: the IK file's name); returns the number of numbers compared."""
+    ``walk1``, from the IK file's name ``subject01_walk1_ik``); returns the number of numbers compared."""
     from musclemetab.report.cli_folder import read_report_input
     from musclemetab.report.page import page_tables
 
     cli, st = read_report_input(a), read_report_input(study)
     labels = ["subject", "trial", "workflow"]
-    assert cli.ok[labels].drop_duplicates().values.tolist() == [["subject01_simbody", "subject01_walk1_ik",
-                                                                  "effort-gen"]]
+    assert cli.ok[labels].drop_duplicates().values.tolist() == [["subject01", "walk1", "effort-gen"]]
+    assert cli.settings["name"] == "subject subject01, trial walk1"
     mine = st.ok[st.ok["subject"] == "gait2392"]
     # the results rows: every column of the study's, `quality` (the plausibility flags) included
     got = cli.ok.drop(columns=labels + ["unit_dir"])

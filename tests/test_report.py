@@ -326,7 +326,9 @@ def test_excitations_and_fiber_lengths():
     # default muscles present: soleus, gasmed, tibant, vaslat, recfem, glmax2 -> 6 muscles x 2 panels
     assert len(axes) == 12
     titles = [ax.get_title() for ax in axes if ax.get_title()]
-    assert titles == ["soleus_r", "gasmed_r", "tibant_r", "vaslat_r", "recfem_r", "glmax2_r"]
+    # each muscle named as everywhere in the report: the anatomical muscle with the model's name
+    assert titles == ["soleus (soleus_r)", "gastrocnemius medialis (gasmed_r)", "tibialis anterior (tibant_r)",
+                      "vastus lateralis (vaslat_r)", "rectus femoris (recfem_r)", "gluteus maximus (glmax2_r)"]
     for ax in axes:
         data = _lines(ax, "workflow:")
         assert len(data) == len(WORKFLOWS)
@@ -486,10 +488,12 @@ def test_phase_shares(results):
 
 
 def test_phase_shares_one_speed(results):
+    # one speed: no trend, no speed panel (it would be a vertical stripe at one speed); the
+    # bars' panel says which trial it shows, not "the preferred speed"
     fig = phase_shares(results[results["trial"] == "fast"])
-    ax_b, ax_s = fig.axes
-    assert "fast" in ax_b.get_title() and "one speed only" in ax_s.get_title()
-    assert len(_lines(ax_s, "model:")) == len(MODELS) * len(SUBJECTS)
+    (ax_b,) = fig.axes
+    assert "of trial fast" in ax_b.get_title() and "preferred" not in ax_b.get_title()
+    assert fig.shown["speeds"] == 1 and fig.shown["sd"]  # three subjects: SD drawn
     with pytest.raises(OptionError, match="trial 'normal'"):
         phase_shares(results[results["trial"] == "fast"], trial="normal")
 
@@ -831,27 +835,29 @@ def test_rates_against_speed_values(study):
 
     r = pd.read_csv(study / "results.csv")
     fig = rates_against_speed(r, workflow="effort-ten", models=["UM10", "BH04"])
-    ax = fig.axes[0]
+    ax, ax_g = fig.axes[0], fig.axes[1]  # per model: the whole body above, the groups on their own scale below
     d = r[(r.workflow == "effort-ten") & (r.model == "UM10")]
     for subject in SUBJECTS:  # each subject's own trials, in the order of its speeds
         ds = d[d.subject == subject].set_index("trial").loc[["slow", "normal", "fast"]]
         wb = next(ln for ln in ax.lines if ln.get_gid() == f"whole-body:{subject}")
         np.testing.assert_allclose(wb.get_xdata(), ds["speed_m_per_s"])
         np.testing.assert_allclose(wb.get_ydata(), ds["whole_body_no_basal_W_per_kg"])
-        pf = next(ln for ln in ax.lines if ln.get_gid() == f"group:PF:{subject}")
+        pf = next(ln for ln in ax_g.lines if ln.get_gid() == f"group:PF:{subject}")
         np.testing.assert_allclose(pf.get_ydata(), ds.share_PF_pct / 100 * ds.whole_body_no_basal_W_per_kg)
-    assert fig.axes[0].get_shared_y_axes().joined(fig.axes[0], fig.axes[1])
+    # whole-body panels share one scale, group panels another
+    assert fig.axes[0].get_shared_y_axes().joined(fig.axes[0], fig.axes[2])
+    assert fig.axes[1].get_shared_y_axes().joined(fig.axes[1], fig.axes[3])
+    assert not fig.axes[0].get_shared_y_axes().joined(fig.axes[0], fig.axes[1])
     # the speed axis spans the trials' speeds (m/s), the same in every panel, not the cycle's 0-100 %
     speeds = r[r.workflow == "effort-ten"]["speed_m_per_s"]
-    for ax in fig.axes[:2]:
-        assert ax.get_xlim() == pytest.approx((speeds.min() - 0.05, speeds.max() + 0.05))
+    for a in fig.axes[:4]:
+        assert a.get_xlim() == pytest.approx((speeds.min() - 0.05, speeds.max() + 0.05))
     assert fig.axes[-1].get_xlabel() == "walking speed (m/s)"
     # black is the whole body's alone
     from matplotlib.colors import to_rgb
 
     assert to_rgb(wb.get_color()) == (0.0, 0.0, 0.0)
-    assert all(to_rgb(ln.get_color()) != (0.0, 0.0, 0.0) for ln in ax.lines
-               if not str(ln.get_gid()).startswith("whole-body"))
+    assert all(to_rgb(ln.get_color()) != (0.0, 0.0, 0.0) for ln in ax_g.lines)
 
 
 # ------------------------------------------------------------------- pies, colours, runs
@@ -1207,7 +1213,7 @@ def test_muscle_heat_map_holds_each_muscles_rate_over_the_cycle(tmp_path):
         np.testing.assert_allclose(np.asarray(image.get_array()), want, rtol=1e-9)  # the file keeps 12 digits
         assert np.allclose(_lines(ax, "toe-off")[0].get_xdata(), TOE_OFF_PCT)
     labels = [x.get_text() for x in panels[0].get_yticklabels()]
-    assert labels == ["soleus (r) [PF]", "vastus lateralis (r) [KE]", "gluteus maximus (r) [HE]"]
+    assert labels == ["soleus (soleus_r) [PF]", "vastus lateralis (vaslat_r) [KE]", "gluteus maximus (glmax1_r) [HE]"]
 
 
 def test_speed_series_never_match_trials_of_two_subjects_by_name():
@@ -1220,8 +1226,8 @@ def test_speed_series_never_match_trials_of_two_subjects_by_name():
     r = pd.DataFrame([{"subject": s, "trial": t, "workflow": "effort-ten", "model": "UM10", "status": "ok",
                        "speed_m_per_s": v, "whole_body_W_per_kg": w + 1.2, "whole_body_no_basal_W_per_kg": w, "share_PF_pct": 40.0}
                       for s, t, v, w in rows])
-    ax = rates_against_speed(r).axes[0]
-    lines = {ln.get_gid(): ln for ln in ax.lines}
+    fig = rates_against_speed(r)
+    lines = {ln.get_gid(): ln for ax in fig.axes for ln in ax.lines}
     assert set(lines) == {"whole-body:a", "whole-body:b", "group:PF:a", "group:PF:b"}
     assert lines["whole-body:a"].get_xdata().tolist() == [1.3, 1.8]
     assert lines["whole-body:a"].get_ydata().tolist() == [9.6, 12.0]

@@ -116,6 +116,12 @@ class WindowWarning(MusclemetabWarning):
     """The solve window was clipped at the edge of the data (the record says where)."""
 
 
+class FigureLayoutWarning(MusclemetabWarning):
+    """A text of a report's figure is cut by the figure's edge or drawn over another text
+    (:func:`musclemetab.report.layout_check.figure_problems`): the figure is written, but
+    that text cannot be read."""
+
+
 class TruncatedFileWarning(MusclemetabWarning):
     """A storage file's last data line has no line end: the file may have been cut inside that
     line (a number cut short cannot be told from a whole one); the file is read as it is."""

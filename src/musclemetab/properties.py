@@ -99,7 +99,7 @@ FALLBACK_SLOW_TWITCH_FRACTION = 0.5
 HANDSFIELD_SLOPE_CM3_PER_KG_M = 47.0
 HANDSFIELD_INTERCEPT_CM3 = 1285.0
 
-_TEXT_COLUMNS = ("function_groups", "tendon", "emg_scale_group", "passive_calibration_trials",
+_TEXT_COLUMNS = ("function_groups", "primary_group", "tendon", "emg_scale_group", "passive_calibration_trials",
                  "passive_coupling_group", "emg_channel", "lump_group")
 
 
@@ -378,6 +378,10 @@ class MuscleRecord:
     mass_kg_override: float | None = None
     family: str = ""
     fallback: tuple[str, ...] = ()  # quantities taken from the fallback rule
+    #: the group of the muscle's main action (``primary_group`` of the table; of a model muscle
+    #: standing for several anatomical muscles, that of the largest by volume; with
+    #: ``function_groups`` overridden, their first): "" when not placed
+    primary_group: str = ""
 
     @property
     def placed(self) -> bool:
@@ -478,6 +482,7 @@ def resolve_muscles(
             for g in " ".join(column("function_groups")).split():
                 if g not in groups:
                     groups.append(g)
+            primary = column("primary_group")[int(np.argmax(w))] if len(ids) else ""
             tendon = _common(column("tendon"))
             emg_group = _common(column("emg_scale_group"))
             coupling = _common(column("passive_coupling_group"))
@@ -485,6 +490,7 @@ def resolve_muscles(
             channels = tuple(c for c in column("emg_channel") if c)
         else:
             frac, vp, fst, sigma, groups = (), float("nan"), FALLBACK_SLOW_TWITCH_FRACTION, SPECIFIC_TENSION_PA, []
+            primary = ""
             tendon = emg_group = coupling = trials = ""
             channels = ()
             if "mass_kg" not in o:
@@ -500,6 +506,7 @@ def resolve_muscles(
             function_groups=tuple(o.get("function_groups", groups)),
             tendon=tendon, emg_scale_group=emg_group, coupling_group=coupling, calibration_trials=trials,
             emg_channels=channels, mass_kg_override=o.get("mass_kg"), family=family, fallback=tuple(fb),
+            primary_group=(o["function_groups"][0].split("/")[0] if o.get("function_groups") else primary),
         ))
     _report_unplaced(unplaced, strict, warn)
     return tuple(records)

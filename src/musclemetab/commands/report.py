@@ -68,4 +68,11 @@ def run(args) -> int:
     for e in entries:
         if e.paths is None:
             print(f"  not drawn: {e.name}: {e.note}")
+    import warnings
+
+    from ..errors import FigureLayoutWarning
+
+    for e in entries:  # a text cut by the figure's edge or drawn over another (figures/report.json too)
+        for problem in e.problems:
+            warnings.warn(f"figure {e.name}: {problem}", FigureLayoutWarning, stacklevel=1)
     return 0

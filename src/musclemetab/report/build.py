@@ -66,7 +66,8 @@ def _write_record(fig_dir: Path, key: str, page: Path, entries: Sequence[FigureE
 
     record = {"key": key, "page": page.name, "entries": [
         {"name": e.name, "title": e.title, "caption": e.caption, "note": e.note,
-         "paths": None if e.paths is None else {k: str(v) for k, v in e.paths.items()}} for e in entries]}
+         "paths": None if e.paths is None else {k: str(v) for k, v in e.paths.items()},
+         "layout_problems": list(e.problems)} for e in entries]}
     atomic_write_text(fig_dir / REPORT_RECORD, json.dumps(record, indent=1) + "\n", mark=True)
 
 
@@ -87,7 +88,8 @@ def _recorded_entries(out: Path, key: str) -> list[FigureEntry] | None:
     try:
         entries = [FigureEntry(e["name"], e["title"], e.get("caption", ""),
                                None if e.get("paths") is None else {k: Path(v) for k, v in e["paths"].items()},
-                               e.get("note")) for e in rec.get("entries") or []]
+                               e.get("note"), problems=list(e.get("layout_problems") or []))
+                   for e in rec.get("entries") or []]
     except (KeyError, TypeError, AttributeError):
         return None
     if any(e.paths is not None and not all(p.is_file() for p in e.paths.values()) for e in entries):

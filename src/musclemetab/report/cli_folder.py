@@ -8,8 +8,10 @@ parent of ``r/`` and ``l/`` of a both-legs solve) into a :class:`AnalyseFolders`
 :class:`~.folder.StudyFolder` whose unit files are found through those records, so the
 report's figures and tables are drawn from it as from a study folder:
 
-* one unit per folder: subject the model's file name, trial the IK file's name (with the
-  folder's name when two folders share both), workflow the solve's;
+* one unit per folder: subject and trial from the model's and the IK file's names
+  (:func:`unit_names`: ``subject01_simbody.osim`` and ``subject01_walk1_ik.mot`` are subject
+  ``subject01``, trial ``walk1``; the folder's name added to the trial when two folders share
+  both), workflow the solve's;
 * the results rows: the folder's ``results.csv`` (the study's columns, the legs added), with
   the ``quality`` a study gives (:func:`musclemetab.metabolics.plausibility.add_quality` of the legs'
   ``summary.json``);
@@ -178,6 +180,26 @@ def _leg_record(rec: dict, path: Path, record: Path) -> tuple[str, LegFiles, dic
     return ("" if folder == "." else folder), leg, rec
 
 
+def unit_names(model: str, ik: str) -> tuple[str, str]:
+    """``(subject, trial)`` of a trial given on the command line, from its model's and IK file's
+    names: the words (parted by ``_``, ``-``, ``.`` or a space) both names begin with name the
+    subject, the IK file's other words the trial, less a word ``ik``
+    (``subject01_simbody.osim``, ``subject01_walk1_ik.mot``: ``subject01``, ``walk1``). Names
+    without a common beginning, or an IK name with nothing else: the model's name and the IK
+    file's name."""
+    import re
+
+    m, t = Path(model).stem, Path(ik).stem
+    mw, tw = re.split(r"[_\-. ]+", m), re.split(r"[_\-. ]+", t)
+    n = 0
+    while n < min(len(mw), len(tw)) and mw[n] and mw[n].lower() == tw[n].lower():
+        n += 1
+    rest = [w for w in tw[n:] if w and w.lower() != "ik"]
+    if n == 0 or not rest:
+        return m, t
+    return "_".join(tw[:n]), "_".join(rest)
+
+
 def read_analyse_folders(paths, models=None) -> AnalyseFolders:
     """Read ``analyse`` output folders (each with ``analyse.json``) as a study of their trials
     (see the module's text). ``models``: the models the figures show, as for
@@ -208,7 +230,7 @@ def read_analyse_folders(paths, models=None) -> AnalyseFolders:
         summary = next(iter(summaries.values()))
         software = software or dict(summary.get("software") or {})
         workflow = str((summary.get("workflow") or {}).get("name") or "solve")
-        subject, trial = Path(str(first.get("model"))).stem, Path(str(first.get("ik"))).stem
+        subject, trial = unit_names(str(first.get("model")), str(first.get("ik")))
         if (subject, trial, workflow) in units:
             trial = f"{trial} ({path.name})"
         key = (subject, trial, workflow)
@@ -242,7 +264,8 @@ def read_analyse_folders(paths, models=None) -> AnalyseFolders:
     for c in results.columns:
         if c.endswith(("_pct", "_W_per_kg", "_per_m", "_m_per_s", "_W")):
             results[c] = pd.to_numeric(results[c], errors="coerce")
-    settings = {"name": paths[0].name if len(paths) == 1 else f"{len(paths)} analyse folders",
+    settings = {"name": f"subject {keys[0][0]}, trial {keys[0][1]}" if len(paths) == 1 else
+                f"{len(paths)} analyse folders",
                 "workflows": list(dict.fromkeys(k[2] for k in keys)),
                 "models": list(dict.fromkeys(results["model"].astype(str))),  # as metabolics --models gave them
                 "basal": basal, "subjects": subjects, "software": software,

@@ -21,7 +21,7 @@ import os
 import signal
 import time
 from collections.abc import Callable, Collection, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import MusclemetabError, OptionError
@@ -40,7 +40,9 @@ COSTS_FILE = "draw_costs.json"
 @dataclass
 class FigureEntry:
     """One figure of the report: its files, or the note saying why it is not drawn;
-    ``draw_s``: the processor time (s) of drawing it (or of copying it from the cache)."""
+    ``draw_s``: the processor time (s) of drawing it (or of copying it from the cache);
+    ``problems``: its texts cut by its edge or drawn over one another
+    (:func:`~.layout_check.figure_problems` of the figure as saved; none expected)."""
 
     name: str
     title: str
@@ -48,6 +50,7 @@ class FigureEntry:
     paths: dict | None = None
     note: str | None = None
     draw_s: float | None = None
+    problems: list = field(default_factory=list)
 
 
 # ------------------------------------------------------------------ one figure
@@ -56,6 +59,7 @@ def draw_figure(study: StudyFolder, fig_dir: Path, formats: Sequence[str], name:
     """Draw and save one figure of the report (``plan``: its entry of
     :func:`~.plan.plan_figures`, made here when not given)."""
     from .figures import save_figure
+    from .layout_check import figure_problems
 
     if plan is None:
         plan = plan_figures(study)[name]
@@ -78,9 +82,11 @@ def draw_figure(study: StudyFolder, fig_dir: Path, formats: Sequence[str], name:
     except MusclemetabError as exc:  # the data cannot make it: its note (the time spent finding out kept)
         return FigureEntry(name, plan.title, note=study.short(exc), draw_s=time.process_time() - start)
     paths = save_figure(fig, fig_dir, name, formats=formats)
+    problems = figure_problems(fig, drawn=True)  # as saved: every text inside the figure, none over another
     if cache is not None:
         _store_in_cache(paths, cache)
-    return FigureEntry(name, plan.title, caption=caption, paths=paths, draw_s=time.process_time() - start)
+    return FigureEntry(name, plan.title, caption=caption, paths=paths, draw_s=time.process_time() - start,
+                       problems=problems)
 
 
 # ------------------------------------------------------------------ the cache of the package's figures
@@ -103,7 +109,8 @@ def figure_cache(name: str) -> dict[str, Path] | None:
     from . import figures, plan
 
     h = hashlib.sha256(f"{name} matplotlib {version('matplotlib')}\n".encode())
-    sources = [Path(colours.__file__), Path(figures.__file__), Path(plan.__file__)]
+    here = Path(figures.__file__).parent  # the figure modules (figures.py gathers fig_*.py)
+    sources = [Path(colours.__file__), *sorted(here.glob("fig*.py")), Path(plan.__file__)]
     for package in (metabolics, muscle):
         sources += sorted(Path(package.__file__).parent.glob("*.py"))
     for src in sources:

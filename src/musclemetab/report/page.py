@@ -196,6 +196,18 @@ def _estimation_notes(study: StudyFolder) -> list[str]:
     return notes
 
 
+def _muscle_names(per_muscle) -> dict[str, str]:
+    """Model muscle -> the name the figures give it (:func:`~.figures.muscle_names`: the
+    anatomical muscle with the model's name), each subject's muscles placed in its model family."""
+    from .figures import muscle_names
+
+    names: dict[str, str] = {}
+    by = per_muscle.groupby(per_muscle["subject"].astype(str)) if "subject" in per_muscle.columns else [(None, per_muscle)]
+    for _, ds in by:
+        names.update(muscle_names(ds["muscle"].astype(str).unique()))
+    return names
+
+
 def _per_muscle(study: StudyFolder) -> dict:
     """The muscles costing most energy: ``{"note": ...}``, or the workflow and one table per model."""
     from ..study_layout import PER_MUSCLE_FILE
@@ -213,6 +225,7 @@ def _per_muscle(study: StudyFolder) -> dict:
     trials = [t for t in trial_order(ok) if t in set(pm["trial"].astype(str))] if not ok.empty else []
     wf = main_workflow(list(dict.fromkeys(pm["workflow"].astype(str))))
     d = pm[pm["workflow"].astype(str) == wf]
+    names = _muscle_names(d)
     tables = {}
     for m in [m for m in study.models() if m in set(d["model"].astype(str))]:
         dm = d[d["model"].astype(str) == m]
@@ -220,8 +233,8 @@ def _per_muscle(study: StudyFolder) -> dict:
         cols = [t for t in trials if t in mean.columns] or list(mean.columns)
         mean = mean[cols]
         order = mean.mean(axis=1).sort_values(ascending=False).index[:TOP_MUSCLES]
-        body = [[mu] + [f"{mean.loc[mu, t]:.3f}" if np.isfinite(mean.loc[mu, t]) else "–" for t in cols]
-                for mu in order]
+        body = [[names.get(mu, mu)] + [f"{mean.loc[mu, t]:.3f}" if np.isfinite(mean.loc[mu, t]) else "–"
+                                       for t in cols] for mu in order]
         tables[m] = Table([[("muscle", 1)] + [(t, 1) for t in cols]], body, 1, "results")
     return {"note": None, "workflow": wf, "top": TOP_MUSCLES, "file": PER_MUSCLE_FILE, "tables": tables}
 
@@ -496,13 +509,14 @@ def uncertainty_section(study: StudyFolder) -> dict | None:
     if pm is not None and "muscle_W_per_kg_p05" in pm.columns:
         wf = main_workflow(list(dict.fromkeys(pm["workflow"].astype(str))))
         d = pm[pm["workflow"].astype(str) == wf]
+        names = _muscle_names(d)
         cols = ["muscle_W_per_kg", "muscle_W_per_kg_p05", "muscle_W_per_kg_p95"]
         for m in [m for m in study.models() if m in set(d["model"].astype(str))]:
             dm = d[d["model"].astype(str) == m].groupby(["muscle", "trial"])[cols].mean()
             ts = [t for t in trials if t in set(dm.index.get_level_values("trial"))]
             order = dm["muscle_W_per_kg"].groupby("muscle").mean().sort_values(ascending=False).index[:TOP_MUSCLES]
-            body = [[mu] + [_interval(dm.loc[(mu, t)], "muscle_W_per_kg") if (mu, t) in dm.index else "–" for t in ts]
-                    for mu in order]
+            body = [[names.get(mu, mu)] + [_interval(dm.loc[(mu, t)], "muscle_W_per_kg") if (mu, t) in dm.index
+                                           else "–" for t in ts] for mu in order]
             muscles[m] = Table([[("muscle", 1)] + [(t, 1) for t in ts]], body, 1, "results")
         muscles_workflow = wf
     else:

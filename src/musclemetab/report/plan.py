@@ -104,6 +104,25 @@ class Selection:
     mass: float | None  # the subject's body mass (kg)
     both_legs: bool  # the subject was solved on both sides
 
+    @property
+    def n_trials(self) -> int:
+        return len(set(self.ok["trial"].astype(str)))
+
+    @property
+    def n_subjects(self) -> int:
+        return len(set(self.ok["subject"].astype(str)))
+
+    def trial_text(self, trial: str | None = None) -> str:
+        """``trial T`` with what is known of it: ``(preferred speed, 1.33 m/s)`` when the study
+        has other trials, its speed when known."""
+        trial = self.trial if trial is None else trial
+        sp = math.nan
+        if "speed_m_per_s" in self.ok.columns:
+            v = self.ok.loc[self.ok["trial"].astype(str) == trial, "speed_m_per_s"].to_numpy(float)
+            sp = float(np.nanmean(v)) if np.isfinite(v).any() else math.nan
+        known = (["preferred speed"] if self.n_trials > 1 else []) + ([f"{sp:.2f} m/s"] if np.isfinite(sp) else [])
+        return f"trial {trial}" + (f" ({', '.join(known)})" if known else "")
+
     def rows(self, subject, trial=None, workflow=None):
         """The successful rows of a subject (and trial, and workflow)."""
         ok = self.ok
@@ -188,11 +207,20 @@ def estimated_vs_measured_figure(sel: Selection):
 def phase_shares_figure(sel: Selection):
     from .figures import phase_shares
 
-    return phase_shares(sel.ok, trial=sel.trial, workflow=sel.workflow), (
-        "Share of the cycle's muscle metabolic energy (one leg, without basal heat) spent in stance (initial "
-        "contact to toe-off) and swing, mean over subjects (error bar: SD). Left: at the preferred speed "
-        f"(trial {sel.trial}); right: swing share against walking speed for {sel.workflow}, with the "
-        "repeated-measures slope (% per m/s)." + band_caption(sel.ok, "stance_energy_share_pct"))
+    fig = phase_shares(sel.ok, trial=sel.trial, workflow=sel.workflow)
+    # what was drawn (nothing claimed of a figure that does not say)
+    shown = getattr(fig, "shown", {"sd": False, "speeds": 1, "slopes": []})
+    cap = ("Share of the cycle's muscle metabolic energy (one leg, without basal heat) spent in stance (initial "
+           "contact to toe-off) and swing" + (", mean over subjects" if sel.n_subjects > 1 else "")
+           + (" (error bar: SD over subjects)" if shown["sd"] else "")
+           + (", per model and workflow, " if shown["speeds"] < 2 else "; left: ") + sel.trial_text())
+    if shown["speeds"] > 1:
+        cap += f"; right: swing share against walking speed for {sel.workflow}"
+        if shown["slopes"]:
+            cap += (", the legend giving the repeated-measures slope (% per m/s) and correlation"
+                    + ("" if len(shown["slopes"]) == len(sel.models) else f" of {', '.join(shown['slopes'])}"))
+    cap += "." + band_caption(sel.ok, "stance_energy_share_pct")
+    return fig, cap
 
 
 def phase_pies_figure(sel: Selection):
@@ -201,27 +229,31 @@ def phase_pies_figure(sel: Selection):
     return phase_pies(sel.ok, workflow=sel.workflow, models=sel.models), (
         f"Workflow {sel.workflow}. Each pie splits the cycle's muscle metabolic energy (one leg, without basal "
         "heat) into stance (dark) and swing (light); its area is proportional to the whole-body rate without "
-        "basal heat (W/kg of body mass, both legs; printed under the pie), so the pies grow with walking "
-        "speed (rows) and differ between models (columns); means over subjects.")
+        "basal heat (W/kg of body mass, both legs; printed under the pie), so the pies "
+        + ("grow with walking speed (rows) and " if sel.n_trials > 1 else "")
+        + "differ between models (columns)" + ("; means over subjects." if sel.n_subjects > 1 else
+                                               f"; {sel.trial_text()}." if sel.n_trials == 1 else "."))
 
 
 def group_shares_figure(sel: Selection):
     from .figures import group_shares
 
     return group_shares(sel.ok, workflows=sel.workflows, models=sel.models), (
-        "Share of each muscle group in the cycle's muscle metabolic energy (%, one leg, without basal heat; "
-        "mean over subjects), one bar per trial (walking speed in m/s)."
-        + band_caption(sel.ok, "share_PF_pct").replace("Shaded:", "Grey strip at the top of each segment:"))
+        "Share of each muscle group in the cycle's muscle metabolic energy (%, one leg, without basal heat"
+        + ("; mean over subjects" if sel.n_subjects > 1 else "") + "), "
+        + ("one bar per trial (walking speed in m/s where known)." if sel.n_trials > 1 else f"{sel.trial_text()}.")
+        + band_caption(sel.ok, "share_PF_pct").replace("Shaded:", "Whisker at the top of each segment:"))
 
 
 def rates_against_speed_figure(sel: Selection):
     from .figures import rates_against_speed
 
     return rates_against_speed(sel.ok, workflow=sel.workflow, models=sel.models), (
-        f"Workflow {sel.workflow}. Whole-body metabolic rate without basal heat (black) and each muscle group's "
-        "part of it (group share × whole-body rate), W per kg of body mass, both legs; one line per subject "
-        "through its trials in the order of its walking speeds (line style and marker: the subject); same "
-        "axes in every panel." + band_caption(sel.ok, "whole_body_no_basal_W_per_kg"))
+        f"Workflow {sel.workflow}. Per model, the whole-body metabolic rate without basal heat (black, upper "
+        "panel) and each muscle group's part of it (group share × whole-body rate, lower panel, on a scale of "
+        "its own), W per kg of body mass, both legs; one line per subject through its trials in the order of "
+        "its walking speeds (line style and marker: the subject); the panels of a kind share their axes; "
+        "groups with no energy are not drawn." + band_caption(sel.ok, "whole_body_no_basal_W_per_kg"))
 
 
 def spread_figure(sel: Selection):
@@ -274,7 +306,7 @@ def excitations_figure(study: StudyFolder, sel: Selection):
         sols, cycles, emg=emg, emg_label=emg_label,
         title=f"Muscle excitation and normalised fiber length over the gait cycle: subject {subject}, trial {trial}",
     )
-    cap = (f"Subject {subject}, trial {trial} (preferred speed). Excitation (-) and fiber length "
+    cap = (f"Subject {subject}, {sel.trial_text(trial)}. Excitation (-) and fiber length "
            "normalised by the optimal fiber length (-), one line per workflow; dotted line: toe-off; "
            "grey band: plateau of the active force-length curve (0.75-1.05); dashed line: start of "
            f"the descending limb (1.05). {emg_text}")
@@ -365,10 +397,6 @@ def unit_timeseries(study: StudyFolder, sel: Selection, subject, trial, workflow
     return ts, float(to), float(sp)
 
 
-def _per_kg(sel: Selection) -> str:
-    return " per kg of body mass" if sel.mass else ""
-
-
 def group_rates_figure(study: StudyFolder, sel: Selection):
     """The muscle groups' rates over the cycle of the selected unit (main workflow)."""
     from .figures import group_rates_over_cycle
@@ -381,11 +409,17 @@ def group_rates_figure(study: StudyFolder, sel: Selection):
         title=f"Metabolic rate of the muscle groups over the gait cycle ({unit}, {legs}, no basal heat): "
         f"subject {subject}, trial {trial}, {wf}", scale=scale, unit=unit,
     )
-    cap = (f"Subject {subject}, trial {trial} (preferred speed), workflow {wf}. Muscle metabolic "
-           f"rates ({unit}, {legs}: {how}{_per_kg(sel)}, "
+    drawn = [str(ax.title.get_gid())[len("group:"):] for ax in fig.axes
+             if ax.get_visible() and str(ax.title.get_gid()).startswith("group:")]
+    empty = [g for g in dict.fromkeys(s.split("/", 1)[1] for s in ts["series"].astype(str).unique()
+                                      if s.startswith("group/")) if drawn and g not in drawn]
+    cap = (f"Subject {subject}, {sel.trial_text(trial)}, workflow {wf}. Muscle metabolic "
+           f"rates ({unit}, {legs}: {how}; "
            "without basal heat) distributed to the muscle groups by moment-arm ratio, over the first leg's gait "
            "cycle; one panel per muscle group, one line per metabolic model; same axes in every panel; dotted "
            f"line: toe-off ({to:.1f} % of the cycle).")
+    if empty:
+        cap += f" No energy, no panel: {', '.join(empty)}."
     return fig, cap
 
 
@@ -431,12 +465,14 @@ def heat_map_figure(study: StudyFolder, sel: Selection):
     cap = (f"Subject {subject}, workflow {wf}; "
            + (f"one row of panels per trial ({', '.join(trials)}; by walking speed where known), "
               if several else f"trial {trials[0]}, ")
-           + f"one panel per model. Metabolic rate of each muscle of {side} ({unit}{_per_kg(sel)}, without "
-           "basal heat) at every node of the gait cycle (initial contact to the next initial contact), one "
-           "colour scale for every panel; muscles ordered by muscle group (in brackets: the first group of the "
-           "muscle's function) and named by the anatomical muscle table, bundles of one muscle by their model "
-           f"name; sky blue: a rate below -2 % of the peak (work absorbed); dashed line: toe-off ({marks}), the "
-           "boundary between stance and swing.")
+           + f"one panel per model. Metabolic rate of each muscle of {side} ({unit}, without "
+           "basal heat) at every node of the gait cycle (initial contact to the next initial contact), "
+           + ("one colour scale per row of panels (trial), its colour bar beside the row, so that the slow trials "
+              "read as well as the fast; " if several else "one colour scale for every panel; ")
+           + "muscles named by the anatomical muscle table with the model's name, ordered and tagged (in "
+           "brackets) by the muscle group of their main action (primary_group of the muscle table); sky blue: a "
+           f"rate below -2 % of the {'row' + chr(39) + 's ' if several else ''}peak (work absorbed); dashed line: toe-off "
+           f"({marks}), the boundary between stance and swing.")
     return fig, cap
 
 
@@ -473,7 +509,7 @@ def whole_body_figure(study: StudyFolder, sel: Selection):
         f"muscles, no basal heat): subject {subject}, {wf}", scale=scale, unit=unit,
     )
     cap = (f"Subject {subject}, workflow {wf}. Summed muscle metabolic rate ({unit}, {legs}: "
-           f"{how}{_per_kg(sel)}, without basal heat) over the gait "
+           f"{how}; without basal heat) over the gait "
            "cycle, one line per walking speed; same axes in every panel; marks at the bottom: toe-off of "
            "each trial.")
     if skipped:
@@ -495,9 +531,12 @@ def per_muscle_figure(study: StudyFolder, sel: Selection):
         pm = pm.merge(sp.astype({"subject": str, "trial": str}), on=["subject", "trial"], how="left")
     fig = per_muscle_ranked(pm, workflow=wf if wf in set(pm["workflow"].astype(str).unique()) else None,
                             models=[m for m in sel.models if m in set(pm["model"].astype(str).unique())] or None)
+    several = pm["trial"].astype(str).nunique() > 1
     cap = (f"Workflow {wf}. The 15 anatomical muscles with the largest cycle-average metabolic rate of each model "
-           "(W per kg of body mass, one leg, without basal heat; mean over subjects), one bar per trial "
-           "(light: slow, dark: fast); each subject's model muscles are summed into the anatomical muscles of the "
+           "(W per kg of body mass, one leg, without basal heat"
+           + ("; mean over subjects" if pm["subject"].astype(str).nunique() > 1 else "") + "), "
+           + ("one bar per trial (light: slow, dark: fast); " if several else f"{sel.trial_text()}; ")
+           + "each subject's model muscles are summed into the anatomical muscles of the "
            "package's muscle table (bundles of one muscle together, the names of different model families "
            "merged); every model muscle is in per_muscle.csv.")
     return fig, cap
