@@ -6,6 +6,8 @@
   session's ``two_subjects``, run by ``musclemetab run --report``; the solve memo makes the
   command line's solves the study's), the report's tables included;
 * ``musclemetab run`` prints no Python source line and no file of the package's cache;
+* ``metabolics`` after ``solve`` says each of the solve's plausibility flags once (the solve
+  said them; ``--show-solve-flags`` says them again), and ``-q`` prints nothing but errors;
 * a running solve prints progress lines from IPOPT's iteration callback, throttled, also when
   its legs are solved in two processes (each line labelled with its leg);
 * the study's progress lines carry an estimate of the time left.
@@ -55,17 +57,76 @@ def _compare(got: pd.DataFrame, want: pd.DataFrame, keys: list[str], what: str, 
     return n
 
 
+def _solve_argv(gait2392) -> list[str]:
+    """``solve`` of gait2392's subject, both legs, the cycle found from the ground forces (no ``--out``)."""
+    return ["solve", "--model", str(gait2392.model), "--ik", str(gait2392.ik), "--external-loads",
+            str(gait2392.external_loads), "--side", "both", "--cycle", "auto"]
+
+
 @pytest.fixture(scope="module")
 def cli_flow(gait2392, tmp_path_factory):
     """solve (both legs, cycle auto), metabolics (UM10, BH04; mass; height 1.8 m as in the study
-    file), analyse with nothing but the two folders."""
+    file), analyse with nothing but the two folders. What solve and metabolics printed on
+    standard error is in ``solve.err`` and ``metabolics.err`` beside the folders."""
+    from conftest import _captured_fds
+
     root = tmp_path_factory.mktemp("cli_flow")
     s, m, a = root / "S", root / "M", root / "A"
-    assert main(["solve", "--model", str(gait2392.model), "--ik", str(gait2392.ik), "--external-loads",
-                 str(gait2392.external_loads), "--side", "both", "--cycle", "auto", "--out", str(s)]) == 0
-    assert main(["metabolics", "--solution", str(s), "--mass", str(gait2392.body_mass_kg), "--height", "1.8",
-                 "--models", "UM10,BH04", "--out", str(m)]) == 0
+    with _captured_fds(root / "solve.out", root / "solve.err"):
+        assert main([*_solve_argv(gait2392), "--out", str(s)]) == 0
+    with _captured_fds(root / "metabolics.out", root / "metabolics.err"):
+        assert main(["metabolics", "--solution", str(s), "--mass", str(gait2392.body_mass_kg), "--height", "1.8",
+                     "--models", "UM10,BH04", "--out", str(m)]) == 0
     return s, m, a
+
+
+def _flag_lines(s: Path) -> list[str]:
+    """The warning line of each plausibility flag the solve of ``s`` recorded (both legs)."""
+    return [f"musclemetab: warning: {s / side}: {' '.join(f['message'].split())}"
+            for side in "rl" for f in json.loads((s / side / "summary.json").read_text())["plausibility"]]
+
+
+@pytest.mark.opensim
+def test_metabolics_after_solve_says_each_solve_flag_once(cli_flow, gait2392, tmp_path):
+    """The solve of gait2392's subject records nine plausibility flags (weak hamstrings, large
+    reserves...) and warns of each; ``metabolics`` of its folder used to warn of all nine again.
+    Now each is said once over the two commands, ``metabolics`` counts them in one note and
+    still lists them in its ``plausibility.json``; ``--show-solve-flags`` says them again, once each."""
+    s, m, _ = cli_flow
+    solve_err = (s.parent / "solve.err").read_text().splitlines()
+    metabolics_err = (s.parent / "metabolics.err").read_text().splitlines()
+    flags = _flag_lines(s)
+    assert len(flags) == 9
+    for line in flags:
+        assert solve_err.count(line) == 1 and line not in metabolics_err, line
+    assert "musclemetab: note: the solve's 9 plausibility flags" in "\n".join(metabolics_err)
+    recorded = json.loads((m / "plausibility.json").read_text())
+    assert [f["message"] for f in recorded if f["code"] != "metabolic_rate"] == [
+        f["message"] for side in "rl" for f in json.loads((s / side / "summary.json").read_text())["plausibility"]]
+    from conftest import _captured_fds
+
+    with _captured_fds(tmp_path / "out.txt", tmp_path / "err.txt"):
+        assert main(["metabolics", "--solution", str(s), "--mass", str(gait2392.body_mass_kg), "--height", "1.8",
+                     "--models", "UM10", "--show-solve-flags", "--out", str(tmp_path / "M")]) == 0
+    again = (tmp_path / "err.txt").read_text().splitlines()
+    assert [again.count(line) for line in flags] == [1] * 9
+
+
+@pytest.mark.opensim
+def test_quiet_prints_nothing_but_errors(cli_flow, gait2392, tmp_path, capfd):
+    """``-q`` before or after the command's name: the solve (the solve memo's stored result, whose
+    warnings are raised again; the same solve without ``-q`` printed them, a summary and progress)
+    writes its folders and prints nothing; an error is still its one line."""
+    s, _, _ = cli_flow
+    assert "musclemetab: warning: " in (s.parent / "solve.err").read_text()
+    assert (s.parent / "solve.out").read_text().startswith("diagnosis:")
+    assert main(["-q", *_solve_argv(gait2392), "--out", str(tmp_path / "S")]) == 0
+    assert capfd.readouterr() == ("", "")
+    assert (tmp_path / "S" / "l" / "summary.json").is_file()
+    (tmp_path / "file").write_text("")
+    assert main([*_solve_argv(gait2392), "--quiet", "--out", str(tmp_path / "file")]) == 1
+    out, err = capfd.readouterr()
+    assert out == "" and err.count("\n") == 1 and err.startswith("musclemetab: error: ") and "file" in err
 
 
 @pytest.mark.slow
