@@ -32,7 +32,8 @@ def test_help_on_every_subcommand(command, capsys):
         main([command, "--help"])
     assert info.value.code == 0
     out = capsys.readouterr().out
-    assert out.startswith(f"usage: musclemetab {command}") and "--out" in out
+    assert out.startswith(f"usage: musclemetab {command}") and ("--mat" if command == "export" else "--out") in out
+    assert "-q, --quiet" in out and "-v, --verbose" in out
 
 
 def test_usage_error_is_one_line_and_status_1(capsys):
@@ -71,7 +72,7 @@ def test_an_unknown_option_names_the_closest_known_one_and_the_commands_help(arg
     (["-q", "metabolcs", "--out", "o"],
      "unknown command 'metabolcs' (did you mean metabolics?); see 'musclemetab metabolics --help'"),
     (["frobnicate"], "unknown command 'frobnicate' (the commands: c3d, prepare, geometry, solve, estimate, metabolics, "
-     "analyse, calibrate-passive, run, demo, report); see 'musclemetab --help'"),
+     "analyse, export, calibrate-passive, run, demo, report); see 'musclemetab --help'"),
 ])
 def test_a_misspelt_command_names_the_closest_and_its_help(argv, line, capsys):
     """A misspelt command (it used to be taken for a missing one, its options for unknown ones:
@@ -184,3 +185,18 @@ def test_no_library_module_imports_a_command_module():
             if any(n == "musclemetab.commands" or n.startswith("musclemetab.commands.") for n in names):
                 offending.append(str(rel))
     assert offending == []
+
+
+def test_export_refuses_a_name_without_mat_and_a_file_it_did_not_write(tmp_path, capsys):
+    """``export --mat`` checks the file before reading the folder: a name not ending in ``.mat``
+    and a file of the user's under the name are refused in one line, the file left as it was."""
+    mine = tmp_path / "mine.mat"
+    mine.write_text("my own notes")
+    assert main(["export", str(tmp_path / "S"), "--mat", str(tmp_path / "out.txt")]) == 1
+    assert capsys.readouterr().err.splitlines() == [
+        f"musclemetab: error: --mat {tmp_path / 'out.txt'}: a MATLAB file's name ends in .mat; give e.g. "
+        f"{tmp_path / 'out.mat'}"]
+    assert main(["export", str(tmp_path / "S"), "--mat", str(mine)]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith(f"musclemetab: error: {mine} was not written by musclemetab")
+    assert mine.read_text() == "my own notes" and sorted(p.name for p in tmp_path.iterdir()) == ["mine.mat"]

@@ -429,3 +429,92 @@ def test_study_progress_time_left_and_interrupted_units():
         "[##################......] 3/4 units, 0 failed, 1 interrupted, T s, about 30 s left | s/c/effort-gen interrupted",
         "[########################] 4/4 units, 1 failed, 1 interrupted, T s | s/d/effort-gen FAILED",
     ]
+
+
+@pytest.mark.opensim
+def test_mat_files_of_metabolics_and_export_hold_the_folders_tables(cli_flow, gait2392, tmp_path):
+    """``metabolics --mat`` (from the objects in memory) and ``export --mat`` (from the folders'
+    files) of the solve of both legs, read back with :func:`scipy.io.loadmat`: every array equals
+    the folders' own tables (``solution.sto`` read by the storage reader, ``metabolics.sto``,
+    ``whole_body.csv``, ``per_muscle.csv``), time in rows and one column per muscle, each
+    component of each model; the two files agree."""
+    import scipy.io
+
+    from musclemetab.io import read_storage
+
+    s, m, _ = cli_flow
+    a = tmp_path / "M" / "rates.mat"
+    assert main(["-q", "metabolics", "--solution", str(s), "--mass", str(gait2392.body_mass_kg), "--height", "1.8",
+                 "--models", "UM10,BH04", "--mat", str(a), "--out", str(tmp_path / "M")]) == 0
+    b = tmp_path / "export.mat"
+    assert main(["-q", "export", str(s), "--metabolics", str(m), "--mat", str(b)]) == 0
+    for path in (a, b):
+        got = scipy.io.loadmat(path, simplify_cells=True)
+        assert got["format"] == "musclemetab mat 1" and list(got["legs"]) == ["r", "l"]
+        whole = pd.read_csv(m / "whole_body.csv")
+        assert list(got["whole_body"]["model"]) == whole["model"].tolist() == ["UM10", "BH04"]
+        np.testing.assert_allclose(got["whole_body"]["whole_body_W_per_kg"], whole["whole_body_W_per_kg"], rtol=1e-9)
+        for side in "rl":
+            leg = got[side]
+            sto = read_storage(s / side / "solution.sto")
+            muscles = json.loads((s / side / "summary.json").read_text())["muscles"]
+            assert list(leg["muscles"]) == muscles and leg["solve"]["side"] == side
+            np.testing.assert_allclose(leg["time_s"], sto.index.to_numpy(), rtol=0, atol=1e-12)
+            for key, column in (("activation", "activation"), ("excitation", "excitation"),
+                                ("tendon_force_N", "tendon_force"), ("normalized_fiber_length", "normalized_fiber_length"),
+                                ("normalized_fiber_velocity", "normalized_fiber_velocity")):
+                want = sto[[f"/forceset/{mu}/{column}" for mu in muscles]].to_numpy()
+                np.testing.assert_allclose(leg[key], want, rtol=1e-9, atol=1e-12, err_msg=f"{path.name} {side} {key}")
+            lmo = leg["parameters"]["optimal_fiber_length_m"]
+            np.testing.assert_allclose(leg["fiber_length_m"], leg["normalized_fiber_length"] * lmo, rtol=1e-12)
+            rates = read_storage(m / side / "metabolics.sto")
+            np.testing.assert_allclose(leg["metabolics"]["time_s"], rates.index.to_numpy(), atol=1e-12)
+            for model in ("UM10", "BH04"):
+                for comp in ("work", "activation_maintenance", "shortening_lengthening", "basal", "total_no_basal"):
+                    want = rates[[f"{model}/{mu}/{comp}" for mu in muscles]].to_numpy()
+                    np.testing.assert_allclose(leg["metabolics"][model][comp], want, rtol=1e-9, atol=1e-9,
+                                               err_msg=f"{path.name} {side} {model} {comp}")
+            per = pd.read_csv(m / side / "per_muscle.csv")
+            np.testing.assert_allclose(leg["metabolics"]["per_muscle"]["muscle_W"], per["muscle_W"], rtol=1e-9)
+            assert list(leg["metabolics"]["per_muscle"]["muscle"]) == per["muscle"].tolist()
+            legs_csv = pd.read_csv(m / side / "leg_muscles.csv")
+            np.testing.assert_allclose(leg["metabolics"]["leg_muscles"]["leg_muscles_W"], legs_csv["leg_muscles_W"],
+                                       rtol=1e-9)
+
+
+@pytest.mark.opensim
+def test_printing_a_solution_or_its_rates_gives_a_short_summary(cli_flow):
+    """``print(solution)`` and ``print(rates)`` in a new Python process: at most 20 lines each,
+    no array, the muscles x nodes of ``solution.sto``, the solve's status, stop and flags, and
+    each model's whole-body rate of the leg (``leg_muscles.csv``, W)."""
+    import subprocess
+    import sys
+
+    s, m, _ = cli_flow
+    code = ("from musclemetab.redundancy import Solution\n"
+            "from musclemetab.metabolics.solution import metabolics_from_legs\n"
+            f"print(Solution.load({str(s / 'r')!r}))\n"
+            "print('--')\n"
+            f"print(metabolics_from_legs({str(s)!r}, 72.6, 1.8, models='UM10,BH04')['r'])\n")
+    r = subprocess.run([sys.executable, "-W", "ignore", "-c", code], capture_output=True, text=True, check=True)
+    solution, rates = (part.strip().splitlines() for part in r.stdout.split("--\n"))
+    summary = json.loads((s / "r" / "summary.json").read_text())
+    n_nodes = len(read_storage_index(s / "r" / "solution.sto"))
+    assert len(solution) <= 20 and len(rates) <= 20
+    assert solution[0] == (f"Solution (effort-gen, side r): {len(summary['muscles'])} muscles x {n_nodes} nodes "
+                           f"({summary['time_window_s'][0]:.3f}-{summary['time_window_s'][1]:.3f} s, "
+                           f"{n_nodes - 1} intervals), {len(summary['dofs'])} DOFs")
+    assert solution[1].startswith(f"  {summary['status']} in {summary['iterations']} iterations")
+    assert solution[2].startswith("  stop optimum (tolerance 1e-08); rates converged")
+    assert solution[3] == "  5 plausibility flags (passive_force, fiber_length, saturated_activation, " \
+                          "saturated_lengthening, reserve)"
+    assert "array(" not in r.stdout  # no array printed (the dataclass repr printed every array)
+    leg = pd.read_csv(m / "r" / "leg_muscles.csv").set_index("model")["leg_muscles_W"]
+    assert rates[1] == "  the leg's muscles (W, no basal heat; a leg to add to the other):"
+    assert rates[2:4] == [f"    {model:<5} {leg[model]:8.2f}" for model in ("UM10", "BH04")]
+
+
+def read_storage_index(path):
+    from musclemetab.io import read_table
+
+    return read_table(path).index

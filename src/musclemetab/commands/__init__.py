@@ -47,6 +47,7 @@ SUBCOMMANDS = (
     ("estimate", "musclemetab.commands.estimate", "add_parser"),
     ("metabolics", "musclemetab.commands.metabolics", "add_parser"),
     ("analyse", "musclemetab.commands.analyse", "add_parser"),
+    ("export", "musclemetab.commands.export", "add_parser"),
     ("calibrate-passive", "musclemetab.commands.calibrate_passive", "add_parser"),
     ("run", "musclemetab.commands.run", "add_parser"),
     ("demo", "musclemetab.commands.demo", "add_parser"),

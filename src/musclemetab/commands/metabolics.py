@@ -107,6 +107,9 @@ def add_parser(subparsers) -> None:
         "leg's solution folder; a few minutes for all parameters of 40 muscles",
     )
     add_solve_flags_argument(p)
+    p.add_argument("--mat", metavar="FILE.mat",
+                   help="also write a MATLAB file: the solution's arrays (time x muscles) and parameters, the rates of "
+                   "each model per muscle and component, the whole-body and per-muscle tables (docs/matlab.md)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (may be the solution folder)")
     p.set_defaults(func=run)
 
@@ -126,6 +129,10 @@ def run(args) -> int:
 
     models = parse_models(args.models)
     check_output_folder(args.out)
+    if args.mat is not None:
+        from ..io.matlab import check_mat_path
+
+        check_mat_path(args.mat)
     check_speed(args.speed)
     check_body(args.mass, args.height)
     check_basal_arguments(args)
@@ -165,6 +172,7 @@ def run(args) -> int:
         muscle_properties=args.muscle_properties, strict=args.strict,
     )
     files = write_legs_metabolics(results, args.out)
+    _write_mat(args, results, folders)
     if args.height is None:
         note("no --height: muscle masses from the model (F0 / specific tension x density x lMo)")
     if len(results) == 1:
@@ -229,6 +237,7 @@ def _run_states(args, models) -> int:
         note(f"muscle masses and slow-twitch ratios from the model's metabolic probes ({used}); "
              "--muscle-parameters package for the package's tables")
     files = write_legs_metabolics(results, args.out)
+    _write_mat(args, results)
     n_cl = int(read.clamped.sum()) if read.clamped is not None else 0
     if n_cl:
         act = read.states.states["activation"][read.clamped]
@@ -252,6 +261,18 @@ def _run_states(args, models) -> int:
           f"({', '.join(sorted({p.name for p in files.values()}))}); {whole} (W/kg, basal {args.basal}): {means}")
     _plausibility(args, {}, results)
     return 0
+
+
+def _write_mat(args, results, folders=None) -> None:
+    """``--mat FILE``: the solutions of ``folders`` (``{side: folder}``; none for ``--states``) and
+    their rates ``results`` as a MATLAB file (:mod:`musclemetab.io.matlab`)."""
+    if args.mat is None:
+        return
+    from ..io.matlab import results_struct, write_mat
+    from ..redundancy.solution import Solution
+
+    solutions = {side: Solution.load(folder, require_success=False) for side, folder in (folders or {}).items()}
+    note(f"MATLAB file {write_mat(args.mat, results_struct(solutions or None, results))}")
 
 
 def _sensitivity_parameters(value, folders) -> list | None:
