@@ -170,16 +170,18 @@ def add_solve_flags_argument(parser) -> None:
     """``--show-solve-flags`` of the commands that read a solve's folder (``metabolics``, ``analyse``)."""
     parser.add_argument("--show-solve-flags", action="store_true",
                         help="warn again of the plausibility flags the solve recorded (default: the solve warned of "
-                        "them; one note counts them, and OUT/plausibility.json lists them with the command's own)")
+                        "them; one note counts them, and OUT/plausibility.json lists them with the command's own; "
+                        "--strict warns of them, its reasons to fail)")
 
 
 def warn_solve_flags(args, solve_flags: dict) -> None:
     """The plausibility flags of the solve folders (``{folder: [Flag]}``): one warning each with
-    ``--show-solve-flags``, else one note counting them (``solve`` warned of each already)."""
+    ``--show-solve-flags`` or ``--strict`` (they are then the reasons of the failure), else one
+    note counting them (``solve`` warned of each already)."""
     from ..messages import note
     from ..quality import warn_flags
 
-    if getattr(args, "show_solve_flags", False):
+    if getattr(args, "show_solve_flags", False) or getattr(args, "strict", False):
         for folder, flags in solve_flags.items():
             warn_flags(flags, str(folder))
         return
