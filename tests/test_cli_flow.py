@@ -6,6 +6,8 @@
   session's ``two_subjects``, run by ``musclemetab run --report``; the solve memo makes the
   command line's solves the study's), the report's tables included;
 * ``musclemetab run`` prints no Python source line and no file of the package's cache;
+* ``metabolics`` after ``solve`` says each of the solve's plausibility flags once (the solve
+  said them; ``--show-solve-flags`` says them again), and ``-q`` prints nothing but errors;
 * a running solve prints progress lines from IPOPT's iteration callback, throttled, also when
   its legs are solved in two processes (each line labelled with its leg);
 * the study's progress lines carry an estimate of the time left.
@@ -55,17 +57,76 @@ def _compare(got: pd.DataFrame, want: pd.DataFrame, keys: list[str], what: str, 
     return n
 
 
+def _solve_argv(gait2392) -> list[str]:
+    """``solve`` of gait2392's subject, both legs, the cycle found from the ground forces (no ``--out``)."""
+    return ["solve", "--model", str(gait2392.model), "--ik", str(gait2392.ik), "--external-loads",
+            str(gait2392.external_loads), "--side", "both", "--cycle", "auto"]
+
+
 @pytest.fixture(scope="module")
 def cli_flow(gait2392, tmp_path_factory):
     """solve (both legs, cycle auto), metabolics (UM10, BH04; mass; height 1.8 m as in the study
-    file), analyse with nothing but the two folders."""
+    file), analyse with nothing but the two folders. What solve and metabolics printed on
+    standard error is in ``solve.err`` and ``metabolics.err`` beside the folders."""
+    from conftest import _captured_fds
+
     root = tmp_path_factory.mktemp("cli_flow")
     s, m, a = root / "S", root / "M", root / "A"
-    assert main(["solve", "--model", str(gait2392.model), "--ik", str(gait2392.ik), "--external-loads",
-                 str(gait2392.external_loads), "--side", "both", "--cycle", "auto", "--out", str(s)]) == 0
-    assert main(["metabolics", "--solution", str(s), "--mass", str(gait2392.body_mass_kg), "--height", "1.8",
-                 "--models", "UM10,BH04", "--out", str(m)]) == 0
+    with _captured_fds(root / "solve.out", root / "solve.err"):
+        assert main([*_solve_argv(gait2392), "--out", str(s)]) == 0
+    with _captured_fds(root / "metabolics.out", root / "metabolics.err"):
+        assert main(["metabolics", "--solution", str(s), "--mass", str(gait2392.body_mass_kg), "--height", "1.8",
+                     "--models", "UM10,BH04", "--out", str(m)]) == 0
     return s, m, a
+
+
+def _flag_lines(s: Path) -> list[str]:
+    """The warning line of each plausibility flag the solve of ``s`` recorded (both legs)."""
+    return [f"musclemetab: warning: {s / side}: {' '.join(f['message'].split())}"
+            for side in "rl" for f in json.loads((s / side / "summary.json").read_text())["plausibility"]]
+
+
+@pytest.mark.opensim
+def test_metabolics_after_solve_says_each_solve_flag_once(cli_flow, gait2392, tmp_path):
+    """The solve of gait2392's subject records nine plausibility flags (weak hamstrings, large
+    reserves...) and warns of each; ``metabolics`` of its folder used to warn of all nine again.
+    Now each is said once over the two commands, ``metabolics`` counts them in one note and
+    still lists them in its ``plausibility.json``; ``--show-solve-flags`` says them again, once each."""
+    s, m, _ = cli_flow
+    solve_err = (s.parent / "solve.err").read_text().splitlines()
+    metabolics_err = (s.parent / "metabolics.err").read_text().splitlines()
+    flags = _flag_lines(s)
+    assert len(flags) == 9
+    for line in flags:
+        assert solve_err.count(line) == 1 and line not in metabolics_err, line
+    assert "musclemetab: note: the solve's 9 plausibility flags" in "\n".join(metabolics_err)
+    recorded = json.loads((m / "plausibility.json").read_text())
+    assert [f["message"] for f in recorded if f["code"] != "metabolic_rate"] == [
+        f["message"] for side in "rl" for f in json.loads((s / side / "summary.json").read_text())["plausibility"]]
+    from conftest import _captured_fds
+
+    with _captured_fds(tmp_path / "out.txt", tmp_path / "err.txt"):
+        assert main(["metabolics", "--solution", str(s), "--mass", str(gait2392.body_mass_kg), "--height", "1.8",
+                     "--models", "UM10", "--show-solve-flags", "--out", str(tmp_path / "M")]) == 0
+    again = (tmp_path / "err.txt").read_text().splitlines()
+    assert [again.count(line) for line in flags] == [1] * 9
+
+
+@pytest.mark.opensim
+def test_quiet_prints_nothing_but_errors(cli_flow, gait2392, tmp_path, capfd):
+    """``-q`` before or after the command's name: the solve (the solve memo's stored result, whose
+    warnings are raised again; the same solve without ``-q`` printed them, a summary and progress)
+    writes its folders and prints nothing; an error is still its one line."""
+    s, _, _ = cli_flow
+    assert "musclemetab: warning: " in (s.parent / "solve.err").read_text()
+    assert (s.parent / "solve.out").read_text().startswith("diagnosis:")
+    assert main(["-q", *_solve_argv(gait2392), "--out", str(tmp_path / "S")]) == 0
+    assert capfd.readouterr() == ("", "")
+    assert (tmp_path / "S" / "l" / "summary.json").is_file()
+    (tmp_path / "file").write_text("")
+    assert main([*_solve_argv(gait2392), "--quiet", "--out", str(tmp_path / "file")]) == 1
+    out, err = capfd.readouterr()
+    assert out == "" and err.count("\n") == 1 and err.startswith("musclemetab: error: ") and "file" in err
 
 
 @pytest.mark.slow
@@ -380,3 +441,92 @@ def test_study_progress_time_left_and_interrupted_units():
         "[##################......] 3/4 units, 0 failed, 1 interrupted, T s, about 30 s left | s/c/effort-gen interrupted",
         "[########################] 4/4 units, 1 failed, 1 interrupted, T s | s/d/effort-gen FAILED",
     ]
+
+
+@pytest.mark.opensim
+def test_mat_files_of_metabolics_and_export_hold_the_folders_tables(cli_flow, gait2392, tmp_path):
+    """``metabolics --mat`` (from the objects in memory) and ``export --mat`` (from the folders'
+    files) of the solve of both legs, read back with :func:`scipy.io.loadmat`: every array equals
+    the folders' own tables (``solution.sto`` read by the storage reader, ``metabolics.sto``,
+    ``whole_body.csv``, ``per_muscle.csv``), time in rows and one column per muscle, each
+    component of each model; the two files agree."""
+    import scipy.io
+
+    from musclemetab.io import read_storage
+
+    s, m, _ = cli_flow
+    a = tmp_path / "M" / "rates.mat"
+    assert main(["-q", "metabolics", "--solution", str(s), "--mass", str(gait2392.body_mass_kg), "--height", "1.8",
+                 "--models", "UM10,BH04", "--mat", str(a), "--out", str(tmp_path / "M")]) == 0
+    b = tmp_path / "export.mat"
+    assert main(["-q", "export", str(s), "--metabolics", str(m), "--mat", str(b)]) == 0
+    for path in (a, b):
+        got = scipy.io.loadmat(path, simplify_cells=True)
+        assert got["format"] == "musclemetab mat 1" and list(got["legs"]) == ["r", "l"]
+        whole = pd.read_csv(m / "whole_body.csv")
+        assert list(got["whole_body"]["model"]) == whole["model"].tolist() == ["UM10", "BH04"]
+        np.testing.assert_allclose(got["whole_body"]["whole_body_W_per_kg"], whole["whole_body_W_per_kg"], rtol=1e-9)
+        for side in "rl":
+            leg = got[side]
+            sto = read_storage(s / side / "solution.sto")
+            muscles = json.loads((s / side / "summary.json").read_text())["muscles"]
+            assert list(leg["muscles"]) == muscles and leg["solve"]["side"] == side
+            np.testing.assert_allclose(leg["time_s"], sto.index.to_numpy(), rtol=0, atol=1e-12)
+            for key, column in (("activation", "activation"), ("excitation", "excitation"),
+                                ("tendon_force_N", "tendon_force"), ("normalized_fiber_length", "normalized_fiber_length"),
+                                ("normalized_fiber_velocity", "normalized_fiber_velocity")):
+                want = sto[[f"/forceset/{mu}/{column}" for mu in muscles]].to_numpy()
+                np.testing.assert_allclose(leg[key], want, rtol=1e-9, atol=1e-12, err_msg=f"{path.name} {side} {key}")
+            lmo = leg["parameters"]["optimal_fiber_length_m"]
+            np.testing.assert_allclose(leg["fiber_length_m"], leg["normalized_fiber_length"] * lmo, rtol=1e-12)
+            rates = read_storage(m / side / "metabolics.sto")
+            np.testing.assert_allclose(leg["metabolics"]["time_s"], rates.index.to_numpy(), atol=1e-12)
+            for model in ("UM10", "BH04"):
+                for comp in ("work", "activation_maintenance", "shortening_lengthening", "basal", "total_no_basal"):
+                    want = rates[[f"{model}/{mu}/{comp}" for mu in muscles]].to_numpy()
+                    np.testing.assert_allclose(leg["metabolics"][model][comp], want, rtol=1e-9, atol=1e-9,
+                                               err_msg=f"{path.name} {side} {model} {comp}")
+            per = pd.read_csv(m / side / "per_muscle.csv")
+            np.testing.assert_allclose(leg["metabolics"]["per_muscle"]["muscle_W"], per["muscle_W"], rtol=1e-9)
+            assert list(leg["metabolics"]["per_muscle"]["muscle"]) == per["muscle"].tolist()
+            legs_csv = pd.read_csv(m / side / "leg_muscles.csv")
+            np.testing.assert_allclose(leg["metabolics"]["leg_muscles"]["leg_muscles_W"], legs_csv["leg_muscles_W"],
+                                       rtol=1e-9)
+
+
+@pytest.mark.opensim
+def test_printing_a_solution_or_its_rates_gives_a_short_summary(cli_flow):
+    """``print(solution)`` and ``print(rates)`` in a new Python process: at most 20 lines each,
+    no array, the muscles x nodes of ``solution.sto``, the solve's status, stop and flags, and
+    each model's whole-body rate of the leg (``leg_muscles.csv``, W)."""
+    import subprocess
+    import sys
+
+    s, m, _ = cli_flow
+    code = ("from musclemetab.redundancy import Solution\n"
+            "from musclemetab.metabolics.solution import metabolics_from_legs\n"
+            f"print(Solution.load({str(s / 'r')!r}))\n"
+            "print('--')\n"
+            f"print(metabolics_from_legs({str(s)!r}, 72.6, 1.8, models='UM10,BH04')['r'])\n")
+    r = subprocess.run([sys.executable, "-W", "ignore", "-c", code], capture_output=True, text=True, check=True)
+    solution, rates = (part.strip().splitlines() for part in r.stdout.split("--\n"))
+    summary = json.loads((s / "r" / "summary.json").read_text())
+    n_nodes = len(read_storage_index(s / "r" / "solution.sto"))
+    assert len(solution) <= 20 and len(rates) <= 20
+    assert solution[0] == (f"Solution (effort-gen, side r): {len(summary['muscles'])} muscles x {n_nodes} nodes "
+                           f"({summary['time_window_s'][0]:.3f}-{summary['time_window_s'][1]:.3f} s, "
+                           f"{n_nodes - 1} intervals), {len(summary['dofs'])} DOFs")
+    assert solution[1].startswith(f"  {summary['status']} in {summary['iterations']} iterations")
+    assert solution[2].startswith("  stop optimum (tolerance 1e-08); rates converged")
+    assert solution[3] == "  5 plausibility flags (passive_force, fiber_length, saturated_activation, " \
+                          "saturated_lengthening, reserve)"
+    assert "array(" not in r.stdout  # no array printed (the dataclass repr printed every array)
+    leg = pd.read_csv(m / "r" / "leg_muscles.csv").set_index("model")["leg_muscles_W"]
+    assert rates[1] == "  the leg's muscles (W, no basal heat; a leg to add to the other):"
+    assert rates[2:4] == [f"    {model:<5} {leg[model]:8.2f}" for model in ("UM10", "BH04")]
+
+
+def read_storage_index(path):
+    from musclemetab.io import read_table
+
+    return read_table(path).index

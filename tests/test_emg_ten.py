@@ -141,6 +141,26 @@ def test_result_load_and_write_round_trip(emg_ten, parameters, solutions, tmp_pa
     assert result.record.iterations == parameters["solve"]["iterations"] == result.iterations
     assert result.record.trials == parameters["solve"]["trials"] and not result.record.extra
     assert Result.load(again).record == result.record
+    # printed: a summary of at most 20 lines; as a MATLAB file: each trial's arrays as its solution.sto holds them
+    lines = str(result).splitlines()
+    assert len(lines) <= 20 and "array(" not in str(result)
+    assert lines[0] == f"Result (emg-ten): {len(TRIALS)} trials, {len(result.parameters.names)} muscles"
+    assert any(line.startswith(f"  estimated tendon_stiffness ({len(parameters['tendon_stiffness_scale'])}): ")
+               for line in lines)
+    import scipy.io
+
+    from musclemetab.io import read_storage
+
+    mat = scipy.io.loadmat(result.to_mat(tmp_path / "result.mat"), simplify_cells=True)
+    assert list(mat["trials"]) == list(TRIALS)
+    est = mat["estimated"]["tendon_stiffness"]
+    assert dict(zip(est["muscles"], est["factor"])) == pytest.approx(parameters["tendon_stiffness_scale"], rel=1e-15)
+    for t in TRIALS:
+        sto = read_storage(out / t / "solution.sto")
+        muscles = mat[t]["muscles"]
+        np.testing.assert_allclose(mat[t]["time_s"], sto.index.to_numpy(), atol=1e-12)
+        np.testing.assert_allclose(mat[t]["activation"], sto[[f"/forceset/{m}/activation" for m in muscles]].to_numpy(),
+                                   rtol=1e-9, atol=1e-12)
     (tmp_path / "empty").mkdir()
     with pytest.raises(InputFileError, match="parameters.json: no such file"):
         Result.load(tmp_path / "empty")

@@ -415,3 +415,28 @@ def test_without_a_height_the_masses_come_from_the_model(solution_dir, tmp_path,
     assert wb.loc["UM10", "whole_body_W_per_kg"] == pytest.approx(res.whole_body["UM10"].mean_W_per_kg, rel=1e-9)
     settings = read_metabolics_settings(out)
     assert "height_m" not in settings and settings["muscle_mass_rule"] == MASS_RULE_MODEL
+
+
+def test_printed_rates_are_short_summaries_of_their_arrays():
+    """``print`` of a model's rates and of a whole-body rate: a line per component with its mean
+    and range (worked by hand here), two lines for the whole body; never the arrays (the
+    dataclasses' own repr printed every value)."""
+    from musclemetab.metabolics import MetabolicRates
+    from musclemetab.metabolics.whole_body import WholeBodyRate
+
+    work = np.array([[1.0, -2.0, 4.0], [0.0, 0.0, 3.0]])  # mean 1, min -2, max 4
+    heat = np.full((2, 3), 0.5)
+    rates = MetabolicRates("UM10", work, heat, 2 * heat, np.full((2, 3), 0.25), work + 3.25 * np.ones((2, 3)))
+    assert str(rates).splitlines() == [
+        "MetabolicRates UM10: components of shape (2, 3) (W; mean, min to max)",
+        "  work                              1         -2 to 4",
+        "  activation_maintenance          0.5        0.5 to 0.5",
+        "  shortening_lengthening            1          1 to 1",
+        "  basal                          0.25       0.25 to 0.25",
+        "  total                          4.25       1.25 to 7.25"]
+    t = np.linspace(0.0, 1.0, 201)
+    wb = WholeBodyRate(time_s=t, rate_W_per_kg=np.full(t.size, 3.2), one_leg_W=np.full(t.size, 70.0),
+                       mean_W_per_kg=3.2, mean_W_per_kg_no_basal=2.0, one_leg_mean_W=70.0, duration_s=1.0,
+                       basal_rule="body", body_mass_kg=70.0, legs=2, basal_W_per_kg=1.2)
+    assert repr(wb) == ("WholeBodyRate: 3.2 W/kg (2 without basal heat) over 1 s, 201 samples\n"
+                        "  both legs, basal body (1.2 W/kg), body 70 kg; the simulated leg's muscles 70 W")

@@ -338,3 +338,37 @@ def test_a_locked_coordinate_the_motion_moves_follows_it_in_the_written_model(ex
     # (the model file keeps 6 significant digits) held at the ends outside the window: the model
     # assembles at time 0
     assert function.calcValue(osim.Vector(1, 0.0)) == pytest.approx(info["values"][knee][0], abs=1e-9)
+
+
+def test_the_joint_reaction_example_of_the_docs_writes_the_file_it_names(gait2392_right, tmp_path):
+    """The Python example of docs/opensim_files.md ("knee contact force with OpenSim's
+    JointReaction analysis"), run by OpenSim over the first four states of the solution's files
+    (without the ground forces, which do not change the file's name): OpenSim writes the file
+    the example's last comment names, with the columns it names. The example used to name
+    ``jr/<name>_JointReaction_ReactionLoads.sto``, a file OpenSim does not write: without names
+    it writes ``_Un-named analysis._ReactionLoads``."""
+    import re
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from musclemetab.io import read_storage
+
+    _, folder = gait2392_right
+    text = (Path(__file__).resolve().parents[1] / "docs" / "opensim_files.md").read_text()
+    section = text[text.index("## Example: knee contact force with OpenSim's JointReaction analysis"):]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    named = re.search(r"tool\.run\(\)\s+# (\S+): (knee\S+)_fx, fy, fz", code)
+    code = "\n".join(line for line in code.splitlines() if "ExternalLoads(" not in line)
+    code = code.replace('folder = "out/r"', f"folder = {str(folder)!r}")
+    states = read_storage(folder / "states.sto").index
+    code = code.replace("import opensim as osim",
+                        f"import opensim as osim\nosim.Logger.setLevelString('error')\n"
+                        f"t0, t1 = {float(states[0])!r}, {float(states[3])!r}")
+    r = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr[-2000:]
+    written = tmp_path / named.group(1)
+    assert sorted(p.name for p in written.parent.iterdir()) == [written.name]
+    table = read_storage(written)
+    assert len(table) == 4 and [f"{named.group(2)}_f{a}" for a in "xyz"] == [c for c in table.columns
+                                                                            if c.startswith(named.group(2) + "_f")]

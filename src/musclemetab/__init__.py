@@ -9,7 +9,12 @@ cannot share a process (they ship the same shared library), so OpenSim runs in a
 process (:mod:`musclemetab.opensim_bridge`) and CasADi in the caller's.
 """
 
+import logging
+
 from .errors import MusclemetabError
+
+# a library leaves the handling of its records to the application (messages.configure for the command line)
+logging.getLogger("musclemetab").addHandler(logging.NullHandler())
 
 __all__ = ["MusclemetabError", "__version__"]
 

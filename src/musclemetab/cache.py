@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import os
 import warnings
 from pathlib import Path
@@ -110,6 +111,7 @@ def read_entry(path: Path) -> tuple[dict | None, str]:
         return None, f"cannot be read ({type(exc).__name__})"
     if _checksum(arrays) != stored:
         return None, "does not match its checksum (it was modified or damaged)"
+    logging.getLogger(__name__).debug("cache entry used: %s", path)
     return arrays, ""
 
 
@@ -125,6 +127,7 @@ def write_entry(path: Path, what: str, **arrays) -> None:
     try:
         with atomic_path(path, suffix=".npz") as tmp:
             np.savez(tmp, **arrays)
+        logging.getLogger(__name__).debug("cache entry written: %s", path)
     except OSError as exc:
         warnings.warn(f"could not write the {what} cache entry {path} ({exc.strerror or exc}); "
                       "continuing without caching it", CacheWarning, stacklevel=3)

@@ -5,6 +5,11 @@ the library; it holds no method of its own, so that everything a command does ca
 Python as well. Nothing in the library imports this package. Options several commands share
 (the basal heat, the study runs) are in :mod:`.options`.
 
+Every command takes ``-q``/``--quiet`` (nothing printed but errors) and ``-v``/``--verbose``
+(debug records too), before or after the command's name: the package logs with :mod:`logging`
+(logger ``musclemetab``), and :func:`musclemetab.messages.configure` prints the records and the
+package's warnings, each warning once per run.
+
 Every error, a usage error included, is printed as one line (``musclemetab: error: ...``) and
 the command exits with status 1; Ctrl-C exits with status 130, SIGTERM (a batch scheduler
 stopping the job) stops the work the same way (workers ended, units marked interrupted) with
@@ -43,6 +48,7 @@ SUBCOMMANDS = (
     ("estimate", "musclemetab.commands.estimate", "add_parser"),
     ("metabolics", "musclemetab.commands.metabolics", "add_parser"),
     ("analyse", "musclemetab.commands.analyse", "add_parser"),
+    ("export", "musclemetab.commands.export", "add_parser"),
     ("calibrate-passive", "musclemetab.commands.calibrate_passive", "add_parser"),
     ("run", "musclemetab.commands.run", "add_parser"),
     ("demo", "musclemetab.commands.demo", "add_parser"),
@@ -64,13 +70,27 @@ class _Parser(argparse.ArgumentParser):
         self._args = list(sys.argv[1:] if args is None else args)  # what this parser (or command) was given
         return super().parse_known_args(args, namespace)
 
+    def _commands(self) -> dict:
+        """The commands of this (top-level) parser by name, ``{}`` for a command's parser."""
+        actions = self._subparsers._group_actions if self._subparsers is not None else ()
+        return next((a.choices for a in actions if isinstance(a.choices, dict)), {})
+
     def _command_parser(self):
         """The parser of the command named by the arguments (for the top-level parser), or ``None``."""
-        actions = self._subparsers._group_actions if self._subparsers is not None else ()
-        for action in actions:
-            if self._args and isinstance(action.choices, dict) and self._args[0] in action.choices:
-                return action.choices[self._args[0]]
-        return None
+        return self._commands().get(_command_name(self._args))
+
+    def _unknown_command(self) -> str | None:
+        """The line for a first word that names no command (``solv``: "did you mean solve?",
+        pointing to that command's ``--help``), or ``None``."""
+        import difflib
+
+        commands, name = self._commands(), _command_name(self._args)
+        if not commands or name is None or name.startswith("-") or name in commands:
+            return None
+        close = difflib.get_close_matches(name, list(commands), n=1)
+        if close:
+            return f"unknown command '{name}' (did you mean {close[0]}?); see '{self.prog} {close[0]} --help'"
+        return f"unknown command '{name}' (the commands: {', '.join(commands)}); see '{self.prog} --help'"
 
     def _unknown_options(self) -> list[str]:
         """Each option given that this parser does not know (nor abbreviates), with the closest it knows."""
@@ -93,6 +113,10 @@ class _Parser(argparse.ArgumentParser):
         command = self._command_parser()
         if command is not None and command is not self:  # an argument the command refused: its parser says so
             command.error(message)
+        line = self._unknown_command()
+        if line is not None:
+            sys.stderr.write(f"musclemetab: error: {line}\n")
+            sys.exit(1)
         unknown = self._unknown_options()
         if unknown:
             message = f"unrecognized option{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}"
@@ -111,6 +135,18 @@ class _Version(argparse.Action):
         parser.exit()
 
 
+def add_verbosity_arguments(parser, top: bool = False) -> None:
+    """``-q``/``--quiet`` and ``-v``/``--verbose``, on the top-level parser (``top``) and on each
+    command's: given after the command's name they default to nothing, so that the top-level
+    ones given before it are kept."""
+    group = parser.add_mutually_exclusive_group()
+    default = False if top else argparse.SUPPRESS
+    group.add_argument("-q", "--quiet", action="store_true", default=default,
+                       help="print nothing but errors (no notes, warnings, progress or summary)")
+    group.add_argument("-v", "--verbose", action="store_true", default=default,
+                       help="also print debug lines (caches used, each solve's outcome)")
+
+
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The ``musclemetab`` parser; with ``command``, only that subcommand (its module alone is
     imported, which keeps the start of a command short)."""
@@ -119,6 +155,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         description="Muscle-by-muscle, moment-by-moment metabolic energy of walking.",
     )
     parser.add_argument("--version", action=_Version, nargs=0, help="show the version and exit")
+    add_verbosity_arguments(parser, top=True)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     names = {name for name, _, _ in SUBCOMMANDS}
@@ -132,6 +169,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                 continue
             raise
         getattr(mod, func)(sub)
+        add_verbosity_arguments(sub.choices[name])
     return parser
 
 
@@ -284,16 +322,40 @@ def _silence_stdout() -> None:
         pass
 
 
+def _command_name(argv: list[str]) -> str | None:
+    """The command named in ``argv``: its first word that is not ``-q``/``-v`` (given before it)."""
+    words = [a for a in argv if a not in ("-q", "--quiet", "-v", "--verbose")]
+    return words[0] if words else None
+
+
+class _Silent:
+    """Standard output under ``--quiet``: what the commands print there is dropped."""
+
+    def write(self, text):
+        return len(text)
+
+    def flush(self):
+        pass
+
+    def isatty(self):
+        return False
+
+
 def _main(argv: list[str] | None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
-    parser = build_parser(argv[0] if argv else None)
+    parser = build_parser(_command_name(argv))
     args = parser.parse_args(argv)
-    from ..messages import show_warning
+    from ..messages import configure, logger, verbosity_level
 
-    previous, warnings.showwarning = warnings.showwarning, show_warning
+    if args.quiet and args.verbose:  # one before the command's name, one after it
+        parser.error("argument -v/--verbose: not allowed with argument -q/--quiet")
+    stdout = sys.stdout
+    if args.quiet:
+        sys.stdout = _Silent()
     try:
         with warnings.catch_warnings():
-            warnings.showwarning = show_warning
+            restore = configure(verbosity_level(args.quiet, args.verbose))
+            logger("commands").debug("musclemetab %s (Python %s)", " ".join(argv), sys.version.split()[0])
             from .options import check_exclusive, check_number_options
 
             check_number_options(args)  # every command's numeric options, by the table of the study file
@@ -314,4 +376,6 @@ def _main(argv: list[str] | None) -> int:
         # Ctrl-C during an import of a compiled module comes back as that import's error
         return interrupted_status()
     finally:
-        warnings.showwarning = previous
+        if "restore" in locals():
+            restore()
+        sys.stdout = stdout

@@ -44,7 +44,15 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..errors import InputFileError, OptionError
-from .options import BASAL_DEFAULTS, add_basal_arguments, check_basal_arguments, check_body, check_speed
+from .options import (
+    BASAL_DEFAULTS,
+    add_basal_arguments,
+    add_solve_flags_argument,
+    check_basal_arguments,
+    check_body,
+    check_speed,
+    warn_solve_flags,
+)
 
 __all__ = ["add_parser", "run", "SIDES"]
 
@@ -94,6 +102,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--strict", action="store_true",
                    help="a plausibility flag of the solve or of a whole-body rate (one warning line each, "
                    "docs/quality.md) fails the command (exit status 1; the files are still written)")
+    add_solve_flags_argument(p)
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.set_defaults(func=run)
 
@@ -146,13 +155,13 @@ def _metabolics_folder(root, side):
 def run(args) -> int:
     """Run ``musclemetab analyse`` (``args`` from :func:`add_parser`)."""
     import json
-    import sys
 
     import pandas as pd
 
     from ..analysis.unit import analyse, recorded_excluded_muscles, recorded_trial, write_analysis
     from ..errors import DataMismatchError
     from ..io import atomic_path
+    from ..messages import note
     from ..metabolics.per_muscle import PER_MUSCLE_FILE
     from ..metabolics.solution import read_metabolics_settings
     from ..redundancy.solution import SOLUTION_FILE, read_flags
@@ -210,8 +219,7 @@ def run(args) -> int:
                 speed_note = "estimated from the pelvis displacement over the cycle (IK)"
             except DataMismatchError as exc:
                 speed, speed_note = None, "not available"
-                print(f"musclemetab: note: no walking speed, no cost of transport ({exc}); give --speed",
-                      file=sys.stderr)
+                note(f"no walking speed, no cost of transport ({exc}); give --speed")
         result = analyse(sol_dir, model, ik, cycle, mass, height, models=models, side=side,
                          basal=args.basal, basal_rate_W_per_kg=args.basal_coefficient,
                          basal_exponent=args.basal_exponent, speed_m_per_s=speed)
@@ -277,17 +285,15 @@ def run(args) -> int:
 
 
 def _plausibility(args, solve_flags, table) -> None:
-    """Warn (one line each) of the solves' plausibility flags (``{folder: [Flag]}``) and of the
-    results rows' metabolic ones (each model's whole-body rate against its speed, its negative
-    group shares; the ``quality`` column of ``results.csv``); write them all to
-    ``OUT/plausibility.json``; with ``--strict`` fail."""
+    """Warn (one line each) of the results rows' metabolic plausibility flags (each model's
+    whole-body rate against its speed, its negative group shares; the ``quality`` column of
+    ``results.csv``) and, with ``--show-solve-flags``, of the solves' (``{folder: [Flag]}``);
+    write them all to ``OUT/plausibility.json``; with ``--strict`` fail."""
     from ..metabolics.plausibility import results_rows_flags, write_plausibility
     from ..quality import check_strict, warn_flags
 
-    flags = []
-    for folder, found in solve_flags.items():
-        warn_flags(found, folder)
-        flags += found
+    warn_solve_flags(args, solve_flags)
+    flags = [f for found in solve_flags.values() for f in found]
     rates = results_rows_flags(table)
     warn_flags(rates, str(args.out))
     write_plausibility(flags + rates, args.out)

@@ -30,7 +30,7 @@ def run(args) -> int:
     """Run ``musclemetab demo`` (``args`` from :func:`add_parser`)."""
     from ..study.demo import run_demo
 
-    result = run_demo(args.out, workers=args.workers, speeds=args.speeds, progress=not args.no_progress,
+    result = run_demo(args.out, workers=args.workers, speeds=args.speeds, progress=not (args.no_progress or args.quiet),
                       force=args.force, strict=args.strict, warm_start=bool(args.warm_start),
                       adjust=lambda study: apply_uncertainty_arguments(study, args))
     print_run(result, "demo")

@@ -19,10 +19,16 @@ the two legs (basal heat once); :func:`musclemetab.metabolics.solution.metabolic
 
 from __future__ import annotations
 
-import sys
 
-from .options import add_basal_arguments, check_basal_arguments, check_body, check_speed
-from ..messages import name_list
+from ..messages import name_list, note
+from .options import (
+    add_basal_arguments,
+    add_solve_flags_argument,
+    check_basal_arguments,
+    check_body,
+    check_speed,
+    warn_solve_flags,
+)
 
 __all__ = ["add_parser", "run"]
 
@@ -101,6 +107,10 @@ def add_parser(subparsers) -> None:
         "(default: F0,lMo,lTs,kT,kPE,s0,sM,vmax,alpha0) or a comma-separated list of them; effort workflows, one "
         "leg's solution folder; a few minutes for all parameters of 40 muscles",
     )
+    add_solve_flags_argument(p)
+    p.add_argument("--mat", metavar="FILE.mat",
+                   help="also write a MATLAB file: the solution's arrays (time x muscles) and parameters, the rates of "
+                   "each model per muscle and component, the whole-body and per-muscle tables (docs/matlab.md)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (may be the solution folder)")
     p.set_defaults(func=run)
 
@@ -120,6 +130,10 @@ def run(args) -> int:
 
     models = parse_models(args.models)
     check_output_folder(args.out)
+    if args.mat is not None:
+        from ..io.matlab import check_mat_path
+
+        check_mat_path(args.mat)
     check_speed(args.speed)
     check_body(args.mass, args.height)
     check_basal_arguments(args)
@@ -159,9 +173,9 @@ def run(args) -> int:
         muscle_properties=args.muscle_properties, strict=args.strict,
     )
     files = write_legs_metabolics(results, args.out)
+    _write_mat(args, results, folders)
     if args.height is None:
-        print("musclemetab: note: no --height: muscle masses from the model (F0 / specific tension x density x lMo)",
-              file=sys.stderr)
+        note("no --height: muscle masses from the model (F0 / specific tension x density x lMo)")
     if len(results) == 1:
         (side, result), = results.items()
         means = ", ".join(f"{m} {result.whole_body[m].mean_W_per_kg:.2f}" for m in result.models)
@@ -204,15 +218,18 @@ def _run_states(args, models) -> int:
         basal_rate_W_per_kg=args.basal_coefficient, basal_exponent=args.basal_exponent, speed_m_per_s=args.speed,
         muscle_properties=args.muscle_properties, strict=args.strict, muscle_parameters=args.muscle_parameters)
     if used:
-        print(f"musclemetab: note: muscle masses and slow-twitch ratios from the model's metabolic probes ({used}); "
-              "--muscle-parameters package for the package's tables", file=sys.stderr)
+        for r in results.values():
+            r.muscle_parameters = f"OpenSim metabolic probes of the model: {used}"
+        note(f"muscle masses and slow-twitch ratios from the model's metabolic probes ({used}); "
+             "--muscle-parameters package for the package's tables")
     files = write_legs_metabolics(results, args.out)
+    _write_mat(args, results)
     n_cl = int(read.clamped.sum()) if read.clamped is not None else 0
     if n_cl:
         act = read.states.states["activation"][read.clamped]
-        print(f"musclemetab: note: {n_cl} of {read.clamped.size} muscle-states of DeGrooteFregly2016 muscles have a "
-              f"fiber velocity off the force-velocity curve in OpenSim (activation there up to {act.max():.3g}); "
-              "taken at the curve's bound", file=sys.stderr)
+        note(f"{n_cl} of {read.clamped.size} muscle-states of DeGrooteFregly2016 muscles have a "
+             f"fiber velocity off the force-velocity curve in OpenSim (activation there up to {act.max():.3g}); "
+             "taken at the curve's bound")
     excitation = ("from " + str(args.controls)) if read.excitation_source == "controls" else "= activation"
     skipped = f", {len(read.skipped_muscles)} muscles without controls skipped" if read.skipped_muscles else ""
     first = next(iter(results.values()))
@@ -230,6 +247,18 @@ def _run_states(args, models) -> int:
           f"({', '.join(sorted({p.name for p in files.values()}))}); {whole} (W/kg, basal {args.basal}): {means}")
     _plausibility(args, {}, results)
     return 0
+
+
+def _write_mat(args, results, folders=None) -> None:
+    """``--mat FILE``: the solutions of ``folders`` (``{side: folder}``; none for ``--states``) and
+    their rates ``results`` as a MATLAB file (:mod:`musclemetab.io.matlab`)."""
+    if args.mat is None:
+        return
+    from ..io.matlab import results_struct, write_mat
+    from ..redundancy.solution import Solution
+
+    solutions = {side: Solution.load(folder, require_success=False) for side, folder in (folders or {}).items()}
+    note(f"MATLAB file {write_mat(args.mat, results_struct(solutions or None, results))}")
 
 
 def _sensitivity_parameters(value, folders) -> list | None:
@@ -278,17 +307,16 @@ def _write_sensitivity(args, folder, names, models) -> None:
 
 
 def _plausibility(args, folders, results) -> None:
-    """Warn (one line each) of the solves' plausibility flags and of whole-body rates outside the
-    band of walking at ``--speed``; write them to ``OUT/plausibility.json``; with ``--strict`` fail."""
+    """Warn (one line each) of whole-body rates outside the band of walking at ``--speed`` (and of
+    the solves' plausibility flags with ``--show-solve-flags``); write them all to
+    ``OUT/plausibility.json``; with ``--strict`` fail."""
     from ..metabolics.plausibility import legs_rate_flags, write_plausibility
     from ..quality import check_strict, warn_flags
     from ..redundancy.solution import read_flags
 
-    flags = []
-    for folder in folders.values():
-        solve = read_flags(folder)
-        warn_flags(solve, str(folder))
-        flags += solve
+    solve = {folder: read_flags(folder) for folder in folders.values()}
+    warn_solve_flags(args, solve)
+    flags = [f for found in solve.values() for f in found]
     rates = legs_rate_flags(results, args.speed)
     warn_flags(rates, str(args.out))
     write_plausibility(flags + rates, args.out)
@@ -299,8 +327,5 @@ def _plausibility(args, folders, results) -> None:
 def _note(differences: list[str], model_path) -> None:
     """Say (on stderr) when the model's parameters differ from those the solve recorded."""
     if differences:
-        print(
-            f"musclemetab: note: {model_path} differs from the solution's recorded parameters "
-            f"({'; '.join(differences[:3])}{' ...' if len(differences) > 3 else ''}); using the model's values",
-            file=sys.stderr,
-        )
+        note(f"{model_path} differs from the solution's recorded parameters "
+             f"({'; '.join(differences[:3])}{' ...' if len(differences) > 3 else ''}); using the model's values")

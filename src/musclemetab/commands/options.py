@@ -7,7 +7,8 @@ from ..errors import OptionError
 
 __all__ = ["BASAL_DEFAULTS", "add_basal_arguments", "check_basal_arguments", "check_speed", "check_body",
            "add_study_arguments", "number_option", "check_number_options", "EXCLUSIVE_OPTIONS", "check_exclusive",
-           "add_emg_scale_bounds_argument", "emg_scale_bounds", "add_stop_argument"]
+           "add_emg_scale_bounds_argument", "emg_scale_bounds", "add_stop_argument", "add_solve_flags_argument",
+           "warn_solve_flags"]
 
 #: the basal options' defaults: the paper's 1.2 W per kg of body mass
 BASAL_DEFAULTS = {"basal": "body", "basal_coefficient": 1.2, "basal_exponent": 1.0}
@@ -163,3 +164,29 @@ def add_stop_argument(parser) -> None:
         help="where the solver stops: optimum (default; the optimum of the problem, IPOPT tolerance 1e-8 with the "
         "adaptive barrier parameter) or authors (the study's settings, tolerance 1e-6 with the monotone barrier, "
         "whose rates lie 4-18 %% above the optimum's; to reproduce the paper's numbers; docs/solver.md)")
+
+
+def add_solve_flags_argument(parser) -> None:
+    """``--show-solve-flags`` of the commands that read a solve's folder (``metabolics``, ``analyse``)."""
+    parser.add_argument("--show-solve-flags", action="store_true",
+                        help="warn again of the plausibility flags the solve recorded (default: the solve warned of "
+                        "them; one note counts them, and OUT/plausibility.json lists them with the command's own; "
+                        "--strict warns of them, its reasons to fail)")
+
+
+def warn_solve_flags(args, solve_flags: dict) -> None:
+    """The plausibility flags of the solve folders (``{folder: [Flag]}``): one warning each with
+    ``--show-solve-flags`` or ``--strict`` (they are then the reasons of the failure), else one
+    note counting them (``solve`` warned of each already)."""
+    from ..messages import note
+    from ..quality import warn_flags
+
+    if getattr(args, "show_solve_flags", False) or getattr(args, "strict", False):
+        for folder, flags in solve_flags.items():
+            warn_flags(flags, str(folder))
+        return
+    n = sum(len(flags) for flags in solve_flags.values())
+    if n:
+        where = ", ".join(str(folder) for folder, flags in solve_flags.items() if flags)
+        note(f"the solve's {n} plausibility flag{'s' if n > 1 else ''} ({where}: summary.json) not repeated; "
+             "--show-solve-flags repeats them")

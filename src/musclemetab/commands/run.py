@@ -125,7 +125,7 @@ def run(args) -> int:
         study = warm_start_study(study, args.warm_start)
     study = apply_uncertainty_arguments(study, args)
     result = run_study(study, workers=args.workers, scheduler=args.scheduler, force=args.force,
-                       progress=not args.no_progress)
+                       progress=not (args.no_progress or args.quiet))
     if args.report and not result.interrupted:
         from ..report import write_report
 

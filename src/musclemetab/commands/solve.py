@@ -795,12 +795,13 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
 
 def progress_lines(args):
     """IPOPT's progress lines on stderr while the block runs (:class:`~musclemetab.redundancy.ipopt.solve_progress`),
-    unless ``--no-progress`` (a context manager)."""
+    unless ``--no-progress`` or ``-q`` (a context manager)."""
     import contextlib
 
     from ..redundancy.ipopt import solve_progress
 
-    return contextlib.nullcontext() if getattr(args, "no_progress", False) else solve_progress()
+    off = getattr(args, "no_progress", False) or getattr(args, "quiet", False)
+    return contextlib.nullcontext() if off else solve_progress()
 
 
 def run_with_progress(args) -> int:

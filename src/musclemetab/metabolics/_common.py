@@ -164,6 +164,16 @@ class MetabolicRates:
     total: np.ndarray
     extras: Mapping[str, np.ndarray] = field(default_factory=dict)
 
+    def __repr__(self) -> str:
+        """One line per component: its mean and range (W) over every muscle and sample, not the arrays."""
+        lines = [f"MetabolicRates {self.model}: components of shape {self.shape} (W; mean, min to max)"]
+        for name, arr in self.components().items():
+            a = np.asarray(arr, dtype=float)
+            lines.append(f"  {name:<24} {a.mean():10.4g} {a.min():10.4g} to {a.max():.4g}" if a.size else f"  {name}: empty")
+        return "\n".join(lines)
+
+    __str__ = __repr__
+
     @property
     def heat(self) -> np.ndarray:
         """Total heat rate (W): activation/maintenance + shortening/lengthening + basal."""

@@ -65,6 +65,7 @@ __all__ = [
     "trim_slice",
     "metabolics_from_solution",
     "metabolics_from_legs",
+    "legs_table",
     "write_metabolics",
     "write_legs_metabolics",
     "add_legs",
@@ -342,6 +343,35 @@ class SolutionMetabolics:
     #: where the masses and slow-twitch fractions came from when not the package's own tables
     #: (e.g. the model's OpenSim metabolic probes), recorded in the header of ``metabolics.sto``
     muscle_parameters: str = ""
+
+    def __repr__(self) -> str:
+        """A summary of a few lines (models x muscles x nodes, the leg, the body, the basal rule and
+        each model's whole-body rate), not the arrays."""
+        t = self.time_s
+        span = f"{t[0]:.3f}-{t[-1]:.3f} s" if t.size else "no nodes"
+        height = f", {self.height_m:g} m" if self.height_m is not None else ""
+        lines = [f"SolutionMetabolics: {len(self.models)} models x {len(self.muscles)} muscles x {t.size} nodes "
+                 f"({span}){f', side {self.side}' if self.side else ''}; body {self.body_mass_kg:g} kg{height}; "
+                 f"muscle masses by {self.muscle_mass_rule}"]
+        legs = {wb.legs for wb in self.whole_body.values()}
+        if legs == {2}:
+            lines.append(f"  whole body (W/kg; the leg doubled, basal {self.basal_rule}): model, rate, without basal heat")
+            lines += [f"    {m:<5} {self.whole_body[m].mean_W_per_kg:7.3f} {self.whole_body[m].mean_W_per_kg_no_basal:7.3f}"
+                      for m in self.models]
+        else:
+            lines.append("  the leg's muscles (W, no basal heat; a leg to add to the other):")
+            lines += [f"    {m:<5} {self.whole_body[m].leg_no_basal_mean_W:8.2f}" for m in self.models]
+        lines.append("  rates[model] (muscles x nodes, W), whole_body[model]; whole_body_table(), to_long(), to_mat(path)")
+        return "\n".join(lines)
+
+    __str__ = __repr__
+
+    def to_mat(self, path: str | os.PathLike) -> Path:
+        """Write the rates to the MATLAB file ``path``: the ``metabolics`` struct of
+        :mod:`musclemetab.io.matlab` at the top (layout: ``docs/matlab.md``)."""
+        from ..io.matlab import metabolics_struct_of, write_mat
+
+        return write_mat(path, metabolics_struct_of(self))
 
     @property
     def muscle_mass_rule(self) -> str:
@@ -770,32 +800,39 @@ def write_legs_metabolics(results: Mapping[str, SolutionMetabolics], out_dir: st
     ``leg_muscles.csv``, no whole-body file) and, in ``out_dir/whole_body.csv``, one row per
     model of the legs added (:func:`add_legs`): ``model``, ``legs`` (``r+l``),
     ``whole_body_W_per_kg``, ``whole_body_no_basal_W_per_kg``, ``basal_rule``, ``basal_W_per_kg``,
-    ``muscle_mass_rule`` and ``<side>_leg_muscles_W`` (each leg, no basal). Returns the files written (by name)."""
-    import pandas as pd
-
+    ``muscle_mass_rule`` and ``<side>_leg_muscles_W`` (each leg, no basal; :func:`legs_table`).
+    Returns the files written (by name)."""
     from ..io import atomic_path
 
     out_dir = Path(out_dir)
     if len(results) == 1:
         (result,) = results.values()
         return write_metabolics(result, out_dir, cycle=cycle)
-    total = add_legs(results)
     files = {}
     for side, result in results.items():
         files.update({f"{side}/{k}": v for k, v in write_metabolics(result, out_dir / side, cycle=cycle).items()})
+    with atomic_path(out_dir / WHOLE_BODY_CSV, mark=True) as tmp:
+        legs_table(results).to_csv(tmp, index=False, float_format="%.10g")
+    files["whole_body_csv"] = out_dir / WHOLE_BODY_CSV
+    return files
+
+
+def legs_table(results: Mapping[str, SolutionMetabolics]):
+    """The whole-body table of two legs evaluated apart (:func:`metabolics_from_legs`), one row
+    per model of the legs added (:func:`add_legs`): ``model``, ``legs`` (``r+l``),
+    ``whole_body_W_per_kg``, ``whole_body_no_basal_W_per_kg``, ``basal_rule``, ``basal_W_per_kg``,
+    ``muscle_mass_rule`` and ``<side>_leg_muscles_W`` (each leg, no basal)."""
+    import pandas as pd
+
     first = next(iter(results.values()))
-    table = pd.DataFrame([{
+    return pd.DataFrame([{
         "model": m, "legs": "+".join(results), "whole_body_W_per_kg": v,
         "whole_body_no_basal_W_per_kg": sum(r.whole_body[m].leg_no_basal_mean_W for r in results.values())
         / first.body_mass_kg,
         "basal_rule": first.basal_rule, "basal_W_per_kg": first.whole_body[m].basal_W_per_kg,
         "muscle_mass_rule": first.muscle_mass_rule,
         **{f"{s}_leg_muscles_W": r.whole_body[m].leg_no_basal_mean_W for s, r in results.items()},
-    } for m, v in total.items()])
-    with atomic_path(out_dir / WHOLE_BODY_CSV, mark=True) as tmp:
-        table.to_csv(tmp, index=False, float_format="%.10g")
-    files["whole_body_csv"] = out_dir / WHOLE_BODY_CSV
-    return files
+    } for m, v in add_legs(results).items()])
 
 
 def parameter_differences(states: SolutionStates, muscle_parameters, rtol: float = 1e-6) -> list[str]:

@@ -87,6 +87,16 @@ class WholeBodyRate:
     #: cycle average of the simulated leg's summed muscle rates without any basal heat (W)
     leg_no_basal_mean_W: float = float("nan")
 
+    def __repr__(self) -> str:
+        """A summary of two lines (the cycle averages, the basal rule), not the arrays."""
+        legs = "both legs" if self.legs == 2 else f"{self.legs} leg{'s' if self.legs != 1 else ''}"
+        return (f"WholeBodyRate: {self.mean_W_per_kg:.4g} W/kg ({self.mean_W_per_kg_no_basal:.4g} without basal heat) "
+                f"over {self.duration_s:.4g} s, {len(self.time_s)} samples\n"
+                f"  {legs}, basal {self.basal_rule} ({self.basal_W_per_kg:g} W/kg), body {self.body_mass_kg:g} kg; "
+                f"the simulated leg's muscles {self.one_leg_mean_W:.4g} W")
+
+    __str__ = __repr__
+
     def cost_of_transport_J_per_kg_per_m(self, speed_m_per_s: float) -> float:
         """Gross cost of transport (J/kg/m) at the walking speed (basal heat of the rule included)."""
         return cost_of_transport_J_per_kg_per_m(self.mean_W_per_kg, speed_m_per_s)

@@ -476,6 +476,11 @@ def solve_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
                    function_time_s={k[len("t_wall_"):]: float(v) for k, v in stats.items()
                                     if k.startswith("t_wall_nlp") and v},
                    final_barrier_parameter=_final_barrier_parameter(stats))
+    from ..messages import logger
+
+    logger("redundancy").debug("IPOPT: %s in %d iterations, %d variables, build %.2f s, solve %.2f s, largest "
+                               "constraint violation %.1e", outcome["status"], outcome["iterations"],
+                               outcome["n_variables"], build_time, solve_time, max_viol)
     ocps, devs = [], []
     lmo = dict(zip(params.names, params.optimal_fiber_length_m))
     for i, t in enumerate(trials):

@@ -19,7 +19,8 @@ _PROGRESS: dict = {"stream": None, "interval_s": None, "label": ""}
 class solve_progress:
     """While this context is active, every IPOPT solve of this process writes a progress line
     at most every ``interval_s`` seconds (default :data:`PROGRESS_INTERVAL_S`) to ``stream``
-    (default standard error)::
+    (default: a record of level INFO of the logger ``musclemetab.progress``, which the command
+    line prints on standard error unless ``-q``)::
 
         musclemetab: solving: iteration 40, objective 2.7012e-01, constraint violation 3.1e-05, 21 s
 
@@ -61,11 +62,9 @@ class ProgressLines:
     ``solving`` (e.g. `` side r``)."""
 
     def __init__(self, lbg, ubg, interval_s: float, stream=None, clock=None, label: str = ""):
-        import sys
-
         self.lbg, self.ubg = np.asarray(lbg, dtype=float).reshape(-1), np.asarray(ubg, dtype=float).reshape(-1)
         self.interval_s = float(interval_s)
-        self.stream = stream if stream is not None else sys.stderr
+        self.stream = stream  # None: the package's logger ``musclemetab.progress``, level INFO
         self.clock = clock or _time.perf_counter
         self.t0 = self.last = self.clock()
         self.count = 0
@@ -83,10 +82,17 @@ class ProgressLines:
         viol = float(np.max(np.maximum(self.lbg - g, 0.0) + np.maximum(g - self.ubg, 0.0))) if g.size else 0.0
         # IPOPT calls back once for the starting point (iteration 0); a stream that cannot be
         # written (closed, full) loses the line, never the solve
+        text = (f"solving{self.label}: iteration {self.count - 1}, objective {float(f):.4e}, "
+                f"constraint violation {viol:.1e}, {now - self.t0:.0f} s")
+        if self.stream is None:
+            from ..messages import logger
+
+            logger("progress").info(text)
+            self.lines += 1
+            return
         from ..messages import write_quietly
 
-        self.lines += write_quietly(self.stream, f"musclemetab: solving{self.label}: iteration {self.count - 1}, "
-                                    f"objective {float(f):.4e}, constraint violation {viol:.1e}, {now - self.t0:.0f} s\n")
+        self.lines += write_quietly(self.stream, f"musclemetab: {text}\n")
 
 
 def _progress_callback(n_x: int, n_g: int, lbg, ubg):

@@ -184,6 +184,39 @@ class _OutcomeRecord(_FileRecord):
     #: final barrier parameter, the share of each model's rate carried by muscles that are off
     convergence: dict | None = _ABSENT
 
+    def outcome_lines(self) -> list[str]:
+        """The lines of a printed summary: IPOPT's outcome (status, iterations, objective, time),
+        where it stopped and how converged the rates are (:mod:`~.convergence`), and (a solve's
+        record) the plausibility flags by code."""
+        from .convergence import UNCONVERGED_RATE_SHARE
+
+        run = str(self.status) + (f" in {int(self.iterations)} iterations" if self.iterations is not None else "")
+        if self.objective is not None:
+            run += f", objective {float(self.objective):.6g}"
+        if self.solve_time_s is not None:
+            run += f", solve {float(self.solve_time_s):.1f} s"
+        conv = self.convergence or {}
+        options = getattr(self, "solver_options", None) or {}
+        where, tol = conv.get("stop", options.get("stop", "?")), conv.get("tolerance", options.get("tol"))
+        stop = f"stop {where}" + (f" (tolerance {tol:g})" if tol is not None else "")
+        worst = conv.get("max_rate_residue")
+        if worst is None:
+            rates = "rates' convergence not checked"
+        else:
+            state = "converged" if worst <= UNCONVERGED_RATE_SHARE else "NOT converged"
+            rates = f"rates {state} (off muscles carry {100 * worst:.2g} % of a leg's rate)"
+        if not hasattr(self, "plausibility"):  # a problem of several trials: each solution holds its own
+            return [run, f"{stop}; {rates}"]
+        flags = self.plausibility
+        if flags is None:
+            quality = "plausibility not checked"
+        elif not flags:
+            quality = "plausibility ok"
+        else:
+            codes = list(dict.fromkeys(str(f.get("code", "?")) for f in flags))
+            quality = f"{len(flags)} plausibility flag{'s' if len(flags) > 1 else ''} ({', '.join(codes)})"
+        return [run, f"{stop}; {rates}", quality]
+
 
 @dataclass(frozen=True)
 class SolveRecord(_OutcomeRecord):

@@ -77,6 +77,51 @@ class Result:
     document: dict | None = field(default=None, repr=False)
     trials: tuple = field(default=(), repr=False)
 
+    #: trials a printed summary lists one by one
+    TRIALS_SHOWN = 8
+
+    def __repr__(self) -> str:
+        """A summary of at most about 20 lines (workflow, trials with their muscles x nodes, IPOPT's
+        outcome, the stop and the rates' convergence, the estimated factors), not the arrays."""
+        from ..messages import name_list
+
+        rec = self.record
+        lines = [f"Result{f' ({rec.workflow})' if rec.workflow else ''}: {len(self.solutions)} trial"
+                 f"{'s' if len(self.solutions) != 1 else ''}, {len(self.parameters.names)} muscles",
+                 *(f"  {line}" for line in rec.outcome_lines())]
+        for kind, values in self.factors.items():
+            if values:
+                shown = name_list([f"{m} x{v:.3g}" for m, v in values.items()], 4)
+                lines.append(f"  estimated {kind} ({len(values)}): {shown}")
+        for label, sol in list(self.solutions.items())[:self.TRIALS_SHOWN]:
+            t = sol.time_s
+            flags = sol.record.plausibility
+            quality = "" if flags is None else f", {len(flags)} plausibility flag{'s' if len(flags) != 1 else ''}"
+            lines.append(f"  trial {label}: {len(sol.muscles)} muscles x {t.size} nodes ({t[0]:.3f}-{t[-1]:.3f} s)"
+                         f"{quality}")
+        if len(self.solutions) > self.TRIALS_SHOWN:
+            lines.append(f"  ... and {len(self.solutions) - self.TRIALS_SHOWN} more trials")
+        lines.append("  solutions[label] (Solution), parameters, factors; write(folder), to_mat(path)")
+        return "\n".join(lines)
+
+    __str__ = __repr__
+
+    def to_mat(self, path) -> "Path":
+        """Write the result to the MATLAB file ``path`` (:mod:`musclemetab.io.matlab`; the
+        layout: ``docs/matlab.md``): ``trials`` (the labels), one solution struct per trial
+        (field: the label as a MATLAB name), ``estimated`` (per kind of factor: ``muscles`` and
+        ``factor``) and the problem's ``solve`` outcome."""
+        from ..io.matlab import names_cell, number_column, field_name, solution_struct, write_mat
+
+        rec = self.record
+        struct = {"trials": names_cell(self.solutions),
+                  **{field_name(label): solution_struct(sol) for label, sol in self.solutions.items()},
+                  "estimated": {field_name(kind): {"muscles": names_cell(values), "factor": number_column(list(values.values()))}
+                                for kind, values in self.factors.items() if values},
+                  "solve": {"workflow": rec.workflow or "", "status": str(rec.status), "success": bool(rec.success),
+                            "objective": self.objective, "iterations": self.iterations}}
+        return write_mat(path, struct)
+
     @property
     def labels(self) -> tuple[str, ...]:
         return tuple(self.solutions)

@@ -194,6 +194,33 @@ class Solution:
     parameters: MuscleTendonParameters
     record: SolveRecord = field(default_factory=SolveRecord)
 
+    #: the arrays of a solution, time-first ``(nodes, muscles)`` (``reserve_Nm``: ``(nodes, DOFs)``)
+    ARRAYS = ("excitation", "activation", "lm_norm", "fiber_velocity_lmo_per_s", "tendon_force_N",
+              "active_fiber_force_N", "passive_fiber_force_N", "active_force_length_multiplier",
+              "force_velocity_multiplier", "reserve_Nm")
+
+    def __repr__(self) -> str:
+        """A summary of a few lines (workflow, leg, muscles x nodes, IPOPT's outcome, the stop and
+        the rates' convergence, the plausibility flags), not the arrays."""
+        import textwrap
+
+        from ..messages import name_list
+
+        rec = self.record
+        where = ", ".join(x for x in (rec.workflow_name, f"side {rec.side}" if rec.side else "") if x)
+        t = self.time_s
+        span = f"{t[0]:.3f}-{t[-1]:.3f} s" if t.size else "no nodes"
+        lines = [f"Solution{f' ({where})' if where else ''}: {len(self.muscles)} muscles x {t.size} nodes "
+                 f"({span}, {self.n_intervals} intervals), {len(self.dofs)} DOFs",
+                 *(f"  {line}" for line in rec.outcome_lines()),
+                 f"  muscles: {name_list(self.muscles, 6)}",
+                 f"  DOFs: {name_list(self.dofs, 6)}",
+                 *textwrap.wrap(f"arrays (nodes x muscles): {', '.join(self.ARRAYS)}; write(folder), to_dataframe(), "
+                                "to_mat(path)", 100, initial_indent="  ", subsequent_indent="    ")]
+        return "\n".join(lines)
+
+    __str__ = __repr__
+
     # ------------------------------------------------------------------ properties
     @property
     def summary(self) -> dict:
@@ -245,6 +272,14 @@ class Solution:
             ) from None
 
     # ------------------------------------------------------------------ files
+    def to_mat(self, path: str | os.PathLike, metabolics=None) -> Path:
+        """Write the solution (and, given, its :class:`~musclemetab.metabolics.solution.SolutionMetabolics`)
+        to the MATLAB file ``path`` (:mod:`musclemetab.io.matlab`; the layout: ``docs/matlab.md``)."""
+        from ..io.matlab import results_struct, write_mat
+
+        side = self.record.side or ""
+        return write_mat(path, results_struct({side: self}, None if metabolics is None else {side: metabolics}))
+
     def to_dataframe(self):
         """The ``solution.sto`` table as a time-indexed pandas DataFrame."""
         return self._table().to_dataframe()

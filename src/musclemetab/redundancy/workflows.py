@@ -1,12 +1,15 @@
 """The effort-based workflows of the study and their muscle parameters.
 
-==============  =====================================  ===================================workflow        passive force-length (kPE, s0, sM)     tendon stiffness kT
-==============  =====================================  ===================================``effort-gen``  generic: 4, 1, 0.6 for every muscle    35 for every muscle
+==============  =====================================  ===================================
+workflow        passive force-length (kPE, s0, sM)     tendon stiffness kT
+==============  =====================================  ===================================
+``effort-gen``  generic: 4, 1, 0.6 for every muscle    35 for every muscle
 ``effort-cal``  calibrated                             35 for every muscle
 ``effort-ten``  calibrated                             personalised for the muscles of the Achilles
                                                        (triceps surae) and patellar (vasti)
                                                        tendons, 35 for the others
 ==============  =====================================  ===================================
+
 EFFORT-TEN's personalised ``kT``, in this order of precedence (``summary.json`` records the
 source of every value, ``tendon_stiffness_sources``, and their kinds,
 ``tendon_stiffness_source``):

@@ -1,0 +1,49 @@
+"""``musclemetab export``: a solution folder (and its metabolic rates) as a MATLAB ``.mat`` file.
+
+    musclemetab export --mat OUT.mat FOLDER [--metabolics DIR]
+
+``FOLDER`` is a solution folder (``solution.sto``, ``summary.json``; the demo's and a study's
+unit folders, which hold the metabolic rates beside it) or the parent of ``r/`` and ``l/``
+written by ``solve --side both``. The layout of the file is in ``docs/matlab.md``
+(:mod:`musclemetab.io.matlab`).
+"""
+
+from __future__ import annotations
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(subparsers) -> None:
+    """Add the ``export`` subcommand to an ``argparse`` subparsers object."""
+    p = subparsers.add_parser(
+        "export",
+        help="a solution folder and its metabolic rates as a MATLAB .mat file",
+        description=(
+            "Write a solution folder as a MATLAB .mat file (scipy.io.savemat, version 5): time, muscle and DOF "
+            "names, activations, excitations, forces, fiber lengths and velocities (time x muscles), the muscle "
+            "parameters and the solve's outcome, and, where the folder (or --metabolics) holds them, the "
+            "per-muscle rates of each energy model (time x muscles, per component) with the whole-body and "
+            "per-muscle tables. Two legs (the parent of r/ and l/) are the fields r and l. Layout: docs/matlab.md."
+        ),
+    )
+    p.add_argument("folder", metavar="FOLDER",
+                   help="solution folder (solution.sto, summary.json), or the parent of r/ and l/ (solve --side both)")
+    p.add_argument("--metabolics", metavar="DIR",
+                   help="folder written by musclemetab metabolics for FOLDER (default: FOLDER itself, where a study "
+                   "or the demo writes them)")
+    p.add_argument("--mat", required=True, metavar="OUT.mat", help="the MATLAB file to write")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    """Run ``musclemetab export`` (``args`` from :func:`add_parser`)."""
+    from ..io.matlab import check_mat_path, folder_struct, write_mat
+
+    check_mat_path(args.mat)
+    struct = folder_struct(args.folder, args.metabolics)
+    path = write_mat(args.mat, struct)
+    legs = [s for s in ("r", "l") if s in struct] or ["one leg"]
+    rates = [leg for leg in ([struct] if "time_s" in struct else [struct[s] for s in ("r", "l") if s in struct])
+             if "metabolics" in leg]
+    print(f"export: {args.folder} ({', '.join(legs)}; {'with' if rates else 'without'} metabolic rates) -> {path}")
+    return 0
