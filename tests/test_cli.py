@@ -71,7 +71,7 @@ def test_an_unknown_option_names_the_closest_known_one_and_the_commands_help(arg
     (["solv", "--model", "m.osim"], "unknown command 'solv' (did you mean solve?); see 'musclemetab solve --help'"),
     (["-q", "metabolcs", "--out", "o"],
      "unknown command 'metabolcs' (did you mean metabolics?); see 'musclemetab metabolics --help'"),
-    (["frobnicate"], "unknown command 'frobnicate' (the commands: c3d, prepare, geometry, solve, estimate, metabolics, "
+    (["frobnicate"], "unknown command 'frobnicate' (the commands: c3d, emg, prepare, geometry, solve, estimate, metabolics, "
      "analyse, export, calibrate-passive, run, demo, report); see 'musclemetab --help'"),
 ])
 def test_a_misspelt_command_names_the_closest_and_its_help(argv, line, capsys):

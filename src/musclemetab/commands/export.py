@@ -10,7 +10,9 @@ written by ``solve --side both``. The layout of the file is in ``docs/matlab.md`
 
 from __future__ import annotations
 
-__all__ = ["add_parser", "run"]
+from pathlib import Path
+
+__all__ = ["add_parser", "run", "folder_struct"]
 
 
 def add_parser(subparsers) -> None:
@@ -37,7 +39,7 @@ def add_parser(subparsers) -> None:
 
 def run(args) -> int:
     """Run ``musclemetab export`` (``args`` from :func:`add_parser`)."""
-    from ..io.matlab import check_mat_path, folder_struct, write_mat
+    from ..io.matlab import check_mat_path, write_mat
 
     check_mat_path(args.mat)
     struct = folder_struct(args.folder, args.metabolics)
@@ -47,3 +49,29 @@ def run(args) -> int:
              if "metabolics" in leg]
     print(f"export: {args.folder} ({', '.join(legs)}; {'with' if rates else 'without'} metabolic rates) -> {path}")
     return 0
+
+
+def folder_struct(solution_folder, metabolics_folder=None) -> dict:
+    """:func:`legs_struct` of a solution folder (``solution.sto``, ``summary.json``) or of the
+    parent of ``r/`` and ``l/`` written by ``solve --side both``, with, when the folder (or
+    ``metabolics_folder``) holds them, the metabolic rates ``metabolics`` wrote
+    (``metabolics.sto``, ``whole_body.csv`` or ``leg_muscles.csv``, ``per_muscle.csv``; the
+    legs' ``whole_body.csv`` of the parent), read from those files."""
+    import pandas as pd
+
+    from ..metabolics.solution import WHOLE_BODY_CSV, solution_folders
+    from ..io.matlab import legs_struct, solution_struct
+    from ..metabolics.matlab import folder_metabolics
+    from ..redundancy.solution import Solution
+
+    folders = solution_folders(solution_folder)
+    root = Path(metabolics_folder if metabolics_folder is not None else solution_folder)
+    legs = {}
+    for side, folder in folders.items():
+        legs[side] = solution_struct(Solution.load(folder, require_success=False))
+        where = Path(folder) if metabolics_folder is None else (root / side if len(folders) > 1 else root)
+        metabolics = folder_metabolics(where)
+        if metabolics is not None:
+            legs[side]["metabolics"] = metabolics
+    whole = root / WHOLE_BODY_CSV
+    return legs_struct(legs, pd.read_csv(whole) if len(folders) > 1 and whole.is_file() else None)

@@ -254,7 +254,8 @@ def _write_mat(args, results, folders=None) -> None:
     their rates ``results`` as a MATLAB file (:mod:`musclemetab.io.matlab`)."""
     if args.mat is None:
         return
-    from ..io.matlab import results_struct, write_mat
+    from ..io.matlab import write_mat
+    from ..metabolics.matlab import results_struct
     from ..redundancy.solution import Solution
 
     solutions = {side: Solution.load(folder, require_success=False) for side, folder in (folders or {}).items()}

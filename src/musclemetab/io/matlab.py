@@ -11,7 +11,8 @@ the package's files (``solution.sto``, ``metabolics.sto``, ``whole_body.csv``,
 The same struct comes from objects (:meth:`~musclemetab.redundancy.solution.Solution.to_mat`,
 :meth:`~musclemetab.redundancy.result.Result.to_mat`,
 :meth:`~musclemetab.metabolics.solution.SolutionMetabolics.to_mat`, ``metabolics --mat``) and
-from folders the package wrote (:func:`folder_struct`, ``musclemetab export --mat``).
+from folders the package wrote (:func:`musclemetab.commands.export.folder_struct`, ``musclemetab export --mat``);
+the structs of metabolic rates are built in :mod:`musclemetab.metabolics.matlab`.
 """
 
 from __future__ import annotations
@@ -22,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["MAT_FORMAT", "solution_struct", "metabolics_struct", "metabolics_struct_of", "table_struct",
-           "legs_struct", "results_struct", "folder_struct", "field_name", "names_cell", "number_column", "check_mat_path",
+__all__ = ["MAT_FORMAT", "solution_struct", "metabolics_struct", "table_struct",
+           "legs_struct", "field_name", "names_cell", "number_column", "check_mat_path",
            "write_mat"]
 
 #: the value of every file's ``format`` field (the layout's version follows it)
@@ -147,32 +148,6 @@ def metabolics_struct(time_s, columns: dict, tables: dict | None = None) -> dict
     return out
 
 
-def metabolics_struct_of(result, cycle=None) -> dict:
-    """:func:`metabolics_struct` of a :class:`~musclemetab.metabolics.solution.SolutionMetabolics`
-    (its columns and tables as :func:`~musclemetab.metabolics.solution.write_metabolics` writes them)."""
-    from ..metabolics.per_muscle import per_muscle_table
-
-    one_leg = any(wb.legs != 2 for wb in result.whole_body.values())
-    whole = {"leg_muscles": result.leg_table()} if one_leg else {"whole_body": result.whole_body_table()}
-    return metabolics_struct(result.time_s, result.columns(), {**whole, "per_muscle": per_muscle_table(result, cycle)})
-
-
-def _folder_metabolics(folder: Path) -> dict | None:
-    """:func:`metabolics_struct` of the files ``metabolics`` wrote into ``folder`` (``None``: none)."""
-    import pandas as pd
-
-    from ..metabolics.per_muscle import PER_MUSCLE_FILE
-    from ..metabolics.solution import LEG_CSV, METABOLICS_STO, WHOLE_BODY_CSV
-    from .storage import read_table
-
-    if not (folder / METABOLICS_STO).is_file():
-        return None
-    table = read_table(folder / METABOLICS_STO)
-    files = {"whole_body": WHOLE_BODY_CSV, "leg_muscles": LEG_CSV, "per_muscle": PER_MUSCLE_FILE}
-    tables = {name: pd.read_csv(folder / file) for name, file in files.items() if (folder / file).is_file()}
-    return metabolics_struct(table.index, {c: table[c] for c in table.columns}, tables)
-
-
 def legs_struct(legs: dict, whole_body=None) -> dict:
     """The file's struct of the legs' structs ``{side: struct}``: one leg's fields at the top;
     two legs (``solve --side both``) as fields ``r`` and ``l``, ``legs`` naming them, and
@@ -183,43 +158,6 @@ def legs_struct(legs: dict, whole_body=None) -> dict:
     if whole_body is not None:
         out["whole_body"] = table_struct(whole_body)
     return out
-
-
-def results_struct(solutions: dict | None, metabolics: dict | None = None) -> dict:
-    """:func:`legs_struct` of ``{side: Solution}`` and, optionally, their metabolic rates
-    ``{side: SolutionMetabolics}`` (what :func:`~musclemetab.metabolics.solution.metabolics_from_legs`
-    returns); without solutions (the rates of an OpenSim motion), each leg's struct holds its
-    ``metabolics`` alone."""
-    from ..metabolics.solution import legs_table
-
-    legs = {side: solution_struct(solution) for side, solution in (solutions or {}).items()}
-    for side, result in (metabolics or {}).items():
-        legs.setdefault(side, {})["metabolics"] = metabolics_struct_of(result)
-    return legs_struct(legs, legs_table(metabolics) if metabolics is not None and len(metabolics) > 1 else None)
-
-
-def folder_struct(solution_folder, metabolics_folder=None) -> dict:
-    """:func:`legs_struct` of a solution folder (``solution.sto``, ``summary.json``) or of the
-    parent of ``r/`` and ``l/`` written by ``solve --side both``, with, when the folder (or
-    ``metabolics_folder``) holds them, the metabolic rates ``metabolics`` wrote
-    (``metabolics.sto``, ``whole_body.csv`` or ``leg_muscles.csv``, ``per_muscle.csv``; the
-    legs' ``whole_body.csv`` of the parent), read from those files."""
-    import pandas as pd
-
-    from ..metabolics.solution import WHOLE_BODY_CSV, solution_folders
-    from ..redundancy.solution import Solution
-
-    folders = solution_folders(solution_folder)
-    root = Path(metabolics_folder if metabolics_folder is not None else solution_folder)
-    legs = {}
-    for side, folder in folders.items():
-        legs[side] = solution_struct(Solution.load(folder, require_success=False))
-        where = Path(folder) if metabolics_folder is None else (root / side if len(folders) > 1 else root)
-        metabolics = _folder_metabolics(where)
-        if metabolics is not None:
-            legs[side]["metabolics"] = metabolics
-    whole = root / WHOLE_BODY_CSV
-    return legs_struct(legs, pd.read_csv(whole) if len(folders) > 1 and whole.is_file() else None)
 
 
 def check_mat_path(path: str | os.PathLike, option: str = "--mat") -> Path:

@@ -369,7 +369,8 @@ class SolutionMetabolics:
     def to_mat(self, path: str | os.PathLike) -> Path:
         """Write the rates to the MATLAB file ``path``: the ``metabolics`` struct of
         :mod:`musclemetab.io.matlab` at the top (layout: ``docs/matlab.md``)."""
-        from ..io.matlab import metabolics_struct_of, write_mat
+        from ..io.matlab import write_mat
+        from .matlab import metabolics_struct_of
 
         return write_mat(path, metabolics_struct_of(self))
 

@@ -275,7 +275,8 @@ class Solution:
     def to_mat(self, path: str | os.PathLike, metabolics=None) -> Path:
         """Write the solution (and, given, its :class:`~musclemetab.metabolics.solution.SolutionMetabolics`)
         to the MATLAB file ``path`` (:mod:`musclemetab.io.matlab`; the layout: ``docs/matlab.md``)."""
-        from ..io.matlab import results_struct, write_mat
+        from ..io.matlab import write_mat
+        from ..metabolics.matlab import results_struct
 
         side = self.record.side or ""
         return write_mat(path, results_struct({side: self}, None if metabolics is None else {side: metabolics}))
