@@ -112,7 +112,8 @@ def main(argv=None) -> int:
                 ("warm from GEN, mu_init 1e-6 (the package's)", dict(warm=gen)),
                 (f"warm from GEN adapted to {wf.upper()}'s parameters", dict(warm=adapted_start(gen, cold.parameters)))]
     for v in (1e-9, 1e-6, 1e-4, 1e-3, 1e-2):
-        variants.append((f"  + GEN's multipliers, pushes {v:g}", dict(warm=gen, multipliers=gen_point, ipopt=pushes(v))))
+        variants.append((f"  + GEN's multipliers, pushes {v:g}",
+                         dict(warm=gen, multipliers=gen_point, ipopt=pushes(v))))
     variants += [
         ("  + multipliers, pushes 1e-9, monotone from 1e-9",
          dict(warm=gen, multipliers=gen_point, ipopt={**pushes(1e-9), "mu_strategy": "monotone", "mu_init": 1e-9})),
