@@ -3,14 +3,18 @@
     python benchmarks/warm_start.py [--trial normal]
     python benchmarks/warm_start.py --across-trials [--trial normal]
 
-On one trial of the example subject (EFFORT-GEN solved first, cold), EFFORT-TEN is solved:
+    python benchmarks/warm_start.py --trial slow --workflow effort-cal [--repeats 2]
+
+On one trial of the example subject (EFFORT-GEN solved first, cold), EFFORT-TEN (or
+``--workflow effort-cal``) is solved, with the package's default stop (the optimum):
 
 * cold (static optimisation, IPOPT's ``mu_init`` 0.1: the study's procedure);
 * warm from the EFFORT-GEN solution with ``mu_init`` 1e-6 (``solve_files(warm_start=...)``, the
   package's warm start);
 * the same with IPOPT's ``warm_start_init_point`` and EFFORT-GEN's multipliers (``lam_x``, ``lam_g``:
   the problems have the same variables and constraints), with IPOPT's default and with small
-  warm-start bound pushes;
+  warm-start bound pushes (``warm_start_bound_push``, ``warm_start_mult_bound_push`` and
+  ``warm_start_slack_bound_push`` 1e-9 to 1e-2), and from a monotone barrier at ``mu_init`` 1e-9;
 * warm from EFFORT-GEN's solution adapted to EFFORT-TEN's parameters (the same tendon forces,
   fiber states that give them: :func:`musclemetab.uncertainty.adapted_start`);
 * warm from EFFORT-TEN's own cold optimum (the floor of any warm start that follows the barrier
@@ -21,8 +25,12 @@ On one trial of the example subject (EFFORT-GEN solved first, cold), EFFORT-TEN 
 EFFORT-GEN solution (resampled over the window's normalised time) at ``mu_init`` 1e-6 to 0.1,
 against their cold solves.
 
-Printed per variant: IPOPT's iterations, its CPU time (``solve_cpu_time_s``) and the objective's
-relative difference to the cold solve's. The CPU times are comparable within one run only.
+Printed per variant: IPOPT's iterations, its CPU time (``solve_cpu_time_s``), the objective's
+relative difference to the cold solve's, and the largest relative differences to the cold
+solve's rates: the whole-body rates of the six study models and the rate of every muscle above
+1 % of its leg's. The CPU times are comparable within one run only; ``--repeats N`` solves the
+cold problem and each variant N times, alternately, and prints the CPU range (docs/solver.md,
+"Warm starts at the optimum").
 """
 
 from __future__ import annotations
@@ -41,6 +49,9 @@ HERE = Path(__file__).resolve().parent
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trial", default="normal", choices=("slow", "normal", "fast"))
+    ap.add_argument("--workflow", default="effort-ten", choices=("effort-ten", "effort-cal"),
+                    help="the second solve of the chain (default effort-ten)")
+    ap.add_argument("--repeats", type=int, default=1, help="solves of the cold problem and of each variant, alternately")
     ap.add_argument("--across-trials", action="store_true",
                     help="instead: EFFORT-GEN of the other trials started from this trial's EFFORT-GEN")
     args = ap.parse_args(argv)
@@ -85,38 +96,73 @@ def main(argv=None) -> int:
                            tendon_stiffness="example" if workflow == "effort-ten" else None,
                            warm_start=warm, options=SolverOptions(ipopt=dict(ipopt or {})))
 
-    print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}; trial {args.trial}")
+    print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}; trial {args.trial}, "
+          f"EFFORT-GEN -> {args.workflow.upper()}")
+    wf = args.workflow
     gen = solve("effort-gen")
     gen_point = dict(kkt)
-    cold = solve("effort-ten")
-    rows = [("EFFORT-GEN, cold", gen), ("EFFORT-TEN, cold (the study's)", cold)]
-    push = {"warm_start_bound_push": 1e-9, "warm_start_mult_bound_push": 1e-9}
-    variants = [
-        ("warm from GEN, mu_init 1e-6 (the package's)", dict(warm=gen)),
-        ("  + GEN's multipliers (warm_start_init_point)", dict(warm=gen, multipliers=gen_point,
-                                                           ipopt={"mu_init": 1e-6, "warm_start_init_point": "yes"})),
-        ("  + multipliers, bound pushes 1e-9", dict(warm=gen, multipliers=gen_point,
-                                                 ipopt={"mu_init": 1e-6, "warm_start_init_point": "yes", **push})),
-        ("warm from GEN adapted to TEN's parameters", dict(warm=adapted_start(gen, cold.parameters))),
-        ("warm from TEN's own cold optimum", dict(warm=cold)),
-        ("warm from GEN, mu_init 1e-7", dict(warm=gen, ipopt={"mu_init": 1e-7})),
-        ("warm from GEN, mu_init 1e-8", dict(warm=gen, ipopt={"mu_init": 1e-8})),
+    cold = solve(wf)
+    cold_rates = _rates(cold, ex)
+
+    def pushes(v):
+        return {"warm_start_init_point": "yes", "warm_start_bound_push": v, "warm_start_mult_bound_push": v,
+                "warm_start_slack_bound_push": v}
+
+    variants = [("cold (static optimisation)", {}),
+                ("warm from GEN, mu_init 1e-6 (the package's)", dict(warm=gen)),
+                (f"warm from GEN adapted to {wf.upper()}'s parameters", dict(warm=adapted_start(gen, cold.parameters)))]
+    for v in (1e-9, 1e-6, 1e-4, 1e-3, 1e-2):
+        variants.append((f"  + GEN's multipliers, pushes {v:g}",
+                         dict(warm=gen, multipliers=gen_point, ipopt=pushes(v))))
+    variants += [
+        ("  + multipliers, pushes 1e-9, monotone from 1e-9",
+         dict(warm=gen, multipliers=gen_point, ipopt={**pushes(1e-9), "mu_strategy": "monotone", "mu_init": 1e-9})),
+        (f"warm from {wf.upper()}'s own cold optimum", dict(warm=cold)),
         ("warm from GEN, mu_init 1e-9", dict(warm=gen, ipopt={"mu_init": 1e-9})),
     ]
-    for label, kw in variants:
-        rows.append((label, solve("effort-ten", **kw)))
+    rows = {label: [] for label, _ in variants}
+    for _ in range(args.repeats):
+        for label, kw in variants:
+            rows[label].append(solve(wf, **kw))
     f_cold = cold.record.objective
-    print(f"\n{'EFFORT-TEN start':<48} {'iterations':>10} {'IPOPT CPU s':>12} {'objective':>14} {'vs cold':>10}")
-    for label, sol in rows:
-        r = sol.record
-        diff = "" if sol is gen else f"{(r.objective - f_cold) / f_cold:+.1e}"
-        print(f"{label:<48} {r.iterations:>10d} {r.solve_cpu_time_s:>12.2f} {r.objective:>14.8g} {diff:>10}")
-    cpu_gen, cpu_cold = gen.record.solve_cpu_time_s, cold.record.solve_cpu_time_s
-    floor = rows[6][1].record.solve_cpu_time_s
-    print(f"\nchain GEN -> TEN: cold {cpu_gen + cpu_cold:.2f} CPU s; with the package's warm start "
-          f"{(cpu_gen + rows[2][1].record.solve_cpu_time_s) / (cpu_gen + cpu_cold):.2f}x; with a warm start as cheap "
-          f"as one from TEN's own optimum {(cpu_gen + floor) / (cpu_gen + cpu_cold):.2f}x")
+    print(f"\n{wf.upper() + ' start':<52} {'iterations':>10} {'IPOPT CPU s':>12} {'objective':>14} {'vs cold':>9} "
+          f"{'whole body':>10} {'muscles':>9}")
+    for label, sols in rows.items():
+        r = sols[0].record
+        cpu = sorted(s.record.solve_cpu_time_s for s in sols)
+        cpu_text = f"{cpu[0]:.2f}" if len(cpu) == 1 else f"{cpu[0]:.2f}-{cpu[-1]:.2f}"
+        if sols[0].success:
+            body, muscles = _rate_difference(_rates(sols[0], ex), cold_rates)
+            rates = f"{100 * body:>9.4f}% {100 * muscles:>8.4f}%"
+        else:
+            rates = f"{r.status}"
+        print(f"{label:<52} {r.iterations:>10d} {cpu_text:>12} {r.objective:>14.8g} "
+              f"{(r.objective - f_cold) / f_cold:>+9.1e} {rates}")
     return 0
+
+
+#: the study's six metabolic models
+MODELS = ("UM03", "BH04", "HO06", "LW07", "UM10", "UC16")
+
+
+def _rates(solution, subject):
+    """``(whole-body rate per model, mean rate per muscle per model)`` with ``subject``'s mass and height."""
+    from musclemetab.metabolics.solution import metabolics_from_solution
+
+    result = metabolics_from_solution(solution, subject.body_mass_kg, subject.height_m, models=list(MODELS))
+    return ({m: result.whole_body[m].mean_W_per_kg for m in MODELS},
+            {m: result.rates[m].total.mean(axis=1) for m in MODELS})
+
+
+def _rate_difference(rates, reference) -> tuple[float, float]:
+    """Largest relative differences: whole-body rates, and muscles above 1 % of the leg's rate."""
+    body = max(abs(rates[0][m] / reference[0][m] - 1) for m in MODELS)
+    muscles = 0.0
+    for m in MODELS:
+        ref = reference[1][m]
+        big = ref > 0.01 * ref.sum()
+        muscles = max(muscles, float(np.max(np.abs(rates[1][m][big] / ref[big] - 1))))
+    return body, muscles
 
 
 def across_trials(source: str) -> int:

@@ -39,8 +39,10 @@ def add_warm_start_arguments(p) -> None:
     group = p.add_mutually_exclusive_group()
     group.add_argument(key.on_option, dest="warm_start", action="store_const", const=True, default=None,
                        help="start a trial's EFFORT-CAL and EFFORT-TEN solves from the solution of the workflow "
-                            "before them, as the study file's [solver] warm_start = true: about half the solver "
-                            "time of those units; the results may differ (another local optimum, docs/study.md)")
+                            "before them, as the study file's [solver] warm_start = true: with the study's "
+                            "stop ([solver] stop = \"authors\") about half the solver time of those units, with the "
+                            "default stop no faster (docs/solver.md); the results may differ (another local optimum, "
+                            "docs/study.md)")
     group.add_argument(key.off_option, dest="warm_start", action="store_const", const=False,
                        help="start every solve from static optimisation (the default), as [solver] warm_start = false")
 

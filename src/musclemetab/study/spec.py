@@ -271,7 +271,7 @@ class Study:
     @property
     def warm_start(self) -> bool:
         """Whether a trial's effort solves start from the solve of the workflow before them
-        (the study file's ``[solver] warm_start``, default true; ``docs/study.md``)."""
+        (the study file's ``[solver] warm_start``, default false; ``docs/study.md``)."""
         from ..settings import SWITCH_KEYS
 
         return bool(self.settings.get("warm_start", SWITCH_KEYS["warm_start"].default))
