@@ -106,11 +106,67 @@ def test_sample_factors_are_sobol_points_through_the_normal_quantile():
     assert not np.allclose(draw(priors, muscles, 5, 6).factors["F0"], draw(priors, muscles, 5, 5).factors["F0"])
 
 
-def test_band_is_the_5_50_95_quantiles():
+def test_band_is_the_5_50_95_quantiles_or_the_min_max_of_few_samples():
+    from musclemetab.uncertainty import QUANTILE_SAMPLES, band_kind, expected_coverage
+
     # 0, 1, ..., 100: the 5 % quantile with linear interpolation is 5 (worked by hand: position 0.05 x 100)
     assert band(np.arange(101.0)) == (5.0, 50.0, 95.0)
-    assert band([2.0, np.nan, 4.0]) == (2.1, 3.0, 3.9)
-    assert all(math.isnan(v) for v in band([np.nan]))
+    # below 20 samples the band is the min and max (their 5/95 % quantiles would be little more than them)
+    assert QUANTILE_SAMPLES == 20
+    assert band([2.0, np.nan, 4.0]) == (2.0, 3.0, 4.0)
+    assert band(np.arange(19.0)) == (0.0, 9.0, 18.0)
+    assert band(np.arange(20.0)) == pytest.approx((0.95, 9.5, 18.05))  # positions 0.05 x 19 and 0.95 x 19
+    assert [band_kind(n) for n in (0, 4, 12, 20)] == ["none", "min-max, few samples", "min-max", "5-95 %"]
+    # a new exchangeable draw falls between the min and max of n with probability (n-1)/(n+1)
+    assert expected_coverage(16) == pytest.approx(15 / 17)
+    assert expected_coverage(64) == pytest.approx(0.9 * 63 / 65)  # 87.2 %
+    assert all(math.isnan(x) for x in band([]))
+
+
+def test_bands_leave_out_flagged_samples_and_say_where_the_nominal_lies():
+    """The band of five plausible samples (1.0-1.3) leaves out the flagged and unconverged ones,
+    counts them, lists them; the nominal 0.9 lies below it, said with the count of samples above it
+    and the flagged samples' side; with keep_flagged the flagged ones make the band."""
+    from musclemetab.uncertainty import band_table, nominal_quantile
+
+    keys = ["subject", "trial", "workflow", "model"]
+    s = pd.DataFrame({"subject": "s", "trial": "t", "workflow": "w", "model": "UM10", "sample": range(8),
+                      "x": [1.0, 1.1, 1.2, 1.15, 1.3, 5.0, 6.0, np.nan],
+                      "sample_flags": ["", "", "", "", "", "large_reserve(hip)", "saturation(soleus_r)",
+                                       "not_converged"]})
+    nominal = pd.DataFrame({"subject": ["s"], "trial": ["t"], "workflow": ["w"], "model": ["UM10"], "x": [0.9],
+                            "quality": ["ok"]})
+    b = band_table(s, keys, ["x"], nominal=nominal, note_column="x", listing=True).iloc[0]
+    assert (b["x_p05"], b["x_p50"], b["x_p95"]) == (1.0, 1.15, 1.3)
+    assert (b["uncertainty_samples"], b["uncertainty_rejected"]) == (5, 3)
+    assert b["uncertainty_band"] == "min-max, few samples"
+    assert b["uncertainty_flagged_samples"] == "5: large_reserve(hip); 6: saturation(soleus_r); 7: not_converged"
+    assert b["x_nominal_quantile"] == 0.0
+    assert b["uncertainty_note"].startswith("below its band (min-max, few samples, 5 samples): 5 of 5 plausible "
+                                            "samples lie above it")
+    assert "2 flagged samples left out, 0 of them below the band" in b["uncertainty_note"]
+    assert "only 5 plausible samples" in b["uncertainty_note"]
+    kept = band_table(s, keys, ["x"], keep_flagged=True, listing=True).iloc[0]
+    assert (kept["x_p05"], kept["x_p95"], kept["uncertainty_samples"], kept["uncertainty_rejected"]) == (1.0, 6.0, 7, 1)
+    assert kept["uncertainty_flagged_samples"].startswith("5: large_reserve(hip) (kept); ")
+    assert nominal_quantile([1.0, 2.0, 3.0, 4.0], 2.0) == pytest.approx(1.5 / 4)  # one below, one tie (half)
+
+
+def test_width_contributions_are_the_derivative_times_the_prior_spread():
+    """|dR/dlog p| x spread, per parameter and muscle, ranked; vmax has no prior (no width)."""
+    from musclemetab.uncertainty import top_parameters_text, width_contributions
+
+    sens = pd.DataFrame({"model": "UM10", "rate": "whole_body", "parameter": ["lTs", "F0", "kT", "vmax"],
+                         "muscle": ["soleus_r", "soleus_r", "vaslat_r", "soleus_r"],
+                         "d_rate_d_log_p": [-2.4, 0.05, 0.07, 3.0]})
+    priors = default_priors()
+    c = width_contributions(sens, priors)
+    expected = {("lTs", "soleus_r"): 2.4 * priors.prior("lTs", "soleus_r").spread,
+                ("F0", "soleus_r"): 0.05 * priors.prior("F0", "soleus_r").spread,
+                ("kT", "vaslat_r"): 0.07 * priors.prior("kT", "vaslat_r").spread}
+    assert {(p, m): sd for p, m, sd in c[["parameter", "muscle", "sd"]].itertuples(index=False)} == pytest.approx(expected)
+    assert list(c["sd"]) == sorted(expected.values(), reverse=True)
+    assert top_parameters_text(c, top=1) == f"{c['parameter'][0]} {c['muscle'][0]} {c['sd'][0]:.3g}"
 
 
 def test_study_file_uncertainty_table(tmp_path, example):
@@ -170,6 +226,13 @@ def test_zero_spreads_collapse_the_bands_to_the_nominal_result(zero_study):
     results = pd.read_csv(out / "results.csv")
     per_muscle = pd.read_csv(out / "per_muscle.csv")
     assert (results["uncertainty_samples"] == 2).all() and (per_muscle["uncertainty_samples"] == 2).all()
+    # every sample is checked as any solve is: its record keeps its flags (none here) and convergence
+    rec = json.loads((out / "units/sub1/normal/effort-gen/samples/0000/unit.json").read_text())
+    assert rec["plausibility"] == [] and rec["convergence"]["max_rate_residue"] < 0.01
+    assert (results["uncertainty_rejected"] == 0).all() and (per_muscle["uncertainty_rejected"] == 0).all()
+    assert (results["uncertainty_band"] == "min-max, few samples").all()
+    assert results["whole_body_W_per_kg_nominal_quantile"].between(0, 1).all()
+    assert results["uncertainty_note"].str.contains(r"its band \(min-max, few samples, 2 samples\)").all()
     # the columns of a band stand beside the rate
     cols = list(results.columns)
     i = cols.index("whole_body_W_per_kg")
@@ -289,6 +352,14 @@ def test_report_draws_the_bands(zero_study):
     assert [r[0] for r in section["priors"].body] == [r.parameter for r in read_priors(
         json.loads((Path(study.output) / "study.json").read_text())["uncertainty"]["priors"]).rows]
     assert "[" in section["muscles"]["UM10"].body[0][1]
+    # each band with its nominal: one row per results row, the counts, the band's kind, the quantile
+    assert len(section["bands"].body) == len(folder.ok) and section["flagged"] is None
+    um10 = next(r for r in section["bands"].body if r[3] == "UM10")
+    assert um10[6:9] == ["min-max, few samples", "2", "0"] and um10[9].endswith(" %")
+    from musclemetab.report.uncertainty import band_caption
+
+    caption = band_caption(folder.ok, "whole_body_no_basal_W_per_kg")
+    assert "min-max uncertainty band" in caption and "over 2 samples" in caption
     fig = phase_shares(folder.ok)
     gids = {a.get_gid() for ax in fig.axes for a in ax.get_children()}
     assert "band:stance:effort-gen" in gids and "band:swing:UM10:sub1" in gids

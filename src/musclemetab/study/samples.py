@@ -7,8 +7,10 @@ trial unit's solution adapted to them (:func:`musclemetab.uncertainty.adapted_st
 forces; :func:`musclemetab.redundancy.run.solve_files`, ``warm_start`` and ``parameter_transform``),
 evaluates every metabolic model of the study with the sampled muscle masses, slow-twitch fractions
 and height, and writes ``whole_body.csv``, ``analysis.csv`` and ``per_muscle.csv`` (the trial unit's
-columns) and ``factors.csv`` (the factors of every muscle). A sample whose solve does not converge is
-recorded (``converged: false``) and left out of the bands. Its key is the trial unit's key, the
+columns) and ``factors.csv`` (the factors of every muscle). Its record (``unit.json``) keeps the
+solve's plausibility flags and convergence record as a trial unit's does; a sample whose solve does
+not converge (``converged: false``), or that has a flag, is left out of the bands
+(:func:`.uncertainty.sample_tables`). Its key is the trial unit's key, the
 priors' values, the seed and ``k``.
 """
 
@@ -29,7 +31,7 @@ __all__ = ["study_priors", "sample_key", "run_sample", "FACTORS_FILE", "METHOD"]
 
 FACTORS_FILE = "factors.csv"
 #: the sampling rule, part of every sample's key
-METHOD = "sobol (owen scrambling) -> inverse normal cdf; factors of musclemetab.uncertainty"
+METHOD = "sobol (owen scrambling) -> inverse normal cdf; factors of musclemetab.uncertainty; solve flags recorded"
 
 
 @functools.lru_cache(maxsize=8)
@@ -120,7 +122,10 @@ def run_sample(study: Study, unit, tmp: Path, nominal_folder: Path, *, options=N
     times = {"solve_s": sol.record.solve_time_s, "solution_s": time.perf_counter() - t0}
     record = {"times": times, "converged": bool(sol.success), "solve_status": sol.status,
               "iterations": sol.record.get("iterations"),
-              "height_factor": factors.height}
+              "height_factor": factors.height,
+              # checked as any solve is (docs/quality.md): the bands leave a flagged sample out
+              "plausibility": [f.to_dict() for f in sol.record.flags],
+              "convergence": sol.record.convergence}
     if not sol.success:  # recorded, left out of the bands
         return record
     t1 = time.perf_counter()
