@@ -51,7 +51,7 @@ __all__ = ["Prior", "Priors", "Draw", "read_priors", "default_priors", "draw", "
            "MUSCLE_PARAMETERS", "SOLVE_PARAMETERS", "GLOBAL_PARAMETERS", "PARAMETERS", "DISTRIBUTIONS",
            "PRIORS_FILE", "DEFAULT_SEED", "zero_priors", "MIN_NORMAL_FACTOR", "adapted_start", "band_table", "with_bands",
            "band_kind", "expected_coverage", "nominal_quantile", "nominal_note", "width_contributions",
-           "top_parameters_text", "muscle_tendons", "TENDON_PREFIX", "QUANTILE_SAMPLES", "MIN_BAND_SAMPLES", "NOT_CONVERGED", "TOP_PARAMETERS"]
+           "top_parameters_text", "muscle_tendons", "dimension", "draw_from_normal", "sampled_properties", "TENDON_PREFIX", "QUANTILE_SAMPLES", "MIN_BAND_SAMPLES", "NOT_CONVERGED", "TOP_PARAMETERS"]
 
 PRIORS_FILE = "uncertainty_priors.csv"
 #: solve parameter -> field of MuscleTendonParameters
@@ -276,11 +276,6 @@ class Draw:
         return MuscleTendonParameters(names=params.names, sources={**params.sources, "uncertainty sample": self.index},
                                       **kw)
 
-    def metabolic_properties(self, masses_kg, slow_twitch):
-        """Muscle masses and slow-twitch fractions (arrays over this draw's muscles) with their factors."""
-        return (np.asarray(masses_kg, dtype=float) * self.factors["muscle_mass"],
-                np.clip(np.asarray(slow_twitch, dtype=float) * self.factors["slow_twitch_fraction"], 0.0, 1.0))
-
     def table(self):
         """One row per muscle, one column per factor (and the height factor on every row)."""
         import pandas as pd
@@ -288,6 +283,22 @@ class Draw:
         df = pd.DataFrame({"muscle": list(self.muscles), **{p: self.factors[p] for p in MUSCLE_PARAMETERS}})
         df["height"] = self.height
         return df
+
+
+def sampled_properties(draw_: Draw, solution, body_mass_kg: float, height_m: float | None, overrides=None):
+    """``(masses_kg, slow_twitch)``, dictionaries by muscle of ``solution``: the muscle masses (the
+    volume rule at the sampled height, :func:`musclemetab.properties.metabolic_properties`, of the
+    solution's own F0 and lMo) and slow-twitch fractions with the sample's factors."""
+    from .properties import metabolic_properties
+
+    params = solution.parameters.subset(solution.muscles)
+    height = None if height_m is None else height_m * draw_.height
+    masses, fst = metabolic_properties(list(solution.muscles), body_mass_kg, height, params.max_isometric_force_N,
+                                       params.optimal_fiber_length_m, overrides=overrides)
+    pos = [draw_.muscles.index(m) for m in solution.muscles]
+    masses = np.asarray(masses, dtype=float) * draw_.factors["muscle_mass"][pos]
+    fst = np.clip(np.asarray(fst, dtype=float) * draw_.factors["slow_twitch_fraction"][pos], 0.0, 1.0)
+    return dict(zip(solution.muscles, masses.tolist())), dict(zip(solution.muscles, fst.tolist()))
 
 
 def sobol_normal(dimension: int, index: int, seed: int) -> np.ndarray:
@@ -321,8 +332,21 @@ def draw(priors: Priors, muscles: Sequence[str], index: int, seed: int) -> Draw:
     """The factors of sample ``index`` for ``muscles`` (module doc)."""
     muscles = tuple(muscles)
     priors.check_muscles(muscles)
+    z = sobol_normal(dimension(muscles), index, seed)
+    return draw_from_normal(priors, muscles, index, z)
+
+
+def dimension(muscles: Sequence[str]) -> int:
+    """The number of standard normal values a sample of ``muscles`` takes: nine per muscle and the height."""
+    return len(MUSCLE_PARAMETERS) * len(muscles) + len(GLOBAL_PARAMETERS)
+
+
+def draw_from_normal(priors: Priors, muscles: Sequence[str], index: int, z) -> Draw:
+    """The factors of the standard normal values ``z`` (:func:`dimension` of them, in the order of
+    the module doc) for ``muscles``: sample ``index``."""
+    muscles = tuple(muscles)
     m = len(muscles)
-    z = sobol_normal(len(MUSCLE_PARAMETERS) * m + len(GLOBAL_PARAMETERS), index, seed)
+    z = np.asarray(z, dtype=float)
     tendons = muscle_tendons(muscles)
     factors = {}
     for j, p in enumerate(MUSCLE_PARAMETERS):

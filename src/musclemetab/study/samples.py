@@ -95,10 +95,9 @@ def run_sample(study: Study, unit, tmp: Path, nominal_folder: Path, *, options=N
     from ..geometry import compute_geometry
     from ..metabolics.per_muscle import PER_MUSCLE_FILE, per_muscle_table
     from ..metabolics.solution import WHOLE_BODY_CSV, metabolics_from_solution
-    from ..properties import metabolic_properties
     from ..redundancy import run as redundancy_run
     from ..redundancy.solution import Solution
-    from ..uncertainty import adapted_start, draw
+    from ..uncertainty import adapted_start, draw, sampled_properties
 
     nominal = _record(nominal_folder)
     if nominal.get("status") != "ok":
@@ -129,17 +128,12 @@ def run_sample(study: Study, unit, tmp: Path, nominal_folder: Path, *, options=N
     if not sol.success:  # recorded, left out of the bands
         return record
     t1 = time.perf_counter()
-    params = sol.parameters.subset(sol.muscles)
-    masses, fst = metabolic_properties(list(sol.muscles), subject.body_mass_kg, subject.height_m * factors.height,
-                                       params.max_isometric_force_N, params.optimal_fiber_length_m,
-                                       overrides=subject.muscle_properties)
-    masses, fst = factors.metabolic_properties(masses, fst)
+    masses, fst = sampled_properties(factors, sol, subject.body_mass_kg, subject.height_m, subject.muscle_properties)
     speed = nominal.get("speed_m_per_s")
     result = metabolics_from_solution(
         sol, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
         basal_rate_W_per_kg=study.basal_coefficient, basal_exponent=study.basal_exponent, speed_m_per_s=speed,
-        muscle_properties=subject.muscle_properties, muscle_masses_kg=dict(zip(sol.muscles, masses.tolist())),
-        slow_twitch_fractions=dict(zip(sol.muscles, fst.tolist())))
+        muscle_properties=subject.muscle_properties, muscle_masses_kg=masses, slow_twitch_fractions=fst)
     cycle = GaitCycle(**{k: float(v) for k, v in nominal["cycle"].items()})
     result.whole_body_table().to_csv(tmp / WHOLE_BODY_CSV, index=False, float_format="%.10g")
     per_muscle_table(result, cycle).to_csv(tmp / PER_MUSCLE_FILE, index=False, float_format="%.10g")
