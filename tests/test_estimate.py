@@ -268,6 +268,13 @@ def test_estimate_command_with_emg_recovers_the_parameters(example, generated, r
         e = val.excitation[:N, val.muscles.index(m)]
         assert fit["emg"][m]["rms"] == pytest.approx(np.sqrt(np.mean((e - exc[:N, j]) ** 2)), rel=1e-6), m
     assert "standard errors: optimal_fiber_length:tibant_r" in text
+    # a misfit beyond the limits is a warning line, recorded and printed
+    from musclemetab.redundancy.identifiability import VALIDATION_MIN_R, VALIDATION_RMS_MM, validation_warnings
+
+    assert doc["validation_warnings"] == validation_warnings(doc["validation"])
+    for m, v in fit["fiber_length"].items():
+        warned = f"warning: validation of normal: the fiber length of {m} misfits its ultrasound" in text
+        assert warned == (v["rms_mm"] > VALIDATION_RMS_MM or v["r"] < VALIDATION_MIN_R), m
     # the folder read back as a Result, and written again: the same files
     from musclemetab.redundancy import Result
 

@@ -58,6 +58,37 @@ def _zero_priors_csv(path: Path) -> Path:
 def test_package_priors_name_every_parameter_with_a_source():
     priors = default_priors()
     assert {r.parameter for r in priors.rows} == {*MUSCLE_PARAMETERS, "height"}
+    # every row says where its number comes from, who was measured, what was taken and how
+    for r in priors.rows:
+        assert r.source and r.population and r.value_taken and r.note, r
+
+
+def test_the_example_subjects_triceps_surae_tendon_lies_inside_its_prior():
+    """The tendon-stiffness prior of the triceps surae holds, within its 95 % range around the
+    generic kT = 35 (EFFORT-GEN's value), the example subject's own EMG-TEN estimate (10.6,
+    workflows.KT_TRICEPS_SURAE) and the in-vivo Achilles stiffness converted for the model (155
+    N/mm at a quarter of F0: kT 10.1, docs/muscles.md); the other tendons keep 0.30. The vasti's
+    estimate (4.7, bound-limited) lies outside the patellar prior, which holds the patellar
+    tendon's literature value (kT 78.6) instead: docs/uncertainty.md says why."""
+    from musclemetab.muscle import KT_GENERIC
+    from musclemetab.redundancy.workflows import KT_TRICEPS_SURAE, KT_VASTI
+
+    priors = default_priors()
+
+    def sds(value, muscle):
+        return math.log(value / KT_GENERIC) / priors.prior("kT", muscle).spread
+
+    for m in ("soleus_r", "gasmed_l", "gaslat_r"):
+        assert abs(sds(KT_TRICEPS_SURAE, m)) < 1.96 and abs(sds(10.09, m)) < 1.96
+    assert abs(sds(78.6, "vaslat_r")) < 1.96 and sds(KT_VASTI, "vasmed_r") < -1.96
+    assert priors.prior("kT", "tibant_r").spread == 0.30
+    # the draws give the triceps surae the Achilles row's spread: factor exp(0.65 z)
+    d = draw(priors, ("soleus_r", "tibant_r"), 5, 1)
+    from musclemetab.uncertainty import sobol_normal
+
+    z = sobol_normal(len(MUSCLE_PARAMETERS) * 2 + 1, 5, 1)
+    kt = MUSCLE_PARAMETERS.index("kT")
+    assert d.factors["kT"] == pytest.approx(np.exp(np.array([0.65, 0.30]) * z[2 * kt:2 * kt + 2]))
     assert all(r.source and r.spread > 0 for r in priors.rows)
     assert priors.prior("kT", "soleus_r").distribution == "lognormal"
 
@@ -67,7 +98,16 @@ def test_priors_file_replaces_rows_and_refuses_unknown_names(tmp_path):
     own.write_text("parameter,distribution,spread,muscle\nkT,lognormal,0.5,soleus\nF0,normal,0.1,\n")
     priors = read_priors(own)
     assert priors.prior("kT", "soleus_r").spread == 0.5  # the side-free row covers both sides
-    assert priors.prior("kT", "gasmed_r").spread == default_priors().prior("kT").spread
+    # the side-free row wins over the package's tendon row; the tendon's other muscles keep it
+    assert priors.prior("kT", "gasmed_r").spread == default_priors().prior("kT", "gasmed_r").spread == 0.65
+    own.write_text("parameter,spread,muscle\nkT,0.1,tendon:patellar\n")
+    assert read_priors(own).prior("kT", "vasmed_l").spread == 0.1
+    own.write_text("parameter,spread\nkT,0\n")  # a row for every muscle replaces the tendons' rows too
+    assert read_priors(own).prior("kT", "soleus_r").spread == read_priors(own).prior("kT", "vaslat_r").spread == 0
+    own.write_text("parameter,spread,muscle\nkT,0.1,tendon:quadriceps\n")
+    with pytest.raises(InputFileError, match="line 2: 'tendon:quadriceps' names no anatomical tendon; the tendons "
+                                             "are tendon:achilles, tendon:patellar"):
+        read_priors(own)
     assert priors.prior("F0", "gasmed_r").distribution == "normal"
     bad = tmp_path / "bad.csv"
     bad.write_text("parameter,spread\ntendon_stifness,0.3\n")
@@ -180,6 +220,11 @@ def test_study_file_uncertainty_table(tmp_path, example):
     path.write_text(STUDY.format(ex=example).replace("seed = 7", "seed = 7\nsampels = 3"))
     with pytest.raises(OptionError, match=r"\[uncertainty\]: unknown key\(s\) sampels"):
         load_study(path)
+    path.write_text(STUDY.format(ex=example).replace("samples = 2", "samples = 2\nkeep_flagged = true"))
+    assert load_study(path).settings["uncertainty"]["keep_flagged"] is True
+    path.write_text(STUDY.format(ex=example).replace("samples = 2", "samples = 2\nkeep_flagged = 1"))
+    with pytest.raises(OptionError, match="'keep_flagged' must be true or false"):
+        load_study(path)
     path.write_text(STUDY.format(ex=example).replace("samples = 2", "samples = -2"))
     with pytest.raises(OptionError, match="'samples' = -2 is not a number of uncertainty samples"):
         load_study(path)
@@ -203,6 +248,11 @@ def test_command_line_options(tmp_path, example):
     assert "uncertainty" not in none.settings and sample_units(none) == []
     with pytest.raises(OptionError, match="--uncertainty = -1"):
         apply_uncertainty_arguments(study, build_parser("run").parse_args(["run", str(path), "--uncertainty", "-1"]))
+    keep = apply_uncertainty_arguments(study, build_parser("run").parse_args(["run", str(path),
+                                                                              "--keep-flagged-samples"]))
+    assert keep.settings["uncertainty"]["keep_flagged"] is True and keep.settings["uncertainty"]["samples"] == 2
+    demo = build_parser("demo").parse_args(["demo", "--uncertainty", "4", "--keep-flagged-samples"])
+    assert apply_uncertainty_arguments(study, demo).settings["uncertainty"]["keep_flagged"] is True
 
 
 # ------------------------------------------------------------------------------------- the study

@@ -226,7 +226,8 @@ def default_priors() -> Priors:
 
 def read_priors(path: str | os.PathLike | None = None) -> Priors:
     """The package's priors with the rows of the CSV ``path`` in place of theirs (same parameter
-    and muscle); :class:`InputFileError` naming the file, line and value for an unknown parameter
+    and muscle; a row for every muscle, empty ``muscle``, in place of all the package's rows of its
+    parameter, those of single muscles and tendons too); :class:`InputFileError` naming the file, line and value for an unknown parameter
     or distribution or a spread out of range."""
     base = default_priors()
     if path is None:
@@ -237,7 +238,8 @@ def read_priors(path: str | os.PathLike | None = None) -> Priors:
                              f"(columns {','.join(_COLUMNS)})")
     own = _read_rows(path, str(path))
     keys = {(r.parameter, r.muscle) for r in own}
-    rows = tuple(r for r in base.rows if (r.parameter, r.muscle) not in keys) + tuple(own)
+    every = {r.parameter for r in own if not r.muscle}  # a row for every muscle replaces all the package's
+    rows = tuple(r for r in base.rows if (r.parameter, r.muscle) not in keys and r.parameter not in every) + tuple(own)
     return Priors(rows, str(path), (str(path),))
 
 
