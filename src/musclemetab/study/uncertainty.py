@@ -9,14 +9,19 @@ EMG-informed solves of a subject's ``emg_mode`` have none)::
     samples = 64          # per trial unit (and leg)
     seed = 1              # of the Sobol' sequence (default 1)
     priors = "mine.csv"   # optional: rows replacing the package's priors (musclemetab.uncertainty)
+    keep_flagged = false  # optional: the bands also take samples with a plausibility flag
 
 Sample ``k`` of a trial unit is a unit of its own, folder ``<unit>/samples/<kkkk>``, run after
 its trial unit on the same executors (processes, Dask) and resumable like any other.
 
-:func:`add_study_bands` adds to ``results.csv`` and ``per_muscle.csv`` the 5 %, 50 % and
-95 % quantiles of each rate over the converged samples (``<rate>_p05``, ``_p50``, ``_p95``
-beside the rate) and ``uncertainty_samples``; a study without samples keeps its tables as
-they were.
+:func:`add_study_bands` adds to ``results.csv`` and ``per_muscle.csv`` the band of each rate
+over the plausible samples (converged, no plausibility flag; every converged one with
+``keep_flagged = true``): ``<rate>_p05``, ``_p50``, ``_p95`` beside the rate (the 5-95 %
+quantiles, the min-max below :data:`~musclemetab.uncertainty.QUANTILE_SAMPLES`),
+``uncertainty_samples``, ``uncertainty_rejected``, ``uncertainty_band``; in ``results.csv`` the
+flagged samples, where the nominal whole-body rate lies in its band and why; with sensitivities
+the parameters that make each band's width. A study without samples keeps its tables as they
+were.
 """
 
 from __future__ import annotations
