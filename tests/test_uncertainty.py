@@ -475,3 +475,40 @@ def test_bands_cover_independent_truths_at_their_stated_rate(example):
         assert row.inside >= binom.ppf(0.005, row.plausible_truths, row.expected_share)
     # a truth with a flag is left out, never counted inside
     assert not table.loc[~table["plausible"], "inside"].any()
+
+
+def test_a_flagged_sample_is_left_out_of_the_bands_and_listed(zero_study, tmp_path):
+    """The zero study's results gathered again from a copy in which sample 1 records a flag (as a
+    sample whose reserve carried much of a moment would): its bands are sample 0's alone, the rows
+    count one sample used and one rejected and list it with its flag; with keep_flagged both are
+    used again and the list marks it kept. Nothing is solved."""
+    import shutil
+    from dataclasses import replace
+
+    from musclemetab.study.runner import collect_results
+
+    study, _ = zero_study
+    out = tmp_path / "out"
+    shutil.copytree(study.output, out)
+    flag = {"code": "large_reserve", "message": "reserve", "items": {"hip_flexion_r": 0.3}, "threshold": 0.1}
+    unit = out / "units/sub1/normal/effort-gen/samples/0001/unit.json"
+    rec = json.loads(unit.read_text())
+    unit.write_text(json.dumps({**rec, "plausibility": [flag]}))
+    copy = replace(study, output=str(out))
+    collect_results(copy)
+    results = pd.read_csv(out / "results.csv")
+    pm = pd.read_csv(out / "per_muscle.csv")
+    s0 = pd.read_csv(out / "units/sub1/normal/effort-gen/samples/0000/whole_body.csv")
+    assert (results["uncertainty_samples"] == 1).all() and (results["uncertainty_rejected"] == 1).all()
+    assert (pm["uncertainty_samples"] == 1).all() and (pm["uncertainty_rejected"] == 1).all()
+    assert (results["uncertainty_flagged_samples"] == "1: large_reserve(hip_flexion_r)").all()
+    for model in ("UM10", "BH04"):
+        row = results[results["model"] == model].iloc[0]
+        value = float(s0.loc[s0["model"] == model, "whole_body_W_per_kg"].iloc[0])
+        assert row["whole_body_W_per_kg_p05"] == row["whole_body_W_per_kg_p95"]  # one sample: a point
+        assert row["whole_body_W_per_kg_p05"] == pytest.approx(value, rel=1e-8)
+    kept = replace(copy, settings={**copy.settings, "uncertainty": {**copy.settings["uncertainty"], "keep_flagged": True}})
+    collect_results(kept)
+    results = pd.read_csv(out / "results.csv")
+    assert (results["uncertainty_samples"] == 2).all() and (results["uncertainty_rejected"] == 0).all()
+    assert (results["uncertainty_flagged_samples"] == "1: large_reserve(hip_flexion_r) (kept)").all()
