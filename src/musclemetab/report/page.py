@@ -465,7 +465,7 @@ def _interval(row, column: str, digits: int = 3) -> str:
 def uncertainty_section(study: StudyFolder) -> dict | None:
     """The report's uncertainty section, or ``None`` for a study without bands: the samples and
     seed, the priors (a table), the whole-body rates and the top muscles of each model with their
-    5-95 % intervals, each band with where its nominal lies and the parameters that make its width,
+    bands (5-95 %, or min-max from few samples), each band with where its nominal lies and the parameters that make its width,
     the samples left out."""
     from ..uncertainty import GLOBAL_PARAMETERS, MIN_BAND_SAMPLES, QUANTILE_SAMPLES, read_priors
     from .figures import main_workflow, trial_order
