@@ -57,9 +57,11 @@ def band_caption(table, column: str) -> str:
     """The sentence a figure's caption gets when ``table`` has the band of ``column``."""
     if not has_band(table, column):
         return ""
+    kept = ("uncertainty_flagged_samples" in table
+            and table["uncertainty_flagged_samples"].map(_text).str.contains("(kept)", regex=False).any())
     return (f" Shaded: the {_kind_text(table)} over {samples_text(table)} of the muscle properties per unit, "
-            "samples with a plausibility flag left out (mean over subjects of each subject's band; priors in the "
-            "Method section).")
+            f"samples with a plausibility flag {'kept (keep_flagged)' if kept else 'left out'} (mean over subjects "
+            "of each subject's band; priors in the Method section).")
 
 
 def _text(value) -> str:
