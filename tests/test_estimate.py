@@ -268,6 +268,13 @@ def test_estimate_command_with_emg_recovers_the_parameters(example, generated, r
         e = val.excitation[:N, val.muscles.index(m)]
         assert fit["emg"][m]["rms"] == pytest.approx(np.sqrt(np.mean((e - exc[:N, j]) ** 2)), rel=1e-6), m
     assert "standard errors: optimal_fiber_length:tibant_r" in text
+    # a misfit beyond the limits is a warning line, recorded and printed
+    from musclemetab.redundancy.identifiability import VALIDATION_MIN_R, VALIDATION_RMS_MM, validation_warnings
+
+    assert doc["validation_warnings"] == validation_warnings(doc["validation"])
+    for m, v in fit["fiber_length"].items():
+        warned = f"warning: validation of normal: the fiber length of {m} misfits its ultrasound" in text
+        assert warned == (v["rms_mm"] > VALIDATION_RMS_MM or v["r"] < VALIDATION_MIN_R), m
     # the folder read back as a Result, and written again: the same files
     from musclemetab.redundancy import Result
 
@@ -546,7 +553,28 @@ def test_lmo_and_lts_together_are_not_identifiable(generated):
                    for t in text)
     assert max(abs(est.factors["optimal_fiber_length"][m] - 1.10) / 1.10 for m in LMO) > 0.02
     assert res.objective_terms["normal"]["fiber_length_tracking"] / 100.0 < 1e-4  # the fiber lengths still fit
-    assert all(v is not None and v > 0 for v in rep["standard_error"].values())
+    assert all(v is not None and v > 0 for v in rep["standard_error"].values())  # no factor on a bound
+    assert rep["on_bound"] == {}
+
+
+@pytest.mark.opensim
+def test_a_validation_misfit_is_a_warning_line_in_mm(generated):
+    """The generating solve's fit to its own fiber lengths is exact (no warning); shifted by 6 mm
+    (tibialis anterior) the RMS is 6 mm by hand, above the 5 mm limit: one line naming the trial,
+    the muscle and the misfit in mm."""
+    from musclemetab.redundancy.identifiability import VALIDATION_RMS_MM, tracking_fit, validation_warnings
+
+    made, measured = generated[0], generated[1]
+    n = made.lm_norm.shape[0]
+    exact = {"normal": tracking_fit(made, {m: measured[m][1][:n] for m in LMO})}
+    assert exact["normal"]["fiber_length"]["tibant_r"]["rms_mm"] < 1e-6 and validation_warnings(exact) == []
+    shifted = {"normal": tracking_fit(made, {"tibant_r": measured["tibant_r"][1][:n] + 0.006,
+                                             "bflh_r": measured["bflh_r"][1][:n]})}
+    assert shifted["normal"]["fiber_length"]["tibant_r"]["rms_mm"] == pytest.approx(6.0, rel=1e-9)
+    assert VALIDATION_RMS_MM == 5.0
+    assert validation_warnings(shifted) == [
+        "validation of normal: the fiber length of tibant_r misfits its ultrasound: RMS 6 mm (above 5 mm); the "
+        "effort goal with the estimates does not reproduce it"]
 
 
 @pytest.mark.opensim
@@ -569,11 +597,20 @@ def test_a_factor_on_its_bound_warns(generated):
     goals = Goals(**wf.goals.effort_weights(), w_fiber_length=100.0)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        res, est = estimate_parameters([trial], params, specs, goals, options=options, uninformed="warn",
-                                       identify=False)
+        res, est = estimate_parameters([trial], params, specs, goals, options=options, uninformed="warn")
     assert res.success, res.status
     text = [str(w.message) for w in caught if issubclass(w.category, MusclemetabWarning)]
+    print("\n".join(text))
     assert est.factors["tendon_stiffness"]["soleus_r"] == pytest.approx(0.6, abs=1e-3 * 1.4)
+    # on its bound the factor has no symmetric standard error: a one-sided interval from the bound
+    # inwards, whose length is z SE shortened by the slope at the bound (the objective rises from it)
+    rep = est.doubts["identifiability"]
+    label = "tendon_stiffness:soleus_r,gasmed_r,gaslat_r"
+    assert rep["standard_error"][label] is None
+    b = rep["on_bound"][label]
+    assert b["side"] == "lower" and b["bound"] == 0.6 and b["interval"][0] == 0.6 and 0.6 < b["limit"] <= 2.0
+    assert sum(f"{label} is on its lower bound 0.6: no symmetric standard error; one-sided 95 % interval" in t
+               for t in text) == 1
     assert [b for b in est.doubts["on_bounds"] if b["muscle"] in TS] == [
         {"kind": "tendon_stiffness", "muscle": m, "factor": est.factors["tendon_stiffness"][m], "bound": 0.6,
          "side": "lower"} for m in TS]

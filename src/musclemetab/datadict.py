@@ -145,14 +145,36 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
     (_PM, "rank", "-", "rank of the muscle by muscle_W within its unit and model (1 = largest)"),
     # uncertainty bands (docs/uncertainty.md)
     (f"{_STUDY}, {_PM}", "<rate>_p05", "as <rate>",
-     "5 % quantile of the column <rate> (a rate, energy, cost of transport or energy share) over the converged "
-     "uncertainty samples of the row's trial unit (study file [uncertainty], --uncertainty N): beside each rate when the "
-     "study has samples"),
-    (f"{_STUDY}, {_PM}", "<rate>_p50", "as <rate>", "median of <rate> over the converged uncertainty samples"),
-    (f"{_STUDY}, {_PM}", "<rate>_p95", "as <rate>", "95 % quantile of <rate> over the converged uncertainty samples"),
+     "low end of the band of the column <rate> (a rate, energy, cost of transport or energy share) over the plausible "
+     "uncertainty samples of the row's trial unit (study file [uncertainty], --uncertainty N): its 5 % quantile from "
+     "20 samples on, their minimum below (uncertainty_band); beside each rate when the study has samples"),
+    (f"{_STUDY}, {_PM}", "<rate>_p50", "as <rate>", "median of <rate> over the plausible uncertainty samples"),
+    (f"{_STUDY}, {_PM}", "<rate>_p95", "as <rate>",
+     "high end of the band of <rate>: its 95 % quantile over the plausible uncertainty samples from 20 samples on, "
+     "their maximum below"),
     (f"{_STUDY}, {_PM}", "uncertainty_samples", "-",
-     "number of converged uncertainty samples behind the row's bands (a sample whose solve did not converge is left "
-     "out; with side = both, a sample counts when both legs converged)"),
+     "number of uncertainty samples behind the row's bands: converged and without a plausibility flag (every "
+     "converged one with [uncertainty] keep_flagged); with side = both, a sample counts when both legs do"),
+    (f"{_STUDY}, {_PM}", "uncertainty_rejected", "-",
+     "number of the unit's uncertainty samples left out of the row's bands: a plausibility flag (unless "
+     "keep_flagged) or a solve that did not converge"),
+    (f"{_STUDY}, {_PM}", "uncertainty_band", "-",
+     "what the band is: '5-95 %' (quantiles, from 20 samples), 'min-max' (fewer), 'min-max, few samples' (fewer than "
+     "10 samples used: read with care), 'none'"),
+    (f"{_STUDY}, {_PM}", "uncertainty_top_parameters", "as the rate",
+     "the three muscle parameters whose priors give the rate (whole_body_W_per_kg; a muscle's muscle_W) the largest "
+     "standard deviation to first order, '<parameter> <muscle> <SD>': |d rate/d log p| (sensitivity.csv) x the "
+     "prior's spread; empty without sensitivities (--sensitivity)"),
+    (_STUDY, "uncertainty_flagged_samples", "-",
+     "the unit's samples with a plausibility flag or a solve that did not converge, '<sample>: <flags>' "
+     "(flags as in quality), '(kept)' when keep_flagged kept it in the bands"),
+    (_STUDY, "whole_body_W_per_kg_nominal_quantile", "-",
+     "where the nominal whole_body_W_per_kg lies among the samples used for its band: the share of them below it "
+     "(ties half), 0-1"),
+    (_STUDY, "uncertainty_note", "-",
+     "where the nominal whole_body_W_per_kg lies against its band, in words; when outside it, why (how many samples "
+     "lie on the other side, the band's skew, flagged samples left out on the nominal's side, the nominal's own "
+     "flags, few samples)"),
     *(("factors.csv", name, "-", f"factor of an uncertainty sample on the muscle's {what} (priors: docs/uncertainty.md)")
       for name, what in (("F0", "maximal isometric force"), ("lMo", "optimal fiber length"),
                          ("lTs", "tendon slack length"), ("kT", "tendon stiffness"),

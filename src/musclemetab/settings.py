@@ -146,6 +146,9 @@ SWITCH_KEYS: dict[str, SwitchKey] = {k.name: k for k in (
               "dynamics, no EMG or energy goal) also writes sensitivity.csv, the derivative of each rate per log of "
               "each muscle parameter at the optimum (docs/uncertainty.md, Sensitivities); false (the default): not",
               on_option="--sensitivity"),
+    SwitchKey("keep_flagged", False, "[uncertainty] keep_flagged: the bands take every converged sample, also those "
+              "with a plausibility flag (docs/uncertainty.md, Bands); false (the default): a flagged sample is left "
+              "out of the bands and listed", on_option="--keep-flagged-samples"),
 )}
 
 

@@ -230,11 +230,23 @@ def doubt_lines(doc: dict) -> list[str]:
     ident = doubts.get("identifiability")
     if ident:
         se = ident["standard_error"]
-        lines.append("  standard errors: " + ", ".join(
-            f"{p} x{ident['factor'][p]:.4g} +- {se[p]:.2g}" if se[p] is not None else f"{p} x{ident['factor'][p]:.4g} "
-            "(undetermined)" for p in ident["parameters"]))
+        bounded = ident.get("on_bound") or {}
+
+        def estimate_text(p):
+            if p in bounded:
+                b = bounded[p]
+                return (f"{p} x{ident['factor'][p]:.4g} (on its {b['side']} bound {b['bound']:g}: one-sided 95 % "
+                        + (f"{b['interval'][0]:.4g} ... {b['interval'][1]:.4g})" if b["limit"] is not None
+                           else "undetermined)"))
+            return f"{p} x{ident['factor'][p]:.4g} +- {se[p]:.2g}" if se[p] is not None else \
+                f"{p} x{ident['factor'][p]:.4g} (undetermined)"
+
+        lines.append("  standard errors: " + ", ".join(estimate_text(p) for p in ident["parameters"]))
         for pair in ident["correlated_pairs"]:
             lines.append(f"  correlated: {pair['parameters'][0]} / {pair['parameters'][1]} r {pair['correlation']:+.3f}")
+        if ident.get("collinear"):
+            lines.append(f"  collinear: condition index {ident['condition_index']:.3g} (above "
+                         f"{ident['condition_index_limit']:g})")
         if ident["near_singular"]:
             lines.append(f"  reduced Hessian near singular (reciprocal condition {ident['reduced_hessian_rcond']:.2g})")
     for trial, fit in (doc.get("validation") or {}).items():
@@ -243,6 +255,7 @@ def doubt_lines(doc: dict) -> list[str]:
             lines.append(f"  validation {trial} {kind.replace('_', ' ')}: " + ", ".join(
                 f"{m} RMS {v['rms_mm' if unit else 'rms']:.3g}{(' ' + unit) if unit else ''} r {v['r']:.2f}"
                 for m, v in by_muscle.items()))
+    lines += [f"  warning: {w}" for w in doc.get("validation_warnings") or []]
     return lines
 
 

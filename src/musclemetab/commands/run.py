@@ -66,6 +66,10 @@ def add_uncertainty_arguments(parser) -> None:
                         "log of each muscle parameter at the optimum, and the report ranks them (the study file's "
                         "[uncertainty] sensitivity = true; one leg, forward fiber dynamics; about a minute per unit of 40 muscles; "
                         "docs/uncertainty.md)")
+    parser.add_argument(SWITCH_KEYS["keep_flagged"].on_option, dest="keep_flagged", action="store_true",
+                        help="the uncertainty bands also take the samples with a plausibility flag (huge reserves, "
+                        "saturated muscles...); by default they are left out and listed (the study file's "
+                        "[uncertainty] keep_flagged = true; docs/uncertainty.md)")
 
 
 def apply_uncertainty_arguments(study, args):
@@ -79,9 +83,10 @@ def apply_uncertainty_arguments(study, args):
 
         study = sensitivity_study(study, True)
     samples, seed, priors = (getattr(args, k, None) for k in ("uncertainty", "uncertainty_seed", "uncertainty_priors"))
-    if samples is None and seed is None and priors is None:
+    keep = True if getattr(args, "keep_flagged", False) else None
+    if samples is None and seed is None and priors is None and keep is None:
         return study
-    return with_uncertainty(study, samples, seed, priors)
+    return with_uncertainty(study, samples, seed, priors, keep_flagged=keep)
 
 
 def print_run(run, command: str) -> None:

@@ -228,7 +228,10 @@ def estimate_files(
             path, report = write_personalised_model(model, estimated, estimate, out)
             doc["personalised_model"] = {"path": path.name, "muscles": report}
         if validate and run.success and failed is None:
+            from .identifiability import warn_validation
+
             doc["validation"] = fits
+            doc["validation_warnings"] = warn_validation(fits)
         result = Result(solutions=solutions, parameters=estimated, factors=factors,
                         record=ProblemRecord.from_dict(run.to_dict()),
                         emg_channels={m: list(c) for m, c in mapping.items()}, document=doc)

@@ -24,8 +24,22 @@ the same ``C`` as a factorisation of the whole ``K``, whose fill the dense rows 
 ``R_ij = C_ij / sqrt(C_ii C_jj)`` (independent of ``s^2``). The reduced Hessian is reported
 near singular when ``C`` has a non-positive diagonal (no strict minimum along a parameter) or
 the reciprocal condition number of ``C`` scaled to unit diagonal (that of ``R``) is below
-:data:`SINGULAR_RCOND`; a pair is poorly identifiable together when ``|R_ij| >``
-:data:`CORRELATION_THRESHOLD`.
+:data:`SINGULAR_RCOND`; a pair is poorly identifiable together when ``|R_ij| >=``
+:data:`CORRELATION_THRESHOLD`, and the factors are collinear as a whole when the condition index
+of ``R`` (``sqrt`` of its largest over its smallest eigenvalue) exceeds :data:`CONDITION_INDEX_LIMIT`.
+
+**Factors on a bound.** A factor within :data:`BOUND_TOLERANCE` of its bounds' width of a bound
+gets no standard error (the estimate cannot move beyond the bound, so ``+- SE`` would claim values
+the problem excludes) but a one-sided 95 % interval from the bound inwards, ``[b, b + d]`` (lower
+bound) or ``[b - d, b]``: ``d`` where the profile of the objective, to second order, rises by
+``s^2 z^2/2`` (``z = 1.645``): ``g d + h d^2/2 = s^2 z^2/2`` with ``h = 1/C_ii`` its curvature and
+``g`` its slope inwards at the bound (the bound's multiplier, IPOPT's ``lam_x``), clipped to the
+other bound. Without a slope it is ``z SE``; the slope shortens it.
+
+**Validation.** :func:`validation_warnings` turns the fit of a validation re-solve
+(:func:`tracking_fit`) into warning lines: a fiber length off its measurement by more than
+:data:`VALIDATION_RMS_MM` (RMS) or correlating below :data:`VALIDATION_MIN_R`, an excitation
+correlating with its scaled EMG below :data:`VALIDATION_MIN_R`.
 """
 
 from __future__ import annotations
@@ -37,14 +51,30 @@ import numpy as np
 
 from ..errors import MusclemetabWarning, OptionError
 
-__all__ = ["CORRELATION_THRESHOLD", "SINGULAR_RCOND", "BOUND_TOLERANCE", "factors_on_bounds", "informing_muscles",
+__all__ = ["CORRELATION_THRESHOLD", "CONDITION_INDEX_LIMIT", "VALIDATION_RMS_MM", "VALIDATION_MIN_R",
+           "validation_warnings", "warn_validation", "one_sided_interval", "SINGULAR_RCOND", "BOUND_TOLERANCE", "factors_on_bounds", "informing_muscles",
            "uninformed_factors", "check_informed", "identifiability", "warn_identifiability", "warn_on_bounds",
            "tracking_fit", "reduced_inverse_hessian", "correlation", "KKTSystem", "lagrangian_derivatives"]
 
-#: |correlation| above which two estimated parameters are reported as not identifiable together
+#: |correlation| from which two estimated parameters are reported as not identifiable together
 #: (on the synthetic problem of ``tests/test_estimate.py`` the lMo and lTs factors of one muscle
-#: correlate at 0.94 and their lMo factors come back 6-8 % off the truth: 0.95 would miss them)
-CORRELATION_THRESHOLD = 0.9
+#: correlate at 0.94 and their lMo factors come back 6-8 % off the truth; on the example's
+#: ultrasound-shaped estimate they correlate at 0.88, which 0.9 let pass: 0.8, the usual mark
+#: of strong collinearity between two regressors)
+CORRELATION_THRESHOLD = 0.8
+#: condition index of the factors' correlation matrix (sqrt of largest / smallest eigenvalue)
+#: above which the estimated factors are reported collinear as a whole (Belsley, Kuh and Welsch
+#: 1980, Regression Diagnostics: indices above 30 mark strong dependencies)
+CONDITION_INDEX_LIMIT = 30.0
+#: one-sided 95 % normal quantile of the interval of a factor on its bound
+ONE_SIDED_Z = 1.6448536269514722
+#: RMS misfit (mm) of a validation re-solve's fiber length above which it is warned: about 10 %
+#: of the triceps surae's and tibialis anterior's optimal fiber lengths (about 40-70 mm), this
+#: package's choice
+VALIDATION_RMS_MM = 5.0
+#: Pearson r of a validation re-solve's fiber length (or excitation against the EMG) below which
+#: it is warned (this package's choice)
+VALIDATION_MIN_R = 0.7
 #: reciprocal condition number of the parameters' correlation matrix below which the reduced
 #: Hessian is reported near singular
 SINGULAR_RCOND = 1e-8
@@ -314,19 +344,46 @@ def identifiability(trials, params, goals, specs, result, *, optimal_reserve_Nm:
     R, rcond = correlation(C)
     pairs = [{"parameters": [labels[i], labels[j]], "correlation": float(R[i, j])}
              for i in range(len(labels)) for j in range(i + 1, len(labels))
-             if R is not None and abs(R[i, j]) > threshold]
+             if R is not None and abs(R[i, j]) >= threshold]
+    index = float(np.sqrt(1.0 / rcond)) if rcond > 0 else float("inf")
+    on_bound = {}
+    for k, (lab, c) in enumerate(zip(labels, pcols)):
+        lo, hi = float(lbx[c]), float(ubx[c])
+        for side, b in (("lower", lo), ("upper", hi)):
+            if abs(float(x[c]) - b) <= BOUND_TOLERANCE * (hi - lo):
+                curvature = 1.0 / C[k, k] if R is not None else float("nan")
+                on_bound[lab] = one_sided_interval(b, side, (lo, hi), curvature, abs(float(lam_x[c])), s2)
     return {
         "method": "inverse of the reduced Hessian of the Lagrangian on the parameters, (K^-1)_pp, scaled by "
                   "s^2 = 2 J_track/(n_data - n_p) (docs/problem.md)",
         "parameters": labels, "threshold": threshold, "active": active,
         "factor": {lab: float(x[c]) for lab, c in zip(labels, pcols)},
-        "standard_error": {lab: float(np.sqrt(s2 * C[k, k])) if R is not None else None
+        "standard_error": {lab: float(np.sqrt(s2 * C[k, k])) if R is not None and lab not in on_bound else None
                            for k, lab in enumerate(labels)},
+        "on_bound": on_bound,
         "correlation": R.tolist() if R is not None else None,
         "residual_scale": {"s2": s2, "tracking_objective": j_track, "n_data": int(n_data), "n_parameters": len(pcols)},
         "reduced_hessian_rcond": rcond, "near_singular": bool(R is None or rcond < SINGULAR_RCOND),
-        "correlated_pairs": pairs,
+        "correlated_pairs": pairs, "condition_index": index,
+        "condition_index_limit": CONDITION_INDEX_LIMIT,
+        "collinear": bool(R is not None and index > CONDITION_INDEX_LIMIT),
     }
+
+
+def one_sided_interval(bound: float, side: str, bounds: tuple[float, float], curvature: float, slope: float,
+                       s2: float, z: float = ONE_SIDED_Z) -> dict:
+    """The one-sided 95 % interval of a factor on its ``side`` (``"lower"``/``"upper"``) ``bound``
+    (module docstring): ``{bound, side, limit, interval}``, ``limit`` ``None`` when the curvature
+    is not positive and finite (no interval: the data do not bound the factor from inside)."""
+    out = {"bound": float(bound), "side": side, "limit": None, "interval": None}
+    if not (np.isfinite(curvature) and curvature > 0):
+        return out
+    g, h, target = max(float(slope), 0.0), float(curvature), 0.5 * float(s2) * z * z
+    d = (-g + np.sqrt(g * g + 2.0 * h * target)) / h
+    lo, hi = bounds
+    limit = float(min(bound + d, hi) if side == "lower" else max(bound - d, lo))
+    out.update(limit=limit, interval=sorted([float(bound), limit]))
+    return out
 
 
 def warn_identifiability(report: dict, remedy: str = "fix one of them (drop it from --estimate)") -> None:
@@ -335,8 +392,18 @@ def warn_identifiability(report: dict, remedy: str = "fix one of them (drop it f
     for p in report["correlated_pairs"]:
         a, b = p["parameters"]
         warnings.warn(f"{a} and {b} are not identifiable together: correlation {p['correlation']:+.3f} at the optimum "
-                      f"(|r| > {report['threshold']:g}); {remedy} or add data that tells them apart",
+                      f"(|r| >= {report['threshold']:g}); {remedy} or add data that tells them apart",
                       MusclemetabWarning, stacklevel=3)
+    if report.get("collinear"):
+        warnings.warn(f"the estimated factors are collinear: condition index {report['condition_index']:.3g} of their "
+                      f"correlation matrix (above {report['condition_index_limit']:g}); some combination of them is "
+                      "poorly determined by the data; estimate fewer parameters or couple them", MusclemetabWarning,
+                      stacklevel=3)
+    for lab, b in (report.get("on_bound") or {}).items():
+        if b["limit"] is not None:
+            warnings.warn(f"{lab} is on its {b['side']} bound {b['bound']:g}: no symmetric standard error; one-sided "
+                          f"95 % interval {b['interval'][0]:.4g} ... {b['interval'][1]:.4g}", MusclemetabWarning,
+                          stacklevel=3)
     if report["near_singular"]:
         warnings.warn(f"the reduced Hessian of the estimation is near singular (reciprocal condition "
                       f"{report['reduced_hessian_rcond']:.2g}): some combination of the estimated parameters is not "
@@ -369,3 +436,31 @@ def tracking_fit(solution, fiber_lengths: dict | None = None, emg: dict | None =
             fit[m] = {key: float(scale * np.sqrt(np.mean(err**2))), "r": r}
         out[kind] = fit
     return out
+
+
+def validation_warnings(fits: dict, rms_mm: float = VALIDATION_RMS_MM, min_r: float = VALIDATION_MIN_R) -> list[str]:
+    """One line per measured muscle whose validation re-solve misfits its measurement
+    (``fits``: ``{trial: tracking_fit(...)}``): a fiber length with RMS above ``rms_mm`` (mm) or
+    Pearson r below ``min_r``; an excitation with r below ``min_r`` against its scaled EMG."""
+    lines = []
+    for trial, fit in (fits or {}).items():
+        for m, v in (fit.get("fiber_length") or {}).items():
+            bad = [f"RMS {v['rms_mm']:.3g} mm (above {rms_mm:g} mm)"] if v["rms_mm"] > rms_mm else []
+            if not (v["r"] >= min_r):
+                bad.append(f"r {v['r']:.2f} (below {min_r:g})")
+            if bad:
+                lines.append(f"validation of {trial}: the fiber length of {m} misfits its ultrasound: "
+                             + ", ".join(bad) + "; the effort goal with the estimates does not reproduce it")
+        for m, v in (fit.get("emg") or {}).items():
+            if not (v["r"] >= min_r):
+                lines.append(f"validation of {trial}: the excitation of {m} misfits its EMG: r {v['r']:.2f} (below "
+                             f"{min_r:g}); the effort goal with the estimates does not reproduce it")
+    return lines
+
+
+def warn_validation(fits: dict) -> list[str]:
+    """Warn each line of :func:`validation_warnings` (:class:`MusclemetabWarning`); returns them."""
+    lines = validation_warnings(fits)
+    for line in lines:
+        warnings.warn(line, MusclemetabWarning, stacklevel=2)
+    return lines

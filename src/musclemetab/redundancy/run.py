@@ -483,5 +483,3 @@ def write_solution_folder(solution, out, opensim_files: bool = True) -> None:
         from .export import write_solution_opensim_files
 
         write_solution_opensim_files(solution, out)
-
-

@@ -478,10 +478,11 @@ def _interval(row, column: str, digits: int = 3) -> str:
 def uncertainty_section(study: StudyFolder) -> dict | None:
     """The report's uncertainty section, or ``None`` for a study without bands: the samples and
     seed, the priors (a table), the whole-body rates and the top muscles of each model with their
-    5-95 % intervals."""
-    from ..uncertainty import GLOBAL_PARAMETERS, read_priors
+    bands (5-95 %, or min-max from few samples), each band with where its nominal lies and the parameters that make its width,
+    the samples left out."""
+    from ..uncertainty import GLOBAL_PARAMETERS, MIN_BAND_SAMPLES, QUANTILE_SAMPLES, read_priors
     from .figures import main_workflow, trial_order
-    from .uncertainty import has_band
+    from .uncertainty import BAND_HEADER, FLAGGED_HEADER, band_rows, flagged_rows, has_band
 
     ok = study.ok
     if ok.empty or not has_band(ok, "whole_body_W_per_kg"):
@@ -494,10 +495,11 @@ def uncertainty_section(study: StudyFolder) -> dict | None:
     except Exception as exc:  # noqa: BLE001 - a moved priors file: the package's table is shown, said so
         priors, note = read_priors(), f"the study's priors file could not be read ({exc}); the package's are shown"
     rows = [[r.parameter, r.distribution, f"{r.spread:g}",
-             r.muscle or ("the subject" if r.parameter in GLOBAL_PARAMETERS else "every muscle"), r.source]
+             r.muscle or ("the subject" if r.parameter in GLOBAL_PARAMETERS else "every muscle"), r.source,
+             r.population, r.value_taken, r.note]
             for r in priors.rows]
-    priors_table = Table([[("parameter", 1), ("distribution", 1), ("spread", 1), ("muscle", 1), ("source", 1)]],
-                         rows, 1, "settings")
+    priors_table = Table([[(h, 1) for h in ("parameter", "distribution", "spread", "muscle", "source", "population",
+                                            "value taken", "note")]], rows, 1, "settings")
     trials = trial_order(ok)
     wb_rows = []
     for (wf, model), d in ok.groupby([ok["workflow"].astype(str), ok["model"].astype(str)], sort=False):
@@ -522,8 +524,16 @@ def uncertainty_section(study: StudyFolder) -> dict | None:
     else:
         muscles_workflow = None
     n = ok["uncertainty_samples"].to_numpy(float) if "uncertainty_samples" in ok else np.array([np.nan])
+    rejected = ok["uncertainty_rejected"].to_numpy(float) if "uncertainty_rejected" in ok else np.zeros(1)
+    bands = Table([[(h, 1) for h in BAND_HEADER]], band_rows(ok), 4, "results")
+    flagged = flagged_rows(ok)
     return {"samples": int(settings.get("samples", 0) or np.nanmax(n)), "seed": settings.get("seed"),
             "converged": f"{int(np.nanmin(n))}-{int(np.nanmax(n))}" if np.nanmin(n) != np.nanmax(n) else f"{int(n[0])}",
+            "rejected": int(np.nanmax(rejected)) if rejected.size else 0,
+            "keep_flagged": bool(settings.get("keep_flagged", False)), "min_samples": MIN_BAND_SAMPLES,
+            "quantile_samples": QUANTILE_SAMPLES,
+            "bands": bands, "flagged": Table([[(h, 1) for h in FLAGGED_HEADER]], flagged, 3, "results") if flagged
+            else None,
             "priors": priors_table, "priors_source": priors.source, "note": note, "whole_body": whole_body,
             "muscles": muscles, "muscles_workflow": muscles_workflow, "top": TOP_MUSCLES}
 

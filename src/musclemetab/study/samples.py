@@ -7,8 +7,10 @@ trial unit's solution adapted to them (:func:`musclemetab.uncertainty.adapted_st
 forces; :func:`musclemetab.redundancy.run.solve_files`, ``warm_start`` and ``parameter_transform``),
 evaluates every metabolic model of the study with the sampled muscle masses, slow-twitch fractions
 and height, and writes ``whole_body.csv``, ``analysis.csv`` and ``per_muscle.csv`` (the trial unit's
-columns) and ``factors.csv`` (the factors of every muscle). A sample whose solve does not converge is
-recorded (``converged: false``) and left out of the bands. Its key is the trial unit's key, the
+columns) and ``factors.csv`` (the factors of every muscle). Its record (``unit.json``) keeps the
+solve's plausibility flags and convergence record as a trial unit's does; a sample whose solve does
+not converge (``converged: false``), or that has a flag, is left out of the bands
+(:func:`.uncertainty.sample_tables`). Its key is the trial unit's key, the
 priors' values, the seed and ``k``.
 """
 
@@ -29,7 +31,7 @@ __all__ = ["study_priors", "sample_key", "run_sample", "FACTORS_FILE", "METHOD"]
 
 FACTORS_FILE = "factors.csv"
 #: the sampling rule, part of every sample's key
-METHOD = "sobol (owen scrambling) -> inverse normal cdf; factors of musclemetab.uncertainty"
+METHOD = "sobol (owen scrambling) -> inverse normal cdf; factors of musclemetab.uncertainty; solve flags recorded"
 
 
 @functools.lru_cache(maxsize=8)
@@ -93,10 +95,9 @@ def run_sample(study: Study, unit, tmp: Path, nominal_folder: Path, *, options=N
     from ..geometry import compute_geometry
     from ..metabolics.per_muscle import PER_MUSCLE_FILE, per_muscle_table
     from ..metabolics.solution import WHOLE_BODY_CSV, metabolics_from_solution
-    from ..properties import metabolic_properties
     from ..redundancy import run as redundancy_run
     from ..redundancy.solution import Solution
-    from ..uncertainty import adapted_start, draw
+    from ..uncertainty import adapted_start, draw, sampled_properties
 
     nominal = _record(nominal_folder)
     if nominal.get("status") != "ok":
@@ -120,21 +121,19 @@ def run_sample(study: Study, unit, tmp: Path, nominal_folder: Path, *, options=N
     times = {"solve_s": sol.record.solve_time_s, "solution_s": time.perf_counter() - t0}
     record = {"times": times, "converged": bool(sol.success), "solve_status": sol.status,
               "iterations": sol.record.get("iterations"),
-              "height_factor": factors.height}
+              "height_factor": factors.height,
+              # checked as any solve is (docs/quality.md): the bands leave a flagged sample out
+              "plausibility": [f.to_dict() for f in sol.record.flags],
+              "convergence": sol.record.convergence}
     if not sol.success:  # recorded, left out of the bands
         return record
     t1 = time.perf_counter()
-    params = sol.parameters.subset(sol.muscles)
-    masses, fst = metabolic_properties(list(sol.muscles), subject.body_mass_kg, subject.height_m * factors.height,
-                                       params.max_isometric_force_N, params.optimal_fiber_length_m,
-                                       overrides=subject.muscle_properties)
-    masses, fst = factors.metabolic_properties(masses, fst)
+    masses, fst = sampled_properties(factors, sol, subject.body_mass_kg, subject.height_m, subject.muscle_properties)
     speed = nominal.get("speed_m_per_s")
     result = metabolics_from_solution(
         sol, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
         basal_rate_W_per_kg=study.basal_coefficient, basal_exponent=study.basal_exponent, speed_m_per_s=speed,
-        muscle_properties=subject.muscle_properties, muscle_masses_kg=dict(zip(sol.muscles, masses.tolist())),
-        slow_twitch_fractions=dict(zip(sol.muscles, fst.tolist())))
+        muscle_properties=subject.muscle_properties, muscle_masses_kg=masses, slow_twitch_fractions=fst)
     cycle = GaitCycle(**{k: float(v) for k, v in nominal["cycle"].items()})
     result.whole_body_table().to_csv(tmp / WHOLE_BODY_CSV, index=False, float_format="%.10g")
     per_muscle_table(result, cycle).to_csv(tmp / PER_MUSCLE_FILE, index=False, float_format="%.10g")

@@ -21,6 +21,7 @@ A study file names everything a study needs; paths are relative to the file::
     priors = "priors.csv"              # optional: rows replacing the package's priors
     sensitivity = true                 # optional: each effort trial unit writes sensitivity.csv
                                        #  (default false; samples may then be left out)
+    keep_flagged = false               # optional: bands also from samples with plausibility flags
 
     [[subjects]]
     name = "sub1"
@@ -299,7 +300,7 @@ _ASSISTANCE_KEYS = {"file", "gain", "gains"}
 #: keys of the study file's [energy_goal] table (the energy goal of every effort-workflow solve)
 _ENERGY_KEYS = {"model", "weight", "effort_weight", "smoothing", "form"}
 #: keys of the study file's [uncertainty] table (docs/uncertainty.md)
-_UNCERTAINTY_KEYS = {"samples", "seed", "priors", "sensitivity"}
+_UNCERTAINTY_KEYS = {"samples", "seed", "priors", "sensitivity", "keep_flagged"}
 #: keys of the study file's [solver] table (IPOPT settings of every solve)
 _SOLVER_KEYS = {"max_iter", "tol", "stop", "linear_solver", "warm_start"}
 _SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials",
@@ -584,7 +585,7 @@ def _report(data, where: str) -> dict:
 
 
 def _uncertainty(data, base: Path, where: str) -> dict:
-    """The ``[uncertainty]`` table checked: ``{"samples", "seed"[, "priors"]}`` (``{}`` for none or 0 samples;
+    """The ``[uncertainty]`` table checked: ``{"samples", "seed"[, "priors", "keep_flagged"]}`` (``{}`` for none or 0 samples;
     its ``sensitivity`` switch: :func:`_sensitivity`)."""
     if data is None:
         return {}
@@ -604,6 +605,10 @@ def _uncertainty(data, base: Path, where: str) -> dict:
     if priors is not None:
         read_priors(priors)  # checked now, before anything runs
         out["priors"] = str(priors)
+    if "keep_flagged" in data:
+        from ..settings import check_switch
+
+        out["keep_flagged"] = check_switch("keep_flagged", data["keep_flagged"], here)
     return out if out["samples"] else {}
 
 
