@@ -57,7 +57,7 @@ def tiny_study(ex, folder: Path, workflows=("effort-gen",), models=("UM10",), ex
         return json.dumps(v if isinstance(v, (int, float)) else str(v))
 
     lines = ['name = "quick"', 'output = "out"', f"workflows = {json.dumps(list(workflows))}",
-             f"models = {json.dumps(list(models))}", *([extra] if extra else []), "", "[[subjects]]",
+             f"models = {json.dumps(models if isinstance(models, str) else list(models))}", *([extra] if extra else []), "", "[[subjects]]",
              'name = "example"', f"model = {value(ex.model)}", f"body_mass_kg = {ex.body_mass_kg}",
              f"height_m = {ex.height_m}", f"passive = {value(ex.passive_moments_mat)}", 'tendon_stiffness = "example"',
              "", "[[subjects.trials]]", 'name = "normal"', f"ik = {value(files['ik'])}", f"id = {value(files['id'])}",
