@@ -23,9 +23,10 @@ Three parts, on the example subject's normal trial with EFFORT-GEN (``--parts`` 
     python benchmarks/uncertainty.py --quick
 
 ``--quick``: every part on the window 0.6-0.8 s of the normal trial (``warm``: ``solve_files(window=...)``;
-the studies: the trial cut to that window, ``benchmarks/_quick.py``), one sample compared, 2 samples,
-2 truths, one worker, the package's cache (``$MUSCLEMETAB_CACHE``): a check that the script runs (the
-test suite runs it so); its numbers say nothing of a whole trial's.
+the study: the trial cut to that window, ``benchmarks/_quick.py``), one sample compared, 2 samples on
+one worker, whose own samples stand for the truths of ``coverage`` (no second study), the package's
+cache (``$MUSCLEMETAB_CACHE``): a check that the script runs (the test suite runs it so); its numbers
+say nothing of a whole trial's.
 """
 
 from __future__ import annotations
@@ -136,6 +137,7 @@ def study_time(ex, root: Path, samples: int, workers: int, quick: bool = False) 
 
 
 def coverage(ex, root: Path, bands_out: Path, truths: int, workers: int, quick: bool = False) -> None:
+    """The ``coverage`` part (``quick``: the truths are the samples of the study of ``bands_out``)."""
     import numpy as np
     import pandas as pd
 
@@ -143,8 +145,11 @@ def coverage(ex, root: Path, bands_out: Path, truths: int, workers: int, quick: 
     from musclemetab.study.spec import load_study
     from musclemetab.study.uncertainty import sample_tables
 
-    path = _study(ex, root / "truths", truths, 2, quick)
-    _run(path, workers)
+    if quick:  # the bands' own samples stand for the truths: the code path, not a coverage
+        path = bands_out.parent / "study.toml"
+    else:
+        path = _study(ex, root / "truths", truths, 2)
+        _run(path, workers)
     truth_wb, truth_pm = sample_tables(load_study(path), trial_result_rows, add_leg_rows, leg_basal_energy_J)
     results = pd.read_csv(bands_out / "results.csv").set_index("model")
     per_muscle = pd.read_csv(bands_out / "per_muscle.csv").set_index(["model", "muscle"])
@@ -173,7 +178,7 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", help="folder for the studies (default: a new temporary folder)")
     ap.add_argument("--quick", action="store_true", help="every part on the normal trial's window 0.6-0.8 s, "
-                    "1 sample compared, 2 samples, 2 truths, one worker")
+                    "1 sample compared, 2 samples (the truths too), one worker")
     args = ap.parse_args()
     window = None
     if args.quick:

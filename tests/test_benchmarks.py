@@ -1,7 +1,9 @@
-"""The benchmark scripts run: each in a new process with ``--quick`` (a small problem, seconds),
+"""The benchmark scripts run: every one in a new process with ``--quick`` (a small problem, seconds),
 exit status 0 and its result lines printed, the ratios it measures among them. The numbers
 themselves are not checked (they are the machine's); ``benchmarks/*.py`` say what the full runs
-measure and docs/solver.md and docs/study.md hold the measured values."""
+measure and docs/solver.md and docs/study.md hold the measured values. The quick runs use the test
+run's cache (``$MUSCLEMETAB_CACHE``, passed on): the geometry other tests computed is not computed
+again."""
 
 from __future__ import annotations
 
