@@ -120,6 +120,8 @@ def quick() -> None:
 
 
 if __name__ == "__main__":
+    if not sys.argv[1:] or sys.argv[1] in ("-h", "--help"):
+        sys.exit(print(__doc__))
     if sys.argv[1:] == ["--quick"]:
         sys.exit(quick())
     args = [a for a in sys.argv[1:] if a != "--default-resolves"]
