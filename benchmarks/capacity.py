@@ -1,7 +1,8 @@
 """Capacity plan of a study: per-unit CPU and memory, the executors' overhead per unit, and the
 projected wall time and memory of a 1000-trial study on 8, 64 and 512 cores.
 
-    python benchmarks/capacity.py [--small-units 200] [--skip-demo]
+    python benchmarks/capacity.py [--small-units 200]
+    python benchmarks/capacity.py --quick
 
 1. Per unit (the demo's study: the example subject's 3 trials x EFFORT-GEN -> EFFORT-TEN,
    warm-started, a new geometry cache): ``musclemetab run --workers 1`` in a new process; its CPU
@@ -22,6 +23,11 @@ projected wall time and memory of a 1000-trial study on 8, 64 and 512 cores.
    units x CPU per unit / cores + the serial parts (planning and gathering per unit, the
    scheduler's cost per unit) and the tail of the last units; memory = cores x the peak memory of
    one worker (its OpenSim worker included) + the client's.
+
+``--quick``: 1. on a study of two units (EFFORT-GEN -> EFFORT-TEN of the normal trial cut to
+0.6-0.8 s: ``benchmarks/_quick.py``) with the package's cache (``$MUSCLEMETAB_CACHE``), 2. on 4 units
+without Dask (the process pool's cost stands for the scheduler's in 3.): a check that the script
+runs (the test suite runs it so); its numbers say nothing of the demo's.
 """
 
 from __future__ import annotations
@@ -85,19 +91,26 @@ def _measured_run(args: list[str], env) -> tuple[float, float, int]:
     return wall, cpu, peak[0] if peak else 0
 
 
-def per_unit(tmp: Path, env) -> dict:
-    """1.: the demo's study with one worker, a new geometry cache."""
+def per_unit(tmp: Path, env, quick: bool = False) -> dict:
+    """1.: the demo's study with one worker, a new geometry cache (``quick``: a study of two short
+    units, the package's cache)."""
     from musclemetab.study import load_study
     from musclemetab.study.demo import demo_study
     from musclemetab.study.runner import collect_results
     from musclemetab.study.units import plan_units
 
-    env = dict(env, MUSCLEMETAB_CACHE=str(tmp / "cache-units"))
-    study = demo_study(tmp / "units", models="all")
+    if quick:
+        from _quick import tiny_study
+        from solver import _example
+
+        study = load_study(tiny_study(_example(), tmp / "units", workflows=("effort-gen", "effort-ten"), models="all"))
+    else:
+        env = dict(env, MUSCLEMETAB_CACHE=str(tmp / "cache-units"))
+        study = demo_study(tmp / "units", models="all")
     n = sum(len(s) for s in plan_units(study))
     wall, cpu, peak = _measured_run(["run", str(study.source), "--workers", "1", "--no-progress", "--warm-start"], env)
     ipopt = []
-    for f in sorted((tmp / "units" / "units").rglob("summary.json")):
+    for f in sorted((study.output / "units").rglob("summary.json")):
         ipopt.append(float(json.loads(f.read_text())["solve_cpu_time_s"]))
     collect_results(load_study(study.source))  # the imports (pandas, the data dictionary's tables): once
     t0, c0 = time.perf_counter(), time.process_time()
@@ -124,7 +137,7 @@ def _small_study(folder: Path, n: int) -> Path:
     return path
 
 
-def executor_overhead(tmp: Path, n: int) -> dict:
+def executor_overhead(tmp: Path, n: int, dask: bool = True) -> dict:
     """2.: wall time per unit of units that do nothing, in process, on a pool of 2, on Dask (2 processes)."""
     from musclemetab.study import load_study
     from musclemetab.study.runner import run_study
@@ -139,6 +152,8 @@ def executor_overhead(tmp: Path, n: int) -> dict:
         result[label] = ((time.perf_counter() - t0) / n, (time.process_time() - c0) / n)
         assert len(run.failed) == n
     try:
+        if not dask:
+            return result
         from distributed import LocalCluster
     except ImportError:
         return result
@@ -173,18 +188,21 @@ def projection(unit: dict, overhead: dict, trials: int = 1000, units_per_trial: 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--small-units", type=int, default=200, help="units of the overhead study (2.)")
+    ap.add_argument("--quick", action="store_true", help="two short units in 1., 4 units and no Dask in 2.")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.small_units = 4
     tmp = Path(tempfile.mkdtemp(prefix="musclemetab-bench-capacity-"))
     env = dict(os.environ)
     print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}; output under {tmp}")
-    unit = per_unit(tmp, env)
-    print(f"\n1. per unit (the demo's {unit['units']} units, EFFORT-GEN -> EFFORT-TEN warm-started, --workers 1, "
-          "new geometry cache)")
+    unit = per_unit(tmp, env, args.quick)
+    print(f"\n1. per unit ({'a quick study' if args.quick else 'the demo'}'s {unit['units']} units, EFFORT-GEN -> "
+          f"EFFORT-TEN warm-started, --workers 1, {'the package' if args.quick else 'new geometry'} cache)")
     print(f"   CPU {unit['cpu_s']:.2f} s per unit (IPOPT {unit['ipopt_cpu_s']:.2f} s of it), wall {unit['wall_s']:.2f} s; "
           f"peak memory of the run (one unit at a time, its OpenSim worker included) "
           f"{unit['peak_bytes'] / 1024**2:.0f} MiB; gathering the results {1000 * unit['gather_s']:.1f} CPU ms "
           f"({1000 * unit['gather_wall_s']:.1f} ms wall) per unit")
-    overhead = executor_overhead(tmp, args.small_units)
+    overhead = executor_overhead(tmp, args.small_units, dask=not args.quick)
     print(f"\n2. cost per unit of the executors ({args.small_units} units that fail at once)")
     print(f"   {'executor':<40} {'wall ms':>8} {'calling process CPU ms':>23}  (per unit)")
     for label, (wall, cpu) in overhead.items():

@@ -22,6 +22,11 @@ Run it with the Pythons of two environments to compare SciPy versions.
 
     python benchmarks/cold_start.py [--trial normal] [--repeat 3] [--baseline-src OTHER/src]
     python benchmarks/cold_start.py --dependencies [--repeat 5]
+    python benchmarks/cold_start.py --quick
+
+``--quick``: the window 0.6-0.8 s of the normal trial (``--window``), one cold and one warm solve of
+this tree, the package's cache (``$MUSCLEMETAB_CACHE``); the warm process runs first, its untimed
+solve filling the caches. A check that the script runs; its times say nothing of a whole trial's.
 """
 
 from __future__ import annotations
@@ -47,13 +52,19 @@ def _example():
     return example()
 
 
-def cold_run(src: Path, ex, trial: str, cache: Path) -> dict:
+def _env(src: Path, cache: Path | None) -> dict:
+    """The environment of a process of the tree ``src`` with the cache ``cache`` (None: the package's)."""
+    return dict(os.environ, PYTHONPATH=str(src), **({"MUSCLEMETAB_CACHE": str(cache)} if cache else {}))
+
+
+def cold_run(src: Path, ex, trial: str, cache: Path | None, window=None) -> dict:
     out = Path(tempfile.mkdtemp(prefix="mm-cold-")) / "out"
-    env = dict(os.environ, PYTHONPATH=str(src), MUSCLEMETAB_CACHE=str(cache))
+    env = _env(src, cache)
     # the command line's entry: `python -m musclemetab` (older trees: the module musclemetab.cli)
     entry = "musclemetab" if (src / "musclemetab" / "__main__.py").is_file() else "musclemetab.cli"
     cmd = [sys.executable, "-m", entry, "solve", "--model", str(ex.model), "--ik", str(ex.ik[trial]),
-           "--id", str(ex.id[trial]), "--workflow", "effort-gen", "--out", str(out)]
+           "--id", str(ex.id[trial]), "--workflow", "effort-gen", "--out", str(out),
+           *(["--window", f"{window[0]:g}:{window[1]:g}"] if window else [])]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
@@ -72,11 +83,12 @@ _WARM = """
 import json, sys, time
 from musclemetab.redundancy import solve_files
 model, ik, idf, repeat = sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4])
-solve_files(model, ik, idf, "effort-gen")  # imports, in-memory caches, the first solve: untimed
+window = tuple(json.loads(sys.argv[5])) if len(sys.argv) > 5 else None
+solve_files(model, ik, idf, "effort-gen", window=window)  # imports, in-memory caches, the first solve: untimed
 runs = []
 for _ in range(repeat):
     w0, c0 = time.perf_counter(), time.process_time()
-    sol = solve_files(model, ik, idf, "effort-gen")
+    sol = solve_files(model, ik, idf, "effort-gen", window=window)
     wall, cpu = time.perf_counter() - w0, time.process_time() - c0
     s = sol.summary
     runs.append({"wall_s": wall, "solve_s": s["solve_time_s"], "rest_s": wall - s["solve_time_s"], "cpu_s": cpu,
@@ -86,20 +98,20 @@ print(json.dumps(runs))
 """
 
 
-def run_in_tree(code: str, src: Path, ex, trial: str, cache: Path, repeat: int, what: str):
+def run_in_tree(code: str, src: Path, ex, trial: str, cache: Path | None, repeat: int, what: str, window=None):
     """Run ``code`` in a new process with the package of ``src``, given the trial's model, IK
-    and ID files and ``repeat``; its last line of output, read as JSON."""
-    env = dict(os.environ, PYTHONPATH=str(src), MUSCLEMETAB_CACHE=str(cache))
+    and ID files, ``repeat`` and ``window`` (JSON); its last line of output, read as JSON."""
     proc = subprocess.run([sys.executable, "-c", code, str(ex.model), str(ex.ik[trial]), str(ex.id[trial]),
-                           str(repeat)], capture_output=True, text=True, env=env)
+                           str(repeat), *([json.dumps(list(window))] if window else [])], capture_output=True,
+                          text=True, env=_env(src, cache))
     if proc.returncode != 0:
         sys.exit(f"{what} failed with {src}:\n{proc.stderr}")
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-def warm_runs(src: Path, ex, trial: str, cache: Path, repeat: int) -> list[dict]:
+def warm_runs(src: Path, ex, trial: str, cache: Path | None, repeat: int, window=None) -> list[dict]:
     """The same solve repeated in one process (see the module docstring)."""
-    return run_in_tree(_WARM, src, ex, trial, cache, repeat, "the warm solve")
+    return run_in_tree(_WARM, src, ex, trial, cache, repeat, "the warm solve", window)
 
 
 #: what a cold command may spend beyond the solve itself (seconds)
@@ -156,22 +168,33 @@ def main(argv=None) -> int:
     ap.add_argument("--baseline-src", type=Path, help="another source tree (its src folder) to compare with")
     ap.add_argument("--dependencies", action="store_true",
                     help="time only the imports of NumPy, CasADi (with IPOPT) and SciPy that a cold solve needs")
+    ap.add_argument("--quick", action="store_true",
+                    help="the normal trial's window 0.6-0.8 s, one cold and one warm solve, the package's cache")
     args = ap.parse_args(argv)
     if args.dependencies:
         return dependency_floor(args.repeat)
+    window = None
+    if args.quick:
+        from _quick import WINDOW
+
+        args.trial, args.repeat, args.baseline_src, window = "normal", 1, None, WINDOW
     ex = _example()
     trees = {"this tree": HERE.parent / "src"}
     if args.baseline_src:
         trees["baseline"] = args.baseline_src.resolve()
-    cache = Path(tempfile.mkdtemp(prefix="mm-cold-cache-"))
+    cache = None if args.quick else Path(tempfile.mkdtemp(prefix="mm-cold-cache-"))
     print(f"cold start: {os.cpu_count()} cores, load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
-    for src in trees.values():  # fill each tree's caches (not timed)
-        cold_run(src, ex, args.trial, cache)
+    if args.quick:  # the warm process's untimed solve fills the caches
+        warm = {name: warm_runs(src, ex, args.trial, cache, args.repeat, window) for name, src in trees.items()}
+    else:
+        for src in trees.values():  # fill each tree's caches (not timed)
+            cold_run(src, ex, args.trial, cache)
     runs = {name: [] for name in trees}
     for _ in range(args.repeat):
         for name, src in trees.items():
-            runs[name].append(cold_run(src, ex, args.trial, cache))
-    warm = {name: warm_runs(src, ex, args.trial, cache, args.repeat) for name, src in trees.items()}
+            runs[name].append(cold_run(src, ex, args.trial, cache, window))
+    if not args.quick:
+        warm = {name: warm_runs(src, ex, args.trial, cache, args.repeat) for name, src in trees.items()}
     head = f"{'wall s':>7} {'solve s':>8} {'rest s':>7} {'CPU s':>6} {'solve CPU s':>12} {'rest CPU s':>11}"
     print(f"{'tree':<10} {'run':<5} {head}")
     for name in trees:

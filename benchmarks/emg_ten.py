@@ -15,9 +15,10 @@ Usage::
     python benchmarks/emg_ten.py [--mapping authors|default] [--coupling constraints|shared]
         [--repeat 1] [--count-factorizations] [--json results.json] [--quick]
 
-``--quick``: each trial cut to 0.2 s of its motion (IK, ID and EMG files written cropped
-to a temporary folder), so that the whole path runs in seconds (the test suite runs it so);
-its times say nothing of the full problem's.
+``--quick``: each trial cut to 0.2 s of its motion (IK, ID and EMG files written cropped to a
+temporary folder, always with the same content: ``benchmarks/_quick.py``), their geometry from
+the package's cache (``$MUSCLEMETAB_CACHE``), so that the whole path runs in seconds (the test
+suite runs it so); its times say nothing of the full problem's.
 """
 
 from __future__ import annotations
@@ -51,23 +52,16 @@ def _example():
     return example_subject()
 
 
-#: seconds of each trial kept by ``--quick`` (after the first 0.05 s of its motion)
-QUICK_SECONDS = 0.2
-
-
 def _cropped(ex, folder: Path):
-    """``{kind: {trial: path}}`` of the IK, ID and EMG files of each trial cut to
-    :data:`QUICK_SECONDS` of its motion (``--quick``), written into ``folder``."""
-    from musclemetab.io import read_storage, write_storage
+    """``{kind: {trial: path}}`` of the IK, ID and EMG files of each trial cut short
+    (``--quick``: :func:`_quick.cropped_trial`), written into ``folder``."""
+    from _quick import cropped_trial
 
     out = {"ik": {}, "id": {}, "emg": {}}
     for t in TRIALS:
-        t0 = float(read_storage(ex.ik[t]).index[0]) + 0.05
-        for kind, path in (("ik", ex.ik[t]), ("id", ex.id[t]), ("emg", ex.emg[t])):
-            table = read_storage(path)
-            keep = table[(table.index >= t0 - 1e-9) & (table.index <= t0 + QUICK_SECONDS + 1e-9)]
-            out[kind][t] = folder / Path(path).name
-            write_storage(out[kind][t], keep, in_degrees=bool(table.attrs.get("in_degrees")))
+        files = cropped_trial(ex, t, folder / t, kinds=("ik", "id", "emg"))
+        for kind in out:
+            out[kind][t] = files[kind]
     return out
 
 
@@ -114,19 +108,19 @@ def main(argv=None) -> int:
     p.add_argument("--repeat", type=int, default=1)
     p.add_argument("--count-factorizations", action="store_true")
     p.add_argument("--json", metavar="FILE")
-    p.add_argument("--quick", action="store_true", help=f"each trial cut to {QUICK_SECONDS} s (seconds in all)")
+    p.add_argument("--quick", action="store_true", help="each trial cut to 0.2 s (seconds in all)")
     args = p.parse_args(argv)
 
     ex = _example()
-    cache_dir = Path(tempfile.mkdtemp(prefix="emg_ten_bench_"))
-    args.files = (_cropped(ex, cache_dir) if args.quick else
+    cache_dir = None if args.quick else Path(tempfile.mkdtemp(prefix="emg_ten_bench_"))  # quick: the package's
+    args.files = (_cropped(ex, Path(tempfile.mkdtemp(prefix="emg_ten_quick_"))) if args.quick else
                   {"ik": dict(ex.ik), "id": dict(ex.id), "emg": dict(ex.emg)})
     from musclemetab.geometry import compute_geometry
     from musclemetab.model import read_muscle_parameters
 
     for t in TRIALS:  # geometry cache and OpenSim worker warm (not timed)
         compute_geometry(ex.model, args.files["ik"][t], cache_dir=cache_dir)
-    read_muscle_parameters(ex.model)
+    read_muscle_parameters(ex.model, cache_dir=cache_dir)
     import casadi  # noqa: F401
 
     runs = []
@@ -163,7 +157,7 @@ def main(argv=None) -> int:
 
     sizes = " + ".join(str(t["n_intervals"]) for t in r.get("trials") or [] if "n_intervals" in t) or "?"
     print(f"EMG-TEN, example subject, trials {', '.join(TRIALS)} (N = {sizes}), mapping {args.mapping}, "
-          f"couplings as {args.coupling}{f' (--quick: {QUICK_SECONDS} s of each)' if args.quick else ''}")
+          f"couplings as {args.coupling}{' (--quick: 0.2 s of each)' if args.quick else ''}")
     print(f"  status {r['status']}, {r['iterations']} iterations, objective {r['objective']:.6e}")
     print(f"  problem: {size['variables']} variables, {size['equality_constraints']} equality and "
           f"{size['inequality_constraints']} inequality constraints (study: {STUDY['variables']}, "

@@ -17,6 +17,11 @@ Trials: the example subject's slow, normal and fast trials (right leg, ID file) 
 ``--gait2392``, the right leg of OpenSim's gait2392 subject over its first gait cycle.
 
     python benchmarks/inertia.py [--trials slow normal fast] [--gait2392] [--options default ...] [--variant V]
+    python benchmarks/inertia.py --quick
+
+``--quick``: the window 0.6-0.8 s of the normal trial (geometry from the package's cache) with the
+default options and a larger first perturbation (a check that the script runs; its counts say
+nothing of the full trials').
 """
 
 from __future__ import annotations
@@ -175,13 +180,14 @@ def attribute(trial: str, start_frame: int, frames: int, iterations) -> list[dic
     return out
 
 
-def _trials(names, gait2392: bool):
+def _trials(names, gait2392: bool, window=None):
     from musclemetab.datasets import example_subject, gait2392_subject01
     from musclemetab.redundancy import solve_files
 
     ex = example_subject()
     for name in names:
-        yield name, lambda opts, n=name: solve_files(ex.model, ex.ik[n], ex.id[n], "effort-gen", options=opts)
+        yield name, lambda opts, n=name: solve_files(ex.model, ex.ik[n], ex.id[n], "effort-gen", options=opts,
+                                                     window=window)
     if gait2392:
         g = gait2392_subject01()
         yield "gait2392 r", lambda opts: solve_files(g.model, g.ik, None, "effort-gen", external_loads=g.external_loads,
@@ -199,7 +205,15 @@ def main(argv=None) -> int:
                         help="START FRAMES ITERATION [ITERATION ...]: the surplus negative eigenvalues by constraint "
                              "family on FRAMES frames of the first trial from frame START, after each ITERATION "
                              "count of IPOPT iterations (see attribute)")
+    parser.add_argument("--quick", action="store_true",
+                        help="the normal trial's window 0.6-0.8 s, default options and first_pert_1e-2 (seconds)")
     args = parser.parse_args(argv)
+    window = None
+    if args.quick:
+        from _quick import WINDOW
+
+        args.trials, args.gait2392, args.options, args.attribute = ["normal"], False, ["default", "first_pert_1e-2"], None
+        window = WINDOW
     use_variant(args.variant)
     if args.attribute:
         start, frames, *at = args.attribute
@@ -212,7 +226,7 @@ def main(argv=None) -> int:
     print(f"inertia corrections ({args.variant} constraints): {os.cpu_count()} cores, load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     print(f"{'trial':<11} {'options':<22} {'status':<16} {'it':>4} {'fact':>5} {'wrong':>5} {'pert.it':>7} "
           f"{'fact/it':>7} {'excess':>6} {'solve s':>8} {'objective':>15} {'rel. change':>11}")
-    for trial, solve in _trials(args.trials, args.gait2392):
+    for trial, solve in _trials(args.trials, args.gait2392, window):
         reference = None
         for name in args.options:
             r = solve_counted(solve, OPTION_SETS[name])

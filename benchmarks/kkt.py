@@ -37,6 +37,10 @@ Times are the median of ``--repeat`` runs; the residual is
 ``||K x - b||_inf / (||K||_inf ||x||_inf + ||b||_inf)``.
 
     python benchmarks/kkt.py [--trials normal] [--iterations 1 10 0] [--repeat 5] [--no-superlu]
+    python benchmarks/kkt.py --quick
+
+``--quick``: the window 0.6-0.8 s of the normal trial (geometry from the package's cache), the first
+iterate alone, one repeat, no SuperLU: a check that the script runs (the test suite runs it so).
 """
 
 from __future__ import annotations
@@ -70,8 +74,11 @@ def _example():
     return example()
 
 
-def build_problem(ex, trial):
-    """NLP of the trial's EFFORT-GEN problem exactly as the solver builds it."""
+def build_problem(ex, trial, window=None):
+    """NLP of the trial's EFFORT-GEN problem exactly as the solver builds it (``window``: the IK
+    frames of that time range, as ``solve_files(window=...)`` keeps them)."""
+    import dataclasses
+
     from musclemetab.geometry import compute_geometry
     from musclemetab.model import read_muscle_parameters
     from musclemetab.redundancy.inputs import DEFAULT_DOFS, read_inverse_dynamics, restrict_geometry, trial_inputs
@@ -80,6 +87,11 @@ def build_problem(ex, trial):
     from musclemetab.redundancy.workflows import workflow_parameters
 
     geom = restrict_geometry(compute_geometry(ex.model, ex.ik[trial], dofs=list(DEFAULT_DOFS)))
+    if window is not None:
+        t = np.asarray(geom.time)
+        keep = np.flatnonzero((t >= window[0] - 1e-6) & (t <= window[1] + 1e-6))
+        geom = dataclasses.replace(geom, time=t[keep], lmt_m=np.asarray(geom.lmt_m)[keep],
+                                   moment_arms_m=np.asarray(geom.moment_arms_m)[keep])
     id_time, id_mom = read_inverse_dynamics(ex.id[trial], geom.dofs)
     params, _ = workflow_parameters("effort-gen", read_muscle_parameters(ex.model), geom.muscles)
     params = params.subset(geom.muscles)
@@ -350,15 +362,19 @@ def main(argv=None):
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--no-superlu", action="store_true", help="skip SciPy's SuperLU (slow)")
     ap.add_argument("--quick", action="store_true",
-                    help="the first iterate alone, one repeat, no SuperLU (the test suite runs it so)")
+                    help="the normal trial's window 0.6-0.8 s, the first iterate alone, one repeat, no SuperLU "
+                    "(the test suite runs it so)")
     args = ap.parse_args(argv)
+    window = None
     if args.quick:
-        args.iterations, args.repeat, args.no_superlu = [1], 1, True
+        from _quick import WINDOW
+
+        args.trials, args.iterations, args.repeat, args.no_superlu, window = ["normal"], [1], 1, True, WINDOW
     ex = _example()
     print(f"KKT benchmark: {os.cpu_count()} cores, load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     print(f"{'matrix':<26} {'method':<26} {'factorise+solve ms':>19} {'residual':>10}")
     for trial in args.trials:
-        nlp, options = build_problem(ex, trial)
+        nlp, options = build_problem(ex, trial, window)
         t = ipopt_linear_algebra_time(nlp, options)
         print(f"{trial}: IPOPT with MUMPS over the full solve: {t['iterations']} iterations, {t['factorisations']} "
               f"factorisations ({t['wrong_inertia']} refused for wrong inertia); IPOPT outside the NLP functions "

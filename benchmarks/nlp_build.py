@@ -1,6 +1,7 @@
 """The NLP build of a study's worker process: this tree against another, the same solves in turn.
 
     python benchmarks/nlp_build.py --baseline-src OTHER/src [--repeat 2] [--samples 4]
+    python benchmarks/nlp_build.py --quick
 
 A study's worker process solves unit after unit. Each problem's per-interval functions (the
 symbolic derivatives of the constraints and objective) depend on its structure only (muscles,
@@ -16,6 +17,10 @@ as ``musclemetab study --samples`` does). Printed per tree: the sum of the solve
 times (``build_time_s``: from the start of the build to IPOPT's solver object), the sum of
 IPOPT's times, and the build's share; then the ratio of this tree's build time and of its
 build + solve time to the baseline's, and the largest objective difference between the trees.
+
+``--quick``: this tree against itself (``--baseline-src`` defaults to it), one process each, the
+window 0.6-0.8 s of the normal trial alone (EFFORT-GEN, EFFORT-TEN, one sample), the package's
+geometry cache: a check that the script runs (the test suite runs it so).
 """
 
 from __future__ import annotations
@@ -37,6 +42,7 @@ warnings.simplefilter("ignore")
 from musclemetab.redundancy import solve_files
 model, samples = sys.argv[1], int(sys.argv[2])
 trials = json.loads(sys.argv[3])
+window = tuple(json.loads(sys.argv[4])) if len(sys.argv) > 4 else None
 units = []
 def keep(name, sol):
     r = sol.record
@@ -44,7 +50,7 @@ def keep(name, sol):
 nominal = None
 for trial, (ik, idf) in trials.items():
     for wf, kt in (("effort-gen", None), ("effort-ten", "example")):
-        sol = solve_files(model, ik, idf, wf, tendon_stiffness=kt)
+        sol = solve_files(model, ik, idf, wf, tendon_stiffness=kt, window=window)
         keep(f"{trial} {wf}", sol)
         if trial == "normal" and wf == "effort-gen":
             nominal = sol
@@ -55,7 +61,7 @@ if samples:
         factors = draw(default_priors(), nominal.muscles, i + 1, 0)
         start = adapted_start(nominal, factors.parameters(nominal.parameters))
         keep(f"sample {i + 1}", solve_files(model, ik, idf, "effort-gen", warm_start=start,
-                                            parameter_transform=factors.parameters))
+                                            parameter_transform=factors.parameters, window=window))
 print(json.dumps(units))
 """
 
@@ -67,11 +73,13 @@ def _example():
     return example()
 
 
-def run_tree(src: Path, ex, samples: int, cache: Path) -> list[dict]:
-    env = dict(os.environ, PYTHONPATH=str(src), MUSCLEMETAB_CACHE=str(cache))
-    trials = {t: (str(ex.ik[t]), str(ex.id[t])) for t in ("slow", "normal", "fast")}
-    proc = subprocess.run([sys.executable, "-c", _WORKER, str(ex.model), str(samples), json.dumps(trials)],
-                          capture_output=True, text=True, env=env)
+def run_tree(src: Path, ex, samples: int, cache: Path | None, window=None) -> list[dict]:
+    """The worker's solves in a new process of the tree ``src`` (``cache`` None: the package's
+    cache; ``window``: the normal trial's alone, over that window)."""
+    env = dict(os.environ, PYTHONPATH=str(src), **({"MUSCLEMETAB_CACHE": str(cache)} if cache else {}))
+    trials = {t: (str(ex.ik[t]), str(ex.id[t])) for t in (("normal",) if window else ("slow", "normal", "fast"))}
+    proc = subprocess.run([sys.executable, "-c", _WORKER, str(ex.model), str(samples), json.dumps(trials),
+                           *([json.dumps(list(window))] if window else [])], capture_output=True, text=True, env=env)
     if proc.returncode != 0:
         sys.exit(f"the solves failed with {src}:\n{proc.stderr[-3000:]}")
     return json.loads(proc.stdout.strip().splitlines()[-1])
@@ -79,20 +87,33 @@ def run_tree(src: Path, ex, samples: int, cache: Path) -> list[dict]:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--baseline-src", type=Path, required=True, help="the src folder of the tree to compare with")
+    ap.add_argument("--baseline-src", type=Path, help="the src folder of the tree to compare with (required but "
+                    "with --quick)")
     ap.add_argument("--repeat", type=int, default=2, help="processes per tree, alternating (median reported)")
     ap.add_argument("--samples", type=int, default=4, help="uncertainty samples after the demo's units")
+    ap.add_argument("--quick", action="store_true", help="this tree against itself on the normal trial's window "
+                    "0.6-0.8 s, one process each, one sample")
     args = ap.parse_args(argv)
-    ex = _example()
     this = HERE.parent / "src"
-    cache = Path(tempfile.mkdtemp(prefix="mm-build-"))
-    run_tree(this, ex, 0, cache)  # fills the geometry cache: OpenSim is not what is measured
+    window = None
+    if args.quick:
+        from _quick import WINDOW
+
+        args.baseline_src, args.repeat, args.samples, window = args.baseline_src or this, 1, 1, WINDOW
+    elif args.baseline_src is None:
+        ap.error("--baseline-src is required (or --quick)")
+    ex = _example()
+    if args.quick:
+        cache = None  # the package's cache: the build is measured, not OpenSim
+    else:
+        cache = Path(tempfile.mkdtemp(prefix="mm-build-"))
+        run_tree(this, ex, 0, cache)  # fills the geometry cache: OpenSim is not what is measured
     load = os.getloadavg()
     print(f"NLP build: {os.cpu_count()} cores, load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
     runs = {"this tree": [], "baseline": []}
     for _ in range(args.repeat):
-        runs["this tree"].append(run_tree(this, ex, args.samples, cache))
-        runs["baseline"].append(run_tree(args.baseline_src, ex, args.samples, cache))
+        runs["this tree"].append(run_tree(this, ex, args.samples, cache, window))
+        runs["baseline"].append(run_tree(args.baseline_src, ex, args.samples, cache, window))
     totals = {}
     print(f"{'tree':10s} {'units':>5s} {'build s':>8s} {'solve s':>8s} {'build share':>11s}")
     for tree, rs in runs.items():

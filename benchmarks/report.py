@@ -1,6 +1,7 @@
 """Benchmark: redrawing the report of a study folder, and a demo run with nothing changed.
 
     python benchmarks/report.py DIR [--repeats 3] [--baseline-src SRC]
+    python benchmarks/report.py --quick
 
 ``DIR`` is a finished study folder (e.g. made by ``musclemetab demo --out DIR``). Each
 measurement runs a new process, as a user does:
@@ -21,6 +22,10 @@ workers (user + system, s), and the ratios of the baseline's wall and processor 
 version's, with the same workers option, measured in the same run. The
 measurements alternate between the configurations so that a change in the machine's load
 affects them alike.
+
+``--quick``: ``DIR`` is made first, a study of one unit (EFFORT-GEN of the normal trial cut to
+0.6-0.8 s, ``benchmarks/_quick.py``; the package's cache), and 1. (default workers alone) and 2.
+are measured once: a check that the script runs (the test suite runs it so).
 """
 
 from __future__ import annotations
@@ -54,12 +59,38 @@ def _env(src: str | None) -> dict:
     return env
 
 
+def _quick_study() -> str:
+    """``--quick``: a finished one-unit study (run in this process), its output folder."""
+    import tempfile
+    import warnings
+
+    from _quick import tiny_study
+    from solver import _example
+
+    from musclemetab.study import load_study
+    from musclemetab.study.runner import run_study
+
+    path = tiny_study(_example(), Path(tempfile.mkdtemp(prefix="mm-report-")))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = run_study(load_study(path), workers=1, progress=False)
+    if run.failed:
+        sys.exit(f"the quick study failed: {run.failed}")
+    return str(path.parent / "out")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("study_dir", metavar="DIR", help="a finished study folder (e.g. from musclemetab demo --out DIR)")
+    ap.add_argument("study_dir", metavar="DIR", nargs="?",
+                    help="a finished study folder (e.g. from musclemetab demo --out DIR); required but with --quick")
     ap.add_argument("--repeats", type=int, default=3, help="repeats of each measurement (median and best reported)")
     ap.add_argument("--baseline-src", metavar="SRC", help="source tree of the package to compare with")
+    ap.add_argument("--quick", action="store_true", help="a one-unit study made first; default workers, once")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.study_dir, args.repeats, args.baseline_src = _quick_study(), 1, None
+    elif args.study_dir is None:
+        ap.error("DIR is required (or --quick)")
     folder = str(Path(args.study_dir).resolve())
     if not (Path(folder) / "results.csv").is_file():
         sys.exit(f"{folder}: not a finished study folder (no results.csv)")
@@ -67,6 +98,8 @@ def main(argv=None) -> int:
     configs = {"this version, default workers": (_env(here), ["report", folder, "--force"]),
                "this version, --workers 2": (_env(here), ["report", folder, "--force", "--workers", "2"]),
                "this version, --workers 1": (_env(here), ["report", folder, "--force", "--workers", "1"])}
+    if args.quick:
+        configs = {k: v for k, v in configs.items() if k == "this version, default workers"}
     if args.baseline_src:
         configs["baseline, default workers"] = (_env(args.baseline_src), ["report", folder, "--force"])
         configs["baseline, --workers 1"] = (_env(args.baseline_src), ["report", folder, "--force", "--workers", "1"])
@@ -75,7 +108,8 @@ def main(argv=None) -> int:
     for _ in range(args.repeats):
         for name, (env, cmd) in configs.items():
             times[name].append(_run(cmd, env))
-    _run(["report", folder], configs["this version, default workers"][0])  # leave the page of this version
+    if not args.quick:  # the last run of the quick one is this version's
+        _run(["report", folder], configs["this version, default workers"][0])  # leave the page of this version
     times["report, nothing changed"] = [_run(["report", folder], _env(here)) for _ in range(args.repeats)]
     if (Path(folder) / "study.toml").is_file() and Path(folder).joinpath("study.json").is_file():
         times["demo again, nothing changed"] = [

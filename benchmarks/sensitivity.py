@@ -3,6 +3,7 @@ of re-solves (``docs/uncertainty.md``, "Sensitivities").
 
     python benchmarks/sensitivity.py NORMAL_SOLUTION_FOLDER [STEP]
     python benchmarks/sensitivity.py NORMAL_SOLUTION_FOLDER [STEP] --default-resolves
+    python benchmarks/sensitivity.py --quick
 
 NORMAL_SOLUTION_FOLDER: ``musclemetab solve --workflow effort-gen`` of the example subject's
 normal trial. For F0, lMo, lTs, kT of soleus and vastus lateralis and the UM10 and BH04 rates:
@@ -17,6 +18,9 @@ the package's default settings (``solve_files`` from the files the folder's ``su
 names, the parameter scaled through ``parameter_transform``), for the soleus ``lTs`` and the
 vastus lateralis ``kT`` rows (step 1e-2 for ``kT``, whose derivative is small): the check that
 the sensitivities at the default solve are those of the default solves.
+
+``--quick``: the soleus ``lTs`` row alone, on a solution of the window 0.6-0.8 s of the normal
+trial solved first (geometry from the package's cache; a check that the script runs).
 """
 
 import sys
@@ -29,17 +33,17 @@ MODELS = "UM10,BH04"
 PAIRS = [(p, m) for p in ("F0", "lMo", "lTs", "kT") for m in ("soleus_r", "vaslat_r")]
 
 
-def main(folder, step=1e-3):
+def main(folder, step=1e-3, pairs=PAIRS):
     prob = problem_of_solution(folder)
     t = time.perf_counter()
     sens = trial_sensitivity(prob.solution, prob.inputs, prob.params, prob.goals, body_mass_kg=MASS, height_m=HEIGHT,
-                             models=MODELS, parameters=PAIRS)
-    print(f"sensitivities of {len(PAIRS)} parameters (polish included): {time.perf_counter() - t:.1f} s; active set "
+                             models=MODELS, parameters=pairs)
+    print(f"sensitivities of {len(pairs)} parameters (polish included): {time.perf_counter() - t:.1f} s; active set "
           f"{sens.active}")
     print("| parameter | muscle | model | whole body KKT | whole body FD | difference | muscle KKT | muscle FD |")
     print("|---|---|---|---|---|---|---|---|")
     worst = 0.0
-    for p, m in PAIRS:
+    for p, m in pairs:
         wb, per = finite_difference(prob.inputs, prob.params, prob.goals, sens.x, p, m, prob.solution.summary,
                                     step=step, body_mass_kg=MASS, height_m=HEIGHT, models=MODELS)
         i = sens.muscles.index(m)
@@ -94,7 +98,32 @@ def default_resolves(folder, step=1e-3):
     print(f"largest |KKT - FD| / |FD|: {100 * worst:.1f} %")
 
 
+def quick() -> None:
+    """``--quick``: EFFORT-GEN of the normal trial's quick window, written to a temporary folder,
+    and its soleus ``lTs`` row."""
+    import tempfile
+    import warnings
+    from pathlib import Path
+
+    from _quick import WINDOW
+    from solver import _example
+
+    from musclemetab.redundancy import solve_files
+
+    ex = _example()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sol = solve_files(ex.model, ex.ik["normal"], ex.id["normal"], "effort-gen", window=WINDOW)
+    folder = Path(tempfile.mkdtemp(prefix="mm-sensitivity-")) / "normal"
+    sol.write(folder)
+    main(folder, pairs=[("lTs", "soleus_r")])
+
+
 if __name__ == "__main__":
+    if not sys.argv[1:] or sys.argv[1] in ("-h", "--help"):
+        sys.exit(print(__doc__))
+    if sys.argv[1:] == ["--quick"]:
+        sys.exit(quick())
     args = [a for a in sys.argv[1:] if a != "--default-resolves"]
     run = default_resolves if "--default-resolves" in sys.argv else main
     run(args[0], *(float(a) for a in args[1:2]))

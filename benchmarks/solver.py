@@ -18,6 +18,12 @@ Usage::
     python benchmarks/solver.py [--trials slow normal fast] [--workflows effort-gen ...]
         [--baseline moco [--moco-trials normal ...] [--moco-tendons compliant|rigid]]
         [--repeat 1] [--json results.json]
+    python benchmarks/solver.py --quick
+
+``--quick``: EFFORT-GEN of the window 0.6-0.8 s of the normal trial, one solve and one cold
+command-line run of it, the geometry from the package's cache (``$MUSCLEMETAB_CACHE``), no
+baseline: a check that the script runs (the test suite runs it so); its times say nothing of a
+whole trial's.
 """
 
 from __future__ import annotations
@@ -47,7 +53,7 @@ def _example():
     return example_subject()
 
 
-def run_solver(ex, trials, workflows, cache_dir, repeat, options=None):
+def run_solver(ex, trials, workflows, cache_dir, repeat, options=None, window=None):
     from musclemetab.geometry import compute_geometry
     from musclemetab.model import read_muscle_parameters
     from musclemetab.redundancy import solve_files
@@ -65,7 +71,8 @@ def run_solver(ex, trials, workflows, cache_dir, repeat, options=None):
             runs = []
             for _ in range(repeat):
                 t0 = time.perf_counter()
-                sol = solve_files(ex.model, ex.ik[trial], ex.id[trial], wf, cache_dir=cache_dir, options=options)
+                sol = solve_files(ex.model, ex.ik[trial], ex.id[trial], wf, cache_dir=cache_dir, options=options,
+                                  window=window)
                 runs.append((time.perf_counter() - t0, sol))
             wall, sol = min(runs, key=lambda r: r[0])
             s = sol.summary
@@ -76,14 +83,14 @@ def run_solver(ex, trials, workflows, cache_dir, repeat, options=None):
                 functions_s=fun, ipopt_internal_s=s["solve_time_s"] - fun, build_s=s["build_time_s"],
                 files_to_solution_s=wall, max_moment_residual_Nm=s["max_moment_residual_Nm"],
                 ms_per_iteration=1e3 * s["solve_time_s"] / max(s["iterations"], 1),
-                all_solve_s=[r[1].summary["solve_time_s"] for r in runs],
+                all_solve_s=[r[1].summary["solve_time_s"] for r in runs], window=window,
             ))
             print(_fmt_row(rows[-1]), flush=True)
     return rows, warm
 
 
 def _fmt_row(r):
-    ref = REFERENCE_OBJECTIVE.get(r["trial"]) if r["workflow"] == "effort-gen" else None
+    ref = REFERENCE_OBJECTIVE.get(r["trial"]) if r["workflow"] == "effort-gen" and not r["window"] else None
     # the study's logged objectives are those of its stop (--stop authors); the default stop's optimum lies 2-6 % below
     rel = f" ({100 * (r['objective'] / ref - 1):+.3f} % vs study's stop)" if ref else ""
     return (f"{r['trial']:>6} {r['workflow']:<10} N={r['N']:>3} {r['status']:<16} it={r['iterations']:>3} "
@@ -92,13 +99,15 @@ def _fmt_row(r):
             f"{r['ms_per_iteration']:.0f} ms/it) build {r['build_s']:.2f} s files->solution {r['files_to_solution_s']:5.2f} s")
 
 
-def cold_cli(ex, trial, cache_dir, linear_solver="mumps"):
+def cold_cli(ex, trial, cache_dir, linear_solver="mumps", window=None):
     """One ``musclemetab solve`` in a new process: wall time, the solve time it reports, and
-    the time outside the solve (imports, files, problem set-up, writing)."""
+    the time outside the solve (imports, files, problem set-up, writing). ``cache_dir`` None:
+    the package's cache."""
     out = tempfile.mkdtemp(prefix="mm-bench-")
     cmd = [sys.executable, "-m", "musclemetab", "solve", "--model", str(ex.model), "--ik", str(ex.ik[trial]),
-           "--id", str(ex.id[trial]), "--workflow", "effort-gen", "--cache-dir", str(cache_dir),
-           "--linear-solver", linear_solver, "--out", out]
+           "--id", str(ex.id[trial]), "--workflow", "effort-gen", "--linear-solver", linear_solver, "--out", out,
+           *(["--cache-dir", str(cache_dir)] if cache_dir else []),
+           *(["--window", f"{window[0]:g}:{window[1]:g}"] if window else [])]
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, capture_output=True, text=True)
     wall = time.perf_counter() - t0
@@ -141,21 +150,27 @@ def main(argv=None):
     p.add_argument("--linear-solver", default="mumps", help="IPOPT's linear solver (default mumps)")
     p.add_argument("--json", help="write all figures to this file")
     p.add_argument("--quick", action="store_true",
-                   help="the normal trial's EFFORT-GEN alone, one solve and one cold run, no baseline (the test "
-                   "suite runs it so)")
+                   help="EFFORT-GEN of the normal trial's window 0.6-0.8 s alone, one solve and one cold run, the "
+                   "package's geometry cache, no baseline (the test suite runs it so)")
     args = p.parse_args(argv)
+    window = None
     if args.quick:
+        from _quick import WINDOW
+
         args.trials, args.workflows, args.repeat, args.cold_repeat, args.baseline = ["normal"], ["effort-gen"], 1, 1, None
+        window = WINDOW
 
     ex = _example()
-    cache_dir = Path(args.cache_dir or tempfile.mkdtemp(prefix="mm-geometry-"))
+    # the quick run: the package's cache (the geometry other runs computed)
+    cache_dir = Path(args.cache_dir) if args.cache_dir else None if args.quick else Path(tempfile.mkdtemp(
+        prefix="mm-geometry-"))
     print(f"musclemetab solver benchmark: {os.cpu_count()} cores, load average "
           f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     from musclemetab.redundancy.ipopt import SolverOptions
 
     options = SolverOptions(linear_solver=args.linear_solver)
     print(f"linear solver: {args.linear_solver}")
-    rows, warm = run_solver(ex, args.trials, args.workflows, cache_dir, args.repeat, options)
+    rows, warm = run_solver(ex, args.trials, args.workflows, cache_dir, args.repeat, options, window)
     result = {"solver": rows, "geometry_and_worker_warmup_s": warm}
     solve = [r["solve_s"] for r in rows]
     f2s = [r["files_to_solution_s"] for r in rows]
@@ -168,7 +183,7 @@ def main(argv=None):
           f"and solves, step computation) {100 * (tot - fun) / tot:.0f} %")
     if not args.no_cold:
         trial = "normal" if "normal" in args.trials else args.trials[0]
-        colds = [cold_cli(ex, trial, cache_dir, args.linear_solver) for _ in range(max(1, args.cold_repeat))]
+        colds = [cold_cli(ex, trial, cache_dir, args.linear_solver, window) for _ in range(max(1, args.cold_repeat))]
         ok = [c for c in colds if "overhead_s" in c]
         result["cold_cli"] = {trial: colds}
         if ok:

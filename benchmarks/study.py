@@ -1,6 +1,7 @@
 """Benchmark: the demo end to end, and study throughput with 1 and 2 worker processes.
 
     python benchmarks/study.py [--repeats 1] [--study STUDY.toml | --two-subjects]
+    python benchmarks/study.py --quick
 
 1. ``musclemetab demo`` in a new process, with an empty geometry cache and an empty output
    folder: the wall time a new user waits (OpenSim worker start-up, geometry, six solves,
@@ -30,6 +31,10 @@ scheduled together.
    relative, shares in percentage points) against the tolerance a warm start would have to meet
    to reproduce the cold study (:data:`WARM_TOLERANCE`, docs/study.md); the exit status is 1 when
    one is not met (gait2392's warm starts end in other optima: docs/study.md).
+
+``--quick``: 2 and 3 alone, on a study of one unit (EFFORT-GEN of the normal trial cut to 0.6-0.8 s:
+``benchmarks/_quick.py``) with the package's cache (``$MUSCLEMETAB_CACHE``) and
+no run to fill it: a check that the script runs (the test suite runs it so).
 """
 
 from __future__ import annotations
@@ -59,6 +64,7 @@ def main(argv=None) -> int:
     ap.add_argument("--warm", action="store_true", help="measure only the warm-started chains against cold starts (4.)")
     ap.add_argument("--two-subjects", action="store_true",
                     help="measure a two-subject study (example subject and gait2392, different models and legs)")
+    ap.add_argument("--quick", action="store_true", help="2. and 3. on a study of one short unit, the package's cache")
     args = ap.parse_args(argv)
     import statistics
 
@@ -68,6 +74,11 @@ def main(argv=None) -> int:
 
     if args.warm:
         return _warm_against_cold(tmp, env)
+    if args.quick:
+        from _quick import tiny_study
+        from solver import _example
+
+        return _throughput(tiny_study(_example(), tmp / "quick"), 1, env, 1)
     if args.two_subjects:
         args.study = _two_subject_study(tmp / "two-subjects.toml")
     if args.study:

@@ -20,6 +20,13 @@ Three parts, on the example subject's normal trial with EFFORT-GEN (``--parts`` 
 
     python benchmarks/uncertainty.py [--parts warm study coverage] [--samples 64] [--truths 30]
         [--compare 4] [--workers 2] [--out DIR]
+    python benchmarks/uncertainty.py --quick
+
+``--quick``: every part on the window 0.6-0.8 s of the normal trial (``warm``: ``solve_files(window=...)``;
+the study: the trial cut to that window, ``benchmarks/_quick.py``), one sample compared, 2 samples on
+one worker, whose own samples stand for the truths of ``coverage`` (no second study), the package's
+cache (``$MUSCLEMETAB_CACHE``): a check that the script runs (the test suite runs it so); its numbers
+say nothing of a whole trial's.
 """
 
 from __future__ import annotations
@@ -65,11 +72,14 @@ def _example():
     return example()
 
 
-def warm_against_cold(ex, n: int) -> None:
+def warm_against_cold(ex, n: int, window=None) -> None:
+    import functools
+
     from musclemetab.redundancy.run import solve_files
     from musclemetab.uncertainty import adapted_start, draw, read_priors
 
     args = (ex.model, ex.ik["normal"], ex.id["normal"], "effort-gen")
+    solve_files = functools.partial(solve_files, window=window)
     nominal = solve_files(*args)
     print(f"nominal solve: {nominal.record.iterations} iterations, {nominal.record.solve_time_s:.2f} s")
     priors = read_priors()
@@ -88,7 +98,11 @@ def warm_against_cold(ex, n: int) -> None:
           flush=True)
 
 
-def _study(ex, root: Path, samples: int, seed: int) -> Path:
+def _study(ex, root: Path, samples: int, seed: int, quick: bool = False) -> Path:
+    if quick:
+        from _quick import tiny_study
+
+        return tiny_study(ex, root, models=MODELS, extra=f"\n[uncertainty]\nsamples = {samples}\nseed = {seed}")
     root.mkdir(parents=True, exist_ok=True)
     path = root / "study.toml"
     path.write_text(STUDY.format(models=str(MODELS).replace("'", '"'), samples=samples, seed=seed, model=ex.model,
@@ -107,8 +121,8 @@ def _run(path: Path, workers: int, extra=()) -> float:
     return wall
 
 
-def study_time(ex, root: Path, samples: int, workers: int) -> Path:
-    path = _study(ex, root / "bands", samples, 1)
+def study_time(ex, root: Path, samples: int, workers: int, quick: bool = False) -> Path:
+    path = _study(ex, root / "bands", samples, 1, quick)
     nominal = _run(path, workers, ["--uncertainty", "0"])  # the trial unit alone
     wall = _run(path, workers)
     import pandas as pd
@@ -122,7 +136,8 @@ def study_time(ex, root: Path, samples: int, workers: int) -> Path:
     return path.parent / "out"
 
 
-def coverage(ex, root: Path, bands_out: Path, truths: int, workers: int) -> None:
+def coverage(ex, root: Path, bands_out: Path, truths: int, workers: int, quick: bool = False) -> None:
+    """The ``coverage`` part (``quick``: the truths are the samples of the study of ``bands_out``)."""
     import numpy as np
     import pandas as pd
 
@@ -130,8 +145,11 @@ def coverage(ex, root: Path, bands_out: Path, truths: int, workers: int) -> None
     from musclemetab.study.spec import load_study
     from musclemetab.study.uncertainty import sample_tables
 
-    path = _study(ex, root / "truths", truths, 2)
-    _run(path, workers)
+    if quick:  # the bands' own samples stand for the truths: the code path, not a coverage
+        path = bands_out.parent / "study.toml"
+    else:
+        path = _study(ex, root / "truths", truths, 2)
+        _run(path, workers)
     truth_wb, truth_pm = sample_tables(load_study(path), trial_result_rows, add_leg_rows, leg_basal_energy_J)
     # the bands speak of plausible subjects: flagged and unconverged truths are left out as samples are
     truth_wb, truth_pm = (t[t["sample_flags"].fillna("").astype(str) == ""] for t in (truth_wb, truth_pm))
@@ -161,18 +179,25 @@ def main() -> None:
     ap.add_argument("--compare", type=int, default=4)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", help="folder for the studies (default: a new temporary folder)")
+    ap.add_argument("--quick", action="store_true", help="every part on the normal trial's window 0.6-0.8 s, "
+                    "1 sample compared, 2 samples (the truths too), one worker")
     args = ap.parse_args()
+    window = None
+    if args.quick:
+        from _quick import WINDOW
+
+        args.compare, args.samples, args.truths, args.workers, window = 1, 2, 2, 1, WINDOW
     warnings.simplefilter("ignore")
     ex = _example()
     root = Path(args.out or tempfile.mkdtemp(prefix="mm-uncertainty-"))
     print(f"studies in {root}")
     if "warm" in args.parts:
-        warm_against_cold(ex, args.compare)
+        warm_against_cold(ex, args.compare, window)
     bands = root / "bands" / "out"
     if "study" in args.parts:
-        bands = study_time(ex, root, args.samples, args.workers)
+        bands = study_time(ex, root, args.samples, args.workers, args.quick)
     if "coverage" in args.parts:
-        coverage(ex, root, bands, args.truths, args.workers)
+        coverage(ex, root, bands, args.truths, args.workers, args.quick)
 
 
 if __name__ == "__main__":

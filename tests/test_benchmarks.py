@@ -1,7 +1,9 @@
-"""The benchmark scripts run: each in a new process with ``--quick`` (a small problem, seconds),
+"""The benchmark scripts run: every one in a new process with ``--quick`` (a small problem, seconds),
 exit status 0 and its result lines printed, the ratios it measures among them. The numbers
 themselves are not checked (they are the machine's); ``benchmarks/*.py`` say what the full runs
-measure and docs/solver.md and docs/study.md hold the measured values."""
+measure and docs/solver.md and docs/study.md hold the measured values. The quick runs use the test
+run's cache (``$MUSCLEMETAB_CACHE``, passed on): the geometry other tests computed is not computed
+again."""
 
 from __future__ import annotations
 
@@ -29,8 +31,26 @@ EXPECTED = {
     "input_stage.py": [r"^  this tree\s+[\d.]+ ms   files parsed: ", r"^  ratio this tree / baseline: [\d.]+$"],
     "stop.py": [r"^  authors\s+\d+ iterations, IPOPT CPU", r"^  optimum\s+\d+ iterations, IPOPT CPU",
                 r"^  IPOPT CPU optimum / authors: [\d.]+x$"],
-    "solver.py": [r"^normal effort-gen N=\d+ Solve_Succeeded", r"^time split: NLP function evaluations \d+ %",
+    "solver.py": [r"^normal effort-gen N=\s*\d+ Solve_Succeeded", r"^time split: NLP function evaluations \d+ %",
                   r"^cold 'musclemetab solve' \(normal, effort-gen"],
+    "capacity.py": [r"^   CPU [\d.]+ s per unit \(IPOPT [\d.]+ s of it\), wall [\d.]+ s; peak memory",
+                    r"^   process pool of 2 \(--workers 2\)\s+[\d.]+\s+[\d.]+$", r"^\s+512\s+[\d.]+\s+[\d.]+\s+[\d.]+$"],
+    "cold_start.py": [r"^this tree\s+cold\s+[\d.]+\s+[\d.]+", r"^this tree\s+warm\s+[\d.]+\s+[\d.]+",
+                      r"^this tree\s+-?[\d.]+\s+-?[\d.]+\s+-?[\d.]+$"],
+    "inertia.py": [r"^normal\s+default\s+Solve_Succeeded\s+\d+\s+\d+\s+\d+",
+                   r"^normal\s+first_pert_1e-2\s+\S+\s+\d+\s+\d+\s+\d+\s+\d+\s+[\d.]+\s+\d+\s+[\d.]+\s+\S+\s+[+-][\d.]+e[+-]\d+$"],
+    "nlp_build.py": [r"^this tree\s+3\s+[\d.]+\s+[\d.]+\s+[\d.]+%$", r"^baseline\s+3\s+",
+                     r"^this tree / baseline: build [\d.]+x, build \+ solve [\d.]+x; largest relative objective difference "],
+    "report.py": [r"^this version, default workers\s+[\d.]+\s+[\d.]+\s+[\d.]+$", r"^report, nothing changed\s+[\d.]+"],
+    "sensitivity.py": [r"^\| lTs \| soleus_r \| (UM10|BH04) \| [+-][\d.]+ \| [+-][\d.]+ \| [+-][\d.]+ \|",
+                       r"^largest \|KKT - FD\| / \(5 % \|FD\| \+ 0.01 W/kg\) of the whole-body rates: [\d.]+$"],
+    "sides.py": [r"^speed-up of 2 workers over 1: [\d.]+x$", r"^solutions of 1 and 2 workers identical: True$"],
+    "study.py": [r"^speed-up of 2 workers over 1 \(same run\): [\d.]+x$", r"^3\. resumed run, every unit up to date: [\d.]+ s"],
+    "uncertainty.py": [r"^mean solve time of a warm-started sample / cold solve: [\d.]+ ",
+                       r"^trial unit alone: [\d.]+ s; then 2 samples of it on 1 workers: ",
+                       r"^  UM10 whole body: \d+ % inside ", r"^  UM10 per muscle \(muscle_W, \d+ truth x muscle pairs\): "],
+    "warm_start.py": [r"^warm from GEN, mu_init 1e-6 \(the package's\)\s+\d+\s+[\d.]+\s+[\d.]+\s+[+-]",
+                      r"^warm from EFFORT-TEN's own cold optimum\s+\d+\s+[\d.]+"],
 }
 
 
