@@ -81,6 +81,9 @@ NUMBER_KEYS: dict[str, NumberKey] = {k.name: k for k in (
     NumberKey("assistance_gain", "", -10.0, 10.0, "a factor on the device torque of an assistance profile (1: as in "
               "the file; negative: the device acts the other way)"),
     NumberKey("emg_tolerance", "", 0.0, 1.0, "a half-width of the EMG band in normalised excitation"),
+    NumberKey("emg_lowpass_hz", "Hz", 0.0, 100.0, "a cut-off of the EMG envelope's low-pass filter", low_open=True),
+    NumberKey("emg_order", "", 2, 12, "an effective order of a zero-lag EMG filter (even)", integer=True),
+    NumberKey("emg_delay_s", "s", 0.0, 0.5, "an electromechanical delay"),
     NumberKey("grf_threshold_N", "N", 0.0, 1000.0, "a contact threshold of the vertical force", low_open=True),
     NumberKey("speed_m_per_s", "m/s", 0.0, 15.0, "a walking or running speed", low_open=True),
     NumberKey("measured_W_per_kg", "W/kg", 0.0, 50.0, "a measured metabolic rate per kg of body mass",

@@ -216,16 +216,19 @@ def add_emg_processing_argument(p) -> None:
 def add_raw_emg_arguments(p) -> None:
     """The settings of the raw EMG processing (:class:`musclemetab.emg.EmgProcessing`)."""
     p.add_argument("--emg-band", metavar="LOW:HIGH", help="raw EMG: the band-pass edges in Hz (default 20:400)")
-    p.add_argument("--emg-lowpass", type=float, metavar="HZ", help="raw EMG: the envelope's low-pass cut-off (default 6)")
-    p.add_argument("--emg-order", type=int, metavar="N",
-                   help="raw EMG: the effective order of each zero-lag filter (default 4: a 2nd-order design run "
-                   "forward and backward)")
+    from .options import number_option
+
+    number_option(p, "--emg-lowpass", "emg_lowpass_hz", metavar="HZ",
+                  help="raw EMG: the envelope's low-pass cut-off (default 6)")
+    number_option(p, "--emg-order", "emg_order", metavar="N",
+                  help="raw EMG: the effective order of each zero-lag filter (default 4: a 2nd-order design run "
+                  "forward and backward)")
     p.add_argument("--emg-maximum", metavar="peak|MAX.csv",
                    help="raw EMG: normalise to each channel's peak in the file (default) or to the maxima of a CSV "
                    "file with columns channel,maximum (e.g. the envelope peaks of maximal voluntary contractions, in "
                    "the raw signal's units)")
-    p.add_argument("--emg-delay", type=float, metavar="S",
-                   help="raw EMG: electromechanical delay added to the EMG's time (s, default 0)")
+    number_option(p, "--emg-delay", "emg_delay_s", metavar="S",
+                  help="raw EMG: electromechanical delay added to the EMG's time (s, default 0)")
 
 
 def raw_emg_processing(args):
