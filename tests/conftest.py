@@ -269,14 +269,15 @@ def _isolated_cache(tmp_path_factory):
 #: finish together; ``test_demo.py`` makes the shared ``demo`` fixture at the start, while the
 #: other process solves EMG-TEN, so that no module waits for it later; the other modules follow
 #: in collection order
-_LONGEST_FIRST = ("test_emg_ten.py", "test_demo.py", "test_gait2392.py", "test_estimate.py",
-                  "test_robustness_outputs.py", "test_study.py", "test_assistance.py", "test_redundancy.py",
-                  "test_robustness_values.py",
-                  "test_report.py", "test_uncertainty.py", "test_calibration.py", "test_weights.py",
-                  "test_emg_informed.py", "test_energy_goal.py", "test_prepare.py", "test_stop.py", "test_cli_flow.py",
-                  "test_report_browser.py", "test_scale_ik.py",
-                  "test_trials.py", "test_geometry.py", "test_diagnosis.py", "test_sensitivity.py",
-                  "test_robustness_study.py", "test_stage_paths.py", "test_opensim_files.py")
+_LONGEST_FIRST = ("test_emg_ten.py", "test_demo.py", "test_benchmarks.py", "test_gait2392.py", "test_redundancy.py",
+                  "test_estimate.py", "test_study.py", "test_uncertainty.py", "test_calibration.py",
+                  "test_robustness_outputs.py", "test_report.py", "test_energy_goal.py", "test_prepare.py",
+                  "test_emg_informed.py", "test_weights.py", "test_cli_flow.py", "test_diagnosis.py",
+                  "test_opensim_files.py", "test_geometry.py", "test_study_emg_modes.py", "test_robustness_study.py",
+                  "test_assistance.py", "test_report_browser.py", "test_trials.py", "test_api_docs.py",
+                  "test_cold_start.py", "test_scale_ik.py", "test_robustness_lock.py", "test_metabolics_states.py",
+                  "test_study_warm.py", "test_stop.py", "test_robustness_values.py", "test_figure_layout.py",
+                  "test_sensitivity.py", "test_stage_paths.py")
 
 
 def pytest_collection_modifyitems(config, items):
