@@ -23,7 +23,7 @@ LAYERS = [
     {"metabolics"},
     {"redundancy", "study_layout"},
     {"analysis", "uncertainty"},
-    {"report"},
+    {"report", "uncertainty_coverage"},
     {"study", "calibration"},
     {"commands"},
     {"__main__"},
