@@ -15,12 +15,9 @@ __all__ = ["metabolics_struct_of", "folder_metabolics", "results_struct"]
 
 def metabolics_struct_of(result, cycle=None) -> dict:
     """:func:`metabolics_struct` of a :class:`~musclemetab.metabolics.solution.SolutionMetabolics`
-    (its columns and tables as :func:`~musclemetab.metabolics.solution.write_metabolics` writes them)."""
-    from .per_muscle import per_muscle_table
-
-    one_leg = any(wb.legs != 2 for wb in result.whole_body.values())
-    whole = {"leg_muscles": result.leg_table()} if one_leg else {"whole_body": result.whole_body_table()}
-    return metabolics_struct(result.time_s, result.columns(), {**whole, "per_muscle": per_muscle_table(result, cycle)})
+    (:meth:`~musclemetab.metabolics.solution.SolutionMetabolics.mat_struct`: its columns and tables
+    as :func:`~musclemetab.metabolics.solution.write_metabolics` writes them)."""
+    return result.mat_struct(cycle)
 
 
 def folder_metabolics(folder: Path) -> dict | None:

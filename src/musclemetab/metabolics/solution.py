@@ -366,13 +366,22 @@ class SolutionMetabolics:
 
     __str__ = __repr__
 
-    def to_mat(self, path: str | os.PathLike) -> Path:
-        """Write the rates to the MATLAB file ``path``: the ``metabolics`` struct of
-        :mod:`musclemetab.io.matlab` at the top (layout: ``docs/matlab.md``)."""
-        from ..io.matlab import write_mat
-        from .matlab import metabolics_struct_of
+    def mat_struct(self, cycle=None) -> dict:
+        """The ``metabolics`` struct of a MATLAB file (:func:`musclemetab.io.matlab.metabolics_struct`;
+        layout: ``docs/matlab.md``): the columns and tables :func:`write_metabolics` writes."""
+        from ..io.matlab import metabolics_struct
+        from .per_muscle import per_muscle_table
 
-        return write_mat(path, metabolics_struct_of(self))
+        one_leg = any(wb.legs != 2 for wb in self.whole_body.values())
+        whole = {"leg_muscles": self.leg_table()} if one_leg else {"whole_body": self.whole_body_table()}
+        return metabolics_struct(self.time_s, self.columns(), {**whole, "per_muscle": per_muscle_table(self, cycle)})
+
+    def to_mat(self, path: str | os.PathLike) -> Path:
+        """Write the rates to the MATLAB file ``path``: :meth:`mat_struct` at the top (layout:
+        ``docs/matlab.md``)."""
+        from ..io.matlab import write_mat
+
+        return write_mat(path, self.mat_struct())
 
     @property
     def muscle_mass_rule(self) -> str:

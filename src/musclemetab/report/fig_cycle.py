@@ -13,6 +13,7 @@ import numpy as np
 from ..errors import OptionError, UnknownMuscleError
 from ..messages import name_list
 from .fig_data import (
+    _models_and_toe_off,
     GROUPS, GROUP_NAMES, default_muscles, PLATEAU_BAND, DESCENDING_LIMB, model_colour, workflow_colour,
     _require_columns, _unique, _ordered_models, _ordered_workflows,
 )
@@ -216,20 +217,6 @@ def _label_cycle_panels(axes, models: Sequence[str], ylabel: str = "metabolic ra
         if k // ncol == nrow - 1 or k + ncol >= len(models):
             ax.set_xlabel(xlabel)
             ax.tick_params(labelbottom=True)
-
-
-def _models_and_toe_off(available: Sequence[str], models, toe_off_pct, what: str, having: str
-                        ) -> tuple[list[str], float]:
-    """The models to draw (``models`` or every one ``available``) and the toe-off (% of the
-    cycle); :class:`OptionError` for a model without data or a toe-off outside the cycle."""
-    models = list(available) if models is None else [str(m) for m in models]
-    absent = [m for m in models if m not in available]
-    if absent:
-        raise OptionError(f"no {what} for model {name_list(absent)} ({having} {', '.join(available)})")
-    to = float(toe_off_pct)
-    if not (0.0 < to < 100.0):
-        raise OptionError(f"toe-off must be inside the cycle (0-100 %), not {toe_off_pct}")
-    return models, to
 
 
 def group_rates_over_cycle(timeseries, toe_off_pct: float, models: Sequence[str] | None = None,

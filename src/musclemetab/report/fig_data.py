@@ -213,3 +213,17 @@ def _p_text(p: float) -> str:
     if not np.isfinite(p):
         return "p = n/a"
     return "p < 0.001" if p < 0.001 else f"p = {p:.3f}"
+
+
+def _models_and_toe_off(available: Sequence[str], models, toe_off_pct, what: str, having: str
+                        ) -> tuple[list[str], float]:
+    """The models to draw (``models`` or every one ``available``) and the toe-off (% of the
+    cycle); :class:`OptionError` for a model without data or a toe-off outside the cycle."""
+    models = list(available) if models is None else [str(m) for m in models]
+    absent = [m for m in models if m not in available]
+    if absent:
+        raise OptionError(f"no {what} for model {name_list(absent)} ({having} {', '.join(available)})")
+    to = float(toe_off_pct)
+    if not (0.0 < to < 100.0):
+        raise OptionError(f"toe-off must be inside the cycle (0-100 %), not {toe_off_pct}")
+    return models, to

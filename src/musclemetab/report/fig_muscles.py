@@ -13,9 +13,9 @@ import numpy as np
 from ..analysis.groups import OTHER
 from ..colours import OKABE_ITO
 from ..errors import OptionError
-from .fig_data import GROUPS, model_colour, _require_columns, _unique, _ordered_models, trial_order, _one_workflow
+from .fig_data import (GROUPS, model_colour, _require_columns, _unique, _ordered_models, trial_order, _one_workflow,
+                       _models_and_toe_off)
 from .fig_layout import _new_figure, _panel_title, _legend_below, _grid, _add_bars, _vline, _hline, _bar_limits
-from .fig_cycle import _models_and_toe_off
 
 
 # ------------------------------------------------------------- 7. per-muscle ranking
