@@ -222,7 +222,9 @@ def main(argv=None) -> int:
         for r in attribute(args.trials[0], start, frames, at):
             print("  ".join(f"{key} {value:.1e}" if key == "mu" else f"{key} {value}" for key, value in r.items()), flush=True)
         return 0
-    os.environ.setdefault("MUSCLEMETAB_DATA", str(HERE.parent.parent / "shared" / "data"))
+    shared = HERE.parent.parent / "shared" / "data"
+    if not os.environ.get("MUSCLEMETAB_DATA") and shared.is_dir():  # else the package downloads the data
+        os.environ["MUSCLEMETAB_DATA"] = str(shared)
     print(f"inertia corrections ({args.variant} constraints): {os.cpu_count()} cores, load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     print(f"{'trial':<11} {'options':<22} {'status':<16} {'it':>4} {'fact':>5} {'wrong':>5} {'pert.it':>7} "
           f"{'fact/it':>7} {'excess':>6} {'solve s':>8} {'objective':>15} {'rel. change':>11}")

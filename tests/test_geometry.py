@@ -183,18 +183,6 @@ def test_cli_errors_one_line_no_output(example, tmp_path, args, phrase):
     assert not out.exists() or not any(out.iterdir())
 
 
-def _locked_knee_model(example, folder):
-    """The example model with ``<locked>true</locked>`` on knee_angle_r (nothing else changed)."""
-    text = example.model.read_text()
-    start = text.index('<Coordinate name="knee_angle_r">')
-    end = text.index("</Coordinate>", start)
-    block = text[start:end]
-    assert block.count("<locked>false</locked>") == 1
-    path = folder / "locked_knee.osim"
-    path.write_text(text[:start] + block.replace("<locked>false</locked>", "<locked>true</locked>") + text[end:])
-    return path
-
-
 def test_locked_knee_follows_the_motion_and_is_refused_by_name(example, tmp_path):
     """A model locking knee_angle_r: the muscle paths still take the IK's knee angle (lengths
     equal OpenSim 4.1's MuscleAnalysis of the unlocked model along the same motion, which the
@@ -205,7 +193,9 @@ def test_locked_knee_follows_the_motion_and_is_refused_by_name(example, tmp_path
     from musclemetab.opensim_bridge import call
     from musclemetab.redundancy.run import solve_files
 
-    locked = _locked_knee_model(example, tmp_path)
+    from model_edits import with_locked_coordinate
+
+    locked = with_locked_coordinate(example.model, "knee_angle_r", tmp_path / "locked_knee.osim")
     ik = read_table(example.ik["normal"])
     muscles = ["semiten_r", "bfsh_r", "vasmed_r", "recfem_r"]
     raw = call("model_ops:muscle_geometry", str(locked), ik.index.copy(),

@@ -308,13 +308,9 @@ def test_a_locked_coordinate_the_motion_moves_follows_it_in_the_written_model(ex
     from musclemetab.io import read_table
     from musclemetab.opensim_bridge import call
 
-    text = example.model.read_text()
-    start = text.index('<Coordinate name="knee_angle_l">')
-    end = text.index("</Coordinate>", start)
-    block = text[start:end]
-    assert block.count("<locked>false</locked>") == 1
-    model = tmp_path / "locked_left_knee.osim"
-    model.write_text(text[:start] + block.replace("<locked>false</locked>", "<locked>true</locked>") + text[end:])
+    from model_edits import with_locked_coordinate
+
+    model = with_locked_coordinate(example.model, "knee_angle_l", tmp_path / "locked_left_knee.osim")
     ik = read_table(example.ik["normal"])
     times = np.linspace(0.6, 0.8, 21)
     soleus = {"max_isometric_force_N": 3000.0, "optimal_fiber_length_m": 0.05, "tendon_slack_length_m": 0.25,
