@@ -1,9 +1,9 @@
 """The input stage of ``solve_files``: from the file names to the call of the solver.
 
 Times :func:`musclemetab.redundancy.solve_files` on one example trial (EFFORT-GEN) up to the
-point where it hands its arrays to :func:`~musclemetab.redundancy.solve.solve_trial` (the
+point where it hands its arrays to :func:`~musclemetab.redundancy.solve.solve_with_parameters` (the
 model's joint tree and parameters, reading and checking the IK and ID files, the window, the
-geometry from the cache): ``solve_trial`` is replaced by a stub that stops the call there. Each
+geometry from the cache): ``solve_with_parameters`` is replaced by a stub that stops the call there. Each
 source tree runs in its own process, this tree and ``--baseline-src`` (e.g. the previous
 version) in turn, ``--rounds`` times, so that both see the same machine load; in each process
 the stage is run once untimed (imports, caches) and then ``--repeat`` times. Prints per tree
@@ -38,6 +38,7 @@ def counting_read(path):
 
 
 storage.read_table = mio.read_table = counting_read  # before any module imports the name
+import musclemetab.redundancy.problem as problem
 import musclemetab.redundancy.run as run
 
 
@@ -49,7 +50,7 @@ def stop(*args, **kwargs):
     raise Stop
 
 
-run.solve_trial = stop
+problem.solve_with_parameters = stop
 model, ik, idf, repeat = sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4])
 
 

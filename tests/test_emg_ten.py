@@ -168,6 +168,38 @@ def test_result_load_and_write_round_trip(emg_ten, parameters, solutions, tmp_pa
 
 @pytest.mark.opensim
 @pytest.mark.slow
+def test_the_problem_is_kept_beside_the_result(example, emg_ten, parameters, solutions, cache_dir, tmp_path):
+    """The folder's ``problem.json`` gives the problem solved back (``load_result``): the trials,
+    their windows and mesh, the EMG settings and solver options of the solve's record, the
+    nominal parameters; a folder without it (written before results kept their problem) loads
+    with ``problem`` None and a warning."""
+    import shutil
+
+    from musclemetab.errors import MusclemetabWarning
+    from musclemetab.muscle import KT_GENERIC
+    from musclemetab.redundancy.problem import load_result
+
+    result = load_result(emg_ten[0], cache_dir=cache_dir)
+    problem = result.problem
+    assert problem.kind == "emg" and problem.workflow == "emg-ten" and problem.labels == TRIALS
+    assert problem.emg.to_dict() == parameters["solve"]["settings"] and problem.options.stop == "authors"
+    assert {s.kind for s in problem.specs} == {"tendon_stiffness", "emg_scale"}
+    assert dict(problem.emg_mapping) == parameters["emg_channels"]
+    np.testing.assert_array_equal(problem.parameters.tendon_stiffness, KT_GENERIC)  # the nominal kT, estimated after
+    from musclemetab.redundancy.inputs import mesh_for_window
+
+    for trial in problem.trials:
+        np.testing.assert_allclose(mesh_for_window(trial.ik_time_s[0], trial.ik_time_s[-1]),
+                                   solutions[trial.label].time_s, rtol=0, atol=1e-9)
+    old = tmp_path / "old"
+    shutil.copytree(emg_ten[0], old)
+    (old / "problem.json").unlink()
+    with pytest.warns(MusclemetabWarning, match="no problem.json"):
+        assert load_result(old).problem is None
+
+
+@pytest.mark.opensim
+@pytest.mark.slow
 def test_converges_with_the_study_problem_size(example, emg_ten, parameters, solutions):
     out, stdout = emg_ten
     rec = parameters["solve"]
@@ -179,8 +211,8 @@ def test_converges_with_the_study_problem_size(example, emg_ten, parameters, sol
     assert rec["problem_size"]["variables"] == 77250 - 7
     assert rec["problem_size"]["equality_constraints"] == 62002 - 7
     assert rec["problem_size"]["inequality_constraints"] == 3375
-    assert sorted(p.name for p in out.iterdir()) == sorted([*TRIALS, "parameters.json", ".musclemetab-files",
-                                                            f"{example.model.stem}_personalised.osim"])
+    assert sorted(p.name for p in out.iterdir()) == sorted([*TRIALS, "parameters.json", "problem.json",
+                                                            ".musclemetab-files", f"{example.model.stem}_personalised.osim"])
     for t in TRIALS:
         s = solutions[t].summary
         assert s["workflow"]["name"] == "emg-ten" and s["workflow"]["trial"] == t
@@ -614,7 +646,7 @@ def test_dofs_of_the_chosen_side_are_discovered(example, tmp_path, capsys):
     from musclemetab.commands import main
     from musclemetab.errors import UnknownMuscleError
     from musclemetab.redundancy import solve_emg_ten
-    from musclemetab.redundancy.run import _trial_dofs
+    from musclemetab.redundancy.trial_files import trial_dofs as _trial_dofs
     from musclemetab.redundancy.inputs import DEFAULT_DOFS
 
     ik, idf, emg = _args(example)
@@ -689,7 +721,7 @@ def test_unconverged_emg_ten_is_reported(example, cache_dir, geometries, tmp_pat
     assert code == 1 and "did not converge" in err and "Maximum_Iterations_Exceeded" in err
     doc = json.loads((out / "parameters.json").read_text())
     assert doc["solve"]["success"] is False
-    assert sorted(p.name for p in out.iterdir()) == sorted([p.stem for p in ik] + ["parameters.json",
+    assert sorted(p.name for p in out.iterdir()) == sorted([p.stem for p in ik] + ["parameters.json", "problem.json",
                                                                                 ".musclemetab-files"])
     assert main(["solve", "--workflow", "effort-ten", "--model", str(example.model), "--ik", str(ik[0]),
                  "--id", str(idf[0]), "--parameters", str(out / "parameters.json"), "--out", str(tmp_path / "y")]) == 1

@@ -187,7 +187,7 @@ def test_files_are_the_same_with_the_model_work_done_during_the_solve(solved, ex
     from pathlib import Path
 
     from musclemetab.opensim_bridge import call
-    from musclemetab.redundancy import run
+    from musclemetab.redundancy import problem, run
     from musclemetab.redundancy.export import OPENSIM_FILES, prepare_opensim_files, write_opensim_files
 
     _, folder = solved("effort-gen")  # written by the command, with the model prepared during its solve
@@ -201,7 +201,7 @@ def test_files_are_the_same_with_the_model_work_done_during_the_solve(solved, ex
     def stop(*args, **kwargs):
         raise Stop
 
-    monkeypatch.setattr(run, "solve_trial", stop)  # the problem up to IPOPT, not solved again
+    monkeypatch.setattr(problem, "solve_with_parameters", stop)  # the problem up to IPOPT, not solved again
     with pytest.raises(Stop):
         getattr(run.solve_files, "__wrapped__", run.solve_files)(
             *args, cache_dir=geometry_cache, before_solve=lambda **outline: told.update(outline))

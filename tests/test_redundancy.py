@@ -338,6 +338,7 @@ def test_solve_files_reads_each_input_once_and_hands_on_the_same_arrays(example,
 
     import musclemetab.io as mio
     import musclemetab.io.storage as storage
+    import musclemetab.redundancy.problem as problem
     import musclemetab.redundancy.run as run
     from musclemetab.redundancy.inputs import read_inverse_dynamics, read_kinematics
 
@@ -353,13 +354,13 @@ def test_solve_files_reads_each_input_once_and_hands_on_the_same_arrays(example,
     class Handed(Exception):
         pass
 
-    def capture(geometry, model_parameters, id_time, id_moments, workflow, **kwargs):
+    def capture(geometry, params, id_time, id_moments, **kwargs):
         handed.update(geometry=geometry, id_time=id_time, id_moments=id_moments, ik_time=kwargs["ik_time_s"])
         raise Handed
 
     monkeypatch.setattr(storage, "read_table", counting_read)
     monkeypatch.setattr(mio, "read_table", counting_read)
-    monkeypatch.setattr(run, "solve_trial", capture)
+    monkeypatch.setattr(problem, "solve_with_parameters", capture)
     with pytest.raises(Handed):  # the memo of the test run wraps solve_files: call the function itself
         inspect.unwrap(run.solve_files)(example.model, example.ik["normal"], example.id["normal"],
                                           cache_dir=geometry_cache)

@@ -57,22 +57,23 @@ class Outcome:
         return self.converged and self.quality == "ok"
 
 
-def solve_draw(files: tuple, workflow: str, draw, *, body_mass_kg: float, height_m: float | None, models,
-               start=None, **solve_kw) -> Outcome:
-    """Solve ``files`` (model, IK, ID) with the parameters of ``draw``; from ``start`` (the nominal
-    solution, adapted to the draw's parameters) or cold; its whole-body rates with the draw's
-    muscle masses and fiber types and its flags (the solve's and the rates' against the band of
-    walking rates, without a speed)."""
+def solve_draw(problem, draw, *, body_mass_kg: float, height_m: float | None, models, start=None) -> Outcome:
+    """Solve ``problem`` (the nominal :class:`~musclemetab.redundancy.problem.Problem`, e.g.
+    ``nominal.problem``) with the parameters of ``draw``; from ``start`` (the nominal solution,
+    adapted to the draw's parameters) or cold; its whole-body rates with the draw's muscle
+    masses and fiber types and its flags (the solve's and the rates' against the band of walking
+    rates, without a speed)."""
     from .metabolics.plausibility import metabolic_flags
     from .metabolics.solution import metabolics_from_solution
     from .quality import quality_text
-    from .redundancy.run import solve_files
+    from .redundancy.problem import solve
     from .uncertainty import adapted_start, sampled_properties
 
-    warm = {} if start is None else {"warm_start": adapted_start(start, draw.parameters(start.parameters))}
+    warm = None if start is None else adapted_start(start, draw.parameters(start.parameters))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the flags are recorded below
-        sol = solve_files(*files, workflow, parameter_transform=draw.parameters, **warm, **solve_kw)
+        result = solve(problem.with_parameters(draw.parameters(problem.parameters)), warm_start=warm)
+    sol = next(iter(result.solutions.values()))
     if not sol.success:
         return Outcome(draw.index, False, {}, "not_converged")
     masses, fst = sampled_properties(draw, sol, body_mass_kg, height_m)
@@ -99,10 +100,10 @@ def coverage(files: tuple, workflow: str = "effort-gen", *, body_mass_kg: float,
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         nominal = solve_files(*files, workflow, **solve_kw)
-    kw = dict(body_mass_kg=body_mass_kg, height_m=height_m, models=models, **solve_kw)
-    sampled = [solve_draw(files, workflow, draw(priors, nominal.muscles, k, seed), start=nominal, **kw)
+    kw = dict(body_mass_kg=body_mass_kg, height_m=height_m, models=models)
+    sampled = [solve_draw(nominal.problem, draw(priors, nominal.muscles, k, seed), start=nominal, **kw)
                for k in range(samples)]
-    truth = [solve_draw(files, workflow, d, **kw) for d in independent_draws(priors, nominal.muscles, truths,
+    truth = [solve_draw(nominal.problem, d, **kw) for d in independent_draws(priors, nominal.muscles, truths,
                                                                              truth_seed)]
     rows = []
     for model in models:

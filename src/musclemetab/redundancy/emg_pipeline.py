@@ -42,12 +42,14 @@ def solve_emg_ten_arrays(
     workflow: str = EMG_TEN,
     tendon_stiffness=None,
     before_solve=None,
+    parameters: tuple[MuscleTendonParameters, dict] | None = None,
 ) -> Result:
     """EMG-TEN from arrays: per trial a geometry-like object, ``(ID time, ID moments)`` with
     columns in the order of ``geometry.dofs``, and an EMG table (time-indexed ``DataFrame``,
     channels as columns, or already mapped to muscles by ``musclemetab.emg.map_channels``).
     ``before_solve``: see :func:`.emg_run.solve_emg_ten` (called for the trials whose ``sources``
-    name their model and IK files)."""
+    name their model and IK files). ``parameters``: the workflow's muscle parameters and their
+    record when they are known (:class:`.problem.Problem`; ``model_parameters`` is then not used)."""
     t_start = _time.perf_counter()
     settings = settings_for_muscles(settings, restrict_geometry(list(geometries)[0]).muscles) if geometries \
         else (settings or EmgTenSettings())
@@ -55,7 +57,8 @@ def solve_emg_ten_arrays(
     trials, params, wf_record = prepare_emg_ten_trials(
         geometries, model_parameters, id_data, emg_tables, labels=labels, ik_times=ik_times, passive=passive,
         emg_mapping=emg_mapping, settings=settings, options=options, sources=sources, check_units=check_units,
-        workflow="effort-cal" if workflow == EMG_TEN else workflow, tendon_stiffness=tendon_stiffness)
+        workflow="effort-cal" if workflow == EMG_TEN else workflow, tendon_stiffness=tendon_stiffness,
+        parameters=parameters)
     t_prep = _time.perf_counter() - t_start
     if before_solve is not None and workflow != EMG_TEN:  # the solutions' muscle parameters are known
         for trial in trials:
@@ -120,6 +123,7 @@ def prepare_emg_ten_trials(
     check_units: bool = True,
     workflow: str = "effort-cal",
     tendon_stiffness=None,
+    parameters: tuple[MuscleTendonParameters, dict] | None = None,
 ) -> tuple[list[EmgTenTrial], MuscleTendonParameters, dict]:
     """The trials of an EMG-TEN problem (mesh inputs, EMG at the nodes, initial guess), the
     muscle parameters (calibrated passive muscle, nominal ``kT``) and their record; the
@@ -161,8 +165,8 @@ def prepare_emg_ten_trials(
             f"the tendon stiffness of {name_list(missing_kt)} is to be estimated but the problem has no such muscle "
             f"({', '.join(muscles[:6])} ...); change EmgTenSettings.tendon_groups"
         )
-    params, wf_record = workflow_parameters(workflow, model_parameters, muscles, passive=passive,
-                                            tendon_stiffness=tendon_stiffness)
+    params, wf_record = parameters if parameters is not None else \
+        workflow_parameters(workflow, model_parameters, muscles, passive=passive, tendon_stiffness=tendon_stiffness)
     emg_muscles = tuple(sorted(mapping))
 
     trials = []

@@ -6,36 +6,16 @@ problem of both legs. It reads and checks every file before OpenSim is asked any
 
 from __future__ import annotations
 
-import dataclasses
 import os
-import time as _time
-from pathlib import Path
 from typing import Sequence
 
 from ..errors import OptionError
 from ..messages import name_list
 from ._docs import fill_doc
-from .emg_inputs import (
-    check_emg_range,
-    check_emg_window,
-    mapped_emg_table,
-    one_model,
-    path_list,
-    resolve_emg_mapping,
-    trial_labels,
-)
-from .emg_pipeline import solve_emg_ten_arrays
+from .emg_inputs import resolve_emg_mapping
 from .emg_ten import EmgTenSettings
-from .result import EMG_TEN, Result
-from .inputs import (
-    check_time_ranges,
-    read_inverse_dynamics,
-    read_kinematics,
-)
 from .ipopt import SolverOptions
-from .run import (
-    _diagnosis_record, _mapping_without, _trial_dofs, exclude_from_geometry,
-)
+from .result import EMG_TEN, Result
 
 __all__ = ["solve_emg_ten", "emg_mappings_of_legs"]
 
@@ -99,117 +79,20 @@ def solve_emg_ten(
     the window, besides the IK/ID checks of the single-trial solver (columns, units, time
     ranges). Muscles of a custom mapping that the model lacks are reported after the geometry.
     """
-    from ..io import read_table
-    from ..model import read_muscle_parameters
-    from ..processes import BackgroundCall
-    from .workflows import read_passive_parameters
+    from .emg_inputs import path_list
+    from .problem import TrialFiles, load_problem, solve
 
-    ik_paths = path_list(ik_paths, "ik_paths")
-    id_paths = path_list(id_paths, "id_paths")
-    emg_paths = path_list(emg_paths, "emg_paths")
-    if not ik_paths:
-        raise OptionError("EMG-TEN needs at least one trial (IK, ID and EMG file)")
+    ik_paths, id_paths, emg_paths = (path_list(p, what) for p, what in ((ik_paths, "ik_paths"), (id_paths, "id_paths"),
+                                                                        (emg_paths, "emg_paths")))
     if not (len(ik_paths) == len(id_paths) == len(emg_paths)):
-        raise OptionError(
-            f"{len(ik_paths)} IK, {len(id_paths)} ID and {len(emg_paths)} EMG files; give one of each per trial, "
-            "in the same order"
-        )
-    model = one_model(model_path, len(ik_paths))
-    labels = trial_labels(ik_paths, labels)
-    mapping = resolve_emg_mapping(emg_mapping)
-    settings = settings or EmgTenSettings()
-    if passive is not None and not hasattr(passive, "for_muscles"):
-        passive = read_passive_parameters(passive)
-    # each file is read once; every file is checked before OpenSim is asked anything
-    id_tables = [read_table(p) for p in id_paths]
-    dofs = _trial_dofs(model, id_tables, dofs, side, cache_dir)
-    id_data, emg_tables, ik_times, ik_tables = [], [], [], []
-    for ik, idp, id_table, emg, lab in zip(ik_paths, id_paths, id_tables, emg_paths, labels):
-        ik_tables.append(read_table(ik))
-        ik_time, _ = read_kinematics(ik_tables[-1], dofs, check_units=check_units)
-        id_time, id_moments = read_inverse_dynamics(id_table, dofs)
-        check_time_ranges(ik_time, id_time, ik, idp)
-        table = mapped_emg_table(emg, mapping, f"EMG of trial {lab}")
-        what = str(table.attrs.get("path", f"EMG of trial {lab}"))
-        check_emg_window(table, ik_time, what, str(ik))
-        check_emg_range(table, float(ik_time[0]), float(ik_time[-1]), settings.emg_range_tolerance, what)
-        id_data.append((id_time, id_moments))
-        emg_tables.append(table)
-        ik_times.append(ik_time)
-    params_request = BackgroundCall(read_muscle_parameters, model)
-    from ..geometry import compute_geometry
-
-    t0 = _time.perf_counter()
-    geometries = [compute_geometry(model, ik, dofs=list(dofs), side=side, cache_dir=cache_dir) for ik in ik_tables]
-    t_geometry = _time.perf_counter() - t0
-    model_parameters = params_request.result()
-    excluded = []
-    if exclude_muscles:
-        from .emg_ten import settings_without
-        from .inputs import restrict_geometry
-
-        settings = settings_without(settings, restrict_geometry(geometries[0]).muscles, exclude_muscles)
-        pairs = [exclude_from_geometry(g, exclude_muscles, exclude_missing_ok) for g in geometries]
-        geometries, excluded = [g for g, _ in pairs], pairs[0][1]
-        mapping = _mapping_without(mapping, excluded)
-        emg_tables = [_columns_without(t, excluded) for t in emg_tables]
-    diagnoses = _diagnose_emg_trials(geometries, model_parameters, id_data, ik_times, labels, passive, settings,
-                                     options, workflow, tendon_stiffness, check=not diagnose_only)
-    if diagnose_only:
-        return diagnoses
-    if check_units:
-        from ..model import read_model
-        from .inputs import check_moments_per_body_mass
-
-        mass = read_model(model).body_mass_kg
-        for (_, moments), idp in zip(id_data, id_paths):
-            check_moments_per_body_mass(moments, dofs, mass, idp, model)
-    sources = [{"model": Path(model), "ik": Path(ik), "id": Path(idp),
-                "emg": Path(emg) if isinstance(emg, (str, os.PathLike)) else f"EMG table of trial {lab}"}
-               for ik, idp, emg, lab in zip(ik_paths, id_paths, emg_paths, labels)]
-    result = solve_emg_ten_arrays(
-        geometries, model_parameters, id_data, emg_tables, labels=labels, ik_times=ik_times, passive=passive,
-        emg_mapping=mapping, settings=settings, options=options, sources=sources, check_units=check_units,
-        workflow=workflow, tendon_stiffness=tendon_stiffness, before_solve=before_solve,
-    )
-    # the leg, in each trial's record as the single-trial solve's record holds it
-    trial_entries = {label: {"side": side, "diagnosis": _diagnosis_record(diagnosis, solution, g, t, m, ik),
-                             **({"excluded_muscles": list(excluded)} if excluded else {})}
-                     for (label, solution), diagnosis, g, (t, m), ik in zip(result.solutions.items(), diagnoses,
-                                                                          geometries, id_data, ik_times)}
-    solutions = {label: dataclasses.replace(solution, record=solution.record.with_(**trial_entries[label]))
-                 for label, solution in result.solutions.items()}
-    return dataclasses.replace(result, solutions=solutions,
-                               record=result.record.with_(geometry_time_s=t_geometry, side=side))
-
-
-def _columns_without(table, excluded):
-    """An EMG table mapped to muscles without the excluded muscles' columns (its attributes kept)."""
-    out = table.drop(columns=[c for c in excluded if c in table.columns])
-    out.attrs.update(table.attrs)
-    return out
-
-
-def _diagnose_emg_trials(geometries, model_parameters, id_data, ik_times, labels, passive, settings, options,
-                         workflow, tendon_stiffness, check=True) -> list:
-    """The diagnosis of each trial of an EMG problem before it is built (the estimated tendon
-    stiffness within its bounds)."""
-    from .diagnosis import diagnose_geometry
-    from .emg_ten import settings_for_muscles
-    from .inputs import restrict_geometry
-    from .transcription import ParameterSpec
-    from .workflows import workflow_parameters
-
-    muscles = restrict_geometry(geometries[0]).muscles
-    settings = settings_for_muscles(settings or EmgTenSettings(), muscles)
-    params, _ = workflow_parameters("effort-cal" if workflow == EMG_TEN else workflow, model_parameters, muscles,
-                                    passive=passive, tendon_stiffness=tendon_stiffness)
-    kt = [m for m in settings.tendon_muscles if m in muscles]
-    specs = [ParameterSpec("tendon_stiffness", tuple(kt), settings.tendon_scale_bounds)] if kt else []
-    reserve = (options or SolverOptions()).optimal_reserve_Nm
-    out = [diagnose_geometry(g, params, t, m, ik_time_s=ik, specs=specs, optimal_reserve_Nm=reserve, trial=lab)
-           for g, (t, m), ik, lab in zip(geometries, id_data, ik_times, labels)]
-    return [d.check(f"trial {d.trial}") for d in out] if check else out
+        raise OptionError(f"{len(ik_paths)} IK, {len(id_paths)} ID and {len(emg_paths)} EMG files; give one of each "
+                          "per trial, in the same order")
+    problem = load_problem(
+        model_path, [TrialFiles(*files) for files in zip(ik_paths, id_paths, emg_paths)], workflow=workflow,
+        labels=labels, side=side, dofs=dofs, emg=settings or EmgTenSettings(), emg_mapping=emg_mapping, passive=passive,
+        tendon_stiffness=tendon_stiffness, options=options, cache_dir=cache_dir, check_units=check_units,
+        exclude_muscles=exclude_muscles, exclude_missing_ok=exclude_missing_ok, diagnose_only=diagnose_only)
+    return problem if diagnose_only else solve(problem, before_solve=before_solve)
 
 
 def emg_mappings_of_legs(model, ik_path, emg_mapping, side: str, dofs=None, cache_dir=None) -> dict:

@@ -332,16 +332,24 @@ def emg_ten_problem(trials: Sequence[EmgTenTrial], params: MuscleTendonParameter
         raise UnknownMuscleError(
             f"muscle{'s' if len(missing) > 1 else ''} {name_list(missing)} of the EMG-TEN settings "
             f"not among the muscles of the problem ({', '.join(muscles[:6])} ...)")
-    order = list(dict.fromkeys(m for t in trials for m in t.inputs.muscles))
-    kt_muscles = tuple(m for m in order if m in settings.tendon_muscles)
-    specs = [ParameterSpec("tendon_stiffness", kt_muscles, settings.tendon_scale_bounds,
-                           coupling_pairs(settings.tendon_groups, kt_muscles, consecutive=True))] if kt_muscles else []
-    specs.append(ParameterSpec("emg_scale", emg_muscles, settings.emg_scale_bounds,
-                               coupling_pairs(settings.emg_groups, emg_muscles, consecutive=False)))
+    specs = emg_ten_specs(settings, list(dict.fromkeys(m for t in trials for m in t.inputs.muscles)), emg_muscles)
     goals = replace(settings.goals, emg_tolerance=settings.emg_bound, fiber_dynamics=settings.fiber_scheme)
     blocks = [TrialBlock(t.label, t.inputs, t.guess, emg_muscles=emg_muscles, emg_nodes=t.emg_nodes)
               for t in trials]
     return blocks, goals, specs
+
+
+def emg_ten_specs(settings: EmgTenSettings, muscles: Sequence[str], emg_muscles: Sequence[str]) -> list[ParameterSpec]:
+    """The shared factors of an EMG problem: ``s_kT`` of ``settings.tendon_groups`` (in the order
+    of ``muscles``, couplings between consecutive members of a group) and ``s_EMG`` of the
+    tracked ``emg_muscles`` (couplings between the first member of an EMG group and each other one)."""
+    kt_muscles = tuple(m for m in muscles if m in settings.tendon_muscles)
+    specs = [ParameterSpec("tendon_stiffness", kt_muscles, settings.tendon_scale_bounds,
+                           coupling_pairs(settings.tendon_groups, kt_muscles, consecutive=True))] if kt_muscles else []
+    emg_muscles = tuple(emg_muscles)
+    specs.append(ParameterSpec("emg_scale", emg_muscles, settings.emg_scale_bounds,
+                               coupling_pairs(settings.emg_groups, emg_muscles, consecutive=False)))
+    return specs
 
 
 def build_emg_ten_nlp(

@@ -76,6 +76,8 @@ class Result:
     settings: object = None
     document: dict | None = field(default=None, repr=False)
     trials: tuple = field(default=(), repr=False)
+    #: the :class:`~.problem.Problem` solved (:func:`.problem.solve`), or ``None``
+    problem: "Problem | None" = field(default=None, repr=False)  # noqa: F821 (redundancy.problem, a layer above)
 
     #: trials a printed summary lists one by one
     TRIALS_SHOWN = 8
@@ -247,12 +249,16 @@ class Result:
 
         out_dir = Path(out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
-        check_replaceable(out_dir, [PARAMETERS_FILE])  # a parameters.json of the user is not removed
+        from .problem_file import PROBLEM_FILE
+
+        check_replaceable(out_dir, [PARAMETERS_FILE, PROBLEM_FILE])  # a parameters.json of the user is not removed
         (out_dir / PARAMETERS_FILE).unlink(missing_ok=True)
         for label, sol in self.solutions.items():
             sol.write(out_dir / label)
             if opensim_files:
                 write_solution_opensim_files(sol, out_dir / label)
+        if self.problem is not None:
+            self.problem.write(out_dir)
         return self.write_parameters(out_dir)
 
     def write_parameters(self, out_dir: str | os.PathLike) -> Path:
@@ -268,7 +274,7 @@ class Result:
     @classmethod
     def load(cls, out_dir: str | os.PathLike, *, require_success: bool = True) -> "Result":
         """Read a folder written by :meth:`write` (EMG-TEN, an EMG-informed solve of several
-        trials, or ``musclemetab estimate``).
+        trials, or ``musclemetab estimate``); :func:`.problem.load_result` rebuilds its problem too.
 
         Raises :class:`~musclemetab.errors.InputFileError` when ``parameters.json`` or a trial
         folder is missing or is not of this package, and the solve's

@@ -441,10 +441,12 @@ class TrialProblem:
 
 
 def problem_of_solution(solution, cache_dir: str | os.PathLike | None = None) -> TrialProblem:
-    """Rebuild the problem of a single-trial effort solve (EFFORT-GEN/CAL/TEN) from its solution
-    folder (or :class:`.solution.Solution`): the input files its ``summary.json`` names, its
-    window, muscles, DOFs, mesh and parameters. The geometry comes from the cache (OpenSim only
-    when it is not there)."""
+    """The problem of a single-trial effort solve (EFFORT-GEN/CAL/TEN): from the
+    :class:`~.problem.Problem` the solution keeps (``solution.problem``, a solve of this
+    process) with the solution's parameters, else rebuilt from its solution folder (or
+    :class:`.solution.Solution`): the input files its ``summary.json`` names, its window,
+    muscles, DOFs, mesh and parameters. The geometry comes from the cache (OpenSim only when it
+    is not there)."""
     from ..geometry import compute_geometry
     from ..io import read_table
     from .inputs import GeometryArrays, read_inverse_dynamics, read_kinematics
@@ -465,6 +467,8 @@ def problem_of_solution(solution, cache_dir: str | os.PathLike | None = None) ->
     if rec.get("fiber_dynamics", "forward") != "forward":
         raise OptionError(f"{where}: the sensitivities need the forward fiber dynamics; solve without "
                           "--fiber-dynamics backward")
+    if getattr(solution, "problem", None) is not None:
+        return _problem_of_problem(solution, where)
     files = rec.get("inputs") or {}
     missing = [k for k in ("model", "ik", "id") if not files.get(k) or not Path(files[k]).is_file()]
     if missing:
@@ -506,6 +510,34 @@ def problem_of_solution(solution, cache_dir: str | os.PathLike | None = None) ->
                         ik_time_s=ik_time[keep], inputs=inputs, params=params, goals=goals,
                         optimal_reserve_Nm=float(rec.get("optimal_reserve_Nm", 150.0)),
                         filter_inputs=filter_inputs, mesh_frequency_hz=mesh)
+
+
+def _problem_of_problem(solution, where: str) -> TrialProblem:
+    """:func:`problem_of_solution` from ``solution.problem``: its trial's geometry and moments
+    restricted to the solution's muscles and DOFs, the mesh inputs with the solution's parameters."""
+    from .inputs import GeometryArrays
+    from .solve import prepare_trial
+    from .transcription import Goals
+
+    problem = solution.problem
+    trial = problem.trials[0]
+    g = trial.geometry
+    absent = [m for m in solution.muscles if m not in g.muscles]
+    if len(problem.trials) != 1 or absent:
+        raise DataMismatchError(f"{where}: its problem is not the solution's (other trials or muscles)")
+    cols = [list(g.muscles).index(m) for m in solution.muscles]
+    rows = [list(g.dofs).index(d) for d in solution.dofs]
+    geometry = GeometryArrays(np.asarray(g.time), list(solution.muscles), list(solution.dofs),
+                              np.asarray(g.lmt_m)[:, cols], np.asarray(g.moment_arms_m)[:, rows][:, :, cols])
+    moments = np.asarray(trial.id_moments_Nm, dtype=float).reshape(len(trial.id_time_s), -1)[:, rows]
+    inputs, params, _ = prepare_trial(geometry, solution.parameters, trial.id_time_s, moments,
+                                      ik_time_s=trial.ik_time_s, check_units=False,
+                                      mesh_frequency_hz=problem.mesh_frequency_hz)
+    return TrialProblem(solution=solution, geometry=geometry, id_time_s=trial.id_time_s, id_moments_Nm=moments,
+                        ik_time_s=trial.ik_time_s, inputs=inputs, params=params,
+                        goals=Goals(**problem.goals.effort_weights()),
+                        optimal_reserve_Nm=problem.options.optimal_reserve_Nm, filter_inputs=True,
+                        mesh_frequency_hz=problem.mesh_frequency_hz)
 
 
 def sensitivity_of_folder(folder, *, body_mass_kg: float, height_m: float | None, models="all",

@@ -193,6 +193,8 @@ class Solution:
     reserve_Nm: np.ndarray
     parameters: MuscleTendonParameters
     record: SolveRecord = field(default_factory=SolveRecord)
+    #: the :class:`~.problem.Problem` solved (:func:`.problem.solve`), or ``None`` (not kept in the folder)
+    problem: "Problem | None" = field(default=None, repr=False, compare=False)  # noqa: F821 (a layer above)
 
     #: the arrays of a solution, time-first ``(nodes, muscles)`` (``reserve_Nm``: ``(nodes, DOFs)``)
     ARRAYS = ("excitation", "activation", "lm_norm", "fiber_velocity_lmo_per_s", "tendon_force_N",

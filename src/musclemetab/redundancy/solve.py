@@ -31,7 +31,7 @@ from .workflows import (
     workflow_parameters,
 )
 
-__all__ = ["solve_trial", "solve_with_parameters", "prepare_trial", "muscles_at_fiber_length_bound", "WARM_START_MU_INIT"]
+__all__ = ["solve_trial", "solve_with_parameters", "prepare_trial", "workflow_goals", "muscles_at_fiber_length_bound", "WARM_START_MU_INIT"]
 
 #: Barrier parameter at the start of a warm-started solve (the default start uses IPOPT's 0.1).
 WARM_START_MU_INIT = 1e-6
@@ -171,15 +171,23 @@ def solve_trial(
     )
     if parameter_transform is not None:
         params = parameter_transform(params)
-    goals, options = single_trial_goals(goals or wf.goals, options or SolverOptions())
-    effort = goals.energy.effort_weight if goals.energy is not None else None
-    if effort is not None:
-        goals = replace(goals, w_activation=effort)
+    goals, options = workflow_goals(wf, goals, options)
     return solve_with_parameters(
         geometry, params, id_time_s, id_moments_Nm, ik_time_s=ik_time_s, options=options, goals=goals,
         workflow_record=record, sources=sources, check_units=check_units, warm_start=warm_start,
         mesh_frequency_hz=mesh_frequency_hz,
     )
+
+
+def workflow_goals(workflow, goals: Goals | None, options: SolverOptions | None) -> tuple[Goals, SolverOptions]:
+    """``(goals, options)`` of a single-trial solve of ``workflow``: ``goals`` (default the
+    workflow's) agreeing with ``options`` (:func:`.ipopt.single_trial_goals`); the effort weight of
+    the energy goal, when it has one, overrides ``w_activation``."""
+    goals, options = single_trial_goals(goals or get_workflow(workflow).goals, options or SolverOptions())
+    effort = goals.energy.effort_weight if goals.energy is not None else None
+    if effort is not None:
+        goals = replace(goals, w_activation=effort)
+    return goals, options
 
 
 def muscles_at_fiber_length_bound(solution: Solution, tolerance: float = 1e-3) -> list[str]:
