@@ -6,8 +6,9 @@ From inverse kinematics, inverse dynamics and muscle geometry, an optimal contro
 (CasADi + IPOPT) finds muscle excitations, activations, fiber lengths and velocities and
 tendon forces that reproduce the joint moments with minimal effort.
 
-Modules: :mod:`.run` (the pipeline from files: what the command line, the study and Python
-users call), :mod:`.inputs` (filtering, splines, mesh), :mod:`.static_opt` (initial guess),
+Modules: :mod:`.problem` (one problem: :func:`~.problem.load_problem` reads and checks its
+files once, :func:`~.problem.solve` solves it, the result keeps it), :mod:`.run` (the pipeline
+from files: what the command line, the study and Python users call), :mod:`.inputs` (filtering, splines, mesh), :mod:`.static_opt` (initial guess),
 :mod:`.transcription` (one problem: trials, goals, shared parameters; ``docs/problem.md``),
 :mod:`.ipopt` (solving it; the single-trial problem), :mod:`.solution` (results, files),
 :mod:`.record` (the run record), :mod:`.workflows` (presets, passive and tendon parameters),
@@ -32,6 +33,7 @@ _EXPORTS = {
     "WORKFLOWS": "workflows", "Workflow": "workflows", "get_workflow": "workflows",
     "read_passive_parameters": "workflows", "workflow_parameters": "workflows",
     "estimate_files": "estimate_run", "write_solution_folder": "run",
+    "Problem": "problem", "TrialFiles": "problem", "load_problem": "problem", "load_result": "problem",
 }
 
 
@@ -68,4 +70,8 @@ __all__ = [
     "EmgTenResult",
     "EmgTenSettings",
     "estimate_files",
+    "Problem",
+    "TrialFiles",
+    "load_problem",
+    "load_result",
 ]

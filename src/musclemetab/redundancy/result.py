@@ -77,7 +77,7 @@ class Result:
     document: dict | None = field(default=None, repr=False)
     trials: tuple = field(default=(), repr=False)
     #: the :class:`~.problem.Problem` solved (:func:`.problem.solve`), or ``None``
-    problem: "Problem | None" = field(default=None, repr=False)  # noqa: F821 (redundancy.problem, a layer above)
+    problem: "Problem | None" = field(default=None, repr=False, compare=False)  # noqa: F821 (a layer above)
 
     #: trials a printed summary lists one by one
     TRIALS_SHOWN = 8
