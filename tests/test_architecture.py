@@ -85,3 +85,25 @@ def test_no_import_runs_back_up():
             elif LAYER[target] > LAYER[here]:
                 up.append(f"{path.relative_to(SRC)}:{line} imports {target}")
     assert not up, "imports that run back up: " + "; ".join(up)
+
+
+#: the solver's entry points, from the top down (docs/architecture.md, "Stages and the objects
+#: between them"): the file-level functions call problem.py (load_problem, solve), which calls
+#: the array-level modules below it; no module below imports one above it
+REDUNDANCY_TOP = [{"run", "emg_run", "estimate_run"}, {"problem"}]
+
+
+def test_the_solver_modules_below_the_problem_do_not_import_it():
+    """``redundancy/problem.py`` (Problem, load_problem, solve) stands above every other module of
+    ``redundancy`` but the file-level entry points, which stand above it."""
+    level = {name: i for i, names in enumerate(REDUNDANCY_TOP) for name in names}
+    up = []
+    for path in sorted((SRC / "redundancy").glob("*.py")):
+        here = level.get(path.stem, len(REDUNDANCY_TOP))
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.level == 1 and node.module:
+                target = node.module.split(".")[0]
+                if level.get(target, len(REDUNDANCY_TOP)) < here:
+                    up.append(f"redundancy/{path.name}:{node.lineno} imports {target}")
+    assert not up, "imports that run back up inside redundancy: " + "; ".join(up)
