@@ -64,7 +64,7 @@ def test_problem_json_round_trip(example, geometry_cache, tmp_path):
 
 
 @pytest.mark.opensim
-def test_sample_from_the_kept_problem_equals_the_sample_from_files(example, geometry_cache):
+def test_sample_from_the_kept_problem_equals_the_sample_from_files(example, geometry_cache, tmp_path):
     """An uncertainty sample solved from ``nominal.problem`` (``problem.with_parameters``, as
     ``uncertainty_coverage.solve_draw`` does) is the sample solved from the files
     (``solve_files(..., parameter_transform=...)``): objective and arrays to 1e-9 relative."""
@@ -87,6 +87,10 @@ def test_sample_from_the_kept_problem_equals_the_sample_from_files(example, geom
         np.testing.assert_allclose(getattr(from_problem, name), getattr(from_files, name), rtol=1e-9, atol=1e-12,
                                    err_msg=name)
     _same_problem(from_problem.problem, from_files.problem)
+    from musclemetab.errors import OptionError
+
+    with pytest.raises(OptionError, match="result of a single-trial solve has no parameters.json"):
+        solve(kept).write(tmp_path)  # its solution is what is written
 
 
 @pytest.mark.opensim

@@ -237,7 +237,9 @@ class Result:
     def write(self, out_dir: str | os.PathLike, opensim_files: bool = True) -> Path:
         """Write one solution folder per trial and ``parameters.json`` into ``out_dir``.
 
-        Each folder is written atomically; ``parameters.json`` is removed first and written last
+        ``problem.json`` holds the problem solved (:mod:`.problem_file`) when the result has it. A
+        single-trial effort solve's result is refused (write its solution instead). Each folder
+        is written atomically; ``parameters.json`` is removed first and written last
         (atomically), so its presence means that all trial folders belong to it. With
         ``opensim_files`` each trial folder also gets the OpenSim model, states, controls and
         forces of its solution (:func:`.export.write_solution_opensim_files`; trials solved
@@ -247,6 +249,11 @@ class Result:
 
         from ..io.atomic import check_replaceable
 
+        if self.document is None and self.record.trials is None:  # a single-trial effort solve (problem.solve)
+            from ..errors import OptionError
+
+            raise OptionError("the result of a single-trial solve has no parameters.json: write its solution "
+                              "(musclemetab.redundancy.write_solution_folder(result.solutions[label], folder))")
         out_dir = Path(out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
         from .problem_file import PROBLEM_FILE
