@@ -190,7 +190,7 @@ def estimate_files(
                    "fiber_dynamics": fiber_dynamics,
                    "fiber_length_bounds": fiber_length_bounds_record(t.inputs, params, specs),
                    "workflow": {"name": f"{workflow} estimate", "estimate": est.to_dict()["factors"]},
-                   "solver_options": solver_record(options, goals), "diagnosis": diag.to_dict(),
+                   "solver_options": solver_record(options, goals.effort()), "diagnosis": diag.to_dict(),
                    **({"excluded_muscles": list(exclude_muscles)} if exclude_muscles else {})}
         solutions[t.label] = build_solution(t.inputs, estimated.subset(t.inputs.muscles), o, summary)
         if not run.success:
