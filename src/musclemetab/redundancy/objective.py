@@ -46,9 +46,9 @@ def column_sums(x):
     return math_for(x).sum1(x)
 
 
-def _mean_square(x):
-    """``sum x^2 / rows`` at each node."""
-    return column_sums(x**2) / x.shape[0]
+def _mean_square(x, weight):
+    """``weight sum x^2 / rows`` at each node (the coefficient ``weight / rows`` first)."""
+    return (weight / x.shape[0]) * column_sums(x**2)
 
 
 @dataclass(frozen=True)
@@ -79,7 +79,7 @@ class _MeanSquare(Term):
     factor: ClassVar[float] = 1.0
 
     def node(self, v):
-        return self.weight * self.factor * _mean_square(v[self.key])
+        return _mean_square(v[self.key], self.weight * self.factor)
 
     @classmethod
     def of(cls, goals, emg_index, fiber_index):
@@ -124,7 +124,7 @@ class _Tracking(Term):
         raise NotImplementedError
 
     def node(self, v):
-        return self.weight * _mean_square(self.residual(v))
+        return _mean_square(self.residual(v), self.weight)
 
     @classmethod
     def of(cls, goals, emg_index, fiber_index):
@@ -162,15 +162,18 @@ class Energy(Term):
     weight: float = 0.0
     goal: EnergyGoal | None = None
 
+    def _leg_rate_W(self, v):
+        """The summed rate of the muscles (W) at each node."""
+        return column_sums(node_rates(self.goal, v["e"], v["a"], v["lm"], v["vm"], F0=v["f0"], lMo=v["lmo"],
+                                      vmax=v["vmax"], kpe=v["kpe"], s0=v["s0"], sm=v["sm"], mass=v["mass"],
+                                      fst=v["fst"]))
+
     def leg_rate(self, v):
         """The summed rate of the muscles per kg of body mass (W/kg) at each node."""
-        g = self.goal
-        rates = node_rates(g, v["e"], v["a"], v["lm"], v["vm"], F0=v["f0"], lMo=v["lmo"], vmax=v["vmax"],
-                           kpe=v["kpe"], s0=v["s0"], sm=v["sm"], mass=v["mass"], fst=v["fst"])
-        return column_sums(rates) / float(g.body_mass_kg)
+        return self._leg_rate_W(v) / float(self.goal.body_mass_kg)
 
     def node(self, v):
-        return self.weight * self.leg_rate(v)
+        return (self.weight / float(self.goal.body_mass_kg)) * self._leg_rate_W(v)
 
     @classmethod
     def of(cls, goals, emg_index, fiber_index):
