@@ -47,6 +47,7 @@ def solve_key(func, args, kwargs) -> tuple[str, dict] | None:
     """
     from musclemetab.io.atomic import file_sha256
     from musclemetab.redundancy.emg_ten import EmgTenSettings
+    from musclemetab.redundancy.goals import Goals
     from musclemetab.redundancy.ipopt import SolverOptions
     from musclemetab.redundancy.solution import Solution
 
@@ -65,7 +66,7 @@ def solve_key(func, args, kwargs) -> tuple[str, dict] | None:
             return [plain(v) for v in value]
         if isinstance(value, dict) and all(isinstance(k, str) for k in value):
             return {k: plain(v) for k, v in value.items()}
-        if isinstance(value, (SolverOptions, EmgTenSettings)):
+        if isinstance(value, (SolverOptions, EmgTenSettings, Goals)):
             return {type(value).__name__: plain(dataclasses.asdict(value))}
         if isinstance(value, Solution):  # a warm start: by the content of its pickle
             return {"Solution": hashlib.sha256(pickle.dumps(value)).hexdigest()}

@@ -745,6 +745,7 @@ def test_settings_checks_name_the_option_and_what_it_may_be():
         (lambda: Goals(w_activation=float("nan")), "the weight w_activation must be a non-negative number"),
         (lambda: EmgTenSettings(goals=Goals(energy=None, w_fiber_length=1.0)), "no fiber-length weight"),
         (lambda: EmgTenSettings(goals={"w_emg": 1.0}), "goals must be a Goals, not dict"),
+        (lambda: EmgTenSettings(goals=Goals(fiber_dynamics="backward")), "give fiber_dynamics='backward' there"),
         (lambda: SolverOptions(derivatives="numeric"), "derivatives must be one of 'explicit', 'auto'"),
         (lambda: Goals(emg_tolerance=-0.1), "the EMG tolerance must be a non-negative number (0: EMG-driven)"),
         (lambda: ParameterSpec("tendon_stiffness", ("soleus_r",), (0.0, 1.0)),

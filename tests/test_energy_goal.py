@@ -88,9 +88,10 @@ def small_problem(example, reference_table):
 
 def _nlp(small_problem, goal):
     from musclemetab.redundancy.ipopt import SolverOptions, build_nlp
+    from musclemetab.redundancy.goals import Goals
 
     inp, params, guess = small_problem
-    return build_nlp(inp, params, guess, SolverOptions(energy=goal))
+    return build_nlp(inp, params, guess, SolverOptions(), Goals(energy=goal))
 
 
 def _point(nlp, seed=3):
@@ -240,12 +241,12 @@ def test_energy_solve_of_the_normal_trial_converges(example):
     muscle that lengthens is saturated (activation >= 0.95) anywhere in the solved window: with
     the effort goal beside it, the energy goal shares the load (docs/energy_objective.md). The
     command line gives the same solve."""
-    from musclemetab.redundancy import SolverOptions, solve_files
+    from musclemetab.redundancy import Goals, solve_files
 
     effort = solve_files(example.model, example.ik["normal"], example.id["normal"], "effort-cal")
     goal = _goal("BH04", weight=1e-3, smoothing=0.01)
     sol = solve_files(example.model, example.ik["normal"], example.id["normal"], "effort-cal",
-                      options=SolverOptions(energy=goal))
+                      goals=Goals(energy=goal))
     s = sol.summary
     assert s["success"] and s["max_moment_residual_Nm"] <= 1e-4
     N = s["n_intervals"]
@@ -308,10 +309,12 @@ def test_energy_goal_from_the_command_line(example, tmp_path, capsys):
 
 
 def test_emg_solves_refuse_the_energy_goal():
-    from musclemetab.redundancy import SolverOptions
-    from musclemetab.redundancy.emg_pipeline import emg_ten_options
+    """The energy goal is one of the goals (``Goals.energy``), which EMG-TEN and EMG-informed
+    settings refuse; the solver options hold none (a ``TypeError``, as for any unknown field)."""
+    from musclemetab.redundancy import Goals, SolverOptions
     from musclemetab.redundancy.emg_ten import EmgTenSettings
 
-    with pytest.raises(OptionError, match="energy goal"):
-        emg_ten_options(SolverOptions(energy=_goal()), EmgTenSettings())
-    assert emg_ten_options(SolverOptions(), EmgTenSettings()).energy is None
+    with pytest.raises(OptionError, match="no energy goal"):
+        EmgTenSettings(goals=Goals(energy=_goal()))
+    with pytest.raises(TypeError):
+        SolverOptions(energy=_goal())

@@ -377,7 +377,7 @@ def test_study_basal_coefficient_and_exponent(example):
 def test_study_energy_goal_table(example):
     """[energy_goal]: checked, part of the effort units' keys, and the subject's own mass and
     height in each solve's goal."""
-    from musclemetab.study.units import _solver_options, plan_units, unit_key
+    from musclemetab.study.units import _goals, plan_units, unit_key
 
     data = _study_dict(example, workflows=("effort-gen", "emg-ten"))
     data["subjects"][0]["trials"][0]["emg"] = str(example.emg["slow"])
@@ -392,10 +392,12 @@ def test_study_energy_goal_table(example):
     emg = next(u for u in units if u.workflow == "emg-ten")
     assert unit_key(study, effort) != unit_key(plain, effort)
     assert unit_key(study, emg) == unit_key(plain, emg)  # EMG-TEN solves have no energy goal
-    goal = _solver_options(study, study.subject("sub1")).energy
+    goals = _goals(study, study.subject("sub1"), "effort-gen")
+    assert goals.effort_weights() == {"w_activation": 1.0, "w_reserve": 1000.0, "w_velocity": 0.01}
+    goal = goals.energy
     assert (goal.model, goal.weight, goal.effort_weight) == ("UM10", 0.5, 0.0)
     assert (goal.body_mass_kg, goal.height_m) == (example.body_mass_kg, example.height_m)
-    assert _solver_options(plain, plain.subject("sub1")) is None
+    assert _goals(plain, plain.subject("sub1"), "effort-gen") is None
     for table, words in (({"weight": 1.0}, ["energy_goal", "'model' is required"]),
                          ({"model": "UM99"}, ["energy_goal", "UM99"]),
                          ({"model": "UM10", "weight": -2.0}, ["energy_goal", "weight"]),

@@ -112,7 +112,7 @@ def main(argv=None) -> int:
 
     from musclemetab.datasets import example_subject
     from musclemetab.metabolics.solution import metabolics_from_solution
-    from musclemetab.redundancy import SolverOptions, solve_files
+    from musclemetab.redundancy import Goals, get_workflow, solve_files
     from musclemetab.redundancy.energy import EnergyGoal, leg_rate_W_per_kg
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -136,7 +136,8 @@ def main(argv=None) -> int:
         goal = _goal(text, ex)
         t0 = time.perf_counter()
         sol = solve_files(ex.model, ex.ik["normal"], ex.id["normal"], args.workflow,
-                          options=SolverOptions(energy=goal) if goal else None,
+                          goals=Goals(**get_workflow(args.workflow).goals.effort_weights(), energy=goal)
+                          if goal else None,
                           **({"warm_start": effort} if args.warm_start and goal and effort is not None else {}))
         if goal is None:
             effort = sol

@@ -400,10 +400,14 @@ def _solve(args) -> int:
         raise OptionError("--cycle-duration bounds the --cycle found from the events; give --cycle, or drop it")
     cycle_duration = parse_window(args.cycle_duration, "--cycle-duration") if args.cycle_duration else None
     options = _solver_options(args)
-    if energy is not None:
-        options = options.with_(energy=energy)
-    if args.fiber_dynamics:
-        options = options.with_(fiber_dynamics=args.fiber_dynamics)
+    goals = None  # the workflow's
+    if energy is not None or args.fiber_dynamics:
+        from dataclasses import replace
+
+        from ..redundancy.workflows import get_workflow
+
+        goals = replace(get_workflow(args.workflow).goals, energy=energy,
+                        fiber_dynamics=args.fiber_dynamics or "forward")
     warm = None
     if args.warm_start:
         from ..redundancy.solution import Solution
@@ -429,7 +433,7 @@ def _solve(args) -> int:
         **({"cycle_duration_s": cycle_duration} if cycle_duration else {}),
         mesh_frequency_hz=args.mesh_frequency,
         passive=args.passive, tendon_stiffness=kt, tendon_stiffness_file=args.parameters,
-        options=options, cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, warm_start=warm,
+        options=options, goals=goals, cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, warm_start=warm,
         exclude_muscles=excluded, exclude_missing_ok=args.side == "both",
         diagnose_only=getattr(args, "diagnose_only", False), before_solve=prepare_opensim_files, **assistance,
     )

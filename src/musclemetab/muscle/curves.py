@@ -77,6 +77,11 @@ class _NumpyMath:
     tan = staticmethod(np.tan)
     arcsinh = staticmethod(np.arcsinh)
 
+    @staticmethod
+    def sum1(x):
+        """Sums over the first axis (one per column)."""
+        return np.sum(x, axis=0)
+
 
 class _CasadiMath:
     def __init__(self):
@@ -88,6 +93,7 @@ class _CasadiMath:
         self.tanh = ca.tanh
         self.tan = ca.tan
         self.arcsinh = ca.asinh
+        self.sum1 = ca.sum1
 
 
 _NUMPY = _NumpyMath()

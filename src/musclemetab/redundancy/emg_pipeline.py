@@ -99,11 +99,8 @@ def record_identifiability(result: Result, trials, params, settings: EmgTenSetti
 
 
 def emg_ten_options(options: SolverOptions | None, settings: EmgTenSettings) -> SolverOptions:
-    """``options`` (default ``SolverOptions()``), checked for an EMG-TEN or EMG-informed solve:
-    no energy goal (the weights are those of ``settings.goals``)."""
-    if options is not None and options.energy is not None:
-        raise OptionError("the energy goal is for the effort workflows' solves; EMG-TEN and EMG-informed solves "
-                          "do not take it: drop SolverOptions(energy=...)")
+    """``options`` (default ``SolverOptions()``) of an EMG-TEN or EMG-informed solve: numerics
+    only; its goals are ``settings.goals`` (which refuse the energy goal, :class:`.emg_ten.EmgTenSettings`)."""
     return options or SolverOptions()
 
 

@@ -156,6 +156,10 @@ class EmgTenSettings:
         if self.goals.energy is not None or self.goals.w_fiber_length:
             raise OptionError("the EMG-TEN and EMG-informed goals take no energy goal and no fiber-length weight; "
                               "drop them from goals")
+        if self.goals.fiber_dynamics != "forward":  # the problem's goals get the settings' scheme
+            raise OptionError("the fiber dynamics of an EMG-TEN or EMG-informed solve are the settings' "
+                              "(EmgTenSettings.fiber_dynamics, --fiber-dynamics; default: the EMG mode's): give "
+                              f"fiber_dynamics={self.goals.fiber_dynamics!r} there, not in goals")
         check_non_negative("emg_tolerance", self.emg_tolerance)
         check_non_negative("emg_range_tolerance", self.emg_range_tolerance)
         for name in ("tendon_scale_bounds", "emg_scale_bounds"):

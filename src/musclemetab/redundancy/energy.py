@@ -200,16 +200,10 @@ def leg_rate_W_per_kg(goal: EnergyGoal, params, muscles, excitation, activation,
     """The summed smooth rate of ``muscles`` per kg of body mass (W/kg, no basal heat) at each
     node, from NumPy arrays ``(nodes, muscles)``; ``params`` the problem's
     :class:`~.parameters.MuscleTendonParameters`, ``lmo_factor`` the optimal fiber lengths'
-    scale factors (default 1). The goal's value is ``weight`` times its mean over nodes ``0 ... N-1``."""
-    p = params.subset(list(muscles))
-    mass, fst = goal.muscle_values(muscles, p.max_isometric_force_N, p.optimal_fiber_length_m)
+    scale factors (default 1). The goal's value is ``weight`` times its mean over nodes ``0 ... N-1``
+    (the energy term of :mod:`.objective`, whose formula this is)."""
+    from .objective import Energy, node_arrays
 
-    def col(v):
-        return np.asarray(v, dtype=float).reshape(-1, 1)
-
-    lmo = col(p.optimal_fiber_length_m) * (1.0 if lmo_factor is None else col(lmo_factor))
-    rates = node_rates(goal, *(np.asarray(x, dtype=float).T for x in (excitation, activation, lm_norm, fiber_velocity_lmo_per_s)),
-                       F0=col(p.max_isometric_force_N), lMo=lmo, vmax=col(p.max_contraction_velocity),
-                       kpe=col(p.passive_kpe), s0=col(p.passive_s0), sm=col(p.passive_sm), mass=col(mass),
-                       fst=col(fst))
-    return np.asarray(rates).sum(axis=0) / float(goal.body_mass_kg)
+    v = node_arrays(params, muscles, excitation=excitation, activation=activation, lm_norm=lm_norm,
+                    fiber_velocity_lmo_per_s=fiber_velocity_lmo_per_s, lmo_factor=lmo_factor, energy=goal)
+    return np.asarray(Energy(goal.weight, goal).leg_rate(v), dtype=float)

@@ -176,7 +176,7 @@ def solve_estimate(problem):
                    "fiber_dynamics": goals.fiber_dynamics,
                    "fiber_length_bounds": fiber_length_bounds_record(t.inputs, problem.parameters, specs),
                    "workflow": {"name": f"{problem.workflow} estimate", "estimate": est.to_dict()["factors"]},
-                   "solver_options": solver_record(options, goals), "diagnosis": diag.to_dict(),
+                   "solver_options": solver_record(options, goals.effort()), "diagnosis": diag.to_dict(),
                    **({"excluded_muscles": list(problem.excluded_muscles)} if problem.excluded_muscles else {})}
         solutions[t.label] = build_solution(t.inputs, estimated.subset(t.inputs.muscles), o, summary)
         if not run.success:

@@ -29,7 +29,8 @@ Objective::
 
     J = wAct/2 (sum e^2 + sum a^2)/(N M) + wTres sum aT^2/(N D) + wVm sum v~M^2/(N M)
 
-(``a`` has N+1 columns but is divided by N, as in the study.) Simple bounds are passed to
+(``a`` has N+1 columns but is divided by N, as in the study; the terms are those of
+:mod:`.objective`, with the energy, EMG and fiber-length goals of :class:`.goals.Goals`.) Simple bounds are passed to
 IPOPT as variable bounds (``lbx``/``ubx``), not as constraint rows. The per-node constraint
 function is built once from symbolic expressions and mapped over the mesh, so the expression
 graph (and its derivatives) does not grow with ``N``.
@@ -50,8 +51,8 @@ import numpy as np
 from ..errors import OptionError, SolverError
 from ..processes import sigint_noted
 from ._checks import check_option
-from .transcription import Goals, TrialBlock, build_problem, check_fiber_dynamics
-from .energy import EnergyGoal
+from .objective import EmgTracking, find_term, goal_terms, node_arrays, term_values
+from .transcription import Goals, TrialBlock, build_problem
 from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
 from .static_opt import InitialGuess
@@ -73,7 +74,6 @@ __all__ = [
     "OcpResult",
     "solve_ocp",
     "solver_record",
-    "effort_goals",
     "single_trial_goals",
     "build_nlp",
     "problem_size",
@@ -130,10 +130,11 @@ class SolverOptions:
     threads of the BLAS used by MUMPS (CasADi's OpenBLAS); the dense blocks here are small, so
     one thread is fastest and leaves the other cores to other solves (``None`` leaves the
     library default). ``ipopt`` holds further IPOPT options, e.g. ``{"mu_init": 1e-6}`` for a
-    warm start; anything there may change which optimum is found. ``energy`` adds the energy
-    goal (:class:`.energy.EnergyGoal`) to the objective. ``fiber_dynamics``: the transcription
-    of the fiber dynamics (:data:`.goals.FIBER_DYNAMICS`; ``"backward"``: the Hill equilibrium of
-    each interval at its end node, ``docs/problem.md``; not with the energy goal).
+    warm start; anything there may change which optimum is found.
+
+    What the problem asks (the objective's weights, the energy goal, the transcription of the
+    fiber dynamics) is a :class:`.goals.Goals`, not these options. ``optimal_reserve_Nm`` is no
+    weight either: it is the strength of the reserve actuators (``Topt aT`` in the moment rows).
     """
 
     optimal_reserve_Nm: float = 150.0
@@ -146,17 +147,12 @@ class SolverOptions:
     tune_malloc: bool = True
     blas_threads: int | None = 1
     ipopt: dict = field(default_factory=dict)
-    energy: EnergyGoal | None = None
-    fiber_dynamics: str = "forward"
     stop: str = DEFAULT_STOP
 
     def __post_init__(self):
         check_option("stop", self.stop, tuple(STOPS))
         if self.tol is not None and not (0 < self.tol < 1):
             raise OptionError(f"tol must lie between 0 and 1 (an IPOPT tolerance), not {self.tol!r}")
-        if self.energy is not None and not isinstance(self.energy, EnergyGoal):
-            raise OptionError(f"energy must be an EnergyGoal, not {type(self.energy).__name__}")
-        check_fiber_dynamics(self.fiber_dynamics, self.energy)
         check_option("derivatives", self.derivatives, ("explicit", "auto"))
         if self.optimal_reserve_Nm <= 0:
             raise OptionError(f"optimal_reserve_Nm must be positive, not {self.optimal_reserve_Nm}")
@@ -184,8 +180,6 @@ class SolverOptions:
             "tune_malloc": self.tune_malloc,
             "blas_threads": self.blas_threads,
             "ipopt": dict(self.ipopt),
-            **({"energy": self.energy.record()} if self.energy is not None else {}),
-            **({"fiber_dynamics": self.fiber_dynamics} if self.fiber_dynamics != "forward" else {}),
         }
 
 
@@ -254,22 +248,19 @@ def build_nlp(
     goals: Goals | None = None,
 ) -> dict:
     """The NLP of the single-trial problem, without solving it: the problem core
-    (:func:`.transcription.build_problem`) with one trial and the effort goal of ``goals``
-    (default ``Goals()``)."""
+    (:func:`.transcription.build_problem`) with one trial and ``goals`` (default ``Goals()``)."""
     options = options or SolverOptions()
-    return build_problem([TrialBlock("trial", inputs, guess)], params, effort_goals(goals, options),
+    return build_problem([TrialBlock("trial", inputs, guess)], params, single_trial_goals(goals),
                          optimal_reserve_Nm=options.optimal_reserve_Nm,
                          explicit_derivatives=options.derivatives == "explicit")
 
 
-def single_trial_goals(goals: Goals | None, options: SolverOptions) -> tuple[Goals, SolverOptions]:
-    """``(goals, options)`` of a single-trial solve, agreeing on the energy goal and the fiber
-    dynamics, which either may carry: the one that sets them (not ``None`` / not ``"forward"``)
-    gives them to both, so that the solve and its record use what the user asked for; two
-    different energy goals are an :class:`~musclemetab.errors.OptionError`. A single-trial solve
-    has no EMG or measured fiber lengths: ``goals`` asking to track them
-    (``w_emg``, ``emg_tolerance``, ``w_fiber_length``) is an error saying where they are
-    tracked (:func:`~musclemetab.redundancy.solve_emg_ten`, :func:`~musclemetab.redundancy.estimate_files`)."""
+def single_trial_goals(goals: Goals | None) -> Goals:
+    """The goals of a single-trial solve: ``goals`` (default ``Goals()``: the effort goal),
+    checked. A single-trial solve has no EMG or measured fiber lengths: ``goals`` asking to track
+    them (``w_emg``, ``emg_tolerance``, ``w_fiber_length``) is an
+    :class:`~musclemetab.errors.OptionError` saying where they are tracked
+    (:func:`~musclemetab.redundancy.solve_emg_ten`, :func:`~musclemetab.redundancy.estimate_files`)."""
     goals = goals or Goals()
     tracked = [f"{name}={getattr(goals, name)}" for name, unset in (("w_emg", 0.0), ("emg_tolerance", None),
                                                                      ("w_fiber_length", 0.0))
@@ -278,28 +269,19 @@ def single_trial_goals(goals: Goals | None, options: SolverOptions) -> tuple[Goa
         raise OptionError(f"the goals ask to track measurements ({', '.join(tracked)}) but a single-trial solve has "
                           "no EMG or measured fiber lengths; track EMG with solve_emg_ten (musclemetab solve --emg) "
                           "and fiber lengths with estimate_files (musclemetab estimate), or leave these goals out")
-    energy = goals.energy if goals.energy is not None else options.energy
-    if goals.energy is not None and options.energy is not None and goals.energy != options.energy:
-        raise OptionError("the goals and the solver options name different energy goals; give it in one of them")
-    dynamics = goals.fiber_dynamics if goals.fiber_dynamics != "forward" else options.fiber_dynamics
-    goals = replace(goals, energy=energy, fiber_dynamics=dynamics)
-    if (options.energy, options.fiber_dynamics) != (energy, dynamics):
-        options = options.with_(energy=energy, fiber_dynamics=dynamics)
-    return goals, options
-
-
-def effort_goals(goals: Goals | None, options: SolverOptions) -> Goals:
-    """The goals of a single-trial solve (:func:`single_trial_goals`): the effort weights
-    (activation, excitation, reserves, fiber velocity) of ``goals`` (default ``Goals()``) with
-    the energy goal and the fiber dynamics that ``goals`` or ``options`` set."""
-    return single_trial_goals(goals, options)[0]
+    return goals
 
 
 def solver_record(options: SolverOptions, goals: Goals | None = None) -> dict:
     """The ``solver_options`` record of a solve: the effort weights of ``goals`` (default
-    ``Goals()``) under ``w_activation``, ``w_reserve``, ``w_velocity``, then the numerical
-    settings of ``options``."""
-    return {**(goals or Goals()).effort_weights(), **options.to_dict()}
+    ``Goals()``) under ``w_activation``, ``w_reserve``, ``w_velocity``, the numerical settings of
+    ``options``, then the energy goal (``energy``) and the backward fiber dynamics
+    (``fiber_dynamics``) when ``goals`` has them (EMG-TEN and ``estimate`` record their fiber
+    dynamics beside their settings and pass ``goals.effort()``)."""
+    goals = goals or Goals()
+    return {**goals.effort_weights(), **options.to_dict(),
+            **({"energy": goals.energy.record()} if goals.energy is not None else {}),
+            **({"fiber_dynamics": goals.fiber_dynamics} if goals.fiber_dynamics != "forward" else {})}
 
 
 #: IPOPT linear-algebra settings used with MUMPS (``SolverOptions.ipopt`` overrides them): no
@@ -376,27 +358,20 @@ class ProblemResult(SolveOutcome):
     kkt: dict = field(default_factory=dict, repr=False, compare=False)
 
 
-def _trial_terms(goals: Goals, t: TrialBlock, Z, xl, dev, lm_us, params=None, lmo_factor=None) -> dict:
-    """The objective terms of one trial at the optimum (NumPy, the formulas of :mod:`.transcription`)."""
-    M, D, N = len(t.inputs.muscles), len(t.inputs.dofs), t.inputs.n_intervals
-    a = np.concatenate([Z[:, 0:M].ravel(), xl[0:M]])
-    terms = {
-        "activation": goals.w_activation * 0.5 * float(np.sum(a**2)) / (N * M),
-        "excitation": goals.w_activation * 0.5 * float(np.sum(Z[:, 3 * M:4 * M] ** 2)) / (N * M),
-        "reserve": goals.w_reserve * float(np.sum(Z[:, 4 * M:4 * M + D] ** 2)) / (N * D),
-        "fiber_velocity": goals.w_velocity * float(np.sum(Z[:, 4 * M + D:] ** 2)) / (N * M),
-    }
-    if t.emg_muscles:
-        terms = {"emg_tracking": goals.w_emg * float(np.sum(dev**2)) / (len(t.emg_muscles) * N), **terms}
-    if t.fiber_muscles:
-        terms["fiber_length_tracking"] = goals.w_fiber_length * float(np.sum(lm_us**2)) / (len(t.fiber_muscles) * N)
-    if goals.energy is not None:
-        from .energy import leg_rate_W_per_kg
-
-        rate = leg_rate_W_per_kg(goals.energy, params, t.inputs.muscles, Z[:, 3 * M:4 * M], Z[:, 0:M],
-                                 Z[:, M:2 * M], Z[:, 4 * M + D:], lmo_factor)
-        terms["energy"] = goals.energy.weight * float(np.mean(rate))
-    return terms
+def _trial_values(goals: Goals, t: TrialBlock, Z, xl, factors: dict, params) -> tuple:
+    """The NumPy node values (:func:`.objective.node_arrays`) of one trial at the optimum, at
+    nodes ``0 ... N-1`` and at node ``N``, and its terms (:func:`.objective.goal_terms`)."""
+    M, D = len(t.inputs.muscles), len(t.inputs.dofs)
+    s_lmo = factors.get("optimal_fiber_length", {})
+    pos = {m: k for k, m in enumerate(t.inputs.muscles)}
+    emg = {"emg": t.emg_nodes, "emg_scale": [factors["emg_scale"][m] for m in t.emg_muscles]} if t.emg_muscles else {}
+    nodes = node_arrays(params, t.inputs.muscles, excitation=Z[:, 3 * M:4 * M], activation=Z[:, 0:M],
+                        lm_norm=Z[:, M:2 * M], fiber_velocity_lmo_per_s=Z[:, 4 * M + D:], reserve=Z[:, 4 * M:4 * M + D],
+                        lmo_factor=[s_lmo.get(m, 1.0) for m in t.inputs.muscles], energy=goals.energy,
+                        lus=t.fiber_length_nodes_m if t.fiber_muscles else None, **emg)
+    last = {"a": xl[0:M, None], "lm": xl[M:2 * M, None]}
+    terms = goal_terms(goals, [pos[m] for m in t.emg_muscles], [pos[m] for m in t.fiber_muscles])
+    return nodes, last, terms
 
 
 def nlp_solver(nlp: dict, ipopt: dict, callback=None):
@@ -482,26 +457,15 @@ def solve_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
                                "constraint violation %.1e", outcome["status"], outcome["iterations"],
                                outcome["n_variables"], build_time, solve_time, max_viol)
     ocps, devs = [], []
-    lmo = dict(zip(params.names, params.optimal_fiber_length_m))
     for i, t in enumerate(trials):
         d, o = L["trials"][i], L["var_off"][i]
         M, D, N, nz = d["M"], d["D"], d["N"], d["nz"]
         Z = x[o:o + nz * N].reshape(N, nz)
         xl = x[o + nz * N:o + nz * N + 3 * M]
-        pos = {m: k for k, m in enumerate(t.inputs.muscles)}
-        ie = [pos[m] for m in t.emg_muscles]
-        dev = np.zeros((N, 0))
-        if ie:
-            dev = Z[:, 3 * M:4 * M][:, ie] - np.array([factors["emg_scale"][m] for m in t.emg_muscles]) * t.emg_nodes
-        iu = [pos[m] for m in t.fiber_muscles]
-        lm_us = np.zeros((N, 0))
-        if iu:
-            s_lmo = np.array([factors.get("optimal_fiber_length", {}).get(m, 1.0) for m in t.fiber_muscles])
-            l0 = np.array([lmo[m] for m in t.fiber_muscles])
-            lm_us = (Z[:, M:2 * M][:, iu] * s_lmo * l0 - t.fiber_length_nodes_m) / l0
-        s_all = factors.get("optimal_fiber_length", {})
-        terms = _trial_terms(goals, t, Z, xl, dev, lm_us, params,
-                             np.array([s_all.get(m, 1.0) for m in t.inputs.muscles]))
+        nodes, last, trial_terms = _trial_values(goals, t, Z, xl, factors, params)
+        terms = term_values(trial_terms, nodes, last, N)
+        tracking = find_term(trial_terms, EmgTracking)
+        dev = tracking.residual(nodes).T if tracking is not None else np.zeros((N, 0))
         ocps.append(OcpResult(
             activation=np.vstack([Z[:, 0:M], xl[0:M]]), lm_norm=np.vstack([Z[:, M:2 * M], xl[M:2 * M]]),
             lm_projected_m=np.vstack([Z[:, 2 * M:3 * M], xl[2 * M:]]), excitation=Z[:, 3 * M:4 * M].copy(),
@@ -525,10 +489,10 @@ def solve_ocp(
     options: SolverOptions | None = None,
     goals: Goals | None = None,
 ) -> OcpResult:
-    """Build and solve the single-trial problem with the effort goal of ``goals`` (default
-    ``Goals()``) and the energy goal of ``options``; never
+    """Build and solve the single-trial problem with ``goals`` (default ``Goals()``: the effort
+    goal; :func:`single_trial_goals`) and the numerical settings ``options``; never
     raises on non-convergence (``status`` is IPOPT's return status, ``success`` whether IPOPT
     reported success). Errors while building the problem raise :class:`SolverError`."""
     options = options or SolverOptions()
-    res = solve_problem([TrialBlock("trial", inputs, guess)], params, effort_goals(goals, options), options=options)
+    res = solve_problem([TrialBlock("trial", inputs, guess)], params, single_trial_goals(goals), options=options)
     return res.trials[0]

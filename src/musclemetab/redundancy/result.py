@@ -366,7 +366,7 @@ def assemble_result(trials, params, wf_record, ocp, settings, options, t_prep, t
                               for t, d in zip(trials, ocp.emg_deviation)},
         "settings": settings.to_dict(),
         "passive_source": wf_record.get("passive_source"),
-        "solver_options": solver_record(options, settings.goals),
+        "solver_options": solver_record(options, settings.goals.effort()),
         "ipopt_options": ocp.ipopt_options,
         "initial_guess": "static optimisation (rigid tendons) per trial, reserve divided by Topt; scale factors 1",
     }
@@ -411,7 +411,7 @@ def assemble_result(trials, params, wf_record, ocp, settings, options, t_prep, t
             "fiber_dynamics": settings.fiber_scheme,
             # the problem's bounds: those of the nominal parameters (kT and EMG scales do not change them)
             "fiber_length_bounds": fiber_length_bounds_record(inp, params),
-            "solver_options": solver_record(options, settings.goals),
+            "solver_options": solver_record(options, settings.goals.effort()),
             "input_preparation": {"filter": "butterworth 6th order 6 Hz zero-phase (MATLAB filtfilt padding)",
                                   "mesh_intervals_per_second": 100, "interpolation": "not-a-knot cubic spline",
                                   "emg": "linear interpolation at nodes 0..N-1"},

@@ -98,7 +98,7 @@ def parameter_derivatives(inputs, params, goals, optimal_reserve_Nm, x, lam_g, n
     import casadi as ca
     import scipy.sparse as sp
 
-    from .energy import node_rates
+    from .objective import goal_terms, node_cost
     from .transcription import _node_expressions
 
     M, D, N = len(inputs.muscles), len(inputs.dofs), inputs.n_intervals
@@ -111,13 +111,13 @@ def parameter_derivatives(inputs, params, goals, optimal_reserve_Nm, x, lam_g, n
     xn = ca.vertcat(S["a1"], S["lm1"])
     d = ca.vertcat(S["lmt"], S["r"], S["id"], h)
     lam = ca.SX.sym("lam", gk.shape[0])
-    lag = ca.dot(lam, gk)
-    if goals.energy is not None and goals.energy.weight:
-        eg = goals.energy
-        mass, fst = eg.muscle_values(inputs.muscles, params.max_isometric_force_N, params.optimal_fiber_length_m)
-        rates = node_rates(eg, S["e"], S["a"], S["lm"], S["vm"], F0=P["f0"], lMo=P["lmo"], vmax=P["vmax"],
-                           kpe=P["kpe"], s0=P["s0"], sm=P["sm"], mass=ca.DM(mass), fst=ca.DM(fst))
-        lag += (eg.weight / eg.body_mass_kg / N) * ca.sum1(rates)
+    v = {**S, **P}
+    if goals.energy is not None:
+        mass, fst = goals.energy.muscle_values(inputs.muscles, params.max_isometric_force_N,
+                                               params.optimal_fiber_length_m)
+        v.update(mass=ca.DM(mass), fst=ca.DM(fst))
+    # the objective's terms (those that depend on the parameters: the energy goal) at the node
+    lag = ca.dot(lam, gk) + node_cost(goal_terms(goals), v) / N
     v = ca.vertcat(z, xn)
     node = ca.Function("sens_node", [z, xn, d, lam, s], [ca.jacobian(ca.gradient(lag, v), s), ca.jacobian(gk, s)],
                        {"cse": True})

@@ -75,9 +75,9 @@ def solve_with_parameters(
     warm_start: Solution | None = None,
     mesh_frequency_hz: float = MESH_FREQUENCY_HZ,
 ) -> Solution:
-    """Solve the muscle redundancy problem with explicit muscle parameters, the effort weights
-    of ``goals`` (default ``Goals()``: ``[wAct, wTres, wVm] = [1, 1000, 0.01]``) and the
-    numerical settings (and energy goal) of ``options``.
+    """Solve the muscle redundancy problem with explicit muscle parameters, ``goals`` (default
+    ``Goals()``: the effort weights ``[wAct, wTres, wVm] = [1, 1000, 0.01]``; also the energy goal
+    and the fiber dynamics) and the numerical settings ``options``.
 
     ``id_moments_Nm`` columns follow ``geometry.dofs``. Returns a :class:`Solution` whose
     ``summary['status']``/``success`` report IPOPT's outcome (a failed solve is returned, not
@@ -89,7 +89,7 @@ def solve_with_parameters(
     warm-started solve may end in another one (``summary['initial_guess']`` records it).
     """
     t_start = _time.perf_counter()
-    goals, options = single_trial_goals(goals, options or SolverOptions())
+    goals, options = single_trial_goals(goals), options or SolverOptions()
     inputs, params, so = prepare_trial(geometry, params, id_time_s, id_moments_Nm, ik_time_s=ik_time_s,
                                        options=options, sources=sources, check_units=check_units,
                                        filter_inputs=filter_inputs, mesh_frequency_hz=mesh_frequency_hz)
@@ -111,7 +111,7 @@ def solve_with_parameters(
         "mesh_step_s": inputs.step_s,
         "optimal_reserve_Nm": options.optimal_reserve_Nm,
         "static_optimisation_objective": so.objective,
-        "fiber_dynamics": options.fiber_dynamics,
+        "fiber_dynamics": goals.fiber_dynamics,
         "fiber_length_bounds": fiber_length_bounds_record(inputs, params),
         "initial_guess": "static optimisation (rigid tendons)" if warm_start is None else
         f"warm start from {warm_start.record.workflow_name or 'a previous solution'} "
@@ -123,15 +123,15 @@ def solve_with_parameters(
                               "mesh_intervals_per_second": mesh_frequency_hz, "interpolation": "not-a-knot cubic spline"},
         "inputs": {k: str(v) for k, v in (sources or {}).items()},
     }
-    if options.energy is not None:
+    if goals.energy is not None:
         from .energy import leg_rate_W_per_kg
 
         N = inputs.n_intervals
-        rate = leg_rate_W_per_kg(options.energy, params, inputs.muscles, ocp.excitation, ocp.activation[:N],
+        rate = leg_rate_W_per_kg(goals.energy, params, inputs.muscles, ocp.excitation, ocp.activation[:N],
                                  ocp.lm_norm[:N], ocp.fiber_velocity_lmo_per_s)
-        summary["energy_goal"] = {**options.energy.record(), "w_activation": goals.w_activation,
+        summary["energy_goal"] = {**goals.energy.record(), "w_activation": goals.w_activation,
                                   "leg_mean_W_per_kg": float(np.mean(rate))}
-        summary["energy_form"] = options.energy.form_record()
+        summary["energy_form"] = goals.energy.form_record()
     solution = build_solution(inputs, params, ocp, summary)
     return replace(solution, record=solution.record.with_(total_time_s=_time.perf_counter() - t_start))
 
@@ -159,7 +159,7 @@ def solve_trial(
 
     See :func:`musclemetab.redundancy.workflows.workflow_parameters` for ``passive`` and the
     tendon-stiffness arguments. The effort weights are those of ``goals``, by default the
-    workflow's (``Workflow.goals``); the effort weight of ``options.energy``, when it has one,
+    workflow's (``Workflow.goals``); the effort weight of ``goals.energy``, when it has one,
     overrides ``w_activation``. ``parameter_transform`` (a function of the workflow's
     :class:`MuscleTendonParameters`) gives the parameters solved with instead (e.g. a sample of
     :mod:`musclemetab.uncertainty`).
@@ -181,9 +181,9 @@ def solve_trial(
 
 def workflow_goals(workflow, goals: Goals | None, options: SolverOptions | None) -> tuple[Goals, SolverOptions]:
     """``(goals, options)`` of a single-trial solve of ``workflow``: ``goals`` (default the
-    workflow's) agreeing with ``options`` (:func:`.ipopt.single_trial_goals`); the effort weight of
+    workflow's, checked by :func:`.ipopt.single_trial_goals`) and ``options``; the effort weight of
     the energy goal, when it has one, overrides ``w_activation``."""
-    goals, options = single_trial_goals(goals or get_workflow(workflow).goals, options or SolverOptions())
+    goals, options = single_trial_goals(goals or get_workflow(workflow).goals), options or SolverOptions()
     effort = goals.energy.effort_weight if goals.energy is not None else None
     if effort is not None:
         goals = replace(goals, w_activation=effort)

@@ -4,7 +4,8 @@ EFFORT-GEN/CAL/TEN are one trial with the effort goals; EMG-TEN is several trial
 goals and shared tendon-stiffness factors. **Per trial** (muscles, DOFs and side may differ): the
 variables, bounds and constraints of the single-trial problem (:mod:`.ipopt`), node blocks
 ``z_k = [a, l~M, lp, e, aT, v~M]_k`` then ``[a, l~M, lp]_N``, each interval's equality rows
-followed by its EMG bound rows. **Goals** (:class:`Goals`), per trial normalised by its ``N``::
+followed by its EMG bound rows. **Goals** (:class:`Goals`; each term one class of
+:mod:`.objective`, summed into each interval's cost), per trial normalised by its ``N``::
 
     wAct/2 (sum e^2 + sum a^2)/(N M) + wTres sum aT^2/(N D) + wVm sum v~M^2/(N M)
     + wEMG sum (e - s_EMG E)^2/(nEMG N) + wUS sum ((l~M s_lMo lMo - lUS)/lMo)^2/(nUS N)
@@ -48,7 +49,7 @@ from .bounds import (  # noqa: F401  (re-exported)
     ACTIVATION_BOUNDS, FIBER_LENGTH_BOUNDS, FIBER_LENGTH_MARGIN, FIBER_VELOCITY_BOUNDS, MIN_PROJECTED_LENGTH_M,
     RESERVE_BOUNDS, bounds_and_guess, fiber_length_upper_bounds, node_bounds,
 )
-from .energy import node_rates
+from .objective import EmgTracking, find_term, goal_terms, last_node_cost, node_cost
 from .parameters import MuscleTendonParameters
 from .goals import (  # noqa: F401  (re-exported)
     EFFORT_WEIGHTS, FIBER_DYNAMICS, PARAMETER_KINDS, Goals, ParameterSpec, TrialBlock, check_fiber_dynamics,
@@ -194,27 +195,17 @@ def _group_functions(structure: GroupStructure, energy_values=None) -> dict:
     S, gk, _ = _node_expressions(ca.SX.sym, M, D, h, P, st.optimal_reserve_Nm, ca, backward)
     if len(st.zero_r):
         gk = ca.substitute(gk, S["r"][list(st.zero_r)], ca.SX.zeros(len(st.zero_r)))
-    track = S["e"][list(st.emg_index)] - ca.vertcat(*[full[j] for j in st.emg_factor]) * emg \
-        if nE else ca.SX(0, 1)
+    terms = goal_terms(goals, st.emg_index, st.fiber_index)
+    v = {**S, **P, "lmo0": lmo0, "emg": emg, "lus": lus,
+         "emg_scale": ca.vertcat(*[full[j] for j in st.emg_factor]) if nE else ca.SX(0, 1)}
+    if energy_values is not None:
+        v.update(mass=ca.DM(energy_values[0]), fst=ca.DM(energy_values[1]))
+    track = find_term(terms, EmgTracking).residual(v) if nE else ca.SX(0, 1)
     g = ca.vertcat(gk, track) if goals.emg_tolerance is not None else gk
     z = ca.vertcat(S["a"], S["lm"], S["lp"], S["e"], S["aT"], S["vm"])
     xn = ca.vertcat(S["a1"], S["lm1"], S["lp1"]) if backward else ca.vertcat(S["a1"], S["lm1"])
     d = ca.vertcat(S["lmt"], S["r"], S["id"], emg, lus, h, inv_n, *([S["lmt1"]] if backward else []))
-    c_base = np.concatenate([
-        np.full(M, goals.w_activation * 0.5 / M), np.zeros(2 * M), np.full(M, goals.w_activation * 0.5 / M),
-        np.full(D, goals.w_reserve / D), np.full(M, goals.w_velocity / M)])
-    cost = ca.dot(ca.DM(c_base), z**2)
-    if nE and goals.w_emg:
-        cost += (goals.w_emg / nE) * ca.sumsqr(track)
-    if nU and goals.w_fiber_length:
-        iu = list(st.fiber_index)
-        cost += (goals.w_fiber_length / nU) * ca.sumsqr((S["lm"][iu] * P["lmo"][iu] - lus) / lmo0[iu])
-    if goals.energy is not None and goals.energy.weight:
-        eg = goals.energy
-        mass, fst = energy_values
-        rates = node_rates(eg, S["e"], S["a"], S["lm"], S["vm"], F0=P["f0"], lMo=P["lmo"], vmax=P["vmax"],
-                           kpe=P["kpe"], s0=P["s0"], sm=P["sm"], mass=ca.DM(mass), fst=ca.DM(fst))
-        cost += (eg.weight / eg.body_mass_kg) * ca.sum1(rates)
+    cost = node_cost(terms, v)
     f = inv_n * cost
     lam, sigma = ca.SX.sym("lam", g.shape[0]), ca.SX.sym("sigma")
     cse = {"cse": True}
@@ -230,7 +221,7 @@ def _group_functions(structure: GroupStructure, energy_values=None) -> dict:
     # last node: pennation identity and the activation cost of a_N
     xl = ca.SX.sym("xl", 3 * M)
     penn = (xl[M:2 * M] * P["lmo"]) ** 2 - P["w2"] - xl[2 * M:] ** 2
-    f_last = inv_n * (goals.w_activation * 0.5 / M) * ca.sumsqr(xl[0:M])
+    f_last = inv_n * last_node_cost(terms, {"a": xl[0:M], "lm": xl[M:2 * M]})
     lam_l = ca.SX.sym("lam_l", M)
     fn["g_last"] = ca.Function("core_g_last", [xl, p, q], [penn])
     fn["f_last"] = ca.Function("core_f_last", [xl, inv_n], [f_last, ca.gradient(f_last, xl)])

@@ -83,11 +83,11 @@ def _record(folder: Path) -> dict:
         return {}
 
 
-def run_sample(study: Study, unit, tmp: Path, nominal_folder: Path, *, options=None, arguments: Mapping | None = None,
-               analysis_file: str = "analysis.csv") -> dict:
+def run_sample(study: Study, unit, tmp: Path, nominal_folder: Path, *, options=None, goals=None,
+               arguments: Mapping | None = None, analysis_file: str = "analysis.csv") -> dict:
     """Solve and evaluate sample ``unit.sample`` (a :class:`~.units.Unit`) of its trial unit (folder
-    ``nominal_folder``) into ``tmp``; ``options`` and ``arguments`` are the trial unit's solver options
-    and personalisation arguments (passive calibration, tendon stiffness), ``analysis_file`` the name
+    ``nominal_folder``) into ``tmp``; ``options``, ``goals`` and ``arguments`` are the trial unit's solver
+    options, goals and personalisation arguments (passive calibration, tendon stiffness), ``analysis_file`` the name
     of its analysis table."""
     from ..events import GaitCycle
     from ..analysis.groups import has_function_group
@@ -114,7 +114,7 @@ def run_sample(study: Study, unit, tmp: Path, nominal_folder: Path, *, options=N
         subject.model, trial.ik, trial.id, unit.workflow, side=side, dofs=subject.dofs,
         external_loads=trial.external_loads, grf=trial.grf if trial.cycle is not None else None,
         grf_column=trial.grf_column, grf_threshold_N=trial.grf_threshold_N, cycle=trial.cycle,
-        options=options, exclude_muscles=subject.exclude_muscles,
+        options=options, goals=goals, exclude_muscles=subject.exclude_muscles,
         exclude_missing_ok=subject.side == "both", warm_start=adapted_start(start, factors.parameters(start.parameters)),
         parameter_transform=factors.parameters,
         **dict(arguments or {}))

@@ -474,7 +474,8 @@ def _execute_unit(study: Study, unit: Unit, key: str, dependency_folder: str | N
             subject = study.subject(unit.subject)
             estimation = Path(study.output) / Unit(unit.subject, None, EMG_TEN).folder
             record.update(run_sample(study, unit, tmp, Path(dependency_folder),
-                                     options=_solver_options(study, subject),
+                                     options=_solver_options(study),
+                                     goals=_goals(study, subject, unit.workflow),
                                      arguments={**solve_arguments(subject, unit.workflow, estimation),
                                                 **_device_arguments(subject.trial(unit.trial), unit.leg(study),
                                                                     subject.model)},
@@ -558,19 +559,29 @@ def _informed_solve(study: Study, subject: Subject, trial: Trial, workflow: str,
     return result.solutions[trial.name]
 
 
-def _solver_options(study: Study, subject: Subject | None = None):
-    """The study's ``[solver]`` settings as :class:`~musclemetab.redundancy.SolverOptions` (or
-    ``None``), with its ``[energy_goal]`` for ``subject`` (its mass, height and muscle properties)."""
+def _solver_options(study: Study):
+    """The study's ``[solver]`` settings as :class:`~musclemetab.redundancy.SolverOptions` (or ``None``)."""
     from ..redundancy import SolverOptions
 
-    settings = dict(study.settings.get("solver") or {})
-    energy = study.settings.get("energy_goal")
-    if energy and subject is not None:
-        from ..redundancy.energy import EnergyGoal
-
-        settings["energy"] = EnergyGoal(body_mass_kg=subject.body_mass_kg, height_m=subject.height_m,
-                                        muscle_properties=subject.muscle_properties, **energy)
+    settings = study.settings.get("solver") or {}
     return SolverOptions(**settings) if settings else None
+
+
+def _goals(study: Study, subject: Subject, workflow: str):
+    """The goals of ``subject``'s solves with the effort ``workflow``: the workflow's, with the
+    study's ``[energy_goal]`` for the subject (its mass, height and muscle properties); ``None``
+    (the workflow's) without an energy goal."""
+    energy = study.settings.get("energy_goal")
+    if not energy:
+        return None
+    from dataclasses import replace
+
+    from ..redundancy.energy import EnergyGoal
+    from ..redundancy.workflows import get_workflow
+
+    goal = EnergyGoal(body_mass_kg=subject.body_mass_kg, height_m=subject.height_m,
+                      muscle_properties=subject.muscle_properties, **energy)
+    return replace(get_workflow(workflow).goals, energy=goal)
 
 
 def _copy_solution(source: Path, target: Path) -> None:
@@ -650,7 +661,8 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
                                    external_loads=trial.external_loads,
                                    grf=trial.grf if trial.cycle is not None else None,
                                    grf_column=trial.grf_column, grf_threshold_N=trial.grf_threshold_N,
-                                   cycle=trial.cycle, options=_solver_options(study, subject),
+                                   cycle=trial.cycle, options=_solver_options(study),
+                                   goals=_goals(study, subject, unit.workflow),
                                    exclude_muscles=subject.exclude_muscles, exclude_missing_ok=subject.side == "both",
                                    **({"warm_start": warm_start} if warm_start is not None else {}), **device,
                                    **kwargs)
