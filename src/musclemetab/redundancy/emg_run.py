@@ -14,7 +14,7 @@ from typing import Sequence
 
 from ..errors import OptionError
 from ..messages import name_list
-from ._docs import fill_doc
+from .._docs import fill_doc
 from .emg_inputs import (
     check_emg_range,
     check_emg_window,

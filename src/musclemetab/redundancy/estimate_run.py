@@ -9,7 +9,7 @@ import os
 
 from ..errors import OptionError
 from ..messages import name_list
-from ._docs import fill_doc
+from .._docs import fill_doc
 from .result import ESTIMATE_FORMAT, Result
 from .inputs import check_time_ranges
 from .ipopt import SolverOptions

@@ -29,7 +29,7 @@ from ..errors import OptionError
 from ..events import WALKING_CYCLE_DURATION_S
 from ..messages import name_list
 from ..processes import BackgroundCall
-from ._docs import fill_doc
+from .._docs import fill_doc
 from .inputs import (
     MESH_FREQUENCY_HZ,
     GeometryArrays,
