@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING
 from .entries import (
     AssistanceRecord, ConvergenceRecord, EmgRecord, EnergyFormRecord, EnergyGoalRecord, FiberLengthBounds,
     InputPreparation, InverseDynamicsRecord, ProblemSize, SolverOptionsRecord, WindowRecord, WorkflowRecord, _Typed,
-    entry, frozen,
+    entry, frozen, thaw,
 )
 
 if TYPE_CHECKING:
@@ -107,12 +107,12 @@ class RunRecord:
     def to_dict(self) -> dict:
         return {
             "status": self.status, "success": self.success, "message": self.message,
-            "objective": self.objective, "objective_terms": self.objective_terms, "iterations": self.iterations,
+            "objective": self.objective, "objective_terms": thaw(self.objective_terms), "iterations": self.iterations,
             "solve_time_s": self.solve_time_s, "solve_cpu_time_s": self.solve_cpu_time_s,
-            "build_time_s": self.build_time_s, "function_evaluation_time_s": self.function_evaluation_time_s,
+            "build_time_s": self.build_time_s, "function_evaluation_time_s": thaw(self.function_evaluation_time_s),
             "ms_per_iteration": 1e3 * self.solve_time_s / max(self.iterations, 1),
             "max_constraint_violation": self.max_constraint_violation,
-            "software": dict(self.software), "input_hashes": dict(self.input_hashes),
+            "software": thaw(self.software), "input_hashes": thaw(self.input_hashes),
         }
 
     def failure(self, what: str):
