@@ -17,7 +17,7 @@ import pytest
 from musclemetab.quality import Flag
 from musclemetab.redundancy.diagnosis import Diagnosis, Finding, violation_text
 from musclemetab.redundancy.entries import (
-    AssistanceRecord, ConvergenceRecord, FiberLengthBounds, ReadOnlyMap, WindowRecord, WorkflowRecord,
+    AssistanceRecord, ConvergenceRecord, FiberLengthBounds, ReadOnlyMap, TrialRecord, WindowRecord, WorkflowRecord,
 )
 from musclemetab.redundancy.record import ProblemRecord, SolveRecord
 from musclemetab.redundancy.solution import SUMMARY_FILE, Solution, read_summary
@@ -122,11 +122,13 @@ def test_diagnosis_with_the_last_iterate_round_trips_and_names_the_violations():
 def test_problem_record_types_its_structured_entries():
     section = {"workflow": "emg-ten", "status": "Solve_Succeeded", "success": True,
                "problem_size": {"variables": 100, "equality_constraints": 80, "mesh_intervals": 20},
+               "trials": [{"label": "walk", "time_window_s": [0.6, 1.8], "n_intervals": 120, "inputs": {"ik": "w.mot"}}],
                "solver_options": {"w_activation": 1.0, "stop": "optimum", "tol": 1e-8, "ipopt": {}},
                "convergence": {"stop": "optimum", "tolerance": 1e-8, "final_barrier_parameter": None, "note": "n"}}
     record = ProblemRecord.from_dict(section)
     assert record.problem_size.mesh_intervals == 20 and record.solver_options.stop == "optimum"
     assert record.convergence.note == "n" and record.to_dict() == section
+    assert isinstance(record.trials[0], TrialRecord) and record.trials[0].time_window_s == (0.6, 1.8)
     assert record.outcome_lines()[1] == "stop optimum (tolerance 1e-08); rates' convergence not checked"
 
 

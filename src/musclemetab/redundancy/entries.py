@@ -19,7 +19,7 @@ from typing import ClassVar
 __all__ = [
     "ReadOnlyMap", "frozen", "thaw", "entry", "Entries", "WorkflowRecord", "ProblemSize", "SolverOptionsRecord",
     "InputPreparation", "EnergyGoalRecord", "EnergyFormRecord", "EmgRecord", "FiberLengthBounds", "WindowRecord",
-    "InverseDynamicsRecord", "AssistanceRecord", "ConvergenceRecord",
+    "InverseDynamicsRecord", "AssistanceRecord", "ConvergenceRecord", "TrialRecord", "records",
 ]
 
 
@@ -138,6 +138,11 @@ class Entries(_Typed, Mapping):
 
     def __len__(self) -> int:
         return len(self.order)
+
+
+def records(kind):
+    """The conversion of a list of ``kind``'s dictionaries to a tuple of its records."""
+    return lambda values: tuple(kind.from_dict(v) for v in values)
 
 
 def _record(cls):
@@ -350,5 +355,18 @@ class ConvergenceRecord(Entries):
     rate_residue: Mapping | None = None
     max_rate_residue: float | None = None
     note: str | None = None
+    extra: Mapping = field(default_factory=dict)
+    order: tuple = ()
+
+
+@_record
+class TrialRecord(Entries):
+    """One trial of a problem of several (``parameters.json``'s ``solve.trials``): its label,
+    window (s), mesh intervals and input files."""
+
+    label: str | None = None
+    time_window_s: tuple | None = None
+    n_intervals: int | None = None
+    inputs: Mapping | None = None
     extra: Mapping = field(default_factory=dict)
     order: tuple = ()

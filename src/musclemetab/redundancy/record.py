@@ -21,8 +21,8 @@ from typing import TYPE_CHECKING
 
 from .entries import (
     AssistanceRecord, ConvergenceRecord, EmgRecord, EnergyFormRecord, EnergyGoalRecord, FiberLengthBounds,
-    InputPreparation, InverseDynamicsRecord, ProblemSize, SolverOptionsRecord, WindowRecord, WorkflowRecord, _Typed,
-    entry, frozen, thaw,
+    InputPreparation, InverseDynamicsRecord, ProblemSize, SolverOptionsRecord, TrialRecord, WindowRecord, WorkflowRecord,
+    _Typed, entry, frozen, records, thaw,
 )
 
 if TYPE_CHECKING:
@@ -332,7 +332,7 @@ class ProblemRecord(_OutcomeRecord):
     max_coupling_violation: float | None = _ABSENT
     problem_size: ProblemSize | None = entry(ProblemSize)
     #: ``[{"label", "time_window_s", "n_intervals", "inputs"}]``, one per trial
-    trials: tuple | None = _ABSENT
+    trials: tuple | None = entry(records(TrialRecord))
     emg_mapping: Mapping | None = _ABSENT
     max_emg_deviation: Mapping | None = _ABSENT
     #: the :class:`~.emg_ten.EmgTenSettings` as a dictionary (EMG-TEN and EMG-informed problems)
