@@ -11,7 +11,7 @@ SRC = Path(__file__).resolve().parent.parent / "src" / "musclemetab"
 
 #: the layers from the bottom up, as docs/architecture.md lists them
 LAYERS = [
-    {"errors", "muscle", "colours"},
+    {"errors", "muscle", "colours", "_docs"},
     {"settings", "messages", "quality", "__init__"},
     {"io", "properties", "processes", "opensim_bridge"},
     {"cache", "datasets", "datadict", "passive"},

@@ -139,11 +139,11 @@ def test_a_device_supplying_the_ankle_moment_silences_the_ankle_muscles(example,
     activity = {"free": triceps(free), "held": triceps(held)}
     assert activity["held"] < 0.15 * activity["free"], activity
     assert held.record.reserve_max_abs_Nm["ankle_angle_r"] <= free.record.reserve_max_abs_Nm["ankle_angle_r"] + 0.5
-    device = held.record.get("assistance")
-    assert device["gain"] == 1.0 and device["dofs"] == ["ankle_angle_r"] and device["axis"] == "time_s"
+    device = held.record.assistance
+    assert device.gain == 1.0 and device.dofs == ("ankle_angle_r",) and device.axis == "time_s"
     # the device's recorded torque is the ID's ankle moment at the nodes
     id_table = read_table(example.id["normal"])
-    assert np.allclose(device["torque_Nm"]["ankle_angle_r"],
+    assert np.allclose(device.torque_Nm["ankle_angle_r"],
                        np.interp(held.time_s, id_table.index, id_table["ankle_angle_r_moment"]))
 
 

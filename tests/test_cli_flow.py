@@ -249,7 +249,7 @@ def _report_tables_are_the_studys(a: Path, study: Path) -> int:
     assert list(cli.leg_folders(row_c)) == list(st.leg_folders(row_s)) == ["r", "l"]
     for fc, fs in zip(cli.leg_folders(row_c).values(), st.leg_folders(row_s).values()):
         np.testing.assert_allclose(cli.unit_cycle(fc), st.unit_cycle(fs), rtol=RTOL)
-        assert cli.summary(fc)["iterations"] == st.summary(fs)["iterations"]
+        assert cli.summary(fc).iterations == st.summary(fs).iterations > 0
     # the other leg is interpolated at the first leg's instants, its phase worked from the
     # files' times (10 significant digits; the left leg's differ by 1e-9 s in the last digit):
     # where the rate changes by 5e3 W/s that is 5e-6 W of 1000 W

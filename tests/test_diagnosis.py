@@ -305,7 +305,7 @@ def test_exclude_muscles_solves_the_emg_ten_trial(example, long_soleus, geometry
     assert result.success
     solution = result.solutions["normal"]
     assert "soleus_r" not in solution.muscles and len(solution.muscles) == 39
-    assert solution.record.excluded_muscles == ["soleus_r"] and solution.record.diagnosis["findings"] == []
+    assert solution.record.excluded_muscles == ("soleus_r",) and solution.record.diagnosis.findings == ()
     assert "soleus_r" not in result.emg_scale and "soleus_r" not in result.tendon_stiffness
     assert result.tendon_stiffness["gaslat_r"] == result.tendon_stiffness["gasmed_r"]
     from musclemetab.io import read_storage

@@ -267,7 +267,7 @@ def test_solution_record_round_trip(solved, tmp_path):
     assert back.record.to_dict() == json.loads((folder / "summary.json").read_text())
     rec = back.record
     assert rec.success and rec.status == "Solve_Succeeded" and rec.side == "r"
-    assert rec.muscles == list(sol.muscles) and rec.dofs == list(DOFS) and rec.n_intervals == sol.time_s.size - 1
+    assert rec.muscles == tuple(sol.muscles) and rec.dofs == tuple(DOFS) and rec.n_intervals == sol.time_s.size - 1
     assert rec.time_window_s == pytest.approx([0.57, 1.75]) and rec.workflow_name == "effort-gen"
     assert rec.run_record.iterations == rec.iterations > 0
     for f in ("time_s", "excitation", "activation", "lm_norm", "fiber_velocity_lmo_per_s", "tendon_force_N",

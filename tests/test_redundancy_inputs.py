@@ -350,7 +350,11 @@ def test_solution_record_entries_round_trip(tmp_path):
                "workflow": {"name": "effort-gen", "passive_source": None}, "fiber_dynamics": "backward",
                "a_newer_entry": {"x": [1, 2]}, "reserve_share_of_peak_moment": 0.002, "large_reserve": False}
     sol = dataclasses.replace(_toy_solution(), record=SolveRecord.from_dict(entries))
-    assert sol.record.extra == {"a_newer_entry": {"x": [1, 2]}} and sol.record.side is None
+    # typed and read-only: a record's lists are tuples, its mappings read-only, its entries records
+    assert sol.record.extra == {"a_newer_entry": {"x": (1, 2)}} and sol.record.side is None
+    assert sol.record.time_window_s == (0.0, 0.5) and sol.record.workflow.name == "effort-gen"
+    with pytest.raises(TypeError):
+        sol.record.objective_terms["activation"] = 0.0
     assert "side" not in sol.record and sol.record.get("side", "absent") == "absent"
     sol = dataclasses.replace(sol, record=sol.record.with_(side="l", n_intervals=5))
     assert list(sol.summary) == [*entries, "side"] and sol.record.side == "l"
@@ -361,7 +365,7 @@ def test_solution_record_entries_round_trip(tmp_path):
     assert list(back.summary) == [*entries, "side", "format", "format_version", "muscles", "dofs", "parameters",
                                   "conventions"]
     assert back.record.workflow == {"name": "effort-gen", "passive_source": None}
-    assert back.record.muscles == ["a_r", "b_r"] and back.record.parameters["b_r"]["kT"] == 10
+    assert back.record.muscles == ("a_r", "b_r") and back.record.parameters["b_r"]["kT"] == 10
     back.write(tmp_path / "again")
     assert (tmp_path / "again" / "summary.json").read_text() == text
     with pytest.raises(dataclasses.FrozenInstanceError):
@@ -459,7 +463,7 @@ def test_problem_record_round_trips_a_results_parameters_file(tmp_path):
                "settings": settings.to_dict(), "doubts": {"on_bounds": [], "uninformed": []},
                "a_newer_entry": [1, 2]}
     record = ProblemRecord.from_dict(entries)
-    assert record.extra == {"a_newer_entry": [1, 2]} and record.side is None and "side" not in record
+    assert record.extra == {"a_newer_entry": (1, 2)} and record.side is None and "side" not in record
     record = record.with_(side="r", geometry_time_s=1.5)
     assert list(record.to_dict()) == [*entries, "side", "geometry_time_s"] and record.side == "r"
     result = Result(solutions={"walk": _toy_solution()}, parameters=_toy_solution().parameters,

@@ -83,7 +83,7 @@ def test_convergence_record_and_flag(short_solves, tmp_path):
     assert "unconverged_rates" not in [f.code for f in default.record.flags]
     default.write(tmp_path / "sol")
     again = Solution.load(tmp_path / "sol")
-    assert again.record.convergence == json.loads(json.dumps(conv))
+    assert again.record.convergence == json.loads(json.dumps(conv.to_dict()))
 
 
 @pytest.mark.opensim

@@ -41,8 +41,9 @@ class Flag:
 
 
 def flags_from_records(records) -> list[Flag]:
-    """Flags from their dictionaries (``summary.json``'s or ``unit.json``'s ``plausibility``)."""
-    return [Flag.from_dict(d) for d in (records or [])]
+    """Flags from their dictionaries (``summary.json``'s or ``unit.json``'s ``plausibility``); a
+    :class:`Flag` as it is (a typed record's ``plausibility``)."""
+    return [d if isinstance(d, Flag) else Flag.from_dict(d) for d in (records or [])]
 
 
 def quality_text(flags: Sequence[Flag]) -> str:

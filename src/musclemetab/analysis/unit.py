@@ -316,12 +316,9 @@ def recorded_excluded_muscles(solution) -> list[str]:
     its record; ``[]`` when none."""
     record = getattr(solution, "record", solution)
     if isinstance(solution, (str, os.PathLike)):
-        from pathlib import Path
+        from ..redundancy.solution import read_summary
 
-        from ..io import read_json_object
-        from ..redundancy.solution import SUMMARY_FILE
-
-        return list(read_json_object(Path(solution) / SUMMARY_FILE).get("excluded_muscles") or [])
+        record = read_summary(solution)
     return list(getattr(record, "excluded_muscles", None) or [])
 
 
@@ -357,27 +354,22 @@ def recorded_trial(solution) -> RecordedTrial:
     """The trial a solution records (:class:`RecordedTrial`): ``solution`` is a solution folder
     (its ``summary.json``), a :class:`musclemetab.redundancy.Solution` or its
     :class:`~musclemetab.redundancy.record.SolveRecord`; anything else records nothing."""
-    from pathlib import Path
-
     record = getattr(solution, "record", solution)
     if isinstance(solution, (str, os.PathLike)):
-        from ..io import read_json_object
-        from ..redundancy.record import SolveRecord
-        from ..redundancy.solution import SUMMARY_FILE
+        from ..redundancy.solution import read_summary
 
-        path = Path(solution) / SUMMARY_FILE
-        record = SolveRecord.from_dict(read_json_object(path, missing="missing",
-                                                        remedy="give a folder written by 'musclemetab solve'"))
+        record = read_summary(solution, missing="missing", remedy="give a folder written by 'musclemetab solve'")
     if not hasattr(record, "gait_cycle"):
         return RecordedTrial(None, None, None, None, None, None)
     inputs = record.inputs or {}
     dofs = record.dofs if record.dofs is not None else getattr(solution, "dofs", None)
     cycle = recorded_cycle(record.gait_cycle)
     source = f"ground reaction forces ({record.gait_cycle.get('source') or 'found by the solve'})" if cycle else None
+    window_source = record.window.source if record.window is not None else None
     window = record.time_window_s
     return RecordedTrial(inputs.get("model"), inputs.get("ik"), inputs.get("id"), record.side, cycle,
                          tuple(dofs) if dofs is not None else None, source,
-                         (float(window[0]), float(window[1])) if window else None, (record.window or {}).get("source"))
+                         (float(window[0]), float(window[1])) if window else None, window_source)
 
 
 def analyse(

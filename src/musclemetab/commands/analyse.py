@@ -303,7 +303,6 @@ def _plausibility(args, solve_flags, table) -> None:
 
 def _large_reserve(sol_dir) -> bool:
     """Whether the solve's reserves exceed 1 % of the peak joint moment (its ``summary.json``)."""
-    from ..io import read_json_object
-    from ..redundancy.solution import SUMMARY_FILE
+    from ..redundancy.solution import read_summary
 
-    return bool(read_json_object(Path(sol_dir) / SUMMARY_FILE).get("large_reserve", False))
+    return bool(read_summary(sol_dir).large_reserve)

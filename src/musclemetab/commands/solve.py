@@ -492,11 +492,11 @@ def _assistance(args) -> dict:
 
 def _device_note(record) -> str:
     """``, device +W J / -W J per cycle`` of an assisted solve's record (empty otherwise)."""
-    device = record.get("assistance")
+    device = record.assistance
     if not device:
         return ""
-    return (f", device (gain {device['gain']:g}) {device['positive_work_J']:.3g} J positive / "
-            f"{device['negative_work_J']:.3g} J negative work per cycle")
+    return (f", device (gain {device.gain:g}) {device.positive_work_J:.3g} J positive / "
+            f"{device.negative_work_J:.3g} J negative work per cycle")
 
 
 def _plausibility(args, solutions) -> None:
@@ -548,8 +548,8 @@ def _energy_note(record) -> str:
     goal = record.energy_goal
     if not goal:
         return ""
-    return (f", {goal['model']} (smooth, one leg, no basal) {goal['leg_mean_W_per_kg']:.3f} W/kg of body mass "
-            f"(energy weight {goal['weight']:g}, effort weight {goal['w_activation']:g})")
+    return (f", {goal.model} (smooth, one leg, no basal) {goal.leg_mean_W_per_kg:.3f} W/kg of body mass "
+            f"(energy weight {goal.weight:g}, effort weight {goal.w_activation:g})")
 
 
 def _solver_options(args):

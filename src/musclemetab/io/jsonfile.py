@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Mapping
+from dataclasses import is_dataclass
 from pathlib import Path
 
 import numpy as np
@@ -35,8 +37,12 @@ def read_json_object(path: str | os.PathLike, *, missing: str = "not found", rem
 
 def json_ready(x):
     """``x`` with NumPy arrays and scalars, tuples and paths turned into the JSON types (lists,
-    floats, ints, bools, strings) and dictionary keys into strings, for :func:`json.dumps`."""
-    if isinstance(x, dict):
+    floats, ints, bools, strings) and dictionary keys into strings, for :func:`json.dumps`; a typed
+    record (a dataclass with ``to_dict``, e.g. an entry of a solve's record) as its dictionary, a
+    read-only mapping as a dictionary."""
+    if is_dataclass(x) and hasattr(x, "to_dict"):
+        return json_ready(x.to_dict())
+    if isinstance(x, Mapping):
         return {str(k): json_ready(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
         return [json_ready(v) for v in x]

@@ -98,13 +98,13 @@ def solution_struct(solution) -> dict:
         "passive_s0": number_column(p.passive_s0[index]),
         "passive_sm": number_column(p.passive_sm[index]),
     }
-    conv = rec.convergence or {}
+    conv = rec.convergence or {}  # a read-only mapping of its entries
     out["solve"] = {
         "workflow": rec.workflow_name, "side": rec.side or "", "status": str(rec.status),
         "success": bool(rec.success), "objective": _plain(rec.objective), "iterations": _plain(rec.iterations),
         "stop": str(conv.get("stop", "")), "max_rate_residue": _plain(conv.get("max_rate_residue")),
         "time_window_s": _plain(None if rec.time_window_s is None else np.asarray(rec.time_window_s, dtype=float)),
-        "plausibility": names_cell([f.get("code", "") for f in (rec.plausibility or [])]),
+        "plausibility": names_cell([f.code for f in rec.flags]),
     }
     return out
 

@@ -1,7 +1,7 @@
 """What every metabolic energy model shares: inputs, checks, the result type and the rules
 that close a model (non-negativity, minimum heat rate, basal heat).
 
-All models take the same arguments (see :data:`SHARED_PARAMETERS_DOC`):
+All models take the same arguments (``energy_model_arguments`` of :data:`musclemetab._docs.docdict`):
 
 * seven muscle-state arrays of any common (broadcastable) shape, conventionally
   ``(muscles, time)``;
@@ -26,6 +26,7 @@ from typing import Mapping
 
 import numpy as np
 
+from .._docs import fill_doc
 from ..errors import DataMismatchError, OptionError
 
 __all__ = [
@@ -43,7 +44,6 @@ __all__ = [
     "apply_minimum_heat_rate",
     "basal_rate",
     "basal_view",
-    "shared_doc",
     "recruitment_terms",
     "recruited_slow_twitch_fraction",
     "check_flag",
@@ -87,62 +87,6 @@ PARAMETER_ARGUMENTS = (
     "muscle_mass_kg",
     "slow_twitch_fraction",
 )
-
-SHARED_PARAMETERS_DOC = """\
-    excitation : array_like
-        Neural excitation ``e`` (-), 0..1.
-    activation : array_like
-        Muscle activation ``a`` (-), 0..1.
-    normalized_fiber_length : array_like
-        ``l~M = lM / lMo`` (-).
-    normalized_fiber_velocity : array_like
-        ``vbar = v~M / vmax`` (-), fiber velocity in optimal lengths per second divided by
-        the maximal contraction velocity (OpenSim's definition; -1..1); positive =
-        lengthening. The fiber velocity in m/s is ``V_CE = vbar * vmax * lMo``.
-    active_force_length_multiplier : array_like
-        ``fL(l~M)`` (-).
-    force_velocity_multiplier : array_like
-        ``fV(vbar)`` (-).
-    passive_fiber_force_N : array_like
-        Passive fiber force ``F0 * fPE(l~M)`` along the fiber (N).
-    max_isometric_force_N, optimal_fiber_length_m : array_like
-        ``F0`` (N) and ``lMo`` (m), per muscle.
-    max_contraction_velocity : array_like
-        ``vmax`` in optimal fiber lengths per second (10 in the study), per muscle.
-    muscle_mass_kg : array_like
-        Muscle mass ``m`` (kg), per muscle.
-    slow_twitch_fraction : array_like
-        Fraction of slow-twitch fibers ``f_ST`` (-), per muscle; ``f_FT = 1 - f_ST``.
-    time_s : array_like, optional
-        Time (s) along the last axis; used only by models with a time-dependent term.
-    basal : bool
-        Add the basal heat ``basal_rate_W_per_kg * m`` to the muscle's rate (after the
-        non-negativity rule), as the study's code does (``basalOn = 1``). The paper instead
-        adds 1.2 W/kg of *body* mass to the whole-body rate: see
-        :func:`musclemetab.metabolics.whole_body_rate`, which removes this component
-        under that rule.
-    basal_rate_W_per_kg : float
-        Basal rate per kg of muscle mass (1.2).
-    check : bool
-        Check shapes and values (finite states, positive parameters). Turn off only for
-        inputs already checked.
-
-    Arguments are matched by name; states broadcast against each other, parameters are
-    aligned with the leading axes of the states (``(M,)`` for ``(M, T)`` states).
-
-    Returns
-    -------
-    MetabolicRates
-        ``work``, ``activation_maintenance``, ``shortening_lengthening``, ``basal`` and
-        ``total`` (W), arrays of the broadcast shape, plus model-specific ``extras`` (W)."""
-
-
-def shared_doc(func):
-    """Insert the shared parameter documentation at ``%(shared)s`` in a docstring."""
-    if func.__doc__:
-        func.__doc__ = func.__doc__.replace("%(shared)s", SHARED_PARAMETERS_DOC)
-    return func
-
 
 @dataclass(frozen=True, eq=False)
 class MetabolicRates:
@@ -419,6 +363,6 @@ def model_function(name: str):
 
     def deco(func):
         func.model_name = name
-        return shared_doc(func)
+        return fill_doc(func)
 
     return deco

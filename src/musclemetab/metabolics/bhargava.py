@@ -161,7 +161,7 @@ def bhargava2004(
 
     Parameters
     ----------
-%(shared)s
+    %(energy_model_arguments)s
 
     Other parameters
     ----------------

@@ -89,7 +89,7 @@ def houdijk2006(
 
     Parameters
     ----------
-%(shared)s
+    %(energy_model_arguments)s
 
     Other parameters
     ----------------

@@ -81,7 +81,7 @@ def lichtwark2007(
 
     Parameters
     ----------
-%(shared)s
+    %(energy_model_arguments)s
 
     Other parameters
     ----------------
@@ -194,7 +194,7 @@ def lichtwark2005(
 
     Parameters
     ----------
-%(shared)s
+    %(energy_model_arguments)s
 
     Other parameters
     ----------------

@@ -71,7 +71,7 @@ def margaria1968(
 
     Parameters
     ----------
-%(shared)s
+    %(energy_model_arguments)s
     """
     model = "MA68"
     check_flag(model, "basal", basal)

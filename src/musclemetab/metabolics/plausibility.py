@@ -206,7 +206,7 @@ def write_plausibility(flags, out_dir):
 def add_quality(rows, unit_records):
     """``rows`` (one results row per model) with the column ``quality``: ``"ok"`` or the flags
     (:func:`musclemetab.quality.quality_text`) of the solve (every leg's, from the
-    ``plausibility`` of ``unit_records``) and of the row's metabolic results (its whole-body rate
+    ``plausibility`` of ``unit_records``: ``unit.json`` dictionaries or solve records) and of the row's metabolic results (its whole-body rate
     against its speed, its negative group shares: :func:`musclemetab.metabolics.plausibility.metabolic_flags`);
     ``"not checked"`` when a unit record has no ``plausibility`` (written by an earlier version)."""
     from ..quality import flags_from_records, quality_text
@@ -214,6 +214,6 @@ def add_quality(rows, unit_records):
     if any("plausibility" not in r for r in unit_records):
         rows["quality"] = "not checked"
         return rows
-    solve = [f for r in unit_records for f in flags_from_records(r["plausibility"]) if f.model is None]
+    solve = [f for r in unit_records for f in flags_from_records(r.get("plausibility")) if f.model is None]
     rows["quality"] = [quality_text(solve + _row_flags(rows.iloc[[i]])) for i in range(len(rows))]
     return rows

@@ -128,18 +128,6 @@ def _umberger_family(
     )
 
 
-_OPTIONS_DOC = """    effort_scaling : float
-        The factor ``S`` of both heats: 1.5 for aerobic activity (default: the study's value
-        and OpenSim's ``aerobic_factor``), 1.0 for anaerobic activity (Umberger et al.
-        2003; :data:`AEROBIC_FACTOR`, :data:`ANAEROBIC_FACTOR`).
-    minimum_heat_rate_W_per_kg : float or None
-        Where the heat rate ``H_AM + H_SL`` of a muscle falls below this many W per kg of
-        muscle mass, raise it to that value (``H_AM`` takes it, ``H_SL = 0``), before the
-        non-negativity rule; Umberger et al. (2003) and OpenSim's
-        ``enforce_minimum_heat_rate_per_muscle`` (1 W/kg, :data:`MINIMUM_HEAT_RATE_W_PER_KG`).
-        Default None: not applied (commented out in the study's code)."""
-
-
 @model_function("UM03")
 def umberger2003(
     excitation,
@@ -186,7 +174,7 @@ def umberger2003(
 
     Parameters
     ----------
-%(shared)s
+    %(energy_model_arguments)s
 
     Other parameters
     ----------------
@@ -199,7 +187,7 @@ def umberger2003(
         when shortening faster than ``vmax/2.5``), as Umberger et al. (2003) and OpenSim's
         ``Umberger2010MuscleMetabolicsProbe`` do. Default False: the study's code has the
         cap commented out.
-%(options)s
+    %(umberger_options)s
     """
     return _umberger_family("UM03", locals(), lengthening_factor=LENGTHENING_FACTOR_2003, recruitment=False)
 
@@ -248,7 +236,7 @@ def umberger2010(
 
     Parameters
     ----------
-%(shared)s
+    %(energy_model_arguments)s
 
     Other parameters
     ----------------
@@ -261,7 +249,7 @@ def umberger2010(
         when shortening faster than ``vmax/2.5``), as Umberger et al. (2003) and OpenSim's
         ``Umberger2010MuscleMetabolicsProbe`` do. Default False: the study's code has the
         cap commented out.
-%(options)s
+    %(umberger_options)s
     """
     return _umberger_family("UM10", locals(), lengthening_factor=LENGTHENING_FACTOR_2010, recruitment=False)
 
@@ -310,7 +298,7 @@ def uchida2016(
 
     Parameters
     ----------
-%(shared)s
+    %(energy_model_arguments)s
 
     Other parameters
     ----------------
@@ -323,11 +311,6 @@ def uchida2016(
         when shortening faster than ``vmax/2.5``), as Umberger et al. (2003) and OpenSim's
         ``Umberger2010MuscleMetabolicsProbe`` do. Default False: the study's code has the
         cap commented out.
-%(options)s
+    %(umberger_options)s
     """
     return _umberger_family("UC16", locals(), lengthening_factor=LENGTHENING_FACTOR_2003, recruitment=True)
-
-
-
-for _f in (umberger2003, umberger2010, uchida2016):
-    _f.__doc__ = _f.__doc__.replace("%(options)s", _OPTIONS_DOC)

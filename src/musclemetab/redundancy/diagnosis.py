@@ -133,6 +133,9 @@ class Diagnosis:
     findings: tuple = ()
     trial: str = ""
     thresholds: dict = field(default_factory=dict)
+    #: of a solve that did not converge, the constraints its last iterate left violated
+    #: (:func:`last_iterate_violations`); ``None`` for a diagnosis before the solve only
+    last_iterate: tuple | None = None
 
     @property
     def blocking(self) -> tuple:
@@ -154,11 +157,21 @@ class Diagnosis:
         return f"diagnosis{' of ' + self.trial if self.trial else ''}:\n" + "\n".join(lines)
 
     def to_dict(self) -> dict:
-        return {"thresholds": dict(self.thresholds), "findings": [f.to_dict() for f in self.findings]}
+        """``summary.json``'s ``diagnosis``: ``thresholds``, ``findings`` and, after a solve that
+        did not converge, ``last_iterate``."""
+        out = {"thresholds": dict(self.thresholds), "findings": [f.to_dict() for f in self.findings]}
+        if self.last_iterate is not None:
+            out["last_iterate"] = [f.to_dict() for f in self.last_iterate]
+        return out
 
     @classmethod
-    def from_dict(cls, d: dict, trial: str = "") -> "Diagnosis":
-        return cls(tuple(Finding.from_dict(f) for f in d.get("findings", ())), trial, dict(d.get("thresholds", {})))
+    def from_dict(cls, d, trial: str = "") -> "Diagnosis":
+        """From ``summary.json``'s ``diagnosis`` (a :class:`Diagnosis` as it is)."""
+        if isinstance(d, Diagnosis):
+            return d
+        last = d.get("last_iterate")
+        return cls(tuple(Finding.from_dict(f) for f in d.get("findings", ())), trial, dict(d.get("thresholds", {})),
+                   None if last is None else tuple(Finding.from_dict(f) for f in last))
 
     def error(self, what: str = "the trial") -> InfeasibleInputError:
         """The error of the blocking findings (muscles, times, bounds and remedies)."""
@@ -451,8 +464,8 @@ def last_iterate_violations(solution, inputs=None) -> list[Finding]:
 def violation_text(record) -> str:
     """A sentence naming the muscles and DOFs (and times) a solve that did not converge left
     violated (``record``: a :class:`~.record.SolveRecord` or its dictionary), or ``""``."""
-    diag = (record.get("diagnosis") if isinstance(record, dict) else record.diagnosis) or {}
-    rows = [Finding.from_dict(f) for f in diag.get("last_iterate", ())]
+    diag = record.get("diagnosis") if isinstance(record, dict) else record.diagnosis
+    rows = list(Diagnosis.from_dict(diag).last_iterate or ()) if diag else []
     if not rows:
         return ""
     rows.sort(key=lambda f: -f.value / f.bound)

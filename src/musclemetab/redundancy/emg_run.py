@@ -11,7 +11,7 @@ from typing import Sequence
 
 from ..errors import OptionError
 from ..messages import name_list
-from ._docs import fill_doc
+from .._docs import fill_doc
 from .emg_inputs import resolve_emg_mapping
 from .emg_ten import EmgTenSettings
 from .ipopt import SolverOptions

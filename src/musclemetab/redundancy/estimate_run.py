@@ -4,7 +4,7 @@ folder (:func:`estimate_files`, the pipeline of ``musclemetab estimate`` and of 
 
 from __future__ import annotations
 
-from ._docs import fill_doc
+from .._docs import fill_doc
 from .ipopt import SolverOptions
 from .result import Result
 from .run import check_solution_folders

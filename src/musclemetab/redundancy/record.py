@@ -14,8 +14,19 @@ from __future__ import annotations
 import math
 import os
 import platform
-from dataclasses import dataclass, field, replace
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+from .entries import (
+    AssistanceRecord, ConvergenceRecord, EmgRecord, EnergyFormRecord, EnergyGoalRecord, FiberLengthBounds,
+    InputPreparation, InverseDynamicsRecord, ProblemSize, SolverOptionsRecord, TrialRecord, WindowRecord, WorkflowRecord,
+    _Typed, entry, frozen, records, thaw,
+)
+
+if TYPE_CHECKING:
+    from .diagnosis import Diagnosis
 
 __all__ = ["RunRecord", "SolveRecord", "ProblemRecord", "solver_versions", "input_hashes"]
 
@@ -61,6 +72,10 @@ class RunRecord:
     software: dict = field(default_factory=dict)
     input_hashes: dict = field(default_factory=dict)
 
+    def __post_init__(self):
+        for name in ("objective_terms", "function_evaluation_time_s", "software", "input_hashes"):
+            object.__setattr__(self, name, frozen(getattr(self, name)))
+
     @property
     def message(self) -> str:
         """What the status means and what to do (:func:`~.ipopt.failure_advice`)."""
@@ -92,12 +107,12 @@ class RunRecord:
     def to_dict(self) -> dict:
         return {
             "status": self.status, "success": self.success, "message": self.message,
-            "objective": self.objective, "objective_terms": self.objective_terms, "iterations": self.iterations,
+            "objective": self.objective, "objective_terms": thaw(self.objective_terms), "iterations": self.iterations,
             "solve_time_s": self.solve_time_s, "solve_cpu_time_s": self.solve_cpu_time_s,
-            "build_time_s": self.build_time_s, "function_evaluation_time_s": self.function_evaluation_time_s,
+            "build_time_s": self.build_time_s, "function_evaluation_time_s": thaw(self.function_evaluation_time_s),
             "ms_per_iteration": 1e3 * self.solve_time_s / max(self.iterations, 1),
             "max_constraint_violation": self.max_constraint_violation,
-            "software": dict(self.software), "input_hashes": dict(self.input_hashes),
+            "software": thaw(self.software), "input_hashes": thaw(self.input_hashes),
         }
 
     def failure(self, what: str):
@@ -111,46 +126,33 @@ class RunRecord:
 _ABSENT = None
 
 
-class _FileRecord:
+def _flags(records) -> tuple:
+    from ..quality import flags_from_records
+
+    return tuple(flags_from_records(records))
+
+
+def _diagnosis(d):
+    from .diagnosis import Diagnosis
+
+    return Diagnosis.from_dict(d)
+
+
+class _FileRecord(_Typed):
     """The round trip of a typed record to the JSON dictionary it was read from or is written as:
-    the dataclass fields are the known entries, ``extra`` holds the others (older or newer
-    files, kept as read) and ``keys`` the file's order of entries, so that :meth:`to_dict`
-    gives back exactly the dictionary :meth:`from_dict` read. A stage that adds an entry makes a
-    new record (:meth:`with_`)."""
+    the dataclass fields are the known entries (the structured ones typed, :mod:`.entries`),
+    ``extra`` holds the others (older or newer files, kept as read) and ``keys`` the file's order
+    of entries, so that :meth:`to_dict` gives back exactly the dictionary :meth:`from_dict` read.
+    A dictionary given for a typed entry (by a builder) becomes that entry's record. A stage that
+    adds an entry makes a new record (:meth:`with_`)."""
 
-    @classmethod
-    def _entry_names(cls) -> set:
-        return set(cls.__dataclass_fields__) - {"extra", "keys"}
-
-    @classmethod
-    def from_dict(cls, d: dict):
-        """From the file's dictionary (entries that are not fields go to ``extra``)."""
-        names = cls._entry_names()
-        kw = {k: v for k, v in d.items() if k in names}
-        extra = {k: v for k, v in d.items() if k not in names}
-        return cls(**kw, extra=extra, keys=tuple(d))
-
-    def to_dict(self) -> dict:
-        """The file's dictionary (the entries of ``keys``, in that order)."""
-        return {k: (self.extra[k] if k in self.extra else getattr(self, k)) for k in self.keys}
-
-    def with_(self, **entries):
-        """A copy with ``entries`` set (new ones after the others, as in the file). Only the
-        record's fields may be set: an unknown name (a typo) raises :class:`TypeError` instead of
-        becoming an entry nobody reads; entries of other files stay in ``extra`` as read."""
-        names = self._entry_names()
-        unknown = sorted(k for k in entries if k not in names)
-        if unknown:
-            raise TypeError(f"{type(self).__name__} has no entry {', '.join(map(repr, unknown))}; its entries are "
-                            f"{', '.join(sorted(names))}")
-        keys = self.keys + tuple(k for k in entries if k not in self.keys)
-        return replace(self, **entries, keys=keys)
+    _ORDER = "keys"
 
     def get(self, key: str, default=None):
         """The entry ``key`` of the file's dictionary, ``default`` when the record has none."""
         if key not in self.keys:
             return default
-        return self.extra[key] if key in self.extra else getattr(self, key)
+        return self._value(key)
 
     def __contains__(self, key: str) -> bool:
         return key in self.keys
@@ -170,19 +172,19 @@ class _OutcomeRecord(_FileRecord):
     success: bool = False
     message: str | None = _ABSENT
     objective: float | None = _ABSENT
-    objective_terms: dict | None = _ABSENT
+    objective_terms: Mapping | None = _ABSENT
     iterations: int | None = _ABSENT
     solve_time_s: float | None = _ABSENT
     solve_cpu_time_s: float | None = _ABSENT
     build_time_s: float | None = _ABSENT
-    function_evaluation_time_s: dict | None = _ABSENT
+    function_evaluation_time_s: Mapping | None = _ABSENT
     ms_per_iteration: float | None = _ABSENT
     max_constraint_violation: float | None = _ABSENT
-    software: dict | None = _ABSENT
-    input_hashes: dict | None = _ABSENT
+    software: Mapping | None = _ABSENT
+    input_hashes: Mapping | None = _ABSENT
     #: how converged the rates are (:func:`~.convergence.convergence_record`): stop, tolerance,
     #: final barrier parameter, the share of each model's rate carried by muscles that are off
-    convergence: dict | None = _ABSENT
+    convergence: ConvergenceRecord | None = entry(ConvergenceRecord)
 
     def outcome_lines(self) -> list[str]:
         """The lines of a printed summary: IPOPT's outcome (status, iterations, objective, time),
@@ -195,11 +197,12 @@ class _OutcomeRecord(_FileRecord):
             run += f", objective {float(self.objective):.6g}"
         if self.solve_time_s is not None:
             run += f", solve {float(self.solve_time_s):.1f} s"
-        conv = self.convergence or {}
-        options = getattr(self, "solver_options", None) or {}
-        where, tol = conv.get("stop", options.get("stop", "?")), conv.get("tolerance", options.get("tol"))
+        conv, options = self.convergence, self.solver_options
+        where = conv.stop if conv is not None and "stop" in conv else options.stop if options is not None else None
+        tol = conv.tolerance if conv is not None and "tolerance" in conv else options.tol if options is not None else None
+        where = "?" if where is None else where
         stop = f"stop {where}" + (f" (tolerance {tol:g})" if tol is not None else "")
-        worst = conv.get("max_rate_residue")
+        worst = None if conv is None else conv.max_rate_residue
         if worst is None:
             rates = "rates' convergence not checked"
         else:
@@ -213,7 +216,7 @@ class _OutcomeRecord(_FileRecord):
         elif not flags:
             quality = "plausibility ok"
         else:
-            codes = list(dict.fromkeys(str(f.get("code", "?")) for f in flags))
+            codes = list(dict.fromkeys(f.code for f in flags))
             quality = f"{len(flags)} plausibility flag{'s' if len(flags) > 1 else ''} ({', '.join(codes)})"
         return [run, f"{stop}; {rates}", quality]
 
@@ -234,83 +237,81 @@ class SolveRecord(_OutcomeRecord):
     """
 
     # the problem
-    workflow: dict | None = _ABSENT
+    workflow: WorkflowRecord | None = entry(WorkflowRecord)
     objective_trial: float | None = _ABSENT
     preparation_time_s: float | None = _ABSENT
-    problem_size: dict | None = _ABSENT
-    time_window_s: list | None = _ABSENT
+    problem_size: ProblemSize | None = entry(ProblemSize)
+    time_window_s: tuple | None = _ABSENT
     n_intervals: int | None = _ABSENT
     mesh_step_s: float | None = _ABSENT
     optimal_reserve_Nm: float | None = _ABSENT
     static_optimisation_objective: float | None = _ABSENT
     fiber_dynamics: str | None = _ABSENT
-    fiber_length_bounds: dict | None = _ABSENT
+    fiber_length_bounds: FiberLengthBounds | None = entry(FiberLengthBounds)
     initial_guess: str | None = _ABSENT
-    solver_options: dict | None = _ABSENT
-    input_preparation: dict | None = _ABSENT
-    inputs: dict | None = _ABSENT
-    energy_goal: dict | None = _ABSENT
+    solver_options: SolverOptionsRecord | None = entry(SolverOptionsRecord)
+    input_preparation: InputPreparation | None = entry(InputPreparation)
+    inputs: Mapping | None = _ABSENT
+    energy_goal: EnergyGoalRecord | None = entry(EnergyGoalRecord)
     #: the energy goal's form and smoothing (``EnergyGoal.form_record``): model, form, the
     #: non-negativity rule minimised, smoothing ``s``
-    energy_form: dict | None = _ABSENT
-    emg: dict | None = _ABSENT
-    emg_tracking: dict | None = _ABSENT
+    energy_form: EnergyFormRecord | None = entry(EnergyFormRecord)
+    emg: EmgRecord | None = entry(EmgRecord)
+    emg_tracking: Mapping | None = _ABSENT
     emg_tolerance: float | None = _ABSENT
     # the solution's residuals and reserves (build_solution)
-    conventions: dict | None = _ABSENT
+    conventions: Mapping | None = _ABSENT
     max_moment_residual_Nm: float | None = _ABSENT
-    max_moment_residual_by_dof_Nm: dict | None = _ABSENT
+    max_moment_residual_by_dof_Nm: Mapping | None = _ABSENT
     max_hill_residual: float | None = _ABSENT
     max_activation_dynamics_residual: float | None = _ABSENT
-    reserve_rms_Nm: dict | None = _ABSENT
-    reserve_max_abs_Nm: dict | None = _ABSENT
+    reserve_rms_Nm: Mapping | None = _ABSENT
+    reserve_max_abs_Nm: Mapping | None = _ABSENT
     reserve_share_of_peak_moment: float | None = _ABSENT
     large_reserve: bool | None = _ABSENT
-    peak_moment_by_dof_Nm: dict | None = _ABSENT
+    peak_moment_by_dof_Nm: Mapping | None = _ABSENT
     #: the solver-level plausibility flags (:mod:`.plausibility`), each ``Flag.to_dict()``; ``[]``: none
-    plausibility: list | None = _ABSENT
+    plausibility: tuple | None = entry(_flags)
     # the trial (solve_files)
     total_time_s: float | None = _ABSENT
     geometry_time_s: float | None = _ABSENT
     side: str | None = _ABSENT
-    excluded_muscles: list | None = _ABSENT
+    excluded_muscles: tuple | None = _ABSENT
     #: the diagnosis before the solve (:mod:`.diagnosis`): ``thresholds``, ``findings`` and, for a
     #: solve that did not converge, the constraints its last iterate left violated (``last_iterate``)
-    diagnosis: dict | None = _ABSENT
-    window: dict | None = _ABSENT
-    inverse_dynamics: dict | None = _ABSENT
-    assistance: dict | None = _ABSENT
+    diagnosis: Diagnosis | None = entry(_diagnosis)
+    window: WindowRecord | None = entry(WindowRecord)
+    inverse_dynamics: InverseDynamicsRecord | None = entry(InverseDynamicsRecord)
+    assistance: AssistanceRecord | None = entry(AssistanceRecord)
     # the file (Solution.write)
     format: str | None = _ABSENT
     format_version: int | None = _ABSENT
-    muscles: list | None = _ABSENT
-    dofs: list | None = _ABSENT
-    parameters: dict | None = _ABSENT
-    extra: dict = field(default_factory=dict)
+    muscles: tuple | None = _ABSENT
+    dofs: tuple | None = _ABSENT
+    parameters: Mapping | None = _ABSENT
+    extra: Mapping = field(default_factory=dict)
     keys: tuple = ()
 
     @property
     def workflow_name(self) -> str:
-        return str((self.workflow or {}).get("name", ""))
+        return str(self.workflow.name or "") if self.workflow is not None else ""
 
     @property
-    def gait_cycle(self) -> dict | None:
-        """The gait cycle the window was taken from (``window['gait_cycle']``), if recorded."""
-        return (self.window or {}).get("gait_cycle")
+    def gait_cycle(self) -> Mapping | None:
+        """The gait cycle the window was taken from (``window.gait_cycle``), if recorded."""
+        return self.window.gait_cycle if self.window is not None else None
 
     @property
     def flags(self) -> list:
         """The plausibility flags (:class:`~.plausibility.Flag`) the solve recorded (``[]``: none, or not checked)."""
-        from .plausibility import flags_from_records
-
-        return flags_from_records(self.plausibility)
+        return list(self.plausibility or ())
 
     @property
-    def pre_solve_diagnosis(self):
+    def pre_solve_diagnosis(self) -> "Diagnosis":
         """The diagnosis before the solve (:class:`~.diagnosis.Diagnosis`; empty when not recorded)."""
         from .diagnosis import Diagnosis
 
-        return Diagnosis.from_dict(self.diagnosis or {})
+        return self.diagnosis if self.diagnosis is not None else Diagnosis()
 
 
 @dataclass(frozen=True)
@@ -329,26 +330,26 @@ class ProblemRecord(_OutcomeRecord):
     # the problem
     preparation_time_s: float | None = _ABSENT
     max_coupling_violation: float | None = _ABSENT
-    problem_size: dict | None = _ABSENT
+    problem_size: ProblemSize | None = entry(ProblemSize)
     #: ``[{"label", "time_window_s", "n_intervals", "inputs"}]``, one per trial
-    trials: list | None = _ABSENT
-    emg_mapping: dict | None = _ABSENT
-    max_emg_deviation: dict | None = _ABSENT
+    trials: tuple | None = entry(records(TrialRecord))
+    emg_mapping: Mapping | None = _ABSENT
+    max_emg_deviation: Mapping | None = _ABSENT
     #: the :class:`~.emg_ten.EmgTenSettings` as a dictionary (EMG-TEN and EMG-informed problems)
-    settings: dict | None = _ABSENT
+    settings: Mapping | None = _ABSENT
     passive_source: str | None = _ABSENT
-    solver_options: dict | None = _ABSENT
-    ipopt_options: dict | None = _ABSENT
+    solver_options: SolverOptionsRecord | None = entry(SolverOptionsRecord)
+    ipopt_options: Mapping | None = _ABSENT
     initial_guess: str | None = _ABSENT
     #: ``{kind: [low, high]}`` of the estimated factors (parameter estimation)
-    bounds: dict | None = _ABSENT
+    bounds: Mapping | None = _ABSENT
     #: what makes the estimates doubtful: factors on bounds, uninformed factors, identifiability
-    doubts: dict | None = _ABSENT
+    doubts: Mapping | None = _ABSENT
     # the worst over the trials' solutions, and the files
     max_moment_residual_Nm: float | None = _ABSENT
     max_hill_residual: float | None = _ABSENT
     total_time_s: float | None = _ABSENT
     geometry_time_s: float | None = _ABSENT
     side: str | None = _ABSENT
-    extra: dict = field(default_factory=dict)
+    extra: Mapping = field(default_factory=dict)
     keys: tuple = ()

@@ -21,7 +21,7 @@ from typing import Mapping, Sequence
 
 from ..errors import OptionError
 from ..events import WALKING_CYCLE_DURATION_S
-from ._docs import fill_doc
+from .._docs import fill_doc
 from .inputs import MESH_FREQUENCY_HZ
 from .ipopt import SolverOptions
 from .estimate_problem import EMG_SCALE_BOUNDS, WEIGHT_NAMES

@@ -45,7 +45,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -209,7 +209,7 @@ def _trial_rates(x, params, inputs, record, metabolics: dict, nominal=None):
                  "max_contraction_velocity": float(params.max_contraction_velocity[i])}
              for i, m in enumerate(params.names)}
         window = record.get("window") or {}
-        cycle = window.get("gait_cycle") if isinstance(window, dict) else None
+        cycle = window.get("gait_cycle") if isinstance(window, Mapping) else None
         states = SolutionStates(time_s=inputs.mesh_time_s, muscles=tuple(inputs.muscles),
                                 states={k: np.asarray(v).T for k, v in arrays.items()}, parameters=p,
                                 cycle_s=(float(cycle["start_s"]), float(cycle["end_s"])) if cycle else None,

@@ -74,6 +74,7 @@ __all__ = [
     "reserve_column",
     "derived_quantities",
     "read_flags",
+    "read_summary",
 ]
 
 SUMMARY_FORMAT = "musclemetab.redundancy.solution"
@@ -400,13 +401,20 @@ def _moments_source(inputs: dict) -> str:
     return str(id_path)
 
 
+def read_summary(folder, *, missing: str = "not found", remedy: str = "") -> SolveRecord:
+    """The typed record (:class:`~.record.SolveRecord`) of a solution folder's ``summary.json``,
+    for readers that need the record and not the arrays (the report, the analysis);
+    :class:`InputFileError` naming the file (``missing`` and ``remedy`` as
+    :func:`~musclemetab.io.read_json_object` words them) when it cannot be read."""
+    from ..io import read_json_object
+
+    return SolveRecord.from_dict(read_json_object(Path(folder) / SUMMARY_FILE, missing=missing, remedy=remedy))
+
+
 def read_flags(folder) -> list:
     """The plausibility flags (:class:`~.plausibility.Flag`) a solution folder's ``summary.json``
     recorded (``[]``: none, or not checked)."""
-    from ..io import read_json_object
-    from .plausibility import flags_from_records
-
-    return flags_from_records(read_json_object(Path(folder) / SUMMARY_FILE).get("plausibility"))
+    return read_summary(folder).flags
 
 
 def build_solution(

@@ -210,6 +210,7 @@ def read_analyse_folders(paths, models=None) -> AnalyseFolders:
     from ..analysis.unit import ANALYSE_RECORD
     from ..io.jsonfile import read_json_object
     from ..metabolics.plausibility import add_quality
+    from ..redundancy.solution import read_summary
 
     paths = [Path(p) for p in ([paths] if isinstance(paths, (str, os.PathLike)) else paths)]
     remedy = "run 'musclemetab analyse' again to rewrite it"
@@ -224,12 +225,12 @@ def read_analyse_folders(paths, models=None) -> AnalyseFolders:
             raise InputFileError(f"{record}: no legs recorded; {remedy}")
         legs = dict(_leg_record(r, path, record)[:2] for r in legs_rec if isinstance(r, dict))
         first = legs_rec[0]
-        summaries = {side: read_json_object(leg.solution / "summary.json", missing="missing",
-                                            remedy=f"the solution {path} was analysed from is gone; solve again")
+        summaries = {side: read_summary(leg.solution, missing="missing",
+                                        remedy=f"the solution {path} was analysed from is gone; solve again")
                      for side, leg in legs.items()}
         summary = next(iter(summaries.values()))
-        software = software or dict(summary.get("software") or {})
-        workflow = str((summary.get("workflow") or {}).get("name") or "solve")
+        software = software or dict(summary.software or {})
+        workflow = summary.workflow_name or "solve"
         subject, trial = unit_names(str(first.get("model")), str(first.get("ik")))
         if (subject, trial, workflow) in units:
             trial = f"{trial} ({path.name})"

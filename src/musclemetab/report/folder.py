@@ -12,6 +12,7 @@ file the report is drawn from (the content key of :mod:`.build` hashes them).
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -20,7 +21,8 @@ import numpy as np
 from ..errors import InputFileError, MissingColumnError, OptionError
 from ..io.csvfile import read_csv_file
 from ..messages import name_list
-from ..redundancy.solution import SUMMARY_FILE
+from ..redundancy.record import SolveRecord
+from ..redundancy.solution import SUMMARY_FILE, read_summary
 from ..study_layout import (
     FAILURES_CSV,
     PER_MUSCLE_FILE,
@@ -257,16 +259,14 @@ class StudyFolder:
 
         return {m: pd.DataFrame(v, index=pd.Index(pct, name="cycle_pct")) for m, v in out.items()}
 
-    def summary(self, folder: Path) -> dict:
-        """The unit's ``summary.json`` (the solver's run record and the solution's residuals)."""
-        from ..io.jsonfile import read_json_object
+    def summary(self, folder: Path) -> SolveRecord:
+        """The typed record of the unit's ``summary.json`` (the solver's run record and the
+        solution's residuals; :func:`~musclemetab.redundancy.solution.read_summary`)."""
+        return read_summary(self.solution_folder(folder), missing="missing", remedy="run the unit again")
 
-        return read_json_object(self.solution_folder(folder) / SUMMARY_FILE, missing="missing",
-                                remedy="run the unit again")
-
-    def emg_tracking(self, row) -> dict:
+    def emg_tracking(self, row) -> Mapping:
         """``emg_tracking`` of the row's unit (an EMG-TEN unit): ``{muscle: {"channels", "scale"}}``."""
-        return self.summary(self.unit_folder(row)).get("emg_tracking") or {}
+        return self.summary(self.unit_folder(row)).emg_tracking or {}
 
     def units(self) -> list[tuple[tuple[str, str, str], dict]]:
         """``((subject, trial, workflow), row)`` of every unit of the results, then of the failures."""

@@ -315,7 +315,7 @@ def flagged_units(study: StudyFolder) -> Table | None:
         set_ = ok[ok[flag].astype(str).str.strip().str.lower().isin(("true", "1", "yes"))]
         for _, r in set_.drop_duplicates(["subject", "trial", "workflow"]).iterrows():
             try:
-                share = study.summary(study.unit_folder(r)).get("reserve_share_of_peak_moment")
+                share = study.summary(study.unit_folder(r)).reserve_share_of_peak_moment
                 share = f"{100 * float(share):.1f} %" if np.isfinite(float(share)) else "not recorded"
             except (MusclemetabError, TypeError, ValueError):
                 share = "not recorded"
@@ -333,7 +333,6 @@ _NO_FLAG = ("ok", "not checked", "nan", "")
 def _plausibility_rows(study: StudyFolder, ok) -> list[list[str]]:
     """Rows of :func:`flagged_units` for the units whose ``quality`` is not ``ok``."""
     from ..metabolics.plausibility import results_rows_flags
-    from ..quality import flags_from_records
 
     if "quality" not in ok.columns:
         return []
@@ -344,7 +343,7 @@ def _plausibility_rows(study: StudyFolder, ok) -> list[list[str]]:
         first = unit.iloc[0]
         for side, folder in study.leg_folders(first).items():
             try:
-                flags = flags_from_records(study.summary(folder).get("plausibility"))
+                flags = study.summary(folder).flags
             except MusclemetabError as exc:
                 rows.append(key + ["(solve)", study.short(exc)])
                 continue
@@ -358,8 +357,6 @@ def solver_runs(study: StudyFolder) -> list[list[str]]:
     then :data:`RUN_COLUMNS` from the unit's ``summary.json`` (its
     :class:`~musclemetab.redundancy.record.RunRecord` and the solution's residuals); ``–``
     where a value is not recorded, and why where the file cannot be read."""
-    from ..redundancy.record import RunRecord
-
     rows = []
     legs = [(key, folder) for key, r in study.units() if key[1] and key[1] != "nan"  # else: no unit folder
             for folder in study.leg_folders(r).values()]
@@ -369,10 +366,9 @@ def solver_runs(study: StudyFolder) -> list[list[str]]:
         except MusclemetabError as exc:
             rows.append(list(key) + ["–", study.short(exc)] + ["–"] * (len(RUN_COLUMNS) - 1))
             continue
-        run = RunRecord.from_dict(summary)
+        run = summary.run_record
         values = (run.status, run.iterations if run.iterations >= 0 else None, run.solve_time_s,
-                  run.max_constraint_violation, summary.get("max_moment_residual_Nm"),
-                  summary.get("reserve_share_of_peak_moment"))
+                  run.max_constraint_violation, summary.max_moment_residual_Nm, summary.reserve_share_of_peak_moment)
         cells = []
         for (_, fmt), v in zip(RUN_COLUMNS, values):
             if v is None or (isinstance(v, float) and not np.isfinite(v)):
@@ -382,7 +378,7 @@ def solver_runs(study: StudyFolder) -> list[list[str]]:
                 cells.append(fmt.format(v))
             except (TypeError, ValueError):
                 cells.append(str(v))
-        side = str(summary.get("side", "r"))
+        side = str(summary.side or "r")
         rows.append(list(key) + [_SIDES.get(side, side)] + cells)
     return rows
 

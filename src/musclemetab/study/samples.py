@@ -124,7 +124,7 @@ def run_sample(study: Study, unit, tmp: Path, nominal_folder: Path, *, options=N
               "height_factor": factors.height,
               # checked as any solve is (docs/quality.md): the bands leave a flagged sample out
               "plausibility": [f.to_dict() for f in sol.record.flags],
-              "convergence": sol.record.convergence}
+              "convergence": None if sol.record.convergence is None else sol.record.convergence.to_dict()}
     if not sol.success:  # recorded, left out of the bands
         return record
     t1 = time.perf_counter()

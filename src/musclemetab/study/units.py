@@ -810,7 +810,7 @@ def _device_arguments(trial: Trial, side: str, model) -> dict:
 def _device_record(trial: Trial, sol, body_mass_kg: float) -> dict:
     """The unit record's ``assistance``: the unassisted trial, the file, the gain and the device's
     work over the gait cycle (this leg's device; ``summary.json`` holds its torque and power)."""
-    device = sol.record.get("assistance") or {}
+    device = sol.record.assistance or {}
     keys = ("gain", "axis", "dofs", "cycle_s", "positive_work_J", "negative_work_J", "net_work_J",
             "mean_positive_power_W", "mean_negative_power_W", "duration_s")
     return {"assisted_from": trial.assisted_from, "file": Path(trial.assistance).name,
