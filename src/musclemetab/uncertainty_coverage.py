@@ -5,7 +5,8 @@ A *truth* is a subject whose muscle properties are a draw from the priors: its f
 from another generator than the bands' samples (NumPy's PCG64 pseudo-random normals with their
 own seed, :func:`independent_draws`, against the scrambled Sobol' points of
 :func:`musclemetab.uncertainty.draw`), and its problem is solved cold (from static
-optimisation), where the bands' samples start from the nominal solution adapted to them. Each
+optimisation), where the bands' samples start from the nominal solution
+(:func:`musclemetab.uncertainty.sample_start`). Each
 truth's whole-body rate is compared with the band of the plausible samples (converged, no
 plausibility flag) of the nominal problem; truths with a flag are left out as the samples are
 (the band speaks of plausible subjects). With ``n`` plausible samples a truth exchangeable with
@@ -60,16 +61,16 @@ class Outcome:
 def solve_draw(files: tuple, workflow: str, draw, *, body_mass_kg: float, height_m: float | None, models,
                start=None, **solve_kw) -> Outcome:
     """Solve ``files`` (model, IK, ID) with the parameters of ``draw``; from ``start`` (the nominal
-    solution, adapted to the draw's parameters) or cold; its whole-body rates with the draw's
+    solution, :func:`~musclemetab.uncertainty.sample_start`) or cold; its whole-body rates with the draw's
     muscle masses and fiber types and its flags (the solve's and the rates' against the band of
     walking rates, without a speed)."""
     from .metabolics.plausibility import metabolic_flags
     from .metabolics.solution import metabolics_from_solution
     from .quality import quality_text
     from .redundancy.run import solve_files
-    from .uncertainty import adapted_start, sampled_properties
+    from .uncertainty import sample_start, sampled_properties
 
-    warm = {} if start is None else {"warm_start": adapted_start(start, draw.parameters(start.parameters))}
+    warm = {} if start is None else {"warm_start": sample_start(start, draw.parameters(start.parameters))}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the flags are recorded below
         sol = solve_files(*files, workflow, parameter_transform=draw.parameters, **warm, **solve_kw)
