@@ -5,8 +5,9 @@ Three parts, on the example subject's normal trial with EFFORT-GEN (``--parts`` 
 ``warm``
     For samples 0 .. ``--compare``-1 of the package's priors: the solve of the sampled
     parameters from the static-optimisation guess (cold) and warm-started from the nominal
-    solution adapted to them (:func:`musclemetab.uncertainty.adapted_start`, as a study's
-    samples are). Prints IPOPT's iterations and solve time of each and the mean ratio warm / cold.
+    solution's optimum and multipliers (:func:`musclemetab.uncertainty.sample_start`, as a study's
+    samples are). Prints IPOPT's iterations, solve time and CPU time of each and the mean ratio
+    warm / cold of the solve times.
 ``study``
     ``musclemetab run`` of a one-trial study with ``--uncertainty N`` (default 64) on
     ``--workers`` processes (default 2): the wall time of the samples (the nominal unit run
@@ -76,7 +77,7 @@ def warm_against_cold(ex, n: int, window=None) -> None:
     import functools
 
     from musclemetab.redundancy.run import solve_files
-    from musclemetab.uncertainty import adapted_start, draw, read_priors
+    from musclemetab.uncertainty import draw, read_priors, sample_start
 
     args = (ex.model, ex.ik["normal"], ex.id["normal"], "effort-gen")
     solve_files = functools.partial(solve_files, window=window)
@@ -84,16 +85,18 @@ def warm_against_cold(ex, n: int, window=None) -> None:
     print(f"nominal solve: {nominal.record.iterations} iterations, {nominal.record.solve_time_s:.2f} s")
     priors = read_priors()
     ratios = []
-    print(f"{'sample':>6} {'cold it':>8} {'cold s':>8} {'warm it':>8} {'warm s':>8} {'ratio':>6} {'objective cold / warm':>24}")
+    print(f"{'sample':>6} {'cold it':>8} {'cold s':>8} {'warm it':>8} {'warm s':>8} {'ratio':>6} {'objective cold / warm':>24}"
+          f" {'CPU s cold / warm':>18}")
     for k in range(n):
         factors = draw(priors, nominal.muscles, k, 1)
         cold = solve_files(*args, parameter_transform=factors.parameters)
         warm = solve_files(*args, parameter_transform=factors.parameters,
-                           warm_start=adapted_start(nominal, factors.parameters(nominal.parameters)))
+                           warm_start=sample_start(nominal, factors.parameters(nominal.parameters)))
         ratio = warm.record.solve_time_s / cold.record.solve_time_s
         ratios.append(ratio)
         print(f"{k:>6} {cold.record.iterations:>8} {cold.record.solve_time_s:>8.2f} {warm.record.iterations:>8} "
-              f"{warm.record.solve_time_s:>8.2f} {ratio:>6.2f} {cold.objective:>11.6g} / {warm.objective:<11.6g}")
+              f"{warm.record.solve_time_s:>8.2f} {ratio:>6.2f} {cold.objective:>11.6g} / {warm.objective:<11.6g} "
+              f"{cold.record.solve_cpu_time_s:>8.2f} / {warm.record.solve_cpu_time_s:<8.2f}")
     print(f"mean solve time of a warm-started sample / cold solve: {sum(ratios) / len(ratios):.2f} (target <= 0.5)",
           flush=True)
 

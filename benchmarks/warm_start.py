@@ -4,22 +4,30 @@
     python benchmarks/warm_start.py --across-trials [--trial normal]
 
     python benchmarks/warm_start.py --trial slow --workflow effort-cal [--repeats 2]
+    python benchmarks/warm_start.py --trial normal --workflow effort-gen --samples 1 2
 
 On one trial of the example subject (EFFORT-GEN solved first, cold), EFFORT-TEN (or
 ``--workflow effort-cal``) is solved, with the package's default stop (the optimum):
 
 * cold (static optimisation, IPOPT's ``mu_init`` 0.1: the study's procedure);
 * warm from the EFFORT-GEN solution with ``mu_init`` 1e-6 (``solve_files(warm_start=...)``, the
-  package's warm start);
+  package's warm start from a solution read from files), and from the solution in memory, whose
+  optimum and multipliers the package hands to IPOPT's warm start (``Solution.multipliers``);
 * the same with IPOPT's ``warm_start_init_point`` and EFFORT-GEN's multipliers (``lam_x``, ``lam_g``:
   the problems have the same variables and constraints), with IPOPT's default and with small
   warm-start bound pushes (``warm_start_bound_push``, ``warm_start_mult_bound_push`` and
-  ``warm_start_slack_bound_push`` 1e-9 to 1e-2), and from a monotone barrier at ``mu_init`` 1e-9;
+  ``warm_start_slack_bound_push`` 1e-9 to 1e-2), with the fractions (``warm_start_bound_frac``,
+  ``warm_start_slack_bound_frac``) as small and ``mu_init`` at 1e-4 or EFFORT-GEN's last barrier
+  parameter, with the bound multipliers alone, and from a monotone barrier at ``mu_init`` 1e-9 and 1e-4;
 * warm from EFFORT-GEN's solution adapted to EFFORT-TEN's parameters (the same tendon forces,
   fiber states that give them: :func:`musclemetab.uncertainty.adapted_start`);
 * warm from EFFORT-TEN's own cold optimum (the floor of any warm start that follows the barrier
   path from 1e-6);
 * warm from EFFORT-GEN with ``mu_init`` 1e-7, 1e-8 and 1e-9 (no barrier path from 1e-6).
+
+``--samples K ...``: instead, uncertainty samples of the trial's ``--workflow`` (EFFORT-GEN too),
+from the cold, adapted and multiplier starts (:func:`samples`; docs/solver.md, "Uncertainty
+samples start from the nominal's multipliers").
 
 ``--across-trials``: instead, EFFORT-GEN of the other two trials started from this trial's
 EFFORT-GEN solution (resampled over the window's normalised time) at ``mu_init`` 1e-6 to 0.1,
@@ -43,6 +51,7 @@ import argparse
 import os
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -53,11 +62,13 @@ HERE = Path(__file__).resolve().parent
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trial", default="normal", choices=("slow", "normal", "fast"))
-    ap.add_argument("--workflow", default="effort-ten", choices=("effort-ten", "effort-cal"),
+    ap.add_argument("--workflow", default="effort-ten", choices=("effort-ten", "effort-cal", "effort-gen"),
                     help="the second solve of the chain (default effort-ten)")
     ap.add_argument("--repeats", type=int, default=1, help="solves of the cold problem and of each variant, alternately")
     ap.add_argument("--quick", action="store_true",
                     help="the package's warm start and the one from the workflow's own optimum, on 0.6-0.8 s")
+    ap.add_argument("--samples", type=int, nargs="+", metavar="K",
+                    help="instead: uncertainty samples K (package priors, seed 1) of --workflow (effort-gen too)")
     ap.add_argument("--across-trials", action="store_true",
                     help="instead: EFFORT-GEN of the other trials started from this trial's EFFORT-GEN")
     args = ap.parse_args(argv)
@@ -76,11 +87,12 @@ def main(argv=None) -> int:
     start_multipliers: dict = {}
     run_ipopt = ipopt_module.run_ipopt
 
-    def recording_run_ipopt(solver, options, x0, lbx, ubx, lbg, ubg, multipliers=None, p=None):
-        """IPOPT as the package runs it, keeping the optimum's multipliers, or started from
-        ``start_multipliers`` (a measurement only: the package has no such option)."""
+    def recording_run_ipopt(solver, options, x0, lbx, ubx, lbg, ubg, multipliers=None, p=None, start=None):
+        """IPOPT as the package runs it (from ``start``, a solution's optimum and multipliers, when
+        the package gives one), keeping the optimum's multipliers, or started from
+        ``start_multipliers`` with the variant's own IPOPT options."""
         if not start_multipliers:
-            out = run_ipopt(solver, options, x0, lbx, ubx, lbg, ubg, kkt, p=p)
+            out = run_ipopt(solver, options, x0, lbx, ubx, lbg, ubg, kkt, p=p, start=start)
             kkt["x"] = out[0]
             if multipliers is not None:
                 multipliers.update(lam_g=kkt["lam_g"], lam_x=kkt["lam_x"])
@@ -95,13 +107,25 @@ def main(argv=None) -> int:
 
     ipopt_module.run_ipopt = recording_run_ipopt
 
-    def solve(workflow, warm=None, ipopt=None, multipliers=None):
+    def solve(workflow, warm=None, ipopt=None, multipliers=None, keep_multipliers=False, transform=None):
         start_multipliers.clear()
         start_multipliers.update(multipliers or {})
+        if warm is not None and not keep_multipliers:  # a start from the states alone, as from a solution folder
+            warm = replace(warm, multipliers=None)
         return solve_files(ex.model, ex.ik[args.trial], ex.id[args.trial], workflow, window=window,
                            passive=None if workflow == "effort-gen" else ex.passive_moments_mat,
                            tendon_stiffness="example" if workflow == "effort-ten" else None,
-                           warm_start=warm, options=SolverOptions(ipopt=dict(ipopt or {})))
+                           warm_start=warm, options=SolverOptions(ipopt=dict(ipopt or {})),
+                           **({} if transform is None else {"parameter_transform": transform}))
+
+    def pushes(v):
+        return {"warm_start_init_point": "yes", "warm_start_bound_push": v, "warm_start_mult_bound_push": v,
+                "warm_start_slack_bound_push": v}
+
+    if args.samples:
+        return samples(args, ex, solve, kkt, pushes)
+    if args.workflow == "effort-gen":
+        ap.error("--workflow effort-gen needs --samples")
 
     print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}; trial {args.trial}, "
           f"EFFORT-GEN -> {args.workflow.upper()}" + (f", window {window[0]:g}-{window[1]:g} s" if window else ""))
@@ -111,17 +135,29 @@ def main(argv=None) -> int:
     cold = solve(wf)
     cold_rates = _rates(cold, ex)
 
-    def pushes(v):
-        return {"warm_start_init_point": "yes", "warm_start_bound_push": v, "warm_start_mult_bound_push": v,
-                "warm_start_slack_bound_push": v}
+    mu_gen = gen.record.convergence.get("final_barrier_parameter") or 1e-11
+
+    def fractions(v, mu, **more):
+        return {**pushes(v), "warm_start_bound_frac": v, "warm_start_slack_bound_frac": v, "mu_init": mu, **more}
 
     variants = [("cold (static optimisation)", {}),
                 ("warm from GEN, mu_init 1e-6 (the package's)", dict(warm=gen)),
+                ("warm from GEN in memory (optimum and multipliers)", dict(warm=gen, keep_multipliers=True)),
                 (f"warm from GEN adapted to {wf.upper()}'s parameters", dict(warm=adapted_start(gen, cold.parameters)))]
     for v in (1e-9, 1e-6, 1e-4, 1e-3, 1e-2):
         variants.append((f"  + GEN's multipliers, pushes {v:g}",
                          dict(warm=gen, multipliers=gen_point, ipopt=pushes(v))))
     variants += [
+        ("  + multipliers, pushes and fractions 1e-4, mu_init 1e-4",
+         dict(warm=gen, multipliers=gen_point, ipopt=fractions(1e-4, 1e-4))),
+        ("  + multipliers, pushes and fractions 1e-6, mu_init GEN's last",
+         dict(warm=gen, multipliers=gen_point, ipopt=fractions(1e-6, mu_gen))),
+        ("  + multipliers, pushes and fractions 1e-9, mu_init GEN's last",
+         dict(warm=gen, multipliers=gen_point, ipopt=fractions(1e-9, mu_gen))),
+        ("  + multipliers, pushes 1e-4, monotone from 1e-4",
+         dict(warm=gen, multipliers=gen_point, ipopt=fractions(1e-4, 1e-4, mu_strategy="monotone"))),
+        ("  + bound multipliers only (lam_g 0), pushes 1e-4",
+         dict(warm=gen, multipliers={**gen_point, "lam_g": 0 * gen_point["lam_g"]}, ipopt=pushes(1e-4))),
         ("  + multipliers, pushes 1e-9, monotone from 1e-9",
          dict(warm=gen, multipliers=gen_point, ipopt={**pushes(1e-9), "mu_strategy": "monotone", "mu_init": 1e-9})),
         (f"warm from {wf.upper()}'s own cold optimum", dict(warm=cold)),
@@ -149,6 +185,40 @@ def main(argv=None) -> int:
             rates = f"{r.status}"
         print(f"{label:<52} {r.iterations:>10d} {cpu_text:>12} {r.objective:>14.8g} "
               f"{(r.objective - f_cold) / f_cold:>+9.1e} {rates}")
+    return 0
+
+
+def samples(args, ex, solve, kkt, pushes) -> int:
+    """Uncertainty samples ``args.samples`` of ``args.workflow`` on ``args.trial`` (the package's
+    priors, seed 1): cold, from the nominal solution adapted to the sample (``adapted_start``,
+    ``mu_init`` 1e-6), from the nominal optimum and multipliers with pushes 1e-4 and with IPOPT's
+    default pushes 1e-3 (``sample_start``, what a study's sample does); iterations, IPOPT CPU s,
+    CPU over cold, objective and rates against cold."""
+    from musclemetab.uncertainty import DEFAULT_SEED, adapted_start, draw, read_priors, sample_start
+
+    wf = args.workflow
+    nominal = solve(wf)
+    point = dict(kkt)
+    print(f"nominal {wf.upper()}: {nominal.record.iterations} iterations, {nominal.record.solve_cpu_time_s:.2f} CPU s")
+    for k in args.samples:
+        t = draw(read_priors(None), nominal.muscles, k, DEFAULT_SEED).parameters
+        variants = {"cold": dict(transform=t),
+                    "adapted nominal, mu_init 1e-6": dict(warm=adapted_start(nominal, t(nominal.parameters)), transform=t),
+                    "nominal optimum and multipliers, pushes 1e-4": dict(warm=nominal, multipliers=point,
+                                                                         ipopt=pushes(1e-4), transform=t),
+                    "the same, pushes 1e-3 (the package's)": dict(warm=sample_start(nominal, t(nominal.parameters)),
+                                                                  keep_multipliers=True, transform=t)}
+        rows = {label: [solve(wf, **kw) for _ in range(args.repeats)] for label, kw in variants.items()}
+        cold = rows["cold"]
+        cold_rates, cpu_cold = _rates(cold[0], ex), np.median([s.record.solve_cpu_time_s for s in cold])
+        print(f"\nsample {k}, load average {os.getloadavg()[0]:.1f}")
+        print(f"{'start':<48} {'iterations':>10} {'IPOPT CPU s':>12} {'x cold':>6} {'objective':>9} {'whole body':>10} "
+              f"{'muscles':>9}")
+        for label, sols in rows.items():
+            r, cpu = sols[0].record, sorted(s.record.solve_cpu_time_s for s in sols)
+            body, muscles = _rate_difference(_rates(sols[0], ex), cold_rates)
+            print(f"{label:<48} {r.iterations:>10d} {cpu[0]:>5.2f}-{cpu[-1]:<6.2f} {np.median(cpu) / cpu_cold:>6.2f} "
+                  f"{(r.objective - cold[0].objective) / cold[0].objective:>+9.1e} {100 * body:>9.4f}% {100 * muscles:>8.4f}%")
     return 0
 
 

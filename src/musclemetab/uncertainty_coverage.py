@@ -5,7 +5,8 @@ A *truth* is a subject whose muscle properties are a draw from the priors: its f
 from another generator than the bands' samples (NumPy's PCG64 pseudo-random normals with their
 own seed, :func:`independent_draws`, against the scrambled Sobol' points of
 :func:`musclemetab.uncertainty.draw`), and its problem is solved cold (from static
-optimisation), where the bands' samples start from the nominal solution adapted to them. Each
+optimisation), where the bands' samples start from the nominal solution
+(:func:`musclemetab.uncertainty.sample_start`). Each
 truth's whole-body rate is compared with the band of the plausible samples (converged, no
 plausibility flag) of the nominal problem; truths with a flag are left out as the samples are
 (the band speaks of plausible subjects). With ``n`` plausible samples a truth exchangeable with
@@ -59,17 +60,17 @@ class Outcome:
 
 def solve_draw(problem, draw, *, body_mass_kg: float, height_m: float | None, models, start=None) -> Outcome:
     """Solve ``problem`` (the nominal :class:`~musclemetab.redundancy.problem.Problem`, e.g.
-    ``nominal.problem``) with the parameters of ``draw``; from ``start`` (the nominal solution,
-    adapted to the draw's parameters) or cold; its whole-body rates with the draw's muscle
+    ``nominal.problem``) with the parameters of ``draw``; from ``start`` (the nominal solution:
+    :func:`~musclemetab.uncertainty.sample_start`) or cold; its whole-body rates with the draw's muscle
     masses and fiber types and its flags (the solve's and the rates' against the band of walking
     rates, without a speed)."""
     from .metabolics.plausibility import metabolic_flags
     from .metabolics.solution import metabolics_from_solution
     from .quality import quality_text
     from .redundancy.problem import solve
-    from .uncertainty import adapted_start, sampled_properties
+    from .uncertainty import sample_start, sampled_properties
 
-    warm = None if start is None else adapted_start(start, draw.parameters(start.parameters))
+    warm = None if start is None else sample_start(start, draw.parameters(start.parameters))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the flags are recorded below
         result = solve(problem.with_parameters(draw.parameters(problem.parameters)), warm_start=warm)

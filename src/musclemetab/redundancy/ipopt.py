@@ -198,6 +198,8 @@ class SolveOutcome:
     function_time_s: dict = field(default_factory=dict)
     #: IPOPT's barrier parameter at the last iterate (``nan``: not reported)
     final_barrier_parameter: float = float("nan")
+    #: IPOPT started from a previous optimum's variables and multipliers (``InitialGuess.start``)
+    started_from_optimum: bool = False
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -213,6 +215,9 @@ class OcpResult(SolveOutcome):
     objective: float
     objective_terms: dict
     n_constraints: int
+    #: the optimum's variables ``x`` and multipliers ``lam_g``, ``lam_x`` (a start for a problem
+    #: of the same structure: :data:`WARM_START_MULTIPLIER_OPTIONS`)
+    kkt: dict = field(default_factory=dict, repr=False, compare=False)
 
 
 #: IPOPT statuses that mean the constraints cannot be met (not a matter of iterations).
@@ -293,6 +298,12 @@ def solver_record(options: SolverOptions, goals: Goals | None = None) -> dict:
 #: problem.
 MUMPS_OPTIONS = {"min_refinement_steps": 0, "mumps_pivtol": 1e-4}
 
+#: IPOPT's start from a previous optimum's variables and multipliers (``InitialGuess.start``): its
+#: warm start, with its default pushes off the bounds (1e-3; 1e-4 cost more per iteration and
+#: once ended at another optimum). The example's uncertainty samples take half the iterations of
+#: a cold solve from it (docs/solver.md, "Warm starts at the optimum").
+WARM_START_MULTIPLIER_OPTIONS = {"warm_start_init_point": "yes"}
+
 
 def ipopt_options(options: SolverOptions, mumps_settings: dict | None = None) -> dict:
     """IPOPT's options for a problem: tolerances, scaling, exact Hessian, the linear solver
@@ -316,11 +327,13 @@ def ipopt_options(options: SolverOptions, mumps_settings: dict | None = None) ->
     return ipopt
 
 
-def run_ipopt(solver, options: SolverOptions, x0, lbx, ubx, lbg, ubg, multipliers: dict | None = None, p=None):
+def run_ipopt(solver, options: SolverOptions, x0, lbx, ubx, lbg, ubg, multipliers: dict | None = None, p=None,
+              start: dict | None = None):
     """Apply the process settings of ``options`` (``tune_malloc``, ``blas_threads``) and run
     an IPOPT ``nlpsol`` (with the NLP parameter's values ``p``, if it has one); returns ``(x, g,
     f, stats, wall time s, CPU time s)``. A dict ``multipliers`` receives the optimum's
-    ``lam_g`` and ``lam_x`` (CasADi's signs: ``grad f + J' lam_g + lam_x = 0``)."""
+    ``lam_g`` and ``lam_x`` (CasADi's signs: ``grad f + J' lam_g + lam_x = 0``); ``start``, such a
+    dict with ``x``, starts IPOPT from those variables and multipliers (``lam_x0``, ``lam_g0``)."""
     if options.tune_malloc:
         tune_malloc()
     if options.blas_threads is not None:
@@ -329,7 +342,9 @@ def run_ipopt(solver, options: SolverOptions, x0, lbx, ubx, lbg, ubg, multiplier
     c0 = _time.process_time()
     try:
         with sigint_noted():  # Ctrl-C stops IPOPT with a failure status: raised as an interrupt
-            sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, **({} if p is None else {"p": p}))
+            sol = solver(x0=x0 if start is None else start["x"], lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg,
+                         **({} if p is None else {"p": p}),
+                         **({} if start is None else {"lam_x0": start["lam_x"], "lam_g0": start["lam_g"]}))
     except RuntimeError as exc:
         raise SolverError(f"IPOPT stopped with an error: {exc}") from None
     if multipliers is not None:
@@ -389,7 +404,7 @@ def nlp_solver(nlp: dict, ipopt: dict, callback=None):
     return _new_solver(nlp, ipopt, callback)
 
 
-@functools.lru_cache(maxsize=1)
+@functools.lru_cache(maxsize=2)  # a cold solver and a warm-started one (a trial unit and its samples)
 def _shared_solver(structure, ipopt: tuple):
     from .transcription import symbolic_problem
 
@@ -426,13 +441,19 @@ def solve_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
     t_build = _time.perf_counter()
     nlp = build_problem(trials, params, goals, specs, optimal_reserve_Nm=options.optimal_reserve_Nm,
                         coupling=coupling, explicit_derivatives=options.derivatives == "explicit")
+    start = getattr(trials[0].guess, "start", None) if len(trials) == 1 else None
+    if start is not None and (np.size(start["x"]), np.size(start["lam_g"])) != (np.size(nlp["x0"]), np.size(nlp["lbg"])):
+        start = None  # an optimum of another structure: its variables do not map onto this problem's
+    if start is not None:
+        options = options.with_(ipopt={**WARM_START_MULTIPLIER_OPTIONS, **options.ipopt})
     ipopt = ipopt_options(options, MUMPS_OPTIONS if mumps_settings is None else mumps_settings)
     callback = _progress_callback(int(nlp["x"].numel()), int(nlp["g"].numel()), nlp["lbg"], nlp["ubg"])
     solver = nlp_solver(nlp, ipopt, callback)
     build_time = _time.perf_counter() - t_build
     kkt = {}
     x, gval, f_opt, stats, solve_time, solve_cpu = run_ipopt(
-        solver, options, nlp["x0"], nlp["lbx"], nlp["ubx"], nlp["lbg"], nlp["ubg"], kkt, p=nlp["p_values"])
+        solver, options, nlp["x0"], nlp["lbx"], nlp["ubx"], nlp["lbg"], nlp["ubg"], kkt, p=nlp["p_values"],
+        **({} if start is None else {"start": start}))
     # IPOPT relaxes the bounds by up to bound_relax_factor (1e-8, relative) and may end a hair
     # outside them (activations of -4e-9): what leaves the solver lies inside its bounds
     x = np.clip(x, np.asarray(nlp["lbx"], dtype=float).reshape(-1), np.asarray(nlp["ubx"], dtype=float).reshape(-1))
@@ -450,7 +471,7 @@ def solve_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
                    build_time_s=build_time, n_variables=nlp["n_variables"], max_constraint_violation=max_viol,
                    function_time_s={k[len("t_wall_"):]: float(v) for k, v in stats.items()
                                     if k.startswith("t_wall_nlp") and v},
-                   final_barrier_parameter=_final_barrier_parameter(stats))
+                   final_barrier_parameter=_final_barrier_parameter(stats), started_from_optimum=start is not None)
     from ..messages import logger
 
     logger("redundancy").debug("IPOPT: %s in %d iterations, %d variables, build %.2f s, solve %.2f s, largest "
@@ -471,7 +492,7 @@ def solve_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
             lm_projected_m=np.vstack([Z[:, 2 * M:3 * M], xl[2 * M:]]), excitation=Z[:, 3 * M:4 * M].copy(),
             reserve=Z[:, 4 * M:4 * M + D].copy(), fiber_velocity_lmo_per_s=Z[:, 4 * M + D:].copy(),
             objective=f_opt if len(trials) == 1 else float(sum(terms.values())), objective_terms=terms,
-            n_constraints=nlp["n_equality_constraints"], **outcome))
+            n_constraints=nlp["n_equality_constraints"], kkt={"x": x, **kkt} if len(trials) == 1 else {}, **outcome))
         devs.append(dev)
     full = x[L["P0"]:]
     return ProblemResult(

@@ -196,6 +196,10 @@ class Solution:
     record: SolveRecord = field(default_factory=SolveRecord)
     #: the :class:`~.problem.Problem` solved (:func:`.problem.solve`), or ``None`` (not kept in the folder)
     problem: "Problem | None" = field(default=None, repr=False, compare=False)  # noqa: F821 (a layer above)
+    #: the solve's optimum as IPOPT left it (variables ``x``, multipliers ``lam_x``, ``lam_g``), in
+    #: memory only (not written to the folder): a warm start from this solution starts from it
+    #: (:func:`.static_opt.guess_from_solution`); ``None`` for a solution read from files
+    multipliers: dict | None = field(default=None, repr=False, compare=False)
 
     #: the arrays of a solution, time-first ``(nodes, muscles)`` (``reserve_Nm``: ``(nodes, DOFs)``)
     ARRAYS = ("excitation", "activation", "lm_norm", "fiber_velocity_lmo_per_s", "tendon_force_N",
@@ -487,6 +491,7 @@ def build_solution(
         reserve_Nm=reserve_Nm,
         parameters=params,
         record=SolveRecord.from_dict(summary),
+        multipliers=dict(getattr(ocp, "kkt", None) or {}) or None,
     )
     from .convergence import convergence_record
     from .plausibility import solution_flags  # the checks after the solve (docs/quality.md)

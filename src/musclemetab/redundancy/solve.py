@@ -97,7 +97,8 @@ def solve_with_parameters(
         guess = initial_guess(inputs, params, so)
     else:
         guess = guess_from_solution(warm_start, inputs, params, options.optimal_reserve_Nm)
-        options = options.with_(ipopt={"mu_init": WARM_START_MU_INIT, **options.ipopt})
+        if guess.start is None:  # from its optimum and multipliers: IPOPT's warm start (ipopt.py)
+            options = options.with_(ipopt={"mu_init": WARM_START_MU_INIT, **options.ipopt})
     t_prep = _time.perf_counter() - t_start
     ocp = solve_ocp(inputs, params, guess, options, goals)
     from .bounds import fiber_length_bounds_record
@@ -115,7 +116,8 @@ def solve_with_parameters(
         "fiber_length_bounds": fiber_length_bounds_record(inputs, params),
         "initial_guess": "static optimisation (rigid tendons)" if warm_start is None else
         f"warm start from {warm_start.record.workflow_name or 'a previous solution'} "
-        f"(mu_init {WARM_START_MU_INIT:g})",
+        + ("(its optimum and multipliers)" if ocp.started_from_optimum else
+           f"(mu_init {WARM_START_MU_INIT:g})" if guess.start is None else "(its states)"),
         "workflow": dict(workflow_record or {"name": "custom"}),
         "solver_options": solver_record(options, goals),
         "input_preparation": {"filter": "butterworth 6th order 6 Hz zero-phase (MATLAB filtfilt padding)"

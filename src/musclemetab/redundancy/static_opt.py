@@ -25,7 +25,7 @@ not-a-knot spline through that fiber-length guess.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -68,6 +68,9 @@ class InitialGuess:
     excitation: np.ndarray
     reserve: np.ndarray
     fiber_velocity_lmo_per_s: np.ndarray
+    #: an optimum of a problem of the same structure (variables ``x``, multipliers ``lam_x``,
+    #: ``lam_g``; :attr:`.solution.Solution.multipliers`): IPOPT starts from it instead
+    start: dict | None = field(default=None, repr=False, compare=False)
 
 
 def rigid_tendon_forces(lmt_m, lmt_velocity_m_per_s, params: MuscleTendonParameters):
@@ -177,4 +180,5 @@ def guess_from_solution(solution, inputs: TrialInputs, params: MuscleTendonParam
         # the intervals' velocities: nodes 1..N with the backward fiber dynamics (docs/problem.md)
         fiber_velocity_lmo_per_s=(solution.fiber_velocity_lmo_per_s[1:] if solution.record.fiber_dynamics == "backward"
                  else solution.fiber_velocity_lmo_per_s[:N]).copy(),
+        start=getattr(solution, "multipliers", None),
     )

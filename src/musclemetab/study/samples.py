@@ -3,8 +3,10 @@ samples and gathers their bands; ``docs/uncertainty.md``).
 
 Sample ``k`` of a trial unit draws the factors of sample ``k`` (:func:`musclemetab.uncertainty.draw`),
 solves the trial again with the muscle-tendon parameters multiplied by them, warm-started from the
-trial unit's solution adapted to them (:func:`musclemetab.uncertainty.adapted_start`: the same tendon
-forces; :func:`musclemetab.redundancy.run.solve_files`, ``warm_start`` and ``parameter_transform``),
+trial unit's optimum and IPOPT multipliers (its ``ipopt_start.npz``, :data:`START_FILE`), or, without
+them, from its solution adapted to the sample's parameters
+(:func:`musclemetab.uncertainty.sample_start`; :func:`musclemetab.redundancy.run.solve_files`,
+``warm_start`` and ``parameter_transform``; the record's ``start`` says which),
 evaluates every metabolic model of the study with the sampled muscle masses, slow-twitch fractions
 and height, and writes ``whole_body.csv``, ``analysis.csv`` and ``per_muscle.csv`` (the trial unit's
 columns) and ``factors.csv`` (the factors of every muscle). Its record (``unit.json``) keeps the
@@ -27,9 +29,12 @@ from ..errors import OptionError
 from ..uncertainty import DEFAULT_SEED
 from .spec import Study
 
-__all__ = ["study_priors", "sample_key", "run_sample", "FACTORS_FILE", "METHOD"]
+__all__ = ["study_priors", "sample_key", "run_sample", "FACTORS_FILE", "METHOD", "START_FILE", "write_start",
+           "read_start"]
 
 FACTORS_FILE = "factors.csv"
+#: a sampled trial unit's optimum as IPOPT left it (``x``, ``lam_x``, ``lam_g``): its samples' start
+START_FILE = "ipopt_start.npz"
 #: the sampling rule, part of every sample's key
 METHOD = "sobol (owen scrambling) -> inverse normal cdf; factors of musclemetab.uncertainty; solve flags recorded"
 
@@ -73,6 +78,30 @@ def sample_key(study: Study, unit, nominal_key: str | None) -> str:
     return hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()
 
 
+def write_start(solution, folder: Path) -> None:
+    """Write ``solution``'s optimum and multipliers (:attr:`Solution.multipliers
+    <musclemetab.redundancy.solution.Solution.multipliers>`, when it has them) to ``folder``/:data:`START_FILE`."""
+    import numpy as np
+
+    if getattr(solution, "multipliers", None):
+        np.savez(Path(folder) / START_FILE, **{k: np.asarray(solution.multipliers[k], dtype=float)
+                                               for k in ("x", "lam_x", "lam_g")})
+
+
+def read_start(solution, folder: Path):
+    """``solution`` (read from ``folder``) with the optimum and multipliers of ``folder``/:data:`START_FILE`
+    (unchanged when the file is absent or unreadable: a trial unit of an earlier version)."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    try:
+        with np.load(Path(folder) / START_FILE) as data:
+            return replace(solution, multipliers={k: data[k] for k in ("x", "lam_x", "lam_g")})
+    except (OSError, ValueError, KeyError):
+        return solution
+
+
 def _record(folder: Path) -> dict:
     """The trial unit's ``unit.json`` (empty when absent or unreadable)."""
     from ..study_layout import UNIT_FILE
@@ -97,7 +126,7 @@ def run_sample(study: Study, unit, tmp: Path, nominal_folder: Path, *, options=N
     from ..metabolics.solution import WHOLE_BODY_CSV, metabolics_from_solution
     from ..redundancy import run as redundancy_run
     from ..redundancy.solution import Solution
-    from ..uncertainty import adapted_start, draw, sampled_properties
+    from ..uncertainty import draw, sample_start, sampled_properties
 
     nominal = _record(nominal_folder)
     if nominal.get("status") != "ok":
@@ -107,7 +136,7 @@ def run_sample(study: Study, unit, tmp: Path, nominal_folder: Path, *, options=N
     side = unit.leg(study)
     settings = study.settings.get("uncertainty") or {}
     t0 = time.perf_counter()
-    start = Solution.load(nominal_folder)
+    start = read_start(Solution.load(nominal_folder), nominal_folder)
     factors = draw(study_priors(study), start.muscles, unit.sample, int(settings.get("seed", DEFAULT_SEED)))
     factors.table().to_csv(tmp / FACTORS_FILE, index=False, float_format="%.17g")
     sol = redundancy_run.solve_files(
@@ -115,11 +144,13 @@ def run_sample(study: Study, unit, tmp: Path, nominal_folder: Path, *, options=N
         external_loads=trial.external_loads, grf=trial.grf if trial.cycle is not None else None,
         grf_column=trial.grf_column, grf_threshold_N=trial.grf_threshold_N, cycle=trial.cycle,
         options=options, goals=goals, exclude_muscles=subject.exclude_muscles,
-        exclude_missing_ok=subject.side == "both", warm_start=adapted_start(start, factors.parameters(start.parameters)),
+        exclude_missing_ok=subject.side == "both", warm_start=sample_start(start, factors.parameters(start.parameters)),
         parameter_transform=factors.parameters,
         **dict(arguments or {}))
-    times = {"solve_s": sol.record.solve_time_s, "solution_s": time.perf_counter() - t0}
+    times = {"solve_s": sol.record.solve_time_s, "solve_cpu_s": sol.record.solve_cpu_time_s,
+             "solution_s": time.perf_counter() - t0}
     record = {"times": times, "converged": bool(sol.success), "solve_status": sol.status,
+              "start": sol.record.initial_guess,  # from the trial unit's optimum and multipliers, or adapted
               "iterations": sol.record.get("iterations"),
               "height_factor": factors.height,
               # checked as any solve is (docs/quality.md): the bands leave a flagged sample out

@@ -669,6 +669,12 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
 
             sol, start = _chain_solve(solve, unit.warm_source(study), warm, times, trial.name)
         write_solution_folder(sol, tmp, opensim_files=False)  # written below, for every workflow
+        from .uncertainty import is_sampled
+
+        if (study.settings.get("uncertainty") or {}).get("samples") and is_sampled(study, unit):
+            from .samples import write_start
+
+            write_start(sol, tmp)  # its samples start from its optimum
         times["solve_s"] = sol.record.solve_time_s
         if not sol.success:
             from ..redundancy.emg_ten import emg_failure
