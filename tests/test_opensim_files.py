@@ -270,6 +270,18 @@ def test_files_are_the_same_prepared_during_the_solve_and_from_the_cache(solved,
     for name in OPENSIM_FILES:
         assert (out / name).read_bytes() == (tmp_path / "unprepared" / name).read_bytes(), name
     assert started == []
+    # a damaged entry: deleted with a warning, the work done again by OpenSim, the same files
+    monkeypatch.undo()
+    monkeypatch.setenv("MUSCLEMETAB_CACHE", str(cache))
+    from musclemetab.errors import CacheWarning
+
+    (entry,) = (cache / "geometry").glob("osimfiles-*.npz")
+    entry.write_bytes(entry.read_bytes()[:-100])
+    with pytest.warns(CacheWarning, match=f"{entry.name} cannot be read"):
+        write_opensim_files(sol, tmp_path / "redone", model_path=copy)
+    for name in OPENSIM_FILES:
+        assert (tmp_path / "redone" / name).read_bytes() == (tmp_path / "unprepared" / name).read_bytes(), name
+    assert np.load(entry)["model"].size > 0  # written again, readable
 
 
 @pytest.fixture(scope="module")

@@ -54,6 +54,7 @@ solve`` does), so that after the solve only the solution's values are placed and
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 from pathlib import Path
@@ -262,12 +263,16 @@ OPENSIM_FILES_CACHE_FORMAT = 1
 _WORKER_MODULES = ("solution_model.py", "states.py", "model_ops.py")
 
 
+@functools.lru_cache(maxsize=1)
 def _opensim_version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
+    """The installed OpenSim's version file (``opensim/version.py``), read as text: no ``import
+    opensim``, and quicker than the package metadata."""
+    from importlib.util import find_spec
 
     try:
-        return version("opensim")
-    except PackageNotFoundError:
+        spec = find_spec("opensim")
+        return Path(spec.origin).with_name("version.py").read_text(encoding="utf-8")
+    except (AttributeError, TypeError, OSError, ValueError):  # no OpenSim: the worker will say so
         return "unknown"
 
 
