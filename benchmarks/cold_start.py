@@ -8,7 +8,10 @@ load. Reports per tree the median wall time, the solve time IPOPT reports and th
 the process CPU time.
 
 "Warm" is the same solve repeated in one long-lived process: ``solve_files`` with the same
-arguments, called once untimed (imports done, caches hot), then ``--repeat`` times timed.
+arguments, called once untimed (imports done, caches hot, the solution's OpenSim files written
+once so that their model work is in the cache), then ``--repeat`` times timed; a warm solve
+writes no files. A cold command with every cache entry there starts no OpenSim: it writes the
+OpenSim files from the cached model work (``docs/opensim_files.md``).
 The last table gives cold minus warm per tree: the wall times, and the "rest" (wall minus
 IPOPT's solve time, which removes the run-to-run swing of the solve itself), in wall and
 CPU seconds. That difference is what a cold command costs over a warm one.
@@ -26,7 +29,8 @@ Run it with the Pythons of two environments to compare SciPy versions.
 
 ``--quick``: the window 0.6-0.8 s of the normal trial (``--window``), one cold and one warm solve of
 this tree, the package's cache (``$MUSCLEMETAB_CACHE``); the warm process runs first, its untimed
-solve filling the caches. A check that the script runs; its times say nothing of a whole trial's.
+solve (and its OpenSim files) filling the caches. A check that the script runs; its times say
+nothing of a whole trial's.
 """
 
 from __future__ import annotations
@@ -84,7 +88,14 @@ import json, sys, time
 from musclemetab.redundancy import solve_files
 model, ik, idf, repeat = sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4])
 window = tuple(json.loads(sys.argv[5])) if len(sys.argv) > 5 else None
-solve_files(model, ik, idf, "effort-gen", window=window)  # imports, in-memory caches, the first solve: untimed
+first = solve_files(model, ik, idf, "effort-gen", window=window)  # imports, in-memory caches, the first solve: untimed
+try:  # the OpenSim files of that solve, untimed: the cold command finds their model work in the cache
+    from musclemetab.redundancy.export import write_solution_opensim_files
+except ImportError:  # a tree without them
+    write_solution_opensim_files = None
+if write_solution_opensim_files is not None:
+    import tempfile
+    write_solution_opensim_files(first, tempfile.mkdtemp(prefix="mm-warm-files-"))
 runs = []
 for _ in range(repeat):
     w0, c0 = time.perf_counter(), time.process_time()

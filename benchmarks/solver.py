@@ -192,7 +192,9 @@ def main(argv=None):
             warm_txt = (f"; warm process files->solution {warm_row[0]['files_to_solution_s']:.2f} s "
                         f"(solve {warm_row[0]['solve_s']:.2f} s)") if warm_row else ""
             print(f"cold 'musclemetab solve' ({trial}, effort-gen, new process, geometry and model parameters "
-                  f"cached, no OpenSim started), median of {len(ok)}: {med['wall_s']:.2f} s, of which the solve "
+                  f"cached; OpenSim started only by a run whose OpenSim files' model work is not yet in the "
+                  f"package's cache, $MUSCLEMETAB_CACHE), median of {len(ok)}: {med['wall_s']:.2f} s, of which "
+                  f"the solve "
                   f"{med['solve_s']:.2f} s and everything else (imports, files, set-up, writing) "
                   f"{med['overhead_s']:.2f} s{warm_txt}")
 

@@ -177,13 +177,19 @@ def test_a_short_window_solve_hands_opensim_no_pushing_tendon(example, tmp_path)
         assert f"nodes 0-{n - 2} of the solution's {n}" in head and f"node {n - 1} (0.85 s)" in head, name
 
 
-def test_files_are_the_same_with_the_model_work_done_during_the_solve(solved, example, geometry_cache, tmp_path,
-                                                                    monkeypatch):
+def test_files_are_the_same_prepared_during_the_solve_and_from_the_cache(solved, example, geometry_cache, tmp_path,
+                                                                         monkeypatch):
     """``musclemetab solve`` has the OpenSim worker prepare the solution's model while IPOPT
     solves (``solve_files``' ``before_solve`` calls ``prepare_opensim_files``); a write that finds
     the prepared model only writes it. The problem ``before_solve`` is told of is the solution's
     (mesh, parameters, DOFs), and the files are byte for byte those of a write that does all the
-    model work itself."""
+    model work itself.
+
+    That model work is cached by content, the solved muscles' parameter values left out of the
+    key: a cache filled by a write of the solution with other parameters (F0, lTs, kT and the
+    passive curve changed) serves this solution with no OpenSim at all (the cached model text
+    gets its parameters), with the same four files byte for byte; ``musclemetab solve`` with that
+    cache starts no OpenSim worker."""
     from pathlib import Path
 
     from musclemetab.opensim_bridge import call
@@ -212,11 +218,15 @@ def test_files_are_the_same_with_the_model_work_done_during_the_solve(solved, ex
     for field in PARAMETER_FIELDS:
         np.testing.assert_array_equal(getattr(told["parameters"], field), getattr(sol.parameters, field), field)
 
+    # an empty cache of the files' model work: the worker does it
+    monkeypatch.setenv("MUSCLEMETAB_CACHE", str(tmp_path / "cache-prepared"))
     prepare_opensim_files(**told)
     prepared = call("solution_model:prepared_models")  # (waits for the preparation)
     write_opensim_files(sol, tmp_path / "prepared")
     assert call("solution_model:prepared_models") == prepared  # the write found the model prepared
-    # the same model file under another path: nothing prepared for it, all the work in the write
+    # the same model file under another path, another empty cache: nothing prepared for it, all the
+    # work in the write
+    monkeypatch.setenv("MUSCLEMETAB_CACHE", str(tmp_path / "cache-unprepared"))
     model = Path(sol.record.inputs["model"])
     copy = tmp_path / "copy" / model.name
     copy.parent.mkdir()
@@ -227,6 +237,51 @@ def test_files_are_the_same_with_the_model_work_done_during_the_solve(solved, ex
         unprepared = (tmp_path / "unprepared" / name).read_bytes()
         assert (tmp_path / "prepared" / name).read_bytes() == unprepared, name
         assert (folder / name).read_bytes() == unprepared, name
+
+    import dataclasses
+
+    from musclemetab.commands import main
+    from musclemetab.opensim_bridge import client
+
+    p = sol.parameters
+    other = dataclasses.replace(sol, parameters=dataclasses.replace(
+        p, max_isometric_force_N=p.max_isometric_force_N * 1.5, tendon_slack_length_m=p.tendon_slack_length_m * 0.97,
+        tendon_stiffness=p.tendon_stiffness * 0.5, passive_kpe=p.passive_kpe + 1.0))
+    cache = tmp_path / "cache-other"
+    monkeypatch.setenv("MUSCLEMETAB_CACHE", str(cache))
+    write_opensim_files(other, tmp_path / "other")  # the worker does the model work, the cache keeps it
+    assert len(list((cache / "geometry").glob("osimfiles-*.npz"))) == 1
+    assert (tmp_path / "other" / "model.osim").read_bytes() != (folder / "model.osim").read_bytes()
+    started = []
+
+    def refuse():
+        started.append(True)
+        raise RuntimeError("the OpenSim worker was asked for although the cache holds the files' model work")
+
+    monkeypatch.setattr(client, "_ensure_started", refuse)
+    prepare_opensim_files(**told)
+    write_opensim_files(sol, tmp_path / "warm")
+    for name in OPENSIM_FILES:
+        assert (tmp_path / "warm" / name).read_bytes() == (tmp_path / "unprepared" / name).read_bytes(), name
+    out = tmp_path / "again"
+    assert main(["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
+                 str(example.id["normal"]), "--workflow", "effort-gen", "--cache-dir", str(geometry_cache),
+                 "--out", str(out)]) == 0  # the solve: the test run's memo
+    for name in OPENSIM_FILES:
+        assert (out / name).read_bytes() == (tmp_path / "unprepared" / name).read_bytes(), name
+    assert started == []
+    # a damaged entry: deleted with a warning, the work done again by OpenSim, the same files
+    monkeypatch.undo()
+    monkeypatch.setenv("MUSCLEMETAB_CACHE", str(cache))
+    from musclemetab.errors import CacheWarning
+
+    (entry,) = (cache / "geometry").glob("osimfiles-*.npz")
+    entry.write_bytes(entry.read_bytes()[:-100])
+    with pytest.warns(CacheWarning, match=f"{entry.name} cannot be read"):
+        write_opensim_files(sol, tmp_path / "redone", model_path=copy)
+    for name in OPENSIM_FILES:
+        assert (tmp_path / "redone" / name).read_bytes() == (tmp_path / "unprepared" / name).read_bytes(), name
+    assert np.load(entry)["model"].size > 0  # written again, readable
 
 
 @pytest.fixture(scope="module")

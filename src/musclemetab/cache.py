@@ -1,4 +1,5 @@
-"""On-disk cache of what OpenSim computes: muscle geometry and model parameters.
+"""On-disk cache of what OpenSim computes: muscle geometry, model parameters and the model work
+of a solution's OpenSim files (:mod:`musclemetab.redundancy.export`, ``docs/opensim_files.md``).
 
 Entries are ``.npz`` files named by a content key: the SHA-256 of a JSON description of
 the request that includes the SHA-256 of every input file (never file names or times),

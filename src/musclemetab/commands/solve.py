@@ -421,10 +421,8 @@ def _solve(args) -> int:
     # its start-up (a separate process) and the model work that needs no solution values
     # (prepare_opensim_files, asked for once each leg's problem is known) overlap with the solve
     # instead of following it
-    from ..opensim_bridge import start_in_background
     from ..redundancy.export import prepare_opensim_files
 
-    start_in_background()
     # every leg is solved before anything is written, so bad input on one leg leaves no output
     solutions = solve_sides(
         args.model, args.ik, args.id, args.workflow, sides=sides, workers=args.workers,
@@ -760,7 +758,8 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
     from ..opensim_bridge import start_in_background
     from ..redundancy.export import prepare_opensim_files
 
-    start_in_background()
+    if len(ik) > 1:  # one trial: prepare_opensim_files starts the worker unless the cache holds its work
+        start_in_background()
     ahead = prepare_opensim_files if len(ik) == 1 else None
     results = {side: solve_emg_ten(
         args.model, ik, idf, emg, emg_mapping=mapping, labels=args.labels,

@@ -39,6 +39,7 @@ import opensim as osim
 from ..errors import ModelError, UnknownMuscleError
 from ..messages import name_list
 from .model_ops import LoadedModel, model_muscles
+from .model_xml import MUSCLE_PROPERTIES
 from .states import states_along_motion
 
 __all__ = ["solution_model", "prepare_solution_model", "prepared_models", "RESERVE_PREFIX"]
@@ -75,15 +76,8 @@ def _with_degroote_muscles(model_path: str):
 
 
 def _set_parameters(mu, p: dict) -> None:
-    mu.set_max_isometric_force(float(p["max_isometric_force_N"]))
-    mu.set_optimal_fiber_length(float(p["optimal_fiber_length_m"]))
-    mu.set_tendon_slack_length(float(p["tendon_slack_length_m"]))
-    mu.set_pennation_angle_at_optimal(float(p["pennation_angle_at_optimal_rad"]))
-    mu.set_max_contraction_velocity(float(p["max_contraction_velocity"]))
-    mu.set_tendon_strain_at_one_norm_force(float(p["tendon_strain_at_one_norm_force"]))
-    mu.set_passive_fiber_strain_at_one_norm_force(float(p["passive_fiber_strain_at_one_norm_force"]))
-    mu.set_activation_time_constant(float(p["activation_time_constant_s"]))
-    mu.set_deactivation_time_constant(float(p["deactivation_time_constant_s"]))
+    for key, prop in MUSCLE_PROPERTIES.items():
+        getattr(mu, f"set_{prop}")(float(p[key]))
     mu.set_fiber_damping(0.0)
     mu.set_active_force_width_scale(1.0)
     mu.set_ignore_tendon_compliance(False)
@@ -138,7 +132,7 @@ def _prepared(model_path, parameters, ik_time, columns, in_degrees, times, solve
 
 
 def solution_model(model_path: str, out_path: str, parameters: dict, ik_time, columns: dict, in_degrees: bool,
-                   times, solved_dofs: list = (), comments: dict | None = None) -> dict:
+                   times, solved_dofs: list = ()) -> dict:
     """Write the solution's model to ``out_path``; its states and moment arms along ``times``.
 
     ``parameters``: ``{muscle: {max_isometric_force_N, optimal_fiber_length_m,
@@ -146,8 +140,6 @@ def solution_model(model_path: str, out_path: str, parameters: dict, ik_time, co
     tendon_strain_at_one_norm_force, passive_fiber_strain_at_one_norm_force,
     activation_time_constant_s, deactivation_time_constant_s}}``. Moment arms are given about
     the free, independent coordinates other than ``solved_dofs``.
-    ``comments``: ``{muscle or "": text}`` written into the model file as XML comments (before
-    the muscle's element; ``""`` at the top).
 
     Returns what :func:`.states.states_along_motion` returns for the new model, plus
     ``reserves`` (``{coordinate: actuator name}``), ``actuators`` (names in the model's
@@ -158,8 +150,6 @@ def solution_model(model_path: str, out_path: str, parameters: dict, ik_time, co
     """
     model, info = _prepared(str(model_path), parameters, ik_time, columns, in_degrees, times, solved_dofs)
     model.printToXML(str(out_path))
-    if comments:
-        _add_comments(str(out_path), comments)
     return dict(info)
 
 
@@ -317,29 +307,6 @@ def _spans(model, muscle, coordinate: str, m: LoadedModel) -> bool:
     bodies = {points.get(i).getParentFrame().findBaseFrame().getName() for i in range(points.getSize())}
     moved = m._moved.get(coordinate, set())
     return bool(bodies & moved) and bool(bodies - moved)
-
-
-def _add_comments(path: str, comments: dict) -> None:
-    """XML comments in the model file: ``comments[""]`` after the XML declaration, each
-    muscle's before its element (OpenSim ignores comments when it reads the file)."""
-    def clean(text: str) -> str:
-        return text.replace("--", "- -")
-
-    with open(path, encoding="utf-8") as fh:
-        lines = fh.read().split("\n")
-    out = []
-    for i, line in enumerate(lines):
-        s = line.strip()
-        if s.startswith("<DeGrooteFregly2016Muscle name=\""):
-            name = s.split("\"")[1]
-            if name in comments:
-                indent = line[: len(line) - len(line.lstrip())]
-                out.append(f"{indent}<!-- {clean(comments[name])} -->")
-        out.append(line)
-        if i == 0 and s.startswith("<?xml") and "" in comments:
-            out.append(f"<!-- {clean(comments[''])} -->")
-    with open(path, "w", encoding="utf-8") as fh:
-        fh.write("\n".join(out))
 
 
 def muscles_over_states(model_path: str, states_path: str, muscles: list, fiber_length_m=None) -> dict:

@@ -44,13 +44,18 @@ that node (its arrays are the optimum's); the files leave it out.
 The coordinates are those the solve used: the IK frames of the solved window, low-pass
 filtered as the solve filtered the muscle-tendon lengths (``input_preparation`` in
 ``summary.json``) and interpolated with not-a-knot cubic splines. The model work runs in the
-OpenSim worker (:mod:`musclemetab.opensim_bridge.solution_model`); :func:`prepare_opensim_files`
-starts the part that needs no solution values while the solution is being solved (``musclemetab
+OpenSim worker (:mod:`musclemetab.opensim_bridge.solution_model`) and is kept in the package's
+on-disk cache (:mod:`musclemetab.cache`), keyed by the content of the model, the motion, the
+solved muscles and DOFs but not by the muscles' parameter values, which are placed into the
+cached model text: a write that finds the entry starts no OpenSim. Without it,
+:func:`prepare_opensim_files` starts the work while the solution is being solved (``musclemetab
 solve`` does), so that after the solve only the solution's values are placed and the files written.
 """
 
 from __future__ import annotations
 
+import functools
+import json
 import os
 from pathlib import Path
 
@@ -62,7 +67,7 @@ from ..messages import name_list
 __all__ = ["STATES_FILE", "CONTROLS_FILE", "FORCES_FILE", "MODEL_FILE", "OPENSIM_FILES", "equilibrium_nodes",
            "tendon_strain_at_one_norm_force", "passive_fiber_strain_at_one_norm_force",
            "opensim_muscle_parameters", "normalized_tendon_force_state", "inverse_dynamics_at", "opensim_tables",
-           "prepare_opensim_files", "write_opensim_files", "write_solution_opensim_files",
+           "prepare_opensim_files", "model_work_is_cached", "write_opensim_files", "write_solution_opensim_files",
            "write_opensim_states", "joint_reaction"]
 
 STATES_FILE = "states.sto"
@@ -234,19 +239,120 @@ def _model_inputs(model_path, ik_path, time_s, filtered: bool, parameters, dofs)
 def prepare_opensim_files(model_path, ik_path, time_s, parameters, dofs, filtered: bool = True) -> None:
     """Start the OpenSim work of :func:`write_opensim_files` that needs no solution values, for a
     solution about to be solved over the mesh ``time_s`` with ``parameters`` and the solved
-    ``dofs`` (the IK filtered as the solve filters it when ``filtered``): the OpenSim worker
-    converts the model, sets the parameters, adds the reserves and computes the states and moment
-    arms along the motion while this process solves, and keeps the result for the files of that
-    solution (:func:`musclemetab.opensim_bridge.call_in_background`). Nothing is written and the
-    files are the same with or without it; bad input is left to the write, which reports it."""
+    ``dofs`` (the IK filtered as the solve filters it when ``filtered``): unless the cache holds
+    that work (:func:`model_work_is_cached`), the OpenSim worker converts the model, sets the
+    parameters, adds the reserves and computes the states and moment arms along the motion while
+    this process solves, and keeps the result for the files of that solution
+    (:func:`musclemetab.opensim_bridge.call_in_background`). Nothing is written and the files are
+    the same with or without it; bad input is left to the write, which reports it."""
     from ..errors import MusclemetabError
     from ..opensim_bridge import call_in_background
 
     try:
         args = _model_inputs(model_path, ik_path, time_s, filtered, parameters, dofs)
+        if model_work_is_cached(*args):
+            return
     except (MusclemetabError, OSError):
         return
     call_in_background("solution_model:prepare_solution_model", *args)
+
+
+#: bump when the cached model work of the OpenSim files changes meaning
+OPENSIM_FILES_CACHE_FORMAT = 1
+#: the worker's modules that do the model work: their source is part of the cache key
+_WORKER_MODULES = ("solution_model.py", "states.py", "model_ops.py")
+
+
+@functools.lru_cache(maxsize=1)
+def _opensim_version() -> str:
+    """The installed OpenSim's version file (``opensim/version.py``), read as text: no ``import
+    opensim``, and quicker than the package metadata."""
+    from importlib.util import find_spec
+
+    try:
+        spec = find_spec("opensim")
+        return Path(spec.origin).with_name("version.py").read_text(encoding="utf-8")
+    except (AttributeError, TypeError, OSError, ValueError):  # no OpenSim: the worker will say so
+        return "unknown"
+
+
+def _model_work_spec(model, parameters, ik_t, columns, in_degrees, times, dofs) -> dict:
+    """The cache key's description of the model work of :func:`_model_inputs`' inputs: the model
+    file's content, the OpenSim version and the source of the worker's modules that do the work,
+    the solved muscles (names, not parameter values: those are placed in the text,
+    :func:`~musclemetab.opensim_bridge.model_xml.with_muscle_properties`), the DOFs and the motion
+    (the IK window's values and the node times)."""
+    import hashlib
+
+    from ..io.atomic import file_sha256
+
+    here = Path(__file__).resolve().parent.parent / "opensim_bridge"
+    motion = hashlib.sha256()
+    for name, a in (("ik time", ik_t), ("node times", times), *sorted(columns.items())):
+        a = np.ascontiguousarray(a, dtype=float)
+        motion.update(f"{name}:{a.shape}".encode())
+        motion.update(a.tobytes())
+    return {"fmt": OPENSIM_FILES_CACHE_FORMAT, "call": "opensim files", "model": file_sha256(model),
+            "opensim": _opensim_version(), "worker": [file_sha256(here / m) for m in _WORKER_MODULES],
+            "muscles": list(parameters), "dofs": list(dofs), "in_degrees": bool(in_degrees),
+            "motion": motion.hexdigest()}
+
+
+_PREFIX = "osimfiles-"
+_WHAT = "OpenSim files"
+
+
+def model_work_is_cached(model, parameters, ik_t, columns, in_degrees, times, dofs) -> bool:
+    """Whether the cache holds the model work for these inputs (those of :func:`_model_inputs`;
+    nothing is read or created)."""
+    from ..cache import existing_entry
+
+    return existing_entry(_model_work_spec(model, parameters, ik_t, columns, in_degrees, times, dofs), None,
+                          prefix=_PREFIX)
+
+
+def _info_json(info: dict) -> bytes:
+    return json.dumps(info, default=lambda a: np.asarray(a).tolist()).encode()
+
+
+def _info_from_json(data: bytes) -> dict:
+    info = json.loads(data.decode())
+    info["values"] = {k: np.asarray(v, dtype=float) for k, v in info["values"].items()}
+    info["moment_arms_m"] = {c: {m: np.asarray(r, dtype=float) for m, r in arms.items()}
+                             for c, arms in info["moment_arms_m"].items()}
+    return info
+
+
+def _model_work(model, model_out, parameters, ik_t, columns, in_degrees, t, dofs) -> tuple[str, dict]:
+    """``(model text, info)`` of the solution's model: the text OpenSim writes for it (no comments)
+    and what the worker's :func:`~musclemetab.opensim_bridge.solution_model.solution_model`
+    returns. From the package's cache when it holds the work for these inputs (no OpenSim: the
+    cached text gets these parameters); otherwise the worker writes ``model_out`` and the result
+    is cached (``docs/opensim_files.md``)."""
+    from ..cache import discard_entry, entry_path, read_entry, write_entry
+    from ..opensim_bridge import call
+    from ..opensim_bridge.model_xml import with_muscle_properties
+
+    entry = entry_path(_model_work_spec(model, parameters, ik_t, columns, in_degrees, t, dofs), None, _WHAT,
+                       prefix=_PREFIX)
+    if entry is not None:
+        arrays, problem = read_entry(entry)
+        if arrays is not None:
+            try:
+                return (with_muscle_properties(arrays["model"].tobytes().decode(), parameters),
+                        _info_from_json(arrays["info"].tobytes()))
+            except (KeyError, ValueError, TypeError) as exc:
+                problem = f"does not hold the model work of OpenSim files ({exc})"
+        if problem:
+            discard_entry(entry, problem, _WHAT)
+    info = call("solution_model:solution_model", model, str(model_out), parameters, ik_t, columns, in_degrees, t,
+                dofs)
+    with open(model_out, encoding="utf-8", newline="") as fh:
+        text = fh.read()
+    if entry is not None:
+        write_entry(entry, _WHAT, model=np.frombuffer(text.encode(), dtype=np.uint8),
+                    info=np.frombuffer(_info_json(info), dtype=np.uint8))
+    return text, info
 
 
 def inverse_dynamics_at(id_path, coordinates, times) -> dict:
@@ -295,16 +401,18 @@ def _table(t, columns: dict, name: str, rows: slice = slice(None)):
 
 def opensim_tables(solution, model_out, model_path=None, ik_path=None, id_path=None):
     """Write the solution's model to ``model_out``; return its states, controls and forces
-    tables (:class:`~musclemetab.io.StorageTable`, NumPy: no pandas) and what the worker reported."""
-    from ..opensim_bridge import call
+    tables (:class:`~musclemetab.io.StorageTable`, NumPy: no pandas) and what the worker reported
+    (:func:`_model_work`: from the cache when it holds the model work, with no OpenSim)."""
+    from ..opensim_bridge.model_xml import with_comments
 
     paths = _solution_inputs(solution, model_path, ik_path, id_path)
     t = np.asarray(solution.time_s, dtype=float)
     filtered = str((solution.record.input_preparation or {}).get("filter", "none")) != "none"
     model, parameters, ik_t, columns, in_degrees, _, dofs = _model_inputs(
         paths["model"], paths["ik"], t, filtered, solution.parameters, solution.dofs)
-    info = call("solution_model:solution_model", model, str(model_out), parameters, ik_t, columns, in_degrees, t,
-                dofs, _model_comments(solution, paths["model"]))
+    text, info = _model_work(model, model_out, parameters, ik_t, columns, in_degrees, t, dofs)
+    with open(model_out, "w", encoding="utf-8", newline="") as fh:
+        fh.write(with_comments(text, _model_comments(solution, paths["model"])))
     paths_of = info["muscle_paths"]
     # states
     values = dict(info["values"])
