@@ -27,6 +27,8 @@ status, for inspection).
 
 from __future__ import annotations
 
+import functools
+
 import argparse
 
 from ..errors import OptionError, SolverError, UnknownMuscleError
@@ -433,7 +435,8 @@ def _solve(args) -> int:
         passive=args.passive, tendon_stiffness=kt, tendon_stiffness_file=args.parameters,
         options=options, goals=goals, cache_dir=args.cache_dir, check_units=not args.skip_unit_checks, warm_start=warm,
         exclude_muscles=excluded, exclude_missing_ok=args.side == "both",
-        diagnose_only=getattr(args, "diagnose_only", False), before_solve=prepare_opensim_files, **assistance,
+        diagnose_only=getattr(args, "diagnose_only", False),
+        before_solve=functools.partial(prepare_opensim_files, cache_dir=args.cache_dir), **assistance,
     )
     if getattr(args, "diagnose_only", False):
         return _report_diagnoses(solutions)
@@ -443,7 +446,7 @@ def _solve(args) -> int:
     with sigint_deferred():  # Ctrl-C leaves the previous legs' folders or all the new ones
         for side, solution in solutions.items():
             out = Path(args.out) / side if args.side == "both" else Path(args.out)
-            write_solution_folder(solution, out)
+            write_solution_folder(solution, out, cache_dir=args.cache_dir)
     for side, solution in solutions.items():
         out = Path(args.out) / side if args.side == "both" else Path(args.out)
         s = solution.record
@@ -760,7 +763,7 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
 
     if len(ik) > 1:  # one trial: prepare_opensim_files starts the worker unless the cache holds its work
         start_in_background()
-    ahead = prepare_opensim_files if len(ik) == 1 else None
+    ahead = functools.partial(prepare_opensim_files, cache_dir=args.cache_dir) if len(ik) == 1 else None
     results = {side: solve_emg_ten(
         args.model, ik, idf, emg, emg_mapping=mapping, labels=args.labels,
         passive=args.passive, dofs=dofs, side=side,
@@ -778,7 +781,8 @@ def _informed_command(args, ik: list, idf: list, settings, tendon_stiffness) -> 
     with sigint_deferred():  # Ctrl-C leaves the previous legs' folders or all the new ones
         for side, result in results.items():
             if len(result.solutions) == 1:
-                write_solution_folder(next(iter(result.solutions.values())), _leg_out(args, side))
+                write_solution_folder(next(iter(result.solutions.values())), _leg_out(args, side),
+                                      cache_dir=args.cache_dir)
             else:
                 result.write(_leg_out(args, side))
     for side, result in results.items():

@@ -236,7 +236,7 @@ def _model_inputs(model_path, ik_path, time_s, filtered: bool, parameters, dofs)
             t, list(dofs))
 
 
-def prepare_opensim_files(model_path, ik_path, time_s, parameters, dofs, filtered: bool = True) -> None:
+def prepare_opensim_files(model_path, ik_path, time_s, parameters, dofs, filtered: bool = True, cache_dir=None) -> None:
     """Start the OpenSim work of :func:`write_opensim_files` that needs no solution values, for a
     solution about to be solved over the mesh ``time_s`` with ``parameters`` and the solved
     ``dofs`` (the IK filtered as the solve filters it when ``filtered``): unless the cache holds
@@ -250,7 +250,7 @@ def prepare_opensim_files(model_path, ik_path, time_s, parameters, dofs, filtere
 
     try:
         args = _model_inputs(model_path, ik_path, time_s, filtered, parameters, dofs)
-        if model_work_is_cached(*args):
+        if model_work_is_cached(*args, cache_dir=cache_dir):
             return
     except (MusclemetabError, OSError):
         return
@@ -302,12 +302,12 @@ _PREFIX = "osimfiles-"
 _WHAT = "OpenSim files"
 
 
-def model_work_is_cached(model, parameters, ik_t, columns, in_degrees, times, dofs) -> bool:
-    """Whether the cache holds the model work for these inputs (those of :func:`_model_inputs`;
-    nothing is read or created)."""
+def model_work_is_cached(model, parameters, ik_t, columns, in_degrees, times, dofs, cache_dir=None) -> bool:
+    """Whether the cache (``cache_dir``, default the package's) holds the model work for these inputs
+    (those of :func:`_model_inputs`; nothing is read or created)."""
     from ..cache import existing_entry
 
-    return existing_entry(_model_work_spec(model, parameters, ik_t, columns, in_degrees, times, dofs), None,
+    return existing_entry(_model_work_spec(model, parameters, ik_t, columns, in_degrees, times, dofs), cache_dir,
                           prefix=_PREFIX)
 
 
@@ -323,17 +323,17 @@ def _info_from_json(data: bytes) -> dict:
     return info
 
 
-def _model_work(model, model_out, parameters, ik_t, columns, in_degrees, t, dofs) -> tuple[str, dict]:
+def _model_work(model, model_out, parameters, ik_t, columns, in_degrees, t, dofs, cache_dir=None) -> tuple[str, dict]:
     """``(model text, info)`` of the solution's model: the text OpenSim writes for it (no comments)
     and what the worker's :func:`~musclemetab.opensim_bridge.solution_model.solution_model`
     returns. From the package's cache when it holds the work for these inputs (no OpenSim: the
     cached text gets these parameters); otherwise the worker writes ``model_out`` and the result
-    is cached (``docs/opensim_files.md``)."""
+    is cached in ``cache_dir`` (default the package's; ``docs/opensim_files.md``)."""
     from ..cache import discard_entry, entry_path, read_entry, write_entry
     from ..opensim_bridge import call
     from ..opensim_bridge.model_xml import with_muscle_properties
 
-    entry = entry_path(_model_work_spec(model, parameters, ik_t, columns, in_degrees, t, dofs), None, _WHAT,
+    entry = entry_path(_model_work_spec(model, parameters, ik_t, columns, in_degrees, t, dofs), cache_dir, _WHAT,
                        prefix=_PREFIX)
     if entry is not None:
         arrays, problem = read_entry(entry)
@@ -399,7 +399,7 @@ def _table(t, columns: dict, name: str, rows: slice = slice(None)):
     return StorageTable(t[rows], list(columns), values[rows], {"name": name, "in_degrees": False})
 
 
-def opensim_tables(solution, model_out, model_path=None, ik_path=None, id_path=None):
+def opensim_tables(solution, model_out, model_path=None, ik_path=None, id_path=None, cache_dir=None):
     """Write the solution's model to ``model_out``; return its states, controls and forces
     tables (:class:`~musclemetab.io.StorageTable`, NumPy: no pandas) and what the worker reported
     (:func:`_model_work`: from the cache when it holds the model work, with no OpenSim)."""
@@ -410,7 +410,7 @@ def opensim_tables(solution, model_out, model_path=None, ik_path=None, id_path=N
     filtered = str((solution.record.input_preparation or {}).get("filter", "none")) != "none"
     model, parameters, ik_t, columns, in_degrees, _, dofs = _model_inputs(
         paths["model"], paths["ik"], t, filtered, solution.parameters, solution.dofs)
-    text, info = _model_work(model, model_out, parameters, ik_t, columns, in_degrees, t, dofs)
+    text, info = _model_work(model, model_out, parameters, ik_t, columns, in_degrees, t, dofs, cache_dir)
     with open(model_out, "w", encoding="utf-8", newline="") as fh:
         fh.write(with_comments(text, _model_comments(solution, paths["model"])))
     paths_of = info["muscle_paths"]
@@ -457,14 +457,15 @@ def opensim_tables(solution, model_out, model_path=None, ik_path=None, id_path=N
 
 
 def write_opensim_files(solution, out_dir: str | os.PathLike | None = None, *, model_path=None, ik_path=None,
-                        id_path=None) -> dict[str, Path]:
+                        id_path=None, cache_dir=None) -> dict[str, Path]:
     """Write ``model.osim``, ``states.sto``, ``controls.sto`` and ``forces.sto`` of a solution
     (a :class:`~.solution.Solution` or its folder) into ``out_dir`` (default: the solution
     folder), all four together (atomically).
 
     The model, IK and ID files default to those the solution names (``summary.json``
     ``inputs``); without an ID file the reserves of the coordinates outside the problem are
-    ``-sum(r F)`` alone.
+    ``-sum(r F)`` alone. The model work comes from the cache ``cache_dir`` (default the
+    package's) when it holds it.
     """
     from ..io import atomic_directory, write_storage
     from .solution import Solution
@@ -484,7 +485,7 @@ def write_opensim_files(solution, out_dir: str | os.PathLike | None = None, *, m
              f"those where its Hill equilibrium holds; node {left_out} ({solution.time_s[left_out]:g} s), which the "
              "fiber dynamics reaches without an equilibrium (its tendon force can be slack, compressive), is left out")
     with atomic_directory(out_dir, mark=True) as tmp:
-        states, controls, forces, _ = opensim_tables(solution, tmp / MODEL_FILE, model_path, ik_path, id_path)
+        states, controls, forces, _ = opensim_tables(solution, tmp / MODEL_FILE, model_path, ik_path, id_path, cache_dir)
         write_storage(tmp / STATES_FILE, states, name="musclemetab states", in_degrees=False,
                       comments=[f"OpenSim states of the muscle redundancy solution for {MODEL_FILE} (SI units: rad, "
                                 "m, rad/s, m/s)", nodes])
@@ -497,14 +498,14 @@ def write_opensim_files(solution, out_dir: str | os.PathLike | None = None, *, m
             "forces": out_dir / FORCES_FILE}
 
 
-def write_solution_opensim_files(solution, out_dir) -> dict[str, Path] | None:
+def write_solution_opensim_files(solution, out_dir, cache_dir=None) -> dict[str, Path] | None:
     """:func:`write_opensim_files` of a converged solution that names its model and IK files (a
     solve from files); ``None`` (nothing written) for one solved from arrays alone or one that
     did not converge (its values are no solution to reproduce)."""
     inputs = solution.record.inputs or {}
     if not (inputs.get("model") and inputs.get("ik")) or not solution.success:
         return None
-    return write_opensim_files(solution, out_dir)
+    return write_opensim_files(solution, out_dir, cache_dir=cache_dir)
 
 
 def write_opensim_states(solution, model_path, ik_path, out_dir: str | os.PathLike | None = None) -> dict[str, Path]:

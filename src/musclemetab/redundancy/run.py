@@ -202,7 +202,7 @@ def check_solution_folders(folders) -> None:
         check_replaceable(folder, SOLUTION_FOLDER_FILES)
 
 
-def write_solution_folder(solution, out, opensim_files: bool = True) -> None:
+def write_solution_folder(solution, out, opensim_files: bool = True, cache_dir=None) -> None:
     """Write a solution; inverse dynamics computed by OpenSim goes beside it as ``inverse_dynamics.sto``,
     and with ``opensim_files`` the OpenSim model, states, controls and forces that reproduce it
     (:func:`.export.write_solution_opensim_files`)."""
@@ -217,4 +217,4 @@ def write_solution_folder(solution, out, opensim_files: bool = True) -> None:
     if opensim_files:
         from .export import write_solution_opensim_files
 
-        write_solution_opensim_files(solution, out)
+        write_solution_opensim_files(solution, out, cache_dir=cache_dir)
