@@ -401,7 +401,7 @@ def test_solve_prints_progress_while_ipopt_runs(example, tmp_path, capsys, monke
 
 @pytest.mark.opensim
 def test_solve_both_legs_in_two_processes_prints_each_legs_progress(example, tmp_path, capfd, monkeypatch):
-    """``solve --side both --workers 2`` of a short window (0.6-0.9 s, a problem no other test
+    """``solve --side both --workers 2`` of a short window (0.6-0.88 s, a problem no other test
     solves, so IPOPT runs in each leg's pool process) with the throttle at 0 s: each leg's
     process prints a line for every iterate, labelled with the leg, on the command's standard
     error: the interval in force in the command reaches the legs' processes."""
@@ -411,7 +411,7 @@ def test_solve_both_legs_in_two_processes_prints_each_legs_progress(example, tmp
     monkeypatch.setattr(progress, "PROGRESS_INTERVAL_S", 0.0)
     out = tmp_path / "s"
     assert main(["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
-                 str(example.id["normal"]), "--window", "0.6:0.9", "--side", "both",
+                 str(example.id["normal"]), "--window", "0.6:0.88", "--side", "both",
                  "--workers", "2", "--out", str(out)]) == 0
     err = capfd.readouterr().err
     lines = re.findall(r"^musclemetab: solving side ([rl]): iteration (\d+), objective \S+, "
