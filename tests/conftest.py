@@ -64,6 +64,21 @@ def reference_table():
 
 
 @pytest.fixture(scope="session")
+def builder_entries():
+    """``entries(summary) -> list``: the keys of a ``summary.json`` that a solve's record builder
+    writes (those before the residuals), to compare with ``tests/data/trial_record_order.json``
+    (``entries.before[kind]``: the keys, in order, of each kind of solve before one builder made them)."""
+    import json
+
+    def entries(summary: dict) -> list:
+        keys = list(summary)
+        return keys[:keys.index("max_moment_residual_Nm")]
+
+    entries.before = json.loads((TEST_DATA / "trial_record_order.json").read_text())
+    return entries
+
+
+@pytest.fixture(scope="session")
 def demo(tmp_path_factory):
     """``musclemetab demo`` run once per test run: ``(output folder, results table)``.
 

@@ -96,6 +96,16 @@ def solutions(emg_ten):
 # --------------------------------------------------------------------------- results
 @pytest.mark.opensim
 @pytest.mark.slow
+def test_each_trials_record_keeps_its_entries_and_their_order(emg_ten, builder_entries):
+    """The entries of each trial's ``summary.json`` that the record builder writes are those the
+    package wrote before one builder made the records of the three kinds of solve, in order."""
+    for t in TRIALS:
+        raw = json.loads((emg_ten[0] / t / "summary.json").read_text())
+        assert builder_entries(raw) == builder_entries.before["emg-ten"], t
+
+
+@pytest.mark.opensim
+@pytest.mark.slow
 def test_result_load_and_write_round_trip(emg_ten, parameters, solutions, tmp_path):
     """``Result.load`` reads what the solve wrote (estimates, settings, solutions), and writing
     the loaded result again gives the same files: the solutions byte for byte, ``parameters.json``

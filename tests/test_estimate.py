@@ -152,7 +152,7 @@ def _ultrasound(example, path, scale_mm=1.0):
 
 
 @pytest.mark.opensim
-def test_estimate_command_records_a_stopped_solve(example, tmp_path, monkeypatch):
+def test_estimate_command_records_a_stopped_solve(example, tmp_path, monkeypatch, builder_entries):
     """Plumbing of ``musclemetab estimate`` (3 iterations): the solutions and parameters.json are
     written with IPOPT's status, no personalised model, no OpenSim files (no solution to
     reproduce), exit status 1 with one line; IPOPT's progress lines while it runs (the
@@ -174,7 +174,8 @@ def test_estimate_command_records_a_stopped_solve(example, tmp_path, monkeypatch
     assert doc["solve"]["status"] == "Maximum_Iterations_Exceeded" and doc["solve"]["success"] is False
     f = doc["factors"]["tendon_stiffness"]
     assert set(f) == {"soleus_r", "gasmed_r"} and f["soleus_r"] == f["gasmed_r"]  # coupled
-    assert (out / "normal" / "summary.json").is_file()
+    # the trial's record: the builder's entries, in the order of before one builder made them
+    assert builder_entries(json.loads((out / "normal" / "summary.json").read_text())) == builder_entries.before["estimate"]
     assert not list(out.glob("*_personalised.osim")) and not (out / "normal" / "model.osim").exists()
     assert re.findall(r"^musclemetab: solving: iteration (\d+), ", text, flags=re.M) == ["0", "1", "2", "3"]
 

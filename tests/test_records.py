@@ -66,6 +66,25 @@ def test_a_solves_summary_reads_typed_and_writes_back_byte_for_byte(effort_gen, 
     assert (tmp_path / "again" / SUMMARY_FILE).read_text(encoding="utf-8") == text
 
 
+def test_an_effort_solves_record_keeps_its_entries_and_their_order(effort_gen, builder_entries):
+    """The entries that the record builder (``redundancy/records_build.py``) writes into a
+    single-trial effort solve's ``summary.json`` are those the package wrote before one builder
+    made the records of the three kinds of solve, in the same order."""
+    raw = json.loads((effort_gen / SUMMARY_FILE).read_text(encoding="utf-8"))
+    assert builder_entries(raw) == builder_entries.before["effort"]
+
+
+def test_the_record_builder_refuses_an_entry_its_kind_does_not_write_and_a_missing_one():
+    from musclemetab.redundancy.record import RunRecord
+    from musclemetab.redundancy.records_build import trial_record
+
+    run = RunRecord(status="Solve_Succeeded", success=True)
+    with pytest.raises(TypeError, match="estimate records no emg_tracking"):
+        trial_record("estimate", run, None, None, None, None, fiber_dynamics="forward", emg_tracking={})
+    with pytest.raises(TypeError, match="effort record needs its preparation_time_s"):
+        trial_record("effort", run, None, None, None, None, fiber_dynamics="forward")
+
+
 def test_every_summary_of_the_demo_study_round_trips(demo):
     """The units of ``musclemetab demo`` (three trials, two workflows), also after a trip through
     pickle (as a solution travels between processes); each names the workflow of its unit folder."""

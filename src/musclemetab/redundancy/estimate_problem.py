@@ -133,13 +133,11 @@ def solve_estimate(problem):
     :class:`~.result.Result` with each trial's solution (the estimates applied) and the content of
     ``parameters.json`` (``document``; the personalised model and the validation are added when
     written, :func:`.estimate_run.estimate_files`)."""
-    from .bounds import fiber_length_bounds_record
     from .emg_inputs import emg_at_nodes
     from .estimate import estimate_parameters, fiber_length_trial
-    from .ipopt import solver_record
     from .record import ProblemRecord, RunRecord
+    from .records_build import trial_solution
     from .result import ESTIMATE_FORMAT, Result
-    from .solution import build_solution
     from .solve import prepare_trial
     from .static_opt import initial_guess
 
@@ -170,15 +168,12 @@ def solve_estimate(problem):
     solutions = {}
     for t, o, trial in zip(trials, res.trials, problem.trials):
         diag = trial.diagnosis
-        summary = {**run.to_dict(), **emg_record, "objective_trial": o.objective, "objective_terms": o.objective_terms,
-                   "time_window_s": list(t.inputs.window_s), "n_intervals": t.inputs.n_intervals,
-                   "mesh_step_s": t.inputs.step_s, "optimal_reserve_Nm": options.optimal_reserve_Nm,
-                   "fiber_dynamics": goals.fiber_dynamics,
-                   "fiber_length_bounds": fiber_length_bounds_record(t.inputs, problem.parameters, specs),
-                   "workflow": {"name": f"{problem.workflow} estimate", "estimate": est.to_dict()["factors"]},
-                   "solver_options": solver_record(options, goals.effort()), "diagnosis": diag.to_dict(),
-                   **({"excluded_muscles": list(problem.excluded_muscles)} if problem.excluded_muscles else {})}
-        solutions[t.label] = build_solution(t.inputs, estimated.subset(t.inputs.muscles), o, summary)
+        solutions[t.label] = trial_solution(
+            "estimate", run, t.inputs, problem.parameters, options, goals, o, solved=estimated,
+            fiber_dynamics=goals.fiber_dynamics, specs=specs, **emg_record,
+            workflow={"name": f"{problem.workflow} estimate", "estimate": est.to_dict()["factors"]},
+            diagnosis=diag.to_dict(),
+            **({"excluded_muscles": list(problem.excluded_muscles)} if problem.excluded_muscles else {}))
         if not run.success:
             from .diagnosis import last_iterate_violations
 

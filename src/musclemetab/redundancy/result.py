@@ -340,10 +340,9 @@ def assemble_result(trials, params, wf_record, ocp, settings, options, t_prep, t
     estimated tendon stiffness, the estimates and the solve record."""
     import time as _time
 
-    from .bounds import fiber_length_bounds_record
     from .ipopt import solver_record
     from .record import RunRecord
-    from .solution import build_solution
+    from .records_build import input_preparation, trial_solution
 
     tendon_scale = dict(ocp.factors.get("tendon_stiffness", {}))
     emg_scale = dict(ocp.factors["emg_scale"])
@@ -385,39 +384,21 @@ def assemble_result(trials, params, wf_record, ocp, settings, options, t_prep, t
     }
     solutions = {}
     for t, o, dev in zip(trials, ocp.trials, ocp.emg_deviation):
-        inp = t.inputs
-        summary = {
-            **run.to_dict(),
-            "objective_trial": o.objective,
-            "objective_terms": o.objective_terms,
-            "input_hashes": {k.split("/", 1)[1]: v for k, v in run.input_hashes.items()
-                             if k.startswith(f"{t.label}/")},
-            "preparation_time_s": t_prep,
-            "problem_size": dict(record["problem_size"]),
-            "time_window_s": list(inp.window_s),
-            "n_intervals": inp.n_intervals,
-            "mesh_step_s": inp.step_s,
-            "optimal_reserve_Nm": options.optimal_reserve_Nm,
-            "static_optimisation_objective": t.static_optimisation_objective,
-            "initial_guess": record["initial_guess"],
-            "workflow": dict(workflow, trial=t.label),
-            "emg_tracking": {
+        sol = trial_solution(
+            "emg-ten", run, t.inputs, params, options, settings.goals, o, solved=est_params,
+            fiber_dynamics=settings.fiber_scheme, sources=t.sources,
+            input_hashes={k.split("/", 1)[1]: v for k, v in run.input_hashes.items() if k.startswith(f"{t.label}/")},
+            preparation_time_s=t_prep, problem_size=dict(record["problem_size"]),
+            static_optimisation_objective=t.static_optimisation_objective, initial_guess=record["initial_guess"],
+            workflow=dict(workflow, trial=t.label),
+            emg_tracking={
                 m: {"channels": t.emg_channels[m], "scale": emg_scale[m],
                     "max_abs_deviation": float(np.max(np.abs(dev[:, j]))) if dev.size else 0.0,
                     "rms_deviation": float(np.sqrt(np.mean(dev[:, j] ** 2))) if dev.size else 0.0}
                 for j, m in enumerate(t.emg_muscles)
             },
-            "emg_tolerance": settings.emg_tolerance,
-            "fiber_dynamics": settings.fiber_scheme,
-            # the problem's bounds: those of the nominal parameters (kT and EMG scales do not change them)
-            "fiber_length_bounds": fiber_length_bounds_record(inp, params),
-            "solver_options": solver_record(options, settings.goals.effort()),
-            "input_preparation": {"filter": "butterworth 6th order 6 Hz zero-phase (MATLAB filtfilt padding)",
-                                  "mesh_intervals_per_second": 100, "interpolation": "not-a-knot cubic spline",
-                                  "emg": "linear interpolation at nodes 0..N-1"},
-            "inputs": {k: str(v) for k, v in t.sources.items()},
-        }
-        sol = build_solution(inp, est_params.subset(inp.muscles), o, summary)
+            emg_tolerance=settings.emg_tolerance,
+            input_preparation=input_preparation(mesh_frequency_hz=100, emg=True))
         solutions[t.label] = replace(sol, record=sol.record.with_(total_time_s=_time.perf_counter() - t_start))
     if ocp.success:  # doubts, warned and recorded (docs/problem.md, "Doubts of the estimates")
         from .identifiability import BOUND_TOLERANCE, check_informed, factors_on_bounds, warn_on_bounds

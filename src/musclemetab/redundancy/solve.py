@@ -20,10 +20,11 @@ from .inputs import (
     restrict_geometry,
 )
 from .parameters import MuscleTendonParameters
-from .ipopt import SolverOptions, single_trial_goals, solve_ocp, solver_record
+from .ipopt import SolverOptions, single_trial_goals, solve_ocp
 from .transcription import Goals
 from .record import RunRecord
-from .solution import Solution, build_solution
+from .records_build import input_preparation, trial_solution
+from .solution import Solution
 from .static_opt import guess_from_solution, initial_guess, static_optimisation
 from .workflows import (
     PassiveParameters,
@@ -101,40 +102,27 @@ def solve_with_parameters(
             options = options.with_(ipopt={"mu_init": WARM_START_MU_INIT, **options.ipopt})
     t_prep = _time.perf_counter() - t_start
     ocp = solve_ocp(inputs, params, guess, options, goals)
-    from .bounds import fiber_length_bounds_record
-
-    summary = {
-        **RunRecord.from_result(ocp, sources).to_dict(),
-        "preparation_time_s": t_prep,
-        "problem_size": {"variables": ocp.n_variables, "equality_constraints": ocp.n_constraints},
-        "time_window_s": list(inputs.window_s),
-        "n_intervals": inputs.n_intervals,
-        "mesh_step_s": inputs.step_s,
-        "optimal_reserve_Nm": options.optimal_reserve_Nm,
-        "static_optimisation_objective": so.objective,
-        "fiber_dynamics": goals.fiber_dynamics,
-        "fiber_length_bounds": fiber_length_bounds_record(inputs, params),
-        "initial_guess": "static optimisation (rigid tendons)" if warm_start is None else
-        f"warm start from {warm_start.record.workflow_name or 'a previous solution'} "
-        + ("(its optimum and multipliers)" if ocp.started_from_optimum else
-           f"(mu_init {WARM_START_MU_INIT:g})" if guess.start is None else "(its states)"),
-        "workflow": dict(workflow_record or {"name": "custom"}),
-        "solver_options": solver_record(options, goals),
-        "input_preparation": {"filter": "butterworth 6th order 6 Hz zero-phase (MATLAB filtfilt padding)"
-                              if filter_inputs else "none",
-                              "mesh_intervals_per_second": mesh_frequency_hz, "interpolation": "not-a-knot cubic spline"},
-        "inputs": {k: str(v) for k, v in (sources or {}).items()},
-    }
+    energy = {}
     if goals.energy is not None:
         from .energy import leg_rate_W_per_kg
 
         N = inputs.n_intervals
         rate = leg_rate_W_per_kg(goals.energy, params, inputs.muscles, ocp.excitation, ocp.activation[:N],
                                  ocp.lm_norm[:N], ocp.fiber_velocity_lmo_per_s)
-        summary["energy_goal"] = {**goals.energy.record(), "w_activation": goals.w_activation,
-                                  "leg_mean_W_per_kg": float(np.mean(rate))}
-        summary["energy_form"] = goals.energy.form_record()
-    solution = build_solution(inputs, params, ocp, summary)
+        energy = {"energy_goal": {**goals.energy.record(), "w_activation": goals.w_activation,
+                                  "leg_mean_W_per_kg": float(np.mean(rate))},
+                  "energy_form": goals.energy.form_record()}
+    solution = trial_solution(
+        "effort", RunRecord.from_result(ocp, sources), inputs, params, options, goals, ocp,
+        fiber_dynamics=goals.fiber_dynamics, sources=sources, preparation_time_s=t_prep,
+        problem_size={"variables": ocp.n_variables, "equality_constraints": ocp.n_constraints},
+        static_optimisation_objective=so.objective,
+        initial_guess="static optimisation (rigid tendons)" if warm_start is None else
+        f"warm start from {warm_start.record.workflow_name or 'a previous solution'} "
+        + ("(its optimum and multipliers)" if ocp.started_from_optimum else
+           f"(mu_init {WARM_START_MU_INIT:g})" if guess.start is None else "(its states)"),
+        workflow=dict(workflow_record or {"name": "custom"}),
+        input_preparation=input_preparation(filter_inputs, mesh_frequency_hz), **energy)
     return replace(solution, record=solution.record.with_(total_time_s=_time.perf_counter() - t_start))
 
 
