@@ -96,7 +96,7 @@ def test_energy_goal_without_height_takes_the_model_masses(tmp_path):
     assert record["height_m"] is None and record["muscle_mass_rule"].startswith("model")
     assert "muscle_mass_rule" not in EnergyGoal("UM10", 1.0, 72.6, 1.743).record()  # as before
     # the same rate as the smooth model with those masses
-    from musclemetab.redundancy.energy import leg_rate_W_per_kg
+    from musclemetab.redundancy.objective import leg_rate_W_per_kg
 
     params = types.SimpleNamespace(subset=lambda names: types.SimpleNamespace(
         max_isometric_force_N=f0, optimal_fiber_length_m=lmo, max_contraction_velocity=np.full(3, 10.0),

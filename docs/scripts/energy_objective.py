@@ -82,7 +82,8 @@ def smoothing_table(subject, workflow) -> int:
 
     from musclemetab.metabolics.smooth import SMOOTH_MODELS
     from musclemetab.redundancy import solve_files
-    from musclemetab.redundancy.energy import CLAMPED_MODELS, EnergyGoal, leg_rate_W_per_kg
+    from musclemetab.redundancy.energy import CLAMPED_MODELS, EnergyGoal
+    from musclemetab.redundancy.objective import leg_rate_W_per_kg
 
     sol = solve_files(subject.model, subject.ik["normal"], subject.id["normal"], workflow)
     n = sol.summary["n_intervals"]
@@ -113,7 +114,8 @@ def main(argv=None) -> int:
     from musclemetab.datasets import example_subject
     from musclemetab.metabolics.solution import metabolics_from_solution
     from musclemetab.redundancy import Goals, get_workflow, solve_files
-    from musclemetab.redundancy.energy import EnergyGoal, leg_rate_W_per_kg
+    from musclemetab.redundancy.energy import EnergyGoal
+    from musclemetab.redundancy.objective import leg_rate_W_per_kg
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--workflow", default="effort-cal")

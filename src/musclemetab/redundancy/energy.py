@@ -34,7 +34,7 @@ import numpy as np
 
 from ..errors import OptionError
 
-__all__ = ["EnergyGoal", "ENERGY_SMOOTHING", "GOAL_FORMS", "CLAMPED_MODELS", "node_rates", "leg_rate_W_per_kg"]
+__all__ = ["EnergyGoal", "ENERGY_SMOOTHING", "GOAL_FORMS", "CLAMPED_MODELS", "node_rates"]
 
 #: Default smoothing parameter of the energy goal's model (dimensionless;
 #: :data:`musclemetab.metabolics.smooth.SMOOTHING` is the default of the smooth models).
@@ -193,17 +193,3 @@ def node_rates(goal: EnergyGoal, e, a, lm, vm, *, F0, lMo, vmax, kpe, s0, sm, ma
                      F0 * passive_force_length(lm, kpe, s0, sm), F0, lMo, vmax, mass, fst,
                      smoothing=goal.smoothing, basal=False, **goal.smooth_options())
     return r["total"]
-
-
-def leg_rate_W_per_kg(goal: EnergyGoal, params, muscles, excitation, activation, lm_norm, fiber_velocity_lmo_per_s,
-                      lmo_factor=None) -> np.ndarray:
-    """The summed smooth rate of ``muscles`` per kg of body mass (W/kg, no basal heat) at each
-    node, from NumPy arrays ``(nodes, muscles)``; ``params`` the problem's
-    :class:`~.parameters.MuscleTendonParameters`, ``lmo_factor`` the optimal fiber lengths'
-    scale factors (default 1). The goal's value is ``weight`` times its mean over nodes ``0 ... N-1``
-    (the energy term of :mod:`.objective`, whose formula this is)."""
-    from .objective import Energy, node_arrays
-
-    v = node_arrays(params, muscles, excitation=excitation, activation=activation, lm_norm=lm_norm,
-                    fiber_velocity_lmo_per_s=fiber_velocity_lmo_per_s, lmo_factor=lmo_factor, energy=goal)
-    return np.asarray(Energy(goal.weight, goal).leg_rate(v), dtype=float)

@@ -37,7 +37,7 @@ from .energy import EnergyGoal, node_rates
 
 __all__ = ["Term", "Activation", "Excitation", "Reserve", "FiberVelocity", "EmgTracking", "FiberLengthTracking",
            "Energy", "TERMS", "goal_terms", "column_sums", "node_cost", "last_node_cost", "term_values",
-           "node_arrays", "find_term"]
+           "node_arrays", "find_term", "leg_rate_W_per_kg"]
 
 
 def column_sums(x):
@@ -247,3 +247,15 @@ def node_arrays(params, muscles, *, excitation, activation, lm_norm, fiber_veloc
     if lus is not None:
         v["lus"] = rows(lus)
     return v
+
+
+def leg_rate_W_per_kg(goal: EnergyGoal, params, muscles, excitation, activation, lm_norm, fiber_velocity_lmo_per_s,
+                      lmo_factor=None) -> np.ndarray:
+    """The summed smooth rate of ``muscles`` per kg of body mass (W/kg, no basal heat) at each
+    node, from NumPy arrays ``(nodes, muscles)``; ``params`` the problem's
+    :class:`~.parameters.MuscleTendonParameters`, ``lmo_factor`` the optimal fiber lengths'
+    scale factors (default 1). The goal's value is ``weight`` times its mean over nodes ``0 ... N-1``
+    (the formula of :class:`Energy`)."""
+    v = node_arrays(params, muscles, excitation=excitation, activation=activation, lm_norm=lm_norm,
+                    fiber_velocity_lmo_per_s=fiber_velocity_lmo_per_s, lmo_factor=lmo_factor, energy=goal)
+    return np.asarray(Energy(goal.weight, goal).leg_rate(v), dtype=float)

@@ -51,7 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputFileError, LargeReserveWarning, MissingColumnError, SolverError
+from ..errors import LargeReserveWarning, MissingColumnError
 from ..io.jsonfile import json_ready
 from ..io.solution_folder import SOLUTION_FILE, SUMMARY_FILE, read_solution_folder
 from ..muscle import (

@@ -104,7 +104,7 @@ def solve_with_parameters(
     ocp = solve_ocp(inputs, params, guess, options, goals)
     energy = {}
     if goals.energy is not None:
-        from .energy import leg_rate_W_per_kg
+        from .objective import leg_rate_W_per_kg
 
         N = inputs.n_intervals
         rate = leg_rate_W_per_kg(goals.energy, params, inputs.muscles, ocp.excitation, ocp.activation[:N],

@@ -32,8 +32,8 @@ from typing import Callable
 
 from ..errors import OptionError
 from ..uncertainty import DEFAULT_SEED
-from .spec import EMG_TEN, STATES, Study
-from .units import Unit, plan_units, read_unit_record
+from .spec import Study
+from .units import Unit, is_sampled, plan_units, read_unit_record
 
 __all__ = ["with_uncertainty", "sample_units", "is_sampled", "add_study_bands", "RESULT_BAND_COLUMNS",
            "MUSCLE_BAND_COLUMNS"]
@@ -79,12 +79,6 @@ def with_uncertainty(study: Study, samples: int | None = None, seed: int | None 
 
 
 # ---------------------------------------------------------------------------------------- units
-def is_sampled(study: Study, unit: Unit) -> bool:
-    """Whether a trial unit has uncertainty samples: an effort workflow solved from its files."""
-    subject = study.subject(unit.subject)
-    return unit.trial is not None and unit.workflow not in (EMG_TEN, STATES) and subject.emg_mode is None
-
-
 def sample_units(study: Study) -> list[Unit]:
     """The uncertainty samples of the study's trial units, sample by sample (the first samples of
     every trial first)."""

@@ -57,6 +57,7 @@ __all__ = [
     "Unit",
     "UNIT_FILE",
     "plan_units",
+    "is_sampled",
     "unit_key",
     "read_unit_record",
     "is_complete",
@@ -146,6 +147,12 @@ class Unit:
             return None
         before = [w for w in WARM_CHAIN[:WARM_CHAIN.index(self.workflow)] if w in study.workflows]
         return Unit(self.subject, self.trial, before[-1], self.side) if before else None
+
+
+def is_sampled(study: Study, unit: Unit) -> bool:
+    """Whether a trial unit has uncertainty samples: an effort workflow solved from its files."""
+    subject = study.subject(unit.subject)
+    return unit.trial is not None and unit.workflow not in (EMG_TEN, STATES) and subject.emg_mode is None
 
 
 def plan_units(study: Study) -> tuple[list[Unit], list[Unit]]:
@@ -669,8 +676,6 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
 
             sol, start = _chain_solve(solve, unit.warm_source(study), warm, times, trial.name)
         write_solution_folder(sol, tmp, opensim_files=False)  # written below, for every workflow
-        from .uncertainty import is_sampled
-
         if (study.settings.get("uncertainty") or {}).get("samples") and is_sampled(study, unit):
             from .samples import write_start
 
