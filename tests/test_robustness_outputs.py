@@ -389,9 +389,9 @@ _CHILD = textwrap.dedent("""\
     solve_memo.install({memo!r})  # the solve of the test run (stored with no limit)
     write = run.write_solution_folder
 
-    def limited(*args):  # the limit from the writing of the output on
+    def limited(*args, **kwargs):  # the limit from the writing of the output on
         resource.setrlimit(resource.RLIMIT_FSIZE, ({limit}, {limit}))
-        return write(*args)
+        return write(*args, **kwargs)
 
     run.write_solution_folder = limited
     from musclemetab.commands import main
