@@ -248,21 +248,6 @@ def test_failing_unit_is_reported_and_the_rest_complete(pool_run, example, tmp_p
     assert "failed sub1/fast/effort-gen" in out and "knee_angle_r_moment" in out
 
 
-def test_dask_cluster_gives_the_process_pool_table(pool_run, example, tmp_path):
-    distributed = pytest.importorskip("distributed")
-    study, run = pool_run
-    data = _study_dict(example)
-    dask_study = study_from_dict(data, base="/", output=tmp_path / "dask")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
-        client.run(solve_memo.install_in_worker)  # the test run's solves, once (tests/solve_memo.py)
-        dask_run = run_study(dask_study, scheduler=cluster.scheduler_address, progress=False)
-    assert not dask_run.failed and sorted(dask_run.ran) == sorted(run.ran)
-    a = run.results.drop(columns=["unit_dir"])
-    b = dask_run.results.drop(columns=["unit_dir"])
-    pd.testing.assert_frame_equal(a, b, check_dtype=False, rtol=1e-8)
-
-
 def test_bad_scheduler_address_is_an_option_error(pool_run, tmp_path, monkeypatch):
     pytest.importorskip("distributed")
     import musclemetab.study.runner as runner

@@ -346,8 +346,8 @@ def test_samples_are_resumable_and_the_same_in_this_process(zero_study):
 
 def test_samples_on_a_dask_cluster_give_the_process_pool_bands(zero_study, example, tmp_path):
     """The same study on a local Dask cluster of two worker processes: the trial unit and its
-    samples run there as on the process pool, and results.csv (bands included) and
-    per_muscle.csv are the pool's."""
+    samples (units that wait for another unit) run there as on the process pool, and results.csv
+    (bands included) and per_muscle.csv are the pool's. The suite's one run of a study on Dask."""
     distributed = pytest.importorskip("distributed")
     import solve_memo
 
