@@ -3,12 +3,10 @@
 from __future__ import annotations
 
 import json
-import shutil
 
 import numpy as np
 import pandas as pd
 import pytest
-import solve_memo
 
 from musclemetab.errors import InputFileError, OptionError
 from musclemetab.study import load_study, run_study, study_from_dict
