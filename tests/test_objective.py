@@ -105,7 +105,7 @@ def test_reported_terms_add_up_to_ipopts_objective(small_problem):  # noqa: F811
                          fiber_length_nodes_m=1.05 * guess.lm_norm[:n, 3:5] * lmo)
               for label, scale in (("one", 0.8), ("two", 1.2))]
     goals = Goals(w_emg=1.0, w_fiber_length=10.0, energy=EnergyGoal("BH04", 1e-3, MASS, HEIGHT, smoothing=0.01))
-    res = solve_problem(blocks, params, goals, [ParameterSpec("emg_scale", emg_muscles, (0.5, 2.0))])
+    res = solve_problem(blocks, params, goals.resolved(), [ParameterSpec("emg_scale", emg_muscles, (0.5, 2.0))])
     assert res.success, res.status
     assert list(res.objective_terms["one"]) == [cls.name for cls in TERMS]
     assert all(v > 0 for terms in res.objective_terms.values() for v in terms.values())

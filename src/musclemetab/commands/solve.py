@@ -408,8 +408,7 @@ def _solve(args) -> int:
 
         from ..redundancy.workflows import get_workflow
 
-        goals = replace(get_workflow(args.workflow).goals, energy=energy,
-                        fiber_dynamics=args.fiber_dynamics or "forward")
+        goals = replace(get_workflow(args.workflow).goals, energy=energy, fiber_dynamics=args.fiber_dynamics)
     warm = None
     if args.warm_start:
         from ..redundancy.solution import Solution
@@ -649,13 +648,13 @@ def _emg_ten_command(args, ik: list, idf: list) -> int:
         if args.parameters or args.warm_start:
             raise OptionError("--parameters and --warm-start cannot be used with an EMG-informed solve; give "
                               "--tendon-stiffness MUSCLE=KT,... instead of --parameters, and drop --warm-start")
-        settings = replace(informed_settings(args.workflow, mode, args.emg_tolerance, args.emg_weight),
-                           fiber_dynamics=args.fiber_dynamics, **scale_bounds)
+        settings = replace(informed_settings(args.workflow, mode, args.emg_tolerance, args.emg_weight,
+                                             fiber_dynamics=args.fiber_dynamics), **scale_bounds)
         return _informed_command(args, ik, idf, settings, parse_tendon_stiffness(args.tendon_stiffness)
                                  if args.tendon_stiffness else None)
-    goals = EMG_TEN_GOALS if args.emg_weight is None else replace(EMG_TEN_GOALS, w_emg=args.emg_weight)
-    settings = EmgTenSettings(goals=goals, emg_tolerance=args.emg_tolerance, emg_mode=mode,
-                              fiber_dynamics=args.fiber_dynamics, **scale_bounds)
+    goals = replace(EMG_TEN_GOALS, fiber_dynamics=args.fiber_dynamics,
+                    **({} if args.emg_weight is None else {"w_emg": args.emg_weight}))
+    settings = EmgTenSettings(goals=goals, emg_tolerance=args.emg_tolerance, emg_mode=mode, **scale_bounds)
     wrong = [o for o, v in (("--tendon-stiffness", args.tendon_stiffness), ("--parameters", args.parameters),
                             ("--warm-start", args.warm_start)) if v]
     if wrong:

@@ -59,7 +59,7 @@ import numpy as np
 from ..errors import DataMismatchError, OptionError, UnknownMuscleError
 from ..messages import name_list
 from ._checks import COUPLINGS, check_factor_bounds, check_non_negative, check_option
-from .transcription import Goals, ParameterSpec, TrialBlock, build_problem, check_fiber_dynamics, coupling_pairs
+from .transcription import Goals, ParameterSpec, TrialBlock, build_problem, coupling_pairs
 from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
 from .ipopt import ProblemResult, SolverOptions, solve_problem
@@ -71,7 +71,6 @@ __all__ = [
     "EmgTenTrial",
     "informed_settings",
     "emg_bound",
-    "fiber_scheme",
     "emg_failure",
     "settings_for_muscles",
     "settings_without",
@@ -99,21 +98,17 @@ def emg_bound(mode: str, tolerance: float) -> float | None:
     return {"constrained": tolerance, "driven": 0.0}.get(mode)
 
 
-def fiber_scheme(mode: str | None, fiber_dynamics: str | None = None) -> str:
-    """The transcription of the fiber dynamics: ``fiber_dynamics`` when given, else backward
-    Euler in the EMG-driven mode (the forward recurrence is unstable there, ``docs/problem.md``)
-    and forward Euler otherwise (``mode`` ``None``: no EMG)."""
-    return fiber_dynamics or ("backward" if mode == "driven" else "forward")
-
-
 @dataclass(frozen=True)
 class EmgTenSettings:
     """Goals, bounds and couplings of the EMG-TEN problem (defaults: the study's).
 
     ``goals``: the objective's weights (:class:`.goals.Goals`; default
-    :data:`EMG_TEN_GOALS`, ``wEMG 10, wAct 0.1, wTres 1000, wVm 0.01``); the EMG bound and the
-    fiber dynamics of the problem come from ``emg_mode``, ``emg_tolerance`` and
-    ``fiber_dynamics`` below.
+    :data:`EMG_TEN_GOALS`, ``wEMG 10, wAct 0.1, wTres 1000, wVm 0.01``), which also hold the
+    transcription of the fiber dynamics (``goals.fiber_dynamics``; ``None``, the default, is
+    ``"backward"`` in the driven mode and ``"forward"`` in the others: with the excitations
+    fixed, the forward-Euler fiber recurrence of weakly excited muscles amplifies a change of
+    fiber length by up to 1e4 per step, the backward-Euler one damps it, ``docs/problem.md``);
+    the EMG bound of the problem comes from ``emg_mode`` and ``emg_tolerance`` below.
 
     ``tendon_groups``: muscles whose ``kT`` is estimated; the muscles of a group share one
     factor (couplings between consecutive members). ``emg_groups``: tracked muscles sharing one
@@ -130,12 +125,6 @@ class EmgTenSettings:
     cost ``goals.w_emg``), ``"driven"`` (bound rows with tolerance 0: each tracked excitation is its
     scaled EMG) or ``"tracking"`` (the cost only). With ``tendon_groups`` empty no tendon
     stiffness is estimated: an EMG-informed solve of one or more trials.
-
-    ``fiber_dynamics``: the transcription of the fiber dynamics (:data:`.goals.FIBER_DYNAMICS`);
-    ``None`` (default) is ``"backward"`` in the driven mode and ``"forward"`` otherwise: with the
-    excitations fixed, the forward-Euler fiber recurrence of weakly excited muscles amplifies a
-    change of fiber length by up to 1e4 per step, the backward-Euler one damps it
-    (``docs/problem.md``).
     """
 
     goals: Goals = EMG_TEN_GOALS
@@ -148,7 +137,6 @@ class EmgTenSettings:
     emg_range_tolerance: float = 0.0
     coupling: str = "shared"
     emg_mode: str = "constrained"
-    fiber_dynamics: str | None = None
 
     def __post_init__(self):
         if not isinstance(self.goals, Goals):
@@ -156,10 +144,6 @@ class EmgTenSettings:
         if self.goals.energy is not None or self.goals.w_fiber_length:
             raise OptionError("the EMG-TEN and EMG-informed goals take no energy goal and no fiber-length weight; "
                               "drop them from goals")
-        if self.goals.fiber_dynamics != "forward":  # the problem's goals get the settings' scheme
-            raise OptionError("the fiber dynamics of an EMG-TEN or EMG-informed solve are the settings' "
-                              "(EmgTenSettings.fiber_dynamics, --fiber-dynamics; default: the EMG mode's): give "
-                              f"fiber_dynamics={self.goals.fiber_dynamics!r} there, not in goals")
         check_non_negative("emg_tolerance", self.emg_tolerance)
         check_non_negative("emg_range_tolerance", self.emg_range_tolerance)
         for name in ("tendon_scale_bounds", "emg_scale_bounds"):
@@ -174,13 +158,17 @@ class EmgTenSettings:
         check_option("the EMG mode", self.emg_mode, EMG_MODES)
         if self.emg_mode == "tracking" and not self.goals.w_emg > 0:
             raise OptionError("the EMG mode 'tracking' needs a positive EMG weight w_emg")
-        if self.fiber_dynamics is not None:
-            check_fiber_dynamics(self.fiber_dynamics)
+
+    @property
+    def problem_goals(self) -> Goals:
+        """The goals of the problem: ``goals`` resolved for ``emg_mode`` (:meth:`.goals.Goals.resolved`)
+        with the EMG bound of the mode (:attr:`emg_bound`)."""
+        return replace(self.goals.resolved(self.emg_mode), emg_tolerance=self.emg_bound)
 
     @property
     def fiber_scheme(self) -> str:
-        """The transcription of the fiber dynamics used (``fiber_dynamics`` or the mode's default)."""
-        return fiber_scheme(self.emg_mode, self.fiber_dynamics)
+        """The transcription of the fiber dynamics used: ``goals.fiber_dynamics`` or the mode's default."""
+        return self.goals.resolved(self.emg_mode).fiber_dynamics
 
     @property
     def emg_bound(self) -> float | None:
@@ -207,25 +195,27 @@ class EmgTenSettings:
 
     @classmethod
     def from_dict(cls, d: dict) -> "EmgTenSettings":
-        """The settings :meth:`to_dict` recorded (``summary.json``, ``parameters.json``)."""
-        return cls(goals=Goals(**d["weights"]), emg_tolerance=d["emg_tolerance"],
+        """The settings :meth:`to_dict` recorded (``summary.json``, ``parameters.json``); the goals
+        hold the recorded (resolved) fiber dynamics."""
+        return cls(goals=Goals(**d["weights"], fiber_dynamics=d["fiber_dynamics"]), emg_tolerance=d["emg_tolerance"],
                    tendon_scale_bounds=tuple(d["tendon_scale_bounds"]), emg_scale_bounds=tuple(d["emg_scale_bounds"]),
                    tendon_groups=tuple(tuple(g) for g in d["tendon_groups"]),
                    emg_groups=tuple(tuple(g) for g in d["emg_groups"]), emg_range_tolerance=d["emg_range_tolerance"],
-                   coupling=d["coupling"], emg_mode=d["emg_mode"], fiber_dynamics=d["fiber_dynamics"])
+                   coupling=d["coupling"], emg_mode=d["emg_mode"])
 
 
 def informed_settings(workflow: str, mode: str = "constrained", tolerance: float = 0.01,
-                      w_emg: float | None = None) -> EmgTenSettings:
+                      w_emg: float | None = None, fiber_dynamics: str | None = None) -> EmgTenSettings:
     """Settings of an effort workflow's EMG-informed solve: the workflow's effort weights, the
     EMG goals of ``mode`` (tracking weight ``w_emg``, default 10 for ``tracking`` and 0 for
-    ``constrained``/``driven``), no tendon stiffness estimated."""
+    ``constrained``/``driven``), the goals' ``fiber_dynamics`` (``None``: the mode's default),
+    no tendon stiffness estimated."""
     from .workflows import get_workflow
 
     wf = get_workflow(workflow)
     w_emg = w_emg if w_emg is not None else (10.0 if mode == "tracking" else 0.0)
-    return EmgTenSettings(goals=Goals(**wf.goals.effort_weights(), w_emg=w_emg), emg_tolerance=tolerance,
-                          tendon_groups=(), emg_mode=mode)
+    return EmgTenSettings(goals=Goals(**wf.goals.effort_weights(), w_emg=w_emg, fiber_dynamics=fiber_dynamics),
+                          emg_tolerance=tolerance, tendon_groups=(), emg_mode=mode)
 
 
 def emg_failure(record, mode: str, what: str, fiber_dynamics: str = "backward"):
@@ -337,7 +327,7 @@ def emg_ten_problem(trials: Sequence[EmgTenTrial], params: MuscleTendonParameter
             f"muscle{'s' if len(missing) > 1 else ''} {name_list(missing)} of the EMG-TEN settings "
             f"not among the muscles of the problem ({', '.join(muscles[:6])} ...)")
     specs = emg_ten_specs(settings, list(dict.fromkeys(m for t in trials for m in t.inputs.muscles)), emg_muscles)
-    goals = replace(settings.goals, emg_tolerance=settings.emg_bound, fiber_dynamics=settings.fiber_scheme)
+    goals = settings.problem_goals
     blocks = [TrialBlock(t.label, t.inputs, t.guess, emg_muscles=emg_muscles, emg_nodes=t.emg_nodes)
               for t in trials]
     return blocks, goals, specs

@@ -244,7 +244,10 @@ def estimate_parameters(trials: Sequence[TrialBlock], params: MuscleTendonParame
     warned about (``"warn"``), and fiber-length bounds widened beyond
     :data:`FIBER_LENGTH_WIDENING_LIMIT` are warned about; after a successful one, factors on a
     bound and (``identify``) poorly identifiable parameters. All are recorded in the estimate's
-    ``doubts`` (``on_bounds``, ``uninformed``, ``widened_fiber_length_bounds``, ``identifiability``)."""
+    ``doubts`` (``on_bounds``, ``uninformed``, ``widened_fiber_length_bounds``, ``identifiability``).
+    ``goals`` without fiber dynamics get the forward ones (:meth:`.goals.Goals.resolved`; an
+    estimation with EMG in the driven mode resolves them for its mode first, as
+    :func:`.estimate_run.estimate_files` does)."""
     import warnings
 
     from ..errors import MusclemetabWarning
@@ -257,7 +260,7 @@ def estimate_parameters(trials: Sequence[TrialBlock], params: MuscleTendonParame
                           "tendon_slack_length is estimated")
     if not any(t.fiber_muscles or t.emg_muscles for t in trials):
         raise OptionError("parameter estimation needs measurements: give fiber lengths (ultrasound) or EMG")
-    options = options or SolverOptions()
+    options, goals = options or SolverOptions(), goals.resolved()
     doubts = {"uninformed": [{"kind": k, "muscle": m} for k, m in ident.check_informed(trials, specs, uninformed)]}
     widened = widened_fiber_bounds(trials, params, specs)
     doubts["widened_fiber_length_bounds"] = {"limit": FIBER_LENGTH_WIDENING_LIMIT, "upper": widened}

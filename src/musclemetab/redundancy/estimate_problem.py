@@ -38,7 +38,7 @@ def check_estimate_options(workflow, n: int, n_id: int, ultrasound, emg, estimat
                            emg_mode, emg_tolerance, exclude_muscles) -> EstimateOptions:
     """The cheap checks of :func:`.estimate_run.estimate_files`' options, before any file is read."""
     from .estimate import FIELDS, _coupling, parameter_specs
-    from .emg_ten import emg_bound, fiber_scheme
+    from .emg_ten import emg_bound
     from .goals import Goals
     from .workflows import get_workflow
 
@@ -73,8 +73,8 @@ def check_estimate_options(workflow, n: int, n_id: int, ultrasound, emg, estimat
             raise OptionError(f"--emg-tolerance must be a non-negative number, not {emg_tolerance}")
         if mode == "tracking" and not given["w_emg"] > 0:
             raise OptionError("--emg-mode tracking needs a positive EMG weight (--emg-weight)")
-    goals = Goals(**given, emg_tolerance=emg_bound(mode, emg_tolerance) if emg else None,
-                  fiber_dynamics=fiber_scheme(mode if emg else None))
+    goals = Goals(**given, emg_tolerance=emg_bound(mode, emg_tolerance) if emg else None).resolved(
+        mode if emg else None)
     return EstimateOptions(specs, goals, mode if emg else None, couple, bounds)
 
 

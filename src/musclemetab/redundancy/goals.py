@@ -6,7 +6,7 @@ into the NLP."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Sequence
 
 import numpy as np
@@ -30,10 +30,11 @@ FIBER_DYNAMICS = ("forward", "backward")
 
 
 def check_fiber_dynamics(value, energy=None) -> None:
-    """Refuse a transcription of the fiber dynamics that is not one of :data:`FIBER_DYNAMICS`,
-    and the backward one with the energy goal (whose rates pair each node's velocity with its
-    own state, the forward scheme's pairing)."""
-    if value not in FIBER_DYNAMICS:
+    """Refuse a transcription of the fiber dynamics that is not one of :data:`FIBER_DYNAMICS`
+    (or ``None``, the problem's default, :meth:`Goals.resolved`), and the backward one with the
+    energy goal (whose rates pair each node's velocity with its own state, the forward scheme's
+    pairing)."""
+    if value is not None and value not in FIBER_DYNAMICS:
         raise OptionError(f"the fiber dynamics (--fiber-dynamics) must be one of {', '.join(FIBER_DYNAMICS)}, "
                           f"not {value!r}")
     if value == "backward" and energy is not None:
@@ -51,7 +52,9 @@ class Goals:
     settings and every solve take a ``Goals``; :class:`.ipopt.SolverOptions` holds numerics
     only), and the EMG bound (``None``: no bound rows); ``energy``: the
     energy goal (:class:`.energy.EnergyGoal`), or ``None``; ``fiber_dynamics``: the
-    transcription of ``dl~M/dt = v~M`` (:data:`FIBER_DYNAMICS`, ``docs/problem.md``)."""
+    transcription of ``dl~M/dt = v~M`` (:data:`FIBER_DYNAMICS`, ``docs/problem.md``) of every
+    kind of solve (effort, EMG-TEN and EMG-informed, estimation), or ``None`` (default): the
+    problem's default, which :meth:`resolved` gives. Problems are built from resolved goals."""
 
     w_activation: float = 1.0
     w_reserve: float = 1000.0
@@ -60,7 +63,7 @@ class Goals:
     emg_tolerance: float | None = None
     w_fiber_length: float = 0.0
     energy: EnergyGoal | None = None
-    fiber_dynamics: str = "forward"
+    fiber_dynamics: str | None = None
 
     def __post_init__(self):
         check_fiber_dynamics(self.fiber_dynamics, self.energy)
@@ -69,6 +72,15 @@ class Goals:
             check_non_negative("the EMG tolerance", self.emg_tolerance, " (0: EMG-driven)")
         if self.energy is not None and not isinstance(self.energy, EnergyGoal):
             raise OptionError(f"the energy goal must be an EnergyGoal, not {type(self.energy).__name__}")
+
+    def resolved(self, emg_mode: str | None = None) -> "Goals":
+        """These goals with the transcription of the fiber dynamics the problem is built with:
+        ``fiber_dynamics`` when given, else the default of the EMG mode ``emg_mode`` (``None``: a
+        solve without EMG): backward Euler in the EMG-driven mode, whose forward recurrence is
+        unstable (``docs/problem.md``), forward Euler otherwise."""
+        if self.fiber_dynamics is not None:
+            return self
+        return replace(self, fiber_dynamics="backward" if emg_mode == "driven" else "forward")
 
     def effort_weights(self) -> dict:
         """``{"w_activation", "w_reserve", "w_velocity"}``: the weights of the effort goal (the

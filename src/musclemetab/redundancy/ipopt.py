@@ -262,7 +262,8 @@ def build_nlp(
 
 def single_trial_goals(goals: Goals | None) -> Goals:
     """The goals of a single-trial solve: ``goals`` (default ``Goals()``: the effort goal),
-    checked. A single-trial solve has no EMG or measured fiber lengths: ``goals`` asking to track
+    checked and resolved (:meth:`.goals.Goals.resolved`: the forward fiber dynamics unless
+    given). A single-trial solve has no EMG or measured fiber lengths: ``goals`` asking to track
     them (``w_emg``, ``emg_tolerance``, ``w_fiber_length``) is an
     :class:`~musclemetab.errors.OptionError` saying where they are tracked
     (:func:`~musclemetab.redundancy.solve_emg_ten`, :func:`~musclemetab.redundancy.estimate_files`)."""
@@ -274,7 +275,7 @@ def single_trial_goals(goals: Goals | None) -> Goals:
         raise OptionError(f"the goals ask to track measurements ({', '.join(tracked)}) but a single-trial solve has "
                           "no EMG or measured fiber lengths; track EMG with solve_emg_ten (musclemetab solve --emg) "
                           "and fiber lengths with estimate_files (musclemetab estimate), or leave these goals out")
-    return goals
+    return goals.resolved()
 
 
 def solver_record(options: SolverOptions, goals: Goals | None = None) -> dict:
@@ -286,7 +287,7 @@ def solver_record(options: SolverOptions, goals: Goals | None = None) -> dict:
     goals = goals or Goals()
     return {**goals.effort_weights(), **options.to_dict(),
             **({"energy": goals.energy.record()} if goals.energy is not None else {}),
-            **({"fiber_dynamics": goals.fiber_dynamics} if goals.fiber_dynamics != "forward" else {})}
+            **({"fiber_dynamics": "backward"} if goals.fiber_dynamics == "backward" else {})}
 
 
 #: IPOPT linear-algebra settings used with MUMPS (``SolverOptions.ipopt`` overrides them): no

@@ -316,7 +316,7 @@ def _load_emg(model, files, labels, workflow, side, dofs, settings, emg_mapping,
     full = settings_for_muscles(settings, muscles)
     emg_muscles = sorted(mapping_for_muscles(mapping, mapping, muscles))
     specs = emg_ten_specs(full, muscles, emg_muscles)
-    goals = dataclasses.replace(full.goals, emg_tolerance=full.emg_bound, fiber_dynamics=full.fiber_scheme)
+    goals = full.problem_goals
     return Problem(kind="emg", workflow=workflow, side=side, dofs=tuple(dofs),
                    trials=tuple(ProblemTrial(*t) for t in trials), emg_mode=settings.emg_mode,
                    parameters=params, goals=goals, specs=tuple(specs), options=emg_ten_options(options, settings),

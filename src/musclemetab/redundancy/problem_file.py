@@ -71,9 +71,10 @@ def problem_document(problem) -> dict:
     try:
         emg = inputs.pop("emg", None)
         keywords = {k: _plain(v, k) for k, v in inputs.items() if k not in ("options", "goals")}
+        goals = inputs.get("goals")
         doc = {"format": PROBLEM_FORMAT, "format_version": PROBLEM_VERSION, "kept": True, "keywords": keywords,
                "options": _fields(inputs.get("options"), "the options"),
-               "goals": _fields(inputs.get("goals"), "the goals"),
+               "goals": _fields(goals and goals.resolved(problem.emg_mode), "the goals"),  # the scheme solved
                "emg": None if emg is None else emg.to_dict(),
                "solved_options": _fields(problem.options, "the options"),
                "parameters": {"names": list(problem.parameters.names),

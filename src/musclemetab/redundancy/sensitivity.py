@@ -334,7 +334,7 @@ def polish(inputs, params, goals, guess, *, optimal_reserve_Nm: float = 150.0, t
 
     options = SolverOptions(stop="authors", tol=POLISH_TOL, optimal_reserve_Nm=optimal_reserve_Nm,
                             ipopt={"mu_init": POLISH_MU_INIT})  # the monotone barrier from a small mu
-    res = solve_problem([TrialBlock(trial, inputs, guess)], params, goals, options=options)
+    res = solve_problem([TrialBlock(trial, inputs, guess)], params, goals.resolved(), options=options)
     if not res.success:
         raise SolverError(f"{trial}: the re-solve at tolerance {POLISH_TOL:g} from the optimum ended with "
                           f"{res.status}; the sensitivities need a converged optimum: check the solution")
@@ -356,6 +356,7 @@ def trial_sensitivity(solution, inputs, params, goals, *, body_mass_kg: float, h
     from .static_opt import guess_from_solution
     from .transcription import TrialBlock, build_problem
 
+    goals = goals.resolved()  # a solve without EMG: forward unless given
     if goals.fiber_dynamics != "forward":
         raise OptionError("the sensitivities need the forward fiber dynamics; solve without --fiber-dynamics "
                           "backward")
@@ -505,7 +506,7 @@ def problem_of_solution(solution, cache_dir: str | os.PathLike | None = None) ->
         raise DataMismatchError(f"{where}: the rebuilt problem ({len(inputs.muscles)} muscles, {inputs.n_intervals} "
                                 f"intervals) is not the solved one ({len(solution.muscles)}, {solution.n_intervals}); "
                                 "the input files changed since the solve: solve again")
-    goals = Goals(**{k: float(opts[k]) for k in ("w_activation", "w_reserve", "w_velocity") if k in opts})
+    goals = Goals(**{k: float(opts[k]) for k in ("w_activation", "w_reserve", "w_velocity") if k in opts}).resolved()
     return TrialProblem(solution=solution, geometry=geometry, id_time_s=id_time, id_moments_Nm=id_moments,
                         ik_time_s=ik_time[keep], inputs=inputs, params=params, goals=goals,
                         optimal_reserve_Nm=float(rec.get("optimal_reserve_Nm", 150.0)),
@@ -535,7 +536,7 @@ def _problem_of_problem(solution, where: str) -> TrialProblem:
                                       mesh_frequency_hz=problem.mesh_frequency_hz)
     return TrialProblem(solution=solution, geometry=geometry, id_time_s=trial.id_time_s, id_moments_Nm=moments,
                         ik_time_s=trial.ik_time_s, inputs=inputs, params=params,
-                        goals=Goals(**problem.goals.effort_weights()),
+                        goals=Goals(**problem.goals.effort_weights()).resolved(),
                         optimal_reserve_Nm=problem.options.optimal_reserve_Nm, filter_inputs=True,
                         mesh_frequency_hz=problem.mesh_frequency_hz)
 

@@ -318,6 +318,7 @@ class ProblemStructure:
 def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=(), *, optimal_reserve_Nm=150.0,
                   coupling: str = "shared", explicit_derivatives: bool = True) -> dict:
     """The NLP of ``trials`` with ``goals`` and the shared factors ``specs``, without solving it.
+    ``goals`` are resolved (:meth:`.goals.Goals.resolved`: the fiber dynamics given).
 
     Returns the CasADi symbols/expressions ``x``, ``f``, ``g`` and the NLP parameter ``p``
     (the groups' node data and muscle values) with its values ``p_values``, the bounds ``lbx,
@@ -327,6 +328,9 @@ def build_problem(trials, params: MuscleTendonParameters, goals: Goals, specs=()
     once per process for each structure (:func:`symbolic_problem`), except with the energy goal.
     """
     trials, specs = list(trials), list(specs)
+    if goals.fiber_dynamics is None:
+        raise OptionError("the goals' fiber dynamics are the problem's default (None): build the problem from "
+                          "goals.resolved(emg_mode), which gives the scheme of the EMG mode")
     check_option("coupling", coupling, COUPLINGS)
     _check_trials(trials, params, specs)
     spec_off = np.cumsum([0] + [len(s.muscles) for s in specs])
