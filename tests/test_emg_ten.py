@@ -497,24 +497,17 @@ def test_study_problem_size_with_coupling_constraints(example, geometries):
 
 
 # --------------------------------------------------------------------------- derivatives
-@pytest.mark.opensim
-@pytest.mark.parametrize("coupling, fiber_dynamics", [("constraints", "forward"), ("shared", "forward"),
-                                                      ("shared", "backward")])
-def test_assembled_derivatives_equal_automatic_differentiation(example, geometries, coupling, fiber_dynamics):
-    """The hand-assembled Jacobian and Hessian of the multi-trial NLP equal CasADi's AD (two
-    short trials cut from the example, random point), with either transcription of the fiber
-    dynamics (backward: the Hill equilibrium at the end node, second derivatives shared by two
-    intervals' blocks)."""
-    import casadi as ca
+def _short_trials(example, geometries, rng):
+    """Two short trials cut from the example (normal: 3 intervals, fast: 4) with random EMG and
+    a random initial guess, and their effort-cal muscle parameters."""
     from dataclasses import replace
 
     from musclemetab.model import read_muscle_parameters
-    from musclemetab.redundancy.emg_ten import EMG_TEN_GOALS, EmgTenSettings, EmgTenTrial, build_emg_ten_nlp
+    from musclemetab.redundancy.emg_ten import EmgTenTrial
     from musclemetab.redundancy.inputs import read_inverse_dynamics, trial_inputs
     from musclemetab.redundancy.static_opt import InitialGuess
     from musclemetab.redundancy.workflows import workflow_parameters
 
-    rng = np.random.default_rng(0)
     trials = []
     for lab, n in (("normal", 3), ("fast", 4)):
         g = geometries[lab]
@@ -528,6 +521,24 @@ def test_assembled_derivatives_equal_automatic_differentiation(example, geometri
         trials.append(EmgTenTrial(label=lab, inputs=inp, emg_muscles=tuple(sorted(AUTHORS_CHANNELS)),
                                   emg_nodes=rng.random((n, 9)), emg_channels={}, guess=guess))
     params, _ = workflow_parameters("effort-cal", read_muscle_parameters(example.model), trials[0].inputs.muscles)
+    return trials, params
+
+
+@pytest.mark.opensim
+@pytest.mark.parametrize("coupling, fiber_dynamics", [("constraints", "forward"), ("shared", "forward"),
+                                                      ("shared", "backward")])
+def test_assembled_derivatives_equal_automatic_differentiation(example, geometries, coupling, fiber_dynamics):
+    """The hand-assembled Jacobian and Hessian of the multi-trial NLP equal CasADi's AD (two
+    short trials cut from the example, random point), with either transcription of the fiber
+    dynamics (backward: the Hill equilibrium at the end node, second derivatives shared by two
+    intervals' blocks)."""
+    import casadi as ca
+    from dataclasses import replace
+
+    from musclemetab.redundancy.emg_ten import EMG_TEN_GOALS, EmgTenSettings, build_emg_ten_nlp
+
+    rng = np.random.default_rng(0)
+    trials, params = _short_trials(example, geometries, rng)
     settings = EmgTenSettings(goals=replace(EMG_TEN_GOALS, fiber_dynamics=fiber_dynamics), coupling=coupling)
     nlp = build_emg_ten_nlp(trials, params, settings)
     x, f, g = nlp["x"], nlp["f"], nlp["g"]
@@ -551,6 +562,55 @@ def test_assembled_derivatives_equal_automatic_differentiation(example, geometri
     np.testing.assert_allclose(ca.DM(jac).full(), ad_jac(x0, pv).full(), rtol=1e-10, atol=1e-9)
     np.testing.assert_allclose(ca.DM(hess).full(), ad_hess(x0, pv, lam).full(), rtol=1e-9, atol=1e-8)
     assert float(f_val) == pytest.approx(float(ca.Function("f", [x, p], [f])(x0, pv)), rel=1e-12)
+
+
+@pytest.mark.opensim
+def test_the_goals_hold_the_fiber_dynamics_of_every_emg_mode(example, geometries):
+    """The transcription of the fiber dynamics is the goals' (``Goals.fiber_dynamics``; ``None``:
+    the EMG mode's default). At a random point (two short trials) the constraints of the built
+    NLP with the default are those of the explicit backward scheme in the driven mode and of the
+    forward one in the constrained mode, and the recorded settings say so;
+    ``Goals(fiber_dynamics="backward")`` gives the constrained mode the driven NLP's constraints
+    (only its EMG bound rows are wider) and ``Goals(fiber_dynamics="forward")`` the driven mode
+    the constrained ones. ``EmgTenSettings(fiber_dynamics=...)`` is a TypeError, and the problem
+    is not built from goals whose scheme is not resolved."""
+    from dataclasses import replace
+
+    from musclemetab.errors import OptionError
+    from musclemetab.redundancy.emg_ten import (EMG_TEN_GOALS, EmgTenSettings, build_emg_ten_nlp, emg_ten_problem,
+                                                informed_settings)
+    from musclemetab.redundancy.transcription import build_problem
+
+    trials, params = _short_trials(example, geometries, np.random.default_rng(0))
+    x0 = []
+
+    def built(mode, scheme=None):
+        """(recorded scheme, constraints at the random point, width of the constraint bounds)"""
+        settings = EmgTenSettings(goals=replace(EMG_TEN_GOALS, fiber_dynamics=scheme), emg_mode=mode)
+        nlp = build_emg_ten_nlp(trials, params, settings)
+        x0.append(np.array(nlp["x0"]))
+        g = np.array(nlp["jac_g"](x0[0], nlp["p_values"])[0]).ravel()
+        return settings.to_dict()["fiber_dynamics"], g, np.asarray(nlp["ubg"]) - np.asarray(nlp["lbg"])
+
+    driven, constrained = built("driven"), built("constrained")
+    constrained_backward, driven_forward = built("constrained", "backward"), built("driven", "forward")
+    assert all(np.array_equal(x, x0[0]) for x in x0)
+    assert [r[0] for r in (driven, constrained, constrained_backward, driven_forward)] == [
+        "backward", "forward", "backward", "forward"]
+    assert EmgTenSettings(emg_mode="tracking").to_dict()["fiber_dynamics"] == "forward"
+    assert [informed_settings("effort-cal", mode, fiber_dynamics=scheme).to_dict()["fiber_dynamics"]
+            for mode, scheme in (("driven", None), ("constrained", None), ("constrained", "backward"))] == [
+        "backward", "forward", "backward"]  # the command line's --fiber-dynamics of an EMG-informed solve
+    np.testing.assert_array_equal(constrained_backward[1], driven[1])
+    np.testing.assert_array_equal(driven_forward[1], constrained[1])
+    assert np.max(np.abs(driven[1] - constrained[1])) > 1e-3  # the two schemes' constraints differ there
+    assert np.max(driven[2]) == 0.0 and np.max(constrained_backward[2]) == pytest.approx(0.02)
+    with pytest.raises(TypeError):
+        EmgTenSettings(fiber_dynamics="backward")
+    blocks, goals, specs = emg_ten_problem(trials, params, EmgTenSettings())
+    assert goals.fiber_dynamics == "forward"
+    with pytest.raises(OptionError, match=r"goals\.resolved\(emg_mode\)"):
+        build_problem(blocks, params, replace(goals, fiber_dynamics=None), specs)
 
 
 # --------------------------------------------------------------------------- bad inputs
