@@ -10,7 +10,8 @@ the run, under a key made of the input files' content (SHA-256) and every other 
 value, like the package's own caches. A second call with the same key gets the stored result
 and its warnings again; a call that is being solved by another process waits for it (one
 lock file per key). A warm start (a :class:`~musclemetab.redundancy.solution.Solution`) counts by
-the content of its pickle. Calls with other in-memory arguments, and calls that raise, solve as
+the content of its pickle, as does any other in-memory argument. Calls with arguments that do not
+pickle, and calls that raise, solve as
 usual and are not stored. Beside each pickle a ``.json`` file says what the key
 stands for.
 """
@@ -41,9 +42,10 @@ def solve_key(func, args, kwargs) -> tuple[str, dict] | None:
     ``cache_dir`` (where the geometry is cached) does not change the result and is left out, nor
     does ``exclude_missing_ok`` when no muscle is excluded, nor ``before_solve`` (work started
     beside the solve; a stored result does not call it).
-    ``options=None``, ``settings=None`` and ``grf_threshold_N=None`` count as the defaults they stand for. ``None`` when
-    an argument is neither a file, a plain value, a list/tuple/dict of those nor a settings
-    dataclass or a warm-start solution (another in-memory object): such calls always solve.
+    ``options=None``, ``settings=None`` and ``grf_threshold_N=None`` count as the defaults they
+    stand for. A warm-start solution and any other in-memory object (a sample's parameter
+    transform, a bound method of its draw) count by the content of their pickle. ``None`` when an
+    argument does not pickle (a lambda, a local function): such calls always solve.
     """
     from musclemetab.io.atomic import file_sha256
     from musclemetab.redundancy.emg_ten import EmgTenSettings
@@ -70,7 +72,10 @@ def solve_key(func, args, kwargs) -> tuple[str, dict] | None:
             return {type(value).__name__: plain(dataclasses.asdict(value))}
         if isinstance(value, Solution):  # a warm start: by the content of its pickle
             return {"Solution": hashlib.sha256(pickle.dumps(value)).hexdigest()}
-        raise TypeError(type(value).__name__)
+        try:  # another in-memory object (a sample's parameter transform, its start): by its pickle
+            return {type(value).__name__: hashlib.sha256(pickle.dumps(value)).hexdigest()}
+        except Exception as exc:  # not picklable (a lambda, a local function): the call solves
+            raise TypeError(type(value).__name__) from exc
 
     bound = inspect.signature(func).bind(*args, **kwargs)
     bound.apply_defaults()

@@ -27,11 +27,13 @@ def cache_dir(geometry_cache):
 
 
 def _solve(example, cache_dir, out, mode, *extra):
+    """The solve as the command line makes it; labelled as a study labels its trial units, so that
+    the test run solves the problem once for this module and ``test_study_emg_modes``."""
     from musclemetab.commands import main
 
     argv = ["solve", "--workflow", "effort-cal", "--model", str(example.model), "--ik", str(example.ik["normal"]),
             "--id", str(example.id["normal"]), "--emg", str(example.emg["normal"]), "--emg-mapping", "authors",
-            "--emg-mode", mode, "--cache-dir", str(cache_dir), "--out", str(out), *extra]
+            "--emg-mode", mode, "--labels", "normal", "--cache-dir", str(cache_dir), "--out", str(out), *extra]
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
         code = main(argv)
