@@ -168,6 +168,26 @@ def install(folder: str | os.PathLike) -> callable:
     return undo
 
 
+@contextlib.contextmanager
+def solved_again():
+    """Within the block, this process solves every call itself (the memo's stored results are
+    neither used nor added to): for a test whose claim is that a solve repeated in another process
+    gives the same numbers."""
+    import musclemetab.redundancy as redundancy
+    import musclemetab.redundancy.emg_run as emg_run
+    import musclemetab.redundancy.run as run
+
+    wrapped = [(module, name, getattr(module, name)) for module in (run, emg_run, redundancy)
+               for name in ("solve_files", "solve_emg_ten") if hasattr(module, name)]
+    for module, name, func in wrapped:
+        setattr(module, name, getattr(func, "__wrapped__", func))
+    try:
+        yield
+    finally:
+        for module, name, func in wrapped:
+            setattr(module, name, func)
+
+
 def install_in_worker() -> None:
     """In a process the test run started (a study's pool worker, a Dask worker): use the
     run's memo, when the run named one."""
