@@ -68,7 +68,7 @@ EXPECTED = {
 #: stdin, a forked child runs the script as ``__main__``; it writes the child's process id, then
 #: its exit status, one line each
 _LAUNCHER = r"""
-import atexit, json, os, runpy, sys, traceback
+import atexit, json, os, runpy, sys, threading, traceback
 import numpy, pandas, scipy.interpolate, scipy.linalg, scipy.signal, scipy.sparse, scipy.stats, casadi
 import musclemetab.datasets, musclemetab.geometry, musclemetab.metabolics.solution, musclemetab.redundancy.run
 import musclemetab.study.runner, musclemetab.uncertainty
@@ -96,7 +96,8 @@ def run(script, out, err):
     except BaseException:
         traceback.print_exc()
         code = 1
-    atexit._run_exitfuncs()  # the OpenSim worker shut down, temporary folders removed, as at exit
+    threading._shutdown()  # as at exit: the threads the script left running joined, then the exit functions
+    atexit._run_exitfuncs()  # (the OpenSim worker shut down, temporary folders removed)
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(code)
@@ -128,7 +129,9 @@ def run_quick(launcher, script: str, folder: Path, timeout: float = 600) -> tupl
     """``(exit status, stdout, stderr)`` of ``script --quick`` in a child of the launcher."""
     out, err = folder / "stdout.txt", folder / "stderr.txt"
     launcher.stdin.write((json.dumps([script, str(out), str(err)]) + "\n").encode())
-    pid = int(launcher.stdout.readline())
+    line = launcher.stdout.readline()
+    assert line, f"the launcher ended (exit status {launcher.wait()}): see its standard error"
+    pid = int(line)
     if not select.select([launcher.stdout], [], [], timeout)[0]:
         os.kill(pid, signal.SIGKILL)  # the launcher then reports its end (-9)
     code = int(launcher.stdout.readline())
