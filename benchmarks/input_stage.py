@@ -11,6 +11,11 @@ the median time of the stage, how often each input file was parsed (calls of
 :func:`musclemetab.io.read_table`) and the ratio of the medians.
 
     python benchmarks/input_stage.py --baseline-src OTHER/src [--trial normal] [--repeat 50] [--rounds 3]
+    python benchmarks/input_stage.py --quick
+
+``--quick``: this tree against itself (unless ``--baseline-src``), one round of 3 timed runs, the
+package's cache (``$MUSCLEMETAB_CACHE``: the geometry other runs computed) instead of a new one:
+a check that the script runs (the test suite runs it so).
 """
 
 from __future__ import annotations
@@ -93,7 +98,7 @@ def main(argv=None) -> None:
 
     ex = _example()
     trees = {"this tree": HERE.parent / "src", "baseline": args.baseline_src.resolve()}
-    cache = Path(tempfile.mkdtemp(prefix="mm-input-stage-"))
+    cache = None if args.quick else Path(tempfile.mkdtemp(prefix="mm-input-stage-"))  # quick: the package's
     times: dict[str, list[float]] = {k: [] for k in trees}
     parses = {}
     for _ in range(args.rounds):

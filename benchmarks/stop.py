@@ -10,8 +10,9 @@ unit and stop: IPOPT's iterations and CPU time (``solve_cpu_time_s``; the median
 included, the subject's 72.6 kg and 1.743 m), then the ratio of the CPU times, optimum /
 authors. With ``--reference`` each unit is also solved at IPOPT tolerance 1e-10 (monotone
 barrier), and every stop's rates of the six study models are printed as their difference from
-those. ``--quick``: one 0.3 s window of the normal trial, EFFORT-GEN, one repeat (a check that the
-script runs).
+those. ``--quick``: the window 0.6-0.8 s of the normal trial (``benchmarks/_quick.py``; its geometry
+from the package's cache, ``$MUSCLEMETAB_CACHE``), EFFORT-GEN, one repeat (a check that the script
+runs; the test suite runs it so).
 
 CPU times on a shared machine vary by 10-40 % between runs: compare the ratios of one run.
 """
@@ -43,27 +44,27 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--reference", action="store_true", help="also solve at tolerance 1e-10 (monotone)")
-    ap.add_argument("--quick", action="store_true", help="one short window, one repeat")
+    ap.add_argument("--quick", action="store_true", help="the normal trial's window 0.6-0.8 s, EFFORT-GEN, one repeat")
     args = ap.parse_args(argv)
 
-    from musclemetab.io import read_table
     from musclemetab.metabolics.solution import metabolics_from_solution
     from musclemetab.redundancy import SolverOptions, solve_files
 
     ex = _example()
-    cache = tempfile.mkdtemp(prefix="musclemetab-stop-")
+    # the quick run: the package's cache (the geometry other runs computed), the quick window
+    cache = None if args.quick else tempfile.mkdtemp(prefix="musclemetab-stop-")
     units = UNITS[:1] if args.quick else UNITS
     repeat = 1 if args.quick else max(1, args.repeat)
-    window = (0.5, 0.8) if args.quick else None
+    if args.quick:
+        from _quick import WINDOW
     stops = {"authors": SolverOptions(stop="authors"), "optimum": SolverOptions(stop="optimum")}
     if args.reference:
         stops["tol 1e-10"] = SolverOptions(stop="authors", tol=1e-10)
     ratios = []
     for trial, workflow in units:
         kw = dict(passive=ex.passive_moments_mat, tendon_stiffness="example") if workflow == "effort-ten" else {}
-        if window is not None:
-            t0 = float(read_table(ex.ik[trial]).index[0])
-            kw["window"] = (t0 + window[0], t0 + window[1])
+        if args.quick:
+            kw["window"] = WINDOW
 
         def solve(options):
             with warnings.catch_warnings():
