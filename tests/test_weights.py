@@ -72,12 +72,17 @@ def test_command_line_effort_weight_reaches_the_objective(example, geometry_cach
 
 @pytest.mark.opensim
 def test_command_line_emg_weight_reaches_the_objective(example, geometry_cache, tmp_path):
-    """An EMG-informed tracking solve (effort-gen's effort weights, EMG weight 3)."""
+    """An EMG-informed tracking solve (effort-gen's effort weights, EMG weight 3) of the normal
+    trial's IK from 0.6 to 0.9 s (a file of those rows: an EMG-informed solve covers its whole IK file)."""
     from musclemetab.commands import main
+    from musclemetab.io import read_storage, write_storage
     from musclemetab.redundancy import Solution
 
+    full = read_storage(example.ik["normal"])
+    ik = write_storage(tmp_path / "IK_sub1_normal.mot", full[(full.index >= 0.6) & (full.index <= 0.9)], name="ik",
+                       in_degrees=True)
     out = tmp_path / "tracking"
-    assert main(["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
+    assert main(["solve", "--model", str(example.model), "--ik", str(ik), "--id",
                  str(example.id["normal"]), "--emg", str(example.emg["normal"]), "--emg-mapping", "authors",
                  "--workflow", "effort-gen",
                  "--emg-mode", "tracking", "--emg-weight", "3", "--cache-dir", str(geometry_cache),
