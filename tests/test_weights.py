@@ -56,8 +56,8 @@ def test_python_goals_reach_the_objective(example, geometry_cache):
 
 @pytest.fixture(scope="module")
 def short_ik(example, tmp_path_factory):
-    """The normal trial's IK from 0.6 to 0.9 s, a file of those rows: the problem of the command
-    line and of the study below (one solve: the memo), which solve the whole IK file."""
+    """The normal trial's IK from 0.6 to 0.9 s, a file of those rows (OpenSim's geometry once):
+    the command line's and the study's solves cover their whole IK file."""
     from musclemetab.io import read_storage, write_storage
 
     full = read_storage(example.ik["normal"])
@@ -82,18 +82,14 @@ def test_command_line_effort_weight_reaches_the_objective(example, short_ik, geo
 
 
 @pytest.mark.opensim
-def test_command_line_emg_weight_reaches_the_objective(example, geometry_cache, tmp_path):
+def test_command_line_emg_weight_reaches_the_objective(example, short_ik, geometry_cache, tmp_path):
     """An EMG-informed tracking solve (effort-gen's effort weights, EMG weight 3) of the normal
-    trial's IK from 0.6 to 0.9 s (a file of those rows: an EMG-informed solve covers its whole IK file)."""
+    trial's IK from 0.6 to 0.9 s (``short_ik``)."""
     from musclemetab.commands import main
-    from musclemetab.io import read_storage, write_storage
     from musclemetab.redundancy import Solution
 
-    full = read_storage(example.ik["normal"])
-    ik = write_storage(tmp_path / "IK_sub1_normal.mot", full[(full.index >= 0.6) & (full.index <= 0.9)], name="ik",
-                       in_degrees=True)
     out = tmp_path / "tracking"
-    assert main(["solve", "--model", str(example.model), "--ik", str(ik), "--id",
+    assert main(["solve", "--model", str(example.model), "--ik", str(short_ik), "--id",
                  str(example.id["normal"]), "--emg", str(example.emg["normal"]), "--emg-mapping", "authors",
                  "--workflow", "effort-gen",
                  "--emg-mode", "tracking", "--emg-weight", "3", "--cache-dir", str(geometry_cache),
