@@ -388,7 +388,7 @@ def test_solve_prints_progress_while_ipopt_runs(example, tmp_path, capsys, monke
     monkeypatch.setattr(progress, "PROGRESS_INTERVAL_S", 0.0)
     out = tmp_path / "s"
     argv = ["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
-            str(example.id["normal"]), "--window", "0.6:0.85", "--out", str(out)]
+            str(example.id["normal"]), "--window", "0.6:0.81", "--out", str(out)]
     assert main(argv) == 0
     err = capsys.readouterr().err
     iterations = [int(x) for x in re.findall(r"^musclemetab: solving: iteration (\d+), objective \S+, "

@@ -1,6 +1,7 @@
 """Parameter estimation with the problem core: recovery of known changes from fiber lengths.
 
-"Measured" fiber lengths are made by solving the normal trial (EFFORT-CAL goals) with the optimal
+"Measured" fiber lengths are made by solving the normal trial up to 1.3 s (the right leg's stance,
+push-off and toe-off at 1.28 s: an IK file of those rows, ``stance_ik``) with EFFORT-CAL goals and the optimal
 fiber length of tibialis anterior and biceps femoris long head x1.10 and the tendon stiffness of the
 triceps surae x0.5; the factors are then estimated back from those fiber lengths with the
 unchanged model.
@@ -9,7 +10,7 @@ Fiber lengths alone identify the tendon stiffness (with the fiber length and the
 length, the tendon length and hence the tendon force follow, and the moments must be met) but
 hardly the optimal fiber length: for any lMo the measured fiber length gives the same tendon
 force and the activation absorbs the change of fL(lM/lMo); only the effort tells the factors apart
-(the fiber-only estimate ends at about 1.04 and 1.15). Adding the excitations of the generating
+(the fiber-only estimate ends at about 1.06 and 1.12). Adding the excitations of the generating
 solve as EMG of the two muscles (tracked, scale fixed at 1) pins the activation, and the
 force-length relation then gives lMo. Tolerances: kT 1 %, lMo 2 % (at the true factors the
 tracking errors are zero and the effort is that of the generating solve; the estimate moves away
@@ -33,7 +34,18 @@ LMO = ("tibant_r", "bflh_r")
 
 
 @pytest.fixture(scope="module")
-def generated(example, geometry_cache):
+def stance_ik(example, tmp_path_factory):
+    """The normal trial's IK up to 1.3 s (the right leg's stance, push-off and toe-off): the
+    estimates solve the whole IK file, this one is 62 % of the trial."""
+    from musclemetab.io import read_storage, write_storage
+
+    full = read_storage(example.ik["normal"])
+    return write_storage(tmp_path_factory.mktemp("stance") / "ik_stance_r.mot", full[full.index <= 1.3], name="ik",
+                         in_degrees=True)
+
+
+@pytest.fixture(scope="module")
+def generated(example, stance_ik, geometry_cache):
     """The generating solve with the changed parameters and the unchanged model's trial (its
     geometry from the test run's cache: OpenSim once per trial)."""
     from musclemetab.geometry import compute_geometry
@@ -44,9 +56,8 @@ def generated(example, geometry_cache):
     from musclemetab.redundancy.static_opt import initial_guess
     from musclemetab.redundancy.workflows import get_workflow, workflow_parameters
 
-    g = compute_geometry(example.model, example.ik["normal"], dofs=list(DOFS),
-                         cache_dir=geometry_cache)
-    t_ik, _ = read_kinematics(example.ik["normal"], DOFS)
+    g = compute_geometry(example.model, stance_ik, dofs=list(DOFS), cache_dir=geometry_cache)
+    t_ik, _ = read_kinematics(stance_ik, DOFS)
     t_id, mom = read_inverse_dynamics(example.id["normal"], DOFS)
     wf = get_workflow("effort-cal")
     options = SolverOptions()
@@ -195,7 +206,7 @@ def test_estimate_command_bad_input(example, tmp_path):
 
 @pytest.mark.opensim
 @pytest.mark.slow
-def test_estimate_command_with_emg_recovers_the_parameters(example, generated, recovery, tmp_path):
+def test_estimate_command_with_emg_recovers_the_parameters(example, stance_ik, generated, recovery, tmp_path):
     """``musclemetab estimate --ultrasound ... --emg ...``: the recovery problem above from files
     (fiber lengths in mm, the generating excitations as EMG channels TA and BF, scale fixed at 1):
     the same factors as the Python path, hence the known changes, and the EMG written beside them."""
@@ -216,7 +227,7 @@ def test_estimate_command_with_emg_recovers_the_parameters(example, generated, r
     write_storage(tmp_path / "emg.mot", emg, in_degrees=False)
     (tmp_path / "map.json").write_text(json.dumps({"tibant_r": ["TA"], "bflh_r": ["BF"]}))
     out = tmp_path / "est"
-    code, text = _cli(["estimate", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
+    code, text = _cli(["estimate", "--model", str(example.model), "--ik", str(stance_ik), "--id",
                        str(example.id["normal"]), "--ultrasound", str(tmp_path / "us.mot"), "--emg",
                        str(tmp_path / "emg.mot"), "--emg-mapping", str(tmp_path / "map.json"), "--emg-mode",
                        "tracking", "--emg-scale-bounds", "1:1", "--estimate", "optimal_fiber_length=tibant_r,bflh_r",
@@ -331,7 +342,9 @@ def test_estimate_command_emg_input_errors(example, tmp_path):
 def test_estimate_command_on_the_left_leg_recovers_the_tendon_stiffness(example, geometry_cache, tmp_path):
     """``musclemetab estimate --side l``: fiber lengths made by solving the example's left leg
     (its DOFs discovered from the model and the ID file) with the triceps surae's tendon
-    stiffness x0.5 give that factor back (1 %, as on the right leg)."""
+    stiffness x0.5 give that factor back (1 %, as on the right leg). The estimate solves the
+    whole IK file: the normal trial's IK from 1.35 s on (the left leg's push-off, its ankle
+    moment rising to 59 N m), a third of the trial."""
     import json
 
     import pandas as pd
@@ -346,7 +359,9 @@ def test_estimate_command_on_the_left_leg_recovers_the_tendon_stiffness(example,
     from musclemetab.redundancy.workflows import get_workflow, workflow_parameters
 
     ts = ("soleus_l", "gasmed_l", "gaslat_l")
-    ik, idp = example.ik["normal"], example.id["normal"]
+    idp = example.id["normal"]
+    full = read_storage(example.ik["normal"])
+    ik = write_storage(tmp_path / "ik_push-off_l.mot", full[full.index >= 1.35], name="ik", in_degrees=True)
     dofs = discover_dofs(read_layout(example.model), "l", list(read_storage(idp).columns))
     assert dofs and all(d.endswith("_l") for d in dofs)
     g = compute_geometry(example.model, ik, dofs=dofs, side="l", cache_dir=geometry_cache)

@@ -39,11 +39,12 @@ def _check_terms(summary, expected):
 
 @pytest.mark.opensim
 def test_python_goals_reach_the_objective(example, geometry_cache):
+    """Solved on the window 0.6-0.8 s of the normal trial: the terms' sums hold on any window."""
     from musclemetab.redundancy import Goals, solve_files
 
     goals = Goals(w_activation=2.0, w_reserve=250.0)
     sol = solve_files(example.model, example.ik["normal"], example.id["normal"], "effort-gen", goals=goals,
-                      cache_dir=geometry_cache)
+                      window=(0.6, 0.8), cache_dir=geometry_cache)
     s = sol.summary
     assert s["success"]
     _check_terms(s, _effort_terms(s, sol, 2.0, 250.0))
@@ -53,13 +54,24 @@ def test_python_goals_reach_the_objective(example, geometry_cache):
     assert s["workflow"]["weights"] == {"w_activation": 1.0, "w_reserve": 1000.0, "w_velocity": 0.01}
 
 
+@pytest.fixture(scope="module")
+def short_ik(example, tmp_path_factory):
+    """The normal trial's IK from 0.6 to 0.9 s, a file of those rows (OpenSim's geometry once):
+    the command line's and the study's solves cover their whole IK file."""
+    from musclemetab.io import read_storage, write_storage
+
+    full = read_storage(example.ik["normal"])
+    rows = full[(full.index >= 0.6) & (full.index <= 0.9)]
+    return write_storage(tmp_path_factory.mktemp("weights") / "IK_sub1_normal.mot", rows, name="ik", in_degrees=True)
+
+
 @pytest.mark.opensim
-def test_command_line_effort_weight_reaches_the_objective(example, geometry_cache, tmp_path):
+def test_command_line_effort_weight_reaches_the_objective(example, short_ik, geometry_cache, tmp_path):
     from musclemetab.commands import main
     from musclemetab.redundancy import Solution
 
     out = tmp_path / "energy"
-    assert main(["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
+    assert main(["solve", "--model", str(example.model), "--ik", str(short_ik), "--id",
                  str(example.id["normal"]), "--workflow", "effort-cal", "--cache-dir", str(geometry_cache),
                  "--energy-model", "UM10", "--energy-weight", "0.001", "--energy-smoothing", "0.01",
                  "--effort-weight", "0.5", "--mass", "72.6", "--height", "1.743", "--out", str(out)]) == 0
@@ -70,13 +82,14 @@ def test_command_line_effort_weight_reaches_the_objective(example, geometry_cach
 
 
 @pytest.mark.opensim
-def test_command_line_emg_weight_reaches_the_objective(example, geometry_cache, tmp_path):
-    """An EMG-informed tracking solve (effort-gen's effort weights, EMG weight 3)."""
+def test_command_line_emg_weight_reaches_the_objective(example, short_ik, geometry_cache, tmp_path):
+    """An EMG-informed tracking solve (effort-gen's effort weights, EMG weight 3) of the normal
+    trial's IK from 0.6 to 0.9 s (``short_ik``)."""
     from musclemetab.commands import main
     from musclemetab.redundancy import Solution
 
     out = tmp_path / "tracking"
-    assert main(["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
+    assert main(["solve", "--model", str(example.model), "--ik", str(short_ik), "--id",
                  str(example.id["normal"]), "--emg", str(example.emg["normal"]), "--emg-mapping", "authors",
                  "--workflow", "effort-gen",
                  "--emg-mode", "tracking", "--emg-weight", "3", "--cache-dir", str(geometry_cache),
@@ -91,7 +104,7 @@ def test_command_line_emg_weight_reaches_the_objective(example, geometry_cache, 
 
 
 @pytest.mark.opensim
-def test_study_effort_weight_reaches_the_objective(example, tmp_path):
+def test_study_effort_weight_reaches_the_objective(example, short_ik, tmp_path):
     from musclemetab.redundancy import Solution
     from musclemetab.study import run_study, study_from_dict
 
@@ -99,8 +112,7 @@ def test_study_effort_weight_reaches_the_objective(example, tmp_path):
             "energy_goal": {"model": "UM10", "weight": 0.001, "smoothing": 0.01, "effort_weight": 0.5},
             "subjects": [{"name": "sub1", "model": str(example.model), "body_mass_kg": example.body_mass_kg,
                           "height_m": example.height_m,
-                          "trials": [{"name": "normal", "ik": str(example.ik["normal"]),
-                                      "id": str(example.id["normal"])}]}]}
+                          "trials": [{"name": "normal", "ik": str(short_ik), "id": str(example.id["normal"])}]}]}
     study = study_from_dict(data, base="/", output=tmp_path)
     run_study(study, workers=1, progress=False)
     folder = next(p.parent for p in tmp_path.rglob("summary.json") if "effort-cal" in str(p))
