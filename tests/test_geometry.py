@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 
@@ -23,8 +20,9 @@ RIGHT_LEG = (
 
 
 @pytest.fixture(scope="module")
-def normal_geometry(example, tmp_path_factory):
-    return compute_geometry(example.model, example.ik["normal"], cache_dir=tmp_path_factory.mktemp("g"))
+def normal_geometry(example, geometry_cache):
+    """The normal trial's geometry, through OpenSim once per test run (the session's cache)."""
+    return compute_geometry(example.model, example.ik["normal"], cache_dir=geometry_cache)
 
 
 def test_selection_is_the_forty_right_leg_muscles(normal_geometry):
@@ -58,14 +56,15 @@ def test_moment_arms_equal_opensim46_compute_moment_arm(example, normal_geometry
     np.testing.assert_array_equal(normal_geometry.lmt_m, api.lmt_m)
 
 
-def test_coupled_knee_coordinate_comes_from_its_coupler(example, tmp_path):
-    """Corrupting the knee_angle_r_beta column must change nothing: it is never read."""
+def test_coupled_knee_coordinate_comes_from_its_coupler(example, tmp_path, geometry_cache):
+    """Corrupting the knee_angle_r_beta column must change nothing: it is never read (the
+    corrupted file's geometry computed by OpenSim, the fast trial's from the session's cache)."""
     ik = read_storage(example.ik["fast"])
     ik["knee_angle_r_beta"] = 57.0
     from musclemetab.io import write_storage
 
     path = write_storage(tmp_path / "ik_beta.mot", ik, in_degrees=True)
-    a = compute_geometry(example.model, example.ik["fast"], use_cache=False)
+    a = compute_geometry(example.model, example.ik["fast"], cache_dir=geometry_cache)
     b = compute_geometry(example.model, path, use_cache=False)
     np.testing.assert_array_equal(a.lmt_m, b.lmt_m)
     np.testing.assert_array_equal(a.moment_arms_m, b.moment_arms_m)
@@ -144,16 +143,20 @@ def test_bad_inputs(example, tmp_path):
         compute_geometry(example.model, example.ik["normal"], muscles=["soleus_x"], use_cache=False)
 
 
-def _cli(*args):
-    """The command in a new process (``python -m musclemetab``: the program the console script
-    runs, tests/test_cli.py, whatever version of the package is installed)."""
-    return subprocess.run([sys.executable, "-m", "musclemetab", *args], capture_output=True, text=True, timeout=300)
+def _cli(capsys, *args) -> tuple[int, str]:
+    """The command line's ``main`` in this process (``python -m musclemetab`` in a process of its
+    own is tests/test_cli.py's): ``(status, what it printed on standard error)``."""
+    from musclemetab.commands import main
+
+    status = main(list(args))
+    return status, capsys.readouterr().err
 
 
-def test_cli_geometry_writes_opensim_files(example, tmp_path, normal_geometry):
+def test_cli_geometry_writes_opensim_files(example, tmp_path, normal_geometry, capsys):
     out = tmp_path / "geom"
-    r = _cli("geometry", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--out", str(out))
-    assert r.returncode == 0, r.stderr
+    status, err = _cli(capsys, "geometry", "--model", str(example.model), "--ik", str(example.ik["normal"]),
+                       "--out", str(out))
+    assert status == 0, err
     names = sorted(p.name for p in out.iterdir())
     assert names == sorted([".musclemetab-files", "muscle_tendon_lengths.sto"]
                            + [f"moment_arms_{d}.sto" for d in DOFS])
@@ -172,13 +175,13 @@ def test_cli_geometry_writes_opensim_files(example, tmp_path, normal_geometry):
         (["--ik", "{missing}"], "no such file"),
     ],
 )
-def test_cli_errors_one_line_no_output(example, tmp_path, args, phrase):
+def test_cli_errors_one_line_no_output(example, tmp_path, capsys, args, phrase):
     out = tmp_path / "out"
     subs = {"{id}": str(example.id["normal"]), "{ik}": str(example.ik["normal"]), "{missing}": str(tmp_path / "x.mot")}
     args = [subs.get(a, a) for a in args]
-    r = _cli("geometry", "--model", str(example.model), *args, "--out", str(out))
-    assert r.returncode == 1
-    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    status, err = _cli(capsys, "geometry", "--model", str(example.model), *args, "--out", str(out))
+    assert status == 1
+    lines = [ln for ln in err.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("musclemetab: error:") and phrase in lines[0]
     assert not out.exists() or not any(out.iterdir())
 

@@ -39,16 +39,36 @@ import opensim_states as script  # noqa: E402
 OPTIONS = {"UM10": {"slow_twitch_shortening_cap": True}, "BH04": {"activation_heat_decay": False}}
 
 
-def _run(*args):
-    subprocess.run([sys.executable, str(SCRIPT), *map(str, args)], check=True, capture_output=True)
+_STEPS = """
+import sys
+sys.path.insert(0, {tests!r})
+import opensim
+opensim.Logger.setLevelString("error")
+import opensim_models, opensim_states
+for module, function, args, kwargs in {steps!r}:
+    getattr(sys.modules[module], function)(*args, **kwargs)
+"""
+
+
+def _run(*steps):
+    """Each step ``(function of tests/opensim_states.py or opensim_models.py, *arguments)`` in
+    turn, in one process of its own (OpenSim only, as those scripts run)."""
+    funcs = {"probes": ("opensim_states", "add_probes"), "thelen": ("opensim_states", "thelen_states"),
+             "lumped": ("opensim_models", "lumped_sagittal")}
+    plan = []
+    for name, *args in steps:
+        kwargs = {"rigid_left": True} if "--rigid-left" in args else {}
+        args = [a if isinstance(a, (int, float)) else str(a) for a in args if a != "--rigid-left"]
+        plan.append((*funcs[name], tuple(args), kwargs))
+    code = _STEPS.format(tests=str(SCRIPT.parent), steps=plan)
+    subprocess.run([sys.executable, "-c", code], check=True, capture_output=True)
 
 
 @pytest.fixture(scope="module")
 def thelen(gait2392, tmp_path_factory):
     folder = tmp_path_factory.mktemp("thelen")
     model, states = folder / "probes.osim", folder / "states.sto"
-    _run("probes", gait2392.model, model)
-    _run("thelen", model, gait2392.ik, states, 0.6, 0.7, 6)
+    _run(("probes", gait2392.model, model), ("thelen", model, gait2392.ik, states, 0.6, 0.7, 6))
     return model, states
 
 
@@ -57,7 +77,7 @@ def dgf(demo, tmp_path_factory):
     out, table = demo
     folder = out / table[(table.trial == "normal") & (table.workflow == "effort-gen")].unit_dir.iloc[0]
     model = tmp_path_factory.mktemp("dgf") / "probes.osim"
-    _run("probes", folder / "model.osim", model)
+    _run(("probes", folder / "model.osim", model))
     return model, folder / "states.sto", folder / "controls.sto", folder
 
 
@@ -126,10 +146,8 @@ def test_degroote_and_rigid_millard_states_agree_with_opensims_probes(gait2392, 
     from musclemetab.metabolics.opensim_states import read_opensim_states
 
     lumped, model, states = tmp_path / "lumped.osim", tmp_path / "probes.osim", tmp_path / "states.sto"
-    subprocess.run([sys.executable, str(SCRIPT.with_name("opensim_models.py")), str(gait2392.model), str(lumped)],
-                   check=True, capture_output=True)
-    _run("probes", lumped, model, "--rigid-left")
-    _run("thelen", model, gait2392.ik, states, 0.6, 0.7, 6)
+    _run(("lumped", gait2392.model, lumped), ("probes", lumped, model, "--rigid-left"),
+         ("thelen", model, gait2392.ik, states, 0.6, 0.7, 6))
     header = next(line for line in states.read_text().splitlines() if line.startswith("time"))
     assert header.count("/normalized_tendon_force") == 9 and "/fiber_length" not in header
     read = read_opensim_states(model, states)

@@ -73,8 +73,9 @@ class _Figures(HTMLParser):
             self.svg_depth -= 1
 
 
-@pytest.fixture()
-def chromium(tmp_path):
+@pytest.fixture(scope="module")
+def _one_chromium(tmp_path_factory):
+    """One headless Chromium for the module's tests (a browser's start is its largest cost)."""
     found, reason = _browser()
     if found is None:
         if os.environ.get("CI", "").lower() == "true":
@@ -88,7 +89,7 @@ def chromium(tmp_path):
     options.binary_location = binary
     for flag in CHROMIUM_FLAGS:
         options.add_argument(flag)
-    options.add_argument(f"--user-data-dir={tmp_path / 'chromium-profile'}")
+    options.add_argument(f"--user-data-dir={tmp_path_factory.mktemp('chromium') / 'chromium-profile'}")
     options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
     driver = webdriver.Chrome(options=options, service=Service(executable_path=chromedriver))
     driver.set_page_load_timeout(120)
@@ -96,6 +97,16 @@ def chromium(tmp_path):
         yield driver
     finally:
         driver.quit()
+
+
+@pytest.fixture()
+def chromium(_one_chromium):
+    """The module's Chromium as a test finds a new one: a blank page at the window size of its
+    flags, its console log emptied (what a test reads of it is its own)."""
+    _one_chromium.set_window_size(1280, 1024)
+    _one_chromium.get("about:blank")
+    _one_chromium.get_log("browser")
+    return _one_chromium
 
 
 def _screenshot_folder(tmp_path) -> Path:

@@ -291,7 +291,7 @@ def test_ctrl_c_on_a_real_run(example, tmp_path, workers):
         while (len(list((out / "units").rglob(".*.partial-*"))) < workers and proc.poll() is None
                and time.monotonic() < deadline):
             time.sleep(0.1)
-        time.sleep(2.0)  # the units are computing their geometry or solving
+        time.sleep(1.0)  # the units are computing their geometry or solving (as in the SIGTERM test below)
         os.killpg(proc.pid, signal.SIGINT)
         stdout, stderr = proc.communicate(timeout=120)
     finally:
@@ -457,7 +457,8 @@ def test_sigterm_stops_a_run_as_ctrl_c_does_and_leaves_no_process(example, tmp_p
     """``musclemetab run --workers 2`` gets SIGTERM (what a batch scheduler sends, to the main
     process alone) while its two units work: exit status 143, the running units marked
     interrupted, and no process of its tree (the two pool workers, their OpenSim workers,
-    multiprocessing's resource tracker) still running 5 s later."""
+    multiprocessing's resource tracker) still running 5 s later (the test waits until they have all
+    ended, at most 5 s)."""
     out = tmp_path / "out"
     toml = tmp_path / "study.toml"
     toml.write_text(
@@ -478,7 +479,9 @@ def test_sigterm_stops_a_run_as_ctrl_c_does_and_leaves_no_process(example, tmp_p
         tree = _descendants(proc.pid)
         os.kill(proc.pid, signal.SIGTERM)
         stdout, stderr = proc.communicate(timeout=120)
-        time.sleep(5.0)
+        deadline = time.monotonic() + 5.0  # every process of the tree ended within 5 s (checked every 50 ms)
+        while any(_alive(p) for p in tree) and time.monotonic() < deadline:
+            time.sleep(0.05)
         left = sorted(p for p in tree if _alive(p))
     finally:
         if proc.poll() is None:
