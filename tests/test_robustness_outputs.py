@@ -1058,8 +1058,9 @@ def _closing(fd: int):
 
 @pytest.mark.opensim
 def test_a_closed_standard_error_never_stops_a_solve(example, tmp_path):
-    """``solve ... 2>&-`` with a progress line due at every iterate (a window no other test
-    solves, so IPOPT runs): the lines are lost, the solve converges and the command exits 0
+    """``solve ... 2>&-`` with a progress line due at every iterate (a new process: it solves for
+    itself, the test run's memo of solves is not installed there): the lines are lost, the solve
+    converges and the command exits 0
     (the progress callback failing on the write used to stop IPOPT at its first line with
     User_Requested_Stop, and the command blamed the constraints)."""
     out = tmp_path / "s"

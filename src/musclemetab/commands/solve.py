@@ -304,7 +304,9 @@ def add_emg_goal_arguments(p, mode_help: str, weight_help: str) -> None:
     """``--emg-mode``, ``--emg-tolerance``, ``--emg-weight`` and ``--emg-scale-bounds`` (``solve`` and ``estimate``)."""
     from .options import add_emg_scale_bounds_argument
 
-    p.add_argument("--emg-mode", choices=("constrained", "driven", "tracking"), help=mode_help)
+    from ..redundancy._checks import EMG_MODES
+
+    p.add_argument("--emg-mode", choices=EMG_MODES, help=mode_help)
     number_option(p, "--emg-tolerance", "emg_tolerance", default=0.01,
                   help="with --emg-mode constrained: half-width of the EMG band (default 0.01)")
     number_option(p, "--emg-weight", "emg_weight", help=weight_help)

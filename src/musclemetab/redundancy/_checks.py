@@ -13,6 +13,9 @@ __all__ = ["check_option", "check_weights", "check_non_negative", "check_factor_
 #: how the factors shared by muscles are represented: one variable per coupled group, or one per
 #: muscle with equality constraints
 COUPLINGS = ("constraints", "shared")
+#: the EMG goals of an EMG-informed or EMG-TEN problem: bound rows |e - s E| <= tolerance with the
+#: tracking cost (constrained), bound rows of tolerance 0 (driven), or the tracking cost alone
+EMG_MODES = ("constrained", "driven", "tracking")
 
 
 def check_option(name: str, value, allowed: Sequence):

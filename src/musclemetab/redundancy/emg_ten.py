@@ -58,7 +58,7 @@ import numpy as np
 
 from ..errors import DataMismatchError, OptionError, UnknownMuscleError
 from ..messages import name_list
-from ._checks import COUPLINGS, check_factor_bounds, check_non_negative, check_option
+from ._checks import COUPLINGS, EMG_MODES, check_factor_bounds, check_non_negative, check_option
 from .transcription import Goals, ParameterSpec, TrialBlock, build_problem, coupling_pairs
 from .inputs import TrialInputs
 from .parameters import MuscleTendonParameters
@@ -87,7 +87,6 @@ __all__ = [
 #: step; here that saves a quarter of the solve time with identical iterates to 1e-11). They
 #: change the round-off of the KKT solves, not the problem.
 EMG_TEN_MUMPS_OPTIONS = {"mumps_pivot_order": 2, "min_refinement_steps": 0}
-EMG_MODES = ("constrained", "driven", "tracking")
 #: The study's EMG-TEN weights: EMG tracking 10, activation 0.1, reserve 1000, fiber velocity 0.01.
 EMG_TEN_GOALS = Goals(w_activation=0.1, w_reserve=1000.0, w_velocity=0.01, w_emg=10.0)
 

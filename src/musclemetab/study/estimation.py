@@ -30,6 +30,7 @@ from typing import Mapping
 
 from ..errors import OptionError
 from ..messages import name_list
+from ..redundancy._checks import EMG_MODES
 
 __all__ = ["ESTIMATE", "ESTIMATE_FOLDER", "EstimateSpec", "estimate_spec", "estimation_trials",
            "run_parameter_estimation"]
@@ -37,7 +38,6 @@ __all__ = ["ESTIMATE", "ESTIMATE_FOLDER", "EstimateSpec", "estimate_spec", "esti
 #: workflow name of a subject's parameter-estimation unit, and its folder
 ESTIMATE = "estimate"
 ESTIMATE_FOLDER = "_estimate"
-EMG_MODES = ("constrained", "driven", "tracking")
 _KEYS = {"estimate", "couple", "bounds", "weights", "workflow", "emg_mode", "validate"}
 
 

@@ -797,8 +797,10 @@ def _emg_mode(data, here: str, trials) -> tuple[str | None, float]:
         if tol is not None:
             raise OptionError(f"{here}: 'emg_tolerance' needs 'emg_mode' (constrained); set it or drop the tolerance")
         return None, 0.01
-    if mode not in ("constrained", "driven", "tracking"):
-        raise OptionError(f"{here}: 'emg_mode' must be constrained, driven or tracking, not {mode!r}")
+    from ..redundancy._checks import EMG_MODES
+
+    if mode not in EMG_MODES:
+        raise OptionError(f"{here}: 'emg_mode' must be one of {', '.join(EMG_MODES)}, not {mode!r}")
     missing = [t.name for t in trials if t.emg is None]
     if missing:
         raise OptionError(f"{here}: 'emg_mode' needs an 'emg' file for every trial; missing for {name_list(missing)}")
