@@ -162,3 +162,80 @@ def test_work_sent_ahead_leaves_each_reply_to_its_caller(tmp_path):
     with pytest.raises(ModelError, match="no_model.osim: no such model file"):  # the same work, asked for
         call("solution_model:solution_model", missing, str(tmp_path / "m.osim"), *args)
     assert call("solution_model:prepared_models") == before  # nothing kept of the failures
+
+
+def _small_structure(**goals):
+    from musclemetab.redundancy.goals import Goals
+    from musclemetab.redundancy.transcription import GroupStructure
+
+    return GroupStructure(n_muscles=3, n_dofs=2, emg_index=(), fiber_index=(),
+                          goals=Goals(fiber_dynamics="forward", **goals), optimal_reserve_Nm=150.0, factor_of=(),
+                          emg_factor=(), n_full=0, p_index=(), zero_r=())
+
+
+def _assert_same_functions(a: dict, b: dict):
+    """Equal names, and bit-identical outputs at random inputs (the same operations in the same order)."""
+    rng = np.random.default_rng(7)
+    assert sorted(a) == sorted(b)
+    for name in a:
+        ins = [rng.uniform(0.2, 1.2, a[name].size_in(i)) for i in range(a[name].n_in())]
+        out_a, out_b = a[name].call(ins), b[name].call(ins)
+        assert len(out_a) == len(out_b) > 0
+        for x, y in zip(out_a, out_b):
+            assert x.sparsity() == y.sparsity()
+            np.testing.assert_array_equal(np.asarray(x.nonzeros()), np.asarray(y.nonzeros()))
+
+
+def test_group_functions_are_read_back_from_the_cache_unchanged(tmp_path, monkeypatch):
+    """A new process reads a group's functions from the package cache instead of building them:
+    the same functions; another structure, CasADi or package code is another entry; a damaged
+    entry is deleted with a warning and built again."""
+    from musclemetab.redundancy import function_cache
+    from musclemetab.redundancy.transcription import _group_functions
+
+    monkeypatch.setenv("MUSCLEMETAB_CACHE", str(tmp_path))
+    st = _small_structure()
+    builds = []
+
+    def build(structure=st):
+        builds.append(structure)
+        return _group_functions(structure)
+
+    built = function_cache.cached_functions("group functions", st, build)
+    (entry,) = (tmp_path / "functions").glob("functions-*.npz")
+    read = function_cache.cached_functions("group functions", st, build)
+    assert len(builds) == 1  # the second came from the entry
+    _assert_same_functions(built, read)
+
+    other = _small_structure(w_velocity=0.02)  # another structure: built, its own entry
+    function_cache.cached_functions("group functions", other, lambda: build(other))
+    assert len(builds) == 2 and len(list((tmp_path / "functions").glob("*.npz"))) == 2
+
+    monkeypatch.setattr(function_cache, "code_digest", lambda: "another version of the package")
+    function_cache.cached_functions("group functions", st, build)
+    assert len(builds) == 3 and len(list((tmp_path / "functions").glob("*.npz"))) == 3
+    monkeypatch.undo()
+    monkeypatch.setenv("MUSCLEMETAB_CACHE", str(tmp_path))
+
+    entry.write_bytes(entry.read_bytes()[:1000])  # cut short
+    with pytest.warns(CacheWarning, match=f"{entry.name} cannot be read"):
+        again = function_cache.cached_functions("group functions", st, build)
+    assert len(builds) == 4
+    _assert_same_functions(built, again)
+    _assert_same_functions(built, function_cache.cached_functions("group functions", st, build))  # rewritten
+    assert len(builds) == 4
+
+
+def test_code_digest_is_the_package_source():
+    """The key's code part: SHA-256 over every module's path and bytes, worked here independently."""
+    import hashlib
+    from pathlib import Path
+
+    import musclemetab
+    from musclemetab.redundancy.function_cache import code_digest
+
+    root = Path(musclemetab.__file__).resolve().parent
+    h = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        h.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes())
+    assert code_digest() == h.hexdigest()

@@ -75,19 +75,29 @@ def test_written_columns_with_slashes_and_nan(tmp_path):
     assert np.isnan(back["values"][2, 0]) and back["values"][1, 0] == pytest.approx(0.2)
 
 
+def test_written_numbers_are_twelve_significant_digits_and_nan_as_opensim_writes_it(tmp_path):
+    df = storage_from_arrays([0.0, 1.0 / 3.0], {"a": [np.nan, -np.inf], "b": [-0.0, 2.0 ** 0.5 * 1e-300]})
+    lines = (write_storage(tmp_path / "n.sto", df).read_text().split("endheader\n")[1]).splitlines()
+    assert lines == ["time\ta\tb", "0\tNaN\t-0", "0.333333333333\t-inf\t1.41421356237e-300"]
+
+
 def test_write_is_atomic(tmp_path, monkeypatch):
     target = tmp_path / "keep.sto"
     target.write_text("old content")
     df = storage_from_arrays([0.0, 1.0], {"x": [1.0, 2.0]})
 
-    def boom(*a, **k):
-        raise RuntimeError("disk full")
+    from pathlib import Path
 
-    import musclemetab.io.storage as storage
+    real_write_text = Path.write_text
 
-    monkeypatch.setattr(storage, "_format", boom)
-    with pytest.raises(RuntimeError):
+    def half_then_full_disk(self, text, *a, **k):  # the temporary file gets half the text
+        real_write_text(self, text[:len(text) // 2], *a, **k)
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(Path, "write_text", half_then_full_disk)
+    with pytest.raises(OSError):
         write_storage(target, df)
+    monkeypatch.undo()
     assert target.read_text() == "old content"
     assert [p.name for p in tmp_path.iterdir()] == ["keep.sto"]  # no temporary left
 

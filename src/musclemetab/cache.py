@@ -17,7 +17,9 @@ Entries a caller receives as a file (inverse dynamics, a ``.sto``) carry their c
 sidecar ``<name>.sha256`` and follow the same rules.
 
 The folder is ``$MUSCLEMETAB_CACHE/geometry`` (default ``~/.cache/musclemetab/geometry``),
-or the folder a caller names (``--cache-dir``).
+or the folder a caller names (``--cache-dir``). The same entries, under the same rules, keep
+the solver's differentiated functions in ``$MUSCLEMETAB_CACHE/functions``
+(:mod:`musclemetab.redundancy.function_cache`).
 """
 
 from __future__ import annotations

@@ -38,7 +38,6 @@ from either kind of table.
 from __future__ import annotations
 
 import io as _io
-import math
 import os
 import warnings
 from collections.abc import Iterable, Sequence
@@ -435,12 +434,6 @@ def storage_from_arrays(
     return df
 
 
-def _format(x: float) -> str:
-    if math.isnan(x):
-        return "NaN"
-    return f"{x:.12g}"
-
-
 def write_storage(
     path: str | os.PathLike,
     df: "pd.DataFrame | StorageTable",
@@ -468,7 +461,10 @@ def write_storage(
         buf.write(f"{c}\n")
     buf.write("endheader\n")
     buf.write("\t".join(["time", *map(str, df.columns)]) + "\n")
-    for row in values:
-        buf.write("\t".join(_format(x) for x in row) + "\n")
+    # 12 significant digits; a missing value as OpenSim writes it ("NaN": Python's "nan" is the
+    # only text of a formatted number that holds "nan")
+    row_format = "\t".join(["{:.12g}"] * values.shape[1]) + "\n"
+    rows = "".join(row_format.format(*row) for row in values.tolist())
+    buf.write(rows.replace("nan", "NaN") if np.isnan(values).any() else rows)
     atomic_write_text(path, buf.getvalue())
     return path

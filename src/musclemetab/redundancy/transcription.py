@@ -153,7 +153,11 @@ def group_functions(structure: GroupStructure, energy_values=None) -> dict:
 
 @functools.lru_cache(maxsize=8)
 def _shared_group_functions(structure: GroupStructure) -> dict:
-    return _group_functions(structure)
+    """A group's functions, once per process; a new process reads them from the package cache
+    (:mod:`.function_cache`) when an earlier one built them."""
+    from .function_cache import cached_functions
+
+    return cached_functions("group functions", structure, lambda: _group_functions(structure))
 
 
 def _group_functions(structure: GroupStructure, energy_values=None) -> dict:
