@@ -1,7 +1,8 @@
 """Cold start of ``musclemetab solve``: a new process against the same solve in a warm one.
 
 Runs ``musclemetab solve`` (example subject, one trial, EFFORT-GEN) in new processes with
-the geometry and model parameters cached, alternating between this source tree and, with
+the geometry, the model parameters and the solver's differentiated functions cached (an untimed
+command per tree fills the caches first), alternating between this source tree and, with
 ``--baseline-src``, another one (e.g. an older version), so that both see the same machine
 load. Reports per tree the median wall time, the solve time IPOPT reports and the rest
 (interpreter start, imports, reading files, OpenSim if it is started, set-up, writing), and
