@@ -208,7 +208,7 @@ def test_solve_metabolics_analyse_give_the_study_numbers(cli_flow, two_subjects,
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and said in err
     assert main(["report", str(a), str(a)]) == 1  # several folders, one page: where?
-    assert "give --out FILE" in capsys.readouterr().err
+    assert "give --out DIR" in capsys.readouterr().err
     # several analyse folders: one study of their trials (the same trial twice: named apart by folder)
     import shutil
 

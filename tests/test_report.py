@@ -696,6 +696,30 @@ def test_cli(study, tmp_path, capsys, monkeypatch):
         args.func(args)
 
 
+def test_out_without_html_suffix_is_a_folder_holding_page_and_figures(study, tmp_path, capsys, monkeypatch):
+    """``--out pages`` (a name like every other command's ``--out DIR``) makes the folder
+    ``pages`` with the page and its figures inside; nothing is written beside it. A file there
+    that is not a page is refused, naming it, before anything is drawn."""
+    from musclemetab.commands import main
+
+    small_figures(monkeypatch, tmp_path)
+    work = tmp_path / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    assert main(["report", str(study), "--out", "pages", "--workers", "1"]) == 0
+    printed = capsys.readouterr().out
+    assert f"page -> {Path('pages') / 'report.html'}" in printed
+    assert sorted(p.name for p in work.iterdir()) == ["pages"]
+    assert (work / "pages" / "report.html").is_file()
+    assert (work / "pages" / "figures" / "phase_shares.png").is_file()
+    (work / "notes.txt").write_text("mine")
+    assert main(["report", str(study), "--out", "notes.txt"]) == 1
+    err = capsys.readouterr().err
+    assert "--out notes.txt: a file that is not an HTML page" in err and err.count("\n") == 1
+    assert (work / "notes.txt").read_text() == "mine"
+    assert sorted(p.name for p in work.iterdir()) == ["notes.txt", "pages"]
+
+
 def test_output_closed_early_ends_quietly(study):
     """``musclemetab report DIR | head``: no traceback when the reader leaves; status 141."""
     import subprocess

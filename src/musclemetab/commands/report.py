@@ -1,11 +1,12 @@
 """``musclemetab report``: the figures and the HTML report of a study folder, or of the
 command line's ``analyse`` output folders.
 
-    musclemetab report DIR [--out FILE] [--svg] [--force] [--workers N] [--models M1,M2|all]
-    musclemetab report A [A2 ...] [--out FILE] ...
+    musclemetab report DIR [--out OUT] [--svg] [--force] [--workers N] [--models M1,M2|all]
+    musclemetab report A [A2 ...] [--out OUT] ...
 
 Writes ``DIR/figures/<name>.png`` (and ``.svg`` with ``--svg``) for every figure the data support, and
-``DIR/report.html`` (or ``FILE``, with its figures in ``figures/`` beside it): one
+``DIR/report.html`` (or ``OUT/report.html`` in a folder ``OUT``, or ``OUT`` itself when it ends in
+``.html``, with its figures in ``figures/`` beside it): one
 self-contained page (see :mod:`musclemetab.report.build`). Output folders of ``musclemetab
 analyse`` (with the solution and metabolics folders they record) give the page a study of
 their trials would give (:mod:`musclemetab.report.cli_folder`); several of them need ``--out``.
@@ -39,8 +40,9 @@ def add_parser(subparsers) -> None:
                    help="study folder (holding results.csv and study.json), or one or more output folders of "
                    "'musclemetab analyse' (holding analyse.json)")
     p.add_argument(
-        "--out", metavar="FILE",
-        help="HTML file to write (default DIR/report.html); the figures go to a folder 'figures' beside it",
+        "--out", metavar="OUT",
+        help="folder of the page (OUT/report.html, its figures in OUT/figures), or the HTML file to write (a name "
+        "ending in .html; the figures go to a folder 'figures' beside it); default DIR/report.html",
     )
     p.add_argument("--svg", action="store_true", help="also write every figure as SVG (slower)")
     p.add_argument("--force", action="store_true",

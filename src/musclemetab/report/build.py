@@ -142,11 +142,9 @@ def generate_report(study_dir, out: str | os.PathLike | None = None, *,
 
     study = read_report_input(study_dir, models=models)
     if out is None and len(study.sources) > 1:
-        raise OptionError(f"the report of {len(study.sources)} analyse folders goes to one page: give --out FILE "
-                          "(the figures go to a folder 'figures' beside it)")
-    out = Path(out) if out is not None else study.path / REPORT_FILE
-    if out.is_dir():
-        out = out / REPORT_FILE
+        raise OptionError(f"the report of {len(study.sources)} analyse folders goes to one page: give --out DIR "
+                          "(the page DIR/report.html, its figures in DIR/figures) or --out FILE.html")
+    out = page_path(out) if out is not None else study.path / REPORT_FILE
     formats = tuple(dict.fromkeys(("png", *formats)))  # the page embeds the PNG
     key = report_key(study, formats, models=study.figure_models)
     fig_dir = figures_folder(out)
@@ -162,6 +160,23 @@ def generate_report(study_dir, out: str | os.PathLike | None = None, *,
                       mark=True)
     _write_record(fig_dir, key, out, entries)
     return out, entries
+
+
+#: the names of an HTML page; any other ``out`` names a folder
+PAGE_SUFFIXES = (".html", ".htm")
+
+
+def page_path(out: str | os.PathLike) -> Path:
+    """The page that ``out`` names: ``out`` itself when it ends in ``.html`` (or ``.htm``) and is
+    not a folder, else ``out/report.html`` in the folder ``out`` (made when the page is
+    written), so that nothing is written beside a folder the user named."""
+    out = Path(out)
+    if out.suffix.lower() in PAGE_SUFFIXES and not out.is_dir():
+        return out
+    if out.exists() and not out.is_dir():
+        raise OptionError(f"--out {out}: a file that is not an HTML page (.html); name a folder (the page goes to "
+                          f"FOLDER/{REPORT_FILE}, its figures to FOLDER/{FIGURES_FOLDER}) or a file ending in .html")
+    return out / REPORT_FILE
 
 
 def _check_report_files(out: Path, fig_dir: Path) -> None:
@@ -182,9 +197,9 @@ def write_report(study_dir, out: str | os.PathLike | None = None, *,
 
     ``study_dir`` is a study folder, or one or more output folders of ``musclemetab analyse``
     (a list; :func:`~.cli_folder.read_report_input`), reported as a study of their trials.
-    ``out`` is the HTML file (default ``study_dir/report.html``; required for several analyse
-    folders); the figures are written to the
-    folder ``figures`` beside it (PNG; ``formats=("png", "svg")`` adds SVG). Everything is
+    ``out`` is the HTML file (a name ending in ``.html``) or a folder for it (``out/report.html``,
+    :func:`page_path`); default ``study_dir/report.html``; required for several analyse
+    folders. The figures are written to the folder ``figures`` beside the page (PNG; ``formats=("png", "svg")`` adds SVG). Everything is
     written atomically. The report is rebuilt only when its inputs changed (their content
     hash, :func:`report_key`, is recorded in the page and in ``figures/report.json``) or
     when ``force`` is true. ``workers`` processes draw the figures (see
