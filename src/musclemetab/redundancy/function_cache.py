@@ -6,8 +6,8 @@ subexpressions eliminated. On the example's 40 muscles that takes about 0.2 s, t
 of what a new process spends on the problem before IPOPT starts. The functions depend on nothing
 but the group's structure, the CasADi version and the package's code, so a new process reads
 them back, serialised by CasADi, from an entry of the package cache (:mod:`musclemetab.cache`)
-keyed by those three: the structure as its ``repr``, the code as the SHA-256 of every module of
-the package (any change of the package makes new entries). Reading an entry takes about a
+keyed by those three: the structure as its ``repr``, the code as the package's version and the
+SHA-256 of every module of the package (any change of the package makes new entries). Reading an entry takes about a
 fifth of the build and gives the same functions (the same operations in the same order).
 
 The entries live in ``$MUSCLEMETAB_CACHE/functions`` (default ``~/.cache/musclemetab/functions``),
@@ -55,7 +55,10 @@ def cached_functions(kind: str, structure, build: Callable[[], dict]) -> dict:
     there, else built and written to it."""
     import casadi as ca
 
-    spec = {"kind": kind, "structure": repr(structure), "casadi": ca.__version__, "code": code_digest()}
+    from .. import __version__
+
+    spec = {"kind": kind, "structure": repr(structure), "casadi": ca.__version__, "musclemetab": __version__,
+            "code": code_digest()}
     path = entry_path(spec, functions_cache_dir(), _WHAT, prefix="functions-")
     if path is None:  # the folder cannot be used (warned)
         return build()
