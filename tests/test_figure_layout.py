@@ -213,3 +213,25 @@ def test_the_command_lines_subject_and_trial_come_from_the_file_names():
     assert unit_names("P/model.osim", "P/ik.mot") == ("model", "ik")  # nothing in common: the files' names
     assert unit_names("s2-scaled.osim", "s2-fast-ik.mot") == ("s2", "fast")
     assert unit_names("s2.osim", "s2_ik.mot") == ("s2", "s2_ik")  # nothing but the subject: the IK file's name
+
+
+def test_a_trial_prepared_from_the_labs_files_is_named_after_them(tmp_path):
+    """``prepare`` writes model.osim and ik.mot; the report names the trial after the static and
+    walking trials its record names, not after those two files."""
+    import json
+
+    from musclemetab.report.cli_folder import named_files, unit_names
+
+    prep = tmp_path / "P"
+    prep.mkdir()
+    (prep / "ik.mot").write_text("")
+    model, ik = str(prep / "model.osim"), str(prep / "ik.mot")
+    assert unit_names(*named_files(model, ik)) == ("model", "ik")  # no record: the files' names
+    (prep / "prepare.json").write_text(json.dumps({
+        "inputs": {"static": "/lab/subject01_static.trc", "markers": "/lab/subject01_walk1.c3d"},
+        "files": {"model": "model.osim", "ik": "ik.mot"}}))
+    assert unit_names(*named_files(model, ik)) == ("subject01", "walk1")
+    other = prep / "ik_filtered.mot"  # an IK file the record does not name keeps its own name
+    assert named_files(model, str(other)) == (model, str(other))
+    (prep / "prepare.json").write_text("{not json")  # a record this version cannot read: the files' names
+    assert unit_names(*named_files(model, ik)) == ("model", "ik")

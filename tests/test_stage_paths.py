@@ -207,3 +207,25 @@ def test_both_legs_from_objects_and_folders(example, both_legs, tmp_path):
         assert summary["cycle_start_s"].iloc[0] == pytest.approx(cycle.start_s, abs=1e-12)
         assert summary["toe_off_s"].iloc[0] == pytest.approx(cycle.toe_off_s, rel=1e-9)
     _same_table(pd.read_csv(out / "per_muscle.csv"), pd.concat([analysed[s][1].per_muscle for s in "rl"]))
+
+
+def test_a_solve_given_relative_names_is_analysed_from_another_folder(example, tmp_path, monkeypatch, capsys):
+    """The solve records its input files as absolute paths (its folder put in front of the names
+    it was given), so a later command run from another folder finds the model and IK it needs."""
+    import json
+
+    data = example.model.parent
+    monkeypatch.chdir(data)
+    out = tmp_path / "solved"
+    assert main(["solve", "--model", example.model.name, "--ik", example.ik["normal"].name, "--id",
+                 example.id["normal"].name, "--window", "0.6:0.8", "--out", str(out), "-q"]) == 0
+    inputs = json.loads((out / "summary.json").read_text())["inputs"]
+    assert inputs == {"model": str(data / example.model.name), "ik": str(data / example.ik["normal"].name),
+                      "id": str(data / example.id["normal"].name)}
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    capsys.readouterr()
+    assert main(["analyse", "--solution", str(out), "--cycle", "0.6,0.7,0.8", "--mass", "72.6", "--out", "a",
+                 "-q"]) == 0, capsys.readouterr().err
+    assert (elsewhere / "a" / "results.csv").is_file()

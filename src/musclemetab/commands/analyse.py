@@ -137,6 +137,10 @@ def _recorded_file(given, recorded, option: str, sol_dir) -> str:
     if recorded is None:
         raise OptionError(f"{sol_dir}: the solution records no {option[2:]} file; give {option}")
     if not Path(recorded).is_file():
+        if not Path(recorded).is_absolute():  # recorded by an earlier version, as the solve was given it
+            raise InputFileError(f"{sol_dir}: the solution was solved from {recorded}, a name relative to the folder "
+                                 f"the solve ran in and not found from this one; run this command from that folder "
+                                 f"or give {option}")
         raise InputFileError(f"{sol_dir}: the solution was solved from {recorded}, which is not there any more; "
                              f"give {option}")
     return recorded

@@ -19,11 +19,13 @@ from pathlib import Path
 
 from ..errors import InputFileError
 
-__all__ = ["prepare", "PREPARED_FILES"]
+__all__ = ["prepare", "PREPARED_FILES", "PREPARE_RECORD"]
 
+#: the record :func:`prepare` writes beside its files (inputs, scaling, IK, the files written)
+PREPARE_RECORD = "prepare.json"
 #: the files :func:`prepare` always writes
 PREPARED_FILES = ("model.osim", "static_pose.sto", "static_marker_errors.csv", "ik.mot", "ik_marker_errors.csv",
-                  "prepare.json")
+                  PREPARE_RECORD)
 
 
 def prepare(generic_model: str | os.PathLike, static: str | os.PathLike, markers: str | os.PathLike,
@@ -83,7 +85,7 @@ def prepare(generic_model: str | os.PathLike, static: str | os.PathLike, markers
         }
         if c3d_record is not None:
             (tmp / "markers_c3d.json").unlink(missing_ok=True)
-        (tmp / "prepare.json").write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
+        (tmp / PREPARE_RECORD).write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
         with atomic_directory(out, mark=True) as final:
             for item in tmp.iterdir():
                 if item.is_file() and not item.name.startswith("."):  # not a folder's list of written files

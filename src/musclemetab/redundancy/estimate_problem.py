@@ -89,7 +89,7 @@ def read_estimate_trials(model, files, labels, *, workflow, side, dofs, passive,
     from .estimate import read_fiber_lengths
     from .inputs import check_time_ranges, read_inverse_dynamics, read_kinematics, restrict_geometry
     from .trial_files import exclude_from_geometry, fiber_lengths_without, mapping_without, read_model_parameters, \
-        trial_dofs
+        source_path, trial_dofs
     from .workflows import get_workflow, workflow_parameters
 
     with_emg = any(f.emg is not None for f in files)
@@ -121,8 +121,8 @@ def read_estimate_trials(model, files, labels, *, workflow, side, dofs, passive,
         if with_emg:
             mapping = mapping_for_muscles(emg_mapping or "default", mapping, muscles)
             table = mapped_emg_table(f.emg, mapping, str(f.emg))
-        sources = {"model": model, "ik": ik, "id": idp,
-                   **({"emg": f.emg if isinstance(f.emg, (str, os.PathLike)) else f"EMG table of trial {lab}"}
+        sources = {"model": source_path(model), "ik": source_path(ik), "id": source_path(idp),
+                   **({"emg": source_path(f.emg) if isinstance(f.emg, (str, os.PathLike)) else f"EMG table of trial {lab}"}
                       if with_emg else {})}
         trials.append(TrialArrays(lab, g, t_id, mom, t_ik, table, sources, {}, diagnosis, us))
     return trials, params, wf_record, tuple(dofs), mapping

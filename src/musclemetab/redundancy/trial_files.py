@@ -53,6 +53,13 @@ class TrialArrays(NamedTuple):
     fiber_lengths: dict = {}
 
 
+def source_path(path) -> Path:
+    """A source file as a solve's record keeps it: absolute (the folder the command ran in put in
+    front of a relative name), so that a later command run from another folder finds it; links
+    are kept as named."""
+    return Path(os.path.abspath(path))
+
+
 def _arrays(geometry) -> GeometryArrays:
     return GeometryArrays(np.asarray(geometry.time), geometry.muscles, geometry.dofs, np.asarray(geometry.lmt_m),
                           np.asarray(geometry.moment_arms_m))
@@ -147,9 +154,9 @@ def read_effort_trial(model_path, ik_path, id_path, wf, *, dofs, side, window, c
 
         check_moments_per_body_mass(file_moments, dofs, read_model(model_path, cache_dir=cache_dir).body_mass_kg,
                                     id_path, model_path)
-    sources = {"model": Path(model_path), "ik": Path(ik_path), "id": Path(id_path)}
+    sources = {"model": source_path(model_path), "ik": source_path(ik_path), "id": source_path(id_path)}
     if loads is not None:
-        sources["external_loads"] = loads.path
+        sources["external_loads"] = source_path(loads.path)
     label = Path(ik_path).stem
     params, wf_record = _workflow_parameters(wf, model_parameters, geometry, passive, tendon_stiffness,
                                              tendon_stiffness_file)
@@ -241,8 +248,8 @@ def read_emg_trials(model, ik_paths, id_paths, emg_paths, labels, *, mapping, se
         mass = read_model(model).body_mass_kg
         for (_, moments), idp in zip(id_data, id_paths):
             check_moments_per_body_mass(moments, dofs, mass, idp, model)
-    sources = [{"model": Path(model), "ik": Path(ik), "id": Path(idp),
-                "emg": Path(emg) if isinstance(emg, (str, os.PathLike)) else f"EMG table of trial {lab}"}
+    sources = [{"model": source_path(model), "ik": source_path(ik), "id": source_path(idp),
+                "emg": source_path(emg) if isinstance(emg, (str, os.PathLike)) else f"EMG table of trial {lab}"}
                for ik, idp, emg, lab in zip(ik_paths, id_paths, emg_paths, labels)]
     trials = [TrialArrays(lab, g, t, m, ik, table, src, {}, diag) for lab, g, (t, m), ik, table, src, diag
               in zip(labels, geometries, id_data, ik_times, emg_tables, sources, diagnoses)]

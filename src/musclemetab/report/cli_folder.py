@@ -200,6 +200,26 @@ def unit_names(model: str, ik: str) -> tuple[str, str]:
     return "_".join(tw[:n]), "_".join(rest)
 
 
+def named_files(model: str, ik: str) -> tuple[str, str]:
+    """The files a command-line trial is named by (:func:`unit_names`): its model and IK files, or,
+    when the IK file is the one ``musclemetab prepare`` wrote (its record ``prepare.json`` beside
+    it), the lab's static trial and walking markers that record names (``subject01_static.trc``,
+    ``subject01_walk1.trc``: subject ``subject01``, trial ``walk1``, not ``model`` and ``ik``)."""
+    import json
+
+    from ..mocap.prepare import PREPARE_RECORD
+
+    record = Path(ik).parent / PREPARE_RECORD
+    if record.is_file():
+        try:
+            doc = json.loads(record.read_text(encoding="utf-8"))
+            if Path(doc["files"]["ik"]).name == Path(ik).name:
+                return str(doc["inputs"]["static"]), str(doc["inputs"]["markers"])
+        except (OSError, ValueError, KeyError, TypeError):  # not a record this version reads: the files' names
+            pass
+    return model, ik
+
+
 def read_analyse_folders(paths, models=None) -> AnalyseFolders:
     """Read ``analyse`` output folders (each with ``analyse.json``) as a study of their trials
     (see the module's text). ``models``: the models the figures show, as for
@@ -231,7 +251,7 @@ def read_analyse_folders(paths, models=None) -> AnalyseFolders:
         summary = next(iter(summaries.values()))
         software = software or dict(summary.software or {})
         workflow = summary.workflow_name or "solve"
-        subject, trial = unit_names(str(first.get("model")), str(first.get("ik")))
+        subject, trial = unit_names(*named_files(str(first.get("model")), str(first.get("ik"))))
         if (subject, trial, workflow) in units:
             trial = f"{trial} ({path.name})"
         key = (subject, trial, workflow)
