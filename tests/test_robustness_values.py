@@ -297,6 +297,17 @@ def test_file_ending_within_a_sample_tolerance_is_accepted(short_s, accepted, sh
     with pytest.raises(DataMismatchError) as info:
         check_inside((0.5, 1.6), 0.5, 1.6 - short_s, "ID.sto", "inverse dynamics")
     assert f"ends {shown} s before the window end 1.600 s" in str(info.value)
+    # the remedy names the times the file and the window share (rounded to the millisecond)
+    assert f"(this file and the window share 0.500-{1.6 - short_s:.3f} s)" in str(info.value)
+
+
+def test_a_file_outside_the_window_names_no_shared_times():
+    from musclemetab.external_loads import check_inside
+
+    with pytest.raises(DataMismatchError) as info:
+        check_inside((2.0, 3.0), 0.4, 1.6, "ID.sto", "inverse dynamics")
+    assert str(info.value) == ("ID.sto: the inverse dynamics (0.400-1.600 s) ends 1.400 s before the window end "
+                               "3.000 s; choose a window inside every input file")
 
 
 # ----------------------------------------------------------------------------- inverse-dynamics cache

@@ -316,9 +316,11 @@ def check_inside(window, t_first: float, t_last: float, path, what: str,
             parts.append(f"starts {_seconds(short_start)} s after the window start {t0:.3f} s")
         if short_end > tol:
             parts.append(f"ends {_seconds(short_end)} s before the window end {t1:.3f} s")
+        a, b = max(t0, t_first), min(t1, t_last)
+        shared = f" (this file and the window share {a:.3f}-{b:.3f} s)" if b > a else ""
         raise DataMismatchError(
             f"{path}: the {what} ({t_first:.3f}-{t_last:.3f} s) {' and '.join(parts)}; choose a window inside "
-            "every input file"
+            f"every input file{shared}"
         )
 
 
