@@ -124,12 +124,13 @@ def discard_entry(path: Path, problem: str, what: str) -> None:
     path.unlink(missing_ok=True)
 
 
-def write_entry(path: Path, what: str, **arrays) -> None:
-    """Write an entry atomically with its checksum; a failure to write is a warning."""
+def write_entry(path: Path, what: str, *, compress: bool = False, **arrays) -> None:
+    """Write an entry atomically with its checksum (``compress``: deflated, for arrays that shrink
+    several times, such as text); a failure to write is a warning."""
     arrays[CHECKSUM] = np.array(_checksum(arrays))
     try:
         with atomic_path(path, suffix=".npz") as tmp:
-            np.savez(tmp, **arrays)
+            (np.savez_compressed if compress else np.savez)(tmp, **arrays)
         logging.getLogger(__name__).debug("cache entry written: %s", path)
     except OSError as exc:
         warnings.warn(f"could not write the {what} cache entry {path} ({exc.strerror or exc}); "

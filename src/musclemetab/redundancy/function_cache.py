@@ -8,7 +8,8 @@ but the group's structure, the CasADi version and the package's code, so a new p
 them back, serialised by CasADi, from an entry of the package cache (:mod:`musclemetab.cache`)
 keyed by those three: the structure as its ``repr``, the code as the package's version and the
 SHA-256 of every module of the package (any change of the package makes new entries). Reading an entry takes about a
-fifth of the build and gives the same functions (the same operations in the same order).
+fifth of the build and gives the same functions (the same operations in the same order). The
+text is stored deflated (0.33 MB for the example's 40 muscles, against 3.0 MB as it is).
 
 The entries live in ``$MUSCLEMETAB_CACHE/functions`` (default ``~/.cache/musclemetab/functions``),
 beside the geometry, scaling and IK caches, and follow their rules: written atomically with a
@@ -72,6 +73,6 @@ def cached_functions(kind: str, structure, build: Callable[[], dict]) -> dict:
     if problem:
         discard_entry(path, problem, _WHAT)
     functions = build()
-    write_entry(path, _WHAT, **{name: np.frombuffer(f.serialize().encode("ascii"), dtype=np.uint8)
-                                for name, f in functions.items()})
+    write_entry(path, _WHAT, compress=True, **{name: np.frombuffer(f.serialize().encode("ascii"), dtype=np.uint8)
+                                               for name, f in functions.items()})
     return functions
