@@ -121,9 +121,9 @@ def read_estimate_trials(model, files, labels, *, workflow, side, dofs, passive,
         if with_emg:
             mapping = mapping_for_muscles(emg_mapping or "default", mapping, muscles)
             table = mapped_emg_table(f.emg, mapping, str(f.emg))
+        emg_source = source_path(f.emg) if isinstance(f.emg, (str, os.PathLike)) else f"EMG table of trial {lab}"
         sources = {"model": source_path(model), "ik": source_path(ik), "id": source_path(idp),
-                   **({"emg": source_path(f.emg) if isinstance(f.emg, (str, os.PathLike)) else f"EMG table of trial {lab}"}
-                      if with_emg else {})}
+                   **({"emg": emg_source} if with_emg else {})}
         trials.append(TrialArrays(lab, g, t_id, mom, t_ik, table, sources, {}, diagnosis, us))
     return trials, params, wf_record, tuple(dofs), mapping
 

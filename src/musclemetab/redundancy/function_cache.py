@@ -7,9 +7,10 @@ of what a new process spends on the problem before IPOPT starts. The functions d
 but the group's structure, the CasADi version and the package's code, so a new process reads
 them back, serialised by CasADi, from an entry of the package cache (:mod:`musclemetab.cache`)
 keyed by those three: the structure as its ``repr``, the code as the package's version and the
-SHA-256 of every module of the package (any change of the package makes new entries). Reading an entry takes about a
-fifth of the build and gives the same functions (the same operations in the same order). The
-text is stored deflated (0.33 MB for the example's 40 muscles, against 3.0 MB as it is).
+SHA-256 of every module of the package (any change of the package makes new entries). Reading
+an entry takes about a fifth of the build and gives the same functions (the same operations in
+the same order). The text is stored deflated (0.33 MB for the example's 40 muscles, against
+3.0 MB as it is).
 
 The entries live in ``$MUSCLEMETAB_CACHE/functions`` (default ``~/.cache/musclemetab/functions``),
 beside the geometry, scaling and IK caches, and follow their rules: written atomically with a
