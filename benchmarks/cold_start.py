@@ -17,6 +17,9 @@ The last table gives cold minus warm per tree: the wall times, and the "rest" (w
 IPOPT's solve time, which removes the run-to-run swing of the solve itself), in wall and
 CPU seconds. That difference is what a cold command costs over a warm one.
 
+Those imports are also timed once after each round of cold commands, and the last lines split
+each tree's cold rest into them and the package's own share.
+
 ``--dependencies`` measures instead what no change of the package can remove from a cold
 solve: in ``--repeat`` new interpreters (of this Python, so of its installed SciPy), the
 import of NumPy, of CasADi with its IPOPT plugin loaded (a one-variable ``nlpsol``), and of
@@ -145,19 +148,22 @@ print(json.dumps({"scipy": scipy.__version__, "numpy_s": t1 - t0, "casadi_ipopt_
 """
 
 
+def dependency_run() -> dict:
+    """The imports a cold solve cannot avoid, timed in one new interpreter (seconds, and SciPy's version)."""
+    proc = subprocess.run([sys.executable, "-c", _DEPENDENCIES], capture_output=True, text=True)
+    if proc.returncode != 0:
+        sys.exit(f"the imports failed:\n{proc.stderr}")
+    run = json.loads(proc.stdout.strip().splitlines()[-1])
+    run["total_s"] = run["numpy_s"] + run["casadi_ipopt_s"] + run["scipy_s"]
+    return run
+
+
 def dependency_floor(repeat: int) -> int:
     """The imports a cold solve cannot avoid, in ``repeat`` new interpreters (``--dependencies``)."""
-    runs = []
-    for _ in range(repeat):
-        proc = subprocess.run([sys.executable, "-c", _DEPENDENCIES], capture_output=True, text=True)
-        if proc.returncode != 0:
-            sys.exit(f"the imports failed:\n{proc.stderr}")
-        runs.append(json.loads(proc.stdout.strip().splitlines()[-1]))
-    version = runs[0].pop("scipy")
-    for r in runs[1:]:
-        r.pop("scipy")
+    runs = [dependency_run() for _ in range(repeat)]
+    version = runs[0]["scipy"]
     for r in runs:
-        r["total_s"] = r["numpy_s"] + r["casadi_ipopt_s"] + r["scipy_s"]
+        r.pop("scipy")
     med = _median(runs)
     print(f"imports a cold solve needs: {os.cpu_count()} cores, load average "
           f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}; SciPy {version}, Python {sys.version.split()[0]}")
@@ -202,9 +208,12 @@ def main(argv=None) -> int:
         for src in trees.values():  # fill each tree's caches (not timed)
             cold_run(src, ex, args.trial, cache)
     runs = {name: [] for name in trees}
+    floor = []  # the dependencies' imports, timed between the commands (the same machine state)
     for _ in range(args.repeat):
         for name, src in trees.items():
             runs[name].append(cold_run(src, ex, args.trial, cache, window))
+        if not args.quick:
+            floor.append(dependency_run()["total_s"])
     if not args.quick:
         warm = {name: warm_runs(src, ex, args.trial, cache, args.repeat) for name, src in trees.items()}
     head = f"{'wall s':>7} {'solve s':>8} {'rest s':>7} {'CPU s':>6} {'solve CPU s':>12} {'rest CPU s':>11}"
@@ -219,6 +228,14 @@ def main(argv=None) -> int:
         c, w = _median(runs[name]), _median(warm[name])
         print(f"{name:<10} {c['wall_s'] - w['wall_s']:>20.2f} {c['rest_s'] - w['rest_s']:>7.2f} "
               f"{c['rest_cpu_s'] - w['rest_cpu_s']:>11.2f}")
+    if floor:  # what the package adds beyond the imports no change of it can remove
+        dep = statistics.median(floor)
+        print(f"\nimports of NumPy, CasADi with IPOPT, scipy.signal and scipy.interpolate in new interpreters: "
+              f"{dep:.2f} s (median of {len(floor)}, {min(floor):.2f}-{max(floor):.2f} s)")
+        for name in trees:
+            rest = _median(runs[name])["rest_s"]
+            print(f"{name:<10} cold rest {rest:.2f} s = those imports {dep:.2f} s + the package's own "
+                  f"{rest - dep:.2f} s (budget for the rest {COLD_BUDGET_S:g} s)")
     print(f"(medians of {args.repeat}; load average at the end {' '.join(f'{x:.2f}' for x in os.getloadavg())})")
     return 0
 
