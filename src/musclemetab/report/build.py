@@ -199,10 +199,10 @@ def write_report(study_dir, out: str | os.PathLike | None = None, *,
     (a list; :func:`~.cli_folder.read_report_input`), reported as a study of their trials.
     ``out`` is the HTML file (a name ending in ``.html``) or a folder for it (``out/report.html``,
     :func:`page_path`); default ``study_dir/report.html``; required for several analyse
-    folders. The figures are written to the folder ``figures`` beside the page (PNG; ``formats=("png", "svg")`` adds SVG). Everything is
-    written atomically. The report is rebuilt only when its inputs changed (their content
-    hash, :func:`report_key`, is recorded in the page and in ``figures/report.json``) or
-    when ``force`` is true. ``workers`` processes draw the figures (see
+    folders. The figures are written to the folder ``figures`` beside the page (PNG;
+    ``formats=("png", "svg")`` adds SVG). Everything is written atomically. The report is
+    rebuilt only when its inputs changed (their content hash, :func:`report_key`, is recorded
+    in the page and in ``figures/report.json``) or when ``force`` is true. ``workers`` processes draw the figures (see
     :func:`~.draw.make_figures`). ``models``: the metabolic models the figures show (names or
     ``"all"``; default the paper's six, UM03, BH04, HO06, LW07, UM10, UC16, or ``[report]
     models`` of the study file; LW05 and MA68 only when named); the tables list every model
