@@ -19,7 +19,9 @@ sidecar ``<name>.sha256`` and follow the same rules.
 The folder is ``$MUSCLEMETAB_CACHE/geometry`` (default ``~/.cache/musclemetab/geometry``),
 or the folder a caller names (``--cache-dir``). The same entries, under the same rules, keep
 the solver's differentiated functions in ``$MUSCLEMETAB_CACHE/functions``
-(:mod:`musclemetab.redundancy.function_cache`).
+(:mod:`musclemetab.redundancy.function_cache`), and the other folders of :data:`CACHE_FOLDERS`
+what their modules compute. :func:`cache_usage` counts the entries of each folder and
+:func:`clear_cache` deletes them (``musclemetab cache``), touching no other file.
 """
 
 from __future__ import annotations
@@ -28,7 +30,9 @@ import hashlib
 import json
 import logging
 import os
+import re
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -36,18 +40,46 @@ import numpy as np
 from .errors import CacheWarning
 from .io.atomic import atomic_path
 
-__all__ = ["default_cache_dir", "content_key", "entry_path", "read_entry", "discard_entry", "write_entry",
-           "read_file_entry", "discard_file_entry", "seal_file_entry", "cached_texts"]
+__all__ = ["CACHE_FOLDERS", "cache_root", "cache_folder", "default_cache_dir", "content_key", "entry_path",
+           "read_entry", "discard_entry", "write_entry", "read_file_entry", "discard_file_entry", "seal_file_entry",
+           "cached_texts", "CacheUsage", "cache_usage", "clear_cache"]
 
 CHECKSUM = "checksum"
 
+#: The folders of the package cache (under :func:`cache_root`) and what each keeps.
+CACHE_FOLDERS = {
+    "geometry": "muscle-tendon lengths and moment arms, model parameters, the OpenSim files' model work (OpenSim)",
+    "functions": "the solver's differentiated functions, per problem structure and package version (CasADi)",
+    "inverse_dynamics": "inverse dynamics computed from ground forces (OpenSim)",
+    "scale": "scaled models (OpenSim's scale tool)",
+    "ik": "inverse kinematics from markers (OpenSim)",
+    "figures": "figures that depend only on the package",
+}
 
-def default_cache_dir() -> Path:
-    """``$MUSCLEMETAB_CACHE`` or ``~/.cache/musclemetab``, plus ``/geometry``."""
+#: The name of a cache entry: an optional prefix, a content key (:func:`content_key`), a suffix,
+#: and ``.sha256`` for the checksum of a file entry. Nothing else in a cache folder is the package's
+#: to delete (a temporary file is an entry being written).
+_ENTRY_NAME = re.compile(r"(?:[A-Za-z0-9_]+-)?[0-9a-f]{32}\.[A-Za-z0-9]+(?:\.sha256)?")
+
+
+def cache_root() -> Path:
+    """``$MUSCLEMETAB_CACHE``, else ``$XDG_CACHE_HOME/musclemetab`` (default ``~/.cache/musclemetab``)."""
     root = os.environ.get("MUSCLEMETAB_CACHE") or os.path.join(
         os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "musclemetab"
     )
-    return Path(root) / "geometry"
+    return Path(root)
+
+
+def cache_folder(name: str) -> Path:
+    """The folder ``name`` of :data:`CACHE_FOLDERS` under :func:`cache_root` (not created)."""
+    if name not in CACHE_FOLDERS:
+        raise ValueError(f"no cache folder {name!r}; one of {', '.join(CACHE_FOLDERS)}")
+    return cache_root() / name
+
+
+def default_cache_dir() -> Path:
+    """The geometry's cache folder: ``$MUSCLEMETAB_CACHE/geometry`` (:func:`cache_folder`)."""
+    return cache_folder("geometry")
 
 
 def content_key(spec: dict) -> str:
@@ -238,3 +270,55 @@ def cached_model_call(model_path: str | os.PathLike, target: str, cache_dir=None
     if entry is not None:
         write_entry(entry, "model", result=np.array(text))
     return json.loads(text)
+
+
+@dataclass(frozen=True)
+class CacheUsage:
+    """The entries of one folder of the package cache: ``folder`` (its path), ``entries`` (files,
+    a file entry's checksum counted with it) and ``size_bytes``."""
+
+    name: str
+    folder: Path
+    entries: int
+    size_bytes: int
+
+
+def _entries(folder: Path) -> list[Path]:
+    """The package's entries in ``folder`` (regular files named as entries; links and other files left out)."""
+    if not folder.is_dir() or folder.is_symlink():
+        return []
+    return sorted(p for p in folder.iterdir()
+                  if _ENTRY_NAME.fullmatch(p.name) and p.is_file() and not p.is_symlink())
+
+
+def _usage(name: str, files: list[Path]) -> CacheUsage:
+    size = 0
+    for p in files:
+        try:
+            size += p.stat().st_size
+        except FileNotFoundError:  # deleted meanwhile by another process
+            pass
+    return CacheUsage(name, cache_folder(name), sum(not p.name.endswith(".sha256") for p in files), size)
+
+
+def cache_usage(names=None) -> list[CacheUsage]:
+    """The entries of the cache folders ``names`` (default all of :data:`CACHE_FOLDERS`); nothing is created."""
+    return [_usage(n, _entries(cache_folder(n))) for n in (names or CACHE_FOLDERS)]
+
+
+def clear_cache(names=None) -> list[CacheUsage]:
+    """Delete the entries of the cache folders ``names`` (default all); returns what was deleted.
+
+    Only files named as the package names its entries are deleted: a file of another name in a cache
+    folder (e.g. when ``$MUSCLEMETAB_CACHE`` names a folder of the user's), links, the folders
+    themselves and the temporary files of entries being written stay. A process using an entry
+    meanwhile computes it again."""
+    removed = []
+    for n in names or CACHE_FOLDERS:
+        files = _entries(cache_folder(n))
+        usage = _usage(n, files)
+        for p in files:
+            p.unlink(missing_ok=True)
+        logging.getLogger(__name__).debug("cache cleared: %d entries in %s", usage.entries, usage.folder)
+        removed.append(usage)
+    return removed

@@ -214,9 +214,9 @@ def vertical_force(loads: ExternalLoads, layout, side: str):
 
 
 def _cache_dir() -> Path:
-    from .geometry import default_cache_dir
+    from .cache import cache_folder
 
-    return default_cache_dir().parent / "inverse_dynamics"
+    return cache_folder("inverse_dynamics")
 
 
 def compute_inverse_dynamics(

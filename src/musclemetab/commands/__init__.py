@@ -53,6 +53,7 @@ SUBCOMMANDS = (
     ("run", "musclemetab.commands.run", "add_parser"),
     ("demo", "musclemetab.commands.demo", "add_parser"),
     ("report", "musclemetab.commands.report", "add_parser"),
+    ("cache", "musclemetab.commands.cache", "add_parser"),
 )
 
 

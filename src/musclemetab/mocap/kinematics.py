@@ -89,9 +89,9 @@ def warn_flagged(summary: dict, source: str) -> None:
 
 
 def _cache_dir() -> Path:
-    from ..cache import default_cache_dir
+    from ..cache import cache_folder
 
-    return default_cache_dir().parent / "ik"
+    return cache_folder("ik")
 
 
 def inverse_kinematics(model: str | os.PathLike, markers: str | os.PathLike, *,

@@ -188,9 +188,9 @@ def setup_files(setup: str | os.PathLike) -> dict[str, Path]:
 
 
 def _cache_dir() -> Path:
-    from ..cache import default_cache_dir
+    from ..cache import cache_folder
 
-    return default_cache_dir().parent / "scale"
+    return cache_folder("scale")
 
 
 def _sha(path) -> str:

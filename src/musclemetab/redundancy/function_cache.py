@@ -7,7 +7,8 @@ of what a new process spends on the problem before IPOPT starts. The functions d
 but the group's structure, the CasADi version and the package's code, so a new process reads
 them back, serialised by CasADi, from an entry of the package cache (:mod:`musclemetab.cache`)
 keyed by those three: the structure as its ``repr``, the code as the package's version and the
-SHA-256 of every module of the package (any change of the package makes new entries). Reading
+SHA-256 of every module of the package (any change of the package makes new entries; the older
+ones stay until ``musclemetab cache --clear``, :func:`musclemetab.cache.clear_cache`). Reading
 an entry takes about a fifth of the build and gives the same functions (the same operations in
 the same order). The text is stored deflated (0.33 MB for the example's 40 muscles, against
 3.0 MB as it is).
@@ -28,7 +29,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..cache import CHECKSUM, default_cache_dir, discard_entry, entry_path, read_entry, write_entry
+from ..cache import CHECKSUM, cache_folder, discard_entry, entry_path, read_entry, write_entry
 
 __all__ = ["cached_functions", "code_digest", "functions_cache_dir"]
 
@@ -37,7 +38,7 @@ _WHAT = "symbolic functions"
 
 def functions_cache_dir() -> Path:
     """``$MUSCLEMETAB_CACHE/functions`` (default ``~/.cache/musclemetab/functions``)."""
-    return default_cache_dir().parent / "functions"
+    return cache_folder("functions")
 
 
 @functools.lru_cache(maxsize=1)

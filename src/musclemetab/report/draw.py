@@ -91,9 +91,9 @@ def draw_figure(study: StudyFolder, fig_dir: Path, formats: Sequence[str], name:
 
 # ------------------------------------------------------------------ the cache of the package's figures
 def _cache_folder() -> Path:
-    from ..cache import default_cache_dir
+    from ..cache import cache_folder
 
-    return default_cache_dir().parent / "figures"
+    return cache_folder("figures")
 
 
 def figure_cache(name: str) -> dict[str, Path] | None:
