@@ -328,8 +328,10 @@ def _header_rows(path) -> int:
 @pytest.mark.opensim
 def test_run_prints_no_source_line_and_no_cache_file(two_subjects, two_subjects_stderr):
     """``musclemetab run`` with two worker processes: every warning is one line
-    ``musclemetab: warning: ...``; no line names a file of the package's code with a line
-    number, nor a file of the package's cache (which the user never gave)."""
+    ``musclemetab: warning: ...``, said once per run however many workers met it (gait2392's
+    legs run in two workers and both find no walking speed), none from another library (a
+    pandas deprecation); no line names a file of the package's code with a line number, nor a
+    file of the package's cache (which the user never gave)."""
     import os
 
     import musclemetab
@@ -342,6 +344,9 @@ def test_run_prints_no_source_line_and_no_cache_file(two_subjects, two_subjects_
     assert source_lines == []
     warnings_said = [ln for ln in stderr.splitlines() if "warning" in ln.lower()]
     assert warnings_said and all(ln.startswith("musclemetab: warning: ") for ln in warnings_said)
+    assert len(warnings_said) == len(set(warnings_said))
+    assert len([ln for ln in warnings_said if "gait2392/walk1: no walking speed" in ln]) == 1
+    assert [ln for ln in warnings_said if re.match(r"musclemetab: warning: \w+Warning: ", ln)] == []
     # gait2392's knee reserve is large: said, naming the trial's files, not the cached inverse dynamics
     reserve = [ln for ln in warnings_said if "the reserve about knee_angle" in ln]
     assert reserve and all("subject01_walk1_grf.xml" in ln for ln in reserve)

@@ -198,6 +198,27 @@ def test_bands_leave_out_flagged_samples_and_say_where_the_nominal_lies():
                                                              "plausible samples lie below it")
 
 
+def test_bands_of_samples_none_flagged_as_read_from_a_table(tmp_path):
+    """Samples with no flag, their ``sample_flags`` column written empty and read back by pandas
+    as all-missing numbers: every sample makes the band (1.0-1.3, median 1.15), none is listed,
+    and no pandas warning (a missing text cell filled with text in a number column warns in
+    pandas 3 and is an error in pandas 4)."""
+    import warnings
+
+    from musclemetab.uncertainty import band_table
+
+    keys = ["subject", "trial", "workflow", "model"]
+    pd.DataFrame({"subject": "s", "trial": "t", "workflow": "w", "model": "UM10", "sample": range(5),
+                  "x": [1.0, 1.1, 1.2, 1.15, 1.3], "sample_flags": ""}).to_csv(tmp_path / "samples.csv", index=False)
+    s = pd.read_csv(tmp_path / "samples.csv")
+    assert s["sample_flags"].isna().all() and s["sample_flags"].dtype == float
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        b = band_table(s, keys, ["x"], listing=True).iloc[0]
+    assert (b["x_p05"], b["x_p50"], b["x_p95"]) == (1.0, 1.15, 1.3)
+    assert (b["uncertainty_samples"], b["uncertainty_rejected"], b["uncertainty_flagged_samples"]) == (5, 0, "")
+
+
 def test_width_contributions_are_the_derivative_times_the_prior_spread():
     """|dR/dlog p| x spread, per parameter and muscle, ranked; vmax has no prior (no width)."""
     from musclemetab.uncertainty import top_parameters_text, width_contributions

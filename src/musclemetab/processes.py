@@ -14,8 +14,8 @@ import signal
 import threading
 from concurrent.futures import ProcessPoolExecutor
 
-__all__ = ["THREAD_VARIABLES", "pin_threads", "ignore_sigint", "spawn_pool", "stop_pool", "sigint_deferred",
-           "sigint_noted", "sigterm_as_sigint", "terminated", "BackgroundCall"]
+__all__ = ["THREAD_VARIABLES", "pin_threads", "ignore_sigint", "spawn_pool", "stop_pool", "call_recording_warnings",
+           "warn_again", "sigint_deferred", "sigint_noted", "sigterm_as_sigint", "terminated", "BackgroundCall"]
 
 #: environment variables that size the thread pools of BLAS/LAPACK and OpenMP libraries
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
@@ -78,6 +78,28 @@ def stop_pool(pool) -> None:
         if proc.is_alive():
             proc.terminate()
     pool.shutdown(wait=True, cancel_futures=True)
+
+
+def call_recording_warnings(fn, *args, **kwargs) -> tuple[object, list[tuple[type, str]]]:
+    """``(fn(*args, **kwargs), [(category, message), ...])``: in a pool worker (or on a Dask
+    worker), the result and every warning the call raised, instead of printing them there, for
+    the process that waits for the result to raise again (:func:`warn_again`). There, where the
+    user looks (a terminal, a notebook), each is said once per run, however many workers met it,
+    and under that process's warning filters."""
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = fn(*args, **kwargs)
+    return result, [(w.category, str(w.message)) for w in caught]
+
+
+def warn_again(caught) -> None:
+    """Raise the warnings :func:`call_recording_warnings` recorded in another process, in order."""
+    import warnings
+
+    for category, message in caught:
+        warnings.warn(message, category, stacklevel=2)
 
 
 #: Set when a :func:`sigint_noted` block saw Ctrl-C that was not raised yet (an interrupt that

@@ -463,7 +463,7 @@ def nominal_note(nominal: float, used, rejected=(), nominal_quality: str = "ok",
 def _used(group, keep_flagged: bool):
     """The rows of ``group`` (one per sample) that make the band: no flag (``sample_flags`` empty),
     or every converged one with ``keep_flagged``."""
-    flags = group["sample_flags"].fillna("").astype(str) if "sample_flags" in group else None
+    flags = group["sample_flags"].astype(object).fillna("").astype(str) if "sample_flags" in group else None
     if flags is None:
         return group.index == group.index
     return (flags == "") | (keep_flagged & (flags != NOT_CONVERGED))
@@ -498,7 +498,7 @@ def band_table(samples, keys: Sequence[str], columns: Sequence[str], *, keep_fla
         row["uncertainty_rejected"] = int(len(group) - len(used))
         row["uncertainty_band"] = band_kind(len(used))
         if listing:
-            flagged = group[group["sample_flags"].fillna("").astype(str) != ""] if "sample_flags" in group else group[:0]
+            flagged = group[group["sample_flags"].astype(object).fillna("").astype(str) != ""] if "sample_flags" in group else group[:0]
             row["uncertainty_flagged_samples"] = "; ".join(
                 f"{int(s)}: {f}{' (kept)' if keep_flagged and f != NOT_CONVERGED else ''}"
                 for s, f in zip(flagged["sample"], flagged["sample_flags"].astype(str)))

@@ -133,16 +133,14 @@ def _solve_files_recording_warnings(args, kwargs, progress_s=None):
     ``progress_s`` the progress lines every ``progress_s`` seconds on this process's standard
     error (the caller's), labelled with the leg (:class:`~.ipopt.solve_progress`)."""
     import contextlib
-    import warnings
 
+    from ..processes import call_recording_warnings
     from .ipopt import solve_progress
 
     progress = contextlib.nullcontext() if progress_s is None else \
         solve_progress(progress_s, label=f" side {kwargs.get('side')}")
-    with warnings.catch_warnings(record=True) as caught, progress:
-        warnings.simplefilter("always")
-        solution = solve_files(*args, **kwargs)
-    return solution, [(w.category, str(w.message)) for w in caught]
+    with progress:
+        return call_recording_warnings(solve_files, *args, **kwargs)
 
 
 def solve_sides(model_path, ik_path, id_path, workflow: str = "effort-gen", *, sides=("r", "l"), workers: int = 1,
@@ -157,15 +155,13 @@ def solve_sides(model_path, ik_path, id_path, workflow: str = "effort-gen", *, s
     same either way (``tests/test_gait2392.py``; time: ``benchmarks/sides.py``). A ``before_solve``
     function (:func:`solve_files`) is called for legs solved in this process only.
     """
-    import warnings
-
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise OptionError(f"--workers must be a whole number of at least 1, not {workers!r}")
     sides = tuple(sides)
     if workers == 1 or len(sides) == 1:
         return {side: solve_files(model_path, ik_path, id_path, workflow, side=side, **kwargs) for side in sides}
     kwargs.pop("before_solve", None)  # it would run in the leg's process, not in this one
-    from ..processes import spawn_pool, stop_pool
+    from ..processes import spawn_pool, stop_pool, warn_again
 
     from .ipopt import progress_interval
 
@@ -181,8 +177,7 @@ def solve_sides(model_path, ik_path, id_path, workflow: str = "effort-gen", *, s
         pool.shutdown(wait=True, cancel_futures=True)
         restore()
     for _, caught in results.values():
-        for category, message in caught:
-            warnings.warn(message, category, stacklevel=2)
+        warn_again(caught)
     return {side: solution for side, (solution, _) in results.items()}
 
 

@@ -28,7 +28,10 @@ Executors: ``workers=1`` runs the units in this process, one after the other;
 worker; the BLAS/OpenMP thread pools of each process are limited to its share of the cores,
 ``cpu_count // N``, through ``OMP_NUM_THREADS`` and its siblings unless the caller set them); ``scheduler="tcp://host:port"`` on a Dask cluster (``pip install
 musclemetab[dask]``; the workers need musclemetab installed and the study's files at the
-same paths). A unit failure is recorded and the other units go on.
+same paths). A unit failure is recorded and the other units go on. The warnings of a unit run
+in a worker are raised again in this process when the unit returns
+(:func:`~musclemetab.processes.call_recording_warnings`): the command line says each once per
+run, however many workers met it, and a notebook shows them.
 
 Safety: the options (``workers``, ``scheduler``) and the output folder are checked, and the
 cluster connected, before anything is written. While a run works on a study folder it holds
@@ -58,7 +61,8 @@ from ..metabolics.plausibility import add_quality
 from ..messages import write_quietly
 from ..io.atomic import FolderLock, _boot_id, _process_alive  # noqa: F401  (public here before)
 from ..io.atomic import atomic_directory, atomic_path, atomic_write_text, check_output_folder, check_replaceable
-from ..processes import THREAD_VARIABLES, spawn_pool  # noqa: F401  (THREAD_VARIABLES: public here before)
+from ..processes import THREAD_VARIABLES  # noqa: F401  (public here before)
+from ..processes import call_recording_warnings, spawn_pool, warn_again
 from ..processes import pin_threads as _pin_threads  # noqa: F401
 from .spec import Study
 from .units import (
@@ -349,7 +353,7 @@ def _run_units(study: Study, jobs: list[tuple[Unit, str, str | None, str | None,
                         break  # every job left waits for a running unit's solution
                     i = 0  # cannot happen (a warm-start source is planned before its units): run in order
                 unit, key, dep, warm, _ = queue.pop(i)
-                fut = executor.submit(execute_unit, study, unit, key, dep, warm)
+                fut = executor.submit(call_recording_warnings, execute_unit, study, unit, key, dep, warm)
                 futures[fut] = unit
                 pending.append(fut)
             fut = next(iter(executor.completed(pending)))
@@ -357,11 +361,13 @@ def _run_units(study: Study, jobs: list[tuple[Unit, str, str | None, str | None,
             unit = futures[fut]
             waiting.discard(unit)
             try:
-                rec = fut.result()
+                rec, caught = fut.result()
             except BaseException as exc:  # the worker process died, the cluster lost the task, or cancelled
                 if interrupted:
                     continue
                 rec = {"status": "failed", "error": f"{type(exc).__name__}: {exc} (worker lost)"}
+            else:  # the unit's warnings said here, each once per run (not once per worker)
+                warn_again(caught)
             records[unit] = rec
             interrupted = interrupted or rec.get("status") == INTERRUPTED
             progress.update(unit.label, rec, ran=True)
@@ -636,7 +642,7 @@ def add_leg_rows(rows: Mapping[str, object], basal_energy_J: Mapping[str, object
     if "gait_cycle" in first:  # each leg over a gait cycle of its own
         out["gait_cycle"] = np.logical_and.reduce([f["gait_cycle"].astype(bool) for f in frames])
     if "excluded_muscles" in first:
-        names = [n for f in frames for n in str(f["excluded_muscles"].fillna("").iloc[0]).split()]
+        names = [n for f in frames for n in str(f["excluded_muscles"].astype(object).fillna("").iloc[0]).split()]
         out["excluded_muscles"] = " ".join(dict.fromkeys(names)) or float("nan")
     for c in ("cycle_source", "speed_source", "solve_start"):
         if c in out:
