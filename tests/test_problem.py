@@ -35,6 +35,30 @@ def _same_problem(a, b):
 
 
 @pytest.mark.opensim
+def test_problem_json_names_the_files_as_the_solve_record_does(example, geometry_cache, tmp_path):
+    """``problem.json`` names each input file as the solve's record names it (``summary.json``
+    ``inputs``, :func:`~musclemetab.redundancy.trial_files.source_path`): absolute, a link kept as
+    the user named it (a data folder reached through a link), not the file it points to; the
+    problem is read back through the link."""
+    import json
+
+    from musclemetab.redundancy.problem import TrialFiles, load_problem, read_problem
+    from musclemetab.redundancy.trial_files import source_path
+
+    data = tmp_path / "data"
+    data.symlink_to(example.model.parent, target_is_directory=True)
+    model, ik, idf = (data / p.name for p in (example.model, example.ik["normal"], example.id["normal"]))
+    problem = load_problem(model, [TrialFiles(ik, idf)], window=WINDOW, dofs=DOFS, cache_dir=geometry_cache)
+    problem.write(tmp_path / "out")
+    doc = json.loads((tmp_path / "out" / "problem.json").read_text())
+    trial = doc["keywords"]["trials"][0]
+    assert (doc["keywords"]["model"], trial["ik"], trial["id"]) == (str(model), str(ik), str(idf))
+    assert str(source_path(idf)) == str(idf) != str(example.id["normal"].resolve())
+    assert set(doc["sha256"]) == {str(model), str(ik), str(idf)}
+    _same_problem(read_problem(tmp_path / "out", cache_dir=geometry_cache), problem)
+
+
+@pytest.mark.opensim
 def test_problem_json_round_trip(example, geometry_cache, tmp_path):
     """``problem.json`` rebuilds the problem (muscle parameters changed after the load
     included); a file changed or gone since, or a folder without ``problem.json`` (written
