@@ -94,12 +94,13 @@ def call_recording_warnings(fn, *args, **kwargs) -> tuple[object, list[tuple[typ
     return result, [(w.category, str(w.message)) for w in caught]
 
 
-def warn_again(caught) -> None:
-    """Raise the warnings :func:`call_recording_warnings` recorded in another process, in order."""
+def warn_again(caught, stacklevel: int = 1) -> None:
+    """Raise the warnings :func:`call_recording_warnings` recorded in another process, in order,
+    as if raised ``stacklevel`` frames up from the caller (1: the caller's line)."""
     import warnings
 
     for category, message in caught:
-        warnings.warn(message, category, stacklevel=2)
+        warnings.warn(message, category, stacklevel=stacklevel + 1)
 
 
 #: Set when a :func:`sigint_noted` block saw Ctrl-C that was not raised yet (an interrupt that

@@ -177,7 +177,7 @@ def solve_sides(model_path, ik_path, id_path, workflow: str = "effort-gen", *, s
         pool.shutdown(wait=True, cancel_futures=True)
         restore()
     for _, caught in results.values():
-        warn_again(caught)
+        warn_again(caught, stacklevel=2)  # at the line that called solve_sides
     return {side: solution for side, (solution, _) in results.items()}
 
 
