@@ -300,12 +300,14 @@ SAMPLE_TIME_TOLERANCE_S = 1e-5
 
 
 def check_inside(window, t_first: float, t_last: float, path, what: str,
-                 tol: float = SAMPLE_TIME_TOLERANCE_S) -> None:
+                 tol: float = SAMPLE_TIME_TOLERANCE_S, span: str = "the window",
+                 remedy: str = "choose a window inside every input file") -> None:
     """Raise :class:`DataMismatchError` unless ``window`` lies inside ``[t_first, t_last]``
     (give or take ``tol``, :data:`SAMPLE_TIME_TOLERANCE_S`).
 
-    The message names the file and by how much it falls short (to the microsecond when the
-    shortfall is under a millisecond).
+    The message names the file and by how much it falls short of ``span`` (what the times
+    ``window`` are; to the microsecond when the shortfall is under a millisecond), the times they
+    share, then ``remedy``.
     """
     t0, t1 = float(window[0]), float(window[1])
     short_start = t_first - t0
@@ -313,14 +315,13 @@ def check_inside(window, t_first: float, t_last: float, path, what: str,
     if short_start > tol or short_end > tol:
         parts = []
         if short_start > tol:
-            parts.append(f"starts {_seconds(short_start)} s after the window start {t0:.3f} s")
+            parts.append(f"starts {_seconds(short_start)} s after {span} start {t0:.3f} s")
         if short_end > tol:
-            parts.append(f"ends {_seconds(short_end)} s before the window end {t1:.3f} s")
+            parts.append(f"ends {_seconds(short_end)} s before {span} end {t1:.3f} s")
         a, b = max(t0, t_first), min(t1, t_last)
-        shared = f" (this file and the window share {a:.3f}-{b:.3f} s)" if b > a else ""
+        shared = f" (this file and {span} share {a:.3f}-{b:.3f} s)" if b > a else ""
         raise DataMismatchError(
-            f"{path}: the {what} ({t_first:.3f}-{t_last:.3f} s) {' and '.join(parts)}; choose a window inside "
-            f"every input file{shared}"
+            f"{path}: the {what} ({t_first:.3f}-{t_last:.3f} s) {' and '.join(parts)}{shared}; {remedy}"
         )
 
 

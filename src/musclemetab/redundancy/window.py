@@ -160,8 +160,13 @@ def resolve_window(
         for msg in event_notes:
             notes.append(msg)
             _warnings.warn(msg, WindowWarning, stacklevel=2)
+        leg = "right" if side == "r" else "left"
+        span = f"the {leg} leg's gait cycle" + ("" if cycle == "auto" else f" {cycle}")
         for path, what, (a, b) in inputs:
-            check_inside((gc.start_s, gc.end_s), a, b, path, f"{what} (needed for the gait cycle)")
+            remedy = "choose another --cycle, or a --window inside every input file" + (
+                ", or give the ground forces (--external-loads) instead of --id: the inverse dynamics is then "
+                "computed over the whole trial" if what == "inverse dynamics" else "")
+            check_inside((gc.start_s, gc.end_s), a, b, path, what, span=span, remedy=remedy)
         t0, t1 = gc.start_s - padding_s, gc.end_s + padding_s
         if t0 < lo - _TOL or t1 > hi + _TOL:
             edge_file = [p for p, _, (a, b) in inputs if (t0 < a - _TOL) or (t1 > b + _TOL)]
@@ -176,7 +181,7 @@ def resolve_window(
             t0, t1 = clipped
         cycle_rec = dict(start_s=gc.start_s, toe_off_s=gc.toe_off_s, end_s=gc.end_s, side=side,
                          number=cycle, source=where)
-        source = f"gait cycle {cycle} of the {'right' if side == 'r' else 'left'} leg"
+        source = f"gait cycle {cycle} of the {leg} leg"
     # snap outwards to IK frames, never past the data
     ok = (ik_t >= lo - _TOL) & (ik_t <= hi + _TOL)
     before = np.flatnonzero(ok & (ik_t <= t0 + _TOL))
