@@ -448,6 +448,33 @@ def test_study_progress_time_left_and_interrupted_units():
     ]
 
 
+def test_a_units_warnings_come_above_the_progress_bar_on_a_terminal():
+    """On a terminal the bar is one line redrawn in place (a carriage return, no newline): a
+    unit's warnings, said when the unit ends, first blank it, and the next update draws it below
+    them; the warnings are raised in order, with their categories."""
+    import warnings
+
+    from musclemetab.errors import WindowWarning
+    from musclemetab.study.runner import _Progress, _say_warnings
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    stream = Terminal()
+    bar = _Progress(2, True, stream)
+    bar.update("s/a/effort-gen", {"status": "ok"})
+    drawn = stream.getvalue()
+    assert drawn.startswith("\r[############............] 1/2 units") and not drawn.endswith("\n")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        _say_warnings([(WindowWarning, "first"), (UserWarning, "second")], bar)
+    assert [(w.category, str(w.message)) for w in caught] == [(WindowWarning, "first"), (UserWarning, "second")]
+    assert stream.getvalue() == drawn + "\r" + " " * 160 + "\r"
+    _say_warnings([], bar)  # no warning: the bar stays
+    assert stream.getvalue() == drawn + "\r" + " " * 160 + "\r"
+
+
 @pytest.mark.opensim
 def test_mat_files_of_metabolics_and_export_hold_the_folders_tables(cli_flow, gait2392, tmp_path):
     """``metabolics --mat`` (from the objects in memory) and ``export --mat`` (from the folders'

@@ -28,10 +28,10 @@ Executors: ``workers=1`` runs the units in this process, one after the other;
 worker; the BLAS/OpenMP thread pools of each process are limited to its share of the cores,
 ``cpu_count // N``, through ``OMP_NUM_THREADS`` and its siblings unless the caller set them); ``scheduler="tcp://host:port"`` on a Dask cluster (``pip install
 musclemetab[dask]``; the workers need musclemetab installed and the study's files at the
-same paths). A unit failure is recorded and the other units go on. The warnings of a unit run
-in a worker are raised again in this process when the unit returns
-(:func:`~musclemetab.processes.call_recording_warnings`): the command line says each once per
-run, however many workers met it, and a notebook shows them.
+same paths). A unit failure is recorded and the other units go on. The warnings of a unit are
+raised in this process when the unit ends, whatever the executor
+(:func:`~musclemetab.processes.call_recording_warnings`), above the progress bar: the command
+line says each once per run, however many workers met it, and a notebook shows them.
 
 Safety: the options (``workers``, ``scheduler``) and the output folder are checked, and the
 cluster connected, before anything is written. While a run works on a study folder it holds
@@ -173,6 +173,12 @@ class _Progress:
         if left <= 0:
             return 0.0
         return sum(self.costs) / len(self.costs) * left / min(self.parallel, left)
+
+    def clear_line(self) -> None:
+        """Blank the bar on a terminal (before other lines, e.g. a unit's warnings; the next
+        :meth:`update` draws it again below them)."""
+        if self.enabled and self.tty and self.done:
+            write_quietly(self.stream, "\r" + " " * 160 + "\r")
 
     def update(self, label: str, record: dict, ran: bool = False) -> None:
         status = record.get("status")
@@ -319,6 +325,14 @@ def _next_ready(queue: list, waiting: set) -> int | None:
     return None
 
 
+def _say_warnings(caught, progress: _Progress) -> None:
+    """A unit's warnings (:func:`~musclemetab.processes.call_recording_warnings`), raised in this
+    process when the unit ends, above the progress bar."""
+    if caught:
+        progress.clear_line()
+        warn_again(caught, stacklevel=2)
+
+
 def _run_units(study: Study, jobs: list[tuple[Unit, str, str | None, str | None, Unit | None]],
                executor: _Executor, progress: _Progress) -> tuple[dict, bool]:
     """Run ``(unit, key, dependency folder, warm-start folder, warm-start unit)`` jobs; a job starts
@@ -328,8 +342,9 @@ def _run_units(study: Study, jobs: list[tuple[Unit, str, str | None, str | None,
     if executor.submit is None:
         try:
             for unit, key, dep, warm, _ in jobs:  # a warm-start unit comes before the units it starts
-                rec = execute_unit(study, unit, key, dep, warm)
+                rec, caught = call_recording_warnings(execute_unit, study, unit, key, dep, warm)
                 records[unit] = rec
+                _say_warnings(caught, progress)
                 progress.update(unit.label, rec, ran=True)
                 if rec.get("status") == INTERRUPTED:
                     return records, True
@@ -367,7 +382,7 @@ def _run_units(study: Study, jobs: list[tuple[Unit, str, str | None, str | None,
                     continue
                 rec = {"status": "failed", "error": f"{type(exc).__name__}: {exc} (worker lost)"}
             else:  # the unit's warnings said here, each once per run (not once per worker)
-                warn_again(caught)
+                _say_warnings(caught, progress)
             records[unit] = rec
             interrupted = interrupted or rec.get("status") == INTERRUPTED
             progress.update(unit.label, rec, ran=True)
