@@ -89,3 +89,26 @@ def test_bad_input(cache, tmp_path, monkeypatch, capsys):
     assert capsys.readouterr().err.strip() == (f"musclemetab: error: the package cache {a_file} is a file, not a "
                                                "folder: set MUSCLEMETAB_CACHE to a folder")
     assert a_file.read_text() == "x"
+
+
+def test_an_entry_that_cannot_be_deleted(cache, monkeypatch, capsys):
+    """An entry the file system refuses to delete (a folder without write permission) is named in one
+    line, exit status 1; the entries of the other folders are deleted all the same."""
+    from pathlib import Path
+
+    root, entries, _ = cache
+    unlink = Path.unlink
+
+    def refuse_geometry(self, missing_ok=False):
+        if self.parent.name == "geometry":
+            raise PermissionError(13, "Permission denied")
+        return unlink(self, missing_ok=missing_ok)
+
+    monkeypatch.setattr(Path, "unlink", refuse_geometry)
+    assert main(["cache", "--clear"]) == 1
+    err = capsys.readouterr().err.strip()
+    first = sorted(entries["geometry"])[0]  # deleted in the order of their names
+    assert err == (f"musclemetab: error: could not delete 3 cache file(s), e.g. {first} (Permission denied); the "
+                   "other entries are deleted: check the folder's permissions and run it again")
+    assert all(p.exists() for p in entries["geometry"])
+    assert not any(p.exists() for p in entries["functions"] + entries["inverse_dynamics"])

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import CacheWarning
+from .errors import CacheWarning, OutputError
 from .io.atomic import atomic_path
 
 __all__ = ["CACHE_FOLDERS", "cache_root", "cache_folder", "default_cache_dir", "content_key", "entry_path",
@@ -287,18 +287,24 @@ def _entries(folder: Path) -> list[Path]:
     """The package's entries in ``folder`` (regular files named as entries; links and other files left out)."""
     if not folder.is_dir() or folder.is_symlink():
         return []
-    return sorted(p for p in folder.iterdir()
-                  if _ENTRY_NAME.fullmatch(p.name) and p.is_file() and not p.is_symlink())
+    try:
+        return sorted(p for p in folder.iterdir()
+                      if _ENTRY_NAME.fullmatch(p.name) and p.is_file() and not p.is_symlink())
+    except OSError as exc:
+        raise OutputError(f"the cache folder {folder} cannot be read ({exc.strerror or exc}); check its "
+                          "permissions") from None
+
+
+def _size(path: Path) -> int:
+    try:
+        return path.stat().st_size
+    except FileNotFoundError:  # deleted meanwhile by another process
+        return 0
 
 
 def _usage(name: str, files: list[Path]) -> CacheUsage:
-    size = 0
-    for p in files:
-        try:
-            size += p.stat().st_size
-        except FileNotFoundError:  # deleted meanwhile by another process
-            pass
-    return CacheUsage(name, cache_folder(name), sum(not p.name.endswith(".sha256") for p in files), size)
+    return CacheUsage(name, cache_folder(name), sum(not p.name.endswith(".sha256") for p in files),
+                      sum(_size(p) for p in files))
 
 
 def cache_usage(names=None) -> list[CacheUsage]:
@@ -313,12 +319,22 @@ def clear_cache(names=None) -> list[CacheUsage]:
     folder (e.g. when ``$MUSCLEMETAB_CACHE`` names a folder of the user's), links, the folders
     themselves and the temporary files of entries being written stay. A process using an entry
     meanwhile computes it again."""
-    removed = []
+    removed, kept = [], []
     for n in names or CACHE_FOLDERS:
-        files = _entries(cache_folder(n))
-        usage = _usage(n, files)
-        for p in files:
-            p.unlink(missing_ok=True)
+        gone, sizes = [], {}
+        for p in _entries(cache_folder(n)):
+            sizes[p] = _size(p)
+            try:
+                p.unlink(missing_ok=True)
+                gone.append(p)
+            except OSError as exc:  # the others are deleted all the same: entries stand alone
+                kept.append((p, exc))
+        usage = CacheUsage(n, cache_folder(n), sum(not p.name.endswith(".sha256") for p in gone),
+                           sum(sizes[p] for p in gone))
         logging.getLogger(__name__).debug("cache cleared: %d entries in %s", usage.entries, usage.folder)
         removed.append(usage)
+    if kept:
+        path, exc = kept[0]
+        raise OutputError(f"could not delete {len(kept)} cache file(s), e.g. {path} ({exc.strerror or exc}); the "
+                          "other entries are deleted: check the folder's permissions and run it again")
     return removed
