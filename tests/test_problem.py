@@ -37,13 +37,13 @@ def _same_problem(a, b):
 @pytest.mark.opensim
 def test_problem_json_names_the_files_as_the_solve_record_does(example, geometry_cache, tmp_path):
     """``problem.json`` names each input file as the solve's record names it (``summary.json``
-    ``inputs``, :func:`~musclemetab.redundancy.trial_files.source_path`): absolute, a link kept as
+    ``inputs``, :func:`~musclemetab.io.source_path`): absolute, a link kept as
     the user named it (a data folder reached through a link), not the file it points to; the
     problem is read back through the link."""
     import json
 
     from musclemetab.redundancy.problem import TrialFiles, load_problem, read_problem
-    from musclemetab.redundancy.trial_files import source_path
+    from musclemetab.io import source_path
 
     data = tmp_path / "data"
     data.symlink_to(example.model.parent, target_is_directory=True)

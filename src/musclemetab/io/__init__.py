@@ -8,6 +8,7 @@ from .atomic import (
     check_inside,
     check_output_folder,
     file_sha256,
+    source_path,
 )
 from .jsonfile import json_ready, read_json_object
 from .parquet import parquet_available, write_parquet
@@ -25,6 +26,7 @@ from .storage import (
 )
 
 __all__ = [
+    "source_path",
     "StorageTable",
     "read_table",
     "as_table",

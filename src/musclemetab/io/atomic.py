@@ -24,9 +24,16 @@ LOCK_FILE = ".musclemetab.lock"
 #: each (the format of ``sha256sum``, so ``sha256sum -c .musclemetab-files`` checks them)
 FILES_MANIFEST = ".musclemetab-files"
 
-__all__ = ["file_sha256", "atomic_write_text", "atomic_write_bytes", "atomic_path", "atomic_directory",
+__all__ = ["file_sha256", "source_path", "atomic_write_text", "atomic_write_bytes", "atomic_path", "atomic_directory",
            "check_output_folder", "check_inside", "check_replaceable", "written_files", "is_written",
            "FolderLock", "LOCK_FILE", "FILES_MANIFEST"]
+
+
+def source_path(path: str | os.PathLike) -> Path:
+    """An input file as a record keeps it: absolute (the folder the command ran in put in front of
+    a relative name), so that a later command run from another folder finds it; links are kept as
+    named."""
+    return Path(os.path.abspath(path))
 
 
 def file_sha256(path: str | os.PathLike) -> str:

@@ -88,8 +88,9 @@ def read_estimate_trials(model, files, labels, *, workflow, side, dofs, passive,
     from .emg_inputs import mapped_emg_table, mapping_for_muscles, resolve_emg_mapping
     from .estimate import read_fiber_lengths
     from .inputs import check_time_ranges, read_inverse_dynamics, read_kinematics, restrict_geometry
+    from ..io import source_path
     from .trial_files import exclude_from_geometry, fiber_lengths_without, mapping_without, read_model_parameters, \
-        source_path, trial_dofs
+        trial_dofs
     from .workflows import get_workflow, workflow_parameters
 
     with_emg = any(f.emg is not None for f in files)

@@ -94,8 +94,8 @@ def problem_document(problem) -> dict:
 
 def _absolute(value):
     """A file's absolute path, as the solve's record names it (the folder may be read from
-    elsewhere; links kept as named: :func:`.trial_files.source_path`); other values as they are."""
-    from .trial_files import source_path
+    elsewhere; links kept as named: :func:`musclemetab.io.source_path`); other values as they are."""
+    from ..io import source_path
 
     return str(source_path(value)) if isinstance(value, str) and Path(value).is_file() else value
 

@@ -19,6 +19,7 @@ from typing import NamedTuple, Sequence
 import numpy as np
 
 from ..errors import OptionError
+from ..io import source_path
 from ..messages import name_list
 from .inputs import (
     GeometryArrays,
@@ -51,13 +52,6 @@ class TrialArrays(NamedTuple):
     record: dict
     diagnosis: object
     fiber_lengths: dict = {}
-
-
-def source_path(path) -> Path:
-    """A source file as a solve's record keeps it: absolute (the folder the command ran in put in
-    front of a relative name), so that a later command run from another folder finds it; links
-    are kept as named."""
-    return Path(os.path.abspath(path))
 
 
 def _arrays(geometry) -> GeometryArrays:
