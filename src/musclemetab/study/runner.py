@@ -28,8 +28,8 @@ Executors: ``workers=1`` runs the units in this process, one after the other;
 worker; the BLAS/OpenMP thread pools of each process are limited to its share of the cores,
 ``cpu_count // N``, through ``OMP_NUM_THREADS`` and its siblings unless the caller set them); ``scheduler="tcp://host:port"`` on a Dask cluster (``pip install
 musclemetab[dask]``; the workers need musclemetab installed and the study's files at the
-same paths). A unit failure is recorded and the other units go on. The warnings of a unit are
-raised in this process when the unit ends, whatever the executor
+same paths). A unit failure is recorded and the other units go on. The warnings of a unit run
+by a worker are raised in this process when the unit ends
 (:func:`~musclemetab.processes.call_recording_warnings`), above the progress bar: the command
 line says each once per run, however many workers met it, and a notebook shows them.
 
@@ -342,9 +342,10 @@ def _run_units(study: Study, jobs: list[tuple[Unit, str, str | None, str | None,
     if executor.submit is None:
         try:
             for unit, key, dep, warm, _ in jobs:  # a warm-start unit comes before the units it starts
-                rec, caught = call_recording_warnings(execute_unit, study, unit, key, dep, warm)
+                # its warnings said as they come (recording them here would change the warnings state of
+                # the whole process while the demo draws in another thread; the log says each once)
+                rec = execute_unit(study, unit, key, dep, warm)
                 records[unit] = rec
-                _say_warnings(caught, progress)
                 progress.update(unit.label, rec, ran=True)
                 if rec.get("status") == INTERRUPTED:
                     return records, True
