@@ -172,13 +172,14 @@ def test_bad_trial_input_one_line_no_output(gait2392, tmp_path, capsys):
         (["--id", gait2392.id, "--dofs", "knee_angle_r", "wrist_flex_r"], "has no coordinate wrist_flex_r"),
         (["--external-loads", gait2392.external_loads, "--window", "2.0:3.0"], "ends 0.500 s before"),
         (["--external-loads", gait2392.external_loads, "--side", "l", "--cycle", "3"], "cycle 3 does not exist"),
-        # no forces: the cycle from the kinematics (0.60-1.83 s) does not fit the stored ID (0.4-1.6 s); the
-        # remedy names the options that fit a cycle, not --window alone
+        # no forces: neither cycle from the kinematics (0.60-1.83, 1.83-3.05 s) fits the stored ID (0.4-1.6 s);
+        # the remedy names the options that fit, not --window alone
         (["--id", gait2392.id, "--cycle", "auto"],
          "subject01_walk1_id.sto: the inverse dynamics (0.400-1.600 s) ends 0.228989 s before the right leg's gait "
-         "cycle end 1.829 s (this file and the right leg's gait cycle share 0.599-1.600 s); choose another --cycle, "
-         "or a --window inside every input file, or give the ground forces (--external-loads) instead of --id: the "
-         "inverse dynamics is then computed over the whole trial"),
+         "cycle end 1.829 s (this file and the right leg's gait cycle share 0.599-1.600 s); no later cycle of the "
+         "leg (1.829-3.050 s) lies inside every input file either; give a --window inside every input file, or give "
+         "the ground forces (--external-loads) instead of --id: the inverse dynamics is then computed over the whole "
+         "trial"),
     ]
     # ExternalLoads naming a body the model lacks, or a data file that does not exist; forces that
     # hold no complete gait cycle of the leg (cut at 1.5 s: one right heel strike, 0.618 s)

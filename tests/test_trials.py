@@ -336,6 +336,43 @@ def test_the_grf_column_and_threshold_reach_the_cycle_search(gait2392):
         resolve_window(gait2392.ik, side="r", cycle="auto", grf_path=grf, grf_threshold_N=5000.0)
 
 
+def test_cycle_auto_takes_the_first_cycle_inside_every_input_file(tmp_path):
+    """A ground force with three contacts of the right foot (heel strikes 0.20, 1.30 and 2.40 s,
+    toe-offs 0.90 and 2.00 s: two complete cycles) and kinematics from 0.50 s: the first cycle
+    starts before the kinematics, so ``cycle="auto"`` takes the second, 1.30-2.40 s (the force
+    crosses the 20 N threshold 0.97 ms before each step), padded by 0.05 s and snapped outwards
+    to the kinematics' 100 Hz frames: 1.24-2.45 s; ``cycle=1`` is refused naming the IK file and
+    its shortfall, 0.5 - (0.199 + 20/700 ms) = 0.300971 s; kinematics from 1.50 s hold neither,
+    and the message says so of both."""
+    import pandas as pd
+
+    from musclemetab.errors import DataMismatchError
+    from musclemetab.io import write_storage
+    from musclemetab.redundancy.window import resolve_window
+
+    t = np.round(np.arange(0.0, 3.0 + 1e-9, 0.001), 3)
+    stance = ((t >= 0.2) & (t < 0.9)) | ((t >= 1.3) & (t < 2.0)) | ((t >= 2.4) & (t < 2.9))
+    grf = write_storage(tmp_path / "grf.mot", pd.DataFrame({"ground_force_vy": np.where(stance, 700.0, 0.0)}, index=t))
+    ik_t = np.round(np.arange(0.5, 3.0 + 1e-9, 0.01), 2)
+    ik = write_storage(tmp_path / "ik.mot", pd.DataFrame({"knee_angle_r": np.zeros(ik_t.size)}, index=ik_t),
+                       in_degrees=True)
+    window = resolve_window(ik, side="r", cycle="auto", grf_path=grf)
+    assert (window.cycle["start_s"], window.cycle["toe_off_s"], window.cycle["end_s"]) == pytest.approx(
+        (1.30, 2.00, 2.40), abs=1.5e-3)
+    assert window.cycle["index"] == 2 and window.cycle["number"] == "auto"
+    assert (window.start_s, window.end_s) == pytest.approx((1.24, 2.45), abs=1e-9)
+    assert "cycle 2, the first inside every input file" in window.source
+    with pytest.raises(DataMismatchError, match=r"ik.mot: the inverse kinematics \(0.500-3.000 s\) starts 0.300971 s after "
+                                                r"the right leg's gait cycle 1 start 0.199 s.*choose another --cycle"):
+        resolve_window(ik, side="r", cycle=1, grf_path=grf)
+    late = write_storage(tmp_path / "late.mot", pd.DataFrame({"knee_angle_r": np.zeros(101)},
+                                                             index=np.round(np.linspace(1.5, 2.5, 101), 2)), in_degrees=True)
+    with pytest.raises(DataMismatchError, match=r"late.mot: .* starts 1.300971 s after the right leg's gait cycle start 0.199 s.*"
+                                                r"no later cycle of the leg \(1.299-2.399 s\) lies inside every input file either; "
+                                                r"give a --window"):
+        resolve_window(late, side="r", cycle="auto", grf_path=grf)
+
+
 def test_kinematic_toe_off_on_treadmill_trials(example):
     """The example subject walked on a treadmill (the pelvis barely travels): the kinematic rule's
     toe-off against the toe-off of the ankle moment's drop (an independent signal, the study's

@@ -85,8 +85,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="time window (s) to solve; must lie inside every input (default: the whole IK file)")
     p.add_argument("--cycle", metavar="auto|N",
                    help="solve a gait cycle of the leg, heel strike to heel strike from the ground forces, padded "
-                   "by 0.05 s at each end (clipped at the edge of the data, with a warning): auto = the first, "
-                   "N = the N-th complete cycle")
+                   "by 0.05 s at each end (clipped at the edge of the data, with a warning): auto = the first "
+                   "complete cycle inside every input file, N = the N-th complete cycle")
     p.add_argument("--exclude-muscles", nargs="+", metavar="MUSCLE",
                    help="leave these muscles out of the problem (e.g. a muscle that cannot reach force equilibrium "
                    "within the fiber-length bounds, named by the diagnosis before the solve or by a failed solve); "

@@ -3,8 +3,9 @@
 * No window and no cycle: the whole IK file (the study's rule, ``docs/solver.md``).
 * ``window=(T0, T1)``: that window; it must lie inside every input (IK, ID, ground forces),
   otherwise :class:`DataMismatchError` names the file that falls short and by how much.
-* ``cycle="auto"`` or ``cycle=N``: the first (or the N-th, from 1) complete gait cycle of the
-  solved leg, heel strike to heel strike, from the vertical ground force of that leg
+* ``cycle="auto"``: the first complete gait cycle of the solved leg that lies inside every
+  input file; ``cycle=N``: the N-th (from 1) complete cycle of the leg. Heel strike to heel
+  strike, from the vertical ground force of that leg
   (:func:`musclemetab.external_loads.vertical_force` with an ExternalLoads file; or a
   ground-force file whose column is chosen by :func:`musclemetab.events.read_grf`),
   events by :func:`musclemetab.events.gait_events_from_grf` (20 N threshold); with
@@ -155,18 +156,23 @@ def resolve_window(
         for path, what, (a, b) in inputs:
             check_inside((t0, t1), a, b, path, what)
     else:
-        gc, where, event_notes = _cycle(side, cycle, external_loads, grf_path, layout, ik_table, grf_column,
-                                        grf_threshold_N, cycle_duration_s)
+        gc, number, cycles, where, event_notes = _cycle(side, cycle, external_loads, grf_path, layout, ik_table,
+                                                        grf_column, grf_threshold_N, cycle_duration_s, (lo, hi))
         for msg in event_notes:
             notes.append(msg)
             _warnings.warn(msg, WindowWarning, stacklevel=2)
         leg = "right" if side == "r" else "left"
         span = f"the {leg} leg's gait cycle" + ("" if cycle == "auto" else f" {cycle}")
+        if cycle != "auto":
+            remedy = "choose another --cycle, or a --window inside every input file"
+        else:  # "auto" took the first cycle inside every input file: here none is
+            later = ", ".join(f"{c.start_s:.3f}-{c.end_s:.3f}" for c in cycles[1:])
+            remedy = ((f"no later cycle of the leg ({later} s) lies inside every input file either; " if later else "")
+                      + "give a --window inside every input file")
         for path, what, (a, b) in inputs:
-            remedy = "choose another --cycle, or a --window inside every input file" + (
+            check_inside((gc.start_s, gc.end_s), a, b, path, what, span=span, remedy=remedy + (
                 ", or give the ground forces (--external-loads) instead of --id: the inverse dynamics is then "
-                "computed over the whole trial" if what == "inverse dynamics" else "")
-            check_inside((gc.start_s, gc.end_s), a, b, path, what, span=span, remedy=remedy)
+                "computed over the whole trial" if what == "inverse dynamics" else ""))
         t0, t1 = gc.start_s - padding_s, gc.end_s + padding_s
         if t0 < lo - _TOL or t1 > hi + _TOL:
             edge_file = [p for p, _, (a, b) in inputs if (t0 < a - _TOL) or (t1 > b + _TOL)]
@@ -180,8 +186,9 @@ def resolve_window(
             _warnings.warn(msg, WindowWarning, stacklevel=2)
             t0, t1 = clipped
         cycle_rec = dict(start_s=gc.start_s, toe_off_s=gc.toe_off_s, end_s=gc.end_s, side=side,
-                         number=cycle, source=where)
-        source = f"gait cycle {cycle} of the {leg} leg"
+                         number=cycle, index=number, source=where)
+        source = f"gait cycle {cycle} of the {leg} leg" + (f" (cycle {number}, the first inside every input file)"
+                                                           if cycle == "auto" else "")
     # snap outwards to IK frames, never past the data
     ok = (ik_t >= lo - _TOL) & (ik_t <= hi + _TOL)
     before = np.flatnonzero(ok & (ik_t <= t0 + _TOL))
@@ -195,10 +202,13 @@ def resolve_window(
 
 
 def _cycle(side, cycle, external_loads, grf_path, layout, ik=None, grf_column=None, threshold_N=None,
-           duration_s=WALKING_CYCLE_DURATION_S):
-    """The gait cycle ``cycle`` of the leg, where it came from, and the notes (warnings) on its
-    events: the foot of the ground force checked against its centre of pressure, and the force's
-    heel strikes against the kinematic ones, when the model and the IK are at hand."""
+           duration_s=WALKING_CYCLE_DURATION_S, inside_s=(-math.inf, math.inf)):
+    """The gait cycle ``cycle`` of the leg, its number (from 1), every complete cycle of the leg,
+    where they came from, and the notes (warnings) on its events: the foot of the ground force
+    checked against its centre of pressure, and the force's heel strikes against the kinematic
+    ones, when the model and the IK are at hand. ``cycle="auto"``: the first complete cycle inside
+    ``inside_s`` (the times every input file holds), else the first (which the caller refuses,
+    naming the file that falls short)."""
     from ..events import (
         DEFAULT_GRF_THRESHOLD_N,
         GaitCycle,
@@ -247,7 +257,13 @@ def _cycle(side, cycle, external_loads, grf_path, layout, ik=None, grf_column=No
         between = to[(to > a) & (to < b)]
         if between.size:
             cycles.append(GaitCycle(float(a), float(between[0]), float(b)))
-    n = 1 if cycle == "auto" else int(cycle)
+    if cycle == "auto":  # inside as the caller's check_inside has it
+        from ..external_loads import SAMPLE_TIME_TOLERANCE_S as tol
+
+        fits = [k for k, c in enumerate(cycles, 1) if c.start_s >= inside_s[0] - tol and c.end_s <= inside_s[1] + tol]
+        n = fits[0] if fits else 1
+    else:
+        n = int(cycle)
     if len(cycles) < n:
         found = (
             f"heel strikes at {', '.join(f'{x:.3f}' for x in hs) or 'none'} s, toe-offs at "
@@ -265,7 +281,7 @@ def _cycle(side, cycle, external_loads, grf_path, layout, ik=None, grf_column=No
     if forces and feet is not None:
         span = (float(feet.time_s[1]), float(feet.time_s[-2]))  # an extreme needs a frame on either side
         notes += check_against_kinematics(gc, feet.events(side), span_s=span)
-    return gc, where, notes
+    return gc, n, cycles, where, notes
 
 
 def frames_in_window(time_s: np.ndarray, window: TrialWindow) -> np.ndarray:

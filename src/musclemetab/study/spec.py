@@ -73,7 +73,8 @@ A study file names everything a study needs; paths are relative to the file::
     grf_threshold_N = 20.0                # optional
     external_loads = "data/GRF.xml"       # optional: OpenSim ExternalLoads; without 'id', inverse
                                           # dynamics is computed from it by OpenSim
-    cycle = "auto"                        # optional: solve the first (or N-th) gait cycle of the leg
+    cycle = "auto"                        # optional: solve the first gait cycle of the leg inside
+                                          # every input file (or N: the N-th)
     speed_m_per_s = 1.33                  # optional: default from the pelvis in the IK file
     vo2_mL_per_min = 1050.0               # optional calorimetry (or vo2_mL_per_s / vco2_mL_per_s,
     vco2_mL_per_min = 900.0               #  or measured_W_per_kg)
