@@ -8,8 +8,8 @@ geometry other tests computed is not computed again.
 Each script runs in a new process of its own, as ``__main__`` with ``sys.argv`` ``[script,
 "--quick"]`` and the benchmarks folder first on ``sys.path``: a child forked from one launcher
 process of this module that has imported the libraries every script imports (NumPy, pandas,
-SciPy, CasADi with its IPOPT plugin, the package), so that the eighteen scripts do not import them
-eighteen times; the processes a script starts (``musclemetab`` commands, process pools, worker
+SciPy, CasADi with its IPOPT plugin, the package), so that the nineteen scripts do not import them
+nineteen times; the processes a script starts (``musclemetab`` commands, process pools, worker
 trees) are new interpreters, as in any run of the script."""
 
 from __future__ import annotations
@@ -29,6 +29,8 @@ BENCHMARKS = Path(__file__).resolve().parent.parent / "benchmarks"
 
 #: script -> lines its --quick run must print (regular expressions, each matched on a line of its own)
 EXPECTED = {
+    "local_optima.py": [r"^  cold \(the reference\)\s+\+0\.0e\+00\s+\d+\s+[\d.]+\s+0\.000 %",
+                        r"^  warm from EFFORT-GEN\s+[+-][\d.]+e[+-]\d+\s+\d+\s+[\d.]+\s+[\d.]+ % \(\w+\)\s+[\d.]+ %"],
     "lock_takeover.py": [r"^3 rounds of 2 simultaneous starts after a crash: 3 round\(s\) with 1 holder\(s\) "],
     "metabolics.py": [r"^model\s+M samples/s median\s+best\s+x probe median",
                       *[rf"^{m}\s+[\d.]+\s+[\d.]+\s+\d+\s+\d+\s+\((Umberger2010|Bhargava2004)\)$"
