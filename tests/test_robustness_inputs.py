@@ -257,6 +257,18 @@ def test_messages_name_the_file_or_muscle():
     with pytest.raises(DataMismatchError, match="geometry of ik.mot holds NaN .* for tibant_r"):
         trial_inputs(Geometry, Geometry.time, np.ones((30, 1)), sources={"ik": "ik.mot"})
 
+    # a window of 1.0-1.2 s of a 60 Hz file: 13 frames, where the order-6 filter's padding needs more than
+    # 3 (7 - 1) = 18, (18 + 1) / 60 = 0.317 s; the message names the window, not the file, as too short
+    class Window(Geometry):
+        time = 1.0 + np.arange(13) / 60.0
+        lmt_m = np.ones((13, 2))
+        moment_arms_m = np.full((13, 1, 2), 0.04)
+
+    with pytest.raises(DataMismatchError, match=r"^the solved window 1\.000-1\.200 s of the IK file walk\.mot is too short: "
+                                                r"13 samples, .* needs more than 18 \(at 60 Hz, 0\.317 s\); use a longer "
+                                                r"trial or a wider window$"):
+        trial_inputs(Window, Window.time, np.ones((13, 1)), sources={"ik": "walk.mot"})
+
 
 def test_infeasible_solves_are_not_told_to_raise_max_iter():
     from musclemetab.redundancy.ipopt import failure_advice

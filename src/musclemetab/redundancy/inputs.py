@@ -174,7 +174,8 @@ def lowpass_filtfilt(
     if x.shape[0] <= padlen:
         raise DataMismatchError(
             f"{what} is too short: {x.shape[0]} samples, and the {order}th-order "
-            f"{cutoff_hz:g} Hz zero-phase filter needs more than {padlen}; use a longer trial"
+            f"{cutoff_hz:g} Hz zero-phase filter needs more than {padlen} (at {sample_rate_hz:g} Hz, "
+            f"{(padlen + 1) / sample_rate_hz:.3g} s); use a longer trial or a wider window"
         )
     return filtfilt(b, a, x, axis=0, padtype="odd", padlen=padlen)
 
@@ -483,7 +484,8 @@ def trial_inputs(
     fs_ik = _sample_rate(ik_time_s, str(sources.get("ik", "IK")))
     if filter_inputs:
         fs_id = _sample_rate(id_time_s, str(sources.get("id", "ID")))
-        ik_what = f"the IK file {sources.get('ik', '')}".rstrip()
+        ik_what = (f"the solved window {ik_time_s[0]:.3f}-{ik_time_s[-1]:.3f} s of the IK file "
+                   f"{sources.get('ik', '')}").rstrip()
         lmt_f = lowpass_filtfilt(lmt, fs_ik, cutoff_hz, filter_order, what=ik_what)
         r_f = lowpass_filtfilt(r.reshape(F, D * M), fs_ik, cutoff_hz, filter_order, what=ik_what).reshape(F, D, M)
         id_f = lowpass_filtfilt(id_moments_Nm, fs_id, cutoff_hz, filter_order,
