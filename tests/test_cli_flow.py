@@ -129,6 +129,40 @@ def test_quiet_prints_nothing_but_errors(cli_flow, gait2392, tmp_path, capfd):
     assert out == "" and err.count("\n") == 1 and err.startswith("musclemetab: error: ") and "file" in err
 
 
+@pytest.mark.opensim
+def test_analyse_and_report_refuse_rates_of_another_solution(cli_flow, tmp_path, capsys):
+    """``metabolics`` records the SHA-256 of the ``solution.sto`` its rates are of; ``analyse``
+    refuses a metabolics folder of another solution (here each leg's folder given the other
+    leg's solution, as after ``solve --side l --out S`` into the folder ``metabolics`` read with
+    ``--side r``), and so does ``export --mat``; ``report`` refuses an analysed folder whose
+    solution was solved again since: the tables and figures would mix two solutions. The matching
+    pair is analysed as before."""
+    import shutil
+
+    s, m, _ = cli_flow
+    swapped = tmp_path / "swapped"
+    for a, b in (("r", "l"), ("l", "r")):
+        shutil.copytree(s / a, swapped / b)
+    assert main(["analyse", "--solution", str(swapped), "--metabolics", str(m), "--out", str(tmp_path / "A1")]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(
+        f"musclemetab: error: {m / 'r'}: its rates are of another solution than {swapped / 'r'}'s (solved again since "
+        f"'musclemetab metabolics' wrote it, or another trial or leg); run 'musclemetab metabolics --solution "
+        f"{swapped / 'r'} --out {m / 'r'}' again"), err
+    assert not (tmp_path / "A1").exists()
+    assert main(["export", "--mat", str(tmp_path / "x.mat"), str(swapped), "--metabolics", str(m)]) == 1
+    assert f"{m / 'r'}: its rates are of another solution" in capsys.readouterr().err
+    assert not (tmp_path / "x.mat").exists()
+    same = tmp_path / "same"
+    shutil.copytree(s, same)
+    assert main(["analyse", "--solution", str(same), "--metabolics", str(m), "--out", str(tmp_path / "A2")]) == 0
+    shutil.copyfile(s / "l" / "solution.sto", same / "r" / "solution.sto")  # the right leg solved again
+    capsys.readouterr()
+    assert main(["report", str(tmp_path / "A2")]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{tmp_path / 'A2'}: analysed from {same / 'r'}, which has been solved again" in err
+
+
 @pytest.mark.slow
 @pytest.mark.opensim
 def test_solve_metabolics_analyse_give_the_study_numbers(cli_flow, two_subjects, capsys):

@@ -195,7 +195,7 @@ def test_both_legs_from_objects_and_folders(example, both_legs, tmp_path):
         for side in "rl":
             assert whole.loc[m, f"{side}_leg_muscles_W"] == pytest.approx(
                 from_objects[side].whole_body[m].leg_no_basal_mean_W, rel=1e-9)
-    assert main(["analyse", "--solution", str(parent), "--metabolics", str(met / "r"), "--model",
+    assert main(["analyse", "--solution", str(parent), "--metabolics", str(met), "--model",
                  str(example.model), "--ik", str(example.ik["normal"]), "--id", str(example.id["normal"]),
                  "--speed", str(SPEED), "--out", str(out)]) == 0
     for side, (cycle, result) in analysed.items():

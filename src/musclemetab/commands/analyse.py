@@ -167,7 +167,7 @@ def run(args) -> int:
     from ..io import atomic_path
     from ..messages import note
     from ..metabolics.per_muscle import PER_MUSCLE_FILE
-    from ..metabolics.solution import read_metabolics_settings
+    from ..metabolics.solution import check_metabolics_of, read_metabolics_settings
     from ..redundancy.solution import SOLUTION_FILE, read_flags
     from ..metabolics.plausibility import add_quality
     from ..study.runner import RESULTS_CSV, add_leg_rows, leg_basal_energy_J, trial_result_rows
@@ -195,8 +195,9 @@ def run(args) -> int:
     rows, basal_J, tables, legs, solve_flags = {}, {}, [], [], {}
     for side, sol_dir, out in jobs:
         recorded = recorded_trial(sol_dir)
-        settings = (read_metabolics_settings(_metabolics_folder(args.metabolics, side or recorded.side))
-                    if args.metabolics else {})
+        met_dir = _metabolics_folder(args.metabolics, side or recorded.side) if args.metabolics else None
+        settings = read_metabolics_settings(met_dir) if met_dir else {}
+        digest = check_metabolics_of(sol_dir, met_dir, settings)
         try:
             mass = args.mass if args.mass is not None else settings["body_mass_kg"]
             height = args.height if args.height is not None else settings.get("height_m")
@@ -228,8 +229,8 @@ def run(args) -> int:
                          basal=args.basal, basal_rate_W_per_kg=args.basal_coefficient,
                          basal_exponent=args.basal_exponent, speed_m_per_s=speed)
         write_analysis(result, out)
-        met_dir = _metabolics_folder(args.metabolics, side or recorded.side) if args.metabolics else None
         legs.append({"side": leg, "folder": side or ".", "solution": str(Path(sol_dir).resolve()),
+                     "solution_sha256": digest,
                      "metabolics": str(Path(met_dir).resolve()) if met_dir else None, "model": str(model),
                      "ik": str(ik), "cycle": {"start_s": cycle.start_s, "toe_off_s": cycle.toe_off_s,
                                               "end_s": cycle.end_s}, "cycle_source": source,

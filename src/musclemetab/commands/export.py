@@ -59,7 +59,7 @@ def folder_struct(solution_folder, metabolics_folder=None) -> dict:
     legs' ``whole_body.csv`` of the parent), read from those files."""
     import pandas as pd
 
-    from ..metabolics.solution import WHOLE_BODY_CSV, solution_folders
+    from ..metabolics.solution import WHOLE_BODY_CSV, check_metabolics_of, solution_folders
     from ..io.matlab import legs_struct, solution_struct
     from ..metabolics.matlab import folder_metabolics
     from ..redundancy.solution import Solution
@@ -71,6 +71,8 @@ def folder_struct(solution_folder, metabolics_folder=None) -> dict:
         legs[side] = solution_struct(Solution.load(folder, require_success=False))
         where = Path(folder) if metabolics_folder is None else (root / side if len(folders) > 1 else root)
         metabolics = folder_metabolics(where)
+        if metabolics is not None and metabolics_folder is not None:  # a study unit's folder holds both
+            check_metabolics_of(folder, where)
         if metabolics is not None:
             legs[side]["metabolics"] = metabolics
     whole = root / WHOLE_BODY_CSV

@@ -72,6 +72,7 @@ __all__ = [
     "solution_folders",
     "parameter_differences",
     "read_metabolics_settings",
+    "check_metabolics_of",
     "SOLUTION_FILE",
     "SUMMARY_FILE",
     "METABOLICS_STO",
@@ -154,6 +155,9 @@ class SolutionStates:
     cycle_s: tuple[float, float] | None = None
     #: the solved leg ("r"/"l") when the solve recorded it
     side: str | None = None
+    #: SHA-256 of the folder's ``solution.sto`` (a folder read from files; else empty): recorded
+    #: by :func:`write_metabolics`, so that ``analyse`` knows which solution the rates are of
+    solution_sha256: str = ""
 
 
 def read_solution_states(directory: str | os.PathLike, *, require_success: bool = True) -> SolutionStates:
@@ -168,6 +172,7 @@ def read_solution_states(directory: str | os.PathLike, *, require_success: bool 
     SolverError
         The summary says the solve did not succeed (unless ``require_success=False``).
     """
+    from ..io.atomic import file_sha256
     from ..io.solution_folder import read_solution_folder
 
     directory = Path(directory)
@@ -194,7 +199,7 @@ def read_solution_states(directory: str | os.PathLike, *, require_success: bool 
                 params[m] = {arg: float(rec[k]) for k, arg in _SUMMARY_KEYS.items()}
     return SolutionStates(
         time_s=df.index.to_numpy(dtype=float), muscles=muscles, states=states, parameters=params, source=str(directory),
-        cycle_s=_recorded_cycle(summary), side=_recorded_side(summary),
+        cycle_s=_recorded_cycle(summary), side=_recorded_side(summary), solution_sha256=file_sha256(spath),
     )
 
 
@@ -343,6 +348,9 @@ class SolutionMetabolics:
     #: where the masses and slow-twitch fractions came from when not the package's own tables
     #: (e.g. the model's OpenSim metabolic probes), recorded in the header of ``metabolics.sto``
     muscle_parameters: str = ""
+    #: SHA-256 of the ``solution.sto`` the rates were computed from (a solution folder; else
+    #: empty), recorded in the header of ``metabolics.sto``
+    solution_sha256: str = ""
 
     def __repr__(self) -> str:
         """A summary of a few lines (models x muscles x nodes, the leg, the body, the basal rule and
@@ -661,6 +669,7 @@ def metabolics_from_solution(
         basal_rate_W_per_kg=float(basal_rate_W_per_kg),
         basal_exponent=float(basal_exponent),
         side=sol.side,
+        solution_sha256=sol.solution_sha256,
     )
 
 
@@ -685,6 +694,7 @@ def write_metabolics(result: SolutionMetabolics, out_dir: str | os.PathLike, cyc
         f"basal_coefficient={result.basal_rate_W_per_kg:g}",
         f"basal_exponent={result.basal_exponent:g}",
         *([f"muscle_parameters={result.muscle_parameters}"] if result.muscle_parameters else []),
+        *([f"solution_sha256={result.solution_sha256}"] if result.solution_sha256 else []),
         f"units=W; total_no_basal is without basal heat, basal the per-muscle basal heat "
         f"({result.basal_rate_W_per_kg:g} W/kg of muscle mass), apart",
     ]
@@ -864,7 +874,27 @@ def parameter_differences(states: SolutionStates, muscle_parameters, rtol: float
 #: the settings :func:`write_metabolics` records in the header of metabolics.sto, and their types
 METABOLICS_SETTINGS = {"models": str, "body_mass_kg": float, "height_m": float, "basal_rule": str,
                        "basal_coefficient": float, "basal_exponent": float, "muscle_mass_rule": str,
-                       "muscle_parameters": str}
+                       "muscle_parameters": str, "solution_sha256": str}
+
+
+def check_metabolics_of(solution_dir: str | os.PathLike, metabolics_dir: str | os.PathLike | None,
+                        settings: Mapping | None = None) -> str:
+    """SHA-256 of the ``solution.sto`` of ``solution_dir``; :class:`DataMismatchError` when the
+    metabolics folder ``metabolics_dir`` (its :func:`read_metabolics_settings`, or ``settings``)
+    records the rates of another solution: the solution solved again since ``metabolics`` ran, or
+    another trial's or leg's folder given. A folder written by an earlier version records none and
+    passes."""
+    from ..io.atomic import file_sha256
+
+    digest = file_sha256(Path(solution_dir) / SOLUTION_FILE)
+    if metabolics_dir is not None:
+        settings = read_metabolics_settings(metabolics_dir) if settings is None else settings
+        if settings.get("solution_sha256", digest) != digest:
+            raise DataMismatchError(
+                f"{metabolics_dir}: its rates are of another solution than {solution_dir}'s (solved again since "
+                f"'musclemetab metabolics' wrote it, or another trial or leg); run 'musclemetab metabolics --solution "
+                f"{solution_dir} --out {metabolics_dir}' again, or give the metabolics folder of this solution")
+    return digest
 
 
 def read_metabolics_settings(folder: str | os.PathLike) -> dict:

@@ -177,7 +177,21 @@ def _leg_record(rec: dict, path: Path, record: Path) -> tuple[str, LegFiles, dic
     except (KeyError, TypeError, ValueError):
         raise InputFileError(f"{record}: a leg without its folders or gait cycle; run 'musclemetab analyse' "
                              "again to rewrite it") from None
+    _check_solution_unchanged(leg.solution, rec.get("solution_sha256"), path)
     return ("" if folder == "." else folder), leg, rec
+
+
+def _check_solution_unchanged(solution: Path, digest, path: Path) -> None:
+    """:class:`InputFileError` when the solution an ``analyse`` folder records (``digest``, the
+    SHA-256 of its ``solution.sto``; absent in folders of earlier versions) has been solved again
+    since: the folder's tables are of the former solution, the figures would mix the two."""
+    from ..io.atomic import file_sha256
+    from ..redundancy.solution import SOLUTION_FILE
+
+    file = solution / SOLUTION_FILE
+    if digest and file.is_file() and file_sha256(file) != digest:
+        raise InputFileError(f"{path}: analysed from {solution}, which has been solved again since; run "
+                             "'musclemetab metabolics' and 'musclemetab analyse' of it again")
 
 
 def unit_names(model: str, ik: str) -> tuple[str, str]:
