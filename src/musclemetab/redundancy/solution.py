@@ -454,11 +454,12 @@ def build_solution(
     large = share > LARGE_RESERVE_SHARE
     if large and summary.get("success", True):  # an unconverged solve is reported as such instead
         dof = inputs.dofs[int(np.argmax(reserve_rms))]
+        peak_dof = inputs.dofs[int(np.argmax(np.max(np.abs(inputs.moments_Nm), axis=0)))]
         warnings.warn(
             f"{_moments_source(summary.get('inputs') or {})}: the reserve about {dof} has an RMS of "
-            f"{float(np.max(reserve_rms)):.3g} N m, {100 * share:.2g} % of the peak joint moment ({peak_moment:.4g} "
-            f"N m), above {100 * LARGE_RESERVE_SHARE:g} %: the muscles do not explain the moments; check the "
-            "moments' scale and that the inverse dynamics belongs to this model and trial",
+            f"{float(np.max(reserve_rms)):.3g} N m, {100 * share:.2g} % of the largest peak joint moment "
+            f"({peak_dof}, {peak_moment:.4g} N m), above {100 * LARGE_RESERVE_SHARE:g} %: the muscles do not explain "
+            "the moments; check the moments' scale and that the inverse dynamics belongs to this model and trial",
             LargeReserveWarning, stacklevel=2,
         )
     summary = dict(summary)
