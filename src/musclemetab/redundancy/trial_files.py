@@ -108,6 +108,9 @@ def read_effort_trial(model_path, ik_path, id_path, wf, *, dofs, side, window, c
                                                                    cache_dir=cache_dir)):
         start_in_background()
     ik_table = read_table(ik_path)
+    # the coordinates first: the gait events of the window come from the kinematics, and a
+    # missing coordinate would show there as events far from the forces' (warnings before the error)
+    ik_time, ik_angles = read_kinematics(ik_table, dofs, check_units=check_units)
     trial_window = resolve_window(ik_table, side=side, window=window, cycle=cycle, id_path=id_table,
                                   external_loads=loads, grf_path=grf, layout=layout, grf_column=grf_column,
                                   grf_threshold_N=grf_threshold_N, cycle_duration_s=cycle_duration_s)
@@ -121,7 +124,6 @@ def read_effort_trial(model_path, ik_path, id_path, wf, *, dofs, side, window, c
         id_record = {"computed_by": "OpenSim InverseDynamicsTool (muscles excluded)",
                      "coordinate_lowpass_hz": ID_COORDINATE_FILTER_HZ, "external_loads": str(loads.path),
                      "ground_force_data": str(loads.datafile)}
-    ik_time, ik_angles = read_kinematics(ik_table, dofs, check_units=check_units)
     id_time, id_moments = read_inverse_dynamics(id_table, dofs)
     keep = frames_in_window(ik_time, trial_window)
     ik_time, ik_angles = ik_time[keep], ik_angles[keep]
