@@ -120,6 +120,32 @@ def test_a_folder_where_a_file_is_expected_says_so(example, tmp_path):
         study_from_dict(data, base="/")
 
 
+def test_a_folder_given_as_the_study_file_names_the_study_files_in_it(tmp_path):
+    from musclemetab.study.spec import load_study
+
+    with pytest.raises(InputFileError, match=r"is a folder; give the study file itself, a \.toml file$"):
+        load_study(tmp_path)
+    (tmp_path / "study.toml").write_text("")
+    with pytest.raises(InputFileError, match=rf"{tmp_path} is a folder; give the study file itself \({tmp_path / 'study.toml'}\)$"):
+        load_study(tmp_path)
+
+
+def test_failed_units_are_said_on_standard_error(capsys):
+    """What a run did goes to standard output; each failed unit's line, its reason, to standard
+    error (with the other errors), an interrupted unit's to neither."""
+    from types import SimpleNamespace
+
+    from musclemetab.commands.run import print_run
+
+    run = SimpleNamespace(summary_line=lambda: "3 units: 1 run, 0 up to date; 2 failed", removed_partials=[],
+                          failed={"s/walk/effort-gen": "ModelError: m.osim: OpenSim cannot load this model",
+                                  "s/walk/effort-ten": "interrupted"}, interrupted={"s/walk/effort-ten"})
+    print_run(run, "run")
+    out, err = capsys.readouterr()
+    assert out == "run: 3 units: 1 run, 0 up to date; 2 failed\n"
+    assert err == "run: failed s/walk/effort-gen: ModelError: m.osim: OpenSim cannot load this model\n"
+
+
 # ----------------------------------------------------------------------------- before anything is written
 @pytest.mark.parametrize("kwargs, words", [
     ({"workers": 0}, "--workers must be"),

@@ -90,11 +90,14 @@ def apply_uncertainty_arguments(study, args):
 
 
 def print_run(run, command: str) -> None:
-    """Print what a study run did (``command``: the command's name, first on every line)."""
+    """Print what a study run did (``command``: the command's name, first on every line; each
+    failed unit's line, with its reason, on standard error)."""
+    import sys
+
     print(f"{command}: {run.summary_line()}")
     for label, reason in run.failed.items():
         if label not in run.interrupted:
-            print(f"{command}: failed {label}: {reason}")
+            print(f"{command}: failed {label}: {reason}", file=sys.stderr)
     if run.removed_partials:
         print(f"{command}: removed {len(run.removed_partials)} unfinished unit folder(s) left by an earlier run")
     report = getattr(run, "report", None)

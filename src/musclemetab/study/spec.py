@@ -322,6 +322,12 @@ STATES = "states"
 def load_study(path: str | os.PathLike, *, output: str | os.PathLike | None = None) -> Study:
     """Read and check a study file (TOML). ``output`` overrides the file's ``output``."""
     path = Path(path)
+    if path.is_dir():
+        inside = sorted(p.name for p in path.glob("*.toml"))
+        raise InputFileError(f"{path} is a folder; give the study file itself"
+                             + (f" ({', '.join(str(path / n) for n in inside[:3])})" if inside else ", a .toml file")
+                             + (": the study's output folder is read by 'musclemetab report'"
+                                if (path / "study.json").is_file() else ""))
     if not path.is_file():
         raise InputFileError(f"study file {path} not found; give the path of a .toml study file")
     size = path.stat().st_size
