@@ -111,6 +111,25 @@ def test_walking_speed_of_a_synthetic_pelvis():
     assert walking_speed_from_ik(df) == pytest.approx(1.3, rel=1e-9)
 
 
+def test_a_study_trial_speed_is_taken_over_the_cycle_of_its_rates(tmp_path):
+    """A pelvis at 1.0 m/s until 1.5 s, then 2.0 m/s, to 3.0 s: over the gait cycle 0.6-1.4 s the
+    speed is 1.0 m/s, as ``musclemetab analyse`` takes it over the cycle it analyses; over the IK file
+    less the padding (0.05-2.95 s) it would be (1.45 x 1 + 1.45 x 2) / 2.9 = 1.5 m/s, which a trial
+    without a cycle of its own still gets; a given ``speed_m_per_s`` wins."""
+    from musclemetab.events import GaitCycle
+    from musclemetab.io import storage_from_arrays, write_storage
+    from musclemetab.study.events import trial_speed
+    from musclemetab.study.spec import Trial
+
+    t = np.round(np.arange(0.0, 3.0001, 0.01), 2)
+    x = np.where(t <= 1.5, t, 1.5 + 2.0 * (t - 1.5))
+    ik = write_storage(tmp_path / "ik.mot", storage_from_arrays(t, {"pelvis_tx": x, "pelvis_tz": 0 * t}))
+    trial = Trial(name="walk", ik=ik, id=None)
+    assert trial_speed(trial, cycle=GaitCycle(0.6, 1.0, 1.4)) == pytest.approx(1.0, rel=1e-9)
+    assert trial_speed(trial) == pytest.approx(1.5, rel=1e-9)
+    assert trial_speed(Trial(name="walk", ik=ik, id=None, speed_m_per_s=1.3), cycle=GaitCycle(0.6, 1.0, 1.4)) == 1.3
+
+
 def test_example_speeds_follow_the_protocol(example):
     # The protocol: 55 %, 100 % and 145 % of the preferred walking speed (analysis.md §1).
     from musclemetab.analysis.speed import walking_speed_from_ik

@@ -84,9 +84,12 @@ def trial_cycle(trial: Trial, side: str = "r", model=None) -> GaitCycle:
     return GaitCycle(start, toe_off, end)
 
 
-def trial_speed(trial: Trial, model=None) -> float:
-    """Walking speed (m/s) of the trial; ``model`` gives the forward coordinates."""
+def trial_speed(trial: Trial, model=None, cycle: GaitCycle | None = None) -> float:
+    """Walking speed (m/s) of the trial: its ``speed_m_per_s``, else the root body's horizontal
+    displacement over ``cycle`` (the cycle the rates are averaged over, as ``musclemetab analyse``
+    takes it; without one, over the trial's ``start_s``-``end_s``, by default the IK file less the
+    padding); ``model`` gives the forward coordinates."""
     if trial.speed_m_per_s is not None:
         return trial.speed_m_per_s
-    start, end = trial.start_s, trial.end_s
+    start, end = (cycle.start_s, cycle.end_s) if cycle is not None else (trial.start_s, trial.end_s)
     return walking_speed_from_ik(trial.ik, start_s=start, end_s=end, padding_s=PADDING_S, model=model)

@@ -692,14 +692,6 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
         check_strict(sol.record.flags, unit.label)
 
     t1 = time.perf_counter()
-    try:
-        speed = trial_speed(trial, subject.model)
-    except DataMismatchError as exc:  # e.g. a treadmill trial without speed_m_per_s: no cost of transport
-        from ..errors import MusclemetabWarning
-
-        warnings.warn(f"{subject.name}/{trial.name}: no walking speed, no cost of transport ({exc})",
-                      MusclemetabWarning, stacklevel=2)
-        speed = None
     # the stages after the solve take the solution object (the same numbers as its folder,
     # tests/test_stage_paths.py); each writes its files once
     recorded = sol.record.gait_cycle if sol is not None else None
@@ -710,6 +702,14 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
         cycle = GaitCycle(recorded["start_s"], toe_off, recorded["end_s"])
     else:
         cycle = trial_cycle(trial, side, subject.model)
+    try:  # over the cycle the rates are averaged over, as 'musclemetab analyse' takes it
+        speed = trial_speed(trial, subject.model, cycle)
+    except DataMismatchError as exc:  # e.g. a treadmill trial without speed_m_per_s: no cost of transport
+        from ..errors import MusclemetabWarning
+
+        warnings.warn(f"{subject.name}/{trial.name}: no walking speed, no cost of transport ({exc})",
+                      MusclemetabWarning, stacklevel=2)
+        speed = None
     result = states(speed) if states is not None else metabolics_from_solution(
         sol, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
         basal_rate_W_per_kg=study.basal_coefficient, basal_exponent=study.basal_exponent,
