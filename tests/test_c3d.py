@@ -13,7 +13,7 @@ import warnings
 import numpy as np
 import pytest
 
-from musclemetab.errors import DataMismatchError
+from musclemetab.errors import DataMismatchError, OptionError
 from musclemetab.mocap import Markers, Plate, assign_feet, convert_c3d, foot_marker_sets, read_c3d, read_trc
 from musclemetab.mocap.export import ground_force_table
 from musclemetab.mocap.plates import TwoFeetWarning, remove_offsets
@@ -275,6 +275,45 @@ def test_command_line(walking2, tmp_path, capsys):
     assert not (tmp_path / "p").exists()
     assert main(["c3d", str(tmp_path / "none.c3d"), "--out", str(tmp_path / "q")]) == 1
     assert "no such C3D file" in capsys.readouterr().err
+
+
+def test_a_plate_the_file_lacks_is_refused(walking2, tmp_path, capsys):
+    from musclemetab.commands import main
+
+    assert main(["c3d", str(walking2), "--plate-feet", "3=r", "--out", str(tmp_path / "o")]) == 1
+    assert capsys.readouterr().err.strip() == (
+        f"musclemetab: error: --plate-feet 3=r: {walking2} has no force plate 3; its force plates are 1, 2")
+    assert not (tmp_path / "o").exists()
+    time = np.arange(0, 1.0, 0.01)
+    markers = Markers(time=time, names=["A", "B"], xyz=np.zeros((len(time), 2, 3)))
+    plate = _plate(np.full(len(time), 500.0), np.tile([0.5, 0, 0.5], (len(time), 1)), time)
+    with pytest.raises(OptionError, match="--plate-feet 2=l 4=r: x.c3d has no force plates 2, 4; its force plates "
+                                          "are 1$"):
+        assign_feet([plate], markers, plate_feet={1: "r", 2: "l", 4: "r"}, source="x.c3d")
+
+
+def test_two_plates_given_to_one_foot_loaded_at_once_are_flagged(walking2, tmp_path, capsys):
+    """walking2's plate 1 carries the right foot 2.672-3.248 s and plate 2 the left 2.248-2.756 s:
+    given both to the left foot, that foot would carry both at 2.672-2.756 s."""
+    import json
+
+    from musclemetab.commands import main
+
+    assert main(["c3d", str(walking2), "--plate-feet", "1=l", "2=l", "--out", str(tmp_path / "o")]) == 0
+    captured = capsys.readouterr()
+    assert ("plate 1 2.672-3.248 s: left (loaded with plate 2!), plate 2 2.248-2.756 s: left (loaded with plate 1!)"
+            in captured.out)
+    assert (f"musclemetab: warning: {walking2}: force plates 1 and 2 are both given to the left foot (--plate-feet) "
+            "and are loaded at the same time, 2.672-2.756 s (plate 1 2.672-3.248 s, plate 2 2.248-2.756 s): the left "
+            "foot gets both plates' forces together there, which is right only when it stands on both plates at "
+            "once; else give one of them to the other foot") in captured.err.splitlines()
+    record = json.loads((tmp_path / "o" / "walking2_c3d.json").read_text())
+    assert [[(o["plate"], round(o["start_s"], 3), round(o["end_s"], 3)) for o in c["overlaps"]]
+            for c in record["contacts"]] == [[(2, 2.672, 2.756)], [(1, 2.672, 2.756)]]
+    assert main(["c3d", str(walking2), "--plate-feet", "1=r", "2=l", "--out", str(tmp_path / "p")]) == 0
+    captured = capsys.readouterr()  # each plate to its own foot: no overlap
+    assert "loaded with" not in captured.out and "loaded at the same time" not in captured.err
+    assert "plate 1 2.672-3.248 s: right, plate 2 2.248-2.756 s: left" in captured.out
 
 
 def _c3d_with_emg(path, units=("mV", "uV")):

@@ -110,6 +110,90 @@ def test_bad_input_one_line_nothing_written(gait2392, tmp_path, capsys, change, 
     assert not (tmp_path / "out").exists()
 
 
+def _prepare_error(gait2392, tmp_path, capsys, *extra, **files) -> str:
+    """The one error line of ``musclemetab prepare`` of gait2392's files (``files`` replace
+    ``model``, ``static``, ``markers``), checking that nothing was written."""
+    args = {"--model": str(files.get("model", gait2392.generic_model)),
+            "--static": str(files.get("static", gait2392.static)),
+            "--markers": str(files.get("markers", gait2392.markers)), "--mass": "72.6"}
+    argv = ["prepare", *[x for kv in args.items() for x in kv], *map(str, extra), "--out", str(tmp_path / "out")]
+    assert main(argv) == 1
+    err = [line for line in capsys.readouterr().err.strip().splitlines() if "warning:" not in line]
+    assert len(err) == 1 and err[0].startswith("musclemetab: error: "), err
+    assert not (tmp_path / "out").exists()
+    return err[0]
+
+
+def _no_opensim(monkeypatch):
+    from musclemetab import opensim_bridge as bridge
+
+    def no_opensim(target, *a, **k):
+        raise AssertionError(f"OpenSim called: {target}")
+
+    monkeypatch.setattr(bridge, "call", no_opensim)
+
+
+def test_a_file_opensim_cannot_load_as_model_is_named_as_solve_names_it(gait2392, walking2_c3d, tmp_path, capsys):
+    """prepare (a .trc or a C3D trial) and c3d --model say what solve says of the same file."""
+    bad = tmp_path / "notamodel.osim"
+    bad.write_text("hello")
+    err = _prepare_error(gait2392, tmp_path, capsys, model=bad)
+    assert err.startswith(f"musclemetab: error: {bad}: OpenSim cannot load this model (")
+    assert err.endswith("check that it is a valid .osim file") and "lab:" not in err
+    assert main(["solve", "--model", str(bad), "--ik", str(gait2392.ik), "--external-loads",
+                 str(gait2392.external_loads), "--out", str(tmp_path / "s")]) == 1
+    assert capsys.readouterr().err.strip() == err  # the same message, from the same function
+    assert _prepare_error(gait2392, tmp_path, capsys, model=bad, static=walking2_c3d, markers=walking2_c3d) == err
+    assert main(["c3d", str(walking2_c3d), "--model", str(bad), "--out", str(tmp_path / "c")]) == 1
+    assert capsys.readouterr().err.strip().splitlines()[-1] == err and not (tmp_path / "c").exists()
+
+
+@pytest.mark.parametrize("option, setup, message", [
+    ("--scale-setup", "ik_setup", "--scale-setup needs OpenSim's ScaleTool setup, but this file holds an "
+     "InverseKinematicsTool (give it as --ik-setup); give a ScaleTool setup"),
+    ("--ik-setup", "scale_setup", "--ik-setup needs OpenSim's InverseKinematicsTool setup, but this file holds a "
+     "ScaleTool (give it as --scale-setup); give an InverseKinematicsTool setup"),
+    ("--scale-setup", "scale_marker_set", "--scale-setup needs OpenSim's ScaleTool setup, but this file holds a "
+     "MarkerSet (give it as --marker-set); give a ScaleTool setup"),
+])
+def test_the_wrong_kind_of_setup_is_named_before_opensim_runs(gait2392, tmp_path, capsys, monkeypatch, option,
+                                                               setup, message):
+    _no_opensim(monkeypatch)
+    path = getattr(gait2392, setup)
+    assert _prepare_error(gait2392, tmp_path, capsys, option, path) == f"musclemetab: error: {path}: {message}"
+
+
+@pytest.mark.parametrize("window, message", [
+    ("1:4", "the marker data (0.000-2.500 s) ends 1.500 s before the --window end 4.000 s (this file and the "
+     "--window share 1.000-2.500 s); choose a --window inside the marker data"),
+    ("2.6:3", "the marker data (0.000-2.500 s) ends 0.500 s before the --window end 3.000 s; choose a --window "
+     "inside the marker data"),
+])
+def test_a_window_outside_the_markers_is_refused_before_scaling(gait2392, tmp_path, capsys, monkeypatch, window,
+                                                                 message):
+    """As solve refuses a --window outside its files, never clipped, never a reversed range."""
+    _no_opensim(monkeypatch)
+    err = _prepare_error(gait2392, tmp_path, capsys, "--window", window)
+    assert err == f"musclemetab: error: {gait2392.markers}: {message}"
+
+
+def test_a_c3d_static_trial_the_model_cannot_match_names_the_c3d_and_both_remedies(gait2392, walking2_c3d, tmp_path,
+                                                                                   capsys):
+    """gait2392's generic model has no markers: the remedy is a marker set (or a ScaleTool setup); with
+    gait2392's marker set, walking2's markers (Plug-in Gait names) still match none of them."""
+    err = _prepare_error(gait2392, tmp_path, capsys, static=walking2_c3d, markers=walking2_c3d)
+    assert err.startswith(f"musclemetab: error: {walking2_c3d}: the model {gait2392.generic_model} has no markers to "
+                          "match the static trial's (RTH1, RFHD, RTH3, LTH2, LTH3, LTB1 ... and 38 more); give it a "
+                          "marker-set file whose markers are named as the trial's (--marker-set FILE, e.g. OpenSim's "
+                          "gait2392_Scale_MarkerSet.xml")
+    assert err.endswith("or a ScaleTool setup whose measurements use the trial's markers (--scale-setup)")
+    err = _prepare_error(gait2392, tmp_path, capsys, "--marker-set", gait2392.scale_marker_set, static=walking2_c3d,
+                         markers=walking2_c3d)
+    assert err.startswith(f"musclemetab: error: {walking2_c3d}: the model's markers (Sternum, R.Acromium, L.Acromium, "
+                          "Top.Head, R.ASIS, L.ASIS ... and 33 more) and the static trial's (RTH1, ")
+    assert "(--marker-set FILE), or a ScaleTool setup" in err and "musclemetab-prepare-" not in err
+
+
 MARKER_STUDY = """
 name = "from markers"
 output = "out"

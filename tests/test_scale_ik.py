@@ -198,11 +198,26 @@ def test_ik_without_setups(gait2392, tmp_path):
 
 
 def test_ik_time_range_outside_the_markers_is_refused(scaled, gait2392, tmp_path):
+    """A time range given (--window) is refused, not clipped; a setup's own is clipped to the marker
+    data, and one wholly outside it is named with the setup, never as a reversed range."""
     from musclemetab.mocap.kinematics import inverse_kinematics
 
     (tmp_path / "m.osim").write_text(scaled.model_text)
-    with pytest.raises(DataMismatchError, match="not inside the marker data"):
-        inverse_kinematics(tmp_path / "m.osim", gait2392.markers, time_range=(5.0, 6.0), use_cache=False)
+    for window, message in (((5.0, 6.0), "ends 3.500 s before the --window end 6.000 s; "),
+                            ((1.0, 4.0), "ends 1.500 s before the --window end 4.000 s (this file and the --window "
+                                         "share 1.000-2.500 s); ")):
+        with pytest.raises(DataMismatchError) as info:
+            inverse_kinematics(tmp_path / "m.osim", gait2392.markers, time_range=window, use_cache=False)
+        assert str(info.value) == (f"{gait2392.markers}: the marker data (0.000-2.500 s) {message}choose a --window "
+                                   "inside the marker data")
+    setup = tmp_path / "ik_setup.xml"
+    text = gait2392.ik_setup.read_text()
+    setup.write_text(re.sub(r"<time_range>[^<]*</time_range>", "<time_range> 2.6 3</time_range>", text))
+    with pytest.raises(DataMismatchError) as info:
+        inverse_kinematics(tmp_path / "m.osim", gait2392.markers, setup=setup, use_cache=False)
+    assert str(info.value) == (f"{setup}: its IK time range 2.600-3.000 s is not inside the marker data of "
+                               f"{gait2392.markers} (0.000-2.500 s); give a --window inside the marker data, or fix "
+                               "the setup")
 
 
 def test_cached_texts_are_computed_once_and_again_when_damaged(tmp_path):

@@ -87,10 +87,14 @@ def run(args) -> int:
     record = convert_c3d(args.c3d, args.out, model=args.model, up=args.lab_up, forward=args.lab_forward,
                          feet=parse_foot_markers(args.foot_markers), plate_feet=parse_plate_feet(args.plate_feet))
     name = Path(args.c3d).stem
-    feet = ", ".join(f"plate {c['plate']} {c['start_s']:.3f}-{c['end_s']:.3f} s: "
-                     f"{'right' if c['side'] == 'r' else 'left'}{' (both feet!)' if c['two_feet'] else ''}"
-                     f"{' (partly off!)' if c.get('partly_off') else ''}"
-                     for c in record["contacts"]) or "no force plate"
+    feet = ", ".join(_contact_text(c) for c in record["contacts"]) or "no force plate"
     emg = f"; EMG channels {name_list(record['emg_channels'])}" if record.get("emg_channels") else ""
     print(f"c3d: {name}: {feet}{emg} -> {args.out}")
     return 0
+
+
+def _contact_text(c: dict) -> str:
+    """One contact of the record as the command prints it, with its flags."""
+    flags = (" (both feet!)" if c["two_feet"] else "") + (" (partly off!)" if c.get("partly_off") else "") \
+        + "".join(f" (loaded with plate {o['plate']}!)" for o in c.get("overlaps") or [])
+    return f"plate {c['plate']} {c['start_s']:.3f}-{c['end_s']:.3f} s: {'right' if c['side'] == 'r' else 'left'}{flags}"

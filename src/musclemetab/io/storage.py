@@ -68,6 +68,8 @@ __all__ = [
     "MAX_SAMPLE_STEP_S",
     "ROUNDING_S",
     "EXACT_TIME_TOLERANCE_S",
+    "SAMPLE_TIME_TOLERANCE_S",
+    "check_times_inside",
 ]
 
 #: A time step this long (a sampling rate of 2 Hz or less) is not a motion recording in
@@ -468,3 +470,42 @@ def write_storage(
     buf.write(rows.replace("nan", "NaN") if np.isnan(values).any() else rows)
     atomic_write_text(path, buf.getvalue())
     return path
+
+
+#: Times closer than this (s) are the same sample: files written at different precisions
+#: (e.g. 1.5 us apart at the end of a 1 kHz record) cover the same window.
+SAMPLE_TIME_TOLERANCE_S = 1e-5
+
+
+def check_times_inside(window, t_first: float, t_last: float, path, what: str,
+                       tol: float = SAMPLE_TIME_TOLERANCE_S, span: str = "the window",
+                       remedy: str = "choose a window inside every input file") -> None:
+    """Raise :class:`DataMismatchError` unless ``window`` lies inside ``[t_first, t_last]``
+    (give or take ``tol``, :data:`SAMPLE_TIME_TOLERANCE_S`).
+
+    The message names the file and by how much it falls short of ``span`` (what the times
+    ``window`` are; to the microsecond when the shortfall is under a millisecond), the times they
+    share, then ``remedy``.
+    """
+    t0, t1 = float(window[0]), float(window[1])
+    short_start = t_first - t0
+    short_end = t1 - t_last
+    if short_start > tol or short_end > tol:
+        parts = []
+        if short_start > tol:
+            parts.append(f"starts {_seconds(short_start)} s after {span} start {t0:.3f} s")
+        if short_end > tol:
+            parts.append(f"ends {_seconds(short_end)} s before {span} end {t1:.3f} s")
+        a, b = max(t0, t_first), min(t1, t_last)
+        shared = f" (this file and {span} share {a:.3f}-{b:.3f} s)" if b > a else ""
+        raise DataMismatchError(
+            f"{path}: the {what} ({t_first:.3f}-{t_last:.3f} s) {' and '.join(parts)}{shared}; {remedy}"
+        )
+
+
+def _seconds(x: float) -> str:
+    """``x`` with 3 to 6 decimals: as many as it takes to the microsecond."""
+    for digits in (3, 4, 5):
+        if abs(round(x, digits) - x) < 5e-7:
+            return f"{x:.{digits}f}"
+    return f"{x:.6f}"

@@ -128,9 +128,10 @@ def convert_c3d(path: str | os.PathLike, out: str | os.PathLike, *, stem: str | 
     Returns the record (with the paths under ``"files"``).
     """
     from .c3d import read_c3d
-    from .plates import foot_marker_sets
+    from .plates import check_plate_feet, foot_marker_sets
 
     trial = read_c3d(path, up=up, forward=forward)
+    check_plate_feet(plate_feet, trial.plates, str(path))  # also for a file without plates
     stem = stem or Path(path).stem
     record = {"source": str(Path(path).resolve()), **trial.notes, "threshold_n": threshold_n, "plates": [],
               "contacts": [], "forces": []}

@@ -37,7 +37,7 @@ from .scaling import setup_files
 from .trc import read_trc
 from .trial import MAX_LIMIT_M, RMS_LIMIT_M
 
-__all__ = ["IKResult", "inverse_kinematics", "RMS_LIMIT_M", "MAX_LIMIT_M", "MarkerErrorWarning"]
+__all__ = ["IKResult", "inverse_kinematics", "check_window", "RMS_LIMIT_M", "MAX_LIMIT_M", "MarkerErrorWarning"]
 
 #: bump when a cached IK result changes meaning
 IK_CACHE_FORMAT = 3
@@ -99,9 +99,11 @@ def inverse_kinematics(model: str | os.PathLike, markers: str | os.PathLike, *,
                        use_cache: bool = True, cache_dir: str | os.PathLike | None = None,
                        warn: bool = True, source: str | None = None) -> IKResult:
     """IK of ``markers`` (``.trc`` or ``.c3d``) with ``model`` (module docstring); ``source``: the
-    file the warnings name (default ``markers``)."""
+    file the messages name (default ``markers``). A ``time_range`` not inside the marker data is
+    refused (:func:`check_window`); a setup's own time range is clipped to it."""
     from ..cache import cached_texts
     from ..io.atomic import file_sha256
+    from ..layout import read_layout
     from ..model import check_model_path
     from ..opensim_bridge import call
 
@@ -109,27 +111,52 @@ def inverse_kinematics(model: str | os.PathLike, markers: str | os.PathLike, *,
     markers = Path(markers)
     if not markers.is_file():
         raise InputFileError(f"{markers}: no such marker file; check the path")
-    referenced = setup_files(setup) if setup else {}
+    source = source or str(markers)
+    referenced = setup_files(setup, "InverseKinematicsTool") if setup else {}
     coords = [p for k, p in referenced.items() if k.startswith("coordinate_file")]
     for p in coords:
         if not p.is_file():
             raise InputFileError(f"{setup}: its coordinate file {p} does not exist; fix the setup")
+    if time_range is not None:
+        check_window(markers, time_range, source)
+    read_layout(model)  # a file OpenSim cannot load is named as solve names it, before the tool runs
     spec = {"fmt": IK_CACHE_FORMAT, "model": file_sha256(model), "markers": file_sha256(markers),
             "setup": file_sha256(setup) if setup else None, "coords": [file_sha256(p) for p in coords],
             "window": list(time_range) if time_range else None}
     def compute():
-        r = _run(model, markers, setup, time_range, call)
+        r = _run(model, markers, setup, time_range, call, source)
         return {"ik": r.ik_text, "errors": json.dumps(r.errors), "record": json.dumps(r.record)}
 
     texts = cached_texts(spec, cache_dir or _cache_dir(), "inverse kinematics", "ik-", compute,
                          ("ik", "errors", "record"), use_cache)
     result = IKResult(texts["ik"], json.loads(texts["errors"]), json.loads(texts["record"]))
     if warn:
-        warn_flagged(result.record["summary"], source or str(markers))
+        warn_flagged(result.record["summary"], source)
     return result
 
 
-def _run(model: Path, markers: Path, setup, time_range, call) -> IKResult:
+def _marker_times(markers: Path) -> np.ndarray:
+    """The times of a marker file (``.trc`` or ``.c3d``), as the file gives them."""
+    if markers.suffix.lower() == ".c3d":
+        from .c3d import read_c3d
+
+        return read_c3d(markers).markers.time
+    return read_trc(markers).time
+
+
+def check_window(markers: str | os.PathLike, time_range: tuple, source: str | None = None) -> None:
+    """Refuse an IK time range (``--window``) that is not inside the times of the marker file, as
+    ``musclemetab solve`` refuses a window outside its files
+    (:func:`musclemetab.io.storage.check_times_inside`): the message names ``--window``, the file
+    (``source``, default ``markers``) and its time range."""
+    from ..io.storage import check_times_inside
+
+    t = _marker_times(Path(markers))
+    check_times_inside(time_range, float(t[0]), float(t[-1]), source or str(markers), "marker data",
+                       span="the --window", remedy="choose a --window inside the marker data")
+
+
+def _run(model: Path, markers: Path, setup, time_range, call, source: str) -> IKResult:
     tmp = Path(tempfile.mkdtemp(prefix="musclemetab-ik-"))
     try:
         trc = markers
@@ -156,15 +183,17 @@ def _run(model: Path, markers: Path, setup, time_range, call) -> IKResult:
             shared = [n for n in names if n in set(trial.names)]
             if len(shared) < 3:
                 raise DataMismatchError(
-                    f"{markers}: shares {len(shared)} marker(s) with the model {model} (at least 3 are needed); "
+                    f"{source}: shares {len(shared)} marker(s) with the model {model} (at least 3 are needed); "
                     "check the marker names, or give an IK setup (--ik-setup)"
                 )
             kwargs["marker_weights"] = {n: 1.0 for n in shared}
             window = time_range
+        if window and min(window[1], t1) <= max(window[0], t0):  # a setup's time range (a --window was checked)
+            what = f"{setup}: its IK time range" if time_range is None else f"{source}: the --window"
+            raise DataMismatchError(f"{what} {window[0]:.3f}-{window[1]:.3f} s is not inside the marker data of "
+                                    f"{source} ({t0:.3f}-{t1:.3f} s); give a --window inside the marker data"
+                                    f"{', or fix the setup' if time_range is None else ''}")
         window = (max(window[0], t0), min(window[1], t1)) if window else (t0, t1)
-        if window[1] <= window[0]:
-            raise DataMismatchError(f"{markers}: the IK time range {window[0]:.3f}-{window[1]:.3f} s is not inside the "
-                                    f"marker data ({t0:.3f}-{t1:.3f} s)")
         kwargs["time_range"] = window
         res = call("lab:inverse_kinematics", str(model.resolve()), str(Path(trc).resolve()), str(tmp), **kwargs)
         errors = {k: res[k] for k in ("time", "rms_m", "max_m")}

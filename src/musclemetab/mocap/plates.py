@@ -34,7 +34,7 @@ from .trial import Markers, Plate, horizontal
 from ..messages import name_list
 
 __all__ = ["CONTACT_THRESHOLD_N", "PlateContact", "remove_offsets", "contacts", "foot_marker_sets",
-           "assign_feet", "TwoFeetWarning", "PartlyOffPlateWarning"]
+           "assign_feet", "check_plate_feet", "TwoFeetWarning", "PartlyOffPlateWarning", "SameFootOverlapWarning"]
 
 #: vertical force (N) above which a plate is loaded (the package's gait-event threshold)
 CONTACT_THRESHOLD_N = 20.0
@@ -67,6 +67,11 @@ class PartlyOffPlateWarning(MusclemetabWarning):
     """A foot stands partly off the force plate that carries it: the plate misses part of its load."""
 
 
+class SameFootOverlapWarning(MusclemetabWarning):
+    """Two force plates given to one foot by hand (``--plate-feet``) are loaded at the same time:
+    that foot gets the sum of both plates' forces there."""
+
+
 @dataclass
 class PlateContact:
     """One contact of a plate: its time span, the foot given it and the evidence."""
@@ -81,6 +86,9 @@ class PlateContact:
     impulse_ns: float
     how: str = "centre of pressure"
     partly_off: dict | None = None
+    #: the contacts of other plates given to the same foot loaded at the same time (``plate``,
+    #: ``start_s``, ``end_s`` of the overlap), when a plate was given by hand
+    overlaps: list | None = None
 
     def record(self) -> dict:
         return asdict(self)
@@ -232,6 +240,41 @@ def partly_off(markers: Markers, foot: dict, plate: Plate, t0: float, t1: float)
     return worst
 
 
+def check_plate_feet(plate_feet: dict | None, plates: list[Plate], source: str = "") -> None:
+    """Refuse a plate of ``plate_feet`` (``{plate number: side}``, ``--plate-feet``) that the file
+    ``source`` does not have, naming the plates it has."""
+    have = [p.number for p in plates]
+    missing = sorted(int(n) for n in (plate_feet or {}) if int(n) not in have)
+    if missing:
+        plural = "s" if len(missing) > 1 else ""
+        given = " ".join(f"{n}={plate_feet[n]}" for n in missing)
+        has = f"its force plates are {name_list(have)}" if have else "it has no force plate"
+        raise OptionError(f"--plate-feet {given}: {source} has no force plate{plural} {name_list(missing)}; {has}")
+
+
+def _same_foot_overlaps(out: list[PlateContact], source: str) -> None:
+    """Mark and warn about contacts of different plates given to one foot that overlap in time,
+    where a plate was given by hand (:class:`SameFootOverlapWarning`)."""
+    for i, a in enumerate(out):
+        for b in out[i + 1:]:
+            if a.side != b.side or a.plate == b.plate or "given" not in (a.how, b.how):
+                continue
+            t0, t1 = max(a.start_s, b.start_s), min(a.end_s, b.end_s)
+            if t1 <= t0:
+                continue
+            for c, other in ((a, b), (b, a)):
+                c.overlaps = (c.overlaps or []) + [{"plate": other.plate, "start_s": t0, "end_s": t1}]
+            first, second = sorted((a, b), key=lambda c: c.plate)
+            foot = "right" if a.side == "r" else "left"
+            warnings.warn(
+                f"{source}: force plates {first.plate} and {second.plate} are both given to the {foot} foot "
+                f"(--plate-feet) and are loaded at the same time, {t0:.3f}-{t1:.3f} s (plate {first.plate} "
+                f"{first.start_s:.3f}-{first.end_s:.3f} s, plate {second.plate} {second.start_s:.3f}-{second.end_s:.3f} "
+                f"s): the {foot} foot gets both plates' forces together there, which is right only when it stands on "
+                "both plates at once; else give one of them to the other foot",
+                SameFootOverlapWarning, stacklevel=3)
+
+
 def assign_feet(plates: list[Plate], markers: Markers, *, feet: dict | None = None,
                 plate_feet: dict | None = None, threshold_n: float = CONTACT_THRESHOLD_N,
                 source: str = "") -> list[PlateContact]:
@@ -239,13 +282,15 @@ def assign_feet(plates: list[Plate], markers: Markers, *, feet: dict | None = No
 
     ``feet``: ``{side: {"heel": [...], "fore": [...]}}`` (default :func:`foot_marker_sets` of the
     marker names); ``plate_feet``: ``{plate number: side}`` to give whole plates by hand (the
-    record says ``how="given"``).
+    record says ``how="given"``; a plate the file lacks is refused, and two plates given to one
+    foot loaded at the same time are flagged, ``overlaps``, with a :class:`SameFootOverlapWarning`).
 
     Raises :class:`DataMismatchError` when a foot has no heel or no forefoot marker, or no foot
     is near a contact's centre of pressure (markers missing).
     """
-    feet = feet or foot_marker_sets(markers.names)
     plate_feet = {int(k): v for k, v in (plate_feet or {}).items()}
+    check_plate_feet(plate_feet, plates, source)
+    feet = feet or foot_marker_sets(markers.names)
     need = [p for p in plates if p.number not in plate_feet]
     for side in SIDES:
         if need and (not feet[side]["heel"] or not feet[side]["fore"]):
@@ -308,4 +353,5 @@ def assign_feet(plates: list[Plate], markers: Markers, *, feet: dict | None = No
                     f"the {'right' if side == 'r' else 'left'} foot: leave the gait cycles that hold it out",
                     TwoFeetWarning, stacklevel=2)
             out.append(contact)
+    _same_foot_overlaps(out, source)
     return out

@@ -39,13 +39,16 @@ def prepare(generic_model: str | os.PathLike, static: str | os.PathLike, markers
     """
     from ..io import atomic_directory
     from .export import convert_c3d
-    from .kinematics import inverse_kinematics
-    from .scaling import scale_model
+    from .kinematics import check_window, inverse_kinematics
+    from .scaling import scale_model, setup_files
 
     static, markers = Path(static), Path(markers)
     for what, p in (("static trial", static), ("walking trial", markers)):
         if not p.is_file():
             raise InputFileError(f"{p}: no such {what}; check the path")
+    for setup, tool in ((scale_setup, "ScaleTool"), (ik_setup, "InverseKinematicsTool")):
+        if setup:
+            setup_files(setup, tool)  # the wrong kind of setup is named before anything runs
     tmp = Path(tempfile.mkdtemp(prefix="musclemetab-prepare-"))
     try:
         files = {}
@@ -64,6 +67,8 @@ def prepare(generic_model: str | os.PathLike, static: str | os.PathLike, markers
             static_in = write_trc(tmp / "static.trc", read_c3d(static, up=opts.get("up", "auto"),
                                                              forward=opts.get("forward", "auto")).markers)
             files["static_markers"] = "static.trc"
+        if time_range is not None:
+            check_window(walk, time_range, str(markers))  # before the scaling
         scaled = scale_model(generic_model, static_in, mass_kg, setup=scale_setup, marker_set=marker_set,
                              height_m=height_m, use_cache=use_cache, source=str(static))
         scaled.write(tmp)

@@ -43,7 +43,7 @@ from .trc import read_trc
 from .trial import MAX_LIMIT_M, RMS_LIMIT_M
 
 __all__ = ["ScaleResult", "scale_model", "measurement_sets", "choose_measurements", "estimate_height",
-           "setup_files", "marker_error_summary", "HEAD_MARKER_WORDS"]
+           "setup_files", "setup_tool", "SETUP_OPTIONS", "marker_error_summary", "HEAD_MARKER_WORDS"]
 
 #: bump when a cached scaling result changes meaning
 SCALE_CACHE_FORMAT = 1
@@ -111,12 +111,16 @@ def measurement_sets() -> dict[str, list[dict]]:
 
 
 def choose_measurements(model_markers: list[str], trial_markers: list[str], bodies: list[str],
-                        source: str = "") -> tuple[str, list[dict], list[str]]:
+                        source: str = "", model: str = "") -> tuple[str, list[dict], list[str]]:
     """The family whose marker pairs the model and the trial share most, its usable measurements
     (pairs with both markers present, bodies the model has) and the bodies left unscaled.
 
-    Raises :class:`DataMismatchError` when no family has a usable pair.
+    Raises :class:`DataMismatchError` when no family has a usable pair, naming the static trial
+    ``source`` and the model file ``model``, with the remedies: a marker-set file (``--marker-set``)
+    for a model without markers or with other marker names, or a ScaleTool setup.
     """
+    from ..messages import name_list
+
     have = set(model_markers) & set(trial_markers)
     best = None
     for family, items in measurement_sets().items():
@@ -132,20 +136,31 @@ def choose_measurements(model_markers: list[str], trial_markers: list[str], bodi
         if best is None or n > best[0]:
             best = (n, family, usable, unscaled)
     if best is None or best[0] == 0:
+        trial = name_list(trial_markers, 6)
+        setup = "or a ScaleTool setup whose measurements use the trial's markers (--scale-setup)"
+        if not model_markers:
+            raise DataMismatchError(
+                f"{source}: the model {model} has no markers to match the static trial's ({trial}); give it a "
+                "marker-set file whose markers are named as the trial's (--marker-set FILE, e.g. OpenSim's "
+                f"gait2392_Scale_MarkerSet.xml for gait2392's names R.ASIS, R.Knee.Lat ...), {setup}"
+            )
         raise DataMismatchError(
-            f"{source}: the model and the static trial share no marker pair of a known model family "
-            f"(gait2392: R.ASIS, R.Knee.Lat ...; Rajagopal: RASI, RKNE ...); give a ScaleTool setup (--scale-setup)"
+            f"{source}: the model's markers ({name_list(model_markers, 6)}) and the static trial's ({trial}) share no "
+            "marker pair of a known model family (gait2392: R.ASIS, R.Knee.Lat ...; Rajagopal: RASI, RKNE ...); "
+            f"give a marker-set file whose markers are named as the trial's (--marker-set FILE), {setup}"
         )
     return best[1], best[2], best[3]
 
 
-def estimate_height(trc_path: str | os.PathLike, time_range=None) -> tuple[float, str]:
+def estimate_height(trc_path: str | os.PathLike, time_range=None, source: str | None = None) -> tuple[float, str]:
     """Standing height (m) from a static trial: the height above the floor of the highest marker
     (median over ``time_range``). The floor is y = 0 when the lowest marker lies between 0 and
     0.15 m (the lab's origin on the floor, as OpenSim's files have it), else 3 cm below the lowest
     marker. Returns ``(height, marker)``; warns when the highest marker is not a head marker
-    (the height is then too short: give it)."""
+    (the height is then too short: give it). ``source``: the file the messages name (default
+    ``trc_path``)."""
     m = read_trc(trc_path)
+    source = source or str(trc_path)
     sel = np.ones(len(m.time), dtype=bool) if time_range is None else \
         (m.time >= time_range[0] - 1e-9) & (m.time <= time_range[1] + 1e-9)
     with warnings.catch_warnings():
@@ -153,12 +168,12 @@ def estimate_height(trc_path: str | os.PathLike, time_range=None) -> tuple[float
         y = np.nanmedian(m.xyz[sel, :, 1], axis=0)
     ok = np.isfinite(y)
     if not ok.any():
-        raise DataMismatchError(f"{trc_path}: no marker is seen in the static trial's time range")
+        raise DataMismatchError(f"{source}: no marker is seen in the static trial's time range")
     low, k = float(np.nanmin(y)), int(np.nanargmax(y))
     floor = 0.0 if 0.0 <= low <= 0.15 else low - 0.03
     name = m.names[k]
     if not any(w in name.upper().replace(".", "") for w in HEAD_MARKER_WORDS):
-        warnings.warn(f"{trc_path}: the highest marker, {name}, is not on the head: the height estimated from it "
+        warnings.warn(f"{source}: the highest marker, {name}, is not on the head: the height estimated from it "
                       f"({float(y[k]) - floor:.3f} m) is too short; give the height", MusclemetabWarning, stacklevel=2)
     return float(y[k]) - floor, name
 
@@ -167,9 +182,23 @@ def estimate_height(trc_path: str | os.PathLike, time_range=None) -> tuple[float
 _SETUP_FILE_TAGS = ("model_file", "marker_set_file", "marker_file", "coordinate_file")
 
 
-def setup_files(setup: str | os.PathLike) -> dict[str, Path]:
+#: the option of ``musclemetab prepare`` that takes each kind of OpenSim file
+SETUP_OPTIONS = {"ScaleTool": "--scale-setup", "InverseKinematicsTool": "--ik-setup", "MarkerSet": "--marker-set"}
+
+
+def setup_tool(root: ET.Element) -> str | None:
+    """The OpenSim object an XML file holds: the first element inside ``<OpenSimDocument>`` (or
+    the root itself in a file without one), e.g. ``ScaleTool``; ``None`` for an empty document."""
+    if root.tag != "OpenSimDocument":
+        return root.tag
+    return next((el.tag for el in root if isinstance(el.tag, str)), None)
+
+
+def setup_files(setup: str | os.PathLike, tool: str | None = None) -> dict[str, Path]:
     """The input files a setup names (``{tag/index: absolute path}``), each relative name resolved
-    against the setup's folder; raises :class:`InputFileError` for a setup that is not readable."""
+    against the setup's folder; raises :class:`InputFileError` for a setup that is not readable,
+    or (``tool``: ``"ScaleTool"``, ``"InverseKinematicsTool"``) that holds another OpenSim object,
+    naming the option (:data:`SETUP_OPTIONS`) and what the file holds."""
     setup = Path(setup)
     if not setup.is_file():
         raise InputFileError(f"{setup}: no such setup file; check the path")
@@ -177,6 +206,14 @@ def setup_files(setup: str | os.PathLike) -> dict[str, Path]:
         root = ET.parse(setup).getroot()
     except ET.ParseError as exc:
         raise InputFileError(f"{setup}: not a readable XML file ({exc})") from None
+    held = setup_tool(root)
+    if tool is not None and held != tool:
+        def a(name):
+            return f"{'an' if name[0] in 'AEIOU' else 'a'} {name}"
+
+        hint = f" (give it as {SETUP_OPTIONS[held]})" if held in SETUP_OPTIONS else ""
+        raise InputFileError(f"{setup}: {SETUP_OPTIONS.get(tool, 'the setup')} needs OpenSim's {tool} setup, but this "
+                             f"file holds {a(held) if held else 'no OpenSim object'}{hint}; give {a(tool)} setup")
     out = {}
     for tag in _SETUP_FILE_TAGS:
         for i, el in enumerate(root.iter(tag)):
@@ -222,13 +259,14 @@ def scale_model(generic_model: str | os.PathLike, static: str | os.PathLike, mas
     ``source``: the file the warnings name (default ``static``).
     """
     from ..cache import cached_texts
+    from ..layout import read_layout
     from ..model import check_model_path
 
     generic_model = check_model_path(generic_model)
     static = Path(static)
     if not (mass_kg and float(mass_kg) > 0):
         raise InputFileError(f"body mass {mass_kg!r} is not a positive number of kg; give --mass")
-    referenced = setup_files(setup) if setup else {}
+    referenced = setup_files(setup, "ScaleTool") if setup else {}
     marker_set = Path(marker_set) if marker_set else None
     inputs = {"model": generic_model, "static": static}
     if setup:
@@ -247,12 +285,13 @@ def scale_model(generic_model: str | os.PathLike, static: str | os.PathLike, mas
     for what, p in inputs.items():
         if not Path(p).is_file():
             raise InputFileError(f"{p}: no such {what.replace('_', ' ')} file; check the path")
+    read_layout(generic_model)  # a file OpenSim cannot load is named as solve names it, before any tool runs
     spec = {"fmt": SCALE_CACHE_FORMAT, "static_weight": STATIC_COORDINATE_WEIGHT, "mass": float(mass_kg), "height": height_m,
             **{k: _sha(p) for k, p in inputs.items()},
             "coords": sorted(_sha(p) for k, p in referenced.items() if k.startswith("coordinate_file")),
             "measurements": None if setup else json.dumps(measurement_sets(), sort_keys=True)}
     def compute():
-        r = _scale(generic_model, static, mass_kg, setup, marker_set, height_m)
+        r = _scale(generic_model, static, mass_kg, setup, marker_set, height_m, source or str(static))
         return {"model": r.model_text, "pose": r.static_pose_text, "record": json.dumps(r.record)}
 
     texts = cached_texts(spec, cache_dir or _cache_dir(), "scaling", "scale-", compute, ("model", "pose", "record"),
@@ -268,7 +307,9 @@ def scale_model(generic_model: str | os.PathLike, static: str | os.PathLike, mas
     return result
 
 
-def _scale(generic_model: Path, static: Path, mass_kg: float, setup, marker_set, height_m) -> ScaleResult:
+def _scale(generic_model: Path, static: Path, mass_kg: float, setup, marker_set, height_m, source: str) -> ScaleResult:
+    """OpenSim's scaling (:func:`scale_model`); ``source``: the user's static trial, which the
+    messages name (``static`` may be a temporary conversion of it)."""
     from ..opensim_bridge import call
 
     tmp = Path(tempfile.mkdtemp(prefix="musclemetab-scale-"))
@@ -286,9 +327,9 @@ def _scale(generic_model: Path, static: Path, mass_kg: float, setup, marker_set,
             bodies = list(read_layout(generic_model).bodies)
             trial_markers = read_trc(trc).names
             family, measurements, unscaled = choose_measurements(model_markers, trial_markers, bodies,
-                                                                 str(static))
+                                                                 source, str(generic_model))
             if unscaled:
-                warnings.warn(f"{static}: no marker pair of the {family} measurement set for "
+                warnings.warn(f"{source}: no marker pair of the {family} measurement set for "
                               f"{', '.join(unscaled)}; these bodies keep the generic model's size (give a ScaleTool "
                               "setup to scale them)", MusclemetabWarning, stacklevel=2)
             weights = {n: 1.0 for n in model_markers if n in set(trial_markers)}
@@ -301,7 +342,7 @@ def _scale(generic_model: Path, static: Path, mass_kg: float, setup, marker_set,
                 kwargs["time_range"] = (max(tr[0], float(times[0])), min(tr[1], float(times[-1])))
         res = call("lab:scale_model", str(generic_model.resolve()), str(Path(trc).resolve()), float(mass_kg),
                    str(tmp), **kwargs)
-        height, marker = (float(height_m), "given") if height_m else estimate_height(trc, res["time_range"])
+        height, marker = (float(height_m), "given") if height_m else estimate_height(trc, res["time_range"], source)
         errors = static_marker_errors(read_trc(trc), res["static_model_markers"], res["time_range"])
         record.update(mass_kg=res["mass_kg"], height_m=height, height_from=marker, time_range=res["time_range"],
                       scale_factors={k: v for k, v in res["scale_factors"].items() if not k.endswith("_offset")},
