@@ -99,6 +99,21 @@ def test_setup_files_resolved_against_its_folder_nothing_written_there(gait2392,
                     setup=inputs / gait2392.scale_setup.name)
 
 
+def test_the_scaling_record_names_this_calls_files(gait2392, scaled, tmp_path):
+    """The record names the files of the call, also from the cache (an entry is keyed by the
+    files' contents, so another path to the same files finds it), and the user's own static
+    trial (``source``) where the static trial given is a temporary conversion of it (a C3D)."""
+    import shutil
+
+    model = shutil.copy(gait2392.generic_model, tmp_path / "generic.osim")
+    with pytest.warns(MarkerErrorWarning):
+        res = scale_model(model, gait2392.static, 72.6, setup=gait2392.scale_setup, source=str(tmp_path / "static.c3d"))
+    assert res.model_text == scaled.model_text  # from the cache
+    assert res.record["generic_model"] == str((tmp_path / "generic.osim").resolve())
+    assert res.record["static"] == str((tmp_path / "static.c3d").resolve())
+    assert res.record["setup"] == str(gait2392.scale_setup.resolve())
+
+
 def test_scaling_without_a_setup_uses_the_shipped_measurements(gait2392):
     """Without a setup: the gait2392 family's measurements, chosen by the marker names; every body
     scaled; the subject's mass."""

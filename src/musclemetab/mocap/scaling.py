@@ -297,6 +297,11 @@ def scale_model(generic_model: str | os.PathLike, static: str | os.PathLike, mas
     texts = cached_texts(spec, cache_dir or _cache_dir(), "scaling", "scale-", compute, ("model", "pose", "record"),
                          use_cache)
     result = ScaleResult(texts["model"], texts["pose"], json.loads(texts["record"]))
+    # the files of this call (a cached entry keeps those of the call that computed it; ``static``
+    # may be a temporary conversion of the user's C3D, ``source``)
+    result.record.update(generic_model=str(generic_model.resolve()), static=str(Path(source or static).resolve()),
+                         setup=str(Path(setup).resolve()) if setup else None,
+                         marker_set=str(marker_set.resolve()) if marker_set else None)
     s = result.record["static_summary"]
     if s["rms_m"] > RMS_LIMIT_M or s["max_m"] > MAX_LIMIT_M:
         warnings.warn(f"{source or static}: the scaled model's markers in the static pose are {100 * s['rms_m']:.1f} cm RMS and "
