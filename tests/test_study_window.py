@@ -22,17 +22,9 @@ def _data(example, workflows=("effort-gen",), subject=None, **trial):
 
 
 def _toml(example, window: str) -> str:
-    return f"""workflows = ["effort-gen"]
-[[subjects]]
-name = "sub1"
-model = "{example.model}"
-body_mass_kg = 72.6
-[[subjects.trials]]
-name = "normal"
-ik = "{example.ik['normal']}"
-id = "{example.id['normal']}"
-window = {window}
-"""
+    """A study file of the example's normal trial with ``window = <window>`` (TOML text)."""
+    trial = f'name = "normal", ik = "{example.ik["normal"]}", id = "{example.id["normal"]}", window = {window}'
+    return f'subjects = [{{name = "sub1", model = "{example.model}", body_mass_kg = 72.6, trials = [{{{trial}}}]}}]\n'
 
 
 @pytest.mark.parametrize("window", ['"0.6:1.0"', "[0.6, 1.0]", "[0.6, 1]", '" 0.6 : 1.0 "'])

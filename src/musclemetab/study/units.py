@@ -840,8 +840,8 @@ def _model_dofs(subject: Subject, side: str) -> list[str]:
 
 def _device_arguments(trial: Trial, side: str, model) -> dict:
     """The ``solve_files`` keywords of an assisted trial: the profile, its gain and the gait cycle a
-    profile over the cycle is mapped onto (the trial's, :func:`.events.trial_cycle`; with ``cycle``
-    the solve's own)."""
+    profile over the cycle is mapped onto (the trial's, :func:`.events.trial_cycle`, inside its
+    ``window`` when it has one; with ``cycle`` the solve's own)."""
     if trial.assistance is None:
         return {}
     out = {"assistance": trial.assistance, "assistance_gain": trial.assistance_gain}
