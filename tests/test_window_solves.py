@@ -98,3 +98,37 @@ def test_the_legs_added_keep_the_excluded_muscles_and_the_cycle_check():
 
     both = add_leg_rows({"r": leg("tfl_r psoas_r", True), "l": leg("tfl_l", False)})
     assert both["excluded_muscles"].tolist() == ["tfl_r psoas_r tfl_l"] and both["gait_cycle"].tolist() == [False]
+
+
+def test_a_study_trial_window_gives_the_numbers_of_solve_window_and_analyse(window_solve, example, tmp_path):
+    """A study trial with ``window = "1.1:1.45"`` (the subject excluding psoas_r) is the solve of
+    ``solve --window 1.1:1.45``, the same problem (its result comes from the same solve): the same
+    objective, and the rows of ``analyse`` of that solve, with the cycle in the window, its flags
+    and the rates over it; a trial naming ``start_s``, ``toe_off_s`` and ``end_s`` inside the
+    window has the rows of ``analyse --cycle`` with those times."""
+    from musclemetab.study import run_study, study_from_dict
+
+    files = {"ik": str(example.ik["normal"]), "id": str(example.id["normal"])}
+    study = study_from_dict({
+        "workflows": ["effort-gen"],
+        "subjects": [{"name": "sub1", "model": str(example.model), "body_mass_kg": example.body_mass_kg,
+                      "height_m": example.height_m, "exclude_muscles": ["psoas_r"],
+                      "trials": [{"name": "window", **files, "window": f"{WINDOW[0]}:{WINDOW[1]}"},
+                                 {"name": "named", **files, "window": list(WINDOW), "start_s": 1.2, "toe_off_s": 1.28,
+                                  "end_s": 1.4}]}]}, base="/", output=tmp_path / "study")
+    run = run_study(study, workers=1, progress=False)
+    assert not run.failed, run.failed
+    rows = pd.read_csv(tmp_path / "study" / "results.csv").set_index("model")
+    columns = ["whole_body_W_per_kg", "speed_m_per_s", "cycle_start_s", "toe_off_s", "cycle_end_s", "duration_s",
+               "swing_energy_share_pct", "share_PF_pct", "gait_cycle", "excluded_muscles", "quality"]
+    for trial, extra, source in (("window", (), "estimated from the solved window and the ankle moment (no ground "
+                                               "reaction forces)"),
+                                 ("named", ("--cycle", "1.2,1.28,1.4"), "study file")):
+        unit = tmp_path / "study" / "units" / "sub1" / trial / "effort-gen"
+        assert json.loads((unit / "summary.json").read_text())["objective"] == \
+            json.loads((window_solve / "summary.json").read_text())["objective"]
+        got = rows[rows["trial"] == trial].sort_index()
+        want = _analyse(window_solve, example, tmp_path / trial, *extra).sort_index()
+        pd.testing.assert_frame_equal(got[columns], want[columns], rtol=1e-9)
+        assert (got["cycle_source"] == source).all()
+        assert not got["gait_cycle"].any() and got["quality"].str.contains("not_a_gait_cycle").all()

@@ -27,7 +27,8 @@ from .phases import phase_shares
 
 __all__ = ["MetabolicAnalysis", "TrialAnalysis", "RecordedTrial", "analyse", "write_analysis",
            "analyse_metabolics", "analyse_solution_folder", "interpolate_moment_arms", "recorded_trial",
-           "recorded_cycle", "ANALYSIS_FILE", "TIMESERIES_FILE", "GROUP_KEY_FILE", "ANALYSE_RECORD"]
+           "recorded_cycle", "averaged_by_default", "ANALYSIS_FILE", "TIMESERIES_FILE", "GROUP_KEY_FILE",
+           "ANALYSE_RECORD"]
 
 #: files of :func:`write_analysis` (beside ``whole_body.csv`` and ``per_muscle.csv``)
 ANALYSIS_FILE = "analysis.csv"
@@ -322,7 +323,7 @@ def recorded_excluded_muscles(solution) -> list[str]:
     return list(getattr(record, "excluded_muscles", None) or [])
 
 
-def _averaged_by_default(recorded: RecordedTrial, cycle: GaitCycle) -> bool:
+def averaged_by_default(recorded: RecordedTrial, cycle: GaitCycle) -> bool:
     """Whether the metabolic rates of the solution are averaged over ``cycle`` without being told
     (:func:`musclemetab.metabolics.solution.metabolics_from_solution`): the gait cycle the solve
     recorded, else the solved window less the padding at each end (its nodes up to, not including,
@@ -430,7 +431,7 @@ def analyse(
         raise _OptionError(f"the solution records no {name_list(missing)}: give {' and '.join(missing)} "
                            "(the OpenSim model, the IK motion and the gait cycle of the solved trial)")
     if (not (hasattr(solution, "rates") and hasattr(solution, "whole_body")) and "trim" not in metabolics_options
-            and not _averaged_by_default(recorded, cycle)):  # the rates over the cycle the analysis names
+            and not averaged_by_default(recorded, cycle)):  # the rates over the cycle the analysis names
         metabolics_options = {**metabolics_options, "cycle_s": (cycle.start_s, cycle.end_s)}
     result = _metabolics_of(solution, body_mass_kg, height_m, models, metabolics_options)
     if side is None:

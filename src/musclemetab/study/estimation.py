@@ -154,10 +154,11 @@ def estimation_trials(subject, here: str | None = None) -> list:
             if missing:
                 raise OptionError(f"{here}: estimate.emg_mode needs an 'emg' file for every estimation trial; "
                                   f"missing for {name_list(missing)}")
-        bad = [t.name for t in trials if t.id is None or t.cycle is not None]
+        bad = [t.name for t in trials if t.id is None or t.cycle is not None or t.window is not None]
         if bad:
             raise OptionError(f"{here}: the estimation solves the trials' whole IK window with their 'id' file; "
-                              f"trial(s) {name_list(bad)} have no 'id' or set 'cycle'")
+                              f"trial(s) {name_list(bad)} have no 'id' or set 'cycle' or 'window' (drop them, or "
+                              "give the estimation other trials)")
     return trials
 
 

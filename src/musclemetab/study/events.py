@@ -14,8 +14,13 @@ Order of preference for the cycle (initial contact, toe-off, next initial contac
    gait2392 families; for other models give the trial ``cycle = "auto"``, which finds the
    events from ground forces or from the kinematics, ground forces, or the events).
 
+A trial with a ``window`` (the solve of ``musclemetab solve --window``) has its window in
+place of the IK window in 2. and 3. (the solved window, snapped to IK frames), as
+``musclemetab analyse`` finds the cycle of such a solve.
+
 Speed: the study file's ``speed_m_per_s``, else the displacement of the model's forward
-translation coordinates over the cycle (:func:`musclemetab.analysis.speed.walking_speed_from_ik`).
+translation coordinates over the cycle (:func:`musclemetab.analysis.speed.walking_speed_from_ik`;
+the IK file less the padding, or ``start_s`` to ``end_s``; a trial with a ``window``: its cycle).
 """
 
 from __future__ import annotations
@@ -35,17 +40,33 @@ def ankle_moment_column(side: str = "r") -> str:
 
 
 def _ik_window(trial: Trial) -> tuple[float, float]:
+    """The simulated window: the IK file's, or the trial's ``window`` snapped outwards to IK
+    frames as the solve snaps it (:func:`musclemetab.redundancy.window.resolve_window`)."""
     from ..io import read_storage
 
+    if trial.window is not None:
+        from ..redundancy.window import resolve_window
+
+        w = resolve_window(trial.ik, window=trial.window)
+        return w.start_s, w.end_s
     t = read_storage(trial.ik).index.to_numpy(float)
     return float(t[0]), float(t[-1])
 
 
-def trial_cycle(trial: Trial, side: str = "r", model=None) -> GaitCycle:
+def trial_cycle(trial: Trial, side: str = "r", model=None, *, window_s: tuple[float, float] | None = None,
+                id_file=None) -> GaitCycle:
     """The trial's gait cycle (see the module docstring for the order of preference). With the
     subject's ``model``, the foot of a ``grf`` force is checked against its centre of pressure
     (:func:`musclemetab.events.grf_of_side`, warnings for what it finds) and a cycle found from it
-    must last 0.8-2.0 s (:func:`musclemetab.events.check_cycle_duration`)."""
+    must last 0.8-2.0 s (:func:`musclemetab.events.check_cycle_duration`).
+
+    A trial with a ``window`` has its cycle in that window, which stands for the IK window
+    (``window_s``: the window the solve recorded; default the trial's, snapped to IK frames), as
+    ``musclemetab analyse`` finds the cycle of a solve over ``--window``
+    (:func:`musclemetab.events.cycle_of_trial`); ``id_file``: the inverse dynamics for the events
+    (default the trial's ``id``; the one OpenSim computed for a trial without it)."""
+    if window_s is None and trial.window is not None:
+        window_s = _ik_window(trial)
     given = (trial.start_s, trial.toe_off_s, trial.end_s)
     if all(v is not None for v in given):
         return GaitCycle(*given)
@@ -62,7 +83,7 @@ def trial_cycle(trial: Trial, side: str = "r", model=None) -> GaitCycle:
                 warnings.warn(f"trial '{trial.name}': {msg}", WindowWarning, stacklevel=2)
         else:
             force = read_grf(trial.grf, trial.grf_column, side=side)
-        t0, tf = _ik_window(trial)  # the cycle that holds the middle of the simulated window
+        t0, tf = window_s or _ik_window(trial)  # the cycle that holds the middle of the simulated window
         found = cycle_from_grf(force.index.to_numpy(float), force.to_numpy(float),
                                threshold_N=trial.grf_threshold_N, at_time_s=trial.start_s if trial.start_s is not None else 0.5 * (t0 + tf))
         if model is not None:
@@ -70,15 +91,23 @@ def trial_cycle(trial: Trial, side: str = "r", model=None) -> GaitCycle:
 
             check_cycle_duration(found, where=f"trial '{trial.name}': {trial.grf} column {force.name}")
     else:
-        from ..errors import MissingColumnError
+        from ..errors import DataMismatchError, MissingColumnError
 
+        span = window_s or _ik_window(trial)
         try:
-            found = cycle_from_id_file(trial.id, ankle_moment_column(side), window_s=_ik_window(trial),
+            found = cycle_from_id_file(id_file or trial.id, ankle_moment_column(side), window_s=span,
                                        padding_s=PADDING_S)
         except MissingColumnError as exc:
             raise MissingColumnError(
                 f"trial '{trial.name}': no gait events: {exc}; give the trial cycle = \"auto\" (events from "
                 "ground forces or kinematics), a 'grf' file, or start_s, toe_off_s and end_s") from None
+        except DataMismatchError as exc:
+            if trial.window is None:
+                raise
+            raise DataMismatchError(
+                f"trial '{trial.name}': no gait events in its window {span[0]:.3f}-{span[1]:.3f} s from the ankle "
+                f"moment ({exc}); give the trial's start_s, toe_off_s and end_s inside the window, or a 'grf' "
+                "file") from None
     start, toe_off, end = (g if g is not None else f for g, f in
                            zip(given, (found.start_s, found.toe_off_s, found.end_s)))
     return GaitCycle(start, toe_off, end)

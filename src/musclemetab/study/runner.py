@@ -546,7 +546,8 @@ def _unit_rows(folder: Path, unit: Unit, rec: dict):
         speed_m_per_s=rec.get("speed_m_per_s"), toe_off_pct=rec.get("toe_off_pct"),
         measured_W_per_kg=rec.get("measured_W_per_kg"), cycle_source=rec.get("cycle_source"),
         speed_source=rec.get("speed_source"), large_reserve=bool(rec.get("large_reserve", False)),
-        unit_dir=str(unit.folder), excluded_muscles=rec.get("excluded_muscles"))
+        unit_dir=str(unit.folder), excluded_muscles=rec.get("excluded_muscles"),
+        named_by_events=(rec.get("window") or {}).get("named_by_events", True))  # False: a trial's window alone
     df["solve_start"] = rec.get("start") or "cold"  # a record without it: a unit of an earlier version, cold
     if rec.get("assistance"):  # an assisted trial: its device (musclemetab.analysis.assistance)
         from ..analysis.assistance import device_columns

@@ -116,8 +116,10 @@ def run_sample(study: Study, unit, tmp: Path, nominal_folder: Path, *, options=N
                arguments: Mapping | None = None, analysis_file: str = "analysis.csv") -> dict:
     """Solve and evaluate sample ``unit.sample`` (a :class:`~.units.Unit`) of its trial unit (folder
     ``nominal_folder``) into ``tmp``; ``options``, ``goals`` and ``arguments`` are the trial unit's solver
-    options, goals and personalisation arguments (passive calibration, tendon stiffness), ``analysis_file`` the name
-    of its analysis table."""
+    options, goals and the rest of its solve's keywords (its leg, window, ground forces and DOFs:
+    :func:`~.units.trial_solve_keywords`; passive calibration, tendon stiffness; a device),
+    ``analysis_file`` the name of its analysis table. The rates are averaged over the span of
+    the trial unit's."""
     from ..events import GaitCycle
     from ..analysis.groups import has_function_group
     from ..analysis.unit import analyse_metabolics, filtered_moment_arms
@@ -127,6 +129,7 @@ def run_sample(study: Study, unit, tmp: Path, nominal_folder: Path, *, options=N
     from ..redundancy import run as redundancy_run
     from ..redundancy.solution import Solution
     from ..uncertainty import draw, sample_start, sampled_properties
+    from .units import window_rates_s
 
     nominal = _record(nominal_folder)
     if nominal.get("status") != "ok":
@@ -140,12 +143,8 @@ def run_sample(study: Study, unit, tmp: Path, nominal_folder: Path, *, options=N
     factors = draw(study_priors(study), start.muscles, unit.sample, int(settings.get("seed", DEFAULT_SEED)))
     factors.table().to_csv(tmp / FACTORS_FILE, index=False, float_format="%.17g")
     sol = redundancy_run.solve_files(
-        subject.model, trial.ik, trial.id, unit.workflow, side=side, dofs=subject.dofs,
-        external_loads=trial.external_loads, grf=trial.grf if trial.cycle is not None else None,
-        grf_column=trial.grf_column, grf_threshold_N=trial.grf_threshold_N, cycle=trial.cycle,
-        options=options, goals=goals, exclude_muscles=subject.exclude_muscles,
-        exclude_missing_ok=subject.side == "both", warm_start=sample_start(start, factors.parameters(start.parameters)),
-        parameter_transform=factors.parameters,
+        subject.model, trial.ik, trial.id, unit.workflow, options=options, goals=goals,
+        warm_start=sample_start(start, factors.parameters(start.parameters)), parameter_transform=factors.parameters,
         **dict(arguments or {}))
     times = {"solve_s": sol.record.solve_time_s, "solve_cpu_s": sol.record.solve_cpu_time_s,
              "solution_s": time.perf_counter() - t0}
@@ -164,7 +163,8 @@ def run_sample(study: Study, unit, tmp: Path, nominal_folder: Path, *, options=N
     result = metabolics_from_solution(
         sol, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
         basal_rate_W_per_kg=study.basal_coefficient, basal_exponent=study.basal_exponent, speed_m_per_s=speed,
-        muscle_properties=subject.muscle_properties, muscle_masses_kg=masses, slow_twitch_fractions=fst)
+        muscle_properties=subject.muscle_properties, muscle_masses_kg=masses, slow_twitch_fractions=fst,
+        cycle_s=window_rates_s(nominal.get("window")))
     cycle = GaitCycle(**{k: float(v) for k, v in nominal["cycle"].items()})
     result.whole_body_table().to_csv(tmp / WHOLE_BODY_CSV, index=False, float_format="%.10g")
     per_muscle_table(result, cycle).to_csv(tmp / PER_MUSCLE_FILE, index=False, float_format="%.10g")

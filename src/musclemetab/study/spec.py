@@ -75,6 +75,8 @@ A study file names everything a study needs; paths are relative to the file::
                                           # dynamics is computed from it by OpenSim
     cycle = "auto"                        # optional: solve the first gait cycle of the leg inside
                                           # every input file (or N: the N-th)
+    # window = "0.6:1.9"                  # optional, instead of 'cycle': solve that window (s), as
+                                          # `musclemetab solve --window 0.6:1.9` (or [0.6, 1.9])
     speed_m_per_s = 1.33                  # optional: default from the pelvis in the IK file
     vo2_mL_per_min = 1050.0               # optional calorimetry (or vo2_mL_per_s / vco2_mL_per_s,
     vco2_mL_per_min = 900.0               #  or measured_W_per_kg)
@@ -95,7 +97,8 @@ naming the file, the subject, the trial and the key. Subject and trial names bec
 folder names, so they must be plain names (letters, digits, ``-``, ``_``, ``.``, not
 starting with a dot). Every numeric key is checked against :data:`NUMBER_KEYS` (its unit
 and the range of physically possible values, e.g. ``body_mass_kg`` 20 to 300 kg, a human
-body mass in kilograms); ``cycle`` is ``"auto"`` or a whole number from 1. Rows of
+body mass in kilograms); ``cycle`` is ``"auto"`` or a whole number from 1; ``window`` is
+``"T0:T1"`` or ``[T0, T1]``, finite times in seconds with T0 before T1 (:func:`check_window`). Rows of
 ``muscle_properties`` and names in ``dofs`` must name muscles and coordinates of the model.
 A study file may hold :data:`MAX_STUDY_FILE_BYTES` bytes, nested :data:`MAX_STUDY_DEPTH` deep.
 """
@@ -143,6 +146,29 @@ def check_cycle(value, where: str = "", option: str = "'cycle'"):
     raise OptionError(f"{at}{option} must be {CYCLE_HELP}, not {value!r}")
 
 
+#: ``window``: the solved window, as the command line's ``--window``
+WINDOW_HELP = "\"T0:T1\", two finite times in seconds with T0 before T1, e.g. window = \"0.6:1.9\" (or [0.6, 1.9])"
+
+
+def check_window(value, where: str = "", option: str = "'window'") -> tuple[float, float]:
+    """``"T0:T1"`` (read by :func:`musclemetab.redundancy.window.parse_window`, as ``--window``)
+    or a two-number array ``[T0, T1]`` -> ``(T0, T1)``; :class:`OptionError` naming ``where`` and
+    ``option`` for anything else (``"1.5"``, ``"2:1"``, ``"nan:1"``, ``[1]``, ``true``)."""
+    from ..redundancy.window import parse_window
+
+    text = value
+    if isinstance(value, list) and len(value) == 2 and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+        text = f"{float(value[0])!r}:{float(value[1])!r}"
+    if isinstance(text, str):
+        try:
+            return parse_window(text, option)
+        except OptionError:
+            pass
+    at = f"{where}: " if where else ""
+    raise OptionError(f"{at}{option} must be {WINDOW_HELP}, not {value!r}")
+
+
 def check_plain_name(name: str, what: str) -> str:
     """Return ``name`` if it can be used as one folder name; raise :class:`OptionError` otherwise.
 
@@ -179,6 +205,8 @@ class Trial:
     external_loads: Path | None = None
     #: ``"auto"`` or N: solve that gait cycle of the subject's side (see ``musclemetab.redundancy.window``)
     cycle: str | int | None = None
+    #: ``(T0, T1)``: solve that window, s (``--window``; see ``musclemetab.redundancy.window``)
+    window: tuple[float, float] | None = None
     #: measured fiber lengths (mm, MuscleRedundancySolver convention) for the subject's estimation
     ultrasound: Path | None = None
     #: the markers the IK is computed from (``ik`` is then the study's own, under ``prepared/``)
@@ -312,7 +340,7 @@ _SCALING_KEYS = ("static", "scale_setup", "marker_set")
 _TRIAL_KEYS = {
     "name", "ik", "id", "emg", "grf", "grf_column", "grf_threshold_N", "speed_m_per_s",
     "measured_W_per_kg", "vo2_mL_per_s", "vco2_mL_per_s", "vo2_mL_per_min", "vco2_mL_per_min",
-    "start_s", "toe_off_s", "end_s", "external_loads", "cycle", "ultrasound", "emg_processing", "markers", "ik_setup",
+    "start_s", "toe_off_s", "end_s", "external_loads", "cycle", "window", "ultrasound", "emg_processing", "markers", "ik_setup",
     "assistance", "states", "controls",
 }
 #: the workflow of a trial whose rates come from an OpenSim states file (its ``states`` key)
@@ -728,6 +756,13 @@ def _subject(data, base: Path, where: str, workflows, assistance=None) -> Subjec
         if missing:
             raise OptionError(f"{here}: the emg-ten workflow needs an 'emg' file for every trial; missing for "
                               f"{name_list(missing)}")
+        windowed = [t.name for t in trials if t.window is not None]
+        if windowed:
+            what = "the emg-ten workflow" if EMG_TEN in workflows else "tendon_stiffness = \"emg-ten\""
+            raise OptionError(f"{here}: {what} needs the subject's EMG-TEN estimation, which solves every trial over "
+                              f"its whole IK file, so a 'window' cannot apply to it; trial(s) {name_list(windowed)} "
+                              "set 'window': drop it, or put the windowed trials in a subject of their own without "
+                              "emg-ten (tendon_stiffness may name the estimate's parameters.json)")
     emg_mode, emg_tolerance = _emg_mode(data, here, trials)
     muscle_properties = _path(data.get("muscle_properties"), base, here, "muscle_properties", required=False)
     if muscle_properties is not None or dofs is not None or excluded:
@@ -789,11 +824,12 @@ def _check_both_legs(data, here: str, trials, workflows, kt) -> None:
             raise OptionError(f"{here}, trial '{t.name}': {', '.join(events)} belong{'s' if len(events) == 1 else ''} "
                               "to one leg; with side = \"both\" drop "
                               f"{'it' if len(events) == 1 else 'them'} (each leg's gait cycle is found by 'cycle')")
-    missing = [t.name for t in trials if t.cycle is None]
+    missing = [t.name for t in trials if t.cycle is None and t.window is None]
     if missing:
         raise OptionError(f"{here}: side = \"both\" solves each leg over its own gait cycle; set cycle = \"auto\" in "
                           f"trial(s) {name_list(missing)} (heel strike to heel strike of each leg, from the ground "
-                          "forces of 'external_loads' or 'grf', or from the kinematics without them)")
+                          "forces of 'external_loads' or 'grf', or from the kinematics without them), or a "
+                          "window = \"T0:T1\" that both legs are solved over")
 
 
 def _emg_mode(data, here: str, trials) -> tuple[str | None, float]:
@@ -811,10 +847,11 @@ def _emg_mode(data, here: str, trials) -> tuple[str | None, float]:
     missing = [t.name for t in trials if t.emg is None]
     if missing:
         raise OptionError(f"{here}: 'emg_mode' needs an 'emg' file for every trial; missing for {name_list(missing)}")
-    bad = [t.name for t in trials if t.id is None or t.cycle is not None]
+    bad = [t.name for t in trials if t.id is None or t.cycle is not None or t.window is not None]
     if bad:
         raise OptionError(f"{here}: an EMG-informed solve covers the whole IK window with the trial's 'id' file; "
-                          f"trial(s) {name_list(bad)} have no 'id' or set 'cycle' (drop 'cycle', or 'emg_mode')")
+                          f"trial(s) {name_list(bad)} have no 'id' or set 'cycle' or 'window' (drop 'cycle' and "
+                          "'window', or 'emg_mode')")
     return mode, 0.01 if tol is None else tol
 
 
@@ -868,6 +905,14 @@ def _trial(data, base: Path, where: str, emg_processing="envelope") -> Trial:
     if states is not None and data.get("assistance") is not None:
         raise OptionError(f"{here}: 'states' gives the trial's muscle states, and 'assistance' needs a solve; "
                           "drop one of them")
+    cycle = _cycle_key(data.get("cycle"), here)
+    window = None if data.get("window") is None else check_window(data["window"], here)
+    if window is not None and cycle is not None:
+        raise OptionError(f"{here}: give 'window' (the times to solve) or 'cycle' (a gait cycle found from the "
+                          "events), not both, as musclemetab solve takes --window or --cycle; drop one of them")
+    if window is not None and states is not None:
+        raise OptionError(f"{here}: 'states' gives the trial's muscle states, and 'window' the times of a solve; "
+                          "drop one of them")
     return Trial(
         name=name,
         ik=_path(data.get("ik"), base, here, "ik") if markers is None else None,
@@ -886,7 +931,8 @@ def _trial(data, base: Path, where: str, emg_processing="envelope") -> Trial:
         toe_off_s=num["toe_off_s"],
         end_s=num["end_s"],
         external_loads=_path(data.get("external_loads"), base, here, "external_loads", required=False),
-        cycle=_cycle_key(data.get("cycle"), here),
+        cycle=cycle,
+        window=window,
         ultrasound=_path(data.get("ultrasound"), base, here, "ultrasound", required=False),
         markers=markers,
         ik_setup=_path(data.get("ik_setup"), base, here, "ik_setup", required=False),

@@ -191,7 +191,7 @@ def _trial_record(trial: Trial) -> dict:
     rec["files"] = {k: _file_hash(p) for k, p in trial.files().items()}
     for k in ("ik", "id", "emg", "grf", "external_loads", "assistance", "states", "controls"):
         rec.pop(k, None)  # paths do not matter, contents do
-    for k in ("cycle", "ultrasound", "assisted_from"):
+    for k in ("cycle", "window", "ultrasound", "assisted_from"):
         if rec.get(k) is None:
             rec.pop(k, None)  # absent key: earlier studies keep their unit keys
     if trial.assistance is None:
@@ -483,7 +483,9 @@ def _execute_unit(study: Study, unit: Unit, key: str, dependency_folder: str | N
             record.update(run_sample(study, unit, tmp, Path(dependency_folder),
                                      options=_solver_options(study),
                                      goals=_goals(study, subject, unit.workflow),
-                                     arguments={**solve_arguments(subject, unit.workflow, estimation),
+                                     arguments={**trial_solve_keywords(subject, subject.trial(unit.trial),
+                                                                       unit.leg(study)),
+                                                **solve_arguments(subject, unit.workflow, estimation),
                                                 **_device_arguments(subject.trial(unit.trial), unit.leg(study),
                                                                     subject.model)},
                                      analysis_file=ANALYSIS_FILE))
@@ -611,7 +613,18 @@ def _cycle_source(trial: Trial, recorded: dict | None = None) -> str:
         return f"ground reaction forces ({recorded.get('source') or 'found by the solve'})"
     if trial.grf is not None:
         return "ground reaction forces"
-    return "estimated from the IK window and the ankle moment (no ground reaction forces)"
+    return (f"estimated from the {'solved' if trial.window is not None else 'IK'} window and the ankle moment "
+            "(no ground reaction forces)")
+
+
+def trial_solve_keywords(subject: Subject, trial: Trial, side: str) -> dict:
+    """The ``solve_files`` keywords of a trial's solve of the leg ``side`` that every workflow
+    shares: its window (``cycle``, or ``window`` as ``--window``; the whole IK file without
+    either), ground forces, DOFs and excluded muscles."""
+    return dict(side=side, dofs=subject.dofs, external_loads=trial.external_loads,
+                grf=trial.grf if trial.cycle is not None else None, grf_column=trial.grf_column,
+                grf_threshold_N=trial.grf_threshold_N, cycle=trial.cycle, window=trial.window,
+                exclude_muscles=subject.exclude_muscles, exclude_missing_ok=subject.side == "both")
 
 
 def solve_arguments(subject: Subject, workflow: str, estimation: Path | None) -> dict:
@@ -640,6 +653,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
     from ..metabolics.solution import metabolics_from_solution, write_metabolics
     from ..redundancy.run import solve_files, write_solution_folder
     from ..redundancy.solution import Solution
+    from ..analysis.unit import averaged_by_default, recorded_trial
     from .events import trial_cycle, trial_speed
 
     subject = study.subject(unit.subject)
@@ -664,15 +678,10 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
             device = _device_arguments(trial, side, subject.model)
 
             def solve(warm_start=None):
-                return solve_files(subject.model, trial.ik, trial.id, unit.workflow, side=side, dofs=subject.dofs,
-                                   external_loads=trial.external_loads,
-                                   grf=trial.grf if trial.cycle is not None else None,
-                                   grf_column=trial.grf_column, grf_threshold_N=trial.grf_threshold_N,
-                                   cycle=trial.cycle, options=_solver_options(study),
+                return solve_files(subject.model, trial.ik, trial.id, unit.workflow, options=_solver_options(study),
                                    goals=_goals(study, subject, unit.workflow),
-                                   exclude_muscles=subject.exclude_muscles, exclude_missing_ok=subject.side == "both",
                                    **({"warm_start": warm_start} if warm_start is not None else {}), **device,
-                                   **kwargs)
+                                   **trial_solve_keywords(subject, trial, side), **kwargs)
 
             sol, start = _chain_solve(solve, unit.warm_source(study), warm, times, trial.name)
         write_solution_folder(sol, tmp, opensim_files=False)  # written below, for every workflow
@@ -695,11 +704,15 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
     # the stages after the solve take the solution object (the same numbers as its folder,
     # tests/test_stage_paths.py); each writes its files once
     recorded = sol.record.gait_cycle if sol is not None else None
+    window = _window_record(trial, sol) if trial.window is not None else None
     if recorded and trial.start_s is None and trial.end_s is None:  # the cycle the solve found
         from ..events import GaitCycle
 
         toe_off = trial.toe_off_s if trial.toe_off_s is not None else recorded["toe_off_s"]
         cycle = GaitCycle(recorded["start_s"], toe_off, recorded["end_s"])
+    elif window is not None:  # in the solved window, as analyse finds it
+        cycle = trial_cycle(trial, side, subject.model, window_s=tuple(window["solved_s"]),
+                            id_file=trial.id or recorded_trial(sol).id)
     else:
         cycle = trial_cycle(trial, side, subject.model)
     try:  # over the cycle the rates are averaged over, as 'musclemetab analyse' takes it
@@ -710,10 +723,12 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
         warnings.warn(f"{subject.name}/{trial.name}: no walking speed, no cost of transport ({exc})",
                       MusclemetabWarning, stacklevel=2)
         speed = None
+    if window is not None and not averaged_by_default(recorded_trial(sol), cycle):
+        window["rates_over_s"] = [cycle.start_s, cycle.end_s]  # the cycle the trial names inside the window
     result = states(speed) if states is not None else metabolics_from_solution(
         sol, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
         basal_rate_W_per_kg=study.basal_coefficient, basal_exponent=study.basal_exponent,
-        speed_m_per_s=speed, muscle_properties=subject.muscle_properties,
+        speed_m_per_s=speed, muscle_properties=subject.muscle_properties, cycle_s=window_rates_s(window),
     )
     write_metabolics(result, tmp, cycle=cycle)
     times["metabolics_s"] = time.perf_counter() - t1
@@ -756,6 +771,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
         "measured_W_per_kg": measured,
         "cycle": {"start_s": cycle.start_s, "toe_off_s": cycle.toe_off_s, "end_s": cycle.end_s},
         "cycle_source": _cycle_source(trial, recorded),
+        **({"window": window} if window is not None else {}),
         "speed_source": "study file" if trial.speed_m_per_s is not None else (
             "not available" if speed is None else "estimated from the pelvis displacement over the cycle (IK)"),
         "toe_off_pct": float(100.0 * (cycle.toe_off_s - cycle.start_s) / (cycle.end_s - cycle.start_s)),
@@ -769,6 +785,25 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
         **({"sensitivity": sensitivity} if study.sensitivity else {}),
         **({"assistance": _device_record(trial, sol, subject.body_mass_kg)} if trial.assistance is not None else {}),
     }
+
+
+def _window_record(trial: Trial, sol) -> dict:
+    """The unit record's ``window`` of a trial solved over its ``window``: the times given, the
+    window solved (snapped to IK frames) and whether gait events bound the span the rates are
+    averaged over (``named_by_events``: the trial's ``start_s`` and ``end_s``, or its ``grf``),
+    as ``musclemetab analyse`` says of a solve over ``--window`` (``docs/quality.md``,
+    ``not_a_gait_cycle``); :func:`_run_trial` adds ``rates_over_s`` when the rates are averaged
+    over a cycle other than the solved window less the padding."""
+    from ..analysis.unit import recorded_trial
+
+    return {"given_s": list(trial.window), "solved_s": list(recorded_trial(sol).window_s),
+            "named_by_events": trial.grf is not None or (trial.start_s is not None and trial.end_s is not None)}
+
+
+def window_rates_s(window: dict | None) -> tuple[float, float] | None:
+    """The span a windowed trial unit's rates are averaged over (``None``: the solve's default)."""
+    span = (window or {}).get("rates_over_s")
+    return (float(span[0]), float(span[1])) if span else None
 
 
 def _states_metabolics(study: Study, subject: Subject, trial: Trial, side: str):
@@ -805,8 +840,8 @@ def _model_dofs(subject: Subject, side: str) -> list[str]:
 
 def _device_arguments(trial: Trial, side: str, model) -> dict:
     """The ``solve_files`` keywords of an assisted trial: the profile, its gain and the gait cycle a
-    profile over the cycle is mapped onto (the trial's, :func:`.events.trial_cycle`; with ``cycle``
-    the solve's own)."""
+    profile over the cycle is mapped onto (the trial's, :func:`.events.trial_cycle`, inside its
+    ``window`` when it has one; with ``cycle`` the solve's own)."""
     if trial.assistance is None:
         return {}
     out = {"assistance": trial.assistance, "assistance_gain": trial.assistance_gain}
