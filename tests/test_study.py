@@ -259,10 +259,10 @@ def test_failing_unit_is_reported_and_the_rest_complete(pool_run, example, tmp_p
     )
     capsys.readouterr()
     code = main(["run", str(toml), "--out", str(study.output), "--workers", "1", "--no-progress"])
-    out = capsys.readouterr().out
+    out, err = capsys.readouterr()
     assert code == 1
     assert "2 up to date" in out and "1 failed" in out
-    assert "failed sub1/fast/effort-gen" in out and "knee_angle_r_moment" in out
+    assert "failed sub1/fast/effort-gen" in err and "knee_angle_r_moment" in err  # the failure on standard error
 
 
 def test_bad_scheduler_address_is_an_option_error(pool_run, tmp_path, monkeypatch):
