@@ -265,6 +265,36 @@ def test_failing_unit_is_reported_and_the_rest_complete(pool_run, example, tmp_p
     assert "failed sub1/fast/effort-gen" in err and "knee_angle_r_moment" in err  # the failure on standard error
 
 
+def test_a_trial_naming_its_cycle_is_averaged_over_it_as_analyse_does(pool_run, example, tmp_path):
+    """The normal trial (IK 0.57-1.75 s, solved whole; its own span 0.62-1.70 s) with the events
+    ``start_s = 0.8, toe_off_s = 1.2, end_s = 1.5``: the study averages the rates over 0.8-1.5 s and
+    says so in ``unit.json`` (``rates_over_s``), as ``musclemetab analyse --cycle 0.8,1.2,1.5`` of the
+    same solve does (it used to average them over 0.62-1.70 s and split only the phases at the
+    events); the solve is the pool run's (its result comes from the same solve)."""
+    from musclemetab.commands import main
+
+    study, _ = pool_run
+    data = _study_dict(example, trials=("normal",), models=("UM10", "BH04"))
+    data["subjects"][0]["trials"][0].update(start_s=0.8, toe_off_s=1.2, end_s=1.5, speed_m_per_s=1.3)
+    named = study_from_dict(data, base="/", output=tmp_path / "named")
+    run = run_study(named, workers=1, progress=False)
+    assert not run.failed, run.failed
+    unit = tmp_path / "named" / "units" / "sub1" / "normal" / "effort-gen"
+    assert json.loads((unit / "unit.json").read_text())["rates_over_s"] == [0.8, 1.5]
+    solved = study.output / "units" / "sub1" / "normal" / "effort-gen"
+    assert json.loads((unit / "summary.json").read_text())["objective"] == \
+        json.loads((solved / "summary.json").read_text())["objective"]
+    assert main(["analyse", "--solution", str(solved), "--mass", str(example.body_mass_kg), "--height",
+                 str(example.height_m), "--models", "UM10,BH04", "--cycle", "0.8,1.2,1.5", "--speed", "1.3",
+                 "--out", str(tmp_path / "A")]) == 0
+    want = pd.read_csv(tmp_path / "A" / "results.csv").set_index("model").sort_index()
+    got = pd.read_csv(tmp_path / "named" / "results.csv").set_index("model").sort_index()
+    columns = ["whole_body_W_per_kg", "cycle_start_s", "cycle_end_s", "duration_s", "swing_energy_share_pct",
+               "share_PF_pct", "gross_cost_of_transport_J_per_kg_per_m"]
+    pd.testing.assert_frame_equal(got[columns], want[columns], rtol=1e-9)
+    assert got.loc["UM10", "duration_s"] == pytest.approx(0.7, abs=1e-9)
+
+
 def test_bad_scheduler_address_is_an_option_error(pool_run, tmp_path, monkeypatch):
     pytest.importorskip("distributed")
     import musclemetab.study.runner as runner

@@ -129,7 +129,7 @@ def run_sample(study: Study, unit, tmp: Path, nominal_folder: Path, *, options=N
     from ..redundancy import run as redundancy_run
     from ..redundancy.solution import Solution
     from ..uncertainty import draw, sample_start, sampled_properties
-    from .units import window_rates_s
+    from .units import rates_span_s
 
     nominal = _record(nominal_folder)
     if nominal.get("status") != "ok":
@@ -164,7 +164,7 @@ def run_sample(study: Study, unit, tmp: Path, nominal_folder: Path, *, options=N
         sol, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
         basal_rate_W_per_kg=study.basal_coefficient, basal_exponent=study.basal_exponent, speed_m_per_s=speed,
         muscle_properties=subject.muscle_properties, muscle_masses_kg=masses, slow_twitch_fractions=fst,
-        cycle_s=window_rates_s(nominal.get("window")))
+        cycle_s=rates_span_s(nominal.get("rates_over_s")))
     cycle = GaitCycle(**{k: float(v) for k, v in nominal["cycle"].items()})
     result.whole_body_table().to_csv(tmp / WHOLE_BODY_CSV, index=False, float_format="%.10g")
     per_muscle_table(result, cycle).to_csv(tmp / PER_MUSCLE_FILE, index=False, float_format="%.10g")

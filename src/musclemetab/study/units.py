@@ -723,12 +723,15 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
         warnings.warn(f"{subject.name}/{trial.name}: no walking speed, no cost of transport ({exc})",
                       MusclemetabWarning, stacklevel=2)
         speed = None
-    if window is not None and not averaged_by_default(recorded_trial(sol), cycle):
-        window["rates_over_s"] = [cycle.start_s, cycle.end_s]  # the cycle the trial names inside the window
+    # the rates are averaged over the trial's cycle, as 'musclemetab analyse' averages them over the
+    # cycle it is given: when events the trial names (start_s and end_s, its grf, a cycle inside its
+    # window) bound another span than the solve's own (its cycle, or its window less the padding)
+    rates_over_s = None if sol is None or averaged_by_default(recorded_trial(sol), cycle) else \
+        [cycle.start_s, cycle.end_s]
     result = states(speed) if states is not None else metabolics_from_solution(
         sol, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
         basal_rate_W_per_kg=study.basal_coefficient, basal_exponent=study.basal_exponent,
-        speed_m_per_s=speed, muscle_properties=subject.muscle_properties, cycle_s=window_rates_s(window),
+        speed_m_per_s=speed, muscle_properties=subject.muscle_properties, cycle_s=rates_span_s(rates_over_s),
     )
     write_metabolics(result, tmp, cycle=cycle)
     times["metabolics_s"] = time.perf_counter() - t1
@@ -772,6 +775,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
         "cycle": {"start_s": cycle.start_s, "toe_off_s": cycle.toe_off_s, "end_s": cycle.end_s},
         "cycle_source": _cycle_source(trial, recorded),
         **({"window": window} if window is not None else {}),
+        **({"rates_over_s": rates_over_s} if rates_over_s is not None else {}),
         "speed_source": "study file" if trial.speed_m_per_s is not None else (
             "not available" if speed is None else "estimated from the pelvis displacement over the cycle (IK)"),
         "toe_off_pct": float(100.0 * (cycle.toe_off_s - cycle.start_s) / (cycle.end_s - cycle.start_s)),
@@ -792,17 +796,16 @@ def _window_record(trial: Trial, sol) -> dict:
     window solved (snapped to IK frames) and whether gait events bound the span the rates are
     averaged over (``named_by_events``: the trial's ``start_s`` and ``end_s``, or its ``grf``),
     as ``musclemetab analyse`` says of a solve over ``--window`` (``docs/quality.md``,
-    ``not_a_gait_cycle``); :func:`_run_trial` adds ``rates_over_s`` when the rates are averaged
-    over a cycle other than the solved window less the padding."""
+    ``not_a_gait_cycle``)."""
     from ..analysis.unit import recorded_trial
 
     return {"given_s": list(trial.window), "solved_s": list(recorded_trial(sol).window_s),
             "named_by_events": trial.grf is not None or (trial.start_s is not None and trial.end_s is not None)}
 
 
-def window_rates_s(window: dict | None) -> tuple[float, float] | None:
-    """The span a windowed trial unit's rates are averaged over (``None``: the solve's default)."""
-    span = (window or {}).get("rates_over_s")
+def rates_span_s(span) -> tuple[float, float] | None:
+    """The span a trial unit's rates are averaged over, from its record's ``rates_over_s``
+    (``None``: the solve's default, its gait cycle or its window less the padding)."""
     return (float(span[0]), float(span[1])) if span else None
 
 
