@@ -230,6 +230,9 @@ def test_solve_metabolics_analyse_give_the_study_numbers(cli_flow, two_subjects,
     # no speed known, one trial: the captions claim neither a preferred speed nor a speed shading
     captions = " ".join(e["caption"] for e in record["entries"])
     assert "preferred speed" not in captions and "light: slow" not in captions
+    # both legs solved: the per-muscle ranking's "one leg" is the legs' mean, and says so
+    ranked = next(e["caption"] for e in record["entries"] if e["name"] == "per_muscle_ranked")
+    assert "one leg: the mean of the two legs of a subject solved on both" in ranked
     n_report = _report_tables_are_the_studys(a, study)
     assert n_report > 5000
     # a folder that is neither a study nor an analyse output: one line naming it and what to pass

@@ -526,8 +526,9 @@ def _report_unplaced(unplaced: Sequence[str], strict: bool, warn: bool) -> None:
     if not unplaced:
         return
     s = "s" if len(unplaced) > 1 else ""
-    how = ("place them with a --muscle-properties CSV (columns muscle,anatomical_muscles or "
-           "muscle,mass_kg,slow_twitch_fraction; see docs/muscles.md)")
+    how = ("place them with a muscle-properties CSV (columns muscle,anatomical_muscles or "
+           "muscle,mass_kg,slow_twitch_fraction; see docs/muscles.md): --muscle-properties on the command line, "
+           "a study subject's muscle_properties")
     if strict:
         raise UnknownMuscleError(
             f"muscle{s} {name_list(unplaced)} not in the anatomical muscle table (--strict); {how}"

@@ -69,7 +69,7 @@ def walking_speed_from_ik(
                             for c in [next((c for c in df.columns if str(c).endswith(suffix)), None)] if c)
             if not columns:
                 raise DataMismatchError(f"{where}: no column ending in _tx or _tz (root translation); give the model "
-                                        "or the trial's speed_m_per_s")
+                                        "or the speed (a study trial's speed_m_per_s, --speed on the command line)")
     require_columns(df, list(columns), what="root translation column")
     t = df.index.to_numpy(dtype=float)
     t0 = t[0] + padding_s if start_s is None else float(start_s)
@@ -77,13 +77,14 @@ def walking_speed_from_ik(
     if not (t[0] - 1e-9 <= t0 < t1 <= t[-1] + 1e-9):
         raise DataMismatchError(
             f"{where}: cycle {t0:.3f}-{t1:.3f} s is not inside the motion ({t[0]:.3f}-{t[-1]:.3f} s); "
-            "give start_s and end_s within the file, or the trial's speed_m_per_s"
+            "give a cycle within the file, or the speed (a study trial's speed_m_per_s, --speed on the command line)"
         )
     d = [np.interp(t1, t, df[c].to_numpy(float)) - np.interp(t0, t, df[c].to_numpy(float)) for c in columns]
     v = float(np.sqrt(np.sum(np.square(d))) / (t1 - t0))
     if v < MIN_OVERGROUND_SPEED_M_PER_S:
         raise DataMismatchError(
             f"{where}: the root body moves {v:.3f} m/s over the cycle ({', '.join(columns)}): treadmill walking, "
-            "whose speed the kinematics cannot give; give the trial's speed_m_per_s"
+            "whose speed the kinematics cannot give; give the speed (a study trial's speed_m_per_s, --speed on the "
+            "command line)"
         )
     return v

@@ -224,7 +224,7 @@ def run(args) -> int:
                 speed_note = "estimated from the pelvis displacement over the cycle (IK)"
             except DataMismatchError as exc:
                 speed, speed_note = None, "not available"
-                note(f"no walking speed, no cost of transport ({exc}); give --speed")
+                note(f"no walking speed, no cost of transport ({exc})")
         result = analyse(sol_dir, model, ik, cycle, mass, height, models=models, side=side,
                          basal=args.basal, basal_rate_W_per_kg=args.basal_coefficient,
                          basal_exponent=args.basal_exponent, speed_m_per_s=speed)

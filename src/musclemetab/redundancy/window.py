@@ -174,17 +174,8 @@ def resolve_window(
                 ", or give the ground forces (--external-loads) instead of --id: the inverse dynamics is then "
                 "computed over the whole trial" if what == "inverse dynamics" else ""))
         t0, t1 = gc.start_s - padding_s, gc.end_s + padding_s
-        if t0 < lo - _TOL or t1 > hi + _TOL:
-            edge_file = [p for p, _, (a, b) in inputs if (t0 < a - _TOL) or (t1 > b + _TOL)]
-            clipped = (max(t0, lo), min(t1, hi))
-            msg = (
-                f"the padding of the gait cycle {gc.start_s:.3f}-{gc.end_s:.3f} s ({padding_s:g} s at each end) "
-                f"runs past the data of {', '.join(map(str, edge_file))}; the window is clipped to "
-                f"{clipped[0]:.3f}-{clipped[1]:.3f} s"
-            )
-            notes.append(msg)
-            _warnings.warn(msg, WindowWarning, stacklevel=2)
-            t0, t1 = clipped
+        edge_files = [p for p, _, (a, b) in inputs if (t0 < a - _TOL) or (t1 > b + _TOL)]
+        t0, t1 = max(t0, lo), min(t1, hi)  # clipped at the edge of the data (said below, once snapped)
         cycle_rec = dict(start_s=gc.start_s, toe_off_s=gc.toe_off_s, end_s=gc.end_s, side=side,
                          number=cycle, index=number, source=where)
         source = f"gait cycle {cycle} of the {leg} leg" + (f" (cycle {number}, the first inside every input file)"
@@ -198,6 +189,13 @@ def resolve_window(
     start, end = float(ik_t[i0]), float(ik_t[i1])
     if cycle_rec is not None:
         pads = (cycle_rec["start_s"] - start, end - cycle_rec["end_s"])
+        if edge_files:
+            msg = (f"the padding of the gait cycle {gc.start_s:.3f}-{gc.end_s:.3f} s ({padding_s:g} s at each end) runs "
+                   f"past the data of {', '.join(map(str, edge_files))}; the solved window, clipped there and on the "
+                   f"IK frames, is {start:.3f}-{end:.3f} s: {pads[0]:.3f} s before the cycle and {pads[1]:.3f} s "
+                   "after it")
+            notes.append(msg)
+            _warnings.warn(msg, WindowWarning, stacklevel=2)
     return TrialWindow(start, end, source, cycle_rec, pads, tuple(notes))
 
 

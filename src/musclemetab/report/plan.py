@@ -532,8 +532,10 @@ def per_muscle_figure(study: StudyFolder, sel: Selection):
     fig = per_muscle_ranked(pm, workflow=wf if wf in set(pm["workflow"].astype(str).unique()) else None,
                             models=[m for m in sel.models if m in set(pm["model"].astype(str).unique())] or None)
     several = pm["trial"].astype(str).nunique() > 1
+    two_legs = "side" in pm.columns and pm["side"].astype(str).nunique() > 1
     cap = (f"Workflow {wf}. The 15 anatomical muscles with the largest cycle-average metabolic rate of each model "
-           "(W per kg of body mass, one leg, without basal heat"
+           "(W per kg of body mass, one leg" + (": the mean of the two legs of a subject solved on both" if two_legs
+                                                else "") + ", without basal heat"
            + ("; mean over subjects" if pm["subject"].astype(str).nunique() > 1 else "") + "), "
            + ("one bar per trial (light: slow, dark: fast); " if several else f"{sel.trial_text()}; ")
            + "each subject's model muscles are summed into the anatomical muscles of the "
