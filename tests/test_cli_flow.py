@@ -130,6 +130,25 @@ def test_quiet_prints_nothing_but_errors(cli_flow, gait2392, tmp_path, capfd):
 
 
 @pytest.mark.opensim
+def test_a_mass_far_from_the_models_is_said(cli_flow, gait2392, tmp_path):
+    """gait2392's scaled model weighs 72.6 kg: ``metabolics --mass 60`` (17 % less) is computed as
+    asked, with one warning naming both masses; 70 kg (3.6 % less) passes unsaid."""
+    from conftest import _captured_fds
+
+    s, _, _ = cli_flow
+    for mass, said in ((60, "--mass 60 kg differs from the mass of the model "), (70, None)):
+        err = tmp_path / f"{mass}.err"
+        with _captured_fds(tmp_path / f"{mass}.out", err):
+            assert main(["metabolics", "--solution", str(s), "--mass", str(mass), "--height", "1.8", "--models", "UM10",
+                         "--out", str(tmp_path / f"M{mass}")]) == 0
+        lines = [ln for ln in err.read_text().splitlines() if "differs from the mass of the model" in ln]
+        if said is None:
+            assert lines == []
+        else:
+            assert len(lines) == 1 and said in lines[0] and "(72.6 kg) by 17 %" in lines[0], lines
+
+
+@pytest.mark.opensim
 def test_analyse_and_report_refuse_rates_of_another_solution(cli_flow, tmp_path, capsys):
     """``metabolics`` records the SHA-256 of the ``solution.sto`` its rates are of; ``analyse``
     refuses a metabolics folder of another solution (here each leg's folder given the other

@@ -29,6 +29,8 @@ __all__ = [
     "read_model",
     "read_muscle_parameters",
     "model_is_cached",
+    "check_body_mass",
+    "BODY_MASS_TOLERANCE",
     "default_dofs",
     "SIDES",
 ]
@@ -168,6 +170,29 @@ def read_model(model_path: str | os.PathLike, *, cache_dir: str | os.PathLike | 
     )
     _CACHE[key] = info
     return info
+
+
+#: A body mass given for a subject further than this share from its model's mass is said (a typing
+#: slip, or another subject's model: scaling gives the model the subject's mass).
+BODY_MASS_TOLERANCE = 0.10
+
+
+def check_body_mass(mass_kg: float, model_path: str | os.PathLike, given: str = "--mass", *,
+                    cache_dir: str | os.PathLike | None = None) -> None:
+    """Warn (:class:`~musclemetab.errors.MusclemetabWarning`) when ``mass_kg``, the body mass
+    ``given`` (an option or a study key), differs from the mass of the model at ``model_path``
+    (:func:`read_model`, from the cache after a solve) by more than :data:`BODY_MASS_TOLERANCE`:
+    the rates per kilogram, the muscles' masses and the basal heat take the mass given."""
+    import warnings
+
+    from .errors import MusclemetabWarning
+
+    model_kg = read_model(model_path, cache_dir=cache_dir).body_mass_kg
+    if model_kg > 0 and abs(float(mass_kg) / model_kg - 1.0) > BODY_MASS_TOLERANCE:
+        warnings.warn(f"{given} {float(mass_kg):g} kg differs from the mass of the model {model_path} "
+                      f"({model_kg:.4g} kg) by {100 * abs(float(mass_kg) / model_kg - 1.0):.0f} %: the rates per kg, the "
+                      f"muscles' masses and the basal heat take {given}; check that both are this subject's",
+                      MusclemetabWarning, stacklevel=2)
 
 
 def read_muscle_parameters(model_path: str | os.PathLike, *,

@@ -168,6 +168,7 @@ def run(args) -> int:
     from ..messages import note
     from ..metabolics.per_muscle import PER_MUSCLE_FILE
     from ..metabolics.solution import check_metabolics_of, read_metabolics_settings
+    from ..model import check_body_mass
     from ..redundancy.solution import SOLUTION_FILE, read_flags
     from ..metabolics.plausibility import add_quality
     from ..study.runner import RESULTS_CSV, add_leg_rows, leg_basal_energy_J, trial_result_rows
@@ -212,6 +213,8 @@ def run(args) -> int:
         check_basal_arguments(args)
         check_body(mass, height)
         model = _recorded_file(args.model, recorded.model, "--model", sol_dir)
+        if args.mass is not None and not legs:  # once: one subject's mass for both legs
+            check_body_mass(mass, model)
         ik = _recorded_file(args.ik, recorded.ik, "--ik", sol_dir)
         leg = side or recorded.side or "r"
         cycle, source = _cycle(args, leg, ik, recorded)

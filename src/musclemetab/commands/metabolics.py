@@ -19,6 +19,7 @@ the two legs (basal heat once); :func:`musclemetab.metabolics.solution.metabolic
 
 from __future__ import annotations
 
+from pathlib import Path
 
 from ..messages import name_list, note
 from .options import (
@@ -158,6 +159,7 @@ def run(args) -> int:
         params = read_muscle_parameters(args.model)
     states = {side: read_solution_states(folder, require_success=not args.allow_failed)
               for side, folder in folders.items()}
+    _check_mass(args.mass, args.model, next(iter(folders.values())))
     if params is not None:
         for leg in states.values():
             _note(parameter_differences(leg, params), args.model)
@@ -175,7 +177,8 @@ def run(args) -> int:
     files = write_legs_metabolics(results, args.out)
     _write_mat(args, results, folders)
     if args.height is None:
-        note("no --height: muscle masses from the model (F0 / specific tension x density x lMo)")
+        note("no --height: muscle masses from the model (F0 / specific tension x density x lMo), not from the "
+             "volume rule of body mass and height (a study subject with height_m); give --height for those")
     if len(results) == 1:
         (side, result), = results.items()
         means = ", ".join(f"{m} {result.whole_body[m].mean_W_per_kg:.2f}" for m in result.models)
@@ -277,8 +280,6 @@ def _sensitivity_parameters(value, folders) -> list | None:
         raise OptionError(f"--sensitivity: unknown muscle parameter(s) {name_list(bad) or repr(value)}; give 'all' or "
                           f"a comma-separated list of {', '.join(PARAMETERS)}")
     # the sensitivities are derivatives at the optimum: a failed solve has none, --allow-failed or not
-    from pathlib import Path
-
     from ..io import read_json_object
     from ..io.solution_folder import SUMMARY_FILE
 
@@ -323,6 +324,17 @@ def _plausibility(args, folders, results) -> None:
     write_plausibility(flags + rates, args.out)
     if args.strict:
         check_strict(flags + rates, "metabolics --strict", written=str(args.out))
+
+
+def _check_mass(mass_kg: float, model, folder) -> None:
+    """The warning of :func:`musclemetab.model.check_body_mass` for ``--mass`` against ``--model``,
+    else the model the solution in ``folder`` was solved with (when it is still there)."""
+    from ..analysis.unit import recorded_trial
+    from ..model import check_body_mass
+
+    model = model or recorded_trial(folder).model
+    if model and Path(model).is_file():
+        check_body_mass(mass_kg, model)
 
 
 def _note(differences: list[str], model_path) -> None:

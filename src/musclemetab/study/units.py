@@ -701,6 +701,9 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
         check_strict(sol.record.flags, unit.label)
 
     t1 = time.perf_counter()
+    from ..model import check_body_mass
+
+    check_body_mass(subject.body_mass_kg, subject.model, f"{subject.name}: body_mass_kg")
     # the stages after the solve take the solution object (the same numbers as its folder,
     # tests/test_stage_paths.py); each writes its files once
     recorded = sol.record.gait_cycle if sol is not None else None
