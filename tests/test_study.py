@@ -263,6 +263,15 @@ def test_failing_unit_is_reported_and_the_rest_complete(pool_run, example, tmp_p
     assert code == 1
     assert "2 up to date" in out and "1 failed" in out
     assert "failed sub1/fast/effort-gen" in err and "knee_angle_r_moment" in err  # the failure on standard error
+    # then the units' whole-body rates, as results.csv has them, rounded to 0.01 W/kg
+    printed = out.split("whole-body metabolic rate, W/kg (two legs + basal heat):\n")[1].splitlines()
+    table = pd.read_csv(study.output / "results.csv")
+    trials = printed[1].split()[1:]
+    assert sorted(trials) == ["normal", "slow"]
+    for line in printed[4:]:
+        model, *values = line.split()
+        want = [table[(table.model == model) & (table.trial == t)]["whole_body_W_per_kg"].item() for t in trials]
+        assert [float(v) for v in values] == pytest.approx(want, abs=0.005), (model, values, want)
 
 
 def test_a_trial_naming_its_cycle_is_averaged_over_it_as_analyse_does(pool_run, example, tmp_path):

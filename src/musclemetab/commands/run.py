@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from .options import add_study_arguments
 
-__all__ = ["add_parser", "run", "print_run", "exit_status", "add_warm_start_arguments", "add_uncertainty_arguments",
-           "apply_uncertainty_arguments"]
+__all__ = ["add_parser", "run", "print_run", "print_whole_body", "exit_status", "add_warm_start_arguments",
+           "add_uncertainty_arguments", "apply_uncertainty_arguments"]
 
 
 def add_parser(sub) -> None:
@@ -141,4 +141,25 @@ def run(args) -> int:
 
         result.report = write_report(study.output)
     print_run(result, "run")
+    if not result.interrupted:
+        print_whole_body(result.results)
     return exit_status(result)
+
+
+#: the results a run prints as a table at most (more: the table's file is named instead)
+PRINTED_UNITS = 12
+
+
+def print_whole_body(results, limit: int = PRINTED_UNITS) -> None:
+    """Print each unit's whole-body rate of each model (W/kg, the results table's rows; the legs
+    added for a subject solved on both), units as columns, when there are at most ``limit`` of them."""
+    if results is None or not len(results):
+        return
+    keys = [k for k in ("subject", "trial", "workflow") if k in results.columns]
+    units = results.drop_duplicates(keys)
+    if len(units) > limit:
+        print(f"whole-body rates of {len(units)} units: the study folder's results.csv")
+        return
+    table = results.pivot_table(index="model", columns=keys, values="whole_body_W_per_kg", sort=False)
+    print("\nwhole-body metabolic rate, W/kg (two legs + basal heat):")
+    print(table.round(2).to_string())
