@@ -120,12 +120,13 @@ def gait_cycle_flag(start_s, end_s, duration_s: float, named_by_events: bool) ->
     from ..events import WALKING_CYCLE_DURATION_S
 
     span = f"{start_s:g}-{end_s:g} s" if np.isfinite(start_s) and np.isfinite(end_s) else f"{duration_s:g} s"
-    why = ("no gait event bounds it (a solve over --window)" if not named_by_events else
+    why = ("no gait event bounds it (a solve over a window)" if not named_by_events else
            f"its duration {duration_s:.3g} s is outside walking's {WALKING_CYCLE_DURATION_S[0]:g}-"
            f"{WALKING_CYCLE_DURATION_S[1]:g} s")
     return Flag("not_a_gait_cycle", f"the rates are averaged over {span}, which is not shown to be one gait cycle: "
-                f"{why}; give analyse --cycle START,TOE_OFF,END or --grf, or solve over --cycle, for a gait cycle's "
-                "rates", {span: float(duration_s)}, None)
+                f"{why}; for a gait cycle's rates give its events (analyse --cycle START,TOE_OFF,END or --grf; a "
+                "study trial's start_s, toe_off_s and end_s, or grf) or solve over a cycle (--cycle, a study "
+                "trial's cycle)", {span: float(duration_s)}, None)
 
 
 def excluded_muscles_flag(names) -> Flag | None:
