@@ -385,9 +385,9 @@ def _header_rows(path) -> int:
 def test_run_prints_no_source_line_and_no_cache_file(two_subjects, two_subjects_stderr):
     """``musclemetab run`` with two worker processes: every warning is one line
     ``musclemetab: warning: ...``, said once per run however many workers met it (gait2392's
-    legs run in two workers and both find no walking speed), none from another library (a
-    pandas deprecation); no line names a file of the package's code with a line number, nor a
-    file of the package's cache (which the user never gave)."""
+    legs run in two workers: each finds no walking speed over its own cycle, said once per leg),
+    none from another library (a pandas deprecation); no line names a file of the package's code
+    with a line number, nor a file of the package's cache (which the user never gave)."""
     import os
 
     import musclemetab
@@ -401,7 +401,8 @@ def test_run_prints_no_source_line_and_no_cache_file(two_subjects, two_subjects_
     warnings_said = [ln for ln in stderr.splitlines() if "warning" in ln.lower()]
     assert warnings_said and all(ln.startswith("musclemetab: warning: ") for ln in warnings_said)
     assert len(warnings_said) == len(set(warnings_said))
-    assert len([ln for ln in warnings_said if "gait2392/walk1: no walking speed" in ln]) == 1
+    for leg in ("right", "left"):  # each leg's speed over its own cycle: said once for each
+        assert len([ln for ln in warnings_said if f"gait2392/walk1 ({leg} leg): no walking speed" in ln]) == 1
     assert [ln for ln in warnings_said if re.match(r"musclemetab: warning: \w+Warning: ", ln)] == []
     # gait2392's knee reserve is large: said, naming the trial's files, not the cached inverse dynamics
     reserve = [ln for ln in warnings_said if "the reserve about knee_angle" in ln]

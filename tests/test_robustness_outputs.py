@@ -10,6 +10,7 @@ output folder shows that nothing is written outside it."""
 from __future__ import annotations
 
 import errno
+import io
 import json
 import os
 import shutil
@@ -976,6 +977,51 @@ def test_a_ctrl_c_swallowed_on_its_way_is_raised_before_anything_is_written():
     finally:
         signal.signal(signal.SIGINT, previous)
     assert written == ["the next command's outputs"]
+
+
+def test_ctrl_c_inside_the_progress_callback_stops_ipopt_without_a_traceback(capfd):
+    """Ctrl-C that comes while IPOPT's progress callback runs, at its third iteration, inside
+    CasADi's conversion of the callback's arguments, where it surfaces as a ``SystemError`` chaining
+    the interrupt (CasADi printed that traceback and its warning, seen in a run): the callback asks
+    IPOPT to stop, IPOPT returns, and the interrupt is raised once, with nothing on standard error."""
+    import casadi as ca
+
+    from musclemetab.processes import sigint_noted
+    from musclemetab.redundancy import progress
+
+    x = ca.SX.sym("x", 2)
+    iterations = []
+
+    class Lines(progress.ProgressLines):
+        def iteration(self, f, g):
+            iterations.append(f)
+            if len(iterations) == 3:
+                try:
+                    os.kill(os.getpid(), signal.SIGINT)
+                    time.sleep(0.5)  # the handler runs here, inside the callback
+                except KeyboardInterrupt as exc:  # as it surfaces from inside CasADi's argument conversion
+                    raise SystemError("<method 'get' of 'dict' objects> returned a result with an exception "
+                                      "set") from exc
+            super().iteration(f, g)
+
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a terminal (see above)
+    original = progress.ProgressLines
+    progress.ProgressLines = Lines
+    try:
+        with progress.solve_progress(interval_s=60.0, stream=io.StringIO()):
+            callback = progress._progress_callback(2, 0, [], [])
+        solver = ca.nlpsol("s", "ipopt", {"x": x, "f": (x[0] - 1) ** 4 + (x[1] - 2) ** 4},
+                           {"iteration_callback": callback, "ipopt": {"print_level": 0, "sb": "yes"},
+                            "print_time": False})
+        with pytest.raises(KeyboardInterrupt):
+            with sigint_noted():
+                solver(x0=[0, 0])
+    finally:
+        progress.ProgressLines = original
+        signal.signal(signal.SIGINT, previous)
+    assert len(iterations) == 3 and solver.stats()["return_status"] == "User_Requested_Stop"
+    out, err = capfd.readouterr()
+    assert "Traceback" not in out + err and "KeyboardInterrupt" not in out + err, err
 
 
 def test_progress_labels_an_interrupted_unit_interrupted_not_failed():

@@ -15,7 +15,8 @@ import threading
 from concurrent.futures import ProcessPoolExecutor
 
 __all__ = ["THREAD_VARIABLES", "pin_threads", "ignore_sigint", "spawn_pool", "stop_pool", "call_recording_warnings",
-           "warn_again", "sigint_deferred", "sigint_noted", "sigterm_as_sigint", "terminated", "BackgroundCall"]
+           "warn_again", "sigint_deferred", "sigint_noted", "interrupt_noted", "sigterm_as_sigint", "terminated",
+           "BackgroundCall"]
 
 #: environment variables that size the thread pools of BLAS/LAPACK and OpenMP libraries
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
@@ -107,6 +108,12 @@ def warn_again(caught, stacklevel: int = 1) -> None:
 #: Python code or a library swallowed, e.g. one that ran through an import guarded by
 #: ``except ImportError``); cleared when it is raised.
 _NOTED = threading.Event()
+
+
+def interrupt_noted() -> bool:
+    """Whether a :func:`sigint_noted` block has seen Ctrl-C that is still to be raised (the block
+    raises it when the native code returns): a callback of that code may stop it quietly."""
+    return _NOTED.is_set()
 
 
 def _raise_noted() -> None:

@@ -8,6 +8,8 @@ import time as _time
 
 import numpy as np
 
+from ..processes import interrupt_noted
+
 __all__ = ["PROGRESS_INTERVAL_S", "solve_progress", "progress_interval", "ProgressLines"]
 
 
@@ -126,9 +128,17 @@ def _progress_callback(n_x: int, n_g: int, lbg, ubg):
             return ca.Sparsity.dense(size, 1)
 
         def eval(self, arg):
-            names = [ca.nlpsol_out(i) for i in range(ca.nlpsol_n_out())]
-            values = dict(zip(names, arg))
-            lines.iteration(float(values["f"]), np.asarray(values["g"]).reshape(-1))
+            try:
+                names = [ca.nlpsol_out(i) for i in range(ca.nlpsol_n_out())]
+                values = dict(zip(names, arg))
+                lines.iteration(float(values["f"]), np.asarray(values["g"]).reshape(-1))
+            except BaseException:
+                # Ctrl-C during the callback (it may come inside CasADi's conversion of its arguments,
+                # as an error that chains it): IPOPT is asked to stop (1), without CasADi's traceback;
+                # processes.sigint_noted raises the interrupt once IPOPT has returned
+                if interrupt_noted():
+                    return [1]
+                raise
             return [0]
 
     return _Callback()

@@ -723,7 +723,8 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
     except DataMismatchError as exc:  # e.g. a treadmill trial without speed_m_per_s: no cost of transport
         from ..errors import MusclemetabWarning
 
-        warnings.warn(f"{subject.name}/{trial.name}: no walking speed, no cost of transport ({exc})",
+        leg = f" ({'right' if side == 'r' else 'left'} leg)" if unit.side else ""  # each leg over its own cycle
+        warnings.warn(f"{subject.name}/{trial.name}{leg}: no walking speed, no cost of transport ({exc})",
                       MusclemetabWarning, stacklevel=2)
         speed = None
     # the rates are averaged over the trial's cycle, as 'musclemetab analyse' averages them over the
