@@ -29,7 +29,7 @@ from ..events import GaitCycle, cycle_from_grf, cycle_from_id_file, read_grf
 from ..analysis.speed import walking_speed_from_ik
 from .spec import Trial
 
-__all__ = ["trial_cycle", "trial_speed", "PADDING_S", "ankle_moment_column"]
+__all__ = ["trial_cycle", "trial_speed", "rates_span_s", "PADDING_S", "ankle_moment_column"]
 
 PADDING_S = 0.05
 
@@ -122,3 +122,9 @@ def trial_speed(trial: Trial, model=None, cycle: GaitCycle | None = None) -> flo
         return trial.speed_m_per_s
     start, end = (cycle.start_s, cycle.end_s) if cycle is not None else (trial.start_s, trial.end_s)
     return walking_speed_from_ik(trial.ik, start_s=start, end_s=end, padding_s=PADDING_S, model=model)
+
+
+def rates_span_s(span) -> tuple[float, float] | None:
+    """The span a trial unit's rates are averaged over, from its record's ``rates_over_s``
+    (``None``: the solve's default, its gait cycle or its window less the padding)."""
+    return (float(span[0]), float(span[1])) if span else None

@@ -129,7 +129,7 @@ def run_sample(study: Study, unit, tmp: Path, nominal_folder: Path, *, options=N
     from ..redundancy import run as redundancy_run
     from ..redundancy.solution import Solution
     from ..uncertainty import draw, sample_start, sampled_properties
-    from .units import rates_span_s
+    from .events import rates_span_s
 
     nominal = _record(nominal_folder)
     if nominal.get("status") != "ok":

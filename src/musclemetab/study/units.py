@@ -654,7 +654,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
     from ..redundancy.run import solve_files, write_solution_folder
     from ..redundancy.solution import Solution
     from ..analysis.unit import averaged_by_default, recorded_trial
-    from .events import trial_cycle, trial_speed
+    from .events import rates_span_s, trial_cycle, trial_speed
 
     subject = study.subject(unit.subject)
     trial = subject.trial(unit.trial)
@@ -805,12 +805,6 @@ def _window_record(trial: Trial, sol) -> dict:
 
     return {"given_s": list(trial.window), "solved_s": list(recorded_trial(sol).window_s),
             "named_by_events": trial.grf is not None or (trial.start_s is not None and trial.end_s is not None)}
-
-
-def rates_span_s(span) -> tuple[float, float] | None:
-    """The span a trial unit's rates are averaged over, from its record's ``rates_over_s``
-    (``None``: the solve's default, its gait cycle or its window less the padding)."""
-    return (float(span[0]), float(span[1])) if span else None
 
 
 def _states_metabolics(study: Study, subject: Subject, trial: Trial, side: str):
