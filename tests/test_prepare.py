@@ -281,6 +281,16 @@ def test_study_keys_of_markers_checked_when_read(gait2392, walking2_c3d, tmp_pat
     ):
         with pytest.raises(OptionError, match=message):
             study(subject, trial)
+    # a setup of the other OpenSim tool: refused when the file is read, naming the study's keys
+    from musclemetab.errors import InputFileError
+
+    for subject, trial, key, other in (({**generic, "scale_setup": str(gait2392.ik_setup)}, walk, "'scale_setup'",
+                                        "'ik_setup'"),
+                                       (generic, {**walk, "ik_setup": str(gait2392.scale_setup)}, "'ik_setup'",
+                                        "'scale_setup'")):
+        with pytest.raises(InputFileError, match=rf"subject 's01'.*: {key} needs OpenSim's \w+ setup, but this file "
+                                                 rf"holds an? \w+ \(give it as {other}\)"):
+            study(subject, trial)
     # a C3D trial with force plates and no forces given: its ExternalLoads will be the study's own
     c3d = study({"model": str(gait2392.model)}, {"markers": str(walking2_c3d)}).subjects[0].trials[0]
     assert c3d.external_loads == tmp_path / "out" / "prepared" / "s01" / "walk1" / "markers_grf.xml"

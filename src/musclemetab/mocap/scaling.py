@@ -194,11 +194,12 @@ def setup_tool(root: ET.Element) -> str | None:
     return next((el.tag for el in root if isinstance(el.tag, str)), None)
 
 
-def setup_files(setup: str | os.PathLike, tool: str | None = None) -> dict[str, Path]:
+def setup_files(setup: str | os.PathLike, tool: str | None = None, names: dict | None = None) -> dict[str, Path]:
     """The input files a setup names (``{tag/index: absolute path}``), each relative name resolved
     against the setup's folder; raises :class:`InputFileError` for a setup that is not readable,
     or (``tool``: ``"ScaleTool"``, ``"InverseKinematicsTool"``) that holds another OpenSim object,
-    naming the option (:data:`SETUP_OPTIONS`) and what the file holds."""
+    naming the option (``names``, by tool: default :data:`SETUP_OPTIONS`, the command line's; a
+    study names its keys) and what the file holds."""
     setup = Path(setup)
     if not setup.is_file():
         raise InputFileError(f"{setup}: no such setup file; check the path")
@@ -211,8 +212,9 @@ def setup_files(setup: str | os.PathLike, tool: str | None = None) -> dict[str, 
         def a(name):
             return f"{'an' if name[0] in 'AEIOU' else 'a'} {name}"
 
-        hint = f" (give it as {SETUP_OPTIONS[held]})" if held in SETUP_OPTIONS else ""
-        raise InputFileError(f"{setup}: {SETUP_OPTIONS.get(tool, 'the setup')} needs OpenSim's {tool} setup, but this "
+        names = names or SETUP_OPTIONS
+        hint = f" (give it as {names[held]})" if held in names else ""
+        raise InputFileError(f"{setup}: {names.get(tool, 'the setup')} needs OpenSim's {tool} setup, but this "
                              f"file holds {a(held) if held else 'no OpenSim object'}{hint}; give {a(tool)} setup")
     out = {}
     for tag in _SETUP_FILE_TAGS:

@@ -698,6 +698,8 @@ def _subject(data, base: Path, where: str, workflows, assistance=None) -> Subjec
             raise OptionError(f"{here}: give 'model' (a model of the subject) or 'generic_model' with 'static' (scaled "
                               "by the study), not both")
         scaling = {k: _path(data.get(k), base, here, k, required=k == "static") for k in _SCALING_KEYS}
+        if scaling["scale_setup"] is not None:
+            _check_setup(scaling["scale_setup"], "ScaleTool", here)
         model = None
     else:
         given = [k for k in _SCALING_KEYS if data.get(k) is not None]
@@ -832,6 +834,23 @@ def _check_both_legs(data, here: str, trials, workflows, kt) -> None:
                           "window = \"T0:T1\" that both legs are solved over")
 
 
+#: the study keys of OpenSim's setups, by the tool each holds
+SETUP_KEYS = {"ScaleTool": "'scale_setup'", "InverseKinematicsTool": "'ik_setup'"}
+
+
+def _check_setup(path: Path | None, tool: str, here: str) -> Path | None:
+    """``path``, a setup that holds OpenSim's ``tool`` (a setup of the other tool, or no setup,
+    refused when the study file is read, naming ``here`` and the key)."""
+    if path is not None:
+        from ..mocap.scaling import setup_files
+
+        try:
+            setup_files(path, tool, names=SETUP_KEYS)
+        except InputFileError as exc:
+            raise InputFileError(f"{here}: {exc}") from None
+    return path
+
+
 def _emg_mode(data, here: str, trials) -> tuple[str | None, float]:
     """The subject's ``emg_mode`` and ``emg_tolerance``, checked against its trials."""
     mode = data.get("emg_mode")
@@ -935,7 +954,8 @@ def _trial(data, base: Path, where: str, emg_processing="envelope") -> Trial:
         window=window,
         ultrasound=_path(data.get("ultrasound"), base, here, "ultrasound", required=False),
         markers=markers,
-        ik_setup=_path(data.get("ik_setup"), base, here, "ik_setup", required=False),
+        ik_setup=_check_setup(_path(data.get("ik_setup"), base, here, "ik_setup", required=False),
+                              "InverseKinematicsTool", here),
         states=states,
         controls=_path(data.get("controls"), base, here, "controls", required=False),
     )
