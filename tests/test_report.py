@@ -738,7 +738,7 @@ def test_output_closed_early_ends_quietly(study):
     assert r.returncode in (0, 141) and r.stderr == "" and r.stdout.startswith("report: ")
 
 
-def test_report_when_every_unit_failed(tmp_path):
+def test_report_when_every_unit_failed(tmp_path, capsys):
     root = tmp_path / "failed"
     root.mkdir()
     columns = ["subject", "trial", "workflow", "model", "speed_m_per_s", "status", "whole_body_W_per_kg", "unit_dir"]
@@ -752,6 +752,12 @@ def test_report_when_every_unit_failed(tmp_path):
     assert "No unit of the study succeeded: no results to tabulate." in text
     assert "(all trials)" in text and "EMG file missing" in text
     assert "study.json is missing" in text
+    # the command says the one reason once, not once per figure
+    from musclemetab.commands import main
+
+    assert main(["report", str(root), "--force"]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert printed[1:] == ["  no figure drawn: no unit of the study succeeded: nothing to draw."], printed
 
 
 @pytest.mark.parametrize("cut", ["within the last row", "after the header"])

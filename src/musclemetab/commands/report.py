@@ -67,9 +67,13 @@ def run(args) -> int:
                                   workers=args.workers, models=args.models)
     drawn = [e.name for e in entries if e.paths is not None]
     print(f"report: {len(drawn)} of {len(entries)} figures -> {out.parent / FIGURES_FOLDER}; page -> {out}")
-    for e in entries:
-        if e.paths is None:
-            print(f"  not drawn: {e.name}: {e.note}")
+    notes = {e.note for e in entries if e.paths is None}
+    if not drawn and len(notes) == 1:  # one reason for every figure (no unit succeeded): said once
+        print(f"  no figure drawn: {notes.pop()}")
+    else:
+        for e in entries:
+            if e.paths is None:
+                print(f"  not drawn: {e.name}: {e.note}")
     import warnings
 
     from ..errors import FigureLayoutWarning
