@@ -132,3 +132,22 @@ def test_a_study_trial_window_gives_the_numbers_of_solve_window_and_analyse(wind
         pd.testing.assert_frame_equal(got[columns], want[columns], rtol=1e-9)
         assert (got["cycle_source"] == source).all()
         assert not got["gait_cycle"].any() and got["quality"].str.contains("not_a_gait_cycle").all()
+
+
+def test_analyse_of_a_window_without_toe_off_names_the_options_that_give_the_cycle(example):
+    """A solve over 0.57-1.00 s of the normal trial (mid-stance: the plantarflexion moment still
+    rising at 0.95 s): ``analyse`` cannot place toe-off in the window less its padding, and says
+    what to give on the command line (the Python remedy, ``GaitCycle.from_times``, is not its)."""
+    from types import SimpleNamespace
+
+    from musclemetab.analysis.unit import RecordedTrial
+    from musclemetab.commands.analyse import _cycle
+    from musclemetab.errors import DataMismatchError
+
+    recorded = RecordedTrial(str(example.model), str(example.ik["normal"]), str(example.id["normal"]), "r", None,
+                             None, None, (0.57, 1.0), "--window")
+    args = SimpleNamespace(cycle=None, grf=None, id=None, model=None)
+    with pytest.raises(DataMismatchError) as info:
+        _cycle(args, "r", example.ik["normal"], recorded)
+    assert str(info.value).endswith("toe-off cannot be placed: give the cycle's events inside the solved 0.57-1 s "
+                                    "(--cycle START,TOE_OFF,END) or the ground forces (--grf GRF.mot)"), info.value

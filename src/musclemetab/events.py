@@ -45,6 +45,7 @@ __all__ = [
     "kinematic_gait_events",
     "cycle_from_grf",
     "cycle_from_inverse_dynamics",
+    "EVENTS_REMEDY",
     "cycle_from_id_file",
     "cycle_of_trial",
     "read_grf",
@@ -267,6 +268,11 @@ def gait_events_from_grf(
     return GaitEvents(np.array(hs), np.array(to), thr, min_dur)
 
 
+#: What the errors of :func:`cycle_from_grf` and :func:`cycle_from_inverse_dynamics` say to do
+#: by default (the Python functions; the command line and a study give their options' remedy).
+EVENTS_REMEDY = "give the events with GaitCycle.from_times"
+
+
 def cycle_from_grf(
     time_s,
     vertical_force_N,
@@ -274,12 +280,14 @@ def cycle_from_grf(
     min_duration_s: float = DEFAULT_MIN_DURATION_S,
     *,
     at_time_s: float | None = None,
+    remedy: str | None = None,
 ) -> GaitCycle:
     """The gait cycle (heel strike, toe-off, next heel strike) from a vertical force record.
 
     By default the first complete cycle of the record; with ``at_time_s`` the cycle that
     contains that time (``start_s <= at_time_s < end_s``). Events as in
-    :func:`gait_events_from_grf`.
+    :func:`gait_events_from_grf`. ``remedy``: what the error says to do (default
+    :data:`EVENTS_REMEDY`, this module's functions; the command line and a study name their own).
 
     Raises
     ------
@@ -303,7 +311,7 @@ def cycle_from_grf(
     where = "" if at is None else f" containing {at:g} s"
     raise DataMismatchError(
         f"no complete gait cycle{where} in the force record: {found}. A cycle needs two heel strikes "
-        "of the same foot; give the events with GaitCycle.from_times or use cycle_from_inverse_dynamics"
+        f"of the same foot; {remedy or EVENTS_REMEDY + ' or use cycle_from_inverse_dynamics'}"
     )
 
 
@@ -315,8 +323,11 @@ def cycle_from_inverse_dynamics(
     *,
     toe_off_fraction: float = DEFAULT_TOE_OFF_FRACTION,
     plantarflexion_sign: float = -1.0,
+    remedy: str | None = None,
 ) -> GaitCycle:
-    """The gait cycle of a padded simulation window, toe-off from the ankle moment.
+    """The gait cycle of a padded simulation window, toe-off from the ankle moment
+    (``remedy``: what the error of a toe-off that cannot be placed says to do, as for
+    :func:`cycle_from_grf`).
 
     Fallback for data without ground reaction forces (``docs/analysis.md``):
 
@@ -386,6 +397,7 @@ def cycle_from_inverse_dynamics(
         raise DataMismatchError(
             f"the ankle moment has no plantarflexion moment inside the cycle {start:g}-{end:g} s "
             f"(largest {peak:g} N m with plantarflexion_sign={plantarflexion_sign:+g}); check the column and the sign"
+            + (f" (a window without stance has none: {remedy})" if remedy else "")
         )
     level = frac * peak
     after = inside[inside > k_peak]
@@ -393,8 +405,8 @@ def cycle_from_inverse_dynamics(
     if below.size == 0:
         raise DataMismatchError(
             f"the plantarflexion moment does not fall to {frac:g} of its peak ({peak:.1f} N m at "
-            f"{t[k_peak]:.3f} s) before the end of the cycle ({end:g} s); toe-off cannot be placed. "
-            "Give the events with GaitCycle.from_times"
+            f"{t[k_peak]:.3f} s) before the end of the cycle ({end:g} s); toe-off cannot be placed: "
+            f"{remedy or EVENTS_REMEDY}"
         )
     k = int(below[0])
     to = _crossing(t, p, k - 1, level)
@@ -410,6 +422,7 @@ def cycle_from_id_file(
     padding_s: float = DEFAULT_PADDING_S,
     toe_off_fraction: float = DEFAULT_TOE_OFF_FRACTION,
     plantarflexion_sign: float = -1.0,
+    remedy: str | None = None,
 ) -> GaitCycle:
     """:func:`cycle_from_inverse_dynamics` on an OpenSim inverse-dynamics file.
 
@@ -425,13 +438,13 @@ def cycle_from_id_file(
     require_columns(df, [col], what="ankle moment column")
     return cycle_from_inverse_dynamics(
         df.index.to_numpy(), df[col].to_numpy(), window_s, padding_s,
-        toe_off_fraction=toe_off_fraction, plantarflexion_sign=plantarflexion_sign,
+        toe_off_fraction=toe_off_fraction, plantarflexion_sign=plantarflexion_sign, remedy=remedy,
     )
 
 
 def cycle_of_trial(ik: str | os.PathLike, *, grf: str | os.PathLike | None = None,
                    id_file: str | os.PathLike | None = None, side: str = "r", model=None,
-                   window_s: tuple[float, float] | None = None) -> tuple[GaitCycle, str]:
+                   window_s: tuple[float, float] | None = None, remedy: str | None = None) -> tuple[GaitCycle, str]:
     """The gait cycle of a solved trial and where it came from: ``(cycle, source)``.
 
     With ``grf``: the cycle of the side's vertical ground reaction force that holds the middle
@@ -441,7 +454,8 @@ def cycle_of_trial(ik: str | os.PathLike, *, grf: str | os.PathLike | None = Non
     and the IK window (:func:`cycle_from_id_file`: the window less the padding at each end,
     toe-off from the ankle moment; estimated events). ``window_s``: the window the solve
     recorded (``summary.json`` ``time_window_s``), which stands for the IK window: a solve over
-    part of the IK file has its cycle in that part.
+    part of the IK file has its cycle in that part. ``remedy``: what an error finding the events
+    says to do (:func:`cycle_from_grf`).
     """
     from .io import read_storage
 
@@ -461,13 +475,14 @@ def cycle_of_trial(ik: str | os.PathLike, *, grf: str | os.PathLike | None = Non
             force, notes, _ = grf_of_side(grf, side, feet=feet)
             for msg in notes + ([why] if why else []):
                 warnings.warn(msg, WindowWarning, stacklevel=2)
-        cycle = cycle_from_grf(force.index.to_numpy(float), force.to_numpy(float), at_time_s=0.5 * (t[0] + t[-1]))
+        cycle = cycle_from_grf(force.index.to_numpy(float), force.to_numpy(float), at_time_s=0.5 * (t[0] + t[-1]),
+                               remedy=remedy)
         if model is not None:
             check_cycle_duration(cycle, where=f"{grf} column {force.name}")
         return cycle, "ground reaction forces"
     if id_file is None:
         raise OptionError("give the ground reaction forces (grf) or the inverse dynamics (id_file) of the trial")
-    return (cycle_from_id_file(id_file, side=side, window_s=(float(t[0]), float(t[-1]))),
+    return (cycle_from_id_file(id_file, side=side, window_s=(float(t[0]), float(t[-1])), remedy=remedy),
             f"estimated from the {'solved' if part else 'IK'} window and the ankle moment "
             "(no ground reaction forces)")
 

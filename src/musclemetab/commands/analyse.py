@@ -119,13 +119,15 @@ def _cycle(args, side: str, ik, recorded):
         if len(vals) != 3:
             raise OptionError(f"--cycle must be three times in seconds, START,TOE_OFF,END, not '{args.cycle}'")
         return GaitCycle(*vals), "given on the command line"
+    window = "" if recorded.window_s is None else f" inside the solved {recorded.window_s[0]:g}-{recorded.window_s[1]:g} s"
+    remedy = f"give the cycle's events{window} (--cycle START,TOE_OFF,END) or the ground forces (--grf GRF.mot)"
     if args.grf or args.id:  # within the window the solve recorded
         return cycle_of_trial(ik, grf=args.grf, id_file=args.id, side=side, model=args.model or recorded.model,
-                              window_s=recorded.window_s)
+                              window_s=recorded.window_s, remedy=remedy)
     if recorded.cycle is not None:
         return recorded.cycle, recorded.cycle_source
     if recorded.id is not None and Path(recorded.id).is_file():
-        return cycle_of_trial(ik, id_file=recorded.id, side=side, window_s=recorded.window_s)
+        return cycle_of_trial(ik, id_file=recorded.id, side=side, window_s=recorded.window_s, remedy=remedy)
     raise OptionError("the solution records no gait cycle (it was not solved over --cycle) and no inverse dynamics "
                       "file that still exists: give --cycle START,TOE_OFF,END, --grf GRF.mot or --id ID.sto")
 

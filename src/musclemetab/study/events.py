@@ -84,8 +84,15 @@ def trial_cycle(trial: Trial, side: str = "r", model=None, *, window_s: tuple[fl
         else:
             force = read_grf(trial.grf, trial.grf_column, side=side)
         t0, tf = window_s or _ik_window(trial)  # the cycle that holds the middle of the simulated window
-        found = cycle_from_grf(force.index.to_numpy(float), force.to_numpy(float),
-                               threshold_N=trial.grf_threshold_N, at_time_s=trial.start_s if trial.start_s is not None else 0.5 * (t0 + tf))
+        from ..errors import DataMismatchError
+
+        try:
+            found = cycle_from_grf(force.index.to_numpy(float), force.to_numpy(float),
+                                   threshold_N=trial.grf_threshold_N,
+                                   at_time_s=trial.start_s if trial.start_s is not None else 0.5 * (t0 + tf),
+                                   remedy="give the trial's start_s, toe_off_s and end_s, or cycle = \"auto\"")
+        except DataMismatchError as exc:
+            raise DataMismatchError(f"trial '{trial.name}': {trial.grf}: {exc}") from None
         if model is not None:
             from ..events import check_cycle_duration
 
@@ -94,20 +101,18 @@ def trial_cycle(trial: Trial, side: str = "r", model=None, *, window_s: tuple[fl
         from ..errors import DataMismatchError, MissingColumnError
 
         span = window_s or _ik_window(trial)
+        inside = "" if trial.window is None else f" inside its window {span[0]:.3f}-{span[1]:.3f} s"
         try:
             found = cycle_from_id_file(id_file or trial.id, ankle_moment_column(side), window_s=span,
-                                       padding_s=PADDING_S)
+                                       padding_s=PADDING_S,
+                                       remedy=f"give the trial's start_s, toe_off_s and end_s{inside}, or a 'grf' file")
         except MissingColumnError as exc:
             raise MissingColumnError(
                 f"trial '{trial.name}': no gait events: {exc}; give the trial cycle = \"auto\" (events from "
                 "ground forces or kinematics), a 'grf' file, or start_s, toe_off_s and end_s") from None
         except DataMismatchError as exc:
-            if trial.window is None:
-                raise
-            raise DataMismatchError(
-                f"trial '{trial.name}': no gait events in its window {span[0]:.3f}-{span[1]:.3f} s from the ankle "
-                f"moment ({exc}); give the trial's start_s, toe_off_s and end_s inside the window, or a 'grf' "
-                "file") from None
+            raise DataMismatchError(f"trial '{trial.name}': no gait events{inside} from the ankle moment: {exc}") \
+                from None
     start, toe_off, end = (g if g is not None else f for g, f in
                            zip(given, (found.start_s, found.toe_off_s, found.end_s)))
     return GaitCycle(start, toe_off, end)
