@@ -758,6 +758,14 @@ def test_report_when_every_unit_failed(tmp_path, capsys):
     assert main(["report", str(root), "--force"]) == 0
     printed = capsys.readouterr().out.splitlines()
     assert printed[1:] == ["  no figure drawn: no unit of the study succeeded: nothing to draw."], printed
+    # a page or a demo folder where a file is: one line, nothing written
+    (tmp_path / "afile").write_text("x")
+    for argv in (["report", str(root), "--out", str(tmp_path / "afile" / "x.html")],
+                 ["demo", "--speeds", "normal", "--out", str(tmp_path / "afile")]):
+        assert main(argv) == 1
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and f"{tmp_path / 'afile'} is an existing file, not a folder" in err, err
+    assert (tmp_path / "afile").read_text() == "x"
 
 
 @pytest.mark.parametrize("cut", ["within the last row", "after the header"])

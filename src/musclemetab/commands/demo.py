@@ -28,8 +28,10 @@ def add_parser(sub) -> None:
 
 def run(args) -> int:
     """Run ``musclemetab demo`` (``args`` from :func:`add_parser`)."""
+    from ..io.atomic import check_output_folder
     from ..study.demo import run_demo
 
+    check_output_folder(args.out)  # a file, or a folder that cannot be written: one line before any work
     result = run_demo(args.out, workers=args.workers, speeds=args.speeds, progress=not (args.no_progress or args.quiet),
                       force=args.force, strict=args.strict, warm_start=bool(args.warm_start),
                       adjust=lambda study: apply_uncertainty_arguments(study, args))

@@ -184,8 +184,9 @@ def _check_report_files(out: Path, fig_dir: Path) -> None:
     file in the report's place that the package did not write or that was changed since
     (:func:`musclemetab.io.atomic.check_replaceable`; a figure's file is checked when the figure
     is saved, :func:`~.draw.make_figures`)."""
-    from ..io.atomic import check_replaceable
+    from ..io.atomic import check_output_folder, check_replaceable
 
+    check_output_folder(out.parent, "the page's folder")  # below a file, or not writable: one line
     check_replaceable(out.parent, [out.name])
     check_replaceable(fig_dir, [REPORT_RECORD])
 
