@@ -159,6 +159,22 @@ def test_nyquist_and_sampling_errors():
         process_raw_emg(raw, channels=["TA", "XX"])
 
 
+def test_processed_envelopes_given_as_raw_emg_are_refused():
+    """A slow envelope (1 Hz and 2 Hz) keeps almost nothing of its variation above 10 Hz (the
+    zero-lag 4th-order high-pass passes about (2/10)^8 = 3e-6 of it at 2 Hz); a 100 Hz carrier under
+    the same envelope (raw EMG) keeps most of it: the first is refused naming the channel and the
+    remedy, the second is processed."""
+    fs = 1000.0
+    t = np.arange(0, 3, 1 / fs)
+    envelope = 0.5 + 0.3 * np.sin(2 * np.pi * 1.0 * t) + 0.1 * np.sin(2 * np.pi * 2.0 * t)
+    with pytest.raises(DataMismatchError, match=r"EMG channel ENV keep little of their variation above 10 Hz "
+                                                r"\(ENV 0\.\d %; .*look like processed envelopes.*"
+                                                r"--emg-processing envelope"):
+        process_raw_emg(_table(t, ENV=envelope))
+    env = process_raw_emg(_table(t, RAW=envelope * np.sin(2 * np.pi * 100 * t)))
+    assert env["RAW"].max() == pytest.approx(1.0)
+
+
 def test_electromechanical_delay_shifts_time():
     t = np.arange(0, 2, 1 / 2000.0)
     raw = _table(t, TA=np.sin(2 * np.pi * 100 * t))

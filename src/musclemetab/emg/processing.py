@@ -325,6 +325,32 @@ def _select(df: pd.DataFrame, channels: Sequence[str] | None) -> pd.DataFrame:
     return out
 
 
+#: A raw EMG channel keeps at least this share of its variation (RMS about its mean) above
+#: :data:`RAW_CHECK_HZ`, whatever band it is then processed with: raw EMG lives at tens to hundreds
+#: of hertz, a processed envelope below a few (the example subject's envelopes keep 3-15 % of
+#: theirs, their noise), a channel without EMG (a flat line, a drift) nothing.
+RAW_BAND_SHARE = 0.25
+#: The high-pass (Hz, zero-lag, the package's order) of that check
+RAW_CHECK_HZ = 10.0
+
+
+def _check_raw(df: pd.DataFrame, fs: float) -> None:
+    """:class:`DataMismatchError` naming the channels that keep less than :data:`RAW_BAND_SHARE`
+    of their variation above :data:`RAW_CHECK_HZ`: processed envelopes (or no EMG), not raw EMG."""
+    spread = (df - df.mean()).pow(2).mean().pow(0.5)
+    fast = _filter_df(df, RAW_CHECK_HZ, "highpass", FILTER_ORDER, "effective", fs)
+    kept = fast.pow(2).mean().pow(0.5) / spread.where(spread > 0)
+    low = kept[kept < RAW_BAND_SHARE]
+    if len(low):
+        shares = ", ".join(f"{c} {100 * v:.1f} %" for c, v in list(low.items())[:3]) + (", ..." if len(low) > 3 else "")
+        raise DataMismatchError(
+            f"{_source(df)}: EMG channel{'s' if len(low) > 1 else ''} {name_list([str(c) for c in low.index])} keep "
+            f"little of their variation above {RAW_CHECK_HZ:g} Hz ({shares}; raw EMG keeps most of it): they look "
+            "like processed envelopes (or a channel without EMG), not raw EMG; use envelopes as they are (solve "
+            "--emg-processing envelope, the default; a study's emg_processing = \"envelope\"), or give the raw "
+            "recording")
+
+
 def process_raw_emg(
     raw: pd.DataFrame,
     *,
@@ -366,6 +392,7 @@ def process_raw_emg(
         raise DataMismatchError(f"{_source(df)}: EMG channel{'s' if len(bad) > 1 else ''} {name_list(bad)} hold NaN; "
                                 "fill or remove the gaps before processing")
     fs = sample_rate_hz(df)
+    _check_raw(df, fs)
     y = bandpass(df, band_hz, order, order_means, fs)
     y = rectify(y)
     # the rectified signal is not odd about its end values: mirrored (even reflection) over one
