@@ -129,6 +129,27 @@ def test_quiet_prints_nothing_but_errors(cli_flow, gait2392, tmp_path, capfd):
     assert out == "" and err.count("\n") == 1 and err.startswith("musclemetab: error: ") and "file" in err
 
 
+def test_sensitivity_of_a_solve_that_has_none_is_refused_before_anything_is_written(cli_flow, tmp_path, capsys):
+    """``metabolics --sensitivity`` of an EMG-TEN solve (here the right leg's folder relabelled so):
+    refused in one line before the metabolic rates are written (they were written, and the success
+    printed, before the error)."""
+    import shutil
+
+    s, _, _ = cli_flow
+    emg = tmp_path / "emg"
+    shutil.copytree(s / "r", emg)
+    summary = json.loads((emg / "summary.json").read_text())
+    summary["workflow"] = {**summary["workflow"], "name": "emg-ten"}
+    (emg / "summary.json").write_text(json.dumps(summary))
+    assert main(["metabolics", "--solution", str(emg), "--mass", "72.6", "--height", "1.8", "--sensitivity",
+                 "--out", str(tmp_path / "M")]) == 1
+    out, err = capsys.readouterr()
+    assert out == "" and err == (f"musclemetab: error: --sensitivity: {emg}: the sensitivities are computed for the "
+                                 "effort workflows (effort-gen, -cal, -ten); this solve (emg-ten) has EMG or energy "
+                                 "goals; drop --sensitivity\n")
+    assert not (tmp_path / "M").exists()
+
+
 @pytest.mark.opensim
 def test_a_mass_far_from_the_models_is_said(cli_flow, gait2392, tmp_path):
     """gait2392's scaled model weighs 72.6 kg: ``metabolics --mass 60`` (17 % less) is computed as

@@ -291,6 +291,11 @@ def _sensitivity_parameters(value, folders) -> list | None:
             "the sensitivities are derivatives at the optimum, which a failed solve has not reached (--allow-failed "
             "lets its rates be computed, not its sensitivities); solve again, or drop --sensitivity"
         )
+    from ..redundancy.sensitivity import sensitivity_refusal
+
+    why = sensitivity_refusal(summary)
+    if why is not None:  # said before anything is written
+        raise OptionError(f"--sensitivity: {folder}: {why}; drop --sensitivity")
     return names
 
 

@@ -54,7 +54,8 @@ from ..messages import name_list
 
 __all__ = ["PARAMETERS", "RATE_STEP", "BOUND_SLACK", "POLISH_TOL", "POLISH_MU_INIT", "Sensitivity", "polish",
            "finite_difference", "parameter_derivatives", "state_sensitivities", "trial_sensitivity", "problem_of_solution",
-           "sensitivity_of_folder", "ranked_table", "write_sensitivity", "write_folder_sensitivity", "SENSITIVITY_CSV", "SENSITIVITY_COLUMNS"]
+           "sensitivity_refusal", "sensitivity_of_folder", "ranked_table", "write_sensitivity",
+           "write_folder_sensitivity", "SENSITIVITY_CSV", "SENSITIVITY_COLUMNS"]
 
 #: parameter -> field of :class:`.parameters.MuscleTendonParameters`
 PARAMETERS = {"F0": "max_isometric_force_N", "lMo": "optimal_fiber_length_m", "lTs": "tendon_slack_length_m",
@@ -441,6 +442,19 @@ class TrialProblem:
     mesh_frequency_hz: float
 
 
+def sensitivity_refusal(summary) -> str | None:
+    """Why the sensitivities of a solve with this ``summary.json`` (a mapping) are not computed
+    from its folder, or ``None``: they are those of the effort workflows, forward fiber dynamics."""
+    workflow = (summary.get("workflow") or {}).get("name", "custom")
+    opts = summary.get("solver_options") or {}
+    if summary.get("emg") or "emg" in str(workflow).lower() or opts.get("energy") or summary.get("energy_goal"):
+        return (f"the sensitivities are computed for the effort workflows (effort-gen, -cal, -ten); this solve "
+                f"({workflow}) has EMG or energy goals")
+    if summary.get("fiber_dynamics", "forward") != "forward":
+        return "the sensitivities need the forward fiber dynamics"
+    return None
+
+
 def problem_of_solution(solution, cache_dir: str | os.PathLike | None = None) -> TrialProblem:
     """The problem of a single-trial effort solve (EFFORT-GEN/CAL/TEN): from the
     :class:`~.problem.Problem` the solution keeps (``solution.problem``, a solve of this
@@ -459,15 +473,11 @@ def problem_of_solution(solution, cache_dir: str | os.PathLike | None = None) ->
     if isinstance(solution, (str, os.PathLike)):
         solution = Solution.load(solution)
     rec = solution.summary
-    workflow = (rec.get("workflow") or {}).get("name", "custom")
-    opts = rec.get("solver_options") or {}
-    if rec.get("emg") or "emg" in str(workflow).lower() or opts.get("energy") or rec.get("energy_goal"):
-        raise OptionError(f"{where}: the sensitivities are computed for the effort workflows (effort-gen, -cal, "
-                          f"-ten); this solve ({workflow}) has EMG or energy goals: call "
-                          "musclemetab.redundancy.sensitivity.trial_sensitivity with its goals")
-    if rec.get("fiber_dynamics", "forward") != "forward":
-        raise OptionError(f"{where}: the sensitivities need the forward fiber dynamics; solve without "
-                          "--fiber-dynamics backward")
+    why = sensitivity_refusal(rec)
+    if why is not None:
+        remedy = ("call musclemetab.redundancy.sensitivity.trial_sensitivity with its goals" if "goals" in why
+                  else "solve without --fiber-dynamics backward")
+        raise OptionError(f"{where}: {why}; {remedy}")
     if getattr(solution, "problem", None) is not None:
         return _problem_of_problem(solution, where)
     files = rec.get("inputs") or {}
@@ -506,6 +516,7 @@ def problem_of_solution(solution, cache_dir: str | os.PathLike | None = None) ->
         raise DataMismatchError(f"{where}: the rebuilt problem ({len(inputs.muscles)} muscles, {inputs.n_intervals} "
                                 f"intervals) is not the solved one ({len(solution.muscles)}, {solution.n_intervals}); "
                                 "the input files changed since the solve: solve again")
+    opts = rec.get("solver_options") or {}
     goals = Goals(**{k: float(opts[k]) for k in ("w_activation", "w_reserve", "w_velocity") if k in opts}).resolved()
     return TrialProblem(solution=solution, geometry=geometry, id_time_s=id_time, id_moments_Nm=id_moments,
                         ik_time_s=ik_time[keep], inputs=inputs, params=params, goals=goals,
