@@ -766,6 +766,11 @@ def test_report_when_every_unit_failed(tmp_path, capsys):
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and f"{tmp_path / 'afile'} is an existing file, not a folder" in err, err
     assert (tmp_path / "afile").read_text() == "x"
+    # a refused option of the demo leaves no folder, not even its study.toml
+    (tmp_path / "priors.csv").write_text("a,b\n1,2\n")
+    assert main(["demo", "--speeds", "normal", "--uncertainty", "2", "--uncertainty-priors", str(tmp_path / "priors.csv"),
+                 "--out", str(tmp_path / "demo")]) == 1
+    assert "priors.csv: no column parameter, spread" in capsys.readouterr().err and not (tmp_path / "demo").exists()
 
 
 @pytest.mark.parametrize("cut", ["within the last row", "after the header"])

@@ -116,6 +116,10 @@ def test_priors_file_replaces_rows_and_refuses_unknown_names(tmp_path):
     bad.write_text("parameter,spread,colour\nkT,0.3,red\n")
     with pytest.raises(InputFileError, match="unknown column colour"):
         read_priors(bad)
+    bad.write_text("a,b\n1,2\n")  # the columns it has, then those a priors file has
+    with pytest.raises(InputFileError, match=r"bad.csv: no column parameter, spread \(its columns: a, b\); a priors "
+                                             r"file has the columns parameter,distribution,spread,"):
+        read_priors(bad)
     bad.write_text("parameter,spread\nkT,-0.1\n")
     with pytest.raises(InputFileError, match="spread '-0.1' of kT"):
         read_priors(bad)

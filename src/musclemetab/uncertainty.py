@@ -175,8 +175,8 @@ def _read_rows(text_source, where: str) -> list[Prior]:
     extra = [c for c in df.columns if c not in _COLUMNS]
     if missing or extra:
         what = f"no column {name_list(missing)}" if missing else f"unknown column {name_list(extra)}"
-        raise InputFileError(f"{where}: {what}; the columns are {','.join(_COLUMNS)} (all but parameter and "
-                             "spread may be left out)")
+        raise InputFileError(f"{where}: {what} (its columns: {', '.join(map(str, df.columns)) or 'none'}); a priors "
+                             f"file has the columns {','.join(_COLUMNS)}, all but parameter and spread optional")
     rows, seen = [], set()
     for i, row in df.iterrows():
         line = f"{where}: line {i + 2}"

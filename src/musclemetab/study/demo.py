@@ -26,6 +26,13 @@ def _toml_string(value) -> str:
 def demo_study(out: str | os.PathLike = "musclemetab-demo", *, speeds=None,
                workflows=DEMO_WORKFLOWS, models: str | list[str] = "all") -> Study:
     """Write ``OUT/study.toml`` for the example subject and return the study."""
+    path, text = _demo_file(out, speeds, workflows, models)
+    atomic_write_text(path, text, mark=True)  # never over a study.toml of the user
+    return load_study(path)
+
+
+def _demo_file(out, speeds, workflows, models) -> tuple[Path, str]:
+    """``OUT/study.toml`` of the example subject and its text."""
     from ..datasets import SPEEDS, example_subject
 
     ex = example_subject()
@@ -59,9 +66,7 @@ def demo_study(out: str | os.PathLike = "musclemetab-demo", *, speeds=None,
             f"id = {_toml_string(ex.id[s])}",
             f"emg = {_toml_string(ex.emg[s])}",
         ]
-    path = out / "study.toml"
-    atomic_write_text(path, "\n".join(lines) + "\n", mark=True)  # never over a study.toml of the user
-    return load_study(path)
+    return out / "study.toml", "\n".join(lines) + "\n"
 
 
 def run_demo(out: str | os.PathLike = "musclemetab-demo", *, workers: int | None = None, speeds=None,
@@ -72,10 +77,14 @@ def run_demo(out: str | os.PathLike = "musclemetab-demo", *, workers: int | None
     starts from the trial's EFFORT-GEN solution, :func:`~.spec.warm_start_study`; ``adjust``: a
     function of the study giving the study run, e.g. with uncertainty samples, :mod:`.uncertainty`)."""
     import threading
+    import tomllib
 
     from .runner import run_study
+    from .spec import study_from_dict
 
-    study = demo_study(out, speeds=speeds)
+    # the study of the file, which is written once the options are applied: one refused leaves nothing
+    path, text = _demo_file(out, speeds, DEMO_WORKFLOWS, "all")
+    study = study_from_dict(tomllib.loads(text), base=path.parent, source=path)
     if strict:
         from .spec import strict_study
 
@@ -86,6 +95,7 @@ def run_demo(out: str | os.PathLike = "musclemetab-demo", *, workers: int | None
         study = warm_start_study(study, True)
     if adjust is not None:
         study = adjust(study)
+    atomic_write_text(path, text, mark=True)  # never over a study.toml of the user
     figures = None
     if report:  # the plot that depends only on the package, drawn while the units run (once per machine)
         from ..report.draw import draw_package_figures
