@@ -554,6 +554,21 @@ def test_a_units_warnings_come_above_the_progress_bar_on_a_terminal():
 
 
 @pytest.mark.opensim
+def test_export_refuses_a_metabolics_folder_without_rates_and_names_its_own_option(cli_flow, tmp_path, capsys):
+    """``export --metabolics`` given a folder without ``metabolics.sto`` (the solution folder
+    itself) is refused, not exported without rates; a ``.mat`` of the user in the way is refused
+    naming ``--mat`` (export has no ``--out``)."""
+    s, _, _ = cli_flow
+    assert main(["export", "--mat", str(tmp_path / "x.mat"), str(s / "r"), "--metabolics", str(s / "r")]) == 1
+    assert capsys.readouterr().err == (f"musclemetab: error: {s / 'r'}: no metabolics.sto (--metabolics); give the "
+                                       f"folder written by 'musclemetab metabolics --solution {s / 'r'}'\n")
+    (tmp_path / "mine.mat").write_text("the user's")
+    assert main(["export", "--mat", str(tmp_path / "mine.mat"), str(s / "r")]) == 1
+    assert capsys.readouterr().err.endswith("it is not replaced: move the file away, or give another file name "
+                                            "(--mat)\n")
+    assert not (tmp_path / "x.mat").exists() and (tmp_path / "mine.mat").read_text() == "the user's"
+
+
 def test_mat_files_of_metabolics_and_export_hold_the_folders_tables(cli_flow, gait2392, tmp_path):
     """``metabolics --mat`` (from the objects in memory) and ``export --mat`` (from the folders'
     files) of the solve of both legs, read back with :func:`scipy.io.loadmat`: every array equals

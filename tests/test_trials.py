@@ -62,10 +62,19 @@ def test_metabolics_adds_two_legs_and_doubles_one(tmp_path, capsys):
     assert _cli("metabolics", "--solution", parent / "l", "--mass", MASS, "--height", HEIGHT, "--models", "UM10",
                 "--out", tmp_path / "one") == 0
     assert "whole body = 2 x the left leg" in capsys.readouterr().out
-    with pytest.raises(Exception, match="neither a solution folder"):
-        from musclemetab.metabolics.solution import solution_folders
+    from musclemetab.errors import InputFileError
+    from musclemetab.metabolics.solution import solution_folders
 
-        solution_folders(tmp_path)
+    with pytest.raises(InputFileError, match="neither a solution folder"):
+        solution_folders(tmp_path / "one")
+    # a result of several trials (EMG-TEN, estimate): its trial folders are named
+    several = tmp_path / "several"
+    for trial in ("walk_b", "walk_a"):
+        (several / trial).mkdir(parents=True)
+        (several / trial / "summary.json").write_text("{}")
+    with pytest.raises(InputFileError, match=rf"several: a result of several trials, one solution folder each; give one "
+                                             rf"of them \({several / 'walk_a'}, {several / 'walk_b'}\)$"):
+        solution_folders(several)
 
 
 def test_metabolics_trims_to_the_recorded_gait_cycle(tmp_path):

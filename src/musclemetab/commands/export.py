@@ -71,6 +71,12 @@ def folder_struct(solution_folder, metabolics_folder=None) -> dict:
         legs[side] = solution_struct(Solution.load(folder, require_success=False))
         where = Path(folder) if metabolics_folder is None else (root / side if len(folders) > 1 else root)
         metabolics = folder_metabolics(where)
+        if metabolics is None and metabolics_folder is not None:  # given, so asked for: not left out unsaid
+            from ..errors import InputFileError
+            from ..metabolics.solution import METABOLICS_STO
+
+            raise InputFileError(f"{where}: no {METABOLICS_STO} (--metabolics); give the folder written by "
+                                 f"'musclemetab metabolics --solution {folder}'")
         if metabolics is not None and metabolics_folder is not None:  # a study unit's folder holds both
             check_metabolics_of(folder, where)
         if metabolics is not None:

@@ -211,7 +211,8 @@ def output_error(exc: OSError, path: str | os.PathLike) -> OutputError:
                        "(the folder keeps what it held): free space or choose a folder you can write to, and run again")
 
 
-def check_replaceable(folder: str | os.PathLike, names, *, files: bool = True) -> None:
+def check_replaceable(folder: str | os.PathLike, names, *, files: bool = True,
+                      elsewhere: str = "choose another output folder (--out)") -> None:
     """Raise :class:`~musclemetab.errors.OptionError` naming the path when one of the files
     ``names`` that the package is about to write into ``folder`` exists there as a folder
     (or a link to one): the package replaces its own files, never deletes a folder it did not
@@ -219,7 +220,8 @@ def check_replaceable(folder: str | os.PathLike, names, *, files: bool = True) -
     :data:`FILES_MANIFEST` does not list with its present SHA-256: a file of the user, or one
     changed since the package wrote it, is never replaced (a folder written before the
     package kept the list has none: its files are not taken for the package's). Checked for
-    every name before any file is moved, so nothing is half written."""
+    every name before any file is moved, so nothing is half written. ``elsewhere``: the message's
+    other remedy (the option that names another place)."""
     from ..errors import OptionError
 
     folder = Path(folder)
@@ -239,11 +241,10 @@ def check_replaceable(folder: str | os.PathLike, names, *, files: bool = True) -
             why = (f"not listed in {folder / FILES_MANIFEST}" if listed or (folder / FILES_MANIFEST).exists() else
                    f"{folder} has no {FILES_MANIFEST}, the list of the files musclemetab wrote there")
             raise OptionError(f"{path} was not written by musclemetab ({why}); it is not replaced: move the file "
-                              "away, or choose another output folder (--out)")
+                              f"away, or {elsewhere}")
         if file_sha256(path) not in listed[name]:
             raise OptionError(f"{path} was changed since musclemetab wrote it (its SHA-256 is not the one in "
-                              f"{folder / FILES_MANIFEST}); it is not replaced: move the file away, or choose "
-                              "another output folder (--out)")
+                              f"{folder / FILES_MANIFEST}); it is not replaced: move the file away, or {elsewhere}")
 
 
 def check_output_folder(path: str | os.PathLike, option: str = "--out") -> Path:

@@ -172,7 +172,7 @@ def check_mat_path(path: str | os.PathLike, option: str = "--mat") -> Path:
     if path.suffix.lower() != ".mat":
         raise OptionError(f"{option} {path}: a MATLAB file's name ends in .mat; give e.g. {path.with_suffix('.mat')}")
     check_output_folder(path.parent, option=option)
-    check_replaceable(path.parent, [path.name])
+    check_replaceable(path.parent, [path.name], elsewhere=f"give another file name ({option})")
     return path
 
 

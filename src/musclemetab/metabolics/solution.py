@@ -756,6 +756,11 @@ def solution_folders(path: str | os.PathLike) -> dict[str, Path]:
         return {_recorded_side(read_json_object(path / SUMMARY_FILE)) or "": path}
     found = {s: path / s for s in ("r", "l") if (path / s / SUMMARY_FILE).is_file()}
     if not found:
+        trials = sorted(p.parent for p in path.glob(f"*/{SUMMARY_FILE}")) if path.is_dir() else []
+        if trials:  # the result of several trials (EMG-TEN, estimate): one solution folder per trial
+            names = ", ".join(map(str, trials[:3])) + (", ..." if len(trials) > 3 else "")
+            raise InputFileError(f"{path}: a result of several trials, one solution folder each; give one of them "
+                                 f"({names})")
         raise InputFileError(
             f"{path}: neither a solution folder (summary.json) nor a folder of per-leg solutions (r/, l/); "
             "give the folder written by musclemetab solve"
