@@ -89,6 +89,12 @@ def test_bad_profiles_are_refused_naming_file_and_column(tmp_path):
         read_assistance(tmp_path / "nan.csv")
     with pytest.raises(OptionError, match="--assistance-gain = nan is not a factor on the device torque"):
         apply_assistance(t, moments, dofs, read_assistance(ok), float("nan"), **kw)
+    # a profile of the other leg alone would do nothing to this leg: refused, unless that leg is solved too
+    left = _write_profile(tmp_path / "left.sto", [0.5, 1.5], {"ankle_angle_l": [-10.0, -10.0]})
+    with pytest.raises(OptionError, match=r"left\.sto: its columns \(ankle_angle_l\) name none of the solved leg's "
+                                          r"coordinates \(side r: ankle_angle_r, knee_angle_r\)"):
+        apply_assistance(t, moments, dofs, read_assistance(left), 1.0, **kw)
+    assert np.all(apply_assistance(t, moments, dofs, read_assistance(left), 1.0, other_leg_solved=True, **kw) == 0.0)
 
 
 def test_device_work_of_a_constant_torque_on_a_sine_motion(tmp_path):
@@ -162,6 +168,53 @@ def test_solve_command_refuses_a_bad_device_in_one_line(example, tmp_path, capsy
     assert not (tmp_path / "a" / "solution.sto").exists()
     assert main(base + ["--assistance-gain", "2", "--out", str(tmp_path / "b")]) == 1
     assert "--assistance-gain belongs to a device: give --assistance DEVICE.sto" in capsys.readouterr().err
+    # the left ankle's profile on the right leg's solve: it did nothing (0 J, the unassisted objective)
+    left = plantarflexion_assistance(tmp_path / "exo_left.sto", example.body_mass_kg, dof="ankle_angle_l")
+    assert main(base + ["--assistance", str(left), "--out", str(tmp_path / "c")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{left}: its columns (ankle_angle_l) name none of the solved leg's coordinates " \
+        "(side r: ankle_angle_r, knee_angle_r, hip_flexion_r" in err[0], err
+    # a profile over the cycle on a window holding no gait cycle: the cycle must be given
+    pf = plantarflexion_assistance(tmp_path / "exo.sto", example.body_mass_kg)
+    assert main(base + ["--assistance", str(pf), "--out", str(tmp_path / "d")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{pf}: a profile over the gait cycle needs the gait cycle, and none was found in the " \
+        "solve window 1.05-1.25 s" in err[0] and err[0].endswith("--assistance-cycle T0:T1 (or --cycle)"), err
+    assert not any((tmp_path / d / "solution.sto").exists() for d in "cd")
+
+
+def test_a_study_refuses_a_device_of_the_other_leg_when_read(example, tmp_path):
+    """The subject's right leg with a profile of the left ankle alone: refused when the study file
+    is read (it ran, and every assisted trial reported a saving of 0), naming the file and its
+    columns; the same file is a leg's device when the subject's two legs are solved."""
+    from musclemetab.study import study_from_dict
+
+    left = plantarflexion_assistance(tmp_path / "exo_left.sto", example.body_mass_kg, dof="ankle_angle_l")
+    with pytest.raises(OptionError, match=r"subject 'sub1': 'assistance': .*exo_left\.sto: its columns "
+                                          r"\(ankle_angle_l\) name none of the right leg's coordinates \(side \"r\"\)"):
+        _assisted_study(example, left, tmp_path / "study")
+    per_kg = _write_profile(tmp_path / "perkg.sto", [0.0, 100.0], {"ankle_angle_r": [-0.2, 0.0]}, [CYCLE_AXIS_HEADER])
+    with pytest.raises(DataMismatchError, match=r"subject 'sub1': 'assistance': .*perkg\.sto: .*normalised to body "
+                                                r"mass"):
+        _assisted_study(example, per_kg, tmp_path / "study")
+    both = _assisted_study(example, left, tmp_path / "study", side="both", trial_keys={"cycle": "auto"})
+    assert [t.name for t in both.subjects[0].trials] == ["normal", "normal_assist-1"]
+
+
+def test_a_study_refuses_a_device_column_of_no_coordinate_before_any_unit_runs(example, tmp_path):
+    """A column naming no coordinate of the subject's model (it needs the model): the study refuses
+    to run, one line naming the study's trial, the file and the column, before any unit runs (the
+    unassisted units ran, then the assisted ones failed)."""
+    from musclemetab.study.runner import run_study
+
+    bad = _write_profile(tmp_path / "bad.sto", [0.0, 100.0], {"ankle_angle_r": [-10.0, 0.0], "hip_flexion_rr": [1, 1]},
+                         [CYCLE_AXIS_HEADER])
+    study = _assisted_study(example, bad, tmp_path / "study")
+    with pytest.raises(UnknownCoordinateError) as err:
+        run_study(study, workers=1, progress=False)
+    assert str(err.value).startswith(f"subject 'sub1', trial 'normal_assist-1': 'assistance': {bad}: column "
+                                     "'hip_flexion_rr' names no coordinate of the model (near: hip_flexion_r")
+    assert "\n" not in str(err.value) and not (tmp_path / "study" / "units").exists()
 
 
 # ---------------------------------------------------------------------------- a study's gain sweep
@@ -169,13 +222,13 @@ GAINS = (0.5, 1.0, 1.5)
 TRICEPS = ("soleus_r", "gasmed_r", "gaslat_r")
 
 
-def _assisted_study(example, profile, out, **assistance):
+def _assisted_study(example, profile, out, side="r", trial_keys=(), **assistance):
     from musclemetab.study import study_from_dict
 
     trial = {"name": "normal", "ik": str(example.ik["normal"]), "id": str(example.id["normal"]),
-             "assistance": {"file": str(profile), **assistance}}
+             "assistance": {"file": str(profile), **assistance}, **dict(trial_keys)}
     return study_from_dict({"name": "exo", "workflows": ["effort-gen"], "models": ["UM10", "BH04"],
-                            "subjects": [{"name": "sub1", "model": str(example.model),
+                            "subjects": [{"name": "sub1", "model": str(example.model), "side": side,
                                           "body_mass_kg": example.body_mass_kg, "height_m": example.height_m,
                                           "trials": [trial]}]}, base="/", output=out)
 
@@ -294,3 +347,56 @@ def test_the_sensitivities_rebuild_an_assisted_problem_with_its_device(exo_study
     sol, inputs = prob.solution, prob.inputs
     supplied = np.einsum("ndm,nm->nd", inputs.moment_arms_m, sol.tendon_force_N) + sol.reserve_Nm
     assert np.max(np.abs(supplied - inputs.moments_Nm)[:-1]) < 1e-3  # the last node repeats the one before
+
+
+@pytest.mark.opensim
+def test_the_assistance_figure_has_no_layout_problems(exo_study):
+    """The figure as the report saves it: no text cut by the edge, no two texts touching (the
+    rotated tick labels of the leg, phases and groups panel did: 'stance (phase)' over its
+    neighbours, a FigureLayoutWarning on every report)."""
+    import matplotlib.pyplot as plt
+
+    from musclemetab.report.assistance_figure import assistance_figure
+    from musclemetab.report.folder import read_study_folder
+    from musclemetab.report.layout_check import figure_problems
+
+    folder = read_study_folder(exo_study.output)
+    fig = assistance_figure(folder.ok, exo_study.output)
+    labels = [t.get_text() for t in fig.axes[2].get_yticklabels()]
+    assert "stance (phase)" in labels and "swing (phase)" in labels, labels
+    assert figure_problems(fig) == []
+    plt.close(fig)
+
+
+@pytest.mark.opensim
+def test_the_command_maps_a_cycle_profile_onto_the_cycle_the_study_takes(exo_study, example, tmp_path, capsys):
+    """The study's profile solved by ``musclemetab solve`` without --cycle or --assistance-cycle: it
+    is mapped onto the cycle the study takes for the ID-file trial (0.62-1.70 s, the window less
+    0.05 s at each end; it took the padded window 0.57-1.75 s, 2.50 / -1.44 J), the output line
+    says so, and the device's work and mean power are the study's gain-1 row's: the documented
+    2.21 J positive / -1.33 J negative, 2.21 J / 1.08 s of mean positive power."""
+    import json
+
+    import pandas as pd
+
+    from musclemetab.commands import main
+
+    profile = exo_study.subjects[0].trials[1].assistance
+    assert main(["solve", "--model", str(example.model), "--ik", str(example.ik["normal"]), "--id",
+                 str(example.id["normal"]), "--assistance", str(profile), "--no-progress",
+                 "--out", str(tmp_path / "cli")]) == 0
+    line = capsys.readouterr().out
+    assert "device (gain 1) 2.21 J positive / -1.33 J negative work per cycle (profile mapped onto and work over " \
+           "the gait cycle 0.620-1.700 s: estimated from the solve window less 0.05 s at each end and the ankle " \
+           "moment)" in line, line
+    device = json.loads((tmp_path / "cli" / "summary.json").read_text())["assistance"]
+    assert device["cycle_s"] == pytest.approx([0.62, 1.70]) and device["duration_s"] == pytest.approx(1.08)
+    results = pd.read_csv(exo_study.output / "results.csv")
+    row = results[results["trial"] == "normal_assist-1"].iloc[0]
+    assert device["positive_work_J"] == pytest.approx(row["device_positive_work_J"], rel=1e-9)
+    assert device["negative_work_J"] == pytest.approx(row["device_negative_work_J"], rel=1e-9)
+    assert (device["positive_work_J"], device["negative_work_J"]) == (pytest.approx(2.21, abs=0.005),
+                                                                        pytest.approx(-1.33, abs=0.005))
+    assert device["mean_positive_power_W"] == pytest.approx(device["positive_work_J"] / 1.08)
+    mass = example.body_mass_kg  # results.csv: both legs per kg
+    assert row["device_positive_power_W_per_kg"] == pytest.approx(2 * device["mean_positive_power_W"] / mass, rel=1e-9)

@@ -189,8 +189,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     number_option(a, "--assistance-gain", "assistance_gain", metavar="G",
                   help="factor on the device torque (default 1)")
     a.add_argument("--assistance-cycle", metavar="T0:T1",
-                   help="the gait cycle (s) a profile over the cycle is mapped onto (default: the cycle of --cycle, "
-                   "else the solve window)")
+                   help="the gait cycle (s) a profile over the cycle is mapped onto and the device's work is over "
+                   "(default: the cycle of --cycle, else the one a study takes: of --grf, else the window less 0.05 s "
+                   "at each end with toe-off from the ankle moment)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     add_progress_argument(p, "; with --side both --workers 2 each leg's, 'solving side r: ...'")
     p.set_defaults(func=run_with_progress)
@@ -493,12 +494,16 @@ def _assistance(args) -> dict:
 
 
 def _device_note(record) -> str:
-    """``, device +W J / -W J per cycle`` of an assisted solve's record (empty otherwise)."""
+    """``, device +W J / -W J per gait cycle T0-T1 s (its source)`` of an assisted solve's record
+    (empty otherwise): the cycle the work is over, and a profile over the cycle mapped onto."""
     device = record.assistance
     if not device:
         return ""
+    c0, c1 = device.cycle_s
+    mapped = "profile mapped onto and work over" if device.axis == "cycle_pct" else "work over"
     return (f", device (gain {device.gain:g}) {device.positive_work_J:.3g} J positive / "
-            f"{device.negative_work_J:.3g} J negative work per cycle")
+            f"{device.negative_work_J:.3g} J negative work per cycle ({mapped} the gait cycle {c0:.3f}-{c1:.3f} s: "
+            f"{device.cycle_source})")
 
 
 def _plausibility(args, solutions) -> None:

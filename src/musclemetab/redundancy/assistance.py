@@ -50,7 +50,8 @@ from ..errors import DataMismatchError, InputFileError, MissingColumnError, Opti
 
 __all__ = ["AssistanceProfile", "read_assistance", "CYCLE_AXIS_HEADER", "CYCLE_COLUMN", "MUSCLE_EFFICIENCY",
            "MAX_TORQUE_NM_PER_KG", "MIN_PEAK_TORQUE_NM", "apply_assistance", "device_work", "assistance_record",
-           "plantarflexion_assistance", "augmentation_factor_W_per_kg", "check_gain"]
+           "plantarflexion_assistance", "augmentation_factor_W_per_kg", "check_gain", "check_profile_for_leg",
+           "check_profile_against_model"]
 
 #: header line of a ``.sto``/``.mot`` profile whose ``time`` column holds % of the gait cycle
 CYCLE_AXIS_HEADER = "assistance_axis=cycle_pct"
@@ -184,9 +185,12 @@ def read_assistance(path: str | os.PathLike) -> AssistanceProfile:
 
 
 def _check_profile(profile: AssistanceProfile, dofs: Sequence[str], side: str | None, model_coordinates,
-                   body_mass_kg: float | None, window_s: tuple[float, float], check_units: bool) -> None:
+                   body_mass_kg: float | None, window_s: tuple[float, float] | None, check_units: bool,
+                   other_leg_solved: bool = False) -> None:
     """The profile against the problem: its columns name coordinates of the model, those of this
-    leg are solved DOFs, a time profile covers the window, and (``check_units``) its size is N m."""
+    leg are solved DOFs, one at least is (unless ``other_leg_solved``: the other leg's solve takes
+    its columns), a time profile covers the window (``None``: not checked), and (``check_units``)
+    its size is N m."""
     if model_coordinates is not None:
         alien = [c for c, k in zip(profile.columns, profile.coordinates) if k not in set(model_coordinates)]
         if alien:
@@ -197,14 +201,19 @@ def _check_profile(profile: AssistanceProfile, dofs: Sequence[str], side: str | 
                 f"{profile.path}: column '{alien[0]}' names no coordinate of the model"
                 + (f" (near: {', '.join(near)})" if near else "")
                 + "; name each torque column after the coordinate it acts about, e.g. ankle_angle_r")
-    other = f"_{'l' if side == 'r' else 'r'}" if side in ("r", "l") else None
+    other = _other_leg(side)
     unsolved = [c for c, k in zip(profile.columns, profile.coordinates)
                 if k not in set(dofs) and not (other and k.endswith(other))]
     if unsolved:
         raise OptionError(f"{profile.path}: column '{unsolved[0]}' is not a DOF of this problem "
                           f"({', '.join(dofs)}): the device torque about it would be lost; drop the column or "
                           "solve that DOF (--dofs)")
-    if profile.axis == "time_s":
+    if not other_leg_solved and not set(profile.coordinates) & set(dofs):
+        raise OptionError(
+            f"{profile.path}: its columns ({', '.join(profile.columns)}) name none of the solved leg's coordinates "
+            f"({'side ' + side + ': ' if side else ''}{', '.join(dofs)}): the device would do nothing; name the "
+            "solved leg's coordinates (e.g. ankle_angle_r), or solve the leg the profile assists (--side / side)")
+    if profile.axis == "time_s" and window_s is not None:
         t0, tf = window_s
         tol = _COVER_TOLERANCE_S
         if profile.x[0] > t0 + tol or profile.x[-1] < tf - tol:
@@ -214,34 +223,77 @@ def _check_profile(profile: AssistanceProfile, dofs: Sequence[str], side: str | 
                 f"profile over the gait cycle (first column '{CYCLE_COLUMN}', or the header line "
                 f"'{CYCLE_AXIS_HEADER}')")
     if check_units:
-        peak = profile.peak_Nm
-        if peak < MIN_PEAK_TORQUE_NM:
-            col = profile.columns[int(np.argmax(np.abs(profile.torque_Nm).max(axis=0)))]
-            raise DataMismatchError(
-                f"{profile.path}: the largest device torque (column '{col}') is {peak:.3g}, below "
-                f"{MIN_PEAK_TORQUE_NM:g} N m; it looks normalised to body mass (N m/kg): multiply it by the body mass "
-                "(the torque must be in N m)")
-        if body_mass_kg and peak / float(body_mass_kg) > MAX_TORQUE_NM_PER_KG:
-            col = profile.columns[int(np.argmax(np.abs(profile.torque_Nm).max(axis=0)))]
-            raise DataMismatchError(
-                f"{profile.path}: column '{col}' reaches {peak:.4g}, {peak / body_mass_kg:.3g} per kg of body mass, "
-                f"beyond any joint moment of walking ({MAX_TORQUE_NM_PER_KG:g} N m/kg); the torque must be in N m "
-                "(not N mm)")
+        _check_units(profile, body_mass_kg)
+
+
+def _other_leg(side: str | None) -> str | None:
+    """The suffix of the other leg's coordinates (``_l`` for ``r``), ``None`` without a leg."""
+    return f"_{'l' if side == 'r' else 'r'}" if side in ("r", "l") else None
+
+
+def check_profile_for_leg(profile: AssistanceProfile, side: str, body_mass_kg: float | None = None, *,
+                          dofs: Sequence[str] | None = None, check_units: bool = True) -> None:
+    """What can be checked of a profile without the model (a study file when it is read): for one
+    leg (``side`` ``"r"``/``"l"``; ``"both"``: each leg takes its own columns) a profile whose
+    columns all name the other leg's coordinates (``ankle_angle_l`` for ``r``), or none of
+    ``dofs`` when they are given, is refused (the device would do nothing); and the units
+    (``check_units``: N m, against ``body_mass_kg``). :func:`apply_assistance` checks the rest."""
+    other = _other_leg(side)
+    if dofs:
+        useless = not set(profile.coordinates) & set(dofs)
+    else:
+        useless = other is not None and all(k.endswith(other) for k in profile.coordinates)
+    if useless:
+        solved = f"'{', '.join(dofs)}'" if dofs else f"the {'right' if side == 'r' else 'left'} leg's"
+        raise OptionError(
+            f"{profile.path}: its columns ({', '.join(profile.columns)}) name none of {solved} coordinates (side "
+            f"\"{side}\"): the device would do nothing; name the solved leg's coordinates (e.g. ankle_angle_{side}), "
+            "or solve the leg the profile assists (side)")
+    if check_units:
+        _check_units(profile, body_mass_kg)
+
+
+def _check_units(profile: AssistanceProfile, body_mass_kg: float | None) -> None:
+    """The profile's size is N m: its largest torque at least 1 N m, at most 5 N m per kg."""
+    peak = profile.peak_Nm
+    if peak < MIN_PEAK_TORQUE_NM:
+        col = profile.columns[int(np.argmax(np.abs(profile.torque_Nm).max(axis=0)))]
+        raise DataMismatchError(
+            f"{profile.path}: the largest device torque (column '{col}') is {peak:.3g}, below "
+            f"{MIN_PEAK_TORQUE_NM:g} N m; it looks normalised to body mass (N m/kg): multiply it by the body mass "
+            "(the torque must be in N m)")
+    if body_mass_kg and peak / float(body_mass_kg) > MAX_TORQUE_NM_PER_KG:
+        col = profile.columns[int(np.argmax(np.abs(profile.torque_Nm).max(axis=0)))]
+        raise DataMismatchError(
+            f"{profile.path}: column '{col}' reaches {peak:.4g}, {peak / body_mass_kg:.3g} per kg of body mass, "
+            f"beyond any joint moment of walking ({MAX_TORQUE_NM_PER_KG:g} N m/kg); the torque must be in N m "
+            "(not N mm)")
+
+
+def check_profile_against_model(profile: AssistanceProfile, dofs: Sequence[str], side: str, model_coordinates,
+                                body_mass_kg: float | None = None, window_s: tuple[float, float] | None = None, *,
+                                check_units: bool = True, other_leg_solved: bool = False) -> None:
+    """The checks of :func:`apply_assistance` without the moments (a study before its units run):
+    the columns against the model's coordinates and the leg's ``dofs``, a time profile against
+    ``window_s`` (``None``: not checked), the units."""
+    _check_profile(profile, dofs, side, model_coordinates, body_mass_kg, window_s, check_units, other_leg_solved)
 
 
 def apply_assistance(id_time_s, id_moments_Nm, dofs: Sequence[str], profile: AssistanceProfile, gain: float,
                      *, window_s: tuple[float, float], cycle_s: tuple[float, float] | None = None,
                      side: str | None = None, model_coordinates=None, body_mass_kg: float | None = None,
-                     check_units: bool = True) -> np.ndarray:
+                     check_units: bool = True, other_leg_solved: bool = False) -> np.ndarray:
     """The moments the muscles must supply, ``M_ID - gain * tau`` at the ID samples ``(T, D)``,
     after the checks of the profile against the problem (its columns, the window, the units).
 
     ``window_s``: the solved window (a time profile must cover it); ``cycle_s``: the gait cycle a
     cycle profile is mapped onto (default: the window). ``side``: columns of the other leg's
-    coordinates are left to that leg's solve. ``model_coordinates``: the model's coordinate names
-    (a column naming none is refused)."""
+    coordinates are left to that leg's solve; a profile with none of this leg's coordinates is
+    refused (it would do nothing) unless ``other_leg_solved`` (both legs are solved: the other
+    leg's solve takes it). ``model_coordinates``: the model's coordinate names (a column naming
+    none is refused)."""
     gain = check_gain(gain)
-    _check_profile(profile, dofs, side, model_coordinates, body_mass_kg, window_s, check_units)
+    _check_profile(profile, dofs, side, model_coordinates, body_mass_kg, window_s, check_units, other_leg_solved)
     tau = profile.torque_at(id_time_s, dofs, gain, cycle_s or window_s)
     return np.asarray(id_moments_Nm, dtype=float) - tau
 

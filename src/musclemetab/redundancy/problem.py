@@ -196,6 +196,7 @@ def load_problem(
     assistance: str | os.PathLike | None = None,
     assistance_gain: float = 1.0,
     assistance_cycle_s: tuple[float, float] | None = None,
+    assistance_both_legs: bool = False,
     estimate: Mapping[str, Sequence[str]] | None = None,
     couple: Sequence = (),
     bounds: Mapping[str, tuple[float, float]] | None = None,
@@ -230,7 +231,8 @@ def load_problem(
               "tendon_stiffness_file": tendon_stiffness_file, "emg_mapping": emg_mapping,
               "check_units": check_units, "exclude_muscles": list(exclude_muscles),
               "exclude_missing_ok": exclude_missing_ok, "assistance": assistance, "assistance_gain": assistance_gain,
-              "assistance_cycle_s": assistance_cycle_s, "options": options, "goals": goals, "emg": emg,
+              "assistance_cycle_s": assistance_cycle_s, "assistance_both_legs": assistance_both_legs,
+              "options": options, "goals": goals, "emg": emg,
               "estimate": estimate, "couple": list(couple), "bounds": bounds, "weights": weights, "emg_mode": emg_mode,
               "emg_tolerance": emg_tolerance}
     if estimate is not None:
@@ -265,7 +267,8 @@ def load_problem(
         mesh_frequency_hz=mesh_frequency_hz, passive=passive, tendon_stiffness=tendon_stiffness,
         tendon_stiffness_file=tendon_stiffness_file, options=options, cache_dir=cache_dir, check_units=check_units,
         exclude_muscles=exclude_muscles, exclude_missing_ok=exclude_missing_ok, diagnose_only=diagnose_only,
-        assistance=assistance, assistance_gain=assistance_gain, assistance_cycle_s=assistance_cycle_s)
+        assistance=assistance, assistance_gain=assistance_gain, assistance_cycle_s=assistance_cycle_s,
+        assistance_both_legs=assistance_both_legs)
     if diagnose_only:
         return read
     arrays, params, wf_record, dofs, excluded, t_geometry = read

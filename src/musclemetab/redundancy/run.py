@@ -65,6 +65,7 @@ def solve_files(
     assistance: str | os.PathLike | None = None,
     assistance_gain: float = 1.0,
     assistance_cycle_s: tuple[float, float] | None = None,
+    assistance_both_legs: bool = False,
 ) -> Solution:
     """Solve from files: model ``.osim``, IK ``.mot`` and ID ``.sto`` (or ground forces).
 
@@ -90,7 +91,11 @@ def solve_files(
     (:mod:`musclemetab.redundancy.assistance`, ``docs/assistance.md``) times ``assistance_gain`` taken off the
     ID moments before the solve; a profile over the gait cycle is mapped onto the cycle of
     ``cycle`` when the window comes from one, else onto ``assistance_cycle_s`` (start, end in s),
-    else onto the window; ``summary.json``'s ``assistance`` records it with the device's work.
+    else onto the cycle a study takes for the same files (the ground forces' ``grf``, else the
+    window less 0.05 s at each end, toe-off from the ankle moment); the device's work is over that
+    cycle; ``summary.json``'s ``assistance`` records it with the cycle and its source. A profile
+    naming none of the leg's coordinates is refused unless ``assistance_both_legs`` (the other
+    leg is solved too and takes its columns; :func:`solve_sides` sets it for both legs).
 
     The inputs are checked (columns, units, time ranges) before the geometry is computed.
 
@@ -120,7 +125,8 @@ def solve_files(
         tendon_stiffness=tendon_stiffness, tendon_stiffness_file=tendon_stiffness_file, options=options, goals=goals,
         cache_dir=cache_dir, check_units=check_units, exclude_muscles=exclude_muscles,
         exclude_missing_ok=exclude_missing_ok, diagnose_only=diagnose_only, assistance=assistance,
-        assistance_gain=assistance_gain, assistance_cycle_s=assistance_cycle_s)
+        assistance_gain=assistance_gain, assistance_cycle_s=assistance_cycle_s,
+        assistance_both_legs=assistance_both_legs)
     if diagnose_only:
         return problem
     if parameter_transform is not None:
@@ -158,6 +164,8 @@ def solve_sides(model_path, ik_path, id_path, workflow: str = "effort-gen", *, s
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise OptionError(f"--workers must be a whole number of at least 1, not {workers!r}")
     sides = tuple(sides)
+    if kwargs.get("assistance") is not None:  # a profile of one leg's coordinates is that leg's
+        kwargs.setdefault("assistance_both_legs", set(sides) == {"r", "l"})
     if workers == 1 or len(sides) == 1:
         return {side: solve_files(model_path, ik_path, id_path, workflow, side=side, **kwargs) for side in sides}
     kwargs.pop("before_solve", None)  # it would run in the leg's process, not in this one

@@ -62,7 +62,7 @@ def _arrays(geometry) -> GeometryArrays:
 def read_effort_trial(model_path, ik_path, id_path, wf, *, dofs, side, window, cycle, external_loads, grf, grf_column,
                       grf_threshold_N, cycle_duration_s, mesh_frequency_hz, passive, tendon_stiffness,
                       tendon_stiffness_file, options, cache_dir, check_units, exclude_muscles, exclude_missing_ok,
-                      diagnose_only, assistance, assistance_gain, assistance_cycle_s):
+                      diagnose_only, assistance, assistance_gain, assistance_cycle_s, assistance_both_legs=False):
     """One trial of an effort workflow ``wf`` from files (the keywords of :func:`.run.solve_files`):
     ``(TrialArrays, workflow parameters, their record, DOFs, muscles left out, geometry time)``,
     or with ``diagnose_only`` the unchecked :class:`~.diagnosis.Diagnosis`."""
@@ -132,7 +132,8 @@ def read_effort_trial(model_path, ik_path, id_path, wf, *, dofs, side, window, c
     if assistance is not None:  # the muscles supply what the device does not (musclemetab.redundancy.assistance)
         id_moments, device = _assisted_moments(assistance, assistance_gain, assistance_cycle_s, trial_window, layout,
                                                model_path, cache_dir, side, dofs, id_time, id_moments,
-                                               check_units)
+                                               check_units, assistance_both_legs,
+                                               (id_path, grf, grf_column, grf_threshold_N))
 
     t0 = _time.perf_counter()
     geometry = compute_geometry(model_path, ik_table, dofs=list(dofs), side=side, cache_dir=cache_dir)
@@ -253,24 +254,62 @@ def read_emg_trials(model, ik_paths, id_paths, emg_paths, labels, *, mapping, se
 
 
 def _assisted_moments(path, gain, cycle_s, trial_window, layout, model_path, cache_dir, side, dofs, id_time,
-                      id_moments, check_units):
-    """``(moments less the device torque, (profile, gait cycle, its source))`` of :func:`read_effort_trial`."""
+                      id_moments, check_units, both_legs=False, events=(None, None, None, None)):
+    """``(moments less the device torque, (profile, gait cycle, its source))`` of :func:`read_effort_trial`.
+
+    The gait cycle the profile is mapped onto and the device's work integrated over: the solve's
+    (``--cycle``), else the one given (``--assistance-cycle``), else the one a study takes for the
+    same files (:func:`_events_cycle`); ``events``: ``(ID file, ground forces, their column, threshold)``."""
     from ..model import read_model
-    from .assistance import apply_assistance, read_assistance
+    from .assistance import apply_assistance, check_profile_against_model, read_assistance
 
     profile = read_assistance(path)
+    mass = read_model(model_path, cache_dir=cache_dir).body_mass_kg if check_units else None
+    window_s = (trial_window.start_s, trial_window.end_s)
+    coordinates = [c["name"] for c in layout.coordinates]
+    # the profile against the problem first: a cycle is looked for only for a profile that is used
+    check_profile_against_model(profile, dofs, side, coordinates, mass, window_s, check_units=check_units,
+                                other_leg_solved=both_legs)
     if trial_window.cycle is not None:
-        cycle_s, source = (trial_window.cycle["start_s"], trial_window.cycle["end_s"]), "gait cycle of the solve"
+        cycle_s = (trial_window.cycle["start_s"], trial_window.cycle["end_s"])
+        source = "the solve's (its window is the cycle)"
     elif cycle_s is not None:
         cycle_s, source = (float(cycle_s[0]), float(cycle_s[1])), "given"
     else:
-        cycle_s, source = (trial_window.start_s, trial_window.end_s), "solve window"
-    mass = read_model(model_path, cache_dir=cache_dir).body_mass_kg if check_units else None
-    moments = apply_assistance(id_time, id_moments, dofs, profile, gain,
-                               window_s=(trial_window.start_s, trial_window.end_s), cycle_s=cycle_s, side=side,
-                               model_coordinates=[c["name"] for c in layout.coordinates], body_mass_kg=mass,
-                               check_units=check_units)
+        cycle_s, source = _events_cycle(profile, trial_window, side, *events)
+    moments = apply_assistance(id_time, id_moments, dofs, profile, gain, window_s=window_s, cycle_s=cycle_s,
+                               side=side, model_coordinates=coordinates, body_mass_kg=mass, check_units=check_units,
+                               other_leg_solved=both_legs)
     return moments, (profile, cycle_s, source)
+
+
+def _events_cycle(profile, trial_window, side, id_path, grf, grf_column, grf_threshold_N):
+    """``((start, end), source)``: the gait cycle a study takes for a trial of these files
+    (:func:`musclemetab.study.events.trial_cycle`): from the ground forces ``grf`` (the cycle
+    holding the middle of the window), else the solve window less 0.05 s at each end with toe-off
+    from the ankle moment. A time profile without one is integrated over the solve window (said
+    in the source); a cycle profile is refused (it needs a cycle)."""
+    from ..errors import MusclemetabError
+    from ..events import DEFAULT_GRF_THRESHOLD_N, DEFAULT_PADDING_S, cycle_from_grf, cycle_from_id_file, read_grf
+
+    t0, t1 = trial_window.start_s, trial_window.end_s
+    remedy = "give the gait cycle: --assistance-cycle T0:T1 (or --cycle)"
+    try:
+        if grf is not None:
+            force = read_grf(grf, grf_column, side=side)
+            found = cycle_from_grf(force.index.to_numpy(float), force.to_numpy(float),
+                                   threshold_N=DEFAULT_GRF_THRESHOLD_N if grf_threshold_N is None else grf_threshold_N,
+                                   at_time_s=0.5 * (t0 + t1), remedy=remedy)
+            return (found.start_s, found.end_s), f"from the ground forces {Path(grf).name}"
+        found = cycle_from_id_file(id_path, f"ankle_angle_{side}_moment", window_s=(t0, t1),
+                                   padding_s=DEFAULT_PADDING_S, remedy=remedy)
+    except MusclemetabError as exc:
+        if profile.axis == "cycle_pct":
+            raise type(exc)(f"{profile.path}: a profile over the gait cycle needs the gait cycle, and none was found "
+                            f"in the solve window {t0:g}-{t1:g} s: {exc}") from None
+        return (t0, t1), "solve window (no gait cycle found in it)"
+    return (found.start_s, found.end_s), (f"estimated from the solve window less {DEFAULT_PADDING_S:g} s at each end "
+                                          "and the ankle moment")
 
 
 def exclude_from_geometry(geometry, exclude_muscles: Sequence[str] = (), missing_ok: bool = False):

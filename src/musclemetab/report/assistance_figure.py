@@ -7,7 +7,8 @@ the report's main workflow):
   power (W/kg, both legs), one line per energy model through the gains (each gain marked);
 * the change per muscle at the largest gain (J per cycle, one leg, no basal heat; the muscles
   changing most, the first model);
-* the change per muscle group and per phase at the same gain and model.
+* the change of the leg, per phase and per muscle group at the same gain and model (horizontal
+  bars, the leg on top).
 
 Drawn from the results table and ``assistance.csv`` (:mod:`musclemetab.analysis.assistance`);
 the Agg canvas.
@@ -59,7 +60,7 @@ def assistance_figure(results, folder, workflow: str | None = None, models=None)
                                                                    if m in set(models)]
     if not shown:
         raise OptionError("none of the report's models has assisted rows")
-    fig = _new_figure(14.0, 4.6, bottom=1.1, wspace=0.45, left=0.8)
+    fig = _new_figure(14.0, 4.6, bottom=0.75, wspace=0.45, left=0.8)
     ax_curve, ax_muscles, ax_groups = fig.subplots(1, 3, gridspec_kw={"width_ratios": [1.0, 1.1, 1.2]})
     for model in shown:
         r = rows[rows["model"].astype(str) == model].sort_values("assistance_gain")
@@ -95,11 +96,14 @@ def assistance_figure(results, folder, workflow: str | None = None, models=None)
     parts = parts[parts["unassisted_J"].abs() > 0]
     labels = [f"{p}" if lv != "phase" else f"{p} (phase)" for lv, p in zip(parts["level"], parts["part"])]
     colours = ["#1f77b4" if c < 0 else "#d62728" for c in parts["change_J"]]
-    ax_groups.bar(range(len(parts)), parts["change_J"], color=colours)
-    ax_groups.set_xticks(range(len(parts)), labels, fontsize=7, rotation=60, ha="right")
-    ax_groups.axhline(0.0, color="0.3", linewidth=0.6)
-    ax_groups.set_ylabel("change (J per cycle, one leg)")
-    ax_groups.grid(axis="y", linewidth=0.3, alpha=0.5)
+    # horizontal bars, the leg on top: labels read level, one per row (slanted under vertical bars,
+    # the boxes of neighbouring labels overlapped)
+    rows = np.arange(len(parts))[::-1]
+    ax_groups.barh(rows, parts["change_J"], color=colours)
+    ax_groups.set_yticks(rows, labels, fontsize=7)
+    ax_groups.axvline(0.0, color="0.3", linewidth=0.6)
+    ax_groups.set_xlabel("change (J per cycle, one leg)")
+    ax_groups.grid(axis="x", linewidth=0.3, alpha=0.5)
     _panel_title(ax_groups, f"leg, phases and muscle groups, gain {gain:g}, {model}", fontsize=8)
     fig.suptitle("Assisted walking: metabolic change against the unassisted trial (blue: saved, red: added)",
                  fontsize=11)

@@ -69,6 +69,7 @@ from .units import (
     INTERRUPTED,
     WARM_CHAIN,
     Unit,
+    check_assistance,
     execute_unit,
     is_complete,
     plan_units,
@@ -439,6 +440,7 @@ def run_study(
     from .samples import check_priors_muscles
 
     check_priors_muscles(study)
+    check_assistance(study)  # the device profiles against the subjects' models (the scaled ones once scaled)
     check_output_folder(out, "the study's output folder")
     check_replaceable(out, study_root_files())  # a file of the user there is refused before any unit runs
     run = StudyRun(output=out, n_planned=n_total)
@@ -450,6 +452,7 @@ def run_study(
             from .lab import prepare_study
 
             study = prepare_study(study)  # models scaled and IK computed from markers, into prepared/
+            check_assistance(study, prepared=True)
             for stage in stages:
                 for unit in stage:
                     prepare_leg_folder(out, unit)

@@ -749,6 +749,7 @@ def _subject(data, base: Path, where: str, workflows, assistance=None) -> Subjec
                                                                     assistance))
     if any(t.assistance is not None for t in trials):
         _check_assisted_subject(data, here, workflows)
+        _check_profiles(trials, side, mass, dofs, here)
     names = [t.name for t in trials]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
@@ -1013,6 +1014,20 @@ def _check_assisted_subject(data, here: str, workflows) -> None:
         raise OptionError(f"{here}: 'assistance' is solved with the effort workflows (effort-gen, effort-cal, "
                           f"effort-ten) one trial at a time; {', '.join(given)} solve the subject's trials together: "
                           "put the assisted trials in a subject of their own without them")
+
+
+def _check_profiles(trials, side: str, body_mass_kg: float, dofs, here: str) -> None:
+    """Each assistance profile of a subject's trials checked for its leg and its units, as far as
+    it can be without the model (:func:`~musclemetab.redundancy.assistance.check_profile_for_leg`;
+    the rest before any unit runs: :func:`.units.check_assistance`)."""
+    from ..errors import MusclemetabError
+    from ..redundancy.assistance import check_profile_for_leg, read_assistance
+
+    for path in dict.fromkeys(t.assistance for t in trials if t.assistance is not None):
+        try:
+            check_profile_for_leg(read_assistance(path), side, body_mass_kg, dofs=dofs)
+        except MusclemetabError as exc:
+            raise type(exc)(f"{here}: 'assistance': {exc}") from None
 
 
 def _cycle_key(value, where: str):

@@ -55,6 +55,7 @@ from .spec import EMG_TEN, STATES, Study, Subject, Trial
 
 __all__ = [
     "Unit",
+    "check_assistance",
     "UNIT_FILE",
     "plan_units",
     "is_sampled",
@@ -487,7 +488,7 @@ def _execute_unit(study: Study, unit: Unit, key: str, dependency_folder: str | N
                                                                        unit.leg(study)),
                                                 **solve_arguments(subject, unit.workflow, estimation),
                                                 **_device_arguments(subject.trial(unit.trial), unit.leg(study),
-                                                                    subject.model)},
+                                                                    subject.model, subject.side == "both")},
                                      analysis_file=ANALYSIS_FILE))
         else:
             dep = Path(dependency_folder) if dependency_folder else None
@@ -675,7 +676,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
         if subject.emg_mode is not None:
             sol = _informed_solve(study, subject, trial, unit.workflow, kwargs)
         else:
-            device = _device_arguments(trial, side, subject.model)
+            device = _device_arguments(trial, side, subject.model, subject.side == "both")
 
             def solve(warm_start=None):
                 return solve_files(subject.model, trial.ik, trial.id, unit.workflow, options=_solver_options(study),
@@ -839,19 +840,64 @@ def _model_dofs(subject: Subject, side: str) -> list[str]:
     return list(discover_dofs(read_layout(subject.model), side, None))
 
 
-def _device_arguments(trial: Trial, side: str, model) -> dict:
-    """The ``solve_files`` keywords of an assisted trial: the profile, its gain and the gait cycle a
+def _device_arguments(trial: Trial, side: str, model, both_legs: bool = False) -> dict:
+    """The ``solve_files`` keywords of an assisted trial: the profile, its gain, the gait cycle a
     profile over the cycle is mapped onto (the trial's, :func:`.events.trial_cycle`, inside its
-    ``window`` when it has one; with ``cycle`` the solve's own)."""
+    ``window`` when it has one; with ``cycle`` the solve's own) and whether the subject's other
+    leg is solved too (``both_legs``: it takes a profile of its own coordinates)."""
     if trial.assistance is None:
         return {}
-    out = {"assistance": trial.assistance, "assistance_gain": trial.assistance_gain}
+    out = {"assistance": trial.assistance, "assistance_gain": trial.assistance_gain,
+           "assistance_both_legs": both_legs}
     if trial.cycle is None:
         from .events import trial_cycle
 
         c = trial_cycle(trial, side, model)
         out["assistance_cycle_s"] = (c.start_s, c.end_s)
     return out
+
+
+def check_assistance(study: Study, prepared: bool = False) -> None:
+    """Refuse, before any unit runs, an assistance profile that the solves would refuse: a column
+    naming no coordinate of the subject's model, one of the leg's coordinates the solve leaves out,
+    none of the leg's (unless both legs are solved), a time profile not covering the trial's
+    window (a trial without ``cycle``), the units (:func:`~musclemetab.redundancy.assistance.
+    check_profile_against_model`; each error names the subject, the trial and the file). The
+    subjects whose model the study scales and the trials whose IK it computes are checked once
+    they are (``prepared``); the others before (not ``prepared``)."""
+    import warnings
+
+    from ..errors import MusclemetabError
+    from ..io import read_table
+    from ..layout import discover_dofs, read_layout
+    from ..redundancy.assistance import check_profile_against_model, read_assistance
+    from .events import _ik_window
+
+    for subject in study.subjects:
+        for trial in subject.trials:
+            if trial.assistance is None:
+                continue
+            later = subject.generic_model is not None or trial.markers is not None
+            if later != prepared:
+                continue
+            here = (f"{study.source.name + ': ' if study.source else ''}subject '{subject.name}', trial "
+                    f"'{trial.name}': 'assistance'")
+            try:
+                layout = read_layout(subject.model)
+                profile = read_assistance(trial.assistance)
+                window = _ik_window(trial) if trial.cycle is None else None
+                id_columns = list(read_table(trial.id).columns) if trial.id is not None else None
+                for side in (("r", "l") if subject.side == "both" else (subject.side,)):
+                    try:
+                        with warnings.catch_warnings():  # the solve warns of the DOFs left out
+                            warnings.simplefilter("ignore")
+                            dofs = subject.dofs or discover_dofs(layout, side, id_columns)
+                    except MusclemetabError:
+                        continue  # the trial's solves say why, unassisted too
+                    check_profile_against_model(profile, dofs, side, [c["name"] for c in layout.coordinates],
+                                                subject.body_mass_kg, window, other_leg_solved=subject.side == "both")
+            except MusclemetabError as exc:
+                raise type(exc)(f"{here}: {exc}") from None
 
 
 def _device_record(trial: Trial, sol, body_mass_kg: float) -> dict:
