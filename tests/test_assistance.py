@@ -300,12 +300,18 @@ def test_the_report_draws_the_assistance_figure(exo_study, tmp_path):
 @pytest.mark.opensim
 def test_a_study_trial_of_opensim_states_gives_the_numbers_of_the_command(exo_study, example, tmp_path):
     """A trial with ``states`` (and ``controls``) of the subject's model: one unit (workflow
-    "states") whose whole-body and per-muscle tables are those ``musclemetab metabolics --states``
-    writes for the same files (the states and controls OpenSim files of the unassisted unit,
-    its model.osim), and a results row with the phases and groups."""
+    "states") whose whole-body and per-muscle tables are those ``musclemetab metabolics --states
+    --cycle`` writes for the same files (the states and controls OpenSim files of the unassisted unit,
+    its model.osim) over the trial's gait cycle (unit.json), and a results row with the phases and
+    groups. The whole-body rate is the mean over the cycle's states worked here from the command's
+    rates at every state: 2 legs x trapezoidal mean of the leg's muscles over the states inside the
+    cycle / body mass + 1.2 W/kg."""
+    import json
+
     import pandas as pd
 
     from musclemetab.commands import main
+    from musclemetab.io import read_table
     from musclemetab.study import study_from_dict
     from musclemetab.study.runner import run_study
 
@@ -318,17 +324,38 @@ def test_a_study_trial_of_opensim_states_gives_the_numbers_of_the_command(exo_st
                                            "trials": [trial]}]}, base="/", output=tmp_path / "study")
     run = run_study(study, workers=1, progress=False)
     assert not run.failed and len(run.ran) == 1, (run.failed, run.ran)
-    assert main(["metabolics", "--states", str(unit / "states.sto"), "--controls", str(unit / "controls.sto"),
-                 "--model", str(unit / "model.osim"), "--mass", str(example.body_mass_kg), "--height",
-                 str(example.height_m), "--models", "UM10,BH04", "--out", str(tmp_path / "cli")]) == 0
     folder = tmp_path / "study" / "units" / "sub1" / "normal" / "states"
+    c = json.loads((folder / "unit.json").read_text())["cycle"]
+    events = f"{c['start_s']!r},{c['toe_off_s']!r},{c['end_s']!r}"
+    common = ["--states", str(unit / "states.sto"), "--controls", str(unit / "controls.sto"), "--model",
+              str(unit / "model.osim"), "--mass", str(example.body_mass_kg), "--height", str(example.height_m),
+              "--models", "UM10,BH04"]
+    assert main(["metabolics", *common, "--cycle", events, "--out", str(tmp_path / "cli")]) == 0
+    assert main(["metabolics", *common, "--out", str(tmp_path / "every")]) == 0
     cli = pd.read_csv(tmp_path / "cli" / "whole_body.csv").set_index("model")
     mine = pd.read_csv(folder / "whole_body.csv").set_index("model")
     pd.testing.assert_frame_equal(mine[cli.columns], cli)  # the study adds the costs of transport (its speed)
-    # the rates (energy_per_cycle_J is over the study's gait cycle, the command's over every state)
-    cols = ["model", "muscle", "muscle_W", "muscle_W_per_kg", "share_of_leg_pct", "work_mean_W"]
+    cols = ["model", "muscle", "muscle_W", "muscle_W_per_kg", "share_of_leg_pct", "work_mean_W", "energy_per_cycle_J"]
     pd.testing.assert_frame_equal(pd.read_csv(folder / "per_muscle.csv")[cols],
                                   pd.read_csv(tmp_path / "cli" / "per_muscle.csv")[cols])
+    # by hand, from the rates at every state (UM10); BH04's activation-heat decay counts the time since
+    # the stimulation's onset from the first state evaluated, so its rates are those of the cycle's run
+    every = read_table(tmp_path / "every" / "metabolics.sto")
+    t = np.asarray(every.index, dtype=float)
+    inside = (t >= c["start_s"] - 1e-9) & (t <= c["end_s"] + 1e-9)
+    assert t[0] < c["start_s"] - 0.02 and inside.sum() < t.size  # the file's states span more than the cycle
+    whole = pd.read_csv(tmp_path / "every" / "whole_body.csv").set_index("model")
+    over_cycle = read_table(tmp_path / "cli" / "metabolics.sto")
+    np.testing.assert_allclose(np.asarray(over_cycle.index, dtype=float), t[inside], atol=1e-12)
+    for model, rates, rows in (("UM10", every, inside), ("BH04", over_cycle, slice(None))):
+        muscles = [k for k in rates.columns if k.startswith(f"{model}/") and k.endswith("/total_no_basal")]
+        li = rates.to_dataframe()[muscles].to_numpy().sum(axis=1)[rows]
+        ti = t[inside]
+        mean = np.sum((li[1:] + li[:-1]) / 2 * np.diff(ti)) / (ti[-1] - ti[0])
+        want = 2 * mean / example.body_mass_kg + 1.2
+        assert mine.loc[model, "whole_body_W_per_kg"] == pytest.approx(want, rel=1e-9)
+        assert mine.loc[model, "duration_s"] == pytest.approx(ti[-1] - ti[0], abs=1e-9)
+        assert abs(whole.loc[model, "whole_body_W_per_kg"] - want) > 1e-3  # the whole file differs
     results = pd.read_csv(tmp_path / "study" / "results.csv").set_index("model")
     assert set(results["workflow"]) == {"states"}
     assert results.loc["UM10", "whole_body_W_per_kg"] == pytest.approx(cli.loc["UM10", "whole_body_W_per_kg"])

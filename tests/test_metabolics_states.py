@@ -150,8 +150,9 @@ def test_degroote_and_rigid_millard_states_agree_with_opensims_probes(gait2392, 
          ("thelen", model, gait2392.ik, states, 0.6, 0.7, 6))
     header = next(line for line in states.read_text().splitlines() if line.startswith("time"))
     assert header.count("/normalized_tendon_force") == 9 and "/fiber_length" not in header
-    read = read_opensim_states(model, states)
+    read = read_opensim_states(model, states, fiber_velocity="equilibrium")  # the probes' velocity
     assert read.muscle_classes == ("DeGrooteFregly2016Muscle",) * 9 + ("Millard2012EquilibriumMuscle",) * 9
+    assert read.velocity_sources == ("equilibrium",) * 9 + ("geometry",) * 9
     s = read.states
     want = np.array([script.activation(k, s.time_s) for k in range(len(s.muscles))])
     np.testing.assert_allclose(s.states["activation"], want, rtol=1e-9)
@@ -168,8 +169,9 @@ def test_exported_degroote_states_agree_with_opensims_probes(dgf):
 
     model, states, controls, folder = dgf
     sol = Solution.load(folder)
-    read = read_opensim_states(model, states, controls)
+    read = read_opensim_states(model, states, controls, fiber_velocity="equilibrium")  # the probes' velocity
     assert read.states.muscles == tuple(sol.muscles) and len(read.skipped_muscles) == 40  # the left leg
+    assert read.skipped_reason == "no controls"
     assert set(read.muscle_classes) == {"DeGrooteFregly2016Muscle"}
     # the exported files hold the nodes where the Hill equilibrium holds: every node but the last
     n = read.states.states["activation"].shape[1]
@@ -185,6 +187,81 @@ def test_exported_degroote_states_agree_with_opensims_probes(dgf):
     _probe_masses_worked_here(read, masses, fst)
     keep = ~read.clamped
     _agree_with_probes(read, ours, keep)
+
+
+def _leg_mean_W(states, model):
+    """The leg's muscles' rate (W, basal heat apart) averaged over the states, with the package's
+    own masses and ratios (the exported model carries no probe): the solution's and the route's
+    states are weighed alike."""
+    from musclemetab.metabolics.opensim_states import split_sides
+    from musclemetab.metabolics.solution import metabolics_from_legs
+
+    legs = split_sides(states) if not states.side else {states.side: states}
+    res = metabolics_from_legs(legs, 72.6, 1.743, models=model, trim=(0, 0))
+    return float(next(iter(res.values())).rates[model].total_without_basal().sum(0).mean())
+
+
+def test_the_packages_own_solution_round_trips_through_its_opensim_states(dgf):
+    """The package's solution -> its OpenSim files (model.osim, states.sto, controls.sto) -> the states
+    route gives the solution's rates. The states file holds no fiber velocity and the exported
+    DeGrooteFregly2016 muscles carry OpenSim's curves, not the solution's, so OpenSim's force
+    equilibrium puts about half the muscle-states off the force-velocity curve (BH04 +38 %); the route
+    differentiates OpenSim's fiber lengths in time instead. The solution's velocity at node k is the
+    forward-Euler slope from k to k+1 (its transcription), the route's the centred derivative at k: the
+    rates of the solution's own states with the centred derivative of its own fiber lengths
+    (independent of OpenSim) differ from its rates by 0.2 % (UM10) and 0.8 % (BH04); OpenSim's fiber
+    lengths (its tendon curve) add 0.3 % and 0.6 %. Tolerances: 1.5 % against the centred reference,
+    3 % against the solution (about twice the measured)."""
+    from scipy.interpolate import CubicSpline
+
+    from musclemetab.metabolics.opensim_states import read_opensim_states
+    from musclemetab.metabolics.solution import SolutionStates, read_solution_states
+    from musclemetab.muscle.curves import force_velocity
+
+    _, states, controls, folder = dgf
+    sol = read_solution_states(folder)
+    read = read_opensim_states(folder / "model.osim", states, controls)
+    assert set(read.velocity_sources) == {"derivative"} and not read.clamped.any()
+    n = read.states.time_s.size  # every node but the last (the files hold the equilibrium nodes)
+    np.testing.assert_allclose(read.states.time_s, sol.time_s[:n], atol=1e-9)
+    own = {k: v[:, :n] for k, v in sol.states.items()}
+    vmax = np.array([sol.parameters[m]["max_contraction_velocity"] for m in sol.muscles])[:, None]
+    # the forward-Euler velocity is the slope of the solution's fiber lengths (to the solver's tolerance)
+    slope = np.diff(sol.states["normalized_fiber_length"], axis=1) / np.diff(sol.time_s) / vmax
+    np.testing.assert_allclose(slope, sol.states["normalized_fiber_velocity"][:, :-1], atol=1e-6)
+    centred_v = CubicSpline(sol.time_s[:n], own["normalized_fiber_length"], axis=1)(sol.time_s[:n], 1) / vmax
+    v = read.states.states["normalized_fiber_velocity"]
+    assert np.median(np.abs(v - centred_v)) < 2e-3 and np.abs(v - centred_v).max() < 0.15
+    centred = {**own, "normalized_fiber_velocity": centred_v, "force_velocity_multiplier": force_velocity(centred_v)}
+
+    def of(values):
+        return SolutionStates(time_s=sol.time_s[:n], muscles=sol.muscles, states=values, parameters=sol.parameters,
+                              source=str(folder), side="r")
+
+    for model in ("UM10", "BH04"):
+        route, solution, reference = (_leg_mean_W(x, model) for x in (read.states, of(own), of(centred)))
+        assert route == pytest.approx(reference, rel=0.015)
+        assert route == pytest.approx(solution, rel=0.03)
+    # OpenSim's force equilibrium, the other way: far off for these states
+    eq = read_opensim_states(folder / "model.osim", states, controls, fiber_velocity="equilibrium")
+    assert eq.clamped.mean() > 0.2
+    assert _leg_mean_W(eq.states, "BH04") > 1.2 * _leg_mean_W(of(own), "BH04")
+
+
+def test_states_without_controls_leave_out_the_muscles_at_the_models_defaults(dgf):
+    """A one-leg solution's states file holds the other leg's muscles at the model's default states:
+    read without its controls file, those muscles are not evaluated (not taken for a leg at rest)."""
+    from musclemetab.metabolics.opensim_states import read_opensim_states
+    from musclemetab.redundancy import Solution
+
+    _, states, controls, folder = dgf
+    read = read_opensim_states(folder / "model.osim", states)
+    assert read.states.muscles == tuple(Solution.load(folder).muscles)
+    assert len(read.skipped_muscles) == 40 and all(m.endswith("_l") for m in read.skipped_muscles)
+    assert read.skipped_reason == "default states" and read.excitation_source == "activation"
+    with_controls = read_opensim_states(folder / "model.osim", states, controls)
+    np.testing.assert_array_equal(read.states.states["normalized_fiber_velocity"],
+                                  with_controls.states.states["normalized_fiber_velocity"])
 
 
 def test_command_records_the_probes_parameters(thelen, tmp_path, capsys):
@@ -227,6 +304,16 @@ def test_command_refuses_states_without_a_model(thelen, tmp_path, capsys):
     code = main(["metabolics", "--solution", str(tmp_path), "--controls", str(states), "--mass", "72.6",
                  "--out", str(tmp_path / "o")])
     assert code != 0 and "--controls goes with --states" in capsys.readouterr().err
+    code = main(["metabolics", "--solution", str(tmp_path), "--cycle", "0.6,0.65,0.7", "--mass", "72.6",
+                 "--out", str(tmp_path / "o")])
+    assert code != 0 and "--cycle goes with --states" in capsys.readouterr().err
+    model = str(thelen[0])
+    for cycle, says in (("0.6,0.7", "--cycle must be three times"), ("0.6,0.75,0.7", "--cycle 0.6,0.75,0.7: toe-off"),
+                        ("0.5,0.65,0.7", "states.sto: the states spans 0.6-0.7 s but the gait cycle spans 0.5-0.7 s")):
+        code = main(["metabolics", "--states", str(states), "--model", model, "--cycle", cycle, "--mass", "72.6",
+                     "--out", str(tmp_path / "o")])
+        err = capsys.readouterr().err
+        assert code != 0 and says in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "o").exists()
 
 

@@ -63,6 +63,15 @@ def add_parser(subparsers) -> None:
     p.add_argument("--controls", metavar="FILE",
                    help="with --states: the simulation's controls file (muscle excitations, columns /forceset/<muscle> "
                    "or <muscle>); the model's muscles it lacks are not evaluated. Without it excitation = activation")
+    p.add_argument("--fiber-velocity", choices=("derivative", "equilibrium"), default="derivative",
+                   help="with --states: a compliant-tendon DeGrooteFregly2016Muscle's fiber velocity from the time "
+                   "derivative of OpenSim's fiber lengths along the states ('derivative', the default: right for "
+                   "states made with other curves, such as a musclemetab solution's states.sto) or from OpenSim's "
+                   "force equilibrium ('equilibrium': as OpenSim's own probes take it); other muscles always take "
+                   "OpenSim's (docs/metabolics.md, Energy of an OpenSim motion)")
+    p.add_argument("--cycle", metavar="START,TOE_OFF,END",
+                   help="with --states: the gait events (s) of the cycle the rates are averaged over (and the stance "
+                   "and swing of per_muscle.csv); default: every state of the file")
     p.add_argument("--muscle-parameters", choices=("probes", "package"), default="probes",
                    help="with --states and a model carrying OpenSim metabolic probes: 'probes' (default) takes each "
                    "muscle's mass and slow-twitch ratio from the model's probes (its specific tension, density, "
@@ -140,10 +149,12 @@ def run(args) -> int:
     check_basal_arguments(args)
     if args.states is not None:
         return _run_states(args, models)
-    if args.controls is not None:
+    if args.controls is not None or args.cycle is not None:
         from ..errors import OptionError
 
-        raise OptionError("--controls goes with --states (a solution folder carries its excitations)")
+        option = "--controls" if args.controls is not None else "--cycle"
+        raise OptionError(f"{option} goes with --states (a solution folder carries its excitations and the cycle "
+                          "a solve over --cycle recorded; musclemetab analyse --cycle averages a solution over another)")
     folders = solution_folders(args.solution)
     check_metabolics_outputs(args.out, folders)
     sensitivity = _sensitivity_parameters(args.sensitivity, folders)
@@ -213,28 +224,41 @@ def _run_states(args, models) -> int:
         raise OptionError("--states needs --model: the OpenSim model the states belong to")
     if args.sensitivity is not None:
         raise OptionError("--sensitivity needs a solution folder (--solution), not --states")
-    read = read_opensim_states(args.model, args.states, args.controls)
+    cycle = _states_cycle(args.cycle)
+    read = read_opensim_states(args.model, args.states, args.controls, fiber_velocity=args.fiber_velocity)
     legs = split_sides(read.states)
     check_metabolics_outputs(args.out, legs)
     results, used = states_metabolics(
         read, legs, args.mass, args.height, models=models, basal=args.basal,
         basal_rate_W_per_kg=args.basal_coefficient, basal_exponent=args.basal_exponent, speed_m_per_s=args.speed,
-        muscle_properties=args.muscle_properties, strict=args.strict, muscle_parameters=args.muscle_parameters)
+        muscle_properties=args.muscle_properties, strict=args.strict, muscle_parameters=args.muscle_parameters,
+        cycle_s=None if cycle is None else (cycle.start_s, cycle.end_s))
     if used:
         for r in results.values():
             r.muscle_parameters = f"OpenSim metabolic probes of the model: {used}"
         note(f"muscle masses and slow-twitch ratios from the model's metabolic probes ({used}); "
              "--muscle-parameters package for the package's tables")
-    files = write_legs_metabolics(results, args.out)
+    files = write_legs_metabolics(results, args.out, cycle=cycle)
     _write_mat(args, results)
     n_cl = int(read.clamped.sum()) if read.clamped is not None else 0
     if n_cl:
         act = read.states.states["activation"][read.clamped]
+        how = ("the derivative of OpenSim's fiber length" if args.fiber_velocity == "derivative"
+               else "OpenSim's equilibrium")
         note(f"{n_cl} of {read.clamped.size} muscle-states of DeGrooteFregly2016 muscles have a "
-             f"fiber velocity off the force-velocity curve in OpenSim (activation there up to {act.max():.3g}); "
+             f"fiber velocity from {how} off the force-velocity curve (activation there up to {act.max():.3g}); "
              "taken at the curve's bound")
     excitation = ("from " + str(args.controls)) if read.excitation_source == "controls" else "= activation"
-    skipped = f", {len(read.skipped_muscles)} muscles without controls skipped" if read.skipped_muscles else ""
+    skipped = ""
+    if read.skipped_muscles:
+        why = ("without controls" if read.skipped_reason == "no controls"
+               else "whose states are the model's defaults at every state")
+        skipped = f", {len(read.skipped_muscles)} muscles {why} not evaluated"
+        if read.skipped_reason != "no controls":
+            note(f"{len(read.skipped_muscles)} muscles of {args.model} ({read.skipped_muscles[0]}, ...) hold the "
+                 f"model's default states all along {args.states} (not simulated, e.g. the other leg of a one-leg "
+                 "solution): not evaluated")
+    over = "" if cycle is None else f", averaged over the cycle {cycle.start_s:g}-{cycle.end_s:g} s"
     first = next(iter(results.values()))
     if len(results) == 1:
         (side, result), = results.items()
@@ -246,10 +270,28 @@ def _run_states(args, models) -> int:
         whole = f"legs {' + '.join(results)} added"
         means = ", ".join(f"{m} {v:.2f}" for m, v in add_legs(results).items())
     print(f"metabolics: {len(first.models)} models x {len(read.states.muscles)} muscles x {read.states.time_s.size} "
-          f"states of {args.states} (excitation {excitation}{skipped}) -> {args.out} "
+          f"states of {args.states} (excitation {excitation}{skipped}{over}) -> {args.out} "
           f"({', '.join(sorted({p.name for p in files.values()}))}); {whole} (W/kg, basal {args.basal}): {means}")
     _plausibility(args, {}, results)
     return 0
+
+
+def _states_cycle(text):
+    """``--cycle START,TOE_OFF,END`` of ``metabolics --states``: a :class:`~musclemetab.events.GaitCycle`
+    (``None`` without the option)."""
+    from ..errors import DataMismatchError, OptionError
+    from ..events import GaitCycle
+
+    if text is None:
+        return None
+    try:
+        start, toe_off, end = (float(v) for v in text.split(","))
+    except ValueError:
+        raise OptionError(f"--cycle must be three times in seconds, START,TOE_OFF,END, not '{text}'") from None
+    try:
+        return GaitCycle(start, toe_off, end)
+    except (DataMismatchError, OptionError) as exc:
+        raise OptionError(f"--cycle {text}: {exc}; give START < TOE_OFF < END in seconds") from None
 
 
 def _write_mat(args, results, folders=None) -> None:

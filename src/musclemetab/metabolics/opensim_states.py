@@ -5,10 +5,16 @@ section "Energy of an OpenSim motion").
 ``states.sto``) into the :class:`~musclemetab.metabolics.solution.SolutionStates` the package's
 solutions give: OpenSim realises every state to ``Dynamics`` in the OpenSim worker
 (:func:`musclemetab.opensim_bridge.trajectory.muscles_along_states`) and its own muscle
-dynamics give the fiber length and velocity, the force-length and force-velocity multipliers,
-the passive fiber force, activation and excitation (from the controls file; without one,
-excitation = activation). ``F0``, ``lMo`` and ``vmax`` are the model's. So the per-muscle and
-whole-body tables follow from :func:`~musclemetab.metabolics.solution.metabolics_from_legs`.
+dynamics give the fiber length, the force-length multiplier, the passive fiber force, activation
+and excitation (from the controls file; without one, excitation = activation, and the muscles
+holding the model's default states at every state are left out). The fiber velocity is OpenSim's
+(equilibrium with a fiber-length state, or the geometry of a rigid tendon), except for a
+compliant-tendon DeGrooteFregly2016Muscle, whose velocity is by default the time derivative of
+OpenSim's fiber lengths along the states (its force equilibrium is ill-conditioned at low
+activation and wrong for states made with other curves, such as the package's own solutions:
+``fiber_velocity="equilibrium"`` keeps it). ``F0``, ``lMo`` and ``vmax`` are the model's. So the
+per-muscle and whole-body tables follow from
+:func:`~musclemetab.metabolics.solution.metabolics_from_legs`.
 
 When the model carries OpenSim metabolic probes (``Umberger2010MuscleMetabolicsProbe``,
 ``Bhargava2004MuscleMetabolicsProbe``), :func:`probe_muscle_properties` gives their per-muscle
@@ -27,9 +33,12 @@ import numpy as np
 from ..errors import DataMismatchError, OptionError
 from .solution import SolutionStates
 
-__all__ = ["OpenSimStates", "read_opensim_states", "probe_muscle_properties", "split_sides",
+__all__ = ["OpenSimStates", "read_opensim_states", "FIBER_VELOCITY_SOURCES", "probe_muscle_properties", "split_sides",
            "MUSCLE_PARAMETER_SOURCES", "states_metabolics"]
 
+#: ``--fiber-velocity``: a compliant-tendon DeGrooteFregly2016Muscle's fiber velocity from the time
+#: derivative of OpenSim's fiber lengths along the states, or from OpenSim's force equilibrium
+FIBER_VELOCITY_SOURCES = ("derivative", "equilibrium")
 #: ``--muscle-parameters``: the model's probes' (when it has any) or the package's own tables
 MUSCLE_PARAMETER_SOURCES = ("probes", "package")
 _QUANTITIES = ("excitation", "activation", "normalized_fiber_length", "normalized_fiber_velocity",
@@ -46,22 +55,34 @@ class OpenSimStates:
     probes: list = field(default_factory=list)
     #: ``(muscles, states)``: a DeGrooteFregly2016Muscle's fiber velocity off its curve, set to the bound
     clamped: np.ndarray | None = None
+    #: the model's muscles not evaluated: without controls (``skipped_reason`` ``"no controls"``), or
+    #: whose every state variable is the model's default at every state (``"default states"``: the
+    #: other leg of a one-leg solution's model, read without its controls file)
     skipped_muscles: tuple[str, ...] = ()
+    skipped_reason: str = ""
     #: ``"controls"`` (from the controls file) or ``"activation"`` (excitation = activation)
     excitation_source: str = "activation"
     muscle_classes: tuple[str, ...] = ()
-    #: OpenSim's fiber velocity (m/s), ``(muscles, states)``
+    #: the fiber velocity (m/s) taken, ``(muscles, states)``
     fiber_velocity_m_per_s: np.ndarray | None = None
+    #: per muscle, where its fiber velocity comes from: ``"derivative"`` (of OpenSim's fiber length
+    #: along the states), ``"equilibrium"`` (OpenSim's muscle equilibrium) or ``"geometry"`` (rigid tendon)
+    velocity_sources: tuple[str, ...] = ()
 
 
 def read_opensim_states(model: str | os.PathLike, states: str | os.PathLike,
-                        controls: str | os.PathLike | None = None) -> OpenSimStates:
+                        controls: str | os.PathLike | None = None, *,
+                        fiber_velocity: str = "derivative") -> OpenSimStates:
     """The muscle states of every muscle of ``model`` along the states file ``states``, from
     OpenSim's muscle dynamics (see the module's description).
 
     ``controls``: the simulation's controls file (columns ``/forceset/<muscle>`` or
     ``<muscle>``, interpolated to the state times); the model's muscles it has no column for
-    are not evaluated. Without it every muscle's excitation is its activation.
+    are not evaluated. Without it every muscle's excitation is its activation, and the muscles
+    whose state variables are the model's defaults at every state are not evaluated.
+    ``fiber_velocity``: a compliant-tendon DeGrooteFregly2016Muscle's fiber velocity from the time
+    derivative of OpenSim's fiber lengths (``"derivative"``) or OpenSim's force equilibrium
+    (``"equilibrium"``, as OpenSim's probes take it); see ``docs/metabolics.md`` section 4.1.
 
     Raises
     ------
@@ -70,8 +91,10 @@ def read_opensim_states(model: str | os.PathLike, states: str | os.PathLike,
     """
     from ..opensim_bridge import call
 
+    if fiber_velocity not in FIBER_VELOCITY_SOURCES:
+        raise OptionError(f"fiber velocity must be {' or '.join(FIBER_VELOCITY_SOURCES)}, not {fiber_velocity!r}")
     got = call("trajectory:muscles_along_states", str(model), str(states),
-               None if controls is None else str(controls))
+               None if controls is None else str(controls), fiber_velocity)
     if got["failed_states"]:
         t, msg = got["failed_states"][0]
         raise DataMismatchError(
@@ -85,9 +108,11 @@ def read_opensim_states(model: str | os.PathLike, states: str | os.PathLike,
                          states={k: np.asarray(got[k], dtype=float) for k in _QUANTITIES}, parameters=params,
                          source=str(states))
     return OpenSimStates(states=sol, probes=list(got["probes"]), clamped=np.asarray(got["clamped"], dtype=bool),
-                         skipped_muscles=tuple(got["skipped_muscles"]), excitation_source=got["excitation_source"],
+                         skipped_muscles=tuple(got["skipped_muscles"]),
+                         skipped_reason=got["skipped_reason"] if got["skipped_muscles"] else "", excitation_source=got["excitation_source"],
                          muscle_classes=tuple(got["muscle_classes"]),
-                         fiber_velocity_m_per_s=np.asarray(got["fiber_velocity_m_per_s"], dtype=float))
+                         fiber_velocity_m_per_s=np.asarray(got["fiber_velocity_m_per_s"], dtype=float),
+                         velocity_sources=tuple(got["velocity_sources"]))
 
 
 def probe_muscle_properties(read: OpenSimStates) -> tuple[dict, dict, str]:
@@ -133,15 +158,18 @@ def split_sides(states: SolutionStates) -> dict[str, SolutionStates]:
 
 
 def states_metabolics(read: OpenSimStates, legs: dict, body_mass_kg: float, height_m: float | None, *,
-                      muscle_parameters: str = "probes", muscle_properties=None, **options) -> tuple[dict, str]:
+                      muscle_parameters: str = "probes", muscle_properties=None, cycle_s=None,
+                      **options) -> tuple[dict, str]:
     """The metabolic rates of the legs ``legs`` (:func:`split_sides` of ``read.states``, or some of
     them) of an OpenSim states file (``musclemetab metabolics --states`` and a study trial's
     ``states``): ``({side: SolutionMetabolics}, the probes used)``. With ``muscle_parameters =
     "probes"`` the muscle masses and slow-twitch ratios are those of the model's metabolic probes
     (:func:`probe_muscle_properties`; ``""`` when it has none), the rows of ``muscle_properties``
     winning over them; the ``options`` are those of
-    :func:`~musclemetab.metabolics.solution.metabolics_from_legs` (every state is evaluated: no
-    trimming)."""
+    :func:`~musclemetab.metabolics.solution.metabolics_from_legs`. ``cycle_s``: ``(start, end)`` (s)
+    of the gait cycle the rates are averaged over (the states inside it are kept; the states must
+    cover it to within 1.5 state intervals, else :class:`~musclemetab.errors.DataMismatchError`);
+    ``None`` keeps every state."""
     from .solution import metabolics_from_legs
 
     if muscle_parameters not in MUSCLE_PARAMETER_SOURCES:
@@ -159,7 +187,13 @@ def states_metabolics(read: OpenSimStates, legs: dict, body_mass_kg: float, heig
         for values, column in ((masses, "mass_kg"), (fractions, "slow_twitch_fraction")):
             for m in [m for m in (values or {}) if overrides.for_muscle(m).get(column) is not None]:
                 del values[m]
-    results = metabolics_from_legs(legs, body_mass_kg, height_m, trim=(0, 0), muscle_properties=muscle_properties,
+    span = dict(trim=(0, 0))
+    if cycle_s is not None:
+        from ..events import coverage
+
+        coverage(read.states.time_s, float(cycle_s[0]), float(cycle_s[1]), None, f"{read.states.source}: the states")
+        span = dict(trim=None, cycle_s=(float(cycle_s[0]), float(cycle_s[1])))
+    results = metabolics_from_legs(legs, body_mass_kg, height_m, **span, muscle_properties=muscle_properties,
                                    muscle_masses_kg=masses or None, slow_twitch_fractions=fractions or None, **options)
     if used:
         for r in results.values():

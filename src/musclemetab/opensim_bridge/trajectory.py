@@ -10,7 +10,9 @@ the model, sets every muscle's excitation, realises each state to ``Dynamics`` a
 OpenSim's fiber length and velocity, activation, excitation, active force-length and
 force-velocity multipliers and passive fiber force. Rigid-tendon muscles (no fiber-length
 state) take their fiber length and velocity from the model's geometry, as OpenSim computes
-them.
+them. A compliant-tendon DeGrooteFregly2016Muscle takes, with ``fiber_velocity="derivative"``
+(the default), the time derivative of its fiber length along the states instead of its force
+equilibrium's velocity (see :func:`muscles_along_states`).
 
 Excitation: with a controls file, each muscle's control from its column (``/forceset/<muscle>``
 or ``<muscle>``), linearly interpolated to the state times; without one, the muscle's
@@ -109,12 +111,18 @@ def _controls(controls_path, table, labels, muscles, times):
     return out
 
 
-def muscles_along_states(model_path: str, states_path: str, controls_path: str | None = None) -> dict:
+def muscles_along_states(model_path: str, states_path: str, controls_path: str | None = None,
+                         fiber_velocity: str = "derivative") -> dict:
     """OpenSim's muscle quantities of every muscle of ``model_path`` at every state of
     ``states_path`` (see the module's description).
 
     With a controls file, the muscles it has no column for apply no force and are not evaluated
-    (``skipped_muscles``: e.g. the other leg's muscles of a one-leg solution's model).
+    (``skipped_muscles``: e.g. the other leg's muscles of a one-leg solution's model); without one,
+    the muscles whose every state variable is the model's default at every state (the same other
+    leg), unless that is every muscle (``skipped_reason``: ``"no controls"``, ``"default states"``).
+    ``fiber_velocity``: ``"derivative"`` or ``"equilibrium"`` for a compliant-tendon
+    DeGrooteFregly2016Muscle (``velocity_sources`` per muscle: ``derivative``, ``equilibrium``,
+    ``geometry``).
 
     Returns ``muscles`` (names, model order), ``time_s``, the quantities of
     :data:`MUSCLE_GETTERS` as arrays ``(muscles, states)`` (NaN at a state OpenSim cannot
@@ -149,7 +157,7 @@ def muscles_along_states(model_path: str, states_path: str, controls_path: str |
             if m not in driven:
                 m.set_appliesForce(False)
         mus = driven
-    model.initSystem()
+    default = model.initSystem()
     mset = model.getMuscles()
     mus = [mset.get(m.getName()) for m in mus]
     try:
@@ -183,6 +191,21 @@ def muscles_along_states(model_path: str, states_path: str, controls_path: str |
                               else [c.getDefaultValue()] * n))
     sv = model.getStateVariableNames()
     sv = {sv.get(i) for i in range(sv.getSize())}
+    at_default = []
+    if controls_path is None and n:  # muscles whose every state is the model's default at every state
+        # (the other leg of a one-leg solution's model): not evaluated
+        for m in mus:
+            names = m.getStateVariableNames()
+            names = [names.get(i) for i in range(names.getSize())]
+            want = [m.getStateVariableValue(default, x) for x in names]
+            if names and all(m.getStateVariableValue(traj.get(s), x) == w
+                             for s in range(n) for x, w in zip(names, want)):
+                at_default.append(m)
+        if len(at_default) < len(mus):
+            skipped = [m.getName() for m in at_default]
+            mus = [m for m in mus if m not in at_default]
+        else:
+            at_default = []
     if controls_path is not None:
         excitation, source = _controls(controls_path, ctable, clabels, mus, times), "controls"
     else:
@@ -232,22 +255,49 @@ def muscles_along_states(model_path: str, states_path: str, controls_path: str |
             by_label = {labels_of[j][i]: vals.get(i) for i in range(vals.size())}
             for mu in names:
                 probe_out[j][mu][s] = by_label.get(f"{name}_{mu}", math.nan)
-    # a DeGrooteFregly2016Muscle with a compliant tendon solves its fiber velocity from the force
-    # equilibrium, which its curves cannot meet when its active force a fL is near zero: the
-    # velocity leaves the force-velocity curve's -vmax..vmax or is not finite. Such muscle-states
-    # take the bound (0 when not a number), the curve's multiplier and the passive force there; counted in ``clamped``
+    # a DeGrooteFregly2016Muscle with a compliant tendon takes its fiber velocity from its force
+    # equilibrium: v = fV^-1((fT / cos(alpha) - fP) / (a fL)). That holds only for states that meet
+    # OpenSim's own curves (a simulation of this model) and is ill-conditioned where a fL is all but
+    # zero: states made with other curves (the package's own solutions, exported) land far off the
+    # force-velocity curve. "derivative" takes the time derivative of OpenSim's fiber length along the
+    # states instead (a not-a-knot cubic spline through the states' fiber lengths), and with it the
+    # muscle's force-velocity multiplier and passive force; "equilibrium" keeps OpenSim's velocity.
+    # Either way a velocity beyond the curve's -vmax..vmax (or not a number) takes the bound (0 when
+    # not a number), the curve's multiplier and the passive force there; counted in ``clamped``
     v = out["normalized_fiber_velocity"]
     clamped = np.zeros(v.shape, dtype=bool)
+    sources = []
     for i, m in enumerate(mus):
         dgf = osim.DeGrooteFregly2016Muscle.safeDownCast(m)
         if dgf is None:
+            sources.append("geometry" if m.get_ignore_tendon_compliance() else "equilibrium")
             continue
-        row = v[i]
-        off = ~np.isnan(out["activation"][i]) & ~(np.abs(row) <= 1.0)
-        for s in np.flatnonzero(off):
+        lmo, vmax = m.getOptimalFiberLength(), m.getMaxContractionVelocity()
+        ok = ~np.isnan(out["activation"][i])
+        if fiber_velocity == "derivative" and not m.get_ignore_tendon_compliance() and ok.sum() >= 2:
+            from scipy.interpolate import CubicSpline
+
+            if not np.all(np.diff(times[ok]) > 0):
+                k = int(np.flatnonzero(np.diff(times[ok]) <= 0)[0])
+                raise DataMismatchError(
+                    f"{states_path}: the state times do not increase (t = {times[ok][k]:g} s, then "
+                    f"{times[ok][k + 1]:g} s), so the fiber lengths cannot be differentiated in time; drop the "
+                    "repeated rows, or take OpenSim's equilibrium velocity (--fiber-velocity equilibrium)")
+            lm = out["fiber_length_m"][i]
+            vel = CubicSpline(times[ok], lm[ok], bc_type="not-a-knot")(times[ok], 1)
+            out["fiber_velocity_m_per_s"][i, ok] = vel
+            out["normalized_fiber_velocity"][i, ok] = vel / (lmo * vmax)
+            sources.append("derivative")
+        else:
+            sources.append("geometry" if m.get_ignore_tendon_compliance() else "equilibrium")
+        row = out["normalized_fiber_velocity"][i]
+        off = ok & ~(np.abs(row) <= 1.0)
+        # the derivative's states take the multiplier and passive force at their velocity; OpenSim's own
+        # (equilibrium) are kept where on the curve
+        for s in np.flatnonzero(ok if sources[-1] == "derivative" else off):
             vb = 0.0 if math.isnan(row[s]) else float(np.clip(row[s], -1.0, 1.0))
             out["normalized_fiber_velocity"][i, s] = vb
-            out["fiber_velocity_m_per_s"][i, s] = vb * m.getOptimalFiberLength() * m.getMaxContractionVelocity()
+            out["fiber_velocity_m_per_s"][i, s] = vb * lmo * vmax
             out["force_velocity_multiplier"][i, s] = dgf.calcForceVelocityMultiplier(vb)
             out["passive_fiber_force_N"][i, s] = m.getMaxIsometricForce() * (  # the muscle's passive force there
                 dgf.calcPassiveForceMultiplier(out["normalized_fiber_length"][i, s]) + dgf.get_fiber_damping() * vb)
@@ -263,8 +313,10 @@ def muscles_along_states(model_path: str, states_path: str, controls_path: str |
     out.update(
         muscles=[m.getName() for m in mus],
         skipped_muscles=skipped,
+        skipped_reason="no controls" if controls_path is not None else "default states",
         clamped=clamped,
         muscle_classes=[m.getConcreteClassName() for m in mus],
+        velocity_sources=sources,
         time_s=times,
         failed_states=failed,
         excitation_source=source,

@@ -733,7 +733,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
     # window) bound another span than the solve's own (its cycle, or its window less the padding)
     rates_over_s = None if sol is None or averaged_by_default(recorded_trial(sol), cycle) else \
         [cycle.start_s, cycle.end_s]
-    result = states(speed) if states is not None else metabolics_from_solution(
+    result = states(speed, cycle) if states is not None else metabolics_from_solution(
         sol, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
         basal_rate_W_per_kg=study.basal_coefficient, basal_exponent=study.basal_exponent,
         speed_m_per_s=speed, muscle_properties=subject.muscle_properties, cycle_s=rates_span_s(rates_over_s),
@@ -809,8 +809,9 @@ def _window_record(trial: Trial, sol) -> dict:
 
 
 def _states_metabolics(study: Study, subject: Subject, trial: Trial, side: str):
-    """A function of the walking speed giving the trial's metabolic rates of ``side`` from its
-    OpenSim states file, as ``musclemetab metabolics --states`` computes them
+    """A function of the walking speed and the trial's gait cycle giving the trial's metabolic rates of
+    ``side`` from its OpenSim states file averaged over that cycle, as ``musclemetab metabolics
+    --states --cycle`` computes them
     (:func:`musclemetab.metabolics.opensim_states.states_metabolics`: the model's probes' muscle
     masses when it has any). The states are read (by OpenSim) at once, before the speed is known."""
     from ..metabolics.opensim_states import read_opensim_states, split_sides, states_metabolics
@@ -821,11 +822,12 @@ def _states_metabolics(study: Study, subject: Subject, trial: Trial, side: str):
         raise DataMismatchError(f"{trial.states}: no muscle of the {'right' if side == 'r' else 'left'} leg "
                                 f"(the subject's side); it has the legs {', '.join(legs)}")
 
-    def rates(speed):
+    def rates(speed, cycle):
         results, _ = states_metabolics(
             read, {side: legs[side]}, subject.body_mass_kg, subject.height_m, models=list(study.models),
             basal=study.basal, basal_rate_W_per_kg=study.basal_coefficient, basal_exponent=study.basal_exponent,
-            speed_m_per_s=speed, muscle_properties=subject.muscle_properties)
+            speed_m_per_s=speed, muscle_properties=subject.muscle_properties,
+            cycle_s=(cycle.start_s, cycle.end_s))
         return results[side]
 
     return rates
