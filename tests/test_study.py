@@ -304,6 +304,23 @@ def test_a_trial_naming_its_cycle_is_averaged_over_it_as_analyse_does(pool_run, 
     assert got.loc["UM10", "duration_s"] == pytest.approx(0.7, abs=1e-9)
 
 
+def test_the_printed_rates_carry_the_uncertainty_bands(capsys):
+    """With uncertainty samples the printed table gives each rate with its 5-95 % band and says how
+    many samples are behind the bands and how many were left out, summed over the units."""
+    from musclemetab.commands.run import print_whole_body
+
+    rows = pd.DataFrame({"subject": "s", "trial": ["slow", "slow", "fast", "fast"], "workflow": "effort-gen",
+                         "model": ["UM10", "BH04"] * 2, "whole_body_W_per_kg": [4.5, 3.1, 6.25, 4.0],
+                         "whole_body_W_per_kg_p05": [4.2, 2.9, 5.9, 3.8], "whole_body_W_per_kg_p95": [4.9, 3.4, 6.6, 4.3],
+                         "uncertainty_samples": [7, 7, 8, 8], "uncertainty_rejected": [1, 1, 0, 0]})
+    print_whole_body(rows)
+    out = capsys.readouterr().out.splitlines()
+    assert out[1] == "whole-body metabolic rate, W/kg (two legs + basal heat), [5-95 % band of the uncertainty samples]:"
+    assert out[6].split() == ["UM10", "4.50", "[4.20-4.90]", "6.25", "[5.90-6.60]"]
+    assert out[7].split() == ["BH04", "3.10", "[2.90-3.40]", "4.00", "[3.80-4.30]"]
+    assert out[8].startswith("uncertainty: 15 samples behind the bands, 1 left out")
+
+
 def test_bad_scheduler_address_is_an_option_error(pool_run, tmp_path, monkeypatch):
     pytest.importorskip("distributed")
     import musclemetab.study.runner as runner

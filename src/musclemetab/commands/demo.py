@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 from .options import add_study_arguments
-from .run import add_uncertainty_arguments, add_warm_start_arguments, apply_uncertainty_arguments, exit_status, print_run
+from .run import (add_uncertainty_arguments, add_warm_start_arguments, apply_uncertainty_arguments, exit_status,
+                  print_run, print_whole_body)
 
 __all__ = ["add_parser", "run"]
 
@@ -39,9 +40,6 @@ def run(args) -> int:
     if result.interrupted:
         return exit_status(result)
     if not result.failed and result.results is not None and len(result.results):
-        table = result.results.pivot_table(index="model", columns=["workflow", "trial"], values="whole_body_W_per_kg")
-        trials = list(dict.fromkeys(result.results.sort_values("speed_m_per_s")["trial"]))  # by speed
-        table = table.reindex(columns=sorted(table.columns, key=lambda c: (c[0], trials.index(c[1]))))
-        print("\nwhole-body metabolic rate, W/kg (two legs + 1.2 W/kg basal):")
-        print(table.round(2).to_string())
+        by_speed = result.results.sort_values(["workflow", "speed_m_per_s"], kind="stable")
+        print_whole_body(by_speed, keys=("workflow", "trial"))
     return exit_status(result)

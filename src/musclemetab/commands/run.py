@@ -150,16 +150,29 @@ def run(args) -> int:
 PRINTED_UNITS = 12
 
 
-def print_whole_body(results, limit: int = PRINTED_UNITS) -> None:
+def print_whole_body(results, limit: int = PRINTED_UNITS, keys=("subject", "trial", "workflow")) -> None:
     """Print each unit's whole-body rate of each model (W/kg, the results table's rows; the legs
-    added for a subject solved on both), units as columns, when there are at most ``limit`` of them."""
+    added for a subject solved on both), units as columns (``keys``, in the table's order), when
+    there are at most ``limit`` of them; with uncertainty samples, each rate with its band
+    (``[p05-p95]``) and, below, the samples behind the bands and those left out."""
     if results is None or not len(results):
         return
-    keys = [k for k in ("subject", "trial", "workflow") if k in results.columns]
+    keys = [k for k in keys if k in results.columns]
     units = results.drop_duplicates(keys)
     if len(units) > limit:
         print(f"whole-body rates of {len(units)} units: the study folder's results.csv")
         return
-    table = results.pivot_table(index="model", columns=keys, values="whole_body_W_per_kg", sort=False)
-    print("\nwhole-body metabolic rate, W/kg (two legs + basal heat):")
-    print(table.round(2).to_string())
+    band = "whole_body_W_per_kg_p05" in results.columns and results["whole_body_W_per_kg_p05"].notna().any()
+    cells = results.assign(cell=[
+        f"{r.whole_body_W_per_kg:.2f}" + (f" [{r.whole_body_W_per_kg_p05:.2f}-{r.whole_body_W_per_kg_p95:.2f}]"
+                                           if band and r.whole_body_W_per_kg_p05 == r.whole_body_W_per_kg_p05 else "")
+        for r in results.itertuples()])
+    table = cells.pivot_table(index="model", columns=keys, values="cell", aggfunc="first", sort=False)
+    print("\nwhole-body metabolic rate, W/kg (two legs + basal heat)"
+          + (", [5-95 % band of the uncertainty samples]:" if band else ":"))
+    print(table.to_string())
+    if band:
+        used = int(units["uncertainty_samples"].fillna(0).sum())
+        left = int(units["uncertainty_rejected"].fillna(0).sum())
+        print(f"uncertainty: {used} samples behind the bands, {left} left out (a plausibility flag or no "
+              "convergence; results.csv uncertainty_band and uncertainty_note say how each band was taken)")
