@@ -562,6 +562,11 @@ def test_export_refuses_a_metabolics_folder_without_rates_and_names_its_own_opti
     assert main(["export", "--mat", str(tmp_path / "x.mat"), str(s / "r"), "--metabolics", str(s / "r")]) == 1
     assert capsys.readouterr().err == (f"musclemetab: error: {s / 'r'}: no metabolics.sto (--metabolics); give the "
                                        f"folder written by 'musclemetab metabolics --solution {s / 'r'}'\n")
+    (tmp_path / "afile").write_text("x")  # analyse's --out where a file is: the option's one line
+    m = cli_flow[1]
+    assert main(["analyse", "--solution", str(s), "--metabolics", str(m), "--out", str(tmp_path / "afile")]) == 1
+    assert capsys.readouterr().err == (f"musclemetab: error: --out {tmp_path / 'afile'} is an existing file, not a "
+                                       "folder; give the path of a folder\n")
     (tmp_path / "mine.mat").write_text("the user's")
     assert main(["export", "--mat", str(tmp_path / "mine.mat"), str(s / "r")]) == 1
     assert capsys.readouterr().err.endswith("it is not replaced: move the file away, or give another file name "

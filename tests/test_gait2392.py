@@ -170,6 +170,10 @@ def test_bad_trial_input_one_line_no_output(gait2392, tmp_path, capsys):
         (["--id", id_alien, "--dofs", "knee_angle_r", "hip_flexion_r", "--window", "0.6:1.4"],
          "missing inverse-dynamics column knee_angle_r_moment"),
         (["--id", gait2392.id, "--dofs", "knee_angle_r", "wrist_flex_r"], "has no coordinate wrist_flex_r"),
+        # the kinematics given as the inverse dynamics: named, and said to look like kinematics
+        (["--id", gait2392.ik], f"the inverse dynamics {gait2392.ik} holds no moment for the right side's DOFs"),
+        (["--id", gait2392.ik], "as in a kinematics file: check that --id names the inverse dynamics and --ik the "
+                                "kinematics"),
         (["--external-loads", gait2392.external_loads, "--window", "2.0:3.0"], "ends 0.500 s before"),
         (["--external-loads", gait2392.external_loads, "--side", "l", "--cycle", "3"], "cycle 3 does not exist"),
         # no forces: neither cycle from the kinematics (0.60-1.83, 1.83-3.05 s) fits the stored ID (0.4-1.6 s);

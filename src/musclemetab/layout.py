@@ -236,13 +236,14 @@ def foot_bodies(layout: ModelLayout, side: str) -> tuple[str, str]:
     return heel, toe
 
 
-def discover_dofs(layout: ModelLayout, side: str, id_columns: Iterable[str] | None = None) -> list[str]:
+def discover_dofs(layout: ModelLayout, side: str, id_columns: Iterable[str] | None = None,
+                  source: str | os.PathLike | None = None) -> list[str]:
     """The side's DOFs (:func:`side_dofs`) that the inverse dynamics holds ``<dof>_moment`` for.
 
     The others are left out with a :class:`~musclemetab.errors.MusclemetabWarning` naming them.
 
     ``id_columns=None`` keeps them all (inverse dynamics computed by OpenSim holds every
-    coordinate).
+    coordinate). ``source``: the inverse-dynamics file(s) the messages name.
     """
     dofs = side_dofs(layout, side)
     if id_columns is None:
@@ -250,19 +251,24 @@ def discover_dofs(layout: ModelLayout, side: str, id_columns: Iterable[str] | No
     cols = set(id_columns)
     kept = [d for d in dofs if f"{d}_moment" in cols]
     missing = [d for d in dofs if d not in kept]
+    what = f"the inverse dynamics {source}" if source is not None else "the inverse dynamics"
     if missing and kept:
         import warnings
 
         from .errors import MusclemetabWarning
 
         warnings.warn(
-            f"the inverse dynamics holds no moment for {name_list(missing)}: solved without "
+            f"{what} holds no moment for {name_list(missing)}: solved without "
             f"{'it' if len(missing) == 1 else 'them'} (give --dofs to choose the DOFs)", MusclemetabWarning, stacklevel=2,
         )
     if not kept:
+        angles = [d for d in dofs if d in cols]  # the coordinates themselves: a kinematics file
+        why = (f"; its columns are the coordinates ({name_list(angles)}), as in a kinematics file: check that --id "
+               "names the inverse dynamics and --ik the kinematics") if angles else \
+            "; check the side and the inverse-dynamics file"
         raise DataMismatchError(
-            f"the inverse dynamics holds no moment for the {SIDE_NAMES[side]} side's DOFs "
-            f"({', '.join(f'{d}_moment' for d in dofs)}); check the side and the inverse-dynamics file"
+            f"{what} holds no moment for the {SIDE_NAMES[side]} side's DOFs "
+            f"({', '.join(f'{d}_moment' for d in dofs)}){why}"
         )
     return kept
 

@@ -185,8 +185,9 @@ def run(args) -> int:
                                  "give a solution folder written by 'musclemetab solve'")
     check_speed(args.speed)
     from ..analysis.unit import ANALYSIS_FILES
-    from ..io.atomic import check_replaceable
+    from ..io.atomic import check_output_folder, check_replaceable
 
+    check_output_folder(args.out)  # a file, or a folder that cannot be written: one line before any work
     for side, _, out in jobs:  # a file of the user, or changed since written, is not replaced: refused before any work
         check_replaceable(out, ANALYSIS_FILES)
     from ..analysis.unit import ANALYSE_RECORD

@@ -103,7 +103,7 @@ def read_effort_trial(model_path, ik_path, id_path, wf, *, dofs, side, window, c
         dofs = tuple(dofs)
         check_dofs_in_model(layout, dofs)
     else:
-        dofs = tuple(discover_dofs(layout, side, id_columns))
+        dofs = tuple(discover_dofs(layout, side, id_columns, source=id_path))
     if model_cached and (id_path is None or not geometry_is_cached(model_path, ik_path, list(dofs),
                                                                    cache_dir=cache_dir)):
         start_in_background()
