@@ -342,8 +342,9 @@ def test_the_grf_column_and_threshold_reach_the_cycle_search(gait2392):
     # the left foot's cycle 1.245-2.459 s padded runs past the forces' end (2.5 s): the warning says
     # the window solved, snapped outwards to the 60 Hz IK frames (0.5 + 41/60 = 1.183 s) and clipped at 2.5 s
     with pytest.warns(WindowWarning, match=r"the solved window, clipped there and on the IK frames, is 1\.183-2\.500 s: "
-                                           r"0\.062 s before the cycle and 0\.041 s after it"):
+                                           r"0\.062 s before the cycle and 0\.041 s after it") as said:
         left_foot = resolve_window(gait2392.ik, side="r", cycle="auto", grf_path=grf, grf_column="1_ground_force_vy")
+    assert said[0].filename == __file__  # a Python session sees its own line, not the package's source
     assert right.cycle["start_s"] == pytest.approx(0.618, abs=3e-3)
     assert left_foot.cycle["start_s"] == pytest.approx(1.247, abs=3e-3)
     assert "1_ground_force_vy" in left_foot.cycle["source"]

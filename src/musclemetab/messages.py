@@ -20,7 +20,9 @@ with the message's white space collapsed; a warning of another library raised wh
 package runs names its category (``musclemetab: warning: RuntimeWarning: ...``). No Python
 source line and no file path of the package's code is printed: a warning says what was
 found in the user's data and what to do, not where in the package it was noticed. In a
-Python session the warnings keep Python's own format unless :func:`install` is called.
+Python session the warnings keep Python's own format unless :func:`install` is called, and the
+data's warnings (window, diagnosis, reserves, muscle table) name the line of the session's own code
+that led to them (:func:`user_stacklevel`), not the package's.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ import sys
 import warnings
 
 __all__ = ["PREFIX", "NAMES_SHOWN", "LOGGER", "LEVEL_ENV", "name_list", "warning_line", "show_warning", "install",
+           "user_stacklevel",
            "write_quietly", "logger", "note", "configure", "verbosity_level", "LineHandler", "OncePerRun"]
 
 #: name of the package's logger (its children: ``musclemetab.progress``, ``musclemetab.<module>``)
@@ -42,6 +45,19 @@ LEVEL_ENV = "MUSCLEMETAB_LOG_LEVEL"
 PREFIX = "musclemetab: warning: "
 #: names a message lists before it counts the rest (:func:`name_list`)
 NAMES_SHOWN = 10
+
+
+_PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__)) + os.sep
+
+
+def user_stacklevel() -> int:
+    """The ``stacklevel`` of :func:`warnings.warn` that names the first caller outside the package,
+    for a warning raised by the function that calls this one: a Python session sees the line of
+    its own script that led to it, not the package's source (the command line shows no location)."""
+    frame, level = sys._getframe(2), 2  # the caller of the function that warns
+    while frame.f_back is not None and frame.f_code.co_filename.startswith(_PACKAGE_DIR):
+        frame, level = frame.f_back, level + 1
+    return level
 
 
 def name_list(names, shown: int = NAMES_SHOWN, sep: str = ", ") -> str:

@@ -53,7 +53,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputFileError, LumpedMuscleWarning, MuscleTableWarning, OptionError, UnknownMuscleError
-from .messages import name_list
+from .messages import name_list, user_stacklevel
 
 __all__ = [
     "MUSCLE_DENSITY_KG_PER_M3",
@@ -537,7 +537,7 @@ def _report_unplaced(unplaced: Sequence[str], strict: bool, warn: bool) -> None:
         warnings.warn(
             f"muscle{s} {name_list(unplaced)} not in the anatomical muscle table: mass from F0/specific "
             f"tension x density x lMo, slow-twitch fraction 0.5; to override, {how}",
-            MuscleTableWarning, stacklevel=3,
+            MuscleTableWarning, stacklevel=user_stacklevel(),
         )
 
 
@@ -745,7 +745,7 @@ def _report_lumps(lumps: Mapping[str, LumpedMuscle]) -> None:
     warnings.warn(
         f"lumped muscle{s}, maximal isometric force far above the anatomical muscle named: {each}; to choose "
         "otherwise, give mass_kg or anatomical_muscles in a --muscle-properties CSV (see docs/muscles.md)",
-        LumpedMuscleWarning, stacklevel=3,
+        LumpedMuscleWarning, stacklevel=user_stacklevel(),
     )
 
 

@@ -55,6 +55,7 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import MusclemetabWarning, SolverError
+from ..messages import user_stacklevel
 from ..muscle import active_force_length, force_velocity, passive_force_length, tendon_length_from_force
 from .bounds import FIBER_LENGTH_BOUNDS, FIBER_VELOCITY_BOUNDS, MIN_PROJECTED_LENGTH_M, fiber_length_upper_bounds
 
@@ -193,7 +194,8 @@ class Diagnosis:
         if self.warnings:
             warnings.warn(f"{what}: " + "; ".join(f"{f.subject} {f.check.replace('_', ' ')} at {f.times_text()} "
                                                  f"({f.value:.4g} vs {f.bound:.4g} {f.unit}): {f.remedy}"
-                                                 for f in self.warnings), DiagnosisWarning, stacklevel=3)
+                                                 for f in self.warnings), DiagnosisWarning,
+                          stacklevel=user_stacklevel())
         return self
 
 

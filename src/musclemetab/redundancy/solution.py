@@ -63,7 +63,7 @@ from ..muscle import (
 )
 from .parameters import MuscleTendonParameters
 from .record import SolveRecord
-from ..messages import name_list
+from ..messages import name_list, user_stacklevel
 
 __all__ = [
     "Solution",
@@ -460,7 +460,7 @@ def build_solution(
             f"{float(np.max(reserve_rms)):.3g} N m, {100 * share:.2g} % of the largest peak joint moment "
             f"({peak_dof}, {peak_moment:.4g} N m), above {100 * LARGE_RESERVE_SHARE:g} %: the muscles do not explain "
             "the moments; check the moments' scale and that the inverse dynamics belongs to this model and trial",
-            LargeReserveWarning, stacklevel=2,
+            LargeReserveWarning, stacklevel=user_stacklevel(),
         )
     summary = dict(summary)
     if backward:

@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataMismatchError, OptionError, WindowWarning
+from ..messages import user_stacklevel
 from ..events import WALKING_CYCLE_DURATION_S
 from ..io import StorageTable
 from ..layout import SIDE_NAMES
@@ -160,7 +161,7 @@ def resolve_window(
                                                         grf_column, grf_threshold_N, cycle_duration_s, (lo, hi))
         for msg in event_notes:
             notes.append(msg)
-            _warnings.warn(msg, WindowWarning, stacklevel=2)
+            _warnings.warn(msg, WindowWarning, stacklevel=user_stacklevel())
         leg = "right" if side == "r" else "left"
         span = f"the {leg} leg's gait cycle" + ("" if cycle == "auto" else f" {cycle}")
         if cycle != "auto":
@@ -195,7 +196,7 @@ def resolve_window(
                    f"IK frames, is {start:.3f}-{end:.3f} s: {pads[0]:.3f} s before the cycle and {pads[1]:.3f} s "
                    "after it")
             notes.append(msg)
-            _warnings.warn(msg, WindowWarning, stacklevel=2)
+            _warnings.warn(msg, WindowWarning, stacklevel=user_stacklevel())
     return TrialWindow(start, end, source, cycle_rec, pads, tuple(notes))
 
 
