@@ -1024,6 +1024,38 @@ def test_ctrl_c_inside_the_progress_callback_stops_ipopt_without_a_traceback(cap
     assert "Traceback" not in out + err and "KeyboardInterrupt" not in out + err, err
 
 
+def test_an_interrupt_python_cannot_raise_is_not_printed_by_the_command_line(capsys):
+    """Ctrl-C or SIGTERM that lands in a weakref callback (seen in a run: that of an import's module
+    lock) is an "unraisable" error Python prints with its traceback; the command line's hook drops
+    it (the handlers in place have noted the interrupt, which the command says once) and passes
+    every other unraisable error on."""
+    import weakref
+
+    from musclemetab.commands import _interrupt_not_raisable
+
+    passed = []
+    previous, sys.unraisablehook = sys.unraisablehook, _interrupt_not_raisable(passed.append)
+    try:
+        class Thing:
+            pass
+
+        def interrupted(_):
+            raise KeyboardInterrupt
+
+        def broken(_):
+            raise ValueError("a callback's own error")
+
+        for callback in (interrupted, broken):
+            thing = Thing()
+            ref = weakref.ref(thing, callback)
+            del thing  # the callback runs here; its error is unraisable
+            assert ref() is None
+    finally:
+        sys.unraisablehook = previous
+    assert [type(u.exc_value) for u in passed] == [ValueError]
+    assert capsys.readouterr().err == ""
+
+
 def test_progress_labels_an_interrupted_unit_interrupted_not_failed():
     import io
 

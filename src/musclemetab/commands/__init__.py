@@ -189,6 +189,7 @@ def main(argv: list[str] | None = None) -> int:
     _occupy_closed_descriptors()
     real = sys.stdout, sys.stderr
     sys.stdout, sys.stderr = out, _ = _GuardedOutput(sys.stdout, pipe_stops=True), _GuardedOutput(sys.stderr)
+    unraisable, sys.unraisablehook = sys.unraisablehook, _interrupt_not_raisable(sys.unraisablehook)
     try:
         try:
             status = _main(argv)
@@ -199,6 +200,7 @@ def main(argv: list[str] | None = None) -> int:
         return BROKEN_PIPE_STATUS
     finally:
         sys.stdout, sys.stderr = real
+        sys.unraisablehook = unraisable
         if argv is None:
             gc.freeze()
     if out.error is not None:
@@ -210,6 +212,18 @@ def main(argv: list[str] | None = None) -> int:
     if argv is None and status in (INTERRUPTED_STATUS, TERMINATED_STATUS):
         _end_interrupted(status)
     return status
+
+
+def _interrupt_not_raisable(previous):
+    """A :data:`sys.unraisablehook` that drops a :class:`KeyboardInterrupt` Python could not raise
+    (Ctrl-C or SIGTERM landing in code Python runs and ignores the errors of, such as the weakref
+    callback of an import's module lock: it printed "Exception ignored in ..." and a traceback);
+    the handlers in place have noted the interrupt, and the command says it once, its own way.
+    Every other unraisable error goes to ``previous``."""
+    def hook(unraisable):
+        if not isinstance(unraisable.exc_value, KeyboardInterrupt):
+            previous(unraisable)
+    return hook
 
 
 #: Exit status after Ctrl-C (128 + SIGINT).
