@@ -302,6 +302,12 @@ def test_a_trial_naming_its_cycle_is_averaged_over_it_as_analyse_does(pool_run, 
                "share_PF_pct", "gross_cost_of_transport_J_per_kg_per_m"]
     pd.testing.assert_frame_equal(got[columns], want[columns], rtol=1e-9)
     assert got.loc["UM10", "duration_s"] == pytest.approx(0.7, abs=1e-9)
+    # a named cycle the solved window (0.57-1.75 s) does not hold: the unit fails naming the trial and the remedies
+    data["subjects"][0]["trials"][0].update(start_s=0.5, toe_off_s=1.0, end_s=1.5)
+    outside = run_study(study_from_dict(data, base="/", output=tmp_path / "outside"), workers=1, progress=False)
+    assert list(outside.failed) == ["sub1/normal/effort-gen"]
+    assert ("trial 'normal': its gait cycle 0.500-1.500 s (from its start_s and end_s) does not lie inside the solved "
+            "window 0.570-1.750 s") in outside.failed["sub1/normal/effort-gen"]
 
 
 def test_the_printed_rates_carry_the_uncertainty_bands(capsys):

@@ -733,6 +733,8 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
     # window) bound another span than the solve's own (its cycle, or its window less the padding)
     rates_over_s = None if sol is None or averaged_by_default(recorded_trial(sol), cycle) else \
         [cycle.start_s, cycle.end_s]
+    if rates_over_s is not None:
+        _check_cycle_solved(trial, cycle, sol.time_s)
     result = states(speed, cycle) if states is not None else metabolics_from_solution(
         sol, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
         basal_rate_W_per_kg=study.basal_coefficient, basal_exponent=study.basal_exponent,
@@ -794,6 +796,27 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
         **({"sensitivity": sensitivity} if study.sensitivity else {}),
         **({"assistance": _device_record(trial, sol, subject.body_mass_kg)} if trial.assistance is not None else {}),
     }
+
+
+def _check_cycle_solved(trial: Trial, cycle, nodes_s) -> None:
+    """:class:`DataMismatchError` naming the trial when its gait cycle (its events, or its ``grf``'s)
+    is not covered by the solved nodes ``nodes_s``, over which its rates are averaged (the rule of
+    :func:`musclemetab.events.coverage`, as the metabolic rates apply it)."""
+    import numpy as np
+
+    from ..events import coverage
+
+    t = np.asarray(nodes_s, dtype=float)
+    try:
+        coverage(t, cycle.start_s, cycle.end_s, None, "the solved nodes")
+    except DataMismatchError:
+        named = "its start_s and end_s" if trial.start_s is not None and trial.end_s is not None else (
+            f"its ground forces ({trial.grf})" if trial.grf is not None else "its events")
+        raise DataMismatchError(
+            f"trial '{trial.name}': its gait cycle {cycle.start_s:.3f}-{cycle.end_s:.3f} s (from {named}) does not lie "
+            f"inside the solved window {t[0]:.3f}-{t[-1]:.3f} s, over which the rates are averaged; give kinematics "
+            "(ik) that cover the cycle, the trial's start_s, toe_off_s and end_s inside the window, or "
+            "cycle = \"auto\" (the first cycle inside every input file)") from None
 
 
 def _window_record(trial: Trial, sol) -> dict:
