@@ -414,8 +414,8 @@ def test_the_command_maps_a_cycle_profile_onto_the_cycle_the_study_takes(exo_stu
                  "--out", str(tmp_path / "cli")]) == 0
     line = capsys.readouterr().out
     assert "device (gain 1) 2.21 J positive / -1.33 J negative work per cycle (profile mapped onto and work over " \
-           "the gait cycle 0.620-1.700 s: estimated from the solve window less 0.05 s at each end and the ankle " \
-           "moment)" in line, line
+           "the gait cycle 0.620-1.700 s: estimated from the IK window and the ankle moment (no ground reaction " \
+           "forces))" in line, line  # the cycle and the words of analyse and a study (events.cycle_of_trial)
     device = json.loads((tmp_path / "cli" / "summary.json").read_text())["assistance"]
     assert device["cycle_s"] == pytest.approx([0.62, 1.70]) and device["duration_s"] == pytest.approx(1.08)
     results = pd.read_csv(exo_study.output / "results.csv")

@@ -444,7 +444,8 @@ def cycle_from_id_file(
 
 def cycle_of_trial(ik: str | os.PathLike, *, grf: str | os.PathLike | None = None,
                    id_file: str | os.PathLike | None = None, side: str = "r", model=None,
-                   window_s: tuple[float, float] | None = None, remedy: str | None = None) -> tuple[GaitCycle, str]:
+                   window_s: tuple[float, float] | None = None, remedy: str | None = None,
+                   grf_column: str | None = None, threshold_N: float | None = None) -> tuple[GaitCycle, str]:
     """The gait cycle of a solved trial and where it came from: ``(cycle, source)``.
 
     With ``grf``: the cycle of the side's vertical ground reaction force that holds the middle
@@ -455,28 +456,30 @@ def cycle_of_trial(ik: str | os.PathLike, *, grf: str | os.PathLike | None = Non
     toe-off from the ankle moment; estimated events). ``window_s``: the window the solve
     recorded (``summary.json`` ``time_window_s``), which stands for the IK window: a solve over
     part of the IK file has its cycle in that part. ``remedy``: what an error finding the events
-    says to do (:func:`cycle_from_grf`).
+    says to do (:func:`cycle_from_grf`); ``grf_column`` and ``threshold_N``: the foot's vertical force
+    column and the contact threshold (default the name rule of :func:`read_grf` and 20 N).
     """
-    from .io import read_storage
+    from .io import as_table
 
-    t = read_storage(ik).index.to_numpy(float)
+    t = np.asarray(as_table(ik).index, dtype=float)  # a path, or the table a solve has read
     part = window_s is not None and (abs(window_s[0] - t[0]) > 1e-6 or abs(window_s[1] - t[-1]) > 1e-6)
     if window_s is not None:
         t = np.asarray(window_s, dtype=float)
     if grf is not None:
         if model is None:
-            force = read_grf(grf, side=side)
+            force = read_grf(grf, grf_column, side=side)
         else:
             import warnings
 
             from .errors import WindowWarning
 
             feet, why = feet_for_checks(model, ik)
-            force, notes, _ = grf_of_side(grf, side, feet=feet)
+            force, notes, _ = grf_of_side(grf, side, grf_column, feet=feet)
             for msg in notes + ([why] if why else []):
                 warnings.warn(msg, WindowWarning, stacklevel=2)
-        cycle = cycle_from_grf(force.index.to_numpy(float), force.to_numpy(float), at_time_s=0.5 * (t[0] + t[-1]),
-                               remedy=remedy)
+        cycle = cycle_from_grf(force.index.to_numpy(float), force.to_numpy(float),
+                               DEFAULT_GRF_THRESHOLD_N if threshold_N is None else threshold_N,
+                               at_time_s=0.5 * (t[0] + t[-1]), remedy=remedy)
         if model is not None:
             check_cycle_duration(cycle, where=f"{grf} column {force.name}")
         return cycle, "ground reaction forces"

@@ -133,7 +133,7 @@ def read_effort_trial(model_path, ik_path, id_path, wf, *, dofs, side, window, c
         id_moments, device = _assisted_moments(assistance, assistance_gain, assistance_cycle_s, trial_window, layout,
                                                model_path, cache_dir, side, dofs, id_time, id_moments,
                                                check_units, assistance_both_legs,
-                                               (id_path, grf, grf_column, grf_threshold_N))
+                                               (ik_table, id_path, grf, grf_column, grf_threshold_N))
 
     t0 = _time.perf_counter()
     geometry = compute_geometry(model_path, ik_table, dofs=list(dofs), side=side, cache_dir=cache_dir)
@@ -254,7 +254,7 @@ def read_emg_trials(model, ik_paths, id_paths, emg_paths, labels, *, mapping, se
 
 
 def _assisted_moments(path, gain, cycle_s, trial_window, layout, model_path, cache_dir, side, dofs, id_time,
-                      id_moments, check_units, both_legs=False, events=(None, None, None, None)):
+                      id_moments, check_units, both_legs=False, events=(None, None, None, None, None)):
     """``(moments less the device torque, (profile, gait cycle, its source))`` of :func:`read_effort_trial`.
 
     The gait cycle the profile is mapped onto and the device's work integrated over: the solve's
@@ -283,33 +283,26 @@ def _assisted_moments(path, gain, cycle_s, trial_window, layout, model_path, cac
     return moments, (profile, cycle_s, source)
 
 
-def _events_cycle(profile, trial_window, side, id_path, grf, grf_column, grf_threshold_N):
-    """``((start, end), source)``: the gait cycle a study takes for a trial of these files
-    (:func:`musclemetab.study.events.trial_cycle`): from the ground forces ``grf`` (the cycle
-    holding the middle of the window), else the solve window less 0.05 s at each end with toe-off
-    from the ankle moment. A time profile without one is integrated over the solve window (said
-    in the source); a cycle profile is refused (it needs a cycle)."""
+def _events_cycle(profile, trial_window, side, ik, id_path, grf, grf_column, grf_threshold_N):
+    """``((start, end), source)``: the gait cycle a study takes for a trial of these files, found as
+    ``analyse`` finds it in the solve window (:func:`musclemetab.events.cycle_of_trial`: from the
+    ground forces ``grf``, the cycle holding the middle of the window, else the window less 0.05 s
+    at each end with toe-off from the ankle moment). A time profile without one is integrated
+    over the solve window (said in the source); a cycle profile is refused (it needs a cycle)."""
     from ..errors import MusclemetabError
-    from ..events import DEFAULT_GRF_THRESHOLD_N, DEFAULT_PADDING_S, cycle_from_grf, cycle_from_id_file, read_grf
+    from ..events import cycle_of_trial
 
     t0, t1 = trial_window.start_s, trial_window.end_s
-    remedy = "give the gait cycle: --assistance-cycle T0:T1 (or --cycle)"
     try:
-        if grf is not None:
-            force = read_grf(grf, grf_column, side=side)
-            found = cycle_from_grf(force.index.to_numpy(float), force.to_numpy(float),
-                                   threshold_N=DEFAULT_GRF_THRESHOLD_N if grf_threshold_N is None else grf_threshold_N,
-                                   at_time_s=0.5 * (t0 + t1), remedy=remedy)
-            return (found.start_s, found.end_s), f"from the ground forces {Path(grf).name}"
-        found = cycle_from_id_file(id_path, f"ankle_angle_{side}_moment", window_s=(t0, t1),
-                                   padding_s=DEFAULT_PADDING_S, remedy=remedy)
+        found, source = cycle_of_trial(ik, grf=grf, id_file=id_path, side=side, window_s=(t0, t1),
+                                       remedy="give the gait cycle: --assistance-cycle T0:T1 (or --cycle)",
+                                       grf_column=grf_column, threshold_N=grf_threshold_N)
     except MusclemetabError as exc:
         if profile.axis == "cycle_pct":
             raise type(exc)(f"{profile.path}: a profile over the gait cycle needs the gait cycle, and none was found "
                             f"in the solve window {t0:g}-{t1:g} s: {exc}") from None
         return (t0, t1), "solve window (no gait cycle found in it)"
-    return (found.start_s, found.end_s), (f"estimated from the solve window less {DEFAULT_PADDING_S:g} s at each end "
-                                          "and the ankle moment")
+    return (found.start_s, found.end_s), source
 
 
 def exclude_from_geometry(geometry, exclude_muscles: Sequence[str] = (), missing_ok: bool = False):
