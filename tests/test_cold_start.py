@@ -239,3 +239,30 @@ def test_code_digest_is_the_package_source():
     for path in sorted(root.rglob("*.py")):
         h.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes())
     assert code_digest() == h.hexdigest()
+
+
+def test_shutdown_kills_a_worker_that_does_not_end_when_its_input_closes(monkeypatch):
+    """The exit functions stop the OpenSim worker by closing its input (an idle worker ends at
+    once); a process that goes on (here one that never reads its input) is killed after
+    ``SHUTDOWN_WAIT_S``, so that a command's exit, after Ctrl-C too, is never held up by it."""
+    client.shutdown()
+    busy = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE)
+    monkeypatch.setattr(client, "_PROC", busy)
+    try:
+        client.shutdown()
+        assert busy.poll() == -9  # SIGKILL, not the end of its 60 s
+        assert client._PROC is None
+    finally:
+        if busy.poll() is None:
+            busy.kill()
+
+
+def test_shutdown_lets_an_idle_worker_end_by_itself(monkeypatch):
+    """A process that ends when its input closes (as the idle worker does) is not killed."""
+    client.shutdown()
+    idle = subprocess.Popen([sys.executable, "-c", "import sys; sys.stdin.read()"], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE)
+    monkeypatch.setattr(client, "_PROC", idle)
+    client.shutdown()
+    assert idle.returncode == 0

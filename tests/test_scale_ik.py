@@ -34,16 +34,35 @@ def _masses(text: str) -> dict:
 
 
 def test_static_marker_errors_are_opensims(scaled):
-    """RMS, maximum and worst marker of the static pose: the numbers OpenSim's ScaleTool prints."""
+    """RMS, maximum and worst marker of the static pose: the numbers OpenSim's ScaleTool prints in
+    the same run (its log line, kept in the record), to 1e-6, and near those it printed on another
+    machine (tests/data/gait2392_scale_reference.json): the pose its marker placer settles on
+    varies by machine (3.323 against 3.337 cm RMS seen), so that comparison is to 1 %."""
     from conftest import TEST_DATA
 
-    ref = json.loads((TEST_DATA / "gait2392_scale_reference.json").read_text())
-    s = scaled.record["static_summary"]
-    assert s["rms_m"] == pytest.approx(ref["static_rms_m"], rel=1e-6)
-    assert s["max_m"] == pytest.approx(ref["static_max_m"], rel=1e-6)
-    assert s["worst_marker"] == ref["static_worst_marker"]
+    s, opensim = scaled.record["static_summary"], scaled.record["opensim_static_summary"]
     squared = sum(e["error_m"] ** 2 for e in scaled.marker_errors)  # unweighted, as OpenSim adds them
-    assert squared == pytest.approx(ref["static_total_squared_error_m2"], rel=1e-6)
+    assert s["rms_m"] == pytest.approx(opensim["rms_m"], rel=1e-6)
+    assert s["max_m"] == pytest.approx(opensim["max_m"], rel=1e-6)
+    assert s["worst_marker"] == opensim["worst_marker"] == "Top.Head"
+    assert squared == pytest.approx(opensim["total_squared_error_m2"], rel=1e-6)
+    ref = json.loads((TEST_DATA / "gait2392_scale_reference.json").read_text())
+    assert s["rms_m"] == pytest.approx(ref["static_rms_m"], rel=1e-2)
+    assert s["max_m"] == pytest.approx(ref["static_max_m"], rel=2e-2)
+
+
+def test_opensims_marker_placer_line_is_read():
+    """The marker placer's line as OpenSim 4.6 prints it (the reference file's), read back."""
+    from conftest import TEST_DATA
+
+    from musclemetab.mocap.scaling import opensim_marker_error_summary
+
+    ref = json.loads((TEST_DATA / "gait2392_scale_reference.json").read_text())
+    line = ref["source"].split("log line at info level: '")[1].rstrip("'")
+    assert opensim_marker_error_summary("[info] Loading...\n[info] " + line + "\n") == {
+        "rms_m": ref["static_rms_m"], "max_m": ref["static_max_m"], "worst_marker": "Top.Head",
+        "total_squared_error_m2": ref["static_total_squared_error_m2"]}
+    assert opensim_marker_error_summary("[info] no placer here") is None
 
 
 def test_scaled_model_is_opensims(scaled, gait2392, tmp_path):

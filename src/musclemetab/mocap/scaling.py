@@ -28,6 +28,7 @@ import csv
 import io
 import json
 import os
+import re
 import shutil
 import tempfile
 import warnings
@@ -46,7 +47,7 @@ __all__ = ["ScaleResult", "scale_model", "measurement_sets", "choose_measurement
            "setup_files", "setup_tool", "SETUP_OPTIONS", "marker_error_summary", "HEAD_MARKER_WORDS"]
 
 #: bump when a cached scaling result changes meaning
-SCALE_CACHE_FORMAT = 1
+SCALE_CACHE_FORMAT = 2  # 2: the record holds OpenSim's own line on the static pose
 #: without a setup, the weight holding each coordinate (but the root joint's) at its default value
 #: in the static pose: without it the pose trades pelvis tilt against hip and lumbar flexion
 #: (gait2392's static trial: pelvis 15 degrees forward, hips 25 degrees extended)
@@ -90,6 +91,24 @@ def marker_error_summary(errors: list[dict]) -> dict:
         return {"rms_m": float("nan"), "max_m": float("nan"), "worst_marker": ""}
     k = int(np.argmax(e))
     return {"rms_m": float(np.sqrt(np.mean(e ** 2))), "max_m": float(e[k]), "worst_marker": errors[k]["marker"]}
+
+
+#: OpenSim's marker placer's line on the static pose (ScaleTool, info level)
+_OPENSIM_PLACER_LINE = re.compile(
+    r"total squared error = (?P<sq>\S+), marker error: RMS = (?P<rms>\S+), max = (?P<max>\S+) \((?P<worst>[^)]*)\)")
+
+
+def opensim_marker_error_summary(log: str) -> dict | None:
+    """The static pose's marker errors as OpenSim's marker placer prints them (``"total squared
+    error = ..., marker error: RMS = ..., max = ... (marker)"``), from its log ``log``:
+    ``{"rms_m", "max_m", "worst_marker", "total_squared_error_m2"}`` of the last such line, or
+    ``None`` when the log has none (the placer switched off)."""
+    found = list(_OPENSIM_PLACER_LINE.finditer(log or ""))
+    if not found:
+        return None
+    m = found[-1]
+    return {"rms_m": float(m["rms"]), "max_m": float(m["max"]), "worst_marker": m["worst"],
+            "total_squared_error_m2": float(m["sq"])}
 
 
 def measurement_sets() -> dict[str, list[dict]]:
@@ -353,7 +372,8 @@ def _scale(generic_model: Path, static: Path, mass_kg: float, setup, marker_set,
         errors = static_marker_errors(read_trc(trc), res["static_model_markers"], res["time_range"])
         record.update(mass_kg=res["mass_kg"], height_m=height, height_from=marker, time_range=res["time_range"],
                       scale_factors={k: v for k, v in res["scale_factors"].items() if not k.endswith("_offset")},
-                      static_marker_errors=errors, static_summary=marker_error_summary(errors))
+                      static_marker_errors=errors, static_summary=marker_error_summary(errors),
+                      opensim_static_summary=opensim_marker_error_summary(res.get("log", "")))
         result = ScaleResult(Path(res["model"]).read_text(encoding="utf-8"),
                              Path(res["static_pose"]).read_text(encoding="utf-8"), record)
     finally:

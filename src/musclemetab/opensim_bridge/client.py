@@ -142,9 +142,16 @@ def worker_startup_s() -> float | None:
     return _STARTUP_S
 
 
+#: seconds the worker has to end once its input is closed (it ends at once when idle); a worker
+#: still busy then, with work nobody waits for, is killed so that an exit is never held up by it
+SHUTDOWN_WAIT_S = 1.0
+
+
 def shutdown() -> None:
     """Stop the worker process (it is restarted on the next call). When another thread is
-    starting it or waiting for a reply (an exit after Ctrl-C), the process is killed at once."""
+    starting it or waiting for a reply (an exit after Ctrl-C), the process is killed at once;
+    an idle worker ends when its input closes, one that does not within :data:`SHUTDOWN_WAIT_S`
+    is killed."""
     global _PROC
     if not _LOCK.acquire(timeout=0.2):
         starting = _STARTING
@@ -155,9 +162,10 @@ def shutdown() -> None:
         if _PROC is not None and _PROC.poll() is None:
             try:
                 _PROC.stdin.close()
-                _PROC.wait(timeout=5)
-            except Exception:  # pragma: no cover - best effort
+                _PROC.wait(timeout=SHUTDOWN_WAIT_S)
+            except Exception:  # still busy (TimeoutExpired), or its input already broken
                 _PROC.kill()
+                _PROC.wait()
         if _PROC is not None:  # the worker's end of the pipes: closed, not left to the garbage collector
             for pipe in (_PROC.stdin, _PROC.stdout):
                 try:

@@ -177,7 +177,8 @@ def scale_model(generic_model: str, static_trc: str, mass_kg: float, out_dir: st
     placer.setOutputModelFileName(model_out)
     placer.setOutputMotionFileName(pose_out)
     placer.setOutputMarkerFileName("")
-    if not tool.run():
+    ran, log = _run_logging_info(tool)
+    if not ran:
         raise RuntimeError("OpenSim's ScaleTool reported a failure")
     if not os.path.isfile(model_out):
         raise RuntimeError("OpenSim's ScaleTool wrote no model (is the marker placer switched off in the setup?)")
@@ -190,7 +191,22 @@ def scale_model(generic_model: str, static_trc: str, mass_kg: float, out_dir: st
         "scale_factors": _scale_factors(os.path.join(out_dir, "scale_set.xml")),
         "static_model_markers": static_model_markers(scaled_only, pose_out, weights),
         "setup_model_file": gmm.getModelFileName(),
+        "log": log,
     }
+
+
+def _run_logging_info(tool) -> tuple[bool, str]:
+    """``tool.run()`` with OpenSim's messages down to the info level collected: ``(its result,
+    the messages)``; the log level of the worker is restored after it."""
+    sink, level = osim.StringLogSink(), osim.Logger.getLevelString()
+    osim.Logger.addSink(sink)
+    osim.Logger.setLevelString("info")
+    try:
+        ran = tool.run()
+    finally:
+        osim.Logger.setLevelString(level)
+        osim.Logger.removeSink(sink)
+    return bool(ran), sink.getString()
 
 
 def _scale_factors(path: str) -> dict:
