@@ -363,6 +363,77 @@ def test_a_study_trial_of_opensim_states_gives_the_numbers_of_the_command(exo_st
 
 
 @pytest.mark.opensim
+def test_a_study_trial_of_opensim_states_takes_the_fiber_velocity_option(exo_study, example, tmp_path):
+    """A states trial's ``fiber_velocity = "equilibrium"`` gives the rates ``musclemetab metabolics
+    --states --fiber-velocity equilibrium`` writes for the same files and cycle, other than the
+    default's (the derivative): the study does not ignore it. (``muscle_parameters``:
+    tests/test_metabolics_states.py, on a model with metabolic probes.)"""
+    import json
+
+    import pandas as pd
+
+    from musclemetab.commands import main
+    from musclemetab.study import study_from_dict
+    from musclemetab.study.runner import run_study
+
+    unit = exo_study.output / "units" / "sub1" / "normal" / "effort-gen"
+    files = {"states": str(unit / "states.sto"), "controls": str(unit / "controls.sto")}
+    trials = [{"name": name, "ik": str(example.ik["normal"]), "id": str(example.id["normal"]), **files, **options}
+              for name, options in (("equilibrium", {"fiber_velocity": "equilibrium"}), ("default", {}))]
+    study = study_from_dict({"name": "states", "workflows": ["effort-gen"], "models": ["UM10", "BH04"],
+                             "subjects": [{"name": "sub1", "model": str(unit / "model.osim"),
+                                           "body_mass_kg": example.body_mass_kg, "height_m": example.height_m,
+                                           "trials": trials}]}, base="/", output=tmp_path / "study")
+    run = run_study(study, workers=1, progress=False)
+    assert not run.failed and len(run.ran) == 2, (run.failed, run.ran)
+    folder = tmp_path / "study" / "units" / "sub1" / "equilibrium" / "states"
+    c = json.loads((folder / "unit.json").read_text())["cycle"]
+    assert main(["metabolics", "--states", files["states"], "--controls", files["controls"], "--model",
+                 str(unit / "model.osim"), "--mass", str(example.body_mass_kg), "--height", str(example.height_m),
+                 "--models", "UM10,BH04", "--fiber-velocity", "equilibrium", "--cycle",
+                 f"{c['start_s']!r},{c['toe_off_s']!r},{c['end_s']!r}", "--out", str(tmp_path / "cli")]) == 0
+    cli = pd.read_csv(tmp_path / "cli" / "whole_body.csv").set_index("model")
+    mine = pd.read_csv(folder / "whole_body.csv").set_index("model")
+    pd.testing.assert_frame_equal(mine[cli.columns], cli)
+    default = pd.read_csv(tmp_path / "study" / "units" / "sub1" / "default" / "states" / "whole_body.csv")
+    assert (mine["whole_body_W_per_kg"] - default.set_index("model")["whole_body_W_per_kg"]).abs().max() > 0.1
+
+
+def test_the_states_options_go_with_states_and_are_checked(example):
+    """``fiber_velocity`` and ``muscle_parameters`` on a solved trial are refused naming the trial,
+    the keys and the remedy; a value that is not one of the command's choices names them; absent,
+    the unit keys of earlier studies stay as they were."""
+    from musclemetab.study import plan_units, study_from_dict
+    from musclemetab.study.units import unit_key
+
+    def data(**trial):
+        return {"workflows": ["effort-gen"], "models": ["UM10"],
+                "subjects": [{"name": "sub1", "model": str(example.model), "body_mass_kg": 72.6,
+                              "trials": [{"name": "normal", "ik": str(example.ik["normal"]),
+                                          "id": str(example.id["normal"]), **trial}]}]}
+
+    with pytest.raises(OptionError) as info:
+        study_from_dict(data(fiber_velocity="equilibrium", muscle_parameters="package"), base="/")
+    for words in ("trial 'normal'", "'fiber_velocity' and 'muscle_parameters' go with 'states'", "drop them"):
+        assert words in str(info.value), str(info.value)
+    states = {"states": str(example.ik["normal"])}
+    for key, value, allowed in (("fiber_velocity", "centred", "'derivative', 'equilibrium'"),
+                                ("muscle_parameters", "model", "'probes', 'package'")):
+        with pytest.raises(OptionError) as info:
+            study_from_dict(data(**states, **{key: value}), base="/")
+        assert f"trial 'normal': {key} must be one of {allowed}, not '{value}'" in str(info.value), str(info.value)
+
+    def key(**trial):
+        study = study_from_dict(data(**states, **trial), base="/", output="/tmp/out")
+        (unit,) = plan_units(study)[1]
+        return unit_key(study, unit)
+
+    plain = key()
+    assert key(fiber_velocity="equilibrium") != plain != key(muscle_parameters="package")
+    assert key(fiber_velocity=None) == plain
+
+
+@pytest.mark.opensim
 def test_the_sensitivities_rebuild_an_assisted_problem_with_its_device(exo_study):
     """The problem the sensitivities rebuild from an assisted solution's folder is the solved one:
     the solution's muscle moments (moment arms x tendon forces) plus its reserves give the rebuilt

@@ -326,3 +326,41 @@ def test_command_refuses_states_of_another_model(thelen, dgf, tmp_path, capsys):
     err = capsys.readouterr().err
     assert code != 0 and "OpenSim cannot load these states" in err and "missing from the data" in err
     assert "/jointset/walker_knee_r/knee_angle_r/value" in err and not (tmp_path / "o").exists()
+
+
+@pytest.mark.opensim
+def test_a_study_trial_of_states_takes_the_muscle_parameters_option(dgf, example, tmp_path):
+    """A states trial's ``muscle_parameters = "package"`` gives the rates of ``musclemetab metabolics
+    --states --muscle-parameters package`` for the same files and cycle, and the default those of the
+    model's metabolic probes (their masses differ: the rates do)."""
+    import json
+
+    import pandas as pd
+
+    from musclemetab.commands import main
+    from musclemetab.study import study_from_dict
+    from musclemetab.study.runner import run_study
+
+    model, states, controls, _ = dgf
+    files = {"ik": str(example.ik["normal"]), "id": str(example.id["normal"]), "states": str(states),
+             "controls": str(controls)}
+    trials = [{"name": "package", **files, "muscle_parameters": "package"}, {"name": "probes", **files}]
+    study = study_from_dict({"name": "states", "workflows": ["effort-gen"], "models": ["UM10", "BH04"],
+                             "subjects": [{"name": "sub1", "model": str(model), "body_mass_kg": example.body_mass_kg,
+                                           "height_m": example.height_m, "trials": trials}]},
+                            base="/", output=tmp_path / "study")
+    run = run_study(study, workers=1, progress=False)
+    assert not run.failed and len(run.ran) == 2, (run.failed, run.ran)
+    rates = {}
+    for name, option in (("package", ["--muscle-parameters", "package"]), ("probes", [])):
+        folder = tmp_path / "study" / "units" / "sub1" / name / "states"
+        c = json.loads((folder / "unit.json").read_text())["cycle"]
+        out = tmp_path / f"cli-{name}"
+        assert main(["metabolics", "--states", str(states), "--controls", str(controls), "--model", str(model),
+                     "--mass", str(example.body_mass_kg), "--height", str(example.height_m), "--models", "UM10,BH04",
+                     *option, "--cycle", f"{c['start_s']!r},{c['toe_off_s']!r},{c['end_s']!r}", "--out", str(out)]) == 0
+        cli = pd.read_csv(out / "whole_body.csv").set_index("model")
+        mine = pd.read_csv(folder / "whole_body.csv").set_index("model")
+        pd.testing.assert_frame_equal(mine[cli.columns], cli)
+        rates[name] = mine["whole_body_W_per_kg"]
+    assert (rates["package"] - rates["probes"]).abs().max() > 1e-3

@@ -90,6 +90,8 @@ A study file names everything a study needs; paths are relative to the file::
     # controls = "data/controls.sto"      # (and its controls): the trial's rates from them, as
                                           # `musclemetab metabolics --states` gives them; one unit,
                                           # workflow "states", instead of a solve per workflow
+    # fiber_velocity = "equilibrium"      # optional, with states: as --fiber-velocity (default
+    # muscle_parameters = "package"       # "derivative") and --muscle-parameters (default "probes")
 
 Every key is checked: an unknown key, a missing file or a wrong type raises
 :class:`~musclemetab.errors.OptionError` or :class:`~musclemetab.errors.InputFileError`
@@ -220,6 +222,12 @@ class Trial:
     #: an OpenSim states file of the subject's model (and its controls): the rates from them, no solve
     states: Path | None = None
     controls: Path | None = None
+    #: with ``states``: a compliant-tendon muscle's fiber velocity, ``"derivative"`` or
+    #: ``"equilibrium"`` (``--fiber-velocity``; ``None``: the command's default, the derivative)
+    fiber_velocity: str | None = None
+    #: with ``states``: the muscle masses of the model's metabolic probes or of the package's tables,
+    #: ``"probes"`` or ``"package"`` (``--muscle-parameters``; ``None``: the command's default, probes)
+    muscle_parameters: str | None = None
 
     def files(self) -> dict[str, Path]:
         out = {k: v for k, v in (("ik", self.ik), ("id", self.id), ("emg", self.emg), ("grf", self.grf),
@@ -341,8 +349,10 @@ _TRIAL_KEYS = {
     "name", "ik", "id", "emg", "grf", "grf_column", "grf_threshold_N", "speed_m_per_s",
     "measured_W_per_kg", "vo2_mL_per_s", "vco2_mL_per_s", "vo2_mL_per_min", "vco2_mL_per_min",
     "start_s", "toe_off_s", "end_s", "external_loads", "cycle", "window", "ultrasound", "emg_processing", "markers", "ik_setup",
-    "assistance", "states", "controls",
+    "assistance", "states", "controls", "fiber_velocity", "muscle_parameters",
 }
+#: the keys of a trial with ``states`` only: ``musclemetab metabolics --states``'s options
+_STATES_KEYS = ("fiber_velocity", "muscle_parameters")
 #: the workflow of a trial whose rates come from an OpenSim states file (its ``states`` key)
 STATES = "states"
 
@@ -925,6 +935,7 @@ def _trial(data, base: Path, where: str, emg_processing="envelope") -> Trial:
     if states is not None and data.get("assistance") is not None:
         raise OptionError(f"{here}: 'states' gives the trial's muscle states, and 'assistance' needs a solve; "
                           "drop one of them")
+    states_options = _states_options(data, states is not None, here)
     cycle = _cycle_key(data.get("cycle"), here)
     window = None if data.get("window") is None else check_window(data["window"], here)
     if window is not None and cycle is not None:
@@ -959,7 +970,26 @@ def _trial(data, base: Path, where: str, emg_processing="envelope") -> Trial:
                               "InverseKinematicsTool", here),
         states=states,
         controls=_path(data.get("controls"), base, here, "controls", required=False),
+        **states_options,
     )
+
+
+def _states_options(data: Mapping, has_states: bool, here: str) -> dict:
+    """A trial's ``fiber_velocity`` and ``muscle_parameters`` (the options of ``musclemetab
+    metabolics --states``), checked: they go with ``states``."""
+    from ..metabolics.opensim_states import FIBER_VELOCITY_SOURCES, MUSCLE_PARAMETER_SOURCES
+    from ..redundancy._checks import check_option
+
+    given = {k: data[k] for k in _STATES_KEYS if data.get(k) is not None}
+    if given and not has_states:
+        raise OptionError(f"{here}: {' and '.join(repr(k) for k in given)} {'go' if len(given) > 1 else 'goes'} "
+                          "with 'states' (the rates of an OpenSim states file, as musclemetab metabolics --states "
+                          "takes them); a solved trial's fiber velocity and muscle masses are the solve's: drop "
+                          f"{'them' if len(given) > 1 else 'it'}")
+    for key, allowed in (("fiber_velocity", FIBER_VELOCITY_SOURCES), ("muscle_parameters", MUSCLE_PARAMETER_SOURCES)):
+        if key in given:
+            check_option(f"{here}: {key}", given[key], allowed)
+    return given
 
 
 def _assistance(value, base: Path, here: str) -> tuple[Path, tuple[float, ...]] | None:

@@ -192,7 +192,7 @@ def _trial_record(trial: Trial) -> dict:
     rec["files"] = {k: _file_hash(p) for k, p in trial.files().items()}
     for k in ("ik", "id", "emg", "grf", "external_loads", "assistance", "states", "controls"):
         rec.pop(k, None)  # paths do not matter, contents do
-    for k in ("cycle", "window", "ultrasound", "assisted_from"):
+    for k in ("cycle", "window", "ultrasound", "assisted_from", "fiber_velocity", "muscle_parameters"):
         if rec.get(k) is None:
             rec.pop(k, None)  # absent key: earlier studies keep their unit keys
     if trial.assistance is None:
@@ -839,7 +839,8 @@ def _states_metabolics(study: Study, subject: Subject, trial: Trial, side: str):
     masses when it has any). The states are read (by OpenSim) at once, before the speed is known."""
     from ..metabolics.opensim_states import read_opensim_states, split_sides, states_metabolics
 
-    read = read_opensim_states(subject.model, trial.states, trial.controls)
+    read = read_opensim_states(subject.model, trial.states, trial.controls,
+                               **({"fiber_velocity": trial.fiber_velocity} if trial.fiber_velocity else {}))
     legs = split_sides(read.states)
     if side not in legs:
         raise DataMismatchError(f"{trial.states}: no muscle of the {'right' if side == 'r' else 'left'} leg "
@@ -850,7 +851,8 @@ def _states_metabolics(study: Study, subject: Subject, trial: Trial, side: str):
             read, {side: legs[side]}, subject.body_mass_kg, subject.height_m, models=list(study.models),
             basal=study.basal, basal_rate_W_per_kg=study.basal_coefficient, basal_exponent=study.basal_exponent,
             speed_m_per_s=speed, muscle_properties=subject.muscle_properties,
-            cycle_s=(cycle.start_s, cycle.end_s))
+            cycle_s=(cycle.start_s, cycle.end_s),
+            **({"muscle_parameters": trial.muscle_parameters} if trial.muscle_parameters else {}))
         return results[side]
 
     return rates
