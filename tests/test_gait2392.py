@@ -620,3 +620,41 @@ def test_time_stamps_rounded_to_the_millisecond_read_as_the_constant_rate(gait23
                                     np.ones((len(dropped), 1, 1))),
                      *read_inverse_dynamics(gait2392.id, ["knee_angle_r"]), ik_time_s=dropped.index,
                      sources={"ik": dropped.attrs["path"]})
+
+
+@pytest.mark.parametrize("side, column, window", [("r", "ground_force_vy", (0.5, 2.0)),
+                                                  ("l", "1_ground_force_vy", (1.0, 2.4))])
+def test_a_solve_with_external_loads_has_its_cycle_from_their_forces_in_analyse_and_a_study(gait2392, side,
+                                                                                          column, window):
+    """A solve over ``--window`` with ``--external-loads`` (no cycle recorded): ``analyse`` takes the
+    gait cycle of the vertical force the ExternalLoads file applies to the leg's foot (calcn_r: the
+    data file's ``ground_force_vy``, calcn_l: ``1_ground_force_vy``), the cycle holding the middle of
+    the solved window, as the same times found from that column of the data file by
+    ``cycle_from_grf`` (events at 20 N); a study trial with the same window and ``external_loads``
+    takes the same cycle. The ankle moment (the rule without forces) places it elsewhere."""
+    from types import SimpleNamespace
+
+    from musclemetab.analysis.unit import RecordedTrial
+    from musclemetab.commands.analyse import _cycle
+    from musclemetab.events import cycle_from_grf, read_grf
+    from musclemetab.study import study_from_dict
+    from musclemetab.study.events import trial_cycle
+
+    force = read_grf(gait2392.grf, column)
+    want = cycle_from_grf(force.index.to_numpy(float), force.to_numpy(float), 20.0, at_time_s=sum(window) / 2)
+    recorded = RecordedTrial(str(gait2392.model), str(gait2392.ik), str(gait2392.id), side, None, None, None,
+                             window, "--window", str(gait2392.external_loads))
+    args = SimpleNamespace(cycle=None, grf=None, id=None, model=None)
+    got, source = _cycle(args, side, gait2392.ik, recorded)
+    assert source == "ground reaction forces"
+    assert (got.start_s, got.toe_off_s, got.end_s) == pytest.approx((want.start_s, want.toe_off_s, want.end_s),
+                                                                     abs=1e-12)
+    study = study_from_dict({"workflows": ["effort-gen"], "subjects": [{
+        "name": "s", "model": str(gait2392.model), "body_mass_kg": 72.6, "side": side,
+        "trials": [{"name": "w", "ik": str(gait2392.ik), "external_loads": str(gait2392.external_loads),
+                    "window": list(window)}]}]}, base="/")
+    trial = study.subjects[0].trials[0]
+    mine = trial_cycle(trial, side, study.subjects[0].model, window_s=window)
+    assert (mine.start_s, mine.toe_off_s, mine.end_s) == (got.start_s, got.toe_off_s, got.end_s)
+    # without forces the cycle would be the window less 0.05 s at each end (toe-off from the ankle moment)
+    assert abs(got.start_s - (window[0] + 0.05)) > 0.02 and abs(got.end_s - (window[1] - 0.05)) > 0.02

@@ -44,6 +44,7 @@ __all__ = [
     "gait_events_from_kinematics",
     "kinematic_gait_events",
     "cycle_from_grf",
+    "cycle_from_external_loads",
     "cycle_from_inverse_dynamics",
     "EVENTS_REMEDY",
     "cycle_from_id_file",
@@ -442,22 +443,45 @@ def cycle_from_id_file(
     )
 
 
+def cycle_from_external_loads(external_loads, model, side: str, at_time_s: float,
+                              threshold_N: float | None = None, remedy: str | None = None) -> GaitCycle:
+    """The gait cycle holding ``at_time_s`` of the vertical ground force an OpenSim ExternalLoads
+    file (a path, or :class:`~musclemetab.external_loads.ExternalLoads`) applies to the bodies of
+    ``side`` of ``model`` (a path or its layout; :func:`musclemetab.external_loads.vertical_force`),
+    found as :func:`cycle_from_grf` finds it (``threshold_N``, default 20 N), lasting 0.8-2.0 s
+    (:func:`check_cycle_duration`)."""
+    from .external_loads import read_external_loads, vertical_force
+    from .layout import read_layout
+
+    loads = external_loads if hasattr(external_loads, "datafile") else read_external_loads(external_loads)
+    layout = model if hasattr(model, "body_side") else read_layout(model)
+    t, force = vertical_force(loads, layout, side)
+    cycle = cycle_from_grf(t, force, DEFAULT_GRF_THRESHOLD_N if threshold_N is None else threshold_N,
+                           at_time_s=at_time_s, remedy=remedy)
+    check_cycle_duration(cycle, where=f"{loads.path} (the forces on the {'right' if side == 'r' else 'left'} foot)")
+    return cycle
+
+
 def cycle_of_trial(ik: str | os.PathLike, *, grf: str | os.PathLike | None = None,
                    id_file: str | os.PathLike | None = None, side: str = "r", model=None,
                    window_s: tuple[float, float] | None = None, remedy: str | None = None,
-                   grf_column: str | None = None, threshold_N: float | None = None) -> tuple[GaitCycle, str]:
+                   grf_column: str | None = None, threshold_N: float | None = None,
+                   external_loads=None) -> tuple[GaitCycle, str]:
     """The gait cycle of a solved trial and where it came from: ``(cycle, source)``.
 
     With ``grf``: the cycle of the side's vertical ground reaction force that holds the middle
     of the IK window (:func:`cycle_from_grf`; with the ``model``, the force's foot checked against
     its centre of pressure, :func:`grf_of_side`, and the cycle's duration,
-    :func:`check_cycle_duration`); otherwise from the inverse dynamics ``id_file``
-    and the IK window (:func:`cycle_from_id_file`: the window less the padding at each end,
-    toe-off from the ankle moment; estimated events). ``window_s``: the window the solve
-    recorded (``summary.json`` ``time_window_s``), which stands for the IK window: a solve over
-    part of the IK file has its cycle in that part. ``remedy``: what an error finding the events
-    says to do (:func:`cycle_from_grf`); ``grf_column`` and ``threshold_N``: the foot's vertical force
-    column and the contact threshold (default the name rule of :func:`read_grf` and 20 N).
+    :func:`check_cycle_duration`); else with ``external_loads`` (an OpenSim ExternalLoads file, and
+    the ``model``), the cycle of the vertical force it applies to the side's foot that holds the
+    middle of the IK window (:func:`cycle_from_external_loads`); otherwise from the inverse
+    dynamics ``id_file`` and the IK window (:func:`cycle_from_id_file`: the window less the
+    padding at each end, toe-off from the ankle moment; estimated events). ``window_s``: the
+    window the solve recorded (``summary.json`` ``time_window_s``), which stands for the IK
+    window: a solve over part of the IK file has its cycle in that part. ``remedy``: what an
+    error finding the events says to do (:func:`cycle_from_grf`); ``grf_column`` and
+    ``threshold_N``: the foot's vertical force column and the contact threshold (default the
+    name rule of :func:`read_grf` and 20 N).
     """
     from .io import as_table
 
@@ -465,6 +489,11 @@ def cycle_of_trial(ik: str | os.PathLike, *, grf: str | os.PathLike | None = Non
     part = window_s is not None and (abs(window_s[0] - t[0]) > 1e-6 or abs(window_s[1] - t[-1]) > 1e-6)
     if window_s is not None:
         t = np.asarray(window_s, dtype=float)
+    if grf is None and external_loads is not None:
+        if model is None:
+            raise OptionError("the gait events from an ExternalLoads file need the model (which body is which foot)")
+        return (cycle_from_external_loads(external_loads, model, side, 0.5 * (t[0] + t[-1]), threshold_N, remedy),
+                "ground reaction forces")
     if grf is not None:
         if model is None:
             force = read_grf(grf, grf_column, side=side)

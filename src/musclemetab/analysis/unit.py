@@ -290,7 +290,8 @@ class RecordedTrial(NamedTuple):
     (``--cycle``; :func:`recorded_cycle`) and ``cycle_source`` where its events came from (the
     words of a study's ``cycle_source``); ``dofs``: the solved DOFs; ``window_s``: the solved
     window ``(start, end)`` and ``window_source`` what chose it (``"--window"``, a gait cycle, or
-    ``None`` for the whole IK file). An entry the solution does not record is ``None``.
+    ``None`` for the whole IK file); ``external_loads``: the OpenSim ExternalLoads file the inverse
+    dynamics was computed from (``--external-loads``). An entry the solution does not record is ``None``.
     """
 
     model: "str | None"
@@ -302,6 +303,7 @@ class RecordedTrial(NamedTuple):
     cycle_source: "str | None" = None
     window_s: "tuple[float, float] | None" = None
     window_source: "str | None" = None
+    external_loads: "str | None" = None
 
     @property
     def window_named_by_events(self) -> bool:
@@ -370,7 +372,8 @@ def recorded_trial(solution) -> RecordedTrial:
     window = record.time_window_s
     return RecordedTrial(inputs.get("model"), inputs.get("ik"), inputs.get("id"), record.side, cycle,
                          tuple(dofs) if dofs is not None else None, source,
-                         (float(window[0]), float(window[1])) if window else None, window_source)
+                         (float(window[0]), float(window[1])) if window else None, window_source,
+                         inputs.get("external_loads"))
 
 
 def analyse(

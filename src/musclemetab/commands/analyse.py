@@ -126,6 +126,10 @@ def _cycle(args, side: str, ik, recorded):
                               window_s=recorded.window_s, remedy=remedy)
     if recorded.cycle is not None:
         return recorded.cycle, recorded.cycle_source
+    model = args.model or recorded.model
+    if recorded.external_loads is not None and Path(recorded.external_loads).is_file() and model is not None:
+        return cycle_of_trial(ik, external_loads=recorded.external_loads, side=side, model=model,
+                              window_s=recorded.window_s, remedy=remedy)
     if recorded.id is not None and Path(recorded.id).is_file():
         return cycle_of_trial(ik, id_file=recorded.id, side=side, window_s=recorded.window_s, remedy=remedy)
     raise OptionError("the solution records no gait cycle (it was not solved over --cycle) and no inverse dynamics "
@@ -249,7 +253,8 @@ def run(args) -> int:
                                        speed_source=speed_note if speed is not None else "not available",
                                        large_reserve=_large_reserve(sol_dir), unit_dir=side or ".",
                                        excluded_muscles=recorded_excluded_muscles(sol_dir),
-                                       named_by_events=bool(args.cycle or args.grf) or recorded.window_named_by_events)
+                                       named_by_events=(bool(args.cycle) or source == "ground reaction forces"
+                                                        or recorded.window_named_by_events))
         basal_J[side] = leg_basal_energy_J(per, rows[side]["duration_s"].iloc[0])
         solve_flags[str(sol_dir)] = read_flags(sol_dir)
         label = f"side {side}: " if side else ""

@@ -133,7 +133,7 @@ def read_effort_trial(model_path, ik_path, id_path, wf, *, dofs, side, window, c
         id_moments, device = _assisted_moments(assistance, assistance_gain, assistance_cycle_s, trial_window, layout,
                                                model_path, cache_dir, side, dofs, id_time, id_moments,
                                                check_units, assistance_both_legs,
-                                               (ik_table, id_path, grf, grf_column, grf_threshold_N))
+                                               (ik_table, id_path, grf, grf_column, grf_threshold_N, loads))
 
     t0 = _time.perf_counter()
     geometry = compute_geometry(model_path, ik_table, dofs=list(dofs), side=side, cache_dir=cache_dir)
@@ -254,12 +254,13 @@ def read_emg_trials(model, ik_paths, id_paths, emg_paths, labels, *, mapping, se
 
 
 def _assisted_moments(path, gain, cycle_s, trial_window, layout, model_path, cache_dir, side, dofs, id_time,
-                      id_moments, check_units, both_legs=False, events=(None, None, None, None, None)):
+                      id_moments, check_units, both_legs=False, events=(None, None, None, None, None, None)):
     """``(moments less the device torque, (profile, gait cycle, its source))`` of :func:`read_effort_trial`.
 
     The gait cycle the profile is mapped onto and the device's work integrated over: the solve's
     (``--cycle``), else the one given (``--assistance-cycle``), else the one a study takes for the
-    same files (:func:`_events_cycle`); ``events``: ``(ID file, ground forces, their column, threshold)``."""
+    same files (:func:`_events_cycle`); ``events``: ``(IK, ID file, ground forces, their column, threshold,
+    ExternalLoads)``."""
     from ..model import read_model
     from .assistance import apply_assistance, check_profile_against_model, read_assistance
 
@@ -276,18 +277,19 @@ def _assisted_moments(path, gain, cycle_s, trial_window, layout, model_path, cac
     elif cycle_s is not None:
         cycle_s, source = (float(cycle_s[0]), float(cycle_s[1])), "given"
     else:
-        cycle_s, source = _events_cycle(profile, trial_window, side, *events)
+        cycle_s, source = _events_cycle(profile, trial_window, side, layout, *events)
     moments = apply_assistance(id_time, id_moments, dofs, profile, gain, window_s=window_s, cycle_s=cycle_s,
                                side=side, model_coordinates=coordinates, body_mass_kg=mass, check_units=check_units,
                                other_leg_solved=both_legs)
     return moments, (profile, cycle_s, source)
 
 
-def _events_cycle(profile, trial_window, side, ik, id_path, grf, grf_column, grf_threshold_N):
+def _events_cycle(profile, trial_window, side, layout, ik, id_path, grf, grf_column, grf_threshold_N, loads):
     """``((start, end), source)``: the gait cycle a study takes for a trial of these files, found as
     ``analyse`` finds it in the solve window (:func:`musclemetab.events.cycle_of_trial`: from the
-    ground forces ``grf``, the cycle holding the middle of the window, else the window less 0.05 s
-    at each end with toe-off from the ankle moment). A time profile without one is integrated
+    ground forces ``grf`` or the ExternalLoads ``loads`` on the foot of ``side`` of ``layout``, the
+    cycle holding the middle of the window, else the window less 0.05 s at each end with toe-off
+    from the ankle moment). A time profile without one is integrated
     over the solve window (said in the source); a cycle profile is refused (it needs a cycle)."""
     from ..errors import MusclemetabError
     from ..events import cycle_of_trial
@@ -296,7 +298,8 @@ def _events_cycle(profile, trial_window, side, ik, id_path, grf, grf_column, grf
     try:
         found, source = cycle_of_trial(ik, grf=grf, id_file=id_path, side=side, window_s=(t0, t1),
                                        remedy="give the gait cycle: --assistance-cycle T0:T1 (or --cycle)",
-                                       grf_column=grf_column, threshold_N=grf_threshold_N)
+                                       grf_column=grf_column, threshold_N=grf_threshold_N, external_loads=loads,
+                                       model=layout if grf is None else None)
     except MusclemetabError as exc:
         if profile.axis == "cycle_pct":
             raise type(exc)(f"{profile.path}: a profile over the gait cycle needs the gait cycle, and none was found "

@@ -4,7 +4,8 @@ Order of preference for the cycle (initial contact, toe-off, next initial contac
 
 1. times given in the study file (``start_s``, ``toe_off_s``, ``end_s``; any subset: the
    rest is found as below);
-2. ground reaction forces (``grf``): threshold crossings of the vertical force
+2. ground reaction forces (``grf``, or with the subject's model those ``external_loads``
+   applies to the foot of the side): threshold crossings of the vertical force
    (``grf_threshold_N``, 20 N by default), the cycle holding the middle of the IK window;
 3. otherwise: the cycle is the IK window less 0.05 s of padding at both ends (the
    example data carry five extra frames at 100 Hz at each end) and toe-off is found
@@ -97,6 +98,17 @@ def trial_cycle(trial: Trial, side: str = "r", model=None, *, window_s: tuple[fl
             from ..events import check_cycle_duration
 
             check_cycle_duration(found, where=f"trial '{trial.name}': {trial.grf} column {force.name}")
+    elif trial.external_loads is not None and model is not None:
+        from ..errors import DataMismatchError
+        from ..events import cycle_from_external_loads
+
+        t0, tf = window_s or _ik_window(trial)
+        try:
+            found = cycle_from_external_loads(
+                trial.external_loads, model, side, trial.start_s if trial.start_s is not None else 0.5 * (t0 + tf),
+                trial.grf_threshold_N, remedy="give the trial's start_s, toe_off_s and end_s, or cycle = \"auto\"")
+        except DataMismatchError as exc:
+            raise DataMismatchError(f"trial '{trial.name}': {exc}") from None
     else:
         from ..errors import DataMismatchError, MissingColumnError
 

@@ -614,6 +614,8 @@ def _cycle_source(trial: Trial, recorded: dict | None = None) -> str:
         return f"ground reaction forces ({recorded.get('source') or 'found by the solve'})"
     if trial.grf is not None:
         return "ground reaction forces"
+    if trial.external_loads is not None:
+        return "ground reaction forces (external_loads)"
     return (f"estimated from the {'solved' if trial.window is not None else 'IK'} window and the ankle moment "
             "(no ground reaction forces)")
 
@@ -828,7 +830,8 @@ def _window_record(trial: Trial, sol) -> dict:
     from ..analysis.unit import recorded_trial
 
     return {"given_s": list(trial.window), "solved_s": list(recorded_trial(sol).window_s),
-            "named_by_events": trial.grf is not None or (trial.start_s is not None and trial.end_s is not None)}
+            "named_by_events": (trial.grf is not None or trial.external_loads is not None
+                                or (trial.start_s is not None and trial.end_s is not None))}
 
 
 def _states_metabolics(study: Study, subject: Subject, trial: Trial, side: str):
