@@ -417,7 +417,7 @@ def test_the_states_options_go_with_states_and_are_checked(example):
     for words in ("trial 'normal'", "'fiber_velocity' and 'muscle_parameters' go with 'states'", "drop them"):
         assert words in str(info.value), str(info.value)
     states = {"states": str(example.ik["normal"])}
-    for key, value, allowed in (("fiber_velocity", "centred", "'derivative', 'equilibrium'"),
+    for key, value, allowed in (("fiber_velocity", "centred", "'auto', 'trajectory', 'derivative', 'equilibrium'"),
                                 ("muscle_parameters", "model", "'probes', 'package'")):
         with pytest.raises(OptionError) as info:
             study_from_dict(data(**states, **{key: value}), base="/")

@@ -364,3 +364,48 @@ def test_a_study_trial_of_states_takes_the_muscle_parameters_option(dgf, example
         pd.testing.assert_frame_equal(mine[cli.columns], cli)
         rates[name] = mine["whole_body_W_per_kg"]
     assert (rates["package"] - rates["probes"]).abs().max() > 1e-3
+
+
+def test_a_trajectorys_tendon_force_derivatives_give_its_fiber_velocity(dgf, tmp_path):
+    """A states file that holds each muscle's tendon-force derivative (the columns
+    ``<muscle path>/implicitderiv_normalized_tendon_force`` of a Moco solution file) gives the
+    fiber velocity OpenSim computes from it in implicit tendon dynamics, as Moco solved the
+    trajectory (against Moco's own on a MocoInverse of the example: 1e-12, docs/metabolics.md 4.1).
+    Here the package's exported solution with the time derivative of its normalized tendon forces
+    (a cubic spline through the states): the velocities are those the derivative of the fiber
+    lengths gives (two differentiations of one smooth trajectory, through OpenSim's tendon curve);
+    with zero derivatives (the tendon force held) they are far from them, so the column is what
+    sets them. ``"trajectory"`` without the columns names them; ``"derivative"`` ignores them."""
+    from scipy.interpolate import CubicSpline
+
+    from musclemetab.errors import DataMismatchError
+    from musclemetab.io import read_table, write_storage
+    from musclemetab.metabolics.opensim_states import read_opensim_states
+
+    _, states, controls, folder = dgf
+    table = read_table(states).to_dataframe()
+    t = np.asarray(table.index, dtype=float)
+    forces = [c for c in table.columns if c.endswith("/normalized_tendon_force")]
+    assert len(forces) == 80  # both legs of the model; the controls drive the right leg's 40
+
+    def with_derivatives(name, values):
+        frame = table.copy()
+        for c in forces:
+            frame[c.replace("/normalized_tendon_force", "/implicitderiv_normalized_tendon_force")] = values(c)
+        write_storage(tmp_path / name, frame, in_degrees=False)
+        return read_opensim_states(folder / "model.osim", tmp_path / name, controls)
+
+    spline = with_derivatives("spline.sto", lambda c: CubicSpline(t, table[c].to_numpy(float))(t, 1))
+    held = with_derivatives("held.sto", lambda c: np.zeros_like(t))
+    lengths = read_opensim_states(folder / "model.osim", states, controls)
+    assert set(spline.velocity_sources) == {"trajectory"} and set(lengths.velocity_sources) == {"derivative"}
+    ref = lengths.states.states["normalized_fiber_velocity"]
+    inner = slice(2, -2)  # the splines' ends
+    e_spline, e_held = (np.abs(r.states.states["normalized_fiber_velocity"] - ref)[:, inner] for r in (spline, held))
+    # measured: median 5e-7 and 95th percentile 2.4e-4 vmax; held: 2.5e-3 and 0.048
+    assert np.median(e_spline) < 1e-5 and np.percentile(e_spline, 95) < 1e-3
+    assert np.percentile(e_held, 95) > 0.02
+    ignored = read_opensim_states(folder / "model.osim", tmp_path / "spline.sto", controls, fiber_velocity="derivative")
+    np.testing.assert_allclose(ignored.states.states["normalized_fiber_velocity"], ref, atol=1e-12)
+    with pytest.raises(DataMismatchError, match="no column implicitderiv_normalized_tendon_force for addbrev_r"):
+        read_opensim_states(folder / "model.osim", states, controls, fiber_velocity="trajectory")

@@ -63,12 +63,15 @@ def add_parser(subparsers) -> None:
     p.add_argument("--controls", metavar="FILE",
                    help="with --states: the simulation's controls file (muscle excitations, columns /forceset/<muscle> "
                    "or <muscle>); the model's muscles it lacks are not evaluated. Without it excitation = activation")
-    p.add_argument("--fiber-velocity", choices=("derivative", "equilibrium"), default="derivative",
-                   help="with --states: a compliant-tendon DeGrooteFregly2016Muscle's fiber velocity from the time "
-                   "derivative of OpenSim's fiber lengths along the states ('derivative', the default: right for "
-                   "states made with other curves, such as a musclemetab solution's states.sto) or from OpenSim's "
-                   "force equilibrium ('equilibrium': as OpenSim's own probes take it); other muscles always take "
-                   "OpenSim's (docs/metabolics.md, Energy of an OpenSim motion)")
+    p.add_argument("--fiber-velocity", choices=("auto", "trajectory", "derivative", "equilibrium"), default="auto",
+                   help="with --states: a compliant-tendon DeGrooteFregly2016Muscle's fiber velocity from the "
+                   "trajectory's own tendon-force derivatives ('trajectory': the implicitderiv_normalized_tendon_force "
+                   "columns of a Moco solution file, the velocity Moco solved with), from the time derivative of "
+                   "OpenSim's fiber lengths along the states ('derivative': right for states made with other curves, "
+                   "such as a musclemetab solution's states.sto) or from OpenSim's force equilibrium ('equilibrium': "
+                   "as OpenSim's own probes take it); 'auto' (the default): the trajectory's where the file holds "
+                   "them, else the derivative. Other muscles always take OpenSim's (docs/metabolics.md, Energy of an "
+                   "OpenSim motion)")
     p.add_argument("--cycle", metavar="START,TOE_OFF,END",
                    help="with --states: the gait events (s) of the cycle the rates are averaged over (and the stance "
                    "and swing of per_muscle.csv); default: every state of the file")
@@ -243,8 +246,11 @@ def _run_states(args, models) -> int:
     n_cl = int(read.clamped.sum()) if read.clamped is not None else 0
     if n_cl:
         act = read.states.states["activation"][read.clamped]
-        how = ("the derivative of OpenSim's fiber length" if args.fiber_velocity == "derivative"
-               else "OpenSim's equilibrium")
+        words = {"trajectory": "the trajectory's tendon-force derivative", "equilibrium": "OpenSim's equilibrium",
+                 "derivative": "the derivative of OpenSim's fiber length"}
+        clamped_muscles = read.clamped.any(axis=1).tolist()
+        used = sorted({src for src, c in zip(read.velocity_sources, clamped_muscles) if c} & words.keys())
+        how = " or ".join(words[u] for u in used) or "OpenSim"
         note(f"{n_cl} of {read.clamped.size} muscle-states of DeGrooteFregly2016 muscles have a "
              f"fiber velocity from {how} off the force-velocity curve (activation there up to {act.max():.3g}); "
              "taken at the curve's bound")

@@ -36,9 +36,11 @@ from .solution import SolutionStates
 __all__ = ["OpenSimStates", "read_opensim_states", "FIBER_VELOCITY_SOURCES", "probe_muscle_properties", "split_sides",
            "MUSCLE_PARAMETER_SOURCES", "states_metabolics"]
 
-#: ``--fiber-velocity``: a compliant-tendon DeGrooteFregly2016Muscle's fiber velocity from the time
-#: derivative of OpenSim's fiber lengths along the states, or from OpenSim's force equilibrium
-FIBER_VELOCITY_SOURCES = ("derivative", "equilibrium")
+#: ``--fiber-velocity``: a compliant-tendon DeGrooteFregly2016Muscle's fiber velocity from the
+#: trajectory's own tendon-force derivative (a Moco solution file's), from the time derivative of
+#: OpenSim's fiber lengths along the states, or from OpenSim's force equilibrium; ``auto`` (the
+#: default): the trajectory's where the file holds it, else the derivative
+FIBER_VELOCITY_SOURCES = ("auto", "trajectory", "derivative", "equilibrium")
 #: ``--muscle-parameters``: the model's probes' (when it has any) or the package's own tables
 MUSCLE_PARAMETER_SOURCES = ("probes", "package")
 _QUANTITIES = ("excitation", "activation", "normalized_fiber_length", "normalized_fiber_velocity",
@@ -72,7 +74,7 @@ class OpenSimStates:
 
 def read_opensim_states(model: str | os.PathLike, states: str | os.PathLike,
                         controls: str | os.PathLike | None = None, *,
-                        fiber_velocity: str = "derivative") -> OpenSimStates:
+                        fiber_velocity: str = "auto") -> OpenSimStates:
     """The muscle states of every muscle of ``model`` along the states file ``states``, from
     OpenSim's muscle dynamics (see the module's description).
 
@@ -80,9 +82,12 @@ def read_opensim_states(model: str | os.PathLike, states: str | os.PathLike,
     ``<muscle>``, interpolated to the state times); the model's muscles it has no column for
     are not evaluated. Without it every muscle's excitation is its activation, and the muscles
     whose state variables are the model's defaults at every state are not evaluated.
-    ``fiber_velocity``: a compliant-tendon DeGrooteFregly2016Muscle's fiber velocity from the time
-    derivative of OpenSim's fiber lengths (``"derivative"``) or OpenSim's force equilibrium
-    (``"equilibrium"``, as OpenSim's probes take it); see ``docs/metabolics.md`` section 4.1.
+    ``fiber_velocity``: a compliant-tendon DeGrooteFregly2016Muscle's fiber velocity from the
+    trajectory's own tendon-force derivative (``"trajectory"``: the columns
+    ``<muscle path>/implicitderiv_normalized_tendon_force`` of a Moco solution file, the velocity
+    Moco solved with), the time derivative of OpenSim's fiber lengths (``"derivative"``) or OpenSim's
+    force equilibrium (``"equilibrium"``, as OpenSim's probes take it); ``"auto"``: the trajectory's
+    where the file holds it, else the derivative; see ``docs/metabolics.md`` section 4.1.
 
     Raises
     ------
@@ -92,7 +97,7 @@ def read_opensim_states(model: str | os.PathLike, states: str | os.PathLike,
     from ..opensim_bridge import call
 
     if fiber_velocity not in FIBER_VELOCITY_SOURCES:
-        raise OptionError(f"fiber velocity must be {' or '.join(FIBER_VELOCITY_SOURCES)}, not {fiber_velocity!r}")
+        raise OptionError(f"fiber velocity must be {', '.join(FIBER_VELOCITY_SOURCES)}, not {fiber_velocity!r}")
     got = call("trajectory:muscles_along_states", str(model), str(states),
                None if controls is None else str(controls), fiber_velocity)
     if got["failed_states"]:

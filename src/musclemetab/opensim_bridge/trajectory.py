@@ -10,8 +10,10 @@ the model, sets every muscle's excitation, realises each state to ``Dynamics`` a
 OpenSim's fiber length and velocity, activation, excitation, active force-length and
 force-velocity multipliers and passive fiber force. Rigid-tendon muscles (no fiber-length
 state) take their fiber length and velocity from the model's geometry, as OpenSim computes
-them. A compliant-tendon DeGrooteFregly2016Muscle takes, with ``fiber_velocity="derivative"``
-(the default), the time derivative of its fiber length along the states instead of its force
+them. A compliant-tendon DeGrooteFregly2016Muscle takes, with ``fiber_velocity="auto"`` (the
+default), the velocity of the trajectory's own tendon-force derivative when the file holds it (a
+MocoTrajectory's ``implicitderiv_normalized_tendon_force``, set in the muscle in implicit mode, as
+Moco does), else the time derivative of its fiber length along the states instead of its force
 equilibrium's velocity (see :func:`muscles_along_states`).
 
 Excitation: with a controls file, each muscle's control from its column (``/forceset/<muscle>``
@@ -111,6 +113,41 @@ def _controls(controls_path, table, labels, muscles, times):
     return out
 
 
+#: a DeGrooteFregly2016Muscle's discrete variable in implicit tendon dynamics: the derivative of its
+#: normalized tendon force, from which OpenSim computes the fiber velocity (Moco's trajectories hold it)
+IMPLICIT_DERIVATIVE = "implicitderiv_normalized_tendon_force"
+
+
+def _implicit_derivative_muscles(mus, sto, fiber_velocity: str, states_path) -> dict:
+    """``{muscle: column}``: the compliant-tendon DeGrooteFregly2016 muscles among ``mus`` whose
+    tendon-force derivative the states file ``sto`` holds (``<path>/implicitderiv_normalized_tendon_force``),
+    switched to implicit tendon dynamics so that OpenSim takes their fiber velocity from it (before
+    the model's system is made); none unless ``fiber_velocity`` is ``"auto"`` or ``"trajectory"``.
+    With ``"trajectory"`` a compliant-tendon DeGrooteFregly2016 muscle without the column is an error."""
+    if fiber_velocity not in ("auto", "trajectory"):
+        return {}
+    labels = sto.getColumnLabels()
+    labels = {labels.get(i) for i in range(labels.getSize())}
+    found, missing = {}, []
+    for m in mus:
+        dgf = osim.DeGrooteFregly2016Muscle.safeDownCast(m)
+        if dgf is None or m.get_ignore_tendon_compliance():
+            continue
+        column = f"{m.getAbsolutePathString()}/{IMPLICIT_DERIVATIVE}"
+        if column in labels:
+            dgf.set_tendon_compliance_dynamics_mode("implicit")
+            found[m.getName()] = column
+        else:
+            missing.append(m.getName())
+    if fiber_velocity == "trajectory" and missing:
+        raise DataMismatchError(
+            f"{states_path}: no column {IMPLICIT_DERIVATIVE} for {', '.join(missing[:6])}"
+            f"{' ...' if len(missing) > 6 else ''} (the tendon-force derivatives a Moco solution file holds); give "
+            "the file MocoTrajectory.write() wrote, or take the derivative of the fiber lengths "
+            "(--fiber-velocity derivative)")
+    return found
+
+
 def muscles_along_states(model_path: str, states_path: str, controls_path: str | None = None,
                          fiber_velocity: str = "derivative") -> dict:
     """OpenSim's muscle quantities of every muscle of ``model_path`` at every state of
@@ -120,9 +157,13 @@ def muscles_along_states(model_path: str, states_path: str, controls_path: str |
     (``skipped_muscles``: e.g. the other leg's muscles of a one-leg solution's model); without one,
     the muscles whose every state variable is the model's default at every state (the same other
     leg), unless that is every muscle (``skipped_reason``: ``"no controls"``, ``"default states"``).
-    ``fiber_velocity``: ``"derivative"`` or ``"equilibrium"`` for a compliant-tendon
-    DeGrooteFregly2016Muscle (``velocity_sources`` per muscle: ``derivative``, ``equilibrium``,
-    ``geometry``).
+    ``fiber_velocity``: ``"auto"``, ``"trajectory"``, ``"derivative"`` or ``"equilibrium"`` for a
+    compliant-tendon DeGrooteFregly2016Muscle (``velocity_sources`` per muscle: ``trajectory``,
+    ``derivative``, ``equilibrium``, ``geometry``): ``trajectory`` takes the velocity of the tendon-force
+    derivative the states file holds (column ``<muscle path>/implicitderiv_normalized_tendon_force``,
+    as a MocoTrajectory file has it; the muscle in implicit mode, as Moco solves it; a muscle
+    without the column is an error), ``auto`` does where the file has the column and takes the
+    derivative elsewhere.
 
     Returns ``muscles`` (names, model order), ``time_s``, the quantities of
     :data:`MUSCLE_GETTERS` as arrays ``(muscles, states)`` (NaN at a state OpenSim cannot
@@ -157,14 +198,15 @@ def muscles_along_states(model_path: str, states_path: str, controls_path: str |
             if m not in driven:
                 m.set_appliesForce(False)
         mus = driven
-    default = model.initSystem()
-    mset = model.getMuscles()
-    mus = [mset.get(m.getName()) for m in mus]
     try:
         sto = osim.Storage(str(states_path))
     except RuntimeError as exc:
         raise InputFileError(f"{states_path}: OpenSim cannot read the states file "
                              f"({_opensim_message(exc)})") from None
+    implicit = _implicit_derivative_muscles(mus, sto, fiber_velocity, states_path)
+    default = model.initSystem()
+    mset = model.getMuscles()
+    mus = [mset.get(m.getName()) for m in mus]
     if sto.isInDegrees():
         model.getSimbodyEngine().convertDegreesToRadians(sto)
     try:
@@ -178,6 +220,12 @@ def muscles_along_states(model_path: str, states_path: str, controls_path: str |
     times = np.array([traj.get(s).getTime() for s in range(n)])
     labels = sto.getColumnLabels()
     labels = [labels.get(i) for i in range(labels.getSize())]
+    derivatives = {}  # muscle index -> its tendon-force derivative at every state (a Moco trajectory's)
+    for i, m in enumerate(mus):
+        if m.getName() in implicit:
+            col = osim.ArrayDouble()
+            sto.getDataColumn(implicit[m.getName()], col)
+            derivatives[i] = [col.get(k) for k in range(col.getSize())]
     locked = []
     cset = model.getCoordinateSet()
     for i in range(cset.getSize()):
@@ -236,6 +284,8 @@ def muscles_along_states(model_path: str, states_path: str, controls_path: str |
     for s in range(n):
         state = traj.get(s)
         set_locked_coordinates(locked, state, s)
+        for i, values in derivatives.items():  # the velocity of the trajectory's own tendon dynamics
+            mus[i].setDiscreteVariableValue(state, IMPLICIT_DERIVATIVE, float(values[s]))
         model.realizeVelocity(state)
         controls = model.updControls(state)
         for i, m in enumerate(mus):
@@ -261,7 +311,9 @@ def muscles_along_states(model_path: str, states_path: str, controls_path: str |
     # zero: states made with other curves (the package's own solutions, exported) land far off the
     # force-velocity curve. "derivative" takes the time derivative of OpenSim's fiber length along the
     # states instead (a not-a-knot cubic spline through the states' fiber lengths), and with it the
-    # muscle's force-velocity multiplier and passive force; "equilibrium" keeps OpenSim's velocity.
+    # muscle's force-velocity multiplier and passive force; "equilibrium" keeps OpenSim's velocity. A
+    # trajectory that holds its tendon-force derivatives (Moco's) gives OpenSim the velocity it was
+    # solved with ("trajectory", and "auto" where the file has them): OpenSim's, kept.
     # Either way a velocity beyond the curve's -vmax..vmax (or not a number) takes the bound (0 when
     # not a number), the curve's multiplier and the passive force there; counted in ``clamped``
     v = out["normalized_fiber_velocity"]
@@ -274,7 +326,9 @@ def muscles_along_states(model_path: str, states_path: str, controls_path: str |
             continue
         lmo, vmax = m.getOptimalFiberLength(), m.getMaxContractionVelocity()
         ok = ~np.isnan(out["activation"][i])
-        if fiber_velocity == "derivative" and not m.get_ignore_tendon_compliance() and ok.sum() >= 2:
+        if i in derivatives:
+            sources.append("trajectory")
+        elif fiber_velocity in ("auto", "derivative") and not m.get_ignore_tendon_compliance() and ok.sum() >= 2:
             from scipy.interpolate import CubicSpline
 
             if not np.all(np.diff(times[ok]) > 0):

@@ -91,7 +91,7 @@ A study file names everything a study needs; paths are relative to the file::
                                           # `musclemetab metabolics --states` gives them; one unit,
                                           # workflow "states", instead of a solve per workflow
     # fiber_velocity = "equilibrium"      # optional, with states: as --fiber-velocity (default
-    # muscle_parameters = "package"       # "derivative") and --muscle-parameters (default "probes")
+    # muscle_parameters = "package"       # "auto") and --muscle-parameters (default "probes")
 
 Every key is checked: an unknown key, a missing file or a wrong type raises
 :class:`~musclemetab.errors.OptionError` or :class:`~musclemetab.errors.InputFileError`
@@ -222,8 +222,8 @@ class Trial:
     #: an OpenSim states file of the subject's model (and its controls): the rates from them, no solve
     states: Path | None = None
     controls: Path | None = None
-    #: with ``states``: a compliant-tendon muscle's fiber velocity, ``"derivative"`` or
-    #: ``"equilibrium"`` (``--fiber-velocity``; ``None``: the command's default, the derivative)
+    #: with ``states``: a compliant-tendon muscle's fiber velocity, ``"auto"``, ``"trajectory"``,
+    #: ``"derivative"`` or ``"equilibrium"`` (``--fiber-velocity``; ``None``: the command's default, auto)
     fiber_velocity: str | None = None
     #: with ``states``: the muscle masses of the model's metabolic probes or of the package's tables,
     #: ``"probes"`` or ``"package"`` (``--muscle-parameters``; ``None``: the command's default, probes)
