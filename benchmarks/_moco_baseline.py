@@ -20,7 +20,15 @@ MocoInverse, because the example data has no ground reaction forces):
 Usage::
 
     python benchmarks/_moco_baseline.py --model M.osim --ik IK.mot --id ID.sto \\
-        [--mesh-interval 0.01] [--tendons compliant|rigid] [--workdir DIR]
+        [--mesh-interval 0.01] [--tendons compliant|rigid] [--window T0:T1] [--workdir DIR] \\
+        [--write-trajectory DIR]
+
+``--write-trajectory DIR`` (for ``benchmarks/moco_states.py``) writes the solved model
+(``model.osim``), the solution as a MocoTrajectory file with the free coordinates' values and
+speeds added from the filtered kinematics (a MocoInverse solution has none) and the prescribed
+loads' controls (``moco_solution.sto``: states, controls and the tendon-force derivatives), and
+the muscle outputs Moco reports along it (``moco_outputs.sto``, ``analyzeMocoTrajectory``:
+normalized fiber velocity, force-velocity multiplier, passive fiber force).
 """
 
 from __future__ import annotations
@@ -131,7 +139,7 @@ def _write_moving_points(model_path, out_path, edits, samples, grid_rad):
     tree.write(out_path, xml_declaration=True, encoding="UTF-8")
 
 
-def build(model_path, ik_path, id_path, mesh_interval, tendons, workdir):
+def build(model_path, ik_path, id_path, mesh_interval, tendons, workdir, window=None):
     import opensim as osim
 
     osim.Logger.setLevelString("error")
@@ -290,8 +298,8 @@ def build(model_path, ik_path, id_path, mesh_interval, tendons, workdir):
     inverse.setName("moco_baseline")
     inverse.setModel(osim.ModelProcessor(reduced))
     inverse.setKinematics(osim.TableProcessor(table))
-    inverse.set_initial_time(float(t[0]))
-    inverse.set_final_time(float(t[-1]))
+    inverse.set_initial_time(float(t[0]) if window is None else float(window[0]))
+    inverse.set_final_time(float(t[-1]) if window is None else float(window[1]))
     inverse.set_mesh_interval(float(mesh_interval))
     inverse.set_kinematics_allow_extra_columns(True)
     study = inverse.initialize()
@@ -301,7 +309,39 @@ def build(model_path, ik_path, id_path, mesh_interval, tendons, workdir):
         effort.setWeightForControl(f"/forceset/applied_{c}", 0.0)
     setup_s = time.perf_counter() - t_setup
     return study, reduced, {"patella_points_moved": len(edits), "patella_length_check_mm": patella_check_mm,
-                            "setup_s": setup_s}
+                            "setup_s": setup_s, "kinematics": (t, qf)}
+
+
+def write_trajectory(osim, sol, reduced, kinematics, out_dir):
+    """The files of ``--write-trajectory`` (module docstring) in ``out_dir``."""
+    from scipy.interpolate import CubicSpline
+
+    os.makedirs(out_dir, exist_ok=True)
+    reduced.printToXML(os.path.join(out_dir, "model.osim"))
+    t_k, qf = kinematics
+    spline = CubicSpline(t_k, qf, axis=0)
+    t = np.array(sol.getTimeMat()).ravel()
+    path_of = {c.getName(): c.getAbsolutePathString() for c in reduced.getCoordinateSet()}
+    coords = osim.TimeSeriesTable()
+    labels = osim.StdVectorString()
+    for suffix in ("value", "speed"):
+        for c in FREE_COORDS:
+            labels.append(f"{path_of[c]}/{suffix}")
+    coords.setColumnLabels(labels)
+    values, speeds = spline(t), spline(t, 1)
+    for k in range(t.size):
+        row = osim.RowVector(2 * len(FREE_COORDS), 0.0)
+        for j in range(len(FREE_COORDS)):
+            row[j], row[len(FREE_COORDS) + j] = float(values[k, j]), float(speeds[k, j])
+        coords.appendRow(float(t[k]), row)
+    sol.insertStatesTrajectory(coords, True)
+    sol.generateControlsFromModelControllers(reduced)
+    sol.write(os.path.join(out_dir, "moco_solution.sto"))
+    paths = osim.StdVectorString()
+    for name in ("normalized_fiber_velocity", "force_velocity_multiplier", "passive_fiber_force"):
+        paths.append(f".*{name}")
+    osim.STOFileAdapter.write(osim.analyzeMocoTrajectory(reduced, sol, paths),
+                              os.path.join(out_dir, "moco_outputs.sto"))
 
 
 def main(argv=None):
@@ -312,13 +352,17 @@ def main(argv=None):
     p.add_argument("--mesh-interval", type=float, default=0.01)
     p.add_argument("--tendons", choices=("compliant", "rigid"), default="compliant")
     p.add_argument("--workdir")
+    p.add_argument("--window", metavar="T0:T1", help="solve this window of the kinematics (default: all of it)")
+    p.add_argument("--write-trajectory", metavar="DIR", help="write the solution's files there (module docstring)")
     args = p.parse_args(argv)
+    window = tuple(float(v) for v in args.window.split(":")) if args.window else None
     workdir = args.workdir or tempfile.mkdtemp(prefix="moco-baseline-")
     os.makedirs(workdir, exist_ok=True)
     cwd = os.getcwd()
     os.chdir(workdir)  # Moco writes its own files into the working directory
     try:
-        study, reduced, info = build(args.model, args.ik, args.id, args.mesh_interval, args.tendons, workdir)
+        study, reduced, info = build(args.model, args.ik, args.id, args.mesh_interval, args.tendons, workdir, window)
+        kinematics = info.pop("kinematics")
         t0, c0 = time.perf_counter(), time.process_time()  # CPU time of every thread of the process
         sol = study.solve()
         solve_s, solve_cpu_s = time.perf_counter() - t0, time.process_time() - c0
@@ -331,6 +375,10 @@ def main(argv=None):
             out["max_reserve_control"] = max(float(np.max(np.abs(sol.getControl(n).to_numpy()))) for n in reserves)
         except Exception:  # noqa: BLE001 - diagnostics only
             pass
+        if args.write_trajectory:
+            import opensim as osim
+
+            write_trajectory(osim, sol, reduced, kinematics, os.path.abspath(os.path.join(cwd, args.write_trajectory)))
     finally:
         os.chdir(cwd)
     print(json.dumps(out))

@@ -8,8 +8,8 @@ geometry other tests computed is not computed again.
 Each script runs in a new process of its own, as ``__main__`` with ``sys.argv`` ``[script,
 "--quick"]`` and the benchmarks folder first on ``sys.path``: a child forked from one launcher
 process of this module that has imported the libraries every script imports (NumPy, pandas,
-SciPy, CasADi with its IPOPT plugin, the package), so that the nineteen scripts do not import them
-nineteen times; the processes a script starts (``musclemetab`` commands, process pools, worker
+SciPy, CasADi with its IPOPT plugin, the package), so that the twenty scripts do not import them
+twenty times; the processes a script starts (``musclemetab`` commands, process pools, worker
 trees) are new interpreters, as in any run of the script."""
 
 from __future__ import annotations
@@ -31,6 +31,10 @@ BENCHMARKS = Path(__file__).resolve().parent.parent / "benchmarks"
 EXPECTED = {
     "local_optima.py": [r"^  cold \(the reference\)\s+\+0\.0e\+00\s+\d+\s+[\d.]+\s+0\.000 %",
                         r"^  warm from EFFORT-GEN\s+[+-][\d.]+e[+-]\d+\s+\d+\s+[\d.]+\s+[\d.]+ % \(\w+\)\s+[\d.]+ %"],
+    "moco_states.py": [r"^MocoInverse of the normal trial, mesh 0.05 s: .*\"success\": true",
+                       r"^Moco's own outputs\s+0\.0e\+00\s+0\.0e\+00\s+0\.0e\+00(\s+[\d.]+){6}$",
+                       *[rf"^{s}\s+[\d.]+e[+-]\d+\s+[\d.]+e[+-]\d+\s+[\d.]+e[+-]\d+(\s+[\d.]+){{6}}$"
+                         for s in ("trajectory", "derivative", "equilibrium")]],
     "lock_takeover.py": [r"^3 rounds of 2 simultaneous starts after a crash: 3 round\(s\) with 1 holder\(s\) "],
     "metabolics.py": [r"^model\s+M samples/s median\s+best\s+x probe median",
                       *[rf"^{m}\s+[\d.]+\s+[\d.]+\s+\d+\s+\d+\s+\((Umberger2010|Bhargava2004)\)$"

@@ -370,7 +370,8 @@ def test_a_trajectorys_tendon_force_derivatives_give_its_fiber_velocity(dgf, tmp
     """A states file that holds each muscle's tendon-force derivative (the columns
     ``<muscle path>/implicitderiv_normalized_tendon_force`` of a Moco solution file) gives the
     fiber velocity OpenSim computes from it in implicit tendon dynamics, as Moco solved the
-    trajectory (against Moco's own on a MocoInverse of the example: 1e-12, docs/metabolics.md 4.1).
+    trajectory (against Moco's own on a MocoInverse of the example: 3e-5 vmax at most,
+    benchmarks/moco_states.py and docs/metabolics.md 4.1).
     Here the package's exported solution with the time derivative of its normalized tendon forces
     (a cubic spline through the states): the velocities are those the derivative of the fiber
     lengths gives (two differentiations of one smooth trajectory, through OpenSim's tendon curve);
