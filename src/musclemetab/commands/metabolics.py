@@ -265,6 +265,9 @@ def _run_states(args, models) -> int:
                  f"model's default states all along {args.states} (not simulated, e.g. the other leg of a one-leg "
                  "solution): not evaluated")
     over = "" if cycle is None else f", averaged over the cycle {cycle.start_s:g}-{cycle.end_s:g} s"
+    from collections import Counter
+
+    velocity = ", ".join(f"{k} {n}" for k, n in sorted(Counter(read.velocity_sources).items()))
     first = next(iter(results.values()))
     if len(results) == 1:
         (side, result), = results.items()
@@ -276,7 +279,7 @@ def _run_states(args, models) -> int:
         whole = f"legs {' + '.join(results)} added"
         means = ", ".join(f"{m} {v:.2f}" for m, v in add_legs(results).items())
     print(f"metabolics: {len(first.models)} models x {len(read.states.muscles)} muscles x {read.states.time_s.size} "
-          f"states of {args.states} (excitation {excitation}{skipped}{over}) -> {args.out} "
+          f"states of {args.states} (excitation {excitation}, fiber velocity: {velocity}{skipped}{over}) -> {args.out} "
           f"({', '.join(sorted({p.name for p in files.values()}))}); {whole} (W/kg, basal {args.basal}): {means}")
     _plausibility(args, {}, results)
     return 0
