@@ -109,6 +109,10 @@ DATA_DICTIONARY: tuple[tuple[str, str, str, str], ...] = (
      "how the unit's solve started: 'cold' (static optimisation), 'warm from <workflow>' (the same trial's solution of "
      "the workflow before it), or 'cold: <reason>' when a planned warm start was not used or did not succeed "
      "(docs/study.md, warm-started chains); legs that differ are named"),
+    (_STUDY, "other_start_rate_difference", "-",
+     "with [solver] best_start (the unit solved from both starts, the lower objective kept): the other start's "
+     "whole-body rate relative to the kept solution's, minus 1 (docs/study.md, Which optimum); two legs: their "
+     "mean; the column is absent otherwise"),
     (_STUDY, "large_reserve", "-",
      "true when the solve's largest reserve RMS exceeds 1 % of the peak joint moment (the muscles do not explain "
      "the moments: check the inputs); summary.json holds reserve_share_of_peak_moment"),

@@ -145,6 +145,10 @@ SWITCH_KEYS: dict[str, SwitchKey] = {k.name: k for k in (
     SwitchKey("warm_start", False, "[solver] warm_start: start each effort solve of a trial from the solve of the "
               "workflow before it (EFFORT-GEN -> EFFORT-CAL -> EFFORT-TEN); false (the default): every solve from "
               "static optimisation", on_option="--warm-start", off_option="--cold-start"),
+    SwitchKey("best_start", False, "[solver] best_start: solve each effort solve of a trial that has a workflow "
+              "before it twice, from static optimisation and from that workflow's solution, and keep the lower "
+              "objective (unit.json 'starts' records both and the whole-body rates' spread; docs/study.md, Which "
+              "optimum); false (the default): one start", on_option="--best-start"),
     SwitchKey("sensitivity", False, "[uncertainty] sensitivity: each effort trial unit (one leg, forward fiber "
               "dynamics, no EMG or energy goal) also writes sensitivity.csv, the derivative of each rate per log of "
               "each muscle parameter at the optimum (docs/uncertainty.md, Sensitivities); false (the default): not",

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from .options import add_study_arguments
-from .run import (add_uncertainty_arguments, add_warm_start_arguments, apply_uncertainty_arguments, exit_status,
-                  print_run, print_whole_body)
+from .run import (add_uncertainty_arguments, add_warm_start_arguments, apply_start_arguments,
+                  apply_uncertainty_arguments, exit_status, print_run, print_whole_body)
 
 __all__ = ["add_parser", "run"]
 
@@ -35,7 +35,7 @@ def run(args) -> int:
     check_output_folder(args.out)  # a file, or a folder that cannot be written: one line before any work
     result = run_demo(args.out, workers=args.workers, speeds=args.speeds, progress=not (args.no_progress or args.quiet),
                       force=args.force, strict=args.strict, warm_start=bool(args.warm_start),
-                      adjust=lambda study: apply_uncertainty_arguments(study, args))
+                      adjust=lambda study: apply_uncertainty_arguments(apply_start_arguments(study, args), args))
     print_run(result, "demo")
     if result.interrupted:
         return exit_status(result)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from .options import add_study_arguments
 
 __all__ = ["add_parser", "run", "print_run", "print_whole_body", "exit_status", "add_warm_start_arguments",
-           "add_uncertainty_arguments", "apply_uncertainty_arguments"]
+           "apply_start_arguments", "add_uncertainty_arguments", "apply_uncertainty_arguments"]
 
 
 def add_parser(sub) -> None:
@@ -32,7 +32,8 @@ def add_parser(sub) -> None:
 
 
 def add_warm_start_arguments(p) -> None:
-    """``--warm-start``/``--cold-start``: the study file's ``[solver] warm_start`` (``run`` and ``demo``)."""
+    """``--warm-start``/``--cold-start`` and ``--best-start``: the study file's ``[solver] warm_start``
+    and ``best_start`` (``run`` and ``demo``)."""
     from ..settings import SWITCH_KEYS
 
     key = SWITCH_KEYS["warm_start"]
@@ -45,6 +46,21 @@ def add_warm_start_arguments(p) -> None:
                             "docs/study.md)")
     group.add_argument(key.off_option, dest="warm_start", action="store_const", const=False,
                        help="start every solve from static optimisation (the default), as [solver] warm_start = false")
+    p.add_argument(SWITCH_KEYS["best_start"].on_option, action="store_true",
+                   help="solve a trial's EFFORT-CAL and EFFORT-TEN twice, from static optimisation and from the "
+                        "solution of the workflow before them, and keep the lower objective, as the study file's "
+                        "[solver] best_start = true: unit.json 'starts' records both starts' objectives and how far "
+                        "their whole-body rates differ (a problem with several optima, docs/study.md)")
+
+
+def apply_start_arguments(study, args):
+    """``study`` with ``--best-start`` applied (:func:`add_warm_start_arguments`; ``--warm-start`` and
+    ``--cold-start`` are applied by the caller)."""
+    if getattr(args, "best_start", False):
+        from ..study.spec import best_start_study
+
+        study = best_start_study(study, True)
+    return study
 
 
 def add_uncertainty_arguments(parser) -> None:
@@ -133,7 +149,7 @@ def run(args) -> int:
         from ..study.spec import warm_start_study
 
         study = warm_start_study(study, args.warm_start)
-    study = apply_uncertainty_arguments(study, args)
+    study = apply_uncertainty_arguments(apply_start_arguments(study, args), args)
     result = run_study(study, workers=args.workers, scheduler=args.scheduler, force=args.force,
                        progress=not (args.no_progress or args.quiet))
     if args.report and not result.interrupted:

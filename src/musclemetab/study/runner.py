@@ -308,7 +308,7 @@ def unit_batches(study: Study) -> list[list[Unit]]:
     that a unit comes after the unit whose solution it starts from); then the uncertainty
     samples of the trial units (:mod:`.uncertainty`)."""
     stage1, stage2 = plan_units(study)
-    if study.warm_start:
+    if study.warm_start or study.best_start:
         stage2.sort(key=lambda u: WARM_CHAIN.index(u.workflow) if u.workflow in WARM_CHAIN else -1)  # stable
     independent = [u for u in stage2 if u.depends_on(study) is None]
     dependent = [u for u in stage2 if u.depends_on(study) is not None]
@@ -552,6 +552,9 @@ def _unit_rows(folder: Path, unit: Unit, rec: dict):
         unit_dir=str(unit.folder), excluded_muscles=rec.get("excluded_muscles"),
         named_by_events=(rec.get("window") or {}).get("named_by_events", True))  # False: a trial's window alone
     df["solve_start"] = rec.get("start") or "cold"  # a record without it: a unit of an earlier version, cold
+    spread = (rec.get("starts") or {}).get("other_whole_body_difference")
+    if spread:  # solved from both starts ([solver] best_start): how far the other start's rates are
+        df["other_start_rate_difference"] = df["model"].map(spread)
     if rec.get("assistance"):  # an assisted trial: its device (musclemetab.analysis.assistance)
         from ..analysis.assistance import device_columns
 

@@ -119,7 +119,7 @@ from ..messages import name_list
 from ..settings import MAX_ITERATIONS, MESH_FREQUENCY_RANGE_HZ, NUMBER_KEYS, NumberKey, check_number  # noqa: F401
 
 __all__ = ["Study", "Subject", "Trial", "load_study", "study_from_dict", "EMG_TEN", "KNOWN_WORKFLOWS", "BOTH", "strict_study",
-           "warm_start_study", "sensitivity_study"]
+           "warm_start_study", "best_start_study", "sensitivity_study"]
 
 EMG_TEN = "emg-ten"
 #: ``side = "both"``: the two legs solved as independent problems, their rates added
@@ -315,6 +315,15 @@ class Study:
         return bool(self.settings.get("warm_start", SWITCH_KEYS["warm_start"].default))
 
     @property
+    def best_start(self) -> bool:
+        """Whether a trial's effort solve that has a workflow before it is solved from both starts,
+        static optimisation and that workflow's solution, the lower objective kept (the study
+        file's ``[solver] best_start``, default false; ``docs/study.md``, Which optimum)."""
+        from ..settings import SWITCH_KEYS
+
+        return bool(self.settings.get("best_start", SWITCH_KEYS["best_start"].default))
+
+    @property
     def sensitivity(self) -> bool:
         """Whether each effort trial unit writes ``sensitivity.csv`` (the study file's
         ``[uncertainty] sensitivity``, default false; ``docs/study.md``)."""
@@ -339,7 +348,9 @@ _ENERGY_KEYS = {"model", "weight", "effort_weight", "smoothing", "form"}
 #: keys of the study file's [uncertainty] table (docs/uncertainty.md)
 _UNCERTAINTY_KEYS = {"samples", "seed", "priors", "sensitivity", "keep_flagged"}
 #: keys of the study file's [solver] table (IPOPT settings of every solve)
-_SOLVER_KEYS = {"max_iter", "tol", "stop", "linear_solver", "warm_start"}
+_SOLVER_KEYS = {"max_iter", "tol", "stop", "linear_solver", "warm_start", "best_start"}
+#: the [solver] keys that say how the solves start, not IPOPT settings: kept beside [solver]
+_START_KEYS = ("warm_start", "best_start")
 _SUBJECT_KEYS = {"name", "model", "body_mass_kg", "height_m", "passive", "tendon_stiffness", "emg_mapping", "trials",
                  "muscle_properties", "side", "dofs", "emg_mode", "emg_tolerance", "estimate", "exclude_muscles",
                  "emg_processing", "generic_model", "static", "scale_setup", "marker_set"}
@@ -462,8 +473,9 @@ def study_from_dict(data: Mapping[str, Any], *, base: str | os.PathLike = ".", s
     if "basal_coefficient" in data or "basal_exponent" in data:
         settings.update(basal_coefficient=basal_coefficient, basal_exponent=basal_exponent)
     solver = _solver(data.get("solver"), where)
-    if "warm_start" in solver:  # how the solves start, not an IPOPT setting: kept beside [solver]
-        settings["warm_start"] = solver.pop("warm_start")
+    for key in _START_KEYS:  # how the solves start, not IPOPT settings: kept beside [solver]
+        if key in solver:
+            settings[key] = solver.pop(key)
     if solver:
         settings["solver"] = solver
     energy = _energy_goal(data.get("energy_goal"), where)
@@ -518,6 +530,14 @@ def strict_study(study: Study) -> Study:
     return replace(study, strict=True, settings={**study.settings, "strict": True})
 
 
+def best_start_study(study: Study, best_start: bool) -> Study:
+    """``study`` with each chained effort solve solved from both starts, the lower objective kept
+    (``--best-start``: the study file's ``[solver] best_start = true``)."""
+    from dataclasses import replace
+
+    return replace(study, settings={**study.settings, "best_start": bool(best_start)})
+
+
 def warm_start_study(study: Study, warm_start: bool) -> Study:
     """``study`` with warm-started chains on or off (``--warm-start``/``--cold-start``: the study
     file's ``[solver] warm_start = true|false``)."""
@@ -527,7 +547,7 @@ def warm_start_study(study: Study, warm_start: bool) -> Study:
 
 
 def _solver(data, where: str) -> dict:
-    """The ``[solver]`` table: ``max_iter``, ``tol``, ``stop``, ``linear_solver`` and ``warm_start``, checked (the
+    """The ``[solver]`` table: ``max_iter``, ``tol``, ``stop``, ``linear_solver``, ``warm_start`` and ``best_start``, checked (the
     library of a run-time linear solver comes from the command line or the environment, never from the file)."""
     if data is None:
         return {}
@@ -543,14 +563,15 @@ def _solver(data, where: str) -> dict:
     for key in ("max_iter", "tol"):
         if key in data:
             _number(data[key], f"{where}: [solver]", key)
-    if "warm_start" in data:
-        from ..settings import check_switch
+    for key in _START_KEYS:
+        if key in data:
+            from ..settings import check_switch
 
-        check_switch("warm_start", data["warm_start"], f"{where}: [solver]")
+            check_switch(key, data[key], f"{where}: [solver]")
     from ..redundancy import SolverOptions
 
     try:
-        SolverOptions(**{k: v for k, v in data.items() if k != "warm_start"})
+        SolverOptions(**{k: v for k, v in data.items() if k not in _START_KEYS})
     except (TypeError, ValueError, OptionError) as exc:
         raise OptionError(f"{where}: [solver]: {exc}") from None
     return dict(data)

@@ -132,8 +132,8 @@ class Unit:
 
     def warm_source(self, study: Study) -> "Unit | None":
         """The unit whose solution this unit's solve starts from, if any: with the study's
-        ``warm_start``, the same subject, trial and leg with the workflow before this one in
-        :data:`WARM_CHAIN` among the study's workflows; an assisted trial's solve (its
+        ``warm_start`` (or ``best_start``: it is then one of the two starts), the same subject, trial
+        and leg with the workflow before this one in :data:`WARM_CHAIN` among the study's workflows; an assisted trial's solve (its
         ``assisted_from``), whatever ``warm_start`` says, from the unassisted trial's solve with the same
         workflow. EMG-informed solves (the subject's ``emg_mode``), EMG-TEN and estimations start cold."""
         if self.trial is None or self.sample is not None or self.workflow not in WARM_CHAIN:
@@ -144,7 +144,7 @@ class Unit:
         assisted_from = subject.trial(self.trial).assisted_from
         if assisted_from is not None:  # an assisted solve starts from the unassisted one (docs/assistance.md)
             return Unit(self.subject, assisted_from, self.workflow, self.side)
-        if not study.warm_start:
+        if not (study.warm_start or study.best_start):
             return None
         before = [w for w in WARM_CHAIN[:WARM_CHAIN.index(self.workflow)] if w in study.workflows]
         return Unit(self.subject, self.trial, before[-1], self.side) if before else None
@@ -248,6 +248,8 @@ def unit_key(study: Study, unit: Unit, dependency_key: str | None = None, warm_k
         content["solver"] = study.settings["solver"]
     if warm_key is not None:  # absent for a cold start: cold studies keep their unit keys
         content["warm_start"] = warm_key
+        if study.best_start:  # solved from both starts, the lower objective kept
+            content["best_start"] = True
     if study.settings.get("energy_goal") and unit.workflow != EMG_TEN:
         content["energy_goal"] = study.settings["energy_goal"]
     if unit.trial is None:
@@ -665,7 +667,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
     times = {}
     start = COLD
     t0 = time.perf_counter()
-    sol = states = None
+    sol = states = other = None
     if unit.workflow == STATES:  # the rates of an OpenSim states file: no solve
         states = _states_metabolics(study, subject, trial, side)
     elif unit.workflow == EMG_TEN:
@@ -686,7 +688,8 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
                                    **({"warm_start": warm_start} if warm_start is not None else {}), **device,
                                    **trial_solve_keywords(subject, trial, side), **kwargs)
 
-            sol, start = _chain_solve(solve, unit.warm_source(study), warm, times, trial.name)
+            sol, start, other = _chain_solve(solve, unit.warm_source(study), warm, times, trial.name,
+                                             both=study.best_start)
         write_solution_folder(sol, tmp, opensim_files=False)  # written below, for every workflow
         if (study.settings.get("uncertainty") or {}).get("samples") and is_sampled(study, unit):
             from .samples import write_start
@@ -743,6 +746,10 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
         speed_m_per_s=speed, muscle_properties=subject.muscle_properties, cycle_s=rates_span_s(rates_over_s),
     )
     write_metabolics(result, tmp, cycle=cycle)
+    starts = None if other is None else _starts_record(sol, start, other, result, lambda s: metabolics_from_solution(
+        s, subject.body_mass_kg, subject.height_m, models=list(study.models), basal=study.basal,
+        basal_rate_W_per_kg=study.basal_coefficient, basal_exponent=study.basal_exponent,
+        speed_m_per_s=speed, muscle_properties=subject.muscle_properties, cycle_s=rates_span_s(rates_over_s)))
     times["metabolics_s"] = time.perf_counter() - t1
 
     t2 = time.perf_counter()
@@ -779,6 +786,7 @@ def _run_trial(study: Study, unit: Unit, tmp: Path, dependency: Path | None, war
     return {
         "times": times,
         "start": start,
+        **({"starts": starts} if starts is not None else {}),
         "speed_m_per_s": speed,
         "measured_W_per_kg": measured,
         "cycle": {"start_s": cycle.start_s, "toe_off_s": cycle.toe_off_s, "end_s": cycle.end_s},
@@ -985,9 +993,10 @@ def unit_sensitivity(study: Study, unit: Unit, folder: Path) -> dict:
 COLD = "cold"
 
 
-def _chain_solve(solve, source: Unit | None, folder: Path | None, times: dict, trial: str | None = None):
-    """``(solution, start)``: ``solve(warm_start)`` started from the solution in ``folder`` (the
-    unit ``source``), with the fallback of ``docs/study.md`` ("Warm-started chains"):
+def _chain_solve(solve, source: Unit | None, folder: Path | None, times: dict, trial: str | None = None,
+                 both: bool = False):
+    """``(solution, start, other)``: ``solve(warm_start)`` started from the solution in ``folder``
+    (the unit ``source``), with the fallback of ``docs/study.md`` ("Warm-started chains"):
 
     * no ``source``: a cold solve, start ``"cold"``;
     * ``source`` did not succeed (no ``ok`` record in ``folder``) or its solution has another
@@ -996,33 +1005,68 @@ def _chain_solve(solve, source: Unit | None, folder: Path | None, times: dict, t
       ``"cold: ... solved again cold"`` with the warm attempt's status and iterations (its
       time in ``times["warm_attempt_s"]``);
     * otherwise start ``"warm from <workflow>"``.
+
+    ``both`` (the study's ``best_start``): the warm-started solve that succeeded is solved cold too,
+    and the one of lower objective is kept; ``other`` is then ``(the other's start, its solution)``
+    (else ``None``), and ``times["other_start_s"]`` its time.
     """
     from ..errors import DataMismatchError, InputFileError, SolverError
     from ..redundancy.solution import Solution
 
     if source is None:
-        return solve(), COLD
+        return solve(), COLD, None
     if trial is not None and source.trial != trial:  # an assisted trial's unassisted solve
         source = replace(source, workflow=f"{source.trial} ({source.workflow})")
     rec = read_unit_record(folder) if folder is not None else None
     if not rec or rec.get("status") != "ok":
-        return solve(), f"cold: {source.workflow} did not succeed, no warm start"
+        return solve(), f"cold: {source.workflow} did not succeed, no warm start", None
     try:
         previous = Solution.load(folder)
     except (InputFileError, SolverError, OSError) as exc:
-        return solve(), f"cold: the solution of {source.workflow} cannot be read ({' '.join(str(exc).split())})"
+        return solve(), f"cold: the solution of {source.workflow} cannot be read ({' '.join(str(exc).split())})", None
     t0 = time.perf_counter()
     try:
         sol = solve(previous)
     except DataMismatchError as exc:  # another mesh (another gait cycle found), muscles or DOFs
-        return solve(), f"cold: the solution of {source.workflow} does not fit this problem ({exc})"
+        return solve(), f"cold: the solution of {source.workflow} does not fit this problem ({exc})", None
     if sol.success:
-        return sol, f"warm from {source.workflow}"
+        warm = f"warm from {source.workflow}"
+        if not both:
+            return sol, warm, None
+        t1 = time.perf_counter()
+        cold = solve()
+        times["other_start_s"] = time.perf_counter() - t1
+        if cold.success and cold.run_record.objective < sol.run_record.objective:
+            return cold, COLD, (warm, sol)
+        return sol, warm, (COLD, cold)
     times["warm_attempt_s"] = time.perf_counter() - t0
     times["warm_attempt_ipopt_cpu_s"] = sol.record.solve_cpu_time_s
     failed = sol.run_record
     return solve(), (f"cold: the warm start from {source.workflow} did not succeed (IPOPT status {failed.status} "
-                     f"after {failed.iterations} iterations); solved again cold")
+                     f"after {failed.iterations} iterations); solved again cold"), None
+
+
+def _starts_record(sol, start: str, other: tuple, result, rates_of) -> dict:
+    """``unit.json`` ``starts`` of a unit solved from both starts (:func:`_chain_solve` with ``both``):
+    per start its IPOPT status, iterations and objective, the start kept (the lower objective), the
+    objective's relative difference of the other, and per model the relative difference of the other
+    solution's whole-body rate from the kept one's (``rates_of(solution)``: its
+    :class:`~musclemetab.metabolics.solution.SolutionMetabolics`, as the unit's ``result``), with the
+    largest of them (``largest_rate_difference``); a start that did not succeed has no rates."""
+    other_start, other_sol = other
+
+    def run(s):
+        r = s.run_record
+        return {"status": r.status, "iterations": int(r.iterations), "objective": float(r.objective)}
+
+    out = {"kept": start, start: run(sol), other_start: run(other_sol)}
+    out["other_objective_difference"] = float(other_sol.run_record.objective / sol.run_record.objective - 1.0)
+    if other_sol.success:
+        theirs = rates_of(other_sol).whole_body
+        diff = {m: float(theirs[m].mean_W_per_kg / result.whole_body[m].mean_W_per_kg - 1.0) for m in result.models}
+        out["other_whole_body_difference"] = diff
+        out["largest_rate_difference"] = max(abs(v) for v in diff.values())
+    return out
 
 
 def _plausibility(study: Study, unit: Unit, sol, result, speed, groups) -> list:
