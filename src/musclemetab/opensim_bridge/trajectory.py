@@ -149,7 +149,7 @@ def _implicit_derivative_muscles(mus, sto, fiber_velocity: str, states_path) -> 
 
 
 def muscles_along_states(model_path: str, states_path: str, controls_path: str | None = None,
-                         fiber_velocity: str = "derivative") -> dict:
+                         fiber_velocity: str = "auto") -> dict:
     """OpenSim's muscle quantities of every muscle of ``model_path`` at every state of
     ``states_path`` (see the module's description).
 

@@ -133,9 +133,9 @@ class Unit:
     def warm_source(self, study: Study) -> "Unit | None":
         """The unit whose solution this unit's solve starts from, if any: with the study's
         ``warm_start`` (or ``best_start``: it is then one of the two starts), the same subject, trial
-        and leg with the workflow before this one in :data:`WARM_CHAIN` among the study's workflows; an assisted trial's solve (its
-        ``assisted_from``), whatever ``warm_start`` says, from the unassisted trial's solve with the same
-        workflow. EMG-informed solves (the subject's ``emg_mode``), EMG-TEN and estimations start cold."""
+        and leg with the workflow before this one in :data:`WARM_CHAIN` among the study's workflows;
+        an assisted trial's solve (its ``assisted_from``), whatever ``warm_start`` says, from the
+        unassisted trial's solve with the same workflow. EMG-informed solves (the subject's ``emg_mode``), EMG-TEN and estimations start cold."""
         if self.trial is None or self.sample is not None or self.workflow not in WARM_CHAIN:
             return None
         subject = study.subject(self.subject)
