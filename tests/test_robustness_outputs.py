@@ -1024,6 +1024,48 @@ def test_ctrl_c_inside_the_progress_callback_stops_ipopt_without_a_traceback(cap
     assert "Traceback" not in out + err and "KeyboardInterrupt" not in out + err, err
 
 
+def test_ctrl_c_whose_interrupt_is_lost_still_stops_ipopt_at_the_next_iterate():
+    """Ctrl-C noted by the command's handler whose KeyboardInterrupt Python then loses (raised where it
+    drops it, e.g. a weakref callback: here swallowed inside the progress callback's work): IPOPT is
+    asked to stop at its next iterate, and the interrupt is raised once it returns (it ran to its
+    end before)."""
+    import casadi as ca
+
+    from musclemetab.processes import sigint_noted
+    from musclemetab.redundancy import progress
+
+    x = ca.SX.sym("x", 2)
+    iterations = []
+
+    class Lines(progress.ProgressLines):
+        def iteration(self, f, g):
+            iterations.append(f)
+            if len(iterations) == 3:
+                try:
+                    os.kill(os.getpid(), signal.SIGINT)
+                    time.sleep(0.5)  # the handler runs here
+                except KeyboardInterrupt:
+                    pass  # lost
+            super().iteration(f, g)
+
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a terminal (see above)
+    original = progress.ProgressLines
+    progress.ProgressLines = Lines
+    try:
+        with progress.solve_progress(interval_s=60.0, stream=io.StringIO()):
+            callback = progress._progress_callback(2, 0, [], [])
+        solver = ca.nlpsol("s", "ipopt", {"x": x, "f": (x[0] - 1) ** 4 + (x[1] - 2) ** 4},
+                           {"iteration_callback": callback, "ipopt": {"print_level": 0, "sb": "yes"},
+                            "print_time": False})
+        with pytest.raises(KeyboardInterrupt):
+            with sigint_noted():
+                solver(x0=[0, 0])
+    finally:
+        progress.ProgressLines = original
+        signal.signal(signal.SIGINT, previous)
+    assert len(iterations) == 3 and solver.stats()["return_status"] == "User_Requested_Stop"
+
+
 def test_an_interrupt_python_cannot_raise_is_not_printed_by_the_command_line(capsys):
     """Ctrl-C or SIGTERM that lands in a weakref callback (seen in a run: that of an import's module
     lock) is an "unraisable" error Python prints with its traceback; the command line's hook drops

@@ -139,6 +139,8 @@ def _progress_callback(n_x: int, n_g: int, lbg, ubg):
                 if interrupt_noted():
                     return [1]
                 raise
-            return [0]
+            # Ctrl-C noted but its KeyboardInterrupt lost on the way (raised where Python drops it, such
+            # as a weakref callback): IPOPT is asked to stop all the same
+            return [1] if interrupt_noted() else [0]
 
     return _Callback()
