@@ -9,10 +9,12 @@ dynamics give the fiber length, the force-length multiplier, the passive fiber f
 and excitation (from the controls file; without one, excitation = activation, and the muscles
 holding the model's default states at every state are left out). The fiber velocity is OpenSim's
 (equilibrium with a fiber-length state, or the geometry of a rigid tendon), except for a
-compliant-tendon DeGrooteFregly2016Muscle, whose velocity is by default the time derivative of
-OpenSim's fiber lengths along the states (its force equilibrium is ill-conditioned at low
-activation and wrong for states made with other curves, such as the package's own solutions:
-``fiber_velocity="equilibrium"`` keeps it). ``F0``, ``lMo`` and ``vmax`` are the model's. So the
+compliant-tendon DeGrooteFregly2016Muscle, whose velocity is by default that of the trajectory's
+own tendon-force derivative where the file holds it (a Moco solution file's
+``implicitderiv_normalized_tendon_force``: the velocity Moco solved with), else the time
+derivative of OpenSim's fiber lengths along the states (its force equilibrium is ill-conditioned
+at low activation and wrong for states made with other curves, such as the package's own
+solutions: ``fiber_velocity="equilibrium"`` keeps it). ``F0``, ``lMo`` and ``vmax`` are the model's. So the
 per-muscle and whole-body tables follow from
 :func:`~musclemetab.metabolics.solution.metabolics_from_legs`.
 
