@@ -979,17 +979,17 @@ def test_a_ctrl_c_swallowed_on_its_way_is_raised_before_anything_is_written():
     assert written == ["the next command's outputs"]
 
 
-def test_ctrl_c_inside_the_progress_callback_stops_ipopt_without_a_traceback(capfd):
-    """Ctrl-C that comes while IPOPT's progress callback runs, at its third iteration, inside
-    CasADi's conversion of the callback's arguments, where it surfaces as a ``SystemError`` chaining
-    the interrupt (CasADi printed that traceback and its warning, seen in a run): the callback asks
-    IPOPT to stop, IPOPT returns, and the interrupt is raised once, with nothing on standard error."""
+def _interrupted_small_solve(handle):
+    """IPOPT on a small problem with progress lines that send SIGINT at the third iterate, the
+    KeyboardInterrupt then given to ``handle`` (it raises what CasADi would see, or nothing: the
+    interrupt lost), inside :func:`~musclemetab.processes.sigint_noted` and with SIGINT as in a
+    terminal: ``(solver, iterates seen)`` once the block has raised KeyboardInterrupt (the test
+    fails otherwise)."""
     import casadi as ca
 
     from musclemetab.processes import sigint_noted
     from musclemetab.redundancy import progress
 
-    x = ca.SX.sym("x", 2)
     iterations = []
 
     class Lines(progress.ProgressLines):
@@ -999,11 +999,11 @@ def test_ctrl_c_inside_the_progress_callback_stops_ipopt_without_a_traceback(cap
                 try:
                     os.kill(os.getpid(), signal.SIGINT)
                     time.sleep(0.5)  # the handler runs here, inside the callback
-                except KeyboardInterrupt as exc:  # as it surfaces from inside CasADi's argument conversion
-                    raise SystemError("<method 'get' of 'dict' objects> returned a result with an exception "
-                                      "set") from exc
+                except KeyboardInterrupt as exc:
+                    handle(exc)
             super().iteration(f, g)
 
+    x = ca.SX.sym("x", 2)
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a terminal (see above)
     original = progress.ProgressLines
     progress.ProgressLines = Lines
@@ -1019,6 +1019,18 @@ def test_ctrl_c_inside_the_progress_callback_stops_ipopt_without_a_traceback(cap
     finally:
         progress.ProgressLines = original
         signal.signal(signal.SIGINT, previous)
+    return solver, iterations
+
+
+def test_ctrl_c_inside_the_progress_callback_stops_ipopt_without_a_traceback(capfd):
+    """Ctrl-C that comes while IPOPT's progress callback runs, at its third iteration, inside
+    CasADi's conversion of the callback's arguments, where it surfaces as a ``SystemError`` chaining
+    the interrupt (CasADi printed that traceback and its warning, seen in a run): the callback asks
+    IPOPT to stop, IPOPT returns, and the interrupt is raised once, with nothing on standard error."""
+    def as_in_casadi(exc):  # as it surfaces from inside CasADi's argument conversion
+        raise SystemError("<method 'get' of 'dict' objects> returned a result with an exception set") from exc
+
+    solver, iterations = _interrupted_small_solve(as_in_casadi)
     assert len(iterations) == 3 and solver.stats()["return_status"] == "User_Requested_Stop"
     out, err = capfd.readouterr()
     assert "Traceback" not in out + err and "KeyboardInterrupt" not in out + err, err
@@ -1029,40 +1041,7 @@ def test_ctrl_c_whose_interrupt_is_lost_still_stops_ipopt_at_the_next_iterate():
     drops it, e.g. a weakref callback: here swallowed inside the progress callback's work): IPOPT is
     asked to stop at its next iterate, and the interrupt is raised once it returns (it ran to its
     end before)."""
-    import casadi as ca
-
-    from musclemetab.processes import sigint_noted
-    from musclemetab.redundancy import progress
-
-    x = ca.SX.sym("x", 2)
-    iterations = []
-
-    class Lines(progress.ProgressLines):
-        def iteration(self, f, g):
-            iterations.append(f)
-            if len(iterations) == 3:
-                try:
-                    os.kill(os.getpid(), signal.SIGINT)
-                    time.sleep(0.5)  # the handler runs here
-                except KeyboardInterrupt:
-                    pass  # lost
-            super().iteration(f, g)
-
-    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a terminal (see above)
-    original = progress.ProgressLines
-    progress.ProgressLines = Lines
-    try:
-        with progress.solve_progress(interval_s=60.0, stream=io.StringIO()):
-            callback = progress._progress_callback(2, 0, [], [])
-        solver = ca.nlpsol("s", "ipopt", {"x": x, "f": (x[0] - 1) ** 4 + (x[1] - 2) ** 4},
-                           {"iteration_callback": callback, "ipopt": {"print_level": 0, "sb": "yes"},
-                            "print_time": False})
-        with pytest.raises(KeyboardInterrupt):
-            with sigint_noted():
-                solver(x0=[0, 0])
-    finally:
-        progress.ProgressLines = original
-        signal.signal(signal.SIGINT, previous)
+    solver, iterations = _interrupted_small_solve(lambda exc: None)  # lost
     assert len(iterations) == 3 and solver.stats()["return_status"] == "User_Requested_Stop"
 
 
