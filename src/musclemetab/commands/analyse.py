@@ -121,12 +121,12 @@ def _cycle(args, side: str, ik, recorded):
         return GaitCycle(*vals), "given on the command line"
     window = "" if recorded.window_s is None else f" inside the solved {recorded.window_s[0]:g}-{recorded.window_s[1]:g} s"
     remedy = f"give the cycle's events{window} (--cycle START,TOE_OFF,END) or the ground forces (--grf GRF.mot)"
+    model = args.model or recorded.model
     if args.grf or args.id:  # within the window the solve recorded
-        return cycle_of_trial(ik, grf=args.grf, id_file=args.id, side=side, model=args.model or recorded.model,
+        return cycle_of_trial(ik, grf=args.grf, id_file=args.id, side=side, model=model,
                               window_s=recorded.window_s, remedy=remedy)
     if recorded.cycle is not None:
         return recorded.cycle, recorded.cycle_source
-    model = args.model or recorded.model
     if recorded.external_loads is not None and Path(recorded.external_loads).is_file() and model is not None:
         return cycle_of_trial(ik, external_loads=recorded.external_loads, side=side, model=model,
                               window_s=recorded.window_s, remedy=remedy)
